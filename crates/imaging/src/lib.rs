@@ -1,0 +1,157 @@
+//! Linear RGB float images and their output: 8-bit sRGB PNG, 16-bit grayscale
+//! PNG (for index maps), and raw little-endian float32 `.npy` arrays.
+//!
+//! Architecture invariant: colours are linear everywhere in vtfarm; sRGB
+//! encoding happens only here, on the way out.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+/// Errors while writing an image file.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("cannot write {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("cannot encode {path}: {source}")]
+    Encode { path: PathBuf, source: image::ImageError },
+}
+
+/// A linear RGB image, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+impl Image {
+    /// An image filled with one colour.
+    pub fn new(width: u32, height: u32, fill: Vec3) -> Self {
+        Image { width, height, pixels: vec![fill; (width * height) as usize] }
+    }
+
+    /// The index of pixel (`x`, `y`) in [`Image::pixels`].
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        (y * self.width + x) as usize
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> Vec3 {
+        self.pixels[self.index(x, y)]
+    }
+
+    pub fn set(&mut self, x: u32, y: u32, c: Vec3) {
+        let i = self.index(x, y);
+        self.pixels[i] = c;
+    }
+
+    /// The 8-bit sRGB encoding, RGB interleaved, row-major from the top row.
+    pub fn to_srgb8(&self) -> Vec<u8> {
+        self.pixels.iter().flat_map(|c| encode_srgb8(*c)).collect()
+    }
+
+    /// Writes an 8-bit sRGB PNG.
+    pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
+        let buf = image::RgbImage::from_raw(self.width, self.height, self.to_srgb8())
+            .expect("buffer size matches width * height * 3 by construction");
+        buf.save_with_format(path, image::ImageFormat::Png)
+            .map_err(|source| ImageError::Encode { path: path.to_owned(), source })
+    }
+
+    /// Writes the linear colours as a `.npy` array of shape (height, width, 3),
+    /// little-endian float32.
+    pub fn write_npy(&self, path: &Path) -> Result<(), ImageError> {
+        let data: Vec<f32> = self.pixels.iter().flat_map(|c| c.to_array()).collect();
+        write_npy_f32(path, &[self.height as usize, self.width as usize, 3], &data)
+    }
+}
+
+/// Encodes one linear channel value to sRGB in [0, 1] (clamped).
+pub fn linear_to_srgb(v: f32) -> f32 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 }
+}
+
+/// Decodes one sRGB channel value in [0, 1] to linear.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.040_45 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Encodes a linear colour as three 8-bit sRGB values (rounded to nearest).
+pub fn encode_srgb8(c: Vec3) -> [u8; 3] {
+    c.to_array().map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
+}
+
+/// Writes a 16-bit grayscale PNG (used for index maps such as the
+/// reflected-object map, where 0 means "nothing").
+pub fn write_gray16_png(path: &Path, width: u32, height: u32, values: &[u16]) -> Result<(), ImageError> {
+    let buf = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, values.to_vec())
+        .expect("caller passes width * height values");
+    buf.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|source| ImageError::Encode { path: path.to_owned(), source })
+}
+
+/// Writes a little-endian float32 `.npy` file (format version 1.0).
+pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), ImageError> {
+    let io = |source| ImageError::Io { path: path.to_owned(), source };
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let shape_text = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_text}, }}");
+    // Magic (6) + version (2) + header length (2) + header + newline, padded to 64 bytes.
+    let unpadded = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
+    header.push('\n');
+    let mut out = Vec::with_capacity(10 + header.len() + data.len() * 4);
+    out.extend_from_slice(b"\x93NUMPY\x01\x00");
+    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    out.extend_from_slice(header.as_bytes());
+    for v in data {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::File::create(path).and_then(|mut f| f.write_all(&out)).map_err(io)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_round_trips_and_hits_the_ends() {
+        for i in 0..=255u32 {
+            let s = i as f32 / 255.0;
+            assert!((linear_to_srgb(srgb_to_linear(s)) - s).abs() < 1e-5);
+        }
+        assert_eq!(encode_srgb8(Vec3::ZERO), [0, 0, 0]);
+        assert_eq!(encode_srgb8(Vec3::ONE), [255, 255, 255]);
+        assert_eq!(encode_srgb8(Vec3::splat(0.214_041_14)), [128, 128, 128]);
+    }
+
+    #[test]
+    fn png_reads_back_as_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        let mut img = Image::new(3, 2, Vec3::ZERO);
+        img.set(2, 0, Vec3::new(1.0, 0.0, 0.5));
+        img.write_png(&path).unwrap();
+        let back = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(back.as_raw(), &img.to_srgb8());
+        assert_eq!(back.get_pixel(2, 0).0, encode_srgb8(Vec3::new(1.0, 0.0, 0.5)));
+    }
+
+    #[test]
+    fn npy_header_is_aligned_and_data_follows() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.npy");
+        let img = Image::new(2, 1, Vec3::new(0.25, 0.5, 1.0));
+        img.write_npy(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        assert_eq!((10 + header_len) % 64, 0);
+        let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+        assert!(header.contains("'shape': (1, 2, 3)"), "{header}");
+        let first = f32::from_le_bytes(bytes[10 + header_len..14 + header_len].try_into().unwrap());
+        assert_eq!(first, 0.25);
+        assert_eq!(bytes.len(), 10 + header_len + 6 * 4);
+    }
+}

@@ -1,0 +1,157 @@
+//! The pinhole camera and vtfarm's pixel convention, shared by the rasterizer,
+//! the ray tracer and the vertex tracer so that all three agree to the bit.
+//!
+//! Convention: pixel (x, y) has its centre at (x + 0.5, y + 0.5); row 0 is the
+//! top row; x grows to the right. The vertical field of view spans the image
+//! height. Depth is the distance along the viewing direction (view-space z).
+
+use glam::Vec3;
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub target: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub fov_y_deg: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// A point projected to continuous pixel coordinates plus its view depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenPoint {
+    pub x: f32,
+    pub y: f32,
+    /// Distance along the viewing direction; positive in front of the eye.
+    pub depth: f32,
+}
+
+/// Points closer than this (in metres of view depth) are not projected.
+pub const NEAR: f32 = 1e-3;
+
+impl Camera {
+    /// The orthonormal camera basis: (forward, right, up).
+    pub fn basis(&self) -> (Vec3, Vec3, Vec3) {
+        let forward = (self.target - self.eye).normalize();
+        let right = forward.cross(self.up).normalize();
+        let up = right.cross(forward);
+        (forward, right, up)
+    }
+
+    /// Half the image height at view depth 1.
+    pub fn tan_half_fov(&self) -> f32 {
+        (self.fov_y_deg.to_radians() * 0.5).tan()
+    }
+
+    /// Size in world units of one pixel at view depth 1.
+    pub fn pixel_size_at_unit_depth(&self) -> f32 {
+        2.0 * self.tan_half_fov() / self.height as f32
+    }
+
+    /// The unit direction of the ray from the eye through continuous pixel
+    /// coordinates (`px`, `py`); the centre of pixel (x, y) is (x + 0.5, y + 0.5).
+    pub fn ray_direction(&self, px: f32, py: f32) -> Vec3 {
+        let (forward, right, up) = self.basis();
+        let s = self.pixel_size_at_unit_depth();
+        let cx = (px - self.width as f32 * 0.5) * s;
+        let cy = (self.height as f32 * 0.5 - py) * s;
+        (forward + right * cx + up * cy).normalize()
+    }
+
+    /// The ray direction through the centre of pixel (`x`, `y`).
+    pub fn pixel_ray(&self, x: u32, y: u32) -> Vec3 {
+        self.ray_direction(x as f32 + 0.5, y as f32 + 0.5)
+    }
+
+    /// Projects a world point to continuous pixel coordinates, or `None` when
+    /// it lies behind the near plane.
+    pub fn project(&self, p: Vec3) -> Option<ScreenPoint> {
+        Projector::new(self).project(p)
+    }
+}
+
+/// A camera with its basis precomputed, for projecting many points.
+#[derive(Clone, Copy, Debug)]
+pub struct Projector {
+    eye: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    inv_pixel: f32,
+    half_w: f32,
+    half_h: f32,
+}
+
+impl Projector {
+    pub fn new(camera: &Camera) -> Self {
+        let (forward, right, up) = camera.basis();
+        Projector {
+            eye: camera.eye,
+            forward,
+            right,
+            up,
+            inv_pixel: 1.0 / camera.pixel_size_at_unit_depth(),
+            half_w: camera.width as f32 * 0.5,
+            half_h: camera.height as f32 * 0.5,
+        }
+    }
+
+    /// See [`Camera::project`].
+    pub fn project(&self, p: Vec3) -> Option<ScreenPoint> {
+        let d = p - self.eye;
+        let depth = d.dot(self.forward);
+        if depth < NEAR {
+            return None;
+        }
+        let k = self.inv_pixel / depth;
+        Some(ScreenPoint {
+            x: self.half_w + d.dot(self.right) * k,
+            y: self.half_h - d.dot(self.up) * k,
+            depth,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera {
+            eye: Vec3::new(0.0, 1.0, 2.0),
+            target: Vec3::new(0.3, 0.8, 0.0),
+            up: Vec3::Y,
+            fov_y_deg: 50.0,
+            width: 64,
+            height: 48,
+        }
+    }
+
+    #[test]
+    fn projecting_a_point_on_a_pixel_ray_gives_that_pixel_centre() {
+        let cam = camera();
+        for (x, y) in [(0, 0), (63, 47), (10, 30), (32, 24)] {
+            let p = cam.eye + cam.pixel_ray(x, y) * 3.7;
+            let s = cam.project(p).unwrap();
+            assert!((s.x - (x as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
+            assert!((s.y - (y as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
+        }
+    }
+
+    #[test]
+    fn row_zero_is_the_top_row() {
+        let cam = camera();
+        let (_, _, up) = cam.basis();
+        let above = cam.project(cam.target + up * 0.1).unwrap();
+        let below = cam.project(cam.target - up * 0.1).unwrap();
+        assert!(above.y < below.y);
+    }
+
+    #[test]
+    fn points_behind_the_eye_do_not_project() {
+        let cam = camera();
+        assert!(cam.project(cam.eye - (cam.target - cam.eye)).is_none());
+    }
+}

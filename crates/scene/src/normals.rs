@@ -1,0 +1,1 @@
+//! Vertex normals: angle-weighted smoothing with a crease angle (filled in by the loader work).

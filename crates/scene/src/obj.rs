@@ -1,0 +1,1 @@
+//! Wavefront OBJ/MTL import and export (filled in by the loader work).

@@ -1,0 +1,71 @@
+//! The base ray tracer: a BVH (obvhs) over all scene triangles, closest-hit
+//! and any-hit queries, and Whitted recursion with local Phong shading,
+//! shadow rays, mirror reflection and Snell refraction.
+//!
+//! Architecture invariant: the tracer knows nothing of pixels, packages or
+//! networking; it answers "what colour does this ray / surface point see".
+
+use std::sync::Arc;
+
+use glam::Vec3;
+use vtfarm_scene::{Lighting, ObjectId, Scene, TriangleId};
+
+/// A ray; `direction` is unit length.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub direction: Vec3,
+}
+
+/// The closest intersection of a ray with the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub triangle: TriangleId,
+    /// Distance along the ray.
+    pub t: f32,
+    /// Barycentric weights of the triangle's vertices 1 and 2 (vertex 0 has
+    /// `1 - u - v`).
+    pub u: f32,
+    pub v: f32,
+}
+
+/// A point on a surface where shading starts without a primary intersection
+/// (vertex tracing shades reflector vertices directly).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub position: Vec3,
+    /// Unit shading normal (interpolated vertex normal).
+    pub normal: Vec3,
+    /// The triangle the point lies on (gives material, object and geometric normal).
+    pub triangle: TriangleId,
+}
+
+/// Settings of the recursion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraceSettings {
+    /// Maximum recursion depth: 1 shades the first surface only.
+    pub max_depth: u32,
+    /// Weight kr and kt with Schlick's Fresnel approximation.
+    pub fresnel: bool,
+}
+
+impl Default for TraceSettings {
+    fn default() -> Self {
+        TraceSettings { max_depth: 5, fresnel: false }
+    }
+}
+
+/// What one traced sample saw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Total linear RGB radiance.
+    pub color: Vec3,
+    /// The reflected component alone: kr times the radiance of the first
+    /// reflection ray (what the first surface mirrors; a glare study measures this).
+    pub reflected: Vec3,
+    /// The object hit by the first reflection ray, or `vtfarm_scene::NONE`.
+    pub reflected_object: ObjectId,
+    /// A compact ray-tree signature: a hash of the objects hit along the tree
+    /// (and of shadow-ray outcomes), equal for samples whose trees match.
+    pub signature: u64,
+}

@@ -1,0 +1,1 @@
+//! Wire messages between master, workers and submitters (the farm issue fills this crate).
