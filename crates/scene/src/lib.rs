@@ -10,8 +10,9 @@ mod light;
 mod material;
 pub mod normals;
 pub mod obj;
+pub mod shading;
 
-pub use camera::{Camera, Projector, ScreenPoint};
+pub use camera::{Camera, NEAR, Projector, ScreenPoint};
 pub use light::{Light, LightKind, Lighting};
 pub use material::Material;
 
