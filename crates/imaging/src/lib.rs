@@ -13,9 +13,15 @@ use glam::Vec3;
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
     #[error("cannot write {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("cannot encode {path}: {source}")]
-    Encode { path: PathBuf, source: image::ImageError },
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
 }
 
 /// A linear RGB image, row 0 at the top.
@@ -29,7 +35,11 @@ pub struct Image {
 impl Image {
     /// An image filled with one colour.
     pub fn new(width: u32, height: u32, fill: Vec3) -> Self {
-        Image { width, height, pixels: vec![fill; (width * height) as usize] }
+        Image {
+            width,
+            height,
+            pixels: vec![fill; (width * height) as usize],
+        }
     }
 
     /// The index of pixel (`x`, `y`) in [`Image::pixels`].
@@ -56,7 +66,10 @@ impl Image {
         let buf = image::RgbImage::from_raw(self.width, self.height, self.to_srgb8())
             .expect("buffer size matches width * height * 3 by construction");
         buf.save_with_format(path, image::ImageFormat::Png)
-            .map_err(|source| ImageError::Encode { path: path.to_owned(), source })
+            .map_err(|source| ImageError::Encode {
+                path: path.to_owned(),
+                source,
+            })
     }
 
     /// Writes the linear colours as a `.npy` array of shape (height, width, 3),
@@ -70,33 +83,74 @@ impl Image {
 /// Encodes one linear channel value to sRGB in [0, 1] (clamped).
 pub fn linear_to_srgb(v: f32) -> f32 {
     let v = v.clamp(0.0, 1.0);
-    if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 }
+    if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 /// Decodes one sRGB channel value in [0, 1] to linear.
 pub fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.040_45 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 /// Encodes a linear colour as three 8-bit sRGB values (rounded to nearest).
 pub fn encode_srgb8(c: Vec3) -> [u8; 3] {
-    c.to_array().map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
+    c.to_array()
+        .map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
 }
 
 /// Writes a 16-bit grayscale PNG (used for index maps such as the
 /// reflected-object map, where 0 means "nothing").
-pub fn write_gray16_png(path: &Path, width: u32, height: u32, values: &[u16]) -> Result<(), ImageError> {
-    let buf = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, values.to_vec())
+pub fn write_gray16_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    values: &[u16],
+) -> Result<(), ImageError> {
+    let buf =
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, values.to_vec())
+            .expect("caller passes width * height values");
+    buf.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|source| ImageError::Encode {
+            path: path.to_owned(),
+            source,
+        })
+}
+
+/// Writes an 8-bit grayscale PNG (used for masks).
+pub fn write_gray8_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    values: &[u8],
+) -> Result<(), ImageError> {
+    let buf = image::GrayImage::from_raw(width, height, values.to_vec())
         .expect("caller passes width * height values");
     buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| ImageError::Encode { path: path.to_owned(), source })
+        .map_err(|source| ImageError::Encode {
+            path: path.to_owned(),
+            source,
+        })
 }
 
 /// Writes a little-endian float32 `.npy` file (format version 1.0).
 pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), ImageError> {
-    let io = |source| ImageError::Io { path: path.to_owned(), source };
+    let io = |source| ImageError::Io {
+        path: path.to_owned(),
+        source,
+    };
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape_text = if dims.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
+    let shape_text = if dims.len() == 1 {
+        format!("({},)", dims[0])
+    } else {
+        format!("({})", dims.join(", "))
+    };
     let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_text}, }}");
     // Magic (6) + version (2) + header length (2) + header + newline, padded to 64 bytes.
     let unpadded = 10 + header.len() + 1;
@@ -109,7 +163,9 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), I
     for v in data {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    std::fs::File::create(path).and_then(|mut f| f.write_all(&out)).map_err(io)
+    std::fs::File::create(path)
+        .and_then(|mut f| f.write_all(&out))
+        .map_err(io)
 }
 
 #[cfg(test)]
@@ -136,7 +192,10 @@ mod tests {
         img.write_png(&path).unwrap();
         let back = image::open(&path).unwrap().to_rgb8();
         assert_eq!(back.as_raw(), &img.to_srgb8());
-        assert_eq!(back.get_pixel(2, 0).0, encode_srgb8(Vec3::new(1.0, 0.0, 0.5)));
+        assert_eq!(
+            back.get_pixel(2, 0).0,
+            encode_srgb8(Vec3::new(1.0, 0.0, 0.5))
+        );
     }
 
     #[test]

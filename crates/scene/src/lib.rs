@@ -81,12 +81,18 @@ impl Scene {
 
     /// Looks up an object by name.
     pub fn object_id(&self, name: &str) -> Option<ObjectId> {
-        self.objects.iter().position(|o| o.name == name).map(|i| i as ObjectId)
+        self.objects
+            .iter()
+            .position(|o| o.name == name)
+            .map(|i| i as ObjectId)
     }
 
     /// Looks up a material by name.
     pub fn material_id(&self, name: &str) -> Option<MaterialId> {
-        self.materials.iter().position(|m| m.name == name).map(|i| i as MaterialId)
+        self.materials
+            .iter()
+            .position(|m| m.name == name)
+            .map(|i| i as MaterialId)
     }
 
     /// The axis-aligned bounds (min, max) of all vertices.
@@ -106,11 +112,12 @@ impl Scene {
         self.normals.extend_from_slice(&other.normals);
         self.objects.extend(other.objects.iter().cloned());
         self.materials.extend(other.materials.iter().cloned());
-        self.triangles.extend(other.triangles.iter().map(|t| Triangle {
-            vertices: t.vertices.map(|v| v + v0),
-            object: t.object + o0,
-            material: t.material + m0,
-        }));
+        self.triangles
+            .extend(other.triangles.iter().map(|t| Triangle {
+                vertices: t.vertices.map(|v| v + v0),
+                object: t.object + o0,
+                material: t.material + m0,
+            }));
     }
 
     /// Checks the structural invariants: indices in range, one normal per
@@ -124,17 +131,27 @@ impl Scene {
             ));
         }
         for (i, t) in self.triangles.iter().enumerate() {
-            if t.vertices.iter().any(|&v| v as usize >= self.positions.len()) {
+            if t.vertices
+                .iter()
+                .any(|&v| v as usize >= self.positions.len())
+            {
                 return Err(format!("triangle {i} indexes a missing vertex"));
             }
             if t.object as usize >= self.objects.len() {
                 return Err(format!("triangle {i} names missing object {}", t.object));
             }
             if t.material as usize >= self.materials.len() {
-                return Err(format!("triangle {i} names missing material {}", t.material));
+                return Err(format!(
+                    "triangle {i} names missing material {}",
+                    t.material
+                ));
             }
         }
-        if let Some(i) = self.normals.iter().position(|n| (n.length() - 1.0).abs() > 1e-3) {
+        if let Some(i) = self
+            .normals
+            .iter()
+            .position(|n| (n.length() - 1.0).abs() > 1e-3)
+        {
             return Err(format!("normal {i} is not unit length"));
         }
         Ok(())

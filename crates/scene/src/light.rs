@@ -52,6 +52,10 @@ pub struct Lighting {
 
 impl Default for Lighting {
     fn default() -> Self {
-        Lighting { lights: Vec::new(), ambient: Vec3::splat(0.1), background: Vec3::ZERO }
+        Lighting {
+            lights: Vec::new(),
+            ambient: Vec3::splat(0.1),
+            background: Vec3::ZERO,
+        }
     }
 }

@@ -21,7 +21,11 @@ pub fn phong(
     mut light_visible: impl FnMut(&Light, Vec3, f32) -> bool,
 ) -> Vec3 {
     // Shade the side facing the viewer: sheets are two-sided.
-    let n = if normal.dot(to_eye) < 0.0 { -normal } else { normal };
+    let n = if normal.dot(to_eye) < 0.0 {
+        -normal
+    } else {
+        normal
+    };
     let mut color = material.emission + material.ambient * lighting.ambient;
     for light in &lighting.lights {
         let (to_light, distance) = light.direction_from(position);
@@ -51,12 +55,23 @@ mod tests {
         m.specular = Vec3::splat(0.25);
         m.shininess = 10.0;
         let lighting = Lighting {
-            lights: vec![Light { kind: LightKind::Point { position: Vec3::Z * 2.0 }, color: Vec3::ONE, intensity: 2.0 }],
+            lights: vec![Light {
+                kind: LightKind::Point {
+                    position: Vec3::Z * 2.0,
+                },
+                color: Vec3::ONE,
+                intensity: 2.0,
+            }],
             ambient: Vec3::splat(0.1),
             background: Vec3::ZERO,
         };
         let c = phong(&m, &lighting, Vec3::ZERO, Vec3::Z, Vec3::Z, |_, _, _| true);
-        assert!((c - Vec3::splat(0.05 + (0.5 + 0.25) * 2.0)).abs().max_element() < 1e-5);
+        assert!(
+            (c - Vec3::splat(0.05 + (0.5 + 0.25) * 2.0))
+                .abs()
+                .max_element()
+                < 1e-5
+        );
         let shadowed = phong(&m, &lighting, Vec3::ZERO, Vec3::Z, Vec3::Z, |_, _, _| false);
         assert!((shadowed - Vec3::splat(0.05)).abs().max_element() < 1e-6);
     }
