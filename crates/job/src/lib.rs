@@ -1,1 +1,342 @@
-//! (in progress)
+//! Job files: one TOML file describes a render (the scene, the camera and any
+//! extra eye points, the lights, which surfaces are reflectors, and the
+//! quality settings). `configs/cockpit.toml` is the annotated reference of the
+//! format; [`load_job`] reads one into a [`Job`].
+//!
+//! Parsing checks everything that can be checked without the scene, so a
+//! mistake is reported at once with its file, line and column. What depends on
+//! the scene (the cockpit's default camera and lights, which names exist) is
+//! resolved by [`Job::load_scene`] and [`Job::reflector_triangles`].
+//!
+//! Architecture invariant: this crate only turns text into settings and a
+//! scene; it renders nothing.
+
+mod error;
+mod parse;
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use vtfarm_scene::obj::{ObjOptions, load_obj};
+use vtfarm_scene::{Camera, Light, Lighting, Scene, Triangle, TriangleId};
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::VertexSettings;
+
+pub use error::{JobError, Location};
+pub use vtfarm_cockpit::CockpitConfig;
+
+/// A parsed and validated job file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job {
+    /// The job file the job came from: named in every error, and relative
+    /// paths in it are relative to its directory.
+    pub file: PathBuf,
+    pub scene: SceneSource,
+    /// The `[camera]` keys; see [`CameraSpec`].
+    pub camera: CameraSpec,
+    /// The `[lighting]` keys; see [`LightingSpec`].
+    pub lighting: LightingSpec,
+    /// What reflects (never empty).
+    pub reflectors: Vec<ReflectorSelector>,
+    pub trace: TraceSettings,
+    pub vertex: VertexSettings,
+    /// Extra eye points from `[frames]`, each one more frame looking at the
+    /// camera's target.
+    pub eyes: Vec<Vec3>,
+}
+
+/// Where the scene comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSource {
+    /// The built-in procedural truck cockpit.
+    Cockpit(CockpitConfig),
+    /// An OBJ file; the path is already resolved against the job file's directory.
+    Obj(PathBuf),
+}
+
+/// The `[camera]` keys that were given. A given key overrides the scene's own
+/// camera (the cockpit's driver view). OBJ files carry no camera, so for them
+/// parsing requires every key except `up`, which defaults to +Y.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraSpec {
+    pub eye: Option<Vec3>,
+    pub target: Option<Vec3>,
+    pub up: Option<Vec3>,
+    /// Vertical field of view in degrees.
+    pub fov_y_deg: Option<f32>,
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+}
+
+impl CameraSpec {
+    /// `base` with the given keys replaced.
+    pub fn over(&self, base: &Camera) -> Camera {
+        Camera {
+            eye: self.eye.unwrap_or(base.eye),
+            target: self.target.unwrap_or(base.target),
+            up: self.up.unwrap_or(base.up),
+            fov_y_deg: self.fov_y_deg.unwrap_or(base.fov_y_deg),
+            width: self.width.unwrap_or(base.width),
+            height: self.height.unwrap_or(base.height),
+        }
+    }
+
+    /// The camera when every key is given, else the missing keys' names.
+    pub fn complete(&self) -> Result<Camera, Vec<&'static str>> {
+        match *self {
+            CameraSpec {
+                eye: Some(eye),
+                target: Some(target),
+                up: Some(up),
+                fov_y_deg: Some(fov_y_deg),
+                width: Some(width),
+                height: Some(height),
+            } => Ok(Camera {
+                eye,
+                target,
+                up,
+                fov_y_deg,
+                width,
+                height,
+            }),
+            _ => Err([
+                ("eye", self.eye.is_none()),
+                ("target", self.target.is_none()),
+                ("up", self.up.is_none()),
+                ("fov_y", self.fov_y_deg.is_none()),
+                ("width", self.width.is_none()),
+                ("height", self.height.is_none()),
+            ]
+            .into_iter()
+            .filter_map(|(key, missing)| missing.then_some(key))
+            .collect()),
+        }
+    }
+}
+
+/// The `[lighting]` keys that were given; each overrides the scene's own
+/// lighting (the cockpit's sun and cabin lamp, or [`Lighting::default`] with
+/// no lights for OBJ files). `lights: Some(vec![])` means "no lights".
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LightingSpec {
+    pub lights: Option<Vec<Light>>,
+    pub ambient: Option<Vec3>,
+    pub background: Option<Vec3>,
+}
+
+impl LightingSpec {
+    /// `base` with the given keys replaced.
+    pub fn over(&self, base: Lighting) -> Lighting {
+        Lighting {
+            lights: self.lights.clone().unwrap_or(base.lights),
+            ambient: self.ambient.unwrap_or(base.ambient),
+            background: self.background.unwrap_or(base.background),
+        }
+    }
+}
+
+/// Selects reflector triangles by the name of their object or material.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ReflectorSelector {
+    Object(String),
+    Material(String),
+}
+
+impl ReflectorSelector {
+    /// Whether `triangle` of `scene` is selected.
+    pub fn matches(&self, scene: &Scene, triangle: &Triangle) -> bool {
+        match self {
+            ReflectorSelector::Object(name) => scene
+                .objects
+                .get(triangle.object as usize)
+                .is_some_and(|o| o.name == *name),
+            ReflectorSelector::Material(name) => scene
+                .materials
+                .get(triangle.material as usize)
+                .is_some_and(|m| m.name == *name),
+        }
+    }
+}
+
+impl fmt::Display for ReflectorSelector {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReflectorSelector::Object(name) => write!(f, "object {name:?}"),
+            ReflectorSelector::Material(name) => write!(f, "material {name:?}"),
+        }
+    }
+}
+
+/// A loaded scene with the job's camera, frames and lighting resolved against it.
+#[derive(Clone, Debug)]
+pub struct LoadedScene {
+    pub scene: Scene,
+    /// The job's camera: `[camera]` over the scene's own camera.
+    pub camera: Camera,
+    /// One camera per frame: `camera` first, then one per `[frames]` eye
+    /// (same target, up, field of view and size).
+    pub frames: Vec<Camera>,
+    pub lighting: Lighting,
+}
+
+/// Reads and validates a job file.
+pub fn load_job(path: &Path) -> Result<Job, JobError> {
+    let text = std::fs::read_to_string(path).map_err(|source| JobError::Read {
+        file: path.to_owned(),
+        source,
+    })?;
+    parse_job(&text, path)
+}
+
+/// Validates the text of a job file. `origin` is the file's path: errors name
+/// it, relative paths are resolved against its directory, and a referenced
+/// OBJ file must exist.
+pub fn parse_job(text: &str, origin: &Path) -> Result<Job, JobError> {
+    parse::parse(text, origin)
+}
+
+impl Job {
+    /// Generates the cockpit or loads the OBJ file, and resolves the camera,
+    /// frames and lighting against it.
+    pub fn load_scene(&self) -> Result<LoadedScene, JobError> {
+        let (scene, camera, lighting) = match &self.scene {
+            SceneSource::Cockpit(config) => {
+                let cockpit = vtfarm_cockpit::cockpit(config);
+                (
+                    cockpit.scene,
+                    self.camera.over(&cockpit.camera),
+                    self.lighting.over(cockpit.lighting),
+                )
+            }
+            SceneSource::Obj(path) => {
+                let camera = self
+                    .camera
+                    .complete()
+                    .map_err(|missing| self.invalid(obj_camera_missing(&missing)))?;
+                let scene =
+                    load_obj(path, &ObjOptions::default()).map_err(|source| JobError::Obj {
+                        file: self.file.clone(),
+                        obj: path.clone(),
+                        source: Box::new(source),
+                    })?;
+                (scene, camera, self.lighting.over(Lighting::default()))
+            }
+        };
+        let frames = self.frames(&camera)?;
+        Ok(LoadedScene {
+            scene,
+            camera,
+            frames,
+            lighting,
+        })
+    }
+
+    /// One camera per frame: `camera` itself, then `camera` moved to each
+    /// extra eye. Fails when an eye sits on the target or looks along `up`
+    /// (parsing catches these already unless the target or up vector is the
+    /// cockpit's default).
+    pub fn frames(&self, camera: &Camera) -> Result<Vec<Camera>, JobError> {
+        let extra = self
+            .eyes
+            .iter()
+            .enumerate()
+            .map(|(i, &eye)| (format!("frames.eyes[{i}]"), eye));
+        std::iter::once(("camera.eye".to_owned(), camera.eye))
+            .chain(extra)
+            .map(
+                |(key, eye)| match BadView::check(eye, camera.target, camera.up) {
+                    None => Ok(Camera { eye, ..*camera }),
+                    Some(bad) => Err(self.invalid(format!(
+                        "{key} = {eye}: {bad} (target {}, up {})",
+                        camera.target, camera.up
+                    ))),
+                },
+            )
+            .collect()
+    }
+
+    /// The sorted, de-duplicated ids of all triangles any reflector selector
+    /// matches. Fails on a selector that matches nothing, listing the scene's
+    /// object and material names.
+    pub fn reflector_triangles(&self, scene: &Scene) -> Result<Vec<TriangleId>, JobError> {
+        let mut chosen = vec![false; scene.triangles.len()];
+        for selector in &self.reflectors {
+            let mut matched = false;
+            for (chosen, triangle) in chosen.iter_mut().zip(&scene.triangles) {
+                if selector.matches(scene, triangle) {
+                    *chosen = true;
+                    matched = true;
+                }
+            }
+            if !matched {
+                return Err(JobError::NoReflector {
+                    file: self.file.clone(),
+                    selector: selector.clone(),
+                    objects: sorted_names(scene.objects.iter().map(|o| &o.name)),
+                    materials: sorted_names(scene.materials.iter().map(|m| &m.name)),
+                });
+            }
+        }
+        // Walking the triangles in order keeps the ids sorted and unique.
+        Ok((0..)
+            .zip(chosen)
+            .filter_map(|(id, chosen)| chosen.then_some(id))
+            .collect())
+    }
+
+    /// An error about the job as a whole (no line to point at).
+    fn invalid(&self, message: String) -> JobError {
+        JobError::Invalid {
+            file: self.file.clone(),
+            location: None,
+            message,
+        }
+    }
+}
+
+/// The message for an OBJ scene's camera lacking `missing` keys.
+fn obj_camera_missing(missing: &[&str]) -> String {
+    format!(
+        "[camera] needs {} for an OBJ scene (OBJ files carry no camera)",
+        missing.join(", ")
+    )
+}
+
+/// Names sorted and without repeats, for listing in messages.
+fn sorted_names<'a>(names: impl Iterator<Item = &'a String>) -> Vec<String> {
+    let mut names: Vec<String> = names.cloned().collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
+/// Why an eye, target and up vector make no view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BadView {
+    EyeAtTarget,
+    UpAlongView,
+}
+
+impl BadView {
+    fn check(eye: Vec3, target: Vec3, up: Vec3) -> Option<BadView> {
+        let forward = target - eye;
+        if forward.length() < 1e-6 {
+            Some(BadView::EyeAtTarget)
+        } else if forward.normalize().cross(up.normalize_or_zero()).length() < 1e-4 {
+            // The camera basis takes right = forward x up.
+            Some(BadView::UpAlongView)
+        } else {
+            None
+        }
+    }
+}
+
+impl fmt::Display for BadView {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BadView::EyeAtTarget => "the eye is at the target",
+            BadView::UpAlongView => "up is zero or parallel to the view direction",
+        })
+    }
+}

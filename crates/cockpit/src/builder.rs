@@ -1,0 +1,89 @@
+//! Assembles part meshes into a [`Scene`]: named objects, their materials
+//! and the material constructors the parts use.
+
+use glam::Vec3;
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
+
+use crate::mesh::Mesh;
+
+/// Collects objects into a scene.
+#[derive(Debug, Default)]
+pub(crate) struct SceneBuilder {
+    scene: Scene,
+}
+
+impl SceneBuilder {
+    /// Registers `material`, or finds the one already registered under its name.
+    pub(crate) fn material(&mut self, material: Material) -> MaterialId {
+        if let Some(id) = self.scene.material_id(&material.name) {
+            debug_assert_eq!(
+                self.scene.materials[id as usize], material,
+                "two materials named {}",
+                material.name
+            );
+            return id;
+        }
+        self.scene.materials.push(material);
+        (self.scene.materials.len() - 1) as MaterialId
+    }
+
+    /// Starts a new object; names must be unique.
+    pub(crate) fn object(&mut self, name: &str) -> ObjectId {
+        assert!(
+            self.scene.object_id(name).is_none(),
+            "object {name} added twice"
+        );
+        self.scene.objects.push(Object {
+            name: name.to_owned(),
+        });
+        (self.scene.objects.len() - 1) as ObjectId
+    }
+
+    /// Adds `mesh` to `object` with `material`.
+    pub(crate) fn push(&mut self, object: ObjectId, material: MaterialId, mesh: &Mesh) {
+        let base = self.scene.positions.len() as u32;
+        self.scene.positions.extend_from_slice(&mesh.positions);
+        self.scene.normals.extend_from_slice(&mesh.normals);
+        self.scene
+            .triangles
+            .extend(mesh.triangles.iter().map(|t| Triangle {
+                vertices: t.map(|v| v + base),
+                object,
+                material,
+            }));
+    }
+
+    /// Adds a whole object made of one mesh and one material.
+    pub(crate) fn add(&mut self, name: &str, material: Material, mesh: &Mesh) {
+        let material = self.material(material);
+        let object = self.object(name);
+        self.push(object, material, mesh);
+    }
+
+    pub(crate) fn finish(self) -> Scene {
+        self.scene
+    }
+}
+
+/// A plain diffuse material.
+pub(crate) fn matte(name: &str, color: Vec3) -> Material {
+    Material::diffuse(name, color)
+}
+
+/// A diffuse material with a Phong highlight (plastics, leather).
+pub(crate) fn glossy(name: &str, color: Vec3, specular: f32, shininess: f32) -> Material {
+    Material {
+        specular: Vec3::splat(specular),
+        shininess,
+        ..Material::diffuse(name, color)
+    }
+}
+
+/// A surface that only emits: windows' outside panels and lamps, unaffected
+/// by the lights.
+pub(crate) fn emitter(name: &str, emission: Vec3) -> Material {
+    Material {
+        emission,
+        ..Material::diffuse(name, Vec3::ZERO)
+    }
+}

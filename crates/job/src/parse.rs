@@ -1,0 +1,522 @@
+//! The TOML schema (serde structs mirroring the file) and its validation into
+//! a [`Job`]. Every table denies unknown keys so a misspelt key is an error,
+//! and checked values are wrapped in `Spanned` so an error can point at the
+//! line of the offending key.
+
+use std::fmt::Display;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use serde::Deserialize;
+use toml::Spanned;
+use vtfarm_cockpit::COVER_GLASS;
+use vtfarm_scene::{Light, LightKind};
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::{Quality, VertexSettings};
+
+use crate::{
+    BadView, CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
+    SceneSource, obj_camera_missing,
+};
+
+/// Names accepted by `scene.builtin`.
+const BUILTINS: [&str; 1] = ["cockpit"];
+/// Largest accepted image width or height.
+const MAX_IMAGE_SIZE: u32 = 16384;
+/// Deepest accepted Whitted recursion (deeper only risks the stack).
+const MAX_TRACE_DEPTH: u32 = 64;
+
+type Vec3Value = Spanned<[f32; 3]>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawJob {
+    scene: Option<Spanned<RawScene>>,
+    #[serde(default)]
+    camera: RawCamera,
+    #[serde(default)]
+    lighting: RawLighting,
+    reflectors: Option<Spanned<RawReflectors>>,
+    #[serde(default)]
+    quality: RawQuality,
+    #[serde(default)]
+    frames: RawFrames,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    builtin: Option<Spanned<String>>,
+    obj: Option<Spanned<PathBuf>>,
+    detail: Option<Spanned<f32>>,
+    glass_segments: Option<Spanned<u32>>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    eye: Option<Vec3Value>,
+    target: Option<Vec3Value>,
+    up: Option<Vec3Value>,
+    fov_y: Option<Spanned<f32>>,
+    width: Option<Spanned<u32>>,
+    height: Option<Spanned<u32>>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLighting {
+    ambient: Option<Vec3Value>,
+    background: Option<Vec3Value>,
+    lights: Option<Vec<RawLight>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLight {
+    kind: Spanned<RawLightKind>,
+    position: Option<Vec3Value>,
+    direction: Option<Vec3Value>,
+    color: Option<Vec3Value>,
+    intensity: Option<Spanned<f32>>,
+}
+
+#[derive(Clone, Copy, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum RawLightKind {
+    Point,
+    Directional,
+}
+
+impl RawLightKind {
+    fn name(self) -> &'static str {
+        match self {
+            RawLightKind::Point => "point",
+            RawLightKind::Directional => "directional",
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawReflectors {
+    #[serde(default)]
+    objects: Vec<String>,
+    #[serde(default)]
+    materials: Vec<String>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawQuality {
+    level: Option<Spanned<String>>,
+    epsilon: Option<Spanned<f32>>,
+    pixel_floor: Option<Spanned<f32>>,
+    flatness: Option<Spanned<f32>>,
+    max_refine_depth: Option<u32>,
+    max_trace_depth: Option<Spanned<u32>>,
+    fresnel: Option<bool>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFrames {
+    #[serde(default)]
+    eyes: Vec<Vec3Value>,
+}
+
+/// See [`crate::parse_job`].
+pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
+    let source = Source { file: origin, text };
+    let raw: RawJob = toml::from_str(text).map_err(|e| {
+        // toml's messages do not name the key; quoting the line does.
+        let line = e
+            .span()
+            .map_or("", |span| source.line_at(span.start).trim());
+        let message = e.message().trim_end();
+        source.error(
+            e.span(),
+            if line.is_empty() {
+                message.to_owned()
+            } else {
+                format!("{message}, in `{line}`")
+            },
+        )
+    })?;
+    let scene = source.scene(raw.scene)?;
+    let is_obj = matches!(scene, SceneSource::Obj(_));
+    let camera = source.camera(&raw.camera, is_obj)?;
+    let eyes = source.eyes(&raw.frames, &camera)?;
+    let lighting = source.lighting(&raw.lighting)?;
+    let reflectors = source.reflectors(raw.reflectors, is_obj)?;
+    let (trace, vertex) = source.quality(&raw.quality)?;
+    Ok(Job {
+        file: origin.to_owned(),
+        scene,
+        camera,
+        lighting,
+        reflectors,
+        trace,
+        vertex,
+        eyes,
+    })
+}
+
+/// The job file being validated, for turning spans into located errors.
+struct Source<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    fn error(&self, span: Option<Range<usize>>, message: impl Into<String>) -> JobError {
+        JobError::Invalid {
+            file: self.file.to_owned(),
+            location: span.map(|span| Location::of(self.text, span.start)),
+            message: message.into(),
+        }
+    }
+
+    /// The text of the line holding byte `offset`.
+    fn line_at(&self, offset: usize) -> &str {
+        let start = self
+            .text
+            .get(..offset)
+            .and_then(|t| t.rfind('\n'))
+            .map_or(0, |i| i + 1);
+        self.text[start..].lines().next().unwrap_or("")
+    }
+
+    fn error_at<T>(&self, value: &Spanned<T>, message: impl Into<String>) -> JobError {
+        self.error(Some(value.span()), message)
+    }
+
+    /// The value if `ok` accepts it, else "`key = value`: must be {rule}".
+    fn check<T: Copy + Display>(
+        &self,
+        key: &str,
+        value: &Spanned<T>,
+        rule: &str,
+        ok: impl FnOnce(T) -> bool,
+    ) -> Result<T, JobError> {
+        let v = *value.get_ref();
+        if ok(v) {
+            Ok(v)
+        } else {
+            Err(self.error_at(value, format!("{key} = {v}: must be {rule}")))
+        }
+    }
+
+    fn check_opt<T: Copy + Display>(
+        &self,
+        key: &str,
+        value: &Option<Spanned<T>>,
+        rule: &str,
+        ok: impl FnOnce(T) -> bool,
+    ) -> Result<Option<T>, JobError> {
+        value
+            .as_ref()
+            .map(|v| self.check(key, v, rule, ok))
+            .transpose()
+    }
+
+    /// A vector whose components satisfy `ok` (finite, at least).
+    fn vec3(
+        &self,
+        key: &str,
+        value: &Vec3Value,
+        rule: &str,
+        ok: fn(f32) -> bool,
+    ) -> Result<Vec3, JobError> {
+        let v = Vec3::from_array(*value.get_ref());
+        if v.to_array().into_iter().all(|c| c.is_finite() && ok(c)) {
+            Ok(v)
+        } else {
+            Err(self.error_at(value, format!("{key} = {v}: must be {rule}")))
+        }
+    }
+
+    fn point(&self, key: &str, value: &Option<Vec3Value>) -> Result<Option<Vec3>, JobError> {
+        value
+            .as_ref()
+            .map(|v| self.vec3(key, v, "finite", |_| true))
+            .transpose()
+    }
+
+    fn color(&self, key: &str, value: &Option<Vec3Value>) -> Result<Option<Vec3>, JobError> {
+        value
+            .as_ref()
+            .map(|v| self.vec3(key, v, "finite and not negative", |c| c >= 0.0))
+            .transpose()
+    }
+
+    fn scene(&self, raw: Option<Spanned<RawScene>>) -> Result<SceneSource, JobError> {
+        const WHICH: &str = "set either builtin = \"cockpit\" or obj = \"path/to/model.obj\"";
+        let Some(raw) = raw else {
+            return Err(self.error(None, format!("missing [scene]: {WHICH}")));
+        };
+        let span = raw.span();
+        let raw = raw.into_inner();
+        match (raw.builtin, raw.obj) {
+            (Some(_), Some(obj)) => Err(self.error_at(&obj, format!("[scene]: {WHICH}, not both"))),
+            (None, None) => Err(self.error(Some(span), format!("[scene]: {WHICH}"))),
+            (Some(name), None) => {
+                if !BUILTINS.contains(&name.get_ref().as_str()) {
+                    let message = format!(
+                        "unknown scene.builtin {:?}; valid: {}",
+                        name.get_ref(),
+                        BUILTINS.join(", ")
+                    );
+                    return Err(self.error_at(&name, message));
+                }
+                let default = CockpitConfig::default();
+                Ok(SceneSource::Cockpit(CockpitConfig {
+                    detail: self
+                        .check_opt("scene.detail", &raw.detail, "a positive number", |d| {
+                            d.is_finite() && d > 0.0
+                        })?
+                        .unwrap_or(default.detail),
+                    glass_segments: self
+                        .check_opt(
+                            "scene.glass_segments",
+                            &raw.glass_segments,
+                            "at least 1",
+                            |n| n >= 1,
+                        )?
+                        .unwrap_or(default.glass_segments),
+                }))
+            }
+            (None, Some(obj)) => {
+                let builtin_only = [
+                    ("detail", raw.detail.map(|v| v.span())),
+                    ("glass_segments", raw.glass_segments.map(|v| v.span())),
+                ];
+                if let Some((key, span)) = builtin_only.into_iter().find_map(|(k, s)| Some((k, s?)))
+                {
+                    return Err(self.error(
+                        Some(span),
+                        format!("scene.{key} applies to builtin scenes only, not to obj"),
+                    ));
+                }
+                // Relative to the job file, so a job and its model move together.
+                let dir = self.file.parent().unwrap_or(Path::new(""));
+                let path = dir.join(obj.get_ref());
+                if !path.is_file() {
+                    let message = format!(
+                        "scene.obj: no such file {} (a relative path is relative to the job file's directory)",
+                        path.display()
+                    );
+                    return Err(self.error_at(&obj, message));
+                }
+                Ok(SceneSource::Obj(path))
+            }
+        }
+    }
+
+    fn camera(&self, raw: &RawCamera, is_obj: bool) -> Result<CameraSpec, JobError> {
+        let size_rule = format!("1 to {MAX_IMAGE_SIZE}");
+        let size_ok = |n| (1..=MAX_IMAGE_SIZE).contains(&n);
+        let mut spec = CameraSpec {
+            eye: self.point("camera.eye", &raw.eye)?,
+            target: self.point("camera.target", &raw.target)?,
+            up: self.point("camera.up", &raw.up)?,
+            fov_y_deg: self.check_opt(
+                "camera.fov_y",
+                &raw.fov_y,
+                "between 0 and 180 degrees, exclusive",
+                |f| f > 0.0 && f < 180.0,
+            )?,
+            width: self.check_opt("camera.width", &raw.width, &size_rule, size_ok)?,
+            height: self.check_opt("camera.height", &raw.height, &size_rule, size_ok)?,
+        };
+        if is_obj {
+            spec.up.get_or_insert(Vec3::Y);
+            if let Err(missing) = spec.complete() {
+                return Err(self.error(None, obj_camera_missing(&missing)));
+            }
+        }
+        // Check the view here when it is fully known, to point at a line;
+        // otherwise `Job::frames` checks it against the cockpit's camera.
+        if let (Some(eye), Some(target), Some(up)) = (spec.eye, spec.target, spec.up) {
+            if let Some(bad) = BadView::check(eye, target, up) {
+                // Point at the key most likely wrong (up may be the OBJ default).
+                let blamed = match bad {
+                    BadView::EyeAtTarget => &raw.eye,
+                    BadView::UpAlongView if raw.up.is_some() => &raw.up,
+                    BadView::UpAlongView => &raw.target,
+                };
+                let message = format!("[camera]: {bad} (eye {eye}, target {target}, up {up})");
+                return Err(self.error(blamed.as_ref().map(Spanned::span), message));
+            }
+        }
+        Ok(spec)
+    }
+
+    fn eyes(&self, raw: &RawFrames, camera: &CameraSpec) -> Result<Vec<Vec3>, JobError> {
+        raw.eyes
+            .iter()
+            .enumerate()
+            .map(|(i, value)| {
+                let key = format!("frames.eyes[{i}]");
+                let eye = self.vec3(&key, value, "finite", |_| true)?;
+                if let (Some(target), Some(up)) = (camera.target, camera.up) {
+                    if let Some(bad) = BadView::check(eye, target, up) {
+                        return Err(self.error_at(
+                            value,
+                            format!("{key} = {eye}: {bad} (target {target}, up {up})"),
+                        ));
+                    }
+                }
+                Ok(eye)
+            })
+            .collect()
+    }
+
+    fn lighting(&self, raw: &RawLighting) -> Result<LightingSpec, JobError> {
+        Ok(LightingSpec {
+            lights: raw
+                .lights
+                .as_ref()
+                .map(|lights| {
+                    lights
+                        .iter()
+                        .enumerate()
+                        .map(|(i, l)| self.light(i, l))
+                        .collect()
+                })
+                .transpose()?,
+            ambient: self.color("lighting.ambient", &raw.ambient)?,
+            background: self.color("lighting.background", &raw.background)?,
+        })
+    }
+
+    fn light(&self, index: usize, raw: &RawLight) -> Result<Light, JobError> {
+        let key = |name: &str| format!("lighting.lights[{index}].{name}");
+        let kind = *raw.kind.get_ref();
+        let (needs, forbids, needed, forbidden) = match kind {
+            RawLightKind::Point => ("position", "direction", &raw.position, &raw.direction),
+            RawLightKind::Directional => ("direction", "position", &raw.direction, &raw.position),
+        };
+        let name = kind.name();
+        if let Some(value) = forbidden {
+            let message = format!(
+                "{}: a {name} light has a {needs}, not a {forbids}",
+                key(forbids)
+            );
+            return Err(self.error_at(value, message));
+        }
+        let Some(value) = needed else {
+            let message = format!("{}: a {name} light needs {needs} = [x, y, z]", key("kind"));
+            return Err(self.error_at(&raw.kind, message));
+        };
+        let v = self.vec3(&key(needs), value, "finite", |_| true)?;
+        let kind = match kind {
+            RawLightKind::Point => LightKind::Point { position: v },
+            RawLightKind::Directional if v == Vec3::ZERO => {
+                return Err(self.error_at(value, format!("{} = {v}: must not be zero", key(needs))));
+            }
+            RawLightKind::Directional => LightKind::Directional { direction: v },
+        };
+        Ok(Light {
+            kind,
+            color: self.color(&key("color"), &raw.color)?.unwrap_or(Vec3::ONE),
+            intensity: self
+                .check_opt(
+                    &key("intensity"),
+                    &raw.intensity,
+                    "finite and not negative",
+                    |i| i.is_finite() && i >= 0.0,
+                )?
+                .unwrap_or(1.0),
+        })
+    }
+
+    fn reflectors(
+        &self,
+        raw: Option<Spanned<RawReflectors>>,
+        is_obj: bool,
+    ) -> Result<Vec<ReflectorSelector>, JobError> {
+        let Some(raw) = raw else {
+            return if is_obj {
+                Err(self.error(
+                    None,
+                    "an OBJ scene needs [reflectors] with objects = [...] or materials = [...]",
+                ))
+            } else {
+                Ok(vec![ReflectorSelector::Object(COVER_GLASS.to_owned())])
+            };
+        };
+        let span = raw.span();
+        let raw = raw.into_inner();
+        let selectors: Vec<ReflectorSelector> =
+            (raw.objects.into_iter().map(ReflectorSelector::Object))
+                .chain(raw.materials.into_iter().map(ReflectorSelector::Material))
+                .collect();
+        if selectors.is_empty() {
+            return Err(self.error(
+                Some(span),
+                "[reflectors] selects nothing: list objects = [...] or materials = [...]",
+            ));
+        }
+        Ok(selectors)
+    }
+
+    fn quality(&self, raw: &RawQuality) -> Result<(TraceSettings, VertexSettings), JobError> {
+        let non_negative = |x: f32| x.is_finite() && x >= 0.0;
+        let mut trace = TraceSettings::default();
+        let mut vertex = VertexSettings::default();
+        if let Some(level) = &raw.level {
+            vertex.quality = Quality::from_name(level.get_ref()).ok_or_else(|| {
+                let valid: Vec<&str> = Quality::ALL.iter().map(|q| q.name()).collect();
+                self.error_at(
+                    level,
+                    format!(
+                        "unknown quality.level {:?}; valid: {}",
+                        level.get_ref(),
+                        valid.join(", ")
+                    ),
+                )
+            })?;
+        }
+        if let Some(epsilon) = self.check_opt(
+            "quality.epsilon",
+            &raw.epsilon,
+            "finite and not negative",
+            non_negative,
+        )? {
+            // The file speaks 8-bit steps; the vertex tracer compares colours in 0..1.
+            vertex.epsilon = epsilon / 255.0;
+        }
+        if let Some(floor) = self.check_opt(
+            "quality.pixel_floor",
+            &raw.pixel_floor,
+            "finite and not negative",
+            non_negative,
+        )? {
+            vertex.pixel_floor = floor;
+        }
+        if let Some(flatness) =
+            self.check_opt("quality.flatness", &raw.flatness, "between 0 and 1", |v| {
+                (0.0..=1.0).contains(&v)
+            })?
+        {
+            vertex.flatness = flatness;
+        }
+        if let Some(depth) = raw.max_refine_depth {
+            vertex.max_depth = depth;
+        }
+        if let Some(depth) = self.check_opt(
+            "quality.max_trace_depth",
+            &raw.max_trace_depth,
+            &format!("1 to {MAX_TRACE_DEPTH}"),
+            |d| (1..=MAX_TRACE_DEPTH).contains(&d),
+        )? {
+            trace.max_depth = depth;
+        }
+        if let Some(fresnel) = raw.fresnel {
+            trace.fresnel = fresnel;
+        }
+        Ok((trace, vertex))
+    }
+}

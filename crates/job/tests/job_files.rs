@@ -1,0 +1,685 @@
+//! Job files through the public API: every key, the defaults, every rejected
+//! input (each error must name the file and the offending line), relative OBJ
+//! paths and reflector selection.
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use vtfarm_job::{
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, ReflectorSelector, SceneSource,
+    load_job, parse_job,
+};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::{Quality, VertexSettings};
+
+const JOB: &str = "jobs/test.toml";
+
+fn parse(text: &str) -> Job {
+    parse_job(text, Path::new(JOB)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn error(text: &str, origin: &Path) -> String {
+    match parse_job(text, origin) {
+        Ok(job) => panic!("accepted:\n{text}\n{job:?}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// Asserts that `text` is rejected with a message that starts with the job
+/// file's `path:line:` and contains every one of `needles`.
+fn assert_rejected(text: &str, line: usize, needles: &[&str]) {
+    let message = error(text, Path::new(JOB));
+    assert!(
+        message.starts_with(&format!("{JOB}:{line}:")),
+        "wrong place: {message}"
+    );
+    for needle in needles {
+        assert!(
+            message.contains(needle),
+            "{needle:?} missing from: {message}"
+        );
+    }
+}
+
+const COCKPIT: &str = "[scene]\nbuiltin = \"cockpit\"\n";
+
+/// A directory holding `models/cab.obj` (one triangle) and the path a job
+/// file in its `jobs/` subdirectory would have.
+fn obj_fixture() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("models")).unwrap();
+    std::fs::create_dir_all(dir.path().join("jobs")).unwrap();
+    std::fs::write(
+        dir.path().join("models/cab.obj"),
+        "o glass\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let job = dir.path().join("jobs/cab.toml");
+    (dir, job)
+}
+
+const OBJ_JOB: &str = r#"
+[scene]
+obj = "../models/cab.obj"
+[camera]
+eye = [0, 0, 2]
+target = [0, 0, 0]
+fov_y = 40
+width = 64
+height = 48
+[reflectors]
+objects = ["glass"]
+"#;
+
+#[test]
+fn every_key_is_read() {
+    let job = parse(
+        r#"
+[scene]
+builtin = "cockpit"
+detail = 2.1
+glass_segments = 7
+
+[camera]
+eye = [1, 2, 3]
+target = [0.5, 1.5, -1]
+up = [0, 0, 1]
+fov_y = 35.5
+width = 320
+height = 200
+
+[lighting]
+ambient = [0.08, 0.09, 0.1]
+background = [0.3, 0.35, 0.45]
+[[lighting.lights]]
+kind = "point"
+position = [0, 2, 0]
+color = [1, 0.5, 0.25]
+intensity = 3.0
+[[lighting.lights]]
+kind = "directional"
+direction = [0, -1, -1]
+
+[reflectors]
+objects = ["cover_glass", "mirror"]
+materials = ["glass"]
+
+[quality]
+level = "reference"
+epsilon = 5.1
+pixel_floor = 1.5
+flatness = 0.3
+max_refine_depth = 9
+max_trace_depth = 3
+fresnel = true
+
+[frames]
+eyes = [[1, 2, 4], [2, 2, 3]]
+"#,
+    );
+    let expected = Job {
+        file: PathBuf::from(JOB),
+        scene: SceneSource::Cockpit(CockpitConfig {
+            detail: 2.1,
+            glass_segments: 7,
+        }),
+        camera: CameraSpec {
+            eye: Some(Vec3::new(1.0, 2.0, 3.0)),
+            target: Some(Vec3::new(0.5, 1.5, -1.0)),
+            up: Some(Vec3::Z),
+            fov_y_deg: Some(35.5),
+            width: Some(320),
+            height: Some(200),
+        },
+        lighting: LightingSpec {
+            lights: Some(vec![
+                Light {
+                    kind: LightKind::Point {
+                        position: Vec3::new(0.0, 2.0, 0.0),
+                    },
+                    color: Vec3::new(1.0, 0.5, 0.25),
+                    intensity: 3.0,
+                },
+                Light {
+                    kind: LightKind::Directional {
+                        direction: Vec3::new(0.0, -1.0, -1.0),
+                    },
+                    color: Vec3::ONE,
+                    intensity: 1.0,
+                },
+            ]),
+            ambient: Some(Vec3::new(0.08, 0.09, 0.1)),
+            background: Some(Vec3::new(0.3, 0.35, 0.45)),
+        },
+        reflectors: vec![
+            ReflectorSelector::Object("cover_glass".into()),
+            ReflectorSelector::Object("mirror".into()),
+            ReflectorSelector::Material("glass".into()),
+        ],
+        trace: TraceSettings {
+            max_depth: 3,
+            fresnel: true,
+        },
+        vertex: VertexSettings {
+            quality: Quality::Reference,
+            epsilon: 5.1 / 255.0,
+            pixel_floor: 1.5,
+            flatness: 0.3,
+            max_depth: 9,
+            ..VertexSettings::default()
+        },
+        eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
+    };
+    assert_eq!(job, expected);
+}
+
+#[test]
+fn a_bare_cockpit_job_takes_every_default() {
+    let job = parse(COCKPIT);
+    assert_eq!(job.scene, SceneSource::Cockpit(CockpitConfig::default()));
+    assert_eq!(job.camera, CameraSpec::default());
+    assert_eq!(job.lighting, LightingSpec::default());
+    assert_eq!(
+        job.reflectors,
+        [ReflectorSelector::Object(
+            vtfarm_cockpit::COVER_GLASS.into()
+        )]
+    );
+    assert_eq!(job.trace, TraceSettings::default());
+    assert_eq!(job.vertex, VertexSettings::default());
+    assert!(job.eyes.is_empty());
+}
+
+#[test]
+fn the_shipped_cockpit_job_parses() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/cockpit.toml");
+    let job = load_job(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(job.scene, SceneSource::Cockpit(CockpitConfig::default()));
+    // The cockpit's own view, at 720p.
+    assert_eq!(
+        job.camera,
+        CameraSpec {
+            width: Some(1280),
+            height: Some(720),
+            ..CameraSpec::default()
+        }
+    );
+    assert_eq!(job.lighting, LightingSpec::default());
+    assert_eq!(
+        job.reflectors,
+        [ReflectorSelector::Object(
+            vtfarm_cockpit::COVER_GLASS.into()
+        )]
+    );
+    assert_eq!(
+        job.vertex,
+        VertexSettings {
+            quality: Quality::Full,
+            ..VertexSettings::default()
+        }
+    );
+    assert_eq!(job.trace, TraceSettings::default());
+    assert!(job.eyes.is_empty());
+}
+
+#[test]
+fn an_obj_path_is_relative_to_the_job_file() {
+    let (dir, job_path) = obj_fixture();
+    std::fs::write(&job_path, OBJ_JOB).unwrap();
+    let job = load_job(&job_path).unwrap_or_else(|e| panic!("{e}"));
+    let SceneSource::Obj(obj) = &job.scene else {
+        panic!("{:?}", job.scene)
+    };
+    assert_eq!(
+        obj.canonicalize().unwrap(),
+        dir.path().join("models/cab.obj").canonicalize().unwrap()
+    );
+    // OBJ files carry no camera: up defaults to +Y, the rest was required.
+    assert_eq!(job.camera.up, Some(Vec3::Y));
+}
+
+#[test]
+fn an_obj_job_loads_with_its_camera_frames_and_default_lighting() {
+    let (_dir, job_path) = obj_fixture();
+    let text = format!("{OBJ_JOB}[frames]\neyes = [[1, 0, 2]]\n");
+    std::fs::write(&job_path, text).unwrap();
+    let job = load_job(&job_path).unwrap();
+    let loaded = job.load_scene().unwrap_or_else(|e| panic!("{e}"));
+    let camera = Camera {
+        eye: Vec3::new(0.0, 0.0, 2.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 40.0,
+        width: 64,
+        height: 48,
+    };
+    assert_eq!(loaded.camera, camera);
+    assert_eq!(
+        loaded.frames,
+        [
+            camera,
+            Camera {
+                eye: Vec3::new(1.0, 0.0, 2.0),
+                ..camera
+            }
+        ]
+    );
+    assert_eq!(loaded.lighting, Lighting::default());
+    assert_eq!(job.reflector_triangles(&loaded.scene).unwrap(), [0]);
+}
+
+#[test]
+fn a_missing_obj_file_names_the_resolved_path_and_the_job_file() {
+    let (dir, job_path) = obj_fixture();
+    let message = error(&OBJ_JOB.replace("cab.obj", "cabin.obj"), &job_path);
+    assert!(
+        message.starts_with(&format!("{}:3:", job_path.display())),
+        "{message}"
+    );
+    let resolved = dir.path().join("jobs").join("../models/cabin.obj");
+    assert!(
+        message.contains(&resolved.display().to_string()),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_missing_job_file_is_named() {
+    let message = load_job(Path::new("no/such/job.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.starts_with("no/such/job.toml: cannot read job file"),
+        "{message}"
+    );
+}
+
+#[test]
+fn malformed_toml_is_located() {
+    assert_rejected("[scene\nbuiltin = \"cockpit\"\n", 1, &[]);
+    assert_rejected("[scene]\nbuiltin = \"cockpit\"\ndetail = = 2\n", 3, &[]);
+}
+
+#[test]
+fn unknown_keys_and_sections_are_named() {
+    assert_rejected(
+        &format!("{COCKPIT}[camera]\nwidht = 640\n"),
+        4,
+        &["widht", "width"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[qualty]\nlevel = \"full\"\n"),
+        3,
+        &["qualty"],
+    );
+    assert_rejected(
+        &format!(
+            "{COCKPIT}[[lighting.lights]]\nkind = \"point\"\nposition = [0, 1, 0]\nradius = 1\n"
+        ),
+        6,
+        &["radius"],
+    );
+}
+
+#[test]
+fn wrong_types_are_located() {
+    assert_rejected(
+        &format!("{COCKPIT}[camera]\nwidth = \"640\"\n"),
+        4,
+        &["string"],
+    );
+    assert_rejected(&format!("{COCKPIT}[camera]\neye = [0, 1]\n"), 4, &["3"]);
+    assert_rejected(&format!("{COCKPIT}[quality]\nfresnel = 1\n"), 4, &["bool"]);
+    assert_rejected(&format!("{COCKPIT}[camera]\nheight = -1\n"), 4, &["-1"]);
+}
+
+#[test]
+fn camera_values_out_of_range_are_located() {
+    for (key, value, needle) in [
+        ("width", "0", "camera.width = 0"),
+        ("height", "16385", "camera.height = 16385"),
+        ("fov_y", "0", "camera.fov_y = 0"),
+        ("fov_y", "180", "camera.fov_y = 180"),
+        ("eye", "[0, nan, 0]", "camera.eye"),
+    ] {
+        assert_rejected(
+            &format!("{COCKPIT}[camera]\nup = [0, 1, 0]\n{key} = {value}\n"),
+            5,
+            &[needle],
+        );
+    }
+}
+
+#[test]
+fn degenerate_views_are_located() {
+    assert_rejected(
+        &format!("{COCKPIT}[camera]\ntarget = [1, 1, 1]\neye = [1, 1, 1]\nup = [0, 1, 0]\n"),
+        5,
+        &["eye is at the target"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[camera]\neye = [0, 0, 0]\ntarget = [0, 2, 0]\nup = [0, 1, 0]\n"),
+        6,
+        &["parallel"],
+    );
+    assert_rejected(
+        &format!(
+            "{COCKPIT}[camera]\neye = [0, 0, 1]\ntarget = [0, 0, 0]\nup = [0, 1, 0]\n[frames]\neyes = [\n  [1, 0, 0],\n  [0, 0, 0],\n]\n"
+        ),
+        10,
+        &["frames.eyes[1]", "eye is at the target"],
+    );
+}
+
+#[test]
+fn the_scene_needs_exactly_one_known_source() {
+    assert_rejected(
+        "[scene]\nbuiltin = \"cockpit\"\nobj = \"cab.obj\"\n",
+        3,
+        &["not both"],
+    );
+    assert_rejected(
+        "[camera]\nwidth = 8\n[scene]\ndetail = 2.0\n",
+        3,
+        &["builtin", "obj"],
+    );
+    assert_rejected(
+        "[scene]\nbuiltin = \"truck\"\n",
+        2,
+        &["\"truck\"", "valid: cockpit"],
+    );
+    assert_rejected(&format!("{COCKPIT}detail = 0\n"), 3, &["scene.detail = 0"]);
+    assert_rejected(
+        &format!("{COCKPIT}glass_segments = 0\n"),
+        3,
+        &["scene.glass_segments = 0"],
+    );
+    let message = error("[camera]\nwidth = 8\n", Path::new(JOB));
+    assert!(
+        message.starts_with(&format!("{JOB}: missing [scene]")),
+        "{message}"
+    );
+}
+
+#[test]
+fn cockpit_only_keys_are_rejected_for_obj_scenes() {
+    let (_dir, job_path) = obj_fixture();
+    let message = error(
+        &OBJ_JOB.replace("[camera]", "detail = 2.0\n[camera]"),
+        &job_path,
+    );
+    assert!(
+        message.starts_with(&format!("{}:4:", job_path.display())),
+        "{message}"
+    );
+    assert!(message.contains("scene.detail"), "{message}");
+}
+
+#[test]
+fn obj_scenes_need_a_camera_and_reflectors() {
+    let (_dir, job_path) = obj_fixture();
+    let message = error(
+        &OBJ_JOB
+            .replace("fov_y = 40\n", "")
+            .replace("height = 48\n", ""),
+        &job_path,
+    );
+    assert!(
+        message.starts_with(&format!(
+            "{}: [camera] needs fov_y, height",
+            job_path.display()
+        )),
+        "{message}"
+    );
+    let message = error(
+        &OBJ_JOB.replace("[reflectors]\nobjects = [\"glass\"]\n", ""),
+        &job_path,
+    );
+    assert!(
+        message.starts_with(&format!(
+            "{}: an OBJ scene needs [reflectors]",
+            job_path.display()
+        )),
+        "{message}"
+    );
+}
+
+#[test]
+fn lighting_values_are_checked() {
+    let light = |body: &str| format!("{COCKPIT}[[lighting.lights]]\n{body}");
+    assert_rejected(
+        &light("kind = \"point\"\nposition = [0, 1, 0]\nintensity = -1\n"),
+        6,
+        &["intensity = -1"],
+    );
+    assert_rejected(
+        &light("kind = \"spot\"\n"),
+        4,
+        &["spot", "point", "directional"],
+    );
+    assert_rejected(&light("kind = \"point\"\n"), 4, &["needs position"]);
+    assert_rejected(
+        &light("kind = \"point\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\n"),
+        6,
+        &["not a direction"],
+    );
+    assert_rejected(
+        &light("kind = \"directional\"\ndirection = [0, 0, 0]\n"),
+        5,
+        &["must not be zero"],
+    );
+    assert_rejected(
+        &light("kind = \"point\"\nposition = [0, 1, 0]\ncolor = [1, -0.5, 1]\n"),
+        6,
+        &["color"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[lighting]\nambient = [-0.1, 0, 0]\n"),
+        4,
+        &["lighting.ambient"],
+    );
+}
+
+#[test]
+fn quality_values_are_checked() {
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nlevel = \"ultra\"\n"),
+        4,
+        &["\"ultra\"", "preview, refine, full, reference"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nepsilon = -2\n"),
+        4,
+        &["quality.epsilon = -2"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nflatness = 1.5\n"),
+        4,
+        &["quality.flatness"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nmax_trace_depth = 0\n"),
+        4,
+        &["quality.max_trace_depth = 0"],
+    );
+}
+
+#[test]
+fn an_empty_reflector_list_is_rejected() {
+    assert_rejected(
+        &format!("{COCKPIT}[reflectors]\nobjects = []\n"),
+        3,
+        &["selects nothing"],
+    );
+}
+
+/// Four triangles over two objects and two materials:
+/// 0 glass/paint, 1 dash/mirror, 2 glass/mirror, 3 dash/paint.
+fn two_by_two_scene() -> Scene {
+    let corners = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    let triangle = |i: u32, object, material| Triangle {
+        vertices: [3 * i, 3 * i + 1, 3 * i + 2],
+        object,
+        material,
+    };
+    Scene {
+        positions: (0..4).flat_map(|_| corners).collect(),
+        normals: vec![Vec3::Z; 12],
+        triangles: vec![
+            triangle(0, 0, 1),
+            triangle(1, 1, 0),
+            triangle(2, 0, 0),
+            triangle(3, 1, 1),
+        ],
+        objects: vec![
+            Object {
+                name: "glass".into(),
+            },
+            Object {
+                name: "dash".into(),
+            },
+        ],
+        materials: vec![
+            Material::diffuse("mirror", Vec3::ONE),
+            Material::diffuse("paint", Vec3::ONE),
+        ],
+    }
+}
+
+fn with_reflectors(reflectors: Vec<ReflectorSelector>) -> Job {
+    Job {
+        reflectors,
+        ..parse(COCKPIT)
+    }
+}
+
+#[test]
+fn reflectors_select_by_object_and_by_material() {
+    use ReflectorSelector::{Material, Object};
+    let scene = two_by_two_scene();
+    scene.validate().unwrap();
+    let select = |selectors| {
+        with_reflectors(selectors)
+            .reflector_triangles(&scene)
+            .unwrap()
+    };
+    assert_eq!(select(vec![Object("glass".into())]), [0, 2]);
+    assert_eq!(select(vec![Material("mirror".into())]), [1, 2]);
+    // Sorted and without repeats however the selectors overlap.
+    assert_eq!(
+        select(vec![Material("mirror".into()), Object("glass".into())]),
+        [0, 1, 2]
+    );
+}
+
+#[test]
+fn a_reflector_matching_nothing_lists_the_names() {
+    let scene = two_by_two_scene();
+    let job = with_reflectors(vec![ReflectorSelector::Object("cover_glass".into())]);
+    let err = job.reflector_triangles(&scene).unwrap_err();
+    assert!(matches!(err, JobError::NoReflector { .. }));
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "{JOB}: reflector object \"cover_glass\" matches no triangle \
+             (objects: dash, glass; materials: mirror, paint)"
+        )
+    );
+}
+
+#[test]
+fn frames_put_the_camera_first_and_check_each_eye() {
+    let camera = Camera {
+        eye: Vec3::new(0.0, 1.0, 1.0),
+        target: Vec3::new(0.0, 1.0, 0.0),
+        up: Vec3::Y,
+        fov_y_deg: 50.0,
+        width: 16,
+        height: 9,
+    };
+    // The eyes can only be checked at load time when the target is the cockpit's.
+    let job = Job {
+        eyes: vec![Vec3::new(1.0, 1.0, 1.0), camera.target],
+        ..parse(COCKPIT)
+    };
+    let message = job.frames(&camera).unwrap_err().to_string();
+    assert!(
+        message.starts_with(&format!("{JOB}: frames.eyes[1]")),
+        "{message}"
+    );
+    let job = Job {
+        eyes: vec![Vec3::new(1.0, 1.0, 1.0)],
+        ..job
+    };
+    let frames = job.frames(&camera).unwrap();
+    assert_eq!(
+        frames,
+        [
+            camera,
+            Camera {
+                eye: Vec3::new(1.0, 1.0, 1.0),
+                ..camera
+            }
+        ]
+    );
+}
+
+#[test]
+fn specs_override_only_the_given_keys() {
+    let base = Camera {
+        eye: Vec3::ONE,
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 50.0,
+        width: 8,
+        height: 6,
+    };
+    let spec = CameraSpec {
+        fov_y_deg: Some(30.0),
+        width: Some(640),
+        ..CameraSpec::default()
+    };
+    assert_eq!(
+        spec.over(&base),
+        Camera {
+            fov_y_deg: 30.0,
+            width: 640,
+            ..base
+        }
+    );
+    assert_eq!(spec.complete(), Err(vec!["eye", "target", "up", "height"]));
+    let lighting = Lighting {
+        lights: Vec::new(),
+        ambient: Vec3::splat(0.2),
+        background: Vec3::X,
+    };
+    let spec = LightingSpec {
+        background: Some(Vec3::Z),
+        ..LightingSpec::default()
+    };
+    assert_eq!(
+        spec.over(lighting.clone()),
+        Lighting {
+            background: Vec3::Z,
+            ..lighting
+        }
+    );
+}
+
+#[test]
+fn a_broken_obj_file_is_reported_with_the_job_file() {
+    let (dir, job_path) = obj_fixture();
+    std::fs::write(&job_path, OBJ_JOB).unwrap();
+    let job = load_job(&job_path).unwrap();
+    std::fs::write(dir.path().join("models/cab.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    let message = job.load_scene().unwrap_err().to_string();
+    assert!(
+        message.starts_with(&format!(
+            "{}: cannot load the OBJ scene: ",
+            job_path.display()
+        )),
+        "{message}"
+    );
+    assert!(message.contains("cab.obj"), "{message}");
+}
