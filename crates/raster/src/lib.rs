@@ -6,8 +6,24 @@
 //! Architecture invariant: deterministic; the same scene and camera give the
 //! same ID buffer bit for bit on any machine and thread count (workers rebuild
 //! it locally instead of receiving it).
+//!
+//! The pipeline has three stages:
+//! 1. `setup`: project every vertex once, clip triangles that cross the near
+//!    plane (or reach far outside the image) in view space, and snap corners to
+//!    a fixed-point sub-pixel grid (`triangle`).
+//! 2. `bands`: bin triangles into horizontal bands and scan-convert each band
+//!    on its own rayon task with exact integer edge functions, the top-left
+//!    fill rule and a (depth, triangle id) z-test.
+//! 3. `shade`: deferred Phong shading, once per visible pixel.
 
-use vtfarm_scene::{NONE, ObjectId, TriangleId};
+mod bands;
+mod setup;
+mod shade;
+mod triangle;
+
+use rayon::prelude::*;
+use vtfarm_imaging::Image;
+use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
 
 /// Per-pixel visibility: which object and triangle is seen, and at what view
 /// depth. `NONE` where nothing is.
@@ -25,11 +41,59 @@ impl IdBuffer {
     /// An empty buffer.
     pub fn new(width: u32, height: u32) -> Self {
         let n = (width * height) as usize;
-        IdBuffer { width, height, object: vec![NONE; n], triangle: vec![NONE; n], depth: vec![f32::INFINITY; n] }
+        IdBuffer {
+            width,
+            height,
+            object: vec![NONE; n],
+            triangle: vec![NONE; n],
+            depth: vec![f32::INFINITY; n],
+        }
     }
 
     /// The index of pixel (`x`, `y`).
     pub fn index(&self, x: u32, y: u32) -> usize {
         (y * self.width + x) as usize
     }
+}
+
+/// The largest supported image width or height: keeps the fixed-point edge
+/// functions exact in 64-bit integers.
+const MAX_DIMENSION: u32 = 1 << 20;
+
+/// Rasterizes the whole scene: the shaded base frame (linear RGB) and the ID buffer.
+///
+/// # Panics
+/// If the camera's width or height exceeds 2^20 pixels, or the scene
+/// indexes missing vertices, objects or materials.
+pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image, IdBuffer) {
+    let ids = id_buffer(scene, camera);
+    let image = shade::shade(scene, camera, lighting, &ids);
+    (image, ids)
+}
+
+/// Only the ID buffer (workers rebuild it locally; must equal the one from `rasterize` bit for bit).
+///
+/// # Panics
+/// As [`rasterize`].
+pub fn id_buffer(scene: &Scene, camera: &Camera) -> IdBuffer {
+    assert!(
+        camera.width <= MAX_DIMENSION && camera.height <= MAX_DIMENSION,
+        "image {}x{} exceeds the rasterizer's limit of {MAX_DIMENSION} pixels per side",
+        camera.width,
+        camera.height
+    );
+    let triangles = setup::setup(scene, camera);
+    let mut ids = IdBuffer::new(camera.width, camera.height);
+    bands::resolve_visibility(&triangles, &mut ids);
+    let IdBuffer {
+        object, triangle, ..
+    } = &mut ids;
+    object
+        .par_iter_mut()
+        .zip(triangle.par_iter())
+        .filter(|(_, t)| **t != NONE)
+        .for_each(|(o, &t)| {
+            *o = scene.triangles[t as usize].object;
+        });
+    ids
 }

@@ -1,0 +1,85 @@
+//! Visibility. Triangles are binned by the horizontal bands of rows their
+//! bounding boxes overlap; each band is one rayon task that scan-converts its
+//! triangles into its own slice of the z-buffer. A band's result depends only
+//! on its rows and its triangle list (in triangle order), and the z-test is
+//! a total order on (depth, triangle id), so the output is the same for any
+//! thread count and any scheduling.
+
+use rayon::prelude::*;
+
+use crate::IdBuffer;
+use crate::triangle::RasterTriangle;
+
+/// Rows per band: small enough for load balancing and a cache-resident
+/// z-buffer slice, large enough that big triangles are not set up too often.
+const BAND_ROWS: u32 = 16;
+
+/// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel.
+pub(crate) fn resolve_visibility(triangles: &[RasterTriangle], ids: &mut IdBuffer) {
+    let width = ids.width as usize;
+    if width == 0 || ids.height == 0 {
+        return;
+    }
+    let bins = Bins::new(triangles, ids.height);
+    let band_len = width * BAND_ROWS as usize;
+    let depth = ids.depth.par_chunks_mut(band_len);
+    let triangle = ids.triangle.par_chunks_mut(band_len);
+    depth
+        .zip(triangle)
+        .enumerate()
+        .for_each(|(band, (depth, triangle))| {
+            let first_row = band as u32 * BAND_ROWS;
+            let last_row = first_row + (depth.len() / width) as u32 - 1;
+            for &t in bins.band(band) {
+                let t = &triangles[t as usize];
+                for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
+                    let Some((x0, x1)) = t.span(y) else { continue };
+                    let row = (y - first_row) as usize * width;
+                    for x in x0..=x1 {
+                        let i = row + x as usize;
+                        let d = t.depth_at(x, y);
+                        // Nearer wins; an exact tie goes to the lower triangle id.
+                        if d < depth[i] || (d == depth[i] && t.id < triangle[i]) {
+                            depth[i] = d;
+                            triangle[i] = t.id;
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// Triangle indices per band, in triangle order (a counting sort).
+struct Bins {
+    /// Band `b` owns `entries[offsets[b]..offsets[b + 1]]`.
+    offsets: Vec<usize>,
+    entries: Vec<u32>,
+}
+
+impl Bins {
+    fn new(triangles: &[RasterTriangle], height: u32) -> Self {
+        let bands = height.div_ceil(BAND_ROWS) as usize;
+        let overlapped =
+            |t: &RasterTriangle| (t.rows.0 / BAND_ROWS) as usize..=(t.rows.1 / BAND_ROWS) as usize;
+        let mut offsets = vec![0; bands + 1];
+        for t in triangles {
+            overlapped(t).for_each(|b| offsets[b + 1] += 1);
+        }
+        for b in 0..bands {
+            offsets[b + 1] += offsets[b];
+        }
+        let mut next = offsets.clone();
+        let mut entries = vec![0; offsets[bands]];
+        for (i, t) in triangles.iter().enumerate() {
+            for b in overlapped(t) {
+                entries[next[b]] = i as u32;
+                next[b] += 1;
+            }
+        }
+        Bins { offsets, entries }
+    }
+
+    fn band(&self, band: usize) -> &[u32] {
+        &self.entries[self.offsets[band]..self.offsets[band + 1]]
+    }
+}

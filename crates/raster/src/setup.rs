@@ -1,0 +1,315 @@
+//! Triangle setup. Every vertex is projected once with the shared
+//! [`Projector`], so triangles sharing a vertex get the very same screen
+//! point. Triangles fully in front of the eye and near the image go straight
+//! to scan conversion; the rest are clipped in view space (in `f64`) against
+//! the near plane and a guard band around the image, which bounds snapped
+//! coordinates so the integer edge functions cannot overflow.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use vtfarm_scene::{Camera, NEAR, Projector, Scene, Triangle, TriangleId};
+
+use crate::triangle::{RasterTriangle, ScreenVertex};
+
+/// How far beyond the image (in pixels) a corner may project before its
+/// triangle is clipped against the guard band.
+const GUARD: f64 = 16384.0;
+
+// Clip planes as bits of a vertex's outside mask, in clipping order: the
+// near plane first, so the guard planes only ever see points in front of the eye.
+const NEAR_PLANE: u8 = 1;
+const LEFT: u8 = 2;
+const RIGHT: u8 = 4;
+const TOP: u8 = 8;
+const BOTTOM: u8 = 16;
+const PLANES: [u8; 5] = [NEAR_PLANE, LEFT, RIGHT, TOP, BOTTOM];
+/// A non-finite vertex: its triangles are dropped.
+const INVALID: u8 = 128;
+
+/// Clipping a triangle by five planes leaves at most 3 + 5 corners; the
+/// slack absorbs rounding that makes a polygon look slightly non-convex.
+const MAX_CORNERS: usize = 12;
+
+/// A polygon corner during clipping.
+#[derive(Clone, Copy, Debug, Default)]
+struct ClipVertex {
+    /// View-space position: (right, up, forward) relative to the eye.
+    view: DVec3,
+    /// Where it projects; meaningless when outside the near plane.
+    screen: ScreenVertex,
+    /// The planes it lies outside of.
+    outside: u8,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Polygon {
+    corners: [ClipVertex; MAX_CORNERS],
+    len: usize,
+}
+
+impl Polygon {
+    fn push(&mut self, v: ClipVertex) {
+        // Only a degenerate, numerically non-convex polygon could overflow;
+        // dropping a corner then merely changes a sliver.
+        if self.len < MAX_CORNERS {
+            self.corners[self.len] = v;
+            self.len += 1;
+        }
+    }
+
+    fn corners(&self) -> &[ClipVertex] {
+        &self.corners[..self.len]
+    }
+}
+
+/// The camera frame in the two forms setup needs: the shared `f32`
+/// projector for vertices and an `f64` view transform for clipping.
+struct View {
+    projector: Projector,
+    eye: DVec3,
+    right: DVec3,
+    up: DVec3,
+    forward: DVec3,
+    inv_pixel: f64,
+    half_width: f64,
+    half_height: f64,
+    width: u32,
+    height: u32,
+}
+
+/// Projects, clips and snaps all triangles of `scene`, in triangle order.
+pub(crate) fn setup(scene: &Scene, camera: &Camera) -> Vec<RasterTriangle> {
+    let view = View::new(camera);
+    let vertices: Vec<ClipVertex> = scene
+        .positions
+        .par_iter()
+        .map(|&p| view.vertex(p))
+        .collect();
+    scene
+        .triangles
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(id, t)| view.triangle(&vertices, id as TriangleId, t))
+        .collect()
+}
+
+impl View {
+    fn new(camera: &Camera) -> Self {
+        let (forward, right, up) = camera.basis();
+        View {
+            projector: Projector::new(camera),
+            eye: camera.eye.as_dvec3(),
+            right: right.as_dvec3(),
+            up: up.as_dvec3(),
+            forward: forward.as_dvec3(),
+            inv_pixel: 1.0 / f64::from(camera.pixel_size_at_unit_depth()),
+            half_width: f64::from(camera.width) * 0.5,
+            half_height: f64::from(camera.height) * 0.5,
+            width: camera.width,
+            height: camera.height,
+        }
+    }
+
+    /// The guard planes a projected point lies outside of.
+    fn guard_outside(&self, x: f64, y: f64) -> u8 {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        [
+            (x < -GUARD, LEFT),
+            (x > w + GUARD, RIGHT),
+            (y < -GUARD, TOP),
+            (y > h + GUARD, BOTTOM),
+        ]
+        .into_iter()
+        .filter(|&(out, _)| out)
+        .fold(0, |mask, (_, plane)| mask | plane)
+    }
+
+    /// A scene vertex, projected with the shared projector.
+    fn vertex(&self, p: Vec3) -> ClipVertex {
+        if !p.is_finite() {
+            return ClipVertex {
+                outside: INVALID,
+                ..ClipVertex::default()
+            };
+        }
+        let d = p.as_dvec3() - self.eye;
+        let view = DVec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward));
+        match self.projector.project(p) {
+            None => ClipVertex {
+                view,
+                outside: NEAR_PLANE,
+                ..ClipVertex::default()
+            },
+            Some(s) => {
+                let (x, y) = (f64::from(s.x), f64::from(s.y));
+                let screen = ScreenVertex {
+                    x,
+                    y,
+                    inv_depth: 1.0 / f64::from(s.depth),
+                };
+                ClipVertex {
+                    view,
+                    screen,
+                    outside: self.guard_outside(x, y),
+                }
+            }
+        }
+    }
+
+    /// A new corner made by clipping, projected in `f64`.
+    fn clipped_vertex(&self, view: DVec3) -> ClipVertex {
+        let k = self.inv_pixel / view.z;
+        let (x, y) = (self.half_width + view.x * k, self.half_height - view.y * k);
+        ClipVertex {
+            view,
+            screen: ScreenVertex {
+                x,
+                y,
+                inv_depth: 1.0 / view.z,
+            },
+            outside: self.guard_outside(x, y),
+        }
+    }
+
+    /// Signed distance-like value of a view-space point to a clip plane,
+    /// positive inside. The guard planes are the screen lines x = -GUARD,
+    /// x = width + GUARD, ... multiplied through by the (positive) depth.
+    fn plane_value(&self, plane: u8, v: DVec3) -> f64 {
+        let (gx, gy) = (self.half_width + GUARD, self.half_height + GUARD);
+        match plane {
+            NEAR_PLANE => v.z - f64::from(NEAR),
+            LEFT => gx * v.z + v.x * self.inv_pixel,
+            RIGHT => gx * v.z - v.x * self.inv_pixel,
+            TOP => gy * v.z - v.y * self.inv_pixel,
+            _ => gy * v.z + v.y * self.inv_pixel,
+        }
+    }
+
+    /// The point where edge (`inside`, `outside`) crosses `plane`. Always
+    /// called with the inside end first, so the two triangles sharing an edge
+    /// create bit-identical corners and stay watertight.
+    fn intersect(&self, plane: u8, inside: ClipVertex, outside: ClipVertex) -> ClipVertex {
+        let a = self.plane_value(plane, inside.view);
+        let b = self.plane_value(plane, outside.view);
+        // The masks come from the f32 projection, the values from f64: where
+        // they disagree (a corner within rounding of the plane) stay on the edge.
+        let t = a / (a - b);
+        let t = if t.is_finite() {
+            t.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let mut view = inside.view.lerp(outside.view, t);
+        if plane == NEAR_PLANE {
+            view.z = f64::from(NEAR);
+        }
+        self.clipped_vertex(view)
+    }
+
+    /// Sutherland-Hodgman against every plane some corner lies outside of.
+    fn clip(&self, mut polygon: Polygon) -> Polygon {
+        for plane in PLANES {
+            if polygon.corners().iter().all(|v| v.outside & plane == 0) {
+                continue;
+            }
+            let mut clipped = Polygon::default();
+            let corners = polygon.corners();
+            for (i, &a) in corners.iter().enumerate() {
+                let b = corners[(i + 1) % corners.len()];
+                let (a_in, b_in) = (a.outside & plane == 0, b.outside & plane == 0);
+                if a_in {
+                    clipped.push(a);
+                }
+                if a_in && !b_in {
+                    clipped.push(self.intersect(plane, a, b));
+                } else if b_in && !a_in {
+                    clipped.push(self.intersect(plane, b, a));
+                }
+            }
+            polygon = clipped;
+        }
+        polygon
+    }
+
+    /// The raster triangles of scene triangle `id`: none, one, or a fan over
+    /// its clipped polygon.
+    fn triangle(
+        &self,
+        vertices: &[ClipVertex],
+        id: TriangleId,
+        triangle: &Triangle,
+    ) -> impl Iterator<Item = RasterTriangle> + use<'_> {
+        let corners = triangle.vertices.map(|v| vertices[v as usize]);
+        let any_outside = corners.iter().fold(0, |m, c| m | c.outside);
+        let all_outside = corners.iter().fold(u8::MAX, |m, c| m & c.outside);
+        let mut polygon = Polygon::default();
+        // Entirely beyond one plane (or invalid): nothing to draw.
+        if all_outside == 0 && any_outside & INVALID == 0 {
+            corners.into_iter().for_each(|c| polygon.push(c));
+            if any_outside != 0 {
+                polygon = self.clip(polygon);
+            }
+        }
+        let fan = 1..polygon.len.saturating_sub(1);
+        fan.filter_map(move |i| {
+            let [a, b, c] = [0, i, i + 1].map(|j| polygon.corners[j].screen);
+            RasterTriangle::new(id, [a, b, c], self.width, self.height)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera {
+            eye: Vec3::ZERO,
+            target: -Vec3::Z,
+            up: Vec3::Y,
+            fov_y_deg: 60.0,
+            width: 64,
+            height: 48,
+        }
+    }
+
+    #[test]
+    fn near_plane_corners_land_on_the_near_plane_and_on_the_edge() {
+        let view = View::new(&camera());
+        let front = view.vertex(Vec3::new(0.5, -1.0, -2.0));
+        let behind = view.vertex(Vec3::new(0.5, -1.0, 2.0));
+        assert_eq!(behind.outside, NEAR_PLANE);
+        let v = view.intersect(NEAR_PLANE, front, behind);
+        assert_eq!(v.view.z, f64::from(NEAR));
+        assert!((v.view.x - 0.5).abs() < 1e-12 && (v.view.y + 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn guard_band_clipping_keeps_corners_near_the_guard() {
+        let view = View::new(&camera());
+        // A sliver reaching far to the right, just in front of the eye.
+        let t = Triangle {
+            vertices: [0, 1, 2],
+            object: 0,
+            material: 0,
+        };
+        let vertices = [
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(1e3, 0.0, -0.01),
+            Vec3::new(0.0, 0.1, -1.0),
+        ]
+        .map(|p| view.vertex(p));
+        assert_eq!(vertices[1].outside, RIGHT);
+        let mut polygon = Polygon::default();
+        vertices.into_iter().for_each(|v| polygon.push(v));
+        let clipped = view.clip(polygon);
+        assert_eq!(clipped.len, 4);
+        let max_x = clipped
+            .corners()
+            .iter()
+            .map(|c| c.screen.x)
+            .fold(f64::MIN, f64::max);
+        assert!((max_x - (64.0 + GUARD)).abs() < 1e-6, "{max_x}");
+        assert!(view.triangle(&vertices, 0, &t).count() >= 1);
+    }
+}
