@@ -4,11 +4,28 @@
 //!
 //! Architecture invariant: the tracer knows nothing of pixels, packages or
 //! networking; it answers "what colour does this ray / surface point see".
+//!
+//! - [`SceneBvh`] (module `bvh`): the BVH and the closest-hit / any-hit
+//!   queries, independent of tree layout and thread count.
+//! - [`Tracer`] (module `whitted`): Whitted shading of rays and of known
+//!   surface points, single or batched with rayon.
+//!
+//! Everything is deterministic: the same scene, lighting and input give
+//! bit-identical samples whatever the number of threads.
 
-use std::sync::Arc;
+mod bvh;
+mod whitted;
+
+#[cfg(test)]
+mod scenarios;
+#[cfg(test)]
+mod testutil;
+
+pub use bvh::{BuildPreset, BvhLayout, BvhOptions, SceneBvh};
+pub use whitted::Tracer;
 
 use glam::Vec3;
-use vtfarm_scene::{Lighting, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{ObjectId, TriangleId};
 
 /// A ray; `direction` is unit length.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,7 +68,10 @@ pub struct TraceSettings {
 
 impl Default for TraceSettings {
     fn default() -> Self {
-        TraceSettings { max_depth: 5, fresnel: false }
+        TraceSettings {
+            max_depth: 5,
+            fresnel: false,
+        }
     }
 }
 

@@ -1,0 +1,536 @@
+//! The scene's bounding volume hierarchy (obvhs) and the two ray queries the
+//! tracer needs: closest hit and any hit (shadow rays).
+//!
+//! Results never depend on the BVH's shape: ties in `t` go to the lowest
+//! original triangle id, and leaf boxes are padded so that rounding in the box
+//! test cannot cull a triangle that the triangle test would hit. That makes
+//! [`SceneBvh::closest_hit`] equal to a brute-force loop over all triangles,
+//! bit for bit, whatever layout, preset or thread count built the tree.
+
+use std::fmt;
+use std::sync::Arc;
+
+use glam::{Vec3, Vec3A};
+use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::Bvh2;
+use obvhs::bvh2::leaf_collapser::collapse;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
+use obvhs::cwbvh::CwBvh;
+use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+use obvhs::ploc::PlocBuilder;
+use obvhs::ray::{Ray as BvhRay, RayHit};
+use obvhs::splits::split_aabbs_preset;
+use obvhs::triangle::Triangle as BvhTriangle;
+use vtfarm_scene::{Scene, TriangleId};
+
+use crate::{Hit, Ray, SurfacePoint};
+
+/// Which obvhs tree layout a [`SceneBvh`] uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BvhLayout {
+    /// Compressed 8-wide BVH (`obvhs::cwbvh`), traversed with SIMD node tests.
+    Cw,
+    /// Binary BVH (`obvhs::bvh2`) with collapsed multi-triangle leaves.
+    Binary,
+}
+
+/// Which obvhs build preset (`BvhBuildParams::*_build`) a [`SceneBvh`] uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BuildPreset {
+    Fastest,
+    VeryFast,
+    Fast,
+    Medium,
+    /// Adds spatial pre-splits of large triangles.
+    Slow,
+    /// Adds spatial pre-splits and heavy reinsertion.
+    VerySlow,
+}
+
+impl BuildPreset {
+    /// Every preset, fastest build first.
+    pub const ALL: [BuildPreset; 6] = [
+        BuildPreset::Fastest,
+        BuildPreset::VeryFast,
+        BuildPreset::Fast,
+        BuildPreset::Medium,
+        BuildPreset::Slow,
+        BuildPreset::VerySlow,
+    ];
+
+    fn params(self) -> BvhBuildParams {
+        match self {
+            BuildPreset::Fastest => BvhBuildParams::fastest_build(),
+            BuildPreset::VeryFast => BvhBuildParams::very_fast_build(),
+            BuildPreset::Fast => BvhBuildParams::fast_build(),
+            BuildPreset::Medium => BvhBuildParams::medium_build(),
+            BuildPreset::Slow => BvhBuildParams::slow_build(),
+            BuildPreset::VerySlow => BvhBuildParams::very_slow_build(),
+        }
+    }
+}
+
+/// How to build a [`SceneBvh`]. The default is the fastest combination for
+/// closest-hit queries measured by `examples/bvh_layouts.rs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BvhOptions {
+    pub layout: BvhLayout,
+    pub preset: BuildPreset,
+}
+
+impl Default for BvhOptions {
+    /// CwBvh with the `very_slow_build` preset: the fastest closest hit.
+    /// Measured by `examples/bvh_layouts.rs` (102k-triangle room, 200k camera
+    /// and random rays, one thread, busy 2-core dev box, best of 7 rounds;
+    /// closest-hit ns/ray, build ms):
+    ///   Cw:     Fastest 844/54, VeryFast 741/48, Fast 788/58, Medium 840/80,
+    ///           Slow 773/115, VerySlow 734/269 (any hit 308 ns, also best);
+    ///   Binary: Fastest 1173/22, VeryFast 1146/46, Fast 1168/47,
+    ///           Medium 1176/58, Slow 1113/121, VerySlow 1028/304.
+    /// Cw wins by ~30 % throughout. The slow build costs ~0.3 s per 100k
+    /// triangles once per scene, against millions of rays per frame.
+    fn default() -> Self {
+        BvhOptions {
+            layout: BvhLayout::Cw,
+            preset: BuildPreset::VerySlow,
+        }
+    }
+}
+
+/// Triangle data in BVH leaf order, laid out for the intersection test.
+#[derive(Clone, Copy, Debug)]
+struct PrimTriangle {
+    v0: Vec3A,
+    v1: Vec3A,
+    v2: Vec3A,
+    /// Unnormalised plane normal `(v1 - v0) x (v2 - v0)`, zero for triangles
+    /// too degenerate to hit reliably.
+    n: Vec3A,
+}
+
+impl PrimTriangle {
+    fn new([v0, v1, v2]: [Vec3; 3]) -> Self {
+        let (v0, v1, v2) = (Vec3A::from(v0), Vec3A::from(v1), Vec3A::from(v2));
+        let (e1, e2) = (v1 - v0, v2 - v0);
+        let n = e1.cross(e2);
+        // sin(angle between the edges) below ~1e-6 is rounding noise in f32:
+        // the plane (and so t) of such a sliver is meaningless, treat it as a
+        // line and never hit it.
+        // (Written so that NaN input also counts as degenerate.)
+        let solid = n.length_squared() > 1e-12 * e1.length_squared() * e2.length_squared();
+        PrimTriangle {
+            v0,
+            v1,
+            v2,
+            n: if solid { n } else { Vec3A::ZERO },
+        }
+    }
+
+    /// Two-sided ray/triangle test; returns (t, u, v) with u, v the weights of
+    /// vertices 1 and 2.
+    ///
+    /// A Möller–Trumbore variant: the barycentric numerators are the edge
+    /// functions `d . (a x b)` of the origin-relative vertices. An edge shared
+    /// by two triangles is evaluated from the same two floats in both, so its
+    /// edge function is exactly negated between them (IEEE products commute,
+    /// `x - y == -(y - x)`): a ray through the edge is inside at least one of
+    /// them, and no ray leaks through a crack between triangles that share
+    /// vertices. Edges are inclusive.
+    #[inline(always)]
+    fn intersect(&self, origin: Vec3A, direction: Vec3A) -> Option<(f32, f32, f32)> {
+        let n_dot_d = self.n.dot(direction);
+        if n_dot_d == 0.0 {
+            return None; // degenerate, or the ray lies in the plane
+        }
+        let a = self.v0 - origin;
+        let b = self.v1 - origin;
+        let c = self.v2 - origin;
+        let w0 = direction.dot(b.cross(c));
+        let w1 = direction.dot(c.cross(a));
+        let w2 = direction.dot(a.cross(b));
+        let inside = (w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0) || (w0 <= 0.0 && w1 <= 0.0 && w2 <= 0.0);
+        let det = w0 + w1 + w2;
+        if !inside || det == 0.0 {
+            return None;
+        }
+        let t = self.n.dot(a) / n_dot_d;
+        let inv_det = 1.0 / det;
+        // `+ 0.0` turns a -0.0 weight (on an edge) into +0.0.
+        Some((t, w1 * inv_det + 0.0, w2 * inv_det + 0.0))
+    }
+}
+
+/// The tree itself; `Empty` for scenes without triangles (obvhs needs one).
+enum Accel {
+    Empty,
+    Cw(CwBvh),
+    Binary(Bvh2),
+}
+
+/// The scene plus its BVH; built once per scene, shared (Send + Sync) by all threads.
+///
+/// Ray-origin convention: queries accept hits with `t` in `(0, t_max)`; they
+/// do not skip a neighbourhood of the origin. Rays leaving a surface must
+/// start slightly off it: build them with [`SceneBvh::spawn_ray`], which
+/// offsets the origin by [`SceneBvh::epsilon`] along the geometric normal.
+pub struct SceneBvh {
+    scene: Arc<Scene>,
+    options: BvhOptions,
+    accel: Accel,
+    /// Indexed by BVH primitive slot (leaf order; with pre-splits a triangle
+    /// can fill several slots).
+    prims: Vec<PrimTriangle>,
+    /// Original scene triangle id of each slot.
+    prim_ids: Vec<TriangleId>,
+    /// Unit geometric normals by original triangle id (zero if degenerate).
+    geometric_normals: Vec<Vec3>,
+    epsilon: f32,
+}
+
+impl fmt::Debug for SceneBvh {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("SceneBvh")
+            .field("options", &self.options)
+            .field("triangles", &self.scene.triangles.len())
+            .field("primitive_slots", &self.prims.len())
+            .field("epsilon", &self.epsilon)
+            .finish()
+    }
+}
+
+/// The closest hit found so far, with ties broken towards the lowest id so
+/// that the result does not depend on the order triangles are visited in.
+struct ClosestSoFar {
+    t_max: f32,
+    hit: Option<Hit>,
+}
+
+impl ClosestSoFar {
+    /// Offers a candidate; returns whether it became the closest.
+    #[inline(always)]
+    fn offer(&mut self, triangle: TriangleId, (t, u, v): (f32, f32, f32)) -> bool {
+        let better = match self.hit {
+            None => t < self.t_max,
+            Some(best) => t < best.t || (t == best.t && triangle < best.triangle),
+        };
+        // `t > 0.0` is false for NaN too.
+        if better && t > 0.0 {
+            self.hit = Some(Hit { triangle, t, u, v });
+        }
+        better && t > 0.0
+    }
+}
+
+/// The next float above a positive `t`. Traversal culls boxes entered at
+/// `t >= tmax`; keeping tmax one ulp above the best hit lets a triangle at
+/// exactly the same `t` (shared edges, coplanar overlaps) still be offered, so
+/// the lowest-id tie-break sees every candidate.
+#[inline(always)]
+fn next_up(t: f32) -> f32 {
+    f32::from_bits(t.to_bits() + 1)
+}
+
+impl SceneBvh {
+    /// Builds the BVH with the default (fastest measured) [`BvhOptions`].
+    pub fn new(scene: Arc<Scene>) -> SceneBvh {
+        SceneBvh::with_options(scene, BvhOptions::default())
+    }
+
+    /// Builds the BVH with an explicit layout and build preset (benchmarks,
+    /// or trading trace speed for build time). Query results are identical
+    /// for every choice.
+    pub fn with_options(scene: Arc<Scene>, options: BvhOptions) -> SceneBvh {
+        let count = scene.triangles.len();
+        let tri_positions: Vec<[Vec3; 3]> = (0..count as TriangleId)
+            .map(|id| scene.triangle_positions(id))
+            .collect();
+        let geometric_normals = (0..count as TriangleId)
+            .map(|id| scene.geometric_normal(id))
+            .collect();
+
+        let (lo, hi) = scene.bounds();
+        let scale = if lo.is_finite() && hi.is_finite() {
+            (hi - lo)
+                .max_element()
+                .max(lo.abs().max_element())
+                .max(hi.abs().max_element())
+        } else {
+            0.0
+        };
+        // ~100 ulps of the largest coordinate: well above the few-ulp error
+        // of a hit position, well below any modelled detail (0.1 mm in a
+        // 10 m scene). The floor keeps empty or point-sized scenes sane.
+        let epsilon = (scale * 1e-5).max(1e-6);
+
+        let (accel, slots) = if count == 0 {
+            (Accel::Empty, Vec::new())
+        } else {
+            build(&tri_positions, options, scale * 1e-6)
+        };
+        let prims = slots
+            .iter()
+            .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
+            .collect();
+        // Report the layout actually used (see the depth fallback in `build`).
+        let options = match accel {
+            Accel::Binary(_) => BvhOptions {
+                layout: BvhLayout::Binary,
+                ..options
+            },
+            _ => options,
+        };
+
+        SceneBvh {
+            scene,
+            options,
+            accel,
+            prims,
+            prim_ids: slots,
+            geometric_normals,
+            epsilon,
+        }
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The options the BVH was built with; the layout is `Binary` when a
+    /// CwBvh would have been too deep for obvhs' fixed traversal stack.
+    pub fn options(&self) -> BvhOptions {
+        self.options
+    }
+
+    /// The distance secondary-ray origins are moved off a surface, scaled to
+    /// the scene's bounding box.
+    pub fn epsilon(&self) -> f32 {
+        self.epsilon
+    }
+
+    /// A ray leaving the surface point `position` (on a triangle with unit
+    /// geometric normal `geometric_normal`) in unit direction `direction`:
+    /// the origin moves [`SceneBvh::epsilon`] along the geometric normal, on
+    /// the side the ray travels into, so it cannot hit its own triangle.
+    pub fn spawn_ray(&self, position: Vec3, geometric_normal: Vec3, direction: Vec3) -> Ray {
+        let side = if direction.dot(geometric_normal) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        Ray {
+            origin: position + geometric_normal * (side * self.epsilon),
+            direction,
+        }
+    }
+
+    /// The unit geometric normal of a triangle (counter-clockwise winding),
+    /// zero for a degenerate one.
+    pub fn geometric_normal(&self, triangle: TriangleId) -> Vec3 {
+        self.geometric_normals[triangle as usize]
+    }
+
+    /// The surface point of a hit: the barycentric interpolation of the
+    /// triangle's positions and of its vertex normals (normalised; the
+    /// geometric normal where the vertex normals cancel out).
+    pub fn surface_point(&self, hit: &Hit) -> SurfacePoint {
+        let [p0, p1, p2] = self.scene.triangle_positions(hit.triangle);
+        let [n0, n1, n2] = self.scene.triangle_normals(hit.triangle);
+        let w0 = 1.0 - hit.u - hit.v;
+        let normal =
+            (n0 * w0 + n1 * hit.u + n2 * hit.v).normalize_or(self.geometric_normal(hit.triangle));
+        SurfacePoint {
+            position: p0 * w0 + p1 * hit.u + p2 * hit.v,
+            normal,
+            triangle: hit.triangle,
+        }
+    }
+
+    /// Closest hit with t in (0, `t_max`) (see the type's docs for why the
+    /// lower bound is 0). Ties go to the lowest triangle id. Triangles are
+    /// two-sided; degenerate ones are never hit.
+    pub fn closest_hit(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+        let bvh_ray = bvh_ray(origin, direction, t_max)?;
+        let mut best = ClosestSoFar { t_max, hit: None };
+        let mut test = |slot: usize| match self.prims[slot].intersect(origin, direction) {
+            Some(tuv) if best.offer(self.prim_ids[slot], tuv) => {
+                best.hit.map_or(f32::INFINITY, |h| next_up(h.t))
+            }
+            _ => f32::INFINITY,
+        };
+        let mut unused = RayHit::none();
+        match &self.accel {
+            Accel::Empty => false,
+            Accel::Cw(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
+            Accel::Binary(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
+        };
+        best.hit
+    }
+
+    /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
+    /// hit found.
+    pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+        let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
+            return false;
+        };
+        let test = |slot: usize| match self.prims[slot].intersect(origin, direction) {
+            Some((t, _, _)) if t > 0.0 && t < t_max => t,
+            _ => f32::INFINITY,
+        };
+        match &self.accel {
+            Accel::Empty => false,
+            Accel::Cw(bvh) => !bvh.ray_traverse_miss(bvh_ray, |_, slot| test(slot)),
+            Accel::Binary(bvh) => !bvh.ray_traverse_miss(bvh_ray, |_, slot| test(slot)),
+        }
+    }
+
+    /// Reference closest hit: every triangle, in id order, with the same
+    /// triangle test and tie-break as [`SceneBvh::closest_hit`].
+    #[cfg(test)]
+    pub(crate) fn closest_hit_brute_force(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+        let mut best = ClosestSoFar { t_max, hit: None };
+        for id in 0..self.scene.triangles.len() as TriangleId {
+            let tri = PrimTriangle::new(self.scene.triangle_positions(id));
+            if let Some(tuv) = tri.intersect(origin, direction) {
+                best.offer(id, tuv);
+            }
+        }
+        best.hit
+    }
+}
+
+/// The obvhs ray for a query, or `None` when nothing can be hit (non-finite
+/// input, empty interval).
+fn bvh_ray(origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<BvhRay> {
+    if !origin.is_finite()
+        || !direction.is_finite()
+        || direction == Vec3A::ZERO
+        || t_max.is_nan()
+        || t_max <= 0.0
+    {
+        return None;
+    }
+    // obvhs picks a CwBvh node's near planes by `direction < 0.0` but
+    // inverts -0.0 to a large negative: a -0.0 component (as in `-Vec3::Y`)
+    // would pair swapped planes and miss. Adding +0.0 turns -0.0 into +0.0.
+    Some(BvhRay::new(origin, direction + Vec3A::ZERO, 0.0, t_max))
+}
+
+/// Builds the tree over padded triangle boxes; returns it with the original
+/// triangle id of each primitive slot. Mirrors obvhs'
+/// `build_{cwbvh,bvh2}_from_tris`, plus the padding.
+fn build(tris: &[[Vec3; 3]], options: BvhOptions, pad: f32) -> (Accel, Vec<TriangleId>) {
+    let params = options.preset.params();
+    let obvhs_tris: Vec<BvhTriangle> = tris
+        .iter()
+        .map(|&[a, b, c]| BvhTriangle {
+            v0: a.into(),
+            v1: b.into(),
+            v2: c.into(),
+        })
+        .collect();
+    let mut aabbs: Vec<Aabb> = obvhs_tris.iter().map(|t| t.aabb()).collect();
+    let mut indices: Vec<u32> = (0..tris.len() as u32).collect();
+    if params.pre_split {
+        let largest = aabbs.iter().map(Aabb::half_area).fold(0.0, f32::max);
+        let average = aabbs.iter().map(Aabb::half_area).sum::<f32>() / aabbs.len() as f32;
+        split_aabbs_preset(&mut aabbs, &mut indices, &obvhs_tris, average, largest);
+    }
+    // Padding (~16 ulps of the largest coordinate) makes every leaf box
+    // strictly contain its triangle, so the slab test's rounding cannot cull
+    // a hit the triangle test reports.
+    let pad = Vec3A::splat(pad);
+    for aabb in &mut aabbs {
+        *aabb = Aabb::new(aabb.min - pad, aabb.max + pad);
+    }
+
+    let mut bvh2 = PlocBuilder::with_capacity(aabbs.len()).build(
+        params.ploc_search_distance,
+        &aabbs,
+        indices,
+        params.sort_precision,
+        params.search_depth_threshold,
+    );
+    bvh2.uses_spatial_splits = params.pre_split;
+    let mut reinsertion = ReinsertionOptimizer::default();
+    reinsertion.run(&mut bvh2, params.reinsertion_batch_ratio, None);
+    match options.layout {
+        BvhLayout::Cw => {
+            let cw = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
+            if cw_depth(&cw) < CW_STACK_LIMIT {
+                let slots = cw.primitive_indices.clone();
+                return (Accel::Cw(cw), slots);
+            }
+            // obvhs traverses a CwBvh with a fixed 32-entry stack that
+            // silently overwrites its top when full (missed hits). Only a
+            // pathological scene gets this deep; the binary layout's stack
+            // grows with the tree instead.
+            binary(bvh2, params, &mut reinsertion)
+        }
+        BvhLayout::Binary => binary(bvh2, params, &mut reinsertion),
+    }
+}
+
+/// Traversal holds at most one stack entry per level below the root.
+const CW_STACK_LIMIT: usize = 31;
+
+/// Finishes a binary BVH the way obvhs' `build_bvh2_from_tris` does.
+fn binary(
+    mut bvh2: Bvh2,
+    params: BvhBuildParams,
+    reinsertion: &mut ReinsertionOptimizer,
+) -> (Accel, Vec<TriangleId>) {
+    collapse(
+        &mut bvh2,
+        params.max_prims_per_leaf.clamp(1, 255),
+        params.collapse_traversal_cost,
+    );
+    reinsertion.run(
+        &mut bvh2,
+        params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier,
+        None,
+    );
+    // Traversal sizes its stack by `max_depth`, recorded during the PLOC
+    // build; make sure the collapse and reinsertion passes did not deepen it.
+    bvh2.max_depth = bvh2.max_depth.max(bvh2_depth(&bvh2));
+    let slots = bvh2.primitive_indices.clone();
+    (Accel::Binary(bvh2), slots)
+}
+
+/// The number of node levels of a binary BVH.
+fn bvh2_depth(bvh: &Bvh2) -> usize {
+    let mut deepest = 0;
+    let mut pending = vec![(0usize, 1usize)];
+    while let Some((index, depth)) = pending.pop() {
+        let Some(node) = bvh.nodes.get(index) else {
+            continue;
+        };
+        deepest = deepest.max(depth);
+        if !node.is_leaf() {
+            let first = node.first_index as usize;
+            pending.extend([(first, depth + 1), (first + 1, depth + 1)]);
+        }
+    }
+    deepest
+}
+
+/// The number of inner-node levels of a CwBvh.
+fn cw_depth(cw: &CwBvh) -> usize {
+    let mut deepest = 0;
+    let mut pending = vec![(0usize, 1usize)];
+    while let Some((index, depth)) = pending.pop() {
+        deepest = deepest.max(depth);
+        let Some(node) = cw.nodes.get(index) else {
+            continue;
+        };
+        for child in 0..8 {
+            if !node.is_child_empty(child) && !node.is_leaf(child) {
+                pending.push((node.child_node_index(child) as usize, depth + 1));
+            }
+        }
+    }
+    deepest
+}

@@ -1,0 +1,345 @@
+//! Whitted recursion: local Phong with shadow rays at every surface, plus a
+//! mirror ray weighted by kr and a Snell refraction ray weighted by kt, and
+//! the ray-tree signature that tells vertex tracing when two samples saw the
+//! same things.
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_scene::shading::phong;
+use vtfarm_scene::{Light, LightKind, Lighting, NONE, ObjectId};
+
+use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
+
+/// Whitted tracer for one frame's lighting.
+///
+/// Recursion: a surface at depth `d` (the first one has depth 1) spawns its
+/// reflection and refraction rays only while `d < settings.max_depth`;
+/// `max_depth` 0 behaves as 1.
+///
+/// Shadow rays treat every occluder as opaque, transparent ones included
+/// (classic Whitted: no caustics or coloured shadows), and stop at a point
+/// light's distance (minus the spawn epsilon, so geometry at the light does
+/// not shadow it).
+#[derive(Clone, Copy, Debug)]
+pub struct Tracer<'a> {
+    pub bvh: &'a SceneBvh,
+    pub lighting: &'a Lighting,
+    pub settings: TraceSettings,
+}
+
+/// What shading one surface produced; the `reflected*` fields describe this
+/// surface's own reflection ray and are only reported for the first surface.
+#[derive(Clone, Copy, Debug)]
+struct Shaded {
+    color: Vec3,
+    reflected: Vec3,
+    reflected_object: ObjectId,
+}
+
+/// Words fed to the signature besides object ids. Object ids are `u32`, so
+/// anything at or above 2^32 cannot collide with one.
+mod word {
+    const MARK: u64 = 1 << 32;
+    pub(super) const MISS: u64 = MARK | 1;
+    pub(super) const REFLECT: u64 = MARK | 2;
+    pub(super) const REFRACT: u64 = MARK | 3;
+    pub(super) const LIGHTS_END: u64 = MARK | 4;
+    /// Plus the light's index: the light lights the surface (facing it and
+    /// unoccluded).
+    pub(super) const LIT: u64 = 2 << 32;
+}
+
+/// Deterministic FxHash-style hash of the ray tree's event sequence.
+#[derive(Clone, Copy, Debug)]
+struct Signature(u64);
+
+impl Signature {
+    const SEED: u64 = 0x243f_6a88_85a3_08d3;
+    const K: u64 = 0x517c_c1b7_2722_0a95;
+
+    fn new() -> Self {
+        Signature(Self::SEED)
+    }
+
+    fn add(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(Self::K);
+    }
+
+    /// The Fx state with a murmur3 finaliser, so that short sequences that
+    /// differ in one word differ in about half the bits.
+    fn finish(self) -> u64 {
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
+    }
+}
+
+/// Mirror direction of unit `incoming` about unit `normal`.
+pub(crate) fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
+    (incoming - 2.0 * incoming.dot(normal) * normal).normalize_or(incoming)
+}
+
+/// Snell refraction of unit `incoming` through a surface with unit `normal`
+/// facing the incoming side (`incoming . normal <= 0`), with `eta` = n1 / n2.
+/// `None` on total internal reflection.
+pub(crate) fn refract(incoming: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -incoming.dot(normal);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return None;
+    }
+    Some((eta * incoming + (eta * cos_i - k.sqrt()) * normal).normalize_or(incoming))
+}
+
+/// Schlick's angular factor `(1 - cos)^5`: 0 head-on, 1 at grazing. With
+/// `F0` the head-on reflectance, Schlick's `F = F0 + (1 - F0) * factor`.
+pub(crate) fn schlick_factor(cos: f32) -> f32 {
+    (1.0 - cos.clamp(0.0, 1.0)).powi(5)
+}
+
+impl Tracer<'_> {
+    /// Traces a primary ray from the camera (depth 0).
+    pub fn trace(&self, ray: &Ray) -> Sample {
+        let mut signature = Signature::new();
+        let (shaded, _) = self.radiance(ray, 1, &mut signature);
+        sample(shaded, signature)
+    }
+
+    /// Shades a known surface point seen along `incoming` (unit direction of
+    /// the ray arriving at the point, e.g. from the eye to a reflector
+    /// vertex) without intersecting a primary ray: local Phong with shadow
+    /// rays + kr * reflected ray + kt * refracted ray, recursively. This is
+    /// what vertex tracing calls per vertex and per filled pixel.
+    pub fn shade(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
+        let mut signature = Signature::new();
+        let shaded = self.shade_surface(point, incoming, 1, &mut signature);
+        sample(shaded, signature)
+    }
+
+    /// Batches over all cores with rayon (results in input order).
+    pub fn trace_batch(&self, rays: &[Ray]) -> Vec<Sample> {
+        rays.par_iter().map(|ray| self.trace(ray)).collect()
+    }
+
+    pub fn shade_batch(&self, points: &[(SurfacePoint, Vec3)]) -> Vec<Sample> {
+        points
+            .par_iter()
+            .map(|(point, incoming)| self.shade(point, *incoming))
+            .collect()
+    }
+
+    /// Radiance along `ray`, whose first surface gets depth `depth`; also
+    /// returns the object hit (`NONE` on a miss).
+    fn radiance(&self, ray: &Ray, depth: u32, signature: &mut Signature) -> (Shaded, ObjectId) {
+        match self.bvh.closest_hit(ray, f32::INFINITY) {
+            None => {
+                signature.add(word::MISS);
+                let background = Shaded {
+                    color: self.lighting.background,
+                    reflected: Vec3::ZERO,
+                    reflected_object: NONE,
+                };
+                (background, NONE)
+            }
+            Some(hit) => {
+                let point = self.bvh.surface_point(&hit);
+                let object = self.bvh.scene().triangles[hit.triangle as usize].object;
+                (
+                    self.shade_surface(&point, ray.direction, depth, signature),
+                    object,
+                )
+            }
+        }
+    }
+
+    /// The one shading path behind both `trace` and `shade`.
+    fn shade_surface(
+        &self,
+        point: &SurfacePoint,
+        incoming: Vec3,
+        depth: u32,
+        signature: &mut Signature,
+    ) -> Shaded {
+        let scene = self.bvh.scene();
+        let triangle = &scene.triangles[point.triangle as usize];
+        let material = scene.material_of(point.triangle);
+        let geometric = self.bvh.geometric_normal(point.triangle);
+        // Callers' normals come from interpolation: guard against zero ones
+        // (and a degenerate triangle's zero geometric normal).
+        let normal = point.normal.normalize_or(geometric);
+        let geometric = if geometric == Vec3::ZERO {
+            normal
+        } else {
+            geometric
+        };
+        let incoming = incoming.normalize_or(-normal);
+        signature.add(u64::from(triangle.object));
+
+        let local = phong(
+            material,
+            self.lighting,
+            point.position,
+            normal,
+            -incoming,
+            |light, to_light, distance| {
+                let visible =
+                    self.light_visible(point.position, geometric, light, to_light, distance);
+                if visible {
+                    signature.add(word::LIT + light_index(self.lighting, light));
+                }
+                visible
+            },
+        );
+        signature.add(word::LIGHTS_END);
+
+        let mut shaded = Shaded {
+            color: local,
+            reflected: Vec3::ZERO,
+            reflected_object: NONE,
+        };
+        if depth >= self.settings.max_depth.max(1) {
+            return shaded;
+        }
+
+        // The shading normal on the incoming side, for both secondary rays.
+        let facing = if normal.dot(incoming) > 0.0 {
+            -normal
+        } else {
+            normal
+        };
+        // Inside/outside is a property of the geometry, not of the smoothed
+        // normal: the geometric normal points outside.
+        let entering = geometric.dot(incoming) < 0.0;
+        let ior = if material.ior.is_finite() && material.ior > 0.0 {
+            material.ior
+        } else {
+            1.0
+        };
+        let eta = if entering { 1.0 / ior } else { ior };
+
+        let mut kr = material.reflectance;
+        let mut kt = material.transmittance;
+        let refracted = if kt.max_element() > 0.0 {
+            refract(incoming, facing, eta)
+        } else {
+            None
+        };
+        if kt.max_element() > 0.0 && refracted.is_none() {
+            // Total internal reflection: the transmitted energy reflects.
+            kr += kt;
+            kt = Vec3::ZERO;
+        }
+        if self.settings.fresnel {
+            let cos_i = -incoming.dot(facing);
+            match refracted {
+                Some(t) if kt.max_element() > 0.0 => {
+                    // Schlick uses the larger angle: the transmitted one when
+                    // leaving into the optically thinner side.
+                    let cos = if eta > 1.0 { -t.dot(facing) } else { cos_i };
+                    let moved = kt * schlick_factor(cos);
+                    kr += moved;
+                    kt -= moved;
+                }
+                _ if kr.max_element() > 0.0 => kr += (Vec3::ONE - kr) * schlick_factor(cos_i),
+                _ => {}
+            }
+        }
+
+        if kr.max_element() > 0.0 {
+            signature.add(word::REFLECT);
+            let ray = self
+                .bvh
+                .spawn_ray(point.position, geometric, reflect(incoming, facing));
+            let (seen, object) = self.radiance(&ray, depth + 1, signature);
+            shaded.reflected = kr * seen.color;
+            shaded.reflected_object = object;
+            shaded.color += shaded.reflected;
+        }
+        if let Some(direction) = refracted.filter(|_| kt.max_element() > 0.0) {
+            signature.add(word::REFRACT);
+            let ray = self.bvh.spawn_ray(point.position, geometric, direction);
+            let (seen, _) = self.radiance(&ray, depth + 1, signature);
+            shaded.color += kt * seen.color;
+        }
+        shaded
+    }
+
+    /// The shadow test for one light from a surface point.
+    fn light_visible(
+        &self,
+        position: Vec3,
+        geometric: Vec3,
+        light: &Light,
+        to_light: Vec3,
+        distance: f32,
+    ) -> bool {
+        let ray = self.bvh.spawn_ray(position, geometric, to_light);
+        let t_max = match light.kind {
+            LightKind::Point { .. } => distance - self.bvh.epsilon(),
+            LightKind::Directional { .. } => f32::INFINITY,
+        };
+        !self.bvh.occluded(&ray, t_max)
+    }
+}
+
+/// The index of `light` in `lighting.lights` (`phong` hands out references
+/// into that list), as a signature word offset.
+fn light_index(lighting: &Lighting, light: &Light) -> u64 {
+    // A reference not from the list (impossible with `phong`) hashes as an
+    // index past the end rather than aborting a render.
+    lighting
+        .lights
+        .iter()
+        .position(|l| std::ptr::eq(l, light))
+        .unwrap_or(lighting.lights.len()) as u64
+}
+
+fn sample(shaded: Shaded, signature: Signature) -> Sample {
+    Sample {
+        color: shaded.color,
+        reflected: shaded.reflected,
+        reflected_object: shaded.reflected_object,
+        signature: signature.finish(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hash(words: &[u64]) -> u64 {
+        let mut s = Signature::new();
+        words.iter().for_each(|&w| s.add(w));
+        s.finish()
+    }
+
+    #[test]
+    fn signature_hash_is_stable_and_order_sensitive() {
+        // Pinned: signatures travel between farm machines and must not
+        // change with platform or build.
+        assert_eq!(hash(&[]), 0x7acd_bb98_b134_4213);
+        assert_eq!(
+            hash(&[3, word::LIT, word::LIGHTS_END]),
+            0xaca4_bb8b_dc1b_5240
+        );
+        assert_ne!(hash(&[1, 2]), hash(&[2, 1]));
+        assert_ne!(hash(&[1]), hash(&[1, 0]));
+        assert_ne!(hash(&[word::MISS]), hash(&[]));
+    }
+
+    #[test]
+    fn reflection_mirrors_about_the_normal() {
+        let incoming = Vec3::new(1.0, -1.0, 0.0).normalize();
+        assert!(reflect(incoming, Vec3::Y).distance(Vec3::new(1.0, 1.0, 0.0).normalize()) < 1e-6);
+    }
+
+    #[test]
+    fn schlick_factor_is_zero_head_on_and_one_at_grazing() {
+        assert_eq!(schlick_factor(1.0), 0.0);
+        assert_eq!(schlick_factor(0.0), 1.0);
+        assert!((schlick_factor(0.5) - 0.03125).abs() < 1e-7);
+    }
+}
