@@ -69,3 +69,147 @@ impl Default for VertexSettings {
         }
     }
 }
+
+mod composite;
+mod package;
+mod refine;
+
+pub use composite::{FrameImage, draw_wireframe};
+pub use package::{FinishedFace, PackageOptions, PackageResult, PackageStats, SparseBitmap, trace_package};
+
+use glam::Vec3;
+use package::PixelRect;
+use vtfarm_raster::IdBuffer;
+use vtfarm_scene::{Camera, Projector, ScreenPoint, TriangleId};
+use vtfarm_trace::{Sample, SurfacePoint, Tracer};
+
+/// For each scene vertex, the lowest triangle id that uses it. A corner shared
+/// by several reflector triangles is traced once per package, as the surface
+/// point of this owner, so its sample cannot depend on which of the triangles
+/// happened to be in the package. Built once per scene.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VertexOwners(Vec<TriangleId>);
+
+impl VertexOwners {
+    pub fn new(scene: &vtfarm_scene::Scene) -> Self {
+        let mut owners = vec![vtfarm_scene::NONE; scene.positions.len()];
+        for (t, tri) in scene.triangles.iter().enumerate() {
+            for v in tri.vertices {
+                owners[v as usize] = owners[v as usize].min(t as TriangleId);
+            }
+        }
+        VertexOwners(owners)
+    }
+
+    /// The owner of vertex `v`.
+    pub(crate) fn of(&self, v: u32) -> TriangleId {
+        self.0[v as usize]
+    }
+}
+
+/// Everything a package needs about its frame: the tracer (scene, BVH,
+/// lighting), the camera, the frame's ID buffer and the thresholds.
+#[derive(Clone, Copy)]
+pub struct Frame<'a> {
+    pub tracer: Tracer<'a>,
+    pub camera: Camera,
+    pub ids: &'a IdBuffer,
+    pub owners: &'a VertexOwners,
+    pub settings: VertexSettings,
+}
+
+impl Frame<'_> {
+    fn projector(&self) -> Projector {
+        Projector::new(&self.camera)
+    }
+
+    /// Whether the ID buffer assigns pixel (x, y) to `triangle`.
+    fn owns(&self, triangle: TriangleId, x: u32, y: u32) -> bool {
+        self.ids.triangle[self.ids.index(x, y)] == triangle
+    }
+
+    /// The rectangle that holds every pixel `triangle` owns, or `None` when it
+    /// owns none (hidden or off screen: it costs nothing then).
+    fn owned_rect(&self, triangle: TriangleId) -> Option<PixelRect> {
+        let projector = self.projector();
+        let corners = self.tracer.bvh.scene().triangle_positions(triangle).map(|p| projector.project(p));
+        let full = PixelRect { x0: 0, y0: 0, x1: self.ids.width, y1: self.ids.height };
+        let rect = match corners {
+            [Some(a), Some(b), Some(c)] => {
+                let clamp = |v: f32, hi: u32| v.clamp(0.0, hi as f32) as u32;
+                PixelRect {
+                    x0: clamp(a.x.min(b.x).min(c.x).floor() - 1.0, self.ids.width),
+                    y0: clamp(a.y.min(b.y).min(c.y).floor() - 1.0, self.ids.height),
+                    x1: clamp(a.x.max(b.x).max(c.x).ceil() + 1.0, self.ids.width),
+                    y1: clamp(a.y.max(b.y).max(c.y).ceil() + 1.0, self.ids.height),
+                }
+            }
+            // A corner behind the eye: the projection is unbounded, search all.
+            _ => full,
+        };
+        let owns_any = (rect.y0..rect.y1).any(|y| (rect.x0..rect.x1).any(|x| self.owns(triangle, x, y)));
+        owns_any.then_some(rect)
+    }
+
+    /// The visibility test of section 3: a vertex is visible when a pixel in
+    /// a small neighbourhood of its projection shows the same reflector object
+    /// at about the vertex's depth (vertices lie on edges, so their own pixel
+    /// may belong to a neighbour).
+    fn vertex_visible(&self, triangle: TriangleId, s: ScreenPoint) -> bool {
+        let object = self.tracer.bvh.scene().triangles[triangle as usize].object;
+        let r = self.settings.visibility_radius as i64;
+        let (cx, cy) = (s.x.floor() as i64, s.y.floor() as i64);
+        let tolerance = self.settings.depth_tolerance * s.depth;
+        (cy - r..=cy + r).any(|y| {
+            (cx - r..=cx + r).any(|x| {
+                if x < 0 || y < 0 || x >= self.ids.width as i64 || y >= self.ids.height as i64 {
+                    return false;
+                }
+                let i = self.ids.index(x as u32, y as u32);
+                self.ids.object[i] == object && (self.ids.depth[i] - s.depth).abs() <= tolerance
+            })
+        })
+    }
+
+    /// Traces a reflector vertex: the primary ray runs from the eye to the
+    /// vertex, no intersection needed.
+    fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
+        let incoming = (position - self.camera.eye).normalize();
+        self.tracer.shade(&SurfacePoint { position, normal, triangle }, incoming)
+    }
+
+    /// Traces pixel (x, y) on `triangle`: the ray through the pixel centre hits
+    /// the triangle's plane (every sub-triangle lies in it) and the normal is
+    /// interpolated barycentrically. The reference and triangle filling both
+    /// use this, so filled pixels are exactly the reference.
+    fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> Sample {
+        let scene = self.tracer.bvh.scene();
+        let [a, b, c] = scene.triangle_positions(triangle);
+        let [na, nb, nc] = scene.triangle_normals(triangle);
+        let direction = self.camera.pixel_ray(x, y);
+        let plane_normal = (b - a).cross(c - a);
+        let denom = direction.dot(plane_normal);
+        let t = if denom.abs() > 1e-12 {
+            (a - self.camera.eye).dot(plane_normal) / denom
+        } else {
+            // Grazing: fall back on the rasterized depth.
+            let forward = self.camera.basis().0;
+            self.ids.depth[self.ids.index(x, y)] / direction.dot(forward)
+        };
+        let position = self.camera.eye + direction * t;
+        let [wa, wb, wc] = barycentric(position, a, b, c, plane_normal);
+        let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
+        self.tracer.shade(&SurfacePoint { position, normal, triangle }, direction)
+    }
+}
+
+/// Barycentric weights of `p` (in the plane of a, b, c with normal `n`).
+fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3, n: Vec3) -> [f32; 3] {
+    let area = n.length_squared();
+    if area <= 0.0 {
+        return [1.0 / 3.0; 3];
+    }
+    let wa = (c - b).cross(p - b).dot(n) / area;
+    let wb = (a - c).cross(p - c).dot(n) / area;
+    [wa, wb, 1.0 - wa - wb]
+}

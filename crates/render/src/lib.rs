@@ -1,0 +1,173 @@
+//! One frame end to end on one machine: the base frame and ID buffer from the
+//! rasterizer, the reflector triangles cut into packages and vertex traced,
+//! the bitmaps composited over the base frame; plus the error figures against
+//! a reference and the auxiliary output files.
+//!
+//! Architecture invariant: no networking and no scheduling policy here; the
+//! farm's master drives the same pieces (`Renderer::frame`, `trace_package`,
+//! `FrameImage::composite`) package by package.
+
+pub mod output;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use vtfarm_imaging::{Image, encode_srgb8};
+use vtfarm_raster::IdBuffer;
+use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
+use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
+use vtfarm_vertex::{FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings, trace_package};
+
+/// Everything that can change from one frame to the next.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameSetup {
+    pub camera: Camera,
+    pub lighting: Lighting,
+    pub trace: TraceSettings,
+    pub vertex: VertexSettings,
+}
+
+/// How to cut and run the reflector work.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderOptions {
+    /// Reflector triangles per package.
+    pub package_size: usize,
+    /// Keep the final refined faces (for the wireframe overlay).
+    pub collect_faces: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions { package_size: 256, collect_faces: false }
+    }
+}
+
+/// A rendered frame with its counters.
+#[derive(Clone, Debug)]
+pub struct RenderedFrame {
+    pub image: FrameImage,
+    pub stats: PackageStats,
+    /// Wall time of the rasterizer pass.
+    pub raster_time: Duration,
+    /// Wall time of the whole frame.
+    pub total_time: Duration,
+    pub faces: Vec<FinishedFace>,
+}
+
+/// A scene ready to render: its BVH and the reflector triangles.
+pub struct Renderer {
+    bvh: SceneBvh,
+    owners: VertexOwners,
+    reflectors: Vec<TriangleId>,
+}
+
+impl Renderer {
+    pub fn new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Self {
+        let owners = VertexOwners::new(&scene);
+        Renderer { bvh: SceneBvh::new(scene), owners, reflectors }
+    }
+
+    pub fn scene(&self) -> &Scene {
+        self.bvh.scene()
+    }
+
+    pub fn bvh(&self) -> &SceneBvh {
+        &self.bvh
+    }
+
+    pub fn reflectors(&self) -> &[TriangleId] {
+        &self.reflectors
+    }
+
+    /// The rasterized base frame and ID buffer.
+    pub fn base_frame(&self, setup: &FrameSetup) -> (Image, IdBuffer) {
+        vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
+    }
+
+    /// The vertex tracer's view of a frame.
+    pub fn frame<'a>(&'a self, setup: &'a FrameSetup, ids: &'a IdBuffer) -> Frame<'a> {
+        Frame {
+            tracer: Tracer { bvh: &self.bvh, lighting: &setup.lighting, settings: setup.trace },
+            camera: setup.camera,
+            ids,
+            owners: &self.owners,
+            settings: setup.vertex,
+        }
+    }
+
+    /// Renders a frame with the given packages (each a set of reflector
+    /// triangles); `progress` hears (triangles done, triangles in all).
+    pub fn render_packages(
+        &self,
+        setup: &FrameSetup,
+        packages: &[Vec<TriangleId>],
+        options: &RenderOptions,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> RenderedFrame {
+        let start = Instant::now();
+        let (base, ids) = self.base_frame(setup);
+        let raster_time = start.elapsed();
+        let frame = self.frame(setup, &ids);
+        let mut image = FrameImage::new(base);
+        let mut stats = PackageStats::default();
+        let mut faces = Vec::new();
+        let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
+        let mut done = 0;
+        let package_options = PackageOptions { collect_faces: options.collect_faces, time_break: None };
+        for package in packages {
+            let result = trace_package(&frame, package, &package_options, &mut |_| {});
+            image.composite(&result.bitmap);
+            stats.add(&result.stats);
+            faces.extend(result.faces);
+            done += package.len() as u64;
+            progress(done, total);
+        }
+        RenderedFrame { image, stats, raster_time, total_time: start.elapsed(), faces }
+    }
+
+    /// Renders a frame with the reflectors cut into packages of
+    /// `options.package_size` triangles.
+    pub fn render(&self, setup: &FrameSetup, options: &RenderOptions, progress: &mut dyn FnMut(u64, u64)) -> RenderedFrame {
+        let packages = split_packages(&self.reflectors, options.package_size);
+        self.render_packages(setup, &packages, options, progress)
+    }
+}
+
+/// Cuts triangles into consecutive packages of at most `size`.
+pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<TriangleId>> {
+    triangles.chunks(size.max(1)).map(<[TriangleId]>::to_vec).collect()
+}
+
+/// How far an image is from a reference over the reference's reflector
+/// pixels, in 8-bit sRGB steps.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ErrorFigures {
+    /// Reflector pixels compared.
+    pub pixels: u64,
+    /// Mean absolute difference per channel (0..255).
+    pub mean_abs: f64,
+    /// Share of pixels with some channel off by more than 8/255.
+    pub share_off: f64,
+    /// Largest channel difference seen (0..255).
+    pub max_abs: u8,
+}
+
+/// Compares `test` with `reference` on the reference's reflector pixels.
+pub fn compare(test: &FrameImage, reference: &FrameImage) -> ErrorFigures {
+    let mut pixels = 0u64;
+    let mut sum = 0u64;
+    let mut off = 0u64;
+    let mut max_abs = 0u8;
+    for (i, _) in reference.mask.iter().enumerate().filter(|(_, m)| **m) {
+        let a = encode_srgb8(test.color.pixels[i]);
+        let b = encode_srgb8(reference.color.pixels[i]);
+        let d = [0, 1, 2].map(|k| a[k].abs_diff(b[k]));
+        pixels += 1;
+        sum += d.iter().map(|&x| x as u64).sum::<u64>();
+        let worst = d.into_iter().max().unwrap_or(0);
+        max_abs = max_abs.max(worst);
+        off += (worst > 8) as u64;
+    }
+    let n = pixels.max(1) as f64;
+    ErrorFigures { pixels, mean_abs: sum as f64 / (3.0 * n), share_off: off as f64 / n, max_abs }
+}

@@ -1,0 +1,383 @@
+//! A task package: a set of reflector triangles traced into a sparse bitmap.
+//!
+//! Phase 1 traces the package's distinct original vertices in one parallel
+//! batch (the preview). Phase 2 refines each triangle on its own (in
+//! parallel) and reports finished faces at time breaks. Phase 3 gives every
+//! pixel the ID buffer assigns to a triangle its colour: Gouraud from the
+//! final face that contains the pixel centre, or a per-pixel trace where the
+//! face's samples still disagree (triangle filling) or no face reached it.
+
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use vtfarm_scene::{ScreenPoint, TriangleId};
+use vtfarm_trace::Sample;
+
+use crate::refine::{MeshVertex, TriangleMesh};
+use crate::{Frame, Quality};
+
+/// What the caller wants besides pixels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PackageOptions {
+    /// Return the final refined faces in screen space (the wireframe overlay).
+    pub collect_faces: bool,
+    /// Call the progress callback at most this often.
+    pub time_break: Option<Duration>,
+}
+
+/// A refined face as the progress callback and the wireframe overlay see it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FinishedFace {
+    /// Screen positions (pixels) and view depths of the corners.
+    pub corners: [ScreenPoint; 3],
+    /// Linear colours of the corners.
+    pub colors: [Vec3; 3],
+}
+
+/// Counters of one package.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PackageStats {
+    /// Triangles in the package.
+    pub triangles: u64,
+    /// Triangles that own at least one pixel (the others cost nothing).
+    pub traced_triangles: u64,
+    /// Original and inserted vertices that passed the visibility test.
+    pub visible_vertices: u64,
+    /// Samples traced at vertices (original and inserted).
+    pub vertex_samples: u64,
+    /// Samples traced per pixel (triangle filling, or every pixel in `reference`).
+    pub filled_pixels: u64,
+    /// Edges split by the refinement.
+    pub refined_edges: u64,
+    /// Final faces after refinement.
+    pub faces: u64,
+    /// Pixels written.
+    pub pixels: u64,
+    /// Wall time of tracing and refining vertices.
+    pub vertex_time: Duration,
+    /// Wall time of assigning pixels and triangle filling.
+    pub fill_time: Duration,
+}
+
+impl PackageStats {
+    /// All traced samples (the paper's "pixel" column of Table 1).
+    pub fn samples(&self) -> u64 {
+        self.vertex_samples + self.filled_pixels
+    }
+
+    /// Adds another package's counters.
+    pub fn add(&mut self, o: &PackageStats) {
+        self.triangles += o.triangles;
+        self.traced_triangles += o.traced_triangles;
+        self.visible_vertices += o.visible_vertices;
+        self.vertex_samples += o.vertex_samples;
+        self.filled_pixels += o.filled_pixels;
+        self.refined_edges += o.refined_edges;
+        self.faces += o.faces;
+        self.pixels += o.pixels;
+        self.vertex_time += o.vertex_time;
+        self.fill_time += o.fill_time;
+    }
+}
+
+/// The reflector pixels of a package: a bounding rectangle with a coverage
+/// mask, and for each covered pixel (row-major within the rectangle) its
+/// colour, reflected component and reflected object.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SparseBitmap {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+    pub mask: Vec<bool>,
+    pub color: Vec<Vec3>,
+    pub reflected: Vec<Vec3>,
+    pub reflected_object: Vec<u32>,
+}
+
+impl SparseBitmap {
+    /// The covered pixels as (x, y, index into the per-pixel arrays).
+    pub fn covered(&self) -> impl Iterator<Item = (u32, u32, usize)> + '_ {
+        self.mask
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| **m)
+            .enumerate()
+            .map(|(k, (i, _))| (self.x0 + i as u32 % self.width, self.y0 + i as u32 / self.width, k))
+    }
+}
+
+/// The result of one package.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PackageResult {
+    pub bitmap: SparseBitmap,
+    pub stats: PackageStats,
+    /// The final faces, when asked for.
+    pub faces: Vec<FinishedFace>,
+}
+
+/// One pixel's value.
+#[derive(Clone, Copy, Debug)]
+struct PixelValue {
+    index: u32,
+    color: Vec3,
+    reflected: Vec3,
+    object: u32,
+}
+
+impl PixelValue {
+    fn from_sample(index: u32, s: &Sample) -> Self {
+        PixelValue { index, color: s.color, reflected: s.reflected, object: s.reflected_object }
+    }
+}
+
+/// Traces a package of reflector triangles. `progress` is called on this
+/// thread at time breaks with the faces finished since the last call.
+pub fn trace_package(
+    frame: &Frame<'_>,
+    triangles: &[TriangleId],
+    options: &PackageOptions,
+    progress: &mut dyn FnMut(&[FinishedFace]),
+) -> PackageResult {
+    let mut stats = PackageStats { triangles: triangles.len() as u64, ..Default::default() };
+    let owned: Vec<(TriangleId, PixelRect)> = triangles
+        .iter()
+        .filter_map(|&t| frame.owned_rect(t).map(|r| (t, r)))
+        .collect();
+    stats.traced_triangles = owned.len() as u64;
+
+    let vertex_start = Instant::now();
+    let meshes = if frame.settings.quality == Quality::Reference {
+        Vec::new()
+    } else {
+        let meshes = refine_all(frame, &owned, options, progress, &mut stats);
+        for m in &meshes {
+            stats.refined_edges += m.refined_edges;
+            stats.visible_vertices += m.vertices.iter().filter(|v| v.visible).count() as u64;
+            stats.faces += m.faces().count() as u64;
+        }
+        meshes
+    };
+    stats.vertex_time = vertex_start.elapsed();
+
+    let fill_start = Instant::now();
+    let per_triangle: Vec<(Vec<PixelValue>, u64)> = if meshes.is_empty() {
+        owned.par_iter().map(|&(t, rect)| trace_all_pixels(frame, t, rect)).collect()
+    } else {
+        meshes.par_iter().zip(&owned).map(|(mesh, &(_, rect))| shade_pixels(frame, mesh, rect)).collect()
+    };
+    stats.fill_time = fill_start.elapsed();
+    stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
+
+    let faces = if options.collect_faces { meshes.iter().flat_map(|m| finished_faces(frame, m)).collect() } else { Vec::new() };
+    let bitmap = assemble(frame, per_triangle.into_iter().flat_map(|(p, _)| p).collect());
+    stats.pixels = bitmap.color.len() as u64;
+    PackageResult { bitmap, stats, faces }
+}
+
+/// Phases 1 and 2: traces the distinct original vertices once, then refines
+/// each triangle, reporting finished faces at time breaks.
+fn refine_all(
+    frame: &Frame<'_>,
+    owned: &[(TriangleId, PixelRect)],
+    options: &PackageOptions,
+    progress: &mut dyn FnMut(&[FinishedFace]),
+    stats: &mut PackageStats,
+) -> Vec<TriangleMesh> {
+    let scene = frame.tracer.bvh.scene();
+    // Neighbouring triangles share corners: trace each once, on its owner.
+    let mut corner_index = HashMap::new();
+    let mut corners = Vec::new();
+    let corner_slots: Vec<[usize; 3]> = owned
+        .iter()
+        .map(|&(t, _)| {
+            scene.triangles[t as usize].vertices.map(|v| {
+                *corner_index.entry(v).or_insert_with(|| {
+                    corners.push((frame.owners.of(v), v));
+                    corners.len() - 1
+                })
+            })
+        })
+        .collect();
+    let samples: Vec<Sample> = corners
+        .par_iter()
+        .map(|&(t, v)| frame.shade_vertex(t, scene.positions[v as usize], scene.normals[v as usize]))
+        .collect();
+    stats.vertex_samples += samples.len() as u64;
+
+    let projector = frame.projector();
+    let mut meshes: Vec<TriangleMesh> = owned
+        .iter()
+        .zip(&corner_slots)
+        .map(|(&(t, _), slots)| {
+            let tri = scene.triangles[t as usize];
+            let corner = |k: usize| {
+                let v = tri.vertices[k] as usize;
+                MeshVertex::new(frame, &projector, t, scene.positions[v], scene.normals[v], samples[slots[k]])
+            };
+            TriangleMesh::new(t, [corner(0), corner(1), corner(2)])
+        })
+        .collect();
+    if let Some(every) = options.time_break {
+        progress(&meshes.iter().flat_map(|m| finished_faces(frame, m)).collect::<Vec<_>>());
+        let mut last_break = Instant::now();
+        // Chunks keep the time breaks frequent while each chunk stays parallel.
+        let chunk = (rayon::current_num_threads() * 8).max(1);
+        for part in meshes.chunks_mut(chunk) {
+            part.par_iter_mut().for_each(|m| m.refine(frame, &projector));
+            if last_break.elapsed() >= every {
+                progress(&part.iter().flat_map(|m| finished_faces(frame, m)).collect::<Vec<_>>());
+                last_break = Instant::now();
+            }
+        }
+    } else {
+        meshes.par_iter_mut().for_each(|m| m.refine(frame, &projector));
+    }
+    stats.vertex_samples += meshes.iter().map(|m| m.refined_edges).sum::<u64>();
+    meshes
+}
+
+/// The screen-space faces of a mesh with their corner colours.
+fn finished_faces<'a>(_frame: &Frame<'_>, mesh: &'a TriangleMesh) -> impl Iterator<Item = FinishedFace> + 'a {
+    mesh.faces().filter_map(|f| {
+        let v = f.vertices.map(|i| mesh.vertices[i as usize]);
+        let [Some(a), Some(b), Some(c)] = v.map(|v| v.screen) else { return None };
+        Some(FinishedFace { corners: [a, b, c], colors: v.map(|v| v.sample.color) })
+    })
+}
+
+/// A pixel rectangle (inclusive start, exclusive end).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct PixelRect {
+    pub(crate) x0: u32,
+    pub(crate) y0: u32,
+    pub(crate) x1: u32,
+    pub(crate) y1: u32,
+}
+
+impl PixelRect {
+    fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+}
+
+/// Reference level: every owned pixel traced.
+fn trace_all_pixels(frame: &Frame<'_>, triangle: TriangleId, rect: PixelRect) -> (Vec<PixelValue>, u64) {
+    let pixels: Vec<PixelValue> = rect
+        .pixels()
+        .filter(|&(x, y)| frame.owns(triangle, x, y))
+        .map(|(x, y)| PixelValue::from_sample(frame.ids.index(x, y) as u32, &frame.trace_pixel(triangle, x, y)))
+        .collect();
+    let n = pixels.len() as u64;
+    (pixels, n)
+}
+
+/// Phase 3 for one refined triangle: each owned pixel takes the final face
+/// whose screen triangle contains its centre best (largest smallest
+/// barycentric), so the faces need no fill rule and leave no gaps; pixels no
+/// face reaches (float round-off at the rim) are traced.
+fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec<PixelValue>, u64) {
+    let width = rect.x1 - rect.x0;
+    let area = (width * (rect.y1 - rect.y0)) as usize;
+    // (face index, barycentric weights) of the best face so far per pixel.
+    let mut best: Vec<Option<(f32, usize, [f32; 3])>> = vec![None; area];
+    let faces: Vec<_> = mesh.faces().collect();
+    for (fi, face) in faces.iter().enumerate() {
+        let screen = face.vertices.map(|i| mesh.vertices[i as usize].screen);
+        let [Some(a), Some(b), Some(c)] = screen else { continue };
+        let (pa, pb, pc) = (Vec2::new(a.x, a.y), Vec2::new(b.x, b.y), Vec2::new(c.x, c.y));
+        let denom = (pb - pa).perp_dot(pc - pa);
+        if denom.abs() < 1e-12 {
+            continue;
+        }
+        let lo = pa.min(pb).min(pc);
+        let hi = pa.max(pb).max(pc);
+        let x0 = (lo.x.floor().max(rect.x0 as f32)) as u32;
+        let y0 = (lo.y.floor().max(rect.y0 as f32)) as u32;
+        let x1 = ((hi.x.ceil() + 1.0).min(rect.x1 as f32)) as u32;
+        let y1 = ((hi.y.ceil() + 1.0).min(rect.y1 as f32)) as u32;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                let wb = (p - pa).perp_dot(pc - pa) / denom;
+                let wc = (pb - pa).perp_dot(p - pa) / denom;
+                let w = [1.0 - wb - wc, wb, wc];
+                let score = w[0].min(w[1]).min(w[2]);
+                if score < -1e-4 {
+                    continue;
+                }
+                let slot = &mut best[((y - rect.y0) * width + (x - rect.x0)) as usize];
+                if slot.is_none_or(|(s, _, _)| score > s) {
+                    *slot = Some((score, fi, w));
+                }
+            }
+        }
+    }
+    let fill = frame.settings.quality == Quality::Full;
+    let disagrees: Vec<bool> = faces.iter().map(|f| fill && mesh.face_disagrees(f, frame.settings.epsilon)).collect();
+    let mut traced = 0;
+    let pixels = rect
+        .pixels()
+        .filter(|&(x, y)| frame.owns(mesh.triangle, x, y))
+        .map(|(x, y)| {
+            let index = frame.ids.index(x, y) as u32;
+            match best[((y - rect.y0) * width + (x - rect.x0)) as usize] {
+                Some((_, fi, w)) if !disagrees[fi] => gouraud(index, mesh, faces[fi].vertices, w),
+                _ => {
+                    traced += 1;
+                    PixelValue::from_sample(index, &frame.trace_pixel(mesh.triangle, x, y))
+                }
+            }
+        })
+        .collect();
+    (pixels, traced)
+}
+
+/// Perspective-correct interpolation of the corner samples (screen-space
+/// weights divided by depth, as a GPU interpolates).
+fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> PixelValue {
+    let v = vertices.map(|i| &mesh.vertices[i as usize]);
+    let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
+    let total: f32 = pw.iter().sum();
+    let pw = pw.map(|x| x / total);
+    let color = v[0].sample.color * pw[0] + v[1].sample.color * pw[1] + v[2].sample.color * pw[2];
+    let reflected = v[0].sample.reflected * pw[0] + v[1].sample.reflected * pw[1] + v[2].sample.reflected * pw[2];
+    let nearest = (0..3).max_by(|&a, &b| pw[a].total_cmp(&pw[b])).expect("three corners");
+    PixelValue { index, color, reflected, object: v[nearest].sample.reflected_object }
+}
+
+/// Packs pixel values into the sparse bitmap.
+fn assemble(frame: &Frame<'_>, mut pixels: Vec<PixelValue>) -> SparseBitmap {
+    if pixels.is_empty() {
+        return SparseBitmap::default();
+    }
+    pixels.sort_unstable_by_key(|p| p.index);
+    let w = frame.ids.width;
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+    for p in &pixels {
+        let (x, y) = (p.index % w, p.index / w);
+        x0 = x0.min(x);
+        y0 = y0.min(y);
+        x1 = x1.max(x + 1);
+        y1 = y1.max(y + 1);
+    }
+    let width = x1 - x0;
+    let mut mask = vec![false; (width * (y1 - y0)) as usize];
+    for p in &pixels {
+        mask[((p.index / w - y0) * width + (p.index % w - x0)) as usize] = true;
+    }
+    // Sorting by image index is row-major order, which is also the order of
+    // the covered pixels inside the rectangle.
+    SparseBitmap {
+        x0,
+        y0,
+        width,
+        height: y1 - y0,
+        mask,
+        color: pixels.iter().map(|p| p.color).collect(),
+        reflected: pixels.iter().map(|p| p.reflected).collect(),
+        reflected_object: pixels.iter().map(|p| p.object).collect(),
+    }
+}

@@ -1,0 +1,192 @@
+//! `vtfarm bench`: the paper's Table 1 on the built-in cockpit, and the
+//! tracer's ray throughput. Speed targets live here, not in tests.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_render::{FrameSetup, RenderOptions, Renderer, compare};
+use vtfarm_trace::{Ray, SceneBvh, TraceSettings};
+use vtfarm_vertex::{Quality, VertexSettings};
+
+#[derive(clap::Subcommand)]
+pub(crate) enum BenchCommand {
+    /// Reproduces the paper's Table 1: reference, preview, refine and full on the cockpit.
+    Table1(Table1Args),
+}
+
+#[derive(clap::Args)]
+pub(crate) struct Table1Args {
+    #[arg(long, default_value_t = 1920)]
+    width: u32,
+    #[arg(long, default_value_t = 1080)]
+    height: u32,
+    /// Cockpit detail (1.0 ≈ 100k triangles).
+    #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
+    detail: f32,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Also writes the figures as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Writes each level's image into this directory.
+    #[arg(long)]
+    images: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct LevelFigures {
+    name: &'static str,
+    seconds: f64,
+    traced_samples: u64,
+    speedup: f64,
+    sample_ratio: f64,
+    share_off: f64,
+    mean_abs: f64,
+}
+
+#[derive(Serialize)]
+struct Table1 {
+    width: u32,
+    height: u32,
+    scene_triangles: usize,
+    reflector_triangles: usize,
+    glass_pixels: u64,
+    levels: Vec<LevelFigures>,
+    coherent_rays_per_second: f64,
+    incoherent_rays_per_second: f64,
+}
+
+pub(crate) fn run(command: BenchCommand) -> Result<()> {
+    match command {
+        BenchCommand::Table1(args) => table1(args),
+    }
+}
+
+fn table1(args: Table1Args) -> Result<()> {
+    crate::set_threads(args.threads)?;
+    let c = cockpit(&CockpitConfig { detail: args.detail, ..CockpitConfig::default() });
+    let scene = Arc::new(c.scene);
+    let glass = scene.object_id(COVER_GLASS).context("the cockpit has a cover glass")?;
+    let reflectors: Vec<u32> =
+        (0..scene.triangles.len() as u32).filter(|&t| scene.triangles[t as usize].object == glass).collect();
+    let renderer = Renderer::new(scene.clone(), reflectors);
+    let camera = vtfarm_scene::Camera { width: args.width, height: args.height, ..c.camera };
+    let setup_for = |quality| FrameSetup {
+        camera,
+        lighting: c.lighting.clone(),
+        trace: TraceSettings::default(),
+        vertex: VertexSettings { quality, ..VertexSettings::default() },
+    };
+    // Reference first: the others are measured against it.
+    let order = [Quality::Reference, Quality::Preview, Quality::Refine, Quality::Full];
+    let mut frames = Vec::new();
+    for q in order {
+        eprintln!("rendering {} ...", q.name());
+        let frame = renderer.render(&setup_for(q), &RenderOptions::default(), &mut |_, _| {});
+        if let Some(dir) = &args.images {
+            std::fs::create_dir_all(dir)?;
+            frame.image.color.write_png(&dir.join(format!("{}.png", q.name())))?;
+        }
+        frames.push((q, frame));
+    }
+    let reference = &frames[0].1;
+    let ref_seconds = reference.stats.vertex_time.as_secs_f64() + reference.stats.fill_time.as_secs_f64();
+    let ref_samples = reference.stats.samples() as f64;
+    let levels: Vec<LevelFigures> = frames
+        .iter()
+        .map(|(q, f)| {
+            let seconds = f.stats.vertex_time.as_secs_f64() + f.stats.fill_time.as_secs_f64();
+            let err = compare(&f.image, &reference.image);
+            LevelFigures {
+                name: q.name(),
+                seconds,
+                traced_samples: f.stats.samples(),
+                speedup: ref_seconds / seconds.max(1e-9),
+                sample_ratio: ref_samples / (f.stats.samples() as f64).max(1.0),
+                share_off: err.share_off,
+                mean_abs: err.mean_abs,
+            }
+        })
+        .collect();
+    let (coherent, incoherent) = ray_throughput(renderer.bvh(), &camera);
+    let table = Table1 {
+        width: args.width,
+        height: args.height,
+        scene_triangles: scene.triangles.len(),
+        reflector_triangles: renderer.reflectors().len(),
+        glass_pixels: reference.stats.pixels,
+        levels,
+        coherent_rays_per_second: coherent,
+        incoherent_rays_per_second: incoherent,
+    };
+    print_table1(&table);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&table)?).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn print_table1(t: &Table1) {
+    println!(
+        "Table 1 — cockpit {} triangles, {}x{}, cover glass {} triangles / {} pixels",
+        t.scene_triangles, t.width, t.height, t.reflector_triangles, t.glass_pixels
+    );
+    println!("{:<10} {:>10} {:>12} {:>10} {:>12} {:>12} {:>10}", "level", "time s", "samples", "factor", "sample fac.", "px off >8", "mean err");
+    for l in &t.levels {
+        println!(
+            "{:<10} {:>10.3} {:>12} {:>10.1} {:>12.1} {:>11.3}% {:>10.3}",
+            l.name,
+            l.seconds,
+            l.traced_samples,
+            l.speedup,
+            l.sample_ratio,
+            l.share_off * 100.0,
+            l.mean_abs
+        );
+    }
+    println!("paper: preview 502x, refine 77x, full 18x over reference");
+    println!(
+        "tracer: {:.2} M coherent rays/s (camera rays), {:.2} M incoherent rays/s (random rays in the cab)",
+        t.coherent_rays_per_second / 1e6,
+        t.incoherent_rays_per_second / 1e6
+    );
+}
+
+/// Closest-hit throughput for camera rays (coherent) and for random rays
+/// from random points in the scene bounds (incoherent).
+fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
+    let coherent: Vec<Ray> = (0..camera.height)
+        .flat_map(|y| (0..camera.width).map(move |x| (x, y)))
+        .map(|(x, y)| Ray { origin: camera.eye, direction: camera.pixel_ray(x, y) })
+        .collect();
+    let (lo, hi) = bvh.scene().bounds();
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        // xorshift64*: a fixed, reproducible ray set.
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let incoherent: Vec<Ray> = (0..coherent.len())
+        .map(|_| {
+            let origin = lo + (hi - lo) * Vec3::new(next(), next(), next());
+            let direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::X);
+            Ray { origin, direction }
+        })
+        .collect();
+    let rate = |rays: &[Ray]| {
+        let start = Instant::now();
+        let hits = rays.par_iter().filter(|r| bvh.closest_hit(r, f32::INFINITY).is_some()).count();
+        std::hint::black_box(hits);
+        rays.len() as f64 / start.elapsed().as_secs_f64()
+    };
+    (rate(&coherent), rate(&incoherent))
+}

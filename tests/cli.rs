@@ -1,0 +1,123 @@
+//! End-to-end tests of the `vtfarm` command: a render of the default job to
+//! PNG with every auxiliary output, the OBJ export read back as a job, and
+//! bad inputs refused with a located message.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vtfarm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vtfarm")).args(args).output().expect("the vtfarm binary runs")
+}
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn render_writes_the_image_and_documented_aux_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("cockpit.png");
+    let aux = dir.path().join("aux");
+    let out = vtfarm(&[
+        "render",
+        repo("configs/cockpit.toml").to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "192",
+        "--height",
+        "108",
+        "--aux",
+        aux.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    for row in ["visible vertices", "traced samples", "triangle filling"] {
+        assert!(stdout.contains(row), "closing table lacks {row}: {stdout}");
+    }
+    let image = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(image.dimensions(), (192, 108));
+
+    let mask = image::open(aux.join("mask.png")).unwrap().to_luma8();
+    let glass_pixels = mask.pixels().filter(|p| p.0[0] == 255).count();
+    assert!(glass_pixels > 500, "the cover glass is on screen: {glass_pixels} pixels");
+    assert!(mask.pixels().all(|p| p.0[0] == 0 || p.0[0] == 255));
+
+    let objects = image::open(aux.join("reflected_objects.png")).unwrap();
+    let objects = objects.as_luma16().expect("a 16-bit grayscale PNG");
+    let names: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(aux.join("objects.json")).unwrap()).unwrap();
+    let name_of = |value: u16| {
+        names.iter().find(|e| e["value"] == value as u64).and_then(|e| e["name"].as_str()).map(str::to_owned)
+    };
+    let mut seen = std::collections::BTreeSet::new();
+    for (p, m) in objects.pixels().zip(mask.pixels()) {
+        if m.0[0] == 0 {
+            assert_eq!(p.0[0], 0, "only reflector pixels mirror something");
+        } else if p.0[0] != 0 {
+            seen.insert(name_of(p.0[0]).expect("every value is named in objects.json"));
+        }
+    }
+    assert!(seen.contains("side_window_left"), "the glass mirrors the left side window: {seen:?}");
+    for file in ["reflected.png", "reflected.npy", "wireframe.png"] {
+        assert!(aux.join(file).is_file(), "{file} written");
+    }
+}
+
+#[test]
+fn exported_cockpit_renders_as_an_obj_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = vtfarm(&["scene", "export", "cockpit", "-o", dir.path().to_str().unwrap(), "--detail", "0.2"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let job = dir.path().join("job.toml");
+    std::fs::write(
+        &job,
+        r#"
+[scene]
+obj = "cockpit.obj"
+[camera]
+eye = [-0.55, 1.4, 0.1]
+target = [-0.55, 1.05, -0.6]
+fov_y = 50.0
+width = 96
+height = 54
+[reflectors]
+materials = ["glass"]
+[quality]
+level = "preview"
+"#,
+    )
+    .unwrap();
+    let png = dir.path().join("obj.png");
+    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", png.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(image::open(&png).unwrap().to_rgb8().dimensions(), (96, 54));
+}
+
+#[test]
+fn bad_job_and_obj_files_are_refused_with_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = dir.path().join("bad.toml");
+    std::fs::write(&job, "[scene]\nbuiltin = \"cockpit\"\n[camera]\nwidht = 5\n").unwrap();
+    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", dir.path().join("x.png").to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("bad.toml:4"), "names file and line: {err}");
+    assert!(!dir.path().join("x.png").exists());
+
+    std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n").unwrap();
+    std::fs::write(
+        &job,
+        "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
+    )
+    .unwrap();
+    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", dir.path().join("x.png").to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("broken.obj:3"), "names the OBJ file and line: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
