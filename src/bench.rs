@@ -32,6 +32,9 @@ pub(crate) struct Table1Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Refinement threshold in 8-bit sRGB steps (default: the job default).
+    #[arg(long)]
+    epsilon: Option<f32>,
     /// Also writes the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -82,7 +85,11 @@ fn table1(args: Table1Args) -> Result<()> {
         camera,
         lighting: c.lighting.clone(),
         trace: TraceSettings::default(),
-        vertex: VertexSettings { quality, ..VertexSettings::default() },
+        vertex: VertexSettings {
+            quality,
+            epsilon: args.epsilon.map_or(VertexSettings::default().epsilon, |e| e / 255.0),
+            ..VertexSettings::default()
+        },
     };
     // Reference first: the others are measured against it.
     let order = [Quality::Reference, Quality::Preview, Quality::Refine, Quality::Full];

@@ -160,6 +160,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         trace: TraceSettings {
             max_depth: 3,
             fresnel: true,
+            ..Default::default()
         },
         vertex: VertexSettings {
             quality: Quality::Reference,

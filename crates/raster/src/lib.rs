@@ -76,13 +76,23 @@ pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image,
 /// # Panics
 /// As [`rasterize`].
 pub fn id_buffer(scene: &Scene, camera: &Camera) -> IdBuffer {
+    id_buffer_where(scene, camera, &|_| true)
+}
+
+/// The ID buffer of only the triangles `keep` accepts, as if the others were
+/// not there (the vertex tracer uses it to see what lies behind the glass).
+pub fn id_buffer_where(
+    scene: &Scene,
+    camera: &Camera,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+) -> IdBuffer {
     assert!(
         camera.width <= MAX_DIMENSION && camera.height <= MAX_DIMENSION,
         "image {}x{} exceeds the rasterizer's limit of {MAX_DIMENSION} pixels per side",
         camera.width,
         camera.height
     );
-    let triangles = setup::setup(scene, camera);
+    let triangles = setup::setup(scene, camera, keep);
     let mut ids = IdBuffer::new(camera.width, camera.height);
     bands::resolve_visibility(&triangles, &mut ids);
     let IdBuffer {

@@ -77,8 +77,13 @@ struct View {
     height: u32,
 }
 
-/// Projects, clips and snaps all triangles of `scene`, in triangle order.
-pub(crate) fn setup(scene: &Scene, camera: &Camera) -> Vec<RasterTriangle> {
+/// Projects, clips and snaps the triangles of `scene` that `keep` accepts, in
+/// triangle order.
+pub(crate) fn setup(
+    scene: &Scene,
+    camera: &Camera,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+) -> Vec<RasterTriangle> {
     let view = View::new(camera);
     let vertices: Vec<ClipVertex> = scene
         .positions
@@ -89,6 +94,7 @@ pub(crate) fn setup(scene: &Scene, camera: &Camera) -> Vec<RasterTriangle> {
         .triangles
         .par_iter()
         .enumerate()
+        .filter(|&(id, _)| keep(id as TriangleId))
         .flat_map_iter(|(id, t)| view.triangle(&vertices, id as TriangleId, t))
         .collect()
 }

@@ -16,7 +16,7 @@ use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
-use vtfarm_vertex::{FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings, trace_package};
+use vtfarm_vertex::{FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings, behind_id_buffer, trace_package};
 
 /// Everything that can change from one frame to the next.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,12 +59,17 @@ pub struct Renderer {
     bvh: SceneBvh,
     owners: VertexOwners,
     reflectors: Vec<TriangleId>,
+    is_reflector: Vec<bool>,
 }
 
 impl Renderer {
     pub fn new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Self {
         let owners = VertexOwners::new(&scene);
-        Renderer { bvh: SceneBvh::new(scene), owners, reflectors }
+        let mut is_reflector = vec![false; scene.triangles.len()];
+        for &t in &reflectors {
+            is_reflector[t as usize] = true;
+        }
+        Renderer { bvh: SceneBvh::new(scene), owners, reflectors, is_reflector }
     }
 
     pub fn scene(&self) -> &Scene {
@@ -84,12 +89,18 @@ impl Renderer {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
     }
 
+    /// What lies behind the reflectors (see `vtfarm_vertex::behind_id_buffer`).
+    pub fn behind(&self, setup: &FrameSetup) -> IdBuffer {
+        behind_id_buffer(self.scene(), &setup.camera, &self.is_reflector)
+    }
+
     /// The vertex tracer's view of a frame.
-    pub fn frame<'a>(&'a self, setup: &'a FrameSetup, ids: &'a IdBuffer) -> Frame<'a> {
+    pub fn frame<'a>(&'a self, setup: &'a FrameSetup, ids: &'a IdBuffer, behind: &'a IdBuffer) -> Frame<'a> {
         Frame {
             tracer: Tracer { bvh: &self.bvh, lighting: &setup.lighting, settings: setup.trace },
             camera: setup.camera,
             ids,
+            behind,
             owners: &self.owners,
             settings: setup.vertex,
         }
@@ -106,8 +117,9 @@ impl Renderer {
     ) -> RenderedFrame {
         let start = Instant::now();
         let (base, ids) = self.base_frame(setup);
+        let behind = self.behind(setup);
         let raster_time = start.elapsed();
-        let frame = self.frame(setup, &ids);
+        let frame = self.frame(setup, &ids, &behind);
         let mut image = FrameImage::new(base);
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();

@@ -64,6 +64,9 @@ pub struct TraceSettings {
     pub max_depth: u32,
     /// Weight kr and kt with Schlick's Fresnel approximation.
     pub fresnel: bool,
+    /// Ray-tree branches whose weight (the product of kr/kt above them) is
+    /// below this are left out of the signature.
+    pub signature_min_weight: f32,
 }
 
 impl Default for TraceSettings {
@@ -71,6 +74,7 @@ impl Default for TraceSettings {
         TraceSettings {
             max_depth: 5,
             fresnel: false,
+            signature_min_weight: 0.05,
         }
     }
 }

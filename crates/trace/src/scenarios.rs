@@ -409,6 +409,7 @@ fn max_depth_one_shades_only_the_first_surface() {
         settings: TraceSettings {
             max_depth: 1,
             fresnel: false,
+            ..Default::default()
         },
     };
     let sample = shallow.trace(&ray);
@@ -420,6 +421,7 @@ fn max_depth_one_shades_only_the_first_surface() {
         settings: TraceSettings {
             max_depth: 2,
             fresnel: false,
+            ..Default::default()
         },
         ..shallow
     };
@@ -755,6 +757,7 @@ fn batches_equal_single_calls_bit_for_bit_on_any_thread_count() {
         settings: TraceSettings {
             max_depth: 6,
             fresnel: true,
+            ..Default::default()
         },
         ..tracer(&bvh, &s.lighting)
     };

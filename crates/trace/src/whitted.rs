@@ -104,7 +104,7 @@ impl Tracer<'_> {
     /// Traces a primary ray from the camera (depth 0).
     pub fn trace(&self, ray: &Ray) -> Sample {
         let mut signature = Signature::new();
-        let (shaded, _) = self.radiance(ray, 1, &mut signature);
+        let (shaded, _) = self.radiance(ray, 1, 1.0, &mut signature);
         sample(shaded, signature)
     }
 
@@ -115,7 +115,7 @@ impl Tracer<'_> {
     /// what vertex tracing calls per vertex and per filled pixel.
     pub fn shade(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
         let mut signature = Signature::new();
-        let shaded = self.shade_surface(point, incoming, 1, &mut signature);
+        let shaded = self.shade_surface(point, incoming, 1, 1.0, &mut signature);
         sample(shaded, signature)
     }
 
@@ -131,12 +131,21 @@ impl Tracer<'_> {
             .collect()
     }
 
-    /// Radiance along `ray`, whose first surface gets depth `depth`; also
+    /// Radiance along `ray`, whose first surface gets depth `depth` and
+    /// carries `weight` of the sample (the product of kr/kt above it); also
     /// returns the object hit (`NONE` on a miss).
-    fn radiance(&self, ray: &Ray, depth: u32, signature: &mut Signature) -> (Shaded, ObjectId) {
+    fn radiance(
+        &self,
+        ray: &Ray,
+        depth: u32,
+        weight: f32,
+        signature: &mut Signature,
+    ) -> (Shaded, ObjectId) {
         match self.bvh.closest_hit(ray, f32::INFINITY) {
             None => {
-                signature.add(word::MISS);
+                if weight >= self.settings.signature_min_weight {
+                    signature.add(word::MISS);
+                }
                 let background = Shaded {
                     color: self.lighting.background,
                     reflected: Vec3::ZERO,
@@ -148,7 +157,7 @@ impl Tracer<'_> {
                 let point = self.bvh.surface_point(&hit);
                 let object = self.bvh.scene().triangles[hit.triangle as usize].object;
                 (
-                    self.shade_surface(&point, ray.direction, depth, signature),
+                    self.shade_surface(&point, ray.direction, depth, weight, signature),
                     object,
                 )
             }
@@ -161,8 +170,12 @@ impl Tracer<'_> {
         point: &SurfacePoint,
         incoming: Vec3,
         depth: u32,
+        weight: f32,
         signature: &mut Signature,
     ) -> Shaded {
+        // Branches too weak to change a pixel visibly stay out of the ray-tree
+        // signature, so they do not drive the refinement.
+        let tracked = weight >= self.settings.signature_min_weight;
         let scene = self.bvh.scene();
         let triangle = &scene.triangles[point.triangle as usize];
         let material = scene.material_of(point.triangle);
@@ -176,7 +189,9 @@ impl Tracer<'_> {
             geometric
         };
         let incoming = incoming.normalize_or(-normal);
-        signature.add(u64::from(triangle.object));
+        if tracked {
+            signature.add(u64::from(triangle.object));
+        }
 
         let local = phong(
             material,
@@ -187,13 +202,15 @@ impl Tracer<'_> {
             |light, to_light, distance| {
                 let visible =
                     self.light_visible(point.position, geometric, light, to_light, distance);
-                if visible {
+                if visible && tracked {
                     signature.add(word::LIT + light_index(self.lighting, light));
                 }
                 visible
             },
         );
-        signature.add(word::LIGHTS_END);
+        if tracked {
+            signature.add(word::LIGHTS_END);
+        }
 
         let mut shaded = Shaded {
             color: local,
@@ -249,19 +266,24 @@ impl Tracer<'_> {
         }
 
         if kr.max_element() > 0.0 {
-            signature.add(word::REFLECT);
+            if tracked {
+                signature.add(word::REFLECT);
+            }
             let ray = self
                 .bvh
                 .spawn_ray(point.position, geometric, reflect(incoming, facing));
-            let (seen, object) = self.radiance(&ray, depth + 1, signature);
+            let (seen, object) =
+                self.radiance(&ray, depth + 1, weight * kr.max_element(), signature);
             shaded.reflected = kr * seen.color;
             shaded.reflected_object = object;
             shaded.color += shaded.reflected;
         }
         if let Some(direction) = refracted.filter(|_| kt.max_element() > 0.0) {
-            signature.add(word::REFRACT);
+            if tracked {
+                signature.add(word::REFRACT);
+            }
             let ray = self.bvh.spawn_ray(point.position, geometric, direction);
-            let (seen, _) = self.radiance(&ray, depth + 1, signature);
+            let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
             shaded.color += kt * seen.color;
         }
         shaded

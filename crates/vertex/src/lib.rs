@@ -114,6 +114,9 @@ pub struct Frame<'a> {
     pub tracer: Tracer<'a>,
     pub camera: Camera,
     pub ids: &'a IdBuffer,
+    /// The ID buffer of the opaque scene without the reflectors: what a
+    /// transparent reflector shows behind it (see [`behind_id_buffer`]).
+    pub behind: &'a IdBuffer,
     pub owners: &'a VertexOwners,
     pub settings: VertexSettings,
 }
@@ -121,6 +124,39 @@ pub struct Frame<'a> {
 impl Frame<'_> {
     fn projector(&self) -> Projector {
         Projector::new(&self.camera)
+    }
+
+    /// Whether `triangle` is see-through, so [`Frame::behind`] hints at what it shows.
+    fn see_through(&self, triangle: TriangleId) -> bool {
+        self.tracer.bvh.scene().material_of(triangle).transmittance.max_element() > 0.0
+    }
+
+    /// The object behind the reflectors at pixel (x, y), or `NONE` off screen.
+    fn behind_object(&self, x: i64, y: i64) -> u32 {
+        if x < 0 || y < 0 || x >= self.behind.width as i64 || y >= self.behind.height as i64 {
+            return vtfarm_scene::NONE;
+        }
+        self.behind.object[self.behind.index(x as u32, y as u32)]
+    }
+
+    /// Whether the object behind the reflectors changes along the screen
+    /// segment from `a` to `b` (sampled every pixel).
+    fn behind_changes_along(&self, a: ScreenPoint, b: ScreenPoint) -> bool {
+        let steps = (b.x - a.x).abs().max((b.y - a.y).abs()).ceil().max(1.0) as u32;
+        let at = |i: u32| {
+            let t = i as f32 / steps as f32;
+            self.behind_object((a.x + (b.x - a.x) * t).floor() as i64, (a.y + (b.y - a.y) * t).floor() as i64)
+        };
+        let first = at(0);
+        (1..=steps).any(|i| at(i) != first)
+    }
+
+    /// The object behind the reflectors at pixel (x, y) when its 4-neighbours
+    /// show the same (refraction shifts the view by about a pixel), else `None`.
+    fn behind_around(&self, x: u32, y: u32) -> Option<u32> {
+        let (x, y) = (x as i64, y as i64);
+        let o = self.behind_object(x, y);
+        [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().all(|(dx, dy)| self.behind_object(x + dx, y + dy) == o).then_some(o)
     }
 
     /// Whether the ID buffer assigns pixel (x, y) to `triangle`.
@@ -201,6 +237,15 @@ impl Frame<'_> {
         let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
         self.tracer.shade(&SurfacePoint { position, normal, triangle }, direction)
     }
+}
+
+/// The ID buffer of what lies behind the reflectors: every triangle that is
+/// neither a reflector nor transparent. Deterministic like every ID buffer, so
+/// workers rebuild it.
+pub fn behind_id_buffer(scene: &vtfarm_scene::Scene, camera: &Camera, is_reflector: &[bool]) -> IdBuffer {
+    vtfarm_raster::id_buffer_where(scene, camera, &|t| {
+        !is_reflector[t as usize] && scene.material_of(t).transmittance.max_element() <= 0.0
+    })
 }
 
 /// Barycentric weights of `p` (in the plane of a, b, c with normal `n`).

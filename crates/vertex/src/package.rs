@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use vtfarm_scene::{ScreenPoint, TriangleId};
+use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
 use crate::refine::{MeshVertex, TriangleMesh};
@@ -317,6 +317,22 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     }
     let fill = frame.settings.quality == Quality::Full;
     let disagrees: Vec<bool> = faces.iter().map(|f| fill && mesh.face_disagrees(f, frame.settings.epsilon)).collect();
+    // A face whose samples agree may still hide a detail behind the glass that
+    // no sample hit: its pixels near a change of the opaque scene behind are
+    // filled too. `None`: no such check (opaque reflector, or not `full`).
+    let behind_corner: Vec<Option<u32>> = faces
+        .iter()
+        .map(|f| {
+            if !fill || !frame.see_through(mesh.triangle) {
+                return None;
+            }
+            let objects = f.vertices.map(|v| {
+                mesh.vertices[v as usize].screen.map_or(NONE, |s| frame.behind_object(s.x.floor() as i64, s.y.floor() as i64))
+            });
+            // Corners that see different things behind: fill the whole face.
+            Some(if objects[0] == objects[1] && objects[1] == objects[2] { objects[0] } else { NONE })
+        })
+        .collect();
     let mut traced = 0;
     let pixels = rect
         .pixels()
@@ -324,7 +340,9 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         .map(|(x, y)| {
             let index = frame.ids.index(x, y) as u32;
             match best[((y - rect.y0) * width + (x - rect.x0)) as usize] {
-                Some((_, fi, w)) if !disagrees[fi] => gouraud(index, mesh, faces[fi].vertices, w),
+                Some((_, fi, w)) if !disagrees[fi] && behind_corner[fi].is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) => {
+                    gouraud(index, mesh, faces[fi].vertices, w)
+                }
                 _ => {
                     traced += 1;
                     PixelValue::from_sample(index, &frame.trace_pixel(mesh.triangle, x, y))

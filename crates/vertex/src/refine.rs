@@ -14,7 +14,7 @@ use vtfarm_imaging::linear_to_srgb;
 use vtfarm_scene::{Projector, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
-use crate::{Frame, Quality, VertexSettings};
+use crate::{Frame, Quality};
 
 /// A vertex of the refinement mesh with its traced sample.
 #[derive(Clone, Copy, Debug)]
@@ -153,7 +153,7 @@ impl TriangleMesh {
             let Some(&faces) = self.edge_faces.get(&(edge.a, edge.b)) else {
                 continue; // Split already (queued twice, or forced after queueing).
             };
-            if !self.check_refinement(&edge, faces, &settings) {
+            if !self.check_refinement(frame, &edge, faces) {
                 continue;
             }
             let new_faces = self.split(frame, projector, edge.a, edge.b, faces);
@@ -176,7 +176,8 @@ impl TriangleMesh {
 
     /// CheckRefinement(): long enough on screen, not too deep, at least one
     /// end visible, and the samples disagree (or the flatness test forced it).
-    fn check_refinement(&self, edge: &QueuedEdge, faces: [u32; 2], settings: &VertexSettings) -> bool {
+    fn check_refinement(&self, frame: &Frame<'_>, edge: &QueuedEdge, faces: [u32; 2]) -> bool {
+        let settings = &frame.settings;
         let deep = faces
             .iter()
             .filter(|&&f| f != NO_FACE)
@@ -185,7 +186,17 @@ impl TriangleMesh {
         edge.length > settings.pixel_floor
             && !deep
             && visible
-            && (edge.forced || self.disagree(edge.a, edge.b, settings.epsilon))
+            && (edge.forced || self.disagree(edge.a, edge.b, settings.epsilon) || self.crosses_hidden_edge(frame, edge))
+    }
+
+    /// Whether the opaque scene seen through a transparent reflector changes
+    /// along the edge: a marking thinner than the edge between two samples
+    /// that both see the dial would otherwise be missed.
+    fn crosses_hidden_edge(&self, frame: &Frame<'_>, edge: &QueuedEdge) -> bool {
+        let (Some(a), Some(b)) = (self.vertices[edge.a as usize].screen, self.vertices[edge.b as usize].screen) else {
+            return false;
+        };
+        frame.see_through(self.triangle) && frame.behind_changes_along(a, b)
     }
 
     /// RefineEdge(): inserts the midpoint vertex (position interpolated,
