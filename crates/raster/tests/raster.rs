@@ -2,7 +2,6 @@
 //! own contracts: the top-left fill rule, near-plane clipping, shading with
 //! the shared Phong model, and bit-identical results on any thread count.
 
-use std::time::Instant;
 
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{IdBuffer, id_buffer, rasterize};
@@ -723,57 +722,4 @@ fn normals_are_interpolated_perspective_correctly() {
         checked += 1;
     }
     assert!(checked > 1000, "{checked}");
-}
-
-#[test]
-#[ignore = "timing report: cargo test --release -p vtfarm-raster -- --ignored --nocapture"]
-fn timing_on_a_100k_triangle_scene_at_1080p() {
-    // The cockpit's shape: walls around the eye and many small parts in front.
-    let mut rng = Rng::new(2024);
-    let mut b = Builder::default();
-    let walls = b.object("walls", Vec3::splat(0.6));
-    b.cuboid(
-        walls,
-        Vec3::new(0.0, 0.5, -1.0),
-        Vec3::new(2.0, 1.5, 3.0),
-        Quat::IDENTITY,
-    );
-    for i in 0..42 {
-        let o = b.object(&format!("part{i}"), rng.vec3(0.2, 1.0));
-        let center = Vec3::new(
-            rng.range(-1.8, 1.8),
-            rng.range(-0.9, 1.8),
-            rng.range(-3.5, -1.0),
-        );
-        b.sphere(o, center, rng.range(0.05, 0.4), 34, 36);
-    }
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: Vec3::new(0.0, 0.1, -1.0),
-        up: Vec3::Y,
-        fov_y_deg: 60.0,
-        width: 1920,
-        height: 1080,
-    };
-    let lighting = shading_lighting(camera.eye);
-    let best_of = |f: &dyn Fn()| {
-        (0..4)
-            .map(|_| {
-                let start = Instant::now();
-                f();
-                start.elapsed().as_secs_f64()
-            })
-            .fold(f64::INFINITY, f64::min)
-    };
-    let ids = best_of(&|| drop(id_buffer(&b.scene, &camera)));
-    let full = best_of(&|| drop(rasterize(&b.scene, &camera, &lighting)));
-    println!(
-        "{} triangles at {}x{} on {} threads: id_buffer {:.1} ms, rasterize {:.1} ms",
-        b.scene.triangles.len(),
-        camera.width,
-        camera.height,
-        rayon::current_num_threads(),
-        ids * 1e3,
-        full * 1e3
-    );
 }

@@ -152,7 +152,7 @@ fn random_packages_give_byte_identical_images() {
     let renderer = Renderer::new(Arc::new(scene), reflectors.clone());
     for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
         let s = setup(camera, &lighting, quality);
-        let whole = render_with(&renderer, &s, &[reflectors.clone()]);
+        let whole = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
         let mut shuffled = reflectors.clone();
         let mut state = 0x2545_F491_4F6C_DD1Du64;
         for i in (1..shuffled.len()).rev() {

@@ -171,7 +171,7 @@ pub fn trace_package(
     stats.fill_time = fill_start.elapsed();
     stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
 
-    let faces = if options.collect_faces { meshes.iter().flat_map(|m| finished_faces(frame, m)).collect() } else { Vec::new() };
+    let faces = if options.collect_faces { meshes.iter().flat_map(|m| finished_faces(m)).collect() } else { Vec::new() };
     let bitmap = assemble(frame, per_triangle.into_iter().flat_map(|(p, _)| p).collect());
     stats.pixels = bitmap.color.len() as u64;
     PackageResult { bitmap, stats, faces }
@@ -221,16 +221,22 @@ fn refine_all(
         })
         .collect();
     if let Some(every) = options.time_break {
-        progress(&meshes.iter().flat_map(|m| finished_faces(frame, m)).collect::<Vec<_>>());
+        progress(&meshes.iter().flat_map(|m| finished_faces(m)).collect::<Vec<_>>());
         let mut last_break = Instant::now();
+        let mut pending = Vec::new();
         // Chunks keep the time breaks frequent while each chunk stays parallel.
         let chunk = (rayon::current_num_threads() * 8).max(1);
         for part in meshes.chunks_mut(chunk) {
             part.par_iter_mut().for_each(|m| m.refine(frame, &projector));
+            pending.extend(part.iter().flat_map(|m| finished_faces(m)));
             if last_break.elapsed() >= every {
-                progress(&part.iter().flat_map(|m| finished_faces(frame, m)).collect::<Vec<_>>());
+                progress(&pending);
+                pending.clear();
                 last_break = Instant::now();
             }
+        }
+        if !pending.is_empty() {
+            progress(&pending);
         }
     } else {
         meshes.par_iter_mut().for_each(|m| m.refine(frame, &projector));
@@ -240,7 +246,7 @@ fn refine_all(
 }
 
 /// The screen-space faces of a mesh with their corner colours.
-fn finished_faces<'a>(_frame: &Frame<'_>, mesh: &'a TriangleMesh) -> impl Iterator<Item = FinishedFace> + 'a {
+fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '_ {
     mesh.faces().filter_map(|f| {
         let v = f.vertices.map(|i| mesh.vertices[i as usize]);
         let [Some(a), Some(b), Some(c)] = v.map(|v| v.screen) else { return None };

@@ -1,0 +1,60 @@
+//! The frame pipeline on the built-in cockpit: the rasterizer's ID buffer
+//! against the ray tracer's first hits, and progressive delivery of faces.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_scene::{Camera, NONE, TriangleId};
+use vtfarm_trace::{Ray, TraceSettings};
+use vtfarm_vertex::{PackageOptions, Quality, VertexSettings, trace_package};
+
+fn small_cockpit() -> (Renderer, FrameSetup) {
+    let c = cockpit(&CockpitConfig { detail: 0.3, ..CockpitConfig::default() });
+    let glass = c.scene.object_id(COVER_GLASS).unwrap();
+    let reflectors: Vec<TriangleId> =
+        (0..c.scene.triangles.len() as TriangleId).filter(|&t| c.scene.triangles[t as usize].object == glass).collect();
+    let setup = FrameSetup {
+        camera: Camera { width: 240, height: 135, ..c.camera },
+        lighting: c.lighting,
+        trace: TraceSettings::default(),
+        vertex: VertexSettings { quality: Quality::Full, ..VertexSettings::default() },
+    };
+    (Renderer::new(Arc::new(c.scene), reflectors), setup)
+}
+
+#[test]
+fn id_buffer_agrees_with_ray_cast_first_hits_on_the_cockpit() {
+    let (renderer, setup) = small_cockpit();
+    let (_, ids) = renderer.base_frame(&setup);
+    let camera = setup.camera;
+    let mut agree = 0;
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let ray = Ray { origin: camera.eye, direction: camera.pixel_ray(x, y) };
+            let hit = renderer.bvh().closest_hit(&ray, f32::INFINITY).map_or(NONE, |h| h.triangle);
+            agree += (hit == ids.triangle[ids.index(x, y)]) as u32;
+        }
+    }
+    let share = agree as f64 / (camera.width * camera.height) as f64;
+    assert!(share >= 0.995, "ID buffer agrees with the ray cast on {:.3}% of pixels", share * 100.0);
+}
+
+#[test]
+fn time_breaks_deliver_the_preview_then_every_refined_face() {
+    let (renderer, setup) = small_cockpit();
+    let (_, ids) = renderer.base_frame(&setup);
+    let behind = renderer.behind(&setup);
+    let frame = renderer.frame(&setup, &ids, &behind);
+    let mut deliveries = Vec::new();
+    let options = PackageOptions { collect_faces: true, time_break: Some(Duration::ZERO) };
+    let result = trace_package(&frame, renderer.reflectors(), &options, &mut |faces| deliveries.push(faces.to_vec()));
+    assert!(deliveries.len() >= 2, "a preview and at least one refinement break: {}", deliveries.len());
+    // The first break shows the unrefined triangles (the preview) ...
+    assert_eq!(deliveries[0].len() as u64, result.stats.traced_triangles);
+    // ... and the later ones, together, every final face exactly once.
+    let refined: Vec<_> = deliveries[1..].concat();
+    assert_eq!(refined, result.faces);
+    assert!(result.faces.len() as u64 > result.stats.traced_triangles, "the refinement split faces");
+}
