@@ -75,37 +75,58 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
 
 fn table1(args: Table1Args) -> Result<()> {
     crate::set_threads(args.threads)?;
-    let c = cockpit(&CockpitConfig { detail: args.detail, ..CockpitConfig::default() });
+    let c = cockpit(&CockpitConfig {
+        detail: args.detail,
+        ..CockpitConfig::default()
+    });
     let scene = Arc::new(c.scene);
-    let glass = scene.object_id(COVER_GLASS).context("the cockpit has a cover glass")?;
-    let reflectors: Vec<u32> =
-        (0..scene.triangles.len() as u32).filter(|&t| scene.triangles[t as usize].object == glass).collect();
+    let glass = scene
+        .object_id(COVER_GLASS)
+        .context("the cockpit has a cover glass")?;
+    let reflectors: Vec<u32> = (0..scene.triangles.len() as u32)
+        .filter(|&t| scene.triangles[t as usize].object == glass)
+        .collect();
     let renderer = Renderer::new(scene.clone(), reflectors);
-    let camera = vtfarm_scene::Camera { width: args.width, height: args.height, ..c.camera };
+    let camera = vtfarm_scene::Camera {
+        width: args.width,
+        height: args.height,
+        ..c.camera
+    };
     let setup_for = |quality| FrameSetup {
         camera,
         lighting: c.lighting.clone(),
         trace: TraceSettings::default(),
         vertex: VertexSettings {
             quality,
-            epsilon: args.epsilon.map_or(VertexSettings::default().epsilon, |e| e / 255.0),
+            epsilon: args
+                .epsilon
+                .map_or(VertexSettings::default().epsilon, |e| e / 255.0),
             ..VertexSettings::default()
         },
     };
     // Reference first: the others are measured against it.
-    let order = [Quality::Reference, Quality::Preview, Quality::Refine, Quality::Full];
+    let order = [
+        Quality::Reference,
+        Quality::Preview,
+        Quality::Refine,
+        Quality::Full,
+    ];
     let mut frames = Vec::new();
     for q in order {
         eprintln!("rendering {} ...", q.name());
         let frame = renderer.render(&setup_for(q), &RenderOptions::default(), &mut |_, _| {});
         if let Some(dir) = &args.images {
             std::fs::create_dir_all(dir)?;
-            frame.image.color.write_png(&dir.join(format!("{}.png", q.name())))?;
+            frame
+                .image
+                .color
+                .write_png(&dir.join(format!("{}.png", q.name())))?;
         }
         frames.push((q, frame));
     }
     let reference = &frames[0].1;
-    let ref_seconds = reference.stats.vertex_time.as_secs_f64() + reference.stats.fill_time.as_secs_f64();
+    let ref_seconds =
+        reference.stats.vertex_time.as_secs_f64() + reference.stats.fill_time.as_secs_f64();
     let ref_samples = reference.stats.samples() as f64;
     let levels: Vec<LevelFigures> = frames
         .iter()
@@ -137,7 +158,8 @@ fn table1(args: Table1Args) -> Result<()> {
     };
     print_table1(&table);
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&table)?).with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&table)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }
@@ -147,7 +169,10 @@ fn print_table1(t: &Table1) {
         "Table 1 — cockpit {} triangles, {}x{}, cover glass {} triangles / {} pixels",
         t.scene_triangles, t.width, t.height, t.reflector_triangles, t.glass_pixels
     );
-    println!("{:<10} {:>10} {:>12} {:>10} {:>12} {:>12} {:>10}", "level", "time s", "samples", "factor", "sample fac.", "px off >8", "mean err");
+    println!(
+        "{:<10} {:>10} {:>12} {:>10} {:>12} {:>12} {:>10}",
+        "level", "time s", "samples", "factor", "sample fac.", "px off >8", "mean err"
+    );
     for l in &t.levels {
         println!(
             "{:<10} {:>10.3} {:>12} {:>10.1} {:>12.1} {:>11.3}% {:>10.3}",
@@ -161,7 +186,10 @@ fn print_table1(t: &Table1) {
         );
     }
     println!("paper: preview 502x, refine 77x, full 18x over reference");
-    println!("base frame (rasterizer, image + ID buffers): {:.3} s", t.base_frame_seconds);
+    println!(
+        "base frame (rasterizer, image + ID buffers): {:.3} s",
+        t.base_frame_seconds
+    );
     println!(
         "tracer: {:.2} M coherent rays/s (camera rays), {:.2} M incoherent rays/s (random rays in the cab)",
         t.coherent_rays_per_second / 1e6,
@@ -174,7 +202,10 @@ fn print_table1(t: &Table1) {
 fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
     let coherent: Vec<Ray> = (0..camera.height)
         .flat_map(|y| (0..camera.width).map(move |x| (x, y)))
-        .map(|(x, y)| Ray { origin: camera.eye, direction: camera.pixel_ray(x, y) })
+        .map(|(x, y)| Ray {
+            origin: camera.eye,
+            direction: camera.pixel_ray(x, y),
+        })
         .collect();
     let (lo, hi) = bvh.scene().bounds();
     let mut state = 0x9E37_79B9_7F4A_7C15u64;
@@ -188,13 +219,17 @@ fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
     let incoherent: Vec<Ray> = (0..coherent.len())
         .map(|_| {
             let origin = lo + (hi - lo) * Vec3::new(next(), next(), next());
-            let direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::X);
+            let direction =
+                Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::X);
             Ray { origin, direction }
         })
         .collect();
     let rate = |rays: &[Ray]| {
         let start = Instant::now();
-        let hits = rays.par_iter().filter(|r| bvh.closest_hit(r, f32::INFINITY).is_some()).count();
+        let hits = rays
+            .par_iter()
+            .filter(|r| bvh.closest_hit(r, f32::INFINITY).is_some())
+            .count();
         std::hint::black_box(hits);
         rays.len() as f64 / start.elapsed().as_secs_f64()
     };

@@ -14,7 +14,11 @@ use vtfarm_render::{FrameSetup, RenderOptions, RenderedFrame, Renderer, output};
 use vtfarm_vertex::Quality;
 
 #[derive(Parser)]
-#[command(name = "vtfarm", version, about = "Distributed adaptive progressive vertex tracing")]
+#[command(
+    name = "vtfarm",
+    version,
+    about = "Distributed adaptive progressive vertex tracing"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -74,7 +78,8 @@ enum SceneCommand {
 }
 
 fn parse_quality(s: &str) -> Result<Quality, String> {
-    Quality::from_name(s).ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
+    Quality::from_name(s)
+        .ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
 }
 
 fn main() -> std::process::ExitCode {
@@ -96,7 +101,11 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(args) => render(args),
-        Command::Scene(SceneCommand::Export { name, output, detail }) => export_scene(&name, &output, detail),
+        Command::Scene(SceneCommand::Export {
+            name,
+            output,
+            detail,
+        }) => export_scene(&name, &output, detail),
         Command::Bench(b) => bench::run(b),
     }
 }
@@ -104,7 +113,10 @@ fn run(cli: Cli) -> Result<()> {
 /// Sets the size of rayon's global pool (once, before any parallel work).
 fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("setting the thread count")?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("setting the thread count")?;
     }
     Ok(())
 }
@@ -121,26 +133,47 @@ fn render(args: RenderArgs) -> Result<()> {
     camera.height = args.height.unwrap_or(camera.height);
     let reflectors = job.reflector_triangles(&loaded.scene)?;
     let renderer = Renderer::new(Arc::new(loaded.scene), reflectors);
-    let setup = FrameSetup { camera, lighting: loaded.lighting, trace: job.trace, vertex: job.vertex };
-    let options = RenderOptions { package_size: args.package_size, collect_faces: args.aux.is_some() };
+    let setup = FrameSetup {
+        camera,
+        lighting: loaded.lighting,
+        trace: job.trace,
+        vertex: job.vertex,
+    };
+    let options = RenderOptions {
+        package_size: args.package_size,
+        collect_faces: args.aux.is_some(),
+    };
     let bar = ProgressBar::new(renderer.reflectors().len() as u64).with_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})")
-            .expect("template is valid")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})",
+        )
+        .expect("template is valid")
+        .progress_chars("=> "),
     );
     bar.set_message(job.vertex.quality.name());
     let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
     bar.finish_and_clear();
-    output::write_image(&args.output, &frame).with_context(|| format!("writing {}", args.output.display()))?;
+    output::write_image(&args.output, &frame)
+        .with_context(|| format!("writing {}", args.output.display()))?;
     if let Some(dir) = &args.aux {
         output::write_aux(dir, &frame, renderer.scene())?;
     }
-    print_summary(&frame, renderer.scene().triangles.len(), renderer.reflectors().len(), job.vertex.quality);
+    print_summary(
+        &frame,
+        renderer.scene().triangles.len(),
+        renderer.reflectors().len(),
+        job.vertex.quality,
+    );
     println!("wrote {}", args.output.display());
     Ok(())
 }
 
-fn print_summary(frame: &RenderedFrame, scene_triangles: usize, reflector_triangles: usize, quality: Quality) {
+fn print_summary(
+    frame: &RenderedFrame,
+    scene_triangles: usize,
+    reflector_triangles: usize,
+    quality: Quality,
+) {
     let s = &frame.stats;
     let rows: [(&str, String); 12] = [
         ("quality", quality.name().to_owned()),
@@ -149,11 +182,28 @@ fn print_summary(frame: &RenderedFrame, scene_triangles: usize, reflector_triang
         ("traced triangles", s.traced_triangles.to_string()),
         ("visible vertices", s.visible_vertices.to_string()),
         ("refined edges", s.refined_edges.to_string()),
-        ("traced samples", format!("{} ({} vertices + {} filled pixels)", s.samples(), s.vertex_samples, s.filled_pixels)),
+        (
+            "traced samples",
+            format!(
+                "{} ({} vertices + {} filled pixels)",
+                s.samples(),
+                s.vertex_samples,
+                s.filled_pixels
+            ),
+        ),
         ("reflector pixels", s.pixels.to_string()),
-        ("base frame", format!("{:.3} s", frame.raster_time.as_secs_f64())),
-        ("vertex tracing", format!("{:.3} s", s.vertex_time.as_secs_f64())),
-        ("triangle filling", format!("{:.3} s", s.fill_time.as_secs_f64())),
+        (
+            "base frame",
+            format!("{:.3} s", frame.raster_time.as_secs_f64()),
+        ),
+        (
+            "vertex tracing",
+            format!("{:.3} s", s.vertex_time.as_secs_f64()),
+        ),
+        (
+            "triangle filling",
+            format!("{:.3} s", s.fill_time.as_secs_f64()),
+        ),
         ("total", format!("{:.3} s", frame.total_time.as_secs_f64())),
     ];
     for (name, value) in rows {
@@ -165,9 +215,16 @@ fn export_scene(name: &str, dir: &Path, detail: f32) -> Result<()> {
     if name != "cockpit" {
         bail!("unknown built-in scene '{name}' (available: cockpit)");
     }
-    let c = cockpit(&CockpitConfig { detail, ..CockpitConfig::default() });
+    let c = cockpit(&CockpitConfig {
+        detail,
+        ..CockpitConfig::default()
+    });
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     vtfarm_scene::obj::write_obj(&c.scene, dir, name)?;
-    println!("wrote {} triangles to {}", c.scene.triangles.len(), dir.join(format!("{name}.obj")).display());
+    println!(
+        "wrote {} triangles to {}",
+        c.scene.triangles.len(),
+        dir.join(format!("{name}.obj")).display()
+    );
     Ok(())
 }

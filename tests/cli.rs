@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn vtfarm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vtfarm")).args(args).output().expect("the vtfarm binary runs")
+    Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+        .args(args)
+        .output()
+        .expect("the vtfarm binary runs")
 }
 
 fn repo(path: &str) -> PathBuf {
@@ -44,7 +47,10 @@ fn render_writes_the_image_and_documented_aux_files() {
 
     let mask = image::open(aux.join("mask.png")).unwrap().to_luma8();
     let glass_pixels = mask.pixels().filter(|p| p.0[0] == 255).count();
-    assert!(glass_pixels > 500, "the cover glass is on screen: {glass_pixels} pixels");
+    assert!(
+        glass_pixels > 500,
+        "the cover glass is on screen: {glass_pixels} pixels"
+    );
     assert!(mask.pixels().all(|p| p.0[0] == 0 || p.0[0] == 255));
 
     let objects = image::open(aux.join("reflected_objects.png")).unwrap();
@@ -52,7 +58,11 @@ fn render_writes_the_image_and_documented_aux_files() {
     let names: Vec<serde_json::Value> =
         serde_json::from_str(&std::fs::read_to_string(aux.join("objects.json")).unwrap()).unwrap();
     let name_of = |value: u16| {
-        names.iter().find(|e| e["value"] == value as u64).and_then(|e| e["name"].as_str()).map(str::to_owned)
+        names
+            .iter()
+            .find(|e| e["value"] == value as u64)
+            .and_then(|e| e["name"].as_str())
+            .map(str::to_owned)
     };
     let mut seen = std::collections::BTreeSet::new();
     for (p, m) in objects.pixels().zip(mask.pixels()) {
@@ -62,7 +72,10 @@ fn render_writes_the_image_and_documented_aux_files() {
             seen.insert(name_of(p.0[0]).expect("every value is named in objects.json"));
         }
     }
-    assert!(seen.contains("side_window_left"), "the glass mirrors the left side window: {seen:?}");
+    assert!(
+        seen.contains("side_window_left"),
+        "the glass mirrors the left side window: {seen:?}"
+    );
     for file in ["reflected.png", "reflected.npy", "wireframe.png"] {
         assert!(aux.join(file).is_file(), "{file} written");
     }
@@ -71,7 +84,15 @@ fn render_writes_the_image_and_documented_aux_files() {
 #[test]
 fn exported_cockpit_renders_as_an_obj_job() {
     let dir = tempfile::tempdir().unwrap();
-    let out = vtfarm(&["scene", "export", "cockpit", "-o", dir.path().to_str().unwrap(), "--detail", "0.2"]);
+    let out = vtfarm(&[
+        "scene",
+        "export",
+        "cockpit",
+        "-o",
+        dir.path().to_str().unwrap(),
+        "--detail",
+        "0.2",
+    ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let job = dir.path().join("job.toml");
     std::fs::write(
@@ -102,22 +123,43 @@ level = "preview"
 fn bad_job_and_obj_files_are_refused_with_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let job = dir.path().join("bad.toml");
-    std::fs::write(&job, "[scene]\nbuiltin = \"cockpit\"\n[camera]\nwidht = 5\n").unwrap();
-    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", dir.path().join("x.png").to_str().unwrap()]);
+    std::fs::write(
+        &job,
+        "[scene]\nbuiltin = \"cockpit\"\n[camera]\nwidht = 5\n",
+    )
+    .unwrap();
+    let out = vtfarm(&[
+        "render",
+        job.to_str().unwrap(),
+        "-o",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(err.contains("bad.toml:4"), "names file and line: {err}");
     assert!(!dir.path().join("x.png").exists());
 
-    std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n").unwrap();
+    std::fs::write(
+        dir.path().join("broken.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n",
+    )
+    .unwrap();
     std::fs::write(
         &job,
         "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
     )
     .unwrap();
-    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", dir.path().join("x.png").to_str().unwrap()]);
+    let out = vtfarm(&[
+        "render",
+        job.to_str().unwrap(),
+        "-o",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
     assert!(!out.status.success());
     let err = text(&out.stderr);
-    assert!(err.contains("broken.obj:3"), "names the OBJ file and line: {err}");
+    assert!(
+        err.contains("broken.obj:3"),
+        "names the OBJ file and line: {err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 }

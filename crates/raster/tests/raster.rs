@@ -2,7 +2,6 @@
 //! own contracts: the top-left fill rule, near-plane clipping, shading with
 //! the shared Phong model, and bit-identical results on any thread count.
 
-
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{IdBuffer, id_buffer, rasterize};
 use vtfarm_scene::shading::phong;

@@ -16,7 +16,10 @@ use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
-use vtfarm_vertex::{FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings, behind_id_buffer, trace_package};
+use vtfarm_vertex::{
+    FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings,
+    behind_id_buffer, trace_package,
+};
 
 /// Everything that can change from one frame to the next.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,7 +41,10 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { package_size: 256, collect_faces: false }
+        RenderOptions {
+            package_size: 256,
+            collect_faces: false,
+        }
     }
 }
 
@@ -69,7 +75,12 @@ impl Renderer {
         for &t in &reflectors {
             is_reflector[t as usize] = true;
         }
-        Renderer { bvh: SceneBvh::new(scene), owners, reflectors, is_reflector }
+        Renderer {
+            bvh: SceneBvh::new(scene),
+            owners,
+            reflectors,
+            is_reflector,
+        }
     }
 
     pub fn scene(&self) -> &Scene {
@@ -95,9 +106,18 @@ impl Renderer {
     }
 
     /// The vertex tracer's view of a frame.
-    pub fn frame<'a>(&'a self, setup: &'a FrameSetup, ids: &'a IdBuffer, behind: &'a IdBuffer) -> Frame<'a> {
+    pub fn frame<'a>(
+        &'a self,
+        setup: &'a FrameSetup,
+        ids: &'a IdBuffer,
+        behind: &'a IdBuffer,
+    ) -> Frame<'a> {
         Frame {
-            tracer: Tracer { bvh: &self.bvh, lighting: &setup.lighting, settings: setup.trace },
+            tracer: Tracer {
+                bvh: &self.bvh,
+                lighting: &setup.lighting,
+                settings: setup.trace,
+            },
             camera: setup.camera,
             ids,
             behind,
@@ -125,7 +145,10 @@ impl Renderer {
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
         let mut done = 0;
-        let package_options = PackageOptions { collect_faces: options.collect_faces, time_break: None };
+        let package_options = PackageOptions {
+            collect_faces: options.collect_faces,
+            time_break: None,
+        };
         for package in packages {
             let result = trace_package(&frame, package, &package_options, &mut |_| {});
             image.composite(&result.bitmap);
@@ -134,12 +157,23 @@ impl Renderer {
             done += package.len() as u64;
             progress(done, total);
         }
-        RenderedFrame { image, stats, raster_time, total_time: start.elapsed(), faces }
+        RenderedFrame {
+            image,
+            stats,
+            raster_time,
+            total_time: start.elapsed(),
+            faces,
+        }
     }
 
     /// Renders a frame with the reflectors cut into packages of
     /// `options.package_size` triangles.
-    pub fn render(&self, setup: &FrameSetup, options: &RenderOptions, progress: &mut dyn FnMut(u64, u64)) -> RenderedFrame {
+    pub fn render(
+        &self,
+        setup: &FrameSetup,
+        options: &RenderOptions,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> RenderedFrame {
         let packages = split_packages(&self.reflectors, options.package_size);
         self.render_packages(setup, &packages, options, progress)
     }
@@ -147,7 +181,10 @@ impl Renderer {
 
 /// Cuts triangles into consecutive packages of at most `size`.
 pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<TriangleId>> {
-    triangles.chunks(size.max(1)).map(<[TriangleId]>::to_vec).collect()
+    triangles
+        .chunks(size.max(1))
+        .map(<[TriangleId]>::to_vec)
+        .collect()
 }
 
 /// How far an image is from a reference over the reference's reflector
@@ -181,5 +218,10 @@ pub fn compare(test: &FrameImage, reference: &FrameImage) -> ErrorFigures {
         off += (worst > 8) as u64;
     }
     let n = pixels.max(1) as f64;
-    ErrorFigures { pixels, mean_abs: sum as f64 / (3.0 * n), share_off: off as f64 / n, max_abs }
+    ErrorFigures {
+        pixels,
+        mean_abs: sum as f64 / (3.0 * n),
+        share_off: off as f64 / n,
+        max_abs,
+    }
 }

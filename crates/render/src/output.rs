@@ -23,7 +23,10 @@ pub enum OutputError {
     #[error(transparent)]
     Image(#[from] ImageError),
     #[error("cannot write {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 }
 
 /// One entry of `objects.json`.
@@ -53,18 +56,35 @@ pub fn write_aux(dir: &Path, frame: &RenderedFrame, scene: &Scene) -> Result<(),
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let image = &frame.image;
     let (w, h) = (image.color.width, image.color.height);
-    let mask: Vec<u8> = image.mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
+    let mask: Vec<u8> = image
+        .mask
+        .iter()
+        .map(|&m| if m { 255 } else { 0 })
+        .collect();
     write_gray8_png(&dir.join("mask.png"), w, h, &mask)?;
     image.reflected.write_png(&dir.join("reflected.png"))?;
     image.reflected.write_npy(&dir.join("reflected.npy"))?;
     let objects: Vec<u16> = image
         .reflected_object
         .iter()
-        .map(|&o| if o == NONE { 0 } else { (o + 1).min(u16::MAX as u32) as u16 })
+        .map(|&o| {
+            if o == NONE {
+                0
+            } else {
+                (o + 1).min(u16::MAX as u32) as u16
+            }
+        })
         .collect();
     write_gray16_png(&dir.join("reflected_objects.png"), w, h, &objects)?;
-    let entries: Vec<ObjectEntry<'_>> =
-        scene.objects.iter().enumerate().map(|(i, o)| ObjectEntry { value: i as u32 + 1, name: &o.name }).collect();
+    let entries: Vec<ObjectEntry<'_>> = scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| ObjectEntry {
+            value: i as u32 + 1,
+            name: &o.name,
+        })
+        .collect();
     let json_path = dir.join("objects.json");
     let json = serde_json::to_string_pretty(&entries).expect("plain structs serialize");
     std::fs::write(&json_path, json).map_err(io(&json_path))?;

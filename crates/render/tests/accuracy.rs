@@ -7,18 +7,36 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
 use vtfarm_render::{ErrorFigures, FrameSetup, RenderOptions, Renderer, compare, split_packages};
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{
+    Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId,
+};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{FrameImage, Quality, VertexSettings};
 
 /// A UV sphere (smooth normals) appended to `scene` as object `name`.
-fn add_sphere(scene: &mut Scene, name: &str, material: Material, centre: Vec3, radius: f32, rings: u32, segments: u32) {
-    let mut part = Scene { objects: vec![Object { name: name.into() }], materials: vec![material], ..Scene::default() };
+fn add_sphere(
+    scene: &mut Scene,
+    name: &str,
+    material: Material,
+    centre: Vec3,
+    radius: f32,
+    rings: u32,
+    segments: u32,
+) {
+    let mut part = Scene {
+        objects: vec![Object { name: name.into() }],
+        materials: vec![material],
+        ..Scene::default()
+    };
     for r in 0..=rings {
         let theta = PI * r as f32 / rings as f32;
         for s in 0..=segments {
             let phi = 2.0 * PI * s as f32 / segments as f32;
-            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            let n = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
             part.positions.push(centre + n * radius);
             part.normals.push(n);
         }
@@ -26,11 +44,20 @@ fn add_sphere(scene: &mut Scene, name: &str, material: Material, centre: Vec3, r
     let row = segments + 1;
     for r in 0..rings {
         for s in 0..segments {
-            let (a, b, c, d) = (r * row + s, r * row + s + 1, (r + 1) * row + s, (r + 1) * row + s + 1);
+            let (a, b, c, d) = (
+                r * row + s,
+                r * row + s + 1,
+                (r + 1) * row + s,
+                (r + 1) * row + s + 1,
+            );
             for vertices in [[a, c, b], [b, c, d]] {
                 let [p, q, w] = vertices.map(|v| part.positions[v as usize]);
                 if (q - p).cross(w - p).length() > 1e-9 {
-                    part.triangles.push(Triangle { vertices, object: 0, material: 0 });
+                    part.triangles.push(Triangle {
+                        vertices,
+                        object: 0,
+                        material: 0,
+                    });
                 }
             }
         }
@@ -45,8 +72,16 @@ fn add_quad(scene: &mut Scene, name: &str, material: Material, corner: Vec3, u: 
         positions: vec![corner, corner + u, corner + u + v, corner + v],
         normals: vec![n; 4],
         triangles: vec![
-            Triangle { vertices: [0, 1, 2], object: 0, material: 0 },
-            Triangle { vertices: [0, 2, 3], object: 0, material: 0 },
+            Triangle {
+                vertices: [0, 1, 2],
+                object: 0,
+                material: 0,
+            },
+            Triangle {
+                vertices: [0, 2, 3],
+                object: 0,
+                material: 0,
+            },
         ],
         objects: vec![Object { name: name.into() }],
         materials: vec![material],
@@ -55,7 +90,10 @@ fn add_quad(scene: &mut Scene, name: &str, material: Material, corner: Vec3, u: 
 }
 
 fn emissive(name: &str, color: Vec3) -> Material {
-    Material { emission: color, ..Material::diffuse(name, color * 0.2) }
+    Material {
+        emission: color,
+        ..Material::diffuse(name, color * 0.2)
+    }
 }
 
 /// A mirror sphere in a room of coloured, partly emissive walls: sharp
@@ -70,14 +108,62 @@ fn mirror_sphere_scene() -> (Scene, Camera, Lighting) {
     };
     add_sphere(&mut scene, "sphere", mirror, Vec3::ZERO, 1.0, 24, 48);
     let s = 4.0;
-    add_quad(&mut scene, "floor", Material::diffuse("floor", Vec3::new(0.6, 0.5, 0.4)), Vec3::new(-s, -1.5, s), Vec3::X * 2.0 * s, Vec3::NEG_Z * 2.0 * s);
-    add_quad(&mut scene, "back", emissive("back", Vec3::new(0.9, 0.2, 0.2)), Vec3::new(-s, -1.5, -s), Vec3::X * 2.0 * s, Vec3::Y * 6.0);
-    add_quad(&mut scene, "left", emissive("left", Vec3::new(0.2, 0.9, 0.3)), Vec3::new(-s, -1.5, s), Vec3::NEG_Z * 2.0 * s, Vec3::Y * 6.0);
-    add_quad(&mut scene, "window", emissive("window", Vec3::splat(3.0)), Vec3::new(s - 0.01, 0.0, 1.0), Vec3::NEG_Z * 2.0, Vec3::Y * 1.5);
-    add_quad(&mut scene, "block", Material::diffuse("block", Vec3::new(0.2, 0.3, 0.8)), Vec3::new(-1.0, -1.5, 2.0), Vec3::X * 0.8, Vec3::Y * 1.2);
-    let camera = Camera { eye: Vec3::new(0.5, 0.8, 3.5), target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 40.0, width: 160, height: 120 };
+    add_quad(
+        &mut scene,
+        "floor",
+        Material::diffuse("floor", Vec3::new(0.6, 0.5, 0.4)),
+        Vec3::new(-s, -1.5, s),
+        Vec3::X * 2.0 * s,
+        Vec3::NEG_Z * 2.0 * s,
+    );
+    add_quad(
+        &mut scene,
+        "back",
+        emissive("back", Vec3::new(0.9, 0.2, 0.2)),
+        Vec3::new(-s, -1.5, -s),
+        Vec3::X * 2.0 * s,
+        Vec3::Y * 6.0,
+    );
+    add_quad(
+        &mut scene,
+        "left",
+        emissive("left", Vec3::new(0.2, 0.9, 0.3)),
+        Vec3::new(-s, -1.5, s),
+        Vec3::NEG_Z * 2.0 * s,
+        Vec3::Y * 6.0,
+    );
+    add_quad(
+        &mut scene,
+        "window",
+        emissive("window", Vec3::splat(3.0)),
+        Vec3::new(s - 0.01, 0.0, 1.0),
+        Vec3::NEG_Z * 2.0,
+        Vec3::Y * 1.5,
+    );
+    add_quad(
+        &mut scene,
+        "block",
+        Material::diffuse("block", Vec3::new(0.2, 0.3, 0.8)),
+        Vec3::new(-1.0, -1.5, 2.0),
+        Vec3::X * 0.8,
+        Vec3::Y * 1.2,
+    );
+    let camera = Camera {
+        eye: Vec3::new(0.5, 0.8, 3.5),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 40.0,
+        width: 160,
+        height: 120,
+    };
     let lighting = Lighting {
-        lights: vec![Light { kind: LightKind::Point { position: Vec3::new(2.0, 3.0, 2.0) }, color: Vec3::ONE, intensity: 0.8 }],
+        lights: vec![Light {
+            kind: LightKind::Point {
+                position: Vec3::new(2.0, 3.0, 2.0),
+            },
+            color: Vec3::ONE,
+            intensity: 0.8,
+        }],
         ambient: Vec3::splat(0.1),
         background: Vec3::new(0.2, 0.3, 0.5),
     };
@@ -86,7 +172,9 @@ fn mirror_sphere_scene() -> (Scene, Camera, Lighting) {
 
 fn object_triangles(scene: &Scene, name: &str) -> Vec<TriangleId> {
     let object = scene.object_id(name).expect("object exists");
-    (0..scene.triangles.len() as TriangleId).filter(|&t| scene.triangles[t as usize].object == object).collect()
+    (0..scene.triangles.len() as TriangleId)
+        .filter(|&t| scene.triangles[t as usize].object == object)
+        .collect()
 }
 
 fn setup(camera: Camera, lighting: &Lighting, quality: Quality) -> FrameSetup {
@@ -94,22 +182,51 @@ fn setup(camera: Camera, lighting: &Lighting, quality: Quality) -> FrameSetup {
         camera,
         lighting: lighting.clone(),
         trace: TraceSettings::default(),
-        vertex: VertexSettings { quality, ..VertexSettings::default() },
+        vertex: VertexSettings {
+            quality,
+            ..VertexSettings::default()
+        },
     }
 }
 
 /// Renders every level and returns the error figures of each against the reference.
-fn levels_against_reference(renderer: &Renderer, camera: Camera, lighting: &Lighting) -> Vec<(Quality, ErrorFigures, u64)> {
-    let render = |q| renderer.render(&setup(camera, lighting, q), &RenderOptions::default(), &mut |_, _| {});
+fn levels_against_reference(
+    renderer: &Renderer,
+    camera: Camera,
+    lighting: &Lighting,
+) -> Vec<(Quality, ErrorFigures, u64)> {
+    let render = |q| {
+        renderer.render(
+            &setup(camera, lighting, q),
+            &RenderOptions::default(),
+            &mut |_, _| {},
+        )
+    };
     let reference = render(Quality::Reference);
-    assert!(reference.stats.pixels > 1000, "the reflector must be on screen: {} pixels", reference.stats.pixels);
+    assert!(
+        reference.stats.pixels > 1000,
+        "the reflector must be on screen: {} pixels",
+        reference.stats.pixels
+    );
     [Quality::Preview, Quality::Refine, Quality::Full]
         .into_iter()
         .map(|q| {
             let frame = render(q);
-            assert_eq!(frame.image.mask, reference.image.mask, "{}: every level covers the same pixels", q.name());
+            assert_eq!(
+                frame.image.mask,
+                reference.image.mask,
+                "{}: every level covers the same pixels",
+                q.name()
+            );
             let err = compare(&frame.image, &reference.image);
-            eprintln!("{:<8} {:>6} samples vs {:>6}: {:.3}% off by >8/255, mean {:.3}", q.name(), frame.stats.samples(), reference.stats.samples(), err.share_off * 100.0, err.mean_abs);
+            eprintln!(
+                "{:<8} {:>6} samples vs {:>6}: {:.3}% off by >8/255, mean {:.3}",
+                q.name(),
+                frame.stats.samples(),
+                reference.stats.samples(),
+                err.share_off * 100.0,
+                err.mean_abs
+            );
             (q, err, frame.stats.samples())
         })
         .collect()
@@ -122,7 +239,11 @@ fn full_matches_reference_on_a_mirror_sphere() {
     let renderer = Renderer::new(Arc::new(scene), reflectors);
     let figures = levels_against_reference(&renderer, camera, &lighting);
     let (_, full, _) = figures[2];
-    assert!(full.share_off <= 0.01, "full: {:.3}% of pixels off", full.share_off * 100.0);
+    assert!(
+        full.share_off <= 0.01,
+        "full: {:.3}% of pixels off",
+        full.share_off * 100.0
+    );
     // The levels trade accuracy for samples in order.
     assert!(figures[0].1.share_off >= figures[1].1.share_off);
     assert!(figures[1].1.share_off >= full.share_off);
@@ -130,19 +251,36 @@ fn full_matches_reference_on_a_mirror_sphere() {
 
 #[test]
 fn full_matches_reference_on_the_cockpit() {
-    let c = cockpit(&CockpitConfig { detail: 0.3, ..CockpitConfig::default() });
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..CockpitConfig::default()
+    });
     let reflectors = object_triangles(&c.scene, COVER_GLASS);
     let renderer = Renderer::new(Arc::new(c.scene), reflectors);
-    let camera = Camera { width: 320, height: 180, ..c.camera };
+    let camera = Camera {
+        width: 320,
+        height: 180,
+        ..c.camera
+    };
     let figures = levels_against_reference(&renderer, camera, &c.lighting);
     let (_, full, samples) = figures[2];
-    assert!(full.share_off <= 0.01, "full: {:.3}% of pixels off", full.share_off * 100.0);
+    assert!(
+        full.share_off <= 0.01,
+        "full: {:.3}% of pixels off",
+        full.share_off * 100.0
+    );
     assert!(samples > 0);
 }
 
 /// Renders with the given packages and returns the composited frame.
-fn render_with(renderer: &Renderer, setup: &FrameSetup, packages: &[Vec<TriangleId>]) -> FrameImage {
-    renderer.render_packages(setup, packages, &RenderOptions::default(), &mut |_, _| {}).image
+fn render_with(
+    renderer: &Renderer,
+    setup: &FrameSetup,
+    packages: &[Vec<TriangleId>],
+) -> FrameImage {
+    renderer
+        .render_packages(setup, packages, &RenderOptions::default(), &mut |_, _| {})
+        .image
 }
 
 #[test]
@@ -164,10 +302,22 @@ fn random_packages_give_byte_identical_images() {
         for size in [1, 7, 100] {
             let split = render_with(&renderer, &s, &split_packages(&shuffled, size));
             let differing = (0..whole.color.pixels.len())
-                .filter(|&i| split.color.pixels[i] != whole.color.pixels[i] || split.reflected_object[i] != whole.reflected_object[i])
+                .filter(|&i| {
+                    split.color.pixels[i] != whole.color.pixels[i]
+                        || split.reflected_object[i] != whole.reflected_object[i]
+                })
                 .count();
-            assert_eq!(differing, 0, "{} with packages of {size}: pixels differ", quality.name());
-            assert!(split == whole, "{} with packages of {size}: every buffer bit-identical", quality.name());
+            assert_eq!(
+                differing,
+                0,
+                "{} with packages of {size}: pixels differ",
+                quality.name()
+            );
+            assert!(
+                split == whole,
+                "{} with packages of {size}: every buffer bit-identical",
+                quality.name()
+            );
         }
     }
 }

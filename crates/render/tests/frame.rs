@@ -11,15 +11,26 @@ use vtfarm_trace::{Ray, TraceSettings};
 use vtfarm_vertex::{PackageOptions, Quality, VertexSettings, trace_package};
 
 fn small_cockpit() -> (Renderer, FrameSetup) {
-    let c = cockpit(&CockpitConfig { detail: 0.3, ..CockpitConfig::default() });
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..CockpitConfig::default()
+    });
     let glass = c.scene.object_id(COVER_GLASS).unwrap();
-    let reflectors: Vec<TriangleId> =
-        (0..c.scene.triangles.len() as TriangleId).filter(|&t| c.scene.triangles[t as usize].object == glass).collect();
+    let reflectors: Vec<TriangleId> = (0..c.scene.triangles.len() as TriangleId)
+        .filter(|&t| c.scene.triangles[t as usize].object == glass)
+        .collect();
     let setup = FrameSetup {
-        camera: Camera { width: 240, height: 135, ..c.camera },
+        camera: Camera {
+            width: 240,
+            height: 135,
+            ..c.camera
+        },
         lighting: c.lighting,
         trace: TraceSettings::default(),
-        vertex: VertexSettings { quality: Quality::Full, ..VertexSettings::default() },
+        vertex: VertexSettings {
+            quality: Quality::Full,
+            ..VertexSettings::default()
+        },
     };
     (Renderer::new(Arc::new(c.scene), reflectors), setup)
 }
@@ -32,13 +43,23 @@ fn id_buffer_agrees_with_ray_cast_first_hits_on_the_cockpit() {
     let mut agree = 0;
     for y in 0..camera.height {
         for x in 0..camera.width {
-            let ray = Ray { origin: camera.eye, direction: camera.pixel_ray(x, y) };
-            let hit = renderer.bvh().closest_hit(&ray, f32::INFINITY).map_or(NONE, |h| h.triangle);
+            let ray = Ray {
+                origin: camera.eye,
+                direction: camera.pixel_ray(x, y),
+            };
+            let hit = renderer
+                .bvh()
+                .closest_hit(&ray, f32::INFINITY)
+                .map_or(NONE, |h| h.triangle);
             agree += (hit == ids.triangle[ids.index(x, y)]) as u32;
         }
     }
     let share = agree as f64 / (camera.width * camera.height) as f64;
-    assert!(share >= 0.995, "ID buffer agrees with the ray cast on {:.3}% of pixels", share * 100.0);
+    assert!(
+        share >= 0.995,
+        "ID buffer agrees with the ray cast on {:.3}% of pixels",
+        share * 100.0
+    );
 }
 
 #[test]
@@ -48,13 +69,25 @@ fn time_breaks_deliver_the_preview_then_every_refined_face() {
     let behind = renderer.behind(&setup);
     let frame = renderer.frame(&setup, &ids, &behind);
     let mut deliveries = Vec::new();
-    let options = PackageOptions { collect_faces: true, time_break: Some(Duration::ZERO) };
-    let result = trace_package(&frame, renderer.reflectors(), &options, &mut |faces| deliveries.push(faces.to_vec()));
-    assert!(deliveries.len() >= 2, "a preview and at least one refinement break: {}", deliveries.len());
+    let options = PackageOptions {
+        collect_faces: true,
+        time_break: Some(Duration::ZERO),
+    };
+    let result = trace_package(&frame, renderer.reflectors(), &options, &mut |faces| {
+        deliveries.push(faces.to_vec())
+    });
+    assert!(
+        deliveries.len() >= 2,
+        "a preview and at least one refinement break: {}",
+        deliveries.len()
+    );
     // The first break shows the unrefined triangles (the preview) ...
     assert_eq!(deliveries[0].len() as u64, result.stats.traced_triangles);
     // ... and the later ones, together, every final face exactly once.
     let refined: Vec<_> = deliveries[1..].concat();
     assert_eq!(refined, result.faces);
-    assert!(result.faces.len() as u64 > result.stats.traced_triangles, "the refinement split faces");
+    assert!(
+        result.faces.len() as u64 > result.stats.traced_triangles,
+        "the refinement split faces"
+    );
 }

@@ -20,7 +20,12 @@ pub enum Quality {
 }
 
 impl Quality {
-    pub const ALL: [Quality; 4] = [Quality::Preview, Quality::Refine, Quality::Full, Quality::Reference];
+    pub const ALL: [Quality; 4] = [
+        Quality::Preview,
+        Quality::Refine,
+        Quality::Full,
+        Quality::Reference,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -75,7 +80,9 @@ mod package;
 mod refine;
 
 pub use composite::{FrameImage, draw_wireframe};
-pub use package::{FinishedFace, PackageOptions, PackageResult, PackageStats, SparseBitmap, trace_package};
+pub use package::{
+    FinishedFace, PackageOptions, PackageResult, PackageStats, SparseBitmap, trace_package,
+};
 
 use glam::Vec3;
 use package::PixelRect;
@@ -128,7 +135,13 @@ impl Frame<'_> {
 
     /// Whether `triangle` is see-through, so [`Frame::behind`] hints at what it shows.
     fn see_through(&self, triangle: TriangleId) -> bool {
-        self.tracer.bvh.scene().material_of(triangle).transmittance.max_element() > 0.0
+        self.tracer
+            .bvh
+            .scene()
+            .material_of(triangle)
+            .transmittance
+            .max_element()
+            > 0.0
     }
 
     /// The object behind the reflectors at pixel (x, y), or `NONE` off screen.
@@ -145,7 +158,10 @@ impl Frame<'_> {
         let steps = (b.x - a.x).abs().max((b.y - a.y).abs()).ceil().max(1.0) as u32;
         let at = |i: u32| {
             let t = i as f32 / steps as f32;
-            self.behind_object((a.x + (b.x - a.x) * t).floor() as i64, (a.y + (b.y - a.y) * t).floor() as i64)
+            self.behind_object(
+                (a.x + (b.x - a.x) * t).floor() as i64,
+                (a.y + (b.y - a.y) * t).floor() as i64,
+            )
         };
         let first = at(0);
         (1..=steps).any(|i| at(i) != first)
@@ -156,7 +172,10 @@ impl Frame<'_> {
     fn behind_around(&self, x: u32, y: u32) -> Option<u32> {
         let (x, y) = (x as i64, y as i64);
         let o = self.behind_object(x, y);
-        [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().all(|(dx, dy)| self.behind_object(x + dx, y + dy) == o).then_some(o)
+        [(1, 0), (-1, 0), (0, 1), (0, -1)]
+            .iter()
+            .all(|(dx, dy)| self.behind_object(x + dx, y + dy) == o)
+            .then_some(o)
     }
 
     /// Whether the ID buffer assigns pixel (x, y) to `triangle`.
@@ -168,8 +187,18 @@ impl Frame<'_> {
     /// owns none (hidden or off screen: it costs nothing then).
     fn owned_rect(&self, triangle: TriangleId) -> Option<PixelRect> {
         let projector = self.projector();
-        let corners = self.tracer.bvh.scene().triangle_positions(triangle).map(|p| projector.project(p));
-        let full = PixelRect { x0: 0, y0: 0, x1: self.ids.width, y1: self.ids.height };
+        let corners = self
+            .tracer
+            .bvh
+            .scene()
+            .triangle_positions(triangle)
+            .map(|p| projector.project(p));
+        let full = PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: self.ids.width,
+            y1: self.ids.height,
+        };
         let rect = match corners {
             [Some(a), Some(b), Some(c)] => {
                 let clamp = |v: f32, hi: u32| v.clamp(0.0, hi as f32) as u32;
@@ -183,7 +212,8 @@ impl Frame<'_> {
             // A corner behind the eye: the projection is unbounded, search all.
             _ => full,
         };
-        let owns_any = (rect.y0..rect.y1).any(|y| (rect.x0..rect.x1).any(|x| self.owns(triangle, x, y)));
+        let owns_any =
+            (rect.y0..rect.y1).any(|y| (rect.x0..rect.x1).any(|x| self.owns(triangle, x, y)));
         owns_any.then_some(rect)
     }
 
@@ -211,7 +241,14 @@ impl Frame<'_> {
     /// vertex, no intersection needed.
     fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
         let incoming = (position - self.camera.eye).normalize();
-        self.tracer.shade(&SurfacePoint { position, normal, triangle }, incoming)
+        self.tracer.shade(
+            &SurfacePoint {
+                position,
+                normal,
+                triangle,
+            },
+            incoming,
+        )
     }
 
     /// Traces pixel (x, y) on `triangle`: the ray through the pixel centre hits
@@ -235,14 +272,25 @@ impl Frame<'_> {
         let position = self.camera.eye + direction * t;
         let [wa, wb, wc] = barycentric(position, a, b, c, plane_normal);
         let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
-        self.tracer.shade(&SurfacePoint { position, normal, triangle }, direction)
+        self.tracer.shade(
+            &SurfacePoint {
+                position,
+                normal,
+                triangle,
+            },
+            direction,
+        )
     }
 }
 
 /// The ID buffer of what lies behind the reflectors: every triangle that is
 /// neither a reflector nor transparent. Deterministic like every ID buffer, so
 /// workers rebuild it.
-pub fn behind_id_buffer(scene: &vtfarm_scene::Scene, camera: &Camera, is_reflector: &[bool]) -> IdBuffer {
+pub fn behind_id_buffer(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    is_reflector: &[bool],
+) -> IdBuffer {
     vtfarm_raster::id_buffer_where(scene, camera, &|t| {
         !is_reflector[t as usize] && scene.material_of(t).transmittance.max_element() <= 0.0
     })

@@ -105,7 +105,13 @@ impl SparseBitmap {
             .enumerate()
             .filter(|(_, m)| **m)
             .enumerate()
-            .map(|(k, (i, _))| (self.x0 + i as u32 % self.width, self.y0 + i as u32 / self.width, k))
+            .map(|(k, (i, _))| {
+                (
+                    self.x0 + i as u32 % self.width,
+                    self.y0 + i as u32 / self.width,
+                    k,
+                )
+            })
     }
 }
 
@@ -129,7 +135,12 @@ struct PixelValue {
 
 impl PixelValue {
     fn from_sample(index: u32, s: &Sample) -> Self {
-        PixelValue { index, color: s.color, reflected: s.reflected, object: s.reflected_object }
+        PixelValue {
+            index,
+            color: s.color,
+            reflected: s.reflected,
+            object: s.reflected_object,
+        }
     }
 }
 
@@ -141,7 +152,10 @@ pub fn trace_package(
     options: &PackageOptions,
     progress: &mut dyn FnMut(&[FinishedFace]),
 ) -> PackageResult {
-    let mut stats = PackageStats { triangles: triangles.len() as u64, ..Default::default() };
+    let mut stats = PackageStats {
+        triangles: triangles.len() as u64,
+        ..Default::default()
+    };
     let owned: Vec<(TriangleId, PixelRect)> = triangles
         .iter()
         .filter_map(|&t| frame.owned_rect(t).map(|r| (t, r)))
@@ -164,17 +178,35 @@ pub fn trace_package(
 
     let fill_start = Instant::now();
     let per_triangle: Vec<(Vec<PixelValue>, u64)> = if meshes.is_empty() {
-        owned.par_iter().map(|&(t, rect)| trace_all_pixels(frame, t, rect)).collect()
+        owned
+            .par_iter()
+            .map(|&(t, rect)| trace_all_pixels(frame, t, rect))
+            .collect()
     } else {
-        meshes.par_iter().zip(&owned).map(|(mesh, &(_, rect))| shade_pixels(frame, mesh, rect)).collect()
+        meshes
+            .par_iter()
+            .zip(&owned)
+            .map(|(mesh, &(_, rect))| shade_pixels(frame, mesh, rect))
+            .collect()
     };
     stats.fill_time = fill_start.elapsed();
     stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
 
-    let faces = if options.collect_faces { meshes.iter().flat_map(|m| finished_faces(m)).collect() } else { Vec::new() };
-    let bitmap = assemble(frame, per_triangle.into_iter().flat_map(|(p, _)| p).collect());
+    let faces = if options.collect_faces {
+        meshes.iter().flat_map(|m| finished_faces(m)).collect()
+    } else {
+        Vec::new()
+    };
+    let bitmap = assemble(
+        frame,
+        per_triangle.into_iter().flat_map(|(p, _)| p).collect(),
+    );
     stats.pixels = bitmap.color.len() as u64;
-    PackageResult { bitmap, stats, faces }
+    PackageResult {
+        bitmap,
+        stats,
+        faces,
+    }
 }
 
 /// Phases 1 and 2: traces the distinct original vertices once, then refines
@@ -203,7 +235,9 @@ fn refine_all(
         .collect();
     let samples: Vec<Sample> = corners
         .par_iter()
-        .map(|&(t, v)| frame.shade_vertex(t, scene.positions[v as usize], scene.normals[v as usize]))
+        .map(|&(t, v)| {
+            frame.shade_vertex(t, scene.positions[v as usize], scene.normals[v as usize])
+        })
         .collect();
     stats.vertex_samples += samples.len() as u64;
 
@@ -215,19 +249,32 @@ fn refine_all(
             let tri = scene.triangles[t as usize];
             let corner = |k: usize| {
                 let v = tri.vertices[k] as usize;
-                MeshVertex::new(frame, &projector, t, scene.positions[v], scene.normals[v], samples[slots[k]])
+                MeshVertex::new(
+                    frame,
+                    &projector,
+                    t,
+                    scene.positions[v],
+                    scene.normals[v],
+                    samples[slots[k]],
+                )
             };
             TriangleMesh::new(t, [corner(0), corner(1), corner(2)])
         })
         .collect();
     if let Some(every) = options.time_break {
-        progress(&meshes.iter().flat_map(|m| finished_faces(m)).collect::<Vec<_>>());
+        progress(
+            &meshes
+                .iter()
+                .flat_map(|m| finished_faces(m))
+                .collect::<Vec<_>>(),
+        );
         let mut last_break = Instant::now();
         let mut pending = Vec::new();
         // Chunks keep the time breaks frequent while each chunk stays parallel.
         let chunk = (rayon::current_num_threads() * 8).max(1);
         for part in meshes.chunks_mut(chunk) {
-            part.par_iter_mut().for_each(|m| m.refine(frame, &projector));
+            part.par_iter_mut()
+                .for_each(|m| m.refine(frame, &projector));
             pending.extend(part.iter().flat_map(|m| finished_faces(m)));
             if last_break.elapsed() >= every {
                 progress(&pending);
@@ -239,7 +286,9 @@ fn refine_all(
             progress(&pending);
         }
     } else {
-        meshes.par_iter_mut().for_each(|m| m.refine(frame, &projector));
+        meshes
+            .par_iter_mut()
+            .for_each(|m| m.refine(frame, &projector));
     }
     stats.vertex_samples += meshes.iter().map(|m| m.refined_edges).sum::<u64>();
     meshes
@@ -249,8 +298,13 @@ fn refine_all(
 fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '_ {
     mesh.faces().filter_map(|f| {
         let v = f.vertices.map(|i| mesh.vertices[i as usize]);
-        let [Some(a), Some(b), Some(c)] = v.map(|v| v.screen) else { return None };
-        Some(FinishedFace { corners: [a, b, c], colors: v.map(|v| v.sample.color) })
+        let [Some(a), Some(b), Some(c)] = v.map(|v| v.screen) else {
+            return None;
+        };
+        Some(FinishedFace {
+            corners: [a, b, c],
+            colors: v.map(|v| v.sample.color),
+        })
     })
 }
 
@@ -270,11 +324,20 @@ impl PixelRect {
 }
 
 /// Reference level: every owned pixel traced.
-fn trace_all_pixels(frame: &Frame<'_>, triangle: TriangleId, rect: PixelRect) -> (Vec<PixelValue>, u64) {
+fn trace_all_pixels(
+    frame: &Frame<'_>,
+    triangle: TriangleId,
+    rect: PixelRect,
+) -> (Vec<PixelValue>, u64) {
     let pixels: Vec<PixelValue> = rect
         .pixels()
         .filter(|&(x, y)| frame.owns(triangle, x, y))
-        .map(|(x, y)| PixelValue::from_sample(frame.ids.index(x, y) as u32, &frame.trace_pixel(triangle, x, y)))
+        .map(|(x, y)| {
+            PixelValue::from_sample(
+                frame.ids.index(x, y) as u32,
+                &frame.trace_pixel(triangle, x, y),
+            )
+        })
         .collect();
     let n = pixels.len() as u64;
     (pixels, n)
@@ -292,8 +355,14 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     let faces: Vec<_> = mesh.faces().collect();
     for (fi, face) in faces.iter().enumerate() {
         let screen = face.vertices.map(|i| mesh.vertices[i as usize].screen);
-        let [Some(a), Some(b), Some(c)] = screen else { continue };
-        let (pa, pb, pc) = (Vec2::new(a.x, a.y), Vec2::new(b.x, b.y), Vec2::new(c.x, c.y));
+        let [Some(a), Some(b), Some(c)] = screen else {
+            continue;
+        };
+        let (pa, pb, pc) = (
+            Vec2::new(a.x, a.y),
+            Vec2::new(b.x, b.y),
+            Vec2::new(c.x, c.y),
+        );
         let denom = (pb - pa).perp_dot(pc - pa);
         if denom.abs() < 1e-12 {
             continue;
@@ -322,7 +391,10 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         }
     }
     let fill = frame.settings.quality == Quality::Full;
-    let disagrees: Vec<bool> = faces.iter().map(|f| fill && mesh.face_disagrees(f, frame.settings.epsilon)).collect();
+    let disagrees: Vec<bool> = faces
+        .iter()
+        .map(|f| fill && mesh.face_disagrees(f, frame.settings.epsilon))
+        .collect();
     // A face whose samples agree may still hide a detail behind the glass that
     // no sample hit: its pixels near a change of the opaque scene behind are
     // filled too. `None`: no such check (opaque reflector, or not `full`).
@@ -333,10 +405,16 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
                 return None;
             }
             let objects = f.vertices.map(|v| {
-                mesh.vertices[v as usize].screen.map_or(NONE, |s| frame.behind_object(s.x.floor() as i64, s.y.floor() as i64))
+                mesh.vertices[v as usize].screen.map_or(NONE, |s| {
+                    frame.behind_object(s.x.floor() as i64, s.y.floor() as i64)
+                })
             });
             // Corners that see different things behind: fill the whole face.
-            Some(if objects[0] == objects[1] && objects[1] == objects[2] { objects[0] } else { NONE })
+            Some(if objects[0] == objects[1] && objects[1] == objects[2] {
+                objects[0]
+            } else {
+                NONE
+            })
         })
         .collect();
     let mut traced = 0;
@@ -346,7 +424,11 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         .map(|(x, y)| {
             let index = frame.ids.index(x, y) as u32;
             match best[((y - rect.y0) * width + (x - rect.x0)) as usize] {
-                Some((_, fi, w)) if !disagrees[fi] && behind_corner[fi].is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) => {
+                Some((_, fi, w))
+                    if !disagrees[fi]
+                        && behind_corner[fi]
+                            .is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) =>
+                {
                     gouraud(index, mesh, faces[fi].vertices, w)
                 }
                 _ => {
@@ -363,13 +445,23 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
 /// weights divided by depth, as a GPU interpolates).
 fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> PixelValue {
     let v = vertices.map(|i| &mesh.vertices[i as usize]);
-    let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
+    let pw: [f32; 3] =
+        std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
     let total: f32 = pw.iter().sum();
     let pw = pw.map(|x| x / total);
     let color = v[0].sample.color * pw[0] + v[1].sample.color * pw[1] + v[2].sample.color * pw[2];
-    let reflected = v[0].sample.reflected * pw[0] + v[1].sample.reflected * pw[1] + v[2].sample.reflected * pw[2];
-    let nearest = (0..3).max_by(|&a, &b| pw[a].total_cmp(&pw[b])).expect("three corners");
-    PixelValue { index, color, reflected, object: v[nearest].sample.reflected_object }
+    let reflected = v[0].sample.reflected * pw[0]
+        + v[1].sample.reflected * pw[1]
+        + v[2].sample.reflected * pw[2];
+    let nearest = (0..3)
+        .max_by(|&a, &b| pw[a].total_cmp(&pw[b]))
+        .expect("three corners");
+    PixelValue {
+        index,
+        color,
+        reflected,
+        object: v[nearest].sample.reflected_object,
+    }
 }
 
 /// Packs pixel values into the sparse bitmap.

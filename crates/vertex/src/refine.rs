@@ -29,11 +29,25 @@ pub(crate) struct MeshVertex {
 }
 
 impl MeshVertex {
-    pub(crate) fn new(frame: &Frame<'_>, projector: &Projector, triangle: TriangleId, position: Vec3, normal: Vec3, sample: Sample) -> Self {
+    pub(crate) fn new(
+        frame: &Frame<'_>,
+        projector: &Projector,
+        triangle: TriangleId,
+        position: Vec3,
+        normal: Vec3,
+        sample: Sample,
+    ) -> Self {
         let screen = projector.project(position);
         let visible = screen.is_some_and(|s| frame.vertex_visible(triangle, s));
         let srgb = Vec3::from_array(sample.color.to_array().map(linear_to_srgb));
-        MeshVertex { position, normal, screen, visible, sample, srgb }
+        MeshVertex {
+            position,
+            normal,
+            screen,
+            visible,
+            sample,
+            srgb,
+        }
     }
 }
 
@@ -101,7 +115,11 @@ impl TriangleMesh {
         TriangleMesh {
             triangle,
             vertices: corners.to_vec(),
-            faces: vec![Face { vertices: [0, 1, 2], depth: 0, alive: true }],
+            faces: vec![Face {
+                vertices: [0, 1, 2],
+                depth: 0,
+                alive: true,
+            }],
             edge_faces,
             refined_edges: 0,
         }
@@ -115,7 +133,8 @@ impl TriangleMesh {
     /// Whether two vertices' samples differ enough to refine between them.
     fn disagree(&self, a: u32, b: u32, epsilon: f32) -> bool {
         let (va, vb) = (&self.vertices[a as usize], &self.vertices[b as usize]);
-        va.sample.signature != vb.sample.signature || (va.srgb - vb.srgb).abs().max_element() > epsilon
+        va.sample.signature != vb.sample.signature
+            || (va.srgb - vb.srgb).abs().max_element() > epsilon
     }
 
     /// Whether a face's three samples still disagree (the face needs filling).
@@ -135,7 +154,12 @@ impl TriangleMesh {
         // stay as they are and their pixels are traced directly.
         if let Some(length) = self.screen_length(a, b) {
             let (a, b) = edge_key(a, b);
-            queue.push(QueuedEdge { length, a, b, forced });
+            queue.push(QueuedEdge {
+                length,
+                a,
+                b,
+                forced,
+            });
         }
     }
 
@@ -162,12 +186,20 @@ impl TriangleMesh {
             self.queue_edge(&mut queue, m, edge.b, false);
             for &f in new_faces.iter().filter(|&&f| f != NO_FACE) {
                 let face = self.faces[f as usize];
-                let opposite = face.vertices.into_iter().find(|&v| v != edge.a && v != edge.b && v != m);
+                let opposite = face
+                    .vertices
+                    .into_iter()
+                    .find(|&v| v != edge.a && v != edge.b && v != m);
                 if let Some(c) = opposite {
                     // Each opposite vertex appears in two new faces; the second push is dropped at pop.
                     self.queue_edge(&mut queue, m, c, false);
                 }
-                if let Some((a, b)) = self.flat_long_edge(&face, settings.flatness, settings.pixel_floor, settings.epsilon) {
+                if let Some((a, b)) = self.flat_long_edge(
+                    &face,
+                    settings.flatness,
+                    settings.pixel_floor,
+                    settings.epsilon,
+                ) {
                     self.queue_edge(&mut queue, a, b, true);
                 }
             }
@@ -182,18 +214,24 @@ impl TriangleMesh {
             .iter()
             .filter(|&&f| f != NO_FACE)
             .any(|&f| self.faces[f as usize].depth >= settings.max_depth);
-        let visible = self.vertices[edge.a as usize].visible || self.vertices[edge.b as usize].visible;
+        let visible =
+            self.vertices[edge.a as usize].visible || self.vertices[edge.b as usize].visible;
         edge.length > settings.pixel_floor
             && !deep
             && visible
-            && (edge.forced || self.disagree(edge.a, edge.b, settings.epsilon) || self.crosses_hidden_edge(frame, edge))
+            && (edge.forced
+                || self.disagree(edge.a, edge.b, settings.epsilon)
+                || self.crosses_hidden_edge(frame, edge))
     }
 
     /// Whether the opaque scene seen through a transparent reflector changes
     /// along the edge: a marking thinner than the edge between two samples
     /// that both see the dial would otherwise be missed.
     fn crosses_hidden_edge(&self, frame: &Frame<'_>, edge: &QueuedEdge) -> bool {
-        let (Some(a), Some(b)) = (self.vertices[edge.a as usize].screen, self.vertices[edge.b as usize].screen) else {
+        let (Some(a), Some(b)) = (
+            self.vertices[edge.a as usize].screen,
+            self.vertices[edge.b as usize].screen,
+        ) else {
             return false;
         };
         frame.see_through(self.triangle) && frame.behind_changes_along(a, b)
@@ -202,7 +240,14 @@ impl TriangleMesh {
     /// RefineEdge(): inserts the midpoint vertex (position interpolated,
     /// normal interpolated and normalised), traces it, and splits each face on
     /// the edge in two. Returns the new faces.
-    fn split(&mut self, frame: &Frame<'_>, projector: &Projector, a: u32, b: u32, faces: [u32; 2]) -> [u32; 4] {
+    fn split(
+        &mut self,
+        frame: &Frame<'_>,
+        projector: &Projector,
+        a: u32,
+        b: u32,
+        faces: [u32; 2],
+    ) -> [u32; 4] {
         let (va, vb) = (self.vertices[a as usize], self.vertices[b as usize]);
         // a + b is commutative in floating point, so the shared edge of two
         // neighbouring original triangles gets the same midpoint from both.
@@ -210,7 +255,14 @@ impl TriangleMesh {
         let normal = (va.normal + vb.normal).normalize_or(va.normal);
         let sample = frame.shade_vertex(self.triangle, position, normal);
         let m = self.vertices.len() as u32;
-        self.vertices.push(MeshVertex::new(frame, projector, self.triangle, position, normal, sample));
+        self.vertices.push(MeshVertex::new(
+            frame,
+            projector,
+            self.triangle,
+            position,
+            normal,
+            sample,
+        ));
         self.refined_edges += 1;
         self.edge_faces.remove(&edge_key(a, b));
         let mut new_faces = [NO_FACE; 4];
@@ -237,7 +289,11 @@ impl TriangleMesh {
     }
 
     fn push_face(&mut self, vertices: [u32; 3], depth: u32) -> u32 {
-        self.faces.push(Face { vertices, depth, alive: true });
+        self.faces.push(Face {
+            vertices,
+            depth,
+            alive: true,
+        });
         self.faces.len() as u32 - 1
     }
 
@@ -250,7 +306,10 @@ impl TriangleMesh {
     }
 
     fn add_face_to_edge(&mut self, a: u32, b: u32, face: u32) {
-        let slots = self.edge_faces.entry(edge_key(a, b)).or_insert([NO_FACE; 2]);
+        let slots = self
+            .edge_faces
+            .entry(edge_key(a, b))
+            .or_insert([NO_FACE; 2]);
         if slots[0] == NO_FACE {
             slots[0] = face;
         } else {
@@ -261,13 +320,21 @@ impl TriangleMesh {
     /// The convergence guard of section 3.2: a face that still disagrees and
     /// is flat (h / c < v) has its longest edge c refined, unless h is under
     /// the pixel floor (rounding on the raster would then loop forever).
-    fn flat_long_edge(&self, face: &Face, flatness: f32, pixel_floor: f32, epsilon: f32) -> Option<(u32, u32)> {
+    fn flat_long_edge(
+        &self,
+        face: &Face,
+        flatness: f32,
+        pixel_floor: f32,
+        epsilon: f32,
+    ) -> Option<(u32, u32)> {
         if !self.face_disagrees(face, epsilon) {
             return None;
         }
         let [a, b, c] = face.vertices;
         let s = [a, b, c].map(|v| self.vertices[v as usize].screen);
-        let [Some(pa), Some(pb), Some(pc)] = s else { return None };
+        let [Some(pa), Some(pb), Some(pc)] = s else {
+            return None;
+        };
         let edges = [(a, b, pa, pb, pc), (b, c, pb, pc, pa), (c, a, pc, pa, pb)];
         let (ea, eb, p, q, r) = edges
             .into_iter()
