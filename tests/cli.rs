@@ -119,47 +119,45 @@ level = "preview"
     assert_eq!(image::open(&png).unwrap().to_rgb8().dimensions(), (96, 54));
 }
 
+/// Renders `job` (written into `dir` as bad.toml) and returns stderr,
+/// asserting that the render failed cleanly and wrote no image.
+fn refused_render(dir: &Path, job: &str) -> String {
+    let job_path = dir.join("bad.toml");
+    std::fs::write(&job_path, job).unwrap();
+    let png = dir.join("x.png");
+    let out = vtfarm(&[
+        "render",
+        job_path.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(!png.exists(), "nothing written");
+    let err = text(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
 #[test]
 fn bad_job_and_obj_files_are_refused_with_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
-    let job = dir.path().join("bad.toml");
-    std::fs::write(
-        &job,
+    let err = refused_render(
+        dir.path(),
         "[scene]\nbuiltin = \"cockpit\"\n[camera]\nwidht = 5\n",
-    )
-    .unwrap();
-    let out = vtfarm(&[
-        "render",
-        job.to_str().unwrap(),
-        "-o",
-        dir.path().join("x.png").to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    let err = text(&out.stderr);
+    );
     assert!(err.contains("bad.toml:4"), "names file and line: {err}");
-    assert!(!dir.path().join("x.png").exists());
 
     std::fs::write(
         dir.path().join("broken.obj"),
         "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n",
     )
     .unwrap();
-    std::fs::write(
-        &job,
+    let err = refused_render(
+        dir.path(),
         "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
-    )
-    .unwrap();
-    let out = vtfarm(&[
-        "render",
-        job.to_str().unwrap(),
-        "-o",
-        dir.path().join("x.png").to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    let err = text(&out.stderr);
+    );
     assert!(
         err.contains("broken.obj:3"),
         "names the OBJ file and line: {err}"
     );
-    assert!(!err.contains("panicked"), "{err}");
 }

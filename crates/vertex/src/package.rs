@@ -193,7 +193,7 @@ pub fn trace_package(
     stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
 
     let faces = if options.collect_faces {
-        meshes.iter().flat_map(|m| finished_faces(m)).collect()
+        meshes.iter().flat_map(finished_faces).collect()
     } else {
         Vec::new()
     };
@@ -265,7 +265,7 @@ fn refine_all(
         progress(
             &meshes
                 .iter()
-                .flat_map(|m| finished_faces(m))
+                .flat_map(finished_faces)
                 .collect::<Vec<_>>(),
         );
         let mut last_break = Instant::now();
@@ -275,7 +275,7 @@ fn refine_all(
         for part in meshes.chunks_mut(chunk) {
             part.par_iter_mut()
                 .for_each(|m| m.refine(frame, &projector));
-            pending.extend(part.iter().flat_map(|m| finished_faces(m)));
+            pending.extend(part.iter().flat_map(finished_faces));
             if last_break.elapsed() >= every {
                 progress(&pending);
                 pending.clear();
