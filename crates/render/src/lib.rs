@@ -12,6 +12,7 @@ pub mod output;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use glam::Vec3;
 use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
@@ -69,7 +70,10 @@ pub struct Renderer {
 }
 
 impl Renderer {
+    /// Prepares a scene; the reflectors are kept in spatial (Morton) order so
+    /// that consecutive runs make compact packages with short boundaries.
     pub fn new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Self {
+        let reflectors = morton_order(&scene, reflectors);
         let owners = VertexOwners::new(&scene);
         let mut is_reflector = vec![false; scene.triangles.len()];
         for &t in &reflectors {
@@ -179,6 +183,35 @@ impl Renderer {
     }
 }
 
+/// Sorts triangles by the Morton code of their centroids (ties by id), so
+/// that triangles close in the list are close in space.
+pub fn morton_order(scene: &Scene, mut triangles: Vec<TriangleId>) -> Vec<TriangleId> {
+    let centroid = |t: TriangleId| {
+        let [a, b, c] = scene.triangle_positions(t);
+        (a + b + c) / 3.0
+    };
+    let (lo, hi) = triangles.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &t| (lo.min(centroid(t)), hi.max(centroid(t))),
+    );
+    let scale = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+    let code = |t: TriangleId| {
+        let q = ((centroid(t) - lo) / scale * 1023.0).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+        spread_bits(q.x as u32) | (spread_bits(q.y as u32) << 1) | (spread_bits(q.z as u32) << 2)
+    };
+    triangles.sort_by_key(|&t| (code(t), t));
+    triangles
+}
+
+/// Spreads the low 10 bits of `v` so that two zero bits follow each one.
+fn spread_bits(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    (x | (x << 2)) & 0x0924_9249
+}
+
 /// Cuts triangles into consecutive packages of at most `size`.
 pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<TriangleId>> {
     triangles
@@ -223,5 +256,50 @@ pub fn compare(test: &FrameImage, reference: &FrameImage) -> ErrorFigures {
         mean_abs: sum as f64 / (3.0 * n),
         share_off: off as f64 / n,
         max_abs,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_bits_interleaves() {
+        assert_eq!(spread_bits(0b1), 0b1);
+        assert_eq!(spread_bits(0b11), 0b1001);
+        assert_eq!(spread_bits(0x3ff), 0x0924_9249);
+    }
+
+    #[test]
+    fn morton_order_keeps_neighbours_together() {
+        // Four far-apart clusters of two triangles each, listed interleaved.
+        let mut scene = Scene::default();
+        scene
+            .objects
+            .push(vtfarm_scene::Object { name: "o".into() });
+        scene.materials.push(vtfarm_scene::Material::default());
+        let corners = [
+            Vec3::ZERO,
+            Vec3::new(10.0, 0.0, 0.0),
+            Vec3::new(0.0, 10.0, 0.0),
+            Vec3::new(10.0, 10.0, 10.0),
+        ];
+        for k in 0..8 {
+            let base = corners[k % 4] + Vec3::splat(0.01 * (k / 4) as f32);
+            let i = scene.positions.len() as u32;
+            scene
+                .positions
+                .extend([base, base + Vec3::X * 0.1, base + Vec3::Y * 0.1]);
+            scene.normals.extend([Vec3::Z; 3]);
+            scene.triangles.push(vtfarm_scene::Triangle {
+                vertices: [i, i + 1, i + 2],
+                object: 0,
+                material: 0,
+            });
+        }
+        let order = morton_order(&scene, (0..8).collect());
+        for pair in order.chunks(2) {
+            assert_eq!(pair[0] % 4, pair[1] % 4, "{order:?}");
+        }
     }
 }

@@ -122,6 +122,10 @@ pub struct PackageResult {
     pub stats: PackageStats,
     /// The final faces, when asked for.
     pub faces: Vec<FinishedFace>,
+    /// Samples traced for each triangle of the package, in input order
+    /// (corners counted for every triangle that uses them): the cost the
+    /// farm's load balancer learns from.
+    pub triangle_samples: Vec<u32>,
 }
 
 /// One pixel's value.
@@ -191,6 +195,15 @@ pub fn trace_package(
     };
     stats.fill_time = fill_start.elapsed();
     stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
+    let mut triangle_samples = vec![0; triangles.len()];
+    let mut next_owned = 0;
+    for (slot, &t) in triangle_samples.iter_mut().zip(triangles) {
+        if owned.get(next_owned).is_some_and(|&(o, _)| o == t) {
+            let refined = meshes.get(next_owned).map_or(0, |m| m.refined_edges + 3);
+            *slot = (refined + per_triangle[next_owned].1) as u32;
+            next_owned += 1;
+        }
+    }
 
     let faces = if options.collect_faces {
         meshes.iter().flat_map(finished_faces).collect()
@@ -206,6 +219,7 @@ pub fn trace_package(
         bitmap,
         stats,
         faces,
+        triangle_samples,
     }
 }
 
@@ -262,12 +276,7 @@ fn refine_all(
         })
         .collect();
     if let Some(every) = options.time_break {
-        progress(
-            &meshes
-                .iter()
-                .flat_map(finished_faces)
-                .collect::<Vec<_>>(),
-        );
+        progress(&meshes.iter().flat_map(finished_faces).collect::<Vec<_>>());
         let mut last_break = Instant::now();
         let mut pending = Vec::new();
         // Chunks keep the time breaks frequent while each chunk stays parallel.
