@@ -1,1 +1,60 @@
-//! Wire messages between master, workers and submitters (the farm issue fills this crate).
+//! Everything vtfarm puts on the wire, and nothing else: the typed, versioned
+//! messages between master, workers and submitters; their framing over any
+//! byte stream; the TLS set-up with a pinned master certificate; the
+//! `cluster.toml` that tells workers and submitters where the master is; and
+//! the handshake every connection starts with.
+//!
+//! Architecture invariant: this is the only crate that derives `Serialize`.
+//! Domain types (`Scene`, `Camera`, `SparseBitmap`, ...) have `Wire*` mirrors
+//! here with hand-written conversions; the `TryFrom` direction validates
+//! everything a peer could get wrong (non-finite floats, indices out of range,
+//! inconsistent sizes) and never panics. No scheduling or rendering logic.
+//!
+//! - [`message`]: the [`Message`] enum and its payload structs.
+//! - [`wire`]: wire mirrors of the domain types and their conversions.
+//! - [`framing`]: `u32` little-endian length prefix plus a bincode body,
+//!   [`read_message`] / [`write_message`] over tokio's I/O traits.
+//! - [`tls`]: the master's self-signed identity and the quinn configurations
+//!   whose client verifier accepts exactly one certificate fingerprint.
+//! - [`cluster`]: `cluster.toml` and the shared token.
+//! - [`handshake`]: `Hello` / `Welcome` / `Refused` on a connection's first stream.
+
+pub mod cluster;
+pub mod framing;
+pub mod handshake;
+pub mod message;
+pub mod tls;
+pub mod wire;
+
+pub use cluster::{CLUSTER_FILE, ClusterConfig, ConfigError, token_matches};
+pub use framing::{
+    MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, ProtoError, decode_message, encode_message,
+    read_message, write_message,
+};
+pub use handshake::{
+    CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, client_handshake,
+    server_handshake,
+};
+pub use message::{
+    FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
+    PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, SceneData, SceneHash,
+    StatusReply, Welcome, WireJob, WorkerStatus, scene_hash,
+};
+pub use tls::{
+    ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,
+    client_config, fingerprint_of, parse_fingerprint, server_config,
+};
+pub use wire::{
+    WireBitmap, WireCamera, WireError, WireFrameSetup, WireImage, WireLight, WireLightKind,
+    WireLighting, WireMaterial, WirePackageStats, WireQuality, WireScene, WireTraceSettings,
+    WireTriangle, WireVertexSettings, check_triangle_ids,
+};
+
+/// The protocol version in every `Hello` and `Welcome`. Bump it on any change
+/// to a message's encoding; the master refuses other versions with
+/// [`RefuseCode::BadVersion`].
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// The first bytes of every `Hello`, so a stray client is told apart from an
+/// old vtfarm.
+pub const MAGIC: [u8; 8] = *b"VTFARM\0\0";

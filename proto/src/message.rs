@@ -1,0 +1,497 @@
+//! The messages: one [`Message`] enum for every connection, whose variants
+//! are grouped by who talks to whom.
+//!
+//! Compatibility rules: bincode encodes a variant by its position, so new
+//! variants go at the end and any change to an existing message bumps
+//! [`crate::PROTOCOL_VERSION`]. `Message::Hello` stays variant 0 and `Hello`
+//! keeps `magic` and `version` as its first fields in every version, so a
+//! master can tell an old or new client's version even when the rest of its
+//! `Hello` no longer decodes.
+//!
+//! Flows (the farm issue has the full state machines):
+//! - every connection: `Hello` → `Welcome` | `Refused` on the first stream
+//!   (see [`crate::handshake`]);
+//! - worker ↔ master: master `SceneOffer` → worker `SceneRequest` (when the
+//!   hash is not cached) → master `SceneData`; master `FrameStart`; worker
+//!   `RequestWork` → master `Package`; worker `PackageResult` |
+//!   `PackageFailed`; master `CancelPackage`, `Shutdown`; both `Heartbeat`;
+//! - submitter ↔ master: `SubmitJob` → `JobAccepted`, then `Progress` and
+//!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use vtfarm_scene::Scene;
+
+use crate::wire::{WireBitmap, WireError, WireFrameSetup, WireImage, WirePackageStats, WireScene};
+
+/// A scene's content hash: SHA-256 of its canonical encoding (see [`scene_hash`]).
+pub type SceneHash = [u8; 32];
+/// A job, numbered by the master.
+pub type JobId = u64;
+/// A package, numbered by the master; unique for the master's lifetime.
+pub type PackageId = u64;
+
+/// Everything that travels on a vtfarm connection.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Message {
+    // Handshake, on the first stream of every connection.
+    /// Client → master: who I am. Must stay variant 0.
+    Hello(Hello),
+    /// Master → client: accepted.
+    Welcome(Welcome),
+    /// Master → client: not accepted; the master then closes the connection
+    /// with the code's [`RefuseCode::close_code`].
+    Refused(Refusal),
+
+    // Worker ↔ master.
+    /// Master → worker: the next frames use this scene.
+    SceneOffer { hash: SceneHash },
+    /// Worker → master: send me this scene, I do not have it cached.
+    SceneRequest { hash: SceneHash },
+    /// Master → worker (and submitter → master inside a job): a scene.
+    SceneData(SceneData),
+    /// Master → worker: the set-up of a frame whose packages follow.
+    FrameStart(FrameStart),
+    /// Worker → master: I have a free slot, send a package.
+    RequestWork,
+    /// Master → worker: trace these reflector triangles.
+    Package(Package),
+    /// Worker → master: a package's pixels and counters.
+    PackageResult(PackageResult),
+    /// Worker → master: a package could not be traced; the master decides
+    /// whether to retry it elsewhere.
+    PackageFailed(PackageFailed),
+    /// Master → worker: drop this package (its frame was cancelled or it was
+    /// already done elsewhere); no result is expected.
+    CancelPackage { id: PackageId },
+    /// Either way: I am alive (sent when idle; any message counts too).
+    Heartbeat,
+    /// Master → worker: finish nothing more, disconnect.
+    Shutdown,
+
+    // Submitter ↔ master.
+    /// Submitter → master: render this job.
+    SubmitJob { job: WireJob },
+    /// Master → submitter: the job is queued under this id.
+    JobAccepted { job: JobId, frames: u32 },
+    /// Master → submitter: `done` of `total` packages of a frame are in.
+    Progress {
+        job: JobId,
+        frame: u32,
+        done: u32,
+        total: u32,
+    },
+    /// Master → submitter: a finished frame.
+    FrameDone(FrameDone),
+    /// Master → submitter: the job was abandoned, with the reasons.
+    JobFailed { job: JobId, errors: Vec<String> },
+    /// Submitter → master: what is the farm doing?
+    StatusRequest,
+    /// Master → submitter: the answer.
+    StatusReply(StatusReply),
+}
+
+impl Message {
+    /// The variant's name, for logs and "unexpected message" errors.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Message::Hello(_) => "Hello",
+            Message::Welcome(_) => "Welcome",
+            Message::Refused(_) => "Refused",
+            Message::SceneOffer { .. } => "SceneOffer",
+            Message::SceneRequest { .. } => "SceneRequest",
+            Message::SceneData(_) => "SceneData",
+            Message::FrameStart(_) => "FrameStart",
+            Message::RequestWork => "RequestWork",
+            Message::Package(_) => "Package",
+            Message::PackageResult(_) => "PackageResult",
+            Message::PackageFailed(_) => "PackageFailed",
+            Message::CancelPackage { .. } => "CancelPackage",
+            Message::Heartbeat => "Heartbeat",
+            Message::Shutdown => "Shutdown",
+            Message::SubmitJob { .. } => "SubmitJob",
+            Message::JobAccepted { .. } => "JobAccepted",
+            Message::Progress { .. } => "Progress",
+            Message::FrameDone(_) => "FrameDone",
+            Message::JobFailed { .. } => "JobFailed",
+            Message::StatusRequest => "StatusRequest",
+            Message::StatusReply(_) => "StatusReply",
+        }
+    }
+}
+
+/// The first message of every connection.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Hello {
+    /// Always [`crate::MAGIC`]. Frozen position: first field.
+    pub magic: [u8; 8],
+    /// The client's [`crate::PROTOCOL_VERSION`]. Frozen position: second field.
+    pub version: u32,
+    /// The cluster token from `cluster.toml`.
+    pub token: String,
+    pub role: Role,
+}
+
+impl Hello {
+    /// A `Hello` of this build's protocol version.
+    pub fn new(token: impl Into<String>, role: Role) -> Self {
+        Hello {
+            magic: crate::MAGIC,
+            version: crate::PROTOCOL_VERSION,
+            token: token.into(),
+            role,
+        }
+    }
+}
+
+/// What a connecting client is.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Role {
+    /// A render worker with this many tracing threads and a name for logs
+    /// and status (the host name by default).
+    Worker { threads: u32, name: String },
+    /// A command-line client that submits jobs and asks for status.
+    Submitter,
+}
+
+/// The master's answer to an accepted `Hello`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Welcome {
+    /// The master's protocol version (equal to the client's).
+    pub version: u32,
+    /// The master's name for logs.
+    pub master_name: String,
+}
+
+/// Why the master refused a connection. Each code has a QUIC application
+/// error code ([`RefuseCode::close_code`]) with which the master closes the
+/// connection after sending `Refused`, so a client that lost the message
+/// still learns the reason; [`crate::CLOSE_NORMAL`] (0) is an orderly close.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum RefuseCode {
+    /// Close code 1: the token does not match the cluster's.
+    BadToken,
+    /// Close code 2: the client speaks another protocol version.
+    BadVersion,
+    /// Close code 3: the first message is not a well-formed vtfarm `Hello`
+    /// (garbage, wrong magic, another message, stream ended early).
+    BadMessage,
+    /// Close code 4: the first message is longer than
+    /// [`crate::MAX_HANDSHAKE_BYTES`].
+    TooLarge,
+    /// Close code 5: no `Hello` within the handshake timeout.
+    Timeout,
+    /// Close code 6: the master is shutting down.
+    ShuttingDown,
+    /// Close code 7: the connection failed during the handshake; nothing
+    /// could be sent back (the master closes with this code anyway).
+    Disconnected,
+}
+
+impl RefuseCode {
+    pub const ALL: [RefuseCode; 7] = [
+        RefuseCode::BadToken,
+        RefuseCode::BadVersion,
+        RefuseCode::BadMessage,
+        RefuseCode::TooLarge,
+        RefuseCode::Timeout,
+        RefuseCode::ShuttingDown,
+        RefuseCode::Disconnected,
+    ];
+
+    /// The QUIC application error code the master closes the connection with.
+    pub fn close_code(self) -> quinn::VarInt {
+        quinn::VarInt::from_u32(match self {
+            RefuseCode::BadToken => 1,
+            RefuseCode::BadVersion => 2,
+            RefuseCode::BadMessage => 3,
+            RefuseCode::TooLarge => 4,
+            RefuseCode::Timeout => 5,
+            RefuseCode::ShuttingDown => 6,
+            RefuseCode::Disconnected => 7,
+        })
+    }
+
+    /// The refusal a connection's close code stands for, if any.
+    pub fn from_close_code(code: quinn::VarInt) -> Option<RefuseCode> {
+        RefuseCode::ALL.into_iter().find(|c| c.close_code() == code)
+    }
+}
+
+/// A refusal: the `Refused` message, and what [`crate::server_handshake`]
+/// returns for a client it turned away.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+#[error("refused ({code:?}): {message}")]
+pub struct Refusal {
+    pub code: RefuseCode,
+    /// A human-readable reason (never echoes the token).
+    pub message: String,
+}
+
+impl Refusal {
+    pub fn new(code: RefuseCode, message: impl Into<String>) -> Self {
+        Refusal {
+            code,
+            message: message.into(),
+        }
+    }
+}
+
+/// The SHA-256 of a scene's canonical encoding (bincode of its [`WireScene`]).
+pub fn scene_hash(scene: &Scene) -> SceneHash {
+    Sha256::digest(encode_scene(scene)).into()
+}
+
+fn encode_scene(scene: &Scene) -> Vec<u8> {
+    crate::framing::encode_value(&WireScene::from(scene))
+}
+
+/// A scene by value: its canonical encoding and that encoding's hash, so the
+/// receiver can check the content before decoding and cache it by hash.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SceneData {
+    pub hash: SceneHash,
+    /// bincode of a [`WireScene`] (standard configuration).
+    #[serde(with = "bytes")]
+    pub bytes: Vec<u8>,
+}
+
+impl SceneData {
+    /// Encodes and hashes a scene.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let bytes = encode_scene(scene);
+        SceneData {
+            hash: Sha256::digest(&bytes).into(),
+            bytes,
+        }
+    }
+
+    /// Checks the hash, decodes and validates the scene.
+    pub fn to_scene(&self) -> Result<Scene, WireError> {
+        let actual: SceneHash = Sha256::digest(&self.bytes).into();
+        if actual != self.hash {
+            return Err(WireError::HashMismatch {
+                announced: hex::encode(self.hash),
+                actual: hex::encode(actual),
+            });
+        }
+        let wire: WireScene =
+            crate::framing::decode_value(&self.bytes).map_err(|message| WireError::Decode {
+                what: "scene data",
+                message,
+            })?;
+        Scene::try_from(wire)
+    }
+}
+
+/// The set-up of one frame: workers rebuild the BVH (per scene) and ID
+/// buffers (per frame) from it before tracing packages.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameStart {
+    pub job: JobId,
+    pub frame: u32,
+    /// The scene, announced earlier with `SceneOffer`.
+    pub scene: SceneHash,
+    pub setup: WireFrameSetup,
+    /// All reflector triangles of the frame (the behind-ID buffer needs
+    /// them); check with [`crate::wire::check_triangle_ids`].
+    pub reflectors: Vec<u32>,
+}
+
+/// A package: reflector triangle ids of one frame, traced as a unit.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Package {
+    pub id: PackageId,
+    /// The frame (announced with `FrameStart`) the package belongs to.
+    pub job: JobId,
+    pub frame: u32,
+    pub triangles: Vec<u32>,
+}
+
+/// A traced package.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PackageResult {
+    pub id: PackageId,
+    pub bitmap: WireBitmap,
+    pub stats: WirePackageStats,
+    /// Wall time the worker spent on the package, for load balancing.
+    pub busy_micros: u64,
+    /// Samples traced per triangle of the package, in package order: how the
+    /// load balancer splits `busy_micros` over the triangles.
+    pub triangle_samples: Vec<u32>,
+}
+
+/// A package the worker could not trace.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PackageFailed {
+    pub id: PackageId,
+    pub error: String,
+}
+
+/// A job as a submitter sends it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireJob {
+    /// A name for logs and status (the job file's name).
+    pub name: String,
+    pub scene: JobScene,
+    /// One set-up per frame, rendered in order.
+    pub frames: Vec<WireFrameSetup>,
+    /// The reflector triangles (the same for every frame).
+    pub reflectors: Vec<u32>,
+}
+
+/// Where a job's scene comes from.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum JobScene {
+    /// The scene itself.
+    Data(SceneData),
+    /// A scene the master already has (from an earlier job); the master
+    /// fails the job when it does not.
+    Hash(SceneHash),
+}
+
+/// A finished frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameDone {
+    pub job: JobId,
+    pub frame: u32,
+    /// The composited frame in linear RGB f32 (see [`WireImage`]).
+    pub image: WireImage,
+    pub stats: FrameStats,
+}
+
+/// Counters of one farm frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameStats {
+    /// Packages the frame was cut into.
+    pub packages: u32,
+    /// Package attempts that failed or timed out and were retried.
+    pub retries: u32,
+    /// Workers that traced at least one package of the frame.
+    pub workers: u32,
+    /// Master wall time from `FrameStart` to the last result.
+    pub wall_micros: u64,
+    /// Sum of the workers' `busy_micros` over the frame's packages.
+    pub busy_micros: u64,
+    /// Sum of the packages' counters.
+    pub totals: WirePackageStats,
+}
+
+/// The farm's state, for `vtfarm status`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StatusReply {
+    pub workers: Vec<WorkerStatus>,
+    pub queue: QueueStatus,
+}
+
+/// One connected worker.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WorkerStatus {
+    pub name: String,
+    /// The worker's remote address as the master sees it.
+    pub address: String,
+    pub threads: u32,
+    pub packages_in_flight: u32,
+    pub packages_done: u64,
+    pub packages_failed: u64,
+    /// Seconds since the worker connected.
+    pub connected_secs: u64,
+}
+
+/// The master's queue.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QueueStatus {
+    /// Jobs accepted and not yet finished or failed.
+    pub jobs: u32,
+    /// Frames of those jobs not yet done.
+    pub frames: u32,
+    pub packages_queued: u64,
+    pub packages_in_flight: u64,
+}
+
+/// Serde helper for byte vectors: bincode then writes a length and the raw
+/// bytes (and reads them in one copy) instead of one call per byte.
+pub(crate) mod bytes {
+    use serde::{Deserializer, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(bytes: &[u8], s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(bytes)
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u8>, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Vec<u8>;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a byte array")
+            }
+
+            fn visit_bytes<E: serde::de::Error>(self, v: &[u8]) -> Result<Vec<u8>, E> {
+                Ok(v.to_vec())
+            }
+
+            fn visit_byte_buf<E: serde::de::Error>(self, v: Vec<u8>) -> Result<Vec<u8>, E> {
+                Ok(v)
+            }
+
+            // Self-describing formats may present bytes as a sequence.
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Vec<u8>, A::Error> {
+                let mut v = Vec::new();
+                while let Some(b) = seq.next_element()? {
+                    v.push(b);
+                }
+                Ok(v)
+            }
+        }
+        d.deserialize_byte_buf(Visitor)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::tests::scene;
+
+    #[test]
+    fn scene_data_round_trips_and_hashes_the_canonical_encoding() {
+        let s = scene();
+        let data = SceneData::from_scene(&s);
+        assert_eq!(data.hash, scene_hash(&s));
+        assert_eq!(data.to_scene().expect("intact"), s);
+        // Equal scenes hash equal; any change changes the hash.
+        assert_eq!(scene_hash(&scene()), data.hash);
+        let mut moved = scene();
+        moved.positions[3].y += 1.0;
+        assert_ne!(scene_hash(&moved), data.hash);
+    }
+
+    #[test]
+    fn tampered_scene_data_is_rejected() {
+        let mut data = SceneData::from_scene(&scene());
+        let last = data.bytes.len() - 1;
+        data.bytes[last] ^= 1;
+        let error = data.to_scene().expect_err("hash no longer matches");
+        assert!(matches!(error, WireError::HashMismatch { .. }), "{error}");
+        // Consistent hash but content that does not decode.
+        let junk = vec![0xff; 16];
+        let data = SceneData {
+            hash: Sha256::digest(&junk).into(),
+            bytes: junk,
+        };
+        let error = data.to_scene().expect_err("not a scene");
+        assert!(matches!(error, WireError::Decode { .. }), "{error}");
+    }
+
+    #[test]
+    fn close_codes_are_distinct_and_invertible() {
+        for code in RefuseCode::ALL {
+            assert_ne!(code.close_code(), crate::CLOSE_NORMAL);
+            assert_eq!(RefuseCode::from_close_code(code.close_code()), Some(code));
+        }
+        assert_eq!(RefuseCode::from_close_code(crate::CLOSE_NORMAL), None);
+    }
+}

@@ -1,0 +1,1225 @@
+//! Wire mirrors of the domain types and the conversions between them.
+//!
+//! `From<&Domain> for Wire*` is infallible. `TryFrom<Wire*> for Domain`
+//! validates what a peer could get wrong and returns a [`WireError`] naming
+//! the field: non-finite floats, indices out of range, sizes that disagree,
+//! values outside the ranges the renderer relies on. It never panics, so the
+//! receiving side can convert hostile data without further checks.
+//!
+//! Vectors travel as `[f32; 3]` (glam's types do not derive serde here).
+
+use std::time::Duration;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, VertexSettings};
+
+/// The largest image side the wire accepts (the job file's limit too).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+/// The deepest Whitted recursion the wire accepts (the job file's limit too):
+/// deeper trees only risk the worker's stack.
+pub const MAX_TRACE_DEPTH: u32 = 64;
+/// The widest visibility neighbourhood the wire accepts: the test costs
+/// `(2r + 1)^2` ID-buffer reads per vertex.
+pub const MAX_VISIBILITY_RADIUS: u32 = 64;
+
+/// Why wire data does not make a valid domain value.
+#[derive(Debug, thiserror::Error)]
+pub enum WireError {
+    /// A float that must be finite is NaN or infinite.
+    #[error("{field} is not finite")]
+    NotFinite { field: String },
+    /// A value outside its allowed range.
+    #[error("{field} = {value}: must be {rule}")]
+    OutOfRange {
+        field: String,
+        value: String,
+        rule: &'static str,
+    },
+    /// An index that names nothing.
+    #[error("{field} = {index} is out of range (there are {len})")]
+    IndexOutOfRange { field: String, index: u64, len: u64 },
+    /// Two sizes that must agree do not.
+    #[error("{field} has {actual} entries, expected {expected}")]
+    SizeMismatch {
+        field: String,
+        expected: u64,
+        actual: u64,
+    },
+    /// The same index appears twice where each must be unique.
+    #[error("{field} lists {index} twice")]
+    Duplicate { field: String, index: u64 },
+    /// The scene breaks one of [`Scene::validate`]'s invariants.
+    #[error("invalid scene: {0}")]
+    InvalidScene(String),
+    /// Scene bytes whose SHA-256 is not the announced hash.
+    #[error("scene data hash mismatch: announced {announced}, content hashes to {actual}")]
+    HashMismatch { announced: String, actual: String },
+    /// Nested bincode (scene bytes) that does not decode.
+    #[error("cannot decode {what}: {message}")]
+    Decode { what: &'static str, message: String },
+}
+
+fn vec3(v: Vec3) -> [f32; 3] {
+    v.to_array()
+}
+
+/// A finite vector, or the error naming `field`.
+fn finite3(field: impl FnOnce() -> String, v: [f32; 3]) -> Result<Vec3, WireError> {
+    if v.iter().all(|c| c.is_finite()) {
+        Ok(Vec3::from_array(v))
+    } else {
+        Err(WireError::NotFinite { field: field() })
+    }
+}
+
+fn finite(field: &str, v: f32) -> Result<f32, WireError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(WireError::NotFinite {
+            field: field.to_owned(),
+        })
+    }
+}
+
+fn non_negative(field: &str, v: f32) -> Result<f32, WireError> {
+    if finite(field, v)? >= 0.0 {
+        Ok(v)
+    } else {
+        Err(WireError::OutOfRange {
+            field: field.to_owned(),
+            value: v.to_string(),
+            rule: "finite and not negative",
+        })
+    }
+}
+
+fn index(field: impl FnOnce() -> String, index: u32, len: usize) -> Result<u32, WireError> {
+    if (index as usize) < len {
+        Ok(index)
+    } else {
+        Err(WireError::IndexOutOfRange {
+            field: field(),
+            index: index.into(),
+            len: len as u64,
+        })
+    }
+}
+
+/// Checks a list of triangle ids (reflectors, a package) against a scene of
+/// `triangle_count` triangles: every id in range, none twice.
+pub fn check_triangle_ids(
+    field: &str,
+    ids: &[u32],
+    triangle_count: usize,
+) -> Result<(), WireError> {
+    let mut seen = vec![false; triangle_count];
+    for (i, &id) in ids.iter().enumerate() {
+        index(|| format!("{field}[{i}]"), id, triangle_count)?;
+        let slot = &mut seen[id as usize];
+        if *slot {
+            return Err(WireError::Duplicate {
+                field: field.to_owned(),
+                index: id.into(),
+            });
+        }
+        *slot = true;
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------- scene
+
+/// [`Triangle`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WireTriangle {
+    pub vertices: [u32; 3],
+    pub object: u32,
+    pub material: u32,
+}
+
+/// [`Material`] on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireMaterial {
+    pub name: String,
+    pub ambient: [f32; 3],
+    pub diffuse: [f32; 3],
+    pub specular: [f32; 3],
+    pub shininess: f32,
+    pub emission: [f32; 3],
+    pub reflectance: [f32; 3],
+    pub transmittance: [f32; 3],
+    pub ior: f32,
+}
+
+impl From<&Material> for WireMaterial {
+    fn from(m: &Material) -> Self {
+        WireMaterial {
+            name: m.name.clone(),
+            ambient: vec3(m.ambient),
+            diffuse: vec3(m.diffuse),
+            specular: vec3(m.specular),
+            shininess: m.shininess,
+            emission: vec3(m.emission),
+            reflectance: vec3(m.reflectance),
+            transmittance: vec3(m.transmittance),
+            ior: m.ior,
+        }
+    }
+}
+
+impl TryFrom<WireMaterial> for Material {
+    type Error = WireError;
+
+    fn try_from(m: WireMaterial) -> Result<Self, WireError> {
+        let field = |key: &str| format!("material {:?} {key}", m.name);
+        Ok(Material {
+            ambient: finite3(|| field("ambient"), m.ambient)?,
+            diffuse: finite3(|| field("diffuse"), m.diffuse)?,
+            specular: finite3(|| field("specular"), m.specular)?,
+            shininess: finite(&field("shininess"), m.shininess)?,
+            emission: finite3(|| field("emission"), m.emission)?,
+            reflectance: finite3(|| field("reflectance"), m.reflectance)?,
+            transmittance: finite3(|| field("transmittance"), m.transmittance)?,
+            ior: finite(&field("ior"), m.ior)?,
+            name: m.name,
+        })
+    }
+}
+
+/// [`Scene`] on the wire; its bincode encoding is the canonical form that
+/// [`crate::scene_hash`] hashes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WireScene {
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    pub triangles: Vec<WireTriangle>,
+    pub objects: Vec<String>,
+    pub materials: Vec<WireMaterial>,
+}
+
+impl From<&Scene> for WireScene {
+    fn from(s: &Scene) -> Self {
+        WireScene {
+            positions: s.positions.iter().map(|&p| vec3(p)).collect(),
+            normals: s.normals.iter().map(|&n| vec3(n)).collect(),
+            triangles: s
+                .triangles
+                .iter()
+                .map(|t| WireTriangle {
+                    vertices: t.vertices,
+                    object: t.object,
+                    material: t.material,
+                })
+                .collect(),
+            objects: s.objects.iter().map(|o| o.name.clone()).collect(),
+            materials: s.materials.iter().map(WireMaterial::from).collect(),
+        }
+    }
+}
+
+impl TryFrom<WireScene> for Scene {
+    type Error = WireError;
+
+    fn try_from(w: WireScene) -> Result<Self, WireError> {
+        if w.normals.len() != w.positions.len() {
+            return Err(WireError::SizeMismatch {
+                field: "scene normals".to_owned(),
+                expected: w.positions.len() as u64,
+                actual: w.normals.len() as u64,
+            });
+        }
+        let positions = (w.positions.iter().enumerate())
+            .map(|(i, &p)| finite3(|| format!("scene position {i}"), p))
+            .collect::<Result<Vec<_>, _>>()?;
+        let normals = (w.normals.iter().enumerate())
+            .map(|(i, &n)| finite3(|| format!("scene normal {i}"), n))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (vertex_count, object_count, material_count) =
+            (positions.len(), w.objects.len(), w.materials.len());
+        let triangles = (w.triangles.iter().enumerate())
+            .map(|(i, t)| {
+                for (k, &v) in t.vertices.iter().enumerate() {
+                    index(|| format!("triangle {i} vertex {k}"), v, vertex_count)?;
+                }
+                index(|| format!("triangle {i} object"), t.object, object_count)?;
+                index(
+                    || format!("triangle {i} material"),
+                    t.material,
+                    material_count,
+                )?;
+                Ok(Triangle {
+                    vertices: t.vertices,
+                    object: t.object,
+                    material: t.material,
+                })
+            })
+            .collect::<Result<Vec<_>, WireError>>()?;
+        let scene = Scene {
+            positions,
+            normals,
+            triangles,
+            objects: w.objects.into_iter().map(|name| Object { name }).collect(),
+            materials: (w.materials.into_iter())
+                .map(Material::try_from)
+                .collect::<Result<_, _>>()?,
+        };
+        // Indices and finiteness are checked above; this adds unit normals.
+        scene.validate().map_err(WireError::InvalidScene)?;
+        Ok(scene)
+    }
+}
+
+// ---------------------------------------------------------------- camera and lighting
+
+/// [`Camera`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireCamera {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: [f32; 3],
+    pub fov_y_deg: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl From<&Camera> for WireCamera {
+    fn from(c: &Camera) -> Self {
+        WireCamera {
+            eye: vec3(c.eye),
+            target: vec3(c.target),
+            up: vec3(c.up),
+            fov_y_deg: c.fov_y_deg,
+            width: c.width,
+            height: c.height,
+        }
+    }
+}
+
+impl TryFrom<WireCamera> for Camera {
+    type Error = WireError;
+
+    fn try_from(w: WireCamera) -> Result<Self, WireError> {
+        let eye = finite3(|| "camera eye".to_owned(), w.eye)?;
+        let target = finite3(|| "camera target".to_owned(), w.target)?;
+        let up = finite3(|| "camera up".to_owned(), w.up)?;
+        let fov = finite("camera fov_y_deg", w.fov_y_deg)?;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(out_of_range(
+                "camera fov_y_deg",
+                fov,
+                "above 0 and below 180",
+            ));
+        }
+        for (field, side) in [("camera width", w.width), ("camera height", w.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&side) {
+                return Err(out_of_range(field, side, "1 to 16384"));
+            }
+        }
+        // The camera basis normalizes these; degenerate ones would give NaN rays.
+        let forward = (target - eye).normalize_or_zero();
+        if forward == Vec3::ZERO {
+            return Err(out_of_range(
+                "camera target",
+                format!("{target}"),
+                "away from the eye",
+            ));
+        }
+        if forward.cross(up).length_squared() < 1e-12 {
+            return Err(out_of_range(
+                "camera up",
+                format!("{up}"),
+                "non-zero and not along the view direction",
+            ));
+        }
+        Ok(Camera {
+            eye,
+            target,
+            up,
+            fov_y_deg: fov,
+            width: w.width,
+            height: w.height,
+        })
+    }
+}
+
+fn out_of_range(field: &str, value: impl ToString, rule: &'static str) -> WireError {
+    WireError::OutOfRange {
+        field: field.to_owned(),
+        value: value.to_string(),
+        rule,
+    }
+}
+
+/// [`LightKind`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum WireLightKind {
+    Point { position: [f32; 3] },
+    Directional { direction: [f32; 3] },
+}
+
+/// [`Light`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireLight {
+    pub kind: WireLightKind,
+    pub color: [f32; 3],
+    pub intensity: f32,
+}
+
+impl From<&Light> for WireLight {
+    fn from(l: &Light) -> Self {
+        WireLight {
+            kind: match l.kind {
+                LightKind::Point { position } => WireLightKind::Point {
+                    position: vec3(position),
+                },
+                LightKind::Directional { direction } => WireLightKind::Directional {
+                    direction: vec3(direction),
+                },
+            },
+            color: vec3(l.color),
+            intensity: l.intensity,
+        }
+    }
+}
+
+impl TryFrom<WireLight> for Light {
+    type Error = WireError;
+
+    fn try_from(w: WireLight) -> Result<Self, WireError> {
+        let kind = match w.kind {
+            WireLightKind::Point { position } => LightKind::Point {
+                position: finite3(|| "light position".to_owned(), position)?,
+            },
+            WireLightKind::Directional { direction } => {
+                let direction = finite3(|| "light direction".to_owned(), direction)?;
+                // Shading normalizes it: zero would turn into NaN.
+                if direction.normalize_or_zero() == Vec3::ZERO {
+                    return Err(out_of_range(
+                        "light direction",
+                        format!("{direction}"),
+                        "non-zero",
+                    ));
+                }
+                LightKind::Directional { direction }
+            }
+        };
+        Ok(Light {
+            kind,
+            color: finite3(|| "light color".to_owned(), w.color)?,
+            intensity: finite("light intensity", w.intensity)?,
+        })
+    }
+}
+
+/// [`Lighting`] on the wire.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireLighting {
+    pub lights: Vec<WireLight>,
+    pub ambient: [f32; 3],
+    pub background: [f32; 3],
+}
+
+impl From<&Lighting> for WireLighting {
+    fn from(l: &Lighting) -> Self {
+        WireLighting {
+            lights: l.lights.iter().map(WireLight::from).collect(),
+            ambient: vec3(l.ambient),
+            background: vec3(l.background),
+        }
+    }
+}
+
+impl TryFrom<WireLighting> for Lighting {
+    type Error = WireError;
+
+    fn try_from(w: WireLighting) -> Result<Self, WireError> {
+        Ok(Lighting {
+            lights: (w.lights.into_iter())
+                .map(Light::try_from)
+                .collect::<Result<_, _>>()?,
+            ambient: finite3(|| "lighting ambient".to_owned(), w.ambient)?,
+            background: finite3(|| "lighting background".to_owned(), w.background)?,
+        })
+    }
+}
+
+// ---------------------------------------------------------------- settings
+
+/// [`TraceSettings`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireTraceSettings {
+    pub max_depth: u32,
+    pub fresnel: bool,
+    pub signature_min_weight: f32,
+}
+
+impl From<&TraceSettings> for WireTraceSettings {
+    fn from(t: &TraceSettings) -> Self {
+        WireTraceSettings {
+            max_depth: t.max_depth,
+            fresnel: t.fresnel,
+            signature_min_weight: t.signature_min_weight,
+        }
+    }
+}
+
+impl TryFrom<WireTraceSettings> for TraceSettings {
+    type Error = WireError;
+
+    fn try_from(w: WireTraceSettings) -> Result<Self, WireError> {
+        if !(1..=MAX_TRACE_DEPTH).contains(&w.max_depth) {
+            return Err(out_of_range("trace max_depth", w.max_depth, "1 to 64"));
+        }
+        Ok(TraceSettings {
+            max_depth: w.max_depth,
+            fresnel: w.fresnel,
+            signature_min_weight: non_negative(
+                "trace signature_min_weight",
+                w.signature_min_weight,
+            )?,
+        })
+    }
+}
+
+/// [`Quality`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireQuality {
+    Preview,
+    Refine,
+    Full,
+    Reference,
+}
+
+impl From<Quality> for WireQuality {
+    fn from(q: Quality) -> Self {
+        match q {
+            Quality::Preview => WireQuality::Preview,
+            Quality::Refine => WireQuality::Refine,
+            Quality::Full => WireQuality::Full,
+            Quality::Reference => WireQuality::Reference,
+        }
+    }
+}
+
+impl From<WireQuality> for Quality {
+    fn from(q: WireQuality) -> Self {
+        match q {
+            WireQuality::Preview => Quality::Preview,
+            WireQuality::Refine => Quality::Refine,
+            WireQuality::Full => Quality::Full,
+            WireQuality::Reference => Quality::Reference,
+        }
+    }
+}
+
+/// [`VertexSettings`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireVertexSettings {
+    pub quality: WireQuality,
+    pub epsilon: f32,
+    pub pixel_floor: f32,
+    pub flatness: f32,
+    pub max_depth: u32,
+    pub visibility_radius: u32,
+    pub depth_tolerance: f32,
+}
+
+impl From<&VertexSettings> for WireVertexSettings {
+    fn from(v: &VertexSettings) -> Self {
+        WireVertexSettings {
+            quality: v.quality.into(),
+            epsilon: v.epsilon,
+            pixel_floor: v.pixel_floor,
+            flatness: v.flatness,
+            max_depth: v.max_depth,
+            visibility_radius: v.visibility_radius,
+            depth_tolerance: v.depth_tolerance,
+        }
+    }
+}
+
+impl TryFrom<WireVertexSettings> for VertexSettings {
+    type Error = WireError;
+
+    fn try_from(w: WireVertexSettings) -> Result<Self, WireError> {
+        if w.visibility_radius > MAX_VISIBILITY_RADIUS {
+            return Err(out_of_range(
+                "vertex visibility_radius",
+                w.visibility_radius,
+                "0 to 64",
+            ));
+        }
+        Ok(VertexSettings {
+            quality: w.quality.into(),
+            epsilon: non_negative("vertex epsilon", w.epsilon)?,
+            pixel_floor: non_negative("vertex pixel_floor", w.pixel_floor)?,
+            flatness: non_negative("vertex flatness", w.flatness)?,
+            max_depth: w.max_depth,
+            visibility_radius: w.visibility_radius,
+            depth_tolerance: non_negative("vertex depth_tolerance", w.depth_tolerance)?,
+        })
+    }
+}
+
+/// Everything that can change from one frame to the next (the fields of
+/// `vtfarm_render::FrameSetup`, which this crate does not depend on).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireFrameSetup {
+    pub camera: WireCamera,
+    pub lighting: WireLighting,
+    pub trace: WireTraceSettings,
+    pub vertex: WireVertexSettings,
+}
+
+impl WireFrameSetup {
+    /// The wire form of one frame's set-up.
+    pub fn from_parts(
+        camera: &Camera,
+        lighting: &Lighting,
+        trace: &TraceSettings,
+        vertex: &VertexSettings,
+    ) -> Self {
+        WireFrameSetup {
+            camera: camera.into(),
+            lighting: lighting.into(),
+            trace: trace.into(),
+            vertex: vertex.into(),
+        }
+    }
+
+    /// The validated domain values: camera, lighting, trace and vertex settings.
+    pub fn into_parts(
+        self,
+    ) -> Result<(Camera, Lighting, TraceSettings, VertexSettings), WireError> {
+        Ok((
+            self.camera.try_into()?,
+            self.lighting.try_into()?,
+            self.trace.try_into()?,
+            self.vertex.try_into()?,
+        ))
+    }
+}
+
+// ---------------------------------------------------------------- results
+
+/// [`SparseBitmap`] on the wire: the rectangle, the coverage mask packed
+/// eight pixels a byte (row-major within the rectangle, least significant bit
+/// first, unused high bits of the last byte zero), and one entry per covered
+/// pixel in the same order in each per-pixel array.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WireBitmap {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+    #[serde(with = "crate::message::bytes")]
+    pub mask: Vec<u8>,
+    pub color: Vec<[f32; 3]>,
+    pub reflected: Vec<[f32; 3]>,
+    pub reflected_object: Vec<u32>,
+}
+
+impl From<&SparseBitmap> for WireBitmap {
+    fn from(b: &SparseBitmap) -> Self {
+        let mut mask = vec![0u8; b.mask.len().div_ceil(8)];
+        for (i, _) in b.mask.iter().enumerate().filter(|(_, m)| **m) {
+            mask[i / 8] |= 1 << (i % 8);
+        }
+        WireBitmap {
+            x0: b.x0,
+            y0: b.y0,
+            width: b.width,
+            height: b.height,
+            mask,
+            color: b.color.iter().map(|&c| vec3(c)).collect(),
+            reflected: b.reflected.iter().map(|&c| vec3(c)).collect(),
+            reflected_object: b.reflected_object.clone(),
+        }
+    }
+}
+
+impl TryFrom<WireBitmap> for SparseBitmap {
+    type Error = WireError;
+
+    fn try_from(w: WireBitmap) -> Result<Self, WireError> {
+        // Both ends of the rectangle must fit the frame's coordinate type.
+        for (field, start, size) in [("bitmap x", w.x0, w.width), ("bitmap y", w.y0, w.height)] {
+            if start
+                .checked_add(size)
+                .is_none_or(|end| end > MAX_IMAGE_SIDE)
+            {
+                return Err(out_of_range(
+                    field,
+                    format!("{start} + {size}"),
+                    "within 16384 pixels",
+                ));
+            }
+        }
+        let area = w.width as usize * w.height as usize;
+        let mask_bytes = area.div_ceil(8);
+        if w.mask.len() != mask_bytes {
+            return Err(WireError::SizeMismatch {
+                field: "bitmap mask bytes".to_owned(),
+                expected: mask_bytes as u64,
+                actual: w.mask.len() as u64,
+            });
+        }
+        if area % 8 != 0 && w.mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
+            return Err(out_of_range(
+                "bitmap mask padding",
+                "set bits",
+                "zero past the last pixel",
+            ));
+        }
+        let covered: usize = w.mask.iter().map(|b| b.count_ones() as usize).sum();
+        for (field, len) in [
+            ("bitmap color", w.color.len()),
+            ("bitmap reflected", w.reflected.len()),
+            ("bitmap reflected_object", w.reflected_object.len()),
+        ] {
+            if len != covered {
+                return Err(WireError::SizeMismatch {
+                    field: field.to_owned(),
+                    expected: covered as u64,
+                    actual: len as u64,
+                });
+            }
+        }
+        let colors = |field: &'static str, v: &[[f32; 3]]| {
+            (v.iter().enumerate())
+                .map(|(i, &c)| finite3(|| format!("{field}[{i}]"), c))
+                .collect::<Result<Vec<_>, _>>()
+        };
+        Ok(SparseBitmap {
+            x0: w.x0,
+            y0: w.y0,
+            width: w.width,
+            height: w.height,
+            mask: (0..area)
+                .map(|i| w.mask[i / 8] >> (i % 8) & 1 == 1)
+                .collect(),
+            color: colors("bitmap color", &w.color)?,
+            reflected: colors("bitmap reflected", &w.reflected)?,
+            reflected_object: w.reflected_object,
+        })
+    }
+}
+
+impl WireBitmap {
+    /// Converts like `TryFrom`, and also checks that the rectangle lies
+    /// inside a `width` × `height` frame, as compositing requires.
+    pub fn into_bitmap_within(self, width: u32, height: u32) -> Result<SparseBitmap, WireError> {
+        // u64: the sums cannot overflow.
+        let (x_end, y_end) = (
+            u64::from(self.x0) + u64::from(self.width),
+            u64::from(self.y0) + u64::from(self.height),
+        );
+        if x_end > width.into() || y_end > height.into() {
+            return Err(out_of_range(
+                "bitmap rectangle",
+                format!("({}, {}) {}x{}", self.x0, self.y0, self.width, self.height),
+                "inside the frame",
+            ));
+        }
+        self.try_into()
+    }
+}
+
+/// [`PackageStats`] on the wire. Durations keep their full precision.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WirePackageStats {
+    pub triangles: u64,
+    pub traced_triangles: u64,
+    pub visible_vertices: u64,
+    pub vertex_samples: u64,
+    pub filled_pixels: u64,
+    pub refined_edges: u64,
+    pub faces: u64,
+    pub pixels: u64,
+    pub vertex_time: Duration,
+    pub fill_time: Duration,
+}
+
+impl From<&PackageStats> for WirePackageStats {
+    fn from(s: &PackageStats) -> Self {
+        WirePackageStats {
+            triangles: s.triangles,
+            traced_triangles: s.traced_triangles,
+            visible_vertices: s.visible_vertices,
+            vertex_samples: s.vertex_samples,
+            filled_pixels: s.filled_pixels,
+            refined_edges: s.refined_edges,
+            faces: s.faces,
+            pixels: s.pixels,
+            vertex_time: s.vertex_time,
+            fill_time: s.fill_time,
+        }
+    }
+}
+
+// Counters cannot be invalid, and serde already rejects malformed durations.
+impl From<WirePackageStats> for PackageStats {
+    fn from(s: WirePackageStats) -> Self {
+        PackageStats {
+            triangles: s.triangles,
+            traced_triangles: s.traced_triangles,
+            visible_vertices: s.visible_vertices,
+            vertex_samples: s.vertex_samples,
+            filled_pixels: s.filled_pixels,
+            refined_edges: s.refined_edges,
+            faces: s.faces,
+            pixels: s.pixels,
+            vertex_time: s.vertex_time,
+            fill_time: s.fill_time,
+        }
+    }
+}
+
+/// A finished frame as linear RGB f32 (row 0 at the top, row-major), the
+/// same content as `vtfarm_imaging::Image`: the submitter decides on sRGB,
+/// PNG or NPY, since sRGB happens only in vtfarm-imaging. A frame of
+/// `w * h` pixels costs `12 * w * h` bytes, so frames up to about 22 million
+/// pixels fit in [`crate::MAX_MESSAGE_BYTES`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WireImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 3]>,
+}
+
+impl WireImage {
+    /// The wire form of a `width` × `height` linear image.
+    pub fn from_pixels(width: u32, height: u32, pixels: &[Vec3]) -> Self {
+        WireImage {
+            width,
+            height,
+            pixels: pixels.iter().map(|&p| vec3(p)).collect(),
+        }
+    }
+
+    /// The validated pixels: sizes in range, `width * height` of them, all finite.
+    pub fn into_pixels(self) -> Result<(u32, u32, Vec<Vec3>), WireError> {
+        for (field, side) in [("image width", self.width), ("image height", self.height)] {
+            if side > MAX_IMAGE_SIDE {
+                return Err(out_of_range(field, side, "0 to 16384"));
+            }
+        }
+        let expected = u64::from(self.width) * u64::from(self.height);
+        if self.pixels.len() as u64 != expected {
+            return Err(WireError::SizeMismatch {
+                field: "image pixels".to_owned(),
+                expected,
+                actual: self.pixels.len() as u64,
+            });
+        }
+        let pixels = (self.pixels.iter().enumerate())
+            .map(|(i, &p)| finite3(|| format!("image pixel {i}"), p))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((self.width, self.height, pixels))
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    pub(crate) fn material(name: &str) -> Material {
+        Material {
+            name: name.to_owned(),
+            ambient: Vec3::new(0.1, 0.2, 0.3),
+            diffuse: Vec3::new(0.4, 0.5, 0.6),
+            specular: Vec3::splat(0.25),
+            shininess: 32.0,
+            emission: Vec3::new(0.0, 0.5, 0.0),
+            reflectance: Vec3::splat(0.9),
+            transmittance: Vec3::splat(0.1),
+            ior: 1.5,
+        }
+    }
+
+    /// Two triangles in two objects with two materials.
+    pub(crate) fn scene() -> Scene {
+        Scene {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, -0.5)],
+            normals: vec![Vec3::Z; 4],
+            triangles: vec![
+                Triangle {
+                    vertices: [0, 1, 2],
+                    object: 0,
+                    material: 0,
+                },
+                Triangle {
+                    vertices: [1, 3, 2],
+                    object: 1,
+                    material: 1,
+                },
+            ],
+            objects: vec![
+                Object {
+                    name: "glass".to_owned(),
+                },
+                Object {
+                    name: "dash".to_owned(),
+                },
+            ],
+            materials: vec![material("mirror"), Material::default()],
+        }
+    }
+
+    pub(crate) fn camera() -> Camera {
+        Camera {
+            eye: Vec3::new(0.0, 1.0, 3.0),
+            target: Vec3::new(0.2, 0.5, 0.0),
+            up: Vec3::Y,
+            fov_y_deg: 45.0,
+            width: 64,
+            height: 48,
+        }
+    }
+
+    pub(crate) fn lighting() -> Lighting {
+        Lighting {
+            lights: vec![
+                Light {
+                    kind: LightKind::Point {
+                        position: Vec3::new(1.0, 2.0, 3.0),
+                    },
+                    color: Vec3::ONE,
+                    intensity: 0.8,
+                },
+                Light {
+                    kind: LightKind::Directional {
+                        direction: Vec3::new(0.0, -1.0, -1.0),
+                    },
+                    color: Vec3::new(1.0, 0.9, 0.8),
+                    intensity: 0.5,
+                },
+            ],
+            ambient: Vec3::splat(0.05),
+            background: Vec3::new(0.2, 0.3, 0.9),
+        }
+    }
+
+    /// A 5 × 3 rectangle (15 mask bits: not a multiple of 8) with 4 covered pixels.
+    pub(crate) fn bitmap() -> SparseBitmap {
+        let mut mask = vec![false; 15];
+        for i in [0, 6, 7, 14] {
+            mask[i] = true;
+        }
+        SparseBitmap {
+            x0: 3,
+            y0: 2,
+            width: 5,
+            height: 3,
+            mask,
+            color: vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE],
+            reflected: vec![Vec3::ZERO, Vec3::splat(0.5), Vec3::ZERO, Vec3::splat(0.25)],
+            reflected_object: vec![0, vtfarm_scene::NONE, 1, 0],
+        }
+    }
+
+    fn round_trip<D, W>(value: &D) -> D
+    where
+        for<'a> W: From<&'a D>,
+        D: TryFrom<W, Error = WireError>,
+    {
+        D::try_from(W::from(value)).expect("a domain value converts back")
+    }
+
+    #[test]
+    fn scene_round_trips() {
+        let s = scene();
+        assert_eq!(round_trip::<Scene, WireScene>(&s), s);
+        assert_eq!(
+            round_trip::<Scene, WireScene>(&Scene::default()),
+            Scene::default()
+        );
+    }
+
+    #[test]
+    fn camera_lighting_and_material_round_trip() {
+        assert_eq!(round_trip::<Camera, WireCamera>(&camera()), camera());
+        assert_eq!(
+            round_trip::<Lighting, WireLighting>(&lighting()),
+            lighting()
+        );
+        for l in &lighting().lights {
+            assert_eq!(round_trip::<Light, WireLight>(l), *l);
+        }
+        assert_eq!(
+            round_trip::<Material, WireMaterial>(&material("m")),
+            material("m")
+        );
+    }
+
+    #[test]
+    fn settings_round_trip() {
+        let trace = TraceSettings {
+            max_depth: 7,
+            fresnel: true,
+            signature_min_weight: 0.125,
+        };
+        assert_eq!(
+            round_trip::<TraceSettings, WireTraceSettings>(&trace),
+            trace
+        );
+        for quality in Quality::ALL {
+            assert_eq!(Quality::from(WireQuality::from(quality)), quality);
+            let vertex = VertexSettings {
+                quality,
+                max_depth: 9,
+                visibility_radius: 2,
+                ..VertexSettings::default()
+            };
+            assert_eq!(
+                round_trip::<VertexSettings, WireVertexSettings>(&vertex),
+                vertex
+            );
+        }
+        let setup =
+            WireFrameSetup::from_parts(&camera(), &lighting(), &trace, &VertexSettings::default());
+        assert_eq!(
+            setup.into_parts().expect("valid set-up"),
+            (camera(), lighting(), trace, VertexSettings::default())
+        );
+    }
+
+    #[test]
+    fn bitmaps_round_trip_with_packed_masks() {
+        let b = bitmap();
+        let wire = WireBitmap::from(&b);
+        assert_eq!(wire.mask, vec![0b1100_0001, 0b0100_0000]);
+        assert_eq!(round_trip::<SparseBitmap, WireBitmap>(&b), b);
+        assert_eq!(
+            wire.into_bitmap_within(8, 5).expect("fits exactly"),
+            bitmap()
+        );
+        let empty = SparseBitmap::default();
+        assert_eq!(round_trip::<SparseBitmap, WireBitmap>(&empty), empty);
+    }
+
+    #[test]
+    fn stats_and_images_round_trip() {
+        let stats = PackageStats {
+            triangles: 1,
+            traced_triangles: 2,
+            visible_vertices: 3,
+            vertex_samples: 4,
+            filled_pixels: 5,
+            refined_edges: 6,
+            faces: 7,
+            pixels: 8,
+            vertex_time: Duration::new(1, 234_567_891),
+            fill_time: Duration::from_nanos(17),
+        };
+        assert_eq!(PackageStats::from(WirePackageStats::from(&stats)), stats);
+        let pixels = vec![Vec3::new(0.5, 1.5, 2.5); 6];
+        let image = WireImage::from_pixels(3, 2, &pixels);
+        assert_eq!(image.into_pixels().expect("valid image"), (3, 2, pixels));
+    }
+
+    /// Applies `damage` to a valid wire value and expects the conversion to
+    /// fail with a message containing `expected`.
+    fn check_rejects<W: Clone, D: TryFrom<W, Error = WireError> + std::fmt::Debug>(
+        valid: &W,
+        damage: impl FnOnce(&mut W),
+        expected: &str,
+    ) {
+        let mut w = valid.clone();
+        damage(&mut w);
+        let message = D::try_from(w).expect_err(expected).to_string();
+        assert!(message.contains(expected), "{message:?} lacks {expected:?}");
+    }
+
+    #[test]
+    fn hostile_scenes_are_rejected() {
+        let valid = WireScene::from(&scene());
+        let check = |damage: fn(&mut WireScene), expected| {
+            check_rejects::<WireScene, Scene>(&valid, damage, expected)
+        };
+        check(
+            |s| s.positions[1][2] = f32::NAN,
+            "scene position 1 is not finite",
+        );
+        check(
+            |s| s.normals.truncate(3),
+            "scene normals has 3 entries, expected 4",
+        );
+        check(
+            |s| s.triangles[1].vertices[2] = 4,
+            "triangle 1 vertex 2 = 4 is out of range",
+        );
+        check(|s| s.triangles[0].object = 2, "triangle 0 object = 2");
+        check(
+            |s| s.triangles[0].material = u32::MAX,
+            "triangle 0 material",
+        );
+        check(
+            |s| s.normals[0] = [0.0, 0.0, 2.0],
+            "normal 0 is not unit length",
+        );
+        check(
+            |s| s.materials[1].ior = f32::INFINITY,
+            "material \"default\" ior is not finite",
+        );
+    }
+
+    #[test]
+    fn hostile_cameras_lights_and_settings_are_rejected() {
+        let cam = WireCamera::from(&camera());
+        let check = |damage: fn(&mut WireCamera), expected| {
+            check_rejects::<WireCamera, Camera>(&cam, damage, expected)
+        };
+        check(|c| c.eye[0] = f32::NAN, "camera eye is not finite");
+        check(|c| c.width = 0, "camera width = 0");
+        check(|c| c.height = MAX_IMAGE_SIDE + 1, "camera height = 16385");
+        check(|c| c.fov_y_deg = 180.0, "camera fov_y_deg = 180");
+        check(|c| c.target = c.eye, "away from the eye");
+        check(|c| c.up = [0.0; 3], "camera up");
+
+        let light = WireLight::from(&lighting().lights[1]);
+        check_rejects::<WireLight, Light>(
+            &light,
+            |l| {
+                l.kind = WireLightKind::Directional {
+                    direction: [0.0; 3],
+                }
+            },
+            "light direction",
+        );
+        check_rejects::<WireLight, Light>(&light, |l| l.intensity = f32::NAN, "light intensity");
+
+        let trace = WireTraceSettings::from(&TraceSettings::default());
+        check_rejects::<_, TraceSettings>(&trace, |t| t.max_depth = 0, "trace max_depth = 0");
+        check_rejects::<_, TraceSettings>(&trace, |t| t.max_depth = 65, "trace max_depth = 65");
+        let vertex = WireVertexSettings::from(&VertexSettings::default());
+        check_rejects::<_, VertexSettings>(&vertex, |v| v.epsilon = -1.0, "vertex epsilon = -1");
+        check_rejects::<_, VertexSettings>(
+            &vertex,
+            |v| v.visibility_radius = 1000,
+            "vertex visibility_radius = 1000",
+        );
+    }
+
+    #[test]
+    fn hostile_bitmaps_are_rejected() {
+        let valid = WireBitmap::from(&bitmap());
+        let check = |damage: fn(&mut WireBitmap), expected| {
+            check_rejects::<WireBitmap, SparseBitmap>(&valid, damage, expected)
+        };
+        check(
+            |b| b.mask.push(0),
+            "bitmap mask bytes has 3 entries, expected 2",
+        );
+        check(|b| b.mask[1] |= 0x80, "bitmap mask padding");
+        check(
+            |b| b.mask[0] |= 0x02,
+            "bitmap color has 4 entries, expected 5",
+        );
+        check(
+            |b| b.reflected.truncate(3),
+            "bitmap reflected has 3 entries, expected 4",
+        );
+        check(
+            |b| b.reflected_object.clear(),
+            "bitmap reflected_object has 0",
+        );
+        check(
+            |b| b.color[3][1] = f32::NEG_INFINITY,
+            "bitmap color[3] is not finite",
+        );
+        check(|b| b.x0 = u32::MAX, "bitmap x");
+        check(|b| (b.width, b.height) = (u32::MAX, u32::MAX), "bitmap x");
+        let outside = valid
+            .clone()
+            .into_bitmap_within(7, 5)
+            .expect_err("one column short");
+        assert!(
+            outside.to_string().contains("inside the frame"),
+            "{outside}"
+        );
+        let image = WireImage {
+            width: 2,
+            height: 2,
+            pixels: vec![[0.0; 3]; 3],
+        };
+        let error = image.into_pixels().expect_err("three pixels for four");
+        assert!(error.to_string().contains("image pixels has 3"), "{error}");
+    }
+
+    #[test]
+    fn triangle_id_lists_are_checked_against_the_scene() {
+        assert!(check_triangle_ids("reflectors", &[2, 0, 1], 3).is_ok());
+        let error = check_triangle_ids("reflectors", &[0, 3], 3).expect_err("3 of 3");
+        assert_eq!(
+            error.to_string(),
+            "reflectors[1] = 3 is out of range (there are 3)"
+        );
+        let error = check_triangle_ids("package", &[1, 1], 3).expect_err("duplicate");
+        assert_eq!(error.to_string(), "package lists 1 twice");
+    }
+
+    fn any_f32() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            Just(f32::NAN),
+            Just(f32::INFINITY),
+            Just(0.0f32),
+            -2.0f32..2.0
+        ]
+    }
+
+    prop_compose! {
+        fn any_bitmap()(
+            x0 in prop_oneof![0u32..20, Just(u32::MAX)],
+            y0 in 0u32..20,
+            width in prop_oneof![0u32..20, Just(u32::MAX)],
+            height in 0u32..20,
+            mask in proptest::collection::vec(any::<u8>(), 0..60),
+            color in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
+            reflected in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
+            reflected_object in proptest::collection::vec(any::<u32>(), 0..30),
+        ) -> WireBitmap {
+            WireBitmap { x0, y0, width, height, mask, color, reflected, reflected_object }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn hostile_bitmaps_never_panic(b in any_bitmap(), w in 0u32..40, h in 0u32..40) {
+            let accepted = SparseBitmap::try_from(b.clone());
+            if let Ok(bitmap) = &accepted {
+                // Whatever is accepted is self-consistent.
+                prop_assert_eq!(bitmap.mask.len(), (bitmap.width * bitmap.height) as usize);
+                prop_assert_eq!(bitmap.covered().count(), bitmap.color.len());
+            }
+            let _ = b.into_bitmap_within(w, h);
+        }
+
+        #[test]
+        fn hostile_scenes_never_panic(
+            positions in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..6),
+            normals in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..6),
+            triangles in proptest::collection::vec(
+                ([0u32..8, 0u32..8, 0u32..8], 0u32..3, 0u32..3), 0..6),
+        ) {
+            let wire = WireScene {
+                positions,
+                normals,
+                triangles: triangles
+                    .into_iter()
+                    .map(|(vertices, object, material)| WireTriangle { vertices, object, material })
+                    .collect(),
+                objects: vec!["a".to_owned(), "b".to_owned()],
+                materials: vec![WireMaterial::from(&Material::default())],
+            };
+            if let Ok(scene) = Scene::try_from(wire) {
+                prop_assert!(scene.validate().is_ok());
+            }
+        }
+    }
+}
