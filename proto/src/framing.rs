@@ -194,6 +194,7 @@ mod tests {
     use std::task::{Context, Poll};
     use std::time::Duration;
 
+    use crate::WorkerFrameStats;
     use glam::Vec3;
     use proptest::prelude::*;
     use vtfarm_trace::TraceSettings;
@@ -295,11 +296,21 @@ mod tests {
                 image: WireImage::from_pixels(2, 1, &[Vec3::X, Vec3::ONE]),
                 stats: FrameStats {
                     packages: 8,
-                    retries: 1,
-                    workers: 2,
+                    failures: 1,
                     wall_micros: 5_000,
-                    busy_micros: 9_000,
+                    imbalance: 0.04,
+                    speedup: 1.9,
                     totals: stats,
+                    workers: vec![WorkerFrameStats {
+                        name: "w1".into(),
+                        busy_micros: 4_000,
+                        packages: 3,
+                        triangles: 70,
+                        rays: 900,
+                        bytes_in: 100,
+                        bytes_out: 2_000,
+                    }],
+                    ..FrameStats::default()
                 },
             }),
             Message::JobFailed {

@@ -19,9 +19,11 @@
 //! - [`cluster`]: `cluster.toml` and the shared token.
 //! - [`handshake`]: `Hello` / `Welcome` / `Refused` on a connection's first stream.
 
+pub mod client;
 pub mod cluster;
 pub mod framing;
 pub mod handshake;
+pub mod link;
 pub mod message;
 pub mod tls;
 pub mod wire;
@@ -35,10 +37,11 @@ pub use handshake::{
     CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, client_handshake,
     server_handshake,
 };
+pub use link::{Link, LinkBytes, SESSION_LIMIT};
 pub use message::{
     FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
     PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, SceneData, SceneHash,
-    StatusReply, Welcome, WireJob, WorkerStatus, scene_hash,
+    StatusReply, Welcome, WireJob, WorkerFrameStats, WorkerStatus, scene_hash,
 };
 pub use tls::{
     ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,

@@ -360,21 +360,39 @@ pub struct FrameDone {
     pub stats: FrameStats,
 }
 
-/// Counters of one farm frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// Counters of one farm frame (written by `vtfarm submit` as `stats.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameStats {
-    /// Packages the frame was cut into.
-    pub packages: u32,
-    /// Package attempts that failed or timed out and were retried.
-    pub retries: u32,
-    /// Workers that traced at least one package of the frame.
-    pub workers: u32,
-    /// Master wall time from `FrameStart` to the last result.
+    /// Master wall time from the frame's first assignment to its last result.
     pub wall_micros: u64,
-    /// Sum of the workers' `busy_micros` over the frame's packages.
-    pub busy_micros: u64,
+    /// Packages the frame was cut into (each counted once).
+    pub packages: u32,
+    /// Straggler copies handed out.
+    pub duplicates: u32,
+    /// Failed attempts that were retried elsewhere.
+    pub failures: u32,
+    /// Packages requeued from lost workers.
+    pub requeued: u32,
+    /// `(max busy - mean busy) / mean busy` over the workers that took part.
+    pub imbalance: f64,
+    /// Sum of busy time over wall time: the speed-up over one worker.
+    pub speedup: f64,
     /// Sum of the packages' counters.
     pub totals: WirePackageStats,
+    /// Each worker's share, in the order the workers joined.
+    pub workers: Vec<WorkerFrameStats>,
+}
+
+/// One worker's share of a frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WorkerFrameStats {
+    pub name: String,
+    pub busy_micros: u64,
+    pub packages: u32,
+    pub triangles: u32,
+    pub rays: u64,
+    pub bytes_in: u64,
+    pub bytes_out: u64,
 }
 
 /// The farm's state, for `vtfarm status`.

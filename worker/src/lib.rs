@@ -1,1 +1,27 @@
-//! The farm worker: runs task packages with the vertex tracer (the farm issue fills this crate).
+//! The farm worker: dials the master, holds the whole scene (cached on disk by
+//! content hash), rebuilds each frame's ID buffers locally and runs task
+//! packages with the vertex tracer, returning sparse bitmaps.
+//!
+//! - [`engine`]: computing, no network: scene cache, renderer, packages.
+//! - [`session`]: the worker's side of the protocol over any `Link`.
+//! - [`client`]: QUIC: connect, handshake, reconnect with backoff.
+
+pub mod cli;
+pub mod client;
+pub mod engine;
+pub mod session;
+
+pub use client::run_worker;
+pub use engine::Engine;
+pub use session::{SessionEnd, WorkerConfig, serve};
+pub use vtfarm_proto::client::ClientOptions;
+
+/// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`).
+pub fn init_logging() {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}

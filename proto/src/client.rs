@@ -1,0 +1,88 @@
+//! Dialling the master over QUIC: pinned certificate, token handshake, and
+//! one bidirectional stream for the session (workers and submitters alike).
+
+use std::net::SocketAddr;
+
+use tokio::net::lookup_host;
+
+use crate::{
+    Hello, Link, ProtoError, Role, SERVER_NAME, SESSION_LIMIT, client_config, client_handshake,
+};
+
+/// Where and who to connect as.
+#[derive(Clone, Debug)]
+pub struct ClientOptions {
+    /// The master's `host:port`.
+    pub master: String,
+    pub token: String,
+    /// The master certificate's SHA-256 fingerprint (hex).
+    pub fingerprint: String,
+}
+
+/// Why connecting failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    #[error("cannot resolve {0}")]
+    Resolve(String),
+    #[error("{0}")]
+    Setup(String),
+    #[error("cannot connect to {master}: {source}")]
+    Connect { master: String, source: ProtoError },
+}
+
+impl ConnectError {
+    /// Whether trying again later could help (the master may be restarting);
+    /// a refusal (wrong token or version) or a bad set-up will not.
+    pub fn is_transient(&self) -> bool {
+        match self {
+            ConnectError::Resolve(_) => true,
+            ConnectError::Setup(_) => false,
+            ConnectError::Connect { source, .. } => !matches!(source, ProtoError::Refused { .. }),
+        }
+    }
+}
+
+/// An open session: the endpoint must outlive the link.
+pub struct Connection {
+    pub endpoint: quinn::Endpoint,
+    pub connection: quinn::Connection,
+    pub link: Link,
+}
+
+/// Connects, completes the handshake as `role` and opens the session stream.
+pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, ConnectError> {
+    let address: SocketAddr = lookup_host(&options.master)
+        .await
+        .ok()
+        .and_then(|mut a| a.next())
+        .ok_or_else(|| ConnectError::Resolve(options.master.clone()))?;
+    let bind: SocketAddr = if address.is_ipv6() {
+        "[::]:0"
+    } else {
+        "0.0.0.0:0"
+    }
+    .parse()
+    .expect("literal address");
+    let mut endpoint = quinn::Endpoint::client(bind)
+        .map_err(|e| ConnectError::Setup(format!("cannot open a UDP socket: {e}")))?;
+    endpoint.set_default_client_config(
+        client_config(&options.fingerprint).map_err(|e| ConnectError::Setup(e.to_string()))?,
+    );
+    let failed = |source: ProtoError| ConnectError::Connect {
+        master: options.master.clone(),
+        source,
+    };
+    let connecting = endpoint
+        .connect(address, SERVER_NAME)
+        .map_err(|e| ConnectError::Setup(e.to_string()))?;
+    let connection = connecting.await.map_err(|e| failed(e.into()))?;
+    client_handshake(&connection, &Hello::new(options.token.clone(), role))
+        .await
+        .map_err(failed)?;
+    let (send, recv) = connection.open_bi().await.map_err(|e| failed(e.into()))?;
+    Ok(Connection {
+        endpoint,
+        connection,
+        link: Link::over_stream(recv, send, SESSION_LIMIT),
+    })
+}

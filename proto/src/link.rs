@@ -1,0 +1,138 @@
+//! A message link: the two channel ends a session works with, whether the
+//! peer is across a QUIC stream ([`Link::over_stream`]) or in the same
+//! process ([`Link::pair`], the embedded master's local workers). Sessions are
+//! written once against `Link` and never see the transport.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
+use tracing::debug;
+
+use crate::{MAX_MESSAGE_BYTES, Message, ProtoError, encode_message, read_message};
+
+/// Bytes moved over a link, counted at the framing (zero for in-process links).
+#[derive(Debug, Default)]
+pub struct LinkBytes {
+    pub sent: AtomicU64,
+    pub received: AtomicU64,
+}
+
+/// One end of a message link.
+#[derive(Debug)]
+pub struct Link {
+    /// Messages to the peer. Sending fails once the link is down.
+    pub tx: UnboundedSender<Message>,
+    /// Messages from the peer; `None` once the link is down. A link that
+    /// failed on bad input says why in [`Link::error`] after that.
+    pub rx: UnboundedReceiver<Message>,
+    pub bytes: Arc<LinkBytes>,
+    error: Arc<std::sync::Mutex<Option<ProtoError>>>,
+}
+
+impl Link {
+    /// Two connected in-process ends.
+    pub fn pair() -> (Link, Link) {
+        let (a_tx, b_rx) = unbounded_channel();
+        let (b_tx, a_rx) = unbounded_channel();
+        let end = |tx, rx| Link {
+            tx,
+            rx,
+            bytes: Arc::default(),
+            error: Arc::default(),
+        };
+        (end(a_tx, a_rx), end(b_tx, b_rx))
+    }
+
+    /// A link over a byte stream pair (a QUIC bidirectional stream): a task
+    /// reads framed messages of at most `limit` bytes into `rx`, another
+    /// writes `tx` out. The link goes down on the first error either way.
+    pub fn over_stream<R, W>(recv: R, mut send: W, limit: u32) -> Link
+    where
+        R: AsyncRead + Unpin + Send + 'static,
+        W: AsyncWrite + Unpin + Send + 'static,
+    {
+        let (in_tx, rx) = unbounded_channel();
+        let (tx, mut out_rx) = unbounded_channel::<Message>();
+        let bytes = Arc::new(LinkBytes::default());
+        let error = Arc::new(std::sync::Mutex::new(None));
+        let read_error = error.clone();
+        let mut recv = CountingReader {
+            inner: recv,
+            bytes: bytes.clone(),
+        };
+        tokio::spawn(async move {
+            loop {
+                match read_message(&mut recv, limit).await {
+                    Ok(message) => {
+                        if in_tx.send(message).is_err() {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        debug!("link read ended: {e}");
+                        if !matches!(e, ProtoError::Closed) {
+                            *read_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                        }
+                        break;
+                    }
+                }
+            }
+        });
+        let write_bytes = bytes.clone();
+        tokio::spawn(async move {
+            use tokio::io::AsyncWriteExt;
+            while let Some(message) = out_rx.recv().await {
+                let Ok(frame) = encode_message(&message) else {
+                    break;
+                };
+                if send.write_all(&frame).await.is_err() {
+                    break;
+                }
+                write_bytes
+                    .sent
+                    .fetch_add(frame.len() as u64, Ordering::Relaxed);
+            }
+            let _ = send.shutdown().await;
+        });
+        Link {
+            tx,
+            rx,
+            bytes,
+            error,
+        }
+    }
+
+    /// Why the link went down, when it was bad input rather than a close.
+    pub fn error(&self) -> Option<String> {
+        self.error
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .map(ToString::to_string)
+    }
+}
+
+/// Counts the bytes read through it into [`LinkBytes::received`].
+struct CountingReader<R> {
+    inner: R,
+    bytes: Arc<LinkBytes>,
+}
+
+impl<R: AsyncRead + Unpin> AsyncRead for CountingReader<R> {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        let before = buf.filled().len();
+        let poll = std::pin::Pin::new(&mut self.inner).poll_read(cx, buf);
+        let read = (buf.filled().len() - before) as u64;
+        self.bytes.received.fetch_add(read, Ordering::Relaxed);
+        poll
+    }
+}
+
+/// The default limit for session messages.
+pub const SESSION_LIMIT: u32 = MAX_MESSAGE_BYTES;

@@ -1,0 +1,51 @@
+//! The worker's connection loop: connect (see `vtfarm_proto::client`),
+//! serve, and reconnect with backoff when the master goes away.
+
+use std::time::Duration;
+
+use tracing::{info, warn};
+use vtfarm_proto::Role;
+use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
+
+use crate::engine::Engine;
+use crate::session::{SessionEnd, WorkerConfig, serve};
+
+/// Runs a worker until the master shuts it down: connects, serves, and
+/// reconnects with exponential backoff (up to 10 s) when the link drops.
+pub async fn run_worker(
+    options: ClientOptions,
+    name: String,
+    threads: u32,
+    mut engine: Engine,
+    config: WorkerConfig,
+) -> Result<(), ConnectError> {
+    let mut backoff = Duration::from_millis(200);
+    loop {
+        match connect(
+            &options,
+            Role::Worker {
+                threads,
+                name: name.clone(),
+            },
+        )
+        .await
+        {
+            Ok(conn) => {
+                info!(master = %options.master, "connected");
+                backoff = Duration::from_millis(200);
+                let end = serve(conn.link, &mut engine, config).await;
+                conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"bye");
+                conn.endpoint.wait_idle().await;
+                if end == SessionEnd::Shutdown {
+                    info!("shut down by the master");
+                    return Ok(());
+                }
+                warn!(master = %options.master, "connection lost, reconnecting");
+            }
+            Err(e) if e.is_transient() => warn!("{e}; retrying in {backoff:?}"),
+            Err(e) => return Err(e),
+        }
+        tokio::time::sleep(backoff).await;
+        backoff = (backoff * 2).min(Duration::from_secs(10));
+    }
+}

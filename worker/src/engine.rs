@@ -1,0 +1,180 @@
+//! The worker's computing side, without I/O on the network: the scene cache
+//! (in memory and on disk, by content hash), the renderer of the current
+//! scene, the current frame's ID buffers, and running packages.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tracing::{debug, info, warn};
+use vtfarm_proto::{
+    FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WirePackageStats,
+    check_triangle_ids,
+};
+use vtfarm_raster::IdBuffer;
+use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_scene::Scene;
+use vtfarm_vertex::{PackageOptions, trace_package};
+
+/// A frame ready for packages: its renderer, set-up and ID buffers.
+pub struct ActiveFrame {
+    pub job: JobId,
+    pub frame: u32,
+    renderer: Arc<Renderer>,
+    setup: FrameSetup,
+    ids: IdBuffer,
+    behind: IdBuffer,
+}
+
+impl ActiveFrame {
+    /// Traces a package of this frame. `slowdown` > 1 stretches the time the
+    /// package takes (sleeping `slowdown - 1` times the compute time), to
+    /// emulate a slower machine in tests and benchmarks.
+    pub fn run(&self, package: &Package, slowdown: f64) -> Result<PackageResult, String> {
+        let scene = self.renderer.scene();
+        check_triangle_ids(
+            "package triangles",
+            &package.triangles,
+            scene.triangles.len(),
+        )
+        .map_err(|e| e.to_string())?;
+        let start = Instant::now();
+        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
+        let result = trace_package(
+            &frame,
+            &package.triangles,
+            &PackageOptions::default(),
+            &mut |_| {},
+        );
+        let compute = start.elapsed();
+        if slowdown > 1.0 {
+            std::thread::sleep(compute.mul_f64(slowdown - 1.0));
+        }
+        Ok(PackageResult {
+            id: package.id,
+            bitmap: WireBitmap::from(&result.bitmap),
+            stats: WirePackageStats::from(&result.stats),
+            busy_micros: start.elapsed().as_micros() as u64,
+            triangle_samples: result.triangle_samples,
+        })
+    }
+}
+
+/// Scenes by hash and the current frame.
+pub struct Engine {
+    cache_dir: Option<PathBuf>,
+    scenes: BTreeMap<SceneHash, Arc<Scene>>,
+    /// The renderer of the last (scene, reflectors): building a BVH is the
+    /// expensive part of a new frame, so consecutive frames share it.
+    renderer: Option<(SceneHash, Vec<u32>, Arc<Renderer>)>,
+}
+
+impl Engine {
+    /// An engine caching scenes in `cache_dir` (created on demand), or only
+    /// in memory.
+    pub fn new(cache_dir: Option<PathBuf>) -> Self {
+        Engine {
+            cache_dir,
+            scenes: BTreeMap::new(),
+            renderer: None,
+        }
+    }
+
+    fn cache_path(&self, hash: &SceneHash) -> Option<PathBuf> {
+        Some(
+            self.cache_dir
+                .as_ref()?
+                .join(format!("{}.scene", hex::encode(hash))),
+        )
+    }
+
+    /// Whether the scene is at hand (memory, or the disk cache, which loads it).
+    pub fn has_scene(&mut self, hash: &SceneHash) -> bool {
+        if self.scenes.contains_key(hash) {
+            return true;
+        }
+        let Some(path) = self.cache_path(hash) else {
+            return false;
+        };
+        let Ok(bytes) = std::fs::read(&path) else {
+            return false;
+        };
+        match (SceneData { hash: *hash, bytes }).to_scene() {
+            Ok(scene) => {
+                debug!(path = %path.display(), "scene loaded from the cache");
+                self.scenes.insert(*hash, Arc::new(scene));
+                true
+            }
+            Err(e) => {
+                warn!(path = %path.display(), "dropping a bad cached scene: {e}");
+                let _ = std::fs::remove_file(&path);
+                false
+            }
+        }
+    }
+
+    /// Takes a scene from the master: checks it and keeps it (on disk too).
+    pub fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+        let scene = data
+            .to_scene()
+            .map_err(|e| format!("bad scene from the master: {e}"))?;
+        if let Some(path) = self.cache_path(&data.hash) {
+            let stored = path
+                .parent()
+                .map_or(Ok(()), std::fs::create_dir_all)
+                .and_then(|()| std::fs::write(&path, &data.bytes));
+            if let Err(e) = stored {
+                warn!(path = %path.display(), "cannot cache the scene: {e}");
+            }
+        }
+        info!(triangles = scene.triangles.len(), "scene received");
+        self.scenes.insert(data.hash, Arc::new(scene));
+        Ok(())
+    }
+
+    /// Prepares a frame: the renderer (reused when scene and reflectors are
+    /// the same) and the ID buffers, rebuilt locally (they are deterministic).
+    pub fn start_frame(&mut self, start: FrameStart) -> Result<ActiveFrame, String> {
+        let scene = self
+            .scenes
+            .get(&start.scene)
+            .cloned()
+            .ok_or("frame for a scene this worker does not have")?;
+        check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
+            .map_err(|e| e.to_string())?;
+        let (camera, lighting, trace, vertex) =
+            start.setup.into_parts().map_err(|e| e.to_string())?;
+        let setup = FrameSetup {
+            camera,
+            lighting,
+            trace,
+            vertex,
+        };
+        let renderer = match &self.renderer {
+            Some((hash, reflectors, r))
+                if *hash == start.scene && *reflectors == start.reflectors =>
+            {
+                r.clone()
+            }
+            _ => {
+                let r = Arc::new(Renderer::new(scene, start.reflectors.clone()));
+                self.renderer = Some((start.scene, start.reflectors, r.clone()));
+                r
+            }
+        };
+        let (_, ids) = renderer.base_frame(&setup);
+        let behind = renderer.behind(&setup);
+        Ok(ActiveFrame {
+            job: start.job,
+            frame: start.frame,
+            renderer,
+            setup,
+            ids,
+            behind,
+        })
+    }
+}
+
+/// How long a worker waits between heartbeats.
+pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
