@@ -40,7 +40,7 @@ pub use handshake::{
 pub use link::{Link, LinkBytes, SESSION_LIMIT};
 pub use message::{
     FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
-    PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, SceneData, SceneHash,
+    PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, RunningJob, SceneData, SceneHash,
     StatusReply, Welcome, WireJob, WorkerFrameStats, WorkerStatus, scene_hash,
 };
 pub use tls::{

@@ -396,35 +396,52 @@ pub struct WorkerFrameStats {
 }
 
 /// The farm's state, for `vtfarm status`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StatusReply {
     pub workers: Vec<WorkerStatus>,
     pub queue: QueueStatus,
+    /// Scene bytes the master has sent to workers since it started (a worker
+    /// that has a scene cached is sent nothing).
+    pub scene_bytes_sent: u64,
 }
 
 /// One connected worker.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct WorkerStatus {
     pub name: String,
     /// The worker's remote address as the master sees it.
     pub address: String,
     pub threads: u32,
-    pub packages_in_flight: u32,
+    /// Idle, waiting or busy.
+    pub state: String,
+    /// Measured throughput in traced samples per second (assignment to
+    /// result); 0 before its first package.
+    pub samples_per_second: f64,
+    pub packages_running: u32,
     pub packages_done: u64,
-    pub packages_failed: u64,
-    /// Seconds since the worker connected.
-    pub connected_secs: u64,
+    pub triangles_done: u64,
+    pub failures: u64,
+    pub busy_micros: u64,
 }
 
 /// The master's queue.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct QueueStatus {
-    /// Jobs accepted and not yet finished or failed.
-    pub jobs: u32,
-    /// Frames of those jobs not yet done.
+    /// Jobs waiting behind the running one.
+    pub waiting: Vec<JobId>,
+    /// The running job, its current frame and that frame's progress.
+    pub running: Option<RunningJob>,
+}
+
+/// Progress of the running job.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RunningJob {
+    pub job: JobId,
+    pub name: String,
+    pub frame: u32,
     pub frames: u32,
-    pub packages_queued: u64,
-    pub packages_in_flight: u64,
+    pub triangles_done: u64,
+    pub triangles_total: u64,
 }
 
 /// Serde helper for byte vectors: bincode then writes a length and the raw
