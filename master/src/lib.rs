@@ -1,1 +1,22 @@
-//! The farm master: scheduling, load balancing and compositing (the farm issue fills this crate).
+//! The farm master: accepts workers and submitted jobs, runs jobs from a
+//! queue frame by frame, hands out packages on demand through the pure
+//! `vtfarm-scheduler` state machine, and composites the returned bitmaps
+//! over the base frame it rasterized.
+//!
+//! - [`core`]: the logic, without sockets or clock.
+//! - [`driver`]: the async task around the core; links in, messages out.
+//! - [`server`]: the QUIC endpoint and handshake.
+//! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
+//! - [`submit`]: the submitter's side of the protocol.
+
+pub mod cli;
+pub mod core;
+pub mod driver;
+pub mod embedded;
+pub mod server;
+pub mod submit;
+
+pub use core::{ConnId, MasterCore, Output, Peer};
+pub use driver::{MasterHandle, spawn_master};
+pub use embedded::LocalFarm;
+pub use submit::{FinishedFrame, JobError, JobEvent, run_job, wire_job};

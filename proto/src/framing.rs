@@ -324,7 +324,7 @@ mod tests {
                     address: "10.0.0.7:50123".to_owned(),
                     threads: 16,
                     state: "busy".to_owned(),
-                    samples_per_second: 1.5e6,
+                    throughput: 1.5e6,
                     packages_running: 1,
                     packages_done: 40,
                     triangles_done: 4_000,

@@ -414,9 +414,10 @@ pub struct WorkerStatus {
     pub threads: u32,
     /// Idle, waiting or busy.
     pub state: String,
-    /// Measured throughput in traced samples per second (assignment to
-    /// result); 0 before its first package.
-    pub samples_per_second: f64,
+    /// Measured throughput, assignment to result, in the load balancer's
+    /// cost units (estimated triangle cost) per second; 0 before its first
+    /// package.
+    pub throughput: f64,
     pub packages_running: u32,
     pub packages_done: u64,
     pub triangles_done: u64,

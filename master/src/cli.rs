@@ -1,0 +1,95 @@
+//! The master's command line (`vtfarm master`, `vtfarm cluster init`),
+//! shared with the standalone `vtfarm-master` binary.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use tracing::info;
+use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
+use vtfarm_scheduler::SchedulerConfig;
+
+use crate::{driver::spawn_master, server};
+
+/// Runs the master: accepts workers and jobs.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MasterArgs {
+    /// The cluster file from `vtfarm cluster init`; the master's key and
+    /// certificate live beside it.
+    #[arg(long)]
+    pub cluster: PathBuf,
+    /// Address to listen on (default: all interfaces, the cluster file's port).
+    #[arg(long)]
+    pub listen: Option<SocketAddr>,
+}
+
+/// Creates a cluster: the master's key and certificate, and `cluster.toml`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ClusterInitArgs {
+    /// Directory for cluster.toml, master.crt.der and master.key.der.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// The address workers and submitters dial (HOST:PORT).
+    #[arg(long, default_value = "127.0.0.1:7878")]
+    pub master: String,
+}
+
+#[derive(Parser)]
+#[command(name = "vtfarm-master", version, about = "vtfarm master")]
+struct Standalone {
+    #[command(flatten)]
+    args: MasterArgs,
+}
+
+/// `vtfarm cluster init`: returns the path of the written cluster file.
+pub fn cluster_init(args: &ClusterInitArgs) -> Result<PathBuf> {
+    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    let host = args.master.rsplit_once(':').map_or(args.master.as_str(), |(h, _)| h).trim_matches(['[', ']']).to_owned();
+    let identity = server::identity(&args.output, &[host])?;
+    let config = ClusterConfig::generate(&args.master, &identity)?;
+    let path = args.output.join(CLUSTER_FILE);
+    config.save(&path)?;
+    Ok(path)
+}
+
+/// Runs the master until the process is stopped.
+pub fn run(args: MasterArgs) -> Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    runtime.block_on(serve(&args))
+}
+
+/// Binds and serves (inside a runtime).
+pub async fn serve(args: &MasterArgs) -> Result<()> {
+    let cluster = ClusterConfig::load(&args.cluster)?;
+    let state_dir = args.cluster.parent().unwrap_or(Path::new("."));
+    let identity = vtfarm_proto::MasterIdentity::load(state_dir)?;
+    if identity.fingerprint() != cluster.fingerprint {
+        anyhow::bail!("{}: the fingerprint does not match the certificate in {}", args.cluster.display(), state_dir.display());
+    }
+    let listen = match args.listen {
+        Some(a) => a,
+        None => {
+            let port = cluster.master.rsplit_once(':').and_then(|(_, p)| p.parse().ok()).context("cluster file: master has no port")?;
+            SocketAddr::from(([0, 0, 0, 0], port))
+        }
+    };
+    let endpoint = server::bind(listen, &identity)?;
+    info!(address = %endpoint.local_addr()?, "master listening");
+    println!("master listening on {}", endpoint.local_addr()?);
+    let (handle, _task) = spawn_master(SchedulerConfig::default());
+    server::serve(endpoint, HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"), handle).await;
+    Ok(())
+}
+
+/// The standalone binary's entry point.
+pub fn main() -> std::process::ExitCode {
+    vtfarm_worker::init_logging();
+    match run(Standalone::parse().args) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

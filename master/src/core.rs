@@ -1,0 +1,495 @@
+//! The master's logic without sockets or clock: connections and messages in,
+//! messages and closes out, around the pure `Scheduler`. The async driver
+//! (`driver.rs`) feeds it; tests can drive it directly.
+//!
+//! Per frame it rasterizes the base frame, sends `FrameStart` to every
+//! worker, hands out the scheduler's packages, composites each accepted
+//! result over the base frame and sends the finished frame to the submitter.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::time::Duration;
+
+use tracing::{debug, info, warn};
+use vtfarm_proto::{
+    FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
+    SceneData, SceneHash, StatusReply, WireFrameSetup, WireImage, WireJob, WirePackageStats,
+    WorkerFrameStats, WorkerStatus, check_triangle_ids, encode_message,
+};
+use vtfarm_render::{FrameSetup, morton_order};
+use vtfarm_scene::Scene;
+use vtfarm_scheduler::{
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
+    WorkerId, WorkerState,
+};
+use vtfarm_vertex::{FrameImage, PackageStats};
+
+/// A connection, numbered by the driver.
+pub type ConnId = u64;
+
+/// Who is on a connection (from its handshake).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Peer {
+    Worker { name: String, threads: u32, address: String },
+    Submitter { address: String },
+}
+
+/// What the core asks the driver to do.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Output {
+    Send(ConnId, Message),
+    /// Drop the connection, logging why.
+    Close(ConnId, String),
+}
+
+struct Job {
+    name: String,
+    submitter: ConnId,
+    scene: Arc<Scene>,
+    scene_hash: SceneHash,
+    reflectors: Vec<u32>,
+    frames: Vec<FrameSetup>,
+    current: Option<FrameAssembly>,
+}
+
+/// The frame being assembled.
+struct FrameAssembly {
+    frame: u32,
+    start: FrameStart,
+    image: FrameImage,
+    totals: PackageStats,
+    triangles_done: u64,
+}
+
+/// A package on its way: what the results must be matched against.
+struct InFlight {
+    job: u64,
+    frame: u32,
+    items: Vec<u32>,
+}
+
+/// The master's state.
+pub struct MasterCore {
+    scheduler: Scheduler,
+    peers: BTreeMap<ConnId, Peer>,
+    scenes: BTreeMap<SceneHash, (Arc<Scene>, Arc<SceneData>)>,
+    jobs: BTreeMap<u64, Job>,
+    /// Submissions whose scene the master still has to receive.
+    awaiting_scene: BTreeMap<ConnId, WireJob>,
+    packages: BTreeMap<u64, InFlight>,
+    next_job: u64,
+    scene_bytes_sent: u64,
+    outbox: VecDeque<Output>,
+}
+
+impl MasterCore {
+    pub fn new(config: SchedulerConfig) -> Self {
+        MasterCore {
+            scheduler: Scheduler::new(config),
+            peers: BTreeMap::new(),
+            scenes: BTreeMap::new(),
+            jobs: BTreeMap::new(),
+            awaiting_scene: BTreeMap::new(),
+            packages: BTreeMap::new(),
+            next_job: 1,
+            scene_bytes_sent: 0,
+            outbox: VecDeque::new(),
+        }
+    }
+
+    /// The next thing to do, if any.
+    pub fn poll_output(&mut self) -> Option<Output> {
+        self.outbox.pop_front()
+    }
+
+    /// When [`MasterCore::handle_timeout`] should run next.
+    pub fn poll_timeout(&self) -> Option<Duration> {
+        self.scheduler.poll_timeout()
+    }
+
+    pub fn handle_timeout(&mut self, now: Duration) {
+        self.scheduler.handle_timeout(now);
+        self.pump();
+    }
+
+    /// A connection passed its handshake.
+    pub fn connected(&mut self, now: Duration, conn: ConnId, peer: Peer) {
+        if let Peer::Worker { name, threads, address } = &peer {
+            info!(worker = %name, %address, threads, "worker joined");
+            if let Err(e) = self.scheduler.worker_joined(now, WorkerId(conn), *threads) {
+                self.close(conn, format!("cannot join: {e}"));
+                return;
+            }
+            // A running frame: bring the newcomer up to date.
+            for job in self.jobs.values() {
+                if let Some(current) = &job.current {
+                    self.outbox.push_back(Output::Send(conn, Message::SceneOffer { hash: job.scene_hash }));
+                    self.outbox.push_back(Output::Send(conn, Message::FrameStart(current.start.clone())));
+                }
+            }
+        }
+        self.peers.insert(conn, peer);
+        self.pump();
+    }
+
+    /// A connection went away (closed, failed, or dropped by us).
+    pub fn disconnected(&mut self, now: Duration, conn: ConnId) {
+        match self.peers.remove(&conn) {
+            Some(Peer::Worker { name, .. }) => {
+                info!(worker = %name, "worker left");
+                let _ = self.scheduler.worker_left(now, WorkerId(conn));
+            }
+            Some(Peer::Submitter { .. }) => {
+                self.awaiting_scene.remove(&conn);
+                // Nobody is left to receive the images: stop its jobs.
+                let orphaned: Vec<u64> = self.jobs.iter().filter(|(_, j)| j.submitter == conn).map(|(&id, _)| id).collect();
+                for job in orphaned {
+                    info!(job, "submitter left, cancelling its job");
+                    let _ = self.scheduler.cancel_job(now, JobId(job));
+                }
+            }
+            None => {}
+        }
+        self.pump();
+    }
+
+    /// A message arrived on a connection.
+    pub fn message(&mut self, now: Duration, conn: ConnId, message: Message) {
+        match self.peers.get(&conn) {
+            Some(Peer::Worker { .. }) => self.worker_message(now, conn, message),
+            Some(Peer::Submitter { .. }) => self.submitter_message(now, conn, message),
+            None => debug!(conn, "message from an unknown connection ignored"),
+        }
+        self.pump();
+    }
+
+    fn worker_message(&mut self, now: Duration, conn: ConnId, message: Message) {
+        let worker = WorkerId(conn);
+        // Anything from a worker shows it is alive.
+        let _ = self.scheduler.heartbeat(now, worker);
+        match message {
+            Message::Heartbeat => {}
+            Message::RequestWork => {
+                let _ = self.scheduler.request_work(now, worker);
+            }
+            Message::SceneRequest { hash } => match self.scenes.get(&hash) {
+                Some((_, data)) => {
+                    self.scene_bytes_sent += data.bytes.len() as u64;
+                    self.outbox.push_back(Output::Send(conn, Message::SceneData((**data).clone())));
+                }
+                None => self.close(conn, "asked for a scene the master does not have".into()),
+            },
+            Message::PackageResult(result) => self.package_result(now, conn, result),
+            Message::PackageFailed(failed) => {
+                warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
+                if let Err(e) = self.scheduler.package_failed(now, worker, PackageId(failed.id), failed.error) {
+                    debug!("failure report ignored: {e}");
+                }
+            }
+            other => self.close(conn, format!("unexpected {} from a worker", other.name())),
+        }
+    }
+
+    fn package_result(&mut self, now: Duration, conn: ConnId, result: PackageResult) {
+        let worker = WorkerId(conn);
+        let Some(in_flight) = self.packages.get(&result.id) else {
+            debug!(package = result.id, "result for an unknown package ignored");
+            return;
+        };
+        let Some(job) = self.jobs.get(&in_flight.job) else { return };
+        let Some(current) = job.current.as_ref().filter(|c| c.frame == in_flight.frame) else {
+            debug!(package = result.id, "result for a finished frame ignored");
+            return;
+        };
+        let (width, height) = (current.image.color.width, current.image.color.height);
+        let bytes_out = encode_message(&Message::PackageResult(result.clone())).map_or(0, |b| b.len() as u64);
+        let bitmap = match result.bitmap.into_bitmap_within(width, height) {
+            Ok(b) => b,
+            Err(e) => {
+                let error = format!("malformed result: {e}");
+                warn!(worker = %self.name(conn), package = result.id, "{error}");
+                let _ = self.scheduler.package_failed(now, worker, PackageId(result.id), error);
+                return;
+            }
+        };
+        let stats = PackageStats::from(result.stats);
+        let item_seconds = if result.triangle_samples.len() == in_flight.items.len() {
+            // Samples are what a triangle costs; +1 so hidden ones are not free.
+            result.triangle_samples.iter().map(|&s| f64::from(s) + 1.0).collect()
+        } else {
+            Vec::new()
+        };
+        let bytes_in = encode_message(&Message::Package(Package { id: result.id, job: in_flight.job, frame: in_flight.frame, triangles: in_flight.items.clone() }))
+            .map_or(0, |b| b.len() as u64);
+        let measure = PackageMeasure {
+            busy: Duration::from_micros(result.busy_micros),
+            item_seconds,
+            rays: stats.samples(),
+            bytes_in,
+            bytes_out,
+        };
+        if let Err(e) = self.scheduler.package_done(now, worker, PackageId(result.id), measure) {
+            // A late straggler copy or a duplicate: the first result won.
+            debug!(package = result.id, "result ignored: {e}");
+            return;
+        }
+        let items = in_flight.items.len() as u64;
+        let job_id = in_flight.job;
+        let job = self.jobs.get_mut(&job_id).expect("checked above");
+        let current = job.current.as_mut().expect("checked above");
+        current.image.composite(&bitmap);
+        current.totals.add(&stats);
+        current.triangles_done += items;
+        let progress = Message::Progress { job: job_id, frame: current.frame, done: current.triangles_done as u32, total: job.reflectors.len() as u32 };
+        self.outbox.push_back(Output::Send(job.submitter, progress));
+    }
+
+    fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
+        match message {
+            Message::Heartbeat => {}
+            Message::StatusRequest => {
+                let reply = self.status();
+                self.outbox.push_back(Output::Send(conn, Message::StatusReply(reply)));
+            }
+            Message::SubmitJob { job } => self.submit(now, conn, job),
+            Message::SceneData(data) => match self.awaiting_scene.remove(&conn) {
+                Some(mut job) if job.scene == JobScene::Hash(data.hash) => {
+                    job.scene = JobScene::Data(data);
+                    self.submit(now, conn, job);
+                }
+                _ => self.close(conn, "scene data nobody asked for".into()),
+            },
+            other => self.close(conn, format!("unexpected {} from a submitter", other.name())),
+        }
+    }
+
+    /// Checks a submitted job and queues it (or asks for its scene first).
+    fn submit(&mut self, now: Duration, conn: ConnId, job: WireJob) {
+        let scene = match &job.scene {
+            JobScene::Data(data) => match data.to_scene() {
+                Ok(scene) => {
+                    let entry = (Arc::new(scene), Arc::new(data.clone()));
+                    self.scenes.entry(data.hash).or_insert(entry).0.clone()
+                }
+                Err(e) => return self.refuse_job(conn, format!("bad scene: {e}")),
+            },
+            JobScene::Hash(hash) => match self.scenes.get(hash) {
+                Some((scene, _)) => scene.clone(),
+                None => {
+                    // Not cached here: ask the submitter for it.
+                    let hash = *hash;
+                    self.awaiting_scene.insert(conn, job);
+                    self.outbox.push_back(Output::Send(conn, Message::SceneRequest { hash }));
+                    return;
+                }
+            },
+        };
+        let scene_hash = match &job.scene {
+            JobScene::Data(d) => d.hash,
+            JobScene::Hash(h) => *h,
+        };
+        if let Err(e) = check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len()) {
+            return self.refuse_job(conn, e.to_string());
+        }
+        if job.reflectors.is_empty() || job.frames.is_empty() {
+            return self.refuse_job(conn, "a job needs reflectors and at least one frame".into());
+        }
+        let frames: Result<Vec<FrameSetup>, _> = job
+            .frames
+            .into_iter()
+            .map(|f| f.into_parts().map(|(camera, lighting, trace, vertex)| FrameSetup { camera, lighting, trace, vertex }))
+            .collect();
+        let frames = match frames {
+            Ok(f) => f,
+            Err(e) => return self.refuse_job(conn, format!("bad frame set-up: {e}")),
+        };
+        let id = self.next_job;
+        self.next_job += 1;
+        let reflectors = morton_order(&scene, job.reflectors);
+        let work = vec![FrameWork { items: reflectors.clone() }; frames.len()];
+        info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), "job queued");
+        self.outbox.push_back(Output::Send(conn, Message::JobAccepted { job: id, frames: frames.len() as u32 }));
+        self.jobs.insert(id, Job { name: job.name, submitter: conn, scene, scene_hash, reflectors, frames, current: None });
+        if let Err(e) = self.scheduler.submit_job(now, JobId(id), work) {
+            warn!("cannot queue job {id}: {e}");
+        }
+    }
+
+    fn refuse_job(&mut self, conn: ConnId, error: String) {
+        warn!(conn, "job refused: {error}");
+        self.outbox.push_back(Output::Send(conn, Message::JobFailed { job: 0, errors: vec![error] }));
+    }
+
+    fn close(&mut self, conn: ConnId, reason: String) {
+        warn!(peer = %self.name(conn), "closing: {reason}");
+        self.outbox.push_back(Output::Close(conn, reason));
+    }
+
+    fn name(&self, conn: ConnId) -> String {
+        match self.peers.get(&conn) {
+            Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
+            Some(Peer::Submitter { address }) => format!("submitter ({address})"),
+            None => format!("connection {conn}"),
+        }
+    }
+
+    fn workers(&self) -> impl Iterator<Item = ConnId> + '_ {
+        self.peers.iter().filter(|(_, p)| matches!(p, Peer::Worker { .. })).map(|(&c, _)| c)
+    }
+
+    /// Turns the scheduler's events and assignments into messages.
+    fn pump(&mut self) {
+        while let Some(event) = self.scheduler.poll_event() {
+            self.event(event);
+        }
+        while let Some(assignment) = self.scheduler.poll_assignment() {
+            self.assign(assignment);
+        }
+    }
+
+    fn event(&mut self, event: Event) {
+        match event {
+            Event::JobStarted { job, .. } => {
+                let Some(hash) = self.jobs.get(&job.0).map(|j| j.scene_hash) else { return };
+                let workers: Vec<ConnId> = self.workers().collect();
+                for conn in workers {
+                    self.outbox.push_back(Output::Send(conn, Message::SceneOffer { hash }));
+                }
+            }
+            Event::FrameStarted { job, frame, .. } => self.start_frame(job.0, frame),
+            Event::FrameComplete { job, frame, stats } => {
+                let Some(j) = self.jobs.get_mut(&job.0) else { return };
+                let Some(done) = j.current.take().filter(|c| c.frame == frame) else { return };
+                info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
+                let image = &done.image.color;
+                let workers = stats
+                    .workers
+                    .iter()
+                    .map(|w| WorkerFrameStats {
+                        name: self.name(w.worker.0),
+                        busy_micros: w.busy.as_micros() as u64,
+                        packages: w.packages,
+                        triangles: w.items,
+                        rays: w.rays,
+                        bytes_in: w.bytes_in,
+                        bytes_out: w.bytes_out,
+                    })
+                    .collect();
+                let frame_stats = vtfarm_proto::FrameStats {
+                    wall_micros: stats.wall.as_micros() as u64,
+                    packages: stats.packages,
+                    duplicates: stats.duplicates,
+                    failures: stats.failures,
+                    requeued: stats.requeued,
+                    imbalance: stats.imbalance(),
+                    speedup: stats.speedup(),
+                    totals: WirePackageStats::from(&done.totals),
+                    workers,
+                };
+                let j = &self.jobs[&job.0];
+                let message = Message::FrameDone(FrameDone {
+                    job: job.0,
+                    frame,
+                    image: WireImage::from_pixels(image.width, image.height, &image.pixels),
+                    stats: frame_stats,
+                });
+                self.outbox.push_back(Output::Send(j.submitter, message));
+            }
+            Event::JobComplete { job } => {
+                info!(job = job.0, "job complete");
+                self.jobs.remove(&job.0);
+            }
+            Event::JobFailed { job, reason, errors } => {
+                let errors: Vec<String> = std::iter::once(format!("job failed: {reason:?}"))
+                    .chain(errors.iter().map(|(w, e)| format!("{}: {e}", self.name(w.0))))
+                    .collect();
+                warn!(job = job.0, "{}", errors.join("; "));
+                if let Some(j) = self.jobs.remove(&job.0) {
+                    self.outbox.push_back(Output::Send(j.submitter, Message::JobFailed { job: job.0, errors }));
+                }
+            }
+            Event::JobCancelled { job } => {
+                self.jobs.remove(&job.0);
+            }
+            Event::WorkerBlocklisted { worker, job } => {
+                warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
+            }
+            Event::WorkerLost { worker, cause, requeued } => {
+                warn!(worker = %self.name(worker.0), ?cause, requeued = requeued.len(), "worker lost");
+                if matches!(cause, vtfarm_scheduler::LossCause::HeartbeatTimeout) {
+                    self.close(worker.0, "missed its heartbeats".into());
+                }
+            }
+            Event::PackageCancelled { worker, package } => {
+                self.outbox.push_back(Output::Send(worker.0, Message::CancelPackage { id: package.0 }));
+            }
+        }
+    }
+
+    /// Rasterizes a frame's base image and announces the frame to the workers.
+    fn start_frame(&mut self, job: u64, frame: u32) {
+        let Some(j) = self.jobs.get_mut(&job) else { return };
+        let Some(setup) = j.frames.get(frame as usize) else { return };
+        let (base, _) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
+        let start = FrameStart {
+            job,
+            frame,
+            scene: j.scene_hash,
+            setup: WireFrameSetup::from_parts(&setup.camera, &setup.lighting, &setup.trace, &setup.vertex),
+            reflectors: j.reflectors.clone(),
+        };
+        j.current = Some(FrameAssembly { frame, start: start.clone(), image: FrameImage::new(base), totals: PackageStats::default(), triangles_done: 0 });
+        let submitter = j.submitter;
+        let total = j.reflectors.len() as u32;
+        let workers: Vec<ConnId> = self.workers().collect();
+        for conn in workers {
+            self.outbox.push_back(Output::Send(conn, Message::FrameStart(start.clone())));
+        }
+        self.outbox.push_back(Output::Send(submitter, Message::Progress { job, frame, done: 0, total }));
+    }
+
+    fn assign(&mut self, a: Assignment) {
+        self.packages.insert(a.package.0, InFlight { job: a.job.0, frame: a.frame, items: a.items.clone() });
+        let message = Message::Package(Package { id: a.package.0, job: a.job.0, frame: a.frame, triangles: a.items });
+        self.outbox.push_back(Output::Send(a.worker.0, message));
+    }
+
+    /// The farm's state for `vtfarm status`.
+    pub fn status(&self) -> StatusReply {
+        let workers = self
+            .scheduler
+            .workers()
+            .into_iter()
+            .filter(|w| w.state != WorkerState::Gone)
+            .filter_map(|w| {
+                let Some(Peer::Worker { name, address, .. }) = self.peers.get(&w.worker.0) else { return None };
+                Some(WorkerStatus {
+                    name: name.clone(),
+                    address: address.clone(),
+                    threads: w.threads,
+                    state: format!("{:?}", w.state).to_lowercase(),
+                    throughput: w.rate.unwrap_or(0.0),
+                    packages_running: w.running as u32,
+                    packages_done: w.packages_done,
+                    triangles_done: w.items_done,
+                    failures: w.failures,
+                    busy_micros: w.busy.as_micros() as u64,
+                })
+            })
+            .collect();
+        let queue = self.scheduler.queue();
+        let running = queue.running.map(|p| RunningJob {
+            job: p.job.0,
+            name: self.jobs.get(&p.job.0).map(|j| j.name.clone()).unwrap_or_default(),
+            frame: p.frame,
+            frames: p.frames,
+            triangles_done: p.items_done as u64,
+            triangles_total: p.items_total as u64,
+        });
+        StatusReply {
+            workers,
+            queue: QueueStatus { waiting: queue.waiting.iter().map(|j| j.0).collect(), running },
+            scene_bytes_sent: self.scene_bytes_sent,
+        }
+    }
+}

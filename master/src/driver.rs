@@ -1,0 +1,118 @@
+//! The async driver around [`MasterCore`]: one task owns the core, feeds it
+//! connections, messages and deadlines, and carries out its outputs. Links
+//! come from the QUIC server or, for the embedded master, from in-process
+//! pairs; the core cannot tell them apart.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+use tracing::debug;
+use vtfarm_proto::{Link, Message};
+use vtfarm_scheduler::SchedulerConfig;
+
+use crate::core::{ConnId, MasterCore, Output, Peer};
+
+/// Called when the core drops a connection (closes the QUIC connection).
+pub type Closer = Box<dyn FnOnce(&str) + Send>;
+
+enum Input {
+    Connected { conn: ConnId, peer: Peer, tx: UnboundedSender<Message>, closer: Option<Closer> },
+    Message { conn: ConnId, message: Message },
+    Disconnected { conn: ConnId },
+}
+
+/// A running master: attach links to it.
+#[derive(Clone)]
+pub struct MasterHandle {
+    inputs: UnboundedSender<Input>,
+    next_conn: Arc<AtomicU64>,
+}
+
+impl MasterHandle {
+    /// Hands a connection that passed its handshake to the master.
+    pub fn attach(&self, peer: Peer, link: Link, closer: Option<Closer>) -> ConnId {
+        let conn = self.next_conn.fetch_add(1, Ordering::Relaxed);
+        let Link { tx, mut rx, .. } = link;
+        let _ = self.inputs.send(Input::Connected { conn, peer, tx, closer });
+        let inputs = self.inputs.clone();
+        tokio::spawn(async move {
+            while let Some(message) = rx.recv().await {
+                if inputs.send(Input::Message { conn, message }).is_err() {
+                    return;
+                }
+            }
+            let _ = inputs.send(Input::Disconnected { conn });
+        });
+        conn
+    }
+}
+
+/// Starts a master task.
+pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
+    let (inputs, rx) = unbounded_channel();
+    let handle = MasterHandle { inputs, next_conn: Arc::new(AtomicU64::new(1)) };
+    let task = tokio::spawn(run(MasterCore::new(config), rx));
+    (handle, task)
+}
+
+struct Connection {
+    tx: UnboundedSender<Message>,
+    closer: Option<Closer>,
+}
+
+async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
+    let start = Instant::now();
+    let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
+    loop {
+        // The scheduler's next deadline, or idle for a while.
+        let deadline = start + core.poll_timeout().unwrap_or(start.elapsed() + Duration::from_secs(3600));
+        tokio::select! {
+            input = inputs.recv() => {
+                let Some(input) = input else { return };
+                let now = start.elapsed();
+                // Inside a block so the whole frame's CPU work (rasterizing,
+                // compositing) does not starve the I/O tasks.
+                tokio::task::block_in_place(|| match input {
+                    Input::Connected { conn, peer, tx, closer } => {
+                        conns.insert(conn, Connection { tx, closer });
+                        core.connected(now, conn, peer);
+                    }
+                    Input::Message { conn, message } => {
+                        if conns.contains_key(&conn) {
+                            core.message(now, conn, message);
+                        }
+                    }
+                    Input::Disconnected { conn } => {
+                        if conns.remove(&conn).is_some() {
+                            core.disconnected(now, conn);
+                        }
+                    }
+                });
+            }
+            _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),
+        }
+        while let Some(output) = core.poll_output() {
+            match output {
+                Output::Send(conn, message) => {
+                    if let Some(c) = conns.get(&conn) {
+                        let _ = c.tx.send(message);
+                    }
+                }
+                Output::Close(conn, reason) => {
+                    if let Some(c) = conns.remove(&conn) {
+                        debug!(conn, "closing: {reason}");
+                        if let Some(close) = c.closer {
+                            close(&reason);
+                        }
+                        core.disconnected(start.elapsed(), conn);
+                    }
+                }
+            }
+        }
+    }
+}

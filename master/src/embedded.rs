@@ -1,0 +1,42 @@
+//! The embedded farm behind `vtfarm render`: a master and local workers in
+//! one process, joined by in-memory links, so the one-machine path runs the
+//! same scheduler and protocol as the cluster.
+
+use tokio::task::JoinHandle;
+use vtfarm_proto::Link;
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_worker::{Engine, SessionEnd, WorkerConfig, serve};
+
+use crate::core::Peer;
+use crate::driver::{MasterHandle, spawn_master};
+
+/// A master with local workers (call inside a multi-threaded tokio runtime).
+pub struct LocalFarm {
+    master: MasterHandle,
+    _master_task: JoinHandle<()>,
+    _workers: Vec<JoinHandle<SessionEnd>>,
+}
+
+impl LocalFarm {
+    /// Starts a master and `workers` local workers sharing this process's cores.
+    pub fn start(workers: usize, config: SchedulerConfig) -> LocalFarm {
+        let (master, task) = spawn_master(config);
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+        let workers = (0..workers.max(1))
+            .map(|k| {
+                let (master_end, worker_end) = Link::pair();
+                let peer = Peer::Worker { name: format!("local-{k}"), threads: (threads / workers.max(1) as u32).max(1), address: "in-process".into() };
+                master.attach(peer, master_end, None);
+                tokio::spawn(async move { serve(worker_end, &mut Engine::new(None), WorkerConfig::default()).await })
+            })
+            .collect();
+        LocalFarm { master, _master_task: task, _workers: workers }
+    }
+
+    /// A submitter's link to the master.
+    pub fn submitter(&self) -> Link {
+        let (master_end, client_end) = Link::pair();
+        self.master.attach(Peer::Submitter { address: "in-process".into() }, master_end, None);
+        client_end
+    }
+}

@@ -1,0 +1,58 @@
+//! The master's QUIC endpoint: every incoming connection must pass the
+//! handshake (pinned certificate on the client side, token and version here)
+//! before it reaches the core; a bad one is refused and logged with the
+//! peer's address while the master keeps serving everyone else.
+
+use std::net::SocketAddr;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use tracing::{info, warn};
+use vtfarm_proto::{HandshakePolicy, Link, MasterIdentity, Role, SESSION_LIMIT, server_config, server_handshake};
+
+use crate::core::Peer;
+use crate::driver::MasterHandle;
+
+/// A bound QUIC endpoint with the master's identity.
+pub fn bind(listen: SocketAddr, identity: &MasterIdentity) -> Result<quinn::Endpoint> {
+    let config = server_config(identity)?;
+    quinn::Endpoint::server(config, listen).with_context(|| format!("cannot listen on {listen}"))
+}
+
+/// Loads (or creates on first start) the master's key and certificate in `state_dir`.
+pub fn identity(state_dir: &Path, hosts: &[String]) -> Result<MasterIdentity> {
+    Ok(MasterIdentity::load_or_create(state_dir, hosts)?)
+}
+
+/// Accepts connections until the endpoint closes.
+pub async fn serve(endpoint: quinn::Endpoint, policy: HandshakePolicy, master: MasterHandle) {
+    while let Some(incoming) = endpoint.accept().await {
+        let (policy, master) = (policy.clone(), master.clone());
+        tokio::spawn(async move {
+            let address = incoming.remote_address();
+            let conn = match incoming.await {
+                Ok(c) => c,
+                Err(e) => return warn!(peer = %address, "connection failed: {e}"),
+            };
+            let hello = match server_handshake(&conn, &policy).await {
+                Ok(hello) => hello,
+                Err(refusal) => return warn!(peer = %address, code = ?refusal.code, "refused: {}", refusal.message),
+            };
+            let (send, recv) = match conn.accept_bi().await {
+                Ok(s) => s,
+                Err(e) => return warn!(peer = %address, "no session stream: {e}"),
+            };
+            let peer = match hello.role {
+                Role::Worker { threads, name } => Peer::Worker { name, threads, address: address.to_string() },
+                Role::Submitter => Peer::Submitter { address: address.to_string() },
+            };
+            info!(peer = %address, ?peer, "accepted");
+            let closer = conn.clone();
+            master.attach(
+                peer,
+                Link::over_stream(recv, send, SESSION_LIMIT),
+                Some(Box::new(move |reason: &str| closer.close(vtfarm_proto::CLOSE_NORMAL, reason.as_bytes()))),
+            );
+        });
+    }
+}

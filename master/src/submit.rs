@@ -1,0 +1,72 @@
+//! The submitter's side of the protocol, over any [`Link`]: `vtfarm submit`
+//! runs it over QUIC, `vtfarm render` against the embedded master.
+//!
+//! The job names its scene by hash first; the master asks for the bytes only
+//! when it does not have that scene yet.
+
+use vtfarm_imaging::Image;
+use vtfarm_proto::{FrameStats, JobScene, Link, Message, SceneData, WireFrameSetup, WireJob};
+use vtfarm_render::FrameSetup;
+
+/// A finished frame as the submitter receives it.
+#[derive(Clone, Debug)]
+pub struct FinishedFrame {
+    pub frame: u32,
+    pub image: Image,
+    pub stats: FrameStats,
+}
+
+/// What happens while a job runs, for progress displays.
+#[derive(Clone, Debug)]
+pub enum JobEvent<'a> {
+    Accepted { job: u64, frames: u32 },
+    Progress { frame: u32, done: u32, total: u32 },
+    FrameDone(&'a FinishedFrame),
+}
+
+/// Why a job did not complete.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    #[error("the master failed the job:\n  {}", .0.join("\n  "))]
+    Failed(Vec<String>),
+    #[error("the connection to the master closed{}", .0.as_ref().map(|e| format!(": {e}")).unwrap_or_default())]
+    Disconnected(Option<String>),
+    #[error("bad answer from the master: {0}")]
+    Protocol(String),
+}
+
+/// The job message for a scene and its frames.
+pub fn wire_job(name: &str, scene: &SceneData, frames: &[FrameSetup], reflectors: &[u32]) -> WireJob {
+    WireJob {
+        name: name.to_owned(),
+        scene: JobScene::Hash(scene.hash),
+        frames: frames.iter().map(|f| WireFrameSetup::from_parts(&f.camera, &f.lighting, &f.trace, &f.vertex)).collect(),
+        reflectors: reflectors.to_vec(),
+    }
+}
+
+/// Submits `job` and waits for all its frames.
+pub async fn run_job(link: &mut Link, job: WireJob, scene: &SceneData, mut on_event: impl FnMut(JobEvent<'_>)) -> Result<Vec<FinishedFrame>, JobError> {
+    let frames_wanted = job.frames.len();
+    let send = |link: &Link, m| link.tx.send(m).map_err(|_| JobError::Disconnected(link.error()));
+    send(link, Message::SubmitJob { job })?;
+    let mut frames = Vec::new();
+    while frames.len() < frames_wanted {
+        let Some(message) = link.rx.recv().await else { return Err(JobError::Disconnected(link.error())) };
+        match message {
+            Message::SceneRequest { hash } if hash == scene.hash => send(link, Message::SceneData(scene.clone()))?,
+            Message::JobAccepted { job, frames } => on_event(JobEvent::Accepted { job, frames }),
+            Message::Progress { frame, done, total, .. } => on_event(JobEvent::Progress { frame, done, total }),
+            Message::FrameDone(done) => {
+                let (width, height, pixels) = done.image.into_pixels().map_err(|e| JobError::Protocol(e.to_string()))?;
+                let finished = FinishedFrame { frame: done.frame, image: Image { width, height, pixels }, stats: done.stats };
+                on_event(JobEvent::FrameDone(&finished));
+                frames.push(finished);
+            }
+            Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
+            Message::Heartbeat => {}
+            other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
+        }
+    }
+    Ok(frames)
+}
