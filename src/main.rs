@@ -2,6 +2,7 @@
 //! job, drives `vtfarm-render` and prints progress and tables.
 
 mod bench;
+mod farm;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -10,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_render::{FrameSetup, RenderOptions, RenderedFrame, Renderer, output};
+use vtfarm_render::{FrameSetup, RenderOptions, Renderer, output};
 use vtfarm_vertex::Quality;
 
 #[derive(Parser)]
@@ -34,6 +35,23 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Runs the farm master (accepts workers and jobs over QUIC).
+    Master(vtfarm_master::cli::MasterArgs),
+    /// Runs a farm worker that dials the master.
+    Worker(vtfarm_worker::cli::WorkerArgs),
+    /// Submits a job to a running master and writes its frames.
+    Submit(farm::SubmitArgs),
+    /// Lists the master's workers (with their measured throughput) and queue.
+    Status(farm::StatusArgs),
+    /// Cluster set-up.
+    #[command(subcommand)]
+    Cluster(ClusterCommand),
+}
+
+#[derive(Subcommand)]
+enum ClusterCommand {
+    /// Creates the master's key and certificate and DIR/cluster.toml (address, token, fingerprint).
+    Init(vtfarm_master::cli::ClusterInitArgs),
 }
 
 #[derive(clap::Args)]
@@ -57,9 +75,9 @@ struct RenderArgs {
     /// Writes the auxiliary outputs (mask, reflected component, reflected-object map, wireframe) here.
     #[arg(long)]
     aux: Option<PathBuf>,
-    /// Reflector triangles per task package.
-    #[arg(long, default_value_t = RenderOptions::default().package_size)]
-    package_size: usize,
+    /// Local workers of the embedded master (they share the cores).
+    #[arg(long, default_value_t = 2)]
+    local_workers: usize,
 }
 
 #[derive(Subcommand)]
@@ -77,7 +95,7 @@ enum SceneCommand {
     },
 }
 
-fn parse_quality(s: &str) -> Result<Quality, String> {
+pub(crate) fn parse_quality(s: &str) -> Result<Quality, String> {
     Quality::from_name(s)
         .ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
 }
@@ -107,6 +125,15 @@ fn run(cli: Cli) -> Result<()> {
             detail,
         }) => export_scene(&name, &output, detail),
         Command::Bench(b) => bench::run(b),
+        Command::Master(args) => vtfarm_master::cli::run(args),
+        Command::Worker(args) => vtfarm_worker::cli::run(args),
+        Command::Submit(args) => farm::submit(args),
+        Command::Status(args) => farm::status(args),
+        Command::Cluster(ClusterCommand::Init(args)) => {
+            let path = vtfarm_master::cli::cluster_init(&args)?;
+            println!("wrote {} (copy it to every worker and submitter)", path.display());
+            Ok(())
+        }
     }
 }
 
@@ -132,82 +159,68 @@ fn render(args: RenderArgs) -> Result<()> {
     camera.width = args.width.unwrap_or(camera.width);
     camera.height = args.height.unwrap_or(camera.height);
     let reflectors = job.reflector_triangles(&loaded.scene)?;
-    let renderer = Renderer::new(Arc::new(loaded.scene), reflectors);
-    let setup = FrameSetup {
-        camera,
-        lighting: loaded.lighting,
-        trace: job.trace,
-        vertex: job.vertex,
-    };
-    let options = RenderOptions {
-        package_size: args.package_size,
-        collect_faces: args.aux.is_some(),
-    };
-    let bar = ProgressBar::new(renderer.reflectors().len() as u64).with_style(
-        ProgressStyle::with_template(
-            "{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})",
-        )
-        .expect("template is valid")
-        .progress_chars("=> "),
-    );
-    bar.set_message(job.vertex.quality.name());
-    let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
-    bar.finish_and_clear();
-    output::write_image(&args.output, &frame)
-        .with_context(|| format!("writing {}", args.output.display()))?;
+    let setup = FrameSetup { camera, lighting: loaded.lighting, trace: job.trace, vertex: job.vertex };
+    let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
+    let scene_triangles = loaded.scene.triangles.len();
     if let Some(dir) = &args.aux {
+        // The auxiliary outputs need the whole frame in this process.
+        let renderer = Renderer::new(Arc::new(loaded.scene), reflectors);
+        let options = RenderOptions { collect_faces: true, ..RenderOptions::default() };
+        let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
+        bar.finish_and_clear();
+        output::write_image(&args.output, &frame.image.color)?;
         output::write_aux(dir, &frame, renderer.scene())?;
+        let timings = [("base frame", frame.raster_time), ("total", frame.total_time)];
+        print_summary(&frame.stats, &timings, scene_triangles, renderer.reflectors().len(), job.vertex.quality);
+    } else {
+        let name = args.job.file_name().map_or("job".into(), |n| n.to_string_lossy().into_owned());
+        let frame = farm::render_embedded(&name, &loaded.scene, &setup, &reflectors, args.local_workers, &bar)?;
+        bar.finish_and_clear();
+        output::write_image(&args.output, &frame.image)?;
+        let stats = vtfarm_vertex::PackageStats::from(frame.stats.totals);
+        let timings = [("frame (wall)", std::time::Duration::from_micros(frame.stats.wall_micros))];
+        print_summary(&stats, &timings, scene_triangles, reflectors.len(), job.vertex.quality);
+        farm::print_frame_stats(&frame.stats);
     }
-    print_summary(
-        &frame,
-        renderer.scene().triangles.len(),
-        renderer.reflectors().len(),
-        job.vertex.quality,
-    );
     println!("wrote {}", args.output.display());
     Ok(())
 }
 
+/// The progress bar of a frame, counting reflector triangles.
+fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
+    let bar = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})")
+            .expect("template is valid")
+            .progress_chars("=> "),
+    );
+    bar.set_message(message);
+    bar
+}
+
 fn print_summary(
-    frame: &RenderedFrame,
+    s: &vtfarm_vertex::PackageStats,
+    timings: &[(&str, std::time::Duration)],
     scene_triangles: usize,
     reflector_triangles: usize,
     quality: Quality,
 ) {
-    let s = &frame.stats;
-    let rows: [(&str, String); 12] = [
+    let rows: [(&str, String); 10] = [
         ("quality", quality.name().to_owned()),
         ("scene triangles", scene_triangles.to_string()),
         ("reflector triangles", reflector_triangles.to_string()),
         ("traced triangles", s.traced_triangles.to_string()),
         ("visible vertices", s.visible_vertices.to_string()),
         ("refined edges", s.refined_edges.to_string()),
-        (
-            "traced samples",
-            format!(
-                "{} ({} vertices + {} filled pixels)",
-                s.samples(),
-                s.vertex_samples,
-                s.filled_pixels
-            ),
-        ),
+        ("traced samples", format!("{} ({} vertices + {} filled pixels)", s.samples(), s.vertex_samples, s.filled_pixels)),
         ("reflector pixels", s.pixels.to_string()),
-        (
-            "base frame",
-            format!("{:.3} s", frame.raster_time.as_secs_f64()),
-        ),
-        (
-            "vertex tracing",
-            format!("{:.3} s", s.vertex_time.as_secs_f64()),
-        ),
-        (
-            "triangle filling",
-            format!("{:.3} s", s.fill_time.as_secs_f64()),
-        ),
-        ("total", format!("{:.3} s", frame.total_time.as_secs_f64())),
+        ("vertex tracing", format!("{:.3} s (summed over packages)", s.vertex_time.as_secs_f64())),
+        ("triangle filling", format!("{:.3} s (summed over packages)", s.fill_time.as_secs_f64())),
     ];
     for (name, value) in rows {
         println!("{name:>20}  {value}");
+    }
+    for (name, time) in timings {
+        println!("{name:>20}  {:.3} s", time.as_secs_f64());
     }
 }
 

@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use vtfarm_imaging::{ImageError, write_gray8_png, write_gray16_png};
+use vtfarm_imaging::{Image, ImageError, write_gray8_png, write_gray16_png};
 use vtfarm_scene::{NONE, Scene};
 use vtfarm_vertex::draw_wireframe;
 
@@ -37,12 +37,12 @@ struct ObjectEntry<'a> {
     name: &'a str,
 }
 
-/// Writes the main image: `.npy` writes linear floats, anything else PNG.
-pub fn write_image(path: &Path, frame: &RenderedFrame) -> Result<(), OutputError> {
+/// Writes an image: `.npy` writes linear floats, anything else PNG.
+pub fn write_image(path: &Path, image: &Image) -> Result<(), OutputError> {
     if path.extension().is_some_and(|e| e == "npy") {
-        frame.image.color.write_npy(path)?;
+        image.write_npy(path)?;
     } else {
-        frame.image.color.write_png(path)?;
+        image.write_png(path)?;
     }
     Ok(())
 }

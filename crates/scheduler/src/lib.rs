@@ -1,1 +1,136 @@
-//! The farm scheduler (in progress).
+//! The farm master's scheduler and load balancer (paper §4: demand-driven,
+//! central, dynamic load balancing), as a deterministic state machine in the
+//! style of `quinn-proto`.
+//!
+//! Architecture invariant: this crate does no I/O and reads no clock. It
+//! knows nothing of rendering or networking: a frame's work is a list of work
+//! items (reflector triangle ids, already in Morton order), workers and
+//! packages are opaque ids, and time is the `now: Duration` (time since the
+//! master started) passed to every input. Inputs are the `Scheduler` methods
+//! `worker_joined`, `worker_left`, `heartbeat`, `request_work`,
+//! `package_done`, `package_failed`, `submit_job`, `cancel_job` and
+//! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
+//! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
+//! hash-map order, no threads). The [`sim`] module drives it with simulated
+//! workers on a virtual clock.
+//!
+//! A driver feeds inputs and sends what comes out:
+//!
+//! ```
+//! use std::time::Duration;
+//! use vtfarm_scheduler::{FrameWork, JobId, PackageMeasure, Scheduler, SchedulerConfig, WorkerId};
+//!
+//! let mut scheduler = Scheduler::new(SchedulerConfig::default());
+//! let mut now = Duration::ZERO;
+//! scheduler.worker_joined(now, WorkerId(1), 8)?;
+//! let frame = FrameWork { items: vec![4, 5, 6] };
+//! scheduler.submit_job(now, JobId(1), vec![frame])?;
+//! scheduler.request_work(now, WorkerId(1))?;
+//! while let Some(package) = scheduler.poll_assignment() {
+//!     // The driver sends the package; later the worker's result arrives.
+//!     now += Duration::from_millis(50);
+//!     let measure = PackageMeasure { busy: Duration::from_millis(40), ..Default::default() };
+//!     scheduler.package_done(now, package.worker, package.package, measure)?;
+//!     scheduler.request_work(now, package.worker)?;
+//! }
+//! while let Some(event) = scheduler.poll_event() {
+//!     println!("{event:?}"); // JobStarted, FrameStarted, FrameComplete, JobComplete
+//! }
+//! assert!(!scheduler.has_jobs());
+//! // A real driver also calls `handle_timeout` when `poll_timeout` comes.
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # Policy
+//!
+//! * **Demand-driven.** A worker asks ([`Scheduler::request_work`]) and gets
+//!   one package, now or as soon as there is work. Jobs run one after another
+//!   in submission order, frames one after another.
+//! * **Package size** (guided self-scheduling, "large early, small late"):
+//!   a package for worker `w` is the next contiguous run of unassigned items
+//!   whose estimated cost is closest to `target · rate(w)`, with
+//!   `target = clamp(remaining / (k · Σ rate), min_duration, max_duration)`,
+//!   see [`PackageSizing`]. `rate(w)` is the worker's cost units per second
+//!   from assignment to result (so a slow link counts), smoothed
+//!   exponentially over its packages; a new worker starts from the mean rate
+//!   per thread of the measured workers times its threads.
+//! * **Cost estimates** carry over from frame to frame within a job (see
+//!   `costs.rs`): the first frame is uniform, later ones use each item's
+//!   measured cost and the mean for new items.
+//! * **Faults.** A worker that leaves or misses its heartbeats loses its
+//!   packages to the front of the queue. Near the end of a frame (nothing
+//!   left to hand out) a package running `max(factor · expected, min_delay)`
+//!   is also given to a waiting worker; the first result wins and the other
+//!   copy is cancelled ([`Event::PackageCancelled`]). A failed package is
+//!   retried on another worker; a worker that failed 3 packages of a job is
+//!   blocklisted for it; a package that failed on 3 different workers fails
+//!   the job, as does work left when every connected worker is blocklisted.
+//!   A frame therefore completes while one worker that may work on the job
+//!   remains connected. Results that are late, duplicate, from the wrong
+//!   worker or for unknown packages are refused ([`ReportError`]) and
+//!   counted ([`Counters`]).
+//!
+//! # Package states
+//!
+//! A package is created when a worker takes unassigned items (or the first
+//! part of a queued package that is too big for it), directly as `Assigned`.
+//! Each change is made by one function of `scheduler.rs`, through
+//! `Package::set_state`, which checks [`PackageState::may_become`]:
+//!
+//! | from | to | when | function |
+//! |---|---|---|---|
+//! | (new) | Assigned | a waiting worker takes unassigned items or splits a queued package | `assign` |
+//! | Queued | Assigned | a waiting worker takes the queued package | `assign` |
+//! | Assigned | Duplicated | straggler: nothing left to hand out, the copy runs past its deadline, a worker waits | `assign` |
+//! | Assigned, Duplicated | Done | the first result arrives (the other copy is cancelled) | `complete` |
+//! | Assigned | Queued | its worker is lost | `lose` |
+//! | Assigned | Queued | it failed, on fewer than 3 different workers so far | `fail_attempt` |
+//! | Duplicated | Assigned | one copy's worker is lost | `lose` |
+//! | Duplicated | Assigned | one copy failed | `fail_attempt` |
+//! | Assigned | Failed | it failed on the 3rd different worker (the job fails) | `fail_attempt` |
+//! | Queued, Assigned, Duplicated | Cancelled | its job is cancelled or fails | `abandon_running_job` |
+//!
+//! Done, Failed and Cancelled are final. A package's items never change
+//! except when a queued package is split: its first part becomes a new
+//! package and the rest stays queued under the old id (both keep the failure
+//! history).
+//!
+//! # Worker states
+//!
+//! A worker's state follows from whether it is connected, has asked for work
+//! and runs packages ([`WorkerState`], checked by
+//! [`WorkerState::may_become`]):
+//!
+//! | from | to | when | function |
+//! |---|---|---|---|
+//! | (new), Gone | Idle | it joins | `worker_joined` |
+//! | Idle, Busy | Waiting | it asks for work | `request_work` |
+//! | Waiting | Busy | it gets a package | `assign` |
+//! | Busy | Idle | its last package is done, failed or cancelled | `complete`, `fail_attempt`, `cancel_losing_copy`, `abandon_running_job` |
+//! | Idle, Waiting, Busy | Gone | it leaves or misses its heartbeats | `lose` |
+//!
+//! Being blocklisted is not a state: it holds for one job, and a blocklisted
+//! worker that waits gets work again from the next job.
+//!
+//! # Job states
+//!
+//! Queued (`submit_job`) → Running (`advance_jobs`, when the job before it
+//! ends) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
+//! (`cancel_job`); a queued job may be cancelled directly.
+
+mod config;
+mod costs;
+mod error;
+mod event;
+mod frame;
+mod scheduler;
+pub mod sim;
+mod status;
+mod types;
+
+pub use config::{CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy};
+pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError, WorkerError};
+pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
+pub use scheduler::Scheduler;
+pub use status::{Counters, JobProgress, PackageState, QueueStatus, WorkerState, WorkerStatus};
+pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, WorkerId};

@@ -1,0 +1,138 @@
+//! The scheduler's settings and their defaults.
+
+use std::time::Duration;
+
+/// Settings of the scheduler. [`SchedulerConfig::default`] documents the
+/// defaults; every one of them is a policy knob, none is needed for
+/// correctness.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SchedulerConfig {
+    /// A worker that sends nothing (heartbeat, request or result) for this
+    /// long is lost and its packages go back to the queue. Default 10 s, for
+    /// workers that send a heartbeat every 2 s or so.
+    pub heartbeat_timeout: Duration,
+    /// Package sizing: see [`PackageSizing`].
+    pub sizing: PackageSizing,
+    /// Straggler cut near the end of a frame; `None` turns it off.
+    pub straggler: Option<StragglerPolicy>,
+    /// Failure handling: see [`RetryPolicy`].
+    pub retry: RetryPolicy,
+    /// Cost estimation: see [`CostEstimation`].
+    pub estimation: CostEstimation,
+}
+
+impl Default for SchedulerConfig {
+    fn default() -> Self {
+        SchedulerConfig {
+            heartbeat_timeout: Duration::from_secs(10),
+            sizing: PackageSizing::default(),
+            straggler: Some(StragglerPolicy::default()),
+            retry: RetryPolicy::default(),
+            estimation: CostEstimation::default(),
+        }
+    }
+}
+
+/// How big a package is (guided self-scheduling, "large early, small late").
+///
+/// A package for worker `w` aims at the duration
+/// `target = clamp(remaining_cost / (guided_factor · total_rate), min_duration, max_duration)`
+/// and so at the cost `target · rate(w)`, where `remaining_cost` is the
+/// estimated cost of the frame's unassigned work and `total_rate` the sum of
+/// the rates of the workers that may work on the job. Early packages are
+/// large (few round trips), late ones small, so all workers finish together.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackageSizing {
+    /// `k` above: each package takes `1/k` of the worker's fair share of the
+    /// remaining work. Default 2 (factoring); 1 is classic guided
+    /// self-scheduling. Values below 1 are read as 1.
+    pub guided_factor: f64,
+    /// Lower bound of the target duration, so that round trips and per-package
+    /// overhead stay small against the work. Default 20 ms.
+    pub min_duration: Duration,
+    /// Upper bound of the target duration, so that a lost worker never takes
+    /// much work with it. Default 10 s.
+    pub max_duration: Duration,
+    /// A queued package (one coming back from a lost or failed worker) whose
+    /// estimated cost exceeds `split_factor` times the taker's target is split
+    /// and only its first part is handed out. Default 1.5.
+    pub split_factor: f64,
+}
+
+impl Default for PackageSizing {
+    fn default() -> Self {
+        PackageSizing {
+            guided_factor: 2.0,
+            min_duration: Duration::from_millis(20),
+            max_duration: Duration::from_secs(10),
+            split_factor: 1.5,
+        }
+    }
+}
+
+/// When a package counts as a straggler. Near the end of a frame (nothing
+/// left to hand out) a package running longer than
+/// `max(factor · expected, min_delay)` is also given to a waiting worker;
+/// the first result wins and the other copy is cancelled.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StragglerPolicy {
+    /// Default 2.
+    pub factor: f64,
+    /// Default 10 ms, so that tiny packages are not duplicated for jitter.
+    pub min_delay: Duration,
+}
+
+impl Default for StragglerPolicy {
+    fn default() -> Self {
+        StragglerPolicy {
+            factor: 2.0,
+            min_delay: Duration::from_millis(10),
+        }
+    }
+}
+
+/// What failures cost (Flamenco's rules).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RetryPolicy {
+    /// A worker that failed this many packages of a job gets no more of that
+    /// job's work. Default 3.
+    pub worker_failures_per_job: u32,
+    /// A package that failed on this many different workers fails its job.
+    /// Default 3.
+    pub package_failures: u32,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        RetryPolicy {
+            worker_failures_per_job: 3,
+            package_failures: 3,
+        }
+    }
+}
+
+/// Starting points and smoothing of the cost and rate estimates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CostEstimation {
+    /// Estimated cost of every item in a job's first frame: the job's cost
+    /// unit. Later frames measure costs in the same unit. Default 1.
+    pub initial_item_cost: f64,
+    /// Rate (cost units per second) assumed per thread of a worker before any
+    /// worker has finished a package. Only the first packages depend on it;
+    /// default 1 (an item per second per thread, deliberately slow, so that
+    /// the first packages are small).
+    pub initial_rate_per_thread: f64,
+    /// Weight of a new observation in a worker's exponentially smoothed rate.
+    /// Default 0.3.
+    pub rate_smoothing: f64,
+}
+
+impl Default for CostEstimation {
+    fn default() -> Self {
+        CostEstimation {
+            initial_item_cost: 1.0,
+            initial_rate_per_thread: 1.0,
+            rate_smoothing: 0.3,
+        }
+    }
+}

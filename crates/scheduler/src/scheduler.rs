@@ -1,0 +1,1174 @@
+//! The scheduler state machine: inputs (`worker_*`, `request_work`,
+//! `package_*`, `submit_job`, `cancel_job`, `handle_timeout`) change the
+//! state and queue outputs, which the driver takes with `poll_assignment`,
+//! `poll_event` and `poll_timeout`.
+//!
+//! Every input that can create, free or end work ends in `dispatch`, which
+//! starts queued jobs and frames, fails a job nobody may work on, and hands
+//! work to the waiting workers.
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::ops::Range;
+use std::time::Duration;
+
+use crate::costs::CostModel;
+use crate::frame::{Attempt, Frame, Package};
+use crate::{
+    Assignment, CancelError, Counters, Event, FrameWork, InvariantError, JobFailure, JobId,
+    JobProgress, JoinError, LossCause, PackageId, PackageMeasure, PackageState, QueueStatus,
+    ReportError, SchedulerConfig, StragglerPolicy, SubmitError, WorkerError, WorkerFrameStats,
+    WorkerId, WorkerState, WorkerStatus,
+};
+
+/// The master's scheduler and load balancer. See the crate documentation for
+/// the policy and the state tables.
+#[derive(Debug)]
+pub struct Scheduler {
+    config: SchedulerConfig,
+    /// The latest `now` seen; inputs with an earlier one are read as this.
+    now: Duration,
+    workers: BTreeMap<WorkerId, Worker>,
+    /// Workers that asked for work and got none yet, in the order they asked.
+    waiting: VecDeque<WorkerId>,
+    queued_jobs: VecDeque<QueuedJob>,
+    running: Option<RunningJob>,
+    next_package: u64,
+    assignments: VecDeque<Assignment>,
+    events: VecDeque<Event>,
+    counters: Counters,
+}
+
+#[derive(Debug)]
+struct Worker {
+    threads: u32,
+    connected: bool,
+    last_seen: Duration,
+    wants_work: bool,
+    /// Packages it runs, all of the running frame.
+    running: BTreeSet<PackageId>,
+    /// Smoothed cost units per second from assignment to result.
+    rate: Option<f64>,
+    /// Cost units per busy second of its last packages, newest last.
+    compute_samples: VecDeque<f64>,
+    packages_done: u64,
+    items_done: u64,
+    busy: Duration,
+    failures: u64,
+}
+
+#[derive(Debug)]
+struct QueuedJob {
+    id: JobId,
+    frames: Vec<FrameWork>,
+}
+
+#[derive(Debug)]
+struct RunningJob {
+    id: JobId,
+    /// Frames not started yet.
+    frames: VecDeque<FrameWork>,
+    frame_count: u32,
+    costs: CostModel,
+    failures_by_worker: BTreeMap<WorkerId, u32>,
+    blocklist: BTreeSet<WorkerId>,
+    /// Every failure reported in the job, in order.
+    errors: Vec<(WorkerId, String)>,
+    frame: Frame,
+}
+
+/// How many recent packages a worker's compute rate is the median of.
+const COMPUTE_SAMPLES: usize = 16;
+
+/// What a waiting worker gets.
+#[derive(Clone, Copy, Debug)]
+enum Pick {
+    /// The next unassigned items, up to position `end`.
+    Fresh { end: usize },
+    /// The queued package at `index` of the queue, or its part before `split`.
+    Queued { index: usize, split: usize },
+    /// A second copy of a straggler.
+    Duplicate(PackageId),
+}
+
+impl Scheduler {
+    pub fn new(config: SchedulerConfig) -> Scheduler {
+        Scheduler {
+            config,
+            now: Duration::ZERO,
+            workers: BTreeMap::new(),
+            waiting: VecDeque::new(),
+            queued_jobs: VecDeque::new(),
+            running: None,
+            next_package: 0,
+            assignments: VecDeque::new(),
+            events: VecDeque::new(),
+            counters: Counters::default(),
+        }
+    }
+
+    pub fn config(&self) -> &SchedulerConfig {
+        &self.config
+    }
+
+    // ----- Inputs -----
+
+    /// A worker connected with `threads` threads (0 is read as 1). A worker
+    /// that was gone may join again under its old id and keeps its rate.
+    pub fn worker_joined(
+        &mut self,
+        now: Duration,
+        worker: WorkerId,
+        threads: u32,
+    ) -> Result<(), JoinError> {
+        let now = self.advance(now);
+        let threads = threads.max(1);
+        match self.workers.get_mut(&worker) {
+            Some(w) if w.connected => return Err(JoinError::AlreadyConnected(worker)),
+            // Gone → Idle.
+            Some(w) => {
+                w.connected = true;
+                w.threads = threads;
+                w.last_seen = now;
+            }
+            // (new) → Idle.
+            None => {
+                self.workers.insert(
+                    worker,
+                    Worker {
+                        threads,
+                        connected: true,
+                        last_seen: now,
+                        wants_work: false,
+                        running: BTreeSet::new(),
+                        rate: None,
+                        compute_samples: VecDeque::new(),
+                        packages_done: 0,
+                        items_done: 0,
+                        busy: Duration::ZERO,
+                        failures: 0,
+                    },
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The worker disconnected: its packages go back to the queue.
+    pub fn worker_left(&mut self, now: Duration, worker: WorkerId) -> Result<(), WorkerError> {
+        self.advance(now);
+        self.connected(worker)?;
+        self.lose(worker, LossCause::Left);
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The worker is alive. Every other input from a worker counts as a
+    /// heartbeat too.
+    pub fn heartbeat(&mut self, now: Duration, worker: WorkerId) -> Result<(), WorkerError> {
+        self.advance(now);
+        self.connected(worker)?;
+        self.touch(worker);
+        Ok(())
+    }
+
+    /// The worker asks for a package (Idle or Busy → Waiting). The package, now
+    /// or once there is work, comes out of [`Scheduler::poll_assignment`]. Asking
+    /// again before getting one changes nothing; asking while running a
+    /// package lets the driver keep a worker's pipeline full.
+    pub fn request_work(&mut self, now: Duration, worker: WorkerId) -> Result<(), WorkerError> {
+        self.advance(now);
+        self.connected(worker)?;
+        self.touch(worker);
+        if let Some(w) = self.workers.get_mut(&worker) {
+            if !w.wants_work {
+                w.wants_work = true;
+                self.waiting.push_back(worker);
+            }
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Queues a job; jobs run one after another in submission order, and the
+    /// frames of a job one after another. A job without frames completes at
+    /// once; a frame without items completes at once.
+    pub fn submit_job(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+    ) -> Result<(), SubmitError> {
+        self.advance(now);
+        let running = self.running.as_ref().is_some_and(|r| r.id == job);
+        if running || self.queued_jobs.iter().any(|q| q.id == job) {
+            return Err(SubmitError::DuplicateJob(job));
+        }
+        self.queued_jobs.push_back(QueuedJob { id: job, frames });
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Cancels a queued or running job. The packages of a running job are
+    /// cancelled ([`Event::PackageCancelled`] for each copy), then
+    /// [`Event::JobCancelled`].
+    pub fn cancel_job(&mut self, now: Duration, job: JobId) -> Result<(), CancelError> {
+        self.advance(now);
+        if let Some(index) = self.queued_jobs.iter().position(|q| q.id == job) {
+            self.queued_jobs.remove(index);
+        } else if self.running.as_ref().is_some_and(|r| r.id == job) {
+            self.abandon_running_job();
+        } else {
+            return Err(CancelError::UnknownJob(job));
+        }
+        self.events.push_back(Event::JobCancelled { job });
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The worker finished the package. The first result of a package wins;
+    /// the other copy of a straggler is cancelled. A late, duplicate or
+    /// unknown result is ignored, counted, and explained by the error.
+    pub fn package_done(
+        &mut self,
+        now: Duration,
+        worker: WorkerId,
+        package: PackageId,
+        measure: PackageMeasure,
+    ) -> Result<(), ReportError> {
+        self.advance(now);
+        self.check_report(worker, package)?;
+        self.complete(worker, package, &measure);
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The worker could not compute the package. It is retried on another
+    /// worker; see [`RetryPolicy`](crate::RetryPolicy) for when the worker is
+    /// blocklisted and when the job fails.
+    pub fn package_failed(
+        &mut self,
+        now: Duration,
+        worker: WorkerId,
+        package: PackageId,
+        error: String,
+    ) -> Result<(), ReportError> {
+        self.advance(now);
+        self.check_report(worker, package)?;
+        self.fail_attempt(worker, package, error);
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Acts on the deadlines due at `now`: workers whose heartbeat expired are
+    /// lost, stragglers are duplicated to waiting workers.
+    pub fn handle_timeout(&mut self, now: Duration) {
+        let now = self.advance(now);
+        let timeout = self.config.heartbeat_timeout;
+        let expired: Vec<WorkerId> = self
+            .workers
+            .iter()
+            .filter(|(_, w)| w.connected && w.last_seen.saturating_add(timeout) <= now)
+            .map(|(&id, _)| id)
+            .collect();
+        for worker in expired {
+            self.lose(worker, LossCause::HeartbeatTimeout);
+        }
+        self.dispatch();
+    }
+
+    // ----- Outputs -----
+
+    /// The next package to send, in the order they were handed out.
+    pub fn poll_assignment(&mut self) -> Option<Assignment> {
+        self.assignments.pop_front()
+    }
+
+    /// The next event, in the order they happened.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// When [`Scheduler::handle_timeout`] should be called next: the earliest
+    /// heartbeat expiry, or the moment a running package becomes a straggler
+    /// that a waiting worker could take.
+    pub fn poll_timeout(&self) -> Option<Duration> {
+        let timeout = self.config.heartbeat_timeout;
+        let heartbeat = self
+            .workers
+            .values()
+            .filter(|w| w.connected)
+            .map(|w| w.last_seen.saturating_add(timeout))
+            .min();
+        let straggler = self.straggler_deadline();
+        heartbeat.into_iter().chain(straggler).min()
+    }
+
+    // ----- Views -----
+
+    /// Whether a job is queued or running.
+    pub fn has_jobs(&self) -> bool {
+        self.running.is_some() || !self.queued_jobs.is_empty()
+    }
+
+    /// Every worker ever joined, by id, for a `status` listing.
+    pub fn workers(&self) -> Vec<WorkerStatus> {
+        self.workers
+            .iter()
+            .map(|(&id, w)| WorkerStatus {
+                worker: id,
+                state: w.state(),
+                threads: w.threads,
+                rate: w.rate,
+                compute_rate: w.compute_rate(),
+                running: w.running.len(),
+                packages_done: w.packages_done,
+                items_done: w.items_done,
+                busy: w.busy,
+                failures: w.failures,
+            })
+            .collect()
+    }
+
+    pub fn worker_state(&self, worker: WorkerId) -> Option<WorkerState> {
+        self.workers.get(&worker).map(Worker::state)
+    }
+
+    /// The state of a package of the running frame; `None` for packages of
+    /// finished frames and jobs.
+    pub fn package_state(&self, package: PackageId) -> Option<PackageState> {
+        let job = self.running.as_ref()?;
+        job.frame.packages.get(&package).map(Package::state)
+    }
+
+    /// The job queue and the running job's progress.
+    pub fn queue(&self) -> QueueStatus {
+        QueueStatus {
+            waiting: self.queued_jobs.iter().map(|q| q.id).collect(),
+            running: self.running.as_ref().map(|job| JobProgress {
+                job: job.id,
+                frame: job.frame.index,
+                frames: job.frame_count,
+                items_done: job.frame.done_count,
+                items_total: job.frame.items.len(),
+                packages_running: job
+                    .frame
+                    .packages
+                    .values()
+                    .filter(|p| !p.attempts.is_empty())
+                    .count(),
+                blocklisted: job.blocklist.iter().copied().collect(),
+            }),
+        }
+    }
+
+    /// Ignored inputs so far.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Checks every internal invariant (for tests and fuzzing): each item of
+    /// the running frame is in exactly one place (unassigned, one queued or
+    /// running package, or one done package), package states match their
+    /// copies and the queue, and workers' packages match the packages' copies.
+    pub fn validate(&self) -> Result<(), InvariantError> {
+        let fail = |message: String| Err(InvariantError(message));
+        for (&id, w) in &self.workers {
+            let listed = self.waiting.iter().filter(|&&x| x == id).count();
+            if listed != usize::from(w.wants_work) {
+                return fail(format!("{id} listed {listed} times as waiting"));
+            }
+            if !w.connected && (w.wants_work || !w.running.is_empty()) {
+                return fail(format!("{id} is gone but waits or runs packages"));
+            }
+            for package in &w.running {
+                let runs = self.running.as_ref().and_then(|job| {
+                    let p = job.frame.packages.get(package)?;
+                    p.attempt_of(id)
+                });
+                if runs.is_none() {
+                    return fail(format!("{id} lists {package} but does not run it"));
+                }
+            }
+        }
+        if self.waiting.iter().any(|w| !self.workers.contains_key(w)) {
+            return fail("an unknown worker waits".to_string());
+        }
+        let Some(job) = &self.running else {
+            return Ok(());
+        };
+        let frame = &job.frame;
+        let n = frame.items.len();
+        let mut owners = vec![0u32; n];
+        for owner in &mut owners[frame.next_fresh..] {
+            *owner += 1;
+        }
+        let mut done = vec![false; n];
+        for (&id, p) in &frame.packages {
+            let copies = p.attempts.len();
+            let queued = frame.queue.iter().filter(|&&q| q == id).count();
+            let expected = match p.state() {
+                PackageState::Queued => (0, 1),
+                PackageState::Assigned => (1, 0),
+                PackageState::Duplicated => (2, 0),
+                PackageState::Done => (0, 0),
+                PackageState::Failed | PackageState::Cancelled => {
+                    return fail(format!("{id} is {:?} in a running frame", p.state()));
+                }
+            };
+            if (copies, queued) != expected {
+                return fail(format!(
+                    "{id} is {:?} with {copies} copies, queued {queued} times",
+                    p.state()
+                ));
+            }
+            if p.range.is_empty() || p.range.end > frame.next_fresh {
+                return fail(format!("{id} covers {:?}", p.range));
+            }
+            if copies == 2 && p.attempts[0].worker == p.attempts[1].worker {
+                return fail(format!("{id} runs twice on one worker"));
+            }
+            for a in &p.attempts {
+                let listed = self
+                    .workers
+                    .get(&a.worker)
+                    .is_some_and(|w| w.connected && w.running.contains(&id));
+                if !listed {
+                    return fail(format!("{} does not list {id}", a.worker));
+                }
+            }
+            for position in p.range.clone() {
+                owners[position] += 1;
+                done[position] = p.state() == PackageState::Done;
+            }
+        }
+        if let Some(position) = owners.iter().position(|&o| o != 1) {
+            return fail(format!(
+                "position {position} is in {} places",
+                owners[position]
+            ));
+        }
+        if done != frame.done || frame.done.iter().filter(|&&d| d).count() != frame.done_count {
+            return fail("done items do not match done packages".to_string());
+        }
+        Ok(())
+    }
+
+    // ----- Bookkeeping -----
+
+    fn advance(&mut self, now: Duration) -> Duration {
+        self.now = self.now.max(now);
+        self.now
+    }
+
+    fn connected(&self, worker: WorkerId) -> Result<(), WorkerError> {
+        match self.workers.get(&worker) {
+            Some(w) if w.connected => Ok(()),
+            _ => Err(WorkerError::NotConnected(worker)),
+        }
+    }
+
+    fn touch(&mut self, worker: WorkerId) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.last_seen = self.now;
+        }
+    }
+
+    /// Accepts a result only for a package the worker runs now, counting why
+    /// it refused otherwise. Accepted or not, a result from a connected
+    /// worker is a heartbeat.
+    fn check_report(&mut self, worker: WorkerId, package: PackageId) -> Result<(), ReportError> {
+        if self.connected(worker).is_err() {
+            self.counters.results_not_connected += 1;
+            return Err(ReportError::NotConnected(worker));
+        }
+        self.touch(worker);
+        let current = self
+            .running
+            .as_ref()
+            .and_then(|job| job.frame.packages.get(&package));
+        let refusal = match current {
+            Some(p) if p.state().is_final() => Some(ReportError::Finished(package)),
+            Some(p) if p.attempt_of(worker).is_none() => {
+                Some(ReportError::NotAssigned { package, worker })
+            }
+            Some(_) => None,
+            // Ids are handed out in order, so a lower one belonged to a frame
+            // or job that is over.
+            None if package.0 < self.next_package => Some(ReportError::Finished(package)),
+            None => Some(ReportError::UnknownPackage(package)),
+        };
+        let Some(refusal) = refusal else {
+            return Ok(());
+        };
+        let counter = match refusal {
+            ReportError::NotConnected(_) => &mut self.counters.results_not_connected,
+            ReportError::UnknownPackage(_) => &mut self.counters.results_unknown_package,
+            ReportError::Finished(_) => &mut self.counters.results_finished,
+            ReportError::NotAssigned { .. } => &mut self.counters.results_not_assigned,
+        };
+        *counter += 1;
+        Err(refusal)
+    }
+
+    /// Starts queued jobs and frames, fails a job nobody may work on, then
+    /// hands work to the waiting workers in the order they asked.
+    fn dispatch(&mut self) {
+        loop {
+            self.advance_jobs();
+            if !self.no_eligible_worker() {
+                break;
+            }
+            let errors = self
+                .running
+                .as_ref()
+                .map(|job| job.errors.clone())
+                .unwrap_or_default();
+            self.fail_job(JobFailure::NoEligibleWorker, errors);
+        }
+        let mut index = 0;
+        while index < self.waiting.len() {
+            let worker = self.waiting[index];
+            match self.pick(worker) {
+                Some(pick) => {
+                    self.waiting.remove(index);
+                    self.assign(worker, pick);
+                }
+                None => index += 1,
+            }
+        }
+    }
+
+    /// Completes finished frames and jobs and starts the next ones, until a
+    /// frame has work or no job is left.
+    fn advance_jobs(&mut self) {
+        loop {
+            let Some(job) = &mut self.running else {
+                let Some(next) = self.queued_jobs.pop_front() else {
+                    return;
+                };
+                self.start_job(next);
+                continue;
+            };
+            if !job.frame.is_complete() {
+                return;
+            }
+            let speeds: BTreeMap<WorkerId, f64> = self
+                .workers
+                .iter()
+                .filter_map(|(&id, w)| Some((id, w.compute_rate()?)))
+                .collect();
+            job.costs.learn(&job.frame, &speeds);
+            let stats = job.frame.finish_stats(self.now);
+            self.events.push_back(Event::FrameComplete {
+                job: job.id,
+                frame: job.frame.index,
+                stats,
+            });
+            match job.frames.pop_front() {
+                Some(next) => {
+                    let index = job.frame.index + 1;
+                    job.frame = Frame::new(index, next.items, &job.costs);
+                    self.events.push_back(Event::FrameStarted {
+                        job: job.id,
+                        frame: index,
+                        items: job.frame.items.len(),
+                    });
+                }
+                None => {
+                    self.events.push_back(Event::JobComplete { job: job.id });
+                    self.running = None;
+                }
+            }
+        }
+    }
+
+    /// Starts a job. Rates are in the job's cost unit, so every worker's are
+    /// forgotten and measured anew.
+    fn start_job(&mut self, next: QueuedJob) {
+        for w in self.workers.values_mut() {
+            w.rate = None;
+            w.compute_samples.clear();
+        }
+        let frame_count = u32::try_from(next.frames.len()).unwrap_or(u32::MAX);
+        self.events.push_back(Event::JobStarted {
+            job: next.id,
+            frames: frame_count,
+        });
+        let mut frames = VecDeque::from(next.frames);
+        let Some(first) = frames.pop_front() else {
+            self.events.push_back(Event::JobComplete { job: next.id });
+            return;
+        };
+        let costs = CostModel::new(self.config.estimation.initial_item_cost);
+        let frame = Frame::new(0, first.items, &costs);
+        self.events.push_back(Event::FrameStarted {
+            job: next.id,
+            frame: 0,
+            items: frame.items.len(),
+        });
+        self.running = Some(RunningJob {
+            id: next.id,
+            frames,
+            frame_count,
+            costs,
+            failures_by_worker: BTreeMap::new(),
+            blocklist: BTreeSet::new(),
+            errors: Vec::new(),
+            frame,
+        });
+    }
+
+    /// Whether the running job has work left that no connected worker may
+    /// take, because every one is blocklisted (with no worker connected, the
+    /// job waits for one).
+    fn no_eligible_worker(&self) -> bool {
+        let Some(job) = &self.running else {
+            return false;
+        };
+        let mut connected = self.workers.iter().filter(|(_, w)| w.connected).peekable();
+        job.frame.has_unassigned()
+            && connected.peek().is_some()
+            && connected.all(|(id, _)| job.blocklist.contains(id))
+    }
+
+    // ----- Package sizing -----
+
+    /// What to give `worker`: a queued package it may take (split when much
+    /// larger than its target), else the next unassigned items, else, once
+    /// nothing is left to hand out, a straggler's second copy.
+    fn pick(&self, worker: WorkerId) -> Option<Pick> {
+        let job = self.running.as_ref()?;
+        if job.blocklist.contains(&worker) {
+            return None;
+        }
+        let frame = &job.frame;
+        let target = self.target_cost(worker);
+        let split_factor = self.config.sizing.split_factor;
+        for (index, id) in frame.queue.iter().enumerate() {
+            let Some(package) = frame.packages.get(id) else {
+                continue;
+            };
+            if !self.may_retry(package, worker) {
+                continue;
+            }
+            let split = if package.cost > split_factor * target {
+                frame.cut(package.range.clone(), target)
+            } else {
+                package.range.end
+            };
+            return Some(Pick::Queued { index, split });
+        }
+        if frame.next_fresh < frame.items.len() {
+            let end = frame.cut(frame.next_fresh..frame.items.len(), target);
+            return Some(Pick::Fresh { end });
+        }
+        if !frame.queue.is_empty() {
+            return None;
+        }
+        let policy = self.config.straggler.as_ref()?;
+        self.running_packages()
+            .filter(|(_, p)| may_duplicate(p, worker))
+            .filter(|(_, p)| straggler_deadline(p, policy) <= self.now)
+            .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
+            .map(|(&id, _)| Pick::Duplicate(id))
+    }
+
+    /// A worker retries a package it failed only when every worker that may
+    /// work on the job failed it too.
+    fn may_retry(&self, package: &Package, worker: WorkerId) -> bool {
+        if !package.failed_on(worker) {
+            return true;
+        }
+        let Some(job) = &self.running else {
+            return false;
+        };
+        self.workers
+            .iter()
+            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
+            .all(|(&id, _)| package.failed_on(id))
+    }
+
+    /// The cost of the next package for `worker` (see
+    /// [`PackageSizing`](crate::PackageSizing)).
+    fn target_cost(&self, worker: WorkerId) -> f64 {
+        let Some(job) = &self.running else {
+            return 0.0;
+        };
+        let prior = self.prior_rate_per_thread();
+        let total_rate: f64 = self
+            .workers
+            .iter()
+            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
+            .map(|(_, w)| w.rate_or(prior))
+            .sum();
+        let sizing = &self.config.sizing;
+        let k = if sizing.guided_factor >= 1.0 {
+            sizing.guided_factor
+        } else {
+            1.0
+        };
+        let seconds = job.frame.unassigned_cost() / (k * total_rate);
+        let min = sizing.min_duration.as_secs_f64();
+        let max = sizing.max_duration.as_secs_f64().max(min);
+        let seconds = if seconds.is_nan() {
+            max
+        } else {
+            seconds.clamp(min, max)
+        };
+        seconds * self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+    }
+
+    /// The worker's rate (see [`Worker::rate_or`]).
+    fn rate_of(&self, worker: WorkerId) -> f64 {
+        let prior = self.prior_rate_per_thread();
+        self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+    }
+
+    /// The rate per thread assumed for a worker before its first result: the
+    /// mean over the measured connected workers, else the configured one.
+    fn prior_rate_per_thread(&self) -> f64 {
+        let (sum, count) = self
+            .workers
+            .values()
+            .filter(|v| v.connected)
+            .filter_map(|v| v.rate.map(|r| r / f64::from(v.threads)))
+            .fold((0.0, 0), |(sum, count), r| (sum + r, count + 1));
+        let initial = self.config.estimation.initial_rate_per_thread;
+        if count > 0 {
+            sum / f64::from(count)
+        } else if initial.is_finite() && initial > 0.0 {
+            initial
+        } else {
+            1.0
+        }
+    }
+
+    /// The packages that run now, by id.
+    fn running_packages(&self) -> impl Iterator<Item = (&PackageId, &Package)> {
+        let running: BTreeSet<&PackageId> =
+            self.workers.values().flat_map(|w| &w.running).collect();
+        let packages = self.running.as_ref().map(|job| &job.frame.packages);
+        running
+            .into_iter()
+            .filter_map(move |id| Some((id, packages?.get(id)?)))
+    }
+
+    /// The earliest moment a running package becomes a straggler that a
+    /// waiting worker could take; `None` while work is left to hand out.
+    fn straggler_deadline(&self) -> Option<Duration> {
+        let policy = self.config.straggler.as_ref()?;
+        let job = self.running.as_ref()?;
+        if job.frame.has_unassigned() {
+            return None;
+        }
+        let takers: Vec<WorkerId> = self
+            .waiting
+            .iter()
+            .copied()
+            .filter(|w| !job.blocklist.contains(w))
+            .collect();
+        self.running_packages()
+            .filter(|(_, p)| takers.iter().any(|&w| may_duplicate(p, w)))
+            .map(|(_, p)| straggler_deadline(p, policy))
+            .min()
+    }
+
+    // ----- Transitions -----
+
+    /// Hands `pick` to `worker`: (new) → Assigned, Queued → Assigned, or
+    /// Assigned → Duplicated; the worker goes Waiting → Busy.
+    fn assign(&mut self, worker: WorkerId, pick: Pick) {
+        let now = self.now;
+        let rate = self.rate_of(worker);
+        let Some(job) = &mut self.running else {
+            return;
+        };
+        let frame = &mut job.frame;
+        let attempt_for = |cost: f64| Attempt {
+            worker,
+            assigned_at: now,
+            expected: seconds(cost / rate),
+        };
+        let (id, range, cost, duplicate) = match pick {
+            Pick::Fresh { end } => {
+                let id = PackageId(self.next_package);
+                self.next_package += 1;
+                let range = frame.next_fresh..end;
+                let cost = frame.cost(range.clone());
+                frame.next_fresh = end;
+                let package = Package::assigned(range.clone(), cost, attempt_for(cost), Vec::new());
+                frame.packages.insert(id, package);
+                (id, range, cost, false)
+            }
+            Pick::Queued { index, split } => {
+                let Some(&queued) = frame.queue.get(index) else {
+                    return;
+                };
+                let Some(package) = frame.packages.get(&queued) else {
+                    return;
+                };
+                if split < package.range.end {
+                    // The first part becomes a new package; the rest stays
+                    // queued under its id, both keep the failure history.
+                    let id = PackageId(self.next_package);
+                    self.next_package += 1;
+                    let head = package.range.start..split;
+                    let tail = split..package.range.end;
+                    let failures = package.failures.clone();
+                    let (head_cost, tail_cost) =
+                        (frame.cost(head.clone()), frame.cost(tail.clone()));
+                    if let Some(package) = frame.packages.get_mut(&queued) {
+                        package.range = tail;
+                        package.cost = tail_cost;
+                    }
+                    let package = Package::assigned(
+                        head.clone(),
+                        head_cost,
+                        attempt_for(head_cost),
+                        failures,
+                    );
+                    frame.packages.insert(id, package);
+                    (id, head, head_cost, false)
+                } else {
+                    frame.queue.remove(index);
+                    let Some(package) = frame.packages.get_mut(&queued) else {
+                        return;
+                    };
+                    package.set_state(PackageState::Assigned);
+                    package.attempts.push(attempt_for(package.cost));
+                    (queued, package.range.clone(), package.cost, false)
+                }
+            }
+            Pick::Duplicate(id) => {
+                let Some(package) = frame.packages.get_mut(&id) else {
+                    return;
+                };
+                package.set_state(PackageState::Duplicated);
+                package.attempts.push(attempt_for(package.cost));
+                frame.stats.duplicates += 1;
+                (id, package.range.clone(), package.cost, true)
+            }
+        };
+        frame.started.get_or_insert(now);
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.running.insert(id);
+            w.wants_work = false;
+        }
+        self.assignments.push_back(Assignment {
+            worker,
+            package: id,
+            job: job.id,
+            frame: frame.index,
+            items: frame.items[range].to_vec(),
+            estimated_cost: cost,
+            expected: seconds(cost / rate),
+            duplicate,
+        });
+    }
+
+    /// Accepts a result: Assigned or Duplicated → Done, the other copy (if
+    /// any) is cancelled; the worker goes Busy → Idle when it runs nothing
+    /// else. Completes the frame when it was the last package.
+    fn complete(&mut self, worker: WorkerId, id: PackageId, measure: &PackageMeasure) {
+        let now = self.now;
+        let smoothing = self.config.estimation.rate_smoothing;
+        let Some(job) = &mut self.running else {
+            return;
+        };
+        let frame = &mut job.frame;
+        let Some(package) = frame.packages.get_mut(&id) else {
+            return;
+        };
+        let Some(index) = package.attempt_of(worker) else {
+            return;
+        };
+        let attempt = package.attempts.remove(index);
+        let losers = std::mem::take(&mut package.attempts);
+        package.set_state(PackageState::Done);
+        package.completed_by = Some(worker);
+        let range = package.range.clone();
+        let cost = package.cost;
+
+        let busy = measure.busy.as_secs_f64();
+        let weights = split_weights(measure, frame, range.clone());
+        let weight_sum: f64 = weights.iter().sum();
+        for (position, weight) in range.clone().zip(weights) {
+            debug_assert!(!frame.done[position], "position {position} done twice");
+            frame.done[position] = true;
+            frame.measured[position] = busy * weight / weight_sum;
+        }
+        frame.done_count += range.len();
+        frame.stats.packages += 1;
+        let stats = frame
+            .worker_stats
+            .entry(worker)
+            .or_insert_with(|| WorkerFrameStats {
+                worker,
+                busy: Duration::ZERO,
+                packages: 0,
+                items: 0,
+                estimated_cost: 0.0,
+                rays: 0,
+                bytes_in: 0,
+                bytes_out: 0,
+            });
+        stats.busy += measure.busy;
+        stats.packages += 1;
+        stats.items += u32::try_from(range.len()).unwrap_or(u32::MAX);
+        stats.estimated_cost += cost;
+        stats.rays += measure.rays;
+        stats.bytes_in += measure.bytes_in;
+        stats.bytes_out += measure.bytes_out;
+
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.running.remove(&id);
+            w.packages_done += 1;
+            w.items_done += range.len() as u64;
+            w.busy += measure.busy;
+            let elapsed = now.saturating_sub(attempt.assigned_at).as_secs_f64();
+            w.rate = smooth(w.rate, cost / elapsed, smoothing);
+            let compute_rate = cost / busy;
+            if compute_rate.is_finite() && compute_rate > 0.0 {
+                if w.compute_samples.len() == COMPUTE_SAMPLES {
+                    w.compute_samples.pop_front();
+                }
+                w.compute_samples.push_back(compute_rate);
+            }
+        }
+        for loser in losers {
+            self.cancel_losing_copy(id, cost, loser);
+        }
+    }
+
+    /// The other copy of a package that just completed is cancelled. That it
+    /// had not finished is news about its worker: its rate is at most
+    /// `cost / elapsed`.
+    fn cancel_losing_copy(&mut self, id: PackageId, cost: f64, loser: Attempt) {
+        let bound = cost / self.now.saturating_sub(loser.assigned_at).as_secs_f64();
+        let rate = self.rate_of(loser.worker);
+        if let Some(w) = self.workers.get_mut(&loser.worker) {
+            w.running.remove(&id);
+            if bound.is_finite() && bound > 0.0 && bound < rate {
+                w.rate = Some(bound);
+            }
+        }
+        if let Some(job) = &mut self.running {
+            job.frame.stats.cancelled_copies += 1;
+        }
+        self.events.push_back(Event::PackageCancelled {
+            worker: loser.worker,
+            package: id,
+        });
+    }
+
+    /// A copy failed: Assigned → Queued (retry, at the front), Duplicated →
+    /// Assigned (the other copy runs on), or Assigned → Failed when the
+    /// package failed on enough different workers, which fails the job. The
+    /// worker is blocklisted for the job after enough failures.
+    fn fail_attempt(&mut self, worker: WorkerId, id: PackageId, error: String) {
+        let retry = self.config.retry.clone();
+        let Some(job) = &mut self.running else {
+            return;
+        };
+        let Some(package) = job.frame.packages.get_mut(&id) else {
+            return;
+        };
+        let Some(index) = package.attempt_of(worker) else {
+            return;
+        };
+        package.attempts.remove(index);
+        package.failures.push((worker, error.clone()));
+        job.errors.push((worker, error));
+        job.frame.stats.failures += 1;
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.running.remove(&id);
+            w.failures += 1;
+        }
+        let count = job.failures_by_worker.entry(worker).or_insert(0);
+        *count += 1;
+        if *count >= retry.worker_failures_per_job && job.blocklist.insert(worker) {
+            self.events.push_back(Event::WorkerBlocklisted {
+                worker,
+                job: job.id,
+            });
+        }
+        if !package.attempts.is_empty() {
+            package.set_state(PackageState::Assigned);
+        } else if package.failed_workers() >= retry.package_failures as usize {
+            package.set_state(PackageState::Failed);
+            let errors = package.failures.clone();
+            self.fail_job(JobFailure::PackageFailed(id), errors);
+        } else {
+            package.set_state(PackageState::Queued);
+            job.frame.queue.push_front(id);
+        }
+    }
+
+    /// The worker left or timed out: Idle, Waiting or Busy → Gone. Each
+    /// package it ran goes Assigned → Queued (to the front of the queue, in
+    /// item order) or Duplicated → Assigned.
+    fn lose(&mut self, worker: WorkerId, cause: LossCause) {
+        let Some(w) = self.workers.get_mut(&worker) else {
+            return;
+        };
+        w.connected = false;
+        w.wants_work = false;
+        let running = std::mem::take(&mut w.running);
+        self.waiting.retain(|&x| x != worker);
+        let mut requeued: Vec<(usize, PackageId)> = Vec::new();
+        if let Some(job) = &mut self.running {
+            let frame = &mut job.frame;
+            for id in running {
+                let Some(package) = frame.packages.get_mut(&id) else {
+                    continue;
+                };
+                if let Some(index) = package.attempt_of(worker) {
+                    package.attempts.remove(index);
+                }
+                if package.attempts.is_empty() {
+                    package.set_state(PackageState::Queued);
+                    requeued.push((package.range.start, id));
+                } else {
+                    package.set_state(PackageState::Assigned);
+                }
+            }
+            requeued.sort_unstable();
+            for &(_, id) in requeued.iter().rev() {
+                frame.queue.push_front(id);
+            }
+            frame.stats.requeued += u32::try_from(requeued.len()).unwrap_or(u32::MAX);
+        }
+        self.events.push_back(Event::WorkerLost {
+            worker,
+            cause,
+            requeued: requeued.into_iter().map(|(_, id)| id).collect(),
+        });
+    }
+
+    /// Fails the running job: its packages are cancelled, then
+    /// [`Event::JobFailed`].
+    fn fail_job(&mut self, reason: JobFailure, errors: Vec<(WorkerId, String)>) {
+        if let Some(job) = self.abandon_running_job() {
+            self.events.push_back(Event::JobFailed {
+                job,
+                reason,
+                errors,
+            });
+        }
+    }
+
+    /// Ends the running job: every package not final goes → Cancelled, with
+    /// [`Event::PackageCancelled`] for each copy that runs.
+    fn abandon_running_job(&mut self) -> Option<JobId> {
+        let mut job = self.running.take()?;
+        for (&id, package) in &mut job.frame.packages {
+            if package.state().is_final() {
+                continue;
+            }
+            for attempt in std::mem::take(&mut package.attempts) {
+                if let Some(w) = self.workers.get_mut(&attempt.worker) {
+                    w.running.remove(&id);
+                }
+                self.events.push_back(Event::PackageCancelled {
+                    worker: attempt.worker,
+                    package: id,
+                });
+            }
+            package.set_state(PackageState::Cancelled);
+        }
+        Some(job.id)
+    }
+}
+
+impl Worker {
+    /// Its measured rate, or before its first result `prior_per_thread`
+    /// times its threads.
+    fn rate_or(&self, prior_per_thread: f64) -> f64 {
+        self.rate
+            .unwrap_or(prior_per_thread * f64::from(self.threads))
+    }
+
+    /// The median of its recent per-package compute rates. A package whose
+    /// cost was misestimated (a hot spot in the first frame) gives an outlier
+    /// that the median ignores, so that the worker's speed is not confused
+    /// with the cost of the items it happened to get.
+    fn compute_rate(&self) -> Option<f64> {
+        let mut samples: Vec<f64> = self.compute_samples.iter().copied().collect();
+        if samples.is_empty() {
+            return None;
+        }
+        samples.sort_by(f64::total_cmp);
+        let middle = samples.len() / 2;
+        Some(if samples.len() % 2 == 0 {
+            (samples[middle - 1] + samples[middle]) / 2.0
+        } else {
+            samples[middle]
+        })
+    }
+
+    fn state(&self) -> WorkerState {
+        if !self.connected {
+            WorkerState::Gone
+        } else if self.wants_work {
+            WorkerState::Waiting
+        } else if !self.running.is_empty() {
+            WorkerState::Busy
+        } else {
+            WorkerState::Idle
+        }
+    }
+}
+
+/// Whether `worker` may run a second copy of `package`.
+fn may_duplicate(package: &Package, worker: WorkerId) -> bool {
+    package.state() == PackageState::Assigned
+        && package.attempt_of(worker).is_none()
+        && !package.failed_on(worker)
+}
+
+/// When the running copy of an assigned package becomes a straggler.
+fn straggler_deadline(package: &Package, policy: &StragglerPolicy) -> Duration {
+    let Some(attempt) = package.attempts.first() else {
+        return Duration::MAX;
+    };
+    let wait = seconds(attempt.expected.as_secs_f64() * policy.factor).max(policy.min_delay);
+    attempt.assigned_at.saturating_add(wait)
+}
+
+/// How a package's busy time splits over its items: the worker's split when
+/// it is usable, else the estimates.
+fn split_weights(measure: &PackageMeasure, frame: &Frame, range: Range<usize>) -> Vec<f64> {
+    let reported = &measure.item_seconds;
+    let usable = reported.len() == range.len()
+        && reported.iter().all(|s| s.is_finite() && *s >= 0.0)
+        && reported.iter().sum::<f64>() > 0.0;
+    if usable {
+        reported.clone()
+    } else {
+        range.map(|position| frame.estimate(position)).collect()
+    }
+}
+
+/// Exponential smoothing; the first observation is taken as it is, and
+/// observations that are not a positive number are ignored.
+fn smooth(old: Option<f64>, observed: f64, weight: f64) -> Option<f64> {
+    if !(observed.is_finite() && observed > 0.0) {
+        return old;
+    }
+    let weight = if weight.is_nan() {
+        0.3
+    } else {
+        weight.clamp(0.0, 1.0)
+    };
+    Some(old.map_or(observed, |old| old + weight * (observed - old)))
+}
+
+/// A duration from seconds, 0 for what is not a positive number, capped so
+/// that adding it to a time cannot overflow.
+fn seconds(x: f64) -> Duration {
+    if x.is_nan() || x <= 0.0 {
+        Duration::ZERO
+    } else {
+        Duration::from_secs_f64(x.min(1e9))
+    }
+}

@@ -1,0 +1,801 @@
+//! A simulated farm: the [`Scheduler`] with N simulated workers, in-memory
+//! message delivery and a virtual clock that jumps to the next event (a
+//! message arriving, a package finishing, a heartbeat, a scheduler deadline).
+//! Like quinn's test `Pair`, it runs fault scenarios in milliseconds without
+//! sockets or sleeps, and it is what `vtfarm bench simulate` runs.
+//!
+//! Model: every item has a true cost in seconds on a worker of speed 1. A
+//! worker computes one package at a time, taking its fixed overhead plus the
+//! items' true cost divided by its speed (a slowdown divides the speed from a
+//! given time on, also mid-package). A message takes the link latency plus
+//! its size over the link bandwidth; assignments carry a few bytes per item,
+//! results [`SimConfig::result_bytes_per_item`] per item. A worker asks for
+//! work when it joins and, piggybacked on each result, whenever it runs out.
+//! The master side is instantaneous.
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::time::Duration;
+
+use crate::{
+    Assignment, Counters, Event, FrameStats, FrameWork, JobId, LossCause, PackageId,
+    PackageMeasure, Scheduler, SchedulerConfig, WorkerId,
+};
+
+/// Settings of a simulation.
+#[derive(Clone, Debug)]
+pub struct SimConfig {
+    pub scheduler: SchedulerConfig,
+    /// How often a live worker sends a heartbeat. Default 1 s.
+    pub heartbeat_interval: Duration,
+    /// Bytes of every message besides its items. Default 64.
+    pub header_bytes: u64,
+    /// Assignment bytes per item (a triangle id). Default 4.
+    pub assignment_bytes_per_item: u64,
+    /// Result bytes per item (a triangle's pixels). Default 2048.
+    pub result_bytes_per_item: u64,
+    /// Rays per second of work at speed 1, for the statistics. Default 10⁶.
+    pub rays_per_second: f64,
+    /// [`Simulation::drive`] gives up at this virtual time. Default 1 hour.
+    pub time_limit: Duration,
+    /// Check the scheduler's invariants after every step and record
+    /// violations in [`SimReport::violations`]. Default off (it costs time
+    /// linear in the frame per step).
+    pub validate: bool,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            scheduler: SchedulerConfig::default(),
+            heartbeat_interval: Duration::from_secs(1),
+            header_bytes: 64,
+            assignment_bytes_per_item: 4,
+            result_bytes_per_item: 2048,
+            rays_per_second: 1e6,
+            time_limit: Duration::from_secs(3600),
+            validate: false,
+        }
+    }
+}
+
+/// One simulated worker; worker `i` of [`Simulation::new`] is `WorkerId(i)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimWorker {
+    /// Reported to the scheduler (its guess before the first result); the
+    /// speed alone decides how fast the worker computes.
+    pub threads: u32,
+    /// Work per second: an item of true cost `c` takes `c / speed` seconds.
+    pub speed: f64,
+    /// Link bandwidth in bits per second, both ways.
+    pub link_bits_per_second: f64,
+    /// Link latency, both ways.
+    pub latency: Duration,
+    /// Fixed time per package (set-up), counted as busy.
+    pub package_overhead: Duration,
+    /// When it joins.
+    pub join_at: Duration,
+    pub crash: Option<SimCrash>,
+    pub slowdown: Option<SimSlowdown>,
+    pub failures: SimFailures,
+    /// Whether it stops a package when told to; one that does not sends a
+    /// result the master must ignore.
+    pub honours_cancel: bool,
+}
+
+impl SimWorker {
+    /// A single-threaded worker of the given speed on a 100 Mbit/s link with
+    /// 0.2 ms latency and 1 ms overhead per package, joining at time 0.
+    pub fn with_speed(speed: f64) -> SimWorker {
+        SimWorker {
+            threads: 1,
+            speed,
+            link_bits_per_second: 100e6,
+            latency: Duration::from_micros(200),
+            package_overhead: Duration::from_millis(1),
+            join_at: Duration::ZERO,
+            crash: None,
+            slowdown: None,
+            failures: SimFailures::Never,
+            honours_cancel: true,
+        }
+    }
+}
+
+/// A worker crash: it stops computing and sending at `at`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimCrash {
+    pub at: Duration,
+    /// Whether the master's driver notices the dropped connection (then the
+    /// scheduler hears `worker_left` one latency later); otherwise only the
+    /// heartbeat timeout finds out.
+    pub noticed: bool,
+}
+
+/// From `at` on, the worker computes `factor` times slower.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimSlowdown {
+    pub at: Duration,
+    pub factor: f64,
+}
+
+/// Which packages a worker fails (after its package overhead).
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimFailures {
+    Never,
+    Always,
+    /// Its first `n` packages.
+    FirstPackages(u32),
+    /// Every package that contains one of these items.
+    Items(Vec<u32>),
+}
+
+/// A job to simulate: its frames with the true cost of every item.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimJob {
+    pub id: JobId,
+    pub submit_at: Duration,
+    pub frames: Vec<SimFrame>,
+}
+
+/// One frame: items in Morton order and their true costs (seconds at speed 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimFrame {
+    pub items: Vec<u32>,
+    pub costs: Vec<f64>,
+}
+
+/// What a simulation produced.
+#[derive(Clone, Debug, Default)]
+pub struct SimReport {
+    /// Every scheduler event with the virtual time it came out.
+    pub events: Vec<(Duration, Event)>,
+    /// Every completed frame, in order.
+    pub frames: Vec<SimFrameReport>,
+    /// Every package handed out, with the virtual time.
+    pub assignments: Vec<(Duration, Assignment)>,
+    /// Whether every submitted job ended (complete, failed or cancelled).
+    pub finished: bool,
+    /// Virtual time when the simulation stopped.
+    pub end: Duration,
+    /// The scheduler's counters of ignored results at the end.
+    pub counters: Counters,
+    /// Inputs the scheduler refused, with the time (late results included).
+    pub refusals: Vec<(Duration, String)>,
+    /// Broken scheduler invariants (with [`SimConfig::validate`]); a
+    /// non-empty list is a bug.
+    pub violations: Vec<String>,
+}
+
+/// A completed frame as the simulation saw it.
+#[derive(Clone, Debug)]
+pub struct SimFrameReport {
+    pub job: JobId,
+    pub frame: u32,
+    /// When it completed.
+    pub at: Duration,
+    pub stats: FrameStats,
+    /// True cost of the items each worker's accepted results covered.
+    pub true_cost: BTreeMap<WorkerId, f64>,
+    /// How many accepted results covered each item (1 for each, if correct).
+    pub completions: BTreeMap<u32, u32>,
+}
+
+/// The simulation: scheduler, workers, clock and messages in flight.
+#[derive(Debug)]
+pub struct Simulation {
+    config: SimConfig,
+    scheduler: Scheduler,
+    now: Duration,
+    workers: Vec<WorkerSim>,
+    /// True costs of each frame of each submitted job.
+    costs: BTreeMap<JobId, Vec<BTreeMap<u32, f64>>>,
+    /// Jobs submitted to the simulation that have not ended.
+    open_jobs: BTreeSet<JobId>,
+    /// Pending events by time, then by the order they were scheduled.
+    pending: BTreeMap<(Duration, u64), SimEvent>,
+    sequence: u64,
+    /// Accepted results of frames not complete yet.
+    tallies: BTreeMap<(JobId, u32), Tally>,
+    report: SimReport,
+}
+
+#[derive(Debug)]
+struct WorkerSim {
+    id: WorkerId,
+    spec: SimWorker,
+    alive: bool,
+    inbox: VecDeque<Assignment>,
+    current: Option<Computing>,
+    /// Tells a finish event of the current package from a stale one.
+    token: u64,
+    started: u32,
+}
+
+#[derive(Debug)]
+struct Computing {
+    assignment: Assignment,
+    token: u64,
+    started_at: Duration,
+    work: f64,
+    fails: bool,
+}
+
+#[derive(Debug, Default)]
+struct Tally {
+    true_cost: BTreeMap<WorkerId, f64>,
+    completions: BTreeMap<u32, u32>,
+}
+
+#[derive(Debug)]
+enum SimEvent {
+    Submit(SimJob),
+    Join(usize),
+    Crash(usize),
+    HeartbeatTick(usize),
+    ComputeEnd { worker: usize, token: u64 },
+    ToWorker(usize, ToWorker),
+    ToMaster(usize, ToMaster),
+}
+
+#[derive(Debug)]
+enum ToWorker {
+    Assign(Assignment),
+    Cancel(PackageId),
+}
+
+#[derive(Debug)]
+enum ToMaster {
+    Request,
+    Heartbeat,
+    Left,
+    Done {
+        assignment: Assignment,
+        measure: PackageMeasure,
+        true_cost: f64,
+    },
+    Failed {
+        package: PackageId,
+        error: String,
+    },
+}
+
+/// Consecutive steps without the clock moving after which the simulation
+/// reports a livelock instead of spinning.
+const MAX_STEPS_AT_ONE_TIME: u32 = 1_000_000;
+
+impl Simulation {
+    pub fn new(config: SimConfig, workers: Vec<SimWorker>) -> Simulation {
+        let scheduler = Scheduler::new(config.scheduler.clone());
+        let mut simulation = Simulation {
+            config,
+            scheduler,
+            now: Duration::ZERO,
+            workers: Vec::with_capacity(workers.len()),
+            costs: BTreeMap::new(),
+            open_jobs: BTreeSet::new(),
+            pending: BTreeMap::new(),
+            sequence: 0,
+            tallies: BTreeMap::new(),
+            report: SimReport::default(),
+        };
+        for (index, spec) in workers.into_iter().enumerate() {
+            simulation.schedule(spec.join_at, SimEvent::Join(index));
+            if let Some(crash) = &spec.crash {
+                simulation.schedule(crash.at, SimEvent::Crash(index));
+            }
+            simulation.workers.push(WorkerSim {
+                id: WorkerId(index as u64),
+                spec,
+                alive: true,
+                inbox: VecDeque::new(),
+                current: None,
+                token: 0,
+                started: 0,
+            });
+        }
+        simulation
+    }
+
+    /// Submits a job at its `submit_at` time.
+    pub fn submit(&mut self, job: SimJob) {
+        self.open_jobs.insert(job.id);
+        self.schedule(job.submit_at, SimEvent::Submit(job));
+    }
+
+    /// Runs until every submitted job ended and no result is in flight any
+    /// more, nothing can happen any more, or [`SimConfig::time_limit`].
+    pub fn drive(&mut self) -> &SimReport {
+        self.drive_bounded(self.config.time_limit)
+    }
+
+    /// Runs until every submitted job ended and no result is in flight any
+    /// more, nothing can happen any more, or the next event lies after
+    /// `limit`.
+    pub fn drive_bounded(&mut self, limit: Duration) -> &SimReport {
+        let mut steps_at_this_time = 0;
+        loop {
+            if self.open_jobs.is_empty() {
+                self.report.finished = true;
+                // Let results still in flight arrive (and be refused).
+                if self.quiescent() {
+                    break;
+                }
+            }
+            let Some(next) = self.next_time() else {
+                break;
+            };
+            if next > limit {
+                break;
+            }
+            let before = self.now;
+            self.step();
+            steps_at_this_time = if self.now == before {
+                steps_at_this_time + 1
+            } else {
+                0
+            };
+            if steps_at_this_time > MAX_STEPS_AT_ONE_TIME {
+                self.report
+                    .violations
+                    .push(format!("no progress at {:?}", self.now));
+                break;
+            }
+        }
+        self.report.end = self.now;
+        self.report.counters = self.scheduler.counters();
+        &self.report
+    }
+
+    /// Whether no package is computed, queued at a worker, or in flight.
+    fn quiescent(&self) -> bool {
+        let workers_idle = self
+            .workers
+            .iter()
+            .all(|w| w.current.is_none() && w.inbox.is_empty());
+        let in_flight = self.pending.values().any(|event| {
+            matches!(
+                event,
+                SimEvent::ToWorker(_, ToWorker::Assign(_))
+                    | SimEvent::ToMaster(_, ToMaster::Done { .. } | ToMaster::Failed { .. })
+            )
+        });
+        workers_idle && !in_flight
+    }
+
+    pub fn now(&self) -> Duration {
+        self.now
+    }
+
+    pub fn scheduler(&self) -> &Scheduler {
+        &self.scheduler
+    }
+
+    pub fn report(&self) -> &SimReport {
+        &self.report
+    }
+
+    pub fn into_report(self) -> SimReport {
+        self.report
+    }
+
+    // ----- The event loop -----
+
+    fn schedule(&mut self, at: Duration, event: SimEvent) {
+        self.pending.insert((at, self.sequence), event);
+        self.sequence += 1;
+    }
+
+    fn next_time(&self) -> Option<Duration> {
+        let message = self.pending.first_key_value().map(|(&(at, _), _)| at);
+        let timeout = self.scheduler.poll_timeout();
+        message.into_iter().chain(timeout).min()
+    }
+
+    /// Advances to the next event (a scheduler deadline goes first on a tie)
+    /// and handles it.
+    fn step(&mut self) {
+        let message = self.pending.first_key_value().map(|(&(at, _), _)| at);
+        let timeout = self.scheduler.poll_timeout();
+        let timeout_first = match (message, timeout) {
+            (Some(m), Some(t)) => t <= m,
+            (None, Some(_)) => true,
+            (_, None) => false,
+        };
+        if let (true, Some(t)) = (timeout_first, timeout) {
+            self.timeout(t);
+        } else if let Some(((at, _), event)) = self.pending.pop_first() {
+            self.now = self.now.max(at);
+            self.handle(event);
+        } else {
+            return;
+        }
+        self.drain_outputs();
+        if self.config.validate {
+            if let Err(error) = self.scheduler.validate() {
+                self.report
+                    .violations
+                    .push(format!("{:?}: {error}", self.now));
+            }
+        }
+    }
+
+    fn timeout(&mut self, at: Duration) {
+        self.now = self.now.max(at);
+        self.scheduler.handle_timeout(self.now);
+    }
+
+    fn handle(&mut self, event: SimEvent) {
+        let now = self.now;
+        match event {
+            SimEvent::Submit(job) => {
+                self.costs.insert(
+                    job.id,
+                    job.frames
+                        .iter()
+                        .map(|f| {
+                            f.items
+                                .iter()
+                                .copied()
+                                .zip(f.costs.iter().copied())
+                                .collect()
+                        })
+                        .collect(),
+                );
+                let frames = job
+                    .frames
+                    .into_iter()
+                    .map(|f| FrameWork { items: f.items })
+                    .collect();
+                if let Err(error) = self.scheduler.submit_job(now, job.id, frames) {
+                    self.refused(error.to_string());
+                    self.open_jobs.remove(&job.id);
+                }
+            }
+            SimEvent::Join(index) => {
+                let Some(worker) = self.workers.get(index) else {
+                    return;
+                };
+                if !worker.alive {
+                    return;
+                }
+                let (id, threads) = (worker.id, worker.spec.threads);
+                if let Err(error) = self.scheduler.worker_joined(now, id, threads) {
+                    self.refused(error.to_string());
+                }
+                if let Err(error) = self.scheduler.request_work(now, id) {
+                    self.refused(error.to_string());
+                }
+                let interval = self.config.heartbeat_interval;
+                self.schedule(now + interval, SimEvent::HeartbeatTick(index));
+            }
+            SimEvent::Crash(index) => {
+                let Some(worker) = self.workers.get_mut(index) else {
+                    return;
+                };
+                let noticed = worker.spec.crash.as_ref().is_some_and(|c| c.noticed);
+                let latency = worker.spec.latency;
+                worker.alive = false;
+                worker.current = None;
+                worker.inbox.clear();
+                if noticed {
+                    self.schedule(now + latency, SimEvent::ToMaster(index, ToMaster::Left));
+                }
+            }
+            SimEvent::HeartbeatTick(index) => {
+                let Some(worker) = self.workers.get(index) else {
+                    return;
+                };
+                if worker.alive {
+                    let latency = worker.spec.latency;
+                    self.schedule(
+                        now + latency,
+                        SimEvent::ToMaster(index, ToMaster::Heartbeat),
+                    );
+                    let interval = self.config.heartbeat_interval;
+                    self.schedule(now + interval, SimEvent::HeartbeatTick(index));
+                }
+            }
+            SimEvent::ComputeEnd { worker, token } => self.compute_end(worker, token),
+            SimEvent::ToWorker(index, message) => self.deliver_to_worker(index, message),
+            SimEvent::ToMaster(index, message) => self.deliver_to_master(index, message),
+        }
+    }
+
+    fn deliver_to_master(&mut self, index: usize, message: ToMaster) {
+        let now = self.now;
+        let id = WorkerId(index as u64);
+        let refusal = match message {
+            ToMaster::Request => self
+                .scheduler
+                .request_work(now, id)
+                .err()
+                .map(|e| e.to_string()),
+            ToMaster::Heartbeat => self
+                .scheduler
+                .heartbeat(now, id)
+                .err()
+                .map(|e| e.to_string()),
+            ToMaster::Left => self
+                .scheduler
+                .worker_left(now, id)
+                .err()
+                .map(|e| e.to_string()),
+            ToMaster::Failed { package, error } => self
+                .scheduler
+                .package_failed(now, id, package, error)
+                .err()
+                .map(|e| e.to_string()),
+            ToMaster::Done {
+                assignment,
+                measure,
+                true_cost,
+            } => match self
+                .scheduler
+                .package_done(now, id, assignment.package, measure)
+            {
+                Ok(()) => {
+                    let tally = self
+                        .tallies
+                        .entry((assignment.job, assignment.frame))
+                        .or_default();
+                    *tally.true_cost.entry(id).or_insert(0.0) += true_cost;
+                    for item in assignment.items {
+                        *tally.completions.entry(item).or_insert(0) += 1;
+                    }
+                    None
+                }
+                Err(error) => Some(error.to_string()),
+            },
+        };
+        if let Some(refusal) = refusal {
+            self.refused(refusal);
+        }
+    }
+
+    fn deliver_to_worker(&mut self, index: usize, message: ToWorker) {
+        let Some(worker) = self.workers.get_mut(index) else {
+            return;
+        };
+        if !worker.alive {
+            return;
+        }
+        match message {
+            ToWorker::Assign(assignment) => {
+                worker.inbox.push_back(assignment);
+                if worker.current.is_none() {
+                    self.start_next(index);
+                }
+            }
+            ToWorker::Cancel(package) => {
+                worker.inbox.retain(|a| a.package != package);
+                let running = worker
+                    .current
+                    .as_ref()
+                    .is_some_and(|c| c.assignment.package == package);
+                if running && worker.spec.honours_cancel {
+                    worker.current = None;
+                    if worker.inbox.is_empty() {
+                        let latency = worker.spec.latency;
+                        self.schedule(
+                            self.now + latency,
+                            SimEvent::ToMaster(index, ToMaster::Request),
+                        );
+                    } else {
+                        self.start_next(index);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Starts the next package in the worker's inbox, if any.
+    fn start_next(&mut self, index: usize) {
+        let now = self.now;
+        let Some(worker) = self.workers.get_mut(index) else {
+            return;
+        };
+        let Some(assignment) = worker.inbox.pop_front() else {
+            return;
+        };
+        let costs = self
+            .costs
+            .get(&assignment.job)
+            .and_then(|frames| frames.get(assignment.frame as usize));
+        let work: f64 = assignment
+            .items
+            .iter()
+            .map(|item| costs.and_then(|c| c.get(item)).copied().unwrap_or(0.0))
+            .sum();
+        let fails = match &worker.spec.failures {
+            SimFailures::Never => false,
+            SimFailures::Always => true,
+            SimFailures::FirstPackages(n) => worker.started < *n,
+            SimFailures::Items(items) => assignment.items.iter().any(|i| items.contains(i)),
+        };
+        worker.started += 1;
+        worker.token += 1;
+        let token = worker.token;
+        let compute_from = now + worker.spec.package_overhead;
+        let end = if fails {
+            compute_from
+        } else {
+            finish_time(
+                compute_from,
+                work,
+                worker.spec.speed,
+                worker.spec.slowdown.as_ref(),
+            )
+        };
+        worker.current = Some(Computing {
+            assignment,
+            token,
+            started_at: now,
+            work,
+            fails,
+        });
+        self.schedule(
+            end,
+            SimEvent::ComputeEnd {
+                worker: index,
+                token,
+            },
+        );
+    }
+
+    /// A package finished on a worker: it sends the result (and, when it has
+    /// nothing else, a request for more) and starts its next package.
+    fn compute_end(&mut self, index: usize, token: u64) {
+        let now = self.now;
+        let config = &self.config;
+        let Some(worker) = self.workers.get_mut(index) else {
+            return;
+        };
+        let current = worker.current.take_if(|c| c.token == token);
+        let Some(computing) = current.filter(|_| worker.alive) else {
+            return;
+        };
+        let items = computing.assignment.items.len() as u64;
+        let bytes_in = config.header_bytes + config.assignment_bytes_per_item * items;
+        let bytes_out = config.header_bytes + config.result_bytes_per_item * items;
+        let message = if computing.fails {
+            ToMaster::Failed {
+                package: computing.assignment.package,
+                error: format!("simulated failure on {}", worker.id),
+            }
+        } else {
+            let costs = self
+                .costs
+                .get(&computing.assignment.job)
+                .and_then(|frames| frames.get(computing.assignment.frame as usize));
+            let item_seconds = computing
+                .assignment
+                .items
+                .iter()
+                .map(|item| costs.and_then(|c| c.get(item)).copied().unwrap_or(0.0))
+                .collect();
+            ToMaster::Done {
+                measure: PackageMeasure {
+                    busy: now.saturating_sub(computing.started_at),
+                    item_seconds,
+                    rays: (computing.work * config.rays_per_second) as u64,
+                    bytes_in,
+                    bytes_out,
+                },
+                true_cost: computing.work,
+                assignment: computing.assignment,
+            }
+        };
+        let arrival = now + transfer_time(&worker.spec, bytes_out);
+        let idle = worker.inbox.is_empty();
+        self.schedule(arrival, SimEvent::ToMaster(index, message));
+        if idle {
+            self.schedule(arrival, SimEvent::ToMaster(index, ToMaster::Request));
+        } else {
+            self.start_next(index);
+        }
+    }
+
+    /// Sends the scheduler's assignments and acts on its events as a driver
+    /// would: cancellations go to the worker, a worker lost to a heartbeat
+    /// timeout is disconnected, completed frames are reported.
+    fn drain_outputs(&mut self) {
+        let now = self.now;
+        while let Some(assignment) = self.scheduler.poll_assignment() {
+            let index = assignment.worker.0 as usize;
+            let Some(worker) = self.workers.get(index) else {
+                continue;
+            };
+            let bytes = self.config.header_bytes
+                + self.config.assignment_bytes_per_item * assignment.items.len() as u64;
+            let arrival = now + transfer_time(&worker.spec, bytes);
+            self.report.assignments.push((now, assignment.clone()));
+            self.schedule(
+                arrival,
+                SimEvent::ToWorker(index, ToWorker::Assign(assignment)),
+            );
+        }
+        while let Some(event) = self.scheduler.poll_event() {
+            match &event {
+                Event::PackageCancelled { worker, package } => {
+                    let index = worker.0 as usize;
+                    if let Some(w) = self.workers.get(index) {
+                        let arrival = now + w.spec.latency;
+                        self.schedule(
+                            arrival,
+                            SimEvent::ToWorker(index, ToWorker::Cancel(*package)),
+                        );
+                    }
+                }
+                Event::WorkerLost {
+                    worker,
+                    cause: LossCause::HeartbeatTimeout,
+                    ..
+                } => {
+                    // The driver drops the connection; the worker is done.
+                    if let Some(w) = self.workers.get_mut(worker.0 as usize) {
+                        w.alive = false;
+                        w.current = None;
+                        w.inbox.clear();
+                    }
+                }
+                Event::FrameComplete { job, frame, stats } => {
+                    let tally = self.tallies.remove(&(*job, *frame)).unwrap_or_default();
+                    self.report.frames.push(SimFrameReport {
+                        job: *job,
+                        frame: *frame,
+                        at: now,
+                        stats: stats.clone(),
+                        true_cost: tally.true_cost,
+                        completions: tally.completions,
+                    });
+                }
+                Event::JobComplete { job }
+                | Event::JobFailed { job, .. }
+                | Event::JobCancelled { job } => {
+                    self.open_jobs.remove(job);
+                    self.tallies.retain(|(j, _), _| j != job);
+                }
+                _ => {}
+            }
+            self.report.events.push((now, event));
+        }
+    }
+
+    fn refused(&mut self, refusal: String) {
+        self.report.refusals.push((self.now, refusal));
+    }
+}
+
+/// Latency plus size over bandwidth.
+fn transfer_time(worker: &SimWorker, bytes: u64) -> Duration {
+    let seconds = bytes as f64 * 8.0 / worker.link_bits_per_second;
+    worker.latency + duration(seconds)
+}
+
+/// When `work` (seconds at speed 1) started at `start` ends on a worker of
+/// `speed` that may slow down on the way.
+fn finish_time(start: Duration, work: f64, speed: f64, slowdown: Option<&SimSlowdown>) -> Duration {
+    let speed = if speed > 0.0 { speed } else { 1e-9 };
+    let plain = work / speed;
+    let Some(slowdown) = slowdown.filter(|s| s.factor > 0.0) else {
+        return start + duration(plain);
+    };
+    let (t0, at) = (start.as_secs_f64(), slowdown.at.as_secs_f64());
+    let end = if t0 >= at {
+        t0 + plain * slowdown.factor
+    } else if t0 + plain <= at {
+        t0 + plain
+    } else {
+        at + (work - (at - t0) * speed) / speed * slowdown.factor
+    };
+    duration(end)
+}
+
+/// A duration from seconds, 0 for what is not a positive number.
+fn duration(seconds: f64) -> Duration {
+    if seconds.is_nan() || seconds <= 0.0 {
+        Duration::ZERO
+    } else {
+        Duration::from_secs_f64(seconds.min(1e9))
+    }
+}

@@ -1,0 +1,657 @@
+//! The state machine driven by hand: one test per transition of the tables
+//! in the crate documentation, the sizing and estimation formulas, and the
+//! refusal of bad inputs.
+
+use std::time::Duration;
+
+use vtfarm_scheduler::{
+    Assignment, CancelError, Event, FrameWork, JobFailure, JobId, JoinError, LossCause, PackageId,
+    PackageMeasure, PackageSizing, PackageState, ReportError, Scheduler, SchedulerConfig,
+    SubmitError, WorkerError, WorkerId, WorkerState,
+};
+
+/// A scheduler with a clock, and short names for the inputs.
+struct Farm {
+    s: Scheduler,
+    now: Duration,
+}
+
+const W0: WorkerId = WorkerId(0);
+const W1: WorkerId = WorkerId(1);
+const W2: WorkerId = WorkerId(2);
+const W3: WorkerId = WorkerId(3);
+const JOB: JobId = JobId(7);
+
+impl Farm {
+    fn new() -> Farm {
+        Farm::with(SchedulerConfig::default())
+    }
+
+    fn with(config: SchedulerConfig) -> Farm {
+        Farm {
+            s: Scheduler::new(config),
+            now: Duration::ZERO,
+        }
+    }
+
+    /// A farm with `workers` single-threaded workers and a job of `frames`
+    /// frames of `items` items (ids 100..).
+    fn running(workers: u64, items: u32, frames: usize) -> Farm {
+        let mut farm = Farm::new();
+        for w in 0..workers {
+            farm.join(WorkerId(w));
+        }
+        farm.submit(JOB, items, frames);
+        farm
+    }
+
+    fn at_ms(&mut self, ms: u64) -> &mut Farm {
+        self.now = Duration::from_millis(ms);
+        self
+    }
+
+    fn join(&mut self, w: WorkerId) {
+        self.s.worker_joined(self.now, w, 1).expect("join");
+    }
+
+    fn submit(&mut self, job: JobId, items: u32, frames: usize) {
+        let frame = FrameWork {
+            items: (100..100 + items).collect(),
+        };
+        self.s
+            .submit_job(self.now, job, vec![frame; frames])
+            .expect("submit");
+    }
+
+    /// The worker asks; what it gets now, if anything.
+    fn request(&mut self, w: WorkerId) -> Option<Assignment> {
+        self.s.request_work(self.now, w).expect("request");
+        let mut got = self.assignments();
+        assert!(got.len() <= 1, "{got:?}");
+        got.pop()
+    }
+
+    fn assignments(&mut self) -> Vec<Assignment> {
+        std::iter::from_fn(|| self.s.poll_assignment()).collect()
+    }
+
+    fn events(&mut self) -> Vec<Event> {
+        std::iter::from_fn(|| self.s.poll_event()).collect()
+    }
+
+    /// Reports `a` done by `w`, busy for the time since `now` started.
+    fn done(&mut self, w: WorkerId, a: &Assignment) -> Result<(), ReportError> {
+        let measure = PackageMeasure {
+            busy: Duration::from_millis(10),
+            ..PackageMeasure::default()
+        };
+        self.s.package_done(self.now, w, a.package, measure)
+    }
+
+    fn fail(&mut self, w: WorkerId, a: &Assignment) -> Result<(), ReportError> {
+        self.s
+            .package_failed(self.now, w, a.package, format!("boom on {w}"))
+    }
+
+    fn state(&self, p: PackageId) -> Option<PackageState> {
+        self.s.package_state(p)
+    }
+
+    fn valid(&self) {
+        self.s.validate().expect("invariants");
+    }
+}
+
+// ----- Package transitions -----
+
+#[test]
+fn the_transition_table_in_code_matches_the_documentation() {
+    use PackageState::*;
+    let all = [Queued, Assigned, Duplicated, Done, Failed, Cancelled];
+    let documented = [
+        (Queued, Assigned),
+        (Assigned, Duplicated),
+        (Assigned, Done),
+        (Duplicated, Done),
+        (Assigned, Queued),
+        (Duplicated, Assigned),
+        (Assigned, Failed),
+        (Queued, Cancelled),
+        (Assigned, Cancelled),
+        (Duplicated, Cancelled),
+    ];
+    for from in all {
+        for to in all {
+            assert_eq!(
+                from.may_become(to),
+                documented.contains(&(from, to)),
+                "{from:?} -> {to:?}"
+            );
+        }
+        assert_eq!(from.is_final(), all.iter().all(|&to| !from.may_become(to)));
+    }
+    use WorkerState::*;
+    let workers = [Idle, Waiting, Busy, Gone];
+    let documented = [
+        (Idle, Waiting),
+        (Busy, Waiting),
+        (Waiting, Busy),
+        (Busy, Idle),
+        (Gone, Idle),
+        (Idle, Gone),
+        (Waiting, Gone),
+        (Busy, Gone),
+    ];
+    for from in workers {
+        for to in workers {
+            assert_eq!(from.may_become(to), documented.contains(&(from, to)));
+        }
+    }
+}
+
+#[test]
+fn new_to_assigned_takes_the_first_unassigned_items() {
+    let mut farm = Farm::running(2, 100, 1);
+    let a = farm.request(W0).expect("work");
+    let b = farm.request(W1).expect("work");
+    assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
+    assert_eq!(a.items[0], 100);
+    assert_eq!(
+        b.items[0],
+        *a.items.last().expect("items") + 1,
+        "contiguous runs"
+    );
+    assert!(!a.duplicate && a.job == JOB && a.frame == 0);
+    farm.valid();
+}
+
+#[test]
+fn assigned_to_done_and_the_frame_completes() {
+    let mut farm = Farm::running(1, 1, 1);
+    let a = farm.request(W0).expect("work");
+    assert_eq!(a.items, [100]);
+    farm.at_ms(50);
+    farm.done(W0, &a).expect("accepted");
+    let events = farm.events();
+    assert!(
+        matches!(&events[2], Event::FrameComplete { frame: 0, stats, .. }
+        if stats.items == 1 && stats.packages == 1 && stats.wall == Duration::from_millis(50))
+    );
+    assert_eq!(events[3], Event::JobComplete { job: JOB });
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Idle));
+    farm.valid();
+}
+
+#[test]
+fn assigned_to_queued_when_the_worker_leaves_and_queued_to_assigned() {
+    let mut farm = Farm::running(2, 100, 1);
+    let a = farm.request(W0).expect("work");
+    let _ = farm.events();
+    farm.s.worker_left(farm.now, W0).expect("left");
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    assert_eq!(
+        farm.events(),
+        [Event::WorkerLost {
+            worker: W0,
+            cause: LossCause::Left,
+            requeued: vec![a.package]
+        }]
+    );
+    farm.valid();
+    // The queued package goes first, whole when it is not much bigger than
+    // the taker's target.
+    let b = farm.request(W1).expect("work");
+    assert_eq!((b.package, &b.items), (a.package, &a.items));
+    assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
+    farm.valid();
+}
+
+#[test]
+fn a_big_queued_package_is_split_for_its_taker() {
+    let mut farm = Farm::running(1, 1000, 1);
+    let a = farm.request(W0).expect("work");
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    // W0 measured 100 units/s; W1 with 8 threads is taken for 800 and gets a
+    // large package: 990 / (2 · 900) s at 800 units/s, 440 items.
+    farm.s.worker_joined(farm.now, W1, 8).expect("join");
+    let big = farm.request(W1).expect("work");
+    assert_eq!(big.items.len(), 440);
+    farm.s.worker_left(farm.now, W1).expect("left");
+    // W2 (1 thread) aims at 990 / (2 · 200) s at 100 units/s: 247.5 units,
+    // rounded to 248 items.
+    farm.join(W2);
+    let head = farm.request(W2).expect("work");
+    assert_ne!(head.package, big.package, "the first part is a new package");
+    assert_eq!(head.items[..], big.items[..248]);
+    assert_eq!(farm.state(big.package), Some(PackageState::Queued));
+    farm.valid();
+    // The rest stays queued under the old id and goes next, whole.
+    let tail = farm.request(W0).expect("work");
+    assert_eq!(
+        (tail.package, &tail.items[..]),
+        (big.package, &big.items[248..])
+    );
+    farm.valid();
+}
+
+#[test]
+fn assigned_to_queued_on_a_heartbeat_timeout() {
+    let mut farm = Farm::running(2, 100, 1);
+    let a = farm.request(W0).expect("work");
+    farm.at_ms(5000);
+    farm.s.heartbeat(farm.now, W1).expect("alive");
+    assert_eq!(farm.s.poll_timeout(), Some(Duration::from_secs(10)));
+    farm.s.handle_timeout(Duration::from_secs(10));
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Gone));
+    assert_eq!(farm.s.worker_state(W1), Some(WorkerState::Idle));
+    assert!(farm.events().contains(&Event::WorkerLost {
+        worker: W0,
+        cause: LossCause::HeartbeatTimeout,
+        requeued: vec![a.package]
+    }));
+    assert_eq!(farm.s.poll_timeout(), Some(Duration::from_secs(15)));
+    // Its late result is refused.
+    assert_eq!(farm.done(W0, &a), Err(ReportError::NotConnected(W0)));
+    farm.valid();
+}
+
+/// Two workers; W0 holds the only package of a 1-item frame, W1 waits.
+fn straggling() -> (Farm, Assignment) {
+    let mut farm = Farm::running(2, 1, 1);
+    let a = farm.request(W0).expect("work");
+    assert_eq!(farm.request(W1), None);
+    (farm, a)
+}
+
+#[test]
+fn assigned_to_duplicated_when_a_package_straggles() {
+    let (mut farm, a) = straggling();
+    // Expected 1 s (1 unit at the initial rate of 1 unit/s), straggler at 2×.
+    assert_eq!(a.expected, Duration::from_secs(1));
+    assert_eq!(farm.s.poll_timeout(), Some(Duration::from_secs(2)));
+    farm.s.handle_timeout(Duration::from_millis(1999));
+    assert!(farm.assignments().is_empty());
+    farm.s.handle_timeout(Duration::from_secs(2));
+    let copy = farm.assignments().pop().expect("duplicate");
+    assert_eq!(
+        (copy.worker, copy.package, copy.duplicate),
+        (W1, a.package, true)
+    );
+    assert_eq!(farm.state(a.package), Some(PackageState::Duplicated));
+    farm.valid();
+}
+
+#[test]
+fn duplicated_to_done_cancels_the_other_copy_and_ignores_its_result() {
+    let (mut farm, a) = straggling();
+    farm.s.handle_timeout(Duration::from_secs(2));
+    let copy = farm.assignments().pop().expect("duplicate");
+    let _ = farm.events();
+    farm.at_ms(2500);
+    farm.done(W1, &copy).expect("first result wins");
+    let events = farm.events();
+    assert_eq!(
+        events[0],
+        Event::PackageCancelled {
+            worker: W0,
+            package: a.package
+        }
+    );
+    assert!(matches!(&events[1], Event::FrameComplete { stats, .. }
+        if stats.duplicates == 1 && stats.cancelled_copies == 1));
+    assert_eq!(farm.done(W0, &a), Err(ReportError::Finished(a.package)));
+    assert_eq!(farm.s.counters().results_finished, 1);
+    // W0 did not finish in 2.5 s: its rate is now at most 1 unit / 2.5 s.
+    let w0 = &farm.s.workers()[0];
+    assert_eq!(w0.rate, Some(0.4));
+    farm.valid();
+}
+
+#[test]
+fn duplicated_to_assigned_when_one_copy_is_lost_or_fails() {
+    for lose in [true, false] {
+        let (mut farm, a) = straggling();
+        farm.s.handle_timeout(Duration::from_secs(2));
+        let copy = farm.assignments().pop().expect("duplicate");
+        if lose {
+            farm.s.worker_left(farm.now, W0).expect("left");
+        } else {
+            farm.fail(W1, &copy).expect("failed");
+        }
+        assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
+        farm.valid();
+    }
+}
+
+#[test]
+fn assigned_to_queued_on_failure_and_retried_on_another_worker() {
+    let mut farm = Farm::running(2, 1, 1);
+    let a = farm.request(W0).expect("work");
+    farm.fail(W0, &a).expect("failed");
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    // W0 failed it and W1 has not: W0 waits, W1 gets it.
+    assert_eq!(farm.request(W0), None);
+    let b = farm.request(W1).expect("retry");
+    assert_eq!(b.package, a.package);
+    farm.valid();
+}
+
+#[test]
+fn assigned_to_failed_on_the_third_worker_fails_the_job() {
+    let mut farm = Farm::running(4, 1, 1);
+    farm.submit(JobId(8), 1, 1);
+    let mut errors = Vec::new();
+    for w in [W0, W1, W2] {
+        let a = farm.request(w).expect("retry");
+        farm.fail(w, &a).expect("failed");
+        errors.push((w, format!("boom on {w}")));
+    }
+    let events = farm.events();
+    let failed = events.iter().find_map(|e| match e {
+        Event::JobFailed {
+            job,
+            reason,
+            errors,
+        } => Some((*job, *reason, errors.clone())),
+        _ => None,
+    });
+    assert_eq!(
+        failed,
+        Some((JOB, JobFailure::PackageFailed(PackageId(0)), errors))
+    );
+    // The next job starts and runs.
+    assert!(events.contains(&Event::JobStarted {
+        job: JobId(8),
+        frames: 1
+    }));
+    let next = farm.request(W3).expect("next job");
+    assert_eq!(next.job, JobId(8));
+    farm.valid();
+}
+
+#[test]
+fn cancelling_the_running_job_cancels_its_packages() {
+    let mut farm = Farm::running(2, 100, 2);
+    let a = farm.request(W0).expect("work");
+    let b = farm.request(W1).expect("work");
+    let _ = farm.events();
+    farm.s.cancel_job(farm.now, JOB).expect("cancel");
+    assert_eq!(
+        farm.events(),
+        [
+            Event::PackageCancelled {
+                worker: W0,
+                package: a.package
+            },
+            Event::PackageCancelled {
+                worker: W1,
+                package: b.package
+            },
+            Event::JobCancelled { job: JOB },
+        ]
+    );
+    assert_eq!(farm.done(W0, &a), Err(ReportError::Finished(a.package)));
+    assert_eq!(farm.s.worker_state(W1), Some(WorkerState::Idle));
+    assert_eq!(
+        farm.s.cancel_job(farm.now, JOB),
+        Err(CancelError::UnknownJob(JOB))
+    );
+    farm.valid();
+}
+
+#[test]
+fn cancelling_a_queued_job_removes_it() {
+    let mut farm = Farm::running(1, 10, 1);
+    farm.submit(JobId(8), 10, 1);
+    assert_eq!(farm.s.queue().waiting, [JobId(8)]);
+    farm.s.cancel_job(farm.now, JobId(8)).expect("cancel");
+    assert!(farm.s.queue().waiting.is_empty());
+    assert_eq!(
+        farm.events().last(),
+        Some(&Event::JobCancelled { job: JobId(8) })
+    );
+}
+
+// ----- Worker transitions -----
+
+#[test]
+fn worker_states_follow_the_table() {
+    let mut farm = Farm::new();
+    farm.join(W0);
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Idle));
+    assert_eq!(farm.request(W0), None);
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Waiting));
+    farm.submit(JOB, 100, 1);
+    let a = farm.assignments().pop().expect("work once there is some");
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Busy));
+    // Asking ahead while busy (a pipelining driver).
+    let b = farm.request(W0).expect("second package");
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Busy));
+    farm.done(W0, &a).expect("done");
+    farm.done(W0, &b).expect("done");
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Idle));
+    farm.s.worker_left(farm.now, W0).expect("left");
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Gone));
+    assert_eq!(
+        farm.s.heartbeat(farm.now, W0),
+        Err(WorkerError::NotConnected(W0))
+    );
+    farm.join(W0);
+    assert_eq!(farm.s.worker_state(W0), Some(WorkerState::Idle));
+    assert_eq!(
+        farm.s.worker_joined(farm.now, W0, 4),
+        Err(JoinError::AlreadyConnected(W0))
+    );
+    farm.valid();
+}
+
+// ----- Policy -----
+
+#[test]
+fn package_sizes_follow_guided_self_scheduling() {
+    let mut farm = Farm::running(1, 1000, 1);
+    // Before any measurement: 1 unit/s, target clamped to the 10 s maximum.
+    let a = farm.request(W0).expect("work");
+    assert_eq!(a.items.len(), 10);
+    // Round trip 0.1 s for 10 units: 100 units/s. Target
+    // 990 / (2 · 100) = 4.95 s, so 495 units: half the remaining work.
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    let b = farm.request(W0).expect("work");
+    assert_eq!(b.items.len(), 495);
+    // A new worker with 2 threads starts at 2 × the mean rate per thread:
+    // 200 units/s of a total 300, target 495 / (2 · 300) = 0.825 s, so 165
+    // units.
+    farm.s.worker_joined(farm.now, W1, 2).expect("join");
+    let c = farm.request(W1).expect("work");
+    assert_eq!(c.items.len(), 165);
+    assert_eq!(c.expected, Duration::from_millis(825));
+    farm.valid();
+}
+
+#[test]
+fn packages_are_large_early_and_small_late() {
+    use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
+    let frame = SimFrame {
+        items: (0..2000).collect(),
+        costs: vec![0.005; 2000],
+    };
+    let mut sim = Simulation::new(SimConfig::default(), vec![SimWorker::with_speed(1.0); 4]);
+    sim.submit(SimJob {
+        id: JOB,
+        submit_at: Duration::ZERO,
+        frames: vec![frame; 2],
+    });
+    let report = sim.drive();
+    let sizes: Vec<usize> = report
+        .assignments
+        .iter()
+        .filter(|(_, a)| a.frame == 1)
+        .map(|(_, a)| a.items.len())
+        .collect();
+    println!("package sizes of frame 2: {sizes:?}");
+    // Each round of 4 takes about 1/k = half of the rest, down to the
+    // minimum duration (20 ms = 4 items).
+    assert!(sizes[0] >= 200, "{sizes:?}");
+    assert!(sizes.windows(5).all(|w| w[4] <= w[0]), "{sizes:?}");
+    assert!(
+        sizes[sizes.len() - 4..].iter().all(|&s| s <= 5),
+        "{sizes:?}"
+    );
+}
+
+#[test]
+fn cost_estimates_carry_over_to_the_next_frame() {
+    let config = SchedulerConfig {
+        sizing: PackageSizing {
+            guided_factor: 1.0,
+            max_duration: Duration::from_secs(1000),
+            ..PackageSizing::default()
+        },
+        ..SchedulerConfig::default()
+    };
+    let mut farm = Farm::with(config);
+    farm.join(W0);
+    let frames = vec![
+        FrameWork {
+            items: vec![1, 2, 3, 4],
+        },
+        FrameWork {
+            items: vec![1, 2, 3, 4, 99],
+        },
+    ];
+    farm.s.submit_job(farm.now, JOB, frames).expect("submit");
+    // First frame: uniform, 1 unit per item; the whole frame at 4 units/s.
+    let a = farm.request(W0).expect("work");
+    assert_eq!((a.items.len(), a.estimated_cost), (4, 4.0));
+    farm.at_ms(8000);
+    let measure = PackageMeasure {
+        busy: Duration::from_secs(8),
+        item_seconds: vec![1.0, 1.0, 1.0, 5.0],
+        ..PackageMeasure::default()
+    };
+    farm.s
+        .package_done(farm.now, W0, a.package, measure)
+        .expect("done");
+    // 4 units in 8 busy seconds: 0.5 units/s, so items cost 0.5, 0.5, 0.5
+    // and 2.5; the new item 99 gets their mean, 1.
+    let b = farm.request(W0).expect("work");
+    assert_eq!(b.items, [1, 2, 3, 4, 99]);
+    assert_eq!(b.estimated_cost, 5.0);
+    farm.valid();
+}
+
+// ----- Refusals -----
+
+#[test]
+fn bad_results_are_refused_and_counted() {
+    let mut farm = Farm::running(2, 100, 1);
+    let a = farm.request(W0).expect("work");
+    let unknown = Assignment {
+        package: PackageId(999),
+        ..a.clone()
+    };
+    assert_eq!(
+        farm.done(W0, &unknown),
+        Err(ReportError::UnknownPackage(PackageId(999)))
+    );
+    assert_eq!(
+        farm.done(W1, &a),
+        Err(ReportError::NotAssigned {
+            package: a.package,
+            worker: W1
+        })
+    );
+    assert_eq!(farm.fail(W3, &a), Err(ReportError::NotConnected(W3)));
+    farm.done(W0, &a).expect("done");
+    assert_eq!(farm.done(W0, &a), Err(ReportError::Finished(a.package)));
+    let counters = farm.s.counters();
+    assert_eq!(counters.ignored_results(), 4);
+    assert_eq!(
+        (
+            counters.results_unknown_package,
+            counters.results_not_assigned,
+            counters.results_not_connected,
+            counters.results_finished
+        ),
+        (1, 1, 1, 1)
+    );
+    assert_eq!(
+        farm.s.request_work(farm.now, W3),
+        Err(WorkerError::NotConnected(W3))
+    );
+    farm.valid();
+}
+
+#[test]
+fn job_ids_are_unique_among_queued_and_running_jobs() {
+    let mut farm = Farm::running(0, 10, 1);
+    let twice = farm.s.submit_job(farm.now, JOB, Vec::new());
+    assert_eq!(twice, Err(SubmitError::DuplicateJob(JOB)));
+}
+
+#[test]
+fn empty_jobs_and_frames_complete_at_once() {
+    let mut farm = Farm::new();
+    farm.s
+        .submit_job(farm.now, JobId(1), Vec::new())
+        .expect("submit");
+    farm.s
+        .submit_job(farm.now, JobId(2), vec![FrameWork::default()])
+        .expect("submit");
+    let events = farm.events();
+    assert_eq!(
+        events[..2],
+        [
+            Event::JobStarted {
+                job: JobId(1),
+                frames: 0
+            },
+            Event::JobComplete { job: JobId(1) },
+        ]
+    );
+    assert!(
+        matches!(&events[4], Event::FrameComplete { job: JobId(2), stats, .. } if stats.items == 0)
+    );
+    assert_eq!(events[5], Event::JobComplete { job: JobId(2) });
+    assert!(!farm.s.has_jobs());
+}
+
+#[test]
+fn a_job_waits_while_no_worker_is_connected() {
+    let mut farm = Farm::running(1, 10, 1);
+    farm.s.worker_left(farm.now, W0).expect("left");
+    let events = farm.events();
+    assert!(!events.iter().any(|e| matches!(e, Event::JobFailed { .. })));
+    farm.join(W1);
+    assert!(farm.request(W1).is_some());
+}
+
+#[test]
+fn time_going_backwards_is_read_as_now() {
+    let mut farm = Farm::running(1, 10, 1);
+    farm.at_ms(5000);
+    let a = farm.request(W0).expect("work");
+    farm.at_ms(1000);
+    farm.done(W0, &a).expect("done");
+    farm.valid();
+}
+
+#[test]
+fn status_shows_progress_and_rates() {
+    let mut farm = Farm::running(2, 100, 3);
+    let a = farm.request(W0).expect("work");
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    let queue = farm.s.queue();
+    let progress = queue.running.expect("running");
+    assert_eq!((progress.job, progress.frame, progress.frames), (JOB, 0, 3));
+    assert_eq!((progress.items_done, progress.items_total), (10, 100));
+    let workers = farm.s.workers();
+    assert_eq!(workers[0].packages_done, 1);
+    assert_eq!(workers[0].rate, Some(100.0));
+    assert_eq!(workers[0].compute_rate, Some(1000.0));
+    assert_eq!(workers[1].rate, None);
+}

@@ -1,0 +1,460 @@
+//! Scenarios on the simulated farm: balance, scaling, faults. Every scenario
+//! checks that each item of each completed frame was accepted exactly once
+//! and that the scheduler's invariants held after every step.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use vtfarm_scheduler::sim::{
+    SimConfig, SimCrash, SimFailures, SimJob, SimReport, SimSlowdown, SimWorker, Simulation,
+};
+use vtfarm_scheduler::{Event, JobFailure, JobId, LossCause, WorkerId};
+
+fn checked() -> SimConfig {
+    SimConfig {
+        validate: true,
+        ..SimConfig::default()
+    }
+}
+
+/// Runs `jobs` on `workers` to the end and checks exactly-once completion.
+fn run(config: SimConfig, workers: Vec<SimWorker>, jobs: &[SimJob]) -> SimReport {
+    let mut sim = Simulation::new(config, workers);
+    for job in jobs {
+        sim.submit(job.clone());
+    }
+    sim.drive();
+    let report = sim.into_report();
+    assert!(report.finished, "simulation stalled at {:?}", report.end);
+    assert_exactly_once(&report, jobs);
+    report
+}
+
+fn print_frames(label: &str, report: &SimReport) {
+    for f in &report.frames {
+        println!(
+            "{label} {} frame {}: wall {:>9.3?} speed-up {:>5.2} imbalance {:>5.1}% packages {:>3} duplicates {}",
+            f.job,
+            f.frame,
+            f.stats.wall,
+            f.stats.speedup(),
+            100.0 * f.stats.imbalance(),
+            f.stats.packages,
+            f.stats.duplicates
+        );
+    }
+}
+
+#[test]
+fn scaling_from_1_to_64_workers() {
+    // 600 items of 10 to 30 ms with a 3× hot spot: 13 s on one worker.
+    let frame = uneven_frame(600, 7, 0.01, 200..260, 3.0);
+    let job = repeated_job(1, &frame, 3);
+    let mut last_speedup = 0.0;
+    for workers in [1, 2, 4, 8, 16, 32, 64] {
+        let report = run(
+            checked(),
+            vec![SimWorker::with_speed(1.0); workers],
+            std::slice::from_ref(&job),
+        );
+        let warm = &report.frames[2].stats;
+        println!(
+            "{workers:>2} workers (100 Mbit/s): speed-up {:>5.2}, imbalance {:>4.1}% (frame 3); frame 1: {:>5.2}, {:>4.1}%",
+            warm.speedup(),
+            100.0 * warm.imbalance(),
+            report.frames[0].stats.speedup(),
+            100.0 * report.frames[0].stats.imbalance(),
+        );
+        assert!(warm.speedup() > last_speedup, "speed-up grows with workers");
+        last_speedup = warm.speedup();
+        if workers == 16 {
+            assert!(warm.imbalance() < 0.05, "imbalance {}", warm.imbalance());
+            assert!(warm.speedup() > 14.0, "speed-up {}", warm.speedup());
+        }
+    }
+}
+
+#[test]
+fn heterogeneous_workers_share_the_work_by_speed() {
+    let frame = uneven_frame(600, 11, 0.01, 0..0, 1.0);
+    let job = repeated_job(1, &frame, 3);
+    let speeds = [1.0, 1.0, 3.0];
+    let workers = speeds.iter().map(|&s| SimWorker::with_speed(s)).collect();
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    print_frames("speeds 1,1,3", &report);
+    let last = &report.frames[2];
+    let shares = shares(last);
+    for (i, speed) in speeds.iter().enumerate() {
+        let expected = speed / speeds.iter().sum::<f64>();
+        let share = shares[&WorkerId(i as u64)];
+        assert!(
+            (share - expected).abs() <= 0.1 * expected,
+            "worker {i}: share {share:.3}, expected {expected:.3}"
+        );
+    }
+    assert!(last.stats.imbalance() < 0.1, "{}", last.stats.imbalance());
+}
+
+#[test]
+fn cost_estimates_carry_over_between_frames() {
+    // The last 60 items cost 20 times more: the first frame, estimating every
+    // item alike, hands them out late in small packages that run long; later
+    // frames know them.
+    let frame = uneven_frame(600, 3, 0.01, 270..330, 20.0);
+    let job = repeated_job(1, &frame, 3);
+    let config = SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig {
+            straggler: None,
+            ..Default::default()
+        },
+        ..checked()
+    };
+    let report = run(
+        config,
+        vec![SimWorker::with_speed(1.0); 8],
+        std::slice::from_ref(&job),
+    );
+    print_frames("hot spot", &report);
+    let first = &report.frames[0].stats;
+    let third = &report.frames[2].stats;
+    assert!(
+        third.imbalance() < first.imbalance() / 2.0,
+        "imbalance {} → {}",
+        first.imbalance(),
+        third.imbalance()
+    );
+    assert!(third.wall < first.wall);
+    assert!(third.imbalance() < 0.05, "{}", third.imbalance());
+}
+
+/// A 600-item frame of 10 to 30 ms items: 12 s on one worker.
+fn plain_frame() -> vtfarm_scheduler::sim::SimFrame {
+    uneven_frame(600, 5, 0.01, 0..0, 1.0)
+}
+
+fn lost_events(report: &SimReport) -> Vec<(Duration, WorkerId, LossCause, usize)> {
+    report
+        .events
+        .iter()
+        .filter_map(|(at, e)| match e {
+            Event::WorkerLost {
+                worker,
+                cause,
+                requeued,
+            } => Some((*at, *worker, *cause, requeued.len())),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_crash_mid_frame_requeues_the_packages() {
+    let job = repeated_job(1, &plain_frame(), 2);
+    let mut workers = vec![SimWorker::with_speed(1.0); 4];
+    workers[1].crash = Some(SimCrash {
+        at: Duration::from_millis(1500),
+        noticed: true,
+    });
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    assert_eq!(report.frames.len(), 2);
+    let lost = lost_events(&report);
+    assert_eq!(lost.len(), 1);
+    let (at, worker, cause, requeued) = lost[0];
+    assert_eq!((worker, cause), (WorkerId(1), LossCause::Left));
+    assert!(requeued >= 1 && at < Duration::from_millis(1510));
+    assert!(report.frames[0].stats.requeued >= 1);
+    // Worker 1 contributed nothing accepted after its crash.
+    assert!(!report.frames[1].true_cost.contains_key(&WorkerId(1)));
+}
+
+#[test]
+fn a_silent_crash_is_found_by_the_heartbeat_timeout() {
+    let job = repeated_job(1, &plain_frame(), 2);
+    let mut workers = vec![SimWorker::with_speed(1.0); 4];
+    workers[2].crash = Some(SimCrash {
+        at: Duration::from_millis(1500),
+        noticed: false,
+    });
+    // Without straggler cuts only the timeout brings the package back.
+    let config = SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig {
+            straggler: None,
+            ..Default::default()
+        },
+        ..checked()
+    };
+    let report = run(config, workers, std::slice::from_ref(&job));
+    let lost = lost_events(&report);
+    assert_eq!(lost.len(), 1);
+    let (at, worker, cause, requeued) = lost[0];
+    assert_eq!(
+        (worker, cause, requeued),
+        (WorkerId(2), LossCause::HeartbeatTimeout, 1)
+    );
+    // 10 s after the last message, sent before the crash at 1.5 s.
+    assert!(
+        at > Duration::from_secs(11) && at < Duration::from_millis(11_501),
+        "{at:?}"
+    );
+    assert!(report.frames[0].at > at, "the frame waited for the package");
+    assert_eq!(report.frames.len(), 2);
+}
+
+#[test]
+fn a_straggler_is_duplicated_and_the_late_result_ignored() {
+    let job = repeated_job(1, &plain_frame(), 1);
+    let slow = SimWorker {
+        slowdown: Some(SimSlowdown {
+            at: Duration::from_millis(1500),
+            factor: 20.0,
+        }),
+        honours_cancel: false,
+        ..SimWorker::with_speed(1.0)
+    };
+    let workers = vec![
+        slow,
+        SimWorker::with_speed(1.0),
+        SimWorker::with_speed(1.0),
+        SimWorker::with_speed(1.0),
+    ];
+    let report = run(checked(), workers.clone(), std::slice::from_ref(&job));
+    let stats = &report.frames[0].stats;
+    assert!(stats.duplicates >= 1 && stats.cancelled_copies >= 1);
+    let cancelled_on_slow = report.events.iter().any(
+        |(_, e)| matches!(e, Event::PackageCancelled { worker, .. } if *worker == WorkerId(0)),
+    );
+    assert!(cancelled_on_slow);
+    // Worker 0 ignored the cancel; its result arrived after the frame and was refused.
+    assert!(
+        report.counters.results_finished >= 1,
+        "{:?}",
+        report.counters
+    );
+    assert!(
+        report
+            .refusals
+            .iter()
+            .any(|(at, _)| *at > report.frames[0].at)
+    );
+
+    let without = SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig {
+            straggler: None,
+            ..Default::default()
+        },
+        ..checked()
+    };
+    let waited = run(without, workers, std::slice::from_ref(&job));
+    println!(
+        "20× slowdown at 1.5 s: frame wall {:?} with straggler cut, {:?} without",
+        stats.wall, waited.frames[0].stats.wall
+    );
+    assert!(stats.wall * 2 < waited.frames[0].stats.wall);
+}
+
+fn count<F: Fn(&Event) -> bool>(report: &SimReport, f: F) -> usize {
+    report.events.iter().filter(|(_, e)| f(e)).count()
+}
+
+#[test]
+fn failed_packages_are_retried_on_other_workers() {
+    let job = repeated_job(1, &plain_frame(), 1);
+    let mut workers = vec![SimWorker::with_speed(1.0); 3];
+    workers[2].failures = SimFailures::FirstPackages(2);
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    assert_eq!(report.frames[0].stats.failures, 2);
+    assert_eq!(
+        count(&report, |e| matches!(e, Event::WorkerBlocklisted { .. })),
+        0
+    );
+    assert_eq!(
+        count(&report, |e| matches!(e, Event::JobComplete { .. })),
+        1
+    );
+}
+
+#[test]
+fn three_failures_blocklist_a_worker_for_the_job() {
+    let job = repeated_job(1, &plain_frame(), 2);
+    let mut workers = vec![SimWorker::with_speed(1.0); 3];
+    workers[1].failures = SimFailures::Always;
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    let blocklisted: Vec<&Event> = common::events(&report)
+        .into_iter()
+        .filter(|e| matches!(e, Event::WorkerBlocklisted { .. }))
+        .collect();
+    assert_eq!(
+        blocklisted,
+        [&Event::WorkerBlocklisted {
+            worker: WorkerId(1),
+            job: JobId(1)
+        }]
+    );
+    let status = report_worker_failures(&report);
+    assert_eq!(status, 3, "no work after the blocklist");
+    assert_eq!(
+        count(&report, |e| matches!(e, Event::JobComplete { .. })),
+        1
+    );
+    assert!(!report.frames[1].true_cost.contains_key(&WorkerId(1)));
+}
+
+/// Failed attempts over the whole report.
+fn report_worker_failures(report: &SimReport) -> u32 {
+    report.frames.iter().map(|f| f.stats.failures).sum()
+}
+
+#[test]
+fn a_package_failing_on_three_workers_fails_the_job_and_the_next_job_runs() {
+    let bad = plain_frame();
+    let bad_item = bad.items[300];
+    let mut good = plain_frame();
+    good.items.iter_mut().for_each(|i| *i += 10_000);
+    let jobs = [repeated_job(1, &bad, 1), repeated_job(2, &good, 1)];
+    let mut workers = vec![SimWorker::with_speed(1.0); 4];
+    for w in &mut workers {
+        w.failures = SimFailures::Items(vec![bad_item]);
+    }
+    let report = run(checked(), workers, &jobs);
+    let failed: Vec<&Event> = common::events(&report)
+        .into_iter()
+        .filter(|e| matches!(e, Event::JobFailed { .. }))
+        .collect();
+    assert_eq!(failed.len(), 1);
+    let Event::JobFailed {
+        job,
+        reason,
+        errors,
+    } = failed[0]
+    else {
+        unreachable!()
+    };
+    assert_eq!(*job, JobId(1));
+    assert!(matches!(reason, JobFailure::PackageFailed(_)));
+    let mut workers: Vec<WorkerId> = errors.iter().map(|(w, _)| *w).collect();
+    workers.sort();
+    workers.dedup();
+    assert_eq!((errors.len(), workers.len()), (3, 3), "{errors:?}");
+    assert!(errors.iter().all(|(w, e)| e.contains(&w.to_string())));
+    // Job 1 never completed its frame; job 2 ran after it.
+    assert_eq!(report.frames.len(), 1);
+    assert_eq!(report.frames[0].job, JobId(2));
+    assert_eq!(
+        count(
+            &report,
+            |e| matches!(e, Event::JobComplete { job } if *job == JobId(2))
+        ),
+        1
+    );
+}
+
+#[test]
+fn a_job_fails_when_every_worker_is_blocklisted() {
+    let job = repeated_job(1, &plain_frame(), 1);
+    let mut workers = vec![SimWorker::with_speed(1.0); 2];
+    for w in &mut workers {
+        w.failures = SimFailures::Always;
+    }
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    assert_eq!(
+        count(&report, |e| matches!(e, Event::WorkerBlocklisted { .. })),
+        2
+    );
+    let failure = report.events.iter().find_map(|(_, e)| match e {
+        Event::JobFailed { reason, errors, .. } => Some((*reason, errors.len())),
+        _ => None,
+    });
+    assert_eq!(failure, Some((JobFailure::NoEligibleWorker, 6)));
+}
+
+#[test]
+fn jobs_run_one_after_another_in_submission_order() {
+    let frame = uneven_frame(100, 9, 0.01, 0..0, 1.0);
+    let mut jobs: Vec<SimJob> = [3, 1, 2]
+        .iter()
+        .map(|&id| repeated_job(id, &frame, 2))
+        .collect();
+    jobs[2].submit_at = Duration::from_millis(100);
+    let report = run(checked(), vec![SimWorker::with_speed(1.0); 3], &jobs);
+    let order: Vec<String> = common::events(&report)
+        .into_iter()
+        .filter_map(|e| match e {
+            Event::JobStarted { job, .. } => Some(format!("start {}", job.0)),
+            Event::FrameComplete { job, frame, .. } => Some(format!("frame {}.{frame}", job.0)),
+            Event::JobComplete { job } => Some(format!("end {}", job.0)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "start 3",
+            "frame 3.0",
+            "frame 3.1",
+            "end 3",
+            "start 1",
+            "frame 1.0",
+            "frame 1.1",
+            "end 1",
+            "start 2",
+            "frame 2.0",
+            "frame 2.1",
+            "end 2"
+        ]
+    );
+}
+
+#[test]
+fn a_frame_completes_while_one_worker_remains() {
+    let job = repeated_job(1, &plain_frame(), 2);
+    let mut workers = vec![SimWorker::with_speed(1.0); 4];
+    for (i, w) in workers.iter_mut().enumerate().skip(1) {
+        w.crash = Some(SimCrash {
+            at: Duration::from_millis(500 * i as u64),
+            noticed: i % 2 == 1,
+        });
+    }
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    assert_eq!(report.frames.len(), 2);
+    assert_eq!(lost_events(&report).len(), 3);
+    assert_eq!(
+        report.frames[1]
+            .true_cost
+            .keys()
+            .copied()
+            .collect::<Vec<_>>(),
+        [WorkerId(0)]
+    );
+}
+
+#[test]
+fn a_late_joiner_gets_work_mid_frame() {
+    let job = repeated_job(1, &plain_frame(), 1);
+    let mut workers = vec![SimWorker::with_speed(1.0); 2];
+    workers[1].join_at = Duration::from_secs(2);
+    let report = run(checked(), workers, std::slice::from_ref(&job));
+    let share = shares(&report.frames[0])[&WorkerId(1)];
+    // It joined at 2 s of about 7 s, so it did about 5/12 of the work.
+    assert!(share > 0.3 && share < 0.5, "{share}");
+}
+
+#[test]
+fn a_slow_link_gets_smaller_shares() {
+    // The paper's mix of 10 and 100 Mbit links with large results.
+    let job = repeated_job(1, &plain_frame(), 3);
+    let mut workers = vec![SimWorker::with_speed(1.0); 4];
+    workers[3].link_bits_per_second = 1e6;
+    let config = SimConfig {
+        result_bytes_per_item: 8192,
+        ..checked()
+    };
+    let report = run(config, workers, std::slice::from_ref(&job));
+    print_frames("1 Mbit/s link", &report);
+    let shares = shares(&report.frames[2]);
+    assert!(
+        shares[&WorkerId(3)] < 0.5 * shares[&WorkerId(0)],
+        "{shares:?}"
+    );
+}

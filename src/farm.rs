@@ -1,0 +1,186 @@
+//! The farm commands of the CLI: the embedded master behind `render`,
+//! `submit` and `status` against a running master.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use indicatif::ProgressBar;
+use vtfarm_master::{FinishedFrame, JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_proto::client::{ClientOptions, connect};
+use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
+use vtfarm_render::FrameSetup;
+use vtfarm_scene::Scene;
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_vertex::Quality;
+
+/// Options of `vtfarm submit`.
+#[derive(clap::Args)]
+pub(crate) struct SubmitArgs {
+    /// The job file (TOML).
+    job: PathBuf,
+    /// The cluster file from `vtfarm cluster init`.
+    #[arg(long)]
+    cluster: PathBuf,
+    /// The master's HOST:PORT (default: the cluster file's).
+    #[arg(long)]
+    master: Option<String>,
+    /// Output directory for frame_NNNN.png and stats.json.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Overrides the job's quality level.
+    #[arg(long, value_parser = crate::parse_quality)]
+    quality: Option<Quality>,
+    /// Override the image size.
+    #[arg(long)]
+    width: Option<u32>,
+    #[arg(long)]
+    height: Option<u32>,
+}
+
+/// Options of `vtfarm status`.
+#[derive(clap::Args)]
+pub(crate) struct StatusArgs {
+    /// The cluster file from `vtfarm cluster init`.
+    #[arg(long)]
+    cluster: PathBuf,
+    /// The master's HOST:PORT (default: the cluster file's).
+    #[arg(long)]
+    master: Option<String>,
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the async runtime")
+}
+
+/// Renders one frame through an embedded master with `workers` local workers.
+pub(crate) fn render_embedded(name: &str, scene: &Scene, setup: &FrameSetup, reflectors: &[u32], workers: usize, bar: &ProgressBar) -> Result<FinishedFrame> {
+    runtime()?.block_on(async {
+        let farm = LocalFarm::start(workers, SchedulerConfig::default());
+        let mut link = farm.submitter();
+        let data = SceneData::from_scene(scene);
+        let job = wire_job(name, &data, std::slice::from_ref(setup), reflectors);
+        let frames = run_job(&mut link, job, &data, |event| {
+            if let JobEvent::Progress { done, .. } = event {
+                bar.set_position(done.into());
+            }
+        })
+        .await?;
+        frames.into_iter().next().context("the master returned no frame")
+    })
+}
+
+fn client_options(cluster: &PathBuf, master: &Option<String>) -> Result<ClientOptions> {
+    let config = ClusterConfig::load(cluster)?;
+    Ok(ClientOptions { master: master.clone().unwrap_or(config.master), token: config.token, fingerprint: config.fingerprint })
+}
+
+/// `vtfarm submit`.
+pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
+    let mut job = vtfarm_job::load_job(&args.job)?;
+    if let Some(q) = args.quality {
+        job.vertex.quality = q;
+    }
+    let loaded = job.load_scene()?;
+    let mut camera = loaded.camera;
+    camera.width = args.width.unwrap_or(camera.width);
+    camera.height = args.height.unwrap_or(camera.height);
+    let reflectors = job.reflector_triangles(&loaded.scene)?;
+    let setups: Vec<FrameSetup> = job
+        .frames(&camera)?
+        .into_iter()
+        .map(|camera| FrameSetup { camera, lighting: loaded.lighting.clone(), trace: job.trace, vertex: job.vertex })
+        .collect();
+    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    let options = client_options(&args.cluster, &args.master)?;
+    let name = args.job.file_name().map_or("job".into(), |n| n.to_string_lossy().into_owned());
+    let output = args.output.clone();
+    let frames = runtime()?.block_on(async move {
+        let mut conn = connect(&options, Role::Submitter).await?;
+        let data = SceneData::from_scene(&loaded.scene);
+        let wire = wire_job(&name, &data, &setups, &reflectors);
+        let bar = crate::progress_bar(reflectors.len() as u64, "frame");
+        let result = run_job(&mut conn.link, wire, &data, |event| match event {
+            JobEvent::Accepted { job, frames } => bar.println(format!("job {job} accepted: {frames} frame(s)")),
+            JobEvent::Progress { frame, done, .. } => {
+                bar.set_message(format!("frame {frame}"));
+                bar.set_position(done.into());
+            }
+            JobEvent::FrameDone(f) => {
+                let path = output.join(format!("frame_{:04}.png", f.frame));
+                if let Err(e) = f.image.write_png(&path) {
+                    bar.println(format!("error: {e}"));
+                }
+                bar.println(format!("frame {}: {} ({})", f.frame, path.display(), frame_line(&f.stats)));
+            }
+        })
+        .await;
+        bar.finish_and_clear();
+        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.endpoint.wait_idle().await;
+        anyhow::Ok(result?)
+    })?;
+    let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();
+    let path = args.output.join("stats.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", path.display()))?;
+    for f in &frames {
+        println!("frame {}:", f.frame);
+        print_frame_stats(&f.stats);
+    }
+    println!("wrote {} frame(s) and {} ", frames.len(), path.display());
+    Ok(())
+}
+
+fn frame_line(s: &FrameStats) -> String {
+    format!("{:.3} s, {} packages, imbalance {:.1}%, speed-up {:.2}", s.wall_micros as f64 / 1e6, s.packages, s.imbalance * 100.0, s.speedup)
+}
+
+/// Prints a frame's per-worker table.
+pub(crate) fn print_frame_stats(s: &FrameStats) {
+    println!("  {}", frame_line(s));
+    println!("  {:<24} {:>9} {:>8} {:>9} {:>10} {:>10} {:>10}", "worker", "busy s", "packages", "triangles", "samples", "bytes in", "bytes out");
+    for w in &s.workers {
+        println!(
+            "  {:<24} {:>9.3} {:>8} {:>9} {:>10} {:>10} {:>10}",
+            w.name,
+            w.busy_micros as f64 / 1e6,
+            w.packages,
+            w.triangles,
+            w.rays,
+            w.bytes_in,
+            w.bytes_out
+        );
+    }
+}
+
+/// `vtfarm status`.
+pub(crate) fn status(args: StatusArgs) -> Result<()> {
+    let options = client_options(&args.cluster, &args.master)?;
+    let reply = runtime()?.block_on(async move {
+        let mut conn = connect(&options, Role::Submitter).await?;
+        conn.link.tx.send(Message::StatusRequest).ok().context("connection closed")?;
+        let reply = loop {
+            match conn.link.rx.recv().await {
+                Some(Message::StatusReply(r)) => break r,
+                Some(_) => continue,
+                None => bail!("the master closed the connection"),
+            }
+        };
+        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.endpoint.wait_idle().await;
+        Ok(reply)
+    })?;
+    println!("{:<24} {:<22} {:>7} {:>8} {:>12} {:>9} {:>10} {:>8}", "worker", "address", "threads", "state", "throughput", "packages", "triangles", "failures");
+    for w in &reply.workers {
+        println!(
+            "{:<24} {:<22} {:>7} {:>8} {:>12.1} {:>9} {:>10} {:>8}",
+            w.name, w.address, w.threads, w.state, w.throughput, w.packages_done, w.triangles_done, w.failures
+        );
+    }
+    match &reply.queue.running {
+        Some(r) => println!("running: job {} ({}) frame {}/{}: {}/{} triangles", r.job, r.name, r.frame + 1, r.frames, r.triangles_done, r.triangles_total),
+        None => println!("running: nothing"),
+    }
+    println!("waiting: {} job(s) {:?}", reply.queue.waiting.len(), reply.queue.waiting);
+    println!("scene bytes sent to workers: {}", reply.scene_bytes_sent);
+    Ok(())
+}
