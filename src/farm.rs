@@ -49,11 +49,22 @@ pub(crate) struct StatusArgs {
 }
 
 fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the async runtime")
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
 }
 
 /// Renders one frame through an embedded master with `workers` local workers.
-pub(crate) fn render_embedded(name: &str, scene: &Scene, setup: &FrameSetup, reflectors: &[u32], workers: usize, bar: &ProgressBar) -> Result<FinishedFrame> {
+pub(crate) fn render_embedded(
+    name: &str,
+    scene: &Scene,
+    setup: &FrameSetup,
+    reflectors: &[u32],
+    workers: usize,
+    bar: &ProgressBar,
+) -> Result<FinishedFrame> {
     runtime()?.block_on(async {
         let farm = LocalFarm::start(workers, SchedulerConfig::default());
         let mut link = farm.submitter();
@@ -65,13 +76,20 @@ pub(crate) fn render_embedded(name: &str, scene: &Scene, setup: &FrameSetup, ref
             }
         })
         .await?;
-        frames.into_iter().next().context("the master returned no frame")
+        frames
+            .into_iter()
+            .next()
+            .context("the master returned no frame")
     })
 }
 
 fn client_options(cluster: &PathBuf, master: &Option<String>) -> Result<ClientOptions> {
     let config = ClusterConfig::load(cluster)?;
-    Ok(ClientOptions { master: master.clone().unwrap_or(config.master), token: config.token, fingerprint: config.fingerprint })
+    Ok(ClientOptions {
+        master: master.clone().unwrap_or(config.master),
+        token: config.token,
+        fingerprint: config.fingerprint,
+    })
 }
 
 /// `vtfarm submit`.
@@ -88,11 +106,20 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     let setups: Vec<FrameSetup> = job
         .frames(&camera)?
         .into_iter()
-        .map(|camera| FrameSetup { camera, lighting: loaded.lighting.clone(), trace: job.trace, vertex: job.vertex })
+        .map(|camera| FrameSetup {
+            camera,
+            lighting: loaded.lighting.clone(),
+            trace: job.trace,
+            vertex: job.vertex,
+        })
         .collect();
-    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
     let options = client_options(&args.cluster, &args.master)?;
-    let name = args.job.file_name().map_or("job".into(), |n| n.to_string_lossy().into_owned());
+    let name = args
+        .job
+        .file_name()
+        .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
     let frames = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
@@ -100,7 +127,9 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         let wire = wire_job(&name, &data, &setups, &reflectors);
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
         let result = run_job(&mut conn.link, wire, &data, |event| match event {
-            JobEvent::Accepted { job, frames } => bar.println(format!("job {job} accepted: {frames} frame(s)")),
+            JobEvent::Accepted { job, frames } => {
+                bar.println(format!("job {job} accepted: {frames} frame(s)"))
+            }
             JobEvent::Progress { frame, done, .. } => {
                 bar.set_message(format!("frame {frame}"));
                 bar.set_position(done.into());
@@ -110,7 +139,12 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
                 }
-                bar.println(format!("frame {}: {} ({})", f.frame, path.display(), frame_line(&f.stats)));
+                bar.println(format!(
+                    "frame {}: {} ({})",
+                    f.frame,
+                    path.display(),
+                    frame_line(&f.stats)
+                ));
             }
         })
         .await;
@@ -121,7 +155,8 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     })?;
     let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();
     let path = args.output.join("stats.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&stats)?).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::write(&path, serde_json::to_string_pretty(&stats)?)
+        .with_context(|| format!("writing {}", path.display()))?;
     for f in &frames {
         println!("frame {}:", f.frame);
         print_frame_stats(&f.stats);
@@ -131,13 +166,22 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
 }
 
 fn frame_line(s: &FrameStats) -> String {
-    format!("{:.3} s, {} packages, imbalance {:.1}%, speed-up {:.2}", s.wall_micros as f64 / 1e6, s.packages, s.imbalance * 100.0, s.speedup)
+    format!(
+        "{:.3} s, {} packages, imbalance {:.1}%, speed-up {:.2}",
+        s.wall_micros as f64 / 1e6,
+        s.packages,
+        s.imbalance * 100.0,
+        s.speedup
+    )
 }
 
 /// Prints a frame's per-worker table.
 pub(crate) fn print_frame_stats(s: &FrameStats) {
     println!("  {}", frame_line(s));
-    println!("  {:<24} {:>9} {:>8} {:>9} {:>10} {:>10} {:>10}", "worker", "busy s", "packages", "triangles", "samples", "bytes in", "bytes out");
+    println!(
+        "  {:<24} {:>9} {:>8} {:>9} {:>10} {:>10} {:>10}",
+        "worker", "busy s", "packages", "triangles", "samples", "bytes in", "bytes out"
+    );
     for w in &s.workers {
         println!(
             "  {:<24} {:>9.3} {:>8} {:>9} {:>10} {:>10} {:>10}",
@@ -157,7 +201,11 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
     let options = client_options(&args.cluster, &args.master)?;
     let reply = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
-        conn.link.tx.send(Message::StatusRequest).ok().context("connection closed")?;
+        conn.link
+            .tx
+            .send(Message::StatusRequest)
+            .ok()
+            .context("connection closed")?;
         let reply = loop {
             match conn.link.rx.recv().await {
                 Some(Message::StatusReply(r)) => break r,
@@ -169,18 +217,40 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
         conn.endpoint.wait_idle().await;
         Ok(reply)
     })?;
-    println!("{:<24} {:<22} {:>7} {:>8} {:>12} {:>9} {:>10} {:>8}", "worker", "address", "threads", "state", "throughput", "packages", "triangles", "failures");
+    println!(
+        "{:<24} {:<22} {:>7} {:>8} {:>12} {:>9} {:>10} {:>8}",
+        "worker", "address", "threads", "state", "throughput", "packages", "triangles", "failures"
+    );
     for w in &reply.workers {
         println!(
             "{:<24} {:<22} {:>7} {:>8} {:>12.1} {:>9} {:>10} {:>8}",
-            w.name, w.address, w.threads, w.state, w.throughput, w.packages_done, w.triangles_done, w.failures
+            w.name,
+            w.address,
+            w.threads,
+            w.state,
+            w.throughput,
+            w.packages_done,
+            w.triangles_done,
+            w.failures
         );
     }
     match &reply.queue.running {
-        Some(r) => println!("running: job {} ({}) frame {}/{}: {}/{} triangles", r.job, r.name, r.frame + 1, r.frames, r.triangles_done, r.triangles_total),
+        Some(r) => println!(
+            "running: job {} ({}) frame {}/{}: {}/{} triangles",
+            r.job,
+            r.name,
+            r.frame + 1,
+            r.frames,
+            r.triangles_done,
+            r.triangles_total
+        ),
         None => println!("running: nothing"),
     }
-    println!("waiting: {} job(s) {:?}", reply.queue.waiting.len(), reply.queue.waiting);
+    println!(
+        "waiting: {} job(s) {:?}",
+        reply.queue.waiting.len(),
+        reply.queue.waiting
+    );
     println!("scene bytes sent to workers: {}", reply.scene_bytes_sent);
     Ok(())
 }

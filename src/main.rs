@@ -131,7 +131,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::Status(args) => farm::status(args),
         Command::Cluster(ClusterCommand::Init(args)) => {
             let path = vtfarm_master::cli::cluster_init(&args)?;
-            println!("wrote {} (copy it to every worker and submitter)", path.display());
+            println!(
+                "wrote {} (copy it to every worker and submitter)",
+                path.display()
+            );
             Ok(())
         }
     }
@@ -159,27 +162,63 @@ fn render(args: RenderArgs) -> Result<()> {
     camera.width = args.width.unwrap_or(camera.width);
     camera.height = args.height.unwrap_or(camera.height);
     let reflectors = job.reflector_triangles(&loaded.scene)?;
-    let setup = FrameSetup { camera, lighting: loaded.lighting, trace: job.trace, vertex: job.vertex };
+    let setup = FrameSetup {
+        camera,
+        lighting: loaded.lighting,
+        trace: job.trace,
+        vertex: job.vertex,
+    };
     let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
     let scene_triangles = loaded.scene.triangles.len();
     if let Some(dir) = &args.aux {
         // The auxiliary outputs need the whole frame in this process.
         let renderer = Renderer::new(Arc::new(loaded.scene), reflectors);
-        let options = RenderOptions { collect_faces: true, ..RenderOptions::default() };
+        let options = RenderOptions {
+            collect_faces: true,
+            ..RenderOptions::default()
+        };
         let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
         bar.finish_and_clear();
         output::write_image(&args.output, &frame.image.color)?;
         output::write_aux(dir, &frame, renderer.scene())?;
-        let timings = [("base frame", frame.raster_time), ("total", frame.total_time)];
-        print_summary(&frame.stats, &timings, scene_triangles, renderer.reflectors().len(), job.vertex.quality);
+        let timings = [
+            ("base frame", frame.raster_time),
+            ("total", frame.total_time),
+        ];
+        print_summary(
+            &frame.stats,
+            &timings,
+            scene_triangles,
+            renderer.reflectors().len(),
+            job.vertex.quality,
+        );
     } else {
-        let name = args.job.file_name().map_or("job".into(), |n| n.to_string_lossy().into_owned());
-        let frame = farm::render_embedded(&name, &loaded.scene, &setup, &reflectors, args.local_workers, &bar)?;
+        let name = args
+            .job
+            .file_name()
+            .map_or("job".into(), |n| n.to_string_lossy().into_owned());
+        let frame = farm::render_embedded(
+            &name,
+            &loaded.scene,
+            &setup,
+            &reflectors,
+            args.local_workers,
+            &bar,
+        )?;
         bar.finish_and_clear();
         output::write_image(&args.output, &frame.image)?;
         let stats = vtfarm_vertex::PackageStats::from(frame.stats.totals);
-        let timings = [("frame (wall)", std::time::Duration::from_micros(frame.stats.wall_micros))];
-        print_summary(&stats, &timings, scene_triangles, reflectors.len(), job.vertex.quality);
+        let timings = [(
+            "frame (wall)",
+            std::time::Duration::from_micros(frame.stats.wall_micros),
+        )];
+        print_summary(
+            &stats,
+            &timings,
+            scene_triangles,
+            reflectors.len(),
+            job.vertex.quality,
+        );
         farm::print_frame_stats(&frame.stats);
     }
     println!("wrote {}", args.output.display());
@@ -189,9 +228,11 @@ fn render(args: RenderArgs) -> Result<()> {
 /// The progress bar of a frame, counting reflector triangles.
 fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
     let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})")
-            .expect("template is valid")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})",
+        )
+        .expect("template is valid")
+        .progress_chars("=> "),
     );
     bar.set_message(message);
     bar
@@ -211,10 +252,27 @@ fn print_summary(
         ("traced triangles", s.traced_triangles.to_string()),
         ("visible vertices", s.visible_vertices.to_string()),
         ("refined edges", s.refined_edges.to_string()),
-        ("traced samples", format!("{} ({} vertices + {} filled pixels)", s.samples(), s.vertex_samples, s.filled_pixels)),
+        (
+            "traced samples",
+            format!(
+                "{} ({} vertices + {} filled pixels)",
+                s.samples(),
+                s.vertex_samples,
+                s.filled_pixels
+            ),
+        ),
         ("reflector pixels", s.pixels.to_string()),
-        ("vertex tracing", format!("{:.3} s (summed over packages)", s.vertex_time.as_secs_f64())),
-        ("triangle filling", format!("{:.3} s (summed over packages)", s.fill_time.as_secs_f64())),
+        (
+            "vertex tracing",
+            format!(
+                "{:.3} s (summed over packages)",
+                s.vertex_time.as_secs_f64()
+            ),
+        ),
+        (
+            "triangle filling",
+            format!("{:.3} s (summed over packages)", s.fill_time.as_secs_f64()),
+        ),
     ];
     for (name, value) in rows {
         println!("{name:>20}  {value}");

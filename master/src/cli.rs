@@ -44,8 +44,14 @@ struct Standalone {
 
 /// `vtfarm cluster init`: returns the path of the written cluster file.
 pub fn cluster_init(args: &ClusterInitArgs) -> Result<PathBuf> {
-    std::fs::create_dir_all(&args.output).with_context(|| format!("creating {}", args.output.display()))?;
-    let host = args.master.rsplit_once(':').map_or(args.master.as_str(), |(h, _)| h).trim_matches(['[', ']']).to_owned();
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let host = args
+        .master
+        .rsplit_once(':')
+        .map_or(args.master.as_str(), |(h, _)| h)
+        .trim_matches(['[', ']'])
+        .to_owned();
     let identity = server::identity(&args.output, &[host])?;
     let config = ClusterConfig::generate(&args.master, &identity)?;
     let path = args.output.join(CLUSTER_FILE);
@@ -55,7 +61,10 @@ pub fn cluster_init(args: &ClusterInitArgs) -> Result<PathBuf> {
 
 /// Runs the master until the process is stopped.
 pub fn run(args: MasterArgs) -> Result<()> {
-    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     runtime.block_on(serve(&args))
 }
 
@@ -65,12 +74,20 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     let state_dir = args.cluster.parent().unwrap_or(Path::new("."));
     let identity = vtfarm_proto::MasterIdentity::load(state_dir)?;
     if identity.fingerprint() != cluster.fingerprint {
-        anyhow::bail!("{}: the fingerprint does not match the certificate in {}", args.cluster.display(), state_dir.display());
+        anyhow::bail!(
+            "{}: the fingerprint does not match the certificate in {}",
+            args.cluster.display(),
+            state_dir.display()
+        );
     }
     let listen = match args.listen {
         Some(a) => a,
         None => {
-            let port = cluster.master.rsplit_once(':').and_then(|(_, p)| p.parse().ok()).context("cluster file: master has no port")?;
+            let port = cluster
+                .master
+                .rsplit_once(':')
+                .and_then(|(_, p)| p.parse().ok())
+                .context("cluster file: master has no port")?;
             SocketAddr::from(([0, 0, 0, 0], port))
         }
     };
@@ -78,7 +95,12 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     info!(address = %endpoint.local_addr()?, "master listening");
     println!("master listening on {}", endpoint.local_addr()?);
     let (handle, _task) = spawn_master(SchedulerConfig::default());
-    server::serve(endpoint, HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"), handle).await;
+    server::serve(
+        endpoint,
+        HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"),
+        handle,
+    )
+    .await;
     Ok(())
 }
 

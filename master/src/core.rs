@@ -30,8 +30,14 @@ pub type ConnId = u64;
 /// Who is on a connection (from its handshake).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Peer {
-    Worker { name: String, threads: u32, address: String },
-    Submitter { address: String },
+    Worker {
+        name: String,
+        threads: u32,
+        address: String,
+    },
+    Submitter {
+        address: String,
+    },
 }
 
 /// What the core asks the driver to do.
@@ -114,7 +120,12 @@ impl MasterCore {
 
     /// A connection passed its handshake.
     pub fn connected(&mut self, now: Duration, conn: ConnId, peer: Peer) {
-        if let Peer::Worker { name, threads, address } = &peer {
+        if let Peer::Worker {
+            name,
+            threads,
+            address,
+        } = &peer
+        {
             info!(worker = %name, %address, threads, "worker joined");
             if let Err(e) = self.scheduler.worker_joined(now, WorkerId(conn), *threads) {
                 self.close(conn, format!("cannot join: {e}"));
@@ -123,8 +134,16 @@ impl MasterCore {
             // A running frame: bring the newcomer up to date.
             for job in self.jobs.values() {
                 if let Some(current) = &job.current {
-                    self.outbox.push_back(Output::Send(conn, Message::SceneOffer { hash: job.scene_hash }));
-                    self.outbox.push_back(Output::Send(conn, Message::FrameStart(current.start.clone())));
+                    self.outbox.push_back(Output::Send(
+                        conn,
+                        Message::SceneOffer {
+                            hash: job.scene_hash,
+                        },
+                    ));
+                    self.outbox.push_back(Output::Send(
+                        conn,
+                        Message::FrameStart(current.start.clone()),
+                    ));
                 }
             }
         }
@@ -142,7 +161,12 @@ impl MasterCore {
             Some(Peer::Submitter { .. }) => {
                 self.awaiting_scene.remove(&conn);
                 // Nobody is left to receive the images: stop its jobs.
-                let orphaned: Vec<u64> = self.jobs.iter().filter(|(_, j)| j.submitter == conn).map(|(&id, _)| id).collect();
+                let orphaned: Vec<u64> = self
+                    .jobs
+                    .iter()
+                    .filter(|(_, j)| j.submitter == conn)
+                    .map(|(&id, _)| id)
+                    .collect();
                 for job in orphaned {
                     info!(job, "submitter left, cancelling its job");
                     let _ = self.scheduler.cancel_job(now, JobId(job));
@@ -175,14 +199,18 @@ impl MasterCore {
             Message::SceneRequest { hash } => match self.scenes.get(&hash) {
                 Some((_, data)) => {
                     self.scene_bytes_sent += data.bytes.len() as u64;
-                    self.outbox.push_back(Output::Send(conn, Message::SceneData((**data).clone())));
+                    self.outbox
+                        .push_back(Output::Send(conn, Message::SceneData((**data).clone())));
                 }
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
             Message::PackageResult(result) => self.package_result(now, conn, result),
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
-                if let Err(e) = self.scheduler.package_failed(now, worker, PackageId(failed.id), failed.error) {
+                if let Err(e) =
+                    self.scheduler
+                        .package_failed(now, worker, PackageId(failed.id), failed.error)
+                {
                     debug!("failure report ignored: {e}");
                 }
             }
@@ -196,31 +224,45 @@ impl MasterCore {
             debug!(package = result.id, "result for an unknown package ignored");
             return;
         };
-        let Some(job) = self.jobs.get(&in_flight.job) else { return };
+        let Some(job) = self.jobs.get(&in_flight.job) else {
+            return;
+        };
         let Some(current) = job.current.as_ref().filter(|c| c.frame == in_flight.frame) else {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
         let (width, height) = (current.image.color.width, current.image.color.height);
-        let bytes_out = encode_message(&Message::PackageResult(result.clone())).map_or(0, |b| b.len() as u64);
+        let bytes_out =
+            encode_message(&Message::PackageResult(result.clone())).map_or(0, |b| b.len() as u64);
         let bitmap = match result.bitmap.into_bitmap_within(width, height) {
             Ok(b) => b,
             Err(e) => {
                 let error = format!("malformed result: {e}");
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
-                let _ = self.scheduler.package_failed(now, worker, PackageId(result.id), error);
+                let _ = self
+                    .scheduler
+                    .package_failed(now, worker, PackageId(result.id), error);
                 return;
             }
         };
         let stats = PackageStats::from(result.stats);
         let item_seconds = if result.triangle_samples.len() == in_flight.items.len() {
             // Samples are what a triangle costs; +1 so hidden ones are not free.
-            result.triangle_samples.iter().map(|&s| f64::from(s) + 1.0).collect()
+            result
+                .triangle_samples
+                .iter()
+                .map(|&s| f64::from(s) + 1.0)
+                .collect()
         } else {
             Vec::new()
         };
-        let bytes_in = encode_message(&Message::Package(Package { id: result.id, job: in_flight.job, frame: in_flight.frame, triangles: in_flight.items.clone() }))
-            .map_or(0, |b| b.len() as u64);
+        let bytes_in = encode_message(&Message::Package(Package {
+            id: result.id,
+            job: in_flight.job,
+            frame: in_flight.frame,
+            triangles: in_flight.items.clone(),
+        }))
+        .map_or(0, |b| b.len() as u64);
         let measure = PackageMeasure {
             busy: Duration::from_micros(result.busy_micros),
             item_seconds,
@@ -228,7 +270,10 @@ impl MasterCore {
             bytes_in,
             bytes_out,
         };
-        if let Err(e) = self.scheduler.package_done(now, worker, PackageId(result.id), measure) {
+        if let Err(e) = self
+            .scheduler
+            .package_done(now, worker, PackageId(result.id), measure)
+        {
             // A late straggler copy or a duplicate: the first result won.
             debug!(package = result.id, "result ignored: {e}");
             return;
@@ -240,7 +285,12 @@ impl MasterCore {
         current.image.composite(&bitmap);
         current.totals.add(&stats);
         current.triangles_done += items;
-        let progress = Message::Progress { job: job_id, frame: current.frame, done: current.triangles_done as u32, total: job.reflectors.len() as u32 };
+        let progress = Message::Progress {
+            job: job_id,
+            frame: current.frame,
+            done: current.triangles_done as u32,
+            total: job.reflectors.len() as u32,
+        };
         self.outbox.push_back(Output::Send(job.submitter, progress));
     }
 
@@ -249,7 +299,8 @@ impl MasterCore {
             Message::Heartbeat => {}
             Message::StatusRequest => {
                 let reply = self.status();
-                self.outbox.push_back(Output::Send(conn, Message::StatusReply(reply)));
+                self.outbox
+                    .push_back(Output::Send(conn, Message::StatusReply(reply)));
             }
             Message::SubmitJob { job } => self.submit(now, conn, job),
             Message::SceneData(data) => match self.awaiting_scene.remove(&conn) {
@@ -259,7 +310,10 @@ impl MasterCore {
                 }
                 _ => self.close(conn, "scene data nobody asked for".into()),
             },
-            other => self.close(conn, format!("unexpected {} from a submitter", other.name())),
+            other => self.close(
+                conn,
+                format!("unexpected {} from a submitter", other.name()),
+            ),
         }
     }
 
@@ -279,7 +333,8 @@ impl MasterCore {
                     // Not cached here: ask the submitter for it.
                     let hash = *hash;
                     self.awaiting_scene.insert(conn, job);
-                    self.outbox.push_back(Output::Send(conn, Message::SceneRequest { hash }));
+                    self.outbox
+                        .push_back(Output::Send(conn, Message::SceneRequest { hash }));
                     return;
                 }
             },
@@ -297,7 +352,15 @@ impl MasterCore {
         let frames: Result<Vec<FrameSetup>, _> = job
             .frames
             .into_iter()
-            .map(|f| f.into_parts().map(|(camera, lighting, trace, vertex)| FrameSetup { camera, lighting, trace, vertex }))
+            .map(|f| {
+                f.into_parts()
+                    .map(|(camera, lighting, trace, vertex)| FrameSetup {
+                        camera,
+                        lighting,
+                        trace,
+                        vertex,
+                    })
+            })
             .collect();
         let frames = match frames {
             Ok(f) => f,
@@ -306,10 +369,32 @@ impl MasterCore {
         let id = self.next_job;
         self.next_job += 1;
         let reflectors = morton_order(&scene, job.reflectors);
-        let work = vec![FrameWork { items: reflectors.clone() }; frames.len()];
+        let work = vec![
+            FrameWork {
+                items: reflectors.clone()
+            };
+            frames.len()
+        ];
         info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), "job queued");
-        self.outbox.push_back(Output::Send(conn, Message::JobAccepted { job: id, frames: frames.len() as u32 }));
-        self.jobs.insert(id, Job { name: job.name, submitter: conn, scene, scene_hash, reflectors, frames, current: None });
+        self.outbox.push_back(Output::Send(
+            conn,
+            Message::JobAccepted {
+                job: id,
+                frames: frames.len() as u32,
+            },
+        ));
+        self.jobs.insert(
+            id,
+            Job {
+                name: job.name,
+                submitter: conn,
+                scene,
+                scene_hash,
+                reflectors,
+                frames,
+                current: None,
+            },
+        );
         if let Err(e) = self.scheduler.submit_job(now, JobId(id), work) {
             warn!("cannot queue job {id}: {e}");
         }
@@ -317,7 +402,13 @@ impl MasterCore {
 
     fn refuse_job(&mut self, conn: ConnId, error: String) {
         warn!(conn, "job refused: {error}");
-        self.outbox.push_back(Output::Send(conn, Message::JobFailed { job: 0, errors: vec![error] }));
+        self.outbox.push_back(Output::Send(
+            conn,
+            Message::JobFailed {
+                job: 0,
+                errors: vec![error],
+            },
+        ));
     }
 
     fn close(&mut self, conn: ConnId, reason: String) {
@@ -334,7 +425,10 @@ impl MasterCore {
     }
 
     fn workers(&self) -> impl Iterator<Item = ConnId> + '_ {
-        self.peers.iter().filter(|(_, p)| matches!(p, Peer::Worker { .. })).map(|(&c, _)| c)
+        self.peers
+            .iter()
+            .filter(|(_, p)| matches!(p, Peer::Worker { .. }))
+            .map(|(&c, _)| c)
     }
 
     /// Turns the scheduler's events and assignments into messages.
@@ -350,16 +444,23 @@ impl MasterCore {
     fn event(&mut self, event: Event) {
         match event {
             Event::JobStarted { job, .. } => {
-                let Some(hash) = self.jobs.get(&job.0).map(|j| j.scene_hash) else { return };
+                let Some(hash) = self.jobs.get(&job.0).map(|j| j.scene_hash) else {
+                    return;
+                };
                 let workers: Vec<ConnId> = self.workers().collect();
                 for conn in workers {
-                    self.outbox.push_back(Output::Send(conn, Message::SceneOffer { hash }));
+                    self.outbox
+                        .push_back(Output::Send(conn, Message::SceneOffer { hash }));
                 }
             }
             Event::FrameStarted { job, frame, .. } => self.start_frame(job.0, frame),
             Event::FrameComplete { job, frame, stats } => {
-                let Some(j) = self.jobs.get_mut(&job.0) else { return };
-                let Some(done) = j.current.take().filter(|c| c.frame == frame) else { return };
+                let Some(j) = self.jobs.get_mut(&job.0) else {
+                    return;
+                };
+                let Some(done) = j.current.take().filter(|c| c.frame == frame) else {
+                    return;
+                };
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let image = &done.image.color;
                 let workers = stats
@@ -399,13 +500,24 @@ impl MasterCore {
                 info!(job = job.0, "job complete");
                 self.jobs.remove(&job.0);
             }
-            Event::JobFailed { job, reason, errors } => {
+            Event::JobFailed {
+                job,
+                reason,
+                errors,
+            } => {
                 let errors: Vec<String> = std::iter::once(format!("job failed: {reason:?}"))
-                    .chain(errors.iter().map(|(w, e)| format!("{}: {e}", self.name(w.0))))
+                    .chain(
+                        errors
+                            .iter()
+                            .map(|(w, e)| format!("{}: {e}", self.name(w.0))),
+                    )
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
                 if let Some(j) = self.jobs.remove(&job.0) {
-                    self.outbox.push_back(Output::Send(j.submitter, Message::JobFailed { job: job.0, errors }));
+                    self.outbox.push_back(Output::Send(
+                        j.submitter,
+                        Message::JobFailed { job: job.0, errors },
+                    ));
                 }
             }
             Event::JobCancelled { job } => {
@@ -414,43 +526,86 @@ impl MasterCore {
             Event::WorkerBlocklisted { worker, job } => {
                 warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
             }
-            Event::WorkerLost { worker, cause, requeued } => {
+            Event::WorkerLost {
+                worker,
+                cause,
+                requeued,
+            } => {
                 warn!(worker = %self.name(worker.0), ?cause, requeued = requeued.len(), "worker lost");
                 if matches!(cause, vtfarm_scheduler::LossCause::HeartbeatTimeout) {
                     self.close(worker.0, "missed its heartbeats".into());
                 }
             }
             Event::PackageCancelled { worker, package } => {
-                self.outbox.push_back(Output::Send(worker.0, Message::CancelPackage { id: package.0 }));
+                self.outbox.push_back(Output::Send(
+                    worker.0,
+                    Message::CancelPackage { id: package.0 },
+                ));
             }
         }
     }
 
     /// Rasterizes a frame's base image and announces the frame to the workers.
     fn start_frame(&mut self, job: u64, frame: u32) {
-        let Some(j) = self.jobs.get_mut(&job) else { return };
-        let Some(setup) = j.frames.get(frame as usize) else { return };
+        let Some(j) = self.jobs.get_mut(&job) else {
+            return;
+        };
+        let Some(setup) = j.frames.get(frame as usize) else {
+            return;
+        };
         let (base, _) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
         let start = FrameStart {
             job,
             frame,
             scene: j.scene_hash,
-            setup: WireFrameSetup::from_parts(&setup.camera, &setup.lighting, &setup.trace, &setup.vertex),
+            setup: WireFrameSetup::from_parts(
+                &setup.camera,
+                &setup.lighting,
+                &setup.trace,
+                &setup.vertex,
+            ),
             reflectors: j.reflectors.clone(),
         };
-        j.current = Some(FrameAssembly { frame, start: start.clone(), image: FrameImage::new(base), totals: PackageStats::default(), triangles_done: 0 });
+        j.current = Some(FrameAssembly {
+            frame,
+            start: start.clone(),
+            image: FrameImage::new(base),
+            totals: PackageStats::default(),
+            triangles_done: 0,
+        });
         let submitter = j.submitter;
         let total = j.reflectors.len() as u32;
         let workers: Vec<ConnId> = self.workers().collect();
         for conn in workers {
-            self.outbox.push_back(Output::Send(conn, Message::FrameStart(start.clone())));
+            self.outbox
+                .push_back(Output::Send(conn, Message::FrameStart(start.clone())));
         }
-        self.outbox.push_back(Output::Send(submitter, Message::Progress { job, frame, done: 0, total }));
+        self.outbox.push_back(Output::Send(
+            submitter,
+            Message::Progress {
+                job,
+                frame,
+                done: 0,
+                total,
+            },
+        ));
     }
 
     fn assign(&mut self, a: Assignment) {
-        self.packages.insert(a.package.0, InFlight { job: a.job.0, frame: a.frame, items: a.items.clone() });
-        let message = Message::Package(Package { id: a.package.0, job: a.job.0, frame: a.frame, triangles: a.items });
+        self.packages.insert(
+            a.package.0,
+            InFlight {
+                job: a.job.0,
+                frame: a.frame,
+                items: a.items.clone(),
+            },
+        );
+        let message = Message::Package(Package {
+            id: a.package.0,
+            job: a.job.0,
+            frame: a.frame,
+            triangles: a.items,
+        });
         self.outbox.push_back(Output::Send(a.worker.0, message));
     }
 
@@ -462,7 +617,9 @@ impl MasterCore {
             .into_iter()
             .filter(|w| w.state != WorkerState::Gone)
             .filter_map(|w| {
-                let Some(Peer::Worker { name, address, .. }) = self.peers.get(&w.worker.0) else { return None };
+                let Some(Peer::Worker { name, address, .. }) = self.peers.get(&w.worker.0) else {
+                    return None;
+                };
                 Some(WorkerStatus {
                     name: name.clone(),
                     address: address.clone(),
@@ -480,7 +637,11 @@ impl MasterCore {
         let queue = self.scheduler.queue();
         let running = queue.running.map(|p| RunningJob {
             job: p.job.0,
-            name: self.jobs.get(&p.job.0).map(|j| j.name.clone()).unwrap_or_default(),
+            name: self
+                .jobs
+                .get(&p.job.0)
+                .map(|j| j.name.clone())
+                .unwrap_or_default(),
             frame: p.frame,
             frames: p.frames,
             triangles_done: p.items_done as u64,
@@ -488,7 +649,10 @@ impl MasterCore {
         });
         StatusReply {
             workers,
-            queue: QueueStatus { waiting: queue.waiting.iter().map(|j| j.0).collect(), running },
+            queue: QueueStatus {
+                waiting: queue.waiting.iter().map(|j| j.0).collect(),
+                running,
+            },
             scene_bytes_sent: self.scene_bytes_sent,
         }
     }

@@ -21,9 +21,19 @@ use crate::core::{ConnId, MasterCore, Output, Peer};
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
 
 enum Input {
-    Connected { conn: ConnId, peer: Peer, tx: UnboundedSender<Message>, closer: Option<Closer> },
-    Message { conn: ConnId, message: Message },
-    Disconnected { conn: ConnId },
+    Connected {
+        conn: ConnId,
+        peer: Peer,
+        tx: UnboundedSender<Message>,
+        closer: Option<Closer>,
+    },
+    Message {
+        conn: ConnId,
+        message: Message,
+    },
+    Disconnected {
+        conn: ConnId,
+    },
 }
 
 /// A running master: attach links to it.
@@ -38,7 +48,12 @@ impl MasterHandle {
     pub fn attach(&self, peer: Peer, link: Link, closer: Option<Closer>) -> ConnId {
         let conn = self.next_conn.fetch_add(1, Ordering::Relaxed);
         let Link { tx, mut rx, .. } = link;
-        let _ = self.inputs.send(Input::Connected { conn, peer, tx, closer });
+        let _ = self.inputs.send(Input::Connected {
+            conn,
+            peer,
+            tx,
+            closer,
+        });
         let inputs = self.inputs.clone();
         tokio::spawn(async move {
             while let Some(message) = rx.recv().await {
@@ -55,7 +70,10 @@ impl MasterHandle {
 /// Starts a master task.
 pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
     let (inputs, rx) = unbounded_channel();
-    let handle = MasterHandle { inputs, next_conn: Arc::new(AtomicU64::new(1)) };
+    let handle = MasterHandle {
+        inputs,
+        next_conn: Arc::new(AtomicU64::new(1)),
+    };
     let task = tokio::spawn(run(MasterCore::new(config), rx));
     (handle, task)
 }
@@ -70,7 +88,10 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     loop {
         // The scheduler's next deadline, or idle for a while.
-        let deadline = start + core.poll_timeout().unwrap_or(start.elapsed() + Duration::from_secs(3600));
+        let deadline = start
+            + core
+                .poll_timeout()
+                .unwrap_or(start.elapsed() + Duration::from_secs(3600));
         tokio::select! {
             input = inputs.recv() => {
                 let Some(input) = input else { return };

@@ -25,18 +25,34 @@ impl LocalFarm {
         let workers = (0..workers.max(1))
             .map(|k| {
                 let (master_end, worker_end) = Link::pair();
-                let peer = Peer::Worker { name: format!("local-{k}"), threads: (threads / workers.max(1) as u32).max(1), address: "in-process".into() };
+                let peer = Peer::Worker {
+                    name: format!("local-{k}"),
+                    threads: (threads / workers.max(1) as u32).max(1),
+                    address: "in-process".into(),
+                };
                 master.attach(peer, master_end, None);
-                tokio::spawn(async move { serve(worker_end, &mut Engine::new(None), WorkerConfig::default()).await })
+                tokio::spawn(async move {
+                    serve(worker_end, &mut Engine::new(None), WorkerConfig::default()).await
+                })
             })
             .collect();
-        LocalFarm { master, _master_task: task, _workers: workers }
+        LocalFarm {
+            master,
+            _master_task: task,
+            _workers: workers,
+        }
     }
 
     /// A submitter's link to the master.
     pub fn submitter(&self) -> Link {
         let (master_end, client_end) = Link::pair();
-        self.master.attach(Peer::Submitter { address: "in-process".into() }, master_end, None);
+        self.master.attach(
+            Peer::Submitter {
+                address: "in-process".into(),
+            },
+            master_end,
+            None,
+        );
         client_end
     }
 }

@@ -8,7 +8,9 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use tracing::{info, warn};
-use vtfarm_proto::{HandshakePolicy, Link, MasterIdentity, Role, SESSION_LIMIT, server_config, server_handshake};
+use vtfarm_proto::{
+    HandshakePolicy, Link, MasterIdentity, Role, SESSION_LIMIT, server_config, server_handshake,
+};
 
 use crate::core::Peer;
 use crate::driver::MasterHandle;
@@ -36,22 +38,32 @@ pub async fn serve(endpoint: quinn::Endpoint, policy: HandshakePolicy, master: M
             };
             let hello = match server_handshake(&conn, &policy).await {
                 Ok(hello) => hello,
-                Err(refusal) => return warn!(peer = %address, code = ?refusal.code, "refused: {}", refusal.message),
+                Err(refusal) => {
+                    return warn!(peer = %address, code = ?refusal.code, "refused: {}", refusal.message);
+                }
             };
             let (send, recv) = match conn.accept_bi().await {
                 Ok(s) => s,
                 Err(e) => return warn!(peer = %address, "no session stream: {e}"),
             };
             let peer = match hello.role {
-                Role::Worker { threads, name } => Peer::Worker { name, threads, address: address.to_string() },
-                Role::Submitter => Peer::Submitter { address: address.to_string() },
+                Role::Worker { threads, name } => Peer::Worker {
+                    name,
+                    threads,
+                    address: address.to_string(),
+                },
+                Role::Submitter => Peer::Submitter {
+                    address: address.to_string(),
+                },
             };
             info!(peer = %address, ?peer, "accepted");
             let closer = conn.clone();
             master.attach(
                 peer,
                 Link::over_stream(recv, send, SESSION_LIMIT),
-                Some(Box::new(move |reason: &str| closer.close(vtfarm_proto::CLOSE_NORMAL, reason.as_bytes()))),
+                Some(Box::new(move |reason: &str| {
+                    closer.close(vtfarm_proto::CLOSE_NORMAL, reason.as_bytes())
+                })),
             );
         });
     }

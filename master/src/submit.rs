@@ -36,30 +36,64 @@ pub enum JobError {
 }
 
 /// The job message for a scene and its frames.
-pub fn wire_job(name: &str, scene: &SceneData, frames: &[FrameSetup], reflectors: &[u32]) -> WireJob {
+pub fn wire_job(
+    name: &str,
+    scene: &SceneData,
+    frames: &[FrameSetup],
+    reflectors: &[u32],
+) -> WireJob {
     WireJob {
         name: name.to_owned(),
         scene: JobScene::Hash(scene.hash),
-        frames: frames.iter().map(|f| WireFrameSetup::from_parts(&f.camera, &f.lighting, &f.trace, &f.vertex)).collect(),
+        frames: frames
+            .iter()
+            .map(|f| WireFrameSetup::from_parts(&f.camera, &f.lighting, &f.trace, &f.vertex))
+            .collect(),
         reflectors: reflectors.to_vec(),
     }
 }
 
 /// Submits `job` and waits for all its frames.
-pub async fn run_job(link: &mut Link, job: WireJob, scene: &SceneData, mut on_event: impl FnMut(JobEvent<'_>)) -> Result<Vec<FinishedFrame>, JobError> {
+pub async fn run_job(
+    link: &mut Link,
+    job: WireJob,
+    scene: &SceneData,
+    mut on_event: impl FnMut(JobEvent<'_>),
+) -> Result<Vec<FinishedFrame>, JobError> {
     let frames_wanted = job.frames.len();
-    let send = |link: &Link, m| link.tx.send(m).map_err(|_| JobError::Disconnected(link.error()));
+    let send = |link: &Link, m| {
+        link.tx
+            .send(m)
+            .map_err(|_| JobError::Disconnected(link.error()))
+    };
     send(link, Message::SubmitJob { job })?;
     let mut frames = Vec::new();
     while frames.len() < frames_wanted {
-        let Some(message) = link.rx.recv().await else { return Err(JobError::Disconnected(link.error())) };
+        let Some(message) = link.rx.recv().await else {
+            return Err(JobError::Disconnected(link.error()));
+        };
         match message {
-            Message::SceneRequest { hash } if hash == scene.hash => send(link, Message::SceneData(scene.clone()))?,
+            Message::SceneRequest { hash } if hash == scene.hash => {
+                send(link, Message::SceneData(scene.clone()))?
+            }
             Message::JobAccepted { job, frames } => on_event(JobEvent::Accepted { job, frames }),
-            Message::Progress { frame, done, total, .. } => on_event(JobEvent::Progress { frame, done, total }),
+            Message::Progress {
+                frame, done, total, ..
+            } => on_event(JobEvent::Progress { frame, done, total }),
             Message::FrameDone(done) => {
-                let (width, height, pixels) = done.image.into_pixels().map_err(|e| JobError::Protocol(e.to_string()))?;
-                let finished = FinishedFrame { frame: done.frame, image: Image { width, height, pixels }, stats: done.stats };
+                let (width, height, pixels) = done
+                    .image
+                    .into_pixels()
+                    .map_err(|e| JobError::Protocol(e.to_string()))?;
+                let finished = FinishedFrame {
+                    frame: done.frame,
+                    image: Image {
+                        width,
+                        height,
+                        pixels,
+                    },
+                    stats: done.stats,
+                };
                 on_event(JobEvent::FrameDone(&finished));
                 frames.push(finished);
             }

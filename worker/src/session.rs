@@ -50,11 +50,11 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
         cancelled: BTreeSet::new(),
     };
     let mut running: Option<Running> = None;
+    // Whether a RequestWork is outstanding: work is asked for only once the
+    // frame is ready, so the load balancer never counts set-up as tracing.
+    let mut requested = false;
     let mut heartbeat = tokio::time::interval(HEARTBEAT_INTERVAL);
     let send = |link: &Link, m: Message| link.tx.send(m).is_ok();
-    if !send(&link, Message::RequestWork) {
-        return SessionEnd::Disconnected;
-    }
     loop {
         tokio::select! {
             message = link.rx.recv() => {
@@ -62,6 +62,7 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
                 match message {
                     Message::Shutdown => return SessionEnd::Shutdown,
                     other => {
+                        requested &= !matches!(other, Message::Package(_));
                         for reply in session.handle(other) {
                             send(&link, reply);
                         }
@@ -78,9 +79,6 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
                 if !session.cancelled.remove(&id) && !send(&link, reply) {
                     return SessionEnd::Disconnected;
                 }
-                if session.queue.is_empty() && !send(&link, Message::RequestWork) {
-                    return SessionEnd::Disconnected;
-                }
             }
             _ = heartbeat.tick() => {
                 if !send(&link, Message::Heartbeat) {
@@ -94,6 +92,13 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
                 send(&link, failure);
             }
             running = started;
+        }
+        let idle = running.is_none() && session.queue.is_empty();
+        if idle && !requested && session.frame.is_some() && session.pending_frame.is_none() {
+            if !send(&link, Message::RequestWork) {
+                return SessionEnd::Disconnected;
+            }
+            requested = true;
         }
     }
 }

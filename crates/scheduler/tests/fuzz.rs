@@ -308,8 +308,8 @@ fn sim_worker() -> impl Strategy<Value = SimWorker> {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
-    /// Random farms with one reliable worker always finish every frame, each
-    /// item exactly once.
+    /// Random farms with one reliable worker and at most two failing ones
+    /// always finish every frame, each item exactly once.
     #[test]
     fn random_simulated_farms_finish_every_frame_exactly_once(
         mut workers in prop::collection::vec(sim_worker(), 0..8),
@@ -317,6 +317,11 @@ proptest! {
         frames in 1usize..4,
         seed in any::<u64>(),
     ) {
+        // Failing workers beyond two could fail a package three times, which
+        // rightly fails the job; keep failures to two and add a reliable one.
+        for w in workers.iter_mut().skip(2) {
+            w.failures = SimFailures::Never;
+        }
         workers.push(SimWorker::with_speed(1.0));
         let mut rng = seed;
         let frame = SimFrame {
