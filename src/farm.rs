@@ -1,7 +1,7 @@
 //! The farm commands of the CLI: the embedded master behind `render`,
 //! `submit` and `status` against a running master.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
@@ -83,7 +83,7 @@ pub(crate) fn render_embedded(
     })
 }
 
-fn client_options(cluster: &PathBuf, master: &Option<String>) -> Result<ClientOptions> {
+fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptions> {
     let config = ClusterConfig::load(cluster)?;
     Ok(ClientOptions {
         master: master.clone().unwrap_or(config.master),

@@ -43,7 +43,7 @@ pub enum Peer {
 /// What the core asks the driver to do.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Output {
-    Send(ConnId, Message),
+    Send(ConnId, Box<Message>),
     /// Drop the connection, logging why.
     Close(ConnId, String),
 }
@@ -90,6 +90,11 @@ pub struct MasterCore {
 
 impl MasterCore {
     pub fn new(config: SchedulerConfig) -> Self {
+        // Workers set each frame up before they ask for its work (see worker::session).
+        let config = SchedulerConfig {
+            requests_lapse_at_frame_start: true,
+            ..config
+        };
         MasterCore {
             scheduler: Scheduler::new(config),
             peers: BTreeMap::new(),
@@ -132,19 +137,20 @@ impl MasterCore {
                 return;
             }
             // A running frame: bring the newcomer up to date.
-            for job in self.jobs.values() {
-                if let Some(current) = &job.current {
-                    self.outbox.push_back(Output::Send(
-                        conn,
-                        Message::SceneOffer {
-                            hash: job.scene_hash,
-                        },
-                    ));
-                    self.outbox.push_back(Output::Send(
-                        conn,
-                        Message::FrameStart(current.start.clone()),
-                    ));
-                }
+            let catch_up: Vec<Message> = self
+                .jobs
+                .values()
+                .filter_map(|job| {
+                    job.current
+                        .as_ref()
+                        .map(|c| (job.scene_hash, c.start.clone()))
+                })
+                .flat_map(|(hash, start)| {
+                    [Message::SceneOffer { hash }, Message::FrameStart(start)]
+                })
+                .collect();
+            for message in catch_up {
+                self.send(conn, message);
             }
         }
         self.peers.insert(conn, peer);
@@ -193,14 +199,17 @@ impl MasterCore {
         let _ = self.scheduler.heartbeat(now, worker);
         match message {
             Message::Heartbeat => {}
-            Message::RequestWork => {
-                let _ = self.scheduler.request_work(now, worker);
+            Message::RequestWork { job, frame } => {
+                // Only a worker set up for the current frame may get its work.
+                let current = self.scheduler.queue().running.map(|r| (r.job.0, r.frame));
+                if current == Some((job, frame)) {
+                    let _ = self.scheduler.request_work(now, worker);
+                }
             }
             Message::SceneRequest { hash } => match self.scenes.get(&hash) {
                 Some((_, data)) => {
                     self.scene_bytes_sent += data.bytes.len() as u64;
-                    self.outbox
-                        .push_back(Output::Send(conn, Message::SceneData((**data).clone())));
+                    self.send(conn, Message::SceneData((**data).clone()));
                 }
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
@@ -291,7 +300,8 @@ impl MasterCore {
             done: current.triangles_done as u32,
             total: job.reflectors.len() as u32,
         };
-        self.outbox.push_back(Output::Send(job.submitter, progress));
+        let submitter = job.submitter;
+        self.send(submitter, progress);
     }
 
     fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
@@ -299,8 +309,7 @@ impl MasterCore {
             Message::Heartbeat => {}
             Message::StatusRequest => {
                 let reply = self.status();
-                self.outbox
-                    .push_back(Output::Send(conn, Message::StatusReply(reply)));
+                self.send(conn, Message::StatusReply(reply));
             }
             Message::SubmitJob { job } => self.submit(now, conn, job),
             Message::SceneData(data) => match self.awaiting_scene.remove(&conn) {
@@ -333,8 +342,7 @@ impl MasterCore {
                     // Not cached here: ask the submitter for it.
                     let hash = *hash;
                     self.awaiting_scene.insert(conn, job);
-                    self.outbox
-                        .push_back(Output::Send(conn, Message::SceneRequest { hash }));
+                    self.send(conn, Message::SceneRequest { hash });
                     return;
                 }
             },
@@ -376,13 +384,13 @@ impl MasterCore {
             frames.len()
         ];
         info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), "job queued");
-        self.outbox.push_back(Output::Send(
+        self.send(
             conn,
             Message::JobAccepted {
                 job: id,
                 frames: frames.len() as u32,
             },
-        ));
+        );
         self.jobs.insert(
             id,
             Job {
@@ -400,15 +408,19 @@ impl MasterCore {
         }
     }
 
+    fn send(&mut self, conn: ConnId, message: Message) {
+        self.outbox.push_back(Output::Send(conn, Box::new(message)));
+    }
+
     fn refuse_job(&mut self, conn: ConnId, error: String) {
         warn!(conn, "job refused: {error}");
-        self.outbox.push_back(Output::Send(
+        self.send(
             conn,
             Message::JobFailed {
                 job: 0,
                 errors: vec![error],
             },
-        ));
+        );
     }
 
     fn close(&mut self, conn: ConnId, reason: String) {
@@ -449,8 +461,7 @@ impl MasterCore {
                 };
                 let workers: Vec<ConnId> = self.workers().collect();
                 for conn in workers {
-                    self.outbox
-                        .push_back(Output::Send(conn, Message::SceneOffer { hash }));
+                    self.send(conn, Message::SceneOffer { hash });
                 }
             }
             Event::FrameStarted { job, frame, .. } => self.start_frame(job.0, frame),
@@ -494,7 +505,7 @@ impl MasterCore {
                     image: WireImage::from_pixels(image.width, image.height, &image.pixels),
                     stats: frame_stats,
                 });
-                self.outbox.push_back(Output::Send(j.submitter, message));
+                self.send(j.submitter, message);
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
@@ -514,10 +525,7 @@ impl MasterCore {
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
                 if let Some(j) = self.jobs.remove(&job.0) {
-                    self.outbox.push_back(Output::Send(
-                        j.submitter,
-                        Message::JobFailed { job: job.0, errors },
-                    ));
+                    self.send(j.submitter, Message::JobFailed { job: job.0, errors });
                 }
             }
             Event::JobCancelled { job } => {
@@ -537,10 +545,7 @@ impl MasterCore {
                 }
             }
             Event::PackageCancelled { worker, package } => {
-                self.outbox.push_back(Output::Send(
-                    worker.0,
-                    Message::CancelPackage { id: package.0 },
-                ));
+                self.send(worker.0, Message::CancelPackage { id: package.0 });
             }
         }
     }
@@ -577,10 +582,9 @@ impl MasterCore {
         let total = j.reflectors.len() as u32;
         let workers: Vec<ConnId> = self.workers().collect();
         for conn in workers {
-            self.outbox
-                .push_back(Output::Send(conn, Message::FrameStart(start.clone())));
+            self.send(conn, Message::FrameStart(start.clone()));
         }
-        self.outbox.push_back(Output::Send(
+        self.send(
             submitter,
             Message::Progress {
                 job,
@@ -588,7 +592,7 @@ impl MasterCore {
                 done: 0,
                 total,
             },
-        ));
+        );
     }
 
     fn assign(&mut self, a: Assignment) {
@@ -606,7 +610,7 @@ impl MasterCore {
             frame: a.frame,
             triangles: a.items,
         });
-        self.outbox.push_back(Output::Send(a.worker.0, message));
+        self.send(a.worker.0, message);
     }
 
     /// The farm's state for `vtfarm status`.

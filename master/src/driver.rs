@@ -121,7 +121,7 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
             match output {
                 Output::Send(conn, message) => {
                     if let Some(c) = conns.get(&conn) {
-                        let _ = c.tx.send(message);
+                        let _ = c.tx.send(*message);
                     }
                 }
                 Output::Close(conn, reason) => {

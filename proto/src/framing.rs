@@ -246,7 +246,7 @@ mod tests {
                 setup: setup(),
                 reflectors: vec![0, 1],
             }),
-            Message::RequestWork,
+            Message::RequestWork { job: 3, frame: 1 },
             Message::Package(Package {
                 id: 99,
                 job: 3,

@@ -52,8 +52,9 @@ pub enum Message {
     SceneData(SceneData),
     /// Master → worker: the set-up of a frame whose packages follow.
     FrameStart(FrameStart),
-    /// Worker → master: I have a free slot, send a package.
-    RequestWork,
+    /// Worker → master: I have a free slot and this frame set up, send a
+    /// package of it. A request for any other frame is stale and dropped.
+    RequestWork { job: JobId, frame: u32 },
     /// Master → worker: trace these reflector triangles.
     Package(Package),
     /// Worker → master: a package's pixels and counters.
@@ -102,7 +103,7 @@ impl Message {
             Message::SceneRequest { .. } => "SceneRequest",
             Message::SceneData(_) => "SceneData",
             Message::FrameStart(_) => "FrameStart",
-            Message::RequestWork => "RequestWork",
+            Message::RequestWork { .. } => "RequestWork",
             Message::Package(_) => "Package",
             Message::PackageResult(_) => "PackageResult",
             Message::PackageFailed(_) => "PackageFailed",

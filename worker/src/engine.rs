@@ -163,8 +163,7 @@ impl Engine {
                 r
             }
         };
-        let (_, ids) = renderer.base_frame(&setup);
-        let behind = renderer.behind(&setup);
+        let (ids, behind) = renderer.id_buffers(&setup);
         Ok(ActiveFrame {
             job: start.job,
             frame: start.frame,

@@ -62,7 +62,9 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
                 match message {
                     Message::Shutdown => return SessionEnd::Shutdown,
                     other => {
-                        requested &= !matches!(other, Message::Package(_));
+                        // A package answers the request; a new frame voids it
+                        // (the master drops requests for other frames).
+                        requested &= !matches!(other, Message::Package(_) | Message::FrameStart(_));
                         for reply in session.handle(other) {
                             send(&link, reply);
                         }
@@ -94,8 +96,18 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
             running = started;
         }
         let idle = running.is_none() && session.queue.is_empty();
-        if idle && !requested && session.frame.is_some() && session.pending_frame.is_none() {
-            if !send(&link, Message::RequestWork) {
+        let ready = session
+            .frame
+            .as_ref()
+            .filter(|_| session.pending_frame.is_none());
+        if let Some(frame) = ready.filter(|_| idle && !requested) {
+            if !send(
+                &link,
+                Message::RequestWork {
+                    job: frame.job,
+                    frame: frame.frame,
+                },
+            ) {
                 return SessionEnd::Disconnected;
             }
             requested = true;

@@ -104,6 +104,15 @@ impl Renderer {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
     }
 
+    /// Only the ID buffers a worker needs (no shading): the frame's and the
+    /// one behind the reflectors.
+    pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, IdBuffer) {
+        (
+            vtfarm_raster::id_buffer(self.scene(), &setup.camera),
+            self.behind(setup),
+        )
+    }
+
     /// What lies behind the reflectors (see `vtfarm_vertex::behind_id_buffer`).
     pub fn behind(&self, setup: &FrameSetup) -> IdBuffer {
         behind_id_buffer(self.scene(), &setup.camera, &self.is_reflector)

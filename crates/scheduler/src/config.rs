@@ -19,6 +19,11 @@ pub struct SchedulerConfig {
     pub retry: RetryPolicy,
     /// Cost estimation: see [`CostEstimation`].
     pub estimation: CostEstimation,
+    /// Whether requests for work lapse when a frame starts, so that workers
+    /// ask again once they have set the new frame up (vtfarm's workers
+    /// rebuild ID buffers per frame; counting that set-up as package time
+    /// would skew their measured rates). Default `false`: requests carry over.
+    pub requests_lapse_at_frame_start: bool,
 }
 
 impl Default for SchedulerConfig {
@@ -29,6 +34,7 @@ impl Default for SchedulerConfig {
             straggler: Some(StragglerPolicy::default()),
             retry: RetryPolicy::default(),
             estimation: CostEstimation::default(),
+            requests_lapse_at_frame_start: false,
         }
     }
 }
@@ -48,7 +54,7 @@ pub struct PackageSizing {
     /// self-scheduling. Values below 1 are read as 1.
     pub guided_factor: f64,
     /// Lower bound of the target duration, so that round trips and per-package
-    /// overhead stay small against the work. Default 20 ms.
+    /// overhead stay small against the work. Default 5 ms.
     pub min_duration: Duration,
     /// Upper bound of the target duration, so that a lost worker never takes
     /// much work with it. Default 10 s.
@@ -63,7 +69,7 @@ impl Default for PackageSizing {
     fn default() -> Self {
         PackageSizing {
             guided_factor: 2.0,
-            min_duration: Duration::from_millis(20),
+            min_duration: Duration::from_millis(5),
             max_duration: Duration::from_secs(10),
             split_factor: 1.5,
         }

@@ -106,6 +106,7 @@
 //! | (new), Gone | Idle | it joins | `worker_joined` |
 //! | Idle, Busy | Waiting | it asks for work | `request_work` |
 //! | Waiting | Busy | it gets a package | `assign` |
+//! | Waiting | Idle | a frame starts and requests lapse (`SchedulerConfig::requests_lapse_at_frame_start`) | `lapse_requests` |
 //! | Busy | Idle | its last package is done, failed or cancelled | `complete`, `fail_attempt`, `cancel_losing_copy`, `abandon_running_job` |
 //! | Idle, Waiting, Busy | Gone | it leaves or misses its heartbeats | `lose` |
 //!

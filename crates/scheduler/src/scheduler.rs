@@ -573,6 +573,7 @@ impl Scheduler {
                         frame: index,
                         items: job.frame.items.len(),
                     });
+                    self.lapse_requests();
                 }
                 None => {
                     self.events.push_back(Event::JobComplete { job: job.id });
@@ -580,6 +581,19 @@ impl Scheduler {
                 }
             }
         }
+    }
+
+    /// At a frame's start, forgets who asked for work, when so configured.
+    fn lapse_requests(&mut self) {
+        if !self.config.requests_lapse_at_frame_start {
+            return;
+        }
+        for &id in &self.waiting {
+            if let Some(w) = self.workers.get_mut(&id) {
+                w.wants_work = false;
+            }
+        }
+        self.waiting.clear();
     }
 
     /// Starts a job. Rates are in the job's cost unit, so every worker's are
@@ -606,6 +620,7 @@ impl Scheduler {
             frame: 0,
             items: frame.items.len(),
         });
+        self.lapse_requests();
         self.running = Some(RunningJob {
             id: next.id,
             frames,

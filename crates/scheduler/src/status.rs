@@ -68,7 +68,7 @@ impl WorkerState {
         matches!(
             (self, to),
             (Idle, Waiting)
-                | (Waiting, Busy)
+                | (Waiting, Busy | Idle)
                 | (Busy, Idle | Waiting)
                 | (Gone, Idle)
                 | (Idle | Waiting | Busy, Gone)

@@ -136,6 +136,7 @@ fn the_transition_table_in_code_matches_the_documentation() {
         (Idle, Waiting),
         (Busy, Waiting),
         (Waiting, Busy),
+        (Waiting, Idle),
         (Busy, Idle),
         (Gone, Idle),
         (Idle, Gone),
@@ -654,4 +655,26 @@ fn status_shows_progress_and_rates() {
     assert_eq!(workers[0].rate, Some(100.0));
     assert_eq!(workers[0].compute_rate, Some(1000.0));
     assert_eq!(workers[1].rate, None);
+}
+
+#[test]
+fn requests_lapse_at_a_frame_start_when_configured() {
+    let config = SchedulerConfig {
+        requests_lapse_at_frame_start: true,
+        ..SchedulerConfig::default()
+    };
+    let mut farm = Farm::with(config);
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JOB, 1, 2);
+    // W0 takes the one item of frame 0; W1 asks and waits.
+    let first = farm.request(W0).expect("frame 0 has work");
+    assert!(farm.request(W1).is_none());
+    farm.done(W0, &first).expect("accepted");
+    // Frame 1 started: W1's old request lapsed, nobody gets work unasked.
+    assert!(farm.assignments().is_empty());
+    assert_eq!(farm.s.worker_state(W1), Some(WorkerState::Idle));
+    // Asking again (after setting the frame up) gets it.
+    assert_eq!(farm.request(W1).expect("frame 1 has work").frame, 1);
+    farm.valid();
 }

@@ -1,5 +1,11 @@
-//! `vtfarm bench`: the paper's Table 1 on the built-in cockpit, and the
-//! tracer's ray throughput. Speed targets live here, not in tests.
+//! `vtfarm bench`: the paper's Table 1 on the built-in cockpit and the
+//! tracer's ray throughput (`table1`), the load balancer on simulated farms
+//! driven by costs recorded from a real frame (`simulate`, see [`simulate`]),
+//! and a real QUIC farm on localhost (`cluster`, see [`cluster`]). Speed
+//! targets live here, not in tests.
+
+mod cluster;
+mod simulate;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -18,6 +24,11 @@ use vtfarm_vertex::{Quality, VertexSettings};
 pub(crate) enum BenchCommand {
     /// Reproduces the paper's Table 1: reference, preview, refine and full on the cockpit.
     Table1(Table1Args),
+    /// The scheduler on simulated farms (1 to 64 workers, 10/100 Mbit links),
+    /// driven by per-triangle costs recorded from a real cockpit frame.
+    Simulate(simulate::SimulateArgs),
+    /// One worker against two over real QUIC on 127.0.0.1, all in this process.
+    Cluster(cluster::ClusterArgs),
 }
 
 #[derive(clap::Args)]
@@ -70,6 +81,8 @@ struct Table1 {
 pub(crate) fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Table1(args) => table1(args),
+        BenchCommand::Simulate(args) => simulate::run(args),
+        BenchCommand::Cluster(args) => cluster::run(args),
     }
 }
 
@@ -234,4 +247,54 @@ fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
         rays.len() as f64 / start.elapsed().as_secs_f64()
     };
     (rate(&coherent), rate(&incoherent))
+}
+
+/// The built-in cockpit as the farm benchmarks render it: the cover glass as
+/// reflector, the cockpit's camera at the requested size.
+struct CockpitJob {
+    scene: Arc<vtfarm_scene::Scene>,
+    /// Reflector triangle ids, ascending (as a job file selects them).
+    reflectors: Vec<u32>,
+    setup: FrameSetup,
+}
+
+impl CockpitJob {
+    fn new(detail: f32, width: u32, height: u32, quality: Quality) -> Result<CockpitJob> {
+        let c = cockpit(&CockpitConfig {
+            detail,
+            ..CockpitConfig::default()
+        });
+        let glass = c
+            .scene
+            .object_id(COVER_GLASS)
+            .context("the cockpit has a cover glass")?;
+        let reflectors = (0..c.scene.triangles.len() as u32)
+            .filter(|&t| c.scene.triangles[t as usize].object == glass)
+            .collect();
+        let setup = FrameSetup {
+            camera: vtfarm_scene::Camera {
+                width,
+                height,
+                ..c.camera
+            },
+            lighting: c.lighting,
+            trace: TraceSettings::default(),
+            vertex: VertexSettings {
+                quality,
+                ..VertexSettings::default()
+            },
+        };
+        Ok(CockpitJob {
+            scene: Arc::new(c.scene),
+            reflectors,
+            setup,
+        })
+    }
+}
+
+fn write_json(path: &std::path::Path, value: &impl Serialize) -> Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(value)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
 }
