@@ -94,25 +94,12 @@ fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptio
 
 /// `vtfarm submit`.
 pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
-    let mut job = vtfarm_job::load_job(&args.job)?;
-    if let Some(q) = args.quality {
-        job.vertex.quality = q;
-    }
-    let loaded = job.load_scene()?;
-    let mut camera = loaded.camera;
-    camera.width = args.width.unwrap_or(camera.width);
-    camera.height = args.height.unwrap_or(camera.height);
-    let reflectors = job.reflector_triangles(&loaded.scene)?;
-    let setups: Vec<FrameSetup> = job
-        .frames(&camera)?
-        .into_iter()
-        .map(|camera| FrameSetup {
-            camera,
-            lighting: loaded.lighting.clone(),
-            trace: job.trace,
-            vertex: job.vertex,
-        })
-        .collect();
+    let crate::PreparedJob {
+        scene,
+        reflectors,
+        setups,
+        ..
+    } = crate::prepare_job(&args.job, args.quality, args.width, args.height)?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     let options = client_options(&args.cluster, &args.master)?;
@@ -123,7 +110,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     let output = args.output.clone();
     let frames = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
-        let data = SceneData::from_scene(&loaded.scene);
+        let data = SceneData::from_scene(&scene);
         let wire = wire_job(&name, &data, &setups, &reflectors);
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
         let result = run_job(&mut conn.link, wire, &data, |event| match event {

@@ -151,28 +151,68 @@ fn set_threads(threads: Option<usize>) -> Result<()> {
     Ok(())
 }
 
-fn render(args: RenderArgs) -> Result<()> {
-    set_threads(args.threads)?;
-    let mut job = vtfarm_job::load_job(&args.job)?;
-    if let Some(q) = args.quality {
+/// A job file made ready to render: its scene, reflectors and one set-up per frame.
+pub(crate) struct PreparedJob {
+    pub(crate) job: vtfarm_job::Job,
+    pub(crate) scene: vtfarm_scene::Scene,
+    pub(crate) reflectors: Vec<u32>,
+    pub(crate) setups: Vec<FrameSetup>,
+}
+
+/// Loads a job file, applies the command line's overrides and makes the
+/// frames' set-ups (the camera, then one per extra eye point).
+pub(crate) fn prepare_job(
+    path: &Path,
+    quality: Option<Quality>,
+    width: Option<u32>,
+    height: Option<u32>,
+) -> Result<PreparedJob> {
+    let mut job = vtfarm_job::load_job(path)?;
+    if let Some(q) = quality {
         job.vertex.quality = q;
     }
     let loaded = job.load_scene()?;
     let mut camera = loaded.camera;
-    camera.width = args.width.unwrap_or(camera.width);
-    camera.height = args.height.unwrap_or(camera.height);
+    camera.width = width.unwrap_or(camera.width);
+    camera.height = height.unwrap_or(camera.height);
     let reflectors = job.reflector_triangles(&loaded.scene)?;
-    let setup = FrameSetup {
-        camera,
-        lighting: loaded.lighting,
-        trace: job.trace,
-        vertex: job.vertex,
-    };
+    let setups = job
+        .frames(&camera)?
+        .into_iter()
+        .map(|camera| FrameSetup {
+            camera,
+            lighting: loaded.lighting.clone(),
+            trace: job.trace,
+            vertex: job.vertex,
+        })
+        .collect();
+    Ok(PreparedJob {
+        job,
+        scene: loaded.scene,
+        reflectors,
+        setups,
+    })
+}
+
+fn render(args: RenderArgs) -> Result<()> {
+    set_threads(args.threads)?;
+    let PreparedJob {
+        job,
+        scene,
+        reflectors,
+        setups,
+    } = prepare_job(&args.job, args.quality, args.width, args.height)?;
+    // `render` writes one image: the job's first frame.
+    let setup = setups
+        .into_iter()
+        .next()
+        .context("a job has at least one frame")?;
+
     let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
-    let scene_triangles = loaded.scene.triangles.len();
+    let scene_triangles = scene.triangles.len();
     if let Some(dir) = &args.aux {
         // The auxiliary outputs need the whole frame in this process.
-        let renderer = Renderer::new(Arc::new(loaded.scene), reflectors);
+        let renderer = Renderer::new(Arc::new(scene), reflectors);
         let options = RenderOptions {
             collect_faces: true,
             ..RenderOptions::default()
@@ -197,14 +237,8 @@ fn render(args: RenderArgs) -> Result<()> {
             .job
             .file_name()
             .map_or("job".into(), |n| n.to_string_lossy().into_owned());
-        let frame = farm::render_embedded(
-            &name,
-            &loaded.scene,
-            &setup,
-            &reflectors,
-            args.local_workers,
-            &bar,
-        )?;
+        let frame =
+            farm::render_embedded(&name, &scene, &setup, &reflectors, args.local_workers, &bar)?;
         bar.finish_and_clear();
         output::write_image(&args.output, &frame.image)?;
         let stats = vtfarm_vertex::PackageStats::from(frame.stats.totals);
