@@ -76,7 +76,13 @@ fn render_writes_the_image_and_documented_aux_files() {
         seen.contains("side_window_left"),
         "the glass mirrors the left side window: {seen:?}"
     );
-    for file in ["reflected.png", "reflected.npy", "wireframe.png"] {
+    for file in [
+        "reflected.png",
+        "reflected.npy",
+        "transmitted.png",
+        "transmitted.npy",
+        "wireframe.png",
+    ] {
         assert!(aux.join(file).is_file(), "{file} written");
     }
 }

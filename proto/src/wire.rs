@@ -620,6 +620,7 @@ pub struct WireBitmap {
     pub mask: Vec<u8>,
     pub color: Vec<[f32; 3]>,
     pub reflected: Vec<[f32; 3]>,
+    pub transmitted: Vec<[f32; 3]>,
     pub reflected_object: Vec<u32>,
 }
 
@@ -637,6 +638,7 @@ impl From<&SparseBitmap> for WireBitmap {
             mask,
             color: b.color.iter().map(|&c| vec3(c)).collect(),
             reflected: b.reflected.iter().map(|&c| vec3(c)).collect(),
+            transmitted: b.transmitted.iter().map(|&c| vec3(c)).collect(),
             reflected_object: b.reflected_object.clone(),
         }
     }
@@ -679,6 +681,7 @@ impl TryFrom<WireBitmap> for SparseBitmap {
         for (field, len) in [
             ("bitmap color", w.color.len()),
             ("bitmap reflected", w.reflected.len()),
+            ("bitmap transmitted", w.transmitted.len()),
             ("bitmap reflected_object", w.reflected_object.len()),
         ] {
             if len != covered {
@@ -704,6 +707,7 @@ impl TryFrom<WireBitmap> for SparseBitmap {
                 .collect(),
             color: colors("bitmap color", &w.color)?,
             reflected: colors("bitmap reflected", &w.reflected)?,
+            transmitted: colors("bitmap transmitted", &w.transmitted)?,
             reflected_object: w.reflected_object,
         })
     }
@@ -919,6 +923,7 @@ pub(crate) mod tests {
             mask,
             color: vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE],
             reflected: vec![Vec3::ZERO, Vec3::splat(0.5), Vec3::ZERO, Vec3::splat(0.25)],
+            transmitted: vec![Vec3::ONE, Vec3::splat(0.125), Vec3::X, Vec3::ZERO],
             reflected_object: vec![0, vtfarm_scene::NONE, 1, 0],
         }
     }
@@ -1126,6 +1131,10 @@ pub(crate) mod tests {
             "bitmap reflected has 3 entries, expected 4",
         );
         check(
+            |b| b.transmitted.push([0.0; 3]),
+            "bitmap transmitted has 5 entries, expected 4",
+        );
+        check(
             |b| b.reflected_object.clear(),
             "bitmap reflected_object has 0",
         );
@@ -1182,9 +1191,10 @@ pub(crate) mod tests {
             mask in proptest::collection::vec(any::<u8>(), 0..60),
             color in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
             reflected in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
+            transmitted in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
             reflected_object in proptest::collection::vec(any::<u32>(), 0..30),
         ) -> WireBitmap {
-            WireBitmap { x0, y0, width, height, mask, color, reflected, reflected_object }
+            WireBitmap { x0, y0, width, height, mask, color, reflected, transmitted, reflected_object }
         }
     }
 

@@ -4,6 +4,8 @@
 //! - `mask.png`: 8-bit gray, 255 on reflector pixels, 0 elsewhere;
 //! - `reflected.png` (sRGB) and `reflected.npy` (linear float32, height x width x 3):
 //!   the reflected component;
+//! - `transmitted.png` (sRGB) and `transmitted.npy` (linear float32): the
+//!   transmitted component (what is seen through the reflectors);
 //! - `reflected_objects.png`: 16-bit gray, the index of the object each reflector
 //!   pixel mirrors plus one (0 = nothing), with `objects.json` naming each value;
 //! - `wireframe.png`: the image with the refined triangles' edges drawn (Figure 13).
@@ -64,6 +66,8 @@ pub fn write_aux(dir: &Path, frame: &RenderedFrame, scene: &Scene) -> Result<(),
     write_gray8_png(&dir.join("mask.png"), w, h, &mask)?;
     image.reflected.write_png(&dir.join("reflected.png"))?;
     image.reflected.write_npy(&dir.join("reflected.npy"))?;
+    image.transmitted.write_png(&dir.join("transmitted.png"))?;
+    image.transmitted.write_npy(&dir.join("transmitted.npy"))?;
     let objects: Vec<u16> = image
         .reflected_object
         .iter()

@@ -91,3 +91,28 @@ fn time_breaks_deliver_the_preview_then_every_refined_face() {
         "the refinement split faces"
     );
 }
+
+#[test]
+fn glass_pixels_split_into_reflected_and_transmitted_light() {
+    let (renderer, setup) = small_cockpit();
+    let frame = renderer.render(&setup, &Default::default(), &mut |_, _| {});
+    let image = &frame.image;
+    let glass: Vec<usize> = (0..image.mask.len()).filter(|&i| image.mask[i]).collect();
+    assert!(!glass.is_empty());
+    let seen_through = glass
+        .iter()
+        .filter(|&&i| image.transmitted.pixels[i].max_element() > 0.0)
+        .count();
+    assert!(
+        seen_through * 10 > glass.len() * 9,
+        "the instruments are seen through the glass"
+    );
+    for &i in &glass {
+        // Colour = local Phong (never negative) + reflected + transmitted.
+        let local = image.color.pixels[i] - image.reflected.pixels[i] - image.transmitted.pixels[i];
+        assert!(local.min_element() > -1e-4, "pixel {i}: {local}");
+    }
+    // Outside the glass both components stay black.
+    let outside = (0..image.mask.len()).find(|&i| !image.mask[i]).unwrap();
+    assert_eq!(image.transmitted.pixels[outside], glam::Vec3::ZERO);
+}

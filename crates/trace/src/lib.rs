@@ -87,6 +87,9 @@ pub struct Sample {
     /// The reflected component alone: kr times the radiance of the first
     /// reflection ray (what the first surface mirrors; a glare study measures this).
     pub reflected: Vec3,
+    /// The transmitted component alone: kt times the radiance of the first
+    /// refraction ray (what is seen through the first surface).
+    pub transmitted: Vec3,
     /// The object hit by the first reflection ray, or `vtfarm_scene::NONE`.
     pub reflected_object: ObjectId,
     /// A compact ray-tree signature: a hash of the objects hit along the tree

@@ -33,6 +33,7 @@ pub struct Tracer<'a> {
 struct Shaded {
     color: Vec3,
     reflected: Vec3,
+    transmitted: Vec3,
     reflected_object: ObjectId,
 }
 
@@ -149,6 +150,7 @@ impl Tracer<'_> {
                 let background = Shaded {
                     color: self.lighting.background,
                     reflected: Vec3::ZERO,
+                    transmitted: Vec3::ZERO,
                     reflected_object: NONE,
                 };
                 (background, NONE)
@@ -215,6 +217,7 @@ impl Tracer<'_> {
         let mut shaded = Shaded {
             color: local,
             reflected: Vec3::ZERO,
+            transmitted: Vec3::ZERO,
             reflected_object: NONE,
         };
         if depth >= self.settings.max_depth.max(1) {
@@ -284,7 +287,8 @@ impl Tracer<'_> {
             }
             let ray = self.bvh.spawn_ray(point.position, geometric, direction);
             let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
-            shaded.color += kt * seen.color;
+            shaded.transmitted = kt * seen.color;
+            shaded.color += shaded.transmitted;
         }
         shaded
     }
@@ -323,6 +327,7 @@ fn sample(shaded: Shaded, signature: Signature) -> Sample {
     Sample {
         color: shaded.color,
         reflected: shaded.reflected,
+        transmitted: shaded.transmitted,
         reflected_object: shaded.reflected_object,
         signature: signature.finish(),
     }

@@ -15,6 +15,8 @@ pub struct FrameImage {
     pub color: Image,
     /// The reflected component (black outside the reflectors).
     pub reflected: Image,
+    /// The transmitted component: what is seen through the reflectors.
+    pub transmitted: Image,
     /// The object each reflector pixel mirrors (`NONE` for nothing/elsewhere).
     pub reflected_object: Vec<u32>,
     /// Which pixels the traced bitmaps wrote.
@@ -27,6 +29,7 @@ impl FrameImage {
         let n = base.pixels.len();
         FrameImage {
             reflected: Image::new(base.width, base.height, Vec3::ZERO),
+            transmitted: Image::new(base.width, base.height, Vec3::ZERO),
             reflected_object: vec![NONE; n],
             mask: vec![false; n],
             color: base,
@@ -40,6 +43,7 @@ impl FrameImage {
             let i = self.color.index(x, y);
             self.color.pixels[i] = bitmap.color[k];
             self.reflected.pixels[i] = bitmap.reflected[k];
+            self.transmitted.pixels[i] = bitmap.transmitted[k];
             self.reflected_object[i] = bitmap.reflected_object[k];
             self.mask[i] = true;
         }

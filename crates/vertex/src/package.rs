@@ -84,7 +84,7 @@ impl PackageStats {
 
 /// The reflector pixels of a package: a bounding rectangle with a coverage
 /// mask, and for each covered pixel (row-major within the rectangle) its
-/// colour, reflected component and reflected object.
+/// colour, reflected and transmitted components and reflected object.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseBitmap {
     pub x0: u32,
@@ -94,6 +94,7 @@ pub struct SparseBitmap {
     pub mask: Vec<bool>,
     pub color: Vec<Vec3>,
     pub reflected: Vec<Vec3>,
+    pub transmitted: Vec<Vec3>,
     pub reflected_object: Vec<u32>,
 }
 
@@ -134,6 +135,7 @@ struct PixelValue {
     index: u32,
     color: Vec3,
     reflected: Vec3,
+    transmitted: Vec3,
     object: u32,
 }
 
@@ -143,6 +145,7 @@ impl PixelValue {
             index,
             color: s.color,
             reflected: s.reflected,
+            transmitted: s.transmitted,
             object: s.reflected_object,
         }
     }
@@ -458,10 +461,12 @@ fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> 
         std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
     let total: f32 = pw.iter().sum();
     let pw = pw.map(|x| x / total);
-    let color = v[0].sample.color * pw[0] + v[1].sample.color * pw[1] + v[2].sample.color * pw[2];
-    let reflected = v[0].sample.reflected * pw[0]
-        + v[1].sample.reflected * pw[1]
-        + v[2].sample.reflected * pw[2];
+    let blend = |f: fn(&Sample) -> Vec3| {
+        f(&v[0].sample) * pw[0] + f(&v[1].sample) * pw[1] + f(&v[2].sample) * pw[2]
+    };
+    let color = blend(|s| s.color);
+    let reflected = blend(|s| s.reflected);
+    let transmitted = blend(|s| s.transmitted);
     let nearest = (0..3)
         .max_by(|&a, &b| pw[a].total_cmp(&pw[b]))
         .expect("three corners");
@@ -469,6 +474,7 @@ fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> 
         index,
         color,
         reflected,
+        transmitted,
         object: v[nearest].sample.reflected_object,
     }
 }
@@ -503,6 +509,7 @@ fn assemble(frame: &Frame<'_>, mut pixels: Vec<PixelValue>) -> SparseBitmap {
         mask,
         color: pixels.iter().map(|p| p.color).collect(),
         reflected: pixels.iter().map(|p| p.reflected).collect(),
+        transmitted: pixels.iter().map(|p| p.transmitted).collect(),
         reflected_object: pixels.iter().map(|p| p.object).collect(),
     }
 }
