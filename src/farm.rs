@@ -27,6 +27,10 @@ pub(crate) struct SubmitArgs {
     /// Output directory for frame_NNNN.png and stats.json.
     #[arg(short, long)]
     output: PathBuf,
+    /// Also write each frame's auxiliary outputs (mask, reflected and
+    /// transmitted components, reflected-object map) into OUTPUT/frame_NNNN/.
+    #[arg(long)]
+    aux: bool,
     /// Overrides the job's quality level.
     #[arg(long, value_parser = crate::parse_quality)]
     quality: Option<Quality>,
@@ -108,10 +112,14 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .file_name()
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
+    let args_aux = args.aux;
     let frames = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
-        let wire = wire_job(&name, &data, &setups, &reflectors);
+        let wire = vtfarm_proto::WireJob {
+            aux: args_aux,
+            ..wire_job(&name, &data, &setups, &reflectors)
+        };
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
         let result = run_job(&mut conn.link, wire, &data, |event| match event {
             JobEvent::Accepted { job, frames } => {
@@ -125,6 +133,13 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 let path = output.join(format!("frame_{:04}.png", f.frame));
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
+                }
+                if let Some(components) = &f.components {
+                    let dir = output.join(format!("frame_{:04}", f.frame));
+                    if let Err(e) = vtfarm_render::output::write_aux(&dir, components, &[], &scene)
+                    {
+                        bar.println(format!("error: {e}"));
+                    }
                 }
                 bar.println(format!(
                     "frame {}: {} ({})",

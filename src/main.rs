@@ -220,7 +220,7 @@ fn render(args: RenderArgs) -> Result<()> {
         let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
         bar.finish_and_clear();
         output::write_image(&args.output, &frame.image.color)?;
-        output::write_aux(dir, &frame, renderer.scene())?;
+        output::write_aux(dir, &frame.image, &frame.faces, renderer.scene())?;
         let timings = [
             ("base frame", frame.raster_time),
             ("total", frame.total_time),

@@ -82,6 +82,14 @@ fn job_with_glass(frames: usize, width: u32, height: u32, glass_segments: u32) -
 
 /// The single-process images of a job.
 fn reference(job: &Job) -> Vec<Vec<Vec3>> {
+    reference_frames(job)
+        .into_iter()
+        .map(|f| f.color.pixels)
+        .collect()
+}
+
+/// The single-process frames of a job with all their components.
+fn reference_frames(job: &Job) -> Vec<vtfarm_vertex::FrameImage> {
     let renderer = Renderer::new(Arc::new(job.scene.clone()), job.reflectors.clone());
     job.frames
         .iter()
@@ -89,8 +97,6 @@ fn reference(job: &Job) -> Vec<Vec<Vec3>> {
             renderer
                 .render(f, &Default::default(), &mut |_, _| {})
                 .image
-                .color
-                .pixels
         })
         .collect()
 }
@@ -173,7 +179,11 @@ impl Cluster {
         let data = SceneData::from_scene(&job.scene);
         run_job(
             &mut conn.link,
-            wire_job("test", &data, &job.frames, &job.reflectors),
+            // Components too: the glare study measures them.
+            vtfarm_proto::WireJob {
+                aux: true,
+                ..wire_job("test", &data, &job.frames, &job.reflectors)
+            },
             &data,
             |_| {},
         )
@@ -225,6 +235,14 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     cluster.wait_for_workers(2).await;
     let frames = cluster.submit(&job).await.unwrap();
     assert_same_images(&frames, &reference);
+    let components = frames[0]
+        .components
+        .as_ref()
+        .expect("the job asked for components");
+    assert!(
+        components == &reference_frames(&job)[0],
+        "reflected, transmitted and object maps equal too"
+    );
     let workers = &frames[0].stats.workers;
     assert_eq!(workers.len(), 2, "both workers did work: {workers:?}");
     assert!(

@@ -13,8 +13,8 @@ use std::time::Duration;
 use tracing::{debug, info, warn};
 use vtfarm_proto::{
     FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
-    SceneData, SceneHash, StatusReply, WireFrameSetup, WireImage, WireJob, WirePackageStats,
-    WorkerFrameStats, WorkerStatus, check_triangle_ids, encode_message,
+    SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
+    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encode_message,
 };
 use vtfarm_render::{FrameSetup, morton_order};
 use vtfarm_scene::Scene;
@@ -55,6 +55,8 @@ struct Job {
     scene_hash: SceneHash,
     reflectors: Vec<u32>,
     frames: Vec<FrameSetup>,
+    /// Send the per-pixel components with each frame.
+    aux: bool,
     current: Option<FrameAssembly>,
 }
 
@@ -400,6 +402,7 @@ impl MasterCore {
                 scene_hash,
                 reflectors,
                 frames,
+                aux: job.aux,
                 current: None,
             },
         );
@@ -504,6 +507,7 @@ impl MasterCore {
                     frame,
                     image: WireImage::from_pixels(image.width, image.height, &image.pixels),
                     stats: frame_stats,
+                    aux: j.aux.then(|| frame_aux(&done.image)),
                 });
                 self.send(j.submitter, message);
             }
@@ -659,5 +663,16 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
+    }
+}
+
+/// The per-pixel components of a finished frame, for the wire.
+fn frame_aux(image: &FrameImage) -> WireFrameAux {
+    let wire = |i: &vtfarm_imaging::Image| WireImage::from_pixels(i.width, i.height, &i.pixels);
+    WireFrameAux {
+        reflected: wire(&image.reflected),
+        transmitted: wire(&image.transmitted),
+        reflected_object: image.reflected_object.clone(),
+        mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
     }
 }

@@ -29,7 +29,7 @@ enum Input {
     },
     Message {
         conn: ConnId,
-        message: Message,
+        message: Box<Message>,
     },
     Disconnected {
         conn: ConnId,
@@ -57,7 +57,13 @@ impl MasterHandle {
         let inputs = self.inputs.clone();
         tokio::spawn(async move {
             while let Some(message) = rx.recv().await {
-                if inputs.send(Input::Message { conn, message }).is_err() {
+                if inputs
+                    .send(Input::Message {
+                        conn,
+                        message: Box::new(message),
+                    })
+                    .is_err()
+                {
                     return;
                 }
             }
@@ -105,7 +111,7 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                     }
                     Input::Message { conn, message } => {
                         if conns.contains_key(&conn) {
-                            core.message(now, conn, message);
+                            core.message(now, conn, *message);
                         }
                     }
                     Input::Disconnected { conn } => {

@@ -5,8 +5,12 @@
 //! when it does not have that scene yet.
 
 use vtfarm_imaging::Image;
-use vtfarm_proto::{FrameStats, JobScene, Link, Message, SceneData, WireFrameSetup, WireJob};
+use vtfarm_proto::{
+    FrameStats, JobScene, Link, Message, SceneData, WireFrameAux, WireFrameSetup, WireImage,
+    WireJob,
+};
 use vtfarm_render::FrameSetup;
+use vtfarm_vertex::FrameImage;
 
 /// A finished frame as the submitter receives it.
 #[derive(Clone, Debug)]
@@ -14,6 +18,8 @@ pub struct FinishedFrame {
     pub frame: u32,
     pub image: Image,
     pub stats: FrameStats,
+    /// The colour with the per-pixel components, when the job asked for them.
+    pub components: Option<FrameImage>,
 }
 
 /// What happens while a job runs, for progress displays.
@@ -50,6 +56,7 @@ pub fn wire_job(
             .map(|f| WireFrameSetup::from_parts(&f.camera, &f.lighting, &f.trace, &f.vertex))
             .collect(),
         reflectors: reflectors.to_vec(),
+        aux: false,
     }
 }
 
@@ -81,18 +88,13 @@ pub async fn run_job(
                 frame, done, total, ..
             } => on_event(JobEvent::Progress { frame, done, total }),
             Message::FrameDone(done) => {
-                let (width, height, pixels) = done
-                    .image
-                    .into_pixels()
-                    .map_err(|e| JobError::Protocol(e.to_string()))?;
+                let image = image(done.image)?;
+                let components = done.aux.map(|aux| components(&image, aux)).transpose()?;
                 let finished = FinishedFrame {
                     frame: done.frame,
-                    image: Image {
-                        width,
-                        height,
-                        pixels,
-                    },
+                    image,
                     stats: done.stats,
+                    components,
                 };
                 on_event(JobEvent::FrameDone(&finished));
                 frames.push(finished);
@@ -103,4 +105,37 @@ pub async fn run_job(
         }
     }
     Ok(frames)
+}
+
+fn image(wire: WireImage) -> Result<Image, JobError> {
+    let (width, height, pixels) = wire
+        .into_pixels()
+        .map_err(|e| JobError::Protocol(e.to_string()))?;
+    Ok(Image {
+        width,
+        height,
+        pixels,
+    })
+}
+
+/// Rebuilds the frame's components from the wire, checking their sizes.
+fn components(color: &Image, aux: WireFrameAux) -> Result<FrameImage, JobError> {
+    let n = color.pixels.len();
+    let (reflected, transmitted) = (image(aux.reflected)?, image(aux.transmitted)?);
+    if reflected.pixels.len() != n
+        || transmitted.pixels.len() != n
+        || aux.reflected_object.len() != n
+        || aux.mask.len() != n
+    {
+        return Err(JobError::Protocol(
+            "frame components of the wrong size".into(),
+        ));
+    }
+    Ok(FrameImage {
+        color: color.clone(),
+        reflected,
+        transmitted,
+        reflected_object: aux.reflected_object,
+        mask: aux.mask.iter().map(|&m| m != 0).collect(),
+    })
 }

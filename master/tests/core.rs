@@ -126,6 +126,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             &setup.vertex,
         )],
         reflectors: reflectors.clone(),
+        aux: false,
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
     assert!(matches!(

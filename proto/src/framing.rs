@@ -273,6 +273,7 @@ mod tests {
                     scene: JobScene::Data(SceneData::from_scene(&scene())),
                     frames: vec![setup(), setup()],
                     reflectors: vec![0],
+                    aux: true,
                 },
             },
             Message::SubmitJob {
@@ -281,6 +282,7 @@ mod tests {
                     scene: JobScene::Hash(hash),
                     frames: vec![setup()],
                     reflectors: vec![1],
+                    aux: false,
                 },
             },
             Message::JobAccepted { job: 3, frames: 2 },
@@ -294,6 +296,12 @@ mod tests {
                 job: 3,
                 frame: 1,
                 image: WireImage::from_pixels(2, 1, &[Vec3::X, Vec3::ONE]),
+                aux: Some(WireFrameAux {
+                    reflected: WireImage::from_pixels(2, 1, &[Vec3::ZERO, Vec3::Y]),
+                    transmitted: WireImage::from_pixels(2, 1, &[Vec3::ZERO, Vec3::Z]),
+                    reflected_object: vec![vtfarm_scene::NONE, 4],
+                    mask: vec![0, 1],
+                }),
                 stats: FrameStats {
                     packages: 8,
                     failures: 1,

@@ -41,7 +41,8 @@ pub use link::{Link, LinkBytes, SESSION_LIMIT};
 pub use message::{
     FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
     PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, RunningJob, SceneData,
-    SceneHash, StatusReply, Welcome, WireJob, WorkerFrameStats, WorkerStatus, scene_hash,
+    SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WorkerFrameStats, WorkerStatus,
+    scene_hash,
 };
 pub use tls::{
     ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,

@@ -339,6 +339,8 @@ pub struct WireJob {
     pub frames: Vec<WireFrameSetup>,
     /// The reflector triangles (the same for every frame).
     pub reflectors: Vec<u32>,
+    /// Also send each frame's per-pixel components (`FrameDone::aux`).
+    pub aux: bool,
 }
 
 /// Where a job's scene comes from.
@@ -359,6 +361,23 @@ pub struct FrameDone {
     /// The composited frame in linear RGB f32 (see [`WireImage`]).
     pub image: WireImage,
     pub stats: FrameStats,
+    /// The per-pixel components, when the job asked for them.
+    pub aux: Option<WireFrameAux>,
+}
+
+/// A frame's per-pixel components besides the colour: what a glare study
+/// measures. All arrays have one entry per pixel, row-major from the top.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireFrameAux {
+    /// The reflected component (linear RGB; black off the reflectors).
+    pub reflected: WireImage,
+    /// The transmitted component (linear RGB; black off the reflectors).
+    pub transmitted: WireImage,
+    /// The object each reflector pixel mirrors (`vtfarm_scene::NONE` for none).
+    pub reflected_object: Vec<u32>,
+    /// 1 on reflector pixels, 0 elsewhere.
+    #[serde(with = "bytes")]
+    pub mask: Vec<u8>,
 }
 
 /// Counters of one farm frame (written by `vtfarm submit` as `stats.json`).

@@ -8,16 +8,15 @@
 //!   transmitted component (what is seen through the reflectors);
 //! - `reflected_objects.png`: 16-bit gray, the index of the object each reflector
 //!   pixel mirrors plus one (0 = nothing), with `objects.json` naming each value;
-//! - `wireframe.png`: the image with the refined triangles' edges drawn (Figure 13).
+//! - `wireframe.png`: the image with the refined triangles' edges drawn (Figure 13),
+//!   when the frame was rendered in this process.
 
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use vtfarm_imaging::{Image, ImageError, write_gray8_png, write_gray16_png};
 use vtfarm_scene::{NONE, Scene};
-use vtfarm_vertex::draw_wireframe;
-
-use crate::RenderedFrame;
+use vtfarm_vertex::{FinishedFace, FrameImage, draw_wireframe};
 
 /// Errors while writing outputs.
 #[derive(Debug, thiserror::Error)]
@@ -50,13 +49,19 @@ pub fn write_image(path: &Path, image: &Image) -> Result<(), OutputError> {
 }
 
 /// Writes the auxiliary outputs into `dir` (created if missing).
-pub fn write_aux(dir: &Path, frame: &RenderedFrame, scene: &Scene) -> Result<(), OutputError> {
+/// `faces` are the refined triangles for `wireframe.png`, which is written
+/// only when there are some (a frame from the farm has none).
+pub fn write_aux(
+    dir: &Path,
+    image: &FrameImage,
+    faces: &[FinishedFace],
+    scene: &Scene,
+) -> Result<(), OutputError> {
     let io = |path: &Path| {
         let path = path.to_owned();
         move |source| OutputError::Io { path, source }
     };
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let image = &frame.image;
     let (w, h) = (image.color.width, image.color.height);
     let mask: Vec<u8> = image
         .mask
@@ -92,8 +97,10 @@ pub fn write_aux(dir: &Path, frame: &RenderedFrame, scene: &Scene) -> Result<(),
     let json_path = dir.join("objects.json");
     let json = serde_json::to_string_pretty(&entries).expect("plain structs serialize");
     std::fs::write(&json_path, json).map_err(io(&json_path))?;
-    let mut wire = image.color.clone();
-    draw_wireframe(&mut wire, &frame.faces, Vec3::new(1.0, 0.1, 0.1));
-    wire.write_png(&dir.join("wireframe.png"))?;
+    if !faces.is_empty() {
+        let mut wire = image.color.clone();
+        draw_wireframe(&mut wire, faces, Vec3::new(1.0, 0.1, 0.1));
+        wire.write_png(&dir.join("wireframe.png"))?;
+    }
     Ok(())
 }
