@@ -52,6 +52,7 @@ fn job_with_glass(frames: usize, width: u32, height: u32, glass_segments: u32) -
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         glass_segments,
+        ..CockpitConfig::default()
     });
     let glass = c.scene.object_id(COVER_GLASS).unwrap();
     let reflectors = (0..c.scene.triangles.len() as u32)

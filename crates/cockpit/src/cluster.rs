@@ -13,9 +13,9 @@ use glam::{Vec2, Vec3};
 use vtfarm_scene::Material;
 
 use crate::builder::{SceneBuilder, emitter, glossy, matte};
-use crate::layout::glass_frame;
+use crate::layout::{ABSORBER, EYE, GLASS_CENTER, glass_frame};
 use crate::mesh::{Frame, Mesh};
-use crate::{COVER_GLASS, COVER_GLASS_BACK, Detail, GLASS_MATERIAL};
+use crate::{COVER_GLASS, COVER_GLASS_BACK, Detail, GLARE_ABSORBER, GLASS_MATERIAL, GlassDesign};
 
 /// Chord width and height of the cover glass.
 const GLASS_SIZE: Vec2 = Vec2::new(0.46, 0.21);
@@ -67,49 +67,209 @@ const DIALS: [Dial; 3] = [
 const SCALE_START: f32 = 1.25 * PI;
 const SCALE_SWEEP: f32 = 1.5 * PI;
 
-/// The cover glass surface: a patch of an ellipsoid in the glass frame.
+/// The cover glass surface in the glass frame: today's ellipsoid patch or,
+/// for the other designs, a height field over the frame's xy plane.
 #[derive(Clone, Copy, Debug)]
-struct CoverShape {
-    radii: Vec3,
-    /// Patch coordinates (s, t) = (±1, ±1) are the glass edges; these are
-    /// the matching unit-ellipsoid coordinates.
-    extent: Vec2,
+enum CoverShape {
+    Curved {
+        radii: Vec3,
+        /// Patch coordinates (s, t) = (±1, ±1) are the glass edges; these
+        /// are the matching unit-ellipsoid coordinates.
+        extent: Vec2,
+    },
+    /// z = h(x, y) with x = s · half.x, y = t · half.y.
+    Field { half: Vec2, surface: Surface },
+}
+
+/// Height fields through the frame origin with normal +z there (except the
+/// tilted plane), in the glass frame.
+#[derive(Clone, Copy, Debug)]
+enum Surface {
+    /// z = -y tan(tilt).
+    Plane { tan: f32 },
+    /// Axis along x through (0, 0, radius).
+    Cylinder { radius: f32 },
+    /// The spheroid with centre `centre`, unit major axis `axis` and
+    /// semi-axes `a` (major) and `b`; the sheet nearest the origin.
+    Spheroid {
+        centre: glam::DVec3,
+        axis: glam::DVec3,
+        a: f64,
+        b: f64,
+    },
+}
+
+impl Surface {
+    /// Height and unit normal (towards +z) at (x, y).
+    fn at(&self, x: f32, y: f32) -> (f32, Vec3) {
+        match *self {
+            Surface::Plane { tan } => (-y * tan, Vec3::new(0.0, tan, 1.0).normalize()),
+            Surface::Cylinder { radius } => {
+                let z = radius - (radius * radius - y * y).max(0.0).sqrt();
+                (z, Vec3::new(0.0, -y, radius - z).normalize())
+            }
+            Surface::Spheroid { centre, axis, a, b } => {
+                use glam::DVec3;
+                // Quadratic form of the spheroid: q(v) = 1 on its surface.
+                let (ia, ib) = (1.0 / (a * a), 1.0 / (b * b));
+                let form = |u: DVec3, v: DVec3| {
+                    let (ue, ve) = (u.dot(axis), v.dot(axis));
+                    ue * ve * ia + (u.dot(v) - ue * ve) * ib
+                };
+                let d0 = DVec3::new(x as f64, y as f64, 0.0) - centre;
+                let (qa, qb, qc) = (
+                    form(DVec3::Z, DVec3::Z),
+                    2.0 * form(d0, DVec3::Z),
+                    form(d0, d0) - 1.0,
+                );
+                let root = (qb * qb - 4.0 * qa * qc).max(0.0).sqrt();
+                let (l1, l2) = ((-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa));
+                let z = if l1.abs() < l2.abs() { l1 } else { l2 };
+                let d = d0 + DVec3::Z * z;
+                let de = d.dot(axis);
+                // The gradient points outwards; the driver is inside.
+                let gradient = axis * (de * ia) + (d - axis * de) * ib;
+                let n = -gradient.normalize();
+                let n = if n.z < 0.0 { -n } else { n };
+                (z as f32, n.as_vec3())
+            }
+        }
+    }
 }
 
 impl CoverShape {
-    fn new() -> Self {
-        CoverShape {
-            radii: ELLIPSOID,
-            extent: GLASS_SIZE * 0.5 / ELLIPSOID.truncate(),
+    fn new(design: GlassDesign) -> Self {
+        let half = GLASS_SIZE * 0.5;
+        let field = |surface| CoverShape::Field { half, surface };
+        match design {
+            GlassDesign::Current => CoverShape::Curved {
+                radii: ELLIPSOID,
+                extent: GLASS_SIZE * 0.5 / ELLIPSOID.truncate(),
+            },
+            GlassDesign::Flat => field(Surface::Plane { tan: 0.0 }),
+            GlassDesign::FlatTilted { degrees } => {
+                let angle = clamp_or(degrees, -60.0, 60.0, 0.0).to_radians();
+                CoverShape::Field {
+                    // The chord along the tilted glass keeps its height.
+                    half: Vec2::new(half.x, half.y * angle.cos()),
+                    surface: Surface::Plane { tan: angle.tan() },
+                }
+            }
+            GlassDesign::Cylindrical { radius } => field(Surface::Cylinder {
+                radius: clamp_or(radius, MIN_CYLINDER_RADIUS, 1000.0, 1000.0),
+            }),
+            GlassDesign::Ellipsoidal => {
+                let frame = ellipsoid_frame();
+                let local = |p: Vec3| {
+                    let d = p - frame.origin;
+                    glam::DVec3::new(
+                        d.dot(frame.x) as f64,
+                        d.dot(frame.y) as f64,
+                        d.dot(frame.z) as f64,
+                    )
+                };
+                let (f1, f2) = (local(ABSORBER), local(EYE));
+                // The glass centre (the frame origin) lies on the surface.
+                let a = 0.5 * (f1.length() + f2.length());
+                let c = 0.5 * f1.distance(f2);
+                field(Surface::Spheroid {
+                    centre: (f1 + f2) * 0.5,
+                    axis: (f2 - f1).normalize(),
+                    a,
+                    b: (a * a - c * c).sqrt(),
+                })
+            }
         }
     }
 
     /// Point and exact unit normal (towards the driver) at (s, t). The glass
     /// centre is the origin; the ellipsoid's centre is at z = c.
     fn at(&self, s: f32, t: f32) -> (Vec3, Vec3) {
-        let (x, y) = (s * self.extent.x, t * self.extent.y);
-        let z = (1.0 - x * x - y * y).sqrt();
-        let r = self.radii;
-        let position = Vec3::new(r.x * x, r.y * y, r.z * (1.0 - z));
-        // The gradient of the ellipsoid's implicit equation, pointing inwards.
-        let normal = Vec3::new(-x / r.x, -y / r.y, z / r.z).normalize();
-        (position, normal)
+        match *self {
+            CoverShape::Curved { radii, extent } => {
+                let (x, y) = (s * extent.x, t * extent.y);
+                let z = (1.0 - x * x - y * y).sqrt();
+                let r = radii;
+                let position = Vec3::new(r.x * x, r.y * y, r.z * (1.0 - z));
+                // The gradient of the ellipsoid's implicit equation, pointing inwards.
+                let normal = Vec3::new(-x / r.x, -y / r.y, z / r.z).normalize();
+                (position, normal)
+            }
+            CoverShape::Field { half, surface } => {
+                let (x, y) = (s * half.x, t * half.y);
+                let (z, n) = surface.at(x, y);
+                (Vec3::new(x, y, z), n)
+            }
+        }
     }
 
     /// The surface's derivatives along s and along t at (s, t).
     fn tangents(&self, s: f32, t: f32) -> (Vec3, Vec3) {
-        let (x, y) = (s * self.extent.x, t * self.extent.y);
-        let z = (1.0 - x * x - y * y).sqrt();
-        let r = self.radii;
-        (
-            Vec3::new(r.x, 0.0, r.z * x / z) * self.extent.x,
-            Vec3::new(0.0, r.y, r.z * y / z) * self.extent.y,
-        )
+        match *self {
+            CoverShape::Curved { radii, extent } => {
+                let (x, y) = (s * extent.x, t * extent.y);
+                let z = (1.0 - x * x - y * y).sqrt();
+                let r = radii;
+                (
+                    Vec3::new(r.x, 0.0, r.z * x / z) * extent.x,
+                    Vec3::new(0.0, r.y, r.z * y / z) * extent.y,
+                )
+            }
+            CoverShape::Field { half, .. } => {
+                // A height field's slopes follow from its normal.
+                let (_, n) = self.at(s, t);
+                (
+                    Vec3::new(1.0, 0.0, -n.x / n.z) * half.x,
+                    Vec3::new(0.0, 1.0, -n.y / n.z) * half.y,
+                )
+            }
+        }
     }
 
     /// Patch coordinates per metre of x and of y in the glass frame.
     fn per_metre(&self) -> Vec2 {
-        Vec2::ONE / (self.extent * self.radii.truncate())
+        match *self {
+            CoverShape::Curved { radii, extent } => Vec2::ONE / (extent * radii.truncate()),
+            CoverShape::Field { half, .. } => Vec2::ONE / half,
+        }
+    }
+
+    /// How far the glass with its bezel reaches behind the frame's xy
+    /// plane (0 for today's glass, which lies wholly in front of it).
+    fn recess(&self) -> f32 {
+        match self {
+            CoverShape::Curved { .. } => 0.0,
+            CoverShape::Field { .. } => {
+                let margin = self.per_metre() * BEZEL;
+                let (os, ot) = (1.0 + margin.x, 1.0 + margin.y);
+                let mut deepest = 0.0_f32;
+                for s in [-os, 0.0, os] {
+                    for t in [-ot, 0.0, ot] {
+                        deepest = deepest.max(-self.at(s, t).0.z);
+                    }
+                }
+                deepest
+            }
+        }
+    }
+
+    /// The height of the glass (with bezel) nearest to the driver.
+    fn nearest(&self) -> f32 {
+        let margin = self.per_metre() * BEZEL;
+        let (os, ot) = (1.0 + margin.x, 1.0 + margin.y);
+        match self {
+            // The corners, by symmetry (kept as is for bit-identical scenes).
+            CoverShape::Curved { .. } => self.at(os, ot).0.z,
+            CoverShape::Field { .. } => {
+                let mut nearest = f32::MIN;
+                for s in [-os, 0.0, os] {
+                    for t in [-ot, 0.0, ot] {
+                        nearest = nearest.max(self.at(s, t).0.z);
+                    }
+                }
+                nearest
+            }
+        }
     }
 
     /// The grid over the patch coordinates `ss` × `ts`, lifted `lift` along
@@ -123,21 +283,61 @@ impl CoverShape {
     }
 }
 
+/// The smallest radius of the cylindrical glass (its edges then stand at
+/// about 45° to its centre).
+const MIN_CYLINDER_RADIUS: f32 = 0.15;
+
+/// `value` clamped to [lo, hi], or `fallback` when it is not a number.
+fn clamp_or(value: f32, lo: f32, hi: f32, fallback: f32) -> f32 {
+    if value.is_nan() {
+        fallback
+    } else {
+        value.clamp(lo, hi)
+    }
+}
+
+/// The frame of the ellipsoidal glass: its normal at the centre bisects the
+/// directions to the two foci (the eye and the absorber).
+fn ellipsoid_frame() -> Frame {
+    let normal = (EYE - GLASS_CENTER).normalize() + (ABSORBER - GLASS_CENTER).normalize();
+    Frame::facing(GLASS_CENTER, normal, Vec3::Y)
+}
+
+/// The cluster frame for a design: today's turned frame, one facing the eye,
+/// or the ellipsoid's tangent frame.
+fn design_frame(design: GlassDesign) -> Frame {
+    match design {
+        GlassDesign::Current => glass_frame(),
+        GlassDesign::Flat | GlassDesign::FlatTilted { .. } | GlassDesign::Cylindrical { .. } => {
+            Frame::facing(GLASS_CENTER, EYE - GLASS_CENTER, Vec3::Y)
+        }
+        GlassDesign::Ellipsoidal => ellipsoid_frame(),
+    }
+}
+
 /// `n` equal steps from `a` to `b` (n + 1 values).
 fn steps(a: f32, b: f32, n: u32) -> Vec<f32> {
     (0..=n).map(|k| a + (b - a) * k as f32 / n as f32).collect()
 }
 
-pub(crate) fn build(builder: &mut SceneBuilder, detail: Detail, glass_segments: u32) {
-    let frame = glass_frame();
-    let shape = CoverShape::new();
+pub(crate) fn build(
+    builder: &mut SceneBuilder,
+    detail: Detail,
+    glass_segments: u32,
+    design: GlassDesign,
+) {
+    let frame = design_frame(design);
+    let shape = CoverShape::new(design);
+    // The dial panel moves back as far as a tilted glass reaches behind
+    // its centre.
+    let panel_depth = PANEL_DEPTH + shape.recess();
     let place = |mesh: Mesh| mesh.placed(&frame);
 
     // Just larger than the hood's walls (a rectangle in x, y), so it closes
     // them without showing outside the hood.
     let panel_size = GLASS_SIZE + Vec2::splat(2.0 * BEZEL + 0.006);
     let panel = Mesh::rect(panel_size, None, detail.cell(0.01))
-        .placed(&Frame::at((-panel_size * 0.5).extend(-PANEL_DEPTH)));
+        .placed(&Frame::at((-panel_size * 0.5).extend(-panel_depth)));
     builder.add(
         "instrument_panel",
         matte("instrument_panel_black", Vec3::splat(0.02)),
@@ -145,7 +345,7 @@ pub(crate) fn build(builder: &mut SceneBuilder, detail: Detail, glass_segments: 
     );
 
     let segments = detail.segments(64, 12);
-    let face_z = -PANEL_DEPTH + 0.002;
+    let face_z = -panel_depth + 0.002;
     let mut faces = Mesh::default();
     let mut markings = Mesh::default();
     let mut needles = Mesh::default();
@@ -176,9 +376,21 @@ pub(crate) fn build(builder: &mut SceneBuilder, detail: Detail, glass_segments: 
     builder.add(
         "cluster_hood",
         glossy("cluster_hood_plastic", Vec3::splat(0.04), 0.05, 20.0),
-        &place(hood(&shape, glass_segments)),
+        &place(hood(&shape, glass_segments, panel_depth)),
     );
+    if design == GlassDesign::Ellipsoidal {
+        let absorber = Mesh::cuboid(Vec3::splat(ABSORBER_HALF), detail.cell(0.01))
+            .placed(&Frame::at(ABSORBER));
+        builder.add(
+            GLARE_ABSORBER,
+            matte("glare_absorber_black", Vec3::splat(0.01)),
+            &absorber,
+        );
+    }
 }
+
+/// Half the edge of the glare absorber cube around the ellipsoid's focus.
+const ABSORBER_HALF: f32 = 0.012;
 
 /// Tick marks as thin quads on a dial face (local to the dial centre);
 /// every fifth is a long, wide major tick.
@@ -282,7 +494,7 @@ fn glass(builder: &mut SceneBuilder, shape: &CoverShape, frame: &Frame, segments
 /// around its edge, walls from the bezel back past the dial panel (what the
 /// driver sees of the cluster's sides through the glass), and a short visor
 /// over the top edge shading the glass.
-fn hood(shape: &CoverShape, segments: u32) -> Mesh {
+fn hood(shape: &CoverShape, segments: u32, panel_depth: f32) -> Mesh {
     let margin = shape.per_metre() * BEZEL;
     let (os, ot) = (1.0 + margin.x, 1.0 + margin.y);
     let mut across = steps(-1.0, 1.0, segments.max(2));
@@ -304,9 +516,9 @@ fn hood(shape: &CoverShape, segments: u32) -> Mesh {
     up_outer.push(ot);
     let left = edge(shape, up_outer.iter().map(|&t| (-os, t)), false);
     let right = edge(shape, up_outer.iter().map(|&t| (os, t)), false);
-    // The walls reach a little past the dial panel from the bezel's corners,
-    // the points nearest to the driver.
-    let back = Vec3::Z * -(PANEL_DEPTH + shape.at(os, ot).0.z + 0.005);
+    // The walls reach a little past the dial panel from the bezel's points
+    // nearest to the driver.
+    let back = Vec3::Z * -(panel_depth + shape.nearest() + 0.005);
     for side in [&top, &bottom, &left, &right] {
         let inwards = |n: Vec3, p: Vec3| n.dot(Vec3::new(-p.x, -p.y, 0.0)) > 0.0;
         hood.merge(&Mesh::sweep(
@@ -364,7 +576,7 @@ mod tests {
 
     #[test]
     fn glass_patch_has_the_chord_size() {
-        let shape = CoverShape::new();
+        let shape = CoverShape::new(GlassDesign::Current);
         let width = shape.at(1.0, 0.0).0.x - shape.at(-1.0, 0.0).0.x;
         let height = shape.at(0.0, 1.0).0.y - shape.at(0.0, -1.0).0.y;
         assert!((width - GLASS_SIZE.x).abs() < 1e-6 && (height - GLASS_SIZE.y).abs() < 1e-6);
@@ -373,7 +585,7 @@ mod tests {
 
     #[test]
     fn normals_are_exact_and_tangents_match_the_surface() {
-        let shape = CoverShape::new();
+        let shape = CoverShape::new(GlassDesign::Current);
         let h = 1e-3;
         for (s, t) in [(0.3, -0.7), (-1.0, 1.0), (1.07, -1.14), (0.0, 0.5)] {
             let (p, n) = shape.at(s, t);

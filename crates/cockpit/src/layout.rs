@@ -33,6 +33,13 @@ pub(crate) const EYE: Vec3 = Vec3::new(DRIVER_X, 1.40, 0.10);
 /// Centre of the cover glass's front surface.
 pub(crate) const GLASS_CENTER: Vec3 = Vec3::new(DRIVER_X, 1.05, -0.60);
 
+/// Inner focus of the ellipsoidal glass design (the outer one is the eye):
+/// 0.2 m from the glass centre, up and a little towards the driver, above
+/// the driver's sight lines to the glass. A focus only a few cm from the
+/// glass would give an ellipsoid too slim for a 0.46 m wide glass (its
+/// minor semi-axis is at most sqrt(r1 r2), about 0.18 m at r1 = 4 cm).
+pub(crate) const ABSORBER: Vec3 = Vec3::new(DRIVER_X, 1.24, -0.55);
+
 /// The glass is turned away from facing the eye, to the driver's left and
 /// downwards, so the eye sees the left door (and its window) in it rather
 /// than itself.

@@ -31,6 +31,44 @@ pub struct CockpitConfig {
     /// Subdivisions of the cover glass across it, half as many up it (its
     /// tessellation is set separately since it is the reflector).
     pub glass_segments: u32,
+    /// The cover glass's shape; the default is today's curved glass.
+    pub glass: GlassDesign,
+}
+
+/// Shapes of the cover glass for glare studies. All have the same outline
+/// (0.46 m by 0.21 m, measured in the glass's tangent plane at its centre),
+/// the same centre point and the same tessellation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum GlassDesign {
+    /// The ellipsoid patch turned 18° to the driver's left and 10° down,
+    /// concave towards the driver (mirrors the left door window).
+    #[default]
+    Current,
+    /// A plane facing the nominal eye.
+    Flat,
+    /// [`GlassDesign::Flat`] rotated about its horizontal axis by `degrees`
+    /// (positive: the top edge away from the driver; clamped to ±60°).
+    FlatTilted { degrees: f32 },
+    /// A cylinder section facing the eye, axis horizontal, concave towards
+    /// the driver; `radius` is clamped to at least 0.15 m (at most 1000 m).
+    Cylindrical { radius: f32 },
+    /// An ellipsoid (of revolution) section with one focus at the eye and
+    /// the other at a small black absorber above the glass (object
+    /// [`GLARE_ABSORBER`]), so the eye sees almost only the absorber in it.
+    Ellipsoidal,
+}
+
+impl GlassDesign {
+    /// A short name for file names and tables, e.g. "flat-tilted-15".
+    pub fn name(&self) -> String {
+        match *self {
+            GlassDesign::Current => "current".to_owned(),
+            GlassDesign::Flat => "flat".to_owned(),
+            GlassDesign::FlatTilted { degrees } => format!("flat-tilted-{degrees}"),
+            GlassDesign::Cylindrical { radius } => format!("cylindrical-r{radius}"),
+            GlassDesign::Ellipsoidal => "ellipsoidal".to_owned(),
+        }
+    }
 }
 
 impl CockpitConfig {
@@ -43,6 +81,7 @@ impl Default for CockpitConfig {
         CockpitConfig {
             detail: Self::DEFAULT_DETAIL,
             glass_segments: 24,
+            glass: GlassDesign::Current,
         }
     }
 }
@@ -61,6 +100,9 @@ pub struct Cockpit {
 pub const COVER_GLASS: &str = "cover_glass";
 /// Name of the cover glass's back surface (seen only through the glass).
 pub const COVER_GLASS_BACK: &str = "cover_glass_back";
+/// Name of the black absorber at the ellipsoidal glass's inner focus (only
+/// in scenes with [`GlassDesign::Ellipsoidal`]).
+pub const GLARE_ABSORBER: &str = "glare_absorber";
 /// Material name of the cover glass.
 pub const GLASS_MATERIAL: &str = "glass";
 
@@ -69,13 +111,19 @@ pub fn default_eye() -> Vec3 {
     layout::EYE
 }
 
+/// The ellipsoidal glass's inner focus, the centre of [`GLARE_ABSORBER`]
+/// (the outer focus is [`default_eye`]).
+pub fn glare_absorber_focus() -> Vec3 {
+    layout::ABSORBER
+}
+
 /// Generates the cockpit.
 pub fn cockpit(config: &CockpitConfig) -> Cockpit {
     let detail = Detail::new(config.detail);
     let mut builder = builder::SceneBuilder::default();
     cab::build(&mut builder, detail);
     interior::build(&mut builder, detail);
-    cluster::build(&mut builder, detail, config.glass_segments);
+    cluster::build(&mut builder, detail, config.glass_segments, config.glass);
     Cockpit {
         scene: builder.finish(),
         camera: camera(),

@@ -329,6 +329,7 @@ fn glass_tessellation_follows_the_config() {
     let scene = cockpit(&CockpitConfig {
         detail: 0.2,
         glass_segments: 16,
+        ..CockpitConfig::default()
     })
     .scene;
     scene.validate().unwrap();
@@ -569,6 +570,7 @@ fn odd_configurations_still_give_valid_scenes() {
         let scene = cockpit(&CockpitConfig {
             detail,
             glass_segments,
+            ..CockpitConfig::default()
         })
         .scene;
         scene.validate().unwrap();
@@ -590,4 +592,194 @@ fn triangle_count_grows_about_linearly_with_detail() {
     let (half, one, four) = (count(0.5), count(1.0), count(4.0));
     assert!((half / one - 0.5).abs() < 0.06, "{half} vs {one}");
     assert!((four / one - 4.0).abs() < 0.3, "{four} vs {one}");
+}
+
+// ---- Cover-glass design variants ----
+
+use vtfarm_cockpit::{GLARE_ABSORBER, GlassDesign, glare_absorber_focus};
+
+fn design_cockpit(glass: GlassDesign) -> Cockpit {
+    cockpit(&CockpitConfig {
+        detail: 0.2,
+        glass_segments: 16,
+        glass,
+    })
+}
+
+/// Front-glass vertices with their normals.
+fn front_glass(c: &Cockpit) -> Vec<(Vec3, Vec3)> {
+    vertex_range(&c.scene, object(&c.scene, COVER_GLASS))
+        .map(|v| (c.scene.positions[v], c.scene.normals[v]))
+        .collect()
+}
+
+const DESIGNS: [GlassDesign; 6] = [
+    GlassDesign::Current,
+    GlassDesign::Flat,
+    GlassDesign::FlatTilted { degrees: 15.0 },
+    GlassDesign::FlatTilted { degrees: -10.0 },
+    GlassDesign::Cylindrical { radius: 0.5 },
+    GlassDesign::Ellipsoidal,
+];
+
+#[test]
+fn every_design_validates_and_keeps_the_glass_visible_as_a_thin_shell() {
+    let eye = default_eye();
+    for design in DESIGNS {
+        let c = design_cockpit(design);
+        c.scene.validate().unwrap();
+        let (front, back) = (
+            object(&c.scene, COVER_GLASS),
+            object(&c.scene, COVER_GLASS_BACK),
+        );
+        assert_eq!(triangles_of(&c.scene, front).count(), 16 * 8 * 2);
+        for (f, b) in vertex_range(&c.scene, front).zip(vertex_range(&c.scene, back)) {
+            let (p, n) = (c.scene.positions[f], c.scene.normals[f]);
+            assert!(n.dot(eye - p) > 0.0, "{}: normal faces away", design.name());
+            assert!((c.scene.positions[b] - (p - n * 0.003)).length() < 1e-5);
+        }
+        let caster = Caster::new(&c.scene);
+        let (mut seen, mut total) = (0, 0);
+        for t in triangles_of(&c.scene, front) {
+            let centroid = c.scene.triangle_positions(t).iter().sum::<Vec3>() / 3.0;
+            total += 1;
+            if caster.object_hit(eye, (centroid - eye).normalize()) == COVER_GLASS {
+                seen += 1;
+            }
+        }
+        assert!(
+            seen * 100 >= total * 98,
+            "{}: only {seen} of {total} glass triangles are visible",
+            design.name()
+        );
+        let has_absorber = c.scene.object_id(GLARE_ABSORBER).is_some();
+        assert_eq!(has_absorber, design == GlassDesign::Ellipsoidal);
+    }
+}
+
+#[test]
+fn design_names() {
+    let names: Vec<String> = DESIGNS.iter().map(GlassDesign::name).collect();
+    assert_eq!(
+        names,
+        [
+            "current",
+            "flat",
+            "flat-tilted-15",
+            "flat-tilted--10",
+            "cylindrical-r0.5",
+            "ellipsoidal"
+        ]
+    );
+}
+
+#[test]
+fn default_design_is_todays_glass_bit_for_bit() {
+    let a = &default_cockpit().scene;
+    let b = cockpit(&CockpitConfig {
+        glass: GlassDesign::Current,
+        ..CockpitConfig::default()
+    })
+    .scene;
+    assert_eq!(CockpitConfig::default().glass, GlassDesign::Current);
+    assert_eq!(a.triangles.len(), b.triangles.len());
+    assert_eq!(a.positions, b.positions);
+    assert_eq!(a.normals, b.normals);
+    assert_eq!(a.objects.len(), b.objects.len());
+}
+
+/// The least-squares plane normal of points (smallest-eigenvalue direction
+/// of the covariance, by inverse iteration).
+fn plane_fit(points: &[Vec3]) -> (Vec3, Vec3) {
+    let centroid = points.iter().sum::<Vec3>() / points.len() as f32;
+    let mut m = glam::Mat3::ZERO;
+    for p in points {
+        let d = *p - centroid;
+        m += glam::Mat3::from_cols(d * d.x, d * d.y, d * d.z);
+    }
+    let inv = (m + glam::Mat3::IDENTITY * 1e-9).inverse();
+    let mut n = Vec3::new(0.3, 0.5, 0.7);
+    for _ in 0..50 {
+        n = (inv * n).normalize();
+    }
+    (centroid, n)
+}
+
+#[test]
+fn flat_glass_is_planar_and_faces_the_eye() {
+    let eye = default_eye();
+    let flat = front_glass(&design_cockpit(GlassDesign::Flat));
+    let points: Vec<Vec3> = flat.iter().map(|v| v.0).collect();
+    let (centroid, n) = plane_fit(&points);
+    let off = points
+        .iter()
+        .map(|p| (*p - centroid).dot(n).abs())
+        .fold(0.0, f32::max);
+    assert!(off < 1e-5, "{off} m off the plane");
+    let to_eye = (eye - centroid).normalize();
+    assert!(n.dot(to_eye).abs() > 0.9999, "plane normal {n}");
+    for (_, vn) in &flat {
+        assert!(vn.dot(to_eye) > 0.9999);
+    }
+}
+
+#[test]
+fn tilted_glass_turns_by_the_angle_top_edge_away() {
+    let normal = |c: &Cockpit| {
+        let points: Vec<Vec3> = front_glass(c).iter().map(|v| v.0).collect();
+        let (_, n) = plane_fit(&points);
+        let vn = front_glass(c)[0].1;
+        if n.dot(vn) < 0.0 { -n } else { n }
+    };
+    let flat = normal(&design_cockpit(GlassDesign::Flat));
+    for degrees in [15.0_f32, -10.0, 30.0] {
+        let tilted = normal(&design_cockpit(GlassDesign::FlatTilted { degrees }));
+        let angle = flat.dot(tilted).clamp(-1.0, 1.0).acos().to_degrees();
+        assert!((angle - degrees.abs()).abs() < 0.05, "{degrees}: {angle}");
+        // Top edge away from the driver: the normal turns upwards.
+        assert_eq!(tilted.y > flat.y, degrees > 0.0);
+    }
+}
+
+#[test]
+fn cylindrical_glass_lies_at_the_radius_from_its_horizontal_axis() {
+    let c = design_cockpit(GlassDesign::Cylindrical { radius: 0.5 });
+    let (eye, centre) = (default_eye(), c.camera.target);
+    let to_eye = (eye - centre).normalize();
+    let axis_dir = Vec3::Y.cross(to_eye).normalize();
+    let axis_point = centre + to_eye * 0.5;
+    for (p, n) in front_glass(&c) {
+        let d = p - axis_point;
+        let radial = d - axis_dir * d.dot(axis_dir);
+        let r = radial.length();
+        assert!((r - 0.5).abs() < 1e-5, "{p} at {r} m from the axis");
+        // Concave towards the driver: normals point at the axis.
+        assert!(n.dot(-radial.normalize()) > 0.9999);
+    }
+}
+
+#[test]
+fn ellipsoidal_glass_mirrors_the_eye_onto_the_absorber() {
+    let c = design_cockpit(GlassDesign::Ellipsoidal);
+    let eye = default_eye();
+    let f1 = glare_absorber_focus();
+    let (lo, hi) = object_bounds(&c.scene, object(&c.scene, GLARE_ABSORBER));
+    assert!(((lo + hi) * 0.5 - f1).length() < 1e-5);
+    let mut worst = 0.0_f32;
+    for (p, n) in front_glass(&c) {
+        let d = (p - eye).normalize();
+        let r = d - n * (2.0 * d.dot(n));
+        let to_f1 = f1 - p;
+        assert!(to_f1.dot(r) > 0.0);
+        let miss = (to_f1 - r * to_f1.dot(r)).length();
+        worst = worst.max(miss);
+    }
+    assert!(worst < 0.005, "reflected rays miss F1 by up to {worst} m");
+    // Exact focusing also for the default tessellation.
+    let fine = cockpit(&CockpitConfig {
+        detail: 0.2,
+        glass: GlassDesign::Ellipsoidal,
+        ..CockpitConfig::default()
+    });
+    fine.scene.validate().unwrap();
 }

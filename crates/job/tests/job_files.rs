@@ -123,6 +123,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         scene: SceneSource::Cockpit(CockpitConfig {
             detail: 2.1,
             glass_segments: 7,
+            ..CockpitConfig::default()
         }),
         camera: CameraSpec {
             eye: Some(Vec3::new(1.0, 2.0, 3.0)),
