@@ -1,0 +1,263 @@
+//! The heat map of reflected luminance and the reflected-object map, each
+//! with a legend panel to the right of the frame drawn with the built-in
+//! bitmap font.
+//!
+//! Layout of both images: the frame occupies columns `0..width` and rows
+//! `0..height` at the same pixel positions as the input; the legend panel
+//! occupies the columns from `width` on. If the legend needs more rows than
+//! the frame has, the image is taller and the rows below the frame are black.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use vtfarm_imaging::{Image, srgb_to_linear};
+
+use crate::font::{GLYPH_HEIGHT, draw_text, text_width};
+use crate::ramp::ramp_color;
+use crate::{GlareError, GlareInput, Params, check, masked_luminance, rank_objects};
+
+/// The colour of legend text (linear white; nothing else in the images is
+/// pure white).
+pub const FONT_COLOR: Vec3 = Vec3::ONE;
+/// Glass pixels whose reflection shows no object, in the object map (linear).
+pub const NO_OBJECT_COLOR: Vec3 = Vec3::splat(0.02);
+/// Grey of the colour-bar frame and ticks (linear).
+const TICK_COLOR: Vec3 = Vec3::splat(0.3);
+
+/// The object-map palette (sRGB, Tableau 10), assigned by rank: the object
+/// covering the most glass gets the first colour; it repeats after 10.
+pub const PALETTE: [[u8; 3]; 10] = [
+    [0x4e, 0x79, 0xa7],
+    [0xf2, 0x8e, 0x2b],
+    [0xe1, 0x57, 0x59],
+    [0x76, 0xb7, 0xb2],
+    [0x59, 0xa1, 0x4f],
+    [0xed, 0xc9, 0x48],
+    [0xb0, 0x7a, 0xa1],
+    [0xff, 0x9d, 0xa7],
+    [0x9c, 0x75, 0x5f],
+    [0xba, 0xb0, 0xac],
+];
+
+/// Scale of the bitmap font (image pixels per font pixel).
+const SCALE: u32 = 2;
+const MARGIN: u32 = 8;
+const BAR_WIDTH: u32 = 12;
+const LABELS: usize = 5;
+const MIN_LEGEND_HEIGHT: u32 = 120;
+const TEXT_HEIGHT: u32 = GLYPH_HEIGHT * SCALE;
+const ROW_HEIGHT: u32 = 14;
+const MAX_ENTRIES: usize = 20;
+const MAX_NAME_CHARS: usize = 16;
+
+fn palette_color(rank: usize) -> Vec3 {
+    let c = PALETTE[rank % PALETTE.len()];
+    Vec3::new(
+        srgb_to_linear(c[0] as f32 / 255.0),
+        srgb_to_linear(c[1] as f32 / 255.0),
+        srgb_to_linear(c[2] as f32 / 255.0),
+    )
+}
+
+/// A scale label: at most about 5 characters (`0`, `0.125`, `12.5`, `1.2E4`).
+fn format_label(v: f32) -> String {
+    if !v.is_finite() || v <= 0.0 {
+        "0".to_owned()
+    } else if !(0.01..10_000.0).contains(&v) {
+        format!("{v:.1e}").to_uppercase()
+    } else if v >= 100.0 {
+        format!("{v:.0}")
+    } else if v >= 10.0 {
+        format!("{v:.1}")
+    } else if v >= 1.0 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+fn fill_rect(image: &mut Image, x: u32, y: u32, w: u32, h: u32, color: Vec3) {
+    for py in y..(y + h).min(image.height) {
+        for px in x..(x + w).min(image.width) {
+            image.set(px, py, color);
+        }
+    }
+}
+
+fn frame_canvas(width: u32, height: u32, panel_width: u32, panel_height: u32) -> Image {
+    Image::new(width + panel_width, height.max(panel_height), Vec3::ZERO)
+}
+
+/// The heat map of reflected luminance `L_r`, scaled to the frame's peak
+/// (see [`heat_map_with_max`]).
+pub fn heat_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, GlareError> {
+    heat_map_with_max(input, params, None)
+}
+
+/// The heat map of reflected luminance `L_r`: glass pixels take
+/// [`ramp_color`]`(L_r / max)`, everything else is black. `max` is the
+/// luminance at the top of the ramp: `Some` for a fixed scale (compare frames
+/// of a sequence), `None` for the frame's peak `L_r` (1 when the peak is 0);
+/// larger values saturate. The legend panel on the right has the colour bar
+/// (top = `max`), five numeric labels at 0, ¼, ½, ¾ and 1 of `max` in the
+/// luminance unit, and the title `CD/M2`, or `REL L` when the luminance scale
+/// is the default 1 (uncalibrated relative units).
+pub fn heat_map_with_max(
+    input: &GlareInput<'_>,
+    params: &Params,
+    max: Option<f32>,
+) -> Result<Image, GlareError> {
+    check(input, params)?;
+    let lr = masked_luminance(input.glass, input.reflected, params);
+    let peak = lr.iter().copied().fold(0.0f32, f32::max);
+    let max = match max {
+        Some(m) if m.is_finite() && m > 0.0 => m,
+        _ if peak > 0.0 => peak,
+        _ => 1.0,
+    };
+    let labels: Vec<String> = (0..LABELS)
+        .map(|i| format_label(max * i as f32 / (LABELS - 1) as f32))
+        .collect();
+    let title = if params.luminance_scale == 1.0 {
+        "REL L"
+    } else {
+        "CD/M2"
+    };
+    let label_width = labels
+        .iter()
+        .map(|l| text_width(l, SCALE))
+        .max()
+        .unwrap_or(0);
+    let panel_width = (MARGIN + BAR_WIDTH + 6 + label_width + MARGIN)
+        .max(MARGIN + text_width(title, SCALE) + MARGIN);
+    let (w, h) = (input.width, input.height);
+    let mut img = frame_canvas(w, h, panel_width, MIN_LEGEND_HEIGHT);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if input.glass[i] {
+                img.set(x, y, ramp_color(lr[i] / max));
+            }
+        }
+    }
+
+    let x0 = w + MARGIN;
+    draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
+    let bar_top = MARGIN + TEXT_HEIGHT + MARGIN;
+    let bar_bottom = img.height - MARGIN - TEXT_HEIGHT / 2; // exclusive
+    let bar_height = bar_bottom - bar_top;
+    fill_rect(
+        &mut img,
+        x0 - 1,
+        bar_top - 1,
+        BAR_WIDTH + 2,
+        bar_height + 2,
+        TICK_COLOR,
+    );
+    for k in 0..bar_height {
+        let t = 1.0 - k as f32 / (bar_height - 1) as f32;
+        fill_rect(&mut img, x0, bar_top + k, BAR_WIDTH, 1, ramp_color(t));
+    }
+    for (i, label) in labels.iter().enumerate() {
+        let t = i as f32 / (LABELS - 1) as f32;
+        let y = bar_top + ((1.0 - t) * (bar_height - 1) as f32).round() as u32;
+        fill_rect(&mut img, x0 + BAR_WIDTH + 1, y, 3, 1, TICK_COLOR);
+        draw_text(
+            &mut img,
+            (x0 + BAR_WIDTH + 6) as i64,
+            y as i64 - (TEXT_HEIGHT / 2) as i64,
+            label,
+            SCALE,
+            FONT_COLOR,
+        );
+    }
+    Ok(img)
+}
+
+/// The reflected-object map: each glass pixel takes the colour of the object
+/// its reflection shows ([`PALETTE`], by rank as in [`crate::rank_objects`]),
+/// [`NO_OBJECT_COLOR`] where it shows nothing; pixels outside the glass are
+/// black. The legend panel on the right, titled `OBJECTS`, has one swatch per
+/// object with its name (upper-case, cut to 16 characters) and its pixel
+/// count, most glass first; beyond 20 objects a last line says `+N MORE`.
+pub fn object_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, GlareError> {
+    check(input, params)?;
+    let lr = masked_luminance(input.glass, input.reflected, params);
+    let ranked = rank_objects(input, &lr);
+    let colors: BTreeMap<u32, Vec3> = ranked
+        .iter()
+        .enumerate()
+        .map(|(rank, o)| (o.object, palette_color(rank)))
+        .collect();
+    let shown = ranked.len().min(MAX_ENTRIES);
+    let mut lines: Vec<String> = ranked[..shown]
+        .iter()
+        .map(|o| {
+            let name: String = o.name.chars().take(MAX_NAME_CHARS).collect();
+            format!("{name} {}", o.pixels)
+        })
+        .collect();
+    if ranked.len() > shown {
+        lines.push(format!("+{} MORE", ranked.len() - shown));
+    }
+    let title = "OBJECTS";
+    let text_w = lines
+        .iter()
+        .map(|l| text_width(l, SCALE))
+        .max()
+        .unwrap_or(0);
+    let panel_width =
+        (MARGIN + 10 + 6 + text_w + MARGIN).max(MARGIN + text_width(title, SCALE) + MARGIN);
+    let panel_height = MARGIN + TEXT_HEIGHT + MARGIN + lines.len() as u32 * ROW_HEIGHT + MARGIN;
+    let (w, h) = (input.width, input.height);
+    let mut img = frame_canvas(w, h, panel_width, panel_height);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if input.glass[i] {
+                let c = colors
+                    .get(&input.reflected_object[i])
+                    .copied()
+                    .unwrap_or(NO_OBJECT_COLOR);
+                img.set(x, y, c);
+            }
+        }
+    }
+    let x0 = w + MARGIN;
+    draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
+    let mut y = MARGIN + TEXT_HEIGHT + MARGIN;
+    for (k, line) in lines.iter().enumerate() {
+        if k < shown {
+            fill_rect(&mut img, x0, y, 10, 10, palette_color(k));
+        }
+        draw_text(
+            &mut img,
+            (x0 + 16) as i64,
+            y as i64,
+            line,
+            SCALE,
+            FONT_COLOR,
+        );
+        y += ROW_HEIGHT;
+    }
+    Ok(img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_are_short_and_finite() {
+        assert_eq!(format_label(0.0), "0");
+        assert_eq!(format_label(f32::NAN), "0");
+        assert_eq!(format_label(0.125), "0.125");
+        assert_eq!(format_label(12.5), "12.5");
+        assert_eq!(format_label(250.0), "250");
+        assert_eq!(format_label(12_345.0), "1.2E4");
+        assert_eq!(format_label(0.005), "5.0E-3");
+        for v in [1e-9f32, 0.3, 3.0, 30.0, 300.0, 3000.0, 3e9] {
+            assert!(format_label(v).len() <= 6, "{v}: {}", format_label(v));
+        }
+    }
+}

@@ -1,0 +1,640 @@
+//! Glare metrics of a rendered frame: how bright the reflections on the
+//! instrument cover glass are, how much they veil what is seen through the
+//! glass, and how much contrast the instrument markings keep under them.
+//!
+//! Everything here is a pure function of a [`GlareInput`] (borrowed per-pixel
+//! buffers, usually taken from a composited
+//! [`FrameImage`] with [`GlareInput::from_frame`])
+//! and [`Params`]. The two image builders ([`heat_map`], [`object_map`])
+//! return linear [`vtfarm_imaging::Image`]s; writing them (e.g. with
+//! `Image::write_png`) is the caller's job.
+//!
+//! # Units and formulas
+//!
+//! * **Luminance.** Per pixel, `L = s · Y(c)` with
+//!   `Y(c) = 0.2126 R + 0.7152 G + 0.0722 B`, the relative photometric
+//!   luminance of linear Rec.709/sRGB primaries ([`luminance`]), and `s` the
+//!   [`Params::luminance_scale`] in cd/m² per unit of rendered radiance. The
+//!   default `s = 1` leaves luminance in the renderer's relative units; set
+//!   it from a calibration (e.g. the luminance of a known white patch) to get
+//!   cd/m². Non-finite or negative colour values count as luminance 0, so no
+//!   metric is ever NaN.
+//! * **Reflected / transmitted luminance maps** ([`reflected_luminance`],
+//!   [`transmitted_luminance`]): `L_r` and `L_t` per glass pixel, 0 outside
+//!   the glass mask.
+//! * **Veiling ratio** ([`veiling_ratio`]): `V = L_r / max(L_t, f)` per glass
+//!   pixel (0 outside), with `f` the [`Params::luminance_floor`], so that a
+//!   black background gives a large finite ratio instead of infinity.
+//! * **Marking contrast** ([`contrast`]):
+//!   `CR = (L_hi + L_r) / (L_lo + L_r)`, where `L_hi`/`L_lo` are the brighter
+//!   and the darker of the marking luminance `L_m` and the background
+//!   luminance `L_b` (both transmitted luminances). For bright markings on a
+//!   dark dial this is exactly `(L_m + L_r) / (L_b + L_r)`; taking brighter
+//!   over darker makes `CR ≥ 1` for dark-on-light dials too. Without
+//!   reflection `CR = L_m / L_b`; as `L_r` grows `CR` falls towards 1. Both
+//!   numerator and denominator are floored at `f`. See [`contrast`] for the
+//!   choice of `L_b` (the mean background luminance of the instrument area).
+//! * **Summary** ([`summarize`]): peak and mean of `L_r` over the glass, the
+//!   share of glass pixels with `L_r` above [`Thresholds::veiling_luminance`],
+//!   the share of the evaluated instrument area with `CR` below
+//!   [`Thresholds::min_contrast`], and the objects seen in the reflections
+//!   ranked by the glass area they cover (then by their summed `L_r`).
+//!
+//! Areas are pixel counts; shares are fractions in [0, 1] (0 for an empty
+//! area).
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use serde::Serialize;
+use vtfarm_scene::NONE;
+use vtfarm_vertex::FrameImage;
+
+mod font;
+mod images;
+mod ramp;
+
+pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
+pub use images::{FONT_COLOR, NO_OBJECT_COLOR, PALETTE, heat_map, heat_map_with_max, object_map};
+pub use ramp::{INFERNO_SRGB, ramp_color};
+
+/// Relative photometric luminance `Y` of a linear Rec.709/sRGB colour:
+/// `0.2126 R + 0.7152 G + 0.0722 B` (no scale applied).
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// Default [`Params::luminance_scale`]: 1 cd/m² per unit radiance, i.e.
+/// luminances stay in the renderer's relative units until calibrated.
+pub const DEFAULT_LUMINANCE_SCALE: f32 = 1.0;
+
+/// Default [`Params::luminance_floor`] (same unit as the luminances): the
+/// smallest denominator used in ratios. Far below any luminance that matters
+/// for glare, large enough to keep ratios finite over black.
+pub const DEFAULT_LUMINANCE_FLOOR: f32 = 1e-4;
+
+/// Default [`Thresholds::min_contrast`]: 3:1.
+pub const DEFAULT_MIN_CONTRAST: f32 = 3.0;
+
+/// Default [`Thresholds::veiling_luminance`]: 0.05 (same unit as the
+/// luminances).
+pub const DEFAULT_VEILING_LUMINANCE: f32 = 0.05;
+
+/// The thresholds of the summary.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Thresholds {
+    /// Minimum readable contrast ratio of markings against their background
+    /// (dimensionless, `CR` as in [`contrast_ratio`]). Default
+    /// [`DEFAULT_MIN_CONTRAST`] = 3:1, the order of the minimum luminance
+    /// contrast used in display ergonomics for legibility; ISO 15008
+    /// (ergonomic aspects of transport information and control systems —
+    /// in-vehicle visual presentation) gives minimum contrast ratios for
+    /// in-vehicle displays. The standard's exact values depend on the
+    /// lighting condition (day/night) and are not reproduced here: set the
+    /// threshold from the edition and condition your study follows.
+    pub min_contrast: f32,
+    /// Reflected luminance above which a glass pixel counts as glare, in the
+    /// luminance unit (cd/m² once [`Params::luminance_scale`] is calibrated,
+    /// otherwise relative). Default [`DEFAULT_VEILING_LUMINANCE`] = 0.05, a
+    /// vtfarm engineering default (5 % of the luminance of a unit-radiance
+    /// white), not taken from a standard: tune it per study.
+    pub veiling_luminance: f32,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Thresholds {
+            min_contrast: DEFAULT_MIN_CONTRAST,
+            veiling_luminance: DEFAULT_VEILING_LUMINANCE,
+        }
+    }
+}
+
+/// Photometric parameters and thresholds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// cd/m² per unit of rendered radiance (default
+    /// [`DEFAULT_LUMINANCE_SCALE`] = 1, i.e. relative units).
+    pub luminance_scale: f32,
+    /// Floor on ratio denominators, in the luminance unit (default
+    /// [`DEFAULT_LUMINANCE_FLOOR`]).
+    pub luminance_floor: f32,
+    pub thresholds: Thresholds,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            luminance_scale: DEFAULT_LUMINANCE_SCALE,
+            luminance_floor: DEFAULT_LUMINANCE_FLOOR,
+            thresholds: Thresholds::default(),
+        }
+    }
+}
+
+/// Inconsistent input.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GlareError {
+    #[error("image size {width}x{height} is too large")]
+    TooLarge { width: u32, height: u32 },
+    #[error("{name} has {got} entries, expected width * height = {expected}")]
+    Length {
+        name: &'static str,
+        got: usize,
+        expected: usize,
+    },
+    #[error("invalid parameter {name} = {value}: {why}")]
+    Param {
+        name: &'static str,
+        value: f32,
+        why: &'static str,
+    },
+}
+
+/// The per-pixel inputs of one frame (row-major, row 0 at the top, every
+/// slice `width * height` long).
+#[derive(Clone, Copy, Debug)]
+pub struct GlareInput<'a> {
+    pub width: u32,
+    pub height: u32,
+    /// The reflector (cover glass) mask.
+    pub glass: &'a [bool],
+    /// The reflected component, linear RGB.
+    pub reflected: &'a [Vec3],
+    /// The transmitted component (what is seen through the glass), linear RGB.
+    pub transmitted: &'a [Vec3],
+    /// The object each pixel's reflection shows ([`vtfarm_scene::NONE`] for
+    /// nothing).
+    pub reflected_object: &'a [u32],
+    /// Pixels over the instruments.
+    pub instrument: &'a [bool],
+    /// Pixels of instrument markings; the rest of the instrument area is
+    /// background. Marking pixels outside `instrument` are ignored.
+    pub marking: &'a [bool],
+    /// Object names, indexed by object id (ids without a name are called
+    /// `OBJECT <id>`).
+    pub object_names: &'a [String],
+}
+
+impl<'a> GlareInput<'a> {
+    /// Takes the glass mask, reflected and transmitted components and the
+    /// reflected-object map from a composited frame.
+    pub fn from_frame(
+        frame: &'a FrameImage,
+        instrument: &'a [bool],
+        marking: &'a [bool],
+        object_names: &'a [String],
+    ) -> Self {
+        GlareInput {
+            width: frame.color.width,
+            height: frame.color.height,
+            glass: &frame.mask,
+            reflected: &frame.reflected.pixels,
+            transmitted: &frame.transmitted.pixels,
+            reflected_object: &frame.reflected_object,
+            instrument,
+            marking,
+            object_names,
+        }
+    }
+
+    /// The number of pixels, `width * height`.
+    pub fn pixel_count(&self) -> Result<usize, GlareError> {
+        (self.width as usize)
+            .checked_mul(self.height as usize)
+            .ok_or(GlareError::TooLarge {
+                width: self.width,
+                height: self.height,
+            })
+    }
+
+    /// Checks that every buffer has `width * height` entries.
+    pub fn validate(&self) -> Result<usize, GlareError> {
+        let n = self.pixel_count()?;
+        let lens = [
+            ("glass", self.glass.len()),
+            ("reflected", self.reflected.len()),
+            ("transmitted", self.transmitted.len()),
+            ("reflected_object", self.reflected_object.len()),
+            ("instrument", self.instrument.len()),
+            ("marking", self.marking.len()),
+        ];
+        for (name, got) in lens {
+            if got != n {
+                return Err(GlareError::Length {
+                    name,
+                    got,
+                    expected: n,
+                });
+            }
+        }
+        Ok(n)
+    }
+
+    /// The name of object `id`.
+    pub fn object_name(&self, id: u32) -> String {
+        self.object_names
+            .get(id as usize)
+            .cloned()
+            .unwrap_or_else(|| format!("OBJECT {id}"))
+    }
+}
+
+impl Params {
+    /// Checks that the parameters are finite and in range.
+    pub fn validate(&self) -> Result<(), GlareError> {
+        let checks = [
+            ("luminance_scale", self.luminance_scale, true),
+            ("luminance_floor", self.luminance_floor, true),
+            ("min_contrast", self.thresholds.min_contrast, false),
+            (
+                "veiling_luminance",
+                self.thresholds.veiling_luminance,
+                false,
+            ),
+        ];
+        for (name, value, positive) in checks {
+            if !value.is_finite() {
+                return Err(GlareError::Param {
+                    name,
+                    value,
+                    why: "must be finite",
+                });
+            }
+            if positive && value <= 0.0 {
+                return Err(GlareError::Param {
+                    name,
+                    value,
+                    why: "must be positive",
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// `luminance_scale · Y(c)`, with non-finite or negative results as 0.
+    pub fn scaled_luminance(&self, c: Vec3) -> f32 {
+        finite_non_negative(self.luminance_scale * luminance(c))
+    }
+}
+
+fn finite_non_negative(v: f32) -> f32 {
+    if v.is_finite() { v.max(0.0) } else { 0.0 }
+}
+
+fn check(input: &GlareInput<'_>, params: &Params) -> Result<usize, GlareError> {
+    params.validate()?;
+    input.validate()
+}
+
+fn masked_luminance(mask: &[bool], colors: &[Vec3], params: &Params) -> Vec<f32> {
+    mask.iter()
+        .zip(colors)
+        .map(|(&m, &c)| if m { params.scaled_luminance(c) } else { 0.0 })
+        .collect()
+}
+
+/// `L_r = s · Y(reflected)` per glass pixel, 0 outside the glass.
+pub fn reflected_luminance(
+    input: &GlareInput<'_>,
+    params: &Params,
+) -> Result<Vec<f32>, GlareError> {
+    check(input, params)?;
+    Ok(masked_luminance(input.glass, input.reflected, params))
+}
+
+/// `L_t = s · Y(transmitted)` per glass pixel, 0 outside the glass.
+pub fn transmitted_luminance(
+    input: &GlareInput<'_>,
+    params: &Params,
+) -> Result<Vec<f32>, GlareError> {
+    check(input, params)?;
+    Ok(masked_luminance(input.glass, input.transmitted, params))
+}
+
+/// The veiling ratio `V = L_r / max(L_t, f)` per glass pixel (dimensionless,
+/// 0 outside the glass), `f` = [`Params::luminance_floor`].
+pub fn veiling_ratio(input: &GlareInput<'_>, params: &Params) -> Result<Vec<f32>, GlareError> {
+    check(input, params)?;
+    Ok(veiling_from(
+        input.glass,
+        &masked_luminance(input.glass, input.reflected, params),
+        &masked_luminance(input.glass, input.transmitted, params),
+        params.luminance_floor,
+    ))
+}
+
+fn veiling_from(glass: &[bool], lr: &[f32], lt: &[f32], floor: f32) -> Vec<f32> {
+    glass
+        .iter()
+        .zip(lr.iter().zip(lt))
+        .map(|(&g, (&r, &t))| {
+            if g {
+                finite_non_negative(r / t.max(floor))
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The contrast ratio of a marking against its background under a veiling
+/// reflection: `(L_hi + L_r) / (L_lo + L_r)`, `L_hi`/`L_lo` the brighter and
+/// darker of `l_marking` and `l_background`; numerator and denominator are
+/// floored at `floor`. Dimensionless, ≥ 1, finite for finite inputs; with
+/// `l_reflected = 0` and `l_background ≥ floor` it is exactly
+/// `l_marking / l_background` for a bright marking, and it decreases towards
+/// 1 as `l_reflected` grows (while the denominator is above the floor).
+pub fn contrast_ratio(l_marking: f32, l_background: f32, l_reflected: f32, floor: f32) -> f32 {
+    let (hi, lo) = if l_marking >= l_background {
+        (l_marking, l_background)
+    } else {
+        (l_background, l_marking)
+    };
+    let r = finite_non_negative(l_reflected);
+    finite_non_negative((hi + r).max(floor) / (lo + r).max(floor))
+}
+
+/// Marking contrast over the instrument area.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContrastMap {
+    /// `CR` per pixel; `Some` at the evaluated instrument pixels, `None`
+    /// elsewhere.
+    pub per_pixel: Vec<Option<f32>>,
+    /// Mean transmitted luminance `L̄_b` of the instrument background
+    /// (instrument, not marking); 0 when there is none.
+    pub mean_background_luminance: f32,
+    /// Mean transmitted luminance `L̄_m` of the marking pixels; 0 when there
+    /// are none.
+    pub mean_marking_luminance: f32,
+    pub instrument_pixels: usize,
+    pub marking_pixels: usize,
+    /// Pixels where `CR` was evaluated.
+    pub evaluated_pixels: usize,
+    /// Evaluated pixels with `CR` below [`Thresholds::min_contrast`].
+    pub low_contrast_pixels: usize,
+    /// `low_contrast_pixels / evaluated_pixels` (0 when none was evaluated).
+    pub low_contrast_share: f32,
+    /// The smallest evaluated `CR`, if any.
+    pub min_contrast: Option<f32>,
+}
+
+/// The contrast of the instrument markings under the veiling reflection.
+///
+/// Transmitted luminance `L_t` is taken over the whole frame here (not only
+/// the glass), reflected luminance `L_r` is 0 outside the glass.
+///
+/// * The background luminance is one number for the frame: the mean `L̄_b`
+///   of `L_t` over the background pixels (instrument and not marking). A
+///   marking is read against the dial around it, and the mean over the
+///   instrument area is a robust stand-in for "around it" that does not
+///   depend on a neighbourhood size; dials with very different background
+///   zones should be passed as separate instrument masks.
+/// * At a **marking pixel** `CR = contrast_ratio(L_t(p), L̄_b, L_r(p))`.
+/// * At a **background pixel** `CR = contrast_ratio(L̄_m, L̄_b, L_r(p))`
+///   with `L̄_m` the mean marking luminance: the contrast a typical marking
+///   would have under the reflection there. This makes the low-contrast share
+///   a share of the whole instrument area, as glare moving over the dial
+///   makes any marking that passes under it unreadable.
+/// * Without marking pixels nothing can be read: no pixel is evaluated and
+///   the share is 0. Without background pixels `L̄_b = 0`.
+pub fn contrast(input: &GlareInput<'_>, params: &Params) -> Result<ContrastMap, GlareError> {
+    check(input, params)?;
+    let lr = masked_luminance(input.glass, input.reflected, params);
+    Ok(contrast_from(input, params, &lr))
+}
+
+fn contrast_from(input: &GlareInput<'_>, params: &Params, lr: &[f32]) -> ContrastMap {
+    let n = input.instrument.len();
+    let lt = |i: usize| params.scaled_luminance(input.transmitted[i]);
+    let is_marking = |i: usize| input.instrument[i] && input.marking[i];
+    let (mut sum_b, mut count_b, mut sum_m, mut count_m) = (0.0f64, 0usize, 0.0f64, 0usize);
+    for i in 0..n {
+        if !input.instrument[i] {
+            continue;
+        }
+        if is_marking(i) {
+            sum_m += lt(i) as f64;
+            count_m += 1;
+        } else {
+            sum_b += lt(i) as f64;
+            count_b += 1;
+        }
+    }
+    let mean = |s: f64, c: usize| if c == 0 { 0.0 } else { (s / c as f64) as f32 };
+    let lb = mean(sum_b, count_b);
+    let lm = mean(sum_m, count_m);
+    let floor = params.luminance_floor;
+    let threshold = params.thresholds.min_contrast;
+    let mut per_pixel = vec![None; n];
+    let (mut evaluated, mut low) = (0usize, 0usize);
+    let mut min_cr: Option<f32> = None;
+    if count_m > 0 {
+        for (i, out) in per_pixel.iter_mut().enumerate() {
+            if !input.instrument[i] {
+                continue;
+            }
+            let l_mark = if is_marking(i) { lt(i) } else { lm };
+            let cr = contrast_ratio(l_mark, lb, lr[i], floor);
+            *out = Some(cr);
+            evaluated += 1;
+            if cr < threshold {
+                low += 1;
+            }
+            min_cr = Some(min_cr.map_or(cr, |m| m.min(cr)));
+        }
+    }
+    ContrastMap {
+        per_pixel,
+        mean_background_luminance: lb,
+        mean_marking_luminance: lm,
+        instrument_pixels: count_b + count_m,
+        marking_pixels: count_m,
+        evaluated_pixels: evaluated,
+        low_contrast_pixels: low,
+        low_contrast_share: share(low, evaluated),
+        min_contrast: min_cr,
+    }
+}
+
+fn share(part: usize, whole: usize) -> f32 {
+    if whole == 0 {
+        0.0
+    } else {
+        (part as f64 / whole as f64) as f32
+    }
+}
+
+/// One object seen in the reflections.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ObjectGlare {
+    /// Object id (index into the scene's objects).
+    pub object: u32,
+    pub name: String,
+    /// Glass pixels whose reflection shows this object.
+    pub pixels: usize,
+    /// `pixels` / glass pixels.
+    pub area_share: f32,
+    /// `Σ L_r` over those pixels (luminance unit × pixels).
+    pub summed_reflected_luminance: f32,
+    /// `summed_reflected_luminance / pixels`.
+    pub mean_reflected_luminance: f32,
+}
+
+/// The objects in the reflected-object map over the glass, ranked by the
+/// glass area they cover (descending), ties broken by summed reflected
+/// luminance (descending), then by object id (ascending). `lr` is the
+/// reflected luminance map. Pixels showing [`NONE`] are not counted.
+pub fn rank_objects(input: &GlareInput<'_>, lr: &[f32]) -> Vec<ObjectGlare> {
+    let mut per: BTreeMap<u32, (usize, f64)> = BTreeMap::new();
+    let mut glass_pixels = 0usize;
+    for (i, &g) in input.glass.iter().enumerate() {
+        if !g {
+            continue;
+        }
+        glass_pixels += 1;
+        let id = input.reflected_object.get(i).copied().unwrap_or(NONE);
+        if id == NONE {
+            continue;
+        }
+        let e = per.entry(id).or_insert((0, 0.0));
+        e.0 += 1;
+        e.1 += lr.get(i).copied().unwrap_or(0.0) as f64;
+    }
+    let mut out: Vec<ObjectGlare> = per
+        .into_iter()
+        .map(|(object, (pixels, sum))| ObjectGlare {
+            object,
+            name: input.object_name(object),
+            pixels,
+            area_share: share(pixels, glass_pixels),
+            summed_reflected_luminance: sum as f32,
+            mean_reflected_luminance: (sum / pixels as f64) as f32,
+        })
+        .collect();
+    out.sort_by(|a, b| {
+        b.pixels
+            .cmp(&a.pixels)
+            .then(
+                b.summed_reflected_luminance
+                    .total_cmp(&a.summed_reflected_luminance),
+            )
+            .then(a.object.cmp(&b.object))
+    });
+    out
+}
+
+/// The glare summary of one frame (serializable, e.g. to JSON).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Summary {
+    pub luminance_scale: f32,
+    pub luminance_floor: f32,
+    pub thresholds: Thresholds,
+    /// Pixels of the glass mask.
+    pub glass_pixels: usize,
+    /// `max L_r` over the glass (0 for no glass).
+    pub peak_reflected_luminance: f32,
+    /// `mean L_r` over the glass (0 for no glass).
+    pub mean_reflected_luminance: f32,
+    /// `mean L_t` over the glass (0 for no glass).
+    pub mean_transmitted_luminance: f32,
+    /// `max V` over the glass.
+    pub peak_veiling_ratio: f32,
+    /// `mean V` over the glass.
+    pub mean_veiling_ratio: f32,
+    /// Glass pixels with `L_r > veiling_luminance`.
+    pub glare_pixels: usize,
+    /// `glare_pixels / glass_pixels`.
+    pub glare_area_share: f32,
+    pub instrument_pixels: usize,
+    pub marking_pixels: usize,
+    pub mean_marking_luminance: f32,
+    pub mean_background_luminance: f32,
+    /// Smallest `CR` over the evaluated instrument area (`None` without
+    /// markings).
+    pub min_contrast: Option<f32>,
+    /// Evaluated instrument pixels with `CR < min_contrast` threshold.
+    pub low_contrast_pixels: usize,
+    /// `low_contrast_pixels / evaluated instrument pixels`.
+    pub low_contrast_share: f32,
+    /// Objects seen in the reflections, see [`rank_objects`].
+    pub objects: Vec<ObjectGlare>,
+}
+
+/// All metrics of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Analysis {
+    pub reflected_luminance: Vec<f32>,
+    pub transmitted_luminance: Vec<f32>,
+    pub veiling_ratio: Vec<f32>,
+    pub contrast: ContrastMap,
+    pub summary: Summary,
+}
+
+/// Computes every map and the summary.
+pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, GlareError> {
+    check(input, params)?;
+    let lr = masked_luminance(input.glass, input.reflected, params);
+    let lt = masked_luminance(input.glass, input.transmitted, params);
+    let v = veiling_from(input.glass, &lr, &lt, params.luminance_floor);
+    let contrast = contrast_from(input, params, &lr);
+
+    let mut glass_pixels = 0usize;
+    let (mut peak_r, mut sum_r, mut sum_t, mut peak_v, mut sum_v) =
+        (0.0f32, 0.0f64, 0.0f64, 0.0f32, 0.0f64);
+    let mut glare_pixels = 0usize;
+    for i in 0..input.glass.len() {
+        if !input.glass[i] {
+            continue;
+        }
+        glass_pixels += 1;
+        peak_r = peak_r.max(lr[i]);
+        sum_r += lr[i] as f64;
+        sum_t += lt[i] as f64;
+        peak_v = peak_v.max(v[i]);
+        sum_v += v[i] as f64;
+        if lr[i] > params.thresholds.veiling_luminance {
+            glare_pixels += 1;
+        }
+    }
+    let mean = |s: f64| {
+        if glass_pixels == 0 {
+            0.0
+        } else {
+            (s / glass_pixels as f64) as f32
+        }
+    };
+    let summary = Summary {
+        luminance_scale: params.luminance_scale,
+        luminance_floor: params.luminance_floor,
+        thresholds: params.thresholds,
+        glass_pixels,
+        peak_reflected_luminance: peak_r,
+        mean_reflected_luminance: mean(sum_r),
+        mean_transmitted_luminance: mean(sum_t),
+        peak_veiling_ratio: peak_v,
+        mean_veiling_ratio: mean(sum_v),
+        glare_pixels,
+        glare_area_share: share(glare_pixels, glass_pixels),
+        instrument_pixels: contrast.instrument_pixels,
+        marking_pixels: contrast.marking_pixels,
+        mean_marking_luminance: contrast.mean_marking_luminance,
+        mean_background_luminance: contrast.mean_background_luminance,
+        min_contrast: contrast.min_contrast,
+        low_contrast_pixels: contrast.low_contrast_pixels,
+        low_contrast_share: contrast.low_contrast_share,
+        objects: rank_objects(input, &lr),
+    };
+    Ok(Analysis {
+        reflected_luminance: lr,
+        transmitted_luminance: lt,
+        veiling_ratio: v,
+        contrast,
+        summary,
+    })
+}
+
+/// The [`Summary`] alone.
+pub fn summarize(input: &GlareInput<'_>, params: &Params) -> Result<Summary, GlareError> {
+    analyze(input, params).map(|a| a.summary)
+}

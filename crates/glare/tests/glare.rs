@@ -1,0 +1,556 @@
+//! Analytic checks of the glare metrics and images.
+
+use glam::Vec3;
+use vtfarm_glare::*;
+use vtfarm_imaging::Image;
+use vtfarm_scene::NONE;
+
+/// Owned buffers behind a [`GlareInput`].
+struct Frame {
+    w: u32,
+    h: u32,
+    glass: Vec<bool>,
+    reflected: Vec<Vec3>,
+    transmitted: Vec<Vec3>,
+    objects: Vec<u32>,
+    instrument: Vec<bool>,
+    marking: Vec<bool>,
+    names: Vec<String>,
+}
+
+impl Frame {
+    fn new(w: u32, h: u32) -> Self {
+        let n = (w * h) as usize;
+        Frame {
+            w,
+            h,
+            glass: vec![false; n],
+            reflected: vec![Vec3::ZERO; n],
+            transmitted: vec![Vec3::ZERO; n],
+            objects: vec![NONE; n],
+            instrument: vec![false; n],
+            marking: vec![false; n],
+            names: Vec::new(),
+        }
+    }
+
+    fn input(&self) -> GlareInput<'_> {
+        GlareInput {
+            width: self.w,
+            height: self.h,
+            glass: &self.glass,
+            reflected: &self.reflected,
+            transmitted: &self.transmitted,
+            reflected_object: &self.objects,
+            instrument: &self.instrument,
+            marking: &self.marking,
+            object_names: &self.names,
+        }
+    }
+}
+
+fn gray(v: f32) -> Vec3 {
+    Vec3::splat(v)
+}
+
+fn close(a: f32, b: f32) -> bool {
+    (a - b).abs() <= 1e-6 * b.abs().max(1.0)
+}
+
+/// A dial: the whole frame is glass and instrument; the left column is
+/// marking (transmitted `lm`), the rest background (`lb`); uniform reflection
+/// `lr`.
+fn dial(lm: f32, lb: f32, lr: f32) -> Frame {
+    let mut f = Frame::new(4, 4);
+    for i in 0..16 {
+        f.glass[i] = true;
+        f.instrument[i] = true;
+        f.marking[i] = i % 4 == 0;
+        f.transmitted[i] = gray(if f.marking[i] { lm } else { lb });
+        f.reflected[i] = gray(lr);
+    }
+    f
+}
+
+#[test]
+fn luminance_uses_rec709_weights() {
+    assert_eq!(luminance(Vec3::new(1.0, 0.0, 0.0)), 0.2126);
+    assert_eq!(luminance(Vec3::new(0.0, 1.0, 0.0)), 0.7152);
+    assert_eq!(luminance(Vec3::new(0.0, 0.0, 1.0)), 0.0722);
+    assert!(close(luminance(Vec3::ONE), 1.0));
+}
+
+#[test]
+fn uniform_reflected_field_gives_peak_equal_mean() {
+    let mut f = Frame::new(8, 6);
+    for i in 0..48 {
+        // Glass on the upper half only; the lower half reflects too but is
+        // not glass and must not count.
+        f.glass[i] = i < 24;
+        f.reflected[i] = gray(if i < 24 { 0.4 } else { 9.0 });
+    }
+    let mut params = Params::default();
+    let s = summarize(&f.input(), &params).unwrap();
+    assert_eq!(s.glass_pixels, 24);
+    assert!(close(s.peak_reflected_luminance, 0.4));
+    assert!(close(s.mean_reflected_luminance, 0.4));
+
+    params.thresholds.veiling_luminance = 0.0;
+    let s = summarize(&f.input(), &params).unwrap();
+    assert_eq!(s.glare_pixels, 24);
+    assert_eq!(s.glare_area_share, 1.0);
+
+    params.thresholds.veiling_luminance = 0.5;
+    let s = summarize(&f.input(), &params).unwrap();
+    assert_eq!(s.glare_pixels, 0);
+    assert_eq!(s.glare_area_share, 0.0);
+
+    // The scale turns relative units into cd/m².
+    params.luminance_scale = 250.0;
+    let s = summarize(&f.input(), &params).unwrap();
+    assert!((s.peak_reflected_luminance - 100.0).abs() < 1e-3);
+    assert!((s.mean_reflected_luminance - 100.0).abs() < 1e-3);
+    assert_eq!(s.glare_area_share, 1.0);
+}
+
+#[test]
+fn veiling_ratio_on_a_hand_made_4x4_case() {
+    // Glass: the centre 2x2 plus the top-left corner.
+    //   (0,0): L_r 0.2, L_t 0.4 -> 0.5
+    //   (1,1): L_r 0.3, L_t 0.1 -> 3
+    //   (2,1): L_r 0,   L_t 0.5 -> 0
+    //   (1,2): L_r 0.5, L_t 0.5 -> 1
+    //   (2,2): L_r 0.1, L_t 0   -> 0.1 / floor
+    // Everything else is not glass (its colours must be ignored) -> 0.
+    let mut f = Frame::new(4, 4);
+    f.reflected = vec![gray(7.0); 16];
+    f.transmitted = vec![gray(3.0); 16];
+    let cases = [
+        (0, 0, 0.2, 0.4),
+        (1, 1, 0.3, 0.1),
+        (2, 1, 0.0, 0.5),
+        (1, 2, 0.5, 0.5),
+        (2, 2, 0.1, 0.0),
+    ];
+    for (x, y, r, t) in cases {
+        let i = y * 4 + x;
+        f.glass[i] = true;
+        f.reflected[i] = gray(r);
+        f.transmitted[i] = gray(t);
+    }
+    let params = Params::default();
+    let v = veiling_ratio(&f.input(), &params).unwrap();
+    let mut expected = [0.0f32; 16];
+    expected[0] = 0.5;
+    expected[5] = 3.0;
+    expected[6] = 0.0;
+    expected[9] = 1.0;
+    expected[10] = 0.1 / params.luminance_floor;
+    for i in 0..16 {
+        assert!(
+            (v[i] - expected[i]).abs() <= 1e-5 * expected[i].max(1.0),
+            "pixel {i}: {} vs {}",
+            v[i],
+            expected[i]
+        );
+    }
+    let lr = reflected_luminance(&f.input(), &params).unwrap();
+    let lt = transmitted_luminance(&f.input(), &params).unwrap();
+    assert!(close(lr[5], 0.3) && close(lt[5], 0.1));
+    assert_eq!(lr[15], 0.0);
+    assert_eq!(lt[15], 0.0);
+    let s = summarize(&f.input(), &params).unwrap();
+    assert!(close(s.peak_veiling_ratio, expected[10]));
+    let mean: f32 = expected.iter().sum::<f32>() / 5.0;
+    assert!((s.mean_veiling_ratio - mean).abs() <= 1e-5 * mean);
+}
+
+#[test]
+fn contrast_without_reflection_is_marking_over_background() {
+    let f = dial(0.8, 0.1, 0.0);
+    let c = contrast(&f.input(), &Params::default()).unwrap();
+    assert_eq!(c.instrument_pixels, 16);
+    assert_eq!(c.marking_pixels, 4);
+    assert_eq!(c.evaluated_pixels, 16);
+    let (lm, lb) = (c.mean_marking_luminance, c.mean_background_luminance);
+    assert!(close(lm, 0.8) && close(lb, 0.1));
+    for cr in &c.per_pixel {
+        // Exactly L_m / L_b of the computed luminances.
+        assert_eq!(cr.unwrap(), lm / lb);
+        assert!((cr.unwrap() - 8.0).abs() < 1e-4);
+    }
+    assert_eq!(c.low_contrast_pixels, 0);
+    assert_eq!(c.min_contrast, Some(lm / lb));
+    assert_eq!(contrast_ratio(0.8, 0.1, 0.0, 1e-4), 0.8 / 0.1);
+    // Dark markings on a light dial: brighter over darker.
+    assert_eq!(contrast_ratio(0.1, 0.8, 0.0, 1e-4), 0.8 / 0.1);
+}
+
+#[test]
+fn contrast_falls_towards_one_as_reflection_grows() {
+    let mut previous = f32::INFINITY;
+    for k in 0..60 {
+        let lr = 1e-3 * 1.3f32.powi(k);
+        let cr = contrast_ratio(0.8, 0.1, lr, 1e-4);
+        assert!(cr < previous, "not falling at L_r = {lr}");
+        assert!(cr > 1.0);
+        previous = cr;
+    }
+    assert!(contrast_ratio(0.8, 0.1, 1e6, 1e-4) < 1.0001);
+
+    // Through the whole pipeline: the low-contrast share goes from 0 to 1.
+    let mut shares = Vec::new();
+    for lr in [0.0, 0.1, 0.2, 0.3, 0.5, 1.0] {
+        let f = dial(0.8, 0.1, lr);
+        let s = summarize(&f.input(), &Params::default()).unwrap();
+        let expected = (0.8 + lr) / (0.1 + lr);
+        assert!((s.min_contrast.unwrap() - expected).abs() < 1e-4 * expected);
+        shares.push(s.low_contrast_share);
+    }
+    // CR = 8, 4.5, 3.33, 2.75, 2.17, 1.64 against 3:1.
+    assert_eq!(shares, vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+}
+
+#[test]
+fn low_contrast_share_covers_the_instrument_area_where_the_glare_is() {
+    // Reflection only on the right half of the dial: the background pixels
+    // there (with a typical marking) and no marking pixel fall under 3:1.
+    let mut f = dial(0.8, 0.1, 0.0);
+    for y in 0..4 {
+        for x in 2..4 {
+            f.reflected[y * 4 + x] = gray(1.0);
+        }
+    }
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    assert_eq!(s.low_contrast_pixels, 8);
+    assert_eq!(s.low_contrast_share, 0.5);
+}
+
+#[test]
+fn objects_are_ranked_by_covered_area_and_named() {
+    let mut f = Frame::new(8, 4);
+    f.names = vec!["mirror".into(), "driver shirt".into(), "sun visor".into()];
+    f.glass = vec![true; 32];
+    // Object 0: 3 px, object 1: 7 px, object 2: 5 px, object 7 (no name): 1 px.
+    let mut next = 0;
+    for (id, count) in [(0u32, 3), (1, 7), (2, 5), (7, 1)] {
+        for _ in 0..count {
+            f.objects[next] = id;
+            f.reflected[next] = gray(0.1);
+            next += 1;
+        }
+    }
+    // Object 0 also covers non-glass pixels: they do not count.
+    for i in 28..32 {
+        f.glass[i] = false;
+        f.objects[i] = 0;
+    }
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let ranked: Vec<(u32, &str, usize)> = s
+        .objects
+        .iter()
+        .map(|o| (o.object, o.name.as_str(), o.pixels))
+        .collect();
+    assert_eq!(
+        ranked,
+        vec![
+            (1, "driver shirt", 7),
+            (2, "sun visor", 5),
+            (0, "mirror", 3),
+            (7, "OBJECT 7", 1)
+        ]
+    );
+    assert!(close(s.objects[0].summed_reflected_luminance, 0.7));
+    assert!(close(s.objects[0].mean_reflected_luminance, 0.1));
+    assert!(close(s.objects[0].area_share, 7.0 / 28.0));
+}
+
+#[test]
+fn equal_areas_rank_by_summed_reflected_luminance() {
+    let mut f = Frame::new(4, 1);
+    f.glass = vec![true; 4];
+    f.objects = vec![3, 3, 5, 5];
+    f.reflected = vec![gray(0.1), gray(0.1), gray(0.9), gray(0.2)];
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let order: Vec<u32> = s.objects.iter().map(|o| o.object).collect();
+    assert_eq!(order, vec![5, 3]);
+}
+
+/// A gradient strip: row 0 is glass with L_r rising 0..1 over 16 pixels,
+/// row 1 is not glass (but has reflections that must not show).
+fn gradient() -> Frame {
+    let mut f = Frame::new(16, 2);
+    for x in 0..16 {
+        f.glass[x] = true;
+        f.reflected[x] = gray(x as f32 / 15.0);
+        f.reflected[16 + x] = gray(1.0);
+    }
+    f
+}
+
+#[test]
+fn heat_map_is_black_outside_the_glass_and_rises_with_luminance() {
+    let f = gradient();
+    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    assert!(img.width > f.w, "legend panel to the right");
+    assert!(img.height >= f.h);
+    for y in 0..img.height {
+        for x in 0..f.w {
+            if y >= f.h || !f.glass[(y * f.w + x) as usize] {
+                assert_eq!(img.get(x, y), Vec3::ZERO, "({x}, {y})");
+            }
+        }
+    }
+    let mut previous = -1.0;
+    for x in 0..16 {
+        let y = luminance(img.get(x, 0));
+        assert!(y > previous, "heat map not rising at x = {x}");
+        previous = y;
+    }
+    // The top of the ramp is the peak; a fixed scale saturates above it.
+    assert_eq!(img.get(15, 0), ramp_color(1.0));
+    let fixed = heat_map_with_max(&f.input(), &Params::default(), Some(0.5)).unwrap();
+    assert_eq!(fixed.get(15, 0), ramp_color(1.0));
+    assert_eq!(fixed.get(8, 0), ramp_color(1.0));
+    assert!(luminance(fixed.get(7, 0)) < luminance(ramp_color(1.0)));
+    assert_eq!(fixed.get(0, 0), ramp_color(0.0));
+}
+
+#[test]
+fn ramp_rises_monotonically_in_luminance() {
+    let mut previous = -1.0;
+    for k in 0..=1000 {
+        let y = luminance(ramp_color(k as f32 / 1000.0));
+        assert!(y > previous, "ramp not rising at t = {}", k as f32 / 1000.0);
+        previous = y;
+    }
+    assert_eq!(ramp_color(-1.0), ramp_color(0.0));
+    assert_eq!(ramp_color(2.0), ramp_color(1.0));
+    assert_eq!(ramp_color(f32::NAN), ramp_color(0.0));
+}
+
+fn count_font_pixels(img: &Image, x_from: u32) -> usize {
+    let mut n = 0;
+    for y in 0..img.height {
+        for x in x_from..img.width {
+            if img.get(x, y) == FONT_COLOR {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+#[test]
+fn legends_contain_text() {
+    let f = gradient();
+    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    assert!(count_font_pixels(&img, f.w) > 50);
+    // Text only in the legend: the frame area has none.
+    assert_eq!(count_font_pixels(&img, 0), count_font_pixels(&img, f.w));
+
+    let mut o = gradient();
+    o.names = vec!["mirror".into()];
+    o.objects[..8].fill(0);
+    let map = object_map(&o.input(), &Params::default()).unwrap();
+    assert!(count_font_pixels(&map, o.w) > 50);
+    assert_eq!(count_font_pixels(&map, 0), count_font_pixels(&map, o.w));
+}
+
+#[test]
+fn object_map_colours_objects_distinctly() {
+    let mut f = Frame::new(6, 2);
+    f.names = vec!["a".into(), "b".into(), "c".into()];
+    f.glass = vec![
+        true, true, true, true, true, false, true, true, true, true, true, true,
+    ];
+    f.objects = vec![0, 0, 0, 1, 1, 1, 2, NONE, NONE, NONE, NONE, NONE];
+    let img = object_map(&f.input(), &Params::default()).unwrap();
+    let (c0, c1, c2) = (img.get(0, 0), img.get(3, 0), img.get(0, 1));
+    assert_eq!(img.get(1, 0), c0);
+    assert_eq!(img.get(4, 0), c1);
+    assert!(c0 != c1 && c1 != c2 && c0 != c2);
+    for c in [c0, c1, c2] {
+        assert!(c != NO_OBJECT_COLOR && c != Vec3::ZERO && c != FONT_COLOR);
+    }
+    assert_eq!(img.get(5, 0), Vec3::ZERO, "not glass");
+    assert_eq!(img.get(1, 1), NO_OBJECT_COLOR, "glass showing nothing");
+    // The legend has a swatch of each object's colour.
+    for c in [c0, c1, c2] {
+        let n = (0..img.height)
+            .flat_map(|y| (f.w..img.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| img.get(x, y) == c)
+            .count();
+        assert_eq!(n, 100, "a 10x10 swatch");
+    }
+}
+
+#[test]
+fn many_objects_fit_the_legend() {
+    let mut f = Frame::new(30, 1);
+    f.glass = vec![true; 30];
+    f.objects = (0..30).collect();
+    let img = object_map(&f.input(), &Params::default()).unwrap();
+    assert!(img.height > 20 * 10);
+}
+
+fn assert_finite(s: &Summary) {
+    let v = serde_json::to_value(s).unwrap();
+    fn walk(v: &serde_json::Value) {
+        match v {
+            serde_json::Value::Number(n) => assert!(n.as_f64().unwrap().is_finite()),
+            serde_json::Value::Array(a) => a.iter().for_each(walk),
+            serde_json::Value::Object(o) => o.values().for_each(walk),
+            _ => {}
+        }
+    }
+    walk(&v);
+    let floats = [
+        s.peak_reflected_luminance,
+        s.mean_reflected_luminance,
+        s.mean_transmitted_luminance,
+        s.peak_veiling_ratio,
+        s.mean_veiling_ratio,
+        s.glare_area_share,
+        s.mean_marking_luminance,
+        s.mean_background_luminance,
+        s.low_contrast_share,
+    ];
+    assert!(floats.iter().all(|x| x.is_finite()), "{s:?}");
+    assert!(s.min_contrast.is_none_or(f32::is_finite));
+}
+
+#[test]
+fn empty_mask_gives_zeros() {
+    let mut f = Frame::new(5, 3);
+    f.reflected = vec![gray(1.0); 15];
+    let a = analyze(&f.input(), &Params::default()).unwrap();
+    let s = &a.summary;
+    assert_finite(s);
+    assert_eq!(s.glass_pixels, 0);
+    assert_eq!(s.peak_reflected_luminance, 0.0);
+    assert_eq!(s.mean_reflected_luminance, 0.0);
+    assert_eq!(s.glare_area_share, 0.0);
+    assert_eq!(s.low_contrast_share, 0.0);
+    assert_eq!(s.min_contrast, None);
+    assert!(s.objects.is_empty());
+    assert!(a.reflected_luminance.iter().all(|&x| x == 0.0));
+    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    assert!((0..3).all(|y| (0..5).all(|x| img.get(x, y) == Vec3::ZERO)));
+    object_map(&f.input(), &Params::default()).unwrap();
+}
+
+#[test]
+fn zero_sized_frame_works() {
+    let f = Frame::new(0, 0);
+    assert_finite(&summarize(&f.input(), &Params::default()).unwrap());
+    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    assert!(count_font_pixels(&img, 0) > 0);
+    object_map(&f.input(), &Params::default()).unwrap();
+}
+
+#[test]
+fn all_none_object_map_ranks_nothing() {
+    let mut f = gradient();
+    f.objects = vec![NONE; 32];
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    assert!(s.objects.is_empty());
+    assert_finite(&s);
+    let img = object_map(&f.input(), &Params::default()).unwrap();
+    assert_eq!(img.get(0, 0), NO_OBJECT_COLOR);
+}
+
+#[test]
+fn zero_transmitted_luminance_stays_finite() {
+    // Black dial, black markings, with and without reflection.
+    for lr in [0.0, 0.5] {
+        let f = dial(0.0, 0.0, lr);
+        let a = analyze(&f.input(), &Params::default()).unwrap();
+        assert_finite(&a.summary);
+        assert!(a.veiling_ratio.iter().all(|v| v.is_finite()));
+        for cr in a.contrast.per_pixel.iter().flatten() {
+            assert_eq!(*cr, 1.0, "no contrast between two blacks");
+        }
+    }
+    // Bright markings on a black background: large but finite.
+    let f = dial(0.8, 0.0, 0.0);
+    let c = contrast(&f.input(), &Params::default()).unwrap();
+    assert!(
+        c.per_pixel
+            .iter()
+            .flatten()
+            .all(|cr| cr.is_finite() && *cr > 1.0)
+    );
+}
+
+#[test]
+fn non_finite_colours_count_as_black() {
+    let mut f = dial(0.8, 0.1, 0.0);
+    f.reflected[3] = Vec3::new(f32::NAN, 0.0, 0.0);
+    f.reflected[4] = gray(f32::INFINITY);
+    f.transmitted[5] = gray(-1.0);
+    let a = analyze(&f.input(), &Params::default()).unwrap();
+    assert_finite(&a.summary);
+    assert!(a.reflected_luminance.iter().all(|x| x.is_finite()));
+    heat_map(&f.input(), &Params::default()).unwrap();
+}
+
+#[test]
+fn inconsistent_input_is_an_error() {
+    let mut f = Frame::new(4, 4);
+    f.marking.pop();
+    let err = summarize(&f.input(), &Params::default()).unwrap_err();
+    assert_eq!(
+        err,
+        GlareError::Length {
+            name: "marking",
+            got: 15,
+            expected: 16
+        }
+    );
+    assert!(heat_map(&f.input(), &Params::default()).is_err());
+    let f = Frame::new(2, 2);
+    let params = Params {
+        luminance_floor: 0.0,
+        ..Params::default()
+    };
+    assert!(matches!(
+        summarize(&f.input(), &params),
+        Err(GlareError::Param { .. })
+    ));
+}
+
+#[test]
+fn summary_serializes_to_json() {
+    let f = dial(0.8, 0.1, 0.2);
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let json = serde_json::to_value(&s).unwrap();
+    assert_eq!(json["thresholds"]["min_contrast"], 3.0);
+    assert_eq!(json["glass_pixels"], 16);
+    assert!(json["objects"].as_array().unwrap().is_empty());
+    assert!(json["low_contrast_share"].is_number());
+}
+
+#[test]
+fn input_from_a_composited_frame() {
+    let frame = vtfarm_vertex::FrameImage::new(Image::new(3, 2, Vec3::ZERO));
+    let instrument = vec![false; 6];
+    let names = vec!["x".to_owned()];
+    let input = GlareInput::from_frame(&frame, &instrument, &instrument, &names);
+    assert_eq!(input.validate(), Ok(6));
+    assert_eq!(input.object_name(0), "x");
+}
+
+#[test]
+fn text_is_clipped_and_measured() {
+    let mut img = Image::new(10, 10, Vec3::ZERO);
+    draw_text(&mut img, -3, -4, "AB1", 2, FONT_COLOR);
+    draw_text(&mut img, 8, 8, "XYZ", 3, FONT_COLOR);
+    assert_eq!(text_width("", 2), 0);
+    assert_eq!(text_width("12", 1), 7);
+    assert_eq!(text_width("12", 2), 14);
+    let mut one = Image::new(3, 5, Vec3::ZERO);
+    draw_text(&mut one, 0, 0, "8", 1, FONT_COLOR);
+    // "8" is a full box with two holes.
+    assert_eq!(count_font_pixels(&one, 0), 13);
+}
