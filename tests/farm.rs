@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use glam::Vec3;
 use tokio::task::JoinHandle;
-use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{
     FinishedFrame, JobError, LocalFarm, MasterHandle, run_job, server, spawn_master, wire_job,
 };
@@ -54,10 +54,7 @@ fn job_with_glass(frames: usize, width: u32, height: u32, glass_segments: u32) -
         glass_segments,
         ..CockpitConfig::default()
     });
-    let glass = c.scene.object_id(COVER_GLASS).unwrap();
-    let reflectors = (0..c.scene.triangles.len() as u32)
-        .filter(|&t| c.scene.triangles[t as usize].object == glass)
-        .collect();
+    let reflectors = c.cover_glass_triangles();
     let frames = (0..frames)
         .map(|k| FrameSetup {
             camera: Camera {

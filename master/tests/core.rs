@@ -5,7 +5,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{MasterCore, Output, Peer};
 use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireFrameSetup, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
@@ -61,10 +61,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         detail: 0.2,
         ..CockpitConfig::default()
     });
-    let glass = c.scene.object_id(COVER_GLASS).unwrap();
-    let reflectors: Vec<u32> = (0..c.scene.triangles.len() as u32)
-        .filter(|&t| c.scene.triangles[t as usize].object == glass)
-        .collect();
+    let reflectors: Vec<u32> = c.cover_glass_triangles();
     let setup = FrameSetup {
         camera: Camera {
             width: 96,

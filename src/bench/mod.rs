@@ -15,7 +15,7 @@ use anyhow::{Context, Result};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
-use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer, compare};
 use vtfarm_trace::{Ray, SceneBvh, TraceSettings};
 use vtfarm_vertex::{Quality, VertexSettings};
@@ -92,13 +92,8 @@ fn table1(args: Table1Args) -> Result<()> {
         detail: args.detail,
         ..CockpitConfig::default()
     });
+    let reflectors = c.cover_glass_triangles();
     let scene = Arc::new(c.scene);
-    let glass = scene
-        .object_id(COVER_GLASS)
-        .context("the cockpit has a cover glass")?;
-    let reflectors: Vec<u32> = (0..scene.triangles.len() as u32)
-        .filter(|&t| scene.triangles[t as usize].object == glass)
-        .collect();
     let renderer = Renderer::new(scene.clone(), reflectors);
     let camera = vtfarm_scene::Camera {
         width: args.width,
@@ -264,13 +259,7 @@ impl CockpitJob {
             detail,
             ..CockpitConfig::default()
         });
-        let glass = c
-            .scene
-            .object_id(COVER_GLASS)
-            .context("the cockpit has a cover glass")?;
-        let reflectors = (0..c.scene.triangles.len() as u32)
-            .filter(|&t| c.scene.triangles[t as usize].object == glass)
-            .collect();
+        let reflectors = c.cover_glass_triangles();
         let setup = FrameSetup {
             camera: vtfarm_scene::Camera {
                 width,

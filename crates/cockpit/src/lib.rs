@@ -96,6 +96,20 @@ pub struct Cockpit {
     pub lighting: Lighting,
 }
 
+impl Cockpit {
+    /// The triangles of the cover glass's front surface ([`COVER_GLASS`]):
+    /// the default reflectors.
+    pub fn cover_glass_triangles(&self) -> Vec<vtfarm_scene::TriangleId> {
+        let glass = self
+            .scene
+            .object_id(COVER_GLASS)
+            .expect("the generator always makes the cover glass");
+        (0..self.scene.triangles.len() as u32)
+            .filter(|&t| self.scene.triangles[t as usize].object == glass)
+            .collect()
+    }
+}
+
 /// Name of the cover-glass object facing the driver (the default reflector).
 pub const COVER_GLASS: &str = "cover_glass";
 /// Name of the cover glass's back surface (seen only through the glass).

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
+use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, NONE, TriangleId};
 use vtfarm_trace::{Ray, TraceSettings};
@@ -15,10 +15,7 @@ fn small_cockpit() -> (Renderer, FrameSetup) {
         detail: 0.3,
         ..CockpitConfig::default()
     });
-    let glass = c.scene.object_id(COVER_GLASS).unwrap();
-    let reflectors: Vec<TriangleId> = (0..c.scene.triangles.len() as TriangleId)
-        .filter(|&t| c.scene.triangles[t as usize].object == glass)
-        .collect();
+    let reflectors: Vec<TriangleId> = c.cover_glass_triangles();
     let setup = FrameSetup {
         camera: Camera {
             width: 240,
