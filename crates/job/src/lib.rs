@@ -24,7 +24,7 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
 
 pub use error::{JobError, Location};
-pub use vtfarm_cockpit::CockpitConfig;
+pub use vtfarm_cockpit::{CockpitConfig, GlassDesign};
 
 /// A parsed and validated job file.
 #[derive(Clone, Debug, PartialEq)]

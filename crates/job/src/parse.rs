@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use serde::Deserialize;
 use toml::Spanned;
-use vtfarm_cockpit::COVER_GLASS;
+use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
 use vtfarm_scene::{Light, LightKind};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
@@ -51,6 +51,9 @@ struct RawScene {
     obj: Option<Spanned<PathBuf>>,
     detail: Option<Spanned<f32>>,
     glass_segments: Option<Spanned<u32>>,
+    glass: Option<Spanned<String>>,
+    glass_tilt: Option<Spanned<f32>>,
+    glass_radius: Option<Spanned<f32>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -251,6 +254,56 @@ impl Source<'_> {
             .transpose()
     }
 
+    /// The cockpit's cover-glass design from `glass` (and `glass_tilt` /
+    /// `glass_radius` for the designs that need them).
+    fn glass_design(&self, raw: &RawScene) -> Result<GlassDesign, JobError> {
+        const DESIGNS: &str = "current, flat, flat-tilted, cylindrical, ellipsoidal";
+        let Some(name) = &raw.glass else {
+            return Ok(GlassDesign::Current);
+        };
+        let needs = |key: &str, value: Option<f32>| {
+            value.ok_or_else(|| {
+                self.error_at(
+                    name,
+                    format!("scene.glass = {:?} needs scene.{key}", name.get_ref()),
+                )
+            })
+        };
+        Ok(match name.get_ref().as_str() {
+            "current" => GlassDesign::Current,
+            "flat" => GlassDesign::Flat,
+            "ellipsoidal" => GlassDesign::Ellipsoidal,
+            "flat-tilted" => GlassDesign::FlatTilted {
+                degrees: needs(
+                    "glass_tilt",
+                    self.check_opt(
+                        "scene.glass_tilt",
+                        &raw.glass_tilt,
+                        "degrees between -60 and 60",
+                        |d| d.is_finite() && d.abs() <= 60.0,
+                    )?,
+                )?,
+            },
+            "cylindrical" => GlassDesign::Cylindrical {
+                radius: needs(
+                    "glass_radius",
+                    self.check_opt(
+                        "scene.glass_radius",
+                        &raw.glass_radius,
+                        "metres, at least 0.15",
+                        |r| r.is_finite() && r >= 0.15,
+                    )?,
+                )?,
+            },
+            other => {
+                return Err(self.error_at(
+                    name,
+                    format!("unknown scene.glass {other:?}; valid: {DESIGNS}"),
+                ));
+            }
+        })
+    }
+
     fn scene(&self, raw: Option<Spanned<RawScene>>) -> Result<SceneSource, JobError> {
         const WHICH: &str = "set either builtin = \"cockpit\" or obj = \"path/to/model.obj\"";
         let Some(raw) = raw else {
@@ -258,7 +311,7 @@ impl Source<'_> {
         };
         let span = raw.span();
         let raw = raw.into_inner();
-        match (raw.builtin, raw.obj) {
+        match (raw.builtin.clone(), raw.obj.clone()) {
             (Some(_), Some(obj)) => Err(self.error_at(&obj, format!("[scene]: {WHICH}, not both"))),
             (None, None) => Err(self.error(Some(span), format!("[scene]: {WHICH}"))),
             (Some(name), None) => {
@@ -271,7 +324,9 @@ impl Source<'_> {
                     return Err(self.error_at(&name, message));
                 }
                 let default = CockpitConfig::default();
+                let glass = self.glass_design(&raw)?;
                 Ok(SceneSource::Cockpit(CockpitConfig {
+                    glass,
                     detail: self
                         .check_opt("scene.detail", &raw.detail, "a positive number", |d| {
                             d.is_finite() && d > 0.0
@@ -292,6 +347,9 @@ impl Source<'_> {
                 let builtin_only = [
                     ("detail", raw.detail.map(|v| v.span())),
                     ("glass_segments", raw.glass_segments.map(|v| v.span())),
+                    ("glass", raw.glass.map(|v| v.span())),
+                    ("glass_tilt", raw.glass_tilt.map(|v| v.span())),
+                    ("glass_radius", raw.glass_radius.map(|v| v.span())),
                 ];
                 if let Some((key, span)) = builtin_only.into_iter().find_map(|(k, s)| Some((k, s?)))
                 {

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use vtfarm_job::{
-    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, ReflectorSelector, SceneSource,
-    load_job, parse_job,
+    CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, ReflectorSelector,
+    SceneSource, load_job, parse_job,
 };
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
@@ -684,4 +684,46 @@ fn a_broken_obj_file_is_reported_with_the_job_file() {
         "{message}"
     );
     assert!(message.contains("cab.obj"), "{message}");
+}
+
+#[test]
+fn cover_glass_designs_are_chosen_by_name() {
+    let design = |extra: &str| match parse(&format!("{COCKPIT}{extra}")).scene {
+        SceneSource::Cockpit(c) => c.glass,
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(design(""), GlassDesign::Current);
+    assert_eq!(design("glass = \"flat\"\n"), GlassDesign::Flat);
+    assert_eq!(
+        design("glass = \"ellipsoidal\"\n"),
+        GlassDesign::Ellipsoidal
+    );
+    assert_eq!(
+        design("glass = \"flat-tilted\"\nglass_tilt = 15.0\n"),
+        GlassDesign::FlatTilted { degrees: 15.0 }
+    );
+    assert_eq!(
+        design("glass = \"cylindrical\"\nglass_radius = 0.5\n"),
+        GlassDesign::Cylindrical { radius: 0.5 }
+    );
+    assert_rejected(
+        &format!("{COCKPIT}glass = \"round\"\n"),
+        3,
+        &["scene.glass", "round", "ellipsoidal"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}glass = \"flat-tilted\"\n"),
+        3,
+        &["needs scene.glass_tilt"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}glass = \"flat-tilted\"\nglass_tilt = 90.0\n"),
+        4,
+        &["scene.glass_tilt", "-60 and 60"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}glass = \"cylindrical\"\nglass_radius = 0.01\n"),
+        4,
+        &["scene.glass_radius"],
+    );
 }
