@@ -340,7 +340,6 @@ impl Source<'_> {
                             |n| n >= 1,
                         )?
                         .unwrap_or(default.glass_segments),
-                    ..default
                 }))
             }
             (None, Some(obj)) => {
