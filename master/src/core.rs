@@ -14,7 +14,7 @@ use tracing::{debug, info, warn};
 use vtfarm_proto::{
     FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
     SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
-    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encode_message,
+    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_render::{FrameSetup, morton_order};
 use vtfarm_scene::Scene;
@@ -74,6 +74,8 @@ struct InFlight {
     job: u64,
     frame: u32,
     items: Vec<u32>,
+    /// Size of the `Package` message, for the statistics.
+    bytes_in: u64,
 }
 
 /// The master's state.
@@ -199,6 +201,11 @@ impl MasterCore {
         let worker = WorkerId(conn);
         // Anything from a worker shows it is alive.
         let _ = self.scheduler.heartbeat(now, worker);
+        // Results are counted at their wire size for the statistics.
+        let result_bytes = match &message {
+            Message::PackageResult(_) => encoded_len(&message),
+            _ => 0,
+        };
         match message {
             Message::Heartbeat => {}
             Message::RequestWork { job, frame } => {
@@ -215,7 +222,7 @@ impl MasterCore {
                 }
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
-            Message::PackageResult(result) => self.package_result(now, conn, result),
+            Message::PackageResult(result) => self.package_result(now, conn, result, result_bytes),
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
                 if let Err(e) =
@@ -229,7 +236,13 @@ impl MasterCore {
         }
     }
 
-    fn package_result(&mut self, now: Duration, conn: ConnId, result: PackageResult) {
+    fn package_result(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        result: PackageResult,
+        bytes_out: u64,
+    ) {
         let worker = WorkerId(conn);
         let Some(in_flight) = self.packages.get(&result.id) else {
             debug!(package = result.id, "result for an unknown package ignored");
@@ -243,8 +256,6 @@ impl MasterCore {
             return;
         };
         let (width, height) = (current.image.color.width, current.image.color.height);
-        let bytes_out =
-            encode_message(&Message::PackageResult(result.clone())).map_or(0, |b| b.len() as u64);
         let bitmap = match result.bitmap.into_bitmap_within(width, height) {
             Ok(b) => b,
             Err(e) => {
@@ -267,13 +278,7 @@ impl MasterCore {
         } else {
             Vec::new()
         };
-        let bytes_in = encode_message(&Message::Package(Package {
-            id: result.id,
-            job: in_flight.job,
-            frame: in_flight.frame,
-            triangles: in_flight.items.clone(),
-        }))
-        .map_or(0, |b| b.len() as u64);
+        let bytes_in = in_flight.bytes_in;
         let measure = PackageMeasure {
             busy: Duration::from_micros(result.busy_micros),
             item_seconds,
@@ -291,6 +296,8 @@ impl MasterCore {
         }
         let items = in_flight.items.len() as u64;
         let job_id = in_flight.job;
+        // Done: a late duplicate copy now finds nothing and is ignored.
+        self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
         let current = job.current.as_mut().expect("checked above");
         current.image.composite(&bitmap);
@@ -411,6 +418,12 @@ impl MasterCore {
         }
     }
 
+    /// Drops a job that ended, with its packages still in flight.
+    fn forget_job(&mut self, job: u64) -> Option<Job> {
+        self.packages.retain(|_, p| p.job != job);
+        self.jobs.remove(&job)
+    }
+
     fn send(&mut self, conn: ConnId, message: Message) {
         self.outbox.push_back(Output::Send(conn, Box::new(message)));
     }
@@ -513,7 +526,7 @@ impl MasterCore {
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
-                self.jobs.remove(&job.0);
+                self.forget_job(job.0);
             }
             Event::JobFailed {
                 job,
@@ -528,12 +541,12 @@ impl MasterCore {
                     )
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
-                if let Some(j) = self.jobs.remove(&job.0) {
+                if let Some(j) = self.forget_job(job.0) {
                     self.send(j.submitter, Message::JobFailed { job: job.0, errors });
                 }
             }
             Event::JobCancelled { job } => {
-                self.jobs.remove(&job.0);
+                self.forget_job(job.0);
             }
             Event::WorkerBlocklisted { worker, job } => {
                 warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
@@ -600,20 +613,20 @@ impl MasterCore {
     }
 
     fn assign(&mut self, a: Assignment) {
-        self.packages.insert(
-            a.package.0,
-            InFlight {
-                job: a.job.0,
-                frame: a.frame,
-                items: a.items.clone(),
-            },
-        );
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,
             frame: a.frame,
-            triangles: a.items,
+            triangles: a.items.clone(),
         });
+        let bytes_in = encoded_len(&message);
+        let in_flight = InFlight {
+            job: a.job.0,
+            frame: a.frame,
+            items: a.items,
+            bytes_in,
+        };
+        self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
     }
 

@@ -148,6 +148,15 @@ pub fn decode_message(body: &[u8]) -> Result<Message, ProtoError> {
     decode_value(body).map_err(ProtoError::Decode)
 }
 
+/// The size on the wire of `message` (length prefix included), counted
+/// without encoding it into a buffer: for transfer statistics.
+pub fn encoded_len(message: &Message) -> u64 {
+    let mut size = bincode::enc::write::SizeWriter::default();
+    // Same encoding as `encode_message`, which cannot fail for vtfarm's types.
+    let _ = bincode::serde::encode_into_writer(message, &mut size, bincode::config::standard());
+    4 + size.bytes_written as u64
+}
+
 /// bincode of a local value (standard configuration).
 pub(crate) fn encode_value<T: Serialize>(value: &T) -> Vec<u8> {
     // Derived serde impls of owned data with known lengths cannot fail to encode.
@@ -215,6 +224,19 @@ mod tests {
     }
 
     /// One of every message.
+    #[test]
+    fn encoded_len_is_the_framed_size() {
+        for message in every_message() {
+            let framed = encode_message(&message).expect("encodes");
+            assert_eq!(
+                encoded_len(&message),
+                framed.len() as u64,
+                "{}",
+                message.name()
+            );
+        }
+    }
+
     fn every_message() -> Vec<Message> {
         let hash = scene_hash(&scene());
         let stats = WirePackageStats::from(&PackageStats {

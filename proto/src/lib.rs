@@ -31,13 +31,13 @@ pub mod wire;
 pub use cluster::{CLUSTER_FILE, ClusterConfig, ConfigError, token_matches};
 pub use framing::{
     MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, ProtoError, decode_message, encode_message,
-    read_message, write_message,
+    encoded_len, read_message, write_message,
 };
 pub use handshake::{
     CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, client_handshake,
     server_handshake,
 };
-pub use link::{Link, LinkBytes, SESSION_LIMIT};
+pub use link::{Link, SESSION_LIMIT};
 pub use message::{
     FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
     PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, RunningJob, SceneData,

@@ -4,20 +4,12 @@
 //! written once against `Link` and never see the transport.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tracing::debug;
 
 use crate::{MAX_MESSAGE_BYTES, Message, ProtoError, encode_message, read_message};
-
-/// Bytes moved over a link, counted at the framing (zero for in-process links).
-#[derive(Debug, Default)]
-pub struct LinkBytes {
-    pub sent: AtomicU64,
-    pub received: AtomicU64,
-}
 
 /// One end of a message link.
 #[derive(Debug)]
@@ -27,7 +19,6 @@ pub struct Link {
     /// Messages from the peer; `None` once the link is down. A link that
     /// failed on bad input says why in [`Link::error`] after that.
     pub rx: UnboundedReceiver<Message>,
-    pub bytes: Arc<LinkBytes>,
     error: Arc<std::sync::Mutex<Option<ProtoError>>>,
 }
 
@@ -39,7 +30,6 @@ impl Link {
         let end = |tx, rx| Link {
             tx,
             rx,
-            bytes: Arc::default(),
             error: Arc::default(),
         };
         (end(a_tx, a_rx), end(b_tx, b_rx))
@@ -48,20 +38,15 @@ impl Link {
     /// A link over a byte stream pair (a QUIC bidirectional stream): a task
     /// reads framed messages of at most `limit` bytes into `rx`, another
     /// writes `tx` out. The link goes down on the first error either way.
-    pub fn over_stream<R, W>(recv: R, mut send: W, limit: u32) -> Link
+    pub fn over_stream<R, W>(mut recv: R, mut send: W, limit: u32) -> Link
     where
         R: AsyncRead + Unpin + Send + 'static,
         W: AsyncWrite + Unpin + Send + 'static,
     {
         let (in_tx, rx) = unbounded_channel();
         let (tx, mut out_rx) = unbounded_channel::<Message>();
-        let bytes = Arc::new(LinkBytes::default());
         let error = Arc::new(std::sync::Mutex::new(None));
         let read_error = error.clone();
-        let mut recv = CountingReader {
-            inner: recv,
-            bytes: bytes.clone(),
-        };
         tokio::spawn(async move {
             loop {
                 match read_message(&mut recv, limit).await {
@@ -80,7 +65,6 @@ impl Link {
                 }
             }
         });
-        let write_bytes = bytes.clone();
         tokio::spawn(async move {
             use tokio::io::AsyncWriteExt;
             while let Some(message) = out_rx.recv().await {
@@ -90,18 +74,10 @@ impl Link {
                 if send.write_all(&frame).await.is_err() {
                     break;
                 }
-                write_bytes
-                    .sent
-                    .fetch_add(frame.len() as u64, Ordering::Relaxed);
             }
             let _ = send.shutdown().await;
         });
-        Link {
-            tx,
-            rx,
-            bytes,
-            error,
-        }
+        Link { tx, rx, error }
     }
 
     /// Why the link went down, when it was bad input rather than a close.
@@ -111,26 +87,6 @@ impl Link {
             .unwrap_or_else(|p| p.into_inner())
             .as_ref()
             .map(ToString::to_string)
-    }
-}
-
-/// Counts the bytes read through it into [`LinkBytes::received`].
-struct CountingReader<R> {
-    inner: R,
-    bytes: Arc<LinkBytes>,
-}
-
-impl<R: AsyncRead + Unpin> AsyncRead for CountingReader<R> {
-    fn poll_read(
-        mut self: std::pin::Pin<&mut Self>,
-        cx: &mut std::task::Context<'_>,
-        buf: &mut tokio::io::ReadBuf<'_>,
-    ) -> std::task::Poll<std::io::Result<()>> {
-        let before = buf.filled().len();
-        let poll = std::pin::Pin::new(&mut self.inner).poll_read(cx, buf);
-        let read = (buf.filled().len() - before) as u64;
-        self.bytes.received.fetch_add(read, Ordering::Relaxed);
-        poll
     }
 }
 

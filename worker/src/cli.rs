@@ -46,7 +46,10 @@ pub fn run(args: WorkerArgs) -> Result<()> {
     let threads = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    rayon_pool(threads)?;
+    // Already set (e.g. by an embedding program): keep that pool.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global();
     let options = ClientOptions {
         master: args.master.clone().unwrap_or(cluster.master.clone()),
         token: cluster.token.clone(),
@@ -69,14 +72,6 @@ pub fn run(args: WorkerArgs) -> Result<()> {
         Engine::new(Some(cache)),
         config,
     ))?;
-    Ok(())
-}
-
-fn rayon_pool(threads: usize) -> Result<()> {
-    // Already set (e.g. by an embedding program): keep that pool.
-    let _ = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build_global();
     Ok(())
 }
 
