@@ -867,3 +867,69 @@ fn the_bvh_and_tracer_can_be_shared_across_threads() {
     shareable::<SceneBvh>();
     shareable::<Tracer<'static>>();
 }
+
+#[test]
+fn surface_terms_recombine_to_the_shaded_sample() {
+    // A glass pane over a lit floor with an emissive sky above: the pane has
+    // local light, a reflection and a refraction, all three non-zero.
+    let mut b = SceneBuilder::default();
+    b.quad(
+        Material {
+            reflectance: Vec3::splat(0.2),
+            transmittance: Vec3::splat(0.7),
+            diffuse: Vec3::splat(0.1),
+            ..glass("pane", 1.5)
+        },
+        Vec3::new(-5.0, 0.0, -5.0),
+        Vec3::Z * 10.0,
+        Vec3::X * 10.0,
+    );
+    b.quad(
+        Material::diffuse("floor", Vec3::splat(0.6)),
+        Vec3::new(-20.0, -1.0, -20.0),
+        Vec3::Z * 40.0,
+        Vec3::X * 40.0,
+    );
+    b.quad(
+        emitter("sky", Vec3::new(0.0, 3.0, 1.0)),
+        Vec3::new(-20.0, 2.0, -20.0),
+        Vec3::X * 40.0,
+        Vec3::Z * 40.0,
+    );
+    let bvh = bvh(b);
+    let lighting = Lighting {
+        lights: vec![point_light(Vec3::new(1.0, 1.5, 0.0))],
+        ambient: Vec3::splat(0.1),
+        background: Vec3::ZERO,
+    };
+    for fresnel in [false, true] {
+        let settings = TraceSettings {
+            fresnel,
+            ..Default::default()
+        };
+        let full = Tracer {
+            bvh: &bvh,
+            lighting: &lighting,
+            settings,
+        };
+        // The secondary rays start one level deeper inside `shade`.
+        let deeper = Tracer {
+            settings: TraceSettings {
+                max_depth: settings.max_depth - 1,
+                ..settings
+            },
+            ..full
+        };
+        let point = point_on(&bvh, Vec3::new(0.0, 1.0, 2.0), Vec3::new(0.0, 0.0, 0.5));
+        let incoming = (point.position - Vec3::new(0.0, 1.0, 2.0)).normalize();
+        let terms = full.surface_terms(&point, incoming);
+        let reflected = terms.kr * deeper.trace(&terms.reflection.unwrap()).color;
+        let transmitted = terms.kt * deeper.trace(&terms.refraction.unwrap()).color;
+        let sample = full.shade(&point, incoming);
+        assert!(terms.local.max_element() > 0.0 && reflected.max_element() > 0.0);
+        assert!(transmitted.max_element() > 0.0);
+        assert_close(sample.reflected, reflected, 1e-6);
+        assert_close(sample.transmitted, transmitted, 1e-6);
+        assert_close(sample.color, terms.local + reflected + transmitted, 1e-5);
+    }
+}

@@ -224,49 +224,11 @@ impl Tracer<'_> {
             return shaded;
         }
 
-        // The shading normal on the incoming side, for both secondary rays.
-        let facing = if normal.dot(incoming) > 0.0 {
-            -normal
-        } else {
-            normal
-        };
-        // Inside/outside is a property of the geometry, not of the smoothed
-        // normal: the geometric normal points outside.
-        let entering = geometric.dot(incoming) < 0.0;
-        let ior = if material.ior.is_finite() && material.ior > 0.0 {
-            material.ior
-        } else {
-            1.0
-        };
-        let eta = if entering { 1.0 / ior } else { ior };
-
-        let mut kr = material.reflectance;
-        let mut kt = material.transmittance;
-        let refracted = if kt.max_element() > 0.0 {
-            refract(incoming, facing, eta)
-        } else {
-            None
-        };
-        if kt.max_element() > 0.0 && refracted.is_none() {
-            // Total internal reflection: the transmitted energy reflects.
-            kr += kt;
-            kt = Vec3::ZERO;
-        }
-        if self.settings.fresnel {
-            let cos_i = -incoming.dot(facing);
-            match refracted {
-                Some(t) if kt.max_element() > 0.0 => {
-                    // Schlick uses the larger angle: the transmitted one when
-                    // leaving into the optically thinner side.
-                    let cos = if eta > 1.0 { -t.dot(facing) } else { cos_i };
-                    let moved = kt * schlick_factor(cos);
-                    kr += moved;
-                    kt -= moved;
-                }
-                _ if kr.max_element() > 0.0 => kr += (Vec3::ONE - kr) * schlick_factor(cos_i),
-                _ => {}
-            }
-        }
+        let secondary =
+            secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
+        let (kr, kt) = (secondary.kr, secondary.kt);
+        let facing = secondary.facing;
+        let refracted = secondary.refracted;
 
         if kr.max_element() > 0.0 {
             if tracked {
@@ -293,6 +255,48 @@ impl Tracer<'_> {
         shaded
     }
 
+    /// The parts of `shade` that need no secondary ray: local Phong with
+    /// shadow rays, the weights kr and kt (Fresnel included when set) and the
+    /// reflection and refraction rays themselves, untraced. Other reflection
+    /// methods (cube maps, PVRR) find the reflected radiance their own way and
+    /// combine it as `local + kr * reflected + kt * transmitted`.
+    pub fn surface_terms(&self, point: &SurfacePoint, incoming: Vec3) -> SurfaceTerms {
+        let scene = self.bvh.scene();
+        let material = scene.material_of(point.triangle);
+        let geometric = self.bvh.geometric_normal(point.triangle);
+        let normal = point.normal.normalize_or(geometric);
+        let geometric = if geometric == Vec3::ZERO {
+            normal
+        } else {
+            geometric
+        };
+        let incoming = incoming.normalize_or(-normal);
+        let local = phong(
+            material,
+            self.lighting,
+            point.position,
+            normal,
+            -incoming,
+            |light, to_light, distance| {
+                self.light_visible(point.position, geometric, light, to_light, distance)
+            },
+        );
+        let secondary =
+            secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
+        let spawn = |direction| self.bvh.spawn_ray(point.position, geometric, direction);
+        SurfaceTerms {
+            local,
+            kr: secondary.kr,
+            kt: secondary.kt,
+            reflection: (secondary.kr.max_element() > 0.0)
+                .then(|| spawn(reflect(incoming, secondary.facing))),
+            refraction: secondary
+                .refracted
+                .filter(|_| secondary.kt.max_element() > 0.0)
+                .map(spawn),
+        }
+    }
+
     /// The shadow test for one light from a surface point.
     fn light_visible(
         &self,
@@ -308,6 +312,89 @@ impl Tracer<'_> {
             LightKind::Directional { .. } => f32::INFINITY,
         };
         !self.bvh.occluded(&ray, t_max)
+    }
+}
+
+/// The local part of a surface and its secondary rays, untraced
+/// (see [`Tracer::surface_terms`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceTerms {
+    /// Local Phong with shadow rays.
+    pub local: Vec3,
+    /// Weight of the reflected radiance.
+    pub kr: Vec3,
+    /// Weight of the transmitted radiance.
+    pub kt: Vec3,
+    /// The mirror ray, when kr > 0.
+    pub reflection: Option<Ray>,
+    /// The Snell ray, when kt > 0 and there is no total internal reflection.
+    pub refraction: Option<Ray>,
+}
+
+/// kr, kt and the refraction direction of a surface hit along `incoming`.
+struct Secondary {
+    kr: Vec3,
+    kt: Vec3,
+    /// The shading normal on the incoming side.
+    facing: Vec3,
+    refracted: Option<Vec3>,
+}
+
+fn secondary_rays(
+    material: &vtfarm_scene::Material,
+    normal: Vec3,
+    geometric: Vec3,
+    incoming: Vec3,
+    fresnel: bool,
+) -> Secondary {
+    // The shading normal on the incoming side, for both secondary rays.
+    let facing = if normal.dot(incoming) > 0.0 {
+        -normal
+    } else {
+        normal
+    };
+    // Inside/outside is a property of the geometry, not of the smoothed
+    // normal: the geometric normal points outside.
+    let entering = geometric.dot(incoming) < 0.0;
+    let ior = if material.ior.is_finite() && material.ior > 0.0 {
+        material.ior
+    } else {
+        1.0
+    };
+    let eta = if entering { 1.0 / ior } else { ior };
+
+    let mut kr = material.reflectance;
+    let mut kt = material.transmittance;
+    let refracted = if kt.max_element() > 0.0 {
+        refract(incoming, facing, eta)
+    } else {
+        None
+    };
+    if kt.max_element() > 0.0 && refracted.is_none() {
+        // Total internal reflection: the transmitted energy reflects.
+        kr += kt;
+        kt = Vec3::ZERO;
+    }
+    if fresnel {
+        let cos_i = -incoming.dot(facing);
+        match refracted {
+            Some(t) if kt.max_element() > 0.0 => {
+                // Schlick uses the larger angle: the transmitted one when
+                // leaving into the optically thinner side.
+                let cos = if eta > 1.0 { -t.dot(facing) } else { cos_i };
+                let moved = kt * schlick_factor(cos);
+                kr += moved;
+                kt -= moved;
+            }
+            _ if kr.max_element() > 0.0 => kr += (Vec3::ONE - kr) * schlick_factor(cos_i),
+            _ => {}
+        }
+    }
+    Secondary {
+        kr,
+        kt,
+        facing,
+        refracted,
     }
 }
 

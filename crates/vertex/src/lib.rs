@@ -81,7 +81,8 @@ mod refine;
 
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
-    FinishedFace, PackageOptions, PackageResult, PackageStats, SparseBitmap, trace_package,
+    FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
+    trace_package,
 };
 
 use glam::Vec3;
@@ -251,36 +252,50 @@ impl Frame<'_> {
         )
     }
 
-    /// Traces pixel (x, y) on `triangle`: the ray through the pixel centre hits
-    /// the triangle's plane (every sub-triangle lies in it) and the normal is
-    /// interpolated barycentrically. The reference and triangle filling both
-    /// use this, so filled pixels are exactly the reference.
+    /// Traces pixel (x, y) on `triangle` (see [`pixel_surface`]). The
+    /// reference and triangle filling both use this, so filled pixels are
+    /// exactly the reference.
     fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> Sample {
         let scene = self.tracer.bvh.scene();
-        let [a, b, c] = scene.triangle_positions(triangle);
-        let [na, nb, nc] = scene.triangle_normals(triangle);
-        let direction = self.camera.pixel_ray(x, y);
-        let plane_normal = (b - a).cross(c - a);
-        let denom = direction.dot(plane_normal);
-        let t = if denom.abs() > 1e-12 {
-            (a - self.camera.eye).dot(plane_normal) / denom
-        } else {
-            // Grazing: fall back on the rasterized depth.
-            let forward = self.camera.basis().0;
-            self.ids.depth[self.ids.index(x, y)] / direction.dot(forward)
-        };
-        let position = self.camera.eye + direction * t;
-        let [wa, wb, wc] = barycentric(position, a, b, c, plane_normal);
-        let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
-        self.tracer.shade(
-            &SurfacePoint {
-                position,
-                normal,
-                triangle,
-            },
-            direction,
-        )
+        let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
+        self.tracer.shade(&point, direction)
     }
+}
+
+/// The surface point of `triangle` seen through pixel (x, y) and the unit
+/// direction of that pixel's eye ray: the ray through the pixel centre hits
+/// the triangle's plane (every sub-triangle lies in it) and the normal is
+/// interpolated barycentrically. Every method that shades reflector pixels
+/// uses this, so they all shade the same points.
+pub fn pixel_surface(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    ids: &IdBuffer,
+    triangle: TriangleId,
+    x: u32,
+    y: u32,
+) -> (SurfacePoint, Vec3) {
+    let [a, b, c] = scene.triangle_positions(triangle);
+    let [na, nb, nc] = scene.triangle_normals(triangle);
+    let direction = camera.pixel_ray(x, y);
+    let plane_normal = (b - a).cross(c - a);
+    let denom = direction.dot(plane_normal);
+    let t = if denom.abs() > 1e-12 {
+        (a - camera.eye).dot(plane_normal) / denom
+    } else {
+        // Grazing: fall back on the rasterized depth.
+        let forward = camera.basis().0;
+        ids.depth[ids.index(x, y)] / direction.dot(forward)
+    };
+    let position = camera.eye + direction * t;
+    let [wa, wb, wc] = barycentric(position, a, b, c, plane_normal);
+    let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
+    let point = SurfacePoint {
+        position,
+        normal,
+        triangle,
+    };
+    (point, direction)
 }
 
 /// The ID buffer of what lies behind the reflectors: every triangle that is

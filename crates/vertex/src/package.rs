@@ -129,18 +129,18 @@ pub struct PackageResult {
     pub triangle_samples: Vec<u32>,
 }
 
-/// One pixel's value.
-#[derive(Clone, Copy, Debug)]
-struct PixelValue {
-    index: u32,
-    color: Vec3,
-    reflected: Vec3,
-    transmitted: Vec3,
-    object: u32,
+/// One pixel's value; `index` is `y * frame width + x`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelValue {
+    pub index: u32,
+    pub color: Vec3,
+    pub reflected: Vec3,
+    pub transmitted: Vec3,
+    pub object: u32,
 }
 
 impl PixelValue {
-    fn from_sample(index: u32, s: &Sample) -> Self {
+    pub fn from_sample(index: u32, s: &Sample) -> Self {
         PixelValue {
             index,
             color: s.color,
@@ -480,36 +480,44 @@ fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> 
 }
 
 /// Packs pixel values into the sparse bitmap.
-fn assemble(frame: &Frame<'_>, mut pixels: Vec<PixelValue>) -> SparseBitmap {
-    if pixels.is_empty() {
-        return SparseBitmap::default();
-    }
-    pixels.sort_unstable_by_key(|p| p.index);
-    let w = frame.ids.width;
-    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-    for p in &pixels {
-        let (x, y) = (p.index % w, p.index / w);
-        x0 = x0.min(x);
-        y0 = y0.min(y);
-        x1 = x1.max(x + 1);
-        y1 = y1.max(y + 1);
-    }
-    let width = x1 - x0;
-    let mut mask = vec![false; (width * (y1 - y0)) as usize];
-    for p in &pixels {
-        mask[((p.index / w - y0) * width + (p.index % w - x0)) as usize] = true;
-    }
-    // Sorting by image index is row-major order, which is also the order of
-    // the covered pixels inside the rectangle.
-    SparseBitmap {
-        x0,
-        y0,
-        width,
-        height: y1 - y0,
-        mask,
-        color: pixels.iter().map(|p| p.color).collect(),
-        reflected: pixels.iter().map(|p| p.reflected).collect(),
-        transmitted: pixels.iter().map(|p| p.transmitted).collect(),
-        reflected_object: pixels.iter().map(|p| p.object).collect(),
+fn assemble(frame: &Frame<'_>, pixels: Vec<PixelValue>) -> SparseBitmap {
+    SparseBitmap::from_pixels(frame.ids.width, pixels)
+}
+
+impl SparseBitmap {
+    /// Packs pixel values (each pixel at most once, any order) of a frame
+    /// `frame_width` pixels wide into a bitmap.
+    pub fn from_pixels(frame_width: u32, mut pixels: Vec<PixelValue>) -> SparseBitmap {
+        if pixels.is_empty() {
+            return SparseBitmap::default();
+        }
+        pixels.sort_unstable_by_key(|p| p.index);
+        let w = frame_width;
+        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+        for p in &pixels {
+            let (x, y) = (p.index % w, p.index / w);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x + 1);
+            y1 = y1.max(y + 1);
+        }
+        let width = x1 - x0;
+        let mut mask = vec![false; (width * (y1 - y0)) as usize];
+        for p in &pixels {
+            mask[((p.index / w - y0) * width + (p.index % w - x0)) as usize] = true;
+        }
+        // Sorting by image index is row-major order, which is also the order of
+        // the covered pixels inside the rectangle.
+        SparseBitmap {
+            x0,
+            y0,
+            width,
+            height: y1 - y0,
+            mask,
+            color: pixels.iter().map(|p| p.color).collect(),
+            reflected: pixels.iter().map(|p| p.reflected).collect(),
+            transmitted: pixels.iter().map(|p| p.transmitted).collect(),
+            reflected_object: pixels.iter().map(|p| p.object).collect(),
+        }
     }
 }

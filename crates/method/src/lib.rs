@@ -1,0 +1,252 @@
+//! One interface for every reflection method the product offers: a method
+//! turns a frame set-up and a reflector into that reflector's pixels.
+//!
+//! - [`ReflectionMethod`]: the interface; [`MethodFrame`] is its input (the
+//!   tracer with the scene's BVH, lighting and settings; the camera; the
+//!   frame's ID buffer; the reflector's triangles), [`MethodOutput`] its
+//!   result (a [`SparseBitmap`] over the reflector's pixels and counters).
+//! - [`VertexTracing`]: adaptive progressive vertex tracing at any quality,
+//!   the reference (every pixel ray traced) included.
+//! - [`shade_reflector`]: the finishing step shared by the methods that find
+//!   the reflected radiance their own way (cube maps, PVRR, the environment
+//!   map): `colour = local + kr * reflected + kt * transmitted` at exactly the
+//!   surface points the ray tracer shades, so error figures measure the
+//!   method and nothing else.
+//!
+//! Architecture invariant: every method writes only the pixels the frame's ID
+//! buffer gives to the reflector's triangles (pixel ownership), so methods and
+//! packages composite in any order.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_raster::IdBuffer;
+use vtfarm_scene::{Camera, NONE, ObjectId, TriangleId};
+use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
+use vtfarm_vertex::{
+    Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners, VertexSettings,
+    behind_id_buffer, pixel_surface, trace_package,
+};
+
+/// A frame as every method sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct MethodFrame<'a> {
+    /// The scene's BVH (and through it the scene), lighting and settings.
+    pub tracer: Tracer<'a>,
+    pub camera: Camera,
+    /// The frame's ID buffer over the whole scene: a pixel belongs to the
+    /// reflector when its triangle is one of `reflector`.
+    pub ids: &'a IdBuffer,
+    /// The reflector's triangles (one connected surface for cube maps/PVRR).
+    pub reflector: &'a [TriangleId],
+}
+
+/// One reflector pixel: the surface point the eye ray through its centre
+/// hits, and that ray's unit direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReflectorPixel {
+    pub x: u32,
+    pub y: u32,
+    pub point: SurfacePoint,
+    pub incoming: Vec3,
+}
+
+/// What a method did, for `vtfarm compare`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MethodCounters {
+    /// Rays cast (eye, secondary, shadow rays are not counted separately:
+    /// one sample or one traced secondary ray counts one).
+    pub rays: u64,
+    /// Reflection-point searches (cube maps) or per-vertex reflection rays (PVRR).
+    pub searches: u64,
+    /// Reflector pixels written.
+    pub pixels: u64,
+    /// Per-reflector pre-processing (cube maps, reflection maps).
+    pub setup_time: Duration,
+    /// Everything, pre-processing included.
+    pub time: Duration,
+}
+
+/// A method's result for one reflector in one frame.
+#[derive(Clone, Debug, Default)]
+pub struct MethodOutput {
+    pub bitmap: SparseBitmap,
+    pub counters: MethodCounters,
+}
+
+/// A reflection method. Implementations are deterministic: the same frame
+/// gives the same bitmap whatever the thread count.
+pub trait ReflectionMethod: Send + Sync {
+    /// A short name for tables and file names (`full`, `cubemap-grid`, ...).
+    fn name(&self) -> String;
+    /// Renders the reflector's pixels.
+    fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput;
+}
+
+impl MethodFrame<'_> {
+    /// Whether each scene triangle is part of the reflector.
+    pub fn reflector_flags(&self) -> Vec<bool> {
+        let mut flags = vec![false; self.tracer.bvh.scene().triangles.len()];
+        for &t in self.reflector {
+            flags[t as usize] = true;
+        }
+        flags
+    }
+
+    /// The reflector's pixels in row-major order.
+    pub fn pixels(&self) -> Vec<ReflectorPixel> {
+        let flags = self.reflector_flags();
+        let scene = self.tracer.bvh.scene();
+        let (w, h) = (self.ids.width, self.ids.height);
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let flags = &flags;
+                (0..w).filter_map(move |x| {
+                    let triangle = self.ids.triangle[self.ids.index(x, y)];
+                    let owned = flags.get(triangle as usize).copied().unwrap_or(false);
+                    owned.then(|| {
+                        let (point, incoming) =
+                            pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
+                        ReflectorPixel {
+                            x,
+                            y,
+                            point,
+                            incoming,
+                        }
+                    })
+                })
+            })
+            .collect()
+    }
+
+    /// The tracer for rays that leave the reflector: one level less deep,
+    /// so a secondary ray traced here sees what it sees inside `shade`.
+    pub fn secondary_tracer(&self) -> Tracer<'_> {
+        Tracer {
+            settings: TraceSettings {
+                max_depth: self.tracer.settings.max_depth.max(1) - 1,
+                ..self.tracer.settings
+            },
+            ..self.tracer
+        }
+    }
+}
+
+/// The reflected radiance a method found for one pixel (unweighted: the
+/// radiance arriving along the mirror direction) and the object it shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reflection {
+    pub radiance: Vec3,
+    pub object: ObjectId,
+}
+
+impl Reflection {
+    pub const NONE: Reflection = Reflection {
+        radiance: Vec3::ZERO,
+        object: NONE,
+    };
+}
+
+/// Finishes reflector pixels from a method's reflections:
+/// `local + kr * reflection + kt * transmitted`, with local Phong (shadow rays
+/// included) and kr/kt exactly as the ray tracer has them. `transmitted` is
+/// the radiance arriving along the refraction ray per pixel; `None` traces
+/// those rays (for methods that handle reflection only). Returns the bitmap
+/// and the number of rays traced for the transmission.
+pub fn shade_reflector(
+    frame: &MethodFrame<'_>,
+    pixels: &[ReflectorPixel],
+    reflections: &[Reflection],
+    transmitted: Option<&[Vec3]>,
+) -> (SparseBitmap, u64) {
+    assert_eq!(pixels.len(), reflections.len());
+    let secondary = frame.secondary_tracer();
+    let values: Vec<(PixelValue, u64)> = pixels
+        .par_iter()
+        .enumerate()
+        .map(|(i, pixel)| {
+            let terms = frame.tracer.surface_terms(&pixel.point, pixel.incoming);
+            let reflection = reflections[i];
+            let reflected = if terms.reflection.is_some() {
+                terms.kr * reflection.radiance
+            } else {
+                Vec3::ZERO
+            };
+            let (through, rays) = match (transmitted, terms.refraction) {
+                (_, None) => (Vec3::ZERO, 0),
+                (Some(given), Some(_)) => (given[i], 0),
+                (None, Some(ray)) => (secondary.trace(&ray).color, 1),
+            };
+            let through = terms.kt * through;
+            let value = PixelValue {
+                index: pixel.y * frame.ids.width + pixel.x,
+                color: terms.local + reflected + through,
+                reflected,
+                transmitted: through,
+                object: if terms.reflection.is_some() {
+                    reflection.object
+                } else {
+                    NONE
+                },
+            };
+            (value, rays)
+        })
+        .collect();
+    let rays = values.iter().map(|(_, r)| r).sum();
+    let bitmap = SparseBitmap::from_pixels(
+        frame.ids.width,
+        values.into_iter().map(|(v, _)| v).collect(),
+    );
+    (bitmap, rays)
+}
+
+/// Adaptive progressive vertex tracing (`crates/vertex`) as a method; the
+/// reference quality traces every pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VertexTracing {
+    pub settings: VertexSettings,
+}
+
+impl ReflectionMethod for VertexTracing {
+    fn name(&self) -> String {
+        self.settings.quality.name().to_owned()
+    }
+
+    fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput {
+        let start = Instant::now();
+        let scene = frame.tracer.bvh.scene();
+        let behind = behind_id_buffer(scene, &frame.camera, &frame.reflector_flags());
+        let owners = VertexOwners::new(scene);
+        let vertex_frame = Frame {
+            tracer: frame.tracer,
+            camera: frame.camera,
+            ids: frame.ids,
+            behind: &behind,
+            owners: &owners,
+            settings: self.settings,
+        };
+        let setup_time = start.elapsed();
+        let result = trace_package(
+            &vertex_frame,
+            frame.reflector,
+            &PackageOptions::default(),
+            &mut |_| {},
+        );
+        let stats: PackageStats = result.stats;
+        MethodOutput {
+            counters: MethodCounters {
+                rays: stats.samples(),
+                searches: 0,
+                pixels: stats.pixels,
+                setup_time,
+                time: start.elapsed(),
+            },
+            bitmap: result.bitmap,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,140 @@
+use std::sync::Arc;
+
+use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_scene::{Camera, Lighting};
+use vtfarm_trace::SceneBvh;
+use vtfarm_vertex::Quality;
+
+use super::*;
+
+struct Setup {
+    bvh: SceneBvh,
+    camera: Camera,
+    lighting: Lighting,
+    ids: IdBuffer,
+    reflector: Vec<TriangleId>,
+}
+
+fn small_cockpit() -> Setup {
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..Default::default()
+    });
+    let camera = Camera {
+        width: 160,
+        height: 90,
+        ..c.camera
+    };
+    let reflector = c.cover_glass_triangles();
+    let ids = vtfarm_raster::id_buffer(&c.scene, &camera);
+    Setup {
+        bvh: SceneBvh::new(Arc::new(c.scene)),
+        camera,
+        lighting: c.lighting,
+        ids,
+        reflector,
+    }
+}
+
+impl Setup {
+    fn frame(&self) -> MethodFrame<'_> {
+        MethodFrame {
+            tracer: Tracer {
+                bvh: &self.bvh,
+                lighting: &self.lighting,
+                settings: TraceSettings::default(),
+            },
+            camera: self.camera,
+            ids: &self.ids,
+            reflector: &self.reflector,
+        }
+    }
+}
+
+fn reference() -> VertexTracing {
+    VertexTracing {
+        settings: VertexSettings {
+            quality: Quality::Reference,
+            ..Default::default()
+        },
+    }
+}
+
+#[test]
+fn exact_reflections_through_the_shared_finish_equal_the_reference() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let pixels = frame.pixels();
+    assert!(
+        pixels.len() > 500,
+        "the glass covers {} pixels",
+        pixels.len()
+    );
+    let secondary = frame.secondary_tracer();
+    let reflections: Vec<Reflection> = pixels
+        .iter()
+        .map(|p| {
+            let terms = frame.tracer.surface_terms(&p.point, p.incoming);
+            match terms.reflection {
+                Some(ray) => {
+                    let s = secondary.trace(&ray);
+                    let hit = setup.bvh.closest_hit(&ray, f32::INFINITY);
+                    Reflection {
+                        radiance: s.color,
+                        object: hit.map_or(NONE, |h| {
+                            setup.bvh.scene().triangles[h.triangle as usize].object
+                        }),
+                    }
+                }
+                None => Reflection::NONE,
+            }
+        })
+        .collect();
+    let (bitmap, rays) = shade_reflector(&frame, &pixels, &reflections, None);
+    assert!(rays > 0, "the cover glass transmits");
+    let reference = reference().render(&frame).bitmap;
+    assert_eq!(bitmap.mask, reference.mask);
+    assert_eq!((bitmap.x0, bitmap.y0), (reference.x0, reference.y0));
+    assert_eq!(bitmap.reflected_object, reference.reflected_object);
+    for (a, b) in bitmap.color.iter().zip(&reference.color) {
+        assert!((*a - *b).abs().max_element() < 1e-5, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn reflector_pixels_are_exactly_the_id_buffer_pixels_of_the_reflector() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let flags = frame.reflector_flags();
+    let expected = setup
+        .ids
+        .triangle
+        .iter()
+        .filter(|&&t| flags.get(t as usize).copied().unwrap_or(false))
+        .count();
+    let pixels = frame.pixels();
+    assert_eq!(pixels.len(), expected);
+    assert!(
+        pixels
+            .windows(2)
+            .all(|w| (w[0].y, w[0].x) < (w[1].y, w[1].x))
+    );
+}
+
+#[test]
+fn preview_counts_fewer_samples_than_the_reference() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let preview = VertexTracing {
+        settings: VertexSettings {
+            quality: Quality::Preview,
+            ..Default::default()
+        },
+    }
+    .render(&frame);
+    let reference = reference().render(&frame);
+    assert_eq!(preview.bitmap.mask, reference.bitmap.mask);
+    assert_eq!(preview.counters.pixels, reference.counters.pixels);
+    assert!(preview.counters.rays < reference.counters.rays);
+    assert_eq!(preview.counters.searches, 0);
+}
