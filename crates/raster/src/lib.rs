@@ -71,6 +71,13 @@ pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image,
     (image, ids)
 }
 
+/// Shades an ID buffer (local Phong, no shadows): with
+/// [`id_buffer_where`] this rasterizes part of a scene, e.g. a cube-map face
+/// without the reflector.
+pub fn shade_ids(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
+    shade::shade(scene, camera, lighting, ids)
+}
+
 /// Only the ID buffer (workers rebuild it locally; must equal the one from `rasterize` bit for bit).
 ///
 /// # Panics

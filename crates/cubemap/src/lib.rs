@@ -1,0 +1,1 @@
+//! Reflector cube maps with reflection-point search (Estalella et al. 2005).

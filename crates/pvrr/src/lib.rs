@@ -1,0 +1,1 @@
+//! Per-vertex reflection and refraction, PVRR (Kakimoto et al.).
