@@ -52,7 +52,7 @@ pub(crate) struct StatusArgs {
     master: Option<String>,
 }
 
-fn runtime() -> Result<tokio::runtime::Runtime> {
+pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -98,6 +98,9 @@ fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptio
 
 /// `vtfarm submit`.
 pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
+    if vtfarm_job::study::is_study_file(&args.job) {
+        return submit_study(args);
+    }
     let crate::PreparedJob {
         scene,
         reflectors,
@@ -164,6 +167,27 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         print_frame_stats(&f.stats);
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
+    Ok(())
+}
+
+/// `vtfarm submit` of a study file: its variants run on the cluster.
+fn submit_study(args: SubmitArgs) -> Result<()> {
+    if args.width.is_some() || args.height.is_some() || args.aux {
+        bail!(
+            "--width, --height and --aux apply to job files; a study file sets its own size and always keeps the components"
+        );
+    }
+    let plan = crate::study::plan_study(&args.job, args.quality)?;
+    let options = client_options(&args.cluster, &args.master)?;
+    let output = args.output.clone();
+    let report = runtime()?.block_on(async move {
+        let mut conn = connect(&options, Role::Submitter).await?;
+        let report = crate::study::render_study(&mut conn.link, &plan, &output).await;
+        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.endpoint.wait_idle().await;
+        report
+    })?;
+    crate::study::print_report(&report, &args.output);
     Ok(())
 }
 

@@ -3,6 +3,7 @@
 
 mod bench;
 mod farm;
+mod study;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -39,7 +40,10 @@ enum Command {
     Master(vtfarm_master::cli::MasterArgs),
     /// Runs a farm worker that dials the master.
     Worker(vtfarm_worker::cli::WorkerArgs),
-    /// Submits a job to a running master and writes its frames.
+    /// Runs a glare study (design variants x eye points) and writes its report.
+    Study(study::StudyArgs),
+    /// Submits a job or a study to a running master and writes its frames
+    /// (or the study's outputs).
     Submit(farm::SubmitArgs),
     /// Lists the master's workers (with their measured throughput) and queue.
     Status(farm::StatusArgs),
@@ -127,6 +131,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench(b) => bench::run(b),
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
+        Command::Study(args) => study::study(args),
         Command::Submit(args) => farm::submit(args),
         Command::Status(args) => farm::status(args),
         Command::Cluster(ClusterCommand::Init(args)) => {
@@ -141,7 +146,7 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 /// Sets the size of rayon's global pool (once, before any parallel work).
-fn set_threads(threads: Option<usize>) -> Result<()> {
+pub(crate) fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)

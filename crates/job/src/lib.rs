@@ -13,6 +13,7 @@
 
 mod error;
 mod parse;
+pub mod study;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

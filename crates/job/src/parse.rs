@@ -23,11 +23,11 @@ use crate::{
 /// Names accepted by `scene.builtin`.
 const BUILTINS: [&str; 1] = ["cockpit"];
 /// Largest accepted image width or height.
-const MAX_IMAGE_SIZE: u32 = 16384;
+pub(crate) const MAX_IMAGE_SIZE: u32 = 16384;
 /// Deepest accepted Whitted recursion (deeper only risks the stack).
 const MAX_TRACE_DEPTH: u32 = 64;
 
-type Vec3Value = Spanned<[f32; 3]>;
+pub(crate) type Vec3Value = Spanned<[f32; 3]>;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -132,21 +132,7 @@ struct RawFrames {
 /// See [`crate::parse_job`].
 pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let source = Source { file: origin, text };
-    let raw: RawJob = toml::from_str(text).map_err(|e| {
-        // toml's messages do not name the key; quoting the line does.
-        let line = e
-            .span()
-            .map_or("", |span| source.line_at(span.start).trim());
-        let message = e.message().trim_end();
-        source.error(
-            e.span(),
-            if line.is_empty() {
-                message.to_owned()
-            } else {
-                format!("{message}, in `{line}`")
-            },
-        )
-    })?;
+    let raw: RawJob = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
     let scene = source.scene(raw.scene)?;
     let is_obj = matches!(scene, SceneSource::Obj(_));
     let camera = source.camera(&raw.camera, is_obj)?;
@@ -167,13 +153,28 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
 }
 
 /// The job file being validated, for turning spans into located errors.
-struct Source<'a> {
-    file: &'a Path,
-    text: &'a str,
+pub(crate) struct Source<'a> {
+    pub(crate) file: &'a Path,
+    pub(crate) text: &'a str,
 }
 
 impl Source<'_> {
-    fn error(&self, span: Option<Range<usize>>, message: impl Into<String>) -> JobError {
+    /// A TOML syntax or schema error, located and quoting its line (toml's
+    /// messages do not name the key; quoting the line does).
+    pub(crate) fn toml_error(&self, e: &toml::de::Error) -> JobError {
+        let line = e.span().map_or("", |span| self.line_at(span.start).trim());
+        let message = e.message().trim_end();
+        self.error(
+            e.span(),
+            if line.is_empty() {
+                message.to_owned()
+            } else {
+                format!("{message}, in `{line}`")
+            },
+        )
+    }
+
+    pub(crate) fn error(&self, span: Option<Range<usize>>, message: impl Into<String>) -> JobError {
         JobError::Invalid {
             file: self.file.to_owned(),
             location: span.map(|span| Location::of(self.text, span.start)),
@@ -182,7 +183,7 @@ impl Source<'_> {
     }
 
     /// The text of the line holding byte `offset`.
-    fn line_at(&self, offset: usize) -> &str {
+    pub(crate) fn line_at(&self, offset: usize) -> &str {
         let start = self
             .text
             .get(..offset)
@@ -191,12 +192,12 @@ impl Source<'_> {
         self.text[start..].lines().next().unwrap_or("")
     }
 
-    fn error_at<T>(&self, value: &Spanned<T>, message: impl Into<String>) -> JobError {
+    pub(crate) fn error_at<T>(&self, value: &Spanned<T>, message: impl Into<String>) -> JobError {
         self.error(Some(value.span()), message)
     }
 
     /// The value if `ok` accepts it, else "`key = value`: must be {rule}".
-    fn check<T: Copy + Display>(
+    pub(crate) fn check<T: Copy + Display>(
         &self,
         key: &str,
         value: &Spanned<T>,
@@ -211,7 +212,7 @@ impl Source<'_> {
         }
     }
 
-    fn check_opt<T: Copy + Display>(
+    pub(crate) fn check_opt<T: Copy + Display>(
         &self,
         key: &str,
         value: &Option<Spanned<T>>,
@@ -225,7 +226,7 @@ impl Source<'_> {
     }
 
     /// A vector whose components satisfy `ok` (finite, at least).
-    fn vec3(
+    pub(crate) fn vec3(
         &self,
         key: &str,
         value: &Vec3Value,
@@ -240,14 +241,22 @@ impl Source<'_> {
         }
     }
 
-    fn point(&self, key: &str, value: &Option<Vec3Value>) -> Result<Option<Vec3>, JobError> {
+    pub(crate) fn point(
+        &self,
+        key: &str,
+        value: &Option<Vec3Value>,
+    ) -> Result<Option<Vec3>, JobError> {
         value
             .as_ref()
             .map(|v| self.vec3(key, v, "finite", |_| true))
             .transpose()
     }
 
-    fn color(&self, key: &str, value: &Option<Vec3Value>) -> Result<Option<Vec3>, JobError> {
+    pub(crate) fn color(
+        &self,
+        key: &str,
+        value: &Option<Vec3Value>,
+    ) -> Result<Option<Vec3>, JobError> {
         value
             .as_ref()
             .map(|v| self.vec3(key, v, "finite and not negative", |c| c >= 0.0))
@@ -255,17 +264,24 @@ impl Source<'_> {
     }
 
     /// The cockpit's cover-glass design from `glass` (and `glass_tilt` /
-    /// `glass_radius` for the designs that need them).
-    fn glass_design(&self, raw: &RawScene) -> Result<GlassDesign, JobError> {
+    /// `glass_radius` for the designs that need them); `table` names the
+    /// keys' table in messages (`scene`, `variants[2]`).
+    pub(crate) fn glass_design(
+        &self,
+        table: &str,
+        glass: &Option<Spanned<String>>,
+        tilt: &Option<Spanned<f32>>,
+        radius: &Option<Spanned<f32>>,
+    ) -> Result<GlassDesign, JobError> {
         const DESIGNS: &str = "current, flat, flat-tilted, cylindrical, ellipsoidal";
-        let Some(name) = &raw.glass else {
+        let Some(name) = glass else {
             return Ok(GlassDesign::Current);
         };
         let needs = |key: &str, value: Option<f32>| {
             value.ok_or_else(|| {
                 self.error_at(
                     name,
-                    format!("scene.glass = {:?} needs scene.{key}", name.get_ref()),
+                    format!("{table}.glass = {:?} needs {table}.{key}", name.get_ref()),
                 )
             })
         };
@@ -277,8 +293,8 @@ impl Source<'_> {
                 degrees: needs(
                     "glass_tilt",
                     self.check_opt(
-                        "scene.glass_tilt",
-                        &raw.glass_tilt,
+                        &format!("{table}.glass_tilt"),
+                        tilt,
                         "degrees between -60 and 60",
                         |d| d.is_finite() && d.abs() <= 60.0,
                     )?,
@@ -288,8 +304,8 @@ impl Source<'_> {
                 radius: needs(
                     "glass_radius",
                     self.check_opt(
-                        "scene.glass_radius",
-                        &raw.glass_radius,
+                        &format!("{table}.glass_radius"),
+                        radius,
                         "metres, at least 0.15",
                         |r| r.is_finite() && r >= 0.15,
                     )?,
@@ -298,10 +314,31 @@ impl Source<'_> {
             other => {
                 return Err(self.error_at(
                     name,
-                    format!("unknown scene.glass {other:?}; valid: {DESIGNS}"),
+                    format!("unknown {table}.glass {other:?}; valid: {DESIGNS}"),
                 ));
             }
         })
+    }
+
+    /// An OBJ path relative to the file's directory, which must exist.
+    pub(crate) fn existing_file(
+        &self,
+        key: &str,
+        path: &Spanned<PathBuf>,
+    ) -> Result<PathBuf, JobError> {
+        // Relative to the file, so a job and its model move together.
+        let dir = self.file.parent().unwrap_or(Path::new(""));
+        let resolved = dir.join(path.get_ref());
+        if resolved.is_file() {
+            Ok(resolved)
+        } else {
+            let message = format!(
+                "{key}: no such file {} (a relative path is relative to the directory of {})",
+                resolved.display(),
+                self.file.display()
+            );
+            Err(self.error_at(path, message))
+        }
     }
 
     fn scene(&self, raw: Option<Spanned<RawScene>>) -> Result<SceneSource, JobError> {
@@ -324,7 +361,8 @@ impl Source<'_> {
                     return Err(self.error_at(&name, message));
                 }
                 let default = CockpitConfig::default();
-                let glass = self.glass_design(&raw)?;
+                let glass =
+                    self.glass_design("scene", &raw.glass, &raw.glass_tilt, &raw.glass_radius)?;
                 Ok(SceneSource::Cockpit(CockpitConfig {
                     glass,
                     detail: self
@@ -357,16 +395,7 @@ impl Source<'_> {
                         format!("scene.{key} applies to builtin scenes only, not to obj"),
                     ));
                 }
-                // Relative to the job file, so a job and its model move together.
-                let dir = self.file.parent().unwrap_or(Path::new(""));
-                let path = dir.join(obj.get_ref());
-                if !path.is_file() {
-                    let message = format!(
-                        "scene.obj: no such file {} (a relative path is relative to the job file's directory)",
-                        path.display()
-                    );
-                    return Err(self.error_at(&obj, message));
-                }
+                let path = self.existing_file("scene.obj", &obj)?;
                 Ok(SceneSource::Obj(path))
             }
         }

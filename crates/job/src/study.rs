@@ -1,0 +1,422 @@
+//! Study files: a glare study renders every cover-glass design variant from
+//! every eye point of a driver's eye ellipse (or an explicit list) and
+//! measures the glare of each frame. `configs/cockpit-study.toml` is the
+//! annotated reference of the format; [`load_study`] reads one.
+//!
+//! A study names a base job file for everything the frames share (scene,
+//! lighting, reflectors, quality, image size); each variant replaces the
+//! scene: a cover-glass design of the built-in cockpit or an OBJ file. Like
+//! job files, every mistake (an unknown key, an empty eye ellipse, a variant
+//! file that does not exist) is reported with its file and line before any
+//! rendering starts.
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Vec3};
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::parse::{Source, Vec3Value};
+use crate::{Job, JobError, SceneSource, load_job};
+
+/// Eye points sampled on an eye ellipse besides its centre, by default.
+pub const DEFAULT_ELLIPSE_POINTS: u32 = 8;
+
+/// A parsed and validated study file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Study {
+    /// The study file (named in errors; relative paths are relative to it).
+    pub file: PathBuf,
+    pub name: String,
+    /// The base job: scene, lighting, reflectors, quality and image size.
+    pub job: Job,
+    /// Overrides of the base job's image size.
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    /// What every eye point looks at; `None`: the base camera's target
+    /// (the cockpit's instrument cluster).
+    pub look_at: Option<Vec3>,
+    /// The eye points, the nominal eye (ellipse centre) first.
+    pub eyes: Vec<Vec3>,
+    pub variants: Vec<Variant>,
+    pub metrics: MetricsSpec,
+}
+
+/// One cover-glass design.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    pub name: String,
+    pub scene: SceneSource,
+}
+
+/// The `[metrics]` keys; `None` keeps the glare crate's documented default.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MetricsSpec {
+    pub veiling_luminance: Option<f32>,
+    pub min_contrast: Option<f32>,
+    pub luminance_scale: Option<f32>,
+    /// Top of the heat maps' colour scale (the same for every frame).
+    pub heat_scale: Option<f32>,
+    /// Objects behind the glass that make up the instrument area.
+    pub instrument_objects: Vec<String>,
+    /// Objects of the instrument markings (needles, ticks, numerals).
+    pub marking_objects: Vec<String>,
+}
+
+/// An eye ellipse as automotive eyellipses are given: a centre, three
+/// semi-axes along the scene's lateral (x), vertical (y) and fore-aft (z)
+/// axes, turned by `tilt` degrees about the lateral axis (the side-view
+/// inclination) and then `yaw` degrees about the vertical.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EyeEllipse {
+    pub centre: Vec3,
+    pub semi_axes: Vec3,
+    pub tilt_deg: f32,
+    pub yaw_deg: f32,
+}
+
+impl EyeEllipse {
+    /// The centre, then `n` points spread evenly over the ellipsoid's
+    /// surface (a Fibonacci lattice; deterministic).
+    pub fn sample(&self, n: u32) -> Vec<Vec3> {
+        let rotation = Mat3::from_rotation_y(self.yaw_deg.to_radians())
+            * Mat3::from_rotation_x(self.tilt_deg.to_radians());
+        let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+        let mut points = vec![self.centre];
+        points.extend((0..n).map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden * i as f32;
+            let unit = Vec3::new(r * phi.cos(), y, r * phi.sin());
+            self.centre + rotation * (unit * self.semi_axes)
+        }));
+        points
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStudy {
+    study: Spanned<RawHeader>,
+    eyes: Option<Spanned<RawEyes>>,
+    #[serde(default)]
+    variants: Vec<Spanned<RawVariant>>,
+    #[serde(default)]
+    metrics: RawMetrics,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHeader {
+    name: Option<String>,
+    job: Spanned<PathBuf>,
+    width: Option<Spanned<u32>>,
+    height: Option<Spanned<u32>>,
+    look_at: Option<Vec3Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEyes {
+    points: Option<Spanned<Vec<Vec3Value>>>,
+    ellipse: Option<Spanned<RawEllipse>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEllipse {
+    centre: Vec3Value,
+    semi_axes: Vec3Value,
+    #[serde(default)]
+    tilt: f32,
+    #[serde(default)]
+    yaw: f32,
+    points: Option<Spanned<u32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVariant {
+    name: Spanned<String>,
+    glass: Option<Spanned<String>>,
+    glass_tilt: Option<Spanned<f32>>,
+    glass_radius: Option<Spanned<f32>>,
+    obj: Option<Spanned<PathBuf>>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMetrics {
+    veiling_luminance: Option<Spanned<f32>>,
+    min_contrast: Option<Spanned<f32>>,
+    luminance_scale: Option<Spanned<f32>>,
+    heat_scale: Option<Spanned<f32>>,
+    instrument_objects: Option<Vec<String>>,
+    marking_objects: Option<Vec<String>>,
+}
+
+/// The cockpit's instrument area: dial faces, markings, needles and lamps.
+pub const COCKPIT_INSTRUMENT_OBJECTS: [&str; 4] =
+    ["dial_faces", "dial_markings", "needles", "warning_lamps"];
+/// The cockpit's instrument markings.
+pub const COCKPIT_MARKING_OBJECTS: [&str; 2] = ["dial_markings", "needles"];
+
+/// Whether the file at `path` is a study file (it has a `[study]` table)
+/// rather than a job file; unreadable or broken files count as jobs, whose
+/// loader then reports the problem.
+pub fn is_study_file(path: &Path) -> bool {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|text| text.parse::<toml::Table>().ok())
+        .is_some_and(|table| table.contains_key("study"))
+}
+
+/// Reads and validates a study file and its base job.
+pub fn load_study(path: &Path) -> Result<Study, JobError> {
+    let text = std::fs::read_to_string(path).map_err(|source| JobError::Read {
+        file: path.to_owned(),
+        source,
+    })?;
+    parse_study(&text, path)
+}
+
+/// Validates the text of a study file (`origin` is its path; the base job
+/// file and variant OBJ files are resolved against its directory and must
+/// exist).
+pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
+    let source = Source { file: origin, text };
+    let raw: RawStudy = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
+    let header = raw.study.into_inner();
+    let job_path = source.existing_file("study.job", &header.job)?;
+    let job = load_job(&job_path)?;
+    let size_ok = |n: u32| (1..=crate::parse::MAX_IMAGE_SIZE).contains(&n);
+    let size_rule = format!("1 to {}", crate::parse::MAX_IMAGE_SIZE);
+    let width = source.check_opt("study.width", &header.width, &size_rule, size_ok)?;
+    let height = source.check_opt("study.height", &header.height, &size_rule, size_ok)?;
+    let look_at = source.point("study.look_at", &header.look_at)?;
+    let eyes = source.study_eyes(raw.eyes)?;
+    let variants = raw
+        .variants
+        .iter()
+        .enumerate()
+        .map(|(i, v)| source.variant(i, v, &job))
+        .collect::<Result<Vec<_>, _>>()?;
+    if variants.is_empty() {
+        return Err(source.error(
+            None,
+            "a study needs at least one [[variants]] table (name plus glass = \"...\" or obj = \"...\")",
+        ));
+    }
+    if let Some(twin) = variants
+        .iter()
+        .enumerate()
+        .find(|(i, v)| variants[..*i].iter().any(|w| w.name == v.name))
+    {
+        return Err(source.error_at(
+            &raw.variants[twin.0].get_ref().name,
+            format!(
+                "variants[{}]: the name {:?} is used twice",
+                twin.0, twin.1.name
+            ),
+        ));
+    }
+    let metrics = source.metrics(&raw.metrics)?;
+    Ok(Study {
+        file: origin.to_owned(),
+        name: header.name.unwrap_or_else(|| {
+            origin
+                .file_stem()
+                .map_or("study".into(), |s| s.to_string_lossy().into_owned())
+        }),
+        job,
+        width,
+        height,
+        look_at,
+        eyes,
+        variants,
+        metrics,
+    })
+}
+
+impl Source<'_> {
+    fn study_eyes(&self, raw: Option<Spanned<RawEyes>>) -> Result<Vec<Vec3>, JobError> {
+        const WHICH: &str = "give [eyes] either points = [[x, y, z], ...] or an [eyes.ellipse]";
+        let Some(raw) = raw else {
+            return Err(self.error(None, format!("missing [eyes]: {WHICH}")));
+        };
+        let span = raw.span();
+        match raw.into_inner() {
+            RawEyes {
+                points: Some(points),
+                ellipse: None,
+            } => {
+                if points.get_ref().is_empty() {
+                    return Err(
+                        self.error_at(&points, "eyes.points is empty: list at least one eye point")
+                    );
+                }
+                points
+                    .get_ref()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| self.vec3(&format!("eyes.points[{i}]"), p, "finite", |_| true))
+                    .collect()
+            }
+            RawEyes {
+                points: None,
+                ellipse: Some(ellipse),
+            } => self.ellipse(ellipse),
+            RawEyes {
+                points: Some(points),
+                ellipse: Some(_),
+            } => Err(self.error_at(&points, format!("[eyes]: {WHICH}, not both"))),
+            RawEyes {
+                points: None,
+                ellipse: None,
+            } => Err(self.error(Some(span), format!("[eyes] is empty: {WHICH}"))),
+        }
+    }
+
+    fn ellipse(&self, raw: Spanned<RawEllipse>) -> Result<Vec<Vec3>, JobError> {
+        let span = raw.span();
+        let raw = raw.into_inner();
+        let centre = self.vec3("eyes.ellipse.centre", &raw.centre, "finite", |_| true)?;
+        let semi_axes = self.vec3(
+            "eyes.ellipse.semi_axes",
+            &raw.semi_axes,
+            "metres, finite and not negative",
+            |a| a >= 0.0,
+        )?;
+        if semi_axes == Vec3::ZERO {
+            return Err(self.error_at(
+                &raw.semi_axes,
+                "eyes.ellipse.semi_axes = [0, 0, 0]: the eye ellipse is empty (give its lateral, vertical and fore-aft semi-axes in metres)",
+            ));
+        }
+        for (key, angle) in [("tilt", raw.tilt), ("yaw", raw.yaw)] {
+            if !angle.is_finite() {
+                return Err(self.error(
+                    Some(span.clone()),
+                    format!("eyes.ellipse.{key} must be finite degrees"),
+                ));
+            }
+        }
+        let n = match &raw.points {
+            Some(p) => self.check(
+                "eyes.ellipse.points",
+                p,
+                "at least 1 (eye points besides the centre)",
+                |n| (1..=10_000).contains(&n),
+            )?,
+            None => DEFAULT_ELLIPSE_POINTS,
+        };
+        Ok(EyeEllipse {
+            centre,
+            semi_axes,
+            tilt_deg: raw.tilt,
+            yaw_deg: raw.yaw,
+        }
+        .sample(n))
+    }
+
+    fn variant(
+        &self,
+        index: usize,
+        raw: &Spanned<RawVariant>,
+        job: &Job,
+    ) -> Result<Variant, JobError> {
+        let table = format!("variants[{index}]");
+        let v = raw.get_ref();
+        let name = v.name.get_ref().trim().to_owned();
+        if name.is_empty() {
+            return Err(self.error_at(&v.name, format!("{table}.name is empty")));
+        }
+        let scene = match (&v.obj, &v.glass) {
+            (Some(obj), None) => {
+                if let Some(key) = [
+                    ("glass_tilt", v.glass_tilt.is_some()),
+                    ("glass_radius", v.glass_radius.is_some()),
+                ]
+                .into_iter()
+                .find_map(|(k, given)| given.then_some(k))
+                {
+                    return Err(self.error_at(
+                        obj,
+                        format!("{table}.{key} applies to glass variants only, not to obj"),
+                    ));
+                }
+                SceneSource::Obj(self.existing_file(&format!("{table}.obj"), obj)?)
+            }
+            (None, Some(_)) => {
+                let SceneSource::Cockpit(config) = &job.scene else {
+                    return Err(self.error(
+                        Some(raw.span()),
+                        format!("{table}: glass variants need a base job with builtin = \"cockpit\" ({} loads an OBJ scene)", job.file.display()),
+                    ));
+                };
+                let glass = self.glass_design(&table, &v.glass, &v.glass_tilt, &v.glass_radius)?;
+                SceneSource::Cockpit(crate::CockpitConfig { glass, ..*config })
+            }
+            (Some(obj), Some(_)) => {
+                return Err(self.error_at(
+                    obj,
+                    format!("{table}: give glass = \"...\" or obj = \"...\", not both"),
+                ));
+            }
+            (None, None) => {
+                return Err(self.error(
+                    Some(raw.span()),
+                    format!("{table} ({name:?}) needs glass = \"current|flat|flat-tilted|cylindrical|ellipsoidal\" or obj = \"path.obj\""),
+                ));
+            }
+        };
+        Ok(Variant { name, scene })
+    }
+
+    fn metrics(&self, raw: &RawMetrics) -> Result<MetricsSpec, JobError> {
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        let names = |given: &Option<Vec<String>>, default: &[&str]| {
+            given
+                .clone()
+                .unwrap_or_else(|| default.iter().map(|s| (*s).to_owned()).collect())
+        };
+        Ok(MetricsSpec {
+            veiling_luminance: self.check_opt(
+                "metrics.veiling_luminance",
+                &raw.veiling_luminance,
+                "finite and not negative",
+                |x| x.is_finite() && x >= 0.0,
+            )?,
+            min_contrast: self.check_opt(
+                "metrics.min_contrast",
+                &raw.min_contrast,
+                "at least 1",
+                |x| x.is_finite() && x >= 1.0,
+            )?,
+            luminance_scale: self.check_opt(
+                "metrics.luminance_scale",
+                &raw.luminance_scale,
+                "positive",
+                positive,
+            )?,
+            heat_scale: self.check_opt(
+                "metrics.heat_scale",
+                &raw.heat_scale,
+                "positive",
+                positive,
+            )?,
+            instrument_objects: names(&raw.instrument_objects, &COCKPIT_INSTRUMENT_OBJECTS),
+            marking_objects: names(&raw.marking_objects, &COCKPIT_MARKING_OBJECTS),
+        })
+    }
+}
+
+impl Study {
+    /// The base job with `variant`'s scene.
+    pub fn variant_job(&self, variant: &Variant) -> Job {
+        Job {
+            scene: variant.scene.clone(),
+            ..self.job.clone()
+        }
+    }
+}

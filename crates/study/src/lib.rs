@@ -1,0 +1,401 @@
+//! Glare studies: every cover-glass design variant of a study file rendered
+//! from every eye point, each frame measured with `vtfarm-glare`, and the
+//! results written as images, `summary.csv`, `summary.json` and a
+//! self-contained `report.html`.
+//!
+//! - [`plan`]: loads every variant's scene and makes its frames (one per
+//!   eye point, each looking at the instrument cluster) before anything is
+//!   rendered, so a broken variant fails the study at once.
+//! - [`StudyWriter`]: takes rendered frames in any order (from the embedded
+//!   farm or a cluster; the frame's pixels do not depend on which), measures
+//!   them and writes their images; [`StudyWriter::finish`] writes the
+//!   summaries and the report.
+//!
+//! Architecture invariant: no rendering and no networking here; the caller
+//! runs the frames (`vtfarm study`, `vtfarm submit`). Outputs are a pure
+//! function of the frames, so the same study gives byte-identical files on
+//! one machine and on a cluster (no timings in them).
+
+mod masks;
+mod report;
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use serde::Serialize;
+use vtfarm_glare::{GlareInput, Params, Summary, Thresholds};
+use vtfarm_job::JobError;
+use vtfarm_job::study::Study;
+use vtfarm_render::FrameSetup;
+use vtfarm_scene::{Camera, ObjectId, Scene, TriangleId};
+use vtfarm_vertex::{FrameImage, Quality};
+
+pub use masks::InstrumentMasks;
+
+/// Why a study could not be planned or written.
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    #[error(transparent)]
+    Job(#[from] JobError),
+    #[error(
+        "{file}: variant {variant:?}: metrics.{key} names object {object:?}, which the scene lacks (objects: {objects})"
+    )]
+    UnknownObject {
+        file: PathBuf,
+        variant: String,
+        key: &'static str,
+        object: String,
+        objects: String,
+    },
+    #[error("{file}: variant {variant:?}, eye {eye} at {position}: {why}")]
+    BadEye {
+        file: PathBuf,
+        variant: String,
+        eye: usize,
+        position: Vec3,
+        why: String,
+    },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Image(#[from] vtfarm_imaging::ImageError),
+    #[error("frame of variant {variant} eye {eye}: {why}")]
+    Frame {
+        variant: usize,
+        eye: usize,
+        why: String,
+    },
+    #[error("writing the plots: {0}")]
+    Plot(String),
+}
+
+/// One variant ready to render.
+#[derive(Clone, Debug)]
+pub struct PlannedVariant {
+    pub name: String,
+    /// A file-name-safe form of the name, unique in the study.
+    pub slug: String,
+    pub scene: Scene,
+    pub reflectors: Vec<TriangleId>,
+    /// One set-up per eye point, in the study's eye order.
+    pub setups: Vec<FrameSetup>,
+    instrument_objects: Vec<ObjectId>,
+    marking_objects: Vec<ObjectId>,
+}
+
+/// A study ready to render.
+#[derive(Clone, Debug)]
+pub struct StudyPlan {
+    pub name: String,
+    pub file: PathBuf,
+    pub eyes: Vec<Vec3>,
+    pub variants: Vec<PlannedVariant>,
+    pub params: Params,
+    /// The heat maps' top of scale.
+    pub heat_scale: f32,
+}
+
+impl StudyPlan {
+    pub fn frames(&self) -> usize {
+        self.variants.len() * self.eyes.len()
+    }
+}
+
+/// Loads every variant's scene and makes the frames; `quality` overrides the
+/// base job's level.
+pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyError> {
+    let thresholds = Thresholds {
+        min_contrast: study
+            .metrics
+            .min_contrast
+            .unwrap_or(vtfarm_glare::DEFAULT_MIN_CONTRAST),
+        veiling_luminance: study
+            .metrics
+            .veiling_luminance
+            .unwrap_or(vtfarm_glare::DEFAULT_VEILING_LUMINANCE),
+    };
+    let params = Params {
+        luminance_scale: study
+            .metrics
+            .luminance_scale
+            .unwrap_or(vtfarm_glare::DEFAULT_LUMINANCE_SCALE),
+        thresholds,
+        ..Params::default()
+    };
+    let heat_scale = study.metrics.heat_scale.unwrap_or_else(|| {
+        let v = 4.0 * thresholds.veiling_luminance;
+        if v > 0.0 { v } else { 1.0 }
+    });
+    // The base job's own scene gives the lighting and the camera every
+    // variant shares, so that designs are compared under the same light.
+    let base = study.job.load_scene()?;
+    let mut variants = Vec::with_capacity(study.variants.len());
+    let mut slugs: Vec<String> = Vec::new();
+    for variant in &study.variants {
+        let job = study.variant_job(variant);
+        let scene = job.load_scene()?.scene;
+        let reflectors = job.reflector_triangles(&scene)?;
+        let objects = |key: &'static str, names: &[String]| {
+            names
+                .iter()
+                .map(|n| {
+                    scene.object_id(n).ok_or_else(|| StudyError::UnknownObject {
+                        file: study.file.clone(),
+                        variant: variant.name.clone(),
+                        key,
+                        object: n.clone(),
+                        objects: scene
+                            .objects
+                            .iter()
+                            .map(|o| o.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()
+        };
+        let instrument_objects = objects("instrument_objects", &study.metrics.instrument_objects)?;
+        let marking_objects = objects("marking_objects", &study.metrics.marking_objects)?;
+        let setups = study
+            .eyes
+            .iter()
+            .enumerate()
+            .map(|(i, &eye)| {
+                let camera =
+                    eye_camera(study, &base.camera, eye).map_err(|why| StudyError::BadEye {
+                        file: study.file.clone(),
+                        variant: variant.name.clone(),
+                        eye: i,
+                        position: eye,
+                        why,
+                    })?;
+                Ok(FrameSetup {
+                    camera,
+                    lighting: base.lighting.clone(),
+                    trace: job.trace,
+                    vertex: vtfarm_vertex::VertexSettings {
+                        quality: quality.unwrap_or(job.vertex.quality),
+                        ..job.vertex
+                    },
+                })
+            })
+            .collect::<Result<Vec<_>, StudyError>>()?;
+        let slug = unique_slug(&variant.name, &slugs);
+        slugs.push(slug.clone());
+        variants.push(PlannedVariant {
+            name: variant.name.clone(),
+            slug,
+            scene,
+            reflectors,
+            setups,
+            instrument_objects,
+            marking_objects,
+        });
+    }
+    Ok(StudyPlan {
+        name: study.name.clone(),
+        file: study.file.clone(),
+        eyes: study.eyes.clone(),
+        variants,
+        params,
+        heat_scale,
+    })
+}
+
+/// The camera of one eye point: the base camera moved to `eye`, looking at
+/// the study's `look_at` (default: the base camera's target).
+fn eye_camera(study: &Study, base: &Camera, eye: Vec3) -> Result<Camera, String> {
+    let camera = Camera {
+        eye,
+        target: study.look_at.unwrap_or(base.target),
+        width: study.width.unwrap_or(base.width),
+        height: study.height.unwrap_or(base.height),
+        ..*base
+    };
+    let view = camera.target - camera.eye;
+    if view.length_squared() < 1e-12 {
+        return Err("the eye sits on the point it looks at".into());
+    }
+    if view
+        .normalize()
+        .cross(camera.up.normalize_or_zero())
+        .length()
+        < 1e-4
+    {
+        return Err("the eye looks straight along the up vector".into());
+    }
+    Ok(camera)
+}
+
+/// Lower-case letters, digits and dashes; numbered when taken.
+fn unique_slug(name: &str, taken: &[String]) -> String {
+    let mut slug = String::new();
+    for c in name.chars() {
+        if c.is_ascii_alphanumeric() {
+            slug.push(c.to_ascii_lowercase());
+        } else if !slug.ends_with('-') && !slug.is_empty() {
+            slug.push('-');
+        }
+    }
+    let slug = slug.trim_end_matches('-');
+    let base = if slug.is_empty() { "variant" } else { slug };
+    let mut candidate = base.to_owned();
+    let mut n = 2;
+    while taken.contains(&candidate) {
+        candidate = format!("{base}-{n}");
+        n += 1;
+    }
+    candidate
+}
+
+/// One measured frame: a row of `summary.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameRow {
+    pub variant: String,
+    pub eye_index: usize,
+    pub eye: [f32; 3],
+    /// Images relative to the output directory.
+    pub image: String,
+    pub heat_map: String,
+    pub object_map: String,
+    pub summary: Summary,
+}
+
+/// Measures frames and writes their outputs.
+pub struct StudyWriter<'a> {
+    plan: &'a StudyPlan,
+    dir: PathBuf,
+    rows: Vec<Option<FrameRow>>,
+}
+
+impl<'a> StudyWriter<'a> {
+    /// Creates the output directory.
+    pub fn new(plan: &'a StudyPlan, dir: &Path) -> Result<Self, StudyError> {
+        std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
+            path: dir.to_owned(),
+            source,
+        })?;
+        Ok(StudyWriter {
+            plan,
+            dir: dir.to_owned(),
+            rows: vec![None; plan.frames()],
+        })
+    }
+
+    /// Measures the rendered frame of `variant` from eye `eye` (its colour
+    /// with the reflected/transmitted components and the reflected-object
+    /// map) and writes its image, heat map and object map.
+    pub fn frame(
+        &mut self,
+        variant: usize,
+        eye: usize,
+        frame: &FrameImage,
+    ) -> Result<&FrameRow, StudyError> {
+        let bad = |why: String| StudyError::Frame { variant, eye, why };
+        let planned = self
+            .plan
+            .variants
+            .get(variant)
+            .ok_or_else(|| bad("no such variant".into()))?;
+        let setup = planned
+            .setups
+            .get(eye)
+            .ok_or_else(|| bad("no such eye".into()))?;
+        let camera = setup.camera;
+        if (frame.color.width, frame.color.height) != (camera.width, camera.height) {
+            return Err(bad(format!(
+                "size {}x{}, expected {}x{}",
+                frame.color.width, frame.color.height, camera.width, camera.height
+            )));
+        }
+        let masks = InstrumentMasks::new(
+            &planned.scene,
+            &camera,
+            &planned.reflectors,
+            &frame.mask,
+            &planned.instrument_objects,
+            &planned.marking_objects,
+        );
+        let names: Vec<String> = planned
+            .scene
+            .objects
+            .iter()
+            .map(|o| o.name.clone())
+            .collect();
+        let input = GlareInput::from_frame(frame, &masks.instrument, &masks.marking, &names);
+        let params = &self.plan.params;
+        let analysis = vtfarm_glare::analyze(&input, params).map_err(|e| bad(e.to_string()))?;
+        let heat = vtfarm_glare::heat_map_with_max(&input, params, Some(self.plan.heat_scale))
+            .map_err(|e| bad(e.to_string()))?;
+        let objects = vtfarm_glare::object_map(&input, params).map_err(|e| bad(e.to_string()))?;
+
+        let rel = format!("{}/eye_{eye:02}", planned.slug);
+        let dir = self.dir.join(&rel);
+        std::fs::create_dir_all(&dir).map_err(|source| StudyError::Io {
+            path: dir.clone(),
+            source,
+        })?;
+        frame.color.write_png(&dir.join("image.png"))?;
+        heat.write_png(&dir.join("heat.png"))?;
+        objects.write_png(&dir.join("objects.png"))?;
+        let row = FrameRow {
+            variant: planned.name.clone(),
+            eye_index: eye,
+            eye: self.plan.eyes[eye].to_array(),
+            image: format!("{rel}/image.png"),
+            heat_map: format!("{rel}/heat.png"),
+            object_map: format!("{rel}/objects.png"),
+            summary: analysis.summary,
+        };
+        let slot = &mut self.rows[variant * self.plan.eyes.len() + eye];
+        Ok(slot.insert(row))
+    }
+
+    /// Writes `summary.csv`, `summary.json` and `report.html`; fails when a
+    /// frame is missing.
+    pub fn finish(self) -> Result<StudyReport, StudyError> {
+        let eyes = self.plan.eyes.len();
+        let rows = self
+            .rows
+            .into_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                r.ok_or(StudyError::Frame {
+                    variant: i / eyes,
+                    eye: i % eyes,
+                    why: "never rendered".into(),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        report::write_all(self.plan, &self.dir, rows)
+    }
+}
+
+/// What [`StudyWriter::finish`] wrote.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StudyReport {
+    pub frames: Vec<FrameRow>,
+    /// Variants best first.
+    pub ranking: Vec<VariantScore>,
+}
+
+/// A variant's figures over all eye points; the ranking sorts by the mean
+/// glare area share, then the worst low-contrast share, then the mean
+/// reflected luminance (all lower is better).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct VariantScore {
+    pub variant: String,
+    pub mean_glare_area_share: f32,
+    pub worst_glare_area_share: f32,
+    pub worst_low_contrast_share: f32,
+    pub mean_reflected_luminance: f32,
+    pub peak_reflected_luminance: f32,
+    /// The object covering the most glass over all eye points.
+    pub main_glare_source: Option<String>,
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,49 @@
+//! The instrument area and its markings as seen through the cover glass,
+//! from the ID buffer of everything behind the glass.
+
+use vtfarm_scene::{Camera, ObjectId, Scene, TriangleId};
+
+/// Per-pixel masks of one frame (row-major, like the frame).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstrumentMasks {
+    /// Glass pixels through which an instrument object is seen.
+    pub instrument: Vec<bool>,
+    /// Instrument pixels that show a marking object.
+    pub marking: Vec<bool>,
+}
+
+impl InstrumentMasks {
+    /// Rasterizes what lies behind the reflectors (the scene without them and
+    /// without transparent surfaces) and marks the glass pixels that show
+    /// one of `instrument` (and of `marking`).
+    pub fn new(
+        scene: &Scene,
+        camera: &Camera,
+        reflectors: &[TriangleId],
+        glass: &[bool],
+        instrument: &[ObjectId],
+        marking: &[ObjectId],
+    ) -> Self {
+        let mut is_reflector = vec![false; scene.triangles.len()];
+        for &t in reflectors {
+            is_reflector[t as usize] = true;
+        }
+        let behind = vtfarm_vertex::behind_id_buffer(scene, camera, &is_reflector);
+        let instrument: Vec<bool> = behind
+            .object
+            .iter()
+            .zip(glass)
+            .map(|(o, &g)| g && instrument.contains(o))
+            .collect();
+        let marking = behind
+            .object
+            .iter()
+            .zip(&instrument)
+            .map(|(o, &i)| i && marking.contains(o))
+            .collect();
+        InstrumentMasks {
+            instrument,
+            marking,
+        }
+    }
+}

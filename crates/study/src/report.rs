@@ -1,0 +1,352 @@
+//! `summary.csv`, `summary.json` and `report.html` of a finished study.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use plotters::prelude::*;
+use serde::Serialize;
+
+use crate::{FrameRow, StudyError, StudyPlan, StudyReport, VariantScore};
+
+/// One flat CSV row (the JSON keeps the full summary per frame).
+#[derive(Serialize)]
+struct CsvRow<'a> {
+    variant: &'a str,
+    eye: usize,
+    eye_x: f32,
+    eye_y: f32,
+    eye_z: f32,
+    glass_pixels: usize,
+    peak_reflected_luminance: f32,
+    mean_reflected_luminance: f32,
+    mean_transmitted_luminance: f32,
+    mean_veiling_ratio: f32,
+    glare_area_share: f32,
+    instrument_pixels: usize,
+    min_contrast: Option<f32>,
+    low_contrast_share: f32,
+    main_glare_source: &'a str,
+    main_glare_source_area_share: f32,
+}
+
+#[derive(Serialize)]
+struct JsonSummary<'a> {
+    study: &'a str,
+    luminance_scale: f32,
+    veiling_luminance: f32,
+    min_contrast: f32,
+    heat_scale: f32,
+    eyes: Vec<[f32; 3]>,
+    frames: &'a [FrameRow],
+    ranking: &'a [VariantScore],
+}
+
+pub(crate) fn write_all(
+    plan: &StudyPlan,
+    dir: &Path,
+    frames: Vec<FrameRow>,
+) -> Result<StudyReport, StudyError> {
+    let ranking = rank_variants(plan, &frames);
+    write_file(&dir.join("summary.csv"), &csv_text(&frames)?)?;
+    let json = JsonSummary {
+        study: &plan.name,
+        luminance_scale: plan.params.luminance_scale,
+        veiling_luminance: plan.params.thresholds.veiling_luminance,
+        min_contrast: plan.params.thresholds.min_contrast,
+        heat_scale: plan.heat_scale,
+        eyes: plan.eyes.iter().map(|e| e.to_array()).collect(),
+        frames: &frames,
+        ranking: &ranking,
+    };
+    let json = serde_json::to_string_pretty(&json).expect("summaries serialize");
+    write_file(&dir.join("summary.json"), &json)?;
+    write_file(&dir.join("report.html"), &html(plan, &frames, &ranking)?)?;
+    Ok(StudyReport { frames, ranking })
+}
+
+fn write_file(path: &Path, text: &str) -> Result<(), StudyError> {
+    std::fs::write(path, text).map_err(|source| StudyError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+fn csv_text(frames: &[FrameRow]) -> Result<String, StudyError> {
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    for f in frames {
+        let s = &f.summary;
+        let main = s.objects.first();
+        writer
+            .serialize(CsvRow {
+                variant: &f.variant,
+                eye: f.eye_index,
+                eye_x: f.eye[0],
+                eye_y: f.eye[1],
+                eye_z: f.eye[2],
+                glass_pixels: s.glass_pixels,
+                peak_reflected_luminance: s.peak_reflected_luminance,
+                mean_reflected_luminance: s.mean_reflected_luminance,
+                mean_transmitted_luminance: s.mean_transmitted_luminance,
+                mean_veiling_ratio: s.mean_veiling_ratio,
+                glare_area_share: s.glare_area_share,
+                instrument_pixels: s.instrument_pixels,
+                min_contrast: s.min_contrast,
+                low_contrast_share: s.low_contrast_share,
+                main_glare_source: main.map_or("", |o| o.name.as_str()),
+                main_glare_source_area_share: main.map_or(0.0, |o| o.area_share),
+            })
+            .map_err(|e| StudyError::Plot(format!("CSV: {e}")))?;
+    }
+    let bytes = writer
+        .into_inner()
+        .map_err(|e| StudyError::Plot(format!("CSV: {e}")))?;
+    Ok(String::from_utf8(bytes).expect("CSV of UTF-8 fields is UTF-8"))
+}
+
+/// The variants best first (see [`VariantScore`]).
+fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
+    let mut scores: Vec<VariantScore> = plan
+        .variants
+        .iter()
+        .map(|v| {
+            let rows: Vec<&FrameRow> = frames.iter().filter(|f| f.variant == v.name).collect();
+            let n = rows.len().max(1) as f32;
+            let mean = |f: fn(&FrameRow) -> f32| rows.iter().map(|r| f(r)).sum::<f32>() / n;
+            let worst = |f: fn(&FrameRow) -> f32| rows.iter().map(|r| f(r)).fold(0.0, f32::max);
+            // The object that covers the most glass, summed over the eyes.
+            let mut areas: Vec<(String, usize)> = Vec::new();
+            for r in &rows {
+                for o in &r.summary.objects {
+                    match areas.iter_mut().find(|(name, _)| *name == o.name) {
+                        Some((_, a)) => *a += o.pixels,
+                        None => areas.push((o.name.clone(), o.pixels)),
+                    }
+                }
+            }
+            let main = areas
+                .iter()
+                .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+                .map(|(name, _)| name.clone());
+            VariantScore {
+                variant: v.name.clone(),
+                mean_glare_area_share: mean(|r| r.summary.glare_area_share),
+                worst_glare_area_share: worst(|r| r.summary.glare_area_share),
+                worst_low_contrast_share: worst(|r| r.summary.low_contrast_share),
+                mean_reflected_luminance: mean(|r| r.summary.mean_reflected_luminance),
+                peak_reflected_luminance: worst(|r| r.summary.peak_reflected_luminance),
+                main_glare_source: main,
+            }
+        })
+        .collect();
+    scores.sort_by(|a, b| {
+        a.mean_glare_area_share
+            .total_cmp(&b.mean_glare_area_share)
+            .then(
+                a.worst_low_contrast_share
+                    .total_cmp(&b.worst_low_contrast_share),
+            )
+            .then(
+                a.mean_reflected_luminance
+                    .total_cmp(&b.mean_reflected_luminance),
+            )
+    });
+    scores
+}
+
+fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// A metric plotted over the eye points.
+struct Plot {
+    title: &'static str,
+    axis: &'static str,
+    value: fn(&FrameRow) -> f32,
+}
+
+const PLOTS: [Plot; 3] = [
+    Plot {
+        title: "Mean reflected luminance on the glass",
+        axis: "mean Lr",
+        value: |r| r.summary.mean_reflected_luminance,
+    },
+    Plot {
+        title: "Glass area over the glare threshold",
+        axis: "share of glass",
+        value: |r| r.summary.glare_area_share,
+    },
+    Plot {
+        title: "Instrument area under the contrast threshold",
+        axis: "share of instruments",
+        value: |r| r.summary.low_contrast_share,
+    },
+];
+
+/// One SVG line chart: the metric over the eye index, a line per variant.
+fn plot_svg(plan: &StudyPlan, frames: &[FrameRow], plot: &Plot) -> Result<String, StudyError> {
+    let err = |e: &dyn std::fmt::Display| StudyError::Plot(e.to_string());
+    let eyes = plan.eyes.len();
+    let top = frames
+        .iter()
+        .map(plot.value)
+        .fold(0.0f32, f32::max)
+        .max(1e-6)
+        * 1.1;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (720, 340)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(plot.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(64)
+            .build_cartesian_2d(-0.2f32..(eyes.max(2) - 1) as f32 + 0.2, 0f32..top)
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("eye point (0 = nominal eye)")
+            .y_desc(plot.axis)
+            .x_labels(eyes.clamp(2, 20))
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .draw()
+            .map_err(|e| err(&e))?;
+        for (k, variant) in plan.variants.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let points: Vec<(f32, f32)> = frames
+                .iter()
+                .filter(|f| f.variant == variant.name)
+                .map(|f| (f.eye_index as f32, (plot.value)(f)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+                .map_err(|e| err(&e))?
+                .label(variant.name.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+            chart
+                .draw_series(
+                    points
+                        .into_iter()
+                        .map(|p| Circle::new(p, 3, color.filled())),
+                )
+                .map_err(|e| err(&e))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+    }
+    Ok(svg)
+}
+
+fn html(
+    plan: &StudyPlan,
+    frames: &[FrameRow],
+    ranking: &[VariantScore],
+) -> Result<String, StudyError> {
+    let mut h = String::new();
+    let t = &plan.params.thresholds;
+    let _ = write!(
+        h,
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; color: #222; }}
+table {{ border-collapse: collapse; margin: 1em 0; }}
+th, td {{ border: 1px solid #bbb; padding: 4px 8px; text-align: right; }}
+th:first-child, td:first-child {{ text-align: left; }}
+img {{ width: 320px; image-rendering: auto; }}
+.frames td {{ vertical-align: top; }}
+figure {{ display: inline-block; margin: 0 1em 1em 0; }}
+</style></head><body>
+<h1>{title}</h1>
+<p>{variants} design variant(s) &times; {eyes} eye point(s) = {frames} frames. Study file <code>{file}</code>.</p>
+<p>Thresholds: glare where the reflected luminance L<sub>r</sub> &gt; {veil} (luminance scale {scale} per unit radiance);
+markings hard to read where CR = (L<sub>m</sub> + L<sub>r</sub>) / (L<sub>b</sub> + L<sub>r</sub>) &lt; {cr}.
+Heat maps share one scale, 0 to {heat}.</p>
+"#,
+        title = escape(&plan.name),
+        variants = plan.variants.len(),
+        eyes = plan.eyes.len(),
+        frames = frames.len(),
+        file = escape(&plan.file.display().to_string()),
+        veil = t.veiling_luminance,
+        scale = plan.params.luminance_scale,
+        cr = t.min_contrast,
+        heat = plan.heat_scale,
+    );
+
+    h.push_str("<h2>Ranking of the variants</h2>\n<p>Best first: by the mean glass area over the glare threshold, then the worst share of the instruments under the contrast threshold, then the mean reflected luminance.</p>\n<table><tr><th>variant</th><th>mean glare area</th><th>worst glare area</th><th>worst low-contrast area</th><th>mean L<sub>r</sub></th><th>peak L<sub>r</sub></th><th>main glare source</th></tr>\n");
+    for s in ranking {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.5}</td><td>{:.4}</td><td>{}</td></tr>",
+            escape(&s.variant),
+            s.mean_glare_area_share * 100.0,
+            s.worst_glare_area_share * 100.0,
+            s.worst_low_contrast_share * 100.0,
+            s.mean_reflected_luminance,
+            s.peak_reflected_luminance,
+            escape(s.main_glare_source.as_deref().unwrap_or("none")),
+        );
+    }
+    h.push_str("</table>\n<h2>Metrics over the eye points</h2>\n");
+    for plot in &PLOTS {
+        let _ = writeln!(h, "<figure>{}</figure>", plot_svg(plan, frames, plot)?);
+    }
+    h.push_str("<h2>Eye points</h2>\n<table><tr><th>eye</th><th>x</th><th>y</th><th>z</th></tr>\n");
+    for (i, e) in plan.eyes.iter().enumerate() {
+        let _ = writeln!(
+            h,
+            "<tr><td>{i}{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+            if i == 0 { " (nominal)" } else { "" },
+            e.x,
+            e.y,
+            e.z
+        );
+    }
+    h.push_str("</table>\n");
+    for variant in &plan.variants {
+        let _ = writeln!(
+            h,
+            "<h2>Variant: {}</h2>\n<table class=\"frames\"><tr><th>eye</th><th>rendered image</th><th>reflected luminance</th><th>reflected objects</th><th>figures</th></tr>",
+            escape(&variant.name)
+        );
+        for f in frames.iter().filter(|f| f.variant == variant.name) {
+            let s = &f.summary;
+            let _ = writeln!(
+                h,
+                "<tr><td>{eye}</td><td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a></td><td><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a></td><td>mean L<sub>r</sub> {mean:.5}<br>peak L<sub>r</sub> {peak:.4}<br>glare area {area:.2}%<br>low contrast {low:.2}%<br>main source {main}</td></tr>",
+                eye = f.eye_index,
+                img = escape(&f.image),
+                heat = escape(&f.heat_map),
+                obj = escape(&f.object_map),
+                mean = s.mean_reflected_luminance,
+                peak = s.peak_reflected_luminance,
+                area = s.glare_area_share * 100.0,
+                low = s.low_contrast_share * 100.0,
+                main = escape(s.objects.first().map_or("none", |o| o.name.as_str())),
+            );
+        }
+        h.push_str("</table>\n");
+    }
+    h.push_str("</body></html>\n");
+    Ok(h)
+}

@@ -1,0 +1,130 @@
+//! `vtfarm study` (an embedded farm) and the study side of `vtfarm submit`
+//! (a cluster): every variant is one farm job whose frames are its eye
+//! points, so the farm balances the study frame by frame.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use vtfarm_master::{JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_proto::{Link, SceneData, WireJob};
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
+use vtfarm_vertex::Quality;
+
+/// Options of `vtfarm study`.
+#[derive(clap::Args)]
+pub(crate) struct StudyArgs {
+    /// The study file (TOML), e.g. configs/cockpit-study.toml.
+    study: PathBuf,
+    /// Output directory: per-frame images, summary.csv, summary.json, report.html.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Overrides the base job's quality level.
+    #[arg(long, value_parser = crate::parse_quality)]
+    quality: Option<Quality>,
+    /// Local workers of the embedded master (they share the cores).
+    #[arg(long, default_value_t = 2)]
+    local_workers: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+/// Reads a study file and loads every variant, before anything renders.
+pub(crate) fn plan_study(path: &Path, quality: Option<Quality>) -> Result<StudyPlan> {
+    let study = vtfarm_job::study::load_study(path)?;
+    Ok(vtfarm_study::plan(&study, quality)?)
+}
+
+/// `vtfarm study`.
+pub(crate) fn study(args: StudyArgs) -> Result<()> {
+    crate::set_threads(args.threads)?;
+    let plan = plan_study(&args.study, args.quality)?;
+    let report = crate::farm::runtime()?.block_on(async {
+        let farm = LocalFarm::start(args.local_workers, SchedulerConfig::default());
+        let mut link = farm.submitter();
+        render_study(&mut link, &plan, &args.output).await
+    })?;
+    print_report(&report, &args.output);
+    Ok(())
+}
+
+/// Runs the study's variants over `link` (to an embedded or remote master)
+/// and writes its outputs into `dir`.
+pub(crate) async fn render_study(
+    link: &mut Link,
+    plan: &StudyPlan,
+    dir: &Path,
+) -> Result<StudyReport> {
+    let mut writer = StudyWriter::new(plan, dir)?;
+    let bar = ProgressBar::new(plan.frames() as u64).with_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {pos}/{len} frames ({elapsed})")
+            .expect("template is valid")
+            .progress_chars("=> "),
+    );
+    for (v, variant) in plan.variants.iter().enumerate() {
+        bar.set_message(variant.name.clone());
+        let data = SceneData::from_scene(&variant.scene);
+        let name = format!("{} / {}", plan.name, variant.name);
+        let job = WireJob {
+            aux: true,
+            ..wire_job(&name, &data, &variant.setups, &variant.reflectors)
+        };
+        let mut failure = None;
+        run_job(link, job, &data, |event| {
+            if let JobEvent::FrameDone(f) = event {
+                let written = match &f.components {
+                    Some(components) => writer
+                        .frame(v, f.frame as usize, components)
+                        .map(|row| row.summary.mean_reflected_luminance),
+                    None => Err(vtfarm_study::StudyError::Frame {
+                        variant: v,
+                        eye: f.frame as usize,
+                        why: "the master sent no components".into(),
+                    }),
+                };
+                match written {
+                    Ok(mean) => bar.println(format!(
+                        "{} eye {}: mean reflected luminance {mean:.5}",
+                        variant.name, f.frame
+                    )),
+                    Err(e) => {
+                        failure.get_or_insert(e);
+                    }
+                }
+                bar.inc(1);
+            }
+        })
+        .await
+        .with_context(|| format!("variant {:?}", variant.name))?;
+        if let Some(e) = failure {
+            return Err(e).with_context(|| format!("variant {:?}", variant.name));
+        }
+    }
+    bar.finish_and_clear();
+    Ok(writer.finish()?)
+}
+
+pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
+    println!(
+        "{:<24} {:>12} {:>12} {:>14} {:>12}  main glare source",
+        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr"
+    );
+    for s in &report.ranking {
+        println!(
+            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>12.5}  {}",
+            s.variant,
+            s.mean_glare_area_share * 100.0,
+            s.worst_glare_area_share * 100.0,
+            s.worst_low_contrast_share * 100.0,
+            s.mean_reflected_luminance,
+            s.main_glare_source.as_deref().unwrap_or("none")
+        );
+    }
+    println!(
+        "wrote {} frame(s), summary.csv, summary.json and report.html to {}",
+        report.frames.len(),
+        dir.display()
+    );
+}
