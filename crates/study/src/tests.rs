@@ -1,1 +1,173 @@
+//! Glare studies against physics: the ellipsoidal glass with the eye at its
+//! focus, and a flat glass against a plane mirror computed analytically.
 
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::Vec3;
+use vtfarm_job::study::parse_study;
+use vtfarm_render::{RenderOptions, Renderer};
+use vtfarm_scene::{NONE, Scene};
+
+use super::*;
+
+/// A study of `variants` (TOML tables) at 192x108 from `eyes`, with its base
+/// job written next to it.
+fn study_plan(dir: &Path, eyes: &[Vec3], variants: &str) -> StudyPlan {
+    std::fs::write(
+        dir.join("job.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let points: Vec<String> = eyes
+        .iter()
+        .map(|e| format!("[{}, {}, {}]", e.x, e.y, e.z))
+        .collect();
+    let text = format!(
+        "[study]\njob = \"job.toml\"\nwidth = 192\nheight = 108\n[eyes]\npoints = [{}]\n{variants}",
+        points.join(", ")
+    );
+    let file = dir.join("study.toml");
+    let study = parse_study(&text, &file).unwrap();
+    plan(&study, None).unwrap()
+}
+
+/// Renders every frame in this process and runs them through the writer.
+fn run(plan: &StudyPlan, dir: &Path) -> (StudyReport, Vec<Vec<FrameImage>>) {
+    let mut writer = StudyWriter::new(plan, dir).unwrap();
+    let mut images = Vec::new();
+    for (v, variant) in plan.variants.iter().enumerate() {
+        let renderer = Renderer::new(Arc::new(variant.scene.clone()), variant.reflectors.clone());
+        let mut frames = Vec::new();
+        for (e, setup) in variant.setups.iter().enumerate() {
+            let frame = renderer.render(setup, &RenderOptions::default(), &mut |_, _| {});
+            writer.frame(v, e, &frame.image).unwrap();
+            frames.push(frame.image);
+        }
+        images.push(frames);
+    }
+    (writer.finish().unwrap(), images)
+}
+
+fn mean_lr(report: &StudyReport, variant: &str, eye: usize) -> f32 {
+    report
+        .frames
+        .iter()
+        .find(|f| f.variant == variant && f.eye_index == eye)
+        .unwrap()
+        .summary
+        .mean_reflected_luminance
+}
+
+#[test]
+fn the_ellipsoidal_glass_mirrors_only_its_absorber_from_the_focus() {
+    let dir = tempfile::tempdir().unwrap();
+    let focus = vtfarm_cockpit::default_eye();
+    let eyes = [
+        focus,
+        focus + Vec3::new(0.04, 0.0, 0.0),
+        focus + Vec3::new(0.08, 0.0, 0.0),
+        focus + Vec3::new(0.0, 0.04, 0.0),
+        focus + Vec3::new(0.0, 0.08, 0.0),
+        focus + Vec3::new(0.0, 0.0, 0.04),
+        focus + Vec3::new(0.0, 0.0, 0.08),
+    ];
+    let plan = study_plan(
+        dir.path(),
+        &eyes,
+        "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n[[variants]]\nname = \"ellipsoidal\"\nglass = \"ellipsoidal\"\n",
+    );
+    let (report, _) = run(&plan, dir.path());
+    let flat = mean_lr(&report, "flat", 0);
+    let ellipsoidal: Vec<f32> = (0..eyes.len())
+        .map(|e| mean_lr(&report, "ellipsoidal", e))
+        .collect();
+    assert!(
+        ellipsoidal[0] * 10.0 <= flat,
+        "ellipsoidal {} vs flat {flat}",
+        ellipsoidal[0]
+    );
+    // From the focus the glass shows the absorber, nothing else.
+    let nominal = &report.frames[plan.eyes.len()].summary;
+    assert_eq!(nominal.objects[0].name, vtfarm_cockpit::GLARE_ABSORBER);
+    assert!(nominal.objects[0].area_share > 0.95, "{:?}", nominal.objects);
+    // Away from the focus other things appear in the glass: along each axis
+    // (lateral, vertical, fore-aft) 8 cm off is at least ten times brighter
+    // than the focus, and 4 cm off is no brighter than 8 cm off.
+    for axis in 0..3 {
+        let (near, far) = (ellipsoidal[1 + 2 * axis], ellipsoidal[2 + 2 * axis]);
+        assert!(far >= 10.0 * ellipsoidal[0], "axis {axis}: {far} vs {}", ellipsoidal[0]);
+        assert!(near <= far, "axis {axis}: 4 cm {near}, 8 cm {far}");
+    }
+    // The report ranks the designs and names both.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("ellipsoidal"));
+    let csv = std::fs::read_to_string(dir.path().join("summary.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 2 * eyes.len());
+}
+
+/// Mirrors a point or a direction through the plane (o, unit n).
+fn mirror(p: Vec3, o: Vec3, n: Vec3) -> Vec3 {
+    p - 2.0 * (p - o).dot(n) * n
+}
+
+#[test]
+fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let eye = vtfarm_cockpit::default_eye() + Vec3::new(0.02, -0.01, 0.0);
+    let plan = study_plan(dir.path(), &[eye], "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n");
+    let (report, images) = run(&plan, dir.path());
+    let variant = &plan.variants[0];
+    let frame = &images[0][0];
+    let camera = variant.setups[0].camera;
+    let scene = &variant.scene;
+
+    // The glass plane from its triangles (all coplanar for the flat design).
+    let glass = variant.reflectors[0];
+    let [a, _, _] = scene.triangle_positions(glass);
+    let n = scene.geometric_normal(glass).normalize();
+    for &t in &variant.reflectors {
+        for p in scene.triangle_positions(t) {
+            assert!((p - a).dot(n).abs() < 1e-5, "the flat glass is flat");
+        }
+    }
+    // The mirror image: the scene reflected through the plane and seen
+    // through the glass by the same camera. Only what lies on the eye's side
+    // of the plane can appear in it.
+    let eye_side = (camera.eye - a).dot(n).signum();
+    let back = scene.object_id(vtfarm_cockpit::COVER_GLASS_BACK);
+    let mut mirrored = Scene {
+        positions: scene.positions.iter().map(|&p| mirror(p, a, n)).collect(),
+        normals: scene.normals.iter().map(|&d| d - 2.0 * d.dot(n) * n).collect(),
+        ..scene.clone()
+    };
+    let is_glass: Vec<bool> = (0..scene.triangles.len())
+        .map(|t| variant.reflectors.contains(&(t as u32)) || Some(scene.triangles[t].object) == back)
+        .collect();
+    mirrored.triangles.iter_mut().for_each(|t| t.vertices.swap(1, 2));
+    let keep = |t: u32| {
+        let [p, q, r] = scene.triangle_positions(t);
+        !is_glass[t as usize] && ((p + q + r) / 3.0 - a).dot(n) * eye_side > 0.0
+    };
+    let ids = vtfarm_raster::id_buffer_where(&mirrored, &camera, &keep);
+
+    let (w, h) = (camera.width, camera.height);
+    let (mut glass_pixels, mut agree) = (0usize, 0usize);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if !frame.mask[i] {
+                continue;
+            }
+            glass_pixels += 1;
+            let expected = ids.object[ids.index(x, y)];
+            agree += (frame.reflected_object[i] == expected) as usize;
+        }
+    }
+    assert!(glass_pixels > 1000, "{glass_pixels} glass pixels");
+    let share = agree as f64 / glass_pixels as f64;
+    assert!(share >= 0.99, "{share:.4} of {glass_pixels} glass pixels agree");
+    // The map really shows things (not all NONE on both sides).
+    assert!(frame.reflected_object.iter().filter(|&&o| o != NONE).count() > glass_pixels / 2);
+    assert_eq!(report.frames.len(), 1);
+}
