@@ -97,8 +97,8 @@ impl EyeEllipse {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawStudy {
-    study: Spanned<RawHeader>,
-    eyes: Option<Spanned<RawEyes>>,
+    study: RawHeader,
+    eyes: Option<RawEyes>,
     #[serde(default)]
     variants: Vec<Spanned<RawVariant>>,
     #[serde(default)]
@@ -119,7 +119,7 @@ struct RawHeader {
 #[serde(deny_unknown_fields)]
 struct RawEyes {
     points: Option<Spanned<Vec<Vec3Value>>>,
-    ellipse: Option<Spanned<RawEllipse>>,
+    ellipse: Option<RawEllipse>,
 }
 
 #[derive(Deserialize)]
@@ -186,7 +186,7 @@ pub fn load_study(path: &Path) -> Result<Study, JobError> {
 pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
     let source = Source { file: origin, text };
     let raw: RawStudy = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
-    let header = raw.study.into_inner();
+    let header = raw.study;
     let job_path = source.existing_file("study.job", &header.job)?;
     let job = load_job(&job_path)?;
     let size_ok = |n: u32| (1..=crate::parse::MAX_IMAGE_SIZE).contains(&n);
@@ -239,13 +239,12 @@ pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
 }
 
 impl Source<'_> {
-    fn study_eyes(&self, raw: Option<Spanned<RawEyes>>) -> Result<Vec<Vec3>, JobError> {
+    fn study_eyes(&self, raw: Option<RawEyes>) -> Result<Vec<Vec3>, JobError> {
         const WHICH: &str = "give [eyes] either points = [[x, y, z], ...] or an [eyes.ellipse]";
         let Some(raw) = raw else {
             return Err(self.error(None, format!("missing [eyes]: {WHICH}")));
         };
-        let span = raw.span();
-        match raw.into_inner() {
+        match raw {
             RawEyes {
                 points: Some(points),
                 ellipse: None,
@@ -273,13 +272,11 @@ impl Source<'_> {
             RawEyes {
                 points: None,
                 ellipse: None,
-            } => Err(self.error(Some(span), format!("[eyes] is empty: {WHICH}"))),
+            } => Err(self.error(None, format!("[eyes] is empty: {WHICH}"))),
         }
     }
 
-    fn ellipse(&self, raw: Spanned<RawEllipse>) -> Result<Vec<Vec3>, JobError> {
-        let span = raw.span();
-        let raw = raw.into_inner();
+    fn ellipse(&self, raw: RawEllipse) -> Result<Vec<Vec3>, JobError> {
         let centre = self.vec3("eyes.ellipse.centre", &raw.centre, "finite", |_| true)?;
         let semi_axes = self.vec3(
             "eyes.ellipse.semi_axes",
@@ -295,8 +292,8 @@ impl Source<'_> {
         }
         for (key, angle) in [("tilt", raw.tilt), ("yaw", raw.yaw)] {
             if !angle.is_finite() {
-                return Err(self.error(
-                    Some(span.clone()),
+                return Err(self.error_at(
+                    &raw.centre,
                     format!("eyes.ellipse.{key} must be finite degrees"),
                 ));
             }
