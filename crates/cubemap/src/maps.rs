@@ -1,0 +1,341 @@
+//! The reflector cube maps (paper §4.1): per texel the position and normal
+//! of the reflector surface seen from the map's centre, rasterized from a
+//! (possibly finer) tessellation of the reflector.
+//!
+//! Each texel stores an exact sample of the (subdivided) triangles: the ray
+//! from the centre through the texel centre is intersected with them and the
+//! hit's barycentrics interpolate position and normal, so the maps are
+//! perspective-correct (a GPU interpolating colours would be too).
+//!
+//! An open reflector leaves texels empty; the paper then asks for a closed
+//! companion object (§6.2). Instead the maps extend the surface: every
+//! empty texel takes the tangent plane of the nearest covered texel (found
+//! breadth-first), marked [`TexelKind::Extension`], so searches for
+//! vertices reflected just beyond the rim still converge (those vertices
+//! belong to triangles that straddle the rim).
+
+use std::collections::VecDeque;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_scene::{Scene, TriangleId};
+
+use crate::cube::{CubeLayout, TexelPoint, face};
+
+/// What a texel holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TexelKind {
+    /// No surface in this direction (not even the extension).
+    Empty,
+    /// The reflector itself.
+    Surface,
+    /// The tangent-plane extension of an open reflector beyond its rim.
+    Extension,
+}
+
+/// A reflector's position and normal cube maps.
+#[derive(Clone, Debug)]
+pub struct ReflectorMaps {
+    pub layout: CubeLayout,
+    pub position: Vec<Vec3>,
+    /// Unit normals as the reflector's vertex normals orient them.
+    pub normal: Vec<Vec3>,
+    pub kind: Vec<TexelKind>,
+    /// Area-weighted centroid of the reflector (the environment map's centre).
+    pub centroid: Vec3,
+}
+
+/// A bilinear sample of the maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceSample {
+    pub position: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// Whether the sample lies on the reflector rather than its extension.
+    pub on_reflector: bool,
+}
+
+/// One triangle of the tessellation the maps are rasterized from.
+#[derive(Clone, Copy, Debug)]
+struct MapTriangle {
+    positions: [Vec3; 3],
+    normals: [Vec3; 3],
+}
+
+impl ReflectorMaps {
+    /// Builds the maps of the reflector `triangles` of `scene` at
+    /// `resolution` texels per face side, from the triangles subdivided
+    /// `subdivisions` times (see [`subdivide`]).
+    pub fn build(
+        scene: &Scene,
+        triangles: &[TriangleId],
+        resolution: u32,
+        subdivisions: u32,
+    ) -> ReflectorMaps {
+        let mut mesh: Vec<MapTriangle> = triangles
+            .iter()
+            .map(|&t| MapTriangle {
+                positions: scene.triangle_positions(t),
+                normals: scene.triangle_normals(t),
+            })
+            .collect();
+        for _ in 0..subdivisions {
+            mesh = mesh.iter().flat_map(subdivide).collect();
+        }
+        let (centre, centroid) = centres(&mesh);
+        let layout = CubeLayout {
+            centre,
+            resolution: resolution.max(2),
+        };
+        let mut maps = rasterize(&layout, &mesh);
+        maps.centroid = centroid;
+        maps.extend_beyond_rim();
+        maps
+    }
+
+    /// The bilinear sample at a direction from the centre; `None` where
+    /// every tap is empty.
+    pub fn sample(&self, direction: Vec3) -> Option<SurfaceSample> {
+        self.sample_at(self.layout.locate(direction))
+    }
+
+    pub(crate) fn sample_at(&self, p: TexelPoint) -> Option<SurfaceSample> {
+        let mut position = Vec3::ZERO;
+        let mut normal = Vec3::ZERO;
+        let (mut total, mut surface) = (0.0, 0.0);
+        for (index, weight) in self.layout.bilinear(p) {
+            match self.kind[index] {
+                TexelKind::Empty => continue,
+                TexelKind::Surface => surface += weight,
+                TexelKind::Extension => {}
+            }
+            position += self.position[index] * weight;
+            normal += self.normal[index] * weight;
+            total += weight;
+        }
+        (total > 1e-6).then(|| SurfaceSample {
+            position: position / total,
+            normal: normal.normalize_or_zero(),
+            on_reflector: surface >= 0.5 * total,
+        })
+    }
+
+    /// Fills empty texels with the tangent plane of the nearest covered
+    /// texel (breadth-first over texel neighbours, seams included; the
+    /// fixed visiting order keeps it deterministic).
+    fn extend_beyond_rim(&mut self) {
+        let n = self.layout.texel_count();
+        let mut source = vec![usize::MAX; n];
+        let mut queue = VecDeque::new();
+        for (index, kind) in self.kind.iter().enumerate() {
+            if *kind == TexelKind::Surface {
+                source[index] = index;
+                queue.push_back(index);
+            }
+        }
+        let centre = self.layout.centre;
+        while let Some(index) = queue.pop_front() {
+            let (face_index, i, j) = self.layout.texel_coordinates(index);
+            let (i, j) = (i64::from(i), i64::from(j));
+            for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                let next = self.layout.texel_wrapped(face_index, i + di, j + dj);
+                if source[next] != usize::MAX {
+                    continue;
+                }
+                let from = source[index];
+                source[next] = from;
+                queue.push_back(next);
+                let (plane_point, plane_normal) = (self.position[from], self.normal[from]);
+                let direction = self.layout.texel_direction(next).normalize();
+                let along = direction.dot(plane_normal);
+                let distance = (plane_point - centre).dot(plane_normal) / along;
+                // Planes seen edge-on or behind the centre give no surface.
+                if along.abs() > 0.05 && distance > 0.0 {
+                    self.position[next] = centre + direction * distance;
+                    self.normal[next] = plane_normal;
+                    self.kind[next] = TexelKind::Extension;
+                }
+            }
+        }
+    }
+}
+
+/// Splits a triangle into four at its edge midpoints. New vertices are
+/// placed by Phong tessellation (Boubekeur and Alexa 2008: the midpoint
+/// moved halfway towards its projections on the corners' tangent planes),
+/// so finer maps follow the smooth surface the vertex normals describe;
+/// normals are interpolated.
+fn subdivide(t: &MapTriangle) -> [MapTriangle; 4] {
+    let [a, b, c] = t.positions;
+    let [na, nb, nc] = t.normals;
+    let mid = |p: Vec3, q: Vec3, np: Vec3, nq: Vec3| {
+        let m = (p + q) * 0.5;
+        let on_p = m - (m - p).dot(np) * np;
+        let on_q = m - (m - q).dot(nq) * nq;
+        let curved = (on_p + on_q) * 0.5;
+        (m * 0.25 + curved * 0.75, (np + nq).normalize_or(np))
+    };
+    let (ab, nab) = mid(a, b, na, nb);
+    let (bc, nbc) = mid(b, c, nb, nc);
+    let (ca, nca) = mid(c, a, nc, na);
+    let tri = |positions, normals| MapTriangle { positions, normals };
+    [
+        tri([a, ab, ca], [na, nab, nca]),
+        tri([ab, b, bc], [nab, nb, nbc]),
+        tri([ca, bc, c], [nca, nbc, nc]),
+        tri([ab, bc, ca], [nab, nbc, nca]),
+    ]
+}
+
+/// The maps' centre and the reflector's centroid. A closed reflector's
+/// area-weighted normals cancel and the centre is its centroid (the
+/// paper's choice). An open patch seen from its centroid would project
+/// edge-on, so the centre moves against the mean normal by the patch's
+/// radius times its openness (|Σ area·normal| / Σ area, 0 closed, 1 flat):
+/// from there every texel ray meets a gently curved patch at most once.
+fn centres(mesh: &[MapTriangle]) -> (Vec3, Vec3) {
+    let mut area_sum = 0.0f64;
+    let mut weighted = glam::DVec3::ZERO;
+    let mut normal_sum = glam::DVec3::ZERO;
+    for t in mesh {
+        let [a, b, c] = t.positions;
+        let cross = (b - a).cross(c - a);
+        let area = 0.5 * f64::from(cross.length());
+        let shading = t.normals[0] + t.normals[1] + t.normals[2];
+        let oriented = if cross.dot(shading) < 0.0 {
+            -cross
+        } else {
+            cross
+        };
+        area_sum += area;
+        weighted += ((a + b + c) / 3.0).as_dvec3() * area;
+        normal_sum += oriented.normalize_or_zero().as_dvec3() * area;
+    }
+    if area_sum <= 0.0 {
+        let p = mesh.first().map_or(Vec3::ZERO, |t| t.positions[0]);
+        return (p, p);
+    }
+    let centroid = (weighted / area_sum).as_vec3();
+    let mean_normal = (normal_sum / area_sum).as_vec3();
+    let radius = mesh
+        .iter()
+        .flat_map(|t| t.positions)
+        .map(|p| (p - centroid).length())
+        .fold(0.0, f32::max);
+    (centroid - mean_normal * radius, centroid)
+}
+
+/// Rasterizes the tessellation into all six faces (one rayon task per
+/// face; within a face triangles go in order and the hit nearest the
+/// centre wins, ties to the earlier triangle).
+fn rasterize(layout: &CubeLayout, mesh: &[MapTriangle]) -> ReflectorMaps {
+    let res = layout.resolution as usize;
+    let faces: Vec<Vec<(f32, Vec3, Vec3)>> = (0..6)
+        .into_par_iter()
+        .map(|face_index| {
+            let mut texels = vec![(f32::INFINITY, Vec3::ZERO, Vec3::ZERO); res * res];
+            for t in mesh {
+                rasterize_on_face(layout, face_index, t, &mut texels);
+            }
+            texels
+        })
+        .collect();
+    let mut maps = ReflectorMaps {
+        layout: *layout,
+        position: Vec::with_capacity(6 * res * res),
+        normal: Vec::with_capacity(6 * res * res),
+        kind: Vec::with_capacity(6 * res * res),
+        centroid: layout.centre,
+    };
+    for (depth, position, normal) in faces.into_iter().flatten() {
+        maps.position.push(position);
+        maps.normal.push(normal);
+        maps.kind.push(if depth.is_finite() {
+            TexelKind::Surface
+        } else {
+            TexelKind::Empty
+        });
+    }
+    maps
+}
+
+fn rasterize_on_face(
+    layout: &CubeLayout,
+    face_index: usize,
+    t: &MapTriangle,
+    texels: &mut [(f32, Vec3, Vec3)],
+) {
+    let f = face(face_index);
+    let res = layout.resolution;
+    let local = t.positions.map(|p| {
+        let d = p - layout.centre;
+        Vec3::new(d.dot(f.right), d.dot(f.up), d.dot(f.forward))
+    });
+    if local.iter().all(|p| p.z <= 0.0) {
+        return;
+    }
+    let half = res as f32 * 0.5;
+    let (i_range, j_range) = if local.iter().all(|p| p.z > 0.0) {
+        let s = local.map(|p| (p.x / p.z + 1.0) * half);
+        let tt = local.map(|p| (1.0 - p.y / p.z) * half);
+        let lo = |v: [f32; 3]| v[0].min(v[1]).min(v[2]).floor().max(0.0) as u32;
+        let hi = |v: [f32; 3]| v[0].max(v[1]).max(v[2]).ceil().min(res as f32) as u32;
+        (lo(s)..hi(s), lo(tt)..hi(tt))
+    } else {
+        // Crossing the face's plane through the centre: only a triangle
+        // close to the centre can reach into the face; test all texels.
+        let longest = (0..3)
+            .map(|k| (local[k] - local[(k + 1) % 3]).length())
+            .fold(0.0, f32::max);
+        let nearest = local
+            .iter()
+            .map(|p| p.length())
+            .fold(f32::INFINITY, f32::min);
+        if nearest > 2.0 * longest {
+            return;
+        }
+        (0..res, 0..res)
+    };
+    for j in j_range {
+        for i in i_range.clone() {
+            let direction = layout.direction(face_index, i as f32 + 0.5, j as f32 + 0.5);
+            let Some((distance, w)) = intersect(layout.centre, direction, &t.positions) else {
+                continue;
+            };
+            let texel = &mut texels[(j * res + i) as usize];
+            if distance < texel.0 {
+                let [a, b, c] = t.positions;
+                let [na, nb, nc] = t.normals;
+                *texel = (
+                    distance,
+                    a * w[0] + b * w[1] + c * w[2],
+                    (na * w[0] + nb * w[1] + nc * w[2]).normalize_or(na),
+                );
+            }
+        }
+    }
+}
+
+/// Möller–Trumbore: distance along `direction` (in its units) and the
+/// barycentric weights, with a small tolerance so texels on shared edges
+/// are never lost.
+fn intersect(origin: Vec3, direction: Vec3, [a, b, c]: &[Vec3; 3]) -> Option<(f32, [f32; 3])> {
+    const TOLERANCE: f32 = 1e-5;
+    let (e1, e2) = (*b - *a, *c - *a);
+    let p = direction.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-20 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = origin - *a;
+    let u = s.dot(p) * inv;
+    let q = s.cross(e1);
+    let v = direction.dot(q) * inv;
+    let distance = e2.dot(q) * inv;
+    let inside = u >= -TOLERANCE && v >= -TOLERANCE && u + v <= 1.0 + TOLERANCE;
+    (inside && distance > 0.0).then(|| {
+        let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+        (distance, [1.0 - u - v, u, v])
+    })
+}

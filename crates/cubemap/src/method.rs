@@ -1,0 +1,215 @@
+//! The cube-map method behind [`ReflectionMethod`]: pre-process, search,
+//! rasterize the virtual meshes, shade what they show.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_method::{
+    MethodCounters, MethodFrame, MethodOutput, Reflection, ReflectionMethod, shade_reflector,
+};
+use vtfarm_trace::SurfacePoint;
+
+use crate::envmap::{EnvironmentCube, EnvironmentMap, mirror_direction};
+use crate::maps::ReflectorMaps;
+use crate::raster::{VirtualHit, rasterize_virtual_meshes};
+use crate::reflected::reflected_triangle_flags;
+use crate::search::{SearchSettings, VirtualVertex};
+use crate::shape::{ReflectorShape, classify};
+use crate::vertices::{GridSettings, virtual_vertices};
+
+/// Settings of the cube-map method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CubeMapConfig {
+    /// Texels per side of each reflector map face.
+    pub resolution: u32,
+    /// Times each reflector triangle is split in four before rasterizing
+    /// the maps (Phong tessellation; 0 keeps the mesh the tracer sees).
+    pub subdivisions: u32,
+    pub search: SearchSettings,
+    /// The interpolation grid of §5; `None` searches every mesh vertex.
+    pub grid: Option<GridSettings>,
+    /// Texels per face side of the environment map for uncovered pixels.
+    pub fallback_resolution: u32,
+}
+
+impl Default for CubeMapConfig {
+    fn default() -> Self {
+        CubeMapConfig {
+            resolution: 256,
+            subdivisions: 0,
+            search: SearchSettings::default(),
+            grid: None,
+            fallback_resolution: 128,
+        }
+    }
+}
+
+/// Reflector cube maps with reflection-point search (`cubemap`, or
+/// `cubemap-grid` with the interpolation grid).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct CubeMapMethod {
+    pub config: CubeMapConfig,
+}
+
+/// A reflector's view-independent pre-processing.
+#[derive(Clone, Debug)]
+pub struct PreparedReflector {
+    pub maps: ReflectorMaps,
+    /// Whether the search supports this reflector (print
+    /// [`ReflectorShape::warning`]).
+    pub shape: ReflectorShape,
+    /// Shows in pixels no virtual triangle covers.
+    pub fallback: EnvironmentCube,
+}
+
+impl CubeMapMethod {
+    /// Searches every mesh vertex.
+    pub fn full() -> Self {
+        CubeMapMethod::default()
+    }
+
+    /// Searches the corners of the §5 grid with the default fraction.
+    pub fn grid() -> Self {
+        CubeMapMethod {
+            config: CubeMapConfig {
+                grid: Some(GridSettings::default()),
+                ..CubeMapConfig::default()
+            },
+        }
+    }
+
+    /// The pre-processing of the frame's reflector.
+    pub fn prepare(&self, frame: &MethodFrame<'_>) -> PreparedReflector {
+        let scene = frame.tracer.bvh.scene();
+        let shape = classify(scene, frame.reflector);
+        if let Some(warning) = shape.warning() {
+            tracing::warn!("{warning}");
+        }
+        PreparedReflector {
+            maps: ReflectorMaps::build(
+                scene,
+                frame.reflector,
+                self.config.resolution,
+                self.config.subdivisions,
+            ),
+            shape,
+            fallback: EnvironmentMap {
+                resolution: self.config.fallback_resolution,
+            }
+            .cube(frame),
+        }
+    }
+
+    /// The virtual vertex of every scene vertex the reflected meshes use
+    /// (`None` elsewhere) and the number of searches.
+    pub fn virtual_vertices(
+        &self,
+        frame: &MethodFrame<'_>,
+        prepared: &PreparedReflector,
+    ) -> (Vec<Option<VirtualVertex>>, u64) {
+        let scene = frame.tracer.bvh.scene();
+        let triangles = reflected_triangles(frame);
+        virtual_vertices(
+            scene,
+            &triangles,
+            &prepared.maps,
+            frame.camera.eye,
+            &self.config.search,
+            self.config.grid.as_ref(),
+        )
+    }
+
+    /// Renders with an existing pre-processing.
+    pub fn render_prepared(
+        &self,
+        frame: &MethodFrame<'_>,
+        prepared: &PreparedReflector,
+    ) -> MethodOutput {
+        let scene = frame.tracer.bvh.scene();
+        let triangles = reflected_triangles(frame);
+        let (virtuals, searches) = virtual_vertices(
+            scene,
+            &triangles,
+            &prepared.maps,
+            frame.camera.eye,
+            &self.config.search,
+            self.config.grid.as_ref(),
+        );
+        let pixels = frame.pixels();
+        let hits = rasterize_virtual_meshes(
+            scene,
+            &frame.camera,
+            frame.ids,
+            &pixels,
+            &triangles,
+            &virtuals,
+        );
+        let secondary = frame.secondary_tracer();
+        let reflections: Vec<Reflection> = pixels
+            .par_iter()
+            .zip(&hits)
+            .map(|(pixel, hit)| match hit {
+                Some(hit) => {
+                    let point = surface_point(scene, hit);
+                    let incoming = (point.position - pixel.point.position).normalize_or_zero();
+                    Reflection {
+                        radiance: secondary.shade(&point, incoming).color,
+                        object: scene.triangles[hit.triangle as usize].object,
+                    }
+                }
+                None => prepared.fallback.lookup(mirror_direction(pixel)),
+            })
+            .collect();
+        let shaded = hits.iter().filter(|h| h.is_some()).count() as u64;
+        let (bitmap, rays) = shade_reflector(frame, &pixels, &reflections, None);
+        MethodOutput {
+            bitmap,
+            counters: MethodCounters {
+                rays: rays + shaded,
+                searches,
+                pixels: pixels.len() as u64,
+                ..MethodCounters::default()
+            },
+        }
+    }
+}
+
+impl ReflectionMethod for CubeMapMethod {
+    fn name(&self) -> String {
+        match self.config.grid {
+            Some(_) => "cubemap-grid".to_owned(),
+            None => "cubemap".to_owned(),
+        }
+    }
+
+    fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput {
+        let start = Instant::now();
+        let prepared = self.prepare(frame);
+        let setup_time = start.elapsed();
+        let mut output = self.render_prepared(frame, &prepared);
+        output.counters.setup_time = setup_time;
+        output.counters.time = start.elapsed();
+        output
+    }
+}
+
+/// The scene triangles the reflector mirrors.
+fn reflected_triangles(frame: &MethodFrame<'_>) -> Vec<u32> {
+    let flags = reflected_triangle_flags(frame.tracer.bvh.scene(), frame.reflector);
+    (0..flags.len() as u32)
+        .filter(|&t| flags[t as usize])
+        .collect()
+}
+
+/// The original surface point under a virtual fragment.
+fn surface_point(scene: &vtfarm_scene::Scene, hit: &VirtualHit) -> SurfacePoint {
+    let positions = scene.triangle_positions(hit.triangle);
+    let normals = scene.triangle_normals(hit.triangle);
+    let [w0, w1, w2] = hit.weights;
+    SurfacePoint {
+        position: positions[0] * w0 + positions[1] * w1 + positions[2] * w2,
+        normal: (normals[0] * w0 + normals[1] * w1 + normals[2] * w2).normalize_or(Vec3::Y),
+        triangle: hit.triangle,
+    }
+}

@@ -1,0 +1,98 @@
+//! Classifies a reflector as convex, concave, flat or neither from how the
+//! surface bends across its interior edges. The search supports convex and
+//! concave pieces (the paper's §6.2 asks for the segmentation); saddles and
+//! torus-like reflectors are neither and get a warning.
+//!
+//! An edge bends convexly when the far corner of each neighbouring triangle
+//! lies below the other triangle's plane, "below" meaning against the
+//! triangle's normal turned to agree with its vertex normals (the side the
+//! reflector faces).
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+use vtfarm_scene::{Scene, TriangleId};
+
+/// The reflector's shape as the search sees it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReflectorShape {
+    /// Every bent edge bends away from the side the normals face (a sphere
+    /// seen from outside).
+    Convex,
+    /// Every bent edge bends towards it (a sphere seen from inside, the
+    /// cockpit's cover glass).
+    Concave,
+    /// No edge bends (a plane).
+    Flat,
+    /// Both kinds of edges: a saddle, a torus or several pieces; the
+    /// search may converge to a wrong point or not at all.
+    Neither,
+}
+
+impl ReflectorShape {
+    /// The warning a front end should print, if any.
+    pub fn warning(&self) -> Option<String> {
+        (*self == ReflectorShape::Neither).then(|| {
+            "the reflector is neither convex nor concave (saddle, torus-like or several \
+             pieces): cube-map reflections may be wrong; split it into convex and concave pieces"
+                .to_owned()
+        })
+    }
+}
+
+/// Bends smaller than this fraction of the edge length count as flat.
+const FLAT: f32 = 1e-5;
+
+/// Classifies the reflector `triangles` of `scene`.
+pub fn classify(scene: &Scene, triangles: &[TriangleId]) -> ReflectorShape {
+    // Corners are welded by exact position: meshes duplicate vertices
+    // along hard edges, which still bound the same surface.
+    let key = |p: Vec3| p.to_array().map(f32::to_bits);
+    let mut edges: HashMap<([u32; 3], [u32; 3]), Vec<TriangleId>> = HashMap::new();
+    for &t in triangles {
+        let corners = scene.triangle_positions(t);
+        for k in 0..3 {
+            let (a, b) = (key(corners[k]), key(corners[(k + 1) % 3]));
+            edges.entry((a.min(b), a.max(b))).or_default().push(t);
+        }
+    }
+    let (mut convex, mut concave) = (0u32, 0u32);
+    for (edge, owners) in &edges {
+        let [t1, t2] = owners[..] else {
+            continue;
+        };
+        let length = (Vec3::from_array(edge.0.map(f32::from_bits))
+            - Vec3::from_array(edge.1.map(f32::from_bits)))
+        .length();
+        let bend = height_of_far_corner(scene, t1, t2) + height_of_far_corner(scene, t2, t1);
+        if bend < -FLAT * length {
+            convex += 1;
+        } else if bend > FLAT * length {
+            concave += 1;
+        }
+    }
+    match (convex > 0, concave > 0) {
+        (false, false) => ReflectorShape::Flat,
+        (true, false) => ReflectorShape::Convex,
+        (false, true) => ReflectorShape::Concave,
+        (true, true) => ReflectorShape::Neither,
+    }
+}
+
+/// Height of `other`'s corners above `base`'s plane, the largest in
+/// magnitude (the one not on the shared edge), along `base`'s facing normal.
+fn height_of_far_corner(scene: &Scene, base: TriangleId, other: TriangleId) -> f32 {
+    let [a, _, _] = scene.triangle_positions(base);
+    let shading: Vec3 = scene.triangle_normals(base).iter().sum();
+    let geometric = scene.geometric_normal(base);
+    let normal = if geometric.dot(shading) < 0.0 {
+        -geometric
+    } else {
+        geometric
+    };
+    scene
+        .triangle_positions(other)
+        .iter()
+        .map(|&p| (p - a).dot(normal))
+        .fold(0.0, |best, h| if h.abs() > best.abs() { h } else { best })
+}

@@ -1,0 +1,231 @@
+//! Small hand-built scenes: an icosphere mirror with coloured quads around
+//! it, and a saddle.
+
+use glam::Vec3;
+use vtfarm_scene::{Material, Object, Scene, Triangle};
+
+/// Adds an object with its own material; returns the first new triangle id.
+fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
+    scene.objects.push(Object {
+        name: name.to_owned(),
+    });
+    scene.materials.push(material);
+    (
+        scene.objects.len() as u32 - 1,
+        scene.materials.len() as u32 - 1,
+    )
+}
+
+fn push(
+    scene: &mut Scene,
+    object: (u32, u32),
+    positions: &[Vec3],
+    normals: &[Vec3],
+    faces: &[[u32; 3]],
+) {
+    let base = scene.positions.len() as u32;
+    scene.positions.extend_from_slice(positions);
+    scene.normals.extend_from_slice(normals);
+    scene.triangles.extend(faces.iter().map(|f| Triangle {
+        vertices: f.map(|v| v + base),
+        object: object.0,
+        material: object.1,
+    }));
+}
+
+/// Unit icosphere points and faces, `levels` times split.
+fn icosphere(levels: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let p = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut points: Vec<Vec3> = [
+        [-1.0, p, 0.0],
+        [1.0, p, 0.0],
+        [-1.0, -p, 0.0],
+        [1.0, -p, 0.0],
+        [0.0, -1.0, p],
+        [0.0, 1.0, p],
+        [0.0, -1.0, -p],
+        [0.0, 1.0, -p],
+        [p, 0.0, -1.0],
+        [p, 0.0, 1.0],
+        [-p, 0.0, -1.0],
+        [-p, 0.0, 1.0],
+    ]
+    .iter()
+    .map(|&c| Vec3::from_array(c).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut midpoints = std::collections::BTreeMap::new();
+        let mut midpoint = |a: u32, b: u32, points: &mut Vec<Vec3>| {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                points.push(((points[a as usize] + points[b as usize]) * 0.5).normalize());
+                points.len() as u32 - 1
+            })
+        };
+        faces = faces
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let ab = midpoint(a, b, &mut points);
+                let bc = midpoint(b, c, &mut points);
+                let ca = midpoint(c, a, &mut points);
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    (points, faces)
+}
+
+pub(super) fn mirror() -> Material {
+    Material {
+        reflectance: Vec3::ONE,
+        ..Material::diffuse("mirror", Vec3::ZERO)
+    }
+}
+
+/// Adds a sphere; `inward` turns normals and winding inside (a concave
+/// mirror seen from within). Returns its triangle ids.
+pub(super) fn add_sphere(
+    scene: &mut Scene,
+    centre: Vec3,
+    radius: f32,
+    levels: u32,
+    inward: bool,
+) -> Vec<u32> {
+    let (points, mut faces) = icosphere(levels);
+    let sign = if inward { -1.0 } else { 1.0 };
+    if inward {
+        for f in &mut faces {
+            f.swap(1, 2);
+        }
+    }
+    let first = scene.triangles.len() as u32;
+    let object = add_object(scene, "sphere", mirror());
+    let positions: Vec<Vec3> = points.iter().map(|&u| centre + u * radius).collect();
+    let normals: Vec<Vec3> = points.iter().map(|&u| u * sign).collect();
+    push(scene, object, &positions, &normals, &faces);
+    (first..scene.triangles.len() as u32).collect()
+}
+
+/// A coloured quad (two triangles, flat normal `u × v`).
+pub(super) fn add_quad(scene: &mut Scene, name: &str, color: Vec3, corner: Vec3, u: Vec3, v: Vec3) {
+    let object = add_object(scene, name, Material::diffuse(name, color));
+    let n = u.cross(v).normalize();
+    let positions = [corner, corner + u, corner + u + v, corner + v];
+    push(scene, object, &positions, &[n; 4], &[[0, 1, 2], [0, 2, 3]]);
+}
+
+/// The mirror sphere of radius `radius` at the origin with four quads
+/// around it; returns the scene and the sphere's triangles.
+pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
+    let mut scene = Scene::default();
+    let sphere = add_sphere(&mut scene, Vec3::ZERO, radius, 4, false);
+    let r = radius;
+    add_quad(
+        &mut scene,
+        "floor",
+        Vec3::new(0.8, 0.2, 0.2),
+        Vec3::new(-3.0, -1.5, -3.0) * r,
+        Vec3::Z * 6.0 * r,
+        Vec3::X * 6.0 * r,
+    );
+    add_quad(
+        &mut scene,
+        "back",
+        Vec3::new(0.2, 0.8, 0.2),
+        Vec3::new(-3.0, -1.5, -3.0) * r,
+        Vec3::X * 6.0 * r,
+        Vec3::Y * 4.0 * r,
+    );
+    add_quad(
+        &mut scene,
+        "left",
+        Vec3::new(0.2, 0.2, 0.8),
+        Vec3::new(-3.0, -1.5, 3.0) * r,
+        Vec3::Z * -6.0 * r,
+        Vec3::Y * 4.0 * r,
+    );
+    add_quad(
+        &mut scene,
+        "right",
+        Vec3::new(0.8, 0.8, 0.2),
+        Vec3::new(3.0, -1.5, -3.0) * r,
+        Vec3::Z * 6.0 * r,
+        Vec3::Y * 4.0 * r,
+    );
+    (scene, sphere)
+}
+
+/// A saddle z = (x² - y²) / 2 over [-1, 1]², normals up.
+pub(super) fn saddle() -> (Scene, Vec<u32>) {
+    let mut scene = Scene::default();
+    let object = add_object(&mut scene, "saddle", mirror());
+    let n = 8;
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (
+                i as f32 / n as f32 * 2.0 - 1.0,
+                j as f32 / n as f32 * 2.0 - 1.0,
+            );
+            positions.push(Vec3::new(x, y, (x * x - y * y) * 0.5));
+            normals.push(Vec3::new(-x, y, 1.0).normalize());
+        }
+    }
+    let mut faces = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let k = j * (n + 1) + i;
+            faces.push([k, k + 1, k + n + 2]);
+            faces.push([k, k + n + 2, k + n + 1]);
+        }
+    }
+    push(&mut scene, object, &positions, &normals, &faces);
+    let triangles = (0..scene.triangles.len() as u32).collect();
+    (scene, triangles)
+}
+
+/// A sheet `corner + s u + t v` split into `n` × `n` quads (one object).
+pub(super) fn dense_sheet(scene: &mut Scene, corner: Vec3, u: Vec3, v: Vec3, n: u32) -> Vec<u32> {
+    let object = add_object(scene, "sheet", Material::diffuse("sheet", Vec3::splat(0.5)));
+    let normal = u.cross(v).normalize();
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            positions.push(corner + u * (i as f32 / n as f32) + v * (j as f32 / n as f32));
+        }
+    }
+    let mut faces = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let k = j * (n + 1) + i;
+            faces.push([k, k + 1, k + n + 2]);
+            faces.push([k, k + n + 2, k + n + 1]);
+        }
+    }
+    let first = scene.triangles.len() as u32;
+    let normals = vec![normal; positions.len()];
+    push(scene, object, &positions, &normals, &faces);
+    (first..scene.triangles.len() as u32).collect()
+}
