@@ -1,1 +1,203 @@
-//! Per-vertex reflection and refraction, PVRR (Kakimoto et al.).
+//! Per-vertex reflection and refraction, PVRR (Kakimoto, Tatsukawa, Chun,
+//! Nishita: "Real-time reflection and refraction on a per-vertex basis").
+//!
+//! Like a dynamic environment map, PVRR renders the scene once into a map and
+//! textures the reflector with it; unlike one, it warps the map so that every
+//! reflector vertex shows exactly the point its ray-traced reflection ray
+//! hits. Per frame and reflector ([`Pvrr`]):
+//!
+//! 1. Per reflector vertex, the exact exit ray (the tracer's mirror ray, or
+//!    the eye ray refracted at the front and again at the back face) and
+//!    its closest scene hit P through the BVH (§3.1 steps 1 and 3.1).
+//! 2. The virtual viewpoint: the least-squares point closest to all the
+//!    extended exit rays (§3.2), and the frustum of §3.3: viewing direction
+//!    the mean exit direction, near plane just in front of the reflector,
+//!    sides containing every exit ray up to the far end of the scene. For a
+//!    concave mirror or a convex lens the rays cross near the viewpoint and
+//!    the map looks into the reversed region beyond the crossing (§4.2,
+//!    figure 8); the map is the same kind of image, only the near plane moves.
+//! 3. The map: the scene without the reflector (and without the lens's own
+//!    back face) seen from the virtual viewpoint, `map_resolution` texels on
+//!    its longer side.
+//! 4. Texture coordinates: the projection of each vertex's P into the map
+//!    (§3.4), so the warped map shows P exactly at the vertex.
+//! 5. Per reflector pixel: the texture coordinates interpolated with the
+//!    barycentric weights of the pixel's exact surface point, and a bilinear
+//!    lookup. `vtfarm_method::shade_reflector` then finishes the pixel as
+//!    `local + kr * reflected + kt * transmitted`, exactly as the ray tracer.
+//!
+//! Extensions of §4: refraction ([`Refraction::Mapped`]) maps what is seen
+//! through both faces the same way, with one index of refraction per colour
+//! channel for chromatic aberration (three sets of texture coordinates over
+//! one map, as in figure 15); multiple reflection (§4.4) recurses: a map texel
+//! that shows another specular object is finished with that object's own
+//! PVRR map from the virtual viewpoint, down to the tracer's `max_depth`.
+//!
+//! Refraction of the cockpit's cover glass: the default
+//! ([`Refraction::Traced`]) leaves transmission to the shared finishing
+//! step, which traces the refraction ray of every pixel, because the glare
+//! study's transmitted component must be exact and a thin shell barely
+//! displaces it. [`Refraction::Mapped`] maps it instead (the back face's own
+//! shading and kt are interpolated from the vertices).
+//!
+//! # Limitations
+//!
+//! - Occlusion (§6, figure 16): the map is seen from the virtual viewpoint,
+//!   not along each reflection ray. A vertex always shows its own P, but
+//!   between vertices, and at a vertex whose P is hidden from the virtual
+//!   viewpoint by another object, the map shows what the viewpoint sees.
+//!   Only a planar mirror, whose rays all meet in one point, is free of this.
+//! - Sparse vertices (§6): accuracy between vertices depends on the
+//!   tessellation; a large quadrilateral mirror is only exact at its corners.
+//! - The zooming region of concave mirrors and convex lenses (§4.2), P
+//!   behind the near plane, total internal reflection and P outside the
+//!   widest frustum (80° half-angle) have no texture coordinate; pixels of
+//!   the triangles around such a vertex are traced exactly instead (the
+//!   paper leaves them out).
+//! - One map per reflector: no subdivision of strongly curved surfaces into
+//!   patches (§4.1) and no alignment of the map's up vector with a principal
+//!   direction (§4.3).
+//! - Map texels are shaded like ray-traced hits (Phong with shadow rays) but
+//!   from the virtual viewpoint: view-dependent highlights on the reflected
+//!   surfaces differ slightly from the ray tracer's.
+
+mod level;
+mod map;
+mod paths;
+mod viewpoint;
+mod warp;
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_method::{
+    MethodCounters, MethodFrame, MethodOutput, Reflection, ReflectionMethod, shade_reflector,
+};
+use vtfarm_scene::NONE;
+
+use crate::level::{Context, Level};
+use crate::warp::{Kind, Warp};
+
+/// PVRR as a [`ReflectionMethod`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Pvrr {
+    pub config: PvrrConfig,
+}
+
+/// Settings of [`Pvrr`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PvrrConfig {
+    /// Texels on the longer side of each reflection or refraction map.
+    pub map_resolution: u32,
+    pub refraction: Refraction,
+}
+
+impl Default for PvrrConfig {
+    fn default() -> Self {
+        PvrrConfig {
+            map_resolution: 512,
+            refraction: Refraction::Traced,
+        }
+    }
+}
+
+/// How the light transmitted through the reflector is found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Refraction {
+    /// Traced per pixel by `vtfarm_method::shade_reflector`.
+    Traced,
+    /// A refraction map through front and back faces (§4.5); `iors` gives
+    /// one index of refraction per colour channel (R, G, B) for chromatic
+    /// aberration (the paper's 1.60 / 1.61 / 1.62), `None` the material's.
+    Mapped { iors: Option<[f32; 3]> },
+}
+
+impl Pvrr {
+    pub fn new(config: PvrrConfig) -> Self {
+        Pvrr { config }
+    }
+}
+
+impl ReflectionMethod for Pvrr {
+    fn name(&self) -> String {
+        match self.config.refraction {
+            Refraction::Traced => "pvrr".to_owned(),
+            Refraction::Mapped { .. } => "pvrr-refraction".to_owned(),
+        }
+    }
+
+    fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput {
+        let start = Instant::now();
+        let context = Context::new(&self.config, &frame.tracer);
+        let level = Level {
+            context: &context,
+            tracer: frame.tracer,
+        };
+        let eye = frame.camera.eye;
+        let pixels = frame.pixels();
+        let build = |kind| Warp::build(&level, eye, frame.reflector, kind);
+        let reflection = reflects(frame).then(|| build(Kind::Reflection));
+        let refraction = self.refraction_kind(frame).map(build);
+        let setup_time = start.elapsed();
+
+        let found: Vec<(Reflection, Vec3, u64)> = pixels
+            .par_iter()
+            .map(|p| {
+                let at = |w: &Warp<'_>| w.radiance_at(&p.point, p.incoming);
+                let (radiance, object, r1) = reflection.as_ref().map_or((Vec3::ZERO, NONE, 0), at);
+                let (through, _, r2) = refraction.as_ref().map_or((Vec3::ZERO, NONE, 0), at);
+                (Reflection { radiance, object }, through, r1 + r2)
+            })
+            .collect();
+        let reflections: Vec<Reflection> = found.iter().map(|f| f.0).collect();
+        let transmitted: Vec<Vec3> = found.iter().map(|f| f.1).collect();
+        let (bitmap, finish_rays) = shade_reflector(
+            frame,
+            &pixels,
+            &reflections,
+            refraction.as_ref().map(|_| transmitted.as_slice()),
+        );
+        level.count_rays(finish_rays + found.iter().map(|f| f.2).sum::<u64>());
+        let (searches, rays) = context.counts();
+        tracing::debug!(searches, rays, "pvrr rendered {} pixels", pixels.len());
+        MethodOutput {
+            bitmap,
+            counters: MethodCounters {
+                rays,
+                searches,
+                pixels: pixels.len() as u64,
+                setup_time,
+                time: start.elapsed(),
+            },
+        }
+    }
+}
+
+/// Whether the reflector mirrors at all (the shared finishing step skips
+/// the reflection of a reflector that does not).
+fn reflects(frame: &MethodFrame<'_>) -> bool {
+    let scene = frame.tracer.bvh.scene();
+    frame
+        .reflector
+        .first()
+        .is_some_and(|&t| scene.material_of(t).reflectance.max_element() > 0.0)
+}
+
+impl Pvrr {
+    /// The refraction map to build, if any: only for a transmitting reflector.
+    fn refraction_kind(&self, frame: &MethodFrame<'_>) -> Option<Kind> {
+        let Refraction::Mapped { iors } = self.config.refraction else {
+            return None;
+        };
+        let scene = frame.tracer.bvh.scene();
+        let first = *frame.reflector.first()?;
+        let material = scene.material_of(first);
+        (material.transmittance.max_element() > 0.0).then(|| Kind::Refraction {
+            iors: iors.unwrap_or([material.ior; 3]),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -86,7 +86,7 @@ pub(crate) fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
 /// Snell refraction of unit `incoming` through a surface with unit `normal`
 /// facing the incoming side (`incoming . normal <= 0`), with `eta` = n1 / n2.
 /// `None` on total internal reflection.
-pub(crate) fn refract(incoming: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
+pub fn refract(incoming: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
     let cos_i = -incoming.dot(normal);
     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
     if k < 0.0 {

@@ -1,0 +1,99 @@
+//! The first pass (paper §3.1 step 2): the reflection map, the scene without
+//! the reflector seen from the virtual viewpoint through the §3.3 frustum,
+//! and its bilinear lookup.
+//!
+//! The rasterizer has a fixed near plane, while the frustum needs one just in
+//! front of the reflector (the virtual viewpoint of a convex mirror lies
+//! behind the mirror, inside whatever is there). So each texel's visibility
+//! is one ray from the near plane through the texel centre: exactly what a
+//! z-buffer with that near plane shows at the texel centre.
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use vtfarm_scene::{NONE, ObjectId, Projector};
+use vtfarm_trace::Ray;
+
+use crate::level::{Level, Seen};
+use crate::viewpoint::MapView;
+
+/// Surfaces of excluded objects passed on one texel ray at most; more means
+/// a degenerate stack of coincident sheets.
+const MAX_SKIPS: usize = 16;
+
+/// A rendered reflection (or refraction) map.
+pub(crate) struct ReflectionMap {
+    pub(crate) view: MapView,
+    pub(crate) projector: Projector,
+    radiance: Vec<Vec3>,
+    object: Vec<ObjectId>,
+}
+
+impl ReflectionMap {
+    /// Renders the map: per texel the first surface beyond the near plane
+    /// that is not one of `excluded` (sorted), shaded by `level` as seen from
+    /// the virtual viewpoint (multiple reflection recurses there).
+    pub(crate) fn render(level: &Level<'_>, view: MapView, excluded: &[ObjectId]) -> Self {
+        let camera = view.camera;
+        let bvh = level.tracer.bvh;
+        let scene = bvh.scene();
+        let forward = camera.basis().0;
+        let texels = (camera.width * camera.height) as usize;
+        let seen: Vec<Option<Seen>> = (0..texels)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
+                let direction = camera.pixel_ray(x, y);
+                let start = view.near / direction.dot(forward).max(1e-6);
+                let mut ray = Ray {
+                    origin: camera.eye + direction * start,
+                    direction,
+                };
+                for _ in 0..MAX_SKIPS {
+                    let hit = bvh.closest_hit(&ray, f32::INFINITY)?;
+                    let object = scene.triangles[hit.triangle as usize].object;
+                    let point = bvh.surface_point(&hit);
+                    if excluded.binary_search(&object).is_err() {
+                        return Some(Seen {
+                            point,
+                            incoming: direction,
+                            object,
+                        });
+                    }
+                    ray.origin = point.position + direction * bvh.epsilon();
+                }
+                None
+            })
+            .collect();
+        level.count_rays(texels as u64);
+        let radiance = level.shade_seen(camera.eye, &seen);
+        ReflectionMap {
+            projector: Projector::new(&camera),
+            view,
+            radiance,
+            object: seen.iter().map(|s| s.map_or(NONE, |s| s.object)).collect(),
+        }
+    }
+
+    /// Bilinear lookup at continuous map coordinates (texel centres at +0.5),
+    /// clamped at the border.
+    pub(crate) fn sample(&self, at: Vec2) -> Vec3 {
+        let (w, h) = (self.view.camera.width, self.view.camera.height);
+        let fx = (at.x - 0.5).clamp(0.0, (w - 1) as f32);
+        let fy = (at.y - 0.5).clamp(0.0, (h - 1) as f32);
+        let (x0, y0) = (fx.floor() as u32, fy.floor() as u32);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+        let texel = |x: u32, y: u32| self.radiance[(y * w + x) as usize];
+        let top = texel(x0, y0).lerp(texel(x1, y0), tx);
+        let bottom = texel(x0, y1).lerp(texel(x1, y1), tx);
+        top.lerp(bottom, ty)
+    }
+
+    /// The object of the texel containing `at`.
+    pub(crate) fn object_at(&self, at: Vec2) -> ObjectId {
+        let (w, h) = (self.view.camera.width, self.view.camera.height);
+        let x = (at.x.max(0.0) as u32).min(w - 1);
+        let y = (at.y.max(0.0) as u32).min(h - 1);
+        self.object[(y * w + x) as usize]
+    }
+}

@@ -1,0 +1,253 @@
+//! The warped map of one reflector (paper §3.1 steps 2–4, §3.4, §4.5): per
+//! vertex the exit ray and its hit P, the virtual viewpoint and frustum, the
+//! map, texture coordinates that put each P exactly at its vertex, and the
+//! per-point lookup (barycentric interpolation of the texture coordinates at
+//! the exact surface point, then a bilinear map lookup).
+//!
+//! Texture coordinates are kept per colour channel: refraction with three
+//! indices (§4.5, chromatic aberration) gives three sets over one shared map.
+//! A vertex whose P is not in the map (the zooming region of §4.2, a path
+//! that reflects totally, a point past the widest frustum) has no coordinate;
+//! points on its triangles are traced exactly instead.
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use vtfarm_scene::{NONE, ObjectId, Scene, TriangleId};
+use vtfarm_trace::SurfacePoint;
+
+use crate::level::Level;
+use crate::map::ReflectionMap;
+use crate::paths::{self, VertexPath};
+use crate::viewpoint::{FrustumInput, fit_frustum, virtual_viewpoint};
+
+/// What leaves the reflector towards the map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Kind {
+    Reflection,
+    /// Refraction through front and back faces with one index of
+    /// refraction per colour channel (R, G, B).
+    Refraction {
+        iors: [f32; 3],
+    },
+}
+
+/// One vertex's data per colour channel.
+#[derive(Clone, Copy, Debug, Default)]
+struct VertexCoords {
+    coords: [Option<Vec2>; 3],
+    offset: Vec3,
+    weight: Vec3,
+}
+
+/// A reflector's map and texture coordinates, ready for lookups.
+pub(crate) struct Warp<'a> {
+    level: Level<'a>,
+    kind: Kind,
+    map: ReflectionMap,
+    /// The reflector's scene vertices, sorted; `vertices[i]` has `coords[i]`.
+    vertices: Vec<u32>,
+    coords: Vec<VertexCoords>,
+}
+
+impl<'a> Warp<'a> {
+    /// Builds the map for `triangles` seen from `eye` at `level`.
+    pub(crate) fn build(
+        level: &Level<'a>,
+        eye: Vec3,
+        triangles: &[TriangleId],
+        kind: Kind,
+    ) -> Warp<'a> {
+        let bvh = level.tracer.bvh;
+        let scene = bvh.scene();
+        let (vertices, points) = reflector_vertices(scene, triangles);
+        let channels = channel_paths(kind);
+        let paths: Vec<[Option<VertexPath>; 3]> = points
+            .par_iter()
+            .map(|point| {
+                let incoming = (point.position - eye).normalize_or(Vec3::NEG_Z);
+                let mut traced: [Option<VertexPath>; 3] = [None; 3];
+                // A vertex facing away from the eye is never seen; its ray
+                // would only widen the frustum.
+                if point.normal.dot(incoming) >= 0.0 {
+                    return traced;
+                }
+                for (c, source) in channels.iter().enumerate() {
+                    traced[c] = match (kind, source) {
+                        (_, Some(earlier)) => traced[*earlier],
+                        (Kind::Reflection, None) => paths::reflection(level, point, incoming),
+                        (Kind::Refraction { iors }, None) => {
+                            paths::refraction(level, point, incoming, iors[c])
+                        }
+                    };
+                }
+                traced
+            })
+            .collect();
+
+        let distinct = |p: &[Option<VertexPath>; 3]| {
+            (0..3)
+                .filter(|&c| channels[c].is_none())
+                .filter_map(move |c| p[c])
+                .collect::<Vec<_>>()
+        };
+        let all: Vec<VertexPath> = paths.iter().flat_map(distinct).collect();
+        let lines: Vec<_> = all.iter().map(|p| p.exit).collect();
+        let hits: Vec<_> = all.iter().map(|p| p.hit).collect();
+        let view = fit_frustum(&FrustumInput {
+            eye: virtual_viewpoint(&lines),
+            lines: &lines,
+            hits: &hits,
+            bounds: scene.bounds(),
+            epsilon: bvh.epsilon(),
+            resolution: level.context.config.map_resolution,
+        });
+
+        let mut excluded: Vec<ObjectId> = triangles
+            .iter()
+            .map(|&t| scene.triangles[t as usize].object)
+            .chain(all.iter().map(|p| p.inner).filter(|&o| o != NONE))
+            .collect();
+        excluded.sort_unstable();
+        excluded.dedup();
+        let bounces = match kind {
+            Kind::Reflection => 1,
+            Kind::Refraction { .. } => 2,
+        };
+        let map = ReflectionMap::render(&level.deeper(bounces), view, &excluded);
+
+        let coords = paths
+            .iter()
+            .map(|p| {
+                let mut v = VertexCoords::default();
+                for (c, path) in p.iter().enumerate() {
+                    let Some(path) = path else { continue };
+                    v.coords[c] = match path.hit {
+                        Some(hit) => map.view.coords_of_point(&map.projector, hit),
+                        None => map
+                            .view
+                            .coords_of_direction(&map.projector, path.exit.direction),
+                    };
+                    v.offset[c] = path.offset[c];
+                    v.weight[c] = path.weight[c];
+                }
+                v
+            })
+            .collect();
+        Warp {
+            level: *level,
+            kind,
+            map,
+            vertices,
+            coords,
+        }
+    }
+
+    /// The radiance the reflector passes on at a point of one of its
+    /// triangles seen along `incoming` (reflected, or transmitted through
+    /// both faces), the object the map shows there, and the rays traced
+    /// where a corner had no texture coordinate.
+    pub(crate) fn radiance_at(
+        &self,
+        point: &SurfacePoint,
+        incoming: Vec3,
+    ) -> (Vec3, ObjectId, u64) {
+        let scene = self.level.tracer.bvh.scene();
+        let corners = scene.triangles[point.triangle as usize].vertices.map(|v| {
+            let i = self.vertices.binary_search(&v);
+            // Invariant: points lie on the triangles the warp was built for.
+            &self.coords[i.expect("a point on the warp's own reflector")]
+        });
+        let w = barycentric(scene.triangle_positions(point.triangle), point.position);
+        let mut radiance = Vec3::ZERO;
+        let mut object = NONE;
+        let blend = |f: fn(&VertexCoords) -> Vec3| {
+            f(corners[0]) * w[0] + f(corners[1]) * w[1] + f(corners[2]) * w[2]
+        };
+        let (offset, weight) = (blend(|v| v.offset), blend(|v| v.weight));
+        for c in 0..3 {
+            let [a, b, d] = corners.map(|v| v.coords[c]);
+            let (Some(a), Some(b), Some(d)) = (a, b, d) else {
+                return self.traced(point, incoming);
+            };
+            let at = a * w[0] + b * w[1] + d * w[2];
+            radiance[c] = offset[c] + weight[c] * self.map.sample(at)[c];
+            if c == 1 {
+                object = self.map.object_at(at);
+            }
+        }
+        (radiance, object, 0)
+    }
+
+    /// The exact radiance at a point the map cannot show, by tracing.
+    fn traced(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, ObjectId, u64) {
+        let terms = self.level.tracer.surface_terms(point, incoming);
+        let ray = match self.kind {
+            Kind::Reflection => terms.reflection,
+            Kind::Refraction { .. } => terms.refraction,
+        };
+        let Some(ray) = ray else {
+            return (Vec3::ZERO, NONE, 0);
+        };
+        let bvh = self.level.tracer.bvh;
+        let object = bvh
+            .closest_hit(&ray, f32::INFINITY)
+            .map_or(NONE, |h| bvh.scene().triangles[h.triangle as usize].object);
+        let color = self.level.deeper(1).tracer.trace(&ray).color;
+        (color, object, 2)
+    }
+
+    #[cfg(test)]
+    pub(crate) fn map(&self) -> &ReflectionMap {
+        &self.map
+    }
+}
+
+/// For each channel, the earlier channel whose path it shares (equal
+/// indices of refraction), or `None` when it needs its own.
+fn channel_paths(kind: Kind) -> [Option<usize>; 3] {
+    match kind {
+        Kind::Reflection => [None, Some(0), Some(0)],
+        Kind::Refraction { iors } => std::array::from_fn(|c| (0..c).find(|&e| iors[e] == iors[c])),
+    }
+}
+
+/// The sorted distinct vertices of `triangles` and, per vertex, its surface
+/// point (the vertex normal, on the lowest-numbered triangle that uses it).
+fn reflector_vertices(scene: &Scene, triangles: &[TriangleId]) -> (Vec<u32>, Vec<SurfacePoint>) {
+    let mut owned: Vec<(u32, TriangleId)> = triangles
+        .iter()
+        .flat_map(|&t| scene.triangles[t as usize].vertices.map(|v| (v, t)))
+        .collect();
+    owned.sort_unstable();
+    owned.dedup_by_key(|(v, _)| *v);
+    let points = owned
+        .iter()
+        .map(|&(v, triangle)| SurfacePoint {
+            position: scene.positions[v as usize],
+            normal: scene.normals[v as usize],
+            triangle,
+        })
+        .collect();
+    (owned.into_iter().map(|(v, _)| v).collect(), points)
+}
+
+/// Barycentric weights of `p` (on the triangle's plane) in the triangle.
+fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
+    let n = (b - a).cross(c - a);
+    let area = n.length_squared();
+    if area <= 0.0 {
+        return [1.0 / 3.0; 3];
+    }
+    let wa = (c - b).cross(p - b).dot(n) / area;
+    let wb = (a - c).cross(p - c).dot(n) / area;
+    [wa, wb, 1.0 - wa - wb]
+}
+#[cfg(test)]
+impl Warp<'_> {
+    pub(crate) fn debug_counts(&self) -> (usize, usize) {
+        (
+            self.coords.len(),
+            self.coords.iter().filter(|c| c.coords[0].is_some()).count(),
+        )
+    }
+}
