@@ -167,3 +167,71 @@ fn bad_job_and_obj_files_are_refused_with_file_and_line() {
         "names the OBJ file and line: {err}"
     );
 }
+
+/// Runs `vtfarm study` on `study` (written into `dir` next to a base job)
+/// and returns stderr, asserting that it failed before rendering anything.
+fn refused_study(dir: &Path, study: &str) -> String {
+    std::fs::write(
+        dir.join("job.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let path = dir.join("bad-study.toml");
+    std::fs::write(&path, study).unwrap();
+    let out_dir = dir.join("out");
+    let out = vtfarm(&[
+        "study",
+        path.to_str().unwrap(),
+        "-o",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(!out_dir.exists(), "refused before any output");
+    let err = text(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+#[test]
+fn bad_study_files_are_refused_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "[study]\njob = \"job.toml\"\n";
+    let flat = "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n";
+    let err = refused_study(
+        dir.path(),
+        &format!("{head}[eyes]\npoints = [[-0.55, 1.4, 0.1]]\nresolution = 3\n{flat}"),
+    );
+    assert!(
+        err.contains("bad-study.toml:5") && err.contains("resolution"),
+        "{err}"
+    );
+    let err = refused_study(
+        dir.path(),
+        &format!("{head}[eyes.ellipse]\ncentre = [-0.55, 1.4, 0.1]\nsemi_axes = [0, 0, 0]\n{flat}"),
+    );
+    assert!(
+        err.contains("bad-study.toml:5") && err.contains("eye ellipse is empty"),
+        "{err}"
+    );
+    let err = refused_study(
+        dir.path(),
+        &format!(
+            "{head}[eyes]\npoints = [[-0.55, 1.4, 0.1]]\n[[variants]]\nname = \"b\"\nobj = \"b.obj\"\n"
+        ),
+    );
+    assert!(
+        err.contains("bad-study.toml:7") && err.contains("no such file") && err.contains("b.obj"),
+        "{err}"
+    );
+    // A metrics object the variant's scene lacks is caught while planning.
+    let err = refused_study(
+        dir.path(),
+        &format!(
+            "{head}[eyes]\npoints = [[-0.55, 1.4, 0.1]]\n{flat}[metrics]\nmarking_objects = [\"ticks\"]\n"
+        ),
+    );
+    assert!(
+        err.contains("marking_objects") && err.contains("\"ticks\"") && err.contains("needles"),
+        "{err}"
+    );
+}

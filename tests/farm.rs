@@ -267,6 +267,111 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     assert_same_images(&embedded, &reference);
 }
 
+/// Every file under `dir`, by relative path, with its bytes.
+fn files_under(dir: &std::path::Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    let mut files = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_owned()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let bytes = std::fs::read(&path).unwrap();
+                files.insert(path.strip_prefix(dir).unwrap().to_owned(), bytes);
+            }
+        }
+    }
+    files
+}
+
+/// Runs the `vtfarm` binary off the async runtime and asserts success.
+async fn vtfarm_cli(args: Vec<String>) {
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+            .args(&args)
+            .output()
+            .expect("the vtfarm binary runs")
+    })
+    .await
+    .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine() {
+    let _serial = SERIAL.lock().await;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("job.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let study = dir.path().join("study.toml");
+    std::fs::write(
+        &study,
+        "[study]\njob = \"job.toml\"\nwidth = 192\nheight = 108\n\
+         [eyes]\npoints = [[-0.55, 1.40, 0.10], [-0.60, 1.45, 0.12]]\n\
+         [[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
+         [[variants]]\nname = \"ellipsoidal\"\nglass = \"ellipsoidal\"\n",
+    )
+    .unwrap();
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    let one = dir.path().join("one-machine");
+    vtfarm_cli(vec![
+        "study".into(),
+        path(&study),
+        "-o".into(),
+        path(&one),
+        "--local-workers".into(),
+        "1".into(),
+    ])
+    .await;
+
+    let cluster = Cluster::start(SchedulerConfig::default());
+    let _w1 = cluster.worker("w1", 1.0);
+    let _w2 = cluster.worker("w2", 1.0);
+    cluster.wait_for_workers(2).await;
+    let two = dir.path().join("cluster");
+    vtfarm_cli(vec![
+        "submit".into(),
+        path(&study),
+        "--cluster".into(),
+        path(&cluster.file),
+        "-o".into(),
+        path(&two),
+    ])
+    .await;
+    let workers = cluster.status().await.workers;
+    assert!(
+        workers.iter().all(|w| w.packages_done > 0),
+        "both workers rendered: {workers:?}"
+    );
+
+    let (a, b) = (files_under(&one), files_under(&two));
+    let names: Vec<&PathBuf> = a.keys().collect();
+    assert_eq!(names, b.keys().collect::<Vec<_>>());
+    for expected in [
+        "summary.csv",
+        "summary.json",
+        "report.html",
+        "flat/eye_01/heat.png",
+    ] {
+        assert!(
+            a.contains_key(std::path::Path::new(expected)),
+            "{expected} in {names:?}"
+        );
+    }
+    assert_eq!(names.len(), 3 + 2 * 2 * 3, "three images per frame");
+    for (name, bytes) in &a {
+        assert!(bytes == &b[name], "{} differs", name.display());
+    }
+}
+
 /// The share of a frame's triangles traced by the worker whose name starts with `name`.
 fn share(stats: &vtfarm_proto::FrameStats, name: &str) -> f64 {
     let total: u32 = stats.workers.iter().map(|w| w.triangles).sum();
