@@ -8,7 +8,7 @@
 //!    §4.1): position and normal cube maps around the reflector, rasterized
 //!    from its triangles subdivided `subdivisions` times. An open reflector
 //!    (the cover glass) gets its centre moved behind it and its maps
-//!    extended beyond the rim by tangent planes (see `maps`).
+//!    continued beyond the rim by a fitted quadric (see `maps`).
 //! 2. For every vertex of the reflected meshes (all scene triangles but the
 //!    reflector and its transparent back, see [`reflected_triangle_flags`])
 //!    [`search`] finds the reflection point R by following the projected
@@ -47,6 +47,7 @@
 
 mod cube;
 mod envmap;
+mod extension;
 mod maps;
 mod method;
 mod raster;

@@ -8,19 +8,19 @@
 //! perspective-correct (a GPU interpolating colours would be too).
 //!
 //! An open reflector leaves texels empty; the paper then asks for a closed
-//! companion object (§6.2). Instead the maps extend the surface: every
-//! empty texel takes the tangent plane of the nearest covered texel (found
-//! breadth-first), marked [`TexelKind::Extension`], so searches for
-//! vertices reflected just beyond the rim still converge (those vertices
-//! belong to triangles that straddle the rim).
-
-use std::collections::VecDeque;
+//! companion object (§6.2). Instead empty texels show the reflector's
+//! quadric continuation ([`QuadricPatch`]), marked
+//! [`TexelKind::Extension`], so searches for vertices reflected beyond the
+//! rim still converge (those vertices belong to triangles that straddle
+//! the rim).
 
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_scene::{Scene, TriangleId};
 
 use crate::cube::{CubeLayout, TexelPoint, face};
+use crate::extension::QuadricPatch;
+use crate::shape::{ReflectorShape, classify};
 
 /// What a texel holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -29,7 +29,7 @@ pub enum TexelKind {
     Empty,
     /// The reflector itself.
     Surface,
-    /// The tangent-plane extension of an open reflector beyond its rim.
+    /// The quadric continuation of an open reflector beyond its rim.
     Extension,
 }
 
@@ -43,6 +43,7 @@ pub struct ReflectorMaps {
     pub kind: Vec<TexelKind>,
     /// Area-weighted centroid of the reflector (the environment map's centre).
     pub centroid: Vec3,
+    pub shape: ReflectorShape,
 }
 
 /// A bilinear sample of the maps.
@@ -82,14 +83,20 @@ impl ReflectorMaps {
         for _ in 0..subdivisions {
             mesh = mesh.iter().flat_map(subdivide).collect();
         }
-        let (centre, centroid) = centres(&mesh);
+        let shape = classify(scene, triangles);
+        let placement = Placement::new(&mesh, shape);
         let layout = CubeLayout {
-            centre,
+            centre: placement.centre,
             resolution: resolution.max(2),
         };
         let mut maps = rasterize(&layout, &mesh);
-        maps.centroid = centroid;
-        maps.extend_beyond_rim();
+        maps.centroid = placement.centroid;
+        maps.shape = shape;
+        let corners: Vec<Vec3> = mesh.iter().flat_map(|t| t.positions).collect();
+        if let Some(patch) = QuadricPatch::fit(&corners, placement.centroid, placement.mean_normal)
+        {
+            maps.extend_beyond_rim(&patch);
+        }
         maps
     }
 
@@ -120,41 +127,18 @@ impl ReflectorMaps {
         })
     }
 
-    /// Fills empty texels with the tangent plane of the nearest covered
-    /// texel (breadth-first over texel neighbours, seams included; the
-    /// fixed visiting order keeps it deterministic).
-    fn extend_beyond_rim(&mut self) {
-        let n = self.layout.texel_count();
-        let mut source = vec![usize::MAX; n];
-        let mut queue = VecDeque::new();
-        for (index, kind) in self.kind.iter().enumerate() {
-            if *kind == TexelKind::Surface {
-                source[index] = index;
-                queue.push_back(index);
-            }
-        }
+    /// Fills empty texels from the quadric continuation.
+    fn extend_beyond_rim(&mut self, patch: &QuadricPatch) {
         let centre = self.layout.centre;
-        while let Some(index) = queue.pop_front() {
-            let (face_index, i, j) = self.layout.texel_coordinates(index);
-            let (i, j) = (i64::from(i), i64::from(j));
-            for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
-                let next = self.layout.texel_wrapped(face_index, i + di, j + dj);
-                if source[next] != usize::MAX {
-                    continue;
-                }
-                let from = source[index];
-                source[next] = from;
-                queue.push_back(next);
-                let (plane_point, plane_normal) = (self.position[from], self.normal[from]);
-                let direction = self.layout.texel_direction(next).normalize();
-                let along = direction.dot(plane_normal);
-                let distance = (plane_point - centre).dot(plane_normal) / along;
-                // Planes seen edge-on or behind the centre give no surface.
-                if along.abs() > 0.05 && distance > 0.0 {
-                    self.position[next] = centre + direction * distance;
-                    self.normal[next] = plane_normal;
-                    self.kind[next] = TexelKind::Extension;
-                }
+        for index in 0..self.kind.len() {
+            if self.kind[index] != TexelKind::Empty {
+                continue;
+            }
+            let direction = self.layout.texel_direction(index);
+            if let Some((position, normal)) = patch.intersect(centre, direction) {
+                self.position[index] = position;
+                self.normal[index] = normal;
+                self.kind[index] = TexelKind::Extension;
             }
         }
     }
@@ -187,42 +171,65 @@ fn subdivide(t: &MapTriangle) -> [MapTriangle; 4] {
     ]
 }
 
-/// The maps' centre and the reflector's centroid. A closed reflector's
-/// area-weighted normals cancel and the centre is its centroid (the
-/// paper's choice). An open patch seen from its centroid would project
-/// edge-on, so the centre moves against the mean normal by the patch's
-/// radius times its openness (|Σ area·normal| / Σ area, 0 closed, 1 flat):
-/// from there every texel ray meets a gently curved patch at most once.
-fn centres(mesh: &[MapTriangle]) -> (Vec3, Vec3) {
-    let mut area_sum = 0.0f64;
-    let mut weighted = glam::DVec3::ZERO;
-    let mut normal_sum = glam::DVec3::ZERO;
-    for t in mesh {
-        let [a, b, c] = t.positions;
-        let cross = (b - a).cross(c - a);
-        let area = 0.5 * f64::from(cross.length());
-        let shading = t.normals[0] + t.normals[1] + t.normals[2];
-        let oriented = if cross.dot(shading) < 0.0 {
-            -cross
+/// Where the maps sit. A closed reflector's area-weighted normals cancel
+/// and the centre is its centroid (the paper's choice). An open patch seen
+/// from its centroid would project edge-on, so the centre moves off it by
+/// the patch's radius times its openness (|Σ area·normal| / Σ area: 0
+/// closed, 1 flat), to the side of its centres of curvature: in front of a
+/// concave patch (inside the bowl, which every texel ray then meets once,
+/// its quadric continuation included), behind a convex or flat one.
+struct Placement {
+    centre: Vec3,
+    centroid: Vec3,
+    /// Σ area·normal / Σ area.
+    mean_normal: Vec3,
+}
+
+impl Placement {
+    fn new(mesh: &[MapTriangle], shape: ReflectorShape) -> Placement {
+        let mut area_sum = 0.0f64;
+        let mut weighted = glam::DVec3::ZERO;
+        let mut normal_sum = glam::DVec3::ZERO;
+        for t in mesh {
+            let [a, b, c] = t.positions;
+            let cross = (b - a).cross(c - a);
+            let area = 0.5 * f64::from(cross.length());
+            let shading = t.normals[0] + t.normals[1] + t.normals[2];
+            let oriented = if cross.dot(shading) < 0.0 {
+                -cross
+            } else {
+                cross
+            };
+            area_sum += area;
+            weighted += ((a + b + c) / 3.0).as_dvec3() * area;
+            normal_sum += oriented.normalize_or_zero().as_dvec3() * area;
+        }
+        if area_sum <= 0.0 {
+            let p = mesh.first().map_or(Vec3::ZERO, |t| t.positions[0]);
+            return Placement {
+                centre: p,
+                centroid: p,
+                mean_normal: Vec3::ZERO,
+            };
+        }
+        let centroid = (weighted / area_sum).as_vec3();
+        let mean_normal = (normal_sum / area_sum).as_vec3();
+        let radius = mesh
+            .iter()
+            .flat_map(|t| t.positions)
+            .map(|p| (p - centroid).length())
+            .fold(0.0, f32::max);
+        let side = if shape == ReflectorShape::Concave {
+            1.0
         } else {
-            cross
+            -1.0
         };
-        area_sum += area;
-        weighted += ((a + b + c) / 3.0).as_dvec3() * area;
-        normal_sum += oriented.normalize_or_zero().as_dvec3() * area;
+        Placement {
+            centre: centroid + mean_normal * (side * radius),
+            centroid,
+            mean_normal,
+        }
     }
-    if area_sum <= 0.0 {
-        let p = mesh.first().map_or(Vec3::ZERO, |t| t.positions[0]);
-        return (p, p);
-    }
-    let centroid = (weighted / area_sum).as_vec3();
-    let mean_normal = (normal_sum / area_sum).as_vec3();
-    let radius = mesh
-        .iter()
-        .flat_map(|t| t.positions)
-        .map(|p| (p - centroid).length())
-        .fold(0.0, f32::max);
-    (centroid - mean_normal * radius, centroid)
 }
 
 /// Rasterizes the tessellation into all six faces (one rayon task per
@@ -246,6 +253,7 @@ fn rasterize(layout: &CubeLayout, mesh: &[MapTriangle]) -> ReflectorMaps {
         normal: Vec::with_capacity(6 * res * res),
         kind: Vec::with_capacity(6 * res * res),
         centroid: layout.centre,
+        shape: ReflectorShape::Flat,
     };
     for (depth, position, normal) in faces.into_iter().flatten() {
         maps.position.push(position);

@@ -15,7 +15,7 @@ use crate::maps::ReflectorMaps;
 use crate::raster::{VirtualHit, rasterize_virtual_meshes};
 use crate::reflected::reflected_triangle_flags;
 use crate::search::{SearchSettings, VirtualVertex};
-use crate::shape::{ReflectorShape, classify};
+use crate::shape::ReflectorShape;
 use crate::vertices::{GridSettings, virtual_vertices};
 
 /// Settings of the cube-map method.
@@ -82,17 +82,18 @@ impl CubeMapMethod {
     /// The pre-processing of the frame's reflector.
     pub fn prepare(&self, frame: &MethodFrame<'_>) -> PreparedReflector {
         let scene = frame.tracer.bvh.scene();
-        let shape = classify(scene, frame.reflector);
+        let maps = ReflectorMaps::build(
+            scene,
+            frame.reflector,
+            self.config.resolution,
+            self.config.subdivisions,
+        );
+        let shape = maps.shape;
         if let Some(warning) = shape.warning() {
             tracing::warn!("{warning}");
         }
         PreparedReflector {
-            maps: ReflectorMaps::build(
-                scene,
-                frame.reflector,
-                self.config.resolution,
-                self.config.subdivisions,
-            ),
+            maps,
             shape,
             fallback: EnvironmentMap {
                 resolution: self.config.fallback_resolution,

@@ -103,29 +103,34 @@ pub fn search(
     let centre = maps.layout.centre;
     let to_eye = (eye - centre).normalize_or_zero();
     let to_vertex = (vertex - centre).normalize_or_zero();
-    // The bisector at the centre is near R on a closed reflector; the
-    // centroid direction is the fallback (the vertex opposite the eye).
+    // The bisector at the centre is near R on a closed reflector; an open
+    // one starts in its middle. A start must lie on the reflector itself
+    // (not its continuation) and face the eye.
     let starts = [
         (to_eye + to_vertex).normalize_or_zero(),
-        to_eye,
         (maps.centroid - centre).normalize_or_zero(),
+        to_eye,
     ];
-    for start in starts {
-        if start == Vec3::ZERO {
-            continue;
-        }
-        let field = Field {
-            maps,
-            eye,
-            vertex,
-            chart: Chart::new(centre, start),
-            lambda: 0.25 * (maps.centroid - centre).length().max(1e-3),
-        };
-        if let Some(first) = field.eval(Vec2::ZERO) {
-            return field.run(first, settings);
-        }
+    let lambda = 0.25 * (maps.centroid - centre).length().max(1e-3);
+    let field = |start: Vec3| Field {
+        maps,
+        eye,
+        vertex,
+        chart: Chart::new(centre, start),
+        lambda,
+    };
+    let first = starts
+        .into_iter()
+        .filter(|start| *start != Vec3::ZERO)
+        .map(field)
+        .find_map(|field| {
+            let first = field.eval(Vec2::ZERO)?;
+            first.surface.on_reflector.then_some((field, first))
+        });
+    match first {
+        Some((field, first)) => field.run(first, settings),
+        None => VirtualVertex::FAILED,
     }
-    VirtualVertex::FAILED
 }
 
 /// A gnomonic chart of directions from `centre`, tangent at `axis`.

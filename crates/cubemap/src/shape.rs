@@ -40,8 +40,10 @@ impl ReflectorShape {
     }
 }
 
-/// Bends smaller than this fraction of the edge length count as flat.
+/// Mean bends smaller than this fraction of the edge length count as flat.
 const FLAT: f32 = 1e-5;
+/// A kind of bend whose sum is below this share of all bends is noise.
+const MINOR: f64 = 0.1;
 
 /// Classifies the reflector `triangles` of `scene`.
 pub fn classify(scene: &Scene, triangles: &[TriangleId]) -> ReflectorShape {
@@ -56,7 +58,7 @@ pub fn classify(scene: &Scene, triangles: &[TriangleId]) -> ReflectorShape {
             edges.entry((a.min(b), a.max(b))).or_default().push(t);
         }
     }
-    let (mut convex, mut concave) = (0u32, 0u32);
+    let (mut convex, mut concave) = (0.0f64, 0.0f64);
     for (edge, owners) in &edges {
         let [t1, t2] = owners[..] else {
             continue;
@@ -65,13 +67,18 @@ pub fn classify(scene: &Scene, triangles: &[TriangleId]) -> ReflectorShape {
             - Vec3::from_array(edge.1.map(f32::from_bits)))
         .length();
         let bend = height_of_far_corner(scene, t1, t2) + height_of_far_corner(scene, t2, t1);
-        if bend < -FLAT * length {
-            convex += 1;
-        } else if bend > FLAT * length {
-            concave += 1;
+        let relative = f64::from(bend / length.max(f32::MIN_POSITIVE));
+        if relative < 0.0 {
+            convex -= relative;
+        } else {
+            concave += relative;
         }
     }
-    match (convex > 0, concave > 0) {
+    // A quad's diagonal on a doubly curved patch may bend slightly against
+    // the surface (twist): only a bend sum of comparable size counts.
+    let total = convex + concave;
+    let significant = |sum: f64| sum > f64::from(FLAT) * edges.len() as f64 && sum > MINOR * total;
+    match (significant(convex), significant(concave)) {
         (false, false) => ReflectorShape::Flat,
         (true, false) => ReflectorShape::Convex,
         (false, true) => ReflectorShape::Concave,

@@ -15,15 +15,15 @@ use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 
 use crate::{CubeMapMethod, EnvironmentMap, ReflectorShape};
 
-struct Setup {
-    bvh: SceneBvh,
+pub(super) struct Setup {
+    pub(super) bvh: SceneBvh,
     camera: Camera,
     lighting: Lighting,
     ids: IdBuffer,
-    reflector: Vec<u32>,
+    pub(super) reflector: Vec<u32>,
 }
 
-fn small_cockpit() -> Setup {
+pub(super) fn small_cockpit() -> Setup {
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..Default::default()
@@ -45,7 +45,7 @@ fn small_cockpit() -> Setup {
 }
 
 impl Setup {
-    fn frame(&self) -> MethodFrame<'_> {
+    pub(super) fn frame(&self) -> MethodFrame<'_> {
         MethodFrame {
             tracer: Tracer {
                 bvh: &self.bvh,

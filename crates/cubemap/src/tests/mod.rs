@@ -3,5 +3,6 @@
 //! cockpit against the ray-traced reference.
 
 mod cockpit;
+mod debug;
 mod scenes;
 mod sphere;
