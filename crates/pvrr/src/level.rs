@@ -26,6 +26,7 @@ pub(crate) struct Context<'a> {
     specular: BTreeMap<ObjectId, Vec<TriangleId>>,
     searches: AtomicU64,
     rays: AtomicU64,
+    fallbacks: AtomicU64,
 }
 
 impl<'a> Context<'a> {
@@ -45,17 +46,29 @@ impl<'a> Context<'a> {
             specular,
             searches: AtomicU64::new(0),
             rays: AtomicU64::new(0),
+            fallbacks: AtomicU64::new(0),
         }
     }
 
-    /// Per-vertex searches and all rays so far (sums, so independent of the
-    /// thread count).
-    pub(crate) fn counts(&self) -> (u64, u64) {
-        (
-            self.searches.load(Ordering::Relaxed),
-            self.rays.load(Ordering::Relaxed),
-        )
+    /// The counts so far (sums, so independent of the thread count).
+    pub(crate) fn counts(&self) -> Counts {
+        Counts {
+            searches: self.searches.load(Ordering::Relaxed),
+            rays: self.rays.load(Ordering::Relaxed),
+            fallbacks: self.fallbacks.load(Ordering::Relaxed),
+        }
     }
+}
+
+/// What a frame's levels did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Counts {
+    /// Per-vertex exit-ray searches (rays too).
+    pub(crate) searches: u64,
+    /// All rays: searches, map texels, occlusion tests, fallbacks.
+    pub(crate) rays: u64,
+    /// Lookups traced because a corner had no texture coordinate.
+    pub(crate) fallbacks: u64,
 }
 
 /// A surface seen along a ray (a map texel's visible point).
@@ -96,6 +109,10 @@ impl<'a> Level<'a> {
     pub(crate) fn count_searches(&self, n: u64) {
         self.context.searches.fetch_add(n, Ordering::Relaxed);
         self.count_rays(n);
+    }
+
+    pub(crate) fn count_fallback(&self) {
+        self.context.fallbacks.fetch_add(1, Ordering::Relaxed);
     }
 
     pub(crate) fn count_rays(&self, n: u64) {
@@ -141,25 +158,20 @@ impl<'a> Level<'a> {
     fn shade_specular(&self, eye: Vec3, triangles: &[TriangleId], points: &[Seen]) -> Vec<Vec3> {
         let warp = Warp::build(self, eye, triangles, Kind::Reflection);
         let secondary = self.deeper(1).tracer;
-        let traced = points
+        points
             .par_iter()
             .map(|s| {
                 let terms = self.tracer.surface_terms(&s.point, s.incoming);
                 let mut color = terms.local;
-                let mut rays = 0;
                 if terms.reflection.is_some() {
-                    let (radiance, _, r) = warp.radiance_at(&s.point, s.incoming);
-                    color += terms.kr * radiance;
-                    rays += r;
+                    color += terms.kr * warp.radiance_at(&s.point, s.incoming).radiance;
                 }
                 if let Some(ray) = terms.refraction {
                     color += terms.kt * secondary.trace(&ray).color;
-                    rays += 1;
+                    self.count_rays(1);
                 }
-                (color, rays)
+                color
             })
-            .collect::<Vec<_>>();
-        self.count_rays(traced.iter().map(|(_, r)| r).sum());
-        traced.into_iter().map(|(c, _)| c).collect()
+            .collect()
     }
 }

@@ -74,9 +74,8 @@ use rayon::prelude::*;
 use vtfarm_method::{
     MethodCounters, MethodFrame, MethodOutput, Reflection, ReflectionMethod, shade_reflector,
 };
-use vtfarm_scene::NONE;
 
-use crate::level::{Context, Level};
+use crate::level::{Context, Counts, Level};
 use crate::warp::{Kind, Warp};
 
 /// PVRR as a [`ReflectionMethod`].
@@ -128,6 +127,13 @@ impl ReflectionMethod for Pvrr {
     }
 
     fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput {
+        self.render_counted(frame).0
+    }
+}
+
+impl Pvrr {
+    /// [`ReflectionMethod::render`] plus what the levels counted.
+    fn render_counted(&self, frame: &MethodFrame<'_>) -> (MethodOutput, Counts) {
         let start = Instant::now();
         let context = Context::new(&self.config, &frame.tracer);
         let level = Level {
@@ -141,36 +147,40 @@ impl ReflectionMethod for Pvrr {
         let refraction = self.refraction_kind(frame).map(build);
         let setup_time = start.elapsed();
 
-        let found: Vec<(Reflection, Vec3, u64)> = pixels
+        let found: Vec<(Reflection, Vec3)> = pixels
             .par_iter()
             .map(|p| {
                 let at = |w: &Warp<'_>| w.radiance_at(&p.point, p.incoming);
-                let (radiance, object, r1) = reflection.as_ref().map_or((Vec3::ZERO, NONE, 0), at);
-                let (through, _, r2) = refraction.as_ref().map_or((Vec3::ZERO, NONE, 0), at);
-                (Reflection { radiance, object }, through, r1 + r2)
+                let reflected = reflection.as_ref().map(at);
+                let through = refraction.as_ref().map_or(Vec3::ZERO, |w| at(w).radiance);
+                let reflection = reflected.map_or(Reflection::NONE, |r| Reflection {
+                    radiance: r.radiance,
+                    object: r.object,
+                });
+                (reflection, through)
             })
             .collect();
-        let reflections: Vec<Reflection> = found.iter().map(|f| f.0).collect();
-        let transmitted: Vec<Vec3> = found.iter().map(|f| f.1).collect();
+        let (reflections, transmitted): (Vec<Reflection>, Vec<Vec3>) = found.into_iter().unzip();
         let (bitmap, finish_rays) = shade_reflector(
             frame,
             &pixels,
             &reflections,
             refraction.as_ref().map(|_| transmitted.as_slice()),
         );
-        level.count_rays(finish_rays + found.iter().map(|f| f.2).sum::<u64>());
-        let (searches, rays) = context.counts();
-        tracing::debug!(searches, rays, "pvrr rendered {} pixels", pixels.len());
-        MethodOutput {
+        level.count_rays(finish_rays);
+        let counts = context.counts();
+        tracing::debug!(?counts, "pvrr rendered {} pixels", pixels.len());
+        let output = MethodOutput {
             bitmap,
             counters: MethodCounters {
-                rays,
-                searches,
+                rays: counts.rays,
+                searches: counts.searches,
                 pixels: pixels.len() as u64,
                 setup_time,
                 time: start.elapsed(),
             },
-        }
+        };
+        (output, counts)
     }
 }
 

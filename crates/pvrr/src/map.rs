@@ -20,12 +20,49 @@ use crate::viewpoint::MapView;
 /// a degenerate stack of coincident sheets.
 const MAX_SKIPS: usize = 16;
 
+/// How close, relative to its distance, a visible point must be to P to be P.
+const SAME_POINT: f32 = 1e-3;
+
+/// The first surface beyond the near plane, in `direction` from the virtual
+/// viewpoint, that is not one of `excluded` (sorted).
+fn first_visible(
+    level: &Level<'_>,
+    view: &MapView,
+    excluded: &[ObjectId],
+    direction: Vec3,
+) -> Option<Seen> {
+    let bvh = level.tracer.bvh;
+    let scene = bvh.scene();
+    let forward = view.camera.basis().0;
+    let start = view.near / direction.dot(forward).max(1e-6);
+    let mut ray = Ray {
+        origin: view.camera.eye + direction * start,
+        direction,
+    };
+    for _ in 0..MAX_SKIPS {
+        let hit = bvh.closest_hit(&ray, f32::INFINITY)?;
+        let object = scene.triangles[hit.triangle as usize].object;
+        let point = bvh.surface_point(&hit);
+        if excluded.binary_search(&object).is_err() {
+            return Some(Seen {
+                point,
+                incoming: direction,
+                object,
+            });
+        }
+        ray.origin = point.position + direction * bvh.epsilon();
+    }
+    None
+}
+
 /// A rendered reflection (or refraction) map.
 pub(crate) struct ReflectionMap {
     pub(crate) view: MapView,
     pub(crate) projector: Projector,
     radiance: Vec<Vec3>,
     object: Vec<ObjectId>,
+    /// The objects left out (the reflector itself), sorted.
+    excluded: Vec<ObjectId>,
 }
 
 impl ReflectionMap {
@@ -34,34 +71,12 @@ impl ReflectionMap {
     /// the virtual viewpoint (multiple reflection recurses there).
     pub(crate) fn render(level: &Level<'_>, view: MapView, excluded: &[ObjectId]) -> Self {
         let camera = view.camera;
-        let bvh = level.tracer.bvh;
-        let scene = bvh.scene();
-        let forward = camera.basis().0;
         let texels = (camera.width * camera.height) as usize;
         let seen: Vec<Option<Seen>> = (0..texels)
             .into_par_iter()
             .map(|i| {
                 let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
-                let direction = camera.pixel_ray(x, y);
-                let start = view.near / direction.dot(forward).max(1e-6);
-                let mut ray = Ray {
-                    origin: camera.eye + direction * start,
-                    direction,
-                };
-                for _ in 0..MAX_SKIPS {
-                    let hit = bvh.closest_hit(&ray, f32::INFINITY)?;
-                    let object = scene.triangles[hit.triangle as usize].object;
-                    let point = bvh.surface_point(&hit);
-                    if excluded.binary_search(&object).is_err() {
-                        return Some(Seen {
-                            point,
-                            incoming: direction,
-                            object,
-                        });
-                    }
-                    ray.origin = point.position + direction * bvh.epsilon();
-                }
-                None
+                first_visible(level, &view, excluded, camera.pixel_ray(x, y))
             })
             .collect();
         level.count_rays(texels as u64);
@@ -71,7 +86,23 @@ impl ReflectionMap {
             view,
             radiance,
             object: seen.iter().map(|s| s.map_or(NONE, |s| s.object)).collect(),
+            excluded: excluded.to_vec(),
         }
+    }
+
+    /// Whether the map shows the scene point `p` (a hit P) or, for `None`,
+    /// the empty background in `direction` from the virtual viewpoint: the
+    /// occlusion test of §6, one ray.
+    pub(crate) fn shows(&self, level: &Level<'_>, p: Option<Vec3>, direction: Vec3) -> bool {
+        let eye = self.view.camera.eye;
+        level.count_rays(1);
+        let Some(p) = p else {
+            return first_visible(level, &self.view, &self.excluded, direction).is_none();
+        };
+        let distance = p.distance(eye);
+        let towards = (p - eye) / distance;
+        first_visible(level, &self.view, &self.excluded, towards)
+            .is_some_and(|s| s.point.position.distance(p) <= distance * SAME_POINT)
     }
 
     /// Bilinear lookup at continuous map coordinates (texel centres at +0.5),

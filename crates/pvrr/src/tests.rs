@@ -7,10 +7,11 @@ mod scenes;
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_method::{MethodFrame, ReflectionMethod, VertexTracing};
+use vtfarm_method::{MethodFrame, Reflection, ReflectionMethod, VertexTracing, shade_reflector};
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, NONE, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
+use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 
 use self::scenes::Builder;
 use crate::level::{Context, Level};
@@ -82,8 +83,11 @@ struct VertexErrors {
     facing: usize,
     /// Vertices the map shows (the others are traced, so trivially exact).
     mapped: usize,
-    /// Mean and maximum of the largest channel error over mapped vertices.
+    /// Mean and maximum of the largest channel error over mapped vertices
+    /// (the maximum is reported, not checked: a vertex whose P lies on an
+    /// edge between two colours gets a texel of each).
     mean: f32,
+    #[allow(dead_code)]
     worst: f32,
     /// Share of mapped vertices within `tolerance`.
     within: f32,
@@ -100,10 +104,9 @@ fn vertex_errors(
     let vertices = setup.facing_vertices();
     let mut errors = Vec::new();
     for (point, incoming) in &vertices {
-        let (got, _, traced) = warp.radiance_at(point, *incoming);
-        if traced == 0 {
+        if let Some(got) = warp.mapped_at(point, *incoming) {
             errors.push(
-                ((got - expected(point, *incoming)) * mask)
+                ((got.radiance - expected(point, *incoming)) * mask)
                     .abs()
                     .max_element(),
             );
@@ -453,26 +456,29 @@ fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
     assert!(via_b.len() > 40, "{} vertices see mirror B", via_b.len());
     with_level(&frame, config(512, Refraction::Traced), |level| {
         let warp = Warp::build(level, setup.camera.eye, &setup.reflector, Kind::Reflection);
-        let mut brightness = 0.0;
-        let mut close = 0;
+        let (mut brightness, mut mapped, mut close) = (0.0, 0, 0);
         for (point, incoming) in &via_b {
-            let (got, object, traced) = warp.radiance_at(point, *incoming);
+            let Some(got) = warp.mapped_at(point, *incoming) else {
+                continue;
+            };
             let expected = traced_reflection(&frame)(point, *incoming);
-            assert_eq!(traced, 0);
-            assert_eq!(object, mirror_b);
-            brightness += got.max_element() / via_b.len() as f32;
-            if (got - expected).abs().max_element() < 0.03 {
-                close += 1;
-            }
+            assert_eq!(got.object, mirror_b);
+            mapped += 1;
+            brightness += got.radiance.max_element();
+            close += usize::from((got.radiance - expected).abs().max_element() < 0.03);
         }
         // Mirror B has no colour of its own: what it shows is the room
         // reflected a second time.
-        assert!(brightness > 0.1, "mean brightness {brightness}");
         assert!(
-            close as f32 >= 0.95 * via_b.len() as f32,
-            "{close} of {}",
+            mapped as f32 >= 0.8 * via_b.len() as f32,
+            "{mapped} of {}",
             via_b.len()
         );
+        assert!(
+            brightness / mapped as f32 > 0.1,
+            "mean brightness {brightness}"
+        );
+        assert!(close as f32 >= 0.95 * mapped as f32, "{close} of {mapped}");
     });
 }
 
@@ -493,10 +499,10 @@ fn without_depth_for_a_second_bounce_the_mirror_in_the_mirror_is_dark() {
         // Only the texels at B's silhouette blend in the room behind it.
         let (mut on_b, mut dark) = (0, 0);
         for (point, incoming) in setup.facing_vertices() {
-            let (got, object, _) = warp.radiance_at(&point, incoming);
-            if object == mirror_b {
+            let got = warp.radiance_at(&point, incoming);
+            if got.object == mirror_b {
                 on_b += 1;
-                dark += usize::from(got.max_element() < 0.01);
+                dark += usize::from(got.radiance.max_element() < 0.01);
             }
         }
         assert!(on_b > 40, "{on_b} vertices show mirror B");
@@ -521,4 +527,150 @@ fn the_image_does_not_depend_on_the_thread_count() {
     assert_eq!(one.bitmap.reflected_object, three.bitmap.reflected_object);
     assert_eq!(one.counters.rays, three.counters.rays);
     assert_eq!(one.counters.searches, three.counters.searches);
+}
+
+/// The cockpit at detail 0.3, 160×90, default camera and lights.
+fn small_cockpit() -> Setup {
+    let c = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
+        detail: 0.3,
+        ..Default::default()
+    });
+    let camera = Camera {
+        width: 160,
+        height: 90,
+        ..c.camera
+    };
+    let reflector = c.cover_glass_triangles();
+    Setup::new(c.scene, c.lighting, camera, reflector)
+}
+
+/// Mean absolute error of the reflected component over the reflector's
+/// pixels (both bitmaps cover the same pixels).
+fn reflected_error(a: &SparseBitmap, b: &SparseBitmap) -> f32 {
+    assert_eq!(a.mask, b.mask);
+    let sum: f32 = a
+        .reflected
+        .iter()
+        .zip(&b.reflected)
+        .map(|(x, y)| (*x - *y).abs().element_sum() / 3.0)
+        .sum();
+    sum / a.reflected.len().max(1) as f32
+}
+
+/// The plain environment map the paper improves on: one cube map from the
+/// reflector's centre (the scene without the glass, rasterized), looked up
+/// by the mirror direction alone.
+fn environment_map_reflected(setup: &Setup, face: u32) -> SparseBitmap {
+    let frame = setup.frame();
+    let scene = setup.bvh.scene();
+    let glass: Vec<u32> = ["cover_glass", "cover_glass_back"]
+        .iter()
+        .filter_map(|name| scene.object_id(name))
+        .collect();
+    let (sum, count) = setup
+        .reflector
+        .iter()
+        .fold((Vec3::ZERO, 0.0), |(s, n), &t| {
+            let [a, b, c] = scene.triangle_positions(t);
+            (s + (a + b + c) / 3.0, n + 1.0)
+        });
+    let center = sum / count;
+    let faces: Vec<(Camera, vtfarm_imaging::Image)> = [
+        (Vec3::X, Vec3::Y),
+        (Vec3::NEG_X, Vec3::Y),
+        (Vec3::Y, Vec3::Z),
+        (Vec3::NEG_Y, Vec3::Z),
+        (Vec3::Z, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::Y),
+    ]
+    .iter()
+    .map(|&(axis, up)| {
+        let camera = Camera {
+            eye: center,
+            target: center + axis,
+            up,
+            fov_y_deg: 90.0,
+            width: face,
+            height: face,
+        };
+        let keep = |t: TriangleId| !glass.contains(&scene.triangles[t as usize].object);
+        let ids = vtfarm_raster::id_buffer_where(scene, &camera, &keep);
+        let image = vtfarm_raster::shade_ids(scene, &camera, &setup.lighting, &ids);
+        (camera, image)
+    })
+    .collect();
+    let lookup = |d: Vec3| {
+        let (camera, image) = faces
+            .iter()
+            .max_by(|a, b| {
+                let da = (a.0.target - a.0.eye).dot(d);
+                let db = (b.0.target - b.0.eye).dot(d);
+                da.total_cmp(&db)
+            })
+            .expect("six faces");
+        let s = camera
+            .project(camera.eye + d)
+            .expect("in front of its face");
+        let x = (s.x.max(0.0) as u32).min(face - 1);
+        let y = (s.y.max(0.0) as u32).min(face - 1);
+        image.get(x, y)
+    };
+    let pixels = frame.pixels();
+    let reflections: Vec<Reflection> = pixels
+        .iter()
+        .map(|p| {
+            let terms = frame.tracer.surface_terms(&p.point, p.incoming);
+            Reflection {
+                radiance: terms.reflection.map_or(Vec3::ZERO, |r| lookup(r.direction)),
+                object: NONE,
+            }
+        })
+        .collect();
+    shade_reflector(&frame, &pixels, &reflections, None).0
+}
+
+#[test]
+fn on_the_cockpit_pvrr_is_closer_to_the_reference_than_an_environment_map() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let reference = VertexTracing {
+        settings: VertexSettings {
+            quality: Quality::Reference,
+            ..Default::default()
+        },
+    }
+    .render(&frame);
+    let (pvrr, counts) = Pvrr::default().render_counted(&frame);
+    let environment = environment_map_reflected(&setup, 256);
+    let pvrr_error = reflected_error(&pvrr.bitmap, &reference.bitmap);
+    let environment_error = reflected_error(&environment, &reference.bitmap);
+    let mean_reflected = reflected_error(
+        &reference.bitmap,
+        &SparseBitmap {
+            reflected: vec![Vec3::ZERO; reference.bitmap.reflected.len()],
+            ..reference.bitmap.clone()
+        },
+    );
+    eprintln!(
+        "cockpit: reflected MAE pvrr {pvrr_error:.5}, environment map {environment_error:.5} \
+         (mean reflected {mean_reflected:.5}); pvrr {:?} {counts:?}; reference {:?}",
+        pvrr.counters, reference.counters
+    );
+    assert!(pvrr.counters.searches > 300, "{:?}", pvrr.counters);
+    // The concave glass's virtual viewpoint does not see all of the left
+    // door window (§6): those pixels are traced, the rest mapped.
+    assert!(counts.fallbacks * 3 < pvrr.counters.pixels, "{counts:?}");
+    assert!(
+        pvrr_error < environment_error * 0.7,
+        "{pvrr_error} vs {environment_error}"
+    );
+    // Transmission is traced exactly by the shared finishing step.
+    for (a, b) in pvrr
+        .bitmap
+        .transmitted
+        .iter()
+        .zip(&reference.bitmap.transmitted)
+    {
+        assert!((*a - *b).abs().max_element() < 1e-5, "{a} vs {b}");
+    }
 }

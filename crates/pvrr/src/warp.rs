@@ -7,7 +7,8 @@
 //! Texture coordinates are kept per colour channel: refraction with three
 //! indices (§4.5, chromatic aberration) gives three sets over one shared map.
 //! A vertex whose P is not in the map (the zooming region of §4.2, a path
-//! that reflects totally, a point past the widest frustum) has no coordinate;
+//! that reflects totally, a point past the widest frustum, or a P hidden
+//! from the virtual viewpoint by another object, §6) has no coordinate;
 //! points on its triangles are traced exactly instead.
 
 use glam::{Vec2, Vec3};
@@ -37,6 +38,13 @@ struct VertexCoords {
     coords: [Option<Vec2>; 3],
     offset: Vec3,
     weight: Vec3,
+}
+
+/// What a lookup found.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lookup {
+    pub(crate) radiance: Vec3,
+    pub(crate) object: ObjectId,
 }
 
 /// A reflector's map and texture coordinates, ready for lookups.
@@ -113,20 +121,23 @@ impl<'a> Warp<'a> {
             Kind::Reflection => 1,
             Kind::Refraction { .. } => 2,
         };
-        let map = ReflectionMap::render(&level.deeper(bounces), view, &excluded);
+        let texel_level = level.deeper(bounces);
+        let map = ReflectionMap::render(&texel_level, view, &excluded);
 
         let coords = paths
-            .iter()
+            .par_iter()
             .map(|p| {
                 let mut v = VertexCoords::default();
                 for (c, path) in p.iter().enumerate() {
                     let Some(path) = path else { continue };
-                    v.coords[c] = match path.hit {
+                    let coords = match path.hit {
                         Some(hit) => map.view.coords_of_point(&map.projector, hit),
                         None => map
                             .view
                             .coords_of_direction(&map.projector, path.exit.direction),
                     };
+                    v.coords[c] =
+                        coords.filter(|_| map.shows(&texel_level, path.hit, path.exit.direction));
                     v.offset[c] = path.offset[c];
                     v.weight[c] = path.weight[c];
                 }
@@ -144,13 +155,9 @@ impl<'a> Warp<'a> {
 
     /// The radiance the reflector passes on at a point of one of its
     /// triangles seen along `incoming` (reflected, or transmitted through
-    /// both faces), the object the map shows there, and the rays traced
-    /// where a corner had no texture coordinate.
-    pub(crate) fn radiance_at(
-        &self,
-        point: &SurfacePoint,
-        incoming: Vec3,
-    ) -> (Vec3, ObjectId, u64) {
+    /// both faces) and the object shown there; traced (and counted) where a
+    /// corner has no texture coordinate.
+    pub(crate) fn radiance_at(&self, point: &SurfacePoint, incoming: Vec3) -> Lookup {
         let scene = self.level.tracer.bvh.scene();
         let corners = scene.triangles[point.triangle as usize].vertices.map(|v| {
             let i = self.vertices.binary_search(&v);
@@ -175,30 +182,46 @@ impl<'a> Warp<'a> {
                 object = self.map.object_at(at);
             }
         }
-        (radiance, object, 0)
+        Lookup { radiance, object }
     }
 
     /// The exact radiance at a point the map cannot show, by tracing.
-    fn traced(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, ObjectId, u64) {
+    fn traced(&self, point: &SurfacePoint, incoming: Vec3) -> Lookup {
+        self.level.count_fallback();
         let terms = self.level.tracer.surface_terms(point, incoming);
         let ray = match self.kind {
             Kind::Reflection => terms.reflection,
             Kind::Refraction { .. } => terms.refraction,
         };
         let Some(ray) = ray else {
-            return (Vec3::ZERO, NONE, 0);
+            return Lookup {
+                radiance: Vec3::ZERO,
+                object: NONE,
+            };
         };
         let bvh = self.level.tracer.bvh;
         let object = bvh
             .closest_hit(&ray, f32::INFINITY)
             .map_or(NONE, |h| bvh.scene().triangles[h.triangle as usize].object);
-        let color = self.level.deeper(1).tracer.trace(&ray).color;
-        (color, object, 2)
+        self.level.count_rays(2);
+        Lookup {
+            radiance: self.level.deeper(1).tracer.trace(&ray).color,
+            object,
+        }
     }
 
     #[cfg(test)]
     pub(crate) fn map(&self) -> &ReflectionMap {
         &self.map
+    }
+
+    /// A lookup that the map answers, or `None` where it falls back on
+    /// tracing.
+    #[cfg(test)]
+    pub(crate) fn mapped_at(&self, point: &SurfacePoint, incoming: Vec3) -> Option<Lookup> {
+        let before = self.level.context.counts().fallbacks;
+        let lookup = self.radiance_at(point, incoming);
+        (self.level.context.counts().fallbacks == before).then_some(lookup)
     }
 }
 
@@ -241,13 +264,4 @@ fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
     let wa = (c - b).cross(p - b).dot(n) / area;
     let wb = (a - c).cross(p - c).dot(n) / area;
     [wa, wb, 1.0 - wa - wb]
-}
-#[cfg(test)]
-impl Warp<'_> {
-    pub(crate) fn debug_counts(&self) -> (usize, usize) {
-        (
-            self.coords.len(),
-            self.coords.iter().filter(|c| c.coords[0].is_some()).count(),
-        )
-    }
 }
