@@ -5,8 +5,9 @@
 //! tangent at the start direction (a cube face centred on the start, so the
 //! search never meets a seam). At a chart point x the maps give the surface
 //! point P and normal N; B is the bisector of P→eye and P→V, and the
-//! projected bisector direction b(x) is the chart image of P + λB minus
-//! that of P + λN (§4.2, Fig. 3). The reflection point is the sink b = 0.
+//! projected bisector direction b(x) is the chart image of the move from
+//! the tip of N to the tip of B at P (§4.2, Fig. 3), taken through the
+//! projection's differential. The reflection point is the sink b = 0.
 //!
 //! Steps follow the midpoint method (second-order Runge–Kutta): b at x,
 //! then at half a step along it, then a full step along the midpoint's
@@ -45,7 +46,7 @@ pub struct SearchSettings {
 impl Default for SearchSettings {
     fn default() -> Self {
         SearchSettings {
-            epsilon: 1e-7,
+            epsilon: 1e-9,
             max_iterations: 40,
         }
     }
@@ -111,13 +112,11 @@ pub fn search(
         (maps.centroid - centre).normalize_or_zero(),
         to_eye,
     ];
-    let lambda = 0.25 * (maps.centroid - centre).length().max(1e-3);
     let field = |start: Vec3| Field {
         maps,
         eye,
         vertex,
         chart: Chart::new(centre, start),
-        lambda,
     };
     let first = starts
         .into_iter()
@@ -157,10 +156,14 @@ impl Chart {
         self.axis + self.e1 * x.x + self.e2 * x.y
     }
 
-    fn project(&self, p: Vec3) -> Vec2 {
+    /// The chart image of an infinitesimal move `delta` at `p` (the
+    /// projection's differential: no cancellation between two nearby
+    /// projected points).
+    fn project_move(&self, p: Vec3, delta: Vec3) -> Vec2 {
         let d = p - self.centre;
         let depth = d.dot(self.axis).max(1e-6);
-        Vec2::new(d.dot(self.e1), d.dot(self.e2)) / depth
+        let image = Vec2::new(d.dot(self.e1), d.dot(self.e2)) / depth;
+        (Vec2::new(delta.dot(self.e1), delta.dot(self.e2)) - image * delta.dot(self.axis)) / depth
     }
 }
 
@@ -170,8 +173,6 @@ struct Field<'a> {
     eye: Vec3,
     vertex: Vec3,
     chart: Chart,
-    /// Length of the B and N arrows projected into the chart.
-    lambda: f32,
 }
 
 /// The field at one chart point.
@@ -211,8 +212,7 @@ impl Field<'_> {
         };
         let b = ((self.eye - p).normalize_or_zero() + (seen - p).normalize_or_zero())
             .normalize_or(normal);
-        let bisector =
-            self.chart.project(p + b * self.lambda) - self.chart.project(p + normal * self.lambda);
+        let bisector = self.chart.project_move(p, b - normal);
         Some(Eval {
             x,
             surface,
@@ -249,10 +249,7 @@ impl Field<'_> {
         while current.error >= settings.epsilon && iterations < settings.max_iterations {
             iterations += 1;
             let g_start = m * current.bisector;
-            let distance = g_start.length();
-            if distance < 1e-9 {
-                break;
-            }
+            let distance = g_start.length().max(f32::MIN_POSITIVE);
             let step = distance.min(step_cap);
             let accepted = self
                 .eval(current.x + g_start * (0.5 * step / distance))

@@ -196,3 +196,16 @@ fn debug_relevant() {
         println!("{n:6} {k}");
     }
 }
+
+#[test]
+fn debug_sphere_case() {
+    let (scene, sphere) = super::scenes::sphere_scene(0.5);
+    let maps = crate::ReflectorMaps::build(&scene, &sphere, 256, 1);
+    let s = crate::search(
+        &maps,
+        glam::Vec3::new(0.3, 0.4, 2.0),
+        glam::Vec3::new(0.80520606, -0.14700004, 0.65767324),
+        &crate::SearchSettings::default(),
+    );
+    println!("{s:?}");
+}
