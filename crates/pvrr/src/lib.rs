@@ -95,7 +95,7 @@ pub struct PvrrConfig {
 impl Default for PvrrConfig {
     fn default() -> Self {
         PvrrConfig {
-            map_resolution: 512,
+            map_resolution: 256,
             refraction: Refraction::Traced,
         }
     }

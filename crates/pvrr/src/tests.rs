@@ -674,3 +674,54 @@ fn on_the_cockpit_pvrr_is_closer_to_the_reference_than_an_environment_map() {
         assert!((*a - *b).abs().max_element() < 1e-5, "{a} vs {b}");
     }
 }
+
+/// Mean absolute error of the transmitted component over the reflector's
+/// pixels, and the reference's mean.
+fn transmitted_error(a: &SparseBitmap, reference: &SparseBitmap) -> (f32, f32) {
+    assert_eq!(a.mask, reference.mask);
+    let n = a.transmitted.len().max(1) as f32;
+    let error: f32 = a
+        .transmitted
+        .iter()
+        .zip(&reference.transmitted)
+        .map(|(x, y)| (*x - *y).abs().element_sum() / 3.0)
+        .sum();
+    let mean: f32 = reference
+        .transmitted
+        .iter()
+        .map(|x| x.element_sum() / 3.0)
+        .sum();
+    (error / n, mean / n)
+}
+
+#[test]
+fn a_rendered_lens_matches_the_reference_through_both_faces() {
+    let setup = lens(1.61);
+    let frame = setup.frame();
+    let reference = VertexTracing {
+        settings: VertexSettings {
+            quality: Quality::Reference,
+            ..Default::default()
+        },
+    }
+    .render(&frame);
+    let method = Pvrr::new(config(256, Refraction::Mapped { iors: None }));
+    assert_eq!(method.name(), "pvrr-refraction");
+    let (pvrr, counts) = method.render_counted(&frame);
+    let (error, mean) = transmitted_error(&pvrr.bitmap, &reference.bitmap);
+    eprintln!(
+        "lens: transmitted MAE {error:.5} (mean {mean:.5}); {:?} {counts:?}",
+        pvrr.counters
+    );
+    assert!(mean > 0.2, "the lens shows the backdrop");
+    assert!(error < 0.01 * mean, "{error} vs mean {mean}");
+    // Up to two rays per vertex: to the back face and on to the backdrop
+    // (one where the ray leaves through the open rim).
+    let facing = setup.facing_vertices().len() as u64;
+    assert!(
+        counts.searches > facing && counts.searches <= 2 * facing,
+        "{counts:?}"
+    );
+    // Only pixels next to the lens's open rim are traced.
+    assert!(counts.fallbacks * 5 < pvrr.counters.pixels, "{counts:?}");
+}
