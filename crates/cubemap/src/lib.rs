@@ -49,6 +49,7 @@ mod cube;
 mod envmap;
 mod extension;
 mod maps;
+mod mesh;
 mod method;
 mod raster;
 mod reflected;

@@ -8,10 +8,12 @@ use rayon::prelude::*;
 use vtfarm_method::{
     MethodCounters, MethodFrame, MethodOutput, Reflection, ReflectionMethod, shade_reflector,
 };
+use vtfarm_scene::Scene;
 use vtfarm_trace::SurfacePoint;
 
 use crate::envmap::{EnvironmentCube, EnvironmentMap, mirror_direction};
 use crate::maps::ReflectorMaps;
+use crate::mesh::ReflectedMesh;
 use crate::raster::{VirtualHit, rasterize_virtual_meshes};
 use crate::reflected::reflected_triangle_flags;
 use crate::search::{SearchSettings, VirtualVertex};
@@ -31,6 +33,9 @@ pub struct CubeMapConfig {
     pub grid: Option<GridSettings>,
     /// Texels per face side of the environment map for uncovered pixels.
     pub fallback_resolution: u32,
+    /// Reflected triangles with a longer edge are split (see `mesh`), as a
+    /// fraction of the reflector's radius around its centroid.
+    pub max_edge: f32,
 }
 
 impl Default for CubeMapConfig {
@@ -41,6 +46,7 @@ impl Default for CubeMapConfig {
             search: SearchSettings::default(),
             grid: None,
             fallback_resolution: 128,
+            max_edge: 0.5,
         }
     }
 }
@@ -102,23 +108,39 @@ impl CubeMapMethod {
         }
     }
 
-    /// The virtual vertex of every scene vertex the reflected meshes use
-    /// (`None` elsewhere) and the number of searches.
-    pub fn virtual_vertices(
+    /// The reflected meshes, split as `max_edge` asks.
+    pub(crate) fn reflected_mesh(
+        &self,
+        frame: &MethodFrame<'_>,
+        maps: &ReflectorMaps,
+    ) -> ReflectedMesh {
+        let scene = frame.tracer.bvh.scene();
+        let radius = frame
+            .reflector
+            .iter()
+            .flat_map(|&t| scene.triangle_positions(t))
+            .map(|p| (p - maps.centroid).length())
+            .fold(0.0, f32::max);
+        let keep = reflected_triangle_flags(scene, frame.reflector);
+        ReflectedMesh::build(scene, &keep, self.config.max_edge * radius)
+    }
+
+    /// The virtual vertex of every vertex of the reflected meshes (with the
+    /// mesh) and the number of searches.
+    pub(crate) fn virtual_vertices(
         &self,
         frame: &MethodFrame<'_>,
         prepared: &PreparedReflector,
-    ) -> (Vec<Option<VirtualVertex>>, u64) {
-        let scene = frame.tracer.bvh.scene();
-        let triangles = reflected_triangles(frame);
-        virtual_vertices(
-            scene,
-            &triangles,
+    ) -> (ReflectedMesh, Vec<VirtualVertex>, u64) {
+        let mesh = self.reflected_mesh(frame, &prepared.maps);
+        let (virtuals, searches) = virtual_vertices(
+            &mesh,
             &prepared.maps,
             frame.camera.eye,
             &self.config.search,
             self.config.grid.as_ref(),
-        )
+        );
+        (mesh, virtuals, searches)
     }
 
     /// Renders with an existing pre-processing.
@@ -128,35 +150,20 @@ impl CubeMapMethod {
         prepared: &PreparedReflector,
     ) -> MethodOutput {
         let scene = frame.tracer.bvh.scene();
-        let triangles = reflected_triangles(frame);
-        let (virtuals, searches) = virtual_vertices(
-            scene,
-            &triangles,
-            &prepared.maps,
-            frame.camera.eye,
-            &self.config.search,
-            self.config.grid.as_ref(),
-        );
+        let (mesh, virtuals, searches) = self.virtual_vertices(frame, prepared);
         let pixels = frame.pixels();
-        let hits = rasterize_virtual_meshes(
-            scene,
-            &frame.camera,
-            frame.ids,
-            &pixels,
-            &triangles,
-            &virtuals,
-        );
+        let hits = rasterize_virtual_meshes(&mesh, &frame.camera, frame.ids, &pixels, &virtuals);
         let secondary = frame.secondary_tracer();
         let reflections: Vec<Reflection> = pixels
             .par_iter()
             .zip(&hits)
             .map(|(pixel, hit)| match hit {
                 Some(hit) => {
-                    let point = surface_point(scene, hit);
+                    let point = surface_point(scene, &mesh, hit);
                     let incoming = (point.position - pixel.point.position).normalize_or_zero();
                     Reflection {
                         radiance: secondary.shade(&point, incoming).color,
-                        object: scene.triangles[hit.triangle as usize].object,
+                        object: scene.triangles[point.triangle as usize].object,
                     }
                 }
                 None => prepared.fallback.lookup(mirror_direction(pixel)),
@@ -195,22 +202,18 @@ impl ReflectionMethod for CubeMapMethod {
     }
 }
 
-/// The scene triangles the reflector mirrors.
-fn reflected_triangles(frame: &MethodFrame<'_>) -> Vec<u32> {
-    let flags = reflected_triangle_flags(frame.tracer.bvh.scene(), frame.reflector);
-    (0..flags.len() as u32)
-        .filter(|&t| flags[t as usize])
-        .collect()
-}
-
 /// The original surface point under a virtual fragment.
-fn surface_point(scene: &vtfarm_scene::Scene, hit: &VirtualHit) -> SurfacePoint {
-    let positions = scene.triangle_positions(hit.triangle);
-    let normals = scene.triangle_normals(hit.triangle);
-    let [w0, w1, w2] = hit.weights;
+fn surface_point(scene: &Scene, mesh: &ReflectedMesh, hit: &VirtualHit) -> SurfacePoint {
+    let triangle = &mesh.triangles[hit.triangle as usize];
+    let w: Vec3 = (0..3)
+        .map(|k| triangle.barycentric[k] * hit.weights[k])
+        .sum();
+    let positions = scene.triangle_positions(triangle.original);
+    let normals = scene.triangle_normals(triangle.original);
     SurfacePoint {
-        position: positions[0] * w0 + positions[1] * w1 + positions[2] * w2,
-        normal: (normals[0] * w0 + normals[1] * w1 + normals[2] * w2).normalize_or(Vec3::Y),
-        triangle: hit.triangle,
+        position: positions[0] * w.x + positions[1] * w.y + positions[2] * w.z,
+        normal: (normals[0] * w.x + normals[1] * w.y + normals[2] * w.z)
+            .normalize_or(scene.geometric_normal(triangle.original)),
+        triangle: triangle.original,
     }
 }

@@ -10,21 +10,22 @@
 use rayon::prelude::*;
 use vtfarm_method::ReflectorPixel;
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, NONE, Projector, ScreenPoint, TriangleId};
+use vtfarm_scene::{Camera, NONE, Projector, ScreenPoint};
 
+use crate::mesh::ReflectedMesh;
 use crate::search::{Region, VirtualVertex};
 
-/// What a reflector pixel shows of the virtual meshes: the original
-/// triangle and perspective-correct barycentric weights of its corners.
+/// What a reflector pixel shows of the virtual meshes: a triangle of the
+/// reflected mesh and perspective-correct barycentric weights of its corners.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct VirtualHit {
-    pub(crate) triangle: TriangleId,
+    pub(crate) triangle: u32,
     pub(crate) weights: [f32; 3],
 }
 
 /// A virtual triangle projected to the screen.
 struct ScreenTriangle {
-    triangle: TriangleId,
+    triangle: u32,
     corners: [ScreenPoint; 3],
 }
 
@@ -41,25 +42,24 @@ struct PixelWindow {
 const BAND_ROWS: u32 = 8;
 
 /// One hit (or none) per entry of `pixels`. `virtuals` holds the virtual
-/// vertex of every scene vertex `triangles` use.
+/// vertex of every vertex of `mesh`.
 pub(crate) fn rasterize_virtual_meshes(
-    scene: &vtfarm_scene::Scene,
+    mesh: &ReflectedMesh,
     camera: &Camera,
     ids: &IdBuffer,
     pixels: &[ReflectorPixel],
-    triangles: &[TriangleId],
-    virtuals: &[Option<VirtualVertex>],
+    virtuals: &[VirtualVertex],
 ) -> Vec<Option<VirtualHit>> {
     let Some(window) = PixelWindow::new(pixels) else {
         return Vec::new();
     };
     let projector = Projector::new(camera);
-    let screen: Vec<ScreenTriangle> = triangles
+    let screen: Vec<ScreenTriangle> = mesh
+        .triangles
         .par_iter()
-        .filter_map(|&t| {
-            let corners = scene.triangles[t as usize]
-                .vertices
-                .map(|v| virtuals[v as usize].unwrap_or(VirtualVertex::FAILED));
+        .enumerate()
+        .filter_map(|(t, triangle)| {
+            let corners = triangle.corners.map(|v| virtuals[v as usize]);
             // Triangles wholly hidden or unreflected stay out (§6.1); a
             // failed corner would place the triangle anywhere.
             let usable = corners.iter().all(|c| c.region != Region::Failed)
@@ -72,7 +72,7 @@ pub(crate) fn rasterize_virtual_meshes(
                 return None;
             };
             let triangle = ScreenTriangle {
-                triangle: t,
+                triangle: t as u32,
                 corners: [a, b, c],
             };
             window.span(&triangle).is_some().then_some(triangle)

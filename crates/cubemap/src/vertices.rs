@@ -8,9 +8,9 @@
 
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
-use vtfarm_scene::Scene;
 
 use crate::maps::ReflectorMaps;
+use crate::mesh::ReflectedMesh;
 use crate::search::{Region, SearchSettings, VirtualVertex, search};
 
 /// The interpolation grid's size (§5).
@@ -28,26 +28,24 @@ impl Default for GridSettings {
     }
 }
 
-/// Virtual vertices for every scene vertex used by `triangles`
-/// (`None` for unused vertices) and the number of searches run.
+/// The virtual vertex of every vertex of `mesh` and the number of
+/// searches run.
 pub(crate) fn virtual_vertices(
-    scene: &Scene,
-    triangles: &[u32],
+    mesh: &ReflectedMesh,
     maps: &ReflectorMaps,
     eye: Vec3,
     search_settings: &SearchSettings,
     grid: Option<&GridSettings>,
-) -> (Vec<Option<VirtualVertex>>, u64) {
-    let meshes = mesh_vertices(scene, triangles);
-    let mut out = vec![None; scene.positions.len()];
+) -> (Vec<VirtualVertex>, u64) {
+    let mut out = vec![VirtualVertex::FAILED; mesh.positions.len()];
     let mut searches = 0;
-    for vertices in meshes.iter().filter(|v| !v.is_empty()) {
+    for vertices in objects_vertices(mesh) {
         let points: Vec<Vec3> = vertices
             .iter()
-            .map(|&v| scene.positions[v as usize])
+            .map(|&v| mesh.positions[v as usize])
             .collect();
         let grid = grid.and_then(|g| Grid::new(&points, g.fraction));
-        let results = match grid {
+        let results: Vec<VirtualVertex> = match grid {
             Some(grid) => {
                 let corners: Vec<VirtualVertex> = grid
                     .corners
@@ -56,9 +54,9 @@ pub(crate) fn virtual_vertices(
                     .collect();
                 searches += corners.len() as u64;
                 points
-                    .iter()
+                    .par_iter()
                     .map(|&p| grid.interpolate(p, &corners))
-                    .collect::<Vec<_>>()
+                    .collect()
             }
             None => {
                 searches += points.len() as u64;
@@ -69,24 +67,27 @@ pub(crate) fn virtual_vertices(
             }
         };
         for (&v, result) in vertices.iter().zip(results) {
-            out[v as usize] = Some(result);
+            out[v as usize] = result;
         }
     }
     (out, searches)
 }
 
-/// The sorted, distinct vertex indices of `triangles` per object.
-fn mesh_vertices(scene: &Scene, triangles: &[u32]) -> Vec<Vec<u32>> {
-    let mut meshes = vec![Vec::new(); scene.objects.len()];
-    for &t in triangles {
-        let triangle = &scene.triangles[t as usize];
-        meshes[triangle.object as usize].extend(triangle.vertices);
+/// The mesh's vertex indices per object (objects in id order, vertices in
+/// index order), leaving out objects without vertices.
+fn objects_vertices(mesh: &ReflectedMesh) -> Vec<Vec<u32>> {
+    let count = mesh
+        .objects
+        .iter()
+        .map(|&o| o as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut objects = vec![Vec::new(); count];
+    for (v, &object) in mesh.objects.iter().enumerate() {
+        objects[object as usize].push(v as u32);
     }
-    for mesh in &mut meshes {
-        mesh.sort_unstable();
-        mesh.dedup();
-    }
-    meshes
+    objects.retain(|v| !v.is_empty());
+    objects
 }
 
 /// A regular bounding grid of one mesh, keeping only the corners of the
@@ -172,18 +173,18 @@ impl Grid {
         self.origin + corner * self.cell
     }
 
-    /// Trilinear interpolation of the cell's virtual corners (§5). The
-    /// region: failed if a corner failed, else the "most visible" one.
+    /// Trilinear interpolation of the cell's virtual corners (§5). Failed
+    /// corners (their reflection lies beyond the maps) are left out and the
+    /// others' weights renormalised, as long as they carry most of the
+    /// weight; the region is the "most visible" one among them.
     fn interpolate(&self, p: Vec3, corners: &[VirtualVertex]) -> VirtualVertex {
         let (c, w) = self.locate(p);
         let mut out = VirtualVertex {
             region: Region::Hidden,
-            reflection_point: Vec3::ZERO,
-            virtual_position: Vec3::ZERO,
-            in_front: false,
             error: 0.0,
-            iterations: 0,
+            ..VirtualVertex::FAILED
         };
+        let mut total = 0.0;
         for o in CORNERS {
             let key = self.key(c + o);
             let index = self
@@ -191,11 +192,15 @@ impl Grid {
                 .binary_search(&key)
                 .expect("every occupied cell's corners were searched");
             let corner = &corners[index];
+            if corner.region == Region::Failed {
+                continue;
+            }
             let weight = [o.x, o.y, o.z]
                 .iter()
                 .zip(w.to_array())
                 .map(|(&bit, t)| if bit == 1 { t } else { 1.0 - t })
                 .product::<f32>();
+            total += weight;
             out.reflection_point += corner.reflection_point * weight;
             out.virtual_position += corner.virtual_position * weight;
             out.in_front |= corner.in_front;
@@ -203,9 +208,17 @@ impl Grid {
             out.iterations = out.iterations.max(corner.iterations);
             out.region = most_visible(out.region, corner.region);
         }
+        if total < MIN_WEIGHT {
+            return VirtualVertex::FAILED;
+        }
+        out.reflection_point /= total;
+        out.virtual_position /= total;
         out
     }
 }
+
+/// Interpolated vertices need this much weight on successful corners.
+const MIN_WEIGHT: f32 = 0.5;
 
 const CORNERS: [UVec3; 8] = [
     UVec3::new(0, 0, 0),
@@ -218,7 +231,7 @@ const CORNERS: [UVec3; 8] = [
     UVec3::new(1, 1, 1),
 ];
 
-/// Failed dominates; otherwise reflected over unreflected over hidden.
+/// Reflected over unreflected over hidden.
 fn most_visible(a: Region, b: Region) -> Region {
     let rank = |r: Region| match r {
         Region::Failed => 3,
