@@ -68,39 +68,13 @@ impl<'a> Warp<'a> {
         let bvh = level.tracer.bvh;
         let scene = bvh.scene();
         let (vertices, points) = reflector_vertices(scene, triangles);
-        let channels = channel_paths(kind);
-        let paths: Vec<[Option<VertexPath>; 3]> = points
-            .par_iter()
-            .map(|point| {
-                let incoming = (point.position - eye).normalize_or(Vec3::NEG_Z);
-                let mut traced: [Option<VertexPath>; 3] = [None; 3];
-                // A vertex facing away from the eye is never seen; its ray
-                // would only widen the frustum.
-                if point.normal.dot(incoming) >= 0.0 {
-                    return traced;
-                }
-                for (c, source) in channels.iter().enumerate() {
-                    traced[c] = match (kind, source) {
-                        (_, Some(earlier)) => traced[*earlier],
-                        (Kind::Reflection, None) => paths::reflection(level, point, incoming),
-                        (Kind::Refraction { iors }, None) => {
-                            paths::refraction(level, point, incoming, iors[c])
-                        }
-                    };
-                }
-                traced
-            })
+        let paths = vertex_paths(level, eye, &points, kind);
+        let distinct: Vec<VertexPath> = paths
+            .iter()
+            .flat_map(|p| (0..3).filter(|&c| kind.own_path(c)).filter_map(|c| p[c]))
             .collect();
-
-        let distinct = |p: &[Option<VertexPath>; 3]| {
-            (0..3)
-                .filter(|&c| channels[c].is_none())
-                .filter_map(move |c| p[c])
-                .collect::<Vec<_>>()
-        };
-        let all: Vec<VertexPath> = paths.iter().flat_map(distinct).collect();
-        let lines: Vec<_> = all.iter().map(|p| p.exit).collect();
-        let hits: Vec<_> = all.iter().map(|p| p.hit).collect();
+        let lines: Vec<_> = distinct.iter().map(|p| p.exit).collect();
+        let hits: Vec<_> = distinct.iter().map(|p| p.hit).collect();
         let view = fit_frustum(&FrustumInput {
             eye: virtual_viewpoint(&lines),
             lines: &lines,
@@ -109,40 +83,12 @@ impl<'a> Warp<'a> {
             epsilon: bvh.epsilon(),
             resolution: level.context.config.map_resolution,
         });
-
-        let mut excluded: Vec<ObjectId> = triangles
-            .iter()
-            .map(|&t| scene.triangles[t as usize].object)
-            .chain(all.iter().map(|p| p.inner).filter(|&o| o != NONE))
-            .collect();
-        excluded.sort_unstable();
-        excluded.dedup();
-        let bounces = match kind {
-            Kind::Reflection => 1,
-            Kind::Refraction { .. } => 2,
-        };
-        let texel_level = level.deeper(bounces);
+        let texel_level = level.deeper(kind.bounces());
+        let excluded = excluded_objects(scene, triangles, &distinct);
         let map = ReflectionMap::render(&texel_level, view, &excluded);
-
         let coords = paths
             .par_iter()
-            .map(|p| {
-                let mut v = VertexCoords::default();
-                for (c, path) in p.iter().enumerate() {
-                    let Some(path) = path else { continue };
-                    let coords = match path.hit {
-                        Some(hit) => map.view.coords_of_point(&map.projector, hit),
-                        None => map
-                            .view
-                            .coords_of_direction(&map.projector, path.exit.direction),
-                    };
-                    v.coords[c] =
-                        coords.filter(|_| map.shows(&texel_level, path.hit, path.exit.direction));
-                    v.offset[c] = path.offset[c];
-                    v.weight[c] = path.weight[c];
-                }
-                v
-            })
+            .map(|p| vertex_coords(&map, &texel_level, kind, p))
             .collect();
         Warp {
             level: *level,
@@ -225,13 +171,103 @@ impl<'a> Warp<'a> {
     }
 }
 
-/// For each channel, the earlier channel whose path it shares (equal
-/// indices of refraction), or `None` when it needs its own.
-fn channel_paths(kind: Kind) -> [Option<usize>; 3] {
-    match kind {
-        Kind::Reflection => [None, Some(0), Some(0)],
-        Kind::Refraction { iors } => std::array::from_fn(|c| (0..c).find(|&e| iors[e] == iors[c])),
+impl Kind {
+    /// The earlier channel whose path channel `c` shares (equal indices of
+    /// refraction), if any.
+    fn shared_path(self, c: usize) -> Option<usize> {
+        match self {
+            Kind::Reflection => (c > 0).then_some(0),
+            Kind::Refraction { iors } => (0..c).find(|&e| iors[e] == iors[c]),
+        }
     }
+
+    fn own_path(self, c: usize) -> bool {
+        self.shared_path(c).is_none()
+    }
+
+    /// Surfaces between the eye and the map's scene: the reflector, or the
+    /// lens's front and back faces.
+    fn bounces(self) -> u32 {
+        match self {
+            Kind::Reflection => 1,
+            Kind::Refraction { .. } => 2,
+        }
+    }
+}
+
+/// Per vertex and channel, the exit path (`None` for a vertex facing away
+/// from the eye: it is never seen and its ray would only widen the frustum).
+fn vertex_paths(
+    level: &Level<'_>,
+    eye: Vec3,
+    points: &[SurfacePoint],
+    kind: Kind,
+) -> Vec<[Option<VertexPath>; 3]> {
+    points
+        .par_iter()
+        .map(|point| {
+            let incoming = (point.position - eye).normalize_or(Vec3::NEG_Z);
+            let mut traced: [Option<VertexPath>; 3] = [None; 3];
+            if point.normal.dot(incoming) >= 0.0 {
+                return traced;
+            }
+            for c in 0..3 {
+                traced[c] = match (kind, kind.shared_path(c)) {
+                    (_, Some(earlier)) => traced[earlier],
+                    (Kind::Reflection, None) => paths::reflection(level, point, incoming),
+                    (Kind::Refraction { iors }, None) => {
+                        paths::refraction(level, point, incoming, iors[c])
+                    }
+                };
+            }
+            traced
+        })
+        .collect()
+}
+
+/// The objects the map leaves out, sorted: the reflector's and those its
+/// paths pass through (a lens's back face).
+fn excluded_objects(
+    scene: &Scene,
+    triangles: &[TriangleId],
+    paths: &[VertexPath],
+) -> Vec<ObjectId> {
+    let mut excluded: Vec<ObjectId> = triangles
+        .iter()
+        .map(|&t| scene.triangles[t as usize].object)
+        .chain(paths.iter().map(|p| p.inner).filter(|&o| o != NONE))
+        .collect();
+    excluded.sort_unstable();
+    excluded.dedup();
+    excluded
+}
+
+/// A vertex's texture coordinates (where the map shows its P) and its
+/// back-face terms, per channel.
+fn vertex_coords(
+    map: &ReflectionMap,
+    texel_level: &Level<'_>,
+    kind: Kind,
+    paths: &[Option<VertexPath>; 3],
+) -> VertexCoords {
+    let mut v = VertexCoords::default();
+    for (c, path) in paths.iter().enumerate() {
+        let Some(path) = path else { continue };
+        v.offset[c] = path.offset[c];
+        v.weight[c] = path.weight[c];
+        if let Some(earlier) = kind.shared_path(c) {
+            v.coords[c] = v.coords[earlier];
+            continue;
+        }
+        let coords = match path.hit {
+            Some(hit) => map.view.coords_of_point(&map.projector, hit),
+            None => map
+                .view
+                .coords_of_direction(&map.projector, path.exit.direction),
+        };
+        v.coords[c] = coords.filter(|_| map.shows(texel_level, path.hit, path.exit.direction));
+    }
+    v
 }
 
 /// The sorted distinct vertices of `triangles` and, per vertex, its surface
