@@ -110,12 +110,14 @@ fn solve(mut m: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
         }
         m.swap(col, pivot);
         b.swap(col, pivot);
-        for row in col + 1..6 {
-            let f = m[row][col] / m[col][col];
-            for k in col..6 {
-                m[row][k] -= f * m[col][k];
+        let (above, below) = m.split_at_mut(col + 1);
+        let pivot_row = &above[col];
+        for (offset, row) in below.iter_mut().enumerate() {
+            let f = row[col] / pivot_row[col];
+            for (value, &p) in row.iter_mut().zip(pivot_row).skip(col) {
+                *value -= f * p;
             }
-            b[row] -= f * b[col];
+            b[col + 1 + offset] -= f * b[col];
         }
     }
     let mut x = [0.0; 6];

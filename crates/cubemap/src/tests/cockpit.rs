@@ -13,17 +13,17 @@ use vtfarm_scene::{Camera, Lighting};
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 
-use crate::{CubeMapMethod, EnvironmentMap, ReflectorShape};
+use crate::{CubeMapMethod, EnvironmentMap, ReflectorShape, Region, SearchSettings, search};
 
-pub(super) struct Setup {
-    pub(super) bvh: SceneBvh,
+struct Setup {
+    bvh: SceneBvh,
     camera: Camera,
     lighting: Lighting,
     ids: IdBuffer,
-    pub(super) reflector: Vec<u32>,
+    reflector: Vec<u32>,
 }
 
-pub(super) fn small_cockpit() -> Setup {
+fn small_cockpit() -> Setup {
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..Default::default()
@@ -45,7 +45,7 @@ pub(super) fn small_cockpit() -> Setup {
 }
 
 impl Setup {
-    pub(super) fn frame(&self) -> MethodFrame<'_> {
+    fn frame(&self) -> MethodFrame<'_> {
         MethodFrame {
             tracer: Tracer {
                 bvh: &self.bvh,
@@ -152,4 +152,60 @@ fn the_cover_glass_is_concave() {
     let setup = small_cockpit();
     let prepared = CubeMapMethod::full().prepare(&setup.frame());
     assert_eq!(prepared.shape, ReflectorShape::Concave);
+}
+
+#[test]
+fn the_search_finds_the_ray_traced_reflection_points_on_the_glass() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let prepared = CubeMapMethod::full().prepare(&frame);
+    let mut worst = 0.0f32;
+    let mut checked = 0;
+    for pixel in frame.pixels().iter().step_by(37) {
+        let terms = frame.tracer.surface_terms(&pixel.point, pixel.incoming);
+        let Some(ray) = terms.reflection else {
+            continue;
+        };
+        let Some(hit) = setup.bvh.closest_hit(&ray, f32::INFINITY) else {
+            continue;
+        };
+        let seen = setup.bvh.surface_point(&hit).position;
+        let found = search(
+            &prepared.maps,
+            frame.camera.eye,
+            seen,
+            &SearchSettings::default(),
+        );
+        assert_eq!(found.region, Region::Reflected, "{seen}: {found:?}");
+        worst = worst.max((found.reflection_point - pixel.point.position).length());
+        checked += 1;
+    }
+    assert!(checked > 100, "{checked} pixels checked");
+    println!(
+        "worst reflection-point error on the glass {:.2} mm over {checked} pixels",
+        worst * 1e3
+    );
+    assert!(worst < 2e-3, "reflection points up to {worst} m off");
+}
+
+#[test]
+fn the_output_does_not_depend_on_the_thread_count() {
+    let setup = small_cockpit();
+    let frame = setup.frame();
+    let render = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a thread pool");
+        pool.install(|| CubeMapMethod::grid().render(&frame).bitmap)
+    };
+    let (one, three) = (render(1), render(3));
+    assert_eq!(one.mask, three.mask);
+    assert_eq!(one.reflected_object, three.reflected_object);
+    let bits = |v: &[Vec3]| {
+        v.iter()
+            .flat_map(|c| c.to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(bits(&one.color), bits(&three.color));
 }

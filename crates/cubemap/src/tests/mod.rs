@@ -3,6 +3,5 @@
 //! cockpit against the ray-traced reference.
 
 mod cockpit;
-mod debug;
 mod scenes;
 mod sphere;
