@@ -66,7 +66,7 @@ struct MapTriangle {
 impl ReflectorMaps {
     /// Builds the maps of the reflector `triangles` of `scene` at
     /// `resolution` texels per face side, from the triangles subdivided
-    /// `subdivisions` times (see [`subdivide`]).
+    /// `subdivisions` times (each split in four by Phong tessellation).
     pub fn build(
         scene: &Scene,
         triangles: &[TriangleId],

@@ -35,7 +35,7 @@ pub struct CubeMapConfig {
     pub fallback_resolution: u32,
     /// Reflected triangles with a longer edge are split (see `mesh`), as a
     /// fraction of the reflector's radius around its centroid.
-    pub max_edge: f32,
+    pub max_edge_ratio: f32,
 }
 
 impl Default for CubeMapConfig {
@@ -46,7 +46,7 @@ impl Default for CubeMapConfig {
             search: SearchSettings::default(),
             grid: None,
             fallback_resolution: 128,
-            max_edge: 0.5,
+            max_edge_ratio: 0.5,
         }
     }
 }
@@ -108,7 +108,7 @@ impl CubeMapMethod {
         }
     }
 
-    /// The reflected meshes, split as `max_edge` asks.
+    /// The reflected meshes, split as `max_edge_ratio` asks.
     pub(crate) fn reflected_mesh(
         &self,
         frame: &MethodFrame<'_>,
@@ -122,7 +122,7 @@ impl CubeMapMethod {
             .map(|p| (p - maps.centroid).length())
             .fold(0.0, f32::max);
         let keep = reflected_triangle_flags(scene, frame.reflector);
-        ReflectedMesh::build(scene, &keep, self.config.max_edge * radius)
+        ReflectedMesh::build(scene, &keep, self.config.max_edge_ratio * radius)
     }
 
     /// The virtual vertex of every vertex of the reflected meshes (with the
