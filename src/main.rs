@@ -2,6 +2,7 @@
 //! job, drives `vtfarm-render` and prints progress and tables.
 
 mod bench;
+mod compare;
 mod farm;
 mod study;
 
@@ -40,6 +41,9 @@ enum Command {
     Master(vtfarm_master::cli::MasterArgs),
     /// Runs a farm worker that dials the master.
     Worker(vtfarm_worker::cli::WorkerArgs),
+    /// Renders the job's view with every reflection method and measures each
+    /// against the per-pixel reference.
+    Compare(compare::CompareArgs),
     /// Runs a glare study (design variants x eye points) and writes its report.
     Study(study::StudyArgs),
     /// Submits a job or a study to a running master and writes its frames
@@ -132,6 +136,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
         Command::Study(args) => study::study(args),
+        Command::Compare(args) => compare::compare(args),
         Command::Submit(args) => farm::submit(args),
         Command::Status(args) => farm::status(args),
         Command::Cluster(ClusterCommand::Init(args)) => {
@@ -265,7 +270,7 @@ fn render(args: RenderArgs) -> Result<()> {
 }
 
 /// The progress bar of a frame, counting reflector triangles.
-fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
+pub(crate) fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
     let bar = ProgressBar::new(total).with_style(
         ProgressStyle::with_template(
             "{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})",

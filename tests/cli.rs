@@ -235,3 +235,49 @@ fn bad_study_files_are_refused_before_rendering() {
         "{err}"
     );
 }
+
+#[test]
+fn compare_measures_every_method_against_the_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = vtfarm(&[
+        "compare",
+        repo("configs/cockpit.toml").to_str().unwrap(),
+        "-o",
+        dir.path().to_str().unwrap(),
+        "--width",
+        "192",
+        "--height",
+        "108",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let methods = [
+        "reference",
+        "preview",
+        "refine",
+        "full",
+        "cubemap",
+        "cubemap-grid",
+        "pvrr",
+        "envmap",
+    ];
+    for method in methods {
+        assert!(
+            stdout.lines().any(|l| l.starts_with(method)),
+            "{method} in {stdout}"
+        );
+        let png = image::open(dir.path().join(format!("{method}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (192, 108));
+    }
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("compare.json")).unwrap()).unwrap();
+    let rows = json.as_array().unwrap();
+    assert_eq!(rows.len(), methods.len());
+    assert_eq!(rows[0]["mean_abs"], 0.0, "the reference against itself");
+    assert!(
+        rows[4]["searches"].as_u64().unwrap() > 0,
+        "cube maps search"
+    );
+    let sheet = image::open(dir.path().join("sheet.png")).unwrap();
+    assert!(sheet.width() > 8 * 40);
+}

@@ -90,13 +90,21 @@ fn the_ellipsoidal_glass_mirrors_only_its_absorber_from_the_focus() {
     // From the focus the glass shows the absorber, nothing else.
     let nominal = &report.frames[plan.eyes.len()].summary;
     assert_eq!(nominal.objects[0].name, vtfarm_cockpit::GLARE_ABSORBER);
-    assert!(nominal.objects[0].area_share > 0.95, "{:?}", nominal.objects);
+    assert!(
+        nominal.objects[0].area_share > 0.95,
+        "{:?}",
+        nominal.objects
+    );
     // Away from the focus other things appear in the glass: along each axis
     // (lateral, vertical, fore-aft) 8 cm off is at least ten times brighter
     // than the focus, and 4 cm off is no brighter than 8 cm off.
     for axis in 0..3 {
         let (near, far) = (ellipsoidal[1 + 2 * axis], ellipsoidal[2 + 2 * axis]);
-        assert!(far >= 10.0 * ellipsoidal[0], "axis {axis}: {far} vs {}", ellipsoidal[0]);
+        assert!(
+            far >= 10.0 * ellipsoidal[0],
+            "axis {axis}: {far} vs {}",
+            ellipsoidal[0]
+        );
         assert!(near <= far, "axis {axis}: 4 cm {near}, 8 cm {far}");
     }
     // The report ranks the designs and names both.
@@ -115,7 +123,11 @@ fn mirror(p: Vec3, o: Vec3, n: Vec3) -> Vec3 {
 fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     let dir = tempfile::tempdir().unwrap();
     let eye = vtfarm_cockpit::default_eye() + Vec3::new(0.02, -0.01, 0.0);
-    let plan = study_plan(dir.path(), &[eye], "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n");
+    let plan = study_plan(
+        dir.path(),
+        &[eye],
+        "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n",
+    );
     let (report, images) = run(&plan, dir.path());
     let variant = &plan.variants[0];
     let frame = &images[0][0];
@@ -138,13 +150,22 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     let back = scene.object_id(vtfarm_cockpit::COVER_GLASS_BACK);
     let mut mirrored = Scene {
         positions: scene.positions.iter().map(|&p| mirror(p, a, n)).collect(),
-        normals: scene.normals.iter().map(|&d| d - 2.0 * d.dot(n) * n).collect(),
+        normals: scene
+            .normals
+            .iter()
+            .map(|&d| d - 2.0 * d.dot(n) * n)
+            .collect(),
         ..scene.clone()
     };
     let is_glass: Vec<bool> = (0..scene.triangles.len())
-        .map(|t| variant.reflectors.contains(&(t as u32)) || Some(scene.triangles[t].object) == back)
+        .map(|t| {
+            variant.reflectors.contains(&(t as u32)) || Some(scene.triangles[t].object) == back
+        })
         .collect();
-    mirrored.triangles.iter_mut().for_each(|t| t.vertices.swap(1, 2));
+    mirrored
+        .triangles
+        .iter_mut()
+        .for_each(|t| t.vertices.swap(1, 2));
     let keep = |t: u32| {
         let [p, q, r] = scene.triangle_positions(t);
         !is_glass[t as usize] && ((p + q + r) / 3.0 - a).dot(n) * eye_side > 0.0
@@ -166,8 +187,18 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     }
     assert!(glass_pixels > 1000, "{glass_pixels} glass pixels");
     let share = agree as f64 / glass_pixels as f64;
-    assert!(share >= 0.99, "{share:.4} of {glass_pixels} glass pixels agree");
+    assert!(
+        share >= 0.99,
+        "{share:.4} of {glass_pixels} glass pixels agree"
+    );
     // The map really shows things (not all NONE on both sides).
-    assert!(frame.reflected_object.iter().filter(|&&o| o != NONE).count() > glass_pixels / 2);
+    assert!(
+        frame
+            .reflected_object
+            .iter()
+            .filter(|&&o| o != NONE)
+            .count()
+            > glass_pixels / 2
+    );
     assert_eq!(report.frames.len(), 1);
 }

@@ -1,0 +1,121 @@
+//! `vtfarm compare`: every reflection method on the job's first view,
+//! measured against the per-pixel reference.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{Context, Result};
+use vtfarm_compare::{reference_method, run_all, sheet, standard_methods};
+use vtfarm_method::{MethodFrame, ReflectionMethod};
+use vtfarm_trace::{SceneBvh, Tracer};
+
+/// Options of `vtfarm compare`.
+#[derive(clap::Args)]
+pub(crate) struct CompareArgs {
+    /// The job file (TOML); its first frame is compared.
+    job: PathBuf,
+    /// Output directory: one PNG per method, sheet.png, compare.json.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Override the image size.
+    #[arg(long)]
+    width: Option<u32>,
+    #[arg(long)]
+    height: Option<u32>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+/// `vtfarm compare`.
+pub(crate) fn compare(args: CompareArgs) -> Result<()> {
+    crate::set_threads(args.threads)?;
+    let crate::PreparedJob {
+        job,
+        scene,
+        reflectors,
+        setups,
+    } = crate::prepare_job(&args.job, None, args.width, args.height)?;
+    let setup = setups
+        .into_iter()
+        .next()
+        .context("a job has at least one frame")?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    if let Some(warning) = vtfarm_cubemap::classify(&scene, &reflectors).warning() {
+        eprintln!("warning: {warning}");
+    }
+    let (base, ids) = vtfarm_raster::rasterize(&scene, &setup.camera, &setup.lighting);
+    let bvh = SceneBvh::new(Arc::new(scene));
+    let frame = MethodFrame {
+        tracer: Tracer {
+            bvh: &bvh,
+            lighting: &setup.lighting,
+            settings: setup.trace,
+        },
+        camera: setup.camera,
+        ids: &ids,
+        reflector: &reflectors,
+    };
+    let methods = standard_methods(job.vertex);
+    let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();
+    let bar = crate::progress_bar(methods.len() as u64 + 1, "compare");
+    let bar_style = indicatif::ProgressStyle::with_template(
+        "{spinner} {msg} [{bar:40}] {pos}/{len} methods ({elapsed})",
+    )
+    .expect("template is valid")
+    .progress_chars("=> ");
+    bar.set_style(bar_style);
+    let mut started = false;
+    let runs = run_all(
+        &frame,
+        &base,
+        &reference_method(job.vertex),
+        &methods,
+        &mut |name| {
+            if std::mem::replace(&mut started, true) {
+                bar.inc(1);
+            }
+            bar.set_message(name.to_owned());
+        },
+    );
+    bar.finish_and_clear();
+
+    println!(
+        "{:<14} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11} {:>12}",
+        "method", "time s", "setup s", "rays", "searches", "MAE", "off >8/255", "reflect MAE"
+    );
+    let mut figures = Vec::new();
+    for run in &runs {
+        let f = run.figures();
+        println!(
+            "{:<14} {:>9.3} {:>9.3} {:>10} {:>10} {:>9.3} {:>10.3}% {:>12.3}",
+            f.method,
+            f.seconds,
+            f.setup_seconds,
+            f.rays,
+            f.searches,
+            f.mean_abs,
+            f.share_off * 100.0,
+            f.reflected_mean_abs
+        );
+        vtfarm_render::output::write_image(
+            &args.output.join(format!("{}.png", f.method)),
+            &run.image.color,
+        )?;
+        figures.push(f);
+    }
+    let sheet_path = args.output.join("sheet.png");
+    sheet(&runs).write_png(&sheet_path)?;
+    let json_path = args.output.join("compare.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&figures)?)
+        .with_context(|| format!("writing {}", json_path.display()))?;
+    println!(
+        "errors against `reference` on its {} reflector pixels (8-bit sRGB steps); wrote {} images, {} and {}",
+        runs[0].error.pixels,
+        runs.len(),
+        sheet_path.display(),
+        json_path.display()
+    );
+    Ok(())
+}
