@@ -26,6 +26,7 @@ pub(crate) struct Context<'a> {
     specular: BTreeMap<ObjectId, Vec<TriangleId>>,
     searches: AtomicU64,
     rays: AtomicU64,
+    texels: AtomicU64,
     fallbacks: AtomicU64,
 }
 
@@ -46,6 +47,7 @@ impl<'a> Context<'a> {
             specular,
             searches: AtomicU64::new(0),
             rays: AtomicU64::new(0),
+            texels: AtomicU64::new(0),
             fallbacks: AtomicU64::new(0),
         }
     }
@@ -55,6 +57,7 @@ impl<'a> Context<'a> {
         Counts {
             searches: self.searches.load(Ordering::Relaxed),
             rays: self.rays.load(Ordering::Relaxed),
+            texels: self.texels.load(Ordering::Relaxed),
             fallbacks: self.fallbacks.load(Ordering::Relaxed),
         }
     }
@@ -65,8 +68,11 @@ impl<'a> Context<'a> {
 pub(crate) struct Counts {
     /// Per-vertex exit-ray searches (rays too).
     pub(crate) searches: u64,
-    /// All rays: searches, map texels, occlusion tests, fallbacks.
+    /// All rays: searches, occlusion tests, fallbacks, transmission rays of
+    /// specular surfaces seen in maps, the shared finishing step's rays.
     pub(crate) rays: u64,
+    /// Map texels rasterized and shaded (not rays).
+    pub(crate) texels: u64,
     /// Lookups traced because a corner had no texture coordinate.
     pub(crate) fallbacks: u64,
 }
@@ -113,6 +119,10 @@ impl<'a> Level<'a> {
 
     pub(crate) fn count_fallback(&self) {
         self.context.fallbacks.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn count_texels(&self, n: u64) {
+        self.context.texels.fetch_add(n, Ordering::Relaxed);
     }
 
     pub(crate) fn count_rays(&self, n: u64) {

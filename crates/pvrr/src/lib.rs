@@ -17,8 +17,13 @@
 //!    the map looks into the reversed region beyond the crossing (§4.2,
 //!    figure 8); the map is the same kind of image, only the near plane moves.
 //! 3. The map: the scene without the reflector (and without the lens's own
-//!    back face) seen from the virtual viewpoint, `map_resolution` texels on
-//!    its longer side.
+//!    back face) rasterized from the virtual viewpoint, `map_resolution`
+//!    texels on its longer side: a z-buffer (`vtfarm_raster::id_buffer_clipped`)
+//!    whose near plane is the frustum's, so nothing between the virtual
+//!    viewpoint and the reflector (for a convex mirror, whatever lies behind
+//!    the mirror) enters the map. Each texel's surface point is rebuilt from
+//!    the triangle the z-buffer shows there (the texel-centre ray on the
+//!    triangle's plane, barycentric normal) and shaded like a ray-traced hit.
 //! 4. Texture coordinates: the projection of each vertex's P into the map
 //!    (§3.4), so the warped map shows P exactly at the vertex.
 //! 5. Per reflector pixel: the texture coordinates interpolated with the
@@ -80,10 +85,12 @@
 //! # Counters
 //!
 //! `searches` counts per-vertex exit rays (one per vertex for reflection, up
-//! to two per vertex and distinct index for refraction); `rays` adds one per
-//! map texel, one occlusion test per vertex, the traced fallbacks and the
-//! rays of the shared finishing step (shadow rays are not counted, as in
-//! vertex tracing). `setup_time` covers the exit rays, viewpoints and maps.
+//! to two per vertex and distinct index for refraction); `rays` adds one
+//! occlusion test per vertex, the traced fallbacks (two rays each: the
+//! object seen and its radiance), the transmission rays of specular surfaces
+//! seen in maps and the rays of the shared finishing step. Map texels are
+//! rasterized, not cast, and are not rays; shadow rays are not counted, as
+//! in vertex tracing. `setup_time` covers the exit rays, viewpoints and maps.
 
 mod level;
 mod map;

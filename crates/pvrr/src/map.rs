@@ -1,22 +1,32 @@
 //! The first pass (paper §3.1 step 2): the reflection map, the scene without
-//! the reflector seen from the virtual viewpoint through the §3.3 frustum,
-//! and its bilinear lookup.
+//! the reflector rasterized from the virtual viewpoint through the §3.3
+//! frustum, and its bilinear lookup.
 //!
-//! The rasterizer has a fixed near plane, while the frustum needs one just in
-//! front of the reflector (the virtual viewpoint of a convex mirror lies
-//! behind the mirror, inside whatever is there). So each texel's visibility
-//! is one ray from the near plane through the texel centre: exactly what a
-//! z-buffer with that near plane shows at the texel centre.
+//! The frustum's near plane lies just in front of the reflector (the virtual
+//! viewpoint of a convex mirror lies behind the mirror, inside whatever is
+//! there), so the map is an ID buffer with that near plane
+//! (`vtfarm_raster::id_buffer_clipped`) over every triangle but the excluded
+//! objects': per texel the triangle seen at the texel centre. The texel's
+//! surface point is where the ray through the texel centre meets that
+//! triangle's plane, with the barycentric normal, as
+//! `vtfarm_vertex::pixel_surface` reconstructs a pixel's; it is then shaded
+//! as a ray-traced hit seen from the virtual viewpoint.
+//!
+//! The occlusion test of §6 ([`ReflectionMap::shows`]) still casts one ray
+//! per vertex: it asks whether the virtual viewpoint sees a given point, at
+//! full precision rather than at the nearest texel centre.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use vtfarm_scene::{NONE, ObjectId, Projector};
-use vtfarm_trace::Ray;
+use vtfarm_raster::IdBuffer;
+use vtfarm_scene::{Camera, NONE, ObjectId, Projector, Scene, TriangleId};
+use vtfarm_trace::{Ray, SurfacePoint};
 
 use crate::level::{Level, Seen};
 use crate::viewpoint::MapView;
+use crate::warp::barycentric;
 
-/// Surfaces of excluded objects passed on one texel ray at most; more means
+/// Surfaces of excluded objects passed on one occlusion ray at most; more means
 /// a degenerate stack of coincident sheets.
 const MAX_SKIPS: usize = 16;
 
@@ -24,7 +34,8 @@ const MAX_SKIPS: usize = 16;
 const SAME_POINT: f32 = 1e-3;
 
 /// The first surface beyond the near plane, in `direction` from the virtual
-/// viewpoint, that is not one of `excluded` (sorted).
+/// viewpoint, that is not one of `excluded` (sorted): by one ray from the
+/// near plane, what the map's z-buffer shows in that exact direction.
 fn first_visible(
     level: &Level<'_>,
     view: &MapView,
@@ -55,6 +66,42 @@ fn first_visible(
     None
 }
 
+/// The surface seen at the centre of texel (`x`, `y`) of the map's ID buffer:
+/// where the ray through the texel centre meets the plane of the triangle
+/// seen there (its view depth where the ray grazes the plane), with the
+/// barycentric vertex normal.
+fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32) -> Option<Seen> {
+    let i = ids.index(x, y);
+    let triangle = ids.triangle[i];
+    if triangle == NONE {
+        return None;
+    }
+    let positions = scene.triangle_positions(triangle);
+    let [a, b, c] = positions;
+    let direction = camera.pixel_ray(x, y);
+    let plane_normal = (b - a).cross(c - a);
+    let denom = direction.dot(plane_normal);
+    let t = if denom.abs() > 1e-12 {
+        (a - camera.eye).dot(plane_normal) / denom
+    } else {
+        ids.depth[i] / direction.dot(camera.basis().0)
+    };
+    let position = camera.eye + direction * t;
+    let w = barycentric(positions, position);
+    let [na, nb, nc] = scene.triangle_normals(triangle);
+    let normal =
+        (na * w[0] + nb * w[1] + nc * w[2]).normalize_or(plane_normal.normalize_or(Vec3::Y));
+    Some(Seen {
+        point: SurfacePoint {
+            position,
+            normal,
+            triangle,
+        },
+        incoming: direction,
+        object: ids.object[i],
+    })
+}
+
 /// A rendered reflection (or refraction) map.
 pub(crate) struct ReflectionMap {
     pub(crate) view: MapView,
@@ -66,20 +113,28 @@ pub(crate) struct ReflectionMap {
 }
 
 impl ReflectionMap {
-    /// Renders the map: per texel the first surface beyond the near plane
-    /// that is not one of `excluded` (sorted), shaded by `level` as seen from
-    /// the virtual viewpoint (multiple reflection recurses there).
+    /// Renders the map: rasterizes the scene without `excluded` (sorted)
+    /// from the virtual viewpoint with the view's near plane, and shades each
+    /// texel's visible surface point by `level` as seen from there (multiple
+    /// reflection recurses there).
     pub(crate) fn render(level: &Level<'_>, view: MapView, excluded: &[ObjectId]) -> Self {
         let camera = view.camera;
+        let scene = level.tracer.bvh.scene();
+        let keep = |t: TriangleId| {
+            excluded
+                .binary_search(&scene.triangles[t as usize].object)
+                .is_err()
+        };
+        let ids = vtfarm_raster::id_buffer_clipped(scene, &camera, view.near, &keep);
         let texels = (camera.width * camera.height) as usize;
         let seen: Vec<Option<Seen>> = (0..texels)
             .into_par_iter()
             .map(|i| {
                 let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
-                first_visible(level, &view, excluded, camera.pixel_ray(x, y))
+                texel_surface(scene, &camera, &ids, x, y)
             })
             .collect();
-        level.count_rays(texels as u64);
+        level.count_texels(texels as u64);
         let radiance = level.shade_seen(camera.eye, &seen);
         ReflectionMap {
             projector: Projector::new(&camera),

@@ -291,7 +291,7 @@ fn reflector_vertices(scene: &Scene, triangles: &[TriangleId]) -> (Vec<u32>, Vec
 }
 
 /// Barycentric weights of `p` (on the triangle's plane) in the triangle.
-fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
+pub(crate) fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
     let n = (b - a).cross(c - a);
     let area = n.length_squared();
     if area <= 0.0 {

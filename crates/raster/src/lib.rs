@@ -10,7 +10,9 @@
 //! The pipeline has three stages:
 //! 1. `setup`: project every vertex once, clip triangles that cross the near
 //!    plane (or reach far outside the image) in view space, and snap corners to
-//!    a fixed-point sub-pixel grid (`triangle`).
+//!    a fixed-point sub-pixel grid (`triangle`). The near plane lies at view
+//!    depth `vtfarm_scene::NEAR` unless the caller of [`id_buffer_clipped`]
+//!    places it elsewhere (a reflection map seen from behind its mirror).
 //! 2. `bands`: bin triangles into horizontal bands and scan-convert each band
 //!    on its own rayon task with exact integer edge functions, the top-left
 //!    fill rule and a (depth, triangle id) z-test.
@@ -23,7 +25,7 @@ mod triangle;
 
 use rayon::prelude::*;
 use vtfarm_imaging::Image;
-use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 
 /// Per-pixel visibility: which object and triangle is seen, and at what view
 /// depth. `NONE` where nothing is.
@@ -93,13 +95,35 @@ pub fn id_buffer_where(
     camera: &Camera,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> IdBuffer {
+    id_buffer_clipped(scene, camera, NEAR, keep)
+}
+
+/// [`id_buffer_where`] with the near clipping plane at view depth `near`
+/// instead of `vtfarm_scene::NEAR`: geometry nearer than `near` along the
+/// camera's forward axis is clipped away exactly at the plane, so a pixel
+/// shows the first kept surface beyond it. With `near == NEAR` the result is
+/// [`id_buffer_where`]'s, bit for bit; like it, it is deterministic for any
+/// thread count.
+///
+/// # Panics
+/// As [`rasterize`], and if `near` is not positive and finite.
+pub fn id_buffer_clipped(
+    scene: &Scene,
+    camera: &Camera,
+    near: f32,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+) -> IdBuffer {
+    assert!(
+        near > 0.0 && near.is_finite(),
+        "the near plane must lie in front of the eye, not at depth {near}"
+    );
     assert!(
         camera.width <= MAX_DIMENSION && camera.height <= MAX_DIMENSION,
         "image {}x{} exceeds the rasterizer's limit of {MAX_DIMENSION} pixels per side",
         camera.width,
         camera.height
     );
-    let triangles = setup::setup(scene, camera, keep);
+    let triangles = setup::setup(scene, camera, near, keep);
     let mut ids = IdBuffer::new(camera.width, camera.height);
     bands::resolve_visibility(&triangles, &mut ids);
     let IdBuffer {

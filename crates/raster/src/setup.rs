@@ -4,10 +4,15 @@
 //! to scan conversion; the rest are clipped in view space (in `f64`) against
 //! the near plane and a guard band around the image, which bounds snapped
 //! coordinates so the integer edge functions cannot overflow.
+//!
+//! The near plane's view depth is a parameter: `vtfarm_scene::NEAR` for the
+//! base frame and ID buffers (whose vertices then project exactly as the shared
+//! [`Projector`] projects them), or a caller's plane, e.g. one placed at a
+//! reflector for a map rendered from a virtual viewpoint behind it.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use vtfarm_scene::{Camera, NEAR, Projector, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Camera, NEAR, Projector, Scene, ScreenPoint, Triangle, TriangleId};
 
 use crate::triangle::{RasterTriangle, ScreenVertex};
 
@@ -66,6 +71,12 @@ impl Polygon {
 /// projector for vertices and an `f64` view transform for clipping.
 struct View {
     projector: Projector,
+    /// The near plane's view depth.
+    near: f32,
+    /// The camera basis and scale in `f32`, as the projector holds them, for
+    /// vertices between a near plane closer than [`NEAR`] and `NEAR`.
+    basis32: (Vec3, Vec3, Vec3),
+    inv_pixel32: f32,
     eye: DVec3,
     right: DVec3,
     up: DVec3,
@@ -77,14 +88,15 @@ struct View {
     height: u32,
 }
 
-/// Projects, clips and snaps the triangles of `scene` that `keep` accepts, in
-/// triangle order.
+/// Projects, clips (at view depth `near`) and snaps the triangles of `scene`
+/// that `keep` accepts, in triangle order.
 pub(crate) fn setup(
     scene: &Scene,
     camera: &Camera,
+    near: f32,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> Vec<RasterTriangle> {
-    let view = View::new(camera);
+    let view = View::new(camera, near);
     let vertices: Vec<ClipVertex> = scene
         .positions
         .par_iter()
@@ -100,10 +112,13 @@ pub(crate) fn setup(
 }
 
 impl View {
-    fn new(camera: &Camera) -> Self {
+    fn new(camera: &Camera, near: f32) -> Self {
         let (forward, right, up) = camera.basis();
         View {
             projector: Projector::new(camera),
+            near,
+            basis32: (forward, right, up),
+            inv_pixel32: 1.0 / camera.pixel_size_at_unit_depth(),
             eye: camera.eye.as_dvec3(),
             right: right.as_dvec3(),
             up: up.as_dvec3(),
@@ -130,6 +145,27 @@ impl View {
         .fold(0, |mask, (_, plane)| mask | plane)
     }
 
+    /// Where `p` projects, or `None` in front of the near plane. At the
+    /// default near plane this is exactly the shared projector; a nearer
+    /// plane repeats the projector's `f32` arithmetic for the points it
+    /// rejects, a farther one rejects more of its points.
+    fn project(&self, p: Vec3) -> Option<ScreenPoint> {
+        let projected = self.projector.project(p).or_else(|| {
+            (self.near < NEAR).then(|| {
+                let (forward, right, up) = self.basis32;
+                let d = p - self.eye.as_vec3();
+                let depth = d.dot(forward);
+                let k = self.inv_pixel32 / depth;
+                ScreenPoint {
+                    x: self.half_width as f32 + d.dot(right) * k,
+                    y: self.half_height as f32 - d.dot(up) * k,
+                    depth,
+                }
+            })
+        });
+        projected.filter(|s| s.depth >= self.near)
+    }
+
     /// A scene vertex, projected with the shared projector.
     fn vertex(&self, p: Vec3) -> ClipVertex {
         if !p.is_finite() {
@@ -140,7 +176,7 @@ impl View {
         }
         let d = p.as_dvec3() - self.eye;
         let view = DVec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward));
-        match self.projector.project(p) {
+        match self.project(p) {
             None => ClipVertex {
                 view,
                 outside: NEAR_PLANE,
@@ -183,7 +219,7 @@ impl View {
     fn plane_value(&self, plane: u8, v: DVec3) -> f64 {
         let (gx, gy) = (self.half_width + GUARD, self.half_height + GUARD);
         match plane {
-            NEAR_PLANE => v.z - f64::from(NEAR),
+            NEAR_PLANE => v.z - f64::from(self.near),
             LEFT => gx * v.z + v.x * self.inv_pixel,
             RIGHT => gx * v.z - v.x * self.inv_pixel,
             TOP => gy * v.z - v.y * self.inv_pixel,
@@ -207,7 +243,7 @@ impl View {
         };
         let mut view = inside.view.lerp(outside.view, t);
         if plane == NEAR_PLANE {
-            view.z = f64::from(NEAR);
+            view.z = f64::from(self.near);
         }
         self.clipped_vertex(view)
     }
@@ -281,7 +317,7 @@ mod tests {
 
     #[test]
     fn near_plane_corners_land_on_the_near_plane_and_on_the_edge() {
-        let view = View::new(&camera());
+        let view = View::new(&camera(), NEAR);
         let front = view.vertex(Vec3::new(0.5, -1.0, -2.0));
         let behind = view.vertex(Vec3::new(0.5, -1.0, 2.0));
         assert_eq!(behind.outside, NEAR_PLANE);
@@ -291,8 +327,24 @@ mod tests {
     }
 
     #[test]
+    fn a_custom_near_plane_moves_the_clipped_corners_there() {
+        let near = 1.25f32;
+        let view = View::new(&camera(), near);
+        let front = view.vertex(Vec3::new(0.5, -1.0, -2.0));
+        let between = view.vertex(Vec3::new(0.5, -1.0, -1.0));
+        assert_eq!(between.outside, NEAR_PLANE);
+        let v = view.intersect(NEAR_PLANE, front, between);
+        assert_eq!(v.view.z, f64::from(near));
+        assert!((v.view.x - 0.5).abs() < 1e-12 && (v.view.y + 1.0).abs() < 1e-12);
+        // Nearer than the default: the projector's own arithmetic.
+        let close = View::new(&camera(), NEAR * 0.1).vertex(Vec3::new(0.0, 0.0, -NEAR * 0.5));
+        assert_eq!(close.outside, 0);
+        assert!((close.screen.x - 32.0).abs() < 1e-6 && (close.screen.y - 24.0).abs() < 1e-6);
+    }
+
+    #[test]
     fn guard_band_clipping_keeps_corners_near_the_guard() {
-        let view = View::new(&camera());
+        let view = View::new(&camera(), NEAR);
         // A sliver reaching far to the right, just in front of the eye.
         let t = Triangle {
             vertices: [0, 1, 2],

@@ -3,7 +3,7 @@
 //! the shared Phong model, and bit-identical results on any thread count.
 
 use glam::{DVec3, Quat, Vec3};
-use vtfarm_raster::{IdBuffer, id_buffer, rasterize};
+use vtfarm_raster::{IdBuffer, id_buffer, id_buffer_clipped, id_buffer_where, rasterize};
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
     Camera, Light, LightKind, Lighting, Material, NEAR, NONE, Object, ObjectId, Scene, Triangle,
@@ -215,6 +215,15 @@ fn procedural_scene(seed: u64, width: u32, height: u32) -> (Scene, Camera) {
 /// triangles along `Camera::pixel_ray`, ignoring hits nearer than the near
 /// plane: (triangle, view depth, barycentric u and v).
 fn ray_cast(scene: &Scene, camera: &Camera) -> Vec<Option<(TriangleId, f64, f64, f64)>> {
+    ray_cast_beyond(scene, camera, NEAR)
+}
+
+/// [`ray_cast`] with the near plane at view depth `near`.
+fn ray_cast_beyond(
+    scene: &Scene,
+    camera: &Camera,
+    near: f32,
+) -> Vec<Option<(TriangleId, f64, f64, f64)>> {
     let forward = camera.basis().0.as_dvec3();
     let eye = camera.eye.as_dvec3();
     let triangles: Vec<[DVec3; 3]> = (0..scene.triangles.len())
@@ -241,7 +250,7 @@ fn ray_cast(scene: &Scene, camera: &Camera) -> Vec<Option<(TriangleId, f64, f64,
                 let q = s.cross(e1);
                 let v = dir.dot(q) / det;
                 let depth = e2.dot(q) / det * dir.dot(forward);
-                if u < 0.0 || v < 0.0 || u + v > 1.0 || depth < f64::from(NEAR) {
+                if u < 0.0 || v < 0.0 || u + v > 1.0 || depth < f64::from(near) {
                     continue;
                 }
                 if best.is_none_or(|(_, d, _, _)| depth < d) {
@@ -258,7 +267,17 @@ fn ray_cast(scene: &Scene, camera: &Camera) -> Vec<Option<(TriangleId, f64, f64,
 /// 99.5% of the pixels, at the same depth where it does; returns the share of
 /// covered pixels.
 fn assert_matches_ray_cast(scene: &Scene, camera: &Camera, ids: &IdBuffer) -> f64 {
-    let hits = ray_cast(scene, camera);
+    assert_matches_ray_cast_beyond(scene, camera, NEAR, ids)
+}
+
+/// [`assert_matches_ray_cast`] with the near plane at view depth `near`.
+fn assert_matches_ray_cast_beyond(
+    scene: &Scene,
+    camera: &Camera,
+    near: f32,
+    ids: &IdBuffer,
+) -> f64 {
+    let hits = ray_cast_beyond(scene, camera, near);
     let mut agree = 0;
     for (i, hit) in hits.iter().enumerate() {
         let seen = (ids.triangle[i] != NONE).then_some(ids.triangle[i]);
@@ -721,4 +740,128 @@ fn normals_are_interpolated_perspective_correctly() {
         checked += 1;
     }
     assert!(checked > 1000, "{checked}");
+}
+
+#[test]
+fn the_default_near_plane_gives_the_id_buffer_bit_for_bit() {
+    for seed in 1..=3 {
+        let (scene, camera) = procedural_scene(seed, 96, 64);
+        let keep = |t: TriangleId| t % 3 != 0;
+        assert_same_ids(
+            &id_buffer_clipped(&scene, &camera, NEAR, &keep),
+            &id_buffer_where(&scene, &camera, &keep),
+        );
+        assert_same_ids(
+            &id_buffer_clipped(&scene, &camera, NEAR, &|_| true),
+            &id_buffer(&scene, &camera),
+        );
+    }
+}
+
+#[test]
+fn a_custom_near_plane_clips_exactly_there() {
+    // A quad filling the screen rectangle [4, 60] x [4, 44], its view depth
+    // growing from 1 at the left edge to 4 at the right (1/z linear across).
+    let camera = Camera {
+        eye: Vec3::new(0.2, 0.3, 0.1),
+        target: Vec3::new(0.2, 0.3, -1.0),
+        up: Vec3::Y,
+        fov_y_deg: 50.0,
+        width: 64,
+        height: 48,
+    };
+    let (left, right) = (1.0f64, 4.0f64);
+    let mut b = Builder::default();
+    let o = b.object("ramp", Vec3::ONE);
+    b.quad(
+        o,
+        [
+            point_at(&camera, 4.0, 4.0, left as f32),
+            point_at(&camera, 60.0, 4.0, right as f32),
+            point_at(&camera, 60.0, 44.0, right as f32),
+            point_at(&camera, 4.0, 44.0, left as f32),
+        ],
+    );
+    let expected_depth = |x: u32| {
+        1.0 / (1.0 / left + (f64::from(x) + 0.5 - 4.0) / 56.0 * (1.0 / right - 1.0 / left))
+    };
+    let default = id_buffer(&b.scene, &camera);
+    for near in [1.5f32, 2.0, 3.3] {
+        let ids = id_buffer_clipped(&b.scene, &camera, near, &|_| true);
+        let (mut empty, mut filled) = (0, 0);
+        for y in 4..44 {
+            for x in 4..60 {
+                let i = ids.index(x, y);
+                let expected = expected_depth(x);
+                // Every pixel of the quad is there at the default near plane.
+                assert_ne!(default.triangle[i], NONE, "({x}, {y})");
+                let margin = (expected - f64::from(near)) / f64::from(near);
+                if margin < -1e-3 {
+                    assert_eq!(ids.triangle[i], NONE, "near {near}: ({x}, {y}) in front");
+                    assert_eq!(ids.depth[i], f32::INFINITY);
+                    empty += 1;
+                } else if margin > 1e-3 {
+                    assert_ne!(ids.triangle[i], NONE, "near {near}: ({x}, {y}) beyond");
+                    assert_eq!(ids.object[i], o);
+                    let d = f64::from(ids.depth[i]);
+                    assert!((d - expected).abs() < expected * 1e-4, "({x}, {y}): {d}");
+                    assert!(ids.depth[i] >= near * (1.0 - 1e-6));
+                    filled += 1;
+                }
+            }
+        }
+        assert!(empty >= 40 && filled >= 40, "near {near}: {empty} {filled}");
+        // Outside the quad nothing.
+        assert_eq!(ids.triangle[ids.index(2, 2)], NONE);
+    }
+}
+
+#[test]
+fn custom_near_planes_match_a_ray_cast_from_there() {
+    for seed in 1..=3 {
+        let (scene, camera) = procedural_scene(seed, 96, 64);
+        // The camera is about 7 from the middle: planes through the scene,
+        // and one nearer than the default.
+        for near in [5.5f32, 7.0, NEAR * 0.1] {
+            let ids = id_buffer_clipped(&scene, &camera, near, &|_| true);
+            assert_matches_ray_cast_beyond(&scene, &camera, near, &ids);
+        }
+    }
+}
+
+#[test]
+fn a_near_plane_closer_than_the_default_shows_what_lies_between() {
+    let camera = Camera {
+        eye: Vec3::ZERO,
+        target: -Vec3::Z,
+        up: Vec3::Y,
+        fov_y_deg: 60.0,
+        width: 32,
+        height: 24,
+    };
+    let mut b = Builder::default();
+    let o = b.object("close", Vec3::ONE);
+    let depth = NEAR * 0.5;
+    b.quad(
+        o,
+        [
+            point_at(&camera, 8.0, 6.0, depth),
+            point_at(&camera, 24.0, 6.0, depth),
+            point_at(&camera, 24.0, 18.0, depth),
+            point_at(&camera, 8.0, 18.0, depth),
+        ],
+    );
+    assert!(
+        id_buffer(&b.scene, &camera)
+            .triangle
+            .iter()
+            .all(|&t| t == NONE)
+    );
+    let ids = id_buffer_clipped(&b.scene, &camera, NEAR * 0.1, &|_| true);
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let inside = (8..24).contains(&x) && (6..18).contains(&y);
+            assert_eq!(ids.triangle[ids.index(x, y)] != NONE, inside, "({x}, {y})");
+        }
+    }
 }
