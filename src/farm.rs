@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use vtfarm_master::{FinishedFrame, JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
 use vtfarm_render::FrameSetup;
@@ -60,20 +61,40 @@ pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
         .context("starting the async runtime")
 }
 
+/// What `render_embedded` renders.
+pub(crate) struct EmbeddedJob<'a> {
+    pub(crate) name: &'a str,
+    pub(crate) scene: &'a Scene,
+    pub(crate) setup: &'a FrameSetup,
+    pub(crate) reflectors: &'a [u32],
+    pub(crate) method: MethodKind,
+    /// Also return the per-pixel components.
+    pub(crate) aux: bool,
+}
+
 /// Renders one frame through an embedded master with `workers` local workers.
 pub(crate) fn render_embedded(
-    name: &str,
-    scene: &Scene,
-    setup: &FrameSetup,
-    reflectors: &[u32],
+    job: EmbeddedJob<'_>,
     workers: usize,
     bar: &ProgressBar,
 ) -> Result<FinishedFrame> {
+    let EmbeddedJob {
+        name,
+        scene,
+        setup,
+        reflectors,
+        method,
+        aux,
+    } = job;
     runtime()?.block_on(async {
         let farm = LocalFarm::start(workers, SchedulerConfig::default());
         let mut link = farm.submitter();
         let data = SceneData::from_scene(scene);
-        let job = wire_job(name, &data, std::slice::from_ref(setup), reflectors);
+        let job = vtfarm_proto::WireJob {
+            method: method.into(),
+            aux,
+            ..wire_job(name, &data, std::slice::from_ref(setup), reflectors)
+        };
         let frames = run_job(&mut link, job, &data, |event| {
             if let JobEvent::Progress { done, .. } = event {
                 bar.set_position(done.into());
@@ -102,10 +123,10 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         return submit_study(args);
     }
     let crate::PreparedJob {
+        job,
         scene,
         reflectors,
         setups,
-        ..
     } = crate::prepare_job(&args.job, args.quality, args.width, args.height)?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
@@ -121,6 +142,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         let data = SceneData::from_scene(&scene);
         let wire = vtfarm_proto::WireJob {
             aux: args_aux,
+            method: job.method.into(),
             ..wire_job(&name, &data, &setups, &reflectors)
         };
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");

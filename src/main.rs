@@ -220,8 +220,12 @@ fn render(args: RenderArgs) -> Result<()> {
 
     let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
     let scene_triangles = scene.triangles.len();
-    if let Some(dir) = &args.aux {
-        // The auxiliary outputs need the whole frame in this process.
+    let in_process_aux = args
+        .aux
+        .as_ref()
+        .filter(|_| job.method == vtfarm_method::MethodKind::VertexTracing);
+    if let Some(dir) = in_process_aux {
+        // The wireframe needs the refined faces, which stay in this process.
         let renderer = Renderer::new(Arc::new(scene), reflectors);
         let options = RenderOptions {
             collect_faces: true,
@@ -247,15 +251,26 @@ fn render(args: RenderArgs) -> Result<()> {
             .job
             .file_name()
             .map_or("job".into(), |n| n.to_string_lossy().into_owned());
-        let frame =
-            farm::render_embedded(&name, &scene, &setup, &reflectors, args.local_workers, &bar)?;
+        let embedded = farm::EmbeddedJob {
+            name: &name,
+            scene: &scene,
+            setup: &setup,
+            reflectors: &reflectors,
+            method: job.method,
+            aux: args.aux.is_some(),
+        };
+        let frame = farm::render_embedded(embedded, args.local_workers, &bar)?;
         bar.finish_and_clear();
         output::write_image(&args.output, &frame.image)?;
+        if let (Some(dir), Some(components)) = (&args.aux, &frame.components) {
+            output::write_aux(dir, components, &[], &scene)?;
+        }
         let stats = vtfarm_vertex::PackageStats::from(frame.stats.totals);
         let timings = [(
             "frame (wall)",
             std::time::Duration::from_micros(frame.stats.wall_micros),
         )];
+        println!("{:>20}  {}", "method", job.method.name());
         print_summary(
             &stats,
             &timings,

@@ -69,6 +69,7 @@ pub(crate) async fn render_study(
         let name = format!("{} / {}", plan.name, variant.name);
         let job = WireJob {
             aux: true,
+            method: plan.method.into(),
             ..wire_job(&name, &data, &variant.setups, &variant.reflectors)
         };
         let mut failure = None;

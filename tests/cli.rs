@@ -281,3 +281,43 @@ fn compare_measures_every_method_against_the_reference() {
     let sheet = image::open(dir.path().join("sheet.png")).unwrap();
     assert!(sheet.width() > 8 * 40);
 }
+
+#[test]
+fn render_runs_the_method_the_job_names_through_the_farm() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = dir.path().join("pvrr.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n[camera]\nwidth = 160\nheight = 90\n[quality]\nmethod = \"pvrr\"\n",
+    )
+    .unwrap();
+    let png = dir.path().join("pvrr.png");
+    let aux = dir.path().join("aux");
+    let out = vtfarm(&[
+        "render",
+        job.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--aux",
+        aux.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.lines().any(|l| l.trim() == "method  pvrr"),
+        "{stdout}"
+    );
+    assert!(image::open(&png).is_ok());
+    for file in [
+        "mask.png",
+        "reflected.npy",
+        "reflected_objects.png",
+        "objects.json",
+    ] {
+        assert!(aux.join(file).is_file(), "{file}");
+    }
+    assert!(
+        !aux.join("wireframe.png").exists(),
+        "no refined faces without vertex tracing"
+    );
+}

@@ -14,6 +14,7 @@ use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{
     FinishedFrame, JobError, LocalFarm, MasterHandle, run_job, server, spawn_master, wire_job,
 };
+use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
     ClusterConfig, HandshakePolicy, Hello, Message, PROTOCOL_VERSION, ProtoError, RefuseCode, Role,
@@ -265,6 +266,78 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     .await
     .unwrap();
     assert_same_images(&embedded, &reference);
+}
+
+/// The single-process frame of a per-reflector method: each reflector
+/// object rendered on its own and composited over the rasterized frame.
+fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3> {
+    let (base, ids) = vtfarm_raster::rasterize(&job.scene, &frame.camera, &frame.lighting);
+    let bvh = vtfarm_trace::SceneBvh::new(Arc::new(job.scene.clone()));
+    let method = vtfarm_compare::method(kind, frame.vertex);
+    let mut image = vtfarm_vertex::FrameImage::new(base);
+    let reflectors = vtfarm_render::morton_order(&job.scene, job.reflectors.clone());
+    for group in vtfarm_method::reflector_groups(&job.scene, &reflectors) {
+        let output = method.render(&vtfarm_method::MethodFrame {
+            tracer: vtfarm_trace::Tracer {
+                bvh: &bvh,
+                lighting: &frame.lighting,
+                settings: frame.trace,
+            },
+            camera: frame.camera,
+            ids: &ids,
+            reflector: &group,
+        });
+        image.composite(&output.bitmap);
+    }
+    image.color.pixels
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
+    let _serial = SERIAL.lock().await;
+    let mut job = job(2, 192, 108);
+    // Three reflector objects: the cover glass, the steering wheel and the
+    // centre console, so that the reflectors spread over the workers.
+    for name in ["steering_wheel", "center_console"] {
+        let object = job.scene.object_id(name).unwrap();
+        job.reflectors.extend(
+            (0..job.scene.triangles.len() as u32)
+                .filter(|&t| job.scene.triangles[t as usize].object == object),
+        );
+    }
+    let cluster = Cluster::start(SchedulerConfig::default());
+    let _w1 = cluster.worker("w1", 1.0);
+    let _w2 = cluster.worker("w2", 1.0);
+    cluster.wait_for_workers(2).await;
+    for kind in [MethodKind::EnvironmentMap, MethodKind::Pvrr] {
+        let mut conn = connect(&cluster.options, Role::Submitter).await.unwrap();
+        let data = SceneData::from_scene(&job.scene);
+        let wire = vtfarm_proto::WireJob {
+            method: kind.into(),
+            ..wire_job("methods", &data, &job.frames, &job.reflectors)
+        };
+        let frames = run_job(&mut conn.link, wire, &data, |_| {}).await.unwrap();
+        assert_eq!(frames.len(), 2);
+        for (f, setup) in frames.iter().zip(&job.frames) {
+            assert!(
+                f.image.pixels == method_reference(&job, setup, kind),
+                "{}: frame {} equals the single-process render",
+                kind.name(),
+                f.frame
+            );
+            // The work items of a per-reflector method are whole reflectors.
+            let workers = &f.stats.workers;
+            let items: u32 = workers.iter().map(|w| w.triangles).sum();
+            assert_eq!(items, 3, "{workers:?}");
+        }
+    }
+    // Over both jobs both workers took reflectors.
+    let status = cluster.status().await;
+    assert!(
+        status.workers.iter().all(|w| w.packages_done > 0),
+        "{:?}",
+        status.workers
+    );
 }
 
 /// Every file under `dir`, by relative path, with its bytes.

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use tracing::{debug, info, warn};
+use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
     SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
@@ -57,7 +58,25 @@ struct Job {
     frames: Vec<FrameSetup>,
     /// Send the per-pixel components with each frame.
     aux: bool,
+    method: MethodKind,
+    /// For per-reflector methods, the reflector groups the work items index.
+    groups: Vec<Vec<u32>>,
     current: Option<FrameAssembly>,
+}
+
+impl Job {
+    /// The reflector triangles that work `items` cover (for progress).
+    fn triangles_in(&self, items: &[u32]) -> u64 {
+        if self.method.per_reflector() {
+            items
+                .iter()
+                .filter_map(|&g| self.groups.get(g as usize))
+                .map(|g| g.len() as u64)
+                .sum()
+        } else {
+            items.len() as u64
+        }
+    }
 }
 
 /// The frame being assembled.
@@ -294,8 +313,8 @@ impl MasterCore {
             debug!(package = result.id, "result ignored: {e}");
             return;
         }
-        let items = in_flight.items.len() as u64;
         let job_id = in_flight.job;
+        let items = job.triangles_in(&in_flight.items);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
@@ -386,13 +405,18 @@ impl MasterCore {
         let id = self.next_job;
         self.next_job += 1;
         let reflectors = morton_order(&scene, job.reflectors);
-        let work = vec![
-            FrameWork {
-                items: reflectors.clone()
-            };
-            frames.len()
-        ];
-        info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), "job queued");
+        let method = MethodKind::from(job.method);
+        // Per-reflector methods take whole reflectors: their work items are
+        // reflector groups, which the workers derive from the same list.
+        let (groups, items) = if method.per_reflector() {
+            let groups = reflector_groups(&scene, &reflectors);
+            let items = (0..groups.len() as u32).collect();
+            (groups, items)
+        } else {
+            (Vec::new(), reflectors.clone())
+        };
+        let work = vec![FrameWork { items }; frames.len()];
+        info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), method = method.name(), "job queued");
         self.send(
             conn,
             Message::JobAccepted {
@@ -410,6 +434,8 @@ impl MasterCore {
                 reflectors,
                 frames,
                 aux: job.aux,
+                method,
+                groups,
                 current: None,
             },
         );
@@ -587,6 +613,7 @@ impl MasterCore {
                 &setup.vertex,
             ),
             reflectors: j.reflectors.clone(),
+            method: j.method.into(),
         };
         j.current = Some(FrameAssembly {
             frame,

@@ -57,6 +57,7 @@ pub fn wire_job(
             .collect(),
         reflectors: reflectors.to_vec(),
         aux: false,
+        method: vtfarm_proto::WireMethod::VertexTracing,
     }
 }
 

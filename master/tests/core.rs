@@ -124,6 +124,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         )],
         reflectors: reflectors.clone(),
         aux: false,
+        method: vtfarm_proto::WireMethod::VertexTracing,
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
     assert!(matches!(

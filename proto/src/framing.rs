@@ -267,6 +267,7 @@ mod tests {
                 scene: hash,
                 setup: setup(),
                 reflectors: vec![0, 1],
+                method: crate::WireMethod::Pvrr,
             }),
             Message::RequestWork { job: 3, frame: 1 },
             Message::Package(Package {
@@ -296,6 +297,7 @@ mod tests {
                     frames: vec![setup(), setup()],
                     reflectors: vec![0],
                     aux: true,
+                    method: crate::WireMethod::CubeMapGrid,
                 },
             },
             Message::SubmitJob {
@@ -305,6 +307,7 @@ mod tests {
                     frames: vec![setup()],
                     reflectors: vec![1],
                     aux: false,
+                    method: crate::WireMethod::VertexTracing,
                 },
             },
             Message::JobAccepted { job: 3, frames: 2 },

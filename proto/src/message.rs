@@ -22,7 +22,9 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use vtfarm_scene::Scene;
 
-use crate::wire::{WireBitmap, WireError, WireFrameSetup, WireImage, WirePackageStats, WireScene};
+use crate::wire::{
+    WireBitmap, WireError, WireFrameSetup, WireImage, WireMethod, WirePackageStats, WireScene,
+};
 
 /// A scene's content hash: SHA-256 of its canonical encoding (see [`scene_hash`]).
 pub type SceneHash = [u8; 32];
@@ -297,9 +299,14 @@ pub struct FrameStart {
     /// All reflector triangles of the frame (the behind-ID buffer needs
     /// them); check with [`crate::wire::check_triangle_ids`].
     pub reflectors: Vec<u32>,
+    /// The reflection method. For per-reflector methods a package's items
+    /// are indices of reflector groups (`vtfarm_method::reflector_groups`
+    /// of `reflectors`), not triangle ids.
+    pub method: WireMethod,
 }
 
-/// A package: reflector triangle ids of one frame, traced as a unit.
+/// A package: reflector triangle ids of one frame, traced as a unit (or
+/// reflector group indices, see [`FrameStart::method`]).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Package {
     pub id: PackageId,
@@ -341,6 +348,8 @@ pub struct WireJob {
     pub reflectors: Vec<u32>,
     /// Also send each frame's per-pixel components (`FrameDone::aux`).
     pub aux: bool,
+    /// The reflection method of every frame.
+    pub method: WireMethod,
 }
 
 /// Where a job's scene comes from.

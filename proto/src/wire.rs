@@ -12,6 +12,7 @@ use std::time::Duration;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
+use vtfarm_method::MethodKind;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, VertexSettings};
@@ -516,6 +517,41 @@ impl From<WireQuality> for Quality {
     }
 }
 
+/// [`MethodKind`] on the wire.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireMethod {
+    #[default]
+    VertexTracing,
+    CubeMap,
+    CubeMapGrid,
+    Pvrr,
+    EnvironmentMap,
+}
+
+impl From<MethodKind> for WireMethod {
+    fn from(m: MethodKind) -> Self {
+        match m {
+            MethodKind::VertexTracing => WireMethod::VertexTracing,
+            MethodKind::CubeMap => WireMethod::CubeMap,
+            MethodKind::CubeMapGrid => WireMethod::CubeMapGrid,
+            MethodKind::Pvrr => WireMethod::Pvrr,
+            MethodKind::EnvironmentMap => WireMethod::EnvironmentMap,
+        }
+    }
+}
+
+impl From<WireMethod> for MethodKind {
+    fn from(m: WireMethod) -> Self {
+        match m {
+            WireMethod::VertexTracing => MethodKind::VertexTracing,
+            WireMethod::CubeMap => MethodKind::CubeMap,
+            WireMethod::CubeMapGrid => MethodKind::CubeMapGrid,
+            WireMethod::Pvrr => MethodKind::Pvrr,
+            WireMethod::EnvironmentMap => MethodKind::EnvironmentMap,
+        }
+    }
+}
+
 /// [`VertexSettings`] on the wire.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireVertexSettings {
@@ -973,6 +1009,9 @@ pub(crate) mod tests {
             round_trip::<TraceSettings, WireTraceSettings>(&trace),
             trace
         );
+        for method in MethodKind::ALL {
+            assert_eq!(MethodKind::from(WireMethod::from(method)), method);
+        }
         for quality in Quality::ALL {
             assert_eq!(Quality::from(WireQuality::from(quality)), quality);
             let vertex = VertexSettings {

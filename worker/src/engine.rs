@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use tracing::{debug, info, warn};
+use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
     FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WirePackageStats,
     check_triangle_ids,
@@ -15,7 +16,8 @@ use vtfarm_proto::{
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
-use vtfarm_vertex::{PackageOptions, trace_package};
+use vtfarm_trace::Tracer;
+use vtfarm_vertex::{PackageOptions, PackageStats, SparseBitmap, trace_package};
 
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
@@ -25,6 +27,14 @@ pub struct ActiveFrame {
     setup: FrameSetup,
     ids: IdBuffer,
     behind: IdBuffer,
+    /// The frame's method when it is not vertex tracing.
+    per_reflector: Option<PerReflector>,
+}
+
+/// A per-reflector method with the reflector groups its package items index.
+struct PerReflector {
+    method: Box<dyn ReflectionMethod>,
+    groups: Vec<Vec<u32>>,
 }
 
 impl ActiveFrame {
@@ -32,32 +42,77 @@ impl ActiveFrame {
     /// package takes (sleeping `slowdown - 1` times the compute time), to
     /// emulate a slower machine in tests and benchmarks.
     pub fn run(&self, package: &Package, slowdown: f64) -> Result<PackageResult, String> {
-        let scene = self.renderer.scene();
-        check_triangle_ids(
-            "package triangles",
-            &package.triangles,
-            scene.triangles.len(),
-        )
-        .map_err(|e| e.to_string())?;
         let start = Instant::now();
-        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
-        let result = trace_package(
-            &frame,
-            &package.triangles,
-            &PackageOptions::default(),
-            &mut |_| {},
-        );
+        let (bitmap, stats, samples) = match &self.per_reflector {
+            None => self.trace(&package.triangles)?,
+            Some(PerReflector { method, groups }) => {
+                self.render_groups(method.as_ref(), groups, &package.triangles)?
+            }
+        };
         let compute = start.elapsed();
         if slowdown > 1.0 {
             std::thread::sleep(compute.mul_f64(slowdown - 1.0));
         }
         Ok(PackageResult {
             id: package.id,
-            bitmap: WireBitmap::from(&result.bitmap),
-            stats: WirePackageStats::from(&result.stats),
+            bitmap: WireBitmap::from(&bitmap),
+            stats: WirePackageStats::from(&stats),
             busy_micros: start.elapsed().as_micros() as u64,
-            triangle_samples: result.triangle_samples,
+            triangle_samples: samples,
         })
+    }
+
+    /// Vertex traces reflector triangles.
+    fn trace(&self, triangles: &[u32]) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
+        let scene = self.renderer.scene();
+        check_triangle_ids("package triangles", triangles, scene.triangles.len())
+            .map_err(|e| e.to_string())?;
+        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
+        let result = trace_package(&frame, triangles, &PackageOptions::default(), &mut |_| {});
+        Ok((result.bitmap, result.stats, result.triangle_samples))
+    }
+
+    /// Renders whole reflectors (`items` index `groups`) with a
+    /// per-reflector method; a group's cost for load balancing is its rays.
+    fn render_groups(
+        &self,
+        method: &dyn ReflectionMethod,
+        groups: &[Vec<u32>],
+        items: &[u32],
+    ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
+        let mut bitmaps = Vec::with_capacity(items.len());
+        let mut stats = PackageStats::default();
+        let mut samples = Vec::with_capacity(items.len());
+        for &item in items {
+            let group = groups.get(item as usize).ok_or_else(|| {
+                format!(
+                    "package item {item} names no reflector (the frame has {})",
+                    groups.len()
+                )
+            })?;
+            let output = method.render(&MethodFrame {
+                tracer: Tracer {
+                    bvh: self.renderer.bvh(),
+                    lighting: &self.setup.lighting,
+                    settings: self.setup.trace,
+                },
+                camera: self.setup.camera,
+                ids: &self.ids,
+                reflector: group,
+            });
+            let c = output.counters;
+            stats.add(&PackageStats {
+                triangles: group.len() as u64,
+                traced_triangles: group.len() as u64,
+                vertex_samples: c.rays,
+                pixels: c.pixels,
+                vertex_time: c.time,
+                ..PackageStats::default()
+            });
+            samples.push(u32::try_from(c.rays).unwrap_or(u32::MAX));
+            bitmaps.push(output.bitmap);
+        }
+        Ok((merge_bitmaps(self.ids.width, &bitmaps), stats, samples))
     }
 }
 
@@ -151,6 +206,7 @@ impl Engine {
             trace,
             vertex,
         };
+        let start_reflectors = start.reflectors.clone();
         let renderer = match &self.renderer {
             Some((hash, reflectors, r))
                 if *hash == start.scene && *reflectors == start.reflectors =>
@@ -164,6 +220,14 @@ impl Engine {
             }
         };
         let (ids, behind) = renderer.id_buffers(&setup);
+        let method = MethodKind::from(start.method);
+        let per_reflector = method.per_reflector().then(|| {
+            let groups = reflector_groups(renderer.scene(), &start_reflectors);
+            PerReflector {
+                method: vtfarm_compare::method(method, setup.vertex),
+                groups,
+            }
+        });
         Ok(ActiveFrame {
             job: start.job,
             frame: start.frame,
@@ -171,6 +235,7 @@ impl Engine {
             setup,
             ids,
             behind,
+            per_reflector,
         })
     }
 }

@@ -10,7 +10,7 @@ use std::time::Duration;
 use glam::Vec3;
 use serde::Serialize;
 use vtfarm_imaging::{Image, encode_srgb8};
-use vtfarm_method::{MethodCounters, MethodFrame, ReflectionMethod, VertexTracing};
+use vtfarm_method::{MethodCounters, MethodFrame, MethodKind, ReflectionMethod, VertexTracing};
 use vtfarm_render::{ErrorFigures, compare};
 use vtfarm_vertex::{FrameImage, Quality, VertexSettings};
 
@@ -200,22 +200,38 @@ pub fn sheet(runs: &[MethodRun]) -> Image {
     sheet
 }
 
+/// The catalogue: the method a job chose, with the job's vertex settings
+/// (used by vertex tracing) and each other method's defaults. The farm's
+/// workers build their method here, like `vtfarm compare`.
+pub fn method(kind: MethodKind, vertex: VertexSettings) -> Box<dyn ReflectionMethod> {
+    match kind {
+        MethodKind::VertexTracing => Box::new(VertexTracing { settings: vertex }),
+        MethodKind::CubeMap => Box::new(vtfarm_cubemap::CubeMapMethod::full()),
+        MethodKind::CubeMapGrid => Box::new(vtfarm_cubemap::CubeMapMethod::grid()),
+        MethodKind::Pvrr => Box::new(vtfarm_pvrr::Pvrr::default()),
+        MethodKind::EnvironmentMap => Box::new(vtfarm_cubemap::EnvironmentMap::default()),
+    }
+}
+
 /// Every method `vtfarm compare` measures besides the reference: vertex
 /// tracing at its three levels (with the job's thresholds), cube maps with
 /// and without the interpolation grid, PVRR and the environment-map baseline.
 pub fn standard_methods(vertex: VertexSettings) -> Vec<Box<dyn ReflectionMethod>> {
-    let level = |quality| {
-        Box::new(VertexTracing {
-            settings: VertexSettings { quality, ..vertex },
-        }) as Box<dyn ReflectionMethod>
-    };
-    vec![
-        level(Quality::Preview),
-        level(Quality::Refine),
-        level(Quality::Full),
-        Box::new(vtfarm_cubemap::CubeMapMethod::full()),
-        Box::new(vtfarm_cubemap::CubeMapMethod::grid()),
-        Box::new(vtfarm_pvrr::Pvrr::default()),
-        Box::new(vtfarm_cubemap::EnvironmentMap::default()),
-    ]
+    let mut methods: Vec<Box<dyn ReflectionMethod>> =
+        [Quality::Preview, Quality::Refine, Quality::Full]
+            .into_iter()
+            .map(|quality| {
+                method(
+                    MethodKind::VertexTracing,
+                    VertexSettings { quality, ..vertex },
+                )
+            })
+            .collect();
+    methods.extend(
+        MethodKind::ALL
+            .into_iter()
+            .filter(|k| k.per_reflector())
+            .map(|k| method(k, vertex)),
+    );
+    methods
 }

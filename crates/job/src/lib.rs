@@ -19,6 +19,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use vtfarm_method::MethodKind;
 use vtfarm_scene::obj::{ObjOptions, load_obj};
 use vtfarm_scene::{Camera, Light, Lighting, Scene, Triangle, TriangleId};
 use vtfarm_trace::TraceSettings;
@@ -42,6 +43,8 @@ pub struct Job {
     pub reflectors: Vec<ReflectorSelector>,
     pub trace: TraceSettings,
     pub vertex: VertexSettings,
+    /// The reflection method (`[quality] method`).
+    pub method: MethodKind,
     /// Extra eye points from `[frames]`, each one more frame looking at the
     /// camera's target.
     pub eyes: Vec<Vec3>,

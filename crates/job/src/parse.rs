@@ -11,6 +11,7 @@ use glam::Vec3;
 use serde::Deserialize;
 use toml::Spanned;
 use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
+use vtfarm_method::MethodKind;
 use vtfarm_scene::{Light, LightKind};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
@@ -120,6 +121,7 @@ struct RawQuality {
     max_refine_depth: Option<u32>,
     max_trace_depth: Option<Spanned<u32>>,
     fresnel: Option<bool>,
+    method: Option<Spanned<String>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -140,6 +142,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let lighting = source.lighting(&raw.lighting)?;
     let reflectors = source.reflectors(raw.reflectors, is_obj)?;
     let (trace, vertex) = source.quality(&raw.quality)?;
+    let method = source.method(&raw.quality)?;
     Ok(Job {
         file: origin.to_owned(),
         scene,
@@ -148,6 +151,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
         reflectors,
         trace,
         vertex,
+        method,
         eyes,
     })
 }
@@ -547,6 +551,23 @@ impl Source<'_> {
             ));
         }
         Ok(selectors)
+    }
+
+    fn method(&self, raw: &RawQuality) -> Result<MethodKind, JobError> {
+        let Some(name) = &raw.method else {
+            return Ok(MethodKind::default());
+        };
+        MethodKind::from_name(name.get_ref()).ok_or_else(|| {
+            let valid: Vec<&str> = MethodKind::ALL.iter().map(|m| m.name()).collect();
+            self.error_at(
+                name,
+                format!(
+                    "unknown quality.method {:?}; valid: {}",
+                    name.get_ref(),
+                    valid.join(", ")
+                ),
+            )
+        })
     }
 
     fn quality(&self, raw: &RawQuality) -> Result<(TraceSettings, VertexSettings), JobError> {

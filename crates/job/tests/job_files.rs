@@ -9,6 +9,7 @@ use vtfarm_job::{
     CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, ReflectorSelector,
     SceneSource, load_job, parse_job,
 };
+use vtfarm_method::MethodKind;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
@@ -113,6 +114,7 @@ flatness = 0.3
 max_refine_depth = 9
 max_trace_depth = 3
 fresnel = true
+method = "cubemap-grid"
 
 [frames]
 eyes = [[1, 2, 4], [2, 2, 3]]
@@ -171,6 +173,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
             max_depth: 9,
             ..VertexSettings::default()
         },
+        method: MethodKind::CubeMapGrid,
         eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
     };
     assert_eq!(job, expected);
@@ -504,6 +507,14 @@ fn quality_values_are_checked() {
         &format!("{COCKPIT}[quality]\nmax_trace_depth = 0\n"),
         4,
         &["quality.max_trace_depth = 0"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nmethod = \"raytrace\"\n"),
+        4,
+        &[
+            "\"raytrace\"",
+            "vertex, cubemap, cubemap-grid, pvrr, envmap",
+        ],
     );
 }
 

@@ -84,6 +84,88 @@ pub trait ReflectionMethod: Send + Sync {
     fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput;
 }
 
+/// The methods a job can choose (`[quality] method` in a job file).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MethodKind {
+    /// Adaptive progressive vertex tracing at the job's quality level.
+    #[default]
+    VertexTracing,
+    /// Reflector cube maps with a reflection-point search per vertex.
+    CubeMap,
+    /// The same with the interpolation grid.
+    CubeMapGrid,
+    /// Per-vertex reflection and refraction.
+    Pvrr,
+    /// One environment map from the reflector's centre (the baseline).
+    EnvironmentMap,
+}
+
+impl MethodKind {
+    pub const ALL: [MethodKind; 5] = [
+        MethodKind::VertexTracing,
+        MethodKind::CubeMap,
+        MethodKind::CubeMapGrid,
+        MethodKind::Pvrr,
+        MethodKind::EnvironmentMap,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MethodKind::VertexTracing => "vertex",
+            MethodKind::CubeMap => "cubemap",
+            MethodKind::CubeMapGrid => "cubemap-grid",
+            MethodKind::Pvrr => "pvrr",
+            MethodKind::EnvironmentMap => "envmap",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<MethodKind> {
+        MethodKind::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Whether the method needs a whole reflector at a time (it
+    /// pre-processes per reflector), so that the farm packs reflectors,
+    /// not triangles; vertex tracing works per triangle.
+    pub fn per_reflector(self) -> bool {
+        self != MethodKind::VertexTracing
+    }
+}
+
+/// The reflectors as per-reflector methods take them: the triangles of each
+/// object, objects in ascending id, triangles in the order given. The master
+/// and the workers both derive them from a frame's reflector list, so a
+/// group index means the same on both sides.
+pub fn reflector_groups(
+    scene: &vtfarm_scene::Scene,
+    triangles: &[TriangleId],
+) -> Vec<Vec<TriangleId>> {
+    let mut groups: std::collections::BTreeMap<ObjectId, Vec<TriangleId>> = Default::default();
+    for &t in triangles {
+        groups
+            .entry(scene.triangles[t as usize].object)
+            .or_default()
+            .push(t);
+    }
+    groups.into_values().collect()
+}
+
+/// Puts the pixels of bitmaps that own disjoint pixels into one bitmap.
+pub fn merge_bitmaps(frame_width: u32, bitmaps: &[SparseBitmap]) -> SparseBitmap {
+    let pixels = bitmaps
+        .iter()
+        .flat_map(|b| {
+            b.covered().map(move |(x, y, k)| PixelValue {
+                index: y * frame_width + x,
+                color: b.color[k],
+                reflected: b.reflected[k],
+                transmitted: b.transmitted[k],
+                object: b.reflected_object[k],
+            })
+        })
+        .collect();
+    SparseBitmap::from_pixels(frame_width, pixels)
+}
+
 impl MethodFrame<'_> {
     /// Whether each scene triangle is part of the reflector.
     pub fn reflector_flags(&self) -> Vec<bool> {

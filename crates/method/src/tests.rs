@@ -138,3 +138,49 @@ fn preview_counts_fewer_samples_than_the_reference() {
     assert!(preview.counters.rays < reference.counters.rays);
     assert_eq!(preview.counters.searches, 0);
 }
+
+#[test]
+fn method_names_round_trip_and_only_vertex_tracing_splits_reflectors() {
+    for kind in MethodKind::ALL {
+        assert_eq!(MethodKind::from_name(kind.name()), Some(kind));
+        assert_eq!(kind.per_reflector(), kind != MethodKind::VertexTracing);
+    }
+    assert_eq!(MethodKind::from_name("raytrace"), None);
+}
+
+#[test]
+fn reflector_groups_are_objects_and_merged_groups_equal_one_render() {
+    let setup = small_cockpit();
+    let scene = setup.bvh.scene();
+    let back = scene
+        .object_id(vtfarm_cockpit::COVER_GLASS_BACK)
+        .expect("the cockpit has a glass back");
+    // Two objects: the glass front and its back.
+    let mut both = setup.reflector.clone();
+    both.extend(
+        (0..scene.triangles.len() as u32).filter(|&t| scene.triangles[t as usize].object == back),
+    );
+    let groups = reflector_groups(scene, &both);
+    assert_eq!(groups.len(), 2);
+    assert_eq!(groups[0].len() + groups[1].len(), both.len());
+    assert_eq!(
+        groups[0], setup.reflector,
+        "the front has the lower object id"
+    );
+    // Rendering each group and merging equals rendering the front alone
+    // (the back shows no pixels of its own in front of the front).
+    let frame = setup.frame();
+    let whole = reference().render(&frame).bitmap;
+    let parts: Vec<SparseBitmap> = groups
+        .iter()
+        .map(|g| {
+            reference()
+                .render(&MethodFrame {
+                    reflector: g,
+                    ..frame
+                })
+                .bitmap
+        })
+        .collect();
+    assert_eq!(merge_bitmaps(setup.ids.width, &parts), whole);
+}

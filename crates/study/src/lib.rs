@@ -96,6 +96,8 @@ pub struct StudyPlan {
     pub params: Params,
     /// The heat maps' top of scale.
     pub heat_scale: f32,
+    /// The base job's reflection method.
+    pub method: vtfarm_method::MethodKind,
 }
 
 impl StudyPlan {
@@ -202,6 +204,7 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         variants,
         params,
         heat_scale,
+        method: study.job.method,
     })
 }
 
