@@ -6,8 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use vtfarm_compare::{reference_method, run_all, sheet, standard_methods};
-use vtfarm_method::{MethodFrame, ReflectionMethod};
-use vtfarm_trace::{SceneBvh, Tracer};
+use vtfarm_method::{OwnedFrame, ReflectionMethod};
 
 /// Options of `vtfarm compare`.
 #[derive(clap::Args)]
@@ -45,18 +44,15 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     if let Some(warning) = vtfarm_cubemap::classify(&scene, &reflectors).warning() {
         eprintln!("warning: {warning}");
     }
-    let (base, ids) = vtfarm_raster::rasterize(&scene, &setup.camera, &setup.lighting);
-    let bvh = SceneBvh::new(Arc::new(scene));
-    let frame = MethodFrame {
-        tracer: Tracer {
-            bvh: &bvh,
-            lighting: &setup.lighting,
-            settings: setup.trace,
-        },
-        camera: setup.camera,
-        ids: &ids,
-        reflector: &reflectors,
-    };
+    let (base, _) = vtfarm_raster::rasterize(&scene, &setup.camera, &setup.lighting);
+    let owned = OwnedFrame::new(
+        Arc::new(scene),
+        setup.camera,
+        setup.lighting,
+        setup.trace,
+        reflectors,
+    );
+    let frame = owned.frame();
     let methods = standard_methods(job.vertex);
     let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();
     let bar = crate::progress_bar(methods.len() as u64 + 1, "compare");

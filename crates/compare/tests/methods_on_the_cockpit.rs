@@ -2,39 +2,15 @@
 //! each is closer to it than the plain environment map, by the same figures
 //! `vtfarm compare` prints.
 
-use std::sync::Arc;
-
-use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_compare::{reference_method, run_all, sheet, standard_methods};
-use vtfarm_method::{MethodFrame, ReflectionMethod};
-use vtfarm_scene::Camera;
-use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
+use vtfarm_method::{OwnedFrame, ReflectionMethod};
 use vtfarm_vertex::VertexSettings;
 
 #[test]
 fn every_method_is_closer_to_the_reference_than_the_environment_map() {
-    let c = cockpit(&CockpitConfig {
-        detail: 0.3,
-        ..Default::default()
-    });
-    let camera = Camera {
-        width: 320,
-        height: 180,
-        ..c.camera
-    };
-    let reflectors = c.cover_glass_triangles();
-    let (base, ids) = vtfarm_raster::rasterize(&c.scene, &camera, &c.lighting);
-    let bvh = SceneBvh::new(Arc::new(c.scene));
-    let frame = MethodFrame {
-        tracer: Tracer {
-            bvh: &bvh,
-            lighting: &c.lighting,
-            settings: TraceSettings::default(),
-        },
-        camera,
-        ids: &ids,
-        reflector: &reflectors,
-    };
+    let owned = OwnedFrame::cockpit(0.3, 320, 180);
+    let (base, _) = vtfarm_raster::rasterize(owned.bvh.scene(), &owned.camera, &owned.lighting);
+    let frame = owned.frame();
     let vertex = VertexSettings::default();
     let methods = standard_methods(vertex);
     let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();

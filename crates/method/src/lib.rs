@@ -17,13 +17,14 @@
 //! buffer gives to the reflector's triangles (pixel ownership), so methods and
 //! packages composite in any order.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, NONE, ObjectId, TriangleId};
-use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
+use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
+use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{
     Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners, VertexSettings,
     behind_id_buffer, pixel_surface, trace_package,
@@ -40,6 +41,78 @@ pub struct MethodFrame<'a> {
     pub ids: &'a IdBuffer,
     /// The reflector's triangles (one connected surface for cube maps/PVRR).
     pub reflector: &'a [TriangleId],
+}
+
+/// Everything a [`MethodFrame`] borrows, owned: one view of a scene ready
+/// for any number of methods (`vtfarm compare`, tests).
+pub struct OwnedFrame {
+    pub bvh: SceneBvh,
+    pub camera: Camera,
+    pub lighting: Lighting,
+    pub trace: TraceSettings,
+    pub ids: IdBuffer,
+    pub reflector: Vec<TriangleId>,
+}
+
+impl OwnedFrame {
+    /// Builds the scene's BVH and rasterizes the frame's ID buffer.
+    pub fn new(
+        scene: Arc<Scene>,
+        camera: Camera,
+        lighting: Lighting,
+        trace: TraceSettings,
+        reflector: Vec<TriangleId>,
+    ) -> Self {
+        let ids = vtfarm_raster::id_buffer(&scene, &camera);
+        OwnedFrame {
+            bvh: SceneBvh::new(scene),
+            camera,
+            lighting,
+            trace,
+            ids,
+            reflector,
+        }
+    }
+
+    /// The view every method takes.
+    pub fn frame(&self) -> MethodFrame<'_> {
+        MethodFrame {
+            tracer: Tracer {
+                bvh: &self.bvh,
+                lighting: &self.lighting,
+                settings: self.trace,
+            },
+            camera: self.camera,
+            ids: &self.ids,
+            reflector: &self.reflector,
+        }
+    }
+}
+
+#[cfg(any(test, feature = "cockpit-fixture"))]
+impl OwnedFrame {
+    /// The built-in cockpit at `detail`, seen by its driver camera at
+    /// `width` × `height`, with the cover glass as the reflector and default
+    /// trace settings: the shared fixture of the methods' tests.
+    pub fn cockpit(detail: f32, width: u32, height: u32) -> OwnedFrame {
+        let c = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
+            detail,
+            ..Default::default()
+        });
+        let camera = Camera {
+            width,
+            height,
+            ..c.camera
+        };
+        let reflector = c.cover_glass_triangles();
+        OwnedFrame::new(
+            Arc::new(c.scene),
+            camera,
+            c.lighting,
+            TraceSettings::default(),
+            reflector,
+        )
+    }
 }
 
 /// One reflector pixel: the surface point the eye ray through its centre

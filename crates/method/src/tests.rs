@@ -1,54 +1,9 @@
-use std::sync::Arc;
-
-use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_scene::{Camera, Lighting};
-use vtfarm_trace::SceneBvh;
 use vtfarm_vertex::Quality;
 
 use super::*;
 
-struct Setup {
-    bvh: SceneBvh,
-    camera: Camera,
-    lighting: Lighting,
-    ids: IdBuffer,
-    reflector: Vec<TriangleId>,
-}
-
-fn small_cockpit() -> Setup {
-    let c = cockpit(&CockpitConfig {
-        detail: 0.3,
-        ..Default::default()
-    });
-    let camera = Camera {
-        width: 160,
-        height: 90,
-        ..c.camera
-    };
-    let reflector = c.cover_glass_triangles();
-    let ids = vtfarm_raster::id_buffer(&c.scene, &camera);
-    Setup {
-        bvh: SceneBvh::new(Arc::new(c.scene)),
-        camera,
-        lighting: c.lighting,
-        ids,
-        reflector,
-    }
-}
-
-impl Setup {
-    fn frame(&self) -> MethodFrame<'_> {
-        MethodFrame {
-            tracer: Tracer {
-                bvh: &self.bvh,
-                lighting: &self.lighting,
-                settings: TraceSettings::default(),
-            },
-            camera: self.camera,
-            ids: &self.ids,
-            reflector: &self.reflector,
-        }
-    }
+fn small_cockpit() -> OwnedFrame {
+    OwnedFrame::cockpit(0.3, 160, 90)
 }
 
 fn reference() -> VertexTracing {

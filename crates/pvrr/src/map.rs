@@ -20,11 +20,10 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, NONE, ObjectId, Projector, Scene, TriangleId};
-use vtfarm_trace::{Ray, SurfacePoint};
+use vtfarm_trace::Ray;
 
 use crate::level::{Level, Seen};
 use crate::viewpoint::MapView;
-use crate::warp::barycentric;
 
 /// Surfaces of excluded objects passed on one occlusion ray at most; more means
 /// a degenerate stack of coincident sheets.
@@ -76,27 +75,9 @@ fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32)
     if triangle == NONE {
         return None;
     }
-    let positions = scene.triangle_positions(triangle);
-    let [a, b, c] = positions;
-    let direction = camera.pixel_ray(x, y);
-    let plane_normal = (b - a).cross(c - a);
-    let denom = direction.dot(plane_normal);
-    let t = if denom.abs() > 1e-12 {
-        (a - camera.eye).dot(plane_normal) / denom
-    } else {
-        ids.depth[i] / direction.dot(camera.basis().0)
-    };
-    let position = camera.eye + direction * t;
-    let w = barycentric(positions, position);
-    let [na, nb, nc] = scene.triangle_normals(triangle);
-    let normal =
-        (na * w[0] + nb * w[1] + nc * w[2]).normalize_or(plane_normal.normalize_or(Vec3::Y));
+    let (point, direction) = vtfarm_vertex::pixel_surface(scene, camera, ids, triangle, x, y);
     Some(Seen {
-        point: SurfacePoint {
-            position,
-            normal,
-            triangle,
-        },
+        point,
         incoming: direction,
         object: ids.object[i],
     })

@@ -7,10 +7,9 @@ mod scenes;
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_method::{MethodFrame, Reflection, ReflectionMethod, VertexTracing, shade_reflector};
-use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Lighting, NONE, Scene, TriangleId};
-use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
+use vtfarm_method::{MethodFrame, OwnedFrame, ReflectionMethod, VertexTracing};
+use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
+use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 
 use self::scenes::Builder;
@@ -18,63 +17,41 @@ use crate::level::{Context, Level};
 use crate::warp::{Kind, Warp};
 use crate::{Pvrr, PvrrConfig, Refraction};
 
-/// A scene, its BVH and a frame set-up.
-struct Setup {
-    bvh: SceneBvh,
-    camera: Camera,
-    lighting: Lighting,
-    ids: IdBuffer,
-    reflector: Vec<TriangleId>,
+/// A test view with default trace settings.
+fn setup(scene: Scene, lighting: Lighting, camera: Camera, reflector: Vec<TriangleId>) -> Setup {
+    OwnedFrame::new(
+        Arc::new(scene),
+        camera,
+        lighting,
+        TraceSettings::default(),
+        reflector,
+    )
 }
 
-impl Setup {
-    fn new(scene: Scene, lighting: Lighting, camera: Camera, reflector: Vec<TriangleId>) -> Self {
-        let ids = vtfarm_raster::id_buffer(&scene, &camera);
-        Setup {
-            bvh: SceneBvh::new(Arc::new(scene)),
-            camera,
-            lighting,
-            ids,
-            reflector,
-        }
-    }
+type Setup = OwnedFrame;
 
-    fn frame(&self) -> MethodFrame<'_> {
-        MethodFrame {
-            tracer: Tracer {
-                bvh: &self.bvh,
-                lighting: &self.lighting,
-                settings: TraceSettings::default(),
-            },
-            camera: self.camera,
-            ids: &self.ids,
-            reflector: &self.reflector,
+/// Each reflector vertex facing the eye, as a surface point and the eye
+/// ray's direction.
+fn facing_vertices(setup: &Setup) -> Vec<(SurfacePoint, Vec3)> {
+    let scene = setup.bvh.scene();
+    let mut seen = std::collections::BTreeMap::new();
+    for &t in &setup.reflector {
+        for v in scene.triangles[t as usize].vertices {
+            seen.entry(v).or_insert(t);
         }
     }
-
-    /// Each reflector vertex facing the eye, as a surface point and the eye
-    /// ray's direction.
-    fn facing_vertices(&self) -> Vec<(SurfacePoint, Vec3)> {
-        let scene = self.bvh.scene();
-        let mut seen = std::collections::BTreeMap::new();
-        for &t in &self.reflector {
-            for v in scene.triangles[t as usize].vertices {
-                seen.entry(v).or_insert(t);
-            }
-        }
-        seen.into_iter()
-            .map(|(v, triangle)| {
-                let position = scene.positions[v as usize];
-                let point = SurfacePoint {
-                    position,
-                    normal: scene.normals[v as usize],
-                    triangle,
-                };
-                (point, (position - self.camera.eye).normalize())
-            })
-            .filter(|(p, incoming)| p.normal.dot(*incoming) < 0.0)
-            .collect()
-    }
+    seen.into_iter()
+        .map(|(v, triangle)| {
+            let position = scene.positions[v as usize];
+            let point = SurfacePoint {
+                position,
+                normal: scene.normals[v as usize],
+                triangle,
+            };
+            (point, (position - setup.camera.eye).normalize())
+        })
+        .filter(|(p, incoming)| p.normal.dot(*incoming) < 0.0)
+        .collect()
 }
 
 /// How the warped map compares with the ray tracer at the vertices.
@@ -101,7 +78,7 @@ fn vertex_errors(
     (tolerance, mask): (f32, Vec3),
     expected: &dyn Fn(&SurfacePoint, Vec3) -> Vec3,
 ) -> VertexErrors {
-    let vertices = setup.facing_vertices();
+    let vertices = facing_vertices(setup);
     let mut errors = Vec::new();
     for (point, incoming) in &vertices {
         if let Some(got) = warp.mapped_at(point, *incoming) {
@@ -155,7 +132,7 @@ fn mirror_in_room(facing: f32, radius: f32) -> Setup {
         &scenes::spherical(radius, facing),
     );
     let camera = scenes::camera(Vec3::new(0.4, 0.5, 2.6), Vec3::ZERO, 40.0, 64);
-    Setup::new(b.build(), lighting, camera, reflector)
+    setup(b.build(), lighting, camera, reflector)
 }
 
 #[test]
@@ -185,8 +162,7 @@ fn convex_mirror_vertices_show_the_ray_traced_reflection() {
     // The same map looked up by direction alone (an environment map from the
     // virtual viewpoint) is far off in this small room: the warp matters.
     let map = warp.map();
-    let unwarped: Vec<f32> = setup
-        .facing_vertices()
+    let unwarped: Vec<f32> = facing_vertices(&setup)
         .iter()
         .filter_map(|(point, incoming)| {
             let ray = frame.tracer.surface_terms(point, *incoming).reflection?;
@@ -278,7 +254,7 @@ fn lens(ior: f32) -> Setup {
         background: Vec3::ZERO,
     };
     let camera = scenes::camera(Vec3::new(0.1, 0.05, 3.0), Vec3::ZERO, 20.0, 64);
-    Setup::new(b.build(), lighting, camera, front)
+    setup(b.build(), lighting, camera, front)
 }
 
 /// What the ray tracer sees through the lens at a front vertex.
@@ -337,7 +313,7 @@ fn chromatic_aberration_displaces_the_channels_as_snell_says() {
     let dispersed = lens(1.61);
     let frame = dispersed.frame();
     let per_channel: Vec<Setup> = DISPERSION.iter().map(|&n| lens(n)).collect();
-    let vertices = dispersed.facing_vertices();
+    let vertices = facing_vertices(&dispersed);
     with_level(
         &frame,
         config(
@@ -426,7 +402,7 @@ fn facing_mirrors(max_depth: u32) -> (Setup, TraceSettings) {
         max_depth,
         ..TraceSettings::default()
     };
-    (Setup::new(b.build(), lighting, camera, a), settings)
+    (setup(b.build(), lighting, camera, a), settings)
 }
 
 #[test]
@@ -442,8 +418,7 @@ fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
     let scene = setup.bvh.scene();
     let mirror_b = scene.object_id("mirror_b").unwrap();
     // The vertices whose reflection ray meets mirror B.
-    let via_b: Vec<(SurfacePoint, Vec3)> = setup
-        .facing_vertices()
+    let via_b: Vec<(SurfacePoint, Vec3)> = facing_vertices(&setup)
         .into_iter()
         .filter(|(p, i)| {
             let ray = frame.tracer.surface_terms(p, *i).reflection.unwrap();
@@ -498,7 +473,7 @@ fn without_depth_for_a_second_bounce_the_mirror_in_the_mirror_is_dark() {
         let warp = Warp::build(level, setup.camera.eye, &setup.reflector, Kind::Reflection);
         // Only the texels at B's silhouette blend in the room behind it.
         let (mut on_b, mut dark) = (0, 0);
-        for (point, incoming) in setup.facing_vertices() {
+        for (point, incoming) in facing_vertices(&setup) {
             let got = warp.radiance_at(&point, incoming);
             if got.object == mirror_b {
                 on_b += 1;
@@ -531,17 +506,7 @@ fn the_image_does_not_depend_on_the_thread_count() {
 
 /// The cockpit at detail 0.3, 160×90, default camera and lights.
 fn small_cockpit() -> Setup {
-    let c = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
-        detail: 0.3,
-        ..Default::default()
-    });
-    let camera = Camera {
-        width: 160,
-        height: 90,
-        ..c.camera
-    };
-    let reflector = c.cover_glass_triangles();
-    Setup::new(c.scene, c.lighting, camera, reflector)
+    OwnedFrame::cockpit(0.3, 160, 90)
 }
 
 /// Mean absolute error of the reflected component over the reflector's
@@ -557,78 +522,6 @@ fn reflected_error(a: &SparseBitmap, b: &SparseBitmap) -> f32 {
     sum / a.reflected.len().max(1) as f32
 }
 
-/// The plain environment map the paper improves on: one cube map from the
-/// reflector's centre (the scene without the glass, rasterized), looked up
-/// by the mirror direction alone.
-fn environment_map_reflected(setup: &Setup, face: u32) -> SparseBitmap {
-    let frame = setup.frame();
-    let scene = setup.bvh.scene();
-    let glass: Vec<u32> = ["cover_glass", "cover_glass_back"]
-        .iter()
-        .filter_map(|name| scene.object_id(name))
-        .collect();
-    let (sum, count) = setup
-        .reflector
-        .iter()
-        .fold((Vec3::ZERO, 0.0), |(s, n), &t| {
-            let [a, b, c] = scene.triangle_positions(t);
-            (s + (a + b + c) / 3.0, n + 1.0)
-        });
-    let center = sum / count;
-    let faces: Vec<(Camera, vtfarm_imaging::Image)> = [
-        (Vec3::X, Vec3::Y),
-        (Vec3::NEG_X, Vec3::Y),
-        (Vec3::Y, Vec3::Z),
-        (Vec3::NEG_Y, Vec3::Z),
-        (Vec3::Z, Vec3::Y),
-        (Vec3::NEG_Z, Vec3::Y),
-    ]
-    .iter()
-    .map(|&(axis, up)| {
-        let camera = Camera {
-            eye: center,
-            target: center + axis,
-            up,
-            fov_y_deg: 90.0,
-            width: face,
-            height: face,
-        };
-        let keep = |t: TriangleId| !glass.contains(&scene.triangles[t as usize].object);
-        let ids = vtfarm_raster::id_buffer_where(scene, &camera, &keep);
-        let image = vtfarm_raster::shade_ids(scene, &camera, &setup.lighting, &ids);
-        (camera, image)
-    })
-    .collect();
-    let lookup = |d: Vec3| {
-        let (camera, image) = faces
-            .iter()
-            .max_by(|a, b| {
-                let da = (a.0.target - a.0.eye).dot(d);
-                let db = (b.0.target - b.0.eye).dot(d);
-                da.total_cmp(&db)
-            })
-            .expect("six faces");
-        let s = camera
-            .project(camera.eye + d)
-            .expect("in front of its face");
-        let x = (s.x.max(0.0) as u32).min(face - 1);
-        let y = (s.y.max(0.0) as u32).min(face - 1);
-        image.get(x, y)
-    };
-    let pixels = frame.pixels();
-    let reflections: Vec<Reflection> = pixels
-        .iter()
-        .map(|p| {
-            let terms = frame.tracer.surface_terms(&p.point, p.incoming);
-            Reflection {
-                radiance: terms.reflection.map_or(Vec3::ZERO, |r| lookup(r.direction)),
-                object: NONE,
-            }
-        })
-        .collect();
-    shade_reflector(&frame, &pixels, &reflections, None).0
-}
-
 #[test]
 fn on_the_cockpit_pvrr_is_closer_to_the_reference_than_an_environment_map() {
     let setup = small_cockpit();
@@ -641,7 +534,10 @@ fn on_the_cockpit_pvrr_is_closer_to_the_reference_than_an_environment_map() {
     }
     .render(&frame);
     let (pvrr, counts) = Pvrr::default().render_counted(&frame);
-    let environment = environment_map_reflected(&setup, 256);
+    // The plain environment map the paper improves on.
+    let environment = vtfarm_cubemap::EnvironmentMap { resolution: 256 }
+        .render(&frame)
+        .bitmap;
     let pvrr_error = reflected_error(&pvrr.bitmap, &reference.bitmap);
     let environment_error = reflected_error(&environment, &reference.bitmap);
     let mean_reflected = reflected_error(
@@ -717,7 +613,7 @@ fn a_rendered_lens_matches_the_reference_through_both_faces() {
     assert!(error < 0.01 * mean, "{error} vs mean {mean}");
     // Up to two rays per vertex: to the back face and on to the backdrop
     // (one where the ray leaves through the open rim).
-    let facing = setup.facing_vertices().len() as u64;
+    let facing = facing_vertices(&setup).len() as u64;
     assert!(
         counts.searches > facing && counts.searches <= 2 * facing,
         "{counts:?}"

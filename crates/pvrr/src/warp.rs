@@ -15,6 +15,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use vtfarm_scene::{NONE, ObjectId, Scene, TriangleId};
 use vtfarm_trace::SurfacePoint;
+use vtfarm_vertex::barycentric;
 
 use crate::level::Level;
 use crate::map::ReflectionMap;
@@ -288,16 +289,4 @@ fn reflector_vertices(scene: &Scene, triangles: &[TriangleId]) -> (Vec<u32>, Vec
         })
         .collect();
     (owned.into_iter().map(|(v, _)| v).collect(), points)
-}
-
-/// Barycentric weights of `p` (on the triangle's plane) in the triangle.
-pub(crate) fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
-    let n = (b - a).cross(c - a);
-    let area = n.length_squared();
-    if area <= 0.0 {
-        return [1.0 / 3.0; 3];
-    }
-    let wa = (c - b).cross(p - b).dot(n) / area;
-    let wb = (a - c).cross(p - c).dot(n) / area;
-    [wa, wb, 1.0 - wa - wb]
 }

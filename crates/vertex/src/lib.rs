@@ -288,7 +288,7 @@ pub fn pixel_surface(
         ids.depth[ids.index(x, y)] / direction.dot(forward)
     };
     let position = camera.eye + direction * t;
-    let [wa, wb, wc] = barycentric(position, a, b, c, plane_normal);
+    let [wa, wb, wc] = barycentric([a, b, c], position);
     let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
     let point = SurfacePoint {
         position,
@@ -311,8 +311,10 @@ pub fn behind_id_buffer(
     })
 }
 
-/// Barycentric weights of `p` (in the plane of a, b, c with normal `n`).
-fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3, n: Vec3) -> [f32; 3] {
+/// Barycentric weights of `p` (on the triangle's plane) in the triangle
+/// `[a, b, c]`; a degenerate triangle gives equal weights.
+pub fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
+    let n = (b - a).cross(c - a);
     let area = n.length_squared();
     if area <= 0.0 {
         return [1.0 / 3.0; 3];

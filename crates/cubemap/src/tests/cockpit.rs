@@ -2,61 +2,16 @@
 //! reference: both cube-map variants must be closer than the environment
 //! map on the reflected component.
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
-use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_method::{MethodFrame, MethodOutput, ReflectionMethod, VertexTracing};
-use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Lighting};
-use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
+use vtfarm_method::{MethodFrame, MethodOutput, OwnedFrame, ReflectionMethod, VertexTracing};
 use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 
 use crate::{CubeMapMethod, EnvironmentMap, ReflectorShape, Region, SearchSettings, search};
 
-struct Setup {
-    bvh: SceneBvh,
-    camera: Camera,
-    lighting: Lighting,
-    ids: IdBuffer,
-    reflector: Vec<u32>,
-}
-
-fn small_cockpit() -> Setup {
-    let c = cockpit(&CockpitConfig {
-        detail: 0.3,
-        ..Default::default()
-    });
-    let camera = Camera {
-        width: 320,
-        height: 180,
-        ..c.camera
-    };
-    let reflector = c.cover_glass_triangles();
-    let ids = vtfarm_raster::id_buffer(&c.scene, &camera);
-    Setup {
-        bvh: SceneBvh::new(Arc::new(c.scene)),
-        camera,
-        lighting: c.lighting,
-        ids,
-        reflector,
-    }
-}
-
-impl Setup {
-    fn frame(&self) -> MethodFrame<'_> {
-        MethodFrame {
-            tracer: Tracer {
-                bvh: &self.bvh,
-                lighting: &self.lighting,
-                settings: TraceSettings::default(),
-            },
-            camera: self.camera,
-            ids: &self.ids,
-            reflector: &self.reflector,
-        }
-    }
+fn small_cockpit() -> OwnedFrame {
+    OwnedFrame::cockpit(0.3, 320, 180)
 }
 
 /// Mean absolute error per channel over the reflector's pixels.
