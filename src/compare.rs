@@ -41,9 +41,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
         .context("a job has at least one frame")?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
-    if let Some(warning) = vtfarm_cubemap::classify(&scene, &reflectors).warning() {
-        eprintln!("warning: {warning}");
-    }
+    crate::warn_unsupported_reflectors(vtfarm_method::MethodKind::CubeMap, &scene, &reflectors);
     let (base, _) = vtfarm_raster::rasterize(&scene, &setup.camera, &setup.lighting);
     let owned = OwnedFrame::new(
         Arc::new(scene),

@@ -128,6 +128,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         reflectors,
         setups,
     } = crate::prepare_job(&args.job, args.quality, args.width, args.height)?;
+    crate::warn_unsupported_reflectors(job.method, &scene, &reflectors);
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     let options = client_options(&args.cluster, &args.master)?;

@@ -218,6 +218,7 @@ fn render(args: RenderArgs) -> Result<()> {
         .next()
         .context("a job has at least one frame")?;
 
+    warn_unsupported_reflectors(job.method, &scene, &reflectors);
     let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
     let scene_triangles = scene.triangles.len();
     let in_process_aux = args
@@ -282,6 +283,26 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     println!("wrote {}", args.output.display());
     Ok(())
+}
+
+/// The cube-map search supports convex and concave reflectors only: says so
+/// for each reflector object that is neither.
+pub(crate) fn warn_unsupported_reflectors(
+    method: vtfarm_method::MethodKind,
+    scene: &vtfarm_scene::Scene,
+    reflectors: &[u32],
+) {
+    use vtfarm_method::MethodKind;
+    if !matches!(method, MethodKind::CubeMap | MethodKind::CubeMapGrid) {
+        return;
+    }
+    for group in vtfarm_method::reflector_groups(scene, reflectors) {
+        if let Some(warning) = vtfarm_cubemap::classify(scene, &group).warning() {
+            let object = scene.triangles[group[0] as usize].object;
+            let name = &scene.objects[object as usize].name;
+            eprintln!("warning: reflector {name:?}: {warning}");
+        }
+    }
 }
 
 /// The progress bar of a frame, counting reflector triangles.

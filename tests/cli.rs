@@ -321,3 +321,66 @@ fn render_runs_the_method_the_job_names_through_the_farm() {
         "no refined faces without vertex tracing"
     );
 }
+
+/// A saddle z = x² − y² over [-1, 1]² as OBJ (with its normals), for the
+/// cube-map method's shape warning.
+fn saddle_obj() -> String {
+    let n = 8;
+    let mut obj = String::from("o saddle\n");
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (
+                2.0 * i as f32 / n as f32 - 1.0,
+                2.0 * j as f32 / n as f32 - 1.0,
+            );
+            obj += &format!("v {x} {y} {}\n", 0.3 * (x * x - y * y));
+            let normal = [-0.6 * x, 0.6 * y, 1.0];
+            obj += &format!("vn {} {} {}\n", normal[0], normal[1], normal[2]);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let v = |i: usize, j: usize| j * (n + 1) + i + 1;
+            let (a, b, c, d) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+            obj += &format!("f {a}//{a} {b}//{b} {c}//{c}\nf {a}//{a} {c}//{c} {d}//{d}\n");
+        }
+    }
+    obj
+}
+
+#[test]
+fn cube_maps_warn_about_a_reflector_that_is_neither_convex_nor_concave() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("saddle.obj"), saddle_obj()).unwrap();
+    let job = dir.path().join("saddle.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nobj = \"saddle.obj\"\n[camera]\neye = [0, -2, 3]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 64\nheight = 48\n[reflectors]\nobjects = [\"saddle\"]\n[quality]\nmethod = \"cubemap\"\n",
+    )
+    .unwrap();
+    let png = dir.path().join("saddle.png");
+    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", png.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("reflector \"saddle\"") && err.contains("neither convex nor concave"),
+        "{err}"
+    );
+    // The cockpit's concave glass gets no warning.
+    let out = vtfarm(&[
+        "compare",
+        repo("configs/cockpit.toml").to_str().unwrap(),
+        "-o",
+        dir.path().join("cmp").to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "36",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        !text(&out.stderr).contains("warning"),
+        "{}",
+        text(&out.stderr)
+    );
+}
