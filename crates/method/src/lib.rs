@@ -364,6 +364,19 @@ pub struct VertexTracing {
     pub settings: VertexSettings,
 }
 
+impl VertexTracing {
+    /// The per-pixel reference: every reflector pixel traced, with default
+    /// thresholds (they do not matter to it).
+    pub fn reference() -> Self {
+        VertexTracing {
+            settings: VertexSettings {
+                quality: vtfarm_vertex::Quality::Reference,
+                ..VertexSettings::default()
+            },
+        }
+    }
+}
+
 impl ReflectionMethod for VertexTracing {
     fn name(&self) -> String {
         self.settings.quality.name().to_owned()

@@ -6,15 +6,6 @@ fn small_cockpit() -> OwnedFrame {
     OwnedFrame::cockpit(0.3, 160, 90)
 }
 
-fn reference() -> VertexTracing {
-    VertexTracing {
-        settings: VertexSettings {
-            quality: Quality::Reference,
-            ..Default::default()
-        },
-    }
-}
-
 #[test]
 fn exact_reflections_through_the_shared_finish_equal_the_reference() {
     let setup = small_cockpit();
@@ -47,7 +38,7 @@ fn exact_reflections_through_the_shared_finish_equal_the_reference() {
         .collect();
     let (bitmap, rays) = shade_reflector(&frame, &pixels, &reflections, None);
     assert!(rays > 0, "the cover glass transmits");
-    let reference = reference().render(&frame).bitmap;
+    let reference = VertexTracing::reference().render(&frame).bitmap;
     assert_eq!(bitmap.mask, reference.mask);
     assert_eq!((bitmap.x0, bitmap.y0), (reference.x0, reference.y0));
     assert_eq!(bitmap.reflected_object, reference.reflected_object);
@@ -87,7 +78,7 @@ fn preview_counts_fewer_samples_than_the_reference() {
         },
     }
     .render(&frame);
-    let reference = reference().render(&frame);
+    let reference = VertexTracing::reference().render(&frame);
     assert_eq!(preview.bitmap.mask, reference.bitmap.mask);
     assert_eq!(preview.counters.pixels, reference.counters.pixels);
     assert!(preview.counters.rays < reference.counters.rays);
@@ -125,11 +116,11 @@ fn reflector_groups_are_objects_and_merged_groups_equal_one_render() {
     // Rendering each group and merging equals rendering the front alone
     // (the back shows no pixels of its own in front of the front).
     let frame = setup.frame();
-    let whole = reference().render(&frame).bitmap;
+    let whole = VertexTracing::reference().render(&frame).bitmap;
     let parts: Vec<SparseBitmap> = groups
         .iter()
         .map(|g| {
-            reference()
+            VertexTracing::reference()
                 .render(&MethodFrame {
                     reflector: g,
                     ..frame

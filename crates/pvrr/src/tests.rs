@@ -10,7 +10,7 @@ use glam::Vec3;
 use vtfarm_method::{MethodFrame, OwnedFrame, ReflectionMethod, VertexTracing};
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
 use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
-use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
+use vtfarm_vertex::SparseBitmap;
 
 use self::scenes::Builder;
 use crate::level::{Context, Level};
@@ -526,13 +526,7 @@ fn reflected_error(a: &SparseBitmap, b: &SparseBitmap) -> f32 {
 fn on_the_cockpit_pvrr_is_closer_to_the_reference_than_an_environment_map() {
     let setup = small_cockpit();
     let frame = setup.frame();
-    let reference = VertexTracing {
-        settings: VertexSettings {
-            quality: Quality::Reference,
-            ..Default::default()
-        },
-    }
-    .render(&frame);
+    let reference = VertexTracing::reference().render(&frame);
     let (pvrr, counts) = Pvrr::default().render_counted(&frame);
     // The plain environment map the paper improves on.
     let environment = vtfarm_cubemap::EnvironmentMap { resolution: 256 }
@@ -594,13 +588,7 @@ fn transmitted_error(a: &SparseBitmap, reference: &SparseBitmap) -> (f32, f32) {
 fn a_rendered_lens_matches_the_reference_through_both_faces() {
     let setup = lens(1.61);
     let frame = setup.frame();
-    let reference = VertexTracing {
-        settings: VertexSettings {
-            quality: Quality::Reference,
-            ..Default::default()
-        },
-    }
-    .render(&frame);
+    let reference = VertexTracing::reference().render(&frame);
     let method = Pvrr::new(config(256, Refraction::Mapped { iors: None }));
     assert_eq!(method.name(), "pvrr-refraction");
     let (pvrr, counts) = method.render_counted(&frame);

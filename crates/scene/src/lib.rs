@@ -11,6 +11,7 @@ mod material;
 pub mod normals;
 pub mod obj;
 pub mod shading;
+pub mod shapes;
 
 pub use camera::{Camera, NEAR, Projector, ScreenPoint};
 pub use light::{Light, LightKind, Lighting};

@@ -154,70 +154,13 @@ impl SceneBuilder {
         subdivisions: u32,
     ) -> ObjectId {
         let (object, material) = self.object(material);
-        let p = (1.0 + 5f32.sqrt()) / 2.0;
-        let mut points: Vec<Vec3> = [
-            [-1.0, p, 0.0],
-            [1.0, p, 0.0],
-            [-1.0, -p, 0.0],
-            [1.0, -p, 0.0],
-            [0.0, -1.0, p],
-            [0.0, 1.0, p],
-            [0.0, -1.0, -p],
-            [0.0, 1.0, -p],
-            [p, 0.0, -1.0],
-            [p, 0.0, 1.0],
-            [-p, 0.0, -1.0],
-            [-p, 0.0, 1.0],
-        ]
-        .iter()
-        .map(|&c| Vec3::from_array(c).normalize())
-        .collect();
-        let mut faces: Vec<[usize; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..subdivisions {
-            let mut midpoints = std::collections::HashMap::new();
-            let mut midpoint = |a: usize, b: usize, points: &mut Vec<Vec3>| {
-                *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    points.push(((points[a] + points[b]) * 0.5).normalize());
-                    points.len() - 1
-                })
-            };
-            faces = faces
-                .iter()
-                .flat_map(|&[a, b, c]| {
-                    let ab = midpoint(a, b, &mut points);
-                    let bc = midpoint(b, c, &mut points);
-                    let ca = midpoint(c, a, &mut points);
-                    [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-                })
-                .collect();
-        }
+        let (points, faces) = vtfarm_scene::shapes::icosphere(subdivisions);
         let base = self.scene.positions.len() as u32;
         for &unit in &points {
             self.vertex(centre + unit * radius, unit);
         }
         for face in faces {
-            let vertices = face.map(|i| base + i as u32);
+            let vertices = face.map(|i| base + i);
             self.scene.triangles.push(Triangle {
                 vertices,
                 object,

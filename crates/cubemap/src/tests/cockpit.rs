@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use vtfarm_method::{MethodFrame, MethodOutput, OwnedFrame, ReflectionMethod, VertexTracing};
-use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
+use vtfarm_vertex::SparseBitmap;
 
 use crate::{CubeMapMethod, EnvironmentMap, ReflectorShape, Region, SearchSettings, search};
 
@@ -56,12 +56,7 @@ fn timed(method: &dyn ReflectionMethod, frame: &MethodFrame<'_>) -> MethodOutput
 fn cube_maps_are_closer_to_the_reference_than_the_environment_map() {
     let setup = small_cockpit();
     let frame = setup.frame();
-    let reference = VertexTracing {
-        settings: VertexSettings {
-            quality: Quality::Reference,
-            ..Default::default()
-        },
-    };
+    let reference = VertexTracing::reference();
     let reference = timed(&reference, &frame).bitmap;
     let envmap = errors(
         &timed(&EnvironmentMap::default(), &frame).bitmap,

@@ -33,69 +33,6 @@ fn push(
     }));
 }
 
-/// Unit icosphere points and faces, `levels` times split.
-fn icosphere(levels: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let p = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut points: Vec<Vec3> = [
-        [-1.0, p, 0.0],
-        [1.0, p, 0.0],
-        [-1.0, -p, 0.0],
-        [1.0, -p, 0.0],
-        [0.0, -1.0, p],
-        [0.0, 1.0, p],
-        [0.0, -1.0, -p],
-        [0.0, 1.0, -p],
-        [p, 0.0, -1.0],
-        [p, 0.0, 1.0],
-        [-p, 0.0, -1.0],
-        [-p, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|&c| Vec3::from_array(c).normalize())
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut midpoints = std::collections::BTreeMap::new();
-        let mut midpoint = |a: u32, b: u32, points: &mut Vec<Vec3>| {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                points.push(((points[a as usize] + points[b as usize]) * 0.5).normalize());
-                points.len() as u32 - 1
-            })
-        };
-        faces = faces
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let ab = midpoint(a, b, &mut points);
-                let bc = midpoint(b, c, &mut points);
-                let ca = midpoint(c, a, &mut points);
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
-    }
-    (points, faces)
-}
-
 pub(super) fn mirror() -> Material {
     Material {
         reflectance: Vec3::ONE,
@@ -112,7 +49,7 @@ pub(super) fn add_sphere(
     levels: u32,
     inward: bool,
 ) -> Vec<u32> {
-    let (points, mut faces) = icosphere(levels);
+    let (points, mut faces) = vtfarm_scene::shapes::icosphere(levels);
     let sign = if inward { -1.0 } else { 1.0 };
     if inward {
         for f in &mut faces {
