@@ -213,17 +213,12 @@ impl Job {
                     self.lighting.over(cockpit.lighting),
                 )
             }
-            SceneSource::Obj(path) => {
+            SceneSource::Obj(_) => {
                 let camera = self
                     .camera
                     .complete()
                     .map_err(|missing| self.invalid(obj_camera_missing(&missing)))?;
-                let scene =
-                    load_obj(path, &ObjOptions::default()).map_err(|source| JobError::Obj {
-                        file: self.file.clone(),
-                        obj: path.clone(),
-                        source: Box::new(source),
-                    })?;
+                let scene = self.scene_only()?;
                 (scene, camera, self.lighting.over(Lighting::default()))
             }
         };
@@ -234,6 +229,21 @@ impl Job {
             frames,
             lighting,
         })
+    }
+
+    /// The scene alone, without resolving camera or lighting (a glare study
+    /// takes those from its base job for every design variant).
+    pub fn scene_only(&self) -> Result<Scene, JobError> {
+        match &self.scene {
+            SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
+            SceneSource::Obj(path) => {
+                load_obj(path, &ObjOptions::default()).map_err(|source| JobError::Obj {
+                    file: self.file.clone(),
+                    obj: path.clone(),
+                    source: Box::new(source),
+                })
+            }
+        }
     }
 
     /// One camera per frame: `camera` itself, then `camera` moved to each

@@ -138,7 +138,7 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
     let mut slugs: Vec<String> = Vec::new();
     for variant in &study.variants {
         let job = study.variant_job(variant);
-        let scene = job.load_scene()?.scene;
+        let scene = job.scene_only()?;
         let reflectors = job.reflector_triangles(&scene)?;
         let objects = |key: &'static str, names: &[String]| {
             names

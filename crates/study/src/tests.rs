@@ -202,3 +202,34 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     );
     assert_eq!(report.frames.len(), 1);
 }
+
+#[test]
+fn an_obj_variant_measures_like_the_built_in_design_it_was_exported_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let flat = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
+        detail: 0.3,
+        glass: vtfarm_cockpit::GlassDesign::Flat,
+        ..Default::default()
+    });
+    vtfarm_scene::obj::write_obj(&flat.scene, dir.path(), "flat-cab").unwrap();
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        "[[variants]]\nname = \"built-in\"\nglass = \"flat\"\n\
+         [[variants]]\nname = \"from OBJ\"\nobj = \"flat-cab.obj\"\n",
+    );
+    assert_eq!(
+        plan.variants[1].reflectors.len(),
+        plan.variants[0].reflectors.len()
+    );
+    let (report, _) = run(&plan, dir.path());
+    let [built_in, from_obj] = [0, 1].map(|v| &report.frames[v].summary);
+    assert_eq!(built_in.glass_pixels, from_obj.glass_pixels);
+    assert_eq!(built_in.objects[0].name, from_obj.objects[0].name);
+    let (a, b) = (
+        built_in.mean_reflected_luminance,
+        from_obj.mean_reflected_luminance,
+    );
+    assert!(a > 0.0 && (a - b).abs() <= 0.02 * a, "{a} vs {b}");
+    assert!(dir.path().join("from-obj/eye_00/heat.png").is_file());
+}
