@@ -439,7 +439,11 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
             "{expected} in {names:?}"
         );
     }
-    assert_eq!(names.len(), 3 + 2 * 2 * 3, "three images per frame");
+    assert_eq!(
+        names.len(),
+        3 + 2 * 2 * 7,
+        "three images and four arrays per frame"
+    );
     for (name, bytes) in &a {
         assert!(bytes == &b[name], "{} differs", name.display());
     }

@@ -344,6 +344,23 @@ impl<'a> StudyWriter<'a> {
         frame.color.write_png(&dir.join("image.png"))?;
         heat.write_png(&dir.join("heat.png"))?;
         objects.write_png(&dir.join("objects.png"))?;
+        // The per-pixel figures, for engineers' own analysis (0 off the
+        // glass; contrast NaN where it is not evaluated).
+        let shape = [camera.height as usize, camera.width as usize];
+        let contrast: Vec<f32> = analysis
+            .contrast
+            .per_pixel
+            .iter()
+            .map(|c| c.unwrap_or(f32::NAN))
+            .collect();
+        for (name, data) in [
+            ("reflected_luminance", &analysis.reflected_luminance),
+            ("transmitted_luminance", &analysis.transmitted_luminance),
+            ("veiling_ratio", &analysis.veiling_ratio),
+            ("contrast", &contrast),
+        ] {
+            vtfarm_imaging::write_npy_f32(&dir.join(format!("{name}.npy")), &shape, data)?;
+        }
         let row = FrameRow {
             variant: planned.name.clone(),
             eye_index: eye,

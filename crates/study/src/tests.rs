@@ -222,7 +222,7 @@ fn an_obj_variant_measures_like_the_built_in_design_it_was_exported_from() {
         plan.variants[1].reflectors.len(),
         plan.variants[0].reflectors.len()
     );
-    let (report, _) = run(&plan, dir.path());
+    let (report, images) = run(&plan, dir.path());
     let [built_in, from_obj] = [0, 1].map(|v| &report.frames[v].summary);
     assert_eq!(built_in.glass_pixels, from_obj.glass_pixels);
     assert_eq!(built_in.objects[0].name, from_obj.objects[0].name);
@@ -232,4 +232,31 @@ fn an_obj_variant_measures_like_the_built_in_design_it_was_exported_from() {
     );
     assert!(a > 0.0 && (a - b).abs() <= 0.02 * a, "{a} vs {b}");
     assert!(dir.path().join("from-obj/eye_00/heat.png").is_file());
+
+    // The per-pixel array agrees with the summary.
+    let lr = read_npy_f32(&dir.path().join("from-obj/eye_00/reflected_luminance.npy"));
+    let glass = &images[1][0].mask;
+    assert_eq!(lr.len(), glass.len());
+    let mean = lr
+        .iter()
+        .zip(glass)
+        .filter(|(_, g)| **g)
+        .map(|(l, _)| f64::from(*l))
+        .sum::<f64>()
+        / from_obj.glass_pixels as f64;
+    assert!((mean as f32 - b).abs() <= 1e-5 * b, "{mean} vs {b}");
+    assert!(lr.iter().zip(glass).all(|(l, g)| *g || *l == 0.0));
+}
+
+/// The data of a little-endian float32 `.npy` file (format 1.0).
+fn read_npy_f32(path: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..6], b"\x93NUMPY");
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+    assert!(header.contains("'descr': '<f4'"), "{header}");
+    bytes[10 + header_len..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
 }
