@@ -9,7 +9,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_method::{MethodFrame, OwnedFrame, ReflectionMethod, VertexTracing};
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
-use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
+use vtfarm_trace::{SurfacePoint, TraceSettings};
 use vtfarm_vertex::SparseBitmap;
 
 use self::scenes::Builder;
@@ -380,7 +380,7 @@ fn chromatic_aberration_displaces_the_channels_as_snell_says() {
 
 /// Two mirrors facing each other in the room: the eye sees mirror A (the
 /// reflector), whose rays go on to mirror B.
-fn facing_mirrors(max_depth: u32) -> (Setup, TraceSettings) {
+fn facing_mirrors(max_depth: u32) -> Setup {
     let mut b = Builder::default();
     let lighting = scenes::room(&mut b);
     let a = b.grid(
@@ -402,19 +402,15 @@ fn facing_mirrors(max_depth: u32) -> (Setup, TraceSettings) {
         max_depth,
         ..TraceSettings::default()
     };
-    (setup(b.build(), lighting, camera, a), settings)
+    let mut view = setup(b.build(), lighting, camera, a);
+    view.trace = settings;
+    view
 }
 
 #[test]
 fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
-    let (setup, settings) = facing_mirrors(TraceSettings::default().max_depth);
-    let frame = MethodFrame {
-        tracer: Tracer {
-            settings,
-            ..setup.frame().tracer
-        },
-        ..setup.frame()
-    };
+    let setup = facing_mirrors(TraceSettings::default().max_depth);
+    let frame = setup.frame();
     let scene = setup.bvh.scene();
     let mirror_b = scene.object_id("mirror_b").unwrap();
     // The vertices whose reflection ray meets mirror B.
@@ -459,14 +455,8 @@ fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
 
 #[test]
 fn without_depth_for_a_second_bounce_the_mirror_in_the_mirror_is_dark() {
-    let (setup, settings) = facing_mirrors(2);
-    let frame = MethodFrame {
-        tracer: Tracer {
-            settings,
-            ..setup.frame().tracer
-        },
-        ..setup.frame()
-    };
+    let setup = facing_mirrors(2);
+    let frame = setup.frame();
     let scene = setup.bvh.scene();
     let mirror_b = scene.object_id("mirror_b").unwrap();
     with_level(&frame, config(512, Refraction::Traced), |level| {
@@ -487,7 +477,7 @@ fn without_depth_for_a_second_bounce_the_mirror_in_the_mirror_is_dark() {
 
 #[test]
 fn the_image_does_not_depend_on_the_thread_count() {
-    let (setup, _) = facing_mirrors(5);
+    let setup = facing_mirrors(5);
     let method = Pvrr::new(config(128, Refraction::Traced));
     let render = |threads| {
         let pool = rayon::ThreadPoolBuilder::new()

@@ -181,16 +181,7 @@ impl Tracer<'_> {
         let scene = self.bvh.scene();
         let triangle = &scene.triangles[point.triangle as usize];
         let material = scene.material_of(point.triangle);
-        let geometric = self.bvh.geometric_normal(point.triangle);
-        // Callers' normals come from interpolation: guard against zero ones
-        // (and a degenerate triangle's zero geometric normal).
-        let normal = point.normal.normalize_or(geometric);
-        let geometric = if geometric == Vec3::ZERO {
-            normal
-        } else {
-            geometric
-        };
-        let incoming = incoming.normalize_or(-normal);
+        let (normal, geometric, incoming) = self.guarded_normals(point, incoming);
         if tracked {
             signature.add(u64::from(triangle.object));
         }
@@ -255,6 +246,20 @@ impl Tracer<'_> {
         shaded
     }
 
+    /// The unit shading normal, geometric normal and incoming direction at
+    /// `point`. Callers' normals come from interpolation: this guards against
+    /// zero ones (and a degenerate triangle's zero geometric normal).
+    fn guarded_normals(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3, Vec3) {
+        let geometric = self.bvh.geometric_normal(point.triangle);
+        let normal = point.normal.normalize_or(geometric);
+        let geometric = if geometric == Vec3::ZERO {
+            normal
+        } else {
+            geometric
+        };
+        (normal, geometric, incoming.normalize_or(-normal))
+    }
+
     /// The parts of `shade` that need no secondary ray: local Phong with
     /// shadow rays, the weights kr and kt (Fresnel included when set) and the
     /// reflection and refraction rays themselves, untraced. Other reflection
@@ -263,14 +268,7 @@ impl Tracer<'_> {
     pub fn surface_terms(&self, point: &SurfacePoint, incoming: Vec3) -> SurfaceTerms {
         let scene = self.bvh.scene();
         let material = scene.material_of(point.triangle);
-        let geometric = self.bvh.geometric_normal(point.triangle);
-        let normal = point.normal.normalize_or(geometric);
-        let geometric = if geometric == Vec3::ZERO {
-            normal
-        } else {
-            geometric
-        };
-        let incoming = incoming.normalize_or(-normal);
+        let (normal, geometric, incoming) = self.guarded_normals(point, incoming);
         let local = phong(
             material,
             self.lighting,
