@@ -178,14 +178,79 @@ impl Tracer<'_> {
         // Branches too weak to change a pixel visibly stay out of the ray-tree
         // signature, so they do not drive the refinement.
         let tracked = weight >= self.settings.signature_min_weight;
-        let scene = self.bvh.scene();
-        let triangle = &scene.triangles[point.triangle as usize];
-        let material = scene.material_of(point.triangle);
-        let (normal, geometric, incoming) = self.guarded_normals(point, incoming);
         if tracked {
-            signature.add(u64::from(triangle.object));
+            let object = self.bvh.scene().triangles[point.triangle as usize].object;
+            signature.add(u64::from(object));
+        }
+        let terms = self.terms(point, incoming, &mut |light| {
+            if tracked {
+                signature.add(word::LIT + light_index(self.lighting, light));
+            }
+        });
+        if tracked {
+            signature.add(word::LIGHTS_END);
         }
 
+        let mut shaded = Shaded {
+            color: terms.local,
+            reflected: Vec3::ZERO,
+            transmitted: Vec3::ZERO,
+            reflected_object: NONE,
+        };
+        if depth >= self.settings.max_depth.max(1) {
+            return shaded;
+        }
+        if let Some(ray) = terms.reflection {
+            if tracked {
+                signature.add(word::REFLECT);
+            }
+            let kr = terms.kr;
+            let (seen, object) =
+                self.radiance(&ray, depth + 1, weight * kr.max_element(), signature);
+            shaded.reflected = kr * seen.color;
+            shaded.reflected_object = object;
+            shaded.color += shaded.reflected;
+        }
+        if let Some(ray) = terms.refraction {
+            if tracked {
+                signature.add(word::REFRACT);
+            }
+            let kt = terms.kt;
+            let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
+            shaded.transmitted = kt * seen.color;
+            shaded.color += shaded.transmitted;
+        }
+        shaded
+    }
+
+    /// The parts of `shade` that need no secondary ray: local Phong with
+    /// shadow rays, the weights kr and kt (Fresnel included when set) and the
+    /// reflection and refraction rays themselves, untraced. Other reflection
+    /// methods (cube maps, PVRR) find the reflected radiance their own way and
+    /// combine it as `local + kr * reflected + kt * transmitted`.
+    pub fn surface_terms(&self, point: &SurfacePoint, incoming: Vec3) -> SurfaceTerms {
+        self.terms(point, incoming, &mut |_| {})
+    }
+
+    /// [`Tracer::surface_terms`], telling `lit` each light that reaches the
+    /// point (for the ray-tree signature).
+    fn terms(
+        &self,
+        point: &SurfacePoint,
+        incoming: Vec3,
+        lit: &mut dyn FnMut(&Light),
+    ) -> SurfaceTerms {
+        let material = self.bvh.scene().material_of(point.triangle);
+        let geometric = self.bvh.geometric_normal(point.triangle);
+        // Callers' normals come from interpolation: guard against zero ones
+        // (and a degenerate triangle's zero geometric normal).
+        let normal = point.normal.normalize_or(geometric);
+        let geometric = if geometric == Vec3::ZERO {
+            normal
+        } else {
+            geometric
+        };
+        let incoming = incoming.normalize_or(-normal);
         let local = phong(
             material,
             self.lighting,
@@ -195,88 +260,10 @@ impl Tracer<'_> {
             |light, to_light, distance| {
                 let visible =
                     self.light_visible(point.position, geometric, light, to_light, distance);
-                if visible && tracked {
-                    signature.add(word::LIT + light_index(self.lighting, light));
+                if visible {
+                    lit(light);
                 }
                 visible
-            },
-        );
-        if tracked {
-            signature.add(word::LIGHTS_END);
-        }
-
-        let mut shaded = Shaded {
-            color: local,
-            reflected: Vec3::ZERO,
-            transmitted: Vec3::ZERO,
-            reflected_object: NONE,
-        };
-        if depth >= self.settings.max_depth.max(1) {
-            return shaded;
-        }
-
-        let secondary =
-            secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
-        let (kr, kt) = (secondary.kr, secondary.kt);
-        let facing = secondary.facing;
-        let refracted = secondary.refracted;
-
-        if kr.max_element() > 0.0 {
-            if tracked {
-                signature.add(word::REFLECT);
-            }
-            let ray = self
-                .bvh
-                .spawn_ray(point.position, geometric, reflect(incoming, facing));
-            let (seen, object) =
-                self.radiance(&ray, depth + 1, weight * kr.max_element(), signature);
-            shaded.reflected = kr * seen.color;
-            shaded.reflected_object = object;
-            shaded.color += shaded.reflected;
-        }
-        if let Some(direction) = refracted.filter(|_| kt.max_element() > 0.0) {
-            if tracked {
-                signature.add(word::REFRACT);
-            }
-            let ray = self.bvh.spawn_ray(point.position, geometric, direction);
-            let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
-            shaded.transmitted = kt * seen.color;
-            shaded.color += shaded.transmitted;
-        }
-        shaded
-    }
-
-    /// The unit shading normal, geometric normal and incoming direction at
-    /// `point`. Callers' normals come from interpolation: this guards against
-    /// zero ones (and a degenerate triangle's zero geometric normal).
-    fn guarded_normals(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3, Vec3) {
-        let geometric = self.bvh.geometric_normal(point.triangle);
-        let normal = point.normal.normalize_or(geometric);
-        let geometric = if geometric == Vec3::ZERO {
-            normal
-        } else {
-            geometric
-        };
-        (normal, geometric, incoming.normalize_or(-normal))
-    }
-
-    /// The parts of `shade` that need no secondary ray: local Phong with
-    /// shadow rays, the weights kr and kt (Fresnel included when set) and the
-    /// reflection and refraction rays themselves, untraced. Other reflection
-    /// methods (cube maps, PVRR) find the reflected radiance their own way and
-    /// combine it as `local + kr * reflected + kt * transmitted`.
-    pub fn surface_terms(&self, point: &SurfacePoint, incoming: Vec3) -> SurfaceTerms {
-        let scene = self.bvh.scene();
-        let material = scene.material_of(point.triangle);
-        let (normal, geometric, incoming) = self.guarded_normals(point, incoming);
-        let local = phong(
-            material,
-            self.lighting,
-            point.position,
-            normal,
-            -incoming,
-            |light, to_light, distance| {
-                self.light_visible(point.position, geometric, light, to_light, distance)
             },
         );
         let secondary =
