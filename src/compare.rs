@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use vtfarm_compare::{reference_method, run_all, sheet, standard_methods};
-use vtfarm_method::{OwnedFrame, ReflectionMethod};
+use vtfarm_compare::{run_all, sheet, standard_methods};
+use vtfarm_method::{OwnedFrame, ReflectionMethod, VertexTracing};
 
 /// Options of `vtfarm compare`.
 #[derive(clap::Args)]
@@ -42,7 +42,6 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     crate::warn_unsupported_reflectors(vtfarm_method::MethodKind::CubeMap, &scene, &reflectors);
-    let (base, _) = vtfarm_raster::rasterize(&scene, &setup.camera, &setup.lighting);
     let owned = OwnedFrame::new(
         Arc::new(scene),
         setup.camera,
@@ -50,6 +49,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
         setup.trace,
         reflectors,
     );
+    let base = owned.base_frame();
     let frame = owned.frame();
     let methods = standard_methods(job.vertex);
     let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();
@@ -64,7 +64,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     let runs = run_all(
         &frame,
         &base,
-        &reference_method(job.vertex),
+        &VertexTracing::reference(),
         &methods,
         &mut |name| {
             if std::mem::replace(&mut started, true) {

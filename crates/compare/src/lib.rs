@@ -60,16 +60,6 @@ impl MethodRun {
     }
 }
 
-/// The per-pixel reference as a method.
-pub fn reference_method(vertex: VertexSettings) -> VertexTracing {
-    VertexTracing {
-        settings: VertexSettings {
-            quality: Quality::Reference,
-            ..vertex
-        },
-    }
-}
-
 /// Renders `frame` with the reference and then every method; each image is
 /// the base frame with that method's reflector pixels. The reference comes
 /// first in the result.

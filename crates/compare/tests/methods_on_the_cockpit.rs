@@ -2,14 +2,14 @@
 //! each is closer to it than the plain environment map, by the same figures
 //! `vtfarm compare` prints.
 
-use vtfarm_compare::{reference_method, run_all, sheet, standard_methods};
-use vtfarm_method::{OwnedFrame, ReflectionMethod};
+use vtfarm_compare::{run_all, sheet, standard_methods};
+use vtfarm_method::{OwnedFrame, ReflectionMethod, VertexTracing};
 use vtfarm_vertex::VertexSettings;
 
 #[test]
 fn every_method_is_closer_to_the_reference_than_the_environment_map() {
     let owned = OwnedFrame::cockpit(0.3, 320, 180);
-    let (base, _) = vtfarm_raster::rasterize(owned.bvh.scene(), &owned.camera, &owned.lighting);
+    let base = owned.base_frame();
     let frame = owned.frame();
     let vertex = VertexSettings::default();
     let methods = standard_methods(vertex);
@@ -17,7 +17,7 @@ fn every_method_is_closer_to_the_reference_than_the_environment_map() {
     let runs = run_all(
         &frame,
         &base,
-        &reference_method(vertex),
+        &VertexTracing::reference(),
         &methods,
         &mut |_| {},
     );

@@ -327,13 +327,14 @@ fn sorted_names<'a>(names: impl Iterator<Item = &'a String>) -> Vec<String> {
 
 /// Why an eye, target and up vector make no view.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum BadView {
+pub enum BadView {
     EyeAtTarget,
     UpAlongView,
 }
 
 impl BadView {
-    fn check(eye: Vec3, target: Vec3, up: Vec3) -> Option<BadView> {
+    /// `None` when the eye, target and up vector make a camera.
+    pub fn check(eye: Vec3, target: Vec3, up: Vec3) -> Option<BadView> {
         let forward = target - eye;
         if forward.length() < 1e-6 {
             Some(BadView::EyeAtTarget)

@@ -74,6 +74,12 @@ impl OwnedFrame {
         }
     }
 
+    /// The rasterized base frame the reflector pixels go over (shaded from
+    /// the ID buffer already at hand: the same image `rasterize` gives).
+    pub fn base_frame(&self) -> vtfarm_imaging::Image {
+        vtfarm_raster::shade_ids(self.bvh.scene(), &self.camera, &self.lighting, &self.ids)
+    }
+
     /// The view every method takes.
     pub fn frame(&self) -> MethodFrame<'_> {
         MethodFrame {

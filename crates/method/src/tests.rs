@@ -130,3 +130,11 @@ fn reflector_groups_are_objects_and_merged_groups_equal_one_render() {
         .collect();
     assert_eq!(merge_bitmaps(setup.ids.width, &parts), whole);
 }
+
+#[test]
+fn the_base_frame_is_the_rasterizers_image() {
+    let setup = small_cockpit();
+    let (image, ids) = vtfarm_raster::rasterize(setup.bvh.scene(), &setup.camera, &setup.lighting);
+    assert_eq!(ids, setup.ids);
+    assert_eq!(setup.base_frame(), image);
+}

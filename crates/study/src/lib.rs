@@ -47,10 +47,9 @@ pub enum StudyError {
         object: String,
         objects: String,
     },
-    #[error("{file}: variant {variant:?}, eye {eye} at {position}: {why}")]
+    #[error("{file}: eye {eye} at {position}: {why}")]
     BadEye {
         file: PathBuf,
-        variant: String,
         eye: usize,
         position: Vec3,
         why: String,
@@ -134,6 +133,24 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
     // The base job's own scene gives the lighting and the camera every
     // variant shares, so that designs are compared under the same light.
     let base = study.job.load_scene()?;
+    // The same eye points for every variant.
+    let cameras = study
+        .eyes
+        .iter()
+        .enumerate()
+        .map(|(i, &eye)| {
+            eye_camera(study, &base.camera, eye).map_err(|why| StudyError::BadEye {
+                file: study.file.clone(),
+                eye: i,
+                position: eye,
+                why,
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let vertex = vtfarm_vertex::VertexSettings {
+        quality: quality.unwrap_or(study.job.vertex.quality),
+        ..study.job.vertex
+    };
     let mut variants = Vec::with_capacity(study.variants.len());
     let mut slugs: Vec<String> = Vec::new();
     for variant in &study.variants {
@@ -161,30 +178,15 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         };
         let instrument_objects = objects("instrument_objects", &study.metrics.instrument_objects)?;
         let marking_objects = objects("marking_objects", &study.metrics.marking_objects)?;
-        let setups = study
-            .eyes
+        let setups = cameras
             .iter()
-            .enumerate()
-            .map(|(i, &eye)| {
-                let camera =
-                    eye_camera(study, &base.camera, eye).map_err(|why| StudyError::BadEye {
-                        file: study.file.clone(),
-                        variant: variant.name.clone(),
-                        eye: i,
-                        position: eye,
-                        why,
-                    })?;
-                Ok(FrameSetup {
-                    camera,
-                    lighting: base.lighting.clone(),
-                    trace: job.trace,
-                    vertex: vtfarm_vertex::VertexSettings {
-                        quality: quality.unwrap_or(job.vertex.quality),
-                        ..job.vertex
-                    },
-                })
+            .map(|&camera| FrameSetup {
+                camera,
+                lighting: base.lighting.clone(),
+                trace: study.job.trace,
+                vertex,
             })
-            .collect::<Result<Vec<_>, StudyError>>()?;
+            .collect();
         let slug = unique_slug(&variant.name, &slugs);
         slugs.push(slug.clone());
         variants.push(PlannedVariant {
@@ -218,17 +220,8 @@ fn eye_camera(study: &Study, base: &Camera, eye: Vec3) -> Result<Camera, String>
         height: study.height.unwrap_or(base.height),
         ..*base
     };
-    let view = camera.target - camera.eye;
-    if view.length_squared() < 1e-12 {
-        return Err("the eye sits on the point it looks at".into());
-    }
-    if view
-        .normalize()
-        .cross(camera.up.normalize_or_zero())
-        .length()
-        < 1e-4
-    {
-        return Err("the eye looks straight along the up vector".into());
+    if let Some(bad) = vtfarm_job::BadView::check(camera.eye, camera.target, camera.up) {
+        return Err(bad.to_string());
     }
     Ok(camera)
 }

@@ -113,20 +113,16 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
             let n = rows.len().max(1) as f32;
             let mean = |f: fn(&FrameRow) -> f32| rows.iter().map(|r| f(r)).sum::<f32>() / n;
             let worst = |f: fn(&FrameRow) -> f32| rows.iter().map(|r| f(r)).fold(0.0, f32::max);
-            // The object that covers the most glass, summed over the eyes.
-            let mut areas: Vec<(String, usize)> = Vec::new();
-            for r in &rows {
-                for o in &r.summary.objects {
-                    match areas.iter_mut().find(|(name, _)| *name == o.name) {
-                        Some((_, a)) => *a += o.pixels,
-                        None => areas.push((o.name.clone(), o.pixels)),
-                    }
-                }
+            // The object that covers the most glass, summed over the eyes
+            // (ties to the first name).
+            let mut areas: std::collections::BTreeMap<&str, usize> = Default::default();
+            for o in rows.iter().flat_map(|r| &r.summary.objects) {
+                *areas.entry(o.name.as_str()).or_default() += o.pixels;
             }
             let main = areas
                 .iter()
-                .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
-                .map(|(name, _)| name.clone());
+                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+                .map(|(name, _)| (*name).to_owned());
             VariantScore {
                 variant: v.name.clone(),
                 mean_glare_area_share: mean(|r| r.summary.glare_area_share),

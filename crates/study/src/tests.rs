@@ -260,3 +260,21 @@ fn read_npy_f32(path: &Path) -> Vec<f32> {
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect()
 }
+
+#[test]
+fn an_eye_on_the_point_it_looks_at_is_refused_while_planning() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("job.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let text = "[study]\njob = \"job.toml\"\nlook_at = [0.0, 1.0, 0.0]\n[eyes]\npoints = [[-0.55, 1.4, 0.1], [0.0, 1.0, 0.0]]\n[[variants]]\nname = \"flat\"\nglass = \"flat\"\n";
+    let study = parse_study(text, &dir.path().join("study.toml")).unwrap();
+    let e = plan(&study, None).expect_err("eye 1 sits on the target");
+    let message = e.to_string();
+    assert!(
+        message.contains("eye 1") && message.contains("the eye is at the target"),
+        "{message}"
+    );
+}
