@@ -102,8 +102,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     let sheet_path = args.output.join("sheet.png");
     sheet(&runs).write_png(&sheet_path)?;
     let json_path = args.output.join("compare.json");
-    std::fs::write(&json_path, serde_json::to_string_pretty(&figures)?)
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    crate::write_json(&json_path, &figures)?;
     println!(
         "errors against `reference` on its {} reflector pixels (8-bit sRGB steps); wrote {} images, {} and {}",
         runs[0].error.pixels,

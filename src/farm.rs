@@ -183,8 +183,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     })?;
     let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();
     let path = args.output.join("stats.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&stats)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::write_json(&path, &stats)?;
     for f in &frames {
         println!("frame {}:", f.frame);
         print_frame_stats(&f.stats);

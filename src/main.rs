@@ -305,6 +305,12 @@ pub(crate) fn warn_unsupported_reflectors(
     }
 }
 
+/// Writes `value` as pretty JSON.
+pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(value)?)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
 /// The progress bar of a frame, counting reflector triangles.
 pub(crate) fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
     let bar = ProgressBar::new(total).with_style(

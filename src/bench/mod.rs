@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -166,8 +166,7 @@ fn table1(args: Table1Args) -> Result<()> {
     };
     print_table1(&table);
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&table)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_json(path, &table)?;
     }
     Ok(())
 }
@@ -281,9 +280,9 @@ impl CockpitJob {
     }
 }
 
+/// Writes a bench table as JSON and says so.
 fn write_json(path: &std::path::Path, value: &impl Serialize) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(value)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::write_json(path, value)?;
     println!("wrote {}", path.display());
     Ok(())
 }
