@@ -84,6 +84,19 @@ fn fill_rect(image: &mut Image, x: u32, y: u32, w: u32, h: u32, color: Vec3) {
     }
 }
 
+/// Colours each glass pixel of the frame area with `color(pixel index)`.
+fn paint_glass(img: &mut Image, input: &GlareInput<'_>, color: impl Fn(usize) -> Vec3) {
+    let w = input.width;
+    for y in 0..input.height {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if input.glass[i] {
+                img.set(x, y, color(i));
+            }
+        }
+    }
+}
+
 fn frame_canvas(width: u32, height: u32, panel_width: u32, panel_height: u32) -> Image {
     Image::new(width + panel_width, height.max(panel_height), Vec3::ZERO)
 }
@@ -132,14 +145,7 @@ pub fn heat_map_with_max(
         .max(MARGIN + text_width(title, SCALE) + MARGIN);
     let (w, h) = (input.width, input.height);
     let mut img = frame_canvas(w, h, panel_width, MIN_LEGEND_HEIGHT);
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            if input.glass[i] {
-                img.set(x, y, ramp_color(lr[i] / max));
-            }
-        }
-    }
+    paint_glass(&mut img, input, |i| ramp_color(lr[i] / max));
 
     let x0 = w + MARGIN;
     draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
@@ -211,18 +217,12 @@ pub fn object_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, Glar
     let panel_height = MARGIN + TEXT_HEIGHT + MARGIN + lines.len() as u32 * ROW_HEIGHT + MARGIN;
     let (w, h) = (input.width, input.height);
     let mut img = frame_canvas(w, h, panel_width, panel_height);
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            if input.glass[i] {
-                let c = colors
-                    .get(&input.reflected_object[i])
-                    .copied()
-                    .unwrap_or(NO_OBJECT_COLOR);
-                img.set(x, y, c);
-            }
-        }
-    }
+    paint_glass(&mut img, input, |i| {
+        colors
+            .get(&input.reflected_object[i])
+            .copied()
+            .unwrap_or(NO_OBJECT_COLOR)
+    });
     let x0 = w + MARGIN;
     draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
     let mut y = MARGIN + TEXT_HEIGHT + MARGIN;
