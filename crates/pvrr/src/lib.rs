@@ -178,7 +178,7 @@ impl Pvrr {
         let refraction = self.refraction_kind(frame).map(build);
         let setup_time = start.elapsed();
 
-        let found: Vec<(Reflection, Vec3)> = pixels
+        let (reflections, transmitted): (Vec<Reflection>, Vec<Vec3>) = pixels
             .par_iter()
             .map(|p| {
                 let at = |w: &Warp<'_>| w.radiance_at(&p.point, p.incoming);
@@ -190,8 +190,7 @@ impl Pvrr {
                 });
                 (reflection, through)
             })
-            .collect();
-        let (reflections, transmitted): (Vec<Reflection>, Vec<Vec3>) = found.into_iter().unzip();
+            .unzip();
         let (bitmap, finish_rays) = shade_reflector(
             frame,
             &pixels,

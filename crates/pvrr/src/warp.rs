@@ -273,7 +273,10 @@ fn vertex_coords(
 
 /// The sorted distinct vertices of `triangles` and, per vertex, its surface
 /// point (the vertex normal, on the lowest-numbered triangle that uses it).
-fn reflector_vertices(scene: &Scene, triangles: &[TriangleId]) -> (Vec<u32>, Vec<SurfacePoint>) {
+pub(crate) fn reflector_vertices(
+    scene: &Scene,
+    triangles: &[TriangleId],
+) -> (Vec<u32>, Vec<SurfacePoint>) {
     let mut owned: Vec<(u32, TriangleId)> = triangles
         .iter()
         .flat_map(|&t| scene.triangles[t as usize].vertices.map(|v| (v, t)))

@@ -12,7 +12,7 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use vtfarm_scene::{Camera, NEAR, Projector, Scene, ScreenPoint, Triangle, TriangleId};
+use vtfarm_scene::{Camera, NEAR, Projector, Scene, Triangle, TriangleId};
 
 use crate::triangle::{RasterTriangle, ScreenVertex};
 
@@ -73,10 +73,6 @@ struct View {
     projector: Projector,
     /// The near plane's view depth.
     near: f32,
-    /// The camera basis and scale in `f32`, as the projector holds them, for
-    /// vertices between a near plane closer than [`NEAR`] and `NEAR`.
-    basis32: (Vec3, Vec3, Vec3),
-    inv_pixel32: f32,
     eye: DVec3,
     right: DVec3,
     up: DVec3,
@@ -117,8 +113,6 @@ impl View {
         View {
             projector: Projector::new(camera),
             near,
-            basis32: (forward, right, up),
-            inv_pixel32: 1.0 / camera.pixel_size_at_unit_depth(),
             eye: camera.eye.as_dvec3(),
             right: right.as_dvec3(),
             up: up.as_dvec3(),
@@ -145,28 +139,10 @@ impl View {
         .fold(0, |mask, (_, plane)| mask | plane)
     }
 
-    /// Where `p` projects, or `None` in front of the near plane. At the
-    /// default near plane this is exactly the shared projector; a nearer
-    /// plane repeats the projector's `f32` arithmetic for the points it
-    /// rejects, a farther one rejects more of its points.
-    fn project(&self, p: Vec3) -> Option<ScreenPoint> {
-        let projected = self.projector.project(p).or_else(|| {
-            (self.near < NEAR).then(|| {
-                let (forward, right, up) = self.basis32;
-                let d = p - self.eye.as_vec3();
-                let depth = d.dot(forward);
-                let k = self.inv_pixel32 / depth;
-                ScreenPoint {
-                    x: self.half_width as f32 + d.dot(right) * k,
-                    y: self.half_height as f32 - d.dot(up) * k,
-                    depth,
-                }
-            })
-        });
-        projected.filter(|s| s.depth >= self.near)
-    }
-
-    /// A scene vertex, projected with the shared projector.
+    /// A scene vertex. Beyond [`NEAR`] it projects with the shared projector
+    /// (so the default near plane gives exactly its screen points); between a
+    /// nearer plane and `NEAR`, where the projector declines, it projects in
+    /// `f64` like the corners clipping makes.
     fn vertex(&self, p: Vec3) -> ClipVertex {
         if !p.is_finite() {
             return ClipVertex {
@@ -176,13 +152,8 @@ impl View {
         }
         let d = p.as_dvec3() - self.eye;
         let view = DVec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward));
-        match self.project(p) {
-            None => ClipVertex {
-                view,
-                outside: NEAR_PLANE,
-                ..ClipVertex::default()
-            },
-            Some(s) => {
+        match self.projector.project(p) {
+            Some(s) if s.depth >= self.near => {
                 let (x, y) = (f64::from(s.x), f64::from(s.y));
                 let screen = ScreenVertex {
                     x,
@@ -195,6 +166,12 @@ impl View {
                     outside: self.guard_outside(x, y),
                 }
             }
+            None if self.near < NEAR && view.z >= f64::from(self.near) => self.clipped_vertex(view),
+            _ => ClipVertex {
+                view,
+                outside: NEAR_PLANE,
+                ..ClipVertex::default()
+            },
         }
     }
 
@@ -336,7 +313,7 @@ mod tests {
         let v = view.intersect(NEAR_PLANE, front, between);
         assert_eq!(v.view.z, f64::from(near));
         assert!((v.view.x - 0.5).abs() < 1e-12 && (v.view.y + 1.0).abs() < 1e-12);
-        // Nearer than the default: the projector's own arithmetic.
+        // Nearer than the default: projected in f64 where the projector declines.
         let close = View::new(&camera(), NEAR * 0.1).vertex(Vec3::new(0.0, 0.0, -NEAR * 0.5));
         assert_eq!(close.outside, 0);
         assert!((close.screen.x - 32.0).abs() < 1e-6 && (close.screen.y - 24.0).abs() < 1e-6);

@@ -431,6 +431,18 @@ fn a_tilted_mesh_covers_every_pixel_centre_inside_it_exactly_once() {
     );
 }
 
+/// A camera at the origin looking down -z, y up.
+fn looking_down_z(fov_y_deg: f32, width: u32, height: u32) -> Camera {
+    Camera {
+        eye: Vec3::ZERO,
+        target: -Vec3::Z,
+        up: Vec3::Y,
+        fov_y_deg,
+        width,
+        height,
+    }
+}
+
 /// The world point on the plane at view depth `depth` seen through screen
 /// point (`x`, `y`).
 fn point_at(camera: &Camera, x: f32, y: f32, depth: f32) -> Vec3 {
@@ -442,14 +454,7 @@ fn point_at(camera: &Camera, x: f32, y: f32, depth: f32) -> Vec3 {
 fn edges_through_pixel_centres_follow_the_top_left_rule() {
     // Every vertex sits on a pixel centre, so every edge (rows, columns and
     // diagonals) runs through pixel centres: all ties.
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: -Vec3::Z,
-        up: Vec3::Y,
-        fov_y_deg: 50.0,
-        width: 64,
-        height: 48,
-    };
+    let camera = looking_down_z(50.0, 64, 48);
     let mut rng = Rng::new(5);
     let mut b = Builder::default();
     let o = b.object("grid", Vec3::ONE);
@@ -522,14 +527,7 @@ fn output_is_bit_identical_on_one_and_four_threads() {
 
 #[test]
 fn exact_depth_ties_go_to_the_lower_triangle_id() {
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: -Vec3::Z,
-        up: Vec3::Y,
-        fov_y_deg: 60.0,
-        width: 64,
-        height: 48,
-    };
+    let camera = looking_down_z(60.0, 64, 48);
     let mut b = Builder::default();
     let o = b.object("twice", Vec3::ONE);
     let corners = [
@@ -634,14 +632,7 @@ fn shiny(b: &mut Builder, name: &str) -> ObjectId {
 
 #[test]
 fn a_quad_facing_a_head_on_light_is_shaded_by_phong() {
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: -Vec3::Z,
-        up: Vec3::Y,
-        fov_y_deg: 60.0,
-        width: 64,
-        height: 48,
-    };
+    let camera = looking_down_z(60.0, 64, 48);
     let mut b = Builder::default();
     let o = shiny(&mut b, "quad");
     b.quad(
@@ -686,14 +677,7 @@ fn a_quad_facing_a_head_on_light_is_shaded_by_phong() {
 
 #[test]
 fn normals_are_interpolated_perspective_correctly() {
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: -Vec3::Z,
-        up: Vec3::Y,
-        fov_y_deg: 60.0,
-        width: 96,
-        height: 72,
-    };
+    let camera = looking_down_z(60.0, 96, 72);
     let mut b = Builder::default();
     let o = shiny(&mut b, "slanted");
     // Corners at very different depths with very different normals, so affine
@@ -831,14 +815,7 @@ fn custom_near_planes_match_a_ray_cast_from_there() {
 
 #[test]
 fn a_near_plane_closer_than_the_default_shows_what_lies_between() {
-    let camera = Camera {
-        eye: Vec3::ZERO,
-        target: -Vec3::Z,
-        up: Vec3::Y,
-        fov_y_deg: 60.0,
-        width: 32,
-        height: 24,
-    };
+    let camera = looking_down_z(60.0, 32, 24);
     let mut b = Builder::default();
     let o = b.object("close", Vec3::ONE);
     let depth = NEAR * 0.5;
