@@ -86,8 +86,8 @@
 //!
 //! `searches` counts per-vertex exit rays (one per vertex for reflection, up
 //! to two per vertex and distinct index for refraction); `rays` adds one
-//! occlusion test per vertex, the traced fallbacks (two rays each: the
-//! object seen and its radiance), the transmission rays of specular surfaces
+//! occlusion test per vertex, the traced fallbacks (one ray each: the
+//! object seen, shaded in place), the transmission rays of specular surfaces
 //! seen in maps and the rays of the shared finishing step. Map texels are
 //! rasterized, not cast, and are not rays; shadow rays are not counted, as
 //! in vertex tracing. `setup_time` covers the exit rays, viewpoints and maps.

@@ -146,14 +146,20 @@ impl<'a> Warp<'a> {
                 object: NONE,
             };
         };
+        // One ray for both the object seen and its radiance: shading the hit
+        // is what `Tracer::trace` does after the same intersection.
+        self.level.count_rays(1);
         let bvh = self.level.tracer.bvh;
-        let object = bvh
-            .closest_hit(&ray, f32::INFINITY)
-            .map_or(NONE, |h| bvh.scene().triangles[h.triangle as usize].object);
-        self.level.count_rays(2);
+        let tracer = self.level.deeper(1).tracer;
+        let Some(hit) = bvh.closest_hit(&ray, f32::INFINITY) else {
+            return Lookup {
+                radiance: tracer.lighting.background,
+                object: NONE,
+            };
+        };
         Lookup {
-            radiance: self.level.deeper(1).tracer.trace(&ray).color,
-            object,
+            radiance: tracer.shade(&bvh.surface_point(&hit), ray.direction).color,
+            object: bvh.scene().triangles[hit.triangle as usize].object,
         }
     }
 
