@@ -12,7 +12,7 @@ use vtfarm_method::{
     shade_reflector,
 };
 use vtfarm_raster::{id_buffer_where, shade_ids};
-use vtfarm_scene::{Lighting, NONE, ObjectId, Scene};
+use vtfarm_scene::{Lighting, ObjectId, Scene};
 
 use crate::cube::CubeLayout;
 use crate::reflected::reflected_triangle_flags;
@@ -40,7 +40,7 @@ pub struct EnvironmentCube {
 
 impl EnvironmentCube {
     /// Renders the scene triangles `keep` accepts from `layout.centre`;
-    /// empty texels get the background.
+    /// empty texels get the background (as `shade_ids` leaves them).
     pub fn render(scene: &Scene, lighting: &Lighting, layout: CubeLayout, keep: &[bool]) -> Self {
         let mut cube = EnvironmentCube {
             layout,
@@ -52,16 +52,8 @@ impl EnvironmentCube {
             let camera = layout.camera(face_index);
             let ids = id_buffer_where(scene, &camera, &keep);
             let image: Image = shade_ids(scene, &camera, lighting, &ids);
-            for (k, &object) in ids.object.iter().enumerate() {
-                let x = k as u32 % ids.width;
-                let y = k as u32 / ids.width;
-                cube.color.push(if object == NONE {
-                    lighting.background
-                } else {
-                    image.get(x, y)
-                });
-                cube.object.push(object);
-            }
+            cube.color.extend(image.pixels);
+            cube.object.extend(ids.object);
         }
         cube
     }
@@ -107,13 +99,18 @@ pub(crate) fn reflector_centroid(scene: &Scene, triangles: &[u32]) -> Vec3 {
 impl EnvironmentMap {
     /// The map of the frame's reflector, rendered from its centroid.
     pub fn cube(&self, frame: &MethodFrame<'_>) -> EnvironmentCube {
+        let keep = reflected_triangle_flags(frame.tracer.bvh.scene(), frame.reflector);
+        self.cube_of(frame, &keep)
+    }
+
+    /// [`EnvironmentMap::cube`] with the reflected triangles already known.
+    pub(crate) fn cube_of(&self, frame: &MethodFrame<'_>, keep: &[bool]) -> EnvironmentCube {
         let scene = frame.tracer.bvh.scene();
         let layout = CubeLayout {
             centre: reflector_centroid(scene, frame.reflector),
             resolution: self.resolution.max(2),
         };
-        let keep = reflected_triangle_flags(scene, frame.reflector);
-        EnvironmentCube::render(scene, frame.tracer.lighting, layout, &keep)
+        EnvironmentCube::render(scene, frame.tracer.lighting, layout, keep)
     }
 }
 

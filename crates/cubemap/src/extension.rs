@@ -72,14 +72,12 @@ impl QuadricPatch {
         let p = o + d * t;
         let gradient_x = 2.0 * c[0] * p.x + c[1] * p.y + c[3];
         let gradient_y = c[1] * p.x + 2.0 * c[2] * p.y + c[4];
-        let n = DVec3::new(-gradient_x, -gradient_y, 1.0)
-            .normalize()
-            .as_vec3();
+        let n = DVec3::new(-gradient_x, -gradient_y, 1.0).normalize();
         let world = |v: DVec3| {
             let v = v.as_vec3();
             self.x * v.x + self.y * v.y + self.z * v.z
         };
-        Some((self.origin + world(p), world(n.as_dvec3()).normalize()))
+        Some((self.origin + world(p), world(n).normalize()))
     }
 }
 

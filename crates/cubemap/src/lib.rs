@@ -13,7 +13,8 @@
 //!    (the paper's "accompanying closed object", §6.2, made automatically).
 //! 2. The reflected meshes are every scene triangle but the reflector and
 //!    the transparent back of its object ([`reflected_triangle_flags`]),
-//!    with long triangles split into a lattice (see `mesh`). For each of
+//!    with long triangles split into a lattice (see `mesh`; view
+//!    independent, so built in the pre-processing). For each of
 //!    their vertices V, [`search`] finds the reflection point R by
 //!    following the projected bisector with the midpoint method and an
 //!    adaptive step until E = (1 - B·N)/2 < ε (§4.2–4.3); V' lies behind R

@@ -20,7 +20,7 @@ use vtfarm_scene::{Scene, TriangleId};
 
 use crate::cube::{CubeLayout, TexelPoint, face};
 use crate::extension::QuadricPatch;
-use crate::shape::{ReflectorShape, classify};
+use crate::shape::{ReflectorShape, classify, facing};
 
 /// What a texel holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -41,8 +41,10 @@ pub struct ReflectorMaps {
     /// Unit normals as the reflector's vertex normals orient them.
     pub normal: Vec<Vec3>,
     pub kind: Vec<TexelKind>,
-    /// Area-weighted centroid of the reflector (the environment map's centre).
+    /// Area-weighted centroid of the reflector.
     pub centroid: Vec3,
+    /// The largest distance of the (tessellated) reflector from `centroid`.
+    pub radius: f32,
     pub shape: ReflectorShape,
 }
 
@@ -89,9 +91,16 @@ impl ReflectorMaps {
             centre: placement.centre,
             resolution: resolution.max(2),
         };
-        let mut maps = rasterize(&layout, &mesh);
-        maps.centroid = placement.centroid;
-        maps.shape = shape;
+        let (position, normal, kind) = rasterize(&layout, &mesh);
+        let mut maps = ReflectorMaps {
+            layout,
+            position,
+            normal,
+            kind,
+            centroid: placement.centroid,
+            radius: placement.radius,
+            shape,
+        };
         let corners: Vec<Vec3> = mesh.iter().flat_map(|t| t.positions).collect();
         if let Some(patch) = QuadricPatch::fit(&corners, placement.centroid, placement.mean_normal)
         {
@@ -181,6 +190,8 @@ fn subdivide(t: &MapTriangle) -> [MapTriangle; 4] {
 struct Placement {
     centre: Vec3,
     centroid: Vec3,
+    /// The largest distance of a corner from `centroid`.
+    radius: f32,
     /// Σ area·normal / Σ area.
     mean_normal: Vec3,
 }
@@ -194,12 +205,7 @@ impl Placement {
             let [a, b, c] = t.positions;
             let cross = (b - a).cross(c - a);
             let area = 0.5 * f64::from(cross.length());
-            let shading = t.normals[0] + t.normals[1] + t.normals[2];
-            let oriented = if cross.dot(shading) < 0.0 {
-                -cross
-            } else {
-                cross
-            };
+            let oriented = facing(cross, t.normals);
             area_sum += area;
             weighted += ((a + b + c) / 3.0).as_dvec3() * area;
             normal_sum += oriented.normalize_or_zero().as_dvec3() * area;
@@ -209,6 +215,7 @@ impl Placement {
             return Placement {
                 centre: p,
                 centroid: p,
+                radius: 0.0,
                 mean_normal: Vec3::ZERO,
             };
         }
@@ -227,6 +234,7 @@ impl Placement {
         Placement {
             centre: centroid + mean_normal * (side * radius),
             centroid,
+            radius,
             mean_normal,
         }
     }
@@ -234,8 +242,9 @@ impl Placement {
 
 /// Rasterizes the tessellation into all six faces (one rayon task per
 /// face; within a face triangles go in order and the hit nearest the
-/// centre wins, ties to the earlier triangle).
-fn rasterize(layout: &CubeLayout, mesh: &[MapTriangle]) -> ReflectorMaps {
+/// centre wins, ties to the earlier triangle): position, normal and kind
+/// per texel.
+fn rasterize(layout: &CubeLayout, mesh: &[MapTriangle]) -> (Vec<Vec3>, Vec<Vec3>, Vec<TexelKind>) {
     let res = layout.resolution as usize;
     let faces: Vec<Vec<(f32, Vec3, Vec3)>> = (0..6)
         .into_par_iter()
@@ -247,24 +256,22 @@ fn rasterize(layout: &CubeLayout, mesh: &[MapTriangle]) -> ReflectorMaps {
             texels
         })
         .collect();
-    let mut maps = ReflectorMaps {
-        layout: *layout,
-        position: Vec::with_capacity(6 * res * res),
-        normal: Vec::with_capacity(6 * res * res),
-        kind: Vec::with_capacity(6 * res * res),
-        centroid: layout.centre,
-        shape: ReflectorShape::Flat,
-    };
-    for (depth, position, normal) in faces.into_iter().flatten() {
-        maps.position.push(position);
-        maps.normal.push(normal);
-        maps.kind.push(if depth.is_finite() {
-            TexelKind::Surface
-        } else {
-            TexelKind::Empty
-        });
-    }
-    maps
+    let texels = faces.concat();
+    let kind = texels
+        .iter()
+        .map(|&(depth, _, _)| {
+            if depth.is_finite() {
+                TexelKind::Surface
+            } else {
+                TexelKind::Empty
+            }
+        })
+        .collect();
+    (
+        texels.iter().map(|t| t.1).collect(),
+        texels.iter().map(|t| t.2).collect(),
+        kind,
+    )
 }
 
 fn rasterize_on_face(

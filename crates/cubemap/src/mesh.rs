@@ -115,30 +115,20 @@ impl ReflectedMesh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use vtfarm_scene::{Material, Object, Triangle};
+    use crate::tests::scenes::{add_object, push};
+    use vtfarm_scene::Material;
 
     #[test]
     fn long_triangles_split_into_a_lattice_that_covers_them() {
-        let scene = Scene {
-            positions: vec![Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0, Vec3::Z * 0.5],
-            normals: vec![Vec3::Z; 4],
-            triangles: vec![
-                Triangle {
-                    vertices: [0, 1, 2],
-                    object: 0,
-                    material: 0,
-                },
-                Triangle {
-                    vertices: [0, 3, 1],
-                    object: 0,
-                    material: 0,
-                },
-            ],
-            objects: vec![Object {
-                name: "o".to_owned(),
-            }],
-            materials: vec![Material::diffuse("m", Vec3::ONE)],
-        };
+        let mut scene = Scene::default();
+        let object = add_object(&mut scene, "o", Material::diffuse("m", Vec3::ONE));
+        push(
+            &mut scene,
+            object,
+            &[Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0, Vec3::Z * 0.5],
+            &[Vec3::Z; 4],
+            &[[0, 1, 2], [0, 3, 1]],
+        );
         // Longest edge 5.66 with a limit of 1.5: 2 levels, 16 triangles.
         let mesh = ReflectedMesh::build(&scene, &[true, false], 1.5);
         assert_eq!(mesh.triangles.len(), 16);

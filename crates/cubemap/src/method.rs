@@ -8,16 +8,14 @@ use rayon::prelude::*;
 use vtfarm_method::{
     MethodCounters, MethodFrame, MethodOutput, Reflection, ReflectionMethod, shade_reflector,
 };
-use vtfarm_scene::Scene;
-use vtfarm_trace::SurfacePoint;
+use vtfarm_trace::{Hit, SceneBvh, SurfacePoint};
 
 use crate::envmap::{EnvironmentCube, EnvironmentMap, mirror_direction};
 use crate::maps::ReflectorMaps;
 use crate::mesh::ReflectedMesh;
 use crate::raster::{VirtualHit, rasterize_virtual_meshes};
 use crate::reflected::reflected_triangle_flags;
-use crate::search::{SearchSettings, VirtualVertex};
-use crate::shape::ReflectorShape;
+use crate::search::SearchSettings;
 use crate::vertices::{GridSettings, virtual_vertices};
 
 /// Settings of the cube-map method.
@@ -61,12 +59,13 @@ pub struct CubeMapMethod {
 /// A reflector's view-independent pre-processing.
 #[derive(Clone, Debug)]
 pub struct PreparedReflector {
+    /// The maps; `maps.shape` tells whether the search supports this
+    /// reflector (print [`ReflectorShape::warning`](crate::ReflectorShape::warning)).
     pub maps: ReflectorMaps,
-    /// Whether the search supports this reflector (print
-    /// [`ReflectorShape::warning`]).
-    pub shape: ReflectorShape,
     /// Shows in pixels no virtual triangle covers.
     pub fallback: EnvironmentCube,
+    /// The reflected meshes, split as `max_edge_ratio` asks.
+    pub(crate) mesh: ReflectedMesh,
 }
 
 impl CubeMapMethod {
@@ -85,7 +84,8 @@ impl CubeMapMethod {
         }
     }
 
-    /// The pre-processing of the frame's reflector.
+    /// The pre-processing of the frame's reflector: its maps, the fallback
+    /// environment map and the reflected meshes (none depends on the view).
     pub fn prepare(&self, frame: &MethodFrame<'_>) -> PreparedReflector {
         let scene = frame.tracer.bvh.scene();
         let maps = ReflectorMaps::build(
@@ -94,53 +94,20 @@ impl CubeMapMethod {
             self.config.resolution,
             self.config.subdivisions,
         );
-        let shape = maps.shape;
-        if let Some(warning) = shape.warning() {
+        if let Some(warning) = maps.shape.warning() {
             tracing::warn!("{warning}");
         }
+        let keep = reflected_triangle_flags(scene, frame.reflector);
+        let fallback = EnvironmentMap {
+            resolution: self.config.fallback_resolution,
+        }
+        .cube_of(frame, &keep);
+        let mesh = ReflectedMesh::build(scene, &keep, self.config.max_edge_ratio * maps.radius);
         PreparedReflector {
             maps,
-            shape,
-            fallback: EnvironmentMap {
-                resolution: self.config.fallback_resolution,
-            }
-            .cube(frame),
+            fallback,
+            mesh,
         }
-    }
-
-    /// The reflected meshes, split as `max_edge_ratio` asks.
-    pub(crate) fn reflected_mesh(
-        &self,
-        frame: &MethodFrame<'_>,
-        maps: &ReflectorMaps,
-    ) -> ReflectedMesh {
-        let scene = frame.tracer.bvh.scene();
-        let radius = frame
-            .reflector
-            .iter()
-            .flat_map(|&t| scene.triangle_positions(t))
-            .map(|p| (p - maps.centroid).length())
-            .fold(0.0, f32::max);
-        let keep = reflected_triangle_flags(scene, frame.reflector);
-        ReflectedMesh::build(scene, &keep, self.config.max_edge_ratio * radius)
-    }
-
-    /// The virtual vertex of every vertex of the reflected meshes (with the
-    /// mesh) and the number of searches.
-    pub(crate) fn virtual_vertices(
-        &self,
-        frame: &MethodFrame<'_>,
-        prepared: &PreparedReflector,
-    ) -> (ReflectedMesh, Vec<VirtualVertex>, u64) {
-        let mesh = self.reflected_mesh(frame, &prepared.maps);
-        let (virtuals, searches) = virtual_vertices(
-            &mesh,
-            &prepared.maps,
-            frame.camera.eye,
-            &self.config.search,
-            self.config.grid.as_ref(),
-        );
-        (mesh, virtuals, searches)
     }
 
     /// Renders with an existing pre-processing.
@@ -150,16 +117,23 @@ impl CubeMapMethod {
         prepared: &PreparedReflector,
     ) -> MethodOutput {
         let scene = frame.tracer.bvh.scene();
-        let (mesh, virtuals, searches) = self.virtual_vertices(frame, prepared);
+        let mesh = &prepared.mesh;
+        let (virtuals, searches) = virtual_vertices(
+            mesh,
+            &prepared.maps,
+            frame.camera.eye,
+            &self.config.search,
+            self.config.grid.as_ref(),
+        );
         let pixels = frame.pixels();
-        let hits = rasterize_virtual_meshes(&mesh, &frame.camera, frame.ids, &pixels, &virtuals);
+        let hits = rasterize_virtual_meshes(mesh, &frame.camera, frame.ids, &pixels, &virtuals);
         let secondary = frame.secondary_tracer();
         let reflections: Vec<Reflection> = pixels
             .par_iter()
             .zip(&hits)
             .map(|(pixel, hit)| match hit {
                 Some(hit) => {
-                    let point = surface_point(scene, &mesh, hit);
+                    let point = surface_point(frame.tracer.bvh, mesh, hit);
                     let incoming = (point.position - pixel.point.position).normalize_or_zero();
                     Reflection {
                         radiance: secondary.shade(&point, incoming).color,
@@ -202,18 +176,19 @@ impl ReflectionMethod for CubeMapMethod {
     }
 }
 
-/// The original surface point under a virtual fragment.
-fn surface_point(scene: &Scene, mesh: &ReflectedMesh, hit: &VirtualHit) -> SurfacePoint {
+/// The original surface point under a virtual fragment: the fragment's
+/// weights mapped to barycentrics of the original triangle, interpolated as
+/// the tracer interpolates a hit.
+fn surface_point(bvh: &SceneBvh, mesh: &ReflectedMesh, hit: &VirtualHit) -> SurfacePoint {
     let triangle = &mesh.triangles[hit.triangle as usize];
     let w: Vec3 = (0..3)
         .map(|k| triangle.barycentric[k] * hit.weights[k])
         .sum();
-    let positions = scene.triangle_positions(triangle.original);
-    let normals = scene.triangle_normals(triangle.original);
-    SurfacePoint {
-        position: positions[0] * w.x + positions[1] * w.y + positions[2] * w.z,
-        normal: (normals[0] * w.x + normals[1] * w.y + normals[2] * w.z)
-            .normalize_or(scene.geometric_normal(triangle.original)),
+    bvh.surface_point(&Hit {
         triangle: triangle.original,
-    }
+        // Not a ray hit: surface_point reads only the barycentrics.
+        t: 0.0,
+        u: w.y,
+        v: w.z,
+    })
 }

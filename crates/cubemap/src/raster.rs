@@ -27,6 +27,8 @@ pub(crate) struct VirtualHit {
 struct ScreenTriangle {
     triangle: u32,
     corners: [ScreenPoint; 3],
+    /// Its pixels in the window (see [`PixelWindow::span`]).
+    span: (u32, u32, u32, u32),
 }
 
 /// The reflector pixels' rectangle and a map from its pixels to their
@@ -71,20 +73,19 @@ pub(crate) fn rasterize_virtual_meshes(
             let [Some(a), Some(b), Some(c)] = projected else {
                 return None;
             };
-            let triangle = ScreenTriangle {
+            let corners = [a, b, c];
+            Some(ScreenTriangle {
                 triangle: t as u32,
-                corners: [a, b, c],
-            };
-            window.span(&triangle).is_some().then_some(triangle)
+                corners,
+                span: window.span(&corners)?,
+            })
         })
         .collect();
 
     let bands = window.height.div_ceil(BAND_ROWS);
     let mut bins = vec![Vec::new(); bands as usize];
     for (k, t) in screen.iter().enumerate() {
-        let Some((_, _, y_lo, y_hi)) = window.span(t) else {
-            continue;
-        };
+        let (_, _, y_lo, y_hi) = t.span;
         for band in y_lo / BAND_ROWS..=y_hi / BAND_ROWS {
             bins[band as usize].push(k);
         }
@@ -124,17 +125,18 @@ impl PixelWindow {
         })
     }
 
-    /// The window-relative pixels whose centres lie in the triangle's
-    /// bounding box, as inclusive (x_lo, x_hi, y_lo, y_hi); `None` if none.
-    fn span(&self, t: &ScreenTriangle) -> Option<(u32, u32, u32, u32)> {
+    /// The window-relative pixels whose centres lie in the bounding box of
+    /// a screen triangle's corners, as inclusive (x_lo, x_hi, y_lo, y_hi);
+    /// `None` if none.
+    fn span(&self, corners: &[ScreenPoint; 3]) -> Option<(u32, u32, u32, u32)> {
         let range = |v: [f32; 3], origin: u32, limit: u32| {
             let v = v.map(|c| c - origin as f32 - 0.5);
             let lo = v[0].min(v[1]).min(v[2]).ceil().max(0.0);
             let hi = v[0].max(v[1]).max(v[2]).floor().min(limit as f32 - 1.0);
             (lo <= hi).then_some((lo as u32, hi as u32))
         };
-        let (x_lo, x_hi) = range(t.corners.map(|c| c.x), self.x0, self.width)?;
-        let (y_lo, y_hi) = range(t.corners.map(|c| c.y), self.y0, self.height)?;
+        let (x_lo, x_hi) = range(corners.map(|c| c.x), self.x0, self.width)?;
+        let (y_lo, y_hi) = range(corners.map(|c| c.y), self.y0, self.height)?;
         Some((x_lo, x_hi, y_lo, y_hi))
     }
 
@@ -152,9 +154,7 @@ impl PixelWindow {
             if area.abs() < 1e-12 {
                 continue;
             }
-            let Some((x_lo, x_hi, y_lo, y_hi)) = self.span(t) else {
-                continue;
-            };
+            let (x_lo, x_hi, y_lo, y_hi) = t.span;
             for y in y_lo.max(rows.start)..=y_hi.min(rows.end - 1) {
                 for x in x_lo..=x_hi {
                     let slot = self.slot[(y * self.width + x) as usize];

@@ -14,11 +14,15 @@ pub const BACK_SUFFIX: &str = "_back";
 
 /// Per scene triangle: whether it belongs to a mesh the reflector mirrors.
 pub fn reflected_triangle_flags(scene: &Scene, reflector: &[TriangleId]) -> Vec<bool> {
-    // Objects whose triangles are all left out: the reflector objects' backs.
-    let mut excluded = vec![false; scene.objects.len()];
+    // Objects whose triangles are all left out: the reflector objects' backs
+    // (looked up by name once per reflector object, not per triangle).
+    let mut is_reflector = vec![false; scene.objects.len()];
     for &t in reflector {
-        let object = scene.triangles[t as usize].object;
-        let back = format!("{}{BACK_SUFFIX}", scene.objects[object as usize].name);
+        is_reflector[scene.triangles[t as usize].object as usize] = true;
+    }
+    let mut excluded = vec![false; scene.objects.len()];
+    for (object, _) in is_reflector.iter().enumerate().filter(|(_, r)| **r) {
+        let back = format!("{}{BACK_SUFFIX}", scene.objects[object].name);
         if let Some(back) = scene.object_id(&back) {
             excluded[back as usize] = true;
         }

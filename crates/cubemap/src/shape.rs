@@ -90,16 +90,21 @@ pub fn classify(scene: &Scene, triangles: &[TriangleId]) -> ReflectorShape {
 /// magnitude (the one not on the shared edge), along `base`'s facing normal.
 fn height_of_far_corner(scene: &Scene, base: TriangleId, other: TriangleId) -> f32 {
     let [a, _, _] = scene.triangle_positions(base);
-    let shading: Vec3 = scene.triangle_normals(base).iter().sum();
-    let geometric = scene.geometric_normal(base);
-    let normal = if geometric.dot(shading) < 0.0 {
-        -geometric
-    } else {
-        geometric
-    };
+    let normal = facing(scene.geometric_normal(base), scene.triangle_normals(base));
     scene
         .triangle_positions(other)
         .iter()
         .map(|&p| (p - a).dot(normal))
         .fold(0.0, |best, h| if h.abs() > best.abs() { h } else { best })
+}
+
+/// A triangle's geometric `normal` (any length) turned to agree with its
+/// vertex normals: towards the side the reflector faces.
+pub(crate) fn facing(normal: Vec3, vertex_normals: [Vec3; 3]) -> Vec3 {
+    let shading: Vec3 = vertex_normals.iter().sum();
+    if normal.dot(shading) < 0.0 {
+        -normal
+    } else {
+        normal
+    }
 }

@@ -101,7 +101,7 @@ fn cube_maps_are_closer_to_the_reference_than_the_environment_map() {
 fn the_cover_glass_is_concave() {
     let setup = small_cockpit();
     let prepared = CubeMapMethod::full().prepare(&setup.frame());
-    assert_eq!(prepared.shape, ReflectorShape::Concave);
+    assert_eq!(prepared.maps.shape, ReflectorShape::Concave);
 }
 
 #[test]

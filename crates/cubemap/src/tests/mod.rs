@@ -3,5 +3,5 @@
 //! cockpit against the ray-traced reference.
 
 mod cockpit;
-mod scenes;
+pub(crate) mod scenes;
 mod sphere;

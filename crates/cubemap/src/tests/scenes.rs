@@ -4,8 +4,8 @@
 use glam::Vec3;
 use vtfarm_scene::{Material, Object, Scene, Triangle};
 
-/// Adds an object with its own material; returns the first new triangle id.
-fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
+/// Adds an object with its own material; returns its (object, material) ids.
+pub(crate) fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
     scene.objects.push(Object {
         name: name.to_owned(),
     });
@@ -16,7 +16,8 @@ fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
     )
 }
 
-fn push(
+/// Adds vertices and faces (indices into `positions`) to `object`.
+pub(crate) fn push(
     scene: &mut Scene,
     object: (u32, u32),
     positions: &[Vec3],
@@ -65,94 +66,26 @@ pub(super) fn add_sphere(
 }
 
 /// A coloured quad (two triangles, flat normal `u × v`).
-pub(super) fn add_quad(scene: &mut Scene, name: &str, color: Vec3, corner: Vec3, u: Vec3, v: Vec3) {
+fn add_quad(scene: &mut Scene, name: &str, color: Vec3, corner: Vec3, u: Vec3, v: Vec3) {
     let object = add_object(scene, name, Material::diffuse(name, color));
     let n = u.cross(v).normalize();
     let positions = [corner, corner + u, corner + u + v, corner + v];
     push(scene, object, &positions, &[n; 4], &[[0, 1, 2], [0, 2, 3]]);
 }
 
-/// The mirror sphere of radius `radius` at the origin with four quads
-/// around it; returns the scene and the sphere's triangles.
-pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
-    let mut scene = Scene::default();
-    let sphere = add_sphere(&mut scene, Vec3::ZERO, radius, 4, false);
-    let r = radius;
-    add_quad(
-        &mut scene,
-        "floor",
-        Vec3::new(0.8, 0.2, 0.2),
-        Vec3::new(-3.0, -1.5, -3.0) * r,
-        Vec3::Z * 6.0 * r,
-        Vec3::X * 6.0 * r,
-    );
-    add_quad(
-        &mut scene,
-        "back",
-        Vec3::new(0.2, 0.8, 0.2),
-        Vec3::new(-3.0, -1.5, -3.0) * r,
-        Vec3::X * 6.0 * r,
-        Vec3::Y * 4.0 * r,
-    );
-    add_quad(
-        &mut scene,
-        "left",
-        Vec3::new(0.2, 0.2, 0.8),
-        Vec3::new(-3.0, -1.5, 3.0) * r,
-        Vec3::Z * -6.0 * r,
-        Vec3::Y * 4.0 * r,
-    );
-    add_quad(
-        &mut scene,
-        "right",
-        Vec3::new(0.8, 0.8, 0.2),
-        Vec3::new(3.0, -1.5, -3.0) * r,
-        Vec3::Z * 6.0 * r,
-        Vec3::Y * 4.0 * r,
-    );
-    (scene, sphere)
-}
-
-/// A saddle z = (x² - y²) / 2 over [-1, 1]², normals up.
-pub(super) fn saddle() -> (Scene, Vec<u32>) {
-    let mut scene = Scene::default();
-    let object = add_object(&mut scene, "saddle", mirror());
-    let n = 8;
-    let mut positions = Vec::new();
-    let mut normals = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            let (x, y) = (
-                i as f32 / n as f32 * 2.0 - 1.0,
-                j as f32 / n as f32 * 2.0 - 1.0,
-            );
-            positions.push(Vec3::new(x, y, (x * x - y * y) * 0.5));
-            normals.push(Vec3::new(-x, y, 1.0).normalize());
-        }
-    }
-    let mut faces = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let k = j * (n + 1) + i;
-            faces.push([k, k + 1, k + n + 2]);
-            faces.push([k, k + n + 2, k + n + 1]);
-        }
-    }
-    push(&mut scene, object, &positions, &normals, &faces);
-    let triangles = (0..scene.triangles.len() as u32).collect();
-    (scene, triangles)
-}
-
-/// A sheet `corner + s u + t v` split into `n` × `n` quads (one object).
-pub(super) fn dense_sheet(scene: &mut Scene, corner: Vec3, u: Vec3, v: Vec3, n: u32) -> Vec<u32> {
-    let object = add_object(scene, "sheet", Material::diffuse("sheet", Vec3::splat(0.5)));
-    let normal = u.cross(v).normalize();
-    let mut positions = Vec::new();
-    for j in 0..=n {
-        for i in 0..=n {
-            positions.push(corner + u * (i as f32 / n as f32) + v * (j as f32 / n as f32));
-        }
-    }
+/// Adds an `n` × `n` grid of quads (two triangles each) over the unit
+/// square to `object`; `surface(s, t)` places each lattice point and gives
+/// its normal. Returns the new triangle ids.
+fn add_grid(
+    scene: &mut Scene,
+    object: (u32, u32),
+    n: u32,
+    surface: impl Fn(f32, f32) -> (Vec3, Vec3),
+) -> Vec<u32> {
+    let (positions, normals): (Vec<Vec3>, Vec<Vec3>) = (0..=n)
+        .flat_map(|j| (0..=n).map(move |i| (i, j)))
+        .map(|(i, j)| surface(i as f32 / n as f32, j as f32 / n as f32))
+        .unzip();
     let mut faces = Vec::new();
     for j in 0..n {
         for i in 0..n {
@@ -162,7 +95,77 @@ pub(super) fn dense_sheet(scene: &mut Scene, corner: Vec3, u: Vec3, v: Vec3, n: 
         }
     }
     let first = scene.triangles.len() as u32;
-    let normals = vec![normal; positions.len()];
     push(scene, object, &positions, &normals, &faces);
     (first..scene.triangles.len() as u32).collect()
+}
+
+/// The mirror sphere of radius `radius` at the origin with four quads
+/// around it; returns the scene and the sphere's triangles.
+pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
+    let mut scene = Scene::default();
+    let sphere = add_sphere(&mut scene, Vec3::ZERO, radius, 4, false);
+    let low = Vec3::new(-3.0, -1.5, -3.0);
+    // (name, colour, corner, u, v) in units of the radius.
+    let quads = [
+        (
+            "floor",
+            Vec3::new(0.8, 0.2, 0.2),
+            low,
+            Vec3::Z * 6.0,
+            Vec3::X * 6.0,
+        ),
+        (
+            "back",
+            Vec3::new(0.2, 0.8, 0.2),
+            low,
+            Vec3::X * 6.0,
+            Vec3::Y * 4.0,
+        ),
+        (
+            "left",
+            Vec3::new(0.2, 0.2, 0.8),
+            Vec3::new(-3.0, -1.5, 3.0),
+            Vec3::Z * -6.0,
+            Vec3::Y * 4.0,
+        ),
+        (
+            "right",
+            Vec3::new(0.8, 0.8, 0.2),
+            Vec3::new(3.0, -1.5, -3.0),
+            Vec3::Z * 6.0,
+            Vec3::Y * 4.0,
+        ),
+    ];
+    for (name, color, corner, u, v) in quads {
+        add_quad(
+            &mut scene,
+            name,
+            color,
+            corner * radius,
+            u * radius,
+            v * radius,
+        );
+    }
+    (scene, sphere)
+}
+
+/// A saddle z = (x² - y²) / 2 over [-1, 1]², normals up.
+pub(super) fn saddle() -> (Scene, Vec<u32>) {
+    let mut scene = Scene::default();
+    let object = add_object(&mut scene, "saddle", mirror());
+    let triangles = add_grid(&mut scene, object, 8, |s, t| {
+        let (x, y) = (s * 2.0 - 1.0, t * 2.0 - 1.0);
+        (
+            Vec3::new(x, y, (x * x - y * y) * 0.5),
+            Vec3::new(-x, y, 1.0).normalize(),
+        )
+    });
+    (scene, triangles)
+}
+
+/// A sheet `corner + s u + t v` split into `n` × `n` quads (one object).
+pub(super) fn dense_sheet(scene: &mut Scene, corner: Vec3, u: Vec3, v: Vec3, n: u32) -> Vec<u32> {
+    let object = add_object(scene, "sheet", Material::diffuse("sheet", Vec3::splat(0.5)));
+    let normal = u.cross(v).normalize();
+    add_grid(scene, object, n, |s, t| (corner + u * s + v * t, normal))
 }
