@@ -213,8 +213,8 @@ pub fn trace_package(
     } else {
         Vec::new()
     };
-    let bitmap = assemble(
-        frame,
+    let bitmap = SparseBitmap::from_pixels(
+        frame.ids.width,
         per_triangle.into_iter().flat_map(|(p, _)| p).collect(),
     );
     stats.pixels = bitmap.color.len() as u64;
@@ -477,11 +477,6 @@ fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> 
         transmitted,
         object: v[nearest].sample.reflected_object,
     }
-}
-
-/// Packs pixel values into the sparse bitmap.
-fn assemble(frame: &Frame<'_>, pixels: Vec<PixelValue>) -> SparseBitmap {
-    SparseBitmap::from_pixels(frame.ids.width, pixels)
 }
 
 impl SparseBitmap {
