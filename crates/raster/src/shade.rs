@@ -6,7 +6,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_imaging::Image;
 use vtfarm_scene::shading::phong;
-use vtfarm_scene::{Camera, Lighting, NONE, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, NONE, Projector, Scene, TriangleId};
 
 use crate::IdBuffer;
 
@@ -17,6 +17,7 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
     if width == 0 {
         return image;
     }
+    let rays = Projector::new(camera);
     image
         .pixels
         .par_chunks_mut(width)
@@ -25,24 +26,17 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
         .for_each(|(y, (colors, triangles))| {
             for (x, (color, &t)) in colors.iter_mut().zip(triangles).enumerate() {
                 if t != NONE {
-                    *color = shade_pixel(scene, camera, lighting, t, x as u32, y as u32);
+                    let dir = rays.pixel_ray(x as u32, y as u32);
+                    *color = shade_pixel(scene, camera.eye, lighting, t, dir);
                 }
             }
         });
     image
 }
 
-/// Phong at the point of triangle `id` seen through the centre of pixel (`x`, `y`).
-fn shade_pixel(
-    scene: &Scene,
-    camera: &Camera,
-    lighting: &Lighting,
-    id: TriangleId,
-    x: u32,
-    y: u32,
-) -> Vec3 {
-    let dir = camera.pixel_ray(x, y);
-    let corners = scene.triangle_positions(id).map(|p| p - camera.eye);
+/// Phong at the point of triangle `id` seen from `eye` along the pixel ray `dir`.
+fn shade_pixel(scene: &Scene, eye: Vec3, lighting: &Lighting, id: TriangleId, dir: Vec3) -> Vec3 {
+    let corners = scene.triangle_positions(id).map(|p| p - eye);
     let w = perspective_barycentrics(corners, dir);
     let [n0, n1, n2] = scene.triangle_normals(id);
     let normal = (n0 * w.x + n1 * w.y + n2 * w.z)
@@ -53,7 +47,7 @@ fn shade_pixel(
     phong(
         scene.material_of(id),
         lighting,
-        camera.eye + offset,
+        eye + offset,
         normal,
         to_eye,
         |_, _, _| true,

@@ -53,11 +53,7 @@ impl Camera {
     /// The unit direction of the ray from the eye through continuous pixel
     /// coordinates (`px`, `py`); the centre of pixel (x, y) is (x + 0.5, y + 0.5).
     pub fn ray_direction(&self, px: f32, py: f32) -> Vec3 {
-        let (forward, right, up) = self.basis();
-        let s = self.pixel_size_at_unit_depth();
-        let cx = (px - self.width as f32 * 0.5) * s;
-        let cy = (self.height as f32 * 0.5 - py) * s;
-        (forward + right * cx + up * cy).normalize()
+        Projector::new(self).ray_direction(px, py)
     }
 
     /// The ray direction through the centre of pixel (`x`, `y`).
@@ -72,13 +68,15 @@ impl Camera {
     }
 }
 
-/// A camera with its basis precomputed, for projecting many points.
+/// A camera with its basis precomputed, for projecting many points or
+/// casting many pixel rays (bit-identical to the `Camera` methods).
 #[derive(Clone, Copy, Debug)]
 pub struct Projector {
     eye: Vec3,
     forward: Vec3,
     right: Vec3,
     up: Vec3,
+    pixel: f32,
     inv_pixel: f32,
     half_w: f32,
     half_h: f32,
@@ -92,10 +90,23 @@ impl Projector {
             forward,
             right,
             up,
+            pixel: camera.pixel_size_at_unit_depth(),
             inv_pixel: 1.0 / camera.pixel_size_at_unit_depth(),
             half_w: camera.width as f32 * 0.5,
             half_h: camera.height as f32 * 0.5,
         }
+    }
+
+    /// See [`Camera::ray_direction`].
+    pub fn ray_direction(&self, px: f32, py: f32) -> Vec3 {
+        let cx = (px - self.half_w) * self.pixel;
+        let cy = (self.half_h - py) * self.pixel;
+        (self.forward + self.right * cx + self.up * cy).normalize()
+    }
+
+    /// See [`Camera::pixel_ray`].
+    pub fn pixel_ray(&self, x: u32, y: u32) -> Vec3 {
+        self.ray_direction(x as f32 + 0.5, y as f32 + 0.5)
     }
 
     /// See [`Camera::project`].
