@@ -83,7 +83,7 @@ pub(crate) fn mirror_direction(pixel: &ReflectorPixel) -> Vec3 {
     } else {
         normal
     };
-    (pixel.incoming - 2.0 * pixel.incoming.dot(facing) * facing).normalize_or(pixel.incoming)
+    vtfarm_trace::reflect(pixel.incoming, facing)
 }
 
 /// The area-weighted centroid of the reflector's triangles.

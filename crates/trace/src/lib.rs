@@ -22,7 +22,7 @@ mod scenarios;
 mod testutil;
 
 pub use bvh::{BuildPreset, BvhLayout, BvhOptions, SceneBvh};
-pub use whitted::{SurfaceTerms, Tracer, refract};
+pub use whitted::{SurfaceTerms, Tracer, reflect, refract};
 
 use glam::Vec3;
 use vtfarm_scene::{ObjectId, TriangleId};

@@ -79,7 +79,7 @@ impl Signature {
 }
 
 /// Mirror direction of unit `incoming` about unit `normal`.
-pub(crate) fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
+pub fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
     (incoming - 2.0 * incoming.dot(normal) * normal).normalize_or(incoming)
 }
 
