@@ -59,29 +59,27 @@ struct Job {
     /// Send the per-pixel components with each frame.
     aux: bool,
     method: MethodKind,
-    /// For per-reflector methods, the reflector groups the work items index.
-    groups: Vec<Vec<u32>>,
+    /// For per-reflector methods, the reflector groups the work items
+    /// index; `None` when the items are the reflector triangles themselves.
+    groups: Option<Vec<Vec<u32>>>,
     current: Option<FrameAssembly>,
 }
 
 impl Job {
     /// The reflector triangles that work `items` cover (for progress).
     fn triangles_in(&self, items: &[u32]) -> u64 {
-        if self.method.per_reflector() {
-            items
-                .iter()
-                .filter_map(|&g| self.groups.get(g as usize))
+        match &self.groups {
+            Some(groups) => (items.iter())
+                .filter_map(|&g| groups.get(g as usize))
                 .map(|g| g.len() as u64)
-                .sum()
-        } else {
-            items.len() as u64
+                .sum(),
+            None => items.len() as u64,
         }
     }
 }
 
-/// The frame being assembled.
+/// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
-    frame: u32,
     start: FrameStart,
     image: FrameImage,
     totals: PackageStats,
@@ -92,7 +90,8 @@ struct FrameAssembly {
 struct InFlight {
     job: u64,
     frame: u32,
-    items: Vec<u32>,
+    /// The reflector triangles its items cover, for progress.
+    triangles: u64,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
 }
@@ -270,7 +269,8 @@ impl MasterCore {
         let Some(job) = self.jobs.get(&in_flight.job) else {
             return;
         };
-        let Some(current) = job.current.as_ref().filter(|c| c.frame == in_flight.frame) else {
+        let Some(current) = (job.current.as_ref()).filter(|c| c.start.frame == in_flight.frame)
+        else {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
@@ -287,22 +287,15 @@ impl MasterCore {
             }
         };
         let stats = PackageStats::from(result.stats);
-        let item_seconds = if result.triangle_samples.len() == in_flight.items.len() {
-            // Samples are what a triangle costs; +1 so hidden ones are not free.
-            result
-                .triangle_samples
-                .iter()
-                .map(|&s| f64::from(s) + 1.0)
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let bytes_in = in_flight.bytes_in;
         let measure = PackageMeasure {
             busy: Duration::from_micros(result.busy_micros),
-            item_seconds,
+            // Samples are what an item costs; +1 so hidden ones are not free.
+            // The scheduler checks that there is one per item.
+            item_seconds: (result.triangle_samples.iter())
+                .map(|&s| f64::from(s) + 1.0)
+                .collect(),
             rays: stats.samples(),
-            bytes_in,
+            bytes_in: in_flight.bytes_in,
             bytes_out,
         };
         if let Err(e) = self
@@ -313,18 +306,17 @@ impl MasterCore {
             debug!(package = result.id, "result ignored: {e}");
             return;
         }
-        let job_id = in_flight.job;
-        let items = job.triangles_in(&in_flight.items);
+        let (job_id, triangles) = (in_flight.job, in_flight.triangles);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
         let current = job.current.as_mut().expect("checked above");
         current.image.composite(&bitmap);
         current.totals.add(&stats);
-        current.triangles_done += items;
+        current.triangles_done += triangles;
         let progress = Message::Progress {
             job: job_id,
-            frame: current.frame,
+            frame: current.start.frame,
             done: current.triangles_done as u32,
             total: job.reflectors.len() as u32,
         };
@@ -355,29 +347,29 @@ impl MasterCore {
     }
 
     /// Checks a submitted job and queues it (or asks for its scene first).
-    fn submit(&mut self, now: Duration, conn: ConnId, job: WireJob) {
-        let scene = match &job.scene {
-            JobScene::Data(data) => match data.to_scene() {
-                Ok(scene) => {
-                    let entry = (Arc::new(scene), Arc::new(data.clone()));
-                    self.scenes.entry(data.hash).or_insert(entry).0.clone()
-                }
-                Err(e) => return self.refuse_job(conn, format!("bad scene: {e}")),
-            },
-            JobScene::Hash(hash) => match self.scenes.get(hash) {
-                Some((scene, _)) => scene.clone(),
-                None => {
-                    // Not cached here: ask the submitter for it.
-                    let hash = *hash;
-                    self.awaiting_scene.insert(conn, job);
-                    self.send(conn, Message::SceneRequest { hash });
-                    return;
-                }
-            },
-        };
+    fn submit(&mut self, now: Duration, conn: ConnId, mut job: WireJob) {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
+        };
+        // The scene's bytes move into the cache; the job keeps its hash.
+        let scene = match std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash)) {
+            JobScene::Data(data) => match data.to_scene() {
+                Ok(scene) => (self.scenes.entry(scene_hash))
+                    .or_insert_with(|| (Arc::new(scene), Arc::new(data)))
+                    .0
+                    .clone(),
+                Err(e) => return self.refuse_job(conn, format!("bad scene: {e}")),
+            },
+            JobScene::Hash(_) => match self.scenes.get(&scene_hash) {
+                Some((scene, _)) => scene.clone(),
+                None => {
+                    // Not cached here: ask the submitter for it.
+                    self.awaiting_scene.insert(conn, job);
+                    self.send(conn, Message::SceneRequest { hash: scene_hash });
+                    return;
+                }
+            },
         };
         if let Err(e) = check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len()) {
             return self.refuse_job(conn, e.to_string());
@@ -408,12 +400,10 @@ impl MasterCore {
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
         // reflector groups, which the workers derive from the same list.
-        let (groups, items) = if method.per_reflector() {
-            let groups = reflector_groups(&scene, &reflectors);
-            let items = (0..groups.len() as u32).collect();
-            (groups, items)
-        } else {
-            (Vec::new(), reflectors.clone())
+        let groups = (method.per_reflector()).then(|| reflector_groups(&scene, &reflectors));
+        let items = match &groups {
+            Some(groups) => (0..groups.len() as u32).collect(),
+            None => reflectors.clone(),
         };
         let work = vec![FrameWork { items }; frames.len()];
         info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), method = method.name(), "job queued");
@@ -511,11 +501,10 @@ impl MasterCore {
                 let Some(j) = self.jobs.get_mut(&job.0) else {
                     return;
                 };
-                let Some(done) = j.current.take().filter(|c| c.frame == frame) else {
+                let Some(done) = j.current.take().filter(|c| c.start.frame == frame) else {
                     return;
                 };
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
-                let image = &done.image.color;
                 let workers = stats
                     .workers
                     .iter()
@@ -544,7 +533,7 @@ impl MasterCore {
                 let message = Message::FrameDone(FrameDone {
                     job: job.0,
                     frame,
-                    image: WireImage::from_pixels(image.width, image.height, &image.pixels),
+                    image: wire_image(&done.image.color),
                     stats: frame_stats,
                     aux: j.aux.then(|| frame_aux(&done.image)),
                 });
@@ -616,7 +605,6 @@ impl MasterCore {
             method: j.method.into(),
         };
         j.current = Some(FrameAssembly {
-            frame,
             start: start.clone(),
             image: FrameImage::new(base),
             totals: PackageStats::default(),
@@ -640,18 +628,21 @@ impl MasterCore {
     }
 
     fn assign(&mut self, a: Assignment) {
+        let triangles = self
+            .jobs
+            .get(&a.job.0)
+            .map_or(0, |j| j.triangles_in(&a.items));
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,
             frame: a.frame,
-            triangles: a.items.clone(),
+            triangles: a.items,
         });
-        let bytes_in = encoded_len(&message);
         let in_flight = InFlight {
             job: a.job.0,
             frame: a.frame,
-            items: a.items,
-            bytes_in,
+            triangles,
+            bytes_in: encoded_len(&message),
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
@@ -683,17 +674,19 @@ impl MasterCore {
             })
             .collect();
         let queue = self.scheduler.queue();
-        let running = queue.running.map(|p| RunningJob {
-            job: p.job.0,
-            name: self
-                .jobs
-                .get(&p.job.0)
-                .map(|j| j.name.clone())
-                .unwrap_or_default(),
-            frame: p.frame,
-            frames: p.frames,
-            triangles_done: p.items_done as u64,
-            triangles_total: p.items_total as u64,
+        // Progress in reflector triangles, as `Message::Progress` counts it
+        // (work items are reflector groups for per-reflector methods).
+        let running = queue.running.map(|p| {
+            let job = self.jobs.get(&p.job.0);
+            RunningJob {
+                job: p.job.0,
+                name: job.map(|j| j.name.clone()).unwrap_or_default(),
+                frame: p.frame,
+                frames: p.frames,
+                triangles_done: (job.and_then(|j| j.current.as_ref()))
+                    .map_or(0, |c| c.triangles_done),
+                triangles_total: job.map_or(0, |j| j.reflectors.len() as u64),
+            }
         });
         StatusReply {
             workers,
@@ -706,12 +699,15 @@ impl MasterCore {
     }
 }
 
+fn wire_image(image: &vtfarm_imaging::Image) -> WireImage {
+    WireImage::from_pixels(image.width, image.height, &image.pixels)
+}
+
 /// The per-pixel components of a finished frame, for the wire.
 fn frame_aux(image: &FrameImage) -> WireFrameAux {
-    let wire = |i: &vtfarm_imaging::Image| WireImage::from_pixels(i.width, i.height, &i.pixels);
     WireFrameAux {
-        reflected: wire(&image.reflected),
-        transmitted: wire(&image.transmitted),
+        reflected: wire_image(&image.reflected),
+        transmitted: wire_image(&image.transmitted),
         reflected_object: image.reflected_object.clone(),
         mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
     }

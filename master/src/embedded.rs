@@ -21,13 +21,15 @@ impl LocalFarm {
     /// Starts a master and `workers` local workers sharing this process's cores.
     pub fn start(workers: usize, config: SchedulerConfig) -> LocalFarm {
         let (master, task) = spawn_master(config);
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
-        let workers = (0..workers.max(1))
+        let workers = workers.max(1);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+        let threads = (cores / workers as u32).max(1);
+        let workers = (0..workers)
             .map(|k| {
                 let (master_end, worker_end) = Link::pair();
                 let peer = Peer::Worker {
                     name: format!("local-{k}"),
-                    threads: (threads / workers.max(1) as u32).max(1),
+                    threads,
                     address: "in-process".into(),
                 };
                 master.attach(peer, master_end, None);

@@ -6,8 +6,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{MasterCore, Output, Peer};
-use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireFrameSetup, WireJob};
+use vtfarm_master::{MasterCore, Output, Peer, wire_job};
+use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
@@ -114,17 +114,9 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         },
     );
     let job = WireJob {
-        name: "core".into(),
+        // The scene itself rather than its hash: no round trip for it.
         scene: JobScene::Data(data.clone()),
-        frames: vec![WireFrameSetup::from_parts(
-            &setup.camera,
-            &setup.lighting,
-            &setup.trace,
-            &setup.vertex,
-        )],
-        reflectors: reflectors.clone(),
-        aux: false,
-        method: vtfarm_proto::WireMethod::VertexTracing,
+        ..wire_job("core", &data, std::slice::from_ref(&setup), &reflectors)
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
     assert!(matches!(

@@ -56,21 +56,13 @@ pub struct Location {
 
 impl Location {
     fn of(text: &str, offset: usize) -> Location {
-        let before = &text[..floor_char_boundary(text, offset)];
+        let before = crate::truncate_utf8(text, offset);
         let line_start = before.rfind('\n').map_or(0, |i| i + 1);
         Location {
             line: before.matches('\n').count() + 1,
             column: before[line_start..].chars().count() + 1,
         }
     }
-}
-
-fn floor_char_boundary(text: &str, offset: usize) -> usize {
-    let mut i = offset.min(text.len());
-    while !text.is_char_boundary(i) {
-        i -= 1;
-    }
-    i
 }
 
 impl fmt::Display for Location {

@@ -22,6 +22,7 @@ use crate::framing::{
     MAX_HANDSHAKE_BYTES, ProtoError, decode_message, read_frame, read_message, write_message,
 };
 use crate::message::{Hello, Message, Refusal, RefuseCode, Welcome};
+use crate::truncate_utf8;
 
 /// How long the master waits for a complete `Hello` (and a client for the answer).
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
@@ -258,14 +259,6 @@ async fn send_refusal(mut send: quinn::SendStream, refusal: &Refusal) {
     };
     // Best effort: the close code carries the refusal anyway.
     let _ = tokio::time::timeout(REFUSAL_LINGER, delivered).await;
-}
-
-fn truncate_utf8(text: &str, max: usize) -> &str {
-    let mut end = text.len().min(max);
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    &text[..end]
 }
 
 #[cfg(test)]

@@ -62,3 +62,13 @@ pub const PROTOCOL_VERSION: u32 = 2;
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.
 pub const MAGIC: [u8; 8] = *b"VTFARM\0\0";
+
+/// The longest prefix of `text` of at most `max` bytes that ends on a
+/// character boundary.
+pub(crate) fn truncate_utf8(text: &str, max: usize) -> &str {
+    let mut end = text.len().min(max);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    &text[..end]
+}

@@ -77,7 +77,8 @@ pub enum Message {
     SubmitJob { job: WireJob },
     /// Master → submitter: the job is queued under this id.
     JobAccepted { job: JobId, frames: u32 },
-    /// Master → submitter: `done` of `total` packages of a frame are in.
+    /// Master → submitter: `done` of the frame's `total` reflector triangles
+    /// are in (per-reflector methods count each group's triangles).
     Progress {
         job: JobId,
         frame: u32,
@@ -470,6 +471,8 @@ pub struct RunningJob {
     pub name: String,
     pub frame: u32,
     pub frames: u32,
+    /// Reflector triangles of the current frame that are in, and in all (as
+    /// [`Message::Progress`] counts them).
     pub triangles_done: u64,
     pub triangles_total: u64,
 }

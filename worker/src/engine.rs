@@ -16,8 +16,7 @@ use vtfarm_proto::{
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
-use vtfarm_trace::Tracer;
-use vtfarm_vertex::{PackageOptions, PackageStats, SparseBitmap, trace_package};
+use vtfarm_vertex::{Frame, PackageOptions, PackageStats, SparseBitmap, trace_package};
 
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
@@ -43,11 +42,10 @@ impl ActiveFrame {
     /// emulate a slower machine in tests and benchmarks.
     pub fn run(&self, package: &Package, slowdown: f64) -> Result<PackageResult, String> {
         let start = Instant::now();
+        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
         let (bitmap, stats, samples) = match &self.per_reflector {
-            None => self.trace(&package.triangles)?,
-            Some(PerReflector { method, groups }) => {
-                self.render_groups(method.as_ref(), groups, &package.triangles)?
-            }
+            None => trace(&frame, &package.triangles)?,
+            Some(per_reflector) => per_reflector.render(&frame, &package.triangles)?,
         };
         let compute = start.elapsed();
         if slowdown > 1.0 {
@@ -61,43 +59,42 @@ impl ActiveFrame {
             triangle_samples: samples,
         })
     }
+}
 
-    /// Vertex traces reflector triangles.
-    fn trace(&self, triangles: &[u32]) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
-        let scene = self.renderer.scene();
-        check_triangle_ids("package triangles", triangles, scene.triangles.len())
-            .map_err(|e| e.to_string())?;
-        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
-        let result = trace_package(&frame, triangles, &PackageOptions::default(), &mut |_| {});
-        Ok((result.bitmap, result.stats, result.triangle_samples))
-    }
+/// Vertex traces reflector triangles.
+fn trace(
+    frame: &Frame<'_>,
+    triangles: &[u32],
+) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
+    let triangle_count = frame.tracer.bvh.scene().triangles.len();
+    check_triangle_ids("package triangles", triangles, triangle_count)
+        .map_err(|e| e.to_string())?;
+    let result = trace_package(frame, triangles, &PackageOptions::default(), &mut |_| {});
+    Ok((result.bitmap, result.stats, result.triangle_samples))
+}
 
-    /// Renders whole reflectors (`items` index `groups`) with a
-    /// per-reflector method; a group's cost for load balancing is its rays.
-    fn render_groups(
+impl PerReflector {
+    /// Renders whole reflectors (`items` index the groups); a group's cost
+    /// for load balancing is its rays.
+    fn render(
         &self,
-        method: &dyn ReflectionMethod,
-        groups: &[Vec<u32>],
+        frame: &Frame<'_>,
         items: &[u32],
     ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
         let mut bitmaps = Vec::with_capacity(items.len());
         let mut stats = PackageStats::default();
         let mut samples = Vec::with_capacity(items.len());
         for &item in items {
-            let group = groups.get(item as usize).ok_or_else(|| {
+            let group = self.groups.get(item as usize).ok_or_else(|| {
                 format!(
                     "package item {item} names no reflector (the frame has {})",
-                    groups.len()
+                    self.groups.len()
                 )
             })?;
-            let output = method.render(&MethodFrame {
-                tracer: Tracer {
-                    bvh: self.renderer.bvh(),
-                    lighting: &self.setup.lighting,
-                    settings: self.setup.trace,
-                },
-                camera: self.setup.camera,
-                ids: &self.ids,
+            let output = self.method.render(&MethodFrame {
+                tracer: frame.tracer,
+                camera: frame.camera,
+                ids: frame.ids,
                 reflector: group,
             });
             let c = output.counters;
@@ -112,7 +109,7 @@ impl ActiveFrame {
             samples.push(u32::try_from(c.rays).unwrap_or(u32::MAX));
             bitmaps.push(output.bitmap);
         }
-        Ok((merge_bitmaps(self.ids.width, &bitmaps), stats, samples))
+        Ok((merge_bitmaps(frame.ids.width, &bitmaps), stats, samples))
     }
 }
 
@@ -206,7 +203,12 @@ impl Engine {
             trace,
             vertex,
         };
-        let start_reflectors = start.reflectors.clone();
+        // Items index the groups of the frame's reflector list as sent (the master's order).
+        let method = MethodKind::from(start.method);
+        let per_reflector = method.per_reflector().then(|| PerReflector {
+            method: vtfarm_compare::method(method, setup.vertex),
+            groups: reflector_groups(&scene, &start.reflectors),
+        });
         let renderer = match &self.renderer {
             Some((hash, reflectors, r))
                 if *hash == start.scene && *reflectors == start.reflectors =>
@@ -220,14 +222,6 @@ impl Engine {
             }
         };
         let (ids, behind) = renderer.id_buffers(&setup);
-        let method = MethodKind::from(start.method);
-        let per_reflector = method.per_reflector().then(|| {
-            let groups = reflector_groups(renderer.scene(), &start_reflectors);
-            PerReflector {
-                method: vtfarm_compare::method(method, setup.vertex),
-                groups,
-            }
-        });
         Ok(ActiveFrame {
             job: start.job,
             frame: start.frame,

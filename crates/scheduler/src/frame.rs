@@ -42,9 +42,8 @@ pub(crate) struct Frame {
 #[derive(Debug)]
 pub(crate) struct Package {
     state: PackageState,
+    /// Its positions; its estimated cost is [`Frame::cost`] of them.
     pub(crate) range: Range<usize>,
-    /// Estimated cost of the range.
-    pub(crate) cost: f64,
     /// The workers running it now: one when assigned, two when duplicated.
     pub(crate) attempts: Vec<Attempt>,
     /// Every failure so far, in order.
@@ -112,7 +111,7 @@ impl Frame {
             .queue
             .iter()
             .filter_map(|id| self.packages.get(id))
-            .map(|p| p.cost)
+            .map(|p| self.cost(p.range.clone()))
             .sum();
         self.cost(self.next_fresh..self.items.len()) + queued
     }
@@ -160,14 +159,12 @@ impl Package {
     /// A package handed straight to its first worker.
     pub(crate) fn assigned(
         range: Range<usize>,
-        cost: f64,
         attempt: Attempt,
         failures: Vec<(WorkerId, String)>,
     ) -> Package {
         Package {
             state: PackageState::Assigned,
             range,
-            cost,
             attempts: vec![attempt],
             failures,
             completed_by: None,

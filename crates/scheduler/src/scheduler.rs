@@ -666,7 +666,7 @@ impl Scheduler {
             if !self.may_retry(package, worker) {
                 continue;
             }
-            let split = if package.cost > split_factor * target {
+            let split = if frame.cost(package.range.clone()) > split_factor * target {
                 frame.cut(package.range.clone(), target)
             } else {
                 package.range.end
@@ -811,7 +811,7 @@ impl Scheduler {
                 let range = frame.next_fresh..end;
                 let cost = frame.cost(range.clone());
                 frame.next_fresh = end;
-                let package = Package::assigned(range.clone(), cost, attempt_for(cost), Vec::new());
+                let package = Package::assigned(range.clone(), attempt_for(cost), Vec::new());
                 frame.packages.insert(id, package);
                 (id, range, cost, false)
             }
@@ -819,7 +819,7 @@ impl Scheduler {
                 let Some(&queued) = frame.queue.get(index) else {
                     return;
                 };
-                let Some(package) = frame.packages.get(&queued) else {
+                let Some(package) = frame.packages.get_mut(&queued) else {
                     return;
                 };
                 if split < package.range.end {
@@ -828,40 +828,36 @@ impl Scheduler {
                     let id = PackageId(self.next_package);
                     self.next_package += 1;
                     let head = package.range.start..split;
-                    let tail = split..package.range.end;
+                    package.range.start = split;
                     let failures = package.failures.clone();
-                    let (head_cost, tail_cost) =
-                        (frame.cost(head.clone()), frame.cost(tail.clone()));
-                    if let Some(package) = frame.packages.get_mut(&queued) {
-                        package.range = tail;
-                        package.cost = tail_cost;
-                    }
-                    let package = Package::assigned(
-                        head.clone(),
-                        head_cost,
-                        attempt_for(head_cost),
-                        failures,
-                    );
+                    let cost = frame.cost(head.clone());
+                    let package = Package::assigned(head.clone(), attempt_for(cost), failures);
                     frame.packages.insert(id, package);
-                    (id, head, head_cost, false)
+                    (id, head, cost, false)
                 } else {
+                    let range = package.range.clone();
+                    let cost = frame.cost(range.clone());
                     frame.queue.remove(index);
                     let Some(package) = frame.packages.get_mut(&queued) else {
                         return;
                     };
                     package.set_state(PackageState::Assigned);
-                    package.attempts.push(attempt_for(package.cost));
-                    (queued, package.range.clone(), package.cost, false)
+                    package.attempts.push(attempt_for(cost));
+                    (queued, range, cost, false)
                 }
             }
             Pick::Duplicate(id) => {
+                let Some(range) = frame.packages.get(&id).map(|p| p.range.clone()) else {
+                    return;
+                };
+                let cost = frame.cost(range.clone());
                 let Some(package) = frame.packages.get_mut(&id) else {
                     return;
                 };
                 package.set_state(PackageState::Duplicated);
-                package.attempts.push(attempt_for(package.cost));
+                package.attempts.push(attempt_for(cost));
                 frame.stats.duplicates += 1;
-                (id, package.range.clone(), package.cost, true)
+                (id, range, cost, true)
             }
         };
         frame.started.get_or_insert(now);
@@ -902,7 +898,7 @@ impl Scheduler {
         package.set_state(PackageState::Done);
         package.completed_by = Some(worker);
         let range = package.range.clone();
-        let cost = package.cost;
+        let cost = frame.cost(range.clone());
 
         let busy = measure.busy.as_secs_f64();
         let weights = split_weights(measure, frame, range.clone());
@@ -1180,7 +1176,7 @@ fn smooth(old: Option<f64>, observed: f64, weight: f64) -> Option<f64> {
 
 /// A duration from seconds, 0 for what is not a positive number, capped so
 /// that adding it to a time cannot overflow.
-fn seconds(x: f64) -> Duration {
+pub(crate) fn seconds(x: f64) -> Duration {
     if x.is_nan() || x <= 0.0 {
         Duration::ZERO
     } else {

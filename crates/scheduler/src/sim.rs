@@ -16,6 +16,7 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
+use crate::scheduler::seconds;
 use crate::{
     Assignment, Counters, Event, FrameStats, FrameWork, JobId, LossCause, PackageId,
     PackageMeasure, Scheduler, SchedulerConfig, WorkerId,
@@ -216,7 +217,8 @@ struct Computing {
     assignment: Assignment,
     token: u64,
     started_at: Duration,
-    work: f64,
+    /// The true cost of each item, in item order; their sum is the work.
+    item_costs: Vec<f64>,
     fails: bool,
 }
 
@@ -601,11 +603,13 @@ impl Simulation {
             .costs
             .get(&assignment.job)
             .and_then(|frames| frames.get(assignment.frame as usize));
-        let work: f64 = assignment
+        // True seconds at speed 1 per item: the work, and how a worker splits its busy time.
+        let item_costs: Vec<f64> = assignment
             .items
             .iter()
             .map(|item| costs.and_then(|c| c.get(item)).copied().unwrap_or(0.0))
-            .sum();
+            .collect();
+        let work: f64 = item_costs.iter().sum();
         let fails = match &worker.spec.failures {
             SimFailures::Never => false,
             SimFailures::Always => true,
@@ -630,7 +634,7 @@ impl Simulation {
             assignment,
             token,
             started_at: now,
-            work,
+            item_costs,
             fails,
         });
         self.schedule(
@@ -663,25 +667,16 @@ impl Simulation {
                 error: format!("simulated failure on {}", worker.id),
             }
         } else {
-            let costs = self
-                .costs
-                .get(&computing.assignment.job)
-                .and_then(|frames| frames.get(computing.assignment.frame as usize));
-            let item_seconds = computing
-                .assignment
-                .items
-                .iter()
-                .map(|item| costs.and_then(|c| c.get(item)).copied().unwrap_or(0.0))
-                .collect();
+            let work: f64 = computing.item_costs.iter().sum();
             ToMaster::Done {
                 measure: PackageMeasure {
                     busy: now.saturating_sub(computing.started_at),
-                    item_seconds,
-                    rays: (computing.work * config.rays_per_second) as u64,
+                    item_seconds: computing.item_costs,
+                    rays: (work * config.rays_per_second) as u64,
                     bytes_in,
                     bytes_out,
                 },
-                true_cost: computing.work,
+                true_cost: work,
                 assignment: computing.assignment,
             }
         };
@@ -768,8 +763,7 @@ impl Simulation {
 
 /// Latency plus size over bandwidth.
 fn transfer_time(worker: &SimWorker, bytes: u64) -> Duration {
-    let seconds = bytes as f64 * 8.0 / worker.link_bits_per_second;
-    worker.latency + duration(seconds)
+    worker.latency + seconds(bytes as f64 * 8.0 / worker.link_bits_per_second)
 }
 
 /// When `work` (seconds at speed 1) started at `start` ends on a worker of
@@ -778,7 +772,7 @@ fn finish_time(start: Duration, work: f64, speed: f64, slowdown: Option<&SimSlow
     let speed = if speed > 0.0 { speed } else { 1e-9 };
     let plain = work / speed;
     let Some(slowdown) = slowdown.filter(|s| s.factor > 0.0) else {
-        return start + duration(plain);
+        return start + seconds(plain);
     };
     let (t0, at) = (start.as_secs_f64(), slowdown.at.as_secs_f64());
     let end = if t0 >= at {
@@ -788,14 +782,5 @@ fn finish_time(start: Duration, work: f64, speed: f64, slowdown: Option<&SimSlow
     } else {
         at + (work - (at - t0) * speed) / speed * slowdown.factor
     };
-    duration(end)
-}
-
-/// A duration from seconds, 0 for what is not a positive number.
-fn duration(seconds: f64) -> Duration {
-    if seconds.is_nan() || seconds <= 0.0 {
-        Duration::ZERO
-    } else {
-        Duration::from_secs_f64(seconds.min(1e9))
-    }
+    seconds(end)
 }
