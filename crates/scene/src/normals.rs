@@ -83,7 +83,9 @@ pub fn compute_normals(
         }
     }
 
-    let cos_crease = crease_angle_deg.clamp(0.0, 180.0).to_radians().cos() - CREASE_COS_SLACK;
+    let crease = crease_angle_deg.clamp(0.0, 180.0).to_radians();
+    let cos_crease = crease.cos() - CREASE_COS_SLACK;
+    let cores = Cores::new(&around, &faces, crease);
     let mut out_positions = Vec::new();
     let mut out_normals = Vec::new();
     let mut out_ids: HashMap<(u32, [u32; 3]), u32> = HashMap::new();
@@ -96,11 +98,14 @@ pub fn compute_normals(
                 let w = welded[3 * f + k];
                 // A degenerate face has no direction of its own: it takes
                 // all its neighbours.
-                let sum: Vec3 = around[w as usize]
-                    .iter()
-                    .filter(|&&(g, _)| own == Vec3::ZERO || own.dot(faces[g]) >= cos_crease)
-                    .map(|&(g, angle)| faces[g] * angle)
-                    .sum();
+                let sum = cores.sum(w as usize, own, &faces, cos_crease);
+                let sum: Vec3 = sum.unwrap_or_else(|| {
+                    around[w as usize]
+                        .iter()
+                        .filter(|&&(g, _)| own == Vec3::ZERO || own.dot(faces[g]) >= cos_crease)
+                        .map(|&(g, angle)| faces[g] * angle)
+                        .sum()
+                });
                 let fallback = if own == Vec3::ZERO {
                     FALLBACK_NORMAL
                 } else {
@@ -118,6 +123,70 @@ pub fn compute_normals(
         })
         .collect();
     (out_positions, out_normals, out_triangles)
+}
+
+/// Angle (radians) kept clear of the half crease angle in [`Cores::new`]:
+/// covers the rounding of a dot product near 1 seen through `acos`.
+const CORE_MARGIN: f32 = 1e-3;
+
+/// The faces around each position split into a *core*, all within half the
+/// crease angle of their mean direction (so any two of them are within the
+/// crease angle of each other), and the outliers. A corner whose own face is
+/// in the core takes the core's sum, computed once, plus the outliers within
+/// its crease angle: a position shared by `k` faces (the centre of a big
+/// polygon's fan, slivers included) costs O(k · outliers) instead of O(k²).
+struct Cores {
+    cos_half: f32,
+    /// Per position: the core's mean direction and weighted sum (none when
+    /// the crease angle is too small for a core).
+    core: Vec<Option<(Vec3, Vec3)>>,
+    outliers: Vec<Vec<(usize, f32)>>,
+}
+
+impl Cores {
+    fn new(around: &[Vec<(usize, f32)>], faces: &[Vec3], crease: f32) -> Cores {
+        let cos_half = (crease * 0.5 - CORE_MARGIN).cos();
+        let mut core = Vec::with_capacity(around.len());
+        let mut outliers = Vec::with_capacity(around.len());
+        for here in around {
+            let mean = here
+                .iter()
+                .map(|&(g, _)| faces[g])
+                .sum::<Vec3>()
+                .normalize_or_zero();
+            if crease * 0.5 <= CORE_MARGIN || mean == Vec3::ZERO {
+                core.push(None);
+                outliers.push(Vec::new());
+                continue;
+            }
+            let (inside, outside): (Vec<_>, Vec<_>) = here
+                .iter()
+                .partition(|&&(g, _)| mean.dot(faces[g]) >= cos_half);
+            let sum = inside.iter().map(|&(g, angle)| faces[g] * angle).sum();
+            core.push(Some((mean, sum)));
+            outliers.push(outside);
+        }
+        Cores {
+            cos_half,
+            core,
+            outliers,
+        }
+    }
+
+    /// The sum for a corner at position `w` whose own face has normal `own`
+    /// (zero: degenerate, takes every face), if its face is in the core.
+    fn sum(&self, w: usize, own: Vec3, faces: &[Vec3], cos_crease: f32) -> Option<Vec3> {
+        let (mean, sum) = self.core[w]?;
+        if own != Vec3::ZERO && mean.dot(own) < self.cos_half {
+            return None;
+        }
+        let extra: Vec3 = self.outliers[w]
+            .iter()
+            .filter(|&&(g, _)| own == Vec3::ZERO || own.dot(faces[g]) >= cos_crease)
+            .map(|&(g, angle)| faces[g] * angle)
+            .sum();
+        Some(sum + extra)
+    }
 }
 
 /// Recomputes all of `scene`'s normals with [`compute_normals`], smoothing

@@ -6,13 +6,28 @@
 //! by line, because `tobj` reports errors without line numbers and panics or
 //! overflows on some malformed input (`Kd 1 2`, face index 0 with texture
 //! coordinates). Only text that passed the check reaches `tobj`, as a
-//! normalised copy (lines trimmed, `l` polylines dropped), so every
-//! error message names the file and, for a bad line, its number.
+//! normalised copy (lines trimmed, inline comments and `l` polylines dropped,
+//! `\` in file names turned into `/`), so every error message names the file
+//! and, for a bad line, its number. Quoted input in messages is cut short.
+//!
+//! What exporters write and vtfarm accepts: CRLF line ends, a byte-order
+//! mark, tabs, trailing spaces after names, inline comments (`Ka 0.1 0.1 0.8
+//! # Blue`: a `#` that starts a word ends the line, except on lines that carry
+//! a name or file name — `o`, `g`, `usemtl`, `newmtl`, `mtllib`, textures —
+//! where `Material #25` is a name), Windows paths (`textures\glass.png`).
+//! Textures are not used: a missing one is an [`ObjWarning`] (logged by
+//! [`load_obj`]), not an error.
+//!
+//! Refused with file and line: non-finite numbers and vertex coordinates
+//! beyond ±[`MAX_COORDINATE`], and faces with more than
+//! [`MAX_FACE_VERTICES`] vertices.
 //!
 //! Each OBJ object or group (`o`/`g`) becomes an [`Object`]; groups that share
-//! a name share the object. Points and lines are ignored; polygons are
-//! triangulated as fans. Faces before any `usemtl` get the material named
-//! "default" (the MTL's, or [`Material::default`]). A model whose faces all
+//! a name share the object. Faces before the first `o`/`g` belong to an
+//! object named after their material (`usemtl`), as other tools do, or
+//! "default". Points and lines are ignored; polygons are triangulated as fans.
+//! Faces before any `usemtl` get the material named "default" (the MTL's, or
+//! [`Material::default`]). A model whose faces all
 //! carry `vn` normals keeps them (normalised); otherwise its normals are
 //! computed per object by [`normals::compute_normals`] with the crease angle
 //! from [`ObjOptions`]. The result is in the vertex layout of
@@ -28,12 +43,21 @@
 //! | `Ks r g b`         | `specular` (default: black)                            |
 //! | `Ns s`             | `shininess` (default: 1)                               |
 //! | `Ke r g b`         | `emission` (default: black)                            |
-//! | `illum 3`, `5`, `7`| `reflectance = Ks` (ray-traced mirror)                 |
 //! | `Kr r g b`         | `reflectance`, overriding `illum` (vtfarm extension)   |
+//! | `illum 3`, `5`     | `reflectance = Ks` (ray-traced mirror)                 |
+//! | `illum 4`, `6`, `7`| `reflectance` = Fresnel at normal incidence from `Ni`: |
+//! |                    | `((Ni - 1) / (Ni + 1))²`, glass (1.5) without `Ni`     |
+//! | other `illum`      | `reflectance` = that Fresnel term when the material    |
+//! |                    | transmits and has `Ni`, otherwise 0                    |
 //! | `d a`              | `transmittance = 1 - a` (clamped to 0..=1)             |
 //! | `Tr t`             | `transmittance = t` when there is no `d`               |
+//! | `Tf r g b`         | filters the transmittance; with `illum 4`/`6`/`7` and  |
+//! |                    | no `d`/`Tr` it is the transmittance                    |
 //! | `Ni n`             | `ior` (default: 1)                                     |
-//! | `map_*`, `bump`, … | only checked to exist; textures are not used           |
+//! | `map_*`, `bump`, … | checked to exist (a warning if not); not used          |
+//!
+//! The Fresnel term is the head-on reflectance; with `[quality] fresnel` the
+//! tracer raises it towards grazing angles (Schlick).
 //!
 //! # Export
 //!
@@ -72,13 +96,29 @@ impl Default for ObjOptions {
     }
 }
 
+/// The largest vertex coordinate magnitude accepted (1e8, in scene units).
+/// Ray/triangle tests multiply up to four coordinate differences; below
+/// this bound those products stay far from `f32::MAX`, and the scene is
+/// still 100,000 km wide in metres.
+pub const MAX_COORDINATE: f32 = 1e8;
+
+/// The most vertices one face may have. Larger polygons are refused rather
+/// than loaded in time that grows with their size squared.
+pub const MAX_FACE_VERTICES: usize = 65_536;
+
+/// How many characters of user input an error message quotes.
+const QUOTE_CHARS: usize = 40;
+
 /// Why an OBJ or MTL file could not be read or written. Every message starts
-/// with the file concerned and, for a bad line, `:line`.
+/// with the file concerned and, for a bad line, `:line`. Messages are
+/// complete in themselves: a variant's `Display` includes the I/O error it
+/// carries, so none is reported as a separate `source` (printing the chain
+/// would repeat it).
 #[derive(Debug, thiserror::Error)]
 pub enum ObjError {
     /// A file could not be read or written.
-    #[error("{}: {source}", .path.display())]
-    Io { path: PathBuf, source: io::Error },
+    #[error("{}: {error}", .path.display())]
+    Io { path: PathBuf, error: io::Error },
     /// A line of an OBJ or MTL file is malformed.
     #[error("{}:{line}: {message}", .path.display())]
     Syntax {
@@ -86,14 +126,14 @@ pub enum ObjError {
         line: usize,
         message: String,
     },
-    /// A file named on a line (`mtllib`, `map_Kd`, …) cannot be read.
-    #[error("{}:{line}: cannot read {what} {}: {source}", .path.display(), .file.display())]
+    /// A file named on a line (`mtllib`) cannot be read.
+    #[error("{}:{line}: cannot read {what} {}: {error}", .path.display(), .file.display())]
     Reference {
         path: PathBuf,
         line: usize,
         what: &'static str,
         file: PathBuf,
-        source: io::Error,
+        error: io::Error,
     },
     /// The file as a whole is unusable (no triangles, a scene that cannot be
     /// written, an error `tobj` found that the line check did not).
@@ -101,15 +141,42 @@ pub enum ObjError {
     Invalid { path: PathBuf, message: String },
 }
 
-/// Loads an OBJ file and the MTL libraries it names into a [`Scene`].
+/// Something in an OBJ or MTL file that vtfarm ignores but a user may want
+/// to fix (a missing texture).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{}:{line}: {message}", .path.display())]
+pub struct ObjWarning {
+    pub path: PathBuf,
+    pub line: usize,
+    pub message: String,
+}
+
+/// A loaded scene and the warnings found on the way.
+#[derive(Clone, Debug)]
+pub struct ImportedObj {
+    pub scene: Scene,
+    pub warnings: Vec<ObjWarning>,
+}
+
+/// Loads an OBJ file and the MTL libraries it names into a [`Scene`],
+/// logging each [`ObjWarning`] with `tracing`.
 ///
 /// See the [module documentation](self) for the mapping. Never panics; any
 /// problem is an [`ObjError`] naming the file and, where there is one, the
 /// line.
 pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<Scene, ObjError> {
-    let bytes = fs::read(path).map_err(|source| ObjError::Io {
+    let imported = import_obj(path, options)?;
+    for warning in &imported.warnings {
+        tracing::warn!("{warning}");
+    }
+    Ok(imported.scene)
+}
+
+/// [`load_obj`], returning the warnings instead of logging them.
+pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjError> {
+    let bytes = fs::read(path).map_err(|error| ObjError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     let text = decode_text(path, bytes)?;
     let checked = check_obj(path, &text)?;
@@ -143,7 +210,10 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<Scene, ObjError> {
         materials = scene.materials.len(),
         "loaded OBJ"
     );
-    Ok(scene)
+    Ok(ImportedObj {
+        scene,
+        warnings: checked.warnings,
+    })
 }
 
 /// Writes `scene` as `dir/name.obj` and `dir/name.mtl`.
@@ -152,8 +222,8 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<Scene, ObjError> {
 /// both is scene vertex `i - 1`), then the triangles in scene order as
 /// `f v//vn`, with an `o` line whenever the object changes and a `usemtl` line
 /// whenever the object or material changes. Objects without triangles are not
-/// written. The MTL has every material with `Ka Kd Ks Ns Ke Ni d` and
-/// `illum 2`, or `illum 3` plus `Kr` for mirrors.
+/// written. The MTL has every material with `Ka Kd Ks Ns Ke Ni d Kr` and
+/// `illum 2`, or `illum 3` for mirrors.
 ///
 /// Fails when the scene does not [validate](Scene::validate), holds
 /// non-finite numbers, or has names that OBJ cannot carry (empty, with
@@ -202,19 +272,21 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
         let _ = writeln!(mtl, "Ke {}", format_vec3(m.emission));
         let _ = writeln!(mtl, "Ni {}", m.ior);
         let _ = writeln!(mtl, "d {}", 1.0 - grey(m.transmittance));
-        if m.reflectance.max_element() > 0.0 {
-            // illum 3 tells other readers "ray-traced mirror"; Kr gives ours
-            // the exact reflectance, which need not equal Ks.
-            let _ = writeln!(mtl, "illum 3\nKr {}", format_vec3(m.reflectance));
+        // illum 3 tells other readers "ray-traced mirror"; Kr gives ours
+        // the exact reflectance (also 0, which `Ni` with `d` < 1 would
+        // otherwise turn into Fresnel reflectance).
+        let illum = if m.reflectance.max_element() > 0.0 {
+            3
         } else {
-            let _ = writeln!(mtl, "illum 2");
-        }
+            2
+        };
+        let _ = writeln!(mtl, "illum {illum}\nKr {}", format_vec3(m.reflectance));
     }
 
     let write = |path: &Path, text: &str| {
-        fs::write(path, text).map_err(|source| ObjError::Io {
+        fs::write(path, text).map_err(|error| ObjError::Io {
             path: path.to_owned(),
-            source,
+            error,
         })
     };
     write(&mtl_path, &mtl)?;
@@ -321,13 +393,68 @@ fn keyword(line: &str) -> (&str, &str) {
     }
 }
 
+/// Whether the rest of a line with this keyword is a name or file name, in
+/// which `#` is an ordinary character (`newmtl Material #25`).
+fn takes_name(keyword: &str) -> bool {
+    matches!(keyword, "o" | "g" | "usemtl" | "newmtl" | "mtllib") || is_texture(keyword)
+}
+
+/// The rest of a line without its inline comment: a `#` at the start of a
+/// word and everything after it.
+fn strip_comment(rest: &str) -> &str {
+    let mut previous = ' ';
+    for (i, c) in rest.char_indices() {
+        if c == '#' && previous.is_whitespace() {
+            return rest[..i].trim_end();
+        }
+        previous = c;
+    }
+    rest
+}
+
+/// Splits a line into its keyword and its rest without inline comment, and
+/// gives the line as tobj should see it (trimmed, comment dropped).
+fn split_line(line: &str) -> (&str, &str, Cow<'_, str>) {
+    let line = line.trim();
+    let (keyword, rest) = keyword(line);
+    if takes_name(keyword) {
+        return (keyword, rest, Cow::Borrowed(line));
+    }
+    let stripped = strip_comment(rest);
+    let clean = if stripped.len() == rest.len() {
+        Cow::Borrowed(line)
+    } else {
+        Cow::Owned(format!("{keyword} {stripped}"))
+    };
+    (keyword, stripped, clean)
+}
+
+/// A file name as written in an OBJ or MTL file, with Windows separators
+/// turned into `/`.
+fn file_name(text: &str) -> Cow<'_, str> {
+    if text.contains('\\') {
+        Cow::Owned(text.replace('\\', "/"))
+    } else {
+        Cow::Borrowed(text)
+    }
+}
+
+/// `text` quoted for a message, cut after [`QUOTE_CHARS`] characters so that
+/// a huge token cannot make a huge message.
+fn quote(text: &str) -> String {
+    match text.char_indices().nth(QUOTE_CHARS) {
+        None => format!("{text:?}"),
+        Some((cut, _)) => format!("{:?}… ({} bytes)", &text[..cut], text.len()),
+    }
+}
+
 /// Parses whitespace-separated finite numbers, as many as `count` allows.
 fn parse_numbers(text: &str, count: RangeInclusive<usize>) -> Result<Vec<f32>, String> {
     let values = text
         .split_whitespace()
         .map(|word| match word.parse::<f32>() {
             Ok(x) if x.is_finite() => Ok(x),
-            _ => Err(format!("{word:?} is not a finite number")),
+            _ => Err(format!("{} is not a finite number", quote(word))),
         })
         .collect::<Result<Vec<_>, _>>()?;
     let (found, start, end) = (values.len(), *count.start(), *count.end());
@@ -357,10 +484,11 @@ type Library = tobj::MTLLoadResult;
 
 /// An OBJ file that passed [`check_obj`].
 struct CheckedObj {
-    /// The normalised text to hand to tobj, line for line.
+    /// The normalised text to hand to tobj.
     text: String,
     /// The libraries by the name on their `mtllib` line.
     libraries: HashMap<String, Library>,
+    warnings: Vec<ObjWarning>,
 }
 
 /// State of the line check: what has been defined so far.
@@ -371,8 +499,15 @@ struct ObjCheck {
     normals: usize,
     /// Whether `v` lines carry colours; tobj needs all or none to.
     coloured: Option<bool>,
+    /// Whether an `o` or `g` line has been seen; until then objects are
+    /// named after their material.
+    grouped: bool,
+    /// Whether the faces so far have an object name (from `o`/`g`, or from
+    /// a `usemtl` before any `o`/`g`).
+    named: bool,
     materials: HashSet<String>,
     libraries: HashMap<String, Library>,
+    warnings: Vec<ObjWarning>,
 }
 
 /// Checks an OBJ file line by line, reading and checking the MTL libraries it
@@ -381,8 +516,7 @@ fn check_obj(path: &Path, text: &str) -> Result<CheckedObj, ObjError> {
     let mut check = ObjCheck::default();
     let mut out = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        let (keyword, rest) = keyword(line);
+        let (keyword, rest, line) = split_line(line);
         let clean = match keyword {
             "mtllib" => check.library(path, i + 1, rest)?,
             _ => check
@@ -395,6 +529,7 @@ fn check_obj(path: &Path, text: &str) -> Result<CheckedObj, ObjError> {
     Ok(CheckedObj {
         text: out,
         libraries: check.libraries,
+        warnings: check.warnings,
     })
 }
 
@@ -404,7 +539,7 @@ impl ObjCheck {
         &mut self,
         keyword: &str,
         rest: &str,
-        line: &'a str,
+        line: Cow<'a, str>,
     ) -> Result<Cow<'a, str>, String> {
         match keyword {
             "v" => self.vertex(rest)?,
@@ -416,35 +551,62 @@ impl ObjCheck {
                 parse_numbers(rest, 3..=3).map_err(|e| format!("vn: {e}"))?;
                 self.normals += 1;
             }
-            "f" => self.face(rest)?,
+            "f" => {
+                self.face(rest)?;
+                if !self.named {
+                    // Faces before any `o`, `g` or `usemtl`: their material
+                    // is "default", and so is their object's name.
+                    self.named = true;
+                    return Ok(Cow::Owned(format!(
+                        "o {}\n{line}",
+                        Material::default().name
+                    )));
+                }
+            }
             // tobj would turn a 3-vertex polyline into a triangle.
             "l" => return Ok(Cow::Borrowed("")),
             "usemtl" if rest.is_empty() => return Err("usemtl without a material name".into()),
             "usemtl" if !self.materials.contains(rest) => {
                 return Err(format!(
-                    "usemtl names material {rest:?}, which no mtllib defines"
+                    "usemtl names material {}, which no mtllib defines",
+                    quote(rest)
                 ));
             }
+            "usemtl" if !self.grouped => {
+                // No `o`/`g` yet: the object takes the material's name.
+                self.named = true;
+                return Ok(Cow::Owned(format!("o {rest}\nusemtl {rest}")));
+            }
             // tobj splits these at the first space only.
-            "usemtl" | "o" | "g" => return Ok(Cow::Owned(format!("{keyword} {rest}"))),
+            "usemtl" | "o" | "g" => {
+                if keyword != "usemtl" {
+                    self.grouped = true;
+                    self.named = true;
+                }
+                return Ok(Cow::Owned(format!("{keyword} {rest}")));
+            }
             _ => {}
         }
-        Ok(Cow::Borrowed(line))
+        Ok(line)
     }
 
     fn vertex(&mut self, rest: &str) -> Result<(), String> {
         let values = parse_numbers(rest, 3..=6).map_err(|e| format!("v: {e}"))?;
-        let coloured = match values[..] {
-            [_, _, _] => false,
-            [x, y, z, w] => {
-                if !(Vec3::new(x, y, z) / w).is_finite() {
-                    return Err(format!("v: cannot divide by w = {w}"));
-                }
-                false
-            }
-            [_, _, _, _, _, _] => true,
+        let (position, coloured) = match values[..] {
+            [x, y, z] => (Vec3::new(x, y, z), false),
+            [x, y, z, w] => (Vec3::new(x, y, z) / w, false),
+            [x, y, z, _, _, _] => (Vec3::new(x, y, z), true),
             _ => return Err("v: expected x y z, x y z w or x y z r g b".into()),
         };
+        if !position.is_finite() {
+            return Err(format!("v: cannot divide by w = {}", values[3]));
+        }
+        if position.abs().max_element() > MAX_COORDINATE {
+            return Err(format!(
+                "v: coordinate {} is beyond ±{MAX_COORDINATE:e}, the largest vtfarm traces precisely",
+                position.abs().max_element()
+            ));
+        }
         if *self.coloured.get_or_insert(coloured) != coloured {
             return Err("v: vertex colours must be given for all vertices or none".into());
         }
@@ -466,13 +628,18 @@ impl ObjCheck {
                     // Only the vertex index is required (`v//vn`, `v/vt`).
                     Some("") | None if k > 0 => {}
                     part => face_index(part.unwrap_or_default(), kind, defined)
-                        .map_err(|e| format!("f: {vertex:?}: {e}"))?,
+                        .map_err(|e| format!("f: {}: {e}", quote(vertex)))?,
                 }
             }
             if parts.next().is_some() {
-                return Err(format!("f: {vertex:?} has more than v/vt/vn"));
+                return Err(format!("f: {} has more than v/vt/vn", quote(vertex)));
             }
             count += 1;
+            if count > MAX_FACE_VERTICES {
+                return Err(format!(
+                    "f: a face with more than {MAX_FACE_VERTICES} vertices; split it into smaller polygons"
+                ));
+            }
         }
         if count < 3 {
             return Err(format!(
@@ -492,26 +659,27 @@ impl ObjCheck {
         if name.is_empty() {
             return Err(syntax(obj, line, "mtllib without a file name"));
         }
-        if self.libraries.contains_key(name) {
+        let name = file_name(name);
+        if self.libraries.contains_key(name.as_ref()) {
             // A second mtllib of the same file would duplicate its materials.
             return Ok(Cow::Borrowed(""));
         }
-        let file = obj.parent().unwrap_or(Path::new("")).join(name);
-        let bytes = fs::read(&file).map_err(|source| ObjError::Reference {
+        let file = obj.parent().unwrap_or(Path::new("")).join(name.as_ref());
+        let bytes = fs::read(&file).map_err(|error| ObjError::Reference {
             path: obj.to_owned(),
             line,
             what: "material library",
             file: file.clone(),
-            source,
+            error,
         })?;
         let text = decode_text(&file, bytes)?;
-        check_mtl(&file, &text)?;
-        let (materials, names) = tobj::load_mtl_buf(&mut text.as_bytes())
+        let clean = check_mtl(&file, &text, &mut self.warnings)?;
+        let (materials, names) = tobj::load_mtl_buf(&mut clean.as_bytes())
             .map_err(|e| invalid(&file, format!("tobj: {e}")))?;
         self.materials
             .extend(materials.iter().map(|m| m.name.clone()));
         self.libraries
-            .insert(name.to_owned(), Ok((materials, names)));
+            .insert(name.clone().into_owned(), Ok((materials, names)));
         Ok(Cow::Owned(format!("mtllib {name}")))
     }
 }
@@ -521,7 +689,7 @@ impl ObjCheck {
 fn face_index(text: &str, kind: &str, defined: usize) -> Result<(), String> {
     let index: isize = text
         .parse()
-        .map_err(|_| format!("{kind} index {text:?} is not an integer"))?;
+        .map_err(|_| format!("{kind} index {} is not an integer", quote(text)))?;
     if index == 0 {
         return Err(format!("{kind} index 0 (OBJ indices start at 1)"));
     }
@@ -539,52 +707,62 @@ fn is_texture(keyword: &str) -> bool {
 }
 
 /// Checks an MTL file line by line: numbers where tobj expects them (it panics
-/// on `Kd` with fewer than three), names, and that textures exist.
-fn check_mtl(path: &Path, text: &str) -> Result<(), ObjError> {
+/// on `Kd` with fewer than three) and names; a texture that does not exist is
+/// a warning. Returns the normalised text to hand to tobj.
+fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<String, ObjError> {
+    let mut out = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
-        let (keyword, rest) = keyword(line.trim());
+        let (keyword, rest, clean) = split_line(line);
         let checked = match keyword {
             "newmtl" if rest.is_empty() => Err("no material name".to_owned()),
-            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop),
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" | "Tf" => parse_vec3(rest).map(drop),
             "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop),
             "illum" => rest
                 .parse::<u8>()
                 .map(drop)
-                .map_err(|_| format!("{rest:?} is not a model number")),
+                .map_err(|_| format!("{} is not a model number", quote(rest))),
             _ if is_texture(keyword) && rest.is_empty() => Err("no texture file name".to_owned()),
             _ if is_texture(keyword) => {
-                check_texture(path, i + 1, rest)?;
-                Ok(())
+                let name = file_name(rest);
+                warnings.extend(check_texture(path, i + 1, &name));
+                out.push_str(&format!("{keyword} {name}\n"));
+                continue;
             }
             _ => Ok(()),
         };
         checked.map_err(|m| syntax(path, i + 1, format!("{keyword}: {m}")))?;
+        // tobj takes everything after `newmtl` as the name, untrimmed.
+        match keyword {
+            "newmtl" => out.push_str(&format!("newmtl {rest}")),
+            _ => out.push_str(&clean),
+        }
+        out.push('\n');
     }
-    Ok(())
+    Ok(out)
 }
 
-/// Checks that a texture named by an MTL line exists. The file name is the
-/// whole argument, or its last word when options (`-s 1 1 1`) come first.
-fn check_texture(mtl: &Path, line: usize, rest: &str) -> Result<(), ObjError> {
+/// A warning when the texture named on an MTL line does not exist. The file
+/// name is the whole argument, or its last word when options (`-s 1 1 1`)
+/// come first.
+fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
     let name = if rest.starts_with('-') {
         rest.split_whitespace().last().unwrap_or(rest)
     } else {
         rest
     };
     let file = mtl.parent().unwrap_or(Path::new("")).join(name);
-    let found = fs::metadata(&file).and_then(|m| {
-        if m.is_file() {
-            Ok(())
-        } else {
-            Err(io::Error::new(io::ErrorKind::InvalidInput, "not a file"))
-        }
-    });
-    found.map_err(|source| ObjError::Reference {
+    let problem = match fs::metadata(&file) {
+        Ok(m) if m.is_file() => return None,
+        Ok(_) => "not a file".to_owned(),
+        Err(e) => e.to_string(),
+    };
+    Some(ObjWarning {
         path: mtl.to_owned(),
         line,
-        what: "texture",
-        file,
-        source,
+        message: format!(
+            "texture {} ignored ({problem}); vtfarm does not use textures",
+            file.display()
+        ),
     })
 }
 
@@ -624,7 +802,10 @@ fn build_scene(
         if mesh.indices.iter().any(|&v| v as usize >= positions.len()) {
             return Err(invalid(
                 path,
-                format!("tobj: model {:?} indexes a missing vertex", model.name),
+                format!(
+                    "tobj: model {} indexes a missing vertex",
+                    quote(&model.name)
+                ),
             ));
         }
         let object = object_id(&mut scene, &model.name);
@@ -685,6 +866,19 @@ fn default_material(scene: &mut Scene) -> MaterialId {
     })
 }
 
+/// The index of refraction assumed for a glass `illum` model without `Ni`.
+const GLASS_IOR: f32 = 1.5;
+
+/// The Fresnel reflectance at normal incidence of a dielectric with index of
+/// refraction `ior` in air: `((ior - 1) / (ior + 1))²` (0.04 for glass).
+fn fresnel_reflectance(ior: f32) -> f32 {
+    if ior.is_finite() && ior > 0.0 {
+        ((ior - 1.0) / (ior + 1.0)).powi(2)
+    } else {
+        0.0
+    }
+}
+
 /// Maps one tobj material; see the module documentation for the table.
 fn convert_material(m: &tobj::Material) -> Result<Material, String> {
     // Keys tobj does not know end up as text in `unknown_param`; the MTL check
@@ -695,7 +889,7 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         parse: fn(&str) -> Result<T, String>,
     ) -> Result<Option<T>, String> {
         let parsed = m.unknown_param.get(key).map(|text| parse(text)).transpose();
-        parsed.map_err(|e| format!("material {:?}: {key}: {e}", m.name))
+        parsed.map_err(|e| format!("material {}: {key}: {e}", quote(&m.name)))
     }
     let base = Material::default();
     let diffuse = m.diffuse.map_or(base.diffuse, Vec3::from);
@@ -705,15 +899,30 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         Some(ke) => Vec3::from(ke),
         None => extension(m, "Ke", parse_vec3)?.unwrap_or(Vec3::ZERO),
     };
+    // Glass models: transparency with ray-traced reflection.
+    let glass = matches!(m.illumination_model, Some(4 | 6 | 7));
+    let amount = match (m.dissolve, extension(m, "Tr", parse_number)?) {
+        (Some(d), _) => Some(1.0 - d),
+        (None, tr) => tr,
+    };
+    let transmittance = match (amount, extension(m, "Tf", parse_vec3)?) {
+        (Some(amount), Some(filter)) => filter * amount,
+        (Some(amount), None) => Vec3::splat(amount),
+        (None, Some(filter)) if glass => filter,
+        (None, _) => Vec3::ZERO,
+    }
+    .clamp(Vec3::ZERO, Vec3::ONE);
+    let transmits = transmittance.max_element() > 0.0;
     let reflectance = match (extension(m, "Kr", parse_vec3)?, m.illumination_model) {
         (Some(kr), _) => kr,
-        (None, Some(3 | 5 | 7)) => specular,
-        (None, _) => Vec3::ZERO,
-    };
-    let transmittance = match (m.dissolve, extension(m, "Tr", parse_number)?) {
-        (Some(d), _) => 1.0 - d,
-        (None, Some(tr)) => tr,
-        (None, None) => 0.0,
+        (None, Some(3 | 5)) => specular,
+        (None, _) if glass => {
+            Vec3::splat(fresnel_reflectance(m.optical_density.unwrap_or(GLASS_IOR)))
+        }
+        (None, _) => match m.optical_density {
+            Some(ior) if transmits => Vec3::splat(fresnel_reflectance(ior)),
+            _ => Vec3::ZERO,
+        },
     };
     Ok(Material {
         name: m.name.clone(),
@@ -723,7 +932,7 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         shininess: m.shininess.unwrap_or(base.shininess),
         emission,
         reflectance,
-        transmittance: Vec3::splat(transmittance.clamp(0.0, 1.0)),
+        transmittance,
         ior: m.optical_density.unwrap_or(base.ior),
     })
 }

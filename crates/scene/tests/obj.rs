@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use proptest::prelude::*;
 use tempfile::TempDir;
-use vtfarm_scene::obj::{ObjError, ObjOptions, load_obj, write_obj};
+use vtfarm_scene::obj::{
+    MAX_FACE_VERTICES, ObjError, ObjOptions, ObjWarning, import_obj, load_obj, write_obj,
+};
 use vtfarm_scene::{Material, Object, Scene, Triangle};
 
 fn data(name: &str) -> PathBuf {
@@ -130,12 +132,18 @@ fn a_room_maps_objects_materials_and_normals() {
     let glass = material("glass");
     assert_eq!(
         (glass.transmittance, glass.ior, glass.reflectance),
-        (Vec3::splat(0.9), 1.5, Vec3::ONE)
+        // illum 7: Fresnel at normal incidence from Ni, ((1.5 - 1) / (1.5 + 1))².
+        (Vec3::splat(0.9), 1.5, Vec3::splat(0.2f32 * 0.2))
     );
     let frosted = material("frosted");
     assert_eq!(
         (frosted.transmittance, frosted.ior, frosted.reflectance),
-        (Vec3::splat(0.75), 1.3, Vec3::ZERO)
+        // A dielectric (Tr with Ni): Fresnel at normal incidence.
+        (
+            Vec3::splat(0.75),
+            1.3,
+            Vec3::splat(((1.3f32 - 1.0) / (1.3 + 1.0)).powi(2))
+        )
     );
     assert!(!material("lamp").is_specular() && frosted.is_specular());
 
@@ -307,7 +315,10 @@ fn written_files_follow_the_obj_conventions_other_loaders_expect() {
     }
     // Mirrors say `illum 3` and carry Kr; the rest `illum 2`.
     assert_eq!(lines(&mtl, "illum"), ["2", "3", "3", "2"]);
-    assert_eq!(lines(&mtl, "Kr"), ["0.9 0.85 0.8", "0.1 0.1 0.1"]);
+    assert_eq!(
+        lines(&mtl, "Kr"),
+        ["0 0 0", "0.9 0.85 0.8", "0.1 0.1 0.1", "0 0 0"]
+    );
 
     // tobj on its own, with separate position and normal indices, sees the
     // same geometry.
@@ -400,8 +411,14 @@ const BAD: &[(&str, &str, &str, usize, &str)] = &[
     ("mtllib lib.mtl\n", "newmtl a\nTr 0.1 0.2\n", "lib.mtl", 2, "Tr: expected a number, found 2"),
     ("mtllib lib.mtl\n", "newmtl a\nillum 300\n", "lib.mtl", 2, "illum: \"300\" is not a model number"),
     ("mtllib lib.mtl\n", "newmtl a\nmap_Kd\n", "lib.mtl", 2, "map_Kd: no texture file name"),
-    ("mtllib lib.mtl\n", "newmtl a\n\nmap_Kd gone.png\n", "lib.mtl", 3, "cannot read texture"),
-    ("mtllib lib.mtl\n", "newmtl a\nbump -bm 2 gone.png\n", "lib.mtl", 2, "cannot read texture"),
+    ("mtllib lib.mtl\n", "newmtl a\nKd 1 1 # grey\n", "lib.mtl", 2, "Kd: expected 3 numbers, found 2"),
+    ("mtllib lib.mtl\n", "newmtl a\nTf 1 1\n", "lib.mtl", 2, "Tf: expected 3 numbers, found 2"),
+    ("v 0 0 1e22\n", "", "bad.obj", 1, "coordinate 10000000000000000000000 is beyond ±1e8"),
+    ("v 0 0 0\nv -2e8 0 0\n", "", "bad.obj", 2, "coordinate 200000000 is beyond ±1e8"),
+    ("v 0 0 0\nv 1 1 1 1e-30\n", "", "bad.obj", 2, "coordinate 1000000000000000000000000000000 is beyond"),
+    ("v 0 0 1e39\n", "", "bad.obj", 1, "\"1e39\" is not a finite number"),
+    ("v 0 0 -inf\n", "", "bad.obj", 1, "\"-inf\" is not a finite number"),
+    ("v 0 0 0 # a comment\nv 1 0 0 # another\nv 0 1 0\nf 1 2 3 # 4\nf 1 2 x # y\n", "", "bad.obj", 5, "\"x\" is not an integer"),
 ];
 
 #[test]
@@ -428,17 +445,6 @@ fn missing_files_are_named_with_the_line_that_refers_to_them() {
         "{error:?}"
     );
     assert!(error.to_string().contains("nowhere.mtl"));
-
-    let (dir, result) = load_files(&[
-        ("a.obj", b"mtllib a.mtl\n"),
-        ("a.mtl", b"newmtl a\nmap_Kd tex/wood.ppm\n"),
-    ]);
-    let error = result.unwrap_err();
-    assert!(
-        matches!(&error, ObjError::Reference { line: 2, what: "texture", file, .. }
-        if *file == dir.path().join("tex/wood.ppm")),
-        "{error:?}"
-    );
 
     let missing = data("no such file.obj");
     let error = load(&missing).unwrap_err();
@@ -506,6 +512,198 @@ fn tolerant_of_common_variations() {
     let coloured = "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n";
     let (_dir, result) = load_files(&[("c.obj", coloured.as_bytes())]);
     assert_eq!(result.unwrap().triangles.len(), 1);
+}
+
+/// Writes `files` into a fresh directory (creating subdirectories) and
+/// imports the first, keeping the warnings.
+fn import_files(files: &[(&str, &[u8])]) -> (TempDir, Result<(Scene, Vec<ObjWarning>), ObjError>) {
+    let dir = TempDir::new().unwrap();
+    for (name, contents) in files {
+        let path = dir.path().join(name);
+        fs::create_dir_all(path.parent().unwrap()).unwrap();
+        fs::write(path, contents).unwrap();
+    }
+    let result = import_obj(&dir.path().join(files[0].0), &ObjOptions::default())
+        .map(|imported| (imported.scene, imported.warnings));
+    (dir, result)
+}
+
+const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+#[test]
+fn what_exporters_write_loads() {
+    // Inline comments after numbers, CRLF, trailing spaces after names, a
+    // name with `#` in it, a Windows texture path that exists and one that
+    // does not.
+    let obj = "mtllib scene.mtl \r\nv 0 0 0 # origin\r\nv 1 0 0\r\nv 0 1 0\t# up\r\n\
+               o car # body\r\nusemtl Material #25  \r\nf 1 2 3 # one face\r\n";
+    let mtl = "newmtl Material #25  \r\nKa 0.1 0.1 0.8 # Blue\r\nKd 0.5 0.5 0.5 #grey\r\n\
+               Ns 10 # shiny\r\nillum 2 # highlight\r\nmap_Kd textures\\wood.ppm\r\n\
+               map_Ks textures\\glass_baseColor.png\r\n";
+    let (dir, result) = import_files(&[
+        ("scene.obj", obj.as_bytes()),
+        ("scene.mtl", mtl.as_bytes()),
+        ("textures/wood.ppm", b"P3 1 1 1 1 1 1\n"),
+    ]);
+    let (scene, warnings) = result.unwrap();
+    // `#` that starts a word ends an `o` line too? No: names keep it.
+    assert_eq!(scene.objects[0].name, "car # body");
+    assert_eq!(scene.materials[0].name, "Material #25");
+    assert_eq!(scene.material_of(0).ambient, Vec3::new(0.1, 0.1, 0.8));
+    assert_eq!(scene.material_of(0).shininess, 10.0);
+    assert_eq!(
+        warnings,
+        [ObjWarning {
+            path: dir.path().join("scene.mtl"),
+            line: 7,
+            message: format!(
+                "texture {} ignored (No such file or directory (os error 2)); \
+                 vtfarm does not use textures",
+                dir.path().join("textures/glass_baseColor.png").display()
+            ),
+        }]
+    );
+    assert!(warnings[0].to_string().starts_with(&format!(
+        "{}:7: texture",
+        dir.path().join("scene.mtl").display()
+    )));
+}
+
+#[test]
+fn objects_without_groups_are_named_by_their_material() {
+    let obj = format!(
+        "mtllib m.mtl\n{TRIANGLE_OBJ}f 1 2 3\nusemtl glass\nf 1 2 3\nusemtl paint\nf 1 3 2\n\
+         usemtl glass\nf 2 1 3\ng body\nusemtl paint\nf 3 2 1\n"
+    );
+    let mtl = "newmtl glass\nd 0.5\nnewmtl paint\nKd 1 0 0\n";
+    let (_dir, result) = load_files(&[("m.obj", obj.as_bytes()), ("m.mtl", mtl.as_bytes())]);
+    let scene = result.unwrap();
+    let names: Vec<&str> = scene
+        .triangles
+        .iter()
+        .map(|t| scene.objects[t.object as usize].name.as_str())
+        .collect();
+    assert_eq!(names, ["default", "glass", "paint", "glass", "body"]);
+}
+
+#[test]
+fn errors_quote_huge_input_cut_short() {
+    let huge = "9".repeat(10_000_000);
+    for (obj, mtl) in [
+        (format!("v 0 0 {huge}\n"), String::new()),
+        (format!("v 0 0 0\nusemtl {huge}\n"), String::new()),
+        (format!("{TRIANGLE_OBJ}f 1 2 {huge}\n"), String::new()),
+        (
+            "mtllib m.mtl\n".to_owned(),
+            format!("newmtl a\nNs 1{huge}x\n"),
+        ),
+    ] {
+        let (_dir, result) = load_files(&[("big.obj", obj.as_bytes()), ("m.mtl", mtl.as_bytes())]);
+        let error = result.unwrap_err().to_string();
+        assert!(
+            error.len() < 300,
+            "{} bytes: {}",
+            error.len(),
+            &error[..300]
+        );
+        assert!(error.contains("99999\"… (10000"), "{error}");
+    }
+}
+
+#[test]
+fn huge_polygons_load_and_oversized_ones_are_refused() {
+    let polygon = |n: usize| {
+        let mut obj = String::new();
+        for i in 0..n {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            obj.push_str(&format!("v {} 0 {}\n", a.cos(), -a.sin()));
+        }
+        obj.push('f');
+        for i in 1..=n {
+            obj.push_str(&format!(" {i}"));
+        }
+        obj + "\n"
+    };
+    // 40,000 vertices loaded in 5.3 s before the normals were computed in
+    // linear time (0.14 s after; see `examples/polygon_load.rs`).
+    let (_dir, result) = load_files(&[("disc.obj", polygon(40_000).as_bytes())]);
+    let scene = result.unwrap();
+    assert_eq!(scene.triangles.len(), 39_998);
+    assert!(
+        scene.normals.iter().all(|n| n.y > 0.999),
+        "the disc is flat"
+    );
+
+    let n = MAX_FACE_VERTICES + 1;
+    let (dir, result) = load_files(&[("disc.obj", polygon(n).as_bytes())]);
+    assert_eq!(
+        result.unwrap_err().to_string(),
+        format!(
+            "{}:{}: f: a face with more than {MAX_FACE_VERTICES} vertices; \
+             split it into smaller polygons",
+            dir.path().join("disc.obj").display(),
+            n + 1
+        )
+    );
+}
+
+/// The reflectance and transmittance a one-material MTL gives.
+fn optics(mtl: &str) -> (Vec3, Vec3) {
+    let obj = format!("mtllib m.mtl\n{TRIANGLE_OBJ}usemtl m\nf 1 2 3\n");
+    let mtl = format!("newmtl m\nKs 0.5 0.5 0.5\n{mtl}");
+    let (_dir, result) = load_files(&[("m.obj", obj.as_bytes()), ("m.mtl", mtl.as_bytes())]);
+    let m = result.unwrap().material_of(0).clone();
+    (m.reflectance, m.transmittance)
+}
+
+#[test]
+fn glass_and_dielectrics_reflect_by_fresnel() {
+    let glass = Vec3::splat(0.2f32 * 0.2); // ((1.5 - 1) / (1.5 + 1))²
+    let water = Vec3::splat((0.33f32 / 2.33).powi(2));
+    for (mtl, expected) in [
+        // Mirrors: Ks.
+        ("illum 3\n", (Vec3::splat(0.5), Vec3::ZERO)),
+        ("illum 5\n", (Vec3::splat(0.5), Vec3::ZERO)),
+        // Glass models: Fresnel from Ni, or glass without Ni.
+        ("illum 4\nNi 1.5\nd 0.2\n", (glass, Vec3::splat(0.8))),
+        ("illum 6\nd 0.5\n", (glass, Vec3::splat(0.5))),
+        (
+            "illum 7\nNi 1.33\nTf 0.6 0.7 0.9\n",
+            (water, Vec3::new(0.6, 0.7, 0.9)),
+        ),
+        (
+            "illum 7\nNi 1.33\nTf 1 1 1\nd 0.5\n",
+            (water, Vec3::splat(0.5)),
+        ),
+        // A dielectric with any illum: d < 1 (or Tr) and Ni.
+        ("illum 2\nNi 1.5\nd 0.3\n", (glass, Vec3::splat(0.7))),
+        ("Ni 1.5\nTr 0.6\n", (glass, Vec3::splat(0.6))),
+        // Not dielectric: opaque (Tf alone is a filter), or no Ni.
+        ("illum 2\nNi 1.5\nTf 1 1 1\n", (Vec3::ZERO, Vec3::ZERO)),
+        ("illum 2\nd 0.3\n", (Vec3::ZERO, Vec3::splat(0.7))),
+        // Kr wins over everything.
+        (
+            "illum 7\nNi 1.5\nd 0.2\nKr 0.1 0.2 0.3\n",
+            (Vec3::new(0.1, 0.2, 0.3), Vec3::splat(0.8)),
+        ),
+    ] {
+        let (kr, kt) = optics(mtl);
+        assert!(
+            (kr - expected.0).abs().max_element() < 1e-6
+                && (kt - expected.1).abs().max_element() < 1e-6,
+            "{mtl:?}: kr {kr}, kt {kt}, expected {expected:?}"
+        );
+    }
+}
+
+#[test]
+fn io_errors_are_printed_once() {
+    // The I/O error is part of the message and not also a `source`, so
+    // printing the error chain does not repeat it.
+    let (_dir, result) = load_files(&[("a.obj", b"mtllib gone.mtl\n")]);
+    let error = result.unwrap_err();
+    assert!(std::error::Error::source(&error).is_none(), "{error:?}");
+    assert_eq!(error.to_string().matches("No such file").count(), 1);
 }
 
 #[test]
