@@ -61,13 +61,15 @@ pub enum JobError {
         message: String,
     },
     /// The OBJ scene named by the job failed to load.
-    // The importer's message already names the OBJ file and line.
-    #[error("{file}: cannot load the OBJ scene: {source}")]
+    // The importer's message already names the OBJ file and line. It is part
+    // of this message and deliberately not a `source`: printing the error
+    // chain would repeat it.
+    #[error("{file}: cannot load the OBJ scene: {error}")]
     Obj {
         file: PathBuf,
         obj: PathBuf,
         // Boxed: the importer's error is large and this path is cold.
-        source: Box<ObjError>,
+        error: Box<ObjError>,
     },
     /// A `[reflectors]` name matches no triangle of the scene.
     #[error(

@@ -237,10 +237,10 @@ impl Job {
         match &self.scene {
             SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
             SceneSource::Obj(path) => {
-                load_obj(path, &ObjOptions::default()).map_err(|source| JobError::Obj {
+                load_obj(path, &ObjOptions::default()).map_err(|error| JobError::Obj {
                     file: self.file.clone(),
                     obj: path.clone(),
-                    source: Box::new(source),
+                    error: Box::new(error),
                 })
             }
         }
@@ -293,10 +293,14 @@ impl Job {
             }
         }
         // Walking the triangles in order keeps the ids sorted and unique.
-        Ok((0..)
+        let triangles: Vec<TriangleId> = (0..)
             .zip(chosen)
             .filter_map(|(id, chosen)| chosen.then_some(id))
-            .collect())
+            .collect();
+        for dull in dull_reflectors(scene, &triangles) {
+            tracing::warn!("{}: {dull}", self.file.display());
+        }
+        Ok(triangles)
     }
 
     /// An error about the job as a whole (no line to point at).
@@ -307,6 +311,46 @@ impl Job {
             message,
         }
     }
+}
+
+/// A reflector whose material reflects nothing: its reflection is black
+/// and its reflected-object map empty. The message names the fix.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DullReflector {
+    pub object: String,
+    pub material: String,
+}
+
+impl fmt::Display for DullReflector {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "reflector object {:?} has material {:?}, which has no reflectance: its reflection \
+             is black; give the material `Kr r g b` in the MTL (or `illum 3` with `Ks`, or `Ni` \
+             for glass)",
+            self.object, self.material
+        )
+    }
+}
+
+/// The distinct (object, material) pairs among `triangles` whose material
+/// has no reflectance, in triangle order.
+pub fn dull_reflectors(scene: &Scene, triangles: &[TriangleId]) -> Vec<DullReflector> {
+    let mut seen = std::collections::BTreeSet::new();
+    let mut dull = Vec::new();
+    for &t in triangles {
+        let triangle = &scene.triangles[t as usize];
+        let material = &scene.materials[triangle.material as usize];
+        if material.reflectance.max_element() <= 0.0
+            && seen.insert((triangle.object, triangle.material))
+        {
+            dull.push(DullReflector {
+                object: scene.objects[triangle.object as usize].name.clone(),
+                material: material.name.clone(),
+            });
+        }
+    }
+    dull
 }
 
 /// The message for an OBJ scene's camera lacking `missing` keys.

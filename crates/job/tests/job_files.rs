@@ -686,7 +686,8 @@ fn a_broken_obj_file_is_reported_with_the_job_file() {
     std::fs::write(&job_path, OBJ_JOB).unwrap();
     let job = load_job(&job_path).unwrap();
     std::fs::write(dir.path().join("models/cab.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
-    let message = job.load_scene().unwrap_err().to_string();
+    let error = job.load_scene().unwrap_err();
+    let message = error.to_string();
     assert!(
         message.starts_with(&format!(
             "{}: cannot load the OBJ scene: ",
@@ -695,6 +696,9 @@ fn a_broken_obj_file_is_reported_with_the_job_file() {
         "{message}"
     );
     assert!(message.contains("cab.obj"), "{message}");
+    // The OBJ message is part of this one, not also a source that printing
+    // the chain would repeat.
+    assert!(std::error::Error::source(&error).is_none());
 }
 
 #[test]
@@ -737,4 +741,46 @@ fn cover_glass_designs_are_chosen_by_name() {
         4,
         &["scene.glass_radius"],
     );
+}
+
+#[test]
+fn reflectors_without_reflectance_are_named_with_their_fix() {
+    use vtfarm_job::{DullReflector, dull_reflectors};
+    let mirror = Material {
+        reflectance: Vec3::splat(0.5),
+        ..Material::diffuse("mirror", Vec3::ONE)
+    };
+    let triangle = |object, material| Triangle {
+        vertices: [0, 1, 2],
+        object,
+        material,
+    };
+    let scene = Scene {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        normals: vec![Vec3::Z; 3],
+        triangles: vec![
+            triangle(0, 0),
+            triangle(0, 1),
+            triangle(1, 1),
+            triangle(0, 0),
+        ],
+        objects: vec![Object { name: "car".into() }, Object { name: "bus".into() }],
+        materials: vec![Material::diffuse("glass", Vec3::ONE), mirror],
+    };
+    let dull = dull_reflectors(&scene, &[0, 1, 2, 3]);
+    assert_eq!(
+        dull,
+        [DullReflector {
+            object: "car".into(),
+            material: "glass".into()
+        }]
+    );
+    let message = dull[0].to_string();
+    assert!(
+        message.contains("\"car\"")
+            && message.contains("\"glass\"")
+            && message.contains("`Kr r g b`"),
+        "{message}"
+    );
+    assert!(dull_reflectors(&scene, &[1, 2]).is_empty());
 }
