@@ -60,7 +60,7 @@ fn first_visible(
                 object,
             });
         }
-        ray.origin = point.position + direction * bvh.epsilon();
+        ray = bvh.spawn_ray(point.position, point.triangle, direction);
     }
     None
 }

@@ -101,7 +101,7 @@ fn bend(level: &Level<'_>, point: &SurfacePoint, incoming: Vec3, ior: f32) -> Op
         ior
     };
     let direction = refract(incoming, facing, eta)?;
-    Some(bvh.spawn_ray(point.position, geometric, direction))
+    Some(bvh.spawn_ray(point.position, point.triangle, direction))
 }
 
 fn closest_point(level: &Level<'_>, ray: &Ray) -> Option<Vec3> {

@@ -70,8 +70,6 @@ pub(crate) struct FrustumInput<'a> {
     pub(crate) hits: &'a [Option<Vec3>],
     /// The scene's bounding box, for the far plane.
     pub(crate) bounds: (Vec3, Vec3),
-    /// A length well below any modelled detail (the BVH's epsilon).
-    pub(crate) epsilon: f32,
     /// The map's longer side in texels.
     pub(crate) resolution: u32,
 }
@@ -99,7 +97,8 @@ pub(crate) fn fit_frustum(input: &FrustumInput<'_>) -> MapView {
         .map(|l| (l.origin - eye).dot(mean))
         .fold(f32::NEG_INFINITY, f32::max);
     let scale = (input.bounds.1 - input.bounds.0).max_element().max(1e-3);
-    let margin = (input.epsilon * 10.0).max(scale * 1e-5);
+    // A near-plane clearance, not a ray offset: a small fraction of the scene.
+    let margin = scale * 1e-4;
     let in_front = reflector_depth > margin;
     let near = if in_front {
         reflector_depth + margin
@@ -291,7 +290,6 @@ mod tests {
             lines: &lines,
             hits: &hit_points,
             bounds: (Vec3::splat(-5.0), Vec3::splat(5.0)),
-            epsilon: 1e-5,
             resolution: 64,
         });
         assert!(view.near > 1.0, "the near plane lies past the reflector");

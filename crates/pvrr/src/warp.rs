@@ -81,7 +81,6 @@ impl<'a> Warp<'a> {
             lines: &lines,
             hits: &hits,
             bounds: scene.bounds(),
-            epsilon: bvh.epsilon(),
             resolution: level.context.config.map_resolution,
         });
         let texel_level = level.deeper(kind.bounces());

@@ -130,34 +130,76 @@ impl PrimTriangle {
     /// Two-sided ray/triangle test; returns (t, u, v) with u, v the weights of
     /// vertices 1 and 2.
     ///
-    /// A Möller–Trumbore variant: the barycentric numerators are the edge
-    /// functions `d . (a x b)` of the origin-relative vertices. An edge shared
-    /// by two triangles is evaluated from the same two floats in both, so its
-    /// edge function is exactly negated between them (IEEE products commute,
-    /// `x - y == -(y - x)`): a ray through the edge is inside at least one of
-    /// them, and no ray leaks through a crack between triangles that share
-    /// vertices. Edges are inclusive.
+    /// The watertight test of Woop, Benthin and Wald (JCGT 2013): the
+    /// vertices are moved into the ray's frame (origin at 0, direction along
+    /// +z after a shear), where the barycentric numerators are 2D edge
+    /// functions of those vertices. A vertex shared by several triangles has
+    /// the same sheared coordinates in each, so the edge functions are exact
+    /// orientation tests of the same points (recomputed in f64 when f32
+    /// rounds one to zero): a ray through a shared edge or vertex is inside
+    /// at least one of the triangles around it, and nothing leaks through.
+    /// Edges are inclusive.
     #[inline(always)]
-    fn intersect(&self, origin: Vec3A, direction: Vec3A) -> Option<(f32, f32, f32)> {
-        let n_dot_d = self.n.dot(direction);
-        if n_dot_d == 0.0 {
-            return None; // degenerate, or the ray lies in the plane
+    fn intersect(&self, ray: &ShearedRay) -> Option<(f32, f32, f32)> {
+        if self.n == Vec3A::ZERO {
+            return None; // too degenerate to hit reliably
         }
-        let a = self.v0 - origin;
-        let b = self.v1 - origin;
-        let c = self.v2 - origin;
-        let w0 = direction.dot(b.cross(c));
-        let w1 = direction.dot(c.cross(a));
-        let w2 = direction.dot(a.cross(b));
+        let [kx, ky, kz] = ray.axes;
+        let a = self.v0 - ray.origin;
+        let b = self.v1 - ray.origin;
+        let c = self.v2 - ray.origin;
+        let (ax, ay) = (a[kx] - ray.shear.x * a[kz], a[ky] - ray.shear.y * a[kz]);
+        let (bx, by) = (b[kx] - ray.shear.x * b[kz], b[ky] - ray.shear.y * b[kz]);
+        let (cx, cy) = (c[kx] - ray.shear.x * c[kz], c[ky] - ray.shear.y * c[kz]);
+        let mut w0 = cx * by - cy * bx;
+        let mut w1 = ax * cy - ay * cx;
+        let mut w2 = bx * ay - by * ax;
+        if w0 == 0.0 || w1 == 0.0 || w2 == 0.0 {
+            // Products of two f32 are exact in f64, so the sign is exact.
+            let cross = |x0: f32, y0: f32, x1: f32, y1: f32| {
+                (f64::from(x0) * f64::from(y1) - f64::from(y0) * f64::from(x1)) as f32
+            };
+            w0 = cross(cx, cy, bx, by);
+            w1 = cross(ax, ay, cx, cy);
+            w2 = cross(bx, by, ax, ay);
+        }
         let inside = (w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0) || (w0 <= 0.0 && w1 <= 0.0 && w2 <= 0.0);
         let det = w0 + w1 + w2;
         if !inside || det == 0.0 {
             return None;
         }
-        let t = self.n.dot(a) / n_dot_d;
+        let z = ray.shear.z;
+        let t = (w0 * (z * a[kz]) + w1 * (z * b[kz]) + w2 * (z * c[kz])) / det;
         let inv_det = 1.0 / det;
         // `+ 0.0` turns a -0.0 weight (on an edge) into +0.0.
         Some((t, w1 * inv_det + 0.0, w2 * inv_det + 0.0))
+    }
+}
+
+/// A ray prepared for [`PrimTriangle::intersect`]: the axis permutation that
+/// makes the direction's largest component z (swapping x and y when it is
+/// negative, which keeps the winding) and the shear that maps the direction
+/// to +z.
+struct ShearedRay {
+    origin: Vec3A,
+    axes: [usize; 3],
+    /// (Sx, Sy, Sz) of the paper.
+    shear: Vec3A,
+}
+
+impl ShearedRay {
+    fn new(origin: Vec3A, direction: Vec3A) -> ShearedRay {
+        let kz = direction.abs().max_position();
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if direction[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let dz = direction[kz];
+        ShearedRay {
+            origin,
+            axes: [kx, ky, kz],
+            shear: Vec3A::new(direction[kx] / dz, direction[ky] / dz, 1.0 / dz),
+        }
     }
 }
 
@@ -173,7 +215,7 @@ enum Accel {
 /// Ray-origin convention: queries accept hits with `t` in `(0, t_max)`; they
 /// do not skip a neighbourhood of the origin. Rays leaving a surface must
 /// start slightly off it: build them with [`SceneBvh::spawn_ray`], which
-/// offsets the origin by [`SceneBvh::epsilon`] along the geometric normal.
+/// moves the origin [`SceneBvh::spawn_distance`] off the triangle's plane.
 pub struct SceneBvh {
     scene: Arc<Scene>,
     options: BvhOptions,
@@ -185,7 +227,6 @@ pub struct SceneBvh {
     prim_ids: Vec<TriangleId>,
     /// Unit geometric normals by original triangle id (zero if degenerate).
     geometric_normals: Vec<Vec3>,
-    epsilon: f32,
 }
 
 impl fmt::Debug for SceneBvh {
@@ -194,7 +235,6 @@ impl fmt::Debug for SceneBvh {
             .field("options", &self.options)
             .field("triangles", &self.scene.triangles.len())
             .field("primitive_slots", &self.prims.len())
-            .field("epsilon", &self.epsilon)
             .finish()
     }
 }
@@ -220,6 +260,18 @@ impl ClosestSoFar {
         }
         better && t > 0.0
     }
+}
+
+/// The distance a ray origin keeps from a surface whose coordinates are at
+/// most `magnitude` in absolute value: 64 units in the last place (2^-24
+/// relative) of that magnitude. Putting a point on a plane and testing a ray
+/// against the plane each err by a few units in the last place of the
+/// coordinates involved (about 20 together, PBRT 3.9's bounds), so 64 keeps
+/// the origin on its side of the plane as the triangle test computes it.
+/// Secondary rays, shadow-ray ends and every method's ray origins use this
+/// one rule. The floor keeps a surface at the origin representable.
+pub fn spawn_offset(magnitude: f32) -> f32 {
+    (magnitude * (64.0 * f32::EPSILON * 0.5)).max(f32::MIN_POSITIVE)
 }
 
 /// The next float above a positive `t`. Traversal culls boxes entered at
@@ -258,11 +310,6 @@ impl SceneBvh {
         } else {
             0.0
         };
-        // ~100 ulps of the largest coordinate: well above the few-ulp error
-        // of a hit position, well below any modelled detail (0.1 mm in a
-        // 10 m scene). The floor keeps empty or point-sized scenes sane.
-        let epsilon = (scale * 1e-5).max(1e-6);
-
         let (accel, slots) = if count == 0 {
             (Accel::Empty, Vec::new())
         } else {
@@ -288,7 +335,6 @@ impl SceneBvh {
             prims,
             prim_ids: slots,
             geometric_normals,
-            epsilon,
         }
     }
 
@@ -302,24 +348,46 @@ impl SceneBvh {
         self.options
     }
 
-    /// The distance secondary-ray origins are moved off a surface, scaled to
-    /// the scene's bounding box.
-    pub fn epsilon(&self) -> f32 {
-        self.epsilon
+    /// How far a ray leaving `position` on `triangle` starts off the
+    /// triangle's plane: [`spawn_offset`] of the largest coordinate of the
+    /// point and the triangle's corners. It depends only on the hit and its
+    /// own triangle, never on the scene's extent, so 1-unit details in a
+    /// 500-unit scene keep 1-unit precision.
+    pub fn spawn_distance(&self, position: Vec3, triangle: TriangleId) -> f32 {
+        let [a, b, c] = self.scene.triangle_positions(triangle);
+        let magnitude = [position, a, b, c]
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0, f32::max);
+        spawn_offset(magnitude)
     }
 
-    /// A ray leaving the surface point `position` (on a triangle with unit
-    /// geometric normal `geometric_normal`) in unit direction `direction`:
-    /// the origin moves [`SceneBvh::epsilon`] along the geometric normal, on
-    /// the side the ray travels into, so it cannot hit its own triangle.
-    pub fn spawn_ray(&self, position: Vec3, geometric_normal: Vec3, direction: Vec3) -> Ray {
-        let side = if direction.dot(geometric_normal) >= 0.0 {
-            1.0
+    /// A ray leaving the surface point `position` on `triangle` in unit
+    /// direction `direction`, safe from hitting that triangle again: the
+    /// origin is put on the triangle's plane (however the point was computed
+    /// — barycentric interpolation, a pixel ray meeting the plane) and then
+    /// [`SceneBvh::spawn_distance`] along the geometric normal, on the side
+    /// the ray travels into. Tangentially the origin stays where it was. A
+    /// degenerate triangle has no plane: its ray starts that distance along
+    /// `direction` instead.
+    pub fn spawn_ray(&self, position: Vec3, triangle: TriangleId, direction: Vec3) -> Ray {
+        let distance = self.spawn_distance(position, triangle);
+        let normal = self.geometric_normal(triangle);
+        if normal == Vec3::ZERO {
+            return Ray {
+                origin: position + direction * distance,
+                direction,
+            };
+        }
+        let corner = self.scene.triangle_positions(triangle)[0];
+        let side = if direction.dot(normal) >= 0.0 {
+            distance
         } else {
-            -1.0
+            -distance
         };
+        let height = (position - corner).dot(normal);
         Ray {
-            origin: position + geometric_normal * (side * self.epsilon),
+            origin: position + normal * (side - height),
             direction,
         }
     }
@@ -353,7 +421,8 @@ impl SceneBvh {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let bvh_ray = bvh_ray(origin, direction, t_max)?;
         let mut best = ClosestSoFar { t_max, hit: None };
-        let mut test = |slot: usize| match self.prims[slot].intersect(origin, direction) {
+        let sheared = ShearedRay::new(origin, direction);
+        let mut test = |slot: usize| match self.prims[slot].intersect(&sheared) {
             Some(tuv) if best.offer(self.prim_ids[slot], tuv) => {
                 best.hit.map_or(f32::INFINITY, |h| next_up(h.t))
             }
@@ -375,7 +444,8 @@ impl SceneBvh {
         let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
             return false;
         };
-        let test = |slot: usize| match self.prims[slot].intersect(origin, direction) {
+        let sheared = ShearedRay::new(origin, direction);
+        let test = |slot: usize| match self.prims[slot].intersect(&sheared) {
             Some((t, _, _)) if t > 0.0 && t < t_max => t,
             _ => f32::INFINITY,
         };
@@ -391,10 +461,11 @@ impl SceneBvh {
     #[cfg(test)]
     pub(crate) fn closest_hit_brute_force(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+        let sheared = ShearedRay::new(origin, direction);
         let mut best = ClosestSoFar { t_max, hit: None };
         for id in 0..self.scene.triangles.len() as TriangleId {
             let tri = PrimTriangle::new(self.scene.triangle_positions(id));
-            if let Some(tuv) = tri.intersect(origin, direction) {
+            if let Some(tuv) = tri.intersect(&sheared) {
                 best.offer(id, tuv);
             }
         }

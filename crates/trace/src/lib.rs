@@ -17,11 +17,13 @@ mod bvh;
 mod whitted;
 
 #[cfg(test)]
+mod precision;
+#[cfg(test)]
 mod scenarios;
 #[cfg(test)]
 mod testutil;
 
-pub use bvh::{BuildPreset, BvhLayout, BvhOptions, SceneBvh};
+pub use bvh::{BuildPreset, BvhLayout, BvhOptions, SceneBvh, spawn_offset};
 pub use whitted::{SurfaceTerms, Tracer, reflect, refract};
 
 use glam::Vec3;

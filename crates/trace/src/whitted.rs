@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Light, LightKind, Lighting, NONE, ObjectId};
 
+use crate::bvh::spawn_offset;
 use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
 
 /// Whitted tracer for one frame's lighting.
@@ -258,8 +259,7 @@ impl Tracer<'_> {
             normal,
             -incoming,
             |light, to_light, distance| {
-                let visible =
-                    self.light_visible(point.position, geometric, light, to_light, distance);
+                let visible = self.light_visible(point, light, to_light, distance);
                 if visible {
                     lit(light);
                 }
@@ -268,7 +268,10 @@ impl Tracer<'_> {
         );
         let secondary =
             secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
-        let spawn = |direction| self.bvh.spawn_ray(point.position, geometric, direction);
+        let spawn = |direction| {
+            self.bvh
+                .spawn_ray(point.position, point.triangle, direction)
+        };
         SurfaceTerms {
             local,
             kr: secondary.kr,
@@ -282,18 +285,22 @@ impl Tracer<'_> {
         }
     }
 
-    /// The shadow test for one light from a surface point.
+    /// The shadow test for one light from a surface point. A point light's
+    /// ray stops short of the light by the spawn offset of the light's own
+    /// position, so geometry at the light does not shadow it.
     fn light_visible(
         &self,
-        position: Vec3,
-        geometric: Vec3,
+        point: &SurfacePoint,
         light: &Light,
         to_light: Vec3,
         distance: f32,
     ) -> bool {
-        let ray = self.bvh.spawn_ray(position, geometric, to_light);
+        let ray = self.bvh.spawn_ray(point.position, point.triangle, to_light);
         let t_max = match light.kind {
-            LightKind::Point { .. } => distance - self.bvh.epsilon(),
+            LightKind::Point { position } => {
+                let origin_moved = self.bvh.spawn_distance(point.position, point.triangle);
+                distance - origin_moved - spawn_offset(position.abs().max_element())
+            }
             LightKind::Directional { .. } => f32::INFINITY,
         };
         !self.bvh.occluded(&ray, t_max)
