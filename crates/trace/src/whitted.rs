@@ -206,8 +206,14 @@ impl Tracer<'_> {
                 signature.add(word::REFLECT);
             }
             let kr = terms.kr;
-            let (seen, object) =
-                self.radiance(&ray, depth + 1, weight * kr.max_element(), signature);
+            let branch = weight * kr.max_element();
+            let (seen, object) = self.radiance(&ray, depth + 1, branch, signature);
+            if depth == 1 && branch < self.settings.signature_min_weight {
+                // The sample reports the first reflection's object however
+                // weak the reflection (glass reflects ~4 %): keep that object
+                // in the signature, so refinement finds its edges.
+                signature.add(u64::from(object));
+            }
             shaded.reflected = kr * seen.color;
             shaded.reflected_object = object;
             shaded.color += shaded.reflected;
