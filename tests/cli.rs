@@ -166,6 +166,24 @@ fn bad_job_and_obj_files_are_refused_with_file_and_line() {
         err.contains("broken.obj:3"),
         "names the OBJ file and line: {err}"
     );
+    // Each cause once: no `file:line: msg: file:line: msg` chain.
+    assert_eq!(err.matches("broken.obj:3").count(), 1, "{err}");
+
+    std::fs::write(
+        dir.path().join("broken.obj"),
+        "mtllib gone.mtl
+",
+    )
+    .unwrap();
+    let err = refused_render(
+        dir.path(),
+        "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
+    );
+    assert!(
+        err.contains("broken.obj:1: cannot read material library"),
+        "{err}"
+    );
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
 }
 
 /// Runs `vtfarm study` on `study` (written into `dir` next to a base job)
