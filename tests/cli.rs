@@ -153,37 +153,28 @@ fn bad_job_and_obj_files_are_refused_with_file_and_line() {
     );
     assert!(err.contains("bad.toml:4"), "names file and line: {err}");
 
-    std::fs::write(
-        dir.path().join("broken.obj"),
-        "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n",
-    )
-    .unwrap();
-    let err = refused_render(
-        dir.path(),
-        "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
-    );
-    assert!(
-        err.contains("broken.obj:3"),
-        "names the OBJ file and line: {err}"
-    );
-    // Each cause once: no `file:line: msg: file:line: msg` chain.
-    assert_eq!(err.matches("broken.obj:3").count(), 1, "{err}");
-
-    std::fs::write(
-        dir.path().join("broken.obj"),
-        "mtllib gone.mtl
-",
-    )
-    .unwrap();
-    let err = refused_render(
-        dir.path(),
-        "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
-    );
-    assert!(
-        err.contains("broken.obj:1: cannot read material library"),
-        "{err}"
-    );
-    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    // Each message names the OBJ file and line, and each cause appears
+    // once: no `file:line: msg: file:line: msg` chain.
+    for (obj, location, cause) in [
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 zero\nf 1 2 3\n",
+            "broken.obj:3",
+            "zero",
+        ),
+        (
+            "mtllib gone.mtl\n",
+            "broken.obj:1: cannot read material library",
+            "No such file",
+        ),
+    ] {
+        std::fs::write(dir.path().join("broken.obj"), obj).unwrap();
+        let err = refused_render(
+            dir.path(),
+            "[scene]\nobj = \"broken.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
+        );
+        assert_eq!(err.matches(location).count(), 1, "{err}");
+        assert_eq!(err.matches(cause).count(), 1, "{err}");
+    }
 }
 
 /// Runs `vtfarm study` on `study` (written into `dir` next to a base job)

@@ -6,6 +6,7 @@
 use std::time::Instant;
 
 use vtfarm_scene::obj::{ObjOptions, load_obj};
+use vtfarm_scene::shapes::disc_polygon_obj;
 
 fn main() {
     let sizes: Vec<usize> = std::env::args()
@@ -19,18 +20,8 @@ fn main() {
     };
     let dir = tempfile::tempdir().expect("a temporary directory");
     for n in sizes {
-        let mut obj = String::new();
-        for i in 0..n {
-            let a = std::f64::consts::TAU * i as f64 / n as f64;
-            obj.push_str(&format!("v {} 0 {}\n", a.cos(), -a.sin()));
-        }
-        obj.push('f');
-        for i in 1..=n {
-            obj.push_str(&format!(" {i}"));
-        }
-        obj.push('\n');
         let path = dir.path().join(format!("disc{n}.obj"));
-        std::fs::write(&path, obj).expect("the OBJ file is written");
+        std::fs::write(&path, disc_polygon_obj(n)).expect("the OBJ file is written");
         let start = Instant::now();
         let result = load_obj(&path, &ObjOptions::default());
         let seconds = start.elapsed().as_secs_f64();

@@ -4,6 +4,23 @@ use std::collections::BTreeMap;
 
 use glam::Vec3;
 
+/// OBJ text of the unit disc in the y = 0 plane as a single polygon face
+/// with `vertices` corners (counter-clockwise seen from +y): a stress test
+/// for triangulation and normals.
+pub fn disc_polygon_obj(vertices: usize) -> String {
+    let mut obj = String::new();
+    for i in 0..vertices {
+        let a = std::f64::consts::TAU * i as f64 / vertices as f64;
+        obj.push_str(&format!("v {} 0 {}\n", a.cos(), -a.sin()));
+    }
+    obj.push('f');
+    for i in 1..=vertices {
+        obj.push_str(&format!(" {i}"));
+    }
+    obj.push('\n');
+    obj
+}
+
 /// The unit icosphere: the icosahedron's 12 points on the unit sphere and
 /// its 20 faces (counter-clockwise seen from outside), each face split in
 /// four `levels` times with the new points pushed onto the sphere.

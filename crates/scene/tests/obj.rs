@@ -10,6 +10,7 @@ use tempfile::TempDir;
 use vtfarm_scene::obj::{
     MAX_FACE_VERTICES, ObjError, ObjOptions, ObjWarning, import_obj, load_obj, write_obj,
 };
+use vtfarm_scene::shapes::disc_polygon_obj;
 use vtfarm_scene::{Material, Object, Scene, Triangle};
 
 fn data(name: &str) -> PathBuf {
@@ -612,21 +613,9 @@ fn errors_quote_huge_input_cut_short() {
 
 #[test]
 fn huge_polygons_load_and_oversized_ones_are_refused() {
-    let polygon = |n: usize| {
-        let mut obj = String::new();
-        for i in 0..n {
-            let a = std::f64::consts::TAU * i as f64 / n as f64;
-            obj.push_str(&format!("v {} 0 {}\n", a.cos(), -a.sin()));
-        }
-        obj.push('f');
-        for i in 1..=n {
-            obj.push_str(&format!(" {i}"));
-        }
-        obj + "\n"
-    };
     // 40,000 vertices loaded in 5.3 s before the normals were computed in
     // linear time (0.14 s after; see `examples/polygon_load.rs`).
-    let (_dir, result) = load_files(&[("disc.obj", polygon(40_000).as_bytes())]);
+    let (_dir, result) = load_files(&[("disc.obj", disc_polygon_obj(40_000).as_bytes())]);
     let scene = result.unwrap();
     assert_eq!(scene.triangles.len(), 39_998);
     assert!(
@@ -635,7 +624,7 @@ fn huge_polygons_load_and_oversized_ones_are_refused() {
     );
 
     let n = MAX_FACE_VERTICES + 1;
-    let (dir, result) = load_files(&[("disc.obj", polygon(n).as_bytes())]);
+    let (dir, result) = load_files(&[("disc.obj", disc_polygon_obj(n).as_bytes())]);
     assert_eq!(
         result.unwrap_err().to_string(),
         format!(

@@ -7,28 +7,14 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_scene::{Material, Object, Scene, Triangle};
 
-use crate::testutil::XorShift;
+use crate::testutil::{SceneBuilder, XorShift};
 use crate::{Ray, SceneBvh, spawn_offset};
 
 /// One object made of `corners` (one triangle each), with face normals.
 fn scene_of(corners: &[[Vec3; 3]]) -> Scene {
-    let mut scene = Scene {
-        objects: vec![Object { name: "o".into() }],
-        materials: vec![Material::default()],
-        ..Scene::default()
-    };
-    for c in corners {
-        let n = (c[1] - c[0]).cross(c[2] - c[0]).normalize_or(Vec3::Y);
-        let base = scene.positions.len() as u32;
-        scene.positions.extend(c);
-        scene.normals.extend([n; 3]);
-        scene.triangles.push(Triangle {
-            vertices: [base, base + 1, base + 2],
-            object: 0,
-            material: 0,
-        });
-    }
-    scene
+    let mut builder = SceneBuilder::default();
+    builder.triangles(Material::default(), corners);
+    builder.scene
 }
 
 /// A closed fan of `n` triangles around `centre` in the plane spanned by
