@@ -102,8 +102,9 @@ impl Default for ObjOptions {
 /// still 100,000 km wide in metres.
 pub const MAX_COORDINATE: f32 = 1e8;
 
-/// The most vertices one face may have. Larger polygons are refused rather
-/// than loaded in time that grows with their size squared.
+/// The most vertices one face may have. A face's fan puts all its triangles
+/// around one vertex, where computing normals costs O(k²) in the worst case
+/// (a badly non-planar face; a flat one costs O(k)), so the size is bounded.
 pub const MAX_FACE_VERTICES: usize = 65_536;
 
 /// How many characters of user input an error message quotes.
@@ -479,6 +480,15 @@ fn parse_vec3(text: &str) -> Result<Vec3, String> {
     parse_numbers(text, 3..=3).map(|v| Vec3::from_slice(&v))
 }
 
+/// Parses a transmission filter: `r g b`, or one number for grey.
+fn parse_filter(text: &str) -> Result<Vec3, String> {
+    match parse_numbers(text, 1..=3)?[..] {
+        [grey] => Ok(Vec3::splat(grey)),
+        [r, g, b] => Ok(Vec3::new(r, g, b)),
+        _ => Err("expected r g b or one number".to_owned()),
+    }
+}
+
 /// One library as tobj parsed it (always `Ok`: it was checked first).
 type Library = tobj::MTLLoadResult;
 
@@ -715,7 +725,8 @@ fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<
         let (keyword, rest, clean) = split_line(line);
         let checked = match keyword {
             "newmtl" if rest.is_empty() => Err("no material name".to_owned()),
-            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" | "Tf" => parse_vec3(rest).map(drop),
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop),
+            "Tf" => parse_filter(rest).map(drop),
             "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop),
             "illum" => rest
                 .parse::<u8>()
@@ -905,7 +916,7 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         (Some(d), _) => Some(1.0 - d),
         (None, tr) => tr,
     };
-    let transmittance = match (amount, extension(m, "Tf", parse_vec3)?) {
+    let transmittance = match (amount, extension(m, "Tf", parse_filter)?) {
         (Some(amount), Some(filter)) => filter * amount,
         (Some(amount), None) => Vec3::splat(amount),
         (None, Some(filter)) if glass => filter,

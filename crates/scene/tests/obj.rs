@@ -413,7 +413,7 @@ const BAD: &[(&str, &str, &str, usize, &str)] = &[
     ("mtllib lib.mtl\n", "newmtl a\nillum 300\n", "lib.mtl", 2, "illum: \"300\" is not a model number"),
     ("mtllib lib.mtl\n", "newmtl a\nmap_Kd\n", "lib.mtl", 2, "map_Kd: no texture file name"),
     ("mtllib lib.mtl\n", "newmtl a\nKd 1 1 # grey\n", "lib.mtl", 2, "Kd: expected 3 numbers, found 2"),
-    ("mtllib lib.mtl\n", "newmtl a\nTf 1 1\n", "lib.mtl", 2, "Tf: expected 3 numbers, found 2"),
+    ("mtllib lib.mtl\n", "newmtl a\nTf 1 1\n", "lib.mtl", 2, "Tf: expected r g b or one number"),
     ("v 0 0 1e22\n", "", "bad.obj", 1, "coordinate 10000000000000000000000 is beyond ±1e8"),
     ("v 0 0 0\nv -2e8 0 0\n", "", "bad.obj", 2, "coordinate 200000000 is beyond ±1e8"),
     ("v 0 0 0\nv 1 1 1 1e-30\n", "", "bad.obj", 2, "coordinate 1000000000000000000000000000000 is beyond"),
@@ -660,10 +660,7 @@ fn glass_and_dielectrics_reflect_by_fresnel() {
             "illum 7\nNi 1.33\nTf 0.6 0.7 0.9\n",
             (water, Vec3::new(0.6, 0.7, 0.9)),
         ),
-        (
-            "illum 7\nNi 1.33\nTf 1 1 1\nd 0.5\n",
-            (water, Vec3::splat(0.5)),
-        ),
+        ("illum 7\nNi 1.33\nTf 1\nd 0.5\n", (water, Vec3::splat(0.5))),
         // A dielectric with any illum: d < 1 (or Tr) and Ni.
         ("illum 2\nNi 1.5\nd 0.3\n", (glass, Vec3::splat(0.7))),
         ("Ni 1.5\nTr 0.6\n", (glass, Vec3::splat(0.6))),
