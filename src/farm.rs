@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
-use vtfarm_master::{FinishedFrame, JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_master::{FinishedFrame, JobEvent, JobOptions, LocalFarm, run_job, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
@@ -90,11 +90,14 @@ pub(crate) fn render_embedded(
         let farm = LocalFarm::start(workers, SchedulerConfig::default());
         let mut link = farm.submitter();
         let data = SceneData::from_scene(scene);
-        let job = vtfarm_proto::WireJob {
-            method: method.into(),
-            aux,
-            ..wire_job(name, &data, std::slice::from_ref(setup), reflectors)
-        };
+        let options = JobOptions { method, aux };
+        let job = wire_job(
+            name,
+            &data,
+            std::slice::from_ref(setup),
+            reflectors,
+            options,
+        );
         let frames = run_job(&mut link, job, &data, |event| {
             if let JobEvent::Progress { done, .. } = event {
                 bar.set_position(done.into());
@@ -141,11 +144,11 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     let frames = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
-        let wire = vtfarm_proto::WireJob {
+        let options = JobOptions {
+            method: job.method,
             aux: args_aux,
-            method: job.method.into(),
-            ..wire_job(&name, &data, &setups, &reflectors)
         };
+        let wire = wire_job(&name, &data, &setups, &reflectors, options);
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
         let result = run_job(&mut conn.link, wire, &data, |event| match event {
             JobEvent::Accepted { job, frames } => {

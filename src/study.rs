@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use vtfarm_master::{JobEvent, LocalFarm, run_job, wire_job};
-use vtfarm_proto::{Link, SceneData, WireJob};
+use vtfarm_master::{JobEvent, JobOptions, LocalFarm, run_job, wire_job};
+use vtfarm_proto::{Link, SceneData};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
 use vtfarm_vertex::Quality;
@@ -67,11 +67,11 @@ pub(crate) async fn render_study(
         bar.set_message(variant.name.clone());
         let data = SceneData::from_scene(&variant.scene);
         let name = format!("{} / {}", plan.name, variant.name);
-        let job = WireJob {
+        let options = JobOptions {
+            method: plan.method,
             aux: true,
-            method: plan.method.into(),
-            ..wire_job(&name, &data, &variant.setups, &variant.reflectors)
         };
+        let job = wire_job(&name, &data, &variant.setups, &variant.reflectors, options);
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {

@@ -377,19 +377,8 @@ impl MasterCore {
         if job.reflectors.is_empty() || job.frames.is_empty() {
             return self.refuse_job(conn, "a job needs reflectors and at least one frame".into());
         }
-        let frames: Result<Vec<FrameSetup>, _> = job
-            .frames
-            .into_iter()
-            .map(|f| {
-                f.into_parts()
-                    .map(|(camera, lighting, trace, vertex)| FrameSetup {
-                        camera,
-                        lighting,
-                        trace,
-                        vertex,
-                    })
-            })
-            .collect();
+        let frames: Result<Vec<FrameSetup>, _> =
+            job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = match frames {
             Ok(f) => f,
             Err(e) => return self.refuse_job(conn, format!("bad frame set-up: {e}")),
@@ -595,12 +584,7 @@ impl MasterCore {
             job,
             frame,
             scene: j.scene_hash,
-            setup: WireFrameSetup::from_parts(
-                &setup.camera,
-                &setup.lighting,
-                &setup.trace,
-                &setup.vertex,
-            ),
+            setup: WireFrameSetup::from(setup),
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
         };

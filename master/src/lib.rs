@@ -19,4 +19,4 @@ pub mod submit;
 pub use core::{ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master};
 pub use embedded::LocalFarm;
-pub use submit::{FinishedFrame, JobError, JobEvent, run_job, wire_job};
+pub use submit::{FinishedFrame, JobError, JobEvent, JobOptions, run_job, wire_job};

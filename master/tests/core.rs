@@ -6,7 +6,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{MasterCore, Output, Peer, wire_job};
+use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
@@ -113,10 +114,20 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             address: "test".into(),
         },
     );
+    let options = JobOptions {
+        method: MethodKind::VertexTracing,
+        aux: false,
+    };
     let job = WireJob {
         // The scene itself rather than its hash: no round trip for it.
         scene: JobScene::Data(data.clone()),
-        ..wire_job("core", &data, std::slice::from_ref(&setup), &reflectors)
+        ..wire_job(
+            "core",
+            &data,
+            std::slice::from_ref(&setup),
+            &reflectors,
+            options,
+        )
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
     assert!(matches!(

@@ -17,7 +17,8 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::CockpitConfig;
-use vtfarm_master::{run_job, server, spawn_master, wire_job};
+use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
     CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Message, Role,
@@ -235,7 +236,11 @@ async fn run_farm(
         let mut conn = connect(&options, Role::Submitter).await?;
         wait_for_workers(&mut conn.link, workers).await?;
         let data = SceneData::from_scene(&job.scene);
-        let wire = wire_job("bench-cluster", &data, setups, &job.reflectors);
+        let options = JobOptions {
+            method: MethodKind::VertexTracing,
+            aux: false,
+        };
+        let wire = wire_job("bench-cluster", &data, setups, &job.reflectors, options);
         let start = Instant::now();
         let frames = run_job(&mut conn.link, wire, &data, |_| {}).await;
         let job_seconds = start.elapsed().as_secs_f64();
