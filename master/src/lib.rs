@@ -9,6 +9,7 @@
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod core;
 pub mod driver;
