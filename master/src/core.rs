@@ -5,6 +5,8 @@
 //! Per frame it rasterizes the base frame, sends `FrameStart` to every
 //! worker, hands out the scheduler's packages, composites each accepted
 //! result over the base frame and sends the finished frame to the submitter.
+//! A result that writes a pixel its package does not own in the frame's ID
+//! buffer (pixel ownership) fails the package.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;

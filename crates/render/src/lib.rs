@@ -1,7 +1,8 @@
 //! One frame end to end on one machine: the base frame and ID buffer from the
 //! rasterizer, the reflector triangles cut into packages and vertex traced,
 //! the bitmaps composited over the base frame; plus the error figures against
-//! a reference and the auxiliary output files.
+//! a reference and the auxiliary output files; and the catalogue of
+//! reflection methods ([`method`]).
 //!
 //! Architecture invariant: no networking and no scheduling policy here; the
 //! farm's master drives the same pieces (`Renderer::frame`, `trace_package`,
