@@ -25,7 +25,7 @@ use vtfarm_scene::{Camera, Scene};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
-use vtfarm_worker::{Engine, WorkerConfig, run_worker};
+use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// The farm tests measure load balance: run them one at a time, so that they
 /// do not compete for the machine's cores.
@@ -146,6 +146,7 @@ impl Cluster {
                 1,
                 Engine::new(Some(cache)),
                 WorkerConfig { slowdown },
+                DrainSignal::never(),
             )
             .await;
         })

@@ -5,7 +5,7 @@
 use tokio::task::JoinHandle;
 use vtfarm_proto::Link;
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_worker::{Engine, SessionEnd, WorkerConfig, serve};
+use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 
 use crate::core::Peer;
 use crate::driver::{MasterHandle, spawn_master};
@@ -34,7 +34,13 @@ impl LocalFarm {
                 };
                 master.attach(peer, master_end, None);
                 tokio::spawn(async move {
-                    serve(worker_end, &mut Engine::new(None), WorkerConfig::default()).await
+                    serve(
+                        worker_end,
+                        &mut Engine::new(None),
+                        WorkerConfig::default(),
+                        DrainSignal::never(),
+                    )
+                    .await
                 })
             })
             .collect();
