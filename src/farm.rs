@@ -100,8 +100,10 @@ pub(crate) fn render_embedded(
                 bar.set_position(done.into());
             }
         })
-        .await?;
-        frames
+        .await;
+        // Every task ends before the runtime does (see `LocalFarm`).
+        farm.shutdown().await;
+        frames?
             .into_iter()
             .next()
             .context("the master returned no frame")

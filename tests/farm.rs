@@ -267,6 +267,12 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     .await
     .unwrap();
     assert_same_images(&embedded, &reference);
+    let shut_down = tokio::time::timeout(Duration::from_secs(60), farm.shutdown());
+    assert_eq!(
+        shut_down.await.expect("the embedded farm shuts down"),
+        0,
+        "no task of the embedded farm panicked"
+    );
 }
 
 /// The single-process frame of a per-reflector method: each reflector
@@ -450,98 +456,187 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     }
 }
 
-/// The share of a frame's triangles traced by the worker whose name starts with `name`.
-fn share(stats: &vtfarm_proto::FrameStats, name: &str) -> f64 {
-    let total: u32 = stats.workers.iter().map(|w| w.triangles).sum();
-    let mine: u32 = stats
-        .workers
-        .iter()
-        .filter(|w| w.name.starts_with(name))
-        .map(|w| w.triangles)
-        .sum();
-    f64::from(mine) / f64::from(total.max(1))
-}
+/// A child process, killed when dropped (a failing test leaves no orphans).
+struct ChildGuard(Child);
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn a_slowed_worker_gets_a_share_that_follows_its_speed() {
-    let _serial = SERIAL.lock().await;
-    let job = job_with_glass(4, 1280, 720, 48);
-    let cluster = Cluster::start(SchedulerConfig::default());
-    // Separate processes with one thread each, so that the speeds do not
-    // depend on sharing one thread pool; the slow one takes three times as long.
-    let mut fast = cluster.worker_process("fast", 1.0);
-    let mut slow = cluster.worker_process("slow", 3.0);
-    cluster.wait_for_workers(2).await;
-    let frames = cluster.submit(&job).await.unwrap();
-    let _ = (fast.kill(), slow.kill(), fast.wait(), slow.wait());
-    for f in &frames {
-        eprintln!(
-            "frame {}: imbalance {:.1}%, slow share {:.2}, {:?}",
-            f.frame,
-            f.stats.imbalance * 100.0,
-            share(&f.stats, "slow"),
-            f.stats.workers
-        );
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
-    // After the first frame (uniform cost estimates, unmeasured workers), a
-    // frame within the next three is balanced: busy times within 10% and the
-    // slow worker's share well below the fast one's (nominally a quarter, a
-    // third of the speed; other load on the machine shifts the effective
-    // speeds). One frame, not every frame: CI's two cores also run the master
-    // and this test.
-    let balanced = frames[1..].iter().map(|f| &f.stats).find(|s| {
-        s.workers.len() == 2 && s.imbalance < 0.10 && (0.05..=0.45).contains(&share(s, "slow"))
-    });
-    assert!(balanced.is_some(), "no balanced frame among frames 1 to 3");
 }
 
+impl ChildGuard {
+    /// Waits (bounded) for the process to exit.
+    async fn exit_status(&mut self, bound: Duration) -> std::process::ExitStatus {
+        let deadline = tokio::time::Instant::now() + bound;
+        loop {
+            if let Some(status) = self.0.try_wait().unwrap() {
+                return status;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "the child did not exit within {bound:?}"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+}
+
+/// A bound for waits on the farm: generous for a loaded machine, but a
+/// failing test ends.
+const BOUND: Duration = Duration::from_secs(120);
+
+impl Cluster {
+    /// Waits (bounded) until the named worker holds a package, per `vtfarm status`.
+    async fn wait_until_running(&self, name: &str) {
+        let deadline = tokio::time::Instant::now() + BOUND;
+        while tokio::time::Instant::now() < deadline {
+            let status = self.status().await;
+            if (status.workers.iter()).any(|w| w.name == name && w.packages_running > 0) {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        panic!("{name} never held a package");
+    }
+
+    /// Waits (bounded) until the master lists `count` workers.
+    async fn wait_for_worker_count(&self, count: usize) {
+        let deadline = tokio::time::Instant::now() + BOUND;
+        while tokio::time::Instant::now() < deadline {
+            if self.status().await.workers.len() == count {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        panic!("the master does not list {count} workers");
+    }
+}
+
+/// Submits `job` in a task (so that the test can act while it runs).
+fn submit_in_background(
+    cluster: &Arc<Cluster>,
+    job: &Job,
+) -> JoinHandle<Result<Vec<FinishedFrame>, JobError>> {
+    let cluster = cluster.clone();
+    let job = Job {
+        scene: job.scene.clone(),
+        reflectors: job.reflectors.clone(),
+        frames: job.frames.clone(),
+    };
+    tokio::spawn(async move { cluster.submit(&job).await })
+}
+
+// The load balance under a slowed worker and a kill at every moment of a
+// frame are checked deterministically in master/tests/faults.rs; these two
+// check the real processes, triggered by protocol events, every wait bounded.
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn a_worker_killed_mid_frame_loses_its_packages_to_the_others() {
+async fn a_killed_worker_process_loses_its_package_to_a_newcomer() {
     let _serial = SERIAL.lock().await;
-    let job = job(1, 320, 180);
+    let job = job(1, 160, 90);
     let reference = reference(&job);
-    // No straggler cut: the survivor must get the package back through the lost worker, not a duplicate.
+    // No straggler cut: the package must come back through the loss itself.
     let config = SchedulerConfig {
         heartbeat_timeout: Duration::from_millis(1500),
         straggler: None,
         ..SchedulerConfig::default()
     };
     let cluster = Arc::new(Cluster::start(config));
+    // Alone on the farm and slowed, so it surely holds a package.
+    let mut doomed = ChildGuard(cluster.worker_process("doomed", 50.0));
+    cluster.wait_for_workers(1).await;
+    let submit = submit_in_background(&cluster, &job);
+    cluster.wait_until_running("doomed").await;
+    doomed.0.kill().unwrap();
+    doomed.exit_status(BOUND).await;
+    // Only the newcomer can finish the frame, and only with the lost package.
     let _survivor = cluster.worker("survivor", 1.0);
-    let mut doomed = cluster.worker_process("doomed", 50.0);
-    cluster.wait_for_workers(2).await;
-    let submit = {
-        let cluster = cluster.clone();
-        let job = Job {
-            scene: job.scene.clone(),
-            reflectors: job.reflectors.clone(),
-            frames: job.frames.clone(),
-        };
-        tokio::spawn(async move { cluster.submit(&job).await })
-    };
-    // Kill the slowed child while it holds a package.
-    let mut killed = false;
-    for _ in 0..400 {
-        let status = cluster.status().await;
-        if status
-            .workers
-            .iter()
-            .any(|w| w.name == "doomed" && w.packages_running > 0)
-        {
-            doomed.kill().unwrap();
-            killed = true;
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-    let _ = doomed.wait();
-    assert!(killed, "the doomed worker never got a package");
-    let frames = submit.await.unwrap().unwrap();
+    let frames = tokio::time::timeout(BOUND, submit)
+        .await
+        .expect("the job finishes")
+        .unwrap()
+        .unwrap();
     assert_same_images(&frames, &reference);
     assert!(
         frames[0].stats.requeued >= 1,
         "its package went back to the queue: {:?}",
         frames[0].stats
+    );
+}
+
+#[cfg(unix)]
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
+    let _serial = SERIAL.lock().await;
+    let job = job(1, 160, 90);
+    let reference = reference(&job);
+    // A heartbeat timeout far beyond the test's bounds: the master can only
+    // drop the worker early because it said goodbye.
+    let config = SchedulerConfig {
+        heartbeat_timeout: Duration::from_secs(3600),
+        straggler: None,
+        ..SchedulerConfig::default()
+    };
+    let cluster = Arc::new(Cluster::start(config));
+    let mut leaving = ChildGuard(cluster.worker_process("leaving", 5.0));
+    cluster.wait_for_workers(1).await;
+    let submit = submit_in_background(&cluster, &job);
+    cluster.wait_until_running("leaving").await;
+    let sent = Command::new("kill")
+        .args(["-TERM", &leaving.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = leaving.exit_status(BOUND).await;
+    assert!(status.success(), "a drained worker exits cleanly: {status}");
+    cluster.wait_for_worker_count(0).await;
+    let _newcomer = cluster.worker("newcomer", 1.0);
+    let frames = tokio::time::timeout(BOUND, submit)
+        .await
+        .expect("the job finishes")
+        .unwrap()
+        .unwrap();
+    assert_same_images(&frames, &reference);
+    // (A departed worker is listed by its connection number, not its name.)
+    let stats = &frames[0].stats;
+    let leaving_packages: u32 = (stats.workers.iter())
+        .filter(|w| !w.name.starts_with("newcomer"))
+        .map(|w| w.packages)
+        .sum();
+    assert!(
+        leaving_packages >= 1 && stats.requeued == 0,
+        "the package it held was finished and counted, not requeued: {stats:?}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn status_without_a_master_fails_fast_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
+    // A port nobody listens on (bound, then closed).
+    let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let address = free.local_addr().unwrap();
+    drop(free);
+    let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+    let file = dir.path().join("cluster.toml");
+    cluster.save(&file).unwrap();
+    let mut child = ChildGuard(
+        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+            .args(["status", "--cluster", file.to_str().unwrap()])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    // Before: the QUIC idle timeout (30 s) passed first.
+    let status = child.exit_status(Duration::from_secs(20)).await;
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(!status.success());
+    assert!(
+        stderr.contains(&address.to_string()) && stderr.contains("timed out"),
+        "{stderr}"
     );
 }
 

@@ -34,6 +34,8 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
+    /// End the master task (dropping every connection).
+    Stop,
 }
 
 /// A running master: attach links to it.
@@ -71,6 +73,11 @@ impl MasterHandle {
         });
         conn
     }
+
+    /// Ends the master task: its connections close and the workers' sessions end.
+    pub fn stop(&self) {
+        let _ = self.inputs.send(Input::Stop);
+    }
 }
 
 /// Starts a master task.
@@ -101,6 +108,9 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
         tokio::select! {
             input = inputs.recv() => {
                 let Some(input) = input else { return };
+                if matches!(input, Input::Stop) {
+                    return;
+                }
                 let now = start.elapsed();
                 // Inside a block so the whole frame's CPU work (rasterizing,
                 // compositing) does not starve the I/O tasks.
@@ -119,6 +129,7 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                             core.disconnected(now, conn);
                         }
                     }
+                    Input::Stop => {} // returned above
                 });
             }
             _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),

@@ -278,3 +278,14 @@ fn the_same_faults_replay_the_same_schedule() {
     };
     assert_eq!(run(), run());
 }
+
+#[test]
+fn a_dead_peer_is_noticed_by_quic_within_the_heartbeat_timeout() {
+    // Both ends of a connection close it after the QUIC idle timeout, so a
+    // worker notices a dead master (and the master a dead worker) when the
+    // master's scheduler gives up on the worker's heartbeats; keep-alives
+    // keep a busy connection open well within it.
+    let heartbeat_timeout = SchedulerConfig::default().heartbeat_timeout;
+    assert_eq!(vtfarm_proto::IDLE_TIMEOUT, heartbeat_timeout);
+    assert!(vtfarm_proto::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
+}
