@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
-use vtfarm_master::{FinishedFrame, JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_master::{
+    FinishedFrame, JobEvent, LocalFarm, RemoteJob, run_job, run_remote_job, wire_job,
+};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
@@ -28,6 +30,11 @@ pub(crate) struct SubmitArgs {
     /// Output directory for frame_NNNN.png and stats.json.
     #[arg(short, long)]
     output: PathBuf,
+    /// Follow job JOB that the master already has (submitted from another
+    /// shell, or before this one lost the master) instead of submitting
+    /// the job file again; the job file still names the scene and outputs.
+    #[arg(long, value_name = "JOB")]
+    attach: Option<u64>,
     /// Also write each frame's auxiliary outputs (mask, reflected and
     /// transmitted components, reflected-object map) into OUTPUT/frame_NNNN/.
     #[arg(long)]
@@ -139,17 +146,23 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .file_name()
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
-    let args_aux = args.aux;
+    let (args_aux, attach) = (args.aux, args.attach);
     let frames = runtime()?.block_on(async move {
-        let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
         let wire = vtfarm_proto::WireJob {
             aux: args_aux,
             method: job.method.into(),
             ..wire_job(&name, &data, &setups, &reflectors)
         };
+        let start = match attach {
+            Some(job) => RemoteJob::Attach { job },
+            None => RemoteJob::Submit {
+                job: wire,
+                scene: &data,
+            },
+        };
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
-        let result = run_job(&mut conn.link, wire, &data, |event| match event {
+        let result = run_remote_job(&options, start, |event| match event {
             JobEvent::Accepted { job, frames } => {
                 bar.println(format!("job {job} accepted: {frames} frame(s)"))
             }
@@ -179,8 +192,6 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         })
         .await;
         bar.finish_and_clear();
-        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
-        conn.endpoint.wait_idle().await;
         anyhow::Ok(result?)
     })?;
     let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();

@@ -10,7 +10,7 @@ use std::time::Duration;
 use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::wire_job;
+use vtfarm_master::{ATTACH_GRACE, wire_job};
 use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, Scene};
@@ -292,4 +292,85 @@ fn a_dead_peer_is_noticed_by_quic_within_the_heartbeat_timeout() {
     let heartbeat_timeout = SchedulerConfig::default().heartbeat_timeout;
     assert_eq!(vtfarm_proto::IDLE_TIMEOUT, heartbeat_timeout);
     assert!(vtfarm_proto::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
+}
+
+#[test]
+fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
+    let job = Job::new(4);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    pair.add_worker("b", 1.5);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    // Mid-job: two frames delivered, the third running.
+    pair.drive(BOUND, |p| {
+        p.frames_done().len() == 2 && p.workers.iter().any(|w| w.is_running_a_package())
+    });
+    let id = pair.job_id().unwrap();
+    let starts_before = pair.frame_starts.len();
+    pair.restart_master();
+    // The submitter comes back (after its backoff) and re-attaches.
+    pair.drive_bounded(Duration::from_secs(1), u64::MAX, &mut |_| false);
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(4));
+    check_images(&pair, &job);
+    let resumed: Vec<u32> = pair.frame_starts[starts_before..]
+        .iter()
+        .map(|&(_, frame)| frame)
+        .collect();
+    assert!(
+        resumed.iter().all(|&f| f >= 2),
+        "finished frames are not rendered again: {resumed:?}"
+    );
+}
+
+#[test]
+fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
+    let job = Job::new(3);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    let id = pair.job_id().unwrap();
+    pair.drop_submitter();
+    // The job goes on without it; the frames finished meanwhile are replayed.
+    pair.drive(BOUND, |p| p.frame_starts.iter().any(|&(_, f)| f == 2));
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(3));
+    check_images(&pair, &job);
+}
+
+#[test]
+fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
+    let job = Job::new(3);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.attach_submitter(77);
+    let errors = pair.job_failed().expect("no job 77");
+    assert!(errors[0].contains("no job 77"), "{errors:?}");
+
+    // In memory: nobody can come back for the frames, the job stops at once.
+    let mut pair = Pair::new(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data.clone());
+    pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    pair.drop_submitter();
+    assert!(pair.master.status().queue.running.is_none());
+
+    // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1e4);
+    pair.submit(job.wire().0, data);
+    pair.drive(BOUND, |p| p.workers[0].is_running_a_package());
+    let left_at = pair.now;
+    pair.drop_submitter();
+    pair.drive(2 * ATTACH_GRACE, |p| {
+        p.master.status().queue.running.is_none()
+    });
+    assert!(
+        pair.now >= left_at + ATTACH_GRACE,
+        "cancelled after {:?}",
+        pair.now - left_at
+    );
 }

@@ -14,14 +14,11 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use vtfarm_master::{ConnId, MasterCore, Output, Peer};
+use vtfarm_master::{ConnId, Journal, MasterCore, Output, Peer};
 use vtfarm_proto::{FrameDone, JobScene, Message, PackageResult, SceneData, WireJob};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_worker::engine::ActiveFrame;
 use vtfarm_worker::{Engine, SessionEnd, Task, WorkerSession};
-
-/// The submitter's connection.
-pub(crate) const SUBMITTER: ConnId = 1_000_000;
 
 /// Virtual time one traced sample costs a worker of slowdown 1.
 const SAMPLE_COST: Duration = Duration::from_micros(20);
@@ -83,19 +80,35 @@ pub(crate) struct Pair {
     next_conn: ConnId,
     /// Steps taken so far (a bound against livelock).
     pub(crate) steps: u64,
+    /// The submitter's current connection (`None` while it is away).
+    submitter: Option<ConnId>,
+    /// Every frame a `FrameStart` announced, in order.
+    pub(crate) frame_starts: Vec<(u64, u32)>,
+    config: SchedulerConfig,
+    /// The job journal of a persistent master, in a temporary state directory.
+    journal: Option<(Journal, tempfile::TempDir)>,
 }
 
 impl Pair {
+    /// A pair whose master keeps its jobs in memory.
     pub(crate) fn new(config: SchedulerConfig) -> Pair {
-        let mut master = MasterCore::new(config);
-        master.connected(
-            Duration::ZERO,
-            SUBMITTER,
-            Peer::Submitter {
-                address: "pair".into(),
-            },
-        );
-        Pair {
+        Pair::with_master(MasterCore::new(config.clone()), config, None)
+    }
+
+    /// A pair whose master journals its jobs in a temporary state directory.
+    pub(crate) fn persistent(config: SchedulerConfig) -> Pair {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let master = MasterCore::persistent(config.clone());
+        Pair::with_master(master, config, Some((journal, dir)))
+    }
+
+    fn with_master(
+        master: MasterCore,
+        config: SchedulerConfig,
+        journal: Option<(Journal, tempfile::TempDir)>,
+    ) -> Pair {
+        let mut pair = Pair {
             master,
             now: Duration::ZERO,
             latency: Duration::from_millis(1),
@@ -106,7 +119,69 @@ impl Pair {
             next_seq: 0,
             next_conn: 1,
             steps: 0,
+            submitter: None,
+            frame_starts: Vec::new(),
+            config,
+            journal,
+        };
+        pair.connect_submitter();
+        pair
+    }
+
+    fn connect_submitter(&mut self) {
+        let conn = self.next_conn;
+        self.next_conn += 1;
+        self.submitter = Some(conn);
+        let peer = Peer::Submitter {
+            address: "pair".into(),
+        };
+        self.master.connected(self.now, conn, peer);
+    }
+
+    /// The submitter's connection drops (the master hears of it at once).
+    pub(crate) fn drop_submitter(&mut self) {
+        if let Some(conn) = self.submitter.take() {
+            self.master.disconnected(self.now, conn);
+            self.flush();
         }
+    }
+
+    /// A submitter connects and attaches to `job` from the first frame it lacks.
+    pub(crate) fn attach_submitter(&mut self, job: u64) {
+        self.connect_submitter();
+        let from_frame = self.frames_done().len() as u32;
+        let conn = self.submitter.expect("just connected");
+        self.master
+            .message(self.now, conn, Message::AttachJob { job, from_frame });
+        self.flush();
+    }
+
+    /// Kills the master and starts a new one on the same journal: every
+    /// connection is lost, the workers reconnect at once, the submitter
+    /// stays away until it attaches again.
+    pub(crate) fn restart_master(&mut self) {
+        let (journal, _) = self.journal.as_ref().expect("a persistent pair");
+        let journal = journal.clone();
+        self.master = MasterCore::persistent(self.config.clone());
+        self.events.clear();
+        self.submitter = None;
+        for stored in journal.load() {
+            self.master.restore(self.now, stored);
+        }
+        for w in 0..self.workers.len() {
+            if self.workers[w].session.is_some() {
+                self.connect(w);
+            }
+        }
+        self.flush();
+    }
+
+    /// The job id the master gave the submitter.
+    pub(crate) fn job_id(&self) -> Option<u64> {
+        self.to_submitter.iter().find_map(|m| match m {
+            Message::JobAccepted { job, .. } => Some(*job),
+            _ => None,
+        })
     }
 
     /// Adds a worker that connects now; returns its index.
@@ -168,19 +243,25 @@ impl Pair {
             ..job
         };
         self.scene = Some(scene);
+        let conn = self.submitter.expect("the submitter is connected");
         self.master
-            .message(self.now, SUBMITTER, Message::SubmitJob { job });
+            .message(self.now, conn, Message::SubmitJob { job });
         self.flush();
     }
 
-    /// The finished frames the submitter received, in order.
+    /// The finished frames the submitter kept, in order (like
+    /// `run_remote_job`, it skips a frame it has already).
     pub(crate) fn frames_done(&self) -> Vec<&FrameDone> {
-        (self.to_submitter.iter())
-            .filter_map(|m| match m {
-                Message::FrameDone(done) => Some(done),
-                _ => None,
-            })
-            .collect()
+        let mut frames: Vec<&FrameDone> = Vec::new();
+        for m in &self.to_submitter {
+            match m {
+                Message::FrameDone(done) if done.frame as usize == frames.len() => {
+                    frames.push(done)
+                }
+                _ => {}
+            }
+        }
+        frames
     }
 
     /// Whether the submitter was told its job failed.
@@ -264,7 +345,7 @@ impl Pair {
         let now = self.now;
         match event {
             Event::ToMaster(conn, message) => {
-                if conn == SUBMITTER || self.workers.iter().any(|w| w.conn == conn) {
+                if self.submitter == Some(conn) || self.workers.iter().any(|w| w.conn == conn) {
                     self.master.message(now, conn, *message);
                 }
             }
@@ -310,20 +391,21 @@ impl Pair {
     fn route_master_output(&mut self, output: Output) {
         let at = self.now + self.latency;
         match output {
-            Output::Send(SUBMITTER, message) => {
+            Output::Send(conn, message) if Some(conn) == self.submitter => {
                 if let Message::SceneRequest { hash } = *message {
                     let data = self.scene.clone().filter(|s| s.hash == hash);
                     if let Some(data) = data {
-                        self.schedule(
-                            at,
-                            Event::ToMaster(SUBMITTER, Box::new(Message::SceneData(data))),
-                        );
+                        let reply = Message::SceneData(data);
+                        self.schedule(at, Event::ToMaster(conn, Box::new(reply)));
                     }
                 } else {
                     self.to_submitter.push(*message);
                 }
             }
             Output::Send(conn, message) => {
+                if let Message::FrameStart(start) = message.as_ref() {
+                    self.frame_starts.push((start.job, start.frame));
+                }
                 let reachable = (self.workers.iter())
                     .position(|w| w.conn == conn)
                     .filter(|&w| !self.workers[w].partitioned);
@@ -338,6 +420,25 @@ impl Pair {
                     self.kill(w);
                 }
                 self.master.disconnected(self.now, conn);
+            }
+            Output::Persist(record) => {
+                let (journal, _) = self
+                    .journal
+                    .as_ref()
+                    .expect("only a persistent core persists");
+                journal.write(&record);
+            }
+            Output::Replay { conn, job, frames } => {
+                let (journal, _) = self
+                    .journal
+                    .as_ref()
+                    .expect("only a persistent core replays");
+                for frame in frames {
+                    let done = journal.frame(job, frame).expect("journaled frames replay");
+                    if Some(conn) == self.submitter {
+                        self.to_submitter.push(Message::FrameDone(done));
+                    }
+                }
             }
         }
     }
