@@ -12,7 +12,8 @@ use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{
-    FinishedFrame, JobError, LocalFarm, MasterHandle, run_job, server, spawn_master, wire_job,
+    FinishedFrame, JobError, LocalFarm, MasterHandle, RemoteJob, run_job, run_remote_job, server,
+    spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
@@ -731,4 +732,96 @@ async fn a_second_job_on_the_same_scene_transfers_no_scene_bytes() {
         after_first,
         "the second job sends no scene bytes"
     );
+}
+
+/// A master as a child process of the `vtfarm` binary on `listen`.
+fn master_process(cluster_file: &std::path::Path, listen: std::net::SocketAddr) -> ChildGuard {
+    ChildGuard(
+        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+            .args(["master", "--cluster", cluster_file.to_str().unwrap()])
+            .args(["--listen", &listen.to_string()])
+            .spawn()
+            .expect("the vtfarm binary starts"),
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follows() {
+    let _serial = SERIAL.lock().await;
+    let job = job(4, 160, 90);
+    let reference = reference(&job);
+    let dir = tempfile::tempdir().unwrap();
+    let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
+    let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let address = free.local_addr().unwrap();
+    drop(free);
+    let config = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+    let file = dir.path().join("cluster.toml");
+    config.save(&file).unwrap();
+    let options = ClientOptions {
+        master: config.master.clone(),
+        token: config.token.clone(),
+        fingerprint: config.fingerprint.clone(),
+    };
+    let mut master = master_process(&file, address);
+    let workers: Vec<JoinHandle<_>> = ["w1", "w2"]
+        .into_iter()
+        .map(|name| {
+            let (options, cache) = (options.clone(), dir.path().join(name));
+            tokio::spawn(run_worker(
+                options,
+                name.into(),
+                1,
+                Engine::new(Some(cache)),
+                WorkerConfig { slowdown: 4.0 },
+                DrainSignal::never(),
+            ))
+        })
+        .collect();
+    let (frame_tx, mut frame_rx) = tokio::sync::mpsc::unbounded_channel();
+    let submit = {
+        let data = SceneData::from_scene(&job.scene);
+        let wire = wire_job("restart", &data, &job.frames, &job.reflectors);
+        tokio::spawn(async move {
+            // The master may still be starting: try until it answers.
+            loop {
+                let start = RemoteJob::Submit {
+                    job: wire.clone(),
+                    scene: &data,
+                };
+                let outcome = run_remote_job(&options, start, |event| {
+                    if let vtfarm_master::JobEvent::FrameDone(f) = event {
+                        let _ = frame_tx.send(f.frame);
+                    }
+                })
+                .await;
+                match outcome {
+                    Err(JobError::Connect(_)) => {
+                        tokio::time::sleep(Duration::from_millis(100)).await
+                    }
+                    other => return other,
+                }
+            }
+        })
+    };
+    // The trigger: the first finished frame (three remain).
+    let first = tokio::time::timeout(BOUND, frame_rx.recv()).await;
+    assert_eq!(first.expect("a first frame"), Some(0));
+    master.0.kill().unwrap();
+    master.exit_status(BOUND).await;
+    let _restarted = master_process(&file, address);
+    let frames = tokio::time::timeout(BOUND, submit)
+        .await
+        .expect("the job finishes after the restart")
+        .unwrap()
+        .unwrap();
+    assert_same_images(&frames, &reference);
+    let journal = std::fs::read_dir(dir.path().join("jobs")).unwrap().count();
+    assert_eq!(
+        journal, 2,
+        "the completed job stays journaled a while (with the scenes)"
+    );
+    for w in workers {
+        w.abort();
+    }
 }
