@@ -178,7 +178,7 @@ impl Cluster {
     async fn submit(&self, job: &Job) -> Result<Vec<FinishedFrame>, JobError> {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
         let data = SceneData::from_scene(&job.scene);
-        run_job(
+        let run = run_job(
             &mut conn.link,
             // Components too: the glare study measures them.
             vtfarm_proto::WireJob {
@@ -187,18 +187,23 @@ impl Cluster {
             },
             &data,
             |_| {},
-        )
-        .await
+        );
+        (tokio::time::timeout(BOUND, run).await).expect("the job finishes within the bound")
     }
 
     async fn status(&self) -> StatusReply {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
         conn.link.tx.send(Message::StatusRequest).unwrap();
-        loop {
-            if let Some(Message::StatusReply(reply)) = conn.link.rx.recv().await {
-                return reply;
+        let reply = async {
+            loop {
+                match conn.link.rx.recv().await {
+                    Some(Message::StatusReply(reply)) => return reply,
+                    Some(_) => {}
+                    None => panic!("the master closed the status connection"),
+                }
             }
-        }
+        };
+        (tokio::time::timeout(BOUND, reply).await).expect("a status reply within the bound")
     }
 
     /// Waits until `count` workers are connected and asking for work.
@@ -244,8 +249,10 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
         components == &reference_frames(&job)[0],
         "reflected, transmitted and object maps equal too"
     );
+    // Which worker traced how much depends on timing (a loaded machine may
+    // let one do it all); the split is checked deterministically in
+    // master/tests/faults.rs. Every package is counted once, whoever ran it.
     let workers = &frames[0].stats.workers;
-    assert_eq!(workers.len(), 2, "both workers did work: {workers:?}");
     assert!(
         workers.iter().all(|w| w.packages > 0 && w.triangles > 0),
         "{workers:?}"
@@ -264,9 +271,10 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
         wire_job("embedded", &data, &job.frames, &job.reflectors),
         &data,
         |_| {},
-    )
-    .await
-    .unwrap();
+    );
+    let embedded = (tokio::time::timeout(BOUND, embedded).await)
+        .expect("the embedded job finishes within the bound")
+        .unwrap();
     assert_same_images(&embedded, &reference);
     let shut_down = tokio::time::timeout(Duration::from_secs(60), farm.shutdown());
     assert_eq!(
@@ -368,19 +376,27 @@ fn files_under(dir: &std::path::Path) -> std::collections::BTreeMap<PathBuf, Vec
 
 /// Runs the `vtfarm` binary off the async runtime and asserts success.
 async fn vtfarm_cli(args: Vec<String>) {
-    let out = tokio::task::spawn_blocking(move || {
+    let (status, stderr) = run_vtfarm(&args, BOUND).await;
+    assert!(status.success(), "{stderr}");
+}
+
+/// Runs the `vtfarm` binary, bounded; returns its exit status and stderr.
+async fn run_vtfarm(args: &[String], bound: Duration) -> (std::process::ExitStatus, String) {
+    use std::io::{Read, Seek};
+    // A file, not a pipe: a chatty child cannot fill it and block.
+    let mut stderr = tempfile::tempfile().unwrap();
+    let mut child = ChildGuard(
         Command::new(env!("CARGO_BIN_EXE_vtfarm"))
-            .args(&args)
-            .output()
-            .expect("the vtfarm binary runs")
-    })
-    .await
-    .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+            .args(args)
+            .stderr(stderr.try_clone().unwrap())
+            .spawn()
+            .expect("the vtfarm binary runs"),
     );
+    let status = child.exit_status(bound).await;
+    let mut text = String::new();
+    stderr.rewind().unwrap();
+    stderr.read_to_string(&mut text).unwrap();
+    (status, text)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
@@ -623,17 +639,9 @@ async fn status_without_a_master_fails_fast_with_a_clear_error() {
     let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
     let file = dir.path().join("cluster.toml");
     cluster.save(&file).unwrap();
-    let mut child = ChildGuard(
-        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
-            .args(["status", "--cluster", file.to_str().unwrap()])
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
+    let args = ["status", "--cluster", file.to_str().unwrap()].map(String::from);
     // Before: the QUIC idle timeout (30 s) passed first.
-    let status = child.exit_status(Duration::from_secs(20)).await;
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut stderr).unwrap();
+    let (status, stderr) = run_vtfarm(&args, Duration::from_secs(20)).await;
     assert!(!status.success());
     assert!(
         stderr.contains(&address.to_string()) && stderr.contains("timed out"),
