@@ -531,11 +531,10 @@ impl Cluster {
     }
 }
 
+type Submission = JoinHandle<Result<Vec<FinishedFrame>, JobError>>;
+
 /// Submits `job` in a task (so that the test can act while it runs).
-fn submit_in_background(
-    cluster: &Arc<Cluster>,
-    job: &Job,
-) -> JoinHandle<Result<Vec<FinishedFrame>, JobError>> {
+fn submit_in_background(cluster: &Arc<Cluster>, job: &Job) -> Submission {
     let cluster = cluster.clone();
     let job = Job {
         scene: job.scene.clone(),
@@ -549,32 +548,48 @@ fn submit_in_background(
 // frame are checked deterministically in master/tests/faults.rs; these two
 // check the real processes, triggered by protocol events, every wait bounded.
 
+/// A cluster whose only worker, a slowed child process named `name`, holds a
+/// package of `job` (the trigger is `vtfarm status`, not a delay). Straggler
+/// copies are off: the package must come back through the worker's loss.
+async fn a_lone_worker_holding_a_package(
+    job: &Job,
+    heartbeat_timeout: Duration,
+    name: &str,
+    slowdown: f64,
+) -> (Arc<Cluster>, ChildGuard, Submission) {
+    let config = SchedulerConfig {
+        heartbeat_timeout,
+        straggler: None,
+        ..SchedulerConfig::default()
+    };
+    let cluster = Arc::new(Cluster::start(config));
+    let worker = ChildGuard(cluster.worker_process(name, slowdown));
+    cluster.wait_for_workers(1).await;
+    let submit = submit_in_background(&cluster, job);
+    cluster.wait_until_running(name).await;
+    (cluster, worker, submit)
+}
+
+/// The frames of a submission, bounded.
+async fn finished(submit: Submission) -> Vec<FinishedFrame> {
+    (tokio::time::timeout(BOUND, submit).await)
+        .expect("the job finishes")
+        .unwrap()
+        .unwrap()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_killed_worker_process_loses_its_package_to_a_newcomer() {
     let _serial = SERIAL.lock().await;
     let job = job(1, 160, 90);
     let reference = reference(&job);
-    // No straggler cut: the package must come back through the loss itself.
-    let config = SchedulerConfig {
-        heartbeat_timeout: Duration::from_millis(1500),
-        straggler: None,
-        ..SchedulerConfig::default()
-    };
-    let cluster = Arc::new(Cluster::start(config));
-    // Alone on the farm and slowed, so it surely holds a package.
-    let mut doomed = ChildGuard(cluster.worker_process("doomed", 50.0));
-    cluster.wait_for_workers(1).await;
-    let submit = submit_in_background(&cluster, &job);
-    cluster.wait_until_running("doomed").await;
+    let (cluster, mut doomed, submit) =
+        a_lone_worker_holding_a_package(&job, Duration::from_millis(1500), "doomed", 50.0).await;
     doomed.0.kill().unwrap();
     doomed.exit_status(BOUND).await;
     // Only the newcomer can finish the frame, and only with the lost package.
     let _survivor = cluster.worker("survivor", 1.0);
-    let frames = tokio::time::timeout(BOUND, submit)
-        .await
-        .expect("the job finishes")
-        .unwrap()
-        .unwrap();
+    let frames = finished(submit).await;
     assert_same_images(&frames, &reference);
     assert!(
         frames[0].stats.requeued >= 1,
@@ -591,16 +606,8 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
     let reference = reference(&job);
     // A heartbeat timeout far beyond the test's bounds: the master can only
     // drop the worker early because it said goodbye.
-    let config = SchedulerConfig {
-        heartbeat_timeout: Duration::from_secs(3600),
-        straggler: None,
-        ..SchedulerConfig::default()
-    };
-    let cluster = Arc::new(Cluster::start(config));
-    let mut leaving = ChildGuard(cluster.worker_process("leaving", 5.0));
-    cluster.wait_for_workers(1).await;
-    let submit = submit_in_background(&cluster, &job);
-    cluster.wait_until_running("leaving").await;
+    let (cluster, mut leaving, submit) =
+        a_lone_worker_holding_a_package(&job, Duration::from_secs(3600), "leaving", 5.0).await;
     let sent = Command::new("kill")
         .args(["-TERM", &leaving.0.id().to_string()])
         .status()
@@ -610,11 +617,7 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
     assert!(status.success(), "a drained worker exits cleanly: {status}");
     cluster.wait_for_worker_count(0).await;
     let _newcomer = cluster.worker("newcomer", 1.0);
-    let frames = tokio::time::timeout(BOUND, submit)
-        .await
-        .expect("the job finishes")
-        .unwrap()
-        .unwrap();
+    let frames = finished(submit).await;
     assert_same_images(&frames, &reference);
     // (A departed worker is listed by its connection number, not its name.)
     let stats = &frames[0].stats;
@@ -818,8 +821,7 @@ async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follo
     master.0.kill().unwrap();
     master.exit_status(BOUND).await;
     let _restarted = master_process(&file, address);
-    let frames = tokio::time::timeout(BOUND, submit)
-        .await
+    let frames = (tokio::time::timeout(BOUND, submit).await)
         .expect("the job finishes after the restart")
         .unwrap()
         .unwrap();

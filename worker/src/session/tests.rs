@@ -82,22 +82,25 @@ fn tasks(s: &mut WorkerSession) -> Vec<Task> {
     std::iter::from_fn(|| s.poll_task()).collect()
 }
 
-/// A session with the scene at hand and frame (1, 0) prepared, work requested.
-fn ready_session() -> (WorkerSession, Scenes) {
+/// A session with the scene at hand that was told to prepare frame (1, 0).
+fn preparing_session() -> (WorkerSession, Scenes) {
     let mut scenes = Scenes::default();
     scenes.0.insert(SCENE);
     let mut s = WorkerSession::new(Duration::ZERO);
-    s.handle_message(
-        Duration::ZERO,
-        Message::FrameStart(frame_start(1, 0)),
-        &mut scenes,
-    );
+    let start = Message::FrameStart(frame_start(1, 0));
+    s.handle_message(Duration::ZERO, start, &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
     assert_eq!(
         messages(&mut s),
         vec![],
         "no request before the frame is ready"
     );
+    (s, scenes)
+}
+
+/// A session with frame (1, 0) prepared and work requested.
+fn ready_session() -> (WorkerSession, Scenes) {
+    let (mut s, scenes) = preparing_session();
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
     assert_eq!(
         messages(&mut s),
@@ -156,16 +159,8 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
 
 #[test]
 fn packages_of_a_frame_that_failed_to_prepare_fail_with_its_reason() {
-    let mut scenes = Scenes::default();
-    scenes.0.insert(SCENE);
-    let mut s = WorkerSession::new(Duration::ZERO);
-    s.handle_message(
-        Duration::ZERO,
-        Message::FrameStart(frame_start(1, 0)),
-        &mut scenes,
-    );
+    let (mut s, mut scenes) = preparing_session();
     s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
-    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
     s.frame_prepared(Duration::ZERO, (1, 0), Err("BVH build panicked".into()));
     s.handle_message(Duration::ZERO, package(11, 2, 5), &mut scenes);
     let failed: Vec<(u64, String)> = messages(&mut s)
