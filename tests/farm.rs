@@ -619,10 +619,9 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
     let _newcomer = cluster.worker("newcomer", 1.0);
     let frames = finished(submit).await;
     assert_same_images(&frames, &reference);
-    // (A departed worker is listed by its connection number, not its name.)
     let stats = &frames[0].stats;
     let leaving_packages: u32 = (stats.workers.iter())
-        .filter(|w| !w.name.starts_with("newcomer"))
+        .filter(|w| w.name.starts_with("leaving"))
         .map(|w| w.packages)
         .sum();
     assert!(

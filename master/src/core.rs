@@ -137,6 +137,8 @@ pub struct MasterCore {
     completed: BTreeMap<u64, (u32, Duration)>,
     /// The time of the input being handled.
     now: Duration,
+    /// Workers that left during the running frame, for its stats' names.
+    departed: BTreeMap<ConnId, Peer>,
 }
 
 impl MasterCore {
@@ -159,6 +161,7 @@ impl MasterCore {
             persistent: false,
             completed: BTreeMap::new(),
             now: Duration::ZERO,
+            departed: BTreeMap::new(),
         }
     }
 
@@ -271,9 +274,11 @@ impl MasterCore {
     pub fn disconnected(&mut self, now: Duration, conn: ConnId) {
         self.now = now;
         match self.peers.remove(&conn) {
-            Some(Peer::Worker { name, .. }) => {
-                info!(worker = %name, "worker left");
+            Some(peer @ Peer::Worker { .. }) => {
+                info!(worker = %peer_name(conn, Some(&peer)), "worker left");
                 let _ = self.scheduler.worker_left(now, WorkerId(conn));
+                // Its packages of the running frame still count in the frame's stats.
+                self.departed.insert(conn, peer);
             }
             Some(Peer::Submitter { .. }) => {
                 self.awaiting_scene.remove(&conn);
@@ -639,11 +644,7 @@ impl MasterCore {
     }
 
     fn name(&self, conn: ConnId) -> String {
-        match self.peers.get(&conn) {
-            Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
-            Some(Peer::Submitter { address }) => format!("submitter ({address})"),
-            None => format!("connection {conn}"),
-        }
+        peer_name(conn, self.peers.get(&conn).or(self.departed.get(&conn)))
     }
 
     fn workers(&self) -> impl Iterator<Item = ConnId> + '_ {
@@ -724,6 +725,7 @@ impl MasterCore {
                 let submitter = j.submitter;
                 self.persist(Record::FrameDone(Box::new(done.clone())));
                 self.send_to(submitter, Message::FrameDone(done));
+                self.departed.clear();
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
@@ -905,5 +907,14 @@ fn frame_aux(image: &FrameImage) -> WireFrameAux {
         transmitted: wire_image(&image.transmitted),
         reflected_object: image.reflected_object.clone(),
         mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
+    }
+}
+
+/// How logs and statistics name a peer.
+fn peer_name(conn: ConnId, peer: Option<&Peer>) -> String {
+    match peer {
+        Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
+        Some(Peer::Submitter { address }) => format!("submitter ({address})"),
+        None => format!("connection {conn}"),
     }
 }
