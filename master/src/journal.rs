@@ -116,15 +116,48 @@ impl Journal {
             Record::JobComplete { id } => write_atomic(&self.job_dir(*id).join("complete"), b""),
             Record::JobForgotten { id } => {
                 let removed = std::fs::remove_dir_all(self.job_dir(*id));
-                removed.or_else(|e| match e.kind() {
+                let removed = removed.or_else(|e| match e.kind() {
                     std::io::ErrorKind::NotFound => Ok(()),
                     _ => Err(e),
-                })
+                });
+                removed.and_then(|()| self.remove_unused_scenes())
             }
         };
         if let Err(e) = written {
             warn!(dir = %self.dir.display(), "cannot journal {record:?}: {e}", record = record_name(record));
         }
+    }
+
+    /// Removes the scenes no journaled job names any more.
+    fn remove_unused_scenes(&self) -> std::io::Result<()> {
+        let used: Vec<String> = (self.job_ids().into_iter())
+            .filter_map(|id| match read_message(&self.job_dir(id).join("job"))? {
+                Message::SubmitJob { job } => match job.scene {
+                    JobScene::Hash(hash) => Some(format!("{}.scene", hex::encode(hash))),
+                    JobScene::Data(_) => None,
+                },
+                _ => None,
+            })
+            .collect();
+        for entry in std::fs::read_dir(self.dir.join("scenes"))? {
+            let entry = entry?;
+            if !used.iter().any(|u| entry.file_name() == u.as_str()) {
+                std::fs::remove_file(entry.path())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The ids of the journaled jobs, in order.
+    fn job_ids(&self) -> Vec<u64> {
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return Vec::new();
+        };
+        let mut ids: Vec<u64> = entries
+            .filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok())
+            .collect();
+        ids.sort_unstable();
+        ids
     }
 
     /// A finished frame, if the journal has it.
@@ -137,14 +170,9 @@ impl Journal {
 
     /// Every job in the journal, in id order; damaged ones are skipped with a warning.
     pub fn load(&self) -> Vec<StoredJob> {
-        let Ok(entries) = std::fs::read_dir(&self.dir) else {
-            return Vec::new();
-        };
-        let mut ids: Vec<u64> = entries
-            .filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok())
-            .collect();
-        ids.sort_unstable();
-        ids.into_iter().filter_map(|id| self.load_job(id)).collect()
+        (self.job_ids().into_iter())
+            .filter_map(|id| self.load_job(id))
+            .collect()
     }
 
     fn load_job(&self, id: u64) -> Option<StoredJob> {
@@ -204,7 +232,65 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use glam::Vec3;
+    use vtfarm_proto::{FrameStats, WireImage};
+    use vtfarm_render::FrameSetup;
+    use vtfarm_scene::{Camera, Scene};
+
     use super::*;
+
+    fn frame_done(job: u64, frame: u32) -> Record {
+        Record::FrameDone(Box::new(FrameDone {
+            job,
+            frame,
+            image: WireImage::from_pixels(1, 1, &[Vec3::splat(frame as f32)]),
+            stats: FrameStats::default(),
+            aux: None,
+        }))
+    }
+
+    #[test]
+    fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let scene = Arc::new(SceneData::from_scene(&Scene::default()));
+        let setup = FrameSetup {
+            camera: Camera {
+                eye: Vec3::ZERO,
+                target: Vec3::Z,
+                up: Vec3::Y,
+                fov_y_deg: 60.0,
+                width: 1,
+                height: 1,
+            },
+            lighting: Default::default(),
+            trace: Default::default(),
+            vertex: Default::default(),
+        };
+        let job = crate::wire_job("j", &scene, &[setup.clone(), setup.clone(), setup], &[0]);
+        journal.write(&Record::JobQueued {
+            id: 4,
+            job: Box::new(job.clone()),
+            scene: scene.clone(),
+        });
+        journal.write(&frame_done(4, 0));
+        journal.write(&frame_done(4, 2));
+        let stored = journal.load();
+        assert_eq!(stored.len(), 1);
+        assert_eq!(
+            (stored[0].id, stored[0].frames_done, stored[0].complete),
+            (4, 1, false)
+        );
+        assert_eq!(stored[0].job.scene, JobScene::Data((*scene).clone()));
+        assert_eq!(stored[0].job.frames, job.frames);
+        assert_eq!(journal.frame(4, 2).unwrap().frame, 2);
+
+        journal.write(&Record::JobForgotten { id: 4 });
+        assert!(journal.load().is_empty());
+        assert!(journal.frame(4, 0).is_none());
+        let scenes = std::fs::read_dir(dir.path().join("jobs/scenes")).unwrap();
+        assert_eq!(scenes.count(), 0, "the scene went with its last job");
+    }
 
     #[test]
     fn a_damaged_entry_is_skipped() {
