@@ -27,7 +27,9 @@ WORK=${WORK:-$(mktemp -d /tmp/vtfarm-soak.XXXXXX)}
 mkdir -p "$WORK/ref" "$WORK/out" "$WORK/logs"
 echo "soak: $FRAMES frames of ${WIDTH}x$HEIGHT, $WORKERS workers, work dir $WORK"
 
-run() { nice -n 10 "$VTFARM" "$@"; }
+# `nice` execs vtfarm, so $! of `nice ... &` is vtfarm's own pid.
+NICE="nice -n 10"
+run() { $NICE "$VTFARM" "$@"; }
 declare -A PIDS=()
 cleanup() {
     for pid in "${PIDS[@]}"; do kill -9 "$pid" 2>/dev/null || true; done
@@ -62,12 +64,13 @@ job_file "$WORK/job.toml" 0 $((FRAMES - 1))
 run cluster init -o "$WORK/cluster" --master "127.0.0.1:$PORT" >/dev/null
 CLUSTER=$WORK/cluster/cluster.toml
 start_master() {
-    run master --cluster "$CLUSTER" --listen "127.0.0.1:$PORT" >>"$WORK/logs/master.log" 2>&1 &
+    $NICE "$VTFARM" master --cluster "$CLUSTER" --listen "127.0.0.1:$PORT" \
+        >>"$WORK/logs/master.log" 2>&1 &
     PIDS[master]=$!
 }
 start_worker() {
-    run worker --cluster "$CLUSTER" --name "w$1" --threads 1 --cache "$WORK/cache$1" \
-        >>"$WORK/logs/w$1.log" 2>&1 &
+    $NICE "$VTFARM" worker --cluster "$CLUSTER" --name "w$1" --threads 1 \
+        --cache "$WORK/cache$1" >>"$WORK/logs/w$1.log" 2>&1 &
     PIDS[w$1]=$!
 }
 rss() { ps -o rss= -p "$1" 2>/dev/null | tr -d ' ' || echo 0; }
@@ -79,9 +82,15 @@ report_rss() {
 frames_done() { find "$WORK/out" -name 'frame_*.png' | wc -l; }
 
 start_master
+for ((try = 0; ; try++)); do # the master answers before anything else starts
+    run status --cluster "$CLUSTER" >/dev/null 2>&1 && break
+    ((try < 20)) || { echo "the master does not answer; see $WORK/logs/master.log" >&2; exit 1; }
+    sleep 0.5
+done
 for ((w = 0; w < WORKERS; w++)); do start_worker "$w"; done
 start=$(date +%s)
-run submit "$WORK/job.toml" --cluster "$CLUSTER" -o "$WORK/out" >"$WORK/logs/submit.log" 2>&1 &
+$NICE "$VTFARM" submit "$WORK/job.toml" --cluster "$CLUSTER" -o "$WORK/out" \
+    >"$WORK/logs/submit.log" 2>&1 &
 PIDS[submit]=$!
 
 kills=0
