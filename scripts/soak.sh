@@ -3,8 +3,8 @@
 # worker processes, a random worker killed with -9 (and restarted) every
 # KILL_EVERY seconds on average, and the master killed with -9 and restarted
 # once, half way. Every frame must be byte-identical to `vtfarm render` of the
-# same view; the master's and the workers' resident memory is reported along
-# the way. Everything runs niced (the machine may be shared).
+# same view; the master's and the workers' resident memory is reported every
+# tenth of the frames (a killed worker starts afresh, so its figure restarts). Everything runs niced (the machine may be shared).
 #
 #   cargo build --release
 #   scripts/soak.sh                      # 1000 frames of 96x54
@@ -95,14 +95,14 @@ PIDS[submit]=$!
 
 kills=0
 restarted=no
-reported_start=no
+next_report=$((FRAMES / 20))
 next_kill=$((start + RANDOM % (2 * KILL_EVERY) + 1))
 while kill -0 "${PIDS[submit]}" 2>/dev/null; do
     sleep 0.5
     done_now=$(frames_done)
-    if [[ $reported_start == no && $done_now -ge $((FRAMES / 20)) ]]; then
-        report_rss start
-        reported_start=yes
+    if ((done_now >= next_report)); then
+        report_rss "every tenth"
+        next_report=$((next_report + FRAMES / 10))
     fi
     if [[ $restarted == no && $done_now -ge $((FRAMES / 2)) ]]; then
         report_rss "before the master restart"
