@@ -222,7 +222,11 @@ impl MasterCore {
             .collect();
         for job in abandoned {
             info!(job, "no submitter re-attached, cancelling the job");
-            let _ = self.scheduler.cancel_job(now, JobId(job));
+            if self.scheduler.cancel_job(now, JobId(job)).is_err() {
+                // Not in the scheduler (any more): drop it here too.
+                self.forget_job(job);
+                self.persist(Record::JobForgotten { id: job });
+            }
         }
         let delivered: Vec<u64> = (self.completed.iter())
             .filter(|(_, (_, at))| expired(*at))
@@ -563,9 +567,11 @@ impl MasterCore {
                 current: None,
             },
         );
-        self.scheduler
-            .submit_job(now, JobId(id), work)
-            .map_err(|e| e.to_string())
+        let submitted = self.scheduler.submit_job(now, JobId(id), work);
+        submitted.map_err(|e| {
+            self.jobs.remove(&id);
+            e.to_string()
+        })
     }
 
     /// A submitter asks for a job's frames from `from_frame` on.
