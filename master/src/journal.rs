@@ -267,7 +267,12 @@ mod tests {
             trace: Default::default(),
             vertex: Default::default(),
         };
-        let job = crate::wire_job("j", &scene, &[setup.clone(), setup.clone(), setup], &[0]);
+        let options = crate::JobOptions {
+            method: vtfarm_method::MethodKind::VertexTracing,
+            aux: false,
+        };
+        let frames = [setup.clone(), setup.clone(), setup];
+        let job = crate::wire_job("j", &scene, &frames, &[0], options);
         journal.write(&Record::JobQueued {
             id: 4,
             job: Box::new(job.clone()),

@@ -10,6 +10,7 @@
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod core;
 pub mod driver;
@@ -22,4 +23,6 @@ pub use core::{ATTACH_GRACE, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::LocalFarm;
 pub use journal::{Journal, Record, StoredJob};
-pub use submit::{FinishedFrame, JobError, JobEvent, RemoteJob, run_job, run_remote_job, wire_job};
+pub use submit::{
+    FinishedFrame, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+};

@@ -10,7 +10,8 @@ use std::time::Duration;
 use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{ATTACH_GRACE, wire_job};
+use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, Scene};
@@ -59,7 +60,16 @@ impl Job {
     fn wire(&self) -> (WireJob, SceneData) {
         let data = SceneData::from_scene(&self.scene);
         (
-            wire_job("faults", &data, &self.frames, &self.reflectors),
+            wire_job(
+                "faults",
+                &data,
+                &self.frames,
+                &self.reflectors,
+                JobOptions {
+                    method: MethodKind::VertexTracing,
+                    aux: false,
+                },
+            ),
             data,
         )
     }

@@ -7,6 +7,7 @@
 //! - [`serve`]: the async driver of a session over any `Link`.
 //! - [`client`]: QUIC: connect, handshake, reconnect with backoff.
 
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod client;
 pub mod engine;

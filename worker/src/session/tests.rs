@@ -4,6 +4,7 @@ use std::collections::BTreeSet;
 use std::time::Duration;
 
 use glam::Vec3;
+use vtfarm_method::FrameSetup;
 use vtfarm_proto::{
     FrameStart, Message, Package, PackageFailed, PackageResult, SceneData, SceneHash,
     WireFrameSetup, WireMethod,
@@ -44,12 +45,12 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
         job,
         frame,
         scene: SCENE,
-        setup: WireFrameSetup::from_parts(
-            &camera,
-            &Lighting::default(),
-            &TraceSettings::default(),
-            &VertexSettings::default(),
-        ),
+        setup: WireFrameSetup::from(&FrameSetup {
+            camera,
+            lighting: Lighting::default(),
+            trace: TraceSettings::default(),
+            vertex: VertexSettings::default(),
+        }),
         reflectors: vec![0],
         method: WireMethod::VertexTracing,
     }
