@@ -89,8 +89,8 @@ docker-compose version --short
 base=${BASE:-debian:bookworm-slim}
 if ! docker image inspect "$base" >/dev/null 2>&1 && [[ -z ${BASE:-} ]]; then
     # No registry: a minimal bookworm from this machine's apt mirror.
-    mirror=$(grep -hoE 'https?://[^ ]*/debian/?' /etc/apt/sources.list /etc/apt/sources.list.d/* \
-        2>/dev/null | head -n 1 || true)
+    mirror=$(grep -hE '^(URIs:|deb) ' /etc/apt/sources.list /etc/apt/sources.list.d/* 2>/dev/null \
+        | grep -oE 'https?://[^ ]*/debian/?( |$)' | grep -v security | head -n 1 | tr -d ' ' || true)
     [[ -n $mirror ]] || skip "no debian:bookworm-slim image, and no Debian apt mirror for debootstrap"
     command -v debootstrap >/dev/null || {
         [[ $(id -u) -eq 0 ]] || skip "no debian:bookworm-slim image, and debootstrap needs root"
