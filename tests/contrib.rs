@@ -81,6 +81,7 @@ fn shell_scripts_parse_and_slurm_sees_every_sbatch_line() {
         "contrib/slurm/vtfarm.sbatch",
         "contrib/slurm/test-local.sh",
         "contrib/docker/test-local.sh",
+        "contrib/test-lib.sh",
     ] {
         let out = Command::new("bash")
             .arg("-n")

@@ -18,29 +18,8 @@ project=vtfarmtest
 image=vtfarm-test:prebuilt
 host_port=27903
 
-skip() {
-    echo "skipped: $*"
-    exit 0
-}
-
-# Bounded wait: `wait_for SECONDS WHAT COMMAND...` polls COMMAND every half second.
-wait_for() {
-    local seconds=$1 what=$2
-    shift 2
-    for _ in $(seq $((seconds * 2))); do
-        "$@" >/dev/null 2>&1 && return 0
-        sleep 0.5
-    done
-    echo "FAIL: no $what after $seconds s" >&2
-    return 1
-}
-
-vtfarm=${VTFARM:-$repo/target/release/vtfarm}
-if [[ ! -x $vtfarm ]]; then
-    echo "== building $vtfarm"
-    cargo build --release --locked --bin vtfarm --manifest-path "$repo/Cargo.toml"
-fi
-vtfarm=$(realpath "$vtfarm")
+# shellcheck source=contrib/test-lib.sh
+source "$repo/contrib/test-lib.sh"
 
 work=$(mktemp -d /tmp/vtfarm-docker.XXXXXX)
 compose=(env "VTFARM_IMAGE=$image" "VTFARM_HOST_PORT=$host_port"
@@ -109,6 +88,7 @@ if ! docker image inspect "$base" >/dev/null 2>&1 && [[ -z ${BASE:-} ]]; then
     echo "base image $base in $(($(date +%s) - start)) s"
 fi
 
+find_vtfarm
 echo "== docker build -f contrib/docker/Dockerfile.prebuilt (BASE=$base)"
 mkdir "$work/context"
 cp "$vtfarm" "$work/context/vtfarm"

@@ -12,29 +12,10 @@
 set -euo pipefail
 
 repo=$(cd "$(dirname "$0")/../.." && pwd)
-if [[ $(id -u) -ne 0 ]]; then
-    echo "skipped: needs root (installs slurm-wlm and munge, starts slurmctld and slurmd)"
-    exit 0
-fi
-
-# Bounded wait: `wait_for SECONDS WHAT COMMAND...` polls COMMAND every half second.
-wait_for() {
-    local seconds=$1 what=$2
-    shift 2
-    for _ in $(seq $((seconds * 2))); do
-        "$@" >/dev/null 2>&1 && return 0
-        sleep 0.5
-    done
-    echo "FAIL: no $what after $seconds s" >&2
-    return 1
-}
-
-vtfarm=${VTFARM:-$repo/target/release/vtfarm}
-if [[ ! -x $vtfarm ]]; then
-    echo "== building $vtfarm"
-    cargo build --release --locked --bin vtfarm --manifest-path "$repo/Cargo.toml"
-fi
-vtfarm=$(realpath "$vtfarm")
+# shellcheck source=contrib/test-lib.sh
+source "$repo/contrib/test-lib.sh"
+[[ $(id -u) -eq 0 ]] || skip "needs root (installs slurm-wlm and munge, starts slurmctld and slurmd)"
+find_vtfarm
 
 if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
     echo "== installing slurm-wlm and munge"
