@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Shared by contrib/*/test-local.sh (sourced, after `repo` is set): bounded waits, skipping, and
 # the vtfarm binary to test.
 

@@ -15,7 +15,7 @@ set -euo pipefail
 
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 project=vtfarmtest
-image=vtfarm-test:prebuilt
+image="vtfarm-test:prebuilt"
 host_port=27903
 
 # shellcheck source=contrib/test-lib.sh
@@ -75,7 +75,7 @@ if ! docker image inspect "$base" >/dev/null 2>&1 && [[ -z ${BASE:-} ]]; then
         [[ $(id -u) -eq 0 ]] || skip "no debian:bookworm-slim image, and debootstrap needs root"
         DEBIAN_FRONTEND=noninteractive apt-get install -y -q debootstrap
     }
-    base=vtfarm-test-base:bookworm
+    base="vtfarm-test-base:bookworm"
     echo "== debootstrap --variant=minbase bookworm from $mirror"
     start=$(date +%s)
     debootstrap --variant=minbase bookworm "$work/rootfs" "$mirror" >"$work/debootstrap.log" 2>&1 || {

@@ -40,7 +40,7 @@ cleanup() {
 trap cleanup EXIT
 
 echo "== munge and slurm under $work"
-mkdir -p -m 700 "$work/munge"
+mkdir -m 700 "$work/munge"
 dd if=/dev/urandom of="$work/munge/munge.key" bs=128 count=1 status=none
 chmod 400 "$work/munge/munge.key"
 munged --foreground --force --socket="$work/munge/socket" --key-file="$work/munge/munge.key" \
@@ -87,6 +87,7 @@ slurmctld -D -i -f "$SLURM_CONF" >/dev/null 2>&1 &
 pids+=($!)
 slurmd -D -N localhost -f "$SLURM_CONF" >/dev/null 2>&1 &
 pids+=($!)
+# shellcheck disable=SC2016 # expanded by the inner shell, on every poll
 wait_for 60 "idle Slurm node" bash -c '[[ $(sinfo -h -n localhost -o %t) == idle ]]'
 sinfo
 
