@@ -25,10 +25,12 @@ fi
 
 work=$(mktemp -d /tmp/vtfarm-slurm.XXXXXX)
 chmod 755 "$work"
+# Every Slurm command here, scancel in cleanup included, talks to this test cluster only.
+export SLURM_CONF=$work/slurm.conf
 pids=()
 cleanup() {
     local rc=$?
-    scancel --full --quiet -u root 2>/dev/null || true
+    if [[ -s $SLURM_CONF ]]; then timeout 20 scancel --full --quiet -u root 2>/dev/null || true; fi
     for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
     for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
     if [[ $rc -ne 0 ]]; then
@@ -49,7 +51,6 @@ munged --foreground --force --socket="$work/munge/socket" --key-file="$work/mung
 pids+=($!)
 wait_for 10 "munge socket" test -S "$work/munge/socket"
 
-export SLURM_CONF=$work/slurm.conf
 cat >"$SLURM_CONF" <<CONF
 ClusterName=vtfarmtest
 SlurmctldHost=localhost(127.0.0.1)
