@@ -51,13 +51,13 @@ pub use tls::{
 pub use wire::{
     WireBitmap, WireCamera, WireError, WireFrameSetup, WireImage, WireLight, WireLightKind,
     WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality, WireScene,
-    WireTraceSettings, WireTriangle, WireVertexSettings, check_triangle_ids,
+    WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings, check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

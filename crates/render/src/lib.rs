@@ -18,8 +18,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 use vtfarm_vertex::{
-    FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings,
-    behind_id_buffer, trace_package,
+    Behind, FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners,
+    VertexSettings, trace_package,
 };
 
 /// Everything that can change from one frame to the next.
@@ -104,18 +104,32 @@ impl Renderer {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
     }
 
-    /// Only the ID buffers a worker needs (no shading): the frame's and the
-    /// one behind the reflectors.
-    pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, IdBuffer) {
-        (
-            vtfarm_raster::id_buffer(self.scene(), &setup.camera),
-            self.behind(setup),
+    /// Only the raster results a worker needs (no base frame): the frame's
+    /// ID buffer and what lies behind the reflectors.
+    pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
+        let ids = vtfarm_raster::id_buffer(self.scene(), &setup.camera);
+        let behind = self.behind(setup, &ids);
+        (ids, behind)
+    }
+
+    /// What lies behind the reflectors of a frame whose ID buffer is `ids`
+    /// (see `vtfarm_vertex::Behind`).
+    pub fn behind(&self, setup: &FrameSetup, ids: &IdBuffer) -> Behind {
+        Behind::new(
+            &self.tracer(setup),
+            &setup.camera,
+            ids,
+            &self.is_reflector,
+            setup.vertex.transmission,
         )
     }
 
-    /// What lies behind the reflectors (see `vtfarm_vertex::behind_id_buffer`).
-    pub fn behind(&self, setup: &FrameSetup) -> IdBuffer {
-        behind_id_buffer(self.scene(), &setup.camera, &self.is_reflector)
+    fn tracer<'a>(&'a self, setup: &'a FrameSetup) -> Tracer<'a> {
+        Tracer {
+            bvh: &self.bvh,
+            lighting: &setup.lighting,
+            settings: setup.trace,
+        }
     }
 
     /// The vertex tracer's view of a frame.
@@ -123,14 +137,10 @@ impl Renderer {
         &'a self,
         setup: &'a FrameSetup,
         ids: &'a IdBuffer,
-        behind: &'a IdBuffer,
+        behind: &'a Behind,
     ) -> Frame<'a> {
         Frame {
-            tracer: Tracer {
-                bvh: &self.bvh,
-                lighting: &setup.lighting,
-                settings: setup.trace,
-            },
+            tracer: self.tracer(setup),
             camera: setup.camera,
             ids,
             behind,
@@ -150,7 +160,7 @@ impl Renderer {
     ) -> RenderedFrame {
         let start = Instant::now();
         let (base, ids) = self.base_frame(setup);
-        let behind = self.behind(setup);
+        let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
         let mut image = FrameImage::new(base);

@@ -32,8 +32,8 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Frame, PackageOptions, PackageResult, Quality, VertexOwners, VertexSettings, behind_id_buffer,
-    trace_package,
+    Behind, Frame, PackageOptions, PackageResult, Quality, Transmission, VertexOwners,
+    VertexSettings, trace_package,
 };
 
 /// Mirror triangle A (the one with the blue corner) and B.
@@ -53,7 +53,7 @@ struct TestFrame {
     lighting: Lighting,
     camera: Camera,
     ids: IdBuffer,
-    behind: IdBuffer,
+    behind: Behind,
     owners: VertexOwners,
 }
 
@@ -140,15 +140,22 @@ impl TestFrame {
         let mut is_reflector = vec![false; scene.triangles.len()];
         is_reflector[A as usize] = true;
         is_reflector[B as usize] = true;
-        let behind = behind_id_buffer(&scene, &camera, &is_reflector);
         let owners = VertexOwners::new(&scene);
+        let bvh = SceneBvh::new(Arc::new(scene));
+        let lighting = Lighting {
+            lights: Vec::new(),
+            ambient: Vec3::ZERO,
+            background: Vec3::ZERO,
+        };
+        let tracer = Tracer {
+            bvh: &bvh,
+            lighting: &lighting,
+            settings: TraceSettings::default(),
+        };
+        let behind = Behind::new(&tracer, &camera, &ids, &is_reflector, Transmission::Raster);
         TestFrame {
-            bvh: SceneBvh::new(Arc::new(scene)),
-            lighting: Lighting {
-                lights: Vec::new(),
-                ambient: Vec3::ZERO,
-                background: Vec3::ZERO,
-            },
+            bvh,
+            lighting,
             camera,
             ids,
             behind,
