@@ -37,13 +37,23 @@ pub struct Behind {
 }
 
 /// The thin-glass terms of one reflector pixel.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct ThinGlass {
     /// kt(front) · kt(back) · the opaque scene behind.
     transmitted: Vec3,
     /// What the front surface's reflection is multiplied by to add the back
     /// surface's (1 for a single sheet or an opaque reflector).
     reflection_scale: f32,
+}
+
+impl Default for ThinGlass {
+    /// Nothing transmitted, the reflection as it is (an opaque reflector).
+    fn default() -> Self {
+        ThinGlass {
+            transmitted: Vec3::ZERO,
+            reflection_scale: 1.0,
+        }
+    }
 }
 
 impl Behind {
