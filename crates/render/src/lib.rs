@@ -234,6 +234,28 @@ pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<Triangle
         .collect()
 }
 
+/// The per-pixel reference with its traced transmitted part replaced by the
+/// thin-glass model's (rasterized transmission, the back surface's
+/// reflection added to the front's): what `transmission = "raster"` would
+/// give with every reflector pixel traced, i.e. the model's own error.
+pub fn thin_glass_model(reference: &FrameImage, behind: &Behind) -> FrameImage {
+    let mut modelled = reference.clone();
+    for i in (0..modelled.mask.len()).filter(|&i| modelled.mask[i]) {
+        let mut value = vtfarm_vertex::PixelValue {
+            index: i as u32,
+            color: modelled.color.pixels[i] - modelled.transmitted.pixels[i],
+            reflected: modelled.reflected.pixels[i],
+            transmitted: Vec3::ZERO,
+            object: modelled.reflected_object[i],
+        };
+        behind.finish(&mut value);
+        modelled.color.pixels[i] = value.color;
+        modelled.reflected.pixels[i] = value.reflected;
+        modelled.transmitted.pixels[i] = value.transmitted;
+    }
+    modelled
+}
+
 /// How far an image is from a reference over the reference's reflector
 /// pixels, in 8-bit sRGB steps.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
