@@ -345,7 +345,11 @@ fn wrong_types_are_located() {
         4,
         &["transmission", "raster", "traced"],
     );
-    assert_rejected(&format!("{COCKPIT}[quality]\nmax_edge = -3\n"), 4, &["max_edge"]);
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nmax_edge = -3\n"),
+        4,
+        &["max_edge"],
+    );
     assert_rejected(&format!("{COCKPIT}[camera]\nheight = -1\n"), 4, &["-1"]);
 }
 
