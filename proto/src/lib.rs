@@ -51,7 +51,7 @@ pub use tls::{
 pub use wire::{
     WireBitmap, WireCamera, WireError, WireFrameSetup, WireImage, WireLight, WireLightKind,
     WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality, WireScene,
-    WireTraceSettings, WireTriangle, WireVertexSettings, check_triangle_ids,
+    WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings, check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change

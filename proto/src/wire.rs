@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use vtfarm_method::{FrameSetup, MethodKind};
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, VertexSettings};
+use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, Transmission, VertexSettings};
 
 /// The largest image side the wire accepts (the job file's limit too).
 pub const MAX_IMAGE_SIDE: u32 = 16384;
@@ -517,6 +517,31 @@ impl From<WireQuality> for Quality {
     }
 }
 
+/// [`Transmission`] on the wire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireTransmission {
+    Raster,
+    Traced,
+}
+
+impl From<Transmission> for WireTransmission {
+    fn from(t: Transmission) -> Self {
+        match t {
+            Transmission::Raster => WireTransmission::Raster,
+            Transmission::Traced => WireTransmission::Traced,
+        }
+    }
+}
+
+impl From<WireTransmission> for Transmission {
+    fn from(t: WireTransmission) -> Self {
+        match t {
+            WireTransmission::Raster => Transmission::Raster,
+            WireTransmission::Traced => Transmission::Traced,
+        }
+    }
+}
+
 /// [`MethodKind`] on the wire.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum WireMethod {
@@ -562,6 +587,8 @@ pub struct WireVertexSettings {
     pub max_depth: u32,
     pub visibility_radius: u32,
     pub depth_tolerance: f32,
+    pub max_edge: f32,
+    pub transmission: WireTransmission,
 }
 
 impl From<&VertexSettings> for WireVertexSettings {
@@ -574,6 +601,8 @@ impl From<&VertexSettings> for WireVertexSettings {
             max_depth: v.max_depth,
             visibility_radius: v.visibility_radius,
             depth_tolerance: v.depth_tolerance,
+            max_edge: v.max_edge,
+            transmission: v.transmission.into(),
         }
     }
 }
@@ -597,6 +626,8 @@ impl TryFrom<WireVertexSettings> for VertexSettings {
             max_depth: w.max_depth,
             visibility_radius: w.visibility_radius,
             depth_tolerance: non_negative("vertex depth_tolerance", w.depth_tolerance)?,
+            max_edge: non_negative("vertex max_edge", w.max_edge)?,
+            transmission: w.transmission.into(),
         })
     }
 }

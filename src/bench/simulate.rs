@@ -146,7 +146,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     let renderer = Renderer::new(job.scene.clone(), job.reflectors.clone());
     let start = Instant::now();
     let (_, ids) = renderer.base_frame(&job.setup);
-    let behind = renderer.behind(&job.setup);
+    let behind = renderer.behind(&job.setup, &ids);
     let base_frame_seconds = start.elapsed().as_secs_f64();
     let frame = renderer.frame(&job.setup, &ids, &behind);
     let triangles = renderer.reflectors().to_vec();

@@ -16,7 +16,7 @@ use vtfarm_proto::{
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
-use vtfarm_vertex::{Frame, PackageOptions, PackageStats, SparseBitmap, trace_package};
+use vtfarm_vertex::{Behind, Frame, PackageOptions, PackageStats, SparseBitmap, trace_package};
 
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
@@ -25,7 +25,7 @@ pub struct ActiveFrame {
     renderer: Arc<Renderer>,
     setup: FrameSetup,
     ids: IdBuffer,
-    behind: IdBuffer,
+    behind: Behind,
     /// The frame's method when it is not vertex tracing.
     per_reflector: Option<PerReflector>,
 }

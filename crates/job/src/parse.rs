@@ -14,7 +14,7 @@ use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
 use vtfarm_method::MethodKind;
 use vtfarm_scene::{Light, LightKind};
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
     BadView, CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
@@ -122,6 +122,8 @@ struct RawQuality {
     max_trace_depth: Option<Spanned<u32>>,
     fresnel: Option<bool>,
     method: Option<Spanned<String>>,
+    max_edge: Option<Spanned<f32>>,
+    transmission: Option<Spanned<String>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -613,6 +615,27 @@ impl Source<'_> {
         }
         if let Some(depth) = raw.max_refine_depth {
             vertex.max_depth = depth;
+        }
+        if let Some(max_edge) = self.check_opt(
+            "quality.max_edge",
+            &raw.max_edge,
+            "finite and not negative",
+            non_negative,
+        )? {
+            vertex.max_edge = max_edge;
+        }
+        if let Some(name) = &raw.transmission {
+            vertex.transmission = Transmission::from_name(name.get_ref()).ok_or_else(|| {
+                let valid: Vec<&str> = Transmission::ALL.iter().map(|t| t.name()).collect();
+                self.error_at(
+                    name,
+                    format!(
+                        "unknown quality.transmission {:?}; valid: {}",
+                        name.get_ref(),
+                        valid.join(", ")
+                    ),
+                )
+            })?;
         }
         if let Some(depth) = self.check_opt(
             "quality.max_trace_depth",

@@ -12,7 +12,7 @@ use vtfarm_job::{
 use vtfarm_method::MethodKind;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 const JOB: &str = "jobs/test.toml";
 
@@ -115,6 +115,8 @@ max_refine_depth = 9
 max_trace_depth = 3
 fresnel = true
 method = "cubemap-grid"
+max_edge = 12.5
+transmission = "traced"
 
 [frames]
 eyes = [[1, 2, 4], [2, 2, 3]]
@@ -171,6 +173,8 @@ eyes = [[1, 2, 4], [2, 2, 3]]
             pixel_floor: 1.5,
             flatness: 0.3,
             max_depth: 9,
+            max_edge: 12.5,
+            transmission: Transmission::Traced,
             ..VertexSettings::default()
         },
         method: MethodKind::CubeMapGrid,
@@ -336,6 +340,16 @@ fn wrong_types_are_located() {
     );
     assert_rejected(&format!("{COCKPIT}[camera]\neye = [0, 1]\n"), 4, &["3"]);
     assert_rejected(&format!("{COCKPIT}[quality]\nfresnel = 1\n"), 4, &["bool"]);
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\ntransmission = \"glass\"\n"),
+        4,
+        &["transmission", "raster", "traced"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[quality]\nmax_edge = -3\n"),
+        4,
+        &["max_edge"],
+    );
     assert_rejected(&format!("{COCKPIT}[camera]\nheight = -1\n"), 4, &["-1"]);
 }
 

@@ -27,8 +27,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{
-    Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners, VertexSettings,
-    behind_id_buffer, pixel_surface, trace_package,
+    Behind, Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners,
+    VertexSettings, pixel_surface, trace_package,
 };
 
 /// Everything that can change from one frame to the next: what a job
@@ -402,7 +402,13 @@ impl ReflectionMethod for VertexTracing {
     fn render(&self, frame: &MethodFrame<'_>) -> MethodOutput {
         let start = Instant::now();
         let scene = frame.tracer.bvh.scene();
-        let behind = behind_id_buffer(scene, &frame.camera, &frame.reflector_flags());
+        let behind = Behind::new(
+            &frame.tracer,
+            &frame.camera,
+            frame.ids,
+            &frame.reflector_flags(),
+            self.settings.transmission,
+        );
         let owners = VertexOwners::new(scene);
         let vertex_frame = Frame {
             tracer: frame.tracer,

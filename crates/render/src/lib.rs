@@ -22,8 +22,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, Tracer};
 use vtfarm_vertex::{
-    FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings,
-    behind_id_buffer, trace_package,
+    Behind, FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners,
+    VertexSettings, trace_package,
 };
 
 /// How to cut and run the reflector work.
@@ -99,18 +99,32 @@ impl Renderer {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
     }
 
-    /// Only the ID buffers a worker needs (no shading): the frame's and the
-    /// one behind the reflectors.
-    pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, IdBuffer) {
-        (
-            vtfarm_raster::id_buffer(self.scene(), &setup.camera),
-            self.behind(setup),
+    /// Only the raster results a worker needs (no base frame): the frame's
+    /// ID buffer and what lies behind the reflectors.
+    pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
+        let ids = vtfarm_raster::id_buffer(self.scene(), &setup.camera);
+        let behind = self.behind(setup, &ids);
+        (ids, behind)
+    }
+
+    /// What lies behind the reflectors of a frame whose ID buffer is `ids`
+    /// (see `vtfarm_vertex::Behind`).
+    pub fn behind(&self, setup: &FrameSetup, ids: &IdBuffer) -> Behind {
+        Behind::new(
+            &self.tracer(setup),
+            &setup.camera,
+            ids,
+            &self.is_reflector,
+            setup.vertex.transmission,
         )
     }
 
-    /// What lies behind the reflectors (see `vtfarm_vertex::behind_id_buffer`).
-    pub fn behind(&self, setup: &FrameSetup) -> IdBuffer {
-        behind_id_buffer(self.scene(), &setup.camera, &self.is_reflector)
+    fn tracer<'a>(&'a self, setup: &'a FrameSetup) -> Tracer<'a> {
+        Tracer {
+            bvh: &self.bvh,
+            lighting: &setup.lighting,
+            settings: setup.trace,
+        }
     }
 
     /// The vertex tracer's view of a frame.
@@ -118,14 +132,10 @@ impl Renderer {
         &'a self,
         setup: &'a FrameSetup,
         ids: &'a IdBuffer,
-        behind: &'a IdBuffer,
+        behind: &'a Behind,
     ) -> Frame<'a> {
         Frame {
-            tracer: Tracer {
-                bvh: &self.bvh,
-                lighting: &setup.lighting,
-                settings: setup.trace,
-            },
+            tracer: self.tracer(setup),
             camera: setup.camera,
             ids,
             behind,
@@ -145,7 +155,7 @@ impl Renderer {
     ) -> RenderedFrame {
         let start = Instant::now();
         let (base, ids) = self.base_frame(setup);
-        let behind = self.behind(setup);
+        let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
         let mut image = FrameImage::new(base);
@@ -222,6 +232,28 @@ pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<Triangle
         .chunks(size.max(1))
         .map(<[TriangleId]>::to_vec)
         .collect()
+}
+
+/// The per-pixel reference with its traced transmitted part replaced by the
+/// thin-glass model's (rasterized transmission, the back surface's
+/// reflection added to the front's): what `transmission = "raster"` would
+/// give with every reflector pixel traced, i.e. the model's own error.
+pub fn thin_glass_model(reference: &FrameImage, behind: &Behind) -> FrameImage {
+    let mut modelled = reference.clone();
+    for i in (0..modelled.mask.len()).filter(|&i| modelled.mask[i]) {
+        let mut value = vtfarm_vertex::PixelValue {
+            index: i as u32,
+            color: modelled.color.pixels[i] - modelled.transmitted.pixels[i],
+            reflected: modelled.reflected.pixels[i],
+            transmitted: Vec3::ZERO,
+            object: modelled.reflected_object[i],
+        };
+        behind.finish(&mut value);
+        modelled.color.pixels[i] = value.color;
+        modelled.reflected.pixels[i] = value.reflected;
+        modelled.transmitted.pixels[i] = value.transmitted;
+    }
+    modelled
 }
 
 /// How far an image is from a reference over the reference's reflector

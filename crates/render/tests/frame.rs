@@ -63,7 +63,7 @@ fn id_buffer_agrees_with_ray_cast_first_hits_on_the_cockpit() {
 fn time_breaks_deliver_the_preview_then_every_refined_face() {
     let (renderer, setup) = small_cockpit();
     let (_, ids) = renderer.base_frame(&setup);
-    let behind = renderer.behind(&setup);
+    let behind = renderer.behind(&setup, &ids);
     let frame = renderer.frame(&setup, &ids, &behind);
     let mut deliveries = Vec::new();
     let options = PackageOptions {

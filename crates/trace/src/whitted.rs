@@ -38,6 +38,13 @@ struct Shaded {
     reflected_object: ObjectId,
 }
 
+/// Which secondary rays a surface spawns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Rays {
+    Both,
+    ReflectionOnly,
+}
+
 /// Words fed to the signature besides object ids. Object ids are `u32`, so
 /// anything at or above 2^32 cannot collide with one.
 mod word {
@@ -117,7 +124,25 @@ impl Tracer<'_> {
     /// what vertex tracing calls per vertex and per filled pixel.
     pub fn shade(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
         let mut signature = Signature::new();
-        let shaded = self.shade_surface(point, incoming, 1, 1.0, &mut signature);
+        let shaded = self.shade_surface(point, incoming, 1, 1.0, Rays::Both, &mut signature);
+        sample(shaded, signature)
+    }
+
+    /// [`Tracer::shade`] without the point's own refraction ray: local Phong
+    /// with shadow rays plus kr times the reflected radiance (traced in full
+    /// Whitted), `transmitted` zero, and a signature of the local lights and
+    /// the reflected subtree only. For a thin reflector whose transmitted
+    /// part comes from elsewhere (the rasterizer).
+    pub fn shade_reflection(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
+        let mut signature = Signature::new();
+        let shaded = self.shade_surface(
+            point,
+            incoming,
+            1,
+            1.0,
+            Rays::ReflectionOnly,
+            &mut signature,
+        );
         sample(shaded, signature)
     }
 
@@ -160,20 +185,21 @@ impl Tracer<'_> {
                 let point = self.bvh.surface_point(&hit);
                 let object = self.bvh.scene().triangles[hit.triangle as usize].object;
                 (
-                    self.shade_surface(&point, ray.direction, depth, weight, signature),
+                    self.shade_surface(&point, ray.direction, depth, weight, Rays::Both, signature),
                     object,
                 )
             }
         }
     }
 
-    /// The one shading path behind both `trace` and `shade`.
+    /// The one shading path behind `trace`, `shade` and `shade_reflection`.
     fn shade_surface(
         &self,
         point: &SurfacePoint,
         incoming: Vec3,
         depth: u32,
         weight: f32,
+        rays: Rays,
         signature: &mut Signature,
     ) -> Shaded {
         // Branches too weak to change a pixel visibly stay out of the ray-tree
@@ -218,7 +244,7 @@ impl Tracer<'_> {
             shaded.reflected_object = object;
             shaded.color += shaded.reflected;
         }
-        if let Some(ray) = terms.refraction {
+        if let Some(ray) = terms.refraction.filter(|_| rays == Rays::Both) {
             if tracked {
                 signature.add(word::REFRACT);
             }
@@ -239,6 +265,29 @@ impl Tracer<'_> {
         self.terms(point, incoming, &mut |_| {})
     }
 
+    /// Only kr and kt of [`Tracer::surface_terms`] (Fresnel included when
+    /// set): no shadow or secondary ray, so cheap enough for every pixel.
+    pub fn weights(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3) {
+        let (normal, geometric, incoming) = self.normals(point, incoming);
+        let material = self.bvh.scene().material_of(point.triangle);
+        let s = secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
+        (s.kr, s.kt)
+    }
+
+    /// The unit shading normal, geometric normal and incoming direction at
+    /// `point`. Callers' normals come from interpolation: this guards against
+    /// zero ones (and a degenerate triangle's zero geometric normal).
+    fn normals(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3, Vec3) {
+        let geometric = self.bvh.geometric_normal(point.triangle);
+        let normal = point.normal.normalize_or(geometric);
+        let geometric = if geometric == Vec3::ZERO {
+            normal
+        } else {
+            geometric
+        };
+        (normal, geometric, incoming.normalize_or(-normal))
+    }
+
     /// [`Tracer::surface_terms`], telling `lit` each light that reaches the
     /// point (for the ray-tree signature).
     fn terms(
@@ -248,16 +297,7 @@ impl Tracer<'_> {
         lit: &mut dyn FnMut(&Light),
     ) -> SurfaceTerms {
         let material = self.bvh.scene().material_of(point.triangle);
-        let geometric = self.bvh.geometric_normal(point.triangle);
-        // Callers' normals come from interpolation: guard against zero ones
-        // (and a degenerate triangle's zero geometric normal).
-        let normal = point.normal.normalize_or(geometric);
-        let geometric = if geometric == Vec3::ZERO {
-            normal
-        } else {
-            geometric
-        };
-        let incoming = incoming.normalize_or(-normal);
+        let (normal, geometric, incoming) = self.normals(point, incoming);
         let local = phong(
             material,
             self.lighting,

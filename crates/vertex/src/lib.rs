@@ -59,6 +59,42 @@ pub struct VertexSettings {
     pub visibility_radius: u32,
     /// Relative depth tolerance of the visibility test.
     pub depth_tolerance: f32,
+    /// Edges longer than this on screen (pixels) are split even when their
+    /// end samples agree: a reflected object smaller than the gap between two
+    /// samples would otherwise be missed (the sampling-density guarantee).
+    pub max_edge: f32,
+    /// Where a see-through reflector's transmitted part comes from.
+    pub transmission: Transmission,
+}
+
+/// Where the transmitted part of a see-through reflector comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Transmission {
+    /// Thin shells (cover glass, windows, windshields): what the glass lets
+    /// through is the rasterized opaque scene behind it, shaded per pixel and
+    /// weighted per pixel by the glass's transmittance (for a shell that is
+    /// a slab with a back surface, by both surfaces'); only the reflection is
+    /// vertex traced, so refinement follows reflection edges alone.
+    #[default]
+    Raster,
+    /// Thick or lens-like refractors: the refraction ray is traced with the
+    /// rest of the Whitted tree, at vertices and filled pixels alike.
+    Traced,
+}
+
+impl Transmission {
+    pub const ALL: [Transmission; 2] = [Transmission::Raster, Transmission::Traced];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Transmission::Raster => "raster",
+            Transmission::Traced => "traced",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Transmission> {
+        Transmission::ALL.into_iter().find(|t| t.name() == name)
+    }
 }
 
 impl Default for VertexSettings {
@@ -71,6 +107,8 @@ impl Default for VertexSettings {
             max_depth: 16,
             visibility_radius: 1,
             depth_tolerance: 0.01,
+            max_edge: 24.0,
+            transmission: Transmission::Raster,
         }
     }
 }
@@ -78,12 +116,14 @@ impl Default for VertexSettings {
 mod composite;
 mod package;
 mod refine;
+mod thin;
 
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
     trace_package,
 };
+pub use thin::Behind;
 
 use glam::Vec3;
 use package::PixelRect;
@@ -122,9 +162,8 @@ pub struct Frame<'a> {
     pub tracer: Tracer<'a>,
     pub camera: Camera,
     pub ids: &'a IdBuffer,
-    /// The ID buffer of the opaque scene without the reflectors: what a
-    /// transparent reflector shows behind it (see [`behind_id_buffer`]).
-    pub behind: &'a IdBuffer,
+    /// What the reflectors show behind them (see [`Behind`]).
+    pub behind: &'a Behind,
     pub owners: &'a VertexOwners,
     pub settings: VertexSettings,
 }
@@ -145,12 +184,20 @@ impl Frame<'_> {
             > 0.0
     }
 
+    /// Whether refinement and filling watch the opaque scene behind
+    /// `triangle`: only when it is see-through and its transmission is
+    /// traced (rasterized transmission is exact per pixel already).
+    fn behind_hints(&self, triangle: TriangleId) -> bool {
+        self.settings.transmission == Transmission::Traced && self.see_through(triangle)
+    }
+
     /// The object behind the reflectors at pixel (x, y), or `NONE` off screen.
     fn behind_object(&self, x: i64, y: i64) -> u32 {
-        if x < 0 || y < 0 || x >= self.behind.width as i64 || y >= self.behind.height as i64 {
+        let ids = &self.behind.ids;
+        if x < 0 || y < 0 || x >= ids.width as i64 || y >= ids.height as i64 {
             return vtfarm_scene::NONE;
         }
-        self.behind.object[self.behind.index(x as u32, y as u32)]
+        ids.object[ids.index(x as u32, y as u32)]
     }
 
     /// Whether the object behind the reflectors changes along the screen
@@ -239,26 +286,50 @@ impl Frame<'_> {
     }
 
     /// Traces a reflector vertex: the primary ray runs from the eye to the
-    /// vertex, no intersection needed.
+    /// vertex, no intersection needed. With raster transmission only the
+    /// local part and the reflection are traced (see [`Transmission`]).
     fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
         let incoming = (position - self.camera.eye).normalize();
-        self.tracer.shade(
-            &SurfacePoint {
-                position,
-                normal,
-                triangle,
-            },
-            incoming,
-        )
+        let point = SurfacePoint {
+            position,
+            normal,
+            triangle,
+        };
+        match self.settings.transmission {
+            Transmission::Raster => self.tracer.shade_reflection(&point, incoming),
+            Transmission::Traced => self.tracer.shade(&point, incoming),
+        }
     }
 
-    /// Traces pixel (x, y) on `triangle` (see [`pixel_surface`]). The
-    /// reference and triangle filling both use this, so filled pixels are
-    /// exactly the reference.
-    fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> Sample {
+    /// Traces pixel (x, y) on `triangle` (see [`pixel_surface`]) the way
+    /// vertices are traced, and finishes it (see [`Frame::finish_pixel`]).
+    /// Triangle filling and pixels no face reaches use this.
+    fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
         let scene = self.tracer.bvh.scene();
         let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
-        self.tracer.shade(&point, direction)
+        let sample = match self.settings.transmission {
+            Transmission::Raster => self.tracer.shade_reflection(&point, direction),
+            Transmission::Traced => self.tracer.shade(&point, direction),
+        };
+        let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, &sample);
+        self.finish_pixel(&mut value);
+        value
+    }
+
+    /// The reference: pixel (x, y) on `triangle` in full Whitted, the
+    /// refraction ray traced whatever the transmission setting.
+    fn reference_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
+        let scene = self.tracer.bvh.scene();
+        let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
+        let sample = self.tracer.shade(&point, direction);
+        PixelValue::from_sample(self.ids.index(x, y) as u32, &sample)
+    }
+
+    /// Finishes a vertex-traced pixel value: adds the rasterized
+    /// transmitted part (zero unless the transmission comes from the
+    /// rasterizer and the reflector is see-through).
+    fn finish_pixel(&self, value: &mut PixelValue) {
+        self.behind.finish(value);
     }
 }
 

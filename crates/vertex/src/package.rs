@@ -360,12 +360,7 @@ fn trace_all_pixels(
     let pixels: Vec<PixelValue> = rect
         .pixels()
         .filter(|&(x, y)| frame.owns(triangle, x, y))
-        .map(|(x, y)| {
-            PixelValue::from_sample(
-                frame.ids.index(x, y) as u32,
-                &frame.trace_pixel(triangle, x, y),
-            )
-        })
+        .map(|(x, y)| frame.reference_pixel(triangle, x, y))
         .collect();
     let n = pixels.len() as u64;
     (pixels, n)
@@ -429,7 +424,7 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     let behind_corner: Vec<Option<u32>> = faces
         .iter()
         .map(|f| {
-            if !fill || !frame.see_through(mesh.triangle) {
+            if !fill || !frame.behind_hints(mesh.triangle) {
                 return None;
             }
             let objects = f.vertices.map(|v| {
@@ -457,11 +452,13 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
                         && behind_corner[fi]
                             .is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) =>
                 {
-                    gouraud(index, mesh, faces[fi].vertices, w)
+                    let mut value = gouraud(index, mesh, faces[fi].vertices, w);
+                    frame.finish_pixel(&mut value);
+                    value
                 }
                 _ => {
                     traced += 1;
-                    PixelValue::from_sample(index, &frame.trace_pixel(mesh.triangle, x, y))
+                    frame.trace_pixel(mesh.triangle, x, y)
                 }
             }
         })

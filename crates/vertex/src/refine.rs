@@ -207,7 +207,9 @@ impl TriangleMesh {
     }
 
     /// CheckRefinement(): long enough on screen, not too deep, at least one
-    /// end visible, and the samples disagree (or the flatness test forced it).
+    /// end visible, and the samples disagree (or the flatness test forced it,
+    /// or the edge is longer than the maximum edge, below which agreeing
+    /// ends are trusted).
     fn check_refinement(&self, frame: &Frame<'_>, edge: &QueuedEdge, faces: [u32; 2]) -> bool {
         let settings = &frame.settings;
         let deep = faces
@@ -220,6 +222,7 @@ impl TriangleMesh {
             && !deep
             && visible
             && (edge.forced
+                || edge.length > settings.max_edge
                 || self.disagree(edge.a, edge.b, settings.epsilon)
                 || self.crosses_hidden_edge(frame, edge))
     }
@@ -234,7 +237,7 @@ impl TriangleMesh {
         ) else {
             return false;
         };
-        frame.see_through(self.triangle) && frame.behind_changes_along(a, b)
+        frame.behind_hints(self.triangle) && frame.behind_changes_along(a, b)
     }
 
     /// RefineEdge(): inserts the midpoint vertex (position interpolated,

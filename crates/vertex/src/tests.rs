@@ -32,9 +32,18 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Frame, PackageOptions, PackageResult, Quality, VertexOwners, VertexSettings, behind_id_buffer,
-    trace_package,
+    Behind, Frame, PackageOptions, PackageResult, Quality, Transmission, VertexOwners,
+    VertexSettings, trace_package,
 };
+
+/// The default thresholds without the maximum edge length, so that only
+/// the criteria under test split edges (the hand-worked splits assume it).
+fn unguarded() -> VertexSettings {
+    VertexSettings {
+        max_edge: f32::MAX,
+        ..VertexSettings::default()
+    }
+}
 
 /// Mirror triangle A (the one with the blue corner) and B.
 const A: TriangleId = 0;
@@ -53,7 +62,7 @@ struct TestFrame {
     lighting: Lighting,
     camera: Camera,
     ids: IdBuffer,
-    behind: IdBuffer,
+    behind: Behind,
     owners: VertexOwners,
 }
 
@@ -140,15 +149,22 @@ impl TestFrame {
         let mut is_reflector = vec![false; scene.triangles.len()];
         is_reflector[A as usize] = true;
         is_reflector[B as usize] = true;
-        let behind = behind_id_buffer(&scene, &camera, &is_reflector);
         let owners = VertexOwners::new(&scene);
+        let bvh = SceneBvh::new(Arc::new(scene));
+        let lighting = Lighting {
+            lights: Vec::new(),
+            ambient: Vec3::ZERO,
+            background: Vec3::ZERO,
+        };
+        let tracer = Tracer {
+            bvh: &bvh,
+            lighting: &lighting,
+            settings: TraceSettings::default(),
+        };
+        let behind = Behind::new(&tracer, &camera, &ids, &is_reflector, Transmission::Raster);
         TestFrame {
-            bvh: SceneBvh::new(Arc::new(scene)),
-            lighting: Lighting {
-                lights: Vec::new(),
-                ambient: Vec3::ZERO,
-                background: Vec3::ZERO,
-            },
+            bvh,
+            lighting,
             camera,
             ids,
             behind,
@@ -215,7 +231,7 @@ fn check(case: Case, expect: &str) {
     let settings = VertexSettings {
         quality: case.quality,
         pixel_floor: case.pixel_floor,
-        ..VertexSettings::default()
+        ..unguarded()
     };
     let s = frame.trace(settings, case.triangles).stats;
     let filled = if s.filled_pixels == frame.owned_pixels(A) {
@@ -267,7 +283,7 @@ fn the_pixel_floor_stops_refinement() {
     let frame = TestFrame::new(Extras::default());
     let settings = VertexSettings {
         pixel_floor: 2.0,
-        ..VertexSettings::default()
+        ..unguarded()
     };
     let fine = frame.trace(settings, &[A]).stats;
     assert!(fine.refined_edges > 2, "{fine:?}");
@@ -315,7 +331,7 @@ fn vertex_visibility_follows_the_id_buffer() {
     let hidden = TestFrame::new(Extras {
         bottom_occluder: true,
     });
-    let projector = plain.frame(VertexSettings::default()).projector();
+    let projector = plain.frame(unguarded()).projector();
     let at = |x: f32, y: f32, z: f32| {
         projector
             .project(Vec3::new(x, y, z))
@@ -335,8 +351,8 @@ fn vertex_visibility_follows_the_id_buffer() {
     for ((x, y, z), plain_visible, hidden_visible) in cases {
         let s = at(x, y, z);
         let got = (
-            plain.frame(VertexSettings::default()).vertex_visible(A, s),
-            hidden.frame(VertexSettings::default()).vertex_visible(A, s),
+            plain.frame(unguarded()).vertex_visible(A, s),
+            hidden.frame(unguarded()).vertex_visible(A, s),
         );
         assert_eq!(got, (plain_visible, hidden_visible), "at ({x}, {y}, {z})");
     }
@@ -351,7 +367,7 @@ fn triangle_filling_gives_reference_pixels_where_interpolation_would_blur() {
                 VertexSettings {
                     quality,
                     pixel_floor: 20.0,
-                    ..VertexSettings::default()
+                    ..unguarded()
                 },
                 &[A],
             )
@@ -387,7 +403,7 @@ fn the_flatness_guard_splits_a_flat_face_across_its_agreeing_long_edge() {
         let settings = VertexSettings {
             pixel_floor: 14.0,
             flatness,
-            ..VertexSettings::default()
+            ..unguarded()
         };
         let result = trace_package(
             &frame.frame(settings),

@@ -1,0 +1,407 @@
+//! The raster pass of the thin-glass model (`Transmission::Raster`): what
+//! the reflectors show behind them, computed per pixel the way a rasterizer
+//! blends a transparent surface over the scene, with no ray traced.
+//!
+//! A see-through reflector is a thin shell: its front surface, optionally a
+//! back surface close behind (a slab, like the cover glass), then the opaque
+//! scene. Per reflector pixel, from the interpolated normals:
+//! - the transmitted part is kt(front) · kt(back) times the opaque surface
+//!   behind, seen along the eye ray shifted sideways by the slab (Snell
+//!   through both surfaces, which leaves the direction unchanged), shaded
+//!   with local Phong whose shadow test is a shadow map per light (Whitted's
+//!   shadow rays treat the glass as opaque, and so does the map);
+//! - the back surface mirrors about what the front does: the reflected part
+//!   is scaled by (kr(front) + kt(front)² · kr(back)) / kr(front).
+//!
+//! Everything here is deterministic for any thread count, so workers rebuild
+//! it like the ID buffers.
+
+use glam::Vec3;
+use rayon::prelude::*;
+use vtfarm_raster::IdBuffer;
+use vtfarm_scene::shading::phong;
+use vtfarm_scene::{Camera, LightKind, NONE, Projector, Scene, TriangleId};
+use vtfarm_trace::{SurfacePoint, Tracer, refract};
+
+use crate::{PixelValue, Transmission, barycentric, behind_id_buffer, pixel_surface};
+
+/// What lies behind the reflectors: the ID buffer of the opaque scene
+/// (neither reflectors nor see-through surfaces), and with
+/// [`Transmission::Raster`] the thin-glass terms of every see-through
+/// reflector pixel (see the module docs). Part of the frame's raster pass.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Behind {
+    pub ids: IdBuffer,
+    /// Per frame pixel; empty with traced transmission.
+    glass: Vec<ThinGlass>,
+}
+
+/// The thin-glass terms of one reflector pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ThinGlass {
+    /// kt(front) · kt(back) · the opaque scene behind.
+    transmitted: Vec3,
+    /// What the front surface's reflection is multiplied by to add the back
+    /// surface's (1 for a single sheet or an opaque reflector).
+    reflection_scale: f32,
+}
+
+impl Default for ThinGlass {
+    /// Nothing transmitted, the reflection as it is (an opaque reflector).
+    fn default() -> Self {
+        ThinGlass {
+            transmitted: Vec3::ZERO,
+            reflection_scale: 1.0,
+        }
+    }
+}
+
+impl Behind {
+    /// Rasterizes what lies behind the reflectors of a frame whose ID buffer
+    /// is `ids` (`is_reflector` per scene triangle).
+    pub fn new(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        ids: &IdBuffer,
+        is_reflector: &[bool],
+        transmission: Transmission,
+    ) -> Behind {
+        let scene = tracer.bvh.scene();
+        let behind = behind_id_buffer(scene, camera, is_reflector);
+        let glass = match transmission {
+            Transmission::Traced => Vec::new(),
+            Transmission::Raster => thin_glass(tracer, camera, ids, &behind, is_reflector),
+        };
+        Behind { ids: behind, glass }
+    }
+
+    /// Finishes a reflector pixel whose value holds the local part and the
+    /// front surface's reflection: adds the back surface's reflection and the
+    /// transmitted part (nothing with traced transmission).
+    pub fn finish(&self, value: &mut PixelValue) {
+        if let Some(glass) = self.glass.get(value.index as usize) {
+            let ghost = value.reflected * (glass.reflection_scale - 1.0);
+            value.reflected += ghost;
+            value.transmitted += glass.transmitted;
+            value.color += ghost + glass.transmitted;
+        }
+    }
+}
+
+/// The thin-glass terms of every pixel whose reflector is see-through.
+fn thin_glass(
+    tracer: &Tracer<'_>,
+    camera: &Camera,
+    ids: &IdBuffer,
+    behind: &IdBuffer,
+    is_reflector: &[bool],
+) -> Vec<ThinGlass> {
+    let scene = tracer.bvh.scene();
+    let see_through = |t: TriangleId| scene.material_of(t).transmittance.max_element() > 0.0;
+    let glass_pixel = |i: usize| {
+        let t = ids.triangle[i];
+        t != NONE && is_reflector[t as usize] && see_through(t)
+    };
+    let mut out = vec![ThinGlass::default(); ids.triangle.len()];
+    if !(0..ids.triangle.len()).any(glass_pixel) {
+        return out;
+    }
+    // The see-through surfaces that are not reflectors: a slab's back.
+    let layers = vtfarm_raster::id_buffer_where(scene, camera, &|t| {
+        !is_reflector[t as usize] && see_through(t)
+    });
+    let shadows = ShadowMaps::new(tracer, camera, behind, &|i| glass_pixel(i));
+    let width = ids.width as usize;
+    out.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        for (x, slot) in row.iter_mut().enumerate() {
+            let i = y * width + x;
+            if glass_pixel(i) {
+                *slot = glass_at(
+                    tracer, camera, ids, &layers, behind, &shadows, x as u32, y as u32,
+                );
+            }
+        }
+    });
+    out
+}
+
+/// The thin-glass terms at one glass pixel.
+#[allow(clippy::too_many_arguments)]
+fn glass_at(
+    tracer: &Tracer<'_>,
+    camera: &Camera,
+    ids: &IdBuffer,
+    layers: &IdBuffer,
+    behind: &IdBuffer,
+    shadows: &ShadowMaps,
+    x: u32,
+    y: u32,
+) -> ThinGlass {
+    let scene = tracer.bvh.scene();
+    let i = ids.index(x, y);
+    let (front, direction) = pixel_surface(scene, camera, ids, ids.triangle[i], x, y);
+    let (kr, kt) = tracer.weights(&front, direction);
+    let mut weight = kt;
+    let mut reflection_scale = 1.0;
+    let mut shift = Vec3::ZERO;
+    let back = layers.triangle[i];
+    if back != NONE && layers.depth[i] < behind.depth[i] {
+        let (back_point, _) = pixel_surface(scene, camera, layers, back, x, y);
+        let (kr_back, kt_back) = tracer.weights(&back_point, direction);
+        weight *= kt_back;
+        let kr_front = kr.max_element();
+        if kr_front > 0.0 {
+            reflection_scale += (kt * kt * kr_back).max_element() / kr_front;
+        }
+        shift = slab_shift(scene, &front, &back_point, direction);
+    }
+    let seen = opaque_radiance(
+        tracer,
+        camera,
+        behind,
+        shadows,
+        (x, y),
+        front.position,
+        shift,
+    );
+    ThinGlass {
+        transmitted: weight * seen,
+        reflection_scale,
+    }
+}
+
+/// How far sideways a ray along `direction` leaves a slab whose front and
+/// back surfaces it meets (straight) at `front` and `back`: inside, it runs
+/// along the Snell direction to the back plane, and leaves parallel to
+/// `direction` again.
+fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, direction: Vec3) -> Vec3 {
+    let normal = if front.normal.dot(direction) > 0.0 {
+        -front.normal
+    } else {
+        front.normal
+    };
+    let ior = scene.material_of(front.triangle).ior;
+    let eta = if ior.is_finite() && ior > 0.0 {
+        1.0 / ior
+    } else {
+        1.0
+    };
+    let Some(inside) = refract(direction, normal, eta) else {
+        return Vec3::ZERO;
+    };
+    let thickness = (back.position - front.position).dot(-normal);
+    let along = inside.dot(-normal);
+    if thickness <= 0.0 || along <= 1e-6 {
+        return Vec3::ZERO;
+    }
+    let exit = inside * (thickness / along);
+    // The exit point relative to where the straight ray would be.
+    exit - direction * exit.dot(direction)
+}
+
+/// The rasterizer's colour of the opaque scene seen through glass pixel
+/// (x, y) (front surface point `front`) along the eye ray shifted sideways
+/// by `shift`: the triangle the behind buffer shows where the shifted ray's
+/// hit projects, shaded with shadow-mapped local Phong.
+fn opaque_radiance(
+    tracer: &Tracer<'_>,
+    camera: &Camera,
+    behind: &IdBuffer,
+    shadows: &ShadowMaps,
+    (x, y): (u32, u32),
+    front: Vec3,
+    shift: Vec3,
+) -> Vec3 {
+    let scene = tracer.bvh.scene();
+    let projector = Projector::new(camera);
+    let direction = projector.pixel_ray(x, y);
+    let i = behind.index(x, y);
+    if behind.triangle[i] == NONE {
+        return tracer.lighting.background;
+    }
+    // The shifted ray is parallel to the eye ray: it meets the opaque scene
+    // about the shift beside where the eye ray does.
+    let forward = camera.basis().0;
+    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(forward));
+    let Some(guess) = projector.project(straight + shift) else {
+        return tracer.lighting.background;
+    };
+    let origin = front + shift;
+    let (gx, gy) = (guess.x.floor() as i64, guess.y.floor() as i64);
+    // The triangle the behind buffer shows at the guess or, when the
+    // shifted ray misses it, at a neighbouring pixel: the first the ray
+    // meets inside.
+    let candidates = [
+        (0, 0),
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (-1, -1),
+        (1, -1),
+        (-1, 1),
+    ];
+    let mut first = None;
+    let mut found = None;
+    for (dx, dy) in candidates {
+        let (px, py) = (gx + dx, gy + dy);
+        if px < 0 || py < 0 || px >= behind.width as i64 || py >= behind.height as i64 {
+            continue;
+        }
+        let triangle = behind.triangle[behind.index(px as u32, py as u32)];
+        if triangle == NONE {
+            continue;
+        }
+        let Some((position, weights)) = ray_plane(scene, triangle, origin, direction) else {
+            continue;
+        };
+        first.get_or_insert((triangle, position, weights));
+        if weights.iter().all(|&w| w >= -1e-4) {
+            found = Some((triangle, position, weights));
+            break;
+        }
+    }
+    let Some((triangle, position, [wa, wb, wc])) = found.or(first) else {
+        return tracer.lighting.background;
+    };
+    let [na, nb, nc] = scene.triangle_normals(triangle);
+    let plane = scene.geometric_normal(triangle);
+    let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane.normalize_or(Vec3::Y));
+    phong(
+        scene.material_of(triangle),
+        tracer.lighting,
+        position,
+        normal,
+        -direction,
+        |light, _, _| {
+            let k = tracer
+                .lighting
+                .lights
+                .iter()
+                .position(|l| std::ptr::eq(l, light))
+                .unwrap_or(usize::MAX);
+            shadows.lit(k, position, triangle)
+        },
+    )
+}
+
+/// Where the ray from `origin` along `direction` meets the plane of
+/// `triangle`, and the barycentric weights of that point.
+fn ray_plane(
+    scene: &Scene,
+    triangle: TriangleId,
+    origin: Vec3,
+    direction: Vec3,
+) -> Option<(Vec3, [f32; 3])> {
+    let [a, b, c] = scene.triangle_positions(triangle);
+    let plane = (b - a).cross(c - a);
+    let denom = direction.dot(plane);
+    if denom.abs() <= 1e-12 {
+        return None;
+    }
+    let position = origin + direction * ((a - origin).dot(plane) / denom);
+    Some((position, barycentric([a, b, c], position)))
+}
+
+/// One shadow map per light: the scene's ID buffer seen from the light
+/// through a frustum fitted to the opaque points behind the glass.
+struct ShadowMaps {
+    maps: Vec<Option<(Projector, IdBuffer)>>,
+    /// How much nearer than a point an occluder must be to shadow it: a
+    /// small share of the lit region's size, so a surface does not shadow
+    /// itself between texels.
+    bias: f32,
+}
+
+/// Texels along each side of a shadow map.
+const SHADOW_MAP_SIZE: u32 = 1024;
+
+impl ShadowMaps {
+    fn new(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        behind: &IdBuffer,
+        glass_pixel: &(dyn Fn(usize) -> bool + Sync),
+    ) -> ShadowMaps {
+        let scene = tracer.bvh.scene();
+        // The opaque points behind the glass, bounded by a box.
+        let projector = Projector::new(camera);
+        let forward = camera.basis().0;
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for y in 0..behind.height {
+            for x in 0..behind.width {
+                let i = behind.index(x, y);
+                if glass_pixel(i) && behind.triangle[i] != NONE {
+                    let d = projector.pixel_ray(x, y);
+                    let p = camera.eye + d * (behind.depth[i] / d.dot(forward));
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+        }
+        let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.05;
+        let maps = tracer
+            .lighting
+            .lights
+            .iter()
+            .map(|light| {
+                if lo.x > hi.x {
+                    return None;
+                }
+                let centre = (lo + hi) * 0.5;
+                let (eye, distance) = match light.kind {
+                    LightKind::Point { position } => (position, (centre - position).length()),
+                    LightKind::Directional { direction } => {
+                        let far = radius * 100.0;
+                        (centre - direction.normalize_or(Vec3::NEG_Y) * far, far)
+                    }
+                };
+                if distance <= radius * 1.05 {
+                    // The light sits among the points: no frustum holds them.
+                    return None;
+                }
+                let forward = (centre - eye).normalize();
+                let up = if forward.y.abs() > 0.9 {
+                    Vec3::X
+                } else {
+                    Vec3::Y
+                };
+                let view = Camera {
+                    eye,
+                    target: centre,
+                    up,
+                    fov_y_deg: 2.0 * (radius / distance).asin().to_degrees(),
+                    width: SHADOW_MAP_SIZE,
+                    height: SHADOW_MAP_SIZE,
+                };
+                Some((
+                    Projector::new(&view),
+                    vtfarm_raster::id_buffer(scene, &view),
+                ))
+            })
+            .collect();
+        ShadowMaps {
+            maps,
+            bias: radius * 5e-3,
+        }
+    }
+
+    /// Whether light `k` reaches `position` on `triangle`: the map shows
+    /// that triangle there, or nothing clearly nearer than it. A light
+    /// without a map lights every point (it sits among them).
+    fn lit(&self, k: usize, position: Vec3, triangle: TriangleId) -> bool {
+        let Some(Some((projector, map))) = self.maps.get(k) else {
+            return true;
+        };
+        let Some(s) = projector.project(position) else {
+            return true;
+        };
+        let (x, y) = (s.x.floor(), s.y.floor());
+        if x < 0.0 || y < 0.0 || x >= map.width as f32 || y >= map.height as f32 {
+            return true;
+        }
+        let i = map.index(x as u32, y as u32);
+        map.triangle[i] == triangle || map.depth[i] >= s.depth - self.bias
+    }
+}
