@@ -10,7 +10,10 @@ use std::sync::Arc;
 
 use tokio::task::JoinHandle;
 use tracing::{info, warn};
-use vtfarm_proto::{FrameStart, Link, Message, Package, PackageFailed, PackageId, PackageResult};
+use vtfarm_proto::{
+    FrameStart, JobId, Link, Message, Package, PackageFailed, PackageId, PackageResult,
+};
+use vtfarm_vertex::Stop;
 
 use crate::engine::{ActiveFrame, Engine, HEARTBEAT_INTERVAL};
 
@@ -37,7 +40,12 @@ pub enum SessionEnd {
     Disconnected,
 }
 
-type Running = (PackageId, JoinHandle<Result<PackageResult, String>>);
+/// The package being computed, and its stop (cancelled when the master cancels it).
+type Running = (
+    PackageId,
+    JoinHandle<Result<PackageResult, String>>,
+    Arc<Stop>,
+);
 
 /// Serves the master over `link` until it shuts the worker down or the link drops.
 pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) -> SessionEnd {
@@ -48,6 +56,7 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
         pending_frame: None,
         queue: VecDeque::new(),
         cancelled: BTreeSet::new(),
+        frame_error: None,
     };
     let mut running: Option<Running> = None;
     // Whether a RequestWork is outstanding: work is asked for only once the
@@ -68,11 +77,17 @@ pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) ->
                         for reply in session.handle(other) {
                             send(&link, reply);
                         }
+                        // Stop a cancelled package now: it frees its memory and the cores.
+                        if let Some((id, _, stop)) = &running {
+                            if session.cancelled.contains(id) {
+                                stop.cancel();
+                            }
+                        }
                     }
                 }
             }
             outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
-                let (id, _) = running.take().expect("guarded by the select condition");
+                let (id, _, _) = running.take().expect("guarded by the select condition");
                 let reply = match outcome {
                     Ok(Ok(result)) => Message::PackageResult(result),
                     Ok(Err(error)) => Message::PackageFailed(PackageFailed { id, error }),
@@ -123,6 +138,8 @@ struct Session<'a> {
     pending_frame: Option<FrameStart>,
     queue: VecDeque<Package>,
     cancelled: BTreeSet<PackageId>,
+    /// The last frame that could not start, with why: its packages fail with that.
+    frame_error: Option<((JobId, u32), String)>,
 }
 
 impl Session<'_> {
@@ -136,6 +153,9 @@ impl Session<'_> {
             Message::SceneData(data) => {
                 if let Err(e) = self.engine.add_scene(data) {
                     warn!("{e}");
+                    if let Some(start) = self.pending_frame.take() {
+                        self.frame_error = Some(((start.job, start.frame), e));
+                    }
                 }
                 match self.pending_frame.take() {
                     Some(start) => self.start_frame(start),
@@ -183,6 +203,7 @@ impl Session<'_> {
             Err(error) => {
                 warn!(job, frame, "cannot start frame: {error}");
                 self.frame = None;
+                self.frame_error = Some(((job, frame), error));
                 // Its packages fail with this error as they arrive.
                 self.pending_frame = None;
                 Vec::new()
@@ -206,15 +227,27 @@ impl Session<'_> {
             match &self.frame {
                 Some(active) if (active.job, active.frame) == (package.job, package.frame) => {
                     let (active, slowdown, id) = (active.clone(), self.config.slowdown, package.id);
-                    let task = tokio::task::spawn_blocking(move || active.run(&package, slowdown));
-                    return (Some((id, task)), failures);
+                    let stop = Arc::new(Stop::with_budget(active.sample_budget()));
+                    let task_stop = stop.clone();
+                    let task = tokio::task::spawn_blocking(move || {
+                        active.run(&package, slowdown, &task_stop)
+                    });
+                    return (Some((id, task, stop)), failures);
                 }
                 _ => failures.push(Message::PackageFailed(PackageFailed {
                     id: package.id,
-                    error: format!(
-                        "package of job {} frame {} arrived without its frame",
-                        package.job, package.frame
-                    ),
+                    error: match &self.frame_error {
+                        Some((frame, error)) if *frame == (package.job, package.frame) => {
+                            format!(
+                                "frame {} of job {} cannot start: {error}",
+                                package.frame, package.job
+                            )
+                        }
+                        _ => format!(
+                            "package of job {} frame {} arrived without its frame",
+                            package.job, package.frame
+                        ),
+                    },
                 })),
             }
         }

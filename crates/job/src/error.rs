@@ -71,12 +71,15 @@ pub enum JobError {
     },
     /// A `[reflectors]` name matches no triangle of the scene.
     #[error(
-        "{file}: reflector {selector} matches no triangle (objects: {}; materials: {})",
+        "{}: reflector {selector} matches no triangle (objects: {}; materials: {})",
+        place(.file, .location),
         .objects.join(", "),
         .materials.join(", ")
     )]
     NoReflector {
         file: PathBuf,
+        /// Where the name stands in the job file.
+        location: Option<Location>,
         selector: ReflectorSelector,
         /// The scene's object names, to spot a misspelling.
         objects: Vec<String>,

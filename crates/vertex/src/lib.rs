@@ -61,6 +61,51 @@ pub struct VertexSettings {
     pub depth_tolerance: f32,
 }
 
+/// The smallest accepted [`VertexSettings::pixel_floor`]: edges shorter than
+/// half a pixel are never split, so a triangle covering P pixels gets at most
+/// about 8P faces whatever `epsilon` and `flatness` say (a floor of 0 with
+/// epsilon 0 refined hard edges down to float noise).
+pub const MIN_PIXEL_FLOOR: f32 = 0.5;
+/// The deepest accepted [`VertexSettings::max_depth`]: 32 halvings take a
+/// 16384-pixel edge below the smallest pixel floor.
+pub const MAX_REFINE_DEPTH: u32 = 32;
+/// The widest accepted [`VertexSettings::visibility_radius`]: the test costs
+/// `(2r + 1)^2` ID-buffer reads per vertex.
+pub const MAX_VISIBILITY_RADIUS: u32 = 64;
+
+impl VertexSettings {
+    /// Checks every bound: `epsilon` and `depth_tolerance` finite and not
+    /// negative, `pixel_floor` finite and at least [`MIN_PIXEL_FLOOR`],
+    /// `flatness` 0 to 1, `max_depth` at most [`MAX_REFINE_DEPTH`],
+    /// `visibility_radius` at most [`MAX_VISIBILITY_RADIUS`].
+    pub fn validate(&self) -> Result<(), OutOfBounds> {
+        non_negative("epsilon", self.epsilon)?;
+        check(
+            "pixel_floor",
+            self.pixel_floor,
+            format!("finite and at least {MIN_PIXEL_FLOOR} (pixels)"),
+            |f| f.is_finite() && f >= MIN_PIXEL_FLOOR,
+        )?;
+        check("flatness", self.flatness, "between 0 and 1", |v| {
+            (0.0..=1.0).contains(&v)
+        })?;
+        check(
+            "max_depth",
+            self.max_depth,
+            format!("0 to {MAX_REFINE_DEPTH}"),
+            |d| d <= MAX_REFINE_DEPTH,
+        )?;
+        check(
+            "visibility_radius",
+            self.visibility_radius,
+            format!("0 to {MAX_VISIBILITY_RADIUS}"),
+            |r| r <= MAX_VISIBILITY_RADIUS,
+        )?;
+        non_negative("depth_tolerance", self.depth_tolerance)?;
+        Ok(())
+    }
+}
+
 impl Default for VertexSettings {
     fn default() -> Self {
         VertexSettings {
@@ -78,16 +123,19 @@ impl Default for VertexSettings {
 mod composite;
 mod package;
 mod refine;
+mod stop;
 
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
     trace_package,
 };
+pub use stop::{Stop, Stopped};
 
 use glam::Vec3;
 use package::PixelRect;
 use vtfarm_raster::IdBuffer;
+use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
 use vtfarm_scene::{Camera, Projector, ScreenPoint, TriangleId};
 use vtfarm_trace::{Sample, SurfacePoint, Tracer};
 
@@ -127,9 +175,23 @@ pub struct Frame<'a> {
     pub behind: &'a IdBuffer,
     pub owners: &'a VertexOwners,
     pub settings: VertexSettings,
+    /// Cancellation and the sample budget; `None` runs to the end.
+    pub stop: Option<&'a Stop>,
 }
 
 impl Frame<'_> {
+    /// Whether the package must stop (see [`Stop`]).
+    fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.stopped().is_some())
+    }
+
+    /// Every traced sample counts against the budget, here in one place.
+    fn charge_sample(&self) {
+        if let Some(stop) = self.stop {
+            stop.charge(1);
+        }
+    }
+
     fn projector(&self) -> Projector {
         Projector::new(&self.camera)
     }
@@ -241,6 +303,7 @@ impl Frame<'_> {
     /// Traces a reflector vertex: the primary ray runs from the eye to the
     /// vertex, no intersection needed.
     fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
+        self.charge_sample();
         let incoming = (position - self.camera.eye).normalize();
         self.tracer.shade(
             &SurfacePoint {
@@ -256,6 +319,7 @@ impl Frame<'_> {
     /// reference and triangle filling both use this, so filled pixels are
     /// exactly the reference.
     fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> Sample {
+        self.charge_sample();
         let scene = self.tracer.bvh.scene();
         let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
         self.tracer.shade(&point, direction)

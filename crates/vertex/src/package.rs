@@ -343,6 +343,7 @@ fn trace_all_pixels(
 ) -> (Vec<PixelValue>, u64) {
     let pixels: Vec<PixelValue> = rect
         .pixels()
+        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(triangle, x, y))
         .map(|(x, y)| {
             PixelValue::from_sample(
@@ -432,6 +433,7 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     let mut traced = 0;
     let pixels = rect
         .pixels()
+        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(mesh.triangle, x, y))
         .map(|(x, y)| {
             let index = frame.ids.index(x, y) as u32;
