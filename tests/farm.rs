@@ -145,7 +145,10 @@ impl Cluster {
                 name,
                 1,
                 Engine::new(Some(cache)),
-                WorkerConfig { slowdown },
+                WorkerConfig {
+                    slowdown,
+                    ..WorkerConfig::default()
+                },
             )
             .await;
         })

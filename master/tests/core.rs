@@ -12,7 +12,7 @@ use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_vertex::{Quality, Stop, VertexSettings};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
@@ -187,13 +187,23 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             // The first package comes back with a bitmap outside the frame: it fails and is retried.
             Some(p) if !malformed_sent => {
                 malformed_sent = true;
-                let mut result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
+                let mut result = h
+                    .frame
+                    .as_ref()
+                    .unwrap()
+                    .run(&p, 1.0, &Stop::with_budget(u64::MAX))
+                    .unwrap();
                 result.bitmap.x0 = u32::MAX - 1;
                 result.bitmap.width = 4;
                 h.send(WORKER, Message::PackageResult(result))
             }
             Some(p) => {
-                let result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
+                let result = h
+                    .frame
+                    .as_ref()
+                    .unwrap()
+                    .run(&p, 1.0, &Stop::with_budget(u64::MAX))
+                    .unwrap();
                 h.send(WORKER, Message::PackageResult(result))
             }
             None => h.send(

@@ -41,8 +41,8 @@ impl ActiveFrame {
     /// package takes (sleeping `slowdown - 1` times the compute time), to
     /// emulate a slower machine in tests and benchmarks.
     ///
-    /// `stop` cancels the package from another thread; it should allow
-    /// [`ActiveFrame::sample_budget`] samples. A panic inside the package
+    /// `stop` cancels the package from another thread, and fails it when it
+    /// traces more samples than its budget. A panic inside the package
     /// becomes its error: it never takes the worker down.
     pub fn run(
         &self,
@@ -77,19 +77,16 @@ impl ActiveFrame {
 }
 
 impl ActiveFrame {
-    /// The samples one package of this frame may trace before it counts as
-    /// a runaway and fails: [`SAMPLES_PER_PIXEL_BUDGET`] per pixel of the
-    /// frame (no package owns more than the frame's pixels).
-    pub fn sample_budget(&self) -> u64 {
-        SAMPLES_PER_PIXEL_BUDGET
-            * u64::from(self.setup.camera.width)
-            * u64::from(self.setup.camera.height)
+    /// The frame's pixel count: a package's sample budget is a multiple of it
+    /// (no package owns more than the frame's pixels).
+    pub fn pixels(&self) -> u64 {
+        u64::from(self.setup.camera.width) * u64::from(self.setup.camera.height)
     }
 }
 
-/// Traced samples per frame pixel a package may use. Vertex tracing needs
-/// about 5 per pixel it owns at most (vertices at the half-pixel floor plus
-/// filling), so only a runaway reaches this.
+/// The default budget of traced samples per frame pixel for one package.
+/// Vertex tracing needs about 5 per pixel it owns at most (vertices at the
+/// half-pixel floor plus filling), so only a runaway reaches this.
 pub const SAMPLES_PER_PIXEL_BUDGET: u64 = 64;
 
 /// Runs `f`, turning a panic into an error with its message, so that neither

@@ -23,11 +23,17 @@ pub struct WorkerConfig {
     /// Makes every package take this many times its compute time (≥ 1): a
     /// documented way to emulate a slower machine.
     pub slowdown: f64,
+    /// Traced samples a package may use per pixel of its frame before it
+    /// fails as a runaway (see [`crate::engine::SAMPLES_PER_PIXEL_BUDGET`]).
+    pub samples_per_pixel_budget: u64,
 }
 
 impl Default for WorkerConfig {
     fn default() -> Self {
-        WorkerConfig { slowdown: 1.0 }
+        WorkerConfig {
+            slowdown: 1.0,
+            samples_per_pixel_budget: crate::engine::SAMPLES_PER_PIXEL_BUDGET,
+        }
     }
 }
 
@@ -227,7 +233,8 @@ impl Session<'_> {
             match &self.frame {
                 Some(active) if (active.job, active.frame) == (package.job, package.frame) => {
                     let (active, slowdown, id) = (active.clone(), self.config.slowdown, package.id);
-                    let stop = Arc::new(Stop::with_budget(active.sample_budget()));
+                    let budget = active.pixels() * self.config.samples_per_pixel_budget;
+                    let stop = Arc::new(Stop::with_budget(budget));
                     let task_stop = stop.clone();
                     let task = tokio::task::spawn_blocking(move || {
                         active.run(&package, slowdown, &task_stop)
