@@ -5,6 +5,8 @@
 //! Per frame it rasterizes the base frame, sends `FrameStart` to every
 //! worker, hands out the scheduler's packages, composites each accepted
 //! result over the base frame and sends the finished frame to the submitter.
+//! A result that writes a pixel its package does not own in the frame's ID
+//! buffer (pixel ownership) fails the package.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
@@ -17,8 +19,9 @@ use vtfarm_proto::{
     SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
     WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
 };
+use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
     WorkerId, WorkerState,
@@ -66,21 +69,27 @@ struct Job {
 }
 
 impl Job {
-    /// The reflector triangles that work `items` cover (for progress).
-    fn triangles_in(&self, items: &[u32]) -> u64 {
-        match &self.groups {
+    /// The reflector triangles that work `items` cover, sorted: the
+    /// triangles whose pixels the package's result may write.
+    fn triangles_in(&self, items: &[u32]) -> Vec<TriangleId> {
+        let mut triangles: Vec<TriangleId> = match &self.groups {
             Some(groups) => (items.iter())
                 .filter_map(|&g| groups.get(g as usize))
-                .map(|g| g.len() as u64)
-                .sum(),
-            None => items.len() as u64,
-        }
+                .flatten()
+                .copied()
+                .collect(),
+            None => items.to_vec(),
+        };
+        triangles.sort_unstable();
+        triangles
     }
 }
 
 /// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
     start: FrameStart,
+    /// The frame's ID buffer: which reflector triangle owns each pixel.
+    ids: IdBuffer,
     image: FrameImage,
     totals: PackageStats,
     triangles_done: u64,
@@ -90,8 +99,9 @@ struct FrameAssembly {
 struct InFlight {
     job: u64,
     frame: u32,
-    /// The reflector triangles its items cover, for progress.
-    triangles: u64,
+    /// The reflector triangles its items cover, sorted: for progress and
+    /// pixel ownership.
+    triangles: Vec<TriangleId>,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
 }
@@ -275,10 +285,20 @@ impl MasterCore {
             return;
         };
         let (width, height) = (current.image.color.width, current.image.color.height);
-        let bitmap = match result.bitmap.into_bitmap_within(width, height) {
+        let checked = (result.bitmap.into_bitmap_within(width, height))
+            .map_err(|e| format!("malformed result: {e}"))
+            .and_then(|bitmap| {
+                let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
+                match bitmap.foreign_pixel(&current.ids, owned) {
+                    Some((x, y)) => Err(format!(
+                        "result writes pixel ({x}, {y}), which its package does not own"
+                    )),
+                    None => Ok(bitmap),
+                }
+            });
+        let bitmap = match checked {
             Ok(b) => b,
-            Err(e) => {
-                let error = format!("malformed result: {e}");
+            Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
                 let _ = self
                     .scheduler
@@ -306,7 +326,7 @@ impl MasterCore {
             debug!(package = result.id, "result ignored: {e}");
             return;
         }
-        let (job_id, triangles) = (in_flight.job, in_flight.triangles);
+        let (job_id, triangles) = (in_flight.job, in_flight.triangles.len() as u64);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
@@ -377,19 +397,8 @@ impl MasterCore {
         if job.reflectors.is_empty() || job.frames.is_empty() {
             return self.refuse_job(conn, "a job needs reflectors and at least one frame".into());
         }
-        let frames: Result<Vec<FrameSetup>, _> = job
-            .frames
-            .into_iter()
-            .map(|f| {
-                f.into_parts()
-                    .map(|(camera, lighting, trace, vertex)| FrameSetup {
-                        camera,
-                        lighting,
-                        trace,
-                        vertex,
-                    })
-            })
-            .collect();
+        let frames: Result<Vec<FrameSetup>, _> =
+            job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = match frames {
             Ok(f) => f,
             Err(e) => return self.refuse_job(conn, format!("bad frame set-up: {e}")),
@@ -598,22 +607,18 @@ impl MasterCore {
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let (base, _) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
+        let (base, ids) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
         let start = FrameStart {
             job,
             frame,
             scene: j.scene_hash,
-            setup: WireFrameSetup::from_parts(
-                &setup.camera,
-                &setup.lighting,
-                &setup.trace,
-                &setup.vertex,
-            ),
+            setup: WireFrameSetup::from(setup),
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
         };
         j.current = Some(FrameAssembly {
             start: start.clone(),
+            ids,
             image: FrameImage::new(base),
             totals: PackageStats::default(),
             triangles_done: 0,
@@ -636,10 +641,8 @@ impl MasterCore {
     }
 
     fn assign(&mut self, a: Assignment) {
-        let triangles = self
-            .jobs
-            .get(&a.job.0)
-            .map_or(0, |j| j.triangles_in(&a.items));
+        let triangles =
+            (self.jobs.get(&a.job.0)).map_or_else(Vec::new, |j| j.triangles_in(&a.items));
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,

@@ -9,7 +9,8 @@ use std::time::Duration;
 use tokio::task::JoinHandle;
 use tokio::time::timeout;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{JobError, MasterHandle, Peer, run_job, spawn_master, wire_job};
+use vtfarm_master::{JobError, JobOptions, MasterHandle, Peer, run_job, spawn_master, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::{Link, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
@@ -65,7 +66,17 @@ fn small_job() -> (
         vertex: VertexSettings::default(),
     };
     let data = SceneData::from_scene(&c.scene);
-    let job = wire_job("failures", &data, std::slice::from_ref(&setup), &reflectors);
+    let options = JobOptions {
+        method: MethodKind::VertexTracing,
+        aux: false,
+    };
+    let job = wire_job(
+        "failures",
+        &data,
+        std::slice::from_ref(&setup),
+        &reflectors,
+        options,
+    );
     (job, data, setup, reflectors, c.scene)
 }
 

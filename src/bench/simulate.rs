@@ -61,7 +61,7 @@ pub(crate) struct SimulateArgs {
     #[arg(long, default_value_t = 1080)]
     height: u32,
     /// Quality level of the recorded frame.
-    #[arg(long, value_parser = crate::parse_quality, default_value = "full")]
+    #[arg(long, value_parser = crate::shared::parse_quality, default_value = "full")]
     quality: Quality,
     /// Cockpit detail (1.0 ≈ 100k triangles).
     #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
