@@ -28,15 +28,21 @@ pub enum ConnectError {
     Setup(String),
     #[error("cannot connect to {master}: {source}")]
     Connect { master: String, source: ProtoError },
+    /// The master's certificate is not the one pinned in `cluster.toml`.
+    #[error(
+        "the certificate of {master} does not match the fingerprint in cluster.toml ({source}); copy the master's current cluster.toml"
+    )]
+    WrongCertificate { master: String, source: ProtoError },
 }
 
 impl ConnectError {
     /// Whether trying again later could help (the master may be restarting);
-    /// a refusal (wrong token or version) or a bad set-up will not.
+    /// a refusal (wrong token or version), a certificate other than the
+    /// pinned one or a bad set-up will not.
     pub fn is_transient(&self) -> bool {
         match self {
             ConnectError::Resolve(_) => true,
-            ConnectError::Setup(_) => false,
+            ConnectError::Setup(_) | ConnectError::WrongCertificate { .. } => false,
             ConnectError::Connect { source, .. } => !matches!(source, ProtoError::Refused { .. }),
         }
     }
@@ -75,7 +81,19 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
     let connecting = endpoint
         .connect(address, SERVER_NAME)
         .map_err(|e| ConnectError::Setup(e.to_string()))?;
-    let connection = connecting.await.map_err(|e| failed(e.into()))?;
+    let connection = connecting.await.map_err(|e| {
+        // Our verifier refuses a certificate only when its fingerprint differs.
+        let wrong_certificate = matches!(&e, quinn::ConnectionError::TransportError(t)
+            if t.reason.contains("invalid peer certificate"));
+        if wrong_certificate {
+            ConnectError::WrongCertificate {
+                master: options.master.clone(),
+                source: e.into(),
+            }
+        } else {
+            failed(e.into())
+        }
+    })?;
     client_handshake(&connection, &Hello::new(options.token.clone(), role))
         .await
         .map_err(failed)?;

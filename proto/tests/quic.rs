@@ -350,3 +350,25 @@ async fn one_endpoint_survives_every_bad_client_in_turn() {
         server.check_good_client().await;
     }
 }
+
+/// A pinned fingerprint that does not match is a configuration error:
+/// retrying cannot help, so a worker stops instead of retrying forever.
+#[tokio::test]
+async fn a_wrong_fingerprint_is_not_worth_retrying() {
+    let server = Server::start();
+    let options = vtfarm_proto::client::ClientOptions {
+        master: server.addr.to_string(),
+        token: TOKEN.to_owned(),
+        fingerprint: "ab".repeat(32),
+    };
+    let error = tokio::time::timeout(
+        PATIENCE,
+        vtfarm_proto::client::connect(&options, vtfarm_proto::Role::Submitter),
+    )
+    .await
+    .expect("TLS finishes in time")
+    .err()
+    .expect("the certificate does not match");
+    assert!(!error.is_transient(), "{error}");
+    assert!(error.to_string().contains("fingerprint"), "{error}");
+}
