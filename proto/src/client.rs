@@ -98,9 +98,16 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
         .await
         .map_err(failed)?;
     let (send, recv) = connection.open_bi().await.map_err(|e| failed(e.into()))?;
+    let link = Link::over_connection(
+        connection.clone(),
+        recv,
+        send,
+        SESSION_LIMIT,
+        options.master.clone(),
+    );
     Ok(Connection {
         endpoint,
         connection,
-        link: Link::over_stream(recv, send, SESSION_LIMIT),
+        link,
     })
 }

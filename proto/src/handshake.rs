@@ -31,7 +31,7 @@ pub const REFUSAL_LINGER: Duration = Duration::from_secs(1);
 /// The application close code of an orderly close (`Shutdown`, job done).
 pub const CLOSE_NORMAL: quinn::VarInt = quinn::VarInt::from_u32(0);
 /// Close reasons are cut to this many bytes to fit one packet.
-const MAX_REASON_BYTES: usize = 200;
+pub(crate) const MAX_REASON_BYTES: usize = 200;
 
 /// What the master accepts and how it introduces itself.
 #[derive(Clone, PartialEq, Eq)]
