@@ -80,7 +80,8 @@ pub enum JobError {
         file: PathBuf,
         /// Where the name stands in the job file.
         location: Option<Location>,
-        selector: ReflectorSelector,
+        // Boxed: keeps the error small on the hot `Result` paths.
+        selector: Box<ReflectorSelector>,
         /// The scene's object names, to spot a misspelling.
         objects: Vec<String>,
         /// The scene's material names.

@@ -316,7 +316,7 @@ impl Job {
                 return Err(JobError::NoReflector {
                     file: self.file.clone(),
                     location: self.locations.get(&selector.key()).copied(),
-                    selector: selector.clone(),
+                    selector: Box::new(selector.clone()),
                     objects: sorted_names(scene.objects.iter().map(|o| &o.name)),
                     materials: sorted_names(scene.materials.iter().map(|m| &m.name)),
                 });

@@ -27,6 +27,9 @@ const BUILTINS: [&str; 1] = ["cockpit"];
 
 pub(crate) type Vec3Value = Spanned<[f32; 3]>;
 
+/// A reflector selector and where the file names it (`None`: a default).
+type LocatedSelector = (ReflectorSelector, Option<Range<usize>>);
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawJob {
@@ -598,7 +601,7 @@ impl Source<'_> {
         &self,
         raw: Option<Spanned<RawReflectors>>,
         is_obj: bool,
-    ) -> Result<Vec<(ReflectorSelector, Option<Range<usize>>)>, JobError> {
+    ) -> Result<Vec<LocatedSelector>, JobError> {
         let Some(raw) = raw else {
             return if is_obj {
                 Err(self.error(
@@ -615,14 +618,13 @@ impl Source<'_> {
         let span = raw.span();
         let raw = raw.into_inner();
         let named = |name: Spanned<String>| (Some(name.span()), name.into_inner());
-        let selectors: Vec<(ReflectorSelector, Option<Range<usize>>)> =
-            (raw.objects.into_iter().map(named))
-                .map(|(span, n)| (ReflectorSelector::Object(n), span))
-                .chain(
-                    (raw.materials.into_iter().map(named))
-                        .map(|(span, n)| (ReflectorSelector::Material(n), span)),
-                )
-                .collect();
+        let selectors: Vec<LocatedSelector> = (raw.objects.into_iter().map(named))
+            .map(|(span, n)| (ReflectorSelector::Object(n), span))
+            .chain(
+                (raw.materials.into_iter().map(named))
+                    .map(|(span, n)| (ReflectorSelector::Material(n), span)),
+            )
+            .collect();
         if selectors.is_empty() {
             return Err(self.error(
                 Some(span),

@@ -104,15 +104,16 @@ impl Camera {
     /// right = forward × up). Blames `eye` or `up`.
     pub fn check_view(eye: Vec3, target: Vec3, up: Vec3) -> Result<(), OutOfBounds> {
         let forward = target - eye;
-        if !(forward.length() >= 1e-6) {
+        let length = forward.length();
+        if length.is_nan() || length < 1e-6 {
             return Err(OutOfBounds::new(
                 "eye",
                 eye,
                 format!("away from the target {target}"),
             ));
         }
-        // Written so that NaN also fails.
-        if !(forward.normalize().cross(up.normalize_or_zero()).length() >= 1e-4) {
+        let sine = forward.normalize().cross(up.normalize_or_zero()).length();
+        if sine.is_nan() || sine < 1e-4 {
             return Err(OutOfBounds::new(
                 "up",
                 up,

@@ -155,7 +155,7 @@ impl Scene {
         if let Some(i) = self
             .normals
             .iter()
-            .position(|n| !((n.length() - 1.0).abs() <= 1e-3))
+            .position(|n| (n.length() - 1.0).abs().is_nan() || (n.length() - 1.0).abs() > 1e-3)
         {
             return Err(format!("normal {i} is not unit length"));
         }
