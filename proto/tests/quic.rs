@@ -145,13 +145,15 @@ impl Server {
 }
 
 /// Asserts that the master closed `conn` with `code`'s application close code.
-async fn check_closed_with(conn: &quinn::Connection, code: RefuseCode) {
+/// Waits for the master to close with `code`; returns the close reason.
+async fn check_closed_with(conn: &quinn::Connection, code: RefuseCode) -> String {
     let closed = tokio::time::timeout(PATIENCE, conn.closed())
         .await
         .expect("the master closes the connection");
     match closed {
         quinn::ConnectionError::ApplicationClosed(close) => {
             assert_eq!(close.error_code, code.close_code(), "{close:?}");
+            String::from_utf8_lossy(&close.reason).into_owned()
         }
         other => panic!("expected an application close with {code:?}, got {other:?}"),
     }
@@ -410,16 +412,7 @@ async fn bad_session_input_closes_with_its_code_and_reason() {
             .expect("welcomed");
         let (mut send, _recv) = conn.open_bi().await.expect("session stream");
         send.write_all(&bytes).await.expect("written");
-        let closed = tokio::time::timeout(PATIENCE, conn.closed())
-            .await
-            .expect("the master closes the connection");
-        match closed {
-            quinn::ConnectionError::ApplicationClosed(close) => {
-                assert_eq!(close.error_code, code.close_code(), "{close:?}");
-                let text = String::from_utf8_lossy(&close.reason);
-                assert!(text.contains(reason), "{text:?}");
-            }
-            other => panic!("expected an application close with {code:?}, got {other:?}"),
-        }
+        let text = check_closed_with(&conn, code).await;
+        assert!(text.contains(reason), "{text:?}");
     }
 }
