@@ -17,7 +17,7 @@ use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
-use vtfarm_worker::{Engine, SessionEnd, WorkerConfig, serve};
+use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 
 /// Long enough for a small frame on a loaded machine; only a hang reaches it.
 const BOUND: Duration = Duration::from_secs(120);
@@ -30,7 +30,15 @@ fn worker(master: &MasterHandle, name: &str, config: WorkerConfig) -> JoinHandle
         address: "in-process".into(),
     };
     master.attach(peer, master_end, None);
-    tokio::spawn(async move { serve(worker_end, &mut Engine::new(None), config).await })
+    tokio::spawn(async move {
+        serve(
+            worker_end,
+            &mut Engine::new(None),
+            config,
+            DrainSignal::never(),
+        )
+        .await
+    })
 }
 
 fn submitter(master: &MasterHandle) -> Link {

@@ -2,6 +2,7 @@
 //! one bidirectional stream for the session (workers and submitters alike).
 
 use std::net::SocketAddr;
+use std::time::Duration;
 
 use tokio::net::lookup_host;
 
@@ -48,6 +49,10 @@ impl ConnectError {
     }
 }
 
+/// How long connecting (QUIC, TLS and the token handshake) may take: a
+/// master that is not there is reported in seconds, not at the idle timeout.
+pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+
 /// An open session: the endpoint must outlive the link.
 pub struct Connection {
     pub endpoint: quinn::Endpoint,
@@ -81,23 +86,27 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
     let connecting = endpoint
         .connect(address, SERVER_NAME)
         .map_err(|e| ConnectError::Setup(e.to_string()))?;
-    let connection = connecting.await.map_err(|e| {
-        // Our verifier refuses a certificate only when its fingerprint differs.
-        let wrong_certificate = matches!(&e, quinn::ConnectionError::TransportError(t)
-            if t.reason.contains("invalid peer certificate"));
-        if wrong_certificate {
-            ConnectError::WrongCertificate {
-                master: options.master.clone(),
-                source: e.into(),
-            }
-        } else {
-            failed(e.into())
-        }
-    })?;
-    client_handshake(&connection, &Hello::new(options.token.clone(), role))
+    let session = async {
+        let connection = connecting.await?;
+        client_handshake(&connection, &Hello::new(options.token.clone(), role)).await?;
+        let (send, recv) = connection.open_bi().await?;
+        Ok::<_, ProtoError>((connection, send, recv))
+    };
+    let (connection, send, recv) = tokio::time::timeout(CONNECT_TIMEOUT, session)
         .await
-        .map_err(failed)?;
-    let (send, recv) = connection.open_bi().await.map_err(|e| failed(e.into()))?;
+        .map_err(|_| failed(ProtoError::Timeout))?
+        .map_err(|e| match e {
+            // Our verifier refuses a certificate only when its fingerprint differs.
+            ProtoError::Connection(quinn::ConnectionError::TransportError(t))
+                if t.reason.contains("invalid peer certificate") =>
+            {
+                ConnectError::WrongCertificate {
+                    master: options.master.clone(),
+                    source: ProtoError::Connection(quinn::ConnectionError::TransportError(t)),
+                }
+            }
+            e => failed(e),
+        })?;
     let link = Link::over_connection(
         connection.clone(),
         recv,
