@@ -209,7 +209,8 @@ fn built_scene() -> Scene {
         Vec3::new(1.0, 0.0, 0.0),
         Vec3::new(0.0, 1.0, 0.0),
         Vec3::new(1.0, 1.0, 0.1),
-        Vec3::new(-1e-7, 2.5e6, std::f32::consts::PI),
+        // Large, but within vtfarm_scene::MAX_COORDINATE (1e6 m).
+        Vec3::new(-1e-7, 2.5e5, std::f32::consts::PI),
     ];
     let normals = positions
         .iter()
@@ -346,7 +347,7 @@ fn write_obj_rejects_scenes_it_cannot_round_trip() {
     for (scene, message) in [
         (twins, "two materials are named \"mirror\""),
         (blank, "object name \" lamp\" cannot be written"),
-        (nan, "vertex 3 is not finite"),
+        (nan, "vertex 3: position = [1, NaN, 0.1]: must be finite"),
         (broken, "triangle 0 names missing material 9"),
     ] {
         let error = write_obj(&scene, dir.path(), "bad")
