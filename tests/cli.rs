@@ -393,3 +393,46 @@ fn cube_maps_warn_about_a_reflector_that_is_neither_convex_nor_concave() {
         text(&out.stderr)
     );
 }
+
+/// A scene whose BVH cannot be built (a vertex at 1e22 overflowed obvhs and
+/// hung `render` behind panicking workers): `render` exits non-zero with the
+/// reason, within a bounded wait.
+#[test]
+fn render_of_a_poison_scene_exits_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("far.obj"),
+        "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e22 1 0\nf 1 2 3\nf 2 4 3\n",
+    )
+    .unwrap();
+    let job = dir.path().join("far.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nobj = \"far.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\nwidth = 8\nheight = 8\n[reflectors]\nobjects = [\"a\"]\n",
+    )
+    .unwrap();
+    let png = dir.path().join("far.png");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+        .args(["render", job.to_str().unwrap(), "-o", png.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("render hung on a poison scene");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(!status.success());
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("far"), "names the file: {err}");
+    assert!(err.contains("within ±1e6 m"), "says why: {err}");
+    assert!(!png.exists());
+}

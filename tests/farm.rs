@@ -146,7 +146,10 @@ impl Cluster {
                 name,
                 1,
                 Engine::new(Some(cache)),
-                WorkerConfig { slowdown },
+                WorkerConfig {
+                    slowdown,
+                    ..WorkerConfig::default()
+                },
                 DrainSignal::never(),
             )
             .await;
@@ -799,7 +802,10 @@ async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follo
                 name.into(),
                 1,
                 Engine::new(Some(cache)),
-                WorkerConfig { slowdown: 4.0 },
+                WorkerConfig {
+                    slowdown: 4.0,
+                    ..WorkerConfig::default()
+                },
                 DrainSignal::never(),
             ))
         })

@@ -758,11 +758,19 @@ impl MasterCore {
                 reason,
                 errors,
             } => {
+                // The same error from several workers is told once, with their names.
+                let mut grouped: Vec<(String, Vec<String>)> = Vec::new();
+                for (worker, error) in &errors {
+                    let name = self.name(worker.0);
+                    match grouped.iter_mut().find(|(e, _)| e == error) {
+                        Some((_, names)) => names.push(name),
+                        None => grouped.push((error.clone(), vec![name])),
+                    }
+                }
                 let errors: Vec<String> = std::iter::once(format!("job failed: {reason:?}"))
                     .chain(
-                        errors
-                            .iter()
-                            .map(|(w, e)| format!("{}: {e}", self.name(w.0))),
+                        (grouped.into_iter())
+                            .map(|(error, names)| format!("{}: {error}", names.join(", "))),
                     )
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));

@@ -75,7 +75,7 @@ pub async fn serve(endpoint: quinn::Endpoint, policy: HandshakePolicy, master: M
             let closer = conn.clone();
             master.attach(
                 peer,
-                Link::over_stream(recv, send, SESSION_LIMIT),
+                Link::over_connection(conn.clone(), recv, send, SESSION_LIMIT, address.to_string()),
                 Some(Box::new(move |reason: &str| {
                     closer.close(vtfarm_proto::CLOSE_NORMAL, reason.as_bytes())
                 })),

@@ -16,7 +16,7 @@ use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_vertex::{Quality, Stop, VertexSettings};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
@@ -188,7 +188,8 @@ fn finish_frame(
         });
         out = match package {
             Some(p) => {
-                let mut result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
+                let unlimited = Stop::with_budget(u64::MAX);
+                let mut result = h.frame.as_ref().unwrap().run(&p, 1.0, &unlimited).unwrap();
                 if let Some(tamper) = tamper.take() {
                     tamper(&p, &mut result);
                 }

@@ -29,15 +29,21 @@ pub enum ConnectError {
     Setup(String),
     #[error("cannot connect to {master}: {source}")]
     Connect { master: String, source: ProtoError },
+    /// The master's certificate is not the one pinned in `cluster.toml`.
+    #[error(
+        "the certificate of {master} does not match the fingerprint in cluster.toml ({source}); copy the master's current cluster.toml"
+    )]
+    WrongCertificate { master: String, source: ProtoError },
 }
 
 impl ConnectError {
     /// Whether trying again later could help (the master may be restarting);
-    /// a refusal (wrong token or version) or a bad set-up will not.
+    /// a refusal (wrong token or version), a certificate other than the
+    /// pinned one or a bad set-up will not.
     pub fn is_transient(&self) -> bool {
         match self {
             ConnectError::Resolve(_) => true,
-            ConnectError::Setup(_) => false,
+            ConnectError::Setup(_) | ConnectError::WrongCertificate { .. } => false,
             ConnectError::Connect { source, .. } => !matches!(source, ProtoError::Refused { .. }),
         }
     }
@@ -89,10 +95,28 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
     let (connection, send, recv) = tokio::time::timeout(CONNECT_TIMEOUT, session)
         .await
         .map_err(|_| failed(ProtoError::Timeout))?
-        .map_err(failed)?;
+        .map_err(|e| match e {
+            // Our verifier refuses a certificate only when its fingerprint differs.
+            ProtoError::Connection(quinn::ConnectionError::TransportError(t))
+                if t.reason.contains("invalid peer certificate") =>
+            {
+                ConnectError::WrongCertificate {
+                    master: options.master.clone(),
+                    source: ProtoError::Connection(quinn::ConnectionError::TransportError(t)),
+                }
+            }
+            e => failed(e),
+        })?;
+    let link = Link::over_connection(
+        connection.clone(),
+        recv,
+        send,
+        SESSION_LIMIT,
+        options.master.clone(),
+    );
     Ok(Connection {
         endpoint,
         connection,
-        link: Link::over_stream(recv, send, SESSION_LIMIT),
+        link,
     })
 }

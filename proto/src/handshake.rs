@@ -31,7 +31,7 @@ pub const REFUSAL_LINGER: Duration = Duration::from_secs(1);
 /// The application close code of an orderly close (`Shutdown`, job done).
 pub const CLOSE_NORMAL: quinn::VarInt = quinn::VarInt::from_u32(0);
 /// Close reasons are cut to this many bytes to fit one packet.
-const MAX_REASON_BYTES: usize = 200;
+pub(crate) const MAX_REASON_BYTES: usize = 200;
 
 /// What the master accepts and how it introduces itself.
 #[derive(Clone, PartialEq, Eq)]
@@ -193,41 +193,47 @@ async fn receive_hello(
             return Err((None, Refusal::new(RefuseCode::Disconnected, message)));
         }
     };
-    let hello = match decode_message(&body) {
+    match check_hello(&body, policy) {
+        Ok(hello) => Ok((hello, send)),
+        Err(refusal) => Err((Some(send), refusal)),
+    }
+}
+
+/// Checks the body of a connection's first message (without its length
+/// prefix): a `Hello` with the magic, the policy's version and token. No I/O,
+/// so it can be fuzzed and tested alone.
+pub fn check_hello(body: &[u8], policy: &HandshakePolicy) -> Result<Hello, Refusal> {
+    let refuse = |code, message: String| Err(Refusal::new(code, message));
+    let hello = match decode_message(body) {
         Ok(Message::Hello(hello)) => hello,
         Ok(other) => {
             let message = format!("expected Hello, got {}", other.name());
-            return refuse(send, RefuseCode::BadMessage, message);
+            return refuse(RefuseCode::BadMessage, message);
         }
         Err(e) => {
             // A Hello of another version need not decode as ours.
-            return match frozen_hello_version(&body) {
+            return match frozen_hello_version(body) {
                 Some(v) if v != policy.version => {
-                    refuse(send, RefuseCode::BadVersion, unsupported(v, policy.version))
+                    refuse(RefuseCode::BadVersion, unsupported(v, policy.version))
                 }
-                _ => refuse(
-                    send,
-                    RefuseCode::BadMessage,
-                    format!("not a vtfarm Hello: {e}"),
-                ),
+                _ => refuse(RefuseCode::BadMessage, format!("not a vtfarm Hello: {e}")),
             };
         }
     };
     if hello.magic != crate::MAGIC {
         return refuse(
-            send,
             RefuseCode::BadMessage,
             "not a vtfarm Hello: bad magic".to_owned(),
         );
     }
     if hello.version != policy.version {
         let message = unsupported(hello.version, policy.version);
-        return refuse(send, RefuseCode::BadVersion, message);
+        return refuse(RefuseCode::BadVersion, message);
     }
     if !token_matches(&policy.token, &hello.token) {
-        return refuse(send, RefuseCode::BadToken, "wrong cluster token".to_owned());
+        return refuse(RefuseCode::BadToken, "wrong cluster token".to_owned());
     }
-    Ok((hello, send))
+    Ok(hello)
 }
 
 fn unsupported(version: u32, ours: u32) -> String {

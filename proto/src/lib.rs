@@ -34,8 +34,8 @@ pub use framing::{
     encoded_len, read_message, write_message,
 };
 pub use handshake::{
-    CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, client_handshake,
-    server_handshake,
+    CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, check_hello,
+    client_handshake, server_handshake,
 };
 pub use link::{Link, SESSION_LIMIT};
 pub use message::{

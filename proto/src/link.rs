@@ -7,9 +7,9 @@ use std::sync::Arc;
 
 use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
-use tracing::debug;
+use tracing::{debug, warn};
 
-use crate::{MAX_MESSAGE_BYTES, Message, ProtoError, encode_message, read_message};
+use crate::{MAX_MESSAGE_BYTES, Message, ProtoError, RefuseCode, encode_message, read_message};
 
 /// One end of a message link.
 #[derive(Debug)]
@@ -38,7 +38,49 @@ impl Link {
     /// A link over a byte stream pair (a QUIC bidirectional stream): a task
     /// reads framed messages of at most `limit` bytes into `rx`, another
     /// writes `tx` out. The link goes down on the first error either way.
-    pub fn over_stream<R, W>(mut recv: R, mut send: W, limit: u32) -> Link
+    pub fn over_stream<R, W>(recv: R, send: W, limit: u32) -> Link
+    where
+        R: AsyncRead + Unpin + Send + 'static,
+        W: AsyncWrite + Unpin + Send + 'static,
+    {
+        Link::with_read_error(recv, send, limit, |_| {})
+    }
+
+    /// A link over a QUIC connection's session stream (after the handshake).
+    /// Bad input from the peer — a length prefix over `limit`, a body that
+    /// does not decode, a stream cut inside a message — is logged naming
+    /// `peer` and closes the connection with the handshake's close code for
+    /// it (3 bad message, 4 too large) and the error as the reason.
+    pub fn over_connection(
+        connection: quinn::Connection,
+        recv: quinn::RecvStream,
+        send: quinn::SendStream,
+        limit: u32,
+        peer: String,
+    ) -> Link {
+        Link::with_read_error(recv, send, limit, move |e| {
+            let code = match e {
+                ProtoError::TooLarge { .. } => RefuseCode::TooLarge,
+                ProtoError::Decode(_) | ProtoError::Truncated { .. } => RefuseCode::BadMessage,
+                _ => return,
+            };
+            warn!(%peer, ?code, "closing the connection: {e}");
+            let reason = e.to_string();
+            connection.close(
+                code.close_code(),
+                crate::truncate_utf8(&reason, crate::handshake::MAX_REASON_BYTES).as_bytes(),
+            );
+        })
+    }
+
+    /// [`Link::over_stream`], calling `on_read_error` when reading fails
+    /// other than by a clean close.
+    fn with_read_error<R, W>(
+        mut recv: R,
+        mut send: W,
+        limit: u32,
+        on_read_error: impl FnOnce(&ProtoError) + Send + 'static,
+    ) -> Link
     where
         R: AsyncRead + Unpin + Send + 'static,
         W: AsyncWrite + Unpin + Send + 'static,
@@ -58,6 +100,7 @@ impl Link {
                     Err(e) => {
                         debug!("link read ended: {e}");
                         if !matches!(e, ProtoError::Closed) {
+                            on_read_error(&e);
                             *read_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
                         }
                         break;

@@ -13,18 +13,12 @@ use std::time::Duration;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use vtfarm_method::{FrameSetup, MethodKind};
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_scene::{
+    Camera, Light, LightKind, Lighting, MAX_IMAGE_SIDE, Material, Object, OutOfBounds, Scene,
+    Triangle,
+};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, Transmission, VertexSettings};
-
-/// The largest image side the wire accepts (the job file's limit too).
-pub const MAX_IMAGE_SIDE: u32 = 16384;
-/// The deepest Whitted recursion the wire accepts (the job file's limit too):
-/// deeper trees only risk the worker's stack.
-pub const MAX_TRACE_DEPTH: u32 = 64;
-/// The widest visibility neighbourhood the wire accepts: the test costs
-/// `(2r + 1)^2` ID-buffer reads per vertex.
-pub const MAX_VISIBILITY_RADIUS: u32 = 64;
 
 /// Why wire data does not make a valid domain value.
 #[derive(Debug, thiserror::Error)]
@@ -32,6 +26,13 @@ pub enum WireError {
     /// A float that must be finite is NaN or infinite.
     #[error("{field} is not finite")]
     NotFinite { field: String },
+    /// A domain value outside the bound its type's `validate` documents;
+    /// `what` names the value (`camera`, `vertex`).
+    #[error("{what} {source}")]
+    Bounds {
+        what: &'static str,
+        source: OutOfBounds,
+    },
     /// A value outside its allowed range.
     #[error("{field} = {value}: must be {rule}")]
     OutOfRange {
@@ -82,18 +83,6 @@ fn finite(field: &str, v: f32) -> Result<f32, WireError> {
     } else {
         Err(WireError::NotFinite {
             field: field.to_owned(),
-        })
-    }
-}
-
-fn non_negative(field: &str, v: f32) -> Result<f32, WireError> {
-    if finite(field, v)? >= 0.0 {
-        Ok(v)
-    } else {
-        Err(WireError::OutOfRange {
-            field: field.to_owned(),
-            value: v.to_string(),
-            rule: "finite and not negative",
         })
     }
 }
@@ -304,47 +293,22 @@ impl TryFrom<WireCamera> for Camera {
     type Error = WireError;
 
     fn try_from(w: WireCamera) -> Result<Self, WireError> {
-        let eye = finite3(|| "camera eye".to_owned(), w.eye)?;
-        let target = finite3(|| "camera target".to_owned(), w.target)?;
-        let up = finite3(|| "camera up".to_owned(), w.up)?;
-        let fov = finite("camera fov_y_deg", w.fov_y_deg)?;
-        if !(fov > 0.0 && fov < 180.0) {
-            return Err(out_of_range(
-                "camera fov_y_deg",
-                fov,
-                "above 0 and below 180",
-            ));
-        }
-        for (field, side) in [("camera width", w.width), ("camera height", w.height)] {
-            if !(1..=MAX_IMAGE_SIDE).contains(&side) {
-                return Err(out_of_range(field, side, "1 to 16384"));
-            }
-        }
-        // The camera basis normalizes these; degenerate ones would give NaN rays.
-        let forward = (target - eye).normalize_or_zero();
-        if forward == Vec3::ZERO {
-            return Err(out_of_range(
-                "camera target",
-                format!("{target}"),
-                "away from the eye",
-            ));
-        }
-        if forward.cross(up).length_squared() < 1e-12 {
-            return Err(out_of_range(
-                "camera up",
-                format!("{up}"),
-                "non-zero and not along the view direction",
-            ));
-        }
-        Ok(Camera {
-            eye,
-            target,
-            up,
-            fov_y_deg: fov,
+        let camera = Camera {
+            eye: Vec3::from_array(w.eye),
+            target: Vec3::from_array(w.target),
+            up: Vec3::from_array(w.up),
+            fov_y_deg: w.fov_y_deg,
             width: w.width,
             height: w.height,
-        })
+        };
+        camera.validate().map_err(bounds("camera"))?;
+        Ok(camera)
     }
+}
+
+/// Wraps a domain bound error, naming the value it is about.
+fn bounds(what: &'static str) -> impl FnOnce(OutOfBounds) -> WireError {
+    move |source| WireError::Bounds { what, source }
 }
 
 fn out_of_range(field: &str, value: impl ToString, rule: &'static str) -> WireError {
@@ -391,28 +355,20 @@ impl TryFrom<WireLight> for Light {
     type Error = WireError;
 
     fn try_from(w: WireLight) -> Result<Self, WireError> {
-        let kind = match w.kind {
-            WireLightKind::Point { position } => LightKind::Point {
-                position: finite3(|| "light position".to_owned(), position)?,
+        let light = Light {
+            kind: match w.kind {
+                WireLightKind::Point { position } => LightKind::Point {
+                    position: Vec3::from_array(position),
+                },
+                WireLightKind::Directional { direction } => LightKind::Directional {
+                    direction: Vec3::from_array(direction),
+                },
             },
-            WireLightKind::Directional { direction } => {
-                let direction = finite3(|| "light direction".to_owned(), direction)?;
-                // Shading normalizes it: zero would turn into NaN.
-                if direction.normalize_or_zero() == Vec3::ZERO {
-                    return Err(out_of_range(
-                        "light direction",
-                        format!("{direction}"),
-                        "non-zero",
-                    ));
-                }
-                LightKind::Directional { direction }
-            }
+            color: Vec3::from_array(w.color),
+            intensity: w.intensity,
         };
-        Ok(Light {
-            kind,
-            color: finite3(|| "light color".to_owned(), w.color)?,
-            intensity: finite("light intensity", w.intensity)?,
-        })
+        light.validate().map_err(bounds("light"))?;
+        Ok(light)
     }
 }
 
@@ -438,13 +394,17 @@ impl TryFrom<WireLighting> for Lighting {
     type Error = WireError;
 
     fn try_from(w: WireLighting) -> Result<Self, WireError> {
-        Ok(Lighting {
+        let lighting = Lighting {
             lights: (w.lights.into_iter())
                 .map(Light::try_from)
                 .collect::<Result<_, _>>()?,
-            ambient: finite3(|| "lighting ambient".to_owned(), w.ambient)?,
-            background: finite3(|| "lighting background".to_owned(), w.background)?,
-        })
+            ambient: Vec3::from_array(w.ambient),
+            background: Vec3::from_array(w.background),
+        };
+        lighting
+            .validate()
+            .map_err(|(_, e)| bounds("lighting")(e))?;
+        Ok(lighting)
     }
 }
 
@@ -472,17 +432,13 @@ impl TryFrom<WireTraceSettings> for TraceSettings {
     type Error = WireError;
 
     fn try_from(w: WireTraceSettings) -> Result<Self, WireError> {
-        if !(1..=MAX_TRACE_DEPTH).contains(&w.max_depth) {
-            return Err(out_of_range("trace max_depth", w.max_depth, "1 to 64"));
-        }
-        Ok(TraceSettings {
+        let trace = TraceSettings {
             max_depth: w.max_depth,
             fresnel: w.fresnel,
-            signature_min_weight: non_negative(
-                "trace signature_min_weight",
-                w.signature_min_weight,
-            )?,
-        })
+            signature_min_weight: w.signature_min_weight,
+        };
+        trace.validate().map_err(bounds("trace"))?;
+        Ok(trace)
     }
 }
 
@@ -611,24 +567,19 @@ impl TryFrom<WireVertexSettings> for VertexSettings {
     type Error = WireError;
 
     fn try_from(w: WireVertexSettings) -> Result<Self, WireError> {
-        if w.visibility_radius > MAX_VISIBILITY_RADIUS {
-            return Err(out_of_range(
-                "vertex visibility_radius",
-                w.visibility_radius,
-                "0 to 64",
-            ));
-        }
-        Ok(VertexSettings {
+        let vertex = VertexSettings {
             quality: w.quality.into(),
-            epsilon: non_negative("vertex epsilon", w.epsilon)?,
-            pixel_floor: non_negative("vertex pixel_floor", w.pixel_floor)?,
-            flatness: non_negative("vertex flatness", w.flatness)?,
+            epsilon: w.epsilon,
+            pixel_floor: w.pixel_floor,
+            flatness: w.flatness,
             max_depth: w.max_depth,
             visibility_radius: w.visibility_radius,
-            depth_tolerance: non_negative("vertex depth_tolerance", w.depth_tolerance)?,
-            max_edge: non_negative("vertex max_edge", w.max_edge)?,
+            depth_tolerance: w.depth_tolerance,
+            max_edge: w.max_edge,
             transmission: w.transmission.into(),
-        })
+        };
+        vertex.validate().map_err(bounds("vertex"))?;
+        Ok(vertex)
     }
 }
 
@@ -1138,6 +1089,11 @@ pub(crate) mod tests {
             |s| s.materials[1].ior = f32::INFINITY,
             "material \"default\" ior is not finite",
         );
+        // Finite but absurd: obvhs' build overflowed on it (issue 13).
+        check(
+            |s| s.positions[3][0] = 1e22,
+            "vertex 3: position = [10000000000000000000000, 1, -0.5]: must be finite and within ±1e6 m",
+        );
     }
 
     #[test]
@@ -1146,11 +1102,17 @@ pub(crate) mod tests {
         let check = |damage: fn(&mut WireCamera), expected| {
             check_rejects::<WireCamera, Camera>(&cam, damage, expected)
         };
-        check(|c| c.eye[0] = f32::NAN, "camera eye is not finite");
+        check(
+            |c| c.eye[0] = f32::NAN,
+            "camera eye = [NaN, 1, 3]: must be finite",
+        );
         check(|c| c.width = 0, "camera width = 0");
         check(|c| c.height = MAX_IMAGE_SIDE + 1, "camera height = 16385");
         check(|c| c.fov_y_deg = 180.0, "camera fov_y_deg = 180");
-        check(|c| c.target = c.eye, "away from the eye");
+        check(
+            |c| c.target = c.eye,
+            "camera eye = [0, 1, 3]: must be away from the target",
+        );
         check(|c| c.up = [0.0; 3], "camera up");
 
         let light = WireLight::from(&lighting().lights[1]);
@@ -1174,6 +1136,35 @@ pub(crate) mod tests {
             &vertex,
             |v| v.visibility_radius = 1000,
             "vertex visibility_radius = 1000",
+        );
+        // Issue 13's runaway values: the same `validate` as the job parser.
+        check_rejects::<_, VertexSettings>(
+            &vertex,
+            |v| v.max_depth = u32::MAX,
+            "vertex max_depth = 4294967295: must be 0 to 32",
+        );
+        check_rejects::<_, VertexSettings>(
+            &vertex,
+            |v| (v.pixel_floor, v.epsilon) = (0.0, 0.0),
+            "vertex pixel_floor = 0: must be finite and at least 0.5",
+        );
+        check(
+            |c| (c.width, c.height) = (16384, 16384),
+            "camera width × height = 16384 × 16384: must be at most 16777216 pixels",
+        );
+        check(
+            |c| c.eye[1] = 1e22,
+            "camera eye = [0, 10000000000000000000000, 3]",
+        );
+        let far = WireLight::from(&lighting().lights[0]);
+        check_rejects::<WireLight, Light>(
+            &far,
+            |l| {
+                l.kind = WireLightKind::Point {
+                    position: [0.0, 0.0, -1e22],
+                }
+            },
+            "light position",
         );
     }
 

@@ -8,9 +8,9 @@ use std::time::Duration;
 
 use tokio::sync::mpsc;
 use vtfarm_proto::{
-    HandshakePolicy, Hello, MAX_HANDSHAKE_BYTES, MasterIdentity, Message, PROTOCOL_VERSION,
-    ProtoError, Refusal, RefuseCode, Role, SERVER_NAME, client_config, client_handshake,
-    encode_message, read_message, server_config, server_handshake,
+    HandshakePolicy, Hello, Link, MAX_HANDSHAKE_BYTES, MasterIdentity, Message, PROTOCOL_VERSION,
+    ProtoError, Refusal, RefuseCode, Role, SERVER_NAME, SESSION_LIMIT, client_config,
+    client_handshake, encode_message, read_message, server_config, server_handshake,
 };
 
 const TOKEN: &str = "0123456789abcdef0123456789abcdef";
@@ -62,6 +62,17 @@ impl Server {
                     let accepted = result.is_ok();
                     let _ = tx.send(Outcome::Handshake(result));
                     if accepted {
+                        // The session stream, served as the master serves it.
+                        let _link = match conn.accept_bi().await {
+                            Ok((send, recv)) => Some(Link::over_connection(
+                                conn.clone(),
+                                recv,
+                                send,
+                                SESSION_LIMIT,
+                                "test client".to_owned(),
+                            )),
+                            Err(_) => None,
+                        };
                         // Dropping the last handle would close the connection.
                         conn.closed().await;
                     }
@@ -134,13 +145,15 @@ impl Server {
 }
 
 /// Asserts that the master closed `conn` with `code`'s application close code.
-async fn check_closed_with(conn: &quinn::Connection, code: RefuseCode) {
+/// Waits for the master to close with `code`; returns the close reason.
+async fn check_closed_with(conn: &quinn::Connection, code: RefuseCode) -> String {
     let closed = tokio::time::timeout(PATIENCE, conn.closed())
         .await
         .expect("the master closes the connection");
     match closed {
         quinn::ConnectionError::ApplicationClosed(close) => {
             assert_eq!(close.error_code, code.close_code(), "{close:?}");
+            String::from_utf8_lossy(&close.reason).into_owned()
         }
         other => panic!("expected an application close with {code:?}, got {other:?}"),
     }
@@ -348,5 +361,58 @@ async fn one_endpoint_survives_every_bad_client_in_turn() {
     for bad in ALL_BAD_CLIENTS {
         bad.check(&mut server).await;
         server.check_good_client().await;
+    }
+}
+
+/// A pinned fingerprint that does not match is a configuration error:
+/// retrying cannot help, so a worker stops instead of retrying forever.
+#[tokio::test]
+async fn a_wrong_fingerprint_is_not_worth_retrying() {
+    let server = Server::start();
+    let options = vtfarm_proto::client::ClientOptions {
+        master: server.addr.to_string(),
+        token: TOKEN.to_owned(),
+        fingerprint: "ab".repeat(32),
+    };
+    let error = tokio::time::timeout(
+        PATIENCE,
+        vtfarm_proto::client::connect(&options, Role::Submitter),
+    )
+    .await
+    .expect("TLS finishes in time")
+    .err()
+    .expect("the certificate does not match");
+    assert!(!error.is_transient(), "{error}");
+    assert!(error.to_string().contains("fingerprint"), "{error}");
+}
+
+/// After a valid handshake, an oversized length prefix or garbage on the
+/// session stream closes the connection with its code and the cause as the
+/// reason (they closed with code 0 and no reason).
+#[tokio::test]
+async fn bad_session_input_closes_with_its_code_and_reason() {
+    let cases = [
+        (
+            vec![0xFF; 4],
+            RefuseCode::TooLarge,
+            "4294967295 bytes exceeds",
+        ),
+        (
+            frame(b"\xff\xfe\xfd garbage"),
+            RefuseCode::BadMessage,
+            "cannot decode",
+        ),
+    ];
+    for (bytes, code, reason) in cases {
+        let server = Server::start();
+        let (_endpoint, conn) = server.connect(&server.fingerprint).await;
+        let conn = conn.expect("TLS with the right fingerprint");
+        client_handshake(&conn, &Hello::new(TOKEN, Role::Submitter))
+            .await
+            .expect("welcomed");
+        let (mut send, _recv) = conn.open_bi().await.expect("session stream");
+        send.write_all(&bytes).await.expect("written");
+        let text = check_closed_with(&conn, code).await;
+        assert!(text.contains(reason), "{text:?}");
     }
 }

@@ -25,6 +25,10 @@ pub struct WorkerArgs {
     /// emulate a slower machine.
     #[arg(long, default_value_t = 1.0)]
     pub slowdown: f64,
+    /// Traced samples a package may use per pixel of its frame before it
+    /// fails as a runaway.
+    #[arg(long, default_value_t = crate::engine::SAMPLES_PER_PIXEL_BUDGET)]
+    pub sample_budget: u64,
     /// A name for logs and `vtfarm status` (default: the host name).
     #[arg(long)]
     pub name: Option<String>,
@@ -59,6 +63,7 @@ pub fn run(args: WorkerArgs) -> Result<()> {
     let cache = args.cache.clone().unwrap_or_else(default_cache);
     let config = WorkerConfig {
         slowdown: args.slowdown.max(1.0),
+        samples_per_pixel_budget: args.sample_budget,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

@@ -16,7 +16,9 @@ use vtfarm_proto::{
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
-use vtfarm_vertex::{Behind, Frame, PackageOptions, PackageStats, SparseBitmap, trace_package};
+use vtfarm_vertex::{
+    Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
+};
 
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
@@ -40,13 +42,28 @@ impl ActiveFrame {
     /// Traces a package of this frame. `slowdown` > 1 stretches the time the
     /// package takes (sleeping `slowdown - 1` times the compute time), to
     /// emulate a slower machine in tests and benchmarks.
-    pub fn run(&self, package: &Package, slowdown: f64) -> Result<PackageResult, String> {
+    ///
+    /// `stop` cancels the package from another thread, and fails it when it
+    /// traces more samples than its budget. A panic inside the package
+    /// becomes its error: it never takes the worker down.
+    pub fn run(
+        &self,
+        package: &Package,
+        slowdown: f64,
+        stop: &Stop,
+    ) -> Result<PackageResult, String> {
         let start = Instant::now();
-        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
-        let (bitmap, stats, samples) = match &self.per_reflector {
-            None => trace(&frame, &package.triangles)?,
-            Some(per_reflector) => per_reflector.render(&frame, &package.triangles)?,
+        let frame = Frame {
+            stop: Some(stop),
+            ..self.renderer.frame(&self.setup, &self.ids, &self.behind)
         };
+        let (bitmap, stats, samples) = contain_panic(|| match &self.per_reflector {
+            None => trace(&frame, &package.triangles),
+            Some(per_reflector) => per_reflector.render(&frame, &package.triangles),
+        })??;
+        if let Some(why) = stop.stopped() {
+            return Err(format!("package {} {why}", package.id));
+        }
         let compute = start.elapsed();
         if slowdown > 1.0 {
             std::thread::sleep(compute.mul_f64(slowdown - 1.0));
@@ -59,6 +76,28 @@ impl ActiveFrame {
             triangle_samples: samples,
         })
     }
+
+    /// The frame's pixel count: a package's sample budget is a multiple of it
+    /// (no package owns more than the frame's pixels).
+    pub fn pixels(&self) -> u64 {
+        u64::from(self.setup.camera.width) * u64::from(self.setup.camera.height)
+    }
+}
+
+/// The default budget of traced samples per frame pixel for one package.
+/// Vertex tracing needs about 5 per pixel it owns at most (vertices at the
+/// half-pixel floor plus filling), so only a runaway reaches this.
+pub const SAMPLES_PER_PIXEL_BUDGET: u64 = 64;
+
+/// Runs `f`, turning a panic into an error with its message, so that neither
+/// a scene nor a package can take the worker down.
+pub fn contain_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|payload| {
+        let message = (payload.downcast_ref::<&str>().map(|s| s.to_string()))
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".to_owned());
+        format!("panicked: {message}")
+    })
 }
 
 /// Vertex traces reflector triangles.
@@ -209,12 +248,15 @@ impl Engine {
                 r.clone()
             }
             _ => {
-                let r = Arc::new(Renderer::new(scene, start.reflectors.clone()));
+                let reflectors = start.reflectors.clone();
+                let r = contain_panic(|| Renderer::try_new(scene, reflectors))?
+                    .map_err(|e| e.to_string())?;
+                let r = Arc::new(r);
                 self.renderer = Some((start.scene, start.reflectors, r.clone()));
                 r
             }
         };
-        let (ids, behind) = renderer.id_buffers(&setup);
+        let (ids, behind) = contain_panic(|| renderer.id_buffers(&setup))?;
         Ok(ActiveFrame {
             job: start.job,
             frame: start.frame,

@@ -11,6 +11,7 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::debug;
 use vtfarm_proto::{Link, PackageId, PackageResult, SceneData, SceneHash};
+use vtfarm_vertex::Stop;
 
 use crate::engine::{ActiveFrame, Engine};
 use crate::session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
@@ -58,7 +59,12 @@ impl SceneStore for Engine {
     }
 }
 
-type Running = (PackageId, JoinHandle<Result<PackageResult, String>>);
+/// The package being computed, and its stop (set when the master cancels it).
+type Running = (
+    PackageId,
+    JoinHandle<Result<PackageResult, String>>,
+    Arc<Stop>,
+);
 
 /// Serves the master over `link` until it shuts the worker down, the link
 /// drops, or `drain` is raised and the session drained.
@@ -87,13 +93,17 @@ pub async fn serve(
                 Task::RunPackage(package) => {
                     let id = package.id;
                     let active = frame.clone();
+                    let budget =
+                        active.as_ref().map_or(0, |a| a.pixels()) * config.samples_per_pixel_budget;
+                    let stop = Arc::new(Stop::with_budget(budget));
+                    let task_stop = stop.clone();
                     let task = tokio::task::spawn_blocking(move || match active {
                         Some(a) if (a.job, a.frame) == (package.job, package.frame) => {
-                            a.run(&package, config.slowdown)
+                            a.run(&package, config.slowdown, &task_stop)
                         }
                         _ => Err("the package's frame is not prepared".to_owned()),
                     });
-                    running = Some((id, task));
+                    running = Some((id, task, stop));
                 }
             }
         }
@@ -119,9 +129,15 @@ pub async fn serve(
             message = rx.recv() => {
                 let Some(message) = message else { return SessionEnd::Disconnected };
                 session.handle_message(start.elapsed(), message, engine);
+                // A cancelled package stops now, freeing its memory and the cores.
+                if let Some((id, _, stop)) = &running {
+                    if session.is_cancelled(*id) {
+                        stop.cancel();
+                    }
+                }
             }
             outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
-                let (id, _) = running.take().expect("guarded by the select condition");
+                let (id, _, _) = running.take().expect("guarded by the select condition");
                 let outcome = outcome.unwrap_or_else(|join| Err(format!("package task failed: {join}")));
                 session.package_finished(start.elapsed(), id, outcome);
             }

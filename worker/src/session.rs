@@ -38,11 +38,17 @@ pub struct WorkerConfig {
     /// Makes every package take this many times its compute time (≥ 1): a
     /// documented way to emulate a slower machine.
     pub slowdown: f64,
+    /// Traced samples a package may use per pixel of its frame before it
+    /// fails as a runaway (see [`crate::engine::SAMPLES_PER_PIXEL_BUDGET`]).
+    pub samples_per_pixel_budget: u64,
 }
 
 impl Default for WorkerConfig {
     fn default() -> Self {
-        WorkerConfig { slowdown: 1.0 }
+        WorkerConfig {
+            slowdown: 1.0,
+            samples_per_pixel_budget: crate::engine::SAMPLES_PER_PIXEL_BUDGET,
+        }
     }
 }
 
@@ -154,6 +160,12 @@ impl WorkerSession {
     /// The package running now, if any.
     pub fn running(&self) -> Option<PackageId> {
         self.running
+    }
+
+    /// Whether the master cancelled the running package `id`: the driver
+    /// stops it (its result would be dropped anyway).
+    pub fn is_cancelled(&self, id: PackageId) -> bool {
+        self.cancelled.contains(&id)
     }
 
     /// Time passed: heartbeats, and the end of a drain that took too long.

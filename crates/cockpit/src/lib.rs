@@ -74,6 +74,29 @@ impl GlassDesign {
 impl CockpitConfig {
     pub const DEFAULT_DETAIL: f32 = 1.0;
     pub const LARGE_DETAIL: f32 = 2.1;
+    /// The accepted `detail` range: 0.01 (about 1,000 triangles) to 10
+    /// (about a million triangles, some 300 MB with the BVH).
+    pub const DETAIL_RANGE: std::ops::RangeInclusive<f32> = 0.01..=10.0;
+    /// The most glass segments: the glass has about segments² triangles, so
+    /// 1024 gives a million reflector triangles.
+    pub const MAX_GLASS_SEGMENTS: u32 = 1024;
+
+    /// Checks `detail` and `glass_segments` against their bounds (the
+    /// generator would otherwise clamp, or run out of memory).
+    pub fn validate(&self) -> Result<(), vtfarm_scene::OutOfBounds> {
+        use vtfarm_scene::bounds::check;
+        let (lo, hi) = Self::DETAIL_RANGE.into_inner();
+        check("detail", self.detail, format!("{lo} to {hi}"), |d| {
+            Self::DETAIL_RANGE.contains(&d)
+        })?;
+        check(
+            "glass_segments",
+            self.glass_segments,
+            format!("1 to {}", Self::MAX_GLASS_SEGMENTS),
+            |n| (1..=Self::MAX_GLASS_SEGMENTS).contains(&n),
+        )?;
+        Ok(())
+    }
 }
 
 impl Default for CockpitConfig {

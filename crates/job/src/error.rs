@@ -73,13 +73,17 @@ pub enum JobError {
     },
     /// A `[reflectors]` name matches no triangle of the scene.
     #[error(
-        "{file}: reflector {selector} matches no triangle (objects: {}; materials: {})",
+        "{}: reflector {selector} matches no triangle (objects: {}; materials: {})",
+        place(.file, .location),
         .objects.join(", "),
         .materials.join(", ")
     )]
     NoReflector {
         file: PathBuf,
-        selector: ReflectorSelector,
+        /// Where the name stands in the job file.
+        location: Option<Location>,
+        // Boxed: keeps the error small on the hot `Result` paths.
+        selector: Box<ReflectorSelector>,
         /// The scene's object names, to spot a misspelling.
         objects: Vec<String>,
         /// The scene's material names.

@@ -15,6 +15,7 @@ mod error;
 mod parse;
 pub mod study;
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -48,6 +49,10 @@ pub struct Job {
     /// Extra eye points from `[frames]`, each one more frame looking at the
     /// camera's target.
     pub eyes: Vec<Vec3>,
+    /// Where the keys checked against the scene stand in the file
+    /// (`camera.eye`, `frames.eyes[1]`, `reflectors object "glass"`), so
+    /// those errors name the line too.
+    pub locations: BTreeMap<String, Location>,
 }
 
 /// Where the scene comes from.
@@ -163,6 +168,13 @@ impl ReflectorSelector {
     }
 }
 
+impl ReflectorSelector {
+    /// Its key in [`Job::locations`].
+    pub fn key(&self) -> String {
+        format!("reflectors {self}")
+    }
+}
+
 impl fmt::Display for ReflectorSelector {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -217,11 +229,15 @@ impl Job {
                 let camera = self
                     .camera
                     .complete()
-                    .map_err(|missing| self.invalid(obj_camera_missing(&missing)))?;
+                    .map_err(|missing| self.invalid(None, obj_camera_missing(&missing)))?;
                 let scene = self.scene_only()?;
                 (scene, camera, self.lighting.over(Lighting::default()))
             }
         };
+        // Scenes made in code or read from files meet the same bounds as on the wire.
+        scene
+            .validate()
+            .map_err(|e| self.invalid(None, format!("the scene is unusable: {e}")))?;
         let frames = self.frames(&camera)?;
         Ok(LoadedScene {
             scene,
@@ -247,9 +263,9 @@ impl Job {
     }
 
     /// One camera per frame: `camera` itself, then `camera` moved to each
-    /// extra eye. Fails when an eye sits on the target or looks along `up`
-    /// (parsing catches these already unless the target or up vector is the
-    /// cockpit's default).
+    /// extra eye. Each must pass [`Camera::validate`] (parsing checks what it
+    /// can without the scene; the cockpit's default camera and command-line
+    /// sizes are checked here), with the error at the key's line.
     pub fn frames(&self, camera: &Camera) -> Result<Vec<Camera>, JobError> {
         let extra = self
             .eyes
@@ -258,15 +274,28 @@ impl Job {
             .map(|(i, &eye)| (format!("frames.eyes[{i}]"), eye));
         std::iter::once(("camera.eye".to_owned(), camera.eye))
             .chain(extra)
-            .map(
-                |(key, eye)| match BadView::check(eye, camera.target, camera.up) {
-                    None => Ok(Camera { eye, ..*camera }),
-                    Some(bad) => Err(self.invalid(format!(
-                        "{key} = {eye}: {bad} (target {}, up {})",
-                        camera.target, camera.up
-                    ))),
-                },
-            )
+            .map(|(eye_key, eye)| {
+                let frame = Camera { eye, ..*camera };
+                frame.validate().map_err(|e| {
+                    let extra_eye = eye_key != "camera.eye";
+                    match e.field {
+                        // This eye, or the view it makes with the target and up vector.
+                        "eye" => self.invalid(Some(&eye_key), e.message_for(&eye_key)),
+                        "up" if extra_eye => {
+                            self.invalid(Some(&eye_key), format!("{eye_key} = {eye}: {e}"))
+                        }
+                        field => {
+                            let key = match field {
+                                "fov_y_deg" => "camera.fov_y".to_owned(),
+                                "width × height" => "camera.height".to_owned(),
+                                field => format!("camera.{field}"),
+                            };
+                            self.invalid(Some(&key), e.message_for(&key))
+                        }
+                    }
+                })?;
+                Ok(frame)
+            })
             .collect()
     }
 
@@ -286,7 +315,8 @@ impl Job {
             if !matched {
                 return Err(JobError::NoReflector {
                     file: self.file.clone(),
-                    selector: selector.clone(),
+                    location: self.locations.get(&selector.key()).copied(),
+                    selector: Box::new(selector.clone()),
                     objects: sorted_names(scene.objects.iter().map(|o| &o.name)),
                     materials: sorted_names(scene.materials.iter().map(|m| &m.name)),
                 });
@@ -303,11 +333,11 @@ impl Job {
         Ok(triangles)
     }
 
-    /// An error about the job as a whole (no line to point at).
-    fn invalid(&self, message: String) -> JobError {
+    /// An error about the job, at the line of `key` when the file gave it.
+    fn invalid(&self, key: Option<&str>, message: String) -> JobError {
         JobError::Invalid {
             file: self.file.clone(),
-            location: None,
+            location: key.and_then(|k| self.locations.get(k)).copied(),
             message,
         }
     }
@@ -367,35 +397,4 @@ fn sorted_names<'a>(names: impl Iterator<Item = &'a String>) -> Vec<String> {
     names.sort();
     names.dedup();
     names
-}
-
-/// Why an eye, target and up vector make no view.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BadView {
-    EyeAtTarget,
-    UpAlongView,
-}
-
-impl BadView {
-    /// `None` when the eye, target and up vector make a camera.
-    pub fn check(eye: Vec3, target: Vec3, up: Vec3) -> Option<BadView> {
-        let forward = target - eye;
-        if forward.length() < 1e-6 {
-            Some(BadView::EyeAtTarget)
-        } else if forward.normalize().cross(up.normalize_or_zero()).length() < 1e-4 {
-            // The camera basis takes right = forward x up.
-            Some(BadView::UpAlongView)
-        } else {
-            None
-        }
-    }
-}
-
-impl fmt::Display for BadView {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            BadView::EyeAtTarget => "the eye is at the target",
-            BadView::UpAlongView => "up is zero or parallel to the view direction",
-        })
-    }
 }

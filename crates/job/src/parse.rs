@@ -12,23 +12,23 @@ use serde::Deserialize;
 use toml::Spanned;
 use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
 use vtfarm_method::MethodKind;
-use vtfarm_scene::{Light, LightKind};
+use vtfarm_scene::bounds::{self, OutOfBounds};
+use vtfarm_scene::{Camera, Light, LightKind};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
-    BadView, CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
     SceneSource, obj_camera_missing,
 };
 
 /// Names accepted by `scene.builtin`.
 const BUILTINS: [&str; 1] = ["cockpit"];
-/// Largest accepted image width or height.
-pub(crate) const MAX_IMAGE_SIZE: u32 = 16384;
-/// Deepest accepted Whitted recursion (deeper only risks the stack).
-const MAX_TRACE_DEPTH: u32 = 64;
 
 pub(crate) type Vec3Value = Spanned<[f32; 3]>;
+
+/// A reflector selector and where the file names it (`None`: a default).
+type LocatedSelector = (ReflectorSelector, Option<Range<usize>>);
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,9 +106,9 @@ impl RawLightKind {
 #[serde(deny_unknown_fields)]
 struct RawReflectors {
     #[serde(default)]
-    objects: Vec<String>,
+    objects: Vec<Spanned<String>>,
     #[serde(default)]
-    materials: Vec<String>,
+    materials: Vec<Spanned<String>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -118,7 +118,7 @@ struct RawQuality {
     epsilon: Option<Spanned<f32>>,
     pixel_floor: Option<Spanned<f32>>,
     flatness: Option<Spanned<f32>>,
-    max_refine_depth: Option<u32>,
+    max_refine_depth: Option<Spanned<u32>>,
     max_trace_depth: Option<Spanned<u32>>,
     fresnel: Option<bool>,
     method: Option<Spanned<String>>,
@@ -142,10 +142,33 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let camera = source.camera(&raw.camera, is_obj)?;
     let eyes = source.eyes(&raw.frames, &camera)?;
     let lighting = source.lighting(&raw.lighting)?;
-    let reflectors = source.reflectors(raw.reflectors, is_obj)?;
     let (trace, vertex) = source.quality(&raw.quality)?;
     let method = source.method(&raw.quality)?;
+    // Where the keys checked against the scene stand (see `Job::locations`).
+    let c = &raw.camera;
+    let mut spans: Vec<(String, Range<usize>)> = [
+        ("eye", c.eye.as_ref().map(Spanned::span)),
+        ("target", c.target.as_ref().map(Spanned::span)),
+        ("up", c.up.as_ref().map(Spanned::span)),
+        ("fov_y", c.fov_y.as_ref().map(Spanned::span)),
+        ("width", c.width.as_ref().map(Spanned::span)),
+        ("height", c.height.as_ref().map(Spanned::span)),
+    ]
+    .into_iter()
+    .filter_map(|(key, span)| Some((format!("camera.{key}"), span?)))
+    .collect();
+    spans.extend(
+        (raw.frames.eyes.iter().enumerate()).map(|(i, e)| (format!("frames.eyes[{i}]"), e.span())),
+    );
+    let reflectors = source.reflectors(raw.reflectors, is_obj)?;
+    spans.extend((reflectors.iter()).filter_map(|(r, span)| Some((r.key(), span.clone()?))));
+    let locations = spans
+        .into_iter()
+        .map(|(key, span)| (key, Location::of(text, span.start)))
+        .collect();
+    let reflectors = reflectors.into_iter().map(|(r, _)| r).collect();
     Ok(Job {
+        locations,
         file: origin.to_owned(),
         scene,
         camera,
@@ -202,6 +225,54 @@ impl Source<'_> {
         self.error(Some(value.span()), message)
     }
 
+    /// A domain bound broken by the value of `key` (a domain type's
+    /// `validate` said so), located at that key when it was given.
+    pub(crate) fn out_of_bounds<T>(
+        &self,
+        key: &str,
+        value: Option<&Spanned<T>>,
+        e: &OutOfBounds,
+    ) -> JobError {
+        self.error(value.map(Spanned::span), e.message_for(key))
+    }
+
+    /// An image side (`camera.width`, `study.height`): [`Camera::check_side`].
+    pub(crate) fn image_side(
+        &self,
+        key: &str,
+        value: &Option<Spanned<u32>>,
+    ) -> Result<Option<u32>, JobError> {
+        value
+            .as_ref()
+            .map(|v| {
+                Camera::check_side("side", *v.get_ref())
+                    .map_err(|e| self.out_of_bounds(key, Some(v), &e))
+            })
+            .transpose()
+    }
+
+    /// A given width and height: [`Camera::check_size`] (each side, and the
+    /// pixel count against the memory bound), located at the height.
+    pub(crate) fn image_size(
+        &self,
+        table: &str,
+        width: &Option<Spanned<u32>>,
+        height: &Option<Spanned<u32>>,
+    ) -> Result<(Option<u32>, Option<u32>), JobError> {
+        let w = self.image_side(&format!("{table}.width"), width)?;
+        let h = self.image_side(&format!("{table}.height"), height)?;
+        if let (Some(w), Some(h)) = (w, h) {
+            Camera::check_size(w, h).map_err(|e| {
+                self.out_of_bounds(
+                    &format!("{table}.width × {table}.height"),
+                    height.as_ref(),
+                    &e,
+                )
+            })?;
+        }
+        Ok((w, h))
+    }
+
     /// The value if `ok` accepts it, else "`key = value`: must be {rule}".
     pub(crate) fn check<T: Copy + Display>(
         &self,
@@ -247,15 +318,13 @@ impl Source<'_> {
         }
     }
 
+    /// A point: finite and within [`bounds::MAX_COORDINATE`].
     pub(crate) fn point(
         &self,
         key: &str,
         value: &Option<Vec3Value>,
     ) -> Result<Option<Vec3>, JobError> {
-        value
-            .as_ref()
-            .map(|v| self.vec3(key, v, "finite", |_| true))
-            .transpose()
+        self.checked(key, value, |v| bounds::point("point", Vec3::from_array(v)))
     }
 
     pub(crate) fn color(
@@ -369,22 +438,19 @@ impl Source<'_> {
                 let default = CockpitConfig::default();
                 let glass =
                     self.glass_design("scene", &raw.glass, &raw.glass_tilt, &raw.glass_radius)?;
-                Ok(SceneSource::Cockpit(CockpitConfig {
+                let config = CockpitConfig {
                     glass,
-                    detail: self
-                        .check_opt("scene.detail", &raw.detail, "a positive number", |d| {
-                            d.is_finite() && d > 0.0
-                        })?
-                        .unwrap_or(default.detail),
-                    glass_segments: self
-                        .check_opt(
-                            "scene.glass_segments",
-                            &raw.glass_segments,
-                            "at least 1",
-                            |n| n >= 1,
-                        )?
-                        .unwrap_or(default.glass_segments),
-                }))
+                    detail: raw.detail.as_ref().map_or(default.detail, |d| *d.get_ref()),
+                    glass_segments: (raw.glass_segments.as_ref())
+                        .map_or(default.glass_segments, |n| *n.get_ref()),
+                };
+                config.validate().map_err(|e| match e.field {
+                    "detail" => self.out_of_bounds("scene.detail", raw.detail.as_ref(), &e),
+                    _ => {
+                        self.out_of_bounds("scene.glass_segments", raw.glass_segments.as_ref(), &e)
+                    }
+                })?;
+                Ok(SceneSource::Cockpit(config))
             }
             (None, Some(obj)) => {
                 let builtin_only = [
@@ -408,20 +474,16 @@ impl Source<'_> {
     }
 
     fn camera(&self, raw: &RawCamera, is_obj: bool) -> Result<CameraSpec, JobError> {
-        let size_rule = format!("1 to {MAX_IMAGE_SIZE}");
-        let size_ok = |n| (1..=MAX_IMAGE_SIZE).contains(&n);
+        let (width, height) = self.image_size("camera", &raw.width, &raw.height)?;
         let mut spec = CameraSpec {
             eye: self.point("camera.eye", &raw.eye)?,
             target: self.point("camera.target", &raw.target)?,
-            up: self.point("camera.up", &raw.up)?,
-            fov_y_deg: self.check_opt(
-                "camera.fov_y",
-                &raw.fov_y,
-                "between 0 and 180 degrees, exclusive",
-                |f| f > 0.0 && f < 180.0,
-            )?,
-            width: self.check_opt("camera.width", &raw.width, &size_rule, size_ok)?,
-            height: self.check_opt("camera.height", &raw.height, &size_rule, size_ok)?,
+            up: self.checked("camera.up", &raw.up, |v| {
+                Camera::check_up(Vec3::from_array(v))
+            })?,
+            fov_y_deg: self.checked("camera.fov_y", &raw.fov_y, Camera::check_fov)?,
+            width,
+            height,
         };
         if is_obj {
             spec.up.get_or_insert(Vec3::Y);
@@ -432,18 +494,30 @@ impl Source<'_> {
         // Check the view here when it is fully known, to point at a line;
         // otherwise `Job::frames` checks it against the cockpit's camera.
         if let (Some(eye), Some(target), Some(up)) = (spec.eye, spec.target, spec.up) {
-            if let Some(bad) = BadView::check(eye, target, up) {
+            if let Err(e) = Camera::check_view(eye, target, up) {
                 // Point at the key most likely wrong (up may be the OBJ default).
-                let blamed = match bad {
-                    BadView::EyeAtTarget => &raw.eye,
-                    BadView::UpAlongView if raw.up.is_some() => &raw.up,
-                    BadView::UpAlongView => &raw.target,
+                let (key, blamed) = match e.field {
+                    "up" if raw.up.is_some() => ("camera.up", &raw.up),
+                    "up" => ("camera.target", &raw.target),
+                    _ => ("camera.eye", &raw.eye),
                 };
-                let message = format!("[camera]: {bad} (eye {eye}, target {target}, up {up})");
-                return Err(self.error(blamed.as_ref().map(Spanned::span), message));
+                return Err(self.out_of_bounds(key, blamed.as_ref(), &e));
             }
         }
         Ok(spec)
+    }
+
+    /// A given value that `validate` (a domain type's check) accepts.
+    fn checked<T: Copy, U>(
+        &self,
+        key: &str,
+        value: &Option<Spanned<T>>,
+        validate: impl FnOnce(T) -> Result<U, OutOfBounds>,
+    ) -> Result<Option<U>, JobError> {
+        value
+            .as_ref()
+            .map(|v| validate(*v.get_ref()).map_err(|e| self.out_of_bounds(key, Some(v), &e)))
+            .transpose()
     }
 
     fn eyes(&self, raw: &RawFrames, camera: &CameraSpec) -> Result<Vec<Vec3>, JobError> {
@@ -452,13 +526,11 @@ impl Source<'_> {
             .enumerate()
             .map(|(i, value)| {
                 let key = format!("frames.eyes[{i}]");
-                let eye = self.vec3(&key, value, "finite", |_| true)?;
+                let eye = bounds::point("eye", Vec3::from_array(*value.get_ref()))
+                    .map_err(|e| self.out_of_bounds(&key, Some(value), &e))?;
                 if let (Some(target), Some(up)) = (camera.target, camera.up) {
-                    if let Some(bad) = BadView::check(eye, target, up) {
-                        return Err(self.error_at(
-                            value,
-                            format!("{key} = {eye}: {bad} (target {target}, up {up})"),
-                        ));
+                    if let Err(e) = Camera::check_view(eye, target, up) {
+                        return Err(self.error_at(value, e.message_for(&key)));
                     }
                 }
                 Ok(eye)
@@ -503,33 +575,35 @@ impl Source<'_> {
             let message = format!("{}: a {name} light needs {needs} = [x, y, z]", key("kind"));
             return Err(self.error_at(&raw.kind, message));
         };
-        let v = self.vec3(&key(needs), value, "finite", |_| true)?;
-        let kind = match kind {
-            RawLightKind::Point => LightKind::Point { position: v },
-            RawLightKind::Directional if v == Vec3::ZERO => {
-                return Err(self.error_at(value, format!("{} = {v}: must not be zero", key(needs))));
-            }
-            RawLightKind::Directional => LightKind::Directional { direction: v },
+        let v = Vec3::from_array(*value.get_ref());
+        let light = Light {
+            kind: match kind {
+                RawLightKind::Point => LightKind::Point { position: v },
+                RawLightKind::Directional => LightKind::Directional { direction: v },
+            },
+            color: raw
+                .color
+                .as_ref()
+                .map_or(Vec3::ONE, |c| Vec3::from_array(*c.get_ref())),
+            intensity: raw.intensity.as_ref().map_or(1.0, |i| *i.get_ref()),
         };
-        Ok(Light {
-            kind,
-            color: self.color(&key("color"), &raw.color)?.unwrap_or(Vec3::ONE),
-            intensity: self
-                .check_opt(
-                    &key("intensity"),
-                    &raw.intensity,
-                    "finite and not negative",
-                    |i| i.is_finite() && i >= 0.0,
-                )?
-                .unwrap_or(1.0),
-        })
+        // The bounds are the light's own (`Light::validate`); locate them here.
+        light.validate().map_err(|e| {
+            let (name, span) = match e.field {
+                "color" => ("color", raw.color.as_ref().map(Spanned::span)),
+                "intensity" => ("intensity", raw.intensity.as_ref().map(Spanned::span)),
+                _ => (needs, Some(value.span())),
+            };
+            self.error(span, e.message_for(&key(name)))
+        })?;
+        Ok(light)
     }
 
     fn reflectors(
         &self,
         raw: Option<Spanned<RawReflectors>>,
         is_obj: bool,
-    ) -> Result<Vec<ReflectorSelector>, JobError> {
+    ) -> Result<Vec<LocatedSelector>, JobError> {
         let Some(raw) = raw else {
             return if is_obj {
                 Err(self.error(
@@ -537,15 +611,22 @@ impl Source<'_> {
                     "an OBJ scene needs [reflectors] with objects = [...] or materials = [...]",
                 ))
             } else {
-                Ok(vec![ReflectorSelector::Object(COVER_GLASS.to_owned())])
+                Ok(vec![(
+                    ReflectorSelector::Object(COVER_GLASS.to_owned()),
+                    None,
+                )])
             };
         };
         let span = raw.span();
         let raw = raw.into_inner();
-        let selectors: Vec<ReflectorSelector> =
-            (raw.objects.into_iter().map(ReflectorSelector::Object))
-                .chain(raw.materials.into_iter().map(ReflectorSelector::Material))
-                .collect();
+        let named = |name: Spanned<String>| (Some(name.span()), name.into_inner());
+        let selectors: Vec<LocatedSelector> = (raw.objects.into_iter().map(named))
+            .map(|(span, n)| (ReflectorSelector::Object(n), span))
+            .chain(
+                (raw.materials.into_iter().map(named))
+                    .map(|(span, n)| (ReflectorSelector::Material(n), span)),
+            )
+            .collect();
         if selectors.is_empty() {
             return Err(self.error(
                 Some(span),
@@ -573,7 +654,6 @@ impl Source<'_> {
     }
 
     fn quality(&self, raw: &RawQuality) -> Result<(TraceSettings, VertexSettings), JobError> {
-        let non_negative = |x: f32| x.is_finite() && x >= 0.0;
         let mut trace = TraceSettings::default();
         let mut vertex = VertexSettings::default();
         if let Some(level) = &raw.level {
@@ -589,40 +669,21 @@ impl Source<'_> {
                 )
             })?;
         }
-        if let Some(epsilon) = self.check_opt(
-            "quality.epsilon",
-            &raw.epsilon,
-            "finite and not negative",
-            non_negative,
-        )? {
+        if let Some(epsilon) = &raw.epsilon {
             // The file speaks 8-bit steps; the vertex tracer compares colours in 0..1.
-            vertex.epsilon = epsilon / 255.0;
+            vertex.epsilon = *epsilon.get_ref() / 255.0;
         }
-        if let Some(floor) = self.check_opt(
-            "quality.pixel_floor",
-            &raw.pixel_floor,
-            "finite and not negative",
-            non_negative,
-        )? {
-            vertex.pixel_floor = floor;
+        if let Some(floor) = &raw.pixel_floor {
+            vertex.pixel_floor = *floor.get_ref();
         }
-        if let Some(flatness) =
-            self.check_opt("quality.flatness", &raw.flatness, "between 0 and 1", |v| {
-                (0.0..=1.0).contains(&v)
-            })?
-        {
-            vertex.flatness = flatness;
+        if let Some(flatness) = &raw.flatness {
+            vertex.flatness = *flatness.get_ref();
         }
-        if let Some(depth) = raw.max_refine_depth {
-            vertex.max_depth = depth;
+        if let Some(depth) = &raw.max_refine_depth {
+            vertex.max_depth = *depth.get_ref();
         }
-        if let Some(max_edge) = self.check_opt(
-            "quality.max_edge",
-            &raw.max_edge,
-            "finite and not negative",
-            non_negative,
-        )? {
-            vertex.max_edge = max_edge;
+        if let Some(max_edge) = &raw.max_edge {
+            vertex.max_edge = *max_edge.get_ref();
         }
         if let Some(name) = &raw.transmission {
             vertex.transmission = Transmission::from_name(name.get_ref()).ok_or_else(|| {
@@ -637,14 +698,39 @@ impl Source<'_> {
                 )
             })?;
         }
-        if let Some(depth) = self.check_opt(
-            "quality.max_trace_depth",
-            &raw.max_trace_depth,
-            &format!("1 to {MAX_TRACE_DEPTH}"),
-            |d| (1..=MAX_TRACE_DEPTH).contains(&d),
-        )? {
-            trace.max_depth = depth;
+        if let Some(depth) = &raw.max_trace_depth {
+            trace.max_depth = *depth.get_ref();
         }
+        // The bounds are the settings' own; the file's keys locate them.
+        vertex.validate().map_err(|e| match e.field {
+            // Quoted in the file's unit, 8-bit steps (the rule does not depend on it).
+            "epsilon" => self.error(
+                raw.epsilon.as_ref().map(Spanned::span),
+                OutOfBounds {
+                    value: raw
+                        .epsilon
+                        .as_ref()
+                        .map_or(e.value.clone(), |v| v.get_ref().to_string()),
+                    ..e.clone()
+                }
+                .message_for("quality.epsilon"),
+            ),
+            "pixel_floor" => {
+                self.out_of_bounds("quality.pixel_floor", raw.pixel_floor.as_ref(), &e)
+            }
+            "flatness" => self.out_of_bounds("quality.flatness", raw.flatness.as_ref(), &e),
+            "max_depth" => self.out_of_bounds(
+                "quality.max_refine_depth",
+                raw.max_refine_depth.as_ref(),
+                &e,
+            ),
+            "max_edge" => self.out_of_bounds("quality.max_edge", raw.max_edge.as_ref(), &e),
+            // Not a job file key: the defaults are valid.
+            _ => self.error(None, format!("quality: vertex {e}")),
+        })?;
+        trace.validate().map_err(|e| {
+            self.out_of_bounds("quality.max_trace_depth", raw.max_trace_depth.as_ref(), &e)
+        })?;
         if let Some(fresnel) = raw.fresnel {
             trace.fresnel = fresnel;
         }

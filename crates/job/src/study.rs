@@ -189,10 +189,7 @@ pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
     let header = raw.study;
     let job_path = source.existing_file("study.job", &header.job)?;
     let job = load_job(&job_path)?;
-    let size_ok = |n: u32| (1..=crate::parse::MAX_IMAGE_SIZE).contains(&n);
-    let size_rule = format!("1 to {}", crate::parse::MAX_IMAGE_SIZE);
-    let width = source.check_opt("study.width", &header.width, &size_rule, size_ok)?;
-    let height = source.check_opt("study.height", &header.height, &size_rule, size_ok)?;
+    let (width, height) = source.image_size("study", &header.width, &header.height)?;
     let look_at = source.point("study.look_at", &header.look_at)?;
     let eyes = source.study_eyes(raw.eyes)?;
     let variants = raw

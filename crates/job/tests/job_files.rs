@@ -179,8 +179,16 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         },
         method: MethodKind::CubeMapGrid,
         eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
+        locations: job.locations.clone(),
     };
     assert_eq!(job, expected);
+    // The keys checked against the scene later keep their lines.
+    let line = |key: &str| job.locations[key].line;
+    assert_eq!(line("camera.eye"), 8);
+    assert_eq!(line("camera.height"), 13);
+    assert_eq!(line("reflectors object \"mirror\""), 28);
+    assert_eq!(line("reflectors material \"glass\""), 29);
+    assert_eq!(line("frames.eyes[1]"), 44);
 }
 
 #[test]
@@ -375,7 +383,7 @@ fn degenerate_views_are_located() {
     assert_rejected(
         &format!("{COCKPIT}[camera]\ntarget = [1, 1, 1]\neye = [1, 1, 1]\nup = [0, 1, 0]\n"),
         5,
-        &["eye is at the target"],
+        &["camera.eye = [1, 1, 1]: must be away from the target"],
     );
     assert_rejected(
         &format!("{COCKPIT}[camera]\neye = [0, 0, 0]\ntarget = [0, 2, 0]\nup = [0, 1, 0]\n"),
@@ -387,7 +395,7 @@ fn degenerate_views_are_located() {
             "{COCKPIT}[camera]\neye = [0, 0, 1]\ntarget = [0, 0, 0]\nup = [0, 1, 0]\n[frames]\neyes = [\n  [1, 0, 0],\n  [0, 0, 0],\n]\n"
         ),
         10,
-        &["frames.eyes[1]", "eye is at the target"],
+        &["frames.eyes[1] = [0, 0, 0]: must be away from the target"],
     );
 }
 
@@ -486,7 +494,7 @@ fn lighting_values_are_checked() {
     assert_rejected(
         &light("kind = \"directional\"\ndirection = [0, 0, 0]\n"),
         5,
-        &["must not be zero"],
+        &["not zero"],
     );
     assert_rejected(
         &light("kind = \"point\"\nposition = [0, 1, 0]\ncolor = [1, -0.5, 1]\n"),
@@ -797,4 +805,100 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
         "{message}"
     );
     assert!(dull_reflectors(&scene, &[1, 2]).is_empty());
+}
+
+/// The runaway values of issue 13: each is refused at its line by the
+/// settings' own bounds (the wire conversion calls the same `validate`).
+#[test]
+fn values_that_would_run_away_are_refused_at_their_line() {
+    let check = |section: &str, key: &str, needle: &str| {
+        assert_rejected(&format!("{COCKPIT}{section}\n{key}\n"), 4, &[needle]);
+    };
+    check(
+        "[quality]",
+        "max_refine_depth = 4294967295",
+        "quality.max_refine_depth = 4294967295: must be 0 to 32",
+    );
+    check(
+        "[quality]",
+        "pixel_floor = 0",
+        "quality.pixel_floor = 0: must be finite and at least 0.5",
+    );
+    check(
+        "[quality]",
+        "epsilon = -1",
+        "quality.epsilon = -1: must be finite",
+    );
+    check(
+        "[quality]",
+        "flatness = 1.5",
+        "quality.flatness = 1.5: must be between 0 and 1",
+    );
+    check(
+        "[quality]",
+        "max_trace_depth = 65",
+        "quality.max_trace_depth = 65: must be 1 to 64",
+    );
+    check(
+        "[camera]",
+        "eye = [1e22, 0, 0]",
+        "camera.eye = [10000000000000000000000, 0, 0]: must be finite and within ±1e6 m",
+    );
+    // `COCKPIT` ends in [scene]: these keys belong to it.
+    assert_rejected(
+        &format!("{COCKPIT}detail = 1e6\n"),
+        3,
+        &["scene.detail = 1000000: must be 0.01 to 10"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}glass_segments = 1000000\n"),
+        3,
+        &["scene.glass_segments = 1000000: must be 1 to 1024"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[camera]\nwidth = 16384\nheight = 16384\n"),
+        5,
+        &["camera.width × camera.height = 16384 × 16384: must be at most 16777216 pixels"],
+    );
+    // A floor of 0.5 with epsilon 0 is bounded, so accepted.
+    let job = parse(&format!(
+        "{COCKPIT}[quality]\npixel_floor = 0.5\nepsilon = 0\n"
+    ));
+    assert_eq!((job.vertex.pixel_floor, job.vertex.epsilon), (0.5, 0.0));
+}
+
+/// Camera and reflector errors found against the scene name their line.
+#[test]
+fn errors_found_against_the_scene_name_the_line() {
+    // An extra eye at the cockpit's default target: parsing cannot tell
+    // (the target comes from the scene), resolving the frames can.
+    let text = format!(
+        "{COCKPIT}[camera]\nwidth = 64\nheight = 48\n[frames]\neyes = [[0, 0, 0], [-0.55, 1.05, -0.6]]\n[reflectors]\nobjects = [\"cover_glass\", \"nothing_here\"]\n"
+    );
+    let job = parse(&text);
+    let message = job.load_scene().expect_err("eye at the target").to_string();
+    assert!(
+        message.starts_with(&format!("{JOB}:7:")) && message.contains("frames.eyes[1]"),
+        "{message}"
+    );
+    let scene = job.scene_only().expect("the cockpit");
+    let message = job
+        .reflector_triangles(&scene)
+        .expect_err("no such object")
+        .to_string();
+    assert!(
+        message.starts_with(&format!("{JOB}:9:")) && message.contains("\"nothing_here\""),
+        "{message}"
+    );
+    // A size given on the command line is checked against the memory bound too.
+    let camera = vtfarm_scene::Camera {
+        width: 16384,
+        height: 16384,
+        ..vtfarm_cockpit::cockpit(&CockpitConfig::default()).camera
+    };
+    let message = job
+        .frames(&camera)
+        .expect_err("too many pixels")
+        .to_string();
+    assert!(message.contains("at most 16777216 pixels"), "{message}");
 }

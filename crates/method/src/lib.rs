@@ -417,6 +417,7 @@ impl ReflectionMethod for VertexTracing {
             behind: &behind,
             owners: &owners,
             settings: self.settings,
+            stop: None,
         };
         let setup_time = start.elapsed();
         let result = trace_package(

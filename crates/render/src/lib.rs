@@ -20,7 +20,7 @@ use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_method::{MethodKind, ReflectionMethod, VertexTracing};
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
-use vtfarm_trace::{SceneBvh, Tracer};
+use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners,
     VertexSettings, trace_package,
@@ -67,19 +67,40 @@ pub struct Renderer {
 impl Renderer {
     /// Prepares a scene; the reflectors are kept in spatial (Morton) order so
     /// that consecutive runs make compact packages with short boundaries.
+    ///
+    /// # Panics
+    /// On a scene that breaks [`Scene::validate`]; scenes from outside go
+    /// through [`Renderer::try_new`].
     pub fn new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Self {
-        let reflectors = morton_order(&scene, reflectors);
-        let owners = VertexOwners::new(&scene);
+        Renderer::try_new(scene, reflectors).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Renderer::new`], or why the scene cannot be rendered (it breaks
+    /// [`Scene::validate`], or a reflector id names no triangle).
+    pub fn try_new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Result<Self, InvalidScene> {
+        if let Some(&t) = reflectors
+            .iter()
+            .find(|&&t| t as usize >= scene.triangles.len())
+        {
+            return Err(InvalidScene(format!(
+                "reflector {t} names no triangle (the scene has {})",
+                scene.triangles.len()
+            )));
+        }
+        let bvh = SceneBvh::try_new(scene)?;
+        let scene = bvh.scene();
+        let reflectors = morton_order(scene, reflectors);
+        let owners = VertexOwners::new(scene);
         let mut is_reflector = vec![false; scene.triangles.len()];
         for &t in &reflectors {
             is_reflector[t as usize] = true;
         }
-        Renderer {
-            bvh: SceneBvh::new(scene),
+        Ok(Renderer {
+            bvh,
             owners,
             reflectors,
             is_reflector,
-        }
+        })
     }
 
     pub fn scene(&self) -> &Scene {
@@ -141,6 +162,7 @@ impl Renderer {
             behind,
             owners: &self.owners,
             settings: setup.vertex,
+            stop: None,
         }
     }
 

@@ -7,7 +7,20 @@
 
 use glam::Vec3;
 
-/// A pinhole camera.
+use crate::bounds::{self, OutOfBounds, check};
+
+/// The largest image width or height in pixels.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// The most pixels one frame may have: 2^24 (4096 × 4096, or 16384 × 1024).
+/// A frame costs about 100 bytes per pixel between master and worker (ID and
+/// behind-the-glass buffers 24, the composited image with its components and
+/// masks about 50, the finished image on the wire 12), so this keeps one frame
+/// near 1.6 GB and its image within the message limit; 16384 × 16384 would
+/// need 27 GB.
+pub const MAX_PIXELS: u64 = 1 << 24;
+
+/// A pinhole camera. [`Camera::validate`] states what makes one usable.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     pub eye: Vec3,
@@ -32,6 +45,84 @@ pub struct ScreenPoint {
 pub const NEAR: f32 = 1e-3;
 
 impl Camera {
+    /// Checks every bound: eye and target within [`bounds::MAX_COORDINATE`],
+    /// `up` finite, the field of view, the image size (each side 1 to
+    /// [`MAX_IMAGE_SIDE`], at most [`MAX_PIXELS`] in all) and a view that
+    /// makes a basis (the eye away from the target, `up` not along the view).
+    pub fn validate(&self) -> Result<(), OutOfBounds> {
+        bounds::point("eye", self.eye)?;
+        bounds::point("target", self.target)?;
+        Camera::check_up(self.up)?;
+        Camera::check_fov(self.fov_y_deg)?;
+        Camera::check_size(self.width, self.height)?;
+        Camera::check_view(self.eye, self.target, self.up)
+    }
+
+    /// The up vector: finite and not zero.
+    pub fn check_up(up: Vec3) -> Result<Vec3, OutOfBounds> {
+        if up.is_finite() && up != Vec3::ZERO {
+            Ok(up)
+        } else {
+            Err(OutOfBounds::new("up", up, "finite and not zero"))
+        }
+    }
+
+    /// The vertical field of view: above 0 and below 180 degrees.
+    pub fn check_fov(fov_y_deg: f32) -> Result<f32, OutOfBounds> {
+        check(
+            "fov_y_deg",
+            fov_y_deg,
+            "between 0 and 180 degrees, exclusive",
+            |f| f > 0.0 && f < 180.0,
+        )
+    }
+
+    /// One image side: 1 to [`MAX_IMAGE_SIDE`] pixels.
+    pub fn check_side(field: &'static str, pixels: u32) -> Result<u32, OutOfBounds> {
+        check(field, pixels, format!("1 to {MAX_IMAGE_SIDE}"), |n| {
+            (1..=MAX_IMAGE_SIDE).contains(&n)
+        })
+    }
+
+    /// Both sides, and at most [`MAX_PIXELS`] in all.
+    pub fn check_size(width: u32, height: u32) -> Result<(), OutOfBounds> {
+        Camera::check_side("width", width)?;
+        Camera::check_side("height", height)?;
+        let pixels = u64::from(width) * u64::from(height);
+        if pixels > MAX_PIXELS {
+            return Err(OutOfBounds::new(
+                "width × height",
+                format!("{width} × {height}"),
+                format!("at most {MAX_PIXELS} pixels (about 100 bytes each in memory)"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether an eye, target and up vector make a camera basis: the eye
+    /// away from the target, `up` not along the view (the basis takes
+    /// right = forward × up). Blames `eye` or `up`.
+    pub fn check_view(eye: Vec3, target: Vec3, up: Vec3) -> Result<(), OutOfBounds> {
+        let forward = target - eye;
+        let length = forward.length();
+        if length.is_nan() || length < 1e-6 {
+            return Err(OutOfBounds::new(
+                "eye",
+                eye,
+                format!("away from the target {target}"),
+            ));
+        }
+        let sine = forward.normalize().cross(up.normalize_or_zero()).length();
+        if sine.is_nan() || sine < 1e-4 {
+            return Err(OutOfBounds::new(
+                "up",
+                up,
+                format!("not zero and not parallel to the view direction {forward}"),
+            ));
+        }
+        Ok(())
+    }
+
     /// The orthonormal camera basis: (forward, right, up).
     pub fn basis(&self) -> (Vec3, Vec3, Vec3) {
         let forward = (self.target - self.eye).normalize();

@@ -5,6 +5,7 @@
 //! Architecture invariant: this crate knows nothing of ray tracing, rasterizing
 //! or networking; it is plain data plus file import and export.
 
+pub mod bounds;
 mod camera;
 mod light;
 mod material;
@@ -13,7 +14,8 @@ pub mod obj;
 pub mod shading;
 pub mod shapes;
 
-pub use camera::{Camera, NEAR, Projector, ScreenPoint};
+pub use bounds::{MAX_COORDINATE, OutOfBounds};
+pub use camera::{Camera, MAX_IMAGE_SIDE, MAX_PIXELS, NEAR, Projector, ScreenPoint};
 pub use light::{Light, LightKind, Lighting};
 pub use material::Material;
 
@@ -122,7 +124,9 @@ impl Scene {
     }
 
     /// Checks the structural invariants: indices in range, one normal per
-    /// position, unit normals. Returns a description of the first violation.
+    /// position, unit normals, and every position within
+    /// [`MAX_COORDINATE`] (the BVH build relies on it). Returns a description
+    /// of the first violation.
     pub fn validate(&self) -> Result<(), String> {
         if self.positions.len() != self.normals.len() {
             return Err(format!(
@@ -151,9 +155,12 @@ impl Scene {
         if let Some(i) = self
             .normals
             .iter()
-            .position(|n| (n.length() - 1.0).abs() > 1e-3)
+            .position(|n| (n.length() - 1.0).abs().is_nan() || (n.length() - 1.0).abs() > 1e-3)
         {
             return Err(format!("normal {i} is not unit length"));
+        }
+        for (i, &p) in self.positions.iter().enumerate() {
+            bounds::point("position", p).map_err(|e| format!("vertex {i}: {e}"))?;
         }
         Ok(())
     }

@@ -2,6 +2,8 @@
 
 use glam::Vec3;
 
+use crate::bounds::{self, OutOfBounds};
+
 /// Where a light is.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightKind {
@@ -20,6 +22,29 @@ pub struct Light {
 }
 
 impl Light {
+    /// A position within [`bounds::MAX_COORDINATE`] or a finite, non-zero
+    /// direction (shading normalizes it); colour and intensity finite and not
+    /// negative.
+    pub fn validate(&self) -> Result<(), OutOfBounds> {
+        match self.kind {
+            LightKind::Point { position } => {
+                bounds::point("position", position)?;
+            }
+            LightKind::Directional { direction } => {
+                if !(direction.is_finite() && direction != Vec3::ZERO) {
+                    return Err(OutOfBounds::new(
+                        "direction",
+                        direction,
+                        "finite and not zero",
+                    ));
+                }
+            }
+        }
+        bounds::non_negative3("color", self.color)?;
+        bounds::non_negative("intensity", self.intensity)?;
+        Ok(())
+    }
+
     /// The radiance scale of this light (colour times intensity).
     pub fn radiance(&self) -> Vec3 {
         self.color * self.intensity
@@ -48,6 +73,19 @@ pub struct Lighting {
     pub ambient: Vec3,
     /// Radiance of rays that hit nothing.
     pub background: Vec3,
+}
+
+impl Lighting {
+    /// Every light valid (the error names the light's index), ambient and
+    /// background finite and not negative.
+    pub fn validate(&self) -> Result<(), (Option<usize>, OutOfBounds)> {
+        for (i, light) in self.lights.iter().enumerate() {
+            light.validate().map_err(|e| (Some(i), e))?;
+        }
+        bounds::non_negative3("ambient", self.ambient).map_err(|e| (None, e))?;
+        bounds::non_negative3("background", self.background).map_err(|e| (None, e))?;
+        Ok(())
+    }
 }
 
 impl Default for Lighting {

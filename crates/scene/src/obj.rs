@@ -96,11 +96,7 @@ impl Default for ObjOptions {
     }
 }
 
-/// The largest vertex coordinate magnitude accepted (1e8, in scene units).
-/// Ray/triangle tests multiply up to four coordinate differences; below
-/// this bound those products stay far from `f32::MAX`, and the scene is
-/// still 100,000 km wide in metres.
-pub const MAX_COORDINATE: f32 = 1e8;
+pub use crate::MAX_COORDINATE;
 
 /// The most vertices one face may have. A face's fan puts all its triangles
 /// around one vertex, where computing normals costs O(k²) in the worst case

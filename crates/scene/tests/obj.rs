@@ -218,7 +218,8 @@ fn built_scene() -> Scene {
         Vec3::new(1.0, 0.0, 0.0),
         Vec3::new(0.0, 1.0, 0.0),
         Vec3::new(1.0, 1.0, 0.1),
-        Vec3::new(-1e-7, 2.5e6, std::f32::consts::PI),
+        // Large, but within vtfarm_scene::MAX_COORDINATE (1e6 m).
+        Vec3::new(-1e-7, 2.5e5, std::f32::consts::PI),
     ];
     let normals = positions
         .iter()
@@ -358,7 +359,7 @@ fn write_obj_rejects_scenes_it_cannot_round_trip() {
     for (scene, message) in [
         (twins, "two materials are named \"mirror\""),
         (blank, "object name \" lamp\" cannot be written"),
-        (nan, "vertex 3 is not finite"),
+        (nan, "vertex 3: position = [1, NaN, 0.1]: must be finite"),
         (broken, "triangle 0 names missing material 9"),
     ] {
         let error = write_obj(&scene, dir.path(), "bad")
@@ -414,8 +415,8 @@ const BAD: &[(&str, &str, &str, usize, &str)] = &[
     ("mtllib lib.mtl\n", "newmtl a\nmap_Kd\n", "lib.mtl", 2, "map_Kd: no texture file name"),
     ("mtllib lib.mtl\n", "newmtl a\nKd 1 1 # grey\n", "lib.mtl", 2, "Kd: expected 3 numbers, found 2"),
     ("mtllib lib.mtl\n", "newmtl a\nTf 1 1\n", "lib.mtl", 2, "Tf: expected r g b or one number"),
-    ("v 0 0 1e22\n", "", "bad.obj", 1, "coordinate 10000000000000000000000 is beyond ±1e8"),
-    ("v 0 0 0\nv -2e8 0 0\n", "", "bad.obj", 2, "coordinate 200000000 is beyond ±1e8"),
+    ("v 0 0 1e22\n", "", "bad.obj", 1, "coordinate 10000000000000000000000 is beyond ±1e6"),
+    ("v 0 0 0\nv -2e8 0 0\n", "", "bad.obj", 2, "coordinate 200000000 is beyond ±1e6"),
     ("v 0 0 0\nv 1 1 1 1e-30\n", "", "bad.obj", 2, "coordinate 1000000000000000000000000000000 is beyond"),
     ("v 0 0 1e39\n", "", "bad.obj", 1, "\"1e39\" is not a finite number"),
     ("v 0 0 -inf\n", "", "bad.obj", 1, "\"-inf\" is not a finite number"),

@@ -220,9 +220,7 @@ fn eye_camera(study: &Study, base: &Camera, eye: Vec3) -> Result<Camera, String>
         height: study.height.unwrap_or(base.height),
         ..*base
     };
-    if let Some(bad) = vtfarm_job::BadView::check(camera.eye, camera.target, camera.up) {
-        return Err(bad.to_string());
-    }
+    camera.validate().map_err(|e| e.to_string())?;
     Ok(camera)
 }
 

@@ -274,7 +274,7 @@ fn an_eye_on_the_point_it_looks_at_is_refused_while_planning() {
     let e = plan(&study, None).expect_err("eye 1 sits on the target");
     let message = e.to_string();
     assert!(
-        message.contains("eye 1") && message.contains("the eye is at the target"),
+        message.contains("eye 1") && message.contains("must be away from the target"),
         "{message}"
     );
 }

@@ -283,16 +283,54 @@ fn next_up(t: f32) -> f32 {
     f32::from_bits(t.to_bits() + 1)
 }
 
+/// A scene the BVH cannot be built over: it breaks [`Scene::validate`]
+/// (an index out of range, or a vertex beyond
+/// [`vtfarm_scene::MAX_COORDINATE`], where obvhs' build overflows and panics).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InvalidScene(pub String);
+
+impl fmt::Display for InvalidScene {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "cannot build the BVH: {}", self.0)
+    }
+}
+
+impl std::error::Error for InvalidScene {}
+
 impl SceneBvh {
     /// Builds the BVH with the default (fastest measured) [`BvhOptions`].
+    /// For scenes from outside (files, the network) use [`SceneBvh::try_new`].
+    ///
+    /// # Panics
+    /// On a scene that breaks [`Scene::validate`].
     pub fn new(scene: Arc<Scene>) -> SceneBvh {
         SceneBvh::with_options(scene, BvhOptions::default())
+    }
+
+    /// [`SceneBvh::new`], or the reason the scene cannot have a BVH.
+    pub fn try_new(scene: Arc<Scene>) -> Result<SceneBvh, InvalidScene> {
+        SceneBvh::try_with_options(scene, BvhOptions::default())
     }
 
     /// Builds the BVH with an explicit layout and build preset (benchmarks,
     /// or trading trace speed for build time). Query results are identical
     /// for every choice.
+    ///
+    /// # Panics
+    /// On a scene that breaks [`Scene::validate`].
     pub fn with_options(scene: Arc<Scene>, options: BvhOptions) -> SceneBvh {
+        match SceneBvh::try_with_options(scene, options) {
+            Ok(bvh) => bvh,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// [`SceneBvh::with_options`], or the reason the scene cannot have a BVH.
+    pub fn try_with_options(
+        scene: Arc<Scene>,
+        options: BvhOptions,
+    ) -> Result<SceneBvh, InvalidScene> {
+        scene.validate().map_err(InvalidScene)?;
         let count = scene.triangles.len();
         let tri_positions: Vec<[Vec3; 3]> = (0..count as TriangleId)
             .map(|id| scene.triangle_positions(id))
@@ -328,14 +366,14 @@ impl SceneBvh {
             _ => options,
         };
 
-        SceneBvh {
+        Ok(SceneBvh {
             scene,
             options,
             accel,
             prims,
             prim_ids: slots,
             geometric_normals,
-        }
+        })
     }
 
     pub fn scene(&self) -> &Scene {

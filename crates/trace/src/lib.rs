@@ -23,10 +23,11 @@ mod scenarios;
 #[cfg(test)]
 mod testutil;
 
-pub use bvh::{BuildPreset, BvhLayout, BvhOptions, SceneBvh, spawn_offset};
+pub use bvh::{BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, spawn_offset};
 pub use whitted::{SurfaceTerms, Tracer, reflect, refract};
 
 use glam::Vec3;
+use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
 use vtfarm_scene::{ObjectId, TriangleId};
 
 /// A ray; `direction` is unit length.
@@ -69,6 +70,25 @@ pub struct TraceSettings {
     /// Ray-tree branches whose weight (the product of kr/kt above them) is
     /// below this are left out of the signature.
     pub signature_min_weight: f32,
+}
+
+/// The deepest Whitted recursion accepted: each level is a stack frame of
+/// the recursion, and deeper trees only risk the stack.
+pub const MAX_TRACE_DEPTH: u32 = 64;
+
+impl TraceSettings {
+    /// `max_depth` 1 to [`MAX_TRACE_DEPTH`]; `signature_min_weight` finite
+    /// and not negative.
+    pub fn validate(&self) -> Result<(), OutOfBounds> {
+        check(
+            "max_depth",
+            self.max_depth,
+            format!("1 to {MAX_TRACE_DEPTH}"),
+            |d| (1..=MAX_TRACE_DEPTH).contains(&d),
+        )?;
+        non_negative("signature_min_weight", self.signature_min_weight)?;
+        Ok(())
+    }
 }
 
 impl Default for TraceSettings {

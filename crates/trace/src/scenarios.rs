@@ -933,3 +933,48 @@ fn surface_terms_recombine_to_the_shaded_sample() {
         assert_close(sample.color, terms.local + reflected + transmitted, 1e-5);
     }
 }
+
+/// A scene with one vertex at `far` and two ordinary triangles.
+fn scene_with_far_vertex(far: f32) -> Scene {
+    let mut b = SceneBuilder::default();
+    b.triangles(
+        Material::default(),
+        &[
+            [Vec3::ZERO, Vec3::X, Vec3::Y],
+            [Vec3::Z, Vec3::X, Vec3::new(far, 0.0, 0.0)],
+        ],
+    );
+    b.scene
+}
+
+#[test]
+fn absurd_coordinates_are_refused_instead_of_panicking_the_build() {
+    // 1e22 overflowed obvhs' SAH costs and panicked bvh2_to_cwbvh (issue 13).
+    for far in [1e22, -3e30, f32::MAX] {
+        for preset in BuildPreset::ALL {
+            let options = BvhOptions {
+                layout: BvhLayout::Cw,
+                preset,
+            };
+            let error = SceneBvh::try_with_options(Arc::new(scene_with_far_vertex(far)), options)
+                .expect_err("a vertex beyond the limit");
+            assert!(
+                error.to_string().contains("vertex 5"),
+                "{far} {preset:?}: {error}"
+            );
+        }
+    }
+    // At the limit it builds and traces.
+    let bvh = SceneBvh::try_new(Arc::new(scene_with_far_vertex(
+        vtfarm_scene::MAX_COORDINATE,
+    )))
+    .expect("a vertex at the limit");
+    let ray = Ray {
+        origin: Vec3::new(0.2, 0.2, 1.0),
+        direction: -Vec3::Z,
+    };
+    assert_eq!(
+        bvh.closest_hit(&ray, f32::INFINITY).map(|h| h.triangle),
+        Some(0)
+    );
+}

@@ -97,6 +97,52 @@ impl Transmission {
     }
 }
 
+/// The smallest accepted [`VertexSettings::pixel_floor`]: edges shorter than
+/// half a pixel are never split, so a triangle covering P pixels gets at most
+/// about 8P faces whatever `epsilon` and `flatness` say (a floor of 0 with
+/// epsilon 0 refined hard edges down to float noise).
+pub const MIN_PIXEL_FLOOR: f32 = 0.5;
+/// The deepest accepted [`VertexSettings::max_depth`]: 32 halvings take a
+/// 16384-pixel edge below the smallest pixel floor.
+pub const MAX_REFINE_DEPTH: u32 = 32;
+/// The widest accepted [`VertexSettings::visibility_radius`]: the test costs
+/// `(2r + 1)^2` ID-buffer reads per vertex.
+pub const MAX_VISIBILITY_RADIUS: u32 = 64;
+
+impl VertexSettings {
+    /// Checks every bound: `epsilon` and `depth_tolerance` finite and not
+    /// negative, `pixel_floor` finite and at least [`MIN_PIXEL_FLOOR`],
+    /// `flatness` 0 to 1, `max_depth` at most [`MAX_REFINE_DEPTH`],
+    /// `visibility_radius` at most [`MAX_VISIBILITY_RADIUS`].
+    pub fn validate(&self) -> Result<(), OutOfBounds> {
+        non_negative("epsilon", self.epsilon)?;
+        check(
+            "pixel_floor",
+            self.pixel_floor,
+            format!("finite and at least {MIN_PIXEL_FLOOR} (pixels)"),
+            |f| f.is_finite() && f >= MIN_PIXEL_FLOOR,
+        )?;
+        check("flatness", self.flatness, "between 0 and 1", |v| {
+            (0.0..=1.0).contains(&v)
+        })?;
+        check(
+            "max_depth",
+            self.max_depth,
+            format!("0 to {MAX_REFINE_DEPTH}"),
+            |d| d <= MAX_REFINE_DEPTH,
+        )?;
+        check(
+            "visibility_radius",
+            self.visibility_radius,
+            format!("0 to {MAX_VISIBILITY_RADIUS}"),
+            |r| r <= MAX_VISIBILITY_RADIUS,
+        )?;
+        non_negative("depth_tolerance", self.depth_tolerance)?;
+        non_negative("max_edge", self.max_edge)?;
+        Ok(())
+    }
+}
+
 impl Default for VertexSettings {
     fn default() -> Self {
         VertexSettings {
@@ -116,6 +162,7 @@ impl Default for VertexSettings {
 mod composite;
 mod package;
 mod refine;
+mod stop;
 mod thin;
 
 pub use composite::{FrameImage, draw_wireframe};
@@ -123,11 +170,13 @@ pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
     trace_package,
 };
+pub use stop::{Stop, Stopped};
 pub use thin::Behind;
 
 use glam::Vec3;
 use package::PixelRect;
 use vtfarm_raster::IdBuffer;
+use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
 use vtfarm_scene::{Camera, Projector, ScreenPoint, TriangleId};
 use vtfarm_trace::{Sample, SurfacePoint, Tracer};
 
@@ -166,9 +215,23 @@ pub struct Frame<'a> {
     pub behind: &'a Behind,
     pub owners: &'a VertexOwners,
     pub settings: VertexSettings,
+    /// Cancellation and the sample budget; `None` runs to the end.
+    pub stop: Option<&'a Stop>,
 }
 
 impl Frame<'_> {
+    /// Whether the package must stop (see [`Stop`]).
+    fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.stopped().is_some())
+    }
+
+    /// Every traced sample counts against the budget, here in one place.
+    fn charge_sample(&self) {
+        if let Some(stop) = self.stop {
+            stop.charge(1);
+        }
+    }
+
     fn projector(&self) -> Projector {
         Projector::new(&self.camera)
     }
@@ -289,6 +352,7 @@ impl Frame<'_> {
     /// vertex, no intersection needed. With raster transmission only the
     /// local part and the reflection are traced (see [`Transmission`]).
     fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
+        self.charge_sample();
         let incoming = (position - self.camera.eye).normalize();
         let point = SurfacePoint {
             position,
@@ -305,6 +369,7 @@ impl Frame<'_> {
     /// vertices are traced, and finishes it (see [`Frame::finish_pixel`]).
     /// Triangle filling and pixels no face reaches use this.
     fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
+        self.charge_sample();
         let scene = self.tracer.bvh.scene();
         let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
         let sample = match self.settings.transmission {
@@ -319,6 +384,7 @@ impl Frame<'_> {
     /// The reference: pixel (x, y) on `triangle` in full Whitted, the
     /// refraction ray traced whatever the transmission setting.
     fn reference_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
+        self.charge_sample();
         let scene = self.tracer.bvh.scene();
         let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
         let sample = self.tracer.shade(&point, direction);

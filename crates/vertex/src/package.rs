@@ -359,6 +359,7 @@ fn trace_all_pixels(
 ) -> (Vec<PixelValue>, u64) {
     let pixels: Vec<PixelValue> = rect
         .pixels()
+        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(triangle, x, y))
         .map(|(x, y)| frame.reference_pixel(triangle, x, y))
         .collect();
@@ -443,6 +444,7 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     let mut traced = 0;
     let pixels = rect
         .pixels()
+        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(mesh.triangle, x, y))
         .map(|(x, y)| {
             let index = frame.ids.index(x, y) as u32;

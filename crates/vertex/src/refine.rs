@@ -174,6 +174,9 @@ impl TriangleMesh {
             self.queue_edge(&mut queue, a, b, false);
         }
         while let Some(edge) = queue.pop() {
+            if frame.stopped() {
+                return;
+            }
             let Some(&faces) = self.edge_faces.get(&(edge.a, edge.b)) else {
                 continue; // Split already (queued twice, or forced after queueing).
             };

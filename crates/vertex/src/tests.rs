@@ -32,8 +32,8 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Behind, Frame, PackageOptions, PackageResult, Quality, Transmission, VertexOwners,
-    VertexSettings, trace_package,
+    Behind, Frame, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
+    VertexOwners, VertexSettings, trace_package,
 };
 
 /// The default thresholds without the maximum edge length, so that only
@@ -184,6 +184,7 @@ impl TestFrame {
             behind: &self.behind,
             owners: &self.owners,
             settings,
+            stop: None,
         }
     }
 
@@ -422,4 +423,61 @@ fn the_flatness_guard_splits_a_flat_face_across_its_agreeing_long_edge() {
     };
     assert!(has_guard_vertex(0.45));
     assert!(!has_guard_vertex(0.2));
+}
+
+/// Traces triangle A at `full` (2 splits, 136 filled pixels) under `stop`.
+fn trace_with_stop(frame: &TestFrame, stop: &Stop) -> PackageResult {
+    let settings = VertexSettings {
+        pixel_floor: 20.0,
+        ..VertexSettings::default()
+    };
+    let frame = Frame {
+        stop: Some(stop),
+        ..frame.frame(settings)
+    };
+    trace_package(&frame, &[A], &PackageOptions::default(), &mut |_| {})
+}
+
+#[test]
+fn a_cancelled_package_stops_before_refining_or_filling() {
+    let frame = TestFrame::new(Extras::default());
+    let stop = Stop::with_budget(u64::MAX);
+    stop.cancel();
+    let result = trace_with_stop(&frame, &stop);
+    assert_eq!(stop.stopped(), Some(Stopped::Cancelled));
+    // Only the corners were traced: no split, no filled pixel.
+    let s = result.stats;
+    assert_eq!(
+        (s.vertex_samples, s.refined_edges, s.filled_pixels),
+        (3, 0, 0)
+    );
+    assert!(result.bitmap.color.is_empty());
+}
+
+#[test]
+fn a_sample_budget_stops_a_package_that_needs_more() {
+    let frame = TestFrame::new(Extras::default());
+    let unlimited = trace_with_stop(&frame, &Stop::with_budget(u64::MAX));
+    let needed = unlimited.stats.samples();
+    assert_eq!(needed, 5 + 136, "the hand-worked case");
+
+    // Exactly enough: the same result, not stopped.
+    let enough = Stop::with_budget(needed);
+    let result = trace_with_stop(&frame, &enough);
+    assert_eq!(enough.stopped(), None);
+    assert_eq!(result.bitmap, unlimited.bitmap);
+
+    // One short: stopped, within a sample of the budget.
+    let short = Stop::with_budget(needed - 1);
+    let result = trace_with_stop(&frame, &short);
+    assert_eq!(
+        short.stopped(),
+        Some(Stopped::OverBudget { budget: needed - 1 })
+    );
+    assert!(result.stats.samples() <= needed);
+    // Four samples: the corners and one split, then the second split is over.
+    let tiny = Stop::with_budget(4);
+    let result = trace_with_stop(&frame, &tiny);
+    assert_eq!(tiny.stopped(), Some(Stopped::OverBudget { budget: 4 }));
+    assert_eq!(result.stats.filled_pixels, 0);
 }

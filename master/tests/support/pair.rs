@@ -466,7 +466,9 @@ impl Pair {
                         .frame
                         .as_ref()
                         .expect("the session ran a prepared frame");
-                    let mut result = frame.run(&package, 1.0).expect("packages render");
+                    let unlimited = vtfarm_vertex::Stop::with_budget(u64::MAX);
+                    let mut result =
+                        (frame.run(&package, 1.0, &unlimited)).expect("packages render");
                     let samples: u64 = (result.triangle_samples.iter())
                         .map(|&s| u64::from(s) + 1)
                         .sum();

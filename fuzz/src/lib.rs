@@ -1,0 +1,113 @@
+//! The fuzz targets' bodies, one function per target: each feeds hostile
+//! bytes to the code a peer or a file reaches and may only return (errors
+//! are fine; a panic, a hang or an unbounded allocation is a finding).
+
+use std::future::Future;
+use std::path::Path;
+use std::pin::pin;
+use std::task::{Context, Poll, Waker};
+
+use sha2::{Digest, Sha256};
+use vtfarm_proto::{
+    HandshakePolicy, JobScene, MAX_HANDSHAKE_BYTES, Message, SESSION_LIMIT, SceneData, check_hello,
+    read_message,
+};
+
+/// One framed message (length prefix and body) as the session reader reads
+/// it, then every wire conversion the master or a worker applies to it.
+pub fn frame(data: &[u8]) {
+    let mut reader = data;
+    let Ok(message) = ready(read_message(&mut reader, SESSION_LIMIT)) else {
+        return;
+    };
+    convert(message);
+}
+
+/// The body of a connection's first message, as the master checks it.
+pub fn handshake(data: &[u8]) {
+    let policy = HandshakePolicy::new("fuzz-token", "fuzz");
+    let mut reader = data;
+    if let Ok(message) = ready(read_message(&mut reader, MAX_HANDSHAKE_BYTES)) {
+        let _ = message.name();
+    }
+    let _ = check_hello(data, &policy);
+}
+
+/// An OBJ file and its MTL library: the input is the OBJ text, a line
+/// `#MTL`, then the MTL text (written as `scene.mtl`).
+pub fn obj(data: &[u8]) {
+    let (obj, mtl) = match data.windows(5).position(|w| w == b"\n#MTL") {
+        Some(i) => (&data[..i], &data[i + 5..]),
+        None => (data, &b""[..]),
+    };
+    let Ok(dir) = tempfile::tempdir() else {
+        return;
+    };
+    let path = dir.path().join("scene.obj");
+    if std::fs::write(&path, obj).is_err()
+        || std::fs::write(dir.path().join("scene.mtl"), mtl).is_err()
+    {
+        return;
+    }
+    if let Ok(scene) = vtfarm_scene::obj::load_obj(&path, &Default::default()) {
+        // What the loader accepts, the wire and the BVH accept too.
+        assert_eq!(scene.validate(), Ok(()));
+    }
+}
+
+/// A job file's text.
+pub fn job(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(job) = vtfarm_job::parse_job(text, Path::new("fuzz/job.toml")) {
+        // Whatever parses has settings within their bounds.
+        assert_eq!(job.vertex.validate(), Ok(()));
+        assert_eq!(job.trace.validate(), Ok(()));
+    }
+}
+
+/// The conversions to domain types that the master and the workers apply.
+fn convert(message: Message) {
+    match message {
+        Message::SubmitJob { job } => {
+            for frame in job.frames {
+                let _ = frame.into_parts();
+            }
+            if let JobScene::Data(data) = job.scene {
+                scene(data.bytes);
+            }
+        }
+        Message::SceneData(data) => scene(data.bytes),
+        Message::FrameStart(start) => {
+            let _ = start.setup.into_parts();
+        }
+        Message::PackageResult(result) => {
+            let _ = result.bitmap.into_bitmap_within(640, 360);
+        }
+        Message::FrameDone(done) => {
+            let _ = done.image.into_pixels();
+        }
+        _ => {}
+    }
+}
+
+/// Scene bytes under their own hash (the fuzzer cannot forge SHA-256).
+fn scene(bytes: Vec<u8>) {
+    let data = SceneData {
+        hash: Sha256::digest(&bytes).into(),
+        bytes,
+    };
+    if let Ok(scene) = data.to_scene() {
+        assert_eq!(scene.validate(), Ok(()));
+    }
+}
+
+/// Polls a future over an in-memory reader once: reading a slice never
+/// waits, so it is finished.
+fn ready<T>(future: impl Future<Output = T>) -> T {
+    match pin!(future).poll(&mut Context::from_waker(Waker::noop())) {
+        Poll::Ready(value) => value,
+        Poll::Pending => unreachable!("an in-memory reader never waits"),
+    }
+}
