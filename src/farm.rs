@@ -138,7 +138,8 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
     let args_aux = args.aux;
-    let frames = runtime()?.block_on(async move {
+    let mut arrivals = Vec::new();
+    let frames = runtime()?.block_on(async {
         let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
         let wire = vtfarm_proto::WireJob {
@@ -147,6 +148,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             ..wire_job(&name, &data, &setups, &reflectors)
         };
         let bar = crate::progress_bar(reflectors.len() as u64, "frame");
+        let submitted = std::time::Instant::now();
         let result = run_job(&mut conn.link, wire, &data, |event| match event {
             JobEvent::Accepted { job, frames } => {
                 bar.println(format!("job {job} accepted: {frames} frame(s)"))
@@ -156,6 +158,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 bar.set_position(done.into());
             }
             JobEvent::FrameDone(f) => {
+                arrivals.push(submitted.elapsed().as_micros() as u64);
                 let path = output.join(format!("frame_{:04}.png", f.frame));
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
@@ -181,7 +184,13 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         conn.endpoint.wait_idle().await;
         anyhow::Ok(result?)
     })?;
-    let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();
+    let stats: Vec<FrameRecord> = (frames.iter().zip(arrivals))
+        .map(|(f, arrival_micros)| FrameRecord {
+            frame: f.frame,
+            arrival_micros,
+            stats: &f.stats,
+        })
+        .collect();
     let path = args.output.join("stats.json");
     crate::write_json(&path, &stats)?;
     for f in &frames {
@@ -190,6 +199,17 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
     Ok(())
+}
+
+/// One frame in `stats.json`: the master's statistics, and when the frame
+/// reached the submitter (from the submission; the intervals between
+/// arrivals are the farm's frame rate, pipelined or not).
+#[derive(serde::Serialize)]
+struct FrameRecord<'a> {
+    frame: u32,
+    arrival_micros: u64,
+    #[serde(flatten)]
+    stats: &'a FrameStats,
 }
 
 /// `vtfarm submit` of a study file: its variants run on the cluster.

@@ -2,15 +2,21 @@
 //! messages and closes out, around the pure `Scheduler`. The async driver
 //! (`driver.rs`) feeds it; tests can drive it directly.
 //!
-//! Per frame it rasterizes the base frame, sends `FrameStart` to every
-//! worker, hands out the scheduler's packages, composites each accepted
-//! result over the base frame and sends the finished frame to the submitter.
+//! Per frame it sends `FrameStart` to every worker first and then asks the
+//! driver to rasterize the base frame ([`Output::RasterizeBase`]) while the
+//! workers trace: the base is needed only to composite. It hands out the
+//! scheduler's packages and composites each accepted result at once (a
+//! result overwrites its pixels, the base fills the others whenever it
+//! arrives, so the order does not matter); a frame whose last result came
+//! before its base waits for it, then goes to the submitter.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
+use glam::Vec3;
 use tracing::{debug, info, warn};
+use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
@@ -42,11 +48,30 @@ pub enum Peer {
 }
 
 /// What the core asks the driver to do.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Output {
     Send(ConnId, Box<Message>),
     /// Drop the connection, logging why.
     Close(ConnId, String),
+    /// Rasterize a base frame (CPU work, off the driver's task) and hand it
+    /// to [`MasterCore::base_frame_ready`].
+    RasterizeBase(BaseFrameRequest),
+}
+
+/// A base frame to rasterize: what [`BaseFrameRequest::rasterize`] needs.
+#[derive(Clone, Debug)]
+pub struct BaseFrameRequest {
+    pub job: u64,
+    pub frame: u32,
+    scene: Arc<Scene>,
+    setup: FrameSetup,
+}
+
+impl BaseFrameRequest {
+    /// The shaded base frame (the expensive part: seconds at 1080p on one core).
+    pub fn rasterize(&self) -> Image {
+        vtfarm_raster::rasterize(&self.scene, &self.setup.camera, &self.setup.lighting).0
+    }
 }
 
 struct Job {
@@ -63,6 +88,10 @@ struct Job {
     /// index; `None` when the items are the reflector triangles themselves.
     groups: Option<Vec<Vec<u32>>>,
     current: Option<FrameAssembly>,
+    /// Frames whose results are all in but whose base frame is not.
+    finishing: Vec<(FrameAssembly, vtfarm_proto::FrameStats)>,
+    /// The scheduler completed the job; it goes when `finishing` is empty.
+    complete: bool,
 }
 
 impl Job {
@@ -81,9 +110,24 @@ impl Job {
 /// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
     start: FrameStart,
+    /// The results so far, over the base frame once it has arrived.
     image: FrameImage,
+    has_base: bool,
     totals: PackageStats,
     triangles_done: u64,
+}
+
+impl FrameAssembly {
+    /// Fills the pixels no result has written with the base frame.
+    fn add_base(&mut self, base: &Image) {
+        let color = &mut self.image.color.pixels;
+        for ((c, &b), &traced) in color.iter_mut().zip(&base.pixels).zip(&self.image.mask) {
+            if !traced {
+                *c = b;
+            }
+        }
+        self.has_base = true;
+    }
 }
 
 /// A package on its way: what the results must be matched against.
@@ -427,6 +471,8 @@ impl MasterCore {
                 method,
                 groups,
                 current: None,
+                finishing: Vec::new(),
+                complete: false,
             },
         );
         if let Err(e) = self.scheduler.submit_job(now, JobId(id), work) {
@@ -529,19 +575,21 @@ impl MasterCore {
                     totals: WirePackageStats::from(&done.totals),
                     workers,
                 };
-                let j = &self.jobs[&job.0];
-                let message = Message::FrameDone(FrameDone {
-                    job: job.0,
-                    frame,
-                    image: wire_image(&done.image.color),
-                    stats: frame_stats,
-                    aux: j.aux.then(|| frame_aux(&done.image)),
-                });
-                self.send(j.submitter, message);
+                if done.has_base {
+                    self.frame_done(job.0, done, frame_stats);
+                } else if let Some(j) = self.jobs.get_mut(&job.0) {
+                    j.finishing.push((done, frame_stats));
+                }
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
-                self.forget_job(job.0);
+                match self.jobs.get_mut(&job.0) {
+                    // Its last frames still wait for their base frames.
+                    Some(j) if !j.finishing.is_empty() => j.complete = true,
+                    _ => {
+                        self.forget_job(job.0);
+                    }
+                }
             }
             Event::JobFailed {
                 job,
@@ -582,7 +630,46 @@ impl MasterCore {
         }
     }
 
-    /// Rasterizes a frame's base image and announces the frame to the workers.
+    /// Sends a finished frame to its submitter.
+    fn frame_done(&mut self, job: u64, done: FrameAssembly, stats: vtfarm_proto::FrameStats) {
+        let Some(j) = self.jobs.get(&job) else {
+            return;
+        };
+        let message = Message::FrameDone(FrameDone {
+            job,
+            frame: done.start.frame,
+            image: wire_image(&done.image.color),
+            stats,
+            aux: j.aux.then(|| frame_aux(&done.image)),
+        });
+        self.send(j.submitter, message);
+    }
+
+    /// The driver rasterized a base frame that [`Output::RasterizeBase`] asked for.
+    pub fn base_frame_ready(&mut self, job: u64, frame: u32, base: &Image) {
+        let Some(j) = self.jobs.get_mut(&job) else {
+            return;
+        };
+        let fits = |a: &FrameAssembly| {
+            a.start.frame == frame
+                && !a.has_base
+                && (a.image.color.width, a.image.color.height) == (base.width, base.height)
+        };
+        if let Some(current) = j.current.as_mut().filter(|c| fits(c)) {
+            current.add_base(base);
+        } else if let Some(k) = j.finishing.iter().position(|(a, _)| fits(a)) {
+            let (mut done, stats) = j.finishing.remove(k);
+            done.add_base(base);
+            let forget = j.complete && j.finishing.is_empty();
+            self.frame_done(job, done, stats);
+            if forget {
+                self.forget_job(job);
+            }
+        }
+        self.pump();
+    }
+
+    /// Announces a frame to the workers, then asks for its base frame.
     fn start_frame(&mut self, job: u64, frame: u32) {
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
@@ -590,7 +677,13 @@ impl MasterCore {
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let (base, _) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
+        let (width, height) = (setup.camera.width, setup.camera.height);
+        let base = BaseFrameRequest {
+            job,
+            frame,
+            scene: j.scene.clone(),
+            setup: setup.clone(),
+        };
         let start = FrameStart {
             job,
             frame,
@@ -603,10 +696,12 @@ impl MasterCore {
             ),
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
+            aux: j.aux,
         };
         j.current = Some(FrameAssembly {
             start: start.clone(),
-            image: FrameImage::new(base),
+            image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
+            has_base: false,
             totals: PackageStats::default(),
             triangles_done: 0,
         });
@@ -625,6 +720,7 @@ impl MasterCore {
                 total,
             },
         );
+        self.outbox.push_back(Output::RasterizeBase(base));
     }
 
     fn assign(&mut self, a: Assignment) {

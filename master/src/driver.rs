@@ -34,6 +34,12 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
+    /// A base frame rasterized on the blocking pool.
+    BaseFrame {
+        job: u64,
+        frame: u32,
+        image: vtfarm_imaging::Image,
+    },
 }
 
 /// A running master: attach links to it.
@@ -80,7 +86,7 @@ pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
         inputs,
         next_conn: Arc::new(AtomicU64::new(1)),
     };
-    let task = tokio::spawn(run(MasterCore::new(config), rx));
+    let task = tokio::spawn(run(MasterCore::new(config), handle.inputs.clone(), rx));
     (handle, task)
 }
 
@@ -89,7 +95,11 @@ struct Connection {
     closer: Option<Closer>,
 }
 
-async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
+async fn run(
+    mut core: MasterCore,
+    feedback: UnboundedSender<Input>,
+    mut inputs: UnboundedReceiver<Input>,
+) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     loop {
@@ -119,6 +129,9 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                             core.disconnected(now, conn);
                         }
                     }
+                    Input::BaseFrame { job, frame, image } => {
+                        core.base_frame_ready(job, frame, &image);
+                    }
                 });
             }
             _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),
@@ -138,6 +151,18 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                         }
                         core.disconnected(start.elapsed(), conn);
                     }
+                }
+                Output::RasterizeBase(request) => {
+                    // Off the driver's task: results keep flowing meanwhile.
+                    let feedback = feedback.clone();
+                    tokio::task::spawn_blocking(move || {
+                        let image = request.rasterize();
+                        let _ = feedback.send(Input::BaseFrame {
+                            job: request.job,
+                            frame: request.frame,
+                            image,
+                        });
+                    });
                 }
             }
         }

@@ -16,7 +16,7 @@ pub mod embedded;
 pub mod server;
 pub mod submit;
 
-pub use core::{ConnId, MasterCore, Output, Peer};
+pub use core::{BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master};
 pub use embedded::LocalFarm;
 pub use submit::{FinishedFrame, JobError, JobEvent, run_job, wire_job};

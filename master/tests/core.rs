@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{MasterCore, Output, Peer, wire_job};
+use vtfarm_master::{BaseFrameRequest, MasterCore, Output, Peer, wire_job};
 use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
@@ -25,6 +25,8 @@ struct Harness {
     now: Duration,
     engine: Engine,
     frame: Option<ActiveFrame>,
+    /// Base frames the core asked for, rasterized only when the test says.
+    bases: Vec<BaseFrameRequest>,
 }
 
 impl Harness {
@@ -34,7 +36,23 @@ impl Harness {
     }
 
     fn outputs(&mut self) -> Vec<Output> {
-        std::iter::from_fn(|| self.core.poll_output()).collect()
+        let outputs: Vec<Output> = std::iter::from_fn(|| self.core.poll_output()).collect();
+        for output in &outputs {
+            if let Output::RasterizeBase(request) = output {
+                self.bases.push(request.clone());
+            }
+        }
+        outputs
+    }
+
+    /// Hands the core the base frames it asked for.
+    fn rasterize_bases(&mut self) -> Vec<Output> {
+        for request in std::mem::take(&mut self.bases) {
+            let image = request.rasterize();
+            self.core
+                .base_frame_ready(request.job, request.frame, &image);
+        }
+        self.outputs()
     }
 
     /// Sends to the core and returns the messages for `conn` (and closes of anyone).
@@ -87,6 +105,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         now: Duration::ZERO,
         engine: Engine::new(None),
         frame: None,
+        bases: Vec::new(),
     };
     h.core.connected(
         h.now,
@@ -204,10 +223,15 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
                 },
             ),
         };
+        // The base frame comes late: the frame waits for it after its last result.
+        if out.is_empty() {
+            out = h.rasterize_bases();
+        }
     }
     let Some(Message::FrameDone(done)) = done else {
         panic!("the frame did not complete")
     };
+    assert!(h.bases.is_empty(), "the frame waited for its base frame");
     assert!(malformed_sent);
     assert_eq!(
         done.stats.failures, 1,

@@ -49,15 +49,15 @@ pub use tls::{
     client_config, fingerprint_of, parse_fingerprint, server_config,
 };
 pub use wire::{
-    WireBitmap, WireCamera, WireError, WireFrameSetup, WireImage, WireLight, WireLightKind,
-    WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality, WireScene,
-    WireTraceSettings, WireTriangle, WireVertexSettings, check_triangle_ids,
+    WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireLight,
+    WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality,
+    WireScene, WireTraceSettings, WireTriangle, WireVertexSettings, check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

@@ -304,6 +304,9 @@ pub struct FrameStart {
     /// are indices of reflector groups (`vtfarm_method::reflector_groups`
     /// of `reflectors`), not triangle ids.
     pub method: WireMethod,
+    /// Whether results carry the per-pixel components besides the colour
+    /// (the job's `aux`): [`crate::WireBitmapParts::All`] or only `Color`.
+    pub aux: bool,
 }
 
 /// A package: reflector triangle ids of one frame, traced as a unit (or
