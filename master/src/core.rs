@@ -156,13 +156,9 @@ pub struct MasterCore {
 
 impl MasterCore {
     pub fn new(config: SchedulerConfig) -> Self {
-        // Workers set each frame up before they ask for its work (see worker::session).
-        let config = SchedulerConfig {
-            requests_lapse_at_frame_start: true,
-            ..config
-        };
         MasterCore {
-            scheduler: Scheduler::new(config),
+            // Workers set each frame up before they ask for its work (see worker::session).
+            scheduler: Scheduler::new(config.farm()),
             peers: BTreeMap::new(),
             scenes: BTreeMap::new(),
             jobs: BTreeMap::new(),
