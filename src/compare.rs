@@ -28,20 +28,24 @@ pub(crate) struct CompareArgs {
 
 /// `vtfarm compare`.
 pub(crate) fn compare(args: CompareArgs) -> Result<()> {
-    crate::set_threads(args.threads)?;
-    let crate::PreparedJob {
+    crate::shared::set_threads(args.threads)?;
+    let crate::shared::PreparedJob {
         job,
         scene,
         reflectors,
         setups,
-    } = crate::prepare_job(&args.job, None, args.width, args.height)?;
+    } = crate::shared::prepare_job(&args.job, None, args.width, args.height)?;
     let setup = setups
         .into_iter()
         .next()
         .context("a job has at least one frame")?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
-    crate::warn_unsupported_reflectors(vtfarm_method::MethodKind::CubeMap, &scene, &reflectors);
+    crate::shared::warn_unsupported_reflectors(
+        vtfarm_method::MethodKind::CubeMap,
+        &scene,
+        &reflectors,
+    );
     let owned = OwnedFrame::new(
         Arc::new(scene),
         setup.camera,
@@ -53,7 +57,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     let frame = owned.frame();
     let methods = standard_methods(job.vertex);
     let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();
-    let bar = crate::progress_bar(methods.len() as u64 + 1, "compare");
+    let bar = crate::shared::progress_bar(methods.len() as u64 + 1, "methods", "compare");
     let bar_style = indicatif::ProgressStyle::with_template(
         "{spinner} {msg} [{bar:40}] {pos}/{len} methods ({elapsed})",
     )
@@ -102,7 +106,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     let sheet_path = args.output.join("sheet.png");
     sheet(&runs).write_png(&sheet_path)?;
     let json_path = args.output.join("compare.json");
-    crate::write_json(&json_path, &figures)?;
+    crate::shared::write_json(&json_path, &figures)?;
     println!(
         "errors against `reference` on its {} reflector pixels (8-bit sRGB steps); wrote {} images, {} and {}",
         runs[0].error.pixels,

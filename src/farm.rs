@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
-use vtfarm_master::{FinishedFrame, JobEvent, LocalFarm, run_job, wire_job};
+use vtfarm_master::{FinishedFrame, JobEvent, JobOptions, LocalFarm, run_job, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
@@ -13,6 +13,8 @@ use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
+
+use crate::shared::runtime;
 
 /// Options of `vtfarm submit`.
 #[derive(clap::Args)]
@@ -33,7 +35,7 @@ pub(crate) struct SubmitArgs {
     #[arg(long)]
     aux: bool,
     /// Overrides the job's quality level.
-    #[arg(long, value_parser = crate::parse_quality)]
+    #[arg(long, value_parser = crate::shared::parse_quality)]
     quality: Option<Quality>,
     /// Override the image size.
     #[arg(long)]
@@ -51,14 +53,6 @@ pub(crate) struct StatusArgs {
     /// The master's HOST:PORT (default: the cluster file's).
     #[arg(long)]
     master: Option<String>,
-}
-
-pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")
 }
 
 /// What `render_embedded` renders.
@@ -90,11 +84,14 @@ pub(crate) fn render_embedded(
         let farm = LocalFarm::start(workers, SchedulerConfig::default());
         let mut link = farm.submitter();
         let data = SceneData::from_scene(scene);
-        let job = vtfarm_proto::WireJob {
-            method: method.into(),
-            aux,
-            ..wire_job(name, &data, std::slice::from_ref(setup), reflectors)
-        };
+        let options = JobOptions { method, aux };
+        let job = wire_job(
+            name,
+            &data,
+            std::slice::from_ref(setup),
+            reflectors,
+            options,
+        );
         let frames = run_job(&mut link, job, &data, |event| {
             if let JobEvent::Progress { done, .. } = event {
                 bar.set_position(done.into());
@@ -122,13 +119,13 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     if vtfarm_job::study::is_study_file(&args.job) {
         return submit_study(args);
     }
-    let crate::PreparedJob {
+    let crate::shared::PreparedJob {
         job,
         scene,
         reflectors,
         setups,
-    } = crate::prepare_job(&args.job, args.quality, args.width, args.height)?;
-    crate::warn_unsupported_reflectors(job.method, &scene, &reflectors);
+    } = crate::shared::prepare_job(&args.job, args.quality, args.width, args.height)?;
+    crate::shared::warn_unsupported_reflectors(job.method, &scene, &reflectors);
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     let options = client_options(&args.cluster, &args.master)?;
@@ -142,12 +139,13 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     let frames = runtime()?.block_on(async {
         let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
-        let wire = vtfarm_proto::WireJob {
+        let options = JobOptions {
+            method: job.method,
             aux: args_aux,
-            method: job.method.into(),
-            ..wire_job(&name, &data, &setups, &reflectors)
         };
-        let bar = crate::progress_bar(reflectors.len() as u64, "frame");
+        let wire = wire_job(&name, &data, &setups, &reflectors, options);
+        let bar =
+            crate::shared::progress_bar(reflectors.len() as u64, "reflector triangles", "frame");
         let submitted = std::time::Instant::now();
         let result = run_job(&mut conn.link, wire, &data, |event| match event {
             JobEvent::Accepted { job, frames } => {
@@ -192,7 +190,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         })
         .collect();
     let path = args.output.join("stats.json");
-    crate::write_json(&path, &stats)?;
+    crate::shared::write_json(&path, &stats)?;
     for f in &frames {
         println!("frame {}:", f.frame);
         print_frame_stats(&f.stats);

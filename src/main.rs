@@ -4,6 +4,7 @@
 mod bench;
 mod compare;
 mod farm;
+mod shared;
 mod study;
 
 use std::path::{Path, PathBuf};
@@ -11,10 +12,13 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_render::{FrameSetup, RenderOptions, Renderer, output};
+use vtfarm_render::{RenderOptions, Renderer, output};
 use vtfarm_vertex::Quality;
+
+use crate::shared::{
+    PreparedJob, parse_quality, prepare_job, progress_bar, set_threads, warn_unsupported_reflectors,
+};
 
 #[derive(Parser)]
 #[command(
@@ -103,11 +107,6 @@ enum SceneCommand {
     },
 }
 
-pub(crate) fn parse_quality(s: &str) -> Result<Quality, String> {
-    Quality::from_name(s)
-        .ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
-}
-
 fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -150,60 +149,6 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// Sets the size of rayon's global pool (once, before any parallel work).
-pub(crate) fn set_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("setting the thread count")?;
-    }
-    Ok(())
-}
-
-/// A job file made ready to render: its scene, reflectors and one set-up per frame.
-pub(crate) struct PreparedJob {
-    pub(crate) job: vtfarm_job::Job,
-    pub(crate) scene: vtfarm_scene::Scene,
-    pub(crate) reflectors: Vec<u32>,
-    pub(crate) setups: Vec<FrameSetup>,
-}
-
-/// Loads a job file, applies the command line's overrides and makes the
-/// frames' set-ups (the camera, then one per extra eye point).
-pub(crate) fn prepare_job(
-    path: &Path,
-    quality: Option<Quality>,
-    width: Option<u32>,
-    height: Option<u32>,
-) -> Result<PreparedJob> {
-    let mut job = vtfarm_job::load_job(path)?;
-    if let Some(q) = quality {
-        job.vertex.quality = q;
-    }
-    let loaded = job.load_scene()?;
-    let mut camera = loaded.camera;
-    camera.width = width.unwrap_or(camera.width);
-    camera.height = height.unwrap_or(camera.height);
-    let reflectors = job.reflector_triangles(&loaded.scene)?;
-    let setups = job
-        .frames(&camera)?
-        .into_iter()
-        .map(|camera| FrameSetup {
-            camera,
-            lighting: loaded.lighting.clone(),
-            trace: job.trace,
-            vertex: job.vertex,
-        })
-        .collect();
-    Ok(PreparedJob {
-        job,
-        scene: loaded.scene,
-        reflectors,
-        setups,
-    })
-}
-
 fn render(args: RenderArgs) -> Result<()> {
     set_threads(args.threads)?;
     let PreparedJob {
@@ -219,7 +164,11 @@ fn render(args: RenderArgs) -> Result<()> {
         .context("a job has at least one frame")?;
 
     warn_unsupported_reflectors(job.method, &scene, &reflectors);
-    let bar = progress_bar(reflectors.len() as u64, job.vertex.quality.name());
+    let bar = progress_bar(
+        reflectors.len() as u64,
+        "reflector triangles",
+        job.vertex.quality.name(),
+    );
     let scene_triangles = scene.triangles.len();
     let in_process_aux = args
         .aux
@@ -283,45 +232,6 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     println!("wrote {}", args.output.display());
     Ok(())
-}
-
-/// The cube-map search supports convex and concave reflectors only: says so
-/// for each reflector object that is neither.
-pub(crate) fn warn_unsupported_reflectors(
-    method: vtfarm_method::MethodKind,
-    scene: &vtfarm_scene::Scene,
-    reflectors: &[u32],
-) {
-    use vtfarm_method::MethodKind;
-    if !matches!(method, MethodKind::CubeMap | MethodKind::CubeMapGrid) {
-        return;
-    }
-    for group in vtfarm_method::reflector_groups(scene, reflectors) {
-        if let Some(warning) = vtfarm_cubemap::classify(scene, &group).warning() {
-            let object = scene.triangles[group[0] as usize].object;
-            let name = &scene.objects[object as usize].name;
-            eprintln!("warning: reflector {name:?}: {warning}");
-        }
-    }
-}
-
-/// Writes `value` as pretty JSON.
-pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(value)?)
-        .with_context(|| format!("writing {}", path.display()))
-}
-
-/// The progress bar of a frame, counting reflector triangles.
-pub(crate) fn progress_bar(total: u64, message: &'static str) -> ProgressBar {
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template(
-            "{spinner} {msg} [{bar:40}] {pos}/{len} reflector triangles ({elapsed})",
-        )
-        .expect("template is valid")
-        .progress_chars("=> "),
-    );
-    bar.set_message(message);
-    bar
 }
 
 fn print_summary(

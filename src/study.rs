@@ -5,9 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
-use vtfarm_master::{JobEvent, LocalFarm, run_job, wire_job};
-use vtfarm_proto::{Link, SceneData, WireJob};
+use vtfarm_master::{JobEvent, JobOptions, LocalFarm, run_job, wire_job};
+use vtfarm_proto::{Link, SceneData};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
 use vtfarm_vertex::Quality;
@@ -21,7 +20,7 @@ pub(crate) struct StudyArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Overrides the base job's quality level.
-    #[arg(long, value_parser = crate::parse_quality)]
+    #[arg(long, value_parser = crate::shared::parse_quality)]
     quality: Option<Quality>,
     /// Local workers of the embedded master (they share the cores).
     #[arg(long, default_value_t = 2)]
@@ -39,9 +38,9 @@ pub(crate) fn plan_study(path: &Path, quality: Option<Quality>) -> Result<StudyP
 
 /// `vtfarm study`.
 pub(crate) fn study(args: StudyArgs) -> Result<()> {
-    crate::set_threads(args.threads)?;
+    crate::shared::set_threads(args.threads)?;
     let plan = plan_study(&args.study, args.quality)?;
-    let report = crate::farm::runtime()?.block_on(async {
+    let report = crate::shared::runtime()?.block_on(async {
         let farm = LocalFarm::start(args.local_workers, SchedulerConfig::default());
         let mut link = farm.submitter();
         render_study(&mut link, &plan, &args.output).await
@@ -58,20 +57,16 @@ pub(crate) async fn render_study(
     dir: &Path,
 ) -> Result<StudyReport> {
     let mut writer = StudyWriter::new(plan, dir)?;
-    let bar = ProgressBar::new(plan.frames() as u64).with_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:40}] {pos}/{len} frames ({elapsed})")
-            .expect("template is valid")
-            .progress_chars("=> "),
-    );
+    let bar = crate::shared::progress_bar(plan.frames() as u64, "frames", "");
     for (v, variant) in plan.variants.iter().enumerate() {
         bar.set_message(variant.name.clone());
         let data = SceneData::from_scene(&variant.scene);
         let name = format!("{} / {}", plan.name, variant.name);
-        let job = WireJob {
+        let options = JobOptions {
+            method: plan.method,
             aux: true,
-            method: plan.method.into(),
-            ..wire_job(&name, &data, &variant.setups, &variant.reflectors)
         };
+        let job = wire_job(&name, &data, &variant.setups, &variant.reflectors, options);
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {

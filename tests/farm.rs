@@ -12,7 +12,8 @@ use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{
-    FinishedFrame, JobError, LocalFarm, MasterHandle, run_job, server, spawn_master, wire_job,
+    FinishedFrame, JobError, JobOptions, LocalFarm, MasterHandle, run_job, server, spawn_master,
+    wire_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
@@ -179,10 +180,16 @@ impl Cluster {
         run_job(
             &mut conn.link,
             // Components too: the glare study measures them.
-            vtfarm_proto::WireJob {
-                aux: true,
-                ..wire_job("test", &data, &job.frames, &job.reflectors)
-            },
+            wire_job(
+                "test",
+                &data,
+                &job.frames,
+                &job.reflectors,
+                JobOptions {
+                    method: MethodKind::VertexTracing,
+                    aux: true,
+                },
+            ),
             &data,
             |_| {},
         )
@@ -259,7 +266,16 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     let data = SceneData::from_scene(&job.scene);
     let embedded = run_job(
         &mut link,
-        wire_job("embedded", &data, &job.frames, &job.reflectors),
+        wire_job(
+            "embedded",
+            &data,
+            &job.frames,
+            &job.reflectors,
+            JobOptions {
+                method: MethodKind::VertexTracing,
+                aux: false,
+            },
+        ),
         &data,
         |_| {},
     )
@@ -273,7 +289,7 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
 fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3> {
     let (base, ids) = vtfarm_raster::rasterize(&job.scene, &frame.camera, &frame.lighting);
     let bvh = vtfarm_trace::SceneBvh::new(Arc::new(job.scene.clone()));
-    let method = vtfarm_compare::method(kind, frame.vertex);
+    let method = vtfarm_render::method(kind, frame.vertex);
     let mut image = vtfarm_vertex::FrameImage::new(base);
     let reflectors = vtfarm_render::morton_order(&job.scene, job.reflectors.clone());
     for group in vtfarm_method::reflector_groups(&job.scene, &reflectors) {
@@ -312,10 +328,11 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
     for kind in [MethodKind::EnvironmentMap, MethodKind::Pvrr] {
         let mut conn = connect(&cluster.options, Role::Submitter).await.unwrap();
         let data = SceneData::from_scene(&job.scene);
-        let wire = vtfarm_proto::WireJob {
-            method: kind.into(),
-            ..wire_job("methods", &data, &job.frames, &job.reflectors)
+        let options = JobOptions {
+            method: kind,
+            aux: false,
         };
+        let wire = wire_job("methods", &data, &job.frames, &job.reflectors, options);
         let frames = run_job(&mut conn.link, wire, &data, |_| {}).await.unwrap();
         assert_eq!(frames.len(), 2);
         for (f, setup) in frames.iter().zip(&job.frames) {

@@ -3,12 +3,13 @@
 //! (`driver.rs`) feeds it; tests can drive it directly.
 //!
 //! Per frame it sends `FrameStart` to every worker first and then asks the
-//! driver to rasterize the base frame ([`Output::RasterizeBase`]) while the
-//! workers trace: the base is needed only to composite. It hands out the
-//! scheduler's packages and composites each accepted result at once (a
-//! result overwrites its pixels, the base fills the others whenever it
-//! arrives, so the order does not matter); a frame whose last result came
-//! before its base waits for it, then goes to the submitter.
+//! driver to rasterize the base frame and ID buffer
+//! ([`Output::RasterizeBase`]) while the workers set up and trace; results
+//! that arrive before it are held until it is there. It hands out the
+//! scheduler's packages, composites each accepted result over the base frame
+//! and sends the finished frame to the submitter. A result that writes a
+//! pixel its package does not own in the frame's ID buffer (pixel ownership)
+//! fails the package.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
@@ -23,8 +24,9 @@ use vtfarm_proto::{
     SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
     WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
 };
+use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
     WorkerId, WorkerState,
@@ -68,9 +70,10 @@ pub struct BaseFrameRequest {
 }
 
 impl BaseFrameRequest {
-    /// The shaded base frame (the expensive part: seconds at 1080p on one core).
-    pub fn rasterize(&self) -> Image {
-        vtfarm_raster::rasterize(&self.scene, &self.setup.camera, &self.setup.lighting).0
+    /// The shaded base frame and its ID buffer (the expensive part: about a
+    /// second at 1080p on one core).
+    pub fn rasterize(&self) -> (Image, IdBuffer) {
+        vtfarm_raster::rasterize(&self.scene, &self.setup.camera, &self.setup.lighting)
     }
 }
 
@@ -88,54 +91,46 @@ struct Job {
     /// index; `None` when the items are the reflector triangles themselves.
     groups: Option<Vec<Vec<u32>>>,
     current: Option<FrameAssembly>,
-    /// Frames whose results are all in but whose base frame is not.
-    finishing: Vec<(FrameAssembly, vtfarm_proto::FrameStats)>,
-    /// The scheduler completed the job; it goes when `finishing` is empty.
-    complete: bool,
 }
 
 impl Job {
-    /// The reflector triangles that work `items` cover (for progress).
-    fn triangles_in(&self, items: &[u32]) -> u64 {
-        match &self.groups {
+    /// The reflector triangles that work `items` cover, sorted: the
+    /// triangles whose pixels the package's result may write.
+    fn triangles_in(&self, items: &[u32]) -> Vec<TriangleId> {
+        let mut triangles: Vec<TriangleId> = match &self.groups {
             Some(groups) => (items.iter())
                 .filter_map(|&g| groups.get(g as usize))
-                .map(|g| g.len() as u64)
-                .sum(),
-            None => items.len() as u64,
-        }
+                .flatten()
+                .copied()
+                .collect(),
+            None => items.to_vec(),
+        };
+        triangles.sort_unstable();
+        triangles
     }
 }
 
 /// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
     start: FrameStart,
-    /// The results so far, over the base frame once it has arrived.
+    /// The frame's ID buffer: which reflector triangle owns each pixel;
+    /// `None` until the base frame is rasterized.
+    ids: Option<IdBuffer>,
     image: FrameImage,
-    has_base: bool,
+    /// Results that came before the ID buffer, to check once it is there:
+    /// (connection, result, its wire size).
+    held: Vec<(ConnId, PackageResult, u64)>,
     totals: PackageStats,
     triangles_done: u64,
-}
-
-impl FrameAssembly {
-    /// Fills the pixels no result has written with the base frame.
-    fn add_base(&mut self, base: &Image) {
-        let color = &mut self.image.color.pixels;
-        for ((c, &b), &traced) in color.iter_mut().zip(&base.pixels).zip(&self.image.mask) {
-            if !traced {
-                *c = b;
-            }
-        }
-        self.has_base = true;
-    }
 }
 
 /// A package on its way: what the results must be matched against.
 struct InFlight {
     job: u64,
     frame: u32,
-    /// The reflector triangles its items cover, for progress.
-    triangles: u64,
+    /// The reflector triangles its items cover, sorted: for progress and
+    /// pixel ownership.
+    triangles: Vec<TriangleId>,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
 }
@@ -314,11 +309,30 @@ impl MasterCore {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
+        let Some(ids) = &current.ids else {
+            // The base frame is still being rasterized: check the result then.
+            let job_id = in_flight.job;
+            let current = (self.jobs.get_mut(&job_id))
+                .and_then(|j| j.current.as_mut())
+                .expect("checked above");
+            current.held.push((conn, result, bytes_out));
+            return;
+        };
         let (width, height) = (current.image.color.width, current.image.color.height);
-        let bitmap = match result.bitmap.into_bitmap_within(width, height) {
+        let checked = (result.bitmap.into_bitmap_within(width, height))
+            .map_err(|e| format!("malformed result: {e}"))
+            .and_then(|bitmap| {
+                let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
+                match bitmap.foreign_pixel(ids, owned) {
+                    Some((x, y)) => Err(format!(
+                        "result writes pixel ({x}, {y}), which its package does not own"
+                    )),
+                    None => Ok(bitmap),
+                }
+            });
+        let bitmap = match checked {
             Ok(b) => b,
-            Err(e) => {
-                let error = format!("malformed result: {e}");
+            Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
                 let _ = self
                     .scheduler
@@ -346,7 +360,7 @@ impl MasterCore {
             debug!(package = result.id, "result ignored: {e}");
             return;
         }
-        let (job_id, triangles) = (in_flight.job, in_flight.triangles);
+        let (job_id, triangles) = (in_flight.job, in_flight.triangles.len() as u64);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
@@ -417,19 +431,8 @@ impl MasterCore {
         if job.reflectors.is_empty() || job.frames.is_empty() {
             return self.refuse_job(conn, "a job needs reflectors and at least one frame".into());
         }
-        let frames: Result<Vec<FrameSetup>, _> = job
-            .frames
-            .into_iter()
-            .map(|f| {
-                f.into_parts()
-                    .map(|(camera, lighting, trace, vertex)| FrameSetup {
-                        camera,
-                        lighting,
-                        trace,
-                        vertex,
-                    })
-            })
-            .collect();
+        let frames: Result<Vec<FrameSetup>, _> =
+            job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = match frames {
             Ok(f) => f,
             Err(e) => return self.refuse_job(conn, format!("bad frame set-up: {e}")),
@@ -467,8 +470,6 @@ impl MasterCore {
                 method,
                 groups,
                 current: None,
-                finishing: Vec::new(),
-                complete: false,
             },
         );
         if let Err(e) = self.scheduler.submit_job(now, JobId(id), work) {
@@ -571,21 +572,19 @@ impl MasterCore {
                     totals: WirePackageStats::from(&done.totals),
                     workers,
                 };
-                if done.has_base {
-                    self.frame_done(job.0, done, frame_stats);
-                } else if let Some(j) = self.jobs.get_mut(&job.0) {
-                    j.finishing.push((done, frame_stats));
-                }
+                let j = &self.jobs[&job.0];
+                let message = Message::FrameDone(FrameDone {
+                    job: job.0,
+                    frame,
+                    image: wire_image(&done.image.color),
+                    stats: frame_stats,
+                    aux: j.aux.then(|| frame_aux(&done.image)),
+                });
+                self.send(j.submitter, message);
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
-                match self.jobs.get_mut(&job.0) {
-                    // Its last frames still wait for their base frames.
-                    Some(j) if !j.finishing.is_empty() => j.complete = true,
-                    _ => {
-                        self.forget_job(job.0);
-                    }
-                }
+                self.forget_job(job.0);
             }
             Event::JobFailed {
                 job,
@@ -626,46 +625,7 @@ impl MasterCore {
         }
     }
 
-    /// Sends a finished frame to its submitter.
-    fn frame_done(&mut self, job: u64, done: FrameAssembly, stats: vtfarm_proto::FrameStats) {
-        let Some(j) = self.jobs.get(&job) else {
-            return;
-        };
-        let message = Message::FrameDone(FrameDone {
-            job,
-            frame: done.start.frame,
-            image: wire_image(&done.image.color),
-            stats,
-            aux: j.aux.then(|| frame_aux(&done.image)),
-        });
-        self.send(j.submitter, message);
-    }
-
-    /// The driver rasterized a base frame that [`Output::RasterizeBase`] asked for.
-    pub fn base_frame_ready(&mut self, job: u64, frame: u32, base: &Image) {
-        let Some(j) = self.jobs.get_mut(&job) else {
-            return;
-        };
-        let fits = |a: &FrameAssembly| {
-            a.start.frame == frame
-                && !a.has_base
-                && (a.image.color.width, a.image.color.height) == (base.width, base.height)
-        };
-        if let Some(current) = j.current.as_mut().filter(|c| fits(c)) {
-            current.add_base(base);
-        } else if let Some(k) = j.finishing.iter().position(|(a, _)| fits(a)) {
-            let (mut done, stats) = j.finishing.remove(k);
-            done.add_base(base);
-            let forget = j.complete && j.finishing.is_empty();
-            self.frame_done(job, done, stats);
-            if forget {
-                self.forget_job(job);
-            }
-        }
-        self.pump();
-    }
-
-    /// Announces a frame to the workers, then asks for its base frame.
+    /// Rasterizes a frame's base image and announces the frame to the workers.
     fn start_frame(&mut self, job: u64, frame: u32) {
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
@@ -684,20 +644,16 @@ impl MasterCore {
             job,
             frame,
             scene: j.scene_hash,
-            setup: WireFrameSetup::from_parts(
-                &setup.camera,
-                &setup.lighting,
-                &setup.trace,
-                &setup.vertex,
-            ),
+            setup: WireFrameSetup::from(setup),
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
             aux: j.aux,
         };
         j.current = Some(FrameAssembly {
             start: start.clone(),
+            ids: None,
             image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
-            has_base: false,
+            held: Vec::new(),
             totals: PackageStats::default(),
             triangles_done: 0,
         });
@@ -719,11 +675,33 @@ impl MasterCore {
         self.outbox.push_back(Output::RasterizeBase(base));
     }
 
+    /// The driver rasterized the base frame that [`Output::RasterizeBase`]
+    /// asked for: the held results are checked and composited now.
+    pub fn base_frame_ready(
+        &mut self,
+        now: Duration,
+        job: u64,
+        frame: u32,
+        (base, ids): (Image, IdBuffer),
+    ) {
+        let Some(current) = (self.jobs.get_mut(&job))
+            .and_then(|j| j.current.as_mut())
+            .filter(|c| c.start.frame == frame && c.ids.is_none())
+        else {
+            return;
+        };
+        // Nothing is composited yet: the image starts as the base frame.
+        current.image = FrameImage::new(base);
+        current.ids = Some(ids);
+        for (conn, result, bytes) in std::mem::take(&mut current.held) {
+            self.package_result(now, conn, result, bytes);
+        }
+        self.pump();
+    }
+
     fn assign(&mut self, a: Assignment) {
-        let triangles = self
-            .jobs
-            .get(&a.job.0)
-            .map_or(0, |j| j.triangles_in(&a.items));
+        let triangles =
+            (self.jobs.get(&a.job.0)).map_or_else(Vec::new, |j| j.triangles_in(&a.items));
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,

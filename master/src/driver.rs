@@ -34,11 +34,11 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
-    /// A base frame rasterized on the blocking pool.
+    /// A base frame and ID buffer rasterized on the blocking pool.
     BaseFrame {
         job: u64,
         frame: u32,
-        image: vtfarm_imaging::Image,
+        base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
     },
 }
 
@@ -129,8 +129,8 @@ async fn run(
                             core.disconnected(now, conn);
                         }
                     }
-                    Input::BaseFrame { job, frame, image } => {
-                        core.base_frame_ready(job, frame, &image);
+                    Input::BaseFrame { job, frame, base } => {
+                        core.base_frame_ready(now, job, frame, base);
                     }
                 });
             }
@@ -156,11 +156,11 @@ async fn run(
                     // Off the driver's task: results keep flowing meanwhile.
                     let feedback = feedback.clone();
                     tokio::task::spawn_blocking(move || {
-                        let image = request.rasterize();
+                        let base = request.rasterize();
                         let _ = feedback.send(Input::BaseFrame {
                             job: request.job,
                             frame: request.frame,
-                            image,
+                            base,
                         });
                     });
                 }

@@ -9,6 +9,7 @@
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod core;
 pub mod driver;
@@ -19,4 +20,4 @@ pub mod submit;
 pub use core::{BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master};
 pub use embedded::LocalFarm;
-pub use submit::{FinishedFrame, JobError, JobEvent, run_job, wire_job};
+pub use submit::{FinishedFrame, JobError, JobEvent, JobOptions, run_job, wire_job};

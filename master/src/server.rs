@@ -6,24 +6,39 @@
 use std::net::SocketAddr;
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use tracing::{info, warn};
 use vtfarm_proto::{
-    HandshakePolicy, Link, MasterIdentity, Role, SESSION_LIMIT, server_config, server_handshake,
+    HandshakePolicy, IdentityError, Link, MasterIdentity, Role, SESSION_LIMIT, TlsError,
+    server_config, server_handshake,
 };
 
 use crate::core::Peer;
 use crate::driver::MasterHandle;
 
+/// Why the master's endpoint could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum BindError {
+    #[error(transparent)]
+    Tls(#[from] TlsError),
+    #[error("cannot listen on {address}: {source}")]
+    Listen {
+        address: SocketAddr,
+        source: std::io::Error,
+    },
+}
+
 /// A bound QUIC endpoint with the master's identity.
-pub fn bind(listen: SocketAddr, identity: &MasterIdentity) -> Result<quinn::Endpoint> {
+pub fn bind(listen: SocketAddr, identity: &MasterIdentity) -> Result<quinn::Endpoint, BindError> {
     let config = server_config(identity)?;
-    quinn::Endpoint::server(config, listen).with_context(|| format!("cannot listen on {listen}"))
+    quinn::Endpoint::server(config, listen).map_err(|source| BindError::Listen {
+        address: listen,
+        source,
+    })
 }
 
 /// Loads (or creates on first start) the master's key and certificate in `state_dir`.
-pub fn identity(state_dir: &Path, hosts: &[String]) -> Result<MasterIdentity> {
-    Ok(MasterIdentity::load_or_create(state_dir, hosts)?)
+pub fn identity(state_dir: &Path, hosts: &[String]) -> Result<MasterIdentity, IdentityError> {
+    MasterIdentity::load_or_create(state_dir, hosts)
 }
 
 /// Accepts connections until the endpoint closes.

@@ -5,6 +5,7 @@
 //! when it does not have that scene yet.
 
 use vtfarm_imaging::Image;
+use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     FrameStats, JobScene, Link, Message, SceneData, WireFrameAux, WireFrameSetup, WireImage,
     WireJob,
@@ -41,23 +42,31 @@ pub enum JobError {
     Protocol(String),
 }
 
+/// What a job asks the farm for, besides its scene and frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct JobOptions {
+    /// The reflection method the workers run.
+    pub method: MethodKind,
+    /// Send the per-pixel components (mask, reflected, transmitted,
+    /// reflected object) with each frame.
+    pub aux: bool,
+}
+
 /// The job message for a scene and its frames.
 pub fn wire_job(
     name: &str,
     scene: &SceneData,
     frames: &[FrameSetup],
     reflectors: &[u32],
+    options: JobOptions,
 ) -> WireJob {
     WireJob {
         name: name.to_owned(),
         scene: JobScene::Hash(scene.hash),
-        frames: frames
-            .iter()
-            .map(|f| WireFrameSetup::from_parts(&f.camera, &f.lighting, &f.trace, &f.vertex))
-            .collect(),
+        frames: frames.iter().map(WireFrameSetup::from).collect(),
         reflectors: reflectors.to_vec(),
-        aux: false,
-        method: vtfarm_proto::WireMethod::VertexTracing,
+        aux: options.aux,
+        method: options.method.into(),
     }
 }
 

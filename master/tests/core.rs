@@ -6,13 +6,17 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{BaseFrameRequest, MasterCore, Output, Peer, wire_job};
-use vtfarm_proto::{JobScene, Message, PackageResult, SceneData, WireJob};
+use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
+use vtfarm_method::MethodKind;
+use vtfarm_proto::{
+    FrameDone, JobScene, Message, Package, PackageResult, SceneData, WireBitmap, WireJob,
+};
+use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_vertex::{Quality, SparseBitmap, VertexSettings};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
@@ -48,9 +52,10 @@ impl Harness {
     /// Hands the core the base frames it asked for.
     fn rasterize_bases(&mut self) -> Vec<Output> {
         for request in std::mem::take(&mut self.bases) {
-            let image = request.rasterize();
+            let now = self.tick();
+            let base = request.rasterize();
             self.core
-                .base_frame_ready(request.job, request.frame, &image);
+                .base_frame_ready(now, request.job, request.frame, base);
         }
         self.outputs()
     }
@@ -73,8 +78,19 @@ fn messages_to(outputs: &[Output], conn: u64) -> Vec<&Message> {
         .collect()
 }
 
-#[test]
-fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
+/// A master with one worker and one submitter, and the job's first frame
+/// started on both sides.
+struct StartedFrame {
+    h: Harness,
+    job: u64,
+    frame: u32,
+    /// The master's ID buffer of the frame (every worker rebuilds the same).
+    ids: IdBuffer,
+    /// The single-process render of the frame.
+    reference: Vec<[f32; 3]>,
+}
+
+fn start_frame() -> StartedFrame {
     let c = cockpit(&CockpitConfig {
         detail: 0.2,
         ..CockpitConfig::default()
@@ -123,19 +139,20 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             address: "test".into(),
         },
     );
-    h.core.connected(
-        h.now,
-        INTRUDER,
-        Peer::Worker {
-            name: "intruder".into(),
-            threads: 1,
-            address: "test".into(),
-        },
-    );
+    let options = JobOptions {
+        method: MethodKind::VertexTracing,
+        aux: false,
+    };
     let job = WireJob {
         // The scene itself rather than its hash: no round trip for it.
         scene: JobScene::Data(data.clone()),
-        ..wire_job("core", &data, std::slice::from_ref(&setup), &reflectors)
+        ..wire_job(
+            "core",
+            &data,
+            std::slice::from_ref(&setup),
+            &reflectors,
+            options,
+        )
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
     assert!(matches!(
@@ -150,8 +167,96 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
     };
     h.engine.add_scene(data).unwrap();
     h.frame = Some(h.engine.start_frame(start.clone()).unwrap());
-    let (job_id, frame_id) = (start.job, start.frame);
+    StartedFrame {
+        h,
+        job: start.job,
+        frame: start.frame,
+        ids: vtfarm_raster::id_buffer(&c.scene, &setup.camera),
+        reference: reference
+            .image
+            .color
+            .pixels
+            .iter()
+            .map(|p| p.to_array())
+            .collect(),
+    }
+}
 
+/// Runs the frame's packages on the worker until the frame is done; the
+/// first package's result goes through `tamper` first. Returns the finished frame.
+fn finish_frame(
+    started: &mut StartedFrame,
+    tamper: impl FnOnce(&Package, &mut PackageResult),
+) -> FrameDone {
+    let h = &mut started.h;
+    let request = Message::RequestWork {
+        job: started.job,
+        frame: started.frame,
+    };
+    let mut tamper = Some(tamper);
+    let mut out = h.send(WORKER, request.clone());
+    for _ in 0..10_000 {
+        if let Some(Message::FrameDone(done)) = messages_to(&out, SUBMITTER)
+            .into_iter()
+            .find(|m| matches!(m, Message::FrameDone(_)))
+        {
+            return done.clone();
+        }
+        let package = messages_to(&out, WORKER).into_iter().find_map(|m| match m {
+            Message::Package(p) => Some(p.clone()),
+            _ => None,
+        });
+        out = match package {
+            Some(p) => {
+                let mut result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
+                let first = tamper.is_some();
+                if let Some(tamper) = tamper.take() {
+                    tamper(&p, &mut result);
+                }
+                let mut out = h.send(WORKER, Message::PackageResult(result));
+                if first {
+                    // The base frame comes after the first result, which
+                    // waits for its ID buffer to be checked.
+                    assert!(messages_to(&out, SUBMITTER).is_empty(), "{out:?}");
+                    out.extend(h.rasterize_bases());
+                }
+                out
+            }
+            None => h.send(WORKER, request.clone()),
+        };
+    }
+    panic!("the frame did not complete")
+}
+
+/// The frame counted one failed package and still equals the single-process render.
+fn assert_one_failure_and_the_reference(started: &StartedFrame, done: FrameDone) {
+    assert_eq!(
+        done.stats.failures, 1,
+        "the bad result counted as a failure: {:?}",
+        done.stats
+    );
+    let (_, _, pixels) = done.image.into_pixels().unwrap();
+    let pixels: Vec<[f32; 3]> = pixels.iter().map(|p| p.to_array()).collect();
+    assert!(
+        pixels == started.reference,
+        "the image equals the single-process render"
+    );
+}
+
+#[test]
+fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
+    let mut started = start_frame();
+    let (job, frame) = (started.job, started.frame);
+    let h = &mut started.h;
+    h.core.connected(
+        h.now,
+        INTRUDER,
+        Peer::Worker {
+            name: "intruder".into(),
+            threads: 1,
+            address: "test".into(),
+        },
+    );
     // A worker may not submit jobs: the intruder is dropped, nobody else is.
     let out = h.send(INTRUDER, Message::StatusRequest);
     assert!(
@@ -163,8 +268,8 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
     let out = h.send(
         WORKER,
         Message::RequestWork {
-            job: job_id,
-            frame: frame_id + 1,
+            job,
+            frame: frame + 1,
         },
     );
     assert!(messages_to(&out, WORKER).is_empty());
@@ -181,66 +286,36 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
     );
     assert!(messages_to(&out, WORKER).is_empty());
 
-    let mut malformed_sent = false;
-    let mut done = None;
-    let mut out = h.send(
-        WORKER,
-        Message::RequestWork {
-            job: job_id,
-            frame: frame_id,
-        },
-    );
-    for _ in 0..10_000 {
-        if let Some(m) = messages_to(&out, SUBMITTER)
-            .into_iter()
-            .find(|m| matches!(m, Message::FrameDone(_)))
-        {
-            done = Some(m.clone());
-            break;
-        }
-        let package = messages_to(&out, WORKER).into_iter().find_map(|m| match m {
-            Message::Package(p) => Some(p.clone()),
-            _ => None,
+    // The first package comes back with a bitmap outside the frame: it fails and is retried.
+    let done = finish_frame(&mut started, |_, result| {
+        result.bitmap.x0 = u32::MAX - 1;
+        result.bitmap.width = 4;
+    });
+    assert_one_failure_and_the_reference(&started, done);
+}
+
+#[test]
+fn a_result_writing_pixels_its_package_does_not_own_fails_the_package() {
+    let mut started = start_frame();
+    let ids = started.ids.clone();
+    // The first package's result also writes one pixel of the frame that
+    // none of its triangles own (another package's, or the base frame's):
+    // in bounds and well formed, so only the ownership check can catch it.
+    let done = finish_frame(&mut started, |package, result| {
+        let foreign = (ids.triangle.iter())
+            .position(|t| !package.triangles.contains(t))
+            .expect("the package does not own the whole frame") as u32;
+        result.bitmap = WireBitmap::from(&SparseBitmap {
+            x0: foreign % ids.width,
+            y0: foreign / ids.width,
+            width: 1,
+            height: 1,
+            mask: vec![true],
+            color: vec![glam::Vec3::new(1.0, 0.0, 1.0)],
+            reflected: vec![glam::Vec3::ZERO],
+            transmitted: vec![glam::Vec3::ZERO],
+            reflected_object: vec![0],
         });
-        out = match package {
-            // The first package comes back with a bitmap outside the frame: it fails and is retried.
-            Some(p) if !malformed_sent => {
-                malformed_sent = true;
-                let mut result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
-                result.bitmap.x0 = u32::MAX - 1;
-                result.bitmap.width = 4;
-                h.send(WORKER, Message::PackageResult(result))
-            }
-            Some(p) => {
-                let result = h.frame.as_ref().unwrap().run(&p, 1.0).unwrap();
-                h.send(WORKER, Message::PackageResult(result))
-            }
-            None => h.send(
-                WORKER,
-                Message::RequestWork {
-                    job: job_id,
-                    frame: frame_id,
-                },
-            ),
-        };
-        // The base frame comes late: the frame waits for it after its last result.
-        if out.is_empty() {
-            out = h.rasterize_bases();
-        }
-    }
-    let Some(Message::FrameDone(done)) = done else {
-        panic!("the frame did not complete")
-    };
-    assert!(h.bases.is_empty(), "the frame waited for its base frame");
-    assert!(malformed_sent);
-    assert_eq!(
-        done.stats.failures, 1,
-        "the malformed result counted as a failure: {:?}",
-        done.stats
-    );
-    let (_, _, pixels) = done.image.into_pixels().unwrap();
-    assert!(
-        pixels == reference.image.color.pixels,
-        "the image equals the single-process render"
-    );
+    });
+    assert_one_failure_and_the_reference(&started, done);
 }

@@ -206,6 +206,7 @@ mod tests {
     use crate::WorkerFrameStats;
     use glam::Vec3;
     use proptest::prelude::*;
+    use vtfarm_method::FrameSetup;
     use vtfarm_trace::TraceSettings;
     use vtfarm_vertex::{PackageStats, VertexSettings};
 
@@ -215,12 +216,12 @@ mod tests {
     use crate::wire::{WireBitmap, WireFrameSetup, WireImage, WirePackageStats};
 
     fn setup() -> WireFrameSetup {
-        WireFrameSetup::from_parts(
-            &camera(),
-            &lighting(),
-            &TraceSettings::default(),
-            &VertexSettings::default(),
-        )
+        WireFrameSetup::from(&FrameSetup {
+            camera: camera(),
+            lighting: lighting(),
+            trace: TraceSettings::default(),
+            vertex: VertexSettings::default(),
+        })
     }
 
     /// One of every message.

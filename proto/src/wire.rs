@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use vtfarm_method::MethodKind;
+use vtfarm_method::{FrameSetup, MethodKind};
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, VertexSettings};
@@ -601,8 +601,8 @@ impl TryFrom<WireVertexSettings> for VertexSettings {
     }
 }
 
-/// Everything that can change from one frame to the next (the fields of
-/// `vtfarm_render::FrameSetup`, which this crate does not depend on).
+/// [`FrameSetup`] on the wire: everything that can change from one frame to
+/// the next.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireFrameSetup {
     pub camera: WireCamera,
@@ -611,32 +611,27 @@ pub struct WireFrameSetup {
     pub vertex: WireVertexSettings,
 }
 
-impl WireFrameSetup {
-    /// The wire form of one frame's set-up.
-    pub fn from_parts(
-        camera: &Camera,
-        lighting: &Lighting,
-        trace: &TraceSettings,
-        vertex: &VertexSettings,
-    ) -> Self {
+impl From<&FrameSetup> for WireFrameSetup {
+    fn from(f: &FrameSetup) -> Self {
         WireFrameSetup {
-            camera: camera.into(),
-            lighting: lighting.into(),
-            trace: trace.into(),
-            vertex: vertex.into(),
+            camera: (&f.camera).into(),
+            lighting: (&f.lighting).into(),
+            trace: (&f.trace).into(),
+            vertex: (&f.vertex).into(),
         }
     }
+}
 
-    /// The validated domain values: camera, lighting, trace and vertex settings.
-    pub fn into_parts(
-        self,
-    ) -> Result<(Camera, Lighting, TraceSettings, VertexSettings), WireError> {
-        Ok((
-            self.camera.try_into()?,
-            self.lighting.try_into()?,
-            self.trace.try_into()?,
-            self.vertex.try_into()?,
-        ))
+impl TryFrom<WireFrameSetup> for FrameSetup {
+    type Error = WireError;
+
+    fn try_from(w: WireFrameSetup) -> Result<Self, WireError> {
+        Ok(FrameSetup {
+            camera: w.camera.try_into()?,
+            lighting: w.lighting.try_into()?,
+            trace: w.trace.try_into()?,
+            vertex: w.vertex.try_into()?,
+        })
     }
 }
 
@@ -1089,12 +1084,13 @@ pub(crate) mod tests {
                 vertex
             );
         }
-        let setup =
-            WireFrameSetup::from_parts(&camera(), &lighting(), &trace, &VertexSettings::default());
-        assert_eq!(
-            setup.into_parts().expect("valid set-up"),
-            (camera(), lighting(), trace, VertexSettings::default())
-        );
+        let setup = FrameSetup {
+            camera: camera(),
+            lighting: lighting(),
+            trace,
+            vertex: VertexSettings::default(),
+        };
+        assert_eq!(round_trip::<FrameSetup, WireFrameSetup>(&setup), setup);
     }
 
     #[test]

@@ -17,7 +17,8 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::CockpitConfig;
-use vtfarm_master::{run_job, server, spawn_master, wire_job};
+use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
+use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
     CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Message, Role,
@@ -39,7 +40,7 @@ pub(crate) struct ClusterArgs {
     /// Frames of the job (the first one includes the workers' BVH builds).
     #[arg(long, default_value_t = 3)]
     frames: usize,
-    #[arg(long, value_parser = crate::parse_quality, default_value = "full")]
+    #[arg(long, value_parser = crate::shared::parse_quality, default_value = "full")]
     quality: Quality,
     /// Cockpit detail (1.0 ≈ 100k triangles).
     #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
@@ -90,37 +91,11 @@ struct ClusterFigures {
     speedup_two_over_one: f64,
 }
 
-/// A directory under the system's temporary directory, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new() -> Result<TempDir> {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos());
-        let path = std::env::temp_dir().join(format!(
-            "vtfarm-bench-cluster-{}-{nanos}",
-            std::process::id()
-        ));
-        std::fs::create_dir_all(&path).with_context(|| format!("creating {}", path.display()))?;
-        Ok(TempDir(path))
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 pub(crate) fn run(args: ClusterArgs) -> Result<()> {
     if args.frames == 0 || args.threads == 0 {
         bail!("--frames and --threads must be at least 1");
     }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
-        .build_global()
-        .context("setting the thread count")?;
+    crate::shared::set_threads(Some(args.threads))?;
     let job = CockpitJob::new(args.detail, args.width, args.height, args.quality)?;
     // Frame k moves the eye k centimetres to the right and half that up.
     let setups: Vec<FrameSetup> = (0..args.frames)
@@ -130,19 +105,18 @@ pub(crate) fn run(args: ClusterArgs) -> Result<()> {
             setup
         })
         .collect();
-    let dir = TempDir::new()?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
+    let dir = tempfile::Builder::new()
+        .prefix("vtfarm-bench-cluster-")
+        .tempdir()
+        .context("creating a temporary directory")?;
+    let runtime = crate::shared::runtime()?;
     let mut runs = Vec::new();
     for workers in [1, 2] {
         eprintln!(
             "running {} frame(s) on a fresh master with {workers} worker(s) ...",
             args.frames
         );
-        let run_dir = dir.0.join(format!("farm-{workers}"));
+        let run_dir = dir.path().join(format!("farm-{workers}"));
         let (stats, job_seconds) = runtime.block_on(run_farm(&run_dir, &job, &setups, workers))?;
         runs.push(run_figures(workers, stats, job_seconds));
     }
@@ -235,7 +209,11 @@ async fn run_farm(
         let mut conn = connect(&options, Role::Submitter).await?;
         wait_for_workers(&mut conn.link, workers).await?;
         let data = SceneData::from_scene(&job.scene);
-        let wire = wire_job("bench-cluster", &data, setups, &job.reflectors);
+        let options = JobOptions {
+            method: MethodKind::VertexTracing,
+            aux: false,
+        };
+        let wire = wire_job("bench-cluster", &data, setups, &job.reflectors, options);
         let start = Instant::now();
         let frames = run_job(&mut conn.link, wire, &data, |_| {}).await;
         let job_seconds = start.elapsed().as_secs_f64();

@@ -87,7 +87,7 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
 }
 
 fn table1(args: Table1Args) -> Result<()> {
-    crate::set_threads(args.threads)?;
+    crate::shared::set_threads(args.threads)?;
     let c = cockpit(&CockpitConfig {
         detail: args.detail,
         ..CockpitConfig::default()
@@ -282,7 +282,7 @@ impl CockpitJob {
 
 /// Writes a bench table as JSON and says so.
 fn write_json(path: &std::path::Path, value: &impl Serialize) -> Result<()> {
-    crate::write_json(path, value)?;
+    crate::shared::write_json(path, value)?;
     println!("wrote {}", path.display());
     Ok(())
 }

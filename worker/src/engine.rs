@@ -197,18 +197,11 @@ impl Engine {
             .ok_or("frame for a scene this worker does not have")?;
         check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
             .map_err(|e| e.to_string())?;
-        let (camera, lighting, trace, vertex) =
-            start.setup.into_parts().map_err(|e| e.to_string())?;
-        let setup = FrameSetup {
-            camera,
-            lighting,
-            trace,
-            vertex,
-        };
+        let setup = FrameSetup::try_from(start.setup).map_err(|e| e.to_string())?;
         // Items index the groups of the frame's reflector list as sent (the master's order).
         let method = MethodKind::from(start.method);
         let per_reflector = method.per_reflector().then(|| PerReflector {
-            method: vtfarm_compare::method(method, setup.vertex),
+            method: vtfarm_render::method(method, setup.vertex),
             groups: reflector_groups(&scene, &start.reflectors),
         });
         let renderer = match &self.renderer {

@@ -6,6 +6,7 @@
 //! - [`session`]: the worker's side of the protocol over any `Link`.
 //! - [`client`]: QUIC: connect, handshake, reconnect with backoff.
 
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod client;
 pub mod engine;

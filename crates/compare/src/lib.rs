@@ -10,8 +10,8 @@ use std::time::Duration;
 use glam::Vec3;
 use serde::Serialize;
 use vtfarm_imaging::{Image, encode_srgb8};
-use vtfarm_method::{MethodCounters, MethodFrame, MethodKind, ReflectionMethod, VertexTracing};
-use vtfarm_render::{ErrorFigures, compare};
+use vtfarm_method::{MethodCounters, MethodFrame, MethodKind, ReflectionMethod};
+use vtfarm_render::{ErrorFigures, compare, method};
 use vtfarm_vertex::{FrameImage, Quality, VertexSettings};
 
 /// One method's frame and figures.
@@ -188,19 +188,6 @@ pub fn sheet(runs: &[MethodRun]) -> Image {
         }
     }
     sheet
-}
-
-/// The catalogue: the method a job chose, with the job's vertex settings
-/// (used by vertex tracing) and each other method's defaults. The farm's
-/// workers build their method here, like `vtfarm compare`.
-pub fn method(kind: MethodKind, vertex: VertexSettings) -> Box<dyn ReflectionMethod> {
-    match kind {
-        MethodKind::VertexTracing => Box::new(VertexTracing { settings: vertex }),
-        MethodKind::CubeMap => Box::new(vtfarm_cubemap::CubeMapMethod::full()),
-        MethodKind::CubeMapGrid => Box::new(vtfarm_cubemap::CubeMapMethod::grid()),
-        MethodKind::Pvrr => Box::new(vtfarm_pvrr::Pvrr::default()),
-        MethodKind::EnvironmentMap => Box::new(vtfarm_cubemap::EnvironmentMap::default()),
-    }
 }
 
 /// Every method `vtfarm compare` measures besides the reference: vertex

@@ -1,6 +1,7 @@
 //! One interface for every reflection method the product offers: a method
 //! turns a frame set-up and a reflector into that reflector's pixels.
 //!
+//! - [`FrameSetup`]: one frame's camera, lighting and settings.
 //! - [`ReflectionMethod`]: the interface; [`MethodFrame`] is its input (the
 //!   tracer with the scene's BVH, lighting and settings; the camera; the
 //!   frame's ID buffer; the reflector's triangles), [`MethodOutput`] its
@@ -29,6 +30,16 @@ use vtfarm_vertex::{
     Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners, VertexSettings,
     behind_id_buffer, pixel_surface, trace_package,
 };
+
+/// Everything that can change from one frame to the next: what a job
+/// gives each of its frames, and what the farm sends in `FrameStart`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameSetup {
+    pub camera: Camera,
+    pub lighting: Lighting,
+    pub trace: TraceSettings,
+    pub vertex: VertexSettings,
+}
 
 /// A frame as every method sees it.
 #[derive(Clone, Copy, Debug)]

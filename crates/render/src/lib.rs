@@ -1,7 +1,8 @@
 //! One frame end to end on one machine: the base frame and ID buffer from the
 //! rasterizer, the reflector triangles cut into packages and vertex traced,
 //! the bitmaps composited over the base frame; plus the error figures against
-//! a reference and the auxiliary output files.
+//! a reference and the auxiliary output files; and the catalogue of
+//! reflection methods ([`method`]).
 //!
 //! Architecture invariant: no networking and no scheduling policy here; the
 //! farm's master drives the same pieces (`Renderer::frame`, `trace_package`,
@@ -9,27 +10,21 @@
 
 pub mod output;
 
+pub use vtfarm_method::FrameSetup;
+
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use vtfarm_imaging::{Image, encode_srgb8};
+use vtfarm_method::{MethodKind, ReflectionMethod, VertexTracing};
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Lighting, Scene, TriangleId};
-use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
+use vtfarm_scene::{Scene, TriangleId};
+use vtfarm_trace::{SceneBvh, Tracer};
 use vtfarm_vertex::{
     FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners, VertexSettings,
     behind_id_buffer, trace_package,
 };
-
-/// Everything that can change from one frame to the next.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FrameSetup {
-    pub camera: Camera,
-    pub lighting: Lighting,
-    pub trace: TraceSettings,
-    pub vertex: VertexSettings,
-}
 
 /// How to cut and run the reflector work.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -265,6 +260,19 @@ pub fn compare(test: &FrameImage, reference: &FrameImage) -> ErrorFigures {
         mean_abs: sum as f64 / (3.0 * n),
         share_off: off as f64 / n,
         max_abs,
+    }
+}
+
+/// The method catalogue: the method a job chose, with the job's vertex
+/// settings (used by vertex tracing) and each other method's defaults. The
+/// farm's workers and `vtfarm compare` build their methods here.
+pub fn method(kind: MethodKind, vertex: VertexSettings) -> Box<dyn ReflectionMethod> {
+    match kind {
+        MethodKind::VertexTracing => Box::new(VertexTracing { settings: vertex }),
+        MethodKind::CubeMap => Box::new(vtfarm_cubemap::CubeMapMethod::full()),
+        MethodKind::CubeMapGrid => Box::new(vtfarm_cubemap::CubeMapMethod::grid()),
+        MethodKind::Pvrr => Box::new(vtfarm_pvrr::Pvrr::default()),
+        MethodKind::EnvironmentMap => Box::new(vtfarm_cubemap::EnvironmentMap::default()),
     }
 }
 

@@ -323,3 +323,6 @@ pub fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
     let wb = (a - c).cross(p - c).dot(n) / area;
     [wa, wb, 1.0 - wa - wb]
 }
+
+#[cfg(test)]
+mod tests;

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
@@ -113,6 +114,21 @@ impl SparseBitmap {
                     k,
                 )
             })
+    }
+
+    /// Pixel ownership: the first covered pixel that the ID buffer `ids`
+    /// does not give to a triangle `owns` accepts (or that lies outside
+    /// `ids`), or `None` when the package owns every pixel it writes. The
+    /// master checks each result with it before compositing, so one package
+    /// cannot overwrite another's pixels or the base frame.
+    pub fn foreign_pixel(
+        &self,
+        ids: &IdBuffer,
+        owns: impl Fn(TriangleId) -> bool,
+    ) -> Option<(u32, u32)> {
+        self.covered().map(|(x, y, _)| (x, y)).find(|&(x, y)| {
+            x >= ids.width || y >= ids.height || !owns(ids.triangle[ids.index(x, y)])
+        })
     }
 }
 
@@ -514,5 +530,53 @@ impl SparseBitmap {
             transmitted: pixels.iter().map(|p| p.transmitted).collect(),
             reflected_object: pixels.iter().map(|p| p.object).collect(),
         }
+    }
+}
+
+#[cfg(test)]
+mod ownership_tests {
+    use super::*;
+
+    /// A 3x2 frame: triangle 7 owns the left column, 8 the rest.
+    fn ids() -> IdBuffer {
+        let mut ids = IdBuffer::new(3, 2);
+        for y in 0..2 {
+            for x in 0..3 {
+                let i = ids.index(x, y);
+                ids.triangle[i] = if x == 0 { 7 } else { 8 };
+            }
+        }
+        ids
+    }
+
+    /// A bitmap covering the given pixels of a `width` x `height` rectangle at (`x0`, `y0`).
+    fn bitmap(x0: u32, y0: u32, width: u32, height: u32, mask: &[bool]) -> SparseBitmap {
+        let n = mask.iter().filter(|&&m| m).count();
+        SparseBitmap {
+            x0,
+            y0,
+            width,
+            height,
+            mask: mask.to_vec(),
+            color: vec![Vec3::ONE; n],
+            reflected: vec![Vec3::ZERO; n],
+            transmitted: vec![Vec3::ZERO; n],
+            reflected_object: vec![NONE; n],
+        }
+    }
+
+    #[test]
+    fn a_bitmap_owns_only_its_triangles_pixels() {
+        let ids = ids();
+        let left_column = bitmap(0, 0, 1, 2, &[true, true]);
+        assert_eq!(left_column.foreign_pixel(&ids, |t| t == 7), None);
+        assert_eq!(left_column.foreign_pixel(&ids, |t| t == 8), Some((0, 0)));
+        // Uncovered pixels of the rectangle do not count; (1, 1) is 8's.
+        let corner = bitmap(0, 0, 2, 2, &[true, false, true, true]);
+        assert_eq!(corner.foreign_pixel(&ids, |t| t == 7), Some((1, 1)));
+        assert_eq!(corner.foreign_pixel(&ids, |t| t == 7 || t == 8), None);
+        // A pixel outside the frame is never owned.
+        let outside = bitmap(3, 0, 1, 1, &[true]);
+        assert_eq!(outside.foreign_pixel(&ids, |_| true), Some((3, 0)));
     }
 }

@@ -353,3 +353,57 @@ impl TriangleMesh {
 fn dist(a: ScreenPoint, b: ScreenPoint) -> f32 {
     ((a.x - b.x).powi(2) + (a.y - b.y).powi(2)).sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vertex at screen point (x, y) whose sample is `color` (object 0).
+    fn vertex((x, y): (f32, f32), color: f32) -> MeshVertex {
+        MeshVertex {
+            position: Vec3::ZERO,
+            normal: Vec3::Z,
+            screen: Some(ScreenPoint { x, y, depth: 1.0 }),
+            visible: true,
+            sample: Sample {
+                color: Vec3::splat(color),
+                reflected: Vec3::splat(color),
+                transmitted: Vec3::ZERO,
+                reflected_object: 0,
+                signature: 0,
+            },
+            srgb: Vec3::splat(color),
+        }
+    }
+
+    /// The flatness guard on one face with corners at `screen` and corner
+    /// colours `colors` (floor 2 px, v = 0.2, epsilon 0.1): the edge it
+    /// forces, as corner indices, or `None`.
+    fn check(screen: [(f32, f32); 3], colors: [f32; 3], expect: Option<(u32, u32)>) {
+        let mesh = TriangleMesh::new(0, [0, 1, 2].map(|k| vertex(screen[k], colors[k])));
+        let face = mesh.faces[0];
+        let got = mesh
+            .flat_long_edge(&face, 0.2, 2.0, 0.1)
+            .map(|(a, b)| edge_key(a, b));
+        assert_eq!(got, expect, "{screen:?} {colors:?}");
+    }
+
+    #[test]
+    fn the_flatness_guard_splits_the_long_edge_of_flat_disagreeing_faces() {
+        let differ = [0.0, 1.0, 0.0];
+        // Right isosceles: h / c = 7.07 / 14.1 = 0.5, not flat.
+        check([(0.0, 0.0), (10.0, 0.0), (0.0, 10.0)], differ, None);
+        // A sliver: c = 20 (corners 0-1), h = 3, h / c = 0.15 < 0.2.
+        check([(0.0, 0.0), (20.0, 0.0), (10.0, 3.0)], differ, Some((0, 1)));
+        // The long edge is found whichever corners it joins (1-2 here).
+        check([(10.0, 3.0), (0.0, 0.0), (20.0, 0.0)], differ, Some((1, 2)));
+        // Just above v: h = 4.2, c = 20, h / c = 0.21.
+        check([(0.0, 0.0), (20.0, 0.0), (5.0, 4.2)], differ, None);
+        // Flat, but h = 1 is under the 2-px floor: splitting would not end.
+        check([(0.0, 0.0), (20.0, 0.0), (10.0, 1.0)], differ, None);
+        // Flat, but the corners agree: nothing to resolve.
+        check([(0.0, 0.0), (20.0, 0.0), (10.0, 3.0)], [0.5; 3], None);
+        // Degenerate (all corners on one point): no edge.
+        check([(5.0, 5.0); 3], differ, None);
+    }
+}
