@@ -59,6 +59,10 @@ pub(crate) struct SimulateArgs {
     /// Fixed time per package on a worker (set-up), in milliseconds.
     #[arg(long, default_value_t = 1.0)]
     package_overhead_ms: f64,
+    /// Leaves out the per-frame fixed costs (worker set-up, master base
+    /// frame): the load balancer alone, as in the paper's figures.
+    #[arg(long)]
+    no_fixed_costs: bool,
     /// Multiplies every recorded cost (e.g. to emulate slower machines).
     #[arg(long, default_value_t = 1.0)]
     cost_scale: f64,
@@ -196,8 +200,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 &PackageOptions::default(),
                                 &mut |_| {},
                             );
-                            let bitmap =
-                                WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
+                            let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
                             let busy = t0.elapsed();
                             let bytes = result_message_bytes(
                                 bitmap,
@@ -346,7 +349,10 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         args.height,
         args.quality.name()
     );
-    let recording = record(&job, threads, args.repeats)?;
+    let mut recording = record(&job, threads, args.repeats)?;
+    if args.no_fixed_costs {
+        (recording.base_frame_seconds, recording.worker_setup_seconds) = (0.0, 0.0);
+    }
     let total = recording.total_seconds() * args.cost_scale;
     let samples: u64 = recording.samples.iter().sum();
     let config = |mbit: f64| SimConfig {
@@ -512,7 +518,10 @@ fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[
                     ": it bounds the frame (fastest simulated {fastest:.3} s); more workers cannot help"
                 )
             } else {
-                format!(", {:.0}% of the fastest simulated frame", link_seconds / fastest * 100.0)
+                format!(
+                    ", {:.0}% of the fastest simulated frame",
+                    link_seconds / fastest * 100.0
+                )
             }
         );
     }

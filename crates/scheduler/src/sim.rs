@@ -235,10 +235,12 @@ pub struct Simulation {
     sequence: u64,
     /// Accepted results of frames not complete yet.
     tallies: BTreeMap<(JobId, u32), Tally>,
-    /// When each running frame started (for its base frame).
+    /// When each running frame's base frame is ready.
     frame_starts: BTreeMap<(JobId, u32), Duration>,
     /// When the shared master link is next free: towards the workers, from them.
     master_link_free: [Duration; 2],
+    /// When the master's last base frame is done (it rasterizes one at a time).
+    master_free: Duration,
     report: SimReport,
 }
 
@@ -329,6 +331,7 @@ impl Simulation {
             tallies: BTreeMap::new(),
             frame_starts: BTreeMap::new(),
             master_link_free: [Duration::ZERO; 2],
+            master_free: Duration::ZERO,
             report: SimReport::default(),
         };
         for (index, spec) in workers.into_iter().enumerate() {
@@ -793,19 +796,20 @@ impl Simulation {
                     }
                 }
                 Event::FrameStarted { job, frame, .. } => {
-                    self.frame_starts.insert((*job, *frame), now);
+                    self.master_free = now.max(self.master_free) + self.config.master_frame_cost;
+                    self.frame_starts.insert((*job, *frame), self.master_free);
                     if self.config.scheduler.requests_lapse_at_frame_start {
                         self.set_frame_up();
                     }
                 }
                 Event::FrameComplete { job, frame, stats } => {
                     let tally = self.tallies.remove(&(*job, *frame)).unwrap_or_default();
-                    let started = self.frame_starts.remove(&(*job, *frame)).unwrap_or(now);
+                    let base_ready = self.frame_starts.remove(&(*job, *frame)).unwrap_or(now);
                     self.report.frames.push(SimFrameReport {
                         job: *job,
                         frame: *frame,
                         at: now,
-                        done_at: now.max(started + self.config.master_frame_cost),
+                        done_at: now.max(base_ready),
                         stats: stats.clone(),
                         true_cost: tally.true_cost,
                         completions: tally.completions,
