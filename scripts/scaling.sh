@@ -8,13 +8,14 @@
 #
 # Usage: scripts/scaling.sh [--workers "1 2"] [--frames 8] [--width 1920]
 #        [--height 1080] [--detail 2.1] [--bin target/release/vtfarm]
+#        [--keep DIR]   (keeps each run's frames, stats.json and timelines)
 # Prints one line per worker count: the mean frame time (the interval between
 # frame arrivals at the submitter, first frame left out: it includes the scene
 # transfer and BVH builds) and its ratio to the first count's.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
-bin=target/release/vtfarm
+bin=target/release/vtfarm; keep=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --workers) workers_list="$2"; shift 2;;
@@ -23,6 +24,7 @@ while [ $# -gt 0 ]; do
     --height) height="$2"; shift 2;;
     --detail) detail="$2"; shift 2;;
     --bin) bin="$2"; shift 2;;
+    --keep) keep="$2"; shift 2;;
     *) echo "unknown option $1" >&2; exit 2;;
   esac
 done
@@ -94,19 +96,23 @@ gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
 if not any(arrivals):  # an older binary: no arrival times
     gaps = [f["wall_micros"] for f in frames[1:]] or [frames[0]["wall_micros"]]
 walls = [f["wall_micros"] for f in frames[1:]] or [frames[0]["wall_micros"]]
-print(f"{sum(gaps) / len(gaps) / 1e6:.4f} {sum(walls) / len(walls) / 1e6:.4f}")
+results = sum(w["bytes_out"] for f in frames for w in f["workers"]) / len(frames)
+pixels = sum(f["totals"]["pixels"] for f in frames) / len(frames)
+print(f"{sum(gaps) / len(gaps) / 1e6:.4f} {sum(walls) / len(walls) / 1e6:.4f} {results / 1e6:.3f} {pixels * 40 / 1e6:.3f}")
 PY
 )
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
+  [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
 done
 
 first=${workers_list%% *}
 read -r base _ <<<"${mean[$first]}"
 echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
-printf "%8s %16s %16s %10s\n" workers "frame interval s" "frame wall s" speed-up
+printf "%8s %16s %16s %10s %16s %16s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "raw MB/frame"
 for n in $workers_list; do
-  read -r gap wall <<<"${mean[$n]}"
-  printf "%8s %16s %16s %10s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')"
+  read -r gap wall bytes raw <<<"${mean[$n]}"
+  printf "%8s %16s %16s %10s %16s %16s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$raw"
 done
+echo "result MB: results as sent (zstd byte planes, colour only); raw: the same pixels at 40 bytes each (the previous encoding: three colours and an object id)"

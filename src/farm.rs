@@ -27,7 +27,8 @@ pub(crate) struct SubmitArgs {
     /// The master's HOST:PORT (default: the cluster file's).
     #[arg(long)]
     master: Option<String>,
-    /// Output directory for frame_NNNN.png and stats.json.
+    /// Output directory for frame_NNNN.png, frame_NNNN_timeline.svg (where
+    /// each frame's time went) and stats.json.
     #[arg(short, long)]
     output: PathBuf,
     /// Also write each frame's auxiliary outputs (mask, reflected and
@@ -160,6 +161,11 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 let path = output.join(format!("frame_{:04}.png", f.frame));
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
+                }
+                let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
+                let svg = crate::timeline::timeline_svg(&f.stats);
+                if let Err(e) = std::fs::write(&timeline, svg) {
+                    bar.println(format!("error: {}: {e}", timeline.display()));
                 }
                 if let Some(components) = &f.components {
                     let dir = output.join(format!("frame_{:04}", f.frame));

@@ -20,9 +20,10 @@ use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
-    FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
-    SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
-    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
+    FrameDone, FramePhase, FrameStart, JobScene, Message, Package, PackageResult, PhaseKind,
+    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup,
+    WireImage, WireJob, WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids,
+    encoded_len,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
@@ -120,6 +121,11 @@ struct FrameAssembly {
     /// Results that came before the ID buffer, to check once it is there:
     /// (connection, result, its wire size).
     held: Vec<(ConnId, PackageResult, u64)>,
+    /// When the frame started (master time) and where its time went.
+    started: Duration,
+    phases: Vec<FramePhase>,
+    /// Workers whose set-up phase is recorded.
+    set_up: Vec<ConnId>,
     totals: PackageStats,
     triangles_done: u64,
 }
@@ -133,6 +139,8 @@ struct InFlight {
     triangles: Vec<TriangleId>,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
+    /// When it was handed out, for the timeline.
+    assigned_at: Duration,
 }
 
 /// The master's state.
@@ -147,6 +155,8 @@ pub struct MasterCore {
     next_job: u64,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
+    /// The time of the input being handled.
+    now: Duration,
 }
 
 impl MasterCore {
@@ -162,6 +172,7 @@ impl MasterCore {
             next_job: 1,
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
+            now: Duration::ZERO,
         }
     }
 
@@ -176,12 +187,14 @@ impl MasterCore {
     }
 
     pub fn handle_timeout(&mut self, now: Duration) {
+        self.now = now;
         self.scheduler.handle_timeout(now);
         self.pump();
     }
 
     /// A connection passed its handshake.
     pub fn connected(&mut self, now: Duration, conn: ConnId, peer: Peer) {
+        self.now = now;
         if let Peer::Worker {
             name,
             threads,
@@ -216,6 +229,7 @@ impl MasterCore {
 
     /// A connection went away (closed, failed, or dropped by us).
     pub fn disconnected(&mut self, now: Duration, conn: ConnId) {
+        self.now = now;
         match self.peers.remove(&conn) {
             Some(Peer::Worker { name, .. }) => {
                 info!(worker = %name, "worker left");
@@ -242,6 +256,7 @@ impl MasterCore {
 
     /// A message arrived on a connection.
     pub fn message(&mut self, now: Duration, conn: ConnId, message: Message) {
+        self.now = now;
         match self.peers.get(&conn) {
             Some(Peer::Worker { .. }) => self.worker_message(now, conn, message),
             Some(Peer::Submitter { .. }) => self.submitter_message(now, conn, message),
@@ -265,6 +280,7 @@ impl MasterCore {
                 // Only a worker set up for the current frame may get its work.
                 let current = self.scheduler.queue().running.map(|r| (r.job.0, r.frame));
                 if current == Some((job, frame)) {
+                    self.record_setup(conn, job);
                     let _ = self.scheduler.request_work(now, worker);
                 }
             }
@@ -275,7 +291,10 @@ impl MasterCore {
                 }
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
-            Message::PackageResult(result) => self.package_result(now, conn, result, result_bytes),
+            Message::PackageResult(result) => {
+                self.record_package(conn, result.id, result.busy_micros);
+                self.package_result(now, conn, result, result_bytes)
+            }
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
                 if let Err(e) =
@@ -571,6 +590,7 @@ impl MasterCore {
                     speedup: stats.speedup(),
                     totals: WirePackageStats::from(&done.totals),
                     workers,
+                    phases: done.phases.clone(),
                 };
                 let j = &self.jobs[&job.0];
                 let message = Message::FrameDone(FrameDone {
@@ -654,6 +674,9 @@ impl MasterCore {
             ids: None,
             image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
             held: Vec::new(),
+            started: self.now,
+            phases: Vec::new(),
+            set_up: Vec::new(),
             totals: PackageStats::default(),
             triangles_done: 0,
         });
@@ -684,6 +707,7 @@ impl MasterCore {
         frame: u32,
         (base, ids): (Image, IdBuffer),
     ) {
+        self.now = now;
         let Some(current) = (self.jobs.get_mut(&job))
             .and_then(|j| j.current.as_mut())
             .filter(|c| c.start.frame == frame && c.ids.is_none())
@@ -693,10 +717,62 @@ impl MasterCore {
         // Nothing is composited yet: the image starts as the base frame.
         current.image = FrameImage::new(base);
         current.ids = Some(ids);
+        let phase = phase(
+            current.started,
+            "master".into(),
+            PhaseKind::Base,
+            current.started,
+            now,
+        );
+        current.phases.push(phase);
         for (conn, result, bytes) in std::mem::take(&mut current.held) {
             self.package_result(now, conn, result, bytes);
         }
         self.pump();
+    }
+
+    /// A worker's first request for the current frame ends its set-up.
+    fn record_setup(&mut self, conn: ConnId, job: u64) {
+        let name = self.name(conn);
+        let now = self.now;
+        let Some(current) = self.jobs.get_mut(&job).and_then(|j| j.current.as_mut()) else {
+            return;
+        };
+        if !current.set_up.contains(&conn) {
+            current.set_up.push(conn);
+            let phase = phase(
+                current.started,
+                name,
+                PhaseKind::Setup,
+                current.started,
+                now,
+            );
+            current.phases.push(phase);
+        }
+    }
+
+    /// A result arrived: its package was in flight, then computed for its busy time.
+    fn record_package(&mut self, conn: ConnId, id: u64, busy_micros: u64) {
+        let name = self.name(conn);
+        let now = self.now;
+        let Some(in_flight) = self.packages.get(&id) else {
+            return;
+        };
+        let (frame, assigned_at) = (in_flight.frame, in_flight.assigned_at);
+        let Some(current) = (self.jobs.get_mut(&in_flight.job))
+            .and_then(|j| j.current.as_mut())
+            .filter(|c| c.start.frame == frame)
+        else {
+            return;
+        };
+        let computed = now
+            .saturating_sub(Duration::from_micros(busy_micros))
+            .max(assigned_at);
+        let t0 = current.started;
+        current.phases.extend([
+            phase(t0, name.clone(), PhaseKind::Sending, assigned_at, computed),
+            phase(t0, name, PhaseKind::Package, computed, now),
+        ]);
     }
 
     fn assign(&mut self, a: Assignment) {
@@ -713,6 +789,7 @@ impl MasterCore {
             frame: a.frame,
             triangles,
             bytes_in: encoded_len(&message),
+            assigned_at: self.now,
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
@@ -766,6 +843,17 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
+    }
+}
+
+/// A timeline phase from `start` to `end`, in microseconds from `t0`.
+fn phase(t0: Duration, who: String, kind: PhaseKind, start: Duration, end: Duration) -> FramePhase {
+    let micros = |t: Duration| t.saturating_sub(t0).as_micros() as u64;
+    FramePhase {
+        who,
+        kind,
+        start_micros: micros(start),
+        end_micros: micros(end),
     }
 }
 

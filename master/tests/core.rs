@@ -9,7 +9,7 @@ use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameDone, JobScene, Message, Package, PackageResult, SceneData, WireBitmap, WireJob,
+    FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, SceneData, WireBitmap, WireJob,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -230,6 +230,15 @@ fn finish_frame(
 
 /// The frame counted one failed package and still equals the single-process render.
 fn assert_one_failure_and_the_reference(started: &StartedFrame, done: FrameDone) {
+    // The timeline: the master's base frame, the worker's set-up and packages.
+    for kind in [PhaseKind::Base, PhaseKind::Setup, PhaseKind::Package] {
+        let phase = (done.stats.phases.iter()).find(|p| p.kind == kind);
+        assert!(
+            phase.is_some_and(|p| p.start_micros <= p.end_micros),
+            "{kind:?} in {:?}",
+            done.stats.phases
+        );
+    }
     assert_eq!(
         done.stats.failures, 1,
         "the bad result counted as a failure: {:?}",

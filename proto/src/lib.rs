@@ -39,10 +39,10 @@ pub use handshake::{
 };
 pub use link::{Link, SESSION_LIMIT};
 pub use message::{
-    FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
-    PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, RunningJob, SceneData,
-    SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WorkerFrameStats, WorkerStatus,
-    scene_hash,
+    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package,
+    PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode, Role,
+    RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
+    WorkerFrameStats, WorkerStatus, scene_hash,
 };
 pub use tls::{
     ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,
