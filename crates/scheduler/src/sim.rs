@@ -592,27 +592,40 @@ impl Simulation {
                 assignment,
                 measure,
                 true_cost,
-            } => match {
+            } => {
                 self.log(SimInput::Done(id, assignment.package, measure.clone()));
-                self.scheduler
-                    .package_done(now, id, assignment.package, measure)
-            } {
-                Ok(()) => {
-                    let tally = self
-                        .tallies
-                        .entry((assignment.job, assignment.frame))
-                        .or_default();
-                    *tally.true_cost.entry(id).or_insert(0.0) += true_cost;
-                    for item in assignment.items {
-                        *tally.completions.entry(item).or_insert(0) += 1;
-                    }
-                    None
-                }
-                Err(error) => Some(error.to_string()),
-            },
+                let done = self
+                    .scheduler
+                    .package_done(now, id, assignment.package, measure);
+                self.done_outcome(id, assignment, true_cost, done)
+            }
         };
         if let Some(refusal) = refusal {
             self.refused(refusal);
+        }
+    }
+
+    /// Tallies an accepted result; a refused one is returned for the report.
+    fn done_outcome(
+        &mut self,
+        id: WorkerId,
+        assignment: Assignment,
+        true_cost: f64,
+        done: Result<(), crate::ReportError>,
+    ) -> Option<String> {
+        match done {
+            Ok(()) => {
+                let tally = self
+                    .tallies
+                    .entry((assignment.job, assignment.frame))
+                    .or_default();
+                *tally.true_cost.entry(id).or_insert(0.0) += true_cost;
+                for item in assignment.items {
+                    *tally.completions.entry(item).or_insert(0) += 1;
+                }
+                None
+            }
+            Err(error) => Some(error.to_string()),
         }
     }
 
