@@ -36,6 +36,8 @@ skip() { echo "lab skipped: $*"; exit 0; }
 command -v ip >/dev/null && command -v tc >/dev/null || skip "needs ip and tc (iproute2)"
 [ -x "$bin" ] || { echo "no $bin: run cargo build --release first" >&2; exit 1; }
 bin=$(realpath "$bin")
+# shellcheck source=scripts/farm-common.sh
+source "$(dirname "$0")/farm-common.sh"
 tag="vtlab$$"
 ip netns add "$tag-sw" 2>/dev/null || skip "cannot create network namespaces here"
 
@@ -71,23 +73,7 @@ host() {
 host m 10.77.0.1 0
 for ((i = 1; i <= workers; i++)); do host "w$i" "10.77.1.$i" "$i"; done
 
-# The job: frame 0 from the driver's eye, the others from eyes 1 cm apart.
-eyes=""
-for ((i = 1; i < frames; i++)); do
-  eyes+="[$(awk -v i="$i" 'BEGIN { printf "%.3f", -0.55 + 0.01 * i }'), 1.4, 0.1],"
-done
-cat > "$work/job.toml" <<TOML
-[scene]
-builtin = "cockpit"
-detail = $detail
-[camera]
-width = $width
-height = $height
-[quality]
-level = "full"
-[frames]
-eyes = [${eyes%,}]
-TOML
+write_job "$work/job.toml" "$frames" "$width" "$height" "$detail"
 port=7878
 "$bin" cluster init -o "$work/cluster" --master "10.77.0.1:$port" >/dev/null
 cluster="$work/cluster/cluster.toml"
@@ -120,16 +106,8 @@ cores=$(nproc)
 scale=$(awk -v w="$workers" -v c="$cores" -v p="${cpu:-100}" 'BEGIN { s = w > c ? w / c : 1; s *= 100 / p; printf "%.3f", s }')
 "$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --frames "$frames" --width "$width" \
   --height "$height" --detail "$detail" --repeats 1 --cost-scale "$scale" --json "$work/sim.json" >/dev/null 2>&1
-python3 - "$work/out/stats.json" "$work/sim.json" "$workers" "$mbit" "$scale" <<'PY'
-import json, sys
-frames = json.load(open(sys.argv[1]))
-rows = [r for r in json.load(open(sys.argv[2])) if not r["heterogeneous"]]
-arrivals = [f["arrival_micros"] for f in frames]
-gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
-measured = sum(gaps) / len(gaps) / 1e6
-predicted = rows[-1]["frame_seconds"]
-sent = sum(w["bytes_out"] for f in frames for w in f["workers"]) / len(frames)
-print(f"lab: {sys.argv[3]} workers, {sys.argv[4]} Mbit/s tbf links through one bridge (costs x{sys.argv[5]} for shared cores)")
-print(f"  mean frame (after the first): measured {measured:.3f} s, predicted {predicted:.3f} s, ratio {measured / predicted:.2f}")
-print(f"  results per frame: {sent / 1e6:.3f} MB ({sent * 8 / float(sys.argv[4]) / 1e6:.3f} s of the master's link)")
-PY
+read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json")"
+predicted=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim.json")
+echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge (costs x$scale for shared cores)"
+awk -v m="$measured" -v p="$predicted" 'BEGIN { printf "  mean frame (after the first): measured %.3f s, predicted %.3f s, ratio %.2f\n", m, p, m / p }'
+awk -v b="$sent" -v r="$mbit" 'BEGIN { printf "  results per frame: %.3f MB (%.3f s of the master link)\n", b, b * 8 / r }'

@@ -30,6 +30,8 @@ while [ $# -gt 0 ]; do
 done
 [ -x "$bin" ] || { echo "no $bin: run cargo build --release first" >&2; exit 1; }
 bin=$(realpath "$bin")
+# shellcheck source=scripts/farm-common.sh
+source "$(dirname "$0")/farm-common.sh"
 cores=$(nproc)
 
 work=$(mktemp -d /tmp/vtfarm-scaling.XXXXXX)
@@ -41,23 +43,7 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# The job: frame 0 from the driver's eye, the others from eyes 1 cm apart.
-eyes=""
-for ((i = 1; i < frames; i++)); do
-  eyes+="[$(awk -v i="$i" 'BEGIN { printf "%.3f", -0.55 + 0.01 * i }'), 1.4, 0.1],"
-done
-cat > "$work/job.toml" <<TOML
-[scene]
-builtin = "cockpit"
-detail = $detail
-[camera]
-width = $width
-height = $height
-[quality]
-level = "full"
-[frames]
-eyes = [${eyes%,}]
-TOML
+write_job "$work/job.toml" "$frames" "$width" "$height" "$detail"
 
 port=$((20000 + RANDOM % 20000))
 "$bin" cluster init -o "$work/cluster" --master "127.0.0.1:$port" >/dev/null
@@ -88,19 +74,7 @@ for n in $workers_list; do
   out="$work/out-$n"
   timeout 600 "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
     >"$work/submit-$n.log" 2>&1 || { cat "$work/submit-$n.log" >&2; exit 1; }
-  mean[$n]=$(python3 - "$out/stats.json" <<'PY'
-import json, sys
-frames = json.load(open(sys.argv[1]))
-arrivals = [f.get("arrival_micros", 0) for f in frames]
-gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
-if not any(arrivals):  # an older binary: no arrival times
-    gaps = [f["wall_micros"] for f in frames[1:]] or [frames[0]["wall_micros"]]
-walls = [f["wall_micros"] for f in frames[1:]] or [frames[0]["wall_micros"]]
-results = sum(w["bytes_out"] for f in frames for w in f["workers"]) / len(frames)
-pixels = sum(f["totals"]["pixels"] for f in frames) / len(frames)
-print(f"{sum(gaps) / len(gaps) / 1e6:.4f} {sum(walls) / len(walls) / 1e6:.4f} {results / 1e6:.3f} {pixels * 40 / 1e6:.3f}")
-PY
-)
+  mean[$n]=$(frame_figures "$out/stats.json")
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
