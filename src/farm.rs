@@ -29,7 +29,8 @@ pub(crate) struct SubmitArgs {
     /// The master's HOST:PORT (default: the cluster file's).
     #[arg(long)]
     master: Option<String>,
-    /// Output directory for frame_NNNN.png and stats.json.
+    /// Output directory for frame_NNNN.png, frame_NNNN_timeline.svg (where
+    /// each frame's time went) and stats.json.
     #[arg(short, long)]
     output: PathBuf,
     /// Follow job JOB that the master already has (submitted from another
@@ -144,7 +145,8 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
     let (args_aux, attach) = (args.aux, args.attach);
-    let frames = runtime()?.block_on(async move {
+    let mut arrivals = Vec::new();
+    let frames = runtime()?.block_on(async {
         let data = SceneData::from_scene(&scene);
         let options = JobOptions {
             method: job.method,
@@ -160,6 +162,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         };
         let bar =
             crate::shared::progress_bar(reflectors.len() as u64, "reflector triangles", "frame");
+        let submitted = std::time::Instant::now();
         let result = run_remote_job(&client, start, |event| match event {
             JobEvent::Accepted { job, frames } => {
                 bar.println(format!("job {job} accepted: {frames} frame(s)"))
@@ -169,9 +172,15 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 bar.set_position(done.into());
             }
             JobEvent::FrameDone(f) => {
+                arrivals.push(submitted.elapsed().as_micros() as u64);
                 let path = output.join(format!("frame_{:04}.png", f.frame));
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
+                }
+                let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
+                let svg = crate::timeline::timeline_svg(&f.stats);
+                if let Err(e) = std::fs::write(&timeline, svg) {
+                    bar.println(format!("error: {}: {e}", timeline.display()));
                 }
                 if let Some(components) = &f.components {
                     let dir = output.join(format!("frame_{:04}", f.frame));
@@ -192,7 +201,13 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         bar.finish_and_clear();
         anyhow::Ok(result?)
     })?;
-    let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();
+    let stats: Vec<FrameRecord> = (frames.iter().zip(arrivals))
+        .map(|(f, arrival_micros)| FrameRecord {
+            frame: f.frame,
+            arrival_micros,
+            stats: &f.stats,
+        })
+        .collect();
     let path = args.output.join("stats.json");
     crate::shared::write_json(&path, &stats)?;
     for f in &frames {
@@ -201,6 +216,17 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
     Ok(())
+}
+
+/// One frame in `stats.json`: the master's statistics, and when the frame
+/// reached the submitter (from the submission; the intervals between
+/// arrivals are the farm's frame rate, pipelined or not).
+#[derive(serde::Serialize)]
+struct FrameRecord<'a> {
+    frame: u32,
+    arrival_micros: u64,
+    #[serde(flatten)]
+    stats: &'a FrameStats,
 }
 
 /// `vtfarm submit` of a study file: its variants run on the cluster.

@@ -2,22 +2,28 @@
 //! messages and closes out, around the pure `Scheduler`. The async driver
 //! (`driver.rs`) feeds it; tests can drive it directly.
 //!
-//! Per frame it rasterizes the base frame, sends `FrameStart` to every
-//! worker, hands out the scheduler's packages, composites each accepted
-//! result over the base frame and sends the finished frame to the submitter.
-//! A result that writes a pixel its package does not own in the frame's ID
-//! buffer (pixel ownership) fails the package.
+//! Per frame it sends `FrameStart` to every worker first and then asks the
+//! driver to rasterize the base frame and ID buffer
+//! ([`Output::RasterizeBase`]) while the workers set up and trace; results
+//! that arrive before it are held until it is there. It hands out the
+//! scheduler's packages, composites each accepted result over the base frame
+//! and sends the finished frame to the submitter. A result that writes a
+//! pixel its package does not own in the frame's ID buffer (pixel ownership)
+//! fails the package.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
+use glam::Vec3;
 use tracing::{debug, info, warn};
+use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
-    FrameDone, FrameStart, JobScene, Message, Package, PackageResult, QueueStatus, RunningJob,
-    SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup, WireImage, WireJob,
-    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
+    FrameDone, FramePhase, FrameStart, JobScene, Message, Package, PackageResult, PhaseKind,
+    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup,
+    WireImage, WireJob, WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids,
+    encoded_len,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
@@ -47,7 +53,7 @@ pub enum Peer {
 }
 
 /// What the core asks the driver to do.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Output {
     Send(ConnId, Box<Message>),
     /// Drop the connection, logging why.
@@ -61,6 +67,26 @@ pub enum Output {
         job: u64,
         frames: std::ops::Range<u32>,
     },
+    /// Rasterize a base frame (CPU work, off the driver's task) and hand it
+    /// to [`MasterCore::base_frame_ready`].
+    RasterizeBase(BaseFrameRequest),
+}
+
+/// A base frame to rasterize: what [`BaseFrameRequest::rasterize`] needs.
+#[derive(Clone, Debug)]
+pub struct BaseFrameRequest {
+    pub job: u64,
+    pub frame: u32,
+    scene: Arc<Scene>,
+    setup: FrameSetup,
+}
+
+impl BaseFrameRequest {
+    /// The shaded base frame and its ID buffer (the expensive part: about a
+    /// second at 1080p on one core).
+    pub fn rasterize(&self) -> (Image, IdBuffer) {
+        vtfarm_raster::rasterize(&self.scene, &self.setup.camera, &self.setup.lighting)
+    }
 }
 
 /// How long a persistent master keeps a job whose submitter is gone (and a
@@ -111,9 +137,18 @@ impl Job {
 /// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
     start: FrameStart,
-    /// The frame's ID buffer: which reflector triangle owns each pixel.
-    ids: IdBuffer,
+    /// The frame's ID buffer: which reflector triangle owns each pixel;
+    /// `None` until the base frame is rasterized.
+    ids: Option<IdBuffer>,
     image: FrameImage,
+    /// Results that came before the ID buffer, to check once it is there:
+    /// (connection, result, its wire size).
+    held: Vec<(ConnId, PackageResult, u64)>,
+    /// When the frame started (master time) and where its time went.
+    started: Duration,
+    phases: Vec<FramePhase>,
+    /// Workers whose set-up phase is recorded.
+    set_up: Vec<ConnId>,
     totals: PackageStats,
     triangles_done: u64,
 }
@@ -127,6 +162,8 @@ struct InFlight {
     triangles: Vec<TriangleId>,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
+    /// When it was handed out, for the timeline.
+    assigned_at: Duration,
 }
 
 /// The master's state.
@@ -153,13 +190,9 @@ pub struct MasterCore {
 
 impl MasterCore {
     pub fn new(config: SchedulerConfig) -> Self {
-        // Workers set each frame up before they ask for its work (see worker::session).
-        let config = SchedulerConfig {
-            requests_lapse_at_frame_start: true,
-            ..config
-        };
         MasterCore {
-            scheduler: Scheduler::new(config),
+            // Workers set each frame up before they ask for its work (see worker::session).
+            scheduler: Scheduler::new(config.farm()),
             peers: BTreeMap::new(),
             scenes: BTreeMap::new(),
             jobs: BTreeMap::new(),
@@ -347,6 +380,7 @@ impl MasterCore {
                 // Only a worker set up for the current frame may get its work.
                 let current = self.scheduler.queue().running.map(|r| (r.job.0, r.frame));
                 if current == Some((job, frame)) {
+                    self.record_setup(conn, job);
                     let _ = self.scheduler.request_work(now, worker);
                 }
             }
@@ -357,7 +391,10 @@ impl MasterCore {
                 }
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
-            Message::PackageResult(result) => self.package_result(now, conn, result, result_bytes),
+            Message::PackageResult(result) => {
+                self.record_package(conn, result.id, result.busy_micros);
+                self.package_result(now, conn, result, result_bytes)
+            }
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
                 if let Err(e) =
@@ -391,12 +428,21 @@ impl MasterCore {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
+        let Some(ids) = &current.ids else {
+            // The base frame is still being rasterized: check the result then.
+            let job_id = in_flight.job;
+            let current = (self.jobs.get_mut(&job_id))
+                .and_then(|j| j.current.as_mut())
+                .expect("checked above");
+            current.held.push((conn, result, bytes_out));
+            return;
+        };
         let (width, height) = (current.image.color.width, current.image.color.height);
         let checked = (result.bitmap.into_bitmap_within(width, height))
             .map_err(|e| format!("malformed result: {e}"))
             .and_then(|bitmap| {
                 let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
-                match bitmap.foreign_pixel(&current.ids, owned) {
+                match bitmap.foreign_pixel(ids, owned) {
                     Some((x, y)) => Err(format!(
                         "result writes pixel ({x}, {y}), which its package does not own"
                     )),
@@ -727,6 +773,7 @@ impl MasterCore {
                     speedup: stats.speedup(),
                     totals: WirePackageStats::from(&done.totals),
                     workers,
+                    phases: done.phases.clone(),
                 };
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 j.frames_done = frame + 1;
@@ -810,7 +857,13 @@ impl MasterCore {
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let (base, ids) = vtfarm_raster::rasterize(&j.scene, &setup.camera, &setup.lighting);
+        let (width, height) = (setup.camera.width, setup.camera.height);
+        let base = BaseFrameRequest {
+            job,
+            frame,
+            scene: j.scene.clone(),
+            setup: setup.clone(),
+        };
         let start = FrameStart {
             job,
             frame,
@@ -818,11 +871,16 @@ impl MasterCore {
             setup: WireFrameSetup::from(setup),
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
+            aux: j.aux,
         };
         j.current = Some(FrameAssembly {
             start: start.clone(),
-            ids,
-            image: FrameImage::new(base),
+            ids: None,
+            image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
+            held: Vec::new(),
+            started: self.now,
+            phases: Vec::new(),
+            set_up: Vec::new(),
             totals: PackageStats::default(),
             triangles_done: 0,
         });
@@ -841,6 +899,84 @@ impl MasterCore {
                 total,
             },
         );
+        self.outbox.push_back(Output::RasterizeBase(base));
+    }
+
+    /// The driver rasterized the base frame that [`Output::RasterizeBase`]
+    /// asked for: the held results are checked and composited now.
+    pub fn base_frame_ready(
+        &mut self,
+        now: Duration,
+        job: u64,
+        frame: u32,
+        (base, ids): (Image, IdBuffer),
+    ) {
+        self.now = now;
+        let Some(current) = (self.jobs.get_mut(&job))
+            .and_then(|j| j.current.as_mut())
+            .filter(|c| c.start.frame == frame && c.ids.is_none())
+        else {
+            return;
+        };
+        // Nothing is composited yet: the image starts as the base frame.
+        current.image = FrameImage::new(base);
+        current.ids = Some(ids);
+        let phase = phase(
+            current.started,
+            "master".into(),
+            PhaseKind::Base,
+            current.started,
+            now,
+        );
+        current.phases.push(phase);
+        for (conn, result, bytes) in std::mem::take(&mut current.held) {
+            self.package_result(now, conn, result, bytes);
+        }
+        self.pump();
+    }
+
+    /// A worker's first request for the current frame ends its set-up.
+    fn record_setup(&mut self, conn: ConnId, job: u64) {
+        let name = self.name(conn);
+        let now = self.now;
+        let Some(current) = self.jobs.get_mut(&job).and_then(|j| j.current.as_mut()) else {
+            return;
+        };
+        if !current.set_up.contains(&conn) {
+            current.set_up.push(conn);
+            let phase = phase(
+                current.started,
+                name,
+                PhaseKind::Setup,
+                current.started,
+                now,
+            );
+            current.phases.push(phase);
+        }
+    }
+
+    /// A result arrived: its package was in flight, then computed for its busy time.
+    fn record_package(&mut self, conn: ConnId, id: u64, busy_micros: u64) {
+        let name = self.name(conn);
+        let now = self.now;
+        let Some(in_flight) = self.packages.get(&id) else {
+            return;
+        };
+        let (frame, assigned_at) = (in_flight.frame, in_flight.assigned_at);
+        let Some(current) = (self.jobs.get_mut(&in_flight.job))
+            .and_then(|j| j.current.as_mut())
+            .filter(|c| c.start.frame == frame)
+        else {
+            return;
+        };
+        let computed = now
+            .saturating_sub(Duration::from_micros(busy_micros))
+            .max(assigned_at);
+        let t0 = current.started;
+        current.phases.extend([
+            phase(t0, name.clone(), PhaseKind::Sending, assigned_at, computed),
+            phase(t0, name, PhaseKind::Package, computed, now),
+        ]);
     }
 
     fn assign(&mut self, a: Assignment) {
@@ -857,6 +993,7 @@ impl MasterCore {
             frame: a.frame,
             triangles,
             bytes_in: encoded_len(&message),
+            assigned_at: self.now,
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
@@ -910,6 +1047,17 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
+    }
+}
+
+/// A timeline phase from `start` to `end`, in microseconds from `t0`.
+fn phase(t0: Duration, who: String, kind: PhaseKind, start: Duration, end: Duration) -> FramePhase {
+    let micros = |t: Duration| t.saturating_sub(t0).as_micros() as u64;
+    FramePhase {
+        who,
+        kind,
+        start_micros: micros(start),
+        end_micros: micros(end),
     }
 }
 

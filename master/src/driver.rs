@@ -35,6 +35,12 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
+    /// A base frame and ID buffer rasterized on the blocking pool.
+    BaseFrame {
+        job: u64,
+        frame: u32,
+        base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
+    },
     /// End the master task (dropping every connection).
     Stop,
 }
@@ -100,7 +106,7 @@ fn spawn(core: MasterCore, journal: Option<Journal>) -> (MasterHandle, JoinHandl
         inputs,
         next_conn: Arc::new(AtomicU64::new(1)),
     };
-    let task = tokio::spawn(run(core, rx, journal));
+    let task = tokio::spawn(run(core, handle.inputs.clone(), rx, journal));
     (handle, task)
 }
 
@@ -109,7 +115,12 @@ struct Connection {
     closer: Option<Closer>,
 }
 
-async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>, journal: Option<Journal>) {
+async fn run(
+    mut core: MasterCore,
+    feedback: UnboundedSender<Input>,
+    mut inputs: UnboundedReceiver<Input>,
+    journal: Option<Journal>,
+) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     if let Some(journal) = &journal {
@@ -147,6 +158,9 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>, journal
                             core.disconnected(now, conn);
                         }
                     }
+                    Input::BaseFrame { job, frame, base } => {
+                        core.base_frame_ready(now, job, frame, base);
+                    }
                     Input::Stop => {} // returned above
                 });
             }
@@ -167,6 +181,18 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>, journal
                         }
                         core.disconnected(start.elapsed(), conn);
                     }
+                }
+                Output::RasterizeBase(request) => {
+                    // Off the driver's task: results keep flowing meanwhile.
+                    let feedback = feedback.clone();
+                    tokio::task::spawn_blocking(move || {
+                        let base = request.rasterize();
+                        let _ = feedback.send(Input::BaseFrame {
+                            job: request.job,
+                            frame: request.frame,
+                            base,
+                        });
+                    });
                 }
                 Output::Persist(record) => {
                     if let Some(journal) = &journal {

@@ -19,7 +19,7 @@ pub mod journal;
 pub mod server;
 pub mod submit;
 
-pub use core::{ATTACH_GRACE, ConnId, MasterCore, Output, Peer};
+pub use core::{ATTACH_GRACE, BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::LocalFarm;
 pub use journal::{Journal, Record, StoredJob};

@@ -6,17 +6,17 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
+use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameDone, JobScene, Message, Package, PackageResult, SceneData, WireBitmap, WireJob,
+    FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, SceneData, WireBitmap, WireJob,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, Stop, VertexSettings};
+use vtfarm_vertex::{Quality, SparseBitmap, Stop, VertexSettings};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
@@ -29,6 +29,8 @@ struct Harness {
     now: Duration,
     engine: Engine,
     frame: Option<ActiveFrame>,
+    /// Base frames the core asked for, rasterized only when the test says.
+    bases: Vec<BaseFrameRequest>,
 }
 
 impl Harness {
@@ -38,7 +40,24 @@ impl Harness {
     }
 
     fn outputs(&mut self) -> Vec<Output> {
-        std::iter::from_fn(|| self.core.poll_output()).collect()
+        let outputs: Vec<Output> = std::iter::from_fn(|| self.core.poll_output()).collect();
+        for output in &outputs {
+            if let Output::RasterizeBase(request) = output {
+                self.bases.push(request.clone());
+            }
+        }
+        outputs
+    }
+
+    /// Hands the core the base frames it asked for.
+    fn rasterize_bases(&mut self) -> Vec<Output> {
+        for request in std::mem::take(&mut self.bases) {
+            let now = self.tick();
+            let base = request.rasterize();
+            self.core
+                .base_frame_ready(now, request.job, request.frame, base);
+        }
+        self.outputs()
     }
 
     /// Sends to the core and returns the messages for `conn` (and closes of anyone).
@@ -102,6 +121,7 @@ fn start_frame() -> StartedFrame {
         now: Duration::ZERO,
         engine: Engine::new(None),
         frame: None,
+        bases: Vec::new(),
     };
     h.core.connected(
         h.now,
@@ -190,10 +210,18 @@ fn finish_frame(
             Some(p) => {
                 let unlimited = Stop::with_budget(u64::MAX);
                 let mut result = h.frame.as_ref().unwrap().run(&p, 1.0, &unlimited).unwrap();
+                let first = tamper.is_some();
                 if let Some(tamper) = tamper.take() {
                     tamper(&p, &mut result);
                 }
-                h.send(WORKER, Message::PackageResult(result))
+                let mut out = h.send(WORKER, Message::PackageResult(result));
+                if first {
+                    // The base frame comes after the first result, which
+                    // waits for its ID buffer to be checked.
+                    assert!(messages_to(&out, SUBMITTER).is_empty(), "{out:?}");
+                    out.extend(h.rasterize_bases());
+                }
+                out
             }
             None => h.send(WORKER, request.clone()),
         };
@@ -203,6 +231,15 @@ fn finish_frame(
 
 /// The frame counted one failed package and still equals the single-process render.
 fn assert_one_failure_and_the_reference(started: &StartedFrame, done: FrameDone) {
+    // The timeline: the master's base frame, the worker's set-up and packages.
+    for kind in [PhaseKind::Base, PhaseKind::Setup, PhaseKind::Package] {
+        let phase = (done.stats.phases.iter()).find(|p| p.kind == kind);
+        assert!(
+            phase.is_some_and(|p| p.start_micros <= p.end_micros),
+            "{kind:?} in {:?}",
+            done.stats.phases
+        );
+    }
     assert_eq!(
         done.stats.failures, 1,
         "the bad result counted as a failure: {:?}",
@@ -278,17 +315,17 @@ fn a_result_writing_pixels_its_package_does_not_own_fails_the_package() {
         let foreign = (ids.triangle.iter())
             .position(|t| !package.triangles.contains(t))
             .expect("the package does not own the whole frame") as u32;
-        result.bitmap = WireBitmap {
+        result.bitmap = WireBitmap::from(&SparseBitmap {
             x0: foreign % ids.width,
             y0: foreign / ids.width,
             width: 1,
             height: 1,
-            mask: vec![1],
-            color: vec![[1.0, 0.0, 1.0]],
-            reflected: vec![[0.0; 3]],
-            transmitted: vec![[0.0; 3]],
+            mask: vec![true],
+            color: vec![glam::Vec3::new(1.0, 0.0, 1.0)],
+            reflected: vec![glam::Vec3::ZERO],
+            transmitted: vec![glam::Vec3::ZERO],
             reflected_object: vec![0],
-        };
+        });
     });
     assert_one_failure_and_the_reference(&started, done);
 }

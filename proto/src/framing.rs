@@ -269,6 +269,7 @@ mod tests {
                 setup: setup(),
                 reflectors: vec![0, 1],
                 method: crate::WireMethod::Pvrr,
+                aux: true,
             }),
             Message::RequestWork { job: 3, frame: 1 },
             Message::Package(Package {

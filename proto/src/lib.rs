@@ -39,19 +39,20 @@ pub use handshake::{
 };
 pub use link::{Link, SESSION_LIMIT};
 pub use message::{
-    FrameDone, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package, PackageFailed,
-    PackageId, PackageResult, QueueStatus, Refusal, RefuseCode, Role, RunningJob, SceneData,
-    SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WorkerFrameStats, WorkerStatus,
-    scene_hash,
+    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package,
+    PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode, Role,
+    RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
+    WorkerFrameStats, WorkerStatus, scene_hash,
 };
 pub use tls::{
     ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,
     client_config, fingerprint_of, parse_fingerprint, server_config,
 };
 pub use wire::{
-    WireBitmap, WireCamera, WireError, WireFrameSetup, WireImage, WireLight, WireLightKind,
-    WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality, WireScene,
-    WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings, check_triangle_ids,
+    WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireLight,
+    WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality,
+    WireScene, WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings,
+    check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change

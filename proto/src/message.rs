@@ -309,6 +309,9 @@ pub struct FrameStart {
     /// are indices of reflector groups (`vtfarm_method::reflector_groups`
     /// of `reflectors`), not triangle ids.
     pub method: WireMethod,
+    /// Whether results carry the per-pixel components besides the colour
+    /// (the job's `aux`): [`crate::WireBitmapParts::All`] or only `Color`.
+    pub aux: bool,
 }
 
 /// A package: reflector triangle ids of one frame, traced as a unit (or
@@ -416,6 +419,34 @@ pub struct FrameStats {
     pub totals: WirePackageStats,
     /// Each worker's share, in the order the workers joined.
     pub workers: Vec<WorkerFrameStats>,
+    /// Where the frame's time went, as the master saw it (for the timeline).
+    pub phases: Vec<FramePhase>,
+}
+
+/// One stretch of a frame's timeline, in master time from the frame's start.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FramePhase {
+    /// `master` or the worker's name.
+    pub who: String,
+    pub kind: PhaseKind,
+    pub start_micros: u64,
+    pub end_micros: u64,
+}
+
+/// What a [`FramePhase`] was spent on; the gaps between phases are idle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PhaseKind {
+    /// The master rasterizing the base frame and ID buffer.
+    Base,
+    /// A worker setting the frame up, until its first request for work arrives.
+    Setup,
+    /// A package in flight both ways: assignment to compute start (the
+    /// master sees the package and the result transfer only together).
+    Sending,
+    /// A worker computing a package (its reported busy time, ending when
+    /// the result arrived).
+    Package,
 }
 
 /// One worker's share of a frame.

@@ -619,42 +619,124 @@ impl TryFrom<WireFrameSetup> for FrameSetup {
 
 // ---------------------------------------------------------------- results
 
-/// [`SparseBitmap`] on the wire: the rectangle, the coverage mask packed
-/// eight pixels a byte (row-major within the rectangle, least significant bit
-/// first, unused high bits of the last byte zero), and one entry per covered
-/// pixel in the same order in each per-pixel array.
+/// Which per-pixel arrays of a [`SparseBitmap`] travel: the colour always,
+/// the components (reflected, transmitted, reflected object) only when the
+/// job asks for them (`FrameStart::aux`), since they triple the bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireBitmapParts {
+    Color,
+    #[default]
+    All,
+}
+
+/// [`SparseBitmap`] on the wire, compact and lossless: the rectangle; the
+/// coverage mask packed eight pixels a byte (row-major within the rectangle,
+/// least significant bit first, unused high bits of the last byte zero), then
+/// zstd-compressed; and the covered pixels' arrays (in [`WireBitmapParts`])
+/// as little-endian byte planes — byte k of every value, then byte k + 1 …
+/// — zstd-compressed. Byte planes put the slowly varying sign and exponent
+/// bytes of neighbouring pixels side by side, which is what makes float
+/// colours compress. Both decompress into exactly the size the rectangle and
+/// the mask imply, so hostile input cannot make the receiver allocate more.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct WireBitmap {
     pub x0: u32,
     pub y0: u32,
     pub width: u32,
     pub height: u32,
+    pub parts: WireBitmapParts,
     #[serde(with = "crate::message::bytes")]
     pub mask: Vec<u8>,
-    pub color: Vec<[f32; 3]>,
-    pub reflected: Vec<[f32; 3]>,
-    pub transmitted: Vec<[f32; 3]>,
-    pub reflected_object: Vec<u32>,
+    #[serde(with = "crate::message::bytes")]
+    pub pixels: Vec<u8>,
 }
+
+/// zstd's fastest level: results are encoded once per package on the
+/// worker's critical path, and level 1 already gets most of the gain.
+const BITMAP_ZSTD_LEVEL: i32 = 1;
 
 impl From<&SparseBitmap> for WireBitmap {
     fn from(b: &SparseBitmap) -> Self {
+        WireBitmap::encode(b, WireBitmapParts::All)
+    }
+}
+
+impl WireBitmap {
+    /// Encodes `parts` of a bitmap.
+    pub fn encode(b: &SparseBitmap, parts: WireBitmapParts) -> Self {
         let mut mask = vec![0u8; b.mask.len().div_ceil(8)];
         for (i, _) in b.mask.iter().enumerate().filter(|(_, m)| **m) {
             mask[i / 8] |= 1 << (i % 8);
         }
+        let mut values: Vec<[u8; 4]> = Vec::new();
+        let mut colors = |v: &[Vec3]| {
+            values.extend(v.iter().flat_map(|c| c.to_array()).map(f32::to_le_bytes));
+        };
+        colors(&b.color);
+        if parts == WireBitmapParts::All {
+            colors(&b.reflected);
+            colors(&b.transmitted);
+            values.extend(b.reflected_object.iter().map(|o| o.to_le_bytes()));
+        }
+        let planes: Vec<u8> = (0..4)
+            .flat_map(|k| values.iter().map(move |v| v[k]))
+            .collect();
         WireBitmap {
             x0: b.x0,
             y0: b.y0,
             width: b.width,
             height: b.height,
-            mask,
-            color: b.color.iter().map(|&c| vec3(c)).collect(),
-            reflected: b.reflected.iter().map(|&c| vec3(c)).collect(),
-            transmitted: b.transmitted.iter().map(|&c| vec3(c)).collect(),
-            reflected_object: b.reflected_object.clone(),
+            parts,
+            mask: compress(&mask),
+            pixels: compress(&planes),
         }
     }
+
+    /// Converts like `TryFrom`, and also checks that the rectangle lies
+    /// inside a `width` × `height` frame, as compositing requires.
+    pub fn into_bitmap_within(self, width: u32, height: u32) -> Result<SparseBitmap, WireError> {
+        // u64: the sums cannot overflow.
+        let (x_end, y_end) = (
+            u64::from(self.x0) + u64::from(self.width),
+            u64::from(self.y0) + u64::from(self.height),
+        );
+        if x_end > width.into() || y_end > height.into() {
+            return Err(out_of_range(
+                "bitmap rectangle",
+                format!("({}, {}) {}x{}", self.x0, self.y0, self.width, self.height),
+                "inside the frame",
+            ));
+        }
+        self.try_into()
+    }
+}
+
+fn compress(bytes: &[u8]) -> Vec<u8> {
+    if bytes.is_empty() {
+        return Vec::new();
+    }
+    // Compressing from memory into memory fails only on allocation failure.
+    zstd::bulk::compress(bytes, BITMAP_ZSTD_LEVEL).expect("zstd compresses in memory")
+}
+
+/// Decompresses exactly `expected` bytes (no more may be allocated).
+fn decompress(field: &str, bytes: &[u8], expected: usize) -> Result<Vec<u8>, WireError> {
+    let data = if expected == 0 && bytes.is_empty() {
+        Vec::new()
+    } else {
+        zstd::bulk::decompress(bytes, expected).map_err(|e| WireError::Decode {
+            what: "bitmap data",
+            message: format!("{field}: {e}"),
+        })?
+    };
+    if data.len() != expected {
+        return Err(WireError::SizeMismatch {
+            field: field.to_owned(),
+            expected: expected as u64,
+            actual: data.len() as u64,
+        });
+    }
+    Ok(data)
 }
 
 impl TryFrom<WireBitmap> for SparseBitmap {
@@ -675,74 +757,56 @@ impl TryFrom<WireBitmap> for SparseBitmap {
             }
         }
         let area = w.width as usize * w.height as usize;
-        let mask_bytes = area.div_ceil(8);
-        if w.mask.len() != mask_bytes {
-            return Err(WireError::SizeMismatch {
-                field: "bitmap mask bytes".to_owned(),
-                expected: mask_bytes as u64,
-                actual: w.mask.len() as u64,
-            });
-        }
-        if area % 8 != 0 && w.mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
+        let mask = decompress("bitmap mask bytes", &w.mask, area.div_ceil(8))?;
+        if area % 8 != 0 && mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
             return Err(out_of_range(
                 "bitmap mask padding",
                 "set bits",
                 "zero past the last pixel",
             ));
         }
-        let covered: usize = w.mask.iter().map(|b| b.count_ones() as usize).sum();
-        for (field, len) in [
-            ("bitmap color", w.color.len()),
-            ("bitmap reflected", w.reflected.len()),
-            ("bitmap transmitted", w.transmitted.len()),
-            ("bitmap reflected_object", w.reflected_object.len()),
-        ] {
-            if len != covered {
-                return Err(WireError::SizeMismatch {
-                    field: field.to_owned(),
-                    expected: covered as u64,
-                    actual: len as u64,
-                });
-            }
-        }
-        let colors = |field: &'static str, v: &[[f32; 3]]| {
-            (v.iter().enumerate())
-                .map(|(i, &c)| finite3(|| format!("{field}[{i}]"), c))
+        let covered: usize = mask.iter().map(|b| b.count_ones() as usize).sum();
+        let values_per_pixel = match w.parts {
+            WireBitmapParts::Color => 3,
+            WireBitmapParts::All => 10,
+        };
+        let values = covered * values_per_pixel;
+        let planes = decompress("bitmap pixel bytes", &w.pixels, values * 4)?;
+        let value = |i: usize| [0, 1, 2, 3].map(|k| planes[k * values + i]);
+        let colors = |field: &'static str, first: usize| {
+            (0..covered)
+                .map(|p| {
+                    let c = [0, 1, 2].map(|c| f32::from_le_bytes(value(first + 3 * p + c)));
+                    finite3(|| format!("{field}[{p}]"), c)
+                })
                 .collect::<Result<Vec<_>, _>>()
+        };
+        let color = colors("bitmap color", 0)?;
+        let (reflected, transmitted, reflected_object) = match w.parts {
+            WireBitmapParts::Color => (
+                vec![Vec3::ZERO; covered],
+                vec![Vec3::ZERO; covered],
+                vec![vtfarm_scene::NONE; covered],
+            ),
+            WireBitmapParts::All => (
+                colors("bitmap reflected", 3 * covered)?,
+                colors("bitmap transmitted", 6 * covered)?,
+                (0..covered)
+                    .map(|p| u32::from_le_bytes(value(9 * covered + p)))
+                    .collect(),
+            ),
         };
         Ok(SparseBitmap {
             x0: w.x0,
             y0: w.y0,
             width: w.width,
             height: w.height,
-            mask: (0..area)
-                .map(|i| w.mask[i / 8] >> (i % 8) & 1 == 1)
-                .collect(),
-            color: colors("bitmap color", &w.color)?,
-            reflected: colors("bitmap reflected", &w.reflected)?,
-            transmitted: colors("bitmap transmitted", &w.transmitted)?,
-            reflected_object: w.reflected_object,
+            mask: (0..area).map(|i| mask[i / 8] >> (i % 8) & 1 == 1).collect(),
+            color,
+            reflected,
+            transmitted,
+            reflected_object,
         })
-    }
-}
-
-impl WireBitmap {
-    /// Converts like `TryFrom`, and also checks that the rectangle lies
-    /// inside a `width` × `height` frame, as compositing requires.
-    pub fn into_bitmap_within(self, width: u32, height: u32) -> Result<SparseBitmap, WireError> {
-        // u64: the sums cannot overflow.
-        let (x_end, y_end) = (
-            u64::from(self.x0) + u64::from(self.width),
-            u64::from(self.y0) + u64::from(self.height),
-        );
-        if x_end > width.into() || y_end > height.into() {
-            return Err(out_of_range(
-                "bitmap rectangle",
-                format!("({}, {}) {}x{}", self.x0, self.y0, self.width, self.height),
-                "inside the frame",
-            ));
-        }
-        self.try_into()
     }
 }
 
@@ -1015,7 +1079,10 @@ pub(crate) mod tests {
     fn bitmaps_round_trip_with_packed_masks() {
         let b = bitmap();
         let wire = WireBitmap::from(&b);
-        assert_eq!(wire.mask, vec![0b1100_0001, 0b0100_0000]);
+        assert_eq!(
+            zstd::bulk::decompress(&wire.mask, 2).expect("zstd"),
+            vec![0b1100_0001, 0b0100_0000]
+        );
         assert_eq!(round_trip::<SparseBitmap, WireBitmap>(&b), b);
         assert_eq!(
             wire.into_bitmap_within(8, 5).expect("fits exactly"),
@@ -1023,6 +1090,45 @@ pub(crate) mod tests {
         );
         let empty = SparseBitmap::default();
         assert_eq!(round_trip::<SparseBitmap, WireBitmap>(&empty), empty);
+    }
+
+    #[test]
+    fn color_only_bitmaps_leave_the_components_empty() {
+        let b = bitmap();
+        let wire = WireBitmap::encode(&b, WireBitmapParts::Color);
+        assert!(wire.pixels.len() < WireBitmap::from(&b).pixels.len());
+        let back = SparseBitmap::try_from(wire).expect("valid");
+        assert_eq!((&back.mask, &back.color), (&b.mask, &b.color));
+        assert_eq!(back.reflected, vec![Vec3::ZERO; 4]);
+        assert_eq!(back.transmitted, vec![Vec3::ZERO; 4]);
+        assert_eq!(back.reflected_object, vec![vtfarm_scene::NONE; 4]);
+    }
+
+    #[test]
+    fn smooth_colors_compress() {
+        // A 200 x 100 gradient, like a reflection: the byte planes compress.
+        let (width, height) = (200u32, 100u32);
+        let n = (width * height) as usize;
+        let shade = |i: usize| Vec3::new(0.2 + i as f32 * 1e-5, 0.3, 0.4 - i as f32 * 1e-5);
+        let b = SparseBitmap {
+            x0: 0,
+            y0: 0,
+            width,
+            height,
+            mask: vec![true; n],
+            color: (0..n).map(shade).collect(),
+            reflected: (0..n).map(shade).collect(),
+            transmitted: vec![Vec3::splat(0.1); n],
+            reflected_object: vec![3; n],
+        };
+        let raw = n * 40;
+        let wire = WireBitmap::from(&b);
+        assert!(
+            wire.pixels.len() * 2 < raw,
+            "{} of {raw}",
+            wire.pixels.len()
+        );
+        assert_eq!(SparseBitmap::try_from(wire).expect("valid"), b);
     }
 
     #[test]
@@ -1175,28 +1281,26 @@ pub(crate) mod tests {
             check_rejects::<WireBitmap, SparseBitmap>(&valid, damage, expected)
         };
         check(
-            |b| b.mask.push(0),
-            "bitmap mask bytes has 3 entries, expected 2",
-        );
-        check(|b| b.mask[1] |= 0x80, "bitmap mask padding");
-        check(
-            |b| b.mask[0] |= 0x02,
-            "bitmap color has 4 entries, expected 5",
+            |b| b.mask = zstd::bulk::compress(&[0b1100_0001, 0, 0], 1).expect("zstd"),
+            "bitmap mask bytes",
         );
         check(
-            |b| b.reflected.truncate(3),
-            "bitmap reflected has 3 entries, expected 4",
+            |b| b.mask = zstd::bulk::compress(&[0b1100_0001, 0b1100_0000], 1).expect("zstd"),
+            "bitmap mask padding",
         );
         check(
-            |b| b.transmitted.push([0.0; 3]),
-            "bitmap transmitted has 5 entries, expected 4",
+            |b| b.mask = zstd::bulk::compress(&[0b1100_0011, 0b0100_0000], 1).expect("zstd"),
+            "bitmap pixel bytes",
         );
+        check(|b| b.mask = vec![1, 2, 3], "bitmap mask bytes");
+        check(|b| b.pixels.truncate(5), "bitmap pixel bytes");
+        check(|b| b.parts = WireBitmapParts::Color, "bitmap pixel bytes");
         check(
-            |b| b.reflected_object.clear(),
-            "bitmap reflected_object has 0",
-        );
-        check(
-            |b| b.color[3][1] = f32::NEG_INFINITY,
+            |b| {
+                let mut bad = bitmap();
+                bad.color[3].y = f32::NEG_INFINITY;
+                *b = WireBitmap::from(&bad);
+            },
             "bitmap color[3] is not finite",
         );
         check(|b| b.x0 = u32::MAX, "bitmap x");
@@ -1245,13 +1349,16 @@ pub(crate) mod tests {
             y0 in 0u32..20,
             width in prop_oneof![0u32..20, Just(u32::MAX)],
             height in 0u32..20,
-            mask in proptest::collection::vec(any::<u8>(), 0..60),
-            color in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
-            reflected in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
-            transmitted in proptest::collection::vec([any_f32(), any_f32(), any_f32()], 0..30),
-            reflected_object in proptest::collection::vec(any::<u32>(), 0..30),
+            all in any::<bool>(),
+            mask in proptest::collection::vec(any::<u8>(), 0..8),
+            colors in proptest::collection::vec(any_f32(), 0..300),
+            compressed in any::<bool>(),
         ) -> WireBitmap {
-            WireBitmap { x0, y0, width, height, mask, color, reflected, transmitted, reflected_object }
+            let parts = if all { WireBitmapParts::All } else { WireBitmapParts::Color };
+            let planes: Vec<u8> = colors.iter().flat_map(|c| c.to_le_bytes()).collect();
+            // Well-formed zstd of arbitrary content, or arbitrary bytes.
+            let pack = |b: &[u8]| if compressed { compress(b) } else { b.to_vec() };
+            WireBitmap { x0, y0, width, height, parts, mask: pack(&mask), pixels: pack(&planes) }
         }
     }
 

@@ -11,13 +11,18 @@
 //! result is encoded as the `PackageResult` message a worker would send, and
 //! its length is the triangle's result size.
 //!
-//! Model (see `vtfarm_scheduler::sim`): a worker of speed 1 is one thread of
-//! this machine; every worker has its own link of the given bandwidth and
-//! latency to an infinitely fast master; results cost the mean recorded bytes
-//! per triangle (the simulator has one size per item). Every simulated frame
-//! is the recorded frame again, so from the second frame on the scheduler's
-//! cost estimates are measured ones. Not modelled: a worker's per-frame
-//! set-up (its rasterizer pass), the master's own link and compositing.
+//! Model (see `vtfarm_scheduler::sim`): the master's scheduler configuration
+//! (`SchedulerConfig::farm`: requests lapse at a frame start); a worker of
+//! speed 1 is one thread of this machine; every worker has its own link of
+//! the given bandwidth and latency, and all messages also pass the master's
+//! one shared link of the same bandwidth; results cost the mean recorded
+//! (compact, colour-only) bytes per triangle. Per-frame fixed costs are
+//! measured here on one thread: each worker's set-up (its ID buffers) before
+//! it asks for work, and the master's base frame, rasterized while the
+//! workers trace. Every simulated frame is the recorded frame again, so from
+//! the second frame on the scheduler's cost estimates are measured ones. Not
+//! modelled: compositing on the master and the finished image's way to the
+//! submitter.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -26,10 +31,12 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
-use vtfarm_proto::{Message, PackageResult, WireBitmap, WirePackageStats, encode_message};
+use vtfarm_proto::{
+    Message, PackageResult, WireBitmap, WireBitmapParts, WirePackageStats, encode_message,
+};
 use vtfarm_render::Renderer;
-use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
-use vtfarm_scheduler::{FrameStats, JobId};
+use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimFrameReport, SimJob, SimWorker, Simulation};
+use vtfarm_scheduler::{FrameStats, JobId, SchedulerConfig};
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
@@ -42,8 +49,9 @@ pub(crate) struct SimulateArgs {
     /// Frames per simulated job (each the recorded frame).
     #[arg(long, default_value_t = 3)]
     frames: usize,
-    /// Link bandwidths in Mbit/s (every worker has its own link).
-    #[arg(long, value_delimiter = ',', default_values_t = [10.0f64, 100.0])]
+    /// Link bandwidths in Mbit/s: every worker's own link and the master's
+    /// one shared link.
+    #[arg(long, value_delimiter = ',', default_values_t = [1000.0f64, 100.0])]
     link_mbit: Vec<f64>,
     /// One-way link latency in milliseconds.
     #[arg(long, default_value_t = 0.5)]
@@ -51,6 +59,10 @@ pub(crate) struct SimulateArgs {
     /// Fixed time per package on a worker (set-up), in milliseconds.
     #[arg(long, default_value_t = 1.0)]
     package_overhead_ms: f64,
+    /// Leaves out the per-frame fixed costs (worker set-up, master base
+    /// frame): the load balancer alone, as in the paper's figures.
+    #[arg(long)]
+    no_fixed_costs: bool,
     /// Multiplies every recorded cost (e.g. to emulate slower machines).
     #[arg(long, default_value_t = 1.0)]
     cost_scale: f64,
@@ -92,8 +104,10 @@ pub(super) struct Recording {
     pub(super) pixels: Vec<u64>,
     /// Bytes of a `PackageResult` without pixels (a message's fixed part).
     pub(super) empty_result_bytes: u64,
-    /// Rasterizer and behind-buffer pass.
+    /// The master's base frame (shaded, with its ID buffer), one thread.
     pub(super) base_frame_seconds: f64,
+    /// A worker's frame set-up (ID and behind buffers), one thread.
+    pub(super) worker_setup_seconds: f64,
     /// Wall time of the per-triangle tracing, all passes.
     pub(super) tracing_wall_seconds: f64,
 }
@@ -144,10 +158,19 @@ type Measure = (usize, f64, u64, u64, u64);
 /// its result bytes, samples and pixels.
 pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result<Recording> {
     let renderer = Renderer::new(job.scene.clone(), job.reflectors.clone());
-    let start = Instant::now();
-    let (_, ids) = renderer.base_frame(&job.setup);
-    let behind = renderer.behind(&job.setup, &ids);
-    let base_frame_seconds = start.elapsed().as_secs_f64();
+    // The fixed costs on one thread, like a `--threads 1` worker's.
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .context("building a one-thread pool")?;
+    let timed = |f: &(dyn Fn() + Sync)| {
+        let start = Instant::now();
+        one_thread.install(f);
+        start.elapsed().as_secs_f64()
+    };
+    let base_frame_seconds = timed(&|| drop(renderer.base_frame(&job.setup)));
+    let worker_setup_seconds = timed(&|| drop(renderer.id_buffers(&job.setup)));
+    let (ids, behind) = renderer.id_buffers(&job.setup);
     let frame = renderer.frame(&job.setup, &ids, &behind);
     let triangles = renderer.reflectors().to_vec();
     let n = triangles.len();
@@ -177,7 +200,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 &PackageOptions::default(),
                                 &mut |_| {},
                             );
-                            let bitmap = WireBitmap::from(&result.bitmap);
+                            let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
                             let busy = t0.elapsed();
                             let bytes = result_message_bytes(
                                 bitmap,
@@ -217,7 +240,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let empty_result_bytes = result_message_bytes(
-        WireBitmap::from(&SparseBitmap::default()),
+        WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
         Duration::ZERO,
         vec![0],
@@ -230,6 +253,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels,
         empty_result_bytes,
         base_frame_seconds,
+        worker_setup_seconds,
         tracing_wall_seconds,
     })
 }
@@ -257,6 +281,13 @@ struct Row {
     packages: u32,
     /// Straggler copies handed out in the last frame.
     duplicates: u32,
+    /// Mean interval between frames sent to the submitter (base frames and
+    /// set-ups included), the first frame left out.
+    frame_seconds: f64,
+    /// One worker's `frame_seconds` over this one's, over the ideal.
+    efficiency: f64,
+    /// Largest imbalance of the frames after the first.
+    imbalance_after_first: f64,
 }
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
@@ -266,7 +297,7 @@ fn simulate(
     workers: Vec<SimWorker>,
     frames: usize,
     cost_scale: f64,
-) -> Result<Vec<FrameStats>> {
+) -> Result<Vec<SimFrameReport>> {
     let frame = SimFrame {
         items: recording.triangles.clone(),
         costs: recording.seconds.iter().map(|s| s * cost_scale).collect(),
@@ -286,7 +317,18 @@ fn simulate(
             report.refusals
         );
     }
-    Ok(report.frames.iter().map(|f| f.stats.clone()).collect())
+    Ok(report.frames.clone())
+}
+
+/// Mean interval between frames sent to the submitter, the first left out
+/// (it includes the scene's way and every estimate's start).
+pub(super) fn mean_frame_seconds(frames: &[SimFrameReport]) -> f64 {
+    let done: Vec<f64> = frames.iter().map(|f| f.done_at.as_secs_f64()).collect();
+    match done.as_slice() {
+        [] => 0.0,
+        [only] => *only,
+        [first, .., last] => (last - first) / (done.len() - 1) as f64,
+    }
 }
 
 pub(crate) fn run(args: SimulateArgs) -> Result<()> {
@@ -307,12 +349,19 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         args.height,
         args.quality.name()
     );
-    let recording = record(&job, threads, args.repeats)?;
+    let mut recording = record(&job, threads, args.repeats)?;
+    if args.no_fixed_costs {
+        (recording.base_frame_seconds, recording.worker_setup_seconds) = (0.0, 0.0);
+    }
     let total = recording.total_seconds() * args.cost_scale;
     let samples: u64 = recording.samples.iter().sum();
-    let config = SimConfig {
+    let config = |mbit: f64| SimConfig {
+        // The master core's own scheduler configuration.
+        scheduler: SchedulerConfig::default().farm(),
         result_bytes_per_item: recording.bytes_per_item(),
         rays_per_second: samples as f64 / total.max(1e-9),
+        master_link_bits_per_second: Some(mbit * 1e6),
+        master_frame_cost: Duration::from_secs_f64(recording.base_frame_seconds * args.cost_scale),
         ..SimConfig::default()
     };
     let latency = Duration::from_secs_f64(args.latency_ms.max(0.0) / 1e3);
@@ -321,13 +370,17 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         link_bits_per_second: mbit * 1e6,
         latency,
         package_overhead: overhead,
+        frame_setup: Duration::from_secs_f64(
+            recording.worker_setup_seconds * args.cost_scale / speed,
+        ),
         ..SimWorker::with_speed(speed)
     };
     let mut rows = Vec::new();
     for &mbit in &args.link_mbit {
+        let config = &config(mbit);
         let one = simulate(
             &recording,
-            &config,
+            config,
             vec![worker(1.0, mbit)],
             args.frames,
             args.cost_scale,
@@ -341,21 +394,24 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 let speeds: Vec<f64> = (0..n)
                     .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
                     .collect();
-                let stats = simulate(
+                let frames = simulate(
                     &recording,
-                    &config,
+                    config,
                     speeds.iter().map(|&s| worker(s, mbit)).collect(),
                     args.frames,
                     args.cost_scale,
                 )?;
+                let stats: Vec<FrameStats> = frames.iter().map(|f| f.stats.clone()).collect();
                 let last = stats.last().context("no frame simulated")?;
-                let one_last = one.last().context("no frame simulated")?;
+                let one_last = &one.last().context("no frame simulated")?.stats;
+                let frame_seconds = mean_frame_seconds(&frames);
+                let ideal: f64 = speeds.iter().sum();
                 let wall = last.wall.as_secs_f64();
                 rows.push(Row {
                     workers: n,
                     link_mbit: mbit,
                     heterogeneous,
-                    ideal: speeds.iter().sum(),
+                    ideal,
                     speedup: last.speedup(),
                     speedup_vs_one: one_last.wall.as_secs_f64() / wall.max(1e-12),
                     imbalance: last.imbalance(),
@@ -364,24 +420,25 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                     wall_seconds_per_frame: stats.iter().map(|f| f.wall.as_secs_f64()).collect(),
                     packages: last.packages,
                     duplicates: last.duplicates,
+                    frame_seconds,
+                    efficiency: mean_frame_seconds(&one) / frame_seconds.max(1e-12) / ideal,
+                    imbalance_after_first: (stats.iter().skip(1))
+                        .map(FrameStats::imbalance)
+                        .fold(0.0, f64::max),
                 });
             }
         }
     }
-    print_report(&args, &job, &recording, &config, &rows);
+    print_report(&args, &job, &recording, &rows);
     if let Some(path) = &args.json {
         write_json(path, &rows)?;
     }
     Ok(())
 }
 
-fn print_report(
-    args: &SimulateArgs,
-    job: &CockpitJob,
-    rec: &Recording,
-    config: &SimConfig,
-    rows: &[Row],
-) {
+fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[Row]) {
+    let (config_bytes_per_item, header_bytes) =
+        (rec.bytes_per_item(), SimConfig::default().header_bytes);
     let n = rec.triangles.len();
     let owning = rec.pixels.iter().filter(|&&p| p > 0).count();
     let total = rec.total_seconds() * args.cost_scale;
@@ -410,84 +467,82 @@ fn print_report(
         rec.pixels.iter().sum::<u64>()
     );
     println!(
-        "  results: {:.2} MB per frame as one-triangle messages, {} bytes per triangle modelled (+ {} per message)",
+        "  results: {:.2} MB per frame as one-triangle messages (compact: zstd, colour only), {} bytes per triangle modelled (+ {} per message)",
         bytes as f64 / 1e6,
-        config.result_bytes_per_item,
-        config.header_bytes
+        config_bytes_per_item,
+        header_bytes
     );
     println!(
-        "  recording: base frame {:.3} s, per-triangle tracing {:.3} s wall ({} passes, least time kept)",
-        rec.base_frame_seconds, rec.tracing_wall_seconds, args.repeats
+        "  fixed costs per frame (one thread, x{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; per-triangle tracing {:.3} s wall ({} passes, least time kept)",
+        args.cost_scale,
+        rec.base_frame_seconds * args.cost_scale,
+        rec.worker_setup_seconds * args.cost_scale,
+        rec.tracing_wall_seconds,
+        args.repeats
     );
     println!(
-        "model: speed 1 = one thread of this machine; {} frame(s) of the recorded costs; own link per worker, {} ms latency, {} ms per package",
+        "model: the master's scheduler config; speed 1 = one thread of this machine; {} frame(s) of the recorded costs; each worker's own link and the master's one shared link at the given rate, {} ms latency, {} ms per package",
         args.frames, args.latency_ms, args.package_overhead_ms
     );
     println!(
-        "columns: mixed = half the workers at half speed; ideal = sum of speeds; busy/wall and imbalance of the last frame (imb. f1: first frame, uniform estimates); vs 1 wkr = wall of one speed-1 worker on the same link / wall; effic. = vs 1 wkr / ideal (above 100% where the links, not the compute, bound the frame)"
+        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = mean interval between finished frames after the first (set-ups, base frame, links included); effic. = one worker's frame s / frame s / ideal; imb. = (max - mean busy) / mean busy, worst frame after the first; busy/wall of the last frame"
     );
     println!(
-        "{:>7} {:>6} {:>6} {:>6} {:>9} {:>9} {:>7} {:>8} {:>8} {:>9} {:>8}",
-        "workers",
-        "link",
-        "set",
-        "ideal",
-        "busy/wall",
-        "vs 1 wkr",
-        "effic.",
-        "imb. f1",
-        "imb. last",
-        "wall ms",
-        "packages"
+        "{:>7} {:>6} {:>6} {:>6} {:>9} {:>9} {:>7} {:>8} {:>8}",
+        "workers", "link", "set", "ideal", "frame s", "effic.", "imb.", "busy/wall", "packages"
     );
     for r in rows {
         println!(
-            "{:>7} {:>6} {:>6} {:>6.1} {:>9.2} {:>9.2} {:>6.0}% {:>7.1}% {:>8.1}% {:>9.1} {:>8}",
+            "{:>7} {:>6} {:>6} {:>6.1} {:>9.3} {:>6.0}% {:>7.1}% {:>9.2} {:>8}",
             r.workers,
             format!("{}M", r.link_mbit),
             if r.heterogeneous { "mixed" } else { "equal" },
             r.ideal,
+            r.frame_seconds,
+            r.efficiency * 100.0,
+            r.imbalance_after_first * 100.0,
             r.speedup,
-            r.speedup_vs_one,
-            r.speedup_vs_one / r.ideal * 100.0,
-            r.imbalance_per_frame.first().copied().unwrap_or(0.0) * 100.0,
-            r.imbalance * 100.0,
-            r.wall_seconds * 1e3,
             r.packages
         );
     }
     for &mbit in &args.link_mbit {
+        let link_seconds = bytes as f64 * 8.0 / (mbit * 1e6);
+        let fastest = (rows.iter())
+            .filter(|r| r.link_mbit == mbit)
+            .map(|r| r.frame_seconds)
+            .fold(f64::INFINITY, f64::min);
         println!(
-            "  note: through one shared master link of {mbit} Mbit/s the results alone would take {:.3} s per frame (the model gives each worker its own link)",
-            bytes as f64 * 8.0 / (mbit * 1e6)
+            "  {mbit} Mbit/s master link: the results take {link_seconds:.3} s per frame through it{}",
+            if link_seconds > 0.5 * fastest {
+                format!(
+                    ": it bounds the frame (fastest simulated {fastest:.3} s); more workers cannot help"
+                )
+            } else {
+                format!(
+                    ", {:.0}% of the fastest simulated frame",
+                    link_seconds / fastest * 100.0
+                )
+            }
         );
     }
-    // The comparison with the paper: the fastest link, equal workers.
-    let best_link = args.link_mbit.iter().copied().fold(0.0, f64::max);
-    let equal: Vec<&Row> = rows
-        .iter()
-        .filter(|r| !r.heterogeneous && r.link_mbit == best_link)
-        .collect();
-    let linear_to = equal
-        .iter()
-        .filter(|r| r.speedup_vs_one >= 0.8 * r.ideal)
-        .map(|r| r.workers)
-        .max()
-        .unwrap_or(0);
-    let at16 = equal.iter().min_by_key(|r| r.workers.abs_diff(16));
-    println!(
-        "paper (§4.1, Fig. 9, 210k-polygon truck, 13.2 s per frame on one processor): near-linear speed-up to about ten processors, imbalance < 10%; our aim: < 5% at 16 workers"
-    );
-    print!("here ({best_link} Mbit, equal workers): efficiency >= 80% up to {linear_to} workers");
-    match at16 {
-        Some(r) => println!(
-            "; at {} workers speed-up {:.2} over one worker, imbalance {:.1}% in the last frame: aim {}",
-            r.workers,
-            r.speedup_vs_one,
-            r.imbalance * 100.0,
-            if r.imbalance < 0.05 { "met" } else { "missed" }
-        ),
-        None => println!(),
+    // The aims: 16 workers >= 90% and < 5% imbalance, 64 workers >= 80%.
+    for &mbit in &args.link_mbit {
+        let equal = |n: usize| {
+            (rows.iter()).find(|r| !r.heterogeneous && r.link_mbit == mbit && r.workers == n)
+        };
+        for (n, aim) in [(16, 0.9), (64, 0.8)] {
+            if let Some(r) = equal(n) {
+                let met = r.efficiency >= aim && (n != 16 || r.imbalance_after_first < 0.05);
+                println!(
+                    "  aim at {mbit} Mbit, {n} equal workers: efficiency >= {:.0}%{}: {:.0}%, imbalance {:.1}%: {}",
+                    aim * 100.0,
+                    if n == 16 { " and imbalance < 5%" } else { "" },
+                    r.efficiency * 100.0,
+                    r.imbalance_after_first * 100.0,
+                    if met { "met" } else { "missed" }
+                );
+            }
+        }
     }
     if args.cost_scale == 1.0 && total > 0.0 && total < 13.2 {
         println!(
@@ -531,12 +586,13 @@ mod tests {
         );
         assert!(frame.stats.pixels > 0, "the glass is in view");
         assert_eq!(recording.pixels.iter().sum::<u64>(), frame.stats.pixels);
-        // Every covered pixel costs at least its two colours (24 bytes) and
-        // an object id; a triangle without pixels sends about the fixed part.
+        // Covered pixels cost bytes beyond the fixed part (compressed, so
+        // no fixed amount per pixel); a triangle without pixels sends about
+        // the fixed part.
         let empty = recording.empty_result_bytes;
         for (&p, &b) in recording.pixels.iter().zip(&recording.result_bytes) {
             if p > 0 {
-                assert!(b >= empty + 25 * p, "pixels {p}, bytes {b}");
+                assert!(b > empty, "pixels {p}, bytes {b}");
             } else {
                 assert!(b < empty + 32, "no pixels, bytes {b}");
             }

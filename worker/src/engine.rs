@@ -10,8 +10,8 @@ use std::time::Instant;
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
-    FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WirePackageStats,
-    check_triangle_ids,
+    FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WireBitmapParts,
+    WirePackageStats, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -30,6 +30,8 @@ pub struct ActiveFrame {
     behind: Behind,
     /// The frame's method when it is not vertex tracing.
     per_reflector: Option<PerReflector>,
+    /// What the results carry (the components only when the job wants them).
+    parts: WireBitmapParts,
 }
 
 /// A per-reflector method with the reflector groups its package items index.
@@ -70,7 +72,7 @@ impl ActiveFrame {
         }
         Ok(PackageResult {
             id: package.id,
-            bitmap: WireBitmap::from(&bitmap),
+            bitmap: WireBitmap::encode(&bitmap, self.parts),
             stats: WirePackageStats::from(&stats),
             busy_micros: start.elapsed().as_micros() as u64,
             triangle_samples: samples,
@@ -265,6 +267,11 @@ impl Engine {
             ids,
             behind,
             per_reflector,
+            parts: if start.aux {
+                WireBitmapParts::All
+            } else {
+                WireBitmapParts::Color
+            },
         })
     }
 }

@@ -39,6 +39,19 @@ impl Default for SchedulerConfig {
     }
 }
 
+impl SchedulerConfig {
+    /// The rules of vtfarm's master, whose workers set each frame up before
+    /// they ask for its work: requests lapse at a frame start. The master
+    /// core and the simulator (`vtfarm bench simulate`) both take their
+    /// configuration through here, so they run the same scheduler.
+    pub fn farm(self) -> Self {
+        SchedulerConfig {
+            requests_lapse_at_frame_start: true,
+            ..self
+        }
+    }
+}
+
 /// How big a package is (guided self-scheduling, "large early, small late").
 ///
 /// A package for worker `w` aims at the duration

@@ -9,9 +9,18 @@
 //! items' true cost divided by its speed (a slowdown divides the speed from a
 //! given time on, also mid-package). A message takes the link latency plus
 //! its size over the link bandwidth; assignments carry a few bytes per item,
-//! results [`SimConfig::result_bytes_per_item`] per item. A worker asks for
-//! work when it joins and, piggybacked on each result, whenever it runs out.
-//! The master side is instantaneous.
+//! results [`SimConfig::result_bytes_per_item`] per item; with a shared
+//! master link ([`SimConfig::master_link_bits_per_second`]) every message
+//! also queues for it, one direction each way, as all results funnel into
+//! the one master. A worker asks for work when it joins and, piggybacked on
+//! each result, whenever it runs out. With the master's rule
+//! ([`SchedulerConfig::farm`]: requests lapse at a frame start) every worker
+//! sets a new frame up ([`SimWorker::frame_setup`]) and then asks again. The
+//! master computes instantly, except that a frame is done only once its base
+//! frame ([`SimConfig::master_frame_cost`], rasterized from the frame start
+//! on while the workers trace) is ready: [`SimFrameReport::done_at`].
+//! [`SimReport::inputs`] logs every call into the scheduler, so a test can
+//! replay the same calls into the real master core.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
@@ -42,6 +51,12 @@ pub struct SimConfig {
     /// violations in [`SimReport::violations`]. Default off (it costs time
     /// linear in the frame per step).
     pub validate: bool,
+    /// The master's own link, shared by every worker's messages, in bits per
+    /// second each way; `None`: unlimited. Default `None`.
+    pub master_link_bits_per_second: Option<f64>,
+    /// The master's per-frame work that overlaps the tracing (the base
+    /// frame). Default zero.
+    pub master_frame_cost: Duration,
 }
 
 impl Default for SimConfig {
@@ -55,6 +70,8 @@ impl Default for SimConfig {
             rays_per_second: 1e6,
             time_limit: Duration::from_secs(3600),
             validate: false,
+            master_link_bits_per_second: None,
+            master_frame_cost: Duration::ZERO,
         }
     }
 }
@@ -81,6 +98,9 @@ pub struct SimWorker {
     /// Whether it stops a package when told to; one that does not sends a
     /// result the master must ignore.
     pub honours_cancel: bool,
+    /// Time to set a frame up (ID buffers) before asking for its work, when
+    /// requests lapse at a frame start. Default zero.
+    pub frame_setup: Duration,
 }
 
 impl SimWorker {
@@ -98,6 +118,7 @@ impl SimWorker {
             slowdown: None,
             failures: SimFailures::Never,
             honours_cancel: true,
+            frame_setup: Duration::ZERO,
         }
     }
 }
@@ -165,6 +186,21 @@ pub struct SimReport {
     /// Broken scheduler invariants (with [`SimConfig::validate`]); a
     /// non-empty list is a bug.
     pub violations: Vec<String>,
+    /// Every call into the scheduler, in order, with its virtual time.
+    pub inputs: Vec<(Duration, SimInput)>,
+}
+
+/// A call into the scheduler, as [`SimReport::inputs`] logs it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimInput {
+    Submit(JobId, Vec<FrameWork>),
+    Joined(WorkerId, u32),
+    Request(WorkerId),
+    Heartbeat(WorkerId),
+    Left(WorkerId),
+    Done(WorkerId, PackageId, PackageMeasure),
+    Failed(WorkerId, PackageId, String),
+    Timeout,
 }
 
 /// A completed frame as the simulation saw it.
@@ -174,6 +210,8 @@ pub struct SimFrameReport {
     pub frame: u32,
     /// When it completed.
     pub at: Duration,
+    /// When the master could send it: completed, and its base frame ready.
+    pub done_at: Duration,
     pub stats: FrameStats,
     /// True cost of the items each worker's accepted results covered.
     pub true_cost: BTreeMap<WorkerId, f64>,
@@ -197,7 +235,20 @@ pub struct Simulation {
     sequence: u64,
     /// Accepted results of frames not complete yet.
     tallies: BTreeMap<(JobId, u32), Tally>,
+    /// When each running frame's base frame is ready.
+    frame_starts: BTreeMap<(JobId, u32), Duration>,
+    /// When the shared master link is next free: towards the workers, from them.
+    master_link_free: [Duration; 2],
+    /// When the master's last base frame is done (it rasterizes one at a time).
+    master_free: Duration,
     report: SimReport,
+}
+
+/// Which way a message crosses the master's link.
+#[derive(Clone, Copy)]
+enum Direction {
+    ToWorker = 0,
+    ToMaster = 1,
 }
 
 #[derive(Debug)]
@@ -278,6 +329,9 @@ impl Simulation {
             pending: BTreeMap::new(),
             sequence: 0,
             tallies: BTreeMap::new(),
+            frame_starts: BTreeMap::new(),
+            master_link_free: [Duration::ZERO; 2],
+            master_free: Duration::ZERO,
             report: SimReport::default(),
         };
         for (index, spec) in workers.into_iter().enumerate() {
@@ -423,6 +477,7 @@ impl Simulation {
 
     fn timeout(&mut self, at: Duration) {
         self.now = self.now.max(at);
+        self.report.inputs.push((self.now, SimInput::Timeout));
         self.scheduler.handle_timeout(self.now);
     }
 
@@ -443,11 +498,12 @@ impl Simulation {
                         })
                         .collect(),
                 );
-                let frames = job
+                let frames: Vec<FrameWork> = job
                     .frames
                     .into_iter()
                     .map(|f| FrameWork { items: f.items })
                     .collect();
+                self.log(SimInput::Submit(job.id, frames.clone()));
                 if let Err(error) = self.scheduler.submit_job(now, job.id, frames) {
                     self.refused(error.to_string());
                     self.open_jobs.remove(&job.id);
@@ -460,12 +516,20 @@ impl Simulation {
                 if !worker.alive {
                     return;
                 }
-                let (id, threads) = (worker.id, worker.spec.threads);
+                let (id, threads, setup) =
+                    (worker.id, worker.spec.threads, worker.spec.frame_setup);
+                self.log(SimInput::Joined(id, threads));
                 if let Err(error) = self.scheduler.worker_joined(now, id, threads) {
                     self.refused(error.to_string());
                 }
-                if let Err(error) = self.scheduler.request_work(now, id) {
-                    self.refused(error.to_string());
+                if !self.config.scheduler.requests_lapse_at_frame_start {
+                    self.log(SimInput::Request(id));
+                    if let Err(error) = self.scheduler.request_work(now, id) {
+                        self.refused(error.to_string());
+                    }
+                } else if self.scheduler.queue().running.is_some() {
+                    // Like a real worker: it asks once the running frame is set up.
+                    self.schedule(now + setup, SimEvent::ToMaster(index, ToMaster::Request));
                 }
                 let interval = self.config.heartbeat_interval;
                 self.schedule(now + interval, SimEvent::HeartbeatTick(index));
@@ -507,50 +571,61 @@ impl Simulation {
         let now = self.now;
         let id = WorkerId(index as u64);
         let refusal = match message {
-            ToMaster::Request => self
-                .scheduler
-                .request_work(now, id)
-                .err()
-                .map(|e| e.to_string()),
-            ToMaster::Heartbeat => self
-                .scheduler
-                .heartbeat(now, id)
-                .err()
-                .map(|e| e.to_string()),
-            ToMaster::Left => self
-                .scheduler
-                .worker_left(now, id)
-                .err()
-                .map(|e| e.to_string()),
-            ToMaster::Failed { package, error } => self
-                .scheduler
-                .package_failed(now, id, package, error)
-                .err()
-                .map(|e| e.to_string()),
+            ToMaster::Request => {
+                self.log(SimInput::Request(id));
+                (self.scheduler.request_work(now, id).err()).map(|e| e.to_string())
+            }
+            ToMaster::Heartbeat => {
+                self.log(SimInput::Heartbeat(id));
+                (self.scheduler.heartbeat(now, id).err()).map(|e| e.to_string())
+            }
+            ToMaster::Left => {
+                self.log(SimInput::Left(id));
+                (self.scheduler.worker_left(now, id).err()).map(|e| e.to_string())
+            }
+            ToMaster::Failed { package, error } => {
+                self.log(SimInput::Failed(id, package, error.clone()));
+                (self.scheduler.package_failed(now, id, package, error).err())
+                    .map(|e| e.to_string())
+            }
             ToMaster::Done {
                 assignment,
                 measure,
                 true_cost,
-            } => match self
-                .scheduler
-                .package_done(now, id, assignment.package, measure)
-            {
-                Ok(()) => {
-                    let tally = self
-                        .tallies
-                        .entry((assignment.job, assignment.frame))
-                        .or_default();
-                    *tally.true_cost.entry(id).or_insert(0.0) += true_cost;
-                    for item in assignment.items {
-                        *tally.completions.entry(item).or_insert(0) += 1;
-                    }
-                    None
-                }
-                Err(error) => Some(error.to_string()),
-            },
+            } => {
+                self.log(SimInput::Done(id, assignment.package, measure.clone()));
+                let done = self
+                    .scheduler
+                    .package_done(now, id, assignment.package, measure);
+                self.done_outcome(id, assignment, true_cost, done)
+            }
         };
         if let Some(refusal) = refusal {
             self.refused(refusal);
+        }
+    }
+
+    /// Tallies an accepted result; a refused one is returned for the report.
+    fn done_outcome(
+        &mut self,
+        id: WorkerId,
+        assignment: Assignment,
+        true_cost: f64,
+        done: Result<(), crate::ReportError>,
+    ) -> Option<String> {
+        match done {
+            Ok(()) => {
+                let tally = self
+                    .tallies
+                    .entry((assignment.job, assignment.frame))
+                    .or_default();
+                *tally.true_cost.entry(id).or_insert(0.0) += true_cost;
+                for item in assignment.items {
+                    *tally.completions.entry(item).or_insert(0) += 1;
+                }
+                None
+            }
+            Err(error) => Some(error.to_string()),
         }
     }
 
@@ -680,8 +755,8 @@ impl Simulation {
                 assignment: computing.assignment,
             }
         };
-        let arrival = now + transfer_time(&worker.spec, bytes_out);
         let idle = worker.inbox.is_empty();
+        let arrival = self.arrival(index, bytes_out, Direction::ToMaster);
         self.schedule(arrival, SimEvent::ToMaster(index, message));
         if idle {
             self.schedule(arrival, SimEvent::ToMaster(index, ToMaster::Request));
@@ -697,12 +772,12 @@ impl Simulation {
         let now = self.now;
         while let Some(assignment) = self.scheduler.poll_assignment() {
             let index = assignment.worker.0 as usize;
-            let Some(worker) = self.workers.get(index) else {
+            if index >= self.workers.len() {
                 continue;
-            };
+            }
             let bytes = self.config.header_bytes
                 + self.config.assignment_bytes_per_item * assignment.items.len() as u64;
-            let arrival = now + transfer_time(&worker.spec, bytes);
+            let arrival = self.arrival(index, bytes, Direction::ToWorker);
             self.report.assignments.push((now, assignment.clone()));
             self.schedule(
                 arrival,
@@ -733,12 +808,21 @@ impl Simulation {
                         w.inbox.clear();
                     }
                 }
+                Event::FrameStarted { job, frame, .. } => {
+                    self.master_free = now.max(self.master_free) + self.config.master_frame_cost;
+                    self.frame_starts.insert((*job, *frame), self.master_free);
+                    if self.config.scheduler.requests_lapse_at_frame_start {
+                        self.set_frame_up();
+                    }
+                }
                 Event::FrameComplete { job, frame, stats } => {
                     let tally = self.tallies.remove(&(*job, *frame)).unwrap_or_default();
+                    let base_ready = self.frame_starts.remove(&(*job, *frame)).unwrap_or(now);
                     self.report.frames.push(SimFrameReport {
                         job: *job,
                         frame: *frame,
                         at: now,
+                        done_at: now.max(base_ready),
                         stats: stats.clone(),
                         true_cost: tally.true_cost,
                         completions: tally.completions,
@@ -759,11 +843,48 @@ impl Simulation {
     fn refused(&mut self, refusal: String) {
         self.report.refusals.push((self.now, refusal));
     }
-}
 
-/// Latency plus size over bandwidth.
-fn transfer_time(worker: &SimWorker, bytes: u64) -> Duration {
-    worker.latency + seconds(bytes as f64 * 8.0 / worker.link_bits_per_second)
+    fn log(&mut self, input: SimInput) {
+        self.report.inputs.push((self.now, input));
+    }
+
+    /// A frame started: every live idle worker hears of it, sets it up and
+    /// asks for its work (a busy one asks when it is done).
+    fn set_frame_up(&mut self) {
+        let start_bytes = self.config.header_bytes;
+        for index in 0..self.workers.len() {
+            let worker = &self.workers[index];
+            if !worker.alive || worker.current.is_some() || !worker.inbox.is_empty() {
+                continue;
+            }
+            let (setup, latency) = (worker.spec.frame_setup, worker.spec.latency);
+            let ready = self.arrival(index, start_bytes, Direction::ToWorker) + setup;
+            self.schedule(
+                ready + latency,
+                SimEvent::ToMaster(index, ToMaster::Request),
+            );
+        }
+    }
+
+    /// When a message of `bytes` sent now by or to worker `index` arrives:
+    /// the worker's own link, then (if there is one) the master's shared
+    /// link in that direction, then the latency.
+    fn arrival(&mut self, index: usize, bytes: u64, direction: Direction) -> Duration {
+        let Some(worker) = self.workers.get(index) else {
+            return self.now;
+        };
+        let bits = bytes as f64 * 8.0;
+        let own = self.now + seconds(bits / worker.spec.link_bits_per_second);
+        let sent = match self.config.master_link_bits_per_second {
+            Some(rate) => {
+                let free = &mut self.master_link_free[direction as usize];
+                *free = own.max(*free) + seconds(bits / rate);
+                *free
+            }
+            None => own,
+        };
+        sent + worker.spec.latency
+    }
 }
 
 /// When `work` (seconds at speed 1) started at `start` ends on a worker of

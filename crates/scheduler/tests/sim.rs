@@ -458,3 +458,66 @@ fn a_slow_link_gets_smaller_shares() {
         "{shares:?}"
     );
 }
+
+/// The master's rules (requests lapse at a frame start, workers set each
+/// frame up) with one shared master link: the results of a frame queue for
+/// that link, so a slow master link bounds the frame time from below, and
+/// the simulation is deterministic.
+#[test]
+fn a_shared_master_link_bounds_the_frame_and_runs_repeat_exactly() {
+    let frame = uneven_frame(400, 3, 0.005, 100..140, 2.0);
+    let job = repeated_job(1, &frame, 3);
+    let worker = SimWorker {
+        frame_setup: Duration::from_millis(50),
+        link_bits_per_second: 1e9,
+        ..SimWorker::with_speed(1.0)
+    };
+    let config = |master_link: Option<f64>| SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig::default().farm(),
+        master_link_bits_per_second: master_link,
+        master_frame_cost: Duration::from_millis(30),
+        result_bytes_per_item: 20_000,
+        ..checked()
+    };
+    let fast = run(
+        config(None),
+        vec![worker.clone(); 8],
+        std::slice::from_ref(&job),
+    );
+    let slow = run(
+        config(Some(10e6)),
+        vec![worker.clone(); 8],
+        std::slice::from_ref(&job),
+    );
+    // 400 items × 20 kB through 10 Mbit/s: 6.4 s of results per frame.
+    let link_bound = 400.0 * 20_000.0 * 8.0 / 10e6;
+    for f in &slow.frames {
+        assert!(
+            f.stats.wall.as_secs_f64() >= link_bound,
+            "{:?}",
+            f.stats.wall
+        );
+        assert!(f.done_at >= f.at);
+    }
+    for f in &fast.frames {
+        assert!(
+            f.stats.wall.as_secs_f64() < link_bound / 4.0,
+            "{:?}",
+            f.stats.wall
+        );
+    }
+    // Every worker asked again after each frame start (requests lapse).
+    let requests = |r: &SimReport| {
+        (r.inputs.iter())
+            .filter(|(_, i)| matches!(i, vtfarm_scheduler::sim::SimInput::Request(_)))
+            .count()
+    };
+    assert!(requests(&fast) >= 8 * 3, "{}", requests(&fast));
+    let again = run(
+        config(Some(10e6)),
+        vec![worker; 8],
+        std::slice::from_ref(&job),
+    );
+    assert_eq!(again.inputs, slow.inputs, "deterministic");
+    assert_eq!(again.assignments, slow.assignments);
+}

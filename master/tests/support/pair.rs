@@ -421,6 +421,11 @@ impl Pair {
                 }
                 self.master.disconnected(self.now, conn);
             }
+            Output::RasterizeBase(request) => {
+                // The base frame takes no virtual time here.
+                let base = request.rasterize();
+                (self.master).base_frame_ready(self.now, request.job, request.frame, base);
+            }
             Output::Persist(record) => {
                 let (journal, _) = self
                     .journal

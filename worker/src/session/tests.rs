@@ -53,6 +53,7 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
         }),
         reflectors: vec![0],
         method: WireMethod::VertexTracing,
+        aux: false,
     }
 }
 

@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# Measures what a second machine buys: a real master with one, then two
+# `vtfarm worker --threads 1`, each worker pinned to its own core (taskset),
+# running the same job (default: the cockpit at detail 2.1, 1920x1080, `full`,
+# 8 frames). Both runs happen in this one invocation, so the printed ratio
+# compares like with like even on a machine shared with other work (the
+# absolute figures are noisy there: quote ratios).
+#
+# Usage: scripts/scaling.sh [--workers "1 2"] [--frames 8] [--width 1920]
+#        [--height 1080] [--detail 2.1] [--bin target/release/vtfarm]
+#        [--keep DIR]   (keeps each run's frames, stats.json and timelines)
+# Prints one line per worker count: the mean frame time (the interval between
+# frame arrivals at the submitter, first frame left out: it includes the scene
+# transfer and BVH builds) and its ratio to the first count's.
+set -euo pipefail
+
+workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
+bin=target/release/vtfarm; keep=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --workers) workers_list="$2"; shift 2;;
+    --frames) frames="$2"; shift 2;;
+    --width) width="$2"; shift 2;;
+    --height) height="$2"; shift 2;;
+    --detail) detail="$2"; shift 2;;
+    --bin) bin="$2"; shift 2;;
+    --keep) keep="$2"; shift 2;;
+    *) echo "unknown option $1" >&2; exit 2;;
+  esac
+done
+[ -x "$bin" ] || { echo "no $bin: run cargo build --release first" >&2; exit 1; }
+bin=$(realpath "$bin")
+# shellcheck source=scripts/farm-common.sh
+source "$(dirname "$0")/farm-common.sh"
+cores=$(nproc)
+
+work=$(mktemp -d /tmp/vtfarm-scaling.XXXXXX)
+pids=()
+cleanup() {
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+  for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+write_job "$work/job.toml" "$frames" "$width" "$height" "$detail"
+
+port=$((20000 + RANDOM % 20000))
+"$bin" cluster init -o "$work/cluster" --master "127.0.0.1:$port" >/dev/null
+
+# Waits (bounded) until `vtfarm status` lists $1 workers.
+wait_for_workers() {
+  for _ in $(seq 1 100); do
+    n=$("$bin" status --cluster "$work/cluster/cluster.toml" 2>/dev/null | grep -c '^w[0-9]' || true)
+    [ "$n" -ge "$1" ] && return 0
+    sleep 0.2
+  done
+  echo "workers did not join" >&2; return 1
+}
+
+declare -A mean
+for n in $workers_list; do
+  pids=()
+  RUST_LOG=warn "$bin" master --cluster "$work/cluster/cluster.toml" --listen "127.0.0.1:$port" \
+    >"$work/master-$n.log" 2>&1 &
+  pids+=($!)
+  for ((w = 0; w < n; w++)); do
+    core=$((w % cores))
+    RUST_LOG=warn taskset -c "$core" "$bin" worker --cluster "$work/cluster/cluster.toml" \
+      --threads 1 --name "w$w" --cache "$work/cache-$w" >"$work/worker-$n-$w.log" 2>&1 &
+    pids+=($!)
+  done
+  wait_for_workers "$n"
+  out="$work/out-$n"
+  timeout 600 "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
+    >"$work/submit-$n.log" 2>&1 || { cat "$work/submit-$n.log" >&2; exit 1; }
+  mean[$n]=$(frame_figures "$out/stats.json")
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+  for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
+  pids=()
+  [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
+done
+
+first=${workers_list%% *}
+read -r base _ <<<"${mean[$first]}"
+echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
+printf "%8s %16s %16s %10s %16s %16s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "raw MB/frame"
+for n in $workers_list; do
+  read -r gap wall bytes raw <<<"${mean[$n]}"
+  printf "%8s %16s %16s %10s %16s %16s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$raw"
+done
+echo "result MB: results as sent (zstd byte planes, colour only); raw: the same pixels at 40 bytes each (the previous encoding: three colours and an object id)"
