@@ -29,10 +29,18 @@ use crate::{Hit, Ray, SurfacePoint};
 /// Which obvhs tree layout a [`SceneBvh`] uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BvhLayout {
-    /// Compressed 8-wide BVH (`obvhs::cwbvh`), traversed with SIMD node tests.
+    /// Compressed 8-wide BVH (`obvhs::cwbvh`), closest hits traversed
+    /// nearest child first (module `wide`).
     Cw,
+    /// The same tree with obvhs' own (octant-ordered) closest-hit traversal:
+    /// the baseline `bench rays --layout cw-octant` measures against.
+    CwOctant,
     /// Binary BVH (`obvhs::bvh2`) with collapsed multi-triangle leaves.
     Binary,
+}
+
+impl BvhLayout {
+    pub const ALL: [BvhLayout; 3] = [BvhLayout::Cw, BvhLayout::CwOctant, BvhLayout::Binary];
 }
 
 /// Which obvhs build preset (`BvhBuildParams::*_build`) a [`SceneBvh`] uses.
@@ -58,6 +66,18 @@ impl BuildPreset {
         BuildPreset::Slow,
         BuildPreset::VerySlow,
     ];
+
+    /// The preset's command-line name (`very-slow`).
+    pub fn name(self) -> &'static str {
+        match self {
+            BuildPreset::Fastest => "fastest",
+            BuildPreset::VeryFast => "very-fast",
+            BuildPreset::Fast => "fast",
+            BuildPreset::Medium => "medium",
+            BuildPreset::Slow => "slow",
+            BuildPreset::VerySlow => "very-slow",
+        }
+    }
 
     fn params(self) -> BvhBuildParams {
         match self {
@@ -362,6 +382,10 @@ impl SceneBvh {
         let mut unused = RayHit::none();
         match &self.accel {
             Accel::Empty => false,
+            Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
+                crate::wide::closest(bvh, &bvh_ray, test);
+                false
+            }
             Accel::Cw(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
             Accel::Binary(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
         };
@@ -458,7 +482,7 @@ fn build(tris: &[[Vec3; 3]], options: BvhOptions, pad: f32) -> (Accel, Vec<Trian
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut bvh2, params.reinsertion_batch_ratio, None);
     match options.layout {
-        BvhLayout::Cw => {
+        BvhLayout::Cw | BvhLayout::CwOctant => {
             let cw = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
             if cw_depth(&cw) < CW_STACK_LIMIT {
                 let slots = cw.primitive_indices.clone();

@@ -542,7 +542,7 @@ fn bvh_closest_and_any_hit_equal_brute_force_for_every_layout() {
             .all(|h| !degenerate.contains(&h.triangle))
     );
 
-    for layout in [BvhLayout::Cw, BvhLayout::Binary] {
+    for layout in BvhLayout::ALL {
         for preset in BuildPreset::ALL {
             let bvh = SceneBvh::with_options(scene.clone(), BvhOptions { layout, preset });
             for ((ray, t_max), want) in rays.iter().zip(&expected) {
@@ -845,7 +845,7 @@ fn piles_of_identical_triangles_are_traversed_completely() {
             }
         })
         .collect();
-    for layout in [BvhLayout::Cw, BvhLayout::Binary] {
+    for layout in BvhLayout::ALL {
         let bvh = SceneBvh::with_options(
             scene.clone(),
             BvhOptions {

@@ -1,0 +1,103 @@
+//! Closest-hit traversal of obvhs' compressed 8-wide BVH, tuned for the CPU:
+//! each node's children are tested at once, hit children are visited nearest
+//! first and a popped node is skipped when the closest hit so far already lies
+//! before it. obvhs' own traversal (GPU style) orders children by the ray's
+//! octant only, so it visits more nodes behind the hit.
+//!
+//! The box test is obvhs' (`t = q * (extent / d) + (p - o) / d` on the
+//! quantised child bounds), with 0 instead of obvhs' 1e-4 as the lower bound:
+//! it culls exactly the boxes obvhs culls, never one with a hit in `(0, tmax)`.
+
+use std::cell::RefCell;
+
+use glam::Vec3A;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::Ray as BvhRay;
+
+thread_local! {
+    /// The traversal stack (node index, entry distance), kept per thread so
+    /// that a query neither allocates nor clears a large array.
+    static STACK: RefCell<Vec<(u32, f32)>> = RefCell::new(Vec::with_capacity(256));
+}
+
+/// Walks `bvh` for `ray`, calling `test(slot)` for every primitive slot whose
+/// leaf box the ray enters before `tmax`; `test` returns the new `tmax`
+/// (`f32::INFINITY` when it found nothing closer).
+#[inline(always)]
+pub(crate) fn closest<F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, test: F) {
+    STACK.with_borrow_mut(|stack| {
+        stack.clear();
+        walk(bvh, ray, test, stack);
+    });
+}
+
+#[inline(always)]
+fn walk<F: FnMut(usize) -> f32>(
+    bvh: &CwBvh,
+    ray: &BvhRay,
+    mut test: F,
+    stack: &mut Vec<(u32, f32)>,
+) {
+    let mut tmax = ray.tmax;
+    stack.push((0, 0.0));
+    while let Some((index, entry)) = stack.pop() {
+        if entry > tmax {
+            continue;
+        }
+        let node = &bvh.nodes[index as usize];
+        let extent = node.compute_extent();
+        let scale = extent * ray.inv_direction;
+        let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+        let mut near = [0f32; 8];
+        let mut far = [tmax; 8];
+        for (axis, (lo, hi)) in [
+            (&node.child_min_x, &node.child_max_x),
+            (&node.child_min_y, &node.child_max_y),
+            (&node.child_min_z, &node.child_max_z),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for i in 0..8 {
+                let a = lo[i] as f32 * scale[axis] + offset[axis];
+                let b = hi[i] as f32 * scale[axis] + offset[axis];
+                near[i] = near[i].max(a.min(b));
+                far[i] = far[i].min(a.max(b));
+            }
+        }
+        // Hit children, nearest first (insertion sort of at most 8).
+        let mut order = [(0f32, 0u8); 8];
+        let mut hits = 0;
+        for i in 0..8 {
+            if node.child_meta[i] != 0 && near[i] <= far[i] {
+                let mut at = hits;
+                while at > 0 && order[at - 1].0 > near[i] {
+                    order[at] = order[at - 1];
+                    at -= 1;
+                }
+                order[at] = (near[i], i as u8);
+                hits += 1;
+            }
+        }
+        // Leaves now, nearest first; inner children onto the stack farthest
+        // first so the nearest is popped next.
+        let mut inner = [(0u32, 0f32); 8];
+        let mut inner_count = 0;
+        for &(t, child) in &order[..hits] {
+            if t > tmax {
+                break;
+            }
+            let child = child as usize;
+            if node.is_leaf(child) {
+                let (first, count) = node.child_primitives(child);
+                for slot in first..first + count {
+                    tmax = tmax.min(test(slot as usize));
+                }
+            } else {
+                inner[inner_count] = (node.child_node_index(child), t);
+                inner_count += 1;
+            }
+        }
+        stack.extend(inner[..inner_count].iter().rev());
+    }
+}
