@@ -103,6 +103,9 @@ struct RaysFigures {
     incoherent_rays_per_second: f64,
     reflection_rays: usize,
     reflection_rays_per_second: f64,
+    /// The coherent sets again through `closest_hits` (packets).
+    primary_packet_rays_per_second: f64,
+    reflection_packet_rays_per_second: f64,
 }
 
 /// Passes over each ray set; the best counts.
@@ -136,9 +139,11 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
     bvhs.extend(baseline.as_ref().map(|(b, _)| b));
 
     let sets = RaySets::new(&bvh, &camera, args.random_rays, args.seed, reflector);
-    let primary = rays_per_second(&bvhs, &sets.primary);
-    let incoherent = rays_per_second(&bvhs, &sets.incoherent);
-    let reflection = rays_per_second(&bvhs, &sets.reflection);
+    let primary = rays_per_second(&bvhs, &sets.primary, Batch::Single);
+    let incoherent = rays_per_second(&bvhs, &sets.incoherent, Batch::Single);
+    let reflection = rays_per_second(&bvhs, &sets.reflection, Batch::Single);
+    let primary_packets = rays_per_second(&bvhs, &sets.primary, Batch::Packets);
+    let reflection_packets = rays_per_second(&bvhs, &sets.reflection, Batch::Packets);
     let figures = RaysFigures {
         triangles: scene.triangles.len(),
         threads: args.threads,
@@ -149,6 +154,8 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
         incoherent_rays_per_second: incoherent[0],
         reflection_rays: sets.reflection.len(),
         reflection_rays_per_second: reflection[0],
+        primary_packet_rays_per_second: primary_packets[0],
+        reflection_packet_rays_per_second: reflection_packets[0],
     };
     println!(
         "{} triangles, BVH {:?} (build {:.3} s), {} thread(s), best of {ROUNDS}",
@@ -170,8 +177,18 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
             figures.reflection_rays,
             figures.reflection_rays_per_second,
         ),
+        (
+            "primary, packets",
+            figures.primary_rays,
+            figures.primary_packet_rays_per_second,
+        ),
+        (
+            "reflection, packets",
+            figures.reflection_rays,
+            figures.reflection_packet_rays_per_second,
+        ),
     ] {
-        println!("{name:<11} {count:>9} rays  {:>7.2} M rays/s", rate / 1e6);
+        println!("{name:<20} {count:>9} rays  {:>7.2} M rays/s", rate / 1e6);
     }
     if let Some(((base, seconds), layout)) = baseline.as_ref().zip(args.baseline) {
         println!(
@@ -182,9 +199,11 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
             ("primary", &primary),
             ("incoherent", &incoherent),
             ("reflection", &reflection),
+            ("primary, packets", &primary_packets),
+            ("reflection, packets", &reflection_packets),
         ] {
             println!(
-                "{name:<11} {:>7.2} M rays/s  ({:?} is {:.2}x {layout:?})",
+                "{name:<20} {:>7.2} M rays/s  ({:?} is {:.2}x {layout:?})",
                 rates[1] / 1e6,
                 options.layout,
                 rates[0] / rates[1].max(1e-9)
@@ -331,18 +350,23 @@ impl RayGenerator {
 /// Closest-hit queries per second over `rays` on rayon's pool for each BVH,
 /// best of [`ROUNDS`] passes; the BVHs take turns within each round so that
 /// load from other processes hits them alike.
-pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray]) -> Vec<f64> {
+pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) -> Vec<f64> {
     let mut best = vec![f64::INFINITY; bvhs.len()];
     for _ in 0..ROUNDS {
         for (bvh, best) in bvhs.iter().zip(&mut best) {
             let start = Instant::now();
             let hits = rays
                 .par_chunks(CHUNK)
-                .map(|chunk| {
-                    chunk
+                .map(|chunk| match batch {
+                    Batch::Single => chunk
                         .iter()
                         .filter(|r| bvh.closest_hit(r, f32::INFINITY).is_some())
-                        .count()
+                        .count(),
+                    Batch::Packets => bvh
+                        .closest_hits(chunk, f32::INFINITY)
+                        .iter()
+                        .flatten()
+                        .count(),
                 })
                 .sum::<usize>();
             std::hint::black_box(hits);
@@ -358,6 +382,15 @@ pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray]) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+/// How the rays are handed to the tracer.
+#[derive(Clone, Copy)]
+pub(super) enum Batch {
+    /// One `closest_hit` call per ray.
+    Single,
+    /// `closest_hits` on each chunk (packets of consecutive rays).
+    Packets,
 }
 
 /// Rays per rayon task: large enough to amortise scheduling.

@@ -392,6 +392,50 @@ impl SceneBvh {
         best.hit
     }
 
+    /// [`SceneBvh::closest_hit`] for a batch of rays, same results. With the
+    /// `Cw` layout, packets of consecutive rays share the tree walk: worth it
+    /// for coherent rays (a camera's row, a package's reflection rays).
+    pub fn closest_hits(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
+        let Accel::Cw(bvh) = &self.accel else {
+            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+        };
+        if self.options.layout != BvhLayout::Cw {
+            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+        }
+        let mut hits = Vec::with_capacity(rays.len());
+        for packet in rays.chunks(crate::wide::PACKET) {
+            // Rays that can hit nothing sit out; `lane` maps packet slots back.
+            let mut lane = [0usize; crate::wide::PACKET];
+            let mut bvh_rays = Vec::with_capacity(packet.len());
+            let mut dirs = [Vec3A::ZERO; crate::wide::PACKET];
+            for (i, ray) in packet.iter().enumerate() {
+                let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+                if let Some(r) = bvh_ray(origin, direction, t_max) {
+                    lane[bvh_rays.len()] = i;
+                    dirs[bvh_rays.len()] = direction;
+                    bvh_rays.push(r);
+                }
+            }
+            let mut best: [ClosestSoFar; crate::wide::PACKET] =
+                std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
+            crate::wide::closest_packet(bvh, &bvh_rays, |r, slot| {
+                let tuv = self.prims[slot].intersect(bvh_rays[r].origin, dirs[r]);
+                match tuv {
+                    Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
+                        best[r].hit.map_or(f32::INFINITY, |h| next_up(h.t))
+                    }
+                    _ => f32::INFINITY,
+                }
+            });
+            let start = hits.len();
+            hits.resize(start + packet.len(), None);
+            for (r, best) in best.iter().enumerate().take(bvh_rays.len()) {
+                hits[start + lane[r]] = best.hit;
+            }
+        }
+        hits
+    }
+
     /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
     /// hit found.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
