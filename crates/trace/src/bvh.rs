@@ -30,7 +30,10 @@ use crate::{Hit, Ray, SurfacePoint};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BvhLayout {
     /// Compressed 8-wide BVH (`obvhs::cwbvh`), closest hits traversed
-    /// nearest child first (module `wide`).
+    /// nearest child first (module `wide`). As fast as `CwOctant` within the
+    /// noise of `bench rays` (0.93x to 1.12x, busy 2-core machine); kept as
+    /// the default because it has no 1e-4 lower bound on box entry (obvhs'
+    /// test culls a box that lies entirely closer than that).
     Cw,
     /// The same tree with obvhs' own (octant-ordered) closest-hit traversal:
     /// the baseline `bench rays --layout cw-octant` measures against.
@@ -393,8 +396,10 @@ impl SceneBvh {
     }
 
     /// [`SceneBvh::closest_hit`] for a batch of rays, same results. With the
-    /// `Cw` layout, packets of consecutive rays share the tree walk: worth it
-    /// for coherent rays (a camera's row, a package's reflection rays).
+    /// `Cw` layout, packets of 8 consecutive rays share the tree walk. Not yet
+    /// a win: `bench rays` measured it at 0.5x single rays on the cockpit's
+    /// camera and reflection rays (scalar per-ray box tests; a SIMD-across-rays
+    /// box test is the next step), so the renderer does not call it.
     pub fn closest_hits(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
         let Accel::Cw(bvh) = &self.accel else {
             return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
