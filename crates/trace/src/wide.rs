@@ -11,7 +11,7 @@
 use std::cell::RefCell;
 
 use glam::Vec3A;
-use obvhs::cwbvh::CwBvh;
+use obvhs::cwbvh::{CwBvh, CwBvhNode};
 use obvhs::ray::Ray as BvhRay;
 
 thread_local! {
@@ -65,20 +65,7 @@ fn walk<F: FnMut(usize) -> f32>(
                 far[i] = far[i].min(a.max(b));
             }
         }
-        // Hit children, nearest first (insertion sort of at most 8).
-        let mut order = [(0f32, 0u8); 8];
-        let mut hits = 0;
-        for i in 0..8 {
-            if node.child_meta[i] != 0 && near[i] <= far[i] {
-                let mut at = hits;
-                while at > 0 && order[at - 1].0 > near[i] {
-                    order[at] = order[at - 1];
-                    at -= 1;
-                }
-                order[at] = (near[i], i as u8);
-                hits += 1;
-            }
-        }
+        let (order, hits) = nearest_first(node, &near, |i| near[i] <= far[i]);
         // Leaves now, nearest first; inner children onto the stack farthest
         // first so the nearest is popped next.
         let mut inner = [(0u32, 0f32); 8];
@@ -100,6 +87,30 @@ fn walk<F: FnMut(usize) -> f32>(
         }
         stack.extend(inner[..inner_count].iter().rev());
     }
+}
+
+/// The non-empty children that `hit` accepts as (entry distance, slot),
+/// nearest first (insertion sort of at most 8), and their number.
+#[inline(always)]
+fn nearest_first(
+    node: &CwBvhNode,
+    near: &[f32; 8],
+    hit: impl Fn(usize) -> bool,
+) -> ([(f32, u8); 8], usize) {
+    let mut order = [(0f32, 0u8); 8];
+    let mut hits = 0;
+    for i in 0..8 {
+        if node.child_meta[i] != 0 && hit(i) {
+            let mut at = hits;
+            while at > 0 && order[at - 1].0 > near[i] {
+                order[at] = order[at - 1];
+                at -= 1;
+            }
+            order[at] = (near[i], i as u8);
+            hits += 1;
+        }
+    }
+    (order, hits)
 }
 
 /// Rays per packet of [`closest_packet`]: one bit each in a `u8` mask.
@@ -167,19 +178,7 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
                 }
             }
         }
-        let mut order = [(0f32, 0u8); 8];
-        let mut hits = 0;
-        for i in 0..8 {
-            if node.child_meta[i] != 0 && child_rays[i] != 0 {
-                let mut at = hits;
-                while at > 0 && order[at - 1].0 > child_near[i] {
-                    order[at] = order[at - 1];
-                    at -= 1;
-                }
-                order[at] = (child_near[i], i as u8);
-                hits += 1;
-            }
-        }
+        let (order, hits) = nearest_first(node, &child_near, |i| child_rays[i] != 0);
         let mut inner = [(0u32, 0u8); 8];
         let mut inner_count = 0;
         for &(_, child) in &order[..hits] {
