@@ -11,11 +11,12 @@ use std::time::Duration;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tracing::debug;
+use tracing::{debug, warn};
 use vtfarm_proto::{Link, Message};
 use vtfarm_scheduler::SchedulerConfig;
 
 use crate::core::{ConnId, MasterCore, Output, Peer};
+use crate::journal::Journal;
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -34,6 +35,8 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
+    /// End the master task (dropping every connection).
+    Stop,
 }
 
 /// A running master: attach links to it.
@@ -71,16 +74,33 @@ impl MasterHandle {
         });
         conn
     }
+
+    /// Ends the master task: its connections close and the workers' sessions end.
+    pub fn stop(&self) {
+        let _ = self.inputs.send(Input::Stop);
+    }
 }
 
-/// Starts a master task.
+/// Starts a master task that keeps its jobs in memory only.
 pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
+    spawn(MasterCore::new(config), None)
+}
+
+/// Starts a master task that journals its jobs and resumes those it finds.
+pub fn spawn_persistent_master(
+    config: SchedulerConfig,
+    journal: Journal,
+) -> (MasterHandle, JoinHandle<()>) {
+    spawn(MasterCore::persistent(config), Some(journal))
+}
+
+fn spawn(core: MasterCore, journal: Option<Journal>) -> (MasterHandle, JoinHandle<()>) {
     let (inputs, rx) = unbounded_channel();
     let handle = MasterHandle {
         inputs,
         next_conn: Arc::new(AtomicU64::new(1)),
     };
-    let task = tokio::spawn(run(MasterCore::new(config), rx));
+    let task = tokio::spawn(run(core, rx, journal));
     (handle, task)
 }
 
@@ -89,9 +109,14 @@ struct Connection {
     closer: Option<Closer>,
 }
 
-async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
+async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>, journal: Option<Journal>) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
+    if let Some(journal) = &journal {
+        for stored in tokio::task::block_in_place(|| journal.load()) {
+            core.restore(start.elapsed(), stored);
+        }
+    }
     loop {
         // The scheduler's next deadline, or idle for a while.
         let deadline = start
@@ -101,6 +126,9 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
         tokio::select! {
             input = inputs.recv() => {
                 let Some(input) = input else { return };
+                if matches!(input, Input::Stop) {
+                    return;
+                }
                 let now = start.elapsed();
                 // Inside a block so the whole frame's CPU work (rasterizing,
                 // compositing) does not starve the I/O tasks.
@@ -119,6 +147,7 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                             core.disconnected(now, conn);
                         }
                     }
+                    Input::Stop => {} // returned above
                 });
             }
             _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),
@@ -137,6 +166,26 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                             close(&reason);
                         }
                         core.disconnected(start.elapsed(), conn);
+                    }
+                }
+                Output::Persist(record) => {
+                    if let Some(journal) = &journal {
+                        tokio::task::block_in_place(|| journal.write(&record));
+                    }
+                }
+                Output::Replay { conn, job, frames } => {
+                    let (Some(journal), Some(c)) = (&journal, conns.get(&conn)) else {
+                        continue;
+                    };
+                    for frame in frames {
+                        match tokio::task::block_in_place(|| journal.frame(job, frame)) {
+                            Some(done) => {
+                                let _ = c.tx.send(Message::FrameDone(done));
+                            }
+                            None => {
+                                warn!(job, frame, "a finished frame is missing from the journal")
+                            }
+                        }
                     }
                 }
             }
