@@ -11,7 +11,8 @@
 use std::cell::RefCell;
 
 use glam::Vec3A;
-use obvhs::cwbvh::{CwBvh, CwBvhNode};
+use obvhs::cwbvh::CwBvh;
+use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::ray::Ray as BvhRay;
 
 thread_local! {
