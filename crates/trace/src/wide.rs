@@ -100,14 +100,14 @@ fn nearest_first(
 ) -> ([(f32, u8); 8], usize) {
     let mut order = [(0f32, 0u8); 8];
     let mut hits = 0;
-    for i in 0..8 {
+    for (i, &t) in near.iter().enumerate() {
         if node.child_meta[i] != 0 && hit(i) {
             let mut at = hits;
-            while at > 0 && order[at - 1].0 > near[i] {
+            while at > 0 && order[at - 1].0 > t {
                 order[at] = order[at - 1];
                 at -= 1;
             }
-            order[at] = (near[i], i as u8);
+            order[at] = (t, i as u8);
             hits += 1;
         }
     }
