@@ -5,19 +5,17 @@
 //! targets live here, not in tests.
 
 mod cluster;
+mod rays;
 mod simulate;
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
 
 use anyhow::Result;
-use glam::Vec3;
-use rayon::prelude::*;
 use serde::Serialize;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer, compare};
-use vtfarm_trace::{Ray, SceneBvh, TraceSettings};
+use vtfarm_trace::{SceneBvh, TraceSettings};
 use vtfarm_vertex::{Quality, VertexSettings};
 
 #[derive(clap::Subcommand)]
@@ -29,6 +27,9 @@ pub(crate) enum BenchCommand {
     Simulate(simulate::SimulateArgs),
     /// One worker against two over real QUIC on 127.0.0.1, all in this process.
     Cluster(cluster::ClusterArgs),
+    /// Closest-hit rays per second on fixed camera, random and reflection
+    /// rays (compare with another tracer on the same rays; see README).
+    Rays(rays::RaysArgs),
 }
 
 #[derive(clap::Args)]
@@ -93,6 +94,7 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Table1(args) => table1(args),
         BenchCommand::Simulate(args) => simulate::run(args),
         BenchCommand::Cluster(args) => cluster::run(args),
+        BenchCommand::Rays(args) => rays::run(args),
     }
 }
 
@@ -245,43 +247,21 @@ fn print_table1(t: &Table1) {
     );
 }
 
-/// Closest-hit throughput for camera rays (coherent) and for random rays
-/// from random points in the scene bounds (incoherent).
+/// Closest-hit throughput for camera rays (coherent) and for as many random
+/// rays in the scene bounds (incoherent): `bench rays`' first two sets.
 fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
-    let coherent: Vec<Ray> = (0..camera.height)
-        .flat_map(|y| (0..camera.width).map(move |x| (x, y)))
-        .map(|(x, y)| Ray {
-            origin: camera.eye,
-            direction: camera.pixel_ray(x, y),
-        })
-        .collect();
-    let (lo, hi) = bvh.scene().bounds();
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        // xorshift64*: a fixed, reproducible ray set.
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let incoherent: Vec<Ray> = (0..coherent.len())
-        .map(|_| {
-            let origin = lo + (hi - lo) * Vec3::new(next(), next(), next());
-            let direction =
-                Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::X);
-            Ray { origin, direction }
-        })
-        .collect();
-    let rate = |rays: &[Ray]| {
-        let start = Instant::now();
-        let hits = rays
-            .par_iter()
-            .filter(|r| bvh.closest_hit(r, f32::INFINITY).is_some())
-            .count();
-        std::hint::black_box(hits);
-        rays.len() as f64 / start.elapsed().as_secs_f64()
-    };
-    (rate(&coherent), rate(&incoherent))
+    let pixels = (camera.width * camera.height) as usize;
+    let sets = rays::RaySets::new(
+        bvh,
+        camera,
+        pixels,
+        rays::RayGenerator::DEFAULT_SEED,
+        vtfarm_scene::NONE,
+    );
+    (
+        rays::rays_per_second(&[bvh], &sets.primary, rays::Batch::Single)[0],
+        rays::rays_per_second(&[bvh], &sets.incoherent, rays::Batch::Single)[0],
+    )
 }
 
 /// The built-in cockpit as the farm benchmarks render it: the cover glass as

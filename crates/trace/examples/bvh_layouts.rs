@@ -162,7 +162,7 @@ fn rays() -> Vec<Ray> {
 fn main() {
     let scene = Arc::new(room());
     let rays = rays();
-    let configs: Vec<BvhOptions> = [BvhLayout::Cw, BvhLayout::Binary]
+    let configs: Vec<BvhOptions> = BvhLayout::ALL
         .into_iter()
         .flat_map(|layout| BuildPreset::ALL.map(|preset| BvhOptions { layout, preset }))
         .collect();

@@ -29,10 +29,21 @@ use crate::{Hit, Ray, SurfacePoint};
 /// Which obvhs tree layout a [`SceneBvh`] uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BvhLayout {
-    /// Compressed 8-wide BVH (`obvhs::cwbvh`), traversed with SIMD node tests.
+    /// Compressed 8-wide BVH (`obvhs::cwbvh`), closest hits traversed
+    /// nearest child first (module `wide`). As fast as `CwOctant` within the
+    /// noise of `bench rays` (0.93x to 1.12x, busy 2-core machine); kept as
+    /// the default because it has no 1e-4 lower bound on box entry (obvhs'
+    /// test culls a box that lies entirely closer than that).
     Cw,
+    /// The same tree with obvhs' own (octant-ordered) closest-hit traversal:
+    /// the baseline `bench rays --layout cw-octant` measures against.
+    CwOctant,
     /// Binary BVH (`obvhs::bvh2`) with collapsed multi-triangle leaves.
     Binary,
+}
+
+impl BvhLayout {
+    pub const ALL: [BvhLayout; 3] = [BvhLayout::Cw, BvhLayout::CwOctant, BvhLayout::Binary];
 }
 
 /// Which obvhs build preset (`BvhBuildParams::*_build`) a [`SceneBvh`] uses.
@@ -58,6 +69,18 @@ impl BuildPreset {
         BuildPreset::Slow,
         BuildPreset::VerySlow,
     ];
+
+    /// The preset's command-line name (`very-slow`).
+    pub fn name(self) -> &'static str {
+        match self {
+            BuildPreset::Fastest => "fastest",
+            BuildPreset::VeryFast => "very-fast",
+            BuildPreset::Fast => "fast",
+            BuildPreset::Medium => "medium",
+            BuildPreset::Slow => "slow",
+            BuildPreset::VerySlow => "very-slow",
+        }
+    }
 
     fn params(self) -> BvhBuildParams {
         match self {
@@ -469,10 +492,60 @@ impl SceneBvh {
         let mut unused = RayHit::none();
         match &self.accel {
             Accel::Empty => false,
+            Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
+                crate::wide::closest(bvh, &bvh_ray, test);
+                false
+            }
             Accel::Cw(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
             Accel::Binary(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
         };
         best.hit
+    }
+
+    /// [`SceneBvh::closest_hit`] for a batch of rays, same results. With the
+    /// `Cw` layout, packets of 8 consecutive rays share the tree walk. Not yet
+    /// a win: `bench rays` measured it at 0.5x single rays on the cockpit's
+    /// camera and reflection rays (scalar per-ray box tests; a SIMD-across-rays
+    /// box test is the next step), so the renderer does not call it.
+    pub fn closest_hits(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
+        let Accel::Cw(bvh) = &self.accel else {
+            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+        };
+        if self.options.layout != BvhLayout::Cw {
+            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+        }
+        let mut hits = Vec::with_capacity(rays.len());
+        for packet in rays.chunks(crate::wide::PACKET) {
+            // Rays that can hit nothing sit out; `lane` maps packet slots back.
+            let mut lane = [0usize; crate::wide::PACKET];
+            let mut bvh_rays = Vec::with_capacity(packet.len());
+            let mut dirs = [Vec3A::ZERO; crate::wide::PACKET];
+            for (i, ray) in packet.iter().enumerate() {
+                let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
+                if let Some(r) = bvh_ray(origin, direction, t_max) {
+                    lane[bvh_rays.len()] = i;
+                    dirs[bvh_rays.len()] = direction;
+                    bvh_rays.push(r);
+                }
+            }
+            let mut best: [ClosestSoFar; crate::wide::PACKET] =
+                std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
+            crate::wide::closest_packet(bvh, &bvh_rays, |r, slot| {
+                let tuv = self.prims[slot].intersect(bvh_rays[r].origin, dirs[r]);
+                match tuv {
+                    Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
+                        best[r].hit.map_or(f32::INFINITY, |h| next_up(h.t))
+                    }
+                    _ => f32::INFINITY,
+                }
+            });
+            let start = hits.len();
+            hits.resize(start + packet.len(), None);
+            for (r, best) in best.iter().enumerate().take(bvh_rays.len()) {
+                hits[start + lane[r]] = best.hit;
+            }
+        }
+        hits
     }
 
     /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
@@ -567,7 +640,7 @@ fn build(tris: &[[Vec3; 3]], options: BvhOptions, pad: f32) -> (Accel, Vec<Trian
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut bvh2, params.reinsertion_batch_ratio, None);
     match options.layout {
-        BvhLayout::Cw => {
+        BvhLayout::Cw | BvhLayout::CwOctant => {
             let cw = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
             if cw_depth(&cw) < CW_STACK_LIMIT {
                 let slots = cw.primitive_indices.clone();

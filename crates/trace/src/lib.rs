@@ -15,6 +15,7 @@
 
 mod bvh;
 mod whitted;
+mod wide;
 
 #[cfg(test)]
 mod precision;

@@ -542,7 +542,7 @@ fn bvh_closest_and_any_hit_equal_brute_force_for_every_layout() {
             .all(|h| !degenerate.contains(&h.triangle))
     );
 
-    for layout in [BvhLayout::Cw, BvhLayout::Binary] {
+    for layout in BvhLayout::ALL {
         for preset in BuildPreset::ALL {
             let bvh = SceneBvh::with_options(scene.clone(), BvhOptions { layout, preset });
             for ((ray, t_max), want) in rays.iter().zip(&expected) {
@@ -556,6 +556,72 @@ fn bvh_closest_and_any_hit_equal_brute_force_for_every_layout() {
                     want.is_some(),
                     "{layout:?} {preset:?} {ray:?}"
                 );
+            }
+        }
+    }
+}
+
+#[test]
+fn packets_return_the_single_ray_hits_bit_for_bit() {
+    let bits =
+        |h: &Option<Hit>| h.map(|h| (h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits()));
+    for seed in [3, 7] {
+        let scene = Arc::new(soup(seed));
+        let mut rng = XorShift::new(seed + 100);
+        // Camera rays in row order (coherent), then random rays (incoherent),
+        // then rays no query can hit with, mixed into the packets.
+        let eye = Vec3::new(0.1, -0.2, 2.5);
+        let mut rays: Vec<Ray> = (0..40 * 30)
+            .map(|i| {
+                let p = Vec3::new(
+                    -1.2 + (i % 40) as f32 * 0.06,
+                    0.9 - (i / 40) as f32 * 0.06,
+                    0.0,
+                );
+                Ray {
+                    origin: eye,
+                    direction: (p - eye).normalize(),
+                }
+            })
+            .collect();
+        rays.extend((0..1500).map(|_| Ray {
+            origin: rng.vec3(-2.0, 2.0),
+            direction: rng.direction(),
+        }));
+        for i in [5, 13, 1300, 2001] {
+            rays.insert(
+                i,
+                Ray {
+                    origin: eye,
+                    direction: Vec3::ZERO,
+                },
+            );
+            rays.insert(
+                i + 3,
+                Ray {
+                    origin: Vec3::NAN,
+                    direction: Vec3::X,
+                },
+            );
+        }
+        for layout in BvhLayout::ALL {
+            for preset in [BuildPreset::Fastest, BuildPreset::VerySlow] {
+                let bvh = SceneBvh::with_options(scene.clone(), BvhOptions { layout, preset });
+                for t_max in [f32::INFINITY, 2.4] {
+                    let single: Vec<Option<Hit>> =
+                        rays.iter().map(|r| bvh.closest_hit(r, t_max)).collect();
+                    let packets = bvh.closest_hits(&rays, t_max);
+                    assert_eq!(packets.len(), rays.len());
+                    assert!(single.iter().flatten().count() > rays.len() / 10);
+                    for (i, (p, s)) in packets.iter().zip(&single).enumerate() {
+                        assert_eq!(
+                            bits(p),
+                            bits(s),
+                            "{layout:?} {preset:?} ray {i} {:?}",
+                            rays[i]
+                        );
+                    }
+                }
             }
         }
     }
@@ -845,7 +911,7 @@ fn piles_of_identical_triangles_are_traversed_completely() {
             }
         })
         .collect();
-    for layout in [BvhLayout::Cw, BvhLayout::Binary] {
+    for layout in BvhLayout::ALL {
         let bvh = SceneBvh::with_options(
             scene.clone(),
             BvhOptions {
