@@ -10,7 +10,7 @@ use tracing::info;
 use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
 use vtfarm_scheduler::SchedulerConfig;
 
-use crate::{driver::spawn_master, server};
+use crate::{driver::spawn_master, http, server};
 
 /// Runs the master: accepts workers and jobs.
 #[derive(clap::Args, Debug, Clone)]
@@ -22,6 +22,10 @@ pub struct MasterArgs {
     /// Address to listen on (default: all interfaces, the cluster file's port).
     #[arg(long)]
     pub listen: Option<SocketAddr>,
+    /// Address of the dashboard, status API and `/metrics`. Peers other
+    /// than loopback must send the cluster token as a bearer token.
+    #[arg(long, default_value = "127.0.0.1:7879")]
+    pub http: SocketAddr,
 }
 
 /// Creates a cluster: the master's key and certificate, and `cluster.toml`.
@@ -95,6 +99,10 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     info!(address = %endpoint.local_addr()?, "master listening");
     println!("master listening on {}", endpoint.local_addr()?);
     let (handle, _task) = spawn_master(SchedulerConfig::default());
+    let http = http::bind(args.http).await?;
+    info!(address = %http.local_addr()?, "dashboard listening");
+    println!("dashboard on http://{}/", http.local_addr()?);
+    tokio::spawn(http::serve(http, handle.clone(), cluster.token.clone()));
     server::serve(
         endpoint,
         HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"),

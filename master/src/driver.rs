@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
+use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::debug;
@@ -34,6 +35,8 @@ enum Input {
     Disconnected {
         conn: ConnId,
     },
+    /// Read the core's state (for the HTTP view); changes nothing.
+    Inspect(Box<dyn FnOnce(&MasterCore) + Send>),
 }
 
 /// A running master: attach links to it.
@@ -41,6 +44,7 @@ enum Input {
 pub struct MasterHandle {
     inputs: UnboundedSender<Input>,
     next_conn: Arc<AtomicU64>,
+    changes: watch::Receiver<u64>,
 }
 
 impl MasterHandle {
@@ -71,16 +75,38 @@ impl MasterHandle {
         });
         conn
     }
+
+    /// Runs `read` on the core between two inputs and returns its answer;
+    /// `None` once the master has stopped.
+    pub async fn inspect<R: Send + 'static>(
+        &self,
+        read: impl FnOnce(&MasterCore) -> R + Send + 'static,
+    ) -> Option<R> {
+        let (tx, rx) = oneshot::channel();
+        let read = Box::new(move |core: &MasterCore| {
+            let _ = tx.send(read(core));
+        });
+        self.inputs.send(Input::Inspect(read)).ok()?;
+        rx.await.ok()
+    }
+
+    /// Ticks after every input the core handled (a connection, a message,
+    /// a deadline): watchers re-read the state when it moves.
+    pub fn changes(&self) -> watch::Receiver<u64> {
+        self.changes.clone()
+    }
 }
 
 /// Starts a master task.
 pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
     let (inputs, rx) = unbounded_channel();
+    let (changed, changes) = watch::channel(0);
     let handle = MasterHandle {
         inputs,
         next_conn: Arc::new(AtomicU64::new(1)),
+        changes,
     };
-    let task = tokio::spawn(run(MasterCore::new(config), rx));
+    let task = tokio::spawn(run(MasterCore::new(config), rx, changed));
     (handle, task)
 }
 
@@ -89,7 +115,11 @@ struct Connection {
     closer: Option<Closer>,
 }
 
-async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
+async fn run(
+    mut core: MasterCore,
+    mut inputs: UnboundedReceiver<Input>,
+    changed: watch::Sender<u64>,
+) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     loop {
@@ -101,6 +131,11 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
         tokio::select! {
             input = inputs.recv() => {
                 let Some(input) = input else { return };
+                if let Input::Inspect(read) = input {
+                    // A read: nothing moved, so no tick for the watchers.
+                    read(&core);
+                    continue;
+                }
                 let now = start.elapsed();
                 // Inside a block so the whole frame's CPU work (rasterizing,
                 // compositing) does not starve the I/O tasks.
@@ -119,6 +154,7 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                             core.disconnected(now, conn);
                         }
                     }
+                    Input::Inspect(read) => read(&core),
                 });
             }
             _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),
@@ -141,5 +177,6 @@ async fn run(mut core: MasterCore, mut inputs: UnboundedReceiver<Input>) {
                 }
             }
         }
+        changed.send_modify(|tick| *tick += 1);
     }
 }

@@ -6,6 +6,9 @@
 //! - [`core`]: the logic, without sockets or clock.
 //! - [`driver`]: the async task around the core; links in, messages out.
 //! - [`server`]: the QUIC endpoint and handshake.
+//! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
+//!   core's state through the driver, owns none.
+//! - [`telemetry`]: the core's counters and kept frames for [`http`].
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
@@ -14,8 +17,10 @@ pub mod cli;
 pub mod core;
 pub mod driver;
 pub mod embedded;
+pub mod http;
 pub mod server;
 pub mod submit;
+pub mod telemetry;
 
 pub use core::{ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master};
