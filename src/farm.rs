@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
-use vtfarm_master::{FinishedFrame, JobEvent, JobOptions, LocalFarm, run_job, wire_job};
+use vtfarm_master::{
+    FinishedFrame, JobEvent, JobOptions, LocalFarm, RemoteJob, run_job, run_remote_job, wire_job,
+};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
@@ -30,6 +32,11 @@ pub(crate) struct SubmitArgs {
     /// Output directory for frame_NNNN.png and stats.json.
     #[arg(short, long)]
     output: PathBuf,
+    /// Follow job JOB that the master already has (submitted from another
+    /// shell, or before this one lost the master) instead of submitting
+    /// the job file again; the job file still names the scene and outputs.
+    #[arg(long, value_name = "JOB")]
+    attach: Option<u64>,
     /// Also write each frame's auxiliary outputs (mask, reflected and
     /// transmitted components, reflected-object map) into OUTPUT/frame_NNNN/.
     #[arg(long)]
@@ -97,8 +104,10 @@ pub(crate) fn render_embedded(
                 bar.set_position(done.into());
             }
         })
-        .await?;
-        frames
+        .await;
+        // Every task ends before the runtime does (see `LocalFarm`).
+        farm.shutdown().await;
+        frames?
             .into_iter()
             .next()
             .context("the master returned no frame")
@@ -128,24 +137,30 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     crate::shared::warn_unsupported_reflectors(job.method, &scene, &reflectors);
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
-    let options = client_options(&args.cluster, &args.master)?;
+    let client = client_options(&args.cluster, &args.master)?;
     let name = args
         .job
         .file_name()
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
-    let args_aux = args.aux;
+    let (args_aux, attach) = (args.aux, args.attach);
     let frames = runtime()?.block_on(async move {
-        let mut conn = connect(&options, Role::Submitter).await?;
         let data = SceneData::from_scene(&scene);
         let options = JobOptions {
             method: job.method,
             aux: args_aux,
         };
         let wire = wire_job(&name, &data, &setups, &reflectors, options);
+        let start = match attach {
+            Some(job) => RemoteJob::Attach { job },
+            None => RemoteJob::Submit {
+                job: wire,
+                scene: &data,
+            },
+        };
         let bar =
             crate::shared::progress_bar(reflectors.len() as u64, "reflector triangles", "frame");
-        let result = run_job(&mut conn.link, wire, &data, |event| match event {
+        let result = run_remote_job(&client, start, |event| match event {
             JobEvent::Accepted { job, frames } => {
                 bar.println(format!("job {job} accepted: {frames} frame(s)"))
             }
@@ -175,8 +190,6 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         })
         .await;
         bar.finish_and_clear();
-        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
-        conn.endpoint.wait_idle().await;
         anyhow::Ok(result?)
     })?;
     let stats: Vec<&FrameStats> = frames.iter().map(|f| &f.stats).collect();

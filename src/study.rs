@@ -43,7 +43,9 @@ pub(crate) fn study(args: StudyArgs) -> Result<()> {
     let report = crate::shared::runtime()?.block_on(async {
         let farm = LocalFarm::start(args.local_workers, SchedulerConfig::default());
         let mut link = farm.submitter();
-        render_study(&mut link, &plan, &args.output).await
+        let report = render_study(&mut link, &plan, &args.output).await;
+        farm.shutdown().await;
+        report
     })?;
     print_report(&report, &args.output);
     Ok(())

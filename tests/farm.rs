@@ -12,8 +12,8 @@ use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::{
-    FinishedFrame, JobError, JobOptions, LocalFarm, MasterHandle, run_job, server, spawn_master,
-    wire_job,
+    FinishedFrame, JobError, JobOptions, LocalFarm, MasterHandle, RemoteJob, run_job,
+    run_remote_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
@@ -26,7 +26,7 @@ use vtfarm_scene::{Camera, Scene};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
-use vtfarm_worker::{Engine, WorkerConfig, run_worker};
+use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// The farm tests measure load balance: run them one at a time, so that they
 /// do not compete for the machine's cores.
@@ -147,6 +147,7 @@ impl Cluster {
                 1,
                 Engine::new(Some(cache)),
                 WorkerConfig { slowdown },
+                DrainSignal::never(),
             )
             .await;
         })
@@ -177,7 +178,7 @@ impl Cluster {
     async fn submit(&self, job: &Job) -> Result<Vec<FinishedFrame>, JobError> {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
         let data = SceneData::from_scene(&job.scene);
-        run_job(
+        let run = run_job(
             &mut conn.link,
             // Components too: the glare study measures them.
             wire_job(
@@ -192,18 +193,23 @@ impl Cluster {
             ),
             &data,
             |_| {},
-        )
-        .await
+        );
+        (tokio::time::timeout(BOUND, run).await).expect("the job finishes within the bound")
     }
 
     async fn status(&self) -> StatusReply {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
         conn.link.tx.send(Message::StatusRequest).unwrap();
-        loop {
-            if let Some(Message::StatusReply(reply)) = conn.link.rx.recv().await {
-                return reply;
+        let reply = async {
+            loop {
+                match conn.link.rx.recv().await {
+                    Some(Message::StatusReply(reply)) => return reply,
+                    Some(_) => {}
+                    None => panic!("the master closed the status connection"),
+                }
             }
-        }
+        };
+        (tokio::time::timeout(BOUND, reply).await).expect("a status reply within the bound")
     }
 
     /// Waits until `count` workers are connected and asking for work.
@@ -249,8 +255,10 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
         components == &reference_frames(&job)[0],
         "reflected, transmitted and object maps equal too"
     );
+    // Which worker traced how much depends on timing (a loaded machine may
+    // let one do it all); the split is checked deterministically in
+    // master/tests/faults.rs. Every package is counted once, whoever ran it.
     let workers = &frames[0].stats.workers;
-    assert_eq!(workers.len(), 2, "both workers did work: {workers:?}");
     assert!(
         workers.iter().all(|w| w.packages > 0 && w.triangles > 0),
         "{workers:?}"
@@ -278,10 +286,17 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
         ),
         &data,
         |_| {},
-    )
-    .await
-    .unwrap();
+    );
+    let embedded = (tokio::time::timeout(BOUND, embedded).await)
+        .expect("the embedded job finishes within the bound")
+        .unwrap();
     assert_same_images(&embedded, &reference);
+    let shut_down = tokio::time::timeout(Duration::from_secs(60), farm.shutdown());
+    assert_eq!(
+        shut_down.await.expect("the embedded farm shuts down"),
+        0,
+        "no task of the embedded farm panicked"
+    );
 }
 
 /// The single-process frame of a per-reflector method: each reflector
@@ -377,19 +392,27 @@ fn files_under(dir: &std::path::Path) -> std::collections::BTreeMap<PathBuf, Vec
 
 /// Runs the `vtfarm` binary off the async runtime and asserts success.
 async fn vtfarm_cli(args: Vec<String>) {
-    let out = tokio::task::spawn_blocking(move || {
+    let (status, stderr) = run_vtfarm(&args, BOUND).await;
+    assert!(status.success(), "{stderr}");
+}
+
+/// Runs the `vtfarm` binary, bounded; returns its exit status and stderr.
+async fn run_vtfarm(args: &[String], bound: Duration) -> (std::process::ExitStatus, String) {
+    use std::io::{Read, Seek};
+    // A file, not a pipe: a chatty child cannot fill it and block.
+    let mut stderr = tempfile::tempfile().unwrap();
+    let mut child = ChildGuard(
         Command::new(env!("CARGO_BIN_EXE_vtfarm"))
-            .args(&args)
-            .output()
-            .expect("the vtfarm binary runs")
-    })
-    .await
-    .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+            .args(args)
+            .stderr(stderr.try_clone().unwrap())
+            .spawn()
+            .expect("the vtfarm binary runs"),
     );
+    let status = child.exit_status(bound).await;
+    let mut text = String::new();
+    stderr.rewind().unwrap();
+    stderr.read_to_string(&mut text).unwrap();
+    (status, text)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
@@ -466,98 +489,181 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     }
 }
 
-/// The share of a frame's triangles traced by the worker whose name starts with `name`.
-fn share(stats: &vtfarm_proto::FrameStats, name: &str) -> f64 {
-    let total: u32 = stats.workers.iter().map(|w| w.triangles).sum();
-    let mine: u32 = stats
-        .workers
-        .iter()
-        .filter(|w| w.name.starts_with(name))
-        .map(|w| w.triangles)
-        .sum();
-    f64::from(mine) / f64::from(total.max(1))
-}
+/// A child process, killed when dropped (a failing test leaves no orphans).
+struct ChildGuard(Child);
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn a_slowed_worker_gets_a_share_that_follows_its_speed() {
-    let _serial = SERIAL.lock().await;
-    let job = job_with_glass(4, 1280, 720, 48);
-    let cluster = Cluster::start(SchedulerConfig::default());
-    // Separate processes with one thread each, so that the speeds do not
-    // depend on sharing one thread pool; the slow one takes three times as long.
-    let mut fast = cluster.worker_process("fast", 1.0);
-    let mut slow = cluster.worker_process("slow", 3.0);
-    cluster.wait_for_workers(2).await;
-    let frames = cluster.submit(&job).await.unwrap();
-    let _ = (fast.kill(), slow.kill(), fast.wait(), slow.wait());
-    for f in &frames {
-        eprintln!(
-            "frame {}: imbalance {:.1}%, slow share {:.2}, {:?}",
-            f.frame,
-            f.stats.imbalance * 100.0,
-            share(&f.stats, "slow"),
-            f.stats.workers
-        );
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
-    // After the first frame (uniform cost estimates, unmeasured workers), a
-    // frame within the next three is balanced: busy times within 10% and the
-    // slow worker's share well below the fast one's (nominally a quarter, a
-    // third of the speed; other load on the machine shifts the effective
-    // speeds). One frame, not every frame: CI's two cores also run the master
-    // and this test.
-    let balanced = frames[1..].iter().map(|f| &f.stats).find(|s| {
-        s.workers.len() == 2 && s.imbalance < 0.10 && (0.05..=0.45).contains(&share(s, "slow"))
-    });
-    assert!(balanced.is_some(), "no balanced frame among frames 1 to 3");
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn a_worker_killed_mid_frame_loses_its_packages_to_the_others() {
-    let _serial = SERIAL.lock().await;
-    let job = job(1, 320, 180);
-    let reference = reference(&job);
-    // No straggler cut: the survivor must get the package back through the lost worker, not a duplicate.
+impl ChildGuard {
+    /// Waits (bounded) for the process to exit.
+    async fn exit_status(&mut self, bound: Duration) -> std::process::ExitStatus {
+        let deadline = tokio::time::Instant::now() + bound;
+        loop {
+            if let Some(status) = self.0.try_wait().unwrap() {
+                return status;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "the child did not exit within {bound:?}"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+}
+
+/// A bound for waits on the farm: generous for a loaded machine, but a
+/// failing test ends.
+const BOUND: Duration = Duration::from_secs(120);
+
+impl Cluster {
+    /// Waits (bounded) until the named worker holds a package, per `vtfarm status`.
+    async fn wait_until_running(&self, name: &str) {
+        let deadline = tokio::time::Instant::now() + BOUND;
+        while tokio::time::Instant::now() < deadline {
+            let status = self.status().await;
+            if (status.workers.iter()).any(|w| w.name == name && w.packages_running > 0) {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        panic!("{name} never held a package");
+    }
+
+    /// Waits (bounded) until the master lists `count` workers.
+    async fn wait_for_worker_count(&self, count: usize) {
+        let deadline = tokio::time::Instant::now() + BOUND;
+        while tokio::time::Instant::now() < deadline {
+            if self.status().await.workers.len() == count {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        panic!("the master does not list {count} workers");
+    }
+}
+
+type Submission = JoinHandle<Result<Vec<FinishedFrame>, JobError>>;
+
+/// Submits `job` in a task (so that the test can act while it runs).
+fn submit_in_background(cluster: &Arc<Cluster>, job: &Job) -> Submission {
+    let cluster = cluster.clone();
+    let job = Job {
+        scene: job.scene.clone(),
+        reflectors: job.reflectors.clone(),
+        frames: job.frames.clone(),
+    };
+    tokio::spawn(async move { cluster.submit(&job).await })
+}
+
+// The load balance under a slowed worker and a kill at every moment of a
+// frame are checked deterministically in master/tests/faults.rs; these two
+// check the real processes, triggered by protocol events, every wait bounded.
+
+/// A cluster whose only worker, a slowed child process named `name`, holds a
+/// package of `job` (the trigger is `vtfarm status`, not a delay). Straggler
+/// copies are off: the package must come back through the worker's loss.
+async fn a_lone_worker_holding_a_package(
+    job: &Job,
+    heartbeat_timeout: Duration,
+    name: &str,
+    slowdown: f64,
+) -> (Arc<Cluster>, ChildGuard, Submission) {
     let config = SchedulerConfig {
-        heartbeat_timeout: Duration::from_millis(1500),
+        heartbeat_timeout,
         straggler: None,
         ..SchedulerConfig::default()
     };
     let cluster = Arc::new(Cluster::start(config));
+    let worker = ChildGuard(cluster.worker_process(name, slowdown));
+    cluster.wait_for_workers(1).await;
+    let submit = submit_in_background(&cluster, job);
+    cluster.wait_until_running(name).await;
+    (cluster, worker, submit)
+}
+
+/// The frames of a submission, bounded.
+async fn finished(submit: Submission) -> Vec<FinishedFrame> {
+    (tokio::time::timeout(BOUND, submit).await)
+        .expect("the job finishes")
+        .unwrap()
+        .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_killed_worker_process_loses_its_package_to_a_newcomer() {
+    let _serial = SERIAL.lock().await;
+    let job = job(1, 160, 90);
+    let reference = reference(&job);
+    let (cluster, mut doomed, submit) =
+        a_lone_worker_holding_a_package(&job, Duration::from_millis(1500), "doomed", 50.0).await;
+    doomed.0.kill().unwrap();
+    doomed.exit_status(BOUND).await;
+    // Only the newcomer can finish the frame, and only with the lost package.
     let _survivor = cluster.worker("survivor", 1.0);
-    let mut doomed = cluster.worker_process("doomed", 50.0);
-    cluster.wait_for_workers(2).await;
-    let submit = {
-        let cluster = cluster.clone();
-        let job = Job {
-            scene: job.scene.clone(),
-            reflectors: job.reflectors.clone(),
-            frames: job.frames.clone(),
-        };
-        tokio::spawn(async move { cluster.submit(&job).await })
-    };
-    // Kill the slowed child while it holds a package.
-    let mut killed = false;
-    for _ in 0..400 {
-        let status = cluster.status().await;
-        if status
-            .workers
-            .iter()
-            .any(|w| w.name == "doomed" && w.packages_running > 0)
-        {
-            doomed.kill().unwrap();
-            killed = true;
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-    let _ = doomed.wait();
-    assert!(killed, "the doomed worker never got a package");
-    let frames = submit.await.unwrap().unwrap();
+    let frames = finished(submit).await;
     assert_same_images(&frames, &reference);
     assert!(
         frames[0].stats.requeued >= 1,
         "its package went back to the queue: {:?}",
         frames[0].stats
+    );
+}
+
+#[cfg(unix)]
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
+    let _serial = SERIAL.lock().await;
+    let job = job(1, 160, 90);
+    let reference = reference(&job);
+    // A heartbeat timeout far beyond the test's bounds: the master can only
+    // drop the worker early because it said goodbye.
+    let (cluster, mut leaving, submit) =
+        a_lone_worker_holding_a_package(&job, Duration::from_secs(3600), "leaving", 5.0).await;
+    let sent = Command::new("kill")
+        .args(["-TERM", &leaving.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = leaving.exit_status(BOUND).await;
+    assert!(status.success(), "a drained worker exits cleanly: {status}");
+    cluster.wait_for_worker_count(0).await;
+    let _newcomer = cluster.worker("newcomer", 1.0);
+    let frames = finished(submit).await;
+    assert_same_images(&frames, &reference);
+    let stats = &frames[0].stats;
+    let leaving_packages: u32 = (stats.workers.iter())
+        .filter(|w| w.name.starts_with("leaving"))
+        .map(|w| w.packages)
+        .sum();
+    assert!(
+        leaving_packages >= 1 && stats.requeued == 0,
+        "the package it held was finished and counted, not requeued: {stats:?}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn status_without_a_master_fails_fast_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
+    // A port nobody listens on (bound, then closed).
+    let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let address = free.local_addr().unwrap();
+    drop(free);
+    let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+    let file = dir.path().join("cluster.toml");
+    cluster.save(&file).unwrap();
+    let args = ["status", "--cluster", file.to_str().unwrap()].map(String::from);
+    // Before: the QUIC idle timeout (30 s) passed first.
+    let (status, stderr) = run_vtfarm(&args, Duration::from_secs(20)).await;
+    assert!(!status.success());
+    assert!(
+        stderr.contains(&address.to_string()) && stderr.contains("timed out"),
+        "{stderr}"
     );
 }
 
@@ -652,4 +758,99 @@ async fn a_second_job_on_the_same_scene_transfers_no_scene_bytes() {
         after_first,
         "the second job sends no scene bytes"
     );
+}
+
+/// A master as a child process of the `vtfarm` binary on `listen`.
+fn master_process(cluster_file: &std::path::Path, listen: std::net::SocketAddr) -> ChildGuard {
+    ChildGuard(
+        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+            .args(["master", "--cluster", cluster_file.to_str().unwrap()])
+            .args(["--listen", &listen.to_string()])
+            .spawn()
+            .expect("the vtfarm binary starts"),
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follows() {
+    let _serial = SERIAL.lock().await;
+    let job = job(4, 160, 90);
+    let reference = reference(&job);
+    let dir = tempfile::tempdir().unwrap();
+    let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
+    let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let address = free.local_addr().unwrap();
+    drop(free);
+    let config = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+    let file = dir.path().join("cluster.toml");
+    config.save(&file).unwrap();
+    let options = ClientOptions {
+        master: config.master.clone(),
+        token: config.token.clone(),
+        fingerprint: config.fingerprint.clone(),
+    };
+    let mut master = master_process(&file, address);
+    let workers: Vec<JoinHandle<_>> = ["w1", "w2"]
+        .into_iter()
+        .map(|name| {
+            let (options, cache) = (options.clone(), dir.path().join(name));
+            tokio::spawn(run_worker(
+                options,
+                name.into(),
+                1,
+                Engine::new(Some(cache)),
+                WorkerConfig { slowdown: 4.0 },
+                DrainSignal::never(),
+            ))
+        })
+        .collect();
+    let (frame_tx, mut frame_rx) = tokio::sync::mpsc::unbounded_channel();
+    let submit = {
+        let data = SceneData::from_scene(&job.scene);
+        let job_options = JobOptions {
+            method: MethodKind::VertexTracing,
+            aux: false,
+        };
+        let wire = wire_job("restart", &data, &job.frames, &job.reflectors, job_options);
+        tokio::spawn(async move {
+            // The master may still be starting: try until it answers.
+            loop {
+                let start = RemoteJob::Submit {
+                    job: wire.clone(),
+                    scene: &data,
+                };
+                let outcome = run_remote_job(&options, start, |event| {
+                    if let vtfarm_master::JobEvent::FrameDone(f) = event {
+                        let _ = frame_tx.send(f.frame);
+                    }
+                })
+                .await;
+                match outcome {
+                    Err(JobError::Connect(_)) => {
+                        tokio::time::sleep(Duration::from_millis(100)).await
+                    }
+                    other => return other,
+                }
+            }
+        })
+    };
+    // The trigger: the first finished frame (three remain).
+    let first = tokio::time::timeout(BOUND, frame_rx.recv()).await;
+    assert_eq!(first.expect("a first frame"), Some(0));
+    master.0.kill().unwrap();
+    master.exit_status(BOUND).await;
+    let _restarted = master_process(&file, address);
+    let frames = (tokio::time::timeout(BOUND, submit).await)
+        .expect("the job finishes after the restart")
+        .unwrap()
+        .unwrap();
+    assert_same_images(&frames, &reference);
+    let journal = std::fs::read_dir(dir.path().join("jobs")).unwrap().count();
+    assert_eq!(
+        journal, 2,
+        "the completed job stays journaled a while (with the scenes)"
+    );
+    for w in workers {
+        w.abort();
+    }
 }

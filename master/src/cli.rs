@@ -10,7 +10,8 @@ use tracing::info;
 use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
 use vtfarm_scheduler::SchedulerConfig;
 
-use crate::{driver::spawn_master, http, server};
+use crate::journal::Journal;
+use crate::{driver::spawn_persistent_master, http, server};
 
 /// Runs the master: accepts workers and jobs.
 #[derive(clap::Args, Debug, Clone)]
@@ -98,7 +99,10 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     let endpoint = server::bind(listen, &identity)?;
     info!(address = %endpoint.local_addr()?, "master listening");
     println!("master listening on {}", endpoint.local_addr()?);
-    let (handle, _task) = spawn_master(SchedulerConfig::default());
+    // Jobs and finished frames are journaled beside the key: a restarted
+    // master resumes them.
+    let journal = Journal::open(state_dir)?;
+    let (handle, _task) = spawn_persistent_master(SchedulerConfig::default(), journal);
     let http = http::bind(args.http).await?;
     info!(address = %http.local_addr()?, "dashboard listening");
     println!("dashboard on http://{}/", http.local_addr()?);

@@ -28,6 +28,7 @@ use vtfarm_scheduler::{
 };
 use vtfarm_vertex::{FrameImage, PackageStats};
 
+use crate::journal::{Record, StoredJob};
 use crate::telemetry::Telemetry;
 
 /// A connection, numbered by the driver.
@@ -52,11 +53,32 @@ pub enum Output {
     Send(ConnId, Box<Message>),
     /// Drop the connection, logging why.
     Close(ConnId, String),
+    /// Keep this in the job journal (only when the core is persistent).
+    Persist(Record),
+    /// Send `conn` the journal's `FrameDone`s of `job`, frames `frames`, in
+    /// order, before anything that follows.
+    Replay {
+        conn: ConnId,
+        job: u64,
+        frames: std::ops::Range<u32>,
+    },
 }
+
+/// How long a persistent master keeps a job whose submitter is gone (and a
+/// completed job's frames) for a submitter to re-attach.
+pub const ATTACH_GRACE: Duration = Duration::from_secs(120);
 
 struct Job {
     name: String,
-    submitter: ConnId,
+    /// `None` while no submitter is attached (lost, or not back after a restart).
+    submitter: Option<ConnId>,
+    /// When the submitter went away: past [`ATTACH_GRACE`] the job is cancelled.
+    orphaned_at: Option<Duration>,
+    /// Frames before this one were finished before a restart: they are
+    /// journaled, and the scheduler's empty stand-ins for them are skipped.
+    resume_from: u32,
+    /// Frames finished so far (resumed ones included).
+    frames_done: u32,
     scene: Arc<Scene>,
     scene_hash: SceneHash,
     reflectors: Vec<u32>,
@@ -123,6 +145,14 @@ pub struct MasterCore {
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
     telemetry: Telemetry,
+    /// Whether jobs are journaled and outlive their submitter for [`ATTACH_GRACE`].
+    persistent: bool,
+    /// Completed jobs still kept for re-attaching: frame count and completion time.
+    completed: BTreeMap<u64, (u32, Duration)>,
+    /// The time of the input being handled.
+    now: Duration,
+    /// Workers that left during the running frame, for its stats' names.
+    departed: BTreeMap<ConnId, Peer>,
 }
 
 impl MasterCore {
@@ -143,7 +173,42 @@ impl MasterCore {
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
             telemetry: Telemetry::default(),
+            persistent: false,
+            completed: BTreeMap::new(),
+            now: Duration::ZERO,
+            departed: BTreeMap::new(),
         }
+    }
+
+    /// A core that journals its jobs (see `journal.rs`) and keeps a job
+    /// whose submitter went away for [`ATTACH_GRACE`].
+    pub fn persistent(config: SchedulerConfig) -> Self {
+        MasterCore {
+            persistent: true,
+            ..MasterCore::new(config)
+        }
+    }
+
+    /// Resumes a journaled job (at start, before any connection): it runs
+    /// from its first unfinished frame, or waits complete for its submitter.
+    pub fn restore(&mut self, now: Duration, stored: StoredJob) {
+        self.now = now;
+        self.next_job = self.next_job.max(stored.id + 1);
+        if stored.complete {
+            self.completed.insert(stored.id, (stored.frames_done, now));
+            return;
+        }
+        if let Err(e) = self.queue_job(now, stored.id, stored.job, None, stored.frames_done) {
+            warn!(job = stored.id, "cannot resume a journaled job: {e}");
+            self.persist(Record::JobForgotten { id: stored.id });
+        } else {
+            info!(
+                job = stored.id,
+                from_frame = stored.frames_done,
+                "job resumed from the journal"
+            );
+        }
+        self.pump();
     }
 
     /// The next thing to do, if any.
@@ -153,16 +218,45 @@ impl MasterCore {
 
     /// When [`MasterCore::handle_timeout`] should run next.
     pub fn poll_timeout(&self) -> Option<Duration> {
-        self.scheduler.poll_timeout()
+        let orphans = (self.jobs.values()).filter_map(|j| j.orphaned_at);
+        let completed = self.completed.values().map(|&(_, at)| at);
+        let grace_ends = orphans.chain(completed).min().map(|t| t + ATTACH_GRACE);
+        [self.scheduler.poll_timeout(), grace_ends]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     pub fn handle_timeout(&mut self, now: Duration) {
+        self.now = now;
         self.scheduler.handle_timeout(now);
+        let expired = |at: Duration| now >= at + ATTACH_GRACE;
+        let abandoned: Vec<u64> = (self.jobs.iter())
+            .filter(|(_, j)| j.orphaned_at.is_some_and(expired))
+            .map(|(&id, _)| id)
+            .collect();
+        for job in abandoned {
+            info!(job, "no submitter re-attached, cancelling the job");
+            if self.scheduler.cancel_job(now, JobId(job)).is_err() {
+                // Not in the scheduler (any more): drop it here too.
+                self.forget_job(job);
+                self.persist(Record::JobForgotten { id: job });
+            }
+        }
+        let delivered: Vec<u64> = (self.completed.iter())
+            .filter(|(_, (_, at))| expired(*at))
+            .map(|(&id, _)| id)
+            .collect();
+        for id in delivered {
+            self.completed.remove(&id);
+            self.persist(Record::JobForgotten { id });
+        }
         self.pump();
     }
 
     /// A connection passed its handshake.
     pub fn connected(&mut self, now: Duration, conn: ConnId, peer: Peer) {
+        self.now = now;
         if let Peer::Worker {
             name,
             threads,
@@ -197,23 +291,34 @@ impl MasterCore {
 
     /// A connection went away (closed, failed, or dropped by us).
     pub fn disconnected(&mut self, now: Duration, conn: ConnId) {
+        self.now = now;
         match self.peers.remove(&conn) {
-            Some(Peer::Worker { name, .. }) => {
-                info!(worker = %name, "worker left");
+            Some(peer @ Peer::Worker { .. }) => {
+                info!(worker = %peer_name(conn, Some(&peer)), "worker left");
                 let _ = self.scheduler.worker_left(now, WorkerId(conn));
+                // Its packages of the running frame still count in the frame's stats.
+                self.departed.insert(conn, peer);
             }
             Some(Peer::Submitter { .. }) => {
                 self.awaiting_scene.remove(&conn);
-                // Nobody is left to receive the images: stop its jobs.
                 let orphaned: Vec<u64> = self
                     .jobs
                     .iter()
-                    .filter(|(_, j)| j.submitter == conn)
+                    .filter(|(_, j)| j.submitter == Some(conn))
                     .map(|(&id, _)| id)
                     .collect();
                 for job in orphaned {
-                    info!(job, "submitter left, cancelling its job");
-                    let _ = self.scheduler.cancel_job(now, JobId(job));
+                    if self.persistent {
+                        // It may come back (or attach from elsewhere).
+                        info!(job, "submitter left, keeping its job for {ATTACH_GRACE:?}");
+                        let j = self.jobs.get_mut(&job).expect("listed above");
+                        j.submitter = None;
+                        j.orphaned_at = Some(now);
+                    } else {
+                        // Nobody is left to receive the images: stop its jobs.
+                        info!(job, "submitter left, cancelling its job");
+                        let _ = self.scheduler.cancel_job(now, JobId(job));
+                    }
                 }
             }
             None => {}
@@ -223,6 +328,7 @@ impl MasterCore {
 
     /// A message arrived on a connection.
     pub fn message(&mut self, now: Duration, conn: ConnId, message: Message) {
+        self.now = now;
         match self.peers.get(&conn) {
             Some(Peer::Worker { .. }) => self.worker_message(now, conn, message),
             Some(Peer::Submitter { .. }) => self.submitter_message(now, conn, message),
@@ -349,7 +455,7 @@ impl MasterCore {
             total: job.reflectors.len() as u32,
         };
         let submitter = job.submitter;
-        self.send(submitter, progress);
+        self.send_to(submitter, progress);
     }
 
     fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
@@ -360,6 +466,7 @@ impl MasterCore {
                 self.send(conn, Message::StatusReply(reply));
             }
             Message::SubmitJob { job } => self.submit(now, conn, job),
+            Message::AttachJob { job, from_frame } => self.attach(conn, job, from_frame),
             Message::SceneData(data) => match self.awaiting_scene.remove(&conn) {
                 Some(mut job) if job.scene == JobScene::Hash(data.hash) => {
                     job.scene = JobScene::Data(data);
@@ -380,63 +487,93 @@ impl MasterCore {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
         };
-        // The scene's bytes move into the cache; the job keeps its hash.
-        let scene = match std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash)) {
-            JobScene::Data(data) => match data.to_scene() {
-                Ok(scene) => (self.scenes.entry(scene_hash))
-                    .or_insert_with(|| (Arc::new(scene), Arc::new(data)))
-                    .0
-                    .clone(),
-                Err(e) => return self.refuse_job(conn, format!("bad scene: {e}")),
-            },
-            JobScene::Hash(_) => match self.scenes.get(&scene_hash) {
-                Some((scene, _)) => scene.clone(),
-                None => {
-                    // Not cached here: ask the submitter for it.
-                    self.awaiting_scene.insert(conn, job);
-                    self.send(conn, Message::SceneRequest { hash: scene_hash });
-                    return;
-                }
-            },
-        };
-        if let Err(e) = check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len()) {
-            return self.refuse_job(conn, e.to_string());
+        if job.scene == JobScene::Hash(scene_hash) && !self.scenes.contains_key(&scene_hash) {
+            // Not cached here: ask the submitter for it.
+            self.awaiting_scene.insert(conn, job);
+            self.send(conn, Message::SceneRequest { hash: scene_hash });
+            return;
         }
+        // The journal keeps the job with its scene by hash (the bytes once per scene).
+        let scene = std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash));
+        let journaled = self.persistent.then(|| job.clone());
+        job.scene = scene;
+        let id = self.next_job;
+        let frames = job.frames.len() as u32;
+        if let Err(e) = self.queue_job(now, id, job, Some(conn), 0) {
+            return self.refuse_job(conn, e);
+        }
+        self.next_job += 1;
+        self.send(conn, Message::JobAccepted { job: id, frames });
+        self.telemetry.counters.jobs_submitted += 1;
+        if let Some(job) = journaled {
+            let scene = self.scenes[&scene_hash].1.clone();
+            self.persist(Record::JobQueued {
+                id,
+                job: Box::new(job),
+                scene,
+            });
+        }
+    }
+
+    /// Checks a job whose scene is in the cache (or in `job`) and queues it
+    /// under `id`, frames before `resume_from` being finished already.
+    fn queue_job(
+        &mut self,
+        now: Duration,
+        id: u64,
+        mut job: WireJob,
+        submitter: Option<ConnId>,
+        resume_from: u32,
+    ) -> Result<(), String> {
+        let scene_hash = match &job.scene {
+            JobScene::Data(d) => d.hash,
+            JobScene::Hash(h) => *h,
+        };
+        if let JobScene::Data(data) = std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash))
+        {
+            let scene = data.to_scene().map_err(|e| format!("bad scene: {e}"))?;
+            (self.scenes.entry(scene_hash)).or_insert_with(|| (Arc::new(scene), Arc::new(data)));
+        }
+        let scene = match self.scenes.get(&scene_hash) {
+            Some((scene, _)) => scene.clone(),
+            None => return Err("the job's scene is unknown".into()),
+        };
+        check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
+            .map_err(|e| e.to_string())?;
         if job.reflectors.is_empty() || job.frames.is_empty() {
-            return self.refuse_job(conn, "a job needs reflectors and at least one frame".into());
+            return Err("a job needs reflectors and at least one frame".into());
         }
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
-        let frames = match frames {
-            Ok(f) => f,
-            Err(e) => return self.refuse_job(conn, format!("bad frame set-up: {e}")),
-        };
-        let id = self.next_job;
-        self.next_job += 1;
+        let frames = frames.map_err(|e| format!("bad frame set-up: {e}"))?;
         let reflectors = morton_order(&scene, job.reflectors);
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
         // reflector groups, which the workers derive from the same list.
         let groups = (method.per_reflector()).then(|| reflector_groups(&scene, &reflectors));
-        let items = match &groups {
+        let items: Vec<u32> = match &groups {
             Some(groups) => (0..groups.len() as u32).collect(),
             None => reflectors.clone(),
         };
-        let work = vec![FrameWork { items }; frames.len()];
+        // Finished frames get no work: the scheduler completes them at once.
+        let work = (0..frames.len() as u32)
+            .map(|f| FrameWork {
+                items: if f < resume_from {
+                    Vec::new()
+                } else {
+                    items.clone()
+                },
+            })
+            .collect();
         info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), method = method.name(), "job queued");
-        self.send(
-            conn,
-            Message::JobAccepted {
-                job: id,
-                frames: frames.len() as u32,
-            },
-        );
-        self.telemetry.counters.jobs_submitted += 1;
         self.jobs.insert(
             id,
             Job {
                 name: job.name,
-                submitter: conn,
+                submitter,
+                orphaned_at: submitter.is_none().then_some(now),
+                resume_from,
+                frames_done: resume_from,
                 scene,
                 scene_hash,
                 reflectors,
@@ -447,8 +584,46 @@ impl MasterCore {
                 current: None,
             },
         );
-        if let Err(e) = self.scheduler.submit_job(now, JobId(id), work) {
-            warn!("cannot queue job {id}: {e}");
+        let submitted = self.scheduler.submit_job(now, JobId(id), work);
+        submitted.map_err(|e| {
+            self.jobs.remove(&id);
+            e.to_string()
+        })
+    }
+
+    /// A submitter asks for a job's frames from `from_frame` on.
+    fn attach(&mut self, conn: ConnId, job: u64, from_frame: u32) {
+        let (frames, done) = if let Some(j) = self.jobs.get_mut(&job) {
+            if let Some(previous) = j.submitter.replace(conn) {
+                info!(
+                    job,
+                    previous, "another submitter attached; the previous one gets no more frames"
+                );
+            }
+            j.orphaned_at = None;
+            (j.frames.len() as u32, j.frames_done)
+        } else if let Some(&(frames, _)) = self.completed.get(&job) {
+            (frames, frames)
+        } else {
+            self.send(
+                conn,
+                Message::JobFailed {
+                    job,
+                    errors: vec![format!(
+                        "the master has no job {job} (finished long ago, failed or never submitted)"
+                    )],
+                },
+            );
+            return;
+        };
+        info!(job, conn, from_frame, "submitter attached");
+        self.send(conn, Message::JobAccepted { job, frames });
+        if from_frame < done {
+            self.outbox.push_back(Output::Replay {
+                conn,
+                job,
+                frames: from_frame..done,
+            });
         }
     }
 
@@ -460,6 +635,19 @@ impl MasterCore {
 
     fn send(&mut self, conn: ConnId, message: Message) {
         self.outbox.push_back(Output::Send(conn, Box::new(message)));
+    }
+
+    /// Sends to a job's submitter, if one is attached.
+    fn send_to(&mut self, submitter: Option<ConnId>, message: Message) {
+        if let Some(conn) = submitter {
+            self.send(conn, message);
+        }
+    }
+
+    fn persist(&mut self, record: Record) {
+        if self.persistent {
+            self.outbox.push_back(Output::Persist(record));
+        }
     }
 
     fn refuse_job(&mut self, conn: ConnId, error: String) {
@@ -479,11 +667,7 @@ impl MasterCore {
     }
 
     fn name(&self, conn: ConnId) -> String {
-        match self.peers.get(&conn) {
-            Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
-            Some(Peer::Submitter { address }) => format!("submitter ({address})"),
-            None => format!("connection {conn}"),
-        }
+        peer_name(conn, self.peers.get(&conn).or(self.departed.get(&conn)))
     }
 
     fn workers(&self) -> impl Iterator<Item = ConnId> + '_ {
@@ -514,7 +698,12 @@ impl MasterCore {
                     self.send(conn, Message::SceneOffer { hash });
                 }
             }
-            Event::FrameStarted { job, frame, .. } => self.start_frame(job.0, frame),
+            Event::FrameStarted { job, frame, .. } => {
+                let resumed = (self.jobs.get(&job.0)).is_some_and(|j| frame < j.resume_from);
+                if !resumed {
+                    self.start_frame(job.0, frame);
+                }
+            }
             Event::FrameComplete { job, frame, stats } => {
                 let Some(j) = self.jobs.get_mut(&job.0) else {
                     return;
@@ -547,21 +736,33 @@ impl MasterCore {
                     totals: WirePackageStats::from(&done.totals),
                     workers,
                 };
-                let j = &self.jobs[&job.0];
-                let message = Message::FrameDone(FrameDone {
+                let color = done.image.color.clone();
+                let j = self.jobs.get_mut(&job.0).expect("checked above");
+                j.frames_done = frame + 1;
+                let done = FrameDone {
                     job: job.0,
                     frame,
                     image: wire_image(&done.image.color),
                     stats: frame_stats.clone(),
                     aux: j.aux.then(|| frame_aux(&done.image)),
-                });
-                self.send(j.submitter, message);
-                (self.telemetry).frame_finished(job.0, frame, frame_stats, done.image.color);
+                };
+                let submitter = j.submitter;
+                self.persist(Record::FrameDone(Box::new(done.clone())));
+                (self.telemetry).frame_finished(job.0, frame, frame_stats, color);
+                self.send_to(submitter, Message::FrameDone(done));
+                self.departed.clear();
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
                 self.telemetry.counters.jobs_completed += 1;
-                self.forget_job(job.0);
+                if let Some(j) = self.forget_job(job.0) {
+                    if self.persistent {
+                        // Kept a while for a submitter that lost the connection.
+                        self.completed
+                            .insert(job.0, (j.frames.len() as u32, self.now));
+                        self.persist(Record::JobComplete { id: job.0 });
+                    }
+                }
             }
             Event::JobFailed {
                 job,
@@ -578,12 +779,14 @@ impl MasterCore {
                 warn!(job = job.0, "{}", errors.join("; "));
                 self.telemetry.counters.jobs_failed += 1;
                 if let Some(j) = self.forget_job(job.0) {
-                    self.send(j.submitter, Message::JobFailed { job: job.0, errors });
+                    self.send_to(j.submitter, Message::JobFailed { job: job.0, errors });
                 }
+                self.persist(Record::JobForgotten { id: job.0 });
             }
             Event::JobCancelled { job } => {
                 self.telemetry.counters.jobs_cancelled += 1;
                 self.forget_job(job.0);
+                self.persist(Record::JobForgotten { id: job.0 });
             }
             Event::WorkerBlocklisted { worker, job } => {
                 warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
@@ -636,7 +839,7 @@ impl MasterCore {
         for conn in workers {
             self.send(conn, Message::FrameStart(start.clone()));
         }
-        self.send(
+        self.send_to(
             submitter,
             Message::Progress {
                 job,
@@ -778,5 +981,14 @@ fn frame_aux(image: &FrameImage) -> WireFrameAux {
         transmitted: wire_image(&image.transmitted),
         reflected_object: image.reflected_object.clone(),
         mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
+    }
+}
+
+/// How logs and statistics name a peer.
+fn peer_name(conn: ConnId, peer: Option<&Peer>) -> String {
+    match peer {
+        Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
+        Some(Peer::Submitter { address }) => format!("submitter ({address})"),
+        None => format!("connection {conn}"),
     }
 }

@@ -12,11 +12,12 @@ use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tracing::debug;
+use tracing::{debug, warn};
 use vtfarm_proto::{Link, Message};
 use vtfarm_scheduler::SchedulerConfig;
 
 use crate::core::{ConnId, MasterCore, Output, Peer};
+use crate::journal::Journal;
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -37,6 +38,8 @@ enum Input {
     },
     /// Read the core's state (for the HTTP view); changes nothing.
     Inspect(Box<dyn FnOnce(&MasterCore) + Send>),
+    /// End the master task (dropping every connection).
+    Stop,
 }
 
 /// A running master: attach links to it.
@@ -95,10 +98,27 @@ impl MasterHandle {
     pub fn changes(&self) -> watch::Receiver<u64> {
         self.changes.clone()
     }
+
+    /// Ends the master task: its connections close and the workers' sessions end.
+    pub fn stop(&self) {
+        let _ = self.inputs.send(Input::Stop);
+    }
 }
 
-/// Starts a master task.
+/// Starts a master task that keeps its jobs in memory only.
 pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
+    spawn(MasterCore::new(config), None)
+}
+
+/// Starts a master task that journals its jobs and resumes those it finds.
+pub fn spawn_persistent_master(
+    config: SchedulerConfig,
+    journal: Journal,
+) -> (MasterHandle, JoinHandle<()>) {
+    spawn(MasterCore::persistent(config), Some(journal))
+}
+
+fn spawn(core: MasterCore, journal: Option<Journal>) -> (MasterHandle, JoinHandle<()>) {
     let (inputs, rx) = unbounded_channel();
     let (changed, changes) = watch::channel(0);
     let handle = MasterHandle {
@@ -106,7 +126,7 @@ pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
         next_conn: Arc::new(AtomicU64::new(1)),
         changes,
     };
-    let task = tokio::spawn(run(MasterCore::new(config), rx, changed));
+    let task = tokio::spawn(run(core, rx, journal, changed));
     (handle, task)
 }
 
@@ -118,10 +138,16 @@ struct Connection {
 async fn run(
     mut core: MasterCore,
     mut inputs: UnboundedReceiver<Input>,
+    journal: Option<Journal>,
     changed: watch::Sender<u64>,
 ) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
+    if let Some(journal) = &journal {
+        for stored in tokio::task::block_in_place(|| journal.load()) {
+            core.restore(start.elapsed(), stored);
+        }
+    }
     loop {
         // The scheduler's next deadline, or idle for a while.
         let deadline = start
@@ -131,6 +157,9 @@ async fn run(
         tokio::select! {
             input = inputs.recv() => {
                 let Some(input) = input else { return };
+                if matches!(input, Input::Stop) {
+                    return;
+                }
                 if let Input::Inspect(read) = input {
                     // A read: nothing moved, so no tick for the watchers.
                     read(&core);
@@ -155,6 +184,7 @@ async fn run(
                         }
                     }
                     Input::Inspect(read) => read(&core),
+                    Input::Stop => {} // returned above
                 });
             }
             _ = tokio::time::sleep_until(deadline) => core.handle_timeout(start.elapsed()),
@@ -173,6 +203,26 @@ async fn run(
                             close(&reason);
                         }
                         core.disconnected(start.elapsed(), conn);
+                    }
+                }
+                Output::Persist(record) => {
+                    if let Some(journal) = &journal {
+                        tokio::task::block_in_place(|| journal.write(&record));
+                    }
+                }
+                Output::Replay { conn, job, frames } => {
+                    let (Some(journal), Some(c)) = (&journal, conns.get(&conn)) else {
+                        continue;
+                    };
+                    for frame in frames {
+                        match tokio::task::block_in_place(|| journal.frame(job, frame)) {
+                            Some(done) => {
+                                let _ = c.tx.send(Message::FrameDone(done));
+                            }
+                            None => {
+                                warn!(job, frame, "a finished frame is missing from the journal")
+                            }
+                        }
                     }
                 }
             }

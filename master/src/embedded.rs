@@ -5,16 +5,18 @@
 use tokio::task::JoinHandle;
 use vtfarm_proto::Link;
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_worker::{Engine, SessionEnd, WorkerConfig, serve};
+use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 
 use crate::core::Peer;
 use crate::driver::{MasterHandle, spawn_master};
 
 /// A master with local workers (call inside a multi-threaded tokio runtime).
+/// End it with [`LocalFarm::shutdown`] before the runtime goes: a task still
+/// running while the runtime shuts down panics on its next timer.
 pub struct LocalFarm {
     master: MasterHandle,
-    _master_task: JoinHandle<()>,
-    _workers: Vec<JoinHandle<SessionEnd>>,
+    master_task: JoinHandle<()>,
+    workers: Vec<JoinHandle<SessionEnd>>,
 }
 
 impl LocalFarm {
@@ -34,15 +36,32 @@ impl LocalFarm {
                 };
                 master.attach(peer, master_end, None);
                 tokio::spawn(async move {
-                    serve(worker_end, &mut Engine::new(None), WorkerConfig::default()).await
+                    serve(
+                        worker_end,
+                        &mut Engine::new(None),
+                        WorkerConfig::default(),
+                        DrainSignal::never(),
+                    )
+                    .await
                 })
             })
             .collect();
         LocalFarm {
             master,
-            _master_task: task,
-            _workers: workers,
+            master_task: task,
+            workers,
         }
+    }
+
+    /// Stops the master and waits for it and every worker task to end.
+    /// Returns how many tasks failed (panicked).
+    pub async fn shutdown(self) -> usize {
+        self.master.stop();
+        let mut failed = usize::from(self.master_task.await.is_err());
+        for worker in self.workers {
+            failed += usize::from(worker.await.is_err());
+        }
+        failed
     }
 
     /// A submitter's link to the master.

@@ -6,6 +6,7 @@
 //! - [`core`]: the logic, without sockets or clock.
 //! - [`driver`]: the async task around the core; links in, messages out.
 //! - [`server`]: the QUIC endpoint and handshake.
+//! - [`journal`]: the job journal in the state directory (restarts, re-attaching).
 //! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
 //!   core's state through the driver, owns none.
 //! - [`telemetry`]: the core's counters and kept frames for [`http`].
@@ -18,11 +19,15 @@ pub mod core;
 pub mod driver;
 pub mod embedded;
 pub mod http;
+pub mod journal;
 pub mod server;
 pub mod submit;
 pub mod telemetry;
 
-pub use core::{ConnId, MasterCore, Output, Peer};
-pub use driver::{MasterHandle, spawn_master};
+pub use core::{ATTACH_GRACE, ConnId, MasterCore, Output, Peer};
+pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::LocalFarm;
-pub use submit::{FinishedFrame, JobError, JobEvent, JobOptions, run_job, wire_job};
+pub use journal::{Journal, Record, StoredJob};
+pub use submit::{
+    FinishedFrame, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+};

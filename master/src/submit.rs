@@ -2,12 +2,18 @@
 //! runs it over QUIC, `vtfarm render` against the embedded master.
 //!
 //! The job names its scene by hash first; the master asks for the bytes only
-//! when it does not have that scene yet.
+//! when it does not have that scene yet. [`run_remote_job`] follows a job
+//! across lost connections: it reconnects and re-attaches (`AttachJob`) to
+//! receive the frames from the first one it lacks.
 
+use std::time::{Duration, Instant};
+
+use tracing::warn;
 use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
+use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
 use vtfarm_proto::{
-    FrameStats, JobScene, Link, Message, SceneData, WireFrameAux, WireFrameSetup, WireImage,
+    FrameStats, JobScene, Link, Message, Role, SceneData, WireFrameAux, WireFrameSetup, WireImage,
     WireJob,
 };
 use vtfarm_render::FrameSetup;
@@ -40,6 +46,8 @@ pub enum JobError {
     Disconnected(Option<String>),
     #[error("bad answer from the master: {0}")]
     Protocol(String),
+    #[error(transparent)]
+    Connect(#[from] ConnectError),
 }
 
 /// What a job asks the farm for, besides its scene and frames.
@@ -77,44 +85,147 @@ pub async fn run_job(
     scene: &SceneData,
     mut on_event: impl FnMut(JobEvent<'_>),
 ) -> Result<Vec<FinishedFrame>, JobError> {
-    let frames_wanted = job.frames.len();
-    let send = |link: &Link, m| {
-        link.tx
-            .send(m)
-            .map_err(|_| JobError::Disconnected(link.error()))
-    };
     send(link, Message::SubmitJob { job })?;
-    let mut frames = Vec::new();
-    while frames.len() < frames_wanted {
-        let Some(message) = link.rx.recv().await else {
-            return Err(JobError::Disconnected(link.error()));
+    let mut follower = JobFollower::default();
+    follower.follow(link, Some(scene), &mut on_event).await?;
+    Ok(follower.frames)
+}
+
+/// What a remote job run starts from.
+pub enum RemoteJob<'a> {
+    /// Submit this job (its scene is sent if the master asks).
+    Submit { job: WireJob, scene: &'a SceneData },
+    /// Re-attach to a job the master already has (`vtfarm submit --attach`).
+    Attach { job: u64 },
+}
+
+/// Runs a job on the master at `options` and waits for all its frames. When
+/// the connection drops after the master accepted the job, it reconnects
+/// with backoff (for up to [`crate::ATTACH_GRACE`]) and re-attaches, so a
+/// restarted master goes on sending frames; connecting the first time fails
+/// fast.
+pub async fn run_remote_job(
+    options: &ClientOptions,
+    start: RemoteJob<'_>,
+    mut on_event: impl FnMut(JobEvent<'_>),
+) -> Result<Vec<FinishedFrame>, JobError> {
+    let (mut submission, scene, mut follower) = match start {
+        RemoteJob::Submit { job, scene } => (Some(job), Some(scene), JobFollower::default()),
+        RemoteJob::Attach { job } => (None, None, JobFollower::attaching(job)),
+    };
+    let mut backoff = Duration::from_millis(200);
+    let mut lost_at: Option<Instant> = None;
+    loop {
+        let conn = match connect(options, Role::Submitter).await {
+            Ok(conn) => conn,
+            Err(e) => {
+                let retry = lost_at.is_some_and(|t| t.elapsed() < crate::ATTACH_GRACE);
+                if !(retry && e.is_transient()) {
+                    return Err(JobError::Connect(e));
+                }
+                warn!("{e}; retrying in {backoff:?}");
+                tokio::time::sleep(backoff).await;
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+                continue;
+            }
         };
-        match message {
-            Message::SceneRequest { hash } if hash == scene.hash => {
-                send(link, Message::SceneData(scene.clone()))?
+        let mut link = conn.link;
+        let request = match (submission.take(), follower.job) {
+            (Some(job), _) => Message::SubmitJob { job },
+            (None, Some(job)) => Message::AttachJob {
+                job,
+                from_frame: follower.frames.len() as u32,
+            },
+            (None, None) => return Err(JobError::Protocol("no job to attach to".into())),
+        };
+        let outcome = match send(&link, request) {
+            Ok(()) => follower.follow(&mut link, scene, &mut on_event).await,
+            Err(e) => Err(e),
+        };
+        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.endpoint.wait_idle().await;
+        match outcome {
+            Ok(()) => return Ok(follower.frames),
+            Err(JobError::Disconnected(why)) if follower.job.is_some() => {
+                let why = why.map(|w| format!(": {w}")).unwrap_or_default();
+                warn!("lost the master{why}; reconnecting to follow the job");
+                lost_at = Some(Instant::now());
+                backoff = Duration::from_millis(200);
             }
-            Message::JobAccepted { job, frames } => on_event(JobEvent::Accepted { job, frames }),
-            Message::Progress {
-                frame, done, total, ..
-            } => on_event(JobEvent::Progress { frame, done, total }),
-            Message::FrameDone(done) => {
-                let image = image(done.image)?;
-                let components = done.aux.map(|aux| components(&image, aux)).transpose()?;
-                let finished = FinishedFrame {
-                    frame: done.frame,
-                    image,
-                    stats: done.stats,
-                    components,
-                };
-                on_event(JobEvent::FrameDone(&finished));
-                frames.push(finished);
-            }
-            Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
-            Message::Heartbeat => {}
-            other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
+            Err(e) => return Err(e),
         }
     }
-    Ok(frames)
+}
+
+fn send(link: &Link, message: Message) -> Result<(), JobError> {
+    link.tx
+        .send(message)
+        .map_err(|_| JobError::Disconnected(link.error()))
+}
+
+/// A job's frames as they come in, over one connection or several.
+#[derive(Default)]
+struct JobFollower {
+    /// The job's id, once accepted (or the one attached to).
+    job: Option<u64>,
+    /// How many frames the job has, once accepted.
+    total: Option<usize>,
+    frames: Vec<FinishedFrame>,
+}
+
+impl JobFollower {
+    fn attaching(job: u64) -> Self {
+        JobFollower {
+            job: Some(job),
+            ..JobFollower::default()
+        }
+    }
+
+    /// Receives until every frame is in (or the job fails, or the link drops).
+    async fn follow(
+        &mut self,
+        link: &mut Link,
+        scene: Option<&SceneData>,
+        on_event: &mut impl FnMut(JobEvent<'_>),
+    ) -> Result<(), JobError> {
+        while self.total.is_none_or(|total| self.frames.len() < total) {
+            let Some(message) = link.rx.recv().await else {
+                return Err(JobError::Disconnected(link.error()));
+            };
+            match message {
+                Message::SceneRequest { hash } => match scene.filter(|s| s.hash == hash) {
+                    Some(scene) => send(link, Message::SceneData(scene.clone()))?,
+                    None => return Err(JobError::Protocol("request for an unknown scene".into())),
+                },
+                Message::JobAccepted { job, frames } => {
+                    self.job = Some(job);
+                    self.total = Some(frames as usize);
+                    on_event(JobEvent::Accepted { job, frames });
+                }
+                Message::Progress {
+                    frame, done, total, ..
+                } => on_event(JobEvent::Progress { frame, done, total }),
+                // A frame the submitter has already (re-sent after re-attaching) is skipped.
+                Message::FrameDone(done) if done.frame as usize != self.frames.len() => {}
+                Message::FrameDone(done) => {
+                    let image = image(done.image)?;
+                    let components = done.aux.map(|aux| components(&image, aux)).transpose()?;
+                    let finished = FinishedFrame {
+                        frame: done.frame,
+                        image,
+                        stats: done.stats,
+                        components,
+                    };
+                    on_event(JobEvent::FrameDone(&finished));
+                    self.frames.push(finished);
+                }
+                Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
+                Message::Heartbeat => {}
+                other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
+            }
+        }
+        Ok(())
+    }
 }
 
 fn image(wire: WireImage) -> Result<Image, JobError> {

@@ -28,7 +28,7 @@ use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, VertexSettings};
-use vtfarm_worker::{Engine, WorkerConfig, run_worker};
+use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// Every wait on the network is bounded by this.
 const WAIT: Duration = Duration::from_secs(60);
@@ -73,7 +73,15 @@ impl Farm {
             let (options, name) = (farm.options.clone(), name.to_owned());
             let engine = Engine::new(Some(farm.dir.path().join(format!("cache-{name}"))));
             farm._tasks.push(tokio::spawn(async move {
-                let _ = run_worker(options, name, 1, engine, WorkerConfig::default()).await;
+                let _ = run_worker(
+                    options,
+                    name,
+                    1,
+                    engine,
+                    WorkerConfig::default(),
+                    DrainSignal::never(),
+                )
+                .await;
             }));
         }
         farm.wait_until(|s| s.workers.len() == 2).await;

@@ -2,6 +2,7 @@
 //! one bidirectional stream for the session (workers and submitters alike).
 
 use std::net::SocketAddr;
+use std::time::Duration;
 
 use tokio::net::lookup_host;
 
@@ -42,6 +43,10 @@ impl ConnectError {
     }
 }
 
+/// How long connecting (QUIC, TLS and the token handshake) may take: a
+/// master that is not there is reported in seconds, not at the idle timeout.
+pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(3);
+
 /// An open session: the endpoint must outlive the link.
 pub struct Connection {
     pub endpoint: quinn::Endpoint,
@@ -75,11 +80,16 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
     let connecting = endpoint
         .connect(address, SERVER_NAME)
         .map_err(|e| ConnectError::Setup(e.to_string()))?;
-    let connection = connecting.await.map_err(|e| failed(e.into()))?;
-    client_handshake(&connection, &Hello::new(options.token.clone(), role))
+    let session = async {
+        let connection = connecting.await?;
+        client_handshake(&connection, &Hello::new(options.token.clone(), role)).await?;
+        let (send, recv) = connection.open_bi().await?;
+        Ok::<_, ProtoError>((connection, send, recv))
+    };
+    let (connection, send, recv) = tokio::time::timeout(CONNECT_TIMEOUT, session)
         .await
+        .map_err(|_| failed(ProtoError::Timeout))?
         .map_err(failed)?;
-    let (send, recv) = connection.open_bi().await.map_err(|e| failed(e.into()))?;
     Ok(Connection {
         endpoint,
         connection,

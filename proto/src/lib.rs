@@ -57,7 +57,7 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

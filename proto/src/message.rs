@@ -93,6 +93,10 @@ pub enum Message {
     StatusRequest,
     /// Master → submitter: the answer.
     StatusReply(StatusReply),
+    /// Submitter → master: send me job `job`'s frames from `from_frame` on
+    /// (after a lost connection, or from another shell). The master answers
+    /// `JobAccepted` and the frames, or `JobFailed` when it has no such job.
+    AttachJob { job: JobId, from_frame: u32 },
 }
 
 impl Message {
@@ -120,6 +124,7 @@ impl Message {
             Message::JobFailed { .. } => "JobFailed",
             Message::StatusRequest => "StatusRequest",
             Message::StatusReply(_) => "StatusReply",
+            Message::AttachJob { .. } => "AttachJob",
         }
     }
 }

@@ -27,7 +27,7 @@ use vtfarm_proto::{
 use vtfarm_render::FrameSetup;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
-use vtfarm_worker::{Engine, WorkerConfig, run_worker};
+use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 use super::{CockpitJob, write_json};
 
@@ -202,6 +202,7 @@ async fn run_farm(
                 1,
                 Engine::new(Some(dir.join(format!("cache-{k}")))),
                 WorkerConfig::default(),
+                DrainSignal::never(),
             ))
         })
         .collect();

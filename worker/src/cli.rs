@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use vtfarm_proto::ClusterConfig;
 
-use crate::{ClientOptions, Engine, WorkerConfig, run_worker};
+use crate::{ClientOptions, DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// Runs a render worker that dials the master and traces task packages.
 #[derive(clap::Args, Debug, Clone)]
@@ -40,7 +40,7 @@ struct Standalone {
     args: WorkerArgs,
 }
 
-/// Runs the worker until the master shuts it down.
+/// Runs the worker until the master shuts it down or SIGTERM drains it.
 pub fn run(args: WorkerArgs) -> Result<()> {
     let cluster = ClusterConfig::load(&args.cluster)?;
     let threads = args
@@ -65,13 +65,38 @@ pub fn run(args: WorkerArgs) -> Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(run_worker(
-        options,
-        name,
-        threads as u32,
-        Engine::new(Some(cache)),
-        config,
-    ))?;
+    runtime.block_on(async {
+        let (raise, drain) = DrainSignal::new();
+        watch_for_sigterm(raise)?;
+        run_worker(
+            options,
+            name,
+            threads as u32,
+            Engine::new(Some(cache)),
+            config,
+            drain,
+        )
+        .await
+        .map_err(anyhow::Error::from)
+    })
+}
+
+/// SIGTERM drains the worker: it finishes its package and says goodbye.
+#[cfg(unix)]
+fn watch_for_sigterm(raise: tokio::sync::watch::Sender<bool>) -> Result<()> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+    tokio::spawn(async move {
+        if sigterm.recv().await.is_some() {
+            tracing::info!("SIGTERM: draining");
+            let _ = raise.send(true);
+        }
+    });
+    Ok(())
+}
+
+#[cfg(not(unix))]
+fn watch_for_sigterm(_raise: tokio::sync::watch::Sender<bool>) -> Result<()> {
     Ok(())
 }
 

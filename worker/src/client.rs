@@ -8,19 +8,22 @@ use vtfarm_proto::Role;
 use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
 
 use crate::engine::Engine;
-use crate::session::{SessionEnd, WorkerConfig, serve};
+use crate::serve::{DrainSignal, serve};
+use crate::session::{SessionEnd, WorkerConfig};
 
-/// Runs a worker until the master shuts it down: connects, serves, and
-/// reconnects with exponential backoff (up to 10 s) when the link drops.
+/// Runs a worker until the master shuts it down or `drain` is raised:
+/// connects, serves, and reconnects with exponential backoff (up to 10 s)
+/// when the link drops.
 pub async fn run_worker(
     options: ClientOptions,
     name: String,
     threads: u32,
     mut engine: Engine,
     config: WorkerConfig,
+    mut drain: DrainSignal,
 ) -> Result<(), ConnectError> {
     let mut backoff = Duration::from_millis(200);
-    loop {
+    while !drain.is_raised() {
         match connect(
             &options,
             Role::Worker {
@@ -33,19 +36,32 @@ pub async fn run_worker(
             Ok(conn) => {
                 info!(master = %options.master, "connected");
                 backoff = Duration::from_millis(200);
-                let end = serve(conn.link, &mut engine, config).await;
+                let end = serve(conn.link, &mut engine, config, drain.clone()).await;
                 conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"bye");
                 conn.endpoint.wait_idle().await;
-                if end == SessionEnd::Shutdown {
-                    info!("shut down by the master");
-                    return Ok(());
+                match end {
+                    SessionEnd::Shutdown => {
+                        info!("shut down by the master");
+                        return Ok(());
+                    }
+                    SessionEnd::Drained => {
+                        info!("drained, said goodbye");
+                        return Ok(());
+                    }
+                    SessionEnd::Disconnected => {
+                        warn!(master = %options.master, "connection lost, reconnecting")
+                    }
                 }
-                warn!(master = %options.master, "connection lost, reconnecting");
             }
             Err(e) if e.is_transient() => warn!("{e}; retrying in {backoff:?}"),
             Err(e) => return Err(e),
         }
-        tokio::time::sleep(backoff).await;
+        tokio::select! {
+            () = tokio::time::sleep(backoff) => {}
+            () = drain.raised() => {}
+        }
         backoff = (backoff * 2).min(Duration::from_secs(10));
     }
+    info!("stopped while not connected");
+    Ok(())
 }

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
@@ -226,6 +226,3 @@ impl Engine {
         })
     }
 }
-
-/// How long a worker waits between heartbeats.
-pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);

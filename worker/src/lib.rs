@@ -3,18 +3,21 @@
 //! packages with the vertex tracer, returning sparse bitmaps.
 //!
 //! - [`engine`]: computing, no network: scene cache, renderer, packages.
-//! - [`session`]: the worker's side of the protocol over any `Link`.
+//! - [`session`]: the worker's side of the protocol, a sans-IO state machine.
+//! - [`serve`]: the async driver of a session over any `Link`.
 //! - [`client`]: QUIC: connect, handshake, reconnect with backoff.
 
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod client;
 pub mod engine;
+pub mod serve;
 pub mod session;
 
 pub use client::run_worker;
 pub use engine::Engine;
-pub use session::{SessionEnd, WorkerConfig, serve};
+pub use serve::{DrainSignal, serve};
+pub use session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 pub use vtfarm_proto::client::ClientOptions;
 
 /// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`).

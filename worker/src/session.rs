@@ -1,18 +1,36 @@
-//! The worker's side of a session with the master, over any [`Link`].
+//! The worker's side of a session with the master as a sans-IO state
+//! machine (quinn-proto style): messages, finished work and time go in
+//! (`handle_message`, `frame_prepared`, `package_finished`, `handle_timeout`,
+//! `drain`), messages, work to do and the next deadline come out
+//! (`poll_message`, `poll_task`, `poll_timeout`, `poll_end`). It owns no
+//! socket, no clock and no thread; `serve.rs` drives it over a `Link`, and
+//! the master's fault harness drives it on a virtual clock.
 //!
-//! Pull-based: the worker asks for work (`RequestWork`) whenever it is idle,
-//! runs one package at a time (the package itself uses every core), and
-//! sends the result or the error. Scenes are fetched only when the disk cache
-//! lacks them. Heartbeats go out every second, busy or not.
+//! Pull-based: the worker asks for work (`RequestWork`) once its frame is
+//! ready and it is idle, runs one package at a time (the package itself uses
+//! every core), and sends the result or the error. Scenes are fetched only
+//! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
+//!
+//! Draining (SIGTERM): no more requests; the running package finishes (or
+//! the [`DRAIN_LIMIT`] passes), then the session ends with
+//! [`SessionEnd::Drained`] and the driver says goodbye by closing the link,
+//! which makes the master requeue everything else at once.
 
 use std::collections::{BTreeSet, VecDeque};
-use std::sync::Arc;
+use std::time::Duration;
 
-use tokio::task::JoinHandle;
 use tracing::{info, warn};
-use vtfarm_proto::{FrameStart, Link, Message, Package, PackageFailed, PackageId, PackageResult};
+use vtfarm_proto::{
+    FrameStart, JobId, Message, Package, PackageFailed, PackageId, PackageResult, SceneData,
+    SceneHash,
+};
 
-use crate::engine::{ActiveFrame, Engine, HEARTBEAT_INTERVAL};
+/// How long a worker waits between heartbeats.
+pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
+
+/// How long a draining worker lets its running package go on before it
+/// hands it back anyway.
+pub const DRAIN_LIMIT: Duration = Duration::from_secs(30);
 
 /// How a worker behaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,189 +53,280 @@ pub enum SessionEnd {
     Shutdown,
     /// The link went down.
     Disconnected,
+    /// The worker was told to stop (SIGTERM) and drained.
+    Drained,
 }
 
-type Running = (PackageId, JoinHandle<Result<PackageResult, String>>);
+/// Scenes the worker has, by content hash (the engine's cache, or a test's).
+pub trait SceneStore {
+    /// Whether the scene is at hand.
+    fn has_scene(&mut self, hash: &SceneHash) -> bool;
+    /// Checks a scene from the master and keeps it.
+    fn add_scene(&mut self, data: SceneData) -> Result<(), String>;
+}
 
-/// Serves the master over `link` until it shuts the worker down or the link drops.
-pub async fn serve(mut link: Link, engine: &mut Engine, config: WorkerConfig) -> SessionEnd {
-    let mut session = Session {
-        engine,
-        config,
-        frame: None,
-        pending_frame: None,
-        queue: VecDeque::new(),
-        cancelled: BTreeSet::new(),
-    };
-    let mut running: Option<Running> = None;
-    // Whether a RequestWork is outstanding: work is asked for only once the
-    // frame is ready, so the load balancer never counts set-up as tracing.
-    let mut requested = false;
-    let mut heartbeat = tokio::time::interval(HEARTBEAT_INTERVAL);
-    let send = |link: &Link, m: Message| link.tx.send(m).is_ok();
-    loop {
-        tokio::select! {
-            message = link.rx.recv() => {
-                let Some(message) = message else { return SessionEnd::Disconnected };
-                match message {
-                    Message::Shutdown => return SessionEnd::Shutdown,
-                    other => {
-                        // A package answers the request; a new frame voids it
-                        // (the master drops requests for other frames).
-                        requested &= !matches!(other, Message::Package(_) | Message::FrameStart(_));
-                        for reply in session.handle(other) {
-                            send(&link, reply);
-                        }
-                    }
-                }
-            }
-            outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
-                let (id, _) = running.take().expect("guarded by the select condition");
-                let reply = match outcome {
-                    Ok(Ok(result)) => Message::PackageResult(result),
-                    Ok(Err(error)) => Message::PackageFailed(PackageFailed { id, error }),
-                    Err(join) => Message::PackageFailed(PackageFailed { id, error: format!("package task failed: {join}") }),
-                };
-                if !session.cancelled.remove(&id) && !send(&link, reply) {
-                    return SessionEnd::Disconnected;
-                }
-            }
-            _ = heartbeat.tick() => {
-                if !send(&link, Message::Heartbeat) {
-                    return SessionEnd::Disconnected;
-                }
-            }
-        }
-        if running.is_none() {
-            let (started, failures) = session.next_package();
-            for failure in failures {
-                send(&link, failure);
-            }
-            running = started;
-        }
-        let idle = running.is_none() && session.queue.is_empty();
-        let ready = session
-            .frame
-            .as_ref()
-            .filter(|_| session.pending_frame.is_none());
-        if let Some(frame) = ready.filter(|_| idle && !requested) {
-            if !send(
-                &link,
-                Message::RequestWork {
-                    job: frame.job,
-                    frame: frame.frame,
-                },
-            ) {
-                return SessionEnd::Disconnected;
-            }
-            requested = true;
+/// A frame by job and index.
+pub type FrameKey = (JobId, u32);
+
+/// Work the driver carries out and answers.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Task {
+    /// Build the frame's ID buffers (and renderer); answer with
+    /// [`WorkerSession::frame_prepared`].
+    PrepareFrame(FrameStart),
+    /// Run the package on the frame prepared last; answer with
+    /// [`WorkerSession::package_finished`].
+    RunPackage(Package),
+}
+
+/// The worker's session state.
+#[derive(Debug)]
+pub struct WorkerSession {
+    /// The frame whose packages can run now.
+    ready: Option<FrameKey>,
+    /// A frame handed to the driver for preparation.
+    preparing: Option<FrameKey>,
+    /// A frame whose scene is still on its way.
+    awaiting_scene: Option<FrameStart>,
+    /// A frame that could not be prepared, with why: its packages fail so.
+    unusable: Option<(FrameKey, String)>,
+    queue: VecDeque<Package>,
+    running: Option<PackageId>,
+    /// Packages the master took back while they ran: their results are dropped.
+    cancelled: BTreeSet<PackageId>,
+    /// Whether a `RequestWork` is outstanding: work is asked for only once
+    /// the frame is ready, so the load balancer never counts set-up as tracing.
+    requested: bool,
+    next_heartbeat: Duration,
+    /// When draining gives up on the running package.
+    drain_deadline: Option<Duration>,
+    end: Option<SessionEnd>,
+    outbox: VecDeque<Message>,
+    tasks: VecDeque<Task>,
+}
+
+impl WorkerSession {
+    /// A session that starts at `now`.
+    pub fn new(now: Duration) -> Self {
+        WorkerSession {
+            ready: None,
+            preparing: None,
+            awaiting_scene: None,
+            unusable: None,
+            queue: VecDeque::new(),
+            running: None,
+            cancelled: BTreeSet::new(),
+            requested: false,
+            next_heartbeat: now + HEARTBEAT_INTERVAL,
+            drain_deadline: None,
+            end: None,
+            outbox: VecDeque::new(),
+            tasks: VecDeque::new(),
         }
     }
-}
 
-struct Session<'a> {
-    engine: &'a mut Engine,
-    config: WorkerConfig,
-    frame: Option<Arc<ActiveFrame>>,
-    /// A frame whose scene is still on its way.
-    pending_frame: Option<FrameStart>,
-    queue: VecDeque<Package>,
-    cancelled: BTreeSet<PackageId>,
-}
+    /// The next message for the master.
+    pub fn poll_message(&mut self) -> Option<Message> {
+        self.outbox.pop_front()
+    }
 
-impl Session<'_> {
-    /// Handles one message from the master; returns the replies.
-    fn handle(&mut self, message: Message) -> Vec<Message> {
+    /// The next work for the driver.
+    pub fn poll_task(&mut self) -> Option<Task> {
+        self.tasks.pop_front()
+    }
+
+    /// When [`WorkerSession::handle_timeout`] should run next.
+    pub fn poll_timeout(&self) -> Duration {
+        self.drain_deadline
+            .map_or(self.next_heartbeat, |d| d.min(self.next_heartbeat))
+    }
+
+    /// Why the session ended, once it has; the driver then stops.
+    pub fn poll_end(&self) -> Option<SessionEnd> {
+        self.end.clone()
+    }
+
+    /// Whether the session is draining (or has drained).
+    pub fn is_draining(&self) -> bool {
+        self.drain_deadline.is_some()
+    }
+
+    /// The package running now, if any.
+    pub fn running(&self) -> Option<PackageId> {
+        self.running
+    }
+
+    /// Time passed: heartbeats, and the end of a drain that took too long.
+    pub fn handle_timeout(&mut self, now: Duration) {
+        if now >= self.next_heartbeat {
+            self.outbox.push_back(Message::Heartbeat);
+            self.next_heartbeat = now + HEARTBEAT_INTERVAL;
+        }
+        if self.drain_deadline.is_some_and(|d| now >= d) && self.end.is_none() {
+            warn!(
+                package = self.running,
+                "drain limit reached, handing the running package back"
+            );
+            self.end = Some(SessionEnd::Drained);
+        }
+    }
+
+    /// Stop taking work: finish the running package, then end.
+    pub fn drain(&mut self, now: Duration) {
+        if self.drain_deadline.is_none() {
+            info!("draining: finishing the running package, handing back the rest");
+            self.drain_deadline = Some(now + DRAIN_LIMIT);
+        }
+        self.advance();
+    }
+
+    /// A message from the master.
+    pub fn handle_message(
+        &mut self,
+        _now: Duration,
+        message: Message,
+        scenes: &mut impl SceneStore,
+    ) {
+        // A package answers the request; a new frame voids it (the master
+        // drops requests for other frames).
+        self.requested &= !matches!(message, Message::Package(_) | Message::FrameStart(_));
         match message {
-            Message::SceneOffer { hash } if !self.engine.has_scene(&hash) => {
-                vec![Message::SceneRequest { hash }]
+            Message::Shutdown => self.end = Some(SessionEnd::Shutdown),
+            Message::SceneOffer { hash } if !scenes.has_scene(&hash) => {
+                self.outbox.push_back(Message::SceneRequest { hash })
             }
-            Message::SceneOffer { .. } | Message::Heartbeat => Vec::new(),
+            Message::SceneOffer { .. } | Message::Heartbeat => {}
             Message::SceneData(data) => {
-                if let Err(e) = self.engine.add_scene(data) {
+                if let Err(e) = scenes.add_scene(data) {
                     warn!("{e}");
                 }
-                match self.pending_frame.take() {
-                    Some(start) => self.start_frame(start),
-                    None => Vec::new(),
+                if let Some(start) = self.awaiting_scene.take() {
+                    self.start_frame(start, scenes);
                 }
             }
-            Message::FrameStart(start) => self.start_frame(start),
-            Message::Package(package) => {
-                self.queue.push_back(package);
-                Vec::new()
-            }
+            Message::FrameStart(start) => self.start_frame(start, scenes),
+            Message::Package(package) => self.queue.push_back(package),
             Message::CancelPackage { id } => {
                 let before = self.queue.len();
                 self.queue.retain(|p| p.id != id);
-                if self.queue.len() == before {
-                    // Running now (or already sent): drop its result.
+                if self.queue.len() == before && self.running == Some(id) {
                     self.cancelled.insert(id);
                 }
-                Vec::new()
             }
-            other => {
-                warn!(
-                    message = other.name(),
-                    "unexpected message from the master, ignored"
-                );
-                Vec::new()
-            }
+            other => warn!(
+                message = other.name(),
+                "unexpected message from the master, ignored"
+            ),
         }
+        self.advance();
     }
 
-    fn start_frame(&mut self, start: FrameStart) -> Vec<Message> {
-        if !self.engine.has_scene(&start.scene) {
-            // The scene was offered and requested; the frame waits for it.
-            self.pending_frame = Some(start);
-            return Vec::new();
+    /// The driver prepared (or failed to prepare) a frame.
+    pub fn frame_prepared(&mut self, _now: Duration, key: FrameKey, outcome: Result<(), String>) {
+        if self.preparing != Some(key) {
+            return;
         }
-        let (job, frame) = (start.job, start.frame);
-        // Building the BVH and ID buffers is CPU work: keep it off the I/O threads' hot path.
-        match tokio::task::block_in_place(|| self.engine.start_frame(start)) {
-            Ok(active) => {
-                info!(job, frame, "frame ready");
-                self.frame = Some(Arc::new(active));
-                Vec::new()
+        self.preparing = None;
+        match outcome {
+            Ok(()) => {
+                info!(job = key.0, frame = key.1, "frame ready");
+                self.ready = Some(key);
             }
             Err(error) => {
-                warn!(job, frame, "cannot start frame: {error}");
-                self.frame = None;
-                // Its packages fail with this error as they arrive.
-                self.pending_frame = None;
-                Vec::new()
+                warn!(job = key.0, frame = key.1, "cannot start frame: {error}");
+                self.unusable = Some((key, error));
             }
+        }
+        self.advance();
+    }
+
+    /// The running package finished.
+    pub fn package_finished(
+        &mut self,
+        _now: Duration,
+        id: PackageId,
+        outcome: Result<PackageResult, String>,
+    ) {
+        if self.running != Some(id) {
+            return;
+        }
+        self.running = None;
+        if !self.cancelled.remove(&id) {
+            self.outbox.push_back(match outcome {
+                Ok(result) => Message::PackageResult(result),
+                Err(error) => Message::PackageFailed(PackageFailed { id, error }),
+            });
+        }
+        self.advance();
+    }
+
+    fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
+        let key = (start.job, start.frame);
+        self.ready = None;
+        self.unusable = None;
+        self.awaiting_scene = None;
+        if scenes.has_scene(&start.scene) {
+            self.preparing = Some(key);
+            self.tasks.push_back(Task::PrepareFrame(start));
+        } else {
+            // The scene was offered and requested; the frame waits for it.
+            self.preparing = None;
+            self.awaiting_scene = Some(start);
         }
     }
 
-    /// Starts the next queued package of the active frame; packages of any
-    /// other frame fail at once (the master retries them elsewhere).
-    fn next_package(&mut self) -> (Option<Running>, Vec<Message>) {
-        let mut failures = Vec::new();
-        while let Some(package) = self.queue.front() {
-            let waiting_for_scene = self
-                .pending_frame
-                .as_ref()
-                .is_some_and(|f| (f.job, f.frame) == (package.job, package.frame));
-            if waiting_for_scene {
+    /// Starts the next package, ends a finished drain, asks for work.
+    fn advance(&mut self) {
+        if self.end.is_some() {
+            return;
+        }
+        if self.is_draining() {
+            if self.running.is_none() {
+                // Queued packages go back to the queue when the link closes.
+                self.end = Some(SessionEnd::Drained);
+            }
+            return;
+        }
+        while self.running.is_none() {
+            let Some(package) = self.queue.front() else {
+                break;
+            };
+            let key = (package.job, package.frame);
+            let waiting = self.preparing == Some(key)
+                || self
+                    .awaiting_scene
+                    .as_ref()
+                    .is_some_and(|f| (f.job, f.frame) == key);
+            if waiting {
                 break;
             }
             let package = self.queue.pop_front().expect("front exists");
-            match &self.frame {
-                Some(active) if (active.job, active.frame) == (package.job, package.frame) => {
-                    let (active, slowdown, id) = (active.clone(), self.config.slowdown, package.id);
-                    let task = tokio::task::spawn_blocking(move || active.run(&package, slowdown));
-                    return (Some((id, task)), failures);
-                }
-                _ => failures.push(Message::PackageFailed(PackageFailed {
-                    id: package.id,
-                    error: format!(
+            if self.ready == Some(key) {
+                self.running = Some(package.id);
+                self.tasks.push_back(Task::RunPackage(package));
+            } else {
+                // The master retries it elsewhere.
+                let error = match &self.unusable {
+                    Some((k, why)) if *k == key => format!("cannot start frame: {why}"),
+                    _ => format!(
                         "package of job {} frame {} arrived without its frame",
-                        package.job, package.frame
+                        key.0, key.1
                     ),
-                })),
+                };
+                self.outbox.push_back(Message::PackageFailed(PackageFailed {
+                    id: package.id,
+                    error,
+                }));
             }
         }
-        (None, failures)
+        let idle = self.running.is_none() && self.queue.is_empty();
+        let settled = self.awaiting_scene.is_none() && self.preparing.is_none();
+        if let Some((job, frame)) = self.ready.filter(|_| idle && settled && !self.requested) {
+            self.outbox.push_back(Message::RequestWork { job, frame });
+            self.requested = true;
+        }
     }
 }
+
+#[cfg(test)]
+mod tests;

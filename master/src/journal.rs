@@ -1,0 +1,309 @@
+//! The master's job journal: its queue and each job's finished frames, kept
+//! in the state directory so that a restarted master resumes its jobs from
+//! the last finished frame and a submitter can re-attach.
+//!
+//! Layout (every file one protocol message, written to a temporary name and
+//! renamed, so a crash leaves either the old or the new file):
+//!
+//! ```text
+//! STATE/jobs/scenes/HASH.scene     the scene bytes of queued jobs
+//! STATE/jobs/NNNNNNNNNNNN/job      SubmitJob { job } (scene by hash)
+//! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F
+//! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
+//! ```
+//!
+//! The core never touches it: it emits [`Record`]s, the driver writes them
+//! and feeds [`StoredJob`]s back at start. A damaged entry is skipped with a
+//! warning naming its file; the master never fails to start over it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use tracing::warn;
+use vtfarm_proto::{
+    FrameDone, JobScene, Message, SceneData, SceneHash, WireJob, decode_message, encode_message,
+};
+
+/// What the core asks to keep.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Record {
+    /// A job was queued (its scene by hash in `job`, the bytes in `scene`).
+    JobQueued {
+        id: u64,
+        job: Box<WireJob>,
+        scene: Arc<SceneData>,
+    },
+    /// A frame finished.
+    FrameDone(Box<FrameDone>),
+    /// Every frame of the job is done (kept for re-attaching submitters).
+    JobComplete { id: u64 },
+    /// The job is gone: failed, cancelled, or delivered long enough ago.
+    JobForgotten { id: u64 },
+}
+
+/// A job read back from the journal.
+#[derive(Debug)]
+pub struct StoredJob {
+    pub id: u64,
+    /// The job with its scene's bytes (`JobScene::Data`).
+    pub job: WireJob,
+    /// How many frames are finished, counted from frame 0 without a gap.
+    pub frames_done: u32,
+    pub complete: bool,
+}
+
+/// Why the journal cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("job journal {path}: {source}")]
+pub struct JournalError {
+    path: PathBuf,
+    source: std::io::Error,
+}
+
+/// The journal in a directory.
+#[derive(Clone, Debug)]
+pub struct Journal {
+    dir: PathBuf,
+}
+
+impl Journal {
+    /// Opens (creating) the journal under `state_dir/jobs`.
+    pub fn open(state_dir: &Path) -> Result<Journal, JournalError> {
+        let dir = state_dir.join("jobs");
+        std::fs::create_dir_all(dir.join("scenes")).map_err(|source| JournalError {
+            path: dir.clone(),
+            source,
+        })?;
+        Ok(Journal { dir })
+    }
+
+    fn job_dir(&self, id: u64) -> PathBuf {
+        self.dir.join(format!("{id:012}"))
+    }
+
+    fn scene_path(&self, hash: &SceneHash) -> PathBuf {
+        self.dir
+            .join("scenes")
+            .join(format!("{}.scene", hex::encode(hash)))
+    }
+
+    fn frame_path(&self, id: u64, frame: u32) -> PathBuf {
+        self.job_dir(id).join(format!("{frame:06}"))
+    }
+
+    /// Writes a record; a failure is logged (the farm goes on, unjournaled).
+    pub fn write(&self, record: &Record) {
+        let written = match record {
+            Record::JobQueued { id, job, scene } => {
+                let scene_path = self.scene_path(&scene.hash);
+                let scene_written = if scene_path.exists() {
+                    Ok(())
+                } else {
+                    write_atomic(&scene_path, &scene.bytes)
+                };
+                scene_written.and_then(|()| {
+                    std::fs::create_dir_all(self.job_dir(*id))?;
+                    let message = Message::SubmitJob {
+                        job: (**job).clone(),
+                    };
+                    write_message(&self.job_dir(*id).join("job"), &message)
+                })
+            }
+            Record::FrameDone(done) => write_message(
+                &self.frame_path(done.job, done.frame),
+                &Message::FrameDone((**done).clone()),
+            ),
+            Record::JobComplete { id } => write_atomic(&self.job_dir(*id).join("complete"), b""),
+            Record::JobForgotten { id } => {
+                let removed = std::fs::remove_dir_all(self.job_dir(*id));
+                let removed = removed.or_else(|e| match e.kind() {
+                    std::io::ErrorKind::NotFound => Ok(()),
+                    _ => Err(e),
+                });
+                removed.and_then(|()| self.remove_unused_scenes())
+            }
+        };
+        if let Err(e) = written {
+            warn!(dir = %self.dir.display(), "cannot journal {record:?}: {e}", record = record_name(record));
+        }
+    }
+
+    /// Removes the scenes no journaled job names any more.
+    fn remove_unused_scenes(&self) -> std::io::Result<()> {
+        let used: Vec<String> = (self.job_ids().into_iter())
+            .filter_map(|id| match read_message(&self.job_dir(id).join("job"))? {
+                Message::SubmitJob { job } => match job.scene {
+                    JobScene::Hash(hash) => Some(format!("{}.scene", hex::encode(hash))),
+                    JobScene::Data(_) => None,
+                },
+                _ => None,
+            })
+            .collect();
+        for entry in std::fs::read_dir(self.dir.join("scenes"))? {
+            let entry = entry?;
+            if !used.iter().any(|u| entry.file_name() == u.as_str()) {
+                std::fs::remove_file(entry.path())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The ids of the journaled jobs, in order.
+    fn job_ids(&self) -> Vec<u64> {
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return Vec::new();
+        };
+        let mut ids: Vec<u64> = entries
+            .filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok())
+            .collect();
+        ids.sort_unstable();
+        ids
+    }
+
+    /// A finished frame, if the journal has it.
+    pub fn frame(&self, id: u64, frame: u32) -> Option<FrameDone> {
+        match read_message(&self.frame_path(id, frame))? {
+            Message::FrameDone(done) if done.job == id && done.frame == frame => Some(done),
+            _ => None,
+        }
+    }
+
+    /// Every job in the journal, in id order; damaged ones are skipped with a warning.
+    pub fn load(&self) -> Vec<StoredJob> {
+        (self.job_ids().into_iter())
+            .filter_map(|id| self.load_job(id))
+            .collect()
+    }
+
+    fn load_job(&self, id: u64) -> Option<StoredJob> {
+        let path = self.job_dir(id).join("job");
+        let Some(Message::SubmitJob { mut job }) = read_message(&path) else {
+            warn!(path = %path.display(), "skipping a damaged journal entry");
+            return None;
+        };
+        let JobScene::Hash(hash) = job.scene else {
+            warn!(path = %path.display(), "skipping a journal entry with an inline scene");
+            return None;
+        };
+        let scene_path = self.scene_path(&hash);
+        let Ok(bytes) = std::fs::read(&scene_path) else {
+            warn!(path = %scene_path.display(), "skipping a job whose scene is missing");
+            return None;
+        };
+        job.scene = JobScene::Data(SceneData { hash, bytes });
+        let frames = job.frames.len() as u32;
+        let frames_done = (0..frames)
+            .take_while(|&f| self.frame_path(id, f).exists())
+            .count() as u32;
+        let complete = self.job_dir(id).join("complete").exists() && frames_done == frames;
+        Some(StoredJob {
+            id,
+            job,
+            frames_done,
+            complete,
+        })
+    }
+}
+
+fn record_name(record: &Record) -> String {
+    match record {
+        Record::JobQueued { id, .. } => format!("job {id}"),
+        Record::FrameDone(done) => format!("job {} frame {}", done.job, done.frame),
+        Record::JobComplete { id } => format!("the completion of job {id}"),
+        Record::JobForgotten { id } => format!("the removal of job {id}"),
+    }
+}
+
+fn write_message(path: &Path, message: &Message) -> std::io::Result<()> {
+    let frame = encode_message(message).map_err(std::io::Error::other)?;
+    write_atomic(path, &frame[4..])
+}
+
+fn read_message(path: &Path) -> Option<Message> {
+    decode_message(&std::fs::read(path).ok()?).ok()
+}
+
+/// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
+fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let temporary = path.with_extension("partial");
+    std::fs::write(&temporary, bytes)?;
+    std::fs::rename(&temporary, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+    use vtfarm_proto::{FrameStats, WireImage};
+    use vtfarm_render::FrameSetup;
+    use vtfarm_scene::{Camera, Scene};
+
+    use super::*;
+
+    fn frame_done(job: u64, frame: u32) -> Record {
+        Record::FrameDone(Box::new(FrameDone {
+            job,
+            frame,
+            image: WireImage::from_pixels(1, 1, &[Vec3::splat(frame as f32)]),
+            stats: FrameStats::default(),
+            aux: None,
+        }))
+    }
+
+    #[test]
+    fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let scene = Arc::new(SceneData::from_scene(&Scene::default()));
+        let setup = FrameSetup {
+            camera: Camera {
+                eye: Vec3::ZERO,
+                target: Vec3::Z,
+                up: Vec3::Y,
+                fov_y_deg: 60.0,
+                width: 1,
+                height: 1,
+            },
+            lighting: Default::default(),
+            trace: Default::default(),
+            vertex: Default::default(),
+        };
+        let options = crate::JobOptions {
+            method: vtfarm_method::MethodKind::VertexTracing,
+            aux: false,
+        };
+        let frames = [setup.clone(), setup.clone(), setup];
+        let job = crate::wire_job("j", &scene, &frames, &[0], options);
+        journal.write(&Record::JobQueued {
+            id: 4,
+            job: Box::new(job.clone()),
+            scene: scene.clone(),
+        });
+        journal.write(&frame_done(4, 0));
+        journal.write(&frame_done(4, 2));
+        let stored = journal.load();
+        assert_eq!(stored.len(), 1);
+        assert_eq!(
+            (stored[0].id, stored[0].frames_done, stored[0].complete),
+            (4, 1, false)
+        );
+        assert_eq!(stored[0].job.scene, JobScene::Data((*scene).clone()));
+        assert_eq!(stored[0].job.frames, job.frames);
+        assert_eq!(journal.frame(4, 2).unwrap().frame, 2);
+
+        journal.write(&Record::JobForgotten { id: 4 });
+        assert!(journal.load().is_empty());
+        assert!(journal.frame(4, 0).is_none());
+        let scenes = std::fs::read_dir(dir.path().join("jobs/scenes")).unwrap();
+        assert_eq!(scenes.count(), 0, "the scene went with its last job");
+    }
+
+    #[test]
+    fn a_damaged_entry_is_skipped() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        std::fs::create_dir_all(journal.job_dir(1)).unwrap();
+        std::fs::write(journal.job_dir(1).join("job"), b"\xff\xfe not a message").unwrap();
+        assert!(journal.load().is_empty());
+        assert!(journal.frame(1, 0).is_none());
+    }
+}

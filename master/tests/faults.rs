@@ -1,0 +1,386 @@
+//! Deterministic fault tests: the master's core and real worker sessions in
+//! the `Pair` harness (virtual clock, in-memory queues). Every scenario ends
+//! with images equal to the single-process render, bit for bit.
+
+mod support;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use glam::Vec3;
+use support::pair::Pair;
+use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
+use vtfarm_method::MethodKind;
+use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
+use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_scene::{Camera, Scene};
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::{Quality, VertexSettings};
+
+/// A small cockpit job of `frames` frames from slightly different eyes.
+struct Job {
+    scene: Scene,
+    reflectors: Vec<u32>,
+    frames: Vec<FrameSetup>,
+}
+
+impl Job {
+    fn new(frames: usize) -> Job {
+        let c = cockpit(&CockpitConfig {
+            detail: 0.2,
+            glass_segments: 24,
+            ..CockpitConfig::default()
+        });
+        let reflectors = c.cover_glass_triangles();
+        let frames = (0..frames)
+            .map(|k| FrameSetup {
+                camera: Camera {
+                    eye: c.camera.eye + Vec3::new(0.01, 0.005, 0.0) * k as f32,
+                    width: 96,
+                    height: 54,
+                    ..c.camera
+                },
+                lighting: c.lighting.clone(),
+                trace: TraceSettings::default(),
+                vertex: VertexSettings {
+                    quality: Quality::Full,
+                    ..VertexSettings::default()
+                },
+            })
+            .collect();
+        Job {
+            scene: c.scene,
+            reflectors,
+            frames,
+        }
+    }
+
+    fn wire(&self) -> (WireJob, SceneData) {
+        let data = SceneData::from_scene(&self.scene);
+        (
+            wire_job(
+                "faults",
+                &data,
+                &self.frames,
+                &self.reflectors,
+                JobOptions {
+                    method: MethodKind::VertexTracing,
+                    aux: false,
+                },
+            ),
+            data,
+        )
+    }
+
+    /// The single-process images.
+    fn reference(&self) -> Vec<Vec<Vec3>> {
+        let renderer = Renderer::new(Arc::new(self.scene.clone()), self.reflectors.clone());
+        (self.frames.iter())
+            .map(|f| {
+                let render = renderer.render(f, &Default::default(), &mut |_, _| {});
+                render.image.color.pixels
+            })
+            .collect()
+    }
+}
+
+/// Virtual time a scenario may take at most.
+const BOUND: Duration = Duration::from_secs(600);
+
+fn all_frames(frames: usize) -> impl FnMut(&Pair) -> bool {
+    move |pair| pair.frames_done().len() == frames || pair.job_failed().is_some()
+}
+
+/// The finished frames' stats, after checking every image against the reference.
+fn check_images(pair: &Pair, job: &Job) -> Vec<FrameStats> {
+    assert_eq!(pair.job_failed(), None);
+    let reference = job.reference();
+    let done = pair.frames_done();
+    assert_eq!(done.len(), reference.len());
+    (done.into_iter().zip(&reference))
+        .map(|(done, reference)| {
+            let (_, _, pixels) = done.image.clone().into_pixels().unwrap();
+            assert!(
+                &pixels == reference,
+                "frame {}: pixels differ from the single-process render",
+                done.frame
+            );
+            done.stats.clone()
+        })
+        .collect()
+}
+
+/// No straggler copies: a lost package must come back through the loss itself.
+fn no_stragglers() -> SchedulerConfig {
+    SchedulerConfig {
+        straggler: None,
+        ..SchedulerConfig::default()
+    }
+}
+
+#[test]
+fn a_worker_killed_mid_frame_loses_its_packages_to_the_others() {
+    let job = Job::new(1);
+    let config = no_stragglers();
+    let heartbeat_timeout = config.heartbeat_timeout;
+    let mut pair = Pair::new(config);
+    let survivor = pair.add_worker("survivor", 1.0);
+    let doomed = pair.add_worker("doomed", 4.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    // The trigger is a protocol state, not a time: the doomed worker runs a package.
+    pair.drive(BOUND, |p| p.workers[doomed].is_running_a_package());
+    let killed_at = pair.now;
+    pair.kill(doomed);
+    pair.drive(BOUND, all_frames(1));
+    let stats = check_images(&pair, &job);
+    assert!(
+        stats[0].requeued >= 1,
+        "its package was requeued: {stats:?}"
+    );
+    let names: Vec<&str> = stats[0].workers.iter().map(|w| w.name.as_str()).collect();
+    assert!(
+        stats[0]
+            .workers
+            .iter()
+            .all(|w| w.name.starts_with("survivor") || w.packages == 0),
+        "only the survivor's results count: {names:?}"
+    );
+    assert!(pair.workers[survivor].results_sent > 0);
+    assert!(
+        pair.now - killed_at < heartbeat_timeout * 2,
+        "the loss was noticed within the heartbeat timeout ({:?} after the kill)",
+        pair.now - killed_at
+    );
+}
+
+#[test]
+fn a_slowed_worker_gets_a_share_that_follows_its_speed() {
+    let job = Job::new(4);
+    let mut pair = Pair::new(SchedulerConfig::default());
+    pair.add_worker("fast", 1.0);
+    pair.add_worker("slow", 3.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, all_frames(4));
+    let stats = check_images(&pair, &job);
+    for s in &stats {
+        eprintln!(
+            "imbalance {:.1}%, slow share {:.3}",
+            s.imbalance * 100.0,
+            share(s, "slow")
+        );
+    }
+    // After the first frame (uniform estimates, unmeasured workers) every
+    // frame is balanced and the slow worker traces about a quarter (a third
+    // of the fast one's speed).
+    for s in &stats[1..] {
+        assert!(s.imbalance < 0.10, "imbalance {:.3}: {s:?}", s.imbalance);
+        let slow = share(s, "slow");
+        assert!((0.20..=0.30).contains(&slow), "slow share {slow:.3}: {s:?}");
+    }
+}
+
+/// The share of a frame's triangles traced by the worker named `name`.
+fn share(stats: &FrameStats, name: &str) -> f64 {
+    let total: u32 = stats.workers.iter().map(|w| w.triangles).sum();
+    let mine: u32 = (stats.workers.iter())
+        .filter(|w| w.name.starts_with(name))
+        .map(|w| w.triangles)
+        .sum();
+    f64::from(mine) / f64::from(total.max(1))
+}
+
+#[test]
+fn a_worker_whose_heartbeats_are_lost_is_dropped_and_its_work_redone() {
+    let job = Job::new(1);
+    let mut pair = Pair::new(no_stragglers());
+    pair.add_worker("steady", 1.0);
+    let cut_off = pair.add_worker("cut-off", 2.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, |p| p.workers[cut_off].is_running_a_package());
+    // Its session goes on (it keeps tracing and sending), but nothing arrives.
+    pair.workers[cut_off].partitioned = true;
+    pair.drive(BOUND, all_frames(1));
+    let stats = check_images(&pair, &job);
+    assert!(stats[0].requeued >= 1, "{stats:?}");
+    assert!(
+        !pair.workers[cut_off].is_connected(),
+        "the master closed the silent worker"
+    );
+}
+
+#[test]
+fn duplicated_results_are_composited_and_counted_once() {
+    let job = Job::new(2);
+    let mut pair = Pair::new(SchedulerConfig::default());
+    let echo = pair.add_worker("echo", 1.0);
+    pair.add_worker("plain", 1.0);
+    pair.workers[echo].duplicate_results = true;
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, all_frames(2));
+    check_images(&pair, &job);
+    let total = job.reflectors.len() as u32;
+    for m in &pair.to_submitter {
+        if let Message::Progress { done, .. } = m {
+            assert!(
+                *done <= total,
+                "progress {done} of {total} counts a result twice"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_draining_worker_finishes_its_package_and_its_queue_goes_back_at_once() {
+    let job = Job::new(2);
+    let config = no_stragglers();
+    let heartbeat_timeout = config.heartbeat_timeout;
+    let mut pair = Pair::new(config);
+    pair.add_worker("stays", 1.0);
+    let leaving = pair.add_worker("leaving", 2.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, |p| p.workers[leaving].is_running_a_package());
+    let results_before = pair.workers[leaving].results_sent;
+    pair.drain(leaving);
+    let drained_at = pair.now;
+    // Gone from the master's worker list long before a heartbeat timeout.
+    pair.drive(heartbeat_timeout / 2, |p| {
+        !p.workers[leaving].is_connected() && p.master.status().workers.len() == 1
+    });
+    assert!(pair.now - drained_at < heartbeat_timeout / 2);
+    assert_eq!(
+        pair.workers[leaving].results_sent,
+        results_before + 1,
+        "the running package was finished and sent"
+    );
+    pair.drive(BOUND, all_frames(2));
+    check_images(&pair, &job);
+}
+
+#[test]
+fn the_same_faults_replay_the_same_schedule() {
+    let run = || {
+        let job = Job::new(2);
+        let mut pair = Pair::new(SchedulerConfig::default());
+        pair.add_worker("a", 1.0);
+        let b = pair.add_worker("b", 2.5);
+        pair.add_worker("c", 1.5);
+        let (wire, data) = job.wire();
+        pair.submit(wire, data);
+        pair.drive(BOUND, |p| p.workers[b].is_running_a_package());
+        pair.kill(b);
+        pair.drive(BOUND, all_frames(2));
+        // Everything but what depends on measured compute times.
+        let trace: Vec<String> = (pair.frames_done().iter())
+            .map(|d| {
+                let s = &d.stats;
+                let split = (s.wall_micros, s.packages, s.requeued, s.duplicates);
+                // (Result sizes include the measured times too.)
+                let workers: Vec<_> = (s.workers.iter())
+                    .map(|w| (&w.name, w.busy_micros, w.packages, w.triangles, w.rays))
+                    .collect();
+                format!("{split:?} {workers:?}")
+            })
+            .collect();
+        (pair.now, trace)
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn a_dead_peer_is_noticed_by_quic_within_the_heartbeat_timeout() {
+    // Both ends of a connection close it after the QUIC idle timeout, so a
+    // worker notices a dead master (and the master a dead worker) when the
+    // master's scheduler gives up on the worker's heartbeats; keep-alives
+    // keep a busy connection open well within it.
+    let heartbeat_timeout = SchedulerConfig::default().heartbeat_timeout;
+    assert_eq!(vtfarm_proto::IDLE_TIMEOUT, heartbeat_timeout);
+    assert!(vtfarm_proto::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
+}
+
+#[test]
+fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
+    let job = Job::new(4);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    pair.add_worker("b", 1.5);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    // Mid-job: two frames delivered, the third running.
+    pair.drive(BOUND, |p| {
+        p.frames_done().len() == 2 && p.workers.iter().any(|w| w.is_running_a_package())
+    });
+    let id = pair.job_id().unwrap();
+    let starts_before = pair.frame_starts.len();
+    pair.restart_master();
+    // The submitter comes back (after its backoff) and re-attaches.
+    pair.drive_bounded(Duration::from_secs(1), u64::MAX, &mut |_| false);
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(4));
+    check_images(&pair, &job);
+    let resumed: Vec<u32> = pair.frame_starts[starts_before..]
+        .iter()
+        .map(|&(_, frame)| frame)
+        .collect();
+    assert!(
+        resumed.iter().all(|&f| f >= 2),
+        "finished frames are not rendered again: {resumed:?}"
+    );
+}
+
+#[test]
+fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
+    let job = Job::new(3);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    let id = pair.job_id().unwrap();
+    pair.drop_submitter();
+    // The job goes on without it; the frames finished meanwhile are replayed.
+    pair.drive(BOUND, |p| p.frame_starts.iter().any(|&(_, f)| f == 2));
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(3));
+    check_images(&pair, &job);
+}
+
+#[test]
+fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
+    let job = Job::new(3);
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.attach_submitter(77);
+    let errors = pair.job_failed().expect("no job 77");
+    assert!(errors[0].contains("no job 77"), "{errors:?}");
+
+    // In memory: nobody can come back for the frames, the job stops at once.
+    let mut pair = Pair::new(SchedulerConfig::default());
+    pair.add_worker("a", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data.clone());
+    pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    pair.drop_submitter();
+    assert!(pair.master.status().queue.running.is_none());
+
+    // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
+    let mut pair = Pair::persistent(SchedulerConfig::default());
+    pair.add_worker("a", 1e4);
+    pair.submit(job.wire().0, data);
+    pair.drive(BOUND, |p| p.workers[0].is_running_a_package());
+    let left_at = pair.now;
+    pair.drop_submitter();
+    pair.drive(2 * ATTACH_GRACE, |p| {
+        p.master.status().queue.running.is_none()
+    });
+    assert!(
+        pair.now >= left_at + ATTACH_GRACE,
+        "cancelled after {:?}",
+        pair.now - left_at
+    );
+}
