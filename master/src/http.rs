@@ -322,6 +322,19 @@ fn gauge_family(registry: &mut Registry, name: &str, help: &str, values: &[(Labe
     registry.register(name, help, family);
 }
 
+/// A metric without labels.
+fn counter(registry: &mut Registry, name: &str, help: &str, value: u64) {
+    let counter = Counter::<u64>::default();
+    counter.inc_by(value);
+    registry.register(name, help, counter);
+}
+
+fn gauge(registry: &mut Registry, name: &str, help: &str, value: f64) {
+    let gauge = Gauge::<f64, std::sync::atomic::AtomicU64>::default();
+    gauge.set(value);
+    registry.register(name, help, gauge);
+}
+
 fn label(key: &'static str, value: impl Into<String>) -> Labels {
     vec![(key, value.into())]
 }
@@ -355,12 +368,7 @@ fn metrics_registry(core: &MasterCore) -> Registry {
             (label("state", "waiting"), status.queue.waiting.len() as f64),
         ],
     );
-    counter_family(
-        &mut r,
-        "frames",
-        "Frames completed",
-        &[(vec![], c.frames_completed)],
-    );
+    counter(&mut r, "frames", "Frames completed", c.frames_completed);
     counter_family(
         &mut r,
         "packages",
@@ -377,11 +385,11 @@ fn metrics_registry(core: &MasterCore) -> Registry {
         .iter()
         .map(|w| u64::from(w.packages_running))
         .sum();
-    gauge_family(
+    gauge(
         &mut r,
         "packages_running",
         "Packages out at workers now",
-        &[(vec![], running as f64)],
+        running as f64,
     );
     let per_worker = |f: &dyn Fn(&vtfarm_proto::WorkerStatus) -> f64| -> Vec<(Labels, f64)> {
         (status.workers.iter())
@@ -444,11 +452,11 @@ fn metrics_registry(core: &MasterCore) -> Registry {
         "Package (in) and result (out) bytes of each worker's accepted results",
         &bytes,
     );
-    counter_family(
+    counter(
         &mut r,
         "scene_bytes_sent",
         "Scene bytes sent to workers",
-        &[(vec![], status.scene_bytes_sent)],
+        status.scene_bytes_sent,
     );
     r.register_with_unit(
         "frame_duration",

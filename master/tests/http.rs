@@ -184,34 +184,34 @@ impl Response {
     }
 }
 
-/// A plain HTTP/1.1 GET over a fresh connection.
+/// A plain HTTP/1.1 GET over a fresh connection; reads the headers, then
+/// exactly `Content-Length` bytes (servers need not close the connection).
 async fn get(address: SocketAddr, path: &str) -> Response {
-    let mut stream = TcpStream::connect(address).await.unwrap();
+    let stream = TcpStream::connect(address).await.unwrap();
+    let mut stream = BufReader::new(stream);
     let request = format!("GET {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n");
-    stream.write_all(request.as_bytes()).await.unwrap();
-    let mut raw = Vec::new();
-    stream.read_to_end(&mut raw).await.unwrap();
-    let split = raw
-        .windows(4)
-        .position(|w| w == b"\r\n\r\n")
-        .expect("end of headers");
-    let head = std::str::from_utf8(&raw[..split]).unwrap();
-    let mut lines = head.split("\r\n");
-    let status = lines
-        .next()
-        .unwrap()
-        .split(' ')
-        .nth(1)
-        .unwrap()
-        .parse()
+    stream
+        .get_mut()
+        .write_all(request.as_bytes())
+        .await
         .unwrap();
-    let headers: BTreeMap<String, String> = lines
-        .filter_map(|l| l.split_once(": "))
-        .map(|(k, v)| (k.to_ascii_lowercase(), v.to_owned()))
-        .collect();
-    let body = raw[split + 4..].to_vec();
+    let mut status_line = String::new();
+    stream.read_line(&mut status_line).await.unwrap();
+    let status = status_line.split(' ').nth(1).unwrap().parse().unwrap();
+    let mut headers = BTreeMap::new();
+    loop {
+        let mut line = String::new();
+        stream.read_line(&mut line).await.unwrap();
+        let line = line.trim_end();
+        if line.is_empty() {
+            break;
+        }
+        let (key, value) = line.split_once(':').expect("header line");
+        headers.insert(key.to_ascii_lowercase(), value.trim().to_owned());
+    }
     let length: usize = headers["content-length"].parse().unwrap();
-    assert_eq!(body.len(), length, "{path}: whole body");
+    let mut body = vec![0; length];
+    stream.read_exact(&mut body).await.unwrap();
     Response {
         status,
         headers,
@@ -406,7 +406,7 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
 
 /// Headless Chromium driven over the DevTools protocol, with a fresh profile.
 struct Browser {
-    child: std::process::Child,
+    _child: KillOnDrop,
     _profile: tempfile::TempDir,
     socket: tokio_tungstenite::WebSocketStream<
         tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
@@ -444,9 +444,10 @@ impl Browser {
             .stderr(std::process::Stdio::piped())
             .spawn()
             .expect("chromium starts");
+        let stderr = child.stderr.take().unwrap();
+        let child = KillOnDrop(child);
         // Chromium says where its DevTools endpoint is on stderr; a thread
         // passes the lines on and keeps draining, so Chromium never blocks.
-        let stderr = child.stderr.take().unwrap();
         let (lines_tx, mut lines) = tokio::sync::mpsc::unbounded_channel();
         std::thread::spawn(move || {
             use std::io::BufRead;
@@ -474,7 +475,10 @@ impl Browser {
             .next()
             .and_then(|p| p.parse().ok())
             .expect("DevTools port");
-        let list = get(SocketAddr::from(([127, 0, 0, 1], port)), "/json/list").await;
+        let list = get(SocketAddr::from(([127, 0, 0, 1], port)), "/json/list");
+        let list = tokio::time::timeout(WAIT, list)
+            .await
+            .expect("DevTools target list");
         let targets: serde_json::Value = serde_json::from_slice(&list.body).unwrap();
         let page_url = (targets.as_array().unwrap().iter())
             .find(|t| t["type"] == "page")
@@ -483,7 +487,7 @@ impl Browser {
             .to_owned();
         let (socket, _) = tokio_tungstenite::connect_async(page_url).await.unwrap();
         Some(Browser {
-            child,
+            _child: child,
             _profile: profile,
             socket,
             next_id: 1,
@@ -555,10 +559,13 @@ impl Browser {
     }
 }
 
-impl Drop for Browser {
+/// Chromium ends with the test, whichever way the test ends.
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }
 
