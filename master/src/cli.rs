@@ -11,7 +11,7 @@ use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
 use vtfarm_scheduler::SchedulerConfig;
 
 use crate::journal::Journal;
-use crate::{driver::spawn_persistent_master, server};
+use crate::{driver::spawn_persistent_master, http, server};
 
 /// Runs the master: accepts workers and jobs.
 #[derive(clap::Args, Debug, Clone)]
@@ -23,6 +23,10 @@ pub struct MasterArgs {
     /// Address to listen on (default: all interfaces, the cluster file's port).
     #[arg(long)]
     pub listen: Option<SocketAddr>,
+    /// Address of the dashboard, status API and `/metrics`. Peers other
+    /// than loopback must send the cluster token as a bearer token.
+    #[arg(long, default_value = "127.0.0.1:7879")]
+    pub http: SocketAddr,
 }
 
 /// Creates a cluster: the master's key and certificate, and `cluster.toml`.
@@ -99,6 +103,10 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     // master resumes them.
     let journal = Journal::open(state_dir)?;
     let (handle, _task) = spawn_persistent_master(SchedulerConfig::default(), journal);
+    let http = http::bind(args.http).await?;
+    info!(address = %http.local_addr()?, "dashboard listening");
+    println!("dashboard on http://{}/", http.local_addr()?);
+    tokio::spawn(http::serve(http, handle.clone(), cluster.token.clone()));
     server::serve(
         endpoint,
         HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"),

@@ -35,6 +35,7 @@ use vtfarm_scheduler::{
 use vtfarm_vertex::{FrameImage, PackageStats};
 
 use crate::journal::{Record, StoredJob};
+use crate::telemetry::Telemetry;
 
 /// A connection, numbered by the driver.
 pub type ConnId = u64;
@@ -156,6 +157,8 @@ struct FrameAssembly {
 /// A package on its way: what the results must be matched against.
 struct InFlight {
     job: u64,
+    /// The connection of the worker it went to.
+    worker: ConnId,
     frame: u32,
     /// The reflector triangles its items cover, sorted: for progress and
     /// pixel ownership.
@@ -178,6 +181,7 @@ pub struct MasterCore {
     next_job: u64,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
+    telemetry: Telemetry,
     /// Whether jobs are journaled and outlive their submitter for [`ATTACH_GRACE`].
     persistent: bool,
     /// Completed jobs still kept for re-attaching: frame count and completion time.
@@ -201,6 +205,7 @@ impl MasterCore {
             next_job: 1,
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
+            telemetry: Telemetry::default(),
             persistent: false,
             completed: BTreeMap::new(),
             now: Duration::ZERO,
@@ -480,6 +485,8 @@ impl MasterCore {
             return;
         }
         let (job_id, triangles) = (in_flight.job, in_flight.triangles.len() as u64);
+        let worker_name = self.worker_name(conn);
+        (self.telemetry).package_done(&worker_name, stats.samples(), in_flight.bytes_in, bytes_out);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
@@ -543,6 +550,7 @@ impl MasterCore {
         }
         self.next_job += 1;
         self.send(conn, Message::JobAccepted { job: id, frames });
+        self.telemetry.counters.jobs_submitted += 1;
         if let Some(job) = journaled {
             let scene = self.scenes[&scene_hash].1.clone();
             self.persist(Record::JobQueued {
@@ -775,22 +783,25 @@ impl MasterCore {
                     workers,
                     phases: done.phases.clone(),
                 };
+                let color = done.image.color.clone();
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 j.frames_done = frame + 1;
                 let done = FrameDone {
                     job: job.0,
                     frame,
                     image: wire_image(&done.image.color),
-                    stats: frame_stats,
+                    stats: frame_stats.clone(),
                     aux: j.aux.then(|| frame_aux(&done.image)),
                 };
                 let submitter = j.submitter;
                 self.persist(Record::FrameDone(Box::new(done.clone())));
+                (self.telemetry).frame_finished(job.0, frame, frame_stats, color);
                 self.send_to(submitter, Message::FrameDone(done));
                 self.departed.clear();
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
+                self.telemetry.counters.jobs_completed += 1;
                 if let Some(j) = self.forget_job(job.0) {
                     if self.persistent {
                         // Kept a while for a submitter that lost the connection.
@@ -821,17 +832,21 @@ impl MasterCore {
                     )
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
+                self.telemetry.counters.jobs_failed += 1;
                 if let Some(j) = self.forget_job(job.0) {
                     self.send_to(j.submitter, Message::JobFailed { job: job.0, errors });
                 }
                 self.persist(Record::JobForgotten { id: job.0 });
             }
             Event::JobCancelled { job } => {
+                self.telemetry.counters.jobs_cancelled += 1;
                 self.forget_job(job.0);
                 self.persist(Record::JobForgotten { id: job.0 });
             }
             Event::WorkerBlocklisted { worker, job } => {
                 warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
+                let name = self.worker_name(worker.0);
+                self.telemetry.blocklisted(&name, job.0);
             }
             Event::WorkerLost {
                 worker,
@@ -990,6 +1005,7 @@ impl MasterCore {
         });
         let in_flight = InFlight {
             job: a.job.0,
+            worker: a.worker.0,
             frame: a.frame,
             triangles,
             bytes_in: encoded_len(&message),
@@ -997,6 +1013,46 @@ impl MasterCore {
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
+    }
+
+    /// The master's history: counters, per-worker totals, finished frames.
+    pub fn telemetry(&self) -> &Telemetry {
+        &self.telemetry
+    }
+
+    /// The packages each worker (by name) is working on now.
+    pub fn packages_by_worker(&self) -> BTreeMap<String, Vec<u64>> {
+        let mut by_worker: BTreeMap<String, Vec<u64>> = BTreeMap::new();
+        for (&id, p) in &self.packages {
+            by_worker
+                .entry(self.worker_name(p.worker))
+                .or_default()
+                .push(id);
+        }
+        by_worker
+    }
+
+    /// The frame being assembled: job, frame index, reflector triangles
+    /// done, and its image so far (base frame with the results composited).
+    pub fn live_frame(&self) -> Option<LiveFrame<'_>> {
+        let running = self.scheduler.queue().running?;
+        let job = self.jobs.get(&running.job.0)?;
+        let current = job.current.as_ref()?;
+        Some(LiveFrame {
+            job: running.job.0,
+            frame: current.start.frame,
+            triangles_done: current.triangles_done,
+            triangles_total: job.reflectors.len() as u64,
+            image: &current.image.color,
+        })
+    }
+
+    /// A worker's name (its connection number if it is gone).
+    fn worker_name(&self, conn: ConnId) -> String {
+        match self.peers.get(&conn) {
+            Some(Peer::Worker { name, .. }) => name.clone(),
+            _ => format!("connection {conn}"),
+        }
     }
 
     /// The farm's state for `vtfarm status`.
@@ -1059,6 +1115,15 @@ fn phase(t0: Duration, who: String, kind: PhaseKind, start: Duration, end: Durat
         start_micros: micros(start),
         end_micros: micros(end),
     }
+}
+
+/// The frame being assembled, borrowed from the core.
+pub struct LiveFrame<'a> {
+    pub job: u64,
+    pub frame: u32,
+    pub triangles_done: u64,
+    pub triangles_total: u64,
+    pub image: &'a vtfarm_imaging::Image,
 }
 
 fn wire_image(image: &vtfarm_imaging::Image) -> WireImage {

@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
+use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::{debug, warn};
@@ -41,6 +42,8 @@ enum Input {
         frame: u32,
         base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
     },
+    /// Read the core's state (for the HTTP view); changes nothing.
+    Inspect(Box<dyn FnOnce(&MasterCore) + Send>),
     /// End the master task (dropping every connection).
     Stop,
 }
@@ -50,6 +53,7 @@ enum Input {
 pub struct MasterHandle {
     inputs: UnboundedSender<Input>,
     next_conn: Arc<AtomicU64>,
+    changes: watch::Receiver<u64>,
 }
 
 impl MasterHandle {
@@ -81,6 +85,26 @@ impl MasterHandle {
         conn
     }
 
+    /// Runs `read` on the core between two inputs and returns its answer;
+    /// `None` once the master has stopped.
+    pub async fn inspect<R: Send + 'static>(
+        &self,
+        read: impl FnOnce(&MasterCore) -> R + Send + 'static,
+    ) -> Option<R> {
+        let (tx, rx) = oneshot::channel();
+        let read = Box::new(move |core: &MasterCore| {
+            let _ = tx.send(read(core));
+        });
+        self.inputs.send(Input::Inspect(read)).ok()?;
+        rx.await.ok()
+    }
+
+    /// Ticks after every input the core handled (a connection, a message,
+    /// a deadline): watchers re-read the state when it moves.
+    pub fn changes(&self) -> watch::Receiver<u64> {
+        self.changes.clone()
+    }
+
     /// Ends the master task: its connections close and the workers' sessions end.
     pub fn stop(&self) {
         let _ = self.inputs.send(Input::Stop);
@@ -102,11 +126,13 @@ pub fn spawn_persistent_master(
 
 fn spawn(core: MasterCore, journal: Option<Journal>) -> (MasterHandle, JoinHandle<()>) {
     let (inputs, rx) = unbounded_channel();
+    let (changed, changes) = watch::channel(0);
     let handle = MasterHandle {
         inputs,
         next_conn: Arc::new(AtomicU64::new(1)),
+        changes,
     };
-    let task = tokio::spawn(run(core, handle.inputs.clone(), rx, journal));
+    let task = tokio::spawn(run(core, handle.inputs.clone(), rx, journal, changed));
     (handle, task)
 }
 
@@ -120,6 +146,7 @@ async fn run(
     feedback: UnboundedSender<Input>,
     mut inputs: UnboundedReceiver<Input>,
     journal: Option<Journal>,
+    changed: watch::Sender<u64>,
 ) {
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
@@ -139,6 +166,11 @@ async fn run(
                 let Some(input) = input else { return };
                 if matches!(input, Input::Stop) {
                     return;
+                }
+                if let Input::Inspect(read) = input {
+                    // A read: nothing moved, so no tick for the watchers.
+                    read(&core);
+                    continue;
                 }
                 let now = start.elapsed();
                 // Inside a block so the whole frame's CPU work (rasterizing,
@@ -161,6 +193,7 @@ async fn run(
                     Input::BaseFrame { job, frame, base } => {
                         core.base_frame_ready(now, job, frame, base);
                     }
+                    Input::Inspect(read) => read(&core),
                     Input::Stop => {} // returned above
                 });
             }
@@ -216,5 +249,6 @@ async fn run(
                 }
             }
         }
+        changed.send_modify(|tick| *tick += 1);
     }
 }

@@ -7,6 +7,9 @@
 //! - [`driver`]: the async task around the core; links in, messages out.
 //! - [`server`]: the QUIC endpoint and handshake.
 //! - [`journal`]: the job journal in the state directory (restarts, re-attaching).
+//! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
+//!   core's state through the driver, owns none.
+//! - [`telemetry`]: the core's counters and kept frames for [`http`].
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
@@ -15,9 +18,11 @@ pub mod cli;
 pub mod core;
 pub mod driver;
 pub mod embedded;
+pub mod http;
 pub mod journal;
 pub mod server;
 pub mod submit;
+pub mod telemetry;
 
 pub use core::{ATTACH_GRACE, BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};

@@ -297,11 +297,7 @@ impl RaySets {
                     surface.normal
                 };
                 let direction = reflect(ray.direction, facing);
-                Some(bvh.spawn_ray(
-                    surface.position,
-                    bvh.geometric_normal(hit.triangle),
-                    direction,
-                ))
+                Some(bvh.spawn_ray(surface.position, hit.triangle, direction))
             })
             .collect();
         RaySets {

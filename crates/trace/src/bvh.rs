@@ -519,19 +519,19 @@ impl SceneBvh {
             // Rays that can hit nothing sit out; `lane` maps packet slots back.
             let mut lane = [0usize; crate::wide::PACKET];
             let mut bvh_rays = Vec::with_capacity(packet.len());
-            let mut dirs = [Vec3A::ZERO; crate::wide::PACKET];
+            let mut sheared = Vec::with_capacity(packet.len());
             for (i, ray) in packet.iter().enumerate() {
                 let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
                 if let Some(r) = bvh_ray(origin, direction, t_max) {
                     lane[bvh_rays.len()] = i;
-                    dirs[bvh_rays.len()] = direction;
+                    sheared.push(ShearedRay::new(origin, direction));
                     bvh_rays.push(r);
                 }
             }
             let mut best: [ClosestSoFar; crate::wide::PACKET] =
                 std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
             crate::wide::closest_packet(bvh, &bvh_rays, |r, slot| {
-                let tuv = self.prims[slot].intersect(bvh_rays[r].origin, dirs[r]);
+                let tuv = self.prims[slot].intersect(&sheared[r]);
                 match tuv {
                     Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
                         best[r].hit.map_or(f32::INFINITY, |h| next_up(h.t))

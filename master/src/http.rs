@@ -1,0 +1,484 @@
+//! The master's HTTP side (`vtfarm master --http ADDR`): the dashboard page,
+//! its live event stream, frames as PNG, `/api/status` and Prometheus
+//! `/metrics`.
+//!
+//! It reads the core's state through [`MasterHandle::inspect`] and wakes on
+//! [`MasterHandle::changes`]; it owns no farm state, so the page, the
+//! metrics and `vtfarm status` (which asks the same `MasterCore::status`)
+//! cannot disagree.
+//!
+//! Peers on loopback are trusted; any other peer must send the cluster
+//! token as `Authorization: Bearer TOKEN`.
+
+use std::collections::BTreeMap;
+use std::convert::Infallible;
+use std::io::Cursor;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::Arc;
+
+use axum::Router;
+use axum::extract::{ConnectInfo, Path, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event, Sse};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use futures_util::stream::{self, Stream};
+use prometheus_client::encoding::{EncodeMetric, MetricEncoder, NoLabelSet};
+use prometheus_client::metrics::MetricType;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::registry::Registry;
+use serde::Serialize;
+use subtle::ConstantTimeEq;
+use tokio::net::TcpListener;
+use vtfarm_imaging::Image;
+use vtfarm_proto::{FrameStats, StatusReply};
+
+use crate::core::MasterCore;
+use crate::driver::MasterHandle;
+use crate::telemetry::{FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals};
+
+/// The dashboard, served from the binary.
+const DASHBOARD: &str = include_str!("dashboard.html");
+
+#[derive(Clone)]
+struct HttpState {
+    master: MasterHandle,
+    token: Arc<str>,
+}
+
+/// Why the HTTP server could not start.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot listen for HTTP on {address}: {source}")]
+pub struct HttpBindError {
+    address: SocketAddr,
+    source: std::io::Error,
+}
+
+/// Binds the HTTP listener.
+pub async fn bind(address: SocketAddr) -> Result<TcpListener, HttpBindError> {
+    TcpListener::bind(address)
+        .await
+        .map_err(|source| HttpBindError { address, source })
+}
+
+/// Serves the dashboard, API and metrics until the listener fails.
+pub async fn serve(listener: TcpListener, master: MasterHandle, token: String) {
+    let app = router(master, token).into_make_service_with_connect_info::<SocketAddr>();
+    if let Err(e) = axum::serve(listener, app).await {
+        tracing::warn!("HTTP server stopped: {e}");
+    }
+}
+
+/// The routes, behind the token check. Requests need a
+/// `ConnectInfo<SocketAddr>` (the peer) to pass it.
+pub fn router(master: MasterHandle, token: String) -> Router {
+    let state = HttpState {
+        master,
+        token: token.into(),
+    };
+    Router::new()
+        .route("/", get(|| async { Html(DASHBOARD) }))
+        .route("/metrics", get(metrics))
+        .route("/api/status", get(status))
+        .route("/api/dashboard", get(dashboard))
+        .route("/api/events", get(events))
+        .route("/frames/live.png", get(live_png))
+        .route("/frames/{seq}", get(frame_png))
+        .layer(middleware::from_fn_with_state(state.clone(), require_token))
+        .with_state(state)
+}
+
+/// Whether a request from `peer` may be served: loopback always, anyone
+/// else with the cluster token as a bearer token.
+pub fn authorized(peer: IpAddr, headers: &HeaderMap, token: &str) -> bool {
+    if peer.to_canonical().is_loopback() {
+        return true;
+    }
+    let bearer = (headers.get(header::AUTHORIZATION))
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    bearer.is_some_and(|t| bool::from(t.as_bytes().ct_eq(token.as_bytes())))
+}
+
+async fn require_token(
+    State(state): State<HttpState>,
+    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    request: Request,
+    next: Next,
+) -> Response {
+    if authorized(peer.ip(), request.headers(), &state.token) {
+        next.run(request).await
+    } else {
+        let challenge = [(header::WWW_AUTHENTICATE, "Bearer")];
+        let message = "the cluster token is required (Authorization: Bearer TOKEN)\n";
+        (StatusCode::UNAUTHORIZED, challenge, message).into_response()
+    }
+}
+
+fn unavailable() -> Response {
+    (StatusCode::SERVICE_UNAVAILABLE, "the master has stopped\n").into_response()
+}
+
+/// `MasterCore::status`, the reply `vtfarm status` prints.
+async fn status(State(state): State<HttpState>) -> Response {
+    match state.master.inspect(MasterCore::status).await {
+        Some(reply) => axum::Json(reply).into_response(),
+        None => unavailable(),
+    }
+}
+
+/// Everything the dashboard shows.
+#[derive(Serialize)]
+pub struct DashboardView {
+    pub status: StatusReply,
+    pub counters: FarmCounters,
+    /// Per worker name: totals and the packages it is working on.
+    pub workers: BTreeMap<String, WorkerView>,
+    pub live: Option<LiveView>,
+    /// The kept finished frames, oldest first.
+    pub frames: Vec<FrameView>,
+}
+
+#[derive(Serialize)]
+pub struct WorkerView {
+    #[serde(flatten)]
+    pub totals: WorkerTotals,
+    pub packages: Vec<u64>,
+}
+
+#[derive(Serialize)]
+pub struct LiveView {
+    pub job: u64,
+    pub frame: u32,
+    pub triangles_done: u64,
+    pub triangles_total: u64,
+}
+
+#[derive(Serialize)]
+pub struct FrameView {
+    pub seq: u64,
+    pub job: u64,
+    pub frame: u32,
+    pub stats: FrameStats,
+}
+
+fn dashboard_view(core: &MasterCore) -> DashboardView {
+    let telemetry = core.telemetry();
+    let mut packages = core.packages_by_worker();
+    let status = core.status();
+    let names = (status.workers.iter().map(|w| w.name.clone()))
+        .chain(telemetry.workers.keys().cloned())
+        .collect::<std::collections::BTreeSet<_>>();
+    let workers = names
+        .into_iter()
+        .map(|name| {
+            let view = WorkerView {
+                totals: telemetry.workers.get(&name).cloned().unwrap_or_default(),
+                packages: packages.remove(&name).unwrap_or_default(),
+            };
+            (name, view)
+        })
+        .collect();
+    DashboardView {
+        status,
+        counters: telemetry.counters.clone(),
+        workers,
+        live: core.live_frame().map(|f| LiveView {
+            job: f.job,
+            frame: f.frame,
+            triangles_done: f.triangles_done,
+            triangles_total: f.triangles_total,
+        }),
+        frames: (telemetry.frames())
+            .map(|f| FrameView {
+                seq: f.seq,
+                job: f.job,
+                frame: f.frame,
+                stats: f.stats.clone(),
+            })
+            .collect(),
+    }
+}
+
+async fn dashboard(State(state): State<HttpState>) -> Response {
+    match state.master.inspect(dashboard_view).await {
+        Some(view) => axum::Json(view).into_response(),
+        None => unavailable(),
+    }
+}
+
+/// Server-sent events: the dashboard view now, then again whenever the
+/// master's state moves (changes in between coalesce).
+async fn events(
+    State(state): State<HttpState>,
+) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+    let changes = state.master.changes();
+    let stream = stream::unfold(
+        (state.master, changes, true),
+        |(master, mut changes, first)| async move {
+            if !first {
+                changes.changed().await.ok()?;
+            }
+            changes.mark_unchanged();
+            let view = master.inspect(dashboard_view).await?;
+            let json = serde_json::to_string(&view).unwrap_or_default();
+            let event = Event::default().event("farm").data(json);
+            Some((Ok(event), (master, changes, false)))
+        },
+    );
+    Sse::new(stream)
+}
+
+/// The frame being assembled, as far as it got.
+async fn live_png(State(state): State<HttpState>) -> Response {
+    let image = state
+        .master
+        .inspect(|c| c.live_frame().map(|f| f.image.clone()));
+    match image.await {
+        Some(Some(image)) => png_response(Arc::new(image)).await,
+        Some(None) => (StatusCode::NOT_FOUND, "no frame is being rendered\n").into_response(),
+        None => unavailable(),
+    }
+}
+
+/// A kept finished frame: `/frames/SEQ.png`.
+async fn frame_png(State(state): State<HttpState>, Path(name): Path<String>) -> Response {
+    let Some(seq) = name
+        .strip_suffix(".png")
+        .and_then(|s| s.parse::<u64>().ok())
+    else {
+        return (StatusCode::NOT_FOUND, "frames are /frames/SEQ.png\n").into_response();
+    };
+    let image = (state.master).inspect(move |c| c.telemetry().frame(seq).map(|f| f.image.clone()));
+    match image.await {
+        Some(Some(image)) => png_response(image).await,
+        Some(None) => (StatusCode::NOT_FOUND, "that frame is not kept\n").into_response(),
+        None => unavailable(),
+    }
+}
+
+/// The image as an sRGB PNG, encoded off the async threads.
+async fn png_response(image: Arc<Image>) -> Response {
+    let encoded = tokio::task::spawn_blocking(move || encode_png(&image)).await;
+    match encoded {
+        Ok(Ok(png)) => (
+            [
+                (header::CONTENT_TYPE, "image/png"),
+                (header::CACHE_CONTROL, "no-store"),
+            ],
+            png,
+        )
+            .into_response(),
+        Ok(Err(e)) => (StatusCode::INTERNAL_SERVER_ERROR, format!("PNG: {e}\n")).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("PNG: {e}\n")).into_response(),
+    }
+}
+
+/// The image as an 8-bit sRGB PNG (the pixels `Image::write_png` writes).
+pub fn encode_png(image: &Image) -> Result<Vec<u8>, image::ImageError> {
+    let mut png = Vec::new();
+    image::write_buffer_with_format(
+        &mut Cursor::new(&mut png),
+        &image.to_srgb8(),
+        image.width,
+        image.height,
+        image::ExtendedColorType::Rgb8,
+        image::ImageFormat::Png,
+    )?;
+    Ok(png)
+}
+
+/// The farm's metrics in the Prometheus (OpenMetrics) text format.
+async fn metrics(State(state): State<HttpState>) -> Response {
+    let Some(registry) = state.master.inspect(metrics_registry).await else {
+        return unavailable();
+    };
+    let mut text = String::new();
+    if let Err(e) = prometheus_client::encoding::text::encode(&mut text, &registry) {
+        return (StatusCode::INTERNAL_SERVER_ERROR, format!("metrics: {e}\n")).into_response();
+    }
+    let content_type = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+    ([(header::CONTENT_TYPE, content_type)], text).into_response()
+}
+
+type Labels = Vec<(&'static str, String)>;
+
+fn counter_family(registry: &mut Registry, name: &str, help: &str, values: &[(Labels, u64)]) {
+    let family = Family::<Labels, Counter>::default();
+    for (labels, value) in values {
+        family.get_or_create(labels).inc_by(*value);
+    }
+    registry.register(name, help, family);
+}
+
+fn gauge_family(registry: &mut Registry, name: &str, help: &str, values: &[(Labels, f64)]) {
+    let family = Family::<Labels, Gauge<f64, std::sync::atomic::AtomicU64>>::default();
+    for (labels, value) in values {
+        family.get_or_create(labels).set(*value);
+    }
+    registry.register(name, help, family);
+}
+
+/// A metric without labels.
+fn counter(registry: &mut Registry, name: &str, help: &str, value: u64) {
+    let counter = Counter::<u64>::default();
+    counter.inc_by(value);
+    registry.register(name, help, counter);
+}
+
+fn gauge(registry: &mut Registry, name: &str, help: &str, value: f64) {
+    let gauge = Gauge::<f64, std::sync::atomic::AtomicU64>::default();
+    gauge.set(value);
+    registry.register(name, help, gauge);
+}
+
+fn label(key: &'static str, value: impl Into<String>) -> Labels {
+    vec![(key, value.into())]
+}
+
+/// A registry holding the core's figures right now.
+fn metrics_registry(core: &MasterCore) -> Registry {
+    let status = core.status();
+    let telemetry = core.telemetry();
+    let c = &telemetry.counters;
+    let mut r = Registry::with_prefix("vtfarm");
+    counter_family(
+        &mut r,
+        "jobs",
+        "Jobs that reached each state since the master started",
+        &[
+            (label("state", "submitted"), c.jobs_submitted),
+            (label("state", "completed"), c.jobs_completed),
+            (label("state", "failed"), c.jobs_failed),
+            (label("state", "cancelled"), c.jobs_cancelled),
+        ],
+    );
+    gauge_family(
+        &mut r,
+        "jobs_now",
+        "Jobs running or waiting now",
+        &[
+            (
+                label("state", "running"),
+                f64::from(u8::from(status.queue.running.is_some())),
+            ),
+            (label("state", "waiting"), status.queue.waiting.len() as f64),
+        ],
+    );
+    counter(&mut r, "frames", "Frames completed", c.frames_completed);
+    counter_family(
+        &mut r,
+        "packages",
+        "Packages by outcome: done, failed attempts, requeued from lost workers, straggler copies",
+        &[
+            (label("state", "done"), c.packages_done),
+            (label("state", "failed"), c.packages_failed),
+            (label("state", "requeued"), c.packages_requeued),
+            (label("state", "duplicated"), c.packages_duplicated),
+        ],
+    );
+    let running: u64 = status
+        .workers
+        .iter()
+        .map(|w| u64::from(w.packages_running))
+        .sum();
+    gauge(
+        &mut r,
+        "packages_running",
+        "Packages out at workers now",
+        running as f64,
+    );
+    let per_worker = |f: &dyn Fn(&vtfarm_proto::WorkerStatus) -> f64| -> Vec<(Labels, f64)> {
+        (status.workers.iter())
+            .map(|w| (label("worker", w.name.clone()), f(w)))
+            .collect()
+    };
+    gauge_family(
+        &mut r,
+        "worker_busy_seconds",
+        "Seconds each connected worker spent on packages",
+        &per_worker(&|w| w.busy_micros as f64 / 1e6),
+    );
+    gauge_family(
+        &mut r,
+        "worker_throughput",
+        "Each connected worker's measured throughput (work units per second)",
+        &per_worker(&|w| w.throughput),
+    );
+    gauge_family(
+        &mut r,
+        "worker_failures",
+        "Failed packages of each connected worker",
+        &per_worker(&|w| w.failures as f64),
+    );
+    let states: Vec<(Labels, f64)> = ["idle", "waiting", "busy"]
+        .into_iter()
+        .map(|s| {
+            let n = status.workers.iter().filter(|w| w.state == s).count();
+            (label("state", s), n as f64)
+        })
+        .collect();
+    gauge_family(&mut r, "workers", "Connected workers by state", &states);
+    let totals = |f: &dyn Fn(&WorkerTotals) -> u64| -> Vec<(Labels, u64)> {
+        (telemetry.workers.iter())
+            .map(|(name, t)| (label("worker", name.clone()), f(t)))
+            .collect()
+    };
+    counter_family(
+        &mut r,
+        "worker_samples",
+        "Samples (rays) each worker traced in accepted results",
+        &totals(&|t| t.samples),
+    );
+    let bytes: Vec<(Labels, u64)> = (telemetry.workers.iter())
+        .flat_map(|(name, t)| {
+            [("in", t.bytes_in), ("out", t.bytes_out)].map(|(direction, n)| {
+                (
+                    vec![
+                        ("worker", name.clone()),
+                        ("direction", direction.to_owned()),
+                    ],
+                    n,
+                )
+            })
+        })
+        .collect();
+    counter_family(
+        &mut r,
+        "worker_bytes",
+        "Package (in) and result (out) bytes of each worker's accepted results",
+        &bytes,
+    );
+    counter(
+        &mut r,
+        "scene_bytes_sent",
+        "Scene bytes sent to workers",
+        status.scene_bytes_sent,
+    );
+    r.register_with_unit(
+        "frame_duration",
+        "Wall time of each completed frame",
+        prometheus_client::registry::Unit::Seconds,
+        FrameDurationMetric(telemetry.frame_durations.clone()),
+    );
+    r
+}
+
+/// The core's frame-duration histogram as a Prometheus histogram.
+#[derive(Debug)]
+struct FrameDurationMetric(FrameDurations);
+
+impl EncodeMetric for FrameDurationMetric {
+    fn encode(&self, mut encoder: MetricEncoder) -> Result<(), std::fmt::Error> {
+        let bounds = FRAME_SECONDS_BUCKETS.iter().copied().chain([f64::MAX]);
+        let buckets: Vec<(f64, u64)> = bounds.zip(self.0.counts).collect();
+        encoder.encode_histogram::<NoLabelSet>(self.0.sum_seconds, self.0.count, &buckets, None)
+    }
+
+    fn metric_type(&self) -> MetricType {
+        MetricType::Histogram
+    }
+}

@@ -1,0 +1,642 @@
+//! The master's HTTP side over real sockets on 127.0.0.1: a master, two
+//! worker tasks over QUIC and the HTTP server; `/metrics` parses as
+//! Prometheus text and moves when a job runs, `/api/status` and the event
+//! stream agree with `vtfarm status`, finished frames are served as the
+//! submitter received them, and a non-loopback peer needs the token.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use axum::body::Body;
+use axum::extract::connect_info::MockConnectInfo;
+use axum::http::{Request, StatusCode};
+use glam::Vec3;
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpStream;
+use tokio::task::JoinHandle;
+use tower::ServiceExt;
+use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::{
+    FinishedFrame, JobOptions, MasterHandle, http, run_job, server, spawn_master, wire_job,
+};
+use vtfarm_method::MethodKind;
+use vtfarm_proto::client::{ClientOptions, connect};
+use vtfarm_proto::{ClusterConfig, HandshakePolicy, Message, Role, SceneData, StatusReply};
+use vtfarm_render::FrameSetup;
+use vtfarm_scene::Camera;
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_trace::TraceSettings;
+use vtfarm_vertex::{Quality, VertexSettings};
+use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
+
+/// Every wait on the network is bounded by this.
+const WAIT: Duration = Duration::from_secs(60);
+
+/// A master with its QUIC and HTTP servers on 127.0.0.1 and two workers.
+struct Farm {
+    dir: tempfile::TempDir,
+    options: ClientOptions,
+    master: MasterHandle,
+    http: SocketAddr,
+    _tasks: Vec<JoinHandle<()>>,
+}
+
+impl Farm {
+    async fn start() -> Farm {
+        let dir = tempfile::tempdir().unwrap();
+        let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
+        let endpoint = server::bind("127.0.0.1:0".parse().unwrap(), &identity).unwrap();
+        let address = endpoint.local_addr().unwrap();
+        let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+        let (master, _) = spawn_master(SchedulerConfig::default());
+        let policy = HandshakePolicy::new(cluster.token.clone(), "test-master");
+        let listener = http::bind("127.0.0.1:0".parse().unwrap()).await.unwrap();
+        let http = listener.local_addr().unwrap();
+        let tasks = vec![
+            tokio::spawn(server::serve(endpoint, policy, master.clone())),
+            tokio::spawn(http::serve(listener, master.clone(), cluster.token.clone())),
+        ];
+        let options = ClientOptions {
+            master: cluster.master,
+            token: cluster.token,
+            fingerprint: cluster.fingerprint,
+        };
+        let mut farm = Farm {
+            dir,
+            options,
+            master,
+            http,
+            _tasks: tasks,
+        };
+        for name in ["w1", "w2"] {
+            let (options, name) = (farm.options.clone(), name.to_owned());
+            let engine = Engine::new(Some(farm.dir.path().join(format!("cache-{name}"))));
+            farm._tasks.push(tokio::spawn(async move {
+                let _ = run_worker(
+                    options,
+                    name,
+                    1,
+                    engine,
+                    WorkerConfig::default(),
+                    DrainSignal::never(),
+                )
+                .await;
+            }));
+        }
+        farm.wait_until(|s| s.workers.len() == 2).await;
+        farm
+    }
+
+    /// Waits (bounded) for the master's state to satisfy `done`, woken by
+    /// its change notifications.
+    async fn wait_until(&self, done: impl Fn(&StatusReply) -> bool) {
+        let mut changes = self.master.changes();
+        let check = async {
+            loop {
+                changes.mark_unchanged();
+                let status = self.master.inspect(|c| c.status()).await.unwrap();
+                if done(&status) {
+                    return;
+                }
+                changes.changed().await.unwrap();
+            }
+        };
+        tokio::time::timeout(WAIT, check)
+            .await
+            .expect("the farm reached the awaited state");
+    }
+
+    /// What `vtfarm status` gets: a `StatusRequest` over QUIC.
+    async fn quic_status(&self) -> StatusReply {
+        let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
+        conn.link.tx.send(Message::StatusRequest).unwrap();
+        let reply = async {
+            loop {
+                match conn.link.rx.recv().await {
+                    Some(Message::StatusReply(reply)) => return reply,
+                    Some(_) => continue,
+                    None => panic!("the master closed the connection"),
+                }
+            }
+        };
+        tokio::time::timeout(WAIT, reply)
+            .await
+            .expect("status reply")
+    }
+
+    async fn submit(&self, frames: usize) -> Vec<FinishedFrame> {
+        let c = cockpit(&CockpitConfig {
+            detail: 0.3,
+            ..CockpitConfig::default()
+        });
+        let setups: Vec<FrameSetup> = (0..frames)
+            .map(|k| FrameSetup {
+                camera: Camera {
+                    eye: c.camera.eye + Vec3::new(0.01, 0.0, 0.0) * k as f32,
+                    width: 96,
+                    height: 54,
+                    ..c.camera
+                },
+                lighting: c.lighting.clone(),
+                trace: TraceSettings::default(),
+                vertex: VertexSettings {
+                    quality: Quality::Full,
+                    ..VertexSettings::default()
+                },
+            })
+            .collect();
+        let reflectors = c.cover_glass_triangles();
+        let data = SceneData::from_scene(&c.scene);
+        let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
+        let job = wire_job(
+            "http-test",
+            &data,
+            &setups,
+            &reflectors,
+            JobOptions {
+                method: MethodKind::VertexTracing,
+                aux: false,
+            },
+        );
+        let run = run_job(&mut conn.link, job, &data, |_| {});
+        (tokio::time::timeout(WAIT, run).await)
+            .expect("the job finished in time")
+            .expect("the job succeeded")
+    }
+
+    async fn get(&self, path: &str) -> Response {
+        tokio::time::timeout(WAIT, get(self.http, path))
+            .await
+            .expect("HTTP answer in time")
+    }
+}
+
+struct Response {
+    status: u16,
+    headers: BTreeMap<String, String>,
+    body: Vec<u8>,
+}
+
+impl Response {
+    fn text(&self) -> &str {
+        std::str::from_utf8(&self.body).expect("UTF-8 body")
+    }
+}
+
+/// A plain HTTP/1.1 GET over a fresh connection; reads the headers, then
+/// exactly `Content-Length` bytes (servers need not close the connection).
+async fn get(address: SocketAddr, path: &str) -> Response {
+    let stream = TcpStream::connect(address).await.unwrap();
+    let mut stream = BufReader::new(stream);
+    let request = format!("GET {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n");
+    stream
+        .get_mut()
+        .write_all(request.as_bytes())
+        .await
+        .unwrap();
+    let mut status_line = String::new();
+    stream.read_line(&mut status_line).await.unwrap();
+    let status = status_line.split(' ').nth(1).unwrap().parse().unwrap();
+    let mut headers = BTreeMap::new();
+    loop {
+        let mut line = String::new();
+        stream.read_line(&mut line).await.unwrap();
+        let line = line.trim_end();
+        if line.is_empty() {
+            break;
+        }
+        let (key, value) = line.split_once(':').expect("header line");
+        headers.insert(key.to_ascii_lowercase(), value.trim().to_owned());
+    }
+    let length: usize = headers["content-length"].parse().unwrap();
+    let mut body = vec![0; length];
+    stream.read_exact(&mut body).await.unwrap();
+    Response {
+        status,
+        headers,
+        body,
+    }
+}
+
+/// The first `farm` event of the event stream, as JSON.
+async fn first_event(address: SocketAddr) -> serde_json::Value {
+    let read = async {
+        let mut stream = TcpStream::connect(address).await.unwrap();
+        let request = format!("GET /api/events HTTP/1.1\r\nHost: {address}\r\n\r\n");
+        stream.write_all(request.as_bytes()).await.unwrap();
+        let mut lines = BufReader::new(stream).lines();
+        let mut in_farm_event = false;
+        while let Some(line) = lines.next_line().await.unwrap() {
+            if line == "event: farm" {
+                in_farm_event = true;
+            } else if let (true, Some(data)) = (in_farm_event, line.strip_prefix("data: ")) {
+                return serde_json::from_str(data).expect("event data is JSON");
+            }
+        }
+        panic!("the event stream ended");
+    };
+    tokio::time::timeout(WAIT, read)
+        .await
+        .expect("an event in time")
+}
+
+/// Parses Prometheus/OpenMetrics text into `name{labels}` -> value, checking
+/// every line's form: `# HELP|TYPE|UNIT`, samples, and `# EOF` last.
+fn parse_metrics(text: &str) -> BTreeMap<String, f64> {
+    let mut samples = BTreeMap::new();
+    let mut lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines.pop(),
+        Some("# EOF"),
+        "OpenMetrics text ends with # EOF"
+    );
+    for line in lines {
+        if let Some(comment) = line.strip_prefix("# ") {
+            let kind = comment.split(' ').next().unwrap();
+            assert!(
+                ["HELP", "TYPE", "UNIT"].contains(&kind),
+                "comment line: {line}"
+            );
+            continue;
+        }
+        let (series, value) = line.rsplit_once(' ').expect("sample line: NAME VALUE");
+        let name_end = series.find('{').unwrap_or(series.len());
+        let name = &series[..name_end];
+        assert!(
+            !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'),
+            "metric name in {line}"
+        );
+        if name_end < series.len() {
+            assert!(series.ends_with('}'), "label set closes: {line}");
+        }
+        let value: f64 = match value {
+            "+Inf" => f64::INFINITY,
+            v => v
+                .parse()
+                .unwrap_or_else(|_| panic!("sample value in {line}")),
+        };
+        assert!(
+            samples.insert(series.to_owned(), value).is_none(),
+            "duplicate {series}"
+        );
+    }
+    samples
+}
+
+fn sum_of(samples: &BTreeMap<String, f64>, name: &str) -> f64 {
+    (samples.iter())
+        .filter(|(series, _)| series.split('{').next() == Some(name))
+        .map(|(_, v)| v)
+        .sum()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
+    let farm = Farm::start().await;
+    let before = farm.get("/metrics").await;
+    assert_eq!(before.status, 200);
+    assert!(before.headers["content-type"].starts_with("application/openmetrics-text"));
+    let before = parse_metrics(before.text());
+    assert_eq!(before["vtfarm_frames_total"], 0.0);
+    assert_eq!(before["vtfarm_jobs_total{state=\"completed\"}"], 0.0);
+    assert_eq!(before["vtfarm_frame_duration_seconds_count"], 0.0);
+    assert_eq!(sum_of(&before, "vtfarm_workers"), 2.0);
+
+    let frames = farm.submit(2).await;
+    assert_eq!(frames.len(), 2);
+    // The job's end reaches the master before the submitter hears of it,
+    // but wait for the workers to be idle again so the figures hold still.
+    farm.wait_until(|s| {
+        s.queue.running.is_none() && s.workers.iter().all(|w| w.packages_running == 0)
+    })
+    .await;
+
+    let after = parse_metrics(farm.get("/metrics").await.text());
+    assert_eq!(after["vtfarm_frames_total"], 2.0);
+    assert_eq!(after["vtfarm_jobs_total{state=\"submitted\"}"], 1.0);
+    assert_eq!(after["vtfarm_jobs_total{state=\"completed\"}"], 1.0);
+    assert_eq!(after["vtfarm_frame_duration_seconds_count"], 2.0);
+    assert_eq!(
+        after["vtfarm_frame_duration_seconds_bucket{le=\"+Inf\"}"],
+        2.0
+    );
+    let packages: u32 = frames.iter().map(|f| f.stats.packages).sum();
+    assert_eq!(
+        after["vtfarm_packages_total{state=\"done\"}"],
+        f64::from(packages)
+    );
+    let samples: u64 = (frames.iter())
+        .flat_map(|f| &f.stats.workers)
+        .map(|w| w.rays)
+        .sum();
+    assert_eq!(
+        sum_of(&after, "vtfarm_worker_samples_total"),
+        samples as f64
+    );
+    assert!(sum_of(&after, "vtfarm_worker_bytes_total") > 0.0);
+    assert!(sum_of(&after, "vtfarm_worker_busy_seconds") > 0.0);
+
+    // One source: the status API, the event stream and `vtfarm status`.
+    let quic = farm.quic_status().await;
+    assert_eq!(quic.workers.len(), 2);
+    let api: StatusReply = serde_json::from_slice(&farm.get("/api/status").await.body).unwrap();
+    assert_eq!(api, quic);
+    let event = first_event(farm.http).await;
+    let streamed: StatusReply = serde_json::from_value(event["status"].clone()).unwrap();
+    assert_eq!(streamed, quic);
+    assert_eq!(event["counters"]["frames_completed"], 2);
+    assert_eq!(event["frames"].as_array().unwrap().len(), 2);
+
+    // Finished frames come back as the submitter received them.
+    for (seq, frame) in (1..).zip(&frames) {
+        let png = farm.get(&format!("/frames/{seq}.png")).await;
+        assert_eq!(png.headers["content-type"], "image/png");
+        let decoded = image::load_from_memory(&png.body).unwrap().to_rgb8();
+        assert_eq!(decoded.as_raw(), &frame.image.to_srgb8(), "frame {seq}");
+    }
+    assert_eq!(farm.get("/frames/99.png").await.status, 404);
+    assert_eq!(
+        farm.get("/frames/live.png").await.status,
+        404,
+        "nothing running"
+    );
+    let page = farm.get("/").await;
+    assert!(page.text().contains("EventSource(\"/api/events\")"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_peer_off_loopback_needs_the_cluster_token() {
+    let (master, _task) = spawn_master(SchedulerConfig::default());
+    let token = "c0ffee".to_owned();
+    let ask = |peer: SocketAddr, authorization: Option<&str>| {
+        let app = http::router(master.clone(), token.clone()).layer(MockConnectInfo(peer));
+        let mut request = Request::get("/api/status");
+        if let Some(value) = authorization {
+            request = request.header("authorization", value);
+        }
+        app.oneshot(request.body(Body::empty()).unwrap())
+    };
+    let remote: SocketAddr = "192.0.2.7:40000".parse().unwrap();
+    let local: SocketAddr = "127.0.0.1:40000".parse().unwrap();
+    let mapped_local: SocketAddr = "[::ffff:127.0.0.1]:40000".parse().unwrap();
+    let status = |r: axum::response::Response| r.status();
+    assert_eq!(
+        status(ask(remote, None).await.unwrap()),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        status(ask(remote, Some("Bearer wrong")).await.unwrap()),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        status(ask(remote, Some("c0ffee")).await.unwrap()),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        status(ask(remote, Some("Bearer c0ffee")).await.unwrap()),
+        StatusCode::OK
+    );
+    assert_eq!(status(ask(local, None).await.unwrap()), StatusCode::OK);
+    assert_eq!(
+        status(ask(mapped_local, None).await.unwrap()),
+        StatusCode::OK
+    );
+}
+
+/// Headless Chromium driven over the DevTools protocol, with a fresh profile.
+struct Browser {
+    _child: KillOnDrop,
+    _profile: tempfile::TempDir,
+    socket: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+    next_id: u64,
+    /// DevTools events that arrived while waiting for a reply.
+    events: Vec<serde_json::Value>,
+}
+
+impl Browser {
+    /// Starts Chromium if the machine has it (`None`, said aloud, if not).
+    async fn start() -> Option<Browser> {
+        let Ok(path) = which_chromium() else {
+            eprintln!("SKIPPED: no `chromium` on this machine (apt-get install chromium)");
+            return None;
+        };
+        let profile = tempfile::tempdir().unwrap();
+        let mut child = std::process::Command::new(path)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--remote-debugging-port=0",
+                "--window-size=1100,900",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .arg("about:blank")
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("chromium starts");
+        let stderr = child.stderr.take().unwrap();
+        let child = KillOnDrop(child);
+        // Chromium says where its DevTools endpoint is on stderr; a thread
+        // passes the lines on and keeps draining, so Chromium never blocks.
+        let (lines_tx, mut lines) = tokio::sync::mpsc::unbounded_channel();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+            {
+                let _ = lines_tx.send(line);
+            }
+        });
+        let endpoint = async {
+            while let Some(line) = lines.recv().await {
+                if let Some(url) = line.strip_prefix("DevTools listening on ") {
+                    return url.to_owned();
+                }
+            }
+            panic!("chromium exited without a DevTools endpoint");
+        };
+        let browser_url = tokio::time::timeout(WAIT, endpoint)
+            .await
+            .expect("DevTools endpoint");
+        // The page target of the first tab.
+        let port: u16 = (browser_url.trim_start_matches("ws://127.0.0.1:"))
+            .split('/')
+            .next()
+            .and_then(|p| p.parse().ok())
+            .expect("DevTools port");
+        let list = get(SocketAddr::from(([127, 0, 0, 1], port)), "/json/list");
+        let list = tokio::time::timeout(WAIT, list)
+            .await
+            .expect("DevTools target list");
+        let targets: serde_json::Value = serde_json::from_slice(&list.body).unwrap();
+        let page_url = (targets.as_array().unwrap().iter())
+            .find(|t| t["type"] == "page")
+            .and_then(|t| t["webSocketDebuggerUrl"].as_str())
+            .expect("a page target")
+            .to_owned();
+        let (socket, _) = tokio_tungstenite::connect_async(page_url).await.unwrap();
+        Some(Browser {
+            _child: child,
+            _profile: profile,
+            socket,
+            next_id: 1,
+            events: Vec::new(),
+        })
+    }
+
+    /// Sends a DevTools command and returns its result (bounded wait).
+    async fn call(&mut self, method: &str, params: serde_json::Value) -> serde_json::Value {
+        use futures_util::SinkExt;
+        use tokio_tungstenite::tungstenite::Message as Ws;
+        let id = self.next_id;
+        self.next_id += 1;
+        let command = serde_json::json!({ "id": id, "method": method, "params": params });
+        self.socket
+            .send(Ws::text(command.to_string()))
+            .await
+            .unwrap();
+        let reply = self.next_message(|v| v["id"] == id);
+        let value = tokio::time::timeout(WAIT, reply)
+            .await
+            .expect("DevTools reply in time");
+        assert!(value.get("error").is_none(), "{method}: {value}");
+        value["result"].clone()
+    }
+
+    /// Waits (bounded) for the DevTools event `method`.
+    async fn event(&mut self, method: &str) {
+        if let Some(at) = self.events.iter().position(|e| e["method"] == method) {
+            self.events.remove(at);
+            return;
+        }
+        let event = self.next_message(|v| v["method"] == method);
+        tokio::time::timeout(WAIT, event)
+            .await
+            .expect("DevTools event in time");
+    }
+
+    /// The next message that is `wanted`; events on the way are kept.
+    async fn next_message(
+        &mut self,
+        wanted: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        use futures_util::StreamExt;
+        use tokio_tungstenite::tungstenite::Message as Ws;
+        while let Some(message) = self.socket.next().await {
+            let Ws::Text(text) = message.unwrap() else {
+                continue;
+            };
+            let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+            if wanted(&value) {
+                return value;
+            }
+            if value.get("method").is_some() {
+                self.events.push(value);
+            }
+        }
+        panic!("DevTools connection closed");
+    }
+
+    /// Evaluates a JavaScript expression (awaiting a promise) to JSON.
+    async fn eval(&mut self, expression: &str) -> serde_json::Value {
+        let params = serde_json::json!({
+            "expression": expression, "awaitPromise": true, "returnByValue": true
+        });
+        let result = self.call("Runtime.evaluate", params).await;
+        assert!(result.get("exceptionDetails").is_none(), "{result}");
+        result["result"]["value"].clone()
+    }
+}
+
+/// Chromium ends with the test, whichever way the test ends.
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn which_chromium() -> Result<std::path::PathBuf, ()> {
+    let path = std::env::var_os("PATH").ok_or(())?;
+    std::env::split_paths(&path)
+        .map(|dir| dir.join("chromium"))
+        .find(|p| p.is_file())
+        .ok_or(())
+}
+
+/// FNV-1a over the RGB bytes, as the dashboard hashes what it drew.
+fn fnv1a(bytes: &[u8]) -> String {
+    let hash = bytes.iter().fold(0x811c_9dc5_u32, |h, &b| {
+        (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
+    });
+    format!("{hash:08x}")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_dashboard_in_chromium_shows_both_workers_and_the_finished_frame() {
+    let Some(mut browser) = Browser::start().await else {
+        return;
+    };
+    let farm = Farm::start().await;
+    let url = format!("http://{}/", farm.http);
+    browser.call("Page.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.navigate", serde_json::json!({ "url": url }))
+        .await;
+    browser.event("Page.loadEventFired").await;
+    // Armed before the job starts: resolves when the page has drawn
+    // finished frame #1 (the page's own event), whatever the timing.
+    let arm = r#"window.shownFrame = new Promise((resolve) => {
+        const done = () => document.getElementById("frame").dataset.seq === "1"
+            && document.getElementById("frame").dataset.state === "shown";
+        if (done()) resolve();
+        document.addEventListener("vtfarm-frame-shown", () => { if (done()) resolve(); });
+    }); true"#;
+    assert_eq!(browser.eval(arm).await, true);
+    let frames = farm.submit(1).await;
+    let shown = browser
+        .eval(
+            r##"window.shownFrame.then(() => ({
+                hash: document.getElementById("frame").dataset.hash,
+                workers: [...document.querySelectorAll("#workers tr td:first-child")].map((td) => td.textContent),
+            }))"##,
+        )
+        .await;
+    assert_eq!(
+        shown["hash"],
+        fnv1a(&frames[0].image.to_srgb8()),
+        "pixels equal the submitted image"
+    );
+    let mut workers: Vec<&str> = (shown["workers"].as_array().unwrap().iter())
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    workers.sort_unstable();
+    assert_eq!(workers, ["w1", "w2"]);
+    let shot = browser
+        .call(
+            "Page.captureScreenshot",
+            serde_json::json!({ "format": "png" }),
+        )
+        .await;
+    let png = base64::Engine::decode(
+        &base64::engine::general_purpose::STANDARD,
+        shot["data"].as_str().unwrap(),
+    )
+    .unwrap();
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
+    std::fs::write(&path, png).unwrap();
+    eprintln!("dashboard screenshot: {}", path.display());
+}
