@@ -429,7 +429,7 @@ fn the_flatness_guard_splits_a_flat_face_across_its_agreeing_long_edge() {
 fn trace_with_stop(frame: &TestFrame, stop: &Stop) -> PackageResult {
     let settings = VertexSettings {
         pixel_floor: 20.0,
-        ..VertexSettings::default()
+        ..unguarded()
     };
     let frame = Frame {
         stop: Some(stop),
