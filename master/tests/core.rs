@@ -2,6 +2,10 @@
 //! messages and time go in, messages come out. Hostile or confused peers get
 //! closed or ignored while the frame still completes correctly.
 
+#[path = "support/frame.rs"]
+mod frame;
+
+use frame::small_frame;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -12,11 +16,9 @@ use vtfarm_proto::{
     FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, SceneData, WireBitmap, WireJob,
 };
 use vtfarm_raster::IdBuffer;
-use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::Camera;
+use vtfarm_render::Renderer;
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, SparseBitmap, Stop, VertexSettings};
+use vtfarm_vertex::{SparseBitmap, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
@@ -96,19 +98,7 @@ fn start_frame() -> StartedFrame {
         ..CockpitConfig::default()
     });
     let reflectors: Vec<u32> = c.cover_glass_triangles();
-    let setup = FrameSetup {
-        camera: Camera {
-            width: 96,
-            height: 54,
-            ..c.camera
-        },
-        lighting: c.lighting.clone(),
-        trace: TraceSettings::default(),
-        vertex: VertexSettings {
-            quality: Quality::Full,
-            ..VertexSettings::default()
-        },
-    };
+    let setup = small_frame(&c, glam::Vec3::ZERO);
     let reference = Renderer::new(Arc::new(c.scene.clone()), reflectors.clone()).render(
         &setup,
         &Default::default(),

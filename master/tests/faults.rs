@@ -2,8 +2,12 @@
 //! the `Pair` harness (virtual clock, in-memory queues). Every scenario ends
 //! with images equal to the single-process render, bit for bit.
 
+#[path = "support/frame.rs"]
+mod frame;
+
 mod support;
 
+use frame::small_frame;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,10 +18,8 @@ use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::{Camera, Scene};
+use vtfarm_scene::Scene;
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
 
 /// A small cockpit job of `frames` frames from slightly different eyes.
 struct Job {
@@ -35,20 +37,7 @@ impl Job {
         });
         let reflectors = c.cover_glass_triangles();
         let frames = (0..frames)
-            .map(|k| FrameSetup {
-                camera: Camera {
-                    eye: c.camera.eye + Vec3::new(0.01, 0.005, 0.0) * k as f32,
-                    width: 96,
-                    height: 54,
-                    ..c.camera
-                },
-                lighting: c.lighting.clone(),
-                trace: TraceSettings::default(),
-                vertex: VertexSettings {
-                    quality: Quality::Full,
-                    ..VertexSettings::default()
-                },
-            })
+            .map(|k| small_frame(&c, Vec3::new(0.01, 0.005, 0.0) * k as f32))
             .collect();
         Job {
             scene: c.scene,

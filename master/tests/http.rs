@@ -4,6 +4,10 @@
 //! stream agree with `vtfarm status`, finished frames are served as the
 //! submitter received them, and a non-loopback peer needs the token.
 
+#[path = "support/frame.rs"]
+mod frame;
+
+use frame::small_frame;
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -24,10 +28,7 @@ use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, HandshakePolicy, Message, Role, SceneData, StatusReply};
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, VertexSettings};
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// Every wait on the network is bounded by this.
@@ -131,20 +132,7 @@ impl Farm {
             ..CockpitConfig::default()
         });
         let setups: Vec<FrameSetup> = (0..frames)
-            .map(|k| FrameSetup {
-                camera: Camera {
-                    eye: c.camera.eye + Vec3::new(0.01, 0.0, 0.0) * k as f32,
-                    width: 96,
-                    height: 54,
-                    ..c.camera
-                },
-                lighting: c.lighting.clone(),
-                trace: TraceSettings::default(),
-                vertex: VertexSettings {
-                    quality: Quality::Full,
-                    ..VertexSettings::default()
-                },
-            })
+            .map(|k| small_frame(&c, Vec3::new(0.01, 0.0, 0.0) * k as f32))
             .collect();
         let reflectors = c.cover_glass_triangles();
         let data = SceneData::from_scene(&c.scene);
