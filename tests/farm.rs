@@ -462,11 +462,8 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
         path(&two),
     ])
     .await;
-    let workers = cluster.status().await.workers;
-    assert!(
-        workers.iter().all(|w| w.packages_done > 0),
-        "both workers rendered: {workers:?}"
-    );
+    // How the work splits between the two workers depends on timing (a worker
+    // still fetching the scene gets none); the files below must not.
 
     let (a, b) = (files_under(&one), files_under(&two));
     let names: Vec<&PathBuf> = a.keys().collect();
