@@ -366,13 +366,8 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
             assert_eq!(items, 3, "{workers:?}");
         }
     }
-    // Over both jobs both workers took reflectors.
-    let status = cluster.status().await;
-    assert!(
-        status.workers.iter().all(|w| w.packages_done > 0),
-        "{:?}",
-        status.workers
-    );
+    // Which worker took which reflector depends on timing; the images above
+    // must not (the split itself is tested deterministically in master/tests/faults.rs).
 }
 
 /// Every file under `dir`, by relative path, with its bytes.
