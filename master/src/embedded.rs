@@ -10,6 +10,32 @@ use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 use crate::core::Peer;
 use crate::driver::{MasterHandle, spawn_master};
 
+/// Attaches a worker to `master` over an in-memory link and runs its session
+/// as a task (no scene cache on disk, never drained).
+pub fn local_worker(
+    master: &MasterHandle,
+    name: String,
+    threads: u32,
+    config: WorkerConfig,
+) -> JoinHandle<SessionEnd> {
+    let (master_end, worker_end) = Link::pair();
+    let peer = Peer::Worker {
+        name,
+        threads,
+        address: "in-process".into(),
+    };
+    master.attach(peer, master_end, None);
+    tokio::spawn(async move {
+        serve(
+            worker_end,
+            &mut Engine::new(None),
+            config,
+            DrainSignal::never(),
+        )
+        .await
+    })
+}
+
 /// A master with local workers (call inside a multi-threaded tokio runtime).
 /// End it with [`LocalFarm::shutdown`] before the runtime goes: a task still
 /// running while the runtime shuts down panics on its next timer.
@@ -28,22 +54,12 @@ impl LocalFarm {
         let threads = (cores / workers as u32).max(1);
         let workers = (0..workers)
             .map(|k| {
-                let (master_end, worker_end) = Link::pair();
-                let peer = Peer::Worker {
-                    name: format!("local-{k}"),
+                local_worker(
+                    &master,
+                    format!("local-{k}"),
                     threads,
-                    address: "in-process".into(),
-                };
-                master.attach(peer, master_end, None);
-                tokio::spawn(async move {
-                    serve(
-                        worker_end,
-                        &mut Engine::new(None),
-                        WorkerConfig::default(),
-                        DrainSignal::never(),
-                    )
-                    .await
-                })
+                    WorkerConfig::default(),
+                )
             })
             .collect();
         LocalFarm {

@@ -9,7 +9,9 @@ use std::time::Duration;
 use tokio::task::JoinHandle;
 use tokio::time::timeout;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::{JobError, JobOptions, MasterHandle, Peer, run_job, spawn_master, wire_job};
+use vtfarm_master::{
+    JobError, JobOptions, MasterHandle, Peer, local_worker, run_job, spawn_master, wire_job,
+};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{Link, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
@@ -17,28 +19,13 @@ use vtfarm_scene::Camera;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
-use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
+use vtfarm_worker::{SessionEnd, WorkerConfig};
 
 /// Long enough for a small frame on a loaded machine; only a hang reaches it.
 const BOUND: Duration = Duration::from_secs(120);
 
 fn worker(master: &MasterHandle, name: &str, config: WorkerConfig) -> JoinHandle<SessionEnd> {
-    let (master_end, worker_end) = Link::pair();
-    let peer = Peer::Worker {
-        name: name.into(),
-        threads: 1,
-        address: "in-process".into(),
-    };
-    master.attach(peer, master_end, None);
-    tokio::spawn(async move {
-        serve(
-            worker_end,
-            &mut Engine::new(None),
-            config,
-            DrainSignal::never(),
-        )
-        .await
-    })
+    local_worker(master, name.into(), 1, config)
 }
 
 fn submitter(master: &MasterHandle) -> Link {
