@@ -97,14 +97,23 @@ mod tests {
                 background: Vec3::ZERO,
             };
             let white = Material::diffuse("white", Vec3::ONE);
-            let facing = phong(&white, &lighting, Vec3::ZERO, Vec3::Z, Vec3::Z, |_, _, _| true);
+            let facing = phong(
+                &white,
+                &lighting,
+                Vec3::ZERO,
+                Vec3::Z,
+                Vec3::Z,
+                |_, _, _| true,
+            );
             assert!(
                 close(cd_m2(facing), 100_000.0 / std::f32::consts::PI),
                 "{}",
                 cd_m2(facing)
             );
             let tilted = Vec3::new(60f32.to_radians().sin(), 0.0, 60f32.to_radians().cos());
-            let oblique = phong(&white, &lighting, Vec3::ZERO, tilted, tilted, |_, _, _| true);
+            let oblique = phong(&white, &lighting, Vec3::ZERO, tilted, tilted, |_, _, _| {
+                true
+            });
             assert!(close(cd_m2(oblique), 50_000.0 / std::f32::consts::PI));
         }
     }
@@ -121,7 +130,14 @@ mod tests {
                 ambient: ambient(ambient_lux),
                 background: Vec3::ZERO,
             };
-            cd_m2(phong(m, &lighting, Vec3::ZERO, Vec3::Z, Vec3::Z, |_, _, _| true))
+            cd_m2(phong(
+                m,
+                &lighting,
+                Vec3::ZERO,
+                Vec3::Z,
+                Vec3::Z,
+                |_, _, _| true,
+            ))
         };
         assert!(close(lit(&panel, 0.0), 8_000.0));
         let grey = Material::diffuse("grey", Vec3::splat(0.2));
