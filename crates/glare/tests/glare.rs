@@ -697,19 +697,19 @@ fn a_flat_mirror_reflecting_a_panel_returns_kr_times_its_luminance() {
         ],
     );
     assert_eq!(scene.validate(), Ok(()));
-    let bvh = SceneBvh::new(Arc::new(scene));
-    let lighting = Lighting {
-        lights: Vec::new(),
+    // No lights and no ambient term: the panel's emission is all there is.
+    let dark = Lighting {
         ambient: Vec3::ZERO,
-        background: Vec3::ZERO,
+        ..Lighting::default()
     };
-    let tracer = Tracer {
-        bvh: &bvh,
-        lighting: &lighting,
-        settings: TraceSettings::default(),
-    };
+    let bvh = SceneBvh::new(Arc::new(scene));
     let eye = Vec3::new(0.2, 0.1, 1.0);
-    let sample = tracer.trace(&Ray {
+    let sample = Tracer {
+        bvh: &bvh,
+        lighting: &dark,
+        settings: TraceSettings::default(),
+    }
+    .trace(&Ray {
         origin: eye,
         direction: (Vec3::new(0.0, 0.0, 0.0) - eye).normalize(),
     });
