@@ -71,6 +71,10 @@ pub(crate) struct RaysArgs {
     /// Also writes the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Writes the scene's triangles and the three ray sets as float32 `.npy`
+    /// files into this directory (`scripts/embree_rays.py` traces them).
+    #[arg(long, value_name = "DIR")]
+    dump_rays: Option<PathBuf>,
 }
 
 fn parse_preset(s: &str) -> Result<BuildPreset, String> {
@@ -139,6 +143,9 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
     bvhs.extend(baseline.as_ref().map(|(b, _)| b));
 
     let sets = RaySets::new(&bvh, &camera, args.random_rays, args.seed, reflector);
+    if let Some(dir) = &args.dump_rays {
+        sets.dump(&bvh, dir)?;
+    }
     let primary = rays_per_second(&bvhs, &sets.primary, Batch::Single);
     let incoherent = rays_per_second(&bvhs, &sets.incoherent, Batch::Single);
     let reflection = rays_per_second(&bvhs, &sets.reflection, Batch::Single);
@@ -305,6 +312,51 @@ impl RaySets {
             incoherent,
             reflection,
         }
+    }
+}
+
+impl RaySets {
+    /// `triangles.npy` (triangles × 3 corners × xyz), then for each set
+    /// `NAME_origins.npy` and `NAME_directions.npy` (rays × xyz, ray order)
+    /// and `NAME_hits.npy` (rays: the closest hit's t, +inf for a miss), so
+    /// that another tracer can check it found the same hits.
+    fn dump(&self, bvh: &SceneBvh, dir: &std::path::Path) -> Result<()> {
+        let scene = bvh.scene();
+        std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
+        let corners: Vec<f32> = (0..scene.triangles.len() as vtfarm_scene::TriangleId)
+            .flat_map(|id| scene.triangle_positions(id))
+            .flat_map(|p| p.to_array())
+            .collect();
+        let count = scene.triangles.len();
+        vtfarm_imaging::write_npy_f32(&dir.join("triangles.npy"), &[count, 3, 3], &corners)?;
+        for (name, rays) in self.named() {
+            let xyz = |f: fn(&Ray) -> Vec3| -> Vec<f32> {
+                rays.iter().flat_map(|r| f(r).to_array()).collect()
+            };
+            let shape = [rays.len(), 3];
+            let path = |suffix: &str| dir.join(format!("{name}_{suffix}.npy"));
+            vtfarm_imaging::write_npy_f32(&path("origins"), &shape, &xyz(|r| r.origin))?;
+            vtfarm_imaging::write_npy_f32(&path("directions"), &shape, &xyz(|r| r.direction))?;
+            let hits: Vec<f32> = rays
+                .par_iter()
+                .map(|r| {
+                    bvh.closest_hit(r, f32::INFINITY)
+                        .map_or(f32::INFINITY, |h| h.t)
+                })
+                .collect();
+            vtfarm_imaging::write_npy_f32(&path("hits"), &[rays.len()], &hits)?;
+        }
+        println!("rays written to {}", dir.display());
+        Ok(())
+    }
+
+    /// The sets with their names in file names and output.
+    fn named(&self) -> [(&'static str, &[Ray]); 3] {
+        [
+            ("primary", &self.primary),
+            ("incoherent", &self.incoherent),
+            ("reflection", &self.reflection),
+        ]
     }
 }
 
