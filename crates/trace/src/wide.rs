@@ -107,21 +107,11 @@ fn entry_distances(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
     let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
     let mut near = [0f32; 8];
     let mut far = [tmax; 8];
-    for (axis, (lo, hi)) in [
-        (&node.child_min_x, &node.child_max_x),
-        (&node.child_min_y, &node.child_max_y),
-        (&node.child_min_z, &node.child_max_z),
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        for i in 0..8 {
-            let a = lo[i] as f32 * scale[axis] + offset[axis];
-            let b = hi[i] as f32 * scale[axis] + offset[axis];
-            near[i] = near[i].max(a.min(b));
-            far[i] = far[i].min(a.max(b));
-        }
-    }
+    // One call per axis with the scalars picked out (a loop over the axes
+    // indexing `scale[axis]` kept the compiler from vectorising the lanes).
+    slab(&node.child_min_x, &node.child_max_x, scale.x, offset.x, &mut near, &mut far);
+    slab(&node.child_min_y, &node.child_max_y, scale.y, offset.y, &mut near, &mut far);
+    slab(&node.child_min_z, &node.child_max_z, scale.z, offset.z, &mut near, &mut far);
     let mut entries = [f32::INFINITY; 8];
     for i in 0..8 {
         if node.child_meta[i] != 0 && near[i] <= far[i] {
@@ -129,6 +119,40 @@ fn entry_distances(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
         }
     }
     entries
+}
+
+/// Narrows each child's entry/exit interval by its slab on one axis
+/// (quantised bounds `lo`, `hi`; `t = q * scale + offset`).
+#[inline(always)]
+fn slab(
+    lo: &[u8; 8],
+    hi: &[u8; 8],
+    scale: f32,
+    offset: f32,
+    near: &mut [f32; 8],
+    far: &mut [f32; 8],
+) {
+    for i in 0..8 {
+        let a = lo[i] as f32 * scale + offset;
+        let b = hi[i] as f32 * scale + offset;
+        near[i] = max(near[i], min(a, b));
+        far[i] = min(far[i], max(a, b));
+    }
+}
+
+/// `a.min(b)` for numbers that are not NaN, as one SIMD instruction:
+/// `f32::min`'s NaN rule costs a compare and a blend per lane. Nothing here
+/// is NaN: obvhs' `inv_direction` is finite (its `safe_inverse`), and so are
+/// node bounds and ray origins (`bvh_ray` refuses others).
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `a.max(b)` for numbers that are not NaN (see [`min`]).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
 }
 
 /// The finite entries of `near` as (entry distance, child), nearest first
@@ -159,6 +183,7 @@ pub(crate) const PACKET: usize = 8;
 /// box test as alone with its own `tmax`, so every ray is offered every
 /// primitive it would be offered alone (results are identical).
 /// `test(ray, slot)` returns that ray's new `tmax`.
+#[inline(always)]
 pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
     bvh: &CwBvh,
     rays: &[BvhRay],
