@@ -24,6 +24,7 @@ use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
 use vtfarm_scene::{Scene, TriangleId};
 
+use crate::wide::Isa;
 use crate::{Hit, Ray, SurfacePoint};
 
 /// Which obvhs tree layout a [`SceneBvh`] uses.
@@ -519,7 +520,7 @@ impl SceneBvh {
             // (`has_avx2`, checked when the BVH was built).
             return unsafe { self.closest_hit_avx2(ray, t_max) };
         }
-        self.closest_hit_portable(ray, t_max)
+        self.closest_hit_with(Isa::Portable, ray, t_max)
     }
 
     /// [`SceneBvh::closest_hit`] compiled for AVX2: the same code, so the
@@ -530,21 +531,22 @@ impl SceneBvh {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
     unsafe fn closest_hit_avx2(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        self.closest_hit_portable(ray, t_max)
+        self.closest_hit_with(Isa::Avx2, ray, t_max)
     }
 
     #[inline(always)]
-    fn closest_hit_portable(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+    fn closest_hit_with(&self, isa: Isa, ray: &Ray, t_max: f32) -> Option<Hit> {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let bvh_ray = bvh_ray(origin, direction, t_max)?;
         let sheared = ShearedRay::new(origin, direction);
-        with_axes!(sheared.axes, self.closest_hit_in(&bvh_ray, &sheared, t_max))
+        with_axes!(sheared.axes, self.closest_hit_in(isa, &bvh_ray, &sheared, t_max))
     }
 
     /// The closest hit for a ray with axis order `[KX, KY, KZ]`.
     #[inline(always)]
     fn closest_hit_in<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
+        isa: Isa,
         bvh_ray: &BvhRay,
         sheared: &ShearedRay,
         t_max: f32,
@@ -560,7 +562,7 @@ impl SceneBvh {
         match &self.accel {
             Accel::Empty => false,
             Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
-                crate::wide::closest(bvh, bvh_ray, test);
+                crate::wide::closest(isa, bvh, bvh_ray, test);
                 false
             }
             Accel::Cw(bvh) => bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(slot)),
@@ -579,7 +581,7 @@ impl SceneBvh {
             // SAFETY: as in `closest_hit`.
             return unsafe { self.closest_hits_avx2(rays, t_max) };
         }
-        self.closest_hits_portable(rays, t_max)
+        self.closest_hits_with(Isa::Portable, rays, t_max)
     }
 
     /// [`SceneBvh::closest_hits`] compiled for AVX2.
@@ -589,16 +591,16 @@ impl SceneBvh {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
     unsafe fn closest_hits_avx2(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
-        self.closest_hits_portable(rays, t_max)
+        self.closest_hits_with(Isa::Avx2, rays, t_max)
     }
 
     #[inline(always)]
-    fn closest_hits_portable(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
+    fn closest_hits_with(&self, isa: Isa, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
         let Accel::Cw(bvh) = &self.accel else {
-            return rays.iter().map(|r| self.closest_hit_portable(r, t_max)).collect();
+            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
         };
         if self.options.layout != BvhLayout::Cw {
-            return rays.iter().map(|r| self.closest_hit_portable(r, t_max)).collect();
+            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
         }
         let mut hits = Vec::with_capacity(rays.len());
         for packet in rays.chunks(crate::wide::PACKET) {
@@ -616,7 +618,7 @@ impl SceneBvh {
             }
             let mut best: [ClosestSoFar; crate::wide::PACKET] =
                 std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
-            crate::wide::closest_packet(bvh, &bvh_rays, |r, slot| {
+            crate::wide::closest_packet(isa, bvh, &bvh_rays, |r, slot| {
                 let tuv = self.prims[slot].intersect(&sheared[r]);
                 match tuv {
                     Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
@@ -642,7 +644,7 @@ impl SceneBvh {
             // SAFETY: as in `closest_hit`.
             return unsafe { self.occluded_avx2(ray, t_max) };
         }
-        self.occluded_portable(ray, t_max)
+        self.occluded_with(Isa::Portable, ray, t_max)
     }
 
     /// [`SceneBvh::occluded`] compiled for AVX2.
@@ -652,23 +654,24 @@ impl SceneBvh {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
     unsafe fn occluded_avx2(&self, ray: &Ray, t_max: f32) -> bool {
-        self.occluded_portable(ray, t_max)
+        self.occluded_with(Isa::Avx2, ray, t_max)
     }
 
     #[inline(always)]
-    fn occluded_portable(&self, ray: &Ray, t_max: f32) -> bool {
+    fn occluded_with(&self, isa: Isa, ray: &Ray, t_max: f32) -> bool {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
             return false;
         };
         let sheared = ShearedRay::new(origin, direction);
-        with_axes!(sheared.axes, self.occluded_in(&bvh_ray, &sheared, t_max))
+        with_axes!(sheared.axes, self.occluded_in(isa, &bvh_ray, &sheared, t_max))
     }
 
     /// Any hit for a ray with axis order `[KX, KY, KZ]`.
     #[inline(always)]
     fn occluded_in<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
+        isa: Isa,
         bvh_ray: &BvhRay,
         sheared: &ShearedRay,
         t_max: f32,
@@ -680,7 +683,7 @@ impl SceneBvh {
         match &self.accel {
             Accel::Empty => false,
             Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
-                crate::wide::any(bvh, bvh_ray, test)
+                crate::wide::any(isa, bvh, bvh_ray, test)
             }
             Accel::Cw(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),
             Accel::Binary(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),

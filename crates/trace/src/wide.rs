@@ -21,22 +21,42 @@ const STACK: usize = 1 + 7 * crate::bvh::CW_STACK_LIMIT + 8;
 /// Walks `bvh` for `ray`, calling `test(slot)` for every primitive slot whose
 /// leaf box the ray enters before `tmax`; `test` returns the new `tmax`
 /// (`f32::INFINITY` when it found nothing closer).
+///
+/// `Isa` says which box test to run; the AVX2 one only from code compiled
+/// for AVX2 on a CPU that has it.
 #[inline(always)]
-pub(crate) fn closest<F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, test: F) {
-    walk::<false, F>(bvh, ray, test);
+pub(crate) fn closest<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRay, test: F) {
+    walk::<false, F>(isa, bvh, ray, test);
 }
 
 /// Whether `test(slot)` returns a finite distance for any primitive slot
 /// whose leaf box the ray enters; stops at the first (shadow rays).
 #[inline(always)]
-pub(crate) fn any<F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, test: F) -> bool {
-    walk::<true, F>(bvh, ray, test)
+pub(crate) fn any<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRay, test: F) -> bool {
+    walk::<true, F>(isa, bvh, ray, test)
+}
+
+/// Which build of the 8-child box test a walk uses (both give the same
+/// entry distances, bit for bit: the same operations, no fused multiply-add).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Isa {
+    /// Plain Rust.
+    Portable,
+    /// `std::arch` AVX2 intrinsics: all 8 children in one register. Only
+    /// for code compiled with AVX2 enabled, on a CPU that has it.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
 }
 
 /// The traversal of [`closest`] and [`any`]: a fixed stack of (node, entry
 /// distance) on the call stack (no allocation, no thread-local lookup).
 #[inline(always)]
-fn walk<const ANY: bool, F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, mut test: F) -> bool {
+fn walk<const ANY: bool, F: FnMut(usize) -> f32>(
+    isa: Isa,
+    bvh: &CwBvh,
+    ray: &BvhRay,
+    mut test: F,
+) -> bool {
     let mut tmax = ray.tmax;
     let mut stack = [(0u32, 0f32); STACK];
     let mut pending = 1;
@@ -47,7 +67,7 @@ fn walk<const ANY: bool, F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, mut 
             continue;
         }
         let node = &bvh.nodes[index as usize];
-        let near = entry_distances(node, ray, tmax);
+        let near = entry_distances(isa, node, ray, tmax);
         if ANY {
             // Order does not matter: the first hit ends the walk.
             for (child, &t) in near.iter().enumerate() {
@@ -97,11 +117,19 @@ fn walk<const ANY: bool, F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, mut 
 }
 
 /// The distance at which `ray` enters each child box of `node` before
-/// `tmax`, `f32::INFINITY` for a child it misses or an empty slot. Written
-/// lane by lane over the 8 children so that the compiler turns it into
-/// 8-wide SIMD where the CPU has it (see `SceneBvh::closest_hit`).
+/// `tmax`, `f32::INFINITY` for a child it misses or an empty slot.
 #[inline(always)]
-fn entry_distances(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+fn entry_distances(isa: Isa, node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+    match isa {
+        Isa::Portable => entry_distances_portable(node, ray, tmax),
+        // SAFETY: `Isa::Avx2` is only passed where the CPU has AVX2.
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 => unsafe { entry_distances_avx2(node, ray, tmax) },
+    }
+}
+
+#[inline(always)]
+fn entry_distances_portable(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
     let extent = node.compute_extent();
     let scale = extent * ray.inv_direction;
     let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
@@ -119,6 +147,48 @@ fn entry_distances(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
         }
     }
     entries
+}
+
+/// [`entry_distances`] with AVX2: the same operations on 8 lanes at once
+/// (`_mm256_min_ps` is [`min`], `_mm256_max_ps` is [`max`]).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn entry_distances_avx2(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+    use std::arch::x86_64::*;
+    let extent = node.compute_extent();
+    let scale = extent * ray.inv_direction;
+    let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    // SAFETY: each load reads the 8 bytes of one `[u8; 8]` field; the store
+    // writes the 8 lanes of `entries`.
+    unsafe {
+        let lanes = |bytes: &[u8; 8]| _mm256_cvtepu8_epi32(_mm_loadl_epi64(bytes.as_ptr().cast()));
+        let mut near = _mm256_setzero_ps();
+        let mut far = _mm256_set1_ps(tmax);
+        for (lo, hi, scale, offset) in [
+            (&node.child_min_x, &node.child_max_x, scale.x, offset.x),
+            (&node.child_min_y, &node.child_max_y, scale.y, offset.y),
+            (&node.child_min_z, &node.child_max_z, scale.z, offset.z),
+        ] {
+            let (scale, offset) = (_mm256_set1_ps(scale), _mm256_set1_ps(offset));
+            let a = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(lo)), scale), offset);
+            let b = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(hi)), scale), offset);
+            near = _mm256_max_ps(near, _mm256_min_ps(a, b));
+            far = _mm256_min_ps(far, _mm256_max_ps(a, b));
+        }
+        let nonempty = _mm256_cmpgt_epi32(lanes(&node.child_meta), _mm256_setzero_si256());
+        let enters = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_LE_OQ>(near, far),
+            _mm256_castsi256_ps(nonempty),
+        );
+        let entries = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), near, enters);
+        let mut out = [0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), entries);
+        out
+    }
 }
 
 /// Narrows each child's entry/exit interval by its slab on one axis
@@ -185,6 +255,7 @@ pub(crate) const PACKET: usize = 8;
 /// `test(ray, slot)` returns that ray's new `tmax`.
 #[inline(always)]
 pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
+    isa: Isa,
     bvh: &CwBvh,
     rays: &[BvhRay],
     mut test: F,
@@ -209,7 +280,7 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
         while remaining != 0 {
             let r = remaining.trailing_zeros() as usize;
             remaining &= remaining - 1;
-            let near = entry_distances(node, &rays[r], tmax[r]);
+            let near = entry_distances(isa, node, &rays[r], tmax[r]);
             for i in 0..8 {
                 if near[i] < f32::INFINITY {
                     child_rays[i] |= 1 << r;
