@@ -690,6 +690,14 @@ impl SceneBvh {
         }
     }
 
+    /// The same BVH with queries on the portable build even where the CPU
+    /// has AVX2, so tests check both builds.
+    #[cfg(test)]
+    pub(crate) fn portable(mut self) -> SceneBvh {
+        self.avx2 = false;
+        self
+    }
+
     /// Reference closest hit: every triangle, in id order, with the same
     /// triangle test and tie-break as [`SceneBvh::closest_hit`].
     #[cfg(test)]
