@@ -397,7 +397,10 @@ impl Scheduler {
     /// finished frames and jobs.
     pub fn package_state(&self, package: PackageId) -> Option<PackageState> {
         let job = self.running.as_ref()?;
-        job.frame_of(package)?.packages.get(&package).map(Package::state)
+        job.frame_of(package)?
+            .packages
+            .get(&package)
+            .map(Package::state)
     }
 
     /// The job queue and the running job's progress.
@@ -454,7 +457,11 @@ impl Scheduler {
         let Some(job) = &self.running else {
             return Ok(());
         };
-        if job.ahead.as_ref().is_some_and(|a| a.index != job.frame.index + 1) {
+        if job
+            .ahead
+            .as_ref()
+            .is_some_and(|a| a.index != job.frame.index + 1)
+        {
             return fail("the frame ahead does not follow the running one".to_string());
         }
         for frame in job.running_frames() {

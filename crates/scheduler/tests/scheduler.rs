@@ -708,7 +708,10 @@ fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
     farm.submit(JOB, 2, 3);
     let a = farm.request(W0).expect("frame 0");
     let b = farm.request(W1).expect("frame 0");
-    assert_eq!((a.frame, b.frame, a.items.len(), b.items.len()), (0, 0, 1, 1));
+    assert_eq!(
+        (a.frame, b.frame, a.items.len(), b.items.len()),
+        (0, 0, 1, 1)
+    );
     // Frame 0 has nothing left to hand out: frame 1 starts, frame 0 runs on.
     let started: Vec<u32> = (farm.events().into_iter())
         .filter_map(|e| match e {
