@@ -250,6 +250,30 @@ pub struct SceneBvh {
     prim_ids: Vec<TriangleId>,
     /// Unit geometric normals by original triangle id (zero if degenerate).
     geometric_normals: Vec<Vec3>,
+    /// Whether each slot's triangle casts shadows ([`casts_shadow`]).
+    slot_casts_shadow: Vec<bool>,
+}
+
+/// Whether a surface of `material` blocks light: every surface except those
+/// that only emit (the panels outside the windows that stand for sky, road
+/// and landscape, and lamps). They stand for light, not for an occluder, so
+/// a low sun shines into a cab past the panel outside its window.
+pub fn casts_shadow(material: &vtfarm_scene::Material) -> bool {
+    let responds = [
+        material.ambient,
+        material.diffuse,
+        material.specular,
+        material.reflectance,
+        material.transmittance,
+    ]
+    .iter()
+    .any(|&k| k != Vec3::ZERO);
+    responds || material.emission == Vec3::ZERO
+}
+
+fn triangle_casts_shadow(scene: &Scene, id: TriangleId) -> bool {
+    let material = scene.triangles[id as usize].material as usize;
+    casts_shadow(&scene.materials[material])
 }
 
 impl fmt::Debug for SceneBvh {
@@ -380,6 +404,10 @@ impl SceneBvh {
             .iter()
             .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
             .collect();
+        let slot_casts_shadow = slots
+            .iter()
+            .map(|&i| triangle_casts_shadow(&scene, i))
+            .collect();
         // Report the layout actually used (see the depth fallback in `build`).
         let options = match accel {
             Accel::Binary(_) => BvhOptions {
@@ -396,6 +424,7 @@ impl SceneBvh {
             prims,
             prim_ids: slots,
             geometric_normals,
+            slot_casts_shadow,
         })
     }
 
@@ -548,17 +577,36 @@ impl SceneBvh {
         hits
     }
 
-    /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
-    /// hit found.
+    /// Any hit with t in (0, `t_max`); stops at the first hit found.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        self.any_hit_where(ray, t_max, |_| true)
+    }
+
+    /// Whether a shadow-casting triangle ([`casts_shadow`]) lies on the
+    /// ray with t in (0, `t_max`): the shadow test.
+    pub fn shadowed(&self, ray: &Ray, t_max: f32) -> bool {
+        self.any_hit_where(ray, t_max, |slot| self.slot_casts_shadow[slot])
+    }
+
+    /// Whether triangle `id` casts shadows ([`casts_shadow`]).
+    pub fn casts_shadow(&self, id: TriangleId) -> bool {
+        triangle_casts_shadow(&self.scene, id)
+    }
+
+    fn any_hit_where(&self, ray: &Ray, t_max: f32, slot_counts: impl Fn(usize) -> bool) -> bool {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
             return false;
         };
         let sheared = ShearedRay::new(origin, direction);
-        let test = |slot: usize| match self.prims[slot].intersect(&sheared) {
-            Some((t, _, _)) if t > 0.0 && t < t_max => t,
-            _ => f32::INFINITY,
+        let test = |slot: usize| {
+            if !slot_counts(slot) {
+                return f32::INFINITY;
+            }
+            match self.prims[slot].intersect(&sheared) {
+                Some((t, _, _)) if t > 0.0 && t < t_max => t,
+                _ => f32::INFINITY,
+            }
         };
         match &self.accel {
             Accel::Empty => false,
