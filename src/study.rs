@@ -1,6 +1,8 @@
 //! `vtfarm study` (an embedded farm) and the study side of `vtfarm submit`
-//! (a cluster): every variant is one farm job whose frames are its eye
-//! points, so the farm balances the study frame by frame.
+//! (a cluster): every variant is one farm job whose frames are its sun
+//! positions times its eye points, so the farm balances the study frame by
+//! frame, and the workers keep the variant's scene and BVH for all of them
+//! (a sun position changes only the lighting).
 
 use std::path::{Path, PathBuf};
 
@@ -78,14 +80,15 @@ pub(crate) async fn render_study(
                         .map(|row| row.summary.mean_reflected_luminance),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
-                        eye: f.frame as usize,
+                        eye: plan.frame_at(f.frame as usize).1,
                         why: "the master sent no components".into(),
                     }),
                 };
                 match written {
                     Ok(mean) => bar.println(format!(
-                        "{} eye {}: mean reflected luminance {mean:.5}",
-                        variant.name, f.frame
+                        "{} {}: mean reflected luminance {mean:.5}",
+                        variant.name,
+                        frame_name(plan, f.frame as usize)
                     )),
                     Err(e) => {
                         failure.get_or_insert(e);
@@ -102,6 +105,14 @@ pub(crate) async fn render_study(
     }
     bar.finish_and_clear();
     Ok(writer.finish()?)
+}
+
+/// "eye 3" or "sun 12 eye 3".
+fn frame_name(plan: &StudyPlan, frame: usize) -> String {
+    match plan.frame_at(frame) {
+        (Some(sun), eye) => format!("sun {sun} eye {eye}"),
+        (None, eye) => format!("eye {eye}"),
+    }
 }
 
 pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
