@@ -555,7 +555,7 @@ impl Source<'_> {
             Some(v) => self.check(&format!("sun.{key}"), v, rule, ok),
             None => Err(self.error(
                 Some(raw.span()),
-                format!("[sun] with start = ... needs sun.{key} ({rule})"),
+                format!("[sun] with start = ... needs sun.{key}: {rule}"),
             )),
         };
         let latitude_deg = required(

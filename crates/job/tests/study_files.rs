@@ -198,38 +198,38 @@ fn sun_sweep_mistakes_name_the_line_and_the_fix() {
     for (sun, line, expected) in [
         (
             "azimuths = [0]\nelevations = [0]\n",
-            8,
+            10,
             "over 0 and at most 90",
         ),
-        ("azimuths = [0]\n", 7, "needs sun.elevations"),
+        ("azimuths = [0]\n", 8, "needs sun.elevations"),
         (
             "azimuths = [0]\nelevations = [30]\nlatitude = 48.0\n",
-            7,
+            8,
             "not both",
         ),
         (
             "start = 2026-06-21T08:00:00\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
-            7,
+            9,
             "UTC offset",
         ),
         (
             "start = 2026-06-21T08:00:00Z\nlatitude = 98.0\nlongitude = 11.0\nheading = 0\n",
-            8,
+            10,
             "-90 to 90",
         ),
         (
             "start = 2026-06-21T08:00:00Z\nlatitude = 48.0\nlongitude = 11.0\n",
-            7,
+            8,
             "needs sun.heading",
         ),
         (
             "start = 2026-06-21T08:00:00Z\nend = 2026-06-20T08:00:00Z\nstep_minutes = 10\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
-            8,
+            10,
             "before sun.start",
         ),
         (
             "start = 2026-06-21T08:00:00Z\nend = 2027-06-20T08:00:00Z\nstep_minutes = 1\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
-            8,
+            10,
             "at most 10000",
         ),
     ] {
