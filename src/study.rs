@@ -131,6 +131,21 @@ pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
             s.main_glare_source.as_deref().unwrap_or("none")
         );
     }
+    for s in &report.ranking {
+        if let Some(w) = s.worst_cases.first() {
+            let sun = match (w.sun_azimuth_deg, w.sun_elevation_deg) {
+                (Some(a), Some(e)) => format!("sun at azimuth {a:.1}°, elevation {e:.1}°"),
+                _ => "no sun".to_owned(),
+            };
+            println!(
+                "worst for {}: {sun}, eye {}: mean Lr {:.5}, mirrors {}",
+                s.variant,
+                w.eye_index,
+                w.mean_reflected_luminance,
+                w.mirrored_object.as_deref().unwrap_or("nothing")
+            );
+        }
+    }
     println!(
         "wrote {} frame(s), summary.csv, summary.json and report.html to {}",
         report.frames.len(),

@@ -318,7 +318,7 @@ mod tests {
                 scene: hash,
                 setup: WireFrameSetup::from(&setup),
                 reflectors: reflectors.to_vec(),
-                method: MethodKind::Vertex.into(),
+                method: MethodKind::VertexTracing.into(),
                 aux: true,
             }
         };

@@ -240,3 +240,18 @@ fn sun_sweep_mistakes_name_the_line_and_the_fix() {
         );
     }
 }
+
+#[test]
+fn the_example_sun_study_sweeps_sixteen_suns_over_seven_eyes_and_five_designs() {
+    let study = load_study(&repo("configs/cockpit-sun-study.toml")).unwrap();
+    assert_eq!(study.eyes.len(), 7);
+    assert_eq!(study.variants.len(), 5);
+    let Some(vtfarm_job::study::SunSweep::Grid {
+        azimuths_deg,
+        elevations_deg,
+    }) = study.sun
+    else {
+        panic!("a grid sweep: {:?}", study.sun);
+    };
+    assert_eq!(azimuths_deg.len() * elevations_deg.len(), 16);
+}
