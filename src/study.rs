@@ -77,7 +77,7 @@ pub(crate) async fn render_study(
                 let written = match &f.components {
                     Some(components) => writer
                         .frame(v, f.frame as usize, components)
-                        .map(|row| row.summary.mean_reflected_luminance),
+                        .map(|row| row.summary.mean_reflected_luminance_cd_m2),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
                         eye: plan.frame_at(f.frame as usize).1,
@@ -86,7 +86,7 @@ pub(crate) async fn render_study(
                 };
                 match written {
                     Ok(mean) => bar.println(format!(
-                        "{} {}: mean reflected luminance {mean:.5}",
+                        "{} {}: mean reflected luminance {mean:.1} cd/m²",
                         variant.name,
                         frame_name(plan, f.frame as usize)
                     )),
@@ -117,17 +117,17 @@ fn frame_name(plan: &StudyPlan, frame: usize) -> String {
 
 pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
     println!(
-        "{:<24} {:>12} {:>12} {:>14} {:>12}  main glare source",
-        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr"
+        "{:<24} {:>12} {:>12} {:>14} {:>14}  main glare source",
+        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr cd/m²"
     );
     for s in &report.ranking {
         println!(
-            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>12.5}  {}",
+            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>14.1}  {}",
             s.variant,
             s.mean_glare_area_share * 100.0,
             s.worst_glare_area_share * 100.0,
             s.worst_low_contrast_share * 100.0,
-            s.mean_reflected_luminance,
+            s.mean_reflected_luminance_cd_m2,
             s.main_glare_source.as_deref().unwrap_or("none")
         );
     }
@@ -138,10 +138,10 @@ pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
                 _ => "no sun".to_owned(),
             };
             println!(
-                "worst for {}: {sun}, eye {}: mean Lr {:.5}, mirrors {}",
+                "worst for {}: {sun}, eye {}: mean Lr {:.1} cd/m², mirrors {}",
                 s.variant,
                 w.eye_index,
-                w.mean_reflected_luminance,
+                w.mean_reflected_luminance_cd_m2,
                 w.mirrored_object.as_deref().unwrap_or("nothing")
             );
         }
