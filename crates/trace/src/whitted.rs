@@ -18,7 +18,8 @@ use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
 /// `max_depth` 0 behaves as 1.
 ///
 /// Shadow rays treat every occluder as opaque, transparent ones included
-/// (classic Whitted: no caustics or coloured shadows), and stop at a point
+/// (classic Whitted: no caustics or coloured shadows), pass surfaces that
+/// only emit ([`crate::casts_shadow`]), and stop at a point
 /// light's distance (minus the spawn epsilon, so geometry at the light does
 /// not shadow it).
 #[derive(Clone, Copy, Debug)]
@@ -353,7 +354,7 @@ impl Tracer<'_> {
             }
             LightKind::Directional { .. } => f32::INFINITY,
         };
-        !self.bvh.occluded(&ray, t_max)
+        !self.bvh.shadowed(&ray, t_max)
     }
 }
 
