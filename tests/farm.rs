@@ -320,6 +320,7 @@ fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3
             camera: frame.camera,
             ids: &ids,
             reflector: &group,
+            stop: None,
         });
         image.composite(&output.bitmap);
     }

@@ -137,6 +137,7 @@ impl PerReflector {
                 camera: frame.camera,
                 ids: frame.ids,
                 reflector: group,
+                stop: frame.stop,
             });
             let c = output.counters;
             stats.add(&PackageStats {
