@@ -5,7 +5,10 @@
 //! Per frame it sends `FrameStart` to every worker first and then asks the
 //! driver to rasterize the base frame and ID buffer
 //! ([`Output::RasterizeBase`]) while the workers set up and trace; results
-//! that arrive before it are held until it is there. It hands out the
+//! that arrive before it are held until it is there (and reported to the
+//! scheduler as arrived, so they are not taken for stragglers). Frames are
+//! pipelined: the scheduler starts frame N+1 as soon as frame N has nothing
+//! left to hand out, so two frames may be assembled at once. It hands out the
 //! scheduler's packages, composites each accepted result over the base frame
 //! and sends the finished frame to the submitter. A result that writes a
 //! pixel its package does not own in the frame's ID buffer (pixel ownership)
@@ -36,6 +39,7 @@ use vtfarm_vertex::{FrameImage, PackageStats};
 
 use crate::journal::{Record, StoredJob};
 use crate::telemetry::Telemetry;
+use crate::view::{ViewError, ViewRequest, ViewSource, Views};
 
 /// A connection, numbered by the driver.
 pub type ConnId = u64;
@@ -115,10 +119,20 @@ struct Job {
     /// For per-reflector methods, the reflector groups the work items
     /// index; `None` when the items are the reflector triangles themselves.
     groups: Option<Vec<Vec<u32>>>,
-    current: Option<FrameAssembly>,
+    /// The frames being assembled, oldest first (two while pipelined).
+    assembling: Vec<FrameAssembly>,
 }
 
 impl Job {
+    /// The frame `frame` if it is being assembled.
+    fn assembly(&self, frame: u32) -> Option<&FrameAssembly> {
+        self.assembling.iter().find(|a| a.start.frame == frame)
+    }
+
+    fn assembly_mut(&mut self, frame: u32) -> Option<&mut FrameAssembly> {
+        self.assembling.iter_mut().find(|a| a.start.frame == frame)
+    }
+
     /// The reflector triangles that work `items` cover, sorted: the
     /// triangles whose pixels the package's result may write.
     fn triangles_in(&self, items: &[u32]) -> Vec<TriangleId> {
@@ -190,6 +204,8 @@ pub struct MasterCore {
     now: Duration,
     /// Workers that left during the running frame, for its stats' names.
     departed: BTreeMap<ConnId, Peer>,
+    /// The interactive view: pickable scenes and the move being rendered.
+    views: Views,
 }
 
 impl MasterCore {
@@ -210,6 +226,7 @@ impl MasterCore {
             completed: BTreeMap::new(),
             now: Duration::ZERO,
             departed: BTreeMap::new(),
+            views: Views::default(),
         }
     }
 
@@ -305,13 +322,13 @@ impl MasterCore {
             let catch_up: Vec<Message> = self
                 .jobs
                 .values()
-                .filter_map(|job| {
-                    job.current
-                        .as_ref()
-                        .map(|c| (job.scene_hash, c.start.clone()))
-                })
-                .flat_map(|(hash, start)| {
-                    [Message::SceneOffer { hash }, Message::FrameStart(start)]
+                .filter(|job| !job.assembling.is_empty())
+                .flat_map(|job| {
+                    let starts = job.assembling.iter().map(|a| a.start.clone());
+                    std::iter::once(Message::SceneOffer {
+                        hash: job.scene_hash,
+                    })
+                    .chain(starts.map(Message::FrameStart))
                 })
                 .collect();
             for message in catch_up {
@@ -382,10 +399,14 @@ impl MasterCore {
         match message {
             Message::Heartbeat => {}
             Message::RequestWork { job, frame } => {
-                // Only a worker set up for the current frame may get its work.
-                let current = self.scheduler.queue().running.map(|r| (r.job.0, r.frame));
-                if current == Some((job, frame)) {
-                    self.record_setup(conn, job);
+                // Only a worker set up for the newest frame may get work
+                // (it keeps the frame before too).
+                let running = self.scheduler.queue().running.map(|r| r.job.0);
+                let newest = (running.and_then(|r| self.jobs.get(&r)))
+                    .and_then(|j| j.assembling.last())
+                    .map(|a| (a.start.job, a.start.frame));
+                if newest == Some((job, frame)) {
+                    self.record_setup(conn, job, frame);
                     let _ = self.scheduler.request_work(now, worker);
                 }
             }
@@ -428,16 +449,21 @@ impl MasterCore {
         let Some(job) = self.jobs.get(&in_flight.job) else {
             return;
         };
-        let Some(current) = (job.current.as_ref()).filter(|c| c.start.frame == in_flight.frame)
-        else {
+        let Some(current) = job.assembly(in_flight.frame) else {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
         let Some(ids) = &current.ids else {
-            // The base frame is still being rasterized: check the result then.
-            let job_id = in_flight.job;
+            // The base frame is still being rasterized: check the result
+            // then; till then it is no straggler.
+            let (job_id, frame) = (in_flight.job, in_flight.frame);
+            let package = PackageId(result.id);
+            if let Err(e) = self.scheduler.package_arrived(now, worker, package) {
+                debug!(package = result.id, "result ignored: {e}");
+                return;
+            }
             let current = (self.jobs.get_mut(&job_id))
-                .and_then(|j| j.current.as_mut())
+                .and_then(|j| j.assembly_mut(frame))
                 .expect("checked above");
             current.held.push((conn, result, bytes_out));
             return;
@@ -484,13 +510,14 @@ impl MasterCore {
             debug!(package = result.id, "result ignored: {e}");
             return;
         }
-        let (job_id, triangles) = (in_flight.job, in_flight.triangles.len() as u64);
+        let (job_id, frame) = (in_flight.job, in_flight.frame);
+        let triangles = in_flight.triangles.len() as u64;
         let worker_name = self.worker_name(conn);
         (self.telemetry).package_done(&worker_name, stats.samples(), in_flight.bytes_in, bytes_out);
         // Done: a late duplicate copy now finds nothing and is ignored.
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
-        let current = job.current.as_mut().expect("checked above");
+        let current = job.assembly_mut(frame).expect("checked above");
         current.image.composite(&bitmap);
         current.totals.add(&stats);
         current.triangles_done += triangles;
@@ -549,6 +576,7 @@ impl MasterCore {
             return self.refuse_job(conn, e);
         }
         self.next_job += 1;
+        self.remember_for_view(id);
         self.send(conn, Message::JobAccepted { job: id, frames });
         self.telemetry.counters.jobs_submitted += 1;
         if let Some(job) = journaled {
@@ -627,7 +655,7 @@ impl MasterCore {
                 aux: job.aux,
                 method,
                 groups,
-                current: None,
+                assembling: Vec::new(),
             },
         );
         let submitted = self.scheduler.submit_job(now, JobId(id), work);
@@ -691,7 +719,8 @@ impl MasterCore {
     }
 
     fn persist(&mut self, record: Record) {
-        if self.persistent {
+        // A view's jobs live as long as the page looks at them.
+        if self.persistent && !self.views.owns(record.job()) {
             self.outbox.push_back(Output::Persist(record));
         }
     }
@@ -754,9 +783,11 @@ impl MasterCore {
                 let Some(j) = self.jobs.get_mut(&job.0) else {
                     return;
                 };
-                let Some(done) = j.current.take().filter(|c| c.start.frame == frame) else {
+                let Some(index) = j.assembling.iter().position(|a| a.start.frame == frame) else {
                     return;
                 };
+                let done = j.assembling.remove(index);
+                (self.views).frame_finished(job.0, frame, &done.image, &j.scene);
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let workers = stats
                     .workers
@@ -888,7 +919,7 @@ impl MasterCore {
             method: j.method.into(),
             aux: j.aux,
         };
-        j.current = Some(FrameAssembly {
+        j.assembling.push(FrameAssembly {
             start: start.clone(),
             ids: None,
             image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
@@ -928,8 +959,8 @@ impl MasterCore {
     ) {
         self.now = now;
         let Some(current) = (self.jobs.get_mut(&job))
-            .and_then(|j| j.current.as_mut())
-            .filter(|c| c.start.frame == frame && c.ids.is_none())
+            .and_then(|j| j.assembly_mut(frame))
+            .filter(|c| c.ids.is_none())
         else {
             return;
         };
@@ -950,11 +981,11 @@ impl MasterCore {
         self.pump();
     }
 
-    /// A worker's first request for the current frame ends its set-up.
-    fn record_setup(&mut self, conn: ConnId, job: u64) {
+    /// A worker's first request for a frame ends its set-up.
+    fn record_setup(&mut self, conn: ConnId, job: u64, frame: u32) {
         let name = self.name(conn);
         let now = self.now;
-        let Some(current) = self.jobs.get_mut(&job).and_then(|j| j.current.as_mut()) else {
+        let Some(current) = self.jobs.get_mut(&job).and_then(|j| j.assembly_mut(frame)) else {
             return;
         };
         if !current.set_up.contains(&conn) {
@@ -978,9 +1009,7 @@ impl MasterCore {
             return;
         };
         let (frame, assigned_at) = (in_flight.frame, in_flight.assigned_at);
-        let Some(current) = (self.jobs.get_mut(&in_flight.job))
-            .and_then(|j| j.current.as_mut())
-            .filter(|c| c.start.frame == frame)
+        let Some(current) = (self.jobs.get_mut(&in_flight.job)).and_then(|j| j.assembly_mut(frame))
         else {
             return;
         };
@@ -1015,6 +1044,57 @@ impl MasterCore {
         self.send(a.worker.0, message);
     }
 
+    /// Moves the interactive view's eye: cancels the previous move's job and
+    /// queues the new view at rising quality (see `view.rs`); returns the
+    /// new job's id.
+    pub fn steer_view(&mut self, now: Duration, request: ViewRequest) -> Result<u64, ViewError> {
+        self.now = now;
+        let planned = self.views.plan(&request)?;
+        if let Some(outdated) = self.views.running_job() {
+            if self.scheduler.cancel_job(now, JobId(outdated)).is_ok() {
+                self.views.superseded();
+            }
+        }
+        let id = self.next_job;
+        let queued = self.queue_job(now, id, planned.job.clone(), None, 0);
+        if let Err(e) = queued {
+            self.pump();
+            return Err(ViewError::Queue(e));
+        }
+        self.next_job += 1;
+        // Nobody attaches to a view's job: it is not orphaned.
+        if let Some(j) = self.jobs.get_mut(&id) {
+            j.orphaned_at = None;
+        }
+        self.views.started(planned, id);
+        self.pump();
+        Ok(id)
+    }
+
+    /// The interactive view's state.
+    pub fn views(&self) -> &Views {
+        &self.views
+    }
+
+    /// Keeps a submitted job's scene and first frame pickable for the view.
+    fn remember_for_view(&mut self, id: u64) {
+        let Some(j) = self.jobs.get(&id) else {
+            return;
+        };
+        let Some(setup) = j.frames.first() else {
+            return;
+        };
+        let source = ViewSource {
+            name: j.name.clone(),
+            scene_hash: j.scene_hash,
+            scene: j.scene.clone(),
+            reflectors: j.reflectors.clone(),
+            method: j.method,
+            setup: setup.clone(),
+        };
+        self.views.remember(id, source);
+    }
+
     /// The master's history: counters, per-worker totals, finished frames.
     pub fn telemetry(&self) -> &Telemetry {
         &self.telemetry
@@ -1037,7 +1117,7 @@ impl MasterCore {
     pub fn live_frame(&self) -> Option<LiveFrame<'_>> {
         let running = self.scheduler.queue().running?;
         let job = self.jobs.get(&running.job.0)?;
-        let current = job.current.as_ref()?;
+        let current = job.assembly(running.frame)?;
         Some(LiveFrame {
             job: running.job.0,
             frame: current.start.frame,
@@ -1090,7 +1170,7 @@ impl MasterCore {
                 name: job.map(|j| j.name.clone()).unwrap_or_default(),
                 frame: p.frame,
                 frames: p.frames,
-                triangles_done: (job.and_then(|j| j.current.as_ref()))
+                triangles_done: (job.and_then(|j| j.assembly(p.frame)))
                     .map_or(0, |c| c.triangles_done),
                 triangles_total: job.map_or(0, |j| j.reflectors.len() as u64),
             }

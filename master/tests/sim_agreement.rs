@@ -134,6 +134,9 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
                 core.message(now, worker.0, Message::PackageFailed(failed));
             }
             SimInput::Timeout => core.handle_timeout(now),
+            // The core holds results for the base frame by itself; here base
+            // frames are ready at once, and so they are in the simulation.
+            SimInput::Arrived(..) => panic!("no result waits for a base frame here"),
         }
         // Carry out the core's outputs; base frames are ready at once.
         while let Some(output) = core.poll_output() {

@@ -77,7 +77,8 @@ pub async fn serve(
     let Link { tx, mut rx, .. } = link;
     let start = Instant::now();
     let mut session = WorkerSession::new(Duration::ZERO);
-    let mut frame: Option<Arc<ActiveFrame>> = None;
+    // The newest prepared frame and the one before it (see `session`).
+    let mut frames: Vec<Arc<ActiveFrame>> = Vec::with_capacity(2);
     let mut running: Option<Running> = None;
     loop {
         while let Some(task) = session.poll_task() {
@@ -87,12 +88,19 @@ pub async fn serve(
                     // Building the BVH and ID buffers is CPU work: keep it off
                     // the I/O threads' hot path.
                     let outcome = tokio::task::block_in_place(|| engine.start_frame(frame_start));
-                    let outcome = outcome.map(|active| frame = Some(Arc::new(active)));
+                    let outcome = outcome.map(|active| {
+                        if frames.len() == 2 {
+                            frames.remove(0);
+                        }
+                        frames.push(Arc::new(active));
+                    });
                     session.frame_prepared(start.elapsed(), key, outcome);
                 }
                 Task::RunPackage(package) => {
                     let id = package.id;
-                    let active = frame.clone();
+                    let active = (frames.iter())
+                        .find(|a| (a.job, a.frame) == (package.job, package.frame))
+                        .cloned();
                     let budget =
                         active.as_ref().map_or(0, |a| a.pixels()) * config.samples_per_pixel_budget;
                     let stop = Arc::new(Stop::with_budget(budget));

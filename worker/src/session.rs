@@ -6,9 +6,12 @@
 //! socket, no clock and no thread; `serve.rs` drives it over a `Link`, and
 //! the master's fault harness drives it on a virtual clock.
 //!
-//! Pull-based: the worker asks for work (`RequestWork`) once its frame is
-//! ready and it is idle, runs one package at a time (the package itself uses
-//! every core), and sends the result or the error. Scenes are fetched only
+//! Pull-based: the worker asks for work (`RequestWork`) once its newest frame
+//! is ready and it is idle, runs one package at a time (the package itself uses
+//! every core), and sends the result or the error. The master pipelines
+//! frames (it announces frame N+1 while N's last packages run and may still
+//! hand out N's requeued work), so the frame prepared before the newest one
+//! stays usable. Scenes are fetched only
 //! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
 //!
 //! Draining (SIGTERM): no more requests; the running package finishes (or
@@ -88,8 +91,10 @@ pub enum Task {
 /// The worker's session state.
 #[derive(Debug)]
 pub struct WorkerSession {
-    /// The frame whose packages can run now.
+    /// The frame whose packages can run now (the newest prepared).
     ready: Option<FrameKey>,
+    /// The frame prepared before `ready`: its packages can run too.
+    previous: Option<FrameKey>,
     /// A frame handed to the driver for preparation.
     preparing: Option<FrameKey>,
     /// A frame whose scene is still on its way.
@@ -116,6 +121,7 @@ impl WorkerSession {
     pub fn new(now: Duration) -> Self {
         WorkerSession {
             ready: None,
+            previous: None,
             preparing: None,
             awaiting_scene: None,
             unusable: None,
@@ -274,7 +280,9 @@ impl WorkerSession {
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
         let key = (start.job, start.frame);
-        self.ready = None;
+        if let Some(ready) = self.ready.take() {
+            self.previous = Some(ready);
+        }
         self.unusable = None;
         self.awaiting_scene = None;
         if scenes.has_scene(&start.scene) {
@@ -313,7 +321,7 @@ impl WorkerSession {
                 break;
             }
             let package = self.queue.pop_front().expect("front exists");
-            if self.ready == Some(key) {
+            if self.ready == Some(key) || self.previous == Some(key) {
                 self.running = Some(package.id);
                 self.tasks.push_back(Task::RunPackage(package));
             } else {

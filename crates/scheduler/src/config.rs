@@ -24,6 +24,11 @@ pub struct SchedulerConfig {
     /// rebuild ID buffers per frame; counting that set-up as package time
     /// would skew their measured rates). Default `false`: requests carry over.
     pub requests_lapse_at_frame_start: bool,
+    /// Whether the next frame starts as soon as the running one has nothing
+    /// left to hand out, so that idle workers take its packages while the
+    /// running frame's last packages finish (at most two frames run at a
+    /// time; frames still complete in order). Default `false`.
+    pub pipeline_frames: bool,
 }
 
 impl Default for SchedulerConfig {
@@ -35,18 +40,21 @@ impl Default for SchedulerConfig {
             retry: RetryPolicy::default(),
             estimation: CostEstimation::default(),
             requests_lapse_at_frame_start: false,
+            pipeline_frames: false,
         }
     }
 }
 
 impl SchedulerConfig {
     /// The rules of vtfarm's master, whose workers set each frame up before
-    /// they ask for its work: requests lapse at a frame start. The master
+    /// they ask for its work: requests lapse at a frame start, and frames
+    /// are pipelined (a worker keeps the frame before its newest). The master
     /// core and the simulator (`vtfarm bench simulate`) both take their
     /// configuration through here, so they run the same scheduler.
     pub fn farm(self) -> Self {
         SchedulerConfig {
             requests_lapse_at_frame_start: true,
+            pipeline_frames: true,
             ..self
         }
     }

@@ -58,18 +58,14 @@ pub(crate) struct Attempt {
     pub(crate) worker: WorkerId,
     pub(crate) assigned_at: Duration,
     pub(crate) expected: Duration,
+    /// When its result arrived, if the driver holds it before accepting it.
+    pub(crate) arrived_at: Option<Duration>,
 }
 
 impl Frame {
     /// A frame whose items are estimated by `costs`.
     pub(crate) fn new(index: u32, items: Vec<u32>, costs: &CostModel) -> Frame {
-        let mut prefix = Vec::with_capacity(items.len() + 1);
-        let mut sum = 0.0;
-        prefix.push(sum);
-        for &item in &items {
-            sum += costs.estimate(item);
-            prefix.push(sum);
-        }
+        let prefix = prefix_costs(&items, costs);
         let n = items.len();
         Frame {
             index,
@@ -88,6 +84,12 @@ impl Frame {
             },
             worker_stats: BTreeMap::new(),
         }
+    }
+
+    /// Estimates the items anew (a frame started before the one before it
+    /// completed learns from that one too).
+    pub(crate) fn reestimate(&mut self, costs: &CostModel) {
+        self.prefix = prefix_costs(&self.items, costs);
     }
 
     pub(crate) fn is_complete(&self) -> bool {
@@ -202,4 +204,16 @@ impl Package {
     pub(crate) fn failed_on(&self, worker: WorkerId) -> bool {
         self.failures.iter().any(|(w, _)| *w == worker)
     }
+}
+
+/// Running sums of the items' estimated costs, from 0.
+fn prefix_costs(items: &[u32], costs: &CostModel) -> Vec<f64> {
+    let mut prefix = Vec::with_capacity(items.len() + 1);
+    let mut sum = 0.0;
+    prefix.push(sum);
+    for &item in items {
+        sum += costs.estimate(item);
+        prefix.push(sum);
+    }
+    prefix
 }

@@ -8,7 +8,7 @@
 //! packages are opaque ids, and time is the `now: Duration` (time since the
 //! master started) passed to every input. Inputs are the `Scheduler` methods
 //! `worker_joined`, `worker_left`, `heartbeat`, `request_work`,
-//! `package_done`, `package_failed`, `submit_job`, `cancel_job` and
+//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `cancel_job` and
 //! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
 //! hash-map order, no threads). The [`sim`] module drives it with simulated
@@ -45,7 +45,15 @@
 //!
 //! * **Demand-driven.** A worker asks ([`Scheduler::request_work`]) and gets
 //!   one package, now or as soon as there is work. Jobs run one after another
-//!   in submission order, frames one after another.
+//!   in submission order, frames one after another; with
+//!   [`SchedulerConfig::pipeline_frames`] the next frame starts as soon as the
+//!   running one has nothing left to hand out, so idle workers take its
+//!   packages while the last ones of the running frame finish (two frames at
+//!   most; frames complete in order; the older frame's requeued work first).
+//! * **Held results.** A driver that checks results only later (the master
+//!   waits for the frame's base image) reports them with
+//!   [`Scheduler::package_arrived`] first: such a package is no straggler and
+//!   its worker's rate counts only up to the arrival.
 //! * **Package size** (guided self-scheduling, "large early, small late"):
 //!   a package for worker `w` is the next contiguous run of unassigned items
 //!   whose estimated cost is closest to `target · rate(w)`, with

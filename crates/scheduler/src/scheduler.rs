@@ -73,7 +73,36 @@ struct RunningJob {
     blocklist: BTreeSet<WorkerId>,
     /// Every failure reported in the job, in order.
     errors: Vec<(WorkerId, String)>,
+    /// The oldest running frame: frames complete in order.
     frame: Frame,
+    /// The frame after it, started early when `frame` had nothing left to
+    /// hand out ([`SchedulerConfig::pipeline_frames`]).
+    ahead: Option<Frame>,
+}
+
+impl RunningJob {
+    /// The running frames, oldest first.
+    fn running_frames(&self) -> impl Iterator<Item = &Frame> {
+        std::iter::once(&self.frame).chain(&self.ahead)
+    }
+
+    fn running_frames_mut(&mut self) -> impl Iterator<Item = &mut Frame> {
+        std::iter::once(&mut self.frame).chain(self.ahead.as_mut())
+    }
+
+    /// The running frame a package belongs to.
+    fn frame_of(&self, package: PackageId) -> Option<&Frame> {
+        (self.running_frames()).find(|f| f.packages.contains_key(&package))
+    }
+
+    fn frame_of_mut(&mut self, package: PackageId) -> Option<&mut Frame> {
+        (self.running_frames_mut()).find(|f| f.packages.contains_key(&package))
+    }
+
+    /// The running frame with this index.
+    fn frame_mut(&mut self, index: u32) -> Option<&mut Frame> {
+        (self.running_frames_mut()).find(|f| f.index == index)
+    }
 }
 
 /// How many recent packages a worker's compute rate is the median of.
@@ -82,10 +111,15 @@ const COMPUTE_SAMPLES: usize = 16;
 /// What a waiting worker gets.
 #[derive(Clone, Copy, Debug)]
 enum Pick {
-    /// The next unassigned items, up to position `end`.
-    Fresh { end: usize },
-    /// The queued package at `index` of the queue, or its part before `split`.
-    Queued { index: usize, split: usize },
+    /// The next unassigned items of frame `frame`, up to position `end`.
+    Fresh { frame: u32, end: usize },
+    /// The queued package at `index` of frame `frame`'s queue, or its part
+    /// before `split`.
+    Queued {
+        frame: u32,
+        index: usize,
+        split: usize,
+    },
     /// A second copy of a straggler.
     Duplicate(PackageId),
 }
@@ -242,6 +276,32 @@ impl Scheduler {
         Ok(())
     }
 
+    /// The worker's result for the package arrived, but the driver accepts
+    /// it only later (it checks results against the frame's base image,
+    /// which may still be in the making): the package no longer runs late,
+    /// so it is not duplicated, and the worker's rate is measured up to now.
+    /// [`Scheduler::package_done`] or [`Scheduler::package_failed`] follows.
+    pub fn package_arrived(
+        &mut self,
+        now: Duration,
+        worker: WorkerId,
+        package: PackageId,
+    ) -> Result<(), ReportError> {
+        let now = self.advance(now);
+        self.check_report(worker, package)?;
+        let attempt = (self.running.as_mut())
+            .and_then(|job| job.frame_of_mut(package))
+            .and_then(|frame| frame.packages.get_mut(&package))
+            .and_then(|p| {
+                let index = p.attempt_of(worker)?;
+                p.attempts.get_mut(index)
+            });
+        if let Some(attempt) = attempt {
+            attempt.arrived_at.get_or_insert(now);
+        }
+        Ok(())
+    }
+
     /// The worker could not compute the package. It is retried on another
     /// worker; see [`RetryPolicy`](crate::RetryPolicy) for when the worker is
     /// blocklisted and when the job fails.
@@ -337,7 +397,10 @@ impl Scheduler {
     /// finished frames and jobs.
     pub fn package_state(&self, package: PackageId) -> Option<PackageState> {
         let job = self.running.as_ref()?;
-        job.frame.packages.get(&package).map(Package::state)
+        job.frame_of(package)?
+            .packages
+            .get(&package)
+            .map(Package::state)
     }
 
     /// The job queue and the running job's progress.
@@ -350,10 +413,8 @@ impl Scheduler {
                 frames: job.frame_count,
                 items_done: job.frame.done_count,
                 items_total: job.frame.items.len(),
-                packages_running: job
-                    .frame
-                    .packages
-                    .values()
+                packages_running: (job.running_frames())
+                    .flat_map(|f| f.packages.values())
                     .filter(|p| !p.attempts.is_empty())
                     .count(),
                 blocklisted: job.blocklist.iter().copied().collect(),
@@ -382,7 +443,7 @@ impl Scheduler {
             }
             for package in &w.running {
                 let runs = self.running.as_ref().and_then(|job| {
-                    let p = job.frame.packages.get(package)?;
+                    let p = job.frame_of(*package)?.packages.get(package)?;
                     p.attempt_of(id)
                 });
                 if runs.is_none() {
@@ -396,7 +457,22 @@ impl Scheduler {
         let Some(job) = &self.running else {
             return Ok(());
         };
-        let frame = &job.frame;
+        if job
+            .ahead
+            .as_ref()
+            .is_some_and(|a| a.index != job.frame.index + 1)
+        {
+            return fail("the frame ahead does not follow the running one".to_string());
+        }
+        for frame in job.running_frames() {
+            self.validate_frame(frame)?;
+        }
+        Ok(())
+    }
+
+    /// Checks one running frame's items and packages (see `validate`).
+    fn validate_frame(&self, frame: &Frame) -> Result<(), InvariantError> {
+        let fail = |message: String| Err(InvariantError(message));
         let n = frame.items.len();
         let mut owners = vec![0u32; n];
         for owner in &mut owners[frame.next_fresh..] {
@@ -482,10 +558,9 @@ impl Scheduler {
             return Err(ReportError::NotConnected(worker));
         }
         self.touch(worker);
-        let current = self
-            .running
-            .as_ref()
-            .and_then(|job| job.frame.packages.get(&package));
+        let current = (self.running.as_ref())
+            .and_then(|job| job.frame_of(package))
+            .and_then(|frame| frame.packages.get(&package));
         let refusal = match current {
             Some(p) if p.state().is_final() => Some(ReportError::Finished(package)),
             Some(p) if p.attempt_of(worker).is_none() => {
@@ -514,6 +589,18 @@ impl Scheduler {
     /// hands work to the waiting workers in the order they asked.
     fn dispatch(&mut self) {
         loop {
+            self.start_jobs_and_frames();
+            self.hand_out();
+            // Handing out a frame's last work may start the next frame.
+            if !self.may_start_ahead() {
+                break;
+            }
+        }
+    }
+
+    /// Starts queued jobs and frames, failing a job nobody may work on.
+    fn start_jobs_and_frames(&mut self) {
+        loop {
             self.advance_jobs();
             if !self.no_eligible_worker() {
                 break;
@@ -525,6 +612,10 @@ impl Scheduler {
                 .unwrap_or_default();
             self.fail_job(JobFailure::NoEligibleWorker, errors);
         }
+    }
+
+    /// Hands work to the waiting workers in the order they asked.
+    fn hand_out(&mut self) {
         let mut index = 0;
         while index < self.waiting.len() {
             let worker = self.waiting[index];
@@ -538,8 +629,21 @@ impl Scheduler {
         }
     }
 
+    /// Whether the next frame starts early ([`SchedulerConfig::pipeline_frames`]):
+    /// the running frame has nothing left to hand out, and no frame runs
+    /// ahead of it yet.
+    fn may_start_ahead(&self) -> bool {
+        self.running.as_ref().is_some_and(|job| {
+            self.config.pipeline_frames
+                && job.ahead.is_none()
+                && !job.frames.is_empty()
+                && !job.frame.has_unassigned()
+                && !job.frame.is_complete()
+        })
+    }
+
     /// Completes finished frames and jobs and starts the next ones, until a
-    /// frame has work or no job is left.
+    /// frame has work or no job is left; starts a frame early when it may.
     fn advance_jobs(&mut self) {
         loop {
             let Some(job) = &mut self.running else {
@@ -550,6 +654,9 @@ impl Scheduler {
                 continue;
             };
             if !job.frame.is_complete() {
+                if self.may_start_ahead() {
+                    self.start_ahead();
+                }
                 return;
             }
             let speeds: BTreeMap<WorkerId, f64> = self
@@ -564,6 +671,12 @@ impl Scheduler {
                 frame: job.frame.index,
                 stats,
             });
+            if let Some(mut ahead) = job.ahead.take() {
+                // Started already; its estimates now learn from this frame too.
+                ahead.reestimate(&job.costs);
+                job.frame = ahead;
+                continue;
+            }
             match job.frames.pop_front() {
                 Some(next) => {
                     let index = job.frame.index + 1;
@@ -581,6 +694,25 @@ impl Scheduler {
                 }
             }
         }
+    }
+
+    /// Starts the running job's next frame while its running frame finishes.
+    fn start_ahead(&mut self) {
+        let Some(job) = &mut self.running else {
+            return;
+        };
+        let Some(next) = job.frames.pop_front() else {
+            return;
+        };
+        let index = job.frame.index + 1;
+        let ahead = Frame::new(index, next.items, &job.costs);
+        self.events.push_back(Event::FrameStarted {
+            job: job.id,
+            frame: index,
+            items: ahead.items.len(),
+        });
+        job.ahead = Some(ahead);
+        self.lapse_requests();
     }
 
     /// At a frame's start, forgets who asked for work, when so configured.
@@ -630,6 +762,7 @@ impl Scheduler {
             blocklist: BTreeSet::new(),
             errors: Vec::new(),
             frame,
+            ahead: None,
         });
     }
 
@@ -641,7 +774,7 @@ impl Scheduler {
             return false;
         };
         let mut connected = self.workers.iter().filter(|(_, w)| w.connected).peekable();
-        job.frame.has_unassigned()
+        job.running_frames().any(Frame::has_unassigned)
             && connected.peek().is_some()
             && connected.all(|(id, _)| job.blocklist.contains(id))
     }
@@ -656,8 +789,28 @@ impl Scheduler {
         if job.blocklist.contains(&worker) {
             return None;
         }
-        let frame = &job.frame;
         let target = self.target_cost(worker);
+        // Unassigned work of the older frame first; stragglers only once
+        // both frames have nothing left to hand out.
+        for frame in job.running_frames() {
+            if let Some(pick) = self.pick_unassigned(frame, worker, target) {
+                return Some(pick);
+            }
+        }
+        if job.running_frames().any(|f| !f.queue.is_empty()) {
+            return None;
+        }
+        let policy = self.config.straggler.as_ref()?;
+        self.running_packages()
+            .filter(|(_, p)| may_duplicate(p, worker))
+            .filter(|(_, p)| straggler_deadline(p, policy) <= self.now)
+            .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
+            .map(|(&id, _)| Pick::Duplicate(id))
+    }
+
+    /// A queued package of `frame` that `worker` may take (split when much
+    /// larger than `target`), else the frame's next unassigned items.
+    fn pick_unassigned(&self, frame: &Frame, worker: WorkerId, target: f64) -> Option<Pick> {
         let split_factor = self.config.sizing.split_factor;
         for (index, id) in frame.queue.iter().enumerate() {
             let Some(package) = frame.packages.get(id) else {
@@ -671,21 +824,17 @@ impl Scheduler {
             } else {
                 package.range.end
             };
-            return Some(Pick::Queued { index, split });
+            let frame = frame.index;
+            return Some(Pick::Queued {
+                frame,
+                index,
+                split,
+            });
         }
-        if frame.next_fresh < frame.items.len() {
-            let end = frame.cut(frame.next_fresh..frame.items.len(), target);
-            return Some(Pick::Fresh { end });
-        }
-        if !frame.queue.is_empty() {
-            return None;
-        }
-        let policy = self.config.straggler.as_ref()?;
-        self.running_packages()
-            .filter(|(_, p)| may_duplicate(p, worker))
-            .filter(|(_, p)| straggler_deadline(p, policy) <= self.now)
-            .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
-            .map(|(&id, _)| Pick::Duplicate(id))
+        (frame.next_fresh < frame.items.len()).then(|| Pick::Fresh {
+            frame: frame.index,
+            end: frame.cut(frame.next_fresh..frame.items.len(), target),
+        })
     }
 
     /// A worker retries a package it failed only when every worker that may
@@ -722,7 +871,8 @@ impl Scheduler {
         } else {
             1.0
         };
-        let seconds = job.frame.unassigned_cost() / (k * total_rate);
+        let unassigned: f64 = job.running_frames().map(Frame::unassigned_cost).sum();
+        let seconds = unassigned / (k * total_rate);
         let min = sizing.min_duration.as_secs_f64();
         let max = sizing.max_duration.as_secs_f64().max(min);
         let seconds = if seconds.is_nan() {
@@ -762,10 +912,10 @@ impl Scheduler {
     fn running_packages(&self) -> impl Iterator<Item = (&PackageId, &Package)> {
         let running: BTreeSet<&PackageId> =
             self.workers.values().flat_map(|w| &w.running).collect();
-        let packages = self.running.as_ref().map(|job| &job.frame.packages);
+        let job = self.running.as_ref();
         running
             .into_iter()
-            .filter_map(move |id| Some((id, packages?.get(id)?)))
+            .filter_map(move |id| Some((id, job?.frame_of(*id)?.packages.get(id)?)))
     }
 
     /// The earliest moment a running package becomes a straggler that a
@@ -773,7 +923,7 @@ impl Scheduler {
     fn straggler_deadline(&self) -> Option<Duration> {
         let policy = self.config.straggler.as_ref()?;
         let job = self.running.as_ref()?;
-        if job.frame.has_unassigned() {
+        if job.running_frames().any(Frame::has_unassigned) {
             return None;
         }
         let takers: Vec<WorkerId> = self
@@ -798,14 +948,22 @@ impl Scheduler {
         let Some(job) = &mut self.running else {
             return;
         };
-        let frame = &mut job.frame;
+        let job_id = job.id;
+        let frame = match pick {
+            Pick::Fresh { frame, .. } | Pick::Queued { frame, .. } => job.frame_mut(frame),
+            Pick::Duplicate(id) => job.frame_of_mut(id),
+        };
+        let Some(frame) = frame else {
+            return;
+        };
         let attempt_for = |cost: f64| Attempt {
             worker,
             assigned_at: now,
             expected: seconds(cost / rate),
+            arrived_at: None,
         };
         let (id, range, cost, duplicate) = match pick {
-            Pick::Fresh { end } => {
+            Pick::Fresh { end, .. } => {
                 let id = PackageId(self.next_package);
                 self.next_package += 1;
                 let range = frame.next_fresh..end;
@@ -815,7 +973,7 @@ impl Scheduler {
                 frame.packages.insert(id, package);
                 (id, range, cost, false)
             }
-            Pick::Queued { index, split } => {
+            Pick::Queued { index, split, .. } => {
                 let Some(&queued) = frame.queue.get(index) else {
                     return;
                 };
@@ -868,7 +1026,7 @@ impl Scheduler {
         self.assignments.push_back(Assignment {
             worker,
             package: id,
-            job: job.id,
+            job: job_id,
             frame: frame.index,
             items: frame.items[range].to_vec(),
             estimated_cost: cost,
@@ -883,10 +1041,9 @@ impl Scheduler {
     fn complete(&mut self, worker: WorkerId, id: PackageId, measure: &PackageMeasure) {
         let now = self.now;
         let smoothing = self.config.estimation.rate_smoothing;
-        let Some(job) = &mut self.running else {
+        let Some(frame) = (self.running.as_mut()).and_then(|job| job.frame_of_mut(id)) else {
             return;
         };
-        let frame = &mut job.frame;
         let Some(package) = frame.packages.get_mut(&id) else {
             return;
         };
@@ -936,7 +1093,9 @@ impl Scheduler {
             w.packages_done += 1;
             w.items_done += range.len() as u64;
             w.busy += measure.busy;
-            let elapsed = now.saturating_sub(attempt.assigned_at).as_secs_f64();
+            // Up to its arrival: a result held by the driver is not slow.
+            let arrived = attempt.arrived_at.unwrap_or(now);
+            let elapsed = arrived.saturating_sub(attempt.assigned_at).as_secs_f64();
             w.rate = smooth(w.rate, cost / elapsed, smoothing);
             let compute_rate = cost / busy;
             if compute_rate.is_finite() && compute_rate > 0.0 {
@@ -963,8 +1122,8 @@ impl Scheduler {
                 w.rate = Some(bound);
             }
         }
-        if let Some(job) = &mut self.running {
-            job.frame.stats.cancelled_copies += 1;
+        if let Some(frame) = (self.running.as_mut()).and_then(|job| job.frame_of_mut(id)) {
+            frame.stats.cancelled_copies += 1;
         }
         self.events.push_back(Event::PackageCancelled {
             worker: loser.worker,
@@ -981,7 +1140,10 @@ impl Scheduler {
         let Some(job) = &mut self.running else {
             return;
         };
-        let Some(package) = job.frame.packages.get_mut(&id) else {
+        let Some(frame) = job.frame_of_mut(id) else {
+            return;
+        };
+        let Some(package) = frame.packages.get_mut(&id) else {
             return;
         };
         let Some(index) = package.attempt_of(worker) else {
@@ -989,8 +1151,19 @@ impl Scheduler {
         };
         package.attempts.remove(index);
         package.failures.push((worker, error.clone()));
+        frame.stats.failures += 1;
+        let job_fails = if !package.attempts.is_empty() {
+            package.set_state(PackageState::Assigned);
+            None
+        } else if package.failed_workers() >= retry.package_failures as usize {
+            package.set_state(PackageState::Failed);
+            Some(package.failures.clone())
+        } else {
+            package.set_state(PackageState::Queued);
+            frame.queue.push_front(id);
+            None
+        };
         job.errors.push((worker, error));
-        job.frame.stats.failures += 1;
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.remove(&id);
             w.failures += 1;
@@ -1003,15 +1176,8 @@ impl Scheduler {
                 job: job.id,
             });
         }
-        if !package.attempts.is_empty() {
-            package.set_state(PackageState::Assigned);
-        } else if package.failed_workers() >= retry.package_failures as usize {
-            package.set_state(PackageState::Failed);
-            let errors = package.failures.clone();
+        if let Some(errors) = job_fails {
             self.fail_job(JobFailure::PackageFailed(id), errors);
-        } else {
-            package.set_state(PackageState::Queued);
-            job.frame.queue.push_front(id);
         }
     }
 
@@ -1026,33 +1192,36 @@ impl Scheduler {
         w.wants_work = false;
         let running = std::mem::take(&mut w.running);
         self.waiting.retain(|&x| x != worker);
-        let mut requeued: Vec<(usize, PackageId)> = Vec::new();
+        let mut all_requeued: Vec<PackageId> = Vec::new();
         if let Some(job) = &mut self.running {
-            let frame = &mut job.frame;
-            for id in running {
-                let Some(package) = frame.packages.get_mut(&id) else {
-                    continue;
-                };
-                if let Some(index) = package.attempt_of(worker) {
-                    package.attempts.remove(index);
+            for frame in job.running_frames_mut() {
+                let mut requeued: Vec<(usize, PackageId)> = Vec::new();
+                for &id in &running {
+                    let Some(package) = frame.packages.get_mut(&id) else {
+                        continue;
+                    };
+                    if let Some(index) = package.attempt_of(worker) {
+                        package.attempts.remove(index);
+                    }
+                    if package.attempts.is_empty() {
+                        package.set_state(PackageState::Queued);
+                        requeued.push((package.range.start, id));
+                    } else {
+                        package.set_state(PackageState::Assigned);
+                    }
                 }
-                if package.attempts.is_empty() {
-                    package.set_state(PackageState::Queued);
-                    requeued.push((package.range.start, id));
-                } else {
-                    package.set_state(PackageState::Assigned);
+                requeued.sort_unstable();
+                for &(_, id) in requeued.iter().rev() {
+                    frame.queue.push_front(id);
                 }
+                frame.stats.requeued += u32::try_from(requeued.len()).unwrap_or(u32::MAX);
+                all_requeued.extend(requeued.into_iter().map(|(_, id)| id));
             }
-            requeued.sort_unstable();
-            for &(_, id) in requeued.iter().rev() {
-                frame.queue.push_front(id);
-            }
-            frame.stats.requeued += u32::try_from(requeued.len()).unwrap_or(u32::MAX);
         }
         self.events.push_back(Event::WorkerLost {
             worker,
             cause,
-            requeued: requeued.into_iter().map(|(_, id)| id).collect(),
+            requeued: all_requeued,
         });
     }
 
@@ -1072,20 +1241,22 @@ impl Scheduler {
     /// [`Event::PackageCancelled`] for each copy that runs.
     fn abandon_running_job(&mut self) -> Option<JobId> {
         let mut job = self.running.take()?;
-        for (&id, package) in &mut job.frame.packages {
-            if package.state().is_final() {
-                continue;
-            }
-            for attempt in std::mem::take(&mut package.attempts) {
-                if let Some(w) = self.workers.get_mut(&attempt.worker) {
-                    w.running.remove(&id);
+        for frame in job.running_frames_mut() {
+            for (&id, package) in &mut frame.packages {
+                if package.state().is_final() {
+                    continue;
                 }
-                self.events.push_back(Event::PackageCancelled {
-                    worker: attempt.worker,
-                    package: id,
-                });
+                for attempt in std::mem::take(&mut package.attempts) {
+                    if let Some(w) = self.workers.get_mut(&attempt.worker) {
+                        w.running.remove(&id);
+                    }
+                    self.events.push_back(Event::PackageCancelled {
+                        worker: attempt.worker,
+                        package: id,
+                    });
+                }
+                package.set_state(PackageState::Cancelled);
             }
-            package.set_state(PackageState::Cancelled);
         }
         Some(job.id)
     }
@@ -1135,6 +1306,8 @@ fn may_duplicate(package: &Package, worker: WorkerId) -> bool {
     package.state() == PackageState::Assigned
         && package.attempt_of(worker).is_none()
         && !package.failed_on(worker)
+        // Its result is here, waiting for the driver's check.
+        && package.attempts.iter().all(|a| a.arrived_at.is_none())
 }
 
 /// When the running copy of an assigned package becomes a straggler.

@@ -13,12 +13,19 @@
 //! master link ([`SimConfig::master_link_bits_per_second`]) every message
 //! also queues for it, one direction each way, as all results funnel into
 //! the one master. A worker asks for work when it joins and, piggybacked on
-//! each result, whenever it runs out. With the master's rule
-//! ([`SchedulerConfig::farm`]: requests lapse at a frame start) every worker
-//! sets a new frame up ([`SimWorker::frame_setup`]) and then asks again. The
-//! master computes instantly, except that a frame is done only once its base
-//! frame ([`SimConfig::master_frame_cost`], rasterized from the frame start
-//! on while the workers trace) is ready: [`SimFrameReport::done_at`].
+//! each result, whenever it runs out. With the master's rules
+//! ([`SchedulerConfig::farm`]: requests lapse at a frame start, frames are
+//! pipelined) every worker hears of each new frame (`FrameStart` over its
+//! link), sets it up ([`SimWorker::frame_setup`]; a worker that is computing
+//! a package of the older frame shares its core between the two, so both
+//! take longer) and then asks for work of that frame; like the master core,
+//! the simulated master takes only requests for the newest frame. The
+//! master rasterizes each frame's base image ([`SimConfig::master_frame_cost`],
+//! from the frame start on, one at a time, beside the tracing); results that
+//! arrive before it are held ([`Scheduler::package_arrived`]) and accepted
+//! when it is ready, as the master core does. The master handles messages
+//! one at a time, and checking and compositing a result costs
+//! [`SimConfig::master_result_cost_per_item`] per item.
 //! [`SimReport::inputs`] logs every call into the scheduler, so a test can
 //! replay the same calls into the real master core.
 
@@ -57,6 +64,9 @@ pub struct SimConfig {
     /// The master's per-frame work that overlaps the tracing (the base
     /// frame). Default zero.
     pub master_frame_cost: Duration,
+    /// The master's time to check and composite a result, per item; its
+    /// messages wait meanwhile. Default zero.
+    pub master_result_cost_per_item: Duration,
 }
 
 impl Default for SimConfig {
@@ -72,6 +82,7 @@ impl Default for SimConfig {
             validate: false,
             master_link_bits_per_second: None,
             master_frame_cost: Duration::ZERO,
+            master_result_cost_per_item: Duration::ZERO,
         }
     }
 }
@@ -197,6 +208,8 @@ pub enum SimInput {
     Joined(WorkerId, u32),
     Request(WorkerId),
     Heartbeat(WorkerId),
+    /// A result held until its frame's base image is ready.
+    Arrived(WorkerId, PackageId),
     Left(WorkerId),
     Done(WorkerId, PackageId, PackageMeasure),
     Failed(WorkerId, PackageId, String),
@@ -241,6 +254,12 @@ pub struct Simulation {
     master_link_free: [Duration; 2],
     /// When the master's last base frame is done (it rasterizes one at a time).
     master_free: Duration,
+    /// When the master's driver is done with the messages so far.
+    master_busy_until: Duration,
+    /// The newest frame started: the only one requests are taken for.
+    newest: Option<FrameKey>,
+    /// Results held until their frame's base image is ready.
+    held: BTreeMap<FrameKey, Vec<HeldResult>>,
     report: SimReport,
 }
 
@@ -251,11 +270,28 @@ enum Direction {
     ToMaster = 1,
 }
 
+/// A frame by job and index.
+type FrameKey = (JobId, u32);
+
+/// A result the master holds for its frame's base image.
+#[derive(Debug)]
+struct HeldResult {
+    worker: WorkerId,
+    assignment: Assignment,
+    measure: PackageMeasure,
+    true_cost: f64,
+}
+
 #[derive(Debug)]
 struct WorkerSim {
     id: WorkerId,
     spec: SimWorker,
     alive: bool,
+    /// The newest frame it heard of, and when its set-up is done.
+    frame: Option<FrameKey>,
+    ready_at: Duration,
+    /// Whether a request is outstanding (a package or a new frame voids it).
+    requested: bool,
     inbox: VecDeque<Assignment>,
     current: Option<Computing>,
     /// Tells a finish event of the current package from a stale one.
@@ -268,6 +304,8 @@ struct Computing {
     assignment: Assignment,
     token: u64,
     started_at: Duration,
+    /// When it ends, unless a frame set-up shares the core meanwhile.
+    ends_at: Duration,
     /// The true cost of each item, in item order; their sum is the work.
     item_costs: Vec<f64>,
     fails: bool,
@@ -285,7 +323,16 @@ enum SimEvent {
     Join(usize),
     Crash(usize),
     HeartbeatTick(usize),
-    ComputeEnd { worker: usize, token: u64 },
+    ComputeEnd {
+        worker: usize,
+        token: u64,
+    },
+    /// `FrameStart` reaches a worker.
+    FrameStart(usize, FrameKey),
+    /// A worker's frame set-up is done.
+    FrameReady(usize, FrameKey),
+    /// The master's base image of a frame is ready.
+    BaseReady(FrameKey),
     ToWorker(usize, ToWorker),
     ToMaster(usize, ToMaster),
 }
@@ -298,7 +345,8 @@ enum ToWorker {
 
 #[derive(Debug)]
 enum ToMaster {
-    Request,
+    /// A request for work of a frame (`None`: any, when requests do not lapse).
+    Request(Option<FrameKey>),
     Heartbeat,
     Left,
     Done {
@@ -332,6 +380,9 @@ impl Simulation {
             frame_starts: BTreeMap::new(),
             master_link_free: [Duration::ZERO; 2],
             master_free: Duration::ZERO,
+            master_busy_until: Duration::ZERO,
+            newest: None,
+            held: BTreeMap::new(),
             report: SimReport::default(),
         };
         for (index, spec) in workers.into_iter().enumerate() {
@@ -343,6 +394,9 @@ impl Simulation {
                 id: WorkerId(index as u64),
                 spec,
                 alive: true,
+                frame: None,
+                ready_at: Duration::ZERO,
+                requested: false,
                 inbox: VecDeque::new(),
                 current: None,
                 token: 0,
@@ -516,8 +570,7 @@ impl Simulation {
                 if !worker.alive {
                     return;
                 }
-                let (id, threads, setup) =
-                    (worker.id, worker.spec.threads, worker.spec.frame_setup);
+                let (id, threads) = (worker.id, worker.spec.threads);
                 self.log(SimInput::Joined(id, threads));
                 if let Err(error) = self.scheduler.worker_joined(now, id, threads) {
                     self.refused(error.to_string());
@@ -527,9 +580,12 @@ impl Simulation {
                     if let Err(error) = self.scheduler.request_work(now, id) {
                         self.refused(error.to_string());
                     }
-                } else if self.scheduler.queue().running.is_some() {
-                    // Like a real worker: it asks once the running frame is set up.
-                    self.schedule(now + setup, SimEvent::ToMaster(index, ToMaster::Request));
+                } else if let Some(key) = self.newest {
+                    // Like a real worker: it hears of the running frame,
+                    // sets it up and then asks.
+                    let arrival =
+                        self.arrival(index, self.config.header_bytes, Direction::ToWorker);
+                    self.schedule(arrival, SimEvent::FrameStart(index, key));
                 }
                 let interval = self.config.heartbeat_interval;
                 self.schedule(now + interval, SimEvent::HeartbeatTick(index));
@@ -562,8 +618,27 @@ impl Simulation {
                 }
             }
             SimEvent::ComputeEnd { worker, token } => self.compute_end(worker, token),
+            SimEvent::FrameStart(index, key) => self.frame_start(index, key),
+            SimEvent::FrameReady(index, key) => {
+                let ready = self
+                    .workers
+                    .get(index)
+                    .is_some_and(|w| w.alive && w.frame == Some(key) && now >= w.ready_at);
+                if ready {
+                    self.ask_when_idle(index);
+                }
+            }
+            SimEvent::BaseReady(key) => self.base_ready(key),
             SimEvent::ToWorker(index, message) => self.deliver_to_worker(index, message),
-            SimEvent::ToMaster(index, message) => self.deliver_to_master(index, message),
+            SimEvent::ToMaster(index, message) => {
+                // The master's driver handles one message at a time.
+                if now < self.master_busy_until {
+                    let at = self.master_busy_until;
+                    self.schedule(at, SimEvent::ToMaster(index, message));
+                } else {
+                    self.deliver_to_master(index, message);
+                }
+            }
         }
     }
 
@@ -571,7 +646,13 @@ impl Simulation {
         let now = self.now;
         let id = WorkerId(index as u64);
         let refusal = match message {
-            ToMaster::Request => {
+            ToMaster::Request(frame) => {
+                // Like the master core: only a worker set up for the newest
+                // frame may get work (it keeps the frame before too).
+                let lapse = self.config.scheduler.requests_lapse_at_frame_start;
+                if lapse && frame != self.newest {
+                    return;
+                }
                 self.log(SimInput::Request(id));
                 (self.scheduler.request_work(now, id).err()).map(|e| e.to_string())
             }
@@ -593,16 +674,118 @@ impl Simulation {
                 measure,
                 true_cost,
             } => {
-                self.log(SimInput::Done(id, assignment.package, measure.clone()));
-                let done = self
-                    .scheduler
-                    .package_done(now, id, assignment.package, measure);
-                self.done_outcome(id, assignment, true_cost, done)
+                let key = (assignment.job, assignment.frame);
+                let base_ready = self.frame_starts.get(&key).is_none_or(|&at| at <= now);
+                if base_ready {
+                    self.accept(id, assignment, measure, true_cost)
+                } else {
+                    // Held for the base image, like the master core does.
+                    self.log(SimInput::Arrived(id, assignment.package));
+                    let arrived = self.scheduler.package_arrived(now, id, assignment.package);
+                    match arrived {
+                        Ok(()) => {
+                            let held = HeldResult {
+                                worker: id,
+                                assignment,
+                                measure,
+                                true_cost,
+                            };
+                            self.held.entry(key).or_default().push(held);
+                            None
+                        }
+                        Err(e) => Some(e.to_string()),
+                    }
+                }
             }
         };
         if let Some(refusal) = refusal {
             self.refused(refusal);
         }
+    }
+
+    /// The master checks and composites a result (its driver is busy
+    /// meanwhile) and hands it to the scheduler.
+    fn accept(
+        &mut self,
+        id: WorkerId,
+        assignment: Assignment,
+        measure: PackageMeasure,
+        true_cost: f64,
+    ) -> Option<String> {
+        let now = self.now;
+        let items = assignment.items.len() as u32;
+        self.master_busy_until = now + self.config.master_result_cost_per_item * items;
+        self.log(SimInput::Done(id, assignment.package, measure.clone()));
+        let done = self
+            .scheduler
+            .package_done(now, id, assignment.package, measure);
+        self.done_outcome(id, assignment, true_cost, done)
+    }
+
+    /// A frame's base image is ready: the held results are accepted.
+    fn base_ready(&mut self, key: FrameKey) {
+        for held in self.held.remove(&key).unwrap_or_default() {
+            let refusal = self.accept(held.worker, held.assignment, held.measure, held.true_cost);
+            if let Some(refusal) = refusal {
+                self.refused(refusal);
+            }
+        }
+    }
+
+    /// `FrameStart` reaches a worker: it sets the frame up, sharing its core
+    /// with the package it computes (if any), which so ends later too.
+    fn frame_start(&mut self, index: usize, key: FrameKey) {
+        let now = self.now;
+        let Some(worker) = self.workers.get_mut(index) else {
+            return;
+        };
+        if !worker.alive {
+            return;
+        }
+        let setup = worker.spec.frame_setup;
+        // Processor sharing: both run at half speed while both run.
+        let shared = (worker.current.as_ref())
+            .map_or(Duration::ZERO, |c| c.ends_at.saturating_sub(now).min(setup));
+        worker.frame = Some(key);
+        worker.requested = false;
+        worker.ready_at = worker.ready_at.max(now) + setup + shared;
+        let ready_at = worker.ready_at;
+        if let Some(current) = worker.current.as_mut().filter(|_| !shared.is_zero()) {
+            worker.token += 1;
+            current.token = worker.token;
+            current.ends_at += shared;
+            let (end, token) = (current.ends_at, current.token);
+            self.schedule(
+                end,
+                SimEvent::ComputeEnd {
+                    worker: index,
+                    token,
+                },
+            );
+        }
+        self.schedule(ready_at, SimEvent::FrameReady(index, key));
+    }
+
+    /// A worker with nothing to do asks for work of its newest frame once it
+    /// is set up (of any frame when requests do not lapse).
+    fn ask_when_idle(&mut self, index: usize) {
+        let now = self.now;
+        let lapse = self.config.scheduler.requests_lapse_at_frame_start;
+        let Some(worker) = self.workers.get_mut(index) else {
+            return;
+        };
+        let idle = worker.alive && worker.current.is_none() && worker.inbox.is_empty();
+        let ready = !lapse || (worker.frame.is_some() && now >= worker.ready_at);
+        if !idle || !ready || worker.requested {
+            return;
+        }
+        worker.requested = true;
+        let frame = if lapse { worker.frame } else { None };
+        let latency = worker.spec.latency;
+        self.schedule(
+            now + latency,
+            SimEvent::ToMaster(index, ToMaster::Request(frame)),
+        );
     }
 
     /// Tallies an accepted result; a refused one is returned for the report.
@@ -638,6 +821,7 @@ impl Simulation {
         }
         match message {
             ToWorker::Assign(assignment) => {
+                worker.requested = false;
                 worker.inbox.push_back(assignment);
                 if worker.current.is_none() {
                     self.start_next(index);
@@ -652,11 +836,7 @@ impl Simulation {
                 if running && worker.spec.honours_cancel {
                     worker.current = None;
                     if worker.inbox.is_empty() {
-                        let latency = worker.spec.latency;
-                        self.schedule(
-                            self.now + latency,
-                            SimEvent::ToMaster(index, ToMaster::Request),
-                        );
+                        self.ask_when_idle(index);
                     } else {
                         self.start_next(index);
                     }
@@ -709,6 +889,7 @@ impl Simulation {
             assignment,
             token,
             started_at: now,
+            ends_at: end,
             item_costs,
             fails,
         });
@@ -759,7 +940,15 @@ impl Simulation {
         let arrival = self.arrival(index, bytes_out, Direction::ToMaster);
         self.schedule(arrival, SimEvent::ToMaster(index, message));
         if idle {
-            self.schedule(arrival, SimEvent::ToMaster(index, ToMaster::Request));
+            // Piggybacked on the result, when the frame is set up.
+            let lapse = self.config.scheduler.requests_lapse_at_frame_start;
+            let worker = &mut self.workers[index];
+            let ready = !lapse || (worker.frame.is_some() && now >= worker.ready_at);
+            if ready && !worker.requested {
+                worker.requested = true;
+                let frame = if lapse { worker.frame } else { None };
+                self.schedule(arrival, SimEvent::ToMaster(index, ToMaster::Request(frame)));
+            }
         } else {
             self.start_next(index);
         }
@@ -809,10 +998,13 @@ impl Simulation {
                     }
                 }
                 Event::FrameStarted { job, frame, .. } => {
+                    let key = (*job, *frame);
                     self.master_free = now.max(self.master_free) + self.config.master_frame_cost;
-                    self.frame_starts.insert((*job, *frame), self.master_free);
+                    self.frame_starts.insert(key, self.master_free);
+                    self.schedule(self.master_free, SimEvent::BaseReady(key));
+                    self.newest = Some(key);
                     if self.config.scheduler.requests_lapse_at_frame_start {
-                        self.set_frame_up();
+                        self.announce_frame(key);
                     }
                 }
                 Event::FrameComplete { job, frame, stats } => {
@@ -848,21 +1040,15 @@ impl Simulation {
         self.report.inputs.push((self.now, input));
     }
 
-    /// A frame started: every live idle worker hears of it, sets it up and
-    /// asks for its work (a busy one asks when it is done).
-    fn set_frame_up(&mut self) {
+    /// A frame started: every live worker hears of it.
+    fn announce_frame(&mut self, key: FrameKey) {
         let start_bytes = self.config.header_bytes;
         for index in 0..self.workers.len() {
-            let worker = &self.workers[index];
-            if !worker.alive || worker.current.is_some() || !worker.inbox.is_empty() {
+            if !self.workers[index].alive {
                 continue;
             }
-            let (setup, latency) = (worker.spec.frame_setup, worker.spec.latency);
-            let ready = self.arrival(index, start_bytes, Direction::ToWorker) + setup;
-            self.schedule(
-                ready + latency,
-                SimEvent::ToMaster(index, ToMaster::Request),
-            );
+            let arrival = self.arrival(index, start_bytes, Direction::ToWorker);
+            self.schedule(arrival, SimEvent::FrameStart(index, key));
         }
     }
 

@@ -247,11 +247,14 @@ proptest! {
     fn random_inputs_never_panic_nor_complete_an_item_twice(
         ops in prop::collection::vec(op(), 0..300),
         heartbeat_s in 1u64..60,
+        farm in any::<bool>(),
     ) {
         let config = SchedulerConfig {
             heartbeat_timeout: Duration::from_secs(heartbeat_s),
             ..SchedulerConfig::default()
         };
+        // The master's rules too: lapsing requests and pipelined frames.
+        let config = if farm { config.farm() } else { config };
         let mut model = Model {
             s: Scheduler::new(config),
             now: Duration::ZERO,

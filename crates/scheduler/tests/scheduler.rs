@@ -678,3 +678,100 @@ fn requests_lapse_at_a_frame_start_when_configured() {
     assert_eq!(farm.request(W1).expect("frame 1 has work").frame, 1);
     farm.valid();
 }
+
+#[test]
+fn an_arrived_result_held_by_the_driver_is_not_a_straggler() {
+    let (mut farm, a) = straggling();
+    // The result is here at 0.5 s, but the driver checks it only later.
+    farm.at_ms(500);
+    farm.s
+        .package_arrived(farm.now, W0, a.package)
+        .expect("arrived");
+    // Only the heartbeats are due now (W1 asked at 0 s).
+    assert_eq!(farm.s.poll_timeout(), Some(Duration::from_secs(10)));
+    farm.s.handle_timeout(Duration::from_secs(3));
+    assert!(farm.assignments().is_empty(), "no copy of a held result");
+    assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
+    // Accepted at 3 s: the rate counts the time up to its arrival.
+    farm.at_ms(3000);
+    farm.done(W0, &a).expect("accepted");
+    let w0 = farm.s.workers()[0].clone();
+    assert_eq!(w0.rate, Some(2.0));
+    farm.valid();
+}
+
+#[test]
+fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
+    let mut farm = Farm::with(SchedulerConfig::default().farm());
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JOB, 2, 3);
+    let a = farm.request(W0).expect("frame 0");
+    let b = farm.request(W1).expect("frame 0");
+    assert_eq!(
+        (a.frame, b.frame, a.items.len(), b.items.len()),
+        (0, 0, 1, 1)
+    );
+    // Frame 0 has nothing left to hand out: frame 1 starts, frame 0 runs on.
+    let started: Vec<u32> = (farm.events().into_iter())
+        .filter_map(|e| match e {
+            Event::FrameStarted { frame, .. } => Some(frame),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(started, [0, 1]);
+    farm.valid();
+    // W1 is done and, set up for frame 1, takes its work while W0 is busy.
+    farm.at_ms(100);
+    farm.done(W1, &b).expect("accepted");
+    let c = farm.request(W1).expect("frame 1");
+    assert_eq!(c.frame, 1);
+    let d = farm.request(W1).expect("frame 1, asking ahead");
+    assert_eq!(d.frame, 1);
+    farm.valid();
+    // Only two frames run at once: frame 1 has nothing left, frame 2 waits
+    // for frame 0.
+    assert!(farm.events().is_empty());
+    farm.at_ms(200);
+    farm.done(W1, &c).expect("accepted");
+    farm.done(W1, &d).expect("accepted");
+    assert!(farm.events().is_empty(), "frame 1 completes after frame 0");
+    farm.at_ms(300);
+    farm.done(W0, &a).expect("accepted");
+    let order: Vec<(&str, u32)> = (farm.events().iter())
+        .filter_map(|e| match e {
+            Event::FrameComplete { frame, .. } => Some(("complete", *frame)),
+            Event::FrameStarted { frame, .. } => Some(("started", *frame)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(order, [("complete", 0), ("complete", 1), ("started", 2)]);
+    assert_eq!(farm.s.queue().running.expect("frame 2").frame, 2);
+    farm.valid();
+}
+
+#[test]
+fn a_lost_worker_requeues_its_packages_in_both_pipelined_frames() {
+    let mut farm = Farm::with(SchedulerConfig::default().farm());
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JOB, 2, 2);
+    let a = farm.request(W0).expect("frame 0");
+    let b = farm.request(W1).expect("frame 0");
+    let _ = farm.events();
+    farm.at_ms(100);
+    let c = farm.request(W0).expect("frame 1, asking ahead");
+    assert_eq!(c.frame, 1);
+    farm.s.worker_left(farm.now, W0).expect("left");
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    assert_eq!(farm.state(c.package), Some(PackageState::Queued));
+    farm.valid();
+    // W1 redoes frame 0's package first, then frame 1's.
+    farm.done(W1, &b).expect("accepted");
+    let redo = farm.request(W1).expect("requeued");
+    assert_eq!((redo.frame, &redo.items), (0, &a.items));
+    farm.done(W1, &redo).expect("accepted");
+    let next = farm.request(W1).expect("requeued");
+    assert_eq!((next.frame, &next.items), (1, &c.items));
+    farm.valid();
+}

@@ -521,3 +521,46 @@ fn a_shared_master_link_bounds_the_frame_and_runs_repeat_exactly() {
     assert_eq!(again.inputs, slow.inputs, "deterministic");
     assert_eq!(again.assignments, slow.assignments);
 }
+
+/// With the master's rules frames overlap: frame N+1's first packages go
+/// out before frame N completes, results held for a slow base image are
+/// never duplicated as stragglers, and every item completes once.
+#[test]
+fn pipelined_frames_overlap_and_held_results_are_not_duplicated() {
+    let frame = uneven_frame(300, 5, 0.002, 100..120, 3.0);
+    let job = repeated_job(1, &frame, 4);
+    let worker = SimWorker {
+        frame_setup: Duration::from_millis(40),
+        ..SimWorker::with_speed(1.0)
+    };
+    let config = SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig::default().farm(),
+        // Longer than a frame's tracing: every result waits for it.
+        master_frame_cost: Duration::from_secs(2),
+        master_result_cost_per_item: Duration::from_micros(20),
+        ..checked()
+    };
+    let report = run(config, vec![worker; 4], std::slice::from_ref(&job));
+    assert_eq!(report.frames.len(), 4);
+    for f in &report.frames {
+        assert_eq!(f.stats.duplicates, 0, "frame {}", f.frame);
+        assert!(f.completions.values().all(|&c| c == 1));
+    }
+    let held = (report.inputs.iter())
+        .filter(|(_, i)| matches!(i, vtfarm_scheduler::sim::SimInput::Arrived(..)))
+        .count();
+    assert!(held > 0, "results waited for the base image");
+    for pair in report.frames.windows(2) {
+        let first_of_next = (report.assignments.iter())
+            .find(|(_, a)| a.frame == pair[1].frame)
+            .map(|(at, _)| *at)
+            .expect("the next frame has packages");
+        assert!(
+            first_of_next < pair[0].at,
+            "frame {} started at {first_of_next:?}, frame {} completed at {:?}",
+            pair[1].frame,
+            pair[0].frame,
+            pair[0].at
+        );
+    }
+}

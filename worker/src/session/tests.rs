@@ -253,3 +253,36 @@ fn an_idle_worker_drains_at_once_and_shutdown_ends_the_session() {
     s.handle_message(Duration::ZERO, Message::Shutdown, &mut scenes);
     assert_eq!(s.poll_end(), Some(SessionEnd::Shutdown));
 }
+
+#[test]
+fn a_frame_announced_while_a_package_runs_is_prepared_and_the_older_frame_stays_usable() {
+    let (mut s, mut scenes) = ready_session();
+    let now = Duration::from_millis(5);
+    s.handle_message(now, package(10, 1, 0), &mut scenes);
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    // Frame 1 is announced while frame 0's package runs: it is prepared
+    // beside it, and work is asked for frame 1 once both are done.
+    s.handle_message(now, Message::FrameStart(frame_start(1, 1)), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
+    s.frame_prepared(now, (1, 1), Ok(()));
+    assert_eq!(messages(&mut s), vec![], "busy: no request yet");
+    s.package_finished(now, 10, Ok(result(10)));
+    assert_eq!(
+        messages(&mut s),
+        vec![
+            Message::PackageResult(result(10)),
+            Message::RequestWork { job: 1, frame: 1 }
+        ]
+    );
+    // A requeued package of frame 0 still runs here.
+    s.handle_message(now, package(11, 1, 0), &mut scenes);
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
+    s.package_finished(now, 11, Ok(result(11)));
+    let _ = messages(&mut s);
+    // Two frames back is too old: the master retries it elsewhere.
+    s.handle_message(now, Message::FrameStart(frame_start(1, 2)), &mut scenes);
+    s.frame_prepared(now, (1, 2), Ok(()));
+    let _ = (tasks(&mut s), messages(&mut s));
+    s.handle_message(now, package(12, 1, 0), &mut scenes);
+    assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 12));
+}
