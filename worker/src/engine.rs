@@ -20,6 +20,29 @@ use vtfarm_vertex::{
     Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
 };
 
+/// The frames a worker keeps prepared: the newest and the one before it,
+/// whose requeued packages the master may still hand out while frames are
+/// pipelined (see `session`).
+#[derive(Default)]
+pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
+
+impl PreparedFrames {
+    /// Keeps `frame` as the newest, dropping the oldest beyond two.
+    pub fn insert(&mut self, frame: ActiveFrame) {
+        if self.0.len() == 2 {
+            self.0.remove(0);
+        }
+        self.0.push(Arc::new(frame));
+    }
+
+    /// The prepared frame `frame` of `job`, if kept.
+    pub fn get(&self, job: JobId, frame: u32) -> Option<Arc<ActiveFrame>> {
+        (self.0.iter())
+            .find(|a| (a.job, a.frame) == (job, frame))
+            .cloned()
+    }
+}
+
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
     pub job: JobId,
