@@ -178,7 +178,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                     bar.println(format!("error: {e}"));
                 }
                 let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
-                let svg = crate::timeline::timeline_svg(&f.stats);
+                let svg = vtfarm_master::timeline::timeline_svg(&f.stats);
                 if let Err(e) = std::fs::write(&timeline, svg) {
                     bar.println(format!("error: {}: {e}", timeline.display()));
                 }

@@ -6,7 +6,6 @@ mod compare;
 mod farm;
 mod shared;
 mod study;
-mod timeline;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -75,7 +75,7 @@ pub(crate) async fn render_study(
                 let written = match &f.components {
                     Some(components) => writer
                         .frame(v, f.frame as usize, components)
-                        .map(|row| row.summary.mean_reflected_luminance),
+                        .map(|row| row.summary.mean_reflected_luminance_cd_m2),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
                         eye: f.frame as usize,
@@ -84,7 +84,7 @@ pub(crate) async fn render_study(
                 };
                 match written {
                     Ok(mean) => bar.println(format!(
-                        "{} eye {}: mean reflected luminance {mean:.5}",
+                        "{} eye {}: mean reflected luminance {mean:.1} cd/m²",
                         variant.name, f.frame
                     )),
                     Err(e) => {
@@ -106,17 +106,17 @@ pub(crate) async fn render_study(
 
 pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
     println!(
-        "{:<24} {:>12} {:>12} {:>14} {:>12}  main glare source",
-        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr"
+        "{:<24} {:>12} {:>12} {:>14} {:>14}  main glare source",
+        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr cd/m²"
     );
     for s in &report.ranking {
         println!(
-            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>12.5}  {}",
+            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>14.1}  {}",
             s.variant,
             s.mean_glare_area_share * 100.0,
             s.worst_glare_area_share * 100.0,
             s.worst_low_contrast_share * 100.0,
-            s.mean_reflected_luminance,
+            s.mean_reflected_luminance_cd_m2,
             s.main_glare_source.as_deref().unwrap_or("none")
         );
     }

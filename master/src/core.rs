@@ -39,6 +39,7 @@ use vtfarm_vertex::{FrameImage, PackageStats};
 
 use crate::journal::{Record, StoredJob};
 use crate::telemetry::Telemetry;
+use crate::view::{ViewError, ViewRequest, ViewSource, Views};
 
 /// A connection, numbered by the driver.
 pub type ConnId = u64;
@@ -203,6 +204,8 @@ pub struct MasterCore {
     now: Duration,
     /// Workers that left during the running frame, for its stats' names.
     departed: BTreeMap<ConnId, Peer>,
+    /// The interactive view: pickable scenes and the move being rendered.
+    views: Views,
 }
 
 impl MasterCore {
@@ -223,6 +226,7 @@ impl MasterCore {
             completed: BTreeMap::new(),
             now: Duration::ZERO,
             departed: BTreeMap::new(),
+            views: Views::default(),
         }
     }
 
@@ -572,6 +576,7 @@ impl MasterCore {
             return self.refuse_job(conn, e);
         }
         self.next_job += 1;
+        self.remember_for_view(id);
         self.send(conn, Message::JobAccepted { job: id, frames });
         self.telemetry.counters.jobs_submitted += 1;
         if let Some(job) = journaled {
@@ -714,7 +719,8 @@ impl MasterCore {
     }
 
     fn persist(&mut self, record: Record) {
-        if self.persistent {
+        // A view's jobs live as long as the page looks at them.
+        if self.persistent && !self.views.owns(record.job()) {
             self.outbox.push_back(Output::Persist(record));
         }
     }
@@ -781,6 +787,7 @@ impl MasterCore {
                     return;
                 };
                 let done = j.assembling.remove(index);
+                (self.views).frame_finished(job.0, frame, &done.image, &j.scene);
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let workers = stats
                     .workers
@@ -1035,6 +1042,57 @@ impl MasterCore {
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
+    }
+
+    /// Moves the interactive view's eye: cancels the previous move's job and
+    /// queues the new view at rising quality (see `view.rs`); returns the
+    /// new job's id.
+    pub fn steer_view(&mut self, now: Duration, request: ViewRequest) -> Result<u64, ViewError> {
+        self.now = now;
+        let planned = self.views.plan(&request)?;
+        if let Some(outdated) = self.views.running_job() {
+            if self.scheduler.cancel_job(now, JobId(outdated)).is_ok() {
+                self.views.superseded();
+            }
+        }
+        let id = self.next_job;
+        let queued = self.queue_job(now, id, planned.job.clone(), None, 0);
+        if let Err(e) = queued {
+            self.pump();
+            return Err(ViewError::Queue(e));
+        }
+        self.next_job += 1;
+        // Nobody attaches to a view's job: it is not orphaned.
+        if let Some(j) = self.jobs.get_mut(&id) {
+            j.orphaned_at = None;
+        }
+        self.views.started(planned, id);
+        self.pump();
+        Ok(id)
+    }
+
+    /// The interactive view's state.
+    pub fn views(&self) -> &Views {
+        &self.views
+    }
+
+    /// Keeps a submitted job's scene and first frame pickable for the view.
+    fn remember_for_view(&mut self, id: u64) {
+        let Some(j) = self.jobs.get(&id) else {
+            return;
+        };
+        let Some(setup) = j.frames.first() else {
+            return;
+        };
+        let source = ViewSource {
+            name: j.name.clone(),
+            scene_hash: j.scene_hash,
+            scene: j.scene.clone(),
+            reflectors: j.reflectors.clone(),
+            method: j.method,
+            setup: setup.clone(),
+        };
+        self.views.remember(id, source);
     }
 
     /// The master's history: counters, per-worker totals, finished frames.

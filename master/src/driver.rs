@@ -18,6 +18,7 @@ use vtfarm_scheduler::SchedulerConfig;
 
 use crate::core::{ConnId, MasterCore, Output, Peer};
 use crate::journal::Journal;
+use crate::view::{ViewError, ViewRequest};
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -41,6 +42,11 @@ enum Input {
         job: u64,
         frame: u32,
         base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
+    },
+    /// Move the interactive view's eye (from the HTTP view).
+    Steer {
+        request: ViewRequest,
+        reply: oneshot::Sender<Result<u64, ViewError>>,
     },
     /// Read the core's state (for the HTTP view); changes nothing.
     Inspect(Box<dyn FnOnce(&MasterCore) + Send>),
@@ -97,6 +103,14 @@ impl MasterHandle {
         });
         self.inputs.send(Input::Inspect(read)).ok()?;
         rx.await.ok()
+    }
+
+    /// Moves the interactive view's eye ([`MasterCore::steer_view`]); `None`
+    /// once the master has stopped.
+    pub async fn steer_view(&self, request: ViewRequest) -> Option<Result<u64, ViewError>> {
+        let (reply, answer) = oneshot::channel();
+        self.inputs.send(Input::Steer { request, reply }).ok()?;
+        answer.await.ok()
     }
 
     /// Ticks after every input the core handled (a connection, a message,
@@ -192,6 +206,9 @@ async fn run(
                     }
                     Input::BaseFrame { job, frame, base } => {
                         core.base_frame_ready(now, job, frame, base);
+                    }
+                    Input::Steer { request, reply } => {
+                        let _ = reply.send(core.steer_view(now, request));
                     }
                     Input::Inspect(read) => read(&core),
                     Input::Stop => {} // returned above

@@ -1,6 +1,8 @@
 //! The master's HTTP side (`vtfarm master --http ADDR`): the dashboard page,
 //! its live event stream, frames as PNG, `/api/status` and Prometheus
-//! `/metrics`.
+//! `/metrics`, the interactive view (`POST /api/view` moves the eye,
+//! `/view/image.png` and `/view/objects.png` show its newest stage) and each
+//! kept frame's timeline (`/frames/SEQ.svg`).
 //!
 //! It reads the core's state through [`MasterHandle::inspect`] and wakes on
 //! [`MasterHandle::changes`]; it owns no farm state, so the page, the
@@ -8,7 +10,9 @@
 //! cannot disagree.
 //!
 //! Peers on loopback are trusted; any other peer must send the cluster
-//! token as `Authorization: Bearer TOKEN`.
+//! token as `Authorization: Bearer TOKEN`, or log in once at `/login` (the
+//! token in a form), which sets a session cookie: a hash of the token, so
+//! the cookie does not reveal the token, valid until the token changes.
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
@@ -17,12 +21,12 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 
 use axum::Router;
-use axum::extract::{ConnectInfo, Path, Request, State};
+use axum::extract::{ConnectInfo, Form, Path, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, Sse};
-use axum::response::{Html, IntoResponse, Response};
-use axum::routing::get;
+use axum::response::{Html, IntoResponse, Redirect, Response};
+use axum::routing::{get, post};
 use futures_util::stream::{self, Stream};
 use prometheus_client::encoding::{EncodeMetric, MetricEncoder, NoLabelSet};
 use prometheus_client::metrics::MetricType;
@@ -30,7 +34,8 @@ use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 use tokio::net::TcpListener;
 use vtfarm_imaging::Image;
@@ -39,14 +44,23 @@ use vtfarm_proto::{FrameStats, StatusReply};
 use crate::core::MasterCore;
 use crate::driver::MasterHandle;
 use crate::telemetry::{FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals};
+use crate::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
 
 /// The dashboard, served from the binary.
 const DASHBOARD: &str = include_str!("dashboard.html");
+
+/// The login page for peers off loopback (`{message}` is filled in).
+const LOGIN: &str = include_str!("login.html");
+
+/// The session cookie's name.
+pub const SESSION_COOKIE: &str = "vtfarm_session";
 
 #[derive(Clone)]
 struct HttpState {
     master: MasterHandle,
     token: Arc<str>,
+    /// The session cookie's value for this token.
+    session: Arc<str>,
 }
 
 /// Why the HTTP server could not start.
@@ -77,10 +91,15 @@ pub async fn serve(listener: TcpListener, master: MasterHandle, token: String) {
 pub fn router(master: MasterHandle, token: String) -> Router {
     let state = HttpState {
         master,
+        session: session_value(&token).into(),
         token: token.into(),
     };
     Router::new()
         .route("/", get(|| async { Html(DASHBOARD) }))
+        .route("/login", get(login_page).post(login))
+        .route("/api/view", post(steer_view))
+        .route("/view/image.png", get(view_png))
+        .route("/view/objects.png", get(view_objects_png))
         .route("/metrics", get(metrics))
         .route("/api/status", get(status))
         .route("/api/dashboard", get(dashboard))
@@ -92,7 +111,8 @@ pub fn router(master: MasterHandle, token: String) -> Router {
 }
 
 /// Whether a request from `peer` may be served: loopback always, anyone
-/// else with the cluster token as a bearer token.
+/// else with the cluster token as a bearer token or the session cookie
+/// that `/login` sets.
 pub fn authorized(peer: IpAddr, headers: &HeaderMap, token: &str) -> bool {
     if peer.to_canonical().is_loopback() {
         return true;
@@ -100,7 +120,28 @@ pub fn authorized(peer: IpAddr, headers: &HeaderMap, token: &str) -> bool {
     let bearer = (headers.get(header::AUTHORIZATION))
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
-    bearer.is_some_and(|t| bool::from(t.as_bytes().ct_eq(token.as_bytes())))
+    bearer.is_some_and(|t| same(t, token))
+        || session_cookie(headers).is_some_and(|c| same(c, &session_value(token)))
+}
+
+fn same(a: &str, b: &str) -> bool {
+    bool::from(a.as_bytes().ct_eq(b.as_bytes()))
+}
+
+/// The session cookie's value for `token`: a hash, so that a stolen cookie
+/// does not give the token (which also admits workers).
+fn session_value(token: &str) -> String {
+    hex::encode(Sha256::digest(format!("vtfarm dashboard session\n{token}")))
+}
+
+/// The session cookie of a request, if it sent one.
+fn session_cookie(headers: &HeaderMap) -> Option<&str> {
+    (headers.get_all(header::COOKIE).iter())
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(';'))
+        .filter_map(|pair| pair.trim().split_once('='))
+        .find(|(name, _)| *name == SESSION_COOKIE)
+        .map(|(_, value)| value)
 }
 
 async fn require_token(
@@ -109,13 +150,42 @@ async fn require_token(
     request: Request,
     next: Next,
 ) -> Response {
-    if authorized(peer.ip(), request.headers(), &state.token) {
-        next.run(request).await
-    } else {
-        let challenge = [(header::WWW_AUTHENTICATE, "Bearer")];
-        let message = "the cluster token is required (Authorization: Bearer TOKEN)\n";
-        (StatusCode::UNAUTHORIZED, challenge, message).into_response()
+    if request.uri().path() == "/login" || authorized(peer.ip(), request.headers(), &state.token) {
+        return next.run(request).await;
     }
+    let wants_page = (request.headers().get(header::ACCEPT))
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.contains("text/html"));
+    if wants_page {
+        // A browser: log in first.
+        return Redirect::to("/login").into_response();
+    }
+    let challenge = [(header::WWW_AUTHENTICATE, "Bearer")];
+    let message =
+        "the cluster token is required (Authorization: Bearer TOKEN, or log in at /login)\n";
+    (StatusCode::UNAUTHORIZED, challenge, message).into_response()
+}
+
+async fn login_page() -> Html<String> {
+    Html(LOGIN.replace("{message}", ""))
+}
+
+#[derive(Deserialize)]
+struct LoginForm {
+    token: String,
+}
+
+/// The token entered once: the session cookie, then the dashboard.
+async fn login(State(state): State<HttpState>, Form(form): Form<LoginForm>) -> Response {
+    if !same(form.token.trim(), &state.token) {
+        let page = LOGIN.replace("{message}", "That is not the cluster token.");
+        return (StatusCode::UNAUTHORIZED, Html(page)).into_response();
+    }
+    let cookie = format!(
+        "{SESSION_COOKIE}={}; Path=/; HttpOnly; SameSite=Strict",
+        state.session
+    );
+    ([(header::SET_COOKIE, cookie)], Redirect::to("/")).into_response()
 }
 
 fn unavailable() -> Response {
@@ -140,6 +210,34 @@ pub struct DashboardView {
     pub live: Option<LiveView>,
     /// The kept finished frames, oldest first.
     pub frames: Vec<FrameView>,
+    pub view: ViewState,
+}
+
+/// The interactive view, as the page shows it.
+#[derive(Serialize)]
+pub struct ViewState {
+    /// The jobs whose scene the view can start from.
+    pub sources: Vec<ViewSourceView>,
+    /// Half the side of the box the eye moves in (metres).
+    pub eye_box: f32,
+    pub current: Option<CurrentView>,
+    /// The newest finished stage, shown at `/view/image.png`.
+    pub latest: Option<LatestView>,
+    /// What happened to the last views' jobs, oldest first.
+    pub outcomes: Vec<ViewOutcome>,
+}
+
+#[derive(Serialize)]
+pub struct ViewSourceView {
+    pub job: u64,
+    pub name: String,
+}
+
+#[derive(Serialize)]
+pub struct LatestView {
+    pub generation: u64,
+    pub quality: &'static str,
+    pub glare: vtfarm_glare::Summary,
 }
 
 #[derive(Serialize)]
@@ -200,6 +298,61 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
                 stats: f.stats.clone(),
             })
             .collect(),
+        view: view_state(core),
+    }
+}
+
+fn view_state(core: &MasterCore) -> ViewState {
+    let views = core.views();
+    ViewState {
+        sources: (views.sources())
+            .map(|(job, name)| ViewSourceView {
+                job,
+                name: name.to_owned(),
+            })
+            .collect(),
+        eye_box: EYE_BOX,
+        current: views.current().cloned(),
+        latest: views.latest().map(|v| LatestView {
+            generation: v.generation,
+            quality: v.quality.name(),
+            glare: v.glare.clone(),
+        }),
+        outcomes: views.outcomes().copied().collect(),
+    }
+}
+
+/// Moves the view's eye: `{"job": ID, "offset": [x, y, z]}` in metres;
+/// answers the view's farm job.
+async fn steer_view(
+    State(state): State<HttpState>,
+    axum::Json(request): axum::Json<ViewRequest>,
+) -> Response {
+    match state.master.steer_view(request).await {
+        Some(Ok(job)) => axum::Json(serde_json::json!({ "job": job })).into_response(),
+        Some(Err(e)) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+        None => unavailable(),
+    }
+}
+
+/// The view's newest finished stage.
+async fn view_png(State(state): State<HttpState>) -> Response {
+    let image = (state.master).inspect(|c| c.views().latest().map(|v| v.image.clone()));
+    kept_png(image.await).await
+}
+
+/// The reflected-object map of the view's newest finished stage.
+async fn view_objects_png(State(state): State<HttpState>) -> Response {
+    let image = (state.master).inspect(|c| c.views().latest().map(|v| v.object_map.clone()));
+    kept_png(image.await).await
+}
+
+/// A kept image as PNG; 404 when there is none, 503 once the master stopped.
+async fn kept_png(image: Option<Option<Arc<Image>>>) -> Response {
+    match image {
+        Some(Some(image)) => png_response(image).await,
+        Some(None) => (StatusCode::NOT_FOUND, "no such image (yet)\n").into_response(),
+        None => unavailable(),
     }
 }
 
@@ -244,19 +397,31 @@ async fn live_png(State(state): State<HttpState>) -> Response {
     }
 }
 
-/// A kept finished frame: `/frames/SEQ.png`.
+/// A kept finished frame, `/frames/SEQ.png`, or its timeline, `/frames/SEQ.svg`.
 async fn frame_png(State(state): State<HttpState>, Path(name): Path<String>) -> Response {
-    let Some(seq) = name
-        .strip_suffix(".png")
-        .and_then(|s| s.parse::<u64>().ok())
-    else {
-        return (StatusCode::NOT_FOUND, "frames are /frames/SEQ.png\n").into_response();
-    };
-    let image = (state.master).inspect(move |c| c.telemetry().frame(seq).map(|f| f.image.clone()));
-    match image.await {
-        Some(Some(image)) => png_response(image).await,
-        Some(None) => (StatusCode::NOT_FOUND, "that frame is not kept\n").into_response(),
-        None => unavailable(),
+    let parsed =
+        (name.rsplit_once('.')).and_then(|(seq, kind)| Some((seq.parse::<u64>().ok()?, kind)));
+    match parsed {
+        Some((seq, "png")) => {
+            let image =
+                (state.master).inspect(move |c| c.telemetry().frame(seq).map(|f| f.image.clone()));
+            kept_png(image.await).await
+        }
+        Some((seq, "svg")) => {
+            let svg = (state.master).inspect(move |c| {
+                (c.telemetry().frame(seq)).map(|f| crate::timeline::timeline_svg(&f.stats))
+            });
+            match svg.await {
+                Some(Some(svg)) => ([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response(),
+                Some(None) => (StatusCode::NOT_FOUND, "that frame is not kept\n").into_response(),
+                None => unavailable(),
+            }
+        }
+        _ => (
+            StatusCode::NOT_FOUND,
+            "frames are /frames/SEQ.png and /frames/SEQ.svg\n",
+        )
+            .into_response(),
     }
 }
 

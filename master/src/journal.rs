@@ -41,6 +41,18 @@ pub enum Record {
     JobForgotten { id: u64 },
 }
 
+impl Record {
+    /// The job the record is about.
+    pub fn job(&self) -> u64 {
+        match self {
+            Record::JobQueued { id, .. }
+            | Record::JobComplete { id }
+            | Record::JobForgotten { id } => *id,
+            Record::FrameDone(done) => done.job,
+        }
+    }
+}
+
 /// A job read back from the journal.
 #[derive(Debug)]
 pub struct StoredJob {

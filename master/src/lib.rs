@@ -10,6 +10,8 @@
 //! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
 //!   core's state through the driver, owns none.
 //! - [`telemetry`]: the core's counters and kept frames for [`http`].
+//! - [`timeline`]: a frame's phases as SVG (beside `vtfarm submit`'s frames, in the dashboard).
+//! - [`view`]: the interactive view (move the eye, progressive stages, glare).
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
@@ -23,6 +25,8 @@ pub mod journal;
 pub mod server;
 pub mod submit;
 pub mod telemetry;
+pub mod timeline;
+pub mod view;
 
 pub use core::{ATTACH_GRACE, BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};

@@ -10,6 +10,7 @@ mod frame;
 use frame::small_frame;
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::body::Body;
@@ -21,14 +22,16 @@ use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
 use tower::ServiceExt;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::view::ViewOutcome;
 use vtfarm_master::{
     FinishedFrame, JobOptions, MasterHandle, http, run_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, HandshakePolicy, Message, Role, SceneData, StatusReply};
-use vtfarm_render::FrameSetup;
+use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 /// Every wait on the network is bounded by this.
@@ -392,6 +395,80 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
     );
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_browser_off_loopback_logs_in_once_and_keeps_a_cookie() {
+    let (master, _task) = spawn_master(SchedulerConfig::default());
+    let remote: SocketAddr = "192.0.2.7:40000".parse().unwrap();
+    let app = http::router(master.clone(), "c0ffee".into()).layer(MockConnectInfo(remote));
+    let send = |request: Request<Body>| app.clone().oneshot(request);
+    let get_with = |path: &str, header: Option<(&str, &str)>| {
+        let mut request = Request::get(path);
+        if let Some((name, value)) = header {
+            request = request.header(name, value);
+        }
+        request.body(Body::empty()).unwrap()
+    };
+    let login = |token: &str| {
+        Request::post("/login")
+            .header("content-type", "application/x-www-form-urlencoded")
+            .body(Body::from(format!("token={token}")))
+            .unwrap()
+    };
+    // A browser without the cookie is sent to the login page, which it may see.
+    let page = send(get_with("/", Some(("accept", "text/html"))))
+        .await
+        .unwrap();
+    assert_eq!(page.status(), StatusCode::SEE_OTHER);
+    assert_eq!(page.headers()["location"], "/login");
+    let form = send(get_with("/login", None)).await.unwrap();
+    assert_eq!(form.status(), StatusCode::OK);
+    let body = axum::body::to_bytes(form.into_body(), 1 << 20)
+        .await
+        .unwrap();
+    assert!(
+        std::str::from_utf8(&body)
+            .unwrap()
+            .contains("name=\"token\"")
+    );
+
+    let wrong = send(login("tea")).await.unwrap();
+    assert_eq!(wrong.status(), StatusCode::UNAUTHORIZED);
+    assert!(wrong.headers().get("set-cookie").is_none());
+
+    let right = send(login("c0ffee")).await.unwrap();
+    assert_eq!(right.status(), StatusCode::SEE_OTHER);
+    assert_eq!(right.headers()["location"], "/");
+    let set_cookie = right.headers()["set-cookie"].to_str().unwrap().to_owned();
+    assert!(set_cookie.contains("HttpOnly") && set_cookie.contains("SameSite=Strict"));
+    let cookie = set_cookie.split(';').next().unwrap().to_owned();
+    assert!(cookie.starts_with(http::SESSION_COOKIE));
+    assert!(
+        !cookie.contains("c0ffee"),
+        "the cookie does not carry the token"
+    );
+
+    let among_others = format!("theme=dark; {cookie}");
+    let ok = send(get_with("/api/status", Some(("cookie", &among_others))))
+        .await
+        .unwrap();
+    assert_eq!(ok.status(), StatusCode::OK);
+    let forged = format!("{}=c0ffee", http::SESSION_COOKIE);
+    let forged = send(get_with("/api/status", Some(("cookie", &forged))))
+        .await
+        .unwrap();
+    assert_eq!(forged.status(), StatusCode::UNAUTHORIZED);
+    let none = send(get_with("/api/status", None)).await.unwrap();
+    assert_eq!(none.status(), StatusCode::UNAUTHORIZED);
+    // Bearer tokens keep working beside the cookie.
+    let bearer = send(get_with(
+        "/api/status",
+        Some(("authorization", "Bearer c0ffee")),
+    ))
+    .await
+    .unwrap();
+    assert_eq!(bearer.status(), StatusCode::OK);
+}
+
 /// Headless Chromium driven over the DevTools protocol, with a fresh profile.
 struct Browser {
     _child: KillOnDrop,
@@ -574,7 +651,7 @@ fn fnv1a(bytes: &[u8]) -> String {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn the_dashboard_in_chromium_shows_both_workers_and_the_finished_frame() {
+async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the_moved_eye() {
     let Some(mut browser) = Browser::start().await else {
         return;
     };
@@ -613,10 +690,101 @@ async fn the_dashboard_in_chromium_shows_both_workers_and_the_finished_frame() {
         .collect();
     workers.sort_unstable();
     assert_eq!(workers, ["w1", "w2"]);
+
+    // The interactive view: pick the job's scene, then three quick moves
+    // with the keys. Armed first: resolves when the page shows the newest
+    // move's `full` stage (the page's own events, whatever the timing).
+    let pick = r#"new Promise((resolve) => {
+        const select = document.getElementById("view-source");
+        const pick = () => {
+            if (![...select.options].some((o) => o.value === "1")) return false;
+            select.value = "1";
+            select.dispatchEvent(new Event("change"));
+            return true;
+        };
+        if (pick()) return resolve(true);
+        const retry = () => { if (pick()) { document.removeEventListener("vtfarm-update", retry); resolve(true); } };
+        document.addEventListener("vtfarm-update", retry);
+    })"#;
+    assert_eq!(browser.eval(pick).await, true);
+    let arm = r#"window.viewDone = new Promise((resolve) => {
+        const done = () => {
+            const v = window.lastView.view, img = document.getElementById("view");
+            return v.current && v.latest && v.current.offset[0] > 0.029
+                && v.latest.generation === v.current.generation && v.latest.quality === "full"
+                && img.dataset.key === v.latest.generation + "/full" && img.dataset.hash;
+        };
+        const check = () => { if (done()) resolve(); };
+        document.addEventListener("vtfarm-view-shown", check);
+        document.addEventListener("vtfarm-update", check);
+        check();
+    }); true"#;
+    assert_eq!(browser.eval(arm).await, true);
+    for _ in 0..3 {
+        for kind in ["keyDown", "keyUp"] {
+            let key = serde_json::json!({
+                "type": kind, "key": "ArrowRight", "code": "ArrowRight", "windowsVirtualKeyCode": 39
+            });
+            browser.call("Input.dispatchKeyEvent", key).await;
+        }
+    }
+    let view = browser
+        .eval(
+            r##"window.viewDone.then(() => ({
+                hash: document.getElementById("view").dataset.hash,
+                glare: document.querySelectorAll("#glare tr").length,
+                objects: document.getElementById("view-objects").src,
+            }))"##,
+        )
+        .await;
+    // The view is the single-process render of the moved eye at `full`.
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..CockpitConfig::default()
+    });
+    let moved = small_frame(&c, Vec3::new(0.03, 0.0, 0.0));
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), c.cover_glass_triangles());
+    let reference = renderer.render(&moved, &Default::default(), &mut |_, _| {});
+    assert_eq!(view["hash"], fnv1a(&reference.image.color.to_srgb8()));
+    assert!(view["glare"].as_u64().unwrap() >= 7, "{view}");
+    assert!(
+        view["objects"]
+            .as_str()
+            .unwrap()
+            .contains("/view/objects.png")
+    );
+    // Only the newest move was rendered to `full`.
+    let fulls = farm
+        .master
+        .inspect(|c| {
+            (c.views().outcomes())
+                .filter(|o| {
+                    matches!(
+                        o,
+                        ViewOutcome::Rendered {
+                            quality: Quality::Full,
+                            ..
+                        }
+                    )
+                })
+                .count()
+        })
+        .await
+        .unwrap();
+    assert_eq!(fulls, 1);
+
+    // The whole page, view and timeline included.
+    let metrics = browser
+        .call("Page.getLayoutMetrics", serde_json::json!({}))
+        .await;
+    let size = &metrics["cssContentSize"];
+    let clip = serde_json::json!({
+        "x": 0, "y": 0, "width": size["width"], "height": size["height"], "scale": 1
+    });
     let shot = browser
         .call(
             "Page.captureScreenshot",
-            serde_json::json!({ "format": "png" }),
+            serde_json::json!({ "format": "png", "clip": clip, "captureBeyondViewport": true }),
         )
         .await;
     let png = base64::Engine::decode(

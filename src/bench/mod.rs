@@ -259,8 +259,8 @@ fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
         vtfarm_scene::NONE,
     );
     (
-        rays::rays_per_second(&[bvh], &sets.primary, rays::Batch::Single)[0],
-        rays::rays_per_second(&[bvh], &sets.incoherent, rays::Batch::Single)[0],
+        rays::rays_per_second(&[bvh], &sets.primary, rays::Batch::Single)[0].wall,
+        rays::rays_per_second(&[bvh], &sets.incoherent, rays::Batch::Single)[0].wall,
     )
 }
 

@@ -71,6 +71,10 @@ pub(crate) struct RaysArgs {
     /// Also writes the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Writes the scene's triangles and the three ray sets as float32 `.npy`
+    /// files into this directory (`scripts/embree_rays.py` traces them).
+    #[arg(long, value_name = "DIR")]
+    dump_rays: Option<PathBuf>,
 }
 
 fn parse_preset(s: &str) -> Result<BuildPreset, String> {
@@ -106,6 +110,13 @@ struct RaysFigures {
     /// The coherent sets again through `closest_hits` (packets).
     primary_packet_rays_per_second: f64,
     reflection_packet_rays_per_second: f64,
+    /// The same figures per second of this process's CPU time: on a busy
+    /// machine these compare fairly with another tracer's (one thread).
+    primary_rays_per_cpu_second: f64,
+    incoherent_rays_per_cpu_second: f64,
+    reflection_rays_per_cpu_second: f64,
+    primary_packet_rays_per_cpu_second: f64,
+    reflection_packet_rays_per_cpu_second: f64,
 }
 
 /// Passes over each ray set; the best counts.
@@ -139,6 +150,9 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
     bvhs.extend(baseline.as_ref().map(|(b, _)| b));
 
     let sets = RaySets::new(&bvh, &camera, args.random_rays, args.seed, reflector);
+    if let Some(dir) = &args.dump_rays {
+        sets.dump(&bvh, dir)?;
+    }
     let primary = rays_per_second(&bvhs, &sets.primary, Batch::Single);
     let incoherent = rays_per_second(&bvhs, &sets.incoherent, Batch::Single);
     let reflection = rays_per_second(&bvhs, &sets.reflection, Batch::Single);
@@ -149,46 +163,35 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
         threads: args.threads,
         bvh_build_seconds,
         primary_rays: sets.primary.len(),
-        primary_rays_per_second: primary[0],
+        primary_rays_per_second: primary[0].wall,
         incoherent_rays: sets.incoherent.len(),
-        incoherent_rays_per_second: incoherent[0],
+        incoherent_rays_per_second: incoherent[0].wall,
         reflection_rays: sets.reflection.len(),
-        reflection_rays_per_second: reflection[0],
-        primary_packet_rays_per_second: primary_packets[0],
-        reflection_packet_rays_per_second: reflection_packets[0],
+        reflection_rays_per_second: reflection[0].wall,
+        primary_packet_rays_per_second: primary_packets[0].wall,
+        reflection_packet_rays_per_second: reflection_packets[0].wall,
+        primary_rays_per_cpu_second: primary[0].cpu,
+        incoherent_rays_per_cpu_second: incoherent[0].cpu,
+        reflection_rays_per_cpu_second: reflection[0].cpu,
+        primary_packet_rays_per_cpu_second: primary_packets[0].cpu,
+        reflection_packet_rays_per_cpu_second: reflection_packets[0].cpu,
     };
     println!(
         "{} triangles, BVH {:?} (build {:.3} s), {} thread(s), best of {ROUNDS}",
         figures.triangles, options, figures.bvh_build_seconds, figures.threads
     );
     for (name, count, rate) in [
-        (
-            "primary",
-            figures.primary_rays,
-            figures.primary_rays_per_second,
-        ),
-        (
-            "incoherent",
-            figures.incoherent_rays,
-            figures.incoherent_rays_per_second,
-        ),
-        (
-            "reflection",
-            figures.reflection_rays,
-            figures.reflection_rays_per_second,
-        ),
-        (
-            "primary, packets",
-            figures.primary_rays,
-            figures.primary_packet_rays_per_second,
-        ),
-        (
-            "reflection, packets",
-            figures.reflection_rays,
-            figures.reflection_packet_rays_per_second,
-        ),
+        ("primary", sets.primary.len(), primary[0]),
+        ("incoherent", sets.incoherent.len(), incoherent[0]),
+        ("reflection", sets.reflection.len(), reflection[0]),
+        ("primary, packets", sets.primary.len(), primary_packets[0]),
+        ("reflection, packets", sets.reflection.len(), reflection_packets[0]),
     ] {
-        println!("{name:<20} {count:>9} rays  {:>7.2} M rays/s", rate / 1e6);
+        println!(
+            "{name:<20} {count:>9} rays  {:>7.2} M rays/s  {:>7.2} M rays/CPU-s",
+            rate.wall / 1e6,
+            rate.cpu / 1e6
+        );
     }
     if let Some(((base, seconds), layout)) = baseline.as_ref().zip(args.baseline) {
         println!(
@@ -204,9 +207,9 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
         ] {
             println!(
                 "{name:<20} {:>7.2} M rays/s  ({:?} is {:.2}x {layout:?})",
-                rates[1] / 1e6,
+                rates[1].wall / 1e6,
                 options.layout,
-                rates[0] / rates[1].max(1e-9)
+                rates[0].wall / rates[1].wall.max(1e-9)
             );
         }
     }
@@ -308,6 +311,51 @@ impl RaySets {
     }
 }
 
+impl RaySets {
+    /// `triangles.npy` (triangles × 3 corners × xyz), then for each set
+    /// `NAME_origins.npy` and `NAME_directions.npy` (rays × xyz, ray order)
+    /// and `NAME_hits.npy` (rays: the closest hit's t, +inf for a miss), so
+    /// that another tracer can check it found the same hits.
+    fn dump(&self, bvh: &SceneBvh, dir: &std::path::Path) -> Result<()> {
+        let scene = bvh.scene();
+        std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
+        let corners: Vec<f32> = (0..scene.triangles.len() as vtfarm_scene::TriangleId)
+            .flat_map(|id| scene.triangle_positions(id))
+            .flat_map(|p| p.to_array())
+            .collect();
+        let count = scene.triangles.len();
+        vtfarm_imaging::write_npy_f32(&dir.join("triangles.npy"), &[count, 3, 3], &corners)?;
+        for (name, rays) in self.named() {
+            let xyz = |f: fn(&Ray) -> Vec3| -> Vec<f32> {
+                rays.iter().flat_map(|r| f(r).to_array()).collect()
+            };
+            let shape = [rays.len(), 3];
+            let path = |suffix: &str| dir.join(format!("{name}_{suffix}.npy"));
+            vtfarm_imaging::write_npy_f32(&path("origins"), &shape, &xyz(|r| r.origin))?;
+            vtfarm_imaging::write_npy_f32(&path("directions"), &shape, &xyz(|r| r.direction))?;
+            let hits: Vec<f32> = rays
+                .par_iter()
+                .map(|r| {
+                    bvh.closest_hit(r, f32::INFINITY)
+                        .map_or(f32::INFINITY, |h| h.t)
+                })
+                .collect();
+            vtfarm_imaging::write_npy_f32(&path("hits"), &[rays.len()], &hits)?;
+        }
+        println!("rays written to {}", dir.display());
+        Ok(())
+    }
+
+    /// The sets with their names in file names and output.
+    fn named(&self) -> [(&'static str, &[Ray]); 3] {
+        [
+            ("primary", &self.primary),
+            ("incoherent", &self.incoherent),
+            ("reflection", &self.reflection),
+        ]
+    }
+}
+
 /// The fixed generator of the incoherent rays (README gives it for other
 /// tracers): xorshift64* with state `seed` (0 becomes the default seed).
 /// Each ray draws five numbers `u = (next() >> 40) / 2^24` in [0, 1), in this
@@ -343,14 +391,21 @@ impl RayGenerator {
     }
 }
 
+/// Closest-hit queries per second of wall-clock and of CPU time.
+#[derive(Clone, Copy)]
+pub(super) struct Rate {
+    pub(super) wall: f64,
+    pub(super) cpu: f64,
+}
+
 /// Closest-hit queries per second over `rays` on rayon's pool for each BVH,
 /// best of [`ROUNDS`] passes; the BVHs take turns within each round so that
 /// load from other processes hits them alike.
-pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) -> Vec<f64> {
-    let mut best = vec![f64::INFINITY; bvhs.len()];
+pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) -> Vec<Rate> {
+    let mut best = vec![(f64::INFINITY, f64::INFINITY); bvhs.len()];
     for _ in 0..ROUNDS {
         for (bvh, best) in bvhs.iter().zip(&mut best) {
-            let start = Instant::now();
+            let (start, cpu_start) = (Instant::now(), cpu_seconds());
             let hits = rays
                 .par_chunks(CHUNK)
                 .map(|chunk| match batch {
@@ -366,18 +421,38 @@ pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) ->
                 })
                 .sum::<usize>();
             std::hint::black_box(hits);
-            *best = best.min(start.elapsed().as_secs_f64());
+            best.0 = best.0.min(start.elapsed().as_secs_f64());
+            best.1 = best.1.min(cpu_seconds() - cpu_start);
         }
     }
+    let per_second = |seconds: f64| {
+        if rays.is_empty() {
+            0.0
+        } else {
+            rays.len() as f64 / seconds.max(1e-9)
+        }
+    };
     best.iter()
-        .map(|&seconds| {
-            if rays.is_empty() {
-                0.0
-            } else {
-                rays.len() as f64 / seconds
-            }
+        .map(|&(wall, cpu)| Rate {
+            wall: per_second(wall),
+            cpu: per_second(cpu),
         })
         .collect()
+}
+
+/// CPU time of this process so far, all threads (Linux: the sum of
+/// `/proc/self/task/*/schedstat`, nanoseconds; elsewhere 0, so CPU figures
+/// read as unmeasured).
+fn cpu_seconds() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    let nanos: u64 = tasks
+        .flatten()
+        .filter_map(|task| std::fs::read_to_string(task.path().join("schedstat")).ok())
+        .filter_map(|stat| stat.split_whitespace().next()?.parse::<u64>().ok())
+        .sum();
+    nanos as f64 * 1e-9
 }
 
 /// How the rays are handed to the tracer.

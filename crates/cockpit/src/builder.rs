@@ -2,7 +2,7 @@
 //! and the material constructors the parts use.
 
 use glam::Vec3;
-use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle, photometry};
 
 use crate::mesh::Mesh;
 
@@ -79,11 +79,19 @@ pub(crate) fn glossy(name: &str, color: Vec3, specular: f32, shininess: f32) -> 
     }
 }
 
-/// A surface that only emits: windows' outside panels and lamps, unaffected
-/// by the lights.
-pub(crate) fn emitter(name: &str, emission: Vec3) -> Material {
+/// A surface that only emits, with the hue of `color` and the luminance
+/// `cd_m2` (windows' outside panels and lamps), unaffected by the lights.
+pub(crate) fn emitter(name: &str, color: Vec3, cd_m2: f32) -> Material {
+    backlit(name, Vec3::ZERO, color, cd_m2)
+}
+
+/// A diffuse surface of reflectance `diffuse` that also emits `cd_m2` in the
+/// hue of `color` (backlit dial faces and markings: lit from behind, and
+/// reflecting the cab's light like any print).
+pub(crate) fn backlit(name: &str, diffuse: Vec3, color: Vec3, cd_m2: f32) -> Material {
     Material {
-        emission,
-        ..Material::diffuse(name, Vec3::ZERO)
+        emission: photometry::emission(color, cd_m2)
+            .expect("the cockpit's emitters have colours with luminance"),
+        ..Material::diffuse(name, diffuse)
     }
 }

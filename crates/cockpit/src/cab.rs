@@ -5,12 +5,12 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::Detail;
 use crate::builder::{SceneBuilder, emitter, matte};
 use crate::layout::{
     CAB_MAX, CAB_MIN, GROUND_Y, SIDE_WINDOW_Y, SIDE_WINDOW_Z, WINDSHIELD_X, WINDSHIELD_Y,
 };
 use crate::mesh::{Frame, Mesh};
+use crate::{Detail, GROUND_CD_M2, SHADED_WINDOW_CD_M2, SKY_CD_M2, SUNLIT_WINDOW_CD_M2};
 
 /// Wall, floor and roof cell size at detail 1.
 const WALL_CELL: f32 = 0.047;
@@ -129,7 +129,7 @@ fn outside(builder: &mut SceneBuilder) {
     );
     builder.add(
         "windshield_sky",
-        emitter("sky_light", Vec3::new(2.0, 2.2, 2.6)),
+        emitter("sky_light", Vec3::new(2.0, 2.2, 2.6), SKY_CD_M2),
         &sky,
     );
 
@@ -146,7 +146,11 @@ fn outside(builder: &mut SceneBuilder) {
     );
     builder.add(
         "side_window_left",
-        emitter("side_window_left_light", Vec3::new(3.0, 3.0, 2.8)),
+        emitter(
+            "side_window_left_light",
+            Vec3::new(3.0, 3.0, 2.8),
+            SUNLIT_WINDOW_CD_M2,
+        ),
         &left,
     );
 
@@ -162,7 +166,11 @@ fn outside(builder: &mut SceneBuilder) {
     );
     builder.add(
         "side_window_right",
-        emitter("side_window_right_light", Vec3::new(1.5, 1.65, 1.9)),
+        emitter(
+            "side_window_right_light",
+            Vec3::new(1.5, 1.65, 1.9),
+            SHADED_WINDOW_CD_M2,
+        ),
         &right,
     );
 
@@ -185,7 +193,7 @@ fn outside(builder: &mut SceneBuilder) {
     ));
     builder.add(
         "ground",
-        emitter("ground_landscape", Vec3::new(0.3, 0.32, 0.24)),
+        emitter("ground_landscape", Vec3::new(0.3, 0.32, 0.24), GROUND_CD_M2),
         &ground,
     );
 }

@@ -10,12 +10,15 @@
 use std::f32::consts::PI;
 
 use glam::{Vec2, Vec3};
-use vtfarm_scene::Material;
+use vtfarm_scene::{Material, photometry};
 
-use crate::builder::{SceneBuilder, emitter, glossy, matte};
+use crate::builder::{SceneBuilder, backlit, emitter, glossy, matte};
 use crate::layout::{ABSORBER, EYE, GLASS_CENTER, glass_frame};
 use crate::mesh::{Frame, Mesh};
-use crate::{COVER_GLASS, COVER_GLASS_BACK, Detail, GLARE_ABSORBER, GLASS_MATERIAL, GlassDesign};
+use crate::{
+    COVER_GLASS, COVER_GLASS_BACK, DIAL_FACE_CD_M2, Detail, GLARE_ABSORBER, GLASS_MATERIAL,
+    GlassDesign, MARKING_CD_M2, NEEDLE_CD_M2, WARNING_LAMP_CD_M2,
+};
 
 /// Chord width and height of the cover glass.
 const GLASS_SIZE: Vec2 = Vec2::new(0.46, 0.21);
@@ -360,15 +363,29 @@ pub(crate) fn build(
     }
     builder.add(
         "dial_faces",
-        matte("dial_face_white", Vec3::new(0.85, 0.85, 0.82)),
+        backlit(
+            "dial_face_black",
+            Vec3::splat(0.04),
+            Vec3::ONE,
+            DIAL_FACE_CD_M2,
+        ),
         &place(faces),
     );
     builder.add(
         "dial_markings",
-        matte("dial_marking_black", Vec3::splat(0.03)),
+        backlit(
+            "dial_marking_white",
+            Vec3::splat(0.8),
+            Vec3::new(1.0, 0.97, 0.9),
+            MARKING_CD_M2,
+        ),
         &place(markings),
     );
-    let needle_red = glossy("needle_red", Vec3::new(0.8, 0.05, 0.03), 0.2, 30.0);
+    let needle_red = Material {
+        emission: photometry::emission(Vec3::new(1.0, 0.1, 0.05), NEEDLE_CD_M2)
+            .expect("red has luminance"),
+        ..glossy("needle_red", Vec3::new(0.8, 0.05, 0.03), 0.2, 30.0)
+    };
     builder.add("needles", needle_red, &place(needles));
 
     warning_lamps(builder, &frame, face_z, detail);
@@ -451,8 +468,8 @@ fn warning_lamps(builder: &mut SceneBuilder, frame: &Frame, face_z: f32, detail:
     let object = builder.object("warning_lamps");
     let lamp = Mesh::disc(0.006, detail.segments(24, 8));
     for (k, x) in steps(-0.075, 0.075, 5).into_iter().enumerate() {
-        let (name, emission) = colors[k % colors.len()];
-        let material = builder.material(emitter(name, emission));
+        let (name, color) = colors[k % colors.len()];
+        let material = builder.material(emitter(name, color, WARNING_LAMP_CD_M2));
         let at = frame.compose(&Frame::at(Vec3::new(x, -0.082, face_z)));
         builder.push(object, material, &lamp.placed(&at));
     }

@@ -20,7 +20,7 @@ mod layout;
 mod mesh;
 
 use glam::Vec3;
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Scene};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, Scene, photometry};
 
 /// Settings of the generator.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -115,7 +115,8 @@ pub struct Cockpit {
     pub scene: Scene,
     /// The default driver eye point looking at the instrument cluster.
     pub camera: Camera,
-    /// Suggested lights (a sun through the side window, a cabin lamp).
+    /// Suggested lighting (a sun through the side window and the cab's
+    /// diffuse daylight), in physical units.
     pub lighting: Lighting,
 }
 
@@ -186,26 +187,49 @@ fn camera() -> Camera {
 /// opaque) and comes from behind so none enters through the windshield.
 const SUN_DIRECTION: Vec3 = Vec3::new(0.45, -0.85, -0.15);
 
-/// A warm sun through the left door window, a dim cabin lamp in the roof.
+/// Illuminance of the sun on a surface facing it: a clear summer noon.
+pub const SUN_ILLUMINANCE_LUX: f32 = 100_000.0;
+/// Diffuse daylight inside the cab (sky light through the windows, from
+/// every side): the ambient term.
+pub const CAB_AMBIENT_LUX: f32 = 2_500.0;
+/// Luminance of rays that leave the scene (sky seen past the panels).
+pub const BACKGROUND_CD_M2: f32 = 3_500.0;
+/// The sky panel seen through the windshield: a bright sky near the horizon.
+pub const SKY_CD_M2: f32 = 10_000.0;
+/// The sunlit view through the left door window (sunlit clouds and white
+/// surfaces reach 20,000 to 30,000 cd/m²): the stock glass's glare source.
+pub const SUNLIT_WINDOW_CD_M2: f32 = 25_000.0;
+/// The view through the right door window, on the shaded side.
+pub const SHADED_WINDOW_CD_M2: f32 = 10_000.0;
+/// Road and fields below the horizon: ground of reflectance 0.1 under the sun.
+pub const GROUND_CD_M2: f32 = 3_000.0;
+/// Backlit instrument markings in day mode.
+pub const MARKING_CD_M2: f32 = 500.0;
+/// Backlight of the black dial faces (their print also reflects the cab's
+/// light).
+pub const DIAL_FACE_CD_M2: f32 = 10.0;
+/// Backlit red needles.
+pub const NEEDLE_CD_M2: f32 = 300.0;
+/// Lit warning lamps (tell-tales) in day mode.
+pub const WARNING_LAMP_CD_M2: f32 = 1_500.0;
+
+/// The sun through the left door window and the cab's diffuse daylight, in
+/// the units of [`vtfarm_scene::photometry`].
 fn lighting() -> Lighting {
+    let color = Vec3::new(1.0, 0.95, 0.85);
     let sun = Light {
         kind: LightKind::Directional {
             direction: SUN_DIRECTION.normalize(),
         },
-        color: Vec3::new(1.0, 0.95, 0.85),
-        intensity: 1.5,
-    };
-    let lamp = Light {
-        kind: LightKind::Point {
-            position: Vec3::new(-0.1, layout::CAB_MAX.y - 0.05, 0.2),
-        },
-        color: Vec3::new(1.0, 0.9, 0.75),
-        intensity: 0.25,
+        color,
+        intensity: photometry::directional_intensity(color, SUN_ILLUMINANCE_LUX)
+            .expect("the sun's colour has luminance"),
     };
     Lighting {
-        lights: vec![sun, lamp],
-        ambient: Vec3::splat(0.08),
-        background: Vec3::new(0.3, 0.35, 0.45),
+        lights: vec![sun],
+        ambient: photometry::ambient(CAB_AMBIENT_LUX),
+        background: photometry::emission(Vec3::new(0.3, 0.35, 0.45), BACKGROUND_CD_M2)
+            .expect("the sky's colour has luminance"),
     }
 }
 

@@ -7,7 +7,9 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use vtfarm_cockpit::{
-    COVER_GLASS, COVER_GLASS_BACK, Cockpit, CockpitConfig, GLASS_MATERIAL, cockpit, default_eye,
+    BACKGROUND_CD_M2, CAB_AMBIENT_LUX, COVER_GLASS, COVER_GLASS_BACK, Cockpit, CockpitConfig,
+    DIAL_FACE_CD_M2, GLASS_MATERIAL, MARKING_CD_M2, SKY_CD_M2, SUN_ILLUMINANCE_LUX,
+    SUNLIT_WINDOW_CD_M2, cockpit, default_eye,
 };
 use vtfarm_scene::{Camera, LightKind, ObjectId, Scene};
 
@@ -253,9 +255,21 @@ fn windows_are_bright_panels_and_the_glass_is_a_weak_mirror() {
             .material_of(scene.triangles.iter().position(|t| t.object == id).unwrap() as u32)
             .emission
     };
-    assert_eq!(emission("side_window_left"), Vec3::new(3.0, 3.0, 2.8));
-    assert_eq!(emission("windshield_sky"), Vec3::new(2.0, 2.2, 2.6));
-    assert!(emission("ground").max_element() < 1.0);
+    // Emitters have the luminance in cd/m² the cockpit documents.
+    let cd_m2 = |name: &str| vtfarm_scene::photometry::cd_m2(emission(name));
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * b;
+    assert!(close(cd_m2("side_window_left"), SUNLIT_WINDOW_CD_M2));
+    assert!(close(cd_m2("windshield_sky"), SKY_CD_M2));
+    assert!(close(cd_m2("dial_markings"), MARKING_CD_M2));
+    assert!(close(cd_m2("dial_faces"), DIAL_FACE_CD_M2));
+    assert!(cd_m2("ground") < cd_m2("windshield_sky"));
+    // The sun delivers its documented illuminance: a white Lambertian
+    // surface facing it would have E/π cd/m².
+    let sun = default_cockpit().lighting.lights[0];
+    assert!(close(
+        vtfarm_scene::photometry::cd_m2(sun.radiance()),
+        SUN_ILLUMINANCE_LUX / std::f32::consts::PI
+    ));
     let glass = &scene.materials[scene.material_id(GLASS_MATERIAL).unwrap() as usize];
     assert_eq!(glass.reflectance, Vec3::splat(0.12));
     assert_eq!(glass.transmittance, Vec3::splat(0.85));
@@ -358,31 +372,20 @@ fn camera_looks_from_the_driver_eye_at_the_glass_centre() {
     );
 }
 
+/// Daylight in physical units: one sun in lux, the cab's diffuse daylight
+/// as the ambient term in lux, no unit-less lamps.
 #[test]
-fn lighting_has_a_sun_and_a_cabin_lamp() {
+fn lighting_is_the_sun_and_the_cabs_daylight_in_physical_units() {
+    use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
     let lighting = &default_cockpit().lighting;
-    assert_eq!(lighting.ambient, Vec3::splat(0.08));
-    assert_eq!(lighting.background, Vec3::new(0.3, 0.35, 0.45));
-    let sun = lighting
-        .lights
-        .iter()
-        .find(|l| matches!(l.kind, LightKind::Directional { .. }))
-        .unwrap();
-    assert_eq!(sun.intensity, 1.5);
-    // The cabin lamp hangs just under the roof, inside the cab.
-    let (lo, hi) = object_bounds(
-        &default_cockpit().scene,
-        object(&default_cockpit().scene, "cab_walls"),
-    );
-    let lamp = lighting.lights.iter().find_map(|l| match l.kind {
-        LightKind::Point { position } => Some(position),
-        LightKind::Directional { .. } => None,
-    });
-    let lamp = lamp.expect("a cabin lamp");
-    assert!(
-        lamp.cmpgt(lo).all() && lamp.cmplt(hi).all() && lamp.y > hi.y - 0.2,
-        "{lamp}"
-    );
+    let pi = std::f32::consts::PI;
+    assert!((lighting.ambient.x * pi * CD_M2_PER_UNIT - CAB_AMBIENT_LUX).abs() < 0.1);
+    assert!((photometry::cd_m2(lighting.background) - BACKGROUND_CD_M2).abs() < 0.5);
+    assert_eq!(lighting.lights.len(), 1);
+    assert!(matches!(
+        lighting.lights[0].kind,
+        LightKind::Directional { .. }
+    ));
 }
 
 #[test]

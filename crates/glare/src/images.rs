@@ -101,41 +101,70 @@ fn frame_canvas(width: u32, height: u32, panel_width: u32, panel_height: u32) ->
     Image::new(width + panel_width, height.max(panel_height), Vec3::ZERO)
 }
 
-/// The heat map of reflected luminance `L_r`, scaled to the frame's peak
-/// (see [`heat_map_with_max`]).
-pub fn heat_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, GlareError> {
-    heat_map_with_max(input, params, None)
+/// The luminance range of a heat map's logarithmic colour scale, in cd/m².
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LogRange {
+    /// The bottom of the scale: darker pixels take the ramp's first colour.
+    pub min_cd_m2: f32,
+    /// The top of the scale: brighter pixels saturate.
+    pub max_cd_m2: f32,
 }
 
-/// The heat map of reflected luminance `L_r`: glass pixels take
-/// [`ramp_color`]`(L_r / max)`, everything else is black. `max` is the
-/// luminance at the top of the ramp: `Some` for a fixed scale (compare frames
-/// of a sequence), `None` for the frame's peak `L_r` (1 when the peak is 0);
-/// larger values saturate. The legend panel on the right has the colour bar
-/// (top = `max`), five numeric labels at 0, ¼, ½, ¾ and 1 of `max` in the
-/// luminance unit, and the title `CD/M2`, or `REL L` when the luminance scale
-/// is the default 1 (uncalibrated relative units).
-pub fn heat_map_with_max(
+impl LogRange {
+    /// Decades a frame's own scale spans below its peak.
+    pub const AUTO_DECADES: i32 = 4;
+
+    /// The frame's own range: its peak (1 cd/m² for a black frame) and
+    /// [`LogRange::AUTO_DECADES`] below.
+    pub fn below_peak(peak_cd_m2: f32) -> Self {
+        let max = if peak_cd_m2.is_finite() && peak_cd_m2 > 0.0 {
+            peak_cd_m2
+        } else {
+            1.0
+        };
+        LogRange {
+            min_cd_m2: max * 10f32.powi(-Self::AUTO_DECADES),
+            max_cd_m2: max,
+        }
+    }
+
+    /// Where `l` sits on the scale, 0 at or below the bottom, 1 at or above
+    /// the top (0 for a range that is not positive and increasing).
+    pub fn position(&self, l: f32) -> f32 {
+        let span = (self.max_cd_m2 / self.min_cd_m2).ln();
+        if !(self.min_cd_m2 > 0.0 && span.is_finite() && span > 0.0) || !(l > self.min_cd_m2) {
+            return 0.0;
+        }
+        ((l / self.min_cd_m2).ln() / span).clamp(0.0, 1.0)
+    }
+
+    /// The luminance at position `t` of the scale.
+    fn at(&self, t: f32) -> f32 {
+        self.min_cd_m2 * (self.max_cd_m2 / self.min_cd_m2).powf(t)
+    }
+}
+
+/// The heat map of reflected luminance `L_r` in cd/m² on a logarithmic
+/// colour scale: glass pixels take [`ramp_color`] of their
+/// [`LogRange::position`], everything else is black. `range` is `Some` for a
+/// fixed scale (to compare the frames of a study), `None` for
+/// [`LogRange::below_peak`] of the frame's peak. The legend panel on the
+/// right has the colour bar (top = the range's top), five labels evenly
+/// spaced in the logarithm (decades for the automatic range) and the title
+/// `CD/M2 LOG`.
+pub fn heat_map(
     input: &GlareInput<'_>,
     params: &Params,
-    max: Option<f32>,
+    range: Option<LogRange>,
 ) -> Result<Image, GlareError> {
     check(input, params)?;
     let lr = masked_luminance(input.glass, input.reflected, params);
     let peak = lr.iter().copied().fold(0.0f32, f32::max);
-    let max = match max {
-        Some(m) if m.is_finite() && m > 0.0 => m,
-        _ if peak > 0.0 => peak,
-        _ => 1.0,
-    };
+    let range = range.unwrap_or_else(|| LogRange::below_peak(peak));
     let labels: Vec<String> = (0..LABELS)
-        .map(|i| format_label(max * i as f32 / (LABELS - 1) as f32))
+        .map(|i| format_label(range.at(i as f32 / (LABELS - 1) as f32)))
         .collect();
-    let title = if params.luminance_scale == 1.0 {
-        "REL L"
-    } else {
-        "CD/M2"
-    };
+    let title = "CD/M2 LOG";
     let label_width = labels
         .iter()
         .map(|l| text_width(l, SCALE))
@@ -145,7 +174,7 @@ pub fn heat_map_with_max(
         .max(MARGIN + text_width(title, SCALE) + MARGIN);
     let (w, h) = (input.width, input.height);
     let mut img = frame_canvas(w, h, panel_width, MIN_LEGEND_HEIGHT);
-    paint_glass(&mut img, input, |i| ramp_color(lr[i] / max));
+    paint_glass(&mut img, input, |i| ramp_color(range.position(lr[i])));
 
     let x0 = w + MARGIN;
     draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);

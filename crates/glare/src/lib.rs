@@ -11,37 +11,55 @@
 //!
 //! # Units and formulas
 //!
-//! * **Luminance.** Per pixel, `L = s · Y(c)` with
-//!   `Y(c) = 0.2126 R + 0.7152 G + 0.0722 B`, the relative photometric
-//!   luminance of linear Rec.709/sRGB primaries ([`luminance`]), and `s` the
-//!   [`Params::luminance_scale`] in cd/m² per unit of rendered radiance. The
-//!   default `s = 1` leaves luminance in the renderer's relative units; set
-//!   it from a calibration (e.g. the luminance of a known white patch) to get
-//!   cd/m². Non-finite or negative colour values count as luminance 0, so no
-//!   metric is ever NaN.
+//! * **Luminance** is in cd/m², by the convention of
+//!   [`vtfarm_scene::photometry`]: per pixel `L = s · Y(c)` with
+//!   `Y(c) = 0.2126 R + 0.7152 G + 0.0722 B` ([`luminance`]) and `s` the
+//!   [`Params::cd_m2_per_unit`], by default the renderer's
+//!   [`CD_M2_PER_UNIT`] (10,000 cd/m² per unit of rendered radiance).
+//!   Non-finite or negative colour values count as luminance 0, so no metric
+//!   is ever NaN.
 //! * **Reflected / transmitted luminance maps** ([`reflected_luminance`],
 //!   [`transmitted_luminance`]): `L_r` and `L_t` per glass pixel, 0 outside
-//!   the glass mask.
+//!   the glass mask. `L_r` is the veiling (reflected) luminance on the glass.
+//! * **Ambient condition** ([`AmbientCondition`]): the glass also scatters
+//!   the ambient illuminance `E` diffusely with its diffuse reflectance `ρ_d`,
+//!   a uniform veil `L_a = ρ_d · E / π` over the instruments.
 //! * **Veiling ratio** ([`veiling_ratio`]): `V = L_r / max(L_t, f)` per glass
-//!   pixel (0 outside), with `f` the [`Params::luminance_floor`], so that a
-//!   black background gives a large finite ratio instead of infinity.
+//!   pixel (0 outside), with `f` the [`Params::luminance_floor_cd_m2`], so
+//!   that a black background gives a large finite ratio instead of infinity.
 //! * **Marking contrast** ([`contrast`]):
-//!   `CR = (L_hi + L_r) / (L_lo + L_r)`, where `L_hi`/`L_lo` are the brighter
-//!   and the darker of the marking luminance `L_m` and the background
-//!   luminance `L_b` (both transmitted luminances). For bright markings on a
-//!   dark dial this is exactly `(L_m + L_r) / (L_b + L_r)`; taking brighter
-//!   over darker makes `CR ≥ 1` for dark-on-light dials too. Without
-//!   reflection `CR = L_m / L_b`; as `L_r` grows `CR` falls towards 1. Both
-//!   numerator and denominator are floored at `f`. See [`contrast`] for the
-//!   choice of `L_b` (the mean background luminance of the instrument area).
+//!   `CR = (L_hi + L_r + L_a) / (L_lo + L_r + L_a)`, where `L_hi`/`L_lo` are
+//!   the brighter and the darker of the marking luminance `L_m` and the
+//!   background luminance `L_b` (both transmitted luminances): the contrast
+//!   ratio of display ergonomics (ISO 15008) with the reflections added to
+//!   both. For bright markings on a dark dial this is
+//!   `(L_m + L_r + L_a) / (L_b + L_r + L_a)`; brighter over darker makes
+//!   `CR ≥ 1` for dark-on-light dials too. Without reflection or veil
+//!   `CR = L_m / L_b`; as `L_r` grows `CR` falls towards 1. Both numerator
+//!   and denominator are floored at `f`. See [`contrast`] for the choice of
+//!   `L_b` (the mean background luminance of the instrument area).
 //! * **Summary** ([`summarize`]): peak and mean of `L_r` over the glass, the
-//!   share of glass pixels with `L_r` above [`Thresholds::veiling_luminance`],
-//!   the share of the evaluated instrument area with `CR` below
-//!   [`Thresholds::min_contrast`], and the objects seen in the reflections
-//!   ranked by the glass area they cover (then by their summed `L_r`).
+//!   share of glass pixels with `L_r` above
+//!   [`Thresholds::veiling_luminance_cd_m2`], the share of the evaluated
+//!   instrument area with `CR` below [`Thresholds::min_contrast`], and the
+//!   objects seen in the reflections ranked by the glass area they cover
+//!   (then by their summed `L_r`). Fields carry their unit in their names
+//!   (`mean_reflected_luminance_cd_m2`); ratios and shares have none.
 //!
 //! Areas are pixel counts; shares are fractions in [0, 1] (0 for an empty
 //! area).
+//!
+//! # Defaults and their sources
+//!
+//! Every threshold travels with a source string that the study writes next
+//! to it. The defaults: a minimum contrast of 3:1 ([`DEFAULT_MIN_CONTRAST`]),
+//! the daytime minimum usually quoted from ISO 15008 for in-vehicle displays;
+//! a daylight ambient condition of 45,000 lx ([`DEFAULT_AMBIENT_LUX`]) on a
+//! glass of diffuse reflectance 0.005; and a glare threshold of 500 cd/m²
+//! ([`DEFAULT_VEILING_LUMINANCE_CD_M2`]), a vtfarm engineering default. The
+//! standard's text is not reproduced in vtfarm: a study that signs off a
+//! design sets the values (and their sources) of the edition and clause it
+//! follows.
 
 use std::collections::BTreeMap;
 
@@ -55,79 +73,106 @@ mod images;
 mod ramp;
 
 pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
-pub use images::{FONT_COLOR, NO_OBJECT_COLOR, PALETTE, heat_map, heat_map_with_max, object_map};
+pub use images::{FONT_COLOR, LogRange, NO_OBJECT_COLOR, PALETTE, heat_map, object_map};
 pub use ramp::{INFERNO_SRGB, ramp_color};
 
-/// Relative photometric luminance `Y` of a linear Rec.709/sRGB colour:
-/// `0.2126 R + 0.7152 G + 0.0722 B` (no scale applied).
-pub fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
+pub use vtfarm_scene::photometry::{CD_M2_PER_UNIT, luminance};
 
-/// Default [`Params::luminance_scale`]: 1 cd/m² per unit radiance, i.e.
-/// luminances stay in the renderer's relative units until calibrated.
-pub const DEFAULT_LUMINANCE_SCALE: f32 = 1.0;
-
-/// Default [`Params::luminance_floor`] (same unit as the luminances): the
-/// smallest denominator used in ratios. Far below any luminance that matters
-/// for glare, large enough to keep ratios finite over black.
-pub const DEFAULT_LUMINANCE_FLOOR: f32 = 1e-4;
+/// Default [`Params::luminance_floor_cd_m2`]: the smallest denominator used
+/// in ratios. Far below any luminance that matters for glare, large enough
+/// to keep ratios finite over black.
+pub const DEFAULT_LUMINANCE_FLOOR_CD_M2: f32 = 0.01;
 
 /// Default [`Thresholds::min_contrast`]: 3:1.
 pub const DEFAULT_MIN_CONTRAST: f32 = 3.0;
+/// The source recorded with the default minimum contrast.
+pub const DEFAULT_MIN_CONTRAST_SOURCE: &str = "ISO 15008 (in-vehicle visual presentation), daytime minimum contrast ratio 3:1 as usually quoted; vtfarm default, check the edition you follow";
 
-/// Default [`Thresholds::veiling_luminance`]: 0.05 (same unit as the
-/// luminances).
-pub const DEFAULT_VEILING_LUMINANCE: f32 = 0.05;
+/// Default [`Thresholds::veiling_luminance_cd_m2`]: 500 cd/m².
+pub const DEFAULT_VEILING_LUMINANCE_CD_M2: f32 = 500.0;
+/// The source recorded with the default glare threshold.
+pub const DEFAULT_VEILING_LUMINANCE_SOURCE: &str =
+    "vtfarm engineering default (about the luminance of a day-mode display)";
 
-/// The thresholds of the summary.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// Default [`AmbientCondition::illuminance_lux`]: daylight on the display.
+pub const DEFAULT_AMBIENT_LUX: f32 = 45_000.0;
+/// Default [`AmbientCondition::glass_diffuse_reflectance`]: a clean cover
+/// glass (the cockpit glass's own diffuse reflectance).
+pub const DEFAULT_GLASS_DIFFUSE_REFLECTANCE: f32 = 0.005;
+/// The source recorded with the default ambient condition.
+pub const DEFAULT_AMBIENT_SOURCE: &str = "daylight condition after ISO 15008's bright-ambient legibility test (45,000 lx diffuse on the display); vtfarm default, check the edition you follow";
+
+/// The thresholds of the summary, each with where it comes from.
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Thresholds {
     /// Minimum readable contrast ratio of markings against their background
     /// (dimensionless, `CR` as in [`contrast_ratio`]). Default
-    /// [`DEFAULT_MIN_CONTRAST`] = 3:1, the order of the minimum luminance
-    /// contrast used in display ergonomics for legibility; ISO 15008
-    /// (ergonomic aspects of transport information and control systems —
-    /// in-vehicle visual presentation) gives minimum contrast ratios for
-    /// in-vehicle displays. The standard's exact values depend on the
-    /// lighting condition (day/night) and are not reproduced here: set the
-    /// threshold from the edition and condition your study follows.
+    /// [`DEFAULT_MIN_CONTRAST`] = 3:1.
     pub min_contrast: f32,
-    /// Reflected luminance above which a glass pixel counts as glare, in the
-    /// luminance unit (cd/m² once [`Params::luminance_scale`] is calibrated,
-    /// otherwise relative). Default [`DEFAULT_VEILING_LUMINANCE`] = 0.05, a
-    /// vtfarm engineering default (5 % of the luminance of a unit-radiance
-    /// white), not taken from a standard: tune it per study.
-    pub veiling_luminance: f32,
+    pub min_contrast_source: String,
+    /// Reflected luminance above which a glass pixel counts as glare, in
+    /// cd/m². Default [`DEFAULT_VEILING_LUMINANCE_CD_M2`].
+    pub veiling_luminance_cd_m2: f32,
+    pub veiling_luminance_source: String,
 }
 
 impl Default for Thresholds {
     fn default() -> Self {
         Thresholds {
             min_contrast: DEFAULT_MIN_CONTRAST,
-            veiling_luminance: DEFAULT_VEILING_LUMINANCE,
+            min_contrast_source: DEFAULT_MIN_CONTRAST_SOURCE.to_owned(),
+            veiling_luminance_cd_m2: DEFAULT_VEILING_LUMINANCE_CD_M2,
+            veiling_luminance_source: DEFAULT_VEILING_LUMINANCE_SOURCE.to_owned(),
         }
     }
 }
 
-/// Photometric parameters and thresholds.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The ambient condition the contrast is judged under: diffuse illuminance
+/// on the display, scattered back by the cover glass.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AmbientCondition {
+    pub illuminance_lux: f32,
+    /// Diffuse (Lambertian) reflectance of the cover glass, 0 to 1.
+    pub glass_diffuse_reflectance: f32,
+    pub source: String,
+}
+
+impl AmbientCondition {
+    /// `ρ_d · E / π`: the uniform veil the glass adds over the instruments.
+    pub fn veiling_luminance_cd_m2(&self) -> f32 {
+        self.glass_diffuse_reflectance * self.illuminance_lux / std::f32::consts::PI
+    }
+}
+
+impl Default for AmbientCondition {
+    fn default() -> Self {
+        AmbientCondition {
+            illuminance_lux: DEFAULT_AMBIENT_LUX,
+            glass_diffuse_reflectance: DEFAULT_GLASS_DIFFUSE_REFLECTANCE,
+            source: DEFAULT_AMBIENT_SOURCE.to_owned(),
+        }
+    }
+}
+
+/// Photometric parameters, thresholds and the ambient condition.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Params {
-    /// cd/m² per unit of rendered radiance (default
-    /// [`DEFAULT_LUMINANCE_SCALE`] = 1, i.e. relative units).
-    pub luminance_scale: f32,
-    /// Floor on ratio denominators, in the luminance unit (default
-    /// [`DEFAULT_LUMINANCE_FLOOR`]).
-    pub luminance_floor: f32,
+    /// cd/m² per unit of rendered radiance (default [`CD_M2_PER_UNIT`]).
+    pub cd_m2_per_unit: f32,
+    /// Floor on ratio denominators, in cd/m² (default
+    /// [`DEFAULT_LUMINANCE_FLOOR_CD_M2`]).
+    pub luminance_floor_cd_m2: f32,
     pub thresholds: Thresholds,
+    pub ambient: AmbientCondition,
 }
 
 impl Default for Params {
     fn default() -> Self {
         Params {
-            luminance_scale: DEFAULT_LUMINANCE_SCALE,
-            luminance_floor: DEFAULT_LUMINANCE_FLOOR,
+            cd_m2_per_unit: CD_M2_PER_UNIT,
+            luminance_floor_cd_m2: DEFAULT_LUMINANCE_FLOOR_CD_M2,
             thresholds: Thresholds::default(),
+            ambient: AmbientCondition::default(),
         }
     }
 }
@@ -243,17 +288,41 @@ impl<'a> GlareInput<'a> {
 impl Params {
     /// Checks that the parameters are finite and in range.
     pub fn validate(&self) -> Result<(), GlareError> {
-        let checks = [
-            ("luminance_scale", self.luminance_scale, true),
-            ("luminance_floor", self.luminance_floor, true),
-            ("min_contrast", self.thresholds.min_contrast, false),
+        let (t, a) = (&self.thresholds, &self.ambient);
+        let checks: [(&'static str, f32, &'static str, fn(f32) -> bool); 6] = [
             (
-                "veiling_luminance",
-                self.thresholds.veiling_luminance,
-                false,
+                "cd_m2_per_unit",
+                self.cd_m2_per_unit,
+                "must be positive",
+                |v| v > 0.0,
+            ),
+            (
+                "luminance_floor_cd_m2",
+                self.luminance_floor_cd_m2,
+                "must be positive",
+                |v| v > 0.0,
+            ),
+            ("min_contrast", t.min_contrast, "must be finite", |_| true),
+            (
+                "veiling_luminance_cd_m2",
+                t.veiling_luminance_cd_m2,
+                "must be finite",
+                |_| true,
+            ),
+            (
+                "ambient illuminance_lux",
+                a.illuminance_lux,
+                "must not be negative",
+                |v| v >= 0.0,
+            ),
+            (
+                "glass_diffuse_reflectance",
+                a.glass_diffuse_reflectance,
+                "must be 0 to 1",
+                |v| (0.0..=1.0).contains(&v),
             ),
         ];
-        for (name, value, positive) in checks {
+        for (name, value, why, ok) in checks {
             if !value.is_finite() {
                 return Err(GlareError::Param {
                     name,
@@ -261,20 +330,16 @@ impl Params {
                     why: "must be finite",
                 });
             }
-            if positive && value <= 0.0 {
-                return Err(GlareError::Param {
-                    name,
-                    value,
-                    why: "must be positive",
-                });
+            if !ok(value) {
+                return Err(GlareError::Param { name, value, why });
             }
         }
         Ok(())
     }
 
-    /// `luminance_scale · Y(c)`, with non-finite or negative results as 0.
+    /// `cd_m2_per_unit · Y(c)`, with non-finite or negative results as 0.
     pub fn scaled_luminance(&self, c: Vec3) -> f32 {
-        finite_non_negative(self.luminance_scale * luminance(c))
+        finite_non_negative(self.cd_m2_per_unit * luminance(c))
     }
 }
 
@@ -313,14 +378,14 @@ pub fn transmitted_luminance(
 }
 
 /// The veiling ratio `V = L_r / max(L_t, f)` per glass pixel (dimensionless,
-/// 0 outside the glass), `f` = [`Params::luminance_floor`].
+/// 0 outside the glass), `f` = [`Params::luminance_floor_cd_m2`].
 pub fn veiling_ratio(input: &GlareInput<'_>, params: &Params) -> Result<Vec<f32>, GlareError> {
     check(input, params)?;
     Ok(veiling_from(
         input.glass,
         &masked_luminance(input.glass, input.reflected, params),
         &masked_luminance(input.glass, input.transmitted, params),
-        params.luminance_floor,
+        params.luminance_floor_cd_m2,
     ))
 }
 
@@ -339,7 +404,8 @@ fn veiling_from(glass: &[bool], lr: &[f32], lt: &[f32], floor: f32) -> Vec<f32> 
 }
 
 /// The contrast ratio of a marking against its background under a veiling
-/// reflection: `(L_hi + L_r) / (L_lo + L_r)`, `L_hi`/`L_lo` the brighter and
+/// luminance `l_reflected` (the reflection plus the ambient veil):
+/// `(L_hi + L_r) / (L_lo + L_r)`, `L_hi`/`L_lo` the brighter and
 /// darker of `l_marking` and `l_background`; numerator and denominator are
 /// floored at `floor`. Dimensionless, ≥ 1, finite for finite inputs; with
 /// `l_reflected = 0` and `l_background ≥ floor` it is exactly
@@ -363,10 +429,10 @@ pub struct ContrastMap {
     pub per_pixel: Vec<Option<f32>>,
     /// Mean transmitted luminance `L̄_b` of the instrument background
     /// (instrument, not marking); 0 when there is none.
-    pub mean_background_luminance: f32,
+    pub mean_background_luminance_cd_m2: f32,
     /// Mean transmitted luminance `L̄_m` of the marking pixels; 0 when there
     /// are none.
-    pub mean_marking_luminance: f32,
+    pub mean_marking_luminance_cd_m2: f32,
     pub instrument_pixels: usize,
     pub marking_pixels: usize,
     /// Pixels where `CR` was evaluated.
@@ -390,8 +456,9 @@ pub struct ContrastMap {
 ///   instrument area is a robust stand-in for "around it" that does not
 ///   depend on a neighbourhood size; dials with very different background
 ///   zones should be passed as separate instrument masks.
-/// * At a **marking pixel** `CR = contrast_ratio(L_t(p), L̄_b, L_r(p))`.
-/// * At a **background pixel** `CR = contrast_ratio(L̄_m, L̄_b, L_r(p))`
+/// * At a **marking pixel** `CR = contrast_ratio(L_t(p), L̄_b, L_r(p) + L_a)`
+///   with `L_a` the ambient veil ([`AmbientCondition::veiling_luminance_cd_m2`]).
+/// * At a **background pixel** `CR = contrast_ratio(L̄_m, L̄_b, L_r(p) + L_a)`
 ///   with `L̄_m` the mean marking luminance: the contrast a typical marking
 ///   would have under the reflection there. This makes the low-contrast share
 ///   a share of the whole instrument area, as glare moving over the dial
@@ -424,7 +491,8 @@ fn contrast_from(input: &GlareInput<'_>, params: &Params, lr: &[f32]) -> Contras
     let mean = |s: f64, c: usize| if c == 0 { 0.0 } else { (s / c as f64) as f32 };
     let lb = mean(sum_b, count_b);
     let lm = mean(sum_m, count_m);
-    let floor = params.luminance_floor;
+    let floor = params.luminance_floor_cd_m2;
+    let veil = params.ambient.veiling_luminance_cd_m2();
     let threshold = params.thresholds.min_contrast;
     let mut per_pixel = vec![None; n];
     let (mut evaluated, mut low) = (0usize, 0usize);
@@ -435,7 +503,7 @@ fn contrast_from(input: &GlareInput<'_>, params: &Params, lr: &[f32]) -> Contras
                 continue;
             }
             let l_mark = if is_marking(i) { lt(i) } else { lm };
-            let cr = contrast_ratio(l_mark, lb, lr[i], floor);
+            let cr = contrast_ratio(l_mark, lb, lr[i] + veil, floor);
             *out = Some(cr);
             evaluated += 1;
             if cr < threshold {
@@ -446,8 +514,8 @@ fn contrast_from(input: &GlareInput<'_>, params: &Params, lr: &[f32]) -> Contras
     }
     ContrastMap {
         per_pixel,
-        mean_background_luminance: lb,
-        mean_marking_luminance: lm,
+        mean_background_luminance_cd_m2: lb,
+        mean_marking_luminance_cd_m2: lm,
         instrument_pixels: count_b + count_m,
         marking_pixels: count_m,
         evaluated_pixels: evaluated,
@@ -475,10 +543,10 @@ pub struct ObjectGlare {
     pub pixels: usize,
     /// `pixels` / glass pixels.
     pub area_share: f32,
-    /// `Σ L_r` over those pixels (luminance unit × pixels).
-    pub summed_reflected_luminance: f32,
-    /// `summed_reflected_luminance / pixels`.
-    pub mean_reflected_luminance: f32,
+    /// `Σ L_r` over those pixels (cd/m² × pixels).
+    pub summed_reflected_luminance_cd_m2: f32,
+    /// `summed_reflected_luminance_cd_m2 / pixels`.
+    pub mean_reflected_luminance_cd_m2: f32,
 }
 
 /// The objects in the reflected-object map over the glass, ranked by the
@@ -508,16 +576,16 @@ pub fn rank_objects(input: &GlareInput<'_>, lr: &[f32]) -> Vec<ObjectGlare> {
             name: input.object_name(object),
             pixels,
             area_share: share(pixels, glass_pixels),
-            summed_reflected_luminance: sum as f32,
-            mean_reflected_luminance: (sum / pixels as f64) as f32,
+            summed_reflected_luminance_cd_m2: sum as f32,
+            mean_reflected_luminance_cd_m2: (sum / pixels as f64) as f32,
         })
         .collect();
     out.sort_by(|a, b| {
         b.pixels
             .cmp(&a.pixels)
             .then(
-                b.summed_reflected_luminance
-                    .total_cmp(&a.summed_reflected_luminance),
+                b.summed_reflected_luminance_cd_m2
+                    .total_cmp(&a.summed_reflected_luminance_cd_m2),
             )
             .then(a.object.cmp(&b.object))
     });
@@ -527,29 +595,32 @@ pub fn rank_objects(input: &GlareInput<'_>, lr: &[f32]) -> Vec<ObjectGlare> {
 /// The glare summary of one frame (serializable, e.g. to JSON).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Summary {
-    pub luminance_scale: f32,
-    pub luminance_floor: f32,
+    pub cd_m2_per_unit: f32,
+    pub luminance_floor_cd_m2: f32,
     pub thresholds: Thresholds,
+    pub ambient: AmbientCondition,
     /// Pixels of the glass mask.
     pub glass_pixels: usize,
     /// `max L_r` over the glass (0 for no glass).
-    pub peak_reflected_luminance: f32,
+    pub peak_reflected_luminance_cd_m2: f32,
     /// `mean L_r` over the glass (0 for no glass).
-    pub mean_reflected_luminance: f32,
+    pub mean_reflected_luminance_cd_m2: f32,
     /// `mean L_t` over the glass (0 for no glass).
-    pub mean_transmitted_luminance: f32,
+    pub mean_transmitted_luminance_cd_m2: f32,
+    /// The ambient veil `L_a` added to every contrast.
+    pub ambient_veiling_luminance_cd_m2: f32,
     /// `max V` over the glass.
     pub peak_veiling_ratio: f32,
     /// `mean V` over the glass.
     pub mean_veiling_ratio: f32,
-    /// Glass pixels with `L_r > veiling_luminance`.
+    /// Glass pixels with `L_r > veiling_luminance_cd_m2`.
     pub glare_pixels: usize,
     /// `glare_pixels / glass_pixels`.
     pub glare_area_share: f32,
     pub instrument_pixels: usize,
     pub marking_pixels: usize,
-    pub mean_marking_luminance: f32,
-    pub mean_background_luminance: f32,
+    pub mean_marking_luminance_cd_m2: f32,
+    pub mean_background_luminance_cd_m2: f32,
     /// Smallest `CR` over the evaluated instrument area (`None` without
     /// markings).
     pub min_contrast: Option<f32>,
@@ -576,7 +647,7 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
     check(input, params)?;
     let lr = masked_luminance(input.glass, input.reflected, params);
     let lt = masked_luminance(input.glass, input.transmitted, params);
-    let v = veiling_from(input.glass, &lr, &lt, params.luminance_floor);
+    let v = veiling_from(input.glass, &lr, &lt, params.luminance_floor_cd_m2);
     let contrast = contrast_from(input, params, &lr);
 
     let mut glass_pixels = 0usize;
@@ -593,7 +664,7 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         sum_t += lt[i] as f64;
         peak_v = peak_v.max(v[i]);
         sum_v += v[i] as f64;
-        if lr[i] > params.thresholds.veiling_luminance {
+        if lr[i] > params.thresholds.veiling_luminance_cd_m2 {
             glare_pixels += 1;
         }
     }
@@ -605,21 +676,23 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         }
     };
     let summary = Summary {
-        luminance_scale: params.luminance_scale,
-        luminance_floor: params.luminance_floor,
-        thresholds: params.thresholds,
+        cd_m2_per_unit: params.cd_m2_per_unit,
+        luminance_floor_cd_m2: params.luminance_floor_cd_m2,
+        thresholds: params.thresholds.clone(),
+        ambient: params.ambient.clone(),
         glass_pixels,
-        peak_reflected_luminance: peak_r,
-        mean_reflected_luminance: mean(sum_r),
-        mean_transmitted_luminance: mean(sum_t),
+        peak_reflected_luminance_cd_m2: peak_r,
+        mean_reflected_luminance_cd_m2: mean(sum_r),
+        mean_transmitted_luminance_cd_m2: mean(sum_t),
+        ambient_veiling_luminance_cd_m2: params.ambient.veiling_luminance_cd_m2(),
         peak_veiling_ratio: peak_v,
         mean_veiling_ratio: mean(sum_v),
         glare_pixels,
         glare_area_share: share(glare_pixels, glass_pixels),
         instrument_pixels: contrast.instrument_pixels,
         marking_pixels: contrast.marking_pixels,
-        mean_marking_luminance: contrast.mean_marking_luminance,
-        mean_background_luminance: contrast.mean_background_luminance,
+        mean_marking_luminance_cd_m2: contrast.mean_marking_luminance_cd_m2,
+        mean_background_luminance_cd_m2: contrast.mean_background_luminance_cd_m2,
         min_contrast: contrast.min_contrast,
         low_contrast_pixels: contrast.low_contrast_pixels,
         low_contrast_share: contrast.low_contrast_share,

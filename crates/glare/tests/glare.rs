@@ -49,6 +49,23 @@ impl Frame {
     }
 }
 
+/// Parameters that read rendered values as cd/m² (scale 1), so the
+/// hand-made cases below state luminances directly.
+fn relative() -> Params {
+    Params {
+        cd_m2_per_unit: 1.0,
+        luminance_floor_cd_m2: 1e-4,
+        thresholds: Thresholds {
+            veiling_luminance_cd_m2: 0.05,
+            ..Thresholds::default()
+        },
+        ambient: AmbientCondition {
+            glass_diffuse_reflectance: 0.0,
+            ..AmbientCondition::default()
+        },
+    }
+}
+
 fn gray(v: f32) -> Vec3 {
     Vec3::splat(v)
 }
@@ -89,27 +106,27 @@ fn uniform_reflected_field_gives_peak_equal_mean() {
         f.glass[i] = i < 24;
         f.reflected[i] = gray(if i < 24 { 0.4 } else { 9.0 });
     }
-    let mut params = Params::default();
+    let mut params = relative();
     let s = summarize(&f.input(), &params).unwrap();
     assert_eq!(s.glass_pixels, 24);
-    assert!(close(s.peak_reflected_luminance, 0.4));
-    assert!(close(s.mean_reflected_luminance, 0.4));
+    assert!(close(s.peak_reflected_luminance_cd_m2, 0.4));
+    assert!(close(s.mean_reflected_luminance_cd_m2, 0.4));
 
-    params.thresholds.veiling_luminance = 0.0;
+    params.thresholds.veiling_luminance_cd_m2 = 0.0;
     let s = summarize(&f.input(), &params).unwrap();
     assert_eq!(s.glare_pixels, 24);
     assert_eq!(s.glare_area_share, 1.0);
 
-    params.thresholds.veiling_luminance = 0.5;
+    params.thresholds.veiling_luminance_cd_m2 = 0.5;
     let s = summarize(&f.input(), &params).unwrap();
     assert_eq!(s.glare_pixels, 0);
     assert_eq!(s.glare_area_share, 0.0);
 
-    // The scale turns relative units into cd/m².
-    params.luminance_scale = 250.0;
+    // The scale turns rendered radiance into cd/m².
+    params.cd_m2_per_unit = 250.0;
     let s = summarize(&f.input(), &params).unwrap();
-    assert!((s.peak_reflected_luminance - 100.0).abs() < 1e-3);
-    assert!((s.mean_reflected_luminance - 100.0).abs() < 1e-3);
+    assert!((s.peak_reflected_luminance_cd_m2 - 100.0).abs() < 1e-3);
+    assert!((s.mean_reflected_luminance_cd_m2 - 100.0).abs() < 1e-3);
     assert_eq!(s.glare_area_share, 1.0);
 }
 
@@ -138,14 +155,14 @@ fn veiling_ratio_on_a_hand_made_4x4_case() {
         f.reflected[i] = gray(r);
         f.transmitted[i] = gray(t);
     }
-    let params = Params::default();
+    let params = relative();
     let v = veiling_ratio(&f.input(), &params).unwrap();
     let mut expected = [0.0f32; 16];
     expected[0] = 0.5;
     expected[5] = 3.0;
     expected[6] = 0.0;
     expected[9] = 1.0;
-    expected[10] = 0.1 / params.luminance_floor;
+    expected[10] = 0.1 / params.luminance_floor_cd_m2;
     for i in 0..16 {
         assert!(
             (v[i] - expected[i]).abs() <= 1e-5 * expected[i].max(1.0),
@@ -168,11 +185,14 @@ fn veiling_ratio_on_a_hand_made_4x4_case() {
 #[test]
 fn contrast_without_reflection_is_marking_over_background() {
     let f = dial(0.8, 0.1, 0.0);
-    let c = contrast(&f.input(), &Params::default()).unwrap();
+    let c = contrast(&f.input(), &relative()).unwrap();
     assert_eq!(c.instrument_pixels, 16);
     assert_eq!(c.marking_pixels, 4);
     assert_eq!(c.evaluated_pixels, 16);
-    let (lm, lb) = (c.mean_marking_luminance, c.mean_background_luminance);
+    let (lm, lb) = (
+        c.mean_marking_luminance_cd_m2,
+        c.mean_background_luminance_cd_m2,
+    );
     assert!(close(lm, 0.8) && close(lb, 0.1));
     for cr in &c.per_pixel {
         // Exactly L_m / L_b of the computed luminances.
@@ -202,7 +222,7 @@ fn contrast_falls_towards_one_as_reflection_grows() {
     let mut shares = Vec::new();
     for lr in [0.0, 0.1, 0.2, 0.3, 0.5, 1.0] {
         let f = dial(0.8, 0.1, lr);
-        let s = summarize(&f.input(), &Params::default()).unwrap();
+        let s = summarize(&f.input(), &relative()).unwrap();
         let expected = (0.8 + lr) / (0.1 + lr);
         assert!((s.min_contrast.unwrap() - expected).abs() < 1e-4 * expected);
         shares.push(s.low_contrast_share);
@@ -221,7 +241,7 @@ fn low_contrast_share_covers_the_instrument_area_where_the_glare_is() {
             f.reflected[y * 4 + x] = gray(1.0);
         }
     }
-    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let s = summarize(&f.input(), &relative()).unwrap();
     assert_eq!(s.low_contrast_pixels, 8);
     assert_eq!(s.low_contrast_share, 0.5);
 }
@@ -245,7 +265,7 @@ fn objects_are_ranked_by_covered_area_and_named() {
         f.glass[i] = false;
         f.objects[i] = 0;
     }
-    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let s = summarize(&f.input(), &relative()).unwrap();
     let ranked: Vec<(u32, &str, usize)> = s
         .objects
         .iter()
@@ -260,8 +280,8 @@ fn objects_are_ranked_by_covered_area_and_named() {
             (7, "OBJECT 7", 1)
         ]
     );
-    assert!(close(s.objects[0].summed_reflected_luminance, 0.7));
-    assert!(close(s.objects[0].mean_reflected_luminance, 0.1));
+    assert!(close(s.objects[0].summed_reflected_luminance_cd_m2, 0.7));
+    assert!(close(s.objects[0].mean_reflected_luminance_cd_m2, 0.1));
     assert!(close(s.objects[0].area_share, 7.0 / 28.0));
 }
 
@@ -271,7 +291,7 @@ fn equal_areas_rank_by_summed_reflected_luminance() {
     f.glass = vec![true; 4];
     f.objects = vec![3, 3, 5, 5];
     f.reflected = vec![gray(0.1), gray(0.1), gray(0.9), gray(0.2)];
-    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let s = summarize(&f.input(), &relative()).unwrap();
     let order: Vec<u32> = s.objects.iter().map(|o| o.object).collect();
     assert_eq!(order, vec![5, 3]);
 }
@@ -291,7 +311,7 @@ fn gradient() -> Frame {
 #[test]
 fn heat_map_is_black_outside_the_glass_and_rises_with_luminance() {
     let f = gradient();
-    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    let img = heat_map(&f.input(), &relative(), None).unwrap();
     assert!(img.width > f.w, "legend panel to the right");
     assert!(img.height >= f.h);
     for y in 0..img.height {
@@ -309,11 +329,41 @@ fn heat_map_is_black_outside_the_glass_and_rises_with_luminance() {
     }
     // The top of the ramp is the peak; a fixed scale saturates above it.
     assert_eq!(img.get(15, 0), ramp_color(1.0));
-    let fixed = heat_map_with_max(&f.input(), &Params::default(), Some(0.5)).unwrap();
-    assert_eq!(fixed.get(15, 0), ramp_color(1.0));
-    assert_eq!(fixed.get(8, 0), ramp_color(1.0));
-    assert!(luminance(fixed.get(7, 0)) < luminance(ramp_color(1.0)));
-    assert_eq!(fixed.get(0, 0), ramp_color(0.0));
+    let fixed = LogRange {
+        min_cd_m2: 0.05,
+        max_cd_m2: 0.5,
+    };
+    let fixed_img = heat_map(&f.input(), &relative(), Some(fixed)).unwrap();
+    assert_eq!(fixed_img.get(15, 0), ramp_color(1.0));
+    assert_eq!(fixed_img.get(8, 0), ramp_color(1.0));
+    assert!(luminance(fixed_img.get(7, 0)) < luminance(ramp_color(1.0)));
+    assert_eq!(fixed_img.get(0, 0), ramp_color(0.0));
+}
+
+/// The colour scale is logarithmic: each decade of cd/m² takes the same
+/// step of the ramp, and the automatic range spans four decades below the
+/// peak.
+#[test]
+fn heat_map_scale_is_logarithmic_in_cd_m2() {
+    let mut f = Frame::new(5, 1);
+    for (x, l) in [1.0f32, 10.0, 100.0, 1000.0, 10_000.0]
+        .into_iter()
+        .enumerate()
+    {
+        f.glass[x] = true;
+        f.reflected[x] = gray(l / CD_M2_PER_UNIT);
+    }
+    let params = Params::default();
+    let img = heat_map(&f.input(), &params, None).unwrap();
+    for x in 0..5 {
+        assert_eq!(img.get(x, 0), ramp_color(x as f32 / 4.0), "decade {x}");
+    }
+    let range = LogRange::below_peak(10_000.0);
+    assert!((range.min_cd_m2 - 1.0).abs() < 1e-4);
+    assert!((range.position(100.0) - 0.5).abs() < 1e-6);
+    assert_eq!(range.position(0.0), 0.0);
+    assert_eq!(range.position(f32::NAN), 0.0);
+    assert_eq!(range.position(1e9), 1.0);
 }
 
 #[test]
@@ -344,7 +394,7 @@ fn count_font_pixels(img: &Image, x_from: u32) -> usize {
 #[test]
 fn legends_contain_text() {
     let f = gradient();
-    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    let img = heat_map(&f.input(), &relative(), None).unwrap();
     assert!(count_font_pixels(&img, f.w) > 50);
     // Text only in the legend: the frame area has none.
     assert_eq!(count_font_pixels(&img, 0), count_font_pixels(&img, f.w));
@@ -352,7 +402,7 @@ fn legends_contain_text() {
     let mut o = gradient();
     o.names = vec!["mirror".into()];
     o.objects[..8].fill(0);
-    let map = object_map(&o.input(), &Params::default()).unwrap();
+    let map = object_map(&o.input(), &relative()).unwrap();
     assert!(count_font_pixels(&map, o.w) > 50);
     assert_eq!(count_font_pixels(&map, 0), count_font_pixels(&map, o.w));
 }
@@ -365,7 +415,7 @@ fn object_map_colours_objects_distinctly() {
         true, true, true, true, true, false, true, true, true, true, true, true,
     ];
     f.objects = vec![0, 0, 0, 1, 1, 1, 2, NONE, NONE, NONE, NONE, NONE];
-    let img = object_map(&f.input(), &Params::default()).unwrap();
+    let img = object_map(&f.input(), &relative()).unwrap();
     let (c0, c1, c2) = (img.get(0, 0), img.get(3, 0), img.get(0, 1));
     assert_eq!(img.get(1, 0), c0);
     assert_eq!(img.get(4, 0), c1);
@@ -390,7 +440,7 @@ fn many_objects_fit_the_legend() {
     let mut f = Frame::new(30, 1);
     f.glass = vec![true; 30];
     f.objects = (0..30).collect();
-    let img = object_map(&f.input(), &Params::default()).unwrap();
+    let img = object_map(&f.input(), &relative()).unwrap();
     assert!(img.height > 20 * 10);
 }
 
@@ -406,14 +456,14 @@ fn assert_finite(s: &Summary) {
     }
     walk(&v);
     let floats = [
-        s.peak_reflected_luminance,
-        s.mean_reflected_luminance,
-        s.mean_transmitted_luminance,
+        s.peak_reflected_luminance_cd_m2,
+        s.mean_reflected_luminance_cd_m2,
+        s.mean_transmitted_luminance_cd_m2,
         s.peak_veiling_ratio,
         s.mean_veiling_ratio,
         s.glare_area_share,
-        s.mean_marking_luminance,
-        s.mean_background_luminance,
+        s.mean_marking_luminance_cd_m2,
+        s.mean_background_luminance_cd_m2,
         s.low_contrast_share,
     ];
     assert!(floats.iter().all(|x| x.is_finite()), "{s:?}");
@@ -424,39 +474,39 @@ fn assert_finite(s: &Summary) {
 fn empty_mask_gives_zeros() {
     let mut f = Frame::new(5, 3);
     f.reflected = vec![gray(1.0); 15];
-    let a = analyze(&f.input(), &Params::default()).unwrap();
+    let a = analyze(&f.input(), &relative()).unwrap();
     let s = &a.summary;
     assert_finite(s);
     assert_eq!(s.glass_pixels, 0);
-    assert_eq!(s.peak_reflected_luminance, 0.0);
-    assert_eq!(s.mean_reflected_luminance, 0.0);
+    assert_eq!(s.peak_reflected_luminance_cd_m2, 0.0);
+    assert_eq!(s.mean_reflected_luminance_cd_m2, 0.0);
     assert_eq!(s.glare_area_share, 0.0);
     assert_eq!(s.low_contrast_share, 0.0);
     assert_eq!(s.min_contrast, None);
     assert!(s.objects.is_empty());
     assert!(a.reflected_luminance.iter().all(|&x| x == 0.0));
-    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    let img = heat_map(&f.input(), &relative(), None).unwrap();
     assert!((0..3).all(|y| (0..5).all(|x| img.get(x, y) == Vec3::ZERO)));
-    object_map(&f.input(), &Params::default()).unwrap();
+    object_map(&f.input(), &relative()).unwrap();
 }
 
 #[test]
 fn zero_sized_frame_works() {
     let f = Frame::new(0, 0);
-    assert_finite(&summarize(&f.input(), &Params::default()).unwrap());
-    let img = heat_map(&f.input(), &Params::default()).unwrap();
+    assert_finite(&summarize(&f.input(), &relative()).unwrap());
+    let img = heat_map(&f.input(), &relative(), None).unwrap();
     assert!(count_font_pixels(&img, 0) > 0);
-    object_map(&f.input(), &Params::default()).unwrap();
+    object_map(&f.input(), &relative()).unwrap();
 }
 
 #[test]
 fn all_none_object_map_ranks_nothing() {
     let mut f = gradient();
     f.objects = vec![NONE; 32];
-    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let s = summarize(&f.input(), &relative()).unwrap();
     assert!(s.objects.is_empty());
     assert_finite(&s);
-    let img = object_map(&f.input(), &Params::default()).unwrap();
+    let img = object_map(&f.input(), &relative()).unwrap();
     assert_eq!(img.get(0, 0), NO_OBJECT_COLOR);
 }
 
@@ -465,7 +515,7 @@ fn zero_transmitted_luminance_stays_finite() {
     // Black dial, black markings, with and without reflection.
     for lr in [0.0, 0.5] {
         let f = dial(0.0, 0.0, lr);
-        let a = analyze(&f.input(), &Params::default()).unwrap();
+        let a = analyze(&f.input(), &relative()).unwrap();
         assert_finite(&a.summary);
         assert!(a.veiling_ratio.iter().all(|v| v.is_finite()));
         for cr in a.contrast.per_pixel.iter().flatten() {
@@ -474,7 +524,7 @@ fn zero_transmitted_luminance_stays_finite() {
     }
     // Bright markings on a black background: large but finite.
     let f = dial(0.8, 0.0, 0.0);
-    let c = contrast(&f.input(), &Params::default()).unwrap();
+    let c = contrast(&f.input(), &relative()).unwrap();
     assert!(
         c.per_pixel
             .iter()
@@ -489,17 +539,17 @@ fn non_finite_colours_count_as_black() {
     f.reflected[3] = Vec3::new(f32::NAN, 0.0, 0.0);
     f.reflected[4] = gray(f32::INFINITY);
     f.transmitted[5] = gray(-1.0);
-    let a = analyze(&f.input(), &Params::default()).unwrap();
+    let a = analyze(&f.input(), &relative()).unwrap();
     assert_finite(&a.summary);
     assert!(a.reflected_luminance.iter().all(|x| x.is_finite()));
-    heat_map(&f.input(), &Params::default()).unwrap();
+    heat_map(&f.input(), &relative(), None).unwrap();
 }
 
 #[test]
 fn inconsistent_input_is_an_error() {
     let mut f = Frame::new(4, 4);
     f.marking.pop();
-    let err = summarize(&f.input(), &Params::default()).unwrap_err();
+    let err = summarize(&f.input(), &relative()).unwrap_err();
     assert_eq!(
         err,
         GlareError::Length {
@@ -508,11 +558,11 @@ fn inconsistent_input_is_an_error() {
             expected: 16
         }
     );
-    assert!(heat_map(&f.input(), &Params::default()).is_err());
+    assert!(heat_map(&f.input(), &relative(), None).is_err());
     let f = Frame::new(2, 2);
     let params = Params {
-        luminance_floor: 0.0,
-        ..Params::default()
+        luminance_floor_cd_m2: 0.0,
+        ..relative()
     };
     assert!(matches!(
         summarize(&f.input(), &params),
@@ -523,9 +573,16 @@ fn inconsistent_input_is_an_error() {
 #[test]
 fn summary_serializes_to_json() {
     let f = dial(0.8, 0.1, 0.2);
-    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let s = summarize(&f.input(), &relative()).unwrap();
     let json = serde_json::to_value(&s).unwrap();
     assert_eq!(json["thresholds"]["min_contrast"], 3.0);
+    assert!(
+        json["thresholds"]["min_contrast_source"]
+            .as_str()
+            .unwrap()
+            .contains("ISO 15008")
+    );
+    assert!(json["mean_reflected_luminance_cd_m2"].is_number());
     assert_eq!(json["glass_pixels"], 16);
     assert!(json["objects"].as_array().unwrap().is_empty());
     assert!(json["low_contrast_share"].is_number());
@@ -553,4 +610,122 @@ fn text_is_clipped_and_measured() {
     draw_text(&mut one, 0, 0, "8", 1, FONT_COLOR);
     // "8" is a full box with two holes.
     assert_eq!(count_font_pixels(&one, 0), 13);
+}
+
+/// The ambient condition adds its veil `ρ_d · E / π` to both sides of the
+/// contrast: bright markings (1000 cd/m² over 50) under 45,000 lx on a glass
+/// of diffuse reflectance 0.01 keep `(1000 + L_a) / (50 + L_a)`.
+#[test]
+fn the_ambient_condition_veils_the_contrast() {
+    let f = dial(1000.0, 50.0, 0.0);
+    let mut params = relative();
+    params.ambient = AmbientCondition {
+        illuminance_lux: 45_000.0,
+        glass_diffuse_reflectance: 0.01,
+        source: "test".to_owned(),
+    };
+    let la = 0.01 * 45_000.0 / std::f32::consts::PI;
+    let s = summarize(&f.input(), &params).unwrap();
+    assert!((s.ambient_veiling_luminance_cd_m2 - la).abs() < 1e-3);
+    let expected = (1000.0 + la) / (50.0 + la);
+    assert!((s.min_contrast.unwrap() - expected).abs() < 1e-4 * expected);
+    assert!(s.min_contrast.unwrap() < 20.0);
+    params.ambient.glass_diffuse_reflectance = 1.5;
+    assert!(matches!(
+        summarize(&f.input(), &params),
+        Err(GlareError::Param { .. })
+    ));
+}
+
+/// A flat mirror of reflectance k_r in front of a panel of luminance L,
+/// traced by the renderer and measured here: the reflected luminance on the
+/// mirror is k_r · L cd/m² (and the object map names the panel).
+#[test]
+fn a_flat_mirror_reflecting_a_panel_returns_kr_times_its_luminance() {
+    use std::sync::Arc;
+    use vtfarm_scene::{Lighting, Material, Object, Scene, Triangle, photometry};
+    use vtfarm_trace::{Ray, SceneBvh, TraceSettings, Tracer};
+
+    let panel_cd_m2 = 8_000.0;
+    let kr = 0.12;
+    let mut scene = Scene::default();
+    let mut quad = |name: &str, material: Material, corners: [Vec3; 4]| {
+        let n = (corners[1] - corners[0])
+            .cross(corners[2] - corners[0])
+            .normalize();
+        let base = scene.positions.len() as u32;
+        scene.positions.extend(corners);
+        scene.normals.extend([n; 4]);
+        let object = scene.objects.len() as u32;
+        scene.objects.push(Object {
+            name: name.to_owned(),
+        });
+        scene.materials.push(material);
+        for vertices in [[0, 1, 2], [0, 2, 3]] {
+            scene.triangles.push(Triangle {
+                vertices: vertices.map(|v| base + v),
+                object,
+                material: object,
+            });
+        }
+    };
+    // The mirror in the plane z = 0 facing +z; the panel at z = 2 facing it.
+    quad(
+        "mirror",
+        Material {
+            reflectance: Vec3::splat(kr),
+            ..Material::diffuse("mirror", Vec3::ZERO)
+        },
+        [
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+    );
+    quad(
+        "panel",
+        Material {
+            emission: photometry::emission(Vec3::new(0.9, 1.0, 1.1), panel_cd_m2).unwrap(),
+            ..Material::diffuse("panel", Vec3::ZERO)
+        },
+        [
+            Vec3::new(-5.0, -5.0, 2.0),
+            Vec3::new(-5.0, 5.0, 2.0),
+            Vec3::new(5.0, 5.0, 2.0),
+            Vec3::new(5.0, -5.0, 2.0),
+        ],
+    );
+    assert_eq!(scene.validate(), Ok(()));
+    // No lights and no ambient term: the panel's emission is all there is.
+    let dark = Lighting {
+        ambient: Vec3::ZERO,
+        ..Lighting::default()
+    };
+    let bvh = SceneBvh::new(Arc::new(scene));
+    let eye = Vec3::new(0.2, 0.1, 1.0);
+    let sample = Tracer {
+        bvh: &bvh,
+        lighting: &dark,
+        settings: TraceSettings::default(),
+    }
+    .trace(&Ray {
+        origin: eye,
+        direction: (Vec3::new(0.0, 0.0, 0.0) - eye).normalize(),
+    });
+
+    let mut f = Frame::new(1, 1);
+    f.glass[0] = true;
+    f.reflected[0] = sample.reflected;
+    f.transmitted[0] = sample.transmitted;
+    f.objects[0] = sample.reflected_object;
+    f.names = vec!["mirror".to_owned(), "panel".to_owned()];
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let expected = kr * panel_cd_m2;
+    assert!(
+        (s.mean_reflected_luminance_cd_m2 - expected).abs() <= 1e-4 * expected,
+        "{} cd/m² vs {expected}",
+        s.mean_reflected_luminance_cd_m2
+    );
+    assert_eq!(s.objects[0].name, "panel");
 }

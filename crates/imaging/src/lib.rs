@@ -42,6 +42,37 @@ impl Image {
         }
     }
 
+    /// A black image, [`Image::new`] with `Vec3::ZERO`, whose pixels come
+    /// from a zeroed allocation: the operating system maps untouched pages on
+    /// first use, so a full-frame plane of which little is written (a
+    /// frame's reflected component outside the reflectors) costs only what
+    /// is touched, not a full-frame pass.
+    pub fn black(width: u32, height: u32) -> Self {
+        const { assert!(size_of::<Vec3>() == 3 * size_of::<f32>()) };
+        const { assert!(align_of::<Vec3>() == align_of::<f32>()) };
+        let n = (width * height) as usize;
+        // `vec![0.0; len]` allocates zeroed (calloc) rather than writing.
+        let floats = std::mem::ManuallyDrop::new(vec![0.0f32; 3 * n]);
+        if floats.capacity() != 3 * n {
+            // Never taken (`vec!` allocates exactly), but the cast below
+            // needs it: fall back on writing every pixel.
+            std::mem::ManuallyDrop::into_inner(floats);
+            return Image::new(width, height, Vec3::ZERO);
+        }
+        let mut floats = floats;
+        // SAFETY: `Vec3` is `#[repr(C)]` of three `f32` (size and alignment
+        // checked above), so the buffer of 3n zeroed `f32` with capacity 3n
+        // is a valid, identically laid out allocation of n zero `Vec3`; the
+        // original `Vec` is never dropped (`ManuallyDrop`), so the allocation
+        // has one owner.
+        let pixels = unsafe { Vec::from_raw_parts(floats.as_mut_ptr().cast::<Vec3>(), n, n) };
+        Image {
+            width,
+            height,
+            pixels,
+        }
+    }
+
     /// The index of pixel (`x`, `y`) in [`Image::pixels`].
     pub fn index(&self, x: u32, y: u32) -> usize {
         (y * self.width + x) as usize
@@ -170,6 +201,20 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), I
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_black_image_is_a_zero_filled_one() {
+        for (w, h) in [(0, 0), (1, 1), (3, 2), (1920, 1080)] {
+            let mut black = Image::black(w, h);
+            assert_eq!(black, Image::new(w, h, Vec3::ZERO));
+            if w > 0 {
+                // It is an ordinary image: writable and growable.
+                black.set(w - 1, h - 1, Vec3::ONE);
+                black.pixels.push(Vec3::X);
+                assert_eq!(black.pixels.len(), (w * h) as usize + 1);
+            }
+        }
+    }
+
     use super::*;
 
     #[test]

@@ -125,7 +125,7 @@ impl CameraSpec {
 }
 
 /// The `[lighting]` keys that were given; each overrides the scene's own
-/// lighting (the cockpit's sun and cabin lamp, or [`Lighting::default`] with
+/// lighting (the cockpit's sun and daylight, or [`Lighting::default`] with
 /// no lights for OBJ files). `lights: Some(vec![])` means "no lights".
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LightingSpec {

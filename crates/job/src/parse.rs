@@ -13,7 +13,7 @@ use toml::Spanned;
 use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
 use vtfarm_method::MethodKind;
 use vtfarm_scene::bounds::{self, OutOfBounds};
-use vtfarm_scene::{Camera, Light, LightKind};
+use vtfarm_scene::{Camera, Light, LightKind, photometry};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
@@ -72,7 +72,9 @@ struct RawCamera {
 #[serde(deny_unknown_fields)]
 struct RawLighting {
     ambient: Option<Vec3Value>,
+    ambient_illuminance_lux: Option<Spanned<f32>>,
     background: Option<Vec3Value>,
+    background_luminance_cd_m2: Option<Spanned<f32>>,
     lights: Option<Vec<RawLight>>,
 }
 
@@ -84,6 +86,7 @@ struct RawLight {
     direction: Option<Vec3Value>,
     color: Option<Vec3Value>,
     intensity: Option<Spanned<f32>>,
+    illuminance_lux: Option<Spanned<f32>>,
 }
 
 #[derive(Clone, Copy, Deserialize)]
@@ -551,9 +554,47 @@ impl Source<'_> {
                         .collect()
                 })
                 .transpose()?,
-            ambient: self.color("lighting.ambient", &raw.ambient)?,
-            background: self.color("lighting.background", &raw.background)?,
+            ambient: self.photometric_or_color(
+                ("lighting.ambient", &raw.ambient),
+                (
+                    "lighting.ambient_illuminance_lux",
+                    &raw.ambient_illuminance_lux,
+                ),
+                photometry::ambient,
+            )?,
+            background: self.photometric_or_color(
+                ("lighting.background", &raw.background),
+                (
+                    "lighting.background_luminance_cd_m2",
+                    &raw.background_luminance_cd_m2,
+                ),
+                |cd_m2| Vec3::splat(cd_m2 / photometry::CD_M2_PER_UNIT),
+            )?,
         })
+    }
+
+    /// A colour given either in render units (`color_key`) or as a grey of
+    /// the photometric quantity under `unit_key`, converted by `convert`;
+    /// giving both is an error at the second.
+    fn photometric_or_color(
+        &self,
+        (color_key, color): (&str, &Option<Vec3Value>),
+        (unit_key, value): (&str, &Option<Spanned<f32>>),
+        convert: impl FnOnce(f32) -> Vec3,
+    ) -> Result<Option<Vec3>, JobError> {
+        match (color, value) {
+            (Some(_), Some(v)) => Err(self.error_at(
+                v,
+                format!("{unit_key}: give {unit_key} or {color_key} (render units), not both"),
+            )),
+            (None, Some(v)) => Ok(Some(convert(self.check(
+                unit_key,
+                v,
+                "finite and not negative",
+                |x| x.is_finite() && x >= 0.0,
+            )?))),
+            (_, None) => self.color(color_key, color),
+        }
     }
 
     fn light(&self, index: usize, raw: &RawLight) -> Result<Light, JobError> {
@@ -576,16 +617,17 @@ impl Source<'_> {
             return Err(self.error_at(&raw.kind, message));
         };
         let v = Vec3::from_array(*value.get_ref());
+        let color = raw
+            .color
+            .as_ref()
+            .map_or(Vec3::ONE, |c| Vec3::from_array(*c.get_ref()));
         let light = Light {
             kind: match kind {
                 RawLightKind::Point => LightKind::Point { position: v },
                 RawLightKind::Directional => LightKind::Directional { direction: v },
             },
-            color: raw
-                .color
-                .as_ref()
-                .map_or(Vec3::ONE, |c| Vec3::from_array(*c.get_ref())),
-            intensity: raw.intensity.as_ref().map_or(1.0, |i| *i.get_ref()),
+            color,
+            intensity: self.light_intensity(index, kind, raw, color)?,
         };
         // The bounds are the light's own (`Light::validate`); locate them here.
         light.validate().map_err(|e| {
@@ -597,6 +639,42 @@ impl Source<'_> {
             self.error(span, e.message_for(&key(name)))
         })?;
         Ok(light)
+    }
+
+    /// `intensity` (render units) or, for directional lights,
+    /// `illuminance_lux` converted by the photometric convention.
+    fn light_intensity(
+        &self,
+        index: usize,
+        kind: RawLightKind,
+        raw: &RawLight,
+        color: Vec3,
+    ) -> Result<f32, JobError> {
+        let key = format!("lighting.lights[{index}].illuminance_lux");
+        let Some(lux) = &raw.illuminance_lux else {
+            return Ok(raw.intensity.as_ref().map_or(1.0, |i| *i.get_ref()));
+        };
+        if let RawLightKind::Point = kind {
+            return Err(self.error_at(
+                lux,
+                format!("{key}: point lights have no distance falloff, so no photometric unit; give intensity (render units) or make the light directional"),
+            ));
+        }
+        if let Some(intensity) = &raw.intensity {
+            return Err(self.error_at(
+                intensity,
+                format!("lighting.lights[{index}]: give illuminance_lux or intensity (render units), not both"),
+            ));
+        }
+        let lux = self.check(&key, lux, "finite and not negative", |x| {
+            x.is_finite() && x >= 0.0
+        })?;
+        photometry::directional_intensity(color, lux).ok_or_else(|| {
+            self.error(
+                raw.color.as_ref().map(Spanned::span),
+                format!("lighting.lights[{index}].color = {color}: a light given in lux needs a colour with luminance (not black)"),
+            )
+        })
     }
 
     fn reflectors(

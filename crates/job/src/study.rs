@@ -49,18 +49,33 @@ pub struct Variant {
     pub scene: SceneSource,
 }
 
-/// The `[metrics]` keys; `None` keeps the glare crate's documented default.
+/// The `[metrics]` keys; `None` keeps the glare crate's documented default
+/// (and its source). Luminances are in cd/m², illuminances in lux.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MetricsSpec {
-    pub veiling_luminance: Option<f32>,
-    pub min_contrast: Option<f32>,
-    pub luminance_scale: Option<f32>,
-    /// Top of the heat maps' colour scale (the same for every frame).
-    pub heat_scale: Option<f32>,
+    /// Reflected luminance above which a glass pixel counts as glare.
+    pub veiling_luminance_cd_m2: Option<Sourced>,
+    /// Minimum contrast ratio of the markings.
+    pub min_contrast: Option<Sourced>,
+    /// The ambient condition: diffuse illuminance on the display.
+    pub ambient_illuminance_lux: Option<Sourced>,
+    /// Diffuse reflectance of the cover glass under the ambient condition.
+    pub glass_diffuse_reflectance: Option<f32>,
+    /// The heat maps' logarithmic scale (the same for every frame).
+    pub heat_min_cd_m2: Option<f32>,
+    pub heat_max_cd_m2: Option<f32>,
     /// Objects behind the glass that make up the instrument area.
     pub instrument_objects: Vec<String>,
     /// Objects of the instrument markings (needles, ticks, numerals).
     pub marking_objects: Vec<String>,
+}
+
+/// A setting with where it comes from: the study's `<key>_source`, or
+/// "set in <study file>" when only the value is given.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sourced {
+    pub value: f32,
+    pub source: String,
 }
 
 /// An eye ellipse as automotive eyellipses are given: a centre, three
@@ -147,12 +162,21 @@ struct RawVariant {
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawMetrics {
-    veiling_luminance: Option<Spanned<f32>>,
+    veiling_luminance_cd_m2: Option<Spanned<f32>>,
+    veiling_luminance_source: Option<String>,
     min_contrast: Option<Spanned<f32>>,
-    luminance_scale: Option<Spanned<f32>>,
-    heat_scale: Option<Spanned<f32>>,
+    min_contrast_source: Option<String>,
+    ambient_illuminance_lux: Option<Spanned<f32>>,
+    ambient_source: Option<String>,
+    glass_diffuse_reflectance: Option<Spanned<f32>>,
+    heat_min_cd_m2: Option<Spanned<f32>>,
+    heat_max_cd_m2: Option<Spanned<f32>>,
     instrument_objects: Option<Vec<String>>,
     marking_objects: Option<Vec<String>>,
+    // Unit-less keys of earlier versions, refused with their replacement.
+    veiling_luminance: Option<Spanned<f32>>,
+    luminance_scale: Option<Spanned<f32>>,
+    heat_scale: Option<Spanned<f32>>,
 }
 
 /// The cockpit's instrument area: dial faces, markings, needles and lamps.
@@ -368,37 +392,92 @@ impl Source<'_> {
     }
 
     fn metrics(&self, raw: &RawMetrics) -> Result<MetricsSpec, JobError> {
+        let retired = [
+            (
+                &raw.veiling_luminance,
+                "metrics.veiling_luminance is unit-less; give veiling_luminance_cd_m2 (cd/m²: the old value times the old luminance_scale, or times 10,000 without one)",
+            ),
+            (
+                &raw.luminance_scale,
+                "metrics.luminance_scale is gone: luminances are in cd/m² by vtfarm's photometric convention (10,000 cd/m² per unit of rendered radiance; README, \"Photometric units\")",
+            ),
+            (
+                &raw.heat_scale,
+                "metrics.heat_scale is unit-less; give heat_max_cd_m2 (and heat_min_cd_m2) for the heat maps' logarithmic scale in cd/m²",
+            ),
+        ];
+        if let Some((Some(value), why)) = retired.into_iter().find(|(v, _)| v.is_some()) {
+            return Err(self.error_at(value, why));
+        }
         let positive = |x: f32| x.is_finite() && x > 0.0;
         let names = |given: &Option<Vec<String>>, default: &[&str]| {
             given
                 .clone()
                 .unwrap_or_else(|| default.iter().map(|s| (*s).to_owned()).collect())
         };
+        let given_here = format!("set in {}", self.file.display());
+        let sourced = |value: Option<f32>, source: &Option<String>| {
+            value.map(|value| Sourced {
+                value,
+                source: source.clone().unwrap_or_else(|| given_here.clone()),
+            })
+        };
+        let heat_min = self.check_opt(
+            "metrics.heat_min_cd_m2",
+            &raw.heat_min_cd_m2,
+            "positive",
+            positive,
+        )?;
+        let heat_max = self.check_opt(
+            "metrics.heat_max_cd_m2",
+            &raw.heat_max_cd_m2,
+            "positive",
+            positive,
+        )?;
+        if let (Some(lo), Some(hi), Some(at)) = (heat_min, heat_max, &raw.heat_max_cd_m2) {
+            if hi <= lo {
+                return Err(self.error_at(
+                    at,
+                    format!("metrics.heat_max_cd_m2 = {hi} must be above heat_min_cd_m2 = {lo}"),
+                ));
+            }
+        }
         Ok(MetricsSpec {
-            veiling_luminance: self.check_opt(
-                "metrics.veiling_luminance",
-                &raw.veiling_luminance,
-                "finite and not negative",
-                |x| x.is_finite() && x >= 0.0,
+            veiling_luminance_cd_m2: sourced(
+                self.check_opt(
+                    "metrics.veiling_luminance_cd_m2",
+                    &raw.veiling_luminance_cd_m2,
+                    "finite and not negative",
+                    |x| x.is_finite() && x >= 0.0,
+                )?,
+                &raw.veiling_luminance_source,
+            ),
+            min_contrast: sourced(
+                self.check_opt(
+                    "metrics.min_contrast",
+                    &raw.min_contrast,
+                    "at least 1",
+                    |x| x.is_finite() && x >= 1.0,
+                )?,
+                &raw.min_contrast_source,
+            ),
+            ambient_illuminance_lux: sourced(
+                self.check_opt(
+                    "metrics.ambient_illuminance_lux",
+                    &raw.ambient_illuminance_lux,
+                    "finite and not negative",
+                    |x| x.is_finite() && x >= 0.0,
+                )?,
+                &raw.ambient_source,
+            ),
+            glass_diffuse_reflectance: self.check_opt(
+                "metrics.glass_diffuse_reflectance",
+                &raw.glass_diffuse_reflectance,
+                "0 to 1",
+                |x| (0.0..=1.0).contains(&x),
             )?,
-            min_contrast: self.check_opt(
-                "metrics.min_contrast",
-                &raw.min_contrast,
-                "at least 1",
-                |x| x.is_finite() && x >= 1.0,
-            )?,
-            luminance_scale: self.check_opt(
-                "metrics.luminance_scale",
-                &raw.luminance_scale,
-                "positive",
-                positive,
-            )?,
-            heat_scale: self.check_opt(
-                "metrics.heat_scale",
-                &raw.heat_scale,
-                "positive",
-                positive,
-            )?,
+            heat_min_cd_m2: heat_min,
+            heat_max_cd_m2: heat_max,
             instrument_objects: names(&raw.instrument_objects, &COCKPIT_INSTRUMENT_OBJECTS),
             marking_objects: names(&raw.marking_objects, &COCKPIT_MARKING_OBJECTS),
         })

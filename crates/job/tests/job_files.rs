@@ -508,6 +508,73 @@ fn lighting_values_are_checked() {
     );
 }
 
+/// Lights in lux and cd/m² become render units by the one convention of
+/// `vtfarm_scene::photometry`; unit-less keys keep loading as render units.
+#[test]
+fn photometric_lighting_keys_convert_by_the_convention() {
+    use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
+    let job = parse(&format!(
+        "{COCKPIT}[lighting]\nambient_illuminance_lux = 3000\nbackground_luminance_cd_m2 = 5000\n\
+         [[lighting.lights]]\nkind = \"directional\"\ndirection = [0, -1, 0]\ncolor = [1, 0.9, 0.8]\nilluminance_lux = 100000\n\
+         [[lighting.lights]]\nkind = \"point\"\nposition = [0, 1, 0]\nintensity = 0.5\n"
+    ));
+    let lights = job.lighting.lights.unwrap();
+    let sun = lights[0];
+    let facing_white = photometry::cd_m2(sun.radiance());
+    assert!(
+        (facing_white - 100_000.0 / std::f32::consts::PI).abs() < 0.5,
+        "{facing_white}"
+    );
+    assert_eq!(sun.color, Vec3::new(1.0, 0.9, 0.8));
+    assert_eq!(lights[1].intensity, 0.5);
+    assert_eq!(job.lighting.ambient, Some(photometry::ambient(3000.0)));
+    assert_eq!(
+        job.lighting.background,
+        Some(Vec3::splat(5000.0 / CD_M2_PER_UNIT))
+    );
+}
+
+#[test]
+fn photometric_lighting_keys_are_checked() {
+    let light = |body: &str| format!("{COCKPIT}[[lighting.lights]]\n{body}");
+    assert_rejected(
+        &light(
+            "kind = \"directional\"\ndirection = [0, -1, 0]\nilluminance_lux = 1000\nintensity = 2\n",
+        ),
+        7,
+        &["illuminance_lux or intensity", "not both"],
+    );
+    assert_rejected(
+        &light("kind = \"point\"\nposition = [0, 1, 0]\nilluminance_lux = 1000\n"),
+        6,
+        &["illuminance_lux", "point lights"],
+    );
+    assert_rejected(
+        &light("kind = \"directional\"\ndirection = [0, -1, 0]\nilluminance_lux = -5\n"),
+        6,
+        &["illuminance_lux = -5", "not negative"],
+    );
+    assert_rejected(
+        &light(
+            "kind = \"directional\"\ndirection = [0, -1, 0]\ncolor = [0, 0, 0]\nilluminance_lux = 5\n",
+        ),
+        6,
+        &["color", "luminance"],
+    );
+    assert_rejected(
+        &format!(
+            "{COCKPIT}[lighting]\nbackground = [0.1, 0.1, 0.1]\nbackground_luminance_cd_m2 = 300\n"
+        ),
+        5,
+        &["background_luminance_cd_m2", "not both"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[lighting]\nambient_illuminance_lux = inf\n"),
+        4,
+        &["ambient_illuminance_lux", "finite"],
+    );
+}
+
 #[test]
 fn quality_values_are_checked() {
     assert_rejected(

@@ -61,6 +61,21 @@ fn the_example_study_parses_into_its_variants_and_eye_ellipse() {
     ));
     assert_eq!((study.width, study.height), (Some(640), Some(360)));
     assert_eq!(study.metrics.instrument_objects, COCKPIT_INSTRUMENT_OBJECTS);
+    let min_contrast = study.metrics.min_contrast.clone().unwrap();
+    assert_eq!(min_contrast.value, 3.0);
+    assert!(min_contrast.source.contains("ISO 15008"));
+    // A value without its source is recorded as set in the study file.
+    let veil = study.metrics.veiling_luminance_cd_m2.clone().unwrap();
+    assert_eq!(veil.value, 500.0);
+    assert!(
+        veil.source.contains("cockpit-study.toml"),
+        "{}",
+        veil.source
+    );
+    assert_eq!(
+        study.metrics.ambient_illuminance_lux.unwrap().value,
+        45_000.0
+    );
     // Every ellipse point lies on the ellipsoid (semi-axes 0.06, 0.04, 0.08,
     // tilted 12 degrees about x).
     let tilt = glam::Mat3::from_rotation_x(12f32.to_radians());
@@ -143,4 +158,27 @@ fn other_mistakes_name_what_to_fix() {
         let m = refused(&text);
         assert!(m.contains(expected), "{expected:?} not in {m}");
     }
+}
+
+/// The unit-less metric keys of earlier study files are refused at their
+/// line with the key that replaces them, never read in the wrong unit.
+#[test]
+fn unit_less_metric_keys_name_their_replacement() {
+    let eyes = "[eyes]\npoints = [[0.0, 1.4, 0.1]]\n";
+    for (key, replacement) in [
+        ("veiling_luminance = 0.05", "veiling_luminance_cd_m2"),
+        ("luminance_scale = 1.0", "cd/m²"),
+        ("heat_scale = 0.2", "heat_max_cd_m2"),
+    ] {
+        let m = refused(&format!("{HEADER}{eyes}{ONE_VARIANT}[metrics]\n{key}\n"));
+        let line = 3 + eyes.lines().count() + ONE_VARIANT.lines().count() + 1;
+        assert!(
+            m.contains(&format!(":{line}:")) && m.contains(replacement),
+            "{key}: {m}"
+        );
+    }
+    let m = refused(&format!(
+        "{HEADER}{eyes}{ONE_VARIANT}[metrics]\nheat_min_cd_m2 = 10.0\nheat_max_cd_m2 = 5.0\n"
+    ));
+    assert!(m.contains("must be above heat_min_cd_m2"), "{m}");
 }

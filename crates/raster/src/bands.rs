@@ -7,17 +7,24 @@
 
 use rayon::prelude::*;
 
-use crate::IdBuffer;
 use crate::triangle::RasterTriangle;
+use crate::{IdBuffer, PixelRect};
 
 /// Rows per band: small enough for load balancing and a cache-resident
 /// z-buffer slice, large enough that big triangles are not set up too often.
 const BAND_ROWS: u32 = 16;
 
-/// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel.
-pub(crate) fn resolve_visibility(triangles: &[RasterTriangle], ids: &mut IdBuffer) {
+/// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel
+/// inside `within` (the rest stays empty). A pixel's result does not depend
+/// on `within`, as long as it lies inside.
+pub(crate) fn resolve_visibility(
+    triangles: &[RasterTriangle],
+    ids: &mut IdBuffer,
+    within: PixelRect,
+) {
     let width = ids.width as usize;
-    if width == 0 || ids.height == 0 {
+    let within = within.clamped(ids.width, ids.height);
+    if within.is_empty() {
         return;
     }
     let bins = Bins::new(triangles, ids.height);
@@ -28,13 +35,19 @@ pub(crate) fn resolve_visibility(triangles: &[RasterTriangle], ids: &mut IdBuffe
         .zip(triangle)
         .enumerate()
         .for_each(|(band, (depth, triangle))| {
-            let first_row = band as u32 * BAND_ROWS;
-            let last_row = first_row + (depth.len() / width) as u32 - 1;
+            let first_row = (band as u32 * BAND_ROWS).max(within.y0);
+            let last_row =
+                (band as u32 * BAND_ROWS + (depth.len() / width) as u32 - 1).min(within.y1 - 1);
+            if first_row > last_row {
+                return;
+            }
+            let band_row = band as u32 * BAND_ROWS;
             for &t in bins.band(band) {
                 let t = &triangles[t as usize];
                 for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
                     let Some((x0, x1)) = t.span(y) else { continue };
-                    let row = (y - first_row) as usize * width;
+                    let (x0, x1) = (x0.max(within.x0), x1.min(within.x1 - 1));
+                    let row = (y - band_row) as usize * width;
                     for x in x0..=x1 {
                         let i = row + x as usize;
                         let d = t.depth_at(x, y);

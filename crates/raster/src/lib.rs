@@ -58,6 +58,51 @@ impl IdBuffer {
     }
 }
 
+/// A rectangle of pixels: columns `x0..x1`, rows `y0..y1` (ends exclusive).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelRect {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+}
+
+impl PixelRect {
+    /// The whole `width` x `height` image.
+    pub fn full(width: u32, height: u32) -> Self {
+        PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        }
+    }
+
+    /// This rectangle cut to a `width` x `height` image.
+    pub fn clamped(self, width: u32, height: u32) -> Self {
+        PixelRect {
+            x0: self.x0.min(width),
+            y0: self.y0.min(height),
+            x1: self.x1.min(width),
+            y1: self.y1.min(height),
+        }
+    }
+
+    pub fn is_empty(self) -> bool {
+        self.x0 >= self.x1 || self.y0 >= self.y1
+    }
+
+    /// Whether pixel (`x`, `y`) lies inside.
+    pub fn contains(self, x: u32, y: u32) -> bool {
+        (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
+    }
+
+    /// The pixels inside, row by row.
+    pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+}
+
 /// The largest supported image width or height: keeps the fixed-point edge
 /// functions exact in 64-bit integers.
 const MAX_DIMENSION: u32 = 1 << 20;
@@ -98,6 +143,22 @@ pub fn id_buffer_where(
     id_buffer_clipped(scene, camera, NEAR, keep)
 }
 
+/// [`id_buffer_where`] over the pixels of `within` only: they get exactly
+/// what the whole buffer has there, every other pixel stays empty. For a
+/// caller that looks at a known part of the frame (a worker at the
+/// reflectors), at the cost of that part.
+///
+/// # Panics
+/// As [`rasterize`].
+pub fn id_buffer_within(
+    scene: &Scene,
+    camera: &Camera,
+    within: PixelRect,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+) -> IdBuffer {
+    rasterize_ids(scene, camera, NEAR, within, keep)
+}
+
 /// [`id_buffer_where`] with the near clipping plane at view depth `near`
 /// instead of `vtfarm_scene::NEAR`: geometry nearer than `near` along the
 /// camera's forward axis is clipped away exactly at the plane, so a pixel
@@ -113,6 +174,18 @@ pub fn id_buffer_clipped(
     near: f32,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> IdBuffer {
+    let full = PixelRect::full(camera.width, camera.height);
+    rasterize_ids(scene, camera, near, full, keep)
+}
+
+/// The one ID-buffer pass behind the public variants.
+fn rasterize_ids(
+    scene: &Scene,
+    camera: &Camera,
+    near: f32,
+    within: PixelRect,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+) -> IdBuffer {
     assert!(
         near > 0.0 && near.is_finite(),
         "the near plane must lie in front of the eye, not at depth {near}"
@@ -125,7 +198,7 @@ pub fn id_buffer_clipped(
     );
     let triangles = setup::setup(scene, camera, near, keep);
     let mut ids = IdBuffer::new(camera.width, camera.height);
-    bands::resolve_visibility(&triangles, &mut ids);
+    bands::resolve_visibility(&triangles, &mut ids, within);
     let IdBuffer {
         object, triangle, ..
     } = &mut ids;

@@ -3,7 +3,9 @@
 //! the shared Phong model, and bit-identical results on any thread count.
 
 use glam::{DVec3, Quat, Vec3};
-use vtfarm_raster::{IdBuffer, id_buffer, id_buffer_clipped, id_buffer_where, rasterize};
+use vtfarm_raster::{
+    IdBuffer, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within, rasterize,
+};
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
     Camera, Light, LightKind, Lighting, Material, NEAR, NONE, Object, ObjectId, Scene, Triangle,
@@ -341,6 +343,56 @@ fn id_buffer_matches_a_brute_force_ray_cast() {
             assert_eq!(ids.object[i], expected);
         }
     }
+}
+
+#[test]
+fn a_buffer_within_a_rectangle_is_the_whole_buffer_there_and_empty_elsewhere() {
+    let (scene, camera) = procedural_scene(3, 128, 96);
+    let whole = id_buffer(&scene, &camera);
+    let rects = [
+        PixelRect::full(128, 96),
+        // Band edges (16 rows) cut inside, odd columns.
+        PixelRect {
+            x0: 7,
+            y0: 13,
+            x1: 77,
+            y1: 50,
+        },
+        PixelRect {
+            x0: 0,
+            y0: 95,
+            x1: 1,
+            y1: 96,
+        },
+        // Reaching past the image, and empty.
+        PixelRect {
+            x0: 100,
+            y0: 80,
+            x1: 500,
+            y1: 500,
+        },
+        PixelRect {
+            x0: 40,
+            y0: 40,
+            x1: 40,
+            y1: 90,
+        },
+    ];
+    for rect in rects {
+        let part = id_buffer_within(&scene, &camera, rect, &|_| true);
+        let mut expected = IdBuffer::new(128, 96);
+        for (x, y) in rect.clamped(128, 96).pixels() {
+            let i = whole.index(x, y);
+            expected.triangle[i] = whole.triangle[i];
+            expected.object[i] = whole.object[i];
+            expected.depth[i] = whole.depth[i];
+        }
+        assert_same_ids(&part, &expected);
+    }
+    // Not vacuous: the middle rectangle shows several triangles.
+    let middle = id_buffer_within(&scene, &camera, rects[1], &|_| true);
+    let seen: std::collections::HashSet<_> = middle.triangle.iter().collect();
+    assert!(seen.len() > 10, "{} triangles seen", seen.len());
 }
 
 /// How many of the grid's triangles, each rasterized alone, cover each pixel.

@@ -11,6 +11,7 @@ mod light;
 mod material;
 pub mod normals;
 pub mod obj;
+pub mod photometry;
 pub mod shading;
 pub mod shapes;
 

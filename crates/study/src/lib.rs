@@ -23,9 +23,9 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use serde::Serialize;
-use vtfarm_glare::{GlareInput, Params, Summary, Thresholds};
+use vtfarm_glare::{AmbientCondition, GlareInput, LogRange, Params, Summary, Thresholds};
 use vtfarm_job::JobError;
-use vtfarm_job::study::Study;
+use vtfarm_job::study::{MetricsSpec, Sourced, Study};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::{Camera, ObjectId, Scene, TriangleId};
 use vtfarm_vertex::{FrameImage, Quality};
@@ -93,8 +93,8 @@ pub struct StudyPlan {
     pub eyes: Vec<Vec3>,
     pub variants: Vec<PlannedVariant>,
     pub params: Params,
-    /// The heat maps' top of scale.
-    pub heat_scale: f32,
+    /// The heat maps' logarithmic scale, the same for every frame.
+    pub heat_range: LogRange,
     /// The base job's reflection method.
     pub method: vtfarm_method::MethodKind,
 }
@@ -105,31 +105,67 @@ impl StudyPlan {
     }
 }
 
+/// Default bottom of the heat maps' scale.
+pub const DEFAULT_HEAT_MIN_CD_M2: f32 = 1.0;
+/// Default top of the heat maps' scale: a strong window reflection.
+pub const DEFAULT_HEAT_MAX_CD_M2: f32 = 10_000.0;
+
+/// The glare parameters of a study's `[metrics]`: each given value with its
+/// source, the glare crate's documented defaults (and theirs) otherwise.
+fn glare_params(metrics: &MetricsSpec) -> Params {
+    let defaults = Params::default();
+    let pick = |given: &Option<Sourced>, value: f32, source: String| {
+        given
+            .as_ref()
+            .map_or((value, source), |s| (s.value, s.source.clone()))
+    };
+    let (min_contrast, min_contrast_source) = pick(
+        &metrics.min_contrast,
+        defaults.thresholds.min_contrast,
+        defaults.thresholds.min_contrast_source,
+    );
+    let (veiling_luminance_cd_m2, veiling_luminance_source) = pick(
+        &metrics.veiling_luminance_cd_m2,
+        defaults.thresholds.veiling_luminance_cd_m2,
+        defaults.thresholds.veiling_luminance_source,
+    );
+    let (illuminance_lux, source) = pick(
+        &metrics.ambient_illuminance_lux,
+        defaults.ambient.illuminance_lux,
+        defaults.ambient.source,
+    );
+    Params {
+        thresholds: Thresholds {
+            min_contrast,
+            min_contrast_source,
+            veiling_luminance_cd_m2,
+            veiling_luminance_source,
+        },
+        ambient: AmbientCondition {
+            illuminance_lux,
+            glass_diffuse_reflectance: metrics
+                .glass_diffuse_reflectance
+                .unwrap_or(defaults.ambient.glass_diffuse_reflectance),
+            source,
+        },
+        ..defaults
+    }
+}
+
 /// Loads every variant's scene and makes the frames; `quality` overrides the
 /// base job's level.
 pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyError> {
-    let thresholds = Thresholds {
-        min_contrast: study
+    let params = glare_params(&study.metrics);
+    let heat_range = LogRange {
+        min_cd_m2: study
             .metrics
-            .min_contrast
-            .unwrap_or(vtfarm_glare::DEFAULT_MIN_CONTRAST),
-        veiling_luminance: study
+            .heat_min_cd_m2
+            .unwrap_or(DEFAULT_HEAT_MIN_CD_M2),
+        max_cd_m2: study
             .metrics
-            .veiling_luminance
-            .unwrap_or(vtfarm_glare::DEFAULT_VEILING_LUMINANCE),
+            .heat_max_cd_m2
+            .unwrap_or(DEFAULT_HEAT_MAX_CD_M2),
     };
-    let params = Params {
-        luminance_scale: study
-            .metrics
-            .luminance_scale
-            .unwrap_or(vtfarm_glare::DEFAULT_LUMINANCE_SCALE),
-        thresholds,
-        ..Params::default()
-    };
-    let heat_scale = study.metrics.heat_scale.unwrap_or_else(|| {
-        let v = 4.0 * thresholds.veiling_luminance;
-        if v > 0.0 { v } else { 1.0 }
-    });
     // The base job's own scene gives the lighting and the camera every
     // variant shares, so that designs are compared under the same light.
     let base = study.job.load_scene()?;
@@ -205,7 +241,7 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         eyes: study.eyes.clone(),
         variants,
         params,
-        heat_scale,
+        heat_range,
         method: study.job.method,
     })
 }
@@ -322,7 +358,7 @@ impl<'a> StudyWriter<'a> {
         let input = GlareInput::from_frame(frame, &masks.instrument, &masks.marking, &names);
         let params = &self.plan.params;
         let analysis = vtfarm_glare::analyze(&input, params).map_err(|e| bad(e.to_string()))?;
-        let heat = vtfarm_glare::heat_map_with_max(&input, params, Some(self.plan.heat_scale))
+        let heat = vtfarm_glare::heat_map(&input, params, Some(self.plan.heat_range))
             .map_err(|e| bad(e.to_string()))?;
         let objects = vtfarm_glare::object_map(&input, params).map_err(|e| bad(e.to_string()))?;
 
@@ -402,8 +438,8 @@ pub struct VariantScore {
     pub mean_glare_area_share: f32,
     pub worst_glare_area_share: f32,
     pub worst_low_contrast_share: f32,
-    pub mean_reflected_luminance: f32,
-    pub peak_reflected_luminance: f32,
+    pub mean_reflected_luminance_cd_m2: f32,
+    pub peak_reflected_luminance_cd_m2: f32,
     /// The object covering the most glass over all eye points.
     pub main_glare_source: Option<String>,
 }

@@ -17,9 +17,11 @@ struct CsvRow<'a> {
     eye_y: f32,
     eye_z: f32,
     glass_pixels: usize,
-    peak_reflected_luminance: f32,
-    mean_reflected_luminance: f32,
-    mean_transmitted_luminance: f32,
+    peak_reflected_luminance_cd_m2: f32,
+    mean_reflected_luminance_cd_m2: f32,
+    mean_transmitted_luminance_cd_m2: f32,
+    mean_marking_luminance_cd_m2: f32,
+    mean_background_luminance_cd_m2: f32,
     mean_veiling_ratio: f32,
     glare_area_share: f32,
     instrument_pixels: usize,
@@ -32,10 +34,11 @@ struct CsvRow<'a> {
 #[derive(Serialize)]
 struct JsonSummary<'a> {
     study: &'a str,
-    luminance_scale: f32,
-    veiling_luminance: f32,
-    min_contrast: f32,
-    heat_scale: f32,
+    cd_m2_per_unit: f32,
+    thresholds: &'a vtfarm_glare::Thresholds,
+    ambient: &'a vtfarm_glare::AmbientCondition,
+    heat_min_cd_m2: f32,
+    heat_max_cd_m2: f32,
     eyes: Vec<[f32; 3]>,
     frames: &'a [FrameRow],
     ranking: &'a [VariantScore],
@@ -50,10 +53,11 @@ pub(crate) fn write_all(
     write_file(&dir.join("summary.csv"), &csv_text(&frames)?)?;
     let json = JsonSummary {
         study: &plan.name,
-        luminance_scale: plan.params.luminance_scale,
-        veiling_luminance: plan.params.thresholds.veiling_luminance,
-        min_contrast: plan.params.thresholds.min_contrast,
-        heat_scale: plan.heat_scale,
+        cd_m2_per_unit: plan.params.cd_m2_per_unit,
+        thresholds: &plan.params.thresholds,
+        ambient: &plan.params.ambient,
+        heat_min_cd_m2: plan.heat_range.min_cd_m2,
+        heat_max_cd_m2: plan.heat_range.max_cd_m2,
         eyes: plan.eyes.iter().map(|e| e.to_array()).collect(),
         frames: &frames,
         ranking: &ranking,
@@ -84,9 +88,11 @@ fn csv_text(frames: &[FrameRow]) -> Result<String, StudyError> {
                 eye_y: f.eye[1],
                 eye_z: f.eye[2],
                 glass_pixels: s.glass_pixels,
-                peak_reflected_luminance: s.peak_reflected_luminance,
-                mean_reflected_luminance: s.mean_reflected_luminance,
-                mean_transmitted_luminance: s.mean_transmitted_luminance,
+                peak_reflected_luminance_cd_m2: s.peak_reflected_luminance_cd_m2,
+                mean_reflected_luminance_cd_m2: s.mean_reflected_luminance_cd_m2,
+                mean_transmitted_luminance_cd_m2: s.mean_transmitted_luminance_cd_m2,
+                mean_marking_luminance_cd_m2: s.mean_marking_luminance_cd_m2,
+                mean_background_luminance_cd_m2: s.mean_background_luminance_cd_m2,
                 mean_veiling_ratio: s.mean_veiling_ratio,
                 glare_area_share: s.glare_area_share,
                 instrument_pixels: s.instrument_pixels,
@@ -128,8 +134,8 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
                 mean_glare_area_share: mean(|r| r.summary.glare_area_share),
                 worst_glare_area_share: worst(|r| r.summary.glare_area_share),
                 worst_low_contrast_share: worst(|r| r.summary.low_contrast_share),
-                mean_reflected_luminance: mean(|r| r.summary.mean_reflected_luminance),
-                peak_reflected_luminance: worst(|r| r.summary.peak_reflected_luminance),
+                mean_reflected_luminance_cd_m2: mean(|r| r.summary.mean_reflected_luminance_cd_m2),
+                peak_reflected_luminance_cd_m2: worst(|r| r.summary.peak_reflected_luminance_cd_m2),
                 main_glare_source: main,
             }
         })
@@ -142,8 +148,8 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
                     .total_cmp(&b.worst_low_contrast_share),
             )
             .then(
-                a.mean_reflected_luminance
-                    .total_cmp(&b.mean_reflected_luminance),
+                a.mean_reflected_luminance_cd_m2
+                    .total_cmp(&b.mean_reflected_luminance_cd_m2),
             )
     });
     scores
@@ -174,8 +180,8 @@ struct Plot {
 const PLOTS: [Plot; 3] = [
     Plot {
         title: "Mean reflected luminance on the glass",
-        axis: "mean Lr",
-        value: |r| r.summary.mean_reflected_luminance,
+        axis: "mean Lr (cd/m²)",
+        value: |r| r.summary.mean_reflected_luminance_cd_m2,
     },
     Plot {
         title: "Glass area over the glare threshold",
@@ -274,32 +280,41 @@ figure {{ display: inline-block; margin: 0 1em 1em 0; }}
 </style></head><body>
 <h1>{title}</h1>
 <p>{variants} design variant(s) &times; {eyes} eye point(s) = {frames} frames. Study file <code>{file}</code>.</p>
-<p>Thresholds: glare where the reflected luminance L<sub>r</sub> &gt; {veil} (luminance scale {scale} per unit radiance);
-markings hard to read where CR = (L<sub>m</sub> + L<sub>r</sub>) / (L<sub>b</sub> + L<sub>r</sub>) &lt; {cr}.
-Heat maps share one scale, 0 to {heat}.</p>
+<p>Luminances in cd/m² ({scale} cd/m² per unit of rendered radiance).
+Thresholds: glare where the reflected luminance L<sub>r</sub> &gt; {veil} cd/m² ({veil_source});
+markings hard to read where CR = (L<sub>m</sub> + L<sub>r</sub> + L<sub>a</sub>) / (L<sub>b</sub> + L<sub>r</sub> + L<sub>a</sub>) &lt; {cr} ({cr_source}),
+under {lux} lx ambient on a glass of diffuse reflectance {rho}, L<sub>a</sub> = {la:.1} cd/m² ({ambient_source}).
+Heat maps share one logarithmic scale, {heat_min} to {heat_max} cd/m².</p>
 "#,
         title = escape(&plan.name),
         variants = plan.variants.len(),
         eyes = plan.eyes.len(),
         frames = frames.len(),
         file = escape(&plan.file.display().to_string()),
-        veil = t.veiling_luminance,
-        scale = plan.params.luminance_scale,
+        veil = t.veiling_luminance_cd_m2,
+        veil_source = escape(&t.veiling_luminance_source),
+        scale = plan.params.cd_m2_per_unit,
         cr = t.min_contrast,
-        heat = plan.heat_scale,
+        cr_source = escape(&t.min_contrast_source),
+        lux = plan.params.ambient.illuminance_lux,
+        rho = plan.params.ambient.glass_diffuse_reflectance,
+        la = plan.params.ambient.veiling_luminance_cd_m2(),
+        ambient_source = escape(&plan.params.ambient.source),
+        heat_min = plan.heat_range.min_cd_m2,
+        heat_max = plan.heat_range.max_cd_m2,
     );
 
-    h.push_str("<h2>Ranking of the variants</h2>\n<p>Best first: by the mean glass area over the glare threshold, then the worst share of the instruments under the contrast threshold, then the mean reflected luminance.</p>\n<table><tr><th>variant</th><th>mean glare area</th><th>worst glare area</th><th>worst low-contrast area</th><th>mean L<sub>r</sub></th><th>peak L<sub>r</sub></th><th>main glare source</th></tr>\n");
+    h.push_str("<h2>Ranking of the variants</h2>\n<p>Best first: by the mean glass area over the glare threshold, then the worst share of the instruments under the contrast threshold, then the mean reflected luminance.</p>\n<table><tr><th>variant</th><th>mean glare area</th><th>worst glare area</th><th>worst low-contrast area</th><th>mean L<sub>r</sub> (cd/m²)</th><th>peak L<sub>r</sub> (cd/m²)</th><th>main glare source</th></tr>\n");
     for s in ranking {
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.5}</td><td>{:.4}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.2}%</td><td>{:.1}</td><td>{:.1}</td><td>{}</td></tr>",
             escape(&s.variant),
             s.mean_glare_area_share * 100.0,
             s.worst_glare_area_share * 100.0,
             s.worst_low_contrast_share * 100.0,
-            s.mean_reflected_luminance,
-            s.peak_reflected_luminance,
+            s.mean_reflected_luminance_cd_m2,
+            s.peak_reflected_luminance_cd_m2,
             escape(s.main_glare_source.as_deref().unwrap_or("none")),
         );
     }
@@ -322,20 +337,20 @@ Heat maps share one scale, 0 to {heat}.</p>
     for variant in &plan.variants {
         let _ = writeln!(
             h,
-            "<h2>Variant: {}</h2>\n<table class=\"frames\"><tr><th>eye</th><th>rendered image</th><th>reflected luminance</th><th>reflected objects</th><th>figures</th></tr>",
+            "<h2>Variant: {}</h2>\n<table class=\"frames\"><tr><th>eye</th><th>rendered image</th><th>reflected luminance (cd/m², log)</th><th>reflected objects</th><th>figures</th></tr>",
             escape(&variant.name)
         );
         for f in frames.iter().filter(|f| f.variant == variant.name) {
             let s = &f.summary;
             let _ = writeln!(
                 h,
-                "<tr><td>{eye}</td><td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a></td><td><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a></td><td>mean L<sub>r</sub> {mean:.5}<br>peak L<sub>r</sub> {peak:.4}<br>glare area {area:.2}%<br>low contrast {low:.2}%<br>main source {main}</td></tr>",
+                "<tr><td>{eye}</td><td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a></td><td><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a></td><td>mean L<sub>r</sub> {mean:.1} cd/m²<br>peak L<sub>r</sub> {peak:.1} cd/m²<br>glare area {area:.2}%<br>low contrast {low:.2}%<br>main source {main}</td></tr>",
                 eye = f.eye_index,
                 img = escape(&f.image),
                 heat = escape(&f.heat_map),
                 obj = escape(&f.object_map),
-                mean = s.mean_reflected_luminance,
-                peak = s.peak_reflected_luminance,
+                mean = s.mean_reflected_luminance_cd_m2,
+                peak = s.peak_reflected_luminance_cd_m2,
                 area = s.glare_area_share * 100.0,
                 low = s.low_contrast_share * 100.0,
                 main = escape(s.objects.first().map_or("none", |o| o.name.as_str())),

@@ -56,7 +56,7 @@ fn mean_lr(report: &StudyReport, variant: &str, eye: usize) -> f32 {
         .find(|f| f.variant == variant && f.eye_index == eye)
         .unwrap()
         .summary
-        .mean_reflected_luminance
+        .mean_reflected_luminance_cd_m2
 }
 
 #[test]
@@ -227,8 +227,8 @@ fn an_obj_variant_measures_like_the_built_in_design_it_was_exported_from() {
     assert_eq!(built_in.glass_pixels, from_obj.glass_pixels);
     assert_eq!(built_in.objects[0].name, from_obj.objects[0].name);
     let (a, b) = (
-        built_in.mean_reflected_luminance,
-        from_obj.mean_reflected_luminance,
+        built_in.mean_reflected_luminance_cd_m2,
+        from_obj.mean_reflected_luminance_cd_m2,
     );
     assert!(a > 0.0 && (a - b).abs() <= 0.02 * a, "{a} vs {b}");
     assert!(dir.path().join("from-obj/eye_00/heat.png").is_file());

@@ -24,6 +24,7 @@ use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
 use vtfarm_scene::{Scene, TriangleId};
 
+use crate::wide::Isa;
 use crate::{Hit, Ray, SurfacePoint};
 
 /// Which obvhs tree layout a [`SceneBvh`] uses.
@@ -121,6 +122,24 @@ impl Default for BvhOptions {
     }
 }
 
+/// Calls `$recv.$method::<KX, KY, KZ>(args)` with the constant axis order
+/// equal to `$axes` (a permutation made by [`ShearedRay::new`]).
+macro_rules! with_axes {
+    ($axes:expr, $recv:ident . $method:ident ( $($arg:expr),* )) => {
+        match $axes {
+            [1, 2, 0] => $recv.$method::<1, 2, 0>($($arg),*),
+            [2, 1, 0] => $recv.$method::<2, 1, 0>($($arg),*),
+            [2, 0, 1] => $recv.$method::<2, 0, 1>($($arg),*),
+            [0, 2, 1] => $recv.$method::<0, 2, 1>($($arg),*),
+            [0, 1, 2] => $recv.$method::<0, 1, 2>($($arg),*),
+            axes => {
+                debug_assert_eq!(axes, [1, 0, 2]);
+                $recv.$method::<1, 0, 2>($($arg),*)
+            }
+        }
+    };
+}
+
 /// Triangle data in BVH leaf order, laid out for the intersection test.
 #[derive(Clone, Copy, Debug)]
 struct PrimTriangle {
@@ -162,12 +181,25 @@ impl PrimTriangle {
     /// rounds one to zero): a ray through a shared edge or vertex is inside
     /// at least one of the triangles around it, and nothing leaks through.
     /// Edges are inclusive.
+    ///
+    /// [`PrimTriangle::intersect_in`] does the work; this picks its axis order.
     #[inline(always)]
     fn intersect(&self, ray: &ShearedRay) -> Option<(f32, f32, f32)> {
+        with_axes!(ray.axes, self.intersect_in(ray))
+    }
+
+    /// The test for a ray whose axis order ([`ShearedRay::axes`]) is
+    /// `[KX, KY, KZ]`: with the axes constant, picking a vertex's coordinate
+    /// is free (by a variable axis it goes through memory).
+    #[inline(always)]
+    fn intersect_in<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        ray: &ShearedRay,
+    ) -> Option<(f32, f32, f32)> {
         if self.n == Vec3A::ZERO {
             return None; // too degenerate to hit reliably
         }
-        let [kx, ky, kz] = ray.axes;
+        let (kx, ky, kz) = (KX, KY, KZ);
         let a = self.v0 - ray.origin;
         let b = self.v1 - ray.origin;
         let c = self.v2 - ray.origin;
@@ -250,6 +282,8 @@ pub struct SceneBvh {
     prim_ids: Vec<TriangleId>,
     /// Unit geometric normals by original triangle id (zero if degenerate).
     geometric_normals: Vec<Vec3>,
+    /// Whether queries run their AVX2 build ([`has_avx2`]).
+    avx2: bool,
 }
 
 impl fmt::Debug for SceneBvh {
@@ -396,6 +430,7 @@ impl SceneBvh {
             prims,
             prim_ids: slots,
             geometric_normals,
+            avx2: has_avx2(),
         })
     }
 
@@ -479,11 +514,45 @@ impl SceneBvh {
     /// lower bound is 0). Ties go to the lowest triangle id. Triangles are
     /// two-sided; degenerate ones are never hit.
     pub fn closest_hit(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only where the CPU has the features
+            // (`has_avx2`, checked when the BVH was built).
+            return unsafe { self.closest_hit_avx2(ray, t_max) };
+        }
+        self.closest_hit_with(Isa::Portable, ray, t_max)
+    }
+
+    /// [`SceneBvh::closest_hit`] compiled for AVX2: the same code, so the
+    /// same results, with the 8-child box test in 256-bit registers.
+    ///
+    /// # Safety
+    /// The CPU must have the enabled features ([`has_avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
+    unsafe fn closest_hit_avx2(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
+        self.closest_hit_with(Isa::Avx2, ray, t_max)
+    }
+
+    #[inline(always)]
+    fn closest_hit_with(&self, isa: Isa, ray: &Ray, t_max: f32) -> Option<Hit> {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let bvh_ray = bvh_ray(origin, direction, t_max)?;
-        let mut best = ClosestSoFar { t_max, hit: None };
         let sheared = ShearedRay::new(origin, direction);
-        let mut test = |slot: usize| match self.prims[slot].intersect(&sheared) {
+        with_axes!(sheared.axes, self.closest_hit_in(isa, &bvh_ray, &sheared, t_max))
+    }
+
+    /// The closest hit for a ray with axis order `[KX, KY, KZ]`.
+    #[inline(always)]
+    fn closest_hit_in<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        isa: Isa,
+        bvh_ray: &BvhRay,
+        sheared: &ShearedRay,
+        t_max: f32,
+    ) -> Option<Hit> {
+        let mut best = ClosestSoFar { t_max, hit: None };
+        let mut test = |slot: usize| match self.prims[slot].intersect_in::<KX, KY, KZ>(sheared) {
             Some(tuv) if best.offer(self.prim_ids[slot], tuv) => {
                 best.hit.map_or(f32::INFINITY, |h| next_up(h.t))
             }
@@ -493,11 +562,11 @@ impl SceneBvh {
         match &self.accel {
             Accel::Empty => false,
             Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
-                crate::wide::closest(bvh, &bvh_ray, test);
+                crate::wide::closest(isa, bvh, bvh_ray, test);
                 false
             }
-            Accel::Cw(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
-            Accel::Binary(bvh) => bvh.ray_traverse(bvh_ray, &mut unused, |_, slot| test(slot)),
+            Accel::Cw(bvh) => bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(slot)),
+            Accel::Binary(bvh) => bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(slot)),
         };
         best.hit
     }
@@ -505,14 +574,33 @@ impl SceneBvh {
     /// [`SceneBvh::closest_hit`] for a batch of rays, same results. With the
     /// `Cw` layout, packets of 8 consecutive rays share the tree walk. Not yet
     /// a win: `bench rays` measured it at 0.5x single rays on the cockpit's
-    /// camera and reflection rays (scalar per-ray box tests; a SIMD-across-rays
-    /// box test is the next step), so the renderer does not call it.
+    /// camera and reflection rays, so the renderer does not call it.
     pub fn closest_hits(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as in `closest_hit`.
+            return unsafe { self.closest_hits_avx2(rays, t_max) };
+        }
+        self.closest_hits_with(Isa::Portable, rays, t_max)
+    }
+
+    /// [`SceneBvh::closest_hits`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must have the enabled features ([`has_avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
+    unsafe fn closest_hits_avx2(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
+        self.closest_hits_with(Isa::Avx2, rays, t_max)
+    }
+
+    #[inline(always)]
+    fn closest_hits_with(&self, isa: Isa, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
         let Accel::Cw(bvh) = &self.accel else {
-            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
         };
         if self.options.layout != BvhLayout::Cw {
-            return rays.iter().map(|r| self.closest_hit(r, t_max)).collect();
+            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
         }
         let mut hits = Vec::with_capacity(rays.len());
         for packet in rays.chunks(crate::wide::PACKET) {
@@ -530,7 +618,7 @@ impl SceneBvh {
             }
             let mut best: [ClosestSoFar; crate::wide::PACKET] =
                 std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
-            crate::wide::closest_packet(bvh, &bvh_rays, |r, slot| {
+            crate::wide::closest_packet(isa, bvh, &bvh_rays, |r, slot| {
                 let tuv = self.prims[slot].intersect(&sheared[r]);
                 match tuv {
                     Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
@@ -551,20 +639,63 @@ impl SceneBvh {
     /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
     /// hit found.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as in `closest_hit`.
+            return unsafe { self.occluded_avx2(ray, t_max) };
+        }
+        self.occluded_with(Isa::Portable, ray, t_max)
+    }
+
+    /// [`SceneBvh::occluded`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must have the enabled features ([`has_avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
+    unsafe fn occluded_avx2(&self, ray: &Ray, t_max: f32) -> bool {
+        self.occluded_with(Isa::Avx2, ray, t_max)
+    }
+
+    #[inline(always)]
+    fn occluded_with(&self, isa: Isa, ray: &Ray, t_max: f32) -> bool {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
             return false;
         };
         let sheared = ShearedRay::new(origin, direction);
-        let test = |slot: usize| match self.prims[slot].intersect(&sheared) {
+        with_axes!(sheared.axes, self.occluded_in(isa, &bvh_ray, &sheared, t_max))
+    }
+
+    /// Any hit for a ray with axis order `[KX, KY, KZ]`.
+    #[inline(always)]
+    fn occluded_in<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        isa: Isa,
+        bvh_ray: &BvhRay,
+        sheared: &ShearedRay,
+        t_max: f32,
+    ) -> bool {
+        let test = |slot: usize| match self.prims[slot].intersect_in::<KX, KY, KZ>(sheared) {
             Some((t, _, _)) if t > 0.0 && t < t_max => t,
             _ => f32::INFINITY,
         };
         match &self.accel {
             Accel::Empty => false,
-            Accel::Cw(bvh) => !bvh.ray_traverse_miss(bvh_ray, |_, slot| test(slot)),
-            Accel::Binary(bvh) => !bvh.ray_traverse_miss(bvh_ray, |_, slot| test(slot)),
+            Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
+                crate::wide::any(isa, bvh, bvh_ray, test)
+            }
+            Accel::Cw(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),
+            Accel::Binary(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),
         }
+    }
+
+    /// The same BVH with queries on the portable build even where the CPU
+    /// has AVX2, so tests check both builds.
+    #[cfg(test)]
+    pub(crate) fn portable(mut self) -> SceneBvh {
+        self.avx2 = false;
+        self
     }
 
     /// Reference closest hit: every triangle, in id order, with the same
@@ -582,6 +713,21 @@ impl SceneBvh {
         }
         best.hit
     }
+}
+
+/// Whether this CPU runs the queries' AVX2 builds (the features their
+/// `target_feature` attribute enables).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("popcnt")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
 }
 
 /// The obvhs ray for a query, or `None` when nothing can be hit (non-finite
@@ -657,7 +803,7 @@ fn build(tris: &[[Vec3; 3]], options: BvhOptions, pad: f32) -> (Accel, Vec<Trian
 }
 
 /// Traversal holds at most one stack entry per level below the root.
-const CW_STACK_LIMIT: usize = 31;
+pub(crate) const CW_STACK_LIMIT: usize = 31;
 
 /// Finishes a binary BVH the way obvhs' `build_bvh2_from_tris` does.
 fn binary(

@@ -545,20 +545,28 @@ fn bvh_closest_and_any_hit_equal_brute_force_for_every_layout() {
     for layout in BvhLayout::ALL {
         for preset in BuildPreset::ALL {
             let bvh = SceneBvh::with_options(scene.clone(), BvhOptions { layout, preset });
-            for ((ray, t_max), want) in rays.iter().zip(&expected) {
-                assert_eq!(
-                    bvh.closest_hit(ray, *t_max),
-                    *want,
-                    "{layout:?} {preset:?} {ray:?} {t_max}"
-                );
-                assert_eq!(
-                    bvh.occluded(ray, *t_max),
-                    want.is_some(),
-                    "{layout:?} {preset:?} {ray:?}"
-                );
+            // The AVX2 build where the CPU has it, then the portable one.
+            for bvh in [&bvh, &bvh_clone(&bvh).portable()] {
+                for ((ray, t_max), want) in rays.iter().zip(&expected) {
+                    assert_eq!(
+                        bvh.closest_hit(ray, *t_max),
+                        *want,
+                        "{layout:?} {preset:?} {ray:?} {t_max}"
+                    );
+                    assert_eq!(
+                        bvh.occluded(ray, *t_max),
+                        want.is_some(),
+                        "{layout:?} {preset:?} {ray:?}"
+                    );
+                }
             }
         }
     }
+}
+
+/// A second BVH with the same options (`SceneBvh` is not `Clone`).
+fn bvh_clone(bvh: &SceneBvh) -> SceneBvh {
+    SceneBvh::with_options(Arc::new(bvh.scene().clone()), bvh.options())
 }
 
 #[test]
@@ -607,10 +615,16 @@ fn packets_return_the_single_ray_hits_bit_for_bit() {
         for layout in BvhLayout::ALL {
             for preset in [BuildPreset::Fastest, BuildPreset::VerySlow] {
                 let bvh = SceneBvh::with_options(scene.clone(), BvhOptions { layout, preset });
+                let portable = bvh_clone(&bvh).portable();
                 for t_max in [f32::INFINITY, 2.4] {
                     let single: Vec<Option<Hit>> =
                         rays.iter().map(|r| bvh.closest_hit(r, t_max)).collect();
                     let packets = bvh.closest_hits(&rays, t_max);
+                    let portable_single: Vec<Option<Hit>> =
+                        rays.iter().map(|r| portable.closest_hit(r, t_max)).collect();
+                    let portable_packets = portable.closest_hits(&rays, t_max);
+                    assert!(single.iter().map(bits).eq(portable_single.iter().map(bits)));
+                    assert!(packets.iter().map(bits).eq(portable_packets.iter().map(bits)));
                     assert_eq!(packets.len(), rays.len());
                     assert!(single.iter().flatten().count() > rays.len() / 10);
                     for (i, (p, s)) in packets.iter().zip(&single).enumerate() {

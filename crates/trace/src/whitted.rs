@@ -130,9 +130,11 @@ impl Tracer<'_> {
 
     /// [`Tracer::shade`] without the point's own refraction ray: local Phong
     /// with shadow rays plus kr times the reflected radiance (traced in full
-    /// Whitted), `transmitted` zero, and a signature of the local lights and
-    /// the reflected subtree only. For a thin reflector whose transmitted
-    /// part comes from elsewhere (the rasterizer).
+    /// Whitted), `transmitted` zero, and a signature of the reflected subtree
+    /// only. For a thin reflector whose transmitted part comes from elsewhere
+    /// (the rasterizer): vertex tracing then refines at reflection edges; the
+    /// point's own shadow-ray outcomes stay out of the signature (a shadow
+    /// edge across the glass splits only where the colour shows it).
     pub fn shade_reflection(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
         let mut signature = Signature::new();
         let shaded = self.shade_surface(
@@ -209,12 +211,14 @@ impl Tracer<'_> {
             let object = self.bvh.scene().triangles[point.triangle as usize].object;
             signature.add(u64::from(object));
         }
+        // `shade_reflection` watches the reflection alone (see there).
+        let lights_tracked = tracked && rays == Rays::Both;
         let terms = self.terms(point, incoming, &mut |light| {
-            if tracked {
+            if lights_tracked {
                 signature.add(word::LIT + light_index(self.lighting, light));
             }
         });
-        if tracked {
+        if lights_tracked {
             signature.add(word::LIGHTS_END);
         }
 

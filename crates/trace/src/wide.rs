@@ -8,65 +8,87 @@
 //! quantised child bounds), with 0 instead of obvhs' 1e-4 as the lower bound:
 //! it culls exactly the boxes obvhs culls, never one with a hit in `(0, tmax)`.
 
-use std::cell::RefCell;
-
 use glam::Vec3A;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::ray::Ray as BvhRay;
 
-thread_local! {
-    /// The traversal stack (node index, entry distance), kept per thread so
-    /// that a query neither allocates nor clears a large array.
-    static STACK: RefCell<Vec<(u32, f32)>> = RefCell::new(Vec::with_capacity(256));
-}
+/// Traversal stack entries: a popped node pushes at most 8 inner children,
+/// so a tree of at most [`crate::bvh::CW_STACK_LIMIT`] inner levels holds at
+/// most 1 + 7 per level (the depth is checked when the tree is built).
+const STACK: usize = 1 + 7 * crate::bvh::CW_STACK_LIMIT + 8;
 
 /// Walks `bvh` for `ray`, calling `test(slot)` for every primitive slot whose
 /// leaf box the ray enters before `tmax`; `test` returns the new `tmax`
 /// (`f32::INFINITY` when it found nothing closer).
+///
+/// `Isa` says which box test to run; the AVX2 one only from code compiled
+/// for AVX2 on a CPU that has it.
 #[inline(always)]
-pub(crate) fn closest<F: FnMut(usize) -> f32>(bvh: &CwBvh, ray: &BvhRay, test: F) {
-    STACK.with_borrow_mut(|stack| {
-        stack.clear();
-        walk(bvh, ray, test, stack);
-    });
+pub(crate) fn closest<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRay, test: F) {
+    walk::<false, F>(isa, bvh, ray, test);
 }
 
+/// Whether `test(slot)` returns a finite distance for any primitive slot
+/// whose leaf box the ray enters; stops at the first (shadow rays).
 #[inline(always)]
-fn walk<F: FnMut(usize) -> f32>(
+pub(crate) fn any<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRay, test: F) -> bool {
+    walk::<true, F>(isa, bvh, ray, test)
+}
+
+/// Which build of the 8-child box test a walk uses (both give the same
+/// entry distances, bit for bit: the same operations, no fused multiply-add).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Isa {
+    /// Plain Rust.
+    Portable,
+    /// `std::arch` AVX2 intrinsics: all 8 children in one register. Only
+    /// for code compiled with AVX2 enabled, on a CPU that has it.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+/// The traversal of [`closest`] and [`any`]: a fixed stack of (node, entry
+/// distance) on the call stack (no allocation, no thread-local lookup).
+#[inline(always)]
+fn walk<const ANY: bool, F: FnMut(usize) -> f32>(
+    isa: Isa,
     bvh: &CwBvh,
     ray: &BvhRay,
     mut test: F,
-    stack: &mut Vec<(u32, f32)>,
-) {
+) -> bool {
     let mut tmax = ray.tmax;
-    stack.push((0, 0.0));
-    while let Some((index, entry)) = stack.pop() {
+    let mut stack = [(0u32, 0f32); STACK];
+    let mut pending = 1;
+    while pending > 0 {
+        pending -= 1;
+        let (index, entry) = stack[pending];
         if entry > tmax {
             continue;
         }
         let node = &bvh.nodes[index as usize];
-        let extent = node.compute_extent();
-        let scale = extent * ray.inv_direction;
-        let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
-        let mut near = [0f32; 8];
-        let mut far = [tmax; 8];
-        for (axis, (lo, hi)) in [
-            (&node.child_min_x, &node.child_max_x),
-            (&node.child_min_y, &node.child_max_y),
-            (&node.child_min_z, &node.child_max_z),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            for i in 0..8 {
-                let a = lo[i] as f32 * scale[axis] + offset[axis];
-                let b = hi[i] as f32 * scale[axis] + offset[axis];
-                near[i] = near[i].max(a.min(b));
-                far[i] = far[i].min(a.max(b));
+        let near = entry_distances(isa, node, ray, tmax);
+        if ANY {
+            // Order does not matter: the first hit ends the walk.
+            for (child, &t) in near.iter().enumerate() {
+                if t == f32::INFINITY {
+                    continue;
+                }
+                if node.is_leaf(child) {
+                    let (first, count) = node.child_primitives(child);
+                    for slot in first..first + count {
+                        if test(slot as usize) < f32::INFINITY {
+                            return true;
+                        }
+                    }
+                } else {
+                    stack[pending] = (node.child_node_index(child), t);
+                    pending += 1;
+                }
             }
+            continue;
         }
-        let (order, hits) = nearest_first(node, &near, |i| near[i] <= far[i]);
+        let (order, hits) = nearest_first(&near);
         // Leaves now, nearest first; inner children onto the stack farthest
         // first so the nearest is popped next.
         let mut inner = [(0u32, 0f32); 8];
@@ -86,22 +108,131 @@ fn walk<F: FnMut(usize) -> f32>(
                 inner_count += 1;
             }
         }
-        stack.extend(inner[..inner_count].iter().rev());
+        for &entry in inner[..inner_count].iter().rev() {
+            stack[pending] = entry;
+            pending += 1;
+        }
+    }
+    false
+}
+
+/// The distance at which `ray` enters each child box of `node` before
+/// `tmax`, `f32::INFINITY` for a child it misses or an empty slot.
+#[inline(always)]
+fn entry_distances(isa: Isa, node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+    match isa {
+        Isa::Portable => entry_distances_portable(node, ray, tmax),
+        // SAFETY: `Isa::Avx2` is only passed where the CPU has AVX2.
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2 => unsafe { entry_distances_avx2(node, ray, tmax) },
     }
 }
 
-/// The non-empty children that `hit` accepts as (entry distance, slot),
-/// nearest first (insertion sort of at most 8), and their number.
 #[inline(always)]
-fn nearest_first(
-    node: &CwBvhNode,
-    near: &[f32; 8],
-    hit: impl Fn(usize) -> bool,
-) -> ([(f32, u8); 8], usize) {
+fn entry_distances_portable(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+    let extent = node.compute_extent();
+    let scale = extent * ray.inv_direction;
+    let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    let mut near = [0f32; 8];
+    let mut far = [tmax; 8];
+    // One call per axis with the scalars picked out (a loop over the axes
+    // indexing `scale[axis]` kept the compiler from vectorising the lanes).
+    slab(&node.child_min_x, &node.child_max_x, scale.x, offset.x, &mut near, &mut far);
+    slab(&node.child_min_y, &node.child_max_y, scale.y, offset.y, &mut near, &mut far);
+    slab(&node.child_min_z, &node.child_max_z, scale.z, offset.z, &mut near, &mut far);
+    let mut entries = [f32::INFINITY; 8];
+    for i in 0..8 {
+        if node.child_meta[i] != 0 && near[i] <= far[i] {
+            entries[i] = near[i];
+        }
+    }
+    entries
+}
+
+/// [`entry_distances`] with AVX2: the same operations on 8 lanes at once
+/// (`_mm256_min_ps` is [`min`], `_mm256_max_ps` is [`max`]).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn entry_distances_avx2(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 8] {
+    use std::arch::x86_64::*;
+    let extent = node.compute_extent();
+    let scale = extent * ray.inv_direction;
+    let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    // SAFETY: each load reads the 8 bytes of one `[u8; 8]` field; the store
+    // writes the 8 lanes of `entries`.
+    unsafe {
+        let lanes = |bytes: &[u8; 8]| _mm256_cvtepu8_epi32(_mm_loadl_epi64(bytes.as_ptr().cast()));
+        let mut near = _mm256_setzero_ps();
+        let mut far = _mm256_set1_ps(tmax);
+        for (lo, hi, scale, offset) in [
+            (&node.child_min_x, &node.child_max_x, scale.x, offset.x),
+            (&node.child_min_y, &node.child_max_y, scale.y, offset.y),
+            (&node.child_min_z, &node.child_max_z, scale.z, offset.z),
+        ] {
+            let (scale, offset) = (_mm256_set1_ps(scale), _mm256_set1_ps(offset));
+            let a = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(lo)), scale), offset);
+            let b = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(hi)), scale), offset);
+            near = _mm256_max_ps(near, _mm256_min_ps(a, b));
+            far = _mm256_min_ps(far, _mm256_max_ps(a, b));
+        }
+        let nonempty = _mm256_cmpgt_epi32(lanes(&node.child_meta), _mm256_setzero_si256());
+        let enters = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_LE_OQ>(near, far),
+            _mm256_castsi256_ps(nonempty),
+        );
+        let entries = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), near, enters);
+        let mut out = [0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), entries);
+        out
+    }
+}
+
+/// Narrows each child's entry/exit interval by its slab on one axis
+/// (quantised bounds `lo`, `hi`; `t = q * scale + offset`).
+#[inline(always)]
+fn slab(
+    lo: &[u8; 8],
+    hi: &[u8; 8],
+    scale: f32,
+    offset: f32,
+    near: &mut [f32; 8],
+    far: &mut [f32; 8],
+) {
+    for i in 0..8 {
+        let a = lo[i] as f32 * scale + offset;
+        let b = hi[i] as f32 * scale + offset;
+        near[i] = max(near[i], min(a, b));
+        far[i] = min(far[i], max(a, b));
+    }
+}
+
+/// `a.min(b)` for numbers that are not NaN, as one SIMD instruction:
+/// `f32::min`'s NaN rule costs a compare and a blend per lane. Nothing here
+/// is NaN: obvhs' `inv_direction` is finite (its `safe_inverse`), and so are
+/// node bounds and ray origins (`bvh_ray` refuses others).
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// `a.max(b)` for numbers that are not NaN (see [`min`]).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The finite entries of `near` as (entry distance, child), nearest first
+/// (insertion sort of at most 8), and their number.
+#[inline(always)]
+fn nearest_first(near: &[f32; 8]) -> ([(f32, u8); 8], usize) {
     let mut order = [(0f32, 0u8); 8];
     let mut hits = 0;
     for (i, &t) in near.iter().enumerate() {
-        if node.child_meta[i] != 0 && hit(i) {
+        if t < f32::INFINITY {
             let mut at = hits;
             while at > 0 && order[at - 1].0 > t {
                 order[at] = order[at - 1];
@@ -118,11 +249,13 @@ fn nearest_first(
 pub(crate) const PACKET: usize = 8;
 
 /// [`closest`] for up to [`PACKET`] rays at once (camera rays, a package's
-/// reflection rays): a node's child bounds are decoded once for the packet,
-/// each ray runs the same box test as alone and keeps its own `tmax`, so every
-/// ray is offered every primitive it would be offered alone (results are
-/// identical). `test(ray, slot)` returns that ray's new `tmax`.
+/// reflection rays): the rays walk the tree together, each running the same
+/// box test as alone with its own `tmax`, so every ray is offered every
+/// primitive it would be offered alone (results are identical).
+/// `test(ray, slot)` returns that ray's new `tmax`.
+#[inline(always)]
 pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
+    isa: Isa,
     bvh: &CwBvh,
     rays: &[BvhRay],
     mut test: F,
@@ -133,25 +266,13 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
         *t = ray.tmax;
     }
     let all = ((1u32 << rays.len()) - 1) as u8;
-    let mut stack: Vec<(u32, u8)> = Vec::with_capacity(64);
-    stack.push((0, all));
-    while let Some((index, active)) = stack.pop() {
+    let mut stack = [(0u32, 0u8); STACK];
+    stack[0] = (0, all);
+    let mut pending = 1;
+    while pending > 0 {
+        pending -= 1;
+        let (index, active) = stack[pending];
         let node = &bvh.nodes[index as usize];
-        let extent = node.compute_extent();
-        let p = Vec3A::from(node.p);
-        let mut q = [[0f32; 8]; 6];
-        for (q, bytes) in q.iter_mut().zip([
-            &node.child_min_x,
-            &node.child_max_x,
-            &node.child_min_y,
-            &node.child_max_y,
-            &node.child_min_z,
-            &node.child_max_z,
-        ]) {
-            for i in 0..8 {
-                q[i] = bytes[i] as f32;
-            }
-        }
         // Per child: the rays that enter it, and the nearest entry among them.
         let mut child_rays = [0u8; 8];
         let mut child_near = [f32::INFINITY; 8];
@@ -159,27 +280,15 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
         while remaining != 0 {
             let r = remaining.trailing_zeros() as usize;
             remaining &= remaining - 1;
-            let ray = &rays[r];
-            let scale = extent * ray.inv_direction;
-            let offset = (p - ray.origin) * ray.inv_direction;
-            let mut near = [0f32; 8];
-            let mut far = [tmax[r]; 8];
-            for axis in 0..3 {
-                for i in 0..8 {
-                    let a = q[2 * axis][i] * scale[axis] + offset[axis];
-                    let b = q[2 * axis + 1][i] * scale[axis] + offset[axis];
-                    near[i] = near[i].max(a.min(b));
-                    far[i] = far[i].min(a.max(b));
-                }
-            }
+            let near = entry_distances(isa, node, &rays[r], tmax[r]);
             for i in 0..8 {
-                if near[i] <= far[i] {
+                if near[i] < f32::INFINITY {
                     child_rays[i] |= 1 << r;
                     child_near[i] = child_near[i].min(near[i]);
                 }
             }
         }
-        let (order, hits) = nearest_first(node, &child_near, |i| child_rays[i] != 0);
+        let (order, hits) = nearest_first(&child_near);
         let mut inner = [(0u32, 0u8); 8];
         let mut inner_count = 0;
         for &(_, child) in &order[..hits] {
@@ -199,6 +308,9 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
                 inner_count += 1;
             }
         }
-        stack.extend(inner[..inner_count].iter().rev());
+        for &entry in inner[..inner_count].iter().rev() {
+            stack[pending] = entry;
+            pending += 1;
+        }
     }
 }

@@ -24,12 +24,14 @@ pub struct FrameImage {
 }
 
 impl FrameImage {
-    /// Starts from the rasterized base frame.
+    /// Starts from the rasterized base frame. The reflector planes are
+    /// zeroed allocations (see [`Image::black`]): compositing touches only
+    /// the reflectors' pages, so a frame costs no full-frame pass here.
     pub fn new(base: Image) -> Self {
         let n = base.pixels.len();
         FrameImage {
-            reflected: Image::new(base.width, base.height, Vec3::ZERO),
-            transmitted: Image::new(base.width, base.height, Vec3::ZERO),
+            reflected: Image::black(base.width, base.height),
+            transmitted: Image::black(base.width, base.height),
             reflected_object: vec![NONE; n],
             mask: vec![false; n],
             color: base,

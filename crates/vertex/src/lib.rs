@@ -59,9 +59,11 @@ pub struct VertexSettings {
     pub visibility_radius: u32,
     /// Relative depth tolerance of the visibility test.
     pub depth_tolerance: f32,
-    /// Edges longer than this on screen (pixels) are split even when their
-    /// end samples agree: a reflected object smaller than the gap between two
-    /// samples would otherwise be missed (the sampling-density guarantee).
+    /// At `full`, edges longer than this on screen (pixels) are split even
+    /// when their end samples agree: a reflected object smaller than the gap
+    /// between two samples would otherwise be missed (the sampling-density
+    /// guarantee). `refine` is the paper's progressive level and trusts its
+    /// corner samples, as the paper's refinement does.
     pub max_edge: f32,
     /// Where a see-through reflector's transmitted part comes from.
     pub transmission: Transmission,

@@ -496,12 +496,13 @@ fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> 
 
 impl SparseBitmap {
     /// Packs pixel values (each pixel at most once, any order) of a frame
-    /// `frame_width` pixels wide into a bitmap.
-    pub fn from_pixels(frame_width: u32, mut pixels: Vec<PixelValue>) -> SparseBitmap {
+    /// `frame_width` pixels wide into a bitmap: one pass over the bounding
+    /// rectangle ranks the covered pixels row-major, and each value goes
+    /// straight to its rank (no sort).
+    pub fn from_pixels(frame_width: u32, pixels: Vec<PixelValue>) -> SparseBitmap {
         if pixels.is_empty() {
             return SparseBitmap::default();
         }
-        pixels.sort_unstable_by_key(|p| p.index);
         let w = frame_width;
         let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
         for p in &pixels {
@@ -512,23 +513,39 @@ impl SparseBitmap {
             y1 = y1.max(y + 1);
         }
         let width = x1 - x0;
+        let local = |p: &PixelValue| ((p.index / w - y0) * width + (p.index % w - x0)) as usize;
         let mut mask = vec![false; (width * (y1 - y0)) as usize];
         for p in &pixels {
-            mask[((p.index / w - y0) * width + (p.index % w - x0)) as usize] = true;
+            mask[local(p)] = true;
         }
-        // Sorting by image index is row-major order, which is also the order of
-        // the covered pixels inside the rectangle.
-        SparseBitmap {
+        // The rank of each covered pixel among the covered pixels, row-major
+        // within the rectangle: the order of the per-pixel arrays.
+        let mut rank = vec![0u32; mask.len()];
+        let mut next = 0;
+        for (r, &covered) in rank.iter_mut().zip(&mask) {
+            *r = next;
+            next += covered as u32;
+        }
+        let n = pixels.len();
+        let mut bitmap = SparseBitmap {
             x0,
             y0,
             width,
             height: y1 - y0,
+            color: vec![Vec3::ZERO; n],
+            reflected: vec![Vec3::ZERO; n],
+            transmitted: vec![Vec3::ZERO; n],
+            reflected_object: vec![NONE; n],
             mask,
-            color: pixels.iter().map(|p| p.color).collect(),
-            reflected: pixels.iter().map(|p| p.reflected).collect(),
-            transmitted: pixels.iter().map(|p| p.transmitted).collect(),
-            reflected_object: pixels.iter().map(|p| p.object).collect(),
+        };
+        for p in &pixels {
+            let k = rank[local(p)] as usize;
+            bitmap.color[k] = p.color;
+            bitmap.reflected[k] = p.reflected;
+            bitmap.transmitted[k] = p.transmitted;
+            bitmap.reflected_object[k] = p.object;
         }
+        bitmap
     }
 }
 
@@ -562,6 +579,30 @@ mod ownership_tests {
             transmitted: vec![Vec3::ZERO; n],
             reflected_object: vec![NONE; n],
         }
+    }
+
+    #[test]
+    fn pixel_values_pack_row_major_whatever_their_order() {
+        // A frame 10 px wide; pixels (2, 1), (5, 1), (3, 2) in scrambled order.
+        let value = |x: u32, y: u32| PixelValue {
+            index: y * 10 + x,
+            color: Vec3::splat(x as f32),
+            reflected: Vec3::splat(y as f32),
+            transmitted: Vec3::ONE,
+            object: x * 100 + y,
+        };
+        let scrambled = vec![value(3, 2), value(2, 1), value(5, 1)];
+        let b = SparseBitmap::from_pixels(10, scrambled);
+        assert_eq!((b.x0, b.y0, b.width, b.height), (2, 1, 4, 2));
+        let covered: Vec<_> = b.covered().collect();
+        assert_eq!(covered, [(2, 1, 0), (5, 1, 1), (3, 2, 2)]);
+        assert_eq!(b.color, [2.0, 5.0, 3.0].map(Vec3::splat));
+        assert_eq!(b.reflected, [1.0, 1.0, 2.0].map(Vec3::splat));
+        assert_eq!(b.reflected_object, [201, 501, 302]);
+        assert_eq!(
+            SparseBitmap::from_pixels(10, Vec::new()),
+            SparseBitmap::default()
+        );
     }
 
     #[test]

@@ -211,8 +211,8 @@ impl TriangleMesh {
 
     /// CheckRefinement(): long enough on screen, not too deep, at least one
     /// end visible, and the samples disagree (or the flatness test forced it,
-    /// or the edge is longer than the maximum edge, below which agreeing
-    /// ends are trusted).
+    /// or, at `full`, the edge is longer than the maximum edge, below which
+    /// agreeing ends are trusted).
     fn check_refinement(&self, frame: &Frame<'_>, edge: &QueuedEdge, faces: [u32; 2]) -> bool {
         let settings = &frame.settings;
         let deep = faces
@@ -225,7 +225,7 @@ impl TriangleMesh {
             && !deep
             && visible
             && (edge.forced
-                || edge.length > settings.max_edge
+                || (settings.quality == Quality::Full && edge.length > settings.max_edge)
                 || self.disagree(edge.a, edge.b, settings.epsilon)
                 || self.crosses_hidden_edge(frame, edge))
     }

@@ -236,6 +236,14 @@ impl Pair {
         self.flush();
     }
 
+    /// Calls the master's core now (an input from outside the farm, like
+    /// the HTTP side's) and routes what follows.
+    pub(crate) fn act<R>(&mut self, call: impl FnOnce(&mut MasterCore, Duration) -> R) -> R {
+        let answer = call(&mut self.master, self.now);
+        self.flush();
+        answer
+    }
+
     /// Submits `job` with its scene (the submitter answers scene requests).
     pub(crate) fn submit(&mut self, job: WireJob, scene: SceneData) {
         let job = WireJob {

@@ -1,7 +1,7 @@
-//! The per-frame timeline `vtfarm submit` writes beside each frame: one row
-//! for the master and one per worker, with their phases (base frame, set-up,
-//! packages in flight, packages computing) from the frame's `stats.json`
-//! entry; the gaps are idle time.
+//! The per-frame timeline (`vtfarm submit` writes it beside each frame, the
+//! dashboard shows it for the frame on view): one row for the master and one
+//! per worker, with their phases (base frame, set-up, packages in flight,
+//! packages computing) from the frame's statistics; the gaps are idle time.
 
 use vtfarm_proto::{FrameStats, PhaseKind};
 
@@ -10,7 +10,7 @@ const LABEL: f64 = 150.0;
 const PLOT: f64 = 900.0;
 
 /// The frame's timeline as a self-contained SVG document.
-pub(crate) fn timeline_svg(stats: &FrameStats) -> String {
+pub fn timeline_svg(stats: &FrameStats) -> String {
     let mut rows: Vec<&str> = vec!["master"];
     for p in &stats.phases {
         if !rows.contains(&p.who.as_str()) {

@@ -1,0 +1,300 @@
+//! The interactive view (the dashboard's "move the eye"): the user picks a
+//! job's scene and moves the eye within a box around that job's eye; each
+//! move becomes a small farm job of its own whose frames are the same view
+//! at rising quality (`preview`, `refine`, `full`), so the view sharpens in
+//! place. A move cancels the previous move's job, whatever stage it was at:
+//! only the newest eye is ever rendered to the end.
+//!
+//! Plain bookkeeping: the core owns a [`Views`], queues and cancels the jobs
+//! and hands finished frames in; the glare figures of each finished stage
+//! (`vtfarm-glare`: reflected luminance, veiling ratio, reflected objects)
+//! are computed here from the frame's components. No I/O, no clock.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use vtfarm_imaging::Image;
+use vtfarm_method::MethodKind;
+use vtfarm_proto::{JobScene, SceneHash, WireFrameSetup, WireJob};
+use vtfarm_render::FrameSetup;
+use vtfarm_scene::Scene;
+use vtfarm_vertex::{FrameImage, Quality};
+
+/// Half the side of the box the eye moves in, in metres, around the picked
+/// job's eye (each axis is clamped to it). About a driver's head movement.
+pub const EYE_BOX: f32 = 0.15;
+
+/// How many submitted jobs' scenes stay pickable for the view.
+pub const KEPT_SOURCES: usize = 8;
+
+/// How many view outcomes (finished stages, cancellations) are kept.
+const KEPT_OUTCOMES: usize = 64;
+
+/// A submitted job the view can start from: its scene and first frame.
+#[derive(Clone, Debug)]
+pub struct ViewSource {
+    pub name: String,
+    pub scene_hash: SceneHash,
+    pub scene: Arc<Scene>,
+    pub reflectors: Vec<u32>,
+    pub method: MethodKind,
+    pub setup: FrameSetup,
+}
+
+/// A move of the eye: which job's view, and the eye's offset from that
+/// job's eye in metres (world axes; clamped to [`EYE_BOX`]).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+pub struct ViewRequest {
+    pub job: u64,
+    pub offset: [f32; 3],
+}
+
+/// Why a move was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ViewError {
+    #[error("job {0} is not among the scenes the master keeps for the view")]
+    UnknownSource(u64),
+    #[error("the eye offset must be finite")]
+    BadOffset,
+    #[error("cannot queue the view: {0}")]
+    Queue(String),
+}
+
+/// What happened to a view's job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum ViewOutcome {
+    /// A stage finished.
+    Rendered {
+        generation: u64,
+        job: u64,
+        #[serde(serialize_with = "quality_name")]
+        quality: Quality,
+    },
+    /// A newer move cancelled the job (its later stages never ran).
+    Cancelled { generation: u64, job: u64 },
+}
+
+fn quality_name<S: serde::Serializer>(q: &Quality, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(q.name())
+}
+
+/// The move being rendered.
+#[derive(Clone, Debug, Serialize)]
+pub struct CurrentView {
+    /// Moves so far, this one included.
+    pub generation: u64,
+    /// The job whose scene and eye the view starts from.
+    pub source: u64,
+    /// The eye's offset after clamping.
+    pub offset: [f32; 3],
+    pub eye: [f32; 3],
+    /// The farm job rendering this move.
+    pub job: u64,
+    /// The qualities its frames render, in order.
+    #[serde(skip)]
+    stages: Vec<Quality>,
+    /// Stages finished so far.
+    pub stages_done: usize,
+    pub stages_total: usize,
+}
+
+/// A finished stage of a view, with its glare figures.
+#[derive(Clone, Debug)]
+pub struct ViewFrame {
+    pub generation: u64,
+    pub quality: Quality,
+    pub image: Arc<Image>,
+    /// The reflected-object map with its legend (`vtfarm_glare::object_map`).
+    pub object_map: Arc<Image>,
+    pub glare: vtfarm_glare::Summary,
+}
+
+/// The view's state, owned by the core.
+#[derive(Debug, Default)]
+pub struct Views {
+    sources: VecDeque<(u64, ViewSource)>,
+    current: Option<CurrentView>,
+    /// The newest finished stage (of this move or, until it has one, of an
+    /// earlier move).
+    latest: Option<ViewFrame>,
+    outcomes: VecDeque<ViewOutcome>,
+}
+
+impl Views {
+    /// Keeps a submitted job's scene pickable (the newest [`KEPT_SOURCES`]).
+    pub fn remember(&mut self, job: u64, source: ViewSource) {
+        if self.sources.len() == KEPT_SOURCES {
+            self.sources.pop_front();
+        }
+        self.sources.push_back((job, source));
+    }
+
+    /// The pickable jobs: id and name, oldest first.
+    pub fn sources(&self) -> impl Iterator<Item = (u64, &str)> {
+        self.sources.iter().map(|(id, s)| (*id, s.name.as_str()))
+    }
+
+    /// The job a move should be rendered as, checked; the view's frame set-up
+    /// per stage goes in the job's frames.
+    pub(crate) fn plan(&self, request: &ViewRequest) -> Result<PlannedView, ViewError> {
+        if !request.offset.iter().all(|v| v.is_finite()) {
+            return Err(ViewError::BadOffset);
+        }
+        let (_, source) = (self.sources.iter())
+            .find(|(id, _)| *id == request.job)
+            .ok_or(ViewError::UnknownSource(request.job))?;
+        let offset = Vec3::from(request.offset).clamp(Vec3::splat(-EYE_BOX), Vec3::splat(EYE_BOX));
+        let mut setup = source.setup.clone();
+        // The eye moves; the gaze stays on the same point (the driver keeps
+        // looking at the instruments).
+        setup.camera.eye += offset;
+        // Per-reflector methods have no quality levels: one frame.
+        let stages = if source.method.per_reflector() {
+            vec![Quality::Full]
+        } else {
+            vec![Quality::Preview, Quality::Refine, Quality::Full]
+        };
+        let frames = (stages.iter())
+            .map(|&quality| {
+                let mut stage = setup.clone();
+                stage.vertex.quality = quality;
+                WireFrameSetup::from(&stage)
+            })
+            .collect();
+        let job = WireJob {
+            name: format!("view of job {}", request.job),
+            scene: JobScene::Hash(source.scene_hash),
+            frames,
+            reflectors: source.reflectors.clone(),
+            aux: false,
+            method: source.method.into(),
+        };
+        Ok(PlannedView {
+            job,
+            source: request.job,
+            offset: offset.to_array(),
+            eye: setup.camera.eye.to_array(),
+            stages,
+        })
+    }
+
+    /// The farm job of the move being rendered, if it still runs.
+    pub(crate) fn running_job(&self) -> Option<u64> {
+        (self.current.as_ref())
+            .filter(|c| c.stages_done < c.stages_total)
+            .map(|c| c.job)
+    }
+
+    /// The planned move is queued as farm job `job`.
+    pub(crate) fn started(&mut self, planned: PlannedView, job: u64) {
+        let generation = self.current.as_ref().map_or(0, |c| c.generation) + 1;
+        self.current = Some(CurrentView {
+            generation,
+            source: planned.source,
+            offset: planned.offset,
+            eye: planned.eye,
+            job,
+            stages_total: planned.stages.len(),
+            stages: planned.stages,
+            stages_done: 0,
+        });
+    }
+
+    /// Whether farm job `job` renders a view (view jobs are not journaled).
+    pub fn owns(&self, job: u64) -> bool {
+        self.current.as_ref().is_some_and(|c| c.job == job)
+            || self.outcomes.iter().any(|o| match *o {
+                ViewOutcome::Rendered { job: j, .. } | ViewOutcome::Cancelled { job: j, .. } => {
+                    j == job
+                }
+            })
+    }
+
+    /// A frame of some job finished: if it is a stage of the current move,
+    /// it becomes the view, with its glare figures.
+    pub(crate) fn frame_finished(
+        &mut self,
+        job: u64,
+        frame: u32,
+        image: &FrameImage,
+        scene: &Scene,
+    ) {
+        let Some(current) = self.current.as_mut().filter(|c| c.job == job) else {
+            return;
+        };
+        let Some(&quality) = current.stages.get(frame as usize) else {
+            return;
+        };
+        current.stages_done = frame as usize + 1;
+        let generation = current.generation;
+        let (object_map, glare) = glare_of(image, scene);
+        self.latest = Some(ViewFrame {
+            generation,
+            quality,
+            image: Arc::new(image.color.clone()),
+            object_map: Arc::new(object_map),
+            glare,
+        });
+        self.record(ViewOutcome::Rendered {
+            generation,
+            job,
+            quality,
+        });
+    }
+
+    /// A newer move cancelled the current move's job.
+    pub(crate) fn superseded(&mut self) {
+        if let Some(c) = &self.current {
+            let (generation, job) = (c.generation, c.job);
+            self.record(ViewOutcome::Cancelled { generation, job });
+        }
+    }
+
+    fn record(&mut self, outcome: ViewOutcome) {
+        if self.outcomes.len() == KEPT_OUTCOMES {
+            self.outcomes.pop_front();
+        }
+        self.outcomes.push_back(outcome);
+    }
+
+    pub fn current(&self) -> Option<&CurrentView> {
+        self.current.as_ref()
+    }
+
+    pub fn latest(&self) -> Option<&ViewFrame> {
+        self.latest.as_ref()
+    }
+
+    /// What happened to the views' jobs, oldest first (the last 64).
+    pub fn outcomes(&self) -> impl Iterator<Item = &ViewOutcome> {
+        self.outcomes.iter()
+    }
+}
+
+/// A move checked and turned into a job, not yet queued.
+pub(crate) struct PlannedView {
+    pub(crate) job: WireJob,
+    source: u64,
+    offset: [f32; 3],
+    eye: [f32; 3],
+    stages: Vec<Quality>,
+}
+
+/// The reflected-object map and the glare summary of a composited frame.
+/// Without a study there are no instrument or marking masks, so the
+/// contrast figures stay empty; reflection, veiling and objects are there.
+fn glare_of(image: &FrameImage, scene: &Scene) -> (Image, vtfarm_glare::Summary) {
+    let none = vec![false; image.mask.len()];
+    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
+    let input = vtfarm_glare::GlareInput::from_frame(image, &none, &none, &names);
+    let params = vtfarm_glare::Params::default();
+    // The frame's buffers are all width × height and the parameters are the
+    // defaults, so neither call can fail.
+    let analysis =
+        vtfarm_glare::analyze(&input, &params).expect("a composited frame is consistent");
+    let map = vtfarm_glare::object_map(&input, &params).expect("a composited frame is consistent");
+    (map, analysis.summary)
+}
