@@ -87,7 +87,7 @@ done
 # The simulator's prediction for each count (localhost: a fast link).
 declare -A predicted
 for n in $workers_list; do
-  scale=$(awk -v w="$n" -v c="$cores" 'BEGIN { printf "%.3f", w > c ? w / c : 1 }')
+  scale=$(awk -v w="$n" -v c="$cores" 'BEGIN { printf "%.3f", (w > c ? w / c : 1) }')
   "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
     --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
     --cost-scale "$scale" --fixed-cost-scale "$scale" --json "$work/sim-$n.json" >/dev/null 2>&1

@@ -20,16 +20,17 @@ use vtfarm_vertex::{
     Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
 };
 
-/// The frames a worker keeps prepared: the newest and the one before it,
-/// whose requeued packages the master may still hand out while frames are
-/// pipelined (see `session`).
+/// The frames a worker keeps prepared: the newest and the ones before it
+/// whose packages the master may still hand out while frames are pipelined
+/// ([`vtfarm_proto::FRAMES_IN_FLIGHT`], see `session`).
 #[derive(Default)]
 pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
 
 impl PreparedFrames {
-    /// Keeps `frame` as the newest, dropping the oldest beyond two.
+    /// Keeps `frame` as the newest, dropping the oldest beyond
+    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`].
     pub fn insert(&mut self, frame: ActiveFrame) {
-        if self.0.len() == 2 {
+        if self.0.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
             self.0.remove(0);
         }
         self.0.push(Arc::new(frame));
