@@ -20,6 +20,30 @@ use vtfarm_vertex::{
     Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
 };
 
+/// The frames a worker keeps prepared: the newest and the ones before it
+/// whose packages the master may still hand out while frames are pipelined
+/// ([`vtfarm_proto::FRAMES_IN_FLIGHT`], see `session`).
+#[derive(Default)]
+pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
+
+impl PreparedFrames {
+    /// Keeps `frame` as the newest, dropping the oldest beyond
+    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`].
+    pub fn insert(&mut self, frame: ActiveFrame) {
+        if self.0.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+            self.0.remove(0);
+        }
+        self.0.push(Arc::new(frame));
+    }
+
+    /// The prepared frame `frame` of `job`, if kept.
+    pub fn get(&self, job: JobId, frame: u32) -> Option<Arc<ActiveFrame>> {
+        (self.0.iter())
+            .find(|a| (a.job, a.frame) == (job, frame))
+            .cloned()
+    }
+}
+
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
     pub job: JobId,
