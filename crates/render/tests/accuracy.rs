@@ -397,23 +397,28 @@ fn render_with(
         .image
 }
 
-#[test]
-fn random_packages_give_byte_identical_images() {
-    // A mirror sphere, and the cockpit's cover glass with the thin-glass model.
+/// The scenes the farm's invariants are checked on: a mirror sphere, and
+/// the cockpit's cover glass (thin-glass model) `cockpit_width` pixels wide.
+fn farm_scenes(cockpit_width: u32) -> [(Scene, &'static str, Camera, Lighting); 2] {
     let (sphere, sphere_camera, sphere_lighting) = mirror_sphere_scene();
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..CockpitConfig::default()
     });
     let cockpit_camera = Camera {
-        width: 160,
-        height: 90,
+        width: cockpit_width,
+        height: cockpit_width * 9 / 16,
         ..c.camera
     };
-    for (scene, reflector, camera, lighting) in [
+    [
         (sphere, "sphere", sphere_camera, sphere_lighting),
         (c.scene, COVER_GLASS, cockpit_camera, c.lighting),
-    ] {
+    ]
+}
+
+#[test]
+fn random_packages_give_byte_identical_images() {
+    for (scene, reflector, camera, lighting) in farm_scenes(160) {
         check_random_packages(scene, reflector, camera, &lighting);
     }
 }
@@ -459,20 +464,7 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
 
 #[test]
 fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
-    let (sphere, sphere_camera, sphere_lighting) = mirror_sphere_scene();
-    let c = cockpit(&CockpitConfig {
-        detail: 0.3,
-        ..CockpitConfig::default()
-    });
-    let cockpit_camera = Camera {
-        width: 320,
-        height: 180,
-        ..c.camera
-    };
-    for (scene, reflector, camera, lighting) in [
-        (sphere, "sphere", sphere_camera, sphere_lighting),
-        (c.scene, COVER_GLASS, cockpit_camera, c.lighting),
-    ] {
+    for (scene, reflector, camera, lighting) in farm_scenes(320) {
         let reflectors = object_triangles(&scene, reflector);
         let renderer = Renderer::new(Arc::new(scene), reflectors.clone());
         let mut is_reflector = vec![false; renderer.scene().triangles.len()];
