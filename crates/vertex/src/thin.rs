@@ -9,7 +9,8 @@
 //!   behind, seen along the eye ray shifted sideways by the slab (Snell
 //!   through both surfaces, which leaves the direction unchanged), shaded
 //!   with local Phong whose shadow test is a shadow map per light (Whitted's
-//!   shadow rays treat the glass as opaque, and so does the map);
+//!   shadow rays treat the glass as opaque, and so does the map; surfaces
+//!   that only emit cast no shadow in either, `vtfarm_trace::casts_shadow`);
 //! - the back surface mirrors about what the front does: the reflected part
 //!   is scaled by (kr(front) + kt(front)² · kr(back)) / kr(front).
 //!
@@ -402,7 +403,7 @@ impl ShadowMaps {
                 };
                 Some((
                     Projector::new(&view),
-                    vtfarm_raster::id_buffer(scene, &view),
+                    vtfarm_raster::id_buffer_where(scene, &view, &|t| tracer.bvh.casts_shadow(t)),
                 ))
             })
             .collect();
