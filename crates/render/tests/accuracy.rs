@@ -464,7 +464,14 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
 
 #[test]
 fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
-    for (scene, reflector, camera, lighting) in farm_scenes(320) {
+    // Also the farm tests' small cockpit frame with the eye moved sideways.
+    let [_, (small, _, small_camera, small_lighting)] = farm_scenes(96);
+    let moved = Camera {
+        eye: small_camera.eye + Vec3::new(0.03, 0.0, 0.0),
+        ..small_camera
+    };
+    let moved_eye = (small, COVER_GLASS, moved, small_lighting);
+    for (scene, reflector, camera, lighting) in farm_scenes(320).into_iter().chain([moved_eye]) {
         let reflectors = object_triangles(&scene, reflector);
         let renderer = Renderer::new(Arc::new(scene), reflectors.clone());
         let mut is_reflector = vec![false; renderer.scene().triangles.len()];
@@ -480,7 +487,7 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
                 "the glass's bounds {bounds:?} must leave most of the frame out"
             );
         }
-        for quality in [Quality::Preview, Quality::Full] {
+        for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
             let s = setup(camera, &lighting, quality);
             // The master: whole-frame buffers.
             let master = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
