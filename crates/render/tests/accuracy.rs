@@ -397,23 +397,28 @@ fn render_with(
         .image
 }
 
-#[test]
-fn random_packages_give_byte_identical_images() {
-    // A mirror sphere, and the cockpit's cover glass with the thin-glass model.
+/// The scenes the farm's invariants are checked on: a mirror sphere, and
+/// the cockpit's cover glass (thin-glass model) `cockpit_width` pixels wide.
+fn farm_scenes(cockpit_width: u32) -> [(Scene, &'static str, Camera, Lighting); 2] {
     let (sphere, sphere_camera, sphere_lighting) = mirror_sphere_scene();
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..CockpitConfig::default()
     });
     let cockpit_camera = Camera {
-        width: 160,
-        height: 90,
+        width: cockpit_width,
+        height: cockpit_width * 9 / 16,
         ..c.camera
     };
-    for (scene, reflector, camera, lighting) in [
+    [
         (sphere, "sphere", sphere_camera, sphere_lighting),
         (c.scene, COVER_GLASS, cockpit_camera, c.lighting),
-    ] {
+    ]
+}
+
+#[test]
+fn random_packages_give_byte_identical_images() {
+    for (scene, reflector, camera, lighting) in farm_scenes(160) {
         check_random_packages(scene, reflector, camera, &lighting);
     }
 }
@@ -459,20 +464,14 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
 
 #[test]
 fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
-    let (sphere, sphere_camera, sphere_lighting) = mirror_sphere_scene();
-    let c = cockpit(&CockpitConfig {
-        detail: 0.3,
-        ..CockpitConfig::default()
-    });
-    let cockpit_camera = Camera {
-        width: 320,
-        height: 180,
-        ..c.camera
+    // Also the farm tests' small cockpit frame with the eye moved sideways.
+    let [_, (small, _, small_camera, small_lighting)] = farm_scenes(96);
+    let moved = Camera {
+        eye: small_camera.eye + Vec3::new(0.03, 0.0, 0.0),
+        ..small_camera
     };
-    for (scene, reflector, camera, lighting) in [
-        (sphere, "sphere", sphere_camera, sphere_lighting),
-        (c.scene, COVER_GLASS, cockpit_camera, c.lighting),
-    ] {
+    let moved_eye = (small, COVER_GLASS, moved, small_lighting);
+    for (scene, reflector, camera, lighting) in farm_scenes(320).into_iter().chain([moved_eye]) {
         let reflectors = object_triangles(&scene, reflector);
         let renderer = Renderer::new(Arc::new(scene), reflectors.clone());
         let mut is_reflector = vec![false; renderer.scene().triangles.len()];
@@ -488,7 +487,7 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
                 "the glass's bounds {bounds:?} must leave most of the frame out"
             );
         }
-        for quality in [Quality::Preview, Quality::Full] {
+        for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
             let s = setup(camera, &lighting, quality);
             // The master: whole-frame buffers.
             let master = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
