@@ -159,3 +159,18 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
     assert_eq!(frames_done, 3);
     assert_eq!(assigned, simulated);
 }
+
+/// The simulator's farm rules run as many frames at once as a worker keeps
+/// prepared, so the master core (which clamps to the latter) runs the same.
+#[test]
+fn the_farm_runs_as_many_frames_in_flight_as_workers_keep() {
+    assert_eq!(
+        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT as usize,
+        vtfarm_proto::FRAMES_IN_FLIGHT
+    );
+    let farm = SchedulerConfig::default().farm();
+    assert_eq!(
+        farm.frames_in_flight,
+        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT
+    );
+}

@@ -254,6 +254,13 @@ impl Engine {
     /// Prepares a frame: the renderer (reused when scene and reflectors are
     /// the same) and the ID buffers, rebuilt locally (they are deterministic).
     pub fn start_frame(&mut self, start: FrameStart) -> Result<ActiveFrame, String> {
+        self.frame_parts(start)?.build()
+    }
+
+    /// The quick part of preparing a frame (checks, the renderer, cached per
+    /// scene and reflectors); [`FrameParts::build`] does the rest (the ID
+    /// buffers) and needs no engine, so a driver can run it on another thread.
+    pub fn frame_parts(&mut self, start: FrameStart) -> Result<FrameParts, String> {
         let scene = self
             .scenes
             .get(&start.scene)
@@ -283,16 +290,48 @@ impl Engine {
                 r
             }
         };
-        let (ids, behind) = contain_panic(|| renderer.id_buffers(&setup))?;
-        Ok(ActiveFrame {
+        Ok(FrameParts {
             job: start.job,
             frame: start.frame,
+            aux: start.aux,
+            renderer,
+            setup,
+            per_reflector,
+        })
+    }
+}
+
+/// A frame checked and with its renderer, before its ID buffers are built.
+pub struct FrameParts {
+    job: JobId,
+    frame: u32,
+    aux: bool,
+    renderer: Arc<Renderer>,
+    setup: FrameSetup,
+    per_reflector: Option<PerReflector>,
+}
+
+impl FrameParts {
+    /// Builds the frame's ID buffers: the CPU work of a frame's set-up.
+    pub fn build(self) -> Result<ActiveFrame, String> {
+        let FrameParts {
+            job,
+            frame,
+            aux,
+            renderer,
+            setup,
+            per_reflector,
+        } = self;
+        let (ids, behind) = contain_panic(|| renderer.id_buffers(&setup))?;
+        Ok(ActiveFrame {
+            job,
+            frame,
             renderer,
             setup,
             ids,
             behind,
             per_reflector,
-            parts: if start.aux {
+            parts: if aux {
                 WireBitmapParts::All
             } else {
                 WireBitmapParts::Color

@@ -13,8 +13,8 @@ use tracing::debug;
 use vtfarm_proto::{Link, PackageId, PackageResult, SceneData, SceneHash};
 use vtfarm_vertex::Stop;
 
-use crate::engine::{Engine, PreparedFrames};
-use crate::session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
+use crate::engine::{ActiveFrame, Engine, PreparedFrames};
+use crate::session::{FrameKey, SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 
 /// How long a drained worker waits for the master to close its side.
 const GOODBYE_LIMIT: Duration = Duration::from_secs(5);
@@ -66,6 +66,9 @@ type Running = (
     Arc<Stop>,
 );
 
+/// A frame being set up on a blocking thread.
+type Preparing = (FrameKey, JoinHandle<Result<ActiveFrame, String>>);
+
 /// Serves the master over `link` until it shuts the worker down, the link
 /// drops, or `drain` is raised and the session drained.
 pub async fn serve(
@@ -78,17 +81,25 @@ pub async fn serve(
     let start = Instant::now();
     let mut session = WorkerSession::new(Duration::ZERO);
     let mut frames = PreparedFrames::default();
+    let mut preparing: Option<Preparing> = None;
     let mut running: Option<Running> = None;
     loop {
         while let Some(task) = session.poll_task() {
             match task {
                 Task::PrepareFrame(frame_start) => {
                     let key = (frame_start.job, frame_start.frame);
-                    // Building the BVH and ID buffers is CPU work: keep it off
-                    // the I/O threads' hot path.
-                    let outcome = tokio::task::block_in_place(|| engine.start_frame(frame_start));
-                    let outcome = outcome.map(|active| frames.insert(active));
-                    session.frame_prepared(start.elapsed(), key, outcome);
+                    // A new scene's BVH is built here (once per scene); the
+                    // ID buffers on a blocking thread, so that a package of
+                    // an older frame that finishes meanwhile is sent at once.
+                    let parts = tokio::task::block_in_place(|| engine.frame_parts(frame_start));
+                    match parts {
+                        Ok(parts) => {
+                            let task = tokio::task::spawn_blocking(move || parts.build());
+                            // A newer frame replaces one still in the making.
+                            preparing = Some((key, task));
+                        }
+                        Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),
+                    }
                 }
                 Task::RunPackage(package) => {
                     let id = package.id;
@@ -140,6 +151,13 @@ pub async fn serve(
                 let (id, _, _) = running.take().expect("guarded by the select condition");
                 let outcome = outcome.unwrap_or_else(|join| Err(format!("package task failed: {join}")));
                 session.package_finished(start.elapsed(), id, outcome);
+            }
+            built = async { (&mut preparing.as_mut().expect("guarded by the select condition").1).await }, if preparing.is_some() => {
+                let (key, _) = preparing.take().expect("guarded by the select condition");
+                let outcome = built
+                    .unwrap_or_else(|join| Err(format!("frame set-up failed: {join}")))
+                    .map(|active| frames.insert(active));
+                session.frame_prepared(start.elapsed(), key, outcome);
             }
             () = tokio::time::sleep_until(deadline) => session.handle_timeout(start.elapsed()),
             () = drain.raised(), if !session.is_draining() => {
