@@ -27,8 +27,8 @@ use std::sync::Arc;
 
 use tracing::warn;
 use vtfarm_proto::{
-    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, WireJob,
-    decode_message, encode_message,
+    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, WireJob, decode_message,
+    encode_message,
 };
 
 /// What the core asks to keep.
