@@ -169,7 +169,9 @@ impl Views {
             scene: JobScene::Hash(source.scene_hash),
             frames,
             reflectors: source.reflectors.clone(),
-            aux: false,
+            // The workers send the reflected and transmitted components
+            // and the reflected objects: the glare figures need them.
+            aux: true,
             method: source.method.into(),
         };
         Ok(PlannedView {
