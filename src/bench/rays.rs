@@ -185,7 +185,11 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
         ("incoherent", sets.incoherent.len(), incoherent[0]),
         ("reflection", sets.reflection.len(), reflection[0]),
         ("primary, packets", sets.primary.len(), primary_packets[0]),
-        ("reflection, packets", sets.reflection.len(), reflection_packets[0]),
+        (
+            "reflection, packets",
+            sets.reflection.len(),
+            reflection_packets[0],
+        ),
     ] {
         println!(
             "{name:<20} {count:>9} rays  {:>7.2} M rays/s  {:>7.2} M rays/CPU-s",

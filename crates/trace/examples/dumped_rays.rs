@@ -73,7 +73,11 @@ fn main() {
                 preset,
             },
         );
-        println!("{} build {:.3} s", preset.name(), start.elapsed().as_secs_f64());
+        println!(
+            "{} build {:.3} s",
+            preset.name(),
+            start.elapsed().as_secs_f64()
+        );
         for (name, rays) in &sets {
             let mut best = [f64::INFINITY; 2];
             let mut single = Vec::new();
@@ -105,7 +109,11 @@ fn main() {
 /// CPU time of this thread (Linux), so that figures hold on a busy machine.
 fn thread_seconds() -> f64 {
     let stat = std::fs::read_to_string("/proc/thread-self/schedstat").expect("Linux schedstat");
-    let nanos: u64 = stat.split_whitespace().next().and_then(|n| n.parse().ok()).expect("schedstat");
+    let nanos: u64 = stat
+        .split_whitespace()
+        .next()
+        .and_then(|n| n.parse().ok())
+        .expect("schedstat");
     nanos as f64 * 1e-9
 }
 

@@ -539,7 +539,10 @@ impl SceneBvh {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let bvh_ray = bvh_ray(origin, direction, t_max)?;
         let sheared = ShearedRay::new(origin, direction);
-        with_axes!(sheared.axes, self.closest_hit_in(isa, &bvh_ray, &sheared, t_max))
+        with_axes!(
+            sheared.axes,
+            self.closest_hit_in(isa, &bvh_ray, &sheared, t_max)
+        )
     }
 
     /// The closest hit for a ray with axis order `[KX, KY, KZ]`.
@@ -597,10 +600,16 @@ impl SceneBvh {
     #[inline(always)]
     fn closest_hits_with(&self, isa: Isa, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
         let Accel::Cw(bvh) = &self.accel else {
-            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
+            return rays
+                .iter()
+                .map(|r| self.closest_hit_with(isa, r, t_max))
+                .collect();
         };
         if self.options.layout != BvhLayout::Cw {
-            return rays.iter().map(|r| self.closest_hit_with(isa, r, t_max)).collect();
+            return rays
+                .iter()
+                .map(|r| self.closest_hit_with(isa, r, t_max))
+                .collect();
         }
         let mut hits = Vec::with_capacity(rays.len());
         for packet in rays.chunks(crate::wide::PACKET) {
@@ -664,7 +673,10 @@ impl SceneBvh {
             return false;
         };
         let sheared = ShearedRay::new(origin, direction);
-        with_axes!(sheared.axes, self.occluded_in(isa, &bvh_ray, &sheared, t_max))
+        with_axes!(
+            sheared.axes,
+            self.occluded_in(isa, &bvh_ray, &sheared, t_max)
+        )
     }
 
     /// Any hit for a ray with axis order `[KX, KY, KZ]`.

@@ -620,11 +620,18 @@ fn packets_return_the_single_ray_hits_bit_for_bit() {
                     let single: Vec<Option<Hit>> =
                         rays.iter().map(|r| bvh.closest_hit(r, t_max)).collect();
                     let packets = bvh.closest_hits(&rays, t_max);
-                    let portable_single: Vec<Option<Hit>> =
-                        rays.iter().map(|r| portable.closest_hit(r, t_max)).collect();
+                    let portable_single: Vec<Option<Hit>> = rays
+                        .iter()
+                        .map(|r| portable.closest_hit(r, t_max))
+                        .collect();
                     let portable_packets = portable.closest_hits(&rays, t_max);
                     assert!(single.iter().map(bits).eq(portable_single.iter().map(bits)));
-                    assert!(packets.iter().map(bits).eq(portable_packets.iter().map(bits)));
+                    assert!(
+                        packets
+                            .iter()
+                            .map(bits)
+                            .eq(portable_packets.iter().map(bits))
+                    );
                     assert_eq!(packets.len(), rays.len());
                     assert!(single.iter().flatten().count() > rays.len() / 10);
                     for (i, (p, s)) in packets.iter().zip(&single).enumerate() {

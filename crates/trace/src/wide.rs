@@ -137,9 +137,30 @@ fn entry_distances_portable(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> [f32; 
     let mut far = [tmax; 8];
     // One call per axis with the scalars picked out (a loop over the axes
     // indexing `scale[axis]` kept the compiler from vectorising the lanes).
-    slab(&node.child_min_x, &node.child_max_x, scale.x, offset.x, &mut near, &mut far);
-    slab(&node.child_min_y, &node.child_max_y, scale.y, offset.y, &mut near, &mut far);
-    slab(&node.child_min_z, &node.child_max_z, scale.z, offset.z, &mut near, &mut far);
+    slab(
+        &node.child_min_x,
+        &node.child_max_x,
+        scale.x,
+        offset.x,
+        &mut near,
+        &mut far,
+    );
+    slab(
+        &node.child_min_y,
+        &node.child_max_y,
+        scale.y,
+        offset.y,
+        &mut near,
+        &mut far,
+    );
+    slab(
+        &node.child_min_z,
+        &node.child_max_z,
+        scale.z,
+        offset.z,
+        &mut near,
+        &mut far,
+    );
     let mut entries = [f32::INFINITY; 8];
     for i in 0..8 {
         if node.child_meta[i] != 0 && near[i] <= far[i] {
