@@ -105,7 +105,7 @@ timeout 900 ip netns exec "$tag-m" "$bin" submit "$work/job.toml" --cluster "$cl
 cores=$(nproc)
 scale=$(awk -v w="$workers" -v c="$cores" -v p="${cpu:-100}" 'BEGIN { s = w > c ? w / c : 1; s *= 100 / p; printf "%.3f", s }')
 "$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --frames "$frames" --width "$width" \
-  --height "$height" --detail "$detail" --repeats 1 --cost-scale "$scale" --json "$work/sim.json" >/dev/null 2>&1
+  --height "$height" --detail "$detail" --repeats 1 --cost-scale "$scale" --fixed-cost-scale "$scale" --json "$work/sim.json" >/dev/null 2>&1
 read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json")"
 predicted=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim.json")
 echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge (costs x$scale for shared cores)"

@@ -11,7 +11,10 @@
 #        [--keep DIR]   (keeps each run's frames, stats.json and timelines)
 # Prints one line per worker count: the mean frame time (the interval between
 # frame arrivals at the submitter, first frame left out: it includes the scene
-# transfer and BVH builds) and its ratio to the first count's.
+# transfer and BVH builds), its ratio to the first count's, and the
+# simulator's prediction for the same job and workers (`vtfarm bench simulate`
+# with costs recorded on this machine; workers beyond the cores share them,
+# so their costs are scaled by workers/cores) with measured/predicted.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
@@ -81,12 +84,23 @@ for n in $workers_list; do
   [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
 done
 
+# The simulator's prediction for each count (localhost: a fast link).
+declare -A predicted
+for n in $workers_list; do
+  scale=$(awk -v w="$n" -v c="$cores" 'BEGIN { printf "%.3f", (w > c ? w / c : 1) }')
+  "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
+    --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
+    --cost-scale "$scale" --fixed-cost-scale "$scale" --json "$work/sim-$n.json" >/dev/null 2>&1
+  predicted[$n]=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim-$n.json")
+done
+
 first=${workers_list%% *}
 read -r base _ <<<"${mean[$first]}"
 echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
-printf "%8s %16s %16s %10s %16s %16s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "raw MB/frame"
+printf "%8s %16s %16s %10s %16s %16s %12s %10s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "raw MB/frame" "predicted s" "meas/pred"
 for n in $workers_list; do
   read -r gap wall bytes raw <<<"${mean[$n]}"
-  printf "%8s %16s %16s %10s %16s %16s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$raw"
+  p=${predicted[$n]}
+  printf "%8s %16s %16s %10s %16s %16s %12.4f %10s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$raw" "$p" "$(awk -v a="$gap" -v b="$p" 'BEGIN { printf "%.2f", a / b }')"
 done
 echo "result MB: results as sent (zstd byte planes, colour only); raw: the same pixels at 40 bytes each (the previous encoding: three colours and an object id)"

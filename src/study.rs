@@ -1,6 +1,8 @@
 //! `vtfarm study` (an embedded farm) and the study side of `vtfarm submit`
-//! (a cluster): every variant is one farm job whose frames are its eye
-//! points, so the farm balances the study frame by frame.
+//! (a cluster): every variant is one farm job whose frames are its sun
+//! positions times its eye points, so the farm balances the study frame by
+//! frame, and the workers keep the variant's scene and BVH for all of them
+//! (a sun position changes only the lighting).
 
 use std::path::{Path, PathBuf};
 
@@ -78,14 +80,15 @@ pub(crate) async fn render_study(
                         .map(|row| row.summary.mean_reflected_luminance_cd_m2),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
-                        eye: f.frame as usize,
+                        eye: plan.frame_at(f.frame as usize).1,
                         why: "the master sent no components".into(),
                     }),
                 };
                 match written {
                     Ok(mean) => bar.println(format!(
-                        "{} eye {}: mean reflected luminance {mean:.1} cd/m²",
-                        variant.name, f.frame
+                        "{} {}: mean reflected luminance {mean:.1} cd/m²",
+                        variant.name,
+                        frame_name(plan, f.frame as usize)
                     )),
                     Err(e) => {
                         failure.get_or_insert(e);
@@ -104,6 +107,14 @@ pub(crate) async fn render_study(
     Ok(writer.finish()?)
 }
 
+/// "eye 3" or "sun 12 eye 3".
+fn frame_name(plan: &StudyPlan, frame: usize) -> String {
+    match plan.frame_at(frame) {
+        (Some(sun), eye) => format!("sun {sun} eye {eye}"),
+        (None, eye) => format!("eye {eye}"),
+    }
+}
+
 pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
     println!(
         "{:<24} {:>12} {:>12} {:>14} {:>14}  main glare source",
@@ -119,6 +130,21 @@ pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
             s.mean_reflected_luminance_cd_m2,
             s.main_glare_source.as_deref().unwrap_or("none")
         );
+    }
+    for s in &report.ranking {
+        if let Some(w) = s.worst_cases.first() {
+            let sun = match (w.sun_azimuth_deg, w.sun_elevation_deg) {
+                (Some(a), Some(e)) => format!("sun at azimuth {a:.1}°, elevation {e:.1}°"),
+                _ => "no sun".to_owned(),
+            };
+            println!(
+                "worst for {}: {sun}, eye {}: mean Lr {:.1} cd/m², mirrors {}",
+                s.variant,
+                w.eye_index,
+                w.mean_reflected_luminance_cd_m2,
+                w.mirrored_object.as_deref().unwrap_or("nothing")
+            );
+        }
     }
     println!(
         "wrote {} frame(s), summary.csv, summary.json and report.html to {}",

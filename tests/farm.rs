@@ -320,6 +320,7 @@ fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3
             camera: frame.camera,
             ids: &ids,
             reflector: &group,
+            stop: None,
         });
         image.composite(&output.bitmap);
     }
@@ -415,6 +416,73 @@ async fn run_vtfarm(args: &[String], bound: Duration) -> (std::process::ExitStat
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine() {
+    let files = study_on_one_machine_and_a_cluster(
+        "[eyes]\npoints = [[-0.55, 1.40, 0.10], [-0.60, 1.45, 0.12]]\n\
+         [[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
+         [[variants]]\nname = \"ellipsoidal\"\nglass = \"ellipsoidal\"\n",
+    )
+    .await;
+    for expected in [
+        "summary.csv",
+        "summary.json",
+        "report.html",
+        "flat/eye_01/heat.png",
+    ] {
+        assert!(
+            files.contains_key(std::path::Path::new(expected)),
+            "{expected} in {:?}",
+            files.keys()
+        );
+    }
+    assert_eq!(
+        files.len(),
+        3 + 2 * 2 * 7,
+        "three images and four arrays per frame"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_sun_sweep_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine() {
+    let files = study_on_one_machine_and_a_cluster(
+        "[eyes]\npoints = [[-0.55, 1.40, 0.10], [-0.60, 1.45, 0.12]]\n\
+         [[variants]]\nname = \"current\"\nglass = \"current\"\n\
+         [[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
+         [sun]\nazimuths = [90, 200]\nelevations = [20]\n",
+    )
+    .await;
+    assert!(files.contains_key(std::path::Path::new("current/sun_001/eye_01/heat.png")));
+    assert_eq!(
+        files.len(),
+        3 + 2 * 2 * 2 * 7,
+        "three images and four arrays per frame: 2 variants x 2 suns x 2 eyes"
+    );
+    let csv = String::from_utf8(files[std::path::Path::new("summary.csv")].clone()).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert!(
+        header.contains("sun_azimuth_deg") && header.contains("sun_elevation_deg"),
+        "{header}"
+    );
+    // The two suns light the same design differently.
+    let column = header
+        .split(',')
+        .position(|c| c == "mean_reflected_luminance_cd_m2")
+        .unwrap();
+    let mean_lr: Vec<&str> = csv
+        .lines()
+        .filter(|l| l.starts_with("current,0,"))
+        .map(|l| l.split(',').nth(column).unwrap())
+        .collect();
+    assert_eq!(mean_lr.len(), 2, "{csv}");
+    assert_ne!(mean_lr[0], mean_lr[1]);
+}
+
+/// Runs the study (`eyes`, `variants` and `[sun]` tables after a 192x108
+/// header on the small cockpit) with `vtfarm study` on one machine and with
+/// `vtfarm submit` on a two-worker localhost cluster; asserts that both
+/// wrote the same files, byte for byte, and returns them.
+async fn study_on_one_machine_and_a_cluster(
+    tables: &str,
+) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
     let _serial = SERIAL.lock().await;
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(
@@ -425,10 +493,7 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     let study = dir.path().join("study.toml");
     std::fs::write(
         &study,
-        "[study]\njob = \"job.toml\"\nwidth = 192\nheight = 108\n\
-         [eyes]\npoints = [[-0.55, 1.40, 0.10], [-0.60, 1.45, 0.12]]\n\
-         [[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
-         [[variants]]\nname = \"ellipsoidal\"\nglass = \"ellipsoidal\"\n",
+        format!("[study]\njob = \"job.toml\"\nwidth = 192\nheight = 108\n{tables}"),
     )
     .unwrap();
     let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
@@ -463,25 +528,10 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     let (a, b) = (files_under(&one), files_under(&two));
     let names: Vec<&PathBuf> = a.keys().collect();
     assert_eq!(names, b.keys().collect::<Vec<_>>());
-    for expected in [
-        "summary.csv",
-        "summary.json",
-        "report.html",
-        "flat/eye_01/heat.png",
-    ] {
-        assert!(
-            a.contains_key(std::path::Path::new(expected)),
-            "{expected} in {names:?}"
-        );
-    }
-    assert_eq!(
-        names.len(),
-        3 + 2 * 2 * 7,
-        "three images and four arrays per frame"
-    );
     for (name, bytes) in &a {
         assert!(bytes == &b[name], "{} differs", name.display());
     }
+    a
 }
 
 /// A child process, killed when dropped (a failing test leaves no orphans).

@@ -8,6 +8,7 @@ use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 
 use sha2::{Digest, Sha256};
+use vtfarm_method::FrameSetup;
 use vtfarm_proto::{
     HandshakePolicy, JobScene, MAX_HANDSHAKE_BYTES, Message, SESSION_LIMIT, SceneData, check_hello,
     read_message,
@@ -72,7 +73,7 @@ fn convert(message: Message) {
     match message {
         Message::SubmitJob { job } => {
             for frame in job.frames {
-                let _ = frame.into_parts();
+                let _ = FrameSetup::try_from(frame);
             }
             if let JobScene::Data(data) = job.scene {
                 scene(data.bytes);
@@ -80,7 +81,7 @@ fn convert(message: Message) {
         }
         Message::SceneData(data) => scene(data.bytes),
         Message::FrameStart(start) => {
-            let _ = start.setup.into_parts();
+            let _ = FrameSetup::try_from(start.setup);
         }
         Message::PackageResult(result) => {
             let _ = result.bitmap.into_bitmap_within(640, 360);

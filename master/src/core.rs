@@ -211,8 +211,9 @@ pub struct MasterCore {
 impl MasterCore {
     pub fn new(config: SchedulerConfig) -> Self {
         MasterCore {
-            // Workers set each frame up before they ask for its work (see worker::session).
-            scheduler: Scheduler::new(config.farm()),
+            // Workers set each frame up before they ask for its work, and
+            // keep FRAMES_IN_FLIGHT frames prepared (see worker::session).
+            scheduler: Scheduler::new(farm_config(config)),
             peers: BTreeMap::new(),
             scenes: BTreeMap::new(),
             jobs: BTreeMap::new(),
@@ -1183,6 +1184,16 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
+    }
+}
+
+/// The master's scheduler rules: the farm's, with no more frames in flight
+/// than a worker keeps prepared.
+fn farm_config(config: SchedulerConfig) -> SchedulerConfig {
+    let config = config.farm();
+    SchedulerConfig {
+        frames_in_flight: (config.frames_in_flight).min(vtfarm_proto::FRAMES_IN_FLIGHT as u32),
+        ..config
     }
 }
 

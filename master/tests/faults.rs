@@ -373,3 +373,22 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
         pair.now - left_at
     );
 }
+
+#[test]
+fn pipelined_frames_overlap_and_stay_byte_identical() {
+    let job = Job::new(3);
+    let mut pair = Pair::new(SchedulerConfig::default());
+    pair.add_worker("fast", 1.0);
+    pair.add_worker("slow", 3.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    // Frame 1 is announced while frame 0's last packages still run.
+    pair.drive(BOUND, |p| p.frame_starts.iter().any(|&(_, f)| f == 1));
+    assert!(
+        pair.frames_done().is_empty(),
+        "frame 1 started before frame 0 was done"
+    );
+    pair.drive(BOUND, all_frames(3));
+    let stats = check_images(&pair, &job);
+    assert!(stats.iter().all(|s| s.failures == 0), "{stats:?}");
+}

@@ -60,6 +60,11 @@ pub use wire::{
 /// [`RefuseCode::BadVersion`].
 pub const PROTOCOL_VERSION: u32 = 3;
 
+/// How many frames of a job the master runs at once (pipelined frames) and
+/// so how many prepared frames a worker keeps: a package of any of them may
+/// come. The master's scheduler configuration must not exceed it.
+pub const FRAMES_IN_FLIGHT: usize = 4;
+
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.
 pub const MAGIC: [u8; 8] = *b"VTFARM\0\0";

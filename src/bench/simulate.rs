@@ -18,11 +18,15 @@
 //! one shared link of the same bandwidth; results cost the mean recorded
 //! (compact, colour-only) bytes per triangle. Per-frame fixed costs are
 //! measured here on one thread: each worker's set-up (its ID buffers) before
-//! it asks for work, and the master's base frame, rasterized while the
-//! workers trace. Every simulated frame is the recorded frame again, so from
-//! the second frame on the scheduler's cost estimates are measured ones. Not
-//! modelled: compositing on the master and the finished image's way to the
-//! submitter.
+//! it asks for work (beside its last package of the frame before: frames
+//! are pipelined), the master's base frame, rasterized while the workers
+//! trace (results that come earlier wait for it), and the master's checking
+//! and compositing of each result (its messages wait meanwhile; not scaled
+//! by `--cost-scale`, it does not grow with the work per pixel). Every
+//! simulated frame is the recorded frame again, so from the second frame on
+//! the scheduler's cost estimates are measured ones. Not modelled: the
+//! finished image's way to the submitter, and CPU the master takes from
+//! workers on the same machine.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -37,7 +41,7 @@ use vtfarm_proto::{
 use vtfarm_render::Renderer;
 use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimFrameReport, SimJob, SimWorker, Simulation};
 use vtfarm_scheduler::{FrameStats, JobId, SchedulerConfig};
-use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
+use vtfarm_vertex::{FrameImage, PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
 
@@ -63,9 +67,23 @@ pub(crate) struct SimulateArgs {
     /// frame): the load balancer alone, as in the paper's figures.
     #[arg(long)]
     no_fixed_costs: bool,
-    /// Multiplies every recorded cost (e.g. to emulate slower machines).
+    /// Multiplies every recorded tracing cost (36: the paper's work per
+    /// frame).
     #[arg(long, default_value_t = 1.0)]
     cost_scale: f64,
+    /// Multiplies the per-frame fixed costs (the master's base frame, the
+    /// workers' set-up). Default 1: rasterizing does not grow with the
+    /// traced work per frame (the paper's came from graphics hardware);
+    /// set it like --cost-scale to emulate machines that are slower at
+    /// everything.
+    #[arg(long, default_value_t = 1.0)]
+    fixed_cost_scale: f64,
+    /// Cores of the master: its base frame is rasterized in parallel (the
+    /// rasterizer is bit-identical for any thread count), so it takes the
+    /// recorded one-thread time divided by this. Compositing stays on the
+    /// master's one driver task.
+    #[arg(long, default_value_t = 1)]
+    master_threads: u32,
     /// Width of the recorded frame.
     #[arg(long, default_value_t = 1920)]
     width: u32,
@@ -108,6 +126,8 @@ pub(super) struct Recording {
     pub(super) base_frame_seconds: f64,
     /// A worker's frame set-up (ID and behind buffers), one thread.
     pub(super) worker_setup_seconds: f64,
+    /// The master's checking and compositing of a frame's results, one thread.
+    pub(super) composite_seconds: f64,
     /// Wall time of the per-triangle tracing, all passes.
     pub(super) tracing_wall_seconds: f64,
 }
@@ -150,8 +170,9 @@ fn result_message_bytes(
     Ok(encode_message(&message)?.len() as u64)
 }
 
-/// One triangle's measurements: (index, seconds, bytes, samples, pixels).
-type Measure = (usize, f64, u64, u64, u64);
+/// One triangle's measurements: (index, seconds, bytes, samples, pixels,
+/// and from its first pass the result's bitmap as sent).
+type Measure = (usize, f64, u64, u64, u64, Option<WireBitmap>);
 
 /// Traces each reflector triangle of `job` as a package of its own on
 /// `threads` one-thread pools, `repeats` times, and records its least time,
@@ -202,6 +223,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                             );
                             let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
                             let busy = t0.elapsed();
+                            let kept = (run < n).then(|| bitmap.clone());
                             let bytes = result_message_bytes(
                                 bitmap,
                                 WirePackageStats::from(&result.stats),
@@ -214,6 +236,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 bytes,
                                 result.stats.samples(),
                                 result.stats.pixels,
+                                kept,
                             ));
                         }
                         Ok(out)
@@ -231,7 +254,9 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     let mut result_bytes = vec![0; n];
     let mut samples = vec![0; n];
     let mut pixels = vec![0; n];
-    for (i, s, b, k, p) in per_thread.into_iter().flatten() {
+    let mut bitmaps = Vec::with_capacity(n);
+    for (i, s, b, k, p, bitmap) in per_thread.into_iter().flatten() {
+        bitmaps.extend(bitmap.map(|bitmap| (i, bitmap)));
         seconds[i] = seconds[i].min(s);
         // Pixels and samples are deterministic; the message differs only in
         // the varint of its busy time.
@@ -239,6 +264,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         samples[i] = k;
         pixels[i] = p;
     }
+    let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -254,8 +280,35 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         empty_result_bytes,
         base_frame_seconds,
         worker_setup_seconds,
+        composite_seconds,
         tracing_wall_seconds,
     })
+}
+
+/// The master's work on the results of a frame, on one thread: each
+/// one-triangle result decoded, checked for pixel ownership and composited,
+/// as `MasterCore` does.
+fn composite_time(
+    renderer: &Renderer,
+    job: &CockpitJob,
+    triangles: &[u32],
+    bitmaps: Vec<(usize, WireBitmap)>,
+) -> Result<f64> {
+    let (base, ids) = renderer.base_frame(&job.setup);
+    let (width, height) = (base.width, base.height);
+    let mut image = FrameImage::new(base);
+    let start = Instant::now();
+    for (i, bitmap) in bitmaps {
+        let bitmap = bitmap.into_bitmap_within(width, height)?;
+        if let Some((x, y)) = bitmap.foreign_pixel(&ids, |t| t == triangles[i]) {
+            bail!(
+                "triangle {}'s result writes the foreign pixel ({x}, {y})",
+                triangles[i]
+            );
+        }
+        image.composite(&bitmap);
+    }
+    Ok(start.elapsed().as_secs_f64())
 }
 
 /// One simulated farm: the figures of its frames.
@@ -332,8 +385,8 @@ pub(super) fn mean_frame_seconds(frames: &[SimFrameReport]) -> f64 {
 }
 
 pub(crate) fn run(args: SimulateArgs) -> Result<()> {
-    if args.frames == 0 || args.workers.contains(&0) {
-        bail!("--frames and every --workers entry must be at least 1");
+    if args.frames == 0 || args.workers.contains(&0) || args.master_threads == 0 {
+        bail!("--frames, --master-threads and every --workers entry must be at least 1");
     }
     if args.link_mbit.iter().any(|&m| m.is_nan() || m <= 0.0) {
         bail!("every --link-mbit entry must be positive");
@@ -351,7 +404,9 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     );
     let mut recording = record(&job, threads, args.repeats)?;
     if args.no_fixed_costs {
-        (recording.base_frame_seconds, recording.worker_setup_seconds) = (0.0, 0.0);
+        recording.base_frame_seconds = 0.0;
+        recording.worker_setup_seconds = 0.0;
+        recording.composite_seconds = 0.0;
     }
     let total = recording.total_seconds() * args.cost_scale;
     let samples: u64 = recording.samples.iter().sum();
@@ -361,7 +416,13 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         result_bytes_per_item: recording.bytes_per_item(),
         rays_per_second: samples as f64 / total.max(1e-9),
         master_link_bits_per_second: Some(mbit * 1e6),
-        master_frame_cost: Duration::from_secs_f64(recording.base_frame_seconds * args.cost_scale),
+        master_frame_cost: Duration::from_secs_f64(
+            recording.base_frame_seconds * args.fixed_cost_scale / f64::from(args.master_threads),
+        ),
+        // Compositing does not grow with the work per pixel: not scaled.
+        master_result_cost_per_item: Duration::from_secs_f64(
+            recording.composite_seconds / recording.triangles.len().max(1) as f64,
+        ),
         ..SimConfig::default()
     };
     let latency = Duration::from_secs_f64(args.latency_ms.max(0.0) / 1e3);
@@ -371,7 +432,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         latency,
         package_overhead: overhead,
         frame_setup: Duration::from_secs_f64(
-            recording.worker_setup_seconds * args.cost_scale / speed,
+            recording.worker_setup_seconds * args.fixed_cost_scale / speed,
         ),
         ..SimWorker::with_speed(speed)
     };
@@ -473,10 +534,11 @@ fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[
         header_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; per-triangle tracing {:.3} s wall ({} passes, least time kept)",
-        args.cost_scale,
-        rec.base_frame_seconds * args.cost_scale,
-        rec.worker_setup_seconds * args.cost_scale,
+        "  fixed costs per frame (one thread, x{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s (not scaled); per-triangle tracing {:.3} s wall ({} passes, least time kept)",
+        args.fixed_cost_scale,
+        rec.base_frame_seconds * args.fixed_cost_scale,
+        rec.worker_setup_seconds * args.fixed_cost_scale,
+        rec.composite_seconds,
         rec.tracing_wall_seconds,
         args.repeats
     );
@@ -523,6 +585,22 @@ fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[
                     link_seconds / fastest * 100.0
                 )
             }
+        );
+    }
+    // The master does per frame what no worker can take over: its base
+    // frame (one at a time) and every result's compositing.
+    let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(args.master_threads);
+    let fastest = rows
+        .iter()
+        .map(|r| r.frame_seconds)
+        .fold(f64::INFINITY, f64::min);
+    let master = base.max(rec.composite_seconds);
+    if master > 0.5 * fastest {
+        println!(
+            "  the master's own work per frame (base frame {base:.3} s on {} thread(s), compositing {:.3} s) is {:.0}% of the fastest simulated frame ({fastest:.3} s): it bounds the frame (more --master-threads would help)",
+            args.master_threads,
+            rec.composite_seconds,
+            master / fastest * 100.0
         );
     }
     // The aims: 16 workers >= 90% and < 5% imbalance, 64 workers >= 80%.

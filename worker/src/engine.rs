@@ -20,6 +20,30 @@ use vtfarm_vertex::{
     Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
 };
 
+/// The frames a worker keeps prepared: the newest and the ones before it
+/// whose packages the master may still hand out while frames are pipelined
+/// ([`vtfarm_proto::FRAMES_IN_FLIGHT`], see `session`).
+#[derive(Default)]
+pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
+
+impl PreparedFrames {
+    /// Keeps `frame` as the newest, dropping the oldest beyond
+    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`].
+    pub fn insert(&mut self, frame: ActiveFrame) {
+        if self.0.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+            self.0.remove(0);
+        }
+        self.0.push(Arc::new(frame));
+    }
+
+    /// The prepared frame `frame` of `job`, if kept.
+    pub fn get(&self, job: JobId, frame: u32) -> Option<Arc<ActiveFrame>> {
+        (self.0.iter())
+            .find(|a| (a.job, a.frame) == (job, frame))
+            .cloned()
+    }
+}
+
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
     pub job: JobId,
@@ -137,6 +161,7 @@ impl PerReflector {
                 camera: frame.camera,
                 ids: frame.ids,
                 reflector: group,
+                stop: frame.stop,
             });
             let c = output.counters;
             stats.add(&PackageStats {
@@ -273,5 +298,67 @@ impl Engine {
                 WireBitmapParts::Color
             },
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use vtfarm_proto::{SceneData, WireFrameSetup};
+    use vtfarm_scene::{Light, LightKind};
+
+    /// A study's sun sweep sends frames that differ only in the lighting:
+    /// the worker keeps the scene's renderer (its BVH) for all of them.
+    #[test]
+    fn frames_that_differ_only_in_the_sun_share_the_renderer() {
+        let cockpit = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
+            detail: 0.1,
+            ..Default::default()
+        });
+        let data = SceneData::from_scene(&cockpit.scene);
+        let hash = data.hash;
+        let mut engine = Engine::new(None);
+        engine.add_scene(data).unwrap();
+        let reflectors = cockpit.cover_glass_triangles();
+        let start = |frame: u32, sun: Vec3, reflectors: &[u32]| {
+            let mut lighting = cockpit.lighting.clone();
+            lighting.lights[0] = Light {
+                kind: LightKind::Directional { direction: sun },
+                ..lighting.lights[0]
+            };
+            let setup = FrameSetup {
+                camera: vtfarm_scene::Camera {
+                    width: 32,
+                    height: 18,
+                    ..cockpit.camera
+                },
+                lighting,
+                trace: Default::default(),
+                vertex: Default::default(),
+            };
+            FrameStart {
+                job: 1,
+                frame,
+                scene: hash,
+                setup: WireFrameSetup::from(&setup),
+                reflectors: reflectors.to_vec(),
+                method: MethodKind::VertexTracing.into(),
+                aux: true,
+            }
+        };
+        let a = engine
+            .start_frame(start(0, Vec3::new(0.45, -0.85, -0.15), &reflectors))
+            .unwrap();
+        let b = engine
+            .start_frame(start(1, Vec3::new(-0.9, -0.3, 0.1), &reflectors))
+            .unwrap();
+        assert!(Arc::ptr_eq(&a.renderer, &b.renderer));
+        assert_ne!(a.setup.lighting, b.setup.lighting);
+        // Other reflectors make another renderer.
+        let c = engine
+            .start_frame(start(2, Vec3::new(-0.9, -0.3, 0.1), &reflectors[1..]))
+            .unwrap();
+        assert!(!Arc::ptr_eq(&a.renderer, &c.renderer));
     }
 }

@@ -13,7 +13,7 @@ use tracing::debug;
 use vtfarm_proto::{Link, PackageId, PackageResult, SceneData, SceneHash};
 use vtfarm_vertex::Stop;
 
-use crate::engine::{ActiveFrame, Engine};
+use crate::engine::{Engine, PreparedFrames};
 use crate::session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 
 /// How long a drained worker waits for the master to close its side.
@@ -77,8 +77,7 @@ pub async fn serve(
     let Link { tx, mut rx, .. } = link;
     let start = Instant::now();
     let mut session = WorkerSession::new(Duration::ZERO);
-    // The newest prepared frame and the one before it (see `session`).
-    let mut frames: Vec<Arc<ActiveFrame>> = Vec::with_capacity(2);
+    let mut frames = PreparedFrames::default();
     let mut running: Option<Running> = None;
     loop {
         while let Some(task) = session.poll_task() {
@@ -88,19 +87,12 @@ pub async fn serve(
                     // Building the BVH and ID buffers is CPU work: keep it off
                     // the I/O threads' hot path.
                     let outcome = tokio::task::block_in_place(|| engine.start_frame(frame_start));
-                    let outcome = outcome.map(|active| {
-                        if frames.len() == 2 {
-                            frames.remove(0);
-                        }
-                        frames.push(Arc::new(active));
-                    });
+                    let outcome = outcome.map(|active| frames.insert(active));
                     session.frame_prepared(start.elapsed(), key, outcome);
                 }
                 Task::RunPackage(package) => {
                     let id = package.id;
-                    let active = (frames.iter())
-                        .find(|a| (a.job, a.frame) == (package.job, package.frame))
-                        .cloned();
+                    let active = frames.get(package.job, package.frame);
                     let budget =
                         active.as_ref().map_or(0, |a| a.pixels()) * config.samples_per_pixel_budget;
                     let stop = Arc::new(Stop::with_budget(budget));

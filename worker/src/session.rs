@@ -10,8 +10,8 @@
 //! is ready and it is idle, runs one package at a time (the package itself uses
 //! every core), and sends the result or the error. The master pipelines
 //! frames (it announces frame N+1 while N's last packages run and may still
-//! hand out N's requeued work), so the frame prepared before the newest one
-//! stays usable. Scenes are fetched only
+//! hand out N's requeued work), so the frames prepared before the newest one
+//! stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all. Scenes are fetched only
 //! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
 //!
 //! Draining (SIGTERM): no more requests; the running package finishes (or
@@ -93,8 +93,9 @@ pub enum Task {
 pub struct WorkerSession {
     /// The frame whose packages can run now (the newest prepared).
     ready: Option<FrameKey>,
-    /// The frame prepared before `ready`: its packages can run too.
-    previous: Option<FrameKey>,
+    /// Frames prepared before `ready`, oldest first: their packages can run
+    /// too.
+    older: VecDeque<FrameKey>,
     /// A frame handed to the driver for preparation.
     preparing: Option<FrameKey>,
     /// A frame whose scene is still on its way.
@@ -121,7 +122,7 @@ impl WorkerSession {
     pub fn new(now: Duration) -> Self {
         WorkerSession {
             ready: None,
-            previous: None,
+            older: VecDeque::new(),
             preparing: None,
             awaiting_scene: None,
             unusable: None,
@@ -281,7 +282,10 @@ impl WorkerSession {
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
         let key = (start.job, start.frame);
         if let Some(ready) = self.ready.take() {
-            self.previous = Some(ready);
+            if self.older.len() + 1 == vtfarm_proto::FRAMES_IN_FLIGHT {
+                self.older.pop_front();
+            }
+            self.older.push_back(ready);
         }
         self.unusable = None;
         self.awaiting_scene = None;
@@ -321,7 +325,7 @@ impl WorkerSession {
                 break;
             }
             let package = self.queue.pop_front().expect("front exists");
-            if self.ready == Some(key) || self.previous == Some(key) {
+            if self.ready == Some(key) || self.older.contains(&key) {
                 self.running = Some(package.id);
                 self.tasks.push_back(Task::RunPackage(package));
             } else {

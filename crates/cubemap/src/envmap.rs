@@ -123,6 +123,9 @@ impl ReflectionMethod for EnvironmentMap {
         let start = Instant::now();
         let cube = self.cube(frame);
         let setup_time = start.elapsed();
+        if frame.stopped() {
+            return MethodOutput::default();
+        }
         let pixels = frame.pixels();
         let reflections: Vec<Reflection> = pixels
             .iter()

@@ -116,6 +116,9 @@ impl CubeMapMethod {
         frame: &MethodFrame<'_>,
         prepared: &PreparedReflector,
     ) -> MethodOutput {
+        if frame.stopped() {
+            return MethodOutput::default();
+        }
         let scene = frame.tracer.bvh.scene();
         let mesh = &prepared.mesh;
         let (virtuals, searches) = virtual_vertices(
@@ -124,26 +127,35 @@ impl CubeMapMethod {
             frame.camera.eye,
             &self.config.search,
             self.config.grid.as_ref(),
+            &|| frame.stopped(),
         );
+        if frame.stopped() {
+            return MethodOutput::default();
+        }
         let pixels = frame.pixels();
         let hits = rasterize_virtual_meshes(mesh, &frame.camera, frame.ids, &pixels, &virtuals);
         let secondary = frame.secondary_tracer();
-        let reflections: Vec<Reflection> = pixels
+        // Each reflection with whether it shaded a hit (one ray's work).
+        let (reflections, shaded): (Vec<Reflection>, Vec<bool>) = pixels
             .par_iter()
             .zip(&hits)
             .map(|(pixel, hit)| match hit {
+                // Not shaded: a stopped package's result is discarded.
+                Some(_) if frame.stopped() => (Reflection::NONE, false),
                 Some(hit) => {
+                    frame.charge(1);
                     let point = surface_point(frame.tracer.bvh, mesh, hit);
                     let incoming = (point.position - pixel.point.position).normalize_or_zero();
-                    Reflection {
+                    let reflection = Reflection {
                         radiance: secondary.shade(&point, incoming).color,
                         object: scene.triangles[point.triangle as usize].object,
-                    }
+                    };
+                    (reflection, true)
                 }
-                None => prepared.fallback.lookup(mirror_direction(pixel)),
+                None => (prepared.fallback.lookup(mirror_direction(pixel)), false),
             })
-            .collect();
-        let shaded = hits.iter().filter(|h| h.is_some()).count() as u64;
+            .unzip();
+        let shaded = shaded.iter().filter(|&&s| s).count() as u64;
         let (bitmap, rays) = shade_reflector(frame, &pixels, &reflections, None);
         MethodOutput {
             bitmap,

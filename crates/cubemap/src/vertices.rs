@@ -29,17 +29,22 @@ impl Default for GridSettings {
 }
 
 /// The virtual vertex of every vertex of `mesh` and the number of
-/// searches run.
+/// searches run. Once `stopped` says so, the objects not yet searched are
+/// left `FAILED` (the package is being cancelled).
 pub(crate) fn virtual_vertices(
     mesh: &ReflectedMesh,
     maps: &ReflectorMaps,
     eye: Vec3,
     search_settings: &SearchSettings,
     grid: Option<&GridSettings>,
+    stopped: &dyn Fn() -> bool,
 ) -> (Vec<VirtualVertex>, u64) {
     let mut out = vec![VirtualVertex::FAILED; mesh.positions.len()];
     let mut searches = 0;
     for vertices in objects_vertices(mesh) {
+        if stopped() {
+            break;
+        }
         let points: Vec<Vec3> = vertices
             .iter()
             .map(|&v| mesh.positions[v as usize])

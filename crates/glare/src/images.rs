@@ -132,10 +132,13 @@ impl LogRange {
     /// the top (0 for a range that is not positive and increasing).
     pub fn position(&self, l: f32) -> f32 {
         let span = (self.max_cd_m2 / self.min_cd_m2).ln();
-        if !(self.min_cd_m2 > 0.0 && span.is_finite() && span > 0.0) || !(l > self.min_cd_m2) {
-            return 0.0;
+        let valid = self.min_cd_m2 > 0.0 && span.is_finite() && span > 0.0;
+        // A NaN luminance compares false and sits at the bottom.
+        if valid && l > self.min_cd_m2 {
+            ((l / self.min_cd_m2).ln() / span).clamp(0.0, 1.0)
+        } else {
+            0.0
         }
-        ((l / self.min_cd_m2).ln() / span).clamp(0.0, 1.0)
     }
 
     /// The luminance at position `t` of the scale.

@@ -285,11 +285,14 @@ impl<'a> GlareInput<'a> {
     }
 }
 
+/// A parameter's name, value, rule and test.
+type ParamCheck = (&'static str, f32, &'static str, fn(f32) -> bool);
+
 impl Params {
     /// Checks that the parameters are finite and in range.
     pub fn validate(&self) -> Result<(), GlareError> {
         let (t, a) = (&self.thresholds, &self.ambient);
-        let checks: [(&'static str, f32, &'static str, fn(f32) -> bool); 6] = [
+        let checks: [ParamCheck; 6] = [
             (
                 "cd_m2_per_unit",
                 self.cd_m2_per_unit,

@@ -40,6 +40,107 @@ pub struct Study {
     pub eyes: Vec<Vec3>,
     pub variants: Vec<Variant>,
     pub metrics: MetricsSpec,
+    /// The `[sun]` sweep; `None`: the base job's sun only.
+    pub sun: Option<SunSweep>,
+}
+
+/// Sun positions a study sweeps: every position is one more frame per eye
+/// point and variant, lit by the base job's directional lights (the sun)
+/// turned to it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SunSweep {
+    /// Every azimuth with every elevation, relative to the vehicle: azimuth
+    /// clockwise seen from above from straight ahead (90° right, 270° left),
+    /// elevation above the horizon in (0°, 90°].
+    Grid {
+        azimuths_deg: Vec<f32>,
+        elevations_deg: Vec<f32>,
+    },
+    /// The sun at each of `times` (UTC) seen from a vehicle at latitude and
+    /// longitude (degrees, north and east positive) driving towards compass
+    /// heading `heading_deg` (0° north, 90° east).
+    Times {
+        times: Vec<UtcTime>,
+        latitude_deg: f64,
+        longitude_deg: f64,
+        heading_deg: f64,
+    },
+}
+
+/// The most sun positions a sweep may have.
+pub const MAX_SUN_POSITIONS: usize = 10_000;
+
+/// An instant in UTC, to the second.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct UtcTime {
+    /// Seconds since 1970-01-01T00:00:00Z.
+    pub unix_seconds: i64,
+}
+
+impl UtcTime {
+    /// The instant of a civil date and time at a UTC offset in minutes
+    /// (local = UTC + offset); `None` for a date or time that does not exist.
+    pub fn from_civil(
+        year: i32,
+        month: u32,
+        day: u32,
+        hour: u32,
+        minute: u32,
+        second: u32,
+        offset_minutes: i32,
+    ) -> Option<UtcTime> {
+        let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+        let days_in_month = match month {
+            1 | 3 | 5 | 7 | 8 | 10 | 12 => 31,
+            4 | 6 | 9 | 11 => 30,
+            2 if leap => 29,
+            2 => 28,
+            _ => return None,
+        };
+        if !(1..=days_in_month).contains(&day) || hour > 23 || minute > 59 || second > 59 {
+            return None;
+        }
+        // Days since 1970-01-01 (H. Hinnant's days_from_civil).
+        let y = i64::from(year) - i64::from(month <= 2);
+        let era = y.div_euclid(400);
+        let year_of_era = y - era * 400;
+        let m = i64::from(month);
+        let day_of_year = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + i64::from(day) - 1;
+        let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+        let days = era * 146_097 + day_of_era - 719_468;
+        let seconds =
+            days * 86_400 + i64::from(hour) * 3600 + i64::from(minute) * 60 + i64::from(second)
+                - i64::from(offset_minutes) * 60;
+        Some(UtcTime {
+            unix_seconds: seconds,
+        })
+    }
+
+    /// (year, month, day, hour, minute, second) in UTC.
+    pub fn civil(self) -> (i64, u32, u32, u32, u32, u32) {
+        let days = self.unix_seconds.div_euclid(86_400);
+        let secs = self.unix_seconds.rem_euclid(86_400) as u32;
+        // H. Hinnant's civil_from_days.
+        let z = days + 719_468;
+        let era = z.div_euclid(146_097);
+        let day_of_era = z - era * 146_097;
+        let year_of_era =
+            (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
+        let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+        let mp = (5 * day_of_year + 2) / 153;
+        let day = (day_of_year - (153 * mp + 2) / 5 + 1) as u32;
+        let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+        let year = year_of_era + era * 400 + i64::from(month <= 2);
+        (year, month, day, secs / 3600, secs / 60 % 60, secs % 60)
+    }
+}
+
+impl std::fmt::Display for UtcTime {
+    /// RFC 3339 in UTC, e.g. `2026-06-21T08:00:00Z`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (y, mo, d, h, mi, s) = self.civil();
+        write!(f, "{y:04}-{mo:02}-{d:02}T{h:02}:{mi:02}:{s:02}Z")
+    }
 }
 
 /// One cover-glass design.
@@ -118,6 +219,20 @@ struct RawStudy {
     variants: Vec<Spanned<RawVariant>>,
     #[serde(default)]
     metrics: RawMetrics,
+    sun: Option<Spanned<RawSun>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSun {
+    azimuths: Option<Spanned<Vec<f32>>>,
+    elevations: Option<Spanned<Vec<f32>>>,
+    start: Option<Spanned<toml::value::Datetime>>,
+    end: Option<Spanned<toml::value::Datetime>>,
+    step_minutes: Option<Spanned<u32>>,
+    latitude: Option<Spanned<f64>>,
+    longitude: Option<Spanned<f64>>,
+    heading: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -242,6 +357,7 @@ pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
         ));
     }
     let metrics = source.metrics(&raw.metrics)?;
+    let sun = raw.sun.as_ref().map(|sun| source.sun(sun)).transpose()?;
     Ok(Study {
         file: origin.to_owned(),
         name: header.name.unwrap_or_else(|| {
@@ -256,6 +372,7 @@ pub fn parse_study(text: &str, origin: &Path) -> Result<Study, JobError> {
         eyes,
         variants,
         metrics,
+        sun,
     })
 }
 
@@ -389,6 +506,161 @@ impl Source<'_> {
             }
         };
         Ok(Variant { name, scene })
+    }
+
+    fn sun(&self, raw: &Spanned<RawSun>) -> Result<SunSweep, JobError> {
+        const WHICH: &str = "give [sun] either azimuths = [...] and elevations = [...] (degrees relative to the vehicle) or start = 2026-06-21T08:00:00Z with latitude, longitude and heading";
+        let sun = raw.get_ref();
+        let grid = sun.azimuths.is_some() || sun.elevations.is_some();
+        let times = sun.start.is_some()
+            || sun.end.is_some()
+            || sun.step_minutes.is_some()
+            || sun.latitude.is_some()
+            || sun.longitude.is_some()
+            || sun.heading.is_some();
+        match (grid, times) {
+            (true, false) => self.sun_grid(raw),
+            (false, true) => self.sun_times(raw),
+            (true, true) => Err(self.error(Some(raw.span()), format!("[sun]: {WHICH}, not both"))),
+            (false, false) => Err(self.error(Some(raw.span()), format!("[sun] is empty: {WHICH}"))),
+        }
+    }
+
+    fn sun_grid(&self, raw: &Spanned<RawSun>) -> Result<SunSweep, JobError> {
+        let sun = raw.get_ref();
+        let list =
+            |key: &str, value: &Option<Spanned<Vec<f32>>>, rule: &str, ok: fn(f32) -> bool| {
+                let Some(value) = value else {
+                    return Err(self.error(
+                        Some(raw.span()),
+                        format!("[sun] needs sun.{key} too: a grid takes azimuths and elevations"),
+                    ));
+                };
+                let angles = value.get_ref();
+                if angles.is_empty() {
+                    return Err(self.error_at(value, format!("sun.{key} is empty")));
+                }
+                if let Some(bad) = angles.iter().find(|&&a| !ok(a)) {
+                    return Err(self.error_at(value, format!("sun.{key}: {bad} must be {rule}")));
+                }
+                Ok(angles.clone())
+            };
+        let azimuths_deg = list("azimuths", &sun.azimuths, "finite degrees", |a| {
+            a.is_finite()
+        })?;
+        let elevations_deg = list(
+            "elevations",
+            &sun.elevations,
+            "degrees above the horizon, over 0 and at most 90",
+            |e| e > 0.0 && e <= 90.0,
+        )?;
+        if azimuths_deg.len() * elevations_deg.len() > MAX_SUN_POSITIONS {
+            return Err(self.error(
+                Some(raw.span()),
+                format!(
+                    "[sun]: {} x {} positions, at most {MAX_SUN_POSITIONS}",
+                    azimuths_deg.len(),
+                    elevations_deg.len()
+                ),
+            ));
+        }
+        Ok(SunSweep::Grid {
+            azimuths_deg,
+            elevations_deg,
+        })
+    }
+
+    fn sun_times(&self, raw: &Spanned<RawSun>) -> Result<SunSweep, JobError> {
+        let sun = raw.get_ref();
+        let required = |key: &str,
+                        value: &Option<Spanned<f64>>,
+                        rule: &str,
+                        ok: fn(f64) -> bool| match value {
+            Some(v) => self.check(&format!("sun.{key}"), v, rule, ok),
+            None => Err(self.error(
+                Some(raw.span()),
+                format!("[sun] with start = ... needs sun.{key}: {rule}"),
+            )),
+        };
+        let latitude_deg = required(
+            "latitude",
+            &sun.latitude,
+            "degrees from -90 to 90, north positive",
+            |x| (-90.0..=90.0).contains(&x),
+        )?;
+        let longitude_deg = required(
+            "longitude",
+            &sun.longitude,
+            "degrees from -180 to 180, east positive",
+            |x| (-180.0..=180.0).contains(&x),
+        )?;
+        let heading_deg = required(
+            "heading",
+            &sun.heading,
+            "the compass direction the vehicle drives, finite degrees (0 north, 90 east)",
+            f64::is_finite,
+        )?;
+        let Some(start) = &sun.start else {
+            return Err(self.error(
+                Some(raw.span()),
+                "[sun] needs start = 2026-06-21T08:00:00Z (a date, time and UTC offset)",
+            ));
+        };
+        let start_time = self.utc_time("sun.start", start)?;
+        let times = match (&sun.end, &sun.step_minutes) {
+            (None, None) => vec![start_time],
+            (Some(end), Some(step)) => {
+                let end_time = self.utc_time("sun.end", end)?;
+                if end_time < start_time {
+                    return Err(self.error_at(end, "sun.end is before sun.start"));
+                }
+                let step =
+                    i64::from(self.check("sun.step_minutes", step, "at least 1", |s| s >= 1)?) * 60;
+                let count = (end_time.unix_seconds - start_time.unix_seconds) / step + 1;
+                if count > MAX_SUN_POSITIONS as i64 {
+                    return Err(self.error_at(end, format!("[sun]: {count} times from start to end, at most {MAX_SUN_POSITIONS}: take a longer step_minutes")));
+                }
+                (0..count)
+                    .map(|k| UtcTime {
+                        unix_seconds: start_time.unix_seconds + k * step,
+                    })
+                    .collect()
+            }
+            (Some(end), None) => return Err(self.error_at(end, "sun.end needs sun.step_minutes")),
+            (None, Some(step)) => return Err(self.error_at(step, "sun.step_minutes needs sun.end")),
+        };
+        Ok(SunSweep::Times {
+            times,
+            latitude_deg,
+            longitude_deg,
+            heading_deg,
+        })
+    }
+
+    fn utc_time(
+        &self,
+        key: &str,
+        value: &Spanned<toml::value::Datetime>,
+    ) -> Result<UtcTime, JobError> {
+        use toml::value::Offset;
+        let v = value.get_ref();
+        let (Some(date), Some(time), Some(offset)) = (v.date, v.time, v.offset) else {
+            return Err(self.error_at(value, format!("{key} = {v}: give a date, a time and a UTC offset, e.g. 2026-06-21T08:00:00Z or 2026-06-21T10:00:00+02:00")));
+        };
+        let offset_minutes = match offset {
+            Offset::Z => 0,
+            Offset::Custom { minutes } => i32::from(minutes),
+        };
+        UtcTime::from_civil(
+            i32::from(date.year),
+            u32::from(date.month),
+            u32::from(date.day),
+            u32::from(time.hour),
+            u32::from(time.minute),
+            u32::from(time.second),
+            offset_minutes,
+        )
+        .ok_or_else(|| self.error_at(value, format!("{key} = {v}: no such date or time")))
     }
 
     fn metrics(&self, raw: &RawMetrics) -> Result<MetricsSpec, JobError> {

@@ -160,6 +160,117 @@ fn other_mistakes_name_what_to_fix() {
     }
 }
 
+#[test]
+fn a_sun_sweep_is_a_grid_or_a_range_of_utc_times() {
+    use vtfarm_job::study::{SunSweep, UtcTime};
+    let dir = dir_with_job();
+    let file = dir.path().join("s.toml");
+    let grid = parse_study(
+        &format!("{HEADER}[eyes]\npoints = [[0, 1.4, 0]]\n{ONE_VARIANT}[sun]\nazimuths = [0, 90]\nelevations = [10, 45, 90]\n"),
+        &file,
+    )
+    .unwrap();
+    assert_eq!(
+        grid.sun,
+        Some(SunSweep::Grid {
+            azimuths_deg: vec![0.0, 90.0],
+            elevations_deg: vec![10.0, 45.0, 90.0]
+        })
+    );
+    // Local time at +02:00 is two hours ahead of UTC; the end is inclusive.
+    let times = parse_study(
+        &format!("{HEADER}[eyes]\npoints = [[0, 1.4, 0]]\n{ONE_VARIANT}[sun]\nstart = 2026-06-21T10:00:00+02:00\nend = 2026-06-21T09:00:00Z\nstep_minutes = 30\nlatitude = 48.1\nlongitude = 11.6\nheading = 90\n"),
+        &file,
+    )
+    .unwrap();
+    let Some(SunSweep::Times {
+        times, heading_deg, ..
+    }) = times.sun
+    else {
+        panic!("a time range: {:?}", times.sun);
+    };
+    let text: Vec<String> = times.iter().map(UtcTime::to_string).collect();
+    assert_eq!(
+        text,
+        [
+            "2026-06-21T08:00:00Z",
+            "2026-06-21T08:30:00Z",
+            "2026-06-21T09:00:00Z"
+        ]
+    );
+    assert_eq!(heading_deg, 90.0);
+    // Day numbers across leap years and before 1970 round-trip.
+    for (y, mo, d) in [(1969, 12, 31), (2000, 2, 29), (2024, 3, 1), (2100, 12, 31)] {
+        let t = UtcTime::from_civil(y, mo, d, 23, 59, 58, 0).unwrap();
+        assert_eq!(t.civil(), (i64::from(y), mo, d, 23, 59, 58));
+    }
+    assert_eq!(UtcTime::from_civil(2023, 2, 29, 0, 0, 0, 0), None);
+}
+
+#[test]
+fn sun_sweep_mistakes_name_the_line_and_the_fix() {
+    let head = format!("{HEADER}[eyes]\npoints = [[0, 1.4, 0]]\n{ONE_VARIANT}[sun]\n");
+    for (sun, line, expected) in [
+        (
+            "azimuths = [0]\nelevations = [0]\n",
+            10,
+            "over 0 and at most 90",
+        ),
+        ("azimuths = [0]\n", 8, "needs sun.elevations"),
+        (
+            "azimuths = [0]\nelevations = [30]\nlatitude = 48.0\n",
+            8,
+            "not both",
+        ),
+        (
+            "start = 2026-06-21T08:00:00\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
+            9,
+            "UTC offset",
+        ),
+        (
+            "start = 2026-06-21T08:00:00Z\nlatitude = 98.0\nlongitude = 11.0\nheading = 0\n",
+            10,
+            "-90 to 90",
+        ),
+        (
+            "start = 2026-06-21T08:00:00Z\nlatitude = 48.0\nlongitude = 11.0\n",
+            8,
+            "needs sun.heading",
+        ),
+        (
+            "start = 2026-06-21T08:00:00Z\nend = 2026-06-20T08:00:00Z\nstep_minutes = 10\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
+            10,
+            "before sun.start",
+        ),
+        (
+            "start = 2026-06-21T08:00:00Z\nend = 2027-06-20T08:00:00Z\nstep_minutes = 1\nlatitude = 48.0\nlongitude = 11.0\nheading = 0\n",
+            10,
+            "at most 10000",
+        ),
+    ] {
+        let message = refused(&format!("{head}{sun}"));
+        assert!(
+            message.contains(&format!("s.toml:{line}")) && message.contains(expected),
+            "{sun}: {message}"
+        );
+    }
+}
+
+#[test]
+fn the_example_sun_study_sweeps_sixteen_suns_over_seven_eyes_and_five_designs() {
+    let study = load_study(&repo("configs/cockpit-sun-study.toml")).unwrap();
+    assert_eq!(study.eyes.len(), 7);
+    assert_eq!(study.variants.len(), 5);
+    let Some(vtfarm_job::study::SunSweep::Grid {
+        azimuths_deg,
+        elevations_deg,
+    }) = study.sun
+    else {
+        panic!("a grid sweep: {:?}", study.sun);
+    };
+    assert_eq!(azimuths_deg.len() * elevations_deg.len(), 16);
+}
+
 /// The unit-less metric keys of earlier study files are refused at their
 /// line with the key that replaces them, never read in the wrong unit.
 #[test]

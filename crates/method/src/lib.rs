@@ -27,7 +27,7 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{
-    Behind, Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, VertexOwners,
+    Behind, Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, Stop, VertexOwners,
     VertexSettings, pixel_surface, trace_package,
 };
 
@@ -52,6 +52,12 @@ pub struct MethodFrame<'a> {
     pub ids: &'a IdBuffer,
     /// The reflector's triangles (one connected surface for cube maps/PVRR).
     pub reflector: &'a [TriangleId],
+    /// The package's cancel flag and sample budget; `None` runs to the end.
+    /// A method charges the rays it counts ([`MethodFrame::charge`]; those
+    /// of [`shade_reflector`] are charged there), checks
+    /// [`MethodFrame::stopped`] between its phases and per pixel, and when
+    /// stopped returns what it has (the worker discards it).
+    pub stop: Option<&'a Stop>,
 }
 
 /// Everything a [`MethodFrame`] borrows, owned: one view of a scene ready
@@ -102,6 +108,7 @@ impl OwnedFrame {
             camera: self.camera,
             ids: &self.ids,
             reflector: &self.reflector,
+            stop: None,
         }
     }
 }
@@ -130,6 +137,72 @@ impl OwnedFrame {
             reflector,
         )
     }
+}
+
+/// The methods' shared test of [`MethodFrame::stop`]: `method` charges
+/// exactly the rays it counts (a budget of that many changes nothing, one
+/// fewer stops it over budget), a budget of a tenth of them stops it having
+/// counted less than half, and cancelled before it starts it leaves every
+/// pixel black.
+#[cfg(any(test, feature = "cockpit-fixture"))]
+pub fn check_honours_stop(method: &dyn ReflectionMethod, frame: &MethodFrame<'_>) {
+    use vtfarm_vertex::Stopped;
+    let name = method.name();
+    let render = |stop: &Stop| {
+        method.render(&MethodFrame {
+            stop: Some(stop),
+            ..*frame
+        })
+    };
+    let free = method.render(&MethodFrame {
+        stop: None,
+        ..*frame
+    });
+    let rays = free.counters.rays;
+    assert!(rays >= 100, "{name}: {rays} rays are too few to test with");
+    assert!(free.bitmap.color.iter().any(|c| *c != Vec3::ZERO), "{name}");
+
+    let enough = Stop::with_budget(rays);
+    assert_eq!(render(&enough).bitmap, free.bitmap, "{name}");
+    assert_eq!(
+        enough.stopped(),
+        None,
+        "{name}: charged more rays than it counted"
+    );
+
+    let short = Stop::with_budget(rays - 1);
+    render(&short);
+    assert_eq!(
+        short.stopped(),
+        Some(Stopped::OverBudget { budget: rays - 1 }),
+        "{name}: charged fewer rays than it counted"
+    );
+
+    let tenth = Stop::with_budget(rays / 10);
+    let stopped = render(&tenth);
+    assert_eq!(
+        tenth.stopped(),
+        Some(Stopped::OverBudget { budget: rays / 10 })
+    );
+    assert!(
+        stopped.counters.rays < rays / 2,
+        "{name}: went on to {} of {rays} rays after its budget of {}",
+        stopped.counters.rays,
+        rays / 10
+    );
+
+    let cancelled = Stop::with_budget(u64::MAX);
+    cancelled.cancel();
+    let output = render(&cancelled);
+    assert!(
+        output.bitmap.color.iter().all(|c| *c == Vec3::ZERO),
+        "{name}: a cancelled method shaded pixels"
+    );
+    assert!(
+        output.counters.rays < rays / 2,
+        "{name}: a cancelled method counted {} of {rays} rays",
+        output.counters.rays
+    );
 }
 
 /// One reflector pixel: the surface point the eye ray through its centre
@@ -257,6 +330,18 @@ pub fn merge_bitmaps(frame_width: u32, bitmaps: &[SparseBitmap]) -> SparseBitmap
 }
 
 impl MethodFrame<'_> {
+    /// Whether the package must stop: cancelled, or over its sample budget.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.stopped().is_some())
+    }
+
+    /// Counts `rays` traced rays against the package's sample budget.
+    pub fn charge(&self, rays: u64) {
+        if let Some(stop) = self.stop {
+            stop.charge(rays);
+        }
+    }
+
     /// Whether each scene triangle is part of the reflector.
     pub fn reflector_flags(&self) -> Vec<bool> {
         let mut flags = vec![false; self.tracer.bvh.scene().triangles.len()];
@@ -326,7 +411,8 @@ impl Reflection {
 /// included) and kr/kt exactly as the ray tracer has them. `transmitted` is
 /// the radiance arriving along the refraction ray per pixel; `None` traces
 /// those rays (for methods that handle reflection only). Returns the bitmap
-/// and the number of rays traced for the transmission.
+/// and the number of rays traced for the transmission (already charged to
+/// the frame's stop). Once the frame is stopped, the pixels left are black.
 pub fn shade_reflector(
     frame: &MethodFrame<'_>,
     pixels: &[ReflectorPixel],
@@ -339,6 +425,18 @@ pub fn shade_reflector(
         .par_iter()
         .enumerate()
         .map(|(i, pixel)| {
+            let index = pixel.y * frame.ids.width + pixel.x;
+            if frame.stopped() {
+                // Left black: a stopped package's result is discarded.
+                let black = PixelValue {
+                    index,
+                    color: Vec3::ZERO,
+                    reflected: Vec3::ZERO,
+                    transmitted: Vec3::ZERO,
+                    object: NONE,
+                };
+                return (black, 0);
+            }
             let terms = frame.tracer.surface_terms(&pixel.point, pixel.incoming);
             let reflection = reflections[i];
             let reflected = if terms.reflection.is_some() {
@@ -349,11 +447,14 @@ pub fn shade_reflector(
             let (through, rays) = match (transmitted, terms.refraction) {
                 (_, None) => (Vec3::ZERO, 0),
                 (Some(given), Some(_)) => (given[i], 0),
-                (None, Some(ray)) => (secondary.trace(&ray).color, 1),
+                (None, Some(ray)) => {
+                    frame.charge(1);
+                    (secondary.trace(&ray).color, 1)
+                }
             };
             let through = terms.kt * through;
             let value = PixelValue {
-                index: pixel.y * frame.ids.width + pixel.x,
+                index,
                 color: terms.local + reflected + through,
                 reflected,
                 transmitted: through,
@@ -417,7 +518,7 @@ impl ReflectionMethod for VertexTracing {
             behind: &behind,
             owners: &owners,
             settings: self.settings,
-            stop: None,
+            stop: frame.stop,
         };
         let setup_time = start.elapsed();
         let result = trace_package(

@@ -138,3 +138,14 @@ fn the_base_frame_is_the_rasterizers_image() {
     assert_eq!(ids, setup.ids);
     assert_eq!(setup.base_frame(), image);
 }
+
+#[test]
+fn vertex_tracing_honours_the_packages_stop() {
+    let setup = small_cockpit();
+    for settings in [
+        VertexSettings::default(),
+        VertexTracing::reference().settings,
+    ] {
+        check_honours_stop(&VertexTracing { settings }, &setup.frame());
+    }
+}

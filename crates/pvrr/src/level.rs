@@ -13,8 +13,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec3;
 use rayon::prelude::*;
+use vtfarm_method::MethodFrame;
 use vtfarm_scene::{ObjectId, TriangleId};
 use vtfarm_trace::{SurfacePoint, TraceSettings, Tracer};
+use vtfarm_vertex::Stop;
 
 use crate::PvrrConfig;
 use crate::warp::{Kind, Warp};
@@ -24,6 +26,8 @@ pub(crate) struct Context<'a> {
     pub(crate) config: &'a PvrrConfig,
     /// The triangles of every specular object, for multiple reflection.
     specular: BTreeMap<ObjectId, Vec<TriangleId>>,
+    /// The package's stop: every counted ray is charged to it.
+    stop: Option<&'a Stop>,
     searches: AtomicU64,
     rays: AtomicU64,
     texels: AtomicU64,
@@ -31,8 +35,8 @@ pub(crate) struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    pub(crate) fn new(config: &'a PvrrConfig, tracer: &Tracer<'_>) -> Self {
-        let scene = tracer.bvh.scene();
+    pub(crate) fn new(config: &'a PvrrConfig, frame: &MethodFrame<'a>) -> Self {
+        let scene = frame.tracer.bvh.scene();
         let mut specular: BTreeMap<ObjectId, Vec<TriangleId>> = BTreeMap::new();
         for (id, triangle) in scene.triangles.iter().enumerate() {
             if scene.materials[triangle.material as usize].is_specular() {
@@ -45,6 +49,7 @@ impl<'a> Context<'a> {
         Context {
             config,
             specular,
+            stop: frame.stop,
             searches: AtomicU64::new(0),
             rays: AtomicU64::new(0),
             texels: AtomicU64::new(0),
@@ -126,7 +131,21 @@ impl<'a> Level<'a> {
     }
 
     pub(crate) fn count_rays(&self, n: u64) {
+        self.count_charged_rays(n);
+        if let Some(stop) = self.context.stop {
+            stop.charge(n);
+        }
+    }
+
+    /// Counts rays already charged to the stop (the shared finishing step's).
+    pub(crate) fn count_charged_rays(&self, n: u64) {
         self.context.rays.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// Whether the package must stop (cancelled or over its budget): the
+    /// loops then skip their work, and the result is discarded.
+    pub(crate) fn stopped(&self) -> bool {
+        self.context.stop.is_some_and(|s| s.stopped().is_some())
     }
 
     /// The radiance leaving each seen surface towards `eye` (the background
@@ -136,6 +155,7 @@ impl<'a> Level<'a> {
         let mut radiance: Vec<Vec3> = seen
             .par_iter()
             .map(|s| match s {
+                _ if self.stopped() => Vec3::ZERO,
                 Some(s) if !self.is_nested(s.object) => {
                     self.tracer.surface_terms(&s.point, s.incoming).local
                 }
@@ -166,6 +186,9 @@ impl<'a> Level<'a> {
     /// Specular surfaces of one object seen from `eye`: local + kr * their
     /// PVRR reflection + kt * their traced transmission.
     fn shade_specular(&self, eye: Vec3, triangles: &[TriangleId], points: &[Seen]) -> Vec<Vec3> {
+        if self.stopped() {
+            return vec![Vec3::ZERO; points.len()];
+        }
         let warp = Warp::build(self, eye, triangles, Kind::Reflection);
         let secondary = self.deeper(1).tracer;
         points

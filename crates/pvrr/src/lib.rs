@@ -166,7 +166,7 @@ impl Pvrr {
     /// [`ReflectionMethod::render`] plus what the levels counted.
     fn render_counted(&self, frame: &MethodFrame<'_>) -> (MethodOutput, Counts) {
         let start = Instant::now();
-        let context = Context::new(&self.config, &frame.tracer);
+        let context = Context::new(&self.config, frame);
         let level = Level {
             context: &context,
             tracer: frame.tracer,
@@ -181,6 +181,9 @@ impl Pvrr {
         let (reflections, transmitted): (Vec<Reflection>, Vec<Vec3>) = pixels
             .par_iter()
             .map(|p| {
+                if level.stopped() {
+                    return (Reflection::NONE, Vec3::ZERO);
+                }
                 let at = |w: &Warp<'_>| w.radiance_at(&p.point, p.incoming);
                 let reflected = reflection.as_ref().map(at);
                 let through = refraction.as_ref().map_or(Vec3::ZERO, |w| at(w).radiance);
@@ -197,7 +200,7 @@ impl Pvrr {
             &reflections,
             refraction.as_ref().map(|_| transmitted.as_slice()),
         );
-        level.count_rays(finish_rays);
+        level.count_charged_rays(finish_rays);
         let counts = context.counts();
         tracing::debug!(?counts, "pvrr rendered {} pixels", pixels.len());
         let output = MethodOutput {

@@ -169,7 +169,7 @@ fn with_level<T>(
     config: PvrrConfig,
     f: impl FnOnce(&Level<'_>) -> T,
 ) -> T {
-    let context = Context::new(&config, &frame.tracer);
+    let context = Context::new(&config, frame);
     f(&Level {
         context: &context,
         tracer: frame.tracer,
@@ -592,4 +592,16 @@ fn a_rendered_lens_matches_the_reference_through_both_faces() {
     );
     // Only pixels next to the lens's open rim are traced.
     assert!(counts.fallbacks * 5 < pvrr.counters.pixels, "{counts:?}");
+}
+
+#[test]
+fn pvrr_honours_the_packages_stop() {
+    let setup = OwnedFrame::cockpit(0.3, 160, 90);
+    for refraction in [Refraction::Traced, Refraction::Mapped { iors: None }] {
+        let pvrr = Pvrr::new(PvrrConfig {
+            map_resolution: 64,
+            refraction,
+        });
+        vtfarm_method::check_honours_stop(&pvrr, &setup.frame());
+    }
 }

@@ -214,7 +214,8 @@ fn vertex_paths(
         .map(|point| {
             let incoming = (point.position - eye).normalize_or(Vec3::NEG_Z);
             let mut traced: [Option<VertexPath>; 3] = [None; 3];
-            if point.normal.dot(incoming) >= 0.0 {
+            // A stopped package's paths stay untraced (its result is discarded).
+            if point.normal.dot(incoming) >= 0.0 || level.stopped() {
                 return traced;
             }
             for c in 0..3 {
@@ -257,6 +258,9 @@ fn vertex_coords(
     paths: &[Option<VertexPath>; 3],
 ) -> VertexCoords {
     let mut v = VertexCoords::default();
+    if texel_level.stopped() {
+        return v;
+    }
     for (c, path) in paths.iter().enumerate() {
         let Some(path) = path else { continue };
         v.offset[c] = path.offset[c];

@@ -23,7 +23,7 @@ use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners,
-    VertexSettings, trace_package,
+    VertexSettings, reflector_bounds, trace_package,
 };
 
 /// How to cut and run the reflector work.
@@ -121,9 +121,13 @@ impl Renderer {
     }
 
     /// Only the raster results a worker needs (no base frame): the frame's
-    /// ID buffer and what lies behind the reflectors.
+    /// ID buffer and what lies behind the reflectors, both over the
+    /// reflectors' bounds only (`vtfarm_vertex::reflector_bounds`; empty
+    /// elsewhere, where no package looks).
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
-        let ids = vtfarm_raster::id_buffer(self.scene(), &setup.camera);
+        let margin = setup.vertex.visibility_radius + 1;
+        let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
+        let ids = vtfarm_raster::id_buffer_within(self.scene(), &setup.camera, bounds, &|_| true);
         let behind = self.behind(setup, &ids);
         (ids, behind)
     }

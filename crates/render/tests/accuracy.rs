@@ -11,7 +11,9 @@ use vtfarm_scene::{
     Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId,
 };
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{FrameImage, Quality, VertexSettings};
+use vtfarm_vertex::{
+    FrameImage, PackageOptions, Quality, VertexSettings, reflector_bounds, trace_package,
+};
 
 /// A UV sphere (smooth normals) appended to `scene` as object `name`.
 fn add_sphere(
@@ -449,6 +451,64 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
             assert!(
                 split == whole,
                 "{} with packages of {size}: every buffer bit-identical",
+                quality.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
+    let (sphere, sphere_camera, sphere_lighting) = mirror_sphere_scene();
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..CockpitConfig::default()
+    });
+    let cockpit_camera = Camera {
+        width: 320,
+        height: 180,
+        ..c.camera
+    };
+    for (scene, reflector, camera, lighting) in [
+        (sphere, "sphere", sphere_camera, sphere_lighting),
+        (c.scene, COVER_GLASS, cockpit_camera, c.lighting),
+    ] {
+        let reflectors = object_triangles(&scene, reflector);
+        let renderer = Renderer::new(Arc::new(scene), reflectors.clone());
+        let mut is_reflector = vec![false; renderer.scene().triangles.len()];
+        reflectors
+            .iter()
+            .for_each(|&t| is_reflector[t as usize] = true);
+        let margin = VertexSettings::default().visibility_radius + 1;
+        let bounds = reflector_bounds(renderer.scene(), &camera, &is_reflector, margin);
+        let area = (bounds.x1 - bounds.x0) * (bounds.y1 - bounds.y0);
+        if reflector == COVER_GLASS {
+            assert!(
+                area < camera.width * camera.height / 2,
+                "the glass's bounds {bounds:?} must leave most of the frame out"
+            );
+        }
+        for quality in [Quality::Preview, Quality::Full] {
+            let s = setup(camera, &lighting, quality);
+            // The master: whole-frame buffers.
+            let master = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
+            // A worker: the bounded buffers, packages composited the same way.
+            let (base, full_ids) = renderer.base_frame(&s);
+            let (ids, behind) = renderer.id_buffers(&s);
+            for (x, y) in bounds.pixels() {
+                let i = ids.index(x, y);
+                assert_eq!(ids.triangle[i], full_ids.triangle[i], "({x}, {y})");
+            }
+            let frame = renderer.frame(&s, &ids, &behind);
+            let mut worker = FrameImage::new(base);
+            for package in split_packages(&reflectors, 7) {
+                let result =
+                    trace_package(&frame, &package, &PackageOptions::default(), &mut |_| {});
+                worker.composite(&result.bitmap);
+            }
+            assert!(
+                worker == master,
+                "{reflector} at {}: the worker's frame differs from the master's",
                 quality.name()
             );
         }

@@ -24,11 +24,12 @@ pub struct SchedulerConfig {
     /// rebuild ID buffers per frame; counting that set-up as package time
     /// would skew their measured rates). Default `false`: requests carry over.
     pub requests_lapse_at_frame_start: bool,
-    /// Whether the next frame starts as soon as the running one has nothing
-    /// left to hand out, so that idle workers take its packages while the
-    /// running frame's last packages finish (at most two frames run at a
-    /// time; frames still complete in order). Default `false`.
-    pub pipeline_frames: bool,
+    /// How many frames of a job may run at once (pipelining): the next frame
+    /// starts as soon as the newest running one has nothing left to hand
+    /// out, so that idle workers take its packages while older frames'
+    /// last packages finish; frames still complete in order. Default 1 (no
+    /// pipelining); values below 1 are read as 1.
+    pub frames_in_flight: u32,
 }
 
 impl Default for SchedulerConfig {
@@ -40,25 +41,31 @@ impl Default for SchedulerConfig {
             retry: RetryPolicy::default(),
             estimation: CostEstimation::default(),
             requests_lapse_at_frame_start: false,
-            pipeline_frames: false,
+            frames_in_flight: 1,
         }
     }
 }
 
 impl SchedulerConfig {
     /// The rules of vtfarm's master, whose workers set each frame up before
-    /// they ask for its work: requests lapse at a frame start, and frames
-    /// are pipelined (a worker keeps the frame before its newest). The master
+    /// they ask for its work: requests lapse at a frame start, and
+    /// [`FARM_FRAMES_IN_FLIGHT`] frames are pipelined (a worker keeps that
+    /// many frames prepared: `vtfarm_proto::FRAMES_IN_FLIGHT`). The master
     /// core and the simulator (`vtfarm bench simulate`) both take their
     /// configuration through here, so they run the same scheduler.
     pub fn farm(self) -> Self {
         SchedulerConfig {
             requests_lapse_at_frame_start: true,
-            pipeline_frames: true,
+            frames_in_flight: FARM_FRAMES_IN_FLIGHT,
             ..self
         }
     }
 }
+
+/// Frames in flight under [`SchedulerConfig::farm`]: enough that a frame's
+/// most expensive item (one reflector triangle can be a tenth of a frame's
+/// work) does not keep the other workers waiting for the next frame.
+pub const FARM_FRAMES_IN_FLIGHT: u32 = 4;
 
 /// How big a package is (guided self-scheduling, "large early, small late").
 ///

@@ -46,10 +46,10 @@
 //! * **Demand-driven.** A worker asks ([`Scheduler::request_work`]) and gets
 //!   one package, now or as soon as there is work. Jobs run one after another
 //!   in submission order, frames one after another; with
-//!   [`SchedulerConfig::pipeline_frames`] the next frame starts as soon as the
-//!   running one has nothing left to hand out, so idle workers take its
-//!   packages while the last ones of the running frame finish (two frames at
-//!   most; frames complete in order; the older frame's requeued work first).
+//!   [`SchedulerConfig::frames_in_flight`] above 1 the next frame starts as
+//!   soon as the newest running one has nothing left to hand out, so idle
+//!   workers take its packages while older frames' last ones finish (frames
+//!   complete in order; older frames' requeued work first).
 //! * **Held results.** A driver that checks results only later (the master
 //!   waits for the frame's base image) reports them with
 //!   [`Scheduler::package_arrived`] first: such a package is no straggler and
@@ -137,7 +137,10 @@ pub mod sim;
 mod status;
 mod types;
 
-pub use config::{CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy};
+pub use config::{
+    CostEstimation, FARM_FRAMES_IN_FLIGHT, PackageSizing, RetryPolicy, SchedulerConfig,
+    StragglerPolicy,
+};
 pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError, WorkerError};
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
 pub use scheduler::Scheduler;

@@ -75,9 +75,9 @@ struct RunningJob {
     errors: Vec<(WorkerId, String)>,
     /// The oldest running frame: frames complete in order.
     frame: Frame,
-    /// The frame after it, started early when `frame` had nothing left to
-    /// hand out ([`SchedulerConfig::pipeline_frames`]).
-    ahead: Option<Frame>,
+    /// The frames after it, started early, oldest first
+    /// ([`SchedulerConfig::frames_in_flight`]).
+    ahead: VecDeque<Frame>,
 }
 
 impl RunningJob {
@@ -87,7 +87,7 @@ impl RunningJob {
     }
 
     fn running_frames_mut(&mut self) -> impl Iterator<Item = &mut Frame> {
-        std::iter::once(&mut self.frame).chain(self.ahead.as_mut())
+        std::iter::once(&mut self.frame).chain(self.ahead.iter_mut())
     }
 
     /// The running frame a package belongs to.
@@ -457,12 +457,9 @@ impl Scheduler {
         let Some(job) = &self.running else {
             return Ok(());
         };
-        if job
-            .ahead
-            .as_ref()
-            .is_some_and(|a| a.index != job.frame.index + 1)
-        {
-            return fail("the frame ahead does not follow the running one".to_string());
+        let indices: Vec<u32> = job.running_frames().map(|f| f.index).collect();
+        if indices.windows(2).any(|w| w[1] != w[0] + 1) {
+            return fail(format!("running frames {indices:?} are not consecutive"));
         }
         for frame in job.running_frames() {
             self.validate_frame(frame)?;
@@ -629,15 +626,15 @@ impl Scheduler {
         }
     }
 
-    /// Whether the next frame starts early ([`SchedulerConfig::pipeline_frames`]):
-    /// the running frame has nothing left to hand out, and no frame runs
-    /// ahead of it yet.
+    /// Whether the next frame starts early ([`SchedulerConfig::frames_in_flight`]):
+    /// the newest running frame has nothing left to hand out, and fewer
+    /// frames than allowed run.
     fn may_start_ahead(&self) -> bool {
         self.running.as_ref().is_some_and(|job| {
-            self.config.pipeline_frames
-                && job.ahead.is_none()
+            let newest = job.ahead.back().unwrap_or(&job.frame);
+            job.ahead.len() + 1 < self.config.frames_in_flight as usize
                 && !job.frames.is_empty()
-                && !job.frame.has_unassigned()
+                && !newest.has_unassigned()
                 && !job.frame.is_complete()
         })
     }
@@ -671,10 +668,13 @@ impl Scheduler {
                 frame: job.frame.index,
                 stats,
             });
-            if let Some(mut ahead) = job.ahead.take() {
-                // Started already; its estimates now learn from this frame too.
-                ahead.reestimate(&job.costs);
-                job.frame = ahead;
+            if let Some(next) = job.ahead.pop_front() {
+                // Started already; the estimates now learn from this frame too.
+                job.frame = next;
+                job.frame.reestimate(&job.costs);
+                for frame in &mut job.ahead {
+                    frame.reestimate(&job.costs);
+                }
                 continue;
             }
             match job.frames.pop_front() {
@@ -704,14 +704,14 @@ impl Scheduler {
         let Some(next) = job.frames.pop_front() else {
             return;
         };
-        let index = job.frame.index + 1;
+        let index = job.ahead.back().unwrap_or(&job.frame).index + 1;
         let ahead = Frame::new(index, next.items, &job.costs);
         self.events.push_back(Event::FrameStarted {
             job: job.id,
             frame: index,
             items: ahead.items.len(),
         });
-        job.ahead = Some(ahead);
+        job.ahead.push_back(ahead);
         self.lapse_requests();
     }
 
@@ -762,7 +762,7 @@ impl Scheduler {
             blocklist: BTreeSet::new(),
             errors: Vec::new(),
             frame,
-            ahead: None,
+            ahead: VecDeque::new(),
         });
     }
 

@@ -702,7 +702,11 @@ fn an_arrived_result_held_by_the_driver_is_not_a_straggler() {
 
 #[test]
 fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
-    let mut farm = Farm::with(SchedulerConfig::default().farm());
+    let config = SchedulerConfig {
+        frames_in_flight: 2,
+        ..SchedulerConfig::default().farm()
+    };
+    let mut farm = Farm::with(config);
     farm.join(W0);
     farm.join(W1);
     farm.submit(JOB, 2, 3);

@@ -4,8 +4,10 @@
 //! self-contained `report.html`.
 //!
 //! - [`plan`]: loads every variant's scene and makes its frames (one per
-//!   eye point, each looking at the instrument cluster) before anything is
-//!   rendered, so a broken variant fails the study at once.
+//!   sun position and eye point, each looking at the instrument cluster)
+//!   before anything is rendered, so a broken variant fails the study at
+//!   once. A sun sweep ([`sun`]) changes only the frames' lighting: frames
+//!   of one variant share its scene, so workers keep its BVH.
 //! - [`StudyWriter`]: takes rendered frames in any order (from the embedded
 //!   farm or a cluster; the frame's pixels do not depend on which), measures
 //!   them and writes their images; [`StudyWriter::finish`] writes the
@@ -18,6 +20,7 @@
 
 mod masks;
 mod report;
+pub mod sun;
 
 use std::path::{Path, PathBuf};
 
@@ -25,9 +28,9 @@ use glam::Vec3;
 use serde::Serialize;
 use vtfarm_glare::{AmbientCondition, GlareInput, LogRange, Params, Summary, Thresholds};
 use vtfarm_job::JobError;
-use vtfarm_job::study::{MetricsSpec, Sourced, Study};
+use vtfarm_job::study::{MetricsSpec, Sourced, Study, SunSweep, UtcTime};
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::{Camera, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{Camera, LightKind, Lighting, ObjectId, Scene, TriangleId};
 use vtfarm_vertex::{FrameImage, Quality};
 
 pub use masks::InstrumentMasks;
@@ -69,6 +72,31 @@ pub enum StudyError {
     },
     #[error("writing the plots: {0}")]
     Plot(String),
+    #[error(
+        "{file}: [sun] sweeps the sun, but the base job's lighting has no directional light to turn (add a [[lighting.lights]] with kind = \"directional\")"
+    )]
+    NoSun { file: PathBuf },
+    #[error(
+        "{file}: [sun]: the sun is below the horizon at every time of the sweep (from {first} to {last})"
+    )]
+    SunAlwaysDown {
+        file: PathBuf,
+        first: UtcTime,
+        last: UtcTime,
+    },
+}
+
+/// One sun position of a study: where the frames' directional lights come
+/// from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SunPosition {
+    /// Degrees relative to the vehicle, clockwise from straight ahead (see
+    /// [`sun`]).
+    pub azimuth_deg: f32,
+    /// Degrees above the horizon.
+    pub elevation_deg: f32,
+    /// The time of a date/time sweep.
+    pub time: Option<UtcTime>,
 }
 
 /// One variant ready to render.
@@ -79,7 +107,8 @@ pub struct PlannedVariant {
     pub slug: String,
     pub scene: Scene,
     pub reflectors: Vec<TriangleId>,
-    /// One set-up per eye point, in the study's eye order.
+    /// One set-up per frame: sun by sun, every eye point in the study's
+    /// eye order (frame `sun * eyes + eye`; see [`StudyPlan::frame_at`]).
     pub setups: Vec<FrameSetup>,
     instrument_objects: Vec<ObjectId>,
     marking_objects: Vec<ObjectId>,
@@ -91,6 +120,13 @@ pub struct StudyPlan {
     pub name: String,
     pub file: PathBuf,
     pub eyes: Vec<Vec3>,
+    /// The swept sun positions above the horizon; empty without a `[sun]`
+    /// sweep (the base job's sun, [`StudyPlan::base_sun`], lights every frame).
+    pub suns: Vec<SunPosition>,
+    /// Times of the sweep with the sun below the horizon: not rendered.
+    pub suns_below_horizon: Vec<UtcTime>,
+    /// The direction of the base job's sun, if it has one.
+    pub base_sun: Option<SunPosition>,
     pub variants: Vec<PlannedVariant>,
     pub params: Params,
     /// The heat maps' logarithmic scale, the same for every frame.
@@ -101,8 +137,99 @@ pub struct StudyPlan {
 
 impl StudyPlan {
     pub fn frames(&self) -> usize {
-        self.variants.len() * self.eyes.len()
+        self.variants.len() * self.frames_per_variant()
     }
+
+    /// Frames of one variant: eye points times sun positions.
+    pub fn frames_per_variant(&self) -> usize {
+        self.eyes.len() * self.suns.len().max(1)
+    }
+
+    /// The (sun, eye) of a variant's frame index; the sun is `None` without a
+    /// sweep.
+    pub fn frame_at(&self, frame: usize) -> (Option<usize>, usize) {
+        let eyes = self.eyes.len();
+        let sun = (!self.suns.is_empty()).then_some(frame / eyes);
+        (sun, frame % eyes)
+    }
+
+    /// The sun lighting a frame of the given sun index.
+    pub fn sun(&self, sun: Option<usize>) -> Option<SunPosition> {
+        sun.map_or(self.base_sun, |s| Some(self.suns[s]))
+    }
+}
+
+/// The sun positions of a sweep, those above the horizon first, then the
+/// times with the sun below it.
+fn sun_positions(sweep: &SunSweep) -> (Vec<SunPosition>, Vec<UtcTime>) {
+    match sweep {
+        SunSweep::Grid {
+            azimuths_deg,
+            elevations_deg,
+        } => {
+            let positions = elevations_deg
+                .iter()
+                .flat_map(|&elevation_deg| {
+                    azimuths_deg.iter().map(move |&azimuth_deg| SunPosition {
+                        azimuth_deg: azimuth_deg.rem_euclid(360.0),
+                        elevation_deg,
+                        time: None,
+                    })
+                })
+                .collect();
+            (positions, Vec::new())
+        }
+        SunSweep::Times {
+            times,
+            latitude_deg,
+            longitude_deg,
+            heading_deg,
+        } => {
+            let mut up = Vec::new();
+            let mut down = Vec::new();
+            for &time in times {
+                let p =
+                    sun::solar_position(time.unix_seconds as f64, *latitude_deg, *longitude_deg);
+                if p.elevation_deg > 0.0 {
+                    up.push(SunPosition {
+                        azimuth_deg: sun::relative_azimuth_deg(p.azimuth_deg, *heading_deg) as f32,
+                        elevation_deg: p.elevation_deg as f32,
+                        time: Some(time),
+                    });
+                } else {
+                    down.push(time);
+                }
+            }
+            (up, down)
+        }
+    }
+}
+
+/// `base` with every directional light (the sun) coming from `sun`.
+fn lighting_with_sun(base: &Lighting, sun: &SunPosition) -> Lighting {
+    let travel = -sun::direction_to_sun(sun.azimuth_deg, sun.elevation_deg);
+    let mut lighting = base.clone();
+    for light in &mut lighting.lights {
+        if let LightKind::Directional { direction } = &mut light.kind {
+            *direction = travel;
+        }
+    }
+    lighting
+}
+
+/// The direction of the first directional light of `lighting`.
+fn base_sun(lighting: &Lighting) -> Option<SunPosition> {
+    lighting.lights.iter().find_map(|light| match light.kind {
+        LightKind::Directional { direction } => {
+            let (azimuth_deg, elevation_deg) = sun::vehicle_angles(-direction);
+            Some(SunPosition {
+                azimuth_deg,
+                elevation_deg,
+                time: None,
+            })
+        }
+        LightKind::Point { .. } => None,
+    })
 }
 
 /// Default bottom of the heat maps' scale.
@@ -169,6 +296,30 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
     // The base job's own scene gives the lighting and the camera every
     // variant shares, so that designs are compared under the same light.
     let base = study.job.load_scene()?;
+    let base_sun = base_sun(&base.lighting);
+    let (suns, suns_below_horizon) = study.sun.as_ref().map(sun_positions).unwrap_or_default();
+    if study.sun.is_some() {
+        if base_sun.is_none() {
+            return Err(StudyError::NoSun {
+                file: study.file.clone(),
+            });
+        }
+        if suns.is_empty() {
+            return Err(StudyError::SunAlwaysDown {
+                file: study.file.clone(),
+                first: suns_below_horizon[0],
+                last: suns_below_horizon[suns_below_horizon.len() - 1],
+            });
+        }
+    }
+    // One lighting per sun position (the base lighting without a sweep).
+    let lightings: Vec<Lighting> = if suns.is_empty() {
+        vec![base.lighting.clone()]
+    } else {
+        suns.iter()
+            .map(|s| lighting_with_sun(&base.lighting, s))
+            .collect()
+    };
     // The same eye points for every variant.
     let cameras = study
         .eyes
@@ -214,13 +365,15 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         };
         let instrument_objects = objects("instrument_objects", &study.metrics.instrument_objects)?;
         let marking_objects = objects("marking_objects", &study.metrics.marking_objects)?;
-        let setups = cameras
+        let setups = lightings
             .iter()
-            .map(|&camera| FrameSetup {
-                camera,
-                lighting: base.lighting.clone(),
-                trace: study.job.trace,
-                vertex,
+            .flat_map(|lighting| {
+                cameras.iter().map(|&camera| FrameSetup {
+                    camera,
+                    lighting: lighting.clone(),
+                    trace: study.job.trace,
+                    vertex,
+                })
             })
             .collect();
         let slug = unique_slug(&variant.name, &slugs);
@@ -239,6 +392,9 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         name: study.name.clone(),
         file: study.file.clone(),
         eyes: study.eyes.clone(),
+        suns,
+        suns_below_horizon,
+        base_sun,
         variants,
         params,
         heat_range,
@@ -287,6 +443,14 @@ pub struct FrameRow {
     pub variant: String,
     pub eye_index: usize,
     pub eye: [f32; 3],
+    /// Index into the study's sun sweep; `None` without one.
+    pub sun_index: Option<usize>,
+    /// The sun's direction relative to the vehicle (the base job's sun
+    /// without a sweep; `None` when it has none).
+    pub sun_azimuth_deg: Option<f32>,
+    pub sun_elevation_deg: Option<f32>,
+    /// The UTC time of a date/time sweep (RFC 3339).
+    pub sun_time: Option<String>,
     /// Images relative to the output directory.
     pub image: String,
     pub heat_map: String,
@@ -315,15 +479,17 @@ impl<'a> StudyWriter<'a> {
         })
     }
 
-    /// Measures the rendered frame of `variant` from eye `eye` (its colour
+    /// Measures rendered frame `frame` of `variant` (an index into its
+    /// set-ups: [`StudyPlan::frame_at`] gives its sun and eye; its colour
     /// with the reflected/transmitted components and the reflected-object
     /// map) and writes its image, heat map and object map.
     pub fn frame(
         &mut self,
         variant: usize,
-        eye: usize,
+        frame_index: usize,
         frame: &FrameImage,
     ) -> Result<&FrameRow, StudyError> {
+        let (sun, eye) = self.plan.frame_at(frame_index);
         let bad = |why: String| StudyError::Frame { variant, eye, why };
         let planned = self
             .plan
@@ -332,8 +498,8 @@ impl<'a> StudyWriter<'a> {
             .ok_or_else(|| bad("no such variant".into()))?;
         let setup = planned
             .setups
-            .get(eye)
-            .ok_or_else(|| bad("no such eye".into()))?;
+            .get(frame_index)
+            .ok_or_else(|| bad("no such frame".into()))?;
         let camera = setup.camera;
         if (frame.color.width, frame.color.height) != (camera.width, camera.height) {
             return Err(bad(format!(
@@ -362,7 +528,10 @@ impl<'a> StudyWriter<'a> {
             .map_err(|e| bad(e.to_string()))?;
         let objects = vtfarm_glare::object_map(&input, params).map_err(|e| bad(e.to_string()))?;
 
-        let rel = format!("{}/eye_{eye:02}", planned.slug);
+        let rel = match sun {
+            Some(sun) => format!("{}/sun_{sun:03}/eye_{eye:02}", planned.slug),
+            None => format!("{}/eye_{eye:02}", planned.slug),
+        };
         let dir = self.dir.join(&rel);
         std::fs::create_dir_all(&dir).map_err(|source| StudyError::Io {
             path: dir.clone(),
@@ -388,31 +557,37 @@ impl<'a> StudyWriter<'a> {
         ] {
             vtfarm_imaging::write_npy_f32(&dir.join(format!("{name}.npy")), &shape, data)?;
         }
+        let sun_position = self.plan.sun(sun);
         let row = FrameRow {
             variant: planned.name.clone(),
             eye_index: eye,
             eye: self.plan.eyes[eye].to_array(),
+            sun_index: sun,
+            sun_azimuth_deg: sun_position.map(|s| s.azimuth_deg),
+            sun_elevation_deg: sun_position.map(|s| s.elevation_deg),
+            sun_time: sun_position.and_then(|s| s.time).map(|t| t.to_string()),
             image: format!("{rel}/image.png"),
             heat_map: format!("{rel}/heat.png"),
             object_map: format!("{rel}/objects.png"),
             summary: analysis.summary,
         };
-        let slot = &mut self.rows[variant * self.plan.eyes.len() + eye];
+        let slot = &mut self.rows[variant * self.plan.frames_per_variant() + frame_index];
         Ok(slot.insert(row))
     }
 
     /// Writes `summary.csv`, `summary.json` and `report.html`; fails when a
     /// frame is missing.
     pub fn finish(self) -> Result<StudyReport, StudyError> {
-        let eyes = self.plan.eyes.len();
+        let per_variant = self.plan.frames_per_variant();
+        let plan = self.plan;
         let rows = self
             .rows
             .into_iter()
             .enumerate()
             .map(|(i, r)| {
-                r.ok_or(StudyError::Frame {
-                    variant: i / eyes,
-                    eye: i % eyes,
+                r.ok_or_else(|| StudyError::Frame {
+                    variant: i / per_variant,
+                    eye: plan.frame_at(i % per_variant).1,
                     why: "never rendered".into(),
                 })
             })
@@ -442,6 +617,25 @@ pub struct VariantScore {
     pub peak_reflected_luminance_cd_m2: f32,
     /// The object covering the most glass over all eye points.
     pub main_glare_source: Option<String>,
+    /// The variant's worst frames, worst first (by mean reflected
+    /// luminance): where the sun and the eye make the glass brightest.
+    pub worst_cases: Vec<WorstCase>,
+}
+
+/// One of a variant's worst frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WorstCase {
+    /// Index into [`StudyReport::frames`].
+    pub frame: usize,
+    pub eye_index: usize,
+    pub sun_index: Option<usize>,
+    pub sun_azimuth_deg: Option<f32>,
+    pub sun_elevation_deg: Option<f32>,
+    pub sun_time: Option<String>,
+    pub mean_reflected_luminance_cd_m2: f32,
+    pub low_contrast_share: f32,
+    /// The object covering the most glass in that frame.
+    pub mirrored_object: Option<String>,
 }
 
 #[cfg(test)]

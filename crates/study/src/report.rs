@@ -6,7 +6,10 @@ use std::path::Path;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use crate::{FrameRow, StudyError, StudyPlan, StudyReport, VariantScore};
+use crate::{FrameRow, StudyError, StudyPlan, StudyReport, VariantScore, WorstCase};
+
+/// Worst cases listed per variant.
+const WORST_CASES: usize = 3;
 
 /// One flat CSV row (the JSON keeps the full summary per frame).
 #[derive(Serialize)]
@@ -16,6 +19,10 @@ struct CsvRow<'a> {
     eye_x: f32,
     eye_y: f32,
     eye_z: f32,
+    sun_index: Option<usize>,
+    sun_time: Option<&'a str>,
+    sun_azimuth_deg: Option<f32>,
+    sun_elevation_deg: Option<f32>,
     glass_pixels: usize,
     peak_reflected_luminance_cd_m2: f32,
     mean_reflected_luminance_cd_m2: f32,
@@ -40,6 +47,8 @@ struct JsonSummary<'a> {
     heat_min_cd_m2: f32,
     heat_max_cd_m2: f32,
     eyes: Vec<[f32; 3]>,
+    /// Sun times of the sweep with the sun below the horizon (not rendered).
+    suns_below_horizon: Vec<String>,
     frames: &'a [FrameRow],
     ranking: &'a [VariantScore],
 }
@@ -59,6 +68,11 @@ pub(crate) fn write_all(
         heat_min_cd_m2: plan.heat_range.min_cd_m2,
         heat_max_cd_m2: plan.heat_range.max_cd_m2,
         eyes: plan.eyes.iter().map(|e| e.to_array()).collect(),
+        suns_below_horizon: plan
+            .suns_below_horizon
+            .iter()
+            .map(|t| t.to_string())
+            .collect(),
         frames: &frames,
         ranking: &ranking,
     };
@@ -87,6 +101,10 @@ fn csv_text(frames: &[FrameRow]) -> Result<String, StudyError> {
                 eye_x: f.eye[0],
                 eye_y: f.eye[1],
                 eye_z: f.eye[2],
+                sun_index: f.sun_index,
+                sun_time: f.sun_time.as_deref(),
+                sun_azimuth_deg: f.sun_azimuth_deg,
+                sun_elevation_deg: f.sun_elevation_deg,
                 glass_pixels: s.glass_pixels,
                 peak_reflected_luminance_cd_m2: s.peak_reflected_luminance_cd_m2,
                 mean_reflected_luminance_cd_m2: s.mean_reflected_luminance_cd_m2,
@@ -129,6 +147,34 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
                 .iter()
                 .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
                 .map(|(name, _)| (*name).to_owned());
+            // Brightest first; ties keep the frame order.
+            let mut brightest: Vec<usize> = (0..frames.len())
+                .filter(|&i| frames[i].variant == v.name)
+                .collect();
+            brightest.sort_by(|&a, &b| {
+                frames[b]
+                    .summary
+                    .mean_reflected_luminance_cd_m2
+                    .total_cmp(&frames[a].summary.mean_reflected_luminance_cd_m2)
+            });
+            let worst_cases = brightest
+                .into_iter()
+                .take(WORST_CASES)
+                .map(|i| {
+                    let f = &frames[i];
+                    WorstCase {
+                        frame: i,
+                        eye_index: f.eye_index,
+                        sun_index: f.sun_index,
+                        sun_azimuth_deg: f.sun_azimuth_deg,
+                        sun_elevation_deg: f.sun_elevation_deg,
+                        sun_time: f.sun_time.clone(),
+                        mean_reflected_luminance_cd_m2: f.summary.mean_reflected_luminance_cd_m2,
+                        low_contrast_share: f.summary.low_contrast_share,
+                        mirrored_object: f.summary.objects.first().map(|o| o.name.clone()),
+                    }
+                })
+                .collect();
             VariantScore {
                 variant: v.name.clone(),
                 mean_glare_area_share: mean(|r| r.summary.glare_area_share),
@@ -137,6 +183,7 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
                 mean_reflected_luminance_cd_m2: mean(|r| r.summary.mean_reflected_luminance_cd_m2),
                 peak_reflected_luminance_cd_m2: worst(|r| r.summary.peak_reflected_luminance_cd_m2),
                 main_glare_source: main,
+                worst_cases,
             }
         })
         .collect();
@@ -195,7 +242,12 @@ const PLOTS: [Plot; 3] = [
     },
 ];
 
-/// One SVG line chart: the metric over the eye index, a line per variant.
+fn mean(values: &[f32]) -> f32 {
+    values.iter().sum::<f32>() / values.len().max(1) as f32
+}
+
+/// One SVG line chart: the metric over the eye index (its mean over the sun
+/// positions), a line per variant.
 fn plot_svg(plan: &StudyPlan, frames: &[FrameRow], plot: &Plot) -> Result<String, StudyError> {
     let err = |e: &dyn std::fmt::Display| StudyError::Plot(e.to_string());
     let eyes = plan.eyes.len();
@@ -226,10 +278,16 @@ fn plot_svg(plan: &StudyPlan, frames: &[FrameRow], plot: &Plot) -> Result<String
             .map_err(|e| err(&e))?;
         for (k, variant) in plan.variants.iter().enumerate() {
             let color = Palette99::pick(k).to_rgba();
-            let points: Vec<(f32, f32)> = frames
-                .iter()
-                .filter(|f| f.variant == variant.name)
-                .map(|f| (f.eye_index as f32, (plot.value)(f)))
+            // The mean over the sun positions at each eye.
+            let points: Vec<(f32, f32)> = (0..eyes)
+                .map(|eye| {
+                    let values: Vec<f32> = frames
+                        .iter()
+                        .filter(|f| f.variant == variant.name && f.eye_index == eye)
+                        .map(plot.value)
+                        .collect();
+                    (eye as f32, mean(&values))
+                })
                 .collect();
             chart
                 .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
@@ -279,7 +337,7 @@ img {{ width: 320px; image-rendering: auto; }}
 figure {{ display: inline-block; margin: 0 1em 1em 0; }}
 </style></head><body>
 <h1>{title}</h1>
-<p>{variants} design variant(s) &times; {eyes} eye point(s) = {frames} frames. Study file <code>{file}</code>.</p>
+<p>{variants} design variant(s) &times; {eyes} eye point(s){suns} = {frames} frames. Study file <code>{file}</code>.</p>
 <p>Luminances in cd/m² ({scale} cd/m² per unit of rendered radiance).
 Thresholds: glare where the reflected luminance L<sub>r</sub> &gt; {veil} cd/m² ({veil_source});
 markings hard to read where CR = (L<sub>m</sub> + L<sub>r</sub> + L<sub>a</sub>) / (L<sub>b</sub> + L<sub>r</sub> + L<sub>a</sub>) &lt; {cr} ({cr_source}),
@@ -289,6 +347,11 @@ Heat maps share one logarithmic scale, {heat_min} to {heat_max} cd/m².</p>
         title = escape(&plan.name),
         variants = plan.variants.len(),
         eyes = plan.eyes.len(),
+        suns = if plan.suns.is_empty() {
+            String::new()
+        } else {
+            format!(" &times; {} sun position(s)", plan.suns.len())
+        },
         frames = frames.len(),
         file = escape(&plan.file.display().to_string()),
         veil = t.veiling_luminance_cd_m2,
@@ -334,30 +397,215 @@ Heat maps share one logarithmic scale, {heat_min} to {heat_max} cd/m².</p>
         );
     }
     h.push_str("</table>\n");
-    for variant in &plan.variants {
+    if !plan.suns_below_horizon.is_empty() {
         let _ = writeln!(
             h,
-            "<h2>Variant: {}</h2>\n<table class=\"frames\"><tr><th>eye</th><th>rendered image</th><th>reflected luminance (cd/m², log)</th><th>reflected objects</th><th>figures</th></tr>",
-            escape(&variant.name)
+            "<p>Not rendered: {} time(s) of the sweep with the sun below the horizon ({}).</p>",
+            plan.suns_below_horizon.len(),
+            plan.suns_below_horizon
+                .iter()
+                .map(|t| t.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         );
-        for f in frames.iter().filter(|f| f.variant == variant.name) {
-            let s = &f.summary;
-            let _ = writeln!(
-                h,
-                "<tr><td>{eye}</td><td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a></td><td><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a></td><td>mean L<sub>r</sub> {mean:.1} cd/m²<br>peak L<sub>r</sub> {peak:.1} cd/m²<br>glare area {area:.2}%<br>low contrast {low:.2}%<br>main source {main}</td></tr>",
-                eye = f.eye_index,
-                img = escape(&f.image),
-                heat = escape(&f.heat_map),
-                obj = escape(&f.object_map),
-                mean = s.mean_reflected_luminance_cd_m2,
-                peak = s.peak_reflected_luminance_cd_m2,
-                area = s.glare_area_share * 100.0,
-                low = s.low_contrast_share * 100.0,
-                main = escape(s.objects.first().map_or("none", |o| o.name.as_str())),
-            );
+    }
+    // The polar plots of all variants share their colour scales.
+    let polar_tops: Vec<f32> = POLAR_PLOTS
+        .iter()
+        .map(|plot| {
+            per_sun(plan, frames, None, plot.value)
+                .into_iter()
+                .fold(0.0f32, f32::max)
+        })
+        .collect();
+    for variant in &plan.variants {
+        let _ = writeln!(h, "<h2>Variant: {}</h2>", escape(&variant.name));
+        if !plan.suns.is_empty() {
+            for (plot, &top) in POLAR_PLOTS.iter().zip(&polar_tops) {
+                let _ = writeln!(
+                    h,
+                    "<figure>{}</figure>",
+                    polar_svg(plan, frames, &variant.name, plot, top)
+                );
+            }
         }
-        h.push_str("</table>\n");
+        if let Some(score) = ranking.iter().find(|s| s.variant == variant.name) {
+            h.push_str("<h3>Worst cases</h3>\n<table class=\"frames worst\"><tr><th>case</th><th>sun</th><th>eye</th><th>rendered image</th><th>reflected luminance (cd/m², log)</th><th>reflected objects</th><th>figures</th></tr>\n");
+            for (k, case) in score.worst_cases.iter().enumerate() {
+                let f = &frames[case.frame];
+                let _ = writeln!(
+                    h,
+                    "<tr><td>{n}</td><td>{sun}</td><td>{eye}</td>{cells}</tr>",
+                    n = k + 1,
+                    sun = sun_text(f),
+                    eye = f.eye_index,
+                    cells = frame_cells(f),
+                );
+            }
+            h.push_str("</table>\n");
+        }
+        if plan.suns.is_empty() {
+            h.push_str("<h3>Every eye point</h3>\n<table class=\"frames\"><tr><th>eye</th><th>rendered image</th><th>reflected luminance (cd/m², log)</th><th>reflected objects</th><th>figures</th></tr>\n");
+            for f in frames.iter().filter(|f| f.variant == variant.name) {
+                let _ = writeln!(h, "<tr><td>{}</td>{}</tr>", f.eye_index, frame_cells(f));
+            }
+            h.push_str("</table>\n");
+        }
     }
     h.push_str("</body></html>\n");
     Ok(h)
+}
+
+/// A frame's images and figures as table cells.
+fn frame_cells(f: &FrameRow) -> String {
+    let s = &f.summary;
+    format!(
+        "<td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a></td><td><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a></td><td>mean L<sub>r</sub> {mean:.1} cd/m²<br>peak L<sub>r</sub> {peak:.1} cd/m²<br>glare area {area:.2}%<br>low contrast {low:.2}%<br>mirrored: {main}</td>",
+        img = escape(&f.image),
+        heat = escape(&f.heat_map),
+        obj = escape(&f.object_map),
+        mean = s.mean_reflected_luminance_cd_m2,
+        peak = s.peak_reflected_luminance_cd_m2,
+        area = s.glare_area_share * 100.0,
+        low = s.low_contrast_share * 100.0,
+        main = escape(s.objects.first().map_or("none", |o| o.name.as_str())),
+    )
+}
+
+/// Where a frame's sun stands, for the tables.
+fn sun_text(f: &FrameRow) -> String {
+    let mut text = match (f.sun_azimuth_deg, f.sun_elevation_deg) {
+        (Some(a), Some(e)) => format!("azimuth {a:.1}&deg;, elevation {e:.1}&deg;"),
+        _ => "none".to_owned(),
+    };
+    if let Some(t) = &f.sun_time {
+        let _ = write!(text, "<br>{}", escape(t));
+    }
+    text
+}
+
+/// A metric over the sun positions.
+struct PolarPlot {
+    title: &'static str,
+    value: fn(&FrameRow) -> f32,
+}
+
+const POLAR_PLOTS: [PolarPlot; 2] = [
+    PolarPlot {
+        title: "Mean reflected luminance (cd/m²) over the sun positions",
+        value: |r| r.summary.mean_reflected_luminance_cd_m2,
+    },
+    PolarPlot {
+        title: "Instrument area under the contrast threshold over the sun positions",
+        value: |r| r.summary.low_contrast_share,
+    },
+];
+
+/// Per sun position, the mean of `value` over the eye points of `variant`
+/// (of every variant for `None`).
+fn per_sun(
+    plan: &StudyPlan,
+    frames: &[FrameRow],
+    variant: Option<&str>,
+    value: fn(&FrameRow) -> f32,
+) -> Vec<f32> {
+    let mut sums = vec![(0.0f32, 0usize); plan.suns.len()];
+    for f in frames {
+        if let (Some(s), true) = (f.sun_index, variant.is_none_or(|v| v == f.variant)) {
+            sums[s].0 += value(f);
+            sums[s].1 += 1;
+        }
+    }
+    sums.into_iter()
+        .map(|(sum, n)| sum / n.max(1) as f32)
+        .collect()
+}
+
+/// A polar plot (SVG) of a metric over the sun's azimuth (relative to the
+/// vehicle, ahead at the top, clockwise) and elevation (the horizon at the
+/// rim, the zenith in the centre): one disc per sun position, coloured from
+/// 0 to `top` (the mean over the eye points).
+fn polar_svg(
+    plan: &StudyPlan,
+    frames: &[FrameRow],
+    variant: &str,
+    plot: &PolarPlot,
+    top: f32,
+) -> String {
+    const SIZE: f32 = 360.0;
+    const RIM: f32 = 140.0;
+    let (cx, cy) = (SIZE / 2.0, SIZE / 2.0 + 10.0);
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="11">"#,
+        w = SIZE + 90.0,
+        h = SIZE + 30.0
+    );
+    let _ = writeln!(
+        svg,
+        r#"<text x="{x}" y="14" text-anchor="middle" font-size="12">{}</text>"#,
+        escape(plot.title),
+        x = (SIZE + 90.0) / 2.0
+    );
+    for elevation in [0.0f32, 30.0, 60.0] {
+        let r = RIM * (90.0 - elevation) / 90.0;
+        let _ = writeln!(
+            svg,
+            r##"<circle cx="{cx}" cy="{cy}" r="{r}" fill="none" stroke="#bbb"/><text x="{x}" y="{y}" fill="#777">{elevation:.0}&#176;</text>"##,
+            x = cx + 3.0,
+            y = cy - r + 11.0
+        );
+    }
+    for (azimuth, label) in [
+        (0.0f32, "ahead"),
+        (90.0, "right"),
+        (180.0, "behind"),
+        (270.0, "left"),
+    ] {
+        let (x, y) = polar_point(cx, cy, RIM, azimuth, 0.0);
+        let (lx, ly) = polar_point(cx, cy, RIM + 12.0, azimuth, 0.0);
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{cx}" y1="{cy}" x2="{x:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{lx:.1}" y="{ly:.1}" text-anchor="middle" dominant-baseline="middle">{label}</text>"##
+        );
+    }
+    let values = per_sun(plan, frames, Some(variant), plot.value);
+    for (sun, value) in plan.suns.iter().zip(&values) {
+        let (x, y) = polar_point(cx, cy, RIM, sun.azimuth_deg, sun.elevation_deg);
+        let t = if top > 0.0 { value / top } else { 0.0 };
+        let [r, g, b] = vtfarm_imaging::encode_srgb8(vtfarm_glare::ramp_color(t));
+        let _ = writeln!(
+            svg,
+            r##"<circle cx="{x:.1}" cy="{y:.1}" r="7" fill="rgb({r},{g},{b})" stroke="#333"><title>azimuth {a:.1}, elevation {e:.1}: {value:.5}</title></circle>"##,
+            a = sun.azimuth_deg,
+            e = sun.elevation_deg
+        );
+    }
+    // The colour scale.
+    let (x0, y0, height) = (SIZE + 30.0, 40.0, 200.0);
+    for k in 0..20 {
+        let t = 1.0 - k as f32 / 19.0;
+        let [r, g, b] = vtfarm_imaging::encode_srgb8(vtfarm_glare::ramp_color(t));
+        let _ = writeln!(
+            svg,
+            r#"<rect x="{x0}" y="{y:.1}" width="14" height="{h:.1}" fill="rgb({r},{g},{b})"/>"#,
+            y = y0 + height * k as f32 / 20.0,
+            h = height / 20.0 + 0.5
+        );
+    }
+    let _ = writeln!(
+        svg,
+        r#"<text x="{x0}" y="{y1}">{top:.3}</text><text x="{x0}" y="{y2}">0</text></svg>"#,
+        y1 = y0 - 4.0,
+        y2 = y0 + height + 12.0
+    );
+    svg
+}
+
+/// The plot position of a sun direction.
+fn polar_point(cx: f32, cy: f32, rim: f32, azimuth_deg: f32, elevation_deg: f32) -> (f32, f32) {
+    let r = rim * (90.0 - elevation_deg) / 90.0;
+    let (sin, cos) = azimuth_deg.to_radians().sin_cos();
+    (cx + r * sin, cy - r * cos)
 }

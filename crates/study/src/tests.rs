@@ -278,3 +278,108 @@ fn an_eye_on_the_point_it_looks_at_is_refused_while_planning() {
         "{message}"
     );
 }
+
+#[test]
+fn a_low_sun_through_the_side_window_mirrors_brighter_than_a_sun_behind_the_roof() {
+    let dir = tempfile::tempdir().unwrap();
+    // The current glass mirrors the left side of the cab; a low sun from the
+    // right shines through the right door window onto it, a sun from behind
+    // stays behind the cab's back wall and roof.
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        "[[variants]]\nname = \"current\"\nglass = \"current\"\n\
+         [sun]\nazimuths = [90, 180]\nelevations = [10, 40]\n",
+    );
+    assert_eq!(plan.suns.len(), 4);
+    assert_eq!(plan.frames(), 4);
+    let (report, _) = run(&plan, dir.path());
+    let lr = |azimuth: f32, elevation: f32| {
+        let row = report
+            .frames
+            .iter()
+            .find(|f| f.sun_azimuth_deg == Some(azimuth) && f.sun_elevation_deg == Some(elevation))
+            .unwrap();
+        row.summary.mean_reflected_luminance_cd_m2
+    };
+    let (side, roof) = (lr(90.0, 10.0), lr(180.0, 40.0));
+    assert!(
+        side > 1.05 * roof,
+        "side window {side}, behind the roof {roof}"
+    );
+
+    // The report lists the side-window sun as the worst case, with what the
+    // glass mirrors there.
+    let worst = &report.ranking[0].worst_cases[0];
+    assert_eq!(
+        (worst.sun_azimuth_deg, worst.sun_elevation_deg),
+        (Some(90.0), Some(10.0))
+    );
+    assert_eq!(worst.mirrored_object.as_deref(), Some("cab_walls"));
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    let first_case = html
+        .find("<tr><td>1</td><td>azimuth ")
+        .expect("a worst-case table");
+    assert!(
+        html[first_case..].starts_with("<tr><td>1</td><td>azimuth 90.0&deg;, elevation 10.0&deg;"),
+        "{}",
+        &html[first_case..first_case + 120]
+    );
+    assert!(
+        html.contains("over the sun positions</text>"),
+        "the polar plots"
+    );
+    assert!(dir.path().join("current/sun_000/eye_00/heat.png").is_file());
+    let csv = std::fs::read_to_string(dir.path().join("summary.csv")).unwrap();
+    assert!(
+        csv.lines()
+            .next()
+            .unwrap()
+            .contains("sun_azimuth_deg,sun_elevation_deg")
+    );
+}
+
+#[test]
+fn a_date_range_skips_the_night_and_turns_the_sun_with_the_heading() {
+    let dir = tempfile::tempdir().unwrap();
+    // Munich on the June solstice, every three hours of the UTC day, driving
+    // east: the sun is up from about 03:12 to 19:17 UTC.
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        "[[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
+         [sun]\nstart = 2026-06-21T00:00:00Z\nend = 2026-06-21T21:00:00Z\nstep_minutes = 180\n\
+         latitude = 48.14\nlongitude = 11.58\nheading = 90\n",
+    );
+    let below: Vec<String> = plan
+        .suns_below_horizon
+        .iter()
+        .map(|t| t.to_string())
+        .collect();
+    assert_eq!(
+        below,
+        [
+            "2026-06-21T00:00:00Z",
+            "2026-06-21T03:00:00Z",
+            "2026-06-21T21:00:00Z"
+        ]
+    );
+    assert_eq!(plan.suns.len(), 5);
+    assert_eq!(plan.variants[0].setups.len(), 5);
+    assert!(plan.suns.iter().all(|s| s.elevation_deg > 0.0));
+    // Near solar noon (11:27 UTC) the sun stands in the south, on the
+    // right of a vehicle driving east, about 65° high (90° - 48.1° + 23.4°).
+    let noon = plan.suns[2];
+    assert_eq!(noon.time.unwrap().to_string(), "2026-06-21T12:00:00Z");
+    assert!((noon.azimuth_deg - 90.0).abs() < 25.0, "{noon:?}");
+    assert!((noon.elevation_deg - 64.5).abs() < 1.5, "{noon:?}");
+    // The frame's sun light comes from there.
+    let lighting = &plan.variants[0].setups[2].lighting;
+    let vtfarm_scene::LightKind::Directional { direction } = lighting.lights[0].kind else {
+        panic!("the cockpit's sun is its first light");
+    };
+    let (azimuth, elevation) = sun::vehicle_angles(-direction);
+    assert!(
+        (azimuth - noon.azimuth_deg).abs() < 1e-3 && (elevation - noon.elevation_deg).abs() < 1e-3
+    );
+}

@@ -284,6 +284,30 @@ pub struct SceneBvh {
     geometric_normals: Vec<Vec3>,
     /// Whether queries run their AVX2 build ([`has_avx2`]).
     avx2: bool,
+    /// Whether each slot's triangle casts shadows ([`casts_shadow`]).
+    slot_casts_shadow: Vec<bool>,
+}
+
+/// Whether a surface of `material` blocks light: every surface except those
+/// that only emit (the panels outside the windows that stand for sky, road
+/// and landscape, and lamps). They stand for light, not for an occluder, so
+/// a low sun shines into a cab past the panel outside its window.
+pub fn casts_shadow(material: &vtfarm_scene::Material) -> bool {
+    let responds = [
+        material.ambient,
+        material.diffuse,
+        material.specular,
+        material.reflectance,
+        material.transmittance,
+    ]
+    .iter()
+    .any(|&k| k != Vec3::ZERO);
+    responds || material.emission == Vec3::ZERO
+}
+
+fn triangle_casts_shadow(scene: &Scene, id: TriangleId) -> bool {
+    let material = scene.triangles[id as usize].material as usize;
+    casts_shadow(&scene.materials[material])
 }
 
 impl fmt::Debug for SceneBvh {
@@ -414,6 +438,10 @@ impl SceneBvh {
             .iter()
             .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
             .collect();
+        let slot_casts_shadow = slots
+            .iter()
+            .map(|&i| triangle_casts_shadow(&scene, i))
+            .collect();
         // Report the layout actually used (see the depth fallback in `build`).
         let options = match accel {
             Accel::Binary(_) => BvhOptions {
@@ -431,6 +459,7 @@ impl SceneBvh {
             prim_ids: slots,
             geometric_normals,
             avx2: has_avx2(),
+            slot_casts_shadow,
         })
     }
 
@@ -574,10 +603,11 @@ impl SceneBvh {
         best.hit
     }
 
-    /// [`SceneBvh::closest_hit`] for a batch of rays, same results. With the
-    /// `Cw` layout, packets of 8 consecutive rays share the tree walk. Not yet
-    /// a win: `bench rays` measured it at 0.5x single rays on the cockpit's
-    /// camera and reflection rays, so the renderer does not call it.
+    /// [`SceneBvh::closest_hit`] for a batch of rays, same results bit for
+    /// bit. With the `Cw` layout, packets of 8 consecutive rays share the tree
+    /// walk: on coherent rays (camera rays in row order, a reflector's
+    /// reflection rays) `bench rays` measured it at about 1.5x single rays;
+    /// on incoherent rays it is slower than single rays.
     pub fn closest_hits(&self, rays: &[Ray], t_max: f32) -> Vec<Option<Hit>> {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
@@ -645,29 +675,44 @@ impl SceneBvh {
         hits
     }
 
-    /// Any hit with t in (0, `t_max`), for shadow rays; stops at the first
-    /// hit found.
+    /// Any hit with t in (0, `t_max`); stops at the first hit found.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
+        self.any_hit(ray, t_max, None)
+    }
+
+    /// Whether a shadow-casting triangle ([`casts_shadow`]) lies on the
+    /// ray with t in (0, `t_max`): the shadow test.
+    pub fn shadowed(&self, ray: &Ray, t_max: f32) -> bool {
+        self.any_hit(ray, t_max, Some(&self.slot_casts_shadow))
+    }
+
+    /// Whether triangle `id` casts shadows ([`casts_shadow`]).
+    pub fn casts_shadow(&self, id: TriangleId) -> bool {
+        triangle_casts_shadow(&self.scene, id)
+    }
+
+    /// Any hit among the slots `counts` marks (all for `None`).
+    fn any_hit(&self, ray: &Ray, t_max: f32, counts: Option<&[bool]>) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: as in `closest_hit`.
-            return unsafe { self.occluded_avx2(ray, t_max) };
+            return unsafe { self.any_hit_avx2(ray, t_max, counts) };
         }
-        self.occluded_with(Isa::Portable, ray, t_max)
+        self.any_hit_with(Isa::Portable, ray, t_max, counts)
     }
 
-    /// [`SceneBvh::occluded`] compiled for AVX2.
+    /// [`SceneBvh::any_hit`] compiled for AVX2.
     ///
     /// # Safety
     /// The CPU must have the enabled features ([`has_avx2`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
-    unsafe fn occluded_avx2(&self, ray: &Ray, t_max: f32) -> bool {
-        self.occluded_with(Isa::Avx2, ray, t_max)
+    unsafe fn any_hit_avx2(&self, ray: &Ray, t_max: f32, counts: Option<&[bool]>) -> bool {
+        self.any_hit_with(Isa::Avx2, ray, t_max, counts)
     }
 
     #[inline(always)]
-    fn occluded_with(&self, isa: Isa, ray: &Ray, t_max: f32) -> bool {
+    fn any_hit_with(&self, isa: Isa, ray: &Ray, t_max: f32, counts: Option<&[bool]>) -> bool {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let Some(bvh_ray) = bvh_ray(origin, direction, t_max) else {
             return false;
@@ -675,22 +720,28 @@ impl SceneBvh {
         let sheared = ShearedRay::new(origin, direction);
         with_axes!(
             sheared.axes,
-            self.occluded_in(isa, &bvh_ray, &sheared, t_max)
+            self.any_hit_in(isa, &bvh_ray, &sheared, t_max, counts)
         )
     }
 
     /// Any hit for a ray with axis order `[KX, KY, KZ]`.
     #[inline(always)]
-    fn occluded_in<const KX: usize, const KY: usize, const KZ: usize>(
+    fn any_hit_in<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
         isa: Isa,
         bvh_ray: &BvhRay,
         sheared: &ShearedRay,
         t_max: f32,
+        counts: Option<&[bool]>,
     ) -> bool {
-        let test = |slot: usize| match self.prims[slot].intersect_in::<KX, KY, KZ>(sheared) {
-            Some((t, _, _)) if t > 0.0 && t < t_max => t,
-            _ => f32::INFINITY,
+        let test = |slot: usize| {
+            if counts.is_some_and(|c| !c[slot]) {
+                return f32::INFINITY;
+            }
+            match self.prims[slot].intersect_in::<KX, KY, KZ>(sheared) {
+                Some((t, _, _)) if t > 0.0 && t < t_max => t,
+                _ => f32::INFINITY,
+            }
         };
         match &self.accel {
             Accel::Empty => false,

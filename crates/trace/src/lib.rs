@@ -24,7 +24,9 @@ mod scenarios;
 #[cfg(test)]
 mod testutil;
 
-pub use bvh::{BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, spawn_offset};
+pub use bvh::{
+    BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
+};
 pub use whitted::{SurfaceTerms, Tracer, reflect, refract};
 
 use glam::Vec3;

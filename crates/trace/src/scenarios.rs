@@ -391,6 +391,32 @@ fn a_point_behind_an_occluder_gets_only_ambient() {
 }
 
 #[test]
+fn a_surface_that_only_emits_casts_no_shadow() {
+    // A panel standing for the sky outside a window: the light passes it.
+    let light = Vec3::new(0.0, 3.0, 0.0);
+    let s = shadow_scene(emitter("sky panel", Vec3::ONE), &[light]);
+    let tracer = tracer(&s.bvh, &s.lighting);
+    let under_point = Vec3::new(0.05, 0.0, 0.03);
+    let under = tracer.trace(&Ray {
+        origin: under_point + Vec3::Y * 0.5,
+        direction: -Vec3::Y,
+    });
+    let n_dot_l = Vec3::Y.dot((light - under_point).normalize());
+    assert_close(
+        under.color,
+        s.floor.ambient * s.lighting.ambient + s.floor.diffuse * n_dot_l,
+        1e-5,
+    );
+    // The same ray is still occluded for any-hit queries; only shadows pass.
+    let up = Ray {
+        origin: under_point,
+        direction: Vec3::Y,
+    };
+    assert!(s.bvh.occluded(&up, f32::INFINITY));
+    assert!(!s.bvh.shadowed(&up, f32::INFINITY));
+}
+
+#[test]
 fn max_depth_one_shades_only_the_first_surface() {
     let mut b = SceneBuilder::default();
     let mut chrome = mirror("chrome");

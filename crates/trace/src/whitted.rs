@@ -18,7 +18,8 @@ use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
 /// `max_depth` 0 behaves as 1.
 ///
 /// Shadow rays treat every occluder as opaque, transparent ones included
-/// (classic Whitted: no caustics or coloured shadows), and stop at a point
+/// (classic Whitted: no caustics or coloured shadows), pass surfaces that
+/// only emit ([`crate::casts_shadow`]), and stop at a point
 /// light's distance (minus the spawn epsilon, so geometry at the light does
 /// not shadow it).
 #[derive(Clone, Copy, Debug)]
@@ -86,6 +87,10 @@ impl Signature {
     }
 }
 
+/// Rays per rayon task of [`Tracer::trace_batch`]: whole packets, large
+/// enough to amortise scheduling.
+const PRIMARY_CHUNK: usize = 256;
+
 /// Mirror direction of unit `incoming` about unit `normal`.
 pub fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
     (incoming - 2.0 * incoming.dot(normal) * normal).normalize_or(incoming)
@@ -148,9 +153,21 @@ impl Tracer<'_> {
         sample(shaded, signature)
     }
 
-    /// Batches over all cores with rayon (results in input order).
+    /// Batches over all cores with rayon (results in input order), the
+    /// same samples as [`Tracer::trace`] per ray; the primary hits come from
+    /// [`SceneBvh::closest_hits`] (packets: coherent batches such as camera
+    /// rays in row order trace faster that way).
     pub fn trace_batch(&self, rays: &[Ray]) -> Vec<Sample> {
-        rays.par_iter().map(|ray| self.trace(ray)).collect()
+        rays.par_chunks(PRIMARY_CHUNK)
+            .flat_map_iter(|chunk| {
+                let hits = self.bvh.closest_hits(chunk, f32::INFINITY);
+                chunk.iter().zip(hits).map(|(ray, hit)| {
+                    let mut signature = Signature::new();
+                    let (shaded, _) = self.radiance_of(ray, hit, 1, 1.0, &mut signature);
+                    sample(shaded, signature)
+                })
+            })
+            .collect()
     }
 
     pub fn shade_batch(&self, points: &[(SurfacePoint, Vec3)]) -> Vec<Sample> {
@@ -170,7 +187,20 @@ impl Tracer<'_> {
         weight: f32,
         signature: &mut Signature,
     ) -> (Shaded, ObjectId) {
-        match self.bvh.closest_hit(ray, f32::INFINITY) {
+        let hit = self.bvh.closest_hit(ray, f32::INFINITY);
+        self.radiance_of(ray, hit, depth, weight, signature)
+    }
+
+    /// [`Tracer::radiance`] once the ray's closest hit is known.
+    fn radiance_of(
+        &self,
+        ray: &Ray,
+        hit: Option<crate::Hit>,
+        depth: u32,
+        weight: f32,
+        signature: &mut Signature,
+    ) -> (Shaded, ObjectId) {
+        match hit {
             None => {
                 if weight >= self.settings.signature_min_weight {
                     signature.add(word::MISS);
@@ -353,7 +383,7 @@ impl Tracer<'_> {
             }
             LightKind::Directional { .. } => f32::INFINITY,
         };
-        !self.bvh.occluded(&ray, t_max)
+        !self.bvh.shadowed(&ray, t_max)
     }
 }
 

@@ -174,9 +174,9 @@ pub use package::{
 };
 pub use stop::{Stop, Stopped};
 pub use thin::Behind;
+pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;
-use package::PixelRect;
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
 use vtfarm_scene::{Camera, Projector, ScreenPoint, TriangleId};
@@ -306,12 +306,7 @@ impl Frame<'_> {
             .scene()
             .triangle_positions(triangle)
             .map(|p| projector.project(p));
-        let full = PixelRect {
-            x0: 0,
-            y0: 0,
-            x1: self.ids.width,
-            y1: self.ids.height,
-        };
+        let full = PixelRect::full(self.ids.width, self.ids.height);
         let rect = match corners {
             [Some(a), Some(b), Some(c)] => {
                 let clamp = |v: f32, hi: u32| v.clamp(0.0, hi as f32) as u32;
@@ -437,15 +432,74 @@ pub fn pixel_surface(
     (point, direction)
 }
 
+/// The part of the frame the vertex tracer looks at: the bounding rectangle
+/// of the reflector triangles' projections (`is_reflector` per scene
+/// triangle) widened by `margin` pixels, cut to the frame; the whole frame
+/// when a reflector reaches behind the eye. Every reflector pixel lies
+/// inside without margin; look-ups around them need one: the frame's ID
+/// buffer [`VertexSettings::visibility_radius`] + 1 (the visibility test),
+/// [`Behind`] its own. ID buffers built over it
+/// ([`vtfarm_raster::id_buffer_within`]) then give the vertex tracer exactly
+/// what whole-frame ones give, so workers build only this part.
+pub fn reflector_bounds(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    is_reflector: &[bool],
+    margin: u32,
+) -> PixelRect {
+    let projector = Projector::new(camera);
+    let full = PixelRect::full(camera.width, camera.height);
+    let (mut lo, mut hi) = (
+        glam::Vec2::splat(f32::INFINITY),
+        glam::Vec2::splat(f32::NEG_INFINITY),
+    );
+    for (t, _) in is_reflector.iter().enumerate().filter(|(_, r)| **r) {
+        for p in scene.triangle_positions(t as TriangleId) {
+            let Some(s) = projector.project(p) else {
+                return full;
+            };
+            lo = lo.min(glam::Vec2::new(s.x, s.y));
+            hi = hi.max(glam::Vec2::new(s.x, s.y));
+        }
+    }
+    if lo.x > hi.x {
+        return PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: 0,
+            y1: 0,
+        };
+    }
+    let margin = margin as f32;
+    let clamp = |v: f32, size: u32| v.clamp(0.0, size as f32) as u32;
+    PixelRect {
+        x0: clamp(lo.x.floor() - margin, camera.width),
+        y0: clamp(lo.y.floor() - margin, camera.height),
+        x1: clamp(hi.x.ceil() + 1.0 + margin, camera.width),
+        y1: clamp(hi.y.ceil() + 1.0 + margin, camera.height),
+    }
+}
+
 /// The ID buffer of what lies behind the reflectors: every triangle that is
 /// neither a reflector nor transparent. Deterministic like every ID buffer, so
-/// workers rebuild it.
+/// workers rebuild it (over [`reflector_bounds`] only, see [`Behind`]).
 pub fn behind_id_buffer(
     scene: &vtfarm_scene::Scene,
     camera: &Camera,
     is_reflector: &[bool],
 ) -> IdBuffer {
-    vtfarm_raster::id_buffer_where(scene, camera, &|t| {
+    let full = PixelRect::full(camera.width, camera.height);
+    behind_id_buffer_within(scene, camera, is_reflector, full)
+}
+
+/// [`behind_id_buffer`] over the pixels of `within` only.
+fn behind_id_buffer_within(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    is_reflector: &[bool],
+    within: PixelRect,
+) -> IdBuffer {
+    vtfarm_raster::id_buffer_within(scene, camera, within, &|t| {
         !is_reflector[t as usize] && scene.material_of(t).transmittance.max_element() <= 0.0
     })
 }

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use vtfarm_raster::IdBuffer;
+use vtfarm_raster::{IdBuffer, PixelRect};
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
@@ -334,21 +334,6 @@ fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '
             colors: v.map(|v| v.sample.color),
         })
     })
-}
-
-/// A pixel rectangle (inclusive start, exclusive end).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct PixelRect {
-    pub(crate) x0: u32,
-    pub(crate) y0: u32,
-    pub(crate) x1: u32,
-    pub(crate) y1: u32,
-}
-
-impl PixelRect {
-    fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
-        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
-    }
 }
 
 /// Reference level: every owned pixel traced.

@@ -53,7 +53,7 @@ impl Stop {
     }
 
     /// Counts `samples` traced samples.
-    pub(crate) fn charge(&self, samples: u64) {
+    pub fn charge(&self, samples: u64) {
         self.samples.fetch_add(samples, Ordering::Relaxed);
     }
 

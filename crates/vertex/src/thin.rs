@@ -9,7 +9,8 @@
 //!   behind, seen along the eye ray shifted sideways by the slab (Snell
 //!   through both surfaces, which leaves the direction unchanged), shaded
 //!   with local Phong whose shadow test is a shadow map per light (Whitted's
-//!   shadow rays treat the glass as opaque, and so does the map);
+//!   shadow rays treat the glass as opaque, and so does the map; surfaces
+//!   that only emit cast no shadow in either, `vtfarm_trace::casts_shadow`);
 //! - the back surface mirrors about what the front does: the reflected part
 //!   is scaled by (kr(front) + kt(front)² · kr(back)) / kr(front).
 //!
@@ -23,18 +24,31 @@ use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Camera, LightKind, NONE, Projector, Scene, TriangleId};
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
-use crate::{PixelValue, Transmission, barycentric, behind_id_buffer, pixel_surface};
+use crate::{
+    PixelRect, PixelValue, Transmission, barycentric, behind_id_buffer_within, pixel_surface,
+    reflector_bounds,
+};
 
 /// What lies behind the reflectors: the ID buffer of the opaque scene
 /// (neither reflectors nor see-through surfaces), and with
 /// [`Transmission::Raster`] the thin-glass terms of every see-through
-/// reflector pixel (see the module docs). Part of the frame's raster pass.
+/// reflector pixel (see the module docs). Part of the frame's raster pass,
+/// built over the reflectors' bounds only ([`crate::reflector_bounds`]):
+/// the ID buffer is empty elsewhere.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Behind {
     pub ids: IdBuffer,
-    /// Per frame pixel; empty with traced transmission.
+    /// The pixels `glass` covers.
+    bounds: PixelRect,
+    /// Per pixel of `bounds`, row-major; empty with traced transmission.
     glass: Vec<ThinGlass>,
 }
+
+/// Pixels around the reflectors that [`Behind`] covers besides them: the
+/// behind-glass hints read 4-neighbours, and the thin-glass model looks
+/// beside a pixel by the slab's sideways shift (about a pixel for the
+/// cockpit's 3-mm glass at 1920×1080).
+const BEHIND_MARGIN: u32 = 16;
 
 /// The thin-glass terms of one reflector pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,19 +81,29 @@ impl Behind {
         transmission: Transmission,
     ) -> Behind {
         let scene = tracer.bvh.scene();
-        let behind = behind_id_buffer(scene, camera, is_reflector);
+        let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
+        let behind = behind_id_buffer_within(scene, camera, is_reflector, bounds);
         let glass = match transmission {
             Transmission::Traced => Vec::new(),
-            Transmission::Raster => thin_glass(tracer, camera, ids, &behind, is_reflector),
+            Transmission::Raster => thin_glass(tracer, camera, ids, &behind, is_reflector, bounds),
         };
-        Behind { ids: behind, glass }
+        Behind {
+            ids: behind,
+            bounds,
+            glass,
+        }
     }
 
     /// Finishes a reflector pixel whose value holds the local part and the
     /// front surface's reflection: adds the back surface's reflection and the
     /// transmitted part (nothing with traced transmission).
     pub fn finish(&self, value: &mut PixelValue) {
-        if let Some(glass) = self.glass.get(value.index as usize) {
+        let (x, y) = (value.index % self.ids.width, value.index / self.ids.width);
+        if !self.bounds.contains(x, y) {
+            return;
+        }
+        let local = (y - self.bounds.y0) * (self.bounds.x1 - self.bounds.x0) + (x - self.bounds.x0);
+        if let Some(glass) = self.glass.get(local as usize) {
             let ghost = value.reflected * (glass.reflection_scale - 1.0);
             value.reflected += ghost;
             value.transmitted += glass.transmitted;
@@ -88,13 +112,15 @@ impl Behind {
     }
 }
 
-/// The thin-glass terms of every pixel whose reflector is see-through.
+/// The thin-glass terms of every pixel of `bounds` (row-major) whose
+/// reflector is see-through.
 fn thin_glass(
     tracer: &Tracer<'_>,
     camera: &Camera,
     ids: &IdBuffer,
     behind: &IdBuffer,
     is_reflector: &[bool],
+    bounds: PixelRect,
 ) -> Vec<ThinGlass> {
     let scene = tracer.bvh.scene();
     let see_through = |t: TriangleId| scene.material_of(t).transmittance.max_element() > 0.0;
@@ -102,26 +128,27 @@ fn thin_glass(
         let t = ids.triangle[i];
         t != NONE && is_reflector[t as usize] && see_through(t)
     };
-    let mut out = vec![ThinGlass::default(); ids.triangle.len()];
-    if !(0..ids.triangle.len()).any(glass_pixel) {
+    let width = (bounds.x1 - bounds.x0) as usize;
+    let mut out = vec![ThinGlass::default(); width * (bounds.y1 - bounds.y0) as usize];
+    if !bounds.pixels().any(|(x, y)| glass_pixel(ids.index(x, y))) {
         return out;
     }
     // The see-through surfaces that are not reflectors: a slab's back.
-    let layers = vtfarm_raster::id_buffer_where(scene, camera, &|t| {
+    let layers = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|t| {
         !is_reflector[t as usize] && see_through(t)
     });
-    let shadows = ShadowMaps::new(tracer, camera, behind, &|i| glass_pixel(i));
-    let width = ids.width as usize;
-    out.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, slot) in row.iter_mut().enumerate() {
-            let i = y * width + x;
-            if glass_pixel(i) {
-                *slot = glass_at(
-                    tracer, camera, ids, &layers, behind, &shadows, x as u32, y as u32,
-                );
+    let shadows = ShadowMaps::new(tracer, camera, behind, bounds, &|i| glass_pixel(i));
+    out.par_chunks_mut(width)
+        .enumerate()
+        .for_each(|(row, slots)| {
+            let y = bounds.y0 + row as u32;
+            for (column, slot) in slots.iter_mut().enumerate() {
+                let x = bounds.x0 + column as u32;
+                if glass_pixel(ids.index(x, y)) {
+                    *slot = glass_at(tracer, camera, ids, &layers, behind, &shadows, x, y);
+                }
             }
-        }
-    });
+        });
     out
 }
 
@@ -322,6 +349,7 @@ impl ShadowMaps {
         tracer: &Tracer<'_>,
         camera: &Camera,
         behind: &IdBuffer,
+        bounds: PixelRect,
         glass_pixel: &(dyn Fn(usize) -> bool + Sync),
     ) -> ShadowMaps {
         let scene = tracer.bvh.scene();
@@ -329,15 +357,13 @@ impl ShadowMaps {
         let projector = Projector::new(camera);
         let forward = camera.basis().0;
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for y in 0..behind.height {
-            for x in 0..behind.width {
-                let i = behind.index(x, y);
-                if glass_pixel(i) && behind.triangle[i] != NONE {
-                    let d = projector.pixel_ray(x, y);
-                    let p = camera.eye + d * (behind.depth[i] / d.dot(forward));
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
+        for (x, y) in bounds.pixels() {
+            let i = behind.index(x, y);
+            if glass_pixel(i) && behind.triangle[i] != NONE {
+                let d = projector.pixel_ray(x, y);
+                let p = camera.eye + d * (behind.depth[i] / d.dot(forward));
+                lo = lo.min(p);
+                hi = hi.max(p);
             }
         }
         let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.05;
@@ -377,7 +403,7 @@ impl ShadowMaps {
                 };
                 Some((
                     Projector::new(&view),
-                    vtfarm_raster::id_buffer(scene, &view),
+                    vtfarm_raster::id_buffer_where(scene, &view, &|t| tracer.bvh.casts_shadow(t)),
                 ))
             })
             .collect();

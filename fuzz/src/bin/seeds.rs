@@ -9,6 +9,7 @@ use vtfarm_proto::{
     FrameStart, Hello, JobScene, Message, Package, PackageResult, Role, SceneData, WireBitmap,
     WireFrameSetup, WireJob, WireMethod, WirePackageStats, encode_message,
 };
+use vtfarm_method::FrameSetup;
 use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{SparseBitmap, VertexSettings};
@@ -41,12 +42,12 @@ fn main() -> std::io::Result<()> {
         width: 8,
         height: 6,
     };
-    let setup = WireFrameSetup::from_parts(
-        &camera,
-        &Lighting::default(),
-        &TraceSettings::default(),
-        &VertexSettings::default(),
-    );
+    let setup = WireFrameSetup::from(&FrameSetup {
+        camera,
+        lighting: Lighting::default(),
+        trace: TraceSettings::default(),
+        vertex: VertexSettings::default(),
+    });
     let data = SceneData::from_scene(&scene);
     let hello = Message::Hello(Hello::new("fuzz-token", Role::Submitter));
     let messages = [
@@ -75,6 +76,7 @@ fn main() -> std::io::Result<()> {
                 setup,
                 reflectors: vec![0],
                 method: WireMethod::VertexTracing,
+                aux: false,
             }),
         ),
         (

@@ -17,7 +17,7 @@ use std::time::Duration;
 use vtfarm_master::{ConnId, Journal, MasterCore, Output, Peer};
 use vtfarm_proto::{FrameDone, JobScene, Message, PackageResult, SceneData, WireJob};
 use vtfarm_scheduler::SchedulerConfig;
-use vtfarm_worker::engine::ActiveFrame;
+use vtfarm_worker::engine::PreparedFrames;
 use vtfarm_worker::{Engine, SessionEnd, Task, WorkerSession};
 
 /// Virtual time one traced sample costs a worker of slowdown 1.
@@ -48,7 +48,7 @@ pub(crate) struct SimWorker {
     epoch: u64,
     session: Option<WorkerSession>,
     engine: Engine,
-    frame: Option<ActiveFrame>,
+    frames: PreparedFrames,
     /// Results this worker's sessions sent.
     pub(crate) results_sent: u32,
 }
@@ -195,7 +195,7 @@ impl Pair {
             epoch: 0,
             session: None,
             engine: Engine::new(None),
-            frame: None,
+            frames: PreparedFrames::default(),
             results_sent: 0,
         });
         let w = self.workers.len() - 1;
@@ -211,7 +211,7 @@ impl Pair {
         worker.conn = conn;
         worker.epoch += 1;
         worker.session = Some(WorkerSession::new(self.now));
-        worker.frame = None;
+        worker.frames = PreparedFrames::default();
         let peer = Peer::Worker {
             name: worker.name.clone(),
             threads: 1,
@@ -471,14 +471,12 @@ impl Pair {
                 Task::PrepareFrame(start) => {
                     let key = (start.job, start.frame);
                     let outcome = worker.engine.start_frame(start);
-                    let outcome = outcome.map(|frame| worker.frame = Some(frame));
+                    let outcome = outcome.map(|frame| worker.frames.insert(frame));
                     session.frame_prepared(self.now, key, outcome);
                 }
                 Task::RunPackage(package) => {
-                    let frame = worker
-                        .frame
-                        .as_ref()
-                        .expect("the session ran a prepared frame");
+                    let frame = (worker.frames.get(package.job, package.frame))
+                        .expect("the session runs packages of prepared frames only");
                     let unlimited = vtfarm_vertex::Stop::with_budget(u64::MAX);
                     let mut result =
                         (frame.run(&package, 1.0, &unlimited)).expect("packages render");

@@ -255,7 +255,7 @@ fn an_idle_worker_drains_at_once_and_shutdown_ends_the_session() {
 }
 
 #[test]
-fn a_frame_announced_while_a_package_runs_is_prepared_and_the_older_frame_stays_usable() {
+fn a_frame_announced_while_a_package_runs_is_prepared_and_older_frames_stay_usable() {
     let (mut s, mut scenes) = ready_session();
     let now = Duration::from_millis(5);
     s.handle_message(now, package(10, 1, 0), &mut scenes);
@@ -279,9 +279,12 @@ fn a_frame_announced_while_a_package_runs_is_prepared_and_the_older_frame_stays_
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
     s.package_finished(now, 11, Ok(result(11)));
     let _ = messages(&mut s);
-    // Two frames back is too old: the master retries it elsewhere.
-    s.handle_message(now, Message::FrameStart(frame_start(1, 2)), &mut scenes);
-    s.frame_prepared(now, (1, 2), Ok(()));
+    // A frame more than FRAMES_IN_FLIGHT back is too old: the master
+    // retries its package elsewhere.
+    for frame in 2..=vtfarm_proto::FRAMES_IN_FLIGHT as u32 {
+        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
+        s.frame_prepared(now, (1, frame), Ok(()));
+    }
     let _ = (tasks(&mut s), messages(&mut s));
     s.handle_message(now, package(12, 1, 0), &mut scenes);
     assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 12));

@@ -159,3 +159,16 @@ fn the_output_does_not_depend_on_the_thread_count() {
     };
     assert_eq!(bits(&one.color), bits(&three.color));
 }
+
+#[test]
+fn the_cube_map_methods_honour_the_packages_stop() {
+    let setup = OwnedFrame::cockpit(0.3, 160, 90);
+    let methods: [&dyn ReflectionMethod; 3] = [
+        &CubeMapMethod::full(),
+        &CubeMapMethod::grid(),
+        &EnvironmentMap::default(),
+    ];
+    for method in methods {
+        vtfarm_method::check_honours_stop(method, &setup.frame());
+    }
+}

@@ -140,13 +140,14 @@ fn the_grid_agrees_with_the_full_search() {
         keep[t as usize] = true;
     }
     let mesh = ReflectedMesh::build(&sheet, &keep, 0.0);
-    let full = crate::vertices::virtual_vertices(&mesh, &maps, EYE, &settings, None);
+    let full = crate::vertices::virtual_vertices(&mesh, &maps, EYE, &settings, None, &|| false);
     let grid = crate::vertices::virtual_vertices(
         &mesh,
         &maps,
         EYE,
         &settings,
         Some(&GridSettings { fraction: 0.1 }),
+        &|| false,
     );
     assert!(
         grid.1 * 4 < full.1,
