@@ -820,6 +820,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
             r##"window.viewDone.then(() => ({
                 hash: document.getElementById("view").dataset.hash,
                 glare: document.querySelectorAll("#glare tr").length,
+                unshown: [...document.querySelectorAll("#glare td")].filter((td) => td.textContent.includes("–")).length,
                 objects: document.getElementById("view-objects").src,
                 current: window.lastView.view.current,
                 outcomes: window.lastView.view.outcomes,
@@ -841,6 +842,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         moved.camera.eye
     );
     assert!(view["glare"].as_u64().unwrap() >= 7, "{view}");
+    assert_eq!(view["unshown"], 0, "every glare figure is shown: {view}");
     assert!(
         view["objects"]
             .as_str()
