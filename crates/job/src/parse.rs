@@ -568,7 +568,7 @@ impl Source<'_> {
                     "lighting.background_luminance_cd_m2",
                     &raw.background_luminance_cd_m2,
                 ),
-                |cd_m2| Vec3::splat(cd_m2 / photometry::CD_M2_PER_UNIT),
+                photometry::grey,
             )?,
         })
     }

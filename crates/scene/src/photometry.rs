@@ -55,6 +55,11 @@ pub fn emission(color: Vec3, cd_m2: f32) -> Option<Vec3> {
     (y > 0.0).then(|| color * (cd_m2 / (CD_M2_PER_UNIT * y)))
 }
 
+/// A grey of luminance `cd_m2`, in render units (backgrounds given in cd/m²).
+pub fn grey(cd_m2: f32) -> Vec3 {
+    Vec3::splat(cd_m2 / CD_M2_PER_UNIT)
+}
+
 /// The intensity of a directional light of `color` that delivers
 /// `illuminance_lux` to a surface facing it; `None` for a black colour.
 pub fn directional_intensity(color: Vec3, illuminance_lux: f32) -> Option<f32> {

@@ -33,8 +33,8 @@ pub fn julian_day(unix_seconds: f64) -> f64 {
 /// (north positive) and `longitude_deg` (east positive).
 pub fn solar_position(unix_seconds: f64, latitude_deg: f64, longitude_deg: f64) -> SolarPosition {
     let t = (julian_day(unix_seconds) - 2_451_545.0) / 36_525.0;
-    let mean_longitude = (280.46646 + t * (36_000.76983 + t * 0.000_303_2)).rem_euclid(360.0);
-    let mean_anomaly = 357.52911 + t * (35_999.05029 - 0.000_153_7 * t);
+    let mean_longitude = (280.46646 + t * (36_000.769_83 + t * 0.000_303_2)).rem_euclid(360.0);
+    let mean_anomaly = 357.52911 + t * (35_999.050_29 - 0.000_153_7 * t);
     let eccentricity = 0.016_708_634 - t * (0.000_042_037 + 0.000_000_126_7 * t);
     let m = mean_anomaly.to_radians();
     let centre = m.sin() * (1.914_602 - t * (0.004_817 + 0.000_014 * t))
