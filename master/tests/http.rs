@@ -161,6 +161,33 @@ impl Farm {
             .await
             .expect("HTTP answer in time")
     }
+
+    async fn post(&self, path: &str, json: serde_json::Value) -> Response {
+        tokio::time::timeout(WAIT, request(self.http, "POST", path, Some(json)))
+            .await
+            .expect("HTTP answer in time")
+    }
+
+    /// Waits (bounded) until `done` holds of the master's core, woken by
+    /// its change notifications.
+    async fn wait_for_core(
+        &self,
+        done: impl Fn(&vtfarm_master::MasterCore) -> bool + Clone + Send + 'static,
+    ) {
+        let mut changes = self.master.changes();
+        let check = async {
+            loop {
+                changes.mark_unchanged();
+                if self.master.inspect(done.clone()).await.unwrap() {
+                    return;
+                }
+                changes.changed().await.unwrap();
+            }
+        };
+        tokio::time::timeout(WAIT, check)
+            .await
+            .expect("the master reached the awaited state");
+    }
 }
 
 struct Response {
@@ -175,12 +202,28 @@ impl Response {
     }
 }
 
-/// A plain HTTP/1.1 GET over a fresh connection; reads the headers, then
-/// exactly `Content-Length` bytes (servers need not close the connection).
+/// A plain HTTP/1.1 GET over a fresh connection.
 async fn get(address: SocketAddr, path: &str) -> Response {
+    request(address, "GET", path, None).await
+}
+
+/// A plain HTTP/1.1 request over a fresh connection, with an optional JSON
+/// body; reads the headers, then exactly `Content-Length` bytes (servers
+/// need not close the connection).
+async fn request(
+    address: SocketAddr,
+    method: &str,
+    path: &str,
+    json: Option<serde_json::Value>,
+) -> Response {
     let stream = TcpStream::connect(address).await.unwrap();
     let mut stream = BufReader::new(stream);
-    let request = format!("GET {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n");
+    let body = json.map(|j| j.to_string()).unwrap_or_default();
+    let request = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\
+         Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    );
     stream
         .get_mut()
         .write_all(request.as_bytes())
@@ -354,6 +397,50 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     );
     let page = farm.get("/").await;
     assert!(page.text().contains("EventSource(\"/api/events\")"));
+    let timeline = farm.get("/frames/2.svg").await;
+    assert_eq!(timeline.headers["content-type"], "image/svg+xml");
+    assert!(timeline.text().starts_with("<svg") && timeline.text().contains(">master<"));
+
+    // The interactive view over HTTP: a refused move, then one that renders
+    // to `full`; its image is served as the core holds it.
+    assert_eq!(farm.get("/view/image.png").await.status, 404, "no view yet");
+    let refused = farm
+        .post(
+            "/api/view",
+            serde_json::json!({ "job": 99, "offset": [0, 0, 0] }),
+        )
+        .await;
+    assert_eq!(refused.status, 400);
+    assert!(refused.text().contains("job 99"), "{}", refused.text());
+    let moved = farm
+        .post(
+            "/api/view",
+            serde_json::json!({ "job": 1, "offset": [0.01, 0, 0] }),
+        )
+        .await;
+    assert_eq!(moved.status, 200, "{}", moved.text());
+    let view_job: serde_json::Value = serde_json::from_slice(&moved.body).unwrap();
+    farm.wait_for_core(|c| {
+        c.views()
+            .latest()
+            .is_some_and(|l| l.quality == Quality::Full)
+    })
+    .await;
+    let core_view = (farm.master)
+        .inspect(|c| c.views().latest().unwrap().image.clone())
+        .await
+        .unwrap();
+    assert_eq!(
+        view_job["job"],
+        farm.master
+            .inspect(|c| c.views().current().unwrap().job)
+            .await
+            .unwrap()
+    );
+    let png = farm.get("/view/image.png").await;
+    let decoded = image::load_from_memory(&png.body).unwrap().to_rgb8();
+    assert_eq!(decoded.as_raw(), &core_view.to_srgb8());
+    assert_eq!(farm.get("/view/objects.png").await.status, 200);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -733,6 +820,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
             r##"window.viewDone.then(() => ({
                 hash: document.getElementById("view").dataset.hash,
                 glare: document.querySelectorAll("#glare tr").length,
+                unshown: [...document.querySelectorAll("#glare td")].filter((td) => td.textContent.includes("–")).length,
                 objects: document.getElementById("view-objects").src,
                 current: window.lastView.view.current,
                 outcomes: window.lastView.view.outcomes,
@@ -754,6 +842,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         moved.camera.eye
     );
     assert!(view["glare"].as_u64().unwrap() >= 7, "{view}");
+    assert_eq!(view["unshown"], 0, "every glare figure is shown: {view}");
     assert!(
         view["objects"]
             .as_str()

@@ -40,7 +40,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         method: MethodKind::VertexTracing,
         aux: false,
     };
-    let job = wire_job("source", &data, &[setup.clone()], &reflectors, options);
+    let job = wire_job("source", &data, &[setup], &reflectors, options);
     let mut pair = Pair::new(SchedulerConfig::default());
     pair.add_worker("w1", 1.0);
     pair.add_worker("w2", 1.0);
