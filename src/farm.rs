@@ -10,7 +10,7 @@ use vtfarm_master::{
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, FrameStats, Message, Role, SceneData};
+use vtfarm_proto::{ClusterConfig, FrameStats, Role, SceneData};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
 use vtfarm_scheduler::SchedulerConfig;
@@ -286,21 +286,10 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
     let options = client_options(&args.cluster, &args.master)?;
     let reply = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
-        conn.link
-            .tx
-            .send(Message::StatusRequest)
-            .ok()
-            .context("connection closed")?;
-        let reply = loop {
-            match conn.link.rx.recv().await {
-                Some(Message::StatusReply(r)) => break r,
-                Some(_) => continue,
-                None => bail!("the master closed the connection"),
-            }
-        };
+        let reply = (conn.link.status().await).context("the master closed the connection")?;
         conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
-        Ok(reply)
+        anyhow::Ok(reply)
     })?;
     println!(
         "{:<24} {:<22} {:>7} {:>8} {:>12} {:>9} {:>10} {:>8}",

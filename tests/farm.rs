@@ -106,7 +106,7 @@ struct Cluster {
     dir: tempfile::TempDir,
     options: ClientOptions,
     file: PathBuf,
-    _master: MasterHandle,
+    master: MasterHandle,
     _server: JoinHandle<()>,
 }
 
@@ -131,7 +131,7 @@ impl Cluster {
             dir,
             options,
             file,
-            _master: master,
+            master,
             _server: server,
         }
     }
@@ -200,30 +200,26 @@ impl Cluster {
         (tokio::time::timeout(BOUND, run).await).expect("the job finishes within the bound")
     }
 
+    /// What `vtfarm status` gets: a `StatusRequest` over QUIC.
     async fn status(&self) -> StatusReply {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
-        conn.link.tx.send(Message::StatusRequest).unwrap();
-        let reply = async {
-            loop {
-                match conn.link.rx.recv().await {
-                    Some(Message::StatusReply(reply)) => return reply,
-                    Some(_) => {}
-                    None => panic!("the master closed the status connection"),
-                }
-            }
-        };
-        (tokio::time::timeout(BOUND, reply).await).expect("a status reply within the bound")
+        let reply = tokio::time::timeout(BOUND, conn.link.status()).await;
+        (reply.expect("a status reply within the bound")).expect("the master closed the connection")
+    }
+
+    /// Waits (bounded) until the master's status satisfies `done`, woken by
+    /// its change notifications; `what` names the state for the failure.
+    async fn wait_until(&self, what: &str, done: impl Fn(&StatusReply) -> bool) {
+        let reached = tokio::time::timeout(BOUND, self.master.wait_for_status(done)).await;
+        let reached = reached.unwrap_or_else(|_| panic!("{what} within the bound"));
+        reached.expect("the master runs");
     }
 
     /// Waits until `count` workers are connected and asking for work.
     async fn wait_for_workers(&self, count: usize) {
-        for _ in 0..400 {
-            if self.status().await.workers.len() >= count {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(25)).await;
-        }
-        panic!("{count} workers did not connect");
+        let message = format!("{count} workers connected");
+        self.wait_until(&message, |s| s.workers.len() >= count)
+            .await;
     }
 }
 
@@ -566,29 +562,19 @@ impl ChildGuard {
 const BOUND: Duration = Duration::from_secs(120);
 
 impl Cluster {
-    /// Waits (bounded) until the named worker holds a package, per `vtfarm status`.
+    /// Waits (bounded) until the named worker holds a package.
     async fn wait_until_running(&self, name: &str) {
-        let deadline = tokio::time::Instant::now() + BOUND;
-        while tokio::time::Instant::now() < deadline {
-            let status = self.status().await;
-            if (status.workers.iter()).any(|w| w.name == name && w.packages_running > 0) {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
-        panic!("{name} never held a package");
+        let message = format!("{name} holding a package");
+        let running =
+            |s: &StatusReply| (s.workers.iter()).any(|w| w.name == name && w.packages_running > 0);
+        self.wait_until(&message, running).await;
     }
 
     /// Waits (bounded) until the master lists `count` workers.
     async fn wait_for_worker_count(&self, count: usize) {
-        let deadline = tokio::time::Instant::now() + BOUND;
-        while tokio::time::Instant::now() < deadline {
-            if self.status().await.workers.len() == count {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(10)).await;
-        }
-        panic!("the master does not list {count} workers");
+        let message = format!("the master listing {count} workers");
+        self.wait_until(&message, |s| s.workers.len() == count)
+            .await;
     }
 }
 

@@ -13,7 +13,7 @@ use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::{debug, warn};
-use vtfarm_proto::{Link, Message};
+use vtfarm_proto::{Link, Message, StatusReply};
 use vtfarm_scheduler::SchedulerConfig;
 
 use crate::core::{ConnId, MasterCore, Output, Peer};
@@ -117,6 +117,24 @@ impl MasterHandle {
     /// a deadline): watchers re-read the state when it moves.
     pub fn changes(&self) -> watch::Receiver<u64> {
         self.changes.clone()
+    }
+
+    /// Waits until the master's status satisfies `done`, re-reading it after
+    /// every input the core handles (woken by [`MasterHandle::changes`], no
+    /// polling); `None` once the master has stopped. Callers bound the wait.
+    pub async fn wait_for_status(
+        &self,
+        done: impl Fn(&StatusReply) -> bool,
+    ) -> Option<StatusReply> {
+        let mut changes = self.changes();
+        loop {
+            changes.mark_unchanged();
+            let status = self.inspect(|core| core.status()).await?;
+            if done(&status) {
+                return Some(status);
+            }
+            changes.changed().await.ok()?;
+        }
     }
 
     /// Ends the master task: its connections close and the workers' sessions end.

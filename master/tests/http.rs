@@ -28,7 +28,7 @@ use vtfarm_master::{
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, HandshakePolicy, Message, Role, SceneData, StatusReply};
+use vtfarm_proto::{ClusterConfig, HandshakePolicy, Role, SceneData, StatusReply};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
@@ -95,38 +95,15 @@ impl Farm {
     /// Waits (bounded) for the master's state to satisfy `done`, woken by
     /// its change notifications.
     async fn wait_until(&self, done: impl Fn(&StatusReply) -> bool) {
-        let mut changes = self.master.changes();
-        let check = async {
-            loop {
-                changes.mark_unchanged();
-                let status = self.master.inspect(|c| c.status()).await.unwrap();
-                if done(&status) {
-                    return;
-                }
-                changes.changed().await.unwrap();
-            }
-        };
-        tokio::time::timeout(WAIT, check)
-            .await
-            .expect("the farm reached the awaited state");
+        let reached = tokio::time::timeout(WAIT, self.master.wait_for_status(done)).await;
+        (reached.expect("the farm reached the awaited state")).expect("the master runs");
     }
 
     /// What `vtfarm status` gets: a `StatusRequest` over QUIC.
     async fn quic_status(&self) -> StatusReply {
         let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
-        conn.link.tx.send(Message::StatusRequest).unwrap();
-        let reply = async {
-            loop {
-                match conn.link.rx.recv().await {
-                    Some(Message::StatusReply(reply)) => return reply,
-                    Some(_) => continue,
-                    None => panic!("the master closed the connection"),
-                }
-            }
-        };
-        tokio::time::timeout(WAIT, reply)
-            .await
-            .expect("status reply")
+        let reply = tokio::time::timeout(WAIT, conn.link.status()).await;
+        (reply.expect("status reply")).expect("the master closed the connection")
     }
 
     async fn submit(&self, frames: usize) -> Vec<FinishedFrame> {

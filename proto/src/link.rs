@@ -35,6 +35,18 @@ impl Link {
         (end(a_tx, a_rx), end(b_tx, b_rx))
     }
 
+    /// Asks the master for its status (a submitter's link): sends
+    /// `StatusRequest` and waits for the `StatusReply`, skipping other
+    /// messages; `None` once the link is down.
+    pub async fn status(&mut self) -> Option<crate::StatusReply> {
+        self.tx.send(Message::StatusRequest).ok()?;
+        loop {
+            if let Message::StatusReply(reply) = self.rx.recv().await? {
+                return Some(reply);
+            }
+        }
+    }
+
     /// A link over a byte stream pair (a QUIC bidirectional stream): a task
     /// reads framed messages of at most `limit` bytes into `rx`, another
     /// writes `tx` out. The link goes down on the first error either way.

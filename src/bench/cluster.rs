@@ -21,8 +21,7 @@ use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
-    CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Message, Role,
-    SceneData,
+    CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Role, SceneData,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_scheduler::SchedulerConfig;
@@ -237,17 +236,7 @@ async fn run_farm(
 async fn wait_for_workers(link: &mut Link, workers: usize) -> Result<()> {
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
-        link.tx
-            .send(Message::StatusRequest)
-            .ok()
-            .context("the master closed the connection")?;
-        let reply = loop {
-            match link.rx.recv().await {
-                Some(Message::StatusReply(reply)) => break reply,
-                Some(_) => continue,
-                None => bail!("the master closed the connection"),
-            }
-        };
+        let reply = (link.status().await).context("the master closed the connection")?;
         if reply.workers.len() >= workers {
             return Ok(());
         }
