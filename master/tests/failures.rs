@@ -87,6 +87,13 @@ async fn a_package_failing_on_every_worker_fails_the_job_with_its_error_once() {
         .map(|k| worker(&master, &format!("starved-{k}"), starved))
         .collect();
     let (job, data, setup, reflectors, scene) = small_job();
+    // All three connected first: with fewer, every connected worker is soon
+    // blocklisted and the job fails for want of an eligible worker instead.
+    let connected = master.wait_for_status(|s| s.workers.len() == 3);
+    (timeout(BOUND, connected)
+        .await
+        .expect("the workers connect"))
+    .expect("the master runs");
 
     let mut link = submitter(&master);
     let outcome = timeout(BOUND, run_job(&mut link, job.clone(), &data, |_| {}))
