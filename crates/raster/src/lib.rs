@@ -19,6 +19,7 @@
 //! 3. `shade`: deferred Phong shading, once per visible pixel.
 
 mod bands;
+mod lanes;
 mod setup;
 mod shade;
 mod triangle;
