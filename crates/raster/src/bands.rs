@@ -1,9 +1,14 @@
 //! Visibility. Triangles are binned by the horizontal bands of rows their
 //! bounding boxes overlap; each band is one rayon task that scan-converts its
-//! triangles into its own slice of the z-buffer. A band's result depends only
-//! on its rows and its triangle list (in triangle order), and the z-test is
-//! a total order on (depth, triangle id), so the output is the same for any
-//! thread count and any scheduling.
+//! triangles into its own slice of the z-buffer. The z-test is a total order
+//! on (depth, triangle id), so a pixel's result does not depend on the order
+//! in which triangles reach it: the output is the same for any thread count
+//! and any scheduling.
+//!
+//! Most triangles of a detailed scene are hidden. Bands take their triangles
+//! nearest first, and a row of a triangle whose nearest depth lies beyond
+//! every depth already stored along it is skipped without interpolating its
+//! depths: it could not win a single pixel there.
 
 use rayon::prelude::*;
 
@@ -27,7 +32,7 @@ pub(crate) fn resolve_visibility(
     if within.is_empty() {
         return;
     }
-    let bins = Bins::new(triangles, ids.height);
+    let bins = Bins::new(&nearest_first(triangles), triangles, ids.height);
     let band_len = width * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
@@ -44,10 +49,21 @@ pub(crate) fn resolve_visibility(
             let band_row = band as u32 * BAND_ROWS;
             for &t in bins.band(band) {
                 let t = &triangles[t as usize];
+                let nearest = t.nearest_depth();
+                // A branch-free maximum, which vectorizes (depths are never NaN).
+                let hidden =
+                    |row: &[f32]| nearest > row.iter().fold(0.0, |m, &d| if d > m { d } else { m });
                 for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
+                    let row = (y - band_row) as usize * width;
+                    let (c0, c1) = (t.columns.0.max(within.x0), t.columns.1.min(within.x1 - 1));
+                    if c0 > c1 || hidden(&depth[row + c0 as usize..=row + c1 as usize]) {
+                        continue;
+                    }
                     let Some((x0, x1)) = t.span(y) else { continue };
                     let (x0, x1) = (x0.max(within.x0), x1.min(within.x1 - 1));
-                    let row = (y - band_row) as usize * width;
+                    if x0 > x1 || hidden(&depth[row + x0 as usize..=row + x1 as usize]) {
+                        continue;
+                    }
                     for x in x0..=x1 {
                         let i = row + x as usize;
                         let d = t.depth_at(x, y);
@@ -62,7 +78,19 @@ pub(crate) fn resolve_visibility(
         });
 }
 
-/// Triangle indices per band, in triangle order (a counting sort).
+/// The indices of `triangles`, nearest first (ties in index order).
+fn nearest_first(triangles: &[RasterTriangle]) -> Vec<u32> {
+    // Positive depths order like their bits: sort (depth bits, index) keys.
+    let mut keys: Vec<u64> = triangles
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| u64::from(t.nearest_depth().to_bits()) << 32 | i as u64)
+        .collect();
+    keys.par_sort_unstable();
+    keys.into_iter().map(|k| k as u32).collect()
+}
+
+/// Triangle indices per band, in a given order (a counting sort).
 struct Bins {
     /// Band `b` owns `entries[offsets[b]..offsets[b + 1]]`.
     offsets: Vec<usize>,
@@ -70,7 +98,8 @@ struct Bins {
 }
 
 impl Bins {
-    fn new(triangles: &[RasterTriangle], height: u32) -> Self {
+    /// Bins `triangles`, taking them in `order`.
+    fn new(order: &[u32], triangles: &[RasterTriangle], height: u32) -> Self {
         let bands = height.div_ceil(BAND_ROWS) as usize;
         let overlapped =
             |t: &RasterTriangle| (t.rows.0 / BAND_ROWS) as usize..=(t.rows.1 / BAND_ROWS) as usize;
@@ -83,9 +112,9 @@ impl Bins {
         }
         let mut next = offsets.clone();
         let mut entries = vec![0; offsets[bands]];
-        for (i, t) in triangles.iter().enumerate() {
-            for b in overlapped(t) {
-                entries[next[b]] = i as u32;
+        for &i in order {
+            for b in overlapped(&triangles[i as usize]) {
+                entries[next[b]] = i;
                 next[b] += 1;
             }
         }

@@ -4,13 +4,12 @@
 //! bit-identical to the scalar code's while LLVM turns each operation into
 //! one vector instruction across the lanes.
 
-use std::array::from_fn;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use glam::Vec3;
 
 /// Pixels shaded together.
-pub(crate) const LANES: usize = 4;
+pub(crate) const LANES: usize = 8;
 
 /// One `f32` per lane.
 #[derive(Clone, Copy, Debug)]
@@ -27,23 +26,41 @@ impl F {
 
     #[inline(always)]
     fn zip(self, other: F, f: impl Fn(f32, f32) -> f32) -> F {
-        F(from_fn(|i| f(self.0[i], other.0[i])))
+        let mut out = self.0;
+        for (o, &b) in out.iter_mut().zip(&other.0) {
+            *o = f(*o, b);
+        }
+        F(out)
     }
 
     #[inline(always)]
     pub(crate) fn map(self, f: impl Fn(f32) -> f32) -> F {
-        F(self.0.map(f))
+        let mut out = self.0;
+        for o in &mut out {
+            *o = f(*o);
+        }
+        F(out)
     }
 
     #[inline(always)]
     pub(crate) fn test(self, f: impl Fn(f32) -> bool) -> Mask {
-        self.0.map(f)
+        let mut out = [false; LANES];
+        for (o, &v) in out.iter_mut().zip(&self.0) {
+            *o = f(v);
+        }
+        out
     }
 
     /// `a` where `mask` holds, else `b`.
     #[inline(always)]
     pub(crate) fn select(mask: Mask, a: F, b: F) -> F {
-        F(from_fn(|i| if mask[i] { a.0[i] } else { b.0[i] }))
+        let mut out = b.0;
+        for i in 0..LANES {
+            if mask[i] {
+                out[i] = a.0[i];
+            }
+        }
+        F(out)
     }
 }
 
@@ -100,12 +117,12 @@ impl V3 {
     /// Lane `i`'s vector is `f(i)`.
     #[inline(always)]
     pub(crate) fn from_fn(f: impl Fn(usize) -> Vec3) -> V3 {
-        let v: [Vec3; LANES] = from_fn(f);
-        V3 {
-            x: F(v.map(|v| v.x)),
-            y: F(v.map(|v| v.y)),
-            z: F(v.map(|v| v.z)),
+        let mut v = V3::splat(Vec3::ZERO);
+        for i in 0..LANES {
+            let lane = f(i);
+            (v.x.0[i], v.y.0[i], v.z.0[i]) = (lane.x, lane.y, lane.z);
         }
+        v
     }
 
     #[inline(always)]

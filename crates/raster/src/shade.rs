@@ -28,29 +28,8 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
         .zip(ids.triangle.par_chunks(width * ROWS_PER_TASK))
         .enumerate()
         .for_each(|(task, (colors, triangles))| {
-            // A row is shaded run by run of pixels that see the same
-            // triangle, whose set-up is reused while it lasts.
-            let mut surface: Option<Surface> = None;
-            let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
-            for (row, (colors, triangles)) in rows.enumerate() {
-                let row_ray = frame.row_ray((task * ROWS_PER_TASK + row) as u32);
-                let mut x = 0;
-                while x < width {
-                    let t = triangles[x];
-                    let run = triangles[x..].iter().take_while(|&&u| u == t).count();
-                    if t != NONE {
-                        let surface = match &mut surface {
-                            Some(s) if s.id == t => s,
-                            slot => slot.insert(Surface::new(scene, &frame, t)),
-                        };
-                        for start in (x..x + run).step_by(LANES) {
-                            let end = (start + LANES).min(x + run);
-                            frame.shade(surface, row_ray, start, &mut colors[start..end]);
-                        }
-                    }
-                    x += run;
-                }
-            }
+            let first_row = (task * ROWS_PER_TASK) as u32;
+            frame.shade_rows(scene, first_row, colors, triangles, width);
         });
     image
 }
@@ -114,6 +93,81 @@ impl<'a> FrameShading<'a> {
         }
     }
 
+    /// Shades the rows from `first_row` on whose pixels are `colors` and
+    /// whose ID buffer rows are `triangles`, each `width` long, with the
+    /// widest vector instructions this CPU has (the same bits either way:
+    /// IEEE arithmetic is exact per lane and nothing is fused).
+    fn shade_rows(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.shade_rows_avx2(scene, first_row, colors, triangles, width) };
+            return;
+        }
+        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+    }
+
+    /// [`Self::shade_rows_portable`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn shade_rows_avx2(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+    }
+
+    /// See [`Self::shade_rows`]. A row is shaded run by run of pixels that
+    /// see the same triangle, whose set-up is reused while it lasts.
+    #[inline(always)]
+    fn shade_rows_portable(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        let mut surface: Option<Surface> = None;
+        let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
+        for (row, (colors, triangles)) in rows.enumerate() {
+            let row_ray = self.row_ray(first_row + row as u32);
+            let mut x = 0;
+            while x < width {
+                let t = triangles[x];
+                let mut run = 1;
+                while x + run < width && triangles[x + run] == t {
+                    run += 1;
+                }
+                if t != NONE {
+                    let surface = match &mut surface {
+                        Some(s) if s.id == t => s,
+                        slot => slot.insert(Surface::new(scene, self, t)),
+                    };
+                    for start in (x..x + run).step_by(LANES) {
+                        let end = (start + LANES).min(x + run);
+                        self.shade(surface, row_ray, start, &mut colors[start..end]);
+                    }
+                }
+                x += run;
+            }
+        }
+    }
+
     /// The pixel ray's row term for row `y`.
     fn row_ray(&self, y: u32) -> Vec3 {
         self.up * ((self.half_height - (y as f32 + 0.5)) * self.pixel)
@@ -122,24 +176,30 @@ impl<'a> FrameShading<'a> {
     /// Shades pixels `x0..x0 + out.len()` (at most [`LANES`]) of a row with
     /// ray term `row_ray`, all on `surface`: Phong at the point the pixel ray
     /// meets the triangle, exactly as `vtfarm_scene::shading::phong` lights it.
+    #[inline(always)]
     fn shade(&self, surface: &Surface, row_ray: Vec3, x0: usize, out: &mut [Vec3]) {
         let last = out.len() - 1;
         let dir = V3::from_fn(|i| self.columns[x0 + i.min(last)] + row_ray).normalize();
         let w = perspective_barycentrics(surface.opposite, dir);
-        let [n0, n1, n2] = surface.normals.map(V3::splat);
+        let [n0, n1, n2] = surface.normals;
+        let [n0, n1, n2] = [V3::splat(n0), V3::splat(n1), V3::splat(n2)];
         let normal = (n0 * w.x + n1 * w.y + n2 * w.z).normalize_or(V3::splat(surface.geometric));
-        let [c0, c1, c2] = surface.corners.map(V3::splat);
+        let [c0, c1, c2] = surface.corners;
+        let [c0, c1, c2] = [V3::splat(c0), V3::splat(c1), V3::splat(c2)];
         let offset = c0 * w.x + c1 * w.y + c2 * w.z;
         let to_eye = (-offset).normalize_or(-dir);
-        let color = self.phong(surface, V3::splat(self.eye) + offset, normal, to_eye);
+        let position = V3::splat(self.eye) + offset;
+        let color = self.phong(surface, position, normal, to_eye, out.len());
         for (i, out) in out.iter_mut().enumerate() {
             *out = color.lane(i);
         }
     }
 
     /// `vtfarm_scene::shading::phong` (no shadows) lane by lane, with the
-    /// per-material and per-light terms computed once.
-    fn phong(&self, surface: &Surface, position: V3, normal: V3, to_eye: V3) -> V3 {
+    /// per-material and per-light terms computed once; lanes from `used` on
+    /// are padding.
+    #[inline(always)]
+    fn phong(&self, surface: &Surface, position: V3, normal: V3, to_eye: V3, used: usize) -> V3 {
         let material = surface.material;
         let facing_away = normal.dot(to_eye).test(|d| d < 0.0);
         let n = V3::select(facing_away, -normal, normal);
@@ -161,11 +221,30 @@ impl<'a> FrameShading<'a> {
                 let reflected = n * (F::splat(2.0) * n_dot_l) - to_light;
                 let r_dot_v = reflected.dot(to_eye).map(|d| d.max(0.0));
                 let exponent = material.shininess.max(1.0);
-                term = term + V3::splat(material.specular) * r_dot_v.map(|r| r.powf(exponent));
+                // The one call that does not vectorize: only where it counts.
+                let mut highlight = F::splat(0.0);
+                for i in (0..used).filter(|&i| lit[i]) {
+                    highlight.0[i] = power(r_dot_v.0[i], exponent);
+                }
+                term = term + V3::splat(material.specular) * highlight;
             }
             color = V3::select(lit, color + term * V3::splat(light.radiance), color);
         }
         color
+    }
+}
+
+/// `base.powf(exponent)` for an `exponent` of at least 1, with the common
+/// bases 0 and 1 answered without the call, as C's `pow` answers them.
+#[inline(always)]
+fn power(base: f32, exponent: f32) -> f32 {
+    if base == 0.0 {
+        // pow(±0, y > 0) is ±0 for odd integer y, +0 otherwise.
+        if exponent % 2.0 == 1.0 { base } else { 0.0 }
+    } else if base == 1.0 {
+        1.0
+    } else {
+        base.powf(exponent)
     }
 }
 
@@ -212,6 +291,7 @@ fn opposite_products([a, b, c]: [Vec3; 3]) -> [Vec3; 3] {
 /// screen-space barycentrics weighted by 1/z (perspective-correct
 /// interpolation) but needs no projected corners, so it also holds for
 /// triangles clipped at the near plane.
+#[inline(always)]
 fn perspective_barycentrics([bc, ca, ab]: [Vec3; 3], dir: V3) -> V3 {
     let raw = V3 {
         x: dir.dot(V3::splat(bc)),
@@ -220,7 +300,8 @@ fn perspective_barycentrics([bc, ca, ab]: [Vec3; 3], dir: V3) -> V3 {
     };
     let w = raw / (raw.x + raw.y + raw.z);
     // Where the ray grazes the plane, any point of the triangle will do.
-    let finite = std::array::from_fn(|i| w.lane(i).is_finite());
+    let finite = w.x.test(f32::is_finite);
+    let finite = std::array::from_fn(|i| finite[i] && w.y.0[i].is_finite() && w.z.0[i].is_finite());
     let w = V3::select(finite, w, V3::splat(Vec3::splat(1.0 / 3.0)));
     // Pixel centres lie inside the triangle up to snapping; clamp the rest.
     let w = V3 {

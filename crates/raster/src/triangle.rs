@@ -35,7 +35,7 @@ pub(crate) struct RasterTriangle {
     /// clipped to the image.
     pub(crate) rows: (u32, u32),
     /// The same for columns.
-    columns: (u32, u32),
+    pub(crate) columns: (u32, u32),
 }
 
 /// Snaps a pixel coordinate to the sub-pixel grid. Callers keep coordinates
@@ -127,6 +127,13 @@ impl RasterTriangle {
             }
         }
         (first <= last).then_some((first as u32, last as u32))
+    }
+
+    /// A lower bound of [`Self::depth_at`] over the whole triangle: its
+    /// nearest corner's depth (the interpolated 1/z is clamped to the
+    /// corners' range, and division and rounding to `f32` are monotonic).
+    pub(crate) fn nearest_depth(&self) -> f32 {
+        (1.0 / self.inv_depth_range[1]) as f32
     }
 
     /// The view depth at the centre of pixel (`x`, `y`): 1/z is interpolated
