@@ -197,15 +197,23 @@ fn rasterize_ids(
         camera.width,
         camera.height
     );
-    let triangles = setup::setup(scene, camera, near, keep);
     let mut ids = IdBuffer::new(camera.width, camera.height);
+    let within = within.clamped(camera.width, camera.height);
+    if within.is_empty() {
+        return ids;
+    }
+    // Only triangles that reach `within` are set up: a small rectangle costs
+    // little more than projecting the scene's vertices.
+    let triangles = setup::setup(scene, camera, near, within, keep);
     bands::resolve_visibility(&triangles, &mut ids, within);
     let IdBuffer {
         object, triangle, ..
     } = &mut ids;
-    object
+    let rows =
+        within.y0 as usize * camera.width as usize..within.y1 as usize * camera.width as usize;
+    object[rows.clone()]
         .par_iter_mut()
-        .zip(triangle.par_iter())
+        .zip(triangle[rows].par_iter())
         .filter(|(_, t)| **t != NONE)
         .for_each(|(o, &t)| {
             *o = scene.triangles[t as usize].object;
