@@ -5,6 +5,7 @@
 //! targets live here, not in tests.
 
 mod cluster;
+mod raster;
 mod rays;
 mod simulate;
 
@@ -30,6 +31,9 @@ pub(crate) enum BenchCommand {
     /// Closest-hit rays per second on fixed camera, random and reflection
     /// rays (compare with another tracer on the same rays; see README).
     Rays(rays::RaysArgs),
+    /// The rasterizer's per-frame costs: the master's base frame and a
+    /// worker's ID buffer over the reflectors' bounds, on 1 and more threads.
+    Raster(raster::RasterArgs),
 }
 
 #[derive(clap::Args)]
@@ -95,6 +99,7 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Simulate(args) => simulate::run(args),
         BenchCommand::Cluster(args) => cluster::run(args),
         BenchCommand::Rays(args) => rays::run(args),
+        BenchCommand::Raster(args) => raster::run(args),
     }
 }
 

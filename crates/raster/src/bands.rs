@@ -50,9 +50,7 @@ pub(crate) fn resolve_visibility(
             for &t in bins.band(band) {
                 let t = &triangles[t as usize];
                 let nearest = t.nearest_depth();
-                // A branch-free maximum, which vectorizes (depths are never NaN).
-                let hidden =
-                    |row: &[f32]| nearest > row.iter().fold(0.0, |m, &d| if d > m { d } else { m });
+                let hidden = |row: &[f32]| nearest > farthest(row);
                 for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
                     let row = (y - band_row) as usize * width;
                     let (c0, c1) = (t.columns.0.max(within.x0), t.columns.1.min(within.x1 - 1));
@@ -64,18 +62,34 @@ pub(crate) fn resolve_visibility(
                     if x0 > x1 || hidden(&depth[row + x0 as usize..=row + x1 as usize]) {
                         continue;
                     }
-                    for x in x0..=x1 {
-                        let i = row + x as usize;
+                    let span = row + x0 as usize..=row + x1 as usize;
+                    let slots = depth[span.clone()].iter_mut().zip(&mut triangle[span]);
+                    for (x, (stored, seen)) in (x0..=x1).zip(slots) {
                         let d = t.depth_at(x, y);
                         // Nearer wins; an exact tie goes to the lower triangle id.
-                        if d < depth[i] || (d == depth[i] && t.id < triangle[i]) {
-                            depth[i] = d;
-                            triangle[i] = t.id;
-                        }
+                        // Unconditional stores let the loop vectorize.
+                        let wins = d < *stored || (d == *stored && t.id < *seen);
+                        *stored = if wins { d } else { *stored };
+                        *seen = if wins { t.id } else { *seen };
                     }
                 }
             }
         });
+}
+
+/// The largest of `depths` (never NaN), in eight independent lanes so that
+/// it vectorizes.
+fn farthest(depths: &[f32]) -> f32 {
+    let max = |a: f32, b: f32| if b > a { b } else { a };
+    let mut lanes = [0.0f32; 8];
+    let chunks = depths.chunks_exact(lanes.len());
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        for (lane, &d) in lanes.iter_mut().zip(chunk) {
+            *lane = max(*lane, d);
+        }
+    }
+    rest.iter().chain(&lanes).fold(0.0, |m, &d| max(m, d))
 }
 
 /// The indices of `triangles`, nearest first (ties in index order).
