@@ -32,7 +32,8 @@ pub(crate) fn resolve_visibility(
     if within.is_empty() {
         return;
     }
-    let bins = Bins::new(&nearest_first(triangles), triangles, ids.height);
+    let triangles = &nearest_first(triangles);
+    let bins = Bins::new(triangles, ids.height);
     let band_len = width * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
@@ -92,8 +93,9 @@ fn farthest(depths: &[f32]) -> f32 {
     rest.iter().chain(&lanes).fold(0.0, |m, &d| max(m, d))
 }
 
-/// The indices of `triangles`, nearest first (ties in index order).
-fn nearest_first(triangles: &[RasterTriangle]) -> Vec<u32> {
+/// `triangles` nearest first (ties in their order), copied so that bands
+/// read them in memory order.
+fn nearest_first(triangles: &[RasterTriangle]) -> Vec<RasterTriangle> {
     // Positive depths order like their bits: sort (depth bits, index) keys.
     let mut keys: Vec<u64> = triangles
         .par_iter()
@@ -101,10 +103,12 @@ fn nearest_first(triangles: &[RasterTriangle]) -> Vec<u32> {
         .map(|(i, t)| u64::from(t.nearest_depth().to_bits()) << 32 | i as u64)
         .collect();
     keys.par_sort_unstable();
-    keys.into_iter().map(|k| k as u32).collect()
+    keys.par_iter()
+        .map(|&k| triangles[k as u32 as usize])
+        .collect()
 }
 
-/// Triangle indices per band, in a given order (a counting sort).
+/// Triangle indices per band, in triangle order (a counting sort).
 struct Bins {
     /// Band `b` owns `entries[offsets[b]..offsets[b + 1]]`.
     offsets: Vec<usize>,
@@ -112,8 +116,7 @@ struct Bins {
 }
 
 impl Bins {
-    /// Bins `triangles`, taking them in `order`.
-    fn new(order: &[u32], triangles: &[RasterTriangle], height: u32) -> Self {
+    fn new(triangles: &[RasterTriangle], height: u32) -> Self {
         let bands = height.div_ceil(BAND_ROWS) as usize;
         let overlapped =
             |t: &RasterTriangle| (t.rows.0 / BAND_ROWS) as usize..=(t.rows.1 / BAND_ROWS) as usize;
@@ -126,9 +129,9 @@ impl Bins {
         }
         let mut next = offsets.clone();
         let mut entries = vec![0; offsets[bands]];
-        for &i in order {
-            for b in overlapped(&triangles[i as usize]) {
-                entries[next[b]] = i;
+        for (i, t) in triangles.iter().enumerate() {
+            for b in overlapped(t) {
+                entries[next[b]] = i as u32;
                 next[b] += 1;
             }
         }
