@@ -148,6 +148,19 @@ impl V3 {
         self * self.length_recip()
     }
 
+    /// As `Vec3::normalize_or`, lane by lane, with the fallback made only
+    /// when a lane needs it.
+    #[inline(always)]
+    pub(crate) fn normalize_or_else(self, fallback: impl FnOnce() -> V3) -> V3 {
+        let rcp = self.length_recip();
+        let ok = rcp.test(|r| r.is_finite() && r > 0.0);
+        if ok.iter().all(|&ok| ok) {
+            self * rcp
+        } else {
+            V3::select(ok, self * rcp, fallback())
+        }
+    }
+
     /// As `Vec3::normalize_or`, lane by lane.
     #[inline(always)]
     pub(crate) fn normalize_or(self, fallback: V3) -> V3 {

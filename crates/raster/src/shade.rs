@@ -183,7 +183,8 @@ impl<'a> FrameShading<'a> {
         let w = perspective_barycentrics(surface.opposite, dir);
         let [n0, n1, n2] = surface.normals;
         let [n0, n1, n2] = [V3::splat(n0), V3::splat(n1), V3::splat(n2)];
-        let normal = (n0 * w.x + n1 * w.y + n2 * w.z).normalize_or(V3::splat(surface.geometric));
+        let normal = (n0 * w.x + n1 * w.y + n2 * w.z)
+            .normalize_or_else(|| V3::splat(surface.scene.geometric_normal(surface.id)));
         let [c0, c1, c2] = surface.corners;
         let [c0, c1, c2] = [V3::splat(c0), V3::splat(c1), V3::splat(c2)];
         let offset = c0 * w.x + c1 * w.y + c2 * w.z;
@@ -250,14 +251,13 @@ fn power(base: f32, exponent: f32) -> f32 {
 
 /// What shading a triangle's pixels needs, set up once per triangle.
 struct Surface<'a> {
+    scene: &'a Scene,
     id: TriangleId,
     /// Corners relative to the eye.
     corners: [Vec3; 3],
     /// [`opposite_products`] of the corners.
     opposite: [Vec3; 3],
     normals: [Vec3; 3],
-    /// For pixels where the interpolated normal vanishes.
-    geometric: Vec3,
     material: &'a Material,
     /// The material's emission plus its ambient term.
     unlit: Vec3,
@@ -268,11 +268,11 @@ impl<'a> Surface<'a> {
         let corners = scene.triangle_positions(id).map(|p| p - frame.eye);
         let material = scene.material_of(id);
         Surface {
+            scene,
             id,
             corners,
             opposite: opposite_products(corners),
             normals: scene.triangle_normals(id),
-            geometric: scene.geometric_normal(id),
             material,
             unlit: material.emission + material.ambient * frame.lighting.ambient,
         }
