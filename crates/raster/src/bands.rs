@@ -65,7 +65,7 @@ pub(crate) fn resolve_visibility(
                     }
                     let span = row + x0 as usize..=row + x1 as usize;
                     let slots = depth[span.clone()].iter_mut().zip(&mut triangle[span]);
-                    for (x, (stored, seen)) in (x0..=x1).zip(slots) {
+                    for (x, (stored, seen)) in (x0..x1 + 1).zip(slots) {
                         let d = t.depth_at(x, y);
                         // Nearer wins; an exact tie goes to the lower triangle id.
                         // Unconditional stores let the loop vectorize.
