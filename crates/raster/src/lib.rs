@@ -13,10 +13,12 @@
 //!    a fixed-point sub-pixel grid (`triangle`). The near plane lies at view
 //!    depth `vtfarm_scene::NEAR` unless the caller of [`id_buffer_clipped`]
 //!    places it elsewhere (a reflection map seen from behind its mirror).
+//!    Only triangles that reach the rectangle being rasterized are kept.
 //! 2. `bands`: bin triangles into horizontal bands and scan-convert each band
-//!    on its own rayon task with exact integer edge functions, the top-left
-//!    fill rule and a (depth, triangle id) z-test.
-//! 3. `shade`: deferred Phong shading, once per visible pixel.
+//!    on its own rayon task, nearest triangles first, with exact integer edge
+//!    functions, the top-left fill rule and a (depth, triangle id) z-test.
+//! 3. `shade`: deferred Phong shading, once per visible pixel, several pixels
+//!    of a triangle at a time (`lanes`), bit-identical to the scalar model.
 
 mod bands;
 mod lanes;
