@@ -8,7 +8,7 @@
 //! quantised child bounds), with 0 instead of obvhs' 1e-4 as the lower bound:
 //! it culls exactly the boxes obvhs culls, never one with a hit in `(0, tmax)`.
 
-use std::cell::RefCell;
+use std::mem::MaybeUninit;
 
 use glam::Vec3A;
 use obvhs::cwbvh::CwBvh;
@@ -52,39 +52,25 @@ pub(crate) enum Isa {
 
 /// The traversal of [`closest`] and [`any`], on a fixed stack of (node,
 /// entry distance).
+///
+/// The stack is left uninitialised: zeroing its 1.8 kB per ray cost a fifth
+/// of an incoherent ray, and a thread-local stack kept the walk out of the
+/// caller's AVX2 build (the box test became a call per node).
 #[inline(always)]
 fn walk<const ANY: bool, F: FnMut(usize) -> f32>(
     isa: Isa,
     bvh: &CwBvh,
     ray: &BvhRay,
-    test: F,
-) -> bool {
-    TRAVERSAL_STACK.with_borrow_mut(|stack| walk_on::<ANY, F>(isa, bvh, ray, test, stack))
-}
-
-thread_local! {
-    /// The traversal stack of [`walk`], one per thread: an array on the call
-    /// stack would be zeroed per ray (1.8 kB, a fifth of an incoherent ray's
-    /// cost). A walk never starts another, so the borrow never clashes.
-    static TRAVERSAL_STACK: RefCell<[(u32, f32); STACK]> = const {
-        RefCell::new([(0, 0.0); STACK])
-    };
-}
-
-#[inline(always)]
-fn walk_on<const ANY: bool, F: FnMut(usize) -> f32>(
-    isa: Isa,
-    bvh: &CwBvh,
-    ray: &BvhRay,
     mut test: F,
-    stack: &mut [(u32, f32); STACK],
 ) -> bool {
+    let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
     let mut tmax = ray.tmax;
-    stack[0] = (0, 0.0);
+    stack[0].write((0, 0.0));
     let mut pending = 1;
     while pending > 0 {
         pending -= 1;
-        let (index, entry) = stack[pending];
+        // SAFETY: entries below `pending` were written (pushes write first).
+        let (index, entry) = unsafe { stack[pending].assume_init() };
         if entry > tmax {
             continue;
         }
@@ -104,7 +90,7 @@ fn walk_on<const ANY: bool, F: FnMut(usize) -> f32>(
                         }
                     }
                 } else {
-                    stack[pending] = (node.child_node_index(child), t);
+                    stack[pending].write((node.child_node_index(child), t));
                     pending += 1;
                 }
             }
@@ -131,7 +117,7 @@ fn walk_on<const ANY: bool, F: FnMut(usize) -> f32>(
             }
         }
         for &entry in inner[..inner_count].iter().rev() {
-            stack[pending] = entry;
+            stack[pending].write(entry);
             pending += 1;
         }
     }
