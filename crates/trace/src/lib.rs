@@ -14,6 +14,7 @@
 //! bit-identical samples whatever the number of threads.
 
 mod bvh;
+mod leaf;
 mod whitted;
 mod wide;
 

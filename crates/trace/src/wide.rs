@@ -15,14 +15,28 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::ray::Ray as BvhRay;
 
+use crate::leaf::bits;
+
 /// Traversal stack entries: a popped node pushes at most 8 inner children,
 /// so a tree of at most [`crate::bvh::CW_STACK_LIMIT`] inner levels holds at
 /// most 1 + 7 per level (the depth is checked when the tree is built).
 const STACK: usize = 1 + 7 * crate::bvh::CW_STACK_LIMIT + 8;
 
-/// Walks `bvh` for `ray`, calling `test(slot)` for every primitive slot whose
-/// leaf box the ray enters before `tmax`; `test` returns the new `tmax`
-/// (`f32::INFINITY` when it found nothing closer).
+/// What a walk does at a leaf whose box a ray enters.
+///
+/// A trait rather than a closure: closures are compiled apart from the AVX2
+/// build of the query that calls the walk, and left out of line they cost a
+/// call per leaf in baseline code.
+pub(crate) trait LeafTest {
+    /// Tests the primitive slots `first..first + count` for ray `ray` of the
+    /// walk (0 for a single-ray walk); returns that ray's new `tmax`
+    /// (`f32::INFINITY` when nothing closer was found; for [`any`], any
+    /// finite value means a hit).
+    fn test(&mut self, ray: usize, first: u32, count: u32) -> f32;
+}
+
+/// Walks `bvh` for `ray`, calling `leaf.test` for every leaf whose box the
+/// ray enters before `tmax`.
 ///
 /// `Isa` says which box test to run; the AVX2 one only from code compiled
 /// for AVX2 on a CPU that has it.
@@ -36,7 +50,7 @@ const STACK: usize = 1 + 7 * crate::bvh::CW_STACK_LIMIT + 8;
 /// of an incoherent ray, and a thread-local stack kept the walk out of the
 /// caller's AVX2 build (the box test became a call per node).
 #[inline(always)]
-pub(crate) fn closest<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRay, mut test: F) {
+pub(crate) fn closest(isa: Isa, bvh: &CwBvh, ray: &BvhRay, leaf: &mut impl LeafTest) {
     let mut stack = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
     let mut pending = 0;
     let mut tmax = ray.tmax;
@@ -52,9 +66,7 @@ pub(crate) fn closest<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRa
             }
             leaves &= !(1 << child);
             let (first, count) = node.child_primitives(child);
-            for slot in first..first + count {
-                tmax = tmax.min(test(slot as usize));
-            }
+            tmax = tmax.min(leaf.test(0, first, count));
         }
         let mut inner = 0u8;
         for child in bits(entered & node.imask) {
@@ -89,16 +101,11 @@ pub(crate) fn closest<F: FnMut(usize) -> f32>(isa: Isa, bvh: &CwBvh, ray: &BvhRa
     }
 }
 
-/// Whether `test(slot)` returns a finite distance for any primitive slot
-/// whose leaf box the ray enters; stops at the first (shadow rays). Order
-/// does not matter here: the first hit ends the walk.
+/// Whether `leaf.test` finds a hit in any leaf whose box the ray enters;
+/// stops at the first (shadow rays). Order does not matter here: the first
+/// hit ends the walk.
 #[inline(always)]
-pub(crate) fn any<F: FnMut(usize) -> f32>(
-    isa: Isa,
-    bvh: &CwBvh,
-    ray: &BvhRay,
-    mut test: F,
-) -> bool {
+pub(crate) fn any(isa: Isa, bvh: &CwBvh, ray: &BvhRay, leaf: &mut impl LeafTest) -> bool {
     // Uninitialised, as in `closest`.
     let mut stack = [MaybeUninit::<u32>::uninit(); STACK];
     stack[0].write(0);
@@ -111,10 +118,8 @@ pub(crate) fn any<F: FnMut(usize) -> f32>(
         let (_, entered) = entry_distances(isa, node, ray, ray.tmax);
         for child in bits(entered & !node.imask) {
             let (first, count) = node.child_primitives(child);
-            for slot in first..first + count {
-                if test(slot as usize) < f32::INFINITY {
-                    return true;
-                }
+            if leaf.test(0, first, count) < f32::INFINITY {
+                return true;
             }
         }
         for child in bits(entered & node.imask) {
@@ -135,18 +140,6 @@ pub(crate) enum Isa {
     /// for code compiled with AVX2 enabled, on a CPU that has it.
     #[cfg(target_arch = "x86_64")]
     Avx2,
-}
-
-/// The set bits of `mask`, lowest first, as child indices.
-#[inline(always)]
-fn bits(mut mask: u8) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        (mask != 0).then(|| {
-            let child = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            child
-        })
-    })
 }
 
 /// The child in `mask` with the smallest entry distance (the lowest index
@@ -319,14 +312,9 @@ pub(crate) const PACKET: usize = 8;
 /// reflection rays): the rays walk the tree together, each running the same
 /// box test as alone with its own `tmax`, so every ray is offered every
 /// primitive it would be offered alone (results are identical).
-/// `test(ray, slot)` returns that ray's new `tmax`.
+/// `leaf.test(r, ..)` tests a leaf for ray `rays[r]`.
 #[inline(always)]
-pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
-    isa: Isa,
-    bvh: &CwBvh,
-    rays: &[BvhRay],
-    mut test: F,
-) {
+pub(crate) fn closest_packet(isa: Isa, bvh: &CwBvh, rays: &[BvhRay], leaf: &mut impl LeafTest) {
     debug_assert!(rays.len() <= PACKET);
     let mut tmax = [0f32; PACKET];
     for (t, ray) in tmax.iter_mut().zip(rays) {
@@ -364,13 +352,8 @@ pub(crate) fn closest_packet<F: FnMut(usize, usize) -> f32>(
             let child = child as usize;
             if node.is_leaf(child) {
                 let (first, count) = node.child_primitives(child);
-                for slot in first..first + count {
-                    let mut remaining = child_rays[child];
-                    while remaining != 0 {
-                        let r = remaining.trailing_zeros() as usize;
-                        remaining &= remaining - 1;
-                        tmax[r] = tmax[r].min(test(r, slot as usize));
-                    }
+                for r in bits(child_rays[child]) {
+                    tmax[r] = tmax[r].min(leaf.test(r, first, count));
                 }
             } else {
                 inner[inner_count] = (node.child_node_index(child), child_rays[child]);
