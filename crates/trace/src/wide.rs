@@ -253,11 +253,18 @@ unsafe fn entry_distances_avx2(node: &CwBvhNode, ray: &BvhRay, tmax: f32) -> ([f
             (&node.child_min_y, &node.child_max_y, scale.y, offset.y),
             (&node.child_min_z, &node.child_max_z, scale.z, offset.z),
         ] {
+            let (entry, exit) = near_far(lo, hi, scale);
             let (scale, offset) = (_mm256_set1_ps(scale), _mm256_set1_ps(offset));
-            let a = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(lo)), scale), offset);
-            let b = _mm256_add_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(lanes(hi)), scale), offset);
-            near = _mm256_max_ps(near, _mm256_min_ps(a, b));
-            far = _mm256_min_ps(far, _mm256_max_ps(a, b));
+            let a = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_cvtepi32_ps(lanes(entry)), scale),
+                offset,
+            );
+            let b = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_cvtepi32_ps(lanes(exit)), scale),
+                offset,
+            );
+            near = _mm256_max_ps(near, a);
+            far = _mm256_min_ps(far, b);
         }
         let nonempty = _mm256_cmpgt_epi32(lanes(&node.child_meta), _mm256_setzero_si256());
         let enters = _mm256_and_ps(
@@ -282,12 +289,23 @@ fn slab(
     near: &mut [f32; 8],
     far: &mut [f32; 8],
 ) {
+    let (entry, exit) = near_far(lo, hi, scale);
     for i in 0..8 {
-        let a = lo[i] as f32 * scale + offset;
-        let b = hi[i] as f32 * scale + offset;
-        near[i] = max(near[i], min(a, b));
-        far[i] = min(far[i], max(a, b));
+        let a = entry[i] as f32 * scale + offset;
+        let b = exit[i] as f32 * scale + offset;
+        near[i] = max(near[i], a);
+        far[i] = min(far[i], b);
     }
+}
+
+/// The quantised planes a ray crosses first and last on one axis: `lo`
+/// then `hi` when `scale` (the axis's `extent / d`) is positive, else the
+/// other way round. `q * scale + offset` is monotonic in `q` and
+/// `lo <= hi` in every child, so this picks exactly what a per-lane min and
+/// max of the two distances would (the same values, without the min and max).
+#[inline(always)]
+fn near_far<'a>(lo: &'a [u8; 8], hi: &'a [u8; 8], scale: f32) -> (&'a [u8; 8], &'a [u8; 8]) {
+    if scale < 0.0 { (hi, lo) } else { (lo, hi) }
 }
 
 /// `a.min(b)` for numbers that are not NaN, as one SIMD instruction:
