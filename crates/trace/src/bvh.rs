@@ -452,7 +452,7 @@ impl SceneBvh {
             .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
             .collect();
         let leaves = match &accel {
-            Accel::Cw(cw) if options.layout == BvhLayout::Cw => Leaves::new(cw, &prims),
+            Accel::Cw(cw) if options.layout == BvhLayout::Cw => Leaves::new(cw, &prims, &slots),
             _ => Leaves::default(),
         };
         let slot_casts_shadow = slots
@@ -828,7 +828,7 @@ impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest
             .leaves
             .block(first)
             .intersect_in::<KX, KY, KZ>(self.ray);
-        offer_leaf(&mut self.best, &self.bvh.prim_ids, first, &hits)
+        offer_leaf(&mut self.best, &hits)
     }
 }
 
@@ -845,7 +845,7 @@ impl LeafTest for PacketInLeaves<'_> {
         let block = self.bvh.leaves.block(first);
         let ray = &self.rays[r];
         let hits = with_axes!(ray.axes, block.intersect_in(ray));
-        offer_leaf(&mut self.best[r], &self.bvh.prim_ids, first, &hits)
+        offer_leaf(&mut self.best[r], &hits)
     }
 }
 
@@ -877,20 +877,15 @@ impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest for AnyInLeaves
     }
 }
 
-/// Offers a leaf's hits (its first slot `first`) to `best` in slot order;
-/// returns the new `tmax` for the walk: just above the closest hit when one
-/// of them became it, else `f32::INFINITY`.
+/// Offers a leaf's hits to `best` in slot order; returns the new `tmax` for
+/// the walk: just above the closest hit when one of them became it, else
+/// `f32::INFINITY`.
 #[inline(always)]
-fn offer_leaf(
-    best: &mut ClosestSoFar,
-    prim_ids: &[TriangleId],
-    first: u32,
-    hits: &LaneHits,
-) -> f32 {
+fn offer_leaf(best: &mut ClosestSoFar, hits: &LaneHits) -> f32 {
     let mut closer = false;
     for lane in bits(hits.hits) {
         let tuv = (hits.t[lane], hits.u[lane], hits.v[lane]);
-        closer |= best.offer(prim_ids[first as usize + lane], tuv);
+        closer |= best.offer(hits.ids[lane], tuv);
     }
     match best.hit {
         Some(hit) if closer => next_up(hit.t),

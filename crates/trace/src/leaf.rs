@@ -6,6 +6,7 @@
 
 use glam::Vec4;
 use obvhs::cwbvh::CwBvh;
+use vtfarm_scene::TriangleId;
 
 use crate::bvh::{PrimTriangle, ShearedRay};
 
@@ -22,8 +23,9 @@ pub(crate) struct Leaves {
 }
 
 impl Leaves {
-    /// The blocks of every leaf of `bvh`, whose slot `s` holds `prims[s]`.
-    pub(crate) fn new(bvh: &CwBvh, prims: &[PrimTriangle]) -> Leaves {
+    /// The blocks of every leaf of `bvh`, whose slot `s` holds `prims[s]`,
+    /// triangle `ids[s]` of the scene.
+    pub(crate) fn new(bvh: &CwBvh, prims: &[PrimTriangle], ids: &[TriangleId]) -> Leaves {
         let mut leaves = Leaves {
             blocks: Vec::new(),
             block_of_slot: vec![0; prims.len()],
@@ -36,7 +38,9 @@ impl Leaves {
                 let (first, count) = node.child_primitives(child);
                 let slots = first as usize..(first + count) as usize;
                 leaves.block_of_slot[slots.start] = leaves.blocks.len() as u32;
-                leaves.blocks.push(LeafBlock::new(&prims[slots]));
+                leaves
+                    .blocks
+                    .push(LeafBlock::new(&prims[slots.clone()], &ids[slots]));
             }
         }
         leaves
@@ -54,14 +58,18 @@ impl Leaves {
 #[derive(Clone, Copy)]
 pub(crate) struct LeafBlock {
     corners: [[Vec4; 3]; 3],
+    /// Each lane's scene triangle (here rather than looked up by slot: one
+    /// cache line fewer per hit).
+    pub(crate) ids: [TriangleId; LANES],
     /// The lanes that hold a triangle that can be hit (present and not
     /// degenerate, as [`PrimTriangle::is_solid`] says).
     live: u8,
 }
 
-/// What a [`LeafBlock`] test found: lane `i` hit at `t[i]` with weights
-/// `u[i]`, `v[i]` where bit `i` of `hits` is set.
+/// What a [`LeafBlock`] test found: lane `i` hit triangle `ids[i]` at
+/// `t[i]` with weights `u[i]`, `v[i]` where bit `i` of `hits` is set.
 pub(crate) struct LaneHits {
+    pub(crate) ids: [TriangleId; LANES],
     pub(crate) hits: u8,
     pub(crate) t: [f32; LANES],
     pub(crate) u: [f32; LANES],
@@ -69,12 +77,14 @@ pub(crate) struct LaneHits {
 }
 
 impl LeafBlock {
-    fn new(prims: &[PrimTriangle]) -> LeafBlock {
+    fn new(prims: &[PrimTriangle], ids: &[TriangleId]) -> LeafBlock {
         assert!(
             prims.len() <= LANES,
             "a leaf holds at most {LANES} triangles"
         );
         let mut corners = [[[0f32; LANES]; 3]; 3];
+        let mut lane_ids = [0; LANES];
+        lane_ids[..ids.len()].copy_from_slice(ids);
         let mut live = 0;
         for (lane, prim) in prims.iter().enumerate() {
             for (vertex, corner) in prim.corners().into_iter().enumerate() {
@@ -88,6 +98,7 @@ impl LeafBlock {
         }
         LeafBlock {
             corners: corners.map(|vertex| vertex.map(Vec4::from_array)),
+            ids: lane_ids,
             live,
         }
     }
@@ -138,6 +149,7 @@ impl LeafBlock {
         let det = w0 + w1 + w2;
         let hits = (inside & det.cmpne(Vec4::ZERO)).bitmask() as u8 & self.live;
         let mut out = LaneHits {
+            ids: self.ids,
             hits,
             t: [0.0; LANES],
             u: [0.0; LANES],

@@ -58,6 +58,7 @@ pub(crate) fn closest(isa: Isa, bvh: &CwBvh, ray: &BvhRay, leaf: &mut impl LeafT
     'walk: loop {
         let node = &bvh.nodes[index as usize];
         let (near, entered) = entry_distances(isa, node, ray, tmax);
+        let tmax_at_node = tmax;
         let mut leaves = entered & !node.imask;
         while leaves != 0 {
             let child = nearest(&near, leaves);
@@ -68,10 +69,13 @@ pub(crate) fn closest(isa: Isa, bvh: &CwBvh, ray: &BvhRay, leaf: &mut impl LeafT
             let (first, count) = node.child_primitives(child);
             tmax = tmax.min(leaf.test(0, first, count));
         }
-        let mut inner = 0u8;
-        for child in bits(entered & node.imask) {
-            if near[child] <= tmax {
-                inner |= 1 << child;
+        let mut inner = entered & node.imask;
+        if tmax < tmax_at_node {
+            // A leaf brought the hit closer: drop the children now behind it.
+            for child in bits(inner) {
+                if near[child] > tmax {
+                    inner &= !(1 << child);
+                }
             }
         }
         match inner.count_ones() {
