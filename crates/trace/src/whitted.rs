@@ -9,7 +9,7 @@ use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Light, LightKind, Lighting, NONE, ObjectId};
 
 use crate::bvh::spawn_offset;
-use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
+use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
 
 /// Whitted tracer for one frame's lighting.
 ///
@@ -39,6 +39,8 @@ struct Shaded {
     reflected_object: ObjectId,
 }
 
+mod generations;
+
 /// Which secondary rays the first surface of a sample spawns (deeper
 /// surfaces spawn both).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,14 +49,6 @@ pub enum Rays {
     Both,
     /// The reflection alone: [`Tracer::shade_reflection`].
     ReflectionOnly,
-}
-
-/// The closest hits of a surface's secondary rays, where a batch traced
-/// them already (`None`: trace the ray when it is needed).
-#[derive(Clone, Copy, Debug, Default)]
-struct KnownHits {
-    reflection: Option<Option<Hit>>,
-    refraction: Option<Option<Hit>>,
 }
 
 /// Words fed to the signature besides object ids. Object ids are `u32`, so
@@ -190,49 +184,14 @@ impl Tracer<'_> {
 
     /// [`Tracer::shade`] (`Rays::Both`) or [`Tracer::shade_reflection`]
     /// (`Rays::ReflectionOnly`) of every point, on this thread, with the same
-    /// samples bit for bit: the first surfaces are shaded first, then their
-    /// reflection rays (and refraction rays) are traced together through
-    /// [`SceneBvh::closest_hits`] (packets of consecutive rays), then each
-    /// sample's deeper recursion goes on one ray at a time. Tracing is a
-    /// pure function of the ray, so the earlier trace changes nothing else.
-    /// Pays for coherent batches: neighbouring pixels or vertices of one
-    /// reflector, in order.
+    /// samples bit for bit, generation by generation: all first surfaces
+    /// are shaded, then all their reflection rays are traced together
+    /// through [`SceneBvh::closest_hits`] (packets of consecutive rays), then
+    /// all their refraction rays, then the surfaces those rays hit, and so on
+    /// (module `generations`). Pays for coherent batches: neighbouring
+    /// pixels or vertices of one reflector, in order.
     pub fn shade_points(&self, points: &[(SurfacePoint, Vec3)], rays: Rays) -> Vec<Sample> {
-        let mut signatures = vec![Signature::new(); points.len()];
-        let terms: Vec<SurfaceTerms> = points
-            .iter()
-            .zip(&mut signatures)
-            .map(|((point, incoming), signature)| {
-                self.surface_start(point, *incoming, 1.0, rays, signature)
-            })
-            .collect();
-        let deeper = 1 < self.settings.max_depth.max(1);
-        let traced = |ray_of: &dyn Fn(&SurfaceTerms) -> Option<Ray>| {
-            let batch: Vec<Ray> = terms.iter().filter_map(ray_of).collect();
-            let hits = if deeper {
-                self.bvh.closest_hits(&batch, f32::INFINITY)
-            } else {
-                Vec::new()
-            };
-            hits.into_iter()
-        };
-        let mut reflection_hits = traced(&|t| t.reflection);
-        let mut refraction_hits = traced(&|t| t.refraction.filter(|_| rays == Rays::Both));
-        terms
-            .iter()
-            .zip(signatures)
-            .map(|(terms, mut signature)| {
-                let known = KnownHits {
-                    reflection: terms.reflection.and_then(|_| reflection_hits.next()),
-                    refraction: terms
-                        .refraction
-                        .filter(|_| rays == Rays::Both)
-                        .and_then(|_| refraction_hits.next()),
-                };
-                let shaded = self.surface_finish(terms, 1, 1.0, rays, &mut signature, known);
-                sample(shaded, signature)
-            })
-            .collect()
+        generations::shade_points(self, points, rays)
     }
 
     /// Radiance along `ray`, whose first surface gets depth `depth` and
@@ -292,20 +251,6 @@ impl Tracer<'_> {
         rays: Rays,
         signature: &mut Signature,
     ) -> Shaded {
-        let terms = self.surface_start(point, incoming, weight, rays, signature);
-        self.surface_finish(&terms, depth, weight, rays, signature, KnownHits::default())
-    }
-
-    /// The first half of [`Tracer::shade_surface`]: the surface's terms,
-    /// with its object and lights in the signature.
-    fn surface_start(
-        &self,
-        point: &SurfacePoint,
-        incoming: Vec3,
-        weight: f32,
-        rays: Rays,
-        signature: &mut Signature,
-    ) -> SurfaceTerms {
         // Branches too weak to change a pixel visibly stay out of the ray-tree
         // signature, so they do not drive the refinement.
         let tracked = weight >= self.settings.signature_min_weight;
@@ -323,22 +268,7 @@ impl Tracer<'_> {
         if lights_tracked {
             signature.add(word::LIGHTS_END);
         }
-        terms
-    }
 
-    /// The second half of [`Tracer::shade_surface`]: the secondary rays'
-    /// radiance (from `known` hits where a batch traced them) added to the
-    /// local part.
-    fn surface_finish(
-        &self,
-        terms: &SurfaceTerms,
-        depth: u32,
-        weight: f32,
-        rays: Rays,
-        signature: &mut Signature,
-        known: KnownHits,
-    ) -> Shaded {
-        let tracked = weight >= self.settings.signature_min_weight;
         let mut shaded = Shaded {
             color: terms.local,
             reflected: Vec3::ZERO,
@@ -348,17 +278,13 @@ impl Tracer<'_> {
         if depth >= self.settings.max_depth.max(1) {
             return shaded;
         }
-        let hit_of = |ray: &Ray, known: Option<Option<Hit>>| {
-            known.unwrap_or_else(|| self.bvh.closest_hit(ray, f32::INFINITY))
-        };
         if let Some(ray) = terms.reflection {
             if tracked {
                 signature.add(word::REFLECT);
             }
             let kr = terms.kr;
             let branch = weight * kr.max_element();
-            let hit = hit_of(&ray, known.reflection);
-            let (seen, object) = self.radiance_of(&ray, hit, depth + 1, branch, signature);
+            let (seen, object) = self.radiance(&ray, depth + 1, branch, signature);
             if depth == 1 && branch < self.settings.signature_min_weight {
                 // The sample reports the first reflection's object however
                 // weak the reflection (glass reflects ~4 %): keep that object
@@ -374,9 +300,7 @@ impl Tracer<'_> {
                 signature.add(word::REFRACT);
             }
             let kt = terms.kt;
-            let hit = hit_of(&ray, known.refraction);
-            let branch = weight * kt.max_element();
-            let (seen, _) = self.radiance_of(&ray, hit, depth + 1, branch, signature);
+            let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
             shaded.transmitted = kt * seen.color;
             shaded.color += shaded.transmitted;
         }
