@@ -267,9 +267,13 @@ fn refine_all(
         })
         .collect();
     let samples: Vec<Sample> = corners
-        .par_iter()
-        .map(|&(t, v)| {
-            frame.shade_vertex(t, scene.positions[v as usize], scene.normals[v as usize])
+        .par_chunks(VERTEX_BATCH)
+        .flat_map_iter(|chunk| {
+            let vertices: Vec<_> = chunk
+                .iter()
+                .map(|&(t, v)| (t, scene.positions[v as usize], scene.normals[v as usize]))
+                .collect();
+            frame.shade_vertices(&vertices)
         })
         .collect();
     stats.vertex_samples += samples.len() as u64;
@@ -336,18 +340,31 @@ fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '
     })
 }
 
+/// Corners per [`Frame::shade_vertices`] call: neighbours in mesh order,
+/// whose reflection rays fill packets; small enough to share out to threads.
+const VERTEX_BATCH: usize = 64;
+
+/// Pixels per [`Frame::reference_pixels`] call: rows of neighbours whose
+/// reflection rays fill packets, few enough that a stop is noticed soon.
+const REFERENCE_BATCH: usize = 256;
+
 /// Reference level: every owned pixel traced.
 fn trace_all_pixels(
     frame: &Frame<'_>,
     triangle: TriangleId,
     rect: PixelRect,
 ) -> (Vec<PixelValue>, u64) {
-    let pixels: Vec<PixelValue> = rect
+    let owned: Vec<(u32, u32)> = rect
         .pixels()
-        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(triangle, x, y))
-        .map(|(x, y)| frame.reference_pixel(triangle, x, y))
         .collect();
+    let mut pixels = Vec::with_capacity(owned.len());
+    for batch in owned.chunks(REFERENCE_BATCH) {
+        if frame.stopped() {
+            break;
+        }
+        pixels.extend(frame.reference_pixels(triangle, batch));
+    }
     let n = pixels.len() as u64;
     (pixels, n)
 }
