@@ -192,7 +192,9 @@ impl Renderer {
         let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
+        let t0 = Instant::now();
         let mut image = FrameImage::new(base);
+        eprintln!("PHASE frameimage_new {:?}", t0.elapsed());
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
@@ -213,6 +215,7 @@ impl Renderer {
             done += package.len() as u64;
             progress(done, total);
         }
+        eprintln!("PHASE total-raster {:?} vertex {:?} fill {:?}", start.elapsed() - raster_time, stats.vertex_time, stats.fill_time);
         RenderedFrame {
             image,
             stats,
@@ -287,7 +290,8 @@ pub fn thin_glass_model(reference: &FrameImage, frame: &Frame<'_>) -> FrameImage
             transmitted: Vec3::ZERO,
             object: modelled.reflected_object[i],
         };
-        frame.finish_pixel(&mut value);
+        let width = modelled.color.width as usize;
+        frame.finish_pixel(((i % width) as u32, (i / width) as u32), &mut value);
         modelled.color.pixels[i] = value.color;
         modelled.reflected.pixels[i] = value.reflected;
         modelled.transmitted.pixels[i] = value.transmitted;

@@ -374,7 +374,7 @@ impl Frame<'_> {
             Transmission::Traced => self.tracer.shade(&point, direction),
         };
         let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, &sample);
-        self.finish_pixel(&mut value);
+        self.finish_pixel((x, y), &mut value);
         value
     }
 
@@ -391,9 +391,10 @@ impl Frame<'_> {
     /// Finishes a vertex-traced pixel value: adds the rasterized
     /// transmitted part (zero unless the transmission comes from the
     /// rasterizer and the reflector is see-through; see [`Behind::finish`]).
-    pub fn finish_pixel(&self, value: &mut PixelValue) {
+    /// (`x`, `y`) is the value's pixel.
+    pub fn finish_pixel(&self, (x, y): (u32, u32), value: &mut PixelValue) {
         self.behind
-            .finish(&self.tracer, &self.camera, self.ids, value);
+            .finish(&self.tracer, &self.camera, self.ids, (x, y), value);
     }
 }
 

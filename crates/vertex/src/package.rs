@@ -454,8 +454,8 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
                         && behind_corner[fi]
                             .is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) =>
                 {
-                    let mut value = gouraud(index, mesh, face.face.vertices, face.weights(x, y));
-                    frame.finish_pixel(&mut value);
+                    let mut value = face.gouraud(index, mesh, face.weights(x, y));
+                    frame.finish_pixel((x, y), &mut value);
                     value
                 }
                 _ => {
@@ -472,14 +472,17 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
 /// No face reaches the pixel.
 const NO_FACE: u32 = u32::MAX;
 
-/// A final face with its corners on screen, ready for barycentric weights.
+/// A final face with its corners on screen, ready for barycentric weights
+/// and perspective-correct interpolation.
 struct ScreenFace<'m> {
     face: &'m Face,
     a: Vec2,
     b: Vec2,
     c: Vec2,
-    /// Twice the signed screen area.
-    denom: f32,
+    /// One over twice the signed screen area.
+    inv_denom: f32,
+    /// One over each corner's view depth.
+    inv_depth: [f32; 3],
 }
 
 impl<'m> ScreenFace<'m> {
@@ -489,6 +492,7 @@ impl<'m> ScreenFace<'m> {
         else {
             return None;
         };
+        let inv_depth = [a.depth, b.depth, c.depth].map(|d| 1.0 / d);
         let (a, b, c) = (
             Vec2::new(a.x, a.y),
             Vec2::new(b.x, b.y),
@@ -500,42 +504,42 @@ impl<'m> ScreenFace<'m> {
             a,
             b,
             c,
-            denom,
+            inv_denom: 1.0 / denom,
+            inv_depth,
         })
     }
 
     /// The barycentric weights of pixel (x, y)'s centre.
     fn weights(&self, x: u32, y: u32) -> [f32; 3] {
         let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        let wb = (p - self.a).perp_dot(self.c - self.a) / self.denom;
-        let wc = (self.b - self.a).perp_dot(p - self.a) / self.denom;
+        let wb = (p - self.a).perp_dot(self.c - self.a) * self.inv_denom;
+        let wc = (self.b - self.a).perp_dot(p - self.a) * self.inv_denom;
         [1.0 - wb - wc, wb, wc]
     }
-}
 
-/// Perspective-correct interpolation of the corner samples (screen-space
-/// weights divided by depth, as a GPU interpolates).
-fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> PixelValue {
-    let v = vertices.map(|i| &mesh.vertices[i as usize]);
-    let pw: [f32; 3] =
-        std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
-    let total: f32 = pw.iter().sum();
-    let pw = pw.map(|x| x / total);
-    let blend = |f: fn(&Sample) -> Vec3| {
-        f(&v[0].sample) * pw[0] + f(&v[1].sample) * pw[1] + f(&v[2].sample) * pw[2]
-    };
-    let color = blend(|s| s.color);
-    let reflected = blend(|s| s.reflected);
-    let transmitted = blend(|s| s.transmitted);
-    let nearest = (0..3)
-        .max_by(|&a, &b| pw[a].total_cmp(&pw[b]))
-        .expect("three corners");
-    PixelValue {
-        index,
-        color,
-        reflected,
-        transmitted,
-        object: v[nearest].sample.reflected_object,
+    /// Perspective-correct interpolation of the corner samples at screen
+    /// weights `w` (divided by depth, as a GPU interpolates); the reflected
+    /// object is the nearest corner's (the last of equals).
+    fn gouraud(&self, index: u32, mesh: &TriangleMesh, w: [f32; 3]) -> PixelValue {
+        let v = self.face.vertices.map(|i| &mesh.vertices[i as usize].sample);
+        let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) * self.inv_depth[k]);
+        let scale = 1.0 / (pw[0] + pw[1] + pw[2]);
+        let pw = pw.map(|x| x * scale);
+        let blend = |f: fn(&Sample) -> Vec3| f(v[0]) * pw[0] + f(v[1]) * pw[1] + f(v[2]) * pw[2];
+        let nearest = if pw[2] >= pw[1] && pw[2] >= pw[0] {
+            2
+        } else if pw[1] >= pw[0] {
+            1
+        } else {
+            0
+        };
+        PixelValue {
+            index,
+            color: blend(|s| s.color),
+            reflected: blend(|s| s.reflected),
+            transmitted: blend(|s| s.transmitted),
+            object: v[nearest].reflected_object,
+        }
     }
 }
 

@@ -129,15 +129,16 @@ impl Behind {
     /// Finishes a reflector pixel whose value holds the local part and the
     /// front surface's reflection: adds the back surface's reflection and the
     /// transmitted part (nothing with traced transmission). `tracer`,
-    /// `camera` and `ids` are the frame's, as given to [`Behind::new`].
+    /// `camera` and `ids` are the frame's, as given to [`Behind::new`];
+    /// (`x`, `y`) is the value's pixel.
     pub fn finish(
         &self,
         tracer: &Tracer<'_>,
         camera: &Camera,
         ids: &IdBuffer,
+        (x, y): (u32, u32),
         value: &mut PixelValue,
     ) {
-        let (x, y) = (value.index % self.ids.width, value.index / self.ids.width);
         if !self.bounds.contains(x, y) {
             return;
         }
