@@ -74,8 +74,12 @@ pub(crate) struct FarmCosts {
 /// One simulated worker.
 #[derive(Clone, Debug)]
 pub(crate) struct FarmWorker {
-    /// Work per second (1: one thread of the recording machine).
+    /// Work per second of one thread (1: one thread of the recording machine).
     pub(crate) speed: f64,
+    /// Cores of its machine: a package uses them all (the tracer is
+    /// parallel), a frame's set-up one (so it overlaps a package on a
+    /// spare core). Ignored on a shared machine (one core's worth each).
+    pub(crate) cores: u32,
     pub(crate) link_bits_per_second: f64,
     pub(crate) latency: Duration,
     /// Fixed time per package.
@@ -161,6 +165,8 @@ enum Work {
 
 struct CpuJob {
     machine: usize,
+    /// Cores it can use at once.
+    threads: u32,
     /// CPU seconds left.
     left: f64,
     work: Work,
@@ -245,7 +251,7 @@ impl<'a> Farm<'a> {
         let cores = match config.shared_cores {
             Some(c) => vec![c.max(1)],
             None => std::iter::once(config.master_cores.max(1))
-                .chain(specs.iter().map(|_| 1))
+                .chain(specs.iter().map(|w| w.cores.max(1)))
                 .collect(),
         };
         let mut farm = Farm {
@@ -321,14 +327,18 @@ impl<'a> Farm<'a> {
         }
     }
 
-    /// Each running job's speed on its machine (fair share of the cores).
+    /// Each running job's speed on its machine: its threads, all slowed
+    /// alike when the machine has fewer cores than threads want to run.
     fn rates(&self) -> Vec<f64> {
-        let mut running = vec![0u32; self.cores.len()];
+        let mut wanted = vec![0u32; self.cores.len()];
         for job in &self.cpu {
-            running[job.machine] += 1;
+            wanted[job.machine] += job.threads;
         }
         (self.cpu.iter())
-            .map(|j| (f64::from(self.cores[j.machine]) / f64::from(running[j.machine])).min(1.0))
+            .map(|j| {
+                let share = f64::from(self.cores[j.machine]) / f64::from(wanted[j.machine]);
+                f64::from(j.threads) * share.min(1.0)
+            })
             .collect()
     }
 
@@ -400,9 +410,15 @@ impl<'a> Farm<'a> {
         self.sequence += 1;
     }
 
+    /// Starts `seconds` of one-thread work on `machine`, on one thread.
     fn start_cpu(&mut self, machine: usize, seconds: f64, work: Work) {
+        self.start_threads(machine, 1, seconds, work);
+    }
+
+    fn start_threads(&mut self, machine: usize, threads: u32, seconds: f64, work: Work) {
         self.cpu.push(CpuJob {
             machine,
+            threads: threads.max(1),
             left: seconds.max(0.0),
             work,
         });
@@ -602,7 +618,12 @@ impl<'a> Farm<'a> {
                         started: self.now,
                         bytes,
                     };
-                    self.start_cpu(machine, (work + overhead) / speed, package_work);
+                    let threads = match self.config.shared_cores {
+                        Some(_) => 1,
+                        None => self.workers[w].spec.cores.max(1),
+                    };
+                    let seconds = (work + overhead) / speed;
+                    self.start_threads(machine, threads, seconds, package_work);
                 }
             }
         }
@@ -677,6 +698,7 @@ mod tests {
             link_bits_per_second: 1e9,
             latency: Duration::from_micros(100),
             package_overhead: Duration::from_millis(1),
+            cores: 1,
         };
         vec![worker; n]
     }
@@ -740,6 +762,25 @@ mod tests {
             with_base > one + 0.4,
             "without base {one} s, with {with_base} s"
         );
+    }
+
+    /// Figures for a worker with a spare core (printed; see the README).
+    #[test]
+    fn a_spare_core_overlaps_set_up_and_tracing() {
+        let (job, costs) = small_farm(0.3, 0.0);
+        let work: f64 = costs.seconds.iter().sum();
+        let interval = |cores| {
+            let workers: Vec<FarmWorker> = (workers(1).into_iter())
+                .map(|w| FarmWorker { cores, ..w })
+                .collect();
+            super::super::simulate::mean_frame_seconds(
+                &simulate_farm(&job, &costs, &config(8), &workers).unwrap(),
+            )
+        };
+        let (one, two) = (interval(1), interval(2));
+        println!("work {work} s, set-up 0.3 s: one core {one} s, two cores {two} s");
+        assert!(one >= work + 0.3 * 0.99, "{one}");
+        assert!(two < 0.3 + work / 2.0, "{two}");
     }
 
     /// A slow shared master link bounds the frame: results can come no

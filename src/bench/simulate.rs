@@ -87,6 +87,11 @@ pub(crate) struct SimulateArgs {
     /// divided by this. Its driver handles one input at a time.
     #[arg(long)]
     master_threads: Option<u32>,
+    /// Cores of each worker's machine: a package uses them all (speed 1 is
+    /// one thread each; the tracing is taken as parallel without loss), a
+    /// frame's set-up one, so it overlaps a package on a spare core.
+    #[arg(long, default_value_t = 1)]
+    worker_threads: u32,
     /// Everything on one machine of this many cores (a localhost farm, as
     /// `scripts/scaling.sh` runs it): workers, master and submitter share them.
     #[arg(long)]
@@ -528,6 +533,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         link_bits_per_second: mbit * 1e6,
         latency,
         package_overhead: overhead,
+        cores: args.worker_threads.max(1),
     };
     let mut rows = Vec::new();
     for &mbit in &args.link_mbit {
