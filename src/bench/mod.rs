@@ -5,6 +5,7 @@
 //! targets live here, not in tests.
 
 mod cluster;
+mod farm;
 mod raster;
 mod rays;
 mod simulate;
