@@ -5,6 +5,7 @@
 //! targets live here, not in tests.
 
 mod cluster;
+mod farm;
 mod raster;
 mod rays;
 mod simulate;
@@ -179,7 +180,10 @@ fn table1(args: Table1Args) -> Result<()> {
         let setup = setup_for(Quality::Full);
         let ids = vtfarm_raster::id_buffer(&scene, &camera);
         let behind = renderer.behind(&setup, &ids);
-        let modelled = vtfarm_render::thin_glass_model(&reference.image, &behind);
+        let modelled = vtfarm_render::thin_glass_model(
+            &reference.image,
+            &renderer.frame(&setup, &ids, &behind),
+        );
         let err = compare(&modelled, &reference.image);
         ModelFigures {
             share_off: err.share_off,
