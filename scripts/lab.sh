@@ -100,14 +100,17 @@ done
 timeout 900 ip netns exec "$tag-m" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out" \
   >"$work/submit.log" 2>&1 || { cat "$work/submit.log" >&2; exit 1; }
 
-# The prediction: the simulator with the same job, workers and link. Workers
-# beyond the cores share them: each computes at cores/workers of a thread.
+# The prediction: the simulator (the master core and worker sessions on a
+# virtual clock) with the same job, workers and links. The emulated hosts
+# share this machine's cores (`--shared-cores`); a CPU quota makes the
+# workers' work (and, roughly, the rest) 100/P times slower.
 cores=$(nproc)
-scale=$(awk -v w="$workers" -v c="$cores" -v p="${cpu:-100}" 'BEGIN { s = w > c ? w / c : 1; s *= 100 / p; printf "%.3f", s }')
-"$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --frames "$frames" --width "$width" \
-  --height "$height" --detail "$detail" --repeats 1 --cost-scale "$scale" --fixed-cost-scale "$scale" --json "$work/sim.json" >/dev/null 2>&1
+scale=$(awk -v p="${cpu:-100}" 'BEGIN { printf "%.3f", 100 / p }')
+"$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --latency-ms 0.05 --frames "$frames" --width "$width" \
+  --height "$height" --detail "$detail" --repeats 1 --threads 1 --shared-cores "$cores" --cost-scale "$scale" \
+  --fixed-cost-scale "$scale" --json "$work/sim.json" >"$work/sim.log" 2>&1 || { cat "$work/sim.log" >&2; exit 1; }
 read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json")"
 predicted=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim.json")
-echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge (costs x$scale for shared cores)"
+echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge, all on this machine's $cores cores (CPU x$scale)"
 awk -v m="$measured" -v p="$predicted" 'BEGIN { printf "  mean frame (after the first): measured %.3f s, predicted %.3f s, ratio %.2f\n", m, p, m / p }'
 awk -v b="$sent" -v r="$mbit" 'BEGIN { printf "  results per frame: %.3f MB (%.3f s of the master link)\n", b, b * 8 / r }'

@@ -12,9 +12,9 @@
 # Prints one line per worker count: the mean frame time (the interval between
 # frame arrivals at the submitter, first frame left out: it includes the scene
 # transfer and BVH builds), its ratio to the first count's, and the
-# simulator's prediction for the same job and workers (`vtfarm bench simulate`
-# with costs recorded on this machine; workers beyond the cores share them,
-# so their costs are scaled by workers/cores) with measured/predicted.
+# simulator's prediction for the same job and workers (`vtfarm bench simulate
+# --shared-cores`: the master core and worker sessions with costs recorded on
+# this machine, all sharing its cores) with measured/predicted.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
@@ -84,23 +84,33 @@ for n in $workers_list; do
   [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
 done
 
-# The simulator's prediction for each count (localhost: a fast link).
-declare -A predicted
+# The simulator's prediction for each count: the master core and worker
+# sessions on a virtual clock, everything sharing this machine's cores
+# (`--shared-cores`), localhost links. Twice: with the fixed costs (base
+# frame, set-up) timed by the simulator itself, and with those measured in
+# the first count's run (its stats.json phases).
+first=${workers_list%% *}
+declare -A predicted predicted_phases
 for n in $workers_list; do
-  scale=$(awk -v w="$n" -v c="$cores" 'BEGIN { printf "%.3f", (w > c ? w / c : 1) }')
-  "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
-    --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
-    --cost-scale "$scale" --fixed-cost-scale "$scale" --json "$work/sim-$n.json" >/dev/null 2>&1
-  predicted[$n]=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim-$n.json")
+  for source in recorded phases; do
+    extra=()
+    [ "$source" = phases ] && extra=(--fixed-costs "$work/out-$first/stats.json")
+    "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
+      --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
+      --shared-cores "$cores" "${extra[@]}" --json "$work/sim-$n-$source.json" >"$work/sim-$n-$source.log" 2>&1 \
+      || { cat "$work/sim-$n-$source.log" >&2; exit 1; }
+    p=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim-$n-$source.json")
+    if [ "$source" = phases ]; then predicted_phases[$n]=$p; else predicted[$n]=$p; fi
+  done
 done
 
-first=${workers_list%% *}
 read -r base _ <<<"${mean[$first]}"
 echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
-printf "%8s %16s %16s %10s %16s %16s %12s %10s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "raw MB/frame" "predicted s" "meas/pred"
+printf "%8s %16s %13s %9s %15s %13s %10s %13s %10s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "predicted s" "meas/pred" "pred.phases s" "meas/pred"
 for n in $workers_list; do
   read -r gap wall bytes raw <<<"${mean[$n]}"
-  p=${predicted[$n]}
-  printf "%8s %16s %16s %10s %16s %16s %12.4f %10s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$raw" "$p" "$(awk -v a="$gap" -v b="$p" 'BEGIN { printf "%.2f", a / b }')"
+  p=${predicted[$n]}; q=${predicted_phases[$n]}
+  printf "%8s %16s %13s %9s %15s %13.4f %10s %13.4f %10s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$p" "$(awk -v a="$gap" -v b="$p" 'BEGIN { printf "%.2f", a / b }')" "$q" "$(awk -v a="$gap" -v b="$q" 'BEGIN { printf "%.2f", a / b }')"
 done
-echo "result MB: results as sent (zstd byte planes, colour only); raw: the same pixels at 40 bytes each (the previous encoding: three colours and an object id)"
+echo "predicted: vtfarm bench simulate --shared-cores $cores (master core and worker sessions on a virtual clock), fixed costs timed by it; pred.phases: base frame and set-up from the $first-worker run's stats.json phases"
+echo "result MB: results as sent (zstd byte planes, colour only)"

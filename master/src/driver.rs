@@ -17,7 +17,7 @@ use vtfarm_proto::{Link, Message, StatusReply};
 use vtfarm_scheduler::SchedulerConfig;
 
 use crate::core::{ConnId, MasterCore, Output, Peer};
-use crate::journal::Journal;
+use crate::journal::{Journal, JournalWriter};
 use crate::view::{ViewError, ViewRequest};
 
 /// Called when the core drops a connection (closes the QUIC connection).
@@ -187,6 +187,9 @@ async fn run(
             core.restore(start.elapsed(), stored);
         }
     }
+    // Records are written off this task (a finished frame is compressed and
+    // written while the next results come in); replays wait for them.
+    let writer = journal.clone().map(JournalWriter::new);
     loop {
         // The scheduler's next deadline, or idle for a while.
         let deadline = start
@@ -263,14 +266,17 @@ async fn run(
                     });
                 }
                 Output::Persist(record) => {
-                    if let Some(journal) = &journal {
-                        tokio::task::block_in_place(|| journal.write(&record));
+                    if let Some(writer) = &writer {
+                        writer.write(record);
                     }
                 }
                 Output::Replay { conn, job, frames } => {
-                    let (Some(journal), Some(c)) = (&journal, conns.get(&conn)) else {
+                    let (Some(journal), Some(writer), Some(c)) =
+                        (&journal, &writer, conns.get(&conn))
+                    else {
                         continue;
                     };
+                    tokio::task::block_in_place(|| writer.flush());
                     for frame in frames {
                         match tokio::task::block_in_place(|| journal.frame(job, frame)) {
                             Some(done) => {

@@ -31,7 +31,7 @@ pub mod view;
 pub use core::{ATTACH_GRACE, BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::{LocalFarm, local_worker};
-pub use journal::{Journal, Record, StoredJob};
+pub use journal::{Journal, JournalWriter, Record, StoredJob};
 pub use submit::{
     FinishedFrame, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
 };

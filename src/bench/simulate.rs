@@ -35,12 +35,15 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
+use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
-    Message, PackageResult, WireBitmap, WireBitmapParts, WirePackageStats, encode_message,
+    FrameDone, Message, PackageResult, WireBitmap, WireBitmapParts, WireImage, WirePackageStats,
+    encode_message,
 };
+use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
-use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimFrameReport, SimJob, SimWorker, Simulation};
-use vtfarm_scheduler::{FrameStats, JobId, SchedulerConfig};
+
+use super::farm::{FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm};
 use vtfarm_vertex::{FrameImage, PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
@@ -78,12 +81,26 @@ pub(crate) struct SimulateArgs {
     /// everything.
     #[arg(long, default_value_t = 1.0)]
     fixed_cost_scale: f64,
-    /// Cores of the master: its base frame is rasterized in parallel (the
-    /// rasterizer is bit-identical for any thread count), so it takes the
-    /// recorded one-thread time divided by this. Compositing stays on the
-    /// master's one driver task.
+    /// Cores of the master's own machine (default: this machine's): its
+    /// base frame is rasterized in parallel (the rasterizer is bit-identical
+    /// for any thread count), so it takes the recorded one-thread time
+    /// divided by this. Its driver handles one input at a time.
+    #[arg(long)]
+    master_threads: Option<u32>,
+    /// Cores of each worker's machine: a package uses them all (speed 1 is
+    /// one thread each; the tracing is taken as parallel without loss), a
+    /// frame's set-up one, so it overlaps a package on a spare core.
     #[arg(long, default_value_t = 1)]
-    master_threads: u32,
+    worker_threads: u32,
+    /// Everything on one machine of this many cores (a localhost farm, as
+    /// `scripts/scaling.sh` runs it): workers, master and submitter share them.
+    #[arg(long)]
+    shared_cores: Option<u32>,
+    /// Takes the per-frame fixed costs (the master's base frame, a worker's
+    /// set-up) from the phases in a real run's `stats.json` (medians over
+    /// the frames after the first) instead of timing them here.
+    #[arg(long, value_name = "STATS_JSON")]
+    fixed_costs: Option<PathBuf>,
     /// Width of the recorded frame.
     #[arg(long, default_value_t = 1920)]
     width: u32,
@@ -128,6 +145,9 @@ pub(super) struct Recording {
     pub(super) worker_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
+    /// The master's driver per finished frame: the image for the wire and
+    /// its encoding, the journal's record.
+    pub(super) frame_out_seconds: f64,
     /// Wall time of the per-triangle tracing, all passes.
     pub(super) tracing_wall_seconds: f64,
 }
@@ -265,6 +285,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
+    let frame_out_seconds = frame_out_time(&renderer, job)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -281,8 +302,31 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         base_frame_seconds,
         worker_setup_seconds,
         composite_seconds,
+        frame_out_seconds,
         tracing_wall_seconds,
     })
+}
+
+/// The master's driver's work on a finished frame, as `MasterCore` and the
+/// driver do it: the frame's image for the wire, its `FrameDone` encoded for
+/// the submitter and written to a journal.
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<f64> {
+    let (base, _) = renderer.base_frame(&job.setup);
+    let dir = tempfile::tempdir()?;
+    let journal = vtfarm_master::Journal::open(dir.path())?;
+    // The job's directory, which its queued record would have made.
+    std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
+    let start = Instant::now();
+    let done = FrameDone {
+        job: 1,
+        frame: 0,
+        image: WireImage::from_pixels(base.width, base.height, &base.pixels),
+        stats: Default::default(),
+        aux: None,
+    };
+    journal.write(&vtfarm_master::Record::FrameDone(Box::new(done.clone())));
+    encode_message(&Message::FrameDone(done))?;
+    Ok(start.elapsed().as_secs_f64())
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -345,37 +389,17 @@ struct Row {
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
 fn simulate(
-    recording: &Recording,
-    config: &SimConfig,
-    workers: Vec<SimWorker>,
-    frames: usize,
-    cost_scale: f64,
-) -> Result<Vec<SimFrameReport>> {
-    let frame = SimFrame {
-        items: recording.triangles.clone(),
-        costs: recording.seconds.iter().map(|s| s * cost_scale).collect(),
-    };
-    let mut sim = Simulation::new(config.clone(), workers);
-    sim.submit(SimJob {
-        id: JobId(1),
-        submit_at: Duration::ZERO,
-        frames: vec![frame; frames],
-    });
-    let report = sim.drive();
-    if !report.finished || report.frames.len() != frames || !report.violations.is_empty() {
-        bail!(
-            "the simulation did not complete: {} of {frames} frames, violations {:?}, refusals {:?}",
-            report.frames.len(),
-            report.violations,
-            report.refusals
-        );
-    }
-    Ok(report.frames.clone())
+    job: &FarmJob,
+    costs: &FarmCosts,
+    config: &FarmConfig,
+    workers: Vec<FarmWorker>,
+) -> Result<Vec<FarmFrame>> {
+    simulate_farm(job, costs, config, &workers)
 }
 
 /// Mean interval between frames sent to the submitter, the first left out
 /// (it includes the scene's way and every estimate's start).
-pub(super) fn mean_frame_seconds(frames: &[SimFrameReport]) -> f64 {
+pub(super) fn mean_frame_seconds(frames: &[FarmFrame]) -> f64 {
     let done: Vec<f64> = frames.iter().map(|f| f.done_at.as_secs_f64()).collect();
     match done.as_slice() {
         [] => 0.0,
@@ -384,16 +408,60 @@ pub(super) fn mean_frame_seconds(frames: &[SimFrameReport]) -> f64 {
     }
 }
 
+/// Per-frame fixed costs measured in a real run: the medians, over the
+/// frames after the first, of the master's base-frame phase and of the
+/// workers' set-up phases in its `stats.json` (`vtfarm submit`).
+#[derive(Debug, PartialEq)]
+pub(super) struct MeasuredFixedCosts {
+    pub(super) base_frame_seconds: f64,
+    pub(super) worker_setup_seconds: f64,
+}
+
+pub(super) fn fixed_costs_from_stats(path: &std::path::Path) -> Result<MeasuredFixedCosts> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let frames: Vec<vtfarm_proto::FrameStats> = serde_json::from_str::<Vec<StatsFrame>>(&text)
+        .with_context(|| format!("{}: not a stats.json of vtfarm submit", path.display()))?
+        .into_iter()
+        .map(|f| f.stats)
+        .collect();
+    let median = |kind: PhaseKind| -> Option<f64> {
+        let mut d: Vec<f64> = (frames.iter().skip(1).flat_map(|f| &f.phases))
+            .filter(|p| p.kind == kind)
+            .map(|p| p.end_micros.saturating_sub(p.start_micros) as f64 / 1e6)
+            .collect();
+        d.sort_by(f64::total_cmp);
+        d.get(d.len() / 2).copied()
+    };
+    match (median(PhaseKind::Base), median(PhaseKind::Setup)) {
+        (Some(base_frame_seconds), Some(worker_setup_seconds)) => Ok(MeasuredFixedCosts {
+            base_frame_seconds,
+            worker_setup_seconds,
+        }),
+        _ => bail!(
+            "{}: needs base and set-up phases of at least two frames",
+            path.display()
+        ),
+    }
+}
+
+/// One frame of `stats.json`: its statistics (and fields this reader ignores).
+#[derive(serde::Deserialize)]
+struct StatsFrame {
+    #[serde(flatten)]
+    stats: vtfarm_proto::FrameStats,
+}
+
 pub(crate) fn run(args: SimulateArgs) -> Result<()> {
-    if args.frames == 0 || args.workers.contains(&0) || args.master_threads == 0 {
+    if args.frames == 0 || args.workers.contains(&0) || args.master_threads == Some(0) {
         bail!("--frames, --master-threads and every --workers entry must be at least 1");
     }
     if args.link_mbit.iter().any(|&m| m.is_nan() || m <= 0.0) {
         bail!("every --link-mbit entry must be positive");
     }
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = args.threads.unwrap_or(cores);
+    let master_cores = args.master_threads.unwrap_or(cores as u32);
     let job = CockpitJob::new(args.detail, args.width, args.height, args.quality)?;
     eprintln!(
         "recording per-triangle costs ({} reflector triangles, {}x{} {}, {threads} one-thread pools) ...",
@@ -403,49 +471,74 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         args.quality.name()
     );
     let mut recording = record(&job, threads, args.repeats)?;
+    if let Some(path) = &args.fixed_costs {
+        let measured = fixed_costs_from_stats(path)?;
+        // The phases are wall times of that run: the base frame already on
+        // its machine's cores.
+        recording.base_frame_seconds = measured.base_frame_seconds * f64::from(master_cores);
+        recording.worker_setup_seconds = measured.worker_setup_seconds;
+    }
     if args.no_fixed_costs {
         recording.base_frame_seconds = 0.0;
         recording.worker_setup_seconds = 0.0;
         recording.composite_seconds = 0.0;
+        recording.frame_out_seconds = 0.0;
     }
     let total = recording.total_seconds() * args.cost_scale;
-    let samples: u64 = recording.samples.iter().sum();
-    let config = |mbit: f64| SimConfig {
-        // The master core's own scheduler configuration.
-        scheduler: SchedulerConfig::default().farm(),
-        result_bytes_per_item: recording.bytes_per_item(),
-        rays_per_second: samples as f64 / total.max(1e-9),
-        master_link_bits_per_second: Some(mbit * 1e6),
-        master_frame_cost: Duration::from_secs_f64(
-            recording.base_frame_seconds * args.fixed_cost_scale / f64::from(args.master_threads),
-        ),
+    let n = recording.triangles.len().max(1) as f64;
+    let costs = FarmCosts {
+        items: recording.triangles.clone(),
+        seconds: recording
+            .seconds
+            .iter()
+            .map(|s| s * args.cost_scale)
+            .collect(),
+        samples: (recording.samples.iter())
+            .map(|&s| u32::try_from(s).unwrap_or(u32::MAX))
+            .collect(),
+        result_bytes: (recording.result_bytes.iter())
+            .map(|b| b.saturating_sub(recording.empty_result_bytes))
+            .collect(),
+        empty_result_bytes: recording.empty_result_bytes,
+        worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
+        base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
         // Compositing does not grow with the work per pixel: not scaled.
-        master_result_cost_per_item: Duration::from_secs_f64(
-            recording.composite_seconds / recording.triangles.len().max(1) as f64,
-        ),
-        ..SimConfig::default()
+        result_per_item: recording.composite_seconds / n,
+        frame_out: recording.frame_out_seconds,
+    };
+    // The master core rasterizes a stand-in base frame: tiny, the time is modelled.
+    let farm_job = FarmJob {
+        scene: job.scene.clone(),
+        reflectors: job.reflectors.clone(),
+        setup: FrameSetup {
+            camera: vtfarm_scene::Camera {
+                width: 32,
+                height: 18,
+                ..job.setup.camera
+            },
+            ..job.setup.clone()
+        },
+    };
+    let config = |mbit: f64| FarmConfig {
+        master_link_bits_per_second: mbit * 1e6,
+        master_cores,
+        shared_cores: args.shared_cores,
+        frames: args.frames as u32,
+        time_limit: Duration::from_secs(24 * 3600),
     };
     let latency = Duration::from_secs_f64(args.latency_ms.max(0.0) / 1e3);
     let overhead = Duration::from_secs_f64(args.package_overhead_ms.max(0.0) / 1e3);
-    let worker = |speed: f64, mbit: f64| SimWorker {
+    let worker = |speed: f64, mbit: f64| FarmWorker {
+        speed,
         link_bits_per_second: mbit * 1e6,
         latency,
         package_overhead: overhead,
-        frame_setup: Duration::from_secs_f64(
-            recording.worker_setup_seconds * args.fixed_cost_scale / speed,
-        ),
-        ..SimWorker::with_speed(speed)
+        cores: args.worker_threads.max(1),
     };
     let mut rows = Vec::new();
     for &mbit in &args.link_mbit {
         let config = &config(mbit);
-        let one = simulate(
-            &recording,
-            config,
-            vec![worker(1.0, mbit)],
-            args.frames,
-            args.cost_scale,
-        )?;
+        let one = simulate(&farm_job, &costs, config, vec![worker(1.0, mbit)])?;
         for &n in &args.workers {
             for heterogeneous in [false, true] {
                 if heterogeneous && n < 2 {
@@ -456,50 +549,58 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                     .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
                     .collect();
                 let frames = simulate(
-                    &recording,
+                    &farm_job,
+                    &costs,
                     config,
                     speeds.iter().map(|&s| worker(s, mbit)).collect(),
-                    args.frames,
-                    args.cost_scale,
                 )?;
-                let stats: Vec<FrameStats> = frames.iter().map(|f| f.stats.clone()).collect();
-                let last = stats.last().context("no frame simulated")?;
+                let stats: Vec<&vtfarm_proto::FrameStats> =
+                    frames.iter().map(|f| &f.stats).collect();
+                let last = *stats.last().context("no frame simulated")?;
                 let one_last = &one.last().context("no frame simulated")?.stats;
                 let frame_seconds = mean_frame_seconds(&frames);
                 let ideal: f64 = speeds.iter().sum();
-                let wall = last.wall.as_secs_f64();
+                let wall = last.wall_micros as f64 / 1e6;
                 rows.push(Row {
                     workers: n,
                     link_mbit: mbit,
                     heterogeneous,
                     ideal,
-                    speedup: last.speedup(),
-                    speedup_vs_one: one_last.wall.as_secs_f64() / wall.max(1e-12),
-                    imbalance: last.imbalance(),
+                    speedup: last.speedup,
+                    speedup_vs_one: one_last.wall_micros as f64 / 1e6 / wall.max(1e-12),
+                    imbalance: last.imbalance,
                     wall_seconds: wall,
-                    imbalance_per_frame: stats.iter().map(FrameStats::imbalance).collect(),
-                    wall_seconds_per_frame: stats.iter().map(|f| f.wall.as_secs_f64()).collect(),
+                    imbalance_per_frame: stats.iter().map(|f| f.imbalance).collect(),
+                    wall_seconds_per_frame: (stats.iter())
+                        .map(|f| f.wall_micros as f64 / 1e6)
+                        .collect(),
                     packages: last.packages,
                     duplicates: last.duplicates,
                     frame_seconds,
                     efficiency: mean_frame_seconds(&one) / frame_seconds.max(1e-12) / ideal,
                     imbalance_after_first: (stats.iter().skip(1))
-                        .map(FrameStats::imbalance)
+                        .map(|f| f.imbalance)
                         .fold(0.0, f64::max),
                 });
             }
         }
     }
-    print_report(&args, &job, &recording, &rows);
+    let _ = total;
+    print_report(&args, &job, &recording, &rows, master_cores);
     if let Some(path) = &args.json {
         write_json(path, &rows)?;
     }
     Ok(())
 }
 
-fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[Row]) {
-    let (config_bytes_per_item, header_bytes) =
-        (rec.bytes_per_item(), SimConfig::default().header_bytes);
+fn print_report(
+    args: &SimulateArgs,
+    job: &CockpitJob,
+    rec: &Recording,
+    rows: &[Row],
+    master_cores: u32,
+) {
+    let config_bytes_per_item = rec.bytes_per_item();
     let n = rec.triangles.len();
     let owning = rec.pixels.iter().filter(|&&p| p > 0).count();
     let total = rec.total_seconds() * args.cost_scale;
@@ -531,20 +632,33 @@ fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[
         "  results: {:.2} MB per frame as one-triangle messages (compact: zstd, colour only), {} bytes per triangle modelled (+ {} per message)",
         bytes as f64 / 1e6,
         config_bytes_per_item,
-        header_bytes
+        rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s (not scaled); per-triangle tracing {:.3} s wall ({} passes, least time kept)",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s and finished frame out {:.3} s (not scaled); per-triangle tracing {:.3} s wall ({} passes, least time kept)",
         args.fixed_cost_scale,
+        match &args.fixed_costs {
+            Some(path) => format!(", base and set-up from {}", path.display()),
+            None => String::new(),
+        },
         rec.base_frame_seconds * args.fixed_cost_scale,
         rec.worker_setup_seconds * args.fixed_cost_scale,
         rec.composite_seconds,
+        rec.frame_out_seconds,
         rec.tracing_wall_seconds,
         args.repeats
     );
     println!(
-        "model: the master's scheduler config; speed 1 = one thread of this machine; {} frame(s) of the recorded costs; each worker's own link and the master's one shared link at the given rate, {} ms latency, {} ms per package",
-        args.frames, args.latency_ms, args.package_overhead_ms
+        "model: the master's own core and the workers' own sessions on a virtual clock; speed 1 = one thread of this machine; {} frame(s) of the recorded costs; each worker's own link and the master's one shared link at the given rate, {} ms latency, {} ms per package; {}",
+        args.frames,
+        args.latency_ms,
+        args.package_overhead_ms,
+        match args.shared_cores {
+            Some(c) => format!("everything shares one machine of {c} cores"),
+            None => format!(
+                "the master on its own machine of {master_cores} cores, each worker on its own core"
+            ),
+        }
     );
     println!(
         "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = mean interval between finished frames after the first (set-ups, base frame, links included); effic. = one worker's frame s / frame s / ideal; imb. = (max - mean busy) / mean busy, worst frame after the first; busy/wall of the last frame"
@@ -589,17 +703,16 @@ fn print_report(args: &SimulateArgs, job: &CockpitJob, rec: &Recording, rows: &[
     }
     // The master does per frame what no worker can take over: its base
     // frame (one at a time) and every result's compositing.
-    let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(args.master_threads);
+    let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
     let fastest = rows
         .iter()
         .map(|r| r.frame_seconds)
         .fold(f64::INFINITY, f64::min);
-    let master = base.max(rec.composite_seconds);
+    let driver = rec.composite_seconds + rec.frame_out_seconds;
+    let master = base.max(driver);
     if master > 0.5 * fastest {
         println!(
-            "  the master's own work per frame (base frame {base:.3} s on {} thread(s), compositing {:.3} s) is {:.0}% of the fastest simulated frame ({fastest:.3} s): it bounds the frame (more --master-threads would help)",
-            args.master_threads,
-            rec.composite_seconds,
+            "  the master's own work per frame (base frame {base:.3} s on {master_cores} core(s), driver {driver:.3} s: compositing and the finished frame) is {:.0}% of the fastest simulated frame ({fastest:.3} s): it bounds the frame",
             master / fastest * 100.0
         );
     }

@@ -27,13 +27,15 @@ use vtfarm_vertex::{
 pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
 
 impl PreparedFrames {
-    /// Keeps `frame` as the newest, dropping the oldest beyond
-    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`].
+    /// Keeps `frame`, dropping the oldest (by job and frame) beyond
+    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`]: a skipped frame may be prepared
+    /// after newer ones.
     pub fn insert(&mut self, frame: ActiveFrame) {
-        if self.0.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+        self.0.push(Arc::new(frame));
+        self.0.sort_by_key(|a| (a.job, a.frame));
+        if self.0.len() > vtfarm_proto::FRAMES_IN_FLIGHT {
             self.0.remove(0);
         }
-        self.0.push(Arc::new(frame));
     }
 
     /// The prepared frame `frame` of `job`, if kept.

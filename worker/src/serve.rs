@@ -95,7 +95,7 @@ pub async fn serve(
                     match parts {
                         Ok(parts) => {
                             let task = tokio::task::spawn_blocking(move || parts.build());
-                            // A newer frame replaces one still in the making.
+                            // The session prepares one frame at a time.
                             preparing = Some((key, task));
                         }
                         Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),

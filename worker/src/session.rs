@@ -11,7 +11,11 @@
 //! every core), and sends the result or the error. The master pipelines
 //! frames (it announces frame N+1 while N's last packages run and may still
 //! hand out N's requeued work), so the frames prepared before the newest one
-//! stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all. Scenes are fetched only
+//! stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all. Frames are
+//! prepared one at a time, the newest announced first: a frame announced
+//! while another is being set up waits for it, and a frame skipped that way
+//! is prepared only if a package of it comes (before, such a package failed,
+//! and three of them blocklisted the worker). Scenes are fetched only
 //! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
 //!
 //! Draining (SIGTERM): no more requests; the running package finishes (or
@@ -96,8 +100,13 @@ pub struct WorkerSession {
     /// Frames prepared before `ready`, oldest first: their packages can run
     /// too.
     older: VecDeque<FrameKey>,
-    /// A frame handed to the driver for preparation.
+    /// A frame handed to the driver for preparation (one at a time).
     preparing: Option<FrameKey>,
+    /// Frames announced and not prepared yet, oldest first: the newest is
+    /// prepared next; an older one only when a package of it comes (a
+    /// requeued or straggler package of a frame the worker skipped while
+    /// it was setting another up).
+    announced: VecDeque<FrameStart>,
     /// A frame whose scene is still on its way.
     awaiting_scene: Option<FrameStart>,
     /// A frame that could not be prepared, with why: its packages fail so.
@@ -124,6 +133,7 @@ impl WorkerSession {
             ready: None,
             older: VecDeque::new(),
             preparing: None,
+            announced: VecDeque::new(),
             awaiting_scene: None,
             unusable: None,
             queue: VecDeque::new(),
@@ -249,14 +259,55 @@ impl WorkerSession {
         match outcome {
             Ok(()) => {
                 info!(job = key.0, frame = key.1, "frame ready");
-                self.ready = Some(key);
+                match self.ready {
+                    // A skipped older frame, prepared for a package of it.
+                    Some(ready) if ready > key => self.keep_older(key),
+                    _ => {
+                        if let Some(previous) = self.ready.replace(key) {
+                            self.keep_older(previous);
+                        }
+                    }
+                }
             }
             Err(error) => {
                 warn!(job = key.0, frame = key.1, "cannot start frame: {error}");
                 self.unusable = Some((key, error));
             }
         }
+        self.prepare_next();
         self.advance();
+    }
+
+    /// Keeps a prepared frame older than the newest, dropping the oldest
+    /// beyond [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all.
+    fn keep_older(&mut self, key: FrameKey) {
+        self.older.push_back(key);
+        self.older.make_contiguous().sort_unstable();
+        while self.older.len() + 1 > vtfarm_proto::FRAMES_IN_FLIGHT {
+            self.older.pop_front();
+        }
+    }
+
+    /// Hands the driver the next frame to prepare, if none is being
+    /// prepared: the frame of the first waiting package if it is only
+    /// announced, else the newest announced frame when it is newer than
+    /// the ready one.
+    fn prepare_next(&mut self) {
+        if self.preparing.is_some() {
+            return;
+        }
+        let wanted = self.queue.front().map(|p| (p.job, p.frame));
+        let position = (self.announced.iter())
+            .position(|f| Some((f.job, f.frame)) == wanted)
+            .or_else(|| {
+                let newest = self.announced.back()?;
+                let key = (newest.job, newest.frame);
+                (self.ready.is_none_or(|r| key > r)).then(|| self.announced.len() - 1)
+            });
+        if let Some(start) = position.and_then(|i| self.announced.remove(i)) {
+            self.preparing = Some((start.job, start.frame));
+            self.tasks.push_back(Task::PrepareFrame(start));
+        }
     }
 
     /// The running package finished.
@@ -280,21 +331,16 @@ impl WorkerSession {
     }
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
-        let key = (start.job, start.frame);
-        if let Some(ready) = self.ready.take() {
-            if self.older.len() + 1 == vtfarm_proto::FRAMES_IN_FLIGHT {
-                self.older.pop_front();
-            }
-            self.older.push_back(ready);
-        }
         self.unusable = None;
         self.awaiting_scene = None;
         if scenes.has_scene(&start.scene) {
-            self.preparing = Some(key);
-            self.tasks.push_back(Task::PrepareFrame(start));
+            if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+                self.announced.pop_front();
+            }
+            self.announced.push_back(start);
+            self.prepare_next();
         } else {
             // The scene was offered and requested; the frame waits for it.
-            self.preparing = None;
             self.awaiting_scene = Some(start);
         }
     }
@@ -324,6 +370,14 @@ impl WorkerSession {
             if waiting {
                 break;
             }
+            if self.ready != Some(key) && !self.older.contains(&key) {
+                let announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
+                if announced {
+                    // A frame skipped while another was set up: prepare it now.
+                    self.prepare_next();
+                    break;
+                }
+            }
             let package = self.queue.pop_front().expect("front exists");
             if self.ready == Some(key) || self.older.contains(&key) {
                 self.running = Some(package.id);
@@ -344,7 +398,10 @@ impl WorkerSession {
             }
         }
         let idle = self.running.is_none() && self.queue.is_empty();
-        let settled = self.awaiting_scene.is_none() && self.preparing.is_none();
+        // Work is asked for the newest frame only, once it is prepared.
+        let newer_announced =
+            (self.announced.iter()).any(|f| self.ready.is_none_or(|r| (f.job, f.frame) > r));
+        let settled = self.awaiting_scene.is_none() && self.preparing.is_none() && !newer_announced;
         if let Some((job, frame)) = self.ready.filter(|_| idle && settled && !self.requested) {
             self.outbox.push_back(Message::RequestWork { job, frame });
             self.requested = true;

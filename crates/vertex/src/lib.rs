@@ -170,10 +170,10 @@ mod thin;
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
-    trace_package,
+    TracedPixels, trace_package, trace_package_pixels,
 };
 pub use stop::{Stop, Stopped};
-pub use thin::Behind;
+pub use thin::{Behind, GlassPass};
 pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;
@@ -409,7 +409,7 @@ impl Frame<'_> {
             Rays::Both => self.tracer.shade(&point, direction),
         };
         let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, &sample);
-        self.finish_pixel(&mut value);
+        self.finish_pixel((x, y), &mut value);
         value
     }
 
@@ -434,9 +434,11 @@ impl Frame<'_> {
 
     /// Finishes a vertex-traced pixel value: adds the rasterized
     /// transmitted part (zero unless the transmission comes from the
-    /// rasterizer and the reflector is see-through).
-    fn finish_pixel(&self, value: &mut PixelValue) {
-        self.behind.finish(value);
+    /// rasterizer and the reflector is see-through; see [`Behind::finish`]).
+    /// (`x`, `y`) is the value's pixel.
+    pub fn finish_pixel(&self, (x, y): (u32, u32), value: &mut PixelValue) {
+        self.behind
+            .finish(&self.tracer, &self.camera, self.ids, (x, y), value);
     }
 }
 
@@ -453,9 +455,21 @@ pub fn pixel_surface(
     x: u32,
     y: u32,
 ) -> (SurfacePoint, Vec3) {
+    pixel_surface_along(scene, camera, ids, triangle, (x, y), camera.pixel_ray(x, y))
+}
+
+/// [`pixel_surface`] with the pixel's ray `direction` at hand (from a
+/// [`Projector`], bit-identical to the camera's).
+pub(crate) fn pixel_surface_along(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    ids: &IdBuffer,
+    triangle: TriangleId,
+    (x, y): (u32, u32),
+    direction: Vec3,
+) -> (SurfacePoint, Vec3) {
     let [a, b, c] = scene.triangle_positions(triangle);
     let [na, nb, nc] = scene.triangle_normals(triangle);
-    let direction = camera.pixel_ray(x, y);
     let plane_normal = (b - a).cross(c - a);
     let denom = direction.dot(plane_normal);
     let t = if denom.abs() > 1e-12 {

@@ -32,7 +32,7 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Behind, Frame, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
+    Behind, Frame, GlassPass, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
     VertexOwners, VertexSettings, trace_package,
 };
 
@@ -161,7 +161,14 @@ impl TestFrame {
             lighting: &lighting,
             settings: TraceSettings::default(),
         };
-        let behind = Behind::new(&tracer, &camera, &ids, &is_reflector, Transmission::Raster);
+        let behind = Behind::new(
+            &tracer,
+            &camera,
+            &ids,
+            &is_reflector,
+            Transmission::Raster,
+            GlassPass::Upfront,
+        );
         TestFrame {
             bvh,
             lighting,

@@ -289,3 +289,51 @@ fn a_frame_announced_while_a_package_runs_is_prepared_and_older_frames_stay_usab
     s.handle_message(now, package(12, 1, 0), &mut scenes);
     assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 12));
 }
+
+/// Frames announced faster than the worker sets them up: one is prepared at
+/// a time, the newest next, and a skipped frame only when a package of it
+/// comes (the package waits for it instead of failing).
+#[test]
+fn frames_are_prepared_one_at_a_time_and_a_skipped_one_when_a_package_needs_it() {
+    let (mut s, mut scenes) = ready_session();
+    let now = Duration::from_millis(5);
+    s.handle_message(now, Message::FrameStart(frame_start(1, 1)), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
+    for frame in [2, 3] {
+        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
+    }
+    assert_eq!(tasks(&mut s), vec![], "one frame at a time");
+    s.frame_prepared(now, (1, 1), Ok(()));
+    assert_eq!(
+        tasks(&mut s),
+        vec![Task::PrepareFrame(frame_start(1, 3))],
+        "the newest next; frame 2 is skipped"
+    );
+    assert_eq!(
+        messages(&mut s),
+        vec![],
+        "no request before the newest is ready"
+    );
+    // A requeued package of the skipped frame waits for its set-up.
+    s.handle_message(now, package(20, 1, 2), &mut scenes);
+    assert_eq!((tasks(&mut s), messages(&mut s)), (vec![], vec![]));
+    s.frame_prepared(now, (1, 3), Ok(()));
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 2))]);
+    s.frame_prepared(now, (1, 2), Ok(()));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 20));
+    s.package_finished(now, 20, Ok(result(20)));
+    assert_eq!(
+        messages(&mut s),
+        vec![
+            Message::PackageResult(result(20)),
+            Message::RequestWork { job: 1, frame: 3 }
+        ],
+        "work is asked for the newest frame again"
+    );
+    // Frames 0 to 3 are all kept for their packages.
+    for (id, frame) in [(21, 0), (22, 1)] {
+        s.handle_message(now, package(id, 1, frame), &mut scenes);
+        assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == id));
+        s.package_finished(now, id, Ok(result(id)));
+    }
+}

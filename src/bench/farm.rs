@@ -1,0 +1,809 @@
+//! The simulated farm behind `vtfarm bench simulate`: the master's own
+//! sans-IO core ([`MasterCore`]) and the workers' own sessions
+//! ([`WorkerSession`]) on a virtual clock, with the CPU work and the links
+//! modelled. Every decision — which frame starts when, which requests count,
+//! package sizes, held results, stragglers — is made by the same code as in
+//! the real farm; only the work and the wires are replaced by their costs.
+//!
+//! Model:
+//! - **CPU.** Each machine has cores shared fairly by its running jobs (a job
+//!   runs on one core at most): a worker with one core that sets a frame up
+//!   (its blocking thread) while it traces a package runs both at half speed,
+//!   as the real worker does. The master has its own machine
+//!   ([`FarmConfig::master_cores`]): its base frame is spread over those
+//!   cores (the rasterizer is parallel), and its driver handles one input at
+//!   a time, each costing CPU (a result: [`FarmCosts::result_per_item`] per
+//!   item; a finished frame: [`FarmCosts::frame_out`]); inputs queue
+//!   meanwhile. With [`FarmConfig::shared_cores`] everything runs on one
+//!   machine (a localhost farm), so the master takes CPU from the workers.
+//! - **Work.** A package costs the recorded one-thread seconds of its items
+//!   over the worker's speed, plus a fixed overhead; a frame's set-up
+//!   [`FarmCosts::worker_setup`] over the speed. Results carry each item's
+//!   recorded samples (what the master's cost estimates learn from) and an
+//!   empty bitmap; their size on the wire is the recorded one.
+//! - **Links.** Each worker's link and the master's one shared link, each a
+//!   rate (a message occupies both for its size over the slower rate) plus a
+//!   latency. The submitter sits on the master's machine: its messages cost
+//!   nothing.
+//!
+//! The master core rasterizes for real, but at a tiny resolution (the base
+//! frame's *time* is modelled): the images do not matter here.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Result, bail};
+use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
+use vtfarm_method::MethodKind;
+use vtfarm_proto::{
+    FrameStats, JobScene, Message, PackageResult, SceneData, SceneHash, WireBitmap,
+    WireBitmapParts, WirePackageStats, encoded_len,
+};
+use vtfarm_render::FrameSetup;
+use vtfarm_scene::Scene;
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_vertex::SparseBitmap;
+use vtfarm_worker::{SceneStore, Task, WorkerSession};
+
+/// What the work costs: per item (reflector triangle, in the master's
+/// Morton order) and per frame, in one-thread seconds of this machine.
+#[derive(Clone, Debug)]
+pub(crate) struct FarmCosts {
+    /// The work items (reflector triangle ids) in the master's order.
+    pub(crate) items: Vec<u32>,
+    /// Tracing seconds per item.
+    pub(crate) seconds: Vec<f64>,
+    /// Traced samples per item (what a result reports).
+    pub(crate) samples: Vec<u32>,
+    /// Bytes per item of a result beyond a message's fixed part.
+    pub(crate) result_bytes: Vec<u64>,
+    /// A result message's fixed part.
+    pub(crate) empty_result_bytes: u64,
+    /// A worker's set-up of a frame.
+    pub(crate) worker_setup: f64,
+    /// The master's base frame on one thread.
+    pub(crate) base_frame: f64,
+    /// The master's driver per item of a result (decode, check, composite).
+    pub(crate) result_per_item: f64,
+    /// The master's driver per finished frame (image to the submitter,
+    /// journal).
+    pub(crate) frame_out: f64,
+}
+
+/// One simulated worker.
+#[derive(Clone, Debug)]
+pub(crate) struct FarmWorker {
+    /// Work per second of one thread (1: one thread of the recording machine).
+    pub(crate) speed: f64,
+    /// Cores of its machine: a package uses them all (the tracer is
+    /// parallel), a frame's set-up one (so it overlaps a package on a
+    /// spare core). Ignored on a shared machine (one core's worth each).
+    pub(crate) cores: u32,
+    pub(crate) link_bits_per_second: f64,
+    pub(crate) latency: Duration,
+    /// Fixed time per package.
+    pub(crate) package_overhead: Duration,
+}
+
+/// The farm around the workers.
+#[derive(Clone, Debug)]
+pub(crate) struct FarmConfig {
+    /// The master's shared link, bits per second each way.
+    pub(crate) master_link_bits_per_second: f64,
+    /// Cores of the master's machine.
+    pub(crate) master_cores: u32,
+    /// Everything on one machine of this many cores (a localhost farm):
+    /// workers, master and its base frames share them.
+    pub(crate) shared_cores: Option<u32>,
+    /// Frames of the job.
+    pub(crate) frames: u32,
+    /// Gives up at this virtual time.
+    pub(crate) time_limit: Duration,
+}
+
+/// A finished frame as the submitter got it.
+#[derive(Clone, Debug)]
+pub(crate) struct FarmFrame {
+    /// When the master's driver sent it.
+    pub(crate) done_at: Duration,
+    pub(crate) stats: FrameStats,
+}
+
+/// The job the simulated master runs: the real scene and reflectors, one
+/// frame set-up repeated.
+pub(crate) struct FarmJob {
+    pub(crate) scene: Arc<Scene>,
+    pub(crate) reflectors: Vec<u32>,
+    pub(crate) setup: FrameSetup,
+}
+
+/// Connection of the submitter; workers get 1, 2, ...
+const SUBMITTER: u64 = 1_000_000;
+
+/// Simulates `job` on `workers` and returns its finished frames in order.
+pub(crate) fn simulate_farm(
+    job: &FarmJob,
+    costs: &FarmCosts,
+    config: &FarmConfig,
+    workers: &[FarmWorker],
+) -> Result<Vec<FarmFrame>> {
+    let mut farm = Farm::new(job, costs, config, workers);
+    farm.run()?;
+    if farm.frames.len() != config.frames as usize {
+        bail!(
+            "the simulated farm finished {} of {} frames by {:?} of virtual time",
+            farm.frames.len(),
+            config.frames,
+            farm.now
+        );
+    }
+    Ok(farm.frames)
+}
+
+/// Who a CPU job belongs to; its completion is handled accordingly.
+#[derive(Clone, Debug)]
+enum Work {
+    Setup {
+        worker: usize,
+        key: (u64, u32),
+    },
+    Package {
+        worker: usize,
+        result: Box<PackageResult>,
+        started: Duration,
+        bytes: u64,
+    },
+    /// One core's share of a base frame.
+    Base {
+        job: u64,
+        frame: u32,
+    },
+    /// The driver's handling of an input: its outputs go out when done.
+    Driver(Vec<Output>),
+}
+
+struct CpuJob {
+    machine: usize,
+    /// Cores it can use at once.
+    threads: u32,
+    /// CPU seconds left.
+    left: f64,
+    work: Work,
+}
+
+/// A timed event.
+enum Event {
+    ToMaster(u64, Box<Message>),
+    ToWorker(usize, Box<Message>),
+}
+
+/// An input waiting for the master's driver.
+enum DriverInput {
+    Message(u64, Box<Message>),
+    Base(u64, u32),
+}
+
+struct SimStore {
+    scenes: Vec<SceneHash>,
+}
+
+impl SceneStore for SimStore {
+    fn has_scene(&mut self, hash: &SceneHash) -> bool {
+        self.scenes.contains(hash)
+    }
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+        self.scenes.push(data.hash);
+        Ok(())
+    }
+}
+
+struct Worker {
+    spec: FarmWorker,
+    session: WorkerSession,
+    store: SimStore,
+    /// When its link is free, towards the master and from it.
+    link_free: [Duration; 2],
+}
+
+struct Farm<'a> {
+    costs: &'a FarmCosts,
+    config: &'a FarmConfig,
+    now: Duration,
+    master: MasterCore,
+    workers: Vec<Worker>,
+    /// Cores per machine: the master's is 0, worker `w`'s is `w + 1`
+    /// (all 0 on a shared machine).
+    cores: Vec<u32>,
+    cpu: Vec<CpuJob>,
+    events: BTreeMap<(Duration, u64), Event>,
+    sequence: u64,
+    /// When the master's link is free, towards the workers and from them.
+    master_link_free: [Duration; 2],
+    driver_queue: std::collections::VecDeque<DriverInput>,
+    driver_busy: bool,
+    /// Base-frame shares still running, per frame.
+    base_left: BTreeMap<(u64, u32), u32>,
+    /// Items of results that arrived before their frame's base image.
+    held_items: BTreeMap<(u64, u32), usize>,
+    base_ready: Vec<(u64, u32)>,
+    /// Base frames being "rasterized", to hand to the core when done.
+    pending_base: BTreeMap<(u64, u32), vtfarm_master::BaseFrameRequest>,
+    /// Each package's frame, for the held results.
+    package_frames: BTreeMap<u64, (u64, u32)>,
+    index_of: HashMap<u32, usize>,
+    empty_bitmap: WireBitmap,
+    scene: SceneData,
+    scene_bytes: u64,
+    frames: Vec<FarmFrame>,
+}
+
+impl<'a> Farm<'a> {
+    fn new(
+        job: &FarmJob,
+        costs: &'a FarmCosts,
+        config: &'a FarmConfig,
+        specs: &[FarmWorker],
+    ) -> Farm<'a> {
+        let scene = SceneData::from_scene(&job.scene);
+        let scene_bytes = encoded_len(&Message::SceneData(scene.clone()));
+        let cores = match config.shared_cores {
+            Some(c) => vec![c.max(1)],
+            None => std::iter::once(config.master_cores.max(1))
+                .chain(specs.iter().map(|w| w.cores.max(1)))
+                .collect(),
+        };
+        let mut farm = Farm {
+            costs,
+            config,
+            now: Duration::ZERO,
+            master: MasterCore::new(SchedulerConfig::default()),
+            workers: Vec::new(),
+            cores,
+            cpu: Vec::new(),
+            events: BTreeMap::new(),
+            sequence: 0,
+            master_link_free: [Duration::ZERO; 2],
+            driver_queue: Default::default(),
+            driver_busy: false,
+            base_left: BTreeMap::new(),
+            held_items: BTreeMap::new(),
+            base_ready: Vec::new(),
+            pending_base: BTreeMap::new(),
+            package_frames: BTreeMap::new(),
+            index_of: (costs.items.iter().enumerate())
+                .map(|(i, &t)| (t, i))
+                .collect(),
+            empty_bitmap: WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
+            scene,
+            scene_bytes,
+            frames: Vec::new(),
+        };
+        let peer = Peer::Submitter {
+            address: "simulated".into(),
+        };
+        farm.master.connected(farm.now, SUBMITTER, peer);
+        for (w, spec) in specs.iter().enumerate() {
+            farm.workers.push(Worker {
+                spec: spec.clone(),
+                session: WorkerSession::new(Duration::ZERO),
+                store: SimStore { scenes: Vec::new() },
+                link_free: [Duration::ZERO; 2],
+            });
+            let peer = Peer::Worker {
+                name: format!("w{w}"),
+                threads: 1,
+                address: "simulated".into(),
+            };
+            farm.master.connected(farm.now, w as u64 + 1, peer);
+        }
+        let frames = vec![job.setup.clone(); config.frames as usize];
+        let wire = wire_job(
+            "simulated",
+            &farm.scene,
+            &frames,
+            &job.reflectors,
+            JobOptions {
+                method: MethodKind::VertexTracing,
+                aux: false,
+            },
+        );
+        let wire = vtfarm_proto::WireJob {
+            scene: JobScene::Data(farm.scene.clone()),
+            ..wire
+        };
+        farm.master
+            .message(farm.now, SUBMITTER, Message::SubmitJob { job: wire });
+        farm.route_master_outputs();
+        farm
+    }
+
+    fn machine_of_worker(&self, w: usize) -> usize {
+        if self.config.shared_cores.is_some() {
+            0
+        } else {
+            w + 1
+        }
+    }
+
+    /// Each running job's speed on its machine: its threads, all slowed
+    /// alike when the machine has fewer cores than threads want to run.
+    fn rates(&self) -> Vec<f64> {
+        let mut wanted = vec![0u32; self.cores.len()];
+        for job in &self.cpu {
+            wanted[job.machine] += job.threads;
+        }
+        (self.cpu.iter())
+            .map(|j| {
+                let share = f64::from(self.cores[j.machine]) / f64::from(wanted[j.machine]);
+                f64::from(j.threads) * share.min(1.0)
+            })
+            .collect()
+    }
+
+    fn run(&mut self) -> Result<()> {
+        let mut steps: u64 = 0;
+        while self.frames.len() < self.config.frames as usize {
+            steps += 1;
+            if steps > 50_000_000 || self.now > self.config.time_limit {
+                bail!(
+                    "the simulated farm did not finish (virtual time {:?})",
+                    self.now
+                );
+            }
+            let rates = self.rates();
+            let cpu_next = (self.cpu.iter().zip(&rates))
+                .enumerate()
+                .map(|(i, (j, r))| (j.left.max(0.0) / r, i))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let event_at = self.events.keys().next().map(|k| k.0);
+            let master_at = self.master.poll_timeout();
+            let session_at = (self.workers.iter().enumerate())
+                .map(|(w, x)| (x.session.poll_timeout(), w))
+                .min();
+            let cpu_at = cpu_next.map(|(dt, _)| self.now + Duration::from_secs_f64(dt));
+            let next = [event_at, master_at, session_at.map(|s| s.0), cpu_at]
+                .into_iter()
+                .flatten()
+                .min();
+            let Some(next) = next else {
+                bail!("the simulated farm stalled at {:?}", self.now);
+            };
+            let next = next.max(self.now);
+            let dt = (next - self.now).as_secs_f64();
+            for (job, rate) in self.cpu.iter_mut().zip(&rates) {
+                job.left -= dt * rate;
+            }
+            self.now = next;
+            if cpu_at == Some(next) {
+                let (_, i) = cpu_next.expect("a CPU job is due");
+                let job = self.cpu.swap_remove(i);
+                self.finish(job.work);
+            } else if event_at == Some(next) {
+                let (_, event) = self.events.pop_first().expect("an event is due");
+                match event {
+                    Event::ToMaster(conn, message) => {
+                        self.to_driver(DriverInput::Message(conn, message))
+                    }
+                    Event::ToWorker(w, message) => {
+                        let worker = &mut self.workers[w];
+                        worker
+                            .session
+                            .handle_message(next, *message, &mut worker.store);
+                        self.pump_worker(w);
+                    }
+                }
+            } else if master_at == Some(next) {
+                self.master.handle_timeout(next);
+                self.route_master_outputs();
+            } else if let Some((_, w)) = session_at {
+                self.workers[w].session.handle_timeout(next);
+                self.pump_worker(w);
+            }
+        }
+        Ok(())
+    }
+
+    fn schedule(&mut self, at: Duration, event: Event) {
+        self.events.insert((at, self.sequence), event);
+        self.sequence += 1;
+    }
+
+    /// Starts `seconds` of one-thread work on `machine`, on one thread.
+    fn start_cpu(&mut self, machine: usize, seconds: f64, work: Work) {
+        self.start_threads(machine, 1, seconds, work);
+    }
+
+    fn start_threads(&mut self, machine: usize, threads: u32, seconds: f64, work: Work) {
+        self.cpu.push(CpuJob {
+            machine,
+            threads: threads.max(1),
+            left: seconds.max(0.0),
+            work,
+        });
+    }
+
+    /// A message of `bytes` over worker `w`'s link and the master's link,
+    /// `to_master` or from it: when it arrives.
+    fn transfer(&mut self, w: usize, bytes: u64, to_master: bool) -> Duration {
+        let direction = usize::from(to_master);
+        let worker = &mut self.workers[w];
+        let rate = (worker.spec.link_bits_per_second).min(self.config.master_link_bits_per_second);
+        let start = (self.now)
+            .max(worker.link_free[direction])
+            .max(self.master_link_free[direction]);
+        let end = start + Duration::from_secs_f64(bytes as f64 * 8.0 / rate);
+        worker.link_free[direction] = end;
+        self.master_link_free[direction] = end;
+        end + worker.spec.latency
+    }
+
+    fn finish(&mut self, work: Work) {
+        match work {
+            Work::Setup { worker, key } => {
+                self.workers[worker]
+                    .session
+                    .frame_prepared(self.now, key, Ok(()));
+                self.pump_worker(worker);
+            }
+            Work::Package {
+                worker,
+                mut result,
+                started,
+                bytes,
+            } => {
+                result.busy_micros = (self.now - started).as_micros() as u64;
+                let id = result.id;
+                let session = &mut self.workers[worker].session;
+                session.package_finished(self.now, id, Ok(*result));
+                self.pump_worker_sized(worker, Some(bytes));
+            }
+            Work::Base { job, frame } => {
+                let left = self.base_left.entry((job, frame)).or_insert(1);
+                *left -= 1;
+                if *left == 0 {
+                    self.base_left.remove(&(job, frame));
+                    self.to_driver(DriverInput::Base(job, frame));
+                }
+            }
+            Work::Driver(outputs) => {
+                self.driver_busy = false;
+                for output in outputs {
+                    self.release(output);
+                }
+                self.next_driver_input();
+            }
+        }
+    }
+
+    fn to_driver(&mut self, input: DriverInput) {
+        self.driver_queue.push_back(input);
+        if !self.driver_busy {
+            self.next_driver_input();
+        }
+    }
+
+    /// Hands the driver's next input to the core; its outputs go out once
+    /// the driver's CPU time for it has passed.
+    fn next_driver_input(&mut self) {
+        let Some(input) = self.driver_queue.pop_front() else {
+            return;
+        };
+        let mut seconds = 0.0;
+        match input {
+            DriverInput::Message(conn, message) => {
+                if let Message::PackageResult(result) = message.as_ref() {
+                    let items = result.triangle_samples.len();
+                    seconds += self.costs.result_per_item * items as f64;
+                    if let Some(&key) = self.package_frames.get(&result.id) {
+                        if !self.base_ready.contains(&key) {
+                            *self.held_items.entry(key).or_default() += items;
+                        }
+                    }
+                }
+                self.master.message(self.now, conn, *message);
+            }
+            DriverInput::Base(job, frame) => {
+                self.base_ready.push((job, frame));
+                let held = self.held_items.remove(&(job, frame)).unwrap_or(0);
+                seconds += self.costs.result_per_item * held as f64;
+                // The tiny stand-in image: the time was modelled.
+                let request = self.pending_base.remove(&(job, frame));
+                if let Some(request) = request {
+                    let base = request.rasterize();
+                    self.master.base_frame_ready(self.now, job, frame, base);
+                }
+            }
+        }
+        let mut outputs = Vec::new();
+        while let Some(output) = self.master.poll_output() {
+            if let Output::Send(_, message) = &output {
+                if matches!(message.as_ref(), Message::FrameDone(_)) {
+                    seconds += self.costs.frame_out;
+                }
+            }
+            outputs.push(output);
+        }
+        self.driver_busy = true;
+        self.start_cpu(0, seconds, Work::Driver(outputs));
+    }
+
+    /// Outputs of a core call made outside the driver's queue (timeouts).
+    fn route_master_outputs(&mut self) {
+        while let Some(output) = self.master.poll_output() {
+            self.release(output);
+        }
+    }
+
+    fn release(&mut self, output: Output) {
+        match output {
+            Output::Send(SUBMITTER, message) => match *message {
+                Message::FrameDone(done) => self.frames.push(FarmFrame {
+                    done_at: self.now,
+                    stats: done.stats,
+                }),
+                Message::SceneRequest { .. } => {
+                    let data = Message::SceneData(self.scene.clone());
+                    self.schedule(self.now, Event::ToMaster(SUBMITTER, Box::new(data)));
+                }
+                _ => {}
+            },
+            Output::Send(conn, message) => {
+                let w = (conn - 1) as usize;
+                if let Message::Package(p) = message.as_ref() {
+                    self.package_frames.insert(p.id, (p.job, p.frame));
+                }
+                let bytes = match message.as_ref() {
+                    Message::SceneData(_) => self.scene_bytes,
+                    m => encoded_len(m),
+                };
+                let at = self.transfer(w, bytes, false);
+                self.schedule(at, Event::ToWorker(w, message));
+            }
+            Output::RasterizeBase(request) => {
+                let key = (request.job, request.frame);
+                let shares = self.cores[0];
+                self.base_left.insert(key, shares);
+                self.pending_base.insert(key, request);
+                let seconds = self.costs.base_frame / f64::from(shares);
+                for _ in 0..shares {
+                    let work = Work::Base {
+                        job: key.0,
+                        frame: key.1,
+                    };
+                    self.start_cpu(0, seconds, work);
+                }
+            }
+            Output::Close(..) | Output::Persist(_) | Output::Replay { .. } => {}
+        }
+    }
+
+    fn pump_worker(&mut self, w: usize) {
+        self.pump_worker_sized(w, None);
+    }
+
+    /// Starts worker `w`'s tasks and sends its messages (a result at
+    /// `result_bytes`, its recorded size).
+    fn pump_worker_sized(&mut self, w: usize, result_bytes: Option<u64>) {
+        let machine = self.machine_of_worker(w);
+        while let Some(task) = self.workers[w].session.poll_task() {
+            let speed = self.workers[w].spec.speed;
+            match task {
+                Task::PrepareFrame(start) => {
+                    let key = (start.job, start.frame);
+                    let seconds = self.costs.worker_setup / speed;
+                    self.start_cpu(machine, seconds, Work::Setup { worker: w, key });
+                }
+                Task::RunPackage(package) => {
+                    let indices: Vec<usize> = (package.triangles.iter())
+                        .filter_map(|t| self.index_of.get(t).copied())
+                        .collect();
+                    let work: f64 = indices.iter().map(|&i| self.costs.seconds[i]).sum();
+                    let overhead = self.workers[w].spec.package_overhead.as_secs_f64();
+                    let bytes = self.costs.empty_result_bytes
+                        + (indices.iter())
+                            .map(|&i| self.costs.result_bytes[i])
+                            .sum::<u64>();
+                    let result = PackageResult {
+                        id: package.id,
+                        bitmap: self.empty_bitmap.clone(),
+                        stats: WirePackageStats::default(),
+                        busy_micros: 0,
+                        triangle_samples: indices.iter().map(|&i| self.costs.samples[i]).collect(),
+                    };
+                    let package_work = Work::Package {
+                        worker: w,
+                        result: Box::new(result),
+                        started: self.now,
+                        bytes,
+                    };
+                    let threads = match self.config.shared_cores {
+                        Some(_) => 1,
+                        None => self.workers[w].spec.cores.max(1),
+                    };
+                    let seconds = (work + overhead) / speed;
+                    self.start_threads(machine, threads, seconds, package_work);
+                }
+            }
+        }
+        while let Some(message) = self.workers[w].session.poll_message() {
+            let bytes = match (&message, result_bytes) {
+                (Message::PackageResult(_), Some(bytes)) => bytes,
+                _ => encoded_len(&message),
+            };
+            let at = self.transfer(w, bytes, true);
+            self.schedule(at, Event::ToMaster(w as u64 + 1, Box::new(message)));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use vtfarm_cockpit::{CockpitConfig, cockpit};
+    use vtfarm_render::morton_order;
+
+    use super::*;
+
+    /// A small cockpit job and costs: every item 10 ms, 2 samples, 100 bytes.
+    fn small_farm(worker_setup: f64, base_frame: f64) -> (FarmJob, FarmCosts) {
+        let c = cockpit(&CockpitConfig {
+            detail: 0.2,
+            ..CockpitConfig::default()
+        });
+        let reflectors = c.cover_glass_triangles();
+        let items = morton_order(&c.scene, reflectors.clone());
+        let n = items.len();
+        let job = FarmJob {
+            scene: Arc::new(c.scene),
+            reflectors,
+            setup: FrameSetup {
+                camera: vtfarm_scene::Camera {
+                    width: 32,
+                    height: 18,
+                    ..c.camera
+                },
+                lighting: c.lighting,
+                trace: Default::default(),
+                vertex: Default::default(),
+            },
+        };
+        let costs = FarmCosts {
+            items,
+            seconds: vec![0.01; n],
+            samples: vec![2; n],
+            result_bytes: vec![100; n],
+            empty_result_bytes: 30,
+            worker_setup,
+            base_frame,
+            result_per_item: 0.0,
+            frame_out: 0.0,
+        };
+        (job, costs)
+    }
+
+    fn config(frames: u32) -> FarmConfig {
+        FarmConfig {
+            master_link_bits_per_second: 1e9,
+            master_cores: 1,
+            shared_cores: None,
+            frames,
+            time_limit: Duration::from_secs(3600),
+        }
+    }
+
+    fn workers(n: usize) -> Vec<FarmWorker> {
+        let worker = FarmWorker {
+            speed: 1.0,
+            link_bits_per_second: 1e9,
+            latency: Duration::from_micros(100),
+            package_overhead: Duration::from_millis(1),
+            cores: 1,
+        };
+        vec![worker; n]
+    }
+
+    fn frame_times(frames: &[FarmFrame]) -> Vec<Duration> {
+        frames.iter().map(|f| f.done_at).collect()
+    }
+
+    /// Same inputs, same frames at the same virtual times; every frame is
+    /// delivered with every item traced once.
+    #[test]
+    fn the_farm_is_deterministic_and_delivers_every_frame() {
+        let (job, costs) = small_farm(0.05, 0.05);
+        let run = || simulate_farm(&job, &costs, &config(4), &workers(3)).unwrap();
+        let (a, b) = (run(), run());
+        assert_eq!(a.len(), 4);
+        assert_eq!(frame_times(&a), frame_times(&b));
+        for frame in &a {
+            let items: u32 = frame.stats.workers.iter().map(|w| w.triangles).sum();
+            assert_eq!(items as usize, costs.items.len());
+        }
+    }
+
+    /// The load balancer spreads the work: with no fixed costs, four workers
+    /// make the frames nearly four times as fast as one.
+    #[test]
+    fn four_workers_without_fixed_costs_are_nearly_four_times_as_fast() {
+        let (job, costs) = small_farm(0.0, 0.0);
+        let interval = |n| {
+            super::super::simulate::mean_frame_seconds(
+                &simulate_farm(&job, &costs, &config(6), &workers(n)).unwrap(),
+            )
+        };
+        let (one, four) = (interval(1), interval(4));
+        let work: f64 = costs.seconds.iter().sum();
+        assert!(one >= work, "one worker: {one} s for {work} s of work");
+        assert!(one / four > 3.2, "one {one} s, four {four} s");
+    }
+
+    /// On one shared core, a second worker only shares it: no faster; and
+    /// the master's base frame takes from the workers too.
+    #[test]
+    fn workers_on_one_shared_core_are_no_faster() {
+        let (job, costs) = small_farm(0.02, 0.0);
+        let shared = FarmConfig {
+            shared_cores: Some(1),
+            ..config(5)
+        };
+        let interval = |config: &FarmConfig, n| {
+            super::super::simulate::mean_frame_seconds(
+                &simulate_farm(&job, &costs, config, &workers(n)).unwrap(),
+            )
+        };
+        let (one, two) = (interval(&shared, 1), interval(&shared, 2));
+        assert!(two > one * 0.95, "one {one} s, two {two} s");
+        let (job_base, costs_base) = small_farm(0.02, 0.5);
+        let with_base = super::super::simulate::mean_frame_seconds(
+            &simulate_farm(&job_base, &costs_base, &shared, &workers(1)).unwrap(),
+        );
+        assert!(
+            with_base > one + 0.4,
+            "without base {one} s, with {with_base} s"
+        );
+    }
+
+    /// Figures for a worker with a spare core (printed; see the README).
+    #[test]
+    fn a_spare_core_overlaps_set_up_and_tracing() {
+        let (job, costs) = small_farm(0.3, 0.0);
+        let work: f64 = costs.seconds.iter().sum();
+        let interval = |cores| {
+            let workers: Vec<FarmWorker> = (workers(1).into_iter())
+                .map(|w| FarmWorker { cores, ..w })
+                .collect();
+            super::super::simulate::mean_frame_seconds(
+                &simulate_farm(&job, &costs, &config(8), &workers).unwrap(),
+            )
+        };
+        let (one, two) = (interval(1), interval(2));
+        println!("work {work} s, set-up 0.3 s: one core {one} s, two cores {two} s");
+        assert!(one >= work + 0.3 * 0.99, "{one}");
+        assert!(two < 0.3 + work / 2.0, "{two}");
+    }
+
+    /// A slow shared master link bounds the frame: results can come no
+    /// faster than their bytes through it.
+    #[test]
+    fn a_slow_master_link_bounds_the_frame() {
+        let (job, mut costs) = small_farm(0.0, 0.0);
+        costs.result_bytes = vec![20_000; costs.items.len()];
+        let slow = FarmConfig {
+            master_link_bits_per_second: 10e6,
+            ..config(4)
+        };
+        let frames = simulate_farm(&job, &costs, &slow, &workers(8)).unwrap();
+        let bytes: u64 = costs.result_bytes.iter().sum();
+        let link = bytes as f64 * 8.0 / 10e6;
+        let interval = super::super::simulate::mean_frame_seconds(&frames);
+        assert!(
+            interval >= link,
+            "{interval} s per frame, the link needs {link} s"
+        );
+        assert!(
+            interval < link * 1.5,
+            "{interval} s per frame, the link needs {link} s"
+        );
+    }
+}
