@@ -130,22 +130,6 @@ fn table1(args: Table1Args) -> Result<()> {
             ..VertexSettings::default()
         },
     };
-    if std::env::var_os("PHASE_SETUP").is_some() {
-        for _ in 0..2 {
-            let t0 = std::time::Instant::now();
-            let _ = renderer.id_buffers(&setup_for(Quality::Full));
-            eprintln!("PHASE id_buffers total {:?}", t0.elapsed());
-        }
-        return Ok(());
-    }
-    if let Some(level) = std::env::var_os("PHASE_LEVEL") {
-        let q = Quality::from_name(level.to_str().unwrap()).unwrap();
-        for _ in 0..30 {
-            let f = renderer.render(&setup_for(q), &RenderOptions::default(), &mut |_, _| {});
-            eprintln!("PHASE level {:?}", f.total_time - f.raster_time);
-        }
-        return Ok(());
-    }
     // Reference first: the others are measured against it.
     let order = [
         Quality::Reference,
