@@ -187,6 +187,7 @@ fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
 impl GlassTerms {
     /// The thin-glass terms of every pixel of `bounds` whose reflector is
     /// see-through, or (`GlassPass::OnDemand`) what computing them needs.
+    #[allow(clippy::too_many_arguments)]
     fn new(
         tracer: &Tracer<'_>,
         camera: &Camera,
