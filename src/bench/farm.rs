@@ -764,9 +764,12 @@ mod tests {
         );
     }
 
-    /// Figures for a worker with a spare core (printed; see the README).
+    /// A worker with two cores traces its packages on both; its set-up of
+    /// frame N+1 overlaps only the last package of frame N (the master
+    /// announces N+1 once N has nothing left to hand out, and late packages
+    /// are small), so the frame takes about set-up + work / 2.
     #[test]
-    fn a_spare_core_overlaps_set_up_and_tracing() {
+    fn a_second_core_halves_the_tracing_but_not_the_set_up() {
         let (job, costs) = small_farm(0.3, 0.0);
         let work: f64 = costs.seconds.iter().sum();
         let interval = |cores| {
@@ -778,9 +781,12 @@ mod tests {
             )
         };
         let (one, two) = (interval(1), interval(2));
-        println!("work {work} s, set-up 0.3 s: one core {one} s, two cores {two} s");
-        assert!(one >= work + 0.3 * 0.99, "{one}");
-        assert!(two < 0.3 + work / 2.0, "{two}");
+        assert!(one >= work + 0.3 * 0.99, "one core: {one} s");
+        let serial = 0.3 + work / 2.0;
+        assert!(
+            two > serial * 0.97 && two < serial * 1.03,
+            "two cores: {two} s, {serial} s serial"
+        );
     }
 
     /// A slow shared master link bounds the frame: results can come no
