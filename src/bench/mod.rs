@@ -6,6 +6,7 @@
 
 mod cluster;
 mod farm;
+mod raster;
 mod rays;
 mod simulate;
 
@@ -31,6 +32,9 @@ pub(crate) enum BenchCommand {
     /// Closest-hit rays per second on fixed camera, random and reflection
     /// rays (compare with another tracer on the same rays; see README).
     Rays(rays::RaysArgs),
+    /// The rasterizer's per-frame costs: the master's base frame and a
+    /// worker's ID buffer over the reflectors' bounds, on 1 and more threads.
+    Raster(raster::RasterArgs),
 }
 
 #[derive(clap::Args)]
@@ -96,6 +100,7 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Simulate(args) => simulate::run(args),
         BenchCommand::Cluster(args) => cluster::run(args),
         BenchCommand::Rays(args) => rays::run(args),
+        BenchCommand::Raster(args) => raster::run(args),
     }
 }
 
@@ -175,7 +180,10 @@ fn table1(args: Table1Args) -> Result<()> {
         let setup = setup_for(Quality::Full);
         let ids = vtfarm_raster::id_buffer(&scene, &camera);
         let behind = renderer.behind(&setup, &ids);
-        let modelled = vtfarm_render::thin_glass_model(&reference.image, &behind);
+        let modelled = vtfarm_render::thin_glass_model(
+            &reference.image,
+            &renderer.frame(&setup, &ids, &behind),
+        );
         let err = compare(&modelled, &reference.image);
         ModelFigures {
             share_off: err.share_off,

@@ -27,8 +27,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{
-    Behind, Frame, PackageOptions, PackageStats, PixelValue, SparseBitmap, Stop, VertexOwners,
-    VertexSettings, pixel_surface, trace_package,
+    Behind, Frame, GlassPass, PackageOptions, PackageStats, PixelValue, SparseBitmap, Stop,
+    VertexOwners, VertexSettings, pixel_surface, trace_package,
 };
 
 /// Everything that can change from one frame to the next: what a job
@@ -509,6 +509,7 @@ impl ReflectionMethod for VertexTracing {
             frame.ids,
             &frame.reflector_flags(),
             self.settings.transmission,
+            GlassPass::Upfront,
         );
         let owners = VertexOwners::new(scene);
         let vertex_frame = Frame {

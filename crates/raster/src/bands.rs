@@ -1,9 +1,14 @@
 //! Visibility. Triangles are binned by the horizontal bands of rows their
 //! bounding boxes overlap; each band is one rayon task that scan-converts its
-//! triangles into its own slice of the z-buffer. A band's result depends only
-//! on its rows and its triangle list (in triangle order), and the z-test is
-//! a total order on (depth, triangle id), so the output is the same for any
-//! thread count and any scheduling.
+//! triangles into its own slice of the z-buffer. The z-test is a total order
+//! on (depth, triangle id), so a pixel's result does not depend on the order
+//! in which triangles reach it: the output is the same for any thread count
+//! and any scheduling.
+//!
+//! Most triangles of a detailed scene are hidden. Bands take their triangles
+//! nearest first, and a row of a triangle whose nearest depth lies beyond
+//! every depth already stored along it is skipped without interpolating its
+//! depths: it could not win a single pixel there.
 
 use rayon::prelude::*;
 
@@ -27,6 +32,7 @@ pub(crate) fn resolve_visibility(
     if within.is_empty() {
         return;
     }
+    let triangles = &nearest_first(triangles);
     let bins = Bins::new(triangles, ids.height);
     let band_len = width * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
@@ -44,22 +50,62 @@ pub(crate) fn resolve_visibility(
             let band_row = band as u32 * BAND_ROWS;
             for &t in bins.band(band) {
                 let t = &triangles[t as usize];
+                let nearest = t.nearest_depth();
+                let hidden = |row: &[f32]| nearest > farthest(row);
                 for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
+                    let row = (y - band_row) as usize * width;
+                    let (c0, c1) = (t.columns.0.max(within.x0), t.columns.1.min(within.x1 - 1));
+                    if c0 > c1 || hidden(&depth[row + c0 as usize..=row + c1 as usize]) {
+                        continue;
+                    }
                     let Some((x0, x1)) = t.span(y) else { continue };
                     let (x0, x1) = (x0.max(within.x0), x1.min(within.x1 - 1));
-                    let row = (y - band_row) as usize * width;
-                    for x in x0..=x1 {
-                        let i = row + x as usize;
+                    if x0 > x1 || hidden(&depth[row + x0 as usize..=row + x1 as usize]) {
+                        continue;
+                    }
+                    let span = row + x0 as usize..=row + x1 as usize;
+                    let slots = depth[span.clone()].iter_mut().zip(&mut triangle[span]);
+                    for (x, (stored, seen)) in (x0..x1 + 1).zip(slots) {
                         let d = t.depth_at(x, y);
                         // Nearer wins; an exact tie goes to the lower triangle id.
-                        if d < depth[i] || (d == depth[i] && t.id < triangle[i]) {
-                            depth[i] = d;
-                            triangle[i] = t.id;
-                        }
+                        // Unconditional stores let the loop vectorize.
+                        let wins = d < *stored || (d == *stored && t.id < *seen);
+                        *stored = if wins { d } else { *stored };
+                        *seen = if wins { t.id } else { *seen };
                     }
                 }
             }
         });
+}
+
+/// The largest of `depths` (never NaN), in eight independent lanes so that
+/// it vectorizes.
+fn farthest(depths: &[f32]) -> f32 {
+    let max = |a: f32, b: f32| if b > a { b } else { a };
+    let mut lanes = [0.0f32; 8];
+    let chunks = depths.chunks_exact(lanes.len());
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        for (lane, &d) in lanes.iter_mut().zip(chunk) {
+            *lane = max(*lane, d);
+        }
+    }
+    rest.iter().chain(&lanes).fold(0.0, |m, &d| max(m, d))
+}
+
+/// `triangles` nearest first (ties in their order), copied so that bands
+/// read them in memory order.
+fn nearest_first(triangles: &[RasterTriangle]) -> Vec<RasterTriangle> {
+    // Positive depths order like their bits: sort (depth bits, index) keys.
+    let mut keys: Vec<u64> = triangles
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| u64::from(t.nearest_depth().to_bits()) << 32 | i as u64)
+        .collect();
+    keys.par_sort_unstable();
+    keys.par_iter()
+        .map(|&k| triangles[k as u32 as usize])
+        .collect()
 }
 
 /// Triangle indices per band, in triangle order (a counting sort).

@@ -11,9 +11,11 @@
 //! reflector for a map rendered from a virtual viewpoint behind it.
 
 use glam::{DVec3, Vec3};
+use rayon::iter::Either;
 use rayon::prelude::*;
 use vtfarm_scene::{Camera, NEAR, Projector, Scene, Triangle, TriangleId};
 
+use crate::PixelRect;
 use crate::triangle::{RasterTriangle, ScreenVertex};
 
 /// How far beyond the image (in pixels) a corner may project before its
@@ -82,17 +84,21 @@ struct View {
     half_height: f64,
     width: u32,
     height: u32,
+    /// The pixels being rasterized: triangles outside are dropped.
+    within: PixelRect,
 }
 
 /// Projects, clips (at view depth `near`) and snaps the triangles of `scene`
-/// that `keep` accepts, in triangle order.
+/// that `keep` accepts and that may cover pixels of `within` (a non-empty
+/// rectangle inside the image), in triangle order.
 pub(crate) fn setup(
     scene: &Scene,
     camera: &Camera,
     near: f32,
+    within: PixelRect,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> Vec<RasterTriangle> {
-    let view = View::new(camera, near);
+    let view = View::new(camera, near, within);
     let vertices: Vec<ClipVertex> = scene
         .positions
         .par_iter()
@@ -108,7 +114,7 @@ pub(crate) fn setup(
 }
 
 impl View {
-    fn new(camera: &Camera, near: f32) -> Self {
+    fn new(camera: &Camera, near: f32, within: PixelRect) -> Self {
         let (forward, right, up) = camera.basis();
         View {
             projector: Projector::new(camera),
@@ -122,6 +128,7 @@ impl View {
             half_height: f64::from(camera.height) * 0.5,
             width: camera.width,
             height: camera.height,
+            within,
         }
     }
 
@@ -261,19 +268,22 @@ impl View {
         let corners = triangle.vertices.map(|v| vertices[v as usize]);
         let any_outside = corners.iter().fold(0, |m, c| m | c.outside);
         let all_outside = corners.iter().fold(u8::MAX, |m, c| m & c.outside);
-        let mut polygon = Polygon::default();
+        if any_outside == 0 {
+            // The common case: in front of the eye and near the image.
+            let screen = corners.map(|c| c.screen);
+            return Either::Left(RasterTriangle::new(id, screen, self.within).into_iter());
+        }
         // Entirely beyond one plane (or invalid): nothing to draw.
+        let mut polygon = Box::<Polygon>::default();
         if all_outside == 0 && any_outside & INVALID == 0 {
             corners.into_iter().for_each(|c| polygon.push(c));
-            if any_outside != 0 {
-                polygon = self.clip(polygon);
-            }
+            *polygon = self.clip(*polygon);
         }
         let fan = 1..polygon.len.saturating_sub(1);
-        fan.filter_map(move |i| {
+        Either::Right(fan.filter_map(move |i| {
             let [a, b, c] = [0, i, i + 1].map(|j| polygon.corners[j].screen);
-            RasterTriangle::new(id, [a, b, c], self.width, self.height)
-        })
+            RasterTriangle::new(id, [a, b, c], self.within)
+        }))
     }
 }
 
@@ -294,7 +304,7 @@ mod tests {
 
     #[test]
     fn near_plane_corners_land_on_the_near_plane_and_on_the_edge() {
-        let view = View::new(&camera(), NEAR);
+        let view = View::new(&camera(), NEAR, PixelRect::full(64, 48));
         let front = view.vertex(Vec3::new(0.5, -1.0, -2.0));
         let behind = view.vertex(Vec3::new(0.5, -1.0, 2.0));
         assert_eq!(behind.outside, NEAR_PLANE);
@@ -306,7 +316,7 @@ mod tests {
     #[test]
     fn a_custom_near_plane_moves_the_clipped_corners_there() {
         let near = 1.25f32;
-        let view = View::new(&camera(), near);
+        let view = View::new(&camera(), near, PixelRect::full(64, 48));
         let front = view.vertex(Vec3::new(0.5, -1.0, -2.0));
         let between = view.vertex(Vec3::new(0.5, -1.0, -1.0));
         assert_eq!(between.outside, NEAR_PLANE);
@@ -314,14 +324,18 @@ mod tests {
         assert_eq!(v.view.z, f64::from(near));
         assert!((v.view.x - 0.5).abs() < 1e-12 && (v.view.y + 1.0).abs() < 1e-12);
         // Nearer than the default: projected in f64 where the projector declines.
-        let close = View::new(&camera(), NEAR * 0.1).vertex(Vec3::new(0.0, 0.0, -NEAR * 0.5));
+        let close = View::new(&camera(), NEAR * 0.1, PixelRect::full(64, 48)).vertex(Vec3::new(
+            0.0,
+            0.0,
+            -NEAR * 0.5,
+        ));
         assert_eq!(close.outside, 0);
         assert!((close.screen.x - 32.0).abs() < 1e-6 && (close.screen.y - 24.0).abs() < 1e-6);
     }
 
     #[test]
     fn guard_band_clipping_keeps_corners_near_the_guard() {
-        let view = View::new(&camera(), NEAR);
+        let view = View::new(&camera(), NEAR, PixelRect::full(64, 48));
         // A sliver reaching far to the right, just in front of the eye.
         let t = Triangle {
             vertices: [0, 1, 2],

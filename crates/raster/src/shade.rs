@@ -5,10 +5,14 @@
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_imaging::Image;
-use vtfarm_scene::shading::phong;
-use vtfarm_scene::{Camera, Lighting, NONE, Projector, Scene, TriangleId};
+use vtfarm_scene::{Camera, LightKind, Lighting, Material, NONE, Scene, TriangleId};
+
+use crate::lanes::{F, LANES, V3};
 
 use crate::IdBuffer;
+
+/// Rows per rayon task: enough work per task to amortise scheduling.
+const ROWS_PER_TASK: usize = 8;
 
 /// Shades every pixel of `ids`; empty pixels get the background.
 pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
@@ -17,68 +21,461 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
     if width == 0 {
         return image;
     }
-    let rays = Projector::new(camera);
+    let frame = FrameShading::new(camera, lighting);
     image
         .pixels
-        .par_chunks_mut(width)
-        .zip(ids.triangle.par_chunks(width))
+        .par_chunks_mut(width * ROWS_PER_TASK)
+        .zip(ids.triangle.par_chunks(width * ROWS_PER_TASK))
         .enumerate()
-        .for_each(|(y, (colors, triangles))| {
-            for (x, (color, &t)) in colors.iter_mut().zip(triangles).enumerate() {
-                if t != NONE {
-                    let dir = rays.pixel_ray(x as u32, y as u32);
-                    *color = shade_pixel(scene, camera.eye, lighting, t, dir);
-                }
-            }
+        .for_each(|(task, (colors, triangles))| {
+            let first_row = (task * ROWS_PER_TASK) as u32;
+            frame.shade_rows(scene, first_row, colors, triangles, width);
         });
     image
 }
 
-/// Phong at the point of triangle `id` seen from `eye` along the pixel ray `dir`.
-fn shade_pixel(scene: &Scene, eye: Vec3, lighting: &Lighting, id: TriangleId, dir: Vec3) -> Vec3 {
-    let corners = scene.triangle_positions(id).map(|p| p - eye);
-    let w = perspective_barycentrics(corners, dir);
-    let [n0, n1, n2] = scene.triangle_normals(id);
-    let normal = (n0 * w.x + n1 * w.y + n2 * w.z)
-        .try_normalize()
-        .unwrap_or_else(|| scene.geometric_normal(id));
-    let offset = corners[0] * w.x + corners[1] * w.y + corners[2] * w.z;
-    let to_eye = (-offset).normalize_or(-dir);
-    phong(
-        scene.material_of(id),
-        lighting,
-        eye + offset,
-        normal,
-        to_eye,
-        |_, _, _| true,
-    )
+/// What shading needs of the camera and the lights, set up once per frame.
+struct FrameShading<'a> {
+    lighting: &'a Lighting,
+    eye: Vec3,
+    /// Per column, the pixel ray's part that depends on the column
+    /// (`Projector::pixel_ray` before its row term and normalization).
+    columns: Vec<Vec3>,
+    up: Vec3,
+    pixel: f32,
+    half_height: f32,
+    lights: Vec<LightTerms>,
+}
+
+/// A light as the shading of every pixel sees it.
+struct LightTerms {
+    toward: Toward,
+    radiance: Vec3,
+}
+
+enum Toward {
+    /// The unit direction towards a directional light, normalized once.
+    Direction(Vec3),
+    Point(Vec3),
+}
+
+impl<'a> FrameShading<'a> {
+    fn new(camera: &Camera, lighting: &'a Lighting) -> Self {
+        // The arithmetic of `Projector::ray_direction`, split into a column
+        // and a row term (the test `pixel_rays_are_the_projectors` pins it).
+        let (forward, right, up) = camera.basis();
+        let pixel = camera.pixel_size_at_unit_depth();
+        let half_width = camera.width as f32 * 0.5;
+        let columns = (0..camera.width)
+            .map(|x| forward + right * ((x as f32 + 0.5 - half_width) * pixel))
+            .collect();
+        let lights = lighting
+            .lights
+            .iter()
+            .map(|light| LightTerms {
+                toward: match light.kind {
+                    LightKind::Directional { .. } => {
+                        Toward::Direction(light.direction_from(Vec3::ZERO).0)
+                    }
+                    LightKind::Point { position } => Toward::Point(position),
+                },
+                radiance: light.radiance(),
+            })
+            .collect();
+        FrameShading {
+            lighting,
+            eye: camera.eye,
+            columns,
+            up,
+            pixel,
+            half_height: camera.height as f32 * 0.5,
+            lights,
+        }
+    }
+
+    /// Shades the rows from `first_row` on whose pixels are `colors` and
+    /// whose ID buffer rows are `triangles`, each `width` long, with the
+    /// widest vector instructions this CPU has (the same bits either way:
+    /// IEEE arithmetic is exact per lane and nothing is fused).
+    fn shade_rows(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.shade_rows_avx2(scene, first_row, colors, triangles, width) };
+            return;
+        }
+        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+    }
+
+    /// [`Self::shade_rows_portable`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn shade_rows_avx2(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+    }
+
+    /// See [`Self::shade_rows`]. A row is shaded run by run of pixels that
+    /// see the same triangle, whose set-up is reused while it lasts.
+    #[inline(always)]
+    fn shade_rows_portable(
+        &self,
+        scene: &Scene,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+        width: usize,
+    ) {
+        let mut surface: Option<Surface> = None;
+        let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
+        for (row, (colors, triangles)) in rows.enumerate() {
+            let row_ray = self.row_ray(first_row + row as u32);
+            let mut x = 0;
+            while x < width {
+                let t = triangles[x];
+                let mut run = 1;
+                while x + run < width && triangles[x + run] == t {
+                    run += 1;
+                }
+                if t != NONE {
+                    let surface = match &mut surface {
+                        Some(s) if s.id == t => s,
+                        slot => slot.insert(Surface::new(scene, self, t)),
+                    };
+                    for start in (x..x + run).step_by(LANES) {
+                        let end = (start + LANES).min(x + run);
+                        self.shade(surface, row_ray, start, &mut colors[start..end]);
+                    }
+                }
+                x += run;
+            }
+        }
+    }
+
+    /// The pixel ray's row term for row `y`.
+    fn row_ray(&self, y: u32) -> Vec3 {
+        self.up * ((self.half_height - (y as f32 + 0.5)) * self.pixel)
+    }
+
+    /// Shades pixels `x0..x0 + out.len()` (at most [`LANES`]) of a row with
+    /// ray term `row_ray`, all on `surface`: Phong at the point the pixel ray
+    /// meets the triangle, exactly as `vtfarm_scene::shading::phong` lights it.
+    #[inline(always)]
+    fn shade(&self, surface: &Surface, row_ray: Vec3, x0: usize, out: &mut [Vec3]) {
+        let last = out.len() - 1;
+        let dir = V3::from_fn(|i| self.columns[x0 + i.min(last)] + row_ray).normalize();
+        let w = perspective_barycentrics(surface.opposite, dir);
+        let [n0, n1, n2] = surface.normals;
+        let [n0, n1, n2] = [V3::splat(n0), V3::splat(n1), V3::splat(n2)];
+        let normal = (n0 * w.x + n1 * w.y + n2 * w.z)
+            .normalize_or_else(|| V3::splat(surface.scene.geometric_normal(surface.id)));
+        let [c0, c1, c2] = surface.corners;
+        let [c0, c1, c2] = [V3::splat(c0), V3::splat(c1), V3::splat(c2)];
+        let offset = c0 * w.x + c1 * w.y + c2 * w.z;
+        let to_eye = (-offset).normalize_or(-dir);
+        let position = V3::splat(self.eye) + offset;
+        let color = self.phong(surface, position, normal, to_eye, out.len());
+        for (i, out) in out.iter_mut().enumerate() {
+            *out = color.lane(i);
+        }
+    }
+
+    /// `vtfarm_scene::shading::phong` (no shadows) lane by lane, with the
+    /// per-material and per-light terms computed once; lanes from `used` on
+    /// are padding.
+    #[inline(always)]
+    fn phong(&self, surface: &Surface, position: V3, normal: V3, to_eye: V3, used: usize) -> V3 {
+        let material = surface.material;
+        let facing_away = normal.dot(to_eye).test(|d| d < 0.0);
+        let n = V3::select(facing_away, -normal, normal);
+        let mut color = V3::splat(surface.unlit);
+        for light in &self.lights {
+            let to_light = match light.toward {
+                Toward::Direction(d) => V3::splat(d),
+                Toward::Point(p) => {
+                    let d = V3::splat(p) - position;
+                    let length = d.dot(d).map(f32::sqrt);
+                    d / length.map(|l| l.max(f32::MIN_POSITIVE))
+                }
+            };
+            let n_dot_l = n.dot(to_light);
+            // As `phong`'s `n_dot_l <= 0.0` skip: a NaN lights.
+            let lit = n_dot_l.test(|d| d > 0.0 || d.is_nan());
+            let mut term = V3::splat(material.diffuse) * n_dot_l;
+            if material.specular.max_element() > 0.0 {
+                let reflected = n * (F::splat(2.0) * n_dot_l) - to_light;
+                let r_dot_v = reflected.dot(to_eye).map(|d| d.max(0.0));
+                let exponent = material.shininess.max(1.0);
+                // The one call that does not vectorize: only where it counts.
+                let mut highlight = F::splat(0.0);
+                for i in (0..used).filter(|&i| lit[i]) {
+                    highlight.0[i] = power(r_dot_v.0[i], exponent);
+                }
+                term = term + V3::splat(material.specular) * highlight;
+            }
+            color = V3::select(lit, color + term * V3::splat(light.radiance), color);
+        }
+        color
+    }
+}
+
+/// `base.powf(exponent)` for an `exponent` of at least 1, with the common
+/// bases 0 and 1 answered without the call, as C's `pow` answers them.
+#[inline(always)]
+fn power(base: f32, exponent: f32) -> f32 {
+    if base == 0.0 {
+        // pow(±0, y > 0) is ±0 for odd integer y, +0 otherwise.
+        if exponent % 2.0 == 1.0 { base } else { 0.0 }
+    } else if base == 1.0 {
+        1.0
+    } else {
+        base.powf(exponent)
+    }
+}
+
+/// What shading a triangle's pixels needs, set up once per triangle.
+struct Surface<'a> {
+    scene: &'a Scene,
+    id: TriangleId,
+    /// Corners relative to the eye.
+    corners: [Vec3; 3],
+    /// [`opposite_products`] of the corners.
+    opposite: [Vec3; 3],
+    normals: [Vec3; 3],
+    material: &'a Material,
+    /// The material's emission plus its ambient term.
+    unlit: Vec3,
+}
+
+impl<'a> Surface<'a> {
+    fn new(scene: &'a Scene, frame: &FrameShading, id: TriangleId) -> Self {
+        let corners = scene.triangle_positions(id).map(|p| p - frame.eye);
+        let material = scene.material_of(id);
+        Surface {
+            scene,
+            id,
+            corners,
+            opposite: opposite_products(corners),
+            normals: scene.triangle_normals(id),
+            material,
+            unlit: material.emission + material.ambient * frame.lighting.ambient,
+        }
+    }
+}
+
+/// [b × c, c × a, a × b] for corners [a, b, c].
+fn opposite_products([a, b, c]: [Vec3; 3]) -> [Vec3; 3] {
+    [b.cross(c), c.cross(a), a.cross(b)]
 }
 
 /// The barycentric coordinates of the point where the ray from the eye along
-/// `dir` meets the plane of a triangle whose `corners` are given relative to
-/// the eye. Each weight is the volume of the tetrahedron spanned by the ray and
-/// the opposite edge: this equals screen-space barycentrics weighted by 1/z
-/// (perspective-correct interpolation) but needs no projected corners, so it
-/// also holds for triangles clipped at the near plane.
-fn perspective_barycentrics([a, b, c]: [Vec3; 3], dir: Vec3) -> Vec3 {
-    let raw = Vec3::new(
-        dir.dot(b.cross(c)),
-        dir.dot(c.cross(a)),
-        dir.dot(a.cross(b)),
-    );
-    let w = raw / raw.element_sum();
-    if !w.is_finite() {
-        // The ray grazes the plane: any point of the triangle will do.
-        return Vec3::splat(1.0 / 3.0);
-    }
+/// `dir` meets the plane of a triangle with corners a, b, c relative to the
+/// eye, given `opposite` = [b × c, c × a, a × b]. Each weight is the volume of
+/// the tetrahedron spanned by the ray and the opposite edge: this equals
+/// screen-space barycentrics weighted by 1/z (perspective-correct
+/// interpolation) but needs no projected corners, so it also holds for
+/// triangles clipped at the near plane.
+#[inline(always)]
+fn perspective_barycentrics([bc, ca, ab]: [Vec3; 3], dir: V3) -> V3 {
+    let raw = V3 {
+        x: dir.dot(V3::splat(bc)),
+        y: dir.dot(V3::splat(ca)),
+        z: dir.dot(V3::splat(ab)),
+    };
+    let w = raw / (raw.x + raw.y + raw.z);
+    // Where the ray grazes the plane, any point of the triangle will do.
+    let finite = w.x.test(f32::is_finite);
+    let finite = std::array::from_fn(|i| finite[i] && w.y.0[i].is_finite() && w.z.0[i].is_finite());
+    let w = V3::select(finite, w, V3::splat(Vec3::splat(1.0 / 3.0)));
     // Pixel centres lie inside the triangle up to snapping; clamp the rest.
-    let w = w.max(Vec3::ZERO);
-    w / w.element_sum()
+    let w = V3 {
+        x: w.x.map(|v| if v > 0.0 { v } else { 0.0 }),
+        y: w.y.map(|v| if v > 0.0 { v } else { 0.0 }),
+        z: w.z.map(|v| if v > 0.0 { v } else { 0.0 }),
+    };
+    w / (w.x + w.y + w.z)
 }
 
 #[cfg(test)]
 mod tests {
+    use glam::Vec3;
+    use vtfarm_scene::shading::phong;
+    use vtfarm_scene::{Light, LightKind, Object, Projector, Triangle};
+
     use super::*;
+
+    fn camera(width: u32, height: u32) -> Camera {
+        Camera {
+            eye: Vec3::new(0.3, 1.2, 2.0),
+            target: Vec3::new(-0.2, 0.9, -1.0),
+            up: Vec3::Y,
+            fov_y_deg: 55.0,
+            width,
+            height,
+        }
+    }
+
+    /// The scalar shading the lanes must reproduce bit for bit: Phong at
+    /// the point of triangle `id` seen along `dir`.
+    fn scalar_shade(
+        scene: &Scene,
+        eye: Vec3,
+        lighting: &Lighting,
+        id: TriangleId,
+        dir: Vec3,
+    ) -> Vec3 {
+        let corners = scene.triangle_positions(id).map(|p| p - eye);
+        let [a, b, c] = corners;
+        let raw = Vec3::new(
+            dir.dot(b.cross(c)),
+            dir.dot(c.cross(a)),
+            dir.dot(a.cross(b)),
+        );
+        let w = raw / raw.element_sum();
+        let w = if w.is_finite() {
+            w
+        } else {
+            Vec3::splat(1.0 / 3.0)
+        };
+        let w = w.max(Vec3::ZERO);
+        let w = w / w.element_sum();
+        let [n0, n1, n2] = scene.triangle_normals(id);
+        let normal = (n0 * w.x + n1 * w.y + n2 * w.z)
+            .try_normalize()
+            .unwrap_or_else(|| scene.geometric_normal(id));
+        let offset = corners[0] * w.x + corners[1] * w.y + corners[2] * w.z;
+        let to_eye = (-offset).normalize_or(-dir);
+        phong(
+            scene.material_of(id),
+            lighting,
+            eye + offset,
+            normal,
+            to_eye,
+            |_, _, _| true,
+        )
+    }
+
+    #[test]
+    fn pixel_rays_are_the_projectors() {
+        for (width, height) in [(64, 48), (1920, 1080), (7, 300)] {
+            let camera = camera(width, height);
+            let lighting = Lighting::default();
+            let frame = FrameShading::new(&camera, &lighting);
+            let rays = Projector::new(&camera);
+            for y in (0..height).step_by(7) {
+                for x in (0..width).step_by(5) {
+                    let lanes = V3::from_fn(|_| frame.columns[x as usize] + frame.row_ray(y));
+                    assert_eq!(
+                        lanes.normalize().lane(0),
+                        rays.pixel_ray(x, y),
+                        "({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_shade_every_pixel_as_scalar_phong_does_bit_for_bit() {
+        // Triangles facing towards and away from the eye, one seen edge on,
+        // one with cancelling normals; shiny and matte; a point and a
+        // directional light.
+        let mut shiny = Material::diffuse("shiny", Vec3::new(0.5, 0.3, 0.2));
+        shiny.specular = Vec3::splat(0.4);
+        shiny.shininess = 23.0;
+        shiny.emission = Vec3::new(0.01, 0.0, 0.02);
+        let matte = Material::diffuse("matte", Vec3::splat(0.7));
+        let positions = vec![
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.2, -1.5),
+            Vec3::new(0.0, 1.5, -1.2),
+            Vec3::new(-2.0, 0.5, 0.0),
+            Vec3::new(2.0, 0.6, 0.5),
+            Vec3::new(0.0, 1.2, -3.0),
+        ];
+        let normals = vec![
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.3, 0.1, 0.9).normalize(),
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.5, 0.5, 0.0).normalize(),
+            Vec3::new(0.0, -1.0, 0.0),
+        ];
+        let triangles = [[0, 1, 2, 0], [2, 1, 0, 1], [3, 4, 5, 0], [5, 4, 3, 1]]
+            .map(|[a, b, c, m]| Triangle {
+                vertices: [a, b, c],
+                object: 0,
+                material: m,
+            })
+            .to_vec();
+        let scene = Scene {
+            positions,
+            normals,
+            triangles,
+            objects: vec![Object { name: "o".into() }],
+            materials: vec![shiny, matte],
+        };
+        let lighting = Lighting {
+            lights: vec![
+                Light {
+                    kind: LightKind::Point {
+                        position: Vec3::new(0.5, 3.0, 1.0),
+                    },
+                    color: Vec3::new(1.0, 0.9, 0.8),
+                    intensity: 3.0,
+                },
+                Light {
+                    kind: LightKind::Directional {
+                        direction: Vec3::new(0.3, -1.0, -0.4),
+                    },
+                    color: Vec3::ONE,
+                    intensity: 0.7,
+                },
+            ],
+            ambient: Vec3::splat(0.05),
+            background: Vec3::ZERO,
+        };
+        let camera = camera(40, 30);
+        let frame = FrameShading::new(&camera, &lighting);
+        let rays = Projector::new(&camera);
+        for id in 0..scene.triangles.len() as TriangleId {
+            let surface = Surface::new(&scene, &frame, id);
+            for y in 0..camera.height {
+                for x0 in (0..camera.width as usize).step_by(3) {
+                    // Runs of 1 to LANES pixels, as the row loop makes them.
+                    let len = (x0 % LANES + 1).min(camera.width as usize - x0);
+                    let mut out = vec![Vec3::NAN; len];
+                    frame.shade(&surface, frame.row_ray(y), x0, &mut out);
+                    for (i, color) in out.into_iter().enumerate() {
+                        let x = (x0 + i) as u32;
+                        let expected =
+                            scalar_shade(&scene, camera.eye, &lighting, id, rays.pixel_ray(x, y));
+                        assert_eq!(
+                            color.to_array().map(f32::to_bits),
+                            expected.to_array().map(f32::to_bits),
+                            "triangle {id} ({x}, {y})"
+                        );
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn barycentrics_follow_the_ray_not_the_screen() {
@@ -88,13 +485,15 @@ mod tests {
             Vec3::new(-1.0, 1.0, -1.0),
         ];
         let point = corners[0] * 0.2 + corners[1] * 0.5 + corners[2] * 0.3;
-        let w = perspective_barycentrics(corners, point.normalize());
+        let dir = V3::splat(point.normalize());
+        let w = perspective_barycentrics(opposite_products(corners), dir).lane(0);
         assert!(
             (w - Vec3::new(0.2, 0.5, 0.3)).abs().max_element() < 1e-5,
             "{w}"
         );
         // Independent of the corners' orientation.
-        let w = perspective_barycentrics([corners[0], corners[2], corners[1]], point.normalize());
+        let swapped = [corners[0], corners[2], corners[1]];
+        let w = perspective_barycentrics(opposite_products(swapped), dir).lane(0);
         assert!(
             (w - Vec3::new(0.2, 0.3, 0.5)).abs().max_element() < 1e-5,
             "{w}"

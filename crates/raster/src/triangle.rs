@@ -6,6 +6,8 @@
 
 use vtfarm_scene::TriangleId;
 
+use crate::PixelRect;
+
 /// Sub-pixel units per pixel.
 const SUBPIXEL: i64 = 256;
 /// A pixel centre's offset from its corner, in sub-pixel units.
@@ -32,10 +34,10 @@ pub(crate) struct RasterTriangle {
     /// triangle stays in this range, rounding must not leave it.
     inv_depth_range: [f64; 2],
     /// Inclusive range of rows whose pixel centres the bounding box covers,
-    /// clipped to the image.
+    /// clipped to the rectangle being rasterized.
     pub(crate) rows: (u32, u32),
     /// The same for columns.
-    columns: (u32, u32),
+    pub(crate) columns: (u32, u32),
 }
 
 /// Snaps a pixel coordinate to the sub-pixel grid. Callers keep coordinates
@@ -45,25 +47,24 @@ fn snap(v: f64) -> i64 {
 }
 
 /// The pixels whose centres lie in the sub-pixel range [`lo`, `hi`],
-/// intersected with 0..`size`.
-fn pixel_range(lo: i64, hi: i64, size: u32) -> Option<(u32, u32)> {
+/// intersected with `start..end`.
+fn pixel_range(lo: i64, hi: i64, start: u32, end: u32) -> Option<(u32, u32)> {
     // First centre at or after lo: ceil((lo - HALF) / SUBPIXEL).
-    let first = (-(HALF_PIXEL - lo).div_euclid(SUBPIXEL)).max(0);
+    let first = (-(HALF_PIXEL - lo).div_euclid(SUBPIXEL)).max(i64::from(start));
     let last = (hi - HALF_PIXEL)
         .div_euclid(SUBPIXEL)
-        .min(i64::from(size) - 1);
+        .min(i64::from(end) - 1);
     (first <= last).then_some((first as u32, last as u32))
 }
 
 impl RasterTriangle {
-    /// Sets up a triangle for an image of `width` x `height` pixels; `None`
-    /// when it covers no pixel centre for sure (zero area after snapping, or
-    /// off the image).
+    /// Sets up a triangle for rasterizing the pixels of `within` (inside the
+    /// image); `None` when it covers none of their centres for sure (zero
+    /// area after snapping, or outside the rectangle).
     pub(crate) fn new(
         id: TriangleId,
         vertices: [ScreenVertex; 3],
-        width: u32,
-        height: u32,
+        within: PixelRect,
     ) -> Option<Self> {
         let mut corners = vertices.map(|v| [snap(v.x), snap(v.y)]);
         let mut inv = vertices.map(|v| v.inv_depth);
@@ -76,8 +77,8 @@ impl RasterTriangle {
             corners.swap(1, 2);
             inv.swap(1, 2);
         }
-        let columns = pixel_range(x0.min(x1).min(x2), x0.max(x1).max(x2), width)?;
-        let rows = pixel_range(y0.min(y1).min(y2), y0.max(y1).max(y2), height)?;
+        let columns = pixel_range(x0.min(x1).min(x2), x0.max(x1).max(x2), within.x0, within.x1)?;
+        let rows = pixel_range(y0.min(y1).min(y2), y0.max(y1).max(y2), within.y0, within.y1)?;
 
         // The plane of 1/z over the snapped corners (pixel units).
         let p = corners.map(|[x, y]| [x as f64 / SUBPIXEL as f64, y as f64 / SUBPIXEL as f64]);
@@ -129,6 +130,13 @@ impl RasterTriangle {
         (first <= last).then_some((first as u32, last as u32))
     }
 
+    /// A lower bound of [`Self::depth_at`] over the whole triangle: its
+    /// nearest corner's depth (the interpolated 1/z is clamped to the
+    /// corners' range, and division and rounding to `f32` are monotonic).
+    pub(crate) fn nearest_depth(&self) -> f32 {
+        (1.0 / self.inv_depth_range[1]) as f32
+    }
+
     /// The view depth at the centre of pixel (`x`, `y`): 1/z is interpolated
     /// linearly in screen space (perspective-correct). Evaluated from scratch
     /// per pixel, never incrementally, so it does not depend on where a band
@@ -167,8 +175,8 @@ mod tests {
             vertex(5.5, 5.5),
             vertex(1.5, 5.5),
         ];
-        let upper = RasterTriangle::new(0, [a, b, c], 8, 8).unwrap();
-        let lower = RasterTriangle::new(1, [a, d, c], 8, 8).unwrap();
+        let upper = RasterTriangle::new(0, [a, b, c], PixelRect::full(8, 8)).unwrap();
+        let lower = RasterTriangle::new(1, [a, d, c], PixelRect::full(8, 8)).unwrap();
         for y in 2..5 {
             for x in 2..5 {
                 assert_eq!(
@@ -204,8 +212,7 @@ mod tests {
                     inv_depth: 1.0,
                 },
             ],
-            16,
-            16,
+            PixelRect::full(16, 16),
         )
         .unwrap();
         // Halfway across on screen, 1/z is halfway: z = 1 / 0.625.

@@ -22,8 +22,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
-    Behind, FinishedFace, Frame, FrameImage, PackageOptions, PackageStats, VertexOwners,
-    VertexSettings, reflector_bounds, trace_package,
+    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, VertexOwners,
+    VertexSettings, reflector_bounds, trace_package_pixels,
 };
 
 /// How to cut and run the reflector work.
@@ -123,24 +123,32 @@ impl Renderer {
     /// Only the raster results a worker needs (no base frame): the frame's
     /// ID buffer and what lies behind the reflectors, both over the
     /// reflectors' bounds only (`vtfarm_vertex::reflector_bounds`; empty
-    /// elsewhere, where no package looks).
+    /// elsewhere, where no package looks). The thin-glass terms are left to
+    /// the pixels the worker's packages finish (`GlassPass::OnDemand`), so
+    /// two workers split that pass instead of each doing all of it.
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
         let margin = setup.vertex.visibility_radius + 1;
         let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
         let ids = vtfarm_raster::id_buffer_within(self.scene(), &setup.camera, bounds, &|_| true);
-        let behind = self.behind(setup, &ids);
+        let behind = self.behind_with(setup, &ids, GlassPass::OnDemand);
         (ids, behind)
     }
 
     /// What lies behind the reflectors of a frame whose ID buffer is `ids`
-    /// (see `vtfarm_vertex::Behind`).
+    /// (see `vtfarm_vertex::Behind`), with the thin-glass terms of every
+    /// glass pixel: the raster pass of a whole frame.
     pub fn behind(&self, setup: &FrameSetup, ids: &IdBuffer) -> Behind {
+        self.behind_with(setup, ids, GlassPass::Upfront)
+    }
+
+    fn behind_with(&self, setup: &FrameSetup, ids: &IdBuffer, pass: GlassPass) -> Behind {
         Behind::new(
             &self.tracer(setup),
             &setup.camera,
             ids,
             &self.is_reflector,
             setup.vertex.transmission,
+            pass,
         )
     }
 
@@ -184,7 +192,9 @@ impl Renderer {
         let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
+        let t0 = Instant::now();
         let mut image = FrameImage::new(base);
+        eprintln!("PHASE frameimage_new {:?}", t0.elapsed());
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
@@ -194,13 +204,18 @@ impl Renderer {
             time_break: None,
         };
         for package in packages {
-            let result = trace_package(&frame, package, &package_options, &mut |_| {});
-            image.composite(&result.bitmap);
+            // One machine: the pixels go straight into the frame (the farm's
+            // master composites the same values from bitmaps).
+            let result = trace_package_pixels(&frame, package, &package_options, &mut |_| {});
+            for pixels in &result.pixels {
+                image.write(pixels);
+            }
             stats.add(&result.stats);
             faces.extend(result.faces);
             done += package.len() as u64;
             progress(done, total);
         }
+        eprintln!("PHASE total-raster {:?} vertex {:?} fill {:?}", start.elapsed() - raster_time, stats.vertex_time, stats.fill_time);
         RenderedFrame {
             image,
             stats,
@@ -264,7 +279,8 @@ pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<Triangle
 /// thin-glass model's (rasterized transmission, the back surface's
 /// reflection added to the front's): what `transmission = "raster"` would
 /// give with every reflector pixel traced, i.e. the model's own error.
-pub fn thin_glass_model(reference: &FrameImage, behind: &Behind) -> FrameImage {
+/// `frame` is the reference's frame with raster transmission.
+pub fn thin_glass_model(reference: &FrameImage, frame: &Frame<'_>) -> FrameImage {
     let mut modelled = reference.clone();
     for i in (0..modelled.mask.len()).filter(|&i| modelled.mask[i]) {
         let mut value = vtfarm_vertex::PixelValue {
@@ -274,7 +290,8 @@ pub fn thin_glass_model(reference: &FrameImage, behind: &Behind) -> FrameImage {
             transmitted: Vec3::ZERO,
             object: modelled.reflected_object[i],
         };
-        behind.finish(&mut value);
+        let width = modelled.color.width as usize;
+        frame.finish_pixel(((i % width) as u32, (i / width) as u32), &mut value);
         modelled.color.pixels[i] = value.color;
         modelled.reflected.pixels[i] = value.reflected;
         modelled.transmitted.pixels[i] = value.transmitted;

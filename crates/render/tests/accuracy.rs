@@ -491,7 +491,8 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
             let s = setup(camera, &lighting, quality);
             // The master: whole-frame buffers.
             let master = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
-            // A worker: the bounded buffers, packages composited the same way.
+            // A worker: the bounded buffers and the thin-glass terms computed
+            // per finished pixel, packages composited the same way.
             let (base, full_ids) = renderer.base_frame(&s);
             let (ids, behind) = renderer.id_buffers(&s);
             for (x, y) in bounds.pixels() {
@@ -595,7 +596,7 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
     // the back one's reflection included) replaced by the raster model's.
     let (_, ids) = renderer.base_frame(&s);
     let behind = renderer.behind(&s, &ids);
-    let modelled = vtfarm_render::thin_glass_model(&reference, &behind);
+    let modelled = vtfarm_render::thin_glass_model(&reference, &renderer.frame(&s, &ids, &behind));
     let err = compare(&modelled, &reference);
     assert!(err.pixels > 10_000, "the pane covers {} pixels", err.pixels);
     // The slab shifts the view by well under a pixel here: only stripe

@@ -24,7 +24,8 @@ use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
 use vtfarm_scene::{Scene, TriangleId};
 
-use crate::wide::Isa;
+use crate::leaf::{LaneHits, Leaves, bits};
+use crate::wide::{Isa, LeafTest};
 use crate::{Hit, Ray, SurfacePoint};
 
 /// Which obvhs tree layout a [`SceneBvh`] uses.
@@ -142,7 +143,7 @@ macro_rules! with_axes {
 
 /// Triangle data in BVH leaf order, laid out for the intersection test.
 #[derive(Clone, Copy, Debug)]
-struct PrimTriangle {
+pub(crate) struct PrimTriangle {
     v0: Vec3A,
     v1: Vec3A,
     v2: Vec3A,
@@ -169,6 +170,15 @@ impl PrimTriangle {
         }
     }
 
+    pub(crate) fn corners(&self) -> [Vec3A; 3] {
+        [self.v0, self.v1, self.v2]
+    }
+
+    /// Whether the triangle can be hit at all (not too degenerate).
+    pub(crate) fn is_solid(&self) -> bool {
+        self.n != Vec3A::ZERO
+    }
+
     /// Two-sided ray/triangle test; returns (t, u, v) with u, v the weights of
     /// vertices 1 and 2.
     ///
@@ -183,7 +193,7 @@ impl PrimTriangle {
     /// Edges are inclusive.
     ///
     /// [`PrimTriangle::intersect_in`] does the work; this picks its axis order.
-    #[inline(always)]
+    #[cfg(test)]
     fn intersect(&self, ray: &ShearedRay) -> Option<(f32, f32, f32)> {
         with_axes!(ray.axes, self.intersect_in(ray))
     }
@@ -196,7 +206,7 @@ impl PrimTriangle {
         &self,
         ray: &ShearedRay,
     ) -> Option<(f32, f32, f32)> {
-        if self.n == Vec3A::ZERO {
+        if !self.is_solid() {
             return None; // too degenerate to hit reliably
         }
         let (kx, ky, kz) = (KX, KY, KZ);
@@ -235,11 +245,11 @@ impl PrimTriangle {
 /// makes the direction's largest component z (swapping x and y when it is
 /// negative, which keeps the winding) and the shear that maps the direction
 /// to +z.
-struct ShearedRay {
-    origin: Vec3A,
+pub(crate) struct ShearedRay {
+    pub(crate) origin: Vec3A,
     axes: [usize; 3],
     /// (Sx, Sy, Sz) of the paper.
-    shear: Vec3A,
+    pub(crate) shear: Vec3A,
 }
 
 impl ShearedRay {
@@ -278,6 +288,9 @@ pub struct SceneBvh {
     /// Indexed by BVH primitive slot (leaf order; with pre-splits a triangle
     /// can fill several slots).
     prims: Vec<PrimTriangle>,
+    /// The same triangles by leaf, for the 8-wide layout's walk (empty for
+    /// the others).
+    leaves: Leaves,
     /// Original scene triangle id of each slot.
     prim_ids: Vec<TriangleId>,
     /// Unit geometric normals by original triangle id (zero if degenerate).
@@ -434,10 +447,14 @@ impl SceneBvh {
         } else {
             build(&tri_positions, options, scale * 1e-6)
         };
-        let prims = slots
+        let prims: Vec<PrimTriangle> = slots
             .iter()
             .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
             .collect();
+        let leaves = match &accel {
+            Accel::Cw(cw) if options.layout == BvhLayout::Cw => Leaves::new(cw, &prims, &slots),
+            _ => Leaves::default(),
+        };
         let slot_casts_shadow = slots
             .iter()
             .map(|&i| triangle_casts_shadow(&scene, i))
@@ -456,6 +473,7 @@ impl SceneBvh {
             options,
             accel,
             prims,
+            leaves,
             prim_ids: slots,
             geometric_normals,
             avx2: has_avx2(),
@@ -584,7 +602,9 @@ impl SceneBvh {
         t_max: f32,
     ) -> Option<Hit> {
         let mut best = ClosestSoFar { t_max, hit: None };
-        let mut test = |slot: usize| match self.prims[slot].intersect_in::<KX, KY, KZ>(sheared) {
+        let test = |best: &mut ClosestSoFar, slot: usize| match self.prims[slot]
+            .intersect_in::<KX, KY, KZ>(sheared)
+        {
             Some(tuv) if best.offer(self.prim_ids[slot], tuv) => {
                 best.hit.map_or(f32::INFINITY, |h| next_up(h.t))
             }
@@ -594,11 +614,20 @@ impl SceneBvh {
         match &self.accel {
             Accel::Empty => false,
             Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
-                crate::wide::closest(isa, bvh, bvh_ray, test);
-                false
+                let mut leaf = ClosestInLeaves::<KX, KY, KZ> {
+                    bvh: self,
+                    ray: sheared,
+                    best,
+                };
+                crate::wide::closest(isa, bvh, bvh_ray, &mut leaf);
+                return leaf.best.hit;
             }
-            Accel::Cw(bvh) => bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(slot)),
-            Accel::Binary(bvh) => bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(slot)),
+            Accel::Cw(bvh) => {
+                bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(&mut best, slot))
+            }
+            Accel::Binary(bvh) => {
+                bvh.ray_traverse(*bvh_ray, &mut unused, |_, slot| test(&mut best, slot))
+            }
         };
         best.hit
     }
@@ -655,17 +684,15 @@ impl SceneBvh {
                     bvh_rays.push(r);
                 }
             }
-            let mut best: [ClosestSoFar; crate::wide::PACKET] =
+            let best: [ClosestSoFar; crate::wide::PACKET] =
                 std::array::from_fn(|_| ClosestSoFar { t_max, hit: None });
-            crate::wide::closest_packet(isa, bvh, &bvh_rays, |r, slot| {
-                let tuv = self.prims[slot].intersect(&sheared[r]);
-                match tuv {
-                    Some(tuv) if best[r].offer(self.prim_ids[slot], tuv) => {
-                        best[r].hit.map_or(f32::INFINITY, |h| next_up(h.t))
-                    }
-                    _ => f32::INFINITY,
-                }
-            });
+            let mut leaf = PacketInLeaves {
+                bvh: self,
+                rays: &sheared,
+                best,
+            };
+            crate::wide::closest_packet(isa, bvh, &bvh_rays, &mut leaf);
+            let best = leaf.best;
             let start = hits.len();
             hits.resize(start + packet.len(), None);
             for (r, best) in best.iter().enumerate().take(bvh_rays.len()) {
@@ -746,7 +773,13 @@ impl SceneBvh {
         match &self.accel {
             Accel::Empty => false,
             Accel::Cw(bvh) if self.options.layout == BvhLayout::Cw => {
-                crate::wide::any(isa, bvh, bvh_ray, test)
+                let mut leaf = AnyInLeaves::<KX, KY, KZ> {
+                    bvh: self,
+                    ray: sheared,
+                    t_max,
+                    counts,
+                };
+                crate::wide::any(isa, bvh, bvh_ray, &mut leaf)
             }
             Accel::Cw(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),
             Accel::Binary(bvh) => !bvh.ray_traverse_miss(*bvh_ray, |_, slot| test(slot)),
@@ -775,6 +808,88 @@ impl SceneBvh {
             }
         }
         best.hit
+    }
+}
+
+/// The closest-hit leaf test of one ray with axis order `[KX, KY, KZ]`.
+struct ClosestInLeaves<'a, const KX: usize, const KY: usize, const KZ: usize> {
+    bvh: &'a SceneBvh,
+    ray: &'a ShearedRay,
+    best: ClosestSoFar,
+}
+
+impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest
+    for ClosestInLeaves<'_, KX, KY, KZ>
+{
+    #[inline(always)]
+    fn test(&mut self, _: usize, first: u32, _: u32) -> f32 {
+        let hits = self
+            .bvh
+            .leaves
+            .block(first)
+            .intersect_in::<KX, KY, KZ>(self.ray);
+        offer_leaf(&mut self.best, &hits)
+    }
+}
+
+/// The closest-hit leaf test of a packet's rays (any axis orders).
+struct PacketInLeaves<'a> {
+    bvh: &'a SceneBvh,
+    rays: &'a [ShearedRay],
+    best: [ClosestSoFar; crate::wide::PACKET],
+}
+
+impl LeafTest for PacketInLeaves<'_> {
+    #[inline(always)]
+    fn test(&mut self, r: usize, first: u32, _: u32) -> f32 {
+        let block = self.bvh.leaves.block(first);
+        let ray = &self.rays[r];
+        let hits = with_axes!(ray.axes, block.intersect_in(ray));
+        offer_leaf(&mut self.best[r], &hits)
+    }
+}
+
+/// The any-hit leaf test of one ray with axis order `[KX, KY, KZ]`: hits
+/// in `(0, t_max)` on slots `counts` marks (all for `None`).
+struct AnyInLeaves<'a, const KX: usize, const KY: usize, const KZ: usize> {
+    bvh: &'a SceneBvh,
+    ray: &'a ShearedRay,
+    t_max: f32,
+    counts: Option<&'a [bool]>,
+}
+
+impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest for AnyInLeaves<'_, KX, KY, KZ> {
+    #[inline(always)]
+    fn test(&mut self, _: usize, first: u32, _: u32) -> f32 {
+        let hits = self
+            .bvh
+            .leaves
+            .block(first)
+            .intersect_in::<KX, KY, KZ>(self.ray);
+        for lane in bits(hits.hits) {
+            let t = hits.t[lane];
+            let slot = first as usize + lane;
+            if t > 0.0 && t < self.t_max && self.counts.is_none_or(|c| c[slot]) {
+                return t;
+            }
+        }
+        f32::INFINITY
+    }
+}
+
+/// Offers a leaf's hits to `best` in slot order; returns the new `tmax` for
+/// the walk: just above the closest hit when one of them became it, else
+/// `f32::INFINITY`.
+#[inline(always)]
+fn offer_leaf(best: &mut ClosestSoFar, hits: &LaneHits) -> f32 {
+    let mut closer = false;
+    for lane in bits(hits.hits) {
+        let tuv = (hits.t[lane], hits.u[lane], hits.v[lane]);
+        closer |= best.offer(hits.ids[lane], tuv);
+    }
+    match best.hit {
+        Some(hit) if closer => next_up(hit.t),
+        _ => f32::INFINITY,
     }
 }
 

@@ -14,6 +14,7 @@
 //! bit-identical samples whatever the number of threads.
 
 mod bvh;
+mod leaf;
 mod whitted;
 mod wide;
 
@@ -27,7 +28,7 @@ mod testutil;
 pub use bvh::{
     BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
 };
-pub use whitted::{SurfaceTerms, Tracer, reflect, refract};
+pub use whitted::{Rays, SurfaceTerms, Tracer, reflect, refract};
 
 use glam::Vec3;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};

@@ -10,8 +10,8 @@ use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, Scene};
 use crate::testutil::{SceneBuilder, XorShift, emitter, glass, mirror};
 use crate::whitted::{reflect, refract};
 use crate::{
-    BuildPreset, BvhLayout, BvhOptions, Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings,
-    Tracer,
+    BuildPreset, BvhLayout, BvhOptions, Hit, Ray, Rays, Sample, SceneBvh, SurfacePoint,
+    TraceSettings, Tracer,
 };
 
 fn dark() -> Lighting {
@@ -846,25 +846,31 @@ fn trace_and_shade_share_one_path() {
 }
 
 /// A sample as plain bits, for exact comparisons (-0.0 vs 0.0, NaN).
-fn bits(s: &Sample) -> ([u32; 3], [u32; 3], u32, u64) {
+fn bits(s: &Sample) -> ([u32; 3], [u32; 3], [u32; 3], u32, u64) {
     (
         s.color.to_array().map(f32::to_bits),
         s.reflected.to_array().map(f32::to_bits),
+        s.transmitted.to_array().map(f32::to_bits),
         s.reflected_object,
         s.signature,
     )
 }
 
-#[test]
-fn batches_equal_single_calls_bit_for_bit_on_any_thread_count() {
+/// The signature scene plus a glass ball and a mirror ball, so that rays
+/// branch; with its lighting.
+fn branching_scene() -> (Arc<Scene>, Lighting) {
     let (s, _) = signature_scene();
-    // Add glass and a mirror ball so rays branch.
     let mut b = SceneBuilder {
         scene: s.bvh.scene().clone(),
     };
     b.icosphere(glass("ball", 1.5), Vec3::new(-1.0, 1.5, 1.0), 0.6, 3);
     b.icosphere(mirror("ball"), Vec3::new(1.2, 0.7, 1.5), 0.5, 3);
-    let scene = Arc::new(b.scene);
+    (Arc::new(b.scene), s.lighting)
+}
+
+#[test]
+fn batches_equal_single_calls_bit_for_bit_on_any_thread_count() {
+    let (scene, lighting) = branching_scene();
     let bvh = SceneBvh::new(scene.clone());
     let tracer = Tracer {
         settings: TraceSettings {
@@ -872,7 +878,7 @@ fn batches_equal_single_calls_bit_for_bit_on_any_thread_count() {
             fresnel: true,
             ..Default::default()
         },
-        ..tracer(&bvh, &s.lighting)
+        ..tracer(&bvh, &lighting)
     };
 
     let eye = Vec3::new(0.3, 2.0, 7.0);
@@ -927,7 +933,73 @@ fn batches_equal_single_calls_bit_for_bit_on_any_thread_count() {
         .collect();
     assert_eq!(shaded, one_by_one);
     // Some rays really branched: the sample set is not trivially uniform.
-    assert!(single.iter().any(|s| s.2 != NONE));
+    assert!(single.iter().any(|s| s.3 != NONE));
+}
+
+#[test]
+fn shade_points_traces_the_first_reflections_in_packets_with_the_single_ray_samples() {
+    let (scene, lighting) = branching_scene();
+    let bvh = SceneBvh::new(scene);
+    // Camera rays in row order onto both balls: coherent packets, as a
+    // reflector's pixels are.
+    let eye = Vec3::new(0.3, 2.0, 7.0);
+    let points: Vec<(SurfacePoint, Vec3)> = (0..48 * 32)
+        .filter_map(|i| {
+            let target = Vec3::new(
+                -2.0 + (i % 48) as f32 * 0.09,
+                2.4 - (i / 48) as f32 * 0.07,
+                1.2,
+            );
+            let ray = Ray {
+                origin: eye,
+                direction: (target - eye).normalize(),
+            };
+            let hit = bvh.closest_hit(&ray, f32::INFINITY)?;
+            Some((bvh.surface_point(&hit), ray.direction))
+        })
+        .collect();
+    for (max_depth, fresnel) in [(6, true), (2, false), (1, false)] {
+        let tracer = Tracer {
+            settings: TraceSettings {
+                max_depth,
+                fresnel,
+                ..Default::default()
+            },
+            ..tracer(&bvh, &lighting)
+        };
+        let shade = |(p, d): &(SurfacePoint, Vec3)| bits(&tracer.shade(p, *d));
+        let reflection = |(p, d): &(SurfacePoint, Vec3)| bits(&tracer.shade_reflection(p, *d));
+        let single: Vec<_> = points.iter().map(shade).collect();
+        let single_reflection: Vec<_> = points.iter().map(reflection).collect();
+        // Batches of every size, so packets are full, partial and single.
+        for batch in [1, 7, 64, points.len()] {
+            let batched = |rays| -> Vec<_> {
+                points
+                    .chunks(batch)
+                    .flat_map(|chunk| tracer.shade_points(chunk, rays))
+                    .map(|s| bits(&s))
+                    .collect()
+            };
+            assert_eq!(batched(Rays::Both), single, "{max_depth} {batch}");
+            assert_eq!(
+                batched(Rays::ReflectionOnly),
+                single_reflection,
+                "{max_depth} {batch}"
+            );
+        }
+        if max_depth > 1 {
+            // Both kinds of secondary ray really went through the packets.
+            let mirrored = single.iter().filter(|s| s.3 != NONE).count();
+            let refracting = points
+                .iter()
+                .filter(|(p, d)| tracer.surface_terms(p, *d).refraction.is_some())
+                .count();
+            assert!(
+                mirrored > 100 && refracting > 100,
+                "{mirrored} {refracting}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -39,10 +39,15 @@ struct Shaded {
     reflected_object: ObjectId,
 }
 
-/// Which secondary rays a surface spawns.
+mod generations;
+
+/// Which secondary rays the first surface of a sample spawns (deeper
+/// surfaces spawn both).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Rays {
+pub enum Rays {
+    /// Reflection and refraction: [`Tracer::shade`].
     Both,
+    /// The reflection alone: [`Tracer::shade_reflection`].
     ReflectionOnly,
 }
 
@@ -175,6 +180,18 @@ impl Tracer<'_> {
             .par_iter()
             .map(|(point, incoming)| self.shade(point, *incoming))
             .collect()
+    }
+
+    /// [`Tracer::shade`] (`Rays::Both`) or [`Tracer::shade_reflection`]
+    /// (`Rays::ReflectionOnly`) of every point, on this thread, with the same
+    /// samples bit for bit, generation by generation: all first surfaces
+    /// are shaded, then all their reflection rays are traced together
+    /// through [`SceneBvh::closest_hits`] (packets of consecutive rays), then
+    /// all their refraction rays, then the surfaces those rays hit, and so on
+    /// (module `generations`). Pays for coherent batches: neighbouring
+    /// pixels or vertices of one reflector, in order.
+    pub fn shade_points(&self, points: &[(SurfacePoint, Vec3)], rays: Rays) -> Vec<Sample> {
+        generations::shade_points(self, points, rays)
     }
 
     /// Radiance along `ray`, whose first surface gets depth `depth` and

@@ -5,7 +5,7 @@ use glam::{Vec2, Vec3};
 use vtfarm_imaging::Image;
 use vtfarm_scene::NONE;
 
-use crate::{FinishedFace, SparseBitmap};
+use crate::{FinishedFace, PixelValue, SparseBitmap};
 
 /// A frame being assembled: the base frame whose reflector pixels take the
 /// traced colours, plus the per-pixel reflected component, reflected object
@@ -35,6 +35,19 @@ impl FrameImage {
             reflected_object: vec![NONE; n],
             mask: vec![false; n],
             color: base,
+        }
+    }
+
+    /// Writes traced pixel values over the frame (the values of
+    /// [`crate::TracedPixels`], without a bitmap in between).
+    pub fn write(&mut self, pixels: &[PixelValue]) {
+        for p in pixels {
+            let i = p.index as usize;
+            self.color.pixels[i] = p.color;
+            self.reflected.pixels[i] = p.reflected;
+            self.transmitted.pixels[i] = p.transmitted;
+            self.reflected_object[i] = p.object;
+            self.mask[i] = true;
         }
     }
 

@@ -170,17 +170,17 @@ mod thin;
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
-    trace_package,
+    TracedPixels, trace_package, trace_package_pixels,
 };
 pub use stop::{Stop, Stopped};
-pub use thin::Behind;
+pub use thin::{Behind, GlassPass};
 pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
 use vtfarm_scene::{Camera, Projector, ScreenPoint, TriangleId};
-use vtfarm_trace::{Sample, SurfacePoint, Tracer};
+use vtfarm_trace::{Rays, Sample, SurfacePoint, Tracer};
 
 /// For each scene vertex, the lowest triangle id that uses it. A corner shared
 /// by several reflector triangles is traced once per package, as the surface
@@ -229,8 +229,12 @@ impl Frame<'_> {
 
     /// Every traced sample counts against the budget, here in one place.
     fn charge_sample(&self) {
+        self.charge_samples(1);
+    }
+
+    fn charge_samples(&self, samples: u64) {
         if let Some(stop) = self.stop {
-            stop.charge(1);
+            stop.charge(samples);
         }
     }
 
@@ -350,15 +354,46 @@ impl Frame<'_> {
     /// local part and the reflection are traced (see [`Transmission`]).
     fn shade_vertex(&self, triangle: TriangleId, position: Vec3, normal: Vec3) -> Sample {
         self.charge_sample();
+        let (point, incoming) = self.vertex_point(triangle, position, normal);
+        match self.rays() {
+            Rays::ReflectionOnly => self.tracer.shade_reflection(&point, incoming),
+            Rays::Both => self.tracer.shade(&point, incoming),
+        }
+    }
+
+    /// [`Frame::shade_vertex`] for a batch of (triangle, position, normal),
+    /// the same samples: their first reflection rays share packets
+    /// ([`Tracer::shade_points`]).
+    fn shade_vertices(&self, vertices: &[(TriangleId, Vec3, Vec3)]) -> Vec<Sample> {
+        self.charge_samples(vertices.len() as u64);
+        let points: Vec<(SurfacePoint, Vec3)> = vertices
+            .iter()
+            .map(|&(triangle, position, normal)| self.vertex_point(triangle, position, normal))
+            .collect();
+        self.tracer.shade_points(&points, self.rays())
+    }
+
+    /// A reflector vertex as a surface point and the eye ray's direction.
+    fn vertex_point(
+        &self,
+        triangle: TriangleId,
+        position: Vec3,
+        normal: Vec3,
+    ) -> (SurfacePoint, Vec3) {
         let incoming = (position - self.camera.eye).normalize();
         let point = SurfacePoint {
             position,
             normal,
             triangle,
         };
+        (point, incoming)
+    }
+
+    /// Which secondary rays a vertex-traced sample's first surface spawns.
+    fn rays(&self) -> Rays {
         match self.settings.transmission {
-            Transmission::Raster => self.tracer.shade_reflection(&point, incoming),
-            Transmission::Traced => self.tracer.shade(&point, incoming),
+            Transmission::Raster => Rays::ReflectionOnly,
+            Transmission::Traced => Rays::Both,
         }
     }
 
@@ -369,30 +404,41 @@ impl Frame<'_> {
         self.charge_sample();
         let scene = self.tracer.bvh.scene();
         let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
-        let sample = match self.settings.transmission {
-            Transmission::Raster => self.tracer.shade_reflection(&point, direction),
-            Transmission::Traced => self.tracer.shade(&point, direction),
+        let sample = match self.rays() {
+            Rays::ReflectionOnly => self.tracer.shade_reflection(&point, direction),
+            Rays::Both => self.tracer.shade(&point, direction),
         };
         let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, &sample);
-        self.finish_pixel(&mut value);
+        self.finish_pixel((x, y), &mut value);
         value
     }
 
-    /// The reference: pixel (x, y) on `triangle` in full Whitted, the
-    /// refraction ray traced whatever the transmission setting.
-    fn reference_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
-        self.charge_sample();
+    /// The reference: `pixels` on `triangle` in full Whitted, the
+    /// refraction ray traced whatever the transmission setting. One batch
+    /// through [`Tracer::shade_points`]: neighbouring pixels' reflection rays
+    /// share packets (the same values as one pixel at a time).
+    fn reference_pixels(&self, triangle: TriangleId, pixels: &[(u32, u32)]) -> Vec<PixelValue> {
+        self.charge_samples(pixels.len() as u64);
         let scene = self.tracer.bvh.scene();
-        let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
-        let sample = self.tracer.shade(&point, direction);
-        PixelValue::from_sample(self.ids.index(x, y) as u32, &sample)
+        let points: Vec<(SurfacePoint, Vec3)> = pixels
+            .iter()
+            .map(|&(x, y)| pixel_surface(scene, &self.camera, self.ids, triangle, x, y))
+            .collect();
+        let samples = self.tracer.shade_points(&points, Rays::Both);
+        pixels
+            .iter()
+            .zip(&samples)
+            .map(|(&(x, y), sample)| PixelValue::from_sample(self.ids.index(x, y) as u32, sample))
+            .collect()
     }
 
     /// Finishes a vertex-traced pixel value: adds the rasterized
     /// transmitted part (zero unless the transmission comes from the
-    /// rasterizer and the reflector is see-through).
-    fn finish_pixel(&self, value: &mut PixelValue) {
-        self.behind.finish(value);
+    /// rasterizer and the reflector is see-through; see [`Behind::finish`]).
+    /// (`x`, `y`) is the value's pixel.
+    pub fn finish_pixel(&self, (x, y): (u32, u32), value: &mut PixelValue) {
+        self.behind
+            .finish(&self.tracer, &self.camera, self.ids, (x, y), value);
     }
 }
 
@@ -409,9 +455,21 @@ pub fn pixel_surface(
     x: u32,
     y: u32,
 ) -> (SurfacePoint, Vec3) {
+    pixel_surface_along(scene, camera, ids, triangle, (x, y), camera.pixel_ray(x, y))
+}
+
+/// [`pixel_surface`] with the pixel's ray `direction` at hand (from a
+/// [`Projector`], bit-identical to the camera's).
+pub(crate) fn pixel_surface_along(
+    scene: &vtfarm_scene::Scene,
+    camera: &Camera,
+    ids: &IdBuffer,
+    triangle: TriangleId,
+    (x, y): (u32, u32),
+    direction: Vec3,
+) -> (SurfacePoint, Vec3) {
     let [a, b, c] = scene.triangle_positions(triangle);
     let [na, nb, nc] = scene.triangle_normals(triangle);
-    let direction = camera.pixel_ray(x, y);
     let plane_normal = (b - a).cross(c - a);
     let denom = direction.dot(plane_normal);
     let t = if denom.abs() > 1e-12 {

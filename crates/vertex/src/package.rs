@@ -16,7 +16,7 @@ use vtfarm_raster::{IdBuffer, PixelRect};
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
-use crate::refine::{MeshVertex, TriangleMesh};
+use crate::refine::{Face, MeshVertex, TriangleMesh};
 use crate::{Frame, Quality};
 
 /// What the caller wants besides pixels.
@@ -175,6 +175,36 @@ pub fn trace_package(
     options: &PackageOptions,
     progress: &mut dyn FnMut(&[FinishedFace]),
 ) -> PackageResult {
+    let traced = trace_package_pixels(frame, triangles, options, progress);
+    PackageResult {
+        bitmap: SparseBitmap::from_parts(frame.ids.width, &traced.pixels),
+        stats: traced.stats,
+        faces: traced.faces,
+        triangle_samples: traced.triangle_samples,
+    }
+}
+
+/// A package traced with its pixels not packed into a bitmap: what a frame
+/// rendered on one machine writes straight into its image
+/// ([`crate::FrameImage::write`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TracedPixels {
+    /// The pixels of each triangle that owns some, in package order.
+    pub pixels: Vec<Vec<PixelValue>>,
+    pub stats: PackageStats,
+    /// The final faces, when asked for.
+    pub faces: Vec<FinishedFace>,
+    /// As [`PackageResult::triangle_samples`].
+    pub triangle_samples: Vec<u32>,
+}
+
+/// [`trace_package`] without the packing into a bitmap.
+pub fn trace_package_pixels(
+    frame: &Frame<'_>,
+    triangles: &[TriangleId],
+    options: &PackageOptions,
+    progress: &mut dyn FnMut(&[FinishedFace]),
+) -> TracedPixels {
     let mut stats = PackageStats {
         triangles: triangles.len() as u64,
         ..Default::default()
@@ -229,13 +259,10 @@ pub fn trace_package(
     } else {
         Vec::new()
     };
-    let bitmap = SparseBitmap::from_pixels(
-        frame.ids.width,
-        per_triangle.into_iter().flat_map(|(p, _)| p).collect(),
-    );
-    stats.pixels = bitmap.color.len() as u64;
-    PackageResult {
-        bitmap,
+    let pixels: Vec<Vec<PixelValue>> = per_triangle.into_iter().map(|(p, _)| p).collect();
+    stats.pixels = pixels.iter().map(|p| p.len() as u64).sum();
+    TracedPixels {
+        pixels,
         stats,
         faces,
         triangle_samples,
@@ -267,9 +294,13 @@ fn refine_all(
         })
         .collect();
     let samples: Vec<Sample> = corners
-        .par_iter()
-        .map(|&(t, v)| {
-            frame.shade_vertex(t, scene.positions[v as usize], scene.normals[v as usize])
+        .par_chunks(VERTEX_BATCH)
+        .flat_map_iter(|chunk| {
+            let vertices: Vec<_> = chunk
+                .iter()
+                .map(|&(t, v)| (t, scene.positions[v as usize], scene.normals[v as usize]))
+                .collect();
+            frame.shade_vertices(&vertices)
         })
         .collect();
     stats.vertex_samples += samples.len() as u64;
@@ -336,18 +367,31 @@ fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '
     })
 }
 
+/// Corners per [`Frame::shade_vertices`] call: neighbours in mesh order,
+/// whose reflection rays fill packets; small enough to share out to threads.
+const VERTEX_BATCH: usize = 64;
+
+/// Pixels per [`Frame::reference_pixels`] call: rows of neighbours whose
+/// reflection rays fill packets, few enough that a stop is noticed soon.
+const REFERENCE_BATCH: usize = 256;
+
 /// Reference level: every owned pixel traced.
 fn trace_all_pixels(
     frame: &Frame<'_>,
     triangle: TriangleId,
     rect: PixelRect,
 ) -> (Vec<PixelValue>, u64) {
-    let pixels: Vec<PixelValue> = rect
+    let owned: Vec<(u32, u32)> = rect
         .pixels()
-        .take_while(|_| !frame.stopped())
         .filter(|&(x, y)| frame.owns(triangle, x, y))
-        .map(|(x, y)| frame.reference_pixel(triangle, x, y))
         .collect();
+    let mut pixels = Vec::with_capacity(owned.len());
+    for batch in owned.chunks(REFERENCE_BATCH) {
+        if frame.stopped() {
+            break;
+        }
+        pixels.extend(frame.reference_pixels(triangle, batch));
+    }
     let n = pixels.len() as u64;
     (pixels, n)
 }
@@ -359,42 +403,27 @@ fn trace_all_pixels(
 fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec<PixelValue>, u64) {
     let width = rect.x1 - rect.x0;
     let area = (width * (rect.y1 - rect.y0)) as usize;
-    // (face index, barycentric weights) of the best face so far per pixel.
-    let mut best: Vec<Option<(f32, usize, [f32; 3])>> = vec![None; area];
-    let faces: Vec<_> = mesh.faces().collect();
+    let faces: Vec<ScreenFace> = mesh
+        .faces()
+        .filter_map(|f| ScreenFace::new(mesh, f))
+        .collect();
+    // The best face so far per pixel: (smallest barycentric, face index).
+    let mut best: Vec<(f32, u32)> = vec![(f32::NEG_INFINITY, NO_FACE); area];
     for (fi, face) in faces.iter().enumerate() {
-        let screen = face.vertices.map(|i| mesh.vertices[i as usize].screen);
-        let [Some(a), Some(b), Some(c)] = screen else {
-            continue;
-        };
-        let (pa, pb, pc) = (
-            Vec2::new(a.x, a.y),
-            Vec2::new(b.x, b.y),
-            Vec2::new(c.x, c.y),
-        );
-        let denom = (pb - pa).perp_dot(pc - pa);
-        if denom.abs() < 1e-12 {
-            continue;
-        }
-        let lo = pa.min(pb).min(pc);
-        let hi = pa.max(pb).max(pc);
+        let lo = face.a.min(face.b).min(face.c);
+        let hi = face.a.max(face.b).max(face.c);
         let x0 = (lo.x.floor().max(rect.x0 as f32)) as u32;
         let y0 = (lo.y.floor().max(rect.y0 as f32)) as u32;
         let x1 = ((hi.x.ceil() + 1.0).min(rect.x1 as f32)) as u32;
         let y1 = ((hi.y.ceil() + 1.0).min(rect.y1 as f32)) as u32;
         for y in y0..y1 {
+            let row = ((y - rect.y0) * width) as usize;
             for x in x0..x1 {
-                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                let wb = (p - pa).perp_dot(pc - pa) / denom;
-                let wc = (pb - pa).perp_dot(p - pa) / denom;
-                let w = [1.0 - wb - wc, wb, wc];
+                let w = face.weights(x, y);
                 let score = w[0].min(w[1]).min(w[2]);
-                if score < -1e-4 {
-                    continue;
-                }
-                let slot = &mut best[((y - rect.y0) * width + (x - rect.x0)) as usize];
-                if slot.is_none_or(|(s, _, _)| score > s) {
-                    *slot = Some((score, fi, w));
+                let slot = &mut best[row + (x - rect.x0) as usize];
+                if score >= -1e-4 && score > slot.0 {
+                    *slot = (score, fi as u32);
                 }
             }
         }
@@ -402,7 +431,7 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
     let fill = frame.settings.quality == Quality::Full;
     let disagrees: Vec<bool> = faces
         .iter()
-        .map(|f| fill && mesh.face_disagrees(f, frame.settings.epsilon))
+        .map(|f| fill && mesh.face_disagrees(f.face, frame.settings.epsilon))
         .collect();
     // A face whose samples agree may still hide a detail behind the glass that
     // no sample hit: its pixels near a change of the opaque scene behind are
@@ -413,11 +442,8 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
             if !fill || !frame.behind_hints(mesh.triangle) {
                 return None;
             }
-            let objects = f.vertices.map(|v| {
-                mesh.vertices[v as usize].screen.map_or(NONE, |s| {
-                    frame.behind_object(s.x.floor() as i64, s.y.floor() as i64)
-                })
-            });
+            let objects = [f.a, f.b, f.c]
+                .map(|s| frame.behind_object(s.x.floor() as i64, s.y.floor() as i64));
             // Corners that see different things behind: fill the whole face.
             Some(if objects[0] == objects[1] && objects[1] == objects[2] {
                 objects[0]
@@ -427,55 +453,110 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         })
         .collect();
     let mut traced = 0;
-    let pixels = rect
-        .pixels()
-        .take_while(|_| !frame.stopped())
-        .filter(|&(x, y)| frame.owns(mesh.triangle, x, y))
-        .map(|(x, y)| {
+    let mut pixels = Vec::with_capacity(area / 2);
+    for y in rect.y0..rect.y1 {
+        if frame.stopped() {
+            break;
+        }
+        let row = ((y - rect.y0) * width) as usize;
+        for x in rect.x0..rect.x1 {
+            if !frame.owns(mesh.triangle, x, y) {
+                continue;
+            }
             let index = frame.ids.index(x, y) as u32;
-            match best[((y - rect.y0) * width + (x - rect.x0)) as usize] {
-                Some((_, fi, w))
+            let fi = best[row + (x - rect.x0) as usize].1 as usize;
+            let value = match faces.get(fi) {
+                Some(face)
                     if !disagrees[fi]
                         && behind_corner[fi]
                             .is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) =>
                 {
-                    let mut value = gouraud(index, mesh, faces[fi].vertices, w);
-                    frame.finish_pixel(&mut value);
+                    let mut value = face.gouraud(index, mesh, face.weights(x, y));
+                    frame.finish_pixel((x, y), &mut value);
                     value
                 }
                 _ => {
                     traced += 1;
                     frame.trace_pixel(mesh.triangle, x, y)
                 }
-            }
-        })
-        .collect();
+            };
+            pixels.push(value);
+        }
+    }
     (pixels, traced)
 }
 
-/// Perspective-correct interpolation of the corner samples (screen-space
-/// weights divided by depth, as a GPU interpolates).
-fn gouraud(index: u32, mesh: &TriangleMesh, vertices: [u32; 3], w: [f32; 3]) -> PixelValue {
-    let v = vertices.map(|i| &mesh.vertices[i as usize]);
-    let pw: [f32; 3] =
-        std::array::from_fn(|k| w[k].max(0.0) / v[k].screen.map_or(1.0, |s| s.depth));
-    let total: f32 = pw.iter().sum();
-    let pw = pw.map(|x| x / total);
-    let blend = |f: fn(&Sample) -> Vec3| {
-        f(&v[0].sample) * pw[0] + f(&v[1].sample) * pw[1] + f(&v[2].sample) * pw[2]
-    };
-    let color = blend(|s| s.color);
-    let reflected = blend(|s| s.reflected);
-    let transmitted = blend(|s| s.transmitted);
-    let nearest = (0..3)
-        .max_by(|&a, &b| pw[a].total_cmp(&pw[b]))
-        .expect("three corners");
-    PixelValue {
-        index,
-        color,
-        reflected,
-        transmitted,
-        object: v[nearest].sample.reflected_object,
+/// No face reaches the pixel.
+const NO_FACE: u32 = u32::MAX;
+
+/// A final face with its corners on screen, ready for barycentric weights
+/// and perspective-correct interpolation.
+struct ScreenFace<'m> {
+    face: &'m Face,
+    a: Vec2,
+    b: Vec2,
+    c: Vec2,
+    /// One over twice the signed screen area.
+    inv_denom: f32,
+    /// One over each corner's view depth.
+    inv_depth: [f32; 3],
+}
+
+impl<'m> ScreenFace<'m> {
+    /// `None` when a corner is behind the eye or the face is degenerate on screen.
+    fn new(mesh: &TriangleMesh, face: &'m Face) -> Option<Self> {
+        let [Some(a), Some(b), Some(c)] = face.vertices.map(|i| mesh.vertices[i as usize].screen)
+        else {
+            return None;
+        };
+        let inv_depth = [a.depth, b.depth, c.depth].map(|d| 1.0 / d);
+        let (a, b, c) = (
+            Vec2::new(a.x, a.y),
+            Vec2::new(b.x, b.y),
+            Vec2::new(c.x, c.y),
+        );
+        let denom = (b - a).perp_dot(c - a);
+        (denom.abs() >= 1e-12).then_some(ScreenFace {
+            face,
+            a,
+            b,
+            c,
+            inv_denom: 1.0 / denom,
+            inv_depth,
+        })
+    }
+
+    /// The barycentric weights of pixel (x, y)'s centre.
+    fn weights(&self, x: u32, y: u32) -> [f32; 3] {
+        let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        let wb = (p - self.a).perp_dot(self.c - self.a) * self.inv_denom;
+        let wc = (self.b - self.a).perp_dot(p - self.a) * self.inv_denom;
+        [1.0 - wb - wc, wb, wc]
+    }
+
+    /// Perspective-correct interpolation of the corner samples at screen
+    /// weights `w` (divided by depth, as a GPU interpolates); the reflected
+    /// object is the nearest corner's (the last of equals).
+    fn gouraud(&self, index: u32, mesh: &TriangleMesh, w: [f32; 3]) -> PixelValue {
+        let v = self.face.vertices.map(|i| &mesh.vertices[i as usize].sample);
+        let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) * self.inv_depth[k]);
+        let scale = 1.0 / (pw[0] + pw[1] + pw[2]);
+        let pw = pw.map(|x| x * scale);
+        let blend = |f: fn(&Sample) -> Vec3| f(v[0]) * pw[0] + f(v[1]) * pw[1] + f(v[2]) * pw[2];
+        let nearest = if pw[2] >= pw[1] && pw[2] >= pw[0] {
+            2
+        } else if pw[1] >= pw[0] {
+            1
+        } else {
+            0
+        };
+        PixelValue {
+            index,
+            color: blend(|s| s.color),
+            reflected: blend(|s| s.reflected),
+            transmitted: blend(|s| s.transmitted),
+            object: v[nearest].reflected_object,
+        }
     }
 }
 
@@ -485,12 +566,19 @@ impl SparseBitmap {
     /// rectangle ranks the covered pixels row-major, and each value goes
     /// straight to its rank (no sort).
     pub fn from_pixels(frame_width: u32, pixels: Vec<PixelValue>) -> SparseBitmap {
-        if pixels.is_empty() {
+        SparseBitmap::from_parts(frame_width, std::slice::from_ref(&pixels))
+    }
+
+    /// [`SparseBitmap::from_pixels`] of the pixel values of all `parts`.
+    pub fn from_parts(frame_width: u32, parts: &[Vec<PixelValue>]) -> SparseBitmap {
+        let pixels = || parts.iter().flatten();
+        let n = parts.iter().map(Vec::len).sum();
+        if n == 0 {
             return SparseBitmap::default();
         }
         let w = frame_width;
         let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-        for p in &pixels {
+        for p in pixels() {
             let (x, y) = (p.index % w, p.index / w);
             x0 = x0.min(x);
             y0 = y0.min(y);
@@ -500,7 +588,7 @@ impl SparseBitmap {
         let width = x1 - x0;
         let local = |p: &PixelValue| ((p.index / w - y0) * width + (p.index % w - x0)) as usize;
         let mut mask = vec![false; (width * (y1 - y0)) as usize];
-        for p in &pixels {
+        for p in pixels() {
             mask[local(p)] = true;
         }
         // The rank of each covered pixel among the covered pixels, row-major
@@ -511,7 +599,6 @@ impl SparseBitmap {
             *r = next;
             next += covered as u32;
         }
-        let n = pixels.len();
         let mut bitmap = SparseBitmap {
             x0,
             y0,
@@ -523,7 +610,7 @@ impl SparseBitmap {
             reflected_object: vec![NONE; n],
             mask,
         };
-        for p in &pixels {
+        for p in pixels() {
             let k = rank[local(p)] as usize;
             bitmap.color[k] = p.color;
             bitmap.reflected[k] = p.reflected;

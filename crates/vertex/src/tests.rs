@@ -32,7 +32,7 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Behind, Frame, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
+    Behind, Frame, GlassPass, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
     VertexOwners, VertexSettings, trace_package,
 };
 
@@ -161,7 +161,14 @@ impl TestFrame {
             lighting: &lighting,
             settings: TraceSettings::default(),
         };
-        let behind = Behind::new(&tracer, &camera, &ids, &is_reflector, Transmission::Raster);
+        let behind = Behind::new(
+            &tracer,
+            &camera,
+            &ids,
+            &is_reflector,
+            Transmission::Raster,
+            GlassPass::Upfront,
+        );
         TestFrame {
             bvh,
             lighting,
@@ -480,4 +487,40 @@ fn a_sample_budget_stops_a_package_that_needs_more() {
     let result = trace_with_stop(&frame, &tiny);
     assert_eq!(tiny.stopped(), Some(Stopped::OverBudget { budget: 4 }));
     assert_eq!(result.stats.filled_pixels, 0);
+}
+
+#[test]
+fn batched_reference_pixels_and_vertices_equal_one_at_a_time() {
+    let frame = TestFrame::new(Extras::default());
+    for transmission in Transmission::ALL {
+        let f = frame.frame(VertexSettings {
+            transmission,
+            ..unguarded()
+        });
+        let pixels: Vec<(u32, u32)> = (0..f.ids.height)
+            .flat_map(|y| (0..f.ids.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| f.owns(A, x, y))
+            .collect();
+        assert_eq!(pixels.len() as u64, frame.owned_pixels(A));
+        let one_by_one: Vec<_> = pixels
+            .iter()
+            .map(|&p| f.reference_pixels(A, &[p])[0])
+            .collect();
+        assert_eq!(f.reference_pixels(A, &pixels), one_by_one);
+
+        let scene = frame.bvh.scene();
+        let vertices: Vec<(TriangleId, Vec3, Vec3)> = [A, B]
+            .iter()
+            .flat_map(|&t| {
+                scene.triangles[t as usize]
+                    .vertices
+                    .map(|v| (t, scene.positions[v as usize], scene.normals[v as usize]))
+            })
+            .collect();
+        let single: Vec<_> = vertices
+            .iter()
+            .map(|&(t, p, n)| f.shade_vertex(t, p, n))
+            .collect();
+        assert_eq!(f.shade_vertices(&vertices), single, "{transmission:?}");
+    }
 }

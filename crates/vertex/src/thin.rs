@@ -25,23 +25,52 @@ use vtfarm_scene::{Camera, LightKind, NONE, Projector, Scene, TriangleId};
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
 use crate::{
-    PixelRect, PixelValue, Transmission, barycentric, behind_id_buffer_within, pixel_surface,
+    PixelRect, PixelValue, Transmission, barycentric, behind_id_buffer_within, pixel_surface_along,
     reflector_bounds,
 };
 
 /// What lies behind the reflectors: the ID buffer of the opaque scene
 /// (neither reflectors nor see-through surfaces), and with
-/// [`Transmission::Raster`] the thin-glass terms of every see-through
-/// reflector pixel (see the module docs). Part of the frame's raster pass,
-/// built over the reflectors' bounds only ([`crate::reflector_bounds`]):
+/// [`Transmission::Raster`] what the thin-glass terms of every see-through
+/// reflector pixel need (see the module docs). Part of the frame's raster
+/// pass, built over the reflectors' bounds only ([`crate::reflector_bounds`]):
 /// the ID buffer is empty elsewhere.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Behind {
     pub ids: IdBuffer,
-    /// The pixels `glass` covers.
+    /// The pixels the thin-glass terms cover.
     bounds: PixelRect,
-    /// Per pixel of `bounds`, row-major; empty with traced transmission.
-    glass: Vec<ThinGlass>,
+    glass: GlassTerms,
+}
+
+/// When the thin-glass terms of the glass pixels are computed. Either way a
+/// pixel gets the same terms, bit for bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GlassPass {
+    /// All of them in [`Behind::new`], as a rasterizer blends the glass
+    /// over the frame: a frame rendered on one machine.
+    #[default]
+    Upfront,
+    /// Each as its pixel is finished: a farm worker, which finishes only
+    /// the pixels of its packages, so the pass splits between workers
+    /// instead of being repeated on each.
+    OnDemand,
+}
+
+/// The thin-glass terms, or what computing them needs.
+#[derive(Clone, Debug)]
+enum GlassTerms {
+    /// Traced transmission, or no see-through reflector pixel.
+    Nothing,
+    /// Per pixel of `bounds`, row-major.
+    Upfront(Vec<ThinGlass>),
+    /// The see-through surfaces that are not reflectors (a slab's back),
+    /// the shadow maps and the frame camera's projector.
+    OnDemand {
+        layers: IdBuffer,
+        shadows: ShadowMaps,
+        projector: Projector,
+    },
 }
 
 /// Pixels around the reflectors that [`Behind`] covers besides them: the
@@ -79,13 +108,16 @@ impl Behind {
         ids: &IdBuffer,
         is_reflector: &[bool],
         transmission: Transmission,
+        pass: GlassPass,
     ) -> Behind {
         let scene = tracer.bvh.scene();
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let behind = behind_id_buffer_within(scene, camera, is_reflector, bounds);
         let glass = match transmission {
-            Transmission::Traced => Vec::new(),
-            Transmission::Raster => thin_glass(tracer, camera, ids, &behind, is_reflector, bounds),
+            Transmission::Traced => GlassTerms::Nothing,
+            Transmission::Raster => {
+                GlassTerms::new(tracer, camera, ids, &behind, is_reflector, bounds, pass)
+            }
         };
         Behind {
             ids: behind,
@@ -96,67 +128,110 @@ impl Behind {
 
     /// Finishes a reflector pixel whose value holds the local part and the
     /// front surface's reflection: adds the back surface's reflection and the
-    /// transmitted part (nothing with traced transmission).
-    pub fn finish(&self, value: &mut PixelValue) {
-        let (x, y) = (value.index % self.ids.width, value.index / self.ids.width);
+    /// transmitted part (nothing with traced transmission). `tracer`,
+    /// `camera` and `ids` are the frame's, as given to [`Behind::new`];
+    /// (`x`, `y`) is the value's pixel.
+    pub fn finish(
+        &self,
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        ids: &IdBuffer,
+        (x, y): (u32, u32),
+        value: &mut PixelValue,
+    ) {
         if !self.bounds.contains(x, y) {
             return;
         }
-        let local = (y - self.bounds.y0) * (self.bounds.x1 - self.bounds.x0) + (x - self.bounds.x0);
-        if let Some(glass) = self.glass.get(local as usize) {
-            let ghost = value.reflected * (glass.reflection_scale - 1.0);
-            value.reflected += ghost;
-            value.transmitted += glass.transmitted;
-            value.color += ghost + glass.transmitted;
-        }
-    }
-}
-
-/// The thin-glass terms of every pixel of `bounds` (row-major) whose
-/// reflector is see-through.
-fn thin_glass(
-    tracer: &Tracer<'_>,
-    camera: &Camera,
-    ids: &IdBuffer,
-    behind: &IdBuffer,
-    is_reflector: &[bool],
-    bounds: PixelRect,
-) -> Vec<ThinGlass> {
-    let scene = tracer.bvh.scene();
-    let see_through = |t: TriangleId| scene.material_of(t).transmittance.max_element() > 0.0;
-    let glass_pixel = |i: usize| {
-        let t = ids.triangle[i];
-        t != NONE && is_reflector[t as usize] && see_through(t)
-    };
-    let width = (bounds.x1 - bounds.x0) as usize;
-    let mut out = vec![ThinGlass::default(); width * (bounds.y1 - bounds.y0) as usize];
-    if !bounds.pixels().any(|(x, y)| glass_pixel(ids.index(x, y))) {
-        return out;
-    }
-    // The see-through surfaces that are not reflectors: a slab's back.
-    let layers = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|t| {
-        !is_reflector[t as usize] && see_through(t)
-    });
-    let shadows = ShadowMaps::new(tracer, camera, behind, bounds, &|i| glass_pixel(i));
-    out.par_chunks_mut(width)
-        .enumerate()
-        .for_each(|(row, slots)| {
-            let y = bounds.y0 + row as u32;
-            for (column, slot) in slots.iter_mut().enumerate() {
-                let x = bounds.x0 + column as u32;
-                if glass_pixel(ids.index(x, y)) {
-                    *slot = glass_at(tracer, camera, ids, &layers, behind, &shadows, x, y);
-                }
+        let glass = match &self.glass {
+            GlassTerms::Nothing => return,
+            GlassTerms::Upfront(terms) => {
+                let local =
+                    (y - self.bounds.y0) * (self.bounds.x1 - self.bounds.x0) + (x - self.bounds.x0);
+                terms[local as usize]
             }
-        });
-    out
+            GlassTerms::OnDemand {
+                layers,
+                shadows,
+                projector,
+            } => {
+                let t = ids.triangle[ids.index(x, y)];
+                if t == NONE || !see_through(tracer.bvh.scene(), t) {
+                    return;
+                }
+                glass_at(
+                    tracer, camera, projector, ids, layers, &self.ids, shadows, x, y,
+                )
+            }
+        };
+        let ghost = value.reflected * (glass.reflection_scale - 1.0);
+        value.reflected += ghost;
+        value.transmitted += glass.transmitted;
+        value.color += ghost + glass.transmitted;
+    }
 }
 
-/// The thin-glass terms at one glass pixel.
+/// Whether `triangle`'s material lets light through.
+fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
+    scene.material_of(triangle).transmittance.max_element() > 0.0
+}
+
+impl GlassTerms {
+    /// The thin-glass terms of every pixel of `bounds` whose reflector is
+    /// see-through, or (`GlassPass::OnDemand`) what computing them needs.
+    fn new(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        ids: &IdBuffer,
+        behind: &IdBuffer,
+        is_reflector: &[bool],
+        bounds: PixelRect,
+        pass: GlassPass,
+    ) -> GlassTerms {
+        let scene = tracer.bvh.scene();
+        let glass_pixel = |i: usize| {
+            let t = ids.triangle[i];
+            t != NONE && is_reflector[t as usize] && see_through(scene, t)
+        };
+        if !bounds.pixels().any(|(x, y)| glass_pixel(ids.index(x, y))) {
+            return GlassTerms::Nothing;
+        }
+        let layers = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|t| {
+            !is_reflector[t as usize] && see_through(scene, t)
+        });
+        let shadows = ShadowMaps::new(tracer, camera, behind, bounds, &|i| glass_pixel(i));
+        let projector = Projector::new(camera);
+        if pass == GlassPass::OnDemand {
+            return GlassTerms::OnDemand {
+                layers,
+                shadows,
+                projector,
+            };
+        }
+        let width = (bounds.x1 - bounds.x0) as usize;
+        let mut out = vec![ThinGlass::default(); width * (bounds.y1 - bounds.y0) as usize];
+        out.par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(row, slots)| {
+                let y = bounds.y0 + row as u32;
+                for (column, slot) in slots.iter_mut().enumerate() {
+                    let x = bounds.x0 + column as u32;
+                    if glass_pixel(ids.index(x, y)) {
+                        *slot = glass_at(
+                            tracer, camera, &projector, ids, &layers, behind, &shadows, x, y,
+                        );
+                    }
+                }
+            });
+        GlassTerms::Upfront(out)
+    }
+}
+
+/// The thin-glass terms at one glass pixel (`projector` is `camera`'s).
 #[allow(clippy::too_many_arguments)]
 fn glass_at(
     tracer: &Tracer<'_>,
     camera: &Camera,
+    projector: &Projector,
     ids: &IdBuffer,
     layers: &IdBuffer,
     behind: &IdBuffer,
@@ -166,14 +241,16 @@ fn glass_at(
 ) -> ThinGlass {
     let scene = tracer.bvh.scene();
     let i = ids.index(x, y);
-    let (front, direction) = pixel_surface(scene, camera, ids, ids.triangle[i], x, y);
+    let direction = projector.pixel_ray(x, y);
+    let (front, direction) =
+        pixel_surface_along(scene, camera, ids, ids.triangle[i], (x, y), direction);
     let (kr, kt) = tracer.weights(&front, direction);
     let mut weight = kt;
     let mut reflection_scale = 1.0;
     let mut shift = Vec3::ZERO;
     let back = layers.triangle[i];
     if back != NONE && layers.depth[i] < behind.depth[i] {
-        let (back_point, _) = pixel_surface(scene, camera, layers, back, x, y);
+        let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
         let (kr_back, kt_back) = tracer.weights(&back_point, direction);
         weight *= kt_back;
         let kr_front = kr.max_element();
@@ -185,9 +262,10 @@ fn glass_at(
     let seen = opaque_radiance(
         tracer,
         camera,
+        projector,
         behind,
         shadows,
-        (x, y),
+        (x, y, direction),
         front.position,
         shift,
     );
@@ -230,26 +308,25 @@ fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, directio
 /// (x, y) (front surface point `front`) along the eye ray shifted sideways
 /// by `shift`: the triangle the behind buffer shows where the shifted ray's
 /// hit projects, shaded with shadow-mapped local Phong.
+#[allow(clippy::too_many_arguments)]
 fn opaque_radiance(
     tracer: &Tracer<'_>,
     camera: &Camera,
+    projector: &Projector,
     behind: &IdBuffer,
     shadows: &ShadowMaps,
-    (x, y): (u32, u32),
+    (x, y, direction): (u32, u32, Vec3),
     front: Vec3,
     shift: Vec3,
 ) -> Vec3 {
     let scene = tracer.bvh.scene();
-    let projector = Projector::new(camera);
-    let direction = projector.pixel_ray(x, y);
     let i = behind.index(x, y);
     if behind.triangle[i] == NONE {
         return tracer.lighting.background;
     }
     // The shifted ray is parallel to the eye ray: it meets the opaque scene
     // about the shift beside where the eye ray does.
-    let forward = camera.basis().0;
-    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(forward));
+    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(shadows.forward));
     let Some(guess) = projector.project(straight + shift) else {
         return tracer.lighting.background;
     };
@@ -333,8 +410,11 @@ fn ray_plane(
 
 /// One shadow map per light: the scene's ID buffer seen from the light
 /// through a frustum fitted to the opaque points behind the glass.
+#[derive(Clone, Debug)]
 struct ShadowMaps {
     maps: Vec<Option<(Projector, IdBuffer)>>,
+    /// The frame camera's forward axis (view depth is measured along it).
+    forward: Vec3,
     /// How much nearer than a point an occluder must be to shadow it: a
     /// small share of the lit region's size, so a surface does not shadow
     /// itself between texels.
@@ -409,6 +489,7 @@ impl ShadowMaps {
             .collect();
         ShadowMaps {
             maps,
+            forward,
             bias: radius * 5e-3,
         }
     }
