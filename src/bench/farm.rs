@@ -384,7 +384,7 @@ impl<'a> Farm<'a> {
                 let (_, event) = self.events.pop_first().expect("an event is due");
                 match event {
                     Event::ToMaster(conn, message) => {
-                        self.to_driver(DriverInput::Message(conn, message))
+                        self.queue_for_driver(DriverInput::Message(conn, message))
                     }
                     Event::ToWorker(w, message) => {
                         let worker = &mut self.workers[w];
@@ -464,7 +464,7 @@ impl<'a> Farm<'a> {
                 *left -= 1;
                 if *left == 0 {
                     self.base_left.remove(&(job, frame));
-                    self.to_driver(DriverInput::Base(job, frame));
+                    self.queue_for_driver(DriverInput::Base(job, frame));
                 }
             }
             Work::Driver(outputs) => {
@@ -477,7 +477,7 @@ impl<'a> Farm<'a> {
         }
     }
 
-    fn to_driver(&mut self, input: DriverInput) {
+    fn queue_for_driver(&mut self, input: DriverInput) {
         self.driver_queue.push_back(input);
         if !self.driver_busy {
             self.next_driver_input();

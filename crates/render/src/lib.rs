@@ -215,7 +215,12 @@ impl Renderer {
             done += package.len() as u64;
             progress(done, total);
         }
-        eprintln!("PHASE total-raster {:?} vertex {:?} fill {:?}", start.elapsed() - raster_time, stats.vertex_time, stats.fill_time);
+        eprintln!(
+            "PHASE total-raster {:?} vertex {:?} fill {:?}",
+            start.elapsed() - raster_time,
+            stats.vertex_time,
+            stats.fill_time
+        );
         RenderedFrame {
             image,
             stats,

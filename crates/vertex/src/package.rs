@@ -538,7 +538,10 @@ impl<'m> ScreenFace<'m> {
     /// weights `w` (divided by depth, as a GPU interpolates); the reflected
     /// object is the nearest corner's (the last of equals).
     fn gouraud(&self, index: u32, mesh: &TriangleMesh, w: [f32; 3]) -> PixelValue {
-        let v = self.face.vertices.map(|i| &mesh.vertices[i as usize].sample);
+        let v = self
+            .face
+            .vertices
+            .map(|i| &mesh.vertices[i as usize].sample);
         let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) * self.inv_depth[k]);
         let scale = 1.0 / (pw[0] + pw[1] + pw[2]);
         let pw = pw.map(|x| x * scale);
