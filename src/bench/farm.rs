@@ -66,9 +66,11 @@ pub(crate) struct FarmCosts {
     pub(crate) base_frame: f64,
     /// The master's driver per item of a result (decode, check, composite).
     pub(crate) result_per_item: f64,
-    /// The master's driver per finished frame (image to the submitter,
-    /// journal).
+    /// The master's driver per finished frame (the image for the wire).
     pub(crate) frame_out: f64,
+    /// The master's journal thread per finished frame (compress, write):
+    /// beside the driver, on the master's cores.
+    pub(crate) journal: f64,
 }
 
 /// One simulated worker.
@@ -161,6 +163,8 @@ enum Work {
     },
     /// The driver's handling of an input: its outputs go out when done.
     Driver(Vec<Output>),
+    /// Work that only takes CPU (the journal's).
+    Background,
 }
 
 struct CpuJob {
@@ -474,6 +478,7 @@ impl<'a> Farm<'a> {
                 }
                 self.next_driver_input();
             }
+            Work::Background => {}
         }
     }
 
@@ -539,10 +544,13 @@ impl<'a> Farm<'a> {
     fn release(&mut self, output: Output) {
         match output {
             Output::Send(SUBMITTER, message) => match *message {
-                Message::FrameDone(done) => self.frames.push(FarmFrame {
-                    done_at: self.now,
-                    stats: done.stats,
-                }),
+                Message::FrameDone(done) => {
+                    self.frames.push(FarmFrame {
+                        done_at: self.now,
+                        stats: done.stats,
+                    });
+                    self.start_cpu(0, self.costs.journal, Work::Background);
+                }
                 Message::SceneRequest { .. } => {
                     let data = Message::SceneData(self.scene.clone());
                     self.schedule(self.now, Event::ToMaster(SUBMITTER, Box::new(data)));
@@ -678,6 +686,7 @@ mod tests {
             base_frame,
             result_per_item: 0.0,
             frame_out: 0.0,
+            journal: 0.0,
         };
         (job, costs)
     }
