@@ -27,8 +27,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Camera, Lighting, NONE, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
 use vtfarm_vertex::{
-    Behind, Frame, GlassPass, PackageOptions, PackageStats, PixelValue, SparseBitmap, Stop,
-    VertexOwners, VertexSettings, pixel_surface, trace_package,
+    Behind, Frame, GlassPass, PackageOptions, PackageStats, PixelValue, ShadowCache, SparseBitmap,
+    Stop, VertexOwners, VertexSettings, pixel_surface, trace_package,
 };
 
 /// Everything that can change from one frame to the next: what a job
@@ -510,6 +510,7 @@ impl ReflectionMethod for VertexTracing {
             &frame.reflector_flags(),
             self.settings.transmission,
             GlassPass::Upfront,
+            &ShadowCache::default(),
         );
         let owners = VertexOwners::new(scene);
         let vertex_frame = Frame {

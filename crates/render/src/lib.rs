@@ -22,8 +22,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
-    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, VertexOwners,
-    VertexSettings, reflector_bounds, trace_package_pixels,
+    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, ShadowCache,
+    VertexOwners, VertexSettings, reflector_bounds, trace_package_pixels,
 };
 
 /// How to cut and run the reflector work.
@@ -62,6 +62,8 @@ pub struct Renderer {
     owners: VertexOwners,
     reflectors: Vec<TriangleId>,
     is_reflector: Vec<bool>,
+    /// The last frame's shadow maps of the thin-glass pass.
+    shadows: ShadowCache,
 }
 
 impl Renderer {
@@ -100,6 +102,7 @@ impl Renderer {
             owners,
             reflectors,
             is_reflector,
+            shadows: ShadowCache::default(),
         })
     }
 
@@ -113,6 +116,11 @@ impl Renderer {
 
     pub fn reflectors(&self) -> &[TriangleId] {
         &self.reflectors
+    }
+
+    /// The thin-glass pass's shadow maps, kept from frame to frame.
+    pub fn shadow_cache(&self) -> &ShadowCache {
+        &self.shadows
     }
 
     /// The rasterized base frame and ID buffer.
@@ -149,6 +157,7 @@ impl Renderer {
             &self.is_reflector,
             setup.vertex.transmission,
             pass,
+            &self.shadows,
         )
     }
 
@@ -192,9 +201,7 @@ impl Renderer {
         let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
-        let t0 = Instant::now();
         let mut image = FrameImage::new(base);
-        eprintln!("PHASE frameimage_new {:?}", t0.elapsed());
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
@@ -215,7 +222,6 @@ impl Renderer {
             done += package.len() as u64;
             progress(done, total);
         }
-        eprintln!("PHASE total-raster {:?} vertex {:?} fill {:?}", start.elapsed() - raster_time, stats.vertex_time, stats.fill_time);
         RenderedFrame {
             image,
             stats,

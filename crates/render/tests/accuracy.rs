@@ -614,3 +614,39 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
         .sum();
     assert!(transmitted > 0.1 * err.pixels as f32);
 }
+
+#[test]
+fn shadow_maps_kept_from_a_nearby_frame_change_no_pixel() {
+    // Two frames of the farm's small cockpit with eyes 1 mm apart: the
+    // second reuses the first's shadow maps, and gives what a renderer that
+    // never saw the first frame gives.
+    let [_, (scene, reflector, camera, lighting)] = farm_scenes(96);
+    let reflectors = object_triangles(&scene, reflector);
+    let scene = Arc::new(scene);
+    let moved = Camera {
+        eye: camera.eye + Vec3::new(0.001, 0.0, 0.0),
+        ..camera
+    };
+    let warm = Renderer::new(scene.clone(), reflectors.clone());
+    let cold = Renderer::new(scene, reflectors.clone());
+    for quality in [Quality::Preview, Quality::Full] {
+        let render = |renderer: &Renderer, camera: Camera| {
+            let s = setup(camera, &lighting, quality);
+            render_with(renderer, &s, std::slice::from_ref(&reflectors))
+        };
+        render(&warm, camera);
+        let before = warm.shadow_cache().builds();
+        let reused = render(&warm, moved);
+        assert_eq!(
+            warm.shadow_cache().builds(),
+            before,
+            "the maps were rebuilt"
+        );
+        assert!(
+            reused == render(&cold, moved),
+            "{}: reused shadow maps changed the frame",
+            quality.name()
+        );
+    }
+    assert_eq!(cold.shadow_cache().builds(), 1);
+}

@@ -173,7 +173,7 @@ pub use package::{
     TracedPixels, trace_package, trace_package_pixels,
 };
 pub use stop::{Stop, Stopped};
-pub use thin::{Behind, GlassPass};
+pub use thin::{Behind, GlassPass, ShadowCache};
 pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;

@@ -407,27 +407,39 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         .faces()
         .filter_map(|f| ScreenFace::new(mesh, f))
         .collect();
-    // The best face so far per pixel: (smallest barycentric, face index).
-    let mut best: Vec<(f32, u32)> = vec![(f32::NEG_INFINITY, NO_FACE); area];
-    for (fi, face) in faces.iter().enumerate() {
-        let lo = face.a.min(face.b).min(face.c);
-        let hi = face.a.max(face.b).max(face.c);
-        let x0 = (lo.x.floor().max(rect.x0 as f32)) as u32;
-        let y0 = (lo.y.floor().max(rect.y0 as f32)) as u32;
-        let x1 = ((hi.x.ceil() + 1.0).min(rect.x1 as f32)) as u32;
-        let y1 = ((hi.y.ceil() + 1.0).min(rect.y1 as f32)) as u32;
-        for y in y0..y1 {
-            let row = ((y - rect.y0) * width) as usize;
-            for x in x0..x1 {
-                let w = face.weights(x, y);
-                let score = w[0].min(w[1]).min(w[2]);
-                let slot = &mut best[row + (x - rect.x0) as usize];
-                if score >= -1e-4 && score > slot.0 {
-                    *slot = (score, fi as u32);
+    // The best face per pixel: (smallest barycentric, face index). A lone
+    // face (every unrefined triangle) needs no table: it is tested per pixel.
+    let mut best: Vec<(f32, u32)> = Vec::new();
+    if faces.len() > 1 {
+        best = vec![(f32::NEG_INFINITY, NO_FACE); area];
+        for (fi, face) in faces.iter().enumerate() {
+            let reach = face.reach(rect);
+            for y in reach.y0..reach.y1 {
+                let row = ((y - rect.y0) * width) as usize;
+                for x in reach.x0..reach.x1 {
+                    let score = face.score(face.weights(x, y));
+                    let slot = &mut best[row + (x - rect.x0) as usize];
+                    if score >= -1e-4 && score > slot.0 {
+                        *slot = (score, fi as u32);
+                    }
                 }
             }
         }
     }
+    let lone_reach = faces.first().map(|f| f.reach(rect));
+    let face_at = |x: u32, y: u32| -> usize {
+        if faces.len() > 1 {
+            return best[((y - rect.y0) * width + (x - rect.x0)) as usize].1 as usize;
+        }
+        match (faces.first(), lone_reach) {
+            (Some(face), Some(reach))
+                if reach.contains(x, y) && face.score(face.weights(x, y)) >= -1e-4 =>
+            {
+                0
+            }
+            _ => NO_FACE as usize,
+        }
+    };
     let fill = frame.settings.quality == Quality::Full;
     let disagrees: Vec<bool> = faces
         .iter()
@@ -458,13 +470,12 @@ fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec
         if frame.stopped() {
             break;
         }
-        let row = ((y - rect.y0) * width) as usize;
         for x in rect.x0..rect.x1 {
             if !frame.owns(mesh.triangle, x, y) {
                 continue;
             }
             let index = frame.ids.index(x, y) as u32;
-            let fi = best[row + (x - rect.x0) as usize].1 as usize;
+            let fi = face_at(x, y);
             let value = match faces.get(fi) {
                 Some(face)
                     if !disagrees[fi]
@@ -526,6 +537,25 @@ impl<'m> ScreenFace<'m> {
         })
     }
 
+    /// The pixels of `rect` whose centres the face may contain: its screen
+    /// bounding box, a pixel wider to the right and below.
+    fn reach(&self, rect: PixelRect) -> PixelRect {
+        let lo = self.a.min(self.b).min(self.c);
+        let hi = self.a.max(self.b).max(self.c);
+        PixelRect {
+            x0: (lo.x.floor().max(rect.x0 as f32)) as u32,
+            y0: (lo.y.floor().max(rect.y0 as f32)) as u32,
+            x1: ((hi.x.ceil() + 1.0).min(rect.x1 as f32)) as u32,
+            y1: ((hi.y.ceil() + 1.0).min(rect.y1 as f32)) as u32,
+        }
+    }
+
+    /// How well the face contains a pixel centre of weights `w`: the
+    /// smallest weight (negative outside).
+    fn score(&self, w: [f32; 3]) -> f32 {
+        w[0].min(w[1]).min(w[2])
+    }
+
     /// The barycentric weights of pixel (x, y)'s centre.
     fn weights(&self, x: u32, y: u32) -> [f32; 3] {
         let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
@@ -538,7 +568,10 @@ impl<'m> ScreenFace<'m> {
     /// weights `w` (divided by depth, as a GPU interpolates); the reflected
     /// object is the nearest corner's (the last of equals).
     fn gouraud(&self, index: u32, mesh: &TriangleMesh, w: [f32; 3]) -> PixelValue {
-        let v = self.face.vertices.map(|i| &mesh.vertices[i as usize].sample);
+        let v = self
+            .face
+            .vertices
+            .map(|i| &mesh.vertices[i as usize].sample);
         let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) * self.inv_depth[k]);
         let scale = 1.0 / (pw[0] + pw[1] + pw[2]);
         let pw = pw.map(|x| x * scale);

@@ -32,8 +32,8 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Behind, Frame, GlassPass, PackageOptions, PackageResult, Quality, Stop, Stopped, Transmission,
-    VertexOwners, VertexSettings, trace_package,
+    Behind, Frame, GlassPass, PackageOptions, PackageResult, Quality, ShadowCache, Stop, Stopped,
+    Transmission, VertexOwners, VertexSettings, trace_package,
 };
 
 /// The default thresholds without the maximum edge length, so that only
@@ -168,6 +168,7 @@ impl TestFrame {
             &is_reflector,
             Transmission::Raster,
             GlassPass::Upfront,
+            &ShadowCache::default(),
         );
         TestFrame {
             bvh,

@@ -17,11 +17,14 @@
 //! Everything here is deterministic for any thread count, so workers rebuild
 //! it like the ID buffers.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_raster::IdBuffer;
 use vtfarm_scene::shading::phong;
-use vtfarm_scene::{Camera, LightKind, NONE, Projector, Scene, TriangleId};
+use vtfarm_scene::{Camera, Light, LightKind, NONE, Projector, Scene, TriangleId};
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
 use crate::{
@@ -65,11 +68,11 @@ enum GlassTerms {
     /// Per pixel of `bounds`, row-major.
     Upfront(Vec<ThinGlass>),
     /// The see-through surfaces that are not reflectors (a slab's back),
-    /// the shadow maps and the frame camera's projector.
+    /// the shadow maps and the frame camera's view.
     OnDemand {
         layers: IdBuffer,
-        shadows: ShadowMaps,
-        projector: Projector,
+        shadows: Arc<ShadowMaps>,
+        view: View,
     },
 }
 
@@ -109,15 +112,23 @@ impl Behind {
         is_reflector: &[bool],
         transmission: Transmission,
         pass: GlassPass,
+        cache: &ShadowCache,
     ) -> Behind {
         let scene = tracer.bvh.scene();
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let behind = behind_id_buffer_within(scene, camera, is_reflector, bounds);
         let glass = match transmission {
             Transmission::Traced => GlassTerms::Nothing,
-            Transmission::Raster => {
-                GlassTerms::new(tracer, camera, ids, &behind, is_reflector, bounds, pass)
-            }
+            Transmission::Raster => GlassTerms::new(
+                tracer,
+                camera,
+                ids,
+                &behind,
+                is_reflector,
+                bounds,
+                pass,
+                cache,
+            ),
         };
         Behind {
             ids: behind,
@@ -152,15 +163,13 @@ impl Behind {
             GlassTerms::OnDemand {
                 layers,
                 shadows,
-                projector,
+                view,
             } => {
                 let t = ids.triangle[ids.index(x, y)];
                 if t == NONE || !see_through(tracer.bvh.scene(), t) {
                     return;
                 }
-                glass_at(
-                    tracer, camera, projector, ids, layers, &self.ids, shadows, x, y,
-                )
+                glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
             }
         };
         let ghost = value.reflected * (glass.reflection_scale - 1.0);
@@ -178,6 +187,7 @@ fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
 impl GlassTerms {
     /// The thin-glass terms of every pixel of `bounds` whose reflector is
     /// see-through, or (`GlassPass::OnDemand`) what computing them needs.
+    #[allow(clippy::too_many_arguments)]
     fn new(
         tracer: &Tracer<'_>,
         camera: &Camera,
@@ -186,6 +196,7 @@ impl GlassTerms {
         is_reflector: &[bool],
         bounds: PixelRect,
         pass: GlassPass,
+        cache: &ShadowCache,
     ) -> GlassTerms {
         let scene = tracer.bvh.scene();
         let glass_pixel = |i: usize| {
@@ -198,13 +209,17 @@ impl GlassTerms {
         let layers = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|t| {
             !is_reflector[t as usize] && see_through(scene, t)
         });
-        let shadows = ShadowMaps::new(tracer, camera, behind, bounds, &|i| glass_pixel(i));
-        let projector = Projector::new(camera);
+        let shadows =
+            ShadowMaps::for_frame(tracer, camera, behind, bounds, &|i| glass_pixel(i), cache);
+        let view = View {
+            projector: Projector::new(camera),
+            forward: camera.basis().0,
+        };
         if pass == GlassPass::OnDemand {
             return GlassTerms::OnDemand {
                 layers,
                 shadows,
-                projector,
+                view,
             };
         }
         let width = (bounds.x1 - bounds.x0) as usize;
@@ -216,9 +231,8 @@ impl GlassTerms {
                 for (column, slot) in slots.iter_mut().enumerate() {
                     let x = bounds.x0 + column as u32;
                     if glass_pixel(ids.index(x, y)) {
-                        *slot = glass_at(
-                            tracer, camera, &projector, ids, &layers, behind, &shadows, x, y,
-                        );
+                        *slot =
+                            glass_at(tracer, camera, &view, ids, &layers, behind, &shadows, x, y);
                     }
                 }
             });
@@ -226,12 +240,19 @@ impl GlassTerms {
     }
 }
 
-/// The thin-glass terms at one glass pixel (`projector` is `camera`'s).
+/// The frame camera's projector and forward axis (view depth runs along it).
+#[derive(Clone, Copy, Debug)]
+struct View {
+    projector: Projector,
+    forward: Vec3,
+}
+
+/// The thin-glass terms at one glass pixel (`view` is `camera`'s).
 #[allow(clippy::too_many_arguments)]
 fn glass_at(
     tracer: &Tracer<'_>,
     camera: &Camera,
-    projector: &Projector,
+    view: &View,
     ids: &IdBuffer,
     layers: &IdBuffer,
     behind: &IdBuffer,
@@ -241,7 +262,7 @@ fn glass_at(
 ) -> ThinGlass {
     let scene = tracer.bvh.scene();
     let i = ids.index(x, y);
-    let direction = projector.pixel_ray(x, y);
+    let direction = view.projector.pixel_ray(x, y);
     let (front, direction) =
         pixel_surface_along(scene, camera, ids, ids.triangle[i], (x, y), direction);
     let (kr, kt) = tracer.weights(&front, direction);
@@ -262,7 +283,7 @@ fn glass_at(
     let seen = opaque_radiance(
         tracer,
         camera,
-        projector,
+        view,
         behind,
         shadows,
         (x, y, direction),
@@ -312,7 +333,7 @@ fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, directio
 fn opaque_radiance(
     tracer: &Tracer<'_>,
     camera: &Camera,
-    projector: &Projector,
+    view: &View,
     behind: &IdBuffer,
     shadows: &ShadowMaps,
     (x, y, direction): (u32, u32, Vec3),
@@ -326,8 +347,8 @@ fn opaque_radiance(
     }
     // The shifted ray is parallel to the eye ray: it meets the opaque scene
     // about the shift beside where the eye ray does.
-    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(shadows.forward));
-    let Some(guess) = projector.project(straight + shift) else {
+    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(view.forward));
+    let Some(guess) = view.projector.project(straight + shift) else {
         return tracer.lighting.background;
     };
     let origin = front + shift;
@@ -409,30 +430,76 @@ fn ray_plane(
 }
 
 /// One shadow map per light: the scene's ID buffer seen from the light
-/// through a frustum fitted to the opaque points behind the glass.
+/// through a frustum fitted to a box around the opaque points behind the
+/// glass. The box is snapped outward to a grid (a power of two, a quarter
+/// to a half of its size), so that the maps depend on the lights and the
+/// snapped box alone: frames whose eyes differ a little share them
+/// ([`ShadowCache`]), and every machine builds the same ones.
 #[derive(Clone, Debug)]
 struct ShadowMaps {
     maps: Vec<Option<(Projector, IdBuffer)>>,
-    /// The frame camera's forward axis (view depth is measured along it).
-    forward: Vec3,
     /// How much nearer than a point an occluder must be to shadow it: a
-    /// small share of the lit region's size, so a surface does not shadow
-    /// itself between texels.
+    /// few texels, so a surface does not shadow itself between texels.
     bias: f32,
 }
 
-/// Texels along each side of a shadow map.
-const SHADOW_MAP_SIZE: u32 = 1024;
+/// Texels along each side of a shadow map: twice the 1024 that a box fitted
+/// exactly needed, since snapping at most doubles the box.
+const SHADOW_MAP_SIZE: u32 = 2048;
+
+/// What a set of shadow maps is built from: the lights and the snapped box.
+#[derive(Clone, Debug, PartialEq)]
+struct ShadowKey {
+    lights: Vec<Light>,
+    lo: Vec3,
+    hi: Vec3,
+}
+
+/// The shadow maps of the last frame, kept for the next (a renderer holds
+/// one per scene). The maps are a function of the key alone, so whether
+/// they come from here or are built anew never changes a pixel.
+#[derive(Debug, Default)]
+pub struct ShadowCache {
+    last: Mutex<Option<(ShadowKey, Arc<ShadowMaps>)>>,
+    builds: AtomicU64,
+}
+
+impl ShadowCache {
+    /// How many sets of maps were built (a frame that reuses the last
+    /// frame's builds none).
+    pub fn builds(&self) -> u64 {
+        self.builds.load(Ordering::Relaxed)
+    }
+
+    /// The maps for `key`, built with `build` unless the last frame's match.
+    fn get(&self, key: ShadowKey, build: impl FnOnce(&ShadowKey) -> ShadowMaps) -> Arc<ShadowMaps> {
+        let mut last = self
+            .last
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some((k, maps)) = last.as_ref()
+            && *k == key
+        {
+            return maps.clone();
+        }
+        self.builds.fetch_add(1, Ordering::Relaxed);
+        let maps = Arc::new(build(&key));
+        *last = Some((key, maps.clone()));
+        maps
+    }
+}
 
 impl ShadowMaps {
-    fn new(
+    /// The maps for the opaque points behind the glass pixels of `bounds`,
+    /// from `cache` when the last frame's fit.
+    fn for_frame(
         tracer: &Tracer<'_>,
         camera: &Camera,
         behind: &IdBuffer,
         bounds: PixelRect,
         glass_pixel: &(dyn Fn(usize) -> bool + Sync),
-    ) -> ShadowMaps {
-        let scene = tracer.bvh.scene();
+        cache: &ShadowCache,
+    ) -> Arc<ShadowMaps> {
         // The opaque points behind the glass, bounded by a box.
         let projector = Projector::new(camera);
         let forward = camera.basis().0;
@@ -446,9 +513,25 @@ impl ShadowMaps {
                 hi = hi.max(p);
             }
         }
+        if lo.x <= hi.x {
+            let extent = (hi - lo).max_element().max(1e-3);
+            let grid = 2f32.powi((extent / 4.0).log2().ceil() as i32);
+            lo = (lo / grid).floor() * grid;
+            hi = (hi / grid).ceil() * grid;
+        }
+        let key = ShadowKey {
+            lights: tracer.lighting.lights.clone(),
+            lo,
+            hi,
+        };
+        cache.get(key, |key| ShadowMaps::new(tracer, key))
+    }
+
+    fn new(tracer: &Tracer<'_>, key: &ShadowKey) -> ShadowMaps {
+        let scene = tracer.bvh.scene();
+        let (lo, hi) = (key.lo, key.hi);
         let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.05;
-        let maps = tracer
-            .lighting
+        let maps = key
             .lights
             .iter()
             .map(|light| {
@@ -489,8 +572,8 @@ impl ShadowMaps {
             .collect();
         ShadowMaps {
             maps,
-            forward,
-            bias: radius * 5e-3,
+            // 5 texels of a 1024 map across the box's bounding sphere.
+            bias: radius * 5e-3 * (1024.0 / SHADOW_MAP_SIZE as f32),
         }
     }
 
