@@ -18,7 +18,6 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
-use glam::Vec3;
 use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
@@ -923,7 +922,9 @@ impl MasterCore {
         j.assembling.push(FrameAssembly {
             start: start.clone(),
             ids: None,
-            image: FrameImage::new(Image::new(width, height, Vec3::ZERO)),
+            // Replaced by the base frame before anything is composited: a
+            // zeroed allocation, not a pass over 1080p.
+            image: FrameImage::new(Image::black(width, height)),
             held: Vec::new(),
             started: self.now,
             phases: Vec::new(),

@@ -66,9 +66,11 @@ pub(crate) struct FarmCosts {
     pub(crate) base_frame: f64,
     /// The master's driver per item of a result (decode, check, composite).
     pub(crate) result_per_item: f64,
-    /// The master's driver per finished frame (image to the submitter,
-    /// journal).
+    /// The master's driver per finished frame (the image for the wire).
     pub(crate) frame_out: f64,
+    /// The master's journal thread per finished frame (compress, write):
+    /// beside the driver, on the master's cores.
+    pub(crate) journal: f64,
 }
 
 /// One simulated worker.
@@ -161,6 +163,8 @@ enum Work {
     },
     /// The driver's handling of an input: its outputs go out when done.
     Driver(Vec<Output>),
+    /// Work that only takes CPU (the journal's).
+    Background,
 }
 
 struct CpuJob {
@@ -384,7 +388,7 @@ impl<'a> Farm<'a> {
                 let (_, event) = self.events.pop_first().expect("an event is due");
                 match event {
                     Event::ToMaster(conn, message) => {
-                        self.to_driver(DriverInput::Message(conn, message))
+                        self.queue_for_driver(DriverInput::Message(conn, message))
                     }
                     Event::ToWorker(w, message) => {
                         let worker = &mut self.workers[w];
@@ -464,7 +468,7 @@ impl<'a> Farm<'a> {
                 *left -= 1;
                 if *left == 0 {
                     self.base_left.remove(&(job, frame));
-                    self.to_driver(DriverInput::Base(job, frame));
+                    self.queue_for_driver(DriverInput::Base(job, frame));
                 }
             }
             Work::Driver(outputs) => {
@@ -474,10 +478,11 @@ impl<'a> Farm<'a> {
                 }
                 self.next_driver_input();
             }
+            Work::Background => {}
         }
     }
 
-    fn to_driver(&mut self, input: DriverInput) {
+    fn queue_for_driver(&mut self, input: DriverInput) {
         self.driver_queue.push_back(input);
         if !self.driver_busy {
             self.next_driver_input();
@@ -539,10 +544,13 @@ impl<'a> Farm<'a> {
     fn release(&mut self, output: Output) {
         match output {
             Output::Send(SUBMITTER, message) => match *message {
-                Message::FrameDone(done) => self.frames.push(FarmFrame {
-                    done_at: self.now,
-                    stats: done.stats,
-                }),
+                Message::FrameDone(done) => {
+                    self.frames.push(FarmFrame {
+                        done_at: self.now,
+                        stats: done.stats,
+                    });
+                    self.start_cpu(0, self.costs.journal, Work::Background);
+                }
                 Message::SceneRequest { .. } => {
                     let data = Message::SceneData(self.scene.clone());
                     self.schedule(self.now, Event::ToMaster(SUBMITTER, Box::new(data)));
@@ -678,6 +686,7 @@ mod tests {
             base_frame,
             result_per_item: 0.0,
             frame_out: 0.0,
+            journal: 0.0,
         };
         (job, costs)
     }
@@ -764,9 +773,12 @@ mod tests {
         );
     }
 
-    /// Figures for a worker with a spare core (printed; see the README).
+    /// A worker with two cores traces its packages on both; its set-up of
+    /// frame N+1 overlaps only the last package of frame N (the master
+    /// announces N+1 once N has nothing left to hand out, and late packages
+    /// are small), so the frame takes about set-up + work / 2.
     #[test]
-    fn a_spare_core_overlaps_set_up_and_tracing() {
+    fn a_second_core_halves_the_tracing_but_not_the_set_up() {
         let (job, costs) = small_farm(0.3, 0.0);
         let work: f64 = costs.seconds.iter().sum();
         let interval = |cores| {
@@ -778,9 +790,12 @@ mod tests {
             )
         };
         let (one, two) = (interval(1), interval(2));
-        println!("work {work} s, set-up 0.3 s: one core {one} s, two cores {two} s");
-        assert!(one >= work + 0.3 * 0.99, "{one}");
-        assert!(two < 0.3 + work / 2.0, "{two}");
+        assert!(one >= work + 0.3 * 0.99, "one core: {one} s");
+        let serial = 0.3 + work / 2.0;
+        assert!(
+            two > serial * 0.97 && two < serial * 1.03,
+            "two cores: {two} s, {serial} s serial"
+        );
     }
 
     /// A slow shared master link bounds the frame: results can come no

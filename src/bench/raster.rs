@@ -32,7 +32,10 @@ pub(crate) struct RasterArgs {
 
 pub(crate) fn run(args: RasterArgs) -> Result<()> {
     let threads = if args.threads.is_empty() {
-        vec![1, std::thread::available_parallelism().map_or(1, |n| n.get())]
+        vec![
+            1,
+            std::thread::available_parallelism().map_or(1, |n| n.get()),
+        ]
     } else {
         args.threads.clone()
     };
@@ -54,7 +57,8 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
             scene.triangles.len(),
             bounds.x1 - bounds.x0,
             bounds.y1 - bounds.y0,
-            100.0 * pixels(bounds) as f64 / pixels(PixelRect::full(camera.width, camera.height)) as f64
+            100.0 * pixels(bounds) as f64
+                / pixels(PixelRect::full(camera.width, camera.height)) as f64
         );
         for &n in &threads {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -70,10 +74,17 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                     })
                     .fold(f64::INFINITY, f64::min)
             };
-            let base = least(&|| drop(vtfarm_raster::rasterize(scene, camera, &job.setup.lighting)));
+            let base =
+                least(&|| drop(vtfarm_raster::rasterize(scene, camera, &job.setup.lighting)));
             let ids = least(&|| drop(vtfarm_raster::id_buffer(scene, camera)));
-            let within =
-                least(&|| drop(vtfarm_raster::id_buffer_within(scene, camera, bounds, &|_| true)));
+            let within = least(&|| {
+                drop(vtfarm_raster::id_buffer_within(
+                    scene,
+                    camera,
+                    bounds,
+                    &|_| true,
+                ))
+            });
             println!(
                 "  {n} thread(s): base frame {base:.4} s (ID buffer {ids:.4} s, shading {:.4} s), within {within:.4} s",
                 base - ids

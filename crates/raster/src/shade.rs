@@ -21,7 +21,7 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
     if width == 0 {
         return image;
     }
-    let frame = FrameShading::new(camera, lighting);
+    let frame = FrameShading::new(scene, camera, lighting);
     image
         .pixels
         .par_chunks_mut(width * ROWS_PER_TASK)
@@ -29,13 +29,14 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
         .enumerate()
         .for_each(|(task, (colors, triangles))| {
             let first_row = (task * ROWS_PER_TASK) as u32;
-            frame.shade_rows(scene, first_row, colors, triangles, width);
+            frame.shade_rows(first_row, colors, triangles);
         });
     image
 }
 
 /// What shading needs of the camera and the lights, set up once per frame.
 struct FrameShading<'a> {
+    scene: &'a Scene,
     lighting: &'a Lighting,
     eye: Vec3,
     /// Per column, the pixel ray's part that depends on the column
@@ -60,7 +61,7 @@ enum Toward {
 }
 
 impl<'a> FrameShading<'a> {
-    fn new(camera: &Camera, lighting: &'a Lighting) -> Self {
+    fn new(scene: &'a Scene, camera: &Camera, lighting: &'a Lighting) -> Self {
         // The arithmetic of `Projector::ray_direction`, split into a column
         // and a row term (the test `pixel_rays_are_the_projectors` pins it).
         let (forward, right, up) = camera.basis();
@@ -83,6 +84,7 @@ impl<'a> FrameShading<'a> {
             })
             .collect();
         FrameShading {
+            scene,
             lighting,
             eye: camera.eye,
             columns,
@@ -93,25 +95,18 @@ impl<'a> FrameShading<'a> {
         }
     }
 
-    /// Shades the rows from `first_row` on whose pixels are `colors` and
-    /// whose ID buffer rows are `triangles`, each `width` long, with the
-    /// widest vector instructions this CPU has (the same bits either way:
-    /// IEEE arithmetic is exact per lane and nothing is fused).
-    fn shade_rows(
-        &self,
-        scene: &Scene,
-        first_row: u32,
-        colors: &mut [Vec3],
-        triangles: &[TriangleId],
-        width: usize,
-    ) {
+    /// Shades whole rows from `first_row` on: their pixels `colors`, their
+    /// ID buffer rows `triangles`. With the widest vector instructions this
+    /// CPU has: the same bits either way (IEEE arithmetic is exact per lane
+    /// and nothing is fused).
+    fn shade_rows(&self, first_row: u32, colors: &mut [Vec3], triangles: &[TriangleId]) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
-            unsafe { self.shade_rows_avx2(scene, first_row, colors, triangles, width) };
+            unsafe { self.shade_rows_avx2(first_row, colors, triangles) };
             return;
         }
-        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+        self.shade_rows_portable(first_row, colors, triangles);
     }
 
     /// [`Self::shade_rows_portable`] compiled for AVX2.
@@ -122,26 +117,18 @@ impl<'a> FrameShading<'a> {
     #[target_feature(enable = "avx2")]
     unsafe fn shade_rows_avx2(
         &self,
-        scene: &Scene,
         first_row: u32,
         colors: &mut [Vec3],
         triangles: &[TriangleId],
-        width: usize,
     ) {
-        self.shade_rows_portable(scene, first_row, colors, triangles, width);
+        self.shade_rows_portable(first_row, colors, triangles);
     }
 
     /// See [`Self::shade_rows`]. A row is shaded run by run of pixels that
     /// see the same triangle, whose set-up is reused while it lasts.
     #[inline(always)]
-    fn shade_rows_portable(
-        &self,
-        scene: &Scene,
-        first_row: u32,
-        colors: &mut [Vec3],
-        triangles: &[TriangleId],
-        width: usize,
-    ) {
+    fn shade_rows_portable(&self, first_row: u32, colors: &mut [Vec3], triangles: &[TriangleId]) {
+        let width = self.columns.len();
         let mut surface: Option<Surface> = None;
         let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
         for (row, (colors, triangles)) in rows.enumerate() {
@@ -156,7 +143,7 @@ impl<'a> FrameShading<'a> {
                 if t != NONE {
                     let surface = match &mut surface {
                         Some(s) if s.id == t => s,
-                        slot => slot.insert(Surface::new(scene, self, t)),
+                        slot => slot.insert(Surface::new(self, t)),
                     };
                     for start in (x..x + run).step_by(LANES) {
                         let end = (start + LANES).min(x + run);
@@ -264,7 +251,8 @@ struct Surface<'a> {
 }
 
 impl<'a> Surface<'a> {
-    fn new(scene: &'a Scene, frame: &FrameShading, id: TriangleId) -> Self {
+    fn new(frame: &FrameShading<'a>, id: TriangleId) -> Self {
+        let scene = frame.scene;
         let corners = scene.triangle_positions(id).map(|p| p - frame.eye);
         let material = scene.material_of(id);
         Surface {
@@ -375,8 +363,8 @@ mod tests {
     fn pixel_rays_are_the_projectors() {
         for (width, height) in [(64, 48), (1920, 1080), (7, 300)] {
             let camera = camera(width, height);
-            let lighting = Lighting::default();
-            let frame = FrameShading::new(&camera, &lighting);
+            let (scene, lighting) = (Scene::default(), Lighting::default());
+            let frame = FrameShading::new(&scene, &camera, &lighting);
             let rays = Projector::new(&camera);
             for y in (0..height).step_by(7) {
                 for x in (0..width).step_by(5) {
@@ -452,27 +440,35 @@ mod tests {
             background: Vec3::ZERO,
         };
         let camera = camera(40, 30);
-        let frame = FrameShading::new(&camera, &lighting);
         let rays = Projector::new(&camera);
-        for id in 0..scene.triangles.len() as TriangleId {
-            let surface = Surface::new(&scene, &frame, id);
-            for y in 0..camera.height {
-                for x0 in (0..camera.width as usize).step_by(3) {
-                    // Runs of 1 to LANES pixels, as the row loop makes them.
-                    let len = (x0 % LANES + 1).min(camera.width as usize - x0);
-                    let mut out = vec![Vec3::NAN; len];
-                    frame.shade(&surface, frame.row_ray(y), x0, &mut out);
-                    for (i, color) in out.into_iter().enumerate() {
-                        let x = (x0 + i) as u32;
-                        let expected =
-                            scalar_shade(&scene, camera.eye, &lighting, id, rays.pixel_ray(x, y));
-                        assert_eq!(
-                            color.to_array().map(f32::to_bits),
-                            expected.to_array().map(f32::to_bits),
-                            "triangle {id} ({x}, {y})"
-                        );
-                    }
+        // Every triangle on every pixel, in runs of 1 to 13 pixels (so chunks
+        // of every fill) between empty runs, through the whole shading path
+        // (the vector width this CPU picks, lanes, run set-up).
+        let triangles = scene.triangles.len() as u32;
+        for shift in 0..triangles + 1 {
+            let mut ids = IdBuffer::new(camera.width, camera.height);
+            let (mut run, mut left, mut t) = (0, 0, shift);
+            for slot in &mut ids.triangle {
+                if left == 0 {
+                    (run, t) = (run % 13 + 1, (t + 1) % (triangles + 1));
+                    left = run;
                 }
+                left -= 1;
+                *slot = if t == triangles { NONE } else { t };
+            }
+            let image = shade(&scene, &camera, &lighting, &ids);
+            for (x, y) in crate::PixelRect::full(camera.width, camera.height).pixels() {
+                let id = ids.triangle[ids.index(x, y)];
+                let expected = if id == NONE {
+                    lighting.background
+                } else {
+                    scalar_shade(&scene, camera.eye, &lighting, id, rays.pixel_ray(x, y))
+                };
+                assert_eq!(
+                    image.get(x, y).to_array().map(f32::to_bits),
+                    expected.to_array().map(f32::to_bits),
+                    "triangle {id} ({x}, {y})"
+                );
             }
         }
     }

@@ -51,8 +51,9 @@ impl SchedulerConfig {
     /// they ask for its work: requests lapse at a frame start, and
     /// [`FARM_FRAMES_IN_FLIGHT`] frames are pipelined (a worker keeps that
     /// many frames prepared: `vtfarm_proto::FRAMES_IN_FLIGHT`). The master
-    /// core and the simulator (`vtfarm bench simulate`) both take their
-    /// configuration through here, so they run the same scheduler.
+    /// core takes its configuration through here (and `vtfarm bench
+    /// simulate` runs that core), as does this crate's `sim` when it plays
+    /// the farm.
     pub fn farm(self) -> Self {
         SchedulerConfig {
             requests_lapse_at_frame_start: true,

@@ -823,11 +823,7 @@ impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest
 {
     #[inline(always)]
     fn test(&mut self, _: usize, first: u32, _: u32) -> f32 {
-        let hits = self
-            .bvh
-            .leaves
-            .block(first)
-            .intersect_in::<KX, KY, KZ>(self.ray);
+        let hits = self.bvh.leaves.hits::<KX, KY, KZ>(first, self.ray);
         offer_leaf(&mut self.best, &hits)
     }
 }
@@ -861,11 +857,7 @@ struct AnyInLeaves<'a, const KX: usize, const KY: usize, const KZ: usize> {
 impl<const KX: usize, const KY: usize, const KZ: usize> LeafTest for AnyInLeaves<'_, KX, KY, KZ> {
     #[inline(always)]
     fn test(&mut self, _: usize, first: u32, _: u32) -> f32 {
-        let hits = self
-            .bvh
-            .leaves
-            .block(first)
-            .intersect_in::<KX, KY, KZ>(self.ray);
+        let hits = self.bvh.leaves.hits::<KX, KY, KZ>(first, self.ray);
         for lane in bits(hits.hits) {
             let t = hits.t[lane];
             let slot = first as usize + lane;

@@ -51,6 +51,16 @@ impl Leaves {
     pub(crate) fn block(&self, first: u32) -> &LeafBlock {
         &self.blocks[self.block_of_slot[first as usize] as usize]
     }
+
+    /// The hits of `ray` (axis order `[KX, KY, KZ]`) in that leaf.
+    #[inline(always)]
+    pub(crate) fn hits<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        first: u32,
+        ray: &ShearedRay,
+    ) -> LaneHits {
+        self.block(first).intersect_in::<KX, KY, KZ>(ray)
+    }
 }
 
 /// Up to [`LANES`] triangles, coordinate by coordinate:

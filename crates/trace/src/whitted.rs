@@ -9,7 +9,7 @@ use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Light, LightKind, Lighting, NONE, ObjectId};
 
 use crate::bvh::spawn_offset;
-use crate::{Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
+use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
 
 /// Whitted tracer for one frame's lighting.
 ///
@@ -62,6 +62,25 @@ mod word {
     /// Plus the light's index: the light lights the surface (facing it and
     /// unoccluded).
     pub(super) const LIT: u64 = 2 << 32;
+}
+
+impl Shaded {
+    /// A colour with no reflected or transmitted part.
+    fn only(color: Vec3) -> Shaded {
+        Shaded {
+            color,
+            reflected: Vec3::ZERO,
+            transmitted: Vec3::ZERO,
+            reflected_object: NONE,
+        }
+    }
+}
+
+/// The state of one sample's depth-first walk: its signature so far, and
+/// scratch space for a surface's light words.
+struct Walk {
+    signature: Signature,
+    lit: Vec<u64>,
 }
 
 /// Deterministic FxHash-style hash of the ray tree's event sequence.
@@ -122,9 +141,7 @@ pub(crate) fn schlick_factor(cos: f32) -> f32 {
 impl Tracer<'_> {
     /// Traces a primary ray from the camera (depth 0).
     pub fn trace(&self, ray: &Ray) -> Sample {
-        let mut signature = Signature::new();
-        let (shaded, _) = self.radiance(ray, 1, 1.0, &mut signature);
-        sample(shaded, signature)
+        self.sample_of(&mut OnDemand { tracer: self }, Link::Ray(*ray), Rays::Both)
     }
 
     /// Shades a known surface point seen along `incoming` (unit direction of
@@ -133,9 +150,8 @@ impl Tracer<'_> {
     /// rays + kr * reflected ray + kt * refracted ray, recursively. This is
     /// what vertex tracing calls per vertex and per filled pixel.
     pub fn shade(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
-        let mut signature = Signature::new();
-        let shaded = self.shade_surface(point, incoming, 1, 1.0, Rays::Both, &mut signature);
-        sample(shaded, signature)
+        let link = Link::Point(*point, incoming);
+        self.sample_of(&mut OnDemand { tracer: self }, link, Rays::Both)
     }
 
     /// [`Tracer::shade`] without the point's own refraction ray: local Phong
@@ -146,16 +162,8 @@ impl Tracer<'_> {
     /// point's own shadow-ray outcomes stay out of the signature (a shadow
     /// edge across the glass splits only where the colour shows it).
     pub fn shade_reflection(&self, point: &SurfacePoint, incoming: Vec3) -> Sample {
-        let mut signature = Signature::new();
-        let shaded = self.shade_surface(
-            point,
-            incoming,
-            1,
-            1.0,
-            Rays::ReflectionOnly,
-            &mut signature,
-        );
-        sample(shaded, signature)
+        let link = Link::Point(*point, incoming);
+        self.sample_of(&mut OnDemand { tracer: self }, link, Rays::ReflectionOnly)
     }
 
     /// Batches over all cores with rayon (results in input order), the
@@ -167,9 +175,8 @@ impl Tracer<'_> {
             .flat_map_iter(|chunk| {
                 let hits = self.bvh.closest_hits(chunk, f32::INFINITY);
                 chunk.iter().zip(hits).map(|(ray, hit)| {
-                    let mut signature = Signature::new();
-                    let (shaded, _) = self.radiance_of(ray, hit, 1, 1.0, &mut signature);
-                    sample(shaded, signature)
+                    let link = Link::Hit(*ray, hit);
+                    self.sample_of(&mut OnDemand { tracer: self }, link, Rays::Both)
                 })
             })
             .collect()
@@ -194,117 +201,114 @@ impl Tracer<'_> {
         generations::shade_points(self, points, rays)
     }
 
-    /// Radiance along `ray`, whose first surface gets depth `depth` and
-    /// carries `weight` of the sample (the product of kr/kt above it); also
-    /// returns the object hit (`NONE` on a miss).
-    fn radiance(
-        &self,
-        ray: &Ray,
-        depth: u32,
-        weight: f32,
-        signature: &mut Signature,
-    ) -> (Shaded, ObjectId) {
-        let hit = self.bvh.closest_hit(ray, f32::INFINITY);
-        self.radiance_of(ray, hit, depth, weight, signature)
+    /// The sample of the ray tree rooted at `root`, whose first surface
+    /// spawns `rays`.
+    fn sample_of<S: TreeSource>(&self, source: &mut S, root: S::Link, rays: Rays) -> Sample {
+        let mut walk = Walk {
+            signature: Signature::new(),
+            lit: Vec::new(),
+        };
+        let (shaded, _) = self.shade_tree(source, root, 1, 1.0, rays, &mut walk);
+        sample(shaded, walk.signature)
     }
 
-    /// [`Tracer::radiance`] once the ray's closest hit is known.
-    fn radiance_of(
+    /// The one shading path of every sample: the radiance arriving along
+    /// `link`, whose surface gets depth `depth` and carries `weight` of the
+    /// sample (the product of kr/kt above it), summed depth first with the
+    /// signature's words in tree order; also returns the object hit (`NONE`
+    /// on a miss).
+    fn shade_tree<S: TreeSource>(
         &self,
-        ray: &Ray,
-        hit: Option<crate::Hit>,
+        source: &mut S,
+        link: S::Link,
         depth: u32,
         weight: f32,
-        signature: &mut Signature,
+        rays: Rays,
+        walk: &mut Walk,
     ) -> (Shaded, ObjectId) {
-        match hit {
-            None => {
-                if weight >= self.settings.signature_min_weight {
-                    signature.add(word::MISS);
-                }
-                let background = Shaded {
-                    color: self.lighting.background,
-                    reflected: Vec3::ZERO,
-                    transmitted: Vec3::ZERO,
-                    reflected_object: NONE,
-                };
-                (background, NONE)
+        // Branches too weak to change a pixel visibly stay out of the ray-tree
+        // signature, so they do not drive the refinement.
+        let tracked = weight >= self.settings.signature_min_weight;
+        walk.lit.clear();
+        let Visited::Surface(surface) = source.visit(link, depth, rays, &mut walk.lit) else {
+            if tracked {
+                walk.signature.add(word::MISS);
             }
-            Some(hit) => {
-                let point = self.bvh.surface_point(&hit);
-                let object = self.bvh.scene().triangles[hit.triangle as usize].object;
-                (
-                    self.shade_surface(&point, ray.direction, depth, weight, Rays::Both, signature),
-                    object,
-                )
-            }
+            return (Shaded::only(self.lighting.background), NONE);
+        };
+        if tracked {
+            walk.signature.add(u64::from(surface.object));
         }
+        // `shade_reflection` watches the reflection alone (see there).
+        if tracked && rays == Rays::Both {
+            for &word in &walk.lit {
+                walk.signature.add(word);
+            }
+            walk.signature.add(word::LIGHTS_END);
+        }
+        let mut shaded = Shaded::only(surface.local);
+        let (reflection_weight, refraction_weight) = child_weights(weight, surface.kr, surface.kt);
+        if let Some(child) = surface.reflection {
+            if tracked {
+                walk.signature.add(word::REFLECT);
+            }
+            let (seen, object) = self.shade_tree(
+                source,
+                child,
+                depth + 1,
+                reflection_weight,
+                Rays::Both,
+                walk,
+            );
+            if depth == 1 && reflection_weight < self.settings.signature_min_weight {
+                // The sample reports the first reflection's object however
+                // weak the reflection (glass reflects ~4 %): keep that object
+                // in the signature, so refinement finds its edges.
+                walk.signature.add(u64::from(object));
+            }
+            shaded.reflected = surface.kr * seen.color;
+            shaded.reflected_object = object;
+            shaded.color += shaded.reflected;
+        }
+        if let Some(child) = surface.refraction {
+            if tracked {
+                walk.signature.add(word::REFRACT);
+            }
+            let (seen, _) = self.shade_tree(
+                source,
+                child,
+                depth + 1,
+                refraction_weight,
+                Rays::Both,
+                walk,
+            );
+            shaded.transmitted = surface.kt * seen.color;
+            shaded.color += shaded.transmitted;
+        }
+        (shaded, surface.object)
     }
 
-    /// The one shading path behind `trace`, `shade` and `shade_reflection`.
-    fn shade_surface(
+    /// A surface's terms with the `LIT` words of the lights that reach it
+    /// pushed onto `lit` (when `rays` lets its lights into the signature)
+    /// and its secondary rays, none at the deepest depth.
+    fn surface_of(
         &self,
         point: &SurfacePoint,
         incoming: Vec3,
         depth: u32,
-        weight: f32,
         rays: Rays,
-        signature: &mut Signature,
-    ) -> Shaded {
-        // Branches too weak to change a pixel visibly stay out of the ray-tree
-        // signature, so they do not drive the refinement.
-        let tracked = weight >= self.settings.signature_min_weight;
-        if tracked {
-            let object = self.bvh.scene().triangles[point.triangle as usize].object;
-            signature.add(u64::from(object));
-        }
-        // `shade_reflection` watches the reflection alone (see there).
-        let lights_tracked = tracked && rays == Rays::Both;
+        lit: &mut Vec<u64>,
+    ) -> (SurfaceTerms, Option<Ray>, Option<Ray>) {
         let terms = self.terms(point, incoming, &mut |light| {
-            if lights_tracked {
-                signature.add(word::LIT + light_index(self.lighting, light));
+            if rays == Rays::Both {
+                lit.push(word::LIT + light_index(self.lighting, light));
             }
         });
-        if lights_tracked {
-            signature.add(word::LIGHTS_END);
-        }
-
-        let mut shaded = Shaded {
-            color: terms.local,
-            reflected: Vec3::ZERO,
-            transmitted: Vec3::ZERO,
-            reflected_object: NONE,
-        };
         if depth >= self.settings.max_depth.max(1) {
-            return shaded;
+            return (terms, None, None);
         }
-        if let Some(ray) = terms.reflection {
-            if tracked {
-                signature.add(word::REFLECT);
-            }
-            let kr = terms.kr;
-            let branch = weight * kr.max_element();
-            let (seen, object) = self.radiance(&ray, depth + 1, branch, signature);
-            if depth == 1 && branch < self.settings.signature_min_weight {
-                // The sample reports the first reflection's object however
-                // weak the reflection (glass reflects ~4 %): keep that object
-                // in the signature, so refinement finds its edges.
-                signature.add(u64::from(object));
-            }
-            shaded.reflected = kr * seen.color;
-            shaded.reflected_object = object;
-            shaded.color += shaded.reflected;
-        }
-        if let Some(ray) = terms.refraction.filter(|_| rays == Rays::Both) {
-            if tracked {
-                signature.add(word::REFRACT);
-            }
-            let kt = terms.kt;
-            let (seen, _) = self.radiance(&ray, depth + 1, weight * kt.max_element(), signature);
-            shaded.transmitted = kt * seen.color;
-            shaded.color += shaded.transmitted;
-        }
-        shaded
+        let refraction = terms.refraction.filter(|_| rays == Rays::Both);
+        (terms, terms.reflection, refraction)
     }
 
     /// The parts of `shade` that need no secondary ray: local Phong with
@@ -418,6 +422,89 @@ pub struct SurfaceTerms {
     pub reflection: Option<Ray>,
     /// The Snell ray, when kt > 0 and there is no total internal reflection.
     pub refraction: Option<Ray>,
+}
+
+/// What [`Tracer::shade_tree`] needs of a surface: its object and terms,
+/// and where its secondary rays lead.
+struct VisitedSurface<L> {
+    object: ObjectId,
+    local: Vec3,
+    kr: Vec3,
+    kt: Vec3,
+    reflection: Option<L>,
+    refraction: Option<L>,
+}
+
+enum Visited<L> {
+    /// The ray hit nothing.
+    Miss,
+    Surface(VisitedSurface<L>),
+}
+
+/// Where [`Tracer::shade_tree`] gets the surfaces of a ray tree: traced on
+/// demand ([`OnDemand`], one sample), or recorded by a generational batch
+/// (module `generations`). Either way the figures come from
+/// [`Tracer::surface_of`], so the samples agree bit for bit.
+trait TreeSource {
+    /// The way to a node of the tree.
+    type Link: Copy;
+    /// The node `link` leads to, at depth `depth`, whose surface spawns
+    /// `rays`; pushes its light words onto `lit` (see [`Tracer::surface_of`]).
+    fn visit(
+        &mut self,
+        link: Self::Link,
+        depth: u32,
+        rays: Rays,
+        lit: &mut Vec<u64>,
+    ) -> Visited<Self::Link>;
+}
+
+/// A node of a ray tree traced on demand.
+#[derive(Clone, Copy)]
+enum Link {
+    /// A known surface point and the direction it is seen along.
+    Point(SurfacePoint, Vec3),
+    /// A ray still to trace.
+    Ray(Ray),
+    /// A ray and its closest hit.
+    Hit(Ray, Option<Hit>),
+}
+
+/// Traces each ray when the depth-first walk reaches it.
+struct OnDemand<'a> {
+    tracer: &'a Tracer<'a>,
+}
+
+impl TreeSource for OnDemand<'_> {
+    type Link = Link;
+
+    fn visit(&mut self, link: Link, depth: u32, rays: Rays, lit: &mut Vec<u64>) -> Visited<Link> {
+        let tracer = self.tracer;
+        let (point, incoming) = match link {
+            Link::Point(point, incoming) => (point, incoming),
+            Link::Ray(ray) => {
+                let hit = tracer.bvh.closest_hit(&ray, f32::INFINITY);
+                return self.visit(Link::Hit(ray, hit), depth, rays, lit);
+            }
+            Link::Hit(_, None) => return Visited::Miss,
+            Link::Hit(ray, Some(hit)) => (tracer.bvh.surface_point(&hit), ray.direction),
+        };
+        let (terms, reflection, refraction) = tracer.surface_of(&point, incoming, depth, rays, lit);
+        Visited::Surface(VisitedSurface {
+            object: tracer.bvh.scene().triangles[point.triangle as usize].object,
+            local: terms.local,
+            kr: terms.kr,
+            kt: terms.kt,
+            reflection: reflection.map(Link::Ray),
+            refraction: refraction.map(Link::Ray),
+        })
+    }
+}
+
+/// The weights (shares of the sample) of a surface's reflected and
+/// refracted subtrees, for a surface of weight `weight`.
+fn child_weights(weight: f32, kr: Vec3, kt: Vec3) -> (f32, f32) {
+    (weight * kr.max_element(), weight * kt.max_element())
 }
 
 /// kr, kt and the refraction direction of a surface hit along `incoming`.

@@ -343,21 +343,28 @@ pub(crate) fn closest_packet(isa: Isa, bvh: &CwBvh, rays: &[BvhRay], leaf: &mut 
         *t = ray.tmax;
     }
     let all = ((1u32 << rays.len()) - 1) as u8;
-    let mut stack = [(0u32, 0u8); STACK];
-    stack[0] = (0, all);
+    // (node, its rays, the nearest of their entries); uninitialised as in
+    // `closest`.
+    let mut stack = [MaybeUninit::<(u32, u8, f32)>::uninit(); STACK];
+    stack[0].write((0, all, 0.0));
     let mut pending = 1;
     while pending > 0 {
         pending -= 1;
-        let (index, active) = stack[pending];
+        // SAFETY: entries below `pending` were written (pushes write first).
+        let (index, active, entry) = unsafe { stack[pending].assume_init() };
+        // Skip a node every ray of it has a hit before (each ray's own box
+        // test would cull it).
+        if bits(active).all(|r| entry > tmax[r]) {
+            continue;
+        }
         let node = &bvh.nodes[index as usize];
-        // Per child: the rays that enter it, and the nearest entry among them.
+        // Per ray its entries; per child the rays that enter it and the
+        // nearest entry among them.
+        let mut ray_near = [[f32::INFINITY; 8]; PACKET];
         let mut child_rays = [0u8; 8];
         let mut child_near = [f32::INFINITY; 8];
         let mut entered = 0u8;
-        let mut remaining = active;
-        while remaining != 0 {
-            let r = remaining.trailing_zeros() as usize;
-            remaining &= remaining - 1;
+        for r in bits(active) {
             let (near, ray_entered) = entry_distances(isa, node, &rays[r], tmax[r]);
             entered |= ray_entered;
             // Branch-free, so that it runs lane-parallel (a miss is +inf,
@@ -366,24 +373,28 @@ pub(crate) fn closest_packet(isa: Isa, bvh: &CwBvh, rays: &[BvhRay], leaf: &mut 
                 child_rays[i] |= u8::from(near[i] < f32::INFINITY) << r;
                 child_near[i] = min(child_near[i], near[i]);
             }
+            ray_near[r] = near;
         }
         let order = sorted(&child_near, entered);
-        let mut inner = [(0u32, 0u8); 8];
+        let mut inner = [(0u32, 0u8, 0f32); 8];
         let mut inner_count = 0;
-        for &(_, child) in &order[..entered.count_ones() as usize] {
+        for &(near, child) in &order[..entered.count_ones() as usize] {
             let child = child as usize;
             if node.is_leaf(child) {
                 let (first, count) = node.child_primitives(child);
                 for r in bits(child_rays[child]) {
-                    tmax[r] = tmax[r].min(leaf.test(r, first, count));
+                    // A leaf of this node found a hit before this box.
+                    if ray_near[r][child] <= tmax[r] {
+                        tmax[r] = tmax[r].min(leaf.test(r, first, count));
+                    }
                 }
             } else {
-                inner[inner_count] = (node.child_node_index(child), child_rays[child]);
+                inner[inner_count] = (node.child_node_index(child), child_rays[child], near);
                 inner_count += 1;
             }
         }
         for &entry in inner[..inner_count].iter().rev() {
-            stack[pending] = entry;
+            stack[pending].write(entry);
             pending += 1;
         }
     }
