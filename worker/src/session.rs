@@ -18,8 +18,9 @@
 //! and three of them blocklisted the worker). Scenes are fetched only
 //! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
 //!
-//! Draining (SIGTERM): no more requests; the running package finishes (or
-//! the [`DRAIN_LIMIT`] passes), then the session ends with
+//! Draining (SIGTERM): no more requests; the package in hand (the running
+//! one, or else the first received, whose frame may still be set up)
+//! finishes (or the [`DRAIN_LIMIT`] passes), then the session ends with
 //! [`SessionEnd::Drained`] and the driver says goodbye by closing the link,
 //! which makes the master requeue everything else at once.
 
@@ -121,6 +122,10 @@ pub struct WorkerSession {
     next_heartbeat: Duration,
     /// When draining gives up on the running package.
     drain_deadline: Option<Duration>,
+    /// The package in hand when draining began, if none was running: the
+    /// first one received (its frame may still be being set up). It is
+    /// finished like a running one.
+    held_at_drain: Option<PackageId>,
     end: Option<SessionEnd>,
     outbox: VecDeque<Message>,
     tasks: VecDeque<Task>,
@@ -142,6 +147,7 @@ impl WorkerSession {
             requested: false,
             next_heartbeat: now + HEARTBEAT_INTERVAL,
             drain_deadline: None,
+            held_at_drain: None,
             end: None,
             outbox: VecDeque::new(),
             tasks: VecDeque::new(),
@@ -205,6 +211,9 @@ impl WorkerSession {
         if self.drain_deadline.is_none() {
             info!("draining: finishing the running package, handing back the rest");
             self.drain_deadline = Some(now + DRAIN_LIMIT);
+            if self.running.is_none() {
+                self.held_at_drain = self.queue.front().map(|p| p.id);
+            }
         }
         self.advance();
     }
@@ -350,17 +359,13 @@ impl WorkerSession {
         if self.end.is_some() {
             return;
         }
-        if self.is_draining() {
-            if self.running.is_none() {
-                // Queued packages go back to the queue when the link closes.
-                self.end = Some(SessionEnd::Drained);
-            }
-            return;
-        }
         while self.running.is_none() {
             let Some(package) = self.queue.front() else {
                 break;
             };
+            if self.is_draining() && Some(package.id) != self.held_at_drain {
+                break;
+            }
             let key = (package.job, package.frame);
             let waiting = self.preparing == Some(key)
                 || self
@@ -396,6 +401,14 @@ impl WorkerSession {
                     error,
                 }));
             }
+        }
+        if self.is_draining() {
+            let held_waits = (self.queue.front()).is_some_and(|p| Some(p.id) == self.held_at_drain);
+            if self.running.is_none() && !held_waits {
+                // Queued packages go back to the queue when the link closes.
+                self.end = Some(SessionEnd::Drained);
+            }
+            return;
         }
         let idle = self.running.is_none() && self.queue.is_empty();
         // Work is asked for the newest frame only, once it is prepared.

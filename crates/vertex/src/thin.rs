@@ -167,9 +167,11 @@ impl Behind {
             } => {
                 let t = ids.triangle[ids.index(x, y)];
                 if t == NONE || !see_through(tracer.bvh.scene(), t) {
-                    return;
+                    // What the up-front pass holds there, to the bit.
+                    ThinGlass::default()
+                } else {
+                    glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
                 }
-                glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
             }
         };
         let ghost = value.reflected * (glass.reflection_scale - 1.0);

@@ -233,6 +233,27 @@ fn draining_finishes_the_running_package_then_ends_without_asking_for_more() {
 }
 
 #[test]
+fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
+    let (mut s, mut scenes) = preparing_session();
+    s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
+    s.handle_message(Duration::ZERO, package(11, 1, 0), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![], "both wait for the frame");
+    s.drain(Duration::ZERO);
+    assert_eq!(
+        s.poll_end(),
+        None,
+        "the package in hand waits for its frame"
+    );
+    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert_eq!(messages(&mut s), vec![], "no request while draining");
+    s.package_finished(Duration::ZERO, 10, Ok(result(10)));
+    assert_eq!(messages(&mut s), vec![Message::PackageResult(result(10))]);
+    assert_eq!(tasks(&mut s), vec![], "the second package is handed back");
+    assert_eq!(s.poll_end(), Some(SessionEnd::Drained));
+}
+
+#[test]
 fn a_drain_that_outlasts_its_limit_hands_the_running_package_back() {
     let (mut s, mut scenes) = ready_session();
     s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
