@@ -158,7 +158,40 @@ impl Cluster {
 
     /// A worker as a child process of the `vtfarm` binary.
     fn worker_process(&self, name: &str, slowdown: f64) -> Child {
-        Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+        (self.worker_command(name, slowdown).spawn()).expect("the vtfarm binary starts")
+    }
+
+    /// A worker child process that reports when it starts its first package
+    /// (its own debug log line: the master counts a package as running once
+    /// it is sent, before the worker has it). Its log goes on to stderr.
+    fn worker_process_reporting_start(
+        &self,
+        name: &str,
+        slowdown: f64,
+    ) -> (Child, tokio::sync::oneshot::Receiver<()>) {
+        let mut child = (self.worker_command(name, slowdown))
+            .env("RUST_LOG", "warn,vtfarm_worker::serve=debug")
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("the vtfarm binary starts");
+        let stderr = child.stderr.take().expect("stderr is piped");
+        let (started, start) = tokio::sync::oneshot::channel();
+        std::thread::spawn(move || {
+            let mut started = Some(started);
+            for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)) {
+                let Ok(line) = line else { break };
+                eprintln!("{line}");
+                if let Some(started) = started.take_if(|_| line.contains("package started")) {
+                    let _ = started.send(());
+                }
+            }
+        });
+        (child, start)
+    }
+
+    fn worker_command(&self, name: &str, slowdown: f64) -> Command {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_vtfarm"));
+        command
             .args([
                 "worker",
                 "--cluster",
@@ -173,9 +206,8 @@ impl Cluster {
                 &slowdown.to_string(),
                 "--cache",
                 self.dir.path().join(name).to_str().unwrap(),
-            ])
-            .spawn()
-            .expect("the vtfarm binary starts")
+            ]);
+        command
     }
 
     async fn submit(&self, job: &Job) -> Result<Vec<FinishedFrame>, JobError> {
@@ -653,8 +685,23 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
     let reference = reference(&job);
     // A heartbeat timeout far beyond the test's bounds: the master can only
     // drop the worker early because it said goodbye.
-    let (cluster, mut leaving, submit) =
-        a_lone_worker_holding_a_package(&job, Duration::from_secs(3600), "leaving", 5.0).await;
+    let config = SchedulerConfig {
+        heartbeat_timeout: Duration::from_secs(3600),
+        straggler: None,
+        ..SchedulerConfig::default()
+    };
+    let cluster = Arc::new(Cluster::start(config));
+    // Slowed so that its first package (a few triangles) still runs when
+    // SIGTERM comes; the trigger is the worker's own word that it started it
+    // (a package still on its way when the worker drains is rightly handed
+    // back, and the master's status cannot tell the two apart).
+    let (child, started) = cluster.worker_process_reporting_start("leaving", 200.0);
+    let mut leaving = ChildGuard(child);
+    cluster.wait_for_workers(1).await;
+    let submit = submit_in_background(&cluster, &job);
+    (tokio::time::timeout(BOUND, started).await)
+        .expect("the worker starts a package in time")
+        .expect("the worker's log is read");
     let sent = Command::new("kill")
         .args(["-TERM", &leaving.0.id().to_string()])
         .status()

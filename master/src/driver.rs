@@ -267,7 +267,8 @@ async fn run(
                 }
                 Output::Persist(record) => {
                     if let Some(writer) = &writer {
-                        writer.write(record);
+                        // Waits only when the disk is behind by a few frames.
+                        tokio::task::block_in_place(|| writer.write(record));
                     }
                 }
                 Output::Replay { conn, job, frames } => {

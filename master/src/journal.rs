@@ -65,9 +65,11 @@ impl Record {
 /// disk (a 1080p frame is 25 MB before compression). [`JournalWriter::flush`]
 /// waits until everything sent before it is written (before the journal is
 /// read back, as for a replay). Dropping the writer writes what is queued
-/// and ends the thread.
+/// and ends the thread. At most [`JournalWriter::QUEUED`] records wait: when
+/// the disk falls behind, the driver waits for it instead of holding an
+/// unbounded backlog of frames in memory.
 pub struct JournalWriter {
-    queue: Option<std::sync::mpsc::Sender<WriterInput>>,
+    queue: Option<std::sync::mpsc::SyncSender<WriterInput>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -77,8 +79,11 @@ enum WriterInput {
 }
 
 impl JournalWriter {
+    /// Records queued before [`JournalWriter::write`] waits for the disk.
+    pub const QUEUED: usize = 4;
+
     pub fn new(journal: Journal) -> JournalWriter {
-        let (queue, inputs) = std::sync::mpsc::channel();
+        let (queue, inputs) = std::sync::mpsc::sync_channel(Self::QUEUED);
         let thread = std::thread::Builder::new()
             .name("journal".into())
             .spawn(move || {
@@ -106,7 +111,7 @@ impl JournalWriter {
         }
     }
 
-    /// Queues a record.
+    /// Queues a record (waits while [`JournalWriter::QUEUED`] are queued).
     pub fn write(&self, record: Record) {
         if let Some(queue) = &self.queue {
             let _ = queue.send(WriterInput::Write(Box::new(record)));

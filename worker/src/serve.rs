@@ -103,6 +103,7 @@ pub async fn serve(
                 }
                 Task::RunPackage(package) => {
                     let id = package.id;
+                    debug!(package = id, "package started");
                     let active = frames.get(package.job, package.frame);
                     let budget =
                         active.as_ref().map_or(0, |a| a.pixels()) * config.samples_per_pixel_budget;
