@@ -1249,6 +1249,11 @@ pub(crate) mod tests {
             "light direction",
         );
         check_rejects::<WireLight, Light>(&light, |l| l.intensity = f32::NAN, "light intensity");
+        check_rejects::<WireLighting, Lighting>(
+            &WireLighting::from(&lighting()),
+            |l| l.lights = vec![light; Lighting::MAX_LIGHTS + 1],
+            "lights = 65",
+        );
 
         let trace = WireTraceSettings::from(&TraceSettings::default());
         check_rejects::<_, TraceSettings>(&trace, |t| t.max_depth = 0, "trace max_depth = 0");

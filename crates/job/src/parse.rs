@@ -13,7 +13,7 @@ use toml::Spanned;
 use vtfarm_cockpit::{COVER_GLASS, GlassDesign};
 use vtfarm_method::MethodKind;
 use vtfarm_scene::bounds::{self, OutOfBounds};
-use vtfarm_scene::{Camera, Light, LightKind, photometry};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, photometry};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
@@ -542,6 +542,12 @@ impl Source<'_> {
     }
 
     fn lighting(&self, raw: &RawLighting) -> Result<LightingSpec, JobError> {
+        if let Some(lights) = &raw.lights {
+            Lighting::validate_count(lights.len()).map_err(|e| {
+                let first_too_many = lights.get(Lighting::MAX_LIGHTS).map(|l| &l.kind);
+                self.out_of_bounds("lighting.lights", first_too_many, &e)
+            })?;
+        }
         Ok(LightingSpec {
             lights: raw
                 .lights

@@ -506,6 +506,12 @@ fn lighting_values_are_checked() {
         4,
         &["lighting.ambient"],
     );
+    // Each light costs shadow rays and a shadow map: the one past the bound
+    // is named.
+    let one_point_light = "[[lighting.lights]]\nkind = \"point\"\nposition = [0, 1, 0]\n";
+    let many = |n: usize| format!("{COCKPIT}{}", one_point_light.repeat(n));
+    parse(&many(64));
+    assert_rejected(&many(65), 4 + 3 * 64, &["lighting.lights", "at most 64"]);
 }
 
 /// Lights in lux and cd/m² become render units by the one convention of

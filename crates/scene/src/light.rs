@@ -76,9 +76,27 @@ pub struct Lighting {
 }
 
 impl Lighting {
-    /// Every light valid (the error names the light's index), ambient and
-    /// background finite and not negative.
+    /// The most lights a frame may have: each costs a shadow ray per shaded
+    /// point and, behind thin glass, a 2048² shadow map (48 MB).
+    pub const MAX_LIGHTS: usize = 64;
+
+    /// At most [`Lighting::MAX_LIGHTS`] lights.
+    pub fn validate_count(count: usize) -> Result<(), OutOfBounds> {
+        if count > Self::MAX_LIGHTS {
+            return Err(OutOfBounds::new(
+                "lights",
+                count,
+                format!("at most {} lights", Self::MAX_LIGHTS),
+            ));
+        }
+        Ok(())
+    }
+
+    /// At most [`Lighting::MAX_LIGHTS`] lights, every light valid (the error
+    /// names the light's index), ambient and background finite and not
+    /// negative.
     pub fn validate(&self) -> Result<(), (Option<usize>, OutOfBounds)> {
+        Self::validate_count(self.lights.len()).map_err(|e| (None, e))?;
         for (i, light) in self.lights.iter().enumerate() {
             light.validate().map_err(|e| (Some(i), e))?;
         }
