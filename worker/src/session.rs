@@ -300,15 +300,23 @@ impl WorkerSession {
     /// Hands the driver the next frame to prepare, if none is being
     /// prepared: the frame of the first waiting package if it is only
     /// announced, else the newest announced frame when it is newer than
-    /// the ready one.
+    /// the ready one. A draining session prepares only the frame of the
+    /// package in hand.
     fn prepare_next(&mut self) {
         if self.preparing.is_some() {
             return;
         }
-        let wanted = self.queue.front().map(|p| (p.job, p.frame));
+        let draining = self.is_draining();
+        let wanted = (self.queue.front())
+            .filter(|p| !draining || Some(p.id) == self.held_at_drain)
+            .map(|p| (p.job, p.frame));
         let position = (self.announced.iter())
             .position(|f| Some((f.job, f.frame)) == wanted)
+            .filter(|_| wanted.is_some())
             .or_else(|| {
+                if draining {
+                    return None;
+                }
                 let newest = self.announced.back()?;
                 let key = (newest.job, newest.frame);
                 (self.ready.is_none_or(|r| key > r)).then(|| self.announced.len() - 1)

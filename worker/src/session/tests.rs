@@ -244,7 +244,10 @@ fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
         None,
         "the package in hand waits for its frame"
     );
+    let next = Message::FrameStart(frame_start(1, 1));
+    s.handle_message(Duration::ZERO, next, &mut scenes);
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    // Only the package runs: frame (1, 1), announced while draining, is not set up.
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
     assert_eq!(messages(&mut s), vec![], "no request while draining");
     s.package_finished(Duration::ZERO, 10, Ok(result(10)));
