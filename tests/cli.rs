@@ -436,3 +436,23 @@ fn render_of_a_poison_scene_exits_with_the_reason() {
     assert!(err.contains("±1e6"), "says why: {err}");
     assert!(!png.exists());
 }
+
+/// Absurd simulator settings are refused at once, before any cost is
+/// recorded (an infinite latency used to panic in `Duration`).
+#[test]
+fn bench_simulate_refuses_absurd_settings() {
+    for (args, needle) in [
+        (&["--latency-ms", "inf"][..], "--latency-ms"),
+        (&["--cost-scale", "0"], "--cost-scale"),
+        (&["--link-mbit", "nan"], "--link-mbit"),
+        (&["--workers", "5000"], "at most 4096 workers"),
+    ] {
+        let out = vtfarm(&[&["bench", "simulate"][..], args].concat());
+        assert!(!out.status.success(), "{args:?} was accepted");
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains(needle) && !stderr.contains("panicked"),
+            "{args:?}: {stderr}"
+        );
+    }
+}

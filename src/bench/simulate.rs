@@ -468,8 +468,24 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     if args.frames == 0 || args.workers.contains(&0) || args.master_threads == Some(0) {
         bail!("--frames, --master-threads and every --workers entry must be at least 1");
     }
-    if args.link_mbit.iter().any(|&m| m.is_nan() || m <= 0.0) {
-        bail!("every --link-mbit entry must be positive");
+    if args.link_mbit.iter().any(|&m| !(m.is_finite() && m > 0.0)) {
+        bail!("every --link-mbit entry must be positive and finite");
+    }
+    // Durations and scales: finite, so the virtual clock stays meaningful.
+    let times = [args.latency_ms, args.package_overhead_ms];
+    let scales = [args.cost_scale, args.fixed_cost_scale];
+    if !times.iter().all(|t| t.is_finite() && *t >= 0.0)
+        || !scales.iter().all(|s| s.is_finite() && *s > 0.0)
+    {
+        bail!(
+            "--latency-ms and --package-overhead-ms must be finite and not negative, \
+             --cost-scale and --fixed-cost-scale finite and positive"
+        );
+    }
+    // The simulated farm holds every worker's state and every frame's
+    // stats: bound them.
+    if args.workers.iter().any(|&w| w > 4096) || args.frames > 10_000 {
+        bail!("at most 4096 workers and 10000 frames per simulation");
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = args.threads.unwrap_or(cores);
@@ -540,8 +556,8 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
     };
-    let latency = Duration::from_secs_f64(args.latency_ms.max(0.0) / 1e3);
-    let overhead = Duration::from_secs_f64(args.package_overhead_ms.max(0.0) / 1e3);
+    let latency = Duration::from_secs_f64(args.latency_ms / 1e3);
+    let overhead = Duration::from_secs_f64(args.package_overhead_ms / 1e3);
     let worker = |speed: f64, mbit: f64| FarmWorker {
         speed,
         link_bits_per_second: mbit * 1e6,

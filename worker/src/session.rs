@@ -312,7 +312,6 @@ impl WorkerSession {
             .map(|p| (p.job, p.frame));
         let position = (self.announced.iter())
             .position(|f| Some((f.job, f.frame)) == wanted)
-            .filter(|_| wanted.is_some())
             .or_else(|| {
                 if draining {
                     return None;
