@@ -95,6 +95,8 @@ pub(crate) struct TrianglePlan<'m> {
     /// The best face per pixel of `rect` when there are several:
     /// (smallest barycentric, face index).
     best: Vec<(f32, u32)>,
+    /// The pixels a lone face may reach (empty for several faces).
+    lone_reach: PixelRect,
     /// Per face: its samples agree, so its pixels are interpolated.
     interpolated: Vec<bool>,
     /// Per face: with traced transmission at `full`, the object behind the
@@ -157,9 +159,19 @@ impl<'m> TrianglePlan<'m> {
                 })
             })
             .collect();
+        let lone_reach = match faces.as_slice() {
+            [face] => face.reach(rect),
+            _ => PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: 0,
+                y1: 0,
+            },
+        };
         TrianglePlan {
             triangle,
             rect,
+            lone_reach,
             faces,
             best,
             interpolated,
@@ -179,7 +191,7 @@ impl<'m> TrianglePlan<'m> {
             (fi as usize, face.weights(x, y))
         } else {
             let face = self.faces.first()?;
-            if !face.reach(self.rect).contains(x, y) {
+            if !self.lone_reach.contains(x, y) {
                 return None;
             }
             let w = face.weights(x, y);
