@@ -274,7 +274,10 @@ pub(crate) fn fill(
         })
         .collect();
     filled.written = bands.iter().map(|(_, n)| n).sum();
-    let to_trace: Vec<ToTrace> = bands.into_iter().flat_map(|(p, _)| p).collect();
+    let mut to_trace: Vec<ToTrace> = bands.into_iter().flat_map(|(p, _)| p).collect();
+    // Triangle by triangle, row-major: a batch then covers a compact patch
+    // of the glass (its reflection rays stay coherent), not a strip of rows.
+    to_trace.sort_by_key(|&(plan, _, _)| plan);
     filled.interpolation = start.elapsed();
 
     let start = Instant::now();
