@@ -143,32 +143,34 @@ impl Renderer {
     /// Only the raster results a worker needs (no base frame): the frame's
     /// ID buffer and what lies behind the reflectors, both over the
     /// reflectors' bounds only (`vtfarm_vertex::reflector_bounds`; empty
-    /// elsewhere, where no package looks). The thin-glass terms are left to
+    /// elsewhere, where no package looks), rasterized together. The thin-glass terms are left to
     /// the pixels the worker's packages finish (`GlassPass::OnDemand`), so
     /// two workers split that pass instead of each doing all of it.
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
         let margin = setup.vertex.visibility_radius + 1;
         let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
-        let ids = vtfarm_raster::id_buffer_within(self.scene(), &setup.camera, bounds, &|_| true);
-        let behind = self.behind_with(setup, &ids, GlassPass::OnDemand);
-        (ids, behind)
+        Behind::with_frame_ids(
+            &self.tracer(setup),
+            &setup.camera,
+            bounds,
+            &self.is_reflector,
+            setup.vertex.transmission,
+            GlassPass::OnDemand,
+            &self.shadows,
+        )
     }
 
     /// What lies behind the reflectors of a frame whose ID buffer is `ids`
     /// (see `vtfarm_vertex::Behind`), with the thin-glass terms of every
     /// glass pixel: the raster pass of a whole frame.
     pub fn behind(&self, setup: &FrameSetup, ids: &IdBuffer) -> Behind {
-        self.behind_with(setup, ids, GlassPass::Upfront)
-    }
-
-    fn behind_with(&self, setup: &FrameSetup, ids: &IdBuffer, pass: GlassPass) -> Behind {
         Behind::new(
             &self.tracer(setup),
             &setup.camera,
             ids,
             &self.is_reflector,
             setup.vertex.transmission,
-            pass,
+            GlassPass::Upfront,
             &self.shadows,
         )
     }

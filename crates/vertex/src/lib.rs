@@ -476,7 +476,9 @@ pub(crate) fn pixel_surface_along(
     };
     let position = camera.eye + direction * t;
     let [wa, wb, wc] = barycentric([a, b, c], position);
-    let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
+    let normal = thin::normalize_or_else(na * wa + nb * wb + nc * wc, || {
+        plane_normal.normalize_or(Vec3::Y)
+    });
     let point = SurfacePoint {
         position,
         normal,
@@ -553,7 +555,7 @@ fn behind_id_buffer_within(
     within: PixelRect,
 ) -> IdBuffer {
     vtfarm_raster::id_buffer_within(scene, camera, within, &|t| {
-        !is_reflector[t as usize] && scene.material_of(t).transmittance.max_element() <= 0.0
+        thin::lies_behind(scene, is_reflector, t)
     })
 }
 
