@@ -14,7 +14,12 @@
 # transfer and BVH builds), its ratio to the first count's, and the
 # simulator's prediction for the same job and workers (`vtfarm bench simulate
 # --shared-cores`: the master core and worker sessions with costs recorded on
-# this machine, all sharing its cores) with measured/predicted.
+# this machine, all sharing its cores) with measured/predicted. Then the CPU
+# each process spent per frame in the first count's run (frames after the
+# first, from /proc) and what it bounds: n workers on this machine's cores
+# need at least max((master + submitter + n * set-up + tracing) / cores,
+# set-up + tracing / n) per frame, so the speed-up over the first count
+# cannot exceed its measured interval over that floor.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
@@ -61,7 +66,30 @@ wait_for_workers() {
   echo "workers did not join" >&2; return 1
 }
 
-declare -A mean
+# Sets `ticks` to the CPU time (user + system, clock ticks) each of the
+# processes "$@" has spent so far (no subshell: its own CPU would count).
+ticks=()
+cpu_ticks() {
+  local p line fields
+  ticks=()
+  for p in "$@"; do
+    read -r line <"/proc/$p/stat"
+    read -ra fields <<<"${line##*) }"
+    ticks+=($((fields[11] + fields[12])))
+  done
+}
+# Sets `children_ticks` to the CPU time of this shell's reaped children.
+children_ticks=0
+reaped_cpu_ticks() {
+  local line user system
+  times >"$work/times"
+  { read -r line; read -r user system; } <"$work/times"
+  children_ticks=$(awk -v u="$user" -v s="$system" -v hz="$(getconf CLK_TCK)" 'BEGIN {
+    split(u, a, /[ms]/); split(s, b, /[ms]/); printf "%d", (a[1] * 60 + a[2] + b[1] * 60 + b[2]) * hz + 0.5 }')
+}
+exec {sleeper}<> <(:)  # `read -t` on it sleeps without starting a process
+
+declare -A mean cpu
 for n in $workers_list; do
   pids=()
   RUST_LOG=warn "$bin" master --cluster "$work/cluster/cluster.toml" --listen "127.0.0.1:$port" \
@@ -75,9 +103,36 @@ for n in $workers_list; do
   done
   wait_for_workers "$n"
   out="$work/out-$n"
-  timeout 600 "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
-    >"$work/submit-$n.log" 2>&1 || { cat "$work/submit-$n.log" >&2; exit 1; }
+  reaped_cpu_ticks; reaped_before=$children_ticks
+  "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
+    >"$work/submit-$n.log" 2>&1 &
+  submitter=$!
+  # CPU when the first frame arrives and at the end: the frames between
+  # are the ones the frame interval counts.
+  at_first=(); deadline=$((SECONDS + 600))
+  while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
+    if [ ${#at_first[@]} -eq 0 ] && [ -e "$out/frame_0000.png" ]; then
+      cpu_ticks "${pids[@]}" "$submitter"; at_first=("${ticks[@]}")
+    fi
+    [ "$SECONDS" -lt "$deadline" ] || { kill "$submitter"; echo "submit timed out" >&2; exit 1; }
+    read -rt 0.02 -u "$sleeper" || true
+  done
+  cpu_ticks "${pids[@]}"; last=("${ticks[@]}")
+  wait "$submitter" || { cat "$work/submit-$n.log" >&2; exit 1; }
+  reaped_cpu_ticks
+  last+=($((children_ticks - reaped_before)))
   mean[$n]=$(frame_figures "$out/stats.json")
+  # CPU seconds per frame after the first: master, submitter, each worker.
+  cpu[$n]=$(python3 - "$frames" "$(getconf CLK_TCK)" "${at_first[*]}" "${last[*]}" <<'PY'
+import sys
+frames, hz = int(sys.argv[1]), int(sys.argv[2])
+first, last = [list(map(int, a.split())) for a in sys.argv[3:5]]
+if len(first) != len(last):
+    first = [float("nan")] * len(last)  # the first frame was not seen
+per = [(b - a) / hz / max(frames - 1, 1) for a, b in zip(first, last)]
+print(" ".join(f"{x:.4f}" for x in [per[0], per[-1], *per[1:-1]]))
+PY
+)
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
@@ -114,3 +169,25 @@ for n in $workers_list; do
 done
 echo "predicted: vtfarm bench simulate --shared-cores $cores (master core and worker sessions on a virtual clock), fixed costs timed by it; pred.phases: base frame and set-up from the $first-worker run's stats.json phases"
 echo "result MB: results as sent (zstd byte planes, colour only)"
+
+# The CPU floor from the first count's run: the master and the submitter
+# per frame (their CPU from /proc), a worker's set-up (one thread, as the
+# simulator timed it: `worker set-up` in its log) and its tracing (the rest
+# of the worker's CPU), which more workers split.
+read -r m s w _ <<<"${cpu[$first]}"
+python3 - "$m" "$s" "$w" "$cores" "$work/sim-$first-recorded.log" "$workers_list" "$base" <<'PY'
+import re, sys
+m, s, w = map(float, sys.argv[1:4])
+cores, log, counts, measured = int(sys.argv[4]), sys.argv[5], sys.argv[6].split(), float(sys.argv[7])
+found = re.search(r"worker set-up ([0-9.]+) s", open(log).read())
+if not found:
+    sys.exit("no `worker set-up` figure in the simulator's log: no CPU floor")
+setup = float(found.group(1))
+tracing = max(w - setup, 0.0)
+print(f"CPU per frame ({counts[0]}-worker run, frames after the first): master {m:.3f} s, submitter {s:.3f} s, "
+      f"worker {w:.3f} s = set-up {setup:.3f} s (simulator's timing) + tracing {tracing:.3f} s")
+for n in map(int, counts):
+    floor = max((m + s + n * setup + tracing) / cores, setup + tracing / n)
+    print(f"  {n} worker(s): at least {floor:.3f} s per frame = max((master + submitter + {n} set-ups + tracing) / {cores} cores, "
+          f"set-up + tracing / {n}); speed-up over the measured {measured:.3f} s at most {measured / floor:.2f}x")
+PY

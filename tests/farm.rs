@@ -258,7 +258,8 @@ impl Cluster {
 fn assert_same_images(frames: &[FinishedFrame], reference: &[Vec<Vec3>]) {
     assert_eq!(frames.len(), reference.len());
     for (f, r) in frames.iter().zip(reference) {
-        let differing = f.image.pixels.iter().zip(r).filter(|(a, b)| a != b).count();
+        let pixels = &f.image.linear().expect("a linear frame").pixels;
+        let differing = pixels.iter().zip(r).filter(|(a, b)| a != b).count();
         assert_eq!(
             differing, 0,
             "frame {}: pixels differ from the single-process render",
@@ -384,7 +385,8 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
         assert_eq!(frames.len(), 2);
         for (f, setup) in frames.iter().zip(&job.frames) {
             assert!(
-                f.image.pixels == method_reference(&job, setup, kind),
+                f.image.linear().expect("a linear frame").pixels
+                    == method_reference(&job, setup, kind),
                 "{}: frame {} equals the single-process render",
                 kind.name(),
                 f.frame
