@@ -15,11 +15,12 @@
 # simulator's prediction for the same job and workers (`vtfarm bench simulate
 # --shared-cores`: the master core and worker sessions with costs recorded on
 # this machine, all sharing its cores) with measured/predicted. Then the CPU
-# each process spent per frame in the first count's run (frames after the
-# first, from /proc) and what it bounds: n workers on this machine's cores
-# need at least max((master + submitter + n * set-up + tracing) / cores,
-# set-up + tracing / n) per frame, so the speed-up over the first count
-# cannot exceed its measured interval over that floor.
+# each process spent per frame in each run (from /proc, frames after the
+# first) and the floor it sets on this machine's cores: with a worker's
+# set-up U and tracing T (from its CPU alone, U + T, and the workers' total
+# with n, n U + T), n workers need at least max((master + submitter + n U +
+# T) / cores, U + T / n) per frame, so the speed-up over one worker cannot
+# exceed its measured interval over that floor.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
@@ -170,24 +171,30 @@ done
 echo "predicted: vtfarm bench simulate --shared-cores $cores (master core and worker sessions on a virtual clock), fixed costs timed by it; pred.phases: base frame and set-up from the $first-worker run's stats.json phases"
 echo "result MB: results as sent (zstd byte planes, colour only)"
 
-# The CPU floor from the first count's run: the master and the submitter
-# per frame (their CPU from /proc), a worker's set-up (one thread, as the
-# simulator timed it: `worker set-up` in its log) and its tracing (the rest
-# of the worker's CPU), which more workers split.
-read -r m s w _ <<<"${cpu[$first]}"
-python3 - "$m" "$s" "$w" "$cores" "$work/sim-$first-recorded.log" "$workers_list" "$base" <<'PY'
-import re, sys
-m, s, w = map(float, sys.argv[1:4])
-cores, log, counts, measured = int(sys.argv[4]), sys.argv[5], sys.argv[6].split(), float(sys.argv[7])
-found = re.search(r"worker set-up ([0-9.]+) s", open(log).read())
-if not found:
-    sys.exit("no `worker set-up` figure in the simulator's log: no CPU floor")
-setup = float(found.group(1))
-tracing = max(w - setup, 0.0)
-print(f"CPU per frame ({counts[0]}-worker run, frames after the first): master {m:.3f} s, submitter {s:.3f} s, "
-      f"worker {w:.3f} s = set-up {setup:.3f} s (simulator's timing) + tracing {tracing:.3f} s")
-for n in map(int, counts):
-    floor = max((m + s + n * setup + tracing) / cores, setup + tracing / n)
-    print(f"  {n} worker(s): at least {floor:.3f} s per frame = max((master + submitter + {n} set-ups + tracing) / {cores} cores, "
-          f"set-up + tracing / {n}); speed-up over the measured {measured:.3f} s at most {measured / floor:.2f}x")
+# The CPU each process spent per frame (from /proc, frames after the
+# first) and the floor it sets: a worker's set-up U and tracing T follow
+# from its CPU with one worker (U + T) and the workers' total with n (n U + T).
+cpu_args=()
+for n in $workers_list; do cpu_args+=("$n" "${cpu[$n]}" "${mean[$n]%% *}"); done
+python3 - "$cores" "${cpu_args[@]}" <<'PY'
+import sys
+cores, rest = int(sys.argv[1]), sys.argv[2:]
+runs = {int(rest[i]): (list(map(float, rest[i + 1].split())), float(rest[i + 2])) for i in range(0, len(rest), 3)}
+for n, (c, gap) in runs.items():
+    total = sum(c)
+    print(f"CPU per frame, {n} worker(s): master {c[0]:.3f} s, submitter {c[1]:.3f} s, "
+          f"workers {' + '.join(f'{w:.3f}' for w in c[2:])} s; total {total:.3f} s = "
+          f"{total / cores:.3f} s on {cores} cores (interval {gap:.3f} s)")
+first = min(runs)
+more = [n for n in runs if n > first]
+if first == 1 and more:
+    (c1, t1), n = runs[1], more[0]
+    setup = (sum(runs[n][0][2:]) - c1[2]) / (n - 1)
+    tracing = c1[2] - setup
+    m, s = c1[0], c1[1]
+    print(f"one worker's set-up {setup:.3f} s and tracing {tracing:.3f} s per frame (from 1 and {n} workers' CPU)")
+    for k in sorted(runs):
+        floor = max((m + s + k * setup + tracing) / cores, setup + tracing / k)
+        print(f"  {k} worker(s): at least {floor:.3f} s per frame = max((master + submitter + {k} set-ups + tracing) / "
+              f"{cores} cores, set-up + tracing / {k}): speed-up at most {t1 / floor:.2f}x over the measured {t1:.3f} s")
 PY

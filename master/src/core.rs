@@ -18,14 +18,15 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
+use glam::Vec3;
 use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameDone, FramePhase, FrameStart, JobScene, Message, Package, PackageResult, PhaseKind,
-    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup,
-    WireImage, WireImageFormat, WireJob, WirePackageStats, WorkerFrameStats, WorkerStatus,
-    check_triangle_ids, encoded_len,
+    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireBitmap, WireFrameAux,
+    WireFrameSetup, WireImage, WireImageFormat, WireJob, WirePackageStats, WorkerFrameStats,
+    WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
@@ -196,17 +197,62 @@ impl Assembled {
         }
     }
 
-    /// Writes a result's pixels ([`FrameImage::composite`]).
-    fn composite(&mut self, bitmap: &SparseBitmap) {
+    /// Decodes a result into what this frame composites (the colours
+    /// straight from the wire when that is all it keeps) and checks pixel
+    /// ownership: every pixel it writes must be one that `ids` gives to a
+    /// triangle `owned` accepts.
+    fn check(
+        &self,
+        bitmap: WireBitmap,
+        ids: &IdBuffer,
+        owned: impl Fn(TriangleId) -> bool,
+    ) -> Result<ResultPixels, String> {
+        let (width, height) = (self.color().width, self.color().height);
+        let malformed = |e: vtfarm_proto::WireError| format!("malformed result: {e}");
+        let foreign = |(x, y): (u32, u32)| {
+            format!("result writes pixel ({x}, {y}), which its package does not own")
+        };
         match self {
-            Assembled::Color(color) => {
-                for (x, y, k) in bitmap.covered() {
-                    color.set(x, y, bitmap.color[k]);
+            Assembled::Color(_) => {
+                let colors = bitmap.colors_within(width, height).map_err(malformed)?;
+                // The ID buffer is the frame's size: every index is in it.
+                match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
+                    Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
+                    None => Ok(ResultPixels::Colors(colors)),
                 }
             }
-            Assembled::Components(image) => image.composite(bitmap),
+            Assembled::Components(_) => {
+                let bitmap = bitmap
+                    .into_bitmap_within(width, height)
+                    .map_err(malformed)?;
+                match bitmap.foreign_pixel(ids, owned) {
+                    Some(pixel) => Err(foreign(pixel)),
+                    None => Ok(ResultPixels::Bitmap(bitmap)),
+                }
+            }
         }
     }
+
+    /// Writes a checked result's pixels ([`FrameImage::composite`]).
+    fn composite(&mut self, pixels: &ResultPixels) {
+        match (self, pixels) {
+            (Assembled::Color(color), ResultPixels::Colors(colors)) => {
+                for &(i, c) in colors {
+                    color.pixels[i] = c;
+                }
+            }
+            (Assembled::Components(image), ResultPixels::Bitmap(bitmap)) => image.composite(bitmap),
+            // `check` decodes for the assembly it was asked by.
+            _ => unreachable!("a result decoded for another kind of frame"),
+        }
+    }
+}
+
+/// A checked result in the form its frame composites: frame indices and
+/// colours, or the whole bitmap with the components.
+enum ResultPixels {
+    Colors(Vec<(usize, Vec3)>),
+    Bitmap(SparseBitmap),
 }
 
 /// A package on its way: what the results must be matched against.
@@ -510,19 +556,9 @@ impl MasterCore {
             current.held.push((conn, result, bytes_out));
             return;
         };
-        let (width, height) = (current.image.color().width, current.image.color().height);
-        let checked = (result.bitmap.into_bitmap_within(width, height))
-            .map_err(|e| format!("malformed result: {e}"))
-            .and_then(|bitmap| {
-                let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
-                match bitmap.foreign_pixel(ids, owned) {
-                    Some((x, y)) => Err(format!(
-                        "result writes pixel ({x}, {y}), which its package does not own"
-                    )),
-                    None => Ok(bitmap),
-                }
-            });
-        let bitmap = match checked {
+        let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
+        let checked = current.image.check(result.bitmap, ids, owned);
+        let pixels = match checked {
             Ok(b) => b,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
@@ -560,7 +596,7 @@ impl MasterCore {
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
         let current = job.assembly_mut(frame).expect("checked above");
-        current.image.composite(&bitmap);
+        current.image.composite(&pixels);
         current.totals.add(&stats);
         current.triangles_done += triangles;
         let progress = Message::Progress {

@@ -694,6 +694,12 @@ impl WireBitmap {
     /// Converts like `TryFrom`, and also checks that the rectangle lies
     /// inside a `width` × `height` frame, as compositing requires.
     pub fn into_bitmap_within(self, width: u32, height: u32) -> Result<SparseBitmap, WireError> {
+        self.check_within(width, height)?;
+        self.try_into()
+    }
+
+    /// Whether the rectangle lies inside a `width` × `height` frame.
+    fn check_within(&self, width: u32, height: u32) -> Result<(), WireError> {
         // u64: the sums cannot overflow.
         let (x_end, y_end) = (
             u64::from(self.x0) + u64::from(self.width),
@@ -706,7 +712,7 @@ impl WireBitmap {
                 "inside the frame",
             ));
         }
-        self.try_into()
+        Ok(())
     }
 }
 
@@ -719,6 +725,97 @@ fn byte_planes(values: &[[u8; 4]]) -> Vec<u8> {
         }
     }
     planes
+}
+
+/// A [`WireBitmap`]'s checked and decompressed parts.
+struct DecodedBitmap {
+    /// The coverage bits, eight pixels a byte, padding checked to be zero.
+    mask: Vec<u8>,
+    /// Pixels of the rectangle.
+    area: usize,
+    /// Covered pixels.
+    covered: usize,
+    /// Values (each four bytes, one byte per plane) of the covered pixels.
+    values: usize,
+    planes: Vec<u8>,
+}
+
+impl WireBitmap {
+    /// The rectangle checked to fit the coordinate type, the mask and the
+    /// byte planes decompressed into exactly the sizes they imply.
+    fn decode(&self) -> Result<DecodedBitmap, WireError> {
+        // Both ends of the rectangle must fit the frame's coordinate type.
+        for (field, start, size) in [
+            ("bitmap x", self.x0, self.width),
+            ("bitmap y", self.y0, self.height),
+        ] {
+            if start
+                .checked_add(size)
+                .is_none_or(|end| end > MAX_IMAGE_SIDE)
+            {
+                return Err(out_of_range(
+                    field,
+                    format!("{start} + {size}"),
+                    "within 16384 pixels",
+                ));
+            }
+        }
+        let area = self.width as usize * self.height as usize;
+        let mask = decompress("bitmap mask bytes", &self.mask, area.div_ceil(8))?;
+        if area % 8 != 0 && mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
+            return Err(out_of_range(
+                "bitmap mask padding",
+                "set bits",
+                "zero past the last pixel",
+            ));
+        }
+        let covered: usize = mask.iter().map(|b| b.count_ones() as usize).sum();
+        let values_per_pixel = match self.parts {
+            WireBitmapParts::Color => 3,
+            WireBitmapParts::All => 10,
+        };
+        let values = covered * values_per_pixel;
+        let planes = decompress("bitmap pixel bytes", &self.pixels, values * 4)?;
+        Ok(DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        })
+    }
+
+    /// The covered pixels' colours with their indices in a `width`-wide
+    /// frame (`y * width + x`), in the order of the mask, decoded straight
+    /// from the wire for compositing the colour alone (the components, if
+    /// sent, are skipped); the rectangle must lie inside the `width` ×
+    /// `height` frame. The same checks as the conversion to
+    /// [`SparseBitmap`], without building one.
+    pub fn colors_within(&self, width: u32, height: u32) -> Result<Vec<(usize, Vec3)>, WireError> {
+        self.check_within(width, height)?;
+        let DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        } = self.decode()?;
+        let value = |i: usize| f32::from_le_bytes([0, 1, 2, 3].map(|k| planes[k * values + i]));
+        let mut colors = Vec::with_capacity(covered);
+        for i in (0..area).filter(|i| mask[i / 8] >> (i % 8) & 1 == 1) {
+            let p = colors.len();
+            let c = [value(3 * p), value(3 * p + 1), value(3 * p + 2)];
+            let (x, y) = (
+                self.x0 as usize + i % self.width as usize,
+                self.y0 as usize + i / self.width as usize,
+            );
+            colors.push((
+                y * width as usize + x,
+                finite3(|| format!("bitmap color[{p}]"), c)?,
+            ));
+        }
+        Ok(colors)
+    }
 }
 
 fn compress(bytes: &[u8]) -> Vec<u8> {
@@ -753,35 +850,13 @@ impl TryFrom<WireBitmap> for SparseBitmap {
     type Error = WireError;
 
     fn try_from(w: WireBitmap) -> Result<Self, WireError> {
-        // Both ends of the rectangle must fit the frame's coordinate type.
-        for (field, start, size) in [("bitmap x", w.x0, w.width), ("bitmap y", w.y0, w.height)] {
-            if start
-                .checked_add(size)
-                .is_none_or(|end| end > MAX_IMAGE_SIDE)
-            {
-                return Err(out_of_range(
-                    field,
-                    format!("{start} + {size}"),
-                    "within 16384 pixels",
-                ));
-            }
-        }
-        let area = w.width as usize * w.height as usize;
-        let mask = decompress("bitmap mask bytes", &w.mask, area.div_ceil(8))?;
-        if area % 8 != 0 && mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
-            return Err(out_of_range(
-                "bitmap mask padding",
-                "set bits",
-                "zero past the last pixel",
-            ));
-        }
-        let covered: usize = mask.iter().map(|b| b.count_ones() as usize).sum();
-        let values_per_pixel = match w.parts {
-            WireBitmapParts::Color => 3,
-            WireBitmapParts::All => 10,
-        };
-        let values = covered * values_per_pixel;
-        let planes = decompress("bitmap pixel bytes", &w.pixels, values * 4)?;
+        let DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        } = w.decode()?;
         let value = |i: usize| [0, 1, 2, 3].map(|k| planes[k * values + i]);
         let colors = |field: &'static str, first: usize| {
             (0..covered)
@@ -1187,6 +1262,23 @@ pub(crate) mod tests {
         assert_eq!(back.reflected_object, vec![vtfarm_scene::NONE; 4]);
     }
 
+    /// The colours alone, straight from the wire: each covered pixel's
+    /// index in the frame with its colour, whichever parts were sent.
+    #[test]
+    fn colors_come_straight_from_the_wire_with_frame_indices() {
+        let b = bitmap();
+        let expected: Vec<(usize, Vec3)> = (b.covered())
+            .map(|(x, y, k)| ((y * 9 + x) as usize, b.color[k]))
+            .collect();
+        assert_eq!(expected.len(), 4);
+        for parts in [WireBitmapParts::Color, WireBitmapParts::All] {
+            let wire = WireBitmap::encode(&b, parts);
+            assert_eq!(wire.colors_within(9, 5).expect("inside"), expected);
+            let error = wire.colors_within(7, 5).expect_err("one column short");
+            assert!(error.to_string().contains("inside the frame"), "{error}");
+        }
+    }
+
     #[test]
     fn smooth_colors_compress() {
         // A 200 x 100 gradient, like a reflection: the byte planes compress.
@@ -1522,7 +1614,18 @@ pub(crate) mod tests {
                 prop_assert_eq!(bitmap.mask.len(), (bitmap.width * bitmap.height) as usize);
                 prop_assert_eq!(bitmap.covered().count(), bitmap.color.len());
             }
-            let _ = b.into_bitmap_within(w, h);
+            // Compositing the colour straight from the wire accepts the
+            // same results and gives the same pixels.
+            let colors = b.colors_within(w, h);
+            match b.into_bitmap_within(w, h) {
+                Ok(bitmap) => {
+                    let expected: Vec<(usize, Vec3)> = (bitmap.covered())
+                        .map(|(x, y, k)| ((y * w + x) as usize, bitmap.color[k]))
+                        .collect();
+                    prop_assert_eq!(colors.expect("accepted as a bitmap"), expected);
+                }
+                Err(_) => prop_assert!(colors.is_err()),
+            }
         }
 
         #[test]
