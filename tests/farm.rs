@@ -471,6 +471,59 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     );
 }
 
+/// `vtfarm submit` asks for 8-bit sRGB frames (all it writes is PNGs) and
+/// `vtfarm render` gets linear ones: both write the same PNG file, byte for
+/// byte.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn vtfarm_submit_on_a_two_worker_cluster_writes_the_png_of_vtfarm_render() {
+    let _serial = SERIAL.lock().await;
+    let dir = tempfile::tempdir().unwrap();
+    let job = dir.path().join("job.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n[camera]\nwidth = 192\nheight = 108\n",
+    )
+    .unwrap();
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    let rendered = dir.path().join("render.png");
+    vtfarm_cli(vec![
+        "render".into(),
+        path(&job),
+        "-o".into(),
+        path(&rendered),
+        "--local-workers".into(),
+        "1".into(),
+    ])
+    .await;
+
+    let cluster = Cluster::start(SchedulerConfig::default());
+    let _w1 = cluster.worker("w1", 1.0);
+    let _w2 = cluster.worker("w2", 1.0);
+    cluster.wait_for_workers(2).await;
+    let submitted = dir.path().join("submit");
+    vtfarm_cli(vec![
+        "submit".into(),
+        path(&job),
+        "--cluster".into(),
+        path(&cluster.file),
+        "-o".into(),
+        path(&submitted),
+    ])
+    .await;
+    let (a, b) = (
+        std::fs::read(&rendered).unwrap(),
+        std::fs::read(submitted.join("frame_0000.png")).unwrap(),
+    );
+    assert!(
+        a == b,
+        "the PNGs differ ({} and {} bytes)",
+        a.len(),
+        b.len()
+    );
+    let decoded = image::load_from_memory(&b).unwrap().to_rgb8();
+    assert_eq!((decoded.width(), decoded.height()), (192, 108));
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_sun_sweep_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine() {
     let files = study_on_one_machine_and_a_cluster(
@@ -930,8 +983,8 @@ async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follo
     assert_same_images(&frames, &reference);
     let journal = std::fs::read_dir(dir.path().join("jobs")).unwrap().count();
     assert_eq!(
-        journal, 2,
-        "the completed job stays journaled a while (with the scenes)"
+        journal, 3,
+        "the completed job stays journaled a while (with the scenes and the format)"
     );
     for w in workers {
         w.abort();
