@@ -193,8 +193,10 @@ if first == 1 and more:
     tracing = c1[2] - setup
     m, s = c1[0], c1[1]
     print(f"one worker's set-up {setup:.3f} s and tracing {tracing:.3f} s per frame (from 1 and {n} workers' CPU)")
+    floor = lambda k: max((m + s + k * setup + tracing) / cores, setup + tracing / k)
     for k in sorted(runs):
-        floor = max((m + s + k * setup + tracing) / cores, setup + tracing / k)
-        print(f"  {k} worker(s): at least {floor:.3f} s per frame = max((master + submitter + {k} set-ups + tracing) / "
-              f"{cores} cores, set-up + tracing / {k}): speed-up at most {t1 / floor:.2f}x over the measured {t1:.3f} s")
+        print(f"  {k} worker(s): at least {floor(k):.3f} s per frame = max((master + submitter + {k} set-ups + tracing) / "
+              f"{cores} cores, set-up + tracing / {k}); speed-up over 1 worker at most {floor(1) / floor(k):.2f}x when both "
+              f"are CPU-bound ({t1 / floor(k):.2f}x over the measured {t1:.3f} s), "
+              f"{(setup + tracing) / (setup + tracing / k):.2f}x with the master and submitter on other cores")
 PY
