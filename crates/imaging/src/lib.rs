@@ -203,7 +203,7 @@ impl Srgb8Table {
 
     fn encode(&self, v: f32) -> u8 {
         // NaN and everything at or below zero is code 0, as in the rule.
-        if !(v > 0.0) {
+        if v.is_nan() || v <= 0.0 {
             return 0;
         }
         let v = v.min(1.0);
