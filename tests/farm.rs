@@ -471,6 +471,25 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     );
 }
 
+/// Runs `vtfarm submit FILE -o OUTPUT` on a fresh localhost cluster of two
+/// workers.
+async fn submit_on_a_two_worker_cluster(file: &std::path::Path, output: &std::path::Path) {
+    let cluster = Cluster::start(SchedulerConfig::default());
+    let _w1 = cluster.worker("w1", 1.0);
+    let _w2 = cluster.worker("w2", 1.0);
+    cluster.wait_for_workers(2).await;
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    vtfarm_cli(vec![
+        "submit".into(),
+        path(file),
+        "--cluster".into(),
+        path(&cluster.file),
+        "-o".into(),
+        path(output),
+    ])
+    .await;
+}
+
 /// `vtfarm submit` asks for 8-bit sRGB frames (all it writes is PNGs) and
 /// `vtfarm render` gets linear ones: both write the same PNG file, byte for
 /// byte.
@@ -495,21 +514,8 @@ async fn vtfarm_submit_on_a_two_worker_cluster_writes_the_png_of_vtfarm_render()
         "1".into(),
     ])
     .await;
-
-    let cluster = Cluster::start(SchedulerConfig::default());
-    let _w1 = cluster.worker("w1", 1.0);
-    let _w2 = cluster.worker("w2", 1.0);
-    cluster.wait_for_workers(2).await;
     let submitted = dir.path().join("submit");
-    vtfarm_cli(vec![
-        "submit".into(),
-        path(&job),
-        "--cluster".into(),
-        path(&cluster.file),
-        "-o".into(),
-        path(&submitted),
-    ])
-    .await;
+    submit_on_a_two_worker_cluster(&job, &submitted).await;
     let (a, b) = (
         std::fs::read(&rendered).unwrap(),
         std::fs::read(submitted.join("frame_0000.png")).unwrap(),
@@ -590,21 +596,8 @@ async fn study_on_one_machine_and_a_cluster(
         "1".into(),
     ])
     .await;
-
-    let cluster = Cluster::start(SchedulerConfig::default());
-    let _w1 = cluster.worker("w1", 1.0);
-    let _w2 = cluster.worker("w2", 1.0);
-    cluster.wait_for_workers(2).await;
     let two = dir.path().join("cluster");
-    vtfarm_cli(vec![
-        "submit".into(),
-        path(&study),
-        "--cluster".into(),
-        path(&cluster.file),
-        "-o".into(),
-        path(&two),
-    ])
-    .await;
+    submit_on_a_two_worker_cluster(&study, &two).await;
     // How the work splits between the two workers depends on timing (a worker
     // still fetching the scene gets none); the files below must not.
 
