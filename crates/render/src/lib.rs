@@ -22,8 +22,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
-    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, ShadowCache,
-    VertexOwners, VertexSettings, reflector_bounds, trace_package_pixels,
+    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, PhaseTimes,
+    ShadowCache, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -53,7 +53,19 @@ pub struct RenderedFrame {
     pub raster_time: Duration,
     /// Wall time of the whole frame.
     pub total_time: Duration,
+    /// Where the time after the raster pass went.
+    pub times: FrameTimes,
     pub faces: Vec<FinishedFace>,
+}
+
+/// The wall times of a frame after its raster pass (the packages run one
+/// after the other, so their phase times add up to wall time).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTimes {
+    /// Setting up the frame's planes over the base frame ([`FrameImage::new`]).
+    pub image_setup: Duration,
+    /// The packages' phases.
+    pub phases: PhaseTimes,
 }
 
 /// A scene ready to render: its BVH and the reflector triangles.
@@ -203,7 +215,12 @@ impl Renderer {
         let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
+        let setup_start = Instant::now();
         let mut image = FrameImage::new(base);
+        let mut times = FrameTimes {
+            image_setup: setup_start.elapsed(),
+            ..FrameTimes::default()
+        };
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
@@ -213,14 +230,11 @@ impl Renderer {
             time_break: None,
         };
         for package in packages {
-            // One machine: the pixels go straight into the frame (the farm's
-            // master composites the same values from bitmaps).
-            let result = trace_package_pixels(&frame, package, &package_options, &mut |_| {});
-            for pixels in &result.pixels {
-                image.write(pixels);
-            }
-            stats.add(&result.stats);
-            faces.extend(result.faces);
+            let traced =
+                trace_package_into(&frame, package, &package_options, &mut |_| {}, &mut image);
+            stats.add(&traced.stats);
+            times.phases.add(&traced.times);
+            faces.extend(traced.faces);
             done += package.len() as u64;
             progress(done, total);
         }
@@ -229,6 +243,7 @@ impl Renderer {
             stats,
             raster_time,
             total_time: start.elapsed(),
+            times,
             faces,
         }
     }
