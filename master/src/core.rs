@@ -908,7 +908,7 @@ impl MasterCore {
                     image: WireImage::encode(done.image.color(), j.image),
                     stats: frame_stats.clone(),
                     aux: match &done.image {
-                        Assembled::Components(image) => Some(frame_aux(image)),
+                        Assembled::Components(image) => Some(WireFrameAux::encode(image)),
                         Assembled::Color(_) => None,
                     },
                 };
@@ -1310,16 +1310,6 @@ pub struct LiveFrame<'a> {
     pub triangles_done: u64,
     pub triangles_total: u64,
     pub image: &'a vtfarm_imaging::Image,
-}
-
-/// The per-pixel components of a finished frame, for the wire.
-fn frame_aux(image: &FrameImage) -> WireFrameAux {
-    WireFrameAux {
-        reflected: WireImage::encode(&image.reflected, WireImageFormat::LinearF32),
-        transmitted: WireImage::encode(&image.transmitted, WireImageFormat::LinearF32),
-        reflected_object: image.reflected_object.clone(),
-        mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
-    }
 }
 
 /// How logs and statistics name a peer.
