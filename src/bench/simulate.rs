@@ -43,7 +43,9 @@ use vtfarm_proto::{
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
 
-use super::farm::{FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm};
+use super::farm::{
+    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm, steady_frame_seconds,
+};
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
@@ -54,7 +56,10 @@ pub(crate) struct SimulateArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [1usize, 2, 4, 8, 16, 32, 64])]
     workers: Vec<usize>,
     /// Frames per simulated job (each the recorded frame).
-    #[arg(long, default_value_t = 3)]
+    /// The first is left out of the figures and the frame time is taken
+    /// from the second's start to the last's delivery, so more frames
+    /// blur the pipeline's ramp less.
+    #[arg(long, default_value_t = 8)]
     frames: usize,
     /// Link bandwidths in Mbit/s: every worker's own link and the master's
     /// one shared link.
@@ -383,27 +388,65 @@ struct Row {
     heterogeneous: bool,
     /// Sum of the workers' speeds: the ideal speed-up over one worker.
     ideal: f64,
-    /// Last frame: sum of busy times over wall time.
+    /// Last frame: sum of busy times over its wall time (the scheduler's
+    /// figure; with pipelined frames, others' work shares that wall time).
     speedup: f64,
-    /// Last frame: one worker's wall time (same link) over this wall time.
+    /// One worker's `frame_seconds` (same link) over this one's.
     speedup_vs_one: f64,
-    /// Last frame: (max busy − mean busy) / mean busy.
-    imbalance: f64,
-    /// Last frame's wall time (first assignment to last result).
-    wall_seconds: f64,
+    /// Per frame: the lifetime window's imbalance (see `FarmFrame::imbalance`).
     imbalance_per_frame: Vec<f64>,
-    wall_seconds_per_frame: Vec<f64>,
+    /// Per frame: announcement to delivery.
+    latency_seconds_per_frame: Vec<f64>,
     /// Packages of the last frame.
     packages: u32,
     /// Straggler copies handed out in the last frame.
     duplicates: u32,
-    /// Mean interval between frames sent to the submitter (base frames and
-    /// set-ups included), the first frame left out.
+    /// Steady-state seconds per frame (`steady_frame_seconds`).
     frame_seconds: f64,
-    /// One worker's `frame_seconds` over this one's, over the ideal.
+    /// One thread's tracing per frame over (`frame_seconds` × `ideal`):
+    /// at most 1 (see `steady_frame_seconds`).
     efficiency: f64,
-    /// Largest imbalance of the frames after the first.
+    /// Largest imbalance of the frames after the first (of the only frame
+    /// when there is one).
     imbalance_after_first: f64,
+}
+
+impl Row {
+    /// The figures of `frames` simulated on workers of `speeds`, against
+    /// `one`, the same job on one worker of speed 1, and `work`, one
+    /// thread's tracing per frame.
+    fn new(
+        frames: &[FarmFrame],
+        one: &[FarmFrame],
+        work: f64,
+        speeds: &[f64],
+        link_mbit: f64,
+        heterogeneous: bool,
+    ) -> Result<Row> {
+        let last = &frames.last().context("no frame simulated")?.stats;
+        let ideal: f64 = speeds.iter().sum();
+        let frame_seconds = steady_frame_seconds(frames);
+        let after_first = if frames.len() > 1 { &frames[1..] } else { frames };
+        Ok(Row {
+            workers: speeds.len(),
+            link_mbit,
+            heterogeneous,
+            ideal,
+            speedup: last.speedup,
+            speedup_vs_one: steady_frame_seconds(one) / frame_seconds.max(1e-12),
+            imbalance_per_frame: frames.iter().map(|f| f.imbalance).collect(),
+            latency_seconds_per_frame: (frames.iter())
+                .map(|f| f.done_at.saturating_sub(f.started_at).as_secs_f64())
+                .collect(),
+            packages: last.packages,
+            duplicates: last.duplicates,
+            frame_seconds,
+            efficiency: work / (frame_seconds * ideal).max(1e-12),
+            imbalance_after_first: (after_first.iter())
+                .map(|f| f.imbalance)
+                .fold(0.0, f64::max),
+        })
+    }
 }
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
@@ -414,17 +457,6 @@ fn simulate(
     workers: Vec<FarmWorker>,
 ) -> Result<Vec<FarmFrame>> {
     simulate_farm(job, costs, config, &workers)
-}
-
-/// Mean interval between frames sent to the submitter, the first left out
-/// (it includes the scene's way and every estimate's start).
-pub(super) fn mean_frame_seconds(frames: &[FarmFrame]) -> f64 {
-    let done: Vec<f64> = frames.iter().map(|f| f.done_at.as_secs_f64()).collect();
-    match done.as_slice() {
-        [] => 0.0,
-        [only] => *only,
-        [first, .., last] => (last - first) / (done.len() - 1) as f64,
-    }
 }
 
 /// Per-frame fixed costs measured in a real run: the medians, over the
@@ -591,38 +623,17 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                     config,
                     speeds.iter().map(|&s| worker(s, mbit)).collect(),
                 )?;
-                let stats: Vec<&vtfarm_proto::FrameStats> =
-                    frames.iter().map(|f| &f.stats).collect();
-                let last = *stats.last().context("no frame simulated")?;
-                let one_last = &one.last().context("no frame simulated")?.stats;
-                let frame_seconds = mean_frame_seconds(&frames);
-                let ideal: f64 = speeds.iter().sum();
-                let wall = last.wall_micros as f64 / 1e6;
-                rows.push(Row {
-                    workers: n,
-                    link_mbit: mbit,
+                rows.push(Row::new(
+                    &frames,
+                    &one,
+                    total,
+                    &speeds,
+                    mbit,
                     heterogeneous,
-                    ideal,
-                    speedup: last.speedup,
-                    speedup_vs_one: one_last.wall_micros as f64 / 1e6 / wall.max(1e-12),
-                    imbalance: last.imbalance,
-                    wall_seconds: wall,
-                    imbalance_per_frame: stats.iter().map(|f| f.imbalance).collect(),
-                    wall_seconds_per_frame: (stats.iter())
-                        .map(|f| f.wall_micros as f64 / 1e6)
-                        .collect(),
-                    packages: last.packages,
-                    duplicates: last.duplicates,
-                    frame_seconds,
-                    efficiency: mean_frame_seconds(&one) / frame_seconds.max(1e-12) / ideal,
-                    imbalance_after_first: (stats.iter().skip(1))
-                        .map(|f| f.imbalance)
-                        .fold(0.0, f64::max),
-                });
+                )?);
             }
         }
     }
-    let _ = total;
     print_report(&args, &job, &recording, &rows, master_cores);
     if let Some(path) = &args.json {
         write_json(path, &rows)?;
@@ -699,23 +710,24 @@ fn print_report(
         }
     );
     println!(
-        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = mean interval between finished frames after the first (set-ups, base frame, links included); effic. = one worker's frame s / frame s / ideal; imb. = (max - mean busy) / mean busy, worst frame after the first; busy/wall of the last frame"
+        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the second frame's announcement to the last frame's delivery, over the frames after the first (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
     );
     println!(
-        "{:>7} {:>6} {:>6} {:>6} {:>9} {:>9} {:>7} {:>8} {:>8}",
-        "workers", "link", "set", "ideal", "frame s", "effic.", "imb.", "busy/wall", "packages"
+        "{:>7} {:>6} {:>6} {:>6} {:>9} {:>7} {:>7} {:>7} {:>8} {:>8}",
+        "workers", "link", "set", "ideal", "frame s", "effic.", "vs 1", "imb.", "latency", "packages"
     );
     for r in rows {
         println!(
-            "{:>7} {:>6} {:>6} {:>6.1} {:>9.3} {:>6.0}% {:>7.1}% {:>9.2} {:>8}",
+            "{:>7} {:>6} {:>6} {:>6.1} {:>9.3} {:>6.0}% {:>7.2} {:>6.1}% {:>8.3} {:>8}",
             r.workers,
             format!("{}M", r.link_mbit),
             if r.heterogeneous { "mixed" } else { "equal" },
             r.ideal,
             r.frame_seconds,
             r.efficiency * 100.0,
+            r.speedup_vs_one,
             r.imbalance_after_first * 100.0,
-            r.speedup,
+            r.latency_seconds_per_frame.last().copied().unwrap_or(0.0),
             r.packages
         );
     }
