@@ -242,7 +242,8 @@ impl Assembled {
                 }
             }
             (Assembled::Components(image), ResultPixels::Bitmap(bitmap)) => image.composite(bitmap),
-            // `check` decodes for the assembly it was asked by.
+            // `check` decodes for the kind of assembly it is called on, and
+            // a frame's kind is set once, with its base frame.
             _ => unreachable!("a result decoded for another kind of frame"),
         }
     }
@@ -1013,8 +1014,6 @@ impl MasterCore {
         j.assembling.push(FrameAssembly {
             start: start.clone(),
             ids: None,
-            // Replaced by the base frame before anything is composited: a
-            // zeroed allocation, not a pass over 1080p.
             // The base frame, when it comes; until then results are held.
             image: Assembled::Color(Image::black(0, 0)),
             held: Vec::new(),
