@@ -56,10 +56,9 @@ pub(crate) struct SimulateArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [1usize, 2, 4, 8, 16, 32, 64])]
     workers: Vec<usize>,
     /// Frames per simulated job (each the recorded frame).
-    /// The first is left out of the figures and the frame time is taken
-    /// from the second's start to the last's delivery, so more frames
-    /// blur the pipeline's ramp less.
-    #[arg(long, default_value_t = 8)]
+    /// The frame time is taken from the first's delivery to the last's, so
+    /// more frames blur the pipeline's ramp up and down less.
+    #[arg(long, default_value_t = 16)]
     frames: usize,
     /// Link bandwidths in Mbit/s: every worker's own link and the master's
     /// one shared link.
@@ -419,7 +418,11 @@ impl Row {
         let last = &frames.last().context("no frame simulated")?.stats;
         let ideal: f64 = speeds.iter().sum();
         let frame_seconds = steady_frame_seconds(frames);
-        let after_first = if frames.len() > 1 { &frames[1..] } else { frames };
+        let after_first = if frames.len() > 1 {
+            &frames[1..]
+        } else {
+            frames
+        };
         Ok(Row {
             workers: speeds.len(),
             link_mbit,
@@ -703,11 +706,20 @@ fn print_report(
         }
     );
     println!(
-        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the second frame's announcement to the last frame's delivery, over the frames after the first (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
+        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the first frame's delivery to the last's, over the frames' work traced in between (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
     );
     println!(
         "{:>7} {:>6} {:>6} {:>6} {:>9} {:>7} {:>7} {:>7} {:>8} {:>8}",
-        "workers", "link", "set", "ideal", "frame s", "effic.", "vs 1", "imb.", "latency", "packages"
+        "workers",
+        "link",
+        "set",
+        "ideal",
+        "frame s",
+        "effic.",
+        "vs 1",
+        "imb.",
+        "latency",
+        "packages"
     );
     for r in rows {
         println!(
