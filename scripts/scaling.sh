@@ -14,7 +14,13 @@
 # transfer and BVH builds), its ratio to the first count's, and the
 # simulator's prediction for the same job and workers (`vtfarm bench simulate
 # --shared-cores`: the master core and worker sessions with costs recorded on
-# this machine, all sharing its cores) with measured/predicted.
+# this machine, all sharing its cores) with measured/predicted. Then the CPU
+# each process spent per frame in each run (from /proc, frames after the
+# first) and the floor it sets on this machine's cores: with a worker's
+# set-up U and tracing T (from its CPU alone, U + T, and the workers' total
+# with n, n U + T), n workers need at least max((master + submitter + n U +
+# T) / cores, U + T / n) per frame, so the speed-up over one worker cannot
+# exceed its measured interval over that floor.
 set -euo pipefail
 
 workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
@@ -61,7 +67,30 @@ wait_for_workers() {
   echo "workers did not join" >&2; return 1
 }
 
-declare -A mean
+# Sets `ticks` to the CPU time (user + system, clock ticks) each of the
+# processes "$@" has spent so far (no subshell: its own CPU would count).
+ticks=()
+cpu_ticks() {
+  local p line fields
+  ticks=()
+  for p in "$@"; do
+    read -r line <"/proc/$p/stat"
+    read -ra fields <<<"${line##*) }"
+    ticks+=($((fields[11] + fields[12])))
+  done
+}
+# Sets `children_ticks` to the CPU time of this shell's reaped children.
+children_ticks=0
+reaped_cpu_ticks() {
+  local line user system
+  times >"$work/times"
+  { read -r line; read -r user system; } <"$work/times"
+  children_ticks=$(awk -v u="$user" -v s="$system" -v hz="$(getconf CLK_TCK)" 'BEGIN {
+    split(u, a, /[ms]/); split(s, b, /[ms]/); printf "%d", (a[1] * 60 + a[2] + b[1] * 60 + b[2]) * hz + 0.5 }')
+}
+exec {sleeper}<> <(:)  # `read -t` on it sleeps without starting a process
+
+declare -A mean cpu
 for n in $workers_list; do
   pids=()
   RUST_LOG=warn "$bin" master --cluster "$work/cluster/cluster.toml" --listen "127.0.0.1:$port" \
@@ -75,9 +104,36 @@ for n in $workers_list; do
   done
   wait_for_workers "$n"
   out="$work/out-$n"
-  timeout 600 "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
-    >"$work/submit-$n.log" 2>&1 || { cat "$work/submit-$n.log" >&2; exit 1; }
+  reaped_cpu_ticks; reaped_before=$children_ticks
+  "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
+    >"$work/submit-$n.log" 2>&1 &
+  submitter=$!
+  # CPU when the first frame arrives and at the end: the frames between
+  # are the ones the frame interval counts.
+  at_first=(); deadline=$((SECONDS + 600))
+  while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
+    if [ ${#at_first[@]} -eq 0 ] && [ -e "$out/frame_0000.png" ]; then
+      cpu_ticks "${pids[@]}" "$submitter"; at_first=("${ticks[@]}")
+    fi
+    [ "$SECONDS" -lt "$deadline" ] || { kill "$submitter"; echo "submit timed out" >&2; exit 1; }
+    read -rt 0.02 -u "$sleeper" || true
+  done
+  cpu_ticks "${pids[@]}"; last=("${ticks[@]}")
+  wait "$submitter" || { cat "$work/submit-$n.log" >&2; exit 1; }
+  reaped_cpu_ticks
+  last+=($((children_ticks - reaped_before)))
   mean[$n]=$(frame_figures "$out/stats.json")
+  # CPU seconds per frame after the first: master, submitter, each worker.
+  cpu[$n]=$(python3 - "$frames" "$(getconf CLK_TCK)" "${at_first[*]}" "${last[*]}" <<'PY'
+import sys
+frames, hz = int(sys.argv[1]), int(sys.argv[2])
+first, last = [list(map(int, a.split())) for a in sys.argv[3:5]]
+if len(first) != len(last):
+    first = [float("nan")] * len(last)  # the first frame was not seen
+per = [(b - a) / hz / max(frames - 1, 1) for a, b in zip(first, last)]
+print(" ".join(f"{x:.4f}" for x in [per[0], per[-1], *per[1:-1]]))
+PY
+)
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
@@ -114,3 +170,33 @@ for n in $workers_list; do
 done
 echo "predicted: vtfarm bench simulate --shared-cores $cores (master core and worker sessions on a virtual clock), fixed costs timed by it; pred.phases: base frame and set-up from the $first-worker run's stats.json phases"
 echo "result MB: results as sent (zstd byte planes, colour only)"
+
+# The CPU each process spent per frame (from /proc, frames after the
+# first) and the floor it sets: a worker's set-up U and tracing T follow
+# from its CPU with one worker (U + T) and the workers' total with n (n U + T).
+cpu_args=()
+for n in $workers_list; do cpu_args+=("$n" "${cpu[$n]}" "${mean[$n]%% *}"); done
+python3 - "$cores" "${cpu_args[@]}" <<'PY'
+import sys
+cores, rest = int(sys.argv[1]), sys.argv[2:]
+runs = {int(rest[i]): (list(map(float, rest[i + 1].split())), float(rest[i + 2])) for i in range(0, len(rest), 3)}
+for n, (c, gap) in runs.items():
+    total = sum(c)
+    print(f"CPU per frame, {n} worker(s): master {c[0]:.3f} s, submitter {c[1]:.3f} s, "
+          f"workers {' + '.join(f'{w:.3f}' for w in c[2:])} s; total {total:.3f} s = "
+          f"{total / cores:.3f} s on {cores} cores (interval {gap:.3f} s)")
+first = min(runs)
+more = [n for n in runs if n > first]
+if first == 1 and more:
+    (c1, t1), n = runs[1], more[0]
+    setup = (sum(runs[n][0][2:]) - c1[2]) / (n - 1)
+    tracing = c1[2] - setup
+    m, s = c1[0], c1[1]
+    print(f"one worker's set-up {setup:.3f} s and tracing {tracing:.3f} s per frame (from 1 and {n} workers' CPU)")
+    floor = lambda k: max((m + s + k * setup + tracing) / cores, setup + tracing / k)
+    for k in sorted(runs):
+        print(f"  {k} worker(s): at least {floor(k):.3f} s per frame = max((master + submitter + {k} set-ups + tracing) / "
+              f"{cores} cores, set-up + tracing / {k}); speed-up over 1 worker at most {floor(1) / floor(k):.2f}x when both "
+              f"are CPU-bound ({t1 / floor(k):.2f}x over the measured {t1:.3f} s), "
+              f"{(setup + tracing) / (setup + tracing / k):.2f}x with the master and submitter on other cores")
+PY

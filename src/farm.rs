@@ -10,7 +10,7 @@ use vtfarm_master::{
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, FrameStats, Role, SceneData};
+use vtfarm_proto::{ClusterConfig, FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
 use vtfarm_scheduler::SchedulerConfig;
@@ -153,6 +153,14 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             aux: args_aux,
         };
         let wire = wire_job(&name, &data, &setups, &reflectors, options);
+        // Only PNGs are written: 8-bit sRGB frames, a quarter of the bytes
+        // of linear ones before compression, and no conversion here.
+        let image = if args_aux {
+            WireImageFormat::LinearF32
+        } else {
+            WireImageFormat::Srgb8
+        };
+        let wire = WireJob { image, ..wire };
         let start = match attach {
             Some(job) => RemoteJob::Attach { job },
             None => RemoteJob::Submit {

@@ -211,7 +211,9 @@ fn render(args: RenderArgs) -> Result<()> {
         };
         let frame = farm::render_embedded(embedded, args.local_workers, &bar)?;
         bar.finish_and_clear();
-        output::write_image(&args.output, &frame.image)?;
+        let image =
+            (frame.image.linear()).context("the master sent an sRGB frame for linear output")?;
+        output::write_image(&args.output, image)?;
         if let (Some(dir), Some(components)) = (&args.aux, &frame.components) {
             output::write_aux(dir, components, &[], &scene)?;
         }

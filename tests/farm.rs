@@ -258,7 +258,8 @@ impl Cluster {
 fn assert_same_images(frames: &[FinishedFrame], reference: &[Vec<Vec3>]) {
     assert_eq!(frames.len(), reference.len());
     for (f, r) in frames.iter().zip(reference) {
-        let differing = f.image.pixels.iter().zip(r).filter(|(a, b)| a != b).count();
+        let pixels = &f.image.linear().expect("a linear frame").pixels;
+        let differing = pixels.iter().zip(r).filter(|(a, b)| a != b).count();
         assert_eq!(
             differing, 0,
             "frame {}: pixels differ from the single-process render",
@@ -384,7 +385,8 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
         assert_eq!(frames.len(), 2);
         for (f, setup) in frames.iter().zip(&job.frames) {
             assert!(
-                f.image.pixels == method_reference(&job, setup, kind),
+                f.image.linear().expect("a linear frame").pixels
+                    == method_reference(&job, setup, kind),
                 "{}: frame {} equals the single-process render",
                 kind.name(),
                 f.frame
@@ -469,6 +471,65 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     );
 }
 
+/// Runs `vtfarm submit FILE -o OUTPUT` on a fresh localhost cluster of two
+/// workers.
+async fn submit_on_a_two_worker_cluster(file: &std::path::Path, output: &std::path::Path) {
+    let cluster = Cluster::start(SchedulerConfig::default());
+    let _w1 = cluster.worker("w1", 1.0);
+    let _w2 = cluster.worker("w2", 1.0);
+    cluster.wait_for_workers(2).await;
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    vtfarm_cli(vec![
+        "submit".into(),
+        path(file),
+        "--cluster".into(),
+        path(&cluster.file),
+        "-o".into(),
+        path(output),
+    ])
+    .await;
+}
+
+/// `vtfarm submit` asks for 8-bit sRGB frames (all it writes is PNGs) and
+/// `vtfarm render` gets linear ones: both write the same PNG file, byte for
+/// byte.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn vtfarm_submit_on_a_two_worker_cluster_writes_the_png_of_vtfarm_render() {
+    let _serial = SERIAL.lock().await;
+    let dir = tempfile::tempdir().unwrap();
+    let job = dir.path().join("job.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n[camera]\nwidth = 192\nheight = 108\n",
+    )
+    .unwrap();
+    let path = |p: &std::path::Path| p.to_str().unwrap().to_owned();
+    let rendered = dir.path().join("render.png");
+    vtfarm_cli(vec![
+        "render".into(),
+        path(&job),
+        "-o".into(),
+        path(&rendered),
+        "--local-workers".into(),
+        "1".into(),
+    ])
+    .await;
+    let submitted = dir.path().join("submit");
+    submit_on_a_two_worker_cluster(&job, &submitted).await;
+    let (a, b) = (
+        std::fs::read(&rendered).unwrap(),
+        std::fs::read(submitted.join("frame_0000.png")).unwrap(),
+    );
+    assert!(
+        a == b,
+        "the PNGs differ ({} and {} bytes)",
+        a.len(),
+        b.len()
+    );
+    let decoded = image::load_from_memory(&b).unwrap().to_rgb8();
+    assert_eq!((decoded.width(), decoded.height()), (192, 108));
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_sun_sweep_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine() {
     let files = study_on_one_machine_and_a_cluster(
@@ -535,21 +596,8 @@ async fn study_on_one_machine_and_a_cluster(
         "1".into(),
     ])
     .await;
-
-    let cluster = Cluster::start(SchedulerConfig::default());
-    let _w1 = cluster.worker("w1", 1.0);
-    let _w2 = cluster.worker("w2", 1.0);
-    cluster.wait_for_workers(2).await;
     let two = dir.path().join("cluster");
-    vtfarm_cli(vec![
-        "submit".into(),
-        path(&study),
-        "--cluster".into(),
-        path(&cluster.file),
-        "-o".into(),
-        path(&two),
-    ])
-    .await;
+    submit_on_a_two_worker_cluster(&study, &two).await;
     // How the work splits between the two workers depends on timing (a worker
     // still fetching the scene gets none); the files below must not.
 
@@ -928,8 +976,8 @@ async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follo
     assert_same_images(&frames, &reference);
     let journal = std::fs::read_dir(dir.path().join("jobs")).unwrap().count();
     assert_eq!(
-        journal, 2,
-        "the completed job stays journaled a while (with the scenes)"
+        journal, 3,
+        "the completed job stays journaled a while (with the scenes and the format)"
     );
     for w in workers {
         w.abort();

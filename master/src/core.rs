@@ -18,14 +18,15 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
+use glam::Vec3;
 use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameDone, FramePhase, FrameStart, JobScene, Message, Package, PackageResult, PhaseKind,
-    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireFrameAux, WireFrameSetup,
-    WireImage, WireJob, WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids,
-    encoded_len,
+    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireBitmap, WireFrameAux,
+    WireFrameSetup, WireImage, WireImageFormat, WireJob, WirePackageStats, WorkerFrameStats,
+    WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order};
@@ -34,7 +35,7 @@ use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
     WorkerId, WorkerState,
 };
-use vtfarm_vertex::{FrameImage, PackageStats};
+use vtfarm_vertex::{FrameImage, PackageStats, SparseBitmap};
 
 use crate::journal::{Record, StoredJob};
 use crate::telemetry::Telemetry;
@@ -114,6 +115,8 @@ struct Job {
     frames: Vec<FrameSetup>,
     /// Send the per-pixel components with each frame.
     aux: bool,
+    /// How finished frames travel (and are journaled).
+    image: WireImageFormat,
     method: MethodKind,
     /// For per-reflector methods, the reflector groups the work items
     /// index; `None` when the items are the reflector triangles themselves.
@@ -154,7 +157,8 @@ struct FrameAssembly {
     /// The frame's ID buffer: which reflector triangle owns each pixel;
     /// `None` until the base frame is rasterized.
     ids: Option<IdBuffer>,
-    image: FrameImage,
+    /// Empty until the base frame is rasterized.
+    image: Assembled,
     /// Results that came before the ID buffer, to check once it is there:
     /// (connection, result, its wire size).
     held: Vec<(ConnId, PackageResult, u64)>,
@@ -165,6 +169,90 @@ struct FrameAssembly {
     set_up: Vec<ConnId>,
     totals: PackageStats,
     triangles_done: u64,
+}
+
+/// A frame's pixels as results are composited over the base frame: the
+/// colour only, or with the per-pixel components when the job asks for
+/// them (a view's jobs always do). No output of a colour-only job reads
+/// the components, so their full-frame planes are not made.
+enum Assembled {
+    Color(Image),
+    Components(FrameImage),
+}
+
+impl Assembled {
+    /// Starts from the base frame.
+    fn new(base: Image, components: bool) -> Assembled {
+        if components {
+            Assembled::Components(FrameImage::new(base))
+        } else {
+            Assembled::Color(base)
+        }
+    }
+
+    fn color(&self) -> &Image {
+        match self {
+            Assembled::Color(color) => color,
+            Assembled::Components(image) => &image.color,
+        }
+    }
+
+    /// Decodes a result into what this frame composites (the colours
+    /// straight from the wire when that is all it keeps) and checks pixel
+    /// ownership: every pixel it writes must be one that `ids` gives to a
+    /// triangle `owned` accepts.
+    fn check(
+        &self,
+        bitmap: WireBitmap,
+        ids: &IdBuffer,
+        owned: impl Fn(TriangleId) -> bool,
+    ) -> Result<ResultPixels, String> {
+        let (width, height) = (self.color().width, self.color().height);
+        let malformed = |e: vtfarm_proto::WireError| format!("malformed result: {e}");
+        let foreign = |(x, y): (u32, u32)| {
+            format!("result writes pixel ({x}, {y}), which its package does not own")
+        };
+        match self {
+            Assembled::Color(_) => {
+                let colors = bitmap.colors_within(width, height).map_err(malformed)?;
+                // The ID buffer is the frame's size: every index is in it.
+                match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
+                    Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
+                    None => Ok(ResultPixels::Colors(colors)),
+                }
+            }
+            Assembled::Components(_) => {
+                let bitmap = bitmap
+                    .into_bitmap_within(width, height)
+                    .map_err(malformed)?;
+                match bitmap.foreign_pixel(ids, owned) {
+                    Some(pixel) => Err(foreign(pixel)),
+                    None => Ok(ResultPixels::Bitmap(bitmap)),
+                }
+            }
+        }
+    }
+
+    /// Writes a checked result's pixels ([`FrameImage::composite`]).
+    fn composite(&mut self, pixels: &ResultPixels) {
+        match (self, pixels) {
+            (Assembled::Color(color), ResultPixels::Colors(colors)) => {
+                for &(i, c) in colors {
+                    color.pixels[i] = c;
+                }
+            }
+            (Assembled::Components(image), ResultPixels::Bitmap(bitmap)) => image.composite(bitmap),
+            // `check` decodes for the assembly it was asked by.
+            _ => unreachable!("a result decoded for another kind of frame"),
+        }
+    }
+}
+
+/// A checked result in the form its frame composites: frame indices and
+/// colours, or the whole bitmap with the components.
+enum ResultPixels {
+    Colors(Vec<(usize, Vec3)>),
+    Bitmap(SparseBitmap),
 }
 
 /// A package on its way: what the results must be matched against.
@@ -466,19 +554,9 @@ impl MasterCore {
             current.held.push((conn, result, bytes_out));
             return;
         };
-        let (width, height) = (current.image.color.width, current.image.color.height);
-        let checked = (result.bitmap.into_bitmap_within(width, height))
-            .map_err(|e| format!("malformed result: {e}"))
-            .and_then(|bitmap| {
-                let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
-                match bitmap.foreign_pixel(ids, owned) {
-                    Some((x, y)) => Err(format!(
-                        "result writes pixel ({x}, {y}), which its package does not own"
-                    )),
-                    None => Ok(bitmap),
-                }
-            });
-        let bitmap = match checked {
+        let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
+        let checked = current.image.check(result.bitmap, ids, owned);
+        let pixels = match checked {
             Ok(b) => b,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
@@ -516,7 +594,7 @@ impl MasterCore {
         self.packages.remove(&result.id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
         let current = job.assembly_mut(frame).expect("checked above");
-        current.image.composite(&bitmap);
+        current.image.composite(&pixels);
         current.totals.add(&stats);
         current.triangles_done += triangles;
         let progress = Message::Progress {
@@ -615,6 +693,9 @@ impl MasterCore {
         if job.reflectors.is_empty() || job.frames.is_empty() {
             return Err("a job needs reflectors and at least one frame".into());
         }
+        if job.aux && job.image != WireImageFormat::LinearF32 {
+            return Err("a job with components (aux) needs linear frames".into());
+        }
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = frames.map_err(|e| format!("bad frame set-up: {e}"))?;
@@ -651,6 +732,7 @@ impl MasterCore {
                 reflectors,
                 frames,
                 aux: job.aux,
+                image: job.image,
                 method,
                 groups,
                 assembling: Vec::new(),
@@ -785,7 +867,9 @@ impl MasterCore {
                     return;
                 };
                 let done = j.assembling.remove(index);
-                (self.views).frame_finished(job.0, frame, &done.image, &j.scene);
+                if let Assembled::Components(image) = &done.image {
+                    (self.views).frame_finished(job.0, frame, image, &j.scene);
+                }
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let workers = stats
                     .workers
@@ -812,20 +896,28 @@ impl MasterCore {
                     workers,
                     phases: done.phases.clone(),
                 };
-                let color = done.image.color.clone();
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 j.frames_done = frame + 1;
-                let done = FrameDone {
+                // Encoded (and compressed) once: the journal and the
+                // submitter get the same bytes.
+                let message = FrameDone {
                     job: job.0,
                     frame,
-                    image: wire_image(&done.image.color),
+                    image: WireImage::encode(done.image.color(), j.image),
                     stats: frame_stats.clone(),
-                    aux: j.aux.then(|| frame_aux(&done.image)),
+                    aux: match &done.image {
+                        Assembled::Components(image) => Some(frame_aux(image)),
+                        Assembled::Color(_) => None,
+                    },
                 };
                 let submitter = j.submitter;
-                self.persist(Record::FrameDone(Box::new(done.clone())));
+                self.persist(Record::FrameDone(Box::new(message.clone())));
+                let color = match done.image {
+                    Assembled::Color(color) => color,
+                    Assembled::Components(image) => image.color,
+                };
                 (self.telemetry).frame_finished(job.0, frame, frame_stats, color);
-                self.send_to(submitter, Message::FrameDone(done));
+                self.send_to(submitter, Message::FrameDone(message));
                 self.departed.clear();
             }
             Event::JobComplete { job } => {
@@ -901,7 +993,6 @@ impl MasterCore {
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let (width, height) = (setup.camera.width, setup.camera.height);
         let base = BaseFrameRequest {
             job,
             frame,
@@ -922,7 +1013,8 @@ impl MasterCore {
             ids: None,
             // Replaced by the base frame before anything is composited: a
             // zeroed allocation, not a pass over 1080p.
-            image: FrameImage::new(Image::black(width, height)),
+            // The base frame, when it comes; until then results are held.
+            image: Assembled::Color(Image::black(0, 0)),
             held: Vec::new(),
             started: self.now,
             phases: Vec::new(),
@@ -958,14 +1050,15 @@ impl MasterCore {
         (base, ids): (Image, IdBuffer),
     ) {
         self.now = now;
-        let Some(current) = (self.jobs.get_mut(&job))
-            .and_then(|j| j.assembly_mut(frame))
-            .filter(|c| c.ids.is_none())
-        else {
+        let Some(j) = self.jobs.get_mut(&job) else {
+            return;
+        };
+        let aux = j.aux;
+        let Some(current) = j.assembly_mut(frame).filter(|c| c.ids.is_none()) else {
             return;
         };
         // Nothing is composited yet: the image starts as the base frame.
-        current.image = FrameImage::new(base);
+        current.image = Assembled::new(base, aux);
         current.ids = Some(ids);
         let phase = phase(
             current.started,
@@ -1117,13 +1210,14 @@ impl MasterCore {
     pub fn live_frame(&self) -> Option<LiveFrame<'_>> {
         let running = self.scheduler.queue().running?;
         let job = self.jobs.get(&running.job.0)?;
-        let current = job.assembly(running.frame)?;
+        // Nothing to show until the base frame is there.
+        let current = job.assembly(running.frame).filter(|c| c.ids.is_some())?;
         Some(LiveFrame {
             job: running.job.0,
             frame: current.start.frame,
             triangles_done: current.triangles_done,
             triangles_total: job.reflectors.len() as u64,
-            image: &current.image.color,
+            image: current.image.color(),
         })
     }
 
@@ -1216,15 +1310,11 @@ pub struct LiveFrame<'a> {
     pub image: &'a vtfarm_imaging::Image,
 }
 
-fn wire_image(image: &vtfarm_imaging::Image) -> WireImage {
-    WireImage::from_pixels(image.width, image.height, &image.pixels)
-}
-
 /// The per-pixel components of a finished frame, for the wire.
 fn frame_aux(image: &FrameImage) -> WireFrameAux {
     WireFrameAux {
-        reflected: wire_image(&image.reflected),
-        transmitted: wire_image(&image.transmitted),
+        reflected: WireImage::encode(&image.reflected, WireImageFormat::LinearF32),
+        transmitted: WireImage::encode(&image.transmitted, WireImageFormat::LinearF32),
         reflected_object: image.reflected_object.clone(),
         mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
     }

@@ -6,16 +6,19 @@
 //! renamed, so a crash leaves either the old or the new file):
 //!
 //! ```text
+//! STATE/jobs/format                the journal's format, [`JOURNAL_FORMAT`]
 //! STATE/jobs/scenes/HASH.scene     the scene bytes of queued jobs
 //! STATE/jobs/NNNNNNNNNNNN/job      SubmitJob { job } (scene by hash)
-//! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F, zstd-compressed
+//! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F
 //! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
 //! ```
 //!
-//! Frames are the bulk (12 bytes a pixel of linear float RGB, 11 MB at
-//! 720p), so they are kept zstd-compressed: lossless, so a re-attached
-//! submitter gets the very bytes it would have had. A delivered job's
-//! frames go [`ATTACH_GRACE`](crate::core::ATTACH_GRACE) after it completes.
+//! Frames are the bulk; a `FrameDone` already carries its image compressed
+//! in the job's format (`WireImage`), so the file holds the very message the
+//! submitter got, and a re-attached submitter gets the same bytes. A
+//! delivered job's frames go [`ATTACH_GRACE`](crate::core::ATTACH_GRACE)
+//! after it completes. A journal of another format (an older master's) is
+//! refused at start with an error that says what to do.
 //!
 //! The core never touches it: it emits [`Record`]s, the driver writes them
 //! and feeds [`StoredJob`]s back at start. A damaged entry is skipped with a
@@ -149,12 +152,25 @@ pub struct StoredJob {
     pub complete: bool,
 }
 
+/// The journal's format: 2 since finished frames are kept as sent
+/// (compressed inside the message), 1 (no `format` file) before.
+pub const JOURNAL_FORMAT: u32 = 2;
+
 /// Why the journal cannot be used.
 #[derive(Debug, thiserror::Error)]
 #[error("job journal {path}: {source}")]
 pub struct JournalError {
     path: PathBuf,
     source: std::io::Error,
+}
+
+impl JournalError {
+    fn other(path: PathBuf, message: String) -> JournalError {
+        JournalError {
+            path,
+            source: std::io::Error::other(message),
+        }
+    }
 }
 
 /// The journal in a directory.
@@ -164,14 +180,42 @@ pub struct Journal {
 }
 
 impl Journal {
-    /// Opens (creating) the journal under `state_dir/jobs`.
+    /// Opens (creating) the journal under `state_dir/jobs`; refuses one of
+    /// another [`JOURNAL_FORMAT`].
     pub fn open(state_dir: &Path) -> Result<Journal, JournalError> {
         let dir = state_dir.join("jobs");
         std::fs::create_dir_all(dir.join("scenes")).map_err(|source| JournalError {
             path: dir.clone(),
             source,
         })?;
-        Ok(Journal { dir })
+        let journal = Journal { dir };
+        let path = journal.dir.join("format");
+        let format = match std::fs::read_to_string(&path) {
+            Ok(text) => text.trim().parse::<u32>().ok(),
+            // No file: format 1, unless the journal is empty.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                (!journal.job_ids().is_empty()).then_some(1)
+            }
+            Err(source) => return Err(JournalError { path, source }),
+        };
+        match format {
+            Some(JOURNAL_FORMAT) => Ok(journal),
+            None if !path.exists() => {
+                write_atomic(&path, format!("{JOURNAL_FORMAT}\n").as_bytes())
+                    .map_err(|source| JournalError { path, source })?;
+                Ok(journal)
+            }
+            other => {
+                let found =
+                    other.map_or("an unreadable format".to_owned(), |f| format!("format {f}"));
+                Err(JournalError::other(
+                    journal.dir.clone(),
+                    format!(
+                        "{found}, but this master reads format {JOURNAL_FORMAT}: finish its jobs with the master that wrote it, or remove the directory to start afresh"
+                    ),
+                ))
+            }
+        }
     }
 
     fn job_dir(&self, id: u64) -> PathBuf {
@@ -206,7 +250,7 @@ impl Journal {
                     write_message(&self.job_dir(*id).join("job"), &message)
                 })
             }
-            Record::FrameDone(done) => write_compressed(
+            Record::FrameDone(done) => write_message(
                 &self.frame_path(done.job, done.frame),
                 &Message::FrameDone((**done).clone()),
             ),
@@ -259,7 +303,7 @@ impl Journal {
 
     /// A finished frame, if the journal has it.
     pub fn frame(&self, id: u64, frame: u32) -> Option<FrameDone> {
-        match read_compressed(&self.frame_path(id, frame))? {
+        match read_message(&self.frame_path(id, frame))? {
             Message::FrameDone(done) if done.job == id && done.frame == frame => Some(done),
             _ => None,
         }
@@ -316,29 +360,17 @@ fn write_message(path: &Path, message: &Message) -> std::io::Result<()> {
     write_atomic(path, &frame[4..])
 }
 
+/// Reads a message, no more than a message may hold (a damaged file
+/// cannot make the master allocate more).
 fn read_message(path: &Path) -> Option<Message> {
-    decode_message(&std::fs::read(path).ok()?).ok()
-}
-
-/// zstd's fastest regular level: float frames are noisy in their low
-/// mantissa bytes, so higher levels gain little size for their time (every
-/// frame is written, and on a farm's master that is CPU taken from the frame
-/// rate).
-const FRAME_ZSTD_LEVEL: i32 = 1;
-
-fn write_compressed(path: &Path, message: &Message) -> std::io::Result<()> {
-    let frame = encode_message(message).map_err(std::io::Error::other)?;
-    write_atomic(path, &zstd::bulk::compress(&frame[4..], FRAME_ZSTD_LEVEL)?)
-}
-
-/// Reads a compressed message, decompressing no more than a message may
-/// hold (a damaged file cannot make the master allocate more).
-fn read_compressed(path: &Path) -> Option<Message> {
-    let decoder = zstd::stream::read::Decoder::new(std::fs::File::open(path).ok()?).ok()?;
     let mut bytes = Vec::new();
-    (decoder.take(u64::from(MAX_MESSAGE_BYTES)))
+    (std::fs::File::open(path).ok()?)
+        .take(u64::from(MAX_MESSAGE_BYTES) + 1)
         .read_to_end(&mut bytes)
         .ok()?;
+    if bytes.len() > MAX_MESSAGE_BYTES as usize {
+        return None;
+    }
     decode_message(&bytes).ok()
 }
 
@@ -469,6 +501,36 @@ mod tests {
         let raw = 160 * 90 * 12;
         let kept = std::fs::metadata(journal.frame_path(7, 3)).unwrap().len();
         assert!(kept * 3 < raw, "{kept} bytes for a {raw}-byte frame");
+    }
+
+    /// A journal an older master wrote (format 1: no `format` file, frames
+    /// compressed whole) or one of an unknown format is refused with an
+    /// error that names it; an empty or current one opens.
+    #[test]
+    fn a_journal_of_another_format_is_refused_with_a_clear_error() {
+        let dir = tempfile::tempdir().unwrap();
+        Journal::open(dir.path()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
+            "2\n"
+        );
+        Journal::open(dir.path()).expect("the current format opens again");
+
+        let old = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(old.path().join("jobs/000000000001")).unwrap();
+        let error = Journal::open(old.path()).expect_err("format 1").to_string();
+        assert!(
+            error.contains("format 1, but this master reads format 2"),
+            "{error}"
+        );
+        assert!(
+            error.contains(&old.path().join("jobs").display().to_string()),
+            "{error}"
+        );
+
+        std::fs::write(old.path().join("jobs/format"), "7\n").unwrap();
+        let error = Journal::open(old.path()).expect_err("format 7").to_string();
+        assert!(error.contains("format 7"), "{error}");
     }
 
     #[test]

@@ -33,5 +33,6 @@ pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::{LocalFarm, local_worker};
 pub use journal::{Journal, JournalWriter, Record, StoredJob};
 pub use submit::{
-    FinishedFrame, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+    FinishedFrame, FrameColor, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job,
+    wire_job,
 };

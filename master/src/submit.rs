@@ -14,7 +14,7 @@ use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
 use vtfarm_proto::{
     FrameStats, JobScene, Link, Message, Role, SceneData, WireFrameAux, WireFrameSetup, WireImage,
-    WireJob,
+    WireImageFormat, WireJob,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_vertex::FrameImage;
@@ -23,10 +23,53 @@ use vtfarm_vertex::FrameImage;
 #[derive(Clone, Debug)]
 pub struct FinishedFrame {
     pub frame: u32,
-    pub image: Image,
+    /// The colour, in the format the job asked for (`WireJob::image`).
+    pub image: FrameColor,
     pub stats: FrameStats,
     /// The colour with the per-pixel components, when the job asked for them.
     pub components: Option<FrameImage>,
+}
+
+/// A finished frame's colour.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameColor {
+    Linear(Image),
+    /// 8-bit sRGB, RGB interleaved ([`Image::to_srgb8`] of the linear frame).
+    Srgb8 {
+        width: u32,
+        height: u32,
+        pixels: Vec<u8>,
+    },
+}
+
+impl FrameColor {
+    /// The linear colours, unless the job asked for sRGB.
+    pub fn linear(&self) -> Option<&Image> {
+        match self {
+            FrameColor::Linear(image) => Some(image),
+            FrameColor::Srgb8 { .. } => None,
+        }
+    }
+
+    /// The 8-bit sRGB pixels, RGB interleaved: the same bytes from either form.
+    pub fn to_srgb8(&self) -> Vec<u8> {
+        match self {
+            FrameColor::Linear(image) => image.to_srgb8(),
+            FrameColor::Srgb8 { pixels, .. } => pixels.clone(),
+        }
+    }
+
+    /// Writes the frame as an 8-bit sRGB PNG: the same file from either form.
+    pub fn write_png(&self, path: &std::path::Path) -> Result<(), vtfarm_imaging::ImageError> {
+        match self {
+            FrameColor::Linear(image) => image.write_png(path),
+            FrameColor::Srgb8 {
+                width,
+                height,
+                pixels,
+            } => vtfarm_imaging::write_srgb8_png(path, *width, *height, pixels),
+        }
+    }
 }
 
 /// What happens while a job runs, for progress displays.
@@ -75,6 +118,7 @@ pub fn wire_job(
         reflectors: reflectors.to_vec(),
         aux: options.aux,
         method: options.method.into(),
+        image: WireImageFormat::LinearF32,
     }
 }
 
@@ -208,8 +252,16 @@ impl JobFollower {
                 // A frame the submitter has already (re-sent after re-attaching) is skipped.
                 Message::FrameDone(done) if done.frame as usize != self.frames.len() => {}
                 Message::FrameDone(done) => {
-                    let image = image(done.image)?;
-                    let components = done.aux.map(|aux| components(&image, aux)).transpose()?;
+                    let image = frame_color(done.image)?;
+                    let components = match (done.aux, &image) {
+                        (None, _) => None,
+                        (Some(aux), FrameColor::Linear(color)) => Some(components(color, aux)?),
+                        (Some(_), FrameColor::Srgb8 { .. }) => {
+                            return Err(JobError::Protocol(
+                                "frame components with an sRGB colour".into(),
+                            ));
+                        }
+                    };
                     let finished = FinishedFrame {
                         frame: done.frame,
                         image,
@@ -225,6 +277,21 @@ impl JobFollower {
             }
         }
         Ok(())
+    }
+}
+
+fn frame_color(wire: WireImage) -> Result<FrameColor, JobError> {
+    let protocol = |e: vtfarm_proto::WireError| JobError::Protocol(e.to_string());
+    match wire.format {
+        WireImageFormat::LinearF32 => image(wire).map(FrameColor::Linear),
+        WireImageFormat::Srgb8 => {
+            let (width, height, pixels) = wire.into_srgb8().map_err(protocol)?;
+            Ok(FrameColor::Srgb8 {
+                width,
+                height,
+                pixels,
+            })
+        }
     }
 }
 

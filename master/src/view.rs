@@ -173,6 +173,7 @@ impl Views {
             // and the reflected objects: the glare figures need them.
             aux: true,
             method: source.method.into(),
+            image: vtfarm_proto::WireImageFormat::LinearF32,
         };
         Ok(PlannedView {
             job,

@@ -300,6 +300,7 @@ mod tests {
                     reflectors: vec![0],
                     aux: true,
                     method: crate::WireMethod::CubeMapGrid,
+                    image: crate::WireImageFormat::LinearF32,
                 },
             },
             Message::SubmitJob {
@@ -310,6 +311,7 @@ mod tests {
                     reflectors: vec![1],
                     aux: false,
                     method: crate::WireMethod::VertexTracing,
+                    image: crate::WireImageFormat::Srgb8,
                 },
             },
             Message::JobAccepted { job: 3, frames: 2 },

@@ -49,16 +49,16 @@ pub use tls::{
     client_config, fingerprint_of, parse_fingerprint, server_config,
 };
 pub use wire::{
-    WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireLight,
-    WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats, WireQuality,
-    WireScene, WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings,
+    WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
+    WireLight, WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats,
+    WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings,
     check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// How many frames of a job the master runs at once (pipelined frames) and
 /// so how many prepared frames a worker keeps: a package of any of them may

@@ -23,7 +23,8 @@ use sha2::{Digest, Sha256};
 use vtfarm_scene::Scene;
 
 use crate::wire::{
-    WireBitmap, WireError, WireFrameSetup, WireImage, WireMethod, WirePackageStats, WireScene,
+    WireBitmap, WireError, WireFrameSetup, WireImage, WireImageFormat, WireMethod,
+    WirePackageStats, WireScene,
 };
 
 /// A scene's content hash: SHA-256 of its canonical encoding (see [`scene_hash`]).
@@ -359,6 +360,10 @@ pub struct WireJob {
     pub aux: bool,
     /// The reflection method of every frame.
     pub method: WireMethod,
+    /// How finished frames travel (`FrameDone::image`): linear unless the
+    /// submitter writes only 8-bit outputs. The components (`aux`) are
+    /// always linear.
+    pub image: WireImageFormat,
 }
 
 /// Where a job's scene comes from.
@@ -376,7 +381,7 @@ pub enum JobScene {
 pub struct FrameDone {
     pub job: JobId,
     pub frame: u32,
-    /// The composited frame in linear RGB f32 (see [`WireImage`]).
+    /// The composited frame in the job's [`WireImageFormat`].
     pub image: WireImage,
     pub stats: FrameStats,
     /// The per-pixel components, when the job asked for them.

@@ -652,8 +652,9 @@ pub struct WireBitmap {
 }
 
 /// zstd's fastest level: results are encoded once per package on the
-/// worker's critical path, and level 1 already gets most of the gain.
-const BITMAP_ZSTD_LEVEL: i32 = 1;
+/// worker's critical path, finished frames once per frame on the master's,
+/// and level 1 already gets most of the gain.
+const ZSTD_LEVEL: i32 = 1;
 
 impl From<&SparseBitmap> for WireBitmap {
     fn from(b: &SparseBitmap) -> Self {
@@ -678,9 +679,7 @@ impl WireBitmap {
             colors(&b.transmitted);
             values.extend(b.reflected_object.iter().map(|o| o.to_le_bytes()));
         }
-        let planes: Vec<u8> = (0..4)
-            .flat_map(|k| values.iter().map(move |v| v[k]))
-            .collect();
+        let planes = byte_planes(&values);
         WireBitmap {
             x0: b.x0,
             y0: b.y0,
@@ -695,6 +694,12 @@ impl WireBitmap {
     /// Converts like `TryFrom`, and also checks that the rectangle lies
     /// inside a `width` × `height` frame, as compositing requires.
     pub fn into_bitmap_within(self, width: u32, height: u32) -> Result<SparseBitmap, WireError> {
+        self.check_within(width, height)?;
+        self.try_into()
+    }
+
+    /// Whether the rectangle lies inside a `width` × `height` frame.
+    fn check_within(&self, width: u32, height: u32) -> Result<(), WireError> {
         // u64: the sums cannot overflow.
         let (x_end, y_end) = (
             u64::from(self.x0) + u64::from(self.width),
@@ -707,7 +712,109 @@ impl WireBitmap {
                 "inside the frame",
             ));
         }
-        self.try_into()
+        Ok(())
+    }
+}
+
+/// Little-endian values as byte planes: byte 0 of every value, then byte 1 …
+fn byte_planes(values: &[[u8; 4]]) -> Vec<u8> {
+    let mut planes = vec![0; 4 * values.len()];
+    for (k, plane) in planes.chunks_exact_mut(values.len().max(1)).enumerate() {
+        for (byte, value) in plane.iter_mut().zip(values) {
+            *byte = value[k];
+        }
+    }
+    planes
+}
+
+/// A [`WireBitmap`]'s checked and decompressed parts.
+struct DecodedBitmap {
+    /// The coverage bits, eight pixels a byte, padding checked to be zero.
+    mask: Vec<u8>,
+    /// Pixels of the rectangle.
+    area: usize,
+    /// Covered pixels.
+    covered: usize,
+    /// Values (each four bytes, one byte per plane) of the covered pixels.
+    values: usize,
+    planes: Vec<u8>,
+}
+
+impl WireBitmap {
+    /// The rectangle checked to fit the coordinate type, the mask and the
+    /// byte planes decompressed into exactly the sizes they imply.
+    fn decode(&self) -> Result<DecodedBitmap, WireError> {
+        // Both ends of the rectangle must fit the frame's coordinate type.
+        for (field, start, size) in [
+            ("bitmap x", self.x0, self.width),
+            ("bitmap y", self.y0, self.height),
+        ] {
+            if start
+                .checked_add(size)
+                .is_none_or(|end| end > MAX_IMAGE_SIDE)
+            {
+                return Err(out_of_range(
+                    field,
+                    format!("{start} + {size}"),
+                    "within 16384 pixels",
+                ));
+            }
+        }
+        let area = self.width as usize * self.height as usize;
+        let mask = decompress("bitmap mask bytes", &self.mask, area.div_ceil(8))?;
+        if area % 8 != 0 && mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
+            return Err(out_of_range(
+                "bitmap mask padding",
+                "set bits",
+                "zero past the last pixel",
+            ));
+        }
+        let covered: usize = mask.iter().map(|b| b.count_ones() as usize).sum();
+        let values_per_pixel = match self.parts {
+            WireBitmapParts::Color => 3,
+            WireBitmapParts::All => 10,
+        };
+        let values = covered * values_per_pixel;
+        let planes = decompress("bitmap pixel bytes", &self.pixels, values * 4)?;
+        Ok(DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        })
+    }
+
+    /// The covered pixels' colours with their indices in a `width`-wide
+    /// frame (`y * width + x`), in the order of the mask, decoded straight
+    /// from the wire for compositing the colour alone (the components, if
+    /// sent, are skipped); the rectangle must lie inside the `width` ×
+    /// `height` frame. The same checks as the conversion to
+    /// [`SparseBitmap`], without building one.
+    pub fn colors_within(&self, width: u32, height: u32) -> Result<Vec<(usize, Vec3)>, WireError> {
+        self.check_within(width, height)?;
+        let DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        } = self.decode()?;
+        let value = |i: usize| f32::from_le_bytes([0, 1, 2, 3].map(|k| planes[k * values + i]));
+        let mut colors = Vec::with_capacity(covered);
+        for i in (0..area).filter(|i| mask[i / 8] >> (i % 8) & 1 == 1) {
+            let p = colors.len();
+            let c = [value(3 * p), value(3 * p + 1), value(3 * p + 2)];
+            let (x, y) = (
+                self.x0 as usize + i % self.width as usize,
+                self.y0 as usize + i / self.width as usize,
+            );
+            colors.push((
+                y * width as usize + x,
+                finite3(|| format!("bitmap color[{p}]"), c)?,
+            ));
+        }
+        Ok(colors)
     }
 }
 
@@ -716,7 +823,7 @@ fn compress(bytes: &[u8]) -> Vec<u8> {
         return Vec::new();
     }
     // Compressing from memory into memory fails only on allocation failure.
-    zstd::bulk::compress(bytes, BITMAP_ZSTD_LEVEL).expect("zstd compresses in memory")
+    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compresses in memory")
 }
 
 /// Decompresses exactly `expected` bytes (no more may be allocated).
@@ -725,7 +832,7 @@ fn decompress(field: &str, bytes: &[u8], expected: usize) -> Result<Vec<u8>, Wir
         Vec::new()
     } else {
         zstd::bulk::decompress(bytes, expected).map_err(|e| WireError::Decode {
-            what: "bitmap data",
+            what: "compressed data",
             message: format!("{field}: {e}"),
         })?
     };
@@ -743,35 +850,13 @@ impl TryFrom<WireBitmap> for SparseBitmap {
     type Error = WireError;
 
     fn try_from(w: WireBitmap) -> Result<Self, WireError> {
-        // Both ends of the rectangle must fit the frame's coordinate type.
-        for (field, start, size) in [("bitmap x", w.x0, w.width), ("bitmap y", w.y0, w.height)] {
-            if start
-                .checked_add(size)
-                .is_none_or(|end| end > MAX_IMAGE_SIDE)
-            {
-                return Err(out_of_range(
-                    field,
-                    format!("{start} + {size}"),
-                    "within 16384 pixels",
-                ));
-            }
-        }
-        let area = w.width as usize * w.height as usize;
-        let mask = decompress("bitmap mask bytes", &w.mask, area.div_ceil(8))?;
-        if area % 8 != 0 && mask.last().is_some_and(|&b| b >> (area % 8) != 0) {
-            return Err(out_of_range(
-                "bitmap mask padding",
-                "set bits",
-                "zero past the last pixel",
-            ));
-        }
-        let covered: usize = mask.iter().map(|b| b.count_ones() as usize).sum();
-        let values_per_pixel = match w.parts {
-            WireBitmapParts::Color => 3,
-            WireBitmapParts::All => 10,
-        };
-        let values = covered * values_per_pixel;
-        let planes = decompress("bitmap pixel bytes", &w.pixels, values * 4)?;
+        let DecodedBitmap {
+            mask,
+            area,
+            covered,
+            values,
+            planes,
+        } = w.decode()?;
         let value = |i: usize| [0, 1, 2, 3].map(|k| planes[k * values + i]);
         let colors = |field: &'static str, first: usize| {
             (0..covered)
@@ -860,64 +945,120 @@ impl From<WirePackageStats> for PackageStats {
     }
 }
 
-/// A finished frame as linear RGB f32 (row 0 at the top, row-major), the
-/// same content as `vtfarm_imaging::Image`: the submitter decides on sRGB,
-/// PNG or NPY, since sRGB happens only in vtfarm-imaging. The pixels travel
-/// as one byte string (each channel a little-endian f32, 12 bytes a pixel):
-/// encoding and decoding are a copy, not a call per float (a 1080p frame is
-/// 25 MB, and every frame goes to the submitter and the journal). Frames up
-/// to about 22 million pixels fit in [`crate::MAX_MESSAGE_BYTES`].
+/// How a [`WireImage`] codes its pixels: what the job's outputs need
+/// (`WireJob::image`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WireImageFormat {
+    /// Linear RGB f32, lossless: for `.npy` files, error figures and the
+    /// components.
+    #[default]
+    LinearF32,
+    /// 8-bit sRGB, [`vtfarm_imaging::encode_srgb8`] of every pixel: exactly
+    /// what a PNG of the frame holds, for a job that writes only PNGs.
+    Srgb8,
+}
+
+/// A finished frame (row 0 at the top, row-major) in a
+/// [`WireImageFormat`]: linear f32 channels as little-endian byte planes
+/// (as in [`WireBitmap`]), or sRGB bytes, RGB interleaved; zstd-compressed
+/// either way. The master encodes a finished frame once and the same bytes
+/// go to the submitter and the journal (a 1080p frame is 25 MB of floats
+/// before compression, a few MB as sRGB after). The submitter decides on
+/// PNG or NPY, since sRGB happens only in vtfarm-imaging. Decoding
+/// decompresses into exactly the size the sides imply, so hostile input
+/// cannot make the receiver allocate more.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct WireImage {
     pub width: u32,
     pub height: u32,
+    pub format: WireImageFormat,
     #[serde(with = "crate::message::bytes")]
     pub pixels: Vec<u8>,
 }
 
-/// Bytes of one pixel of a [`WireImage`].
-const IMAGE_PIXEL_BYTES: usize = 12;
-
 impl WireImage {
-    /// The wire form of a `width` × `height` linear image.
+    /// The wire form of a `width` × `height` linear image, lossless.
     pub fn from_pixels(width: u32, height: u32, pixels: &[Vec3]) -> Self {
-        let mut bytes = Vec::with_capacity(pixels.len() * IMAGE_PIXEL_BYTES);
-        for p in pixels {
-            for c in p.to_array() {
-                bytes.extend_from_slice(&c.to_le_bytes());
-            }
-        }
+        let values: Vec<[u8; 4]> = (pixels.iter())
+            .flat_map(|c| c.to_array())
+            .map(f32::to_le_bytes)
+            .collect();
         WireImage {
             width,
             height,
-            pixels: bytes,
+            format: WireImageFormat::LinearF32,
+            pixels: compress(&byte_planes(&values)),
         }
     }
 
-    /// The validated pixels: sizes in range, `width * height` of them, all finite.
-    pub fn into_pixels(self) -> Result<(u32, u32, Vec<Vec3>), WireError> {
+    /// The wire form of `image` in `format`.
+    pub fn encode(image: &vtfarm_imaging::Image, format: WireImageFormat) -> Self {
+        match format {
+            WireImageFormat::LinearF32 => {
+                WireImage::from_pixels(image.width, image.height, &image.pixels)
+            }
+            WireImageFormat::Srgb8 => WireImage {
+                width: image.width,
+                height: image.height,
+                format,
+                pixels: compress(&image.to_srgb8()),
+            },
+        }
+    }
+
+    /// The pixel count, with the sides checked.
+    fn pixel_count(&self) -> Result<usize, WireError> {
         for (field, side) in [("image width", self.width), ("image height", self.height)] {
             if side > MAX_IMAGE_SIDE {
                 return Err(out_of_range(field, side, "0 to 16384"));
             }
         }
-        let expected = u64::from(self.width) * u64::from(self.height);
-        let actual = (self.pixels.len() / IMAGE_PIXEL_BYTES) as u64;
-        if actual != expected || self.pixels.len() % IMAGE_PIXEL_BYTES != 0 {
-            return Err(WireError::SizeMismatch {
-                field: "image pixels".to_owned(),
-                expected,
-                actual,
-            });
+        Ok(self.width as usize * self.height as usize)
+    }
+
+    /// The validated linear pixels: sizes in range, `width * height` of
+    /// them, all finite. An sRGB image is refused: its linear colours are
+    /// lost (the job asked for sRGB).
+    pub fn into_pixels(self) -> Result<(u32, u32, Vec<Vec3>), WireError> {
+        let n = self.pixel_count()?;
+        if self.format != WireImageFormat::LinearF32 {
+            return Err(out_of_range(
+                "image format",
+                format!("{:?}", self.format),
+                "LinearF32 where linear colours are needed",
+            ));
         }
-        let channel = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        let pixels = (self.pixels.chunks_exact(IMAGE_PIXEL_BYTES).enumerate())
-            .map(|(i, b)| {
-                let p = [channel(&b[0..4]), channel(&b[4..8]), channel(&b[8..12])];
+        let values = 3 * n;
+        let planes = decompress("image pixel bytes", &self.pixels, 4 * values)?;
+        let value = |i: usize| f32::from_le_bytes([0, 1, 2, 3].map(|k| planes[k * values + i]));
+        let pixels = (0..n)
+            .map(|i| {
+                let p = [value(3 * i), value(3 * i + 1), value(3 * i + 2)];
                 finite3(|| format!("image pixel {i}"), p)
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok((self.width, self.height, pixels))
+    }
+
+    /// The 8-bit sRGB pixels (RGB interleaved), `width * height * 3` of
+    /// them: as sent, or encoded here from linear ones.
+    pub fn into_srgb8(self) -> Result<(u32, u32, Vec<u8>), WireError> {
+        let n = self.pixel_count()?;
+        match self.format {
+            WireImageFormat::Srgb8 => {
+                let bytes = decompress("image pixel bytes", &self.pixels, 3 * n)?;
+                Ok((self.width, self.height, bytes))
+            }
+            WireImageFormat::LinearF32 => {
+                let (width, height, pixels) = self.into_pixels()?;
+                let image = vtfarm_imaging::Image {
+                    width,
+                    height,
+                    pixels,
+                };
+                Ok((width, height, image.to_srgb8()))
+            }
+        }
     }
 }
 
@@ -1119,6 +1260,23 @@ pub(crate) mod tests {
         assert_eq!(back.reflected, vec![Vec3::ZERO; 4]);
         assert_eq!(back.transmitted, vec![Vec3::ZERO; 4]);
         assert_eq!(back.reflected_object, vec![vtfarm_scene::NONE; 4]);
+    }
+
+    /// The colours alone, straight from the wire: each covered pixel's
+    /// index in the frame with its colour, whichever parts were sent.
+    #[test]
+    fn colors_come_straight_from_the_wire_with_frame_indices() {
+        let b = bitmap();
+        let expected: Vec<(usize, Vec3)> = (b.covered())
+            .map(|(x, y, k)| ((y * 9 + x) as usize, b.color[k]))
+            .collect();
+        assert_eq!(expected.len(), 4);
+        for parts in [WireBitmapParts::Color, WireBitmapParts::All] {
+            let wire = WireBitmap::encode(&b, parts);
+            assert_eq!(wire.colors_within(9, 5).expect("inside"), expected);
+            let error = wire.colors_within(7, 5).expect_err("one column short");
+            assert!(error.to_string().contains("inside the frame"), "{error}");
+        }
     }
 
     #[test]
@@ -1335,18 +1493,15 @@ pub(crate) mod tests {
             outside.to_string().contains("inside the frame"),
             "{outside}"
         );
-        let image = WireImage {
-            width: 2,
-            height: 2,
-            pixels: vec![0; 3 * 12],
-        };
-        let error = image.into_pixels().expect_err("three pixels for four");
-        assert!(error.to_string().contains("image pixels has 3"), "{error}");
+        let mut image = WireImage::from_pixels(2, 1, &[Vec3::ZERO; 2]);
+        image.height = 2;
+        let error = image.into_pixels().expect_err("two pixels for four");
+        assert!(error.to_string().contains("image pixel bytes"), "{error}");
     }
 
-    /// A frame's image crosses the wire bit for bit (as one byte string);
-    /// a non-finite pixel or a byte count that is no whole number of pixels
-    /// is refused, naming what is wrong.
+    /// A frame's image crosses the wire bit for bit (compressed byte
+    /// planes); a non-finite pixel or damaged bytes are refused, naming what
+    /// is wrong.
     #[test]
     fn wire_images_round_trip_bit_exact_and_refuse_bad_pixels() {
         let pixels = vec![
@@ -1356,7 +1511,6 @@ pub(crate) mod tests {
             Vec3::new(7.0, 8.0, 9.0),
         ];
         let wire = WireImage::from_pixels(2, 2, &pixels);
-        assert_eq!(wire.pixels.len(), 4 * 12);
         let message = crate::Message::FrameDone(crate::FrameDone {
             job: 1,
             frame: 2,
@@ -1378,13 +1532,37 @@ pub(crate) mod tests {
         };
         assert_eq!(bits(&back), bits(&pixels));
 
-        let mut bad = WireImage::from_pixels(2, 2, &pixels);
-        bad.pixels[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
-        let error = bad.into_pixels().expect_err("a NaN pixel");
+        let mut nan = pixels.clone();
+        nan[1].y = f32::NAN;
+        let error = (WireImage::from_pixels(2, 2, &nan).into_pixels()).expect_err("a NaN pixel");
         assert!(error.to_string().contains("image pixel 1"), "{error}");
         let mut ragged = WireImage::from_pixels(2, 2, &pixels);
         ragged.pixels.pop();
         assert!(ragged.into_pixels().is_err());
+    }
+
+    /// An sRGB frame carries exactly the bytes a PNG of the linear one
+    /// holds; a linear frame gives the same bytes; linear colours are not
+    /// made up from sRGB ones.
+    #[test]
+    fn srgb_wire_images_carry_the_png_bytes() {
+        let image = vtfarm_imaging::Image {
+            width: 3,
+            height: 2,
+            pixels: (0..6)
+                .map(|i| Vec3::new(0.1 * i as f32, 0.5, 2.0))
+                .collect(),
+        };
+        let srgb = WireImage::encode(&image, WireImageFormat::Srgb8);
+        assert_eq!(srgb.clone().into_srgb8().unwrap(), (3, 2, image.to_srgb8()));
+        let linear = WireImage::encode(&image, WireImageFormat::LinearF32);
+        assert_eq!(linear.into_srgb8().unwrap(), (3, 2, image.to_srgb8()));
+        let error = srgb.clone().into_pixels().expect_err("no linear colours");
+        assert!(error.to_string().contains("image format"), "{error}");
+        let mut short = srgb;
+        short.width = 4;
+        let error = short.into_srgb8().expect_err("six pixels for eight");
+        assert!(error.to_string().contains("image pixel bytes"), "{error}");
     }
 
     #[test]
@@ -1436,7 +1614,18 @@ pub(crate) mod tests {
                 prop_assert_eq!(bitmap.mask.len(), (bitmap.width * bitmap.height) as usize);
                 prop_assert_eq!(bitmap.covered().count(), bitmap.color.len());
             }
-            let _ = b.into_bitmap_within(w, h);
+            // Compositing the colour straight from the wire accepts the
+            // same results and gives the same pixels.
+            let colors = b.colors_within(w, h);
+            match b.into_bitmap_within(w, h) {
+                Ok(bitmap) => {
+                    let expected: Vec<(usize, Vec3)> = (bitmap.covered())
+                        .map(|(x, y, k)| ((y * w + x) as usize, bitmap.color[k]))
+                        .collect();
+                    prop_assert_eq!(colors.expect("accepted as a bitmap"), expected);
+                }
+                Err(_) => prop_assert!(colors.is_err()),
+            }
         }
 
         #[test]

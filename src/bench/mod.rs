@@ -65,10 +65,27 @@ struct LevelFigures {
     name: &'static str,
     seconds: f64,
     traced_samples: u64,
+    /// Of `traced_samples`: at vertices (corners and refinement), and per
+    /// pixel (triangle filling, rim pixels no face reaches, the reference).
+    vertex_samples: u64,
+    pixel_samples: u64,
     speedup: f64,
     sample_ratio: f64,
     share_off: f64,
     mean_abs: f64,
+    /// Where `seconds` went (see [`vtfarm_render::FrameTimes`]): setting up
+    /// the frame's planes, tracing and refining the vertices, tracing the
+    /// pixels that get a sample of their own, and the interpolation pass
+    /// that gives every other pixel its value and writes all of them.
+    image_setup_seconds: f64,
+    vertex_seconds: f64,
+    pixel_trace_seconds: f64,
+    interpolation_seconds: f64,
+    /// The floors: the level's traced samples alone (vertices and traced
+    /// pixels) and its per-pixel pass alone (set-up and interpolation).
+    /// The factor cannot beat the reference's time over either.
+    trace_seconds: f64,
+    fill_seconds: f64,
 }
 
 /// The thin-glass model on its own: the reference with its traced
@@ -140,9 +157,11 @@ fn table1(args: Table1Args) -> Result<()> {
     let mut frames = Vec::new();
     for q in order {
         eprintln!("rendering {} ...", q.name());
-        // Best of three: the fast levels take tens of milliseconds, where one
-        // run's noise would move the factor by a quarter. Frames are identical.
-        let frame = (0..3)
+        // Best of several runs (frames are identical): the fast levels take
+        // milliseconds, where one run's noise on a shared machine would move
+        // the factor by half; the reference takes seconds.
+        let runs = if q == Quality::Reference { 3 } else { 9 };
+        let frame = (0..runs)
             .map(|_| renderer.render(&setup_for(q), &RenderOptions::default(), &mut |_, _| {}))
             .min_by_key(|f| f.total_time - f.raster_time)
             .expect("three runs");
@@ -165,14 +184,25 @@ fn table1(args: Table1Args) -> Result<()> {
         .map(|(q, f)| {
             let seconds = seconds(f);
             let err = compare(&f.image, &reference.image);
+            let t = &f.times;
+            let trace = t.phases.vertices + t.phases.pixel_tracing;
+            let fill = t.image_setup + t.phases.interpolation;
             LevelFigures {
                 name: q.name(),
                 seconds,
                 traced_samples: f.stats.samples(),
+                vertex_samples: f.stats.vertex_samples,
+                pixel_samples: f.stats.filled_pixels,
                 speedup: ref_seconds / seconds.max(1e-9),
                 sample_ratio: ref_samples / (f.stats.samples() as f64).max(1.0),
                 share_off: err.share_off,
                 mean_abs: err.mean_abs,
+                image_setup_seconds: t.image_setup.as_secs_f64(),
+                vertex_seconds: t.phases.vertices.as_secs_f64(),
+                pixel_trace_seconds: t.phases.pixel_tracing.as_secs_f64(),
+                interpolation_seconds: t.phases.interpolation.as_secs_f64(),
+                trace_seconds: trace.as_secs_f64(),
+                fill_seconds: fill.as_secs_f64(),
             }
         })
         .collect();
@@ -243,6 +273,39 @@ fn print_table1(t: &Table1) {
             l.share_off * 100.0,
             l.mean_abs,
             paper
+        );
+    }
+    println!(
+        "where the time goes (ms): set-up = the frame's planes, vertices = tracing and refining them,\n\
+         traced px = pixels traced one by one, interp. = every other pixel interpolated and all written;\n\
+         floors: the factor if only the tracing (trace) or only the per-pixel pass (fill) took time"
+    );
+    println!(
+        "{:<10} {:>8} {:>9} {:>10} {:>8} {:>8} {:>12} {:>11} {:>16}",
+        "level",
+        "set-up",
+        "vertices",
+        "traced px",
+        "interp.",
+        "other",
+        "trace floor",
+        "fill floor",
+        "samples vtx/px"
+    );
+    let ref_seconds = t.levels.first().map_or(0.0, |l| l.seconds);
+    for l in &t.levels {
+        let other = l.seconds - l.trace_seconds - l.fill_seconds;
+        println!(
+            "{:<10} {:>8.2} {:>9.2} {:>10.2} {:>8.2} {:>8.2} {:>11.0}x {:>10.0}x {:>16}",
+            l.name,
+            l.image_setup_seconds * 1e3,
+            l.vertex_seconds * 1e3,
+            l.pixel_trace_seconds * 1e3,
+            l.interpolation_seconds * 1e3,
+            other * 1e3,
+            ref_seconds / l.trace_seconds.max(1e-9),
+            ref_seconds / l.fill_seconds.max(1e-9),
+            format!("{} / {}", l.vertex_samples, l.pixel_samples),
         );
     }
     println!(

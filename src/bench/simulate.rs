@@ -37,8 +37,8 @@ use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
-    FrameDone, Message, PackageResult, WireBitmap, WireBitmapParts, WireImage, WirePackageStats,
-    encode_message,
+    FrameDone, Message, PackageResult, WireBitmap, WireBitmapParts, WireImage, WireImageFormat,
+    WirePackageStats, encode_message,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
@@ -46,7 +46,7 @@ use vtfarm_render::Renderer;
 use super::farm::{
     FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm, steady_frame_seconds,
 };
-use vtfarm_vertex::{FrameImage, PackageOptions, Quality, SparseBitmap, trace_package};
+use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
 
@@ -333,7 +333,8 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64)> {
     let done = FrameDone {
         job: 1,
         frame: 0,
-        image: WireImage::from_pixels(base.width, base.height, &base.pixels),
+        // As `vtfarm submit` asks for it (it writes only PNGs).
+        image: WireImage::encode(&base, WireImageFormat::Srgb8),
         stats: Default::default(),
         aux: None,
     };
@@ -356,17 +357,23 @@ fn composite_time(
 ) -> Result<f64> {
     let (base, ids) = renderer.base_frame(&job.setup);
     let (width, height) = (base.width, base.height);
-    let mut image = FrameImage::new(base);
+    // A colour-only job: the colours straight from the wire.
+    let mut image = base;
     let start = Instant::now();
     for (i, bitmap) in bitmaps {
-        let bitmap = bitmap.into_bitmap_within(width, height)?;
-        if let Some((x, y)) = bitmap.foreign_pixel(&ids, |t| t == triangles[i]) {
+        let colors = bitmap.colors_within(width, height)?;
+        if let Some((p, _)) = colors
+            .iter()
+            .find(|(p, _)| ids.triangle[*p] != triangles[i])
+        {
             bail!(
-                "triangle {}'s result writes the foreign pixel ({x}, {y})",
+                "triangle {}'s result writes the foreign pixel {p}",
                 triangles[i]
             );
         }
-        image.composite(&bitmap);
+        for (p, c) in colors {
+            image.pixels[p] = c;
+        }
     }
     Ok(start.elapsed().as_secs_f64())
 }

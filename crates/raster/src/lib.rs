@@ -162,6 +162,62 @@ pub fn id_buffer_within(
     rasterize_ids(scene, camera, NEAR, within, keep)
 }
 
+/// One buffer of [`id_buffers_within`]: the pixels it covers and the
+/// triangles it keeps.
+#[derive(Clone, Copy)]
+pub struct IdPass<'a> {
+    pub within: PixelRect,
+    pub keep: &'a (dyn Fn(TriangleId) -> bool + Sync),
+}
+
+/// [`id_buffer_within`] for several passes at once, each buffer bit for bit
+/// what `id_buffer_within(scene, camera, pass.within, pass.keep)` gives: the
+/// scene's vertices are projected and its triangles set up once for all (a
+/// worker's frame buffer and the buffers behind its glass cover about the
+/// same pixels, and projecting the scene is most of a small buffer's cost).
+///
+/// # Panics
+/// As [`rasterize`].
+pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) -> Vec<IdBuffer> {
+    check_camera(camera);
+    let clamp = |r: PixelRect| r.clamped(camera.width, camera.height);
+    let live: Vec<PixelRect> = (passes.iter())
+        .map(|p| clamp(p.within))
+        .filter(|r| !r.is_empty())
+        .collect();
+    let Some(union) = live.iter().copied().reduce(|a, b| PixelRect {
+        x0: a.x0.min(b.x0),
+        y0: a.y0.min(b.y0),
+        x1: a.x1.max(b.x1),
+        y1: a.y1.max(b.y1),
+    }) else {
+        return passes
+            .iter()
+            .map(|_| IdBuffer::new(camera.width, camera.height))
+            .collect();
+    };
+    let triangles = setup::setup(scene, camera, NEAR, union, &|t| {
+        passes.iter().any(|p| (p.keep)(t))
+    });
+    passes
+        .iter()
+        .map(|pass| {
+            let within = clamp(pass.within);
+            // A triangle's set-up does not depend on the rectangle beyond
+            // which triangles are dropped, so the pass's own are these.
+            let kept: Vec<_> = if within.is_empty() {
+                Vec::new()
+            } else {
+                (triangles.iter())
+                    .filter(|t| t.reaches(within) && (pass.keep)(t.id))
+                    .cloned()
+                    .collect()
+            };
+            resolve(scene, camera, &kept, within)
+        })
+        .collect()
+}
+
 /// [`id_buffer_where`] with the near clipping plane at view depth `near`
 /// instead of `vtfarm_scene::NEAR`: geometry nearer than `near` along the
 /// camera's forward axis is clipped away exactly at the plane, so a pixel
@@ -193,21 +249,39 @@ fn rasterize_ids(
         near > 0.0 && near.is_finite(),
         "the near plane must lie in front of the eye, not at depth {near}"
     );
+    check_camera(camera);
+    let within = within.clamped(camera.width, camera.height);
+    if within.is_empty() {
+        return IdBuffer::new(camera.width, camera.height);
+    }
+    // Only triangles that reach `within` are set up: a small rectangle costs
+    // little more than projecting the scene's vertices.
+    let triangles = setup::setup(scene, camera, near, within, keep);
+    resolve(scene, camera, &triangles, within)
+}
+
+/// Panics unless the camera's image fits the rasterizer.
+fn check_camera(camera: &Camera) {
     assert!(
         camera.width <= MAX_DIMENSION && camera.height <= MAX_DIMENSION,
         "image {}x{} exceeds the rasterizer's limit of {MAX_DIMENSION} pixels per side",
         camera.width,
         camera.height
     );
+}
+
+/// The ID buffer of set-up `triangles` over `within` (inside the image).
+fn resolve(
+    scene: &Scene,
+    camera: &Camera,
+    triangles: &[triangle::RasterTriangle],
+    within: PixelRect,
+) -> IdBuffer {
     let mut ids = IdBuffer::new(camera.width, camera.height);
-    let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
         return ids;
     }
-    // Only triangles that reach `within` are set up: a small rectangle costs
-    // little more than projecting the scene's vertices.
-    let triangles = setup::setup(scene, camera, near, within, keep);
-    bands::resolve_visibility(&triangles, &mut ids, within);
+    bands::resolve_visibility(triangles, &mut ids, within);
     let IdBuffer {
         object, triangle, ..
     } = &mut ids;

@@ -102,6 +102,15 @@ impl RasterTriangle {
         })
     }
 
+    /// Whether its bounding box reaches a pixel of `within`: a triangle set
+    /// up for a larger rectangle covers no pixel of `within` otherwise.
+    pub(crate) fn reaches(&self, within: PixelRect) -> bool {
+        self.columns.0 < within.x1
+            && self.columns.1 >= within.x0
+            && self.rows.0 < within.y1
+            && self.rows.1 >= within.y0
+    }
+
     /// The inclusive range of columns of row `y` whose pixel centres the
     /// triangle covers under the top-left rule, or `None`.
     pub(crate) fn span(&self, y: u32) -> Option<(u32, u32)> {

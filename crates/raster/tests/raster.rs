@@ -4,7 +4,8 @@
 
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{
-    IdBuffer, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within, rasterize,
+    IdBuffer, IdPass, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within,
+    id_buffers_within, rasterize,
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
@@ -393,6 +394,63 @@ fn a_buffer_within_a_rectangle_is_the_whole_buffer_there_and_empty_elsewhere() {
     let middle = id_buffer_within(&scene, &camera, rects[1], &|_| true);
     let seen: std::collections::HashSet<_> = middle.triangle.iter().collect();
     assert!(seen.len() > 10, "{} triangles seen", seen.len());
+}
+
+#[test]
+fn buffers_rasterized_together_are_each_the_buffer_rasterized_alone() {
+    for seed in 1..=3 {
+        let (scene, camera) = procedural_scene(seed, 128, 96);
+        let all = |_: TriangleId| true;
+        let even = |t: TriangleId| t % 2 == 0;
+        let odd = |t: TriangleId| t % 2 == 1;
+        let none = |_: TriangleId| false;
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        // Nested, overlapping, disjoint, past the image and empty
+        // rectangles, with filters that share triangles and that do not.
+        let passes = [
+            IdPass {
+                within: rect(20, 10, 90, 70),
+                keep: &all,
+            },
+            IdPass {
+                within: rect(4, 2, 106, 78),
+                keep: &even,
+            },
+            IdPass {
+                within: rect(30, 20, 60, 40),
+                keep: &odd,
+            },
+            IdPass {
+                within: rect(100, 80, 500, 500),
+                keep: &all,
+            },
+            IdPass {
+                within: rect(0, 90, 10, 96),
+                keep: &odd,
+            },
+            IdPass {
+                within: rect(40, 40, 40, 90),
+                keep: &all,
+            },
+            IdPass {
+                within: rect(10, 10, 50, 50),
+                keep: &none,
+            },
+        ];
+        let together = id_buffers_within(&scene, &camera, &passes);
+        assert_eq!(together.len(), passes.len());
+        for (pass, buffer) in passes.iter().zip(&together) {
+            let alone = id_buffer_within(&scene, &camera, pass.within, pass.keep);
+            assert_same_ids(buffer, &alone);
+        }
+        // Not vacuous: the passes see triangles, and different ones.
+        let seen = |b: &IdBuffer| b.triangle.iter().filter(|&&t| t != NONE).count();
+        assert!(seen(&together[0]) > 1000 && seen(&together[1]) > 1000);
+        assert_ne!(together[1].triangle, together[2].triangle);
+        // No live pass at all: empty buffers.
+        let empty = id_buffers_within(&scene, &camera, &passes[5..6]);
+        assert_same_ids(&empty[0], &IdBuffer::new(128, 96));
+    }
 }
 
 /// How many of the grid's triangles, each rasterized alone, cover each pixel.

@@ -22,8 +22,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
-    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, ShadowCache,
-    VertexOwners, VertexSettings, reflector_bounds, trace_package_pixels,
+    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, PhaseTimes,
+    ShadowCache, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -53,7 +53,19 @@ pub struct RenderedFrame {
     pub raster_time: Duration,
     /// Wall time of the whole frame.
     pub total_time: Duration,
+    /// Where the time after the raster pass went.
+    pub times: FrameTimes,
     pub faces: Vec<FinishedFace>,
+}
+
+/// The wall times of a frame after its raster pass (the packages run one
+/// after the other, so their phase times add up to wall time).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTimes {
+    /// Setting up the frame's planes over the base frame ([`FrameImage::new`]).
+    pub image_setup: Duration,
+    /// The packages' phases.
+    pub phases: PhaseTimes,
 }
 
 /// A scene ready to render: its BVH and the reflector triangles.
@@ -131,32 +143,34 @@ impl Renderer {
     /// Only the raster results a worker needs (no base frame): the frame's
     /// ID buffer and what lies behind the reflectors, both over the
     /// reflectors' bounds only (`vtfarm_vertex::reflector_bounds`; empty
-    /// elsewhere, where no package looks). The thin-glass terms are left to
+    /// elsewhere, where no package looks), rasterized together. The thin-glass terms are left to
     /// the pixels the worker's packages finish (`GlassPass::OnDemand`), so
     /// two workers split that pass instead of each doing all of it.
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
         let margin = setup.vertex.visibility_radius + 1;
         let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
-        let ids = vtfarm_raster::id_buffer_within(self.scene(), &setup.camera, bounds, &|_| true);
-        let behind = self.behind_with(setup, &ids, GlassPass::OnDemand);
-        (ids, behind)
+        Behind::with_frame_ids(
+            &self.tracer(setup),
+            &setup.camera,
+            bounds,
+            &self.is_reflector,
+            setup.vertex.transmission,
+            GlassPass::OnDemand,
+            &self.shadows,
+        )
     }
 
     /// What lies behind the reflectors of a frame whose ID buffer is `ids`
     /// (see `vtfarm_vertex::Behind`), with the thin-glass terms of every
     /// glass pixel: the raster pass of a whole frame.
     pub fn behind(&self, setup: &FrameSetup, ids: &IdBuffer) -> Behind {
-        self.behind_with(setup, ids, GlassPass::Upfront)
-    }
-
-    fn behind_with(&self, setup: &FrameSetup, ids: &IdBuffer, pass: GlassPass) -> Behind {
         Behind::new(
             &self.tracer(setup),
             &setup.camera,
             ids,
             &self.is_reflector,
             setup.vertex.transmission,
-            pass,
+            GlassPass::Upfront,
             &self.shadows,
         )
     }
@@ -201,7 +215,12 @@ impl Renderer {
         let behind = self.behind(setup, &ids);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
+        let setup_start = Instant::now();
         let mut image = FrameImage::new(base);
+        let mut times = FrameTimes {
+            image_setup: setup_start.elapsed(),
+            ..FrameTimes::default()
+        };
         let mut stats = PackageStats::default();
         let mut faces = Vec::new();
         let total: u64 = packages.iter().map(|p| p.len() as u64).sum();
@@ -211,14 +230,11 @@ impl Renderer {
             time_break: None,
         };
         for package in packages {
-            // One machine: the pixels go straight into the frame (the farm's
-            // master composites the same values from bitmaps).
-            let result = trace_package_pixels(&frame, package, &package_options, &mut |_| {});
-            for pixels in &result.pixels {
-                image.write(pixels);
-            }
-            stats.add(&result.stats);
-            faces.extend(result.faces);
+            let traced =
+                trace_package_into(&frame, package, &package_options, &mut |_| {}, &mut image);
+            stats.add(&traced.stats);
+            times.phases.add(&traced.times);
+            faces.extend(traced.faces);
             done += package.len() as u64;
             progress(done, total);
         }
@@ -227,6 +243,7 @@ impl Renderer {
             stats,
             raster_time,
             total_time: start.elapsed(),
+            times,
             faces,
         }
     }

@@ -124,12 +124,44 @@ pub fn reflect(incoming: Vec3, normal: Vec3) -> Vec3 {
 /// facing the incoming side (`incoming . normal <= 0`), with `eta` = n1 / n2.
 /// `None` on total internal reflection.
 pub fn refract(incoming: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
-    let cos_i = -incoming.dot(normal);
-    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-    if k < 0.0 {
-        return None;
+    Refraction::new(incoming, normal, eta).map(|r| r.direction())
+}
+
+/// [`refract`] in two steps: whether light gets through, then (only when
+/// asked for: weights alone do not need it) the direction.
+#[derive(Clone, Copy, Debug)]
+struct Refraction {
+    incoming: Vec3,
+    normal: Vec3,
+    eta: f32,
+    cos_i: f32,
+    k: f32,
+}
+
+impl Refraction {
+    /// `None` on total internal reflection.
+    fn new(incoming: Vec3, normal: Vec3, eta: f32) -> Option<Refraction> {
+        let cos_i = -incoming.dot(normal);
+        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+        (k >= 0.0).then_some(Refraction {
+            incoming,
+            normal,
+            eta,
+            cos_i,
+            k,
+        })
     }
-    Some((eta * incoming + (eta * cos_i - k.sqrt()) * normal).normalize_or(incoming))
+
+    fn direction(&self) -> Vec3 {
+        let Refraction {
+            incoming,
+            normal,
+            eta,
+            cos_i,
+            k,
+        } = *self;
+        (eta * incoming + (eta * cos_i - k.sqrt()) * normal).normalize_or(incoming)
+    }
 }
 
 /// Schlick's angular factor `(1 - cos)^5`: 0 head-on, 1 at grazing. With
@@ -382,7 +414,7 @@ impl Tracer<'_> {
             refraction: secondary
                 .refracted
                 .filter(|_| secondary.kt.max_element() > 0.0)
-                .map(spawn),
+                .map(|r| spawn(r.direction())),
         }
     }
 
@@ -507,13 +539,14 @@ fn child_weights(weight: f32, kr: Vec3, kt: Vec3) -> (f32, f32) {
     (weight * kr.max_element(), weight * kt.max_element())
 }
 
-/// kr, kt and the refraction direction of a surface hit along `incoming`.
+/// kr, kt and the refraction of a surface hit along `incoming`.
 struct Secondary {
     kr: Vec3,
     kt: Vec3,
     /// The shading normal on the incoming side.
     facing: Vec3,
-    refracted: Option<Vec3>,
+    /// `None` on total internal reflection or for an opaque surface.
+    refracted: Option<Refraction>,
 }
 
 fn secondary_rays(
@@ -542,7 +575,7 @@ fn secondary_rays(
     let mut kr = material.reflectance;
     let mut kt = material.transmittance;
     let refracted = if kt.max_element() > 0.0 {
-        refract(incoming, facing, eta)
+        Refraction::new(incoming, facing, eta)
     } else {
         None
     };
@@ -557,7 +590,11 @@ fn secondary_rays(
             Some(t) if kt.max_element() > 0.0 => {
                 // Schlick uses the larger angle: the transmitted one when
                 // leaving into the optically thinner side.
-                let cos = if eta > 1.0 { -t.dot(facing) } else { cos_i };
+                let cos = if eta > 1.0 {
+                    -t.direction().dot(facing)
+                } else {
+                    cos_i
+                };
                 let moved = kt * schlick_factor(cos);
                 kr += moved;
                 kt -= moved;

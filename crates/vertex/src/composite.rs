@@ -5,7 +5,8 @@ use glam::{Vec2, Vec3};
 use vtfarm_imaging::Image;
 use vtfarm_scene::NONE;
 
-use crate::{FinishedFace, PixelValue, SparseBitmap};
+use crate::fill::Planes;
+use crate::{FinishedFace, SparseBitmap};
 
 /// A frame being assembled: the base frame whose reflector pixels take the
 /// traced colours, plus the per-pixel reflected component, reflected object
@@ -38,16 +39,19 @@ impl FrameImage {
         }
     }
 
-    /// Writes traced pixel values over the frame (the values of
-    /// [`crate::TracedPixels`], without a bitmap in between).
-    pub fn write(&mut self, pixels: &[PixelValue]) {
-        for p in pixels {
-            let i = p.index as usize;
-            self.color.pixels[i] = p.color;
-            self.reflected.pixels[i] = p.reflected;
-            self.transmitted.pixels[i] = p.transmitted;
-            self.reflected_object[i] = p.object;
-            self.mask[i] = true;
+    /// The planes of rows `y0..y1`, where a package writes its pixels.
+    pub(crate) fn row_planes(&mut self, y0: u32, y1: u32) -> Planes<'_> {
+        let width = self.color.width as usize;
+        let rows = y0 as usize * width..y1 as usize * width;
+        Planes {
+            x0: 0,
+            y0,
+            stride: width,
+            color: &mut self.color.pixels[rows.clone()],
+            reflected: &mut self.reflected.pixels[rows.clone()],
+            transmitted: &mut self.transmitted.pixels[rows.clone()],
+            object: &mut self.reflected_object[rows.clone()],
+            mask: &mut self.mask[rows],
         }
     }
 

@@ -162,6 +162,7 @@ impl Default for VertexSettings {
 }
 
 mod composite;
+mod fill;
 mod package;
 mod refine;
 mod stop;
@@ -169,8 +170,8 @@ mod thin;
 
 pub use composite::{FrameImage, draw_wireframe};
 pub use package::{
-    FinishedFace, PackageOptions, PackageResult, PackageStats, PixelValue, SparseBitmap,
-    TracedPixels, trace_package, trace_package_pixels,
+    FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelValue,
+    SparseBitmap, TracedPackage, trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};
 pub use thin::{Behind, GlassPass, ShadowCache};
@@ -397,38 +398,32 @@ impl Frame<'_> {
         }
     }
 
-    /// Traces pixel (x, y) on `triangle` (see [`pixel_surface`]) the way
-    /// vertices are traced, and finishes it (see [`Frame::finish_pixel`]).
-    /// Triangle filling and pixels no face reaches use this.
-    fn trace_pixel(&self, triangle: TriangleId, x: u32, y: u32) -> PixelValue {
-        self.charge_sample();
-        let scene = self.tracer.bvh.scene();
-        let (point, direction) = pixel_surface(scene, &self.camera, self.ids, triangle, x, y);
-        let sample = match self.rays() {
-            Rays::ReflectionOnly => self.tracer.shade_reflection(&point, direction),
-            Rays::Both => self.tracer.shade(&point, direction),
-        };
-        let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, &sample);
-        self.finish_pixel((x, y), &mut value);
-        value
-    }
-
-    /// The reference: `pixels` on `triangle` in full Whitted, the
-    /// refraction ray traced whatever the transmission setting. One batch
-    /// through [`Tracer::shade_points`]: neighbouring pixels' reflection rays
-    /// share packets (the same values as one pixel at a time).
-    fn reference_pixels(&self, triangle: TriangleId, pixels: &[(u32, u32)]) -> Vec<PixelValue> {
+    /// Traces `pixels`, each (triangle, x, y) on its triangle (see
+    /// [`pixel_surface`]), in one batch through [`Tracer::shade_points`]:
+    /// neighbouring pixels' reflection rays share packets (the same values as
+    /// one pixel at a time). `reference`: full Whitted, the refraction ray
+    /// traced whatever the transmission setting (the reference level);
+    /// otherwise traced the way vertices are and finished (see
+    /// [`Frame::finish_pixel`]): triangle filling and pixels no face reaches.
+    fn trace_pixels(&self, pixels: &[(TriangleId, u32, u32)], reference: bool) -> Vec<PixelValue> {
         self.charge_samples(pixels.len() as u64);
         let scene = self.tracer.bvh.scene();
         let points: Vec<(SurfacePoint, Vec3)> = pixels
             .iter()
-            .map(|&(x, y)| pixel_surface(scene, &self.camera, self.ids, triangle, x, y))
+            .map(|&(t, x, y)| pixel_surface(scene, &self.camera, self.ids, t, x, y))
             .collect();
-        let samples = self.tracer.shade_points(&points, Rays::Both);
+        let rays = if reference { Rays::Both } else { self.rays() };
+        let samples = self.tracer.shade_points(&points, rays);
         pixels
             .iter()
             .zip(&samples)
-            .map(|(&(x, y), sample)| PixelValue::from_sample(self.ids.index(x, y) as u32, sample))
+            .map(|(&(_, x, y), sample)| {
+                let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, sample);
+                if !reference {
+                    self.finish_pixel((x, y), &mut value);
+                }
+                value
+            })
             .collect()
     }
 
@@ -481,7 +476,9 @@ pub(crate) fn pixel_surface_along(
     };
     let position = camera.eye + direction * t;
     let [wa, wb, wc] = barycentric([a, b, c], position);
-    let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane_normal.normalize_or(Vec3::Y));
+    let normal = thin::normalize_or_else(na * wa + nb * wb + nc * wc, || {
+        plane_normal.normalize_or(Vec3::Y)
+    });
     let point = SurfacePoint {
         position,
         normal,
@@ -558,7 +555,7 @@ fn behind_id_buffer_within(
     within: PixelRect,
 ) -> IdBuffer {
     vtfarm_raster::id_buffer_within(scene, camera, within, &|t| {
-        !is_reflector[t as usize] && scene.material_of(t).transmittance.max_element() <= 0.0
+        thin::lies_behind(scene, is_reflector, t)
     })
 }
 

@@ -2,22 +2,25 @@
 //!
 //! Phase 1 traces the package's distinct original vertices in one parallel
 //! batch (the preview). Phase 2 refines each triangle on its own (in
-//! parallel) and reports finished faces at time breaks. Phase 3 gives every
-//! pixel the ID buffer assigns to a triangle its colour: Gouraud from the
-//! final face that contains the pixel centre, or a per-pixel trace where the
-//! face's samples still disagree (triangle filling) or no face reached it.
+//! parallel) and reports finished faces at time breaks. Phase 3 (module
+//! `fill`) gives every pixel the ID buffer assigns to a triangle its colour:
+//! Gouraud from the final face that contains the pixel centre, or a
+//! per-pixel trace where the face's samples still disagree (triangle
+//! filling) or no face reached it, written straight into planes: the
+//! frame's ([`trace_package_into`]) or the package's bitmap.
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_raster::{IdBuffer, PixelRect};
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
-use crate::refine::{Face, MeshVertex, TriangleMesh};
-use crate::{Frame, Quality};
+use crate::fill::{Filled, Planes, TrianglePlan, fill};
+use crate::refine::{MeshVertex, TriangleMesh};
+use crate::{Frame, FrameImage, Quality};
 
 /// What the caller wants besides pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -175,40 +178,163 @@ pub fn trace_package(
     options: &PackageOptions,
     progress: &mut dyn FnMut(&[FinishedFace]),
 ) -> PackageResult {
-    let traced = trace_package_pixels(frame, triangles, options, progress);
+    let mut dense = DensePlanes::default();
+    let traced = run_package(frame, triangles, options, progress, &mut dense);
     PackageResult {
-        bitmap: SparseBitmap::from_parts(frame.ids.width, &traced.pixels),
+        bitmap: dense.into_bitmap(),
         stats: traced.stats,
         faces: traced.faces,
         triangle_samples: traced.triangle_samples,
     }
 }
 
-/// A package traced with its pixels not packed into a bitmap: what a frame
-/// rendered on one machine writes straight into its image
-/// ([`crate::FrameImage::write`]).
+/// [`trace_package`] writing its pixels straight into a frame (one machine
+/// rendering a whole frame; the farm's master composites the same values
+/// from bitmaps).
+pub fn trace_package_into(
+    frame: &Frame<'_>,
+    triangles: &[TriangleId],
+    options: &PackageOptions,
+    progress: &mut dyn FnMut(&[FinishedFace]),
+    image: &mut FrameImage,
+) -> TracedPackage {
+    run_package(frame, triangles, options, progress, image)
+}
+
+/// What [`trace_package_into`] returns besides the pixels it wrote.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct TracedPixels {
-    /// The pixels of each triangle that owns some, in package order.
-    pub pixels: Vec<Vec<PixelValue>>,
+pub struct TracedPackage {
     pub stats: PackageStats,
     /// The final faces, when asked for.
     pub faces: Vec<FinishedFace>,
     /// As [`PackageResult::triangle_samples`].
     pub triangle_samples: Vec<u32>,
+    pub times: PhaseTimes,
 }
 
-/// [`trace_package`] without the packing into a bitmap.
-pub fn trace_package_pixels(
+/// Wall times of a package's phases on this machine: the breakdown of a
+/// frame rendered in one process (`bench table1`). Not in [`PackageStats`],
+/// which travels.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Phases 1 and 2: tracing and refining the vertices (with the
+    /// visibility tests and the mesh bookkeeping).
+    pub vertices: Duration,
+    /// Tracing the pixels that get a sample of their own (triangle filling,
+    /// pixels no face reaches, every pixel at `reference`).
+    pub pixel_tracing: Duration,
+    /// Everything else of phase 3: which face covers each pixel, the
+    /// interpolation and the writing of every value into the planes.
+    pub interpolation: Duration,
+}
+
+impl PhaseTimes {
+    pub fn add(&mut self, o: &PhaseTimes) {
+        self.vertices += o.vertices;
+        self.pixel_tracing += o.pixel_tracing;
+        self.interpolation += o.interpolation;
+    }
+}
+
+/// Where a package's pixels go: planes covering at least `rect`.
+trait Target {
+    fn planes(&mut self, rect: PixelRect) -> Planes<'_>;
+}
+
+impl Target for FrameImage {
+    fn planes(&mut self, rect: PixelRect) -> Planes<'_> {
+        self.row_planes(rect.y0, rect.y1)
+    }
+}
+
+/// A package's own planes over its rectangle, packed into its bitmap at the end.
+#[derive(Default)]
+struct DensePlanes {
+    rect: Option<PixelRect>,
+    color: Vec<Vec3>,
+    reflected: Vec<Vec3>,
+    transmitted: Vec<Vec3>,
+    object: Vec<u32>,
+    mask: Vec<bool>,
+}
+
+impl Target for DensePlanes {
+    fn planes(&mut self, rect: PixelRect) -> Planes<'_> {
+        let n = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
+        *self = DensePlanes {
+            rect: Some(rect),
+            color: vec![Vec3::ZERO; n],
+            reflected: vec![Vec3::ZERO; n],
+            transmitted: vec![Vec3::ZERO; n],
+            object: vec![NONE; n],
+            mask: vec![false; n],
+        };
+        Planes {
+            x0: rect.x0,
+            y0: rect.y0,
+            stride: (rect.x1 - rect.x0) as usize,
+            color: &mut self.color,
+            reflected: &mut self.reflected,
+            transmitted: &mut self.transmitted,
+            object: &mut self.object,
+            mask: &mut self.mask,
+        }
+    }
+}
+
+impl DensePlanes {
+    /// The written pixels as a bitmap over their bounding rectangle.
+    fn into_bitmap(self) -> SparseBitmap {
+        let Some(rect) = self.rect else {
+            return SparseBitmap::default();
+        };
+        let stride = (rect.x1 - rect.x0) as usize;
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for (i, _) in self.mask.iter().enumerate().filter(|(_, m)| **m) {
+            let (x, y) = (i % stride, i / stride);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x + 1);
+            y1 = y1.max(y + 1);
+        }
+        if x0 > x1 {
+            return SparseBitmap::default();
+        }
+        let mut bitmap = SparseBitmap {
+            x0: rect.x0 + x0 as u32,
+            y0: rect.y0 + y0 as u32,
+            width: (x1 - x0) as u32,
+            height: (y1 - y0) as u32,
+            ..SparseBitmap::default()
+        };
+        for y in y0..y1 {
+            for i in y * stride + x0..y * stride + x1 {
+                bitmap.mask.push(self.mask[i]);
+                if self.mask[i] {
+                    bitmap.color.push(self.color[i]);
+                    bitmap.reflected.push(self.reflected[i]);
+                    bitmap.transmitted.push(self.transmitted[i]);
+                    bitmap.reflected_object.push(self.object[i]);
+                }
+            }
+        }
+        bitmap
+    }
+}
+
+/// The three phases of a package, its pixels written into `target`.
+fn run_package(
     frame: &Frame<'_>,
     triangles: &[TriangleId],
     options: &PackageOptions,
     progress: &mut dyn FnMut(&[FinishedFace]),
-) -> TracedPixels {
+    target: &mut dyn Target,
+) -> TracedPackage {
     let mut stats = PackageStats {
         triangles: triangles.len() as u64,
         ..Default::default()
     };
+    let mut times = PhaseTimes::default();
     let owned: Vec<(TriangleId, PixelRect)> = triangles
         .iter()
         .filter_map(|&t| frame.owned_rect(t).map(|r| (t, r)))
@@ -228,28 +354,36 @@ pub fn trace_package_pixels(
         meshes
     };
     stats.vertex_time = vertex_start.elapsed();
+    times.vertices = stats.vertex_time;
 
     let fill_start = Instant::now();
-    let per_triangle: Vec<(Vec<PixelValue>, u64)> = if meshes.is_empty() {
-        owned
-            .par_iter()
-            .map(|&(t, rect)| trace_all_pixels(frame, t, rect))
-            .collect()
-    } else {
-        meshes
-            .par_iter()
-            .zip(&owned)
-            .map(|(mesh, &(_, rect))| shade_pixels(frame, mesh, rect))
-            .collect()
+    let plans: Vec<TrianglePlan> = owned
+        .par_iter()
+        .enumerate()
+        .map(|(k, &(t, rect))| TrianglePlan::new(frame, t, rect, meshes.get(k)))
+        .collect();
+    let planning = fill_start.elapsed();
+    let filled = match owned.iter().map(|&(_, r)| r).reduce(|a, b| PixelRect {
+        x0: a.x0.min(b.x0),
+        y0: a.y0.min(b.y0),
+        x1: a.x1.max(b.x1),
+        y1: a.y1.max(b.y1),
+    }) {
+        Some(rect) => fill(frame, &plans, &mut target.planes(rect)),
+        None => Filled::default(),
     };
     stats.fill_time = fill_start.elapsed();
-    stats.filled_pixels = per_triangle.iter().map(|(_, n)| n).sum();
+    times.pixel_tracing = filled.tracing;
+    times.interpolation = planning + filled.interpolation;
+    stats.filled_pixels = filled.traced.iter().sum();
+    stats.pixels = filled.written;
     let mut triangle_samples = vec![0; triangles.len()];
     let mut next_owned = 0;
     for (slot, &t) in triangle_samples.iter_mut().zip(triangles) {
         if owned.get(next_owned).is_some_and(|&(o, _)| o == t) {
             let refined = meshes.get(next_owned).map_or(0, |m| m.refined_edges + 3);
-            *slot = (refined + per_triangle[next_owned].1) as u32;
+            let traced = filled.traced.get(next_owned).copied().unwrap_or(0);
+            *slot = (refined + traced) as u32;
             next_owned += 1;
         }
     }
@@ -259,13 +393,11 @@ pub fn trace_package_pixels(
     } else {
         Vec::new()
     };
-    let pixels: Vec<Vec<PixelValue>> = per_triangle.into_iter().map(|(p, _)| p).collect();
-    stats.pixels = pixels.iter().map(|p| p.len() as u64).sum();
-    TracedPixels {
-        pixels,
+    TracedPackage {
         stats,
         faces,
         triangle_samples,
+        times,
     }
 }
 
@@ -370,228 +502,6 @@ fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '
 /// Corners per [`Frame::shade_vertices`] call: neighbours in mesh order,
 /// whose reflection rays fill packets; small enough to share out to threads.
 const VERTEX_BATCH: usize = 64;
-
-/// Pixels per [`Frame::reference_pixels`] call: rows of neighbours whose
-/// reflection rays fill packets, few enough that a stop is noticed soon.
-const REFERENCE_BATCH: usize = 256;
-
-/// Reference level: every owned pixel traced.
-fn trace_all_pixels(
-    frame: &Frame<'_>,
-    triangle: TriangleId,
-    rect: PixelRect,
-) -> (Vec<PixelValue>, u64) {
-    let owned: Vec<(u32, u32)> = rect
-        .pixels()
-        .filter(|&(x, y)| frame.owns(triangle, x, y))
-        .collect();
-    let mut pixels = Vec::with_capacity(owned.len());
-    for batch in owned.chunks(REFERENCE_BATCH) {
-        if frame.stopped() {
-            break;
-        }
-        pixels.extend(frame.reference_pixels(triangle, batch));
-    }
-    let n = pixels.len() as u64;
-    (pixels, n)
-}
-
-/// Phase 3 for one refined triangle: each owned pixel takes the final face
-/// whose screen triangle contains its centre best (largest smallest
-/// barycentric), so the faces need no fill rule and leave no gaps; pixels no
-/// face reaches (float round-off at the rim) are traced.
-fn shade_pixels(frame: &Frame<'_>, mesh: &TriangleMesh, rect: PixelRect) -> (Vec<PixelValue>, u64) {
-    let width = rect.x1 - rect.x0;
-    let area = (width * (rect.y1 - rect.y0)) as usize;
-    let faces: Vec<ScreenFace> = mesh
-        .faces()
-        .filter_map(|f| ScreenFace::new(mesh, f))
-        .collect();
-    // The best face per pixel: (smallest barycentric, face index). A lone
-    // face (every unrefined triangle) needs no table: it is tested per pixel.
-    let mut best: Vec<(f32, u32)> = Vec::new();
-    if faces.len() > 1 {
-        best = vec![(f32::NEG_INFINITY, NO_FACE); area];
-        for (fi, face) in faces.iter().enumerate() {
-            let reach = face.reach(rect);
-            for y in reach.y0..reach.y1 {
-                let row = ((y - rect.y0) * width) as usize;
-                for x in reach.x0..reach.x1 {
-                    let score = face.score(face.weights(x, y));
-                    let slot = &mut best[row + (x - rect.x0) as usize];
-                    if score >= -1e-4 && score > slot.0 {
-                        *slot = (score, fi as u32);
-                    }
-                }
-            }
-        }
-    }
-    let lone_reach = faces.first().map(|f| f.reach(rect));
-    let face_at = |x: u32, y: u32| -> usize {
-        if faces.len() > 1 {
-            return best[((y - rect.y0) * width + (x - rect.x0)) as usize].1 as usize;
-        }
-        match (faces.first(), lone_reach) {
-            (Some(face), Some(reach))
-                if reach.contains(x, y) && face.score(face.weights(x, y)) >= -1e-4 =>
-            {
-                0
-            }
-            _ => NO_FACE as usize,
-        }
-    };
-    let fill = frame.settings.quality == Quality::Full;
-    let disagrees: Vec<bool> = faces
-        .iter()
-        .map(|f| fill && mesh.face_disagrees(f.face, frame.settings.epsilon))
-        .collect();
-    // A face whose samples agree may still hide a detail behind the glass that
-    // no sample hit: its pixels near a change of the opaque scene behind are
-    // filled too. `None`: no such check (opaque reflector, or not `full`).
-    let behind_corner: Vec<Option<u32>> = faces
-        .iter()
-        .map(|f| {
-            if !fill || !frame.behind_hints(mesh.triangle) {
-                return None;
-            }
-            let objects = [f.a, f.b, f.c]
-                .map(|s| frame.behind_object(s.x.floor() as i64, s.y.floor() as i64));
-            // Corners that see different things behind: fill the whole face.
-            Some(if objects[0] == objects[1] && objects[1] == objects[2] {
-                objects[0]
-            } else {
-                NONE
-            })
-        })
-        .collect();
-    let mut traced = 0;
-    let mut pixels = Vec::with_capacity(area / 2);
-    for y in rect.y0..rect.y1 {
-        if frame.stopped() {
-            break;
-        }
-        for x in rect.x0..rect.x1 {
-            if !frame.owns(mesh.triangle, x, y) {
-                continue;
-            }
-            let index = frame.ids.index(x, y) as u32;
-            let fi = face_at(x, y);
-            let value = match faces.get(fi) {
-                Some(face)
-                    if !disagrees[fi]
-                        && behind_corner[fi]
-                            .is_none_or(|o| o != NONE && frame.behind_around(x, y) == Some(o)) =>
-                {
-                    let mut value = face.gouraud(index, mesh, face.weights(x, y));
-                    frame.finish_pixel((x, y), &mut value);
-                    value
-                }
-                _ => {
-                    traced += 1;
-                    frame.trace_pixel(mesh.triangle, x, y)
-                }
-            };
-            pixels.push(value);
-        }
-    }
-    (pixels, traced)
-}
-
-/// No face reaches the pixel.
-const NO_FACE: u32 = u32::MAX;
-
-/// A final face with its corners on screen, ready for barycentric weights
-/// and perspective-correct interpolation.
-struct ScreenFace<'m> {
-    face: &'m Face,
-    a: Vec2,
-    b: Vec2,
-    c: Vec2,
-    /// One over twice the signed screen area.
-    inv_denom: f32,
-    /// One over each corner's view depth.
-    inv_depth: [f32; 3],
-}
-
-impl<'m> ScreenFace<'m> {
-    /// `None` when a corner is behind the eye or the face is degenerate on screen.
-    fn new(mesh: &TriangleMesh, face: &'m Face) -> Option<Self> {
-        let [Some(a), Some(b), Some(c)] = face.vertices.map(|i| mesh.vertices[i as usize].screen)
-        else {
-            return None;
-        };
-        let inv_depth = [a.depth, b.depth, c.depth].map(|d| 1.0 / d);
-        let (a, b, c) = (
-            Vec2::new(a.x, a.y),
-            Vec2::new(b.x, b.y),
-            Vec2::new(c.x, c.y),
-        );
-        let denom = (b - a).perp_dot(c - a);
-        (denom.abs() >= 1e-12).then_some(ScreenFace {
-            face,
-            a,
-            b,
-            c,
-            inv_denom: 1.0 / denom,
-            inv_depth,
-        })
-    }
-
-    /// The pixels of `rect` whose centres the face may contain: its screen
-    /// bounding box, a pixel wider to the right and below.
-    fn reach(&self, rect: PixelRect) -> PixelRect {
-        let lo = self.a.min(self.b).min(self.c);
-        let hi = self.a.max(self.b).max(self.c);
-        PixelRect {
-            x0: (lo.x.floor().max(rect.x0 as f32)) as u32,
-            y0: (lo.y.floor().max(rect.y0 as f32)) as u32,
-            x1: ((hi.x.ceil() + 1.0).min(rect.x1 as f32)) as u32,
-            y1: ((hi.y.ceil() + 1.0).min(rect.y1 as f32)) as u32,
-        }
-    }
-
-    /// How well the face contains a pixel centre of weights `w`: the
-    /// smallest weight (negative outside).
-    fn score(&self, w: [f32; 3]) -> f32 {
-        w[0].min(w[1]).min(w[2])
-    }
-
-    /// The barycentric weights of pixel (x, y)'s centre.
-    fn weights(&self, x: u32, y: u32) -> [f32; 3] {
-        let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        let wb = (p - self.a).perp_dot(self.c - self.a) * self.inv_denom;
-        let wc = (self.b - self.a).perp_dot(p - self.a) * self.inv_denom;
-        [1.0 - wb - wc, wb, wc]
-    }
-
-    /// Perspective-correct interpolation of the corner samples at screen
-    /// weights `w` (divided by depth, as a GPU interpolates); the reflected
-    /// object is the nearest corner's (the last of equals).
-    fn gouraud(&self, index: u32, mesh: &TriangleMesh, w: [f32; 3]) -> PixelValue {
-        let v = self
-            .face
-            .vertices
-            .map(|i| &mesh.vertices[i as usize].sample);
-        let pw: [f32; 3] = std::array::from_fn(|k| w[k].max(0.0) * self.inv_depth[k]);
-        let scale = 1.0 / (pw[0] + pw[1] + pw[2]);
-        let pw = pw.map(|x| x * scale);
-        let blend = |f: fn(&Sample) -> Vec3| f(v[0]) * pw[0] + f(v[1]) * pw[1] + f(v[2]) * pw[2];
-        let nearest = if pw[2] >= pw[1] && pw[2] >= pw[0] {
-            2
-        } else if pw[1] >= pw[0] {
-            1
-        } else {
-            0
-        };
-        PixelValue {
-            index,
-            color: blend(|s| s.color),
-            reflected: blend(|s| s.reflected),
-            transmitted: blend(|s| s.transmitted),
-            object: v[nearest].reflected_object,
-        }
-    }
-}
 
 impl SparseBitmap {
     /// Packs pixel values (each pixel at most once, any order) of a frame

@@ -1,8 +1,9 @@
 //! Stopping a package early: a cancel flag set from another thread (the
 //! worker, when the master cancels the package) and a budget of traced
 //! samples that turns a runaway package into a failure. The package's loops
-//! check it per edge split and per pixel, so a stop takes effect within a
-//! few samples; the partial result is then worthless and dropped.
+//! check it per edge split and per batch of traced pixels, so a stop takes
+//! effect within a few hundred samples; the partial result is then
+//! worthless and dropped.
 
 use std::fmt;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

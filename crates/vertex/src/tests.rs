@@ -491,23 +491,35 @@ fn a_sample_budget_stops_a_package_that_needs_more() {
 }
 
 #[test]
-fn batched_reference_pixels_and_vertices_equal_one_at_a_time() {
+fn batched_pixels_and_vertices_equal_one_at_a_time() {
     let frame = TestFrame::new(Extras::default());
     for transmission in Transmission::ALL {
         let f = frame.frame(VertexSettings {
             transmission,
             ..unguarded()
         });
-        let pixels: Vec<(u32, u32)> = (0..f.ids.height)
+        // Both triangles' pixels in one batch, traced as the reference
+        // does and as triangle filling does.
+        let pixels: Vec<(TriangleId, u32, u32)> = (0..f.ids.height)
             .flat_map(|y| (0..f.ids.width).map(move |x| (x, y)))
-            .filter(|&(x, y)| f.owns(A, x, y))
+            .filter_map(|(x, y)| {
+                [A, B]
+                    .into_iter()
+                    .find(|&t| f.owns(t, x, y))
+                    .map(|t| (t, x, y))
+            })
             .collect();
-        assert_eq!(pixels.len() as u64, frame.owned_pixels(A));
-        let one_by_one: Vec<_> = pixels
-            .iter()
-            .map(|&p| f.reference_pixels(A, &[p])[0])
-            .collect();
-        assert_eq!(f.reference_pixels(A, &pixels), one_by_one);
+        assert_eq!(
+            pixels.len() as u64,
+            frame.owned_pixels(A) + frame.owned_pixels(B)
+        );
+        for reference in [true, false] {
+            let one_by_one: Vec<_> = pixels
+                .iter()
+                .map(|&p| f.trace_pixels(&[p], reference)[0])
+                .collect();
+            assert_eq!(f.trace_pixels(&pixels, reference), one_by_one);
+        }
 
         let scene = frame.bvh.scene();
         let vertices: Vec<(TriangleId, Vec3, Vec3)> = [A, B]

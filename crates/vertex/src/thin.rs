@@ -22,14 +22,13 @@ use std::sync::{Arc, Mutex};
 
 use glam::Vec3;
 use rayon::prelude::*;
-use vtfarm_raster::IdBuffer;
+use vtfarm_raster::{IdBuffer, IdPass};
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Camera, Light, LightKind, NONE, Projector, Scene, TriangleId};
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
 use crate::{
-    PixelRect, PixelValue, Transmission, barycentric, behind_id_buffer_within, pixel_surface_along,
-    reflector_bounds,
+    PixelRect, PixelValue, Transmission, barycentric, pixel_surface_along, reflector_bounds,
 };
 
 /// What lies behind the reflectors: the ID buffer of the opaque scene
@@ -114,16 +113,57 @@ impl Behind {
         pass: GlassPass,
         cache: &ShadowCache,
     ) -> Behind {
-        let scene = tracer.bvh.scene();
-        let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
-        let behind = behind_id_buffer_within(scene, camera, is_reflector, bounds);
-        let glass = match transmission {
-            Transmission::Traced => GlassTerms::Nothing,
-            Transmission::Raster => GlassTerms::new(
+        let buffers = BehindBuffers::new(tracer, camera, None, is_reflector, transmission);
+        Behind::from_buffers(tracer, camera, ids, is_reflector, buffers, pass, cache)
+    }
+
+    /// A worker's frame set-up: the frame's ID buffer over `frame_within`
+    /// and what lies behind its reflectors ([`Behind::new`]), the buffers
+    /// rasterized together (the scene projected and set up once).
+    pub fn with_frame_ids(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        frame_within: PixelRect,
+        is_reflector: &[bool],
+        transmission: Transmission,
+        pass: GlassPass,
+        cache: &ShadowCache,
+    ) -> (IdBuffer, Behind) {
+        let mut buffers = BehindBuffers::new(
+            tracer,
+            camera,
+            Some(frame_within),
+            is_reflector,
+            transmission,
+        );
+        let ids = buffers.frame.take().expect("asked for the frame's buffer");
+        let behind = Behind::from_buffers(tracer, camera, &ids, is_reflector, buffers, pass, cache);
+        (ids, behind)
+    }
+
+    fn from_buffers(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        ids: &IdBuffer,
+        is_reflector: &[bool],
+        buffers: BehindBuffers,
+        pass: GlassPass,
+        cache: &ShadowCache,
+    ) -> Behind {
+        let BehindBuffers {
+            bounds,
+            behind,
+            layers,
+            ..
+        } = buffers;
+        let glass = match layers {
+            None => GlassTerms::Nothing,
+            Some(layers) => GlassTerms::new(
                 tracer,
                 camera,
                 ids,
                 &behind,
+                layers,
                 is_reflector,
                 bounds,
                 pass,
@@ -181,9 +221,70 @@ impl Behind {
     }
 }
 
+/// Whether `triangle` belongs in the ID buffer of what lies behind the
+/// reflectors: neither a reflector nor see-through.
+pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: TriangleId) -> bool {
+    !is_reflector[triangle as usize] && !see_through(scene, triangle)
+}
+
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
     scene.material_of(triangle).transmittance.max_element() > 0.0
+}
+
+/// The ID buffers a frame's [`Behind`] is made of, rasterized in one go.
+struct BehindBuffers {
+    /// The pixels [`Behind`] covers.
+    bounds: PixelRect,
+    /// The frame's own buffer, when asked for.
+    frame: Option<IdBuffer>,
+    /// The opaque scene (neither reflectors nor see-through surfaces).
+    behind: IdBuffer,
+    /// The see-through surfaces that are not reflectors (a slab's back),
+    /// over the reflectors alone (only glass pixels read it): with the
+    /// thin-glass model, when a reflector is see-through.
+    layers: Option<IdBuffer>,
+}
+
+impl BehindBuffers {
+    fn new(
+        tracer: &Tracer<'_>,
+        camera: &Camera,
+        frame_within: Option<PixelRect>,
+        is_reflector: &[bool],
+        transmission: Transmission,
+    ) -> BehindBuffers {
+        let scene = tracer.bvh.scene();
+        let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
+        let any_glass = transmission == Transmission::Raster
+            && (is_reflector.iter().enumerate())
+                .any(|(t, &r)| r && see_through(scene, t as TriangleId));
+        let all = |_: TriangleId| true;
+        let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
+        let layer = |t: TriangleId| !is_reflector[t as usize] && see_through(scene, t);
+        let mut passes = vec![IdPass {
+            within: bounds,
+            keep: &opaque,
+        }];
+        if any_glass {
+            passes.push(IdPass {
+                within: reflector_bounds(scene, camera, is_reflector, 0),
+                keep: &layer,
+            });
+        }
+        if let Some(within) = frame_within {
+            passes.push(IdPass { within, keep: &all });
+        }
+        let mut buffers = vtfarm_raster::id_buffers_within(scene, camera, &passes).into_iter();
+        let behind = buffers.next().expect("one buffer per pass");
+        let layers = any_glass.then(|| buffers.next().expect("one buffer per pass"));
+        BehindBuffers {
+            bounds,
+            frame: buffers.next(),
+            behind,
+            layers,
+        }
+    }
 }
 
 impl GlassTerms {
@@ -195,6 +296,7 @@ impl GlassTerms {
         camera: &Camera,
         ids: &IdBuffer,
         behind: &IdBuffer,
+        layers: IdBuffer,
         is_reflector: &[bool],
         bounds: PixelRect,
         pass: GlassPass,
@@ -208,9 +310,6 @@ impl GlassTerms {
         if !bounds.pixels().any(|(x, y)| glass_pixel(ids.index(x, y))) {
             return GlassTerms::Nothing;
         }
-        let layers = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|t| {
-            !is_reflector[t as usize] && see_through(scene, t)
-        });
         let shadows =
             ShadowMaps::for_frame(tracer, camera, behind, bounds, &|i| glass_pixel(i), cache);
         let view = View {
@@ -354,7 +453,7 @@ fn opaque_radiance(
         return tracer.lighting.background;
     };
     let origin = front + shift;
-    let (gx, gy) = (guess.x.floor() as i64, guess.y.floor() as i64);
+    let (gx, gy) = (floor(guess.x), floor(guess.y));
     // The triangle the behind buffer shows at the guess or, when the
     // shifted ray misses it, at a neighbouring pixel: the first the ray
     // meets inside.
@@ -393,8 +492,9 @@ fn opaque_radiance(
         return tracer.lighting.background;
     };
     let [na, nb, nc] = scene.triangle_normals(triangle);
-    let plane = scene.geometric_normal(triangle);
-    let normal = (na * wa + nb * wb + nc * wc).normalize_or(plane.normalize_or(Vec3::Y));
+    let normal = normalize_or_else(na * wa + nb * wb + nc * wc, || {
+        scene.geometric_normal(triangle).normalize_or(Vec3::Y)
+    });
     phong(
         scene.material_of(triangle),
         tracer.lighting,
@@ -411,6 +511,31 @@ fn opaque_radiance(
             shadows.lit(k, position, triangle)
         },
     )
+}
+
+/// `v.normalize_or(fallback())` (the same operations), with the fallback
+/// worked out only when needed.
+pub(crate) fn normalize_or_else(v: Vec3, fallback: impl FnOnce() -> Vec3) -> Vec3 {
+    let rcp = v.length_recip();
+    if rcp.is_finite() && rcp > 0.0 {
+        v * rcp
+    } else {
+        fallback()
+    }
+}
+
+/// `v.floor() as i64`, without a call to the C library's `floorf` (the
+/// portable x86-64 target has no rounding instruction): exact for every
+/// `f32`, NaN giving 0 and the infinities saturating as `as` does.
+fn floor(v: f32) -> i64 {
+    let truncated = v as i64;
+    // Only a negative non-integer truncates upwards; beyond 2^23 every
+    // f32 is an integer and the conversion back is exact.
+    if (truncated as f32) > v {
+        truncated.saturating_sub(1)
+    } else {
+        truncated
+    }
 }
 
 /// Where the ray from `origin` along `direction` meets the plane of
@@ -439,10 +564,35 @@ fn ray_plane(
 /// ([`ShadowCache`]), and every machine builds the same ones.
 #[derive(Clone, Debug)]
 struct ShadowMaps {
-    maps: Vec<Option<(Projector, IdBuffer)>>,
+    maps: Vec<Option<ShadowMap>>,
     /// How much nearer than a point an occluder must be to shadow it: a
     /// few texels, so a surface does not shadow itself between texels.
     bias: f32,
+}
+
+/// One light's map: what its ID buffer holds per texel, triangle and depth
+/// side by side (a look-up touches one cache line, not two).
+#[derive(Clone, Debug)]
+struct ShadowMap {
+    projector: Projector,
+    size: u32,
+    texels: Vec<(TriangleId, f32)>,
+}
+
+impl ShadowMap {
+    fn new(projector: Projector, ids: &IdBuffer) -> ShadowMap {
+        debug_assert_eq!(ids.width, ids.height);
+        ShadowMap {
+            projector,
+            size: ids.width,
+            texels: ids
+                .triangle
+                .iter()
+                .copied()
+                .zip(ids.depth.iter().copied())
+                .collect(),
+        }
+    }
 }
 
 /// Texels along each side of a shadow map: twice the 1024 that a box fitted
@@ -566,9 +716,9 @@ impl ShadowMaps {
                     width: SHADOW_MAP_SIZE,
                     height: SHADOW_MAP_SIZE,
                 };
-                Some((
+                Some(ShadowMap::new(
                     Projector::new(&view),
-                    vtfarm_raster::id_buffer_where(scene, &view, &|t| tracer.bvh.casts_shadow(t)),
+                    &vtfarm_raster::id_buffer_where(scene, &view, &|t| tracer.bvh.casts_shadow(t)),
                 ))
             })
             .collect();
@@ -583,17 +733,77 @@ impl ShadowMaps {
     /// that triangle there, or nothing clearly nearer than it. A light
     /// without a map lights every point (it sits among them).
     fn lit(&self, k: usize, position: Vec3, triangle: TriangleId) -> bool {
-        let Some(Some((projector, map))) = self.maps.get(k) else {
+        let Some(Some(map)) = self.maps.get(k) else {
             return true;
         };
-        let Some(s) = projector.project(position) else {
+        let Some(s) = map.projector.project(position) else {
             return true;
         };
-        let (x, y) = (s.x.floor(), s.y.floor());
-        if x < 0.0 || y < 0.0 || x >= map.width as f32 || y >= map.height as f32 {
+        let (x, y) = (floor(s.x), floor(s.y));
+        let size = i64::from(map.size);
+        if x < 0 || y < 0 || x >= size || y >= size {
             return true;
         }
-        let i = map.index(x as u32, y as u32);
-        map.triangle[i] == triangle || map.depth[i] >= s.depth - self.bias
+        let (seen, depth) = map.texels[(y * size + x) as usize];
+        seen == triangle || depth >= s.depth - self.bias
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_is_the_c_librarys_floor_for_every_kind_of_f32() {
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.5,
+            -1.5,
+            f32::EPSILON,
+            -f32::EPSILON,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            8_388_607.5,
+            -8_388_607.5,
+            16_777_217.0,
+            9.3e18,
+            -9.3e18,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        // And a sweep across pixel coordinates, around and past a shadow map.
+        values.extend((-5000..5000).map(|i| i as f32 * 0.37));
+        for v in values {
+            assert_eq!(floor(v), v.floor() as i64, "{v}");
+        }
+    }
+
+    #[test]
+    fn normalize_or_else_is_normalize_or() {
+        let fallback = Vec3::new(0.0, 0.0, 1.0);
+        for v in [
+            Vec3::new(3.0, -4.0, 12.0),
+            Vec3::new(1e-30, 0.0, 0.0),
+            Vec3::new(1e-20, 1e-20, 0.0),
+            Vec3::ZERO,
+            Vec3::new(f32::INFINITY, 0.0, 0.0),
+            Vec3::new(f32::NAN, 1.0, 0.0),
+            Vec3::new(0.1, 0.2, 0.3),
+        ] {
+            let (a, b) = (normalize_or_else(v, || fallback), v.normalize_or(fallback));
+            assert_eq!(
+                a.to_array().map(f32::to_bits),
+                b.to_array().map(f32::to_bits),
+                "{v}"
+            );
+        }
     }
 }

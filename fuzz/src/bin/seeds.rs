@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::Vec3;
 use vtfarm_proto::{
     FrameStart, Hello, JobScene, Message, Package, PackageResult, Role, SceneData, WireBitmap,
-    WireFrameSetup, WireJob, WireMethod, WirePackageStats, encode_message,
+    WireFrameSetup, WireImageFormat, WireJob, WireMethod, WirePackageStats, encode_message,
 };
 use vtfarm_method::FrameSetup;
 use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle};
@@ -63,6 +63,7 @@ fn main() -> std::io::Result<()> {
                     reflectors: vec![0],
                     aux: false,
                     method: WireMethod::VertexTracing,
+                    image: WireImageFormat::Srgb8,
                 },
             },
         ),
