@@ -78,7 +78,7 @@ impl SchedulerConfig {
 /// Frames in flight under [`SchedulerConfig::farm`]: enough that a frame's
 /// most expensive item (one reflector triangle can be a tenth of a frame's
 /// work) does not keep the other workers waiting for the next frame.
-pub const FARM_FRAMES_IN_FLIGHT: u32 = 4;
+pub const FARM_FRAMES_IN_FLIGHT: u32 = 8;
 
 /// How big a package is (guided self-scheduling, "large early, small late").
 ///
