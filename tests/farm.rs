@@ -894,6 +894,9 @@ fn master_process(cluster_file: &std::path::Path, listen: std::net::SocketAddr) 
         Command::new(env!("CARGO_BIN_EXE_vtfarm"))
             .args(["master", "--cluster", cluster_file.to_str().unwrap()])
             .args(["--listen", &listen.to_string()])
+            // Any free port: a fixed dashboard port fails the master wherever
+            // another one (another test run) already holds it.
+            .args(["--http", "127.0.0.1:0"])
             .spawn()
             .expect("the vtfarm binary starts"),
     )
