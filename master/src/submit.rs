@@ -17,7 +17,7 @@ use vtfarm_proto::{
     WireImageFormat, WireJob,
 };
 use vtfarm_render::FrameSetup;
-use vtfarm_vertex::FrameImage;
+use vtfarm_vertex::{Components, FrameImage};
 
 /// A finished frame as the submitter receives it.
 #[derive(Clone, Debug)]
@@ -319,11 +319,11 @@ fn components(color: &Image, aux: WireFrameAux) -> Result<FrameImage, JobError> 
             "frame components of the wrong size".into(),
         ));
     }
-    Ok(FrameImage {
-        color: color.clone(),
+    let components = Components {
         reflected,
         transmitted,
         reflected_object: aux.reflected_object,
         mask: aux.mask.iter().map(|&m| m != 0).collect(),
-    })
+    };
+    Ok(FrameImage::from_components(color.clone(), components))
 }
