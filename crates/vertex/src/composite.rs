@@ -214,3 +214,90 @@ fn draw_line(image: &mut Image, a: Vec2, b: Vec2, color: Vec3) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two pixels of a 4x3 frame, at (1, 1) and (2, 1).
+    fn bitmap() -> SparseBitmap {
+        SparseBitmap {
+            x0: 1,
+            y0: 1,
+            width: 2,
+            height: 1,
+            mask: vec![true, true],
+            color: vec![Vec3::X, Vec3::Y],
+            reflected: vec![Vec3::splat(0.25), Vec3::splat(0.5)],
+            transmitted: vec![Vec3::Z, Vec3::ONE],
+            reflected_object: vec![NONE, 7],
+        }
+    }
+
+    #[test]
+    fn planes_over_the_bounds_give_what_full_frame_planes_give() {
+        let base = Image::new(4, 3, Vec3::splat(0.1));
+        let bounds = PixelRect {
+            x0: 1,
+            y0: 1,
+            x1: 3,
+            y1: 2,
+        };
+        let mut small = FrameImage::new(base.clone(), bounds);
+        let mut full = FrameImage::new(base.clone(), PixelRect::full(4, 3));
+        small.composite(&bitmap());
+        full.composite(&bitmap());
+        assert_eq!(small.components(), full.components());
+        assert!(small == full);
+        assert_eq!(small.glass().collect::<Vec<_>>(), [5, 6]);
+        assert_eq!(small.pixel(6).object, 7);
+        assert_eq!(small.pixel(6).reflected, Vec3::splat(0.5));
+        // Outside the bounds, and unwritten pixels: black, NONE, unmasked.
+        for i in [0, 4, 7, 11] {
+            assert!(!small.is_glass(i));
+            let p = small.pixel(i);
+            assert_eq!(
+                (p.color, p.reflected, p.transmitted, p.object),
+                (Vec3::splat(0.1), Vec3::ZERO, Vec3::ZERO, NONE)
+            );
+        }
+        let components = small.components();
+        assert_eq!(components.reflected.pixels.len(), 12);
+        assert_eq!(components.reflected_object[4], NONE);
+        assert_eq!(components.reflected_object[5], NONE);
+        // A frame without reflectors has no planes and no glass.
+        let empty = FrameImage::new(base, PixelRect::full(0, 0));
+        assert_eq!(empty.glass().count(), 0);
+        assert_eq!(
+            empty.components(),
+            FrameImage::new(empty.color.clone(), PixelRect::full(4, 3)).components()
+        );
+    }
+
+    #[test]
+    fn row_planes_are_cut_to_the_bounds() {
+        let bounds = PixelRect {
+            x0: 1,
+            y0: 1,
+            x1: 3,
+            y1: 2,
+        };
+        let mut image = FrameImage::new(Image::black(4, 3), bounds);
+        let mut planes = image.row_planes(0, 3);
+        assert_eq!(planes.rows(), (1, 2));
+        planes.set(
+            2,
+            1,
+            &PixelValue {
+                index: 6,
+                color: Vec3::X,
+                reflected: Vec3::Y,
+                transmitted: Vec3::Z,
+                object: 3,
+            },
+        );
+        assert_eq!(image.pixel(6).object, 3);
+        assert_eq!(image.color.pixels[6], Vec3::X);
+        assert_eq!(image.glass().collect::<Vec<_>>(), [6]);
+    }
+}

@@ -35,7 +35,7 @@ pub(crate) struct Planes<'a> {
 }
 
 impl<'a> Planes<'a> {
-    fn set(&mut self, x: u32, y: u32, value: &PixelValue) {
+    pub(crate) fn set(&mut self, x: u32, y: u32, value: &PixelValue) {
         let row = (y - self.y0) as usize;
         self.color[row * self.color_stride + (x - self.color_x0) as usize] = value.color;
         let i = row * self.stride + (x - self.x0) as usize;
@@ -78,7 +78,7 @@ impl<'a> Planes<'a> {
     }
 
     /// The rows `y0..y1` the planes cover.
-    fn rows(&self) -> (u32, u32) {
+    pub(crate) fn rows(&self) -> (u32, u32) {
         let rows = self.mask.len().checked_div(self.stride).unwrap_or(0);
         (self.y0, self.y0 + rows as u32)
     }
