@@ -174,7 +174,7 @@ struct FrameAssembly {
 /// A frame's pixels as results are composited over the base frame: the
 /// colour only, or with the per-pixel components when the job asks for
 /// them (a view's jobs always do). No output of a colour-only job reads
-/// the components, so their full-frame planes are not made.
+/// the components, so their planes are not made.
 enum Assembled {
     Color(Image),
     Components(FrameImage),
