@@ -93,8 +93,9 @@ exec {sleeper}<> <(:)  # `read -t` on it sleeps without starting a process
 declare -A mean cpu
 for n in $workers_list; do
   pids=()
-  RUST_LOG=warn "$bin" master --cluster "$work/cluster/cluster.toml" --listen "127.0.0.1:$port" --http 127.0.0.1:0 \
-    >"$work/master-$n.log" 2>&1 &
+  # The dashboard on a free port: another farm on this machine may hold the default.
+  RUST_LOG=warn "$bin" master --cluster "$work/cluster/cluster.toml" --listen "127.0.0.1:$port" \
+    --http 127.0.0.1:0 >"$work/master-$n.log" 2>&1 &
   pids+=($!)
   for ((w = 0; w < n; w++)); do
     core=$((w % cores))

@@ -242,7 +242,8 @@ impl Assembled {
                 }
             }
             (Assembled::Components(image), ResultPixels::Bitmap(bitmap)) => image.composite(bitmap),
-            // `check` decodes for the assembly it was asked by.
+            // `check` decodes for the kind of assembly it is called on, and
+            // a frame's kind is set once, with its base frame.
             _ => unreachable!("a result decoded for another kind of frame"),
         }
     }
@@ -908,7 +909,7 @@ impl MasterCore {
                     image: WireImage::encode(done.image.color(), j.image),
                     stats: frame_stats.clone(),
                     aux: match &done.image {
-                        Assembled::Components(image) => Some(frame_aux(image)),
+                        Assembled::Components(image) => Some(WireFrameAux::encode(image)),
                         Assembled::Color(_) => None,
                     },
                 };
@@ -1013,8 +1014,6 @@ impl MasterCore {
         j.assembling.push(FrameAssembly {
             start: start.clone(),
             ids: None,
-            // Replaced by the base frame before anything is composited: a
-            // zeroed allocation, not a pass over 1080p.
             // The base frame, when it comes; until then results are held.
             image: Assembled::Color(Image::black(0, 0)),
             held: Vec::new(),
@@ -1317,17 +1316,6 @@ pub struct LiveFrame<'a> {
     pub triangles_done: u64,
     pub triangles_total: u64,
     pub image: &'a vtfarm_imaging::Image,
-}
-
-/// The per-pixel components of a finished frame, for the wire.
-fn frame_aux(image: &FrameImage) -> WireFrameAux {
-    let image = image.components();
-    WireFrameAux {
-        reflected: WireImage::encode(&image.reflected, WireImageFormat::LinearF32),
-        transmitted: WireImage::encode(&image.transmitted, WireImageFormat::LinearF32),
-        reflected_object: image.reflected_object.clone(),
-        mask: image.mask.iter().map(|&m| u8::from(m)).collect(),
-    }
 }
 
 /// How logs and statistics name a peer.

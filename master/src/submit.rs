@@ -17,7 +17,7 @@ use vtfarm_proto::{
     WireImageFormat, WireJob,
 };
 use vtfarm_render::FrameSetup;
-use vtfarm_vertex::{Components, FrameImage};
+use vtfarm_vertex::FrameImage;
 
 /// A finished frame as the submitter receives it.
 #[derive(Clone, Debug)]
@@ -308,22 +308,6 @@ fn image(wire: WireImage) -> Result<Image, JobError> {
 
 /// Rebuilds the frame's components from the wire, checking their sizes.
 fn components(color: &Image, aux: WireFrameAux) -> Result<FrameImage, JobError> {
-    let n = color.pixels.len();
-    let (reflected, transmitted) = (image(aux.reflected)?, image(aux.transmitted)?);
-    if reflected.pixels.len() != n
-        || transmitted.pixels.len() != n
-        || aux.reflected_object.len() != n
-        || aux.mask.len() != n
-    {
-        return Err(JobError::Protocol(
-            "frame components of the wrong size".into(),
-        ));
-    }
-    let components = Components {
-        reflected,
-        transmitted,
-        reflected_object: aux.reflected_object,
-        mask: aux.mask.iter().map(|&m| m != 0).collect(),
-    };
-    Ok(FrameImage::from_components(color.clone(), components))
+    (aux.into_components(color.clone()))
+        .map_err(|e| JobError::Protocol(format!("frame components: {e}")))
 }

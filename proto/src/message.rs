@@ -389,16 +389,20 @@ pub struct FrameDone {
 }
 
 /// A frame's per-pixel components besides the colour: what a glare study
-/// measures. All arrays have one entry per pixel, row-major from the top.
+/// measures, row-major from the top; compressed like the colour (the
+/// conversions are [`WireFrameAux::encode`] and
+/// [`WireFrameAux::into_components`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct WireFrameAux {
     /// The reflected component (linear RGB; black off the reflectors).
     pub reflected: WireImage,
     /// The transmitted component (linear RGB; black off the reflectors).
     pub transmitted: WireImage,
-    /// The object each reflector pixel mirrors (`vtfarm_scene::NONE` for none).
-    pub reflected_object: Vec<u32>,
-    /// 1 on reflector pixels, 0 elsewhere.
+    /// The object each pixel mirrors (`vtfarm_scene::NONE` for none):
+    /// little-endian byte planes, zstd-compressed.
+    #[serde(with = "bytes")]
+    pub reflected_object: Vec<u8>,
+    /// 1 on reflector pixels, 0 elsewhere, a byte per pixel, zstd-compressed.
     #[serde(with = "bytes")]
     pub mask: Vec<u8>,
 }

@@ -18,7 +18,9 @@ use vtfarm_scene::{
     Triangle,
 };
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{PackageStats, Quality, SparseBitmap, Transmission, VertexSettings};
+use vtfarm_vertex::{
+    Components, FrameImage, PackageStats, Quality, SparseBitmap, Transmission, VertexSettings,
+};
 
 /// Why wire data does not make a valid domain value.
 #[derive(Debug, thiserror::Error)]
@@ -713,6 +715,68 @@ impl WireBitmap {
             ));
         }
         Ok(())
+    }
+}
+
+impl crate::WireFrameAux {
+    /// The wire form of a frame's components (its colour travels apart, in
+    /// `FrameDone::image`).
+    pub fn encode(image: &FrameImage) -> Self {
+        let image = image.components();
+        let objects: Vec<[u8; 4]> = image
+            .reflected_object
+            .iter()
+            .map(|o| o.to_le_bytes())
+            .collect();
+        let mask: Vec<u8> = image.mask.iter().map(|&m| u8::from(m)).collect();
+        crate::WireFrameAux {
+            reflected: WireImage::encode(&image.reflected, WireImageFormat::LinearF32),
+            transmitted: WireImage::encode(&image.transmitted, WireImageFormat::LinearF32),
+            reflected_object: compress(&byte_planes(&objects)),
+            mask: compress(&mask),
+        }
+    }
+
+    /// The frame with its components, every array checked to hold one
+    /// entry per pixel of `color`.
+    pub fn into_components(self, color: vtfarm_imaging::Image) -> Result<FrameImage, WireError> {
+        let n = color.pixels.len();
+        let component = |field: &str, image: WireImage| {
+            let (width, height, pixels) = image.into_pixels()?;
+            if (width, height) != (color.width, color.height) {
+                return Err(out_of_range(
+                    field,
+                    format!("{width}x{height}"),
+                    "the frame's size",
+                ));
+            }
+            Ok(vtfarm_imaging::Image {
+                width,
+                height,
+                pixels,
+            })
+        };
+        let reflected = component("reflected component", self.reflected)?;
+        let transmitted = component("transmitted component", self.transmitted)?;
+        let planes = decompress("reflected object bytes", &self.reflected_object, 4 * n)?;
+        let reflected_object = (0..n)
+            .map(|i| u32::from_le_bytes([0, 1, 2, 3].map(|k| planes[k * n + i])))
+            .collect();
+        let mask = decompress("mask bytes", &self.mask, n)?;
+        if let Some(i) = mask.iter().position(|&m| m > 1) {
+            return Err(out_of_range(
+                "mask",
+                format!("{} at pixel {i}", mask[i]),
+                "0 or 1",
+            ));
+        }
+        let components = Components {
+            reflected,
+            transmitted,
+            reflected_object,
+            mask: mask.into_iter().map(|m| m == 1).collect(),
+        };
+        Ok(FrameImage::from_components(color, components))
     }
 }
 
@@ -1539,6 +1603,45 @@ pub(crate) mod tests {
         let mut ragged = WireImage::from_pixels(2, 2, &pixels);
         ragged.pixels.pop();
         assert!(ragged.into_pixels().is_err());
+    }
+
+    /// A frame's components cross the wire bit for bit; arrays of another
+    /// size than the frame's, or a mask that is not 0 or 1, are refused.
+    #[test]
+    fn frame_components_round_trip_and_refuse_bad_sizes() {
+        let image = |pixels: Vec<Vec3>| vtfarm_imaging::Image {
+            width: 3,
+            height: 1,
+            pixels,
+        };
+        let frame = FrameImage::from_components(
+            image(vec![Vec3::ONE, Vec3::X, Vec3::Y]),
+            Components {
+                reflected: image(vec![Vec3::ZERO, Vec3::splat(0.25), Vec3::Z]),
+                transmitted: image(vec![Vec3::ZERO, Vec3::splat(1e-30), Vec3::X]),
+                reflected_object: vec![vtfarm_scene::NONE, 7, 0],
+                mask: vec![false, true, true],
+            },
+        );
+        let wire = crate::WireFrameAux::encode(&frame);
+        assert_eq!(
+            wire.clone().into_components(frame.color.clone()).unwrap(),
+            frame
+        );
+
+        let wider = vtfarm_imaging::Image::black(4, 1);
+        let error = wire
+            .clone()
+            .into_components(wider)
+            .expect_err("a wider frame");
+        assert!(
+            error.to_string().contains("reflected component = 3x1"),
+            "{error}"
+        );
+        let mut bad_mask = wire;
+        bad_mask.mask = compress(&[0, 2, 1]);
+        let error = (bad_mask.into_components(frame.color.clone())).expect_err("a mask of 2");
+        assert!(error.to_string().contains("mask = 2 at pixel 1"), "{error}");
     }
 
     /// An sRGB frame carries exactly the bytes a PNG of the linear one

@@ -520,7 +520,9 @@ impl<'a> Farm<'a> {
                 bytes,
             } => {
                 result.busy_micros = (self.now - started).as_micros() as u64;
-                if let Some(open) = (self.busy[worker].iter_mut()).rfind(|(s, e)| *s == started && e.is_none()) {
+                if let Some(open) =
+                    (self.busy[worker].iter_mut()).rfind(|(s, e)| *s == started && e.is_none())
+                {
                     open.1 = Some(self.now);
                 }
                 let id = result.id;
@@ -835,7 +837,10 @@ mod tests {
                 }
             }
         }
-        assert!(old_measure_beat_the_work, "the sweep no longer shows the bunching");
+        assert!(
+            old_measure_beat_the_work,
+            "the sweep no longer shows the bunching"
+        );
     }
 
     /// Same inputs, same frames at the same virtual times; every frame is
@@ -859,9 +864,7 @@ mod tests {
     fn four_workers_without_fixed_costs_are_nearly_four_times_as_fast() {
         let (job, costs) = small_farm(0.0, 0.0);
         let interval = |n| {
-            steady_frame_seconds(
-                &simulate_farm(&job, &costs, &config(6), &workers(n)).unwrap(),
-            )
+            steady_frame_seconds(&simulate_farm(&job, &costs, &config(6), &workers(n)).unwrap())
         };
         let (one, four) = (interval(1), interval(4));
         let work: f64 = costs.seconds.iter().sum();
@@ -879,9 +882,7 @@ mod tests {
             ..config(5)
         };
         let interval = |config: &FarmConfig, n| {
-            steady_frame_seconds(
-                &simulate_farm(&job, &costs, config, &workers(n)).unwrap(),
-            )
+            steady_frame_seconds(&simulate_farm(&job, &costs, config, &workers(n)).unwrap())
         };
         let (one, two) = (interval(&shared, 1), interval(&shared, 2));
         assert!(two > one * 0.95, "one {one} s, two {two} s");
@@ -907,9 +908,7 @@ mod tests {
             let workers: Vec<FarmWorker> = (workers(1).into_iter())
                 .map(|w| FarmWorker { cores, ..w })
                 .collect();
-            steady_frame_seconds(
-                &simulate_farm(&job, &costs, &config(8), &workers).unwrap(),
-            )
+            steady_frame_seconds(&simulate_farm(&job, &costs, &config(8), &workers).unwrap())
         };
         let (one, two) = (interval(1), interval(2));
         assert!(one >= work + 0.3 * 0.99, "one core: {one} s");

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use vtfarm_cockpit::CockpitConfig;
-use vtfarm_raster::PixelRect;
+use vtfarm_raster::{IdPass, PixelRect};
 use vtfarm_render::Renderer;
 use vtfarm_vertex::{PixelValue, Quality, VertexSettings, reflector_bounds};
 
@@ -106,6 +106,41 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                 ))
             });
             let setup = least(&|| drop(renderer.id_buffers(&job.setup)));
+            // The same in CPU time per set-up over a few rounds: what the
+            // set-up costs a busy machine's cores, whatever else runs.
+            let setup_cpu = process_cpu_seconds().map(|before| {
+                let rounds = args.rounds.max(1) * 2;
+                for _ in 0..rounds {
+                    pool.install(|| drop(renderer.id_buffers(&job.setup)));
+                }
+                process_cpu_seconds().map_or(f64::NAN, |after| (after - before) / f64::from(rounds))
+            });
+            // A worker's three buffers (frame, behind the glass, the slab's
+            // back) rasterized one by one and together, rounds interleaved
+            // so that both see the same machine.
+            let all = |_: u32| true;
+            let passes = [0, 16, 0].map(|margin| IdPass {
+                within: reflector_bounds(scene, camera, &is_reflector, margin),
+                keep: &all,
+            });
+            let (mut apart, mut together) = (f64::INFINITY, f64::INFINITY);
+            for _ in 0..args.rounds.max(1) {
+                let start = Instant::now();
+                pool.install(|| {
+                    for pass in &passes {
+                        drop(vtfarm_raster::id_buffer_within(
+                            scene,
+                            camera,
+                            pass.within,
+                            pass.keep,
+                        ));
+                    }
+                });
+                apart = apart.min(start.elapsed().as_secs_f64());
+                let start = Instant::now();
+                pool.install(|| drop(vtfarm_raster::id_buffers_within(scene, camera, &passes)));
+                together = together.min(start.elapsed().as_secs_f64());
+            }
             // The glass terms are computed pixel by pixel as packages finish
             // them: one thread, whatever the pool. Timed in runs of a few
             // hundred microseconds, the least of each kept, so that a
@@ -137,7 +172,8 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                 base - ids
             );
             println!(
-                "    worker set-up {setup:.4} s; thin-glass terms of {} glass px {terms:.4} s ({:.0} ns/px)",
+                "    worker set-up {setup:.4} s ({} CPU; three buffers one by one {apart:.4} s, together {together:.4} s); thin-glass terms of {} glass px {terms:.4} s ({:.0} ns/px)",
+                setup_cpu.map_or("no".to_owned(), |c| format!("{c:.4} s")),
                 glass.len(),
                 terms * 1e9 / glass.len().max(1) as f64
             );
@@ -148,4 +184,17 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
 
 fn pixels(r: PixelRect) -> u64 {
     u64::from(r.x1 - r.x0) * u64::from(r.y1 - r.y0)
+}
+
+/// This process's CPU time (user and system, all threads) from
+/// `/proc/self/stat`, in 10-ms ticks; `None` where there is no such file.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The fields after the command name (which may hold spaces), from the
+    // third on: utime and stime are the 14th and 15th.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let mut fields = rest.split(' ').skip(11);
+    let utime: u64 = fields.next()?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
 }

@@ -426,7 +426,11 @@ impl Row {
         let last = &frames.last().context("no frame simulated")?.stats;
         let ideal: f64 = speeds.iter().sum();
         let frame_seconds = steady_frame_seconds(frames);
-        let after_first = if frames.len() > 1 { &frames[1..] } else { frames };
+        let after_first = if frames.len() > 1 {
+            &frames[1..]
+        } else {
+            frames
+        };
         Ok(Row {
             workers: speeds.len(),
             link_mbit,
@@ -714,7 +718,16 @@ fn print_report(
     );
     println!(
         "{:>7} {:>6} {:>6} {:>6} {:>9} {:>7} {:>7} {:>7} {:>8} {:>8}",
-        "workers", "link", "set", "ideal", "frame s", "effic.", "vs 1", "imb.", "latency", "packages"
+        "workers",
+        "link",
+        "set",
+        "ideal",
+        "frame s",
+        "effic.",
+        "vs 1",
+        "imb.",
+        "latency",
+        "packages"
     );
     for r in rows {
         println!(

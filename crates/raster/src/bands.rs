@@ -22,7 +22,9 @@ const BAND_ROWS: u32 = 16;
 /// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel
 /// inside `within` (the rest stays empty). A pixel's result does not depend
 /// on `within`, as long as it lies inside.
-pub(crate) fn resolve_visibility(
+/// `triangles` come in [`nearest_first`] order (a subsequence of such a
+/// list keeps it, so several buffers made from one set-up sort it once).
+pub(crate) fn resolve_nearest_first(
     triangles: &[RasterTriangle],
     ids: &mut IdBuffer,
     within: PixelRect,
@@ -32,7 +34,6 @@ pub(crate) fn resolve_visibility(
     if within.is_empty() {
         return;
     }
-    let triangles = &nearest_first(triangles);
     let bins = Bins::new(triangles, ids.height);
     let band_len = width * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
@@ -95,7 +96,7 @@ fn farthest(depths: &[f32]) -> f32 {
 
 /// `triangles` nearest first (ties in their order), copied so that bands
 /// read them in memory order.
-fn nearest_first(triangles: &[RasterTriangle]) -> Vec<RasterTriangle> {
+pub(crate) fn nearest_first(triangles: &[RasterTriangle]) -> Vec<RasterTriangle> {
     // Positive depths order like their bits: sort (depth bits, index) keys.
     let mut keys: Vec<u64> = triangles
         .par_iter()

@@ -196,15 +196,16 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
             .map(|_| IdBuffer::new(camera.width, camera.height))
             .collect();
     };
-    let triangles = setup::setup(scene, camera, NEAR, union, &|t| {
+    let triangles = bands::nearest_first(&setup::setup(scene, camera, NEAR, union, &|t| {
         passes.iter().any(|p| (p.keep)(t))
-    });
+    }));
     passes
         .iter()
         .map(|pass| {
             let within = clamp(pass.within);
             // A triangle's set-up does not depend on the rectangle beyond
-            // which triangles are dropped, so the pass's own are these.
+            // which triangles are dropped, so the pass's own are these,
+            // still nearest first.
             let kept: Vec<_> = if within.is_empty() {
                 Vec::new()
             } else {
@@ -257,7 +258,7 @@ fn rasterize_ids(
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
     let triangles = setup::setup(scene, camera, near, within, keep);
-    resolve(scene, camera, &triangles, within)
+    resolve(scene, camera, &bands::nearest_first(&triangles), within)
 }
 
 /// Panics unless the camera's image fits the rasterizer.
@@ -270,7 +271,8 @@ fn check_camera(camera: &Camera) {
     );
 }
 
-/// The ID buffer of set-up `triangles` over `within` (inside the image).
+/// The ID buffer of set-up `triangles`, nearest first
+/// (`bands::nearest_first`), over `within` (inside the image).
 fn resolve(
     scene: &Scene,
     camera: &Camera,
@@ -281,7 +283,7 @@ fn resolve(
     if within.is_empty() {
         return ids;
     }
-    bands::resolve_visibility(triangles, &mut ids, within);
+    bands::resolve_nearest_first(triangles, &mut ids, within);
     let IdBuffer {
         object, triangle, ..
     } = &mut ids;
