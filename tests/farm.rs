@@ -767,9 +767,11 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
         .filter(|w| w.name.starts_with("leaving"))
         .map(|w| w.packages)
         .sum();
+    // The package it ran was finished and counted; at most the one it had
+    // asked for ahead (queued behind it) went back to the queue.
     assert!(
-        leaving_packages >= 1 && stats.requeued == 0,
-        "the package it held was finished and counted, not requeued: {stats:?}"
+        leaving_packages >= 1 && stats.requeued <= 1,
+        "the running package was finished and counted: {stats:?}"
     );
 }
 

@@ -488,13 +488,11 @@ impl MasterCore {
         match message {
             Message::Heartbeat => {}
             Message::RequestWork { job, frame } => {
-                // Only a worker set up for the newest frame may get work
-                // (it keeps the frame before too).
+                // A request for a job that is over is stale; a worker sets
+                // a frame up when its first package of it comes, so any
+                // frame of the running job will do.
                 let running = self.scheduler.queue().running.map(|r| r.job.0);
-                let newest = (running.and_then(|r| self.jobs.get(&r)))
-                    .and_then(|j| j.assembling.last())
-                    .map(|a| (a.start.job, a.start.frame));
-                if newest == Some((job, frame)) {
+                if running == Some(job) {
                     self.record_setup(conn, job, frame);
                     let _ = self.scheduler.request_work(now, worker);
                 }

@@ -264,12 +264,12 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         "{out:?}"
     );
     h.core.disconnected(h.now, INTRUDER);
-    // A request for another frame is stale and gets nothing.
+    // A request for another job is stale and gets nothing.
     let out = h.send(
         WORKER,
         Message::RequestWork {
-            job,
-            frame: frame + 1,
+            job: job + 1,
+            frame,
         },
     );
     assert!(messages_to(&out, WORKER).is_empty());

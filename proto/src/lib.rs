@@ -63,7 +63,7 @@ pub const PROTOCOL_VERSION: u32 = 5;
 /// How many frames of a job the master runs at once (pipelined frames) and
 /// so how many prepared frames a worker keeps: a package of any of them may
 /// come. The master's scheduler configuration must not exceed it.
-pub const FRAMES_IN_FLIGHT: usize = 4;
+pub const FRAMES_IN_FLIGHT: usize = 8;
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

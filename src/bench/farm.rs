@@ -119,24 +119,35 @@ pub(crate) struct FarmFrame {
     /// idle time). A worker idle throughout counts with 0; 0 when no
     /// worker traced.
     pub(crate) imbalance: f64,
+    /// The share of the frame's traced work done after the first frame's
+    /// delivery.
+    pub(crate) share_after_first_delivery: f64,
+    /// The frame's index in its job.
+    pub(crate) index: u32,
     pub(crate) stats: FrameStats,
 }
 
-/// Steady-state seconds per frame: from the second frame's announcement
-/// to the last frame's delivery, over the frames in between (the
-/// first frame, with the scene's way and uniform cost estimates, is left
-/// out; one frame: its own lifetime). Every one of those frames' work is
-/// traced inside that window, so it is never shorter than their work over
+/// Steady-state seconds per frame: the window from the first frame's
+/// delivery to the last frame's over the frames traced in it, each counted
+/// with the share of its work done in the window (one frame: its own
+/// lifetime). The start-up (the scene's way to every worker, uniform cost
+/// estimates) is left out, whichever frames were announced meanwhile. When
+/// less than a frame's work is left after the first delivery (a short job
+/// whose frames all ran at once), the window is the whole job instead. The
+/// window holds that much work, so it is never shorter than that work over
 /// the workers' summed speed: an efficiency from it cannot exceed 100%,
-/// however the pipelined frames bunch at the end.
+/// however pipelined frames bunch.
 pub(crate) fn steady_frame_seconds(frames: &[FarmFrame]) -> f64 {
-    let (first, last) = match frames {
-        [] => return 0.0,
-        [only] => (only, only),
-        [_, second, ..] => (second, frames.last().expect("at least two frames")),
+    let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
+        return 0.0;
     };
-    let counted = frames.len().saturating_sub(1).max(1);
-    last.done_at.saturating_sub(first.started_at).as_secs_f64() / counted as f64
+    let traced: f64 = frames.iter().map(|f| f.share_after_first_delivery).sum();
+    let (from, traced) = if traced >= 1.0 {
+        (first.done_at, traced)
+    } else {
+        (first.started_at, frames.len() as f64)
+    };
+    last.done_at.saturating_sub(from).as_secs_f64() / traced
 }
 
 /// The job the simulated master runs: the real scene and reflectors, one
@@ -145,6 +156,17 @@ pub(crate) struct FarmJob {
     pub(crate) scene: Arc<Scene>,
     pub(crate) reflectors: Vec<u32>,
     pub(crate) setup: FrameSetup,
+}
+
+/// One package run on a worker.
+#[derive(Clone, Debug)]
+struct PackageRun {
+    start: Duration,
+    /// `None` while it runs.
+    end: Option<Duration>,
+    frame: u32,
+    /// Its items' one-thread seconds.
+    work: f64,
 }
 
 /// Connection of the submitter; workers get 1, 2, ...
@@ -167,31 +189,50 @@ pub(crate) fn simulate_farm(
             farm.now
         );
     }
+    let end = farm.now;
     let mut frames = farm.frames;
+    let first_delivery = frames.first().map_or(end, |f| f.done_at);
     for frame in &mut frames {
-        frame.imbalance = window_imbalance(&farm.busy, frame.started_at, frame.done_at, farm.now);
+        frame.imbalance = window_imbalance(&farm.busy, frame.started_at, frame.done_at, end);
+        let index = frame.index;
+        let runs = farm.busy.iter().flatten().filter(|r| r.frame == index);
+        let (after, all) = runs.fold((0.0, 0.0), |(after, all), r| {
+            let share = r.share_within(first_delivery, end, end);
+            (after + r.work * share, all + r.work)
+        });
+        frame.share_after_first_delivery = if all > 0.0 { after / all } else { 0.0 };
     }
     Ok(frames)
+}
+
+impl PackageRun {
+    /// Seconds of it within `[from, to]` (running until `end` if it still runs).
+    fn within(&self, from: Duration, to: Duration, end: Duration) -> f64 {
+        let (start, stop) = (self.start.max(from), self.end.unwrap_or(end).min(to));
+        stop.saturating_sub(start).as_secs_f64()
+    }
+
+    /// The share of it within `[from, to]`.
+    fn share_within(&self, from: Duration, to: Duration, end: Duration) -> f64 {
+        let length = self
+            .end
+            .unwrap_or(end)
+            .saturating_sub(self.start)
+            .as_secs_f64();
+        if length > 0.0 {
+            self.within(from, to, end) / length
+        } else {
+            f64::from(u8::from(self.start >= from))
+        }
+    }
 }
 
 /// `(max − mean) / mean` of each worker's package time within
 /// `[from, to]` (packages still running at `end` run until then); 0 when
 /// nobody traced.
-fn window_imbalance(
-    busy: &[Vec<(Duration, Option<Duration>)>],
-    from: Duration,
-    to: Duration,
-    end: Duration,
-) -> f64 {
+fn window_imbalance(busy: &[Vec<PackageRun>], from: Duration, to: Duration, end: Duration) -> f64 {
     let within: Vec<f64> = (busy.iter())
-        .map(|intervals| {
-            (intervals.iter())
-                .map(|&(start, stop)| {
-                    let (start, stop) = (start.max(from), stop.unwrap_or(end).min(to));
-                    stop.saturating_sub(start).as_secs_f64()
-                })
-                .sum()
-        })
+        .map(|runs| runs.iter().map(|r| r.within(from, to, end)).sum())
         .collect();
     let mean = within.iter().sum::<f64>() / within.len().max(1) as f64;
     let max = within.iter().copied().fold(0.0, f64::max);
@@ -298,9 +339,8 @@ struct Farm<'a> {
     frames: Vec<FarmFrame>,
     /// When each frame was first announced to a worker.
     frame_started: BTreeMap<u32, Duration>,
-    /// Per worker, its packages' (start, end) on the virtual clock; a
-    /// package still running has no end yet.
-    busy: Vec<Vec<(Duration, Option<Duration>)>>,
+    /// Per worker, its packages on the virtual clock.
+    busy: Vec<Vec<PackageRun>>,
 }
 
 impl<'a> Farm<'a> {
@@ -520,10 +560,10 @@ impl<'a> Farm<'a> {
                 bytes,
             } => {
                 result.busy_micros = (self.now - started).as_micros() as u64;
-                if let Some(open) =
-                    (self.busy[worker].iter_mut()).rfind(|(s, e)| *s == started && e.is_none())
-                {
-                    open.1 = Some(self.now);
+                let open =
+                    (self.busy[worker].iter_mut()).rfind(|r| r.start == started && r.end.is_none());
+                if let Some(run) = open {
+                    run.end = Some(self.now);
                 }
                 let id = result.id;
                 let session = &mut self.workers[worker].session;
@@ -617,6 +657,8 @@ impl<'a> Farm<'a> {
                         started_at: started_at.unwrap_or(self.now),
                         done_at: self.now,
                         imbalance: 0.0,
+                        share_after_first_delivery: 0.0,
+                        index: done.frame,
                         stats: done.stats,
                     });
                     self.start_cpu(0, self.costs.journal, Work::Background);
@@ -707,7 +749,12 @@ impl<'a> Farm<'a> {
                         None => self.workers[w].spec.cores.max(1),
                     };
                     let seconds = (work + overhead) / speed;
-                    self.busy[w].push((self.now, None));
+                    self.busy[w].push(PackageRun {
+                        start: self.now,
+                        end: None,
+                        frame: package.frame,
+                        work,
+                    });
                     self.start_threads(machine, threads, seconds, package_work);
                 }
             }

@@ -56,10 +56,9 @@ pub(crate) struct SimulateArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [1usize, 2, 4, 8, 16, 32, 64])]
     workers: Vec<usize>,
     /// Frames per simulated job (each the recorded frame).
-    /// The first is left out of the figures and the frame time is taken
-    /// from the second's start to the last's delivery, so more frames
-    /// blur the pipeline's ramp less.
-    #[arg(long, default_value_t = 8)]
+    /// The frame time is taken from the first's delivery to the last's, so
+    /// more frames blur the pipeline's ramp up and down less.
+    #[arg(long, default_value_t = 32)]
     frames: usize,
     /// Link bandwidths in Mbit/s: every worker's own link and the master's
     /// one shared link.
@@ -406,8 +405,10 @@ struct Row {
     /// One thread's tracing per frame over (`frame_seconds` × `ideal`):
     /// at most 1 (see `steady_frame_seconds`).
     efficiency: f64,
-    /// Largest imbalance of the frames after the first (of the only frame
-    /// when there is one).
+    /// Largest imbalance of the frames after the first that were delivered
+    /// before the last frame was announced (then the job drains: workers
+    /// idle when no frame is left to start); of all after the first when
+    /// none was.
     imbalance_after_first: f64,
 }
 
@@ -426,10 +427,18 @@ impl Row {
         let last = &frames.last().context("no frame simulated")?.stats;
         let ideal: f64 = speeds.iter().sum();
         let frame_seconds = steady_frame_seconds(frames);
-        let after_first = if frames.len() > 1 {
-            &frames[1..]
+        // The steady frames: after the first (the start-up) and delivered
+        // before the last frame was announced (from then on the job
+        // drains: a worker that runs out of work finds no frame to start).
+        let last_announced = frames.last().context("no frame simulated")?.started_at;
+        let after_first = frames.get(1..).filter(|f| !f.is_empty()).unwrap_or(frames);
+        let undrained: Vec<&FarmFrame> = (after_first.iter())
+            .filter(|f| f.done_at <= last_announced)
+            .collect();
+        let steady: Vec<&FarmFrame> = if undrained.is_empty() {
+            after_first.iter().collect()
         } else {
-            frames
+            undrained
         };
         Ok(Row {
             workers: speeds.len(),
@@ -446,9 +455,7 @@ impl Row {
             duplicates: last.duplicates,
             frame_seconds,
             efficiency: work / (frame_seconds * ideal).max(1e-12),
-            imbalance_after_first: (after_first.iter())
-                .map(|f| f.imbalance)
-                .fold(0.0, f64::max),
+            imbalance_after_first: (steady.iter()).map(|f| f.imbalance).fold(0.0, f64::max),
         })
     }
 }
@@ -714,7 +721,7 @@ fn print_report(
         }
     );
     println!(
-        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the second frame's announcement to the last frame's delivery, over the frames after the first (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
+        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the first frame's delivery to the last's, over the frames' work traced in between (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first and delivered before the last frame's announcement (the job's drain) of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
     );
     println!(
         "{:>7} {:>6} {:>6} {:>6} {:>9} {:>7} {:>7} {:>7} {:>8} {:>8}",

@@ -6,17 +6,17 @@
 //! socket, no clock and no thread; `serve.rs` drives it over a `Link`, and
 //! the master's fault harness drives it on a virtual clock.
 //!
-//! Pull-based: the worker asks for work (`RequestWork`) once its newest frame
-//! is ready and it is idle, runs one package at a time (the package itself uses
-//! every core), and sends the result or the error. The master pipelines
-//! frames (it announces frame N+1 while N's last packages run and may still
-//! hand out N's requeued work), so the frames prepared before the newest one
-//! stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all. Frames are
-//! prepared one at a time, the newest announced first: a frame announced
-//! while another is being set up waits for it, and a frame skipped that way
-//! is prepared only if a package of it comes (before, such a package failed,
-//! and three of them blocklisted the worker). Scenes are fetched only
-//! when the store lacks them. Heartbeats go out every [`HEARTBEAT_INTERVAL`].
+//! Pull-based: the worker asks for work (`RequestWork`, naming the newest
+//! frame it heard of) whenever it has no package waiting, so one package is
+//! asked for ahead while another runs; it runs one package at a time (the
+//! package itself uses every core), and sends the result or the error. The
+//! master pipelines frames and gives each frame's work to a crew of workers
+//! (frame affinity), so a frame is prepared only when a package of it comes:
+//! a worker sets up the frames of its crew, not every frame announced.
+//! Prepared frames stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all.
+//! Frames are prepared one at a time, for the first waiting package. Scenes
+//! are fetched only when the store lacks them. Heartbeats go out every
+//! [`HEARTBEAT_INTERVAL`].
 //!
 //! Draining (SIGTERM): no more requests; the package in hand (the running
 //! one, or else the first received, whose frame may still be set up)
@@ -103,10 +103,8 @@ pub struct WorkerSession {
     older: VecDeque<FrameKey>,
     /// A frame handed to the driver for preparation (one at a time).
     preparing: Option<FrameKey>,
-    /// Frames announced and not prepared yet, oldest first: the newest is
-    /// prepared next; an older one only when a package of it comes (a
-    /// requeued or straggler package of a frame the worker skipped while
-    /// it was setting another up).
+    /// Frames announced and not prepared yet, oldest first: one is prepared
+    /// when a package of it comes.
     announced: VecDeque<FrameStart>,
     /// A frame whose scene is still on its way.
     awaiting_scene: Option<FrameStart>,
@@ -116,8 +114,7 @@ pub struct WorkerSession {
     running: Option<PackageId>,
     /// Packages the master took back while they ran: their results are dropped.
     cancelled: BTreeSet<PackageId>,
-    /// Whether a `RequestWork` is outstanding: work is asked for only once
-    /// the frame is ready, so the load balancer never counts set-up as tracing.
+    /// Whether a `RequestWork` is outstanding.
     requested: bool,
     next_heartbeat: Duration,
     /// When draining gives up on the running package.
@@ -225,8 +222,9 @@ impl WorkerSession {
         message: Message,
         scenes: &mut impl SceneStore,
     ) {
-        // A package answers the request; a new frame voids it (the master
-        // drops requests for other frames).
+        // A package answers the request. A frame start renews it: the
+        // master drops a request naming a job that is no longer running
+        // (asking twice changes nothing at the master).
         self.requested &= !matches!(message, Message::Package(_) | Message::FrameStart(_));
         match message {
             Message::Shutdown => self.end = Some(SessionEnd::Shutdown),
@@ -299,8 +297,7 @@ impl WorkerSession {
 
     /// Hands the driver the next frame to prepare, if none is being
     /// prepared: the frame of the first waiting package if it is only
-    /// announced, else the newest announced frame when it is newer than
-    /// the ready one. A draining session prepares only the frame of the
+    /// announced. A draining session prepares only the frame of the
     /// package in hand.
     fn prepare_next(&mut self) {
         if self.preparing.is_some() {
@@ -310,16 +307,7 @@ impl WorkerSession {
         let wanted = (self.queue.front())
             .filter(|p| !draining || Some(p.id) == self.held_at_drain)
             .map(|p| (p.job, p.frame));
-        let position = (self.announced.iter())
-            .position(|f| Some((f.job, f.frame)) == wanted)
-            .or_else(|| {
-                if draining {
-                    return None;
-                }
-                let newest = self.announced.back()?;
-                let key = (newest.job, newest.frame);
-                (self.ready.is_none_or(|r| key > r)).then(|| self.announced.len() - 1)
-            });
+        let position = (self.announced.iter()).position(|f| Some((f.job, f.frame)) == wanted);
         if let Some(start) = position.and_then(|i| self.announced.remove(i)) {
             self.preparing = Some((start.job, start.frame));
             self.tasks.push_back(Task::PrepareFrame(start));
@@ -366,6 +354,9 @@ impl WorkerSession {
         if self.end.is_some() {
             return;
         }
+        // The frame of a package that came while another runs is set up
+        // beside it.
+        self.prepare_next();
         while self.running.is_none() {
             let Some(package) = self.queue.front() else {
                 break;
@@ -385,7 +376,7 @@ impl WorkerSession {
             if self.ready != Some(key) && !self.older.contains(&key) {
                 let announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
                 if announced {
-                    // A frame skipped while another was set up: prepare it now.
+                    // Its first package: prepare the frame now.
                     self.prepare_next();
                     break;
                 }
@@ -417,12 +408,16 @@ impl WorkerSession {
             }
             return;
         }
-        let idle = self.running.is_none() && self.queue.is_empty();
-        // Work is asked for the newest frame only, once it is prepared.
-        let newer_announced =
-            (self.announced.iter()).any(|f| self.ready.is_none_or(|r| (f.job, f.frame) > r));
-        let settled = self.awaiting_scene.is_none() && self.preparing.is_none() && !newer_announced;
-        if let Some((job, frame)) = self.ready.filter(|_| idle && settled && !self.requested) {
+        // One package ahead: the next one is asked for while one runs, so
+        // the master's answer (its driver may be busy finishing a frame)
+        // overlaps the tracing.
+        let nothing_queued = self.queue.is_empty();
+        // The newest frame heard of names the job the worker asks work of.
+        let newest = (self.announced.iter().map(|f| (f.job, f.frame)))
+            .chain(self.ready)
+            .max();
+        let asks = nothing_queued && self.awaiting_scene.is_none() && !self.requested;
+        if let Some((job, frame)) = newest.filter(|_| asks) {
             self.outbox.push_back(Message::RequestWork { job, frame });
             self.requested = true;
         }

@@ -30,6 +30,15 @@ pub struct SchedulerConfig {
     /// last packages finish; frames still complete in order. Default 1 (no
     /// pipelining); values below 1 are read as 1.
     pub frames_in_flight: u32,
+    /// Frame affinity (for workers that set a frame up before its first
+    /// package, as vtfarm's do): a worker keeps taking work of the frames
+    /// it already has, and each running frame's fresh work goes to a crew
+    /// of about `workers / (frames_in_flight - 1)` workers (at least 4), so a worker
+    /// sets up only some of the frames instead of every one. A worker
+    /// whose frames have nothing left joins a frame whose crew is short,
+    /// else starts the next frame, else helps the oldest frame with work
+    /// left. Package sizes follow the frame's crew. Default `false`.
+    pub frame_affinity: bool,
 }
 
 impl Default for SchedulerConfig {
@@ -42,22 +51,25 @@ impl Default for SchedulerConfig {
             estimation: CostEstimation::default(),
             requests_lapse_at_frame_start: false,
             frames_in_flight: 1,
+            frame_affinity: false,
         }
     }
 }
 
 impl SchedulerConfig {
-    /// The rules of vtfarm's master, whose workers set each frame up before
-    /// they ask for its work: requests lapse at a frame start, and
-    /// [`FARM_FRAMES_IN_FLIGHT`] frames are pipelined (a worker keeps that
-    /// many frames prepared: `vtfarm_proto::FRAMES_IN_FLIGHT`). The master
-    /// core takes its configuration through here (and `vtfarm bench
-    /// simulate` runs that core), as does this crate's `sim` when it plays
-    /// the farm.
+    /// The rules of vtfarm's master, whose workers set a frame up when its
+    /// first package for them comes: [`FARM_FRAMES_IN_FLIGHT`] frames are
+    /// pipelined (a worker keeps that many frames prepared:
+    /// `vtfarm_proto::FRAMES_IN_FLIGHT`) with frame affinity, so that a
+    /// worker sets up only the frames of its crew; requests carry over.
+    /// The master core takes its configuration through here (and `vtfarm
+    /// bench simulate` runs that core), as does this crate's `sim` when it
+    /// plays the farm.
     pub fn farm(self) -> Self {
         SchedulerConfig {
-            requests_lapse_at_frame_start: true,
+            requests_lapse_at_frame_start: false,
             frames_in_flight: FARM_FRAMES_IN_FLIGHT,
+            frame_affinity: true,
             ..self
         }
     }
@@ -66,7 +78,7 @@ impl SchedulerConfig {
 /// Frames in flight under [`SchedulerConfig::farm`]: enough that a frame's
 /// most expensive item (one reflector triangle can be a tenth of a frame's
 /// work) does not keep the other workers waiting for the next frame.
-pub const FARM_FRAMES_IN_FLIGHT: u32 = 4;
+pub const FARM_FRAMES_IN_FLIGHT: u32 = 8;
 
 /// How big a package is (guided self-scheduling, "large early, small late").
 ///

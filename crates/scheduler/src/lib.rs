@@ -50,6 +50,15 @@
 //!   soon as the newest running one has nothing left to hand out, so idle
 //!   workers take its packages while older frames' last ones finish (frames
 //!   complete in order; older frames' requeued work first).
+//! * **Frame affinity** ([`SchedulerConfig::frame_affinity`], the farm's
+//!   rules, for workers that set a frame up before its first package): a
+//!   waiting worker takes work of a running frame it already has (oldest
+//!   first), else requeued work of any frame, else joins a frame whose crew
+//!   (the workers that took their last own package of it) is short of
+//!   `max(workers / (frames_in_flight − 1), 4)`, else starts the next frame,
+//!   else, when none may start, helps the oldest frame with work left.
+//!   Packages are sized within the frame's crew. A worker so sets up only
+//!   its crew's frames, not every frame.
 //! * **Held results.** A driver that checks results only later (the master
 //!   waits for the frame's base image) reports them with
 //!   [`Scheduler::package_arrived`] first: such a package is no straggler and

@@ -54,6 +54,11 @@ struct Worker {
     items_done: u64,
     busy: Duration,
     failures: u64,
+    /// Running frames of the running job it got packages of (so has set
+    /// up), for [`SchedulerConfig::frame_affinity`].
+    frames: BTreeSet<u32>,
+    /// The frame it took its last own (not duplicate) package of: its crew.
+    crew: Option<u32>,
 }
 
 #[derive(Debug)]
@@ -104,6 +109,12 @@ impl RunningJob {
         (self.running_frames_mut()).find(|f| f.index == index)
     }
 }
+
+/// The smallest crew under frame affinity: a small farm keeps every
+/// worker on every frame (a frame's latency stays short and one slow
+/// worker never holds a frame alone); set-ups only matter once a worker's
+/// share of a frame is small.
+const MIN_CREW: usize = 4;
 
 /// How many recent packages a worker's compute rate is the median of.
 const COMPUTE_SAMPLES: usize = 16;
@@ -180,6 +191,8 @@ impl Scheduler {
                         items_done: 0,
                         busy: Duration::ZERO,
                         failures: 0,
+                        frames: BTreeSet::new(),
+                        crew: None,
                     },
                 );
             }
@@ -588,8 +601,11 @@ impl Scheduler {
         loop {
             self.start_jobs_and_frames();
             self.hand_out();
-            // Handing out a frame's last work may start the next frame.
-            if !self.may_start_ahead() {
+            // Handing out a frame's last work may start the next frame, and
+            // so may a worker that waits for a frame of its own.
+            if self.a_worker_waits_for_a_frame() {
+                self.start_ahead();
+            } else if !self.may_start_ahead() {
                 break;
             }
         }
@@ -632,11 +648,31 @@ impl Scheduler {
     fn may_start_ahead(&self) -> bool {
         self.running.as_ref().is_some_and(|job| {
             let newest = job.ahead.back().unwrap_or(&job.frame);
-            job.ahead.len() + 1 < self.config.frames_in_flight as usize
-                && !job.frames.is_empty()
-                && !newest.has_unassigned()
-                && !job.frame.is_complete()
+            self.room_for_a_frame(job) && !newest.has_unassigned()
         })
+    }
+
+    /// Whether, after hand-out, a worker still waits for a frame of its
+    /// own under frame affinity and another frame may start for it.
+    fn a_worker_waits_for_a_frame(&self) -> bool {
+        self.config.frame_affinity
+            && self
+                .running
+                .as_ref()
+                .is_some_and(|job| self.room_for_a_frame(job) && self.a_worker_waits(job))
+    }
+
+    /// Whether another frame of `job` may start now.
+    fn room_for_a_frame(&self, job: &RunningJob) -> bool {
+        job.ahead.len() + 1 < self.config.frames_in_flight as usize
+            && !job.frames.is_empty()
+            && !job.frame.is_complete()
+    }
+
+    /// Whether a worker that may work on `job` still waits (after hand-out:
+    /// with frame affinity, for a frame of its own).
+    fn a_worker_waits(&self, job: &RunningJob) -> bool {
+        self.waiting.iter().any(|w| !job.blocklist.contains(w))
     }
 
     /// Completes finished frames and jobs and starts the next ones, until a
@@ -662,6 +698,11 @@ impl Scheduler {
                 .filter_map(|(&id, w)| Some((id, w.compute_rate()?)))
                 .collect();
             job.costs.learn(&job.frame, &speeds);
+            let finished = job.frame.index;
+            for w in self.workers.values_mut() {
+                w.frames.remove(&finished);
+                w.crew = w.crew.filter(|&c| c != finished);
+            }
             let stats = job.frame.finish_stats(self.now);
             self.events.push_back(Event::FrameComplete {
                 job: job.id,
@@ -734,6 +775,8 @@ impl Scheduler {
         for w in self.workers.values_mut() {
             w.rate = None;
             w.compute_samples.clear();
+            w.frames.clear();
+            w.crew = None;
         }
         let frame_count = u32::try_from(next.frames.len()).unwrap_or(u32::MAX);
         self.events.push_back(Event::JobStarted {
@@ -789,16 +832,25 @@ impl Scheduler {
         if job.blocklist.contains(&worker) {
             return None;
         }
-        let target = self.target_cost(worker);
-        // Unassigned work of the older frame first; stragglers only once
-        // both frames have nothing left to hand out.
-        for frame in job.running_frames() {
-            if let Some(pick) = self.pick_unassigned(frame, worker, target) {
+        if self.config.frame_affinity {
+            if let Some(pick) = self.pick_with_affinity(job, worker) {
                 return Some(pick);
             }
-        }
-        if job.running_frames().any(|f| !f.queue.is_empty()) {
-            return None;
+            if job.running_frames().any(Frame::has_unassigned) {
+                return None;
+            }
+        } else {
+            let target = self.target_cost(worker);
+            // Unassigned work of the older frame first; stragglers only once
+            // both frames have nothing left to hand out.
+            for frame in job.running_frames() {
+                if let Some(pick) = self.pick_unassigned(frame, worker, target) {
+                    return Some(pick);
+                }
+            }
+            if job.running_frames().any(|f| !f.queue.is_empty()) {
+                return None;
+            }
         }
         let policy = self.config.straggler.as_ref()?;
         self.running_packages()
@@ -806,6 +858,79 @@ impl Scheduler {
             .filter(|(_, p)| straggler_deadline(p, policy) <= self.now)
             .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
             .map(|(&id, _)| Pick::Duplicate(id))
+    }
+
+    /// Unassigned work for `worker` under frame affinity: of a frame it has
+    /// (oldest first), else requeued work of any frame (frames complete in
+    /// order), else of a frame whose crew is short; else nothing while a
+    /// new frame may start (the dispatcher starts it for this worker), and
+    /// once none may, of the oldest frame with work left.
+    fn pick_with_affinity(&self, job: &RunningJob, worker: WorkerId) -> Option<Pick> {
+        let w = self.workers.get(&worker)?;
+        let pick =
+            |frame: &Frame| self.pick_unassigned(frame, worker, self.crew_target(worker, frame));
+        let own = (job.running_frames()).filter(|f| w.frames.contains(&f.index));
+        if let Some(pick) = own.filter_map(pick).next() {
+            return Some(pick);
+        }
+        let requeued = (job.running_frames())
+            .filter(|f| !f.queue.is_empty())
+            .filter_map(pick)
+            .find(|p| matches!(p, Pick::Queued { .. }));
+        if requeued.is_some() {
+            return requeued;
+        }
+        let size = self.crew_size(job);
+        let short = (job.running_frames())
+            .filter(|f| f.next_fresh < f.items.len())
+            .find(|f| self.crew_of(f.index) < size);
+        if let Some(frame) = short {
+            return pick(frame);
+        }
+        if self.room_for_a_frame(job) {
+            return None;
+        }
+        job.running_frames().filter_map(pick).next()
+    }
+
+    /// Workers per frame under frame affinity: the eligible workers spread
+    /// over all but one of the frames in flight (the spare one lets a crew
+    /// whose frame has nothing left start the next while its last packages
+    /// run), but at least [`MIN_CREW`].
+    fn crew_size(&self, job: &RunningJob) -> usize {
+        let crews = (self.config.frames_in_flight.max(2) - 1) as usize;
+        self.eligible_workers(job)
+            .count()
+            .div_ceil(crews)
+            .max(MIN_CREW)
+    }
+
+    /// Connected workers not blocklisted for `job`.
+    fn eligible_workers<'a>(&'a self, job: &'a RunningJob) -> impl Iterator<Item = &'a Worker> {
+        (self.workers.iter())
+            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
+            .map(|(_, w)| w)
+    }
+
+    /// Connected workers whose crew is frame `index`.
+    fn crew_of(&self, index: u32) -> usize {
+        (self.workers.values())
+            .filter(|w| w.connected && w.crew == Some(index))
+            .count()
+    }
+
+    /// The cost of `worker`'s next package of `frame` under frame affinity:
+    /// guided self-scheduling within the frame's crew (the frame's
+    /// unassigned work over `k` times a full crew's rate).
+    fn crew_target(&self, worker: WorkerId, frame: &Frame) -> f64 {
+        let Some(job) = &self.running else {
+            return 0.0;
+        };
+        let prior = self.prior_rate_per_thread();
+        let (sum, count) = (self.eligible_workers(job))
+            .fold((0.0, 0usize), |(sum, n), w| (sum + w.rate_or(prior), n + 1));
+        let crew_rate = sum / count.max(1) as f64 * self.crew_size(job) as f64;
+        self.sized(frame.unassigned_cost(), crew_rate) * self.rate_of(worker)
     }
 
     /// A queued package of `frame` that `worker` may take (split when much
@@ -865,22 +990,28 @@ impl Scheduler {
             .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
             .map(|(_, w)| w.rate_or(prior))
             .sum();
+        let unassigned: f64 = job.running_frames().map(Frame::unassigned_cost).sum();
+        self.sized(unassigned, total_rate)
+            * self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+    }
+
+    /// A package's target duration in seconds: `unassigned` work over `k`
+    /// times `rate`, clamped (see [`PackageSizing`](crate::PackageSizing)).
+    fn sized(&self, unassigned: f64, rate: f64) -> f64 {
         let sizing = &self.config.sizing;
         let k = if sizing.guided_factor >= 1.0 {
             sizing.guided_factor
         } else {
             1.0
         };
-        let unassigned: f64 = job.running_frames().map(Frame::unassigned_cost).sum();
-        let seconds = unassigned / (k * total_rate);
+        let seconds = unassigned / (k * rate);
         let min = sizing.min_duration.as_secs_f64();
         let max = sizing.max_duration.as_secs_f64().max(min);
-        let seconds = if seconds.is_nan() {
+        if seconds.is_nan() {
             max
         } else {
             seconds.clamp(min, max)
-        };
-        seconds * self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+        }
     }
 
     /// The worker's rate (see [`Worker::rate_or`]).
@@ -1022,6 +1153,10 @@ impl Scheduler {
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.insert(id);
             w.wants_work = false;
+            w.frames.insert(frame.index);
+            if !duplicate {
+                w.crew = Some(frame.index);
+            }
         }
         self.assignments.push_back(Assignment {
             worker,

@@ -576,14 +576,14 @@ impl Simulation {
                 if let Err(error) = self.scheduler.worker_joined(now, id, threads) {
                     self.refused(error.to_string());
                 }
-                if !self.config.scheduler.requests_lapse_at_frame_start {
+                if !self.hears_frames() {
                     self.log(SimInput::Request(id));
                     if let Err(error) = self.scheduler.request_work(now, id) {
                         self.refused(error.to_string());
                     }
                 } else if let Some(key) = self.newest {
-                    // Like a real worker: it hears of the running frame,
-                    // sets it up and then asks.
+                    // Like a real worker: it hears of the running frame
+                    // (sets it up when requests lapse) and then asks.
                     let arrival =
                         self.arrival(index, self.config.header_bytes, Direction::ToWorker);
                     self.schedule(arrival, SimEvent::FrameStart(index, key));
@@ -619,7 +619,16 @@ impl Simulation {
                 }
             }
             SimEvent::ComputeEnd { worker, token } => self.compute_end(worker, token),
-            SimEvent::FrameStart(index, key) => self.frame_start(index, key),
+            SimEvent::FrameStart(index, key) => {
+                if self.config.scheduler.requests_lapse_at_frame_start {
+                    self.frame_start(index, key)
+                } else {
+                    // Frame affinity: a frame is set up with its first
+                    // package (not modelled); hearing of one, an idle
+                    // worker asks.
+                    self.ask_when_idle(index)
+                }
+            }
             SimEvent::FrameReady(index, key) => {
                 let ready = self
                     .workers
@@ -1004,7 +1013,7 @@ impl Simulation {
                     self.frame_starts.insert(key, self.master_free);
                     self.schedule(self.master_free, SimEvent::BaseReady(key));
                     self.newest = Some(key);
-                    if self.config.scheduler.requests_lapse_at_frame_start {
+                    if self.hears_frames() {
                         self.announce_frame(key);
                     }
                 }
@@ -1031,6 +1040,14 @@ impl Simulation {
             }
             self.report.events.push((now, event));
         }
+    }
+
+    /// Whether workers ask for work only once they heard of a frame, as
+    /// vtfarm's do (under requests that lapse or frame affinity); else they
+    /// ask as soon as they join.
+    fn hears_frames(&self) -> bool {
+        let rules = &self.config.scheduler;
+        rules.requests_lapse_at_frame_start || rules.frame_affinity
     }
 
     fn refused(&mut self, refusal: String) {

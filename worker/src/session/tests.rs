@@ -84,26 +84,19 @@ fn tasks(s: &mut WorkerSession) -> Vec<Task> {
     std::iter::from_fn(|| s.poll_task()).collect()
 }
 
-/// A session with the scene at hand that was told to prepare frame (1, 0).
-fn preparing_session() -> (WorkerSession, Scenes) {
+/// A session with the scene at hand that heard of frame (1, 0): it sets
+/// nothing up yet and asks for work at once.
+fn announced_session() -> (WorkerSession, Scenes) {
     let mut scenes = Scenes::default();
     scenes.0.insert(SCENE);
     let mut s = WorkerSession::new(Duration::ZERO);
     let start = Message::FrameStart(frame_start(1, 0));
     s.handle_message(Duration::ZERO, start, &mut scenes);
-    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
     assert_eq!(
-        messages(&mut s),
+        tasks(&mut s),
         vec![],
-        "no request before the frame is ready"
+        "a frame is set up for its first package"
     );
-    (s, scenes)
-}
-
-/// A session with frame (1, 0) prepared and work requested.
-fn ready_session() -> (WorkerSession, Scenes) {
-    let (mut s, scenes) = preparing_session();
-    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
     assert_eq!(
         messages(&mut s),
         vec![Message::RequestWork { job: 1, frame: 0 }]
@@ -111,14 +104,47 @@ fn ready_session() -> (WorkerSession, Scenes) {
     (s, scenes)
 }
 
+/// An announced session whose first package (9) of frame (1, 0) made it
+/// prepare that frame.
+fn preparing_session() -> (WorkerSession, Scenes) {
+    let (mut s, mut scenes) = announced_session();
+    s.handle_message(Duration::ZERO, package(9, 1, 0), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
+    assert_eq!(messages(&mut s), vec![], "a package waits: no request");
+    (s, scenes)
+}
+
+/// A session with frame (1, 0) prepared, its first package done and work
+/// asked for.
+fn ready_session() -> (WorkerSession, Scenes) {
+    let (mut s, scenes) = preparing_session();
+    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
+    assert_eq!(
+        messages(&mut s),
+        vec![Message::RequestWork { job: 1, frame: 0 }],
+        "the next package is asked for while one runs"
+    );
+    s.package_finished(Duration::ZERO, 9, Ok(result(9)));
+    assert_eq!(messages(&mut s), vec![Message::PackageResult(result(9))]);
+    (s, scenes)
+}
+
 #[test]
-fn work_is_asked_for_once_the_frame_is_ready_and_again_after_each_result() {
+fn work_is_asked_for_at_once_and_one_package_ahead() {
     let (mut s, mut scenes) = ready_session();
     let now = Duration::from_millis(5);
     s.handle_message(now, package(10, 1, 0), &mut scenes);
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
-    assert_eq!(messages(&mut s), vec![], "no second request while busy");
+    assert_eq!(
+        messages(&mut s),
+        vec![Message::RequestWork { job: 1, frame: 0 }],
+        "one ahead"
+    );
+    s.handle_message(now, package(11, 1, 0), &mut scenes);
+    assert_eq!(messages(&mut s), vec![], "no second request ahead");
     s.package_finished(now, 10, Ok(result(10)));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
     assert_eq!(
         messages(&mut s),
         vec![
@@ -162,13 +188,13 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
 #[test]
 fn packages_of_a_frame_that_failed_to_prepare_fail_with_its_reason() {
     let (mut s, mut scenes) = preparing_session();
-    s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
     s.frame_prepared(Duration::ZERO, (1, 0), Err("BVH build panicked".into()));
     s.handle_message(Duration::ZERO, package(11, 2, 5), &mut scenes);
     let failed: Vec<(u64, String)> = messages(&mut s)
         .into_iter()
-        .map(|m| match m {
-            Message::PackageFailed(PackageFailed { id, error }) => (id, error),
+        .filter_map(|m| match m {
+            Message::PackageFailed(PackageFailed { id, error }) => Some((id, error)),
+            Message::RequestWork { .. } => None,
             other => panic!("{other:?}"),
         })
         .collect();
@@ -201,9 +227,11 @@ fn a_cancelled_running_package_sends_no_result() {
         })
         .collect();
     assert_eq!(ran, vec![10], "the queued one was dropped");
+    // Asked ahead once package 10 ran, and again when 11 was dropped; no
+    // result of 10.
     assert_eq!(
         messages(&mut s),
-        vec![Message::RequestWork { job: 1, frame: 0 }]
+        vec![Message::RequestWork { job: 1, frame: 0 }; 2]
     );
 }
 
@@ -224,6 +252,7 @@ fn draining_finishes_the_running_package_then_ends_without_asking_for_more() {
     s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
     s.handle_message(Duration::ZERO, package(11, 1, 0), &mut scenes);
     tasks(&mut s);
+    let _ = messages(&mut s);
     s.drain(Duration::ZERO);
     assert_eq!(s.poll_end(), None, "the running package finishes first");
     s.package_finished(Duration::ZERO, 10, Ok(result(10)));
@@ -235,7 +264,6 @@ fn draining_finishes_the_running_package_then_ends_without_asking_for_more() {
 #[test]
 fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
     let (mut s, mut scenes) = preparing_session();
-    s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
     s.handle_message(Duration::ZERO, package(11, 1, 0), &mut scenes);
     assert_eq!(tasks(&mut s), vec![], "both wait for the frame");
     s.drain(Duration::ZERO);
@@ -248,10 +276,10 @@ fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
     s.handle_message(Duration::ZERO, next, &mut scenes);
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
     // Only the package runs: frame (1, 1), announced while draining, is not set up.
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
     assert_eq!(messages(&mut s), vec![], "no request while draining");
-    s.package_finished(Duration::ZERO, 10, Ok(result(10)));
-    assert_eq!(messages(&mut s), vec![Message::PackageResult(result(10))]);
+    s.package_finished(Duration::ZERO, 9, Ok(result(9)));
+    assert_eq!(messages(&mut s), vec![Message::PackageResult(result(9))]);
     assert_eq!(tasks(&mut s), vec![], "the second package is handed back");
     assert_eq!(s.poll_end(), Some(SessionEnd::Drained));
 }
@@ -278,86 +306,66 @@ fn an_idle_worker_drains_at_once_and_shutdown_ends_the_session() {
     assert_eq!(s.poll_end(), Some(SessionEnd::Shutdown));
 }
 
+/// Frames announced while a package runs are not set up; a package of one
+/// is (the newest it asked for, or an older one: a requeued package),
+/// prepared frames stay usable, and a frame more than FRAMES_IN_FLIGHT
+/// back is too old.
 #[test]
-fn a_frame_announced_while_a_package_runs_is_prepared_and_older_frames_stay_usable() {
+fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     let (mut s, mut scenes) = ready_session();
     let now = Duration::from_millis(5);
     s.handle_message(now, package(10, 1, 0), &mut scenes);
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
-    // Frame 1 is announced while frame 0's package runs: it is prepared
-    // beside it, and work is asked for frame 1 once both are done.
-    s.handle_message(now, Message::FrameStart(frame_start(1, 1)), &mut scenes);
-    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
-    s.frame_prepared(now, (1, 1), Ok(()));
-    assert_eq!(messages(&mut s), vec![], "busy: no request yet");
+    let _ = messages(&mut s);
+    for frame in [1, 2] {
+        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
+    }
+    assert_eq!(tasks(&mut s), vec![], "announced, not set up");
+    assert_eq!(
+        messages(&mut s),
+        vec![
+            Message::RequestWork { job: 1, frame: 1 },
+            Message::RequestWork { job: 1, frame: 2 }
+        ],
+        "each frame start renews the request"
+    );
+    // A package of frame 2 comes (the one ahead): frame 2 is prepared
+    // beside the running package; frame 1 is skipped.
+    s.handle_message(now, package(11, 1, 2), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 2))]);
+    s.frame_prepared(now, (1, 2), Ok(()));
     s.package_finished(now, 10, Ok(result(10)));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
     assert_eq!(
         messages(&mut s),
         vec![
             Message::PackageResult(result(10)),
-            Message::RequestWork { job: 1, frame: 1 }
+            Message::RequestWork { job: 1, frame: 2 }
         ]
     );
-    // A requeued package of frame 0 still runs here.
-    s.handle_message(now, package(11, 1, 0), &mut scenes);
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
     s.package_finished(now, 11, Ok(result(11)));
     let _ = messages(&mut s);
-    // A frame more than FRAMES_IN_FLIGHT back is too old: the master
-    // retries its package elsewhere.
-    for frame in 2..=vtfarm_proto::FRAMES_IN_FLIGHT as u32 {
-        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
-        s.frame_prepared(now, (1, frame), Ok(()));
-    }
-    let _ = (tasks(&mut s), messages(&mut s));
-    s.handle_message(now, package(12, 1, 0), &mut scenes);
-    assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 12));
-}
-
-/// Frames announced faster than the worker sets them up: one is prepared at
-/// a time, the newest next, and a skipped frame only when a package of it
-/// comes (the package waits for it instead of failing).
-#[test]
-fn frames_are_prepared_one_at_a_time_and_a_skipped_one_when_a_package_needs_it() {
-    let (mut s, mut scenes) = ready_session();
-    let now = Duration::from_millis(5);
-    s.handle_message(now, Message::FrameStart(frame_start(1, 1)), &mut scenes);
+    // A requeued package of the skipped frame 1 waits for its set-up;
+    // one of frame 0 runs on the frame kept.
+    s.handle_message(now, package(12, 1, 1), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
-    for frame in [2, 3] {
-        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
-    }
-    assert_eq!(tasks(&mut s), vec![], "one frame at a time");
     s.frame_prepared(now, (1, 1), Ok(()));
-    assert_eq!(
-        tasks(&mut s),
-        vec![Task::PrepareFrame(frame_start(1, 3))],
-        "the newest next; frame 2 is skipped"
-    );
-    assert_eq!(
-        messages(&mut s),
-        vec![],
-        "no request before the newest is ready"
-    );
-    // A requeued package of the skipped frame waits for its set-up.
-    s.handle_message(now, package(20, 1, 2), &mut scenes);
-    assert_eq!((tasks(&mut s), messages(&mut s)), (vec![], vec![]));
-    s.frame_prepared(now, (1, 3), Ok(()));
-    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 2))]);
-    s.frame_prepared(now, (1, 2), Ok(()));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 20));
-    s.package_finished(now, 20, Ok(result(20)));
-    assert_eq!(
-        messages(&mut s),
-        vec![
-            Message::PackageResult(result(20)),
-            Message::RequestWork { job: 1, frame: 3 }
-        ],
-        "work is asked for the newest frame again"
-    );
-    // Frames 0 to 3 are all kept for their packages.
-    for (id, frame) in [(21, 0), (22, 1)] {
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 12));
+    s.package_finished(now, 12, Ok(result(12)));
+    s.handle_message(now, package(13, 1, 0), &mut scenes);
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 13));
+    s.package_finished(now, 13, Ok(result(13)));
+    let _ = messages(&mut s);
+    // Prepare frames up to FRAMES_IN_FLIGHT + 2: frame 0 falls out, and
+    // its package fails so the master retries it elsewhere.
+    for frame in 3..=vtfarm_proto::FRAMES_IN_FLIGHT as u32 + 2 {
+        let id = 100 + u64::from(frame);
+        s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
         s.handle_message(now, package(id, 1, frame), &mut scenes);
-        assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == id));
+        s.frame_prepared(now, (1, frame), Ok(()));
         s.package_finished(now, id, Ok(result(id)));
     }
+    let _ = (tasks(&mut s), messages(&mut s));
+    s.handle_message(now, package(14, 1, 0), &mut scenes);
+    assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 14));
 }
