@@ -337,7 +337,8 @@ fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3
     let (base, ids) = vtfarm_raster::rasterize(&job.scene, &frame.camera, &frame.lighting);
     let bvh = vtfarm_trace::SceneBvh::new(Arc::new(job.scene.clone()));
     let method = vtfarm_render::method(kind, frame.vertex);
-    let mut image = vtfarm_vertex::FrameImage::new(base);
+    let full = vtfarm_vertex::PixelRect::full(base.width, base.height);
+    let mut image = vtfarm_vertex::FrameImage::new(base, full);
     let reflectors = vtfarm_render::morton_order(&job.scene, job.reflectors.clone());
     for group in vtfarm_method::reflector_groups(&job.scene, &reflectors) {
         let output = method.render(&vtfarm_method::MethodFrame {

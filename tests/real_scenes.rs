@@ -378,7 +378,8 @@ fn a_corpus_of_exporter_quirks_loads_and_renders() {
             &RenderOptions::default(),
             &mut |_, _| {},
         );
-        let image = frame.image;
+        let image = frame.image.components();
+        let color = frame.image.color;
         let covered = image.mask.iter().filter(|&&m| m).count();
         let mirrored = image
             .reflected_object
@@ -390,7 +391,7 @@ fn a_corpus_of_exporter_quirks_loads_and_renders() {
             mirrored * 2 > covered,
             "{name}: {mirrored} of {covered} mirror something"
         );
-        assert!(image.color.pixels.iter().all(|p| p.is_finite()), "{name}");
+        assert!(color.pixels.iter().all(|p| p.is_finite()), "{name}");
     }
 }
 
@@ -482,7 +483,7 @@ fn agreement(scene: &Arc<Scene>, camera: Camera, quality: Quality) -> (f64, usiz
     for (i, expected) in expected.iter().enumerate() {
         if let Some(object) = expected {
             pixels += 1;
-            agree += usize::from(frame.image.reflected_object[i] == *object);
+            agree += usize::from(frame.image.pixel(i).object == *object);
         }
     }
     (agree as f64 / pixels as f64, pixels)

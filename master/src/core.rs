@@ -29,13 +29,13 @@ use vtfarm_proto::{
     WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_raster::IdBuffer;
-use vtfarm_render::{FrameSetup, morton_order};
+use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
     WorkerId, WorkerState,
 };
-use vtfarm_vertex::{FrameImage, PackageStats, SparseBitmap};
+use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
 use crate::journal::{Record, StoredJob};
 use crate::telemetry::Telemetry;
@@ -174,19 +174,19 @@ struct FrameAssembly {
 /// A frame's pixels as results are composited over the base frame: the
 /// colour only, or with the per-pixel components when the job asks for
 /// them (a view's jobs always do). No output of a colour-only job reads
-/// the components, so their full-frame planes are not made.
+/// the components, so their planes are not made.
 enum Assembled {
     Color(Image),
     Components(FrameImage),
 }
 
 impl Assembled {
-    /// Starts from the base frame.
-    fn new(base: Image, components: bool) -> Assembled {
-        if components {
-            Assembled::Components(FrameImage::new(base))
-        } else {
-            Assembled::Color(base)
+    /// Starts from the base frame, with components over `components` (the
+    /// reflectors' rectangle) when the job asks for them.
+    fn new(base: Image, components: Option<PixelRect>) -> Assembled {
+        match components {
+            Some(bounds) => Assembled::Components(FrameImage::new(base, bounds)),
+            None => Assembled::Color(base),
         }
     }
 
@@ -1052,12 +1052,19 @@ impl MasterCore {
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
         };
-        let aux = j.aux;
+        // The components' planes cover the reflectors' rectangle only.
+        let components = match j.frames.get(frame as usize) {
+            Some(setup) if j.aux => {
+                let is_reflector = reflector_flags(&j.scene, &j.reflectors);
+                Some(reflector_bounds(&j.scene, &setup.camera, &is_reflector, 0))
+            }
+            _ => None,
+        };
         let Some(current) = j.assembly_mut(frame).filter(|c| c.ids.is_none()) else {
             return;
         };
         // Nothing is composited yet: the image starts as the base frame.
-        current.image = Assembled::new(base, aux);
+        current.image = Assembled::new(base, components);
         current.ids = Some(ids);
         let phase = phase(
             current.started,

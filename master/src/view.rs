@@ -290,9 +290,10 @@ pub(crate) struct PlannedView {
 /// Without a study there are no instrument or marking masks, so the
 /// contrast figures stay empty; reflection, veiling and objects are there.
 fn glare_of(image: &FrameImage, scene: &Scene) -> (Image, vtfarm_glare::Summary) {
-    let none = vec![false; image.mask.len()];
+    let components = image.components();
+    let none = vec![false; components.mask.len()];
     let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
-    let input = vtfarm_glare::GlareInput::from_frame(image, &none, &none, &names);
+    let input = vtfarm_glare::GlareInput::from_components(&components, &none, &none, &names);
     let params = vtfarm_glare::Params::default();
     // The frame's buffers are all width × height and the parameters are the
     // defaults, so neither call can fail.

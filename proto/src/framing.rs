@@ -325,21 +325,25 @@ mod tests {
                 job: 3,
                 frame: 1,
                 image: WireImage::from_pixels(2, 1, &[Vec3::X, Vec3::ONE]),
-                aux: Some(WireFrameAux::encode(&vtfarm_vertex::FrameImage {
-                    color: vtfarm_imaging::Image::black(2, 1),
-                    reflected: vtfarm_imaging::Image {
-                        width: 2,
-                        height: 1,
-                        pixels: vec![Vec3::ZERO, Vec3::Y],
-                    },
-                    transmitted: vtfarm_imaging::Image {
-                        width: 2,
-                        height: 1,
-                        pixels: vec![Vec3::ZERO, Vec3::Z],
-                    },
-                    reflected_object: vec![vtfarm_scene::NONE, 4],
-                    mask: vec![false, true],
-                })),
+                aux: Some(WireFrameAux::encode(
+                    &vtfarm_vertex::FrameImage::from_components(
+                        vtfarm_imaging::Image::black(2, 1),
+                        vtfarm_vertex::Components {
+                            reflected: vtfarm_imaging::Image {
+                                width: 2,
+                                height: 1,
+                                pixels: vec![Vec3::ZERO, Vec3::Y],
+                            },
+                            transmitted: vtfarm_imaging::Image {
+                                width: 2,
+                                height: 1,
+                                pixels: vec![Vec3::ZERO, Vec3::Z],
+                            },
+                            reflected_object: vec![vtfarm_scene::NONE, 4],
+                            mask: vec![false, true],
+                        },
+                    ),
+                )),
                 stats: FrameStats {
                     packages: 8,
                     failures: 1,

@@ -19,7 +19,7 @@ use vtfarm_scene::{
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{
-    FrameImage, PackageStats, Quality, SparseBitmap, Transmission, VertexSettings,
+    Components, FrameImage, PackageStats, Quality, SparseBitmap, Transmission, VertexSettings,
 };
 
 /// Why wire data does not make a valid domain value.
@@ -722,6 +722,7 @@ impl crate::WireFrameAux {
     /// The wire form of a frame's components (its colour travels apart, in
     /// `FrameDone::image`).
     pub fn encode(image: &FrameImage) -> Self {
+        let image = image.components();
         let objects: Vec<[u8; 4]> = image
             .reflected_object
             .iter()
@@ -769,13 +770,13 @@ impl crate::WireFrameAux {
                 "0 or 1",
             ));
         }
-        Ok(FrameImage {
-            color,
+        let components = Components {
             reflected,
             transmitted,
             reflected_object,
             mask: mask.into_iter().map(|m| m == 1).collect(),
-        })
+        };
+        Ok(FrameImage::from_components(color, components))
     }
 }
 
@@ -1613,13 +1614,15 @@ pub(crate) mod tests {
             height: 1,
             pixels,
         };
-        let frame = FrameImage {
-            color: image(vec![Vec3::ONE, Vec3::X, Vec3::Y]),
-            reflected: image(vec![Vec3::ZERO, Vec3::splat(0.25), Vec3::Z]),
-            transmitted: image(vec![Vec3::ZERO, Vec3::splat(1e-30), Vec3::X]),
-            reflected_object: vec![vtfarm_scene::NONE, 7, 0],
-            mask: vec![false, true, true],
-        };
+        let frame = FrameImage::from_components(
+            image(vec![Vec3::ONE, Vec3::X, Vec3::Y]),
+            Components {
+                reflected: image(vec![Vec3::ZERO, Vec3::splat(0.25), Vec3::Z]),
+                transmitted: image(vec![Vec3::ZERO, Vec3::splat(1e-30), Vec3::X]),
+                reflected_object: vec![vtfarm_scene::NONE, 7, 0],
+                mask: vec![false, true, true],
+            },
+        );
         let wire = crate::WireFrameAux::encode(&frame);
         assert_eq!(
             wire.clone().into_components(frame.color.clone()).unwrap(),

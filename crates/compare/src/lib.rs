@@ -12,7 +12,7 @@ use serde::Serialize;
 use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_method::{MethodCounters, MethodFrame, MethodKind, ReflectionMethod};
 use vtfarm_render::{ErrorFigures, compare, method};
-use vtfarm_vertex::{FrameImage, Quality, VertexSettings};
+use vtfarm_vertex::{FrameImage, PixelRect, Quality, VertexSettings};
 
 /// One method's frame and figures.
 #[derive(Clone, Debug)]
@@ -72,7 +72,8 @@ pub fn run_all(
 ) -> Vec<MethodRun> {
     let render = |method: &dyn ReflectionMethod| {
         let output = method.render(frame);
-        let mut image = FrameImage::new(base.clone());
+        let full = PixelRect::full(base.width, base.height);
+        let mut image = FrameImage::new(base.clone(), full);
         image.composite(&output.bitmap);
         (image, output.counters)
     };
@@ -103,9 +104,9 @@ pub fn run_all(
 /// reference's reflector pixels, in 8-bit sRGB steps per channel.
 pub fn reflected_error(test: &FrameImage, reference: &FrameImage) -> f64 {
     let (mut sum, mut n) = (0u64, 0u64);
-    for (i, _) in reference.mask.iter().enumerate().filter(|(_, m)| **m) {
-        let a = encode_srgb8(test.reflected.pixels[i]);
-        let b = encode_srgb8(reference.reflected.pixels[i]);
+    for i in reference.glass() {
+        let a = encode_srgb8(test.pixel(i).reflected);
+        let b = encode_srgb8(reference.pixel(i).reflected);
         sum += (0..3).map(|k| u64::from(a[k].abs_diff(b[k]))).sum::<u64>();
         n += 3;
     }
@@ -117,7 +118,7 @@ pub fn reflected_error(test: &FrameImage, reference: &FrameImage) -> f64 {
 fn mask_rect(image: &FrameImage, margin: u32) -> (u32, u32, u32, u32) {
     let (w, h) = (image.color.width, image.color.height);
     let mut rect = (u32::MAX, u32::MAX, 0, 0);
-    for (i, _) in image.mask.iter().enumerate().filter(|(_, m)| **m) {
+    for i in image.glass() {
         let (x, y) = (i as u32 % w, i as u32 / w);
         rect = (
             rect.0.min(x),
@@ -142,7 +143,7 @@ fn mask_rect(image: &FrameImage, margin: u32) -> (u32, u32, u32, u32) {
 /// top (black outside the reference's reflector pixels).
 pub fn error_map(test: &FrameImage, reference: &FrameImage) -> Image {
     let mut map = Image::new(reference.color.width, reference.color.height, Vec3::ZERO);
-    for (i, _) in reference.mask.iter().enumerate().filter(|(_, m)| **m) {
+    for i in reference.glass() {
         let a = encode_srgb8(test.color.pixels[i]);
         let b = encode_srgb8(reference.color.pixels[i]);
         let worst = (0..3).map(|k| a[k].abs_diff(b[k])).max().unwrap_or(0);

@@ -48,7 +48,8 @@ fn every_method_is_closer_to_the_reference_than_the_environment_map() {
             f.searches
         );
         assert_eq!(
-            run.image.mask, runs[0].image.mask,
+            run.image.components().mask,
+            runs[0].image.components().mask,
             "{}: the reflector's pixels",
             run.name
         );

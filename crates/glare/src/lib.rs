@@ -4,7 +4,7 @@
 //!
 //! Everything here is a pure function of a [`GlareInput`] (borrowed per-pixel
 //! buffers, usually taken from a composited
-//! [`FrameImage`] with [`GlareInput::from_frame`])
+//! frame's [`vtfarm_vertex::Components`] with [`GlareInput::from_components`])
 //! and [`Params`]. The two image builders ([`heat_map`], [`object_map`])
 //! return linear [`vtfarm_imaging::Image`]s; writing them (e.g. with
 //! `Image::write_png`) is the caller's job.
@@ -66,7 +66,7 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 use serde::Serialize;
 use vtfarm_scene::NONE;
-use vtfarm_vertex::FrameImage;
+use vtfarm_vertex::Components;
 
 mod font;
 mod images;
@@ -223,16 +223,17 @@ pub struct GlareInput<'a> {
 
 impl<'a> GlareInput<'a> {
     /// Takes the glass mask, reflected and transmitted components and the
-    /// reflected-object map from a composited frame.
-    pub fn from_frame(
-        frame: &'a FrameImage,
+    /// reflected-object map from a composited frame's full-frame components
+    /// ([`vtfarm_vertex::FrameImage::components`]).
+    pub fn from_components(
+        frame: &'a Components,
         instrument: &'a [bool],
         marking: &'a [bool],
         object_names: &'a [String],
     ) -> Self {
         GlareInput {
-            width: frame.color.width,
-            height: frame.color.height,
+            width: frame.reflected.width,
+            height: frame.reflected.height,
             glass: &frame.mask,
             reflected: &frame.reflected.pixels,
             transmitted: &frame.transmitted.pixels,

@@ -590,10 +590,18 @@ fn summary_serializes_to_json() {
 
 #[test]
 fn input_from_a_composited_frame() {
-    let frame = vtfarm_vertex::FrameImage::new(Image::new(3, 2, Vec3::ZERO));
+    // Component planes over one pixel: the input still covers the frame.
+    let bounds = vtfarm_vertex::PixelRect {
+        x0: 1,
+        y0: 0,
+        x1: 2,
+        y1: 1,
+    };
+    let frame = vtfarm_vertex::FrameImage::new(Image::new(3, 2, Vec3::ZERO), bounds);
+    let components = frame.components();
     let instrument = vec![false; 6];
     let names = vec!["x".to_owned()];
-    let input = GlareInput::from_frame(&frame, &instrument, &instrument, &names);
+    let input = GlareInput::from_components(&components, &instrument, &instrument, &names);
     assert_eq!(input.validate(), Ok(6));
     assert_eq!(input.object_name(0), "x");
 }

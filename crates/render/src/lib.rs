@@ -68,6 +68,18 @@ pub struct FrameTimes {
     pub phases: PhaseTimes,
 }
 
+/// For each scene triangle, whether it is one of `reflectors` (ids past the
+/// scene's triangles are left out).
+pub fn reflector_flags(scene: &Scene, reflectors: &[TriangleId]) -> Vec<bool> {
+    let mut is_reflector = vec![false; scene.triangles.len()];
+    for &t in reflectors {
+        if let Some(flag) = is_reflector.get_mut(t as usize) {
+            *flag = true;
+        }
+    }
+    is_reflector
+}
+
 /// A scene ready to render: its BVH and the reflector triangles.
 pub struct Renderer {
     bvh: SceneBvh,
@@ -105,10 +117,7 @@ impl Renderer {
         let scene = bvh.scene();
         let reflectors = morton_order(scene, reflectors);
         let owners = VertexOwners::new(scene);
-        let mut is_reflector = vec![false; scene.triangles.len()];
-        for &t in &reflectors {
-            is_reflector[t as usize] = true;
-        }
+        let is_reflector = reflector_flags(scene, &reflectors);
         Ok(Renderer {
             bvh,
             owners,
@@ -138,6 +147,13 @@ impl Renderer {
     /// The rasterized base frame and ID buffer.
     pub fn base_frame(&self, setup: &FrameSetup) -> (Image, IdBuffer) {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
+    }
+
+    /// A frame to composite into over `base`, its component planes over the
+    /// reflectors' bounds ([`FrameImage::new`]).
+    pub fn frame_image(&self, setup: &FrameSetup, base: Image) -> FrameImage {
+        let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, 0);
+        FrameImage::new(base, bounds)
     }
 
     /// Only the raster results a worker needs (no base frame): the frame's
@@ -216,7 +232,7 @@ impl Renderer {
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
         let setup_start = Instant::now();
-        let mut image = FrameImage::new(base);
+        let mut image = self.frame_image(setup, base);
         let mut times = FrameTimes {
             image_setup: setup_start.elapsed(),
             ..FrameTimes::default()
@@ -305,19 +321,14 @@ pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<Triangle
 /// `frame` is the reference's frame with raster transmission.
 pub fn thin_glass_model(reference: &FrameImage, frame: &Frame<'_>) -> FrameImage {
     let mut modelled = reference.clone();
-    for i in (0..modelled.mask.len()).filter(|&i| modelled.mask[i]) {
-        let mut value = vtfarm_vertex::PixelValue {
-            index: i as u32,
-            color: modelled.color.pixels[i] - modelled.transmitted.pixels[i],
-            reflected: modelled.reflected.pixels[i],
-            transmitted: Vec3::ZERO,
-            object: modelled.reflected_object[i],
-        };
+    let glass: Vec<usize> = reference.glass().collect();
+    for i in glass {
+        let mut value = modelled.pixel(i);
+        value.color -= value.transmitted;
+        value.transmitted = Vec3::ZERO;
         let width = modelled.color.width as usize;
         frame.finish_pixel(((i % width) as u32, (i / width) as u32), &mut value);
-        modelled.color.pixels[i] = value.color;
-        modelled.reflected.pixels[i] = value.reflected;
-        modelled.transmitted.pixels[i] = value.transmitted;
+        modelled.set_pixel(&value);
     }
     modelled
 }
@@ -342,7 +353,7 @@ pub fn compare(test: &FrameImage, reference: &FrameImage) -> ErrorFigures {
     let mut sum = 0u64;
     let mut off = 0u64;
     let mut max_abs = 0u8;
-    for (i, _) in reference.mask.iter().enumerate().filter(|(_, m)| **m) {
+    for i in reference.glass() {
         let a = encode_srgb8(test.color.pixels[i]);
         let b = encode_srgb8(reference.color.pixels[i]);
         let d = [0, 1, 2].map(|k| a[k].abs_diff(b[k]));

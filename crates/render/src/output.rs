@@ -63,17 +63,22 @@ pub fn write_aux(
     };
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let (w, h) = (image.color.width, image.color.height);
-    let mask: Vec<u8> = image
+    let components = image.components();
+    let mask: Vec<u8> = components
         .mask
         .iter()
         .map(|&m| if m { 255 } else { 0 })
         .collect();
     write_gray8_png(&dir.join("mask.png"), w, h, &mask)?;
-    image.reflected.write_png(&dir.join("reflected.png"))?;
-    image.reflected.write_npy(&dir.join("reflected.npy"))?;
-    image.transmitted.write_png(&dir.join("transmitted.png"))?;
-    image.transmitted.write_npy(&dir.join("transmitted.npy"))?;
-    let objects: Vec<u16> = image
+    components.reflected.write_png(&dir.join("reflected.png"))?;
+    components.reflected.write_npy(&dir.join("reflected.npy"))?;
+    components
+        .transmitted
+        .write_png(&dir.join("transmitted.png"))?;
+    components
+        .transmitted
+        .write_npy(&dir.join("transmitted.npy"))?;
+    let objects: Vec<u16> = components
         .reflected_object
         .iter()
         .map(|&o| {

@@ -228,8 +228,8 @@ fn levels_against_reference(
                 );
             }
             assert_eq!(
-                frame.image.mask,
-                reference.image.mask,
+                frame.image.glass().collect::<Vec<_>>(),
+                reference.image.glass().collect::<Vec<_>>(),
                 "{}: every level covers the same pixels",
                 q.name()
             );
@@ -250,12 +250,10 @@ fn levels_against_reference(
 /// The share of the reference's reflector pixels where `test` mirrors the
 /// same object.
 fn object_map_agreement(test: &FrameImage, reference: &FrameImage) -> f64 {
-    let pixels: Vec<usize> = (0..reference.mask.len())
-        .filter(|&i| reference.mask[i])
-        .collect();
+    let pixels: Vec<usize> = reference.glass().collect();
     let same = pixels
         .iter()
-        .filter(|&&i| test.reflected_object[i] == reference.reflected_object[i])
+        .filter(|&&i| test.pixel(i).object == reference.pixel(i).object)
         .count();
     same as f64 / pixels.len().max(1) as f64
 }
@@ -444,7 +442,7 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
             let differing = (0..whole.color.pixels.len())
                 .filter(|&i| {
                     split.color.pixels[i] != whole.color.pixels[i]
-                        || split.reflected_object[i] != whole.reflected_object[i]
+                        || split.pixel(i).object != whole.pixel(i).object
                 })
                 .count();
             assert_eq!(
@@ -500,7 +498,7 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
                 assert_eq!(ids.triangle[i], full_ids.triangle[i], "({x}, {y})");
             }
             let frame = renderer.frame(&s, &ids, &behind);
-            let mut worker = FrameImage::new(base);
+            let mut worker = renderer.frame_image(&s, base);
             for package in split_packages(&reflectors, 7) {
                 let result =
                     trace_package(&frame, &package, &PackageOptions::default(), &mut |_| {});
@@ -608,9 +606,9 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
         err.mean_abs
     );
     // The stripes are seen at all: the transmitted part carries the image.
-    let transmitted: f32 = (0..reference.mask.len())
-        .filter(|&i| reference.mask[i])
-        .map(|i| reference.transmitted.pixels[i].max_element())
+    let transmitted: f32 = reference
+        .glass()
+        .map(|i| reference.pixel(i).transmitted.max_element())
         .sum();
     assert!(transmitted > 0.1 * err.pixels as f32);
 }

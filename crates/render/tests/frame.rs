@@ -94,11 +94,11 @@ fn glass_pixels_split_into_reflected_and_transmitted_light() {
     let (renderer, setup) = small_cockpit();
     let frame = renderer.render(&setup, &Default::default(), &mut |_, _| {});
     let image = &frame.image;
-    let glass: Vec<usize> = (0..image.mask.len()).filter(|&i| image.mask[i]).collect();
+    let glass: Vec<usize> = image.glass().collect();
     assert!(!glass.is_empty());
     let seen_through = glass
         .iter()
-        .filter(|&&i| image.transmitted.pixels[i].max_element() > 0.0)
+        .filter(|&&i| image.pixel(i).transmitted.max_element() > 0.0)
         .count();
     assert!(
         seen_through * 10 > glass.len() * 9,
@@ -106,10 +106,15 @@ fn glass_pixels_split_into_reflected_and_transmitted_light() {
     );
     for &i in &glass {
         // Colour = local Phong (never negative) + reflected + transmitted.
-        let local = image.color.pixels[i] - image.reflected.pixels[i] - image.transmitted.pixels[i];
+        let p = image.pixel(i);
+        let local = p.color - p.reflected - p.transmitted;
         assert!(local.min_element() > -1e-4, "pixel {i}: {local}");
     }
     // Outside the glass both components stay black.
-    let outside = (0..image.mask.len()).find(|&i| !image.mask[i]).unwrap();
-    assert_eq!(image.transmitted.pixels[outside], glam::Vec3::ZERO);
+    let outside = (0..image.color.pixels.len())
+        .find(|&i| !image.is_glass(i))
+        .unwrap();
+    assert_eq!(image.pixel(outside).transmitted, glam::Vec3::ZERO);
+    assert_eq!(image.pixel(outside).reflected, glam::Vec3::ZERO);
+    assert_eq!(image.pixel(outside).object, NONE);
 }

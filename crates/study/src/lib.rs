@@ -507,11 +507,12 @@ impl<'a> StudyWriter<'a> {
                 frame.color.width, frame.color.height, camera.width, camera.height
             )));
         }
+        let components = frame.components();
         let masks = InstrumentMasks::new(
             &planned.scene,
             &camera,
             &planned.reflectors,
-            &frame.mask,
+            &components.mask,
             &planned.instrument_objects,
             &planned.marking_objects,
         );
@@ -521,7 +522,8 @@ impl<'a> StudyWriter<'a> {
             .iter()
             .map(|o| o.name.clone())
             .collect();
-        let input = GlareInput::from_frame(frame, &masks.instrument, &masks.marking, &names);
+        let input =
+            GlareInput::from_components(&components, &masks.instrument, &masks.marking, &names);
         let params = &self.plan.params;
         let analysis = vtfarm_glare::analyze(&input, params).map_err(|e| bad(e.to_string()))?;
         let heat = vtfarm_glare::heat_map(&input, params, Some(self.plan.heat_range))

@@ -177,12 +177,12 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
-            if !frame.mask[i] {
+            if !frame.is_glass(i) {
                 continue;
             }
             glass_pixels += 1;
             let expected = ids.object[ids.index(x, y)];
-            agree += (frame.reflected_object[i] == expected) as usize;
+            agree += (frame.pixel(i).object == expected) as usize;
         }
     }
     assert!(glass_pixels > 1000, "{glass_pixels} glass pixels");
@@ -194,6 +194,7 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
     // The map really shows things (not all NONE on both sides).
     assert!(
         frame
+            .components()
             .reflected_object
             .iter()
             .filter(|&&o| o != NONE)
@@ -235,7 +236,7 @@ fn an_obj_variant_measures_like_the_built_in_design_it_was_exported_from() {
 
     // The per-pixel array agrees with the summary.
     let lr = read_npy_f32(&dir.path().join("from-obj/eye_00/reflected_luminance.npy"));
-    let glass = &images[1][0].mask;
+    let glass = &images[1][0].components().mask;
     assert_eq!(lr.len(), glass.len());
     let mean = lr
         .iter()

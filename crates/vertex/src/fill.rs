@@ -19,10 +19,14 @@ use crate::{Frame, PixelValue, Quality};
 
 /// Per-pixel planes over a rectangle of the frame, row-major, `stride`
 /// pixels a row, the first element pixel (`x0`, `y0`): where phase 3 writes.
+/// The colour plane covers the same rows but may be wider (a frame's is
+/// full width): `color_stride` pixels a row, the first column `color_x0`.
 pub(crate) struct Planes<'a> {
     pub(crate) x0: u32,
     pub(crate) y0: u32,
     pub(crate) stride: usize,
+    pub(crate) color_x0: u32,
+    pub(crate) color_stride: usize,
     pub(crate) color: &'a mut [Vec3],
     pub(crate) reflected: &'a mut [Vec3],
     pub(crate) transmitted: &'a mut [Vec3],
@@ -31,9 +35,10 @@ pub(crate) struct Planes<'a> {
 }
 
 impl<'a> Planes<'a> {
-    fn set(&mut self, x: u32, y: u32, value: &PixelValue) {
-        let i = (y - self.y0) as usize * self.stride + (x - self.x0) as usize;
-        self.color[i] = value.color;
+    pub(crate) fn set(&mut self, x: u32, y: u32, value: &PixelValue) {
+        let row = (y - self.y0) as usize;
+        self.color[row * self.color_stride + (x - self.color_x0) as usize] = value.color;
+        let i = row * self.stride + (x - self.x0) as usize;
         self.reflected[i] = value.reflected;
         self.transmitted[i] = value.transmitted;
         self.object[i] = value.object;
@@ -47,8 +52,9 @@ impl<'a> Planes<'a> {
             return Vec::new();
         }
         let (x0, y0, stride) = (self.x0, self.y0, self.stride);
+        let (color_x0, color_stride) = (self.color_x0, self.color_stride);
         self.color
-            .chunks_mut(n)
+            .chunks_mut(color_stride * rows as usize)
             .zip(self.reflected.chunks_mut(n))
             .zip(self.transmitted.chunks_mut(n))
             .zip(self.object.chunks_mut(n))
@@ -59,6 +65,8 @@ impl<'a> Planes<'a> {
                     x0,
                     y0: y0 + k as u32 * rows,
                     stride,
+                    color_x0,
+                    color_stride,
                     color,
                     reflected,
                     transmitted,
@@ -70,7 +78,7 @@ impl<'a> Planes<'a> {
     }
 
     /// The rows `y0..y1` the planes cover.
-    fn rows(&self) -> (u32, u32) {
+    pub(crate) fn rows(&self) -> (u32, u32) {
         let rows = self.mask.len().checked_div(self.stride).unwrap_or(0);
         (self.y0, self.y0 + rows as u32)
     }

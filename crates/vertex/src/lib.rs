@@ -168,7 +168,7 @@ mod refine;
 mod stop;
 mod thin;
 
-pub use composite::{FrameImage, draw_wireframe};
+pub use composite::{Components, FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelValue,
     SparseBitmap, TracedPackage, trace_package, trace_package_into,

@@ -269,10 +269,13 @@ impl Target for DensePlanes {
             object: vec![NONE; n],
             mask: vec![false; n],
         };
+        let stride = (rect.x1 - rect.x0) as usize;
         Planes {
             x0: rect.x0,
             y0: rect.y0,
-            stride: (rect.x1 - rect.x0) as usize,
+            stride,
+            color_x0: rect.x0,
+            color_stride: stride,
             color: &mut self.color,
             reflected: &mut self.reflected,
             transmitted: &mut self.transmitted,
