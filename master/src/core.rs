@@ -165,8 +165,6 @@ struct FrameAssembly {
     /// When the frame started (master time) and where its time went.
     started: Duration,
     phases: Vec<FramePhase>,
-    /// Workers whose set-up phase is recorded.
-    set_up: Vec<ConnId>,
     totals: PackageStats,
     triangles_done: u64,
 }
@@ -487,13 +485,12 @@ impl MasterCore {
         };
         match message {
             Message::Heartbeat => {}
-            Message::RequestWork { job, frame } => {
+            Message::RequestWork { job, .. } => {
                 // A request for a job that is over is stale; a worker sets
                 // a frame up when its first package of it comes, so any
                 // frame of the running job will do.
                 let running = self.scheduler.queue().running.map(|r| r.job.0);
                 if running == Some(job) {
-                    self.record_setup(conn, job, frame);
                     let _ = self.scheduler.request_work(now, worker);
                 }
             }
@@ -505,7 +502,7 @@ impl MasterCore {
                 None => self.close(conn, "asked for a scene the master does not have".into()),
             },
             Message::PackageResult(result) => {
-                self.record_package(conn, result.id, result.busy_micros);
+                self.record_package(conn, &result);
                 self.package_result(now, conn, result, result_bytes)
             }
             Message::PackageFailed(failed) => {
@@ -1017,7 +1014,6 @@ impl MasterCore {
             held: Vec::new(),
             started: self.now,
             phases: Vec::new(),
-            set_up: Vec::new(),
             totals: PackageStats::default(),
             triangles_done: 0,
         });
@@ -1080,31 +1076,13 @@ impl MasterCore {
         self.pump();
     }
 
-    /// A worker's first request for a frame ends its set-up.
-    fn record_setup(&mut self, conn: ConnId, job: u64, frame: u32) {
+    /// A result arrived: its package was in flight, its frame set up first
+    /// if it was the worker's first package of the frame (the set-up starts
+    /// when the package arrives), then computed for its busy time.
+    fn record_package(&mut self, conn: ConnId, result: &PackageResult) {
         let name = self.name(conn);
         let now = self.now;
-        let Some(current) = self.jobs.get_mut(&job).and_then(|j| j.assembly_mut(frame)) else {
-            return;
-        };
-        if !current.set_up.contains(&conn) {
-            current.set_up.push(conn);
-            let phase = phase(
-                current.started,
-                name,
-                PhaseKind::Setup,
-                current.started,
-                now,
-            );
-            current.phases.push(phase);
-        }
-    }
-
-    /// A result arrived: its package was in flight, then computed for its busy time.
-    fn record_package(&mut self, conn: ConnId, id: u64, busy_micros: u64) {
-        let name = self.name(conn);
-        let now = self.now;
-        let Some(in_flight) = self.packages.get(&id) else {
+        let Some(in_flight) = self.packages.get(&result.id) else {
             return;
         };
         let (frame, assigned_at) = (in_flight.frame, in_flight.assigned_at);
@@ -1113,11 +1091,21 @@ impl MasterCore {
             return;
         };
         let computed = now
-            .saturating_sub(Duration::from_micros(busy_micros))
+            .saturating_sub(Duration::from_micros(result.busy_micros))
             .max(assigned_at);
+        let set_up = (assigned_at + Duration::from_micros(result.setup_micros)).min(computed);
         let t0 = current.started;
+        if set_up > assigned_at {
+            (current.phases).push(phase(
+                t0,
+                name.clone(),
+                PhaseKind::Setup,
+                assigned_at,
+                set_up,
+            ));
+        }
         current.phases.extend([
-            phase(t0, name.clone(), PhaseKind::Sending, assigned_at, computed),
+            phase(t0, name.clone(), PhaseKind::Sending, set_up, computed),
             phase(t0, name, PhaseKind::Package, computed, now),
         ]);
     }

@@ -201,6 +201,10 @@ fn finish_frame(
                 let unlimited = Stop::with_budget(u64::MAX);
                 let mut result = h.frame.as_ref().unwrap().run(&p, 1.0, &unlimited).unwrap();
                 let first = tamper.is_some();
+                if first {
+                    // The worker set the frame up for its first package.
+                    result.setup_micros = 1;
+                }
                 if let Some(tamper) = tamper.take() {
                     tamper(&p, &mut result);
                 }
@@ -281,6 +285,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             bitmap: Default::default(),
             stats: Default::default(),
             busy_micros: 1,
+            setup_micros: 0,
             triangle_samples: vec![],
         }),
     );

@@ -120,6 +120,7 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
                     bitmap: Default::default(),
                     stats: Default::default(),
                     busy_micros: measure.busy.as_micros() as u64,
+                    setup_micros: 0,
                     triangle_samples: (measure.item_seconds.iter())
                         .map(|&s| s as u32 - 1)
                         .collect(),

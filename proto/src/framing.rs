@@ -283,6 +283,7 @@ mod tests {
                 bitmap: WireBitmap::from(&bitmap()),
                 stats,
                 busy_micros: 1234,
+                setup_micros: 56,
                 triangle_samples: vec![3, 0, 17],
             }),
             Message::PackageFailed(PackageFailed {

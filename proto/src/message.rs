@@ -334,6 +334,10 @@ pub struct PackageResult {
     pub stats: WirePackageStats,
     /// Wall time the worker spent on the package, for load balancing.
     pub busy_micros: u64,
+    /// Wall time the worker spent setting up the package's frame for it
+    /// (its first package of the frame; 0 for the others): the set-up
+    /// phase of the master's timeline.
+    pub setup_micros: u64,
     /// Samples traced per triangle of the package, in package order: how the
     /// load balancer splits `busy_micros` over the triangles.
     pub triangle_samples: Vec<u32>,

@@ -736,6 +736,7 @@ impl<'a> Farm<'a> {
                         bitmap: self.empty_bitmap.clone(),
                         stats: WirePackageStats::default(),
                         busy_micros: 0,
+                        setup_micros: 0,
                         triangle_samples: indices.iter().map(|&i| self.costs.samples[i]).collect(),
                     };
                     let package_work = Work::Package {

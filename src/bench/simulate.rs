@@ -191,6 +191,7 @@ fn result_message_bytes(
         bitmap,
         stats,
         busy_micros: busy.as_micros() as u64,
+        setup_micros: 0,
         triangle_samples,
     });
     Ok(encode_message(&message)?.len() as u64)

@@ -101,6 +101,7 @@ impl ActiveFrame {
             bitmap: WireBitmap::encode(&bitmap, self.parts),
             stats: WirePackageStats::from(&stats),
             busy_micros: start.elapsed().as_micros() as u64,
+            setup_micros: 0,
             triangle_samples: samples,
         })
     }

@@ -24,7 +24,7 @@
 //! [`SessionEnd::Drained`] and the driver says goodbye by closing the link,
 //! which makes the master requeue everything else at once.
 
-use std::collections::{BTreeSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
 use tracing::{info, warn};
@@ -101,8 +101,15 @@ pub struct WorkerSession {
     /// Frames prepared before `ready`, oldest first: their packages can run
     /// too.
     older: VecDeque<FrameKey>,
-    /// A frame handed to the driver for preparation (one at a time).
+    /// A frame handed to the driver for preparation (one at a time), and
+    /// since when.
     preparing: Option<FrameKey>,
+    preparing_since: Duration,
+    /// How long frames took to set up, told with the first result of each
+    /// (at most `FRAMES_IN_FLIGHT`, the oldest dropped).
+    setup_to_tell: BTreeMap<FrameKey, Duration>,
+    /// The latest time any entry point was told.
+    now: Duration,
     /// Frames announced and not prepared yet, oldest first: one is prepared
     /// when a package of it comes.
     announced: VecDeque<FrameStart>,
@@ -112,6 +119,7 @@ pub struct WorkerSession {
     unusable: Option<(FrameKey, String)>,
     queue: VecDeque<Package>,
     running: Option<PackageId>,
+    running_frame: Option<FrameKey>,
     /// Packages the master took back while they ran: their results are dropped.
     cancelled: BTreeSet<PackageId>,
     /// Whether a `RequestWork` is outstanding.
@@ -135,11 +143,15 @@ impl WorkerSession {
             ready: None,
             older: VecDeque::new(),
             preparing: None,
+            preparing_since: now,
+            setup_to_tell: BTreeMap::new(),
+            now,
             announced: VecDeque::new(),
             awaiting_scene: None,
             unusable: None,
             queue: VecDeque::new(),
             running: None,
+            running_frame: None,
             cancelled: BTreeSet::new(),
             requested: false,
             next_heartbeat: now + HEARTBEAT_INTERVAL,
@@ -190,6 +202,7 @@ impl WorkerSession {
 
     /// Time passed: heartbeats, and the end of a drain that took too long.
     pub fn handle_timeout(&mut self, now: Duration) {
+        self.now = now;
         if now >= self.next_heartbeat {
             self.outbox.push_back(Message::Heartbeat);
             self.next_heartbeat = now + HEARTBEAT_INTERVAL;
@@ -205,6 +218,7 @@ impl WorkerSession {
 
     /// Stop taking work: finish the running package, then end.
     pub fn drain(&mut self, now: Duration) {
+        self.now = now;
         if self.drain_deadline.is_none() {
             info!("draining: finishing the running package, handing back the rest");
             self.drain_deadline = Some(now + DRAIN_LIMIT);
@@ -218,10 +232,11 @@ impl WorkerSession {
     /// A message from the master.
     pub fn handle_message(
         &mut self,
-        _now: Duration,
+        now: Duration,
         message: Message,
         scenes: &mut impl SceneStore,
     ) {
+        self.now = now;
         // A package answers the request. A frame start renews it: the
         // master drops a request naming a job that is no longer running
         // (asking twice changes nothing at the master).
@@ -258,11 +273,16 @@ impl WorkerSession {
     }
 
     /// The driver prepared (or failed to prepare) a frame.
-    pub fn frame_prepared(&mut self, _now: Duration, key: FrameKey, outcome: Result<(), String>) {
+    pub fn frame_prepared(&mut self, now: Duration, key: FrameKey, outcome: Result<(), String>) {
+        self.now = now;
         if self.preparing != Some(key) {
             return;
         }
         self.preparing = None;
+        (self.setup_to_tell).insert(key, now.saturating_sub(self.preparing_since));
+        while self.setup_to_tell.len() > vtfarm_proto::FRAMES_IN_FLIGHT {
+            self.setup_to_tell.pop_first();
+        }
         match outcome {
             Ok(()) => {
                 info!(job = key.0, frame = key.1, "frame ready");
@@ -310,6 +330,7 @@ impl WorkerSession {
         let position = (self.announced.iter()).position(|f| Some((f.job, f.frame)) == wanted);
         if let Some(start) = position.and_then(|i| self.announced.remove(i)) {
             self.preparing = Some((start.job, start.frame));
+            self.preparing_since = self.now;
             self.tasks.push_back(Task::PrepareFrame(start));
         }
     }
@@ -317,17 +338,24 @@ impl WorkerSession {
     /// The running package finished.
     pub fn package_finished(
         &mut self,
-        _now: Duration,
+        now: Duration,
         id: PackageId,
         outcome: Result<PackageResult, String>,
     ) {
+        self.now = now;
         if self.running != Some(id) {
             return;
         }
+        let frame = self.running_frame.take();
         self.running = None;
         if !self.cancelled.remove(&id) {
             self.outbox.push_back(match outcome {
-                Ok(result) => Message::PackageResult(result),
+                Ok(mut result) => {
+                    if let Some(setup) = frame.and_then(|f| self.setup_to_tell.remove(&f)) {
+                        result.setup_micros = setup.as_micros() as u64;
+                    }
+                    Message::PackageResult(result)
+                }
                 Err(error) => Message::PackageFailed(PackageFailed { id, error }),
             });
         }
@@ -384,6 +412,7 @@ impl WorkerSession {
             let package = self.queue.pop_front().expect("front exists");
             if self.ready == Some(key) || self.older.contains(&key) {
                 self.running = Some(package.id);
+                self.running_frame = Some(key);
                 self.tasks.push_back(Task::RunPackage(package));
             } else {
                 // The master retries it elsewhere.

@@ -106,6 +106,7 @@ fn main() -> std::io::Result<()> {
                 }),
                 stats: WirePackageStats::default(),
                 busy_micros: 7,
+                setup_micros: 3,
                 triangle_samples: vec![3],
             }),
         ),

@@ -72,6 +72,7 @@ fn result(id: u64) -> PackageResult {
         bitmap: Default::default(),
         stats: Default::default(),
         busy_micros: 1,
+        setup_micros: 0,
         triangle_samples: vec![1],
     }
 }
@@ -368,4 +369,24 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     let _ = (tasks(&mut s), messages(&mut s));
     s.handle_message(now, package(14, 1, 0), &mut scenes);
     assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 14));
+}
+
+#[test]
+fn the_first_result_of_a_frame_tells_how_long_its_set_up_took() {
+    let (mut s, mut scenes) = preparing_session();
+    // Frame (1, 0) was handed over for set-up at 0; ready at 40 ms.
+    let ms = Duration::from_millis;
+    s.frame_prepared(ms(40), (1, 0), Ok(()));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
+    s.handle_message(ms(41), package(10, 1, 0), &mut scenes);
+    s.package_finished(ms(50), 9, Ok(result(9)));
+    let told = PackageResult {
+        setup_micros: 40_000,
+        ..result(9)
+    };
+    assert!(messages(&mut s).contains(&Message::PackageResult(told)));
+    // The frame's next package had no set-up of its own.
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    s.package_finished(ms(60), 10, Ok(result(10)));
+    assert!(messages(&mut s).contains(&Message::PackageResult(result(10))));
 }
