@@ -1090,10 +1090,13 @@ impl MasterCore {
         else {
             return;
         };
+        // The set-up first (it starts when the package arrives), then the
+        // computing; what the worker's times leave of the interval is the
+        // way there and back.
+        let set_up = (assigned_at + Duration::from_micros(result.setup_micros)).min(now);
         let computed = now
             .saturating_sub(Duration::from_micros(result.busy_micros))
-            .max(assigned_at);
-        let set_up = (assigned_at + Duration::from_micros(result.setup_micros)).min(computed);
+            .max(set_up);
         let t0 = current.started;
         if set_up > assigned_at {
             (current.phases).push(phase(
