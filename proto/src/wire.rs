@@ -804,6 +804,25 @@ struct DecodedBitmap {
     planes: Vec<u8>,
 }
 
+impl DecodedBitmap {
+    /// Whether pixel `i` of the rectangle is covered.
+    fn is_covered(&self, i: usize) -> bool {
+        self.mask[i / 8] >> (i % 8) & 1 == 1
+    }
+
+    /// Value `i`'s four bytes, one from each plane.
+    fn value(&self, i: usize) -> [u8; 4] {
+        [0, 1, 2, 3].map(|k| self.planes[k * self.values + i])
+    }
+
+    /// Covered pixel `p`'s colour of the component whose values start at
+    /// `first`, checked finite.
+    fn color(&self, field: &str, first: usize, p: usize) -> Result<Vec3, WireError> {
+        let c = [0, 1, 2].map(|c| f32::from_le_bytes(self.value(first + 3 * p + c)));
+        finite3(|| format!("{field}[{p}]"), c)
+    }
+}
+
 impl WireBitmap {
     /// The rectangle checked to fit the coordinate type, the mask and the
     /// byte planes decompressed into exactly the sizes they imply.
@@ -857,26 +876,15 @@ impl WireBitmap {
     /// [`SparseBitmap`], without building one.
     pub fn colors_within(&self, width: u32, height: u32) -> Result<Vec<(usize, Vec3)>, WireError> {
         self.check_within(width, height)?;
-        let DecodedBitmap {
-            mask,
-            area,
-            covered,
-            values,
-            planes,
-        } = self.decode()?;
-        let value = |i: usize| f32::from_le_bytes([0, 1, 2, 3].map(|k| planes[k * values + i]));
-        let mut colors = Vec::with_capacity(covered);
-        for i in (0..area).filter(|i| mask[i / 8] >> (i % 8) & 1 == 1) {
+        let decoded = self.decode()?;
+        let mut colors = Vec::with_capacity(decoded.covered);
+        for i in (0..decoded.area).filter(|&i| decoded.is_covered(i)) {
             let p = colors.len();
-            let c = [value(3 * p), value(3 * p + 1), value(3 * p + 2)];
             let (x, y) = (
                 self.x0 as usize + i % self.width as usize,
                 self.y0 as usize + i / self.width as usize,
             );
-            colors.push((
-                y * width as usize + x,
-                finite3(|| format!("bitmap color[{p}]"), c)?,
-            ));
+            colors.push((y * width as usize + x, decoded.color("bitmap color", 0, p)?));
         }
         Ok(colors)
     }
@@ -914,20 +922,11 @@ impl TryFrom<WireBitmap> for SparseBitmap {
     type Error = WireError;
 
     fn try_from(w: WireBitmap) -> Result<Self, WireError> {
-        let DecodedBitmap {
-            mask,
-            area,
-            covered,
-            values,
-            planes,
-        } = w.decode()?;
-        let value = |i: usize| [0, 1, 2, 3].map(|k| planes[k * values + i]);
+        let decoded = w.decode()?;
+        let covered = decoded.covered;
         let colors = |field: &'static str, first: usize| {
             (0..covered)
-                .map(|p| {
-                    let c = [0, 1, 2].map(|c| f32::from_le_bytes(value(first + 3 * p + c)));
-                    finite3(|| format!("{field}[{p}]"), c)
-                })
+                .map(|p| decoded.color(field, first, p))
                 .collect::<Result<Vec<_>, _>>()
         };
         let color = colors("bitmap color", 0)?;
@@ -941,7 +940,7 @@ impl TryFrom<WireBitmap> for SparseBitmap {
                 colors("bitmap reflected", 3 * covered)?,
                 colors("bitmap transmitted", 6 * covered)?,
                 (0..covered)
-                    .map(|p| u32::from_le_bytes(value(9 * covered + p)))
+                    .map(|p| u32::from_le_bytes(decoded.value(9 * covered + p)))
                     .collect(),
             ),
         };
@@ -950,7 +949,7 @@ impl TryFrom<WireBitmap> for SparseBitmap {
             y0: w.y0,
             width: w.width,
             height: w.height,
-            mask: (0..area).map(|i| mask[i / 8] >> (i % 8) & 1 == 1).collect(),
+            mask: (0..decoded.area).map(|i| decoded.is_covered(i)).collect(),
             color,
             reflected,
             transmitted,
