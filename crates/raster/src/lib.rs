@@ -147,6 +147,15 @@ impl PixelRect {
         (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
     }
 
+    /// Whether every pixel of `other` lies inside (an empty `other` does).
+    pub fn holds(self, other: PixelRect) -> bool {
+        other.is_empty()
+            || (self.x0 <= other.x0
+                && self.y0 <= other.y0
+                && other.x1 <= self.x1
+                && other.y1 <= self.y1)
+    }
+
     /// Whether pixel (`x`, `y`) lies inside.
     pub fn contains(self, x: u32, y: u32) -> bool {
         (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
@@ -281,6 +290,54 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
             resolve(scene, camera, &kept, within)
         })
         .collect()
+}
+
+/// The ID buffer over `within` of two disjoint sets of triangles, from the
+/// buffers `a` and `b` of each (their windows must hold `within`): per pixel
+/// the nearer of the two, an exact depth tie going to the lower triangle id
+/// as in the z-test, so bit for bit the buffer of both sets rasterized
+/// together. It costs per pixel where scan conversion costs per triangle: a
+/// worker's frame buffer is the one behind its glass and the glass's.
+///
+/// # Panics
+/// If the buffers are of different frames or a window does not hold `within`.
+pub fn nearer_of(a: &IdBuffer, b: &IdBuffer, within: PixelRect) -> IdBuffer {
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "buffers of one frame"
+    );
+    let mut out = IdBuffer::empty_within(a.width, a.height, within);
+    let w = out.window;
+    assert!(
+        a.window.holds(w) && b.window.holds(w),
+        "the buffers {:?} and {:?} must hold {w:?}",
+        a.window,
+        b.window
+    );
+    let len = (w.x1 - w.x0) as usize;
+    for (row, y) in (w.y0..w.y1).enumerate() {
+        let row_of = |ids: &IdBuffer| ids.slot(w.x0, y).map_or(0..0, |i| i..i + len);
+        let (ra, rb) = (row_of(a), row_of(b));
+        let slots = row * len..(row + 1) * len;
+        let pixels = (out.triangle[slots.clone()].iter_mut())
+            .zip(&mut out.object[slots.clone()])
+            .zip(&mut out.depth[slots]);
+        let sources = (a.triangle[ra.clone()].iter())
+            .zip(&a.object[ra.clone()])
+            .zip(&a.depth[ra])
+            .zip(
+                b.triangle[rb.clone()]
+                    .iter()
+                    .zip(&b.object[rb.clone()])
+                    .zip(&b.depth[rb]),
+            );
+        for (((t, o), d), (((&ta, &oa), &da), ((&tb, &ob), &db))) in pixels.zip(sources) {
+            let b_wins = db < da || (db == da && tb < ta);
+            (*t, *o, *d) = if b_wins { (tb, ob, db) } else { (ta, oa, da) };
+        }
+    }
+    out
 }
 
 /// [`id_buffer_where`] with the near clipping plane at view depth `near`

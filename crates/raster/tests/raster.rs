@@ -5,7 +5,7 @@
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{
     IdBuffer, IdPass, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within,
-    id_buffers_within, rasterize,
+    id_buffers_within, nearer_of, rasterize,
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
@@ -460,6 +460,40 @@ fn buffers_rasterized_together_are_each_the_buffer_rasterized_alone() {
         let empty = id_buffers_within(&scene, &camera, &passes[5..6]);
         assert!(empty[0].window.is_empty() && empty[0].triangle.is_empty());
         assert_eq!(empty[0].triangle_at(40, 40), NONE);
+    }
+}
+
+#[test]
+fn the_nearer_of_two_sets_buffers_is_the_buffer_of_both() {
+    for seed in 1..=3 {
+        let (scene, camera) = procedural_scene(seed, 128, 96);
+        let all = |_: TriangleId| true;
+        // Disjoint sets that interleave in depth, and one set empty.
+        let thirds = |t: TriangleId| t % 3 == 0;
+        let rest = |t: TriangleId| t % 3 != 0;
+        let none = |_: TriangleId| false;
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        let within = rect(10, 5, 100, 70);
+        // `a` over a larger rectangle than `within`, `b` over exactly it.
+        type Keep<'a> = &'a (dyn Fn(TriangleId) -> bool + Sync);
+        let pairs: [(Keep, Keep); 3] = [(&thirds, &rest), (&rest, &thirds), (&all, &none)];
+        for (keep_a, keep_b) in pairs {
+            let a = id_buffer_within(&scene, &camera, rect(0, 0, 120, 90), keep_a);
+            let b = id_buffer_within(&scene, &camera, within, keep_b);
+            let both = id_buffer_within(&scene, &camera, within, &all);
+            assert_same_ids(&nearer_of(&a, &b, within), &both);
+            assert_same_ids(&nearer_of(&b, &a, within), &both);
+        }
+        // Not vacuous: each set shows pixels of the whole buffer.
+        let both = id_buffer_within(&scene, &camera, within, &all);
+        let shown = |keep: &dyn Fn(TriangleId) -> bool| {
+            both.triangle
+                .iter()
+                .filter(|&&t| t != NONE && keep(t))
+                .count()
+        };
+        let (thirds, rest) = (shown(&thirds), shown(&rest));
+        assert!(thirds > 300 && rest > 300, "{thirds} and {rest} pixels");
     }
 }
 

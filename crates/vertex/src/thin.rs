@@ -261,6 +261,7 @@ impl BehindBuffers {
                 .any(|(t, &r)| r && see_through(scene, t as TriangleId));
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
+        let not_opaque = |t: TriangleId| !opaque(t);
         let layer = |t: TriangleId| !is_reflector[t as usize] && see_through(scene, t);
         let mut passes = vec![IdPass {
             within: bounds,
@@ -272,15 +273,27 @@ impl BehindBuffers {
                 keep: &layer,
             });
         }
+        // The frame's buffer is the nearer of the opaque scene's and the
+        // rest's where the first covers it (the usual case: the margins are
+        // small): the rest is little to scan-convert, the opaque scene is
+        // most of the set-up and is not scan-converted twice.
+        let clamp = |r: PixelRect| r.clamped(camera.width, camera.height);
+        let split = frame_within.filter(|&f| clamp(bounds).holds(clamp(f)));
         if let Some(within) = frame_within {
-            passes.push(IdPass { within, keep: &all });
+            let keep: &(dyn Fn(TriangleId) -> bool + Sync) =
+                if split.is_some() { &not_opaque } else { &all };
+            passes.push(IdPass { within, keep });
         }
         let mut buffers = vtfarm_raster::id_buffers_within(scene, camera, &passes).into_iter();
         let behind = buffers.next().expect("one buffer per pass");
         let layers = any_glass.then(|| buffers.next().expect("one buffer per pass"));
+        let frame = match (buffers.next(), split) {
+            (Some(rest), Some(within)) => Some(vtfarm_raster::nearer_of(&behind, &rest, within)),
+            (frame, _) => frame,
+        };
         BehindBuffers {
             bounds,
-            frame: buffers.next(),
+            frame,
             behind,
             layers,
         }
