@@ -44,7 +44,8 @@ use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
 
 use super::farm::{
-    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm, steady_frame_seconds,
+    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, cpu_per_frame, simulate_farm,
+    steady_background_cores, steady_frame_seconds,
 };
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
@@ -100,6 +101,14 @@ pub(crate) struct SimulateArgs {
     /// `scripts/scaling.sh` runs it): workers, master and submitter share them.
     #[arg(long)]
     shared_cores: Option<u32>,
+    /// With --shared-cores: the cores other work used on that machine while
+    /// the real run was measured (`scripts/scaling.sh` reads them from
+    /// /proc/stat), one value for every --workers entry or one each. The
+    /// other work is modelled as threads that always want to run, as many
+    /// as make it use that much beside the simulated farm; the frame time
+    /// on the idle machine is reported too.
+    #[arg(long, value_delimiter = ',')]
+    background_cores: Vec<f64>,
     /// Takes the per-frame fixed costs (the master's base frame, a worker's
     /// set-up) from the phases in a real run's `stats.json` (medians over
     /// the frames after the first) instead of timing them here.
@@ -179,6 +188,52 @@ impl Recording {
     }
 }
 
+/// This thread's CPU time so far (`CLOCK_THREAD_CPUTIME_ID`); `None` where
+/// the system has no such clock.
+#[cfg(unix)]
+fn thread_cpu_time() -> Option<Duration> {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `clock_gettime` writes one `timespec` through the pointer,
+    // which points at a live, writable local.
+    let status = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    (status == 0).then(|| Duration::new(t.tv_sec as u64, t.tv_nsec as u32))
+}
+
+#[cfg(not(unix))]
+fn thread_cpu_time() -> Option<Duration> {
+    None
+}
+
+/// Times work by the CPU time of the thread that runs it: a cost recorded
+/// on a machine busy with other work is the CPU the work needs, not the
+/// wall time it happened to get (timed by the wall clock, the costs grew
+/// with the machine's load, and the simulator then counted that load once
+/// more when it shared the cores). The wall clock where no thread clock is.
+struct CpuStopwatch {
+    cpu: Option<Duration>,
+    wall: Instant,
+}
+
+impl CpuStopwatch {
+    fn start() -> CpuStopwatch {
+        CpuStopwatch {
+            cpu: thread_cpu_time(),
+            wall: Instant::now(),
+        }
+    }
+
+    /// CPU time of this thread since `start` (which must have run on it).
+    fn elapsed(&self) -> Duration {
+        match (self.cpu, thread_cpu_time()) {
+            (Some(from), Some(to)) => to.saturating_sub(from),
+            _ => self.wall.elapsed(),
+        }
+    }
+}
+
 /// Encoded size of the result message a worker sends for this package.
 fn result_message_bytes(
     bitmap: WireBitmap,
@@ -197,6 +252,10 @@ fn result_message_bytes(
     Ok(encode_message(&message)?.len() as u64)
 }
 
+/// Runs of each per-frame fixed cost when recording (the least CPU time is
+/// kept, whatever `--repeats` says: they are cheap beside the tracing).
+const FIXED_COST_RUNS: usize = 3;
+
 /// One triangle's measurements: (index, seconds, bytes, samples, pixels,
 /// and from its first pass the result's bitmap as sent).
 type Measure = (usize, f64, u64, u64, u64, Option<WireBitmap>);
@@ -211,13 +270,18 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         .num_threads(1)
         .build()
         .context("building a one-thread pool")?;
-    // The least of `repeats` runs, like the tracing's, to shed noise.
+    // The least CPU time of a few runs (at least three: they are cheap
+    // beside the tracing, and a single first run pays for page faults of
+    // fresh buffers that the real processes, running frame after frame,
+    // mostly do not).
     let timed = |f: &(dyn Fn() + Sync)| {
-        (0..repeats.max(1))
+        (0..repeats.max(FIXED_COST_RUNS))
             .map(|_| {
-                let start = Instant::now();
-                one_thread.install(f);
-                start.elapsed().as_secs_f64()
+                one_thread.install(|| {
+                    let clock = CpuStopwatch::start();
+                    f();
+                    clock.elapsed().as_secs_f64()
+                })
             })
             .fold(f64::INFINITY, f64::min)
     };
@@ -249,7 +313,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 break;
                             }
                             let i = run % n;
-                            let t0 = Instant::now();
+                            let clock = CpuStopwatch::start();
                             let result = trace_package(
                                 &frame,
                                 &triangles[i..=i],
@@ -257,7 +321,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 &mut |_| {},
                             );
                             let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
-                            let busy = t0.elapsed();
+                            let busy = clock.elapsed();
                             let kept = (run < n).then(|| bitmap.clone());
                             let bytes = result_message_bytes(
                                 bitmap,
@@ -333,21 +397,25 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64)> {
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
-    let start = Instant::now();
-    let done = FrameDone {
-        job: 1,
-        frame: 0,
-        // As `vtfarm submit` asks for it (it writes only PNGs).
-        image: WireImage::encode(&base, WireImageFormat::Srgb8),
-        stats: Default::default(),
-        aux: None,
-    };
-    let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
-    encode_message(&Message::FrameDone(done))?;
-    let driver = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    journal.write(&record);
-    Ok((driver, start.elapsed().as_secs_f64()))
+    let (mut driver, mut journaled) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..FIXED_COST_RUNS {
+        let clock = CpuStopwatch::start();
+        let done = FrameDone {
+            job: 1,
+            frame: 0,
+            // As `vtfarm submit` asks for it (it writes only PNGs).
+            image: WireImage::encode(&base, WireImageFormat::Srgb8),
+            stats: Default::default(),
+            aux: None,
+        };
+        let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
+        encode_message(&Message::FrameDone(done))?;
+        driver = driver.min(clock.elapsed().as_secs_f64());
+        let clock = CpuStopwatch::start();
+        journal.write(&record);
+        journaled = journaled.min(clock.elapsed().as_secs_f64());
+    }
+    Ok((driver, journaled))
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -363,23 +431,27 @@ fn composite_time(
     let (width, height) = (base.width, base.height);
     // A colour-only job: the colours straight from the wire.
     let mut image = base;
-    let start = Instant::now();
-    for (i, bitmap) in bitmaps {
-        let colors = bitmap.colors_within(width, height)?;
-        if let Some((p, _)) = colors
-            .iter()
-            .find(|(p, _)| ids.triangle[*p] != triangles[i])
-        {
-            bail!(
-                "triangle {}'s result writes the foreign pixel {p}",
-                triangles[i]
-            );
+    let mut least = f64::INFINITY;
+    for _ in 0..FIXED_COST_RUNS {
+        let clock = CpuStopwatch::start();
+        for (i, bitmap) in &bitmaps {
+            let colors = bitmap.colors_within(width, height)?;
+            if let Some((p, _)) = colors
+                .iter()
+                .find(|(p, _)| ids.triangle[*p] != triangles[*i])
+            {
+                bail!(
+                    "triangle {}'s result writes the foreign pixel {p}",
+                    triangles[*i]
+                );
+            }
+            for (p, c) in colors {
+                image.pixels[p] = c;
+            }
         }
-        for (p, c) in colors {
-            image.pixels[p] = c;
-        }
+        least = least.min(clock.elapsed().as_secs_f64());
     }
-    Ok(start.elapsed().as_secs_f64())
+    Ok(least)
 }
 
 /// One simulated farm: the figures of its frames.
@@ -406,6 +478,16 @@ struct Row {
     duplicates: u32,
     /// Steady-state seconds per frame (`steady_frame_seconds`).
     frame_seconds: f64,
+    /// The same farm without the other work on its shared machine
+    /// (`--background-cores`); `frame_seconds` when there is none.
+    frame_seconds_idle: f64,
+    /// The modelled other work: always-runnable threads, and the cores
+    /// they got over the steady window (`steady_background_cores`).
+    background_threads: f64,
+    background_cores: f64,
+    /// CPU seconds per frame of the master and each worker
+    /// (`cpu_per_frame`), to set beside the real processes'.
+    cpu_per_frame: Vec<f64>,
     /// One thread's tracing per frame over (`frame_seconds` × `ideal`):
     /// at most 1 (see `steady_frame_seconds`).
     efficiency: f64,
@@ -458,10 +540,56 @@ impl Row {
             packages: last.packages,
             duplicates: last.duplicates,
             frame_seconds,
+            frame_seconds_idle: frame_seconds,
+            background_threads: 0.0,
+            background_cores: 0.0,
+            cpu_per_frame: cpu_per_frame(frames),
             efficiency: work / (frame_seconds * ideal).max(1e-12),
             imbalance_after_first: (steady.iter()).map(|f| f.imbalance).fold(0.0, f64::max),
         })
     }
+}
+
+/// The other work on a shared machine that uses `cores` cores on average
+/// beside the farm of `workers` (over the window `steady_background_cores`
+/// measures): the number of always-runnable threads, found by bisection
+/// (more threads get more of the machine). 0 for 0 cores.
+pub(super) fn background_threads_for(
+    job: &FarmJob,
+    costs: &FarmCosts,
+    config: &FarmConfig,
+    workers: &[FarmWorker],
+    cores: f64,
+) -> Result<f64> {
+    if cores <= 0.0 {
+        return Ok(0.0);
+    }
+    let used = |threads: f64| -> Result<f64> {
+        let config = FarmConfig {
+            background_threads: threads,
+            ..config.clone()
+        };
+        Ok(steady_background_cores(&simulate_farm(
+            job, costs, &config, workers,
+        )?))
+    };
+    let (mut low, mut high) = (0.0, 1.0);
+    while used(high)? < cores {
+        (low, high) = (high, high * 2.0);
+        if high > 1024.0 {
+            bail!("no number of other threads uses {cores} cores beside the farm");
+        }
+    }
+    // To 1/1000 of a thread or better.
+    while high - low > 1e-3 * high.max(1.0) {
+        let middle = (low + high) / 2.0;
+        if used(middle)? < cores {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    Ok((low + high) / 2.0)
 }
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
@@ -536,6 +664,19 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
              --cost-scale and --fixed-cost-scale finite and positive"
         );
     }
+    let background_ok = match args.background_cores.len() {
+        0 | 1 => true,
+        n => n == args.workers.len(),
+    };
+    let cores_ok = |b: &f64| {
+        b.is_finite() && *b >= 0.0 && args.shared_cores.is_some_and(|c| *b < f64::from(c))
+    };
+    if !background_ok || !args.background_cores.iter().all(cores_ok) {
+        bail!(
+            "--background-cores needs --shared-cores, one value or one per --workers entry, \
+             each at least 0 and below the shared cores"
+        );
+    }
     // The simulated farm holds every worker's state and every frame's
     // stats: bound them.
     if args.workers.iter().any(|&w| w > 4096) || args.frames > 10_000 {
@@ -607,6 +748,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         master_link_bits_per_second: mbit * 1e6,
         master_cores,
         shared_cores: args.shared_cores,
+        background_threads: 0.0,
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
     };
@@ -623,7 +765,19 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     for &mbit in &args.link_mbit {
         let config = &config(mbit);
         let one = simulate(&farm_job, &costs, config, vec![worker(1.0, mbit)])?;
-        for &n in &args.workers {
+        for (k, &n) in args.workers.iter().enumerate() {
+            let background = match args.background_cores.as_slice() {
+                [] => 0.0,
+                [all] => *all,
+                each => each[k],
+            };
+            let equal = vec![worker(1.0, mbit); n];
+            let config = &FarmConfig {
+                background_threads: background_threads_for(
+                    &farm_job, &costs, config, &equal, background,
+                )?,
+                ..config.clone()
+            };
             for heterogeneous in [false, true] {
                 if heterogeneous && n < 2 {
                     continue;
@@ -632,20 +786,20 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 let speeds: Vec<f64> = (0..n)
                     .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
                     .collect();
-                let frames = simulate(
-                    &farm_job,
-                    &costs,
-                    config,
-                    speeds.iter().map(|&s| worker(s, mbit)).collect(),
-                )?;
-                rows.push(Row::new(
-                    &frames,
-                    &one,
-                    total,
-                    &speeds,
-                    mbit,
-                    heterogeneous,
-                )?);
+                let workers: Vec<FarmWorker> = speeds.iter().map(|&s| worker(s, mbit)).collect();
+                let frames = simulate(&farm_job, &costs, config, workers.clone())?;
+                let mut row = Row::new(&frames, &one, total, &speeds, mbit, heterogeneous)?;
+                if config.background_threads > 0.0 {
+                    let idle = FarmConfig {
+                        background_threads: 0.0,
+                        ..config.clone()
+                    };
+                    let idle = simulate(&farm_job, &costs, &idle, workers)?;
+                    row.frame_seconds_idle = steady_frame_seconds(&idle);
+                }
+                row.background_threads = config.background_threads;
+                row.background_cores = steady_background_cores(&frames);
+                rows.push(row);
             }
         }
     }
@@ -754,6 +908,12 @@ fn print_report(
             r.latency_seconds_per_frame.last().copied().unwrap_or(0.0),
             r.packages
         );
+        if r.background_threads > 0.0 {
+            println!(
+                "{:>7} other work on the machine: {:.2} always-runnable threads got {:.2} cores; {:.3} s per frame without it",
+                "", r.background_threads, r.background_cores, r.frame_seconds_idle
+            );
+        }
     }
     for &mbit in &args.link_mbit {
         let link_seconds = bytes as f64 * 8.0 / (mbit * 1e6);
