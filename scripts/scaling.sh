@@ -147,8 +147,8 @@ for n, (c, gap) in runs.items():
     print(f"CPU per frame, {n} worker(s): master {c[0]:.3f} s, submitter {c[1]:.3f} s, "
           f"workers {' + '.join(f'{w:.3f}' for w in c[2:])} s; total {total:.3f} s = "
           f"{total / cores:.3f} s on {cores} cores (interval {gap:.3f} s)")
-    print(f"  simulated: master {m[0]:.3f} s, workers {' + '.join(f'{w:.3f}' for w in m[1:])} s; "
-          f"total {sum(m):.3f} s")
+    print(f"  simulated:                master {m[0]:.3f} s, submitter {m[-1]:.3f} s, "
+          f"workers {' + '.join(f'{w:.3f}' for w in m[1:-1])} s; total {sum(m):.3f} s")
 first = min(runs)
 more = [n for n in runs if n > first]
 if first == 1 and more:

@@ -74,6 +74,9 @@ pub(crate) struct FarmCosts {
     /// The master's journal thread per finished frame (compress, write):
     /// beside the driver, on the master's cores.
     pub(crate) journal: f64,
+    /// The submitter per finished frame (decode, PNG, timeline), on the
+    /// master's machine.
+    pub(crate) submitter: f64,
 }
 
 /// One simulated worker.
@@ -135,7 +138,7 @@ pub(crate) struct FarmFrame {
     /// got by the frame's delivery.
     pub(crate) background_cpu: f64,
     /// CPU seconds each process had used by the frame's delivery: the
-    /// master (driver, base frames, journal), then each worker.
+    /// master (driver, base frames, journal), each worker, the submitter.
     pub(crate) cpu: Vec<f64>,
     pub(crate) stats: FrameStats,
 }
@@ -178,7 +181,8 @@ pub(crate) fn steady_background_cores(frames: &[FarmFrame]) -> f64 {
     }
 }
 
-/// CPU seconds per frame of each process (the master, then each worker)
+/// CPU seconds per frame of each process (the master, each worker, the
+/// submitter)
 /// from the first frame's delivery to the last's, over the frames delivered
 /// in between: what `scripts/scaling.sh` reads from /proc for a real run.
 pub(crate) fn cpu_per_frame(frames: &[FarmFrame]) -> Vec<f64> {
@@ -302,14 +306,18 @@ enum Work {
     Driver(Vec<Output>),
     /// Work that only takes CPU (the journal's).
     Background,
+    /// The submitter's handling of a finished frame: only takes CPU.
+    Submitter,
 }
 
 impl Work {
-    /// Whose CPU it is: 0 the master's, `w + 1` worker `w`'s.
-    fn owner(&self) -> usize {
+    /// Whose CPU it is, of a farm of `workers`: 0 the master's, `w + 1`
+    /// worker `w`'s, `workers + 1` the submitter's.
+    fn owner(&self, workers: usize) -> usize {
         match self {
             Work::Setup { worker, .. } | Work::Package { worker, .. } => worker + 1,
             Work::Base { .. } | Work::Driver(_) | Work::Background => 0,
+            Work::Submitter => workers + 1,
         }
     }
 }
@@ -441,7 +449,7 @@ impl<'a> Farm<'a> {
             frame_started: BTreeMap::new(),
             busy: vec![Vec::new(); specs.len()],
             background_cpu: 0.0,
-            cpu_used: vec![0.0; specs.len() + 1],
+            cpu_used: vec![0.0; specs.len() + 2],
         };
         let peer = Peer::Submitter {
             address: "simulated".into(),
@@ -553,9 +561,10 @@ impl<'a> Farm<'a> {
             };
             let next = next.max(self.now);
             let dt = (next - self.now).as_secs_f64();
+            let workers = self.workers.len();
             for (job, rate) in self.cpu.iter_mut().zip(&rates) {
                 job.left -= dt * rate;
-                self.cpu_used[job.work.owner()] += dt * rate;
+                self.cpu_used[job.work.owner(workers)] += dt * rate;
             }
             self.background_cpu += dt * background_rate;
             self.now = next;
@@ -662,7 +671,7 @@ impl<'a> Farm<'a> {
                 }
                 self.next_driver_input();
             }
-            Work::Background => {}
+            Work::Background | Work::Submitter => {}
         }
     }
 
@@ -741,6 +750,7 @@ impl<'a> Farm<'a> {
                         stats: done.stats,
                     });
                     self.start_cpu(0, self.costs.journal, Work::Background);
+                    self.start_cpu(0, self.costs.submitter, Work::Submitter);
                 }
                 Message::SceneRequest { .. } => {
                     let data = Message::SceneData(self.scene.clone());
@@ -891,6 +901,7 @@ mod tests {
             result_per_item: 0.0,
             frame_out: 0.0,
             journal: 0.0,
+            submitter: 0.0,
         };
         (job, costs)
     }
