@@ -346,7 +346,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64)> {
     encode_message(&Message::FrameDone(done))?;
     let driver = start.elapsed().as_secs_f64();
     let start = Instant::now();
-    journal.write(&record);
+    journal.write(record);
     Ok((driver, start.elapsed().as_secs_f64()))
 }
 
