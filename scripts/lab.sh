@@ -97,20 +97,22 @@ for _ in $(seq 1 100); do
   sleep 0.2
 done
 [ "$n" -ge "$workers" ] || { echo "workers did not join" >&2; cat "$work"/w1.log >&2; exit 1; }
-timeout 900 ip netns exec "$tag-m" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out" \
-  >"$work/submit.log" 2>&1 || { cat "$work/submit.log" >&2; exit 1; }
+measured_submit "$work/out" "$work/submit.log" "$frames" "${pids[@]}" -- \
+  ip netns exec "$tag-m" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out"
 
 # The prediction: the simulator (the master core and worker sessions on a
 # virtual clock) with the same job, workers and links. The emulated hosts
-# share this machine's cores (`--shared-cores`); a CPU quota makes the
+# share this machine's cores (`--shared-cores`) with the other work the run
+# met on it (`--background-cores`, from /proc/stat); a CPU quota makes the
 # workers' work (and, roughly, the rest) 100/P times slower.
 cores=$(nproc)
+others=$job_others; [ "$others" = nan ] && others=0
 scale=$(awk -v p="${cpu:-100}" 'BEGIN { printf "%.3f", 100 / p }')
 "$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --latency-ms 0.05 --frames "$frames" --width "$width" \
-  --height "$height" --detail "$detail" --repeats 1 --threads 1 --shared-cores "$cores" --cost-scale "$scale" \
+  --height "$height" --detail "$detail" --repeats 1 --threads 1 --shared-cores "$cores" --background-cores "$others" --cost-scale "$scale" \
   --fixed-cost-scale "$scale" --json "$work/sim.json" >"$work/sim.log" 2>&1 || { cat "$work/sim.log" >&2; exit 1; }
 read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json")"
-predicted=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim.json")
-echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge, all on this machine's $cores cores (CPU x$scale)"
-awk -v m="$measured" -v p="$predicted" 'BEGIN { printf "  mean frame (after the first): measured %.3f s, predicted %.3f s, ratio %.2f\n", m, p, m / p }'
+read -r predicted predicted_idle < <(python3 -c 'import json, sys; r = [r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]; print(r["frame_seconds"], r["frame_seconds_idle"])' "$work/sim.json")
+echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge, all on this machine's $cores cores (CPU x$scale); other processes used $others cores meanwhile"
+awk -v m="$measured" -v p="$predicted" -v q="$predicted_idle" 'BEGIN { printf "  mean frame (after the first): measured %.3f s, predicted %.3f s, ratio %.2f (predicted on the idle machine %.3f s)\n", m, p, m / p, q }'
 awk -v b="$sent" -v r="$mbit" 'BEGIN { printf "  results per frame: %.3f MB (%.3f s of the master link)\n", b, b * 8 / r }'

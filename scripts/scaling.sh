@@ -14,9 +14,10 @@
 # transfer and BVH builds), its ratio to the first count's, and the
 # simulator's prediction for the same job and workers (`vtfarm bench simulate
 # --shared-cores`: the master core and worker sessions with costs recorded on
-# this machine, all sharing its cores) with measured/predicted. Then the CPU
-# each process spent per frame in each run (from /proc, frames after the
-# first) and the floor it sets on this machine's cores: with a worker's
+# this machine in CPU time, all sharing its cores with the other work the run
+# met, measured from /proc/stat) with measured/predicted. Then the CPU each
+# process spent per frame in each run (from /proc, frames after the first)
+# beside the simulator's for it, and the floor it sets on this machine's cores: with a worker's
 # set-up U and tracing T (from its CPU alone, U + T, and the workers' total
 # with n, n U + T), n workers need at least max((master + submitter + n U +
 # T) / cores, U + T / n) per frame, so the speed-up over one worker cannot
@@ -67,30 +68,7 @@ wait_for_workers() {
   echo "workers did not join" >&2; return 1
 }
 
-# Sets `ticks` to the CPU time (user + system, clock ticks) each of the
-# processes "$@" has spent so far (no subshell: its own CPU would count).
-ticks=()
-cpu_ticks() {
-  local p line fields
-  ticks=()
-  for p in "$@"; do
-    read -r line <"/proc/$p/stat"
-    read -ra fields <<<"${line##*) }"
-    ticks+=($((fields[11] + fields[12])))
-  done
-}
-# Sets `children_ticks` to the CPU time of this shell's reaped children.
-children_ticks=0
-reaped_cpu_ticks() {
-  local line user system
-  times >"$work/times"
-  { read -r line; read -r user system; } <"$work/times"
-  children_ticks=$(awk -v u="$user" -v s="$system" -v hz="$(getconf CLK_TCK)" 'BEGIN {
-    split(u, a, /[ms]/); split(s, b, /[ms]/); printf "%d", (a[1] * 60 + a[2] + b[1] * 60 + b[2]) * hz + 0.5 }')
-}
-exec {sleeper}<> <(:)  # `read -t` on it sleeps without starting a process
-
-declare -A mean cpu
+declare -A mean cpu others
 for n in $workers_list; do
   pids=()
   # The dashboard on a free port: another farm on this machine may hold the default.
@@ -105,87 +83,72 @@ for n in $workers_list; do
   done
   wait_for_workers "$n"
   out="$work/out-$n"
-  reaped_cpu_ticks; reaped_before=$children_ticks
-  "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out" \
-    >"$work/submit-$n.log" 2>&1 &
-  submitter=$!
-  # CPU when the first frame arrives and at the end: the frames between
-  # are the ones the frame interval counts.
-  at_first=(); deadline=$((SECONDS + 600))
-  while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
-    if [ ${#at_first[@]} -eq 0 ] && [ -e "$out/frame_0000.png" ]; then
-      cpu_ticks "${pids[@]}" "$submitter"; at_first=("${ticks[@]}")
-    fi
-    [ "$SECONDS" -lt "$deadline" ] || { kill "$submitter"; echo "submit timed out" >&2; exit 1; }
-    read -rt 0.02 -u "$sleeper" || true
-  done
-  cpu_ticks "${pids[@]}"; last=("${ticks[@]}")
-  wait "$submitter" || { cat "$work/submit-$n.log" >&2; exit 1; }
-  reaped_cpu_ticks
-  last+=($((children_ticks - reaped_before)))
+  measured_submit "$out" "$work/submit-$n.log" "$frames" "${pids[@]}" -- \
+    "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out"
   mean[$n]=$(frame_figures "$out/stats.json")
-  # CPU seconds per frame after the first: master, submitter, each worker.
-  cpu[$n]=$(python3 - "$frames" "$(getconf CLK_TCK)" "${at_first[*]}" "${last[*]}" <<'PY'
-import sys
-frames, hz = int(sys.argv[1]), int(sys.argv[2])
-first, last = [list(map(int, a.split())) for a in sys.argv[3:5]]
-if len(first) != len(last):
-    first = [float("nan")] * len(last)  # the first frame was not seen
-per = [(b - a) / hz / max(frames - 1, 1) for a, b in zip(first, last)]
-print(" ".join(f"{x:.4f}" for x in [per[0], per[-1], *per[1:-1]]))
-PY
-)
+  cpu[$n]=$job_cpu; others[$n]=$job_others
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
   [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
 done
 
-# The simulator's prediction for each count: the master core and worker
-# sessions on a virtual clock, everything sharing this machine's cores
-# (`--shared-cores`), localhost links. Twice: with the fixed costs (base
-# frame, set-up) timed by the simulator itself, and with those measured in
-# the first count's run (its stats.json phases).
+# The simulator's prediction for all counts in one invocation: the master
+# core and worker sessions on a virtual clock with costs it records here (CPU
+# time), everything sharing this machine's cores (`--shared-cores`),
+# localhost links, and the other work each run met on the machine
+# (`--background-cores`: always-runnable threads, as many as use that much).
 first=${workers_list%% *}
-declare -A predicted predicted_phases
-for n in $workers_list; do
-  for source in recorded phases; do
-    extra=()
-    [ "$source" = phases ] && extra=(--fixed-costs "$work/out-$first/stats.json")
-    "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
-      --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
-      --shared-cores "$cores" "${extra[@]}" --json "$work/sim-$n-$source.json" >"$work/sim-$n-$source.log" 2>&1 \
-      || { cat "$work/sim-$n-$source.log" >&2; exit 1; }
-    p=$(python3 -c 'import json, sys; print([r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]["frame_seconds"])' "$work/sim-$n-$source.json")
-    if [ "$source" = phases ]; then predicted_phases[$n]=$p; else predicted[$n]=$p; fi
-  done
-done
+counts=$(echo $workers_list | tr ' ' ',')
+background=$(for n in $workers_list; do echo "${others[$n]}"; done | sed 's/^nan$/0/' | paste -sd,)
+"$bin" bench simulate --workers "$counts" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
+  --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
+  --shared-cores "$cores" --background-cores "$background" --json "$work/sim.json" >"$work/sim.log" 2>&1 \
+  || { cat "$work/sim.log" >&2; exit 1; }
+[ -n "$keep" ] && mkdir -p "$keep" && cp "$work/sim.log" "$work/sim.json" "$keep/"
+declare -A predicted predicted_idle modelled_cpu
+while read -r n p q c; do
+  predicted[$n]=$p; predicted_idle[$n]=$q; modelled_cpu[$n]=$c
+done < <(python3 -c '
+import json, sys
+for r in json.load(open(sys.argv[1])):
+    if not r["heterogeneous"]:
+        print(r["workers"], r["frame_seconds"], r["frame_seconds_idle"], ",".join(f"{x:.4f}" for x in r["cpu_per_frame"]))
+' "$work/sim.json")
 
 read -r base _ <<<"${mean[$first]}"
 echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
-printf "%8s %16s %13s %9s %15s %13s %10s %13s %10s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "predicted s" "meas/pred" "pred.phases s" "meas/pred"
+printf "%8s %16s %13s %9s %15s %12s %12s %10s %13s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "others cores" "predicted s" "meas/pred" "pred. idle s"
 for n in $workers_list; do
   read -r gap wall bytes raw <<<"${mean[$n]}"
-  p=${predicted[$n]}; q=${predicted_phases[$n]}
-  printf "%8s %16s %13s %9s %15s %13.4f %10s %13.4f %10s\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "$p" "$(awk -v a="$gap" -v b="$p" 'BEGIN { printf "%.2f", a / b }')" "$q" "$(awk -v a="$gap" -v b="$q" 'BEGIN { printf "%.2f", a / b }')"
+  p=${predicted[$n]}; q=${predicted_idle[$n]}
+  printf "%8s %16s %13s %9s %15s %12s %12.4f %10s %13.4f\n" "$n" "$gap" "$wall" "$(awk -v a="$base" -v b="$gap" 'BEGIN { printf "%.2fx", a / b }')" "$bytes" "${others[$n]}" "$p" "$(awk -v a="$gap" -v b="$p" 'BEGIN { printf "%.2f", a / b }')" "$q"
 done
-echo "predicted: vtfarm bench simulate --shared-cores $cores (master core and worker sessions on a virtual clock), fixed costs timed by it; pred.phases: base frame and set-up from the $first-worker run's stats.json phases"
+echo "others cores: CPU the machine's other processes used during the run (/proc/stat less the farm's), in cores"
+echo "predicted: vtfarm bench simulate --shared-cores $cores --background-cores (master core and worker sessions on a virtual clock, costs timed by it in CPU time, that other work as always-runnable threads); pred. idle: the same without the other work"
 echo "result MB: results as sent (zstd byte planes, colour only)"
 
 # The CPU each process spent per frame (from /proc, frames after the
 # first) and the floor it sets: a worker's set-up U and tracing T follow
 # from its CPU with one worker (U + T) and the workers' total with n (n U + T).
 cpu_args=()
-for n in $workers_list; do cpu_args+=("$n" "${cpu[$n]}" "${mean[$n]%% *}"); done
+for n in $workers_list; do cpu_args+=("$n" "${cpu[$n]}" "${mean[$n]%% *}" "${modelled_cpu[$n]}"); done
 python3 - "$cores" "${cpu_args[@]}" <<'PY'
 import sys
 cores, rest = int(sys.argv[1]), sys.argv[2:]
-runs = {int(rest[i]): (list(map(float, rest[i + 1].split())), float(rest[i + 2])) for i in range(0, len(rest), 3)}
+runs, modelled = {}, {}
+for i in range(0, len(rest), 4):
+    n = int(rest[i])
+    runs[n] = (list(map(float, rest[i + 1].split(","))), float(rest[i + 2]))
+    modelled[n] = list(map(float, rest[i + 3].split(",")))
 for n, (c, gap) in runs.items():
     total = sum(c)
+    m = modelled[n]
     print(f"CPU per frame, {n} worker(s): master {c[0]:.3f} s, submitter {c[1]:.3f} s, "
           f"workers {' + '.join(f'{w:.3f}' for w in c[2:])} s; total {total:.3f} s = "
           f"{total / cores:.3f} s on {cores} cores (interval {gap:.3f} s)")
+    print(f"  simulated:                master {m[0]:.3f} s, submitter {m[-1]:.3f} s, "
+          f"workers {' + '.join(f'{w:.3f}' for w in m[1:-1])} s; total {sum(m):.3f} s")
 first = min(runs)
 more = [n for n in runs if n > first]
 if first == 1 and more:

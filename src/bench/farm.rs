@@ -15,7 +15,10 @@
 //!   a time, each costing CPU (a result: [`FarmCosts::result_per_item`] per
 //!   item; a finished frame: [`FarmCosts::frame_out`]); inputs queue
 //!   meanwhile. With [`FarmConfig::shared_cores`] everything runs on one
-//!   machine (a localhost farm), so the master takes CPU from the workers.
+//!   machine (a localhost farm), so the master takes CPU from the workers,
+//!   and [`FarmConfig::background_threads`] stand for other work on that
+//!   machine (always runnable, each sharing the cores like a job of the
+//!   farm's).
 //! - **Work.** A package costs the recorded one-thread seconds of its items
 //!   over the worker's speed, plus a fixed overhead; a frame's set-up
 //!   [`FarmCosts::worker_setup`] over the speed. Results carry each item's
@@ -71,6 +74,9 @@ pub(crate) struct FarmCosts {
     /// The master's journal thread per finished frame (compress, write):
     /// beside the driver, on the master's cores.
     pub(crate) journal: f64,
+    /// The submitter per finished frame (decode, PNG, timeline), on the
+    /// master's machine.
+    pub(crate) submitter: f64,
 }
 
 /// One simulated worker.
@@ -98,6 +104,10 @@ pub(crate) struct FarmConfig {
     /// Everything on one machine of this many cores (a localhost farm):
     /// workers, master and its base frames share them.
     pub(crate) shared_cores: Option<u32>,
+    /// Other work on the shared machine: this many threads that always want
+    /// to run and share its cores fairly with the farm's jobs (a fraction
+    /// runs part of the time). Ignored without [`FarmConfig::shared_cores`].
+    pub(crate) background_threads: f64,
     /// Frames of the job.
     pub(crate) frames: u32,
     /// Gives up at this virtual time.
@@ -124,6 +134,12 @@ pub(crate) struct FarmFrame {
     pub(crate) share_after_first_delivery: f64,
     /// The frame's index in its job.
     pub(crate) index: u32,
+    /// CPU seconds the other work ([`FarmConfig::background_threads`]) had
+    /// got by the frame's delivery.
+    pub(crate) background_cpu: f64,
+    /// CPU seconds each process had used by the frame's delivery: the
+    /// master (driver, base frames, journal), each worker, the submitter.
+    pub(crate) cpu: Vec<f64>,
     pub(crate) stats: FrameStats,
 }
 
@@ -148,6 +164,35 @@ pub(crate) fn steady_frame_seconds(frames: &[FarmFrame]) -> f64 {
         (first.started_at, frames.len() as f64)
     };
     last.done_at.saturating_sub(from).as_secs_f64() / traced
+}
+
+/// The cores the other work on a shared machine used on average over the
+/// window of [`steady_frame_seconds`] (from the first frame's delivery to
+/// the last's): what `scripts/scaling.sh` measures of a real run.
+pub(crate) fn steady_background_cores(frames: &[FarmFrame]) -> f64 {
+    let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
+        return 0.0;
+    };
+    let window = last.done_at.saturating_sub(first.done_at).as_secs_f64();
+    if window > 0.0 {
+        (last.background_cpu - first.background_cpu) / window
+    } else {
+        0.0
+    }
+}
+
+/// CPU seconds per frame of each process (the master, each worker, the
+/// submitter)
+/// from the first frame's delivery to the last's, over the frames delivered
+/// in between: what `scripts/scaling.sh` reads from /proc for a real run.
+pub(crate) fn cpu_per_frame(frames: &[FarmFrame]) -> Vec<f64> {
+    let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
+        return Vec::new();
+    };
+    let delivered = (frames.len() - 1).max(1) as f64;
+    (first.cpu.iter().zip(&last.cpu))
+        .map(|(a, b)| (b - a) / delivered)
+        .collect()
 }
 
 /// The job the simulated master runs: the real scene and reflectors, one
@@ -261,6 +306,20 @@ enum Work {
     Driver(Vec<Output>),
     /// Work that only takes CPU (the journal's).
     Background,
+    /// The submitter's handling of a finished frame: only takes CPU.
+    Submitter,
+}
+
+impl Work {
+    /// Whose CPU it is, of a farm of `workers`: 0 the master's, `w + 1`
+    /// worker `w`'s, `workers + 1` the submitter's.
+    fn owner(&self, workers: usize) -> usize {
+        match self {
+            Work::Setup { worker, .. } | Work::Package { worker, .. } => worker + 1,
+            Work::Base { .. } | Work::Driver(_) | Work::Background => 0,
+            Work::Submitter => workers + 1,
+        }
+    }
 }
 
 struct CpuJob {
@@ -341,6 +400,10 @@ struct Farm<'a> {
     frame_started: BTreeMap<u32, Duration>,
     /// Per worker, its packages on the virtual clock.
     busy: Vec<Vec<PackageRun>>,
+    /// CPU seconds the other work on the shared machine has got so far.
+    background_cpu: f64,
+    /// CPU seconds used so far, by owner (see [`Work::owner`]).
+    cpu_used: Vec<f64>,
 }
 
 impl<'a> Farm<'a> {
@@ -385,6 +448,8 @@ impl<'a> Farm<'a> {
             frames: Vec::new(),
             frame_started: BTreeMap::new(),
             busy: vec![Vec::new(); specs.len()],
+            background_cpu: 0.0,
+            cpu_used: vec![0.0; specs.len() + 2],
         };
         let peer = Peer::Submitter {
             address: "simulated".into(),
@@ -433,19 +498,37 @@ impl<'a> Farm<'a> {
         }
     }
 
-    /// Each running job's speed on its machine: its threads, all slowed
-    /// alike when the machine has fewer cores than threads want to run.
-    fn rates(&self) -> Vec<f64> {
-        let mut wanted = vec![0u32; self.cores.len()];
-        for job in &self.cpu {
-            wanted[job.machine] += job.threads;
+    /// Other threads that always want to run on `machine`.
+    fn background_threads(&self, machine: usize) -> f64 {
+        match self.config.shared_cores {
+            Some(_) if machine == 0 => self.config.background_threads.max(0.0),
+            _ => 0.0,
         }
-        (self.cpu.iter())
-            .map(|j| {
-                let share = f64::from(self.cores[j.machine]) / f64::from(wanted[j.machine]);
-                f64::from(j.threads) * share.min(1.0)
-            })
-            .collect()
+    }
+
+    /// Each running job's speed on its machine (its threads, all slowed
+    /// alike when the machine has fewer cores than threads want to run),
+    /// and the other work's (cores it gets).
+    fn rates(&self) -> (Vec<f64>, f64) {
+        let mut wanted: Vec<f64> = (0..self.cores.len())
+            .map(|m| self.background_threads(m))
+            .collect();
+        for job in &self.cpu {
+            wanted[job.machine] += f64::from(job.threads);
+        }
+        let share = |m: usize| (f64::from(self.cores[m]) / wanted[m]).min(1.0);
+        let jobs = (self.cpu.iter())
+            .map(|j| f64::from(j.threads) * share(j.machine))
+            .collect();
+        let background = self.background_threads(0);
+        (
+            jobs,
+            if background > 0.0 {
+                background * share(0)
+            } else {
+                0.0
+            },
+        )
     }
 
     fn run(&mut self) -> Result<()> {
@@ -458,7 +541,7 @@ impl<'a> Farm<'a> {
                     self.now
                 );
             }
-            let rates = self.rates();
+            let (rates, background_rate) = self.rates();
             let cpu_next = (self.cpu.iter().zip(&rates))
                 .enumerate()
                 .map(|(i, (j, r))| (j.left.max(0.0) / r, i))
@@ -478,9 +561,12 @@ impl<'a> Farm<'a> {
             };
             let next = next.max(self.now);
             let dt = (next - self.now).as_secs_f64();
+            let workers = self.workers.len();
             for (job, rate) in self.cpu.iter_mut().zip(&rates) {
                 job.left -= dt * rate;
+                self.cpu_used[job.work.owner(workers)] += dt * rate;
             }
+            self.background_cpu += dt * background_rate;
             self.now = next;
             if cpu_at == Some(next) {
                 let (_, i) = cpu_next.expect("a CPU job is due");
@@ -585,7 +671,7 @@ impl<'a> Farm<'a> {
                 }
                 self.next_driver_input();
             }
-            Work::Background => {}
+            Work::Background | Work::Submitter => {}
         }
     }
 
@@ -659,9 +745,12 @@ impl<'a> Farm<'a> {
                         imbalance: 0.0,
                         share_after_first_delivery: 0.0,
                         index: done.frame,
+                        background_cpu: self.background_cpu,
+                        cpu: self.cpu_used.clone(),
                         stats: done.stats,
                     });
                     self.start_cpu(0, self.costs.journal, Work::Background);
+                    self.start_cpu(0, self.costs.submitter, Work::Submitter);
                 }
                 Message::SceneRequest { .. } => {
                     let data = Message::SceneData(self.scene.clone());
@@ -812,6 +901,7 @@ mod tests {
             result_per_item: 0.0,
             frame_out: 0.0,
             journal: 0.0,
+            submitter: 0.0,
         };
         (job, costs)
     }
@@ -821,6 +911,7 @@ mod tests {
             master_link_bits_per_second: 1e9,
             master_cores: 1,
             shared_cores: None,
+            background_threads: 0.0,
             frames,
             time_limit: Duration::from_secs(3600),
         }

@@ -38,13 +38,14 @@ use vtfarm_cockpit::CockpitConfig;
 use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
     FrameDone, Message, PackageResult, WireBitmap, WireBitmapParts, WireImage, WireImageFormat,
-    WirePackageStats, encode_message,
+    WirePackageStats, decode_message, encode_message,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
 
 use super::farm::{
-    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, simulate_farm, steady_frame_seconds,
+    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, cpu_per_frame, simulate_farm,
+    steady_background_cores, steady_frame_seconds,
 };
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
@@ -67,9 +68,11 @@ pub(crate) struct SimulateArgs {
     /// One-way link latency in milliseconds.
     #[arg(long, default_value_t = 0.5)]
     latency_ms: f64,
-    /// Fixed time per package on a worker (set-up), in milliseconds.
-    #[arg(long, default_value_t = 1.0)]
-    package_overhead_ms: f64,
+    /// Fixed CPU time per package on a worker beside its triangles', in
+    /// milliseconds (default: measured, tracing no triangle and encoding
+    /// the empty result).
+    #[arg(long)]
+    package_overhead_ms: Option<f64>,
     /// Leaves out the per-frame fixed costs (worker set-up, master base
     /// frame): the load balancer alone, as in the paper's figures.
     #[arg(long)]
@@ -100,6 +103,14 @@ pub(crate) struct SimulateArgs {
     /// `scripts/scaling.sh` runs it): workers, master and submitter share them.
     #[arg(long)]
     shared_cores: Option<u32>,
+    /// With --shared-cores: the cores other work used on that machine while
+    /// the real run was measured (`scripts/scaling.sh` reads them from
+    /// /proc/stat), one value for every --workers entry or one each. The
+    /// other work is modelled as threads that always want to run, as many
+    /// as make it use that much beside the simulated farm; the frame time
+    /// on the idle machine is reported too.
+    #[arg(long, value_delimiter = ',')]
+    background_cores: Vec<f64>,
     /// Takes the per-frame fixed costs (the master's base frame, a worker's
     /// set-up) from the phases in a real run's `stats.json` (medians over
     /// the frames after the first) instead of timing them here.
@@ -154,6 +165,10 @@ pub(super) struct Recording {
     pub(super) frame_out_seconds: f64,
     /// The master's journal thread per finished frame: compress and write.
     pub(super) journal_seconds: f64,
+    /// The submitter per finished frame: decode, PNG and timeline written.
+    pub(super) submitter_seconds: f64,
+    /// A package's own cost beside its triangles' (`seconds` leave it out).
+    pub(super) package_seconds: f64,
     /// Wall time of the per-triangle tracing, all passes.
     pub(super) tracing_wall_seconds: f64,
 }
@@ -179,6 +194,73 @@ impl Recording {
     }
 }
 
+/// This thread's CPU time so far (`CLOCK_THREAD_CPUTIME_ID`); `None` where
+/// the system has no such clock.
+#[cfg(unix)]
+fn thread_cpu_time() -> Option<Duration> {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `clock_gettime` writes one `timespec` through the pointer,
+    // which points at a live, writable local.
+    let status = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    (status == 0).then(|| Duration::new(t.tv_sec as u64, t.tv_nsec as u32))
+}
+
+#[cfg(not(unix))]
+fn thread_cpu_time() -> Option<Duration> {
+    None
+}
+
+/// Times work by the CPU time of the thread that runs it: a cost recorded
+/// on a machine busy with other work is the CPU the work needs, not the
+/// wall time it happened to get (timed by the wall clock, the costs grew
+/// with the machine's load, and the simulator then counted that load once
+/// more when it shared the cores). The wall clock where no thread clock is.
+struct CpuStopwatch {
+    cpu: Option<Duration>,
+    wall: Instant,
+}
+
+impl CpuStopwatch {
+    fn start() -> CpuStopwatch {
+        CpuStopwatch {
+            cpu: thread_cpu_time(),
+            wall: Instant::now(),
+        }
+    }
+
+    /// CPU time of this thread since `start` (which must have run on it).
+    fn elapsed(&self) -> Duration {
+        match (self.cpu, thread_cpu_time()) {
+            (Some(from), Some(to)) => to.saturating_sub(from),
+            _ => self.wall.elapsed(),
+        }
+    }
+}
+
+/// The least CPU time `f` takes on `pool` in [`FIXED_COST_RUNS`] runs. Each
+/// run's output is kept until all have run: the real master and workers
+/// keep several frames' buffers at once (frames in flight), so each frame
+/// writes fresh memory and pays for its page faults (timed with each
+/// output dropped before the next run, the set-up read 0.048 s against the
+/// workers' 0.060 s of CPU per frame beside their tracing).
+fn least_cpu_seconds<T: Send>(pool: &rayon::ThreadPool, f: impl Fn() -> T + Sync) -> f64 {
+    let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
+    let mut least = f64::INFINITY;
+    for _ in 0..FIXED_COST_RUNS {
+        let (seconds, output) = pool.install(|| {
+            let clock = CpuStopwatch::start();
+            let output = f();
+            (clock.elapsed().as_secs_f64(), output)
+        });
+        least = least.min(seconds);
+        kept.push(output);
+    }
+    least
+}
+
 /// Encoded size of the result message a worker sends for this package.
 fn result_message_bytes(
     bitmap: WireBitmap,
@@ -197,6 +279,10 @@ fn result_message_bytes(
     Ok(encode_message(&message)?.len() as u64)
 }
 
+/// Runs of each per-frame fixed cost when recording (the least CPU time is
+/// kept, whatever `--repeats` says: they are cheap beside the tracing).
+const FIXED_COST_RUNS: usize = 3;
+
 /// One triangle's measurements: (index, seconds, bytes, samples, pixels,
 /// and from its first pass the result's bitmap as sent).
 type Measure = (usize, f64, u64, u64, u64, Option<WireBitmap>);
@@ -211,23 +297,20 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         .num_threads(1)
         .build()
         .context("building a one-thread pool")?;
-    // The least of `repeats` runs, like the tracing's, to shed noise.
-    let timed = |f: &(dyn Fn() + Sync)| {
-        (0..repeats.max(1))
-            .map(|_| {
-                let start = Instant::now();
-                one_thread.install(f);
-                start.elapsed().as_secs_f64()
-            })
-            .fold(f64::INFINITY, f64::min)
-    };
     // Once untimed first: a worker builds its shadow maps on its first
     // frame and keeps them (`ShadowCache`), so a frame's set-up is timed
     // with them built (with `--repeats 1` the first build was counted).
     let (ids, behind) = renderer.id_buffers(&job.setup);
-    let base_frame_seconds = timed(&|| drop(renderer.base_frame(&job.setup)));
-    let worker_setup_seconds = timed(&|| drop(renderer.id_buffers(&job.setup)));
+    let base_frame_seconds = least_cpu_seconds(&one_thread, || renderer.base_frame(&job.setup));
+    let worker_setup_seconds = least_cpu_seconds(&one_thread, || renderer.id_buffers(&job.setup));
     let frame = renderer.frame(&job.setup, &ids, &behind);
+    // A package's own cost beside its triangles': tracing none and
+    // encoding the empty result. Every one-triangle package below paid it
+    // once; a real package pays it once for all its triangles.
+    let package_seconds = least_cpu_seconds(&one_thread, || {
+        let result = trace_package(&frame, &[], &PackageOptions::default(), &mut |_| {});
+        WireBitmap::encode(&result.bitmap, WireBitmapParts::Color)
+    });
     let triangles = renderer.reflectors().to_vec();
     let n = triangles.len();
     let runs = n * repeats.max(1);
@@ -249,7 +332,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 break;
                             }
                             let i = run % n;
-                            let t0 = Instant::now();
+                            let clock = CpuStopwatch::start();
                             let result = trace_package(
                                 &frame,
                                 &triangles[i..=i],
@@ -257,7 +340,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
                                 &mut |_| {},
                             );
                             let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
-                            let busy = t0.elapsed();
+                            let busy = clock.elapsed();
                             let kept = (run < n).then(|| bitmap.clone());
                             let bytes = result_message_bytes(
                                 bitmap,
@@ -292,7 +375,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     let mut bitmaps = Vec::with_capacity(n);
     for (i, s, b, k, p, bitmap) in per_thread.into_iter().flatten() {
         bitmaps.extend(bitmap.map(|bitmap| (i, bitmap)));
-        seconds[i] = seconds[i].min(s);
+        seconds[i] = seconds[i].min((s - package_seconds).max(0.0));
         // Pixels and samples are deterministic; the message differs only in
         // the varint of its busy time.
         result_bytes[i] = result_bytes[i].max(b);
@@ -300,7 +383,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
-    let (frame_out_seconds, journal_seconds) = frame_out_time(&renderer, job)?;
+    let (frame_out_seconds, journal_seconds, submitter_seconds) = frame_out_time(&renderer, job)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -319,6 +402,8 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         composite_seconds,
         frame_out_seconds,
         journal_seconds,
+        submitter_seconds,
+        package_seconds,
         tracing_wall_seconds,
     })
 }
@@ -326,28 +411,46 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
 /// The master's work on a finished frame, as `MasterCore` and its driver do
 /// it: the driver makes the frame's image for the wire and encodes the
 /// `FrameDone` for the submitter (first figure); the journal's thread
-/// compresses and writes its copy (second).
-fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64)> {
+/// compresses and writes its copy (second); the submitter decodes it and
+/// writes the PNG and the timeline, as `vtfarm submit` does (third).
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f64)> {
     let (base, _) = renderer.base_frame(&job.setup);
     let dir = tempfile::tempdir()?;
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
-    let start = Instant::now();
-    let done = FrameDone {
-        job: 1,
-        frame: 0,
-        // As `vtfarm submit` asks for it (it writes only PNGs).
-        image: WireImage::encode(&base, WireImageFormat::Srgb8),
-        stats: Default::default(),
-        aux: None,
-    };
-    let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
-    encode_message(&Message::FrameDone(done))?;
-    let driver = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    journal.write(record);
-    Ok((driver, start.elapsed().as_secs_f64()))
+    let (mut driver, mut journaled, mut submitted) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
+    for _ in 0..FIXED_COST_RUNS {
+        let clock = CpuStopwatch::start();
+        let done = FrameDone {
+            job: 1,
+            frame: 0,
+            // As `vtfarm submit` asks for it (it writes only PNGs).
+            image: WireImage::encode(&base, WireImageFormat::Srgb8),
+            stats: Default::default(),
+            aux: None,
+        };
+        let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
+        // The master's telemetry keeps a copy of the image as sent.
+        let kept_image = done.image.clone();
+        let message = encode_message(&Message::FrameDone(done))?;
+        driver = driver.min(clock.elapsed().as_secs_f64());
+        let clock = CpuStopwatch::start();
+        journal.write(record);
+        journaled = journaled.min(clock.elapsed().as_secs_f64());
+        let clock = CpuStopwatch::start();
+        let Message::FrameDone(done) = decode_message(&message[4..])? else {
+            bail!("a FrameDone decoded as another message");
+        };
+        let (width, height, pixels) = done.image.into_srgb8()?;
+        vtfarm_imaging::write_srgb8_png(&dir.path().join("frame.png"), width, height, &pixels)?;
+        let timeline = vtfarm_master::timeline::timeline_svg(&done.stats);
+        std::fs::write(dir.path().join("timeline.svg"), timeline)?;
+        submitted = submitted.min(clock.elapsed().as_secs_f64());
+        kept.push((kept_image, pixels));
+    }
+    Ok((driver, journaled, submitted))
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -363,23 +466,27 @@ fn composite_time(
     let (width, height) = (base.width, base.height);
     // A colour-only job: the colours straight from the wire.
     let mut image = base;
-    let start = Instant::now();
-    for (i, bitmap) in bitmaps {
-        let colors = bitmap.colors_within(width, height)?;
-        if let Some((p, _)) = colors
-            .iter()
-            .find(|(p, _)| ids.triangle[*p] != triangles[i])
-        {
-            bail!(
-                "triangle {}'s result writes the foreign pixel {p}",
-                triangles[i]
-            );
+    let mut least = f64::INFINITY;
+    for _ in 0..FIXED_COST_RUNS {
+        let clock = CpuStopwatch::start();
+        for (i, bitmap) in &bitmaps {
+            let colors = bitmap.colors_within(width, height)?;
+            if let Some((p, _)) = colors
+                .iter()
+                .find(|(p, _)| ids.triangle[*p] != triangles[*i])
+            {
+                bail!(
+                    "triangle {}'s result writes the foreign pixel {p}",
+                    triangles[*i]
+                );
+            }
+            for (p, c) in colors {
+                image.pixels[p] = c;
+            }
         }
-        for (p, c) in colors {
-            image.pixels[p] = c;
-        }
+        least = least.min(clock.elapsed().as_secs_f64());
     }
-    Ok(start.elapsed().as_secs_f64())
+    Ok(least)
 }
 
 /// One simulated farm: the figures of its frames.
@@ -406,6 +513,16 @@ struct Row {
     duplicates: u32,
     /// Steady-state seconds per frame (`steady_frame_seconds`).
     frame_seconds: f64,
+    /// The same farm without the other work on its shared machine
+    /// (`--background-cores`); `frame_seconds` when there is none.
+    frame_seconds_idle: f64,
+    /// The modelled other work: always-runnable threads, and the cores
+    /// they got over the steady window (`steady_background_cores`).
+    background_threads: f64,
+    background_cores: f64,
+    /// CPU seconds per frame of the master and each worker
+    /// (`cpu_per_frame`), to set beside the real processes'.
+    cpu_per_frame: Vec<f64>,
     /// One thread's tracing per frame over (`frame_seconds` × `ideal`):
     /// at most 1 (see `steady_frame_seconds`).
     efficiency: f64,
@@ -458,10 +575,56 @@ impl Row {
             packages: last.packages,
             duplicates: last.duplicates,
             frame_seconds,
+            frame_seconds_idle: frame_seconds,
+            background_threads: 0.0,
+            background_cores: 0.0,
+            cpu_per_frame: cpu_per_frame(frames),
             efficiency: work / (frame_seconds * ideal).max(1e-12),
             imbalance_after_first: (steady.iter()).map(|f| f.imbalance).fold(0.0, f64::max),
         })
     }
+}
+
+/// The other work on a shared machine that uses `cores` cores on average
+/// beside the farm of `workers` (over the window `steady_background_cores`
+/// measures): the number of always-runnable threads, found by bisection
+/// (more threads get more of the machine). 0 for 0 cores.
+pub(super) fn background_threads_for(
+    job: &FarmJob,
+    costs: &FarmCosts,
+    config: &FarmConfig,
+    workers: &[FarmWorker],
+    cores: f64,
+) -> Result<f64> {
+    if cores <= 0.0 {
+        return Ok(0.0);
+    }
+    let used = |threads: f64| -> Result<f64> {
+        let config = FarmConfig {
+            background_threads: threads,
+            ..config.clone()
+        };
+        Ok(steady_background_cores(&simulate_farm(
+            job, costs, &config, workers,
+        )?))
+    };
+    let (mut low, mut high) = (0.0, 1.0);
+    while used(high)? < cores {
+        (low, high) = (high, high * 2.0);
+        if high > 1024.0 {
+            bail!("no number of other threads uses {cores} cores beside the farm");
+        }
+    }
+    // To 1/1000 of a thread or better.
+    while high - low > 1e-3 * high.max(1.0) {
+        let middle = (low + high) / 2.0;
+        if used(middle)? < cores {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    Ok((low + high) / 2.0)
 }
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
@@ -526,7 +689,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         bail!("every --link-mbit entry must be positive and finite");
     }
     // Durations and scales: finite, so the virtual clock stays meaningful.
-    let times = [args.latency_ms, args.package_overhead_ms];
+    let times = [args.latency_ms, args.package_overhead_ms.unwrap_or(0.0)];
     let scales = [args.cost_scale, args.fixed_cost_scale];
     if !times.iter().all(|t| t.is_finite() && *t >= 0.0)
         || !scales.iter().all(|s| s.is_finite() && *s > 0.0)
@@ -534,6 +697,19 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         bail!(
             "--latency-ms and --package-overhead-ms must be finite and not negative, \
              --cost-scale and --fixed-cost-scale finite and positive"
+        );
+    }
+    let background_ok = match args.background_cores.len() {
+        0 | 1 => true,
+        n => n == args.workers.len(),
+    };
+    let cores_ok = |b: &f64| {
+        b.is_finite() && *b >= 0.0 && args.shared_cores.is_some_and(|c| *b < f64::from(c))
+    };
+    if !background_ok || !args.background_cores.iter().all(cores_ok) {
+        bail!(
+            "--background-cores needs --shared-cores, one value or one per --workers entry, \
+             each at least 0 and below the shared cores"
         );
     }
     // The simulated farm holds every worker's state and every frame's
@@ -566,6 +742,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
         recording.journal_seconds = 0.0;
+        recording.submitter_seconds = 0.0;
     }
     let total = recording.total_seconds() * args.cost_scale;
     let n = recording.triangles.len().max(1) as f64;
@@ -589,6 +766,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         result_per_item: recording.composite_seconds / n,
         frame_out: recording.frame_out_seconds,
         journal: recording.journal_seconds,
+        submitter: recording.submitter_seconds,
     };
     // The master core rasterizes a stand-in base frame: tiny, the time is modelled.
     let farm_job = FarmJob {
@@ -607,11 +785,14 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         master_link_bits_per_second: mbit * 1e6,
         master_cores,
         shared_cores: args.shared_cores,
+        background_threads: 0.0,
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
     };
     let latency = Duration::from_secs_f64(args.latency_ms / 1e3);
-    let overhead = Duration::from_secs_f64(args.package_overhead_ms / 1e3);
+    let overhead = Duration::from_secs_f64(
+        (args.package_overhead_ms).map_or(recording.package_seconds, |ms| ms / 1e3),
+    );
     let worker = |speed: f64, mbit: f64| FarmWorker {
         speed,
         link_bits_per_second: mbit * 1e6,
@@ -623,7 +804,19 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     for &mbit in &args.link_mbit {
         let config = &config(mbit);
         let one = simulate(&farm_job, &costs, config, vec![worker(1.0, mbit)])?;
-        for &n in &args.workers {
+        for (k, &n) in args.workers.iter().enumerate() {
+            let background = match args.background_cores.as_slice() {
+                [] => 0.0,
+                [all] => *all,
+                each => each[k],
+            };
+            let equal = vec![worker(1.0, mbit); n];
+            let config = &FarmConfig {
+                background_threads: background_threads_for(
+                    &farm_job, &costs, config, &equal, background,
+                )?,
+                ..config.clone()
+            };
             for heterogeneous in [false, true] {
                 if heterogeneous && n < 2 {
                     continue;
@@ -632,20 +825,20 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 let speeds: Vec<f64> = (0..n)
                     .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
                     .collect();
-                let frames = simulate(
-                    &farm_job,
-                    &costs,
-                    config,
-                    speeds.iter().map(|&s| worker(s, mbit)).collect(),
-                )?;
-                rows.push(Row::new(
-                    &frames,
-                    &one,
-                    total,
-                    &speeds,
-                    mbit,
-                    heterogeneous,
-                )?);
+                let workers: Vec<FarmWorker> = speeds.iter().map(|&s| worker(s, mbit)).collect();
+                let frames = simulate(&farm_job, &costs, config, workers.clone())?;
+                let mut row = Row::new(&frames, &one, total, &speeds, mbit, heterogeneous)?;
+                if config.background_threads > 0.0 {
+                    let idle = FarmConfig {
+                        background_threads: 0.0,
+                        ..config.clone()
+                    };
+                    let idle = simulate(&farm_job, &costs, &idle, workers)?;
+                    row.frame_seconds_idle = steady_frame_seconds(&idle);
+                }
+                row.background_threads = config.background_threads;
+                row.background_cores = steady_background_cores(&frames);
+                rows.push(row);
             }
         }
     }
@@ -698,7 +891,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s (not scaled); per-triangle tracing {:.3} s wall ({} passes, least time kept)",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -709,14 +902,17 @@ fn print_report(
         rec.composite_seconds,
         rec.frame_out_seconds,
         rec.journal_seconds,
+        rec.submitter_seconds,
+        rec.package_seconds * 1e3,
         rec.tracing_wall_seconds,
         args.repeats
     );
     println!(
-        "model: the master's own core and the workers' own sessions on a virtual clock; speed 1 = one thread of this machine; {} frame(s) of the recorded costs; each worker's own link and the master's one shared link at the given rate, {} ms latency, {} ms per package; {}",
+        "model: the master's own core and the workers' own sessions on a virtual clock; speed 1 = one thread of this machine; {} frame(s) of the recorded costs; each worker's own link and the master's one shared link at the given rate, {} ms latency, {:.2} ms per package; {}",
         args.frames,
         args.latency_ms,
-        args.package_overhead_ms,
+        args.package_overhead_ms
+            .unwrap_or(rec.package_seconds * 1e3),
         match args.shared_cores {
             Some(c) => format!("everything shares one machine of {c} cores"),
             None => format!(
@@ -754,6 +950,12 @@ fn print_report(
             r.latency_seconds_per_frame.last().copied().unwrap_or(0.0),
             r.packages
         );
+        if r.background_threads > 0.0 {
+            println!(
+                "{:>7} other work on the machine: {:.2} always-runnable threads got {:.2} cores; {:.3} s per frame without it",
+                "", r.background_threads, r.background_cores, r.frame_seconds_idle
+            );
+        }
     }
     for &mbit in &args.link_mbit {
         let link_seconds = bytes as f64 * 8.0 / (mbit * 1e6);

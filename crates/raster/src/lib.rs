@@ -31,11 +31,18 @@ use vtfarm_imaging::Image;
 use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 
 /// Per-pixel visibility: which object and triangle is seen, and at what view
-/// depth. `NONE` where nothing is.
+/// depth, over a `width` x `height` frame. The planes hold the pixels of
+/// `window` only (row-major, `window`'s width per row): every pixel outside
+/// it is empty (`NONE`, infinite depth). A buffer of the whole frame has the
+/// whole frame as its window; a worker's covers the reflectors' bounds, so
+/// that it costs their pixels, not the frame's. Read pixels with
+/// [`IdBuffer::triangle_at`] and its siblings, or [`IdBuffer::slot`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct IdBuffer {
     pub width: u32,
     pub height: u32,
+    /// The pixels the planes hold, inside the frame.
+    pub window: PixelRect,
     pub object: Vec<ObjectId>,
     pub triangle: Vec<TriangleId>,
     /// View depth (distance along the camera's forward axis); infinity where empty.
@@ -43,25 +50,33 @@ pub struct IdBuffer {
 }
 
 impl IdBuffer {
-    /// An empty buffer.
+    /// An empty buffer of the whole frame.
     pub fn new(width: u32, height: u32) -> Self {
+        IdBuffer::empty_within(width, height, PixelRect::full(width, height))
+    }
+
+    /// An empty buffer whose planes hold `window` (cut to the frame).
+    pub fn empty_within(width: u32, height: u32, window: PixelRect) -> Self {
         let mut ids = IdBuffer {
             width: 0,
             height: 0,
+            window: EMPTY,
             object: Vec::new(),
             triangle: Vec::new(),
             depth: Vec::new(),
         };
-        ids.clear(width, height);
+        ids.clear_within(width, height, window);
         ids
     }
 
-    /// Makes this the empty `width` x `height` buffer [`IdBuffer::new`]
-    /// makes, in this buffer's allocations.
-    fn clear(&mut self, width: u32, height: u32) {
-        let n = (width * height) as usize;
-        self.width = width;
-        self.height = height;
+    /// Makes this the empty buffer [`IdBuffer::empty_within`] makes, in
+    /// this buffer's allocations.
+    fn clear_within(&mut self, width: u32, height: u32, window: PixelRect) {
+        let window = Some(window.clamped(width, height))
+            .filter(|w| !w.is_empty())
+            .unwrap_or(EMPTY);
+        let n = window.area();
+        (self.width, self.height, self.window) = (width, height, window);
         for plane in [&mut self.object, &mut self.triangle] {
             plane.clear();
             plane.resize(n, NONE);
@@ -70,9 +85,37 @@ impl IdBuffer {
         self.depth.resize(n, f32::INFINITY);
     }
 
-    /// The index of pixel (`x`, `y`).
-    pub fn index(&self, x: u32, y: u32) -> usize {
-        (y * self.width + x) as usize
+    /// The frame's index of pixel (`x`, `y`): row-major over the whole
+    /// frame, as images and bitmaps number pixels.
+    pub fn frame_index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+
+    /// Where pixel (`x`, `y`) lies in the planes, or `None` outside the
+    /// window (an empty pixel, or one off the frame).
+    #[inline]
+    pub fn slot(&self, x: u32, y: u32) -> Option<usize> {
+        let w = self.window;
+        w.contains(x, y)
+            .then(|| (y - w.y0) as usize * (w.x1 - w.x0) as usize + (x - w.x0) as usize)
+    }
+
+    /// The triangle seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
+    #[inline]
+    pub fn triangle_at(&self, x: u32, y: u32) -> TriangleId {
+        self.slot(x, y).map_or(NONE, |i| self.triangle[i])
+    }
+
+    /// The object seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
+    #[inline]
+    pub fn object_at(&self, x: u32, y: u32) -> ObjectId {
+        self.slot(x, y).map_or(NONE, |i| self.object[i])
+    }
+
+    /// The view depth at pixel (`x`, `y`), infinity where nothing is seen (or off the frame).
+    #[inline]
+    pub fn depth_at(&self, x: u32, y: u32) -> f32 {
+        self.slot(x, y).map_or(f32::INFINITY, |i| self.depth[i])
     }
 }
 
@@ -110,6 +153,14 @@ impl PixelRect {
         self.x0 >= self.x1 || self.y0 >= self.y1
     }
 
+    /// The number of pixels inside.
+    pub fn area(self) -> usize {
+        if self.is_empty() {
+            return 0;
+        }
+        (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
+    }
+
     /// Whether pixel (`x`, `y`) lies inside.
     pub fn contains(self, x: u32, y: u32) -> bool {
         (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
@@ -120,6 +171,14 @@ impl PixelRect {
         (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
     }
 }
+
+/// No pixel: the window of a buffer with nothing rasterized.
+const EMPTY: PixelRect = PixelRect {
+    x0: 0,
+    y0: 0,
+    x1: 0,
+    y1: 0,
+};
 
 /// The largest supported image width or height: keeps the fixed-point edge
 /// functions exact in 64-bit integers.
@@ -156,9 +215,13 @@ pub fn rasterize_into(
     shade::shade_into(scene, camera, lighting, ids, image);
 }
 
-/// Shades an ID buffer (local Phong, no shadows): with
+/// Shades an ID buffer of the whole frame (local Phong, no shadows): with
 /// [`id_buffer_where`] this rasterizes part of a scene, e.g. a cube-map face
 /// without the reflector.
+///
+/// # Panics
+/// If `ids` holds less than the whole frame (a buffer of
+/// [`id_buffer_within`]).
 pub fn shade_ids(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
     shade::shade(scene, camera, lighting, ids)
 }
@@ -228,7 +291,7 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
     }) else {
         return passes
             .iter()
-            .map(|_| IdBuffer::new(camera.width, camera.height))
+            .map(|_| IdBuffer::empty_within(camera.width, camera.height, EMPTY))
             .collect();
     };
     let triangles = bands::nearest_first(&setup::setup(scene, camera, NEAR, union, &|t| {
@@ -302,7 +365,7 @@ fn rasterize_ids_into(
     check_camera(camera);
     let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
-        return ids.clear(camera.width, camera.height);
+        return ids.clear_within(camera.width, camera.height, EMPTY);
     }
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
@@ -327,7 +390,7 @@ fn check_camera(camera: &Camera) {
 }
 
 /// The ID buffer of set-up `triangles`, nearest first
-/// (`bands::nearest_first`), over `within` (inside the image).
+/// (`bands::nearest_first`), over `within` (inside the image): its window.
 fn resolve(
     scene: &Scene,
     camera: &Camera,
@@ -347,19 +410,17 @@ fn resolve_into(
     within: PixelRect,
     ids: &mut IdBuffer,
 ) {
-    ids.clear(camera.width, camera.height);
-    if within.is_empty() {
+    ids.clear_within(camera.width, camera.height, within);
+    if ids.window.is_empty() {
         return;
     }
-    bands::resolve_nearest_first(triangles, ids, within);
+    bands::resolve_nearest_first(triangles, ids);
     let IdBuffer {
         object, triangle, ..
     } = ids;
-    let rows =
-        within.y0 as usize * camera.width as usize..within.y1 as usize * camera.width as usize;
-    object[rows.clone()]
+    object
         .par_iter_mut()
-        .zip(triangle[rows].par_iter())
+        .zip(triangle.par_iter())
         .filter(|(_, t)| **t != NONE)
         .for_each(|(o, &t)| {
             *o = scene.triangles[t as usize].object;
