@@ -257,12 +257,9 @@ async fn run(
                     // Off the driver's task: results keep flowing meanwhile.
                     let feedback = feedback.clone();
                     tokio::task::spawn_blocking(move || {
+                        let (job, frame) = (request.job, request.frame);
                         let base = request.rasterize();
-                        let _ = feedback.send(Input::BaseFrame {
-                            job: request.job,
-                            frame: request.frame,
-                            base,
-                        });
+                        let _ = feedback.send(Input::BaseFrame { job, frame, base });
                     });
                 }
                 Output::Persist(record) => {

@@ -39,7 +39,7 @@ use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 use tokio::net::TcpListener;
 use vtfarm_imaging::Image;
-use vtfarm_proto::{FrameStats, StatusReply};
+use vtfarm_proto::{FrameStats, StatusReply, WireImage};
 
 use crate::core::MasterCore;
 use crate::driver::MasterHandle;
@@ -338,19 +338,26 @@ async fn steer_view(
 /// The view's newest finished stage.
 async fn view_png(State(state): State<HttpState>) -> Response {
     let image = (state.master).inspect(|c| c.views().latest().map(|v| v.image.clone()));
-    kept_png(image.await).await
+    kept_png(image.await, linear_srgb8).await
 }
 
 /// The reflected-object map of the view's newest finished stage.
 async fn view_objects_png(State(state): State<HttpState>) -> Response {
     let image = (state.master).inspect(|c| c.views().latest().map(|v| v.object_map.clone()));
-    kept_png(image.await).await
+    kept_png(image.await, linear_srgb8).await
 }
 
-/// A kept image as PNG; 404 when there is none, 503 once the master stopped.
-async fn kept_png(image: Option<Option<Arc<Image>>>) -> Response {
+/// 8-bit sRGB pixels, RGB interleaved: width, height and the bytes.
+type Srgb8 = (u32, u32, Vec<u8>);
+
+/// A kept image as PNG of its `srgb8` pixels; 404 when there is none, 503
+/// once the master stopped.
+async fn kept_png<T: Send + 'static>(
+    image: Option<Option<T>>,
+    srgb8: fn(T) -> Result<Srgb8, String>,
+) -> Response {
     match image {
-        Some(Some(image)) => png_response(image).await,
+        Some(Some(image)) => png_response(move || srgb8(image)).await,
         Some(None) => (StatusCode::NOT_FOUND, "no such image (yet)\n").into_response(),
         None => unavailable(),
     }
@@ -391,7 +398,7 @@ async fn live_png(State(state): State<HttpState>) -> Response {
         .master
         .inspect(|c| c.live_frame().map(|f| f.image.clone()));
     match image.await {
-        Some(Some(image)) => png_response(Arc::new(image)).await,
+        Some(Some(image)) => png_response(move || linear_srgb8(Arc::new(image))).await,
         Some(None) => (StatusCode::NOT_FOUND, "no frame is being rendered\n").into_response(),
         None => unavailable(),
     }
@@ -405,7 +412,7 @@ async fn frame_png(State(state): State<HttpState>, Path(name): Path<String>) -> 
         Some((seq, "png")) => {
             let image =
                 (state.master).inspect(move |c| c.telemetry().frame(seq).map(|f| f.image.clone()));
-            kept_png(image.await).await
+            kept_png(image.await, wire_srgb8).await
         }
         Some((seq, "svg")) => {
             let svg = (state.master).inspect(move |c| {
@@ -425,9 +432,22 @@ async fn frame_png(State(state): State<HttpState>, Path(name): Path<String>) -> 
     }
 }
 
-/// The image as an sRGB PNG, encoded off the async threads.
-async fn png_response(image: Arc<Image>) -> Response {
-    let encoded = tokio::task::spawn_blocking(move || encode_png(&image)).await;
+fn linear_srgb8(image: Arc<Image>) -> Result<Srgb8, String> {
+    Ok((image.width, image.height, image.to_srgb8()))
+}
+
+/// A finished frame as kept: compressed, linear or sRGB.
+fn wire_srgb8(image: Arc<WireImage>) -> Result<Srgb8, String> {
+    (Arc::unwrap_or_clone(image).into_srgb8()).map_err(|e| e.to_string())
+}
+
+/// The `srgb8` pixels as a PNG, made and encoded off the async threads.
+async fn png_response(srgb8: impl FnOnce() -> Result<Srgb8, String> + Send + 'static) -> Response {
+    let encoded = tokio::task::spawn_blocking(move || {
+        let (width, height, pixels) = srgb8()?;
+        encode_srgb8_png(width, height, &pixels).map_err(|e| e.to_string())
+    })
+    .await;
     match encoded {
         Ok(Ok(png)) => (
             [
@@ -442,14 +462,15 @@ async fn png_response(image: Arc<Image>) -> Response {
     }
 }
 
-/// The image as an 8-bit sRGB PNG (the pixels `Image::write_png` writes).
-pub fn encode_png(image: &Image) -> Result<Vec<u8>, image::ImageError> {
+/// 8-bit sRGB pixels (RGB interleaved, the bytes `Image::write_png`
+/// writes) as a PNG.
+fn encode_srgb8_png(width: u32, height: u32, pixels: &[u8]) -> Result<Vec<u8>, image::ImageError> {
     let mut png = Vec::new();
     image::write_buffer_with_format(
         &mut Cursor::new(&mut png),
-        &image.to_srgb8(),
-        image.width,
-        image.height,
+        pixels,
+        width,
+        height,
         image::ExtendedColorType::Rgb8,
         image::ImageFormat::Png,
     )?;

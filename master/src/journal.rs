@@ -92,7 +92,7 @@ impl JournalWriter {
             .spawn(move || {
                 for input in inputs {
                     match input {
-                        WriterInput::Write(record) => journal.write(&record),
+                        WriterInput::Write(record) => journal.write(*record),
                         WriterInput::Flush(done) => {
                             let _ = done.send(());
                         }
@@ -233,7 +233,9 @@ impl Journal {
     }
 
     /// Writes a record; a failure is logged (the farm goes on, unjournaled).
-    pub fn write(&self, record: &Record) {
+    /// Taken by value: a finished frame is written without a copy.
+    pub fn write(&self, record: Record) {
+        let what = record_name(&record);
         let written = match record {
             Record::JobQueued { id, job, scene } => {
                 let scene_path = self.scene_path(&scene.hash);
@@ -243,20 +245,18 @@ impl Journal {
                     write_atomic(&scene_path, &scene.bytes)
                 };
                 scene_written.and_then(|()| {
-                    std::fs::create_dir_all(self.job_dir(*id))?;
-                    let message = Message::SubmitJob {
-                        job: (**job).clone(),
-                    };
-                    write_message(&self.job_dir(*id).join("job"), &message)
+                    std::fs::create_dir_all(self.job_dir(id))?;
+                    let message = Message::SubmitJob { job: *job };
+                    write_message(&self.job_dir(id).join("job"), &message)
                 })
             }
             Record::FrameDone(done) => write_message(
                 &self.frame_path(done.job, done.frame),
-                &Message::FrameDone((**done).clone()),
+                &Message::FrameDone(*done),
             ),
-            Record::JobComplete { id } => write_atomic(&self.job_dir(*id).join("complete"), b""),
+            Record::JobComplete { id } => write_atomic(&self.job_dir(id).join("complete"), b""),
             Record::JobForgotten { id } => {
-                let removed = std::fs::remove_dir_all(self.job_dir(*id));
+                let removed = std::fs::remove_dir_all(self.job_dir(id));
                 let removed = removed.or_else(|e| match e.kind() {
                     std::io::ErrorKind::NotFound => Ok(()),
                     _ => Err(e),
@@ -265,7 +265,7 @@ impl Journal {
             }
         };
         if let Err(e) = written {
-            warn!(dir = %self.dir.display(), "cannot journal {record:?}: {e}", record = record_name(record));
+            warn!(dir = %self.dir.display(), "cannot journal {what}: {e}");
         }
     }
 
@@ -424,13 +424,13 @@ mod tests {
         };
         let frames = [setup.clone(), setup.clone(), setup];
         let job = crate::wire_job("j", &scene, &frames, &[0], options);
-        journal.write(&Record::JobQueued {
+        journal.write(Record::JobQueued {
             id: 4,
             job: Box::new(job.clone()),
             scene: scene.clone(),
         });
-        journal.write(&frame_done(4, 0));
-        journal.write(&frame_done(4, 2));
+        journal.write(frame_done(4, 0));
+        journal.write(frame_done(4, 2));
         let stored = journal.load();
         assert_eq!(stored.len(), 1);
         assert_eq!(
@@ -441,7 +441,7 @@ mod tests {
         assert_eq!(stored[0].job.frames, job.frames);
         assert_eq!(journal.frame(4, 2).unwrap().frame, 2);
 
-        journal.write(&Record::JobForgotten { id: 4 });
+        journal.write(Record::JobForgotten { id: 4 });
         assert!(journal.load().is_empty());
         assert!(journal.frame(4, 0).is_none());
         let scenes = std::fs::read_dir(dir.path().join("jobs/scenes")).unwrap();
@@ -496,7 +496,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
         std::fs::create_dir_all(journal.job_dir(7)).unwrap();
-        journal.write(&Record::FrameDone(Box::new(done.clone())));
+        journal.write(Record::FrameDone(Box::new(done.clone())));
         assert_eq!(journal.frame(7, 3), Some(done));
         let raw = 160 * 90 * 12;
         let kept = std::fs::metadata(journal.frame_path(7, 3)).unwrap().len();

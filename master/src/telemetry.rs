@@ -7,8 +7,7 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
 
 use serde::Serialize;
-use vtfarm_imaging::Image;
-use vtfarm_proto::FrameStats;
+use vtfarm_proto::{FrameStats, WireImage};
 
 /// How many finished frames the master keeps for flicking through.
 pub const KEPT_FRAMES: usize = 16;
@@ -73,7 +72,9 @@ pub struct FinishedFrameRecord {
     pub job: u64,
     pub frame: u32,
     pub stats: FrameStats,
-    pub image: Arc<Image>,
+    /// The image as it went to the submitter (compressed: a few MB where
+    /// the linear 1080p frame is 25 MB), decoded when it is looked at.
+    pub image: Arc<WireImage>,
 }
 
 /// The master's history, bounded.
@@ -88,7 +89,7 @@ pub struct Telemetry {
 
 impl Telemetry {
     /// Records a finished frame: its counts, and its image among the kept ones.
-    pub fn frame_finished(&mut self, job: u64, frame: u32, stats: FrameStats, image: Image) {
+    pub fn frame_finished(&mut self, job: u64, frame: u32, stats: FrameStats, image: WireImage) {
         let c = &mut self.counters;
         c.frames_completed += 1;
         c.packages_failed += u64::from(stats.failures);
@@ -146,7 +147,7 @@ mod tests {
                 wall_micros: 200_000,
                 ..FrameStats::default()
             };
-            t.frame_finished(1, k, stats, Image::new(1, 1, glam::Vec3::ZERO));
+            t.frame_finished(1, k, stats, WireImage::default());
         }
         assert_eq!(t.counters.frames_completed, KEPT_FRAMES as u64 + 3);
         assert_eq!(t.counters.packages_failed, KEPT_FRAMES as u64 + 3);

@@ -55,9 +55,9 @@ impl Harness {
     fn rasterize_bases(&mut self) -> Vec<Output> {
         for request in std::mem::take(&mut self.bases) {
             let now = self.tick();
+            let (job, frame) = (request.job, request.frame);
             let base = request.rasterize();
-            self.core
-                .base_frame_ready(now, request.job, request.frame, base);
+            self.core.base_frame_ready(now, job, frame, base);
         }
         self.outputs()
     }

@@ -149,8 +149,9 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
                     _ => {}
                 },
                 Output::RasterizeBase(request) => {
+                    let (job, frame) = (request.job, request.frame);
                     let base = request.rasterize();
-                    core.base_frame_ready(now, request.job, request.frame, base);
+                    core.base_frame_ready(now, job, frame, base);
                 }
                 Output::Close(conn, reason) => panic!("closed {conn}: {reason}"),
                 Output::Persist(_) | Output::Replay { .. } => {}

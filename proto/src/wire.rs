@@ -8,6 +8,7 @@
 //!
 //! Vectors travel as `[f32; 3]` (glam's types do not derive serde here).
 
+use std::cell::RefCell;
 use std::time::Duration;
 
 use glam::Vec3;
@@ -890,12 +891,28 @@ impl WireBitmap {
     }
 }
 
+thread_local! {
+    /// zstd's contexts, one of each per thread, kept from call to call: a
+    /// fresh one allocates its tables again for every result and frame.
+    static COMPRESSOR: RefCell<Option<zstd::bulk::Compressor<'static>>> =
+        const { RefCell::new(None) };
+    static DECOMPRESSOR: RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+        const { RefCell::new(None) };
+}
+
 fn compress(bytes: &[u8]) -> Vec<u8> {
     if bytes.is_empty() {
         return Vec::new();
     }
     // Compressing from memory into memory fails only on allocation failure.
-    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compresses in memory")
+    COMPRESSOR.with_borrow_mut(|compressor| {
+        let compressor = compressor.get_or_insert_with(|| {
+            zstd::bulk::Compressor::new(ZSTD_LEVEL).expect("zstd makes a context")
+        });
+        compressor
+            .compress(bytes)
+            .expect("zstd compresses in memory")
+    })
 }
 
 /// Decompresses exactly `expected` bytes (no more may be allocated).
@@ -903,7 +920,14 @@ fn decompress(field: &str, bytes: &[u8], expected: usize) -> Result<Vec<u8>, Wir
     let data = if expected == 0 && bytes.is_empty() {
         Vec::new()
     } else {
-        zstd::bulk::decompress(bytes, expected).map_err(|e| WireError::Decode {
+        let decompressed = DECOMPRESSOR.with_borrow_mut(|decompressor| {
+            let decompressor = match decompressor {
+                Some(d) => d,
+                None => decompressor.insert(zstd::bulk::Decompressor::new()?),
+            };
+            decompressor.decompress(bytes, expected)
+        });
+        decompressed.map_err(|e| WireError::Decode {
             what: "compressed data",
             message: format!("{field}: {e}"),
         })?

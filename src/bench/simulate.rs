@@ -432,10 +432,12 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
             aux: None,
         };
         let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
+        // The master's telemetry keeps a copy of the image as sent.
+        let kept_image = done.image.clone();
         let message = encode_message(&Message::FrameDone(done))?;
         driver = driver.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
-        journal.write(&record);
+        journal.write(record);
         journaled = journaled.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
         let Message::FrameDone(done) = decode_message(&message[4..])? else {
@@ -446,7 +448,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         let timeline = vtfarm_master::timeline::timeline_svg(&done.stats);
         std::fs::write(dir.path().join("timeline.svg"), timeline)?;
         submitted = submitted.min(clock.elapsed().as_secs_f64());
-        kept.push((record, pixels));
+        kept.push((kept_image, pixels));
     }
     Ok((driver, journaled, submitted))
 }

@@ -65,20 +65,18 @@ impl IdBuffer {
             triangle: Vec::new(),
             depth: Vec::new(),
         };
-        ids.clear(width, height, window);
+        ids.clear_within(width, height, window);
         ids
     }
 
-    /// Makes this the buffer [`IdBuffer::empty_within`] makes, in this
-    /// buffer's allocations (an earlier frame's: no fresh pages to fault in).
-    fn clear(&mut self, width: u32, height: u32, window: PixelRect) {
+    /// Makes this the empty buffer [`IdBuffer::empty_within`] makes, in
+    /// this buffer's allocations.
+    fn clear_within(&mut self, width: u32, height: u32, window: PixelRect) {
         let window = Some(window.clamped(width, height))
             .filter(|w| !w.is_empty())
             .unwrap_or(EMPTY);
         let n = window.area();
-        self.width = width;
-        self.height = height;
-        self.window = window;
+        (self.width, self.height, self.window) = (width, height, window);
         for plane in [&mut self.object, &mut self.triangle] {
             plane.clear();
             plane.resize(n, NONE);
@@ -424,7 +422,7 @@ fn rasterize_ids_into(
     check_camera(camera);
     let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
-        return ids.clear(camera.width, camera.height, EMPTY);
+        return ids.clear_within(camera.width, camera.height, EMPTY);
     }
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
@@ -469,7 +467,7 @@ fn resolve_into(
     within: PixelRect,
     ids: &mut IdBuffer,
 ) {
-    ids.clear(camera.width, camera.height, within);
+    ids.clear_within(camera.width, camera.height, within);
     if ids.window.is_empty() {
         return;
     }

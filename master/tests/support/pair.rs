@@ -431,15 +431,16 @@ impl Pair {
             }
             Output::RasterizeBase(request) => {
                 // The base frame takes no virtual time here.
+                let (job, frame) = (request.job, request.frame);
                 let base = request.rasterize();
-                (self.master).base_frame_ready(self.now, request.job, request.frame, base);
+                (self.master).base_frame_ready(self.now, job, frame, base);
             }
             Output::Persist(record) => {
                 let (journal, _) = self
                     .journal
                     .as_ref()
                     .expect("only a persistent core persists");
-                journal.write(&record);
+                journal.write(record);
             }
             Output::Replay { conn, job, frames } => {
                 let (journal, _) = self
