@@ -73,7 +73,7 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
         let glass: Vec<(u32, u32)> = bounds
             .pixels()
             .filter(|&(x, y)| {
-                let t = frame_ids.triangle[frame_ids.index(x, y)];
+                let t = frame_ids.triangle_at(x, y);
                 t != vtfarm_scene::NONE
                     && is_reflector[t as usize]
                     && scene.material_of(t).transmittance.max_element() > 0.0
@@ -153,7 +153,7 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                             let start = Instant::now();
                             for &(x, y) in run {
                                 let mut value = PixelValue {
-                                    index: frame_ids.index(x, y) as u32,
+                                    index: frame_ids.frame_index(x, y) as u32,
                                     color: glam::Vec3::ZERO,
                                     reflected: glam::Vec3::ONE,
                                     transmitted: glam::Vec3::ZERO,

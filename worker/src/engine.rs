@@ -347,13 +347,12 @@ impl FrameParts {
 mod tests {
     use super::*;
     use glam::Vec3;
+    use vtfarm_cockpit::Cockpit;
     use vtfarm_proto::{SceneData, WireFrameSetup};
-    use vtfarm_scene::{Light, LightKind};
+    use vtfarm_scene::{Camera, Light, LightKind};
 
-    /// A study's sun sweep sends frames that differ only in the lighting:
-    /// the worker keeps the scene's renderer (its BVH) for all of them.
-    #[test]
-    fn frames_that_differ_only_in_the_sun_share_the_renderer() {
+    /// A small cockpit and an engine that holds it.
+    fn cockpit_engine() -> (Cockpit, SceneHash, Engine) {
         let cockpit = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
             detail: 0.1,
             ..Default::default()
@@ -362,32 +361,52 @@ mod tests {
         let hash = data.hash;
         let mut engine = Engine::new(None);
         engine.add_scene(data).unwrap();
+        (cockpit, hash, engine)
+    }
+
+    /// Frame `frame` of the cockpit seen by `camera`, the sun along `sun`.
+    fn cockpit_frame(
+        (cockpit, hash): (&Cockpit, SceneHash),
+        frame: u32,
+        camera: Camera,
+        sun: Vec3,
+        reflectors: &[u32],
+    ) -> FrameStart {
+        let mut lighting = cockpit.lighting.clone();
+        lighting.lights[0] = Light {
+            kind: LightKind::Directional { direction: sun },
+            ..lighting.lights[0]
+        };
+        let setup = FrameSetup {
+            camera,
+            lighting,
+            trace: Default::default(),
+            vertex: Default::default(),
+        };
+        FrameStart {
+            job: 1,
+            frame,
+            scene: hash,
+            setup: WireFrameSetup::from(&setup),
+            reflectors: reflectors.to_vec(),
+            method: MethodKind::VertexTracing.into(),
+            aux: true,
+        }
+    }
+
+    /// A study's sun sweep sends frames that differ only in the lighting:
+    /// the worker keeps the scene's renderer (its BVH) for all of them.
+    #[test]
+    fn frames_that_differ_only_in_the_sun_share_the_renderer() {
+        let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
+        let camera = Camera {
+            width: 32,
+            height: 18,
+            ..cockpit.camera
+        };
         let start = |frame: u32, sun: Vec3, reflectors: &[u32]| {
-            let mut lighting = cockpit.lighting.clone();
-            lighting.lights[0] = Light {
-                kind: LightKind::Directional { direction: sun },
-                ..lighting.lights[0]
-            };
-            let setup = FrameSetup {
-                camera: vtfarm_scene::Camera {
-                    width: 32,
-                    height: 18,
-                    ..cockpit.camera
-                },
-                lighting,
-                trace: Default::default(),
-                vertex: Default::default(),
-            };
-            FrameStart {
-                job: 1,
-                frame,
-                scene: hash,
-                setup: WireFrameSetup::from(&setup),
-                reflectors: reflectors.to_vec(),
-                method: MethodKind::VertexTracing.into(),
-                aux: true,
-            }
+            cockpit_frame((&cockpit, hash), frame, camera, sun, reflectors)
         };
         let a = engine
             .start_frame(start(0, Vec3::new(0.45, -0.85, -0.15), &reflectors))
@@ -402,5 +421,85 @@ mod tests {
             .start_frame(start(2, Vec3::new(-0.9, -0.3, 0.1), &reflectors[1..]))
             .unwrap();
         assert!(!Arc::ptr_eq(&a.renderer, &c.renderer));
+    }
+
+    /// A frame's packages give the same bytes whether the engine set up
+    /// other frames before (whose buffers covered other pixels, and whose
+    /// shadow maps it keeps) or set up this frame alone: nothing of an
+    /// earlier frame's set-up leaks into a later one.
+    #[test]
+    fn a_frame_traces_the_same_after_other_frames_as_alone() {
+        let (cockpit, hash, mut engine) = cockpit_engine();
+        let reflectors = cockpit.cover_glass_triangles();
+        let camera = Camera {
+            width: 96,
+            height: 54,
+            ..cockpit.camera
+        };
+        // The eye moved sideways and up, the sun turned: other reflector
+        // bounds, other ID buffers, other shadows.
+        let moved = Camera {
+            eye: camera.eye + Vec3::new(0.08, 0.05, 0.0),
+            ..camera
+        };
+        let frames = [
+            cockpit_frame(
+                (&cockpit, hash),
+                0,
+                camera,
+                Vec3::new(0.45, -0.85, -0.15),
+                &reflectors,
+            ),
+            cockpit_frame(
+                (&cockpit, hash),
+                1,
+                moved,
+                Vec3::new(-0.9, -0.3, 0.1),
+                &reflectors,
+            ),
+        ];
+        // Two packages, each half of the reflector triangles.
+        let packages = |frame: u32| {
+            let half = reflectors.len() / 2;
+            [&reflectors[..half], &reflectors[half..]].map(|triangles| Package {
+                id: u64::from(frame),
+                job: 1,
+                frame,
+                triangles: triangles.to_vec(),
+            })
+        };
+        let trace = |active: &ActiveFrame| {
+            packages(active.frame).map(|package| {
+                let result = active
+                    .run(&package, 1.0, &Stop::with_budget(u64::MAX))
+                    .unwrap();
+                (result.bitmap, result.triangle_samples)
+            })
+        };
+        let alone: Vec<_> = frames
+            .iter()
+            .map(|start| {
+                let (_, _, mut engine) = cockpit_engine();
+                trace(&engine.start_frame(start.clone()).unwrap())
+            })
+            .collect();
+        // One engine: both frames prepared, then the first traced after the
+        // second, then the first prepared again after the second.
+        let first = engine.start_frame(frames[0].clone()).unwrap();
+        let second = engine.start_frame(frames[1].clone()).unwrap();
+        assert_eq!(trace(&second), alone[1]);
+        assert_eq!(trace(&first), alone[0]);
+        drop((first, second));
+        let again = engine.start_frame(frames[0].clone()).unwrap();
+        assert_eq!(trace(&again), alone[0]);
+        // Not vacuous: the frames differ, and the packages cover pixels.
+        assert_ne!(alone[0], alone[1]);
+        for (bitmap, _) in alone.iter().flatten() {
+            let covered = SparseBitmap::try_from(bitmap.clone())
+                .unwrap()
+                .covered()
+                .count();
+            assert!(covered > 50, "{covered} pixels covered");
+        }
     }
 }

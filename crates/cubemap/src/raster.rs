@@ -172,7 +172,7 @@ impl PixelWindow {
                     let q = [w[0] / a.depth, w[1] / b.depth, w[2] / c.depth];
                     let sum = q[0] + q[1] + q[2];
                     let depth = 1.0 / sum;
-                    let surface = ids.depth[ids.index(self.x0 + x, self.y0 + y)];
+                    let surface = ids.depth_at(self.x0 + x, self.y0 + y);
                     if depth < surface * (1.0 - 1e-4) {
                         continue;
                     }

@@ -361,7 +361,7 @@ impl MethodFrame<'_> {
             .flat_map_iter(|y| {
                 let flags = &flags;
                 (0..w).filter_map(move |x| {
-                    let triangle = self.ids.triangle[self.ids.index(x, y)];
+                    let triangle = self.ids.triangle_at(x, y);
                     let owned = flags.get(triangle as usize).copied().unwrap_or(false);
                     owned.then(|| {
                         let (point, incoming) =

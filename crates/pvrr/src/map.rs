@@ -70,8 +70,7 @@ fn first_visible(
 /// seen there (its view depth where the ray grazes the plane), with the
 /// barycentric vertex normal.
 fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32) -> Option<Seen> {
-    let i = ids.index(x, y);
-    let triangle = ids.triangle[i];
+    let triangle = ids.triangle_at(x, y);
     if triangle == NONE {
         return None;
     }
@@ -79,7 +78,7 @@ fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32)
     Some(Seen {
         point,
         incoming: direction,
-        object: ids.object[i],
+        object: ids.object_at(x, y),
     })
 }
 

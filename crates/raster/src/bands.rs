@@ -20,51 +20,44 @@ use crate::{IdBuffer, PixelRect};
 const BAND_ROWS: u32 = 16;
 
 /// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel
-/// inside `within` (the rest stays empty). A pixel's result does not depend
-/// on `within`, as long as it lies inside.
+/// of the buffer's window. A pixel's result does not depend on the window,
+/// as long as it lies inside.
 /// `triangles` come in [`nearest_first`] order (a subsequence of such a
 /// list keeps it, so several buffers made from one set-up sort it once).
-pub(crate) fn resolve_nearest_first(
-    triangles: &[RasterTriangle],
-    ids: &mut IdBuffer,
-    within: PixelRect,
-) {
-    let width = ids.width as usize;
-    let within = within.clamped(ids.width, ids.height);
-    if within.is_empty() {
+pub(crate) fn resolve_nearest_first(triangles: &[RasterTriangle], ids: &mut IdBuffer) {
+    let window = ids.window;
+    if window.is_empty() {
         return;
     }
-    let bins = Bins::new(triangles, ids.height);
-    let band_len = width * BAND_ROWS as usize;
+    let stride = (window.x1 - window.x0) as usize;
+    let bins = Bins::new(triangles, window);
+    let band_len = stride * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
     depth
         .zip(triangle)
         .enumerate()
         .for_each(|(band, (depth, triangle))| {
-            let first_row = (band as u32 * BAND_ROWS).max(within.y0);
-            let last_row =
-                (band as u32 * BAND_ROWS + (depth.len() / width) as u32 - 1).min(within.y1 - 1);
-            if first_row > last_row {
-                return;
-            }
-            let band_row = band as u32 * BAND_ROWS;
+            let first_row = window.y0 + band as u32 * BAND_ROWS;
+            let last_row = first_row + (depth.len() / stride) as u32 - 1;
+            // The planes' index of pixel (x, y) of this band.
+            let slot =
+                |x: u32, y: u32| (y - first_row) as usize * stride + (x - window.x0) as usize;
             for &t in bins.band(band) {
                 let t = &triangles[t as usize];
                 let nearest = t.nearest_depth();
                 let hidden = |row: &[f32]| nearest > farthest(row);
                 for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
-                    let row = (y - band_row) as usize * width;
-                    let (c0, c1) = (t.columns.0.max(within.x0), t.columns.1.min(within.x1 - 1));
-                    if c0 > c1 || hidden(&depth[row + c0 as usize..=row + c1 as usize]) {
+                    let (c0, c1) = (t.columns.0.max(window.x0), t.columns.1.min(window.x1 - 1));
+                    if c0 > c1 || hidden(&depth[slot(c0, y)..=slot(c1, y)]) {
                         continue;
                     }
                     let Some((x0, x1)) = t.span(y) else { continue };
-                    let (x0, x1) = (x0.max(within.x0), x1.min(within.x1 - 1));
-                    if x0 > x1 || hidden(&depth[row + x0 as usize..=row + x1 as usize]) {
+                    let (x0, x1) = (x0.max(window.x0), x1.min(window.x1 - 1));
+                    if x0 > x1 || hidden(&depth[slot(x0, y)..=slot(x1, y)]) {
                         continue;
                     }
-                    let span = row + x0 as usize..=row + x1 as usize;
+                    let span = slot(x0, y)..=slot(x1, y);
                     let slots = depth[span.clone()].iter_mut().zip(&mut triangle[span]);
                     for (x, (stored, seen)) in (x0..x1 + 1).zip(slots) {
                         let d = t.depth_at(x, y);
@@ -117,10 +110,12 @@ struct Bins {
 }
 
 impl Bins {
-    fn new(triangles: &[RasterTriangle], height: u32) -> Self {
-        let bands = height.div_ceil(BAND_ROWS) as usize;
-        let overlapped =
-            |t: &RasterTriangle| (t.rows.0 / BAND_ROWS) as usize..=(t.rows.1 / BAND_ROWS) as usize;
+    /// Bins by the bands of `window`'s rows, the first starting at its top.
+    fn new(triangles: &[RasterTriangle], window: PixelRect) -> Self {
+        let bands = (window.y1 - window.y0).div_ceil(BAND_ROWS) as usize;
+        let band_of =
+            |y: u32| ((y.clamp(window.y0, window.y1 - 1) - window.y0) / BAND_ROWS) as usize;
+        let overlapped = |t: &RasterTriangle| band_of(t.rows.0)..=band_of(t.rows.1);
         let mut offsets = vec![0; bands + 1];
         for t in triangles {
             overlapped(t).for_each(|b| offsets[b + 1] += 1);

@@ -31,11 +31,18 @@ use vtfarm_imaging::Image;
 use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 
 /// Per-pixel visibility: which object and triangle is seen, and at what view
-/// depth. `NONE` where nothing is.
+/// depth, over a `width` x `height` frame. The planes hold the pixels of
+/// `window` only (row-major, `window`'s width per row): every pixel outside
+/// it is empty (`NONE`, infinite depth). A buffer of the whole frame has the
+/// whole frame as its window; a worker's covers the reflectors' bounds, so
+/// that it costs their pixels, not the frame's. Read pixels with
+/// [`IdBuffer::triangle_at`] and its siblings, or [`IdBuffer::slot`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct IdBuffer {
     pub width: u32,
     pub height: u32,
+    /// The pixels the planes hold, inside the frame.
+    pub window: PixelRect,
     pub object: Vec<ObjectId>,
     pub triangle: Vec<TriangleId>,
     /// View depth (distance along the camera's forward axis); infinity where empty.
@@ -43,21 +50,58 @@ pub struct IdBuffer {
 }
 
 impl IdBuffer {
-    /// An empty buffer.
+    /// An empty buffer of the whole frame.
     pub fn new(width: u32, height: u32) -> Self {
-        let n = (width * height) as usize;
+        IdBuffer::empty_within(width, height, PixelRect::full(width, height))
+    }
+
+    /// An empty buffer whose planes hold `window` (cut to the frame).
+    pub fn empty_within(width: u32, height: u32, window: PixelRect) -> Self {
+        let window = Some(window.clamped(width, height))
+            .filter(|w| !w.is_empty())
+            .unwrap_or(EMPTY);
+        let n = window.area();
         IdBuffer {
             width,
             height,
+            window,
             object: vec![NONE; n],
             triangle: vec![NONE; n],
             depth: vec![f32::INFINITY; n],
         }
     }
 
-    /// The index of pixel (`x`, `y`).
-    pub fn index(&self, x: u32, y: u32) -> usize {
-        (y * self.width + x) as usize
+    /// The frame's index of pixel (`x`, `y`): row-major over the whole
+    /// frame, as images and bitmaps number pixels.
+    pub fn frame_index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+
+    /// Where pixel (`x`, `y`) lies in the planes, or `None` outside the
+    /// window (an empty pixel, or one off the frame).
+    #[inline]
+    pub fn slot(&self, x: u32, y: u32) -> Option<usize> {
+        let w = self.window;
+        w.contains(x, y)
+            .then(|| (y - w.y0) as usize * (w.x1 - w.x0) as usize + (x - w.x0) as usize)
+    }
+
+    /// The triangle seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
+    #[inline]
+    pub fn triangle_at(&self, x: u32, y: u32) -> TriangleId {
+        self.slot(x, y).map_or(NONE, |i| self.triangle[i])
+    }
+
+    /// The object seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
+    #[inline]
+    pub fn object_at(&self, x: u32, y: u32) -> ObjectId {
+        self.slot(x, y).map_or(NONE, |i| self.object[i])
+    }
+
+    /// The view depth at pixel (`x`, `y`), infinity where nothing is seen (or off the frame).
+    #[inline]
+    pub fn depth_at(&self, x: u32, y: u32) -> f32 {
+        self.slot(x, y).map_or(f32::INFINITY, |i| self.depth[i])
     }
 }
 
@@ -95,6 +139,14 @@ impl PixelRect {
         self.x0 >= self.x1 || self.y0 >= self.y1
     }
 
+    /// The number of pixels inside.
+    pub fn area(self) -> usize {
+        if self.is_empty() {
+            return 0;
+        }
+        (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
+    }
+
     /// Whether pixel (`x`, `y`) lies inside.
     pub fn contains(self, x: u32, y: u32) -> bool {
         (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
@@ -105,6 +157,14 @@ impl PixelRect {
         (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
     }
 }
+
+/// No pixel: the window of a buffer with nothing rasterized.
+const EMPTY: PixelRect = PixelRect {
+    x0: 0,
+    y0: 0,
+    x1: 0,
+    y1: 0,
+};
 
 /// The largest supported image width or height: keeps the fixed-point edge
 /// functions exact in 64-bit integers.
@@ -121,9 +181,13 @@ pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image,
     (image, ids)
 }
 
-/// Shades an ID buffer (local Phong, no shadows): with
+/// Shades an ID buffer of the whole frame (local Phong, no shadows): with
 /// [`id_buffer_where`] this rasterizes part of a scene, e.g. a cube-map face
 /// without the reflector.
+///
+/// # Panics
+/// If `ids` holds less than the whole frame (a buffer of
+/// [`id_buffer_within`]).
 pub fn shade_ids(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
     shade::shade(scene, camera, lighting, ids)
 }
@@ -193,7 +257,7 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
     }) else {
         return passes
             .iter()
-            .map(|_| IdBuffer::new(camera.width, camera.height))
+            .map(|_| IdBuffer::empty_within(camera.width, camera.height, EMPTY))
             .collect();
     };
     let triangles = bands::nearest_first(&setup::setup(scene, camera, NEAR, union, &|t| {
@@ -253,7 +317,7 @@ fn rasterize_ids(
     check_camera(camera);
     let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
-        return IdBuffer::new(camera.width, camera.height);
+        return IdBuffer::empty_within(camera.width, camera.height, EMPTY);
     }
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
@@ -272,26 +336,24 @@ fn check_camera(camera: &Camera) {
 }
 
 /// The ID buffer of set-up `triangles`, nearest first
-/// (`bands::nearest_first`), over `within` (inside the image).
+/// (`bands::nearest_first`), over `within` (inside the image): its window.
 fn resolve(
     scene: &Scene,
     camera: &Camera,
     triangles: &[triangle::RasterTriangle],
     within: PixelRect,
 ) -> IdBuffer {
-    let mut ids = IdBuffer::new(camera.width, camera.height);
-    if within.is_empty() {
+    let mut ids = IdBuffer::empty_within(camera.width, camera.height, within);
+    if ids.window.is_empty() {
         return ids;
     }
-    bands::resolve_nearest_first(triangles, &mut ids, within);
+    bands::resolve_nearest_first(triangles, &mut ids);
     let IdBuffer {
         object, triangle, ..
     } = &mut ids;
-    let rows =
-        within.y0 as usize * camera.width as usize..within.y1 as usize * camera.width as usize;
-    object[rows.clone()]
+    object
         .par_iter_mut()
-        .zip(triangle[rows].par_iter())
+        .zip(triangle.par_iter())
         .filter(|(_, t)| **t != NONE)
         .for_each(|(o, &t)| {
             *o = scene.triangles[t as usize].object;

@@ -14,8 +14,14 @@ use crate::IdBuffer;
 /// Rows per rayon task: enough work per task to amortise scheduling.
 const ROWS_PER_TASK: usize = 8;
 
-/// Shades every pixel of `ids`; empty pixels get the background.
+/// Shades every pixel of `ids`, a buffer of the whole frame; empty pixels
+/// get the background.
 pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
+    assert_eq!(
+        ids.window,
+        crate::PixelRect::full(ids.width, ids.height),
+        "shading needs an ID buffer of the whole frame"
+    );
     let mut image = Image::new(ids.width, ids.height, lighting.background);
     let width = ids.width as usize;
     if width == 0 {
@@ -458,7 +464,7 @@ mod tests {
             }
             let image = shade(&scene, &camera, &lighting, &ids);
             for (x, y) in crate::PixelRect::full(camera.width, camera.height).pixels() {
-                let id = ids.triangle[ids.index(x, y)];
+                let id = ids.triangle_at(x, y);
                 let expected = if id == NONE {
                     lighting.background
                 } else {

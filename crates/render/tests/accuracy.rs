@@ -494,8 +494,11 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
             let (base, full_ids) = renderer.base_frame(&s);
             let (ids, behind) = renderer.id_buffers(&s);
             for (x, y) in bounds.pixels() {
-                let i = ids.index(x, y);
-                assert_eq!(ids.triangle[i], full_ids.triangle[i], "({x}, {y})");
+                assert_eq!(
+                    ids.triangle_at(x, y),
+                    full_ids.triangle_at(x, y),
+                    "({x}, {y})"
+                );
             }
             let frame = renderer.frame(&s, &ids, &behind);
             let mut worker = renderer.frame_image(&s, base);

@@ -48,7 +48,7 @@ fn id_buffer_agrees_with_ray_cast_first_hits_on_the_cockpit() {
                 .bvh()
                 .closest_hit(&ray, f32::INFINITY)
                 .map_or(NONE, |h| h.triangle);
-            agree += (hit == ids.triangle[ids.index(x, y)]) as u32;
+            agree += (hit == ids.triangle_at(x, y)) as u32;
         }
     }
     let share = agree as f64 / (camera.width * camera.height) as f64;

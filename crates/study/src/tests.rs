@@ -181,7 +181,7 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
                 continue;
             }
             glass_pixels += 1;
-            let expected = ids.object[ids.index(x, y)];
+            let expected = ids.object_at(x, y);
             agree += (frame.pixel(i).object == expected) as usize;
         }
     }

@@ -260,9 +260,9 @@ pub(crate) fn fill(
             let (y0, y1) = band.rows();
             for (pi, plan) in plans.iter().enumerate() {
                 for y in plan.rect.y0.max(y0)..plan.rect.y1.min(y1) {
-                    let row = frame.ids.index(0, y);
+                    let row = frame.ids.frame_index(0, y);
                     for x in plan.rect.x0..plan.rect.x1 {
-                        if frame.ids.triangle[row + x as usize] != plan.triangle {
+                        if frame.ids.triangle_at(x, y) != plan.triangle {
                             continue;
                         }
                         match plan.interpolating_face(frame, x, y) {

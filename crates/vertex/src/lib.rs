@@ -267,7 +267,7 @@ impl Frame<'_> {
         if x < 0 || y < 0 || x >= ids.width as i64 || y >= ids.height as i64 {
             return vtfarm_scene::NONE;
         }
-        ids.object[ids.index(x as u32, y as u32)]
+        ids.object_at(x as u32, y as u32)
     }
 
     /// Whether the object behind the reflectors changes along the screen
@@ -298,7 +298,7 @@ impl Frame<'_> {
 
     /// Whether the ID buffer assigns pixel (x, y) to `triangle`.
     fn owns(&self, triangle: TriangleId, x: u32, y: u32) -> bool {
-        self.ids.triangle[self.ids.index(x, y)] == triangle
+        self.ids.triangle_at(x, y) == triangle
     }
 
     /// The rectangle that holds every pixel `triangle` owns, or `None` when it
@@ -344,8 +344,9 @@ impl Frame<'_> {
                 if x < 0 || y < 0 || x >= self.ids.width as i64 || y >= self.ids.height as i64 {
                     return false;
                 }
-                let i = self.ids.index(x as u32, y as u32);
-                self.ids.object[i] == object && (self.ids.depth[i] - s.depth).abs() <= tolerance
+                let (x, y) = (x as u32, y as u32);
+                self.ids.object_at(x, y) == object
+                    && (self.ids.depth_at(x, y) - s.depth).abs() <= tolerance
             })
         })
     }
@@ -418,7 +419,7 @@ impl Frame<'_> {
             .iter()
             .zip(&samples)
             .map(|(&(_, x, y), sample)| {
-                let mut value = PixelValue::from_sample(self.ids.index(x, y) as u32, sample);
+                let mut value = PixelValue::from_sample(self.ids.frame_index(x, y) as u32, sample);
                 if !reference {
                     self.finish_pixel((x, y), &mut value);
                 }
@@ -472,7 +473,7 @@ pub(crate) fn pixel_surface_along(
     } else {
         // Grazing: fall back on the rasterized depth.
         let forward = camera.basis().0;
-        ids.depth[ids.index(x, y)] / direction.dot(forward)
+        ids.depth_at(x, y) / direction.dot(forward)
     };
     let position = camera.eye + direction * t;
     let [wa, wb, wc] = barycentric([a, b, c], position);

@@ -129,9 +129,9 @@ impl SparseBitmap {
         ids: &IdBuffer,
         owns: impl Fn(TriangleId) -> bool,
     ) -> Option<(u32, u32)> {
-        self.covered().map(|(x, y, _)| (x, y)).find(|&(x, y)| {
-            x >= ids.width || y >= ids.height || !owns(ids.triangle[ids.index(x, y)])
-        })
+        self.covered()
+            .map(|(x, y, _)| (x, y))
+            .find(|&(x, y)| x >= ids.width || y >= ids.height || !owns(ids.triangle_at(x, y)))
     }
 }
 
@@ -576,7 +576,9 @@ mod ownership_tests {
         let mut ids = IdBuffer::new(3, 2);
         for y in 0..2 {
             for x in 0..3 {
-                let i = ids.index(x, y);
+                let i = ids
+                    .slot(x, y)
+                    .expect("a whole-frame buffer holds every pixel");
                 ids.triangle[i] = if x == 0 { 7 } else { 8 };
             }
         }

@@ -205,7 +205,7 @@ impl Behind {
                 shadows,
                 view,
             } => {
-                let t = ids.triangle[ids.index(x, y)];
+                let t = ids.triangle_at(x, y);
                 if t == NONE || !see_through(tracer.bvh.scene(), t) {
                     // What the up-front pass holds there, to the bit.
                     ThinGlass::default()
@@ -303,15 +303,14 @@ impl GlassTerms {
         cache: &ShadowCache,
     ) -> GlassTerms {
         let scene = tracer.bvh.scene();
-        let glass_pixel = |i: usize| {
-            let t = ids.triangle[i];
+        let glass_pixel = |x: u32, y: u32| {
+            let t = ids.triangle_at(x, y);
             t != NONE && is_reflector[t as usize] && see_through(scene, t)
         };
-        if !bounds.pixels().any(|(x, y)| glass_pixel(ids.index(x, y))) {
+        if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
             return GlassTerms::Nothing;
         }
-        let shadows =
-            ShadowMaps::for_frame(tracer, camera, behind, bounds, &|i| glass_pixel(i), cache);
+        let shadows = ShadowMaps::for_frame(tracer, camera, behind, bounds, &glass_pixel, cache);
         let view = View {
             projector: Projector::new(camera),
             forward: camera.basis().0,
@@ -331,7 +330,7 @@ impl GlassTerms {
                 let y = bounds.y0 + row as u32;
                 for (column, slot) in slots.iter_mut().enumerate() {
                     let x = bounds.x0 + column as u32;
-                    if glass_pixel(ids.index(x, y)) {
+                    if glass_pixel(x, y) {
                         *slot =
                             glass_at(tracer, camera, &view, ids, &layers, behind, &shadows, x, y);
                     }
@@ -362,16 +361,15 @@ fn glass_at(
     y: u32,
 ) -> ThinGlass {
     let scene = tracer.bvh.scene();
-    let i = ids.index(x, y);
     let direction = view.projector.pixel_ray(x, y);
     let (front, direction) =
-        pixel_surface_along(scene, camera, ids, ids.triangle[i], (x, y), direction);
+        pixel_surface_along(scene, camera, ids, ids.triangle_at(x, y), (x, y), direction);
     let (kr, kt) = tracer.weights(&front, direction);
     let mut weight = kt;
     let mut reflection_scale = 1.0;
     let mut shift = Vec3::ZERO;
-    let back = layers.triangle[i];
-    if back != NONE && layers.depth[i] < behind.depth[i] {
+    let back = layers.triangle_at(x, y);
+    if back != NONE && layers.depth_at(x, y) < behind.depth_at(x, y) {
         let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
         let (kr_back, kt_back) = tracer.weights(&back_point, direction);
         weight *= kt_back;
@@ -442,13 +440,12 @@ fn opaque_radiance(
     shift: Vec3,
 ) -> Vec3 {
     let scene = tracer.bvh.scene();
-    let i = behind.index(x, y);
-    if behind.triangle[i] == NONE {
+    if behind.triangle_at(x, y) == NONE {
         return tracer.lighting.background;
     }
     // The shifted ray is parallel to the eye ray: it meets the opaque scene
     // about the shift beside where the eye ray does.
-    let straight = camera.eye + direction * (behind.depth[i] / direction.dot(view.forward));
+    let straight = camera.eye + direction * (behind.depth_at(x, y) / direction.dot(view.forward));
     let Some(guess) = view.projector.project(straight + shift) else {
         return tracer.lighting.background;
     };
@@ -475,7 +472,7 @@ fn opaque_radiance(
         if px < 0 || py < 0 || px >= behind.width as i64 || py >= behind.height as i64 {
             continue;
         }
-        let triangle = behind.triangle[behind.index(px as u32, py as u32)];
+        let triangle = behind.triangle_at(px as u32, py as u32);
         if triangle == NONE {
             continue;
         }
@@ -582,6 +579,7 @@ struct ShadowMap {
 impl ShadowMap {
     fn new(projector: Projector, ids: &IdBuffer) -> ShadowMap {
         debug_assert_eq!(ids.width, ids.height);
+        debug_assert_eq!(ids.window, PixelRect::full(ids.width, ids.height));
         ShadowMap {
             projector,
             size: ids.width,
@@ -649,7 +647,7 @@ impl ShadowMaps {
         camera: &Camera,
         behind: &IdBuffer,
         bounds: PixelRect,
-        glass_pixel: &(dyn Fn(usize) -> bool + Sync),
+        glass_pixel: &(dyn Fn(u32, u32) -> bool + Sync),
         cache: &ShadowCache,
     ) -> Arc<ShadowMaps> {
         // The opaque points behind the glass, bounded by a box.
@@ -657,10 +655,9 @@ impl ShadowMaps {
         let forward = camera.basis().0;
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for (x, y) in bounds.pixels() {
-            let i = behind.index(x, y);
-            if glass_pixel(i) && behind.triangle[i] != NONE {
+            if glass_pixel(x, y) && behind.triangle_at(x, y) != NONE {
                 let d = projector.pixel_ray(x, y);
-                let p = camera.eye + d * (behind.depth[i] / d.dot(forward));
+                let p = camera.eye + d * (behind.depth_at(x, y) / d.dot(forward));
                 lo = lo.min(p);
                 hi = hi.max(p);
             }
