@@ -27,7 +27,12 @@
 //! - **Links.** Each worker's link and the master's one shared link, each a
 //!   rate (a message occupies both for its size over the slower rate) plus a
 //!   latency. The submitter sits on the master's machine: its messages cost
-//!   nothing.
+//!   nothing on the links, its handling of each finished frame
+//!   ([`FarmCosts::submitter`]) CPU there.
+//! - **Accounting.** Each process's CPU (master, workers, submitter) and the
+//!   other work's are kept at every delivery ([`cpu_per_frame`],
+//!   [`steady_background_cores`]), to set beside what a real run's
+//!   processes used (`scripts/scaling.sh` reads /proc).
 //!
 //! The master core rasterizes for real, but at a tiny resolution (the base
 //! frame's *time* is modelled): the images do not matter here.
