@@ -42,6 +42,17 @@ impl Image {
         }
     }
 
+    /// Makes this a `width` × `height` image filled with `fill`, as
+    /// [`Image::new`] makes one, in this image's allocation: a frame's
+    /// buffer reused for the next costs one pass over its pixels, where a
+    /// fresh one costs a page fault per 4 KiB on first write as well.
+    pub fn refill(&mut self, width: u32, height: u32, fill: Vec3) {
+        self.width = width;
+        self.height = height;
+        self.pixels.clear();
+        self.pixels.resize((width * height) as usize, fill);
+    }
+
     /// A black image, [`Image::new`] with `Vec3::ZERO`, whose pixels come
     /// from a zeroed allocation: the operating system maps untouched pages on
     /// first use, so a full-frame plane of which little is written (a
@@ -91,9 +102,9 @@ impl Image {
     /// ([`encode_srgb8`] of every pixel, by table).
     pub fn to_srgb8(&self) -> Vec<u8> {
         let table = Srgb8Table::get();
-        let mut out = Vec::with_capacity(3 * self.pixels.len());
-        for c in &self.pixels {
-            out.extend_from_slice(&[table.encode(c.x), table.encode(c.y), table.encode(c.z)]);
+        let mut out = vec![0; 3 * self.pixels.len()];
+        for (bytes, c) in out.chunks_exact_mut(3).zip(&self.pixels) {
+            bytes.copy_from_slice(&[table.encode(c.x), table.encode(c.y), table.encode(c.z)]);
         }
         out
     }
@@ -146,17 +157,25 @@ pub fn write_srgb8_png(
     })
 }
 
-/// [`encode_srgb8`]'s channel rule by table: for each code k the smallest
-/// linear value that `linear_to_srgb` rounds to k or more, and per bucket of
-/// floats (sign, exponent and top 7 mantissa bits) the code at the bucket's
-/// start, from which at most a step or two up reach the value's code. Since
-/// the rule is monotonic in its input, this gives its exact bytes (the tests
-/// check every float in [0, 1]) at a fraction of a `powf`.
+/// [`encode_srgb8`]'s channel rule by table: per bucket of floats in
+/// [0, 1] (sign, exponent and top 7 mantissa bits) the code at the
+/// bucket's start and the smallest value in the bucket coded one more.
+/// Since the rule is monotonic in its input and no bucket holds two code
+/// steps (at most 0.66 of one: the rule's steepest part against the widest
+/// buckets, checked as the table is built), a value's code is the bucket's
+/// or one more: its exact bytes (the tests check every float in [0, 1]) at
+/// a fraction of a `powf`, without a branch to mispredict.
 struct Srgb8Table {
-    /// `thresholds[k]`: the smallest value in [0, 1] coded k or more.
-    thresholds: [f32; 256],
-    /// The code of `f32::from_bits(b << BUCKET_SHIFT)` for every value in [0, 1].
-    buckets: Vec<u8>,
+    /// Indexed by `v.to_bits() >> BUCKET_SHIFT` for every `v` in [0, 1].
+    buckets: Vec<Srgb8Bucket>,
+}
+
+#[derive(Clone, Copy)]
+struct Srgb8Bucket {
+    /// The code of the bucket's first value.
+    code: u8,
+    /// The smallest value in [0, 1] coded `code + 1` (infinity for 255).
+    next: f32,
 }
 
 const BUCKET_SHIFT: u32 = 16;
@@ -174,8 +193,9 @@ impl Srgb8Table {
 
     fn build() -> Srgb8Table {
         let one = 1.0f32.to_bits();
-        let mut thresholds = [0.0f32; 256];
-        for (k, t) in thresholds.iter_mut().enumerate().skip(1) {
+        // `thresholds[k]`: the smallest value in [0, 1] coded k or more.
+        let mut thresholds = [f32::INFINITY; 258];
+        for (k, t) in thresholds.iter_mut().enumerate().take(256).skip(1) {
             // Binary search over the bit patterns of [0, 1] (ordered as the values).
             let (mut lo, mut hi) = (0u32, one + 1);
             while lo < hi {
@@ -186,32 +206,32 @@ impl Srgb8Table {
                     lo = mid + 1;
                 }
             }
-            *t = if lo > one {
-                f32::INFINITY
-            } else {
-                f32::from_bits(lo)
-            };
+            if lo <= one {
+                *t = f32::from_bits(lo);
+            }
         }
         let buckets = (0..=one >> BUCKET_SHIFT)
-            .map(|b| srgb8_channel(f32::from_bits(b << BUCKET_SHIFT)))
+            .map(|b| {
+                let first = f32::from_bits(b << BUCKET_SHIFT);
+                let last = f32::from_bits(((b + 1) << BUCKET_SHIFT) - 1).min(1.0);
+                let code = srgb8_channel(first);
+                let next = thresholds[usize::from(code) + 1];
+                assert!(
+                    last < thresholds[usize::from(code) + 2],
+                    "the sRGB bucket at {first:e} holds two code steps"
+                );
+                Srgb8Bucket { code, next }
+            })
             .collect();
-        Srgb8Table {
-            thresholds,
-            buckets,
-        }
+        Srgb8Table { buckets }
     }
 
+    #[inline]
     fn encode(&self, v: f32) -> u8 {
         // NaN and everything at or below zero is code 0, as in the rule.
-        if v.is_nan() || v <= 0.0 {
-            return 0;
-        }
-        let v = v.min(1.0);
-        let mut k = self.buckets[(v.to_bits() >> BUCKET_SHIFT) as usize];
-        while k < 255 && v >= self.thresholds[usize::from(k) + 1] {
-            k += 1;
-        }
-        k
+        let v = if v > 0.0 { v.min(1.0) } else { 0.0 };
+        let bucket = self.buckets[(v.to_bits() >> BUCKET_SHIFT) as usize];
+        bucket.code + u8::from(v >= bucket.next)
     }
 }
 
@@ -320,6 +340,23 @@ mod tests {
     }
 
     use super::*;
+
+    /// A refilled image is the new one whatever it held before, larger or
+    /// smaller.
+    #[test]
+    fn a_refilled_image_is_a_new_one() {
+        let mut image = Image::new(4, 3, Vec3::splat(f32::NAN));
+        image.set(3, 2, Vec3::X);
+        for (w, h, fill) in [
+            (2, 2, Vec3::Y),
+            (5, 4, Vec3::ONE),
+            (0, 7, Vec3::ZERO),
+            (3, 1, Vec3::Z),
+        ] {
+            image.refill(w, h, fill);
+            assert!(image == Image::new(w, h, fill), "{w}x{h}");
+        }
+    }
 
     #[test]
     fn srgb_round_trips_and_hits_the_ends() {

@@ -57,18 +57,34 @@ impl IdBuffer {
 
     /// An empty buffer whose planes hold `window` (cut to the frame).
     pub fn empty_within(width: u32, height: u32, window: PixelRect) -> Self {
+        let mut ids = IdBuffer {
+            width: 0,
+            height: 0,
+            window: EMPTY,
+            object: Vec::new(),
+            triangle: Vec::new(),
+            depth: Vec::new(),
+        };
+        ids.clear(width, height, window);
+        ids
+    }
+
+    /// Makes this the buffer [`IdBuffer::empty_within`] makes, in this
+    /// buffer's allocations (an earlier frame's: no fresh pages to fault in).
+    fn clear(&mut self, width: u32, height: u32, window: PixelRect) {
         let window = Some(window.clamped(width, height))
             .filter(|w| !w.is_empty())
             .unwrap_or(EMPTY);
         let n = window.area();
-        IdBuffer {
-            width,
-            height,
-            window,
-            object: vec![NONE; n],
-            triangle: vec![NONE; n],
-            depth: vec![f32::INFINITY; n],
+        self.width = width;
+        self.height = height;
+        self.window = window;
+        for plane in [&mut self.object, &mut self.triangle] {
+            plane.clear();
+            plane.resize(n, NONE);
         }
+        self.depth.clear();
+        self.depth.resize(n, f32::INFINITY);
     }
 
     /// The frame's index of pixel (`x`, `y`): row-major over the whole
@@ -176,9 +192,29 @@ const MAX_DIMENSION: u32 = 1 << 20;
 /// If the camera's width or height exceeds 2^20 pixels, or the scene
 /// indexes missing vertices, objects or materials.
 pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image, IdBuffer) {
-    let ids = id_buffer(scene, camera);
-    let image = shade::shade(scene, camera, lighting, &ids);
+    let mut image = Image::new(0, 0, lighting.background);
+    let mut ids = IdBuffer::new(0, 0);
+    rasterize_into(scene, camera, lighting, &mut image, &mut ids);
     (image, ids)
+}
+
+/// [`rasterize`] into the buffers of an earlier frame, whatever they hold:
+/// they end up exactly as `rasterize` would make them, in their own
+/// allocations (a frame rasterized in fresh buffers pays a page fault per
+/// 4 KiB of them, at 1080p as much as the rasterizing itself).
+///
+/// # Panics
+/// As [`rasterize`].
+pub fn rasterize_into(
+    scene: &Scene,
+    camera: &Camera,
+    lighting: &Lighting,
+    image: &mut Image,
+    ids: &mut IdBuffer,
+) {
+    let full = PixelRect::full(camera.width, camera.height);
+    rasterize_ids_into(scene, camera, NEAR, full, &|_| true, ids);
+    shade::shade_into(scene, camera, lighting, ids, image);
 }
 
 /// Shades an ID buffer of the whole frame (local Phong, no shadows): with
@@ -310,6 +346,20 @@ fn rasterize_ids(
     within: PixelRect,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> IdBuffer {
+    let mut ids = IdBuffer::new(0, 0);
+    rasterize_ids_into(scene, camera, near, within, keep, &mut ids);
+    ids
+}
+
+/// [`rasterize_ids`] into `ids`, whatever it holds.
+fn rasterize_ids_into(
+    scene: &Scene,
+    camera: &Camera,
+    near: f32,
+    within: PixelRect,
+    keep: &(dyn Fn(TriangleId) -> bool + Sync),
+    ids: &mut IdBuffer,
+) {
     assert!(
         near > 0.0 && near.is_finite(),
         "the near plane must lie in front of the eye, not at depth {near}"
@@ -317,12 +367,18 @@ fn rasterize_ids(
     check_camera(camera);
     let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
-        return IdBuffer::empty_within(camera.width, camera.height, EMPTY);
+        return ids.clear(camera.width, camera.height, EMPTY);
     }
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
     let triangles = setup::setup(scene, camera, near, within, keep);
-    resolve(scene, camera, &bands::nearest_first(&triangles), within)
+    resolve_into(
+        scene,
+        camera,
+        &bands::nearest_first(&triangles),
+        within,
+        ids,
+    );
 }
 
 /// Panics unless the camera's image fits the rasterizer.
@@ -343,14 +399,27 @@ fn resolve(
     triangles: &[triangle::RasterTriangle],
     within: PixelRect,
 ) -> IdBuffer {
-    let mut ids = IdBuffer::empty_within(camera.width, camera.height, within);
+    let mut ids = IdBuffer::new(0, 0);
+    resolve_into(scene, camera, triangles, within, &mut ids);
+    ids
+}
+
+/// [`resolve`] into `ids`, whatever it holds.
+fn resolve_into(
+    scene: &Scene,
+    camera: &Camera,
+    triangles: &[triangle::RasterTriangle],
+    within: PixelRect,
+    ids: &mut IdBuffer,
+) {
+    ids.clear(camera.width, camera.height, within);
     if ids.window.is_empty() {
-        return ids;
+        return;
     }
-    bands::resolve_nearest_first(triangles, &mut ids);
+    bands::resolve_nearest_first(triangles, ids);
     let IdBuffer {
         object, triangle, ..
-    } = &mut ids;
+    } = ids;
     object
         .par_iter_mut()
         .zip(triangle.par_iter())
@@ -358,5 +427,4 @@ fn resolve(
         .for_each(|(o, &t)| {
             *o = scene.triangles[t as usize].object;
         });
-    ids
 }

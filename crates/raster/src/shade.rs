@@ -17,15 +17,28 @@ const ROWS_PER_TASK: usize = 8;
 /// Shades every pixel of `ids`, a buffer of the whole frame; empty pixels
 /// get the background.
 pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
+    let mut image = Image::new(0, 0, lighting.background);
+    shade_into(scene, camera, lighting, ids, &mut image);
+    image
+}
+
+/// [`shade`] into `image`, whatever it holds.
+pub(crate) fn shade_into(
+    scene: &Scene,
+    camera: &Camera,
+    lighting: &Lighting,
+    ids: &IdBuffer,
+    image: &mut Image,
+) {
     assert_eq!(
         ids.window,
         crate::PixelRect::full(ids.width, ids.height),
         "shading needs an ID buffer of the whole frame"
     );
-    let mut image = Image::new(ids.width, ids.height, lighting.background);
+    image.refill(ids.width, ids.height, lighting.background);
     let width = ids.width as usize;
     if width == 0 {
-        return image;
+        return;
     }
     let frame = FrameShading::new(scene, camera, lighting);
     image
@@ -37,7 +50,6 @@ pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &I
             let first_row = (task * ROWS_PER_TASK) as u32;
             frame.shade_rows(first_row, colors, triangles);
         });
-    image
 }
 
 /// What shading needs of the camera and the lights, set up once per frame.

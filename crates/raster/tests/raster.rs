@@ -5,7 +5,7 @@
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{
     IdBuffer, IdPass, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within,
-    id_buffers_within, rasterize,
+    id_buffers_within, rasterize, rasterize_into,
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
@@ -670,6 +670,31 @@ fn id_buffer_equals_the_one_from_rasterize() {
     let (scene, camera) = procedural_scene(3, 128, 96);
     let (_, from_rasterize) = rasterize(&scene, &camera, &Lighting::default());
     assert_same_ids(&id_buffer(&scene, &camera), &from_rasterize);
+}
+
+/// Buffers of earlier frames rasterized into again hold exactly the fresh
+/// frame, nothing of what they held: frames of other scenes and views,
+/// smaller, larger and of the same size (as a farm master reuses them).
+#[test]
+fn a_frame_rasterized_into_reused_buffers_is_the_fresh_frame() {
+    let mut image = vtfarm_imaging::Image::new(50, 40, Vec3::NAN);
+    let mut ids = IdBuffer::new(50, 40);
+    ids.triangle.fill(0);
+    for (seed, width, height) in [(7, 160, 120), (8, 96, 64), (9, 96, 64), (10, 200, 90)] {
+        let (scene, camera) = procedural_scene(seed, width, height);
+        let lighting = shading_lighting(camera.eye);
+        rasterize_into(&scene, &camera, &lighting, &mut image, &mut ids);
+        let (fresh_image, fresh_ids) = rasterize(&scene, &camera, &lighting);
+        assert_same_ids(&ids, &fresh_ids);
+        assert_eq!((image.width, image.height), (width, height));
+        let bits = |image: &vtfarm_imaging::Image| {
+            (image.pixels.iter())
+                .flat_map(|c| c.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&image), bits(&fresh_image), "seed {seed}");
+        assert!(fresh_ids.triangle.contains(&NONE), "the background shows");
+    }
 }
 
 #[test]
