@@ -21,17 +21,33 @@ eyes = [${eyes%,}]
 TOML
 }
 
-# frame_figures STATS_JSON: prints the mean interval between frame arrivals
-# at the submitter (first frame left out: it includes the scene transfer and
-# BVH builds), the mean master frame wall time, the result MB per frame as
-# sent, and the same pixels' MB at the previous 40 bytes each.
-frame_figures() {
+# steady_frame STATS_JSON: prints the first frame of the steady state: the
+# first whose work started (its arrival less its wall time on the master)
+# after frame 0 had arrived. Frame 0 includes the scene transfer and the
+# BVH builds; frames pipelined meanwhile arrive in a bunch right after it,
+# and counted from frame 0 they made the interval up to half the real one.
+# 1 if no frame started that late.
+steady_frame() {
   python3 - "$1" <<'PY'
 import json, sys
 frames = json.load(open(sys.argv[1]))
-arrivals = [f["arrival_micros"] for f in frames]
+first = frames[0]["arrival_micros"]
+late = [i for i, f in enumerate(frames) if i > 0 and f["arrival_micros"] - f["wall_micros"] >= first]
+print(late[0] if late and late[0] < len(frames) - 1 else min(1, len(frames) - 1))
+PY
+}
+
+# frame_figures STATS_JSON FROM: prints the mean interval between frame
+# arrivals at the submitter from frame FROM on (see steady_frame), the mean
+# master frame wall time of those frames, the result MB per frame as sent,
+# and the same pixels' MB at the previous 40 bytes each.
+frame_figures() {
+  python3 - "$1" "$2" <<'PY'
+import json, sys
+frames, start = json.load(open(sys.argv[1])), int(sys.argv[2])
+arrivals = [f["arrival_micros"] for f in frames[start:]]
 gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
-walls = [f["wall_micros"] for f in frames[1:]] or [frames[0]["wall_micros"]]
+walls = [f["wall_micros"] for f in frames[max(start, 1):]] or [frames[0]["wall_micros"]]
 results = sum(w["bytes_out"] for f in frames for w in f["workers"]) / len(frames)
 pixels = sum(f["totals"]["pixels"] for f in frames) / len(frames)
 print(f"{sum(gaps) / len(gaps) / 1e6:.4f} {sum(walls) / len(walls) / 1e6:.4f} {results / 1e6:.3f} {pixels * 40 / 1e6:.3f}")
@@ -72,50 +88,55 @@ machine_cpu_ticks() {
 
 # measured_submit OUT LOG FRAMES PID... -- COMMAND...: runs COMMAND (a
 # `vtfarm submit` writing to OUT, exec'd so that its process is the
-# submitter's; output to LOG), bounded to 600 s, and sets `job_cpu` to the
-# CPU seconds per frame after the first of the farm's processes (the first
-# PID, the submitter, then the other PIDs; comma-separated) and
-# `job_others` to the cores the machine's other processes used meanwhile
-# (/proc/stat less the farm's). CPU is sampled when the first frame
-# arrives and at the end: the frames between are the ones the frame
-# interval counts. Needs `work` (a scratch directory).
+# submitter's; output to LOG), bounded to 600 s, and sets `job_from` to the
+# first steady frame (steady_frame), `job_cpu` to the CPU seconds per frame
+# after it of the farm's processes (the first PID, the submitter, then the
+# other PIDs; comma-separated) and `job_others` to the cores the machine's
+# other processes used meanwhile (/proc/stat less the farm's). CPU is
+# sampled as each frame arrives and at the end. Needs `work` (a scratch
+# directory).
 measured_submit() {
-  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline
+  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline next=0 png
   shift 3
   while [ "$1" != -- ]; do pids+=("$1"); shift; done
   shift
+  local samples="$work/cpu-samples"
+  : >"$samples"
   reaped_cpu_ticks; reaped_before=$children_ticks
   "$@" >"$log" 2>&1 &
   submitter=$!
-  local at_first=() machine_first=() last machine_last
   deadline=$((SECONDS + 600))
   while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
-    if [ ${#at_first[@]} -eq 0 ] && [ -e "$out/frame_0000.png" ]; then
-      cpu_ticks "${pids[@]}" "$submitter"; at_first=("${ticks[@]}")
-      machine_cpu_ticks; machine_first=("$machine_ticks" "$machine_at")
+    printf -v png '%s/frame_%04d.png' "$out" "$next"
+    if [ -e "$png" ]; then
+      cpu_ticks "${pids[@]}" "$submitter"; machine_cpu_ticks
+      echo "${ticks[*]} $machine_ticks $machine_at" >>"$samples"
+      next=$((next + 1))
+      continue
     fi
     [ "$SECONDS" -lt "$deadline" ] || { kill "$submitter"; echo "submit timed out" >&2; exit 1; }
     read -rt 0.02 -u "$sleeper" || true
   done
-  cpu_ticks "${pids[@]}"; last=("${ticks[@]}")
-  machine_cpu_ticks; machine_last=("$machine_ticks" "$machine_at")
+  cpu_ticks "${pids[@]}"; machine_cpu_ticks
+  local last=("${ticks[@]}") machine_last=("$machine_ticks" "$machine_at")
   wait "$submitter" || { cat "$log" >&2; exit 1; }
   reaped_cpu_ticks
   last+=($((children_ticks - reaped_before)))
-  read -r job_cpu job_others < <(python3 - "$frames" "$(getconf CLK_TCK)" "${at_first[*]}" "${last[*]}" \
-    "${machine_first[*]:-}" "${machine_last[*]}" <<'PY'
+  job_from=$(steady_frame "$out/stats.json")
+  read -r job_cpu job_others < <(python3 - "$frames" "$(getconf CLK_TCK)" "$job_from" "$samples" \
+    "${last[*]} ${machine_last[*]}" <<'PY'
 import sys
-frames, hz = int(sys.argv[1]), int(sys.argv[2])
-first, last = [list(map(int, a.split())) for a in sys.argv[3:5]]
-if len(first) != len(last):
-    first = [float("nan")] * len(last)  # the first frame was not seen
-per = [(b - a) / hz / max(frames - 1, 1) for a, b in zip(first, last)]
-machine = [a.split() for a in sys.argv[5:7]]
-others = float("nan")
-if len(machine[0]) == 2:
-    (t0, w0), (t1, w1) = [(int(t), float(w)) for t, w in machine]
-    farm = sum(b - a for a, b in zip(first, last))
-    others = max(0.0, (t1 - t0 - farm) / hz / (w1 - w0))
+frames, hz, start = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+samples = [line.split() for line in open(sys.argv[4])]
+end = sys.argv[5].split()
+if start < len(samples):
+    first = samples[start]
+    farm = [b - a for a, b in zip(map(int, first[:-2]), map(int, end[:-2]))]
+    per = [x / hz / max(frames - 1 - start, 1) for x in farm]
+    wall = float(end[-1]) - float(first[-1])
+    others = max(0.0, (int(end[-2]) - int(first[-2]) - sum(farm)) / hz / wall)
+else:  # that frame's arrival was not seen
+    per, others = [float("nan")] * (len(end) - 2), float("nan")
 print(",".join(f"{x:.4f}" for x in [per[0], per[-1], *per[1:-1]]), f"{others:.3f}")
 PY
 )

@@ -10,13 +10,13 @@
 # it prints why and exits 0. Addresses are 10.77.x.y inside its own
 # namespaces only; nothing leaves this machine.
 #
-# Usage: sudo scripts/lab.sh [--workers 4] [--mbit 100] [--frames 4]
+# Usage: sudo scripts/lab.sh [--workers 4] [--mbit 100] [--frames 16]
 #   [--width 1920] [--height 1080] [--detail 2.1] [--cpu-percent P]
 #   [--bin target/release/vtfarm]
 # --cpu-percent P: each worker gets P% of one core (cgroup v2 cpu.max).
 set -euo pipefail
 
-workers=4; mbit=100; frames=4; width=1920; height=1080; detail=2.1; cpu=""
+workers=4; mbit=100; frames=16; width=1920; height=1080; detail=2.1; cpu=""
 bin=target/release/vtfarm
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -111,8 +111,14 @@ scale=$(awk -v p="${cpu:-100}" 'BEGIN { printf "%.3f", 100 / p }')
 "$bin" bench simulate --workers "$workers" --link-mbit "$mbit" --latency-ms 0.05 --frames "$frames" --width "$width" \
   --height "$height" --detail "$detail" --repeats 1 --threads 1 --shared-cores "$cores" --background-cores "$others" --cost-scale "$scale" \
   --fixed-cost-scale "$scale" --json "$work/sim.json" >"$work/sim.log" 2>&1 || { cat "$work/sim.log" >&2; exit 1; }
-read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json")"
-read -r predicted predicted_idle < <(python3 -c 'import json, sys; r = [r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]; print(r["frame_seconds"], r["frame_seconds_idle"])' "$work/sim.json")
+read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json" "$job_from")"
+read -r predicted predicted_idle modelled_cpu < <(python3 -c 'import json, sys; r = [r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]; print(r["frame_seconds"], r["frame_seconds_idle"], ",".join(f"{x:.3f}" for x in r["cpu_per_frame"]))' "$work/sim.json")
 echo "lab: $workers workers, $mbit Mbit/s tbf links through one bridge, all on this machine's $cores cores (CPU x$scale); other processes used $others cores meanwhile"
-awk -v m="$measured" -v p="$predicted" -v q="$predicted_idle" 'BEGIN { printf "  mean frame (after the first): measured %.3f s, predicted %.3f s, ratio %.2f (predicted on the idle machine %.3f s)\n", m, p, m / p, q }'
+awk -v m="$measured" -v p="$predicted" -v q="$predicted_idle" 'BEGIN { printf "  mean frame (from frame '"$job_from"', the steady state): measured %.3f s, predicted %.3f s, ratio %.2f (predicted on the idle machine %.3f s)\n", m, p, m / p, q }'
 awk -v b="$sent" -v r="$mbit" 'BEGIN { printf "  results per frame: %.3f MB (%.3f s of the master link)\n", b, b * 8 / r }'
+python3 - "$job_cpu" "$modelled_cpu" <<'PY'
+import sys
+c, m = [list(map(float, a.split(","))) for a in sys.argv[1:3]]
+print(f"  CPU per frame: master {c[0]:.3f} s, submitter {c[1]:.3f} s, workers {' + '.join(f'{w:.3f}' for w in c[2:])} s")
+print(f"     simulated:  master {m[0]:.3f} s, submitter {m[-1]:.3f} s, workers {' + '.join(f'{w:.3f}' for w in m[1:-1])} s")
+PY

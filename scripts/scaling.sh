@@ -2,21 +2,21 @@
 # Measures what a second machine buys: a real master with one, then two
 # `vtfarm worker --threads 1`, each worker pinned to its own core (taskset),
 # running the same job (default: the cockpit at detail 2.1, 1920x1080, `full`,
-# 8 frames). Both runs happen in this one invocation, so the printed ratio
+# 16 frames). Both runs happen in this one invocation, so the printed ratio
 # compares like with like even on a machine shared with other work (the
 # absolute figures are noisy there: quote ratios).
 #
-# Usage: scripts/scaling.sh [--workers "1 2"] [--frames 8] [--width 1920]
+# Usage: scripts/scaling.sh [--workers "1 2"] [--frames 16] [--width 1920]
 #        [--height 1080] [--detail 2.1] [--bin target/release/vtfarm]
 #        [--keep DIR]   (keeps each run's frames, stats.json and timelines)
 # Prints one line per worker count: the mean frame time (the interval between
-# frame arrivals at the submitter, first frame left out: it includes the scene
-# transfer and BVH builds), its ratio to the first count's, and the
+# frame arrivals at the submitter in the steady state: from the first frame
+# started after frame 0 arrived, see steady_frame), its ratio to the first count's, and the
 # simulator's prediction for the same job and workers (`vtfarm bench simulate
 # --shared-cores`: the master core and worker sessions with costs recorded on
 # this machine in CPU time, all sharing its cores with the other work the run
 # met, measured from /proc/stat) with measured/predicted. Then the CPU each
-# process spent per frame in each run (from /proc, frames after the first)
+# process spent per frame in each run (from /proc, the same steady frames)
 # beside the simulator's for it, and the floor it sets on this machine's cores: with a worker's
 # set-up U and tracing T (from its CPU alone, U + T, and the workers' total
 # with n, n U + T), n workers need at least max((master + submitter + n U +
@@ -24,7 +24,7 @@
 # exceed its measured interval over that floor.
 set -euo pipefail
 
-workers_list="1 2"; frames=8; width=1920; height=1080; detail=2.1
+workers_list="1 2"; frames=16; width=1920; height=1080; detail=2.1
 bin=target/release/vtfarm; keep=""
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -68,7 +68,7 @@ wait_for_workers() {
   echo "workers did not join" >&2; return 1
 }
 
-declare -A mean cpu others
+declare -A mean cpu others from predicted predicted_idle modelled_cpu
 for n in $workers_list; do
   pids=()
   # The dashboard on a free port: another farm on this machine may hold the default.
@@ -85,39 +85,33 @@ for n in $workers_list; do
   out="$work/out-$n"
   measured_submit "$out" "$work/submit-$n.log" "$frames" "${pids[@]}" -- \
     "$bin" submit "$work/job.toml" --cluster "$work/cluster/cluster.toml" -o "$out"
-  mean[$n]=$(frame_figures "$out/stats.json")
-  cpu[$n]=$job_cpu; others[$n]=$job_others
+  mean[$n]=$(frame_figures "$out/stats.json" "$job_from")
+  cpu[$n]=$job_cpu; others[$n]=$job_others; from[$n]=$job_from
   for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
   for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
   pids=()
-  [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n"
+  # The simulator's prediction, recorded right after the run (the costs are
+  # CPU times, but other work on the machine still slows the CPU a little,
+  # and it changes from minute to minute): the master core and worker
+  # sessions on a virtual clock, everything sharing this machine's cores
+  # (`--shared-cores`), localhost links, and the other work this run met
+  # (`--background-cores`: always-runnable threads, as many as use that much).
+  background=${others[$n]}; [ "$background" = nan ] && background=0
+  "$bin" bench simulate --workers "$n" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
+    --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
+    --shared-cores "$cores" --background-cores "$background" --json "$work/sim-$n.json" >"$work/sim-$n.log" 2>&1 \
+    || { cat "$work/sim-$n.log" >&2; exit 1; }
+  read -r predicted[$n] predicted_idle[$n] modelled_cpu[$n] < <(python3 -c '
+import json, sys
+r = [r for r in json.load(open(sys.argv[1])) if not r["heterogeneous"]][-1]
+print(r["frame_seconds"], r["frame_seconds_idle"], ",".join(f"{x:.4f}" for x in r["cpu_per_frame"]))
+' "$work/sim-$n.json")
+  [ -n "$keep" ] && mkdir -p "$keep" && cp -r "$out" "$keep/workers-$n" && cp "$work/sim-$n.log" "$work/sim-$n.json" "$keep/"
 done
 
-# The simulator's prediction for all counts in one invocation: the master
-# core and worker sessions on a virtual clock with costs it records here (CPU
-# time), everything sharing this machine's cores (`--shared-cores`),
-# localhost links, and the other work each run met on the machine
-# (`--background-cores`: always-runnable threads, as many as use that much).
 first=${workers_list%% *}
-counts=$(echo $workers_list | tr ' ' ',')
-background=$(for n in $workers_list; do echo "${others[$n]}"; done | sed 's/^nan$/0/' | paste -sd,)
-"$bin" bench simulate --workers "$counts" --link-mbit 10000 --latency-ms 0.05 --frames "$frames" \
-  --width "$width" --height "$height" --detail "$detail" --repeats 1 --threads 1 \
-  --shared-cores "$cores" --background-cores "$background" --json "$work/sim.json" >"$work/sim.log" 2>&1 \
-  || { cat "$work/sim.log" >&2; exit 1; }
-[ -n "$keep" ] && mkdir -p "$keep" && cp "$work/sim.log" "$work/sim.json" "$keep/"
-declare -A predicted predicted_idle modelled_cpu
-while read -r n p q c; do
-  predicted[$n]=$p; predicted_idle[$n]=$q; modelled_cpu[$n]=$c
-done < <(python3 -c '
-import json, sys
-for r in json.load(open(sys.argv[1])):
-    if not r["heterogeneous"]:
-        print(r["workers"], r["frame_seconds"], r["frame_seconds_idle"], ",".join(f"{x:.4f}" for x in r["cpu_per_frame"]))
-' "$work/sim.json")
-
 read -r base _ <<<"${mean[$first]}"
-echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames; $cores cores; workers pinned, --threads 1"
+echo "job: cockpit detail $detail, ${width}x${height}, full, $frames frames (measured from the steady frame: $(for n in $workers_list; do printf "%s " "${from[$n]}"; done)); $cores cores; workers pinned, --threads 1"
 printf "%8s %16s %13s %9s %15s %12s %12s %10s %13s\n" workers "frame interval s" "frame wall s" speed-up "result MB/frame" "others cores" "predicted s" "meas/pred" "pred. idle s"
 for n in $workers_list; do
   read -r gap wall bytes raw <<<"${mean[$n]}"

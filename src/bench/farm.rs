@@ -27,7 +27,12 @@
 //! - **Links.** Each worker's link and the master's one shared link, each a
 //!   rate (a message occupies both for its size over the slower rate) plus a
 //!   latency. The submitter sits on the master's machine: its messages cost
-//!   nothing.
+//!   nothing on the links, its handling of each finished frame
+//!   ([`FarmCosts::submitter`]) CPU there.
+//! - **Accounting.** Each process's CPU (master, workers, submitter) and the
+//!   other work's are kept at every delivery ([`cpu_per_frame`],
+//!   [`steady_background_cores`]), to set beside what a real run's
+//!   processes used (`scripts/scaling.sh` reads /proc).
 //!
 //! The master core rasterizes for real, but at a tiny resolution (the base
 //! frame's *time* is modelled): the images do not matter here.
@@ -1056,6 +1061,126 @@ mod tests {
             two > serial * 0.97 && two < serial * 1.03,
             "two cores: {two} s, {serial} s serial"
         );
+    }
+
+    /// Other work on a shared core takes its share: one always-runnable
+    /// thread beside a lone worker (nothing else costs CPU) halves the
+    /// worker's speed while it traces, so the frame takes about twice its
+    /// work, and that thread gets about half the core (all of it in the
+    /// gaps while messages travel).
+    #[test]
+    fn other_work_on_a_shared_core_takes_its_share() {
+        let (job, costs) = small_farm(0.0, 0.0);
+        let work: f64 = costs.seconds.iter().sum();
+        let shared = |background_threads| FarmConfig {
+            shared_cores: Some(1),
+            background_threads,
+            ..config(6)
+        };
+        let idle = simulate_farm(&job, &costs, &shared(0.0), &workers(1)).unwrap();
+        let busy = simulate_farm(&job, &costs, &shared(1.0), &workers(1)).unwrap();
+        assert_eq!(steady_background_cores(&idle), 0.0);
+        let (idle_s, busy_s) = (steady_frame_seconds(&idle), steady_frame_seconds(&busy));
+        assert!(idle_s < work * 1.1, "idle {idle_s} s for {work} s of work");
+        assert!(
+            busy_s > 1.9 * work && busy_s < 2.2 * work,
+            "with other work {busy_s} s for {work} s of work"
+        );
+        let other = steady_background_cores(&busy);
+        assert!(other > 0.5 && other < 0.55, "other work got {other} cores");
+        // Without a shared machine there is nothing to share.
+        let own = FarmConfig {
+            background_threads: 1.0,
+            ..config(6)
+        };
+        let frames = simulate_farm(&job, &costs, &own, &workers(1)).unwrap();
+        assert_eq!(steady_background_cores(&frames), 0.0);
+    }
+
+    /// The other work that a real run measured (cores) is found as the
+    /// threads that use as much beside the simulated farm; more measured
+    /// cores, more threads, and a slower frame.
+    #[test]
+    fn the_measured_other_work_is_matched_by_threads() {
+        let (job, costs) = small_farm(0.02, 0.05);
+        let shared = FarmConfig {
+            shared_cores: Some(2),
+            ..config(6)
+        };
+        let farm = workers(2);
+        let mut last = (0.0, 0.0);
+        for cores in [0.3, 0.9, 1.5] {
+            let threads =
+                crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, cores)
+                    .unwrap();
+            let config = FarmConfig {
+                background_threads: threads,
+                ..shared.clone()
+            };
+            let frames = simulate_farm(&job, &costs, &config, &farm).unwrap();
+            let used = steady_background_cores(&frames);
+            assert!(
+                (used - cores).abs() < 0.01 * cores,
+                "{threads} threads used {used} of {cores} cores"
+            );
+            let seconds = steady_frame_seconds(&frames);
+            assert!(
+                threads > last.0 && seconds > last.1,
+                "{cores} cores: {threads} threads, {seconds} s"
+            );
+            last = (threads, seconds);
+        }
+        let none =
+            crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, 0.0);
+        assert_eq!(none.unwrap(), 0.0);
+    }
+
+    /// The CPU each simulated process has used by the last delivery is the
+    /// costs it was given: the master its base frame, compositing and
+    /// finished frame for every frame and the journal for all but the last
+    /// (it starts at the delivery); the submitter its part likewise; the
+    /// workers all the items and one set-up per frame each worker traced
+    /// in. Its own machines, so nothing is shared.
+    #[test]
+    fn each_process_uses_the_cpu_of_its_costs() {
+        let (job, mut costs) = small_farm(0.02, 0.05);
+        costs.result_per_item = 1e-4;
+        costs.frame_out = 0.003;
+        costs.journal = 0.002;
+        costs.submitter = 0.004;
+        let farm: Vec<FarmWorker> = (workers(2).into_iter())
+            .map(|w| FarmWorker {
+                package_overhead: Duration::ZERO,
+                ..w
+            })
+            .collect();
+        let frames = simulate_farm(&job, &costs, &config(8), &farm).unwrap();
+        let cpu = &frames.last().unwrap().cpu;
+        assert_eq!(cpu.len(), 4, "master, two workers, submitter");
+        let (n, items) = (frames.len() as f64, costs.items.len() as f64);
+        let master = n * (costs.base_frame + costs.result_per_item * items + costs.frame_out)
+            + (n - 1.0) * costs.journal;
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.max(1.0);
+        assert!(
+            close(cpu[0], master),
+            "master {} s, costs {master} s",
+            cpu[0]
+        );
+        assert!(
+            close(cpu[3], (n - 1.0) * costs.submitter),
+            "submitter {} s",
+            cpu[3]
+        );
+        let work = n * costs.seconds.iter().sum::<f64>();
+        let setups = (cpu[1] + cpu[2] - work) / costs.worker_setup;
+        assert!(
+            (setups - setups.round()).abs() < 1e-6 && (n..=2.0 * n).contains(&setups.round()),
+            "workers {} s: {setups} set-ups",
+            cpu[1] + cpu[2]
+        );
+        // Per frame over the steady window: about the same.
+        let per_frame = cpu_per_frame(&frames);
+        assert!((per_frame[0] - master / n).abs() < 0.1 * master / n);
     }
 
     /// A slow shared master link bounds the frame: results can come no

@@ -1,32 +1,32 @@
-//! `vtfarm bench simulate`: the pure scheduler (`vtfarm_scheduler::sim`) on
-//! simulated farms, driven by costs recorded from a real frame.
+//! `vtfarm bench simulate`: the master's core and the workers' sessions on
+//! simulated farms ([`super::farm`]), driven by costs recorded from a real
+//! frame.
 //!
 //! Recording: the cockpit frame is rasterized once, then every reflector
 //! triangle (in the Morton order the master uses) is traced as a package of
-//! its own with `trace_package` on a one-thread rayon pool, so its wall time
-//! is its compute time on one thread (several such pools run side by side,
-//! one per core; each triangle is traced `--repeats` times and the least time
-//! kept, to shed noise). Timed is what a worker's `busy_micros` covers:
-//! `trace_package` plus the conversion of the bitmap for the wire. Each
-//! result is encoded as the `PackageResult` message a worker would send, and
-//! its length is the triangle's result size.
+//! its own with `trace_package` on one-thread rayon pools (several side by
+//! side, `--threads`; each triangle `--repeats` times, the least time kept).
+//! Every cost is the **CPU time** of the thread that ran it, not wall time:
+//! on a machine busy with other work the wall time grew with that load, and
+//! the model then shared the cores out once more. Timed per triangle is what
+//! a worker's `busy_micros` covers (`trace_package` and the result's
+//! encoding) less a package's own cost (tracing no triangle, encoding the
+//! empty result), which the model charges once per package. Each result is
+//! encoded as the `PackageResult` message a worker would send; its length
+//! is the triangle's result size.
 //!
-//! Model (see `vtfarm_scheduler::sim`): the master's scheduler configuration
-//! (`SchedulerConfig::farm`: requests lapse at a frame start); a worker of
-//! speed 1 is one thread of this machine; every worker has its own link of
-//! the given bandwidth and latency, and all messages also pass the master's
-//! one shared link of the same bandwidth; results cost the mean recorded
-//! (compact, colour-only) bytes per triangle. Per-frame fixed costs are
-//! measured here on one thread: each worker's set-up (its ID buffers) before
-//! it asks for work (beside its last package of the frame before: frames
-//! are pipelined), the master's base frame, rasterized while the workers
-//! trace (results that come earlier wait for it), and the master's checking
-//! and compositing of each result (its messages wait meanwhile; not scaled
-//! by `--cost-scale`, it does not grow with the work per pixel). Every
-//! simulated frame is the recorded frame again, so from the second frame on
-//! the scheduler's cost estimates are measured ones. Not modelled: the
-//! finished image's way to the submitter, and CPU the master takes from
-//! workers on the same machine.
+//! Per-frame fixed costs, each the least CPU time of three runs on one
+//! thread with every run's output kept (the real processes keep several
+//! frames in flight, so each frame writes fresh memory): a worker's set-up
+//! (its ID buffers), the master's base frame, its checking and compositing
+//! of the results, the finished frame for the wire and the journal, and the
+//! submitter's decoding and PNG. The model ([`super::farm`]) runs the real
+//! `MasterCore` and `WorkerSession`s with these costs; with
+//! `--shared-cores` everything shares one machine, optionally with the
+//! other work a real run met there (`--background-cores`). Every simulated
+//! frame is the recorded frame again, so from the second frame on the
+//! scheduler's cost estimates are measured ones. Not modelled: the
+//! transport's own CPU (QUIC, the runtimes).
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
