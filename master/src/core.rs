@@ -85,18 +85,25 @@ pub struct BaseFrameRequest {
     scene: Arc<Scene>,
     setup: FrameSetup,
     /// A finished frame's buffers to rasterize into.
-    spare: Option<SpareBase>,
+    spare: Option<Box<SpareBase>>,
 }
 
 impl BaseFrameRequest {
     /// The shaded base frame and its ID buffer, in a finished frame's
     /// buffers where the master has some (`vtfarm_raster::rasterize_into`).
     pub fn rasterize(self) -> (Image, IdBuffer) {
-        let SpareBase(mut image, mut ids) =
-            (self.spare).unwrap_or_else(|| SpareBase(Image::black(0, 0), IdBuffer::new(0, 0)));
+        let SpareBase(mut image, mut ids) = (self.spare).map_or_else(
+            || SpareBase(Image::black(0, 0), IdBuffer::new(0, 0)),
+            |spare| *spare,
+        );
         let (camera, lighting) = (&self.setup.camera, &self.setup.lighting);
         vtfarm_raster::rasterize_into(&self.scene, camera, lighting, &mut image, &mut ids);
         (image, ids)
+    }
+
+    /// Whether it rasterizes into a finished frame's buffers.
+    pub fn reuses_buffers(&self) -> bool {
+        self.spare.is_some()
     }
 }
 
@@ -316,6 +323,8 @@ pub struct MasterCore {
     views: Views,
     /// Finished frames' buffers for the next base frames (at most [`SPARE_BASES`]).
     spare_bases: Vec<SpareBase>,
+    /// The last finished frame's uncompressed bytes, the next one's buffer.
+    frame_bytes: Vec<u8>,
 }
 
 impl MasterCore {
@@ -339,6 +348,7 @@ impl MasterCore {
             departed: BTreeMap::new(),
             views: Views::default(),
             spare_bases: Vec::new(),
+            frame_bytes: Vec::new(),
         }
     }
 
@@ -822,10 +832,15 @@ impl MasterCore {
     }
 
     fn persist(&mut self, record: Record) {
-        // A view's jobs live as long as the page looks at them.
-        if self.persistent && !self.views.owns(record.job()) {
+        if self.journals(record.job()) {
             self.outbox.push_back(Output::Persist(record));
         }
+    }
+
+    /// Whether `job`'s records are journaled.
+    fn journals(&self, job: u64) -> bool {
+        // A view's jobs live as long as the page looks at them.
+        self.persistent && !self.views.owns(job)
     }
 
     fn refuse_job(&mut self, conn: ConnId, error: String) {
@@ -926,7 +941,11 @@ impl MasterCore {
                 let message = FrameDone {
                     job: job.0,
                     frame,
-                    image: WireImage::encode(done.image.color(), j.image),
+                    image: WireImage::encode_reusing(
+                        done.image.color(),
+                        j.image,
+                        &mut self.frame_bytes,
+                    ),
                     stats: frame_stats.clone(),
                     aux: match &done.image {
                         Assembled::Components(image) => Some(WireFrameAux::encode(image)),
@@ -934,7 +953,9 @@ impl MasterCore {
                     },
                 };
                 let submitter = j.submitter;
-                self.persist(Record::FrameDone(Box::new(message.clone())));
+                if self.journals(job.0) {
+                    self.persist(Record::FrameDone(Box::new(message.clone())));
+                }
                 let image = message.image.clone();
                 (self.telemetry).frame_finished(job.0, frame, frame_stats, image);
                 self.send_to(submitter, Message::FrameDone(message));
@@ -1027,7 +1048,7 @@ impl MasterCore {
             frame,
             scene: j.scene.clone(),
             setup: setup.clone(),
-            spare: self.spare_bases.pop(),
+            spare: self.spare_bases.pop().map(Box::new),
         };
         let start = FrameStart {
             job,

@@ -385,6 +385,24 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     );
 }
 
+/// Later base frames are rasterized into earlier frames' buffers, and
+/// nothing of those frames is left in the images.
+#[test]
+fn frames_in_reused_buffers_stay_byte_identical() {
+    let job = Job::new(4);
+    let mut pair = Pair::new(SchedulerConfig::default());
+    pair.add_worker("only", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    pair.drive(BOUND, all_frames(4));
+    assert!(
+        pair.bases_in_reused_buffers >= 2,
+        "{} base frames in reused buffers",
+        pair.bases_in_reused_buffers
+    );
+    check_images(&pair, &job);
+}
+
 #[test]
 fn pipelined_frames_overlap_and_stay_byte_identical() {
     let job = Job::new(3);

@@ -781,6 +781,20 @@ impl crate::WireFrameAux {
     }
 }
 
+/// The pixels' channels as little-endian byte planes ([`byte_planes`] of
+/// every channel), into `planes` (whatever it held).
+fn pixel_planes_into(pixels: &[Vec3], planes: &mut Vec<u8>) {
+    let values = 3 * pixels.len();
+    planes.clear();
+    planes.resize(4 * values, 0);
+    let channels = pixels.iter().flat_map(|c| c.to_array());
+    for (i, bytes) in channels.map(f32::to_le_bytes).enumerate() {
+        for (k, byte) in bytes.into_iter().enumerate() {
+            planes[k * values + i] = byte;
+        }
+    }
+}
+
 /// Little-endian values as byte planes: byte 0 of every value, then byte 1 …
 fn byte_planes(values: &[[u8; 4]]) -> Vec<u8> {
     let mut planes = vec![0; 4 * values.len()];
@@ -1066,30 +1080,38 @@ pub struct WireImage {
 impl WireImage {
     /// The wire form of a `width` × `height` linear image, lossless.
     pub fn from_pixels(width: u32, height: u32, pixels: &[Vec3]) -> Self {
-        let values: Vec<[u8; 4]> = (pixels.iter())
-            .flat_map(|c| c.to_array())
-            .map(f32::to_le_bytes)
-            .collect();
+        let mut planes = Vec::new();
+        pixel_planes_into(pixels, &mut planes);
         WireImage {
             width,
             height,
             format: WireImageFormat::LinearF32,
-            pixels: compress(&byte_planes(&values)),
+            pixels: compress(&planes),
         }
     }
 
     /// The wire form of `image` in `format`.
     pub fn encode(image: &vtfarm_imaging::Image, format: WireImageFormat) -> Self {
+        WireImage::encode_reusing(image, format, &mut Vec::new())
+    }
+
+    /// [`WireImage::encode`] with the uncompressed bytes in `scratch`
+    /// (whatever it held): a buffer kept from frame to frame spares a
+    /// fresh one's page faults (6 MB of sRGB, 25 MB of floats at 1080p).
+    pub fn encode_reusing(
+        image: &vtfarm_imaging::Image,
+        format: WireImageFormat,
+        scratch: &mut Vec<u8>,
+    ) -> Self {
         match format {
-            WireImageFormat::LinearF32 => {
-                WireImage::from_pixels(image.width, image.height, &image.pixels)
-            }
-            WireImageFormat::Srgb8 => WireImage {
-                width: image.width,
-                height: image.height,
-                format,
-                pixels: compress(&image.to_srgb8()),
-            },
+            WireImageFormat::LinearF32 => pixel_planes_into(&image.pixels, scratch),
+            WireImageFormat::Srgb8 => image.to_srgb8_into(scratch),
+        }
+        WireImage {
+            width: image.width,
+            height: image.height,
+            format,
+            pixels: compress(scratch),
         }
     }
 
@@ -1689,6 +1711,14 @@ pub(crate) mod tests {
         short.width = 4;
         let error = short.into_srgb8().expect_err("six pixels for eight");
         assert!(error.to_string().contains("image pixel bytes"), "{error}");
+        // Encoded in a buffer that held more or less, the same bytes.
+        for format in [WireImageFormat::Srgb8, WireImageFormat::LinearF32] {
+            for stale in [vec![0xab; 1000], vec![0xab; 1]] {
+                let mut scratch = stale;
+                let reused = WireImage::encode_reusing(&image, format, &mut scratch);
+                assert_eq!(reused, WireImage::encode(&image, format), "{format:?}");
+            }
+        }
     }
 
     #[test]

@@ -101,12 +101,20 @@ impl Image {
     /// The 8-bit sRGB encoding, RGB interleaved, row-major from the top row
     /// ([`encode_srgb8`] of every pixel, by table).
     pub fn to_srgb8(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        self.to_srgb8_into(&mut out);
+        out
+    }
+
+    /// [`Image::to_srgb8`] into `out`'s allocation (whatever it held): a
+    /// buffer kept from frame to frame spares a fresh one's page faults.
+    pub fn to_srgb8_into(&self, out: &mut Vec<u8>) {
         let table = Srgb8Table::get();
-        let mut out = vec![0; 3 * self.pixels.len()];
+        out.clear();
+        out.resize(3 * self.pixels.len(), 0);
         for (bytes, c) in out.chunks_exact_mut(3).zip(&self.pixels) {
             bytes.copy_from_slice(&[table.encode(c.x), table.encode(c.y), table.encode(c.z)]);
         }
-        out
     }
 
     /// Writes an 8-bit sRGB PNG ([`write_srgb8_png`] of [`Image::to_srgb8`]).
@@ -399,6 +407,12 @@ mod tests {
         };
         let by_rule: Vec<u8> = image.pixels.iter().flat_map(|c| encode_srgb8(*c)).collect();
         assert_eq!(image.to_srgb8(), by_rule);
+        // Into a buffer that held more, and less.
+        for stale in [vec![7; 100], vec![9; 2]] {
+            let mut out = stale;
+            image.to_srgb8_into(&mut out);
+            assert_eq!(out, by_rule);
+        }
     }
 
     #[test]

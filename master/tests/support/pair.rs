@@ -84,6 +84,8 @@ pub(crate) struct Pair {
     submitter: Option<ConnId>,
     /// Every frame a `FrameStart` announced, in order.
     pub(crate) frame_starts: Vec<(u64, u32)>,
+    /// Base frames rasterized into a finished frame's buffers.
+    pub(crate) bases_in_reused_buffers: usize,
     config: SchedulerConfig,
     /// The job journal of a persistent master, in a temporary state directory.
     journal: Option<(Journal, tempfile::TempDir)>,
@@ -121,6 +123,7 @@ impl Pair {
             steps: 0,
             submitter: None,
             frame_starts: Vec::new(),
+            bases_in_reused_buffers: 0,
             config,
             journal,
         };
@@ -432,6 +435,7 @@ impl Pair {
             Output::RasterizeBase(request) => {
                 // The base frame takes no virtual time here.
                 let (job, frame) = (request.job, request.frame);
+                self.bases_in_reused_buffers += usize::from(request.reuses_buffers());
                 let base = request.rasterize();
                 (self.master).base_frame_ready(self.now, job, frame, base);
             }
