@@ -33,11 +33,12 @@ pub struct SchedulerConfig {
     /// Frame affinity (for workers that set a frame up before its first
     /// package, as vtfarm's do): a worker keeps taking work of the frames
     /// it already has, and each running frame's fresh work goes to a crew
-    /// of about `workers / (frames_in_flight - 1)` workers (at least 4), so a worker
+    /// of about `workers / (frames_in_flight - 3)` workers (at least 4), so a worker
     /// sets up only some of the frames instead of every one. A worker
     /// whose frames have nothing left joins a frame whose crew is short,
     /// else starts the next frame, else helps the oldest frame with work
-    /// left. Package sizes follow the frame's crew. Default `false`.
+    /// left. Package sizes follow the frame's crew, bounded by the whole
+    /// job's remaining work over every worker. Default `false`.
     pub frame_affinity: bool,
 }
 

@@ -55,10 +55,15 @@
 //!   waiting worker takes work of a running frame it already has (oldest
 //!   first), else requeued work of any frame, else joins a frame whose crew
 //!   (the workers that took their last own package of it) is short of
-//!   `max(workers / (frames_in_flight − 1), 4)`, else starts the next frame,
-//!   else, when none may start, helps the oldest frame with work left.
-//!   Packages are sized within the frame's crew. A worker so sets up only
-//!   its crew's frames, not every frame.
+//!   `max(workers / (frames_in_flight − 3), 4)` (frames complete in order:
+//!   three slots are left for the oldest frame's last packages, frames
+//!   done but waiting for it, and the next frame a crew starts), else
+//!   starts the next frame, else, when none may start, helps the oldest
+//!   frame with work left. Packages are sized within the frame's crew, and
+//!   never larger than guided self-scheduling over the whole job gives (its
+//!   unassigned and unstarted work over every worker), so near a job's end
+//!   every worker shares the last frames in small packages. A worker so
+//!   sets up only its crew's frames, not every frame.
 //! * **Held results.** A driver that checks results only later (the master
 //!   waits for the frame's base image) reports them with
 //!   [`Scheduler::package_arrived`] first: such a package is no straggler and

@@ -83,9 +83,29 @@ struct RunningJob {
     /// The frames after it, started early, oldest first
     /// ([`SchedulerConfig::frames_in_flight`]).
     ahead: VecDeque<Frame>,
+    /// Estimated cost of the frames not started yet (`frames`), kept by
+    /// [`RunningJob::estimate_unstarted`].
+    unstarted_cost: f64,
 }
 
 impl RunningJob {
+    /// Estimates the frames not started yet anew: after a frame started or
+    /// the cost estimates learned from a complete one.
+    fn estimate_unstarted(&mut self) {
+        let costs = &self.costs;
+        self.unstarted_cost = (self.frames.iter())
+            .flat_map(|f| &f.items)
+            .map(|&item| costs.estimate(item))
+            .sum();
+    }
+
+    /// Estimated cost of the job's work that no worker runs yet: the running
+    /// frames' unassigned work and the frames not started.
+    fn remaining_cost(&self) -> f64 {
+        let running: f64 = self.running_frames().map(Frame::unassigned_cost).sum();
+        running + self.unstarted_cost
+    }
+
     /// The running frames, oldest first.
     fn running_frames(&self) -> impl Iterator<Item = &Frame> {
         std::iter::once(&self.frame).chain(&self.ahead)
@@ -115,6 +135,15 @@ impl RunningJob {
 /// worker never holds a frame alone); set-ups only matter once a worker's
 /// share of a frame is small.
 const MIN_CREW: usize = 4;
+
+/// Frames in flight that no crew is sized for under frame affinity. Frames
+/// complete in order, so besides the crews' frames a slot is held by the
+/// oldest frame while its last packages run and by frames done but waiting
+/// for it; with one more free, a crew whose frame has nothing left to hand
+/// out starts the next frame instead of finding no room and spreading over
+/// the other crews' frames, each worker paying a set-up for a small share
+/// (at 64 simulated workers such helping doubled the set-ups per frame).
+const SPARE_FRAMES: u32 = 3;
 
 /// How many recent packages a worker's compute rate is the median of.
 const COMPUTE_SAMPLES: usize = 16;
@@ -698,6 +727,7 @@ impl Scheduler {
                 .filter_map(|(&id, w)| Some((id, w.compute_rate()?)))
                 .collect();
             job.costs.learn(&job.frame, &speeds);
+            job.estimate_unstarted();
             let finished = job.frame.index;
             for w in self.workers.values_mut() {
                 w.frames.remove(&finished);
@@ -722,6 +752,7 @@ impl Scheduler {
                 Some(next) => {
                     let index = job.frame.index + 1;
                     job.frame = Frame::new(index, next.items, &job.costs);
+                    job.estimate_unstarted();
                     self.events.push_back(Event::FrameStarted {
                         job: job.id,
                         frame: index,
@@ -747,6 +778,7 @@ impl Scheduler {
         };
         let index = job.ahead.back().unwrap_or(&job.frame).index + 1;
         let ahead = Frame::new(index, next.items, &job.costs);
+        job.estimate_unstarted();
         self.events.push_back(Event::FrameStarted {
             job: job.id,
             frame: index,
@@ -796,7 +828,7 @@ impl Scheduler {
             items: frame.items.len(),
         });
         self.lapse_requests();
-        self.running = Some(RunningJob {
+        let mut job = RunningJob {
             id: next.id,
             frames,
             frame_count,
@@ -806,7 +838,10 @@ impl Scheduler {
             errors: Vec::new(),
             frame,
             ahead: VecDeque::new(),
-        });
+            unstarted_cost: 0.0,
+        };
+        job.estimate_unstarted();
+        self.running = Some(job);
     }
 
     /// Whether the running job has work left that no connected worker may
@@ -894,11 +929,10 @@ impl Scheduler {
     }
 
     /// Workers per frame under frame affinity: the eligible workers spread
-    /// over all but one of the frames in flight (the spare one lets a crew
-    /// whose frame has nothing left start the next while its last packages
-    /// run), but at least [`MIN_CREW`].
+    /// over the frames in flight but [`SPARE_FRAMES`] (at least one crew),
+    /// but at least [`MIN_CREW`].
     fn crew_size(&self, job: &RunningJob) -> usize {
-        let crews = (self.config.frames_in_flight.max(2) - 1) as usize;
+        let crews = (self.config.frames_in_flight.saturating_sub(SPARE_FRAMES)).max(1) as usize;
         self.eligible_workers(job)
             .count()
             .div_ceil(crews)
@@ -921,7 +955,11 @@ impl Scheduler {
 
     /// The cost of `worker`'s next package of `frame` under frame affinity:
     /// guided self-scheduling within the frame's crew (the frame's
-    /// unassigned work over `k` times a full crew's rate).
+    /// unassigned work over `k` times a full crew's rate), and no more than
+    /// guided self-scheduling over the whole job (its remaining work over
+    /// `k` times every worker's rate) gives: near the job's end, or in a
+    /// job shorter than the farm is wide, every worker shares the last
+    /// frames, so their packages shrink for all of them, not for one crew.
     fn crew_target(&self, worker: WorkerId, frame: &Frame) -> f64 {
         let Some(job) = &self.running else {
             return 0.0;
@@ -930,7 +968,9 @@ impl Scheduler {
         let (sum, count) = (self.eligible_workers(job))
             .fold((0.0, 0usize), |(sum, n), w| (sum + w.rate_or(prior), n + 1));
         let crew_rate = sum / count.max(1) as f64 * self.crew_size(job) as f64;
-        self.sized(frame.unassigned_cost(), crew_rate) * self.rate_of(worker)
+        let crew = self.sized(frame.unassigned_cost(), crew_rate);
+        let whole_job = self.sized(job.remaining_cost(), sum);
+        crew.min(whole_job) * self.rate_of(worker)
     }
 
     /// A queued package of `frame` that `worker` may take (split when much

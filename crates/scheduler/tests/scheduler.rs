@@ -472,6 +472,57 @@ fn package_sizes_follow_guided_self_scheduling() {
     farm.valid();
 }
 
+/// Under frame affinity a package is sized within its frame's crew, but
+/// never larger than guided self-scheduling over the whole job gives: in a
+/// job that is short for the farm (or near a job's end) every worker
+/// shares the last frames, so their packages shrink for all of them.
+#[test]
+fn packages_near_a_jobs_end_are_sized_for_every_worker() {
+    // 16 workers at the prior rate of 1 unit/s, frames of 60 items of 1
+    // unit; crews of max(16 / (8 − 3), 4) = 4 workers.
+    let check = |frames: usize, expected: usize| {
+        let mut farm = Farm::with(SchedulerConfig::default().farm());
+        for w in 0..16 {
+            farm.join(WorkerId(w));
+        }
+        farm.submit(JOB, 60, frames);
+        let a = farm.request(W0).expect("work");
+        assert_eq!(a.items.len(), expected, "a job of {frames} frames");
+        farm.valid();
+    };
+    // A long job: the crew's share binds, 60 / (2 · 4) = 7.5 units (the
+    // cut closer to it by the later item: 8).
+    check(20, 8);
+    // Two frames: the job's 120 units over 2 · 16 workers, 3.75 units.
+    check(2, 4);
+    // One frame: 60 / (2 · 16) = 1.875 units.
+    check(1, 2);
+}
+
+/// Under frame affinity the workers are spread over the frames in flight
+/// but three: frames complete in order, so the oldest frame while its last
+/// packages run and the frames done but waiting for it hold their slots,
+/// and a crew whose frame has nothing left to hand out must find one free
+/// to start the next frame (with no room it would spread over the other
+/// crews' frames, each worker setting a frame up for a small share).
+#[test]
+fn crews_leave_three_of_the_frames_in_flight_free() {
+    let mut farm = Farm::with(SchedulerConfig::default().farm());
+    for w in 0..40 {
+        farm.join(WorkerId(w));
+    }
+    farm.submit(JOB, 80, 20);
+    let mut crews = std::collections::BTreeMap::<u32, usize>::new();
+    for w in 0..40 {
+        let a = farm.request(WorkerId(w)).expect("work");
+        *crews.entry(a.frame).or_default() += 1;
+    }
+    // 40 workers over 8 − 3 frames: crews of 8.
+    let expected: std::collections::BTreeMap<u32, usize> = (0..5).map(|f| (f, 8)).collect();
+    assert_eq!(crews, expected);
+    farm.valid();
+}
+
 #[test]
 fn packages_are_large_early_and_small_late() {
     use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
