@@ -83,17 +83,21 @@ struct RunningJob {
     /// The frames after it, started early, oldest first
     /// ([`SchedulerConfig::frames_in_flight`]).
     ahead: VecDeque<Frame>,
-    /// Estimated cost of the frames not started yet (`frames`), kept by
-    /// [`RunningJob::estimate_unstarted`].
+    /// Estimated cost of the next frames not started yet (`frames`), kept
+    /// by [`RunningJob::estimate_unstarted`].
     unstarted_cost: f64,
 }
 
 impl RunningJob {
-    /// Estimates the frames not started yet anew: after a frame started or
-    /// the cost estimates learned from a complete one.
-    fn estimate_unstarted(&mut self) {
+    /// Estimates the next `lookahead` frames not started yet anew: after a
+    /// frame started or the cost estimates learned from a complete one.
+    /// With [`SchedulerConfig::frames_in_flight`] frames the whole-job bound
+    /// on package sizes no longer binds (a crew's share of one frame is
+    /// smaller), and summing every frame of a long job at every frame start
+    /// would cost its frames squared.
+    fn estimate_unstarted(&mut self, lookahead: usize) {
         let costs = &self.costs;
-        self.unstarted_cost = (self.frames.iter())
+        self.unstarted_cost = (self.frames.iter().take(lookahead))
             .flat_map(|f| &f.items)
             .map(|&item| costs.estimate(item))
             .sum();
@@ -707,6 +711,7 @@ impl Scheduler {
     /// Completes finished frames and jobs and starts the next ones, until a
     /// frame has work or no job is left; starts a frame early when it may.
     fn advance_jobs(&mut self) {
+        let lookahead = self.config.frames_in_flight as usize;
         loop {
             let Some(job) = &mut self.running else {
                 let Some(next) = self.queued_jobs.pop_front() else {
@@ -727,7 +732,7 @@ impl Scheduler {
                 .filter_map(|(&id, w)| Some((id, w.compute_rate()?)))
                 .collect();
             job.costs.learn(&job.frame, &speeds);
-            job.estimate_unstarted();
+            job.estimate_unstarted(lookahead);
             let finished = job.frame.index;
             for w in self.workers.values_mut() {
                 w.frames.remove(&finished);
@@ -752,7 +757,7 @@ impl Scheduler {
                 Some(next) => {
                     let index = job.frame.index + 1;
                     job.frame = Frame::new(index, next.items, &job.costs);
-                    job.estimate_unstarted();
+                    job.estimate_unstarted(lookahead);
                     self.events.push_back(Event::FrameStarted {
                         job: job.id,
                         frame: index,
@@ -770,6 +775,7 @@ impl Scheduler {
 
     /// Starts the running job's next frame while its running frame finishes.
     fn start_ahead(&mut self) {
+        let lookahead = self.config.frames_in_flight as usize;
         let Some(job) = &mut self.running else {
             return;
         };
@@ -778,7 +784,7 @@ impl Scheduler {
         };
         let index = job.ahead.back().unwrap_or(&job.frame).index + 1;
         let ahead = Frame::new(index, next.items, &job.costs);
-        job.estimate_unstarted();
+        job.estimate_unstarted(lookahead);
         self.events.push_back(Event::FrameStarted {
             job: job.id,
             frame: index,
@@ -840,7 +846,7 @@ impl Scheduler {
             ahead: VecDeque::new(),
             unstarted_cost: 0.0,
         };
-        job.estimate_unstarted();
+        job.estimate_unstarted(self.config.frames_in_flight as usize);
         self.running = Some(job);
     }
 
