@@ -781,29 +781,29 @@ impl crate::WireFrameAux {
     }
 }
 
-/// The pixels' channels as little-endian byte planes ([`byte_planes`] of
-/// every channel), into `planes` (whatever it held).
+/// The pixels' channels as little-endian byte planes ([`byte_planes_into`]
+/// of every channel), into `planes` (whatever it held).
 fn pixel_planes_into(pixels: &[Vec3], planes: &mut Vec<u8>) {
-    let values = 3 * pixels.len();
-    planes.clear();
-    planes.resize(4 * values, 0);
     let channels = pixels.iter().flat_map(|c| c.to_array());
-    for (i, bytes) in channels.map(f32::to_le_bytes).enumerate() {
-        for (k, byte) in bytes.into_iter().enumerate() {
-            planes[k * values + i] = byte;
-        }
-    }
+    byte_planes_into(channels.map(f32::to_le_bytes), 3 * pixels.len(), planes);
 }
 
 /// Little-endian values as byte planes: byte 0 of every value, then byte 1 …
 fn byte_planes(values: &[[u8; 4]]) -> Vec<u8> {
-    let mut planes = vec![0; 4 * values.len()];
-    for (k, plane) in planes.chunks_exact_mut(values.len().max(1)).enumerate() {
-        for (byte, value) in plane.iter_mut().zip(values) {
-            *byte = value[k];
+    let mut planes = Vec::new();
+    byte_planes_into(values.iter().copied(), values.len(), &mut planes);
+    planes
+}
+
+/// [`byte_planes`] of `count` values into `planes` (whatever it held).
+fn byte_planes_into(values: impl Iterator<Item = [u8; 4]>, count: usize, planes: &mut Vec<u8>) {
+    planes.clear();
+    planes.resize(4 * count, 0);
+    for (i, bytes) in values.take(count).enumerate() {
+        for (k, byte) in bytes.into_iter().enumerate() {
+            planes[k * count + i] = byte;
         }
     }
-    planes
 }
 
 /// A [`WireBitmap`]'s checked and decompressed parts.
