@@ -16,11 +16,8 @@ pub(crate) struct CompareArgs {
     /// Output directory: one PNG per method, sheet.png, compare.json.
     #[arg(short, long)]
     output: PathBuf,
-    /// Override the image size.
-    #[arg(long)]
-    width: Option<u32>,
-    #[arg(long)]
-    height: Option<u32>,
+    #[command(flatten)]
+    size: crate::shared::ImageSize,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -34,7 +31,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
         scene,
         reflectors,
         setups,
-    } = crate::shared::prepare_job(&args.job, None, args.width, args.height)?;
+    } = crate::shared::prepare_job(&args.job, None, args.size)?;
     let setup = setups
         .into_iter()
         .next()

@@ -21,7 +21,9 @@ use crate::shared::runtime;
 /// Options of `vtfarm submit`.
 #[derive(clap::Args)]
 pub(crate) struct SubmitArgs {
-    /// The job file (TOML).
+    /// The job file (TOML), or a study file (one with a `[study]` table,
+    /// e.g. configs/cockpit-study.toml): its variants run on the cluster.
+    #[arg(value_name = "JOB_OR_STUDY")]
     job: PathBuf,
     /// The cluster file from `vtfarm cluster init`.
     #[arg(long)]
@@ -42,14 +44,11 @@ pub(crate) struct SubmitArgs {
     /// transmitted components, reflected-object map) into OUTPUT/frame_NNNN/.
     #[arg(long)]
     aux: bool,
-    /// Overrides the job's quality level.
-    #[arg(long, value_parser = crate::shared::parse_quality)]
+    /// Overrides the job's (or the study's base job's) quality level.
+    #[arg(long, value_parser = crate::shared::quality_parser())]
     quality: Option<Quality>,
-    /// Override the image size.
-    #[arg(long)]
-    width: Option<u32>,
-    #[arg(long)]
-    height: Option<u32>,
+    #[command(flatten)]
+    size: crate::shared::ImageSize,
 }
 
 /// Options of `vtfarm status`.
@@ -134,7 +133,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         scene,
         reflectors,
         setups,
-    } = crate::shared::prepare_job(&args.job, args.quality, args.width, args.height)?;
+    } = crate::shared::prepare_job(&args.job, args.quality, args.size)?;
     crate::shared::warn_unsupported_reflectors(job.method, &scene, &reflectors);
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
@@ -239,7 +238,7 @@ struct FrameRecord<'a> {
 
 /// `vtfarm submit` of a study file: its variants run on the cluster.
 fn submit_study(args: SubmitArgs) -> Result<()> {
-    if args.width.is_some() || args.height.is_some() || args.aux {
+    if args.size.is_set() || args.aux {
         bail!(
             "--width, --height and --aux apply to job files; a study file sets its own size and always keeps the components"
         );
@@ -258,9 +257,12 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     Ok(())
 }
 
+/// A frame's summary line. The last figure is `FrameStats::speedup`, the
+/// workers' summed busy time over the frame's wall time: how many workers
+/// were busy on average (it says nothing of a speed-up over anything).
 fn frame_line(s: &FrameStats) -> String {
     format!(
-        "{:.3} s, {} packages, imbalance {:.1}%, speed-up {:.2}",
+        "{:.3} s, {} packages, imbalance {:.1}%, {:.2} workers busy on average",
         s.wall_micros as f64 / 1e6,
         s.packages,
         s.imbalance * 100.0,

@@ -17,7 +17,8 @@ use vtfarm_render::{RenderOptions, Renderer, output};
 use vtfarm_vertex::Quality;
 
 use crate::shared::{
-    PreparedJob, parse_quality, prepare_job, progress_bar, set_threads, warn_unsupported_reflectors,
+    ImageSize, PreparedJob, prepare_job, progress_bar, quality_parser, set_threads,
+    warn_unsupported_reflectors,
 };
 
 #[derive(Parser)]
@@ -31,33 +32,37 @@ struct Cli {
     command: Command,
 }
 
+/// The user's commands first, in the order a newcomer meets them; the
+/// benchmarks last.
 #[derive(Subcommand)]
 enum Command {
-    /// Renders a job to an image (PNG, or linear float32 .npy by extension).
+    /// Renders a job's first frame to an image (PNG, or linear float32 .npy by extension).
     Render(RenderArgs),
-    /// Scene tools.
+    /// Runs a glare study (design variants x eye points, optionally x sun
+    /// positions) and writes its images, summary and report.
+    Study(study::StudyArgs),
+    /// Renders the job's view with every reflection method and measures each
+    /// against the per-pixel reference.
+    Compare(compare::CompareArgs),
+    /// Creates the files of a cluster (key, certificate, cluster.toml).
     #[command(subcommand)]
-    Scene(SceneCommand),
-    /// Benchmarks.
-    #[command(subcommand)]
-    Bench(bench::BenchCommand),
+    Cluster(ClusterCommand),
     /// Runs the farm master (accepts workers and jobs over QUIC).
     Master(vtfarm_master::cli::MasterArgs),
     /// Runs a farm worker that dials the master.
     Worker(vtfarm_worker::cli::WorkerArgs),
-    /// Renders the job's view with every reflection method and measures each
-    /// against the per-pixel reference.
-    Compare(compare::CompareArgs),
-    /// Runs a glare study (design variants x eye points) and writes its report.
-    Study(study::StudyArgs),
     /// Submits a job or a study to a running master and writes its frames
     /// (or the study's outputs).
     Submit(farm::SubmitArgs),
     /// Lists the master's workers (with their measured throughput) and queue.
     Status(farm::StatusArgs),
-    /// Cluster set-up.
+    /// Scene tools (export the built-in cockpit as OBJ + MTL).
     #[command(subcommand)]
-    Cluster(ClusterCommand),
+    Scene(SceneCommand),
+    /// Benchmarks: the paper's Table 1, ray and rasterizer throughput, the
+    /// farm simulator and a localhost cluster.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
 }
 
 #[derive(Subcommand)]
@@ -74,17 +79,15 @@ struct RenderArgs {
     #[arg(short, long, default_value = "out.png")]
     output: PathBuf,
     /// Overrides the job's quality level.
-    #[arg(long, value_parser = parse_quality)]
+    #[arg(long, value_parser = quality_parser())]
     quality: Option<Quality>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Overrides the image width and height.
-    #[arg(long)]
-    width: Option<u32>,
-    #[arg(long)]
-    height: Option<u32>,
-    /// Writes the auxiliary outputs (mask, reflected component, reflected-object map, wireframe) here.
+    #[command(flatten)]
+    size: ImageSize,
+    /// Writes the auxiliary outputs here (mask, reflected and transmitted
+    /// components, reflected-object map, wireframe).
     #[arg(long)]
     aux: Option<PathBuf>,
     /// Local workers of the embedded master (they share the cores).
@@ -156,7 +159,7 @@ fn render(args: RenderArgs) -> Result<()> {
         scene,
         reflectors,
         setups,
-    } = prepare_job(&args.job, args.quality, args.width, args.height)?;
+    } = prepare_job(&args.job, args.quality, args.size)?;
     // `render` writes one image: the job's first frame.
     let setup = setups
         .into_iter()

@@ -6,6 +6,7 @@ use std::borrow::Cow;
 use std::path::Path;
 
 use anyhow::{Context, Result};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use indicatif::{ProgressBar, ProgressStyle};
 use vtfarm_render::FrameSetup;
 use vtfarm_vertex::Quality;
@@ -14,6 +15,59 @@ use vtfarm_vertex::Quality;
 pub(crate) fn parse_quality(s: &str) -> Result<Quality, String> {
     Quality::from_name(s)
         .ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
+}
+
+/// The `--quality` parser of the user's commands: `parse_quality` with the
+/// levels listed in `--help` (and in the error after a wrong one).
+pub(crate) fn quality_parser() -> impl TypedValueParser<Value = Quality> {
+    let levels = Quality::ALL.map(|q| PossibleValue::new(q.name()).help(quality_help(q)));
+    PossibleValuesParser::new(levels).try_map(|name| parse_quality(&name))
+}
+
+/// One line per level for `--help`.
+fn quality_help(quality: Quality) -> &'static str {
+    match quality {
+        Quality::Preview => "the reflector's vertices only, interpolated between them",
+        Quality::Refine => "adaptive edge refinement where the reflection changes",
+        Quality::Full => "refine plus per-pixel tracing where faces still disagree",
+        Quality::Reference => "every reflector pixel traced (the ground truth)",
+    }
+}
+
+/// `--width` and `--height`: the image size, overriding the job's.
+#[derive(clap::Args, Clone, Copy, Debug, Default)]
+pub(crate) struct ImageSize {
+    /// Image width in pixels (default: the job's). Given without --height,
+    /// the height follows from the job's aspect ratio.
+    #[arg(long)]
+    pub(crate) width: Option<u32>,
+    /// Image height in pixels (default: the job's). Given without --width,
+    /// the width follows from the job's aspect ratio.
+    #[arg(long)]
+    pub(crate) height: Option<u32>,
+}
+
+impl ImageSize {
+    /// Whether either dimension is given.
+    pub(crate) fn is_set(self) -> bool {
+        self.width.is_some() || self.height.is_some()
+    }
+
+    /// The size for a job of `job_width` × `job_height`: both given, both
+    /// taken; one given, the other scaled to keep the job's aspect ratio
+    /// (rounded to the nearest pixel, at least 1).
+    pub(crate) fn resolve(self, job_width: u32, job_height: u32) -> (u32, u32) {
+        let scaled = |given: u32, from: u32, to: u32| {
+            let exact = f64::from(given) * f64::from(to) / f64::from(from.max(1));
+            (exact.round() as u32).max(1)
+        };
+        match (self.width, self.height) {
+            (Some(w), Some(h)) => (w, h),
+            (Some(w), None) => (w, scaled(w, job_width, job_height)),
+            (None, Some(h)) => (scaled(h, job_height, job_width), h),
+            (None, None) => (job_width, job_height),
+        }
+    }
 }
 
 /// Sets the size of rayon's global pool (once, before any parallel work).
@@ -50,8 +104,7 @@ pub(crate) struct PreparedJob {
 pub(crate) fn prepare_job(
     path: &Path,
     quality: Option<Quality>,
-    width: Option<u32>,
-    height: Option<u32>,
+    size: ImageSize,
 ) -> Result<PreparedJob> {
     let mut job = vtfarm_job::load_job(path)?;
     if let Some(q) = quality {
@@ -59,8 +112,7 @@ pub(crate) fn prepare_job(
     }
     let loaded = job.load_scene()?;
     let mut camera = loaded.camera;
-    camera.width = width.unwrap_or(camera.width);
-    camera.height = height.unwrap_or(camera.height);
+    (camera.width, camera.height) = size.resolve(camera.width, camera.height);
     let reflectors = job.reflector_triangles(&loaded.scene)?;
     let setups = job
         .frames(&camera)?
@@ -120,4 +172,20 @@ pub(crate) fn progress_bar(
     );
     bar.set_message(message);
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ImageSize;
+
+    #[test]
+    fn one_side_alone_keeps_the_aspect_ratio_and_both_are_taken_as_given() {
+        let size = |width, height| ImageSize { width, height };
+        assert_eq!(size(None, None).resolve(1280, 720), (1280, 720));
+        assert_eq!(size(Some(640), None).resolve(1280, 720), (640, 360));
+        assert_eq!(size(None, Some(1080)).resolve(1280, 720), (1920, 1080));
+        assert_eq!(size(Some(100), None).resolve(1280, 720), (100, 56)); // 56.25
+        assert_eq!(size(Some(1), None).resolve(1280, 720), (1, 1)); // never 0
+        assert_eq!(size(Some(50), Some(70)).resolve(1280, 720), (50, 70));
+    }
 }

@@ -16,13 +16,15 @@ use vtfarm_vertex::Quality;
 /// Options of `vtfarm study`.
 #[derive(clap::Args)]
 pub(crate) struct StudyArgs {
-    /// The study file (TOML), e.g. configs/cockpit-study.toml.
+    /// The study file (TOML): design variants x eye points, e.g.
+    /// configs/cockpit-study.toml, optionally x sun positions (a `[sun]`
+    /// grid or date range, e.g. configs/cockpit-sun-study.toml).
     study: PathBuf,
     /// Output directory: per-frame images, summary.csv, summary.json, report.html.
     #[arg(short, long)]
     output: PathBuf,
     /// Overrides the base job's quality level.
-    #[arg(long, value_parser = crate::shared::parse_quality)]
+    #[arg(long, value_parser = crate::shared::quality_parser())]
     quality: Option<Quality>,
     /// Local workers of the embedded master (they share the cores).
     #[arg(long, default_value_t = 2)]
