@@ -8,6 +8,8 @@
 //!   transmitted component (what is seen through the reflectors);
 //! - `reflected_objects.png`: 16-bit gray, the index of the object each reflector
 //!   pixel mirrors plus one (0 = nothing), with `objects.json` naming each value;
+//! - `reflected_objects_map.png`: the same map for the eye, coloured with a
+//!   legend (`vtfarm_glare::object_map`, as a study's `objects.png`);
 //! - `wireframe.png`: the image with the refined triangles' edges drawn (Figure 13),
 //!   when the frame was rendered in this process.
 
@@ -23,6 +25,8 @@ use vtfarm_vertex::{FinishedFace, FrameImage, draw_wireframe};
 pub enum OutputError {
     #[error(transparent)]
     Image(#[from] ImageError),
+    #[error("the reflected-object map: {0}")]
+    ObjectMap(#[from] vtfarm_glare::GlareError),
     #[error("cannot write {path}: {source}")]
     Io {
         path: PathBuf,
@@ -90,6 +94,13 @@ pub fn write_aux(
         })
         .collect();
     write_gray16_png(&dir.join("reflected_objects.png"), w, h, &objects)?;
+    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
+    // Only the glass, its reflection and the object names are read: no
+    // instrument or marking masks without a study.
+    let none = vec![false; components.mask.len()];
+    let input = vtfarm_glare::GlareInput::from_components(&components, &none, &none, &names);
+    vtfarm_glare::object_map(&input, &vtfarm_glare::Params::default())?
+        .write_png(&dir.join("reflected_objects_map.png"))?;
     let entries: Vec<ObjectEntry<'_>> = scene
         .objects
         .iter()
