@@ -76,6 +76,7 @@ fn render_writes_the_image_and_documented_aux_files() {
         seen.contains("side_window_left"),
         "the glass mirrors the left side window: {seen:?}"
     );
+    assert_colored_object_map(&aux, objects, &mask);
     for file in [
         "reflected.png",
         "reflected.npy",
@@ -85,6 +86,48 @@ fn render_writes_the_image_and_documented_aux_files() {
     ] {
         assert!(aux.join(file).is_file(), "{file} written");
     }
+}
+
+/// `reflected_objects_map.png`, the coloured map beside the 16-bit one:
+/// the frame at the same pixels (a legend to its right), black off the
+/// glass, and one visible colour per mirrored object, a different one for
+/// each of the most common (the palette has ten).
+fn assert_colored_object_map(
+    aux: &Path,
+    objects: &image::ImageBuffer<image::Luma<u16>, Vec<u16>>,
+    mask: &image::GrayImage,
+) {
+    let map = image::open(aux.join("reflected_objects_map.png"))
+        .unwrap()
+        .to_rgb8();
+    let (w, h) = objects.dimensions();
+    assert!(
+        map.width() > w && map.height() >= h,
+        "a legend beside the frame"
+    );
+    let mut color_of = std::collections::BTreeMap::new();
+    for y in 0..h {
+        for x in 0..w {
+            let color = map.get_pixel(x, y).0;
+            let value = objects.get_pixel(x, y).0[0];
+            if mask.get_pixel(x, y).0[0] == 0 {
+                assert_eq!(color, [0, 0, 0], "black off the glass at ({x}, {y})");
+            } else if value != 0 {
+                assert!(
+                    color.iter().any(|&c| c > 40),
+                    "visible at ({x}, {y}): {color:?}"
+                );
+                let first = *color_of.entry(value).or_insert(color);
+                assert_eq!(color, first, "object {value} has one colour");
+            }
+        }
+    }
+    let colors: std::collections::BTreeSet<[u8; 3]> = color_of.values().copied().collect();
+    assert_eq!(
+        colors.len(),
+        color_of.len().min(10),
+        "a colour per object: {color_of:?}"
+    );
 }
 
 #[test]
@@ -455,4 +498,120 @@ fn bench_simulate_refuses_absurd_settings() {
             "{args:?}: {stderr}"
         );
     }
+}
+
+/// A small cockpit job (detail 0.3, 160x90, preview) written into `dir`.
+fn small_job(dir: &Path) -> PathBuf {
+    let job = dir.join("small.toml");
+    std::fs::write(
+        &job,
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n[camera]\nwidth = 160\nheight = 90\n[quality]\nlevel = \"preview\"\n",
+    )
+    .unwrap();
+    job
+}
+
+/// `--width` or `--height` alone scales the job's size, keeping its aspect
+/// ratio (16:9 here); both together are taken as they are.
+#[test]
+fn render_given_one_side_keeps_the_jobs_aspect_ratio() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = small_job(dir.path());
+    for (size, expected) in [
+        (&["--width", "64"][..], (64, 36)),
+        (&["--height", "45"], (80, 45)),
+        (&["--width", "50", "--height", "50"], (50, 50)),
+        (&["--width", "1"], (1, 1)),
+    ] {
+        let png = dir.path().join("out.png");
+        let args = [
+            &["render", job.to_str().unwrap(), "-o", png.to_str().unwrap()][..],
+            size,
+        ]
+        .concat();
+        let out = vtfarm(&args);
+        assert!(out.status.success(), "{size:?}: {}", text(&out.stderr));
+        let dimensions = image::open(&png).unwrap().to_rgb8().dimensions();
+        assert_eq!(dimensions, expected, "{size:?}");
+    }
+}
+
+/// The closing table's farm figure says what it is: the workers' summed
+/// busy time over the frame's wall time (no "speed-up" that reads as a
+/// slow-down when it is below 1).
+#[test]
+fn render_names_what_its_frame_figures_measure() {
+    let dir = tempfile::tempdir().unwrap();
+    let job = small_job(dir.path());
+    let png = dir.path().join("out.png");
+    let out = vtfarm(&["render", job.to_str().unwrap(), "-o", png.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("workers busy on average"), "{stdout}");
+    assert!(!stdout.contains("speed-up"), "{stdout}");
+}
+
+/// The subcommands as `vtfarm --help` lists them.
+fn listed_commands(help: &str) -> Vec<String> {
+    help.lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next().map(str::to_owned))
+        .collect()
+}
+
+#[test]
+fn help_lists_the_users_commands_first_and_bench_last() {
+    let out = vtfarm(&["--help"]);
+    assert!(out.status.success());
+    let commands = listed_commands(&text(&out.stdout));
+    assert_eq!(
+        commands,
+        [
+            "render", "study", "compare", "cluster", "master", "worker", "submit", "status",
+            "scene", "bench", "help"
+        ],
+        "{commands:?}"
+    );
+}
+
+/// What a newcomer reads in `--help`: every option described, the quality
+/// levels listed, studies and their sun sweeps named where they are taken.
+#[test]
+fn help_describes_every_option_and_lists_the_quality_levels() {
+    let help = |command: &str| {
+        let out = vtfarm(&[command, "--help"]);
+        assert!(out.status.success(), "{command} --help");
+        text(&out.stdout)
+    };
+    for command in ["render", "compare", "submit"] {
+        let help = help(command);
+        for described in [
+            "Image width in pixels",
+            "Image height in pixels",
+            "aspect ratio",
+        ] {
+            assert!(help.contains(described), "{command} --help: {help}");
+        }
+    }
+    for command in ["render", "study", "submit"] {
+        let help = help(command);
+        for level in ["preview", "refine", "full", "reference"] {
+            assert!(
+                help.contains(level),
+                "{command} --help lists {level}: {help}"
+            );
+        }
+    }
+    assert!(help("submit").contains("study file"));
+    assert!(help("study").contains("sun positions"));
+
+    let out = vtfarm(&["render", "configs/cockpit.toml", "--quality", "best"]);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("preview") && stderr.contains("reference"),
+        "{stderr}"
+    );
 }
