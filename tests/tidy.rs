@@ -1,8 +1,9 @@
 //! House rules every crate of the workspace follows, checked on the source
-//! tree (as rust-analyzer's tidy tests do): each crate root opens with a `//!`
-//! crate doc, and each dependency is declared through the root's
+//! tree (as rust-analyzer's tidy tests do): each crate root and each module
+//! opens with a `//!` doc; each dependency is declared through the root's
 //! `[workspace.dependencies]` (`dep.workspace = true`), so every version is
-//! set once.
+//! set once; and no test passes without testing (no `#[ignore]`, and a test
+//! that cannot run fails, except behind a named opt-out that CI never sets).
 
 use std::path::{Path, PathBuf};
 
@@ -24,16 +25,67 @@ fn crate_dirs() -> Vec<PathBuf> {
     dirs
 }
 
+/// The directories of a crate that hold Rust modules (its own, not those of
+/// crates nested below it).
+const SOURCE_DIRS: [&str; 4] = ["src", "tests", "examples", "benches"];
+
+/// Every `.rs` file of every member crate and of the fuzz targets' own
+/// workspace, sorted.
+fn rust_files() -> Vec<PathBuf> {
+    fn walk(dir: &Path, files: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return; // a crate without this directory
+        };
+        for entry in entries {
+            let path = entry.expect("a readable directory entry").path();
+            if path.is_dir() {
+                walk(&path, files);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                files.push(path);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    let fuzz = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+    for dir in crate_dirs().into_iter().chain([fuzz]) {
+        for sub in SOURCE_DIRS {
+            walk(&dir.join(sub), &mut files);
+        }
+    }
+    files.sort();
+    files
+}
+
 fn read(path: &Path) -> String {
     std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// Whether a crate root's first non-blank line is a `//!` doc comment.
-fn has_crate_doc(source: &str) -> bool {
+/// Whether a module's first line that is neither blank nor an inner
+/// attribute (`#![...]`) is a `//!` doc comment.
+fn has_module_doc(source: &str) -> bool {
     source
         .lines()
-        .find(|line| !line.trim().is_empty())
+        .map(str::trim_start)
+        .find(|line| !line.is_empty() && !line.starts_with("#!["))
         .is_some_and(|line| line.starts_with("//!"))
+}
+
+/// What in a source file lets a test pass without testing: an `#[ignore]`
+/// attribute, or a `SKIPPED` message outside a file that fails under CI and
+/// names its opt-out (`VTFARM_ALLOW_NO_...`). Each finding as `line: text`.
+fn passes_on_a_skip(source: &str) -> Vec<String> {
+    let gated = source.contains("std::env::var(\"CI\")") && source.contains("\"VTFARM_ALLOW_NO_");
+    source
+        .lines()
+        .enumerate()
+        .filter(|(_, line)| {
+            let code = line.trim_start();
+            let ignored = code.starts_with("#[ignore");
+            let skipped = !code.starts_with("//") && line.contains("SKIPPED") && !gated;
+            ignored || skipped
+        })
+        .map(|(i, line)| format!("{}: {}", i + 1, line.trim()))
+        .collect()
 }
 
 /// The dependencies of a member's manifest not declared as `workspace = true`,
@@ -68,20 +120,34 @@ fn dependencies_outside_the_workspace_table(manifest: &str) -> Vec<String> {
 }
 
 #[test]
-fn every_crate_root_has_a_crate_doc() {
-    let mut missing = Vec::new();
-    for dir in crate_dirs() {
-        for root in ["src/lib.rs", "src/main.rs"] {
-            let path = dir.join(root);
-            if path.exists() && !has_crate_doc(&read(&path)) {
-                missing.push(path.display().to_string());
-            }
+fn every_module_has_a_module_doc() {
+    let missing: Vec<String> = rust_files()
+        .into_iter()
+        .filter(|path| !has_module_doc(&read(path)))
+        .map(|path| path.display().to_string())
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "modules without a `//!` doc saying what they are for:\n{}",
+        missing.join("\n")
+    );
+}
+
+#[test]
+fn no_test_passes_on_a_skip() {
+    // This file names what it looks for.
+    let this_file = Path::new(env!("CARGO_MANIFEST_DIR")).join(file!());
+    let mut found = Vec::new();
+    for path in rust_files().into_iter().filter(|p| *p != this_file) {
+        for finding in passes_on_a_skip(&read(&path)) {
+            found.push(format!("{}:{finding}", path.display()));
         }
     }
     assert!(
-        missing.is_empty(),
-        "crate roots without a `//!` crate doc:\n{}",
-        missing.join("\n")
+        found.is_empty(),
+        "tests that pass without testing (a test that cannot run must fail; an opt-out \
+         needs a VTFARM_ALLOW_NO_* variable and must fail under CI):\n{}",
+        found.join("\n")
     );
 }
 
@@ -105,10 +171,24 @@ fn every_dependency_comes_from_the_workspace_table() {
 /// The checks themselves catch what they are for.
 #[test]
 fn the_checks_catch_violations() {
-    assert!(has_crate_doc("\n//! A crate.\n\nuse std::fs;\n"));
-    assert!(!has_crate_doc("/// An item doc.\npub fn f() {}\n"));
-    assert!(!has_crate_doc("use std::fs;\n//! Too late.\n"));
-    assert!(!has_crate_doc(""));
+    assert!(has_module_doc("\n//! A crate.\n\nuse std::fs;\n"));
+    assert!(!has_module_doc("/// An item doc.\npub fn f() {}\n"));
+    assert!(!has_module_doc("use std::fs;\n//! Too late.\n"));
+    assert!(!has_module_doc(""));
+    assert!(has_module_doc("#![allow(dead_code)]\n//! A module.\n"));
+    assert!(!has_module_doc("#[cfg(test)]\nmod tests;\n"));
+    let ignored = "#[test]\n#[ignore]\nfn slow() {}\n";
+    assert_eq!(passes_on_a_skip(ignored), ["2: #[ignore]"]);
+    let silent = "fn t() {\n    if missing() {\n        eprintln!(\"SKIPPED: no tool\");\n        return;\n    }\n}\n";
+    assert_eq!(
+        passes_on_a_skip(silent),
+        ["3: eprintln!(\"SKIPPED: no tool\");"]
+    );
+    let gated = format!(
+        "const A: &str = \"VTFARM_ALLOW_NO_TOOL\";\nfn g() {{ assert!(std::env::var(\"CI\").is_err()); }}\n{silent}"
+    );
+    assert!(passes_on_a_skip(&gated).is_empty());
+    assert!(passes_on_a_skip("// SKIPPED is said in a comment only\n").is_empty());
     let manifest = r#"
         [package]
         name = "x"

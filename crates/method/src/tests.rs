@@ -1,3 +1,6 @@
+//! The shared finishing step, reflector pixels and groups, and vertex
+//! tracing behind the method interface, on a small cockpit frame.
+
 use vtfarm_vertex::Quality;
 
 use super::*;
