@@ -16,7 +16,7 @@ few in a million may differ).
 
 With --vtfarm-json FILE (the `--json` of a `bench rays` run on the same rays)
 it prints vtfarm/Embree ratios. For a fair ratio on a busy machine alternate
-the two runs (see README "Ray throughput").
+the two runs (see docs/benchmarks.md, "Ray throughput").
 
     scripts/embree_rays.py DIR [--rounds 3] [--vtfarm-json FILE] [--json OUT]
 """
