@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
+use vtfarm_master::FarmRules;
 use vtfarm_master::{
     FinishedFrame, JobEvent, JobOptions, LocalFarm, RemoteJob, run_job, run_remote_job, wire_job,
 };
@@ -13,7 +14,6 @@ use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{ClusterConfig, FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
 
 use crate::shared::runtime;
@@ -89,7 +89,7 @@ pub(crate) fn render_embedded(
         aux,
     } = job;
     runtime()?.block_on(async {
-        let farm = LocalFarm::start(workers, SchedulerConfig::default());
+        let farm = LocalFarm::start(workers, FarmRules::default());
         let mut link = farm.submitter();
         let data = SceneData::from_scene(scene);
         let options = JobOptions { method, aux };

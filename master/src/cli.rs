@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Parser;
 use tracing::info;
+use vtfarm_master_core::FarmRules;
 use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
-use vtfarm_scheduler::SchedulerConfig;
 
 use crate::journal::Journal;
 use crate::{driver::spawn_persistent_master, http, server};
@@ -102,7 +102,7 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     // Jobs and finished frames are journaled beside the key: a restarted
     // master resumes them.
     let journal = Journal::open(state_dir)?;
-    let (handle, _task) = spawn_persistent_master(SchedulerConfig::default(), journal);
+    let (handle, _task) = spawn_persistent_master(FarmRules::default(), journal);
     let http = http::bind(args.http).await?;
     info!(address = %http.local_addr()?, "dashboard listening");
     println!("dashboard on http://{}/", http.local_addr()?);

@@ -7,12 +7,12 @@ use std::net::SocketAddr;
 use std::path::Path;
 
 use tracing::{info, warn};
+use vtfarm_master_core::Peer;
 use vtfarm_proto::{
     HandshakePolicy, IdentityError, Link, MasterIdentity, Role, SESSION_LIMIT, TlsError,
     server_config, server_handshake,
 };
 
-use crate::core::Peer;
 use crate::driver::MasterHandle;
 
 /// Why the master's endpoint could not start.

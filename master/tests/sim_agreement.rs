@@ -6,6 +6,7 @@
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, Message, PackageFailed, PackageResult, SceneData, WireJob};
@@ -40,7 +41,7 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
         items: items.clone(),
     };
     let config = SimConfig {
-        scheduler: SchedulerConfig::default().farm(),
+        scheduler: FarmRules::default().scheduler_config(),
         ..SimConfig::default()
     };
     let workers = vec![
@@ -73,7 +74,7 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
 
     // The same calls, as messages into the real master core.
     let data = SceneData::from_scene(&c.scene);
-    let mut core = MasterCore::new(SchedulerConfig::default());
+    let mut core = MasterCore::new(FarmRules::default());
     let mut assigned = Vec::new();
     let mut current_frame = 0;
     let mut frames_done = 0;

@@ -17,6 +17,7 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::CockpitConfig;
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::{ClientOptions, connect};
@@ -24,7 +25,6 @@ use vtfarm_proto::{
     CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Role, SceneData,
 };
 use vtfarm_render::FrameSetup;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
@@ -182,7 +182,7 @@ async fn run_farm(
     let address = endpoint.local_addr()?;
     let cluster = ClusterConfig::generate(&address.to_string(), &identity)?;
     cluster.save(&dir.join(CLUSTER_FILE))?;
-    let (master, master_task) = spawn_master(SchedulerConfig::default());
+    let (master, master_task) = spawn_master(FarmRules::default());
     let server_task = tokio::spawn(server::serve(
         endpoint.clone(),
         HandshakePolicy::new(cluster.token.clone(), "bench"),

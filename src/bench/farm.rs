@@ -42,6 +42,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
@@ -50,7 +51,6 @@ use vtfarm_proto::{
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::SparseBitmap;
 use vtfarm_worker::{SceneStore, Task, WorkerSession};
 
@@ -430,7 +430,7 @@ impl<'a> Farm<'a> {
             costs,
             config,
             now: Duration::ZERO,
-            master: MasterCore::new(SchedulerConfig::default()),
+            master: MasterCore::new(FarmRules::default()),
             workers: Vec::new(),
             cores,
             cpu: Vec::new(),

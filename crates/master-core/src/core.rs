@@ -1,6 +1,6 @@
 //! The master's logic without sockets or clock: connections and messages in,
-//! messages and closes out, around the pure `Scheduler`. The async driver
-//! (`driver.rs`) feeds it; tests can drive it directly.
+//! messages and closes out, around the pure `Scheduler`. The server crate's
+//! async driver (`vtfarm_master::driver`) feeds it; tests drive it directly.
 //!
 //! Per frame it sends `FrameStart` to every worker first and then asks the
 //! driver to rasterize the base frame and ID buffer
@@ -32,12 +32,13 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
-    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
-    WorkerId, WorkerState,
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, WorkerId,
+    WorkerState,
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
-use crate::journal::{Record, StoredJob};
+use crate::record::{Record, StoredJob};
+use crate::rules::FarmRules;
 use crate::telemetry::Telemetry;
 use crate::view::{ViewError, ViewRequest, ViewSource, Views};
 
@@ -328,11 +329,9 @@ pub struct MasterCore {
 }
 
 impl MasterCore {
-    pub fn new(config: SchedulerConfig) -> Self {
+    pub fn new(rules: FarmRules) -> Self {
         MasterCore {
-            // Workers set each frame up before they ask for its work, and
-            // keep FRAMES_IN_FLIGHT frames prepared (see worker::session).
-            scheduler: Scheduler::new(farm_config(config)),
+            scheduler: Scheduler::new(rules.scheduler_config()),
             peers: BTreeMap::new(),
             scenes: BTreeMap::new(),
             jobs: BTreeMap::new(),
@@ -352,12 +351,12 @@ impl MasterCore {
         }
     }
 
-    /// A core that journals its jobs (see `journal.rs`) and keeps a job
+    /// A core that journals its jobs (`Output::Persist`) and keeps a job
     /// whose submitter went away for [`ATTACH_GRACE`].
-    pub fn persistent(config: SchedulerConfig) -> Self {
+    pub fn persistent(rules: FarmRules) -> Self {
         MasterCore {
             persistent: true,
-            ..MasterCore::new(config)
+            ..MasterCore::new(rules)
         }
     }
 
@@ -1327,16 +1326,6 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
-    }
-}
-
-/// The master's scheduler rules: the farm's, with no more frames in flight
-/// than a worker keeps prepared.
-fn farm_config(config: SchedulerConfig) -> SchedulerConfig {
-    let config = config.farm();
-    SchedulerConfig {
-        frames_in_flight: (config.frames_in_flight).min(vtfarm_proto::FRAMES_IN_FLIGHT as u32),
-        ..config
     }
 }
 
