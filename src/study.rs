@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use vtfarm_master::FarmRules;
 use vtfarm_master::{JobEvent, JobOptions, LocalFarm, run_job, wire_job};
-use vtfarm_proto::{Link, SceneData};
+use vtfarm_proto::SceneData;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
+use vtfarm_transport::Link;
 use vtfarm_vertex::Quality;
 
 /// Options of `vtfarm study`.

@@ -17,14 +17,15 @@ use vtfarm_master::{
     run_remote_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
-    ClusterConfig, HandshakePolicy, Hello, Message, PROTOCOL_VERSION, ProtoError, RefuseCode, Role,
-    SERVER_NAME, SceneData, StatusReply, client_config, encode_message,
+    HandshakePolicy, Hello, Message, PROTOCOL_VERSION, RefuseCode, Role, SceneData, StatusReply,
+    encode_message,
 };
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, Scene};
 use vtfarm_trace::TraceSettings;
+use vtfarm_transport::client::{ClientOptions, connect};
+use vtfarm_transport::{ClusterConfig, ProtoError, SERVER_NAME, client_config};
 use vtfarm_vertex::{Quality, VertexSettings};
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
@@ -812,7 +813,7 @@ async fn raw_client(options: &ClientOptions, bytes: &[u8]) -> Option<RefuseCode>
     let _ = recv.read_to_end(1 << 20).await;
     match tokio::time::timeout(Duration::from_secs(15), conn.closed()).await {
         Ok(quinn::ConnectionError::ApplicationClosed(close)) => {
-            RefuseCode::from_close_code(close.error_code)
+            RefuseCode::from_close_code(close.error_code.into_inner())
         }
         _ => None,
     }
@@ -835,7 +836,7 @@ async fn bad_clients_are_refused_and_the_master_keeps_serving() {
         Err(e) => assert!(
             matches!(
                 &e,
-                vtfarm_proto::client::ConnectError::Connect {
+                vtfarm_transport::client::ConnectError::Connect {
                     source: ProtoError::Refused {
                         code: RefuseCode::BadToken,
                         ..

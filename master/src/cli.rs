@@ -8,7 +8,8 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use tracing::info;
 use vtfarm_master_core::FarmRules;
-use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
+use vtfarm_proto::HandshakePolicy;
+use vtfarm_transport::{CLUSTER_FILE, ClusterConfig};
 
 use crate::journal::Journal;
 use crate::{driver::spawn_persistent_master, http, server};
@@ -77,7 +78,7 @@ pub fn run(args: MasterArgs) -> Result<()> {
 pub async fn serve(args: &MasterArgs) -> Result<()> {
     let cluster = ClusterConfig::load(&args.cluster)?;
     let state_dir = args.cluster.parent().unwrap_or(Path::new("."));
-    let identity = vtfarm_proto::MasterIdentity::load(state_dir)?;
+    let identity = vtfarm_transport::MasterIdentity::load(state_dir)?;
     if identity.fingerprint() != cluster.fingerprint {
         anyhow::bail!(
             "{}: the fingerprint does not match the certificate in {}",

@@ -15,7 +15,8 @@ use tokio::time::Instant;
 use tracing::{debug, warn};
 use vtfarm_master_core::view::{ViewError, ViewRequest};
 use vtfarm_master_core::{ConnId, FarmRules, MasterCore, Output, Peer};
-use vtfarm_proto::{Link, Message, StatusReply};
+use vtfarm_proto::{Message, StatusReply};
+use vtfarm_transport::Link;
 
 use crate::journal::{Journal, JournalWriter};
 

@@ -4,7 +4,7 @@
 
 use tokio::task::JoinHandle;
 use vtfarm_master_core::{FarmRules, Peer};
-use vtfarm_proto::Link;
+use vtfarm_transport::Link;
 use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 
 use crate::driver::{MasterHandle, spawn_master};

@@ -14,10 +14,11 @@ use vtfarm_master::{
     JobError, JobOptions, MasterHandle, Peer, local_worker, run_job, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{Link, Message, SceneData, WireJob};
+use vtfarm_proto::{Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
 use vtfarm_trace::TraceSettings;
+use vtfarm_transport::Link;
 use vtfarm_vertex::VertexSettings;
 use vtfarm_worker::{SessionEnd, WorkerConfig};
 

@@ -300,8 +300,8 @@ fn a_dead_peer_is_noticed_by_quic_within_the_heartbeat_timeout() {
     // master's scheduler gives up on the worker's heartbeats; keep-alives
     // keep a busy connection open well within it.
     let heartbeat_timeout = FarmRules::default().heartbeat_timeout;
-    assert_eq!(vtfarm_proto::IDLE_TIMEOUT, heartbeat_timeout);
-    assert!(vtfarm_proto::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
+    assert_eq!(vtfarm_transport::IDLE_TIMEOUT, heartbeat_timeout);
+    assert!(vtfarm_transport::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
 }
 
 #[test]

@@ -28,9 +28,10 @@ use vtfarm_master::{
     FinishedFrame, JobOptions, MasterHandle, http, run_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, HandshakePolicy, Role, SceneData, StatusReply};
+use vtfarm_proto::{HandshakePolicy, Role, SceneData, StatusReply};
 use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_transport::ClusterConfig;
+use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 

@@ -20,11 +20,10 @@ use vtfarm_cockpit::CockpitConfig;
 use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{
-    CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Role, SceneData,
-};
+use vtfarm_proto::{FrameStats, HandshakePolicy, Role, SceneData};
 use vtfarm_render::FrameSetup;
+use vtfarm_transport::client::{ClientOptions, connect};
+use vtfarm_transport::{CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, Link};
 use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
