@@ -1,7 +1,6 @@
 //! `vtfarm`: the command-line program. Thin: it parses arguments, loads the
 //! job, drives `vtfarm-render` and prints progress and tables.
 
-mod bench;
 mod compare;
 mod farm;
 mod shared;
@@ -40,7 +39,7 @@ enum Command {
     Scene(SceneCommand),
     /// Benchmarks.
     #[command(subcommand)]
-    Bench(bench::BenchCommand),
+    Bench(vtfarm_bench::BenchCommand),
     /// Runs the farm master (accepts workers and jobs over QUIC).
     Master(vtfarm_master::cli::MasterArgs),
     /// Runs a farm worker that dials the master.
@@ -131,7 +130,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
             detail,
         }) => export_scene(&name, &output, detail),
-        Command::Bench(b) => bench::run(b),
+        Command::Bench(b) => vtfarm_bench::run(b),
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
         Command::Study(args) => study::study(args),

@@ -3,7 +3,7 @@
 //! message arriving, a package finishing, a heartbeat, a scheduler deadline).
 //! Like quinn's test `Pair`, it runs fault scenarios in milliseconds without
 //! sockets or sleeps (the scheduler's own tests; `vtfarm bench simulate` runs the real
-//! master core and worker sessions instead, see `src/bench/farm.rs` of the CLI).
+//! master core and worker sessions instead, see `crates/bench/src/farm.rs`).
 //!
 //! Model: every item has a true cost in seconds on a worker of speed 1. A
 //! worker computes one package at a time, taking its fixed overhead plus the

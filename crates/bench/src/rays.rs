@@ -17,6 +17,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::support::{CpuClock, cpu_time};
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -26,7 +27,7 @@ use vtfarm_scene::{Camera, Scene};
 use vtfarm_trace::{BuildPreset, BvhLayout, BvhOptions, Ray, SceneBvh, reflect};
 
 #[derive(clap::Args)]
-pub(crate) struct RaysArgs {
+pub struct RaysArgs {
     /// An OBJ file, or `cockpit` for the built-in cockpit (default detail).
     scene: String,
     /// Camera position (default for `cockpit`: the driver's eye).
@@ -123,7 +124,7 @@ struct RaysFigures {
 const ROUNDS: usize = 3;
 
 pub(crate) fn run(args: RaysArgs) -> Result<()> {
-    crate::shared::set_threads(Some(args.threads))?;
+    crate::support::set_threads(Some(args.threads))?;
     let (scene, camera) = load(&args)?;
     let reflector = scene.object_id(&args.reflector).with_context(|| {
         format!(
@@ -444,19 +445,10 @@ pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) ->
         .collect()
 }
 
-/// CPU time of this process so far, all threads (Linux: the sum of
-/// `/proc/self/task/*/schedstat`, nanoseconds; elsewhere 0, so CPU figures
-/// read as unmeasured).
+/// CPU time of this process so far, all threads, in seconds; 0 where
+/// there is no process clock, so CPU figures read as unmeasured.
 fn cpu_seconds() -> f64 {
-    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    let nanos: u64 = tasks
-        .flatten()
-        .filter_map(|task| std::fs::read_to_string(task.path().join("schedstat")).ok())
-        .filter_map(|stat| stat.split_whitespace().next()?.parse::<u64>().ok())
-        .sum();
-    nanos as f64 * 1e-9
+    cpu_time(CpuClock::Process).map_or(0.0, |t| t.as_secs_f64())
 }
 
 /// How the rays are handed to the tracer.

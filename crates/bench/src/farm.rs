@@ -1111,7 +1111,7 @@ mod tests {
         let mut last = (0.0, 0.0);
         for cores in [0.3, 0.9, 1.5] {
             let threads =
-                crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, cores)
+                crate::simulate::background_threads_for(&job, &costs, &shared, &farm, cores)
                     .unwrap();
             let config = FarmConfig {
                 background_threads: threads,
@@ -1130,8 +1130,7 @@ mod tests {
             );
             last = (threads, seconds);
         }
-        let none =
-            crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, 0.0);
+        let none = crate::simulate::background_threads_for(&job, &costs, &shared, &farm, 0.0);
         assert_eq!(none.unwrap(), 0.0);
     }
 

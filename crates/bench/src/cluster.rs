@@ -30,7 +30,7 @@ use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 use super::{CockpitJob, write_json};
 
 #[derive(clap::Args)]
-pub(crate) struct ClusterArgs {
+pub struct ClusterArgs {
     #[arg(long, default_value_t = 640)]
     width: u32,
     #[arg(long, default_value_t = 360)]
@@ -38,7 +38,7 @@ pub(crate) struct ClusterArgs {
     /// Frames of the job (the first one includes the workers' BVH builds).
     #[arg(long, default_value_t = 3)]
     frames: usize,
-    #[arg(long, value_parser = crate::shared::parse_quality, default_value = "full")]
+    #[arg(long, value_parser = crate::support::parse_quality, default_value = "full")]
     quality: Quality,
     /// Cockpit detail (1.0 ≈ 100k triangles).
     #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
@@ -93,7 +93,7 @@ pub(crate) fn run(args: ClusterArgs) -> Result<()> {
     if args.frames == 0 || args.threads == 0 {
         bail!("--frames and --threads must be at least 1");
     }
-    crate::shared::set_threads(Some(args.threads))?;
+    crate::support::set_threads(Some(args.threads))?;
     let job = CockpitJob::new(args.detail, args.width, args.height, args.quality)?;
     // Frame k moves the eye k centimetres to the right and half that up.
     let setups: Vec<FrameSetup> = (0..args.frames)
@@ -107,7 +107,7 @@ pub(crate) fn run(args: ClusterArgs) -> Result<()> {
         .prefix("vtfarm-bench-cluster-")
         .tempdir()
         .context("creating a temporary directory")?;
-    let runtime = crate::shared::runtime()?;
+    let runtime = crate::support::runtime()?;
     let mut runs = Vec::new();
     for workers in [1, 2] {
         eprintln!(
