@@ -12,8 +12,8 @@ use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, Message, PackageFailed, PackageResult, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, morton_order};
 use vtfarm_scene::Camera;
+use vtfarm_scheduler::JobId;
 use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimInput, SimJob, SimWorker, Simulation};
-use vtfarm_scheduler::{JobId, SchedulerConfig};
 
 const SUBMITTER: u64 = 100;
 
@@ -161,19 +161,4 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
     }
     assert_eq!(frames_done, 3);
     assert_eq!(assigned, simulated);
-}
-
-/// The simulator's farm rules run as many frames at once as a worker keeps
-/// prepared, so the master core (which clamps to the latter) runs the same.
-#[test]
-fn the_farm_runs_as_many_frames_in_flight_as_workers_keep() {
-    assert_eq!(
-        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT as usize,
-        vtfarm_proto::FRAMES_IN_FLIGHT
-    );
-    let farm = SchedulerConfig::default().farm();
-    assert_eq!(
-        farm.frames_in_flight,
-        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT
-    );
 }

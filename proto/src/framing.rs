@@ -36,10 +36,21 @@ pub enum FrameError {
     /// The body is not a valid message (garbage, an unknown variant, bytes
     /// left over after the message).
     #[error("cannot decode message: {0}")]
-    Decode(String),
+    Decode(#[from] DecodeError),
     /// The message could not be encoded (does not happen for vtfarm's types).
     #[error("cannot encode message: {0}")]
     Encode(String),
+}
+
+/// Why bytes do not decode as exactly one value.
+#[derive(Debug, thiserror::Error)]
+pub enum DecodeError {
+    /// Garbage, an unknown variant, a value cut short or over the limit.
+    #[error(transparent)]
+    Bincode(#[from] bincode::error::DecodeError),
+    /// A whole value, then this many more bytes.
+    #[error("{0} bytes left over after the message")]
+    LeftOver(usize),
 }
 
 /// The body length a frame's prefix announces, checked against `limit`
@@ -96,7 +107,7 @@ pub fn encode_message(message: &Message) -> Result<Vec<u8>, FrameError> {
 /// Decodes a message body (without the prefix); the body must hold exactly
 /// one message.
 pub fn decode_message(body: &[u8]) -> Result<Message, FrameError> {
-    decode_value(body).map_err(FrameError::Decode)
+    Ok(decode_value(body)?)
 }
 
 /// The size on the wire of `message` (length prefix included), counted
@@ -120,7 +131,7 @@ pub(crate) fn encode_value<T: Serialize>(value: &T) -> Vec<u8> {
 /// limit bounds what a short body can make us allocate. The limit counts
 /// decoded (in-memory) bytes, up to 8 per wire byte for small varints, hence
 /// the 16× headroom.
-pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, DecodeError> {
     use bincode::config::standard;
     const KIB: usize = 1024;
     const MIB: usize = 1024 * KIB;
@@ -131,12 +142,9 @@ pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Strin
         n if n <= 16 * MIB => decode_with(bytes, standard().with_limit::<{ 256 * MIB }>()),
         _ => decode_with(bytes, standard().with_limit::<TOP>()),
     };
-    let (value, used) = decoded.map_err(|e| e.to_string())?;
+    let (value, used) = decoded?;
     if used != bytes.len() {
-        return Err(format!(
-            "{} bytes left over after the message",
-            bytes.len() - used
-        ));
+        return Err(DecodeError::LeftOver(bytes.len() - used));
     }
     Ok(value)
 }

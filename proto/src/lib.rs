@@ -18,14 +18,16 @@
 //!   [`encode_message`] / [`decode_message`] and the limits.
 //! - [`handshake`]: what a `Hello` must be ([`check_hello`]).
 
+use std::time::Duration;
+
 pub mod framing;
 pub mod handshake;
 pub mod message;
 pub mod wire;
 
 pub use framing::{
-    FrameError, MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, SESSION_LIMIT, body_len, decode_message,
-    encode_message, encoded_len, split_frame,
+    DecodeError, FrameError, MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, SESSION_LIMIT, body_len,
+    decode_message, encode_message, encoded_len, split_frame,
 };
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use message::{
@@ -50,6 +52,13 @@ pub const PROTOCOL_VERSION: u32 = 5;
 /// so how many prepared frames a worker keeps: a package of any of them may
 /// come. The master's scheduler configuration must not exceed it.
 pub const FRAMES_IN_FLIGHT: usize = 8;
+
+/// A peer silent this long is gone: the master drops a worker that sent
+/// nothing (heartbeat, request or result) for this long and requeues its
+/// packages (the default `heartbeat_timeout` of `vtfarm_master_core::FarmRules`),
+/// and QUIC closes a connection idle this long on either end, so a worker or
+/// submitter notices a dead master in the same time.
+pub const PEER_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

@@ -289,9 +289,9 @@ impl SceneData {
             });
         }
         let wire: WireScene =
-            crate::framing::decode_value(&self.bytes).map_err(|message| WireError::Decode {
+            crate::framing::decode_value(&self.bytes).map_err(|e| WireError::Decode {
                 what: "scene data",
-                message,
+                message: e.to_string(),
             })?;
         Scene::try_from(wire)
     }

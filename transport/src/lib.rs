@@ -25,8 +25,8 @@ pub use handshake::{CLOSE_NORMAL, REFUSAL_LINGER, client_handshake, server_hands
 pub use link::Link;
 pub use stream::{ProtoError, read_message, write_message};
 pub use tls::{
-    ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,
-    client_config, fingerprint_of, parse_fingerprint, server_config,
+    ALPN, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError, client_config,
+    fingerprint_of, parse_fingerprint, server_config,
 };
 
 /// The longest prefix of `text` of at most `max` bytes that ends on a

@@ -78,22 +78,39 @@ pub struct RaysArgs {
     dump_rays: Option<PathBuf>,
 }
 
-fn parse_preset(s: &str) -> Result<BuildPreset, String> {
+/// A `--preset` or `--layout` value that names none of the choices.
+#[derive(Debug, thiserror::Error)]
+#[error("unknown {what} '{given}' ({choices})")]
+struct UnknownChoice {
+    what: &'static str,
+    given: String,
+    choices: String,
+}
+
+fn parse_preset(s: &str) -> Result<BuildPreset, UnknownChoice> {
     BuildPreset::ALL
         .into_iter()
         .find(|p| p.name() == s)
         .ok_or_else(|| {
             let names: Vec<_> = BuildPreset::ALL.iter().map(|p| p.name()).collect();
-            format!("unknown preset '{s}' ({})", names.join(", "))
+            UnknownChoice {
+                what: "preset",
+                given: s.to_owned(),
+                choices: names.join(", "),
+            }
         })
 }
 
-fn parse_layout(s: &str) -> Result<BvhLayout, String> {
+fn parse_layout(s: &str) -> Result<BvhLayout, UnknownChoice> {
     match s {
         "cw" => Ok(BvhLayout::Cw),
         "cw-octant" => Ok(BvhLayout::CwOctant),
         "binary" => Ok(BvhLayout::Binary),
-        _ => Err(format!("unknown layout '{s}' (cw, cw-octant, binary)")),
+        _ => Err(UnknownChoice {
+            what: "layout",
+            given: s.to_owned(),
+            choices: "cw, cw-octant, binary".to_owned(),
+        }),
     }
 }
 

@@ -8,7 +8,8 @@
 //! that arrive before it are held until it is there (and reported to the
 //! scheduler as arrived, so they are not taken for stragglers). Frames are
 //! pipelined: the scheduler starts frame N+1 as soon as frame N has nothing
-//! left to hand out, so two frames may be assembled at once. It hands out the
+//! left to hand out, so up to `vtfarm_proto::FRAMES_IN_FLIGHT` frames are
+//! assembled at once (the [`FarmRules`]). It hands out the
 //! scheduler's packages, composites each accepted result over the base frame
 //! and sends the finished frame to the submitter. A result that writes a
 //! pixel its package does not own in the frame's ID buffer (pixel ownership)
@@ -37,6 +38,7 @@ use vtfarm_scheduler::{
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
+use crate::error::{JobRejected, ResultRejected};
 use crate::record::{Record, StoredJob};
 use crate::rules::FarmRules;
 use crate::telemetry::Telemetry;
@@ -120,8 +122,8 @@ impl std::fmt::Debug for SpareBase {
     }
 }
 
-/// Spare base-frame buffers kept: as many as frames are assembled at once
-/// (two while pipelined).
+/// Spare base-frame buffers kept: two pairs (a 1080p image and ID buffer are
+/// about 33 MB); base frames beyond them rasterize into fresh buffers.
 const SPARE_BASES: usize = 2;
 
 /// How long a persistent master keeps a job whose submitter is gone (and a
@@ -234,15 +236,12 @@ impl Assembled {
         bitmap: WireBitmap,
         ids: &IdBuffer,
         owned: impl Fn(TriangleId) -> bool,
-    ) -> Result<ResultPixels, String> {
+    ) -> Result<ResultPixels, ResultRejected> {
         let (width, height) = (self.color().width, self.color().height);
-        let malformed = |e: vtfarm_proto::WireError| format!("malformed result: {e}");
-        let foreign = |(x, y): (u32, u32)| {
-            format!("result writes pixel ({x}, {y}), which its package does not own")
-        };
+        let foreign = |(x, y): (u32, u32)| ResultRejected::ForeignPixel { x, y };
         match self {
             Assembled::Color(_) => {
-                let colors = bitmap.colors_within(width, height).map_err(malformed)?;
+                let colors = bitmap.colors_within(width, height)?;
                 // The ID buffer is the frame's size: every index is in it.
                 match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
                     Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
@@ -250,9 +249,7 @@ impl Assembled {
                 }
             }
             Assembled::Components(_) => {
-                let bitmap = bitmap
-                    .into_bitmap_within(width, height)
-                    .map_err(malformed)?;
+                let bitmap = bitmap.into_bitmap_within(width, height)?;
                 match bitmap.foreign_pixel(ids, owned) {
                     Some(pixel) => Err(foreign(pixel)),
                     None => Ok(ResultPixels::Bitmap(bitmap)),
@@ -592,9 +589,12 @@ impl MasterCore {
             Ok(b) => b,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
-                let _ = self
-                    .scheduler
-                    .package_failed(now, worker, PackageId(result.id), error);
+                let _ = self.scheduler.package_failed(
+                    now,
+                    worker,
+                    PackageId(result.id),
+                    error.to_string(),
+                );
                 return;
             }
         };
@@ -681,7 +681,7 @@ impl MasterCore {
         let id = self.next_job;
         let frames = job.frames.len() as u32;
         if let Err(e) = self.queue_job(now, id, job, Some(conn), 0) {
-            return self.refuse_job(conn, e);
+            return self.refuse_job(conn, e.to_string());
         }
         self.next_job += 1;
         self.remember_for_view(id);
@@ -706,31 +706,31 @@ impl MasterCore {
         mut job: WireJob,
         submitter: Option<ConnId>,
         resume_from: u32,
-    ) -> Result<(), String> {
+    ) -> Result<(), JobRejected> {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
         };
         if let JobScene::Data(data) = std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash))
         {
-            let scene = data.to_scene().map_err(|e| format!("bad scene: {e}"))?;
+            let scene = data.to_scene().map_err(JobRejected::BadScene)?;
             (self.scenes.entry(scene_hash)).or_insert_with(|| (Arc::new(scene), Arc::new(data)));
         }
         let scene = match self.scenes.get(&scene_hash) {
             Some((scene, _)) => scene.clone(),
-            None => return Err("the job's scene is unknown".into()),
+            None => return Err(JobRejected::UnknownScene),
         };
         check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
-            .map_err(|e| e.to_string())?;
+            .map_err(JobRejected::BadReflectors)?;
         if job.reflectors.is_empty() || job.frames.is_empty() {
-            return Err("a job needs reflectors and at least one frame".into());
+            return Err(JobRejected::Empty);
         }
         if job.aux && job.image != WireImageFormat::LinearF32 {
-            return Err("a job with components (aux) needs linear frames".into());
+            return Err(JobRejected::ComponentsNeedLinearFrames);
         }
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
-        let frames = frames.map_err(|e| format!("bad frame set-up: {e}"))?;
+        let frames = frames.map_err(JobRejected::BadFrame)?;
         let reflectors = morton_order(&scene, job.reflectors);
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
@@ -773,7 +773,7 @@ impl MasterCore {
         let submitted = self.scheduler.submit_job(now, JobId(id), work);
         submitted.map_err(|e| {
             self.jobs.remove(&id);
-            e.to_string()
+            JobRejected::from(e)
         })
     }
 
@@ -1201,7 +1201,7 @@ impl MasterCore {
         let queued = self.queue_job(now, id, planned.job.clone(), None, 0);
         if let Err(e) = queued {
             self.pump();
-            return Err(ViewError::Queue(e));
+            return Err(ViewError::Queue(e.to_string()));
         }
         self.next_job += 1;
         // Nobody attaches to a view's job: it is not orphaned.

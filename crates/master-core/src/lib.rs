@@ -7,11 +7,13 @@
 //!
 //! - [`MasterCore`]: jobs, packages, compositing, status.
 //! - [`FarmRules`]: the scheduling rules a master runs.
+//! - [`JobRejected`], [`ResultRejected`]: why it turns a job or a result away.
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare).
 
 mod core;
+mod error;
 pub mod record;
 mod rules;
 pub mod telemetry;
@@ -20,5 +22,6 @@ pub mod view;
 pub use crate::core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
 };
+pub use error::{JobRejected, ResultRejected};
 pub use record::{Record, StoredJob};
 pub use rules::FarmRules;

@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use vtfarm_proto::FRAMES_IN_FLIGHT;
+use vtfarm_proto::{FRAMES_IN_FLIGHT, PEER_TIMEOUT};
 use vtfarm_scheduler::{
     CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy,
 };
@@ -25,9 +25,10 @@ pub struct FarmRules {
 }
 
 impl Default for FarmRules {
+    /// The scheduler's defaults, with [`PEER_TIMEOUT`] for the heartbeat
+    /// timeout (QUIC's idle timeout is the same).
     fn default() -> Self {
         let SchedulerConfig {
-            heartbeat_timeout,
             sizing,
             straggler,
             retry,
@@ -35,7 +36,7 @@ impl Default for FarmRules {
             ..
         } = SchedulerConfig::default();
         FarmRules {
-            heartbeat_timeout,
+            heartbeat_timeout: PEER_TIMEOUT,
             sizing,
             straggler,
             retry,
@@ -55,9 +56,8 @@ impl FarmRules {
             straggler: self.straggler.clone(),
             retry: self.retry.clone(),
             estimation: self.estimation.clone(),
-            requests_lapse_at_frame_start: false,
-            frames_in_flight: FRAMES_IN_FLIGHT as u32,
-            frame_affinity: true,
+            ..SchedulerConfig::default()
         }
+        .pipelined(FRAMES_IN_FLIGHT as u32)
     }
 }

@@ -15,7 +15,7 @@
 //! also queues for it, one direction each way, as all results funnel into
 //! the one master. A worker asks for work when it joins and, piggybacked on
 //! each result, whenever it runs out. With the master's rules
-//! ([`SchedulerConfig::farm`]: frame affinity, frames pipelined) every
+//! ([`SchedulerConfig::pipelined`]: frame affinity, frames pipelined) every
 //! worker hears of each new frame (`FrameStart` over its
 //! link), sets it up ([`SimWorker::frame_setup`]; a worker that is computing
 //! a package of the older frame shares its core between the two, so both
