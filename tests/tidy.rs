@@ -8,12 +8,18 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-/// The workspace root and its member crates' directories (the root package included).
-fn crate_dirs() -> Vec<PathBuf> {
+/// The workspace root and its manifest.
+fn workspace() -> (PathBuf, toml::Table) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let manifest: toml::Table = read(&root.join("Cargo.toml"))
+    let manifest = read(&root.join("Cargo.toml"))
         .parse()
         .expect("root Cargo.toml");
+    (root, manifest)
+}
+
+/// The workspace root and its member crates' directories (the root package included).
+fn crate_dirs() -> Vec<PathBuf> {
+    let (root, manifest) = workspace();
     let members = manifest["workspace"]["members"]
         .as_array()
         .expect("workspace.members is a list");
@@ -108,10 +114,7 @@ fn every_dependency_comes_from_the_workspace_table() {
 /// workspace crates it depends on as well (normal dependencies only: what
 /// a build of the crate links).
 fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let manifest: toml::Table = read(&root.join("Cargo.toml"))
-        .parse()
-        .expect("root Cargo.toml");
+    let (root, manifest) = workspace();
     let shared = manifest["workspace"]["dependencies"]
         .as_table()
         .expect("workspace.dependencies is a table");
