@@ -1,8 +1,9 @@
-//! `vtfarm bench`, called by the command-line program: the paper's Table 1 on the built-in cockpit and the
-//! tracer's ray throughput (`table1`), the load balancer on simulated farms
-//! driven by costs recorded from a real frame (`simulate`, see [`simulate`]),
-//! and a real QUIC farm on localhost (`cluster`, see [`cluster`]). Speed
-//! targets live here, not in tests.
+//! `vtfarm bench`, which the command-line program calls: the paper's
+//! Table 1 on the built-in cockpit and the tracer's ray throughput
+//! (`table1`), the load balancer on simulated farms driven by costs
+//! recorded from a real frame (`simulate`, see [`SimulateArgs`]), and a real
+//! QUIC farm on localhost (`cluster`, see [`ClusterArgs`]). Speed targets
+//! live here, not in tests.
 
 mod cluster;
 mod farm;

@@ -25,7 +25,7 @@ pub enum WireImageFormat {
 
 /// A finished frame (row 0 at the top, row-major) in a
 /// [`WireImageFormat`]: linear f32 channels as little-endian byte planes
-/// (as in [`WireBitmap`]), or sRGB bytes, RGB interleaved; zstd-compressed
+/// (as in [`WireBitmap`](super::WireBitmap)), or sRGB bytes, RGB interleaved; zstd-compressed
 /// either way. The master encodes a finished frame once and the same bytes
 /// go to the submitter and the journal (a 1080p frame is 25 MB of floats
 /// before compression, a few MB as sRGB after). The submitter decides on

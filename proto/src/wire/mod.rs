@@ -68,7 +68,7 @@ pub enum WireError {
     /// The same index appears twice where each must be unique.
     #[error("{field} lists {index} twice")]
     Duplicate { field: String, index: u64 },
-    /// The scene breaks one of [`Scene::validate`]'s invariants.
+    /// The scene breaks one of [`vtfarm_scene::Scene::validate`]'s invariants.
     #[error("invalid scene: {0}")]
     InvalidScene(String),
     /// Scene bytes whose SHA-256 is not the announced hash.
