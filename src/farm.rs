@@ -5,15 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
+use vtfarm_master::FarmRules;
 use vtfarm_master::{
     FinishedFrame, JobEvent, JobOptions, LocalFarm, RemoteJob, run_job, run_remote_job, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, FrameStats, Role, SceneData, WireImageFormat, WireJob};
+use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_transport::ClusterConfig;
+use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;
 
 use crate::shared::runtime;
@@ -88,7 +89,7 @@ pub(crate) fn render_embedded(
         aux,
     } = job;
     runtime()?.block_on(async {
-        let farm = LocalFarm::start(workers, SchedulerConfig::default());
+        let farm = LocalFarm::start(workers, FarmRules::default());
         let mut link = farm.submitter();
         let data = SceneData::from_scene(scene);
         let options = JobOptions { method, aux };
@@ -249,7 +250,8 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let report = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
         let report = crate::study::render_study(&mut conn.link, &plan, &output).await;
-        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.connection
+            .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
         report
     })?;
@@ -297,7 +299,8 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
     let reply = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
         let reply = (conn.link.status().await).context("the master closed the connection")?;
-        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.connection
+            .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
         anyhow::Ok(reply)
     })?;

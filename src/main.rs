@@ -1,7 +1,6 @@
 //! `vtfarm`: the command-line program. Thin: it parses arguments, loads the
 //! job, drives `vtfarm-render` and prints progress and tables.
 
-mod bench;
 mod compare;
 mod farm;
 mod shared;
@@ -62,7 +61,7 @@ enum Command {
     /// Benchmarks: the paper's Table 1, ray and rasterizer throughput, the
     /// farm simulator and a localhost cluster.
     #[command(subcommand)]
-    Bench(bench::BenchCommand),
+    Bench(vtfarm_bench::BenchCommand),
 }
 
 #[derive(Subcommand)]
@@ -134,7 +133,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
             detail,
         }) => export_scene(&name, &output, detail),
-        Command::Bench(b) => bench::run(b),
+        Command::Bench(b) => vtfarm_bench::run(b),
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
         Command::Study(args) => study::study(args),

@@ -1,21 +1,18 @@
 //! What the subcommands share: loading a job with the command line's
-//! overrides, the thread pool and async runtime, progress bars, JSON output
-//! and the cube-map reflector warning.
+//! overrides, progress bars and the cube-map reflector warning; the
+//! `--quality` parser, thread pool, async runtime and JSON output come from
+//! `vtfarm_bench::support`, which the benchmarks share too.
 
 use std::borrow::Cow;
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use indicatif::{ProgressBar, ProgressStyle};
 use vtfarm_render::FrameSetup;
 use vtfarm_vertex::Quality;
 
-/// Parses a `--quality` value.
-pub(crate) fn parse_quality(s: &str) -> Result<Quality, String> {
-    Quality::from_name(s)
-        .ok_or_else(|| format!("unknown quality '{s}' (preview, refine, full, reference)"))
-}
+pub(crate) use vtfarm_bench::support::{parse_quality, runtime, set_threads, write_json};
 
 /// The `--quality` parser of the user's commands: `parse_quality` with the
 /// levels listed in `--help` (and in the error after a wrong one).
@@ -68,27 +65,6 @@ impl ImageSize {
             (None, None) => (job_width, job_height),
         }
     }
-}
-
-/// Sets the size of rayon's global pool (once, before any parallel work).
-pub(crate) fn set_threads(threads: Option<usize>) -> Result<()> {
-    if let Some(n) = threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("setting the thread count")?;
-    }
-    Ok(())
-}
-
-/// The async runtime of the farm subcommands (two threads: the tracing
-/// runs on rayon's pool).
-pub(crate) fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")
 }
 
 /// A job file made ready to render: its scene, reflectors and one set-up per frame.
@@ -150,12 +126,6 @@ pub(crate) fn warn_unsupported_reflectors(
             eprintln!("warning: reflector {name:?}: {warning}");
         }
     }
-}
-
-/// Writes `value` as pretty JSON.
-pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(value)?)
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// A progress bar counting `total` `unit`s (reflector triangles, frames).

@@ -7,10 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobEvent, JobOptions, LocalFarm, run_job, wire_job};
-use vtfarm_proto::{Link, SceneData};
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_proto::SceneData;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
+use vtfarm_transport::Link;
 use vtfarm_vertex::Quality;
 
 /// Options of `vtfarm study`.
@@ -45,7 +46,7 @@ pub(crate) fn study(args: StudyArgs) -> Result<()> {
     crate::shared::set_threads(args.threads)?;
     let plan = plan_study(&args.study, args.quality)?;
     let report = crate::shared::runtime()?.block_on(async {
-        let farm = LocalFarm::start(args.local_workers, SchedulerConfig::default());
+        let farm = LocalFarm::start(args.local_workers, FarmRules::default());
         let mut link = farm.submitter();
         let report = render_study(&mut link, &plan, &args.output).await;
         farm.shutdown().await;

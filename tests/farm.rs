@@ -11,20 +11,21 @@ use std::time::Duration;
 use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{
     FinishedFrame, JobError, JobOptions, LocalFarm, MasterHandle, RemoteJob, run_job,
     run_remote_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
 use vtfarm_proto::{
-    ClusterConfig, HandshakePolicy, Hello, Message, PROTOCOL_VERSION, ProtoError, RefuseCode, Role,
-    SERVER_NAME, SceneData, StatusReply, client_config, encode_message,
+    HandshakePolicy, Hello, Message, PROTOCOL_VERSION, RefuseCode, Role, SceneData, StatusReply,
+    encode_message,
 };
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, Scene};
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
+use vtfarm_transport::client::{ClientOptions, connect};
+use vtfarm_transport::{ClusterConfig, ProtoError, SERVER_NAME, client_config};
 use vtfarm_vertex::{Quality, VertexSettings};
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
@@ -111,7 +112,7 @@ struct Cluster {
 }
 
 impl Cluster {
-    fn start(config: SchedulerConfig) -> Cluster {
+    fn start(config: FarmRules) -> Cluster {
         let dir = tempfile::tempdir().unwrap();
         let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
         let endpoint = server::bind("127.0.0.1:0".parse().unwrap(), &identity).unwrap();
@@ -273,7 +274,7 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     let _serial = SERIAL.lock().await;
     let job = job(1, 240, 135);
     let reference = reference(&job);
-    let cluster = Cluster::start(SchedulerConfig::default());
+    let cluster = Cluster::start(FarmRules::default());
     let _w1 = cluster.worker("w1", 1.0);
     let _w2 = cluster.worker("w2", 1.0);
     cluster.wait_for_workers(2).await;
@@ -301,7 +302,7 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     );
 
     // The embedded master of `vtfarm render` gives the same image too.
-    let farm = LocalFarm::start(3, SchedulerConfig::default());
+    let farm = LocalFarm::start(3, FarmRules::default());
     let mut link = farm.submitter();
     let data = SceneData::from_scene(&job.scene);
     let embedded = run_job(
@@ -370,7 +371,7 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
                 .filter(|&t| job.scene.triangles[t as usize].object == object),
         );
     }
-    let cluster = Cluster::start(SchedulerConfig::default());
+    let cluster = Cluster::start(FarmRules::default());
     let _w1 = cluster.worker("w1", 1.0);
     let _w2 = cluster.worker("w2", 1.0);
     cluster.wait_for_workers(2).await;
@@ -475,7 +476,7 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
 /// Runs `vtfarm submit FILE -o OUTPUT` on a fresh localhost cluster of two
 /// workers.
 async fn submit_on_a_two_worker_cluster(file: &std::path::Path, output: &std::path::Path) {
-    let cluster = Cluster::start(SchedulerConfig::default());
+    let cluster = Cluster::start(FarmRules::default());
     let _w1 = cluster.worker("w1", 1.0);
     let _w2 = cluster.worker("w2", 1.0);
     cluster.wait_for_workers(2).await;
@@ -685,10 +686,10 @@ async fn a_lone_worker_holding_a_package(
     name: &str,
     slowdown: f64,
 ) -> (Arc<Cluster>, ChildGuard, Submission) {
-    let config = SchedulerConfig {
+    let config = FarmRules {
         heartbeat_timeout,
         straggler: None,
-        ..SchedulerConfig::default()
+        ..FarmRules::default()
     };
     let cluster = Arc::new(Cluster::start(config));
     let worker = ChildGuard(cluster.worker_process(name, slowdown));
@@ -734,10 +735,10 @@ async fn a_worker_stopped_with_sigterm_finishes_its_package_and_says_goodbye() {
     let reference = reference(&job);
     // A heartbeat timeout far beyond the test's bounds: the master can only
     // drop the worker early because it said goodbye.
-    let config = SchedulerConfig {
+    let config = FarmRules {
         heartbeat_timeout: Duration::from_secs(3600),
         straggler: None,
-        ..SchedulerConfig::default()
+        ..FarmRules::default()
     };
     let cluster = Arc::new(Cluster::start(config));
     // Slowed so that its first package (a few triangles) still runs when
@@ -812,7 +813,7 @@ async fn raw_client(options: &ClientOptions, bytes: &[u8]) -> Option<RefuseCode>
     let _ = recv.read_to_end(1 << 20).await;
     match tokio::time::timeout(Duration::from_secs(15), conn.closed()).await {
         Ok(quinn::ConnectionError::ApplicationClosed(close)) => {
-            RefuseCode::from_close_code(close.error_code)
+            RefuseCode::from_close_code(close.error_code.into_inner())
         }
         _ => None,
     }
@@ -823,7 +824,7 @@ async fn bad_clients_are_refused_and_the_master_keeps_serving() {
     let _serial = SERIAL.lock().await;
     let job = job(1, 160, 90);
     let reference = reference(&job);
-    let cluster = Cluster::start(SchedulerConfig::default());
+    let cluster = Cluster::start(FarmRules::default());
     let _w = cluster.worker("w", 1.0);
     cluster.wait_for_workers(1).await;
 
@@ -835,7 +836,7 @@ async fn bad_clients_are_refused_and_the_master_keeps_serving() {
         Err(e) => assert!(
             matches!(
                 &e,
-                vtfarm_proto::client::ConnectError::Connect {
+                vtfarm_transport::client::ConnectError::Connect {
                     source: ProtoError::Refused {
                         code: RefuseCode::BadToken,
                         ..
@@ -875,7 +876,7 @@ async fn bad_clients_are_refused_and_the_master_keeps_serving() {
 async fn a_second_job_on_the_same_scene_transfers_no_scene_bytes() {
     let _serial = SERIAL.lock().await;
     let job = job(1, 160, 90);
-    let cluster = Cluster::start(SchedulerConfig::default());
+    let cluster = Cluster::start(FarmRules::default());
     let _w = cluster.worker("w", 1.0);
     cluster.wait_for_workers(1).await;
     cluster.submit(&job).await.unwrap();

@@ -2,17 +2,26 @@
 //! tree (as rust-analyzer's tidy tests do): each crate root and each module
 //! opens with a `//!` doc; each dependency is declared through the root's
 //! `[workspace.dependencies]` (`dep.workspace = true`), so every version is
-//! set once; and no test passes without testing (no `#[ignore]`, and a test
+//! set once; no test passes without testing (no `#[ignore]`, and a test
 //! that cannot run fails, except behind a named opt-out that CI never sets).
+//! Also the architecture's boundaries: the wire and the master's
+//! core build without an async runtime, QUIC, TLS or a web server.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+
+/// The workspace root and its manifest.
+fn workspace() -> (PathBuf, toml::Table) {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let manifest = read(&root.join("Cargo.toml"))
+        .parse()
+        .expect("root Cargo.toml");
+    (root, manifest)
+}
 
 /// The workspace root and its member crates' directories (the root package included).
 fn crate_dirs() -> Vec<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let manifest: toml::Table = read(&root.join("Cargo.toml"))
-        .parse()
-        .expect("root Cargo.toml");
+    let (root, manifest) = workspace();
     let members = manifest["workspace"]["members"]
         .as_array()
         .expect("workspace.members is a list");
@@ -165,6 +174,65 @@ fn every_dependency_comes_from_the_workspace_table() {
         "dependencies not declared with `workspace = true` (put the version in the root's \
          [workspace.dependencies]):\n{}",
         outside.join("\n")
+    );
+}
+
+/// The third-party crates a workspace crate builds on, through the
+/// workspace crates it depends on as well (normal dependencies only: what
+/// a build of the crate links).
+fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
+    let (root, manifest) = workspace();
+    let shared = manifest["workspace"]["dependencies"]
+        .as_table()
+        .expect("workspace.dependencies is a table");
+    let path_of = |name: &str| {
+        let spec = shared.get(name)?.as_table()?;
+        Some(root.join(spec.get("path")?.as_str()?))
+    };
+    let (mut seen, mut external, mut todo) =
+        (BTreeSet::new(), BTreeSet::new(), vec![crate_dir.to_owned()]);
+    while let Some(dir) = todo.pop() {
+        if !seen.insert(dir.clone()) {
+            continue;
+        }
+        let manifest: toml::Table = read(&dir.join("Cargo.toml"))
+            .parse()
+            .expect("manifest is TOML");
+        let Some(dependencies) = manifest.get("dependencies").and_then(|d| d.as_table()) else {
+            continue;
+        };
+        for name in dependencies.keys() {
+            match path_of(name) {
+                Some(path) => todo.push(path),
+                None => {
+                    external.insert(name.clone());
+                }
+            }
+        }
+    }
+    external
+}
+
+/// Architecture invariants: the wire knows nothing of QUIC, and the
+/// master's core does no I/O, so neither links a runtime, QUIC, TLS or a
+/// web server (`fuzz/` builds the wire alone).
+#[test]
+fn the_wire_and_the_master_core_build_without_the_transport() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let forbidden = ["tokio", "quinn", "rustls", "rcgen", "axum"];
+    for dir in ["proto", "crates/master-core"] {
+        let external = external_dependencies(&root.join(dir));
+        let found: Vec<_> = forbidden
+            .iter()
+            .filter(|f| external.contains(**f))
+            .collect();
+        assert!(found.is_empty(), "{dir} builds on {found:?}");
+    }
+    // The check sees through workspace crates: the transport has them all.
+    let transport = external_dependencies(&root.join("transport"));
+    assert!(
+        transport.contains("quinn") && transport.contains("tokio"),
+        "{transport:?}"
     );
 }
 

@@ -2,23 +2,20 @@
 //! bytes to the code a peer or a file reaches and may only return (errors
 //! are fine; a panic, a hang or an unbounded allocation is a finding).
 
-use std::future::Future;
 use std::path::Path;
-use std::pin::pin;
-use std::task::{Context, Poll, Waker};
 
 use sha2::{Digest, Sha256};
 use vtfarm_method::FrameSetup;
 use vtfarm_proto::{
     HandshakePolicy, JobScene, MAX_HANDSHAKE_BYTES, Message, SESSION_LIMIT, SceneData, check_hello,
-    read_message,
+    decode_message, split_frame,
 };
 
-/// One framed message (length prefix and body) as the session reader reads
-/// it, then every wire conversion the master or a worker applies to it.
+/// One framed message (length prefix and body) under the session's limit,
+/// as the session reader takes it apart, then every wire conversion the
+/// master or a worker applies to it.
 pub fn frame(data: &[u8]) {
-    let mut reader = data;
-    let Ok(message) = ready(read_message(&mut reader, SESSION_LIMIT)) else {
+    let Ok(message) = first_message(data, SESSION_LIMIT) else {
         return;
     };
     convert(message);
@@ -27,8 +24,7 @@ pub fn frame(data: &[u8]) {
 /// The body of a connection's first message, as the master checks it.
 pub fn handshake(data: &[u8]) {
     let policy = HandshakePolicy::new("fuzz-token", "fuzz");
-    let mut reader = data;
-    if let Ok(message) = ready(read_message(&mut reader, MAX_HANDSHAKE_BYTES)) {
+    if let Ok(message) = first_message(data, MAX_HANDSHAKE_BYTES) {
         let _ = message.name();
     }
     let _ = check_hello(data, &policy);
@@ -104,11 +100,7 @@ fn scene(bytes: Vec<u8>) {
     }
 }
 
-/// Polls a future over an in-memory reader once: reading a slice never
-/// waits, so it is finished.
-fn ready<T>(future: impl Future<Output = T>) -> T {
-    match pin!(future).poll(&mut Context::from_waker(Waker::noop())) {
-        Poll::Ready(value) => value,
-        Poll::Pending => unreachable!("an in-memory reader never waits"),
-    }
+/// The first message of a frame whose body may be at most `limit` bytes.
+fn first_message(data: &[u8], limit: u32) -> Result<Message, vtfarm_proto::FrameError> {
+    decode_message(split_frame(data, limit)?.0)
 }

@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Parser;
 use tracing::info;
-use vtfarm_proto::{CLUSTER_FILE, ClusterConfig, HandshakePolicy};
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_master_core::FarmRules;
+use vtfarm_proto::HandshakePolicy;
+use vtfarm_transport::{CLUSTER_FILE, ClusterConfig};
 
 use crate::journal::Journal;
 use crate::{driver::spawn_persistent_master, http, server};
@@ -77,7 +78,7 @@ pub fn run(args: MasterArgs) -> Result<()> {
 pub async fn serve(args: &MasterArgs) -> Result<()> {
     let cluster = ClusterConfig::load(&args.cluster)?;
     let state_dir = args.cluster.parent().unwrap_or(Path::new("."));
-    let identity = vtfarm_proto::MasterIdentity::load(state_dir)?;
+    let identity = vtfarm_transport::MasterIdentity::load(state_dir)?;
     if identity.fingerprint() != cluster.fingerprint {
         anyhow::bail!(
             "{}: the fingerprint does not match the certificate in {}",
@@ -102,7 +103,7 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     // Jobs and finished frames are journaled beside the key: a restarted
     // master resumes them.
     let journal = Journal::open(state_dir)?;
-    let (handle, _task) = spawn_persistent_master(SchedulerConfig::default(), journal);
+    let (handle, _task) = spawn_persistent_master(FarmRules::default(), journal);
     let http = http::bind(args.http).await?;
     info!(address = %http.local_addr()?, "dashboard listening");
     println!("dashboard on http://{}/", http.local_addr()?);

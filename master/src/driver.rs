@@ -13,12 +13,12 @@ use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::{debug, warn};
-use vtfarm_proto::{Link, Message, StatusReply};
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_master_core::view::{ViewError, ViewRequest};
+use vtfarm_master_core::{ConnId, FarmRules, MasterCore, Output, Peer};
+use vtfarm_proto::{Message, StatusReply};
+use vtfarm_transport::Link;
 
-use crate::core::{ConnId, MasterCore, Output, Peer};
 use crate::journal::{Journal, JournalWriter};
-use crate::view::{ViewError, ViewRequest};
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -144,16 +144,16 @@ impl MasterHandle {
 }
 
 /// Starts a master task that keeps its jobs in memory only.
-pub fn spawn_master(config: SchedulerConfig) -> (MasterHandle, JoinHandle<()>) {
-    spawn(MasterCore::new(config), None)
+pub fn spawn_master(rules: FarmRules) -> (MasterHandle, JoinHandle<()>) {
+    spawn(MasterCore::new(rules), None)
 }
 
 /// Starts a master task that journals its jobs and resumes those it finds.
 pub fn spawn_persistent_master(
-    config: SchedulerConfig,
+    rules: FarmRules,
     journal: Journal,
 ) -> (MasterHandle, JoinHandle<()>) {
-    spawn(MasterCore::persistent(config), Some(journal))
+    spawn(MasterCore::persistent(rules), Some(journal))
 }
 
 fn spawn(core: MasterCore, journal: Option<Journal>) -> (MasterHandle, JoinHandle<()>) {

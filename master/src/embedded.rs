@@ -3,11 +3,10 @@
 //! same scheduler and protocol as the cluster.
 
 use tokio::task::JoinHandle;
-use vtfarm_proto::Link;
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_master_core::{FarmRules, Peer};
+use vtfarm_transport::Link;
 use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
 
-use crate::core::Peer;
 use crate::driver::{MasterHandle, spawn_master};
 
 /// Attaches a worker to `master` over an in-memory link and runs its session
@@ -47,8 +46,8 @@ pub struct LocalFarm {
 
 impl LocalFarm {
     /// Starts a master and `workers` local workers sharing this process's cores.
-    pub fn start(workers: usize, config: SchedulerConfig) -> LocalFarm {
-        let (master, task) = spawn_master(config);
+    pub fn start(workers: usize, rules: FarmRules) -> LocalFarm {
+        let (master, task) = spawn_master(rules);
         let workers = workers.max(1);
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
         let threads = (cores / workers as u32).max(1);

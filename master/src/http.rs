@@ -39,12 +39,14 @@ use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
 use tokio::net::TcpListener;
 use vtfarm_imaging::Image;
+use vtfarm_master_core::MasterCore;
+use vtfarm_master_core::telemetry::{
+    FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals,
+};
+use vtfarm_master_core::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
 use vtfarm_proto::{FrameStats, StatusReply, WireImage};
 
-use crate::core::MasterCore;
 use crate::driver::MasterHandle;
-use crate::telemetry::{FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals};
-use crate::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
 
 /// The dashboard, served from the binary.
 const DASHBOARD: &str = include_str!("dashboard.html");

@@ -16,7 +16,7 @@
 //! Frames are the bulk; a `FrameDone` already carries its image compressed
 //! in the job's format (`WireImage`), so the file holds the very message the
 //! submitter got, and a re-attached submitter gets the same bytes. A
-//! delivered job's frames go [`ATTACH_GRACE`](crate::core::ATTACH_GRACE)
+//! delivered job's frames go [`ATTACH_GRACE`](vtfarm_master_core::ATTACH_GRACE)
 //! after it completes. A journal of another format (an older master's) is
 //! refused at start with an error that says what to do.
 //!
@@ -26,42 +26,13 @@
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use tracing::warn;
+use vtfarm_master_core::{Record, StoredJob};
 use vtfarm_proto::{
-    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, WireJob, decode_message,
+    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, decode_message,
     encode_message,
 };
-
-/// What the core asks to keep.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Record {
-    /// A job was queued (its scene by hash in `job`, the bytes in `scene`).
-    JobQueued {
-        id: u64,
-        job: Box<WireJob>,
-        scene: Arc<SceneData>,
-    },
-    /// A frame finished.
-    FrameDone(Box<FrameDone>),
-    /// Every frame of the job is done (kept for re-attaching submitters).
-    JobComplete { id: u64 },
-    /// The job is gone: failed, cancelled, or delivered long enough ago.
-    JobForgotten { id: u64 },
-}
-
-impl Record {
-    /// The job the record is about.
-    pub fn job(&self) -> u64 {
-        match self {
-            Record::JobQueued { id, .. }
-            | Record::JobComplete { id }
-            | Record::JobForgotten { id } => *id,
-            Record::FrameDone(done) => done.job,
-        }
-    }
-}
 
 /// Writes a [`Journal`]'s records on a thread of its own, in order, so that
 /// the master's driver does not wait for a finished frame's compression and
@@ -139,17 +110,6 @@ impl Drop for JournalWriter {
             let _ = thread.join();
         }
     }
-}
-
-/// A job read back from the journal.
-#[derive(Debug)]
-pub struct StoredJob {
-    pub id: u64,
-    /// The job with its scene's bytes (`JobScene::Data`).
-    pub job: WireJob,
-    /// How many frames are finished, counted from frame 0 without a gap.
-    pub frames_done: u32,
-    pub complete: bool,
 }
 
 /// The journal's format: 2 since finished frames are kept as sent
@@ -383,6 +343,8 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use std::sync::Arc;
+
     use glam::Vec3;
     use vtfarm_proto::{FrameStats, WireImage};
     use vtfarm_render::FrameSetup;

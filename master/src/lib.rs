@@ -3,36 +3,36 @@
 //! `vtfarm-scheduler` state machine, and composites the returned bitmaps
 //! over the base frame it rasterized.
 //!
-//! - [`core`]: the logic, without sockets or clock.
+//! The logic, without sockets or clock, is `vtfarm-master-core`
+//! ([`MasterCore`]); this crate runs it:
+//!
 //! - [`driver`]: the async task around the core; links in, messages out.
 //! - [`server`]: the QUIC endpoint and handshake.
 //! - [`journal`]: the job journal in the state directory (restarts, re-attaching).
 //! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
 //!   core's state through the driver, owns none.
-//! - [`telemetry`]: the core's counters and kept frames for [`http`].
 //! - [`timeline`]: a frame's phases as SVG (beside `vtfarm submit`'s frames, in the dashboard).
-//! - [`view`]: the interactive view (move the eye, progressive stages, glare).
 //! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
 //! - [`submit`]: the submitter's side of the protocol.
 
 #[cfg(feature = "cli")]
 pub mod cli;
-pub mod core;
 pub mod driver;
 pub mod embedded;
 pub mod http;
 pub mod journal;
 pub mod server;
 pub mod submit;
-pub mod telemetry;
 pub mod timeline;
-pub mod view;
 
-pub use core::{ATTACH_GRACE, BaseFrameRequest, ConnId, MasterCore, Output, Peer};
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use embedded::{LocalFarm, local_worker};
-pub use journal::{Journal, JournalWriter, Record, StoredJob};
+pub use journal::{Journal, JournalWriter};
 pub use submit::{
     FinishedFrame, FrameColor, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job,
     wire_job,
+};
+pub use vtfarm_master_core::{
+    ATTACH_GRACE, BaseFrameRequest, ConnId, FarmRules, MasterCore, Output, Peer, Record, StoredJob,
+    telemetry, view,
 };

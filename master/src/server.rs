@@ -7,12 +7,12 @@ use std::net::SocketAddr;
 use std::path::Path;
 
 use tracing::{info, warn};
-use vtfarm_proto::{
-    HandshakePolicy, IdentityError, Link, MasterIdentity, Role, SESSION_LIMIT, TlsError,
-    server_config, server_handshake,
+use vtfarm_master_core::Peer;
+use vtfarm_proto::{HandshakePolicy, Role, SESSION_LIMIT};
+use vtfarm_transport::{
+    IdentityError, Link, MasterIdentity, TlsError, server_config, server_handshake,
 };
 
-use crate::core::Peer;
 use crate::driver::MasterHandle;
 
 /// Why the master's endpoint could not start.
@@ -77,7 +77,7 @@ pub async fn serve(endpoint: quinn::Endpoint, policy: HandshakePolicy, master: M
                 peer,
                 Link::over_connection(conn.clone(), recv, send, SESSION_LIMIT, address.to_string()),
                 Some(Box::new(move |reason: &str| {
-                    closer.close(vtfarm_proto::CLOSE_NORMAL, reason.as_bytes())
+                    closer.close(vtfarm_transport::CLOSE_NORMAL, reason.as_bytes())
                 })),
             );
         });

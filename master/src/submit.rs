@@ -11,12 +11,13 @@ use std::time::{Duration, Instant};
 use tracing::warn;
 use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
 use vtfarm_proto::{
-    FrameStats, JobScene, Link, Message, Role, SceneData, WireFrameAux, WireFrameSetup, WireImage,
+    FrameStats, JobScene, Message, Role, SceneData, WireFrameAux, WireFrameSetup, WireImage,
     WireImageFormat, WireJob,
 };
 use vtfarm_render::FrameSetup;
+use vtfarm_transport::Link;
+use vtfarm_transport::client::{ClientOptions, ConnectError, connect};
 use vtfarm_vertex::FrameImage;
 
 /// A finished frame as the submitter receives it.
@@ -186,7 +187,8 @@ pub async fn run_remote_job(
             Ok(()) => follower.follow(&mut link, scene, &mut on_event).await,
             Err(e) => Err(e),
         };
-        conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.connection
+            .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
         match outcome {
             Ok(()) => return Ok(follower.frames),

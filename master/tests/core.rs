@@ -10,6 +10,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
@@ -17,7 +18,6 @@ use vtfarm_proto::{
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::Renderer;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::{SparseBitmap, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
@@ -107,7 +107,7 @@ fn start_frame() -> StartedFrame {
     let data = SceneData::from_scene(&c.scene);
 
     let mut h = Harness {
-        core: MasterCore::new(SchedulerConfig::default()),
+        core: MasterCore::new(FarmRules::default()),
         now: Duration::ZERO,
         engine: Engine::new(None),
         frame: None,

@@ -9,15 +9,16 @@ use std::time::Duration;
 use tokio::task::JoinHandle;
 use tokio::time::timeout;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{
     JobError, JobOptions, MasterHandle, Peer, local_worker, run_job, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{Link, Message, SceneData, WireJob};
+use vtfarm_proto::{Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_trace::TraceSettings;
+use vtfarm_transport::Link;
 use vtfarm_vertex::VertexSettings;
 use vtfarm_worker::{SessionEnd, WorkerConfig};
 
@@ -77,7 +78,7 @@ fn small_job() -> (
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_package_failing_on_every_worker_fails_the_job_with_its_error_once() {
-    let (master, _task) = spawn_master(SchedulerConfig::default());
+    let (master, _task) = spawn_master(FarmRules::default());
     // A budget of no samples at all: every package fails on every worker.
     let starved = WorkerConfig {
         samples_per_pixel_budget: 0,

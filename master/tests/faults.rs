@@ -14,12 +14,12 @@ use std::time::Duration;
 use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
-use vtfarm_scheduler::SchedulerConfig;
 
 /// A small cockpit job of `frames` frames from slightly different eyes.
 struct Job {
@@ -102,10 +102,10 @@ fn check_images(pair: &Pair, job: &Job) -> Vec<FrameStats> {
 }
 
 /// No straggler copies: a lost package must come back through the loss itself.
-fn no_stragglers() -> SchedulerConfig {
-    SchedulerConfig {
+fn no_stragglers() -> FarmRules {
+    FarmRules {
         straggler: None,
-        ..SchedulerConfig::default()
+        ..FarmRules::default()
     }
 }
 
@@ -148,7 +148,7 @@ fn a_worker_killed_mid_frame_loses_its_packages_to_the_others() {
 #[test]
 fn a_slowed_worker_gets_a_share_that_follows_its_speed() {
     let job = Job::new(4);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("fast", 1.0);
     pair.add_worker("slow", 3.0);
     let (wire, data) = job.wire();
@@ -216,7 +216,7 @@ fn a_worker_whose_heartbeats_are_lost_is_dropped_and_its_work_redone() {
 #[test]
 fn duplicated_results_are_composited_and_counted_once() {
     let job = Job::new(2);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     let echo = pair.add_worker("echo", 1.0);
     pair.add_worker("plain", 1.0);
     pair.workers[echo].duplicate_results = true;
@@ -267,7 +267,7 @@ fn a_draining_worker_finishes_its_package_and_its_queue_goes_back_at_once() {
 fn the_same_faults_replay_the_same_schedule() {
     let run = || {
         let job = Job::new(2);
-        let mut pair = Pair::new(SchedulerConfig::default());
+        let mut pair = Pair::new(FarmRules::default());
         pair.add_worker("a", 1.0);
         let b = pair.add_worker("b", 2.5);
         pair.add_worker("c", 1.5);
@@ -294,20 +294,9 @@ fn the_same_faults_replay_the_same_schedule() {
 }
 
 #[test]
-fn a_dead_peer_is_noticed_by_quic_within_the_heartbeat_timeout() {
-    // Both ends of a connection close it after the QUIC idle timeout, so a
-    // worker notices a dead master (and the master a dead worker) when the
-    // master's scheduler gives up on the worker's heartbeats; keep-alives
-    // keep a busy connection open well within it.
-    let heartbeat_timeout = SchedulerConfig::default().heartbeat_timeout;
-    assert_eq!(vtfarm_proto::IDLE_TIMEOUT, heartbeat_timeout);
-    assert!(vtfarm_proto::KEEP_ALIVE_INTERVAL * 5 <= heartbeat_timeout);
-}
-
-#[test]
 fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
     let job = Job::new(4);
-    let mut pair = Pair::persistent(SchedulerConfig::default());
+    let mut pair = Pair::persistent(FarmRules::default());
     pair.add_worker("a", 1.0);
     pair.add_worker("b", 1.5);
     let (wire, data) = job.wire();
@@ -337,7 +326,7 @@ fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
 #[test]
 fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
     let job = Job::new(3);
-    let mut pair = Pair::persistent(SchedulerConfig::default());
+    let mut pair = Pair::persistent(FarmRules::default());
     pair.add_worker("a", 1.0);
     let (wire, data) = job.wire();
     pair.submit(wire, data);
@@ -354,13 +343,13 @@ fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
 #[test]
 fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     let job = Job::new(3);
-    let mut pair = Pair::persistent(SchedulerConfig::default());
+    let mut pair = Pair::persistent(FarmRules::default());
     pair.attach_submitter(77);
     let errors = pair.job_failed().expect("no job 77");
     assert!(errors[0].contains("no job 77"), "{errors:?}");
 
     // In memory: nobody can come back for the frames, the job stops at once.
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("a", 1.0);
     let (wire, data) = job.wire();
     pair.submit(wire, data.clone());
@@ -369,7 +358,7 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     assert!(pair.master.status().queue.running.is_none());
 
     // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
-    let mut pair = Pair::persistent(SchedulerConfig::default());
+    let mut pair = Pair::persistent(FarmRules::default());
     pair.add_worker("a", 1e4);
     pair.submit(job.wire().0, data);
     pair.drive(BOUND, |p| p.workers[0].is_running_a_package());
@@ -390,7 +379,7 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
 #[test]
 fn frames_in_reused_buffers_stay_byte_identical() {
     let job = Job::new(4);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("only", 1.0);
     let (wire, data) = job.wire();
     pair.submit(wire, data);
@@ -406,7 +395,7 @@ fn frames_in_reused_buffers_stay_byte_identical() {
 #[test]
 fn pipelined_frames_overlap_and_stay_byte_identical() {
     let job = Job::new(3);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("fast", 1.0);
     pair.add_worker("slow", 3.0);
     let (wire, data) = job.wire();

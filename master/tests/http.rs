@@ -22,15 +22,16 @@ use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
 use tower::ServiceExt;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::view::ViewOutcome;
 use vtfarm_master::{
     FinishedFrame, JobOptions, MasterHandle, http, run_job, server, spawn_master, wire_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{ClusterConfig, HandshakePolicy, Role, SceneData, StatusReply};
+use vtfarm_proto::{HandshakePolicy, Role, SceneData, StatusReply};
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_transport::ClusterConfig;
+use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
@@ -53,7 +54,7 @@ impl Farm {
         let endpoint = server::bind("127.0.0.1:0".parse().unwrap(), &identity).unwrap();
         let address = endpoint.local_addr().unwrap();
         let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
-        let (master, _) = spawn_master(SchedulerConfig::default());
+        let (master, _) = spawn_master(FarmRules::default());
         let policy = HandshakePolicy::new(cluster.token.clone(), "test-master");
         let listener = http::bind("127.0.0.1:0".parse().unwrap()).await.unwrap();
         let http = listener.local_addr().unwrap();
@@ -422,7 +423,7 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_peer_off_loopback_needs_the_cluster_token() {
-    let (master, _task) = spawn_master(SchedulerConfig::default());
+    let (master, _task) = spawn_master(FarmRules::default());
     let token = "c0ffee".to_owned();
     let ask = |peer: SocketAddr, authorization: Option<&str>| {
         let app = http::router(master.clone(), token.clone()).layer(MockConnectInfo(peer));
@@ -461,7 +462,7 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_browser_off_loopback_logs_in_once_and_keeps_a_cookie() {
-    let (master, _task) = spawn_master(SchedulerConfig::default());
+    let (master, _task) = spawn_master(FarmRules::default());
     let remote: SocketAddr = "192.0.2.7:40000".parse().unwrap();
     let app = http::router(master.clone(), "c0ffee".into()).layer(MockConnectInfo(remote));
     let send = |request: Request<Body>| app.clone().oneshot(request);

@@ -16,10 +16,10 @@ use frame::small_frame;
 use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::SceneData;
-use vtfarm_scheduler::SchedulerConfig;
 
 /// Bytes allocated and not yet freed, by every thread.
 static LIVE: AtomicI64 = AtomicI64::new(0);
@@ -63,7 +63,7 @@ fn the_heap_between_jobs_does_not_grow_with_the_frames_rendered() {
     let reflectors = c.cover_glass_triangles();
     // One view repeated: memory, not images, is the question here.
     let view = small_frame(&c, Vec3::ZERO);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("w1", 1.0);
     pair.add_worker("w2", 1.0);
     let run_job = |pair: &mut Pair, frames: usize| {

@@ -6,13 +6,14 @@
 use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, Message, PackageFailed, PackageResult, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, morton_order};
 use vtfarm_scene::Camera;
+use vtfarm_scheduler::JobId;
 use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimInput, SimJob, SimWorker, Simulation};
-use vtfarm_scheduler::{JobId, SchedulerConfig};
 
 const SUBMITTER: u64 = 100;
 
@@ -40,7 +41,7 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
         items: items.clone(),
     };
     let config = SimConfig {
-        scheduler: SchedulerConfig::default().farm(),
+        scheduler: FarmRules::default().scheduler_config(),
         ..SimConfig::default()
     };
     let workers = vec![
@@ -73,7 +74,7 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
 
     // The same calls, as messages into the real master core.
     let data = SceneData::from_scene(&c.scene);
-    let mut core = MasterCore::new(SchedulerConfig::default());
+    let mut core = MasterCore::new(FarmRules::default());
     let mut assigned = Vec::new();
     let mut current_frame = 0;
     let mut frames_done = 0;
@@ -160,19 +161,4 @@ fn the_simulator_and_the_master_core_assign_the_same_packages() {
     }
     assert_eq!(frames_done, 3);
     assert_eq!(assigned, simulated);
-}
-
-/// The simulator's farm rules run as many frames at once as a worker keeps
-/// prepared, so the master core (which clamps to the latter) runs the same.
-#[test]
-fn the_farm_runs_as_many_frames_in_flight_as_workers_keep() {
-    assert_eq!(
-        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT as usize,
-        vtfarm_proto::FRAMES_IN_FLIGHT
-    );
-    let farm = SchedulerConfig::default().farm();
-    assert_eq!(
-        farm.frames_in_flight,
-        vtfarm_scheduler::FARM_FRAMES_IN_FLIGHT
-    );
 }

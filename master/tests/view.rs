@@ -15,12 +15,12 @@ use std::time::Duration;
 use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::FarmRules;
 use vtfarm_master::view::{EYE_BOX, ViewError, ViewOutcome, ViewRequest};
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::SceneData;
 use vtfarm_render::Renderer;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::Quality;
 
 /// Virtual time a scenario may take at most.
@@ -41,7 +41,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         aux: false,
     };
     let job = wire_job("source", &data, &[setup], &reflectors, options);
-    let mut pair = Pair::new(SchedulerConfig::default());
+    let mut pair = Pair::new(FarmRules::default());
     pair.add_worker("w1", 1.0);
     pair.add_worker("w2", 1.0);
     pair.submit(job, data);

@@ -1,17 +1,17 @@
 //! Framing: each message is a 4-byte little-endian body length followed by
 //! the bincode body (`bincode::config::standard()`, serde).
 //!
-//! The reader checks the length against the caller's limit before it
-//! allocates anything, and then lets the body buffer grow only as bytes
-//! actually arrive, so a peer that announces 256 MiB and sends nothing costs
-//! nothing. Decoding runs under a bincode limit scaled to the body's size,
-//! so a small body cannot claim a huge vector either.
+//! A length prefix is checked against the reader's limit ([`body_len`])
+//! before anything is allocated; the stream reader (`vtfarm-transport`) then
+//! lets the body buffer grow only as bytes actually arrive, so a peer that
+//! announces 256 MiB and sends nothing costs nothing. Decoding runs under a
+//! bincode limit scaled to the body's size, so a small body cannot claim a
+//! huge vector either. No I/O here: frames in memory only.
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
-use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 
-use crate::message::{Message, RefuseCode};
+use crate::message::Message;
 
 /// The largest message body: scene data and finished frames are the big ones.
 pub const MAX_MESSAGE_BYTES: u32 = 256 * 1024 * 1024;
@@ -19,123 +19,85 @@ pub const MAX_MESSAGE_BYTES: u32 = 256 * 1024 * 1024;
 /// read before the peer has shown a token.
 pub const MAX_HANDSHAKE_BYTES: u32 = 64 * 1024;
 
-/// The body buffer starts at most this big and grows with the data received.
-const INITIAL_BODY_CAPACITY: usize = 64 * 1024;
+/// The limit of a session's messages (after the handshake): the protocol's
+/// maximum, since scene data and finished frames travel on the session.
+pub const SESSION_LIMIT: u32 = MAX_MESSAGE_BYTES;
 
-/// Why a message could not be read or written (and why a handshake failed).
+/// Why a frame does not hold a message (or a message makes no frame).
 #[derive(Debug, thiserror::Error)]
-pub enum ProtoError {
-    /// The stream failed.
-    #[error("I/O error: {0}")]
-    Io(#[from] std::io::Error),
+pub enum FrameError {
     /// The length prefix (or an outgoing message) exceeds the limit.
     #[error("message of {len} bytes exceeds the limit of {limit} bytes")]
     TooLarge { len: u64, limit: u32 },
-    /// The body is not a valid message (garbage, an unknown variant, bytes
-    /// left over after the message).
-    #[error("cannot decode message: {0}")]
-    Decode(String),
-    /// The message could not be encoded (does not happen for vtfarm's types).
-    #[error("cannot encode message: {0}")]
-    Encode(String),
-    /// The stream ended cleanly at a message boundary.
-    #[error("stream closed")]
-    Closed,
-    /// The stream ended inside a message: `received` of `expected` bytes
+    /// The bytes end inside a message: `received` of `expected` bytes
     /// (counting the 4-byte prefix).
     #[error("stream ended inside a message: {received} of {expected} bytes")]
     Truncated { expected: u64, received: u64 },
-    /// The master refused the handshake.
-    #[error("refused by the master ({code:?}): {message}")]
-    Refused { code: RefuseCode, message: String },
-    /// The QUIC connection failed.
-    #[error("connection failed: {0}")]
-    Connection(#[from] quinn::ConnectionError),
-    /// A well-formed message that does not belong here.
-    #[error("expected {expected}, got {got}")]
-    Unexpected {
-        expected: &'static str,
-        got: &'static str,
-    },
-    /// The peer took too long.
-    #[error("timed out")]
-    Timeout,
+    /// The body is not a valid message (garbage, an unknown variant, bytes
+    /// left over after the message).
+    #[error("cannot decode message: {0}")]
+    Decode(#[from] DecodeError),
+    /// The message could not be encoded (does not happen for vtfarm's types).
+    #[error("cannot encode message: {0}")]
+    Encode(String),
 }
 
-/// Reads one message whose body may be at most `limit` bytes (clamped to
-/// [`MAX_MESSAGE_BYTES`]). Clean end of stream before the first byte gives
-/// [`ProtoError::Closed`].
-pub async fn read_message<R: AsyncRead + Unpin>(
-    r: &mut R,
-    limit: u32,
-) -> Result<Message, ProtoError> {
-    let body = read_frame(r, limit).await?;
-    decode_message(&body)
+/// Why bytes do not decode as exactly one value.
+#[derive(Debug, thiserror::Error)]
+pub enum DecodeError {
+    /// Garbage, an unknown variant, a value cut short or over the limit.
+    #[error(transparent)]
+    Bincode(#[from] bincode::error::DecodeError),
+    /// A whole value, then this many more bytes.
+    #[error("{0} bytes left over after the message")]
+    LeftOver(usize),
 }
 
-/// Reads one frame's body, checking its length against `limit` first.
-pub(crate) async fn read_frame<R: AsyncRead + Unpin>(
-    r: &mut R,
-    limit: u32,
-) -> Result<Vec<u8>, ProtoError> {
+/// The body length a frame's prefix announces, checked against `limit`
+/// (clamped to [`MAX_MESSAGE_BYTES`]) before anything is allocated for it.
+pub fn body_len(prefix: [u8; 4], limit: u32) -> Result<u32, FrameError> {
     let limit = limit.min(MAX_MESSAGE_BYTES);
-    let mut prefix = [0u8; 4];
-    let mut filled = 0;
-    while filled < prefix.len() {
-        let n = r.read(&mut prefix[filled..]).await?;
-        if n == 0 {
-            return Err(if filled == 0 {
-                ProtoError::Closed
-            } else {
-                ProtoError::Truncated {
-                    expected: 4,
-                    received: filled as u64,
-                }
-            });
-        }
-        filled += n;
-    }
     let len = u32::from_le_bytes(prefix);
     if len > limit {
-        return Err(ProtoError::TooLarge {
+        return Err(FrameError::TooLarge {
             len: len.into(),
             limit,
         });
     }
-    let mut body = Vec::with_capacity((len as usize).min(INITIAL_BODY_CAPACITY));
-    let received = (&mut *r).take(len.into()).read_to_end(&mut body).await?;
-    if received < len as usize {
-        return Err(ProtoError::Truncated {
-            expected: 4 + u64::from(len),
-            received: 4 + received as u64,
-        });
-    }
-    Ok(body)
+    Ok(len)
 }
 
-/// Writes one message (prefix and body) and flushes.
-pub async fn write_message<W: AsyncWrite + Unpin>(
-    w: &mut W,
-    message: &Message,
-) -> Result<(), ProtoError> {
-    let frame = encode_message(message)?;
-    w.write_all(&frame).await?;
-    w.flush().await?;
-    Ok(())
+/// The first frame of `bytes`: its body (at most `limit` bytes, see
+/// [`body_len`]) and the bytes after it.
+pub fn split_frame(bytes: &[u8], limit: u32) -> Result<(&[u8], &[u8]), FrameError> {
+    let Some((prefix, rest)) = bytes.split_first_chunk::<4>() else {
+        return Err(FrameError::Truncated {
+            expected: 4,
+            received: bytes.len() as u64,
+        });
+    };
+    let len = body_len(*prefix, limit)? as usize;
+    if rest.len() < len {
+        return Err(FrameError::Truncated {
+            expected: 4 + len as u64,
+            received: bytes.len() as u64,
+        });
+    }
+    Ok(rest.split_at(len))
 }
 
 /// One message as a whole frame: the length prefix and the body.
-pub fn encode_message(message: &Message) -> Result<Vec<u8>, ProtoError> {
+pub fn encode_message(message: &Message) -> Result<Vec<u8>, FrameError> {
     let mut frame = vec![0u8; 4];
     bincode::serde::encode_into_std_write(message, &mut frame, bincode::config::standard())
-        .map_err(|e| ProtoError::Encode(e.to_string()))?;
+        .map_err(|e| FrameError::Encode(e.to_string()))?;
     let len = frame.len() - 4;
     match u32::try_from(len) {
         Ok(len) if len <= MAX_MESSAGE_BYTES => {
             frame[..4].copy_from_slice(&len.to_le_bytes());
             Ok(frame)
         }
-        _ => Err(ProtoError::TooLarge {
+        _ => Err(FrameError::TooLarge {
             len: len as u64,
             limit: MAX_MESSAGE_BYTES,
         }),
@@ -144,8 +106,8 @@ pub fn encode_message(message: &Message) -> Result<Vec<u8>, ProtoError> {
 
 /// Decodes a message body (without the prefix); the body must hold exactly
 /// one message.
-pub fn decode_message(body: &[u8]) -> Result<Message, ProtoError> {
-    decode_value(body).map_err(ProtoError::Decode)
+pub fn decode_message(body: &[u8]) -> Result<Message, FrameError> {
+    Ok(decode_value(body)?)
 }
 
 /// The size on the wire of `message` (length prefix included), counted
@@ -169,7 +131,7 @@ pub(crate) fn encode_value<T: Serialize>(value: &T) -> Vec<u8> {
 /// limit bounds what a short body can make us allocate. The limit counts
 /// decoded (in-memory) bytes, up to 8 per wire byte for small varints, hence
 /// the 16× headroom.
-pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, DecodeError> {
     use bincode::config::standard;
     const KIB: usize = 1024;
     const MIB: usize = 1024 * KIB;
@@ -180,12 +142,9 @@ pub(crate) fn decode_value<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Strin
         n if n <= 16 * MIB => decode_with(bytes, standard().with_limit::<{ 256 * MIB }>()),
         _ => decode_with(bytes, standard().with_limit::<TOP>()),
     };
-    let (value, used) = decoded.map_err(|e| e.to_string())?;
+    let (value, used) = decoded?;
     if used != bytes.len() {
-        return Err(format!(
-            "{} bytes left over after the message",
-            bytes.len() - used
-        ));
+        return Err(DecodeError::LeftOver(bytes.len() - used));
     }
     Ok(value)
 }
@@ -199,8 +158,6 @@ fn decode_with<T: DeserializeOwned, C: bincode::config::Config>(
 
 #[cfg(test)]
 mod tests {
-    use std::pin::Pin;
-    use std::task::{Context, Poll};
     use std::time::Duration;
 
     use crate::WorkerFrameStats;
@@ -398,16 +355,9 @@ mod tests {
         ]
     }
 
-    fn block_on<F: std::future::Future>(f: F) -> F::Output {
-        tokio::runtime::Builder::new_current_thread()
-            .build()
-            .expect("a current-thread runtime builds")
-            .block_on(f)
-    }
-
-    fn read_all(bytes: &[u8], limit: u32) -> Result<Message, ProtoError> {
-        let mut reader = bytes;
-        block_on(read_message(&mut reader, limit))
+    /// The first message of `bytes`, as a session reads it.
+    fn read_all(bytes: &[u8], limit: u32) -> Result<Message, FrameError> {
+        decode_message(split_frame(bytes, limit)?.0)
     }
 
     fn frame(body: &[u8]) -> Vec<u8> {
@@ -416,31 +366,22 @@ mod tests {
         f
     }
 
-    #[tokio::test]
-    async fn every_message_round_trips_through_a_stream() {
+    #[test]
+    fn every_message_round_trips_through_frames() {
         let messages = every_message();
         // Every variant is covered (the list has two extra alternatives).
         let names: std::collections::BTreeSet<_> = messages.iter().map(Message::name).collect();
         assert_eq!(names.len(), 21);
-        let (mut a, mut b) = tokio::io::duplex(1024);
-        let sent = messages.clone();
-        let writer = tokio::spawn(async move {
-            for m in &sent {
-                write_message(&mut a, m).await.expect("duplex accepts");
-            }
-        });
+        let stream: Vec<u8> = (messages.iter())
+            .flat_map(|m| encode_message(m).expect("encodes"))
+            .collect();
+        let mut rest = &stream[..];
         for expected in &messages {
-            let got = read_message(&mut b, MAX_MESSAGE_BYTES)
-                .await
-                .expect("a whole message");
-            assert_eq!(&got, expected);
+            let (body, after) = split_frame(rest, MAX_MESSAGE_BYTES).expect("a whole frame");
+            assert_eq!(&decode_message(body).expect("decodes"), expected);
+            rest = after;
         }
-        writer.await.expect("writer finished");
-        // The writer dropped its end at a message boundary.
-        assert!(matches!(
-            read_message(&mut b, MAX_MESSAGE_BYTES).await,
-            Err(ProtoError::Closed)
-        ));
+        assert!(rest.is_empty());
     }
 
     #[test]
@@ -454,38 +395,17 @@ mod tests {
         );
     }
 
-    /// A reader that yields `prefix` and then fails the test if read again.
-    struct PrefixOnly {
-        prefix: Vec<u8>,
-    }
-
-    impl AsyncRead for PrefixOnly {
-        fn poll_read(
-            mut self: Pin<&mut Self>,
-            _: &mut Context<'_>,
-            buf: &mut tokio::io::ReadBuf<'_>,
-        ) -> Poll<std::io::Result<()>> {
-            assert!(!self.prefix.is_empty(), "read past the length prefix");
-            let n = self.prefix.len().min(buf.remaining());
-            buf.put_slice(&self.prefix[..n]);
-            self.prefix.drain(..n);
-            Poll::Ready(Ok(()))
-        }
-    }
-
-    #[tokio::test]
-    async fn oversized_prefixes_are_rejected_before_reading_the_body() {
+    #[test]
+    fn oversized_prefixes_are_rejected_before_the_body() {
         for (len, limit) in [
             (MAX_HANDSHAKE_BYTES + 1, MAX_HANDSHAKE_BYTES),
             (u32::MAX, MAX_MESSAGE_BYTES),
             // A caller's limit above the maximum is clamped.
             (MAX_MESSAGE_BYTES + 1, u32::MAX),
         ] {
-            let mut r = PrefixOnly {
-                prefix: len.to_le_bytes().to_vec(),
-            };
-            match read_message(&mut r, limit).await {
-                Err(ProtoError::TooLarge { len: l, limit: m }) => {
+            // The prefix alone: no body follows, and none is looked for.
+            match split_frame(&len.to_le_bytes(), limit) {
+                Err(FrameError::TooLarge { len: l, limit: m }) => {
                     assert_eq!((l, m), (len.into(), limit.min(MAX_MESSAGE_BYTES)));
                 }
                 other => panic!("expected TooLarge, got {other:?}"),
@@ -503,7 +423,7 @@ mod tests {
         ] {
             let result = read_all(&frame(body), MAX_MESSAGE_BYTES);
             assert!(
-                matches!(result, Err(ProtoError::Decode(_))),
+                matches!(result, Err(FrameError::Decode(_))),
                 "{body:?}: {result:?}"
             );
         }
@@ -524,15 +444,14 @@ mod tests {
         body.extend_from_slice(&200_000_000u32.to_le_bytes());
         body.extend_from_slice(&[1, 2, 3]);
         let result = read_all(&frame(&body), MAX_MESSAGE_BYTES);
-        assert!(matches!(result, Err(ProtoError::Decode(_))), "{result:?}");
+        assert!(matches!(result, Err(FrameError::Decode(_))), "{result:?}");
     }
 
     #[test]
-    fn truncated_streams_are_told_from_clean_closes() {
-        assert!(matches!(read_all(&[], 100), Err(ProtoError::Closed)));
+    fn truncated_frames_say_how_much_came() {
         assert!(matches!(
             read_all(&[3, 0], 100),
-            Err(ProtoError::Truncated {
+            Err(FrameError::Truncated {
                 expected: 4,
                 received: 2
             })
@@ -541,7 +460,7 @@ mod tests {
         let cut = &whole[..whole.len() - 1];
         assert!(matches!(
             read_all(cut, 100),
-            Err(ProtoError::Truncated { expected, received })
+            Err(FrameError::Truncated { expected, received })
                 if expected == whole.len() as u64 && received == cut.len() as u64
         ));
     }

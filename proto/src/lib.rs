@@ -1,52 +1,40 @@
-//! Everything vtfarm puts on the wire, and nothing else: the typed, versioned
-//! messages between master, workers and submitters; their framing over any
-//! byte stream; the TLS set-up with a pinned master certificate; the
-//! `cluster.toml` that tells workers and submitters where the master is; and
-//! the handshake every connection starts with.
+//! Everything vtfarm puts on the wire, and nothing of how it travels: the
+//! typed, versioned messages between master, workers and submitters; the
+//! wire mirrors of the domain types with their codecs; the framing of a
+//! message into bytes; and the handshake's rules. No I/O: the QUIC
+//! transport, TLS, `cluster.toml` and the stream reader are
+//! `vtfarm-transport`, so the decoder is fuzzed and tested without them.
 //!
-//! Architecture invariant: this is the only crate that derives `Serialize`.
-//! Domain types (`Scene`, `Camera`, `SparseBitmap`, ...) have `Wire*` mirrors
-//! here with hand-written conversions; the `TryFrom` direction validates
-//! everything a peer could get wrong (non-finite floats, indices out of range,
-//! inconsistent sizes) and never panics. No scheduling or rendering logic.
+//! Architecture invariant: this is the only crate that derives `Serialize`
+//! for what goes on the wire. Domain types (`Scene`, `Camera`,
+//! `SparseBitmap`, ...) have `Wire*` mirrors here with hand-written
+//! conversions; the `TryFrom` direction validates everything a peer could
+//! get wrong (non-finite floats, indices out of range, inconsistent sizes)
+//! and never panics. No scheduling or rendering logic.
 //!
 //! - [`message`]: the [`Message`] enum and its payload structs.
 //! - [`wire`]: wire mirrors of the domain types and their conversions.
 //! - [`framing`]: `u32` little-endian length prefix plus a bincode body,
-//!   [`read_message`] / [`write_message`] over tokio's I/O traits.
-//! - [`tls`]: the master's self-signed identity and the quinn configurations
-//!   whose client verifier accepts exactly one certificate fingerprint.
-//! - [`cluster`]: `cluster.toml` and the shared token.
-//! - [`handshake`]: `Hello` / `Welcome` / `Refused` on a connection's first stream.
+//!   [`encode_message`] / [`decode_message`] and the limits.
+//! - [`handshake`]: what a `Hello` must be ([`check_hello`]).
 
-pub mod client;
-pub mod cluster;
+use std::time::Duration;
+
 pub mod framing;
 pub mod handshake;
-pub mod link;
 pub mod message;
-pub mod tls;
 pub mod wire;
 
-pub use cluster::{CLUSTER_FILE, ClusterConfig, ConfigError, token_matches};
 pub use framing::{
-    MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, ProtoError, decode_message, encode_message,
-    encoded_len, read_message, write_message,
+    DecodeError, FrameError, MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, SESSION_LIMIT, body_len,
+    decode_message, encode_message, encoded_len, split_frame,
 };
-pub use handshake::{
-    CLOSE_NORMAL, HANDSHAKE_TIMEOUT, HandshakePolicy, REFUSAL_LINGER, check_hello,
-    client_handshake, server_handshake,
-};
-pub use link::{Link, SESSION_LIMIT};
+pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use message::{
     FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package,
     PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode, Role,
     RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
     WorkerFrameStats, WorkerStatus, scene_hash,
-};
-pub use tls::{
-    ALPN, IDLE_TIMEOUT, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError,
-    client_config, fingerprint_of, parse_fingerprint, server_config,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -65,16 +53,13 @@ pub const PROTOCOL_VERSION: u32 = 5;
 /// come. The master's scheduler configuration must not exceed it.
 pub const FRAMES_IN_FLIGHT: usize = 8;
 
+/// A peer silent this long is gone: the master drops a worker that sent
+/// nothing (heartbeat, request or result) for this long and requeues its
+/// packages (the default `heartbeat_timeout` of `vtfarm_master_core::FarmRules`),
+/// and QUIC closes a connection idle this long on either end, so a worker or
+/// submitter notices a dead master in the same time.
+pub const PEER_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.
 pub const MAGIC: [u8; 8] = *b"VTFARM\0\0";
-
-/// The longest prefix of `text` of at most `max` bytes that ends on a
-/// character boundary.
-pub(crate) fn truncate_utf8(text: &str, max: usize) -> &str {
-    let mut end = text.len().min(max);
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    &text[..end]
-}

@@ -176,7 +176,7 @@ pub struct Welcome {
 /// Why the master refused a connection. Each code has a QUIC application
 /// error code ([`RefuseCode::close_code`]) with which the master closes the
 /// connection after sending `Refused`, so a client that lost the message
-/// still learns the reason; [`crate::CLOSE_NORMAL`] (0) is an orderly close.
+/// still learns the reason; 0 (`vtfarm_transport::CLOSE_NORMAL`) is an orderly close.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum RefuseCode {
     /// Close code 1: the token does not match the cluster's.
@@ -209,9 +209,10 @@ impl RefuseCode {
         RefuseCode::Disconnected,
     ];
 
-    /// The QUIC application error code the master closes the connection with.
-    pub fn close_code(self) -> quinn::VarInt {
-        quinn::VarInt::from_u32(match self {
+    /// The application error code the master closes the connection with
+    /// (0 is an orderly close).
+    pub fn close_code(self) -> u32 {
+        match self {
             RefuseCode::BadToken => 1,
             RefuseCode::BadVersion => 2,
             RefuseCode::BadMessage => 3,
@@ -219,16 +220,18 @@ impl RefuseCode {
             RefuseCode::Timeout => 5,
             RefuseCode::ShuttingDown => 6,
             RefuseCode::Disconnected => 7,
-        })
+        }
     }
 
     /// The refusal a connection's close code stands for, if any.
-    pub fn from_close_code(code: quinn::VarInt) -> Option<RefuseCode> {
-        RefuseCode::ALL.into_iter().find(|c| c.close_code() == code)
+    pub fn from_close_code(code: u64) -> Option<RefuseCode> {
+        RefuseCode::ALL
+            .into_iter()
+            .find(|c| u64::from(c.close_code()) == code)
     }
 }
 
-/// A refusal: the `Refused` message, and what [`crate::server_handshake`]
+/// A refusal: the `Refused` message, and what `vtfarm_transport::server_handshake`
 /// returns for a client it turned away.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
 #[error("refused ({code:?}): {message}")]
@@ -286,9 +289,9 @@ impl SceneData {
             });
         }
         let wire: WireScene =
-            crate::framing::decode_value(&self.bytes).map_err(|message| WireError::Decode {
+            crate::framing::decode_value(&self.bytes).map_err(|e| WireError::Decode {
                 what: "scene data",
-                message,
+                message: e.to_string(),
             })?;
         Scene::try_from(wire)
     }
@@ -606,9 +609,10 @@ mod tests {
     #[test]
     fn close_codes_are_distinct_and_invertible() {
         for code in RefuseCode::ALL {
-            assert_ne!(code.close_code(), crate::CLOSE_NORMAL);
-            assert_eq!(RefuseCode::from_close_code(code.close_code()), Some(code));
+            assert_ne!(code.close_code(), 0, "0 is an orderly close");
+            let close = u64::from(code.close_code());
+            assert_eq!(RefuseCode::from_close_code(close), Some(code));
         }
-        assert_eq!(RefuseCode::from_close_code(crate::CLOSE_NORMAL), None);
+        assert_eq!(RefuseCode::from_close_code(0), None);
     }
 }

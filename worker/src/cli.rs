@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use vtfarm_proto::ClusterConfig;
+use vtfarm_transport::ClusterConfig;
 
 use crate::{ClientOptions, DrainSignal, Engine, WorkerConfig, run_worker};
 

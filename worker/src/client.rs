@@ -1,11 +1,11 @@
-//! The worker's connection loop: connect (see `vtfarm_proto::client`),
+//! The worker's connection loop: connect (see `vtfarm_transport::client`),
 //! serve, and reconnect with backoff when the master goes away.
 
 use std::time::Duration;
 
 use tracing::{info, warn};
 use vtfarm_proto::Role;
-use vtfarm_proto::client::{ClientOptions, ConnectError, connect};
+use vtfarm_transport::client::{ClientOptions, ConnectError, connect};
 
 use crate::engine::Engine;
 use crate::serve::{DrainSignal, serve};
@@ -37,7 +37,8 @@ pub async fn run_worker(
                 info!(master = %options.master, "connected");
                 backoff = Duration::from_millis(200);
                 let end = serve(conn.link, &mut engine, config, drain.clone()).await;
-                conn.connection.close(vtfarm_proto::CLOSE_NORMAL, b"bye");
+                conn.connection
+                    .close(vtfarm_transport::CLOSE_NORMAL, b"bye");
                 conn.endpoint.wait_idle().await;
                 match end {
                     SessionEnd::Shutdown => {

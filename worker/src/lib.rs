@@ -18,7 +18,7 @@ pub use client::run_worker;
 pub use engine::Engine;
 pub use serve::{DrainSignal, serve};
 pub use session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
-pub use vtfarm_proto::client::ClientOptions;
+pub use vtfarm_transport::client::ClientOptions;
 
 /// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`).
 pub fn init_logging() {

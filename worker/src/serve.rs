@@ -10,7 +10,8 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::debug;
-use vtfarm_proto::{Link, PackageId, PackageResult, SceneData, SceneHash};
+use vtfarm_proto::{PackageId, PackageResult, SceneData, SceneHash};
+use vtfarm_transport::Link;
 use vtfarm_vertex::Stop;
 
 use crate::engine::{ActiveFrame, Engine, PreparedFrames};

@@ -88,7 +88,8 @@ pub enum Task {
     /// Build the frame's ID buffers (and renderer); answer with
     /// [`WorkerSession::frame_prepared`].
     PrepareFrame(FrameStart),
-    /// Run the package on the frame prepared last; answer with
+    /// Run the package on its frame, which is among the prepared ones (the
+    /// newest or a kept older one); answer with
     /// [`WorkerSession::package_finished`].
     RunPackage(Package),
 }

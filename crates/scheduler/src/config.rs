@@ -58,28 +58,20 @@ impl Default for SchedulerConfig {
 }
 
 impl SchedulerConfig {
-    /// The rules of vtfarm's master, whose workers set a frame up when its
-    /// first package for them comes: [`FARM_FRAMES_IN_FLIGHT`] frames are
-    /// pipelined (a worker keeps that many frames prepared:
-    /// `vtfarm_proto::FRAMES_IN_FLIGHT`) with frame affinity, so that a
-    /// worker sets up only the frames of its crew; requests carry over.
-    /// The master core takes its configuration through here (and `vtfarm
-    /// bench simulate` runs that core), as does this crate's `sim` when it
-    /// plays the farm.
-    pub fn farm(self) -> Self {
+    /// The rules for workers that set a frame up when its first package for
+    /// them comes (vtfarm's): `frames_in_flight` frames pipelined with frame
+    /// affinity, so that a worker sets up only the frames of its crew, and
+    /// requests carry over a frame start. vtfarm's master takes it with the
+    /// protocol's `FRAMES_IN_FLIGHT` (`vtfarm_master_core::FarmRules`).
+    pub fn pipelined(self, frames_in_flight: u32) -> Self {
         SchedulerConfig {
             requests_lapse_at_frame_start: false,
-            frames_in_flight: FARM_FRAMES_IN_FLIGHT,
+            frames_in_flight,
             frame_affinity: true,
             ..self
         }
     }
 }
-
-/// Frames in flight under [`SchedulerConfig::farm`]: enough that a frame's
-/// most expensive item (one reflector triangle can be a tenth of a frame's
-/// work) does not keep the other workers waiting for the next frame.
-pub const FARM_FRAMES_IN_FLIGHT: u32 = 8;
 
 /// How big a package is (guided self-scheduling, "large early, small late").
 ///

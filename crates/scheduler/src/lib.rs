@@ -151,10 +151,7 @@ pub mod sim;
 mod status;
 mod types;
 
-pub use config::{
-    CostEstimation, FARM_FRAMES_IN_FLIGHT, PackageSizing, RetryPolicy, SchedulerConfig,
-    StragglerPolicy,
-};
+pub use config::{CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy};
 pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError, WorkerError};
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
 pub use scheduler::Scheduler;

@@ -3,7 +3,7 @@
 //! message arriving, a package finishing, a heartbeat, a scheduler deadline).
 //! Like quinn's test `Pair`, it runs fault scenarios in milliseconds without
 //! sockets or sleeps (the scheduler's own tests; `vtfarm bench simulate` runs the real
-//! master core and worker sessions instead, see `src/bench/farm.rs` of the CLI).
+//! master core and worker sessions instead, see `crates/bench/src/farm.rs`).
 //!
 //! Model: every item has a true cost in seconds on a worker of speed 1. A
 //! worker computes one package at a time, taking its fixed overhead plus the
@@ -15,7 +15,7 @@
 //! also queues for it, one direction each way, as all results funnel into
 //! the one master. A worker asks for work when it joins and, piggybacked on
 //! each result, whenever it runs out. With the master's rules
-//! ([`SchedulerConfig::farm`]: frame affinity, frames pipelined) every
+//! ([`SchedulerConfig::pipelined`]: frame affinity, frames pipelined) every
 //! worker hears of each new frame (`FrameStart` over its
 //! link), sets it up ([`SimWorker::frame_setup`]; a worker that is computing
 //! a package of the older frame shares its core between the two, so both

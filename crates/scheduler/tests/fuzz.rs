@@ -6,6 +6,8 @@
 //! same holds for random simulated farms (speeds, links, crashes, slowdowns,
 //! failures) with at least one reliable worker, which also always finish.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -254,7 +256,7 @@ proptest! {
             ..SchedulerConfig::default()
         };
         // The master's rules too: lapsing requests and pipelined frames.
-        let config = if farm { config.farm() } else { config };
+        let config = if farm { config.pipelined(common::FRAMES_IN_FLIGHT) } else { config };
         let mut model = Model {
             s: Scheduler::new(config),
             now: Duration::ZERO,

@@ -2,6 +2,8 @@
 //! in the crate documentation, the sizing and estimation formulas, and the
 //! refusal of bad inputs.
 
+mod common;
+
 use std::time::Duration;
 
 use vtfarm_scheduler::{
@@ -481,7 +483,7 @@ fn packages_near_a_jobs_end_are_sized_for_every_worker() {
     // 16 workers at the prior rate of 1 unit/s, frames of 60 items of 1
     // unit; crews of max(16 / (8 − 3), 4) = 4 workers.
     let check = |frames: usize, expected: usize| {
-        let mut farm = Farm::with(SchedulerConfig::default().farm());
+        let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
         for w in 0..16 {
             farm.join(WorkerId(w));
         }
@@ -507,7 +509,7 @@ fn packages_near_a_jobs_end_are_sized_for_every_worker() {
 /// crews' frames, each worker setting a frame up for a small share).
 #[test]
 fn crews_leave_three_of_the_frames_in_flight_free() {
-    let mut farm = Farm::with(SchedulerConfig::default().farm());
+    let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
     for w in 0..40 {
         farm.join(WorkerId(w));
     }
@@ -755,7 +757,7 @@ fn an_arrived_result_held_by_the_driver_is_not_a_straggler() {
 fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
     let config = SchedulerConfig {
         frames_in_flight: 2,
-        ..SchedulerConfig::default().farm()
+        ..SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
     };
     let mut farm = Farm::with(config);
     farm.join(W0);
@@ -810,7 +812,7 @@ fn a_lost_worker_requeues_its_packages_in_both_pipelined_frames() {
     // Without frame affinity, which would keep W0 on frame 0.
     let mut farm = Farm::with(SchedulerConfig {
         frame_affinity: false,
-        ..SchedulerConfig::default().farm()
+        ..SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
     });
     farm.join(W0);
     farm.join(W1);

@@ -473,7 +473,7 @@ fn a_shared_master_link_bounds_the_frame_and_runs_repeat_exactly() {
         ..SimWorker::with_speed(1.0)
     };
     let config = |master_link: Option<f64>| SimConfig {
-        scheduler: vtfarm_scheduler::SchedulerConfig::default().farm(),
+        scheduler: vtfarm_scheduler::SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT),
         master_link_bits_per_second: master_link,
         master_frame_cost: Duration::from_millis(30),
         result_bytes_per_item: 20_000,
@@ -535,7 +535,7 @@ fn pipelined_frames_overlap_and_held_results_are_not_duplicated() {
         ..SimWorker::with_speed(1.0)
     };
     let config = SimConfig {
-        scheduler: vtfarm_scheduler::SchedulerConfig::default().farm(),
+        scheduler: vtfarm_scheduler::SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT),
         // Longer than a frame's tracing: every result waits for it.
         master_frame_cost: Duration::from_secs(2),
         master_result_cost_per_item: Duration::from_micros(20),
@@ -578,7 +578,7 @@ fn frame_affinity_keeps_workers_on_fewer_frames_and_as_fast() {
     let config = |frame_affinity: bool| SimConfig {
         scheduler: vtfarm_scheduler::SchedulerConfig {
             frame_affinity,
-            ..vtfarm_scheduler::SchedulerConfig::default().farm()
+            ..vtfarm_scheduler::SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
         },
         ..checked()
     };

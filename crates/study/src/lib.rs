@@ -55,7 +55,7 @@ pub enum StudyError {
         file: PathBuf,
         eye: usize,
         position: Vec3,
-        why: String,
+        why: vtfarm_scene::OutOfBounds,
     },
     #[error("{path}: {source}")]
     Io {
@@ -404,7 +404,11 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
 
 /// The camera of one eye point: the base camera moved to `eye`, looking at
 /// the study's `look_at` (default: the base camera's target).
-fn eye_camera(study: &Study, base: &Camera, eye: Vec3) -> Result<Camera, String> {
+fn eye_camera(
+    study: &Study,
+    base: &Camera,
+    eye: Vec3,
+) -> Result<Camera, vtfarm_scene::OutOfBounds> {
     let camera = Camera {
         eye,
         target: study.look_at.unwrap_or(base.target),
@@ -412,7 +416,7 @@ fn eye_camera(study: &Study, base: &Camera, eye: Vec3) -> Result<Camera, String>
         height: study.height.unwrap_or(base.height),
         ..*base
     };
-    camera.validate().map_err(|e| e.to_string())?;
+    camera.validate()?;
     Ok(camera)
 }
 

@@ -14,9 +14,9 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use vtfarm_master::FarmRules;
 use vtfarm_master::{ConnId, Journal, MasterCore, Output, Peer};
 use vtfarm_proto::{FrameDone, JobScene, Message, PackageResult, SceneData, WireJob};
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_worker::engine::PreparedFrames;
 use vtfarm_worker::{Engine, SessionEnd, Task, WorkerSession};
 
@@ -86,28 +86,28 @@ pub(crate) struct Pair {
     pub(crate) frame_starts: Vec<(u64, u32)>,
     /// Base frames rasterized into a finished frame's buffers.
     pub(crate) bases_in_reused_buffers: usize,
-    config: SchedulerConfig,
+    rules: FarmRules,
     /// The job journal of a persistent master, in a temporary state directory.
     journal: Option<(Journal, tempfile::TempDir)>,
 }
 
 impl Pair {
     /// A pair whose master keeps its jobs in memory.
-    pub(crate) fn new(config: SchedulerConfig) -> Pair {
-        Pair::with_master(MasterCore::new(config.clone()), config, None)
+    pub(crate) fn new(rules: FarmRules) -> Pair {
+        Pair::with_master(MasterCore::new(rules.clone()), rules, None)
     }
 
     /// A pair whose master journals its jobs in a temporary state directory.
-    pub(crate) fn persistent(config: SchedulerConfig) -> Pair {
+    pub(crate) fn persistent(rules: FarmRules) -> Pair {
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
-        let master = MasterCore::persistent(config.clone());
-        Pair::with_master(master, config, Some((journal, dir)))
+        let master = MasterCore::persistent(rules.clone());
+        Pair::with_master(master, rules, Some((journal, dir)))
     }
 
     fn with_master(
         master: MasterCore,
-        config: SchedulerConfig,
+        rules: FarmRules,
         journal: Option<(Journal, tempfile::TempDir)>,
     ) -> Pair {
         let mut pair = Pair {
@@ -124,7 +124,7 @@ impl Pair {
             submitter: None,
             frame_starts: Vec::new(),
             bases_in_reused_buffers: 0,
-            config,
+            rules,
             journal,
         };
         pair.connect_submitter();
@@ -165,7 +165,7 @@ impl Pair {
     pub(crate) fn restart_master(&mut self) {
         let (journal, _) = self.journal.as_ref().expect("a persistent pair");
         let journal = journal.clone();
-        self.master = MasterCore::persistent(self.config.clone());
+        self.master = MasterCore::persistent(self.rules.clone());
         self.events.clear();
         self.submitter = None;
         for stored in journal.load() {

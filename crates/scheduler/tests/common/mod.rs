@@ -9,6 +9,11 @@ use std::collections::BTreeMap;
 use vtfarm_scheduler::sim::{SimFrame, SimJob, SimReport};
 use vtfarm_scheduler::{Event, JobId, WorkerId};
 
+/// Frames in flight of the pipelined configurations these tests run
+/// (`SchedulerConfig::pipelined`); vtfarm's master runs the protocol's
+/// `vtfarm_proto::FRAMES_IN_FLIGHT`, of which this crate knows nothing.
+pub(crate) const FRAMES_IN_FLIGHT: u32 = 8;
+
 /// A small seeded generator (SplitMix64), so workloads are the same on every run.
 pub(crate) struct Rng(u64);
 

@@ -11,6 +11,7 @@
 
 use std::time::Instant;
 
+use crate::support::{CpuClock, cpu_time};
 use anyhow::{Context, Result};
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_raster::{IdPass, PixelRect};
@@ -20,7 +21,7 @@ use vtfarm_vertex::{PixelValue, Quality, VertexSettings, reflector_bounds};
 use super::CockpitJob;
 
 #[derive(clap::Args)]
-pub(crate) struct RasterArgs {
+pub struct RasterArgs {
     #[arg(long, default_value_t = 1920)]
     width: u32,
     #[arg(long, default_value_t = 1080)]
@@ -108,13 +109,17 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
             let setup = least(&|| drop(renderer.id_buffers(&job.setup)));
             // The same in CPU time per set-up over a few rounds: what the
             // set-up costs a busy machine's cores, whatever else runs.
-            let setup_cpu = process_cpu_seconds().map(|before| {
-                let rounds = args.rounds.max(1) * 2;
-                for _ in 0..rounds {
-                    pool.install(|| drop(renderer.id_buffers(&job.setup)));
-                }
-                process_cpu_seconds().map_or(f64::NAN, |after| (after - before) / f64::from(rounds))
-            });
+            let setup_cpu = cpu_time(CpuClock::Process)
+                .map(|t| t.as_secs_f64())
+                .map(|before| {
+                    let rounds = args.rounds.max(1) * 2;
+                    for _ in 0..rounds {
+                        pool.install(|| drop(renderer.id_buffers(&job.setup)));
+                    }
+                    cpu_time(CpuClock::Process)
+                        .map(|t| t.as_secs_f64())
+                        .map_or(f64::NAN, |after| (after - before) / f64::from(rounds))
+                });
             // A worker's three buffers (frame, behind the glass, the slab's
             // back) rasterized one by one and together, rounds interleaved
             // so that both see the same machine.
@@ -184,17 +189,4 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
 
 fn pixels(r: PixelRect) -> u64 {
     u64::from(r.x1 - r.x0) * u64::from(r.y1 - r.y0)
-}
-
-/// This process's CPU time (user and system, all threads) from
-/// `/proc/self/stat`, in 10-ms ticks; `None` where there is no such file.
-fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // The fields after the command name (which may hold spaces), from the
-    // third on: utime and stime are the 14th and 15th.
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let mut fields = rest.split(' ').skip(11);
-    let utime: u64 = fields.next()?.parse().ok()?;
-    let stime: u64 = fields.next()?.parse().ok()?;
-    Some((utime + stime) as f64 / 100.0)
 }

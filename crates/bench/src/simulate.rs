@@ -47,12 +47,13 @@ use super::farm::{
     FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, cpu_per_frame, simulate_farm,
     steady_background_cores, steady_frame_seconds,
 };
+use crate::support::{CpuClock, cpu_time};
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
 
 #[derive(clap::Args)]
-pub(crate) struct SimulateArgs {
+pub struct SimulateArgs {
     /// Worker counts to simulate.
     #[arg(long, value_delimiter = ',', default_values_t = [1usize, 2, 4, 8, 16, 32, 64])]
     workers: Vec<usize>,
@@ -123,7 +124,7 @@ pub(crate) struct SimulateArgs {
     #[arg(long, default_value_t = 1080)]
     height: u32,
     /// Quality level of the recorded frame.
-    #[arg(long, value_parser = crate::shared::parse_quality, default_value = "full")]
+    #[arg(long, value_parser = crate::support::parse_quality, default_value = "full")]
     quality: Quality,
     /// Cockpit detail (1.0 ≈ 100k triangles).
     #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
@@ -194,25 +195,6 @@ impl Recording {
     }
 }
 
-/// This thread's CPU time so far (`CLOCK_THREAD_CPUTIME_ID`); `None` where
-/// the system has no such clock.
-#[cfg(unix)]
-fn thread_cpu_time() -> Option<Duration> {
-    let mut t = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `clock_gettime` writes one `timespec` through the pointer,
-    // which points at a live, writable local.
-    let status = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
-    (status == 0).then(|| Duration::new(t.tv_sec as u64, t.tv_nsec as u32))
-}
-
-#[cfg(not(unix))]
-fn thread_cpu_time() -> Option<Duration> {
-    None
-}
-
 /// Times work by the CPU time of the thread that runs it: a cost recorded
 /// on a machine busy with other work is the CPU the work needs, not the
 /// wall time it happened to get (timed by the wall clock, the costs grew
@@ -226,14 +208,14 @@ struct CpuStopwatch {
 impl CpuStopwatch {
     fn start() -> CpuStopwatch {
         CpuStopwatch {
-            cpu: thread_cpu_time(),
+            cpu: cpu_time(CpuClock::Thread),
             wall: Instant::now(),
         }
     }
 
     /// CPU time of this thread since `start` (which must have run on it).
     fn elapsed(&self) -> Duration {
-        match (self.cpu, thread_cpu_time()) {
+        match (self.cpu, cpu_time(CpuClock::Thread)) {
             (Some(from), Some(to)) => to.saturating_sub(from),
             _ => self.wall.elapsed(),
         }

@@ -8,9 +8,12 @@ use std::time::Duration;
 
 use tokio::sync::mpsc;
 use vtfarm_proto::{
-    HandshakePolicy, Hello, Link, MAX_HANDSHAKE_BYTES, MasterIdentity, Message, PROTOCOL_VERSION,
-    ProtoError, Refusal, RefuseCode, Role, SERVER_NAME, SESSION_LIMIT, client_config,
-    client_handshake, encode_message, read_message, server_config, server_handshake,
+    HandshakePolicy, Hello, MAX_HANDSHAKE_BYTES, Message, PROTOCOL_VERSION, Refusal, RefuseCode,
+    Role, SESSION_LIMIT, encode_message,
+};
+use vtfarm_transport::{
+    Link, MasterIdentity, ProtoError, SERVER_NAME, client_config, client_handshake, read_message,
+    server_config, server_handshake,
 };
 
 const TOKEN: &str = "0123456789abcdef0123456789abcdef";
@@ -132,7 +135,7 @@ impl Server {
             Outcome::Handshake(Ok(seen)) => assert_eq!(seen, hello),
             other => panic!("expected an accepted Hello, got {other:?}"),
         }
-        conn.close(vtfarm_proto::CLOSE_NORMAL, b"done");
+        conn.close(vtfarm_transport::CLOSE_NORMAL, b"done");
     }
 
     /// Expects the server to have refused the last connection with `code`.
@@ -152,7 +155,7 @@ async fn check_closed_with(conn: &quinn::Connection, code: RefuseCode) -> String
         .expect("the master closes the connection");
     match closed {
         quinn::ConnectionError::ApplicationClosed(close) => {
-            assert_eq!(close.error_code, code.close_code(), "{close:?}");
+            assert_eq!(close.error_code, code.close_code().into(), "{close:?}");
             String::from_utf8_lossy(&close.reason).into_owned()
         }
         other => panic!("expected an application close with {code:?}, got {other:?}"),
@@ -292,7 +295,8 @@ async fn raw_first_message(conn: &quinn::Connection, client: BadClient) -> Refus
         Ok(other) => panic!("expected Refused, got {other:?}"),
         Err(e) => match conn.close_reason() {
             Some(quinn::ConnectionError::ApplicationClosed(close)) => {
-                RefuseCode::from_close_code(close.error_code).expect("a refusal close code")
+                RefuseCode::from_close_code(close.error_code.into_inner())
+                    .expect("a refusal close code")
             }
             other => panic!("no refusal: {e}, close reason {other:?}"),
         },
@@ -369,14 +373,14 @@ async fn one_endpoint_survives_every_bad_client_in_turn() {
 #[tokio::test]
 async fn a_wrong_fingerprint_is_not_worth_retrying() {
     let server = Server::start();
-    let options = vtfarm_proto::client::ClientOptions {
+    let options = vtfarm_transport::client::ClientOptions {
         master: server.addr.to_string(),
         token: TOKEN.to_owned(),
         fingerprint: "ab".repeat(32),
     };
     let error = tokio::time::timeout(
         PATIENCE,
-        vtfarm_proto::client::connect(&options, Role::Submitter),
+        vtfarm_transport::client::connect(&options, Role::Submitter),
     )
     .await
     .expect("TLS finishes in time")

@@ -9,7 +9,9 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tracing::{debug, warn};
 
-use crate::{MAX_MESSAGE_BYTES, Message, ProtoError, RefuseCode, encode_message, read_message};
+use vtfarm_proto::{FrameError, Message, RefuseCode, StatusReply, encode_message};
+
+use crate::stream::{ProtoError, read_message};
 
 /// One end of a message link.
 #[derive(Debug)]
@@ -38,7 +40,7 @@ impl Link {
     /// Asks the master for its status (a submitter's link): sends
     /// `StatusRequest` and waits for the `StatusReply`, skipping other
     /// messages; `None` once the link is down.
-    pub async fn status(&mut self) -> Option<crate::StatusReply> {
+    pub async fn status(&mut self) -> Option<StatusReply> {
         self.tx.send(Message::StatusRequest).ok()?;
         loop {
             if let Message::StatusReply(reply) = self.rx.recv().await? {
@@ -72,14 +74,16 @@ impl Link {
     ) -> Link {
         Link::with_read_error(recv, send, limit, move |e| {
             let code = match e {
-                ProtoError::TooLarge { .. } => RefuseCode::TooLarge,
-                ProtoError::Decode(_) | ProtoError::Truncated { .. } => RefuseCode::BadMessage,
+                ProtoError::Frame(FrameError::TooLarge { .. }) => RefuseCode::TooLarge,
+                ProtoError::Frame(FrameError::Decode(_) | FrameError::Truncated { .. }) => {
+                    RefuseCode::BadMessage
+                }
                 _ => return,
             };
             warn!(%peer, ?code, "closing the connection: {e}");
             let reason = e.to_string();
             connection.close(
-                code.close_code(),
+                quinn::VarInt::from_u32(code.close_code()),
                 crate::truncate_utf8(&reason, crate::handshake::MAX_REASON_BYTES).as_bytes(),
             );
         })
@@ -144,6 +148,3 @@ impl Link {
             .map(ToString::to_string)
     }
 }
-
-/// The default limit for session messages.
-pub const SESSION_LIMIT: u32 = MAX_MESSAGE_BYTES;

@@ -42,6 +42,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
@@ -50,7 +51,6 @@ use vtfarm_proto::{
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_vertex::SparseBitmap;
 use vtfarm_worker::{SceneStore, Task, WorkerSession};
 
@@ -430,7 +430,7 @@ impl<'a> Farm<'a> {
             costs,
             config,
             now: Duration::ZERO,
-            master: MasterCore::new(SchedulerConfig::default()),
+            master: MasterCore::new(FarmRules::default()),
             workers: Vec::new(),
             cores,
             cpu: Vec::new(),
@@ -1111,7 +1111,7 @@ mod tests {
         let mut last = (0.0, 0.0);
         for cores in [0.3, 0.9, 1.5] {
             let threads =
-                crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, cores)
+                crate::simulate::background_threads_for(&job, &costs, &shared, &farm, cores)
                     .unwrap();
             let config = FarmConfig {
                 background_threads: threads,
@@ -1130,8 +1130,7 @@ mod tests {
             );
             last = (threads, seconds);
         }
-        let none =
-            crate::bench::simulate::background_threads_for(&job, &costs, &shared, &farm, 0.0);
+        let none = crate::simulate::background_threads_for(&job, &costs, &shared, &farm, 0.0);
         assert_eq!(none.unwrap(), 0.0);
     }
 

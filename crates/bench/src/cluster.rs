@@ -17,21 +17,20 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::CockpitConfig;
+use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
 use vtfarm_method::MethodKind;
-use vtfarm_proto::client::{ClientOptions, connect};
-use vtfarm_proto::{
-    CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, FrameStats, HandshakePolicy, Link, Role, SceneData,
-};
+use vtfarm_proto::{FrameStats, HandshakePolicy, Role, SceneData};
 use vtfarm_render::FrameSetup;
-use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_transport::client::{ClientOptions, connect};
+use vtfarm_transport::{CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, Link};
 use vtfarm_vertex::Quality;
 use vtfarm_worker::{DrainSignal, Engine, WorkerConfig, run_worker};
 
 use super::{CockpitJob, write_json};
 
 #[derive(clap::Args)]
-pub(crate) struct ClusterArgs {
+pub struct ClusterArgs {
     #[arg(long, default_value_t = 640)]
     width: u32,
     #[arg(long, default_value_t = 360)]
@@ -39,7 +38,7 @@ pub(crate) struct ClusterArgs {
     /// Frames of the job (the first one includes the workers' BVH builds).
     #[arg(long, default_value_t = 3)]
     frames: usize,
-    #[arg(long, value_parser = crate::shared::parse_quality, default_value = "full")]
+    #[arg(long, value_parser = crate::support::parse_quality, default_value = "full")]
     quality: Quality,
     /// Cockpit detail (1.0 ≈ 100k triangles).
     #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
@@ -94,7 +93,7 @@ pub(crate) fn run(args: ClusterArgs) -> Result<()> {
     if args.frames == 0 || args.threads == 0 {
         bail!("--frames and --threads must be at least 1");
     }
-    crate::shared::set_threads(Some(args.threads))?;
+    crate::support::set_threads(Some(args.threads))?;
     let job = CockpitJob::new(args.detail, args.width, args.height, args.quality)?;
     // Frame k moves the eye k centimetres to the right and half that up.
     let setups: Vec<FrameSetup> = (0..args.frames)
@@ -108,7 +107,7 @@ pub(crate) fn run(args: ClusterArgs) -> Result<()> {
         .prefix("vtfarm-bench-cluster-")
         .tempdir()
         .context("creating a temporary directory")?;
-    let runtime = crate::shared::runtime()?;
+    let runtime = crate::support::runtime()?;
     let mut runs = Vec::new();
     for workers in [1, 2] {
         eprintln!(
@@ -182,7 +181,7 @@ async fn run_farm(
     let address = endpoint.local_addr()?;
     let cluster = ClusterConfig::generate(&address.to_string(), &identity)?;
     cluster.save(&dir.join(CLUSTER_FILE))?;
-    let (master, master_task) = spawn_master(SchedulerConfig::default());
+    let (master, master_task) = spawn_master(FarmRules::default());
     let server_task = tokio::spawn(server::serve(
         endpoint.clone(),
         HandshakePolicy::new(cluster.token.clone(), "bench"),

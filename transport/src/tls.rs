@@ -11,9 +11,9 @@
 //!
 //! Transport settings, the same on both ends: the client sends a keep-alive
 //! every [`KEEP_ALIVE_INTERVAL`] (the master too), and a connection that
-//! hears nothing for [`IDLE_TIMEOUT`] is dead; so a worker busy tracing
-//! stays connected, and a vanished machine (master or worker) is noticed
-//! within the master's heartbeat timeout, which the idle timeout matches.
+//! hears nothing for [`vtfarm_proto::PEER_TIMEOUT`] is dead; so a worker busy
+//! tracing stays connected, and a vanished machine (master or worker) is
+//! noticed when the master's scheduler gives up on it (the same timeout).
 
 use std::fs;
 use std::io::Write;
@@ -27,17 +27,17 @@ use rustls::crypto::CryptoProvider;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer, PrivatePkcs8KeyDer, ServerName, UnixTime};
 use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
+use vtfarm_proto::PEER_TIMEOUT;
 
 /// The ALPN protocol both ends require.
 pub const ALPN: &[u8] = b"vtfarm/1";
 /// The server name clients connect with; always in the certificate's SANs
 /// (the pin, not the name, is what is checked).
 pub const SERVER_NAME: &str = "vtfarm-master";
-/// How often each end sends a QUIC PING when it has nothing else to send.
+/// How often each end sends a QUIC PING when it has nothing else to send:
+/// several times per idle timeout, so a lost PING or two closes nothing.
 pub const KEEP_ALIVE_INTERVAL: Duration = Duration::from_secs(1);
-/// A connection that hears nothing for this long is closed: the scheduler's
-/// default heartbeat timeout, so both ends give up on a peer at the same time.
-pub const IDLE_TIMEOUT: Duration = Duration::from_secs(10);
+const _: () = assert!(KEEP_ALIVE_INTERVAL.as_millis() * 5 <= PEER_TIMEOUT.as_millis());
 /// The certificate's file name in the master's state directory.
 pub const CERT_FILE: &str = "master.crt.der";
 /// The private key's file name (PKCS #8 DER, mode 0600 on unix).
@@ -261,7 +261,7 @@ fn transport() -> Arc<quinn::TransportConfig> {
     let mut transport = quinn::TransportConfig::default();
     transport.keep_alive_interval(Some(KEEP_ALIVE_INTERVAL));
     transport.max_idle_timeout(Some(
-        quinn::IdleTimeout::try_from(IDLE_TIMEOUT).expect("10 s fits QUIC's idle timeout range"),
+        quinn::IdleTimeout::try_from(PEER_TIMEOUT).expect("10 s fits QUIC's idle timeout range"),
     ));
     Arc::new(transport)
 }

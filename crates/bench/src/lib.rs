@@ -1,14 +1,21 @@
-//! `vtfarm bench`: the paper's Table 1 on the built-in cockpit and the
-//! tracer's ray throughput (`table1`), the load balancer on simulated farms
-//! driven by costs recorded from a real frame (`simulate`, see [`simulate`]),
-//! and a real QUIC farm on localhost (`cluster`, see [`cluster`]). Speed
-//! targets live here, not in tests.
+//! `vtfarm bench`, which the command-line program calls: the paper's
+//! Table 1 on the built-in cockpit and the tracer's ray throughput
+//! (`table1`), the load balancer on simulated farms driven by costs
+//! recorded from a real frame (`simulate`, see [`SimulateArgs`]), and a real
+//! QUIC farm on localhost (`cluster`, see [`ClusterArgs`]). Speed targets
+//! live here, not in tests.
 
 mod cluster;
 mod farm;
 mod raster;
 mod rays;
 mod simulate;
+pub mod support;
+
+pub use cluster::ClusterArgs;
+pub use raster::RasterArgs;
+pub use rays::RaysArgs;
+pub use simulate::SimulateArgs;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -21,7 +28,7 @@ use vtfarm_trace::{SceneBvh, TraceSettings};
 use vtfarm_vertex::{Quality, VertexSettings};
 
 #[derive(clap::Subcommand)]
-pub(crate) enum BenchCommand {
+pub enum BenchCommand {
     /// Reproduces the paper's Table 1: reference, preview, refine and full on the cockpit.
     Table1(Table1Args),
     /// The scheduler on simulated farms (1 to 64 workers, 10/100 Mbit links),
@@ -38,7 +45,7 @@ pub(crate) enum BenchCommand {
 }
 
 #[derive(clap::Args)]
-pub(crate) struct Table1Args {
+pub struct Table1Args {
     #[arg(long, default_value_t = 1920)]
     width: u32,
     #[arg(long, default_value_t = 1080)]
@@ -111,7 +118,7 @@ struct Table1 {
     incoherent_rays_per_second: f64,
 }
 
-pub(crate) fn run(command: BenchCommand) -> Result<()> {
+pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Table1(args) => table1(args),
         BenchCommand::Simulate(args) => simulate::run(args),
@@ -122,7 +129,7 @@ pub(crate) fn run(command: BenchCommand) -> Result<()> {
 }
 
 fn table1(args: Table1Args) -> Result<()> {
-    crate::shared::set_threads(args.threads)?;
+    crate::support::set_threads(args.threads)?;
     let c = cockpit(&CockpitConfig {
         detail: args.detail,
         ..CockpitConfig::default()
@@ -380,7 +387,7 @@ impl CockpitJob {
 
 /// Writes a bench table as JSON and says so.
 fn write_json(path: &std::path::Path, value: &impl Serialize) -> Result<()> {
-    crate::shared::write_json(path, value)?;
+    crate::support::write_json(path, value)?;
     println!("wrote {}", path.display());
     Ok(())
 }

@@ -14,8 +14,6 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
-use subtle::ConstantTimeEq;
 
 use crate::tls::{MasterIdentity, parse_fingerprint};
 
@@ -191,15 +189,6 @@ impl ClusterConfig {
     }
 }
 
-/// Whether a presented token equals the expected one, in time independent
-/// of where they differ: both are hashed first, so their lengths do not
-/// leak either, and the equal-length digests are compared in constant time.
-pub fn token_matches(expected: &str, presented: &str) -> bool {
-    let expected = Sha256::digest(expected.as_bytes());
-    let presented = Sha256::digest(presented.as_bytes());
-    expected.ct_eq(&presented).into()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -280,16 +269,6 @@ mod tests {
             missing.starts_with("/nonexistent/cluster.toml: "),
             "{missing}"
         );
-    }
-
-    #[test]
-    fn tokens_match_only_when_equal() {
-        let token = "ab".repeat(32);
-        assert!(token_matches(&token, &token.clone()));
-        assert!(!token_matches(&token, &"ab".repeat(31)));
-        assert!(!token_matches(&token, ""));
-        assert!(!token_matches(&token, &format!("{token}x")));
-        assert!(token_matches("", ""));
     }
 
     #[test]

@@ -17,6 +17,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::support::{CpuClock, cpu_time};
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -26,7 +27,7 @@ use vtfarm_scene::{Camera, Scene};
 use vtfarm_trace::{BuildPreset, BvhLayout, BvhOptions, Ray, SceneBvh, reflect};
 
 #[derive(clap::Args)]
-pub(crate) struct RaysArgs {
+pub struct RaysArgs {
     /// An OBJ file, or `cockpit` for the built-in cockpit (default detail).
     scene: String,
     /// Camera position (default for `cockpit`: the driver's eye).
@@ -77,22 +78,39 @@ pub(crate) struct RaysArgs {
     dump_rays: Option<PathBuf>,
 }
 
-fn parse_preset(s: &str) -> Result<BuildPreset, String> {
+/// A `--preset` or `--layout` value that names none of the choices.
+#[derive(Debug, thiserror::Error)]
+#[error("unknown {what} '{given}' ({choices})")]
+struct UnknownChoice {
+    what: &'static str,
+    given: String,
+    choices: String,
+}
+
+fn parse_preset(s: &str) -> Result<BuildPreset, UnknownChoice> {
     BuildPreset::ALL
         .into_iter()
         .find(|p| p.name() == s)
         .ok_or_else(|| {
             let names: Vec<_> = BuildPreset::ALL.iter().map(|p| p.name()).collect();
-            format!("unknown preset '{s}' ({})", names.join(", "))
+            UnknownChoice {
+                what: "preset",
+                given: s.to_owned(),
+                choices: names.join(", "),
+            }
         })
 }
 
-fn parse_layout(s: &str) -> Result<BvhLayout, String> {
+fn parse_layout(s: &str) -> Result<BvhLayout, UnknownChoice> {
     match s {
         "cw" => Ok(BvhLayout::Cw),
         "cw-octant" => Ok(BvhLayout::CwOctant),
         "binary" => Ok(BvhLayout::Binary),
-        _ => Err(format!("unknown layout '{s}' (cw, cw-octant, binary)")),
+        _ => Err(UnknownChoice {
+            what: "layout",
+            given: s.to_owned(),
+            choices: "cw, cw-octant, binary".to_owned(),
+        }),
     }
 }
 
@@ -123,7 +141,7 @@ struct RaysFigures {
 const ROUNDS: usize = 3;
 
 pub(crate) fn run(args: RaysArgs) -> Result<()> {
-    crate::shared::set_threads(Some(args.threads))?;
+    crate::support::set_threads(Some(args.threads))?;
     let (scene, camera) = load(&args)?;
     let reflector = scene.object_id(&args.reflector).with_context(|| {
         format!(
@@ -444,19 +462,10 @@ pub(super) fn rays_per_second(bvhs: &[&SceneBvh], rays: &[Ray], batch: Batch) ->
         .collect()
 }
 
-/// CPU time of this process so far, all threads (Linux: the sum of
-/// `/proc/self/task/*/schedstat`, nanoseconds; elsewhere 0, so CPU figures
-/// read as unmeasured).
+/// CPU time of this process so far, all threads, in seconds; 0 where
+/// there is no process clock, so CPU figures read as unmeasured.
 fn cpu_seconds() -> f64 {
-    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    let nanos: u64 = tasks
-        .flatten()
-        .filter_map(|task| std::fs::read_to_string(task.path().join("schedstat")).ok())
-        .filter_map(|stat| stat.split_whitespace().next()?.parse::<u64>().ok())
-        .sum();
-    nanos as f64 * 1e-9
+    cpu_time(CpuClock::Process).map_or(0.0, |t| t.as_secs_f64())
 }
 
 /// How the rays are handed to the tracer.

@@ -1,6 +1,6 @@
 //! The master's logic without sockets or clock: connections and messages in,
-//! messages and closes out, around the pure `Scheduler`. The async driver
-//! (`driver.rs`) feeds it; tests can drive it directly.
+//! messages and closes out, around the pure `Scheduler`. The server crate's
+//! async driver (`vtfarm_master::driver`) feeds it; tests drive it directly.
 //!
 //! Per frame it sends `FrameStart` to every worker first and then asks the
 //! driver to rasterize the base frame and ID buffer
@@ -8,7 +8,8 @@
 //! that arrive before it are held until it is there (and reported to the
 //! scheduler as arrived, so they are not taken for stragglers). Frames are
 //! pipelined: the scheduler starts frame N+1 as soon as frame N has nothing
-//! left to hand out, so two frames may be assembled at once. It hands out the
+//! left to hand out, so up to `vtfarm_proto::FRAMES_IN_FLIGHT` frames are
+//! assembled at once (the [`FarmRules`]). It hands out the
 //! scheduler's packages, composites each accepted result over the base frame
 //! and sends the finished frame to the submitter. A result that writes a
 //! pixel its package does not own in the frame's ID buffer (pixel ownership)
@@ -32,12 +33,14 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
-    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
-    WorkerId, WorkerState,
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, WorkerId,
+    WorkerState,
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
-use crate::journal::{Record, StoredJob};
+use crate::error::{JobRejected, ResultRejected};
+use crate::record::{Record, StoredJob};
+use crate::rules::FarmRules;
 use crate::telemetry::Telemetry;
 use crate::view::{ViewError, ViewRequest, ViewSource, Views};
 
@@ -119,8 +122,8 @@ impl std::fmt::Debug for SpareBase {
     }
 }
 
-/// Spare base-frame buffers kept: as many as frames are assembled at once
-/// (two while pipelined).
+/// Spare base-frame buffers kept: two pairs (a 1080p image and ID buffer are
+/// about 33 MB); base frames beyond them rasterize into fresh buffers.
 const SPARE_BASES: usize = 2;
 
 /// How long a persistent master keeps a job whose submitter is gone (and a
@@ -233,15 +236,12 @@ impl Assembled {
         bitmap: WireBitmap,
         ids: &IdBuffer,
         owned: impl Fn(TriangleId) -> bool,
-    ) -> Result<ResultPixels, String> {
+    ) -> Result<ResultPixels, ResultRejected> {
         let (width, height) = (self.color().width, self.color().height);
-        let malformed = |e: vtfarm_proto::WireError| format!("malformed result: {e}");
-        let foreign = |(x, y): (u32, u32)| {
-            format!("result writes pixel ({x}, {y}), which its package does not own")
-        };
+        let foreign = |(x, y): (u32, u32)| ResultRejected::ForeignPixel { x, y };
         match self {
             Assembled::Color(_) => {
-                let colors = bitmap.colors_within(width, height).map_err(malformed)?;
+                let colors = bitmap.colors_within(width, height)?;
                 // The ID buffer is the frame's size: every index is in it.
                 match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
                     Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
@@ -249,9 +249,7 @@ impl Assembled {
                 }
             }
             Assembled::Components(_) => {
-                let bitmap = bitmap
-                    .into_bitmap_within(width, height)
-                    .map_err(malformed)?;
+                let bitmap = bitmap.into_bitmap_within(width, height)?;
                 match bitmap.foreign_pixel(ids, owned) {
                     Some(pixel) => Err(foreign(pixel)),
                     None => Ok(ResultPixels::Bitmap(bitmap)),
@@ -328,11 +326,9 @@ pub struct MasterCore {
 }
 
 impl MasterCore {
-    pub fn new(config: SchedulerConfig) -> Self {
+    pub fn new(rules: FarmRules) -> Self {
         MasterCore {
-            // Workers set each frame up before they ask for its work, and
-            // keep FRAMES_IN_FLIGHT frames prepared (see worker::session).
-            scheduler: Scheduler::new(farm_config(config)),
+            scheduler: Scheduler::new(rules.scheduler_config()),
             peers: BTreeMap::new(),
             scenes: BTreeMap::new(),
             jobs: BTreeMap::new(),
@@ -352,12 +348,12 @@ impl MasterCore {
         }
     }
 
-    /// A core that journals its jobs (see `journal.rs`) and keeps a job
+    /// A core that journals its jobs (`Output::Persist`) and keeps a job
     /// whose submitter went away for [`ATTACH_GRACE`].
-    pub fn persistent(config: SchedulerConfig) -> Self {
+    pub fn persistent(rules: FarmRules) -> Self {
         MasterCore {
             persistent: true,
-            ..MasterCore::new(config)
+            ..MasterCore::new(rules)
         }
     }
 
@@ -593,9 +589,12 @@ impl MasterCore {
             Ok(b) => b,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = result.id, "{error}");
-                let _ = self
-                    .scheduler
-                    .package_failed(now, worker, PackageId(result.id), error);
+                let _ = self.scheduler.package_failed(
+                    now,
+                    worker,
+                    PackageId(result.id),
+                    error.to_string(),
+                );
                 return;
             }
         };
@@ -682,7 +681,7 @@ impl MasterCore {
         let id = self.next_job;
         let frames = job.frames.len() as u32;
         if let Err(e) = self.queue_job(now, id, job, Some(conn), 0) {
-            return self.refuse_job(conn, e);
+            return self.refuse_job(conn, e.to_string());
         }
         self.next_job += 1;
         self.remember_for_view(id);
@@ -707,31 +706,31 @@ impl MasterCore {
         mut job: WireJob,
         submitter: Option<ConnId>,
         resume_from: u32,
-    ) -> Result<(), String> {
+    ) -> Result<(), JobRejected> {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
         };
         if let JobScene::Data(data) = std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash))
         {
-            let scene = data.to_scene().map_err(|e| format!("bad scene: {e}"))?;
+            let scene = data.to_scene().map_err(JobRejected::BadScene)?;
             (self.scenes.entry(scene_hash)).or_insert_with(|| (Arc::new(scene), Arc::new(data)));
         }
         let scene = match self.scenes.get(&scene_hash) {
             Some((scene, _)) => scene.clone(),
-            None => return Err("the job's scene is unknown".into()),
+            None => return Err(JobRejected::UnknownScene),
         };
         check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
-            .map_err(|e| e.to_string())?;
+            .map_err(JobRejected::BadReflectors)?;
         if job.reflectors.is_empty() || job.frames.is_empty() {
-            return Err("a job needs reflectors and at least one frame".into());
+            return Err(JobRejected::Empty);
         }
         if job.aux && job.image != WireImageFormat::LinearF32 {
-            return Err("a job with components (aux) needs linear frames".into());
+            return Err(JobRejected::ComponentsNeedLinearFrames);
         }
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
-        let frames = frames.map_err(|e| format!("bad frame set-up: {e}"))?;
+        let frames = frames.map_err(JobRejected::BadFrame)?;
         let reflectors = morton_order(&scene, job.reflectors);
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
@@ -774,7 +773,7 @@ impl MasterCore {
         let submitted = self.scheduler.submit_job(now, JobId(id), work);
         submitted.map_err(|e| {
             self.jobs.remove(&id);
-            e.to_string()
+            JobRejected::from(e)
         })
     }
 
@@ -1202,7 +1201,7 @@ impl MasterCore {
         let queued = self.queue_job(now, id, planned.job.clone(), None, 0);
         if let Err(e) = queued {
             self.pump();
-            return Err(ViewError::Queue(e));
+            return Err(ViewError::Queue(e.to_string()));
         }
         self.next_job += 1;
         // Nobody attaches to a view's job: it is not orphaned.
@@ -1327,16 +1326,6 @@ impl MasterCore {
             },
             scene_bytes_sent: self.scene_bytes_sent,
         }
-    }
-}
-
-/// The master's scheduler rules: the farm's, with no more frames in flight
-/// than a worker keeps prepared.
-fn farm_config(config: SchedulerConfig) -> SchedulerConfig {
-    let config = config.farm();
-    SchedulerConfig {
-        frames_in_flight: (config.frames_in_flight).min(vtfarm_proto::FRAMES_IN_FLIGHT as u32),
-        ..config
     }
 }
 

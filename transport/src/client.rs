@@ -6,9 +6,9 @@ use std::time::Duration;
 
 use tokio::net::lookup_host;
 
-use crate::{
-    Hello, Link, ProtoError, Role, SERVER_NAME, SESSION_LIMIT, client_config, client_handshake,
-};
+use vtfarm_proto::{Hello, Role, SESSION_LIMIT};
+
+use crate::{Link, ProtoError, SERVER_NAME, client_config, client_handshake};
 
 /// Where and who to connect as.
 #[derive(Clone, Debug)]

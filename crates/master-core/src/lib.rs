@@ -1,0 +1,27 @@
+//! The farm master's logic, free of I/O: connections, messages and the
+//! driver's results in; messages, closes, journal records and base frames to
+//! rasterize out ([`Output`]), around the pure `vtfarm-scheduler` state
+//! machine. It reads no clock (every input carries `now`), opens no socket
+//! or file and starts no thread; the server crate (`vtfarm-master`: driver,
+//! QUIC server, HTTP, journal) runs it.
+//!
+//! - [`MasterCore`]: jobs, packages, compositing, status.
+//! - [`FarmRules`]: the scheduling rules a master runs.
+//! - [`JobRejected`], [`ResultRejected`]: why it turns a job or a result away.
+//! - [`record`]: what the core asks the journal to keep and reads back.
+//! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
+//! - [`view`]: the interactive view (move the eye, progressive stages, glare).
+
+mod core;
+mod error;
+pub mod record;
+mod rules;
+pub mod telemetry;
+pub mod view;
+
+pub use crate::core::{
+    ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
+};
+pub use error::{JobRejected, ResultRejected};
+pub use record::{Record, StoredJob};
+pub use rules::FarmRules;
