@@ -316,12 +316,16 @@ struct Kept {
     repairs: BTreeMap<u64, (u64, u32)>,
     /// Jobs set aside as damaged, with why: an attach is told so.
     damaged: BTreeMap<u64, String>,
+    /// Jobs a record of which could not be written, with the last error:
+    /// a submitter attaching later is told too.
+    failed_writes: BTreeMap<u64, String>,
 }
 
 impl Kept {
     /// A job's records are gone (or set aside): so is what is kept of it.
     fn forget(&mut self, job: u64) {
         self.definitions.remove(&job);
+        self.failed_writes.remove(&job);
         self.unjournaled.retain(|&(j, _), _| j != job);
     }
 }
@@ -403,7 +407,13 @@ impl MasterCore {
             self.completed.insert(stored.id, (stored.frames_done, now));
             return;
         }
-        let queued = self.queue_job(now, stored.id, stored.job, BTreeSet::new(), stored.frames_done);
+        let queued = self.queue_job(
+            now,
+            stored.id,
+            stored.job,
+            BTreeSet::new(),
+            stored.frames_done,
+        );
         if let Err(e) = queued {
             let reason = format!("cannot resume job {}: {e}", stored.id);
             warn!(job = stored.id, "{reason}; setting it aside");
@@ -851,6 +861,9 @@ impl MasterCore {
         };
         info!(job, conn, from_frame, "submitter attached");
         self.send(conn, Message::JobAccepted { job, frames });
+        if let Some(error) = self.kept.failed_writes.get(&job).cloned() {
+            self.send(conn, Message::JournalFailed { job, error });
+        }
         self.replay(conn, job, from_frame..done);
     }
 
@@ -1359,6 +1372,7 @@ impl MasterCore {
                 });
                 let error = format!("{error}{kept}");
                 self.telemetry.last_journal_error = Some(error.clone());
+                (self.kept.failed_writes).insert(written.job, error.clone());
                 let submitters = (self.jobs.get(&written.job)).map(|j| j.submitters.clone());
                 let message = Message::JournalFailed {
                     job: written.job,
@@ -1373,7 +1387,14 @@ impl MasterCore {
     /// The driver could not read frame `frame` of `job` back from the
     /// journal for `conn` (`error` says why): the frame is rendered again
     /// and `conn` gets it then, or `conn` is told it cannot have it.
-    pub fn replay_failed(&mut self, now: Duration, conn: ConnId, job: u64, frame: u32, error: String) {
+    pub fn replay_failed(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        job: u64,
+        frame: u32,
+        error: String,
+    ) {
         self.now = now;
         warn!(job, frame, "a finished frame cannot be read back: {error}");
         if let Some(done) = self.kept.unjournaled.get(&(job, frame)).cloned() {
@@ -1408,7 +1429,13 @@ impl MasterCore {
     }
 
     /// Queues a job of the one frame `frame` of `job`, for `conn`.
-    fn render_again(&mut self, now: Duration, conn: ConnId, job: u64, frame: u32) -> Result<(), String> {
+    fn render_again(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        job: u64,
+        frame: u32,
+    ) -> Result<(), String> {
         let mut definition = (self.kept.definitions.get(&job).cloned())
             .ok_or_else(|| format!("the master no longer keeps job {job}"))?;
         let setup = (definition.frames.get(frame as usize).cloned())

@@ -294,7 +294,9 @@ async fn run(
                                 let _ = c.tx.send(Message::FrameDone(done));
                             }
                             // Rendered again, or the submitter is told it is lost.
-                            Err(e) => core.replay_failed(start.elapsed(), conn, job, frame, e.to_string()),
+                            Err(e) => {
+                                core.replay_failed(start.elapsed(), conn, job, frame, e.to_string())
+                            }
                         }
                     }
                 }

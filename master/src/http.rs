@@ -296,7 +296,8 @@ pub fn host_allowed(host: &str, access: &HttpAccess) -> bool {
         return ip.to_canonical().is_loopback()
             || listen.is_some_and(|l| l.is_unspecified() || l == ip.to_canonical());
     }
-    (access.allowed_hosts.iter()).any(|allowed| allowed.trim_end_matches('.').eq_ignore_ascii_case(&name))
+    (access.allowed_hosts.iter())
+        .any(|allowed| allowed.trim_end_matches('.').eq_ignore_ascii_case(&name))
 }
 
 /// Refuses a request whose `Host` names another site (DNS rebinding). A

@@ -128,7 +128,11 @@ impl JournalWriter {
                         WriterInput::Write(record) => {
                             let (job, frame) = (record.job(), record.frame());
                             let outcome = journal.write(*record).map_err(|e| e.to_string());
-                            report(Written { job, frame, outcome });
+                            report(Written {
+                                job,
+                                frame,
+                                outcome,
+                            });
                         }
                         WriterInput::Flush(done) => {
                             let _ = done.send(());
@@ -619,7 +623,13 @@ impl Journal {
         let mut found: Vec<(u64, PathBuf)> = entries
             .filter_map(|e| {
                 let path = e.ok()?.path();
-                let id: u64 = path.file_name()?.to_str()?.split('.').next()?.parse().ok()?;
+                let id: u64 = path
+                    .file_name()?
+                    .to_str()?
+                    .split('.')
+                    .next()?
+                    .parse()
+                    .ok()?;
                 Some((id, path))
             })
             .collect();
@@ -662,7 +672,12 @@ impl Journal {
                 Err(e) => {
                     let path = self.frame_path(id, frames_done);
                     let aside = path.with_extension("damaged");
-                    warn!(job = id, frame = frames_done, "{e}: the frame is rendered again (the file is kept as {})", aside.display());
+                    warn!(
+                        job = id,
+                        frame = frames_done,
+                        "{e}: the frame is rendered again (the file is kept as {})",
+                        aside.display()
+                    );
                     if let Err(move_error) = std::fs::rename(&path, &aside) {
                         warn!(path = %path.display(), "cannot rename the damaged frame: {move_error}");
                     }
@@ -789,8 +804,14 @@ mod tests {
         // the writer says so.
         assert!(journal.frame(3, 20).is_err());
         assert!(journal.frame(3, 21).is_err());
-        let outcomes: Vec<_> = reports.try_iter().map(|w| (w.frame, w.outcome.is_ok())).collect();
-        assert_eq!(outcomes, [(Some(20), true), (None, true), (Some(21), false)]);
+        let outcomes: Vec<_> = reports
+            .try_iter()
+            .map(|w| (w.frame, w.outcome.is_ok()))
+            .collect();
+        assert_eq!(
+            outcomes,
+            [(Some(20), true), (None, true), (Some(21), false)]
+        );
     }
 
     #[test]
@@ -883,8 +904,15 @@ mod tests {
         std::fs::copy(journal.frame_path(1, 1), &path).unwrap();
         check(&std::fs::read(&path).unwrap(), "it holds frame 1 of job 1");
         std::fs::remove_file(&path).unwrap();
-        assert!(matches!(journal.frame(1, 0), Err(RecordError::Missing { .. })));
+        assert!(matches!(
+            journal.frame(1, 0),
+            Err(RecordError::Missing { .. })
+        ));
         std::fs::write(&path, &good).unwrap();
-        assert_eq!(journal.frame(1, 0).unwrap().frame, 0, "the good bytes read back");
+        assert_eq!(
+            journal.frame(1, 0).unwrap().frame,
+            0,
+            "the good bytes read back"
+        );
     }
 }

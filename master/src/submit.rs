@@ -83,8 +83,15 @@ impl FrameColor {
 /// What happens while a job runs, for progress displays.
 #[derive(Clone, Debug)]
 pub enum JobEvent<'a> {
-    Accepted { job: u64, frames: u32 },
-    Progress { frame: u32, done: u32, total: u32 },
+    Accepted {
+        job: u64,
+        frames: u32,
+    },
+    Progress {
+        frame: u32,
+        done: u32,
+        total: u32,
+    },
     FrameDone(&'a FinishedFrame),
     /// Something the user should know that does not end the job (a frame
     /// being rendered again, a record the master could not journal).
@@ -101,7 +108,11 @@ pub enum JobError {
     #[error("bad answer from the master: {0}")]
     Protocol(String),
     #[error("frame {frame} of job {job} cannot be delivered: {reason}")]
-    FrameLost { job: u64, frame: u32, reason: String },
+    FrameLost {
+        job: u64,
+        frame: u32,
+        reason: String,
+    },
     #[error(transparent)]
     Connect(#[from] ConnectError),
 }
@@ -241,7 +252,9 @@ impl JobFollower {
 
     /// The first frame not received yet (where an attach asks from).
     fn first_missing(&self) -> u32 {
-        (0..).find(|f| !self.frames.contains_key(f)).expect("fewer than 2^32 frames")
+        (0..)
+            .find(|f| !self.frames.contains_key(f))
+            .expect("fewer than 2^32 frames")
     }
 
     /// The frames in order.

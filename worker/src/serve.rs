@@ -15,9 +15,7 @@ use vtfarm_proto::{Link, Message, PackageId, PackageResult, SceneData, SceneHash
 use vtfarm_scene::Scene;
 use vtfarm_vertex::Stop;
 
-use crate::engine::{
-    ActiveFrame, Engine, FrameError, PackageError, PreparedFrames, SceneError,
-};
+use crate::engine::{ActiveFrame, Engine, FrameError, PackageError, PreparedFrames, SceneError};
 use crate::session::{FrameKey, SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 
 /// How long a drained worker waits for the master to close its side.

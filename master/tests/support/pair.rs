@@ -450,7 +450,11 @@ impl Pair {
                     .expect("only a persistent core persists");
                 let (job, frame) = (record.job(), record.frame());
                 let outcome = journal.write(record).map_err(|e| e.to_string());
-                let written = vtfarm_master::journal::Written { job, frame, outcome };
+                let written = vtfarm_master::journal::Written {
+                    job,
+                    frame,
+                    outcome,
+                };
                 self.master.journal_written(self.now, written);
             }
             Output::Replay { conn, job, frames } => {
@@ -465,7 +469,9 @@ impl Pair {
                             self.to_submitter.push(Message::FrameDone(done));
                         }
                         Ok(_) => {}
-                        Err(e) => (self.master).replay_failed(self.now, conn, job, frame, e.to_string()),
+                        Err(e) => {
+                            (self.master).replay_failed(self.now, conn, job, frame, e.to_string())
+                        }
                     }
                 }
             }

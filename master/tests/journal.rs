@@ -1,0 +1,445 @@
+//! The journal under damage, through the real submitter: a persistent
+//! master on 127.0.0.1 (QUIC), a local worker, and `run_remote_job` as
+//! `vtfarm submit --attach` runs it. A flipped byte in each record kind, a
+//! truncated, an emptied and a missing frame, a frame damaged while the
+//! master runs, a full disk, and two submitters on one job: every frame a
+//! submitter gets is byte-identical to a clean run's, or it fails with an
+//! error naming the job or frame; no job directory is deleted; every wait
+//! is bounded and ends on a protocol event.
+
+#[path = "support/frame.rs"]
+mod frame;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use frame::small_frame;
+use glam::Vec3;
+use tokio::task::JoinHandle;
+use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_master::journal::Storage;
+use vtfarm_master::{
+    FinishedFrame, JobError, JobEvent, JobOptions, Journal, MasterHandle, RemoteJob, local_worker,
+    run_remote_job, server, spawn_persistent_master, wire_job,
+};
+use vtfarm_method::MethodKind;
+use vtfarm_proto::client::ClientOptions;
+use vtfarm_proto::{ClusterConfig, HandshakePolicy, SceneData, WireJob};
+use vtfarm_render::FrameSetup;
+use vtfarm_scheduler::SchedulerConfig;
+use vtfarm_worker::WorkerConfig;
+
+/// Every wait on the network is bounded by this.
+const WAIT: Duration = Duration::from_secs(120);
+
+const FRAMES: usize = 4;
+
+/// The job every test runs: four small cockpit frames.
+fn job() -> (WireJob, SceneData) {
+    let c = cockpit(&CockpitConfig {
+        detail: 0.1,
+        ..CockpitConfig::default()
+    });
+    let setups: Vec<FrameSetup> = (0..FRAMES)
+        .map(|k| small_frame(&c, Vec3::new(0.01, 0.0, 0.0) * k as f32))
+        .collect();
+    let data = SceneData::from_scene(&c.scene);
+    let options = JobOptions {
+        method: MethodKind::VertexTracing,
+        aux: false,
+    };
+    let job = wire_job(
+        "journal",
+        &data,
+        &setups,
+        &c.cover_glass_triangles(),
+        options,
+    );
+    (job, data)
+}
+
+/// A store that fails frame writes with "No space left on device" while
+/// `full` is set, as a full disk does (job and scene records still fit).
+struct FullDisk {
+    full: AtomicBool,
+}
+
+impl Storage for FullDisk {
+    fn write_atomic(&self, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+        let is_frame = (path.file_name().and_then(|n| n.to_str()))
+            .is_some_and(|n| n.bytes().all(|b| b.is_ascii_digit()));
+        if is_frame && self.full.load(Ordering::SeqCst) {
+            return Err(std::io::Error::from_raw_os_error(libc::ENOSPC));
+        }
+        vtfarm_master::journal::Disk.write_atomic(path, bytes)
+    }
+}
+
+/// A persistent master on `state` with one local worker.
+struct Master {
+    handle: MasterHandle,
+    task: JoinHandle<()>,
+    endpoint: quinn::Endpoint,
+    options: ClientOptions,
+}
+
+impl Master {
+    fn start(state: &Path, storage: Option<Arc<dyn Storage>>) -> Master {
+        let identity = server::identity(state, &["127.0.0.1".into()]).unwrap();
+        let endpoint = server::bind("127.0.0.1:0".parse().unwrap(), &identity).unwrap();
+        let address = endpoint.local_addr().unwrap();
+        let cluster = ClusterConfig::generate(&address.to_string(), &identity).unwrap();
+        let journal = match storage {
+            Some(storage) => Journal::open_with(state, storage).unwrap(),
+            None => Journal::open(state).unwrap(),
+        };
+        let (handle, task) = spawn_persistent_master(SchedulerConfig::default(), journal);
+        let policy = HandshakePolicy::new(cluster.token.clone(), "test-master");
+        tokio::spawn(server::serve(endpoint.clone(), policy, handle.clone()));
+        let _worker = local_worker(&handle, "w1".into(), 2, WorkerConfig::default());
+        let options = ClientOptions {
+            master: cluster.master,
+            token: cluster.token,
+            fingerprint: cluster.fingerprint,
+        };
+        Master {
+            handle,
+            task,
+            endpoint,
+            options,
+        }
+    }
+
+    /// Stops the master; its journal writer writes what is queued first.
+    async fn stop(self) {
+        self.endpoint.close(vtfarm_proto::CLOSE_NORMAL, b"stop");
+        self.handle.stop();
+        tokio::time::timeout(WAIT, self.task)
+            .await
+            .expect("the master stops")
+            .unwrap();
+    }
+
+    /// Runs a submitter from `start`, bounded; its warnings beside.
+    async fn follow(
+        &self,
+        start: RemoteJob<'_>,
+    ) -> (Result<Vec<FinishedFrame>, JobError>, Vec<String>) {
+        let mut warnings = Vec::new();
+        let run = run_remote_job(&self.options, start, |event| {
+            if let JobEvent::Warning(w) = event {
+                warnings.push(w);
+            }
+        });
+        let outcome = tokio::time::timeout(WAIT, run)
+            .await
+            .expect("the submitter finished");
+        (outcome, warnings)
+    }
+}
+
+fn assert_identical(frames: &[FinishedFrame], reference: &[FinishedFrame], case: &str) {
+    assert_eq!(frames.len(), reference.len(), "{case}: frame count");
+    for (got, want) in frames.iter().zip(reference) {
+        assert_eq!(got.frame, want.frame, "{case}");
+        assert!(
+            got.image == want.image,
+            "{case}: frame {} differs",
+            got.frame
+        );
+    }
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+fn flip_byte(path: &Path, at: usize) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let at = at.min(bytes.len() - 1);
+    bytes[at] ^= 0x5a;
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn job_dir(state: &Path) -> PathBuf {
+    state.join("jobs/000000000001")
+}
+
+fn scene_file(state: &Path) -> PathBuf {
+    let scenes = std::fs::read_dir(state.join("jobs/scenes")).unwrap();
+    let scenes: Vec<PathBuf> = scenes.map(|e| e.unwrap().path()).collect();
+    assert_eq!(scenes.len(), 1, "{scenes:?}");
+    scenes[0].clone()
+}
+
+/// The damage done to a copy of the clean journal before a master starts on it.
+#[derive(Clone, Copy, Debug)]
+enum Damage {
+    FlipFrame(u32, usize),
+    TruncateFrame(u32),
+    EmptyFrame(u32),
+    MissingFrame(u32),
+    FlipJob,
+    FlipScene,
+}
+
+impl Damage {
+    fn apply(self, state: &Path) {
+        let frame = |f: u32| job_dir(state).join(format!("{f:06}"));
+        match self {
+            Damage::FlipFrame(f, at) => flip_byte(&frame(f), at),
+            Damage::TruncateFrame(f) => {
+                let bytes = std::fs::read(frame(f)).unwrap();
+                std::fs::write(frame(f), &bytes[..bytes.len() / 2]).unwrap();
+            }
+            Damage::EmptyFrame(f) => std::fs::write(frame(f), b"").unwrap(),
+            Damage::MissingFrame(f) => std::fs::remove_file(frame(f)).unwrap(),
+            Damage::FlipJob => flip_byte(&job_dir(state).join("job"), 40),
+            Damage::FlipScene => flip_byte(&scene_file(state), 1000),
+        }
+    }
+}
+
+/// Runs the job once on a clean master; returns its frames and the state
+/// directory the master left (the job complete, every frame journaled).
+async fn clean_run() -> (Vec<FinishedFrame>, tempfile::TempDir) {
+    let state = tempfile::tempdir().unwrap();
+    let master = Master::start(state.path(), None);
+    let (job, scene) = job();
+    let (frames, warnings) = master
+        .follow(RemoteJob::Submit { job, scene: &scene })
+        .await;
+    let frames = frames.expect("the clean run completes");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    master.stop().await;
+    (frames, state)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn damaged_records_are_rendered_again_or_refused_by_name_and_never_deleted() {
+    let (reference, clean) = clean_run().await;
+    assert_eq!(reference.len(), FRAMES);
+    let frame_cases = [
+        Damage::FlipFrame(2, 0),
+        Damage::FlipFrame(2, 7),
+        Damage::FlipFrame(0, usize::MAX),
+        Damage::TruncateFrame(1),
+        Damage::EmptyFrame(3),
+        Damage::MissingFrame(1),
+    ];
+    for damage in frame_cases {
+        let state = tempfile::tempdir().unwrap();
+        copy_dir(clean.path(), state.path());
+        damage.apply(state.path());
+        let master = Master::start(state.path(), None);
+        let (frames, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let case = format!("{damage:?}");
+        let frames = frames.unwrap_or_else(|e| panic!("{case}: {e}"));
+        assert_identical(&frames, &reference, &case);
+        master.stop().await;
+        assert!(
+            job_dir(state.path()).join("job").exists(),
+            "{case}: job kept"
+        );
+        if !matches!(damage, Damage::MissingFrame(_)) {
+            let kept = std::fs::read_dir(job_dir(state.path())).unwrap();
+            let kept = kept.filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .path()
+                    .extension()
+                    .is_some_and(|x| x == "damaged")
+            });
+            assert_eq!(kept.count(), 1, "{case}: the damaged frame is kept aside");
+        }
+    }
+    for damage in [Damage::FlipJob, Damage::FlipScene] {
+        let state = tempfile::tempdir().unwrap();
+        copy_dir(clean.path(), state.path());
+        damage.apply(state.path());
+        let master = Master::start(state.path(), None);
+        let (outcome, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let case = format!("{damage:?}");
+        let error = outcome.expect_err(&case).to_string();
+        let aside = state.path().join("jobs/damaged/000000000001");
+        for needle in [
+            "job 1 could not be read back",
+            "checksum mismatch",
+            &aside.display().to_string(),
+        ] {
+            assert!(error.contains(needle), "{case}: {error}");
+        }
+        assert!(aside.join("job").exists(), "{case}: the job is kept aside");
+        assert!(
+            std::fs::read_to_string(aside.join("why"))
+                .unwrap()
+                .contains("checksum")
+        );
+        master.stop().await;
+        // A second start still knows why, and the files stay.
+        let master = Master::start(state.path(), None);
+        let (outcome, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        assert!(
+            outcome
+                .expect_err(&case)
+                .to_string()
+                .contains("checksum mismatch")
+        );
+        master.stop().await;
+        assert!(aside.join("job").exists(), "{case}: still kept");
+    }
+}
+
+/// A frame damaged while the master runs (after it read the journal) is
+/// found when a submitter attaches: rendered again, and the submitter,
+/// told why, gets it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_frame_damaged_after_start_is_rendered_again_for_the_submitter() {
+    let (reference, clean) = clean_run().await;
+    let master = Master::start(clean.path(), None);
+    // The master has read the journal once it answers a status request.
+    let status = master.handle.inspect(|core| core.status()).await.unwrap();
+    assert!(
+        status.queue.running.is_none(),
+        "the job was restored complete"
+    );
+    flip_byte(&job_dir(clean.path()).join("000001"), 100);
+    std::fs::remove_file(job_dir(clean.path()).join("000003")).unwrap();
+    let (frames, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    assert_identical(
+        &frames.expect("attached"),
+        &reference,
+        "damaged after start",
+    );
+    for frame in [
+        "frame 1 of job 1 is rendered again",
+        "frame 3 of job 1 is rendered again",
+    ] {
+        assert!(warnings.iter().any(|w| w.contains(frame)), "{warnings:?}");
+    }
+    let again = master
+        .handle
+        .inspect(|c| c.telemetry().counters.frames_rendered_again);
+    assert_eq!(again.await, Some(2));
+    master.stop().await;
+    // Rendered again, the frames are journaled again.
+    let journal = Journal::open(clean.path()).unwrap();
+    assert_eq!(journal.frame(1, 1).unwrap().frame, 1);
+    assert_eq!(journal.frame(1, 3).unwrap().frame, 3);
+}
+
+/// A full disk: every frame write fails. The submitter still gets every
+/// frame and is told the master cannot journal them; `/metrics` counts the
+/// failures; a second submitter attaching later gets them from memory.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory() {
+    let (reference, _clean) = clean_run().await;
+    let state = tempfile::tempdir().unwrap();
+    let disk = Arc::new(FullDisk {
+        full: AtomicBool::new(true),
+    });
+    let master = Master::start(state.path(), Some(disk.clone()));
+    let (job, scene) = job();
+    let (frames, _) = master
+        .follow(RemoteJob::Submit { job, scene: &scene })
+        .await;
+    assert_identical(&frames.expect("delivered"), &reference, "full disk");
+    // Every frame's write has failed by now (woken by the core's changes).
+    let failures =
+        |core: &vtfarm_master::MasterCore| core.telemetry().counters.journal_write_failures;
+    let mut changes = master.handle.changes();
+    tokio::time::timeout(WAIT, async {
+        while master.handle.inspect(failures).await != Some(FRAMES as u64) {
+            changes.changed().await.expect("the master runs");
+        }
+    })
+    .await
+    .expect("every frame write failed");
+    let (again, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    assert_identical(&again.expect("from memory"), &reference, "attached later");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("No space left on device") && w.contains("kept in memory")),
+        "{warnings:?}"
+    );
+    let app = vtfarm_master::http::router(
+        master.handle.clone(),
+        vtfarm_master::http::HttpAccess::new("t"),
+    )
+    .layer(axum::extract::connect_info::MockConnectInfo(
+        "127.0.0.1:1".parse::<std::net::SocketAddr>().unwrap(),
+    ));
+    let request = axum::http::Request::get("/metrics").body(axum::body::Body::empty());
+    let response = tower::ServiceExt::oneshot(app, request.unwrap())
+        .await
+        .unwrap();
+    let body = axum::body::to_bytes(response.into_body(), 1 << 20)
+        .await
+        .unwrap();
+    let text = String::from_utf8(body.to_vec()).unwrap();
+    assert!(
+        text.contains(&format!("vtfarm_journal_write_failures_total {FRAMES}")),
+        "{text}"
+    );
+    master.stop().await;
+    assert!(job_dir(state.path()).join("job").exists());
+}
+
+/// Two submitters follow one job: the second attaches while the first
+/// runs it, and both finish with every frame.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn two_submitters_on_one_job_both_get_every_frame() {
+    let state = tempfile::tempdir().unwrap();
+    let master = Arc::new(Master::start(state.path(), None));
+    let (job, scene) = job();
+    let (accepted, on_accepted) = tokio::sync::oneshot::channel();
+    let second = {
+        let master = master.clone();
+        tokio::spawn(async move {
+            let job: u64 = on_accepted.await.expect("the first submitter's job");
+            master.follow(RemoteJob::Attach { job }).await
+        })
+    };
+    let mut accepted = Some(accepted);
+    let run = run_remote_job(
+        &master.options,
+        RemoteJob::Submit { job, scene: &scene },
+        |event| {
+            // The second attaches once the first frame is in: the job runs on.
+            if let JobEvent::FrameDone(f) = event {
+                if f.frame == 0 {
+                    if let Some(accepted) = accepted.take() {
+                        let _ = accepted.send(1);
+                    }
+                }
+            }
+        },
+    );
+    let first = tokio::time::timeout(WAIT, run)
+        .await
+        .expect("bounded")
+        .expect("first");
+    let (second, _) = tokio::time::timeout(WAIT, second)
+        .await
+        .expect("bounded")
+        .unwrap();
+    assert_eq!(first.len(), FRAMES);
+    assert_identical(&second.expect("second"), &first, "second submitter");
+    Arc::try_unwrap(master)
+        .ok()
+        .expect("one owner")
+        .stop()
+        .await;
+}
