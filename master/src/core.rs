@@ -401,12 +401,29 @@ impl MasterCore {
     pub fn restore(&mut self, now: Duration, stored: StoredJob) {
         self.now = now;
         self.next_job = self.next_job.max(stored.id + 1);
-        // Kept to render a frame again that the journal cannot give back.
-        (self.kept.definitions).insert(stored.id, stored.job.clone());
         if stored.complete {
+            // Kept (with its scene's bytes) to render a frame again that
+            // the journal cannot give back.
+            (self.kept.definitions).insert(stored.id, stored.job);
             self.completed.insert(stored.id, (stored.frames_done, now));
             return;
         }
+        // Once queued the scene is in the cache: the definition names it by hash.
+        let job = &stored.job;
+        let scene = match &job.scene {
+            JobScene::Data(data) => JobScene::Hash(data.hash),
+            JobScene::Hash(hash) => JobScene::Hash(*hash),
+        };
+        let definition = WireJob {
+            name: job.name.clone(),
+            scene,
+            frames: job.frames.clone(),
+            reflectors: job.reflectors.clone(),
+            aux: job.aux,
+            method: job.method,
+            image: job.image,
+        };
+        (self.kept.definitions).insert(stored.id, definition);
         let queued = self.queue_job(
             now,
             stored.id,

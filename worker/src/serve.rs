@@ -56,8 +56,10 @@ impl SceneStore for Engine {
         Engine::has_scene(self, hash)
     }
 
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
-        Engine::add_scene(self, data).map_err(|e| e.to_string())
+    type Error = SceneError;
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), SceneError> {
+        Engine::add_scene(self, data)
     }
 }
 
@@ -67,15 +69,17 @@ impl SceneStore for Engine {
 struct Ready<'a> {
     engine: &'a mut Engine,
     /// How checking the `SceneData` being handled went.
-    added: Option<Result<(), String>>,
+    added: Option<Result<(), SceneError>>,
 }
 
 impl SceneStore for Ready<'_> {
+    type Error = SceneError;
+
     fn has_scene(&mut self, hash: &SceneHash) -> bool {
         self.engine.has_scene_in_memory(hash)
     }
 
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+    fn add_scene(&mut self, data: SceneData) -> Result<(), SceneError> {
         match self.added.take() {
             Some(added) => added,
             // Not checked on a thread first (no such path): check it here.
@@ -212,12 +216,8 @@ pub async fn serve(
                         continue;
                     }
                 };
-                let added = outcome.map(|checked| match checked {
-                    Ok(scene) => {
-                        engine.insert_scene(hash, scene);
-                        Ok(())
-                    }
-                    Err(e) => Err(e.to_string()),
+                let added = outcome.map(|checked| {
+                    checked.map(|scene| engine.insert_scene(hash, scene))
                 });
                 let mut ready = Ready { engine, added };
                 session.handle_message(start.elapsed(), message, &mut ready);
