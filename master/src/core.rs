@@ -319,6 +319,9 @@ struct Kept {
     /// Jobs a record of which could not be written, with the last error:
     /// a submitter attaching later is told too.
     failed_writes: BTreeMap<u64, String>,
+    /// Restored jobs whose journal had a damaged frame, rendered again:
+    /// the frame and why, told to attaching submitters.
+    damaged_frames: BTreeMap<u64, (u32, String)>,
 }
 
 impl Kept {
@@ -326,6 +329,7 @@ impl Kept {
     fn forget(&mut self, job: u64) {
         self.definitions.remove(&job);
         self.failed_writes.remove(&job);
+        self.damaged_frames.remove(&job);
         self.unjournaled.retain(|&(j, _), _| j != job);
     }
 }
@@ -401,6 +405,9 @@ impl MasterCore {
     pub fn restore(&mut self, now: Duration, stored: StoredJob) {
         self.now = now;
         self.next_job = self.next_job.max(stored.id + 1);
+        if let Some(damaged) = stored.damaged_frame.clone() {
+            self.kept.damaged_frames.insert(stored.id, damaged);
+        }
         if stored.complete {
             // Kept (with its scene's bytes) to render a frame again that
             // the journal cannot give back.
@@ -880,6 +887,17 @@ impl MasterCore {
         self.send(conn, Message::JobAccepted { job, frames });
         if let Some(error) = self.kept.failed_writes.get(&job).cloned() {
             self.send(conn, Message::JournalFailed { job, error });
+        }
+        if let Some((frame, reason)) = self.kept.damaged_frames.get(&job).cloned() {
+            if frame >= from_frame {
+                let again = Message::FrameMissing {
+                    job,
+                    frame,
+                    reason,
+                    rendering_again: true,
+                };
+                self.send(conn, again);
+            }
         }
         self.replay(conn, job, from_frame..done);
     }

@@ -191,6 +191,10 @@ pub struct StoredJob {
     /// How many frames are finished, counted from frame 0 without a gap.
     pub frames_done: u32,
     pub complete: bool,
+    /// The frame that ended the count because its record failed its check
+    /// (or is missing while later ones are there), and why: it is rendered
+    /// again, and an attaching submitter is told.
+    pub damaged_frame: Option<(u32, String)>,
 }
 
 /// A job set aside in `jobs/damaged/` (now or by an earlier start).
@@ -665,22 +669,36 @@ impl Journal {
         job.scene = JobScene::Data(SceneData { hash, bytes });
         let frames = job.frames.len() as u32;
         let mut frames_done = 0;
+        let mut damaged_frame = None;
         while frames_done < frames {
             match self.frame(id, frames_done) {
                 Ok(_) => frames_done += 1,
-                Err(RecordError::Missing { .. }) => break,
+                Err(e @ RecordError::Missing { .. }) => {
+                    // A gap: later frames are there, this one is lost.
+                    let later = (frames_done + 1..frames).any(|f| self.frame_path(id, f).exists());
+                    if later {
+                        warn!(
+                            job = id,
+                            frame = frames_done,
+                            "{e}: the frame is rendered again"
+                        );
+                        damaged_frame = Some((frames_done, e.to_string()));
+                    }
+                    break;
+                }
                 Err(e) => {
                     let path = self.frame_path(id, frames_done);
                     let aside = path.with_extension("damaged");
+                    let reason = format!("{e} (the file is kept as {})", aside.display());
                     warn!(
                         job = id,
                         frame = frames_done,
-                        "{e}: the frame is rendered again (the file is kept as {})",
-                        aside.display()
+                        "{reason}: the frame is rendered again"
                     );
                     if let Err(move_error) = std::fs::rename(&path, &aside) {
                         warn!(path = %path.display(), "cannot rename the damaged frame: {move_error}");
                     }
+                    damaged_frame = Some((frames_done, reason));
                     break;
                 }
             }
@@ -691,6 +709,7 @@ impl Journal {
             job,
             frames_done,
             complete,
+            damaged_frame,
         })
     }
 }

@@ -26,7 +26,7 @@ use vtfarm_master::{
 };
 use vtfarm_method::MethodKind;
 use vtfarm_proto::client::ClientOptions;
-use vtfarm_proto::{ClusterConfig, HandshakePolicy, SceneData, WireJob};
+use vtfarm_proto::{ClusterConfig, HandshakePolicy, Message, SceneData, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_scheduler::SchedulerConfig;
 use vtfarm_worker::WorkerConfig;
@@ -243,10 +243,24 @@ async fn damaged_records_are_rendered_again_or_refused_by_name_and_never_deleted
         copy_dir(clean.path(), state.path());
         damage.apply(state.path());
         let master = Master::start(state.path(), None);
-        let (frames, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let (frames, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
         let case = format!("{damage:?}");
         let frames = frames.unwrap_or_else(|e| panic!("{case}: {e}"));
         assert_identical(&frames, &reference, &case);
+        // Told which frame is rendered again, and why.
+        let (frame, why) = match damage {
+            Damage::FlipFrame(f, _) | Damage::TruncateFrame(f) => (f, "checksum mismatch"),
+            Damage::EmptyFrame(f) => (f, "too short"),
+            Damage::MissingFrame(f) => (f, "missing"),
+            Damage::FlipJob | Damage::FlipScene => unreachable!("frame cases only"),
+        };
+        let told = format!("frame {frame} of job 1 is rendered again");
+        assert!(
+            warnings
+                .iter()
+                .any(|w| w.contains(&told) && w.contains(why)),
+            "{case}: {warnings:?}"
+        );
         master.stop().await;
         assert!(
             job_dir(state.path()).join("job").exists(),
@@ -442,4 +456,105 @@ async fn two_submitters_on_one_job_both_get_every_frame() {
         .expect("one owner")
         .stop()
         .await;
+}
+
+/// When the master says a frame cannot be delivered, the submitter stops
+/// with an error naming the frame and the job.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_frame_the_master_cannot_deliver_fails_the_submitter_naming_it() {
+    let (job, scene) = job();
+    let (mut submitter, mut master) = vtfarm_proto::Link::pair();
+    let fake_master = tokio::spawn(async move {
+        let submitted = tokio::time::timeout(WAIT, master.rx.recv()).await;
+        assert!(matches!(submitted, Ok(Some(Message::SubmitJob { .. }))));
+        for message in [
+            Message::JobAccepted { job: 7, frames: 3 },
+            Message::FrameMissing {
+                job: 7,
+                frame: 1,
+                reason: "its record is gone and so is its job".into(),
+                rendering_again: false,
+            },
+        ] {
+            master.tx.send(message).unwrap();
+        }
+        master
+    });
+    let run = vtfarm_master::run_job(&mut submitter, job, &scene, |_| {});
+    let error = tokio::time::timeout(WAIT, run).await.expect("bounded");
+    let error = error.expect_err("a frame was lost").to_string();
+    assert_eq!(
+        error,
+        "frame 1 of job 7 cannot be delivered: its record is gone and so is its job"
+    );
+    drop(fake_master.await.unwrap());
+}
+
+/// A frame that cannot be read back and cannot be rendered again either
+/// (its job's scene no longer decodes) is told to the submitter as lost,
+/// naming the frame and both reasons.
+#[test]
+fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
+    let (mut job, scene) = job();
+    let mut bytes = scene.bytes.clone();
+    bytes[0] ^= 1;
+    job.scene = vtfarm_proto::JobScene::Data(SceneData {
+        hash: scene.hash,
+        bytes,
+    });
+    let mut core = vtfarm_master::MasterCore::persistent(SchedulerConfig::default());
+    let now = Duration::ZERO;
+    core.restore(
+        now,
+        vtfarm_master::StoredJob {
+            id: 3,
+            job,
+            frames_done: FRAMES as u32,
+            complete: true,
+            damaged_frame: None,
+        },
+    );
+    let submitter = vtfarm_master::Peer::Submitter {
+        address: "test".into(),
+    };
+    core.connected(now, 1, submitter);
+    core.message(
+        now,
+        1,
+        Message::AttachJob {
+            job: 3,
+            from_frame: 0,
+        },
+    );
+    let mut replays = Vec::new();
+    while let Some(output) = core.poll_output() {
+        if let vtfarm_master::Output::Replay { frames, .. } = output {
+            replays.push(frames);
+        }
+    }
+    assert_eq!(replays, [0..FRAMES as u32]);
+    core.replay_failed(now, 1, 3, 2, "jobs/000000000003/000002: missing".into());
+    let told: Vec<Message> = std::iter::from_fn(|| core.poll_output())
+        .filter_map(|o| match o {
+            vtfarm_master::Output::Send(1, message) => Some(*message),
+            _ => None,
+        })
+        .collect();
+    let [
+        Message::FrameMissing {
+            job: 3,
+            frame: 2,
+            reason,
+            rendering_again: false,
+        },
+    ] = told.as_slice()
+    else {
+        panic!("{told:?}");
+    };
+    assert!(
+        reason.starts_with(
+            "jobs/000000000003/000002: missing; it cannot be rendered again: bad scene"
+        ),
+        "{reason}"
+    );
 }
