@@ -66,7 +66,8 @@ pub enum Output {
     /// Keep this in the job journal (only when the core is persistent).
     Persist(Record),
     /// Send `conn` the journal's `FrameDone`s of `job`, frames `frames`, in
-    /// order, before anything that follows.
+    /// order, before anything that follows; a frame the journal cannot give
+    /// back goes to [`MasterCore::replay_failed`] (rendered again).
     Replay {
         conn: ConnId,
         job: u64,
