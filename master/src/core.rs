@@ -320,6 +320,9 @@ struct Kept {
     /// Jobs a record of which could not be written, with the last error:
     /// a submitter attaching later is told too.
     failed_writes: BTreeMap<u64, String>,
+    /// Frames of `unjournaled` whose write failed (not queued again yet):
+    /// one is written again after each write that succeeds.
+    to_rewrite: BTreeSet<(u64, u32)>,
     /// Restored jobs whose journal had a damaged frame, rendered again:
     /// the frame and why, told to attaching submitters.
     damaged_frames: BTreeMap<u64, (u32, String)>,
@@ -332,6 +335,7 @@ impl Kept {
         self.failed_writes.remove(&job);
         self.damaged_frames.remove(&job);
         self.unjournaled.retain(|&(j, _), _| j != job);
+        self.to_rewrite.retain(|&(j, _)| j != job);
     }
 }
 
@@ -1398,13 +1402,23 @@ impl MasterCore {
                 if let Some(frame) = written.frame {
                     self.kept.unjournaled.remove(&(written.job, frame));
                 }
+                // The disk takes records again: write a frame that failed.
+                if let Some(key) = self.kept.to_rewrite.pop_first() {
+                    if let Some(done) = self.kept.unjournaled.get(&key).cloned() {
+                        let record = Record::FrameDone(Box::new(done));
+                        self.outbox.push_back(Output::Persist(record));
+                    }
+                }
             }
             Err(error) => {
+                if let Some(frame) = written.frame {
+                    self.kept.to_rewrite.insert((written.job, frame));
+                }
                 warn!(job = written.job, "{error}");
                 let counters = &mut self.telemetry.counters;
                 counters.journal_write_failures += 1;
                 let kept = written.frame.map_or(String::new(), |f| {
-                    format!("; frame {f} is kept in memory until it is delivered")
+                    format!("; frame {f} is kept in memory until it is written")
                 });
                 let error = format!("{error}{kept}");
                 self.telemetry.last_journal_error = Some(error.clone());
