@@ -145,7 +145,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
     let (args_aux, attach) = (args.aux, args.attach);
-    let mut arrivals = Vec::new();
+    let mut arrivals = std::collections::BTreeMap::new();
     let frames = runtime()?.block_on(async {
         let data = SceneData::from_scene(&scene);
         let options = JobOptions {
@@ -179,8 +179,9 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 bar.set_message(format!("frame {frame}"));
                 bar.set_position(done.into());
             }
+            JobEvent::Warning(warning) => bar.println(format!("warning: {warning}")),
             JobEvent::FrameDone(f) => {
-                arrivals.push(submitted.elapsed().as_micros() as u64);
+                arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);
                 let path = output.join(format!("frame_{:04}.png", f.frame));
                 if let Err(e) = f.image.write_png(&path) {
                     bar.println(format!("error: {e}"));
@@ -209,10 +210,10 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         bar.finish_and_clear();
         anyhow::Ok(result?)
     })?;
-    let stats: Vec<FrameRecord> = (frames.iter().zip(arrivals))
-        .map(|(f, arrival_micros)| FrameRecord {
+    let stats: Vec<FrameRecord> = (frames.iter())
+        .map(|f| FrameRecord {
             frame: f.frame,
-            arrival_micros,
+            arrival_micros: arrivals.get(&f.frame).copied().unwrap_or_default(),
             stats: &f.stats,
         })
         .collect();

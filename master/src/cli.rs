@@ -28,6 +28,14 @@ pub struct MasterArgs {
     /// than loopback must send the cluster token as a bearer token.
     #[arg(long, default_value = "127.0.0.1:7879")]
     pub http: SocketAddr,
+    /// A host name browsers may call the dashboard by, besides localhost
+    /// and its addresses (a proxy's name, say); repeat for several.
+    #[arg(long = "http-allowed-host", value_name = "NAME")]
+    pub http_allowed_hosts: Vec<String>,
+    /// Ask loopback peers for the cluster token too: for a proxy on the
+    /// same host that adds no `Forwarded`/`X-Forwarded-For` header.
+    #[arg(long)]
+    pub http_require_token: bool,
 }
 
 /// Creates a cluster: the master's key and certificate, and `cluster.toml`.
@@ -107,7 +115,13 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     let http = http::bind(args.http).await?;
     info!(address = %http.local_addr()?, "dashboard listening");
     println!("dashboard on http://{}/", http.local_addr()?);
-    tokio::spawn(http::serve(http, handle.clone(), cluster.token.clone()));
+    let access = http::HttpAccess {
+        allowed_hosts: args.http_allowed_hosts.clone(),
+        require_token: args.http_require_token,
+        ..http::HttpAccess::new(cluster.token.clone())
+    };
+    let limits = http::HttpLimits::default();
+    tokio::spawn(http::serve(http, handle.clone(), access, limits));
     server::serve(
         endpoint,
         HandshakePolicy::new(cluster.token.clone(), "vtfarm-master"),

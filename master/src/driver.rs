@@ -12,13 +12,14 @@ use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tracing::{debug, warn};
+use tracing::debug;
 use vtfarm_master_core::view::{ViewError, ViewRequest};
 use vtfarm_master_core::{ConnId, FarmRules, MasterCore, Output, Peer};
 use vtfarm_proto::{Message, StatusReply};
 use vtfarm_transport::Link;
 
 use crate::journal::{Journal, JournalWriter};
+use vtfarm_master_core::Written;
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -43,6 +44,8 @@ enum Input {
         frame: u32,
         base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
     },
+    /// How writing a journal record went (from the journal's thread).
+    Journaled(Written),
     /// Move the interactive view's eye (from the HTTP view).
     Steer {
         request: ViewRequest,
@@ -183,13 +186,23 @@ async fn run(
     let start = Instant::now();
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     if let Some(journal) = &journal {
-        for stored in tokio::task::block_in_place(|| journal.load()) {
+        let loaded = tokio::task::block_in_place(|| journal.load());
+        for damaged in loaded.damaged {
+            core.restore_damaged(damaged);
+        }
+        for stored in loaded.jobs {
             core.restore(start.elapsed(), stored);
         }
     }
     // Records are written off this task (a finished frame is compressed and
-    // written while the next results come in); replays wait for them.
-    let writer = journal.clone().map(JournalWriter::new);
+    // written while the next results come in); replays wait for them. How
+    // each went comes back as an input.
+    let writer = journal.clone().map(|journal| {
+        let feedback = feedback.clone();
+        JournalWriter::new(journal, move |written| {
+            let _ = feedback.send(Input::Journaled(written));
+        })
+    });
     loop {
         // The scheduler's next deadline, or idle for a while.
         let deadline = start
@@ -228,6 +241,7 @@ async fn run(
                     Input::BaseFrame { job, frame, base } => {
                         core.base_frame_ready(now, job, frame, base);
                     }
+                    Input::Journaled(written) => core.journal_written(now, written),
                     Input::Steer { request, reply } => {
                         let _ = reply.send(core.steer_view(now, request));
                     }
@@ -277,11 +291,12 @@ async fn run(
                     tokio::task::block_in_place(|| writer.flush());
                     for frame in frames {
                         match tokio::task::block_in_place(|| journal.frame(job, frame)) {
-                            Some(done) => {
+                            Ok(done) => {
                                 let _ = c.tx.send(Message::FrameDone(done));
                             }
-                            None => {
-                                warn!(job, frame, "a finished frame is missing from the journal")
+                            // Rendered again, or the submitter is told it is lost.
+                            Err(e) => {
+                                core.replay_failed(start.elapsed(), conn, job, frame, e.to_string())
                             }
                         }
                     }

@@ -9,16 +9,31 @@
 //! metrics and `vtfarm status` (which asks the same `MasterCore::status`)
 //! cannot disagree.
 //!
-//! Peers on loopback are trusted; any other peer must send the cluster
-//! token as `Authorization: Bearer TOKEN`, or log in once at `/login` (the
-//! token in a form), which sets a session cookie: a hash of the token, so
-//! the cookie does not reveal the token, valid until the token changes.
+//! Peers on loopback are trusted unless the request was forwarded (it
+//! carries `Forwarded`, `X-Forwarded-For` or `X-Real-IP`, as a same-host
+//! proxy adds) or [`HttpAccess::require_token`] is set; any other peer must
+//! send the cluster token as `Authorization: Bearer TOKEN`, or log in once
+//! at `/login` (the token in a form), which sets a session cookie: a hash of
+//! the token, so the cookie does not reveal the token, valid until the
+//! token changes.
+//!
+//! Every request's `Host` must name this server (loopback names, the
+//! listening address, or an [`HttpAccess::allowed_hosts`] name), so a page
+//! of another site cannot reach it by DNS rebinding. [`serve`] bounds every
+//! client ([`HttpLimits`]): connections beyond the cap and event streams
+//! beyond theirs get 503; a connection that sends no complete request head
+//! within the header timeout, or idles that long between requests, is
+//! closed (hyper's `header_read_timeout`); a client that does not read its
+//! event stream holds one coalesced view and hyper's bounded write buffer,
+//! never a backlog: every stream follows one shared view, computed once
+//! per change for all of them.
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
 use std::io::Cursor;
 use std::net::{IpAddr, SocketAddr};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
 
 use axum::Router;
 use axum::extract::{ConnectInfo, Form, Path, Request, State};
@@ -27,7 +42,7 @@ use axum::middleware::{self, Next};
 use axum::response::sse::{Event, Sse};
 use axum::response::{Html, IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
-use futures_util::stream::{self, Stream};
+use futures_util::stream;
 use prometheus_client::encoding::{EncodeMetric, MetricEncoder, NoLabelSet};
 use prometheus_client::metrics::MetricType;
 use prometheus_client::metrics::counter::Counter;
@@ -37,7 +52,9 @@ use prometheus_client::registry::Registry;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use subtle::ConstantTimeEq;
+use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use vtfarm_imaging::Image;
 use vtfarm_master_core::MasterCore;
 use vtfarm_master_core::telemetry::{
@@ -57,12 +74,78 @@ const LOGIN: &str = include_str!("login.html");
 /// The session cookie's name.
 pub const SESSION_COOKIE: &str = "vtfarm_session";
 
+/// Who may use the HTTP side.
+#[derive(Clone, Debug)]
+pub struct HttpAccess {
+    /// The cluster token.
+    pub token: String,
+    /// Host names a browser may call the server by, besides `localhost`,
+    /// loopback addresses and the listening address
+    /// (`--http-allowed-host`, as a proxy in front of it is named).
+    pub allowed_hosts: Vec<String>,
+    /// Ask loopback peers for the token too (`--http-require-token`: a
+    /// same-host proxy that adds no forwarding header).
+    pub require_token: bool,
+    /// The address the server listens on ([`serve`] fills it in).
+    pub listen: Option<SocketAddr>,
+}
+
+impl HttpAccess {
+    /// Loopback trusted, no extra host names.
+    pub fn new(token: impl Into<String>) -> HttpAccess {
+        HttpAccess {
+            token: token.into(),
+            allowed_hosts: Vec::new(),
+            require_token: false,
+            listen: None,
+        }
+    }
+}
+
+/// The bounds [`serve`] holds every client to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HttpLimits {
+    /// A request's head must be in within this, and a kept-alive connection
+    /// idles no longer between requests.
+    pub header_read_timeout: Duration,
+    /// Connections served at once; more get 503 and are closed.
+    pub max_connections: usize,
+    /// Event streams (`/api/events`, one per open dashboard) at once; more get 503.
+    pub max_event_streams: usize,
+    /// The most a connection buffers for a client that does not read.
+    pub write_buffer_bytes: usize,
+}
+
+impl Default for HttpLimits {
+    fn default() -> Self {
+        HttpLimits {
+            header_read_timeout: Duration::from_secs(10),
+            max_connections: 256,
+            max_event_streams: 64,
+            write_buffer_bytes: 64 * 1024,
+        }
+    }
+}
+
+/// How often the shared dashboard view may be computed again (changes in
+/// between coalesce): the event streams cost the core one view per
+/// interval however many follow it.
+const VIEW_INTERVAL: Duration = Duration::from_millis(100);
+
+/// Connections answered 503 at once beyond [`HttpLimits::max_connections`];
+/// past them a connection is closed unanswered.
+const TURNED_AWAY: usize = 64;
+
 #[derive(Clone)]
 struct HttpState {
     master: MasterHandle,
-    token: Arc<str>,
+    access: Arc<HttpAccess>,
     /// The session cookie's value for this token.
     session: Arc<str>,
+    /// The event streams' permits.
+    streams: Arc<Semaphore>,
+    /// The dashboard view every event stream follows, started with the first.
+    view_feed: Arc<OnceLock<watch::Receiver<Arc<str>>>>,
 }
 
 /// Why the HTTP server could not start.
@@ -80,21 +163,86 @@ pub async fn bind(address: SocketAddr) -> Result<TcpListener, HttpBindError> {
         .map_err(|source| HttpBindError { address, source })
 }
 
-/// Serves the dashboard, API and metrics until the listener fails.
-pub async fn serve(listener: TcpListener, master: MasterHandle, token: String) {
-    let app = router(master, token).into_make_service_with_connect_info::<SocketAddr>();
-    if let Err(e) = axum::serve(listener, app).await {
-        tracing::warn!("HTTP server stopped: {e}");
+/// Serves the dashboard, API and metrics until the listener fails, each
+/// connection within `limits`.
+pub async fn serve(
+    listener: TcpListener,
+    master: MasterHandle,
+    mut access: HttpAccess,
+    limits: HttpLimits,
+) {
+    access.listen = listener.local_addr().ok();
+    let app = router_with(master, access, limits.max_event_streams);
+    let served = Arc::new(Semaphore::new(limits.max_connections));
+    let turned_away = Arc::new(Semaphore::new(TURNED_AWAY));
+    let mut http = hyper::server::conn::http1::Builder::new();
+    http.timer(hyper_util::rt::TokioTimer::new())
+        .header_read_timeout(limits.header_read_timeout)
+        .max_buf_size(limits.write_buffer_bytes);
+    loop {
+        let (stream, peer) = match listener.accept().await {
+            Ok(accepted) => accepted,
+            Err(e) => {
+                // Out of file descriptors, say: wait for some to close.
+                tracing::warn!("HTTP accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let Ok(permit) = served.clone().try_acquire_owned() else {
+            if let Ok(permit) = turned_away.clone().try_acquire_owned() {
+                let timeout = limits.header_read_timeout;
+                tokio::spawn(turn_away(stream, timeout, permit));
+            }
+            continue;
+        };
+        let service = hyper::service::service_fn({
+            let app = app.clone();
+            move |request: hyper::Request<hyper::body::Incoming>| {
+                let mut request = request.map(axum::body::Body::new);
+                request.extensions_mut().insert(ConnectInfo(peer));
+                tower::ServiceExt::oneshot(app.clone(), request)
+            }
+        });
+        let connection = http.serve_connection(hyper_util::rt::TokioIo::new(stream), service);
+        tokio::spawn(async move {
+            let _ = connection.await;
+            drop(permit);
+        });
     }
 }
 
-/// The routes, behind the token check. Requests need a
-/// `ConnectInfo<SocketAddr>` (the peer) to pass it.
-pub fn router(master: MasterHandle, token: String) -> Router {
+/// Answers a connection beyond the cap with 503 and closes it.
+async fn turn_away(
+    mut stream: tokio::net::TcpStream,
+    timeout: Duration,
+    _permit: OwnedSemaphorePermit,
+) {
+    let body = "too many connections to the dashboard; try again shortly\n";
+    let response = format!(
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: text/plain\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = tokio::time::timeout(timeout, async {
+        stream.write_all(response.as_bytes()).await?;
+        stream.shutdown().await
+    })
+    .await;
+}
+
+/// The routes, behind the host and token checks, with the default cap on
+/// event streams. Requests need a `ConnectInfo<SocketAddr>` (the peer).
+pub fn router(master: MasterHandle, access: HttpAccess) -> Router {
+    router_with(master, access, HttpLimits::default().max_event_streams)
+}
+
+fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usize) -> Router {
     let state = HttpState {
         master,
-        session: session_value(&token).into(),
-        token: token.into(),
+        session: session_value(&access.token).into(),
+        access: Arc::new(access),
+        streams: Arc::new(Semaphore::new(max_event_streams)),
+        view_feed: Arc::new(OnceLock::new()),
     };
     Router::new()
         .route("/", get(|| async { Html(DASHBOARD) }))
@@ -109,21 +257,66 @@ pub fn router(master: MasterHandle, token: String) -> Router {
         .route("/frames/live.png", get(live_png))
         .route("/frames/{seq}", get(frame_png))
         .layer(middleware::from_fn_with_state(state.clone(), require_token))
+        .layer(middleware::from_fn_with_state(state.clone(), require_host))
         .with_state(state)
 }
 
-/// Whether a request from `peer` may be served: loopback always, anyone
-/// else with the cluster token as a bearer token or the session cookie
-/// that `/login` sets.
-pub fn authorized(peer: IpAddr, headers: &HeaderMap, token: &str) -> bool {
-    if peer.to_canonical().is_loopback() {
+/// Headers a proxy adds: a request with one is not the loopback peer's own.
+const FORWARDING_HEADERS: [&str; 3] = ["forwarded", "x-forwarded-for", "x-real-ip"];
+
+/// Whether a request from `peer` may be served: loopback unless forwarded
+/// or the token is always required, anyone else with the cluster token as
+/// a bearer token or the session cookie that `/login` sets.
+pub fn authorized(peer: IpAddr, headers: &HeaderMap, access: &HttpAccess) -> bool {
+    let forwarded = FORWARDING_HEADERS.iter().any(|h| headers.contains_key(*h));
+    if peer.to_canonical().is_loopback() && !forwarded && !access.require_token {
         return true;
     }
+    let token = access.token.as_str();
     let bearer = (headers.get(header::AUTHORIZATION))
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
     bearer.is_some_and(|t| same(t, token))
         || session_cookie(headers).is_some_and(|c| same(c, &session_value(token)))
+}
+
+/// Whether `host` (a `Host` header: a name or address, maybe with a port)
+/// names this server: `localhost`, a loopback address, the listening
+/// address (any address when it listens on all), or an allowed name.
+pub fn host_allowed(host: &str, access: &HttpAccess) -> bool {
+    let name = match host.strip_prefix('[') {
+        // [v6]:port
+        Some(rest) => rest.split_once(']').map_or(rest, |(v6, _)| v6),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    };
+    let name = name.trim_end_matches('.').to_ascii_lowercase();
+    if name == "localhost" || name.ends_with(".localhost") {
+        return true;
+    }
+    if let Ok(ip) = name.parse::<IpAddr>() {
+        let listen = access.listen.map(|a| a.ip().to_canonical());
+        return ip.to_canonical().is_loopback()
+            || listen.is_some_and(|l| l.is_unspecified() || l == ip.to_canonical());
+    }
+    (access.allowed_hosts.iter())
+        .any(|allowed| allowed.trim_end_matches('.').eq_ignore_ascii_case(&name))
+}
+
+/// Refuses a request whose `Host` names another site (DNS rebinding). A
+/// request without one (no browser sends such) passes on to the token check.
+async fn require_host(State(state): State<HttpState>, request: Request, next: Next) -> Response {
+    let host = request.headers().get(header::HOST).map(|h| h.to_str());
+    match host {
+        None => next.run(request).await,
+        Some(Ok(host)) if host_allowed(host, &state.access) => next.run(request).await,
+        Some(host) => {
+            let host = host.unwrap_or("(not text)");
+            let message = format!(
+                "this server is not {host}: call it by its address, localhost, or a name given with --http-allowed-host\n"
+            );
+            (StatusCode::FORBIDDEN, message).into_response()
+        }
+    }
 }
 
 fn same(a: &str, b: &str) -> bool {
@@ -152,7 +345,7 @@ async fn require_token(
     request: Request,
     next: Next,
 ) -> Response {
-    if request.uri().path() == "/login" || authorized(peer.ip(), request.headers(), &state.token) {
+    if request.uri().path() == "/login" || authorized(peer.ip(), request.headers(), &state.access) {
         return next.run(request).await;
     }
     let wants_page = (request.headers().get(header::ACCEPT))
@@ -179,7 +372,7 @@ struct LoginForm {
 
 /// The token entered once: the session cookie, then the dashboard.
 async fn login(State(state): State<HttpState>, Form(form): Form<LoginForm>) -> Response {
-    if !same(form.token.trim(), &state.token) {
+    if !same(form.token.trim(), &state.access.token) {
         let page = LOGIN.replace("{message}", "That is not the cluster token.");
         return (StatusCode::UNAUTHORIZED, Html(page)).into_response();
     }
@@ -352,11 +545,22 @@ async fn view_objects_png(State(state): State<HttpState>) -> Response {
 /// 8-bit sRGB pixels, RGB interleaved: width, height and the bytes.
 type Srgb8 = (u32, u32, Vec<u8>);
 
+/// Why a kept image could not be served as PNG.
+#[derive(Debug, thiserror::Error)]
+enum PngError {
+    #[error("the kept frame does not decode: {0}")]
+    Decode(#[from] vtfarm_proto::WireError),
+    #[error("PNG encoding: {0}")]
+    Encode(#[from] image::ImageError),
+    #[error("PNG encoding stopped: {0}")]
+    Task(#[from] tokio::task::JoinError),
+}
+
 /// A kept image as PNG of its `srgb8` pixels; 404 when there is none, 503
 /// once the master stopped.
 async fn kept_png<T: Send + 'static>(
     image: Option<Option<T>>,
-    srgb8: fn(T) -> Result<Srgb8, String>,
+    srgb8: fn(T) -> Result<Srgb8, PngError>,
 ) -> Response {
     match image {
         Some(Some(image)) => png_response(move || srgb8(image)).await,
@@ -373,25 +577,66 @@ async fn dashboard(State(state): State<HttpState>) -> Response {
 }
 
 /// Server-sent events: the dashboard view now, then again whenever the
-/// master's state moves (changes in between coalesce).
-async fn events(
-    State(state): State<HttpState>,
-) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
-    let changes = state.master.changes();
+/// master's state moves (changes in between coalesce: a client that reads
+/// slowly gets the newest view when it reads again). 503 beyond
+/// [`HttpLimits::max_event_streams`].
+async fn events(State(state): State<HttpState>) -> Response {
+    let Ok(permit) = state.streams.clone().try_acquire_owned() else {
+        let message = "too many dashboards follow this master; close one and try again\n";
+        return (StatusCode::SERVICE_UNAVAILABLE, message).into_response();
+    };
+    let Some(first) = state.master.inspect(dashboard_json).await else {
+        return unavailable();
+    };
+    let feed = (state.view_feed)
+        .get_or_init(|| view_feed(state.master.clone()))
+        .clone();
     let stream = stream::unfold(
-        (state.master, changes, true),
-        |(master, mut changes, first)| async move {
-            if !first {
-                changes.changed().await.ok()?;
-            }
-            changes.mark_unchanged();
-            let view = master.inspect(dashboard_view).await?;
-            let json = serde_json::to_string(&view).unwrap_or_default();
-            let event = Event::default().event("farm").data(json);
-            Some((Ok(event), (master, changes, false)))
+        (Some(first), feed, permit),
+        |(first, mut feed, permit)| async move {
+            let json = match first {
+                Some(json) => json,
+                None => {
+                    feed.changed().await.ok()?;
+                    feed.borrow_and_update().clone()
+                }
+            };
+            let event = Event::default().event("farm").data(&*json);
+            Some((Ok::<_, Infallible>(event), (None, feed, permit)))
         },
     );
-    Sse::new(stream)
+    Sse::new(stream).into_response()
+}
+
+fn dashboard_json(core: &MasterCore) -> Arc<str> {
+    serde_json::to_string(&dashboard_view(core))
+        .unwrap_or_default()
+        .into()
+}
+
+/// The dashboard view as JSON, computed again (at most every
+/// [`VIEW_INTERVAL`]) when the master's state moved and someone follows
+/// it; ends with the master.
+fn view_feed(master: MasterHandle) -> watch::Receiver<Arc<str>> {
+    let (publish, feed) = watch::channel(Arc::<str>::from(""));
+    let mut changes = master.changes();
+    tokio::spawn(async move {
+        loop {
+            if changes.changed().await.is_err() {
+                return;
+            }
+            changes.mark_unchanged();
+            // The feed kept by the router is one receiver; streams are the rest.
+            if publish.receiver_count() > 1 {
+                let Some(json) = master.inspect(dashboard_json).await else {
+                    return;
+                };
+                publish.send_replace(json);
+            }
+            tokio::time::sleep(VIEW_INTERVAL).await;
+        }
+    });
+    feed
 }
 
 /// The frame being assembled, as far as it got.
@@ -434,24 +679,27 @@ async fn frame_png(State(state): State<HttpState>, Path(name): Path<String>) -> 
     }
 }
 
-fn linear_srgb8(image: Arc<Image>) -> Result<Srgb8, String> {
+fn linear_srgb8(image: Arc<Image>) -> Result<Srgb8, PngError> {
     Ok((image.width, image.height, image.to_srgb8()))
 }
 
 /// A finished frame as kept: compressed, linear or sRGB.
-fn wire_srgb8(image: Arc<WireImage>) -> Result<Srgb8, String> {
-    (Arc::unwrap_or_clone(image).into_srgb8()).map_err(|e| e.to_string())
+fn wire_srgb8(image: Arc<WireImage>) -> Result<Srgb8, PngError> {
+    Ok(Arc::unwrap_or_clone(image).into_srgb8()?)
 }
 
 /// The `srgb8` pixels as a PNG, made and encoded off the async threads.
-async fn png_response(srgb8: impl FnOnce() -> Result<Srgb8, String> + Send + 'static) -> Response {
+async fn png_response(
+    srgb8: impl FnOnce() -> Result<Srgb8, PngError> + Send + 'static,
+) -> Response {
     let encoded = tokio::task::spawn_blocking(move || {
         let (width, height, pixels) = srgb8()?;
-        encode_srgb8_png(width, height, &pixels).map_err(|e| e.to_string())
+        Ok::<_, PngError>(encode_srgb8_png(width, height, &pixels)?)
     })
-    .await;
+    .await
+    .unwrap_or_else(|e| Err(PngError::from(e)));
     match encoded {
-        Ok(Ok(png)) => (
+        Ok(png) => (
             [
                 (header::CONTENT_TYPE, "image/png"),
                 (header::CACHE_CONTROL, "no-store"),
@@ -459,8 +707,7 @@ async fn png_response(srgb8: impl FnOnce() -> Result<Srgb8, String> + Send + 'st
             png,
         )
             .into_response(),
-        Ok(Err(e)) => (StatusCode::INTERNAL_SERVER_ERROR, format!("PNG: {e}\n")).into_response(),
-        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("PNG: {e}\n")).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
     }
 }
 
@@ -639,6 +886,18 @@ fn metrics_registry(core: &MasterCore) -> Registry {
         "worker_bytes",
         "Package (in) and result (out) bytes of each worker's accepted results",
         &bytes,
+    );
+    counter(
+        &mut r,
+        "journal_write_failures",
+        "Journal records that could not be written (a full disk, say)",
+        c.journal_write_failures,
+    );
+    counter(
+        &mut r,
+        "frames_rendered_again",
+        "Finished frames the journal could not give back, rendered again",
+        c.frames_rendered_again,
     );
     counter(
         &mut r,

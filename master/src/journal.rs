@@ -2,8 +2,7 @@
 //! in the state directory so that a restarted master resumes its jobs from
 //! the last finished frame and a submitter can re-attach.
 //!
-//! Layout (every file one protocol message, written to a temporary name and
-//! renamed, so a crash leaves either the old or the new file):
+//! Layout (every file one record, see below):
 //!
 //! ```text
 //! STATE/jobs/format                the journal's format, [`JOURNAL_FORMAT`]
@@ -11,7 +10,14 @@
 //! STATE/jobs/NNNNNNNNNNNN/job      SubmitJob { job } (scene by hash)
 //! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F
 //! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
+//! STATE/jobs/damaged/NNNNNNNNNNNN  a job set aside, with `why` beside its files
 //! ```
+//!
+//! A record proves itself: its bytes follow their CRC32C ([`RECORD_HEADER`]),
+//! and every read checks it, so a flipped byte, a truncated or an emptied
+//! file is an error naming the file and the check, never a wrong frame. A
+//! record is written to a temporary file, fsynced and renamed (and the
+//! directory fsynced), so a crash leaves the old record or the new one.
 //!
 //! Frames are the bulk; a `FrameDone` already carries its image compressed
 //! in the job's format (`WireImage`), so the file holds the very message the
@@ -21,14 +27,18 @@
 //! refused at start with an error that says what to do.
 //!
 //! The core never touches it: it emits [`Record`]s, the driver writes them
-//! and feeds [`StoredJob`]s back at start. A damaged entry is skipped with a
-//! warning naming its file; the master never fails to start over it.
+//! (and tells the core how each frame's write went) and feeds [`StoredJob`]s
+//! back at start. At start a job whose own record (or scene) fails its check
+//! is moved to `jobs/damaged/` with a warning naming the file and the check,
+//! never deleted; a frame that fails its check is renamed `FFFFFF.damaged`
+//! and the job resumes from it (it is rendered again).
 
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use tracing::warn;
-use vtfarm_master_core::{Record, StoredJob};
+use vtfarm_master_core::{DamagedJob, Record, StoredJob, Written};
 use vtfarm_proto::{
     FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, decode_message,
     encode_message,
@@ -41,7 +51,8 @@ use vtfarm_proto::{
 /// read back, as for a replay). Dropping the writer writes what is queued
 /// and ends the thread. At most [`JournalWriter::QUEUED`] records wait: when
 /// the disk falls behind, the driver waits for it instead of holding an
-/// unbounded backlog of frames in memory.
+/// unbounded backlog of frames in memory. Each record's outcome goes to the
+/// `report` callback given at start (the driver hands it to the core).
 pub struct JournalWriter {
     queue: Option<std::sync::mpsc::SyncSender<WriterInput>>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -56,14 +67,23 @@ impl JournalWriter {
     /// Records queued before [`JournalWriter::write`] waits for the disk.
     pub const QUEUED: usize = 4;
 
-    pub fn new(journal: Journal) -> JournalWriter {
+    /// A writer of `journal` that tells `report` how each record went.
+    pub fn new(journal: Journal, report: impl Fn(Written) + Send + 'static) -> JournalWriter {
         let (queue, inputs) = std::sync::mpsc::sync_channel(Self::QUEUED);
         let thread = std::thread::Builder::new()
             .name("journal".into())
             .spawn(move || {
                 for input in inputs {
                     match input {
-                        WriterInput::Write(record) => journal.write(*record),
+                        WriterInput::Write(record) => {
+                            let (job, frame) = (record.job(), record.frame());
+                            let outcome = journal.write(*record).map_err(|e| e.to_string());
+                            report(Written {
+                                job,
+                                frame,
+                                outcome,
+                            });
+                        }
                         WriterInput::Flush(done) => {
                             let _ = done.send(());
                         }
@@ -112,9 +132,23 @@ impl Drop for JournalWriter {
     }
 }
 
-/// The journal's format: 2 since finished frames are kept as sent
-/// (compressed inside the message), 1 (no `format` file) before.
-pub const JOURNAL_FORMAT: u32 = 2;
+/// What [`Journal::load`] found.
+#[derive(Debug, Default)]
+pub struct Loaded {
+    /// The jobs to resume, in id order.
+    pub jobs: Vec<StoredJob>,
+    /// The jobs set aside, in id order.
+    pub damaged: Vec<DamagedJob>,
+}
+
+/// The journal's format: 3 since every record carries its checksum, 2 when
+/// finished frames were kept as sent without one, 1 (no `format` file)
+/// before.
+pub const JOURNAL_FORMAT: u32 = 3;
+
+/// Every record file starts with the CRC32C of the bytes after it, 4 bytes
+/// little-endian.
+pub const RECORD_HEADER: usize = 4;
 
 /// Why the journal cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -133,22 +167,164 @@ impl JournalError {
     }
 }
 
+/// Why a record could not be read back: each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("{}: missing", .path.display())]
+    Missing { path: PathBuf },
+    #[error("{}: cannot read: {source}", .path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {len} bytes, too short to hold a record's checksum", .path.display())]
+    Truncated { path: PathBuf, len: usize },
+    #[error("{}: more than a record may hold ({MAX_MESSAGE_BYTES} bytes)", .path.display())]
+    TooLarge { path: PathBuf },
+    #[error("{}: checksum mismatch (CRC32C {stored:08x} stored, {computed:08x} computed)", .path.display())]
+    Checksum {
+        path: PathBuf,
+        stored: u32,
+        computed: u32,
+    },
+    #[error("{}: checksum good but not {expected}: {error}", .path.display())]
+    Content {
+        path: PathBuf,
+        expected: &'static str,
+        error: String,
+    },
+}
+
+/// Why a record could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot journal {what} ({}): {source}", .path.display())]
+pub struct WriteError {
+    what: String,
+    path: PathBuf,
+    source: std::io::Error,
+}
+
+/// Where the journal's bytes go: the disk, or (in tests) a store that
+/// fails on demand, as a full disk does.
+pub trait Storage: Send + Sync {
+    /// Writes `bytes` to `path` so that a crash leaves the old file or the
+    /// new one, never half of one.
+    fn write_atomic(&self, path: &Path, bytes: &[u8]) -> std::io::Result<()>;
+}
+
+/// The journal's storage on the file system: temporary file, fsync, rename,
+/// fsync of the directory.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Disk;
+
+impl Storage for Disk {
+    fn write_atomic(&self, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+        let temporary = path.with_extension("partial");
+        let written = (|| {
+            let mut file = std::fs::File::create(&temporary)?;
+            file.write_all(bytes)?;
+            file.sync_all()
+        })();
+        if let Err(e) = written {
+            // A full disk must not keep the half-written file.
+            let _ = std::fs::remove_file(&temporary);
+            return Err(e);
+        }
+        std::fs::rename(&temporary, path)?;
+        match path.parent() {
+            Some(dir) => std::fs::File::open(dir)?.sync_all(),
+            None => Ok(()),
+        }
+    }
+}
+
 /// The journal in a directory.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct Journal {
     dir: PathBuf,
+    storage: Arc<dyn Storage>,
+}
+
+impl std::fmt::Debug for Journal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Journal").field("dir", &self.dir).finish()
+    }
+}
+
+/// A record's file bytes: the checksum, then the payload.
+fn record_bytes(payload: &[u8]) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(RECORD_HEADER + payload.len());
+    bytes.extend_from_slice(&crc32c::crc32c(payload).to_le_bytes());
+    bytes.extend_from_slice(payload);
+    bytes
+}
+
+/// Reads a record and checks its checksum, no more than a message may hold
+/// (a damaged file cannot make the master allocate more).
+fn read_record(path: &Path) -> Result<Vec<u8>, RecordError> {
+    let path_buf = || path.to_owned();
+    let file = std::fs::File::open(path).map_err(|source| match source.kind() {
+        std::io::ErrorKind::NotFound => RecordError::Missing { path: path_buf() },
+        _ => RecordError::Read {
+            path: path_buf(),
+            source,
+        },
+    })?;
+    let limit = u64::from(MAX_MESSAGE_BYTES) + RECORD_HEADER as u64;
+    let mut bytes = Vec::new();
+    (file.take(limit + 1))
+        .read_to_end(&mut bytes)
+        .map_err(|source| RecordError::Read {
+            path: path_buf(),
+            source,
+        })?;
+    if bytes.len() as u64 > limit {
+        return Err(RecordError::TooLarge { path: path_buf() });
+    }
+    if bytes.len() < RECORD_HEADER {
+        return Err(RecordError::Truncated {
+            path: path_buf(),
+            len: bytes.len(),
+        });
+    }
+    let stored = u32::from_le_bytes(bytes[..RECORD_HEADER].try_into().expect("4 bytes"));
+    let computed = crc32c::crc32c(&bytes[RECORD_HEADER..]);
+    if stored != computed {
+        return Err(RecordError::Checksum {
+            path: path_buf(),
+            stored,
+            computed,
+        });
+    }
+    bytes.drain(..RECORD_HEADER);
+    Ok(bytes)
+}
+
+/// Reads a record holding one protocol message.
+fn read_message(path: &Path, expected: &'static str) -> Result<Message, RecordError> {
+    let bytes = read_record(path)?;
+    decode_message(&bytes).map_err(|e| RecordError::Content {
+        path: path.to_owned(),
+        expected,
+        error: e.to_string(),
+    })
 }
 
 impl Journal {
     /// Opens (creating) the journal under `state_dir/jobs`; refuses one of
     /// another [`JOURNAL_FORMAT`].
     pub fn open(state_dir: &Path) -> Result<Journal, JournalError> {
+        Journal::open_with(state_dir, Arc::new(Disk))
+    }
+
+    /// [`Journal::open`] writing through `storage`.
+    pub fn open_with(state_dir: &Path, storage: Arc<dyn Storage>) -> Result<Journal, JournalError> {
         let dir = state_dir.join("jobs");
         std::fs::create_dir_all(dir.join("scenes")).map_err(|source| JournalError {
             path: dir.clone(),
             source,
         })?;
-        let journal = Journal { dir };
+        let journal = Journal { dir, storage };
         let path = journal.dir.join("format");
         let format = match std::fs::read_to_string(&path) {
             Ok(text) => text.trim().parse::<u32>().ok(),
@@ -161,7 +337,8 @@ impl Journal {
         match format {
             Some(JOURNAL_FORMAT) => Ok(journal),
             None if !path.exists() => {
-                write_atomic(&path, format!("{JOURNAL_FORMAT}\n").as_bytes())
+                (journal.storage)
+                    .write_atomic(&path, format!("{JOURNAL_FORMAT}\n").as_bytes())
                     .map_err(|source| JournalError { path, source })?;
                 Ok(journal)
             }
@@ -182,57 +359,125 @@ impl Journal {
         self.dir.join(format!("{id:012}"))
     }
 
-    fn scene_path(&self, hash: &SceneHash) -> PathBuf {
+    fn damaged_dir(&self) -> PathBuf {
+        self.dir.join("damaged")
+    }
+
+    /// The scene file of `hash`.
+    pub fn scene_path(&self, hash: &SceneHash) -> PathBuf {
         self.dir
             .join("scenes")
             .join(format!("{}.scene", hex::encode(hash)))
     }
 
-    fn frame_path(&self, id: u64, frame: u32) -> PathBuf {
+    /// The file of frame `frame` of job `id`.
+    pub fn frame_path(&self, id: u64, frame: u32) -> PathBuf {
         self.job_dir(id).join(format!("{frame:06}"))
     }
 
-    /// Writes a record; a failure is logged (the farm goes on, unjournaled).
-    /// Taken by value: a finished frame is written without a copy.
-    pub fn write(&self, record: Record) {
+    /// The record file of job `id`.
+    pub fn job_path(&self, id: u64) -> PathBuf {
+        self.job_dir(id).join("job")
+    }
+
+    fn write_record(&self, what: &str, path: &Path, payload: &[u8]) -> Result<(), WriteError> {
+        (self.storage)
+            .write_atomic(path, &record_bytes(payload))
+            .map_err(|source| WriteError {
+                what: what.to_owned(),
+                path: path.to_owned(),
+                source,
+            })
+    }
+
+    fn write_message(&self, what: &str, path: &Path, message: &Message) -> Result<(), WriteError> {
+        let frame = encode_message(message).map_err(|e| WriteError {
+            what: what.to_owned(),
+            path: path.to_owned(),
+            source: std::io::Error::other(e),
+        })?;
+        self.write_record(what, path, &frame[4..])
+    }
+
+    /// Writes a record. Taken by value: a finished frame is written without
+    /// a copy.
+    pub fn write(&self, record: Record) -> Result<(), WriteError> {
         let what = record_name(&record);
-        let written = match record {
+        let io = |path: &Path| {
+            let path = path.to_owned();
+            let what = what.clone();
+            move |source| WriteError { what, path, source }
+        };
+        match record {
             Record::JobQueued { id, job, scene } => {
                 let scene_path = self.scene_path(&scene.hash);
-                let scene_written = if scene_path.exists() {
-                    Ok(())
-                } else {
-                    write_atomic(&scene_path, &scene.bytes)
-                };
-                scene_written.and_then(|()| {
-                    std::fs::create_dir_all(self.job_dir(id))?;
-                    let message = Message::SubmitJob { job: *job };
-                    write_message(&self.job_dir(id).join("job"), &message)
-                })
+                if read_record(&scene_path).is_err() {
+                    self.write_record(&what, &scene_path, &scene.bytes)?;
+                }
+                let dir = self.job_dir(id);
+                std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+                let message = Message::SubmitJob { job: *job };
+                self.write_message(&what, &self.job_path(id), &message)
             }
-            Record::FrameDone(done) => write_message(
-                &self.frame_path(done.job, done.frame),
-                &Message::FrameDone(*done),
-            ),
-            Record::JobComplete { id } => write_atomic(&self.job_dir(id).join("complete"), b""),
+            Record::FrameDone(done) => {
+                let path = self.frame_path(done.job, done.frame);
+                self.write_message(&what, &path, &Message::FrameDone(*done))
+            }
+            Record::JobComplete { id } => {
+                self.write_record(&what, &self.job_dir(id).join("complete"), b"")
+            }
             Record::JobForgotten { id } => {
-                let removed = std::fs::remove_dir_all(self.job_dir(id));
-                let removed = removed.or_else(|e| match e.kind() {
+                let dir = self.job_dir(id);
+                let removed = std::fs::remove_dir_all(&dir).or_else(|e| match e.kind() {
                     std::io::ErrorKind::NotFound => Ok(()),
                     _ => Err(e),
                 });
-                removed.and_then(|()| self.remove_unused_scenes())
+                removed.map_err(io(&dir))?;
+                self.remove_unused_scenes().map_err(io(&self.dir))
             }
-        };
-        if let Err(e) = written {
-            warn!(dir = %self.dir.display(), "cannot journal {what}: {e}");
+            Record::JobDamaged { id, reason } => {
+                let dir = self.job_dir(id);
+                self.set_aside(id, &reason).map(|_| ()).map_err(io(&dir))
+            }
         }
     }
 
-    /// Removes the scenes no journaled job names any more.
+    /// Moves job `id`'s directory to `jobs/damaged/` with a `why` file
+    /// holding `reason`; returns where it went. Nothing is deleted.
+    fn set_aside(&self, id: u64, reason: &str) -> std::io::Result<PathBuf> {
+        let damaged = self.damaged_dir();
+        std::fs::create_dir_all(&damaged)?;
+        let name = format!("{id:012}");
+        // A job of this id set aside before keeps its place.
+        let target = (0..)
+            .map(|k| match k {
+                0 => damaged.join(&name),
+                k => damaged.join(format!("{name}.{k}")),
+            })
+            .find(|p| !p.exists())
+            .expect("an unused name");
+        let source = self.job_dir(id);
+        if source.exists() {
+            std::fs::rename(&source, &target)?;
+        } else {
+            std::fs::create_dir_all(&target)?;
+        }
+        std::fs::write(target.join("why"), format!("{reason}\n"))?;
+        warn!(job = id, path = %target.display(), "journaled job set aside: {reason}");
+        Ok(target)
+    }
+
+    /// Removes the scenes no journaled job names any more (jobs set aside
+    /// keep theirs).
     fn remove_unused_scenes(&self) -> std::io::Result<()> {
-        let used: Vec<String> = (self.job_ids().into_iter())
-            .filter_map(|id| match read_message(&self.job_dir(id).join("job"))? {
+        let damaged: Vec<PathBuf> = match std::fs::read_dir(self.damaged_dir()) {
+            Ok(entries) => entries.filter_map(|e| Some(e.ok()?.path())).collect(),
+            Err(_) => Vec::new(),
+        };
+        let records = (self.job_ids().into_iter().map(|id| self.job_path(id)))
+            .chain(damaged.into_iter().map(|dir| dir.join("job")));
+        let used: Vec<String> = records
+            .filter_map(|path| match read_message(&path, "a job").ok()? {
                 Message::SubmitJob { job } => match job.scene {
                     JobScene::Hash(hash) => Some(format!("{}.scene", hex::encode(hash))),
                     JobScene::Data(_) => None,
@@ -261,47 +506,137 @@ impl Journal {
         ids
     }
 
-    /// A finished frame, if the journal has it.
-    pub fn frame(&self, id: u64, frame: u32) -> Option<FrameDone> {
-        match read_message(&self.frame_path(id, frame))? {
-            Message::FrameDone(done) if done.job == id && done.frame == frame => Some(done),
-            _ => None,
+    /// A finished frame, checked against its checksum.
+    pub fn frame(&self, id: u64, frame: u32) -> Result<FrameDone, RecordError> {
+        let path = self.frame_path(id, frame);
+        match read_message(&path, "a finished frame")? {
+            Message::FrameDone(done) if done.job == id && done.frame == frame => Ok(done),
+            other => Err(RecordError::Content {
+                path,
+                expected: "this frame",
+                error: match other {
+                    Message::FrameDone(done) => {
+                        format!("it holds frame {} of job {}", done.frame, done.job)
+                    }
+                    other => format!("it holds a {}", other.name()),
+                },
+            }),
         }
     }
 
-    /// Every job in the journal, in id order; damaged ones are skipped with a warning.
-    pub fn load(&self) -> Vec<StoredJob> {
-        (self.job_ids().into_iter())
-            .filter_map(|id| self.load_job(id))
+    /// Every job in the journal, in id order. A job that cannot be read
+    /// back is set aside (see the module's doc) and listed as damaged,
+    /// with the jobs set aside by earlier starts.
+    pub fn load(&self) -> Loaded {
+        let mut loaded = Loaded::default();
+        for id in self.job_ids() {
+            match self.load_job(id) {
+                Ok(job) => loaded.jobs.push(job),
+                Err(e) => {
+                    if let Err(move_error) = self.set_aside(id, &e.to_string()) {
+                        warn!(job = id, "cannot set the damaged job aside: {move_error}");
+                        let reason = format!("{e} (and it could not be set aside: {move_error})");
+                        loaded.damaged.push(DamagedJob { id, reason });
+                    }
+                }
+            }
+        }
+        loaded.damaged.extend(self.set_aside_jobs());
+        loaded.damaged.sort_by_key(|d| d.id);
+        loaded
+    }
+
+    /// The jobs in `jobs/damaged/`, one per id, with why and where.
+    fn set_aside_jobs(&self) -> Vec<DamagedJob> {
+        let Ok(entries) = std::fs::read_dir(self.damaged_dir()) else {
+            return Vec::new();
+        };
+        let mut found: Vec<(u64, PathBuf)> = entries
+            .filter_map(|e| {
+                let path = e.ok()?.path();
+                let id: u64 = path
+                    .file_name()?
+                    .to_str()?
+                    .split('.')
+                    .next()?
+                    .parse()
+                    .ok()?;
+                Some((id, path))
+            })
+            .collect();
+        found.sort();
+        found.dedup_by_key(|(id, _)| *id);
+        (found.into_iter())
+            .map(|(id, path)| {
+                let why = std::fs::read_to_string(path.join("why")).unwrap_or_default();
+                let reason = format!("{}; the job is kept in {}", why.trim(), path.display());
+                DamagedJob { id, reason }
+            })
             .collect()
     }
 
-    fn load_job(&self, id: u64) -> Option<StoredJob> {
-        let path = self.job_dir(id).join("job");
-        let Some(Message::SubmitJob { mut job }) = read_message(&path) else {
-            warn!(path = %path.display(), "skipping a damaged journal entry");
-            return None;
+    fn load_job(&self, id: u64) -> Result<StoredJob, RecordError> {
+        let path = self.job_path(id);
+        let Message::SubmitJob { mut job } = read_message(&path, "a job")? else {
+            return Err(RecordError::Content {
+                path,
+                expected: "a job",
+                error: "another message".into(),
+            });
         };
         let JobScene::Hash(hash) = job.scene else {
-            warn!(path = %path.display(), "skipping a journal entry with an inline scene");
-            return None;
+            return Err(RecordError::Content {
+                path,
+                expected: "a job with its scene by hash",
+                error: "the scene is inline".into(),
+            });
         };
         let scene_path = self.scene_path(&hash);
-        let Ok(bytes) = std::fs::read(&scene_path) else {
-            warn!(path = %scene_path.display(), "skipping a job whose scene is missing");
-            return None;
-        };
+        let bytes = read_record(&scene_path)?;
         job.scene = JobScene::Data(SceneData { hash, bytes });
         let frames = job.frames.len() as u32;
-        let frames_done = (0..frames)
-            .take_while(|&f| self.frame_path(id, f).exists())
-            .count() as u32;
+        let mut frames_done = 0;
+        let mut damaged_frame = None;
+        while frames_done < frames {
+            match self.frame(id, frames_done) {
+                Ok(_) => frames_done += 1,
+                Err(e @ RecordError::Missing { .. }) => {
+                    // A gap: later frames are there, this one is lost.
+                    let later = (frames_done + 1..frames).any(|f| self.frame_path(id, f).exists());
+                    if later {
+                        warn!(
+                            job = id,
+                            frame = frames_done,
+                            "{e}: the frame is rendered again"
+                        );
+                        damaged_frame = Some((frames_done, e.to_string()));
+                    }
+                    break;
+                }
+                Err(e) => {
+                    let path = self.frame_path(id, frames_done);
+                    let aside = path.with_extension("damaged");
+                    let reason = format!("{e} (the file is kept as {})", aside.display());
+                    warn!(
+                        job = id,
+                        frame = frames_done,
+                        "{reason}: the frame is rendered again"
+                    );
+                    if let Err(move_error) = std::fs::rename(&path, &aside) {
+                        warn!(path = %path.display(), "cannot rename the damaged frame: {move_error}");
+                    }
+                    damaged_frame = Some((frames_done, reason));
+                    break;
+                }
+            }
+        }
         let complete = self.job_dir(id).join("complete").exists() && frames_done == frames;
-        Some(StoredJob {
+        Ok(StoredJob {
             id,
             job,
             frames_done,
             complete,
+            damaged_frame,
         })
     }
 }
@@ -312,33 +647,8 @@ fn record_name(record: &Record) -> String {
         Record::FrameDone(done) => format!("job {} frame {}", done.job, done.frame),
         Record::JobComplete { id } => format!("the completion of job {id}"),
         Record::JobForgotten { id } => format!("the removal of job {id}"),
+        Record::JobDamaged { id, .. } => format!("setting job {id} aside"),
     }
-}
-
-fn write_message(path: &Path, message: &Message) -> std::io::Result<()> {
-    let frame = encode_message(message).map_err(std::io::Error::other)?;
-    write_atomic(path, &frame[4..])
-}
-
-/// Reads a message, no more than a message may hold (a damaged file
-/// cannot make the master allocate more).
-fn read_message(path: &Path) -> Option<Message> {
-    let mut bytes = Vec::new();
-    (std::fs::File::open(path).ok()?)
-        .take(u64::from(MAX_MESSAGE_BYTES) + 1)
-        .read_to_end(&mut bytes)
-        .ok()?;
-    if bytes.len() > MAX_MESSAGE_BYTES as usize {
-        return None;
-    }
-    decode_message(&bytes).ok()
-}
-
-/// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
-fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let temporary = path.with_extension("partial");
-    std::fs::write(&temporary, bytes)?;
-    std::fs::rename(&temporary, path)
 }
 
 #[cfg(test)]
@@ -386,14 +696,16 @@ mod tests {
         };
         let frames = [setup.clone(), setup.clone(), setup];
         let job = crate::wire_job("j", &scene, &frames, &[0], options);
-        journal.write(Record::JobQueued {
-            id: 4,
-            job: Box::new(job.clone()),
-            scene: scene.clone(),
-        });
-        journal.write(frame_done(4, 0));
-        journal.write(frame_done(4, 2));
-        let stored = journal.load();
+        journal
+            .write(Record::JobQueued {
+                id: 4,
+                job: Box::new(job.clone()),
+                scene: scene.clone(),
+            })
+            .unwrap();
+        journal.write(frame_done(4, 0)).unwrap();
+        journal.write(frame_done(4, 2)).unwrap();
+        let stored = journal.load().jobs;
         assert_eq!(stored.len(), 1);
         assert_eq!(
             (stored[0].id, stored[0].frames_done, stored[0].complete),
@@ -403,9 +715,9 @@ mod tests {
         assert_eq!(stored[0].job.frames, job.frames);
         assert_eq!(journal.frame(4, 2).unwrap().frame, 2);
 
-        journal.write(Record::JobForgotten { id: 4 });
-        assert!(journal.load().is_empty());
-        assert!(journal.frame(4, 0).is_none());
+        journal.write(Record::JobForgotten { id: 4 }).unwrap();
+        assert!(journal.load().jobs.is_empty());
+        assert!(journal.frame(4, 0).is_err());
         let scenes = std::fs::read_dir(dir.path().join("jobs/scenes")).unwrap();
         assert_eq!(scenes.count(), 0, "the scene went with its last job");
     }
@@ -417,7 +729,10 @@ mod tests {
     fn the_writer_thread_keeps_the_order_and_a_flush_makes_records_readable() {
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
-        let writer = JournalWriter::new(journal.clone());
+        let (report, reports) = std::sync::mpsc::channel();
+        let writer = JournalWriter::new(journal.clone(), move |written| {
+            let _ = report.send(written);
+        });
         // No JobQueued: the frames need the job's directory, made here.
         std::fs::create_dir_all(journal.job_dir(3)).unwrap();
         for frame in 0..20 {
@@ -425,15 +740,26 @@ mod tests {
         }
         writer.flush();
         for frame in 0..20 {
-            assert_eq!(journal.frame(3, frame).map(|d| d.frame), Some(frame));
+            assert_eq!(journal.frame(3, frame).map(|d| d.frame).ok(), Some(frame));
+            let written = reports.try_recv().expect("a report per record");
+            assert_eq!((written.frame, written.outcome), (Some(frame), Ok(())));
         }
         writer.write(frame_done(3, 20));
         writer.write(Record::JobForgotten { id: 3 });
         writer.write(frame_done(3, 21));
         drop(writer);
-        // Removed after frame 20; frame 21 then finds no directory.
-        assert!(journal.frame(3, 20).is_none());
-        assert!(journal.frame(3, 21).is_none());
+        // Removed after frame 20; frame 21 then finds no directory, and
+        // the writer says so.
+        assert!(journal.frame(3, 20).is_err());
+        assert!(journal.frame(3, 21).is_err());
+        let outcomes: Vec<_> = reports
+            .try_iter()
+            .map(|w| (w.frame, w.outcome.is_ok()))
+            .collect();
+        assert_eq!(
+            outcomes,
+            [(Some(20), true), (None, true), (Some(21), false)]
+        );
     }
 
     #[test]
@@ -458,8 +784,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
         std::fs::create_dir_all(journal.job_dir(7)).unwrap();
-        journal.write(Record::FrameDone(Box::new(done.clone())));
-        assert_eq!(journal.frame(7, 3), Some(done));
+        journal
+            .write(Record::FrameDone(Box::new(done.clone())))
+            .unwrap();
+        assert_eq!(journal.frame(7, 3).unwrap(), done);
         let raw = 160 * 90 * 12;
         let kept = std::fs::metadata(journal.frame_path(7, 3)).unwrap().len();
         assert!(kept * 3 < raw, "{kept} bytes for a {raw}-byte frame");
@@ -474,7 +802,7 @@ mod tests {
         Journal::open(dir.path()).unwrap();
         assert_eq!(
             std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
-            "2\n"
+            "3\n"
         );
         Journal::open(dir.path()).expect("the current format opens again");
 
@@ -482,7 +810,7 @@ mod tests {
         std::fs::create_dir_all(old.path().join("jobs/000000000001")).unwrap();
         let error = Journal::open(old.path()).expect_err("format 1").to_string();
         assert!(
-            error.contains("format 1, but this master reads format 2"),
+            error.contains("format 1, but this master reads format 3"),
             "{error}"
         );
         assert!(
@@ -495,19 +823,44 @@ mod tests {
         assert!(error.contains("format 7"), "{error}");
     }
 
+    /// Every kind of damage to a frame record is an error naming the file
+    /// and the check, never a frame: a flipped byte anywhere, a truncated,
+    /// an emptied, a missing file, another frame's file in its place.
     #[test]
-    fn a_damaged_entry_is_skipped() {
+    fn a_damaged_frame_record_is_an_error_naming_the_file_and_the_check() {
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
         std::fs::create_dir_all(journal.job_dir(1)).unwrap();
-        std::fs::write(journal.job_dir(1).join("job"), b"\xff\xfe not a message").unwrap();
-        assert!(journal.load().is_empty());
-        assert!(journal.frame(1, 0).is_none());
-        // A frame file that is not zstd, or that decompresses to garbage.
-        std::fs::write(journal.frame_path(1, 0), b"\x28\xb5\x2f\xfd garbage").unwrap();
-        assert!(journal.frame(1, 0).is_none());
-        let not_a_message = zstd::bulk::compress(&[0xff; 64], 3).unwrap();
-        std::fs::write(journal.frame_path(1, 0), not_a_message).unwrap();
-        assert!(journal.frame(1, 0).is_none());
+        journal.write(frame_done(1, 0)).unwrap();
+        journal.write(frame_done(1, 1)).unwrap();
+        let path = journal.frame_path(1, 0);
+        let good = std::fs::read(&path).unwrap();
+        let check = |bytes: &[u8], needle: &str| {
+            std::fs::write(&path, bytes).unwrap();
+            let error = journal.frame(1, 0).expect_err("damaged").to_string();
+            assert!(error.contains(&path.display().to_string()), "{error}");
+            assert!(error.contains(needle), "{error}");
+        };
+        for at in 0..good.len() {
+            let mut flipped = good.clone();
+            flipped[at] ^= 0x10;
+            check(&flipped, "checksum mismatch");
+        }
+        check(&good[..good.len() - 1], "checksum mismatch");
+        check(&good[..2], "too short");
+        check(b"", "too short");
+        std::fs::copy(journal.frame_path(1, 1), &path).unwrap();
+        check(&std::fs::read(&path).unwrap(), "it holds frame 1 of job 1");
+        std::fs::remove_file(&path).unwrap();
+        assert!(matches!(
+            journal.frame(1, 0),
+            Err(RecordError::Missing { .. })
+        ));
+        std::fs::write(&path, &good).unwrap();
+        assert_eq!(
+            journal.frame(1, 0).unwrap().frame,
+            0,
+            "the good bytes read back"
+        );
     }
 }

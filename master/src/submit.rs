@@ -5,7 +5,15 @@
 //! when it does not have that scene yet. [`run_remote_job`] follows a job
 //! across lost connections: it reconnects and re-attaches (`AttachJob`) to
 //! receive the frames from the first one it lacks.
+//!
+//! The submitter tracks every frame it is owed: it takes the frames in any
+//! order (a frame the journal could not give back comes later, rendered
+//! again), skips those it has, asks again from the first one it lacks after
+//! each reconnect, and fails naming the frame when the master says one
+//! cannot be delivered. Several submitters may follow one job: each gets
+//! every frame.
 
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use tracing::warn;
@@ -76,9 +84,19 @@ impl FrameColor {
 /// What happens while a job runs, for progress displays.
 #[derive(Clone, Debug)]
 pub enum JobEvent<'a> {
-    Accepted { job: u64, frames: u32 },
-    Progress { frame: u32, done: u32, total: u32 },
+    Accepted {
+        job: u64,
+        frames: u32,
+    },
+    Progress {
+        frame: u32,
+        done: u32,
+        total: u32,
+    },
     FrameDone(&'a FinishedFrame),
+    /// Something the user should know that does not end the job (a frame
+    /// being rendered again, a record the master could not journal).
+    Warning(String),
 }
 
 /// Why a job did not complete.
@@ -90,6 +108,12 @@ pub enum JobError {
     Disconnected(Option<String>),
     #[error("bad answer from the master: {0}")]
     Protocol(String),
+    #[error("frame {frame} of job {job} cannot be delivered: {reason}")]
+    FrameLost {
+        job: u64,
+        frame: u32,
+        reason: String,
+    },
     #[error(transparent)]
     Connect(#[from] ConnectError),
 }
@@ -133,7 +157,7 @@ pub async fn run_job(
     send(link, Message::SubmitJob { job })?;
     let mut follower = JobFollower::default();
     follower.follow(link, Some(scene), &mut on_event).await?;
-    Ok(follower.frames)
+    Ok(follower.into_frames())
 }
 
 /// What a remote job run starts from.
@@ -179,7 +203,7 @@ pub async fn run_remote_job(
             (Some(job), _) => Message::SubmitJob { job },
             (None, Some(job)) => Message::AttachJob {
                 job,
-                from_frame: follower.frames.len() as u32,
+                from_frame: follower.first_missing(),
             },
             (None, None) => return Err(JobError::Protocol("no job to attach to".into())),
         };
@@ -191,7 +215,7 @@ pub async fn run_remote_job(
             .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
         match outcome {
-            Ok(()) => return Ok(follower.frames),
+            Ok(()) => return Ok(follower.into_frames()),
             Err(JobError::Disconnected(why)) if follower.job.is_some() => {
                 let why = why.map(|w| format!(": {w}")).unwrap_or_default();
                 warn!("lost the master{why}; reconnecting to follow the job");
@@ -216,7 +240,8 @@ struct JobFollower {
     job: Option<u64>,
     /// How many frames the job has, once accepted.
     total: Option<usize>,
-    frames: Vec<FinishedFrame>,
+    /// The frames received, by number: the others are still owed.
+    frames: BTreeMap<u32, FinishedFrame>,
 }
 
 impl JobFollower {
@@ -225,6 +250,18 @@ impl JobFollower {
             job: Some(job),
             ..JobFollower::default()
         }
+    }
+
+    /// The first frame not received yet (where an attach asks from).
+    fn first_missing(&self) -> u32 {
+        (0..)
+            .find(|f| !self.frames.contains_key(f))
+            .expect("fewer than 2^32 frames")
+    }
+
+    /// The frames in order.
+    fn into_frames(self) -> Vec<FinishedFrame> {
+        self.frames.into_values().collect()
     }
 
     /// Receives until every frame is in (or the job fails, or the link drops).
@@ -251,17 +288,28 @@ impl JobFollower {
                 Message::Progress {
                     frame, done, total, ..
                 } => on_event(JobEvent::Progress { frame, done, total }),
-                // A frame the submitter has already (re-sent after re-attaching) is skipped.
-                Message::FrameDone(done) if done.frame as usize != self.frames.len() => {}
+                // A frame the submitter has already (re-sent after
+                // re-attaching) or of another job is skipped.
+                Message::FrameDone(done)
+                    if self.frames.contains_key(&done.frame)
+                        || self.job.is_some_and(|job| job != done.job)
+                        || self.total.is_some_and(|total| done.frame as usize >= total) => {}
                 Message::FrameDone(done) => {
-                    let image = frame_color(done.image)?;
+                    let frame = done.frame;
+                    let in_frame = |e: JobError| match e {
+                        JobError::Protocol(e) => JobError::Protocol(format!("frame {frame}: {e}")),
+                        other => other,
+                    };
+                    let image = frame_color(done.image).map_err(in_frame)?;
                     let components = match (done.aux, &image) {
                         (None, _) => None,
-                        (Some(aux), FrameColor::Linear(color)) => Some(components(color, aux)?),
+                        (Some(aux), FrameColor::Linear(color)) => {
+                            Some(components(color, aux).map_err(in_frame)?)
+                        }
                         (Some(_), FrameColor::Srgb8 { .. }) => {
-                            return Err(JobError::Protocol(
-                                "frame components with an sRGB colour".into(),
-                            ));
+                            return Err(in_frame(JobError::Protocol(
+                                "components with an sRGB colour".into(),
+                            )));
                         }
                     };
                     let finished = FinishedFrame {
@@ -271,7 +319,23 @@ impl JobFollower {
                         components,
                     };
                     on_event(JobEvent::FrameDone(&finished));
-                    self.frames.push(finished);
+                    self.frames.insert(frame, finished);
+                }
+                Message::FrameMissing {
+                    job,
+                    frame,
+                    reason,
+                    rendering_again,
+                } => {
+                    if !rendering_again {
+                        return Err(JobError::FrameLost { job, frame, reason });
+                    }
+                    let warning = format!("frame {frame} of job {job} is rendered again: {reason}");
+                    on_event(JobEvent::Warning(warning));
+                }
+                Message::JournalFailed { job, error } => {
+                    let warning = format!("the master cannot journal job {job}: {error}");
+                    on_event(JobEvent::Warning(warning));
                 }
                 Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
                 Message::Heartbeat => {}

@@ -60,7 +60,12 @@ impl Farm {
         let http = listener.local_addr().unwrap();
         let tasks = vec![
             tokio::spawn(server::serve(endpoint, policy, master.clone())),
-            tokio::spawn(http::serve(listener, master.clone(), cluster.token.clone())),
+            tokio::spawn(http::serve(
+                listener,
+                master.clone(),
+                http::HttpAccess::new(cluster.token.clone()),
+                http::HttpLimits::default(),
+            )),
         ];
         let options = ClientOptions {
             master: cluster.master,
@@ -426,7 +431,8 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
     let (master, _task) = spawn_master(FarmRules::default());
     let token = "c0ffee".to_owned();
     let ask = |peer: SocketAddr, authorization: Option<&str>| {
-        let app = http::router(master.clone(), token.clone()).layer(MockConnectInfo(peer));
+        let app = http::router(master.clone(), http::HttpAccess::new(token.clone()))
+            .layer(MockConnectInfo(peer));
         let mut request = Request::get("/api/status");
         if let Some(value) = authorization {
             request = request.header("authorization", value);
@@ -464,7 +470,8 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
 async fn a_browser_off_loopback_logs_in_once_and_keeps_a_cookie() {
     let (master, _task) = spawn_master(FarmRules::default());
     let remote: SocketAddr = "192.0.2.7:40000".parse().unwrap();
-    let app = http::router(master.clone(), "c0ffee".into()).layer(MockConnectInfo(remote));
+    let app = http::router(master.clone(), http::HttpAccess::new("c0ffee"))
+        .layer(MockConnectInfo(remote));
     let send = |request: Request<Body>| app.clone().oneshot(request);
     let get_with = |path: &str, header: Option<(&str, &str)>| {
         let mut request = Request::get(path);

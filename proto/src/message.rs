@@ -16,7 +16,9 @@
 //!   `RequestWork` → master `Package`; worker `PackageResult` |
 //!   `PackageFailed`; master `CancelPackage`, `Shutdown`; both `Heartbeat`;
 //! - submitter ↔ master: `SubmitJob` → `JobAccepted`, then `Progress` and
-//!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`.
+//!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`;
+//!   `AttachJob` → `JobAccepted` and the frames, each a `FrameDone` or a
+//!   `FrameMissing`; `JournalFailed` when the master cannot keep a record.
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -98,6 +100,22 @@ pub enum Message {
     /// (after a lost connection, or from another shell). The master answers
     /// `JobAccepted` and the frames, or `JobFailed` when it has no such job.
     AttachJob { job: JobId, from_frame: u32 },
+
+    // Submitter ↔ master, since version 6: the journal's troubles.
+    /// Master → submitter: a finished frame of the job cannot be given
+    /// back (its journal record failed its check or is gone). With
+    /// `rendering_again` it is being rendered again and follows as a
+    /// `FrameDone`; without, the submitter will not get it.
+    FrameMissing {
+        job: JobId,
+        frame: u32,
+        reason: String,
+        rendering_again: bool,
+    },
+    /// Master → submitter: a record of the job could not be journaled (a
+    /// full disk, say): a restarted master would not have it. The job goes
+    /// on; a frame that was not written stays in the master's memory.
+    JournalFailed { job: JobId, error: String },
 }
 
 impl Message {
@@ -126,6 +144,8 @@ impl Message {
             Message::StatusRequest => "StatusRequest",
             Message::StatusReply(_) => "StatusReply",
             Message::AttachJob { .. } => "AttachJob",
+            Message::FrameMissing { .. } => "FrameMissing",
+            Message::JournalFailed { .. } => "JournalFailed",
         }
     }
 }

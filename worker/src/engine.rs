@@ -1,9 +1,18 @@
 //! The worker's computing side, without I/O on the network: the scene cache
 //! (in memory and on disk, by content hash), the renderer of the current
 //! scene, the current frame's ID buffers, and running packages.
+//!
+//! What takes long (decoding a scene, reading and writing the disk cache,
+//! building a renderer's BVH, the ID buffers) needs no `&mut Engine`:
+//! [`SceneCache`], [`FrameParts::build`], so the driver runs it on blocking
+//! threads and its heartbeats never wait behind it. The disk cache writes
+//! through no symlink: a scene goes to a fresh temporary file (`O_EXCL`,
+//! `O_NOFOLLOW`) renamed over the name, and reads refuse a symlink.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::io::Write;
+use std::os::unix::fs::OpenOptionsExt;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -11,7 +20,7 @@ use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
     FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WireBitmapParts,
-    WirePackageStats, check_triangle_ids,
+    WireError, WirePackageStats, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -46,10 +55,52 @@ impl PreparedFrames {
     }
 }
 
+/// A panic inside a scene's or a package's work, with its message.
+#[derive(Debug, thiserror::Error)]
+#[error("panicked: {0}")]
+pub struct Panicked(pub String);
+
+/// Why a frame could not be set up (the session fails its packages so).
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("frame for a scene this worker does not have")]
+    UnknownScene,
+    #[error("frame reflectors: {0}")]
+    Reflectors(WireError),
+    #[error("frame set-up: {0}")]
+    Setup(WireError),
+    #[error("the scene cannot be traced: {0}")]
+    Renderer(String),
+    #[error(transparent)]
+    Panicked(#[from] Panicked),
+}
+
+/// Why a package failed (its text goes to the master in `PackageFailed`).
+#[derive(Debug, thiserror::Error)]
+pub enum PackageError {
+    #[error("package triangles: {0}")]
+    Triangles(WireError),
+    #[error("package item {item} names no reflector (the frame has {groups})")]
+    NoSuchGroup { item: u32, groups: usize },
+    #[error("package {id} {why}")]
+    Stopped { id: u64, why: String },
+    #[error("the package's frame is not prepared")]
+    FrameNotPrepared,
+    #[error(transparent)]
+    Panicked(#[from] Panicked),
+}
+
+/// Why a scene from the master was refused.
+#[derive(Debug, thiserror::Error)]
+#[error("bad scene from the master: {0}")]
+pub struct SceneError(pub WireError);
+
 /// A frame ready for packages: its renderer, set-up and ID buffers.
 pub struct ActiveFrame {
     pub job: JobId,
     pub frame: u32,
+    /// The scene and reflectors the renderer was built for (its cache key).
+    renderer_key: (SceneHash, Vec<u32>),
     renderer: Arc<Renderer>,
     setup: FrameSetup,
     ids: IdBuffer,
@@ -79,7 +130,7 @@ impl ActiveFrame {
         package: &Package,
         slowdown: f64,
         stop: &Stop,
-    ) -> Result<PackageResult, String> {
+    ) -> Result<PackageResult, PackageError> {
         let start = Instant::now();
         let frame = Frame {
             stop: Some(stop),
@@ -90,7 +141,8 @@ impl ActiveFrame {
             Some(per_reflector) => per_reflector.render(&frame, &package.triangles),
         })??;
         if let Some(why) = stop.stopped() {
-            return Err(format!("package {} {why}", package.id));
+            let (id, why) = (package.id, why.to_string());
+            return Err(PackageError::Stopped { id, why });
         }
         let compute = start.elapsed();
         if slowdown > 1.0 {
@@ -120,12 +172,12 @@ pub const SAMPLES_PER_PIXEL_BUDGET: u64 = 64;
 
 /// Runs `f`, turning a panic into an error with its message, so that neither
 /// a scene nor a package can take the worker down.
-pub fn contain_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+pub fn contain_panic<T>(f: impl FnOnce() -> T) -> Result<T, Panicked> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|payload| {
         let message = (payload.downcast_ref::<&str>().map(|s| s.to_string()))
             .or_else(|| payload.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "no message".to_owned());
-        format!("panicked: {message}")
+        Panicked(message)
     })
 }
 
@@ -133,10 +185,10 @@ pub fn contain_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
 fn trace(
     frame: &Frame<'_>,
     triangles: &[u32],
-) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
+) -> Result<(SparseBitmap, PackageStats, Vec<u32>), PackageError> {
     let triangle_count = frame.tracer.bvh.scene().triangles.len();
     check_triangle_ids("package triangles", triangles, triangle_count)
-        .map_err(|e| e.to_string())?;
+        .map_err(PackageError::Triangles)?;
     let result = trace_package(frame, triangles, &PackageOptions::default(), &mut |_| {});
     Ok((result.bitmap, result.stats, result.triangle_samples))
 }
@@ -148,16 +200,14 @@ impl PerReflector {
         &self,
         frame: &Frame<'_>,
         items: &[u32],
-    ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), String> {
+    ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), PackageError> {
         let mut bitmaps = Vec::with_capacity(items.len());
         let mut stats = PackageStats::default();
         let mut samples = Vec::with_capacity(items.len());
         for &item in items {
-            let group = self.groups.get(item as usize).ok_or_else(|| {
-                format!(
-                    "package item {item} names no reflector (the frame has {})",
-                    self.groups.len()
-                )
+            let group = (self.groups.get(item as usize)).ok_or(PackageError::NoSuchGroup {
+                item,
+                groups: self.groups.len(),
             })?;
             let output = self.method.render(&MethodFrame {
                 tracer: frame.tracer,
@@ -182,9 +232,92 @@ impl PerReflector {
     }
 }
 
+/// The worker's disk cache of scenes, by content hash: blocking I/O (and
+/// decoding), run off the session's task.
+#[derive(Clone, Debug)]
+pub struct SceneCache {
+    dir: Option<PathBuf>,
+}
+
+impl SceneCache {
+    fn path(&self, hash: &SceneHash) -> Option<PathBuf> {
+        let name = format!("{}.scene", hex::encode(hash));
+        Some(self.dir.as_ref()?.join(name))
+    }
+
+    /// The cached scene `hash`, checked against its hash, if the disk has
+    /// it. A bad file is removed; a symlink is not followed (a miss).
+    pub fn load(&self, hash: &SceneHash) -> Option<Scene> {
+        let path = self.path(hash)?;
+        let bytes = read_no_follow(&path).ok()?;
+        match (SceneData { hash: *hash, bytes }).to_scene() {
+            Ok(scene) => {
+                debug!(path = %path.display(), "scene loaded from the cache");
+                Some(scene)
+            }
+            Err(e) => {
+                warn!(path = %path.display(), "dropping a bad cached scene: {e}");
+                let _ = std::fs::remove_file(&path);
+                None
+            }
+        }
+    }
+
+    /// Checks a scene from the master and keeps it on disk (a failure to
+    /// cache is logged: the scene is still used).
+    pub fn store(&self, data: &SceneData) -> Result<Scene, SceneError> {
+        let scene = data.to_scene().map_err(SceneError)?;
+        if let Some(path) = self.path(&data.hash) {
+            if let Err(e) = write_no_follow(&path, &data.bytes) {
+                warn!(path = %path.display(), "cannot cache the scene: {e}");
+            }
+        }
+        info!(triangles = scene.triangles.len(), "scene received");
+        Ok(scene)
+    }
+}
+
+/// Reads a file, refusing a symlink in its last component (`O_NOFOLLOW`).
+fn read_no_follow(path: &Path) -> std::io::Result<Vec<u8>> {
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(path)?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut file, &mut bytes)?;
+    Ok(bytes)
+}
+
+/// Writes `bytes` to a fresh temporary file beside `path` (created, never
+/// opened through a link: `O_EXCL` and `O_NOFOLLOW`) and renames it over
+/// `path`, which replaces a symlink there instead of writing through it.
+fn write_no_follow(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let temporary = path.with_extension(format!("partial-{}", std::process::id()));
+    let _ = std::fs::remove_file(&temporary);
+    let written = (|| {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&temporary)?;
+        file.write_all(bytes)?;
+        file.sync_all()
+    })();
+    match written.and_then(|()| std::fs::rename(&temporary, path)) {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            let _ = std::fs::remove_file(&temporary);
+            Err(e)
+        }
+    }
+}
+
 /// Scenes by hash and the current frame.
 pub struct Engine {
-    cache_dir: Option<PathBuf>,
+    cache: SceneCache,
     scenes: BTreeMap<SceneHash, Arc<Scene>>,
     /// The renderer of the last (scene, reflectors): building a BVH is the
     /// expensive part of a new frame, so consecutive frames share it.
@@ -196,82 +329,67 @@ impl Engine {
     /// in memory.
     pub fn new(cache_dir: Option<PathBuf>) -> Self {
         Engine {
-            cache_dir,
+            cache: SceneCache { dir: cache_dir },
             scenes: BTreeMap::new(),
             renderer: None,
         }
     }
 
-    fn cache_path(&self, hash: &SceneHash) -> Option<PathBuf> {
-        Some(
-            self.cache_dir
-                .as_ref()?
-                .join(format!("{}.scene", hex::encode(hash))),
-        )
+    /// The disk cache, for the driver's blocking threads.
+    pub fn cache(&self) -> &SceneCache {
+        &self.cache
     }
 
-    /// Whether the scene is at hand (memory, or the disk cache, which loads it).
+    /// Whether the scene is in memory.
+    pub fn has_scene_in_memory(&self, hash: &SceneHash) -> bool {
+        self.scenes.contains_key(hash)
+    }
+
+    /// Keeps a scene the driver loaded or checked.
+    pub fn insert_scene(&mut self, hash: SceneHash, scene: Scene) {
+        self.scenes.insert(hash, Arc::new(scene));
+    }
+
+    /// Whether the scene is at hand (memory, or the disk cache, which loads
+    /// it here: the driver does that on a blocking thread first).
     pub fn has_scene(&mut self, hash: &SceneHash) -> bool {
         if self.scenes.contains_key(hash) {
             return true;
         }
-        let Some(path) = self.cache_path(hash) else {
-            return false;
-        };
-        let Ok(bytes) = std::fs::read(&path) else {
-            return false;
-        };
-        match (SceneData { hash: *hash, bytes }).to_scene() {
-            Ok(scene) => {
-                debug!(path = %path.display(), "scene loaded from the cache");
-                self.scenes.insert(*hash, Arc::new(scene));
+        match self.cache.load(hash) {
+            Some(scene) => {
+                self.insert_scene(*hash, scene);
                 true
             }
-            Err(e) => {
-                warn!(path = %path.display(), "dropping a bad cached scene: {e}");
-                let _ = std::fs::remove_file(&path);
-                false
-            }
+            None => false,
         }
     }
 
     /// Takes a scene from the master: checks it and keeps it (on disk too).
-    pub fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
-        let scene = data
-            .to_scene()
-            .map_err(|e| format!("bad scene from the master: {e}"))?;
-        if let Some(path) = self.cache_path(&data.hash) {
-            let stored = path
-                .parent()
-                .map_or(Ok(()), std::fs::create_dir_all)
-                .and_then(|()| std::fs::write(&path, &data.bytes));
-            if let Err(e) = stored {
-                warn!(path = %path.display(), "cannot cache the scene: {e}");
-            }
-        }
-        info!(triangles = scene.triangles.len(), "scene received");
-        self.scenes.insert(data.hash, Arc::new(scene));
+    pub fn add_scene(&mut self, data: SceneData) -> Result<(), SceneError> {
+        let scene = self.cache.store(&data)?;
+        self.insert_scene(data.hash, scene);
         Ok(())
     }
 
     /// Prepares a frame: the renderer (reused when scene and reflectors are
     /// the same) and the ID buffers, rebuilt locally (they are deterministic).
-    pub fn start_frame(&mut self, start: FrameStart) -> Result<ActiveFrame, String> {
-        self.frame_parts(start)?.build()
+    pub fn start_frame(&mut self, start: FrameStart) -> Result<ActiveFrame, FrameError> {
+        let frame = self.frame_parts(start)?.build()?;
+        self.keep_renderer(&frame);
+        Ok(frame)
     }
 
-    /// The quick part of preparing a frame (checks, the renderer, cached per
-    /// scene and reflectors); [`FrameParts::build`] does the rest (the ID
-    /// buffers) and needs no engine, so a driver can run it on another thread.
-    pub fn frame_parts(&mut self, start: FrameStart) -> Result<FrameParts, String> {
-        let scene = self
-            .scenes
-            .get(&start.scene)
-            .cloned()
-            .ok_or("frame for a scene this worker does not have")?;
+    /// The quick part of preparing a frame (checks, the renderer if cached
+    /// for this scene and reflectors); [`FrameParts::build`] does the rest
+    /// (a new renderer's BVH, the ID buffers) and needs no engine, so a
+    /// driver runs it on another thread and then hands the frame to
+    /// [`Engine::keep_renderer`].
+    pub fn frame_parts(&mut self, start: FrameStart) -> Result<FrameParts, FrameError> {
+        let scene = (self.scenes.get(&start.scene).cloned()).ok_or(FrameError::UnknownScene)?;
         check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
-            .map_err(|e| e.to_string())?;
-        let setup = FrameSetup::try_from(start.setup).map_err(|e| e.to_string())?;
+            .map_err(FrameError::Reflectors)?;
+        let setup = FrameSetup::try_from(start.setup).map_err(FrameError::Setup)?;
         // Items index the groups of the frame's reflector list as sent (the master's order).
         let method = MethodKind::from(start.method);
         let per_reflector = method.per_reflector().then(|| PerReflector {
@@ -282,53 +400,69 @@ impl Engine {
             Some((hash, reflectors, r))
                 if *hash == start.scene && *reflectors == start.reflectors =>
             {
-                r.clone()
+                Some(r.clone())
             }
-            _ => {
-                let reflectors = start.reflectors.clone();
-                let r = contain_panic(|| Renderer::try_new(scene, reflectors))?
-                    .map_err(|e| e.to_string())?;
-                let r = Arc::new(r);
-                self.renderer = Some((start.scene, start.reflectors, r.clone()));
-                r
-            }
+            _ => None,
         };
         Ok(FrameParts {
             job: start.job,
             frame: start.frame,
             aux: start.aux,
+            renderer_key: (start.scene, start.reflectors),
+            scene,
             renderer,
             setup,
             per_reflector,
         })
     }
+
+    /// Keeps a prepared frame's renderer for the next frames of its scene
+    /// and reflectors.
+    pub fn keep_renderer(&mut self, frame: &ActiveFrame) {
+        let (hash, reflectors) = frame.renderer_key.clone();
+        self.renderer = Some((hash, reflectors, frame.renderer.clone()));
+    }
 }
 
-/// A frame checked and with its renderer, before its ID buffers are built.
+/// A frame checked, before its renderer (unless cached) and ID buffers are built.
 pub struct FrameParts {
     job: JobId,
     frame: u32,
     aux: bool,
-    renderer: Arc<Renderer>,
+    renderer_key: (SceneHash, Vec<u32>),
+    scene: Arc<Scene>,
+    renderer: Option<Arc<Renderer>>,
     setup: FrameSetup,
     per_reflector: Option<PerReflector>,
 }
 
 impl FrameParts {
-    /// Builds the frame's ID buffers: the CPU work of a frame's set-up.
-    pub fn build(self) -> Result<ActiveFrame, String> {
+    /// Builds the frame's renderer (when not cached: the BVH, seconds for
+    /// the largest scenes) and ID buffers: the CPU work of a frame's set-up.
+    pub fn build(self) -> Result<ActiveFrame, FrameError> {
         let FrameParts {
             job,
             frame,
             aux,
+            renderer_key,
+            scene,
             renderer,
             setup,
             per_reflector,
         } = self;
+        let renderer = match renderer {
+            Some(renderer) => renderer,
+            None => {
+                let reflectors = renderer_key.1.clone();
+                let built = contain_panic(|| Renderer::try_new(scene, reflectors))?;
+                Arc::new(built.map_err(|e| FrameError::Renderer(e.to_string()))?)
+            }
+        };
         let (ids, behind) = contain_panic(|| renderer.id_buffers(&setup))?;
         Ok(ActiveFrame {
             job,
             frame,
+            renderer_key,
             renderer,
             setup,
             ids,

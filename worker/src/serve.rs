@@ -3,18 +3,20 @@
 //! frames with the [`Engine`], runs packages on blocking threads, and sends
 //! what the session says. No protocol decision is made here.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
-use tracing::debug;
-use vtfarm_proto::{PackageId, PackageResult, SceneData, SceneHash};
+use tracing::{debug, warn};
+use vtfarm_proto::{Message, PackageId, PackageResult, SceneData, SceneHash};
+use vtfarm_scene::Scene;
 use vtfarm_transport::Link;
 use vtfarm_vertex::Stop;
 
-use crate::engine::{ActiveFrame, Engine, PreparedFrames};
+use crate::engine::{ActiveFrame, Engine, FrameError, PackageError, PreparedFrames, SceneError};
 use crate::session::{FrameKey, SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 
 /// How long a drained worker waits for the master to close its side.
@@ -55,23 +57,60 @@ impl SceneStore for Engine {
         Engine::has_scene(self, hash)
     }
 
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+    type Error = SceneError;
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), SceneError> {
         Engine::add_scene(self, data)
+    }
+}
+
+/// The engine as the session sees it from [`serve`]: the scene I/O is
+/// done by then (on a blocking thread), so nothing here waits for the disk
+/// or decodes.
+struct Ready<'a> {
+    engine: &'a mut Engine,
+    /// How checking the `SceneData` being handled went.
+    added: Option<Result<(), SceneError>>,
+}
+
+impl SceneStore for Ready<'_> {
+    type Error = SceneError;
+
+    fn has_scene(&mut self, hash: &SceneHash) -> bool {
+        self.engine.has_scene_in_memory(hash)
+    }
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), SceneError> {
+        match self.added.take() {
+            Some(added) => added,
+            // Not checked on a thread first (no such path): check it here.
+            None => SceneStore::add_scene(self.engine, data),
+        }
     }
 }
 
 /// The package being computed, and its stop (set when the master cancels it).
 type Running = (
     PackageId,
-    JoinHandle<Result<PackageResult, String>>,
+    JoinHandle<Result<PackageResult, PackageError>>,
     Arc<Stop>,
 );
 
 /// A frame being set up on a blocking thread.
-type Preparing = (FrameKey, JoinHandle<Result<ActiveFrame, String>>);
+type Preparing = (FrameKey, JoinHandle<Result<ActiveFrame, FrameError>>);
+
+/// A scene read from the cache (`None`: not there) or checked and cached,
+/// on a blocking thread, with the message that waits for it.
+type SceneWork = JoinHandle<(SceneHash, Message, Option<Result<Scene, SceneError>>)>;
 
 /// Serves the master over `link` until it shuts the worker down, the link
 /// drops, or `drain` is raised and the session drained.
+///
+/// Nothing slow runs on this task: scenes are read, checked and cached,
+/// frames set up (a new scene's BVH included) and packages run on blocking
+/// threads, so heartbeats go out on time whatever the scene's size.
+/// Messages that arrive while a scene is being read or checked wait for
+/// it, in order.
 pub async fn serve(
     link: Link,
     engine: &mut Engine,
@@ -84,22 +123,47 @@ pub async fn serve(
     let mut frames = PreparedFrames::default();
     let mut preparing: Option<Preparing> = None;
     let mut running: Option<Running> = None;
+    let mut scene_work: Option<SceneWork> = None;
+    let mut waiting: VecDeque<Message> = VecDeque::new();
     loop {
+        // Hand the session the messages that waited for a scene, until
+        // one needs the disk or a check again.
+        while scene_work.is_none() {
+            let Some(message) = waiting.pop_front() else {
+                break;
+            };
+            match scene_io(message, engine) {
+                Ok(message) => {
+                    let mut ready = Ready {
+                        engine,
+                        added: None,
+                    };
+                    session.handle_message(start.elapsed(), message, &mut ready);
+                }
+                Err(work) => scene_work = Some(work),
+            }
+        }
+        // A cancelled package stops now, freeing its memory and the cores.
+        if let Some((id, _, stop)) = &running {
+            if session.is_cancelled(*id) {
+                stop.cancel();
+            }
+        }
         while let Some(task) = session.poll_task() {
             match task {
                 Task::PrepareFrame(frame_start) => {
                     let key = (frame_start.job, frame_start.frame);
-                    // A new scene's BVH is built here (once per scene); the
-                    // ID buffers on a blocking thread, so that a package of
-                    // an older frame that finishes meanwhile is sent at once.
-                    let parts = tokio::task::block_in_place(|| engine.frame_parts(frame_start));
-                    match parts {
+                    match engine.frame_parts(frame_start) {
                         Ok(parts) => {
+                            // The renderer (a new scene's BVH) and the ID
+                            // buffers on a blocking thread, so that heartbeats
+                            // and a finished package of an older frame go out
+                            // meanwhile.
                             let task = tokio::task::spawn_blocking(move || parts.build());
                             // The session prepares one frame at a time.
                             preparing = Some((key, task));
                         }
-                        Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),
+                        Err(e) => session.frame_prepared(start.elapsed(), key, Err(e.to_string())),
                     }
                 }
                 Task::RunPackage(package) => {
@@ -114,7 +178,7 @@ pub async fn serve(
                         Some(a) if (a.job, a.frame) == (package.job, package.frame) => {
                             a.run(&package, config.slowdown, &task_stop)
                         }
-                        _ => Err("the package's frame is not prepared".to_owned()),
+                        _ => Err(PackageError::FrameNotPrepared),
                     });
                     running = Some((id, task, stop));
                 }
@@ -141,24 +205,43 @@ pub async fn serve(
         tokio::select! {
             message = rx.recv() => {
                 let Some(message) = message else { return SessionEnd::Disconnected };
-                session.handle_message(start.elapsed(), message, engine);
-                // A cancelled package stops now, freeing its memory and the cores.
-                if let Some((id, _, stop)) = &running {
-                    if session.is_cancelled(*id) {
-                        stop.cancel();
+                // In order behind any message still waiting for a scene.
+                waiting.push_back(message);
+            }
+            done = async { (&mut scene_work.as_mut().expect("guarded by the select condition")).await }, if scene_work.is_some() => {
+                scene_work = None;
+                let (hash, message, outcome) = match done {
+                    Ok(done) => done,
+                    Err(join) => {
+                        warn!("the scene task failed: {join}");
+                        continue;
                     }
-                }
+                };
+                let added = outcome.map(|checked| {
+                    checked.map(|scene| engine.insert_scene(hash, scene))
+                });
+                let mut ready = Ready { engine, added };
+                session.handle_message(start.elapsed(), message, &mut ready);
             }
             outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
                 let (id, _, _) = running.take().expect("guarded by the select condition");
-                let outcome = outcome.unwrap_or_else(|join| Err(format!("package task failed: {join}")));
+                let outcome = match outcome {
+                    Ok(result) => result.map_err(|e| e.to_string()),
+                    Err(join) => Err(format!("package task failed: {join}")),
+                };
                 session.package_finished(start.elapsed(), id, outcome);
             }
             built = async { (&mut preparing.as_mut().expect("guarded by the select condition").1).await }, if preparing.is_some() => {
                 let (key, _) = preparing.take().expect("guarded by the select condition");
-                let outcome = built
-                    .unwrap_or_else(|join| Err(format!("frame set-up failed: {join}")))
-                    .map(|active| frames.insert(active));
+                let outcome = match built {
+                    Ok(Ok(active)) => {
+                        engine.keep_renderer(&active);
+                        frames.insert(active);
+                        Ok(())
+                    }
+                    Ok(Err(e)) => Err(e.to_string()),
+                    Err(join) => Err(format!("frame set-up failed: {join}")),
+                };
                 session.frame_prepared(start.elapsed(), key, outcome);
             }
             () = tokio::time::sleep_until(deadline) => session.handle_timeout(start.elapsed()),
@@ -167,5 +250,26 @@ pub async fn serve(
                 session.drain(start.elapsed());
             }
         }
+    }
+}
+
+/// `message` back when the session can take it now, or the blocking task
+/// that reads or checks its scene first: a scene offered and not in
+/// memory is looked for in the disk cache, a scene sent is checked and
+/// cached.
+fn scene_io(message: Message, engine: &Engine) -> Result<Message, SceneWork> {
+    let cache = engine.cache().clone();
+    match message {
+        Message::SceneOffer { hash } if !engine.has_scene_in_memory(&hash) => {
+            Err(tokio::task::spawn_blocking(move || {
+                let loaded = cache.load(&hash).map(Ok);
+                (hash, Message::SceneOffer { hash }, loaded)
+            }))
+        }
+        Message::SceneData(data) => Err(tokio::task::spawn_blocking(move || {
+            let checked = cache.store(&data);
+            (data.hash, Message::SceneData(data), Some(checked))
+        })),
+        other => Ok(other),
     }
 }

@@ -75,8 +75,10 @@ pub enum SessionEnd {
 pub trait SceneStore {
     /// Whether the scene is at hand.
     fn has_scene(&mut self, hash: &SceneHash) -> bool;
+    /// Why a scene was refused.
+    type Error: std::fmt::Display;
     /// Checks a scene from the master and keeps it.
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String>;
+    fn add_scene(&mut self, data: SceneData) -> Result<(), Self::Error>;
 }
 
 /// A frame by job and index.

@@ -357,7 +357,9 @@ impl SceneStore for SimStore {
         self.scenes.contains(hash)
     }
 
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+    type Error = std::convert::Infallible;
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), Self::Error> {
         self.scenes.push(data.hash);
         Ok(())
     }

@@ -419,7 +419,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         let message = encode_message(&Message::FrameDone(done))?;
         driver = driver.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
-        journal.write(record);
+        journal.write(record)?;
         journaled = journaled.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
         let Message::FrameDone(done) = decode_message(&message[4..])? else {

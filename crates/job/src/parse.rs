@@ -165,9 +165,9 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     );
     let reflectors = source.reflectors(raw.reflectors, is_obj)?;
     spans.extend((reflectors.iter()).filter_map(|(r, span)| Some((r.key(), span.clone()?))));
-    let locations = spans
-        .into_iter()
-        .map(|(key, span)| (key, Location::of(text, span.start)))
+    let starts: Vec<usize> = spans.iter().map(|(_, span)| span.start).collect();
+    let locations = (spans.into_iter().map(|(key, _)| key))
+        .zip(Location::all(text, &starts))
         .collect();
     let reflectors = reflectors.into_iter().map(|(r, _)| r).collect();
     Ok(Job {

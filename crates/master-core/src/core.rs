@@ -15,7 +15,7 @@
 //! pixel its package does not own in the frame's ID buffer (pixel ownership)
 //! fails the package.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -39,7 +39,7 @@ use vtfarm_scheduler::{
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
 use crate::error::{JobRejected, ResultRejected};
-use crate::record::{Record, StoredJob};
+use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
 use crate::telemetry::Telemetry;
 use crate::view::{ViewError, ViewRequest, ViewSource, Views};
@@ -69,7 +69,8 @@ pub enum Output {
     /// Keep this in the job journal (only when the core is persistent).
     Persist(Record),
     /// Send `conn` the journal's `FrameDone`s of `job`, frames `frames`, in
-    /// order, before anything that follows.
+    /// order, before anything that follows; a frame the journal cannot give
+    /// back goes to [`MasterCore::replay_failed`] (rendered again).
     Replay {
         conn: ConnId,
         job: u64,
@@ -132,9 +133,10 @@ pub const ATTACH_GRACE: Duration = Duration::from_secs(120);
 
 struct Job {
     name: String,
-    /// `None` while no submitter is attached (lost, or not back after a restart).
-    submitter: Option<ConnId>,
-    /// When the submitter went away: past [`ATTACH_GRACE`] the job is cancelled.
+    /// The submitters following the job: each gets every frame. Empty
+    /// while none is attached (lost, or not back after a restart).
+    submitters: BTreeSet<ConnId>,
+    /// When the last submitter went away: past [`ATTACH_GRACE`] the job is cancelled.
     orphaned_at: Option<Duration>,
     /// Frames before this one were finished before a restart: they are
     /// journaled, and the scheduler's empty stand-ins for them are skipped.
@@ -296,6 +298,45 @@ struct InFlight {
     assigned_at: Duration,
 }
 
+/// What a persistent core keeps beside the journal, so that nothing the
+/// journal fails to keep or give back is lost (see `journal.rs`).
+#[derive(Default)]
+struct Kept {
+    /// Finished frames not (yet) known to be written: until the driver
+    /// says a frame's write succeeded ([`MasterCore::journal_written`]) it
+    /// is replayed from here, and a frame whose write failed stays here as
+    /// long as its job is kept.
+    unjournaled: BTreeMap<(u64, u32), FrameDone>,
+    /// Each journaled job as queued (its scene by hash, or inline for a
+    /// job restored complete), to render a frame again.
+    definitions: BTreeMap<u64, WireJob>,
+    /// Jobs rendering one frame again that the journal could not give
+    /// back: repair job → (its job, the frame).
+    repairs: BTreeMap<u64, (u64, u32)>,
+    /// Jobs set aside as damaged, with why: an attach is told so.
+    damaged: BTreeMap<u64, String>,
+    /// Jobs a record of which could not be written, with the last error:
+    /// a submitter attaching later is told too.
+    failed_writes: BTreeMap<u64, String>,
+    /// Frames of `unjournaled` whose write failed (not queued again yet):
+    /// one is written again after each write that succeeds.
+    to_rewrite: BTreeSet<(u64, u32)>,
+    /// Restored jobs whose journal had a damaged frame, rendered again:
+    /// the frame and why, told to attaching submitters.
+    damaged_frames: BTreeMap<u64, (u32, String)>,
+}
+
+impl Kept {
+    /// A job's records are gone (or set aside): so is what is kept of it.
+    fn forget(&mut self, job: u64) {
+        self.definitions.remove(&job);
+        self.failed_writes.remove(&job);
+        self.damaged_frames.remove(&job);
+        self.unjournaled.retain(|&(j, _), _| j != job);
+        self.to_rewrite.retain(|&(j, _)| j != job);
+    }
+}
+
 /// The master's state.
 pub struct MasterCore {
     scheduler: Scheduler,
@@ -313,6 +354,8 @@ pub struct MasterCore {
     persistent: bool,
     /// Completed jobs still kept for re-attaching: frame count and completion time.
     completed: BTreeMap<u64, (u32, Duration)>,
+    /// The journal's side of the core (persistent cores only).
+    kept: Kept,
     /// The time of the input being handled.
     now: Duration,
     /// Workers that left during the running frame, for its stats' names.
@@ -340,6 +383,7 @@ impl MasterCore {
             telemetry: Telemetry::default(),
             persistent: false,
             completed: BTreeMap::new(),
+            kept: Kept::default(),
             now: Duration::ZERO,
             departed: BTreeMap::new(),
             views: Views::default(),
@@ -362,13 +406,51 @@ impl MasterCore {
     pub fn restore(&mut self, now: Duration, stored: StoredJob) {
         self.now = now;
         self.next_job = self.next_job.max(stored.id + 1);
+        if let Some(damaged) = stored.damaged_frame.clone() {
+            self.kept.damaged_frames.insert(stored.id, damaged);
+        }
         if stored.complete {
+            // Kept (with its scene's bytes) to render a frame again that
+            // the journal cannot give back.
+            (self.kept.definitions).insert(stored.id, stored.job);
             self.completed.insert(stored.id, (stored.frames_done, now));
             return;
         }
-        if let Err(e) = self.queue_job(now, stored.id, stored.job, None, stored.frames_done) {
-            warn!(job = stored.id, "cannot resume a journaled job: {e}");
-            self.persist(Record::JobForgotten { id: stored.id });
+        // Once queued the scene is in the cache: the definition names it by hash.
+        let job = &stored.job;
+        let scene = match &job.scene {
+            JobScene::Data(data) => JobScene::Hash(data.hash),
+            JobScene::Hash(hash) => JobScene::Hash(*hash),
+        };
+        let definition = WireJob {
+            name: job.name.clone(),
+            scene,
+            frames: job.frames.clone(),
+            reflectors: job.reflectors.clone(),
+            aux: job.aux,
+            method: job.method,
+            image: job.image,
+        };
+        (self.kept.definitions).insert(stored.id, definition);
+        let queued = self.queue_job(
+            now,
+            stored.id,
+            stored.job,
+            BTreeSet::new(),
+            stored.frames_done,
+        );
+        if let Err(e) = queued {
+            let reason = format!("cannot resume job {}: {e}", stored.id);
+            warn!(job = stored.id, "{reason}; setting it aside");
+            self.kept.definitions.remove(&stored.id);
+            self.restore_damaged(DamagedJob {
+                id: stored.id,
+                reason: format!("{reason} (kept in jobs/damaged/)"),
+            });
+            self.persist(Record::JobDamaged {
+                id: stored.id,
+                reason,
+            });
         } else {
             info!(
                 job = stored.id,
@@ -472,15 +554,18 @@ impl MasterCore {
                 let orphaned: Vec<u64> = self
                     .jobs
                     .iter()
-                    .filter(|(_, j)| j.submitter == Some(conn))
+                    .filter(|(_, j)| j.submitters.contains(&conn))
                     .map(|(&id, _)| id)
                     .collect();
                 for job in orphaned {
+                    let j = self.jobs.get_mut(&job).expect("listed above");
+                    j.submitters.remove(&conn);
+                    if !j.submitters.is_empty() {
+                        continue; // others still follow it
+                    }
                     if self.persistent {
                         // It may come back (or attach from elsewhere).
                         info!(job, "submitter left, keeping its job for {ATTACH_GRACE:?}");
-                        let j = self.jobs.get_mut(&job).expect("listed above");
-                        j.submitter = None;
                         j.orphaned_at = Some(now);
                     } else {
                         // Nobody is left to receive the images: stop its jobs.
@@ -635,8 +720,8 @@ impl MasterCore {
             done: current.triangles_done as u32,
             total: job.reflectors.len() as u32,
         };
-        let submitter = job.submitter;
-        self.send_to(submitter, progress);
+        let submitters = job.submitters.clone();
+        self.send_to(&submitters, progress);
     }
 
     fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
@@ -680,7 +765,7 @@ impl MasterCore {
         job.scene = scene;
         let id = self.next_job;
         let frames = job.frames.len() as u32;
-        if let Err(e) = self.queue_job(now, id, job, Some(conn), 0) {
+        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0) {
             return self.refuse_job(conn, e.to_string());
         }
         self.next_job += 1;
@@ -688,6 +773,7 @@ impl MasterCore {
         self.send(conn, Message::JobAccepted { job: id, frames });
         self.telemetry.counters.jobs_submitted += 1;
         if let Some(job) = journaled {
+            self.kept.definitions.insert(id, job.clone());
             let scene = self.scenes[&scene_hash].1.clone();
             self.persist(Record::JobQueued {
                 id,
@@ -704,7 +790,7 @@ impl MasterCore {
         now: Duration,
         id: u64,
         mut job: WireJob,
-        submitter: Option<ConnId>,
+        submitters: BTreeSet<ConnId>,
         resume_from: u32,
     ) -> Result<(), JobRejected> {
         let scene_hash = match &job.scene {
@@ -755,8 +841,8 @@ impl MasterCore {
             id,
             Job {
                 name: job.name,
-                submitter,
-                orphaned_at: submitter.is_none().then_some(now),
+                orphaned_at: submitters.is_empty().then_some(now),
+                submitters,
                 resume_from,
                 frames_done: resume_from,
                 scene,
@@ -780,36 +866,66 @@ impl MasterCore {
     /// A submitter asks for a job's frames from `from_frame` on.
     fn attach(&mut self, conn: ConnId, job: u64, from_frame: u32) {
         let (frames, done) = if let Some(j) = self.jobs.get_mut(&job) {
-            if let Some(previous) = j.submitter.replace(conn) {
-                info!(
-                    job,
-                    previous, "another submitter attached; the previous one gets no more frames"
-                );
+            if !j.submitters.is_empty() {
+                info!(job, "another submitter attached; each gets every frame");
             }
+            j.submitters.insert(conn);
             j.orphaned_at = None;
             (j.frames.len() as u32, j.frames_done)
         } else if let Some(&(frames, _)) = self.completed.get(&job) {
             (frames, frames)
         } else {
-            self.send(
-                conn,
-                Message::JobFailed {
-                    job,
-                    errors: vec![format!(
-                        "the master has no job {job} (finished long ago, failed or never submitted)"
-                    )],
-                },
-            );
+            let error = match self.kept.damaged.get(&job) {
+                Some(reason) => {
+                    format!("job {job} could not be read back from the journal: {reason}")
+                }
+                None => format!(
+                    "the master has no job {job} (finished long ago, failed or never submitted)"
+                ),
+            };
+            let errors = vec![error];
+            self.send(conn, Message::JobFailed { job, errors });
             return;
         };
         info!(job, conn, from_frame, "submitter attached");
         self.send(conn, Message::JobAccepted { job, frames });
-        if from_frame < done {
-            self.outbox.push_back(Output::Replay {
-                conn,
-                job,
-                frames: from_frame..done,
-            });
+        if let Some(error) = self.kept.failed_writes.get(&job).cloned() {
+            self.send(conn, Message::JournalFailed { job, error });
+        }
+        if let Some((frame, reason)) = self.kept.damaged_frames.get(&job).cloned() {
+            if frame >= from_frame {
+                let again = Message::FrameMissing {
+                    job,
+                    frame,
+                    reason,
+                    rendering_again: true,
+                };
+                self.send(conn, again);
+            }
+        }
+        self.replay(conn, job, from_frame..done);
+    }
+
+    /// Sends `conn` the finished frames `frames` of `job`, in order: those
+    /// whose journal write is pending or failed from memory, the rest read
+    /// back from the journal by the driver.
+    fn replay(&mut self, conn: ConnId, job: u64, frames: std::ops::Range<u32>) {
+        let mut from_journal = frames.start..frames.start;
+        for frame in frames {
+            if let Some(done) = self.kept.unjournaled.get(&(job, frame)).cloned() {
+                if !from_journal.is_empty() {
+                    let frames = std::mem::replace(&mut from_journal, frame + 1..frame + 1);
+                    self.outbox.push_back(Output::Replay { conn, job, frames });
+                }
+                from_journal = frame + 1..frame + 1;
+                self.send(conn, Message::FrameDone(done));
+            } else {
+                from_journal.end = frame + 1;
+            }
+        }
+        if !from_journal.is_empty() {
+            let frames = from_journal;
+            self.outbox.push_back(Output::Replay { conn, job, frames });
         }
     }
 
@@ -823,23 +939,33 @@ impl MasterCore {
         self.outbox.push_back(Output::Send(conn, Box::new(message)));
     }
 
-    /// Sends to a job's submitter, if one is attached.
-    fn send_to(&mut self, submitter: Option<ConnId>, message: Message) {
-        if let Some(conn) = submitter {
-            self.send(conn, message);
+    /// Sends to each of a job's submitters.
+    fn send_to(&mut self, submitters: &BTreeSet<ConnId>, message: Message) {
+        for &conn in submitters {
+            self.send(conn, message.clone());
         }
     }
 
     fn persist(&mut self, record: Record) {
-        if self.journals(record.job()) {
-            self.outbox.push_back(Output::Persist(record));
+        if !self.journals(record.job()) {
+            return;
         }
+        match &record {
+            // Until the driver says it is written, a frame stays here.
+            Record::FrameDone(done) => {
+                (self.kept.unjournaled).insert((done.job, done.frame), (**done).clone());
+            }
+            Record::JobForgotten { id } | Record::JobDamaged { id, .. } => self.kept.forget(*id),
+            _ => {}
+        }
+        self.outbox.push_back(Output::Persist(record));
     }
 
     /// Whether `job`'s records are journaled.
     fn journals(&self, job: u64) -> bool {
-        // A view's jobs live as long as the page looks at them.
-        self.persistent && !self.views.owns(job)
+        // A view's jobs live as long as the page looks at them, and a frame
+        // rendered again is journaled under its own job.
+        self.persistent && !self.views.owns(job) && !self.kept.repairs.contains_key(&job)
     }
 
     fn refuse_job(&mut self, conn: ConnId, error: String) {
@@ -935,11 +1061,14 @@ impl MasterCore {
                 };
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 j.frames_done = frame + 1;
+                // A frame rendered again is its own job's frame.
+                let (owner, owner_frame) = (self.kept.repairs.get(&job.0))
+                    .map_or((job.0, frame), |&(owner, frame)| (owner, frame));
                 // Encoded (and compressed) once: the journal and the
                 // submitter get the same bytes.
                 let message = FrameDone {
-                    job: job.0,
-                    frame,
+                    job: owner,
+                    frame: owner_frame,
                     image: WireImage::encode_reusing(
                         done.image.color(),
                         j.image,
@@ -951,13 +1080,13 @@ impl MasterCore {
                         Assembled::Color(_) => None,
                     },
                 };
-                let submitter = j.submitter;
-                if self.journals(job.0) {
+                let submitters = j.submitters.clone();
+                if self.journals(owner) {
                     self.persist(Record::FrameDone(Box::new(message.clone())));
                 }
                 let image = message.image.clone();
-                (self.telemetry).frame_finished(job.0, frame, frame_stats, image);
-                self.send_to(submitter, Message::FrameDone(message));
+                (self.telemetry).frame_finished(owner, owner_frame, frame_stats, image);
+                self.send_to(&submitters, Message::FrameDone(message));
                 if let Some(ids) = done.ids {
                     let color = match done.image {
                         Assembled::Color(color) => color,
@@ -972,7 +1101,8 @@ impl MasterCore {
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
                 self.telemetry.counters.jobs_completed += 1;
-                if let Some(j) = self.forget_job(job.0) {
+                let repaired = self.kept.repairs.remove(&job.0);
+                if let Some(j) = self.forget_job(job.0).filter(|_| repaired.is_none()) {
                     if self.persistent {
                         // Kept a while for a submitter that lost the connection.
                         self.completed
@@ -1003,15 +1133,31 @@ impl MasterCore {
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
                 self.telemetry.counters.jobs_failed += 1;
+                let repaired = self.kept.repairs.remove(&job.0);
                 if let Some(j) = self.forget_job(job.0) {
-                    self.send_to(j.submitter, Message::JobFailed { job: job.0, errors });
+                    let message = match repaired {
+                        // Rendering a lost frame again failed: its job's
+                        // submitters learn which frame they will not get.
+                        Some((owner, frame)) => Message::FrameMissing {
+                            job: owner,
+                            frame,
+                            reason: errors.join("; "),
+                            rendering_again: false,
+                        },
+                        None => Message::JobFailed { job: job.0, errors },
+                    };
+                    self.send_to(&j.submitters, message);
                 }
-                self.persist(Record::JobForgotten { id: job.0 });
+                if repaired.is_none() {
+                    self.persist(Record::JobForgotten { id: job.0 });
+                }
             }
             Event::JobCancelled { job } => {
                 self.telemetry.counters.jobs_cancelled += 1;
                 self.forget_job(job.0);
-                self.persist(Record::JobForgotten { id: job.0 });
+                if self.kept.repairs.remove(&job.0).is_none() {
+                    self.persist(Record::JobForgotten { id: job.0 });
+                }
             }
             Event::WorkerBlocklisted { worker, job } => {
                 warn!(worker = %self.name(worker.0), job = job.0, "worker failed 3 packages: no more work of this job");
@@ -1069,14 +1215,14 @@ impl MasterCore {
             totals: PackageStats::default(),
             triangles_done: 0,
         });
-        let submitter = j.submitter;
+        let submitters = j.submitters.clone();
         let total = j.reflectors.len() as u32;
         let workers: Vec<ConnId> = self.workers().collect();
         for conn in workers {
             self.send(conn, Message::FrameStart(start.clone()));
         }
         self.send_to(
-            submitter,
+            &submitters,
             Message::Progress {
                 job,
                 frame,
@@ -1198,7 +1344,7 @@ impl MasterCore {
             }
         }
         let id = self.next_job;
-        let queued = self.queue_job(now, id, planned.job.clone(), None, 0);
+        let queued = self.queue_job(now, id, planned.job.clone(), BTreeSet::new(), 0);
         if let Err(e) = queued {
             self.pump();
             return Err(ViewError::Queue(e.to_string()));
@@ -1238,6 +1384,122 @@ impl MasterCore {
     }
 
     /// The master's history: counters, per-worker totals, finished frames.
+    /// A job the journal set aside as damaged (at start): a submitter
+    /// attaching to it is told why.
+    pub fn restore_damaged(&mut self, damaged: DamagedJob) {
+        self.next_job = self.next_job.max(damaged.id + 1);
+        self.kept.damaged.insert(damaged.id, damaged.reason);
+    }
+
+    /// The driver wrote a record (or failed to): a written frame leaves
+    /// memory; a failure is counted, told to the job's submitters, and the
+    /// frame stays in memory for re-attaching submitters.
+    pub fn journal_written(&mut self, now: Duration, written: Written) {
+        self.now = now;
+        match written.outcome {
+            Ok(()) => {
+                if let Some(frame) = written.frame {
+                    self.kept.unjournaled.remove(&(written.job, frame));
+                }
+                // The disk takes records again: write a frame that failed.
+                if let Some(key) = self.kept.to_rewrite.pop_first() {
+                    if let Some(done) = self.kept.unjournaled.get(&key).cloned() {
+                        let record = Record::FrameDone(Box::new(done));
+                        self.outbox.push_back(Output::Persist(record));
+                    }
+                }
+            }
+            Err(error) => {
+                if let Some(frame) = written.frame {
+                    self.kept.to_rewrite.insert((written.job, frame));
+                }
+                warn!(job = written.job, "{error}");
+                let counters = &mut self.telemetry.counters;
+                counters.journal_write_failures += 1;
+                let kept = written.frame.map_or(String::new(), |f| {
+                    format!("; frame {f} is kept in memory until it is written")
+                });
+                let error = format!("{error}{kept}");
+                self.telemetry.last_journal_error = Some(error.clone());
+                (self.kept.failed_writes).insert(written.job, error.clone());
+                let submitters = (self.jobs.get(&written.job)).map(|j| j.submitters.clone());
+                let message = Message::JournalFailed {
+                    job: written.job,
+                    error,
+                };
+                self.send_to(&submitters.unwrap_or_default(), message);
+            }
+        }
+        self.pump();
+    }
+
+    /// The driver could not read frame `frame` of `job` back from the
+    /// journal for `conn` (`error` says why): the frame is rendered again
+    /// and `conn` gets it then, or `conn` is told it cannot have it.
+    pub fn replay_failed(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        job: u64,
+        frame: u32,
+        error: String,
+    ) {
+        self.now = now;
+        warn!(job, frame, "a finished frame cannot be read back: {error}");
+        if let Some(done) = self.kept.unjournaled.get(&(job, frame)).cloned() {
+            self.send(conn, Message::FrameDone(done));
+            return self.pump();
+        }
+        let running = (self.kept.repairs.iter()).find(|(_, owned)| **owned == (job, frame));
+        if let Some((&repair, _)) = running {
+            if let Some(j) = self.jobs.get_mut(&repair) {
+                j.submitters.insert(conn);
+            }
+        } else if let Err(e) = self.render_again(now, conn, job, frame) {
+            let reason = format!("{error}; it cannot be rendered again: {e}");
+            let lost = Message::FrameMissing {
+                job,
+                frame,
+                reason,
+                rendering_again: false,
+            };
+            self.send(conn, lost);
+            return self.pump();
+        }
+        self.telemetry.counters.frames_rendered_again += 1;
+        let again = Message::FrameMissing {
+            job,
+            frame,
+            reason: error,
+            rendering_again: true,
+        };
+        self.send(conn, again);
+        self.pump();
+    }
+
+    /// Queues a job of the one frame `frame` of `job`, for `conn`.
+    fn render_again(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        job: u64,
+        frame: u32,
+    ) -> Result<(), String> {
+        let mut definition = (self.kept.definitions.get(&job).cloned())
+            .ok_or_else(|| format!("the master no longer keeps job {job}"))?;
+        let setup = (definition.frames.get(frame as usize).cloned())
+            .ok_or_else(|| format!("job {job} has no frame {frame}"))?;
+        definition.frames = vec![setup];
+        definition.name = format!("{} (frame {frame} again)", definition.name);
+        let id = self.next_job;
+        self.queue_job(now, id, definition, BTreeSet::from([conn]), 0)
+            .map_err(|e| e.to_string())?;
+        self.next_job += 1;
+        self.kept.repairs.insert(id, (job, frame));
+        info!(job, frame, repair = id, "rendering a finished frame again");
+        Ok(())
+    }
+
     pub fn telemetry(&self) -> &Telemetry {
         &self.telemetry
     }

@@ -23,5 +23,5 @@ pub use crate::core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
 };
 pub use error::{JobRejected, ResultRejected};
-pub use record::{Record, StoredJob};
+pub use record::{DamagedJob, Record, StoredJob, Written};
 pub use rules::FarmRules;

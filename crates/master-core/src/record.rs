@@ -1,5 +1,6 @@
 //! What the core asks the journal to keep ([`Record`]) and what a restarted
-//! master reads back from it ([`StoredJob`]). Plain data: the server crate's
+//! master reads back from it ([`StoredJob`], [`DamagedJob`]); how a write
+//! went ([`Written`]). Plain data: the server crate's
 //! `journal` writes and reads the files.
 
 use std::sync::Arc;
@@ -21,6 +22,9 @@ pub enum Record {
     JobComplete { id: u64 },
     /// The job is gone: failed, cancelled, or delivered long enough ago.
     JobForgotten { id: u64 },
+    /// The job cannot run from its record: set it aside in `jobs/damaged/`
+    /// with `reason`, never delete it.
+    JobDamaged { id: u64, reason: String },
 }
 
 impl Record {
@@ -29,10 +33,29 @@ impl Record {
         match self {
             Record::JobQueued { id, .. }
             | Record::JobComplete { id }
-            | Record::JobForgotten { id } => *id,
+            | Record::JobForgotten { id }
+            | Record::JobDamaged { id, .. } => *id,
             Record::FrameDone(done) => done.job,
         }
     }
+
+    /// The frame the record is, if it is one.
+    pub fn frame(&self) -> Option<u32> {
+        match self {
+            Record::FrameDone(done) => Some(done.frame),
+            _ => None,
+        }
+    }
+}
+
+/// How writing one record went, as the server's journal writer reports it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Written {
+    pub job: u64,
+    /// The frame, when the record was a finished frame.
+    pub frame: Option<u32>,
+    /// `Err` with the error's text (which names the file) when it failed.
+    pub outcome: Result<(), String>,
 }
 
 /// A job read back from the journal.
@@ -44,4 +67,16 @@ pub struct StoredJob {
     /// How many frames are finished, counted from frame 0 without a gap.
     pub frames_done: u32,
     pub complete: bool,
+    /// The frame that ended the count because its record failed its check
+    /// (or is missing while later ones are there), and why: it is rendered
+    /// again, and an attaching submitter is told.
+    pub damaged_frame: Option<(u32, String)>,
+}
+
+/// A job set aside in `jobs/damaged/` (now or by an earlier start).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DamagedJob {
+    pub id: u64,
+    /// What failed (the file and the check) and where the job now lies.
+    pub reason: String,
 }

@@ -51,6 +51,10 @@ pub struct FarmCounters {
     pub packages_failed: u64,
     pub packages_requeued: u64,
     pub packages_duplicated: u64,
+    /// Journal records that could not be written (a full disk, say).
+    pub journal_write_failures: u64,
+    /// Finished frames the journal could not give back, rendered again.
+    pub frames_rendered_again: u64,
 }
 
 /// One worker's totals since it first joined (kept by name, so a worker
@@ -83,6 +87,8 @@ pub struct Telemetry {
     pub counters: FarmCounters,
     pub workers: BTreeMap<String, WorkerTotals>,
     pub frame_durations: FrameDurations,
+    /// The last journal write that failed, as the submitters were told.
+    pub last_journal_error: Option<String>,
     frames: VecDeque<FinishedFrameRecord>,
     next_seq: u64,
 }

@@ -168,7 +168,11 @@ impl Pair {
         self.master = MasterCore::persistent(self.rules.clone());
         self.events.clear();
         self.submitter = None;
-        for stored in journal.load() {
+        let loaded = journal.load();
+        for damaged in loaded.damaged {
+            self.master.restore_damaged(damaged);
+        }
+        for stored in loaded.jobs {
             self.master.restore(self.now, stored);
         }
         for w in 0..self.workers.len() {
@@ -444,17 +448,30 @@ impl Pair {
                     .journal
                     .as_ref()
                     .expect("only a persistent core persists");
-                journal.write(record);
+                let (job, frame) = (record.job(), record.frame());
+                let outcome = journal.write(record).map_err(|e| e.to_string());
+                let written = vtfarm_master_core::Written {
+                    job,
+                    frame,
+                    outcome,
+                };
+                self.master.journal_written(self.now, written);
             }
             Output::Replay { conn, job, frames } => {
                 let (journal, _) = self
                     .journal
                     .as_ref()
                     .expect("only a persistent core replays");
+                let journal = journal.clone();
                 for frame in frames {
-                    let done = journal.frame(job, frame).expect("journaled frames replay");
-                    if Some(conn) == self.submitter {
-                        self.to_submitter.push(Message::FrameDone(done));
+                    match journal.frame(job, frame) {
+                        Ok(done) if Some(conn) == self.submitter => {
+                            self.to_submitter.push(Message::FrameDone(done));
+                        }
+                        Ok(_) => {}
+                        Err(e) => {
+                            (self.master).replay_failed(self.now, conn, job, frame, e.to_string())
+                        }
                     }
                 }
             }
@@ -476,7 +493,8 @@ impl Pair {
                 Task::PrepareFrame(start) => {
                     let key = (start.job, start.frame);
                     let outcome = worker.engine.start_frame(start);
-                    let outcome = outcome.map(|frame| worker.frames.insert(frame));
+                    let outcome = (outcome.map(|frame| worker.frames.insert(frame)))
+                        .map_err(|e| e.to_string());
                     session.frame_prepared(self.now, key, outcome);
                 }
                 Task::RunPackage(package) => {

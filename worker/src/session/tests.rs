@@ -26,6 +26,8 @@ impl SceneStore for Scenes {
         self.0.contains(hash)
     }
 
+    type Error = String;
+
     fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
         self.0.insert(data.hash);
         Ok(())
