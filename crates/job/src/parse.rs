@@ -18,8 +18,8 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
-    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
-    SceneSource, obj_camera_missing,
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride,
+    ReflectorSelector, SceneSource, obj_camera_missing,
 };
 
 /// Names accepted by `scene.builtin`.
@@ -43,6 +43,25 @@ struct RawJob {
     quality: RawQuality,
     #[serde(default)]
     frames: RawFrames,
+    #[serde(default)]
+    materials: std::collections::BTreeMap<Spanned<String>, RawMaterial>,
+}
+
+/// `[materials."NAME"]`: what a job changes in one material of the scene.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    ka: Option<Vec3Value>,
+    kd: Option<Vec3Value>,
+    ks: Option<Vec3Value>,
+    shininess: Option<Spanned<f32>>,
+    kr: Option<Vec3Value>,
+    kt: Option<Vec3Value>,
+    ior: Option<Spanned<f32>>,
+    thin: Option<bool>,
+    emission_cd_m2: Option<Spanned<f32>>,
+    emission_color: Option<Vec3Value>,
+    texture: Option<Spanned<PathBuf>>,
 }
 
 #[derive(Deserialize)]
@@ -165,12 +184,23 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     );
     let reflectors = source.reflectors(raw.reflectors, is_obj)?;
     spans.extend((reflectors.iter()).filter_map(|(r, span)| Some((r.key(), span.clone()?))));
-    let locations = spans
+    let locations: Vec<(String, Location)> = spans
         .into_iter()
         .map(|(key, span)| (key, Location::of(text, span.start)))
         .collect();
     let reflectors = reflectors.into_iter().map(|(r, _)| r).collect();
+    let materials = (raw.materials.iter())
+        .map(|(name, m)| source.material(name, m))
+        .collect::<Result<Vec<_>, _>>()?;
+    let locations = (raw.materials.keys())
+        .map(|name| {
+            let key = MaterialOverride::key_of(name.get_ref());
+            (key, Location::of(text, name.span().start))
+        })
+        .chain(locations)
+        .collect();
     Ok(Job {
+        materials,
         locations,
         file: origin.to_owned(),
         scene,
@@ -718,6 +748,80 @@ impl Source<'_> {
             ));
         }
         Ok(selectors)
+    }
+
+    /// One `[materials."NAME"]` table: every value checked, nothing yet
+    /// matched against the scene.
+    fn material(
+        &self,
+        name: &Spanned<String>,
+        raw: &RawMaterial,
+    ) -> Result<MaterialOverride, JobError> {
+        let key = |field: &str| format!("{}.{field}", MaterialOverride::key_of(name.get_ref()));
+        let reflectance = |field: &str, value: &Option<Vec3Value>| {
+            value
+                .as_ref()
+                .map(|v| {
+                    self.vec3(&key(field), v, "between 0 and 1", |c| {
+                        (0.0..=1.0).contains(&c)
+                    })
+                })
+                .transpose()
+        };
+        let emission = match (&raw.emission_cd_m2, &raw.emission_color) {
+            (None, Some(color)) => {
+                return Err(self.error_at(
+                    color,
+                    format!("{}: give emission_cd_m2 too", key("emission_color")),
+                ));
+            }
+            (None, None) => None,
+            (Some(cd_m2), color) => {
+                let cd_m2 = self.check(
+                    &key("emission_cd_m2"),
+                    cd_m2,
+                    "finite and not negative",
+                    |x| x.is_finite() && x >= 0.0,
+                )?;
+                let color = self
+                    .color(&key("emission_color"), color)?
+                    .unwrap_or(Vec3::ONE);
+                let emission = photometry::emission(color, cd_m2).ok_or_else(|| {
+                    self.error(
+                        raw.emission_color.as_ref().map(Spanned::span),
+                        format!(
+                            "{} = {color}: an emitter needs a colour with luminance (not black)",
+                            key("emission_color")
+                        ),
+                    )
+                })?;
+                Some(emission)
+            }
+        };
+        Ok(MaterialOverride {
+            name: name.get_ref().clone(),
+            ambient: reflectance("ka", &raw.ka)?,
+            diffuse: reflectance("kd", &raw.kd)?,
+            specular: reflectance("ks", &raw.ks)?,
+            shininess: self.check_opt(
+                &key("shininess"),
+                &raw.shininess,
+                "finite, 0 to 10000",
+                |s| s.is_finite() && (0.0..=10_000.0).contains(&s),
+            )?,
+            reflectance: reflectance("kr", &raw.kr)?,
+            transmittance: reflectance("kt", &raw.kt)?,
+            ior: self.check_opt(&key("ior"), &raw.ior, "finite, 1 to 4", |n| {
+                n.is_finite() && (1.0..=4.0).contains(&n)
+            })?,
+            thin: raw.thin.unwrap_or(false),
+            emission,
+            texture: raw
+                .texture
+                .as_ref()
+                .map(|t| self.existing_file(&key("texture"), t))
+                .transpose()?,
+        })
     }
 
     fn method(&self, raw: &RawQuality) -> Result<MethodKind, JobError> {

@@ -17,8 +17,10 @@ pub mod shapes;
 
 pub use bounds::{MAX_COORDINATE, OutOfBounds};
 pub use camera::{Camera, MAX_IMAGE_SIDE, MAX_PIXELS, NEAR, Projector, ScreenPoint};
-pub use light::{Light, LightKind, Lighting};
-pub use material::Material;
+pub use light::{
+    DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, LightKind, Lighting,
+};
+pub use material::{GLASS_IOR, Material, MtlOptics, fresnel_reflectance, mtl_reflectance};
 
 use glam::Vec3;
 

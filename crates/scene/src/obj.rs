@@ -44,11 +44,13 @@
 //! | `Ns s`             | `shininess` (default: 1)                               |
 //! | `Ke r g b`         | `emission` (default: black)                            |
 //! | `Kr r g b`         | `reflectance`, overriding `illum` (vtfarm extension)   |
-//! | `illum 3`, `5`     | `reflectance = Ks` (ray-traced mirror)                 |
-//! | `illum 4`, `6`, `7`| `reflectance` = Fresnel at normal incidence from `Ni`: |
+//! | `illum 3`, `4`, `6`| `reflectance = Ks` (ray-traced, no Fresnel)            |
+//! | `illum 5`, `7`     | `reflectance` = Fresnel at normal incidence from `Ni`: |
 //! |                    | `((Ni - 1) / (Ni + 1))²`, glass (1.5) without `Ni`     |
 //! | other `illum`      | `reflectance` = that Fresnel term when the material    |
 //! |                    | transmits and has `Ni`, otherwise 0                    |
+//!
+//! The reflectance rule is [`crate::mtl_reflectance`]'s.
 //! | `d a`              | `transmittance = 1 - a` (clamped to 0..=1)             |
 //! | `Tr t`             | `transmittance = t` when there is no `d`               |
 //! | `Tf r g b`         | filters the transmittance; with `illum 4`/`6`/`7` and  |
@@ -79,6 +81,7 @@ use glam::Vec3;
 
 use crate::normals::{self, DEFAULT_CREASE_ANGLE_DEG};
 use crate::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
+use crate::{MtlOptics, mtl_reflectance};
 
 /// Options for [`load_obj`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -873,19 +876,6 @@ fn default_material(scene: &mut Scene) -> MaterialId {
     })
 }
 
-/// The index of refraction assumed for a glass `illum` model without `Ni`.
-const GLASS_IOR: f32 = 1.5;
-
-/// The Fresnel reflectance at normal incidence of a dielectric with index of
-/// refraction `ior` in air: `((ior - 1) / (ior + 1))²` (0.04 for glass).
-fn fresnel_reflectance(ior: f32) -> f32 {
-    if ior.is_finite() && ior > 0.0 {
-        ((ior - 1.0) / (ior + 1.0)).powi(2)
-    } else {
-        0.0
-    }
-}
-
 /// Maps one tobj material; see the module documentation for the table.
 fn convert_material(m: &tobj::Material) -> Result<Material, String> {
     // Keys tobj does not know end up as text in `unknown_param`; the MTL check
@@ -919,18 +909,13 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         (None, _) => Vec3::ZERO,
     }
     .clamp(Vec3::ZERO, Vec3::ONE);
-    let transmits = transmittance.max_element() > 0.0;
-    let reflectance = match (extension(m, "Kr", parse_vec3)?, m.illumination_model) {
-        (Some(kr), _) => kr,
-        (None, Some(3 | 5)) => specular,
-        (None, _) if glass => {
-            Vec3::splat(fresnel_reflectance(m.optical_density.unwrap_or(GLASS_IOR)))
-        }
-        (None, _) => match m.optical_density {
-            Some(ior) if transmits => Vec3::splat(fresnel_reflectance(ior)),
-            _ => Vec3::ZERO,
-        },
-    };
+    let reflectance = mtl_reflectance(&MtlOptics {
+        kr: extension(m, "Kr", parse_vec3)?,
+        illum: m.illumination_model,
+        ks: specular,
+        ni: m.optical_density,
+        transmits: transmittance.max_element() > 0.0,
+    });
     Ok(Material {
         name: m.name.clone(),
         ambient: m.ambient.map_or(diffuse, Vec3::from),
