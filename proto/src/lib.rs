@@ -58,7 +58,7 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;
 
 /// How many frames of a job the master runs at once (pipelined frames) and
 /// so how many prepared frames a worker keeps: a package of any of them may

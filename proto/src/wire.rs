@@ -11,12 +11,12 @@
 use std::cell::RefCell;
 use std::time::Duration;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use vtfarm_method::{FrameSetup, MethodKind};
 use vtfarm_scene::{
     Camera, Light, LightKind, Lighting, MAX_IMAGE_SIDE, Material, Object, OutOfBounds, Scene,
-    Triangle,
+    Texture, Triangle,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{
@@ -146,6 +146,8 @@ pub struct WireMaterial {
     pub reflectance: [f32; 3],
     pub transmittance: [f32; 3],
     pub ior: f32,
+    pub diffuse_texture: Option<u32>,
+    pub alpha_texture: Option<u32>,
 }
 
 impl From<&Material> for WireMaterial {
@@ -160,6 +162,8 @@ impl From<&Material> for WireMaterial {
             reflectance: vec3(m.reflectance),
             transmittance: vec3(m.transmittance),
             ior: m.ior,
+            diffuse_texture: m.diffuse_texture,
+            alpha_texture: m.alpha_texture,
         }
     }
 }
@@ -178,6 +182,9 @@ impl TryFrom<WireMaterial> for Material {
             reflectance: finite3(|| field("reflectance"), m.reflectance)?,
             transmittance: finite3(|| field("transmittance"), m.transmittance)?,
             ior: finite(&field("ior"), m.ior)?,
+            // Checked against the scene's textures by `Scene::validate`.
+            diffuse_texture: m.diffuse_texture,
+            alpha_texture: m.alpha_texture,
             name: m.name,
         })
     }
@@ -192,6 +199,20 @@ pub struct WireScene {
     pub triangles: Vec<WireTriangle>,
     pub objects: Vec<String>,
     pub materials: Vec<WireMaterial>,
+    /// Per triangle, its corners' texture coordinates (or none at all).
+    pub corner_uvs: Vec<[[f32; 2]; 3]>,
+    pub textures: Vec<WireTexture>,
+}
+
+/// [`Texture`] on the wire: its level-0 RGBA bytes (the mip levels are
+/// rebuilt from them).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WireTexture {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    #[serde(with = "crate::message::bytes")]
+    pub rgba8: Vec<u8>,
 }
 
 impl From<&Scene> for WireScene {
@@ -210,6 +231,17 @@ impl From<&Scene> for WireScene {
                 .collect(),
             objects: s.objects.iter().map(|o| o.name.clone()).collect(),
             materials: s.materials.iter().map(WireMaterial::from).collect(),
+            corner_uvs: (s.corner_uvs.iter())
+                .map(|c| c.map(|uv| uv.to_array()))
+                .collect(),
+            textures: (s.textures.iter())
+                .map(|t| WireTexture {
+                    name: t.name().to_owned(),
+                    width: t.width(),
+                    height: t.height(),
+                    rgba8: t.rgba8().to_vec(),
+                })
+                .collect(),
         }
     }
 }
@@ -259,9 +291,18 @@ impl TryFrom<WireScene> for Scene {
             materials: (w.materials.into_iter())
                 .map(Material::try_from)
                 .collect::<Result<_, _>>()?,
+            corner_uvs: (w.corner_uvs.iter())
+                .map(|c| c.map(Vec2::from_array))
+                .collect(),
+            textures: (w.textures.into_iter())
+                .map(|t| Texture::from_rgba8(&t.name, t.width, t.height, t.rgba8))
+                .collect::<Result<_, _>>()
+                .map_err(|e| WireError::InvalidScene(e.to_string()))?,
         };
         // Indices and finiteness are checked above; this adds unit normals.
-        scene.validate().map_err(WireError::InvalidScene)?;
+        scene
+            .validate()
+            .map_err(|e| WireError::InvalidScene(e.to_string()))?;
         Ok(scene)
     }
 }
@@ -1187,6 +1228,7 @@ pub(crate) mod tests {
             reflectance: Vec3::splat(0.9),
             transmittance: Vec3::splat(0.1),
             ior: 1.5,
+            ..Default::default()
         }
     }
 
@@ -1216,6 +1258,7 @@ pub(crate) mod tests {
                 },
             ],
             materials: vec![material("mirror"), Material::default()],
+            ..Default::default()
         }
     }
 
@@ -1799,7 +1842,7 @@ pub(crate) mod tests {
                     .map(|(vertices, object, material)| WireTriangle { vertices, object, material })
                     .collect(),
                 objects: vec!["a".to_owned(), "b".to_owned()],
-                materials: vec![WireMaterial::from(&Material::default())],
+                materials: vec![WireMaterial::from(&Material::default())], ..Default::default()
             };
             if let Ok(scene) = Scene::try_from(wire) {
                 prop_assert!(scene.validate().is_ok());

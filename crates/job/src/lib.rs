@@ -24,7 +24,7 @@ use vtfarm_method::MethodKind;
 use vtfarm_scene::obj::{ObjOptions, load_obj};
 use vtfarm_scene::{
     Camera, DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, Lighting,
-    Material, Scene, Triangle, TriangleId, fresnel_reflectance,
+    Material, Scene, Texture, TextureId, Triangle, TriangleId, fresnel_reflectance,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
@@ -364,6 +364,20 @@ impl Job {
                 ));
             };
             change.apply(&mut scene.materials[id as usize]);
+            if let Some(path) = &change.texture {
+                let key = format!("{}.texture", MaterialOverride::key_of(&change.name));
+                let texture =
+                    Texture::load(path).map_err(|e| self.invalid(Some(&key), e.to_string()))?;
+                if scene.corner_uvs.is_empty() {
+                    return Err(self.invalid(
+                        Some(&key),
+                        format!("{key}: the scene has no texture coordinates (vt) to map it with"),
+                    ));
+                }
+                scene.textures.push(texture);
+                scene.materials[id as usize].diffuse_texture =
+                    Some(scene.textures.len() as TextureId - 1);
+            }
             overridden[id as usize] = Some(change);
         }
         let mut is_reflector_material = vec![false; scene.materials.len()];
@@ -405,7 +419,11 @@ impl Job {
         match &self.scene {
             SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
             SceneSource::Obj(path) => {
-                load_obj(path, &ObjOptions::default()).map_err(|error| JobError::Obj {
+                let options = ObjOptions {
+                    keep_uvs: self.materials.iter().any(|m| m.texture.is_some()),
+                    ..ObjOptions::default()
+                };
+                load_obj(path, &options).map_err(|error| JobError::Obj {
                     file: self.file.clone(),
                     obj: path.clone(),
                     error: Box::new(error),

@@ -192,11 +192,16 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let materials = (raw.materials.iter())
         .map(|(name, m)| source.material(name, m))
         .collect::<Result<Vec<_>, _>>()?;
+    let texture_locations = (raw.materials.iter()).filter_map(|(name, m)| {
+        let key = format!("{}.texture", MaterialOverride::key_of(name.get_ref()));
+        Some((key, Location::of(text, m.texture.as_ref()?.span().start)))
+    });
     let locations = (raw.materials.keys())
         .map(|name| {
             let key = MaterialOverride::key_of(name.get_ref());
             (key, Location::of(text, name.span().start))
         })
+        .chain(texture_locations)
         .chain(locations)
         .collect();
     Ok(Job {

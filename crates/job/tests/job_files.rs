@@ -871,6 +871,7 @@ fn two_by_two_scene() -> Scene {
             Material::diffuse("mirror", Vec3::ONE),
             Material::diffuse("paint", Vec3::ONE),
         ],
+        ..Default::default()
     }
 }
 
@@ -1080,6 +1081,7 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
         ],
         objects: vec![Object { name: "car".into() }, Object { name: "bus".into() }],
         materials: vec![Material::diffuse("glass", Vec3::ONE), mirror],
+        ..Default::default()
     };
     let dull = dull_reflectors(&scene, &[0, 1, 2, 3]);
     assert_eq!(

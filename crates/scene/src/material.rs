@@ -2,6 +2,8 @@
 
 use glam::Vec3;
 
+use crate::TextureId;
+
 /// A surface material. Colours are linear RGB.
 ///
 /// Mapping from MTL: `Ka`, `Kd`, `Ks`, `Ns`, `Ke` as named; `reflectance`
@@ -25,6 +27,12 @@ pub struct Material {
     pub transmittance: Vec3,
     /// Index of refraction (Ni).
     pub ior: f32,
+    /// A base-colour texture (`map_Kd`): its colour multiplies `diffuse`
+    /// and `ambient`.
+    pub diffuse_texture: Option<TextureId>,
+    /// An alpha texture (`map_d`): it multiplies the opacity `1 -
+    /// transmittance`.
+    pub alpha_texture: Option<TextureId>,
 }
 
 impl Material {
@@ -40,12 +48,25 @@ impl Material {
             reflectance: Vec3::ZERO,
             transmittance: Vec3::ZERO,
             ior: 1.0,
+            diffuse_texture: None,
+            alpha_texture: None,
         }
     }
 
     /// Whether rays continue from this surface (mirror or transparent).
     pub fn is_specular(&self) -> bool {
-        self.reflectance.max_element() > 0.0 || self.transmittance.max_element() > 0.0
+        self.reflectance.max_element() > 0.0 || self.may_transmit()
+    }
+
+    /// Whether any point of the surface lets light through: a
+    /// transmittance, or an alpha texture that can make it see-through.
+    pub fn may_transmit(&self) -> bool {
+        self.transmittance.max_element() > 0.0 || self.alpha_texture.is_some()
+    }
+
+    /// Whether a texture changes this material from point to point.
+    pub fn is_textured(&self) -> bool {
+        self.diffuse_texture.is_some() || self.alpha_texture.is_some()
     }
 }
 

@@ -15,8 +15,11 @@
 //! # Blue`: a `#` that starts a word ends the line, except on lines that carry
 //! a name or file name — `o`, `g`, `usemtl`, `newmtl`, `mtllib`, textures —
 //! where `Material #25` is a name), Windows paths (`textures\glass.png`).
-//! Textures are not used: a missing one is an [`ObjWarning`] (logged by
-//! [`load_obj`]), not an error.
+//! Textures: `map_Kd` and `map_d` are loaded (PNG, JPEG; see
+//! [`crate::texture`]) with the faces' `vt` coordinates per corner; one that
+//! cannot be read is an [`ObjWarning`] at its MTL line (logged by
+//! [`load_obj`]) and the material keeps its flat colour. Other texture
+//! kinds are not used: a missing one is a warning too, not an error.
 //!
 //! Refused with file and line: non-finite numbers and vertex coordinates
 //! beyond ±[`MAX_COORDINATE`], and faces with more than
@@ -56,7 +59,9 @@
 //! | `Tf r g b`         | filters the transmittance; with `illum 4`/`6`/`7` and  |
 //! |                    | no `d`/`Tr` it is the transmittance                    |
 //! | `Ni n`             | `ior` (default: 1)                                     |
-//! | `map_*`, `bump`, … | checked to exist (a warning if not); not used          |
+//! | `map_Kd file`      | `diffuse_texture`: the base colour, times `Kd`, `Ka`   |
+//! | `map_d file`       | `alpha_texture`: alpha (or grey), times `d`            |
+//! | other `map_*`, …   | checked to exist (a warning if not); not used          |
 //!
 //! The Fresnel term is the head-on reflectance; with `[quality] fresnel` the
 //! tracer raises it towards grazing angles (Schlick).
@@ -77,10 +82,10 @@ use std::io;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::normals::{self, DEFAULT_CREASE_ANGLE_DEG};
-use crate::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
+use crate::{Material, MaterialId, Object, ObjectId, Scene, Texture, TextureId, Triangle};
 use crate::{MtlOptics, mtl_reflectance};
 
 /// Options for [`load_obj`].
@@ -89,12 +94,17 @@ pub struct ObjOptions {
     /// Crease angle in degrees for normals computed for models that have no
     /// `vn` normals; see [`normals::compute_normals`].
     pub crease_angle_deg: f32,
+    /// Keep the faces' texture coordinates even when no material of the
+    /// file is textured (a job gives one a texture); otherwise they are kept
+    /// only for textured scenes.
+    pub keep_uvs: bool,
 }
 
 impl Default for ObjOptions {
     fn default() -> Self {
         ObjOptions {
             crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
+            keep_uvs: false,
         }
     }
 }
@@ -201,7 +211,10 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
         tobj::load_obj_buf(&mut checked.text.as_bytes(), &load_options, libraries)
             .map_err(|e| invalid(path, format!("tobj: {e}")))?;
     let materials = materials.map_err(|e| invalid(path, format!("tobj: {e}")))?;
-    let scene = build_scene(path, &models, &materials, options)?;
+    let mut warnings = checked.warnings;
+    let scene = build_scene(path, &models, &materials, options, |scene| {
+        load_textures(scene, &checked.textures, &mut warnings)
+    })?;
     tracing::debug!(
         path = %path.display(),
         vertices = scene.positions.len(),
@@ -210,10 +223,7 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
         materials = scene.materials.len(),
         "loaded OBJ"
     );
-    Ok(ImportedObj {
-        scene,
-        warnings: checked.warnings,
-    })
+    Ok(ImportedObj { scene, warnings })
 }
 
 /// Writes `scene` as `dir/name.obj` and `dir/name.mtl`.
@@ -310,7 +320,7 @@ fn format_vec3(v: Vec3) -> String {
 
 /// Checks that `scene` can be written as OBJ and read back as the same scene.
 fn check_writable(scene: &Scene) -> Result<(), String> {
-    scene.validate()?;
+    scene.validate().map_err(|e| e.to_string())?;
     if let Some(i) = scene
         .positions
         .iter()
@@ -498,6 +508,16 @@ struct CheckedObj {
     /// The libraries by the name on their `mtllib` line.
     libraries: HashMap<String, Library>,
     warnings: Vec<ObjWarning>,
+    textures: Vec<TextureRef>,
+}
+
+/// A texture vtfarm uses (`map_Kd`, `map_d`), where the MTL names it.
+struct TextureRef {
+    material: String,
+    alpha: bool,
+    file: PathBuf,
+    mtl: PathBuf,
+    line: usize,
 }
 
 /// State of the line check: what has been defined so far.
@@ -517,6 +537,7 @@ struct ObjCheck {
     materials: HashSet<String>,
     libraries: HashMap<String, Library>,
     warnings: Vec<ObjWarning>,
+    textures: Vec<TextureRef>,
 }
 
 /// Checks an OBJ file line by line, reading and checking the MTL libraries it
@@ -539,6 +560,7 @@ fn check_obj(path: &Path, text: &str) -> Result<CheckedObj, ObjError> {
         text: out,
         libraries: check.libraries,
         warnings: check.warnings,
+        textures: check.textures,
     })
 }
 
@@ -682,7 +704,7 @@ impl ObjCheck {
             error,
         })?;
         let text = decode_text(&file, bytes)?;
-        let clean = check_mtl(&file, &text, &mut self.warnings)?;
+        let clean = check_mtl(&file, &text, &mut self.warnings, &mut self.textures)?;
         let (materials, names) = tobj::load_mtl_buf(&mut clean.as_bytes())
             .map_err(|e| invalid(&file, format!("tobj: {e}")))?;
         self.materials
@@ -718,10 +740,19 @@ fn is_texture(keyword: &str) -> bool {
 /// Checks an MTL file line by line: numbers where tobj expects them (it panics
 /// on `Kd` with fewer than three) and names; a texture that does not exist is
 /// a warning. Returns the normalised text to hand to tobj.
-fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<String, ObjError> {
+fn check_mtl(
+    path: &Path,
+    text: &str,
+    warnings: &mut Vec<ObjWarning>,
+    textures: &mut Vec<TextureRef>,
+) -> Result<String, ObjError> {
     let mut out = String::with_capacity(text.len());
+    let mut material = String::new();
     for (i, line) in text.lines().enumerate() {
         let (keyword, rest, clean) = split_line(line);
+        if keyword == "newmtl" {
+            material = rest.to_owned();
+        }
         let checked = match keyword {
             "newmtl" if rest.is_empty() => Err("no material name".to_owned()),
             "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop),
@@ -734,7 +765,16 @@ fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<
             _ if is_texture(keyword) && rest.is_empty() => Err("no texture file name".to_owned()),
             _ if is_texture(keyword) => {
                 let name = file_name(rest);
-                warnings.extend(check_texture(path, i + 1, &name));
+                match keyword {
+                    "map_Kd" | "map_d" => textures.push(TextureRef {
+                        material: material.clone(),
+                        alpha: keyword == "map_d",
+                        file: texture_file(path, &name),
+                        mtl: path.to_owned(),
+                        line: i + 1,
+                    }),
+                    _ => warnings.extend(check_texture(path, i + 1, &name)),
+                }
                 out.push_str(&format!("{keyword} {name}\n"));
                 continue;
             }
@@ -751,16 +791,21 @@ fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<
     Ok(out)
 }
 
-/// A warning when the texture named on an MTL line does not exist. The file
-/// name is the whole argument, or its last word when options (`-s 1 1 1`)
-/// come first.
-fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
+/// The file a texture line of `mtl` names: the whole argument, or its last
+/// word when options (`-s 1 1 1`) come first; relative to the MTL file.
+fn texture_file(mtl: &Path, rest: &str) -> PathBuf {
     let name = if rest.starts_with('-') {
         rest.split_whitespace().last().unwrap_or(rest)
     } else {
         rest
     };
-    let file = mtl.parent().unwrap_or(Path::new("")).join(name);
+    mtl.parent().unwrap_or(Path::new("")).join(name)
+}
+
+/// A warning when a texture vtfarm does not use (bump, reflection, …)
+/// names a file that does not exist.
+fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
+    let file = texture_file(mtl, rest);
     let problem = match fs::metadata(&file) {
         Ok(m) if m.is_file() => return None,
         Ok(_) => "not a file".to_owned(),
@@ -770,10 +815,46 @@ fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
         path: mtl.to_owned(),
         line,
         message: format!(
-            "texture {} ignored ({problem}); vtfarm does not use textures",
+            "texture {} ignored ({problem}); vtfarm uses map_Kd and map_d only",
             file.display()
         ),
     })
+}
+
+/// Loads the textures the materials use into `scene` (each file once) and
+/// sets the materials' texture ids. A texture that cannot be read is a
+/// warning at its MTL line; the material keeps its flat colour.
+fn load_textures(scene: &mut Scene, textures: &[TextureRef], warnings: &mut Vec<ObjWarning>) {
+    let mut loaded: HashMap<&Path, Option<TextureId>> = HashMap::new();
+    for t in textures {
+        let id = *loaded
+            .entry(&t.file)
+            .or_insert_with(|| match Texture::load(&t.file) {
+                Ok(texture) => {
+                    scene.textures.push(texture);
+                    Some(scene.textures.len() as TextureId - 1)
+                }
+                Err(e) => {
+                    warnings.push(ObjWarning {
+                        path: t.mtl.clone(),
+                        line: t.line,
+                        message: format!(
+                            "texture not used, the material keeps its flat colour: {e}"
+                        ),
+                    });
+                    None
+                }
+            });
+        let Some(id) = id else { continue };
+        // Materials that share a name share the texture (tobj keeps the last).
+        for m in scene.materials.iter_mut().filter(|m| m.name == t.material) {
+            if t.alpha {
+                m.alpha_texture = Some(id);
+            } else {
+                m.diffuse_texture = Some(id);
+            }
+        }
+    }
 }
 
 /// Converts tobj's models and materials into a scene.
@@ -782,6 +863,7 @@ fn build_scene(
     models: &[tobj::Model],
     materials: &[tobj::Material],
     options: &ObjOptions,
+    textures: impl FnOnce(&mut Scene),
 ) -> Result<Scene, ObjError> {
     let mut scene = Scene {
         materials: materials
@@ -791,6 +873,9 @@ fn build_scene(
             .map_err(|m| invalid(path, m))?,
         ..Scene::default()
     };
+    textures(&mut scene);
+    // Corner texture coordinates, kept only when a material is textured.
+    let textured = options.keep_uvs || scene.materials.iter().any(Material::is_textured);
     // Triangles of models without normals; they get theirs at the end, per
     // object, so that smoothing crosses material boundaries.
     let mut to_smooth = Vec::new();
@@ -833,6 +918,20 @@ fn build_scene(
             // Placeholders: the smoothed triangles get new vertices.
             vec![Vec3::Y; positions.len()]
         };
+        if textured {
+            let uvs: Vec<Vec2> = if mesh.texcoords.len() == positions.len() * 2 {
+                mesh.texcoords
+                    .chunks_exact(2)
+                    .map(Vec2::from_slice)
+                    .collect()
+            } else {
+                vec![Vec2::ZERO; positions.len()]
+            };
+            scene
+                .corner_uvs
+                .resize(scene.triangles.len(), [Vec2::ZERO; 3]);
+            (scene.corner_uvs).extend(triangles.iter().map(|t| t.map(|v| uvs[v as usize])));
+        }
         let base = scene.positions.len() as u32;
         scene.positions.extend(positions);
         scene.normals.extend(normals);
@@ -926,5 +1025,7 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         reflectance,
         transmittance,
         ior: m.optical_density.unwrap_or(base.ior),
+        diffuse_texture: None,
+        alpha_texture: None,
     })
 }

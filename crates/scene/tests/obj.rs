@@ -244,6 +244,7 @@ fn built_scene() -> Scene {
             .map(|name| Object { name: name.into() })
             .into(),
         materials: vec![Material::default(), mirror, glass, lamp],
+        ..Default::default()
     }
 }
 
