@@ -94,7 +94,7 @@ struct RenderArgs {
 
 #[derive(Subcommand)]
 enum SceneCommand {
-    /// Writes a built-in scene as OBJ + MTL.
+    /// Writes a built-in scene as OBJ + MTL, or as binary glTF.
     Export {
         /// The built-in scene's name (`cockpit`).
         name: String,
@@ -104,6 +104,9 @@ enum SceneCommand {
         /// Detail factor (1.0 ≈ 100k triangles, 2.1 ≈ 210k).
         #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
         detail: f32,
+        /// `obj` (OBJ + MTL) or `glb` (binary glTF 2.0).
+        #[arg(long, default_value = "obj", value_parser = ["obj", "glb"])]
+        format: String,
     },
 }
 
@@ -130,7 +133,8 @@ fn run(cli: Cli) -> Result<()> {
             name,
             output,
             detail,
-        }) => export_scene(&name, &output, detail),
+            format,
+        }) => export_scene(&name, &output, detail, &format),
         Command::Bench(b) => bench::run(b),
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
@@ -280,7 +284,7 @@ fn print_summary(
     }
 }
 
-fn export_scene(name: &str, dir: &Path, detail: f32) -> Result<()> {
+fn export_scene(name: &str, dir: &Path, detail: f32, format: &str) -> Result<()> {
     if name != "cockpit" {
         bail!("unknown built-in scene '{name}' (available: cockpit)");
     }
@@ -289,11 +293,15 @@ fn export_scene(name: &str, dir: &Path, detail: f32) -> Result<()> {
         ..CockpitConfig::default()
     });
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    vtfarm_scene::obj::write_obj(&c.scene, dir, name)?;
+    let file = dir.join(format!("{name}.{format}"));
+    match format {
+        "glb" => vtfarm_scene::gltf::write_glb(&c.scene, &file)?,
+        _ => vtfarm_scene::obj::write_obj(&c.scene, dir, name)?,
+    }
     println!(
         "wrote {} triangles to {}",
         c.scene.triangles.len(),
-        dir.join(format!("{name}.obj")).display()
+        file.display()
     );
     Ok(())
 }

@@ -41,6 +41,9 @@ pub struct Job {
     pub scene: SceneSource,
     /// The `[camera]` keys; see [`CameraSpec`].
     pub camera: CameraSpec,
+    /// `camera.camera`: a camera of the glTF scene, the base of the other
+    /// `[camera]` keys (width and height are the job's).
+    pub camera_name: Option<String>,
     /// The `[lighting]` keys; see [`LightingSpec`].
     pub lighting: LightingSpec,
     /// What reflects (never empty).
@@ -126,6 +129,8 @@ pub enum SceneSource {
     Cockpit(CockpitConfig),
     /// An OBJ file; the path is already resolved against the job file's directory.
     Obj(PathBuf),
+    /// A glTF 2.0 file (`.gltf` or `.glb`), resolved likewise.
+    Gltf(PathBuf),
 }
 
 /// The `[camera]` keys that were given. A given key overrides the scene's own
@@ -300,11 +305,26 @@ impl Job {
                 let scene = self.loaded_scene()?;
                 (scene, camera, self.lighting.over(Lighting::default()))
             }
+            SceneSource::Gltf(path) => {
+                let imported = self.gltf(path)?;
+                let camera = match &self.camera_name {
+                    None => self
+                        .camera
+                        .complete()
+                        .map_err(|missing| self.invalid(None, obj_camera_missing(&missing)))?,
+                    Some(name) => self.gltf_camera(name, &imported.cameras)?,
+                };
+                (
+                    imported.scene,
+                    camera,
+                    self.lighting.over(Lighting::default()),
+                )
+            }
         };
         let (scene, mut notes) = self.prepare(scene)?;
         let lighting = match (&self.scene, &self.lighting.lights) {
             // A file with no light of its own, and the job sets none.
-            (SceneSource::Obj(_), None) => {
+            (SceneSource::Obj(_) | SceneSource::Gltf(_), None) => {
                 notes.push(default_light_note());
                 let daylight = Lighting::daylight();
                 LightingSpec {
@@ -414,9 +434,59 @@ impl Job {
         Ok((scene, notes))
     }
 
+    /// The glTF file of the job, its warnings logged.
+    fn gltf(&self, path: &Path) -> Result<vtfarm_scene::gltf::ImportedGltf, JobError> {
+        let options = ObjOptions {
+            keep_uvs: self.materials.iter().any(|m| m.texture.is_some()),
+            ..ObjOptions::default()
+        };
+        vtfarm_scene::gltf::load_gltf(path, &options).map_err(|error| JobError::Gltf {
+            file: self.file.clone(),
+            error: Box::new(error),
+        })
+    }
+
+    /// The glTF camera `name` with the job's `[camera]` keys over it.
+    fn gltf_camera(
+        &self,
+        name: &str,
+        cameras: &[vtfarm_scene::gltf::GltfCamera],
+    ) -> Result<Camera, JobError> {
+        let Some(c) = cameras.iter().find(|c| c.name == name) else {
+            let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+            return Err(self.invalid(
+                Some("camera.camera"),
+                format!(
+                    "camera.camera = {name:?}: the glTF file has no such camera (cameras: {})",
+                    if names.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        names.join(", ")
+                    }
+                ),
+            ));
+        };
+        let (Some(width), Some(height)) = (self.camera.width, self.camera.height) else {
+            return Err(self.invalid(
+                Some("camera.camera"),
+                "[camera] needs width and height with a glTF camera".to_owned(),
+            ));
+        };
+        let base = Camera {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+            width,
+            height,
+        };
+        Ok(self.camera.over(&base))
+    }
+
     /// The scene as its source gives it.
     fn loaded_scene(&self) -> Result<Scene, JobError> {
         match &self.scene {
+            SceneSource::Gltf(path) => Ok(self.gltf(path)?.scene),
             SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
             SceneSource::Obj(path) => {
                 let options = ObjOptions {

@@ -69,6 +69,7 @@ struct RawMaterial {
 struct RawScene {
     builtin: Option<Spanned<String>>,
     obj: Option<Spanned<PathBuf>>,
+    gltf: Option<Spanned<PathBuf>>,
     detail: Option<Spanned<f32>>,
     glass_segments: Option<Spanned<u32>>,
     glass: Option<Spanned<String>>,
@@ -79,6 +80,7 @@ struct RawScene {
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCamera {
+    camera: Option<Spanned<String>>,
     eye: Option<Vec3Value>,
     target: Option<Vec3Value>,
     up: Option<Vec3Value>,
@@ -160,8 +162,15 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let source = Source { file: origin, text };
     let raw: RawJob = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
     let scene = source.scene(raw.scene)?;
-    let is_obj = matches!(scene, SceneSource::Obj(_));
-    let camera = source.camera(&raw.camera, is_obj)?;
+    let is_obj = matches!(scene, SceneSource::Obj(_) | SceneSource::Gltf(_));
+    let camera_name = raw.camera.camera.as_ref().map(|n| n.get_ref().clone());
+    if let (Some(name), false) = (&raw.camera.camera, matches!(scene, SceneSource::Gltf(_))) {
+        return Err(source.error_at(
+            name,
+            "camera.camera names a camera of a glTF scene; this scene has none",
+        ));
+    }
+    let camera = source.camera(&raw.camera, is_obj && camera_name.is_none())?;
     let eyes = source.eyes(&raw.frames, &camera)?;
     let lighting = source.lighting(&raw.lighting)?;
     let (trace, vertex) = source.quality(&raw.quality)?;
@@ -169,6 +178,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     // Where the keys checked against the scene stand (see `Job::locations`).
     let c = &raw.camera;
     let mut spans: Vec<(String, Range<usize>)> = [
+        ("camera", c.camera.as_ref().map(Spanned::span)),
         ("eye", c.eye.as_ref().map(Spanned::span)),
         ("target", c.target.as_ref().map(Spanned::span)),
         ("up", c.up.as_ref().map(Spanned::span)),
@@ -206,6 +216,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
         .collect();
     Ok(Job {
         materials,
+        camera_name,
         locations,
         file: origin.to_owned(),
         scene,
@@ -455,12 +466,36 @@ impl Source<'_> {
     }
 
     fn scene(&self, raw: Option<Spanned<RawScene>>) -> Result<SceneSource, JobError> {
-        const WHICH: &str = "set either builtin = \"cockpit\" or obj = \"path/to/model.obj\"";
+        const WHICH: &str = "set one of builtin = \"cockpit\", obj = \"path/to/model.obj\" or gltf = \"path/to/model.glb\"";
         let Some(raw) = raw else {
             return Err(self.error(None, format!("missing [scene]: {WHICH}")));
         };
         let span = raw.span();
-        let raw = raw.into_inner();
+        let mut raw = raw.into_inner();
+        if let Some(gltf) = raw.gltf.take() {
+            if let Some(other) = raw
+                .builtin
+                .as_ref()
+                .map(Spanned::span)
+                .or(raw.obj.as_ref().map(Spanned::span))
+            {
+                return Err(self.error(Some(other), format!("[scene]: {WHICH}, not two")));
+            }
+            let builtin_only = [
+                ("detail", raw.detail.map(|v| v.span())),
+                ("glass_segments", raw.glass_segments.map(|v| v.span())),
+                ("glass", raw.glass.map(|v| v.span())),
+                ("glass_tilt", raw.glass_tilt.map(|v| v.span())),
+                ("glass_radius", raw.glass_radius.map(|v| v.span())),
+            ];
+            if let Some((key, span)) = builtin_only.into_iter().find_map(|(k, s)| Some((k, s?))) {
+                return Err(self.error(
+                    Some(span),
+                    format!("scene.{key} applies to builtin scenes only, not to gltf"),
+                ));
+            }
+            return Ok(SceneSource::Gltf(self.existing_file("scene.gltf", &gltf)?));
+        }
         match (raw.builtin.clone(), raw.obj.clone()) {
             (Some(_), Some(obj)) => Err(self.error_at(&obj, format!("[scene]: {WHICH}, not both"))),
             (None, None) => Err(self.error(Some(span), format!("[scene]: {WHICH}"))),

@@ -181,6 +181,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
         locations: job.locations.clone(),
         materials: Vec::new(),
+        camera_name: None,
     };
     assert_eq!(job, expected);
     // The keys checked against the scene later keep their lines.

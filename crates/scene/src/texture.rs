@@ -154,6 +154,27 @@ impl Texture {
         Texture::from_rgba8(&name, width, height, rgba.into_raw())
     }
 
+    /// Decodes an image file's bytes (PNG or JPEG).
+    pub fn decode(name: &str, bytes: &[u8]) -> Result<Texture, TextureError> {
+        let decode = |error| TextureError::Decode {
+            path: name.into(),
+            error,
+        };
+        let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| decode(image::ImageError::IoError(e)))?;
+        let (width, height) = reader.into_dimensions().map_err(decode)?;
+        if width == 0 || height == 0 || width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
+            return Err(TextureError::Size {
+                name: name.to_owned(),
+                width,
+                height,
+            });
+        }
+        let rgba = image::load_from_memory(bytes).map_err(decode)?.to_rgba8();
+        Texture::from_rgba8(name, width, height, rgba.into_raw())
+    }
+
     /// The name messages use (the file name).
     pub fn name(&self) -> &str {
         &self.name

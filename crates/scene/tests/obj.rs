@@ -178,6 +178,7 @@ fn the_crease_angle_option_controls_smoothing() {
         &data("cube.obj"),
         &ObjOptions {
             crease_angle_deg: 120.0,
+            ..Default::default()
         },
     )
     .unwrap();
