@@ -1212,3 +1212,56 @@ fn errors_found_against_the_scene_name_the_line() {
         .to_string();
     assert!(message.contains("at most 16777216 pixels"), "{message}");
 }
+
+#[test]
+fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
+    let fixture =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scene/tests/data/gltf/instanced.glb");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(&fixture, dir.path().join("car.glb")).unwrap();
+    let job_path = dir.path().join("job.toml");
+    let write = |camera: &str| {
+        std::fs::write(
+            &job_path,
+            format!(
+                "[scene]\ngltf = \"car.glb\"\n[camera]\n{camera}width = 64\nheight = 48\n\
+                 [reflectors]\nobjects = [\"right\"]\n"
+            ),
+        )
+        .unwrap();
+        load_job(&job_path)
+    };
+    let job = write("camera = \"driver\"\nfov_y = 30\n").unwrap_or_else(|e| panic!("{e}"));
+    let loaded = job.load_scene().unwrap_or_else(|e| panic!("{e}"));
+    // The file's camera under the job's keys.
+    assert_eq!(loaded.camera.eye, Vec3::new(0.0, 1.0, 2.0));
+    assert_eq!((loaded.camera.fov_y_deg, loaded.camera.width), (30.0, 64));
+    let right = loaded.scene.object_id("right").unwrap();
+    let chosen = job.reflector_triangles(&loaded.scene).unwrap();
+    assert_eq!(chosen.len(), 2);
+    assert!(
+        chosen
+            .iter()
+            .all(|&t| loaded.scene.triangles[t as usize].object == right)
+    );
+    // A named reflector with glTF's default ior 1.5 reflects by Fresnel.
+    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap() as usize];
+    assert!((paint.reflectance - Vec3::splat(0.04)).abs().max_element() < 1e-6);
+    // An unknown camera names the file's cameras, at its line.
+    let message = write("camera = \"rear\"\n")
+        .unwrap()
+        .load_scene()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.starts_with(&format!("{}:4:", job_path.display()))
+            && message.contains("cameras: driver"),
+        "{message}"
+    );
+    // Without a camera name the view keys are needed, as for OBJ.
+    let message = write("").unwrap_err().to_string();
+    assert!(
+        message.contains("[camera] needs eye, target, fov_y"),
+        "{message}"
+    );
+}
