@@ -72,7 +72,8 @@
 //! the same scene back: floats are printed with Rust's shortest round-trip
 //! formatting, and a scene that came from [`load_obj`] reloads bit for bit.
 //! MTL's `d` is a single number, so a transmittance that is not grey is
-//! written (and read back) as its mean.
+//! written (and read back) as its mean. Textures are written beside them
+//! as PNG (`NAME_textureI.png`), with a `vt` per triangle corner.
 
 use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
@@ -85,7 +86,9 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 
 use crate::normals::{self, DEFAULT_CREASE_ANGLE_DEG};
-use crate::{Material, MaterialId, Object, ObjectId, Scene, Texture, TextureId, Triangle};
+use crate::{
+    Material, MaterialId, Object, ObjectId, Scene, SceneError, Texture, TextureId, Triangle,
+};
 use crate::{MtlOptics, mtl_reflectance};
 
 /// Options for [`load_obj`].
@@ -130,11 +133,11 @@ pub enum ObjError {
     #[error("{}: {error}", .path.display())]
     Io { path: PathBuf, error: io::Error },
     /// A line of an OBJ or MTL file is malformed.
-    #[error("{}:{line}: {message}", .path.display())]
+    #[error("{}:{line}: {error}", .path.display())]
     Syntax {
         path: PathBuf,
         line: usize,
-        message: String,
+        error: LineError,
     },
     /// A file named on a line (`mtllib`) cannot be read.
     #[error("{}:{line}: cannot read {what} {}: {error}", .path.display(), .file.display())]
@@ -149,6 +152,111 @@ pub enum ObjError {
     /// written, an error `tobj` found that the line check did not).
     #[error("{}: {message}", .path.display())]
     Invalid { path: PathBuf, message: String },
+}
+
+/// A value that is not what its keyword takes.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ValueError {
+    /// The word, quoted.
+    #[error("{0} is not a finite number")]
+    NotFinite(String),
+    #[error("expected a number, found {0}")]
+    OneNumber(usize),
+    #[error("expected {expected} numbers, found {found}")]
+    Numbers { expected: usize, found: usize },
+    #[error("expected {start} to {end} numbers, found {found}")]
+    NumberRange {
+        start: usize,
+        end: usize,
+        found: usize,
+    },
+    #[error("expected r g b or one number")]
+    Filter,
+}
+
+/// A face index that names no element.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum IndexError {
+    /// The text, quoted.
+    #[error("{kind} index {text} is not an integer")]
+    NotInteger { kind: &'static str, text: String },
+    #[error("{kind} index 0 (OBJ indices start at 1)")]
+    Zero { kind: &'static str },
+    #[error("{kind} index {index} is out of range: {defined} defined so far")]
+    OutOfRange {
+        kind: &'static str,
+        index: isize,
+        defined: usize,
+    },
+}
+
+/// What is wrong with one line of an OBJ or MTL file (the message of an
+/// [`ObjError::Syntax`]). Quoted input is cut short.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LineError {
+    #[error("not valid UTF-8")]
+    NotUtf8,
+    /// A keyword's numbers (`v`, `vt`, `vn`, `Kd`, `Ns`, …).
+    #[error("{keyword}: {error}")]
+    Value { keyword: String, error: ValueError },
+    #[error("v: expected x y z, x y z w or x y z r g b")]
+    VertexForm,
+    #[error("v: cannot divide by w = {0}")]
+    ZeroW(f32),
+    #[error("v: coordinate {0} is beyond ±{MAX_COORDINATE:e}, the largest vtfarm traces precisely")]
+    Coordinate(f32),
+    #[error("v: vertex colours must be given for all vertices or none")]
+    MixedColours,
+    /// The face vertex, quoted.
+    #[error("f: {vertex}: {error}")]
+    FaceIndex { vertex: String, error: IndexError },
+    #[error("f: {0} has more than v/vt/vn")]
+    FaceVertexParts(String),
+    #[error(
+        "f: a face with more than {MAX_FACE_VERTICES} vertices; split it into smaller polygons"
+    )]
+    FaceTooLarge,
+    #[error("f: a face needs at least 3 vertices, found {0}")]
+    FaceTooSmall(usize),
+    #[error("usemtl without a material name")]
+    UsemtlWithoutName,
+    /// The name, quoted.
+    #[error("usemtl names material {0}, which no mtllib defines")]
+    UnknownMaterial(String),
+    #[error("mtllib without a file name")]
+    MtllibWithoutName,
+    #[error("newmtl: no material name")]
+    NoMaterialName,
+    /// The text, quoted.
+    #[error("illum: {0} is not a model number")]
+    Illum(String),
+    #[error("{0}: no texture file name")]
+    NoTextureName(String),
+}
+
+/// A material value tobj handed on that does not parse.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("material {material}: {key}: {error}")]
+pub struct MaterialError {
+    /// The name, quoted.
+    pub material: String,
+    pub key: &'static str,
+    pub error: ValueError,
+}
+
+/// Why a scene cannot be written as OBJ.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WriteError {
+    #[error(transparent)]
+    Invalid(#[from] SceneError),
+    #[error("vertex {0} is not finite")]
+    NotFinite(usize),
+    #[error("material {0:?} has a non-finite value")]
+    MaterialNotFinite(String),
+    #[error("{what} name {name:?} cannot be written to OBJ")]
+    Name { what: &'static str, name: String },
+    #[error("two {what}s are named {name:?}")]
+    Duplicate { what: &'static str, name: String },
 }
 
 /// Something in an OBJ or MTL file that vtfarm ignores but a user may want
@@ -241,7 +349,7 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
 pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> {
     let obj_path = dir.join(format!("{name}.obj"));
     let mtl_path = dir.join(format!("{name}.mtl"));
-    check_writable(scene).map_err(|message| invalid(&obj_path, message))?;
+    check_writable(scene).map_err(|e| invalid(&obj_path, e.to_string()))?;
     let mtl_name = mtl_path
         .file_name()
         .map(|n| n.to_string_lossy())
@@ -254,8 +362,15 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
     for n in &scene.normals {
         let _ = writeln!(obj, "vn {}", format_vec3(*n));
     }
+    // Texture coordinates per triangle corner: `vt` 3i + k + 1 is corner k
+    // of triangle i.
+    for corners in &scene.corner_uvs {
+        for uv in corners {
+            let _ = writeln!(obj, "vt {} {}", uv.x, uv.y);
+        }
+    }
     let mut current = None;
-    for t in &scene.triangles {
+    for (i, t) in scene.triangles.iter().enumerate() {
         let object = &scene.objects[t.object as usize].name;
         let material = &scene.materials[t.material as usize].name;
         match current {
@@ -269,7 +384,12 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
             current = Some((t.object, t.material));
         }
         let [a, b, c] = t.vertices.map(|v| v + 1);
-        let _ = writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}");
+        if scene.corner_uvs.is_empty() {
+            let _ = writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}");
+        } else {
+            let [ta, tb, tc] = [1, 2, 3].map(|k| 3 * i + k);
+            let _ = writeln!(obj, "f {a}/{ta}/{a} {b}/{tb}/{b} {c}/{tc}/{c}");
+        }
     }
 
     let mut mtl = String::from("# vtfarm materials\n");
@@ -291,6 +411,23 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
             2
         };
         let _ = writeln!(mtl, "illum {illum}\nKr {}", format_vec3(m.reflectance));
+        let maps = [("map_Kd", m.diffuse_texture), ("map_d", m.alpha_texture)];
+        for (keyword, texture) in maps {
+            if let Some(t) = texture {
+                let _ = writeln!(mtl, "{keyword} {name}_texture{t}.png");
+            }
+        }
+    }
+    for (i, texture) in scene.textures.iter().enumerate() {
+        let path = dir.join(format!("{name}_texture{i}.png"));
+        image::save_buffer(
+            &path,
+            texture.rgba8(),
+            texture.width(),
+            texture.height(),
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| invalid(&path, e.to_string()))?;
     }
 
     let write = |path: &Path, text: &str| {
@@ -319,18 +456,15 @@ fn format_vec3(v: Vec3) -> String {
 }
 
 /// Checks that `scene` can be written as OBJ and read back as the same scene.
-fn check_writable(scene: &Scene) -> Result<(), String> {
-    scene.validate().map_err(|e| e.to_string())?;
+fn check_writable(scene: &Scene) -> Result<(), WriteError> {
+    scene.validate()?;
     if let Some(i) = scene
         .positions
         .iter()
         .chain(&scene.normals)
         .position(|v| !v.is_finite())
     {
-        return Err(format!(
-            "vertex {} is not finite",
-            i % scene.positions.len().max(1)
-        ));
+        return Err(WriteError::NotFinite(i % scene.positions.len().max(1)));
     }
     for m in &scene.materials {
         let vectors = [
@@ -343,7 +477,7 @@ fn check_writable(scene: &Scene) -> Result<(), String> {
         ];
         if !(vectors.iter().all(|v| v.is_finite()) && m.shininess.is_finite() && m.ior.is_finite())
         {
-            return Err(format!("material {:?} has a non-finite value", m.name));
+            return Err(WriteError::MaterialNotFinite(m.name.clone()));
         }
     }
     check_names("material", scene.materials.iter().map(|m| m.name.as_str()))?;
@@ -352,14 +486,19 @@ fn check_writable(scene: &Scene) -> Result<(), String> {
 
 /// Names must survive an OBJ line: non-empty, no surrounding whitespace, no
 /// line breaks, and unique (the reader finds objects and materials by name).
-fn check_names<'a>(what: &str, names: impl Iterator<Item = &'a str>) -> Result<(), String> {
+fn check_names<'a>(
+    what: &'static str,
+    names: impl Iterator<Item = &'a str>,
+) -> Result<(), WriteError> {
     let mut seen = HashSet::new();
     for name in names {
         if name.is_empty() || name.trim() != name || name.contains(['\n', '\r']) {
-            return Err(format!("{what} name {name:?} cannot be written to OBJ"));
+            let name = name.to_owned();
+            return Err(WriteError::Name { what, name });
         }
         if !seen.insert(name) {
-            return Err(format!("two {what}s are named {name:?}"));
+            let name = name.to_owned();
+            return Err(WriteError::Duplicate { what, name });
         }
     }
     Ok(())
@@ -372,11 +511,11 @@ fn invalid(path: &Path, message: impl Into<String>) -> ObjError {
     }
 }
 
-fn syntax(path: &Path, line: usize, message: impl Into<String>) -> ObjError {
+fn syntax(path: &Path, line: usize, error: LineError) -> ObjError {
     ObjError::Syntax {
         path: path.to_owned(),
         line,
-        message: message.into(),
+        error,
     }
 }
 
@@ -387,7 +526,7 @@ fn decode_text(path: &Path, bytes: Vec<u8>) -> Result<String, ObjError> {
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = valid.iter().filter(|&&b| b == b'\n').count() + 1;
-        syntax(path, line, "not valid UTF-8")
+        syntax(path, line, LineError::NotUtf8)
     })?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_owned(),
@@ -459,42 +598,45 @@ fn quote(text: &str) -> String {
 }
 
 /// Parses whitespace-separated finite numbers, as many as `count` allows.
-fn parse_numbers(text: &str, count: RangeInclusive<usize>) -> Result<Vec<f32>, String> {
+fn parse_numbers(text: &str, count: RangeInclusive<usize>) -> Result<Vec<f32>, ValueError> {
     let values = text
         .split_whitespace()
         .map(|word| match word.parse::<f32>() {
             Ok(x) if x.is_finite() => Ok(x),
-            _ => Err(format!("{} is not a finite number", quote(word))),
+            _ => Err(ValueError::NotFinite(quote(word))),
         })
         .collect::<Result<Vec<_>, _>>()?;
     let (found, start, end) = (values.len(), *count.start(), *count.end());
     if count.contains(&found) {
         Ok(values)
     } else if end == 1 {
-        Err(format!("expected a number, found {found}"))
+        Err(ValueError::OneNumber(found))
     } else if start == end {
-        Err(format!("expected {start} numbers, found {found}"))
+        Err(ValueError::Numbers {
+            expected: start,
+            found,
+        })
     } else {
-        Err(format!("expected {start} to {end} numbers, found {found}"))
+        Err(ValueError::NumberRange { start, end, found })
     }
 }
 
 /// Parses one finite number.
-fn parse_number(text: &str) -> Result<f32, String> {
+fn parse_number(text: &str) -> Result<f32, ValueError> {
     parse_numbers(text, 1..=1).map(|v| v[0])
 }
 
 /// Parses exactly three finite numbers.
-fn parse_vec3(text: &str) -> Result<Vec3, String> {
+fn parse_vec3(text: &str) -> Result<Vec3, ValueError> {
     parse_numbers(text, 3..=3).map(|v| Vec3::from_slice(&v))
 }
 
 /// Parses a transmission filter: `r g b`, or one number for grey.
-fn parse_filter(text: &str) -> Result<Vec3, String> {
+fn parse_filter(text: &str) -> Result<Vec3, ValueError> {
     match parse_numbers(text, 1..=3)?[..] {
         [grey] => Ok(Vec3::splat(grey)),
         [r, g, b] => Ok(Vec3::new(r, g, b)),
-        _ => Err("expected r g b or one number".to_owned()),
+        _ => Err(ValueError::Filter),
     }
 }
 
@@ -571,15 +713,19 @@ impl ObjCheck {
         keyword: &str,
         rest: &str,
         line: Cow<'a, str>,
-    ) -> Result<Cow<'a, str>, String> {
+    ) -> Result<Cow<'a, str>, LineError> {
+        let value = |keyword: &str| {
+            let keyword = keyword.to_owned();
+            move |error| LineError::Value { keyword, error }
+        };
         match keyword {
             "v" => self.vertex(rest)?,
             "vt" => {
-                parse_numbers(rest, 2..=3).map_err(|e| format!("vt: {e}"))?;
+                parse_numbers(rest, 2..=3).map_err(value("vt"))?;
                 self.texcoords += 1;
             }
             "vn" => {
-                parse_numbers(rest, 3..=3).map_err(|e| format!("vn: {e}"))?;
+                parse_numbers(rest, 3..=3).map_err(value("vn"))?;
                 self.normals += 1;
             }
             "f" => {
@@ -596,12 +742,9 @@ impl ObjCheck {
             }
             // tobj would turn a 3-vertex polyline into a triangle.
             "l" => return Ok(Cow::Borrowed("")),
-            "usemtl" if rest.is_empty() => return Err("usemtl without a material name".into()),
+            "usemtl" if rest.is_empty() => return Err(LineError::UsemtlWithoutName),
             "usemtl" if !self.materials.contains(rest) => {
-                return Err(format!(
-                    "usemtl names material {}, which no mtllib defines",
-                    quote(rest)
-                ));
+                return Err(LineError::UnknownMaterial(quote(rest)));
             }
             "usemtl" if !self.grouped => {
                 // No `o`/`g` yet: the object takes the material's name.
@@ -621,31 +764,31 @@ impl ObjCheck {
         Ok(line)
     }
 
-    fn vertex(&mut self, rest: &str) -> Result<(), String> {
-        let values = parse_numbers(rest, 3..=6).map_err(|e| format!("v: {e}"))?;
+    fn vertex(&mut self, rest: &str) -> Result<(), LineError> {
+        let values = parse_numbers(rest, 3..=6).map_err(|error| LineError::Value {
+            keyword: "v".to_owned(),
+            error,
+        })?;
         let (position, coloured) = match values[..] {
             [x, y, z] => (Vec3::new(x, y, z), false),
             [x, y, z, w] => (Vec3::new(x, y, z) / w, false),
             [x, y, z, _, _, _] => (Vec3::new(x, y, z), true),
-            _ => return Err("v: expected x y z, x y z w or x y z r g b".into()),
+            _ => return Err(LineError::VertexForm),
         };
         if !position.is_finite() {
-            return Err(format!("v: cannot divide by w = {}", values[3]));
+            return Err(LineError::ZeroW(values[3]));
         }
         if position.abs().max_element() > MAX_COORDINATE {
-            return Err(format!(
-                "v: coordinate {} is beyond ±{MAX_COORDINATE:e}, the largest vtfarm traces precisely",
-                position.abs().max_element()
-            ));
+            return Err(LineError::Coordinate(position.abs().max_element()));
         }
         if *self.coloured.get_or_insert(coloured) != coloured {
-            return Err("v: vertex colours must be given for all vertices or none".into());
+            return Err(LineError::MixedColours);
         }
         self.positions += 1;
         Ok(())
     }
 
-    fn face(&self, rest: &str) -> Result<(), String> {
+    fn face(&self, rest: &str) -> Result<(), LineError> {
         let mut count = 0;
         for vertex in rest.split_whitespace() {
             let mut parts = vertex.split('/');
@@ -658,24 +801,26 @@ impl ObjCheck {
                 match parts.next() {
                     // Only the vertex index is required (`v//vn`, `v/vt`).
                     Some("") | None if k > 0 => {}
-                    part => face_index(part.unwrap_or_default(), kind, defined)
-                        .map_err(|e| format!("f: {}: {e}", quote(vertex)))?,
+                    part => {
+                        face_index(part.unwrap_or_default(), kind, defined).map_err(|error| {
+                            LineError::FaceIndex {
+                                vertex: quote(vertex),
+                                error,
+                            }
+                        })?
+                    }
                 }
             }
             if parts.next().is_some() {
-                return Err(format!("f: {} has more than v/vt/vn", quote(vertex)));
+                return Err(LineError::FaceVertexParts(quote(vertex)));
             }
             count += 1;
             if count > MAX_FACE_VERTICES {
-                return Err(format!(
-                    "f: a face with more than {MAX_FACE_VERTICES} vertices; split it into smaller polygons"
-                ));
+                return Err(LineError::FaceTooLarge);
             }
         }
         if count < 3 {
-            return Err(format!(
-                "f: a face needs at least 3 vertices, found {count}"
-            ));
+            return Err(LineError::FaceTooSmall(count));
         }
         Ok(())
     }
@@ -688,7 +833,7 @@ impl ObjCheck {
         name: &str,
     ) -> Result<Cow<'static, str>, ObjError> {
         if name.is_empty() {
-            return Err(syntax(obj, line, "mtllib without a file name"));
+            return Err(syntax(obj, line, LineError::MtllibWithoutName));
         }
         let name = file_name(name);
         if self.libraries.contains_key(name.as_ref()) {
@@ -717,17 +862,20 @@ impl ObjCheck {
 
 /// Checks one 1-based (or negative, relative) OBJ index against the number of
 /// elements defined so far.
-fn face_index(text: &str, kind: &str, defined: usize) -> Result<(), String> {
-    let index: isize = text
-        .parse()
-        .map_err(|_| format!("{kind} index {} is not an integer", quote(text)))?;
+fn face_index(text: &str, kind: &'static str, defined: usize) -> Result<(), IndexError> {
+    let index: isize = text.parse().map_err(|_| IndexError::NotInteger {
+        kind,
+        text: quote(text),
+    })?;
     if index == 0 {
-        return Err(format!("{kind} index 0 (OBJ indices start at 1)"));
+        return Err(IndexError::Zero { kind });
     }
     if index.unsigned_abs() > defined {
-        return Err(format!(
-            "{kind} index {index} is out of range: {defined} defined so far"
-        ));
+        return Err(IndexError::OutOfRange {
+            kind,
+            index,
+            defined,
+        });
     }
     Ok(())
 }
@@ -753,16 +901,22 @@ fn check_mtl(
         if keyword == "newmtl" {
             material = rest.to_owned();
         }
+        let value = |error| LineError::Value {
+            keyword: keyword.to_owned(),
+            error,
+        };
         let checked = match keyword {
-            "newmtl" if rest.is_empty() => Err("no material name".to_owned()),
-            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop),
-            "Tf" => parse_filter(rest).map(drop),
-            "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop),
+            "newmtl" if rest.is_empty() => Err(LineError::NoMaterialName),
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop).map_err(value),
+            "Tf" => parse_filter(rest).map(drop).map_err(value),
+            "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop).map_err(value),
             "illum" => rest
                 .parse::<u8>()
                 .map(drop)
-                .map_err(|_| format!("{} is not a model number", quote(rest))),
-            _ if is_texture(keyword) && rest.is_empty() => Err("no texture file name".to_owned()),
+                .map_err(|_| LineError::Illum(quote(rest))),
+            _ if is_texture(keyword) && rest.is_empty() => {
+                Err(LineError::NoTextureName(keyword.to_owned()))
+            }
             _ if is_texture(keyword) => {
                 let name = file_name(rest);
                 match keyword {
@@ -780,7 +934,7 @@ fn check_mtl(
             }
             _ => Ok(()),
         };
-        checked.map_err(|m| syntax(path, i + 1, format!("{keyword}: {m}")))?;
+        checked.map_err(|e| syntax(path, i + 1, e))?;
         // tobj takes everything after `newmtl` as the name, untrimmed.
         match keyword {
             "newmtl" => out.push_str(&format!("newmtl {rest}")),
@@ -870,7 +1024,7 @@ fn build_scene(
             .iter()
             .map(convert_material)
             .collect::<Result<_, _>>()
-            .map_err(|m| invalid(path, m))?,
+            .map_err(|e| invalid(path, e.to_string()))?,
         ..Scene::default()
     };
     textures(&mut scene);
@@ -976,16 +1130,20 @@ fn default_material(scene: &mut Scene) -> MaterialId {
 }
 
 /// Maps one tobj material; see the module documentation for the table.
-fn convert_material(m: &tobj::Material) -> Result<Material, String> {
+fn convert_material(m: &tobj::Material) -> Result<Material, MaterialError> {
     // Keys tobj does not know end up as text in `unknown_param`; the MTL check
     // has already parsed them once, so errors here are not expected.
     fn extension<T>(
         m: &tobj::Material,
-        key: &str,
-        parse: fn(&str) -> Result<T, String>,
-    ) -> Result<Option<T>, String> {
+        key: &'static str,
+        parse: fn(&str) -> Result<T, ValueError>,
+    ) -> Result<Option<T>, MaterialError> {
         let parsed = m.unknown_param.get(key).map(|text| parse(text)).transpose();
-        parsed.map_err(|e| format!("material {}: {key}: {e}", quote(&m.name)))
+        parsed.map_err(|error| MaterialError {
+            material: quote(&m.name),
+            key,
+            error,
+        })
     }
     let base = Material::default();
     let diffuse = m.diffuse.map_or(base.diffuse, Vec3::from);

@@ -50,8 +50,8 @@ pub enum TextureError {
 }
 
 /// A texture: 8-bit RGBA (colour in sRGB, alpha linear), row 0 at the top.
-/// Two textures are equal when their name and pixels are; the mip levels
-/// follow from them.
+/// Two textures are equal when their pixels are (the name is for messages;
+/// the mip levels follow from the pixels).
 #[derive(Clone, Debug)]
 pub struct Texture {
     name: String,
@@ -72,7 +72,7 @@ struct Level {
 
 impl PartialEq for Texture {
     fn eq(&self, other: &Self) -> bool {
-        self.name == other.name && self.levels[0].rgba8 == other.levels[0].rgba8 && {
+        self.levels[0].rgba8 == other.levels[0].rgba8 && {
             let (a, b) = (&self.levels[0], &other.levels[0]);
             (a.width, a.height) == (b.width, b.height)
         }
@@ -127,7 +127,7 @@ impl Texture {
         })
     }
 
-    /// Reads and decodes an image file (PNG or JPEG), named by its file name.
+    /// Reads and decodes an image file (PNG, JPEG or PNM), named by its file name.
     pub fn load(path: &Path) -> Result<Texture, TextureError> {
         let decode = |error| TextureError::Decode {
             path: path.to_owned(),
@@ -154,7 +154,7 @@ impl Texture {
         Texture::from_rgba8(&name, width, height, rgba.into_raw())
     }
 
-    /// Decodes an image file's bytes (PNG or JPEG).
+    /// Decodes an image file's bytes (PNG, JPEG or PNM).
     pub fn decode(name: &str, bytes: &[u8]) -> Result<Texture, TextureError> {
         let decode = |error| TextureError::Decode {
             path: name.into(),
@@ -332,7 +332,8 @@ mod tests {
         // Halfway between two centres: the mean, in linear light.
         assert_eq!(at(0.5, 0.75), Vec3::new(0.5, 0.5, 0.0));
         // Repeating edges.
-        assert_eq!(at(1.25, -0.25), Vec3::Z);
+        assert_eq!(at(1.25, -0.25), Vec3::X);
+        assert_eq!(at(-0.25, 1.25), Vec3::ONE);
     }
 
     #[test]

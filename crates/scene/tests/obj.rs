@@ -562,7 +562,7 @@ fn what_exporters_write_loads() {
             line: 7,
             message: format!(
                 "texture {} ignored (No such file or directory (os error 2)); \
-                 vtfarm does not use textures",
+                 vtfarm uses map_Kd and map_d only",
                 dir.path().join("textures/glass_baseColor.png").display()
             ),
         }]
