@@ -186,7 +186,7 @@ impl Scene {
         let [a, b, c] = self.triangle_positions(id);
         let normal = (b - a).cross(c - a);
         let area2 = normal.length_squared();
-        if !(area2 > 0.0) {
+        if area2.is_nan() || area2 <= 0.0 {
             return Vec3::splat(1.0 / 3.0);
         }
         let wb = (point - a).cross(c - a).dot(normal) / area2;
