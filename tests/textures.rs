@@ -1,6 +1,7 @@
 //! Textures from OBJ/MTL end to end: a textured wall seen directly (the
-//! rasterized base frame) and in a floor mirror (traced shading) shows the
-//! texture's colours where ray geometry says it must, the scene travels to
+//! rasterized base frame), in a floor mirror (traced shading) and through a
+//! pane of thin glass (the rasterized transmission) shows the texture's
+//! colours where ray geometry says it must, the scene travels to
 //! the farm's workers textures included, and `vtfarm render` (the farm)
 //! writes exactly the single-process image's bytes.
 
@@ -50,6 +51,14 @@ v 4 0 -4
 v -4 0 -4
 f 5 6 7
 f 5 7 8
+o pane
+usemtl glass
+v -1.5 1.1 -2
+v -0.2 1.1 -2
+v -0.2 2 -2
+v -1.5 2 -2
+f 9 10 11
+f 9 11 12
 ";
 
 const MTL: &str = "newmtl wall
@@ -60,6 +69,11 @@ newmtl mirror
 Ka 0 0 0
 Kd 0 0 0
 Kr 1 1 1
+newmtl glass
+Ka 0 0 0
+Kd 0 0 0
+Kr 0 0 0
+d 0.5
 ";
 
 const JOB: &str = r#"
@@ -76,7 +90,7 @@ lights = []
 ambient = [1, 1, 1]
 background = [0, 0, 0]
 [reflectors]
-objects = ["mirror"]
+objects = ["mirror", "pane"]
 [quality]
 level = "full"
 "#;
@@ -102,18 +116,42 @@ fn wall_uv(origin: Vec3, d: Vec3) -> Option<(f32, f32)> {
     (p.x.abs() < 4.0 && (0.0..4.0).contains(&p.y)).then_some(((p.x + 4.0) / 8.0, p.y / 4.0))
 }
 
-/// The colour pixel (x, y) must have, seen directly or in the floor mirror
-/// (an ideal mirror: the ambient-lit texel itself), where the texture is
-/// flat around the point: `None` near a quadrant's edge or off the wall.
-fn expected(x: u32, y: u32) -> Option<(Vec3, bool)> {
+/// How a pixel sees the wall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Seen {
+    Directly,
+    InTheMirror,
+    ThroughGlass,
+}
+
+/// The colour pixel (x, y) must have, seen directly, in the floor mirror
+/// (an ideal mirror: the ambient-lit texel itself) or through the pane
+/// (transmittance 0.5, no refraction: it has no `Ni`), where the texture is
+/// flat around the point: `None` near a quadrant's or the pane's edge, or
+/// off the wall.
+fn expected(x: u32, y: u32) -> Option<(Vec3, Seen)> {
     let camera = camera();
     let d = Projector::new(&camera).pixel_ray(x, y);
     let floor = (d.y < 0.0).then(|| camera.eye + d * (-camera.eye.y / d.y));
-    let (uv, mirrored) = match floor {
+    let pane = camera.eye + d * ((-2.0 - camera.eye.z) / d.z);
+    let inside = |v: f32, lo: f32, hi: f32| v > lo + 0.05 && v < hi - 0.05;
+    let near = |v: f32, lo: f32, hi: f32| v > lo - 0.05 && v < hi + 0.05;
+    let on_pane = inside(pane.x, -1.5, -0.2) && inside(pane.y, 1.1, 2.0);
+    if near(pane.x, -1.5, -0.2) && near(pane.y, 1.1, 2.0) && !on_pane {
+        return None;
+    }
+    let (uv, seen) = match floor {
         Some(p) if p.x.abs() < 4.0 && (-4.0..0.5).contains(&p.z) => {
-            (wall_uv(p, Vec3::new(d.x, -d.y, d.z))?, true)
+            let up = Vec3::new(d.x, -d.y, d.z);
+            // The reflected ray must not pass the pane.
+            let q = p + up * ((-2.0 - p.z) / up.z);
+            if p.z > -2.0 && near(q.x, -1.5, -0.2) && near(q.y, 1.1, 2.0) {
+                return None;
+            }
+            (wall_uv(p, up)?, Seen::InTheMirror)
         }
-        _ => (wall_uv(camera.eye, d)?, false),
+        _ if on_pane => (wall_uv(camera.eye, d)?, Seen::ThroughGlass),
+        _ => (wall_uv(camera.eye, d)?, Seen::Directly),
     };
     let (u, v) = uv;
     let margin = |t: f32| [0.0, 0.5, 1.0].iter().all(|edge| (t - edge).abs() > 0.1);
@@ -122,7 +160,8 @@ fn expected(x: u32, y: u32) -> Option<(Vec3, bool)> {
     }
     let quadrant = QUADRANTS[usize::from(v < 0.5) * 2 + usize::from(u >= 0.5)];
     let linear = quadrant.map(|c| vtfarm_imaging::srgb_to_linear(f32::from(c) / 255.0));
-    Some((Vec3::from_array(linear), mirrored))
+    let weight = if seen == Seen::ThroughGlass { 0.5 } else { 1.0 };
+    Some((Vec3::from_array(linear) * weight, seen))
 }
 
 fn setup() -> FrameSetup {
@@ -141,10 +180,10 @@ fn setup() -> FrameSetup {
     }
 }
 
-fn mirror_triangles(scene: &Scene) -> Vec<TriangleId> {
-    let mirror = scene.object_id("mirror").unwrap();
+fn reflector_triangles(scene: &Scene) -> Vec<TriangleId> {
+    let chosen = [scene.object_id("mirror"), scene.object_id("pane")].map(Option::unwrap);
     (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| scene.triangles[t as usize].object == mirror)
+        .filter(|&t| chosen.contains(&scene.triangles[t as usize].object))
         .collect()
 }
 
@@ -161,33 +200,31 @@ fn a_textured_wall_shows_its_texels_directly_in_a_mirror_and_through_the_farm() 
     assert_eq!(scene.textures.len(), 1);
     assert_eq!(scene.corner_uvs.len(), scene.triangles.len());
 
-    let renderer = Renderer::new(Arc::new(scene.clone()), mirror_triangles(&scene));
+    let renderer = Renderer::new(Arc::new(scene.clone()), reflector_triangles(&scene));
     let image = renderer
         .render(&setup(), &Default::default(), &mut |_, _| {})
         .image
         .color;
-    let (mut direct, mut mirrored) = (0, 0);
+    let mut checked = std::collections::BTreeMap::new();
     for y in 0..48 {
         for x in 0..64 {
-            let Some((colour, in_mirror)) = expected(x, y) else {
+            let Some((colour, seen)) = expected(x, y) else {
                 continue;
             };
             let got = image.get(x, y);
             assert!(
                 (got - colour).abs().max_element() < 1e-4,
-                "pixel ({x}, {y}) {}: {got}, expected {colour}",
-                if in_mirror { "in the mirror" } else { "direct" }
+                "pixel ({x}, {y}) {seen:?}: {got}, expected {colour}"
             );
-            if in_mirror {
-                mirrored += 1;
-            } else {
-                direct += 1;
-            }
+            *checked.entry(format!("{seen:?}")).or_insert(0) += 1;
         }
     }
+    let count = |seen: Seen| checked.get(&format!("{seen:?}")).copied().unwrap_or(0);
     assert!(
-        direct > 200 && mirrored > 100,
-        "{direct} direct, {mirrored} mirrored pixels checked"
+        count(Seen::Directly) > 200
+            && count(Seen::InTheMirror) > 100
+            && count(Seen::ThroughGlass) > 20,
+        "pixels checked: {checked:?}"
     );
 
     // The workers get the scene textures included, as the submitter has it.
