@@ -96,7 +96,7 @@ struct RenderArgs {
 
 #[derive(Subcommand)]
 enum SceneCommand {
-    /// Writes a built-in scene as OBJ + MTL.
+    /// Writes a built-in scene as OBJ + MTL, or as binary glTF.
     Export {
         /// The built-in scene's name (`cockpit`).
         name: String,
@@ -106,6 +106,9 @@ enum SceneCommand {
         /// Detail factor (1.0 ≈ 100k triangles, 2.1 ≈ 210k).
         #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
         detail: f32,
+        /// `obj` (OBJ + MTL) or `glb` (binary glTF 2.0).
+        #[arg(long, default_value = "obj", value_parser = ["obj", "glb"])]
+        format: String,
     },
 }
 
@@ -132,7 +135,8 @@ fn run(cli: Cli) -> Result<()> {
             name,
             output,
             detail,
-        }) => export_scene(&name, &output, detail),
+            format,
+        }) => export_scene(&name, &output, detail, &format),
         Command::Bench(b) => vtfarm_bench::run(b),
         Command::Master(args) => vtfarm_master::cli::run(args),
         Command::Worker(args) => vtfarm_worker::cli::run(args),
@@ -282,7 +286,7 @@ fn print_summary(
     }
 }
 
-fn export_scene(name: &str, dir: &Path, detail: f32) -> Result<()> {
+fn export_scene(name: &str, dir: &Path, detail: f32, format: &str) -> Result<()> {
     if name != "cockpit" {
         bail!("unknown built-in scene '{name}' (available: cockpit)");
     }
@@ -291,11 +295,15 @@ fn export_scene(name: &str, dir: &Path, detail: f32) -> Result<()> {
         ..CockpitConfig::default()
     });
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    vtfarm_scene::obj::write_obj(&c.scene, dir, name)?;
+    let file = dir.join(format!("{name}.{format}"));
+    match format {
+        "glb" => vtfarm_scene::gltf::write_glb(&c.scene, &file)?,
+        _ => vtfarm_scene::obj::write_obj(&c.scene, dir, name)?,
+    }
     println!(
         "wrote {} triangles to {}",
         c.scene.triangles.len(),
-        dir.join(format!("{name}.obj")).display()
+        file.display()
     );
     Ok(())
 }

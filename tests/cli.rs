@@ -168,6 +168,140 @@ level = "preview"
     assert_eq!(image::open(&png).unwrap().to_rgb8().dimensions(), (96, 54));
 }
 
+#[test]
+fn the_cockpit_exported_to_glb_renders_byte_identical_to_its_obj_export() {
+    let dir = tempfile::tempdir().unwrap();
+    for format in ["obj", "glb"] {
+        let out = vtfarm(&[
+            "scene",
+            "export",
+            "cockpit",
+            "-o",
+            dir.path().to_str().unwrap(),
+            "--detail",
+            "0.2",
+            "--format",
+            format,
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+    // The same job on either file, with the cockpit's own kind of light.
+    let job = |scene: &str| {
+        format!(
+            r#"
+[scene]
+{scene}
+[camera]
+eye = [-0.55, 1.4, 0.1]
+target = [-0.55, 1.05, -0.6]
+fov_y = 50.0
+width = 96
+height = 54
+[[lighting.lights]]
+kind = "directional"
+direction = [0.45, -0.85, -0.15]
+illuminance_lux = 100000
+[reflectors]
+materials = ["glass"]
+[quality]
+level = "full"
+"#
+        )
+    };
+    let mut images = Vec::new();
+    for (name, scene) in [
+        ("obj", "obj = \"cockpit.obj\""),
+        ("glb", "gltf = \"cockpit.glb\""),
+    ] {
+        let file = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&file, job(scene)).unwrap();
+        let png = dir.path().join(format!("{name}.png"));
+        let out = vtfarm(&[
+            "render",
+            file.to_str().unwrap(),
+            "-o",
+            png.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert!(!text(&out.stderr).contains("warn"), "{}", text(&out.stderr));
+        images.push(image::open(&png).unwrap().to_rgb8());
+    }
+    assert_eq!(images[0].dimensions(), (96, 54));
+    assert!(images[0] == images[1], "the GLB export renders differently");
+}
+
+/// A lit quad `[materials."paint"]` can recolour, in front of the camera.
+const PAINTED_OBJ: &str = "mtllib p.mtl\no quad\nusemtl paint\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1//1 3//1 4//1\n";
+
+fn painted_job(extra: &str) -> String {
+    format!(
+        "[scene]\nobj = \"p.obj\"\n[camera]\neye = [0, 0, 2]\ntarget = [0, 0, 0]\nfov_y = 40\n\
+         width = 32\nheight = 24\n[reflectors]\nobjects = [\"quad\"]\n{extra}"
+    )
+}
+
+/// Renders the painted quad with `job` and returns the centre pixel and stderr.
+fn render_painted(dir: &Path, job: &str) -> ([u8; 3], String) {
+    std::fs::write(dir.join("p.obj"), PAINTED_OBJ).unwrap();
+    std::fs::write(dir.join("p.mtl"), "newmtl paint\nKd 0.5 0.5 0.5\n").unwrap();
+    std::fs::write(dir.join("p.toml"), job).unwrap();
+    let png = dir.join("p.png");
+    let out = vtfarm(&[
+        "render",
+        dir.join("p.toml").to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let image = image::open(&png).unwrap().to_rgb8();
+    (image.get_pixel(16, 12).0, text(&out.stderr))
+}
+
+#[test]
+fn a_scene_without_light_gets_the_default_daylight_and_one_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pixel, stderr) = render_painted(dir.path(), &painted_job(""));
+    let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("WARN")).collect();
+    assert_eq!(warnings.len(), 2, "{stderr}");
+    let light: Vec<&&str> = warnings
+        .iter()
+        .filter(|l| l.contains("default daylight"))
+        .collect();
+    assert_eq!(light.len(), 1, "{stderr}");
+    assert!(light[0].contains("[[lighting.lights]]"), "{}", light[0]);
+    // The other is the quad's reflectance, which the job did not give.
+    assert!(stderr.contains("reflects nothing"), "{stderr}");
+    // Lit as stated: Kd 0.5 under the sun (at its angle to the quad's
+    // normal, +Z) plus the sky's ambient term.
+    let sun = vtfarm_scene::DAYLIGHT_SUN_DIRECTION.normalize();
+    let lux = vtfarm_scene::DAYLIGHT_SUN_LUX * (-sun.z);
+    let cd_m2 = 0.5 * lux / std::f32::consts::PI + 0.5 * vtfarm_scene::DAYLIGHT_SKY_CD_M2;
+    let expected = vtfarm_imaging::encode_srgb8(glam::Vec3::splat(cd_m2 / 10_000.0));
+    assert!(
+        pixel.iter().zip(expected).all(|(&a, b)| a.abs_diff(b) <= 1),
+        "{pixel:?} vs {expected:?}"
+    );
+}
+
+#[test]
+fn a_material_override_changes_the_image_as_stated() {
+    let dir = tempfile::tempdir().unwrap();
+    let lit = "[lighting]\nlights = []\nambient = [1, 1, 1]\n";
+    let (before, _) = render_painted(dir.path(), &painted_job(lit));
+    let (after, _) = render_painted(
+        dir.path(),
+        &painted_job(&format!(
+            "{lit}[materials.\"paint\"]\nkd = [0.2, 0.4, 0.8]\n"
+        )),
+    );
+    // Ambient light 1 shows the ambient reflectance, which kd also sets.
+    assert_eq!(before, vtfarm_imaging::encode_srgb8(glam::Vec3::splat(0.5)));
+    assert_eq!(
+        after,
+        vtfarm_imaging::encode_srgb8(glam::Vec3::new(0.2, 0.4, 0.8))
+    );
+}
+
 /// Renders `job` (written into `dir` as bad.toml) and returns stderr,
 /// asserting that the render failed cleanly and wrote no image.
 fn refused_render(dir: &Path, job: &str) -> String {

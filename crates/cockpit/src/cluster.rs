@@ -488,6 +488,7 @@ fn glass_material() -> Material {
         reflectance: Vec3::splat(0.12),
         transmittance: Vec3::splat(0.85),
         ior: 1.5,
+        ..Default::default()
     }
 }
 

@@ -109,6 +109,12 @@ pub enum JobError {
         // Boxed: the importer's error is large and this path is cold.
         error: Box<ObjError>,
     },
+    /// The glTF scene named by the job failed to load.
+    #[error("{file}: cannot load the glTF scene: {error}")]
+    Gltf {
+        file: PathBuf,
+        error: Box<vtfarm_scene::gltf::GltfError>,
+    },
     /// A `[reflectors]` name matches no triangle of the scene.
     #[error(
         "{}: reflector {selector} matches no triangle (objects: {}; materials: {})",

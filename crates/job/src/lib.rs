@@ -22,7 +22,10 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use vtfarm_method::MethodKind;
 use vtfarm_scene::obj::{ObjOptions, load_obj};
-use vtfarm_scene::{Camera, Light, Lighting, Scene, Triangle, TriangleId};
+use vtfarm_scene::{
+    Camera, DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, Lighting,
+    Material, Scene, Texture, TextureId, Triangle, TriangleId, fresnel_reflectance,
+};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
 
@@ -38,6 +41,9 @@ pub struct Job {
     pub scene: SceneSource,
     /// The `[camera]` keys; see [`CameraSpec`].
     pub camera: CameraSpec,
+    /// `camera.camera`: a camera of the glTF scene, the base of the other
+    /// `[camera]` keys (width and height are the job's).
+    pub camera_name: Option<String>,
     /// The `[lighting]` keys; see [`LightingSpec`].
     pub lighting: LightingSpec,
     /// What reflects (never empty).
@@ -49,10 +55,71 @@ pub struct Job {
     /// Extra eye points from `[frames]`, each one more frame looking at the
     /// camera's target.
     pub eyes: Vec<Vec3>,
+    /// `[materials."NAME"]`: changes to the scene's materials, in name order.
+    pub materials: Vec<MaterialOverride>,
     /// Where the keys checked against the scene stand in the file
-    /// (`camera.eye`, `frames.eyes[1]`, `reflectors object "glass"`), so
-    /// those errors name the line too.
+    /// (`camera.eye`, `frames.eyes[1]`, `reflectors object "glass"`,
+    /// `materials."glass"`), so those errors name the line too.
     pub locations: BTreeMap<String, Location>,
+}
+
+/// A job's `[materials."NAME"]` table: the given keys replace the scene
+/// material's values, in render units (colours linear RGB, 0 to 1).
+///
+/// `kd` also sets the ambient reflectance unless `ka` is given (as MTL does
+/// without `Ka`). `thin = true` makes the material a thin sheet of glass:
+/// it transmits `1 - kr` (unless `kt` is given) and rays pass it straight
+/// (its index of refraction serves the Fresnel reflectance only).
+/// `emission_cd_m2` (with `emission_color`, white by default) makes it
+/// glow; `texture` is a base-colour texture (MTL's `map_Kd`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MaterialOverride {
+    pub name: String,
+    pub ambient: Option<Vec3>,
+    pub diffuse: Option<Vec3>,
+    pub specular: Option<Vec3>,
+    pub shininess: Option<f32>,
+    pub reflectance: Option<Vec3>,
+    pub transmittance: Option<Vec3>,
+    pub ior: Option<f32>,
+    pub thin: bool,
+    pub emission: Option<Vec3>,
+    /// Already resolved against the job file's directory.
+    pub texture: Option<PathBuf>,
+}
+
+impl MaterialOverride {
+    /// The key in [`Job::locations`] (and messages) of the table for `name`.
+    pub fn key_of(name: &str) -> String {
+        format!("materials.{name:?}")
+    }
+
+    /// `material` with the given keys replaced; the texture is the caller's
+    /// (it needs the scene's texture list).
+    fn apply(&self, material: &mut Material) {
+        if let Some(kd) = self.diffuse {
+            material.diffuse = kd;
+            material.ambient = kd;
+        }
+        let fields = [
+            (&mut material.ambient, self.ambient),
+            (&mut material.specular, self.specular),
+            (&mut material.reflectance, self.reflectance),
+            (&mut material.transmittance, self.transmittance),
+            (&mut material.emission, self.emission),
+        ];
+        for (field, value) in fields {
+            if let Some(value) = value {
+                *field = value;
+            }
+        }
+        if let Some(shininess) = self.shininess {
+            material.shininess = shininess;
+        }
+        if let Some(ior) = self.ior {
+            material.ior = ior;
+        }
+    }
 }
 
 /// Where the scene comes from.
@@ -62,6 +129,8 @@ pub enum SceneSource {
     Cockpit(CockpitConfig),
     /// An OBJ file; the path is already resolved against the job file's directory.
     Obj(PathBuf),
+    /// A glTF 2.0 file (`.gltf` or `.glb`), resolved likewise.
+    Gltf(PathBuf),
 }
 
 /// The `[camera]` keys that were given. A given key overrides the scene's own
@@ -194,6 +263,9 @@ pub struct LoadedScene {
     /// (same target, up, field of view and size).
     pub frames: Vec<Camera>,
     pub lighting: Lighting,
+    /// What the job filled in for the scene (the default light, Fresnel
+    /// reflectance for a reflector): each is also logged as a warning.
+    pub notes: Vec<String>,
 }
 
 /// Reads and validates a job file.
@@ -230,10 +302,43 @@ impl Job {
                     .camera
                     .complete()
                     .map_err(|missing| self.invalid(None, obj_camera_missing(&missing)))?;
-                let scene = self.scene_only()?;
+                let scene = self.loaded_scene()?;
                 (scene, camera, self.lighting.over(Lighting::default()))
             }
+            SceneSource::Gltf(path) => {
+                let imported = self.gltf(path)?;
+                let camera = match &self.camera_name {
+                    None => self
+                        .camera
+                        .complete()
+                        .map_err(|missing| self.invalid(None, obj_camera_missing(&missing)))?,
+                    Some(name) => self.gltf_camera(name, &imported.cameras)?,
+                };
+                (
+                    imported.scene,
+                    camera,
+                    self.lighting.over(Lighting::default()),
+                )
+            }
         };
+        let (scene, mut notes) = self.prepare(scene)?;
+        let lighting = match (&self.scene, &self.lighting.lights) {
+            // A file with no light of its own, and the job sets none.
+            (SceneSource::Obj(_) | SceneSource::Gltf(_), None) => {
+                notes.push(default_light_note());
+                let daylight = Lighting::daylight();
+                LightingSpec {
+                    lights: Some(daylight.lights.clone()),
+                    ambient: self.lighting.ambient.or(Some(daylight.ambient)),
+                    background: self.lighting.background.or(Some(daylight.background)),
+                }
+                .over(lighting)
+            }
+            _ => lighting,
+        };
+        for note in &notes {
+            tracing::warn!("{}: {note}", self.file.display());
+        }
         // Scenes made in code or read from files meet the same bounds as on the wire.
         scene
             .validate()
@@ -244,16 +349,151 @@ impl Job {
             camera,
             frames,
             lighting,
+            notes,
         })
     }
 
-    /// The scene alone, without resolving camera or lighting (a glare study
-    /// takes those from its base job for every design variant).
+    /// The scene alone, with the job's material changes but without
+    /// resolving camera or lighting (a glare study takes those from its base
+    /// job for every design variant).
     pub fn scene_only(&self) -> Result<Scene, JobError> {
+        let (scene, notes) = self.prepare(self.loaded_scene()?)?;
+        for note in &notes {
+            tracing::warn!("{}: {note}", self.file.display());
+        }
+        Ok(scene)
+    }
+
+    /// `scene` with the job's `[materials]` applied, then Fresnel
+    /// reflectance for the reflectors' materials that have `Ni` > 1 and no
+    /// other reflectance (the usual export of glass), then `thin`; returns
+    /// notes for the user about what the job filled in.
+    fn prepare(&self, mut scene: Scene) -> Result<(Scene, Vec<String>), JobError> {
+        let mut notes = Vec::new();
+        let mut overridden = vec![None; scene.materials.len()];
+        for change in &self.materials {
+            let Some(id) = scene.material_id(&change.name) else {
+                let key = MaterialOverride::key_of(&change.name);
+                return Err(self.invalid(
+                    Some(&key),
+                    format!(
+                        "[{key}]: the scene has no material {:?} (materials: {})",
+                        change.name,
+                        sorted_names(scene.materials.iter().map(|m| &m.name)).join(", ")
+                    ),
+                ));
+            };
+            change.apply(&mut scene.materials[id as usize]);
+            if let Some(path) = &change.texture {
+                let key = format!("{}.texture", MaterialOverride::key_of(&change.name));
+                let texture =
+                    Texture::load(path).map_err(|e| self.invalid(Some(&key), e.to_string()))?;
+                if scene.corner_uvs.is_empty() {
+                    return Err(self.invalid(
+                        Some(&key),
+                        format!("{key}: the scene has no texture coordinates (vt) to map it with"),
+                    ));
+                }
+                scene.textures.push(texture);
+                scene.materials[id as usize].diffuse_texture =
+                    Some(scene.textures.len() as TextureId - 1);
+            }
+            overridden[id as usize] = Some(change);
+        }
+        let mut is_reflector_material = vec![false; scene.materials.len()];
+        for triangle in &scene.triangles {
+            if self.reflectors.iter().any(|r| r.matches(&scene, triangle)) {
+                is_reflector_material[triangle.material as usize] = true;
+            }
+        }
+        for (id, material) in scene.materials.iter_mut().enumerate() {
+            let given_kr = overridden[id].is_some_and(|o| o.reflectance.is_some());
+            if is_reflector_material[id]
+                && !given_kr
+                && material.reflectance == Vec3::ZERO
+                && material.ior > 1.0
+            {
+                let kr = fresnel_reflectance(material.ior);
+                material.reflectance = Vec3::splat(kr);
+                notes.push(format!(
+                    "reflector material {:?} has no Kr and no illum 3 to 7, but Ni {}: it \
+                     reflects by Fresnel at normal incidence, kr = {kr:.4} (set \
+                     [{}] kr = [r, g, b] to choose)",
+                    material.name,
+                    material.ior,
+                    MaterialOverride::key_of(&material.name)
+                ));
+            }
+            if let Some(change) = overridden[id].filter(|o| o.thin) {
+                if change.transmittance.is_none() {
+                    material.transmittance = Vec3::ONE - material.reflectance;
+                }
+                material.ior = 1.0;
+            }
+        }
+        Ok((scene, notes))
+    }
+
+    /// The glTF file of the job, its warnings logged.
+    fn gltf(&self, path: &Path) -> Result<vtfarm_scene::gltf::ImportedGltf, JobError> {
+        let options = ObjOptions {
+            keep_uvs: self.materials.iter().any(|m| m.texture.is_some()),
+            ..ObjOptions::default()
+        };
+        vtfarm_scene::gltf::load_gltf(path, &options).map_err(|error| JobError::Gltf {
+            file: self.file.clone(),
+            error: Box::new(error),
+        })
+    }
+
+    /// The glTF camera `name` with the job's `[camera]` keys over it.
+    fn gltf_camera(
+        &self,
+        name: &str,
+        cameras: &[vtfarm_scene::gltf::GltfCamera],
+    ) -> Result<Camera, JobError> {
+        let Some(c) = cameras.iter().find(|c| c.name == name) else {
+            let names: Vec<&str> = cameras.iter().map(|c| c.name.as_str()).collect();
+            return Err(self.invalid(
+                Some("camera.camera"),
+                format!(
+                    "camera.camera = {name:?}: the glTF file has no such camera (cameras: {})",
+                    if names.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        names.join(", ")
+                    }
+                ),
+            ));
+        };
+        let (Some(width), Some(height)) = (self.camera.width, self.camera.height) else {
+            return Err(self.invalid(
+                Some("camera.camera"),
+                "[camera] needs width and height with a glTF camera".to_owned(),
+            ));
+        };
+        let base = Camera {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+            width,
+            height,
+        };
+        Ok(self.camera.over(&base))
+    }
+
+    /// The scene as its source gives it.
+    fn loaded_scene(&self) -> Result<Scene, JobError> {
         match &self.scene {
+            SceneSource::Gltf(path) => Ok(self.gltf(path)?.scene),
             SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
             SceneSource::Obj(path) => {
-                load_obj(path, &ObjOptions::default()).map_err(|error| JobError::Obj {
+                let options = ObjOptions {
+                    keep_uvs: self.materials.iter().any(|m| m.texture.is_some()),
+                    ..ObjOptions::default()
+                };
+                load_obj(path, &options).map_err(|error| JobError::Obj {
                     file: self.file.clone(),
                     obj: path.clone(),
                     error: Box::new(error),
@@ -345,20 +585,33 @@ impl Job {
 
 /// A reflector whose material reflects nothing: its reflection is black
 /// and its reflected-object map empty. The message names the fix.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct DullReflector {
     pub object: String,
     pub material: String,
+    /// The largest channel of the material's Phong highlight (`Ks`).
+    pub specular: f32,
+    /// Its index of refraction (`Ni`).
+    pub ior: f32,
 }
 
 impl fmt::Display for DullReflector {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "reflector object {:?} has material {:?}, which has no reflectance: its reflection \
-             is black; give the material `Kr r g b` in the MTL (or `illum 3` with `Ks`, or `Ni` \
-             for glass)",
+            "reflector object {:?} has material {:?}, which reflects nothing, so its reflection \
+             is black: it has no Kr, no illum 3, 4 or 6 with Ks",
             self.object, self.material
+        )?;
+        if self.specular > 0.0 {
+            write!(f, " (its Ks {} is only a highlight)", self.specular)?;
+        }
+        write!(
+            f,
+            ", no illum 5 or 7, and its Ni {} is not above 1 (no Fresnel); set [{}] kr = \
+             [r, g, b] or ior = 1.5 in the job (or Kr in the MTL)",
+            self.ior,
+            MaterialOverride::key_of(&self.material)
         )
     }
 }
@@ -377,10 +630,27 @@ pub fn dull_reflectors(scene: &Scene, triangles: &[TriangleId]) -> Vec<DullRefle
             dull.push(DullReflector {
                 object: scene.objects[triangle.object as usize].name.clone(),
                 material: material.name.clone(),
+                specular: material.specular.max_element(),
+                ior: material.ior,
             });
         }
     }
     dull
+}
+
+/// The warning for a scene given no light: what it gets instead, and how to
+/// set lights.
+fn default_light_note() -> String {
+    let d = DAYLIGHT_SUN_DIRECTION;
+    format!(
+        "the scene has no light and the job sets none: it is lit by the default daylight, a \
+         sun of {DAYLIGHT_SUN_LUX} lx travelling along [{}, {}, {}] and a sky of \
+         {DAYLIGHT_SKY_CD_M2} cd/m² (background and ambient light); set your own with \
+         [[lighting.lights]] kind = \"directional\", direction = [x, y, z], illuminance_lux = \
+         ... (or lights = [] for none) and lighting.ambient_illuminance_lux, \
+         lighting.background_luminance_cd_m2",
+        d.x, d.y, d.z
+    )
 }
 
 /// The message for an OBJ scene's camera lacking `missing` keys.

@@ -18,8 +18,8 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
-    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, ReflectorSelector,
-    SceneSource, obj_camera_missing,
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride,
+    ReflectorSelector, SceneSource, obj_camera_missing,
 };
 
 /// Names accepted by `scene.builtin`.
@@ -43,6 +43,25 @@ struct RawJob {
     quality: RawQuality,
     #[serde(default)]
     frames: RawFrames,
+    #[serde(default)]
+    materials: std::collections::BTreeMap<Spanned<String>, RawMaterial>,
+}
+
+/// `[materials."NAME"]`: what a job changes in one material of the scene.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    ka: Option<Vec3Value>,
+    kd: Option<Vec3Value>,
+    ks: Option<Vec3Value>,
+    shininess: Option<Spanned<f32>>,
+    kr: Option<Vec3Value>,
+    kt: Option<Vec3Value>,
+    ior: Option<Spanned<f32>>,
+    thin: Option<bool>,
+    emission_cd_m2: Option<Spanned<f32>>,
+    emission_color: Option<Vec3Value>,
+    texture: Option<Spanned<PathBuf>>,
 }
 
 #[derive(Deserialize)]
@@ -50,6 +69,7 @@ struct RawJob {
 struct RawScene {
     builtin: Option<Spanned<String>>,
     obj: Option<Spanned<PathBuf>>,
+    gltf: Option<Spanned<PathBuf>>,
     detail: Option<Spanned<f32>>,
     glass_segments: Option<Spanned<u32>>,
     glass: Option<Spanned<String>>,
@@ -60,6 +80,7 @@ struct RawScene {
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCamera {
+    camera: Option<Spanned<String>>,
     eye: Option<Vec3Value>,
     target: Option<Vec3Value>,
     up: Option<Vec3Value>,
@@ -141,8 +162,15 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let source = Source { file: origin, text };
     let raw: RawJob = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
     let scene = source.scene(raw.scene)?;
-    let is_obj = matches!(scene, SceneSource::Obj(_));
-    let camera = source.camera(&raw.camera, is_obj)?;
+    let is_obj = matches!(scene, SceneSource::Obj(_) | SceneSource::Gltf(_));
+    let camera_name = raw.camera.camera.as_ref().map(|n| n.get_ref().clone());
+    if let (Some(name), false) = (&raw.camera.camera, matches!(scene, SceneSource::Gltf(_))) {
+        return Err(source.error_at(
+            name,
+            "camera.camera names a camera of a glTF scene; this scene has none",
+        ));
+    }
+    let camera = source.camera(&raw.camera, is_obj && camera_name.is_none())?;
     let eyes = source.eyes(&raw.frames, &camera)?;
     let lighting = source.lighting(&raw.lighting)?;
     let (trace, vertex) = source.quality(&raw.quality)?;
@@ -150,6 +178,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     // Where the keys checked against the scene stand (see `Job::locations`).
     let c = &raw.camera;
     let mut spans: Vec<(String, Range<usize>)> = [
+        ("camera", c.camera.as_ref().map(Spanned::span)),
         ("eye", c.eye.as_ref().map(Spanned::span)),
         ("target", c.target.as_ref().map(Spanned::span)),
         ("up", c.up.as_ref().map(Spanned::span)),
@@ -166,11 +195,28 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let reflectors = source.reflectors(raw.reflectors, is_obj)?;
     spans.extend((reflectors.iter()).filter_map(|(r, span)| Some((r.key(), span.clone()?))));
     let starts: Vec<usize> = spans.iter().map(|(_, span)| span.start).collect();
-    let locations = (spans.into_iter().map(|(key, _)| key))
+    let locations: Vec<(String, Location)> = (spans.into_iter().map(|(key, _)| key))
         .zip(Location::all(text, &starts))
         .collect();
     let reflectors = reflectors.into_iter().map(|(r, _)| r).collect();
+    let materials = (raw.materials.iter())
+        .map(|(name, m)| source.material(name, m))
+        .collect::<Result<Vec<_>, _>>()?;
+    let texture_locations = (raw.materials.iter()).filter_map(|(name, m)| {
+        let key = format!("{}.texture", MaterialOverride::key_of(name.get_ref()));
+        Some((key, Location::of(text, m.texture.as_ref()?.span().start)))
+    });
+    let locations = (raw.materials.keys())
+        .map(|name| {
+            let key = MaterialOverride::key_of(name.get_ref());
+            (key, Location::of(text, name.span().start))
+        })
+        .chain(texture_locations)
+        .chain(locations)
+        .collect();
     Ok(Job {
+        materials,
+        camera_name,
         locations,
         file: origin.to_owned(),
         scene,
@@ -420,12 +466,36 @@ impl Source<'_> {
     }
 
     fn scene(&self, raw: Option<Spanned<RawScene>>) -> Result<SceneSource, JobError> {
-        const WHICH: &str = "set either builtin = \"cockpit\" or obj = \"path/to/model.obj\"";
+        const WHICH: &str = "set one of builtin = \"cockpit\", obj = \"path/to/model.obj\" or gltf = \"path/to/model.glb\"";
         let Some(raw) = raw else {
             return Err(self.error(None, format!("missing [scene]: {WHICH}")));
         };
         let span = raw.span();
-        let raw = raw.into_inner();
+        let mut raw = raw.into_inner();
+        if let Some(gltf) = raw.gltf.take() {
+            if let Some(other) = raw
+                .builtin
+                .as_ref()
+                .map(Spanned::span)
+                .or(raw.obj.as_ref().map(Spanned::span))
+            {
+                return Err(self.error(Some(other), format!("[scene]: {WHICH}, not two")));
+            }
+            let builtin_only = [
+                ("detail", raw.detail.map(|v| v.span())),
+                ("glass_segments", raw.glass_segments.map(|v| v.span())),
+                ("glass", raw.glass.map(|v| v.span())),
+                ("glass_tilt", raw.glass_tilt.map(|v| v.span())),
+                ("glass_radius", raw.glass_radius.map(|v| v.span())),
+            ];
+            if let Some((key, span)) = builtin_only.into_iter().find_map(|(k, s)| Some((k, s?))) {
+                return Err(self.error(
+                    Some(span),
+                    format!("scene.{key} applies to builtin scenes only, not to gltf"),
+                ));
+            }
+            return Ok(SceneSource::Gltf(self.existing_file("scene.gltf", &gltf)?));
+        }
         match (raw.builtin.clone(), raw.obj.clone()) {
             (Some(_), Some(obj)) => Err(self.error_at(&obj, format!("[scene]: {WHICH}, not both"))),
             (None, None) => Err(self.error(Some(span), format!("[scene]: {WHICH}"))),
@@ -718,6 +788,80 @@ impl Source<'_> {
             ));
         }
         Ok(selectors)
+    }
+
+    /// One `[materials."NAME"]` table: every value checked, nothing yet
+    /// matched against the scene.
+    fn material(
+        &self,
+        name: &Spanned<String>,
+        raw: &RawMaterial,
+    ) -> Result<MaterialOverride, JobError> {
+        let key = |field: &str| format!("{}.{field}", MaterialOverride::key_of(name.get_ref()));
+        let reflectance = |field: &str, value: &Option<Vec3Value>| {
+            value
+                .as_ref()
+                .map(|v| {
+                    self.vec3(&key(field), v, "between 0 and 1", |c| {
+                        (0.0..=1.0).contains(&c)
+                    })
+                })
+                .transpose()
+        };
+        let emission = match (&raw.emission_cd_m2, &raw.emission_color) {
+            (None, Some(color)) => {
+                return Err(self.error_at(
+                    color,
+                    format!("{}: give emission_cd_m2 too", key("emission_color")),
+                ));
+            }
+            (None, None) => None,
+            (Some(cd_m2), color) => {
+                let cd_m2 = self.check(
+                    &key("emission_cd_m2"),
+                    cd_m2,
+                    "finite and not negative",
+                    |x| x.is_finite() && x >= 0.0,
+                )?;
+                let color = self
+                    .color(&key("emission_color"), color)?
+                    .unwrap_or(Vec3::ONE);
+                let emission = photometry::emission(color, cd_m2).ok_or_else(|| {
+                    self.error(
+                        raw.emission_color.as_ref().map(Spanned::span),
+                        format!(
+                            "{} = {color}: an emitter needs a colour with luminance (not black)",
+                            key("emission_color")
+                        ),
+                    )
+                })?;
+                Some(emission)
+            }
+        };
+        Ok(MaterialOverride {
+            name: name.get_ref().clone(),
+            ambient: reflectance("ka", &raw.ka)?,
+            diffuse: reflectance("kd", &raw.kd)?,
+            specular: reflectance("ks", &raw.ks)?,
+            shininess: self.check_opt(
+                &key("shininess"),
+                &raw.shininess,
+                "finite, 0 to 10000",
+                |s| s.is_finite() && (0.0..=10_000.0).contains(&s),
+            )?,
+            reflectance: reflectance("kr", &raw.kr)?,
+            transmittance: reflectance("kt", &raw.kt)?,
+            ior: self.check_opt(&key("ior"), &raw.ior, "finite, 1 to 4", |n| {
+                n.is_finite() && (1.0..=4.0).contains(&n)
+            })?,
+            thin: raw.thin.unwrap_or(false),
+            emission,
+            texture: raw
+                .texture
+                .as_ref()
+                .map(|t| self.existing_file(&key("texture"), t))
+                .transpose()?,
+        })
     }
 
     fn method(&self, raw: &RawQuality) -> Result<MethodKind, JobError> {

@@ -180,6 +180,8 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         method: MethodKind::CubeMapGrid,
         eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
         locations: job.locations.clone(),
+        materials: Vec::new(),
+        camera_name: None,
     };
     assert_eq!(job, expected);
     // The keys checked against the scene later keep their lines.
@@ -282,8 +284,226 @@ fn an_obj_job_loads_with_its_camera_frames_and_default_lighting() {
             }
         ]
     );
-    assert_eq!(loaded.lighting, Lighting::default());
+    // No light in the file, none in the job: the default daylight, said once.
+    assert_eq!(loaded.lighting, Lighting::daylight());
+    assert_eq!(loaded.notes.len(), 1, "{:?}", loaded.notes);
+    assert!(
+        loaded.notes[0].contains("default daylight")
+            && loaded.notes[0].contains("[[lighting.lights]]"),
+        "{}",
+        loaded.notes[0]
+    );
     assert_eq!(job.reflector_triangles(&loaded.scene).unwrap(), [0]);
+}
+
+#[test]
+fn lights_the_job_sets_replace_the_default_daylight() {
+    let (_dir, job_path) = obj_fixture();
+    for (lighting, lights) in [
+        ("[lighting]\nlights = []\n", vec![]),
+        (
+            "[[lighting.lights]]\nkind = \"point\"\nposition = [0, 1, 0]\n",
+            vec![Light {
+                kind: LightKind::Point { position: Vec3::Y },
+                color: Vec3::ONE,
+                intensity: 1.0,
+            }],
+        ),
+    ] {
+        std::fs::write(&job_path, format!("{OBJ_JOB}{lighting}")).unwrap();
+        let loaded = load_job(&job_path).unwrap().load_scene().unwrap();
+        assert_eq!(loaded.lighting.lights, lights);
+        assert_eq!(loaded.lighting.ambient, Lighting::default().ambient);
+        assert!(loaded.notes.is_empty(), "{:?}", loaded.notes);
+    }
+    // The daylight's sun and sky are the documented photometric values.
+    let daylight = Lighting::daylight();
+    let sun = daylight.lights[0];
+    let facing = vtfarm_scene::shading::phong(
+        &Material::diffuse("white", Vec3::ONE),
+        &Lighting {
+            ambient: Vec3::ZERO,
+            ..daylight.clone()
+        },
+        Vec3::ZERO,
+        -sun.direction_from(Vec3::ZERO).0 * -1.0,
+        Vec3::Y,
+        |_, _, _| true,
+    );
+    let expected = vtfarm_scene::DAYLIGHT_SUN_LUX / std::f32::consts::PI;
+    let cd_m2 = vtfarm_scene::photometry::cd_m2(facing);
+    assert!(
+        (cd_m2 / expected - 1.0).abs() < 1e-5,
+        "{cd_m2} vs {expected}"
+    );
+    assert!(
+        (vtfarm_scene::photometry::cd_m2(daylight.background) / vtfarm_scene::DAYLIGHT_SKY_CD_M2
+            - 1.0)
+            .abs()
+            < 1e-5
+    );
+}
+
+/// A directory with `models/car.obj` (objects `body` and `windshield`,
+/// materials `paint` and Blender's usual glass export) and `jobs/car.toml`.
+fn car_fixture(materials: &str) -> (tempfile::TempDir, PathBuf) {
+    let (dir, job) = obj_fixture();
+    std::fs::write(
+        dir.path().join("models/car.obj"),
+        "mtllib car.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n\
+         o body\nusemtl paint\nf 1 2 3\no windshield\nusemtl glass\nf 1 3 2\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("models/car.mtl"),
+        "newmtl paint\nKd 0.5 0.5 0.5\nKs 0.5 0.5 0.5\nNs 100\nillum 2\n\
+         newmtl glass\nKd 0.8 0.8 0.8\nNi 1.45\nd 1.0\nillum 2\n",
+    )
+    .unwrap();
+    let text = OBJ_JOB
+        .replace("cab.obj", "car.obj")
+        .replace("objects = [\"glass\"]", "objects = [\"windshield\"]");
+    std::fs::write(&job, format!("{text}{materials}")).unwrap();
+    (dir, job)
+}
+
+#[test]
+fn a_reflector_with_only_ni_reflects_by_fresnel_with_a_note() {
+    let (_dir, job_path) = car_fixture("");
+    let loaded = load_job(&job_path).unwrap().load_scene().unwrap();
+    let glass = &loaded.scene.materials[loaded.scene.material_id("glass").unwrap() as usize];
+    let fresnel = (0.45f32 / 2.45).powi(2);
+    assert!(
+        (glass.reflectance - Vec3::splat(fresnel))
+            .abs()
+            .max_element()
+            < 1e-7
+    );
+    // The note, and the default light's.
+    assert_eq!(loaded.notes.len(), 2, "{:?}", loaded.notes);
+    assert!(
+        loaded.notes[0].contains("\"glass\"") && loaded.notes[0].contains("Fresnel"),
+        "{}",
+        loaded.notes[0]
+    );
+    // Not a reflector: untouched.
+    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap() as usize];
+    assert_eq!(paint.reflectance, Vec3::ZERO);
+}
+
+#[test]
+fn material_overrides_replace_the_given_keys() {
+    let (_dir, job_path) = car_fixture(
+        r#"
+[materials."paint"]
+kd = [0.1, 0.2, 0.3]
+ks = [0, 0, 0]
+shininess = 5
+emission_cd_m2 = 500
+emission_color = [1, 0.5, 0]
+
+[materials."glass"]
+kr = [0.08, 0.08, 0.08]
+thin = true
+"#,
+    );
+    let job = load_job(&job_path).unwrap();
+    let loaded = job.load_scene().unwrap();
+    let material = |name| &loaded.scene.materials[loaded.scene.material_id(name).unwrap() as usize];
+    let paint = material("paint");
+    assert_eq!(
+        (
+            paint.diffuse,
+            paint.ambient,
+            paint.specular,
+            paint.shininess
+        ),
+        (
+            Vec3::new(0.1, 0.2, 0.3),
+            Vec3::new(0.1, 0.2, 0.3),
+            Vec3::ZERO,
+            5.0
+        )
+    );
+    let emitted = vtfarm_scene::photometry::cd_m2(paint.emission);
+    assert!((emitted - 500.0).abs() < 1e-2, "{emitted}");
+    assert_eq!(paint.emission.y / paint.emission.x, 0.5);
+    let glass = material("glass");
+    // kr as given (no Fresnel note), thin: transmits the rest, straight.
+    assert_eq!(glass.reflectance, Vec3::splat(0.08));
+    assert_eq!(glass.transmittance, Vec3::splat(0.92));
+    assert_eq!(glass.ior, 1.0);
+    assert_eq!(
+        loaded.notes.len(),
+        1,
+        "only the light's: {:?}",
+        loaded.notes
+    );
+    // The cockpit's materials can be changed too.
+    let cockpit = parse(&format!(
+        "{COCKPIT}[materials.\"{}\"]\nkr = [0.5, 0.5, 0.5]\n",
+        vtfarm_cockpit::GLASS_MATERIAL
+    ))
+    .load_scene()
+    .unwrap();
+    let id = cockpit
+        .scene
+        .material_id(vtfarm_cockpit::GLASS_MATERIAL)
+        .unwrap();
+    assert_eq!(
+        cockpit.scene.materials[id as usize].reflectance,
+        Vec3::splat(0.5)
+    );
+}
+
+#[test]
+fn unknown_materials_and_keys_are_errors_at_their_line() {
+    let (_dir, job_path) = car_fixture("\n[materials.\"windshield\"]\nkr = [0.1, 0.1, 0.1]\n");
+    let message = load_job(&job_path)
+        .unwrap()
+        .load_scene()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.starts_with(&format!("{}:13:", job_path.display()))
+            && message.contains("no material \"windshield\"")
+            && message.contains("materials: glass, paint"),
+        "{message}"
+    );
+    let (_dir, job_path) = car_fixture("\n[materials.\"glass\"]\nreflectance = 0.1\n");
+    let message = load_job(&job_path).unwrap_err().to_string();
+    assert!(
+        message.starts_with(&format!("{}:14:", job_path.display()))
+            && message.contains("unknown field `reflectance`"),
+        "{message}"
+    );
+    for (table, line, needle) in [
+        (
+            "kd = [2, 0, 0]",
+            14,
+            "materials.\"glass\".kd = [2, 0, 0]: must be between 0 and 1",
+        ),
+        (
+            "ior = 0.5",
+            14,
+            "materials.\"glass\".ior = 0.5: must be finite, 1 to 4",
+        ),
+        ("emission_color = [1, 1, 1]", 14, "give emission_cd_m2 too"),
+        (
+            "emission_cd_m2 = 10\nemission_color = [0, 0, 0]",
+            15,
+            "colour with luminance",
+        ),
+        ("texture = \"gone.png\"", 14, "no such file"),
+    ] {
+        let (_dir, job_path) = car_fixture(&format!("\n[materials.\"glass\"]\n{table}\n"));
+        let message = load_job(&job_path).unwrap_err().to_string();
+        assert!(
+            message.starts_with(&format!("{}:{line}:", job_path.display()))
+                && message.contains(needle),
+            "{needle:?}: {message}"
+        );
+    }
 }
 
 #[test]
@@ -652,6 +872,7 @@ fn two_by_two_scene() -> Scene {
             Material::diffuse("mirror", Vec3::ONE),
             Material::diffuse("paint", Vec3::ONE),
         ],
+        ..Default::default()
     }
 }
 
@@ -861,20 +1082,36 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
         ],
         objects: vec![Object { name: "car".into() }, Object { name: "bus".into() }],
         materials: vec![Material::diffuse("glass", Vec3::ONE), mirror],
+        ..Default::default()
     };
     let dull = dull_reflectors(&scene, &[0, 1, 2, 3]);
     assert_eq!(
         dull,
         [DullReflector {
             object: "car".into(),
-            material: "glass".into()
+            material: "glass".into(),
+            specular: 0.0,
+            ior: 1.0,
         }]
     );
     let message = dull[0].to_string();
+    // It names what is missing and the job's fix.
+    for needle in [
+        "\"car\"",
+        "\"glass\"",
+        "no Kr",
+        "no illum 3, 4 or 6 with Ks",
+        "Ni 1 is not above 1",
+        "[materials.\"glass\"] kr = [r, g, b] or ior = 1.5",
+    ] {
+        assert!(message.contains(needle), "{needle:?} missing: {message}");
+    }
+    // A highlight is not a reflection: said so.
+    let mut glossy = scene.clone();
+    glossy.materials[0].specular = Vec3::splat(0.5);
+    let message = dull_reflectors(&glossy, &[0])[0].to_string();
     assert!(
-        message.contains("\"car\"")
-            && message.contains("\"glass\"")
-            && message.contains("`Kr r g b`"),
+        message.contains("its Ks 0.5 is only a highlight"),
         "{message}"
     );
     assert!(dull_reflectors(&scene, &[1, 2]).is_empty());
@@ -1016,5 +1253,58 @@ fn eye_points_parse_in_linear_time() {
     assert!(
         ratio < 30.0,
         "100,000 eyes took {large:?}, {ratio:.1} times the {small:?} of 10,000 (linear: 10)"
+    );
+}
+
+#[test]
+fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
+    let fixture =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scene/tests/data/gltf/instanced.glb");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(&fixture, dir.path().join("car.glb")).unwrap();
+    let job_path = dir.path().join("job.toml");
+    let write = |camera: &str| {
+        std::fs::write(
+            &job_path,
+            format!(
+                "[scene]\ngltf = \"car.glb\"\n[camera]\n{camera}width = 64\nheight = 48\n\
+                 [reflectors]\nobjects = [\"right\"]\n"
+            ),
+        )
+        .unwrap();
+        load_job(&job_path)
+    };
+    let job = write("camera = \"driver\"\nfov_y = 30\n").unwrap_or_else(|e| panic!("{e}"));
+    let loaded = job.load_scene().unwrap_or_else(|e| panic!("{e}"));
+    // The file's camera under the job's keys.
+    assert_eq!(loaded.camera.eye, Vec3::new(0.0, 1.0, 2.0));
+    assert_eq!((loaded.camera.fov_y_deg, loaded.camera.width), (30.0, 64));
+    let right = loaded.scene.object_id("right").unwrap();
+    let chosen = job.reflector_triangles(&loaded.scene).unwrap();
+    assert_eq!(chosen.len(), 2);
+    assert!(
+        chosen
+            .iter()
+            .all(|&t| loaded.scene.triangles[t as usize].object == right)
+    );
+    // A named reflector with glTF's default ior 1.5 reflects by Fresnel.
+    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap() as usize];
+    assert!((paint.reflectance - Vec3::splat(0.04)).abs().max_element() < 1e-6);
+    // An unknown camera names the file's cameras, at its line.
+    let message = write("camera = \"rear\"\n")
+        .unwrap()
+        .load_scene()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        message.starts_with(&format!("{}:4:", job_path.display()))
+            && message.contains("cameras: driver"),
+        "{message}"
+    );
+    // Without a camera name the view keys are needed, as for OBJ.
+    let message = write("").unwrap_err().to_string();
+    assert!(
+        message.contains("[camera] needs eye, target, fov_y"),
+        "{message}"
     );
 }

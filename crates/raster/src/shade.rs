@@ -195,9 +195,38 @@ impl<'a> FrameShading<'a> {
         let offset = c0 * w.x + c1 * w.y + c2 * w.z;
         let to_eye = (-offset).normalize_or(-dir);
         let position = V3::splat(self.eye) + offset;
-        let color = self.phong(surface, position, normal, to_eye, out.len());
+        let albedo = if surface.material.is_textured() {
+            self.textured(surface, w, offset, out.len())
+        } else {
+            Albedo {
+                diffuse: V3::splat(surface.material.diffuse),
+                unlit: V3::splat(surface.unlit),
+            }
+        };
+        let color = self.phong(surface, &albedo, position, normal, to_eye, out.len());
         for (i, out) in out.iter_mut().enumerate() {
             *out = color.lane(i);
+        }
+    }
+
+    /// The textured diffuse and unlit terms of lanes `..used` at weights
+    /// `w`, eye-relative positions `offset`
+    /// ([`vtfarm_scene::Scene::textured_material`], a pixel's footprint
+    /// there choosing the mip level); padding lanes repeat the last.
+    #[cold]
+    fn textured(&self, surface: &Surface, w: V3, offset: V3, used: usize) -> Albedo {
+        let mut diffuse = [Vec3::ZERO; LANES];
+        let mut unlit = [Vec3::ZERO; LANES];
+        for i in 0..LANES {
+            let lane = i.min(used - 1);
+            let footprint = offset.lane(lane).length() * self.pixel;
+            let material = (self.scene).textured_material(surface.id, w.lane(lane), footprint);
+            diffuse[i] = material.diffuse;
+            unlit[i] = material.emission + material.ambient * self.lighting.ambient;
+        }
+        Albedo {
+            diffuse: V3::from_fn(|i| diffuse[i]),
+            unlit: V3::from_fn(|i| unlit[i]),
         }
     }
 
@@ -205,11 +234,19 @@ impl<'a> FrameShading<'a> {
     /// per-material and per-light terms computed once; lanes from `used` on
     /// are padding.
     #[inline(always)]
-    fn phong(&self, surface: &Surface, position: V3, normal: V3, to_eye: V3, used: usize) -> V3 {
+    fn phong(
+        &self,
+        surface: &Surface,
+        albedo: &Albedo,
+        position: V3,
+        normal: V3,
+        to_eye: V3,
+        used: usize,
+    ) -> V3 {
         let material = surface.material;
         let facing_away = normal.dot(to_eye).test(|d| d < 0.0);
         let n = V3::select(facing_away, -normal, normal);
-        let mut color = V3::splat(surface.unlit);
+        let mut color = albedo.unlit;
         for light in &self.lights {
             let to_light = match light.toward {
                 Toward::Direction(d) => V3::splat(d),
@@ -222,7 +259,7 @@ impl<'a> FrameShading<'a> {
             let n_dot_l = n.dot(to_light);
             // As `phong`'s `n_dot_l <= 0.0` skip: a NaN lights.
             let lit = n_dot_l.test(|d| d > 0.0 || d.is_nan());
-            let mut term = V3::splat(material.diffuse) * n_dot_l;
+            let mut term = albedo.diffuse * n_dot_l;
             if material.specular.max_element() > 0.0 {
                 let reflected = n * (F::splat(2.0) * n_dot_l) - to_light;
                 let r_dot_v = reflected.dot(to_eye).map(|d| d.max(0.0));
@@ -252,6 +289,13 @@ fn power(base: f32, exponent: f32) -> f32 {
     } else {
         base.powf(exponent)
     }
+}
+
+/// The per-lane diffuse reflectance and unlit (emission plus ambient) term:
+/// the material's own, or textured.
+struct Albedo {
+    diffuse: V3,
+    unlit: V3,
 }
 
 /// What shading a triangle's pixels needs, set up once per triangle.
@@ -436,6 +480,7 @@ mod tests {
             triangles,
             objects: vec![Object { name: "o".into() }],
             materials: vec![shiny, matte],
+            ..Default::default()
         };
         let lighting = Lighting {
             lights: vec![

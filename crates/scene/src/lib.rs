@@ -7,6 +7,7 @@
 
 pub mod bounds;
 mod camera;
+pub mod gltf;
 mod light;
 mod material;
 pub mod normals;
@@ -14,13 +15,19 @@ pub mod obj;
 pub mod photometry;
 pub mod shading;
 pub mod shapes;
+pub mod texture;
 
 pub use bounds::{MAX_COORDINATE, OutOfBounds};
 pub use camera::{Camera, MAX_IMAGE_SIDE, MAX_PIXELS, NEAR, Projector, ScreenPoint};
-pub use light::{Light, LightKind, Lighting};
-pub use material::Material;
+pub use light::{
+    DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, LightKind, Lighting,
+};
+pub use material::{GLASS_IOR, Material, MtlOptics, fresnel_reflectance, mtl_reflectance};
+pub use texture::{Texture, TextureId};
 
-use glam::Vec3;
+use std::borrow::Cow;
+
+use glam::{Vec2, Vec3};
 
 /// Index of an object (a named OBJ object or group) in [`Scene::objects`].
 pub type ObjectId = u32;
@@ -56,6 +63,42 @@ pub struct Scene {
     pub triangles: Vec<Triangle>,
     pub objects: Vec<Object>,
     pub materials: Vec<Material>,
+    /// The texture coordinates of each triangle's corners (see
+    /// [`texture`]), or empty when nothing is textured.
+    pub corner_uvs: Vec<[Vec2; 3]>,
+    /// The textures the materials name.
+    pub textures: Vec<Texture>,
+}
+
+/// A broken invariant of a [`Scene`] (see [`Scene::validate`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    #[error("{positions} positions but {normals} normals")]
+    NormalCount { positions: usize, normals: usize },
+    #[error("{triangles} triangles but {uvs} sets of corner texture coordinates")]
+    UvCount { triangles: usize, uvs: usize },
+    #[error("triangle {0} indexes a missing vertex")]
+    MissingVertex(usize),
+    #[error("triangle {triangle} names missing object {object}")]
+    MissingObject { triangle: usize, object: ObjectId },
+    #[error("triangle {triangle} names missing material {material}")]
+    MissingMaterial {
+        triangle: usize,
+        material: MaterialId,
+    },
+    #[error("material {material:?} names missing texture {texture}")]
+    MissingTexture {
+        material: String,
+        texture: TextureId,
+    },
+    #[error("texture coordinates of triangle {0} are not finite")]
+    UvNotFinite(usize),
+    #[error("the textures take {0} bytes, more than the {max} a scene may hold", max = texture::MAX_TEXTURE_BYTES)]
+    TextureBytes(usize),
+    #[error("normal {0} is not unit length")]
+    NormalNotUnit(usize),
+    #[error("vertex {vertex}: {bound}")]
+    OutOfBounds { vertex: usize, bound: OutOfBounds },
 }
 
 impl Scene {
@@ -81,6 +124,74 @@ impl Scene {
     /// The material of triangle `id`.
     pub fn material_of(&self, id: TriangleId) -> &Material {
         &self.materials[self.triangles[id as usize].material as usize]
+    }
+
+    /// The material of triangle `id` at the point with barycentric
+    /// `weights` (of its corners), with its textures applied: the base
+    /// colour multiplies `diffuse` and `ambient`, the alpha map the opacity
+    /// `1 - transmittance`. `footprint` is the width in metres of one pixel
+    /// on the surface there (0: the finest mip level); the mip level is
+    /// where one footprint covers one texel. An untextured material is
+    /// borrowed as it is.
+    ///
+    /// Every shading path (rasterized base frame, thin-glass transmission,
+    /// traced shading) textures through this one function.
+    pub fn textured_material(
+        &self,
+        id: TriangleId,
+        weights: Vec3,
+        footprint: f32,
+    ) -> Cow<'_, Material> {
+        let material = self.material_of(id);
+        let Some(corners) = self.corner_uvs.get(id as usize) else {
+            return Cow::Borrowed(material);
+        };
+        if !material.is_textured() {
+            return Cow::Borrowed(material);
+        }
+        let uv = corners[0] * weights.x + corners[1] * weights.y + corners[2] * weights.z;
+        let lod = |texture: &Texture| {
+            if footprint <= 0.0 {
+                return 0.0;
+            }
+            let [a, b, c] = self.triangle_positions(id);
+            let world_area = (b - a).cross(c - a).length() * 0.5;
+            let [p, q, r] = *corners;
+            let uv_area = ((q - p).perp_dot(r - p) * 0.5).abs();
+            Texture::lod(footprint * texture::texel_scale(uv_area, world_area, texture))
+        };
+        let mut textured = material.clone();
+        if let Some(texture) = material
+            .diffuse_texture
+            .and_then(|t| self.textures.get(t as usize))
+        {
+            let colour = texture.sample(uv, lod(texture)).truncate();
+            textured.diffuse *= colour;
+            textured.ambient *= colour;
+        }
+        if let Some(texture) = material
+            .alpha_texture
+            .and_then(|t| self.textures.get(t as usize))
+        {
+            let alpha = texture.sample_alpha(uv, lod(texture));
+            textured.transmittance = Vec3::ONE - (Vec3::ONE - material.transmittance) * alpha;
+        }
+        Cow::Owned(textured)
+    }
+
+    /// The barycentric weights of `point` (on or near the plane of triangle
+    /// `id`) with respect to its corners; the centroid's for a degenerate
+    /// triangle.
+    pub fn barycentrics(&self, id: TriangleId, point: Vec3) -> Vec3 {
+        let [a, b, c] = self.triangle_positions(id);
+        let normal = (b - a).cross(c - a);
+        let area2 = normal.length_squared();
+        if area2.is_nan() || area2 <= 0.0 {
+            return Vec3::splat(1.0 / 3.0);
+        }
+        let wb = (point - a).cross(c - a).dot(normal) / area2;
+        let wc = (b - a).cross(point - a).dot(normal) / area2;
+        Vec3::new(1.0 - wb - wc, wb, wc)
     }
 
     /// Looks up an object by name.
@@ -112,10 +223,26 @@ impl Scene {
         let v0 = self.positions.len() as u32;
         let o0 = self.objects.len() as u32;
         let m0 = self.materials.len() as u32;
+        let t0 = self.textures.len() as TextureId;
+        if !(self.corner_uvs.is_empty() && other.corner_uvs.is_empty()) {
+            self.corner_uvs
+                .resize(self.triangles.len(), [Vec2::ZERO; 3]);
+            self.corner_uvs.extend_from_slice(&other.corner_uvs);
+            self.corner_uvs.resize(
+                self.triangles.len() + other.triangles.len(),
+                [Vec2::ZERO; 3],
+            );
+        }
+        self.textures.extend(other.textures.iter().cloned());
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
         self.objects.extend(other.objects.iter().cloned());
-        self.materials.extend(other.materials.iter().cloned());
+        self.materials
+            .extend(other.materials.iter().map(|m| Material {
+                diffuse_texture: m.diffuse_texture.map(|t| t + t0),
+                alpha_texture: m.alpha_texture.map(|t| t + t0),
+                ..m.clone()
+            }));
         self.triangles
             .extend(other.triangles.iter().map(|t| Triangle {
                 vertices: t.vertices.map(|v| v + v0),
@@ -125,43 +252,70 @@ impl Scene {
     }
 
     /// Checks the structural invariants: indices in range, one normal per
-    /// position, unit normals, and every position within
-    /// [`MAX_COORDINATE`] (the BVH build relies on it). Returns a description
-    /// of the first violation.
-    pub fn validate(&self) -> Result<(), String> {
+    /// position, unit normals, every position within [`MAX_COORDINATE`]
+    /// (the BVH build relies on it), corner texture coordinates for every
+    /// triangle or none, and the textures within
+    /// [`texture::MAX_TEXTURE_BYTES`]. Returns the first violation.
+    pub fn validate(&self) -> Result<(), SceneError> {
         if self.positions.len() != self.normals.len() {
-            return Err(format!(
-                "{} positions but {} normals",
-                self.positions.len(),
-                self.normals.len()
-            ));
+            return Err(SceneError::NormalCount {
+                positions: self.positions.len(),
+                normals: self.normals.len(),
+            });
+        }
+        if !self.corner_uvs.is_empty() && self.corner_uvs.len() != self.triangles.len() {
+            return Err(SceneError::UvCount {
+                triangles: self.triangles.len(),
+                uvs: self.corner_uvs.len(),
+            });
         }
         for (i, t) in self.triangles.iter().enumerate() {
             if t.vertices
                 .iter()
                 .any(|&v| v as usize >= self.positions.len())
             {
-                return Err(format!("triangle {i} indexes a missing vertex"));
+                return Err(SceneError::MissingVertex(i));
             }
             if t.object as usize >= self.objects.len() {
-                return Err(format!("triangle {i} names missing object {}", t.object));
+                return Err(SceneError::MissingObject {
+                    triangle: i,
+                    object: t.object,
+                });
             }
             if t.material as usize >= self.materials.len() {
-                return Err(format!(
-                    "triangle {i} names missing material {}",
-                    t.material
-                ));
+                return Err(SceneError::MissingMaterial {
+                    triangle: i,
+                    material: t.material,
+                });
             }
+        }
+        if let Some(i) = (self.corner_uvs.iter()).position(|c| !c.iter().all(|uv| uv.is_finite())) {
+            return Err(SceneError::UvNotFinite(i));
+        }
+        for m in &self.materials {
+            for texture in [m.diffuse_texture, m.alpha_texture].into_iter().flatten() {
+                if texture as usize >= self.textures.len() {
+                    return Err(SceneError::MissingTexture {
+                        material: m.name.clone(),
+                        texture,
+                    });
+                }
+            }
+        }
+        let bytes: usize = self.textures.iter().map(|t| t.rgba8().len()).sum();
+        if bytes > texture::MAX_TEXTURE_BYTES {
+            return Err(SceneError::TextureBytes(bytes));
         }
         if let Some(i) = self
             .normals
             .iter()
             .position(|n| (n.length() - 1.0).abs().is_nan() || (n.length() - 1.0).abs() > 1e-3)
         {
-            return Err(format!("normal {i} is not unit length"));
+            return Err(SceneError::NormalNotUnit(i));
         }
         for (i, &p) in self.positions.iter().enumerate() {
-            bounds::point("position", p).map_err(|e| format!("vertex {i}: {e}"))?;
+            bounds::point("position", p)
+                .map_err(|bound| SceneError::OutOfBounds { vertex: i, bound })?;
         }
         Ok(())
     }

@@ -106,6 +106,39 @@ impl Lighting {
     }
 }
 
+/// Luminance of the default sky ([`Lighting::daylight`]): a hazy day's
+/// sky away from the sun.
+pub const DAYLIGHT_SKY_CD_M2: f32 = 2_000.0;
+/// Illuminance of the default sun on a surface facing it: a hazy sun.
+pub const DAYLIGHT_SUN_LUX: f32 = 30_000.0;
+/// Direction the default sunlight travels: for a viewer looking along −Z
+/// with +Y up, it comes from behind their left shoulder, 53° above the
+/// horizon, so what faces the viewer is lit.
+pub const DAYLIGHT_SUN_DIRECTION: Vec3 = Vec3::new(0.4, -0.8, -0.45);
+
+impl Lighting {
+    /// The light of a scene that has none: a white sun of
+    /// [`DAYLIGHT_SUN_LUX`] along [`DAYLIGHT_SUN_DIRECTION`], and a uniform
+    /// sky of [`DAYLIGHT_SKY_CD_M2`] as the background and as ambient light
+    /// (a uniform sky of luminance L gives the illuminance π·L), in the
+    /// units of [`crate::photometry`].
+    pub fn daylight() -> Lighting {
+        let color = Vec3::ONE;
+        Lighting {
+            lights: vec![Light {
+                kind: LightKind::Directional {
+                    direction: DAYLIGHT_SUN_DIRECTION.normalize(),
+                },
+                color,
+                intensity: crate::photometry::directional_intensity(color, DAYLIGHT_SUN_LUX)
+                    .expect("white has luminance"),
+            }],
+            ambient: crate::photometry::ambient(std::f32::consts::PI * DAYLIGHT_SKY_CD_M2),
+            background: crate::photometry::grey(DAYLIGHT_SKY_CD_M2),
+        }
+    }
+}
+
 impl Default for Lighting {
     fn default() -> Self {
         Lighting {

@@ -517,6 +517,7 @@ mod tests {
                 .collect(),
             objects: vec![Object { name: "a".into() }, Object { name: "b".into() }],
             materials: vec![Material::default(), Material::diffuse("red", Vec3::X)],
+            ..Default::default()
         };
         // The second cube shares the first one's vertex array but is its own
         // object; it must not smooth with the first where they coincide.

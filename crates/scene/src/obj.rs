@@ -15,8 +15,11 @@
 //! # Blue`: a `#` that starts a word ends the line, except on lines that carry
 //! a name or file name — `o`, `g`, `usemtl`, `newmtl`, `mtllib`, textures —
 //! where `Material #25` is a name), Windows paths (`textures\glass.png`).
-//! Textures are not used: a missing one is an [`ObjWarning`] (logged by
-//! [`load_obj`]), not an error.
+//! Textures: `map_Kd` and `map_d` are loaded (PNG, JPEG; see
+//! [`crate::texture`]) with the faces' `vt` coordinates per corner; one that
+//! cannot be read is an [`ObjWarning`] at its MTL line (logged by
+//! [`load_obj`]) and the material keeps its flat colour. Other texture
+//! kinds are not used: a missing one is a warning too, not an error.
 //!
 //! Refused with file and line: non-finite numbers and vertex coordinates
 //! beyond ±[`MAX_COORDINATE`], and faces with more than
@@ -44,17 +47,21 @@
 //! | `Ns s`             | `shininess` (default: 1)                               |
 //! | `Ke r g b`         | `emission` (default: black)                            |
 //! | `Kr r g b`         | `reflectance`, overriding `illum` (vtfarm extension)   |
-//! | `illum 3`, `5`     | `reflectance = Ks` (ray-traced mirror)                 |
-//! | `illum 4`, `6`, `7`| `reflectance` = Fresnel at normal incidence from `Ni`: |
+//! | `illum 3`, `4`, `6`| `reflectance = Ks` (ray-traced, no Fresnel)            |
+//! | `illum 5`, `7`     | `reflectance` = Fresnel at normal incidence from `Ni`: |
 //! |                    | `((Ni - 1) / (Ni + 1))²`, glass (1.5) without `Ni`     |
 //! | other `illum`      | `reflectance` = that Fresnel term when the material    |
 //! |                    | transmits and has `Ni`, otherwise 0                    |
+//!
+//! The reflectance rule is [`crate::mtl_reflectance`]'s.
 //! | `d a`              | `transmittance = 1 - a` (clamped to 0..=1)             |
 //! | `Tr t`             | `transmittance = t` when there is no `d`               |
 //! | `Tf r g b`         | filters the transmittance; with `illum 4`/`6`/`7` and  |
 //! |                    | no `d`/`Tr` it is the transmittance                    |
 //! | `Ni n`             | `ior` (default: 1)                                     |
-//! | `map_*`, `bump`, … | checked to exist (a warning if not); not used          |
+//! | `map_Kd file`      | `diffuse_texture`: the base colour, times `Kd`, `Ka`   |
+//! | `map_d file`       | `alpha_texture`: alpha (or grey), times `d`            |
+//! | other `map_*`, …   | checked to exist (a warning if not); not used          |
 //!
 //! The Fresnel term is the head-on reflectance; with `[quality] fresnel` the
 //! tracer raises it towards grazing angles (Schlick).
@@ -65,7 +72,8 @@
 //! the same scene back: floats are printed with Rust's shortest round-trip
 //! formatting, and a scene that came from [`load_obj`] reloads bit for bit.
 //! MTL's `d` is a single number, so a transmittance that is not grey is
-//! written (and read back) as its mean.
+//! written (and read back) as its mean. Textures are written beside them
+//! as PNG (`NAME_textureI.png`), with a `vt` per triangle corner.
 
 use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
@@ -75,10 +83,13 @@ use std::io;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::normals::{self, DEFAULT_CREASE_ANGLE_DEG};
-use crate::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
+use crate::{
+    Material, MaterialId, Object, ObjectId, Scene, SceneError, Texture, TextureId, Triangle,
+};
+use crate::{MtlOptics, mtl_reflectance};
 
 /// Options for [`load_obj`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -86,12 +97,17 @@ pub struct ObjOptions {
     /// Crease angle in degrees for normals computed for models that have no
     /// `vn` normals; see [`normals::compute_normals`].
     pub crease_angle_deg: f32,
+    /// Keep the faces' texture coordinates even when no material of the
+    /// file is textured (a job gives one a texture); otherwise they are kept
+    /// only for textured scenes.
+    pub keep_uvs: bool,
 }
 
 impl Default for ObjOptions {
     fn default() -> Self {
         ObjOptions {
             crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
+            keep_uvs: false,
         }
     }
 }
@@ -117,11 +133,11 @@ pub enum ObjError {
     #[error("{}: {error}", .path.display())]
     Io { path: PathBuf, error: io::Error },
     /// A line of an OBJ or MTL file is malformed.
-    #[error("{}:{line}: {message}", .path.display())]
+    #[error("{}:{line}: {error}", .path.display())]
     Syntax {
         path: PathBuf,
         line: usize,
-        message: String,
+        error: LineError,
     },
     /// A file named on a line (`mtllib`) cannot be read.
     #[error("{}:{line}: cannot read {what} {}: {error}", .path.display(), .file.display())]
@@ -136,6 +152,111 @@ pub enum ObjError {
     /// written, an error `tobj` found that the line check did not).
     #[error("{}: {message}", .path.display())]
     Invalid { path: PathBuf, message: String },
+}
+
+/// A value that is not what its keyword takes.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ValueError {
+    /// The word, quoted.
+    #[error("{0} is not a finite number")]
+    NotFinite(String),
+    #[error("expected a number, found {0}")]
+    OneNumber(usize),
+    #[error("expected {expected} numbers, found {found}")]
+    Numbers { expected: usize, found: usize },
+    #[error("expected {start} to {end} numbers, found {found}")]
+    NumberRange {
+        start: usize,
+        end: usize,
+        found: usize,
+    },
+    #[error("expected r g b or one number")]
+    Filter,
+}
+
+/// A face index that names no element.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum IndexError {
+    /// The text, quoted.
+    #[error("{kind} index {text} is not an integer")]
+    NotInteger { kind: &'static str, text: String },
+    #[error("{kind} index 0 (OBJ indices start at 1)")]
+    Zero { kind: &'static str },
+    #[error("{kind} index {index} is out of range: {defined} defined so far")]
+    OutOfRange {
+        kind: &'static str,
+        index: isize,
+        defined: usize,
+    },
+}
+
+/// What is wrong with one line of an OBJ or MTL file (the message of an
+/// [`ObjError::Syntax`]). Quoted input is cut short.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LineError {
+    #[error("not valid UTF-8")]
+    NotUtf8,
+    /// A keyword's numbers (`v`, `vt`, `vn`, `Kd`, `Ns`, …).
+    #[error("{keyword}: {error}")]
+    Value { keyword: String, error: ValueError },
+    #[error("v: expected x y z, x y z w or x y z r g b")]
+    VertexForm,
+    #[error("v: cannot divide by w = {0}")]
+    ZeroW(f32),
+    #[error("v: coordinate {0} is beyond ±{MAX_COORDINATE:e}, the largest vtfarm traces precisely")]
+    Coordinate(f32),
+    #[error("v: vertex colours must be given for all vertices or none")]
+    MixedColours,
+    /// The face vertex, quoted.
+    #[error("f: {vertex}: {error}")]
+    FaceIndex { vertex: String, error: IndexError },
+    #[error("f: {0} has more than v/vt/vn")]
+    FaceVertexParts(String),
+    #[error(
+        "f: a face with more than {MAX_FACE_VERTICES} vertices; split it into smaller polygons"
+    )]
+    FaceTooLarge,
+    #[error("f: a face needs at least 3 vertices, found {0}")]
+    FaceTooSmall(usize),
+    #[error("usemtl without a material name")]
+    UsemtlWithoutName,
+    /// The name, quoted.
+    #[error("usemtl names material {0}, which no mtllib defines")]
+    UnknownMaterial(String),
+    #[error("mtllib without a file name")]
+    MtllibWithoutName,
+    #[error("newmtl: no material name")]
+    NoMaterialName,
+    /// The text, quoted.
+    #[error("illum: {0} is not a model number")]
+    Illum(String),
+    #[error("{0}: no texture file name")]
+    NoTextureName(String),
+}
+
+/// A material value tobj handed on that does not parse.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("material {material}: {key}: {error}")]
+pub struct MaterialError {
+    /// The name, quoted.
+    pub material: String,
+    pub key: &'static str,
+    pub error: ValueError,
+}
+
+/// Why a scene cannot be written as OBJ.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WriteError {
+    #[error(transparent)]
+    Invalid(#[from] SceneError),
+    #[error("vertex {0} is not finite")]
+    NotFinite(usize),
+    #[error("material {0:?} has a non-finite value")]
+    MaterialNotFinite(String),
+    #[error("{what} name {name:?} cannot be written to OBJ")]
+    Name { what: &'static str, name: String },
+    #[error("two {what}s are named {name:?}")]
+    Duplicate { what: &'static str, name: String },
 }
 
 /// Something in an OBJ or MTL file that vtfarm ignores but a user may want
@@ -198,7 +319,10 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
         tobj::load_obj_buf(&mut checked.text.as_bytes(), &load_options, libraries)
             .map_err(|e| invalid(path, format!("tobj: {e}")))?;
     let materials = materials.map_err(|e| invalid(path, format!("tobj: {e}")))?;
-    let scene = build_scene(path, &models, &materials, options)?;
+    let mut warnings = checked.warnings;
+    let scene = build_scene(path, &models, &materials, options, |scene| {
+        load_textures(scene, &checked.textures, &mut warnings)
+    })?;
     tracing::debug!(
         path = %path.display(),
         vertices = scene.positions.len(),
@@ -207,10 +331,7 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
         materials = scene.materials.len(),
         "loaded OBJ"
     );
-    Ok(ImportedObj {
-        scene,
-        warnings: checked.warnings,
-    })
+    Ok(ImportedObj { scene, warnings })
 }
 
 /// Writes `scene` as `dir/name.obj` and `dir/name.mtl`.
@@ -228,7 +349,7 @@ pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjE
 pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> {
     let obj_path = dir.join(format!("{name}.obj"));
     let mtl_path = dir.join(format!("{name}.mtl"));
-    check_writable(scene).map_err(|message| invalid(&obj_path, message))?;
+    check_writable(scene).map_err(|e| invalid(&obj_path, e.to_string()))?;
     let mtl_name = mtl_path
         .file_name()
         .map(|n| n.to_string_lossy())
@@ -241,8 +362,15 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
     for n in &scene.normals {
         let _ = writeln!(obj, "vn {}", format_vec3(*n));
     }
+    // Texture coordinates per triangle corner: `vt` 3i + k + 1 is corner k
+    // of triangle i.
+    for corners in &scene.corner_uvs {
+        for uv in corners {
+            let _ = writeln!(obj, "vt {} {}", uv.x, uv.y);
+        }
+    }
     let mut current = None;
-    for t in &scene.triangles {
+    for (i, t) in scene.triangles.iter().enumerate() {
         let object = &scene.objects[t.object as usize].name;
         let material = &scene.materials[t.material as usize].name;
         match current {
@@ -256,7 +384,12 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
             current = Some((t.object, t.material));
         }
         let [a, b, c] = t.vertices.map(|v| v + 1);
-        let _ = writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}");
+        if scene.corner_uvs.is_empty() {
+            let _ = writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}");
+        } else {
+            let [ta, tb, tc] = [1, 2, 3].map(|k| 3 * i + k);
+            let _ = writeln!(obj, "f {a}/{ta}/{a} {b}/{tb}/{b} {c}/{tc}/{c}");
+        }
     }
 
     let mut mtl = String::from("# vtfarm materials\n");
@@ -278,6 +411,23 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
             2
         };
         let _ = writeln!(mtl, "illum {illum}\nKr {}", format_vec3(m.reflectance));
+        let maps = [("map_Kd", m.diffuse_texture), ("map_d", m.alpha_texture)];
+        for (keyword, texture) in maps {
+            if let Some(t) = texture {
+                let _ = writeln!(mtl, "{keyword} {name}_texture{t}.png");
+            }
+        }
+    }
+    for (i, texture) in scene.textures.iter().enumerate() {
+        let path = dir.join(format!("{name}_texture{i}.png"));
+        image::save_buffer(
+            &path,
+            texture.rgba8(),
+            texture.width(),
+            texture.height(),
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| invalid(&path, e.to_string()))?;
     }
 
     let write = |path: &Path, text: &str| {
@@ -306,7 +456,7 @@ fn format_vec3(v: Vec3) -> String {
 }
 
 /// Checks that `scene` can be written as OBJ and read back as the same scene.
-fn check_writable(scene: &Scene) -> Result<(), String> {
+fn check_writable(scene: &Scene) -> Result<(), WriteError> {
     scene.validate()?;
     if let Some(i) = scene
         .positions
@@ -314,10 +464,7 @@ fn check_writable(scene: &Scene) -> Result<(), String> {
         .chain(&scene.normals)
         .position(|v| !v.is_finite())
     {
-        return Err(format!(
-            "vertex {} is not finite",
-            i % scene.positions.len().max(1)
-        ));
+        return Err(WriteError::NotFinite(i % scene.positions.len().max(1)));
     }
     for m in &scene.materials {
         let vectors = [
@@ -330,7 +477,7 @@ fn check_writable(scene: &Scene) -> Result<(), String> {
         ];
         if !(vectors.iter().all(|v| v.is_finite()) && m.shininess.is_finite() && m.ior.is_finite())
         {
-            return Err(format!("material {:?} has a non-finite value", m.name));
+            return Err(WriteError::MaterialNotFinite(m.name.clone()));
         }
     }
     check_names("material", scene.materials.iter().map(|m| m.name.as_str()))?;
@@ -339,14 +486,19 @@ fn check_writable(scene: &Scene) -> Result<(), String> {
 
 /// Names must survive an OBJ line: non-empty, no surrounding whitespace, no
 /// line breaks, and unique (the reader finds objects and materials by name).
-fn check_names<'a>(what: &str, names: impl Iterator<Item = &'a str>) -> Result<(), String> {
+fn check_names<'a>(
+    what: &'static str,
+    names: impl Iterator<Item = &'a str>,
+) -> Result<(), WriteError> {
     let mut seen = HashSet::new();
     for name in names {
         if name.is_empty() || name.trim() != name || name.contains(['\n', '\r']) {
-            return Err(format!("{what} name {name:?} cannot be written to OBJ"));
+            let name = name.to_owned();
+            return Err(WriteError::Name { what, name });
         }
         if !seen.insert(name) {
-            return Err(format!("two {what}s are named {name:?}"));
+            let name = name.to_owned();
+            return Err(WriteError::Duplicate { what, name });
         }
     }
     Ok(())
@@ -359,11 +511,11 @@ fn invalid(path: &Path, message: impl Into<String>) -> ObjError {
     }
 }
 
-fn syntax(path: &Path, line: usize, message: impl Into<String>) -> ObjError {
+fn syntax(path: &Path, line: usize, error: LineError) -> ObjError {
     ObjError::Syntax {
         path: path.to_owned(),
         line,
-        message: message.into(),
+        error,
     }
 }
 
@@ -374,7 +526,7 @@ fn decode_text(path: &Path, bytes: Vec<u8>) -> Result<String, ObjError> {
     let text = String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = valid.iter().filter(|&&b| b == b'\n').count() + 1;
-        syntax(path, line, "not valid UTF-8")
+        syntax(path, line, LineError::NotUtf8)
     })?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_owned(),
@@ -446,42 +598,45 @@ fn quote(text: &str) -> String {
 }
 
 /// Parses whitespace-separated finite numbers, as many as `count` allows.
-fn parse_numbers(text: &str, count: RangeInclusive<usize>) -> Result<Vec<f32>, String> {
+fn parse_numbers(text: &str, count: RangeInclusive<usize>) -> Result<Vec<f32>, ValueError> {
     let values = text
         .split_whitespace()
         .map(|word| match word.parse::<f32>() {
             Ok(x) if x.is_finite() => Ok(x),
-            _ => Err(format!("{} is not a finite number", quote(word))),
+            _ => Err(ValueError::NotFinite(quote(word))),
         })
         .collect::<Result<Vec<_>, _>>()?;
     let (found, start, end) = (values.len(), *count.start(), *count.end());
     if count.contains(&found) {
         Ok(values)
     } else if end == 1 {
-        Err(format!("expected a number, found {found}"))
+        Err(ValueError::OneNumber(found))
     } else if start == end {
-        Err(format!("expected {start} numbers, found {found}"))
+        Err(ValueError::Numbers {
+            expected: start,
+            found,
+        })
     } else {
-        Err(format!("expected {start} to {end} numbers, found {found}"))
+        Err(ValueError::NumberRange { start, end, found })
     }
 }
 
 /// Parses one finite number.
-fn parse_number(text: &str) -> Result<f32, String> {
+fn parse_number(text: &str) -> Result<f32, ValueError> {
     parse_numbers(text, 1..=1).map(|v| v[0])
 }
 
 /// Parses exactly three finite numbers.
-fn parse_vec3(text: &str) -> Result<Vec3, String> {
+fn parse_vec3(text: &str) -> Result<Vec3, ValueError> {
     parse_numbers(text, 3..=3).map(|v| Vec3::from_slice(&v))
 }
 
 /// Parses a transmission filter: `r g b`, or one number for grey.
-fn parse_filter(text: &str) -> Result<Vec3, String> {
+fn parse_filter(text: &str) -> Result<Vec3, ValueError> {
     match parse_numbers(text, 1..=3)?[..] {
         [grey] => Ok(Vec3::splat(grey)),
         [r, g, b] => Ok(Vec3::new(r, g, b)),
-        _ => Err("expected r g b or one number".to_owned()),
+        _ => Err(ValueError::Filter),
     }
 }
 
@@ -495,6 +650,16 @@ struct CheckedObj {
     /// The libraries by the name on their `mtllib` line.
     libraries: HashMap<String, Library>,
     warnings: Vec<ObjWarning>,
+    textures: Vec<TextureRef>,
+}
+
+/// A texture vtfarm uses (`map_Kd`, `map_d`), where the MTL names it.
+struct TextureRef {
+    material: String,
+    alpha: bool,
+    file: PathBuf,
+    mtl: PathBuf,
+    line: usize,
 }
 
 /// State of the line check: what has been defined so far.
@@ -514,6 +679,7 @@ struct ObjCheck {
     materials: HashSet<String>,
     libraries: HashMap<String, Library>,
     warnings: Vec<ObjWarning>,
+    textures: Vec<TextureRef>,
 }
 
 /// Checks an OBJ file line by line, reading and checking the MTL libraries it
@@ -536,6 +702,7 @@ fn check_obj(path: &Path, text: &str) -> Result<CheckedObj, ObjError> {
         text: out,
         libraries: check.libraries,
         warnings: check.warnings,
+        textures: check.textures,
     })
 }
 
@@ -546,15 +713,19 @@ impl ObjCheck {
         keyword: &str,
         rest: &str,
         line: Cow<'a, str>,
-    ) -> Result<Cow<'a, str>, String> {
+    ) -> Result<Cow<'a, str>, LineError> {
+        let value = |keyword: &str| {
+            let keyword = keyword.to_owned();
+            move |error| LineError::Value { keyword, error }
+        };
         match keyword {
             "v" => self.vertex(rest)?,
             "vt" => {
-                parse_numbers(rest, 2..=3).map_err(|e| format!("vt: {e}"))?;
+                parse_numbers(rest, 2..=3).map_err(value("vt"))?;
                 self.texcoords += 1;
             }
             "vn" => {
-                parse_numbers(rest, 3..=3).map_err(|e| format!("vn: {e}"))?;
+                parse_numbers(rest, 3..=3).map_err(value("vn"))?;
                 self.normals += 1;
             }
             "f" => {
@@ -571,12 +742,9 @@ impl ObjCheck {
             }
             // tobj would turn a 3-vertex polyline into a triangle.
             "l" => return Ok(Cow::Borrowed("")),
-            "usemtl" if rest.is_empty() => return Err("usemtl without a material name".into()),
+            "usemtl" if rest.is_empty() => return Err(LineError::UsemtlWithoutName),
             "usemtl" if !self.materials.contains(rest) => {
-                return Err(format!(
-                    "usemtl names material {}, which no mtllib defines",
-                    quote(rest)
-                ));
+                return Err(LineError::UnknownMaterial(quote(rest)));
             }
             "usemtl" if !self.grouped => {
                 // No `o`/`g` yet: the object takes the material's name.
@@ -596,31 +764,31 @@ impl ObjCheck {
         Ok(line)
     }
 
-    fn vertex(&mut self, rest: &str) -> Result<(), String> {
-        let values = parse_numbers(rest, 3..=6).map_err(|e| format!("v: {e}"))?;
+    fn vertex(&mut self, rest: &str) -> Result<(), LineError> {
+        let values = parse_numbers(rest, 3..=6).map_err(|error| LineError::Value {
+            keyword: "v".to_owned(),
+            error,
+        })?;
         let (position, coloured) = match values[..] {
             [x, y, z] => (Vec3::new(x, y, z), false),
             [x, y, z, w] => (Vec3::new(x, y, z) / w, false),
             [x, y, z, _, _, _] => (Vec3::new(x, y, z), true),
-            _ => return Err("v: expected x y z, x y z w or x y z r g b".into()),
+            _ => return Err(LineError::VertexForm),
         };
         if !position.is_finite() {
-            return Err(format!("v: cannot divide by w = {}", values[3]));
+            return Err(LineError::ZeroW(values[3]));
         }
         if position.abs().max_element() > MAX_COORDINATE {
-            return Err(format!(
-                "v: coordinate {} is beyond ±{MAX_COORDINATE:e}, the largest vtfarm traces precisely",
-                position.abs().max_element()
-            ));
+            return Err(LineError::Coordinate(position.abs().max_element()));
         }
         if *self.coloured.get_or_insert(coloured) != coloured {
-            return Err("v: vertex colours must be given for all vertices or none".into());
+            return Err(LineError::MixedColours);
         }
         self.positions += 1;
         Ok(())
     }
 
-    fn face(&self, rest: &str) -> Result<(), String> {
+    fn face(&self, rest: &str) -> Result<(), LineError> {
         let mut count = 0;
         for vertex in rest.split_whitespace() {
             let mut parts = vertex.split('/');
@@ -633,24 +801,26 @@ impl ObjCheck {
                 match parts.next() {
                     // Only the vertex index is required (`v//vn`, `v/vt`).
                     Some("") | None if k > 0 => {}
-                    part => face_index(part.unwrap_or_default(), kind, defined)
-                        .map_err(|e| format!("f: {}: {e}", quote(vertex)))?,
+                    part => {
+                        face_index(part.unwrap_or_default(), kind, defined).map_err(|error| {
+                            LineError::FaceIndex {
+                                vertex: quote(vertex),
+                                error,
+                            }
+                        })?
+                    }
                 }
             }
             if parts.next().is_some() {
-                return Err(format!("f: {} has more than v/vt/vn", quote(vertex)));
+                return Err(LineError::FaceVertexParts(quote(vertex)));
             }
             count += 1;
             if count > MAX_FACE_VERTICES {
-                return Err(format!(
-                    "f: a face with more than {MAX_FACE_VERTICES} vertices; split it into smaller polygons"
-                ));
+                return Err(LineError::FaceTooLarge);
             }
         }
         if count < 3 {
-            return Err(format!(
-                "f: a face needs at least 3 vertices, found {count}"
-            ));
+            return Err(LineError::FaceTooSmall(count));
         }
         Ok(())
     }
@@ -663,7 +833,7 @@ impl ObjCheck {
         name: &str,
     ) -> Result<Cow<'static, str>, ObjError> {
         if name.is_empty() {
-            return Err(syntax(obj, line, "mtllib without a file name"));
+            return Err(syntax(obj, line, LineError::MtllibWithoutName));
         }
         let name = file_name(name);
         if self.libraries.contains_key(name.as_ref()) {
@@ -679,7 +849,7 @@ impl ObjCheck {
             error,
         })?;
         let text = decode_text(&file, bytes)?;
-        let clean = check_mtl(&file, &text, &mut self.warnings)?;
+        let clean = check_mtl(&file, &text, &mut self.warnings, &mut self.textures)?;
         let (materials, names) = tobj::load_mtl_buf(&mut clean.as_bytes())
             .map_err(|e| invalid(&file, format!("tobj: {e}")))?;
         self.materials
@@ -692,17 +862,20 @@ impl ObjCheck {
 
 /// Checks one 1-based (or negative, relative) OBJ index against the number of
 /// elements defined so far.
-fn face_index(text: &str, kind: &str, defined: usize) -> Result<(), String> {
-    let index: isize = text
-        .parse()
-        .map_err(|_| format!("{kind} index {} is not an integer", quote(text)))?;
+fn face_index(text: &str, kind: &'static str, defined: usize) -> Result<(), IndexError> {
+    let index: isize = text.parse().map_err(|_| IndexError::NotInteger {
+        kind,
+        text: quote(text),
+    })?;
     if index == 0 {
-        return Err(format!("{kind} index 0 (OBJ indices start at 1)"));
+        return Err(IndexError::Zero { kind });
     }
     if index.unsigned_abs() > defined {
-        return Err(format!(
-            "{kind} index {index} is out of range: {defined} defined so far"
-        ));
+        return Err(IndexError::OutOfRange {
+            kind,
+            index,
+            defined,
+        });
     }
     Ok(())
 }
@@ -715,29 +888,53 @@ fn is_texture(keyword: &str) -> bool {
 /// Checks an MTL file line by line: numbers where tobj expects them (it panics
 /// on `Kd` with fewer than three) and names; a texture that does not exist is
 /// a warning. Returns the normalised text to hand to tobj.
-fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<String, ObjError> {
+fn check_mtl(
+    path: &Path,
+    text: &str,
+    warnings: &mut Vec<ObjWarning>,
+    textures: &mut Vec<TextureRef>,
+) -> Result<String, ObjError> {
     let mut out = String::with_capacity(text.len());
+    let mut material = String::new();
     for (i, line) in text.lines().enumerate() {
         let (keyword, rest, clean) = split_line(line);
+        if keyword == "newmtl" {
+            material = rest.to_owned();
+        }
+        let value = |error| LineError::Value {
+            keyword: keyword.to_owned(),
+            error,
+        };
         let checked = match keyword {
-            "newmtl" if rest.is_empty() => Err("no material name".to_owned()),
-            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop),
-            "Tf" => parse_filter(rest).map(drop),
-            "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop),
+            "newmtl" if rest.is_empty() => Err(LineError::NoMaterialName),
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kr" => parse_vec3(rest).map(drop).map_err(value),
+            "Tf" => parse_filter(rest).map(drop).map_err(value),
+            "Ns" | "Ni" | "d" | "Tr" => parse_number(rest).map(drop).map_err(value),
             "illum" => rest
                 .parse::<u8>()
                 .map(drop)
-                .map_err(|_| format!("{} is not a model number", quote(rest))),
-            _ if is_texture(keyword) && rest.is_empty() => Err("no texture file name".to_owned()),
+                .map_err(|_| LineError::Illum(quote(rest))),
+            _ if is_texture(keyword) && rest.is_empty() => {
+                Err(LineError::NoTextureName(keyword.to_owned()))
+            }
             _ if is_texture(keyword) => {
                 let name = file_name(rest);
-                warnings.extend(check_texture(path, i + 1, &name));
+                match keyword {
+                    "map_Kd" | "map_d" => textures.push(TextureRef {
+                        material: material.clone(),
+                        alpha: keyword == "map_d",
+                        file: texture_file(path, &name),
+                        mtl: path.to_owned(),
+                        line: i + 1,
+                    }),
+                    _ => warnings.extend(check_texture(path, i + 1, &name)),
+                }
                 out.push_str(&format!("{keyword} {name}\n"));
                 continue;
             }
             _ => Ok(()),
         };
-        checked.map_err(|m| syntax(path, i + 1, format!("{keyword}: {m}")))?;
+        checked.map_err(|e| syntax(path, i + 1, e))?;
         // tobj takes everything after `newmtl` as the name, untrimmed.
         match keyword {
             "newmtl" => out.push_str(&format!("newmtl {rest}")),
@@ -748,16 +945,21 @@ fn check_mtl(path: &Path, text: &str, warnings: &mut Vec<ObjWarning>) -> Result<
     Ok(out)
 }
 
-/// A warning when the texture named on an MTL line does not exist. The file
-/// name is the whole argument, or its last word when options (`-s 1 1 1`)
-/// come first.
-fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
+/// The file a texture line of `mtl` names: the whole argument, or its last
+/// word when options (`-s 1 1 1`) come first; relative to the MTL file.
+fn texture_file(mtl: &Path, rest: &str) -> PathBuf {
     let name = if rest.starts_with('-') {
         rest.split_whitespace().last().unwrap_or(rest)
     } else {
         rest
     };
-    let file = mtl.parent().unwrap_or(Path::new("")).join(name);
+    mtl.parent().unwrap_or(Path::new("")).join(name)
+}
+
+/// A warning when a texture vtfarm does not use (bump, reflection, …)
+/// names a file that does not exist.
+fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
+    let file = texture_file(mtl, rest);
     let problem = match fs::metadata(&file) {
         Ok(m) if m.is_file() => return None,
         Ok(_) => "not a file".to_owned(),
@@ -767,10 +969,46 @@ fn check_texture(mtl: &Path, line: usize, rest: &str) -> Option<ObjWarning> {
         path: mtl.to_owned(),
         line,
         message: format!(
-            "texture {} ignored ({problem}); vtfarm does not use textures",
+            "texture {} ignored ({problem}); vtfarm uses map_Kd and map_d only",
             file.display()
         ),
     })
+}
+
+/// Loads the textures the materials use into `scene` (each file once) and
+/// sets the materials' texture ids. A texture that cannot be read is a
+/// warning at its MTL line; the material keeps its flat colour.
+fn load_textures(scene: &mut Scene, textures: &[TextureRef], warnings: &mut Vec<ObjWarning>) {
+    let mut loaded: HashMap<&Path, Option<TextureId>> = HashMap::new();
+    for t in textures {
+        let id = *loaded
+            .entry(&t.file)
+            .or_insert_with(|| match Texture::load(&t.file) {
+                Ok(texture) => {
+                    scene.textures.push(texture);
+                    Some(scene.textures.len() as TextureId - 1)
+                }
+                Err(e) => {
+                    warnings.push(ObjWarning {
+                        path: t.mtl.clone(),
+                        line: t.line,
+                        message: format!(
+                            "texture not used, the material keeps its flat colour: {e}"
+                        ),
+                    });
+                    None
+                }
+            });
+        let Some(id) = id else { continue };
+        // Materials that share a name share the texture (tobj keeps the last).
+        for m in scene.materials.iter_mut().filter(|m| m.name == t.material) {
+            if t.alpha {
+                m.alpha_texture = Some(id);
+            } else {
+                m.diffuse_texture = Some(id);
+            }
+        }
+    }
 }
 
 /// Converts tobj's models and materials into a scene.
@@ -779,15 +1017,19 @@ fn build_scene(
     models: &[tobj::Model],
     materials: &[tobj::Material],
     options: &ObjOptions,
+    textures: impl FnOnce(&mut Scene),
 ) -> Result<Scene, ObjError> {
     let mut scene = Scene {
         materials: materials
             .iter()
             .map(convert_material)
             .collect::<Result<_, _>>()
-            .map_err(|m| invalid(path, m))?,
+            .map_err(|e| invalid(path, e.to_string()))?,
         ..Scene::default()
     };
+    textures(&mut scene);
+    // Corner texture coordinates, kept only when a material is textured.
+    let textured = options.keep_uvs || scene.materials.iter().any(Material::is_textured);
     // Triangles of models without normals; they get theirs at the end, per
     // object, so that smoothing crosses material boundaries.
     let mut to_smooth = Vec::new();
@@ -830,6 +1072,20 @@ fn build_scene(
             // Placeholders: the smoothed triangles get new vertices.
             vec![Vec3::Y; positions.len()]
         };
+        if textured {
+            let uvs: Vec<Vec2> = if mesh.texcoords.len() == positions.len() * 2 {
+                mesh.texcoords
+                    .chunks_exact(2)
+                    .map(Vec2::from_slice)
+                    .collect()
+            } else {
+                vec![Vec2::ZERO; positions.len()]
+            };
+            scene
+                .corner_uvs
+                .resize(scene.triangles.len(), [Vec2::ZERO; 3]);
+            (scene.corner_uvs).extend(triangles.iter().map(|t| t.map(|v| uvs[v as usize])));
+        }
         let base = scene.positions.len() as u32;
         scene.positions.extend(positions);
         scene.normals.extend(normals);
@@ -873,30 +1129,21 @@ fn default_material(scene: &mut Scene) -> MaterialId {
     })
 }
 
-/// The index of refraction assumed for a glass `illum` model without `Ni`.
-const GLASS_IOR: f32 = 1.5;
-
-/// The Fresnel reflectance at normal incidence of a dielectric with index of
-/// refraction `ior` in air: `((ior - 1) / (ior + 1))²` (0.04 for glass).
-fn fresnel_reflectance(ior: f32) -> f32 {
-    if ior.is_finite() && ior > 0.0 {
-        ((ior - 1.0) / (ior + 1.0)).powi(2)
-    } else {
-        0.0
-    }
-}
-
 /// Maps one tobj material; see the module documentation for the table.
-fn convert_material(m: &tobj::Material) -> Result<Material, String> {
+fn convert_material(m: &tobj::Material) -> Result<Material, MaterialError> {
     // Keys tobj does not know end up as text in `unknown_param`; the MTL check
     // has already parsed them once, so errors here are not expected.
     fn extension<T>(
         m: &tobj::Material,
-        key: &str,
-        parse: fn(&str) -> Result<T, String>,
-    ) -> Result<Option<T>, String> {
+        key: &'static str,
+        parse: fn(&str) -> Result<T, ValueError>,
+    ) -> Result<Option<T>, MaterialError> {
         let parsed = m.unknown_param.get(key).map(|text| parse(text)).transpose();
-        parsed.map_err(|e| format!("material {}: {key}: {e}", quote(&m.name)))
+        parsed.map_err(|error| MaterialError {
+            material: quote(&m.name),
+            key,
+            error,
+        })
     }
     let base = Material::default();
     let diffuse = m.diffuse.map_or(base.diffuse, Vec3::from);
@@ -919,18 +1166,13 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         (None, _) => Vec3::ZERO,
     }
     .clamp(Vec3::ZERO, Vec3::ONE);
-    let transmits = transmittance.max_element() > 0.0;
-    let reflectance = match (extension(m, "Kr", parse_vec3)?, m.illumination_model) {
-        (Some(kr), _) => kr,
-        (None, Some(3 | 5)) => specular,
-        (None, _) if glass => {
-            Vec3::splat(fresnel_reflectance(m.optical_density.unwrap_or(GLASS_IOR)))
-        }
-        (None, _) => match m.optical_density {
-            Some(ior) if transmits => Vec3::splat(fresnel_reflectance(ior)),
-            _ => Vec3::ZERO,
-        },
-    };
+    let reflectance = mtl_reflectance(&MtlOptics {
+        kr: extension(m, "Kr", parse_vec3)?,
+        illum: m.illumination_model,
+        ks: specular,
+        ni: m.optical_density,
+        transmits: transmittance.max_element() > 0.0,
+    });
     Ok(Material {
         name: m.name.clone(),
         ambient: m.ambient.map_or(diffuse, Vec3::from),
@@ -941,5 +1183,7 @@ fn convert_material(m: &tobj::Material) -> Result<Material, String> {
         reflectance,
         transmittance,
         ior: m.optical_density.unwrap_or(base.ior),
+        diffuse_texture: None,
+        alpha_texture: None,
     })
 }

@@ -178,6 +178,7 @@ fn the_crease_angle_option_controls_smoothing() {
         &data("cube.obj"),
         &ObjOptions {
             crease_angle_deg: 120.0,
+            ..Default::default()
         },
     )
     .unwrap();
@@ -244,6 +245,7 @@ fn built_scene() -> Scene {
             .map(|name| Object { name: name.into() })
             .into(),
         materials: vec![Material::default(), mirror, glass, lamp],
+        ..Default::default()
     }
 }
 
@@ -560,7 +562,7 @@ fn what_exporters_write_loads() {
             line: 7,
             message: format!(
                 "texture {} ignored (No such file or directory (os error 2)); \
-                 vtfarm does not use textures",
+                 vtfarm uses map_Kd and map_d only",
                 dir.path().join("textures/glass_baseColor.png").display()
             ),
         }]
@@ -651,12 +653,19 @@ fn glass_and_dielectrics_reflect_by_fresnel() {
     let glass = Vec3::splat(0.2f32 * 0.2); // ((1.5 - 1) / (1.5 + 1))²
     let water = Vec3::splat((0.33f32 / 2.33).powi(2));
     for (mtl, expected) in [
-        // Mirrors: Ks.
+        // Ray-traced without Fresnel (illum 3, 4, 6): Ks, whatever Ni says.
         ("illum 3\n", (Vec3::splat(0.5), Vec3::ZERO)),
-        ("illum 5\n", (Vec3::splat(0.5), Vec3::ZERO)),
-        // Glass models: Fresnel from Ni, or glass without Ni.
-        ("illum 4\nNi 1.5\nd 0.2\n", (glass, Vec3::splat(0.8))),
-        ("illum 6\nd 0.5\n", (glass, Vec3::splat(0.5))),
+        (
+            "illum 4\nNi 1.5\nd 0.2\n",
+            (Vec3::splat(0.5), Vec3::splat(0.8)),
+        ),
+        (
+            "illum 4\nNi 1.00\nd 0.2\n",
+            (Vec3::splat(0.5), Vec3::splat(0.8)),
+        ),
+        ("illum 6\nd 0.5\n", (Vec3::splat(0.5), Vec3::splat(0.5))),
+        // Fresnel models (illum 5, 7): from Ni, or glass without Ni.
+        ("illum 5\n", (glass, Vec3::ZERO)),
         (
             "illum 7\nNi 1.33\nTf 0.6 0.7 0.9\n",
             (water, Vec3::new(0.6, 0.7, 0.9)),

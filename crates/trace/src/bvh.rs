@@ -424,7 +424,7 @@ impl SceneBvh {
         scene: Arc<Scene>,
         options: BvhOptions,
     ) -> Result<SceneBvh, InvalidScene> {
-        scene.validate().map_err(InvalidScene)?;
+        scene.validate().map_err(|e| InvalidScene(e.to_string()))?;
         let count = scene.triangles.len();
         let tri_positions: Vec<[Vec3; 3]> = (0..count as TriangleId)
             .map(|id| scene.triangle_positions(id))

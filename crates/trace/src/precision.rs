@@ -40,6 +40,7 @@ fn fan(rng: &mut XorShift, centre: Vec3, u: Vec3, v: Vec3, radius: f32, n: u32) 
             .collect(),
         objects: vec![Object { name: "fan".into() }],
         materials: vec![Material::default()],
+        ..Default::default()
     }
 }
 

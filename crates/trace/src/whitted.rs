@@ -356,9 +356,27 @@ impl Tracer<'_> {
     /// set): no shadow or secondary ray, so cheap enough for every pixel.
     pub fn weights(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3) {
         let (normal, geometric, incoming) = self.normals(point, incoming);
-        let material = self.bvh.scene().material_of(point.triangle);
-        let s = secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
+        let material = self.material_at(point);
+        let s = secondary_rays(
+            &material,
+            normal,
+            geometric,
+            incoming,
+            self.settings.fresnel,
+        );
         (s.kr, s.kt)
+    }
+
+    /// The material at `point`, textured
+    /// ([`vtfarm_scene::Scene::textured_material`]). Rays carry no
+    /// footprint, so traced shading samples the finest mip level.
+    fn material_at(&self, point: &SurfacePoint) -> std::borrow::Cow<'_, vtfarm_scene::Material> {
+        let scene = self.bvh.scene();
+        if !scene.material_of(point.triangle).is_textured() {
+            return std::borrow::Cow::Borrowed(scene.material_of(point.triangle));
+        }
+        let weights = scene.barycentrics(point.triangle, point.position);
+        scene.textured_material(point.triangle, weights, 0.0)
     }
 
     /// The unit shading normal, geometric normal and incoming direction at
@@ -383,10 +401,10 @@ impl Tracer<'_> {
         incoming: Vec3,
         lit: &mut dyn FnMut(&Light),
     ) -> SurfaceTerms {
-        let material = self.bvh.scene().material_of(point.triangle);
+        let material = self.material_at(point);
         let (normal, geometric, incoming) = self.normals(point, incoming);
         let local = phong(
-            material,
+            &material,
             self.lighting,
             point.position,
             normal,
@@ -399,8 +417,13 @@ impl Tracer<'_> {
                 visible
             },
         );
-        let secondary =
-            secondary_rays(material, normal, geometric, incoming, self.settings.fresnel);
+        let secondary = secondary_rays(
+            &material,
+            normal,
+            geometric,
+            incoming,
+            self.settings.fresnel,
+        );
         let spawn = |direction| {
             self.bvh
                 .spawn_ray(point.position, point.triangle, direction)

@@ -245,13 +245,7 @@ impl Frame<'_> {
 
     /// Whether `triangle` is see-through, so [`Frame::behind`] hints at what it shows.
     fn see_through(&self, triangle: TriangleId) -> bool {
-        self.tracer
-            .bvh
-            .scene()
-            .material_of(triangle)
-            .transmittance
-            .max_element()
-            > 0.0
+        self.tracer.bvh.scene().material_of(triangle).may_transmit()
     }
 
     /// Whether refinement and filling watch the opaque scene behind

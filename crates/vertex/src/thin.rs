@@ -229,7 +229,7 @@ pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: Triang
 
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
-    scene.material_of(triangle).transmittance.max_element() > 0.0
+    scene.material_of(triangle).may_transmit()
 }
 
 /// The ID buffers a frame's [`Behind`] is made of, rasterized in one go.
@@ -505,8 +505,10 @@ fn opaque_radiance(
     let normal = normalize_or_else(na * wa + nb * wb + nc * wc, || {
         scene.geometric_normal(triangle).normalize_or(Vec3::Y)
     });
+    // A pixel's footprint there, for the texture's mip level.
+    let footprint = (position - camera.eye).length() * camera.pixel_size_at_unit_depth();
     phong(
-        scene.material_of(triangle),
+        &scene.textured_material(triangle, Vec3::new(wa, wb, wc), footprint),
         tracer.lighting,
         position,
         normal,

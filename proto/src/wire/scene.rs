@@ -1,9 +1,11 @@
 //! The scene, its camera and its lights on the wire ([`WireScene`],
 //! [`WireCamera`], [`WireLighting`]): mirrors of `vtfarm-scene`'s types.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_scene::{
+    Camera, Light, LightKind, Lighting, Material, Object, Scene, Texture, Triangle,
+};
 
 use super::{WireError, bounds, finite, finite3, index, vec3};
 
@@ -27,6 +29,8 @@ pub struct WireMaterial {
     pub reflectance: [f32; 3],
     pub transmittance: [f32; 3],
     pub ior: f32,
+    pub diffuse_texture: Option<u32>,
+    pub alpha_texture: Option<u32>,
 }
 
 impl From<&Material> for WireMaterial {
@@ -41,6 +45,8 @@ impl From<&Material> for WireMaterial {
             reflectance: vec3(m.reflectance),
             transmittance: vec3(m.transmittance),
             ior: m.ior,
+            diffuse_texture: m.diffuse_texture,
+            alpha_texture: m.alpha_texture,
         }
     }
 }
@@ -59,6 +65,9 @@ impl TryFrom<WireMaterial> for Material {
             reflectance: finite3(|| field("reflectance"), m.reflectance)?,
             transmittance: finite3(|| field("transmittance"), m.transmittance)?,
             ior: finite(&field("ior"), m.ior)?,
+            // Checked against the scene's textures by `Scene::validate`.
+            diffuse_texture: m.diffuse_texture,
+            alpha_texture: m.alpha_texture,
             name: m.name,
         })
     }
@@ -73,6 +82,20 @@ pub struct WireScene {
     pub triangles: Vec<WireTriangle>,
     pub objects: Vec<String>,
     pub materials: Vec<WireMaterial>,
+    /// Per triangle, its corners' texture coordinates (or none at all).
+    pub corner_uvs: Vec<[[f32; 2]; 3]>,
+    pub textures: Vec<WireTexture>,
+}
+
+/// [`Texture`] on the wire: its level-0 RGBA bytes (the mip levels are
+/// rebuilt from them).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WireTexture {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    #[serde(with = "crate::message::bytes")]
+    pub rgba8: Vec<u8>,
 }
 
 impl From<&Scene> for WireScene {
@@ -91,6 +114,17 @@ impl From<&Scene> for WireScene {
                 .collect(),
             objects: s.objects.iter().map(|o| o.name.clone()).collect(),
             materials: s.materials.iter().map(WireMaterial::from).collect(),
+            corner_uvs: (s.corner_uvs.iter())
+                .map(|c| c.map(|uv| uv.to_array()))
+                .collect(),
+            textures: (s.textures.iter())
+                .map(|t| WireTexture {
+                    name: t.name().to_owned(),
+                    width: t.width(),
+                    height: t.height(),
+                    rgba8: t.rgba8().to_vec(),
+                })
+                .collect(),
         }
     }
 }
@@ -140,9 +174,18 @@ impl TryFrom<WireScene> for Scene {
             materials: (w.materials.into_iter())
                 .map(Material::try_from)
                 .collect::<Result<_, _>>()?,
+            corner_uvs: (w.corner_uvs.iter())
+                .map(|c| c.map(Vec2::from_array))
+                .collect(),
+            textures: (w.textures.into_iter())
+                .map(|t| Texture::from_rgba8(&t.name, t.width, t.height, t.rgba8))
+                .collect::<Result<_, _>>()
+                .map_err(|e| WireError::InvalidScene(e.to_string()))?,
         };
         // Indices and finiteness are checked above; this adds unit normals.
-        scene.validate().map_err(WireError::InvalidScene)?;
+        scene
+            .validate()
+            .map_err(|e| WireError::InvalidScene(e.to_string()))?;
         Ok(scene)
     }
 }
@@ -426,6 +469,7 @@ mod tests {
                     .collect(),
                 objects: vec!["a".to_owned(), "b".to_owned()],
                 materials: vec![WireMaterial::from(&Material::default())],
+                ..Default::default()
             };
             if let Ok(scene) = Scene::try_from(wire) {
                 prop_assert!(scene.validate().is_ok());

@@ -19,6 +19,7 @@ pub(crate) fn material(name: &str) -> Material {
         reflectance: Vec3::splat(0.9),
         transmittance: Vec3::splat(0.1),
         ior: 1.5,
+        ..Default::default()
     }
 }
 
@@ -48,6 +49,7 @@ pub(crate) fn scene() -> Scene {
             },
         ],
         materials: vec![material("mirror"), Material::default()],
+        ..Default::default()
     }
 }
 
