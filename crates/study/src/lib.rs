@@ -445,8 +445,8 @@ pub struct FrameRow {
     pub eye: [f32; 3],
     /// Index into the study's sun sweep; `None` without one.
     pub sun_index: Option<usize>,
-    /// The sun's direction relative to the vehicle (the base job's sun
-    /// without a sweep; `None` when it has none).
+    /// The swept sun's direction relative to the vehicle; `None` without a
+    /// sweep (a fixed sun is the study's, [`StudyPlan::sun_setting`]).
     pub sun_azimuth_deg: Option<f32>,
     pub sun_elevation_deg: Option<f32>,
     /// The UTC time of a date/time sweep (RFC 3339).
@@ -526,9 +526,11 @@ impl<'a> StudyWriter<'a> {
             GlareInput::from_components(&components, &masks.instrument, &masks.marking, &names);
         let params = &self.plan.params;
         let analysis = vtfarm_glare::analyze(&input, params).map_err(|e| bad(e.to_string()))?;
-        let heat = vtfarm_glare::heat_map(&input, params, Some(self.plan.heat_range))
+        // The legends are the report's, as text beside the maps.
+        let (heat, _) = vtfarm_glare::heat_map_frame(&input, params, Some(self.plan.heat_range))
             .map_err(|e| bad(e.to_string()))?;
-        let objects = vtfarm_glare::object_map(&input, params).map_err(|e| bad(e.to_string()))?;
+        let (objects, _) =
+            vtfarm_glare::object_map_frame(&input, params).map_err(|e| bad(e.to_string()))?;
 
         let rel = match sun {
             Some(sun) => format!("{}/sun_{sun:03}/eye_{eye:02}", planned.slug),
@@ -559,7 +561,8 @@ impl<'a> StudyWriter<'a> {
         ] {
             vtfarm_imaging::write_npy_f32(&dir.join(format!("{name}.npy")), &shape, data)?;
         }
-        let sun_position = self.plan.sun(sun);
+        // A frame names its sun only in a sweep (see `SunSetting`).
+        let sun_position = sun.map(|s| self.plan.suns[s]);
         let row = FrameRow {
             variant: planned.name.clone(),
             eye_index: eye,
@@ -617,11 +620,41 @@ pub struct VariantScore {
     pub worst_low_contrast_share: f32,
     pub mean_reflected_luminance_cd_m2: f32,
     pub peak_reflected_luminance_cd_m2: f32,
-    /// The object covering the most glass over all eye points.
-    pub main_glare_source: Option<String>,
+    /// The objects causing the glare over all the variant's frames, the
+    /// culprit first (at most [`CULPRITS`]; none without glare): by the
+    /// glare area they cause, then the luminance they add above the
+    /// threshold ([`vtfarm_glare::rank_objects`], summed over the frames).
+    pub glare_culprits: Vec<Culprit>,
+    /// The object whose reflection covers the most glass over all frames,
+    /// at any luminance (not necessarily a glare source), and its share of
+    /// the glass.
+    pub most_covering_object: Option<Coverage>,
     /// The variant's worst frames, worst first (by mean reflected
     /// luminance): where the sun and the eye make the glass brightest.
     pub worst_cases: Vec<WorstCase>,
+}
+
+/// Culprits named per frame and per variant.
+pub const CULPRITS: usize = 3;
+
+/// An object causing glare, and how much of it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Culprit {
+    pub name: String,
+    /// Glass pixels over the glare threshold whose reflection shows it.
+    pub glare_pixels: usize,
+    /// `glare_pixels` / all glare pixels (of the frame or the variant).
+    pub glare_share: f32,
+    /// `Σ (L_r − threshold)` over those pixels, cd/m² × pixels.
+    pub excess_luminance_cd_m2: f32,
+}
+
+/// The glass area an object's reflection covers, at any luminance.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Coverage {
+    pub name: String,
+    /// Its glass pixels / all glass pixels.
+    pub coverage_share: f32,
 }
 
 /// One of a variant's worst frames.
@@ -636,8 +669,71 @@ pub struct WorstCase {
     pub sun_time: Option<String>,
     pub mean_reflected_luminance_cd_m2: f32,
     pub low_contrast_share: f32,
+    /// The objects causing that frame's glare, the culprit first (see
+    /// [`VariantScore::glare_culprits`]).
+    pub glare_culprits: Vec<Culprit>,
     /// The object covering the most glass in that frame.
-    pub mirrored_object: Option<String>,
+    pub most_covering_object: Option<Coverage>,
+}
+
+impl Culprit {
+    /// The culprits among a frame's ranked objects: those that cause glare,
+    /// at most [`CULPRITS`].
+    pub fn of_frame(summary: &Summary) -> Vec<Culprit> {
+        (summary.objects.iter())
+            .filter(|o| o.glare_pixels > 0)
+            .take(CULPRITS)
+            .map(|o| Culprit {
+                name: o.name.clone(),
+                glare_pixels: o.glare_pixels,
+                glare_share: o.glare_share,
+                excess_luminance_cd_m2: o.excess_luminance_cd_m2,
+            })
+            .collect()
+    }
+}
+
+impl Coverage {
+    /// The object covering the most glass in a frame.
+    pub fn of_frame(summary: &Summary) -> Option<Coverage> {
+        (summary.objects.iter())
+            .max_by(|a, b| (a.covered_pixels.cmp(&b.covered_pixels)).then(b.object.cmp(&a.object)))
+            .map(|o| Coverage {
+                name: o.name.clone(),
+                coverage_share: o.coverage_share,
+            })
+    }
+}
+
+/// How the study set the sun, for the report: the frames' sun is described
+/// as it was set, never as a sweep that did not happen.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "setting", rename_all = "snake_case")]
+pub enum SunSetting {
+    /// A `[sun]` sweep: each frame names its sun position.
+    Sweep { positions: usize },
+    /// The base job's directional light, the same in every frame (angles
+    /// relative to the vehicle).
+    FixedFromJob {
+        azimuth_deg: f32,
+        elevation_deg: f32,
+    },
+    /// No directional light.
+    None,
+}
+
+impl StudyPlan {
+    /// How this study sets the sun.
+    pub fn sun_setting(&self) -> SunSetting {
+        match (self.suns.len(), self.base_sun) {
+            (0, Some(sun)) => SunSetting::FixedFromJob {
+                azimuth_deg: sun.azimuth_deg,
+                elevation_deg: sun.elevation_deg,
+            },
+            (0, None) => SunSetting::None,
+            (positions, _) => SunSetting::Sweep { positions },
+        }
+    }
 }
 
 #[cfg(test)]
