@@ -655,6 +655,12 @@ pub struct Summary {
     pub mean_veiling_ratio: f32,
     /// Glass pixels with `L_r > veiling_luminance_cd_m2`.
     pub glare_pixels: usize,
+    /// Glare pixels whose reflection shows no object: the background (the
+    /// rays that leave the scene, [`vtfarm_scene::Lighting::background`]),
+    /// a glare source beside the objects of [`Summary::objects`].
+    pub background_glare_pixels: usize,
+    /// `Σ (L_r − threshold)` over those pixels (cd/m² × pixels).
+    pub background_excess_luminance_cd_m2: f32,
     /// `glare_pixels / glass_pixels`.
     pub glare_area_share: f32,
     pub instrument_pixels: usize,
@@ -695,6 +701,8 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
     let (mut peak_r, mut sum_r, mut sum_t, mut peak_v, mut sum_v) =
         (0.0f32, 0.0f64, 0.0f64, 0.0f32, 0.0f64);
     let mut glare_pixels = 0usize;
+    let (mut background_glare, mut background_excess) = (0usize, 0.0f64);
+    let threshold = params.thresholds.veiling_luminance_cd_m2;
     for i in 0..input.glass.len() {
         if !input.glass[i] {
             continue;
@@ -705,8 +713,12 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         sum_t += lt[i] as f64;
         peak_v = peak_v.max(v[i]);
         sum_v += v[i] as f64;
-        if lr[i] > params.thresholds.veiling_luminance_cd_m2 {
+        if lr[i] > threshold {
             glare_pixels += 1;
+            if input.reflected_object.get(i).is_none_or(|&o| o == NONE) {
+                background_glare += 1;
+                background_excess += f64::from(lr[i] - threshold);
+            }
         }
     }
     let mean = |s: f64| {
@@ -730,6 +742,8 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         mean_veiling_ratio: mean(sum_v),
         glare_pixels,
         glare_area_share: share(glare_pixels, glass_pixels),
+        background_glare_pixels: background_glare,
+        background_excess_luminance_cd_m2: background_excess as f32,
         instrument_pixels: contrast.instrument_pixels,
         marking_pixels: contrast.marking_pixels,
         mean_marking_luminance_cd_m2: contrast.mean_marking_luminance_cd_m2,

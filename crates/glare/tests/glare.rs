@@ -331,6 +331,13 @@ fn the_culprit_is_the_small_bright_object_over_the_threshold_not_the_large_dim_o
     assert_eq!((walls.name.as_str(), walls.glare_pixels), ("cab_walls", 0));
     assert!(close(walls.coverage_share, 0.9));
     assert_eq!(walls.glare_share, 0.0);
+    assert_eq!(s.background_glare_pixels, 0);
+    // Glare where the glass mirrors no object is the background's.
+    f.reflected[99] = unit(2_000.0);
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    assert_eq!((s.glare_pixels, s.background_glare_pixels), (7, 1));
+    assert!((s.background_excess_luminance_cd_m2 - 1_500.0).abs() < 0.1);
+    assert!(close(s.objects[0].glare_share, 6.0 / 7.0));
     // The object map colours by the same rank: the culprit takes the
     // palette's first colour.
     let (map, ranked) = object_map_frame(&f.input(), &Params::default()).unwrap();

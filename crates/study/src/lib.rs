@@ -676,20 +676,54 @@ pub struct WorstCase {
     pub most_covering_object: Option<Coverage>,
 }
 
+/// The name the background (rays leaving the scene: sky past the windows)
+/// takes among the culprits.
+pub const BACKGROUND_CULPRIT: &str = "background (rays leaving the scene)";
+
 impl Culprit {
-    /// The culprits among a frame's ranked objects: those that cause glare,
-    /// at most [`CULPRITS`].
+    /// The culprits of a frame's glare, at most [`CULPRITS`]: its ranked
+    /// objects that cause glare, and the background where glare pixels
+    /// mirror no object ([`BACKGROUND_CULPRIT`]), ranked alike.
     pub fn of_frame(summary: &Summary) -> Vec<Culprit> {
-        (summary.objects.iter())
+        let mut all = Culprit::candidates(summary);
+        all.truncate(CULPRITS);
+        all
+    }
+
+    /// Every glare source of a frame, the culprit first (see
+    /// [`Culprit::of_frame`]).
+    fn candidates(summary: &Summary) -> Vec<Culprit> {
+        let share = |pixels: usize| {
+            if summary.glare_pixels == 0 {
+                0.0
+            } else {
+                (pixels as f64 / summary.glare_pixels as f64) as f32
+            }
+        };
+        let background = (summary.background_glare_pixels > 0).then(|| Culprit {
+            name: BACKGROUND_CULPRIT.to_owned(),
+            glare_pixels: summary.background_glare_pixels,
+            glare_share: share(summary.background_glare_pixels),
+            excess_luminance_cd_m2: summary.background_excess_luminance_cd_m2,
+        });
+        let mut all: Vec<Culprit> = (summary.objects.iter())
             .filter(|o| o.glare_pixels > 0)
-            .take(CULPRITS)
             .map(|o| Culprit {
                 name: o.name.clone(),
                 glare_pixels: o.glare_pixels,
                 glare_share: o.glare_share,
                 excess_luminance_cd_m2: o.excess_luminance_cd_m2,
             })
-            .collect()
+            .chain(background)
+            .collect();
+        // Objects come ranked; the background takes its place among them.
+        all.sort_by(|a, b| {
+            (b.glare_pixels.cmp(&a.glare_pixels)).then(
+                b.excess_luminance_cd_m2
+                    .total_cmp(&a.excess_luminance_cd_m2),
+            )
+        });
+        all
     }
 }
 

@@ -181,6 +181,11 @@ fn culprits_over(rows: &[&FrameRow]) -> (Vec<Culprit>, Option<Coverage>) {
             t.excess += f64::from(o.excess_luminance_cd_m2);
             t.covered += o.covered_pixels;
         }
+        if r.summary.background_glare_pixels > 0 {
+            let t = per.entry(crate::BACKGROUND_CULPRIT).or_default();
+            t.glare += r.summary.background_glare_pixels;
+            t.excess += f64::from(r.summary.background_excess_luminance_cd_m2);
+        }
     }
     let share = |part: usize, whole: usize| {
         if whole == 0 {
@@ -207,6 +212,7 @@ fn culprits_over(rows: &[&FrameRow]) -> (Vec<Culprit>, Option<Coverage>) {
         })
         .collect();
     let covering = (ranked.iter())
+        .filter(|(_, t)| t.covered > 0)
         .max_by(|a, b| a.1.covered.cmp(&b.1.covered).then(b.0.cmp(a.0)))
         .map(|(name, t)| Coverage {
             name: (*name).to_owned(),
@@ -537,9 +543,16 @@ fn object_legend(f: &FrameRow) -> String {
         );
     }
     let [r, g, b] = vtfarm_imaging::encode_srgb8(vtfarm_glare::NO_OBJECT_COLOR);
+    let s = &f.summary;
+    let background = if s.glare_pixels == 0 {
+        0.0
+    } else {
+        s.background_glare_pixels as f64 / s.glare_pixels as f64
+    };
     let _ = write!(
         h,
-        "<tr><td><span class=\"swatch\" style=\"background:rgb({r},{g},{b})\"></span></td><td colspan=\"3\">nothing mirrored</td></tr></table>"
+        "<tr><td><span class=\"swatch\" style=\"background:rgb({r},{g},{b})\"></span></td><td>background</td><td>{:.1}%</td><td></td></tr></table>",
+        background * 100.0
     );
     h
 }
