@@ -57,10 +57,10 @@ pub enum StudyError {
         position: Vec3,
         why: String,
     },
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error(transparent)]
     Image(#[from] vtfarm_imaging::ImageError),
@@ -133,6 +133,8 @@ pub struct StudyPlan {
     pub heat_range: LogRange,
     /// The base job's reflection method.
     pub method: vtfarm_method::MethodKind,
+    /// The base job's `[output]` exposure of the frames' PNG images.
+    pub exposure: vtfarm_imaging::Exposure,
 }
 
 impl StudyPlan {
@@ -399,6 +401,7 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         params,
         heat_range,
         method: study.job.method,
+        exposure: study.job.output.exposure(),
     })
 }
 
@@ -468,9 +471,9 @@ pub struct StudyWriter<'a> {
 impl<'a> StudyWriter<'a> {
     /// Creates the output directory.
     pub fn new(plan: &'a StudyPlan, dir: &Path) -> Result<Self, StudyError> {
-        std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
+        std::fs::create_dir_all(dir).map_err(|cause| StudyError::Io {
             path: dir.to_owned(),
-            source,
+            cause,
         })?;
         Ok(StudyWriter {
             plan,
@@ -537,11 +540,15 @@ impl<'a> StudyWriter<'a> {
             None => format!("{}/eye_{eye:02}", planned.slug),
         };
         let dir = self.dir.join(&rel);
-        std::fs::create_dir_all(&dir).map_err(|source| StudyError::Io {
+        std::fs::create_dir_all(&dir).map_err(|cause| StudyError::Io {
             path: dir.clone(),
-            source,
+            cause,
         })?;
-        frame.color.write_png(&dir.join("image.png"))?;
+        frame
+            .color
+            .write_png_exposed(&dir.join("image.png"), &self.plan.exposure)?;
+        // The linear frame in cd/m² with its components as layers.
+        vtfarm_render::output::write_exr(&dir.join("image.exr"), &frame.color, Some(&components))?;
         heat.write_png(&dir.join("heat.png"))?;
         objects.write_png(&dir.join("objects.png"))?;
         // The per-pixel figures, for engineers' own analysis (0 off the

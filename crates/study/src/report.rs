@@ -102,9 +102,9 @@ pub(crate) fn write_all(
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), StudyError> {
-    std::fs::write(path, text).map_err(|source| StudyError::Io {
+    std::fs::write(path, text).map_err(|cause| StudyError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     })
 }
 
