@@ -401,6 +401,15 @@ fn plot_svg(plan: &StudyPlan, frames: &[FrameRow], plot: &Plot) -> Result<String
             .y_desc(plot.axis)
             .x_labels(eyes.clamp(1, 20))
             .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_labels(6)
+            .y_label_formatter(&|y| {
+                if top >= 20.0 {
+                    format!("{y:.0}")
+                } else {
+                    format!("{y:.1}")
+                }
+            })
+            .light_line_style(WHITE)
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 14))
             .disable_x_mesh()
@@ -458,16 +467,23 @@ fn sun_sentence(setting: &SunSetting) -> String {
     }
 }
 
-/// A luminance for a legend: 3 significant digits at most, no exponent.
+/// A luminance for a legend: 3 significant digits at most, no exponent,
+/// no trailing zeros (`10000`, `12.5`, `1`, `0.25`).
 fn luminance_label(v: f32) -> String {
-    if v >= 100.0 {
-        format!("{v:.0}")
+    let decimals = if v >= 100.0 {
+        0
     } else if v >= 10.0 {
-        format!("{v:.1}")
+        1
     } else if v >= 1.0 {
-        format!("{v:.2}")
+        2
     } else {
-        format!("{v:.3}")
+        3
+    };
+    let text = format!("{v:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
     }
 }
 
@@ -481,7 +497,7 @@ fn heat_legend(plan: &StudyPlan) -> String {
     let mut svg = String::new();
     let _ = writeln!(
         svg,
-        r#"<svg class="legend-bar" xmlns="http://www.w3.org/2000/svg" width="150" height="{h}" font-family="sans-serif" font-size="13"><text x="0" y="14">L<tspan dy="3" font-size="10">r</tspan><tspan dy="-3"> (cd/m², log)</tspan></text>"#,
+        r#"<svg class="legend-bar" xmlns="http://www.w3.org/2000/svg" width="112" height="{h}" font-family="sans-serif" font-size="12"><text x="0" y="14">cd/m², log</text>"#,
         h = BAR_TOP + BAR_HEIGHT + 12.0
     );
     for k in 0..STEPS {
@@ -509,7 +525,7 @@ fn heat_legend(plan: &StudyPlan) -> String {
         let y = BAR_TOP + BAR_HEIGHT * (1.0 - t);
         let _ = writeln!(
             svg,
-            r##"<line x1="0" y1="{y:.1}" x2="16" y2="{y:.1}" stroke="#0c0" stroke-width="2"/><text x="60" y="{ty:.1}" fill="#080">&#8592; glare {threshold}</text>"##,
+            r##"<line x1="0" y1="{y:.1}" x2="16" y2="{y:.1}" stroke="#0c0" stroke-width="2"/><text x="62" y="{ty:.1}" fill="#080">&#8592; glare</text>"##,
             ty = y + 4.0
         );
     }
@@ -523,7 +539,7 @@ fn object_legend(f: &FrameRow) -> String {
     const SHOWN: usize = 8;
     let objects = &f.summary.objects;
     let mut h = String::from(
-        "<table class=\"objects\"><tr><th></th><th>object</th><th>glare area</th><th>covers</th></tr>",
+        "<table class=\"objects\"><tr><th></th><th>object</th><th>glare</th><th>glass</th></tr>",
     );
     for (rank, o) in objects.iter().enumerate().take(SHOWN) {
         let [r, g, b] = vtfarm_glare::object_color_srgb(rank);
@@ -593,10 +609,11 @@ body {{ font-family: sans-serif; margin: 2em; color: #222; font-size: 15px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }}
 th, td {{ border: 1px solid #bbb; padding: 4px 8px; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
-img {{ width: 320px; image-rendering: auto; }}
-.frames td {{ vertical-align: top; }}
-.map {{ display: flex; gap: 8px; align-items: flex-start; }}
-table.objects {{ margin: 0; font-size: 13px; }}
+img {{ width: 240px; image-rendering: auto; }}
+.frames td {{ vertical-align: top; font-size: 13px; }}
+.frames td:last-child {{ text-align: left; min-width: 180px; }}
+.map {{ display: flex; gap: 4px; align-items: flex-start; }}
+table.objects {{ margin: 0; font-size: 12px; }}
 table.objects td, table.objects th {{ border: none; padding: 1px 4px; text-align: left; }}
 .swatch {{ display: inline-block; width: 12px; height: 12px; border: 1px solid #555; }}
 .legend span {{ margin-right: 1.5em; white-space: nowrap; }}
@@ -748,7 +765,7 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
 }
 
 /// The column headers of [`frame_cells`].
-const FRAME_HEADERS: &str = "<th>rendered image</th><th>reflected luminance L<sub>r</sub> (cd/m², log scale)</th><th>reflected objects (share of the glare area, of the glass)</th><th>figures</th>";
+const FRAME_HEADERS: &str = "<th>rendered image</th><th>reflected luminance L<sub>r</sub><br>(cd/m², log scale; green: the glare threshold)</th><th>reflected objects<br>(% of the glare area they cause, % of the glass they cover)</th><th>figures</th>";
 
 /// A frame's images, their legends and figures as table cells.
 fn frame_cells(plan: &StudyPlan, f: &FrameRow) -> String {
