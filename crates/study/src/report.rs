@@ -609,7 +609,7 @@ body {{ font-family: sans-serif; margin: 2em; color: #222; font-size: 15px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }}
 th, td {{ border: 1px solid #bbb; padding: 4px 8px; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
-img {{ width: 240px; image-rendering: auto; }}
+img {{ width: 224px; image-rendering: auto; }}
 .frames td {{ vertical-align: top; font-size: 13px; }}
 .frames td:last-child {{ text-align: left; min-width: 180px; }}
 .map {{ display: flex; gap: 4px; align-items: flex-start; }}
@@ -765,7 +765,7 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
 }
 
 /// The column headers of [`frame_cells`].
-const FRAME_HEADERS: &str = "<th>rendered image</th><th>reflected luminance L<sub>r</sub><br>(cd/m², log scale; green: the glare threshold)</th><th>reflected objects<br>(% of the glare area they cause, % of the glass they cover)</th><th>figures</th>";
+const FRAME_HEADERS: &str = "<th>rendered image</th><th>reflected luminance L<sub>r</sub><br>(cd/m², log scale;<br>green: glare threshold)</th><th>reflected objects<br>(glare: % of the glare area;<br>glass: % of the glass covered)</th><th>figures</th>";
 
 /// A frame's images, their legends and figures as table cells.
 fn frame_cells(plan: &StudyPlan, f: &FrameRow) -> String {
