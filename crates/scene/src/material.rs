@@ -46,7 +46,14 @@ impl Material {
 
     /// Whether rays continue from this surface (mirror or transparent).
     pub fn is_specular(&self) -> bool {
-        self.reflectance.max_element() > 0.0 || self.transmittance.max_element() > 0.0
+        self.reflectance.max_element() > 0.0 || self.see_through()
+    }
+
+    /// Whether light passes through the surface (any transmittance): glass.
+    /// The thin-glass model's layers and the tracer's reflected/transmitted
+    /// split both go by it.
+    pub fn see_through(&self) -> bool {
+        self.transmittance.max_element() > 0.0
     }
 }
 

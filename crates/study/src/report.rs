@@ -609,9 +609,11 @@ body {{ font-family: sans-serif; margin: 2em; color: #222; font-size: 15px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }}
 th, td {{ border: 1px solid #bbb; padding: 4px 8px; text-align: right; }}
 th:first-child, td:first-child {{ text-align: left; }}
-img {{ width: 224px; image-rendering: auto; }}
-.frames td {{ vertical-align: top; font-size: 13px; }}
-.frames td:last-child {{ text-align: left; min-width: 180px; }}
+img {{ width: 216px; image-rendering: auto; }}
+table.frames {{ table-layout: fixed; }}
+.frames th {{ text-align: left; }}
+.frames td {{ vertical-align: top; font-size: 13px; overflow-wrap: anywhere; }}
+.frames td:last-child {{ text-align: left; }}
 .map {{ display: flex; gap: 4px; align-items: flex-start; }}
 table.objects {{ margin: 0; font-size: 12px; }}
 table.objects td, table.objects th {{ border: none; padding: 1px 4px; text-align: left; }}
@@ -720,23 +722,29 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
                 );
             }
         }
-        let sun_header = if swept { "<th>sun</th>" } else { "" };
         if let Some(score) = ranking.iter().find(|s| s.variant == variant.name) {
+            // In a sweep the case names its sun (one column fewer keeps the
+            // table within 1400 px).
+            let (case_width, case_header) = if swept {
+                (96, "case and sun")
+            } else {
+                (44, "case")
+            };
             let _ = writeln!(
                 h,
-                "<h3>Worst cases</h3>\n<p>The frames with the highest mean reflected luminance.</p>\n<table class=\"frames worst\"><tr><th>case</th>{sun_header}<th>eye</th>{}</tr>",
-                FRAME_HEADERS
+                "<h3>Worst cases</h3>\n<p>The frames with the highest mean reflected luminance.</p>\n<table class=\"frames worst\">{cols}<tr><th>{case_header}</th><th>eye</th>{FRAME_HEADERS}</tr>",
+                cols = frame_columns(case_width),
             );
             for (k, case) in score.worst_cases.iter().enumerate() {
                 let f = &frames[case.frame];
                 let sun = if swept {
-                    format!("<td>{}</td>", sun_text(f))
+                    format!("<br>sun {}", sun_text(f))
                 } else {
                     String::new()
                 };
                 let _ = writeln!(
                     h,
-                    "<tr><td>{n}</td>{sun}<td>{eye}</td>{cells}</tr>",
+                    "<tr><td>{n}{sun}</td><td>{eye}</td>{cells}</tr>",
                     n = k + 1,
                     eye = f.eye_index,
                     cells = frame_cells(plan, f),
@@ -747,7 +755,8 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
         if !swept {
             let _ = writeln!(
                 h,
-                "<h3>Every eye point</h3>\n<table class=\"frames\"><tr><th>eye</th>{FRAME_HEADERS}</tr>"
+                "<h3>Every eye point</h3>\n<table class=\"frames\">{cols}<tr><th>eye</th>{FRAME_HEADERS}</tr>",
+                cols = frame_columns(0),
             );
             for f in frames.iter().filter(|f| f.variant == variant.name) {
                 let _ = writeln!(
@@ -762,6 +771,21 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
     }
     h.push_str("</body></html>\n");
     Ok(h)
+}
+
+/// The column widths of a frame table (px): a first column of
+/// `first_width` (none for 0), the eye, then [`frame_cells`]' columns, so
+/// that every legend sits beside its map within 1400 px.
+fn frame_columns(first_width: u32) -> String {
+    let mut widths = Vec::new();
+    if first_width > 0 {
+        widths.push(first_width);
+    }
+    widths.extend([44, 232, 348, 468, 196]);
+    let cols: String = (widths.iter())
+        .map(|w| format!("<col style=\"width:{w}px\">"))
+        .collect();
+    format!("<colgroup>{cols}</colgroup>")
 }
 
 /// The column headers of [`frame_cells`].

@@ -717,7 +717,7 @@ impl SceneBvh {
     /// transmittance): glass, whose reflections count as reflected light
     /// wherever a ray meets it behind a reflector.
     pub fn see_through(&self, id: TriangleId) -> bool {
-        self.scene.material_of(id).transmittance.max_element() > 0.0
+        self.scene.material_of(id).see_through()
     }
 
     /// Whether triangle `id` casts shadows ([`casts_shadow`]).

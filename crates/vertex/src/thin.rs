@@ -232,7 +232,7 @@ pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: Triang
 
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
-    scene.material_of(triangle).transmittance.max_element() > 0.0
+    scene.material_of(triangle).see_through()
 }
 
 /// The ID buffers a frame's [`Behind`] is made of, rasterized in one go.
