@@ -616,7 +616,7 @@ table.frames {{ table-layout: fixed; }}
 .frames td:last-child {{ text-align: left; }}
 .map {{ display: flex; gap: 4px; align-items: flex-start; }}
 table.objects {{ margin: 0; font-size: 12px; }}
-table.objects td, table.objects th {{ border: none; padding: 1px 4px; text-align: left; }}
+table.objects td, table.objects th {{ border: none; padding: 1px 4px; text-align: left; white-space: nowrap; }}
 .swatch {{ display: inline-block; width: 12px; height: 12px; border: 1px solid #555; }}
 .legend span {{ margin-right: 1.5em; white-space: nowrap; }}
 figure {{ display: inline-block; margin: 0 1em 1em 0; }}
@@ -726,7 +726,7 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
             // In a sweep the case names its sun (one column fewer keeps the
             // table within 1400 px).
             let (case_width, case_header) = if swept {
-                (96, "case and sun")
+                (80, "case and sun")
             } else {
                 (44, "case")
             };
@@ -781,7 +781,7 @@ fn frame_columns(first_width: u32) -> String {
     if first_width > 0 {
         widths.push(first_width);
     }
-    widths.extend([44, 232, 348, 468, 196]);
+    widths.extend([40, 228, 340, 470, 176]);
     let cols: String = (widths.iter())
         .map(|w| format!("<col style=\"width:{w}px\">"))
         .collect();
@@ -826,16 +826,20 @@ fn sun_text(f: &FrameRow) -> String {
 struct PolarPlot {
     title: &'static str,
     value: fn(&FrameRow) -> f32,
+    /// The colour scale's top, with its unit.
+    label: fn(f32) -> String,
 }
 
 const POLAR_PLOTS: [PolarPlot; 2] = [
     PolarPlot {
         title: "Mean reflected luminance (cd/m²) over the sun positions",
         value: |r| r.summary.mean_reflected_luminance_cd_m2,
+        label: |v| format!("{v:.0} cd/m²"),
     },
     PolarPlot {
         title: "Instrument area under the contrast threshold over the sun positions",
         value: |r| r.summary.low_contrast_share,
+        label: |v| format!("{:.1}% of instruments", v * 100.0),
     },
 ];
 
@@ -877,14 +881,14 @@ fn polar_svg(
     let _ = writeln!(
         svg,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="11">"#,
-        w = SIZE + 90.0,
+        w = SIZE + 150.0,
         h = SIZE + 30.0
     );
     let _ = writeln!(
         svg,
         r#"<text x="{x}" y="14" text-anchor="middle" font-size="12">{}</text>"#,
         escape(plot.title),
-        x = (SIZE + 90.0) / 2.0
+        x = (SIZE + 150.0) / 2.0
     );
     for elevation in [0.0f32, 30.0, 60.0] {
         let r = RIM * (90.0 - elevation) / 90.0;
@@ -934,7 +938,8 @@ fn polar_svg(
     }
     let _ = writeln!(
         svg,
-        r#"<text x="{x0}" y="{y1}">{top:.3}</text><text x="{x0}" y="{y2}">0</text></svg>"#,
+        r#"<text x="{x0}" y="{y1}">{top}</text><text x="{x0}" y="{y2}">0</text></svg>"#,
+        top = (plot.label)(top),
         y1 = y0 - 4.0,
         y2 = y0 + height + 12.0
     );
