@@ -217,19 +217,15 @@ fn a_missing_output_directory_is_created_and_a_write_error_says_its_cause_once()
 #[test]
 fn the_png_exposure_and_tone_curve_come_from_the_job() {
     let dir = tempfile::tempdir().unwrap();
+    // The stock job with its documented [output] keys changed.
     let job = std::fs::read_to_string(stock_job()).unwrap();
+    assert!(job.contains("white_cd_m2 = 10000.0") && job.contains("tone = \"clip\""));
+    let brighter_job = job.replace("white_cd_m2 = 10000.0", "white_cd_m2 = 2500.0");
     let brighter = dir.path().join("brighter.toml");
-    std::fs::write(
-        &brighter,
-        format!("{job}\n[output]\nwhite_cd_m2 = 2500.0\n"),
-    )
-    .unwrap();
+    std::fs::write(&brighter, &brighter_job).unwrap();
     let toned = dir.path().join("toned.toml");
-    std::fs::write(
-        &toned,
-        format!("{job}\n[output]\nwhite_cd_m2 = 2500.0\ntone = \"reinhard\"\n"),
-    )
-    .unwrap();
+    let toned_job = brighter_job.replace("tone = \"clip\"", "tone = \"reinhard\"");
+    std::fs::write(&toned, toned_job).unwrap();
     let png = |job: &Path, name: &str| {
         let path = dir.path().join(name);
         let out = vtfarm(&[
