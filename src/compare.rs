@@ -97,6 +97,8 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
         vtfarm_render::output::write_image(
             &args.output.join(format!("{}.png", f.method)),
             &run.image.color,
+            &vtfarm_imaging::Exposure::default(),
+            None,
         )?;
         figures.push(f);
     }

@@ -12,6 +12,7 @@ use vtfarm_master::{
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
+use vtfarm_render::output::ImageFormat;
 use vtfarm_scene::Scene;
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::{ClientOptions, connect};
@@ -32,10 +33,15 @@ pub(crate) struct SubmitArgs {
     /// The master's HOST:PORT (default: the cluster file's).
     #[arg(long)]
     master: Option<String>,
-    /// Output directory for frame_NNNN.png, frame_NNNN_timeline.svg (where
-    /// each frame's time went) and stats.json.
+    /// Output directory for frame_NNNN.png (or .exr), frame_NNNN_timeline.svg
+    /// (where each frame's time went) and stats.json; created if missing.
     #[arg(short, long)]
     output: PathBuf,
+    /// The frames' format: png (8-bit sRGB, the job's [output] exposure) or
+    /// exr (OpenEXR, linear cd/m², RGB and Y; with --aux also the reflected
+    /// and transmitted layers).
+    #[arg(long, default_value = "png", value_parser = parse_frame_format)]
+    format: vtfarm_render::output::ImageFormat,
     /// Follow job JOB that the master already has (submitted from another
     /// shell, or before this one lost the master) instead of submitting
     /// the job file again; the job file still names the scene and outputs.
@@ -50,6 +56,18 @@ pub(crate) struct SubmitArgs {
     quality: Option<Quality>,
     #[command(flatten)]
     size: crate::shared::ImageSize,
+}
+
+/// `png` or `exr`, the frame formats of `vtfarm submit`.
+fn parse_frame_format(name: &str) -> Result<vtfarm_render::output::ImageFormat, String> {
+    use vtfarm_render::output::ImageFormat;
+    match name {
+        "png" => Ok(ImageFormat::Png),
+        "exr" => Ok(ImageFormat::Exr),
+        other => Err(format!(
+            "unsupported frame format {other:?}; supported: png (8-bit sRGB), exr (OpenEXR, linear cd/m²)"
+        )),
+    }
 }
 
 /// Options of `vtfarm status`.
@@ -124,6 +142,26 @@ fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptio
     })
 }
 
+/// Writes a finished frame of `vtfarm submit` as `format` (PNG under
+/// `exposure`, or OpenEXR with the components as layers when the job kept
+/// them).
+fn write_frame(
+    path: &Path,
+    frame: &vtfarm_master::FinishedFrame,
+    format: ImageFormat,
+    exposure: &vtfarm_imaging::Exposure,
+) -> Result<()> {
+    match (format, frame.image.linear()) {
+        (ImageFormat::Png, _) if exposure.is_identity() => frame.image.write_png(path)?,
+        (_, None) => bail!("the master sent an sRGB frame for linear output"),
+        (_, Some(image)) => {
+            let components = frame.components.as_ref().map(|c| c.components());
+            vtfarm_render::output::write_image(path, image, exposure, components.as_ref())?
+        }
+    }
+    Ok(())
+}
+
 /// `vtfarm submit`.
 pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     if vtfarm_job::study::is_study_file(&args.job) {
@@ -144,7 +182,8 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .file_name()
         .map_or("job".into(), |n| n.to_string_lossy().into_owned());
     let output = args.output.clone();
-    let (args_aux, attach) = (args.aux, args.attach);
+    let (args_aux, attach, format) = (args.aux, args.attach, args.format);
+    let exposure = job.output.exposure();
     let mut arrivals = std::collections::BTreeMap::new();
     let frames = runtime()?.block_on(async {
         let data = SceneData::from_scene(&scene);
@@ -153,9 +192,11 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             aux: args_aux,
         };
         let wire = wire_job(&name, &data, &setups, &reflectors, options);
-        // Only PNGs are written: 8-bit sRGB frames, a quarter of the bytes
-        // of linear ones before compression, and no conversion here.
-        let image = if args_aux {
+        // Only PNGs at the default exposure are written: 8-bit sRGB
+        // frames, a quarter of the bytes of linear ones before
+        // compression, and no conversion here.
+        let png_only = format == ImageFormat::Png && exposure.is_identity();
+        let image = if args_aux || !png_only {
             WireImageFormat::LinearF32
         } else {
             WireImageFormat::Srgb8
@@ -182,9 +223,9 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             JobEvent::Warning(warning) => bar.println(format!("warning: {warning}")),
             JobEvent::FrameDone(f) => {
                 arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);
-                let path = output.join(format!("frame_{:04}.png", f.frame));
-                if let Err(e) = f.image.write_png(&path) {
-                    bar.println(format!("error: {e}"));
+                let path = output.join(format!("frame_{:04}.{}", f.frame, format.extension()));
+                if let Err(e) = write_frame(&path, f, format, &exposure) {
+                    bar.println(format!("error: {e:#}"));
                 }
                 let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
                 let svg = vtfarm_master::timeline::timeline_svg(&f.stats);

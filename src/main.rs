@@ -74,7 +74,10 @@ enum ClusterCommand {
 struct RenderArgs {
     /// The job file (TOML), e.g. configs/cockpit.toml.
     job: PathBuf,
-    /// Output image: .png (8-bit sRGB) or .npy (linear float32).
+    /// Output image: .png (8-bit sRGB, the job's [output] exposure), .exr
+    /// (OpenEXR, linear cd/m², RGB and Y; with --aux also the reflected and
+    /// transmitted layers) or .npy (linear float32, render units). A missing
+    /// directory is created.
     #[arg(short, long, default_value = "out.png")]
     output: PathBuf,
     /// Overrides the job's quality level.
@@ -156,6 +159,8 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn render(args: RenderArgs) -> Result<()> {
+    // A wrong extension is refused before anything renders.
+    let format = output::ImageFormat::of(&args.output)?;
     set_threads(args.threads)?;
     let PreparedJob {
         job,
@@ -189,7 +194,14 @@ fn render(args: RenderArgs) -> Result<()> {
         };
         let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
         bar.finish_and_clear();
-        output::write_image(&args.output, &frame.image.color)?;
+        let components = (format == output::ImageFormat::Exr).then(|| frame.image.components());
+        let exposure = job.output.exposure();
+        output::write_image(
+            &args.output,
+            &frame.image.color,
+            &exposure,
+            components.as_ref(),
+        )?;
         output::write_aux(dir, &frame.image, &frame.faces, renderer.scene())?;
         let timings = [
             ("base frame", frame.raster_time),
@@ -219,7 +231,11 @@ fn render(args: RenderArgs) -> Result<()> {
         bar.finish_and_clear();
         let image =
             (frame.image.linear()).context("the master sent an sRGB frame for linear output")?;
-        output::write_image(&args.output, image)?;
+        let components = (frame.components.as_ref())
+            .filter(|_| format == output::ImageFormat::Exr)
+            .map(|c| c.components());
+        let exposure = job.output.exposure();
+        output::write_image(&args.output, image, &exposure, components.as_ref())?;
         if let (Some(dir), Some(components)) = (&args.aux, &frame.components) {
             output::write_aux(dir, components, &[], &scene)?;
         }

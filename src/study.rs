@@ -120,9 +120,14 @@ fn frame_name(plan: &StudyPlan, frame: usize) -> String {
 
 pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
     println!(
-        "{:<24} {:>12} {:>12} {:>14} {:>14}  main glare source",
+        "{:<24} {:>12} {:>12} {:>14} {:>14}  glare culprit (share of the glare area)",
         "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr cd/m²"
     );
+    let culprit = |culprits: &[vtfarm_study::Culprit]| {
+        culprits.first().map_or("none (no glare)".to_owned(), |c| {
+            format!("{} ({:.1}%)", c.name, c.glare_share * 100.0)
+        })
+    };
     for s in &report.ranking {
         println!(
             "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>14.1}  {}",
@@ -131,21 +136,22 @@ pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
             s.worst_glare_area_share * 100.0,
             s.worst_low_contrast_share * 100.0,
             s.mean_reflected_luminance_cd_m2,
-            s.main_glare_source.as_deref().unwrap_or("none")
+            culprit(&s.glare_culprits)
         );
     }
     for s in &report.ranking {
         if let Some(w) = s.worst_cases.first() {
+            // A frame names its sun only in a sweep.
             let sun = match (w.sun_azimuth_deg, w.sun_elevation_deg) {
-                (Some(a), Some(e)) => format!("sun at azimuth {a:.1}°, elevation {e:.1}°"),
-                _ => "no sun".to_owned(),
+                (Some(a), Some(e)) => format!("sun at azimuth {a:.1}°, elevation {e:.1}°, "),
+                _ => String::new(),
             };
             println!(
-                "worst for {}: {sun}, eye {}: mean Lr {:.1} cd/m², mirrors {}",
+                "worst for {}: {sun}eye {}: mean Lr {:.1} cd/m², glare culprit {}",
                 s.variant,
                 w.eye_index,
                 w.mean_reflected_luminance_cd_m2,
-                w.mirrored_object.as_deref().unwrap_or("nothing")
+                culprit(&w.glare_culprits)
             );
         }
     }

@@ -468,8 +468,8 @@ async fn a_study_on_a_two_worker_cluster_writes_the_same_files_as_on_one_machine
     }
     assert_eq!(
         files.len(),
-        3 + 2 * 2 * 7,
-        "three images and four arrays per frame"
+        3 + 2 * 2 * 8,
+        "three PNG images, the OpenEXR image and four arrays per frame"
     );
 }
 
@@ -544,8 +544,8 @@ async fn a_sun_sweep_on_a_two_worker_cluster_writes_the_same_files_as_on_one_mac
     assert!(files.contains_key(std::path::Path::new("current/sun_001/eye_01/heat.png")));
     assert_eq!(
         files.len(),
-        3 + 2 * 2 * 2 * 7,
-        "three images and four arrays per frame: 2 variants x 2 suns x 2 eyes"
+        3 + 2 * 2 * 2 * 8,
+        "three PNG images, the OpenEXR image and four arrays per frame: 2 variants x 2 suns x 2 eyes"
     );
     let csv = String::from_utf8(files[std::path::Path::new("summary.csv")].clone()).unwrap();
     let header = csv.lines().next().unwrap();

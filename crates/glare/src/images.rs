@@ -1,8 +1,9 @@
-//! The heat map of reflected luminance and the reflected-object map, each
-//! with a legend panel to the right of the frame drawn with the built-in
-//! bitmap font.
+//! The heat map of reflected luminance and the reflected-object map: the
+//! frame alone (`*_frame`, with what a legend beside it needs: a report
+//! draws its legends as text), or with a legend panel to the right of the
+//! frame drawn with the built-in bitmap font.
 //!
-//! Layout of both images: the frame occupies columns `0..width` and rows
+//! Layout of the images with a panel: the frame occupies columns `0..width` and rows
 //! `0..height` at the same pixel positions as the input; the legend panel
 //! occupies the columns from `width` on. If the legend needs more rows than
 //! the frame has, the image is taller and the rows below the frame are black.
@@ -14,7 +15,7 @@ use vtfarm_imaging::{Image, srgb_to_linear};
 
 use crate::font::{GLYPH_HEIGHT, draw_text, text_width};
 use crate::ramp::ramp_color;
-use crate::{GlareError, GlareInput, Params, check, masked_luminance, rank_objects};
+use crate::{GlareError, GlareInput, ObjectGlare, Params, check, masked_luminance, rank_objects};
 
 /// The colour of legend text (linear white; nothing else in the images is
 /// pure white).
@@ -60,7 +61,7 @@ fn palette_color(rank: usize) -> Vec3 {
 }
 
 /// A scale label: at most about 5 characters (`0`, `0.125`, `12.5`, `1.2E4`).
-fn format_label(v: f32) -> String {
+pub fn format_label(v: f32) -> String {
     if !v.is_finite() || v <= 0.0 {
         "0".to_owned()
     } else if !(0.01..10_000.0).contains(&v) {
@@ -97,8 +98,17 @@ fn paint_glass(img: &mut Image, input: &GlareInput<'_>, color: impl Fn(usize) ->
     }
 }
 
-fn frame_canvas(width: u32, height: u32, panel_width: u32, panel_height: u32) -> Image {
-    Image::new(width + panel_width, height.max(panel_height), Vec3::ZERO)
+/// `frame` at the top left of a black canvas with room for a legend panel
+/// on its right.
+fn frame_canvas(frame: &Image, panel_width: u32, panel_height: u32) -> Image {
+    let (w, h) = (frame.width, frame.height);
+    let mut img = Image::new(w + panel_width, h.max(panel_height), Vec3::ZERO);
+    for y in 0..h {
+        for x in 0..w {
+            img.set(x, y, frame.get(x, y));
+        }
+    }
+    img
 }
 
 /// The luminance range of a heat map's logarithmic colour scale, in cd/m².
@@ -142,30 +152,58 @@ impl LogRange {
     }
 
     /// The luminance at position `t` of the scale.
-    fn at(&self, t: f32) -> f32 {
+    pub fn at(&self, t: f32) -> f32 {
         self.min_cd_m2 * (self.max_cd_m2 / self.min_cd_m2).powf(t)
+    }
+
+    /// `count` (at least 2) labels of a legend, evenly spaced in the
+    /// logarithm from the bottom to the top: (position on the scale,
+    /// luminance in cd/m²).
+    pub fn ticks(&self, count: usize) -> Vec<(f32, f32)> {
+        let last = count.max(2) - 1;
+        (0..=last)
+            .map(|i| {
+                let t = i as f32 / last as f32;
+                (t, self.at(t))
+            })
+            .collect()
     }
 }
 
 /// The heat map of reflected luminance `L_r` in cd/m² on a logarithmic
-/// colour scale: glass pixels take [`ramp_color`] of their
-/// [`LogRange::position`], everything else is black. `range` is `Some` for a
-/// fixed scale (to compare the frames of a study), `None` for
-/// [`LogRange::below_peak`] of the frame's peak. The legend panel on the
-/// right has the colour bar (top = the range's top), five labels evenly
-/// spaced in the logarithm (decades for the automatic range) and the title
-/// `CD/M2 LOG`.
+/// colour scale, the frame alone (no legend: a report draws it beside the
+/// image, from [`LogRange::ticks`] and [`ramp_color`]): glass pixels take
+/// [`ramp_color`] of their [`LogRange::position`], everything else is black.
+/// `range` is `Some` for a fixed scale (to compare the frames of a study),
+/// `None` for [`LogRange::below_peak`] of the frame's peak; the range used
+/// comes back with the image.
+pub fn heat_map_frame(
+    input: &GlareInput<'_>,
+    params: &Params,
+    range: Option<LogRange>,
+) -> Result<(Image, LogRange), GlareError> {
+    check(input, params)?;
+    let lr = masked_luminance(input.glass, input.reflected, params);
+    let peak = lr.iter().copied().fold(0.0f32, f32::max);
+    let range = range.unwrap_or_else(|| LogRange::below_peak(peak));
+    let mut img = Image::new(input.width, input.height, Vec3::ZERO);
+    paint_glass(&mut img, input, |i| ramp_color(range.position(lr[i])));
+    Ok((img, range))
+}
+
+/// [`heat_map_frame`] with a legend panel baked in on the right, in the
+/// built-in bitmap font (for quick looks, e.g. the dashboard; a report
+/// draws its legends as text): the colour bar (top = the range's top),
+/// five labels evenly spaced in the logarithm (decades for the automatic
+/// range) and the title `CD/M2 LOG`.
 pub fn heat_map(
     input: &GlareInput<'_>,
     params: &Params,
     range: Option<LogRange>,
 ) -> Result<Image, GlareError> {
-    check(input, params)?;
-    let lr = masked_luminance(input.glass, input.reflected, params);
-    let peak = lr.iter().copied().fold(0.0f32, f32::max);
-    let range = range.unwrap_or_else(|| LogRange::below_peak(peak));
-    let labels: Vec<String> = (0..LABELS)
-        .map(|i| format_label(range.at(i as f32 / (LABELS - 1) as f32)))
+    let (frame, range) = heat_map_frame(input, params, range)?;
+    let labels: Vec<String> = (range.ticks(LABELS).into_iter())
+        .map(|(_, value)| format_label(value))
         .collect();
     let title = "CD/M2 LOG";
     let label_width = labels
@@ -175,9 +213,8 @@ pub fn heat_map(
         .unwrap_or(0);
     let panel_width = (MARGIN + BAR_WIDTH + 6 + label_width + MARGIN)
         .max(MARGIN + text_width(title, SCALE) + MARGIN);
-    let (w, h) = (input.width, input.height);
-    let mut img = frame_canvas(w, h, panel_width, MIN_LEGEND_HEIGHT);
-    paint_glass(&mut img, input, |i| ramp_color(range.position(lr[i])));
+    let w = input.width;
+    let mut img = frame_canvas(&frame, panel_width, MIN_LEGEND_HEIGHT);
 
     let x0 = w + MARGIN;
     draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
@@ -196,8 +233,7 @@ pub fn heat_map(
         let t = 1.0 - k as f32 / (bar_height - 1) as f32;
         fill_rect(&mut img, x0, bar_top + k, BAR_WIDTH, 1, ramp_color(t));
     }
-    for (i, label) in labels.iter().enumerate() {
-        let t = i as f32 / (LABELS - 1) as f32;
+    for (label, (t, _)) in labels.iter().zip(range.ticks(LABELS)) {
         let y = bar_top + ((1.0 - t) * (bar_height - 1) as f32).round() as u32;
         fill_rect(&mut img, x0 + BAR_WIDTH + 1, y, 3, 1, TICK_COLOR);
         draw_text(
@@ -212,27 +248,53 @@ pub fn heat_map(
     Ok(img)
 }
 
-/// The reflected-object map: each glass pixel takes the colour of the object
-/// its reflection shows ([`PALETTE`], by rank as in [`crate::rank_objects`]),
+/// The colour of the object ranked `rank` in the object maps (sRGB):
+/// [`PALETTE`], repeating after 10.
+pub fn object_color_srgb(rank: usize) -> [u8; 3] {
+    PALETTE[rank % PALETTE.len()]
+}
+
+/// The reflected-object map, the frame alone (no legend: a report draws
+/// it beside the image): each glass pixel takes the colour of the object
+/// its reflection shows ([`object_color_srgb`] of its rank in
+/// [`crate::rank_objects`], the culprit of the glare first),
 /// [`NO_OBJECT_COLOR`] where it shows nothing; pixels outside the glass are
-/// black. The legend panel on the right, titled `OBJECTS`, has one swatch per
-/// object with its name (upper-case, cut to 16 characters) and its pixel
-/// count, most glass first; beyond 20 objects a last line says `+N MORE`.
-pub fn object_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, GlareError> {
+/// black. The ranked objects come back with the image, in colour order.
+pub fn object_map_frame(
+    input: &GlareInput<'_>,
+    params: &Params,
+) -> Result<(Image, Vec<ObjectGlare>), GlareError> {
     check(input, params)?;
     let lr = masked_luminance(input.glass, input.reflected, params);
-    let ranked = rank_objects(input, &lr);
+    let ranked = rank_objects(input, &lr, params.thresholds.veiling_luminance_cd_m2);
     let colors: BTreeMap<u32, Vec3> = ranked
         .iter()
         .enumerate()
         .map(|(rank, o)| (o.object, palette_color(rank)))
         .collect();
+    let mut img = Image::new(input.width, input.height, Vec3::ZERO);
+    paint_glass(&mut img, input, |i| {
+        colors
+            .get(&input.reflected_object[i])
+            .copied()
+            .unwrap_or(NO_OBJECT_COLOR)
+    });
+    Ok((img, ranked))
+}
+
+/// [`object_map_frame`] with a legend panel baked in on the right, in the
+/// built-in bitmap font (for quick looks, e.g. the dashboard), titled
+/// `OBJECTS`: one swatch per object with its name (upper-case, cut to 16
+/// characters) and the glass pixels it covers, in rank order; beyond 20
+/// objects a last line says `+N MORE`.
+pub fn object_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, GlareError> {
+    let (frame, ranked) = object_map_frame(input, params)?;
     let shown = ranked.len().min(MAX_ENTRIES);
     let mut lines: Vec<String> = ranked[..shown]
         .iter()
         .map(|o| {
             let name: String = o.name.chars().take(MAX_NAME_CHARS).collect();
-            format!("{name} {}", o.pixels)
+            format!("{name} {}", o.covered_pixels)
         })
         .collect();
     if ranked.len() > shown {
@@ -247,14 +309,8 @@ pub fn object_map(input: &GlareInput<'_>, params: &Params) -> Result<Image, Glar
     let panel_width =
         (MARGIN + 10 + 6 + text_w + MARGIN).max(MARGIN + text_width(title, SCALE) + MARGIN);
     let panel_height = MARGIN + TEXT_HEIGHT + MARGIN + lines.len() as u32 * ROW_HEIGHT + MARGIN;
-    let (w, h) = (input.width, input.height);
-    let mut img = frame_canvas(w, h, panel_width, panel_height);
-    paint_glass(&mut img, input, |i| {
-        colors
-            .get(&input.reflected_object[i])
-            .copied()
-            .unwrap_or(NO_OBJECT_COLOR)
-    });
+    let w = input.width;
+    let mut img = frame_canvas(&frame, panel_width, panel_height);
     let x0 = w + MARGIN;
     draw_text(&mut img, x0 as i64, MARGIN as i64, title, SCALE, FONT_COLOR);
     let mut y = MARGIN + TEXT_HEIGHT + MARGIN;

@@ -42,8 +42,11 @@
 //!   share of glass pixels with `L_r` above
 //!   [`Thresholds::veiling_luminance_cd_m2`], the share of the evaluated
 //!   instrument area with `CR` below [`Thresholds::min_contrast`], and the
-//!   objects seen in the reflections ranked by the glass area they cover
-//!   (then by their summed `L_r`). Fields carry their unit in their names
+//!   objects seen in the reflections ranked by the glare they cause: the
+//!   glass area over the glare threshold whose reflection shows them, then
+//!   the luminance they add above the threshold there ([`rank_objects`]);
+//!   the glass area each covers at any luminance is a separate figure
+//!   (`covered_pixels`, `coverage_share`). Fields carry their unit in their names
 //!   (`mean_reflected_luminance_cd_m2`); ratios and shares have none.
 //!
 //! Areas are pixel counts; shares are fractions in [0, 1] (0 for an empty
@@ -73,7 +76,10 @@ mod images;
 mod ramp;
 
 pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
-pub use images::{FONT_COLOR, LogRange, NO_OBJECT_COLOR, PALETTE, heat_map, object_map};
+pub use images::{
+    FONT_COLOR, LogRange, NO_OBJECT_COLOR, PALETTE, format_label, heat_map, heat_map_frame,
+    object_color_srgb, object_map, object_map_frame,
+};
 pub use ramp::{INFERNO_SRGB, ramp_color};
 
 pub use vtfarm_scene::photometry::{CD_M2_PER_UNIT, luminance};
@@ -537,60 +543,90 @@ fn share(part: usize, whole: usize) -> f32 {
     }
 }
 
-/// One object seen in the reflections.
+/// One object seen in the reflections, with the glare it causes.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ObjectGlare {
     /// Object id (index into the scene's objects).
     pub object: u32,
     pub name: String,
-    /// Glass pixels whose reflection shows this object.
-    pub pixels: usize,
-    /// `pixels` / glass pixels.
-    pub area_share: f32,
-    /// `Σ L_r` over those pixels (cd/m² × pixels).
+    /// Glass pixels over the glare threshold (`L_r >
+    /// veiling_luminance_cd_m2`) whose reflection shows this object: the
+    /// glare area it causes.
+    pub glare_pixels: usize,
+    /// `glare_pixels` / every glare pixel of the frame (0 without glare):
+    /// its share of the glare.
+    pub glare_share: f32,
+    /// `Σ (L_r − threshold)` over its glare pixels (cd/m² × pixels): how
+    /// far above the threshold it takes the glass.
+    pub excess_luminance_cd_m2: f32,
+    /// Glass pixels whose reflection shows this object, at any luminance:
+    /// the area it covers, not the glare it causes.
+    pub covered_pixels: usize,
+    /// `covered_pixels` / glass pixels.
+    pub coverage_share: f32,
+    /// `Σ L_r` over the covered pixels (cd/m² × pixels).
     pub summed_reflected_luminance_cd_m2: f32,
-    /// `summed_reflected_luminance_cd_m2 / pixels`.
+    /// `summed_reflected_luminance_cd_m2 / covered_pixels`.
     pub mean_reflected_luminance_cd_m2: f32,
 }
 
 /// The objects in the reflected-object map over the glass, ranked by the
-/// glass area they cover (descending), ties broken by summed reflected
-/// luminance (descending), then by object id (ascending). `lr` is the
+/// glare they cause: the glass area over `threshold_cd_m2` they cause
+/// (descending), then the luminance they add above it (descending), then
+/// the glass area they cover (descending), then object id (ascending). The
+/// first is the frame's culprit, when it causes any glare. `lr` is the
 /// reflected luminance map. Pixels showing [`NONE`] are not counted.
-pub fn rank_objects(input: &GlareInput<'_>, lr: &[f32]) -> Vec<ObjectGlare> {
-    let mut per: BTreeMap<u32, (usize, f64)> = BTreeMap::new();
-    let mut glass_pixels = 0usize;
+pub fn rank_objects(input: &GlareInput<'_>, lr: &[f32], threshold_cd_m2: f32) -> Vec<ObjectGlare> {
+    #[derive(Default)]
+    struct Tally {
+        covered: usize,
+        summed: f64,
+        glare: usize,
+        excess: f64,
+    }
+    let mut per: BTreeMap<u32, Tally> = BTreeMap::new();
+    let (mut glass_pixels, mut all_glare) = (0usize, 0usize);
     for (i, &g) in input.glass.iter().enumerate() {
         if !g {
             continue;
         }
         glass_pixels += 1;
+        let l = lr.get(i).copied().unwrap_or(0.0);
+        let over = l > threshold_cd_m2;
+        all_glare += usize::from(over);
         let id = input.reflected_object.get(i).copied().unwrap_or(NONE);
         if id == NONE {
             continue;
         }
-        let e = per.entry(id).or_insert((0, 0.0));
-        e.0 += 1;
-        e.1 += lr.get(i).copied().unwrap_or(0.0) as f64;
+        let e = per.entry(id).or_default();
+        e.covered += 1;
+        e.summed += l as f64;
+        if over {
+            e.glare += 1;
+            e.excess += (l - threshold_cd_m2) as f64;
+        }
     }
     let mut out: Vec<ObjectGlare> = per
         .into_iter()
-        .map(|(object, (pixels, sum))| ObjectGlare {
+        .map(|(object, t)| ObjectGlare {
             object,
             name: input.object_name(object),
-            pixels,
-            area_share: share(pixels, glass_pixels),
-            summed_reflected_luminance_cd_m2: sum as f32,
-            mean_reflected_luminance_cd_m2: (sum / pixels as f64) as f32,
+            glare_pixels: t.glare,
+            glare_share: share(t.glare, all_glare),
+            excess_luminance_cd_m2: t.excess as f32,
+            covered_pixels: t.covered,
+            coverage_share: share(t.covered, glass_pixels),
+            summed_reflected_luminance_cd_m2: t.summed as f32,
+            mean_reflected_luminance_cd_m2: (t.summed / t.covered as f64) as f32,
         })
         .collect();
     out.sort_by(|a, b| {
-        b.pixels
-            .cmp(&a.pixels)
+        (b.glare_pixels.cmp(&a.glare_pixels))
             .then(
-                b.summed_reflected_luminance_cd_m2
-                    .total_cmp(&a.summed_reflected_luminance_cd_m2),
+                b.excess_luminance_cd_m2
+                    .total_cmp(&a.excess_luminance_cd_m2),
             )
+            .then(b.covered_pixels.cmp(&a.covered_pixels))
             .then(a.object.cmp(&b.object))
     });
     out
@@ -619,6 +655,12 @@ pub struct Summary {
     pub mean_veiling_ratio: f32,
     /// Glass pixels with `L_r > veiling_luminance_cd_m2`.
     pub glare_pixels: usize,
+    /// Glare pixels whose reflection shows no object: the background (the
+    /// rays that leave the scene, [`vtfarm_scene::Lighting::background`]),
+    /// a glare source beside the objects of [`Summary::objects`].
+    pub background_glare_pixels: usize,
+    /// `Σ (L_r − threshold)` over those pixels (cd/m² × pixels).
+    pub background_excess_luminance_cd_m2: f32,
     /// `glare_pixels / glass_pixels`.
     pub glare_area_share: f32,
     pub instrument_pixels: usize,
@@ -632,7 +674,8 @@ pub struct Summary {
     pub low_contrast_pixels: usize,
     /// `low_contrast_pixels / evaluated instrument pixels`.
     pub low_contrast_share: f32,
-    /// Objects seen in the reflections, see [`rank_objects`].
+    /// Objects seen in the reflections, the culprit of the glare first: see
+    /// [`rank_objects`].
     pub objects: Vec<ObjectGlare>,
 }
 
@@ -658,6 +701,8 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
     let (mut peak_r, mut sum_r, mut sum_t, mut peak_v, mut sum_v) =
         (0.0f32, 0.0f64, 0.0f64, 0.0f32, 0.0f64);
     let mut glare_pixels = 0usize;
+    let (mut background_glare, mut background_excess) = (0usize, 0.0f64);
+    let threshold = params.thresholds.veiling_luminance_cd_m2;
     for i in 0..input.glass.len() {
         if !input.glass[i] {
             continue;
@@ -668,8 +713,12 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         sum_t += lt[i] as f64;
         peak_v = peak_v.max(v[i]);
         sum_v += v[i] as f64;
-        if lr[i] > params.thresholds.veiling_luminance_cd_m2 {
+        if lr[i] > threshold {
             glare_pixels += 1;
+            if input.reflected_object.get(i).is_none_or(|&o| o == NONE) {
+                background_glare += 1;
+                background_excess += f64::from(lr[i] - threshold);
+            }
         }
     }
     let mean = |s: f64| {
@@ -693,6 +742,8 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         mean_veiling_ratio: mean(sum_v),
         glare_pixels,
         glare_area_share: share(glare_pixels, glass_pixels),
+        background_glare_pixels: background_glare,
+        background_excess_luminance_cd_m2: background_excess as f32,
         instrument_pixels: contrast.instrument_pixels,
         marking_pixels: contrast.marking_pixels,
         mean_marking_luminance_cd_m2: contrast.mean_marking_luminance_cd_m2,
@@ -700,7 +751,7 @@ pub fn analyze(input: &GlareInput<'_>, params: &Params) -> Result<Analysis, Glar
         min_contrast: contrast.min_contrast,
         low_contrast_pixels: contrast.low_contrast_pixels,
         low_contrast_share: contrast.low_contrast_share,
-        objects: rank_objects(input, &lr),
+        objects: rank_objects(input, &lr, params.thresholds.veiling_luminance_cd_m2),
     };
     Ok(Analysis {
         reflected_luminance: lr,

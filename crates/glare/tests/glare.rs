@@ -247,7 +247,7 @@ fn low_contrast_share_covers_the_instrument_area_where_the_glare_is() {
 }
 
 #[test]
-fn objects_are_ranked_by_covered_area_and_named() {
+fn objects_over_the_threshold_everywhere_rank_by_their_area_and_are_named() {
     let mut f = Frame::new(8, 4);
     f.names = vec!["mirror".into(), "driver shirt".into(), "sun visor".into()];
     f.glass = vec![true; 32];
@@ -269,7 +269,7 @@ fn objects_are_ranked_by_covered_area_and_named() {
     let ranked: Vec<(u32, &str, usize)> = s
         .objects
         .iter()
-        .map(|o| (o.object, o.name.as_str(), o.pixels))
+        .map(|o| (o.object, o.name.as_str(), o.glare_pixels))
         .collect();
     assert_eq!(
         ranked,
@@ -282,11 +282,16 @@ fn objects_are_ranked_by_covered_area_and_named() {
     );
     assert!(close(s.objects[0].summed_reflected_luminance_cd_m2, 0.7));
     assert!(close(s.objects[0].mean_reflected_luminance_cd_m2, 0.1));
-    assert!(close(s.objects[0].area_share, 7.0 / 28.0));
+    assert!(close(s.objects[0].coverage_share, 7.0 / 28.0));
+    assert_eq!(s.objects[0].covered_pixels, 7);
+    // Every pixel showing an object is glare (0.1 > 0.05), 16 in all: the
+    // shares are of the glare area.
+    assert!(close(s.objects[0].glare_share, 7.0 / 16.0));
+    assert!(close(s.objects[0].excess_luminance_cd_m2, 7.0 * 0.05));
 }
 
 #[test]
-fn equal_areas_rank_by_summed_reflected_luminance() {
+fn equal_glare_areas_rank_by_the_luminance_above_the_threshold() {
     let mut f = Frame::new(4, 1);
     f.glass = vec![true; 4];
     f.objects = vec![3, 3, 5, 5];
@@ -294,6 +299,86 @@ fn equal_areas_rank_by_summed_reflected_luminance() {
     let s = summarize(&f.input(), &relative()).unwrap();
     let order: Vec<u32> = s.objects.iter().map(|o| o.object).collect();
     assert_eq!(order, vec![5, 3]);
+}
+
+#[test]
+fn the_culprit_is_the_small_bright_object_over_the_threshold_not_the_large_dim_one() {
+    // The stock cockpit's case in miniature, at the default scale and
+    // threshold (500 cd/m²): cab walls at 35 cd/m² over 90 % of the glass,
+    // a side window at 5,000 cd/m² over 6 %, nothing over the rest.
+    let mut f = Frame::new(10, 10);
+    f.names = vec!["cab_walls".into(), "side_window_left".into()];
+    f.glass = vec![true; 100];
+    let unit = |cd_m2: f32| gray(cd_m2 / CD_M2_PER_UNIT);
+    for i in 0..90 {
+        f.objects[i] = 0;
+        f.reflected[i] = unit(35.0);
+    }
+    for i in 90..96 {
+        f.objects[i] = 1;
+        f.reflected[i] = unit(5_000.0);
+    }
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    assert_eq!(s.glare_pixels, 6);
+    let culprit = &s.objects[0];
+    assert_eq!(culprit.name, "side_window_left");
+    assert_eq!(culprit.glare_pixels, 6);
+    assert_eq!(culprit.glare_share, 1.0);
+    assert!((culprit.excess_luminance_cd_m2 - 6.0 * 4_500.0).abs() < 1.0);
+    assert!(close(culprit.coverage_share, 0.06));
+    // The walls cover the most glass, a separate figure, and cause no glare.
+    let walls = &s.objects[1];
+    assert_eq!((walls.name.as_str(), walls.glare_pixels), ("cab_walls", 0));
+    assert!(close(walls.coverage_share, 0.9));
+    assert_eq!(walls.glare_share, 0.0);
+    assert_eq!(s.background_glare_pixels, 0);
+    // Glare where the glass mirrors no object is the background's.
+    f.reflected[99] = unit(2_000.0);
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    assert_eq!((s.glare_pixels, s.background_glare_pixels), (7, 1));
+    assert!((s.background_excess_luminance_cd_m2 - 1_500.0).abs() < 0.1);
+    assert!(close(s.objects[0].glare_share, 6.0 / 7.0));
+    // The object map colours by the same rank: the culprit takes the
+    // palette's first colour.
+    let (map, ranked) = object_map_frame(&f.input(), &Params::default()).unwrap();
+    assert_eq!(ranked[0].name, "side_window_left");
+    let [r, g, b] = object_color_srgb(0);
+    let first = Vec3::new(r.into(), g.into(), b.into())
+        .map(|c: f32| vtfarm_imaging::srgb_to_linear(c / 255.0));
+    assert_eq!(map.get(0, 9), first);
+    assert_eq!(
+        (map.width, map.height),
+        (10, 10),
+        "the frame alone, no legend"
+    );
+}
+
+#[test]
+fn the_culprit_among_glare_sources_is_the_one_causing_more_glare_area() {
+    // Two objects over the threshold: a larger patch just over it beats a
+    // smaller, brighter one (area first), and at equal areas the brighter
+    // one wins (luminance above the threshold second).
+    let mut f = Frame::new(10, 1);
+    f.names = vec!["lamp".into(), "window".into()];
+    f.glass = vec![true; 10];
+    let unit = |cd_m2: f32| gray(cd_m2 / CD_M2_PER_UNIT);
+    for i in 0..3 {
+        f.objects[i] = 0;
+        f.reflected[i] = unit(9_000.0);
+    }
+    for i in 3..8 {
+        f.objects[i] = 1;
+        f.reflected[i] = unit(600.0);
+    }
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let order: Vec<&str> = s.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(order, ["window", "lamp"]);
+    assert!(close(s.objects[0].glare_share, 5.0 / 8.0));
+    f.objects[3..5].fill(NONE);
+    f.objects[5..8].fill(1);
+    let s = summarize(&f.input(), &Params::default()).unwrap();
+    let order: Vec<&str> = s.objects.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(order, ["lamp", "window"]);
 }
 
 /// A gradient strip: row 0 is glass with L_r rising 0..1 over 16 pixels,

@@ -1,5 +1,7 @@
-//! Linear RGB float images and their output: 8-bit sRGB PNG, 16-bit grayscale
-//! PNG (for index maps), and raw little-endian float32 `.npy` arrays.
+//! Linear RGB float images and their output: 8-bit sRGB PNG (with an
+//! [`Exposure`]: a scale and a tone curve), 16-bit grayscale PNG (for index
+//! maps), float32 OpenEXR ([`write_exr_f32`], named channels) and raw
+//! little-endian float32 `.npy` arrays.
 //!
 //! Architecture invariant: colours are linear everywhere in vtfarm; sRGB
 //! encoding happens only here, on the way out.
@@ -9,19 +11,101 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
-/// Errors while writing an image file.
+/// Errors while writing an image file. The message names the file and
+/// the cause once (the cause is not also the error's `source`, so a chain
+/// printed with `{:#}` does not repeat it).
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("cannot encode {path}: {source}")]
+    #[error("cannot encode {path}: {cause}")]
     Encode {
         path: PathBuf,
-        source: image::ImageError,
+        cause: image::ImageError,
     },
+    #[error("cannot write OpenEXR {path}: {cause}")]
+    Exr {
+        path: PathBuf,
+        cause: exr::error::Error,
+    },
+}
+
+/// How linear colours become the 8-bit PNG's: each channel is multiplied
+/// by `scale`, goes through `tone`, and is encoded as sRGB (values at or
+/// above 1 are white). The default (scale 1, [`ToneCurve::Clip`]) leaves
+/// the colours as they are: 1.0 is white.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Exposure {
+    pub scale: f32,
+    pub tone: ToneCurve,
+}
+
+impl Default for Exposure {
+    fn default() -> Self {
+        Exposure {
+            scale: 1.0,
+            tone: ToneCurve::Clip,
+        }
+    }
+}
+
+/// The tone curve of an [`Exposure`], applied per channel to the scaled
+/// value `x`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ToneCurve {
+    /// `x` itself: linear up to white, clipped above.
+    #[default]
+    Clip,
+    /// Reinhard's global operator `x / (1 + x)`: nothing clips, `x = 1`
+    /// shows at half (sRGB 188), brighter values are compressed towards
+    /// white.
+    Reinhard,
+}
+
+impl ToneCurve {
+    pub const ALL: [ToneCurve; 2] = [ToneCurve::Clip, ToneCurve::Reinhard];
+
+    /// The name in job files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ToneCurve::Clip => "clip",
+            ToneCurve::Reinhard => "reinhard",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<ToneCurve> {
+        ToneCurve::ALL.into_iter().find(|t| t.name() == name)
+    }
+
+    fn apply(self, x: f32) -> f32 {
+        match self {
+            ToneCurve::Clip => x,
+            ToneCurve::Reinhard if x > 0.0 => x / (1.0 + x),
+            ToneCurve::Reinhard => 0.0,
+        }
+    }
+}
+
+impl Exposure {
+    /// Whether the exposure leaves every colour as it is.
+    pub fn is_identity(&self) -> bool {
+        *self == Exposure::default()
+    }
+
+    /// The image as the PNG shows it, still linear: scaled and toned.
+    pub fn apply(&self, image: &Image) -> Image {
+        let Exposure { scale, tone } = *self;
+        Image {
+            width: image.width,
+            height: image.height,
+            pixels: (image.pixels.iter())
+                .map(|c| (*c * scale).map(|x| tone.apply(x)))
+                .collect(),
+        }
+    }
 }
 
 /// A linear RGB image, row 0 at the top.
@@ -122,6 +206,16 @@ impl Image {
         write_srgb8_png(path, self.width, self.height, &self.to_srgb8())
     }
 
+    /// [`Image::write_png`] of the image under `exposure` (the same bytes
+    /// for the default exposure).
+    pub fn write_png_exposed(&self, path: &Path, exposure: &Exposure) -> Result<(), ImageError> {
+        if exposure.is_identity() {
+            self.write_png(path)
+        } else {
+            exposure.apply(self).write_png(path)
+        }
+    }
+
     /// Writes the linear colours as a `.npy` array of shape (height, width, 3),
     /// little-endian float32.
     pub fn write_npy(&self, path: &Path) -> Result<(), ImageError> {
@@ -148,20 +242,20 @@ pub fn write_srgb8_png(
 ) -> Result<(), ImageError> {
     use image::ImageEncoder;
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    let encode = |source| ImageError::Encode {
+    let encode = |cause| ImageError::Encode {
         path: path.to_owned(),
-        source,
+        cause,
     };
-    let file = std::fs::File::create(path).map_err(|source| ImageError::Io {
+    let file = std::fs::File::create(path).map_err(|cause| ImageError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     })?;
     let mut out = std::io::BufWriter::new(file);
     let encoder = PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub);
     (encoder.write_image(pixels, width, height, image::ExtendedColorType::Rgb8)).map_err(encode)?;
-    out.flush().map_err(|source| ImageError::Io {
+    out.flush().map_err(|cause| ImageError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     })
 }
 
@@ -280,9 +374,9 @@ pub fn write_gray16_png(
         image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(width, height, values.to_vec())
             .expect("caller passes width * height values");
     buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| ImageError::Encode {
+        .map_err(|cause| ImageError::Encode {
             path: path.to_owned(),
-            source,
+            cause,
         })
 }
 
@@ -296,17 +390,54 @@ pub fn write_gray8_png(
     let buf = image::GrayImage::from_raw(width, height, values.to_vec())
         .expect("caller passes width * height values");
     buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|source| ImageError::Encode {
+        .map_err(|cause| ImageError::Encode {
             path: path.to_owned(),
-            source,
+            cause,
+        })
+}
+
+/// Writes a float32 OpenEXR file of one part with the named channels
+/// (`R`, `G`, `B`, `Y`, `reflected.R`, …: OpenEXR's layer convention),
+/// each `width * height` values row-major from the top row; ZIP
+/// compressed, so the values read back exactly.
+///
+/// # Panics
+/// If a channel does not hold `width * height` values.
+pub fn write_exr_f32(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: &[(&str, &[f32])],
+) -> Result<(), ImageError> {
+    use exr::prelude::*;
+    let n = width as usize * height as usize;
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
+        .iter()
+        .map(|&(name, values)| {
+            assert_eq!(values.len(), n, "channel {name}: width * height values");
+            AnyChannel::new(name, FlatSamples::F32(values.to_vec()))
+        })
+        .collect();
+    let layer = Layer::new(
+        (width as usize, height as usize),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    exr::prelude::Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|cause| ImageError::Exr {
+            path: path.to_owned(),
+            cause,
         })
 }
 
 /// Writes a little-endian float32 `.npy` file (format version 1.0).
 pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), ImageError> {
-    let io = |source| ImageError::Io {
+    let io = |cause| ImageError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     };
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let shape_text = if dims.len() == 1 {

@@ -57,6 +57,8 @@ pub struct Job {
     pub eyes: Vec<Vec3>,
     /// `[materials."NAME"]`: changes to the scene's materials, in name order.
     pub materials: Vec<MaterialOverride>,
+    /// The `[output]` keys: how the PNG images show the linear colours.
+    pub output: OutputSettings,
     /// Where the keys checked against the scene stand in the file
     /// (`camera.eye`, `frames.eyes[1]`, `reflectors object "glass"`,
     /// `materials."glass"`), so those errors name the line too.
@@ -118,6 +120,41 @@ impl MaterialOverride {
         }
         if let Some(ior) = self.ior {
             material.ior = ior;
+        }
+    }
+}
+
+/// The `[output]` keys of a job: the PNG's exposure. OpenEXR and `.npy`
+/// images keep the linear values whatever these say.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutputSettings {
+    /// The luminance a PNG shows as white (cd/m²): positive and finite.
+    /// Default [`OutputSettings::DEFAULT_WHITE_CD_M2`], the render unit.
+    pub white_cd_m2: f32,
+    /// The tone curve after the exposure ([`ToneCurve::Clip`] by default).
+    pub tone: ToneCurve,
+}
+
+pub use vtfarm_imaging::{Exposure, ToneCurve};
+
+impl OutputSettings {
+    /// White at one render unit (10,000 cd/m²), the PNGs vtfarm always wrote.
+    pub const DEFAULT_WHITE_CD_M2: f32 = vtfarm_scene::photometry::CD_M2_PER_UNIT;
+
+    /// The PNG exposure these settings make.
+    pub fn exposure(&self) -> Exposure {
+        Exposure {
+            scale: vtfarm_scene::photometry::exposure_scale(self.white_cd_m2),
+            tone: self.tone,
+        }
+    }
+}
+
+impl Default for OutputSettings {
+    fn default() -> Self {
+        OutputSettings {
+            white_cd_m2: OutputSettings::DEFAULT_WHITE_CD_M2,
+            tone: ToneCurve::Clip,
         }
     }
 }

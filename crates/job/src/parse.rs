@@ -18,8 +18,8 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
-    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride,
-    ReflectorSelector, SceneSource, obj_camera_missing,
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride, OutputSettings,
+    ReflectorSelector, SceneSource, ToneCurve, obj_camera_missing,
 };
 
 /// Names accepted by `scene.builtin`.
@@ -45,6 +45,8 @@ struct RawJob {
     frames: RawFrames,
     #[serde(default)]
     materials: std::collections::BTreeMap<Spanned<String>, RawMaterial>,
+    #[serde(default)]
+    output: RawOutput,
 }
 
 /// `[materials."NAME"]`: what a job changes in one material of the scene.
@@ -62,6 +64,14 @@ struct RawMaterial {
     emission_cd_m2: Option<Spanned<f32>>,
     emission_color: Option<Vec3Value>,
     texture: Option<Spanned<PathBuf>>,
+}
+
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    white_cd_m2: Option<Spanned<f32>>,
+    tone: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -175,6 +185,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let lighting = source.lighting(&raw.lighting)?;
     let (trace, vertex) = source.quality(&raw.quality)?;
     let method = source.method(&raw.quality)?;
+    let output = source.output(&raw.output)?;
     // Where the keys checked against the scene stand (see `Job::locations`).
     let c = &raw.camera;
     let mut spans: Vec<(String, Range<usize>)> = [
@@ -227,6 +238,7 @@ pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
         vertex,
         method,
         eyes,
+        output,
     })
 }
 
@@ -862,6 +874,34 @@ impl Source<'_> {
                 .map(|t| self.existing_file(&key("texture"), t))
                 .transpose()?,
         })
+    }
+
+    fn output(&self, raw: &RawOutput) -> Result<OutputSettings, JobError> {
+        let mut output = OutputSettings::default();
+        if let Some(white) = &raw.white_cd_m2 {
+            let v = *white.get_ref();
+            if !(v.is_finite() && v > 0.0) {
+                return Err(self.error_at(
+                    white,
+                    format!("output.white_cd_m2 = {v}: must be a positive, finite luminance"),
+                ));
+            }
+            output.white_cd_m2 = v;
+        }
+        if let Some(tone) = &raw.tone {
+            output.tone = ToneCurve::from_name(tone.get_ref()).ok_or_else(|| {
+                let valid: Vec<&str> = ToneCurve::ALL.iter().map(|t| t.name()).collect();
+                self.error_at(
+                    tone,
+                    format!(
+                        "unknown output.tone {:?}; valid: {}",
+                        tone.get_ref(),
+                        valid.join(", ")
+                    ),
+                )
+            })?;
+        }
+        Ok(output)
     }
 
     fn method(&self, raw: &RawQuality) -> Result<MethodKind, JobError> {

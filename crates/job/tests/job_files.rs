@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use vtfarm_job::{
-    CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, ReflectorSelector,
-    SceneSource, load_job, parse_job,
+    CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, OutputSettings,
+    ReflectorSelector, SceneSource, ToneCurve, load_job, parse_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
@@ -179,6 +179,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
         },
         method: MethodKind::CubeMapGrid,
         eyes: vec![Vec3::new(1.0, 2.0, 4.0), Vec3::new(2.0, 2.0, 3.0)],
+        output: OutputSettings::default(),
         locations: job.locations.clone(),
         materials: Vec::new(),
         camera_name: None,
@@ -556,6 +557,35 @@ fn unknown_keys_and_sections_are_named() {
         ),
         6,
         &["radius"],
+    );
+}
+
+#[test]
+fn the_output_section_sets_the_png_exposure() {
+    let job = parse(COCKPIT);
+    assert_eq!(job.output, OutputSettings::default());
+    // The default is the PNGs vtfarm always wrote: white at 10,000 cd/m².
+    assert!(job.output.exposure().is_identity());
+    let job = parse(&format!(
+        "{COCKPIT}[output]\nwhite_cd_m2 = 40000.0\ntone = \"reinhard\"\n"
+    ));
+    assert_eq!(job.output.white_cd_m2, 40_000.0);
+    assert_eq!(job.output.tone, ToneCurve::Reinhard);
+    assert_eq!(job.output.exposure().scale, 0.25);
+    assert_rejected(
+        &format!("{COCKPIT}[output]\nwhite_cd_m2 = 0.0\n"),
+        4,
+        &["white_cd_m2", "positive"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[output]\ntone = \"filmic\"\n"),
+        4,
+        &["filmic", "clip", "reinhard"],
+    );
+    assert_rejected(
+        &format!("{COCKPIT}[output]\nexposure = 1.0\n"),
+        4,
+        &["exposure"],
     );
 }
 

@@ -23,7 +23,7 @@ use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, PhaseTimes,
-    ShadowCache, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
+    PixelValue, ShadowCache, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -318,17 +318,32 @@ pub fn split_packages(triangles: &[TriangleId], size: usize) -> Vec<Vec<Triangle
 /// thin-glass model's (rasterized transmission, the back surface's
 /// reflection added to the front's): what `transmission = "raster"` would
 /// give with every reflector pixel traced, i.e. the model's own error.
-/// `frame` is the reference's frame with raster transmission.
+/// `frame` is the reference's frame with raster transmission. Each glass
+/// pixel is traced again without its refraction ray
+/// ([`Tracer::shade_reflection`]: local plus the front's reflection, which
+/// the reference's own reflected part no longer tells apart from the back
+/// surface's) and finished by the model.
 pub fn thin_glass_model(reference: &FrameImage, frame: &Frame<'_>) -> FrameImage {
+    use rayon::prelude::*;
     let mut modelled = reference.clone();
+    let width = modelled.color.width as usize;
+    let scene = frame.tracer.bvh.scene();
     let glass: Vec<usize> = reference.glass().collect();
-    for i in glass {
-        let mut value = modelled.pixel(i);
-        value.color -= value.transmitted;
-        value.transmitted = Vec3::ZERO;
-        let width = modelled.color.width as usize;
-        frame.finish_pixel(((i % width) as u32, (i / width) as u32), &mut value);
-        modelled.set_pixel(&value);
+    let values: Vec<PixelValue> = glass
+        .par_iter()
+        .map(|&i| {
+            let (x, y) = ((i % width) as u32, (i / width) as u32);
+            let triangle = frame.ids.triangle_at(x, y);
+            let (point, direction) =
+                vtfarm_vertex::pixel_surface(scene, &frame.camera, frame.ids, triangle, x, y);
+            let sample = frame.tracer.shade_reflection(&point, direction);
+            let mut value = PixelValue::from_sample(i as u32, &sample);
+            frame.finish_pixel((x, y), &mut value);
+            value
+        })
+        .collect();
+    for value in &values {
+        modelled.set_pixel(value);
     }
     modelled
 }

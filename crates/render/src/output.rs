@@ -1,5 +1,7 @@
-//! The files a render writes: the image as 8-bit sRGB PNG (or linear `.npy`),
-//! and on request the auxiliary outputs that other tools check:
+//! The files a render writes: the image, by the output path's extension
+//! ([`ImageFormat`]: 8-bit sRGB PNG under an [`Exposure`], linear OpenEXR in
+//! cd/m², or linear `.npy` in render units), and on request the auxiliary
+//! outputs that other tools check:
 //!
 //! - `mask.png`: 8-bit gray, 255 on reflector pixels, 0 elsewhere;
 //! - `reflected.png` (sRGB) and `reflected.npy` (linear float32, height x width x 3):
@@ -12,26 +14,80 @@
 //!   legend (`vtfarm_glare::object_map`, as a study's `objects.png`);
 //! - `wireframe.png`: the image with the refined triangles' edges drawn (Figure 13),
 //!   when the frame was rendered in this process.
+//!
+//! An OpenEXR image holds the channels `R`, `G`, `B` (linear, cd/m²: the
+//! render units times `vtfarm_scene::photometry::CD_M2_PER_UNIT`) and `Y`
+//! (their luminance, [`vtfarm_scene::photometry::cd_m2`]); with the
+//! components also `reflected.R` … `reflected.Y` and `transmitted.R` …
+//! `transmitted.Y`, the same way.
 
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
-use vtfarm_imaging::{Image, ImageError, write_gray8_png, write_gray16_png};
+use vtfarm_imaging::{Exposure, Image, ImageError, write_gray8_png, write_gray16_png};
+use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
 use vtfarm_scene::{NONE, Scene};
-use vtfarm_vertex::{FinishedFace, FrameImage, draw_wireframe};
+use vtfarm_vertex::{Components, FinishedFace, FrameImage, draw_wireframe};
 
-/// Errors while writing outputs.
+/// Errors while writing outputs. Each names the file and its cause once.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
     #[error(transparent)]
     Image(#[from] ImageError),
     #[error("the reflected-object map: {0}")]
     ObjectMap(#[from] vtfarm_glare::GlareError),
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
+    #[error("cannot write {path}: {why}; supported: {}", ImageFormat::SUPPORTED)]
+    Extension { path: PathBuf, why: String },
+}
+
+/// The image formats an output path may name, by its extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// `.png`: 8-bit sRGB under the job's exposure.
+    Png,
+    /// `.exr`: OpenEXR, linear float32 in cd/m², RGB and luminance Y.
+    Exr,
+    /// `.npy`: linear float32 in render units (height × width × 3).
+    Npy,
+}
+
+impl ImageFormat {
+    /// The supported extensions, for messages.
+    pub const SUPPORTED: &str =
+        ".png (8-bit sRGB), .exr (OpenEXR, linear cd/m²), .npy (linear float32, render units)";
+
+    /// The format `path`'s extension names; an error naming the supported
+    /// ones for any other (checked before anything renders).
+    pub fn of(path: &Path) -> Result<ImageFormat, OutputError> {
+        let extension = path.extension().and_then(|e| e.to_str());
+        match extension.map(str::to_ascii_lowercase).as_deref() {
+            Some("png") => Ok(ImageFormat::Png),
+            Some("exr") => Ok(ImageFormat::Exr),
+            Some("npy") => Ok(ImageFormat::Npy),
+            Some(other) => Err(OutputError::Extension {
+                path: path.to_owned(),
+                why: format!("unsupported extension .{other}"),
+            }),
+            None => Err(OutputError::Extension {
+                path: path.to_owned(),
+                why: "no extension".to_owned(),
+            }),
+        }
+    }
+
+    /// The extension, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            ImageFormat::Png => "png",
+            ImageFormat::Exr => "exr",
+            ImageFormat::Npy => "npy",
+        }
+    }
 }
 
 /// One entry of `objects.json`.
@@ -42,14 +98,62 @@ struct ObjectEntry<'a> {
     name: &'a str,
 }
 
-/// Writes an image: `.npy` writes linear floats, anything else PNG.
-pub fn write_image(path: &Path, image: &Image) -> Result<(), OutputError> {
-    if path.extension().is_some_and(|e| e == "npy") {
-        image.write_npy(path)?;
-    } else {
-        image.write_png(path)?;
+/// Writes an image in the format its extension names ([`ImageFormat`]),
+/// creating a missing directory: PNG under `exposure`, OpenEXR with the
+/// `components` as layers when given.
+pub fn write_image(
+    path: &Path,
+    image: &Image,
+    exposure: &Exposure,
+    components: Option<&Components>,
+) -> Result<(), OutputError> {
+    let format = ImageFormat::of(path)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|cause| OutputError::Io {
+            path: dir.to_owned(),
+            cause,
+        })?;
+    }
+    match format {
+        ImageFormat::Png => image.write_png_exposed(path, exposure)?,
+        ImageFormat::Npy => image.write_npy(path)?,
+        ImageFormat::Exr => write_exr(path, image, components)?,
     }
     Ok(())
+}
+
+/// The channels of an image in cd/m²: R, G, B and Y, named `prefix`R … .
+fn cd_m2_channels(prefix: &str, image: &Image) -> [(String, Vec<f32>); 4] {
+    let channel = |k: usize| -> Vec<f32> {
+        (image.pixels.iter())
+            .map(|c| c[k] * CD_M2_PER_UNIT)
+            .collect()
+    };
+    let y = image.pixels.iter().map(|&c| photometry::cd_m2(c)).collect();
+    [
+        (format!("{prefix}R"), channel(0)),
+        (format!("{prefix}G"), channel(1)),
+        (format!("{prefix}B"), channel(2)),
+        (format!("{prefix}Y"), y),
+    ]
+}
+
+/// Writes `image` as OpenEXR in cd/m² (see the module docs), with the
+/// reflected and transmitted components as layers when given.
+pub fn write_exr(
+    path: &Path,
+    image: &Image,
+    components: Option<&Components>,
+) -> Result<(), ImageError> {
+    let mut channels: Vec<(String, Vec<f32>)> = cd_m2_channels("", image).into();
+    if let Some(c) = components {
+        channels.extend(cd_m2_channels("reflected.", &c.reflected));
+        channels.extend(cd_m2_channels("transmitted.", &c.transmitted));
+    }
+    let named: Vec<(&str, &[f32])> = (channels.iter())
+        .map(|(name, values)| (name.as_str(), values.as_slice()))
+        .collect();
+    vtfarm_imaging::write_exr_f32(path, image.width, image.height, &named)
 }
 
 /// Writes the auxiliary outputs into `dir` (created if missing).
@@ -63,7 +167,7 @@ pub fn write_aux(
 ) -> Result<(), OutputError> {
     let io = |path: &Path| {
         let path = path.to_owned();
-        move |source| OutputError::Io { path, source }
+        move |cause| OutputError::Io { path, cause }
     };
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let (w, h) = (image.color.width, image.color.height);

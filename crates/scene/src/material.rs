@@ -55,12 +55,14 @@ impl Material {
 
     /// Whether rays continue from this surface (mirror or transparent).
     pub fn is_specular(&self) -> bool {
-        self.reflectance.max_element() > 0.0 || self.may_transmit()
+        self.reflectance.max_element() > 0.0 || self.see_through()
     }
 
-    /// Whether any point of the surface lets light through: a
-    /// transmittance, or an alpha texture that can make it see-through.
-    pub fn may_transmit(&self) -> bool {
+    /// Whether any point of the surface lets light through (a
+    /// transmittance, or an alpha texture that can make it see-through):
+    /// glass. The thin-glass model's layers and the tracer's
+    /// reflected/transmitted split both go by it.
+    pub fn see_through(&self) -> bool {
         self.transmittance.max_element() > 0.0 || self.alpha_texture.is_some()
     }
 

@@ -64,7 +64,8 @@
 //! | other `map_*`, …   | checked to exist (a warning if not); not used          |
 //!
 //! The Fresnel term is the head-on reflectance; with `[quality] fresnel` the
-//! tracer raises it towards grazing angles (Schlick).
+//! tracer raises it towards grazing angles (the Fresnel equations at `Ni`
+//! for see-through materials, Schlick's approximation for opaque ones).
 //!
 //! # Export
 //!

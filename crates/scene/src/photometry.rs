@@ -8,8 +8,18 @@
 //!   `CD_M2_PER_UNIT · Y(rgb)` ([`cd_m2`]). The renderer keeps this fixed
 //!   scale instead of cd/m² themselves because its 8-bit images and the
 //!   vertex tracer's refinement threshold (in sRGB steps) need values near 1:
-//!   the scale is the exposure of every PNG (white = 10,000 cd/m²), while the
-//!   glare metrics and luminance NPYs are in cd/m².
+//!   the scale is the exposure of every PNG by default (white = 10,000
+//!   cd/m²; a job's `[output] white_cd_m2` sets another, [`exposure_scale`]),
+//!   while the glare metrics, luminance NPYs and OpenEXR images are in
+//!   cd/m² (the `.npy` of a rendered image keeps render units).
+//! * **Reflected light** is the light the glass reflects toward the eye:
+//!   its front surface's reflection and its back surface's (the ghost
+//!   image), at every quality level (`vtfarm_trace::Sample::reflected`).
+//!   For a pane of surface reflectance `R` and transmittance `T` that is
+//!   `R + T²R / (1 − R²)` of what it mirrors (the tracer counts the inner
+//!   bounces to its depth, the thin-glass model the first, `R + T²R`);
+//!   with Fresnel weights `R` is the unpolarised Fresnel reflectance at the
+//!   angle of incidence.
 //! * **Emitters** (sky and window panels, backlit markings, lamps) are given
 //!   a luminance `L` in cd/m² and a colour; their emission is the colour
 //!   scaled to `Y = L / CD_M2_PER_UNIT` ([`emission`]).
@@ -53,6 +63,13 @@ pub fn cd_m2(radiance: Vec3) -> f32 {
 pub fn emission(color: Vec3, cd_m2: f32) -> Option<Vec3> {
     let y = luminance(color);
     (y > 0.0).then(|| color * (cd_m2 / (CD_M2_PER_UNIT * y)))
+}
+
+/// The factor a PNG multiplies render units by so that a luminance of
+/// `white_cd_m2` shows as white: 1 for [`CD_M2_PER_UNIT`], the exposure
+/// of every PNG by default.
+pub fn exposure_scale(white_cd_m2: f32) -> f32 {
+    CD_M2_PER_UNIT / white_cd_m2
 }
 
 /// A grey of luminance `cd_m2`, in render units (backgrounds given in cd/m²).

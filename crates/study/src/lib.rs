@@ -57,10 +57,10 @@ pub enum StudyError {
         position: Vec3,
         why: vtfarm_scene::OutOfBounds,
     },
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error(transparent)]
     Image(#[from] vtfarm_imaging::ImageError),
@@ -133,6 +133,8 @@ pub struct StudyPlan {
     pub heat_range: LogRange,
     /// The base job's reflection method.
     pub method: vtfarm_method::MethodKind,
+    /// The base job's `[output]` exposure of the frames' PNG images.
+    pub exposure: vtfarm_imaging::Exposure,
 }
 
 impl StudyPlan {
@@ -399,6 +401,7 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         params,
         heat_range,
         method: study.job.method,
+        exposure: study.job.output.exposure(),
     })
 }
 
@@ -449,8 +452,8 @@ pub struct FrameRow {
     pub eye: [f32; 3],
     /// Index into the study's sun sweep; `None` without one.
     pub sun_index: Option<usize>,
-    /// The sun's direction relative to the vehicle (the base job's sun
-    /// without a sweep; `None` when it has none).
+    /// The swept sun's direction relative to the vehicle; `None` without a
+    /// sweep (a fixed sun is the study's, [`StudyPlan::sun_setting`]).
     pub sun_azimuth_deg: Option<f32>,
     pub sun_elevation_deg: Option<f32>,
     /// The UTC time of a date/time sweep (RFC 3339).
@@ -472,9 +475,9 @@ pub struct StudyWriter<'a> {
 impl<'a> StudyWriter<'a> {
     /// Creates the output directory.
     pub fn new(plan: &'a StudyPlan, dir: &Path) -> Result<Self, StudyError> {
-        std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
+        std::fs::create_dir_all(dir).map_err(|cause| StudyError::Io {
             path: dir.to_owned(),
-            source,
+            cause,
         })?;
         Ok(StudyWriter {
             plan,
@@ -530,20 +533,26 @@ impl<'a> StudyWriter<'a> {
             GlareInput::from_components(&components, &masks.instrument, &masks.marking, &names);
         let params = &self.plan.params;
         let analysis = vtfarm_glare::analyze(&input, params).map_err(|e| bad(e.to_string()))?;
-        let heat = vtfarm_glare::heat_map(&input, params, Some(self.plan.heat_range))
+        // The legends are the report's, as text beside the maps.
+        let (heat, _) = vtfarm_glare::heat_map_frame(&input, params, Some(self.plan.heat_range))
             .map_err(|e| bad(e.to_string()))?;
-        let objects = vtfarm_glare::object_map(&input, params).map_err(|e| bad(e.to_string()))?;
+        let (objects, _) =
+            vtfarm_glare::object_map_frame(&input, params).map_err(|e| bad(e.to_string()))?;
 
         let rel = match sun {
             Some(sun) => format!("{}/sun_{sun:03}/eye_{eye:02}", planned.slug),
             None => format!("{}/eye_{eye:02}", planned.slug),
         };
         let dir = self.dir.join(&rel);
-        std::fs::create_dir_all(&dir).map_err(|source| StudyError::Io {
+        std::fs::create_dir_all(&dir).map_err(|cause| StudyError::Io {
             path: dir.clone(),
-            source,
+            cause,
         })?;
-        frame.color.write_png(&dir.join("image.png"))?;
+        frame
+            .color
+            .write_png_exposed(&dir.join("image.png"), &self.plan.exposure)?;
+        // The linear frame in cd/m² with its components as layers.
+        vtfarm_render::output::write_exr(&dir.join("image.exr"), &frame.color, Some(&components))?;
         heat.write_png(&dir.join("heat.png"))?;
         objects.write_png(&dir.join("objects.png"))?;
         // The per-pixel figures, for engineers' own analysis (0 off the
@@ -563,7 +572,8 @@ impl<'a> StudyWriter<'a> {
         ] {
             vtfarm_imaging::write_npy_f32(&dir.join(format!("{name}.npy")), &shape, data)?;
         }
-        let sun_position = self.plan.sun(sun);
+        // A frame names its sun only in a sweep (see `SunSetting`).
+        let sun_position = sun.map(|s| self.plan.suns[s]);
         let row = FrameRow {
             variant: planned.name.clone(),
             eye_index: eye,
@@ -621,11 +631,41 @@ pub struct VariantScore {
     pub worst_low_contrast_share: f32,
     pub mean_reflected_luminance_cd_m2: f32,
     pub peak_reflected_luminance_cd_m2: f32,
-    /// The object covering the most glass over all eye points.
-    pub main_glare_source: Option<String>,
+    /// The objects causing the glare over all the variant's frames, the
+    /// culprit first (at most [`CULPRITS`]; none without glare): by the
+    /// glare area they cause, then the luminance they add above the
+    /// threshold ([`vtfarm_glare::rank_objects`], summed over the frames).
+    pub glare_culprits: Vec<Culprit>,
+    /// The object whose reflection covers the most glass over all frames,
+    /// at any luminance (not necessarily a glare source), and its share of
+    /// the glass.
+    pub most_covering_object: Option<Coverage>,
     /// The variant's worst frames, worst first (by mean reflected
     /// luminance): where the sun and the eye make the glass brightest.
     pub worst_cases: Vec<WorstCase>,
+}
+
+/// Culprits named per frame and per variant.
+pub const CULPRITS: usize = 3;
+
+/// An object causing glare, and how much of it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Culprit {
+    pub name: String,
+    /// Glass pixels over the glare threshold whose reflection shows it.
+    pub glare_pixels: usize,
+    /// `glare_pixels` / all glare pixels (of the frame or the variant).
+    pub glare_share: f32,
+    /// `Σ (L_r − threshold)` over those pixels, cd/m² × pixels.
+    pub excess_luminance_cd_m2: f32,
+}
+
+/// The glass area an object's reflection covers, at any luminance.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Coverage {
+    pub name: String,
+    /// Its glass pixels / all glass pixels.
+    pub coverage_share: f32,
 }
 
 /// One of a variant's worst frames.
@@ -640,8 +680,105 @@ pub struct WorstCase {
     pub sun_time: Option<String>,
     pub mean_reflected_luminance_cd_m2: f32,
     pub low_contrast_share: f32,
+    /// The objects causing that frame's glare, the culprit first (see
+    /// [`VariantScore::glare_culprits`]).
+    pub glare_culprits: Vec<Culprit>,
     /// The object covering the most glass in that frame.
-    pub mirrored_object: Option<String>,
+    pub most_covering_object: Option<Coverage>,
+}
+
+/// The name the background (rays leaving the scene: sky past the windows)
+/// takes among the culprits.
+pub const BACKGROUND_CULPRIT: &str = "background (rays leaving the scene)";
+
+impl Culprit {
+    /// The culprits of a frame's glare, at most [`CULPRITS`]: its ranked
+    /// objects that cause glare, and the background where glare pixels
+    /// mirror no object ([`BACKGROUND_CULPRIT`]), ranked alike.
+    pub fn of_frame(summary: &Summary) -> Vec<Culprit> {
+        let mut all = Culprit::candidates(summary);
+        all.truncate(CULPRITS);
+        all
+    }
+
+    /// Every glare source of a frame, the culprit first (see
+    /// [`Culprit::of_frame`]).
+    fn candidates(summary: &Summary) -> Vec<Culprit> {
+        let share = |pixels: usize| {
+            if summary.glare_pixels == 0 {
+                0.0
+            } else {
+                (pixels as f64 / summary.glare_pixels as f64) as f32
+            }
+        };
+        let background = (summary.background_glare_pixels > 0).then(|| Culprit {
+            name: BACKGROUND_CULPRIT.to_owned(),
+            glare_pixels: summary.background_glare_pixels,
+            glare_share: share(summary.background_glare_pixels),
+            excess_luminance_cd_m2: summary.background_excess_luminance_cd_m2,
+        });
+        let mut all: Vec<Culprit> = (summary.objects.iter())
+            .filter(|o| o.glare_pixels > 0)
+            .map(|o| Culprit {
+                name: o.name.clone(),
+                glare_pixels: o.glare_pixels,
+                glare_share: o.glare_share,
+                excess_luminance_cd_m2: o.excess_luminance_cd_m2,
+            })
+            .chain(background)
+            .collect();
+        // Objects come ranked; the background takes its place among them.
+        all.sort_by(|a, b| {
+            (b.glare_pixels.cmp(&a.glare_pixels)).then(
+                b.excess_luminance_cd_m2
+                    .total_cmp(&a.excess_luminance_cd_m2),
+            )
+        });
+        all
+    }
+}
+
+impl Coverage {
+    /// The object covering the most glass in a frame.
+    pub fn of_frame(summary: &Summary) -> Option<Coverage> {
+        (summary.objects.iter())
+            .max_by(|a, b| (a.covered_pixels.cmp(&b.covered_pixels)).then(b.object.cmp(&a.object)))
+            .map(|o| Coverage {
+                name: o.name.clone(),
+                coverage_share: o.coverage_share,
+            })
+    }
+}
+
+/// How the study set the sun, for the report: the frames' sun is described
+/// as it was set, never as a sweep that did not happen.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "setting", rename_all = "snake_case")]
+pub enum SunSetting {
+    /// A `[sun]` sweep: each frame names its sun position.
+    Sweep { positions: usize },
+    /// The base job's directional light, the same in every frame (angles
+    /// relative to the vehicle).
+    FixedFromJob {
+        azimuth_deg: f32,
+        elevation_deg: f32,
+    },
+    /// No directional light.
+    None,
+}
+
+impl StudyPlan {
+    /// How this study sets the sun.
+    pub fn sun_setting(&self) -> SunSetting {
+        match (self.suns.len(), self.base_sun) {
+            (0, Some(sun)) => SunSetting::FixedFromJob {
+                azimuth_deg: sun.azimuth_deg,
+                elevation_deg: sun.elevation_deg,
+            },
+            (0, None) => SunSetting::None,
+            (positions, _) => SunSetting::Sweep { positions },
+        }
+    }
 }
 
 #[cfg(test)]

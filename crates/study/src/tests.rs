@@ -91,7 +91,7 @@ fn the_ellipsoidal_glass_mirrors_only_its_absorber_from_the_focus() {
     let nominal = &report.frames[plan.eyes.len()].summary;
     assert_eq!(nominal.objects[0].name, vtfarm_cockpit::GLARE_ABSORBER);
     assert!(
-        nominal.objects[0].area_share > 0.95,
+        nominal.objects[0].coverage_share > 0.95,
         "{:?}",
         nominal.objects
     );
@@ -316,13 +316,14 @@ fn a_low_sun_through_the_side_window_mirrors_brighter_than_a_sun_behind_the_roof
         (worst.sun_azimuth_deg, worst.sun_elevation_deg),
         (Some(90.0), Some(10.0))
     );
-    assert_eq!(worst.mirrored_object.as_deref(), Some("cab_walls"));
+    let covering = worst.most_covering_object.as_ref().map(|c| c.name.as_str());
+    assert_eq!(covering, Some("cab_walls"));
     let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
     let first_case = html
-        .find("<tr><td>1</td><td>azimuth ")
+        .find("<tr><td>1<br>sun azimuth ")
         .expect("a worst-case table");
     assert!(
-        html[first_case..].starts_with("<tr><td>1</td><td>azimuth 90.0&deg;, elevation 10.0&deg;"),
+        html[first_case..].starts_with("<tr><td>1<br>sun azimuth 90.0&deg;, elevation 10.0&deg;"),
         "{}",
         &html[first_case..first_case + 120]
     );
@@ -383,4 +384,72 @@ fn a_date_range_skips_the_night_and_turns_the_sun_with_the_heading() {
     assert!(
         (azimuth - noon.azimuth_deg).abs() < 1e-3 && (elevation - noon.elevation_deg).abs() < 1e-3
     );
+}
+
+#[test]
+fn the_stock_glass_names_the_side_window_as_culprit_and_its_fixed_sun_once() {
+    // The stock cover glass from the nominal eye: the cab walls cover most
+    // of the glass, dim; the left side window makes the glare.
+    let dir = tempfile::tempdir().unwrap();
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        "[[variants]]\nname = \"current\"\nglass = \"current\"\n",
+    );
+    let (report, _) = run(&plan, dir.path());
+    let score = &report.ranking[0];
+    let culprit = score
+        .glare_culprits
+        .first()
+        .expect("the stock glass glares");
+    assert_eq!(
+        culprit.name, "side_window_left",
+        "{:?}",
+        score.glare_culprits
+    );
+    assert!(culprit.glare_share > 0.5, "{culprit:?}");
+    assert!(score.glare_culprits.len() <= CULPRITS);
+    let covering = score.most_covering_object.as_ref().unwrap();
+    assert_eq!(covering.name, "cab_walls");
+    let worst = &score.worst_cases[0];
+    assert_eq!(worst.glare_culprits[0].name, "side_window_left");
+
+    // summary.csv: the culprits, each with its share, and coverage apart.
+    let csv = std::fs::read_to_string(dir.path().join("summary.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let row: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| {
+        let k = header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        row[k]
+    };
+    assert_eq!(column("culprit_1"), "side_window_left");
+    assert!(column("culprit_1_glare_share").parse::<f32>().unwrap() > 0.5);
+    assert_eq!(column("most_covering_object"), "cab_walls");
+    // A fixed sun is the study's, not each row's.
+    assert_eq!(column("sun_azimuth_deg"), "");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["sun"]["setting"], "fixed_from_job");
+    let ranking = &json["ranking"][0];
+    assert_eq!(ranking["glare_culprits"][0]["name"], "side_window_left");
+    assert_eq!(ranking["most_covering_object"]["name"], "cab_walls");
+
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(html.contains("Sun: fixed, the base job's directional light"));
+    assert!(
+        !html.contains("<th>sun</th>"),
+        "no sun column without a sweep"
+    );
+    assert!(
+        html.contains("side_window_left "),
+        "the culprit in the tables"
+    );
+    assert!(html.contains("<th>x (m)</th>"), "units on the eye table");
+    assert!(html.contains("glare threshold"), "threshold lines");
 }

@@ -713,6 +713,13 @@ impl SceneBvh {
         self.any_hit(ray, t_max, Some(&self.slot_casts_shadow))
     }
 
+    /// Whether triangle `id`'s material lets light through (any
+    /// transmittance): glass, whose reflections count as reflected light
+    /// wherever a ray meets it behind a reflector.
+    pub fn see_through(&self, id: TriangleId) -> bool {
+        self.scene.material_of(id).see_through()
+    }
+
     /// Whether triangle `id` casts shadows ([`casts_shadow`]).
     pub fn casts_shadow(&self, id: TriangleId) -> bool {
         triangle_casts_shadow(&self.scene, id)

@@ -19,6 +19,8 @@ mod whitted;
 mod wide;
 
 #[cfg(test)]
+mod closed_form;
+#[cfg(test)]
 mod precision;
 #[cfg(test)]
 mod scenarios;
@@ -28,7 +30,7 @@ mod testutil;
 pub use bvh::{
     BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
 };
-pub use whitted::{Rays, SurfaceTerms, Tracer, reflect, refract};
+pub use whitted::{Rays, SurfaceTerms, Tracer, fresnel_reflectance, reflect, refract};
 
 use glam::Vec3;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
@@ -69,7 +71,10 @@ pub struct SurfacePoint {
 pub struct TraceSettings {
     /// Maximum recursion depth: 1 shades the first surface only.
     pub max_depth: u32,
-    /// Weight kr and kt with Schlick's Fresnel approximation.
+    /// Weight kr and kt by angle: see-through surfaces with the
+    /// unpolarised Fresnel equations at their index of refraction (kr and
+    /// kt are the head-on values), opaque reflectors with Schlick's
+    /// approximation.
     pub fresnel: bool,
     /// Ray-tree branches whose weight (the product of kr/kt above them) is
     /// below this are left out of the signature.
@@ -110,11 +115,17 @@ impl Default for TraceSettings {
 pub struct Sample {
     /// Total linear RGB radiance.
     pub color: Vec3,
-    /// The reflected component alone: kr times the radiance of the first
-    /// reflection ray (what the first surface mirrors; a glare study measures this).
+    /// The reflected component: the light the glass reflects toward the
+    /// eye, what a glare study measures. kr times the radiance of the first
+    /// reflection ray, plus the reflections of the see-through surfaces the
+    /// first refraction ray passes before an opaque one (a slab's back
+    /// surface, the ghost image), weighted by the transmittances on the way.
+    /// The thin-glass model counts the same, so the split does not depend
+    /// on the quality level.
     pub reflected: Vec3,
-    /// The transmitted component alone: kt times the radiance of the first
-    /// refraction ray (what is seen through the first surface).
+    /// The transmitted component: kt times the radiance of the first
+    /// refraction ray less the ghost counted in `reflected` (what is seen
+    /// through the glass).
     pub transmitted: Vec3,
     /// The object hit by the first reflection ray, or `vtfarm_scene::NONE`.
     pub reflected_object: ObjectId,

@@ -295,9 +295,15 @@ fn fresnel_moves_transmission_into_reflection_at_grazing_angles() {
     };
     let graze = fresnel.shade(&point, incoming);
     assert_eq!(graze.reflected_object, sky);
-    let factor = (1.0 - a.cos()).powi(5);
-    assert_close(graze.reflected, sky_light * factor, 1e-4);
-    // Head-on, Schlick's factor is zero: nothing moves to the mirror ray.
+    // The Fresnel equations at n = 1.5 (kr = 0, kt = 1 head-on): the share
+    // (F(θ) − F0) / (1 − F0) of the transmittance moves to the mirror ray.
+    let (cos_i, sin_t) = (a.cos(), a.sin() / 1.5);
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let rs = (cos_i - 1.5 * cos_t) / (cos_i + 1.5 * cos_t);
+    let rp = (1.5 * cos_i - cos_t) / (1.5 * cos_i + cos_t);
+    let (f, f0) = (0.5 * (rs * rs + rp * rp), 0.04);
+    assert_close(graze.reflected, sky_light * ((f - f0) / (1.0 - f0)), 1e-4);
+    // Head-on, the factor is zero: nothing moves to the mirror ray.
     assert_eq!(fresnel.shade(&point, -Vec3::Y).reflected_object, NONE);
 }
 

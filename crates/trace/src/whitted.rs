@@ -29,14 +29,26 @@ pub struct Tracer<'a> {
     pub settings: TraceSettings,
 }
 
-/// What shading one surface produced; the `reflected*` fields describe this
-/// surface's own reflection ray and are only reported for the first surface.
+/// What shading one surface produced; `reflected`, `transmitted` and
+/// `reflected_object` are only reported for the first surface.
+///
+/// The split, the one meaning of "reflected" at every quality level (the
+/// thin-glass model of `vtfarm-vertex` computes the same): the light the
+/// glass reflects toward the eye. That is the first surface's own
+/// reflection plus the reflections of every see-through surface its
+/// refraction ray passes before it meets an opaque one (a slab's back
+/// surface: the ghost image), weighted by the transmittances on the way;
+/// `transmitted` is the rest of what the refraction ray brings back.
 #[derive(Clone, Copy, Debug)]
 struct Shaded {
     color: Vec3,
     reflected: Vec3,
     transmitted: Vec3,
     reflected_object: ObjectId,
+    /// The light this surface and the see-through surfaces behind it
+    /// reflect back along the ray (zero for an opaque surface or a miss):
+    /// `kr · reflection + kt · ghost of the refraction's surface`.
+    ghost: Vec3,
 }
 
 mod generations;
@@ -72,6 +84,7 @@ impl Shaded {
             reflected: Vec3::ZERO,
             transmitted: Vec3::ZERO,
             reflected_object: NONE,
+            ghost: Vec3::ZERO,
         }
     }
 }
@@ -166,8 +179,40 @@ impl Refraction {
 
 /// Schlick's angular factor `(1 - cos)^5`: 0 head-on, 1 at grazing. With
 /// `F0` the head-on reflectance, Schlick's `F = F0 + (1 - F0) * factor`.
+/// For opaque reflectors (whose index of refraction says nothing of them).
 pub(crate) fn schlick_factor(cos: f32) -> f32 {
     (1.0 - cos.clamp(0.0, 1.0)).powi(5)
+}
+
+/// The unpolarised Fresnel reflectance of a dielectric interface (the mean
+/// of the s- and p-polarised reflectances of the Fresnel equations), light
+/// arriving at `cos_i` from the side of index n1 and leaving at `cos_t`
+/// (Snell), `eta = n1 / n2`. Symmetric in the direction of travel: the same
+/// from either side for the same pair of angles.
+pub fn fresnel_reflectance(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
+    let s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let p = (eta * cos_t - cos_i) / (eta * cos_t + cos_i);
+    let r = 0.5 * (s * s + p * p);
+    if r.is_finite() {
+        r.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
+
+/// The share of a see-through surface's transmittance that the Fresnel
+/// equations move to its reflectance at this angle: 0 head-on (the
+/// material's own kr and kt are its head-on values), 1 at grazing, and in
+/// between `(F(θ) - F0) / (1 - F0)` with `F` [`fresnel_reflectance`] and
+/// `F0` its head-on value. A material with `kr = F0` and `kt = 1 - F0` (a
+/// clear dielectric) then reflects exactly `F(θ)`.
+fn fresnel_factor(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
+    let head_on = fresnel_reflectance(1.0, 1.0, eta);
+    let f = fresnel_reflectance(cos_i.clamp(0.0, 1.0), cos_t.clamp(0.0, 1.0), eta);
+    if head_on >= 1.0 {
+        return 1.0;
+    }
+    ((f - head_on) / (1.0 - head_on)).clamp(0.0, 1.0)
 }
 
 impl Tracer<'_> {
@@ -314,8 +359,17 @@ impl Tracer<'_> {
                 Rays::Both,
                 walk,
             );
-            shaded.transmitted = surface.kt * seen.color;
-            shaded.color += shaded.transmitted;
+            let through = surface.kt * seen.color;
+            shaded.color += through;
+            // The see-through surfaces behind reflect too (see `Shaded`):
+            // their reflections move from the transmitted part to the
+            // reflected one; the colour is the same sum either way.
+            let ghost = surface.kt * seen.ghost;
+            shaded.transmitted = through - ghost;
+            shaded.reflected += ghost;
+        }
+        if surface.see_through {
+            shaded.ghost = shaded.reflected;
         }
         (shaded, surface.object)
     }
@@ -483,6 +537,8 @@ pub struct SurfaceTerms {
 /// and where its secondary rays lead.
 struct VisitedSurface<L> {
     object: ObjectId,
+    /// The material lets light through (glass; see [`Shaded::ghost`]).
+    see_through: bool,
     local: Vec3,
     kr: Vec3,
     kt: Vec3,
@@ -547,6 +603,7 @@ impl TreeSource for OnDemand<'_> {
         let (terms, reflection, refraction) = tracer.surface_of(&point, incoming, depth, rays, lit);
         Visited::Surface(VisitedSurface {
             object: tracer.bvh.scene().triangles[point.triangle as usize].object,
+            see_through: tracer.bvh.see_through(point.triangle),
             local: terms.local,
             kr: terms.kr,
             kt: terms.kt,
@@ -611,14 +668,8 @@ fn secondary_rays(
         let cos_i = -incoming.dot(facing);
         match refracted {
             Some(t) if kt.max_element() > 0.0 => {
-                // Schlick uses the larger angle: the transmitted one when
-                // leaving into the optically thinner side.
-                let cos = if eta > 1.0 {
-                    -t.direction().dot(facing)
-                } else {
-                    cos_i
-                };
-                let moved = kt * schlick_factor(cos);
+                let cos_t = -t.direction().dot(facing);
+                let moved = kt * fresnel_factor(cos_i, cos_t, eta);
                 kr += moved;
                 kt -= moved;
             }

@@ -245,7 +245,7 @@ impl Frame<'_> {
 
     /// Whether `triangle` is see-through, so [`Frame::behind`] hints at what it shows.
     fn see_through(&self, triangle: TriangleId) -> bool {
-        self.tracer.bvh.scene().material_of(triangle).may_transmit()
+        self.tracer.bvh.scene().material_of(triangle).see_through()
     }
 
     /// Whether refinement and filling watch the opaque scene behind

@@ -12,7 +12,10 @@
 //!   shadow rays treat the glass as opaque, and so does the map; surfaces
 //!   that only emit cast no shadow in either, `vtfarm_trace::casts_shadow`);
 //! - the back surface mirrors about what the front does: the reflected part
-//!   is scaled by (kr(front) + kt(front)² · kr(back)) / kr(front).
+//!   is scaled by (kr(front) + kt(front)² · kr(back)) / kr(front), kr(back)
+//!   taken along the refracted ray. This ghost counts as reflected light,
+//!   as in traced shading (`vtfarm_trace::Sample::reflected`), so the
+//!   reflected/transmitted split is the same at every quality level.
 //!
 //! Everything here is deterministic for any thread count, so workers rebuild
 //! it like the ID buffers.
@@ -229,7 +232,7 @@ pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: Triang
 
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
-    scene.material_of(triangle).may_transmit()
+    scene.material_of(triangle).see_through()
 }
 
 /// The ID buffers a frame's [`Behind`] is made of, rasterized in one go.
@@ -384,8 +387,15 @@ fn glass_at(
     let back = layers.triangle_at(x, y);
     if back != NONE && layers.depth_at(x, y) < behind.depth_at(x, y) {
         let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
-        let (kr_back, kt_back) = tracer.weights(&back_point, direction);
+        // The back surface is met from inside, along the refracted ray
+        // (with Fresnel weights its angle matters; parallel surfaces give
+        // it the front's kr again, as a traced ray finds).
+        let inside = inside_direction(scene, &front, direction).unwrap_or(direction);
+        let (kr_back, kt_back) = tracer.weights(&back_point, inside);
         weight *= kt_back;
+        // The ghost: in through the front, reflected at the back, out
+        // through the front again. Counted as reflected, as the tracer
+        // counts it (`vtfarm_trace::Sample::reflected`).
         let kr_front = kr.max_element();
         if kr_front > 0.0 {
             reflection_scale += (kt * kt * kr_back).max_element() / kr_front;
@@ -413,18 +423,8 @@ fn glass_at(
 /// along the Snell direction to the back plane, and leaves parallel to
 /// `direction` again.
 fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, direction: Vec3) -> Vec3 {
-    let normal = if front.normal.dot(direction) > 0.0 {
-        -front.normal
-    } else {
-        front.normal
-    };
-    let ior = scene.material_of(front.triangle).ior;
-    let eta = if ior.is_finite() && ior > 0.0 {
-        1.0 / ior
-    } else {
-        1.0
-    };
-    let Some(inside) = refract(direction, normal, eta) else {
+    let normal = facing_normal(front, direction);
+    let Some(inside) = inside_direction(scene, front, direction) else {
         return Vec3::ZERO;
     };
     let thickness = (back.position - front.position).dot(-normal);
@@ -435,6 +435,27 @@ fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, directio
     let exit = inside * (thickness / along);
     // The exit point relative to where the straight ray would be.
     exit - direction * exit.dot(direction)
+}
+
+/// The front surface's normal on the side `direction` comes from.
+fn facing_normal(front: &SurfacePoint, direction: Vec3) -> Vec3 {
+    if front.normal.dot(direction) > 0.0 {
+        -front.normal
+    } else {
+        front.normal
+    }
+}
+
+/// The direction of a ray along `direction` inside a slab whose front
+/// surface it enters at `front` (Snell); `None` on total internal reflection.
+fn inside_direction(scene: &Scene, front: &SurfacePoint, direction: Vec3) -> Option<Vec3> {
+    let ior = scene.material_of(front.triangle).ior;
+    let eta = if ior.is_finite() && ior > 0.0 {
+        1.0 / ior
+    } else {
+        1.0
+    };
+    refract(direction, facing_normal(front, direction), eta)
 }
 
 /// The rasterizer's colour of the opaque scene seen through glass pixel

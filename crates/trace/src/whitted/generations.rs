@@ -29,6 +29,7 @@ struct Node {
 
 /// What the first pass found at a surface.
 struct Surface {
+    see_through: bool,
     local: Vec3,
     kr: Vec3,
     kt: Vec3,
@@ -84,6 +85,7 @@ pub(super) fn shade_points(
             reflections.extend(reflection.map(|ray| (p.node, ray)));
             refractions.extend(refraction.map(|ray| (p.node, ray)));
             recorded.nodes[p.node].surface = Some(Surface {
+                see_through: tracer.bvh.see_through(p.point.triangle),
                 local: terms.local,
                 kr: terms.kr,
                 kt: terms.kt,
@@ -147,6 +149,7 @@ impl TreeSource for Recorded {
         lit.extend_from_slice(&self.lit_words[surface.lit.clone()]);
         Visited::Surface(VisitedSurface {
             object: node.object,
+            see_through: surface.see_through,
             local: surface.local,
             kr: surface.kr,
             kt: surface.kt,
