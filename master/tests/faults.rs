@@ -1,5 +1,5 @@
 //! Deterministic fault tests: the master's core and real worker sessions in
-//! the `Pair` harness (virtual clock, in-memory queues). Every scenario ends
+//! the `Pair` harness (`vtfarm_farmsim::TestFarm`: virtual clock, in-memory queues). Every scenario ends
 //! with images equal to the single-process render, bit for bit.
 
 #[path = "support/frame.rs"]

@@ -738,4 +738,44 @@ mod tests {
             "{interval} s per frame, the link needs {link} s"
         );
     }
+
+    /// The one link model: a result crosses the worker's link and the
+    /// master's together, at the slower rate, not one after the other.
+    /// Two equal 10 Mbit/s links, one worker, nothing else costing time:
+    /// the frame takes the results' bytes over 10 Mbit/s once (sending
+    /// over one link and then forwarding over the other would take twice
+    /// that); a slower worker link is the one that counts.
+    #[test]
+    fn a_message_holds_both_links_at_the_slower_rate() {
+        let (job, mut costs) = small_farm(0.0, 0.0);
+        costs.seconds = vec![0.0; costs.items.len()];
+        costs.result_bytes = vec![20_000; costs.items.len()];
+        let bytes: u64 = costs.result_bytes.iter().sum();
+        let frame_seconds = |worker_rate: f64| {
+            let config = SimulationConfig {
+                master_link_bits_per_second: 10e6,
+                ..config(4)
+            };
+            let farm: Vec<WorkerSpec> = (workers(1).into_iter())
+                .map(|w| WorkerSpec {
+                    link_bits_per_second: worker_rate,
+                    package_overhead: Duration::ZERO,
+                    ..w
+                })
+                .collect();
+            steady_frame_seconds(&simulate_farm(&job, &costs, &config, &farm).unwrap())
+        };
+        let once = bytes as f64 * 8.0 / 10e6;
+        let equal = frame_seconds(10e6);
+        assert!(
+            equal >= once && equal < 1.2 * once,
+            "{equal} s per frame, the bytes need {once} s on one link"
+        );
+        let slow_worker = frame_seconds(5e6);
+        assert!(
+            slow_worker >= 2.0 * once && slow_worker < 2.4 * once,
+            "{slow_worker} s per frame at 5 Mbit/s, the bytes need {} s",
+            2.0 * once
+        );
+    }
 }
