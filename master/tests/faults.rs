@@ -1,6 +1,7 @@
 //! Deterministic fault tests: the master's core and real worker sessions in
-//! the `Pair` harness (`vtfarm_farmsim::TestFarm`: virtual clock, in-memory queues). Every scenario ends
-//! with images equal to the single-process render, bit for bit.
+//! the `Pair` harness (`vtfarm_farmsim::TestFarm`: virtual clock, in-memory
+//! queues). Every scenario ends with images equal to the single-process
+//! render, bit for bit.
 
 #[path = "support/frame.rs"]
 mod frame;
