@@ -45,8 +45,9 @@ use vtfarm_render::Renderer;
 
 use crate::support::{CpuClock, cpu_time};
 use vtfarm_farmsim::{
-    FarmCosts, FarmFrame, FarmJob, SimulationConfig, WorkerSpec, background_threads_for,
-    cpu_per_frame, simulate_farm, steady_background_cores, steady_frame_seconds,
+    FarmCosts, FarmFrame, FarmJob, MasterCosts, SimulationConfig, WorkerSpec,
+    background_threads_for, cpu_per_frame, simulate_farm, steady_background_cores,
+    steady_frame_seconds,
 };
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
@@ -701,12 +702,14 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             .collect(),
         empty_result_bytes: recording.empty_result_bytes,
         worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
-        base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
-        // Compositing does not grow with the work per pixel: not scaled.
-        result_per_item: recording.composite_seconds / n,
-        frame_out: recording.frame_out_seconds,
-        journal: recording.journal_seconds,
-        submitter: recording.submitter_seconds,
+        master: MasterCosts {
+            base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
+            // Compositing does not grow with the work per pixel: not scaled.
+            result_per_item: recording.composite_seconds / n,
+            frame_out: recording.frame_out_seconds,
+            journal: recording.journal_seconds,
+            submitter: recording.submitter_seconds,
+        },
     };
     // The master core rasterizes a stand-in base frame: tiny, the time is modelled.
     let farm_job = FarmJob {

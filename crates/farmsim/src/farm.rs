@@ -843,7 +843,7 @@ impl<M: CostModel> Farm<M> {
     fn route_master_output(&mut self, output: Output) {
         match output {
             Output::Send(conn, message) if Some(conn) == self.submitter => {
-                self.to_submitter_sent(conn, *message)
+                self.submitter_received(conn, *message)
             }
             Output::Send(conn, message) => {
                 let Some(w) = self.workers.iter().position(|w| w.conn == conn) else {
@@ -909,7 +909,7 @@ impl<M: CostModel> Farm<M> {
 
     /// The submitter's side: answers scene requests, keeps the rest, and
     /// spends its CPU (and the journal's) on each finished frame.
-    fn to_submitter_sent(&mut self, conn: ConnId, message: Message) {
+    fn submitter_received(&mut self, conn: ConnId, message: Message) {
         match message {
             Message::SceneRequest { hash } => {
                 let data = self.scene.clone().filter(|s| s.hash == hash);

@@ -5,7 +5,7 @@
 //! recorded samples (what the master's cost estimates learn from) and an
 //! empty bitmap; their size on the wire is the recorded one. The master
 //! core rasterizes for real, but at the job's tiny resolution (the base
-//! frame's *time* is [`FarmCosts::base_frame`]): the images do not matter
+//! frame's *time* is [`MasterCosts::base_frame`]): the images do not matter
 //! here. [`simulate_farm`] runs a job to its end and measures each frame.
 
 use std::collections::HashMap;
@@ -42,18 +42,8 @@ pub struct FarmCosts {
     pub empty_result_bytes: u64,
     /// A worker's set-up of a frame.
     pub worker_setup: f64,
-    /// The master's base frame on one thread.
-    pub base_frame: f64,
-    /// The master's driver per item of a result (decode, check, composite).
-    pub result_per_item: f64,
-    /// The master's driver per finished frame (the image for the wire).
-    pub frame_out: f64,
-    /// The master's journal thread per finished frame (compress, write):
-    /// beside the driver, on the master's cores.
-    pub journal: f64,
-    /// The submitter per finished frame (decode, PNG, timeline), on the
-    /// master's machine.
-    pub submitter: f64,
+    /// The master's machine's.
+    pub master: MasterCosts,
 }
 
 /// A simulated run: the machines around the workers and the job's length.
@@ -222,18 +212,20 @@ impl CostModel for Recorded<'_> {
     }
 
     fn master_costs(&self) -> MasterCosts {
-        MasterCosts {
-            base_frame: self.costs.base_frame,
-            result_per_item: self.costs.result_per_item,
-            frame_out: self.costs.frame_out,
-            journal: self.costs.journal,
-            submitter: self.costs.submitter,
-        }
+        self.costs.master
     }
 }
 
 /// Steps before a run counts as livelocked.
 const MAX_STEPS: u64 = 50_000_000;
+
+/// A run to its end: the frames delivered, each worker's package runs,
+/// and the virtual time it ended.
+struct FinishedRun {
+    frames: Vec<FarmFrame>,
+    busy: Vec<Vec<PackageRun>>,
+    end: Duration,
+}
 
 /// Runs `job` on a farm of `workers` until every frame is delivered.
 fn run_farm(
@@ -241,7 +233,7 @@ fn run_farm(
     costs: &FarmCosts,
     config: &SimulationConfig,
     workers: &[WorkerSpec],
-) -> Result<(Vec<FarmFrame>, Vec<Vec<PackageRun>>, Duration), SimulationError> {
+) -> Result<FinishedRun, SimulationError> {
     let model = Recorded {
         costs,
         index_of: (costs.items.iter().enumerate())
@@ -293,7 +285,11 @@ fn run_farm(
             stats: d.stats.clone(),
         })
         .collect();
-    Ok((frames, farm.busy, farm.now))
+    Ok(FinishedRun {
+        frames,
+        busy: farm.busy,
+        end: farm.now,
+    })
 }
 
 /// Simulates `job` on `workers` and returns its finished frames in order.
@@ -303,7 +299,11 @@ pub fn simulate_farm(
     config: &SimulationConfig,
     workers: &[WorkerSpec],
 ) -> Result<Vec<FarmFrame>, SimulationError> {
-    let (mut frames, busy, end) = run_farm(job, costs, config, workers)?;
+    let FinishedRun {
+        mut frames,
+        busy,
+        end,
+    } = run_farm(job, costs, config, workers)?;
     let first_delivery = frames.first().map_or(end, |f| f.done_at);
     for frame in &mut frames {
         frame.imbalance = window_imbalance(&busy, frame.started_at, frame.done_at, end);
@@ -437,11 +437,10 @@ mod tests {
             result_bytes: vec![100; n],
             empty_result_bytes: 30,
             worker_setup,
-            base_frame,
-            result_per_item: 0.0,
-            frame_out: 0.0,
-            journal: 0.0,
-            submitter: 0.0,
+            master: MasterCosts {
+                base_frame,
+                ..MasterCosts::default()
+            },
         };
         (job, costs)
     }
@@ -676,10 +675,13 @@ mod tests {
     #[test]
     fn each_process_uses_the_cpu_of_its_costs() {
         let (job, mut costs) = small_farm(0.02, 0.05);
-        costs.result_per_item = 1e-4;
-        costs.frame_out = 0.003;
-        costs.journal = 0.002;
-        costs.submitter = 0.004;
+        costs.master = MasterCosts {
+            result_per_item: 1e-4,
+            frame_out: 0.003,
+            journal: 0.002,
+            ..costs.master
+        };
+        costs.master.submitter = 0.004;
         let farm: Vec<WorkerSpec> = (workers(2).into_iter())
             .map(|w| WorkerSpec {
                 package_overhead: Duration::ZERO,
@@ -690,8 +692,9 @@ mod tests {
         let cpu = &frames.last().unwrap().cpu;
         assert_eq!(cpu.len(), 4, "master, two workers, submitter");
         let (n, items) = (frames.len() as f64, costs.items.len() as f64);
-        let master = n * (costs.base_frame + costs.result_per_item * items + costs.frame_out)
-            + (n - 1.0) * costs.journal;
+        let m = &costs.master;
+        let master =
+            n * (m.base_frame + m.result_per_item * items + m.frame_out) + (n - 1.0) * m.journal;
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.max(1.0);
         assert!(
             close(cpu[0], master),
@@ -699,7 +702,7 @@ mod tests {
             cpu[0]
         );
         assert!(
-            close(cpu[3], (n - 1.0) * costs.submitter),
+            close(cpu[3], (n - 1.0) * costs.master.submitter),
             "submitter {} s",
             cpu[3]
         );
