@@ -451,7 +451,7 @@ impl<M: CostModel> Farm<M> {
         self.model.reconnected(&mut worker.state);
         let peer = Peer::Worker {
             name: worker.name.clone(),
-            threads: worker.spec.cores,
+            threads: 1,
             address: "simulated".into(),
         };
         self.master.connected(self.now, conn, peer);
