@@ -1,6 +1,7 @@
 //! Deterministic fault tests: the master's core and real worker sessions in
-//! the `Pair` harness (virtual clock, in-memory queues). Every scenario ends
-//! with images equal to the single-process render, bit for bit.
+//! the `Pair` harness (`vtfarm_farmsim::TestFarm`: virtual clock, in-memory
+//! queues). Every scenario ends with images equal to the single-process
+//! render, bit for bit.
 
 #[path = "support/frame.rs"]
 mod frame;
@@ -296,7 +297,7 @@ fn the_same_faults_replay_the_same_schedule() {
 #[test]
 fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
     let job = Job::new(4);
-    let mut pair = Pair::persistent(FarmRules::default());
+    let mut pair = support::pair::persistent(FarmRules::default());
     pair.add_worker("a", 1.0);
     pair.add_worker("b", 1.5);
     let (wire, data) = job.wire();
@@ -326,7 +327,7 @@ fn a_restarted_master_resumes_the_job_from_its_last_finished_frame() {
 #[test]
 fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
     let job = Job::new(3);
-    let mut pair = Pair::persistent(FarmRules::default());
+    let mut pair = support::pair::persistent(FarmRules::default());
     pair.add_worker("a", 1.0);
     let (wire, data) = job.wire();
     pair.submit(wire, data);
@@ -343,7 +344,7 @@ fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
 #[test]
 fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     let job = Job::new(3);
-    let mut pair = Pair::persistent(FarmRules::default());
+    let mut pair = support::pair::persistent(FarmRules::default());
     pair.attach_submitter(77);
     let errors = pair.job_failed().expect("no job 77");
     assert!(errors[0].contains("no job 77"), "{errors:?}");
@@ -358,7 +359,7 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     assert!(pair.master.status().queue.running.is_none());
 
     // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
-    let mut pair = Pair::persistent(FarmRules::default());
+    let mut pair = support::pair::persistent(FarmRules::default());
     pair.add_worker("a", 1e4);
     pair.submit(job.wire().0, data);
     pair.drive(BOUND, |p| p.workers[0].is_running_a_package());

@@ -6,7 +6,6 @@
 //! live here, not in tests.
 
 mod cluster;
-mod farm;
 mod raster;
 mod rays;
 mod simulate;

@@ -1,5 +1,5 @@
 //! `vtfarm bench simulate`: the master's core and the workers' sessions on
-//! simulated farms ([`super::farm`]), driven by costs recorded from a real
+//! simulated farms ([`vtfarm_farmsim`]), driven by costs recorded from a real
 //! frame.
 //!
 //! Recording: the cockpit frame is rasterized once, then every reflector
@@ -20,7 +20,7 @@
 //! frames in flight, so each frame writes fresh memory): a worker's set-up
 //! (its ID buffers), the master's base frame, its checking and compositing
 //! of the results, the finished frame for the wire and the journal, and the
-//! submitter's decoding and PNG. The model ([`super::farm`]) runs the real
+//! submitter's decoding and PNG. The model ([`vtfarm_farmsim`]) runs the real
 //! `MasterCore` and `WorkerSession`s with these costs; with
 //! `--shared-cores` everything shares one machine, optionally with the
 //! other work a real run met there (`--background-cores`). Every simulated
@@ -43,11 +43,12 @@ use vtfarm_proto::{
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
 
-use super::farm::{
-    FarmConfig, FarmCosts, FarmFrame, FarmJob, FarmWorker, cpu_per_frame, simulate_farm,
-    steady_background_cores, steady_frame_seconds,
-};
 use crate::support::{CpuClock, cpu_time};
+use vtfarm_farmsim::{
+    FarmCosts, FarmFrame, FarmJob, MasterCosts, SimulationConfig, WorkerSpec,
+    background_threads_for, cpu_per_frame, simulate_farm, steady_background_cores,
+    steady_frame_seconds,
+};
 use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
@@ -567,56 +568,14 @@ impl Row {
     }
 }
 
-/// The other work on a shared machine that uses `cores` cores on average
-/// beside the farm of `workers` (over the window `steady_background_cores`
-/// measures): the number of always-runnable threads, found by bisection
-/// (more threads get more of the machine). 0 for 0 cores.
-pub(super) fn background_threads_for(
-    job: &FarmJob,
-    costs: &FarmCosts,
-    config: &FarmConfig,
-    workers: &[FarmWorker],
-    cores: f64,
-) -> Result<f64> {
-    if cores <= 0.0 {
-        return Ok(0.0);
-    }
-    let used = |threads: f64| -> Result<f64> {
-        let config = FarmConfig {
-            background_threads: threads,
-            ..config.clone()
-        };
-        Ok(steady_background_cores(&simulate_farm(
-            job, costs, &config, workers,
-        )?))
-    };
-    let (mut low, mut high) = (0.0, 1.0);
-    while used(high)? < cores {
-        (low, high) = (high, high * 2.0);
-        if high > 1024.0 {
-            bail!("no number of other threads uses {cores} cores beside the farm");
-        }
-    }
-    // To 1/1000 of a thread or better.
-    while high - low > 1e-3 * high.max(1.0) {
-        let middle = (low + high) / 2.0;
-        if used(middle)? < cores {
-            low = middle;
-        } else {
-            high = middle;
-        }
-    }
-    Ok((low + high) / 2.0)
-}
-
 /// Simulates `frames` copies of the recorded frame on `workers`.
 fn simulate(
     job: &FarmJob,
     costs: &FarmCosts,
-    config: &FarmConfig,
-    workers: Vec<FarmWorker>,
+    config: &SimulationConfig,
+    workers: Vec<WorkerSpec>,
 ) -> Result<Vec<FarmFrame>> {
-    simulate_farm(job, costs, config, &workers)
+    Ok(simulate_farm(job, costs, config, &workers)?)
 }
 
 /// Per-frame fixed costs measured in a real run: the medians, over the
@@ -743,12 +702,14 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             .collect(),
         empty_result_bytes: recording.empty_result_bytes,
         worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
-        base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
-        // Compositing does not grow with the work per pixel: not scaled.
-        result_per_item: recording.composite_seconds / n,
-        frame_out: recording.frame_out_seconds,
-        journal: recording.journal_seconds,
-        submitter: recording.submitter_seconds,
+        master: MasterCosts {
+            base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
+            // Compositing does not grow with the work per pixel: not scaled.
+            result_per_item: recording.composite_seconds / n,
+            frame_out: recording.frame_out_seconds,
+            journal: recording.journal_seconds,
+            submitter: recording.submitter_seconds,
+        },
     };
     // The master core rasterizes a stand-in base frame: tiny, the time is modelled.
     let farm_job = FarmJob {
@@ -763,7 +724,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             ..job.setup.clone()
         },
     };
-    let config = |mbit: f64| FarmConfig {
+    let config = |mbit: f64| SimulationConfig {
         master_link_bits_per_second: mbit * 1e6,
         master_cores,
         shared_cores: args.shared_cores,
@@ -775,7 +736,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     let overhead = Duration::from_secs_f64(
         (args.package_overhead_ms).map_or(recording.package_seconds, |ms| ms / 1e3),
     );
-    let worker = |speed: f64, mbit: f64| FarmWorker {
+    let worker = |speed: f64, mbit: f64| WorkerSpec {
         speed,
         link_bits_per_second: mbit * 1e6,
         latency,
@@ -793,7 +754,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 each => each[k],
             };
             let equal = vec![worker(1.0, mbit); n];
-            let config = &FarmConfig {
+            let config = &SimulationConfig {
                 background_threads: background_threads_for(
                     &farm_job, &costs, config, &equal, background,
                 )?,
@@ -807,11 +768,11 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 let speeds: Vec<f64> = (0..n)
                     .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
                     .collect();
-                let workers: Vec<FarmWorker> = speeds.iter().map(|&s| worker(s, mbit)).collect();
+                let workers: Vec<WorkerSpec> = speeds.iter().map(|&s| worker(s, mbit)).collect();
                 let frames = simulate(&farm_job, &costs, config, workers.clone())?;
                 let mut row = Row::new(&frames, &one, total, &speeds, mbit, heterogeneous)?;
                 if config.background_threads > 0.0 {
-                    let idle = FarmConfig {
+                    let idle = SimulationConfig {
                         background_threads: 0.0,
                         ..config.clone()
                     };

@@ -11,8 +11,9 @@
 //! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `cancel_job` and
 //! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
-//! hash-map order, no threads). The [`sim`] module drives it with simulated
-//! workers on a virtual clock.
+//! hash-map order, no threads). Its tests drive it with simulated workers on
+//! a virtual clock (`tests/common/sim.rs`); `vtfarm-farmsim` drives the real
+//! master core around it.
 //!
 //! A driver feeds inputs and sends what comes out:
 //!
@@ -147,7 +148,6 @@ mod error;
 mod event;
 mod frame;
 mod scheduler;
-pub mod sim;
 mod status;
 mod types;
 

@@ -11,10 +11,10 @@ mod common;
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use proptest::prelude::*;
-use vtfarm_scheduler::sim::{
+use common::sim::{
     SimConfig, SimCrash, SimFailures, SimFrame, SimJob, SimSlowdown, SimWorker, Simulation,
 };
+use proptest::prelude::*;
 use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
     WorkerId,

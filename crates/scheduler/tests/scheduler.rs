@@ -527,7 +527,7 @@ fn crews_leave_three_of_the_frames_in_flight_free() {
 
 #[test]
 fn packages_are_large_early_and_small_late() {
-    use vtfarm_scheduler::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
+    use common::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
     let frame = SimFrame {
         items: (0..2000).collect(),
         costs: vec![0.005; 2000],

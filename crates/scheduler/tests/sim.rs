@@ -6,10 +6,10 @@ mod common;
 
 use std::time::Duration;
 
-use common::*;
-use vtfarm_scheduler::sim::{
+use common::sim::{
     SimConfig, SimCrash, SimFailures, SimJob, SimReport, SimSlowdown, SimWorker, Simulation,
 };
+use common::*;
 use vtfarm_scheduler::{Event, JobFailure, JobId, LossCause, WorkerId};
 
 fn checked() -> SimConfig {
@@ -130,7 +130,7 @@ fn cost_estimates_carry_over_between_frames() {
 }
 
 /// A 600-item frame of 10 to 30 ms items: 12 s on one worker.
-fn plain_frame() -> vtfarm_scheduler::sim::SimFrame {
+fn plain_frame() -> common::sim::SimFrame {
     uneven_frame(600, 5, 0.01, 0..0, 1.0)
 }
 
@@ -510,7 +510,7 @@ fn a_shared_master_link_bounds_the_frame_and_runs_repeat_exactly() {
     // Every worker asked for work of every frame at least once.
     let requests = |r: &SimReport| {
         (r.inputs.iter())
-            .filter(|(_, i)| matches!(i, vtfarm_scheduler::sim::SimInput::Request(_)))
+            .filter(|(_, i)| matches!(i, common::sim::SimInput::Request(_)))
             .count()
     };
     assert!(requests(&fast) >= 8 * 3, "{}", requests(&fast));
@@ -548,7 +548,7 @@ fn pipelined_frames_overlap_and_held_results_are_not_duplicated() {
         assert!(f.completions.values().all(|&c| c == 1));
     }
     let held = (report.inputs.iter())
-        .filter(|(_, i)| matches!(i, vtfarm_scheduler::sim::SimInput::Arrived(..)))
+        .filter(|(_, i)| matches!(i, common::sim::SimInput::Arrived(..)))
         .count();
     assert!(held > 0, "results waited for the base image");
     for pair in report.frames.windows(2) {

@@ -4,9 +4,11 @@
 // Each test binary uses only some of the helpers.
 #![allow(dead_code)]
 
+pub(crate) mod sim;
+
 use std::collections::BTreeMap;
 
-use vtfarm_scheduler::sim::{SimFrame, SimJob, SimReport};
+use sim::{SimFrame, SimJob, SimReport};
 use vtfarm_scheduler::{Event, JobId, WorkerId};
 
 /// Frames in flight of the pipelined configurations these tests run
@@ -87,7 +89,7 @@ pub(crate) fn assert_exactly_once(report: &SimReport, jobs: &[SimJob]) {
 }
 
 /// Each worker's share of the frame's true cost.
-pub(crate) fn shares(frame: &vtfarm_scheduler::sim::SimFrameReport) -> BTreeMap<WorkerId, f64> {
+pub(crate) fn shares(frame: &sim::SimFrameReport) -> BTreeMap<WorkerId, f64> {
     let total: f64 = frame.true_cost.values().sum();
     frame
         .true_cost

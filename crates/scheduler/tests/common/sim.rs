@@ -2,18 +2,18 @@
 //! message delivery and a virtual clock that jumps to the next event (a
 //! message arriving, a package finishing, a heartbeat, a scheduler deadline).
 //! Like quinn's test `Pair`, it runs fault scenarios in milliseconds without
-//! sockets or sleeps (the scheduler's own tests; `vtfarm bench simulate` runs the real
-//! master core and worker sessions instead, see `crates/bench/src/farm.rs`).
+//! sockets or sleeps. It is the scheduler's own test model: the farm itself
+//! (the real master core and worker sessions) is simulated by
+//! `vtfarm-farmsim`, whose link model this one follows.
 //!
 //! Model: every item has a true cost in seconds on a worker of speed 1. A
 //! worker computes one package at a time, taking its fixed overhead plus the
 //! items' true cost divided by its speed (a slowdown divides the speed from a
-//! given time on, also mid-package). A message takes the link latency plus
-//! its size over the link bandwidth; assignments carry a few bytes per item,
-//! results [`SimConfig::result_bytes_per_item`] per item; with a shared
-//! master link ([`SimConfig::master_link_bits_per_second`]) every message
-//! also queues for it, one direction each way, as all results funnel into
-//! the one master. A worker asks for work when it joins and, piggybacked on
+//! given time on, also mid-package). Links as in `vtfarm-farmsim`: a message holds the
+//! worker's link and (with [`SimConfig::master_link_bits_per_second`]) the
+//! master's shared one together, for its size over the slower rate, one
+//! message at a time per direction, then the latency; assignments carry a
+//! few bytes per item, results [`SimConfig::result_bytes_per_item`] per item. A worker asks for work when it joins and, piggybacked on
 //! each result, whenever it runs out. With the master's rules
 //! ([`SchedulerConfig::pipelined`]: frame affinity, frames pipelined) every
 //! worker hears of each new frame (`FrameStart` over its
@@ -27,21 +27,19 @@
 //! when it is ready, as the master core does. The master handles messages
 //! one at a time, and checking and compositing a result costs
 //! [`SimConfig::master_result_cost_per_item`] per item.
-//! [`SimReport::inputs`] logs every call into the scheduler, so a test can
-//! replay the same calls into the real master core.
+//! [`SimReport::inputs`] logs every call into the scheduler.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::time::Duration;
 
-use crate::scheduler::seconds;
-use crate::{
+use vtfarm_scheduler::{
     Assignment, Counters, Event, FrameStats, FrameWork, JobId, LossCause, PackageId,
     PackageMeasure, Scheduler, SchedulerConfig, WorkerId,
 };
 
 /// Settings of a simulation.
 #[derive(Clone, Debug)]
-pub struct SimConfig {
+pub(crate) struct SimConfig {
     pub scheduler: SchedulerConfig,
     /// How often a live worker sends a heartbeat. Default 1 s.
     pub heartbeat_interval: Duration,
@@ -90,7 +88,7 @@ impl Default for SimConfig {
 
 /// One simulated worker; worker `i` of [`Simulation::new`] is `WorkerId(i)`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimWorker {
+pub(crate) struct SimWorker {
     /// Reported to the scheduler (its guess before the first result); the
     /// speed alone decides how fast the worker computes.
     pub threads: u32,
@@ -118,7 +116,7 @@ pub struct SimWorker {
 impl SimWorker {
     /// A single-threaded worker of the given speed on a 100 Mbit/s link with
     /// 0.2 ms latency and 1 ms overhead per package, joining at time 0.
-    pub fn with_speed(speed: f64) -> SimWorker {
+    pub(crate) fn with_speed(speed: f64) -> SimWorker {
         SimWorker {
             threads: 1,
             speed,
@@ -137,7 +135,7 @@ impl SimWorker {
 
 /// A worker crash: it stops computing and sending at `at`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimCrash {
+pub(crate) struct SimCrash {
     pub at: Duration,
     /// Whether the master's driver notices the dropped connection (then the
     /// scheduler hears `worker_left` one latency later); otherwise only the
@@ -147,14 +145,14 @@ pub struct SimCrash {
 
 /// From `at` on, the worker computes `factor` times slower.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimSlowdown {
+pub(crate) struct SimSlowdown {
     pub at: Duration,
     pub factor: f64,
 }
 
 /// Which packages a worker fails (after its package overhead).
 #[derive(Clone, Debug, PartialEq)]
-pub enum SimFailures {
+pub(crate) enum SimFailures {
     Never,
     Always,
     /// Its first `n` packages.
@@ -165,7 +163,7 @@ pub enum SimFailures {
 
 /// A job to simulate: its frames with the true cost of every item.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimJob {
+pub(crate) struct SimJob {
     pub id: JobId,
     pub submit_at: Duration,
     pub frames: Vec<SimFrame>,
@@ -173,14 +171,14 @@ pub struct SimJob {
 
 /// One frame: items in Morton order and their true costs (seconds at speed 1).
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimFrame {
+pub(crate) struct SimFrame {
     pub items: Vec<u32>,
     pub costs: Vec<f64>,
 }
 
 /// What a simulation produced.
 #[derive(Clone, Debug, Default)]
-pub struct SimReport {
+pub(crate) struct SimReport {
     /// Every scheduler event with the virtual time it came out.
     pub events: Vec<(Duration, Event)>,
     /// Every completed frame, in order.
@@ -204,7 +202,7 @@ pub struct SimReport {
 
 /// A call into the scheduler, as [`SimReport::inputs`] logs it.
 #[derive(Clone, Debug, PartialEq)]
-pub enum SimInput {
+pub(crate) enum SimInput {
     Submit(JobId, Vec<FrameWork>),
     Joined(WorkerId, u32),
     Request(WorkerId),
@@ -219,7 +217,7 @@ pub enum SimInput {
 
 /// A completed frame as the simulation saw it.
 #[derive(Clone, Debug)]
-pub struct SimFrameReport {
+pub(crate) struct SimFrameReport {
     pub job: JobId,
     pub frame: u32,
     /// When it completed.
@@ -235,7 +233,7 @@ pub struct SimFrameReport {
 
 /// The simulation: scheduler, workers, clock and messages in flight.
 #[derive(Debug)]
-pub struct Simulation {
+pub(crate) struct Simulation {
     config: SimConfig,
     scheduler: Scheduler,
     now: Duration,
@@ -298,6 +296,8 @@ struct WorkerSim {
     /// Tells a finish event of the current package from a stale one.
     token: u64,
     started: u32,
+    /// When its link is free, indexed by [`Direction`].
+    link_free: [Duration; 2],
 }
 
 #[derive(Debug)]
@@ -366,7 +366,7 @@ enum ToMaster {
 const MAX_STEPS_AT_ONE_TIME: u32 = 1_000_000;
 
 impl Simulation {
-    pub fn new(config: SimConfig, workers: Vec<SimWorker>) -> Simulation {
+    pub(crate) fn new(config: SimConfig, workers: Vec<SimWorker>) -> Simulation {
         let scheduler = Scheduler::new(config.scheduler.clone());
         let mut simulation = Simulation {
             config,
@@ -402,27 +402,28 @@ impl Simulation {
                 current: None,
                 token: 0,
                 started: 0,
+                link_free: [Duration::ZERO; 2],
             });
         }
         simulation
     }
 
     /// Submits a job at its `submit_at` time.
-    pub fn submit(&mut self, job: SimJob) {
+    pub(crate) fn submit(&mut self, job: SimJob) {
         self.open_jobs.insert(job.id);
         self.schedule(job.submit_at, SimEvent::Submit(job));
     }
 
     /// Runs until every submitted job ended and no result is in flight any
     /// more, nothing can happen any more, or [`SimConfig::time_limit`].
-    pub fn drive(&mut self) -> &SimReport {
+    pub(crate) fn drive(&mut self) -> &SimReport {
         self.drive_bounded(self.config.time_limit)
     }
 
     /// Runs until every submitted job ended and no result is in flight any
     /// more, nothing can happen any more, or the next event lies after
     /// `limit`.
-    pub fn drive_bounded(&mut self, limit: Duration) -> &SimReport {
+    pub(crate) fn drive_bounded(&mut self, limit: Duration) -> &SimReport {
         let mut steps_at_this_time = 0;
         loop {
             if self.open_jobs.is_empty() {
@@ -473,19 +474,19 @@ impl Simulation {
         workers_idle && !in_flight
     }
 
-    pub fn now(&self) -> Duration {
+    pub(crate) fn now(&self) -> Duration {
         self.now
     }
 
-    pub fn scheduler(&self) -> &Scheduler {
+    pub(crate) fn scheduler(&self) -> &Scheduler {
         &self.scheduler
     }
 
-    pub fn report(&self) -> &SimReport {
+    pub(crate) fn report(&self) -> &SimReport {
         &self.report
     }
 
-    pub fn into_report(self) -> SimReport {
+    pub(crate) fn into_report(self) -> SimReport {
         self.report
     }
 
@@ -804,7 +805,7 @@ impl Simulation {
         id: WorkerId,
         assignment: Assignment,
         true_cost: f64,
-        done: Result<(), crate::ReportError>,
+        done: Result<(), vtfarm_scheduler::ReportError>,
     ) -> Option<String> {
         match done {
             Ok(()) => {
@@ -1071,23 +1072,25 @@ impl Simulation {
     }
 
     /// When a message of `bytes` sent now by or to worker `index` arrives:
-    /// the worker's own link, then (if there is one) the master's shared
-    /// link in that direction, then the latency.
+    /// it holds the worker's link and the master's shared one (if there is
+    /// one) together, for its size over the slower rate, then the latency.
     fn arrival(&mut self, index: usize, bytes: u64, direction: Direction) -> Duration {
-        let Some(worker) = self.workers.get(index) else {
+        let Some(worker) = self.workers.get_mut(index) else {
             return self.now;
         };
-        let bits = bytes as f64 * 8.0;
-        let own = self.now + seconds(bits / worker.spec.link_bits_per_second);
-        let sent = match self.config.master_link_bits_per_second {
-            Some(rate) => {
-                let free = &mut self.master_link_free[direction as usize];
-                *free = own.max(*free) + seconds(bits / rate);
-                *free
-            }
-            None => own,
-        };
-        sent + worker.spec.latency
+        let d = direction as usize;
+        let master = self.config.master_link_bits_per_second;
+        let rate = master.map_or(worker.spec.link_bits_per_second, |m| {
+            m.min(worker.spec.link_bits_per_second)
+        });
+        let mut start = self.now.max(worker.link_free[d]);
+        if master.is_some() {
+            start = start.max(self.master_link_free[d]);
+            self.master_link_free[d] = start + seconds(bytes as f64 * 8.0 / rate);
+        }
+        let end = start + seconds(bytes as f64 * 8.0 / rate);
+        worker.link_free[d] = end;
+        end + worker.spec.latency
     }
 }
 
@@ -1108,4 +1111,13 @@ fn finish_time(start: Duration, work: f64, speed: f64, slowdown: Option<&SimSlow
         at + (work - (at - t0) * speed) / speed * slowdown.factor
     };
     seconds(end)
+}
+
+/// `x` seconds, 0 for NaN or negatives, capped at 10⁹ s.
+fn seconds(x: f64) -> Duration {
+    if x.is_nan() || x <= 0.0 {
+        Duration::ZERO
+    } else {
+        Duration::from_secs_f64(x.min(1e9))
+    }
 }

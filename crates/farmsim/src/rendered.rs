@@ -1,0 +1,128 @@
+//! The test harness: the farm with the zero-cost model and its fault knobs.
+//! Workers render every package for real (so images can be compared with
+//! the single-process render), but only the traced samples take virtual
+//! time (each [`SAMPLE_COST`] over the worker's speed); set-ups, base
+//! frames, the master's driver and the submitter cost nothing, and links
+//! have a latency only. Schedules, faults and load balance replay exactly,
+//! in milliseconds, without sockets or sleeps.
+
+use std::time::Duration;
+
+use vtfarm_master_core::FarmRules;
+use vtfarm_proto::{FrameStart, Package, SceneData, SceneHash};
+use vtfarm_vertex::Stop;
+use vtfarm_worker::Engine;
+use vtfarm_worker::SceneStore;
+use vtfarm_worker::engine::PreparedFrames;
+
+use crate::farm::{CostModel, Farm, FarmConfig, JobJournal, MasterCosts, PackageWork, WorkerSpec};
+
+/// Virtual time one traced sample costs a worker of speed 1.
+pub const SAMPLE_COST: Duration = Duration::from_micros(20);
+
+/// Delay of every message in the test harness.
+pub const TEST_LATENCY: Duration = Duration::from_millis(1);
+
+/// The zero-cost model: real rendering, only the samples take time.
+#[derive(Debug, Default)]
+pub struct Rendered;
+
+/// A rendering worker's engine (scene cache) and prepared frames.
+pub struct RenderingWorker {
+    pub engine: Engine,
+    frames: PreparedFrames,
+}
+
+impl SceneStore for RenderingWorker {
+    fn has_scene(&mut self, hash: &SceneHash) -> bool {
+        self.engine.has_scene(hash)
+    }
+
+    type Error = vtfarm_worker::engine::SceneError;
+
+    fn add_scene(&mut self, data: SceneData) -> Result<(), Self::Error> {
+        self.engine.add_scene(data)
+    }
+}
+
+impl CostModel for Rendered {
+    type Worker = RenderingWorker;
+
+    fn new_worker(&mut self) -> RenderingWorker {
+        RenderingWorker {
+            engine: Engine::new(None),
+            frames: PreparedFrames::default(),
+        }
+    }
+
+    fn reconnected(&mut self, worker: &mut RenderingWorker) {
+        worker.frames = PreparedFrames::default();
+    }
+
+    fn prepare_frame(
+        &mut self,
+        worker: &mut RenderingWorker,
+        start: FrameStart,
+    ) -> (Result<(), String>, f64) {
+        let outcome = worker.engine.start_frame(start);
+        (outcome.map(|frame| worker.frames.insert(frame)), 0.0)
+    }
+
+    fn run_package(&mut self, worker: &mut RenderingWorker, package: &Package) -> PackageWork {
+        let frame = (worker.frames.get(package.job, package.frame))
+            .expect("the session runs packages of prepared frames only");
+        let unlimited = Stop::with_budget(u64::MAX);
+        let result = (frame.run(package, 1.0, &unlimited)).expect("packages render");
+        let samples: u64 = (result.triangle_samples.iter())
+            .map(|&s| u64::from(s) + 1)
+            .sum();
+        PackageWork {
+            result,
+            seconds: SAMPLE_COST.as_secs_f64() * samples as f64,
+            wire_bytes: None,
+        }
+    }
+
+    fn master_costs(&self) -> MasterCosts {
+        MasterCosts::default()
+    }
+}
+
+/// The test harness: the real master core and N rendering workers, one
+/// submitter, [`TEST_LATENCY`] on every message.
+pub type TestFarm = Farm<Rendered>;
+
+fn test_config() -> FarmConfig {
+    FarmConfig {
+        master_link_bits_per_second: f64::INFINITY,
+        master_cores: 1,
+        shared_cores: None,
+        background_threads: 0.0,
+        submitter_latency: TEST_LATENCY,
+    }
+}
+
+impl Farm<Rendered> {
+    /// A harness whose master keeps its jobs in memory.
+    pub fn new(rules: FarmRules) -> TestFarm {
+        Farm::with_model(Rendered, test_config(), rules, None)
+    }
+
+    /// A harness whose master journals its jobs into `journal`.
+    pub fn persistent(rules: FarmRules, journal: impl JobJournal + 'static) -> TestFarm {
+        Farm::with_model(Rendered, test_config(), rules, Some(Box::new(journal)))
+    }
+
+    /// Adds a worker that connects now, its packages taking `slowdown`
+    /// (≥ 1) times the samples' time; returns its index.
+    pub fn add_worker(&mut self, name: &str, slowdown: f64) -> usize {
+        let spec = WorkerSpec {
+            speed: 1.0 / slowdown,
+            cores: 1,
+            link_bits_per_second: f64::INFINITY,
+            latency: TEST_LATENCY,
+            package_overhead: Duration::ZERO,
+        };
+        self.join(name, spec)
+    }
+}
