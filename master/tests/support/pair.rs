@@ -493,8 +493,7 @@ impl Pair {
                 Task::PrepareFrame(start) => {
                     let key = (start.job, start.frame);
                     let outcome = worker.engine.start_frame(start);
-                    let outcome = (outcome.map(|frame| worker.frames.insert(frame)))
-                        .map_err(|e| e.to_string());
+                    let outcome = outcome.map(|frame| worker.frames.insert(frame));
                     session.frame_prepared(self.now, key, outcome);
                 }
                 Task::RunPackage(package) => {
