@@ -480,7 +480,9 @@ pub struct FrameStats {
     pub requeued: u32,
     /// `(max busy - mean busy) / mean busy` over the workers that took part.
     pub imbalance: f64,
-    /// Sum of busy time over wall time: the speed-up over one worker.
+    /// Sum of busy time over wall time: how many workers were busy on
+    /// average (not a speed-up over anything; the name stays for the status
+    /// API's JSON).
     pub speedup: f64,
     /// Sum of the packages' counters.
     pub totals: WirePackageStats,

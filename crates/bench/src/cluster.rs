@@ -59,7 +59,8 @@ struct FrameFigures {
     wall_seconds: f64,
     packages: u32,
     imbalance: f64,
-    /// Sum of the workers' busy times over the wall time.
+    /// Sum of the workers' busy times over the wall time: how many workers
+    /// were busy on average.
     busy_speedup: f64,
     /// Sum of the workers' bytes in and out.
     bytes: u64,
