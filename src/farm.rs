@@ -5,15 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
+use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{
-    FinishedFrame, JobEvent, JobOptions, LocalFarm, RemoteJob, run_job, run_remote_job, wire_job,
-};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_render::output::ImageFormat;
 use vtfarm_scene::Scene;
+use vtfarm_submit::{
+    FinishedFrame, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+};
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;

@@ -7,10 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{JobEvent, JobOptions, LocalFarm, run_job, wire_job};
 use vtfarm_proto::SceneData;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
+use vtfarm_submit::{JobEvent, JobOptions, run_job, wire_job};
 use vtfarm_transport::Link;
 use vtfarm_vertex::Quality;
 

@@ -11,11 +11,9 @@ use std::time::Duration;
 use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{
-    FinishedFrame, JobError, JobOptions, LocalFarm, MasterHandle, RemoteJob, run_job,
-    run_remote_job, server, spawn_master, wire_job,
-};
+use vtfarm_master::{MasterHandle, server, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     HandshakePolicy, Hello, Message, PROTOCOL_VERSION, RefuseCode, Role, SceneData, StatusReply,
@@ -23,6 +21,9 @@ use vtfarm_proto::{
 };
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::{Camera, Scene};
+use vtfarm_submit::{
+    FinishedFrame, JobError, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+};
 use vtfarm_trace::TraceSettings;
 use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_transport::{ClusterConfig, ProtoError, SERVER_NAME, client_config};
@@ -956,7 +957,7 @@ async fn a_killed_master_resumes_its_job_after_a_restart_and_the_submitter_follo
                     scene: &data,
                 };
                 let outcome = run_remote_job(&options, start, |event| {
-                    if let vtfarm_master::JobEvent::FrameDone(f) = event {
+                    if let vtfarm_submit::JobEvent::FrameDone(f) = event {
                         let _ = frame_tx.send(f.frame);
                     }
                 })

@@ -177,10 +177,10 @@ fn every_dependency_comes_from_the_workspace_table() {
     );
 }
 
-/// The third-party crates a workspace crate builds on, through the
-/// workspace crates it depends on as well (normal dependencies only: what
-/// a build of the crate links).
-fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
+/// The crates a workspace crate builds on, through the workspace crates it
+/// depends on as well (normal dependencies only: what a build of the crate
+/// links): the workspace crates by package name, and the third-party ones.
+fn dependency_closure(crate_dir: &Path) -> (BTreeSet<String>, BTreeSet<String>) {
     let (root, manifest) = workspace();
     let shared = manifest["workspace"]["dependencies"]
         .as_table()
@@ -189,8 +189,12 @@ fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
         let spec = shared.get(name)?.as_table()?;
         Some(root.join(spec.get("path")?.as_str()?))
     };
-    let (mut seen, mut external, mut todo) =
-        (BTreeSet::new(), BTreeSet::new(), vec![crate_dir.to_owned()]);
+    let (mut seen, mut workspace_crates, mut external, mut todo) = (
+        BTreeSet::new(),
+        BTreeSet::new(),
+        BTreeSet::new(),
+        vec![crate_dir.to_owned()],
+    );
     while let Some(dir) = todo.pop() {
         if !seen.insert(dir.clone()) {
             continue;
@@ -203,14 +207,22 @@ fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
         };
         for name in dependencies.keys() {
             match path_of(name) {
-                Some(path) => todo.push(path),
+                Some(path) => {
+                    workspace_crates.insert(name.clone());
+                    todo.push(path);
+                }
                 None => {
                     external.insert(name.clone());
                 }
             }
         }
     }
-    external
+    (workspace_crates, external)
+}
+
+/// The third-party crates a workspace crate builds on (see [`dependency_closure`]).
+fn external_dependencies(crate_dir: &Path) -> BTreeSet<String> {
+    dependency_closure(crate_dir).1
 }
 
 /// Architecture invariants: the wire knows nothing of QUIC, and the
@@ -233,6 +245,40 @@ fn the_wire_and_the_master_core_build_without_the_transport() {
     assert!(
         transport.contains("quinn") && transport.contains("tokio"),
         "{transport:?}"
+    );
+}
+
+/// Architecture invariants: the master server runs no worker and holds no
+/// client (the embedded farm, `vtfarm-embedded`, joins master and workers;
+/// the submitter is `vtfarm-submit`), and the submitter knows the wire and
+/// the transport, nothing of the master's or a worker's insides.
+#[test]
+fn the_master_runs_no_worker_and_the_submitter_knows_only_the_wire() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let (master, _) = dependency_closure(&root.join("master"));
+    let found: Vec<_> = ["vtfarm-worker", "vtfarm-submit", "vtfarm-embedded"]
+        .into_iter()
+        .filter(|c| master.contains(*c))
+        .collect();
+    assert!(found.is_empty(), "the master builds on {found:?}");
+    let (submit, _) = dependency_closure(&root.join("crates/submit"));
+    let found: Vec<_> = ["vtfarm-master", "vtfarm-master-core", "vtfarm-worker"]
+        .into_iter()
+        .filter(|c| submit.contains(*c))
+        .collect();
+    assert!(found.is_empty(), "the submitter builds on {found:?}");
+    // The check sees through workspace crates: the embedded farm has both ends.
+    let (embedded, _) = dependency_closure(&root.join("crates/embedded"));
+    assert!(
+        [
+            "vtfarm-master",
+            "vtfarm-worker",
+            "vtfarm-master-core",
+            "vtfarm-proto"
+        ]
+        .iter()
+        .all(|c| embedded.contains(*c)),
+        "{embedded:?}"
     );
 }
 

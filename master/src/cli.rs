@@ -133,7 +133,7 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
 
 /// The standalone binary's entry point.
 pub fn main() -> std::process::ExitCode {
-    vtfarm_worker::init_logging();
+    vtfarm_transport::init_logging();
     match run(Standalone::parse().args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

@@ -690,12 +690,12 @@ mod tests {
             trace: Default::default(),
             vertex: Default::default(),
         };
-        let options = crate::JobOptions {
+        let options = vtfarm_proto::JobOptions {
             method: vtfarm_method::MethodKind::VertexTracing,
             aux: false,
         };
         let frames = [setup.clone(), setup.clone(), setup];
-        let job = crate::wire_job("j", &scene, &frames, &[0], options);
+        let job = vtfarm_proto::wire_job("j", &scene, &frames, &[0], options);
         journal
             .write(Record::JobQueued {
                 id: 4,

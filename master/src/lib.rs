@@ -12,27 +12,23 @@
 //! - [`http`]: the dashboard, status API and Prometheus metrics; reads the
 //!   core's state through the driver, owns none.
 //! - [`timeline`]: a frame's phases as SVG (beside `vtfarm submit`'s frames, in the dashboard).
-//! - [`embedded`]: master plus local workers in one process (`vtfarm render`).
-//! - [`submit`]: the submitter's side of the protocol.
+//!
+//! The submitter's side of the protocol is `vtfarm-submit`; the master
+//! with local workers in one process (`vtfarm render`) is `vtfarm-embedded`.
 
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod driver;
-pub mod embedded;
 pub mod http;
 pub mod journal;
 pub mod server;
-pub mod submit;
 pub mod timeline;
 
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
-pub use embedded::{LocalFarm, local_worker};
 pub use journal::{Journal, JournalWriter};
-pub use submit::{
-    FinishedFrame, FrameColor, JobError, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job,
-    wire_job,
-};
 pub use vtfarm_master_core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, FarmRules, MasterCore, Output, Peer, Record, StoredJob,
     telemetry, view,
 };
+/// The job message, for the core's users (tests, the farm simulator).
+pub use vtfarm_proto::{JobOptions, wire_job};

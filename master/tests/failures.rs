@@ -9,14 +9,14 @@ use std::time::Duration;
 use tokio::task::JoinHandle;
 use tokio::time::timeout;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_embedded::local_worker;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{
-    JobError, JobOptions, MasterHandle, Peer, local_worker, run_job, spawn_master, wire_job,
-};
+use vtfarm_master::{MasterHandle, Peer, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Camera;
+use vtfarm_submit::{JobError, JobOptions, run_job, wire_job};
 use vtfarm_trace::TraceSettings;
 use vtfarm_transport::Link;
 use vtfarm_vertex::VertexSettings;

@@ -24,12 +24,11 @@ use tower::ServiceExt;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
 use vtfarm_master::view::ViewOutcome;
-use vtfarm_master::{
-    FinishedFrame, JobOptions, MasterHandle, http, run_job, server, spawn_master, wire_job,
-};
+use vtfarm_master::{MasterHandle, http, server, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{HandshakePolicy, Role, SceneData, StatusReply};
 use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_submit::{FinishedFrame, JobOptions, run_job, wire_job};
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;

@@ -19,15 +19,16 @@ use frame::small_frame;
 use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_embedded::local_worker;
 use vtfarm_master::FarmRules;
 use vtfarm_master::journal::Storage;
-use vtfarm_master::{
-    FinishedFrame, JobError, JobEvent, JobOptions, Journal, MasterHandle, RemoteJob, local_worker,
-    run_remote_job, server, spawn_persistent_master, wire_job,
-};
+use vtfarm_master::{Journal, MasterHandle, server, spawn_persistent_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{HandshakePolicy, Message, SceneData, WireJob};
 use vtfarm_render::FrameSetup;
+use vtfarm_submit::{
+    FinishedFrame, JobError, JobEvent, JobOptions, RemoteJob, run_remote_job, wire_job,
+};
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::ClientOptions;
 use vtfarm_worker::WorkerConfig;
@@ -444,7 +445,7 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
 
 /// The wire image a submitter's frame came from (frames are linear f32).
 fn reference_wire(reference: &[FinishedFrame], frame: u32) -> vtfarm_proto::WireImage {
-    let vtfarm_master::FrameColor::Linear(image) = &reference[frame as usize].image else {
+    let vtfarm_submit::FrameColor::Linear(image) = &reference[frame as usize].image else {
         panic!("linear frames");
     };
     vtfarm_proto::WireImage::from_pixels(image.width, image.height, &image.pixels)
@@ -519,7 +520,7 @@ async fn a_frame_the_master_cannot_deliver_fails_the_submitter_naming_it() {
         }
         master
     });
-    let run = vtfarm_master::run_job(&mut submitter, job, &scene, |_| {});
+    let run = vtfarm_submit::run_job(&mut submitter, job, &scene, |_| {});
     let error = tokio::time::timeout(WAIT, run).await.expect("bounded");
     let error = error.expect_err("a frame was lost").to_string();
     assert_eq!(

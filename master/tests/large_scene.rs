@@ -12,12 +12,14 @@ use std::time::Duration;
 use frame::small_frame;
 use glam::Vec3;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_embedded::local_worker;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{JobOptions, Peer, local_worker, run_job, spawn_master, wire_job};
+use vtfarm_master::{Peer, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::SceneData;
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Camera;
+use vtfarm_submit::{JobOptions, run_job, wire_job};
 use vtfarm_transport::Link;
 use vtfarm_worker::WorkerConfig;
 

@@ -31,10 +31,10 @@ pub use framing::{
 };
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use message::{
-    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobScene, Message, Package,
-    PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode, Role,
-    RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
-    WorkerFrameStats, WorkerStatus, scene_hash,
+    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobOptions, JobScene, Message,
+    Package, PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode,
+    Role, RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
+    WorkerFrameStats, WorkerStatus, scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -59,6 +59,11 @@ pub const FRAMES_IN_FLIGHT: usize = 8;
 /// and QUIC closes a connection idle this long on either end, so a worker or
 /// submitter notices a dead master in the same time.
 pub const PEER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long a persistent master keeps a job whose submitters are gone (and
+/// a completed job's frames) for a submitter to re-attach, and so how long
+/// a submitter that lost the master tries to reconnect.
+pub const ATTACH_GRACE: Duration = Duration::from_secs(120);
 
 /// The first bytes of every `Hello`, so a stray client is told apart from an
 /// old vtfarm.

@@ -22,6 +22,7 @@
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
+use vtfarm_method::{FrameSetup, MethodKind};
 use vtfarm_scene::Scene;
 
 use crate::wire::{
@@ -393,6 +394,36 @@ pub struct WireJob {
     pub image: WireImageFormat,
 }
 
+/// What a job asks the farm for, besides its scene and frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct JobOptions {
+    /// The reflection method the workers run.
+    pub method: MethodKind,
+    /// Send the per-pixel components (mask, reflected, transmitted,
+    /// reflected object) with each frame.
+    pub aux: bool,
+}
+
+/// The job message for a scene (named by its hash) and its frames, its
+/// finished frames sent linear.
+pub fn wire_job(
+    name: &str,
+    scene: &SceneData,
+    frames: &[FrameSetup],
+    reflectors: &[u32],
+    options: JobOptions,
+) -> WireJob {
+    WireJob {
+        name: name.to_owned(),
+        scene: JobScene::Hash(scene.hash),
+        frames: frames.iter().map(WireFrameSetup::from).collect(),
+        reflectors: reflectors.to_vec(),
+        aux: options.aux,
+        method: options.method.into(),
+        image: WireImageFormat::LinearF32,
+    }
+}
+
 /// Where a job's scene comes from.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum JobScene {
@@ -449,7 +480,9 @@ pub struct FrameStats {
     pub requeued: u32,
     /// `(max busy - mean busy) / mean busy` over the workers that took part.
     pub imbalance: f64,
-    /// Sum of busy time over wall time: the speed-up over one worker.
+    /// Sum of busy time over wall time: how many workers were busy on
+    /// average (not a speed-up over anything; the name stays for the status
+    /// API's JSON).
     pub speedup: f64,
     /// Sum of the packages' counters.
     pub totals: WirePackageStats,

@@ -12,6 +12,9 @@
 //!   whose client verifier accepts exactly one certificate fingerprint.
 //! - [`cluster`]: `cluster.toml` and the shared token.
 //! - [`client`]: dialling the master.
+//!
+//! [`init_logging`] is the farm daemons' (`vtfarm master`, `vtfarm worker`)
+//! log set-up, here because both sit on this crate.
 
 pub mod client;
 pub mod cluster;
@@ -28,6 +31,17 @@ pub use tls::{
     ALPN, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError, client_config,
     fingerprint_of, parse_fingerprint, server_config,
 };
+
+/// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`):
+/// the master's and the worker's command lines.
+pub fn init_logging() {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
 
 /// The longest prefix of `text` of at most `max` bytes that ends on a
 /// character boundary.

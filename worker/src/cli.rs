@@ -120,7 +120,7 @@ fn default_cache() -> PathBuf {
 
 /// The standalone binary's entry point.
 pub fn main() -> std::process::ExitCode {
-    crate::init_logging();
+    vtfarm_transport::init_logging();
     match run(Standalone::parse().args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

@@ -73,6 +73,9 @@ pub enum FrameError {
     Renderer(String),
     #[error(transparent)]
     Panicked(#[from] Panicked),
+    /// The blocking task that set the frame up did not finish.
+    #[error("frame set-up failed: {0}")]
+    Task(#[source] tokio::task::JoinError),
 }
 
 /// Why a package failed (its text goes to the master in `PackageFailed`).
@@ -88,6 +91,9 @@ pub enum PackageError {
     FrameNotPrepared,
     #[error(transparent)]
     Panicked(#[from] Panicked),
+    /// The blocking task that ran the package did not finish.
+    #[error("package task failed: {0}")]
+    Task(#[source] tokio::task::JoinError),
 }
 
 /// Why a scene from the master was refused.

@@ -19,13 +19,3 @@ pub use engine::Engine;
 pub use serve::{DrainSignal, serve};
 pub use session::{SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
 pub use vtfarm_transport::client::ClientOptions;
-
-/// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`).
-pub fn init_logging() {
-    let filter =
-        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
-}

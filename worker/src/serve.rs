@@ -163,7 +163,7 @@ pub async fn serve(
                             // The session prepares one frame at a time.
                             preparing = Some((key, task));
                         }
-                        Err(e) => session.frame_prepared(start.elapsed(), key, Err(e.to_string())),
+                        Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),
                     }
                 }
                 Task::RunPackage(package) => {
@@ -226,8 +226,8 @@ pub async fn serve(
             outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
                 let (id, _, _) = running.take().expect("guarded by the select condition");
                 let outcome = match outcome {
-                    Ok(result) => result.map_err(|e| e.to_string()),
-                    Err(join) => Err(format!("package task failed: {join}")),
+                    Ok(result) => result,
+                    Err(join) => Err(PackageError::Task(join)),
                 };
                 session.package_finished(start.elapsed(), id, outcome);
             }
@@ -239,8 +239,8 @@ pub async fn serve(
                         frames.insert(active);
                         Ok(())
                     }
-                    Ok(Err(e)) => Err(e.to_string()),
-                    Err(join) => Err(format!("frame set-up failed: {join}")),
+                    Ok(Err(e)) => Err(e),
+                    Err(join) => Err(FrameError::Task(join)),
                 };
                 session.frame_prepared(start.elapsed(), key, outcome);
             }

@@ -33,6 +33,8 @@ use vtfarm_proto::{
     SceneHash,
 };
 
+use crate::engine::{FrameError, PackageError};
+
 /// How long a worker waits between heartbeats.
 pub const HEARTBEAT_INTERVAL: Duration = Duration::from_secs(1);
 
@@ -119,7 +121,7 @@ pub struct WorkerSession {
     /// A frame whose scene is still on its way.
     awaiting_scene: Option<FrameStart>,
     /// A frame that could not be prepared, with why: its packages fail so.
-    unusable: Option<(FrameKey, String)>,
+    unusable: Option<(FrameKey, FrameError)>,
     queue: VecDeque<Package>,
     running: Option<PackageId>,
     running_frame: Option<FrameKey>,
@@ -276,7 +278,12 @@ impl WorkerSession {
     }
 
     /// The driver prepared (or failed to prepare) a frame.
-    pub fn frame_prepared(&mut self, now: Duration, key: FrameKey, outcome: Result<(), String>) {
+    pub fn frame_prepared(
+        &mut self,
+        now: Duration,
+        key: FrameKey,
+        outcome: Result<(), FrameError>,
+    ) {
         self.now = now;
         if self.preparing != Some(key) {
             return;
@@ -343,7 +350,7 @@ impl WorkerSession {
         &mut self,
         now: Duration,
         id: PackageId,
-        outcome: Result<PackageResult, String>,
+        outcome: Result<PackageResult, PackageError>,
     ) {
         self.now = now;
         if self.running != Some(id) {
@@ -359,7 +366,11 @@ impl WorkerSession {
                     }
                     Message::PackageResult(result)
                 }
-                Err(error) => Message::PackageFailed(PackageFailed { id, error }),
+                // The wire carries the reason as text.
+                Err(error) => Message::PackageFailed(PackageFailed {
+                    id,
+                    error: error.to_string(),
+                }),
             });
         }
         self.advance();

@@ -18,10 +18,11 @@ use serde::Serialize;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_master::FarmRules;
-use vtfarm_master::{JobOptions, run_job, server, spawn_master, wire_job};
+use vtfarm_master::{server, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, HandshakePolicy, Role, SceneData};
 use vtfarm_render::FrameSetup;
+use vtfarm_submit::{JobOptions, run_job, wire_job};
 use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_transport::{CLOSE_NORMAL, CLUSTER_FILE, ClusterConfig, Link};
 use vtfarm_vertex::Quality;
@@ -58,7 +59,8 @@ struct FrameFigures {
     wall_seconds: f64,
     packages: u32,
     imbalance: f64,
-    /// Sum of the workers' busy times over the wall time.
+    /// Sum of the workers' busy times over the wall time: how many workers
+    /// were busy on average.
     busy_speedup: f64,
     /// Sum of the workers' bytes in and out.
     bytes: u64,

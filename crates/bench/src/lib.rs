@@ -36,7 +36,7 @@ pub enum BenchCommand {
     /// One worker against two over real QUIC on 127.0.0.1, all in this process.
     Cluster(cluster::ClusterArgs),
     /// Closest-hit rays per second on fixed camera, random and reflection
-    /// rays (compare with another tracer on the same rays; see README).
+    /// rays (compare with another tracer on the same rays; see docs/benchmarks.md).
     Rays(rays::RaysArgs),
     /// The rasterizer's per-frame costs: the master's base frame and a
     /// worker's ID buffer over the reflectors' bounds, on 1 and more threads.

@@ -1,6 +1,6 @@
 //! `vtfarm bench rays`: closest-hit throughput on three fixed, reproducible
 //! ray sets, so that the tracer can be compared with another one (Embree) on
-//! exactly the same rays. README "Ray throughput" documents the sets.
+//! exactly the same rays. docs/benchmarks.md ("Ray throughput") documents the sets.
 //!
 //! - primary: the camera's rays through the pixel centres (x + 0.5, y + 0.5),
 //!   row 0 (top) first, x ascending within a row;
@@ -378,8 +378,8 @@ impl RaySets {
     }
 }
 
-/// The fixed generator of the incoherent rays (README gives it for other
-/// tracers): xorshift64* with state `seed` (0 becomes the default seed).
+/// The fixed generator of the incoherent rays (docs/benchmarks.md gives it
+/// for other tracers): xorshift64* with state `seed` (0 becomes the default seed).
 /// Each ray draws five numbers `u = (next() >> 40) / 2^24` in [0, 1), in this
 /// order: origin x, y, z (`lo + (hi - lo) * u` per axis, in f32), then
 /// `z = 1 - 2 u4` and `phi = 2 pi u5`; the direction is

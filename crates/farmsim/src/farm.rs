@@ -17,6 +17,7 @@ use vtfarm_proto::{
     FrameDone, FrameStart, FrameStats, JobScene, Message, Package, PackageResult, SceneData,
     WireJob, encoded_len,
 };
+use vtfarm_worker::engine::FrameError;
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
 
 /// What the work of a farm costs and gives: the pluggable cost model.
@@ -38,7 +39,7 @@ pub trait CostModel {
         &mut self,
         worker: &mut Self::Worker,
         start: FrameStart,
-    ) -> (Result<(), String>, f64);
+    ) -> (Result<(), FrameError>, f64);
 
     /// Runs a package of a prepared frame.
     fn run_package(&mut self, worker: &mut Self::Worker, package: &Package) -> PackageWork;
@@ -196,7 +197,7 @@ enum Work {
         worker: usize,
         epoch: u64,
         key: (u64, u32),
-        outcome: Result<(), String>,
+        outcome: Result<(), FrameError>,
     },
     Package {
         worker: usize,

@@ -22,6 +22,7 @@ use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
 use vtfarm_vertex::SparseBitmap;
 use vtfarm_worker::SceneStore;
+use vtfarm_worker::engine::FrameError;
 
 use crate::SimulationError;
 use crate::farm::{CostModel, Farm, FarmConfig, MasterCosts, PackageRun, PackageWork, WorkerSpec};
@@ -188,7 +189,7 @@ impl CostModel for Recorded<'_> {
 
     fn reconnected(&mut self, _: &mut SceneHashes) {}
 
-    fn prepare_frame(&mut self, _: &mut SceneHashes, _: FrameStart) -> (Result<(), String>, f64) {
+    fn prepare_frame(&mut self, _: &mut SceneHashes, _: FrameStart) -> (Result<(), FrameError>, f64) {
         (Ok(()), self.costs.worker_setup)
     }
 

@@ -13,7 +13,7 @@ use vtfarm_proto::{FrameStart, Package, SceneData, SceneHash};
 use vtfarm_vertex::Stop;
 use vtfarm_worker::Engine;
 use vtfarm_worker::SceneStore;
-use vtfarm_worker::engine::PreparedFrames;
+use vtfarm_worker::engine::{FrameError, PreparedFrames};
 
 use crate::farm::{CostModel, Farm, FarmConfig, JobJournal, MasterCosts, PackageWork, WorkerSpec};
 
@@ -63,7 +63,7 @@ impl CostModel for Rendered {
         &mut self,
         worker: &mut RenderingWorker,
         start: FrameStart,
-    ) -> (Result<(), String>, f64) {
+    ) -> (Result<(), FrameError>, f64) {
         let outcome = worker.engine.start_frame(start);
         (outcome.map(|frame| worker.frames.insert(frame)), 0.0)
     }

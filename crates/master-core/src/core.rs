@@ -127,9 +127,7 @@ impl std::fmt::Debug for SpareBase {
 /// about 33 MB); base frames beyond them rasterize into fresh buffers.
 const SPARE_BASES: usize = 2;
 
-/// How long a persistent master keeps a job whose submitter is gone (and a
-/// completed job's frames) for a submitter to re-attach.
-pub const ATTACH_GRACE: Duration = Duration::from_secs(120);
+pub use vtfarm_proto::ATTACH_GRACE;
 
 struct Job {
     name: String,

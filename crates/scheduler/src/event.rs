@@ -126,7 +126,7 @@ impl FrameStats {
         if mean > 0.0 { (max - mean) / mean } else { 0.0 }
     }
 
-    /// Speed-up over the one-worker estimate: `total busy / wall`; 0 for a
+    /// How many workers were busy on average: `total busy / wall`; 0 for a
     /// frame without wall time.
     pub fn speedup(&self) -> f64 {
         let wall = self.wall.as_secs_f64();

@@ -14,6 +14,7 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
 
 use super::{DRAIN_LIMIT, HEARTBEAT_INTERVAL, SceneStore, SessionEnd, Task, WorkerSession};
+use crate::engine::{FrameError, Panicked};
 
 const SCENE: SceneHash = [7; 32];
 
@@ -26,9 +27,9 @@ impl SceneStore for Scenes {
         self.0.contains(hash)
     }
 
-    type Error = String;
+    type Error = std::convert::Infallible;
 
-    fn add_scene(&mut self, data: SceneData) -> Result<(), String> {
+    fn add_scene(&mut self, data: SceneData) -> Result<(), Self::Error> {
         self.0.insert(data.hash);
         Ok(())
     }
@@ -191,7 +192,8 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
 #[test]
 fn packages_of_a_frame_that_failed_to_prepare_fail_with_its_reason() {
     let (mut s, mut scenes) = preparing_session();
-    s.frame_prepared(Duration::ZERO, (1, 0), Err("BVH build panicked".into()));
+    let panicked = Panicked("BVH build panicked".into());
+    s.frame_prepared(Duration::ZERO, (1, 0), Err(FrameError::Panicked(panicked)));
     s.handle_message(Duration::ZERO, package(11, 2, 5), &mut scenes);
     let failed: Vec<(u64, String)> = messages(&mut s)
         .into_iter()
@@ -202,7 +204,10 @@ fn packages_of_a_frame_that_failed_to_prepare_fail_with_its_reason() {
         })
         .collect();
     assert_eq!(failed.len(), 2, "{failed:?}");
-    assert!(failed[0].1.contains("BVH build panicked"), "{failed:?}");
+    assert_eq!(
+        failed[0].1, "cannot start frame: panicked: BVH build panicked",
+        "the frame's error, as the wire's reason"
+    );
     assert!(failed[1].1.contains("without its frame"), "{failed:?}");
     assert_eq!(tasks(&mut s), vec![]);
 }

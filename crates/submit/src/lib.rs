@@ -1,5 +1,7 @@
 //! The submitter's side of the protocol, over any [`Link`]: `vtfarm submit`
-//! runs it over QUIC, `vtfarm render` against the embedded master.
+//! runs it over QUIC, `vtfarm render` and `vtfarm study` against the
+//! embedded master (`vtfarm-embedded`). A client of the farm: it knows the
+//! wire and the transport, nothing of the master's or a worker's insides.
 //!
 //! The job names its scene by hash first; the master asks for the bytes only
 //! when it does not have that scene yet. [`run_remote_job`] follows a job
@@ -18,15 +20,16 @@ use std::time::{Duration, Instant};
 
 use tracing::warn;
 use vtfarm_imaging::Image;
-use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameStats, JobScene, Message, Role, SceneData, WireFrameAux, WireFrameSetup, WireImage,
-    WireImageFormat, WireJob,
+    ATTACH_GRACE, FrameStats, Message, Role, SceneData, WireFrameAux, WireImage, WireImageFormat,
+    WireJob,
 };
-use vtfarm_render::FrameSetup;
 use vtfarm_transport::Link;
 use vtfarm_transport::client::{ClientOptions, ConnectError, connect};
 use vtfarm_vertex::FrameImage;
+
+/// The job message and its options: the wire's, here for the submitter's users.
+pub use vtfarm_proto::{JobOptions, wire_job};
 
 /// A finished frame as the submitter receives it.
 #[derive(Clone, Debug)]
@@ -118,35 +121,6 @@ pub enum JobError {
     Connect(#[from] ConnectError),
 }
 
-/// What a job asks the farm for, besides its scene and frames.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct JobOptions {
-    /// The reflection method the workers run.
-    pub method: MethodKind,
-    /// Send the per-pixel components (mask, reflected, transmitted,
-    /// reflected object) with each frame.
-    pub aux: bool,
-}
-
-/// The job message for a scene and its frames.
-pub fn wire_job(
-    name: &str,
-    scene: &SceneData,
-    frames: &[FrameSetup],
-    reflectors: &[u32],
-    options: JobOptions,
-) -> WireJob {
-    WireJob {
-        name: name.to_owned(),
-        scene: JobScene::Hash(scene.hash),
-        frames: frames.iter().map(WireFrameSetup::from).collect(),
-        reflectors: reflectors.to_vec(),
-        aux: options.aux,
-        method: options.method.into(),
-        image: WireImageFormat::LinearF32,
-    }
-}
-
 /// Submits `job` and waits for all its frames.
 pub async fn run_job(
     link: &mut Link,
@@ -170,7 +144,7 @@ pub enum RemoteJob<'a> {
 
 /// Runs a job on the master at `options` and waits for all its frames. When
 /// the connection drops after the master accepted the job, it reconnects
-/// with backoff (for up to [`crate::ATTACH_GRACE`]) and re-attaches, so a
+/// with backoff (for up to [`ATTACH_GRACE`]) and re-attaches, so a
 /// restarted master goes on sending frames; connecting the first time fails
 /// fast.
 pub async fn run_remote_job(
@@ -188,7 +162,7 @@ pub async fn run_remote_job(
         let conn = match connect(options, Role::Submitter).await {
             Ok(conn) => conn,
             Err(e) => {
-                let retry = lost_at.is_some_and(|t| t.elapsed() < crate::ATTACH_GRACE);
+                let retry = lost_at.is_some_and(|t| t.elapsed() < ATTACH_GRACE);
                 if !(retry && e.is_transient()) {
                     return Err(JobError::Connect(e));
                 }

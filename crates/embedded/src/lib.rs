@@ -1,13 +1,14 @@
-//! The embedded farm behind `vtfarm render`: a master and local workers in
-//! one process, joined by in-memory links, so the one-machine path runs the
-//! same scheduler and protocol as the cluster.
+//! The embedded farm behind `vtfarm render` and `vtfarm study`: a master
+//! and local workers in one process, joined by in-memory links, so the
+//! one-machine path runs the same scheduler and protocol as the cluster.
+//! It joins the server (`vtfarm-master`) and the worker (`vtfarm-worker`),
+//! which know nothing of each other; submitters talk to it through
+//! `vtfarm-submit` over [`LocalFarm::submitter`].
 
 use tokio::task::JoinHandle;
-use vtfarm_master_core::{FarmRules, Peer};
+use vtfarm_master::{FarmRules, MasterHandle, Peer, spawn_master};
 use vtfarm_transport::Link;
 use vtfarm_worker::{DrainSignal, Engine, SessionEnd, WorkerConfig, serve};
-
-use crate::driver::{MasterHandle, spawn_master};
 
 /// Attaches a worker to `master` over an in-memory link and runs its session
 /// as a task (no scene cache on disk, never drained).
