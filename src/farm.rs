@@ -148,7 +148,7 @@ fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptio
 /// them).
 fn write_frame(
     path: &Path,
-    frame: &vtfarm_master::FinishedFrame,
+    frame: &vtfarm_submit::FinishedFrame,
     format: ImageFormat,
     exposure: &vtfarm_imaging::Exposure,
 ) -> Result<()> {

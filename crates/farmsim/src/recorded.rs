@@ -189,7 +189,11 @@ impl CostModel for Recorded<'_> {
 
     fn reconnected(&mut self, _: &mut SceneHashes) {}
 
-    fn prepare_frame(&mut self, _: &mut SceneHashes, _: FrameStart) -> (Result<(), FrameError>, f64) {
+    fn prepare_frame(
+        &mut self,
+        _: &mut SceneHashes,
+        _: FrameStart,
+    ) -> (Result<(), FrameError>, f64) {
         (Ok(()), self.costs.worker_setup)
     }
 

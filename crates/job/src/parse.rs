@@ -18,8 +18,8 @@ use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
 use crate::{
-    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride, OutputSettings,
-    ReflectorSelector, SceneSource, ToneCurve, obj_camera_missing,
+    CameraSpec, CockpitConfig, Job, JobError, LightingSpec, Location, MaterialOverride,
+    OutputSettings, ReflectorSelector, SceneSource, ToneCurve, obj_camera_missing,
 };
 
 /// Names accepted by `scene.builtin`.
@@ -65,7 +65,6 @@ struct RawMaterial {
     emission_color: Option<Vec3Value>,
     texture: Option<Spanned<PathBuf>>,
 }
-
 
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
