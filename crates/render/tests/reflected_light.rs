@@ -139,6 +139,7 @@ fn add_quad(scene: &mut Scene, name: &str, material: Material, corner: Vec3, u: 
         ],
         objects: vec![Object { name: name.into() }],
         materials: vec![material],
+        ..Default::default()
     };
     scene.append(&part);
 }
