@@ -150,6 +150,7 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
         warnings: Vec::new(),
         cameras: Vec::new(),
         to_smooth: Vec::new(),
+        visits: 0,
     };
     import.scene.materials = (gltf.document.materials())
         .map(|m| import.material(&m))
@@ -210,6 +211,12 @@ pub fn load_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gltf
 /// Node trees deeper than this are refused (a cycle would never end).
 const MAX_NODE_DEPTH: usize = 256;
 
+/// Instancing lets a small file name a huge scene (a node listing one child
+/// many times, at every level): the node visits and the vertices they emit
+/// are bounded, so the work and memory of a load are.
+const MAX_NODE_VISITS: usize = 1 << 20;
+const MAX_IMPORTED_VERTICES: usize = 1 << 24;
+
 struct Import<'a> {
     path: &'a Path,
     base: &'a Path,
@@ -221,6 +228,8 @@ struct Import<'a> {
     cameras: Vec<GltfCamera>,
     /// Per triangle, whether its normals are to be computed.
     to_smooth: Vec<bool>,
+    /// Nodes visited so far (instances counted each time).
+    visits: usize,
 }
 
 impl Import<'_> {
@@ -236,6 +245,16 @@ impl Import<'_> {
             return Err(invalid(
                 self.path,
                 format!("nodes nested deeper than {MAX_NODE_DEPTH}"),
+            ));
+        }
+        self.visits += 1;
+        if self.visits > MAX_NODE_VISITS || self.scene.positions.len() > MAX_IMPORTED_VERTICES {
+            return Err(invalid(
+                self.path,
+                format!(
+                    "the node tree instances more than {MAX_NODE_VISITS} nodes or \
+                     {MAX_IMPORTED_VERTICES} vertices"
+                ),
             ));
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
