@@ -53,9 +53,9 @@ use glam::{Mat3, Mat4, Vec2, Vec3};
 use serde_json::{Value, json};
 
 use crate::normals;
-use crate::obj::ObjOptions;
+use crate::obj::{ObjOptions, default_material, object_id};
 use crate::{
-    GLASS_IOR, Material, MaterialId, Object, ObjectId, Scene, Texture, TextureId, Triangle,
+    GLASS_IOR, Material, MaterialId, ObjectId, Scene, Texture, TextureId, Triangle,
     fresnel_reflectance,
 };
 
@@ -573,26 +573,6 @@ fn invalid(path: &Path, message: impl Into<String>) -> GltfError {
         path: path.to_owned(),
         message: message.into(),
     }
-}
-
-/// The id of the object named `name`, added if new.
-fn object_id(scene: &mut Scene, name: &str) -> ObjectId {
-    scene.object_id(name).unwrap_or_else(|| {
-        scene.objects.push(Object {
-            name: name.to_owned(),
-        });
-        scene.objects.len() as ObjectId - 1
-    })
-}
-
-/// The material for primitives without one: [`Material::default`], added
-/// on first use.
-fn default_material(scene: &mut Scene) -> MaterialId {
-    let default = Material::default();
-    scene.material_id(&default.name).unwrap_or_else(|| {
-        scene.materials.push(default);
-        scene.materials.len() as MaterialId - 1
-    })
 }
 
 /// Writes `scene` as a binary glTF file at `path` (see the [module

@@ -1111,7 +1111,7 @@ fn build_scene(
 }
 
 /// The id of the object named `name`, added if new.
-fn object_id(scene: &mut Scene, name: &str) -> ObjectId {
+pub(crate) fn object_id(scene: &mut Scene, name: &str) -> ObjectId {
     scene.object_id(name).unwrap_or_else(|| {
         scene.objects.push(Object {
             name: name.to_owned(),
@@ -1120,9 +1120,10 @@ fn object_id(scene: &mut Scene, name: &str) -> ObjectId {
     })
 }
 
-/// The material for faces without one: the MTL's "default" if it has one,
-/// otherwise [`Material::default`], added on first use.
-fn default_material(scene: &mut Scene) -> MaterialId {
+/// The material for faces (or glTF primitives) without one: the MTL's
+/// "default" if it has one, otherwise [`Material::default`], added on
+/// first use.
+pub(crate) fn default_material(scene: &mut Scene) -> MaterialId {
     let default = Material::default();
     scene.material_id(&default.name).unwrap_or_else(|| {
         scene.materials.push(default);
