@@ -8,7 +8,7 @@
 //! packages are opaque ids, and time is the `now: Duration` (time since the
 //! master started) passed to every input. Inputs are the `Scheduler` methods
 //! `worker_joined`, `worker_left`, `heartbeat`, `request_work`,
-//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `cancel_job` and
+//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `submit_interactive_job`, `cancel_job` and
 //! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
 //! hash-map order, no threads). Its tests drive it with simulated workers on
@@ -169,7 +169,7 @@
 //!
 //! # Job states
 //!
-//! Queued (`submit_job`) → Running (`advance_jobs`, when the job before it
+//! Queued (`submit_job`, `submit_interactive_job`) → Running (`advance_jobs`, when the job before it
 //! ends) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
 //! (`cancel_job`); a queued job may be cancelled directly.
 

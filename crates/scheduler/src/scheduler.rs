@@ -65,6 +65,7 @@ struct Worker {
 struct QueuedJob {
     id: JobId,
     frames: Vec<FrameWork>,
+    interactive: bool,
 }
 
 #[derive(Debug)]
@@ -72,6 +73,8 @@ struct RunningJob {
     id: JobId,
     /// Frames not started yet.
     frames: VecDeque<FrameWork>,
+    /// Every frame split, none whole ([`Scheduler::submit_interactive_job`]).
+    interactive: bool,
     frame_count: u32,
     costs: CostModel,
     failures_by_worker: BTreeMap<WorkerId, u32>,
@@ -89,6 +92,16 @@ struct RunningJob {
 }
 
 impl RunningJob {
+    /// The frames not started yet that count towards whole frames (none
+    /// for an interactive job).
+    fn batch_frames_left(&self) -> usize {
+        if self.interactive {
+            0
+        } else {
+            self.frames.len()
+        }
+    }
+
     /// Estimates the next `lookahead` frames not started yet anew: after a
     /// frame started or the cost estimates learned from a complete one.
     /// With [`SchedulerConfig::frames_in_flight`] frames the whole-job bound
@@ -285,12 +298,38 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
+        self.queue_job(now, job, frames, false)
+    }
+
+    /// Queues a job whose frames' latency is what counts (the interactive
+    /// view's stages): every frame is split over the workers, none is whole
+    /// ([`SchedulerConfig::whole_frames`]). Otherwise as [`Scheduler::submit_job`].
+    pub fn submit_interactive_job(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+    ) -> Result<(), SubmitError> {
+        self.queue_job(now, job, frames, true)
+    }
+
+    fn queue_job(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+        interactive: bool,
+    ) -> Result<(), SubmitError> {
         self.advance(now);
         let running = self.running.as_ref().is_some_and(|r| r.id == job);
         if running || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
-        self.queued_jobs.push_back(QueuedJob { id: job, frames });
+        self.queued_jobs.push_back(QueuedJob {
+            id: job,
+            frames,
+            interactive,
+        });
         self.dispatch();
         Ok(())
     }
@@ -713,7 +752,7 @@ impl Scheduler {
             return false;
         }
         let frames_in_flight = self.config.frames_in_flight as usize;
-        if self.starts_whole(&job.blocklist, job.frames.len()) {
+        if self.starts_whole(&job.blocklist, job.batch_frames_left()) {
             let workers = self.eligible_workers(job).count().max(1);
             job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
         } else {
@@ -782,7 +821,7 @@ impl Scheduler {
                 &self.config,
                 &self.workers,
                 &job.blocklist,
-                job.frames.len(),
+                job.batch_frames_left(),
             );
             match job.frames.pop_front() {
                 Some(next) => {
@@ -815,7 +854,7 @@ impl Scheduler {
             &self.config,
             &self.workers,
             &job.blocklist,
-            job.frames.len(),
+            job.batch_frames_left(),
         );
         let Some(next) = job.frames.pop_front() else {
             return;
@@ -866,7 +905,12 @@ impl Scheduler {
             return;
         };
         let costs = CostModel::new(self.config.estimation.initial_item_cost);
-        let whole = self.starts_whole(&BTreeSet::new(), frames.len() + 1);
+        let unstarted = if next.interactive {
+            0
+        } else {
+            frames.len() + 1
+        };
+        let whole = self.starts_whole(&BTreeSet::new(), unstarted);
         let frame = Frame::new(0, first.items, whole, &costs);
         self.events.push_back(Event::FrameStarted {
             job: next.id,
@@ -878,6 +922,7 @@ impl Scheduler {
         let mut job = RunningJob {
             id: next.id,
             frames,
+            interactive: next.interactive,
             frame_count,
             costs,
             failures_by_worker: BTreeMap::new(),

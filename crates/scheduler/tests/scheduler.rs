@@ -928,3 +928,22 @@ fn whole_frames_in_flight_follow_the_workers() {
     assert_eq!(next.iter().map(|a| a.frame).collect::<Vec<_>>(), [6]);
     farm.valid();
 }
+
+#[test]
+fn an_interactive_jobs_frames_are_all_split() {
+    let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
+    farm.join(W0);
+    farm.join(W1);
+    let frame = FrameWork {
+        items: (100..106).collect(),
+    };
+    farm.s
+        .submit_interactive_job(farm.now, JOB, vec![frame; 3])
+        .expect("submit");
+    let a = farm.request(W0).expect("frame 0");
+    let b = farm.request(W1).expect("frame 0");
+    assert!(!a.whole && !b.whole && a.items.len() < 6, "{a:?} {b:?}");
+    // Three frames on two workers would start whole in a batch job.
+    assert_eq!(started_whole(&farm.events())[0], (0, false));
+    farm.valid();
+}
