@@ -333,6 +333,40 @@ async fn two_workers_render_the_cockpit_exactly_like_one_process() {
     );
 }
 
+/// Batch work over real QUIC: a job of more frames than workers runs its
+/// first frames whole (each rendered, composited and encoded on one worker)
+/// and its tail split (composited on the master); every frame, colour and
+/// components, equals the single-process render on 1, 2 and 3 workers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn whole_and_split_frames_over_quic_equal_the_single_process_render() {
+    let _serial = SERIAL.lock().await;
+    let job = job(4, 96, 54);
+    let reference = reference(&job);
+    let components = reference_frames(&job);
+    for workers in 1..=3 {
+        let cluster = Cluster::start(FarmRules::default());
+        let _workers: Vec<JoinHandle<()>> = (0..workers)
+            .map(|w| cluster.worker(&format!("w{w}"), 1.0))
+            .collect();
+        cluster.wait_for_workers(workers).await;
+        let frames = cluster.submit(&job).await.unwrap();
+        assert_same_images(&frames, &reference);
+        for (frame, reference) in frames.iter().zip(&components) {
+            let got = frame.components.as_ref().expect("the job asked for them");
+            assert!(
+                got == reference,
+                "{workers} worker(s), frame {}: components differ",
+                frame.frame
+            );
+            // Frame k starts with 4 − k frames left: whole (one package)
+            // while that is more than the workers.
+            if 4 - frame.frame as usize > workers {
+                assert_eq!(frame.stats.packages, 1, "{:?}", frame.stats);
+            }
+        }
+    }
+}
+
 /// The single-process frame of a per-reflector method: each reflector
 /// object rendered on its own and composited over the rasterized frame.
 fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3> {

@@ -79,9 +79,14 @@ fn convert(message: Message) {
         Message::FrameStart(start) => {
             let _ = FrameSetup::try_from(start.setup);
         }
-        Message::PackageResult(result) => {
-            let _ = result.bitmap.into_bitmap_within(640, 360);
-        }
+        Message::PackageResult(result) => match result.pixels {
+            vtfarm_proto::ResultPixels::Bitmap(bitmap) => {
+                let _ = bitmap.into_bitmap_within(640, 360);
+            }
+            vtfarm_proto::ResultPixels::Frame { image, .. } => {
+                let _ = image.into_pixels();
+            }
+        },
         Message::FrameDone(done) => {
             let _ = done.image.into_pixels();
         }

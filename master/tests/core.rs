@@ -14,7 +14,8 @@ use vtfarm_master::FarmRules;
 use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, SceneData, WireBitmap, WireJob,
+    FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, ResultPixels, SceneData,
+    WireBitmap, WireFrameAux, WireImage, WireImageFormat, WireJob,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::Renderer;
@@ -93,6 +94,13 @@ struct StartedFrame {
 }
 
 fn start_frame() -> StartedFrame {
+    start_job(1)
+}
+
+/// A master with one worker and one submitter and a job of `frames`
+/// frames of the same view: with more than one frame, frame 0 is whole
+/// (more frames than workers) and the worker sets it up from its package.
+fn start_job(frames: usize) -> StartedFrame {
     let c = cockpit(&CockpitConfig {
         detail: 0.2,
         ..CockpitConfig::default()
@@ -139,28 +147,30 @@ fn start_frame() -> StartedFrame {
         ..wire_job(
             "core",
             &data,
-            std::slice::from_ref(&setup),
+            &vec![setup.clone(); frames],
             &reflectors,
             options,
         )
     };
     let out = h.send(SUBMITTER, Message::SubmitJob { job });
-    assert!(matches!(
-        messages_to(&out, SUBMITTER)[0],
-        Message::JobAccepted { frames: 1, .. }
-    ));
-    // Every worker hears of the scene and the frame.
+    let Message::JobAccepted { job, .. } = messages_to(&out, SUBMITTER)[0] else {
+        panic!("{out:?}")
+    };
+    let job = *job;
+    // Every worker hears of the scene and, unless it is whole, the frame.
     let to_worker = messages_to(&out, WORKER);
     assert!(matches!(to_worker[0], Message::SceneOffer { .. }));
-    let Message::FrameStart(start) = to_worker[1] else {
-        panic!("{to_worker:?}")
-    };
     h.engine.add_scene(data).unwrap();
-    h.frame = Some(h.engine.start_frame(start.clone()).unwrap());
+    match to_worker.get(1) {
+        Some(Message::FrameStart(start)) => {
+            h.frame = Some(h.engine.start_frame(start.clone()).unwrap());
+        }
+        other => assert!(frames > 1 && other.is_none(), "{to_worker:?}"),
+    }
     StartedFrame {
         h,
-        job: start.job,
-        frame: start.frame,
+        job,
+        frame: 0,
         ids: vtfarm_raster::id_buffer(&c.scene, &setup.camera),
         reference: reference
             .image
@@ -198,6 +208,10 @@ fn finish_frame(
         });
         out = match package {
             Some(p) => {
+                // A whole frame's set-up comes with its package.
+                if let Some(start) = &p.whole {
+                    h.frame = Some(h.engine.start_frame((**start).clone()).unwrap());
+                }
                 let unlimited = Stop::with_budget(u64::MAX);
                 let mut result = h.frame.as_ref().unwrap().run(&p, 1.0, &unlimited).unwrap();
                 let first = tamper.is_some();
@@ -209,7 +223,7 @@ fn finish_frame(
                     tamper(&p, &mut result);
                 }
                 let mut out = h.send(WORKER, Message::PackageResult(result));
-                if first {
+                if first && p.whole.is_none() {
                     // The base frame comes after the first result, which
                     // waits for its ID buffer to be checked.
                     assert!(messages_to(&out, SUBMITTER).is_empty(), "{out:?}");
@@ -225,8 +239,15 @@ fn finish_frame(
 
 /// The frame counted one failed package and still equals the single-process render.
 fn assert_one_failure_and_the_reference(started: &StartedFrame, done: FrameDone) {
-    // The timeline: the master's base frame, the worker's set-up and packages.
-    for kind in [PhaseKind::Base, PhaseKind::Setup, PhaseKind::Package] {
+    // The timeline: the master's base frame (a split frame's), the worker's
+    // set-up and packages.
+    let whole = done.stats.phases.iter().all(|p| p.kind != PhaseKind::Base);
+    let kinds: &[PhaseKind] = if whole {
+        &[PhaseKind::Setup, PhaseKind::Package]
+    } else {
+        &[PhaseKind::Base, PhaseKind::Setup, PhaseKind::Package]
+    };
+    for &kind in kinds {
         let phase = (done.stats.phases.iter()).find(|p| p.kind == kind);
         assert!(
             phase.is_some_and(|p| p.start_micros <= p.end_micros),
@@ -282,7 +303,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         WORKER,
         Message::PackageResult(PackageResult {
             id: 999,
-            bitmap: Default::default(),
+            pixels: ResultPixels::Bitmap(Default::default()),
             stats: Default::default(),
             busy_micros: 1,
             setup_micros: 0,
@@ -293,8 +314,11 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
 
     // The first package comes back with a bitmap outside the frame: it fails and is retried.
     let done = finish_frame(&mut started, |_, result| {
-        result.bitmap.x0 = u32::MAX - 1;
-        result.bitmap.width = 4;
+        let ResultPixels::Bitmap(bitmap) = &mut result.pixels else {
+            panic!("a split frame's result is a bitmap");
+        };
+        bitmap.x0 = u32::MAX - 1;
+        bitmap.width = 4;
     });
     assert_one_failure_and_the_reference(&started, done);
 }
@@ -310,7 +334,7 @@ fn a_result_writing_pixels_its_package_does_not_own_fails_the_package() {
         let foreign = (ids.triangle.iter())
             .position(|t| !package.triangles.contains(t))
             .expect("the package does not own the whole frame") as u32;
-        result.bitmap = WireBitmap::from(&SparseBitmap {
+        result.pixels = ResultPixels::Bitmap(WireBitmap::from(&SparseBitmap {
             x0: foreign % ids.width,
             y0: foreign / ids.width,
             width: 1,
@@ -320,7 +344,67 @@ fn a_result_writing_pixels_its_package_does_not_own_fails_the_package() {
             reflected: vec![glam::Vec3::ZERO],
             transmitted: vec![glam::Vec3::ZERO],
             reflected_object: vec![0],
+        }));
+    });
+    assert_one_failure_and_the_reference(&started, done);
+}
+
+/// A whole frame comes back finished from its worker; the master checks
+/// it as it checks a split frame's pixels: a finished frame of another
+/// size or format, or pixels to composite where a finished frame is due,
+/// fail the package (retried, and the frame still equals the
+/// single-process render); so does a finished frame for a split package.
+#[test]
+fn a_whole_frame_that_is_not_what_its_job_asks_for_fails_the_package() {
+    type Tamper = fn(&mut PackageResult);
+    let tampers: [(&str, Tamper); 4] = [
+        ("wrong size", |result| {
+            if let ResultPixels::Frame { image, .. } = &mut result.pixels {
+                image.width += 1;
+            }
+        }),
+        ("wrong format", |result| {
+            if let ResultPixels::Frame { image, .. } = &mut result.pixels {
+                image.format = WireImageFormat::Srgb8;
+            }
+        }),
+        ("unasked components", |result| {
+            if let ResultPixels::Frame { aux, .. } = &mut result.pixels {
+                *aux = Some(WireFrameAux {
+                    reflected: WireImage::default(),
+                    transmitted: WireImage::default(),
+                    reflected_object: Vec::new(),
+                    mask: Vec::new(),
+                });
+            }
+        }),
+        ("pixels instead", |result| {
+            result.pixels = ResultPixels::Bitmap(Default::default());
+        }),
+    ];
+    for (what, tamper) in tampers {
+        let mut started = start_job(3);
+        let done = finish_frame(&mut started, |package, result| {
+            assert!(
+                package.whole.is_some(),
+                "frame 0 of 3 on one worker is whole"
+            );
+            assert!(
+                matches!(result.pixels, ResultPixels::Frame { .. }),
+                "{what}"
+            );
+            tamper(result);
         });
+        assert_eq!(done.frame, 0, "{what}");
+        assert_one_failure_and_the_reference(&started, done);
+    }
+    // A finished frame where pixels are due (a split frame's package).
+    let mut started = start_frame();
+    let done = finish_frame(&mut started, |_, result| {
+        result.pixels = ResultPixels::Frame {
+            image: WireImage::from_pixels(1, 1, &[glam::Vec3::ONE]),
+            aux: None,
+        };
     });
     assert_one_failure_and_the_reference(&started, done);
 }

@@ -102,6 +102,15 @@ fn check_images(pair: &Pair, job: &Job) -> Vec<FrameStats> {
         .collect()
 }
 
+/// Every frame split into packages (no whole frames), for the scenarios of
+/// how split frames are shared.
+fn split_frames() -> FarmRules {
+    FarmRules {
+        whole_frames: false,
+        ..FarmRules::default()
+    }
+}
+
 /// No straggler copies: a lost package must come back through the loss itself.
 fn no_stragglers() -> FarmRules {
     FarmRules {
@@ -149,7 +158,7 @@ fn a_worker_killed_mid_frame_loses_its_packages_to_the_others() {
 #[test]
 fn a_slowed_worker_gets_a_share_that_follows_its_speed() {
     let job = Job::new(4);
-    let mut pair = Pair::new(FarmRules::default());
+    let mut pair = Pair::new(split_frames());
     pair.add_worker("fast", 1.0);
     pair.add_worker("slow", 3.0);
     let (wire, data) = job.wire();
@@ -380,7 +389,8 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
 #[test]
 fn frames_in_reused_buffers_stay_byte_identical() {
     let job = Job::new(4);
-    let mut pair = Pair::new(FarmRules::default());
+    // Base frames are the master's for split frames only.
+    let mut pair = Pair::new(split_frames());
     pair.add_worker("only", 1.0);
     let (wire, data) = job.wire();
     pair.submit(wire, data);
@@ -410,4 +420,70 @@ fn pipelined_frames_overlap_and_stay_byte_identical() {
     pair.drive(BOUND, all_frames(3));
     let stats = check_images(&pair, &job);
     assert!(stats.iter().all(|s| s.failures == 0), "{stats:?}");
+}
+
+/// Batch work runs in whole frames (each finished on its worker) and its
+/// tail split (composited on the master); both give the single-process
+/// render's bytes, colour and components, on 1, 2 and 3 workers (a mixed
+/// job: whole frames, then split ones).
+#[test]
+fn whole_and_split_frames_give_the_single_process_bytes_on_1_2_and_3_workers() {
+    let job = Job::new(5);
+    let renderer = Renderer::new(Arc::new(job.scene.clone()), job.reflectors.clone());
+    let reference: Vec<vtfarm_vertex::FrameImage> = (job.frames.iter())
+        .map(|f| {
+            renderer
+                .render(f, &Default::default(), &mut |_, _| {})
+                .image
+        })
+        .collect();
+    for workers in 1..=3 {
+        let mut pair = Pair::new(FarmRules::default());
+        for w in 0..workers {
+            pair.add_worker(&format!("w{w}"), 1.0);
+        }
+        let data = SceneData::from_scene(&job.scene);
+        let options = JobOptions {
+            method: MethodKind::VertexTracing,
+            aux: true,
+        };
+        let wire = wire_job("modes", &data, &job.frames, &job.reflectors, options);
+        pair.submit(wire, data);
+        pair.drive(BOUND, all_frames(5));
+        assert_eq!(pair.job_failed(), None);
+        let done = pair.frames_done();
+        assert_eq!(done.len(), 5);
+        for (done, reference) in done.into_iter().zip(&reference) {
+            let (width, height, pixels) = done.image.clone().into_pixels().unwrap();
+            let color = vtfarm_imaging::Image {
+                width,
+                height,
+                pixels,
+            };
+            let aux = done.aux.clone().expect("the job asked for the components");
+            let image = aux.into_components(color).unwrap();
+            assert!(
+                &image == reference,
+                "{workers} worker(s), frame {}: differs from the single-process render",
+                done.frame
+            );
+            // Frame k starts with 5 − k frames left: whole while that is
+            // more than the workers, one package on one worker.
+            let whole = 5 - done.frame as usize > workers;
+            let stats = &done.stats;
+            if whole {
+                assert_eq!(
+                    (stats.packages, stats.workers.len()),
+                    (1, 1),
+                    "{workers} worker(s), whole frame {}: {stats:?}",
+                    done.frame
+                );
+            } else if workers > 1 && done.frame == 4 {
+                assert!(
+                    stats.workers.iter().filter(|w| w.packages > 0).count() > 1,
+                    "{workers} workers, the last frame split: {stats:?}"
+                );
+            }
+        }
+    }
 }

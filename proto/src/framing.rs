@@ -216,7 +216,7 @@ mod tests {
                 master_name: "master".to_owned(),
             }),
             Message::Refused(Refusal::new(RefuseCode::BadToken, "wrong token")),
-            Message::SceneOffer { hash },
+            Message::SceneOffer { hash, job: 3 },
             Message::SceneRequest { hash },
             Message::SceneData(SceneData::from_scene(&scene())),
             Message::FrameStart(FrameStart {
@@ -227,6 +227,7 @@ mod tests {
                 reflectors: vec![0, 1],
                 method: crate::WireMethod::Pvrr,
                 aux: true,
+                image: crate::WireImageFormat::Srgb8,
             }),
             Message::RequestWork { job: 3, frame: 1 },
             Message::Package(Package {
@@ -234,14 +235,26 @@ mod tests {
                 job: 3,
                 frame: 1,
                 triangles: vec![1, 0],
+                whole: None,
             }),
             Message::PackageResult(PackageResult {
                 id: 99,
-                bitmap: WireBitmap::from(&bitmap()),
+                pixels: crate::ResultPixels::Bitmap(WireBitmap::from(&bitmap())),
                 stats,
                 busy_micros: 1234,
                 setup_micros: 56,
                 triangle_samples: vec![3, 0, 17],
+            }),
+            Message::PackageResult(PackageResult {
+                id: 100,
+                pixels: crate::ResultPixels::Frame {
+                    image: WireImage::from_pixels(2, 1, &[Vec3::X, Vec3::ONE]),
+                    aux: None,
+                },
+                stats: Default::default(),
+                busy_micros: 4321,
+                setup_micros: 0,
+                triangle_samples: vec![1, 2],
             }),
             Message::PackageFailed(PackageFailed {
                 id: 98,

@@ -33,8 +33,8 @@ pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_match
 pub use message::{
     FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobOptions, JobScene, Message,
     Package, PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode,
-    Role, RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob,
-    WorkerFrameStats, WorkerStatus, scene_hash, wire_job,
+    ResultPixels, Role, RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux,
+    WireJob, WorkerFrameStats, WorkerStatus, scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -46,11 +46,14 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 6;
+pub const PROTOCOL_VERSION: u32 = 7;
 
-/// How many frames of a job the master runs at once (pipelined frames) and
-/// so how many prepared frames a worker keeps: a package of any of them may
-/// come. The master's scheduler configuration must not exceed it.
+/// How many split frames of a job the master runs at once (pipelined
+/// frames) and so how many prepared frames a worker keeps: a package of any
+/// of them may come. The master's scheduler configuration must not exceed
+/// it for split frames; whole frames (more of them in flight, two per
+/// worker) bring their `FrameStart` with their package, so a worker never
+/// needs one it was not sent.
 pub const FRAMES_IN_FLIGHT: usize = 8;
 
 /// A peer silent this long is gone: the master drops a worker that sent

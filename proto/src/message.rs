@@ -50,8 +50,10 @@ pub enum Message {
     Refused(Refusal),
 
     // Worker ↔ master.
-    /// Master → worker: the next frames use this scene.
-    SceneOffer { hash: SceneHash },
+    /// Master → worker: job `job` runs now, on this scene: a worker asks
+    /// for its work once it has the scene (a whole frame's set-up comes
+    /// only with its package, so this is all a worker may hear of the job).
+    SceneOffer { hash: SceneHash, job: JobId },
     /// Worker → master: send me this scene, I do not have it cached.
     SceneRequest { hash: SceneHash },
     /// Master → worker (and submitter → master inside a job): a scene.
@@ -335,26 +337,35 @@ pub struct FrameStart {
     /// of `reflectors`), not triangle ids.
     pub method: WireMethod,
     /// Whether results carry the per-pixel components besides the colour
-    /// (the job's `aux`): [`crate::WireBitmapParts::All`] or only `Color`.
+    /// (the job's `aux`): [`crate::WireBitmapParts::All`] or only `Color`;
+    /// a whole frame's result its [`WireFrameAux`].
     pub aux: bool,
+    /// How a whole frame's image travels (the job's [`WireJob::image`]).
+    pub image: WireImageFormat,
 }
 
 /// A package: reflector triangle ids of one frame, traced as a unit (or
 /// reflector group indices, see [`FrameStart::method`]).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Package {
     pub id: PackageId,
     /// The frame (announced with `FrameStart`) the package belongs to.
     pub job: JobId,
     pub frame: u32,
     pub triangles: Vec<u32>,
+    /// A whole frame (every item of it, batch work) comes with its
+    /// frame's set-up, which no other worker hears of (a whole frame's
+    /// `FrameStart` travels only with it): the worker also rasterizes the
+    /// base frame, composites and encodes the finished frame as the master
+    /// would, and answers with [`ResultPixels::Frame`].
+    pub whole: Option<Box<FrameStart>>,
 }
 
 /// A traced package.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PackageResult {
     pub id: PackageId,
-    pub bitmap: WireBitmap,
+    pub pixels: ResultPixels,
     pub stats: WirePackageStats,
     /// Wall time the worker spent on the package, for load balancing.
     pub busy_micros: u64,
@@ -365,6 +376,21 @@ pub struct PackageResult {
     /// Samples traced per triangle of the package, in package order: how the
     /// load balancer splits `busy_micros` over the triangles.
     pub triangle_samples: Vec<u32>,
+}
+
+/// What a result carries: a split package's pixels, for the master to
+/// composite over its base frame, or a whole frame finished on the worker.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ResultPixels {
+    /// The package's pixels (a split frame's package).
+    Bitmap(WireBitmap),
+    /// The finished frame of a whole package: its image in the job's
+    /// format and its components when the job asks for them, exactly what
+    /// the master's [`FrameDone`] carries.
+    Frame {
+        image: WireImage,
+        aux: Option<WireFrameAux>,
+    },
 }
 
 /// A package the worker could not trace.

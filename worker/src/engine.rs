@@ -19,8 +19,9 @@ use std::time::Instant;
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
-    FrameStart, JobId, Package, PackageResult, SceneData, SceneHash, WireBitmap, WireBitmapParts,
-    WireError, WirePackageStats, check_triangle_ids,
+    FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash, WireBitmap,
+    WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WirePackageStats,
+    check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -115,6 +116,8 @@ pub struct ActiveFrame {
     per_reflector: Option<PerReflector>,
     /// What the results carry (the components only when the job wants them).
     parts: WireBitmapParts,
+    /// How a whole frame's finished image travels.
+    image: WireImageFormat,
 }
 
 /// A per-reflector method with the reflector groups its package items index.
@@ -150,18 +153,35 @@ impl ActiveFrame {
             let (id, why) = (package.id, why.to_string());
             return Err(PackageError::Stopped { id, why });
         }
+        let pixels = if package.whole.is_some() {
+            contain_panic(|| self.finish(&bitmap))?
+        } else {
+            ResultPixels::Bitmap(WireBitmap::encode(&bitmap, self.parts))
+        };
         let compute = start.elapsed();
         if slowdown > 1.0 {
             std::thread::sleep(compute.mul_f64(slowdown - 1.0));
         }
         Ok(PackageResult {
             id: package.id,
-            bitmap: WireBitmap::encode(&bitmap, self.parts),
+            pixels,
             stats: WirePackageStats::from(&stats),
             busy_micros: start.elapsed().as_micros() as u64,
             setup_micros: 0,
             triangle_samples: samples,
         })
+    }
+
+    /// A whole frame finished here as the master finishes a split one: the
+    /// base frame with every reflector pixel of `bitmap` composited over it
+    /// ([`Renderer::finish_frame`]), encoded in the job's format with the
+    /// components when the job asks for them (the `FrameDone` codecs).
+    fn finish(&self, bitmap: &SparseBitmap) -> ResultPixels {
+        let image = self.renderer.finish_frame(&self.setup, bitmap);
+        ResultPixels::Frame {
+            image: WireImage::encode(&image.color, self.image),
+            aux: matches!(self.parts, WireBitmapParts::All).then(|| WireFrameAux::encode(&image)),
+        }
     }
 
     /// The frame's pixel count: a package's sample budget is a multiple of it
@@ -414,6 +434,7 @@ impl Engine {
             job: start.job,
             frame: start.frame,
             aux: start.aux,
+            image: start.image,
             renderer_key: (start.scene, start.reflectors),
             scene,
             renderer,
@@ -435,6 +456,7 @@ pub struct FrameParts {
     job: JobId,
     frame: u32,
     aux: bool,
+    image: WireImageFormat,
     renderer_key: (SceneHash, Vec<u32>),
     scene: Arc<Scene>,
     renderer: Option<Arc<Renderer>>,
@@ -450,6 +472,7 @@ impl FrameParts {
             job,
             frame,
             aux,
+            image,
             renderer_key,
             scene,
             renderer,
@@ -479,6 +502,7 @@ impl FrameParts {
             } else {
                 WireBitmapParts::Color
             },
+            image,
         })
     }
 }
@@ -531,6 +555,7 @@ mod tests {
             reflectors: reflectors.to_vec(),
             method: MethodKind::VertexTracing.into(),
             aux: true,
+            image: WireImageFormat::LinearF32,
         }
     }
 
@@ -556,11 +581,55 @@ mod tests {
             .unwrap();
         assert!(Arc::ptr_eq(&a.renderer, &b.renderer));
         assert_ne!(a.setup.lighting, b.setup.lighting);
+        // The ID buffers do not depend on the sun: rasterized once.
+        assert_eq!(a.renderer.id_buffer_cache().builds(), 1);
+        assert_eq!((&a.ids, &a.behind.ids), (&b.ids, &b.behind.ids));
         // Other reflectors make another renderer.
         let c = engine
             .start_frame(start(2, Vec3::new(-0.9, -0.3, 0.1), &reflectors[1..]))
             .unwrap();
         assert!(!Arc::ptr_eq(&a.renderer, &c.renderer));
+    }
+
+    /// A frame that differs from the one before only in the sun reuses its
+    /// ID buffers and traces exactly as when set up alone.
+    #[test]
+    fn a_sun_only_frame_reuses_the_id_buffers_and_traces_as_alone() {
+        let (cockpit, hash, mut engine) = cockpit_engine();
+        let reflectors = cockpit.cover_glass_triangles();
+        let camera = Camera {
+            width: 96,
+            height: 54,
+            ..cockpit.camera
+        };
+        let start = |frame: u32, sun: Vec3| {
+            cockpit_frame((&cockpit, hash), frame, camera, sun, &reflectors)
+        };
+        let second = start(1, Vec3::new(-0.9, -0.3, 0.1));
+        let package = Package {
+            id: 1,
+            job: 1,
+            frame: 1,
+            triangles: reflectors.clone(),
+            whole: Some(Box::new(second.clone())),
+        };
+        let run = |frame: &ActiveFrame| {
+            let result = frame.run(&package, 1.0, &Stop::with_budget(u64::MAX));
+            let result = result.unwrap();
+            (result.pixels, result.triangle_samples)
+        };
+        let alone = run(&cockpit_engine().2.start_frame(second.clone()).unwrap());
+        let first = engine
+            .start_frame(start(0, Vec3::new(0.45, -0.85, -0.15)))
+            .unwrap();
+        let reused = engine.start_frame(second).unwrap();
+        assert_eq!(
+            first.renderer.id_buffer_cache().builds(),
+            1,
+            "rasterized once"
+        );
+        assert_eq!(run(&reused), alone);
+        assert_ne!(run(&first), alone, "not vacuous: the sun changes the frame");
     }
 
     /// A frame's packages give the same bytes whether the engine set up
@@ -606,6 +675,7 @@ mod tests {
                 job: 1,
                 frame,
                 triangles: triangles.to_vec(),
+                whole: None,
             })
         };
         let trace = |active: &ActiveFrame| {
@@ -613,7 +683,7 @@ mod tests {
                 let result = active
                     .run(&package, 1.0, &Stop::with_budget(u64::MAX))
                     .unwrap();
-                (result.bitmap, result.triangle_samples)
+                (result.pixels, result.triangle_samples)
             })
         };
         let alone: Vec<_> = frames
@@ -634,7 +704,10 @@ mod tests {
         assert_eq!(trace(&again), alone[0]);
         // Not vacuous: the frames differ, and the packages cover pixels.
         assert_ne!(alone[0], alone[1]);
-        for (bitmap, _) in alone.iter().flatten() {
+        for (pixels, _) in alone.iter().flatten() {
+            let ResultPixels::Bitmap(bitmap) = pixels else {
+                panic!("a split package's result is a bitmap");
+            };
             let covered = SparseBitmap::try_from(bitmap.clone())
                 .unwrap()
                 .covered()

@@ -260,10 +260,10 @@ pub async fn serve(
 fn scene_io(message: Message, engine: &Engine) -> Result<Message, SceneWork> {
     let cache = engine.cache().clone();
     match message {
-        Message::SceneOffer { hash } if !engine.has_scene_in_memory(&hash) => {
+        Message::SceneOffer { hash, job } if !engine.has_scene_in_memory(&hash) => {
             Err(tokio::task::spawn_blocking(move || {
                 let loaded = cache.load(&hash).map(Ok);
-                (hash, Message::SceneOffer { hash }, loaded)
+                (hash, Message::SceneOffer { hash, job }, loaded)
             }))
         }
         Message::SceneData(data) => Err(tokio::task::spawn_blocking(move || {

@@ -14,6 +14,8 @@
 //! (frame affinity), so a frame is prepared only when a package of it comes:
 //! a worker sets up the frames of its crew, not every frame announced.
 //! Prepared frames stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all.
+//! A whole frame's package brings its frame's set-up itself (no other
+//! worker hears of that frame); its result is the finished frame.
 //! Frames are prepared one at a time, for the first waiting package. Scenes
 //! are fetched only when the store lacks them. Heartbeats go out every
 //! [`HEARTBEAT_INTERVAL`].
@@ -86,6 +88,14 @@ pub trait SceneStore {
 /// A frame by job and index.
 pub type FrameKey = (JobId, u32);
 
+/// A job the master offered and whether its scene is at hand.
+#[derive(Clone, Copy, Debug)]
+struct JobOffer {
+    job: JobId,
+    hash: SceneHash,
+    ready: bool,
+}
+
 /// Work the driver carries out and answers.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Task {
@@ -120,6 +130,9 @@ pub struct WorkerSession {
     announced: VecDeque<FrameStart>,
     /// A frame whose scene is still on its way.
     awaiting_scene: Option<FrameStart>,
+    /// The job last offered (`SceneOffer`): work of it may be asked for
+    /// once its scene is here.
+    offered: Option<JobOffer>,
     /// A frame that could not be prepared, with why: its packages fail so.
     unusable: Option<(FrameKey, FrameError)>,
     queue: VecDeque<Package>,
@@ -153,6 +166,7 @@ impl WorkerSession {
             now,
             announced: VecDeque::new(),
             awaiting_scene: None,
+            offered: None,
             unusable: None,
             queue: VecDeque::new(),
             running: None,
@@ -245,23 +259,42 @@ impl WorkerSession {
         // A package answers the request. A frame start renews it: the
         // master drops a request naming a job that is no longer running
         // (asking twice changes nothing at the master).
-        self.requested &= !matches!(message, Message::Package(_) | Message::FrameStart(_));
+        self.requested &= !matches!(
+            message,
+            Message::Package(_) | Message::FrameStart(_) | Message::SceneOffer { .. }
+        );
         match message {
             Message::Shutdown => self.end = Some(SessionEnd::Shutdown),
-            Message::SceneOffer { hash } if !scenes.has_scene(&hash) => {
-                self.outbox.push_back(Message::SceneRequest { hash })
+            Message::SceneOffer { hash, job } => {
+                let ready = scenes.has_scene(&hash);
+                if !ready {
+                    self.outbox.push_back(Message::SceneRequest { hash })
+                }
+                self.offered = Some(JobOffer { job, hash, ready });
             }
-            Message::SceneOffer { .. } | Message::Heartbeat => {}
+            Message::Heartbeat => {}
             Message::SceneData(data) => {
-                if let Err(e) = scenes.add_scene(data) {
-                    warn!("{e}");
+                let hash = data.hash;
+                match scenes.add_scene(data) {
+                    Err(e) => warn!("{e}"),
+                    Ok(()) => {
+                        if let Some(offer) = self.offered.as_mut().filter(|o| o.hash == hash) {
+                            offer.ready = true;
+                        }
+                    }
                 }
                 if let Some(start) = self.awaiting_scene.take() {
                     self.start_frame(start, scenes);
                 }
             }
             Message::FrameStart(start) => self.start_frame(start, scenes),
-            Message::Package(package) => self.queue.push_back(package),
+            Message::Package(package) => {
+                // A whole frame's set-up comes with it alone.
+                if let Some(start) = &package.whole {
+                    self.start_frame((**start).clone(), scenes);
+                }
+                self.queue.push_back(package);
+            }
             Message::CancelPackage { id } => {
                 let before = self.queue.len();
                 self.queue.retain(|p| p.id != id);
@@ -455,9 +488,15 @@ impl WorkerSession {
         // the master's answer (its driver may be busy finishing a frame)
         // overlaps the tracing.
         let nothing_queued = self.queue.is_empty();
-        // The newest frame heard of names the job the worker asks work of.
+        // The newest frame heard of names the job the worker asks work of;
+        // a job offered whose scene is here will do (its whole frames'
+        // set-ups come with their packages).
+        let offered = (self.offered.as_ref())
+            .filter(|o| o.ready)
+            .map(|o| (o.job, 0));
         let newest = (self.announced.iter().map(|f| (f.job, f.frame)))
             .chain(self.ready)
+            .chain(offered)
             .max();
         let asks = nothing_queued && self.awaiting_scene.is_none() && !self.requested;
         if let Some((job, frame)) = newest.filter(|_| asks) {

@@ -43,7 +43,10 @@ async fn a_cache_read_that_blocks_holds_no_heartbeat_back() {
     });
     master
         .tx
-        .send(Message::SceneOffer { hash: data.hash })
+        .send(Message::SceneOffer {
+            hash: data.hash,
+            job: 1,
+        })
         .unwrap();
     // The worker now reads the FIFO (blocked until it is written); its
     // heartbeats go on meanwhile.

@@ -37,8 +37,8 @@ use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
-    FrameDone, Message, PackageResult, WireBitmap, WireBitmapParts, WireImage, WireImageFormat,
-    WirePackageStats, decode_message, encode_message,
+    FrameDone, Message, PackageResult, ResultPixels, WireBitmap, WireBitmapParts, WireImage,
+    WireImageFormat, WirePackageStats, decode_message, encode_message,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
@@ -160,11 +160,17 @@ pub(super) struct Recording {
     pub(super) base_frame_seconds: f64,
     /// A worker's frame set-up (ID and behind buffers), one thread.
     pub(super) worker_setup_seconds: f64,
+    /// The set-up of a frame that differs from the worker's last only in
+    /// the sun (its ID buffers kept), one thread.
+    pub(super) sun_only_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
     /// The master's driver per finished frame: the image for the wire and
     /// its encoding.
     pub(super) frame_out_seconds: f64,
+    /// A finished frame's image on the wire (`FrameDone::image`, sRGB as
+    /// `vtfarm submit` asks): what a whole frame's result carries.
+    pub(super) frame_bytes: u64,
     /// The master's journal thread per finished frame: compress and write.
     pub(super) journal_seconds: f64,
     /// The submitter per finished frame: decode, PNG and timeline written.
@@ -253,7 +259,7 @@ fn result_message_bytes(
 ) -> Result<u64> {
     let message = Message::PackageResult(PackageResult {
         id: 0,
-        bitmap,
+        pixels: ResultPixels::Bitmap(bitmap),
         stats,
         busy_micros: busy.as_micros() as u64,
         setup_micros: 0,
@@ -285,7 +291,13 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     // with them built (with `--repeats 1` the first build was counted).
     let (ids, behind) = renderer.id_buffers(&job.setup);
     let base_frame_seconds = least_cpu_seconds(&one_thread, || renderer.base_frame(&job.setup));
-    let worker_setup_seconds = least_cpu_seconds(&one_thread, || renderer.id_buffers(&job.setup));
+    // A frame of a new view rasterizes its ID buffers; one that differs
+    // from the worker's last only in the sun reuses them (`IdBufferCache`).
+    let worker_setup_seconds = least_cpu_seconds(&one_thread, || {
+        renderer.id_buffer_cache().clear();
+        renderer.id_buffers(&job.setup)
+    });
+    let sun_only_setup_seconds = least_cpu_seconds(&one_thread, || renderer.id_buffers(&job.setup));
     let frame = renderer.frame(&job.setup, &ids, &behind);
     // A package's own cost beside its triangles': tracing none and
     // encoding the empty result. Every one-triangle package below paid it
@@ -366,7 +378,8 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
-    let (frame_out_seconds, journal_seconds, submitter_seconds) = frame_out_time(&renderer, job)?;
+    let (frame_out_seconds, journal_seconds, submitter_seconds, frame_bytes) =
+        frame_out_time(&renderer, job)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -382,8 +395,10 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         empty_result_bytes,
         base_frame_seconds,
         worker_setup_seconds,
+        sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
+        frame_bytes,
         journal_seconds,
         submitter_seconds,
         package_seconds,
@@ -396,13 +411,14 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
 /// `FrameDone` for the submitter (first figure); the journal's thread
 /// compresses and writes its copy (second); the submitter decodes it and
 /// writes the PNG and the timeline, as `vtfarm submit` does (third).
-fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f64)> {
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f64, u64)> {
     let (base, _) = renderer.base_frame(&job.setup);
     let dir = tempfile::tempdir()?;
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
     let (mut driver, mut journaled, mut submitted) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let mut frame_bytes = 0;
     let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
     for _ in 0..FIXED_COST_RUNS {
         let clock = CpuStopwatch::start();
@@ -417,6 +433,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         let record = vtfarm_master::Record::FrameDone(Box::new(done.clone()));
         // The master's telemetry keeps a copy of the image as sent.
         let kept_image = done.image.clone();
+        frame_bytes = done.image.pixels.len() as u64;
         let message = encode_message(&Message::FrameDone(done))?;
         driver = driver.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
@@ -433,7 +450,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         submitted = submitted.min(clock.elapsed().as_secs_f64());
         kept.push((kept_image, pixels));
     }
-    Ok((driver, journaled, submitted))
+    Ok((driver, journaled, submitted, frame_bytes))
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -701,6 +718,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             .map(|b| b.saturating_sub(recording.empty_result_bytes))
             .collect(),
         empty_result_bytes: recording.empty_result_bytes,
+        frame_bytes: recording.frame_bytes,
         worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
         master: MasterCosts {
             base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
@@ -731,6 +749,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         background_threads: 0.0,
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
+        rules: vtfarm_master::FarmRules::default(),
     };
     let latency = Duration::from_secs_f64(args.latency_ms / 1e3);
     let overhead = Duration::from_secs_f64(
@@ -834,7 +853,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s; master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun); master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -842,6 +861,7 @@ fn print_report(
         },
         rec.base_frame_seconds * args.fixed_cost_scale,
         rec.worker_setup_seconds * args.fixed_cost_scale,
+        rec.sun_only_setup_seconds * args.fixed_cost_scale,
         rec.composite_seconds,
         rec.frame_out_seconds,
         rec.journal_seconds,
@@ -901,6 +921,13 @@ fn print_report(
         }
     }
     for &mbit in &args.link_mbit {
+        // Batch work runs in whole frames: each comes to the master finished.
+        let whole_seconds = (rec.frame_bytes + rec.empty_result_bytes) as f64 * 8.0 / (mbit * 1e6);
+        println!(
+            "  {mbit} Mbit/s master link, whole frames: a finished frame ({:.2} MB) takes {whole_seconds:.4} s through it: the farm's bound is {:.0} frames per second",
+            rec.frame_bytes as f64 / 1e6,
+            1.0 / whole_seconds
+        );
         let link_seconds = bytes as f64 * 8.0 / (mbit * 1e6);
         let fastest = (rows.iter())
             .filter(|r| r.link_mbit == mbit)

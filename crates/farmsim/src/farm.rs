@@ -14,8 +14,8 @@ use vtfarm_master_core::{
     Written,
 };
 use vtfarm_proto::{
-    FrameDone, FrameStart, FrameStats, JobScene, Message, Package, PackageResult, SceneData,
-    WireJob, encoded_len,
+    FrameDone, FrameStart, FrameStats, JobScene, Message, Package, PackageResult, ResultPixels,
+    SceneData, WireJob, encoded_len,
 };
 use vtfarm_worker::engine::FrameError;
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
@@ -58,14 +58,18 @@ pub struct PackageWork {
     pub wire_bytes: Option<u64>,
 }
 
-/// CPU seconds the master's machine spends, one thread each.
+/// CPU seconds the master's machine spends, one thread each. A whole frame
+/// (batch work) costs the master none of `base_frame`, `result_per_item`
+/// and `frame_out`: its worker rasterizes, composites and encodes it (the
+/// same functions), and the driver only forwards it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MasterCosts {
-    /// A base frame (spread over the master's cores: the rasterizer is parallel).
+    /// A split frame's base frame (spread over the master's cores: the
+    /// rasterizer is parallel).
     pub base_frame: f64,
-    /// The driver per item of a result (decode, check, composite).
+    /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// The driver per finished frame (the image for the wire).
+    /// The driver per finished split frame (the image for the wire).
     pub frame_out: f64,
     /// The journal thread per finished frame, beside the driver.
     pub journal: f64,
@@ -248,7 +252,8 @@ pub struct Farm<M: CostModel> {
     pub workers: Vec<SimWorker<M::Worker>>,
     /// Everything the master sent the submitter, in order.
     pub to_submitter: Vec<Message>,
-    /// Every frame a `FrameStart` announced, in order.
+    /// Every frame a `FrameStart` announced, in order (a whole frame's
+    /// with each of its packages).
     pub frame_starts: Vec<(u64, u32)>,
     /// Base frames rasterized into a finished frame's buffers.
     pub bases_in_reused_buffers: usize,
@@ -288,6 +293,9 @@ pub struct Farm<M: CostModel> {
     package_frames: HashMap<u64, (u64, u32)>,
     /// When each frame was first announced (until its delivery).
     frame_started: BTreeMap<(u64, u32), Duration>,
+    /// Whole frames handed out and not yet sent on: their `FrameDone` costs
+    /// the driver no encoding.
+    whole_frames: BTreeSet<(u64, u32)>,
     /// CPU seconds the other work on the shared machine has got so far.
     background_cpu: f64,
     /// CPU seconds used so far: the master's, the submitter's.
@@ -339,6 +347,7 @@ impl<M: CostModel> Farm<M> {
             held_items: BTreeMap::new(),
             package_frames: HashMap::new(),
             frame_started: BTreeMap::new(),
+            whole_frames: BTreeSet::new(),
             background_cpu: 0.0,
             master_cpu: 0.0,
             submitter_cpu: 0.0,
@@ -395,6 +404,7 @@ impl<M: CostModel> Farm<M> {
         self.base_left.clear();
         self.pending_base.clear();
         self.base_pending.clear();
+        self.whole_frames.clear();
         self.held_items.clear();
         self.package_frames.clear();
         self.submitter = None;
@@ -804,7 +814,11 @@ impl<M: CostModel> Farm<M> {
                     return self.next_driver_input();
                 }
                 if let Message::PackageResult(result) = message.as_ref() {
-                    let items = result.triangle_samples.len();
+                    // A whole frame comes finished: the driver only forwards it.
+                    let items = match result.pixels {
+                        ResultPixels::Bitmap(_) => result.triangle_samples.len(),
+                        ResultPixels::Frame { .. } => 0,
+                    };
                     seconds += costs.result_per_item * items as f64;
                     if let Some(key) = self.package_frames.remove(&result.id) {
                         if self.base_pending.contains(&key) {
@@ -828,8 +842,11 @@ impl<M: CostModel> Farm<M> {
         let mut outputs = Vec::new();
         while let Some(output) = self.master.poll_output() {
             if let Output::Send(_, message) = &output {
-                if matches!(message.as_ref(), Message::FrameDone(_)) {
-                    seconds += costs.frame_out;
+                if let Message::FrameDone(done) = message.as_ref() {
+                    // A whole frame's worker encoded it.
+                    if !self.whole_frames.remove(&(done.job, done.frame)) {
+                        seconds += costs.frame_out;
+                    }
                 }
             }
             outputs.push(output);
@@ -857,7 +874,14 @@ impl<M: CostModel> Farm<M> {
                 };
                 match message.as_ref() {
                     Message::Package(p) => {
-                        self.package_frames.insert(p.id, (p.job, p.frame));
+                        let key = (p.job, p.frame);
+                        self.package_frames.insert(p.id, key);
+                        if p.whole.is_some() {
+                            // A whole frame's set-up travels with it.
+                            self.frame_starts.push(key);
+                            self.frame_started.entry(key).or_insert(self.now);
+                            self.whole_frames.insert(key);
+                        }
                     }
                     Message::FrameStart(start) => {
                         let key = (start.job, start.frame);

@@ -3,7 +3,10 @@
 //! the worker's speed, plus a fixed overhead; a frame's set-up
 //! [`FarmCosts::worker_setup`] over the speed. Results carry each item's
 //! recorded samples (what the master's cost estimates learn from) and an
-//! empty bitmap; their size on the wire is the recorded one. The master
+//! empty bitmap; their size on the wire is the recorded one. A whole frame
+//! costs its worker also what the master spends on a split one (base
+//! frame, compositing, encoding: the same functions), and its result is a
+//! stand-in image of the job's size, [`FarmCosts::frame_bytes`] on the wire. The master
 //! core rasterizes for real, but at the job's tiny resolution (the base
 //! frame's *time* is [`MasterCosts::base_frame`]): the images do not matter
 //! here. [`simulate_farm`] runs a job to its end and measures each frame.
@@ -12,11 +15,13 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
+use vtfarm_imaging::Image;
 use vtfarm_master_core::FarmRules;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameStart, FrameStats, JobScene, Package, PackageResult, SceneData, SceneHash, WireBitmap,
-    WireBitmapParts, WireFrameSetup, WireImageFormat, WireJob, WirePackageStats,
+    FrameStart, FrameStats, JobScene, Package, PackageResult, ResultPixels, SceneData, SceneHash,
+    WireBitmap, WireBitmapParts, WireFrameSetup, WireImage, WireImageFormat, WireJob,
+    WirePackageStats,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
@@ -41,6 +46,8 @@ pub struct FarmCosts {
     pub result_bytes: Vec<u64>,
     /// A result message's fixed part.
     pub empty_result_bytes: u64,
+    /// A finished frame's image on the wire (a whole frame's result).
+    pub frame_bytes: u64,
     /// A worker's set-up of a frame.
     pub worker_setup: f64,
     /// The master's machine's.
@@ -63,6 +70,9 @@ pub struct SimulationConfig {
     pub background_threads: f64,
     /// Frames of the job.
     pub frames: u32,
+    /// The master's rules (`FarmRules::default()` is what a master runs:
+    /// whole frames for batch work).
+    pub rules: FarmRules,
     /// Gives up at this virtual time.
     pub time_limit: Duration,
 }
@@ -202,18 +212,46 @@ impl CostModel for Recorded<'_> {
             .filter_map(|t| self.index_of.get(t).copied())
             .collect();
         let costs = self.costs;
-        let bytes =
-            costs.empty_result_bytes + indices.iter().map(|&i| costs.result_bytes[i]).sum::<u64>();
+        let traced: f64 = indices.iter().map(|&i| costs.seconds[i]).sum();
+        let (pixels, seconds, bytes) = match &package.whole {
+            // Finished here: the master's work on a split frame, on the worker.
+            Some(start) => {
+                let camera = &start.setup.camera;
+                let stand_in = Image::black(camera.width, camera.height);
+                let master = &costs.master;
+                let finish = master.base_frame
+                    + master.result_per_item * indices.len() as f64
+                    + master.frame_out;
+                let pixels = ResultPixels::Frame {
+                    image: WireImage::encode(&stand_in, start.image),
+                    aux: None,
+                };
+                (
+                    pixels,
+                    traced + finish,
+                    costs.empty_result_bytes + costs.frame_bytes,
+                )
+            }
+            None => {
+                let bytes = costs.empty_result_bytes
+                    + indices.iter().map(|&i| costs.result_bytes[i]).sum::<u64>();
+                (
+                    ResultPixels::Bitmap(self.empty_bitmap.clone()),
+                    traced,
+                    bytes,
+                )
+            }
+        };
         PackageWork {
             result: PackageResult {
                 id: package.id,
-                bitmap: self.empty_bitmap.clone(),
+                pixels,
                 stats: WirePackageStats::default(),
                 busy_micros: 0,
                 setup_micros: 0,
                 triangle_samples: indices.iter().map(|&i| costs.samples[i]).collect(),
             },
-            seconds: indices.iter().map(|&i| costs.seconds[i]).sum(),
+            seconds,
             wire_bytes: Some(bytes),
         }
     }
@@ -255,7 +293,7 @@ fn run_farm(
         background_threads: config.background_threads,
         submitter_latency: Duration::ZERO,
     };
-    let mut farm = Farm::with_model(model, machines, FarmRules::default(), None);
+    let mut farm = Farm::with_model(model, machines, config.rules.clone(), None);
     for (w, spec) in workers.iter().enumerate() {
         farm.join(&format!("w{w}"), spec.clone());
     }
@@ -443,6 +481,7 @@ mod tests {
             samples: vec![2; n],
             result_bytes: vec![100; n],
             empty_result_bytes: 30,
+            frame_bytes: 1000,
             worker_setup,
             master: MasterCosts {
                 base_frame,
@@ -460,6 +499,12 @@ mod tests {
             background_threads: 0.0,
             frames,
             time_limit: Duration::from_secs(3600),
+            // The tests of the split frames' cost model; whole frames have
+            // theirs.
+            rules: FarmRules {
+                whole_frames: false,
+                ..FarmRules::default()
+            },
         }
     }
 
@@ -755,6 +800,43 @@ mod tests {
     /// the frame takes the results' bytes over 10 Mbit/s once (sending
     /// over one link and then forwarding over the other would take twice
     /// that); a slower worker link is the one that counts.
+    /// Whole frames (the master's rules): the master's CPU per frame is
+    /// only the journal's (no base frame, compositing or encoding: the
+    /// worker does them, the same costs on its clock), and a frame's
+    /// result on the wire is the finished frame.
+    #[test]
+    fn a_whole_frame_costs_the_master_only_its_forwarding() {
+        let (job, mut costs) = small_farm(0.02, 0.05);
+        costs.master = MasterCosts {
+            result_per_item: 1e-4,
+            frame_out: 0.003,
+            journal: 0.002,
+            ..costs.master
+        };
+        let whole = SimulationConfig {
+            rules: FarmRules::default(),
+            ..config(8)
+        };
+        let frames = simulate_farm(&job, &costs, &whole, &workers(1)).unwrap();
+        let n = frames.len() as f64;
+        let cpu = &frames.last().unwrap().cpu;
+        let m = &costs.master;
+        // Frame 7 (the last) starts with one frame left on one worker: split.
+        let split = m.base_frame + m.result_per_item * costs.items.len() as f64 + m.frame_out;
+        let master = split + (n - 1.0) * m.journal;
+        assert!(
+            (cpu[0] - master).abs() < 1e-9,
+            "master {} s, {master} s expected",
+            cpu[0]
+        );
+        // The worker paid the whole frames' finishing: 7 of them.
+        let work: f64 = costs.seconds.iter().sum();
+        assert!(
+            cpu[1] > n * (work + costs.worker_setup) + 7.0 * split * 0.99,
+            "{cpu:?}"
+        );
+    }
+
     #[test]
     fn a_message_holds_both_links_at_the_slower_rate() {
         let (job, mut costs) = small_farm(0.0, 0.0);

@@ -2,11 +2,14 @@
 //! messages and closes out, around the pure `Scheduler`. The server crate's
 //! async driver (`vtfarm_master::driver`) feeds it; tests drive it directly.
 //!
-//! Per frame it sends `FrameStart` to every worker first and then asks the
-//! driver to rasterize the base frame and ID buffer
+//! Per frame it sends `FrameStart` to every worker first. A split frame's
+//! base frame and ID buffer it asks the driver to rasterize
 //! ([`Output::RasterizeBase`]) while the workers set up and trace; results
 //! that arrive before it are held until it is there (and reported to the
-//! scheduler as arrived, so they are not taken for stragglers). Frames are
+//! scheduler as arrived, so they are not taken for stragglers). A whole
+//! frame (batch work, the scheduler's `whole_frames`) has no base frame
+//! here: its one package's worker renders, composites and encodes it, and
+//! the core checks the finished frame's sizes and format and forwards it. Frames are
 //! pipelined: the scheduler starts frame N+1 as soon as frame N has nothing
 //! left to hand out, so up to `vtfarm_proto::FRAMES_IN_FLIGHT` frames are
 //! assembled at once (the [`FarmRules`]). It hands out the
@@ -30,13 +33,13 @@ use vtfarm_proto::{
     WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_raster::IdBuffer;
-use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
+use vtfarm_render::{FrameSetup, components_bounds, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, WorkerId,
     WorkerState,
 };
-use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
+use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap};
 
 use crate::error::{JobRejected, ResultRejected};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
@@ -186,6 +189,10 @@ impl Job {
 /// The frame being assembled (its index is `start.frame`).
 struct FrameAssembly {
     start: FrameStart,
+    /// A whole frame: its worker finishes it, the core forwards `finished`.
+    whole: bool,
+    /// A whole frame's image and components as its worker sent them.
+    finished: Option<(WireImage, Option<WireFrameAux>)>,
     /// The frame's ID buffer: which reflector triangle owns each pixel;
     /// `None` until the base frame is rasterized.
     ids: Option<IdBuffer>,
@@ -274,6 +281,12 @@ impl Assembled {
     }
 }
 
+/// A checked result: pixels to composite, or a whole frame finished.
+enum Accepted {
+    Composite(ResultPixels),
+    Finished(WireImage, Option<WireFrameAux>),
+}
+
 /// A checked result in the form its frame composites: frame indices and
 /// colours, or the whole bitmap with the components.
 enum ResultPixels {
@@ -287,6 +300,8 @@ struct InFlight {
     /// The connection of the worker it went to.
     worker: ConnId,
     frame: u32,
+    /// Its frame's every item, to come back finished.
+    whole: bool,
     /// The reflector triangles its items cover, sorted: for progress and
     /// pixel ownership.
     triangles: Vec<TriangleId>,
@@ -436,6 +451,7 @@ impl MasterCore {
             stored.job,
             BTreeSet::new(),
             stored.frames_done,
+            false,
         );
         if let Err(e) = queued {
             let reason = format!("cannot resume job {}: {e}", stored.id);
@@ -519,12 +535,15 @@ impl MasterCore {
             // A running frame: bring the newcomer up to date.
             let catch_up: Vec<Message> = self
                 .jobs
-                .values()
-                .filter(|job| !job.assembling.is_empty())
-                .flat_map(|job| {
-                    let starts = job.assembling.iter().map(|a| a.start.clone());
+                .iter()
+                .filter(|(_, job)| !job.assembling.is_empty())
+                .flat_map(|(&id, job)| {
+                    // A whole frame's set-up goes only with its package.
+                    let split = job.assembling.iter().filter(|a| !a.whole);
+                    let starts = split.map(|a| a.start.clone());
                     std::iter::once(Message::SceneOffer {
                         hash: job.scene_hash,
+                        job: id,
                     })
                     .chain(starts.map(Message::FrameStart))
                 })
@@ -651,7 +670,8 @@ impl MasterCore {
             debug!(package = result.id, "result for a finished frame ignored");
             return;
         };
-        let Some(ids) = &current.ids else {
+        let ids = current.ids.as_ref();
+        if !in_flight.whole && ids.is_none() {
             // The base frame is still being rasterized: check the result
             // then; till then it is no straggler.
             let (job_id, frame) = (in_flight.job, in_flight.frame);
@@ -665,28 +685,49 @@ impl MasterCore {
                 .expect("checked above");
             current.held.push((conn, result, bytes_out));
             return;
-        };
+        }
+        let PackageResult {
+            id,
+            pixels,
+            stats,
+            busy_micros,
+            setup_micros: _,
+            triangle_samples,
+        } = result;
         let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
-        let checked = current.image.check(result.bitmap, ids, owned);
-        let pixels = match checked {
-            Ok(b) => b,
+        let checked = match (pixels, in_flight.whole, ids) {
+            (vtfarm_proto::ResultPixels::Bitmap(bitmap), false, Some(ids)) => current
+                .image
+                .check(bitmap, ids, owned)
+                .map(Accepted::Composite),
+            (vtfarm_proto::ResultPixels::Frame { image, aux }, true, _) => {
+                check_finished(job, in_flight.frame, image, aux)
+                    .map(|(image, aux)| Accepted::Finished(image, aux))
+            }
+            (vtfarm_proto::ResultPixels::Frame { .. }, false, _) => {
+                Err(ResultRejected::FinishedFrameForSplitPackage)
+            }
+            // A split package's result without its base frame is held above.
+            (vtfarm_proto::ResultPixels::Bitmap(_), _, _) => {
+                Err(ResultRejected::PixelsForWholeFrame)
+            }
+        };
+        let accepted = match checked {
+            Ok(accepted) => accepted,
             Err(error) => {
-                warn!(worker = %self.name(conn), package = result.id, "{error}");
-                let _ = self.scheduler.package_failed(
-                    now,
-                    worker,
-                    PackageId(result.id),
-                    error.to_string(),
-                );
+                warn!(worker = %self.name(conn), package = id, "{error}");
+                let _ =
+                    self.scheduler
+                        .package_failed(now, worker, PackageId(id), error.to_string());
                 return;
             }
         };
-        let stats = PackageStats::from(result.stats);
+        let stats = PackageStats::from(stats);
         let measure = PackageMeasure {
-            busy: Duration::from_micros(result.busy_micros),
+            busy: Duration::from_micros(busy_micros),
             // Samples are what an item costs; +1 so hidden ones are not free.
             // The scheduler checks that there is one per item.
-            item_seconds: (result.triangle_samples.iter())
+            item_seconds: (triangle_samples.iter())
                 .map(|&s| f64::from(s) + 1.0)
                 .collect(),
             rays: stats.samples(),
@@ -695,10 +736,10 @@ impl MasterCore {
         };
         if let Err(e) = self
             .scheduler
-            .package_done(now, worker, PackageId(result.id), measure)
+            .package_done(now, worker, PackageId(id), measure)
         {
             // A late straggler copy or a duplicate: the first result won.
-            debug!(package = result.id, "result ignored: {e}");
+            debug!(package = id, "result ignored: {e}");
             return;
         }
         let (job_id, frame) = (in_flight.job, in_flight.frame);
@@ -706,10 +747,13 @@ impl MasterCore {
         let worker_name = self.worker_name(conn);
         (self.telemetry).package_done(&worker_name, stats.samples(), in_flight.bytes_in, bytes_out);
         // Done: a late duplicate copy now finds nothing and is ignored.
-        self.packages.remove(&result.id);
+        self.packages.remove(&id);
         let job = self.jobs.get_mut(&job_id).expect("checked above");
         let current = job.assembly_mut(frame).expect("checked above");
-        current.image.composite(&pixels);
+        match accepted {
+            Accepted::Composite(pixels) => current.image.composite(&pixels),
+            Accepted::Finished(image, aux) => current.finished = Some((image, aux)),
+        }
         current.totals.add(&stats);
         current.triangles_done += triangles;
         let progress = Message::Progress {
@@ -763,7 +807,7 @@ impl MasterCore {
         job.scene = scene;
         let id = self.next_job;
         let frames = job.frames.len() as u32;
-        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0) {
+        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0, false) {
             return self.refuse_job(conn, e.to_string());
         }
         self.next_job += 1;
@@ -790,6 +834,7 @@ impl MasterCore {
         mut job: WireJob,
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
+        interactive: bool,
     ) -> Result<(), JobRejected> {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
@@ -854,7 +899,13 @@ impl MasterCore {
                 assembling: Vec::new(),
             },
         );
-        let submitted = self.scheduler.submit_job(now, JobId(id), work);
+        // The view's stages are split (latency counts); batch work may run
+        // in whole frames.
+        let submitted = if interactive {
+            self.scheduler.submit_interactive_job(now, JobId(id), work)
+        } else {
+            self.scheduler.submit_job(now, JobId(id), work)
+        };
         submitted.map_err(|e| {
             self.jobs.remove(&id);
             JobRejected::from(e)
@@ -1011,13 +1062,15 @@ impl MasterCore {
                 };
                 let workers: Vec<ConnId> = self.workers().collect();
                 for conn in workers {
-                    self.send(conn, Message::SceneOffer { hash });
+                    self.send(conn, Message::SceneOffer { hash, job: job.0 });
                 }
             }
-            Event::FrameStarted { job, frame, .. } => {
+            Event::FrameStarted {
+                job, frame, whole, ..
+            } => {
                 let resumed = (self.jobs.get(&job.0)).is_some_and(|j| frame < j.resume_from);
                 if !resumed {
-                    self.start_frame(job.0, frame);
+                    self.start_frame(job.0, frame, whole);
                 }
             }
             Event::FrameComplete { job, frame, stats } => {
@@ -1027,7 +1080,7 @@ impl MasterCore {
                 let Some(index) = j.assembling.iter().position(|a| a.start.frame == frame) else {
                     return;
                 };
-                let done = j.assembling.remove(index);
+                let mut done = j.assembling.remove(index);
                 if let Assembled::Components(image) = &done.image {
                     (self.views).frame_finished(job.0, frame, image, &j.scene);
                 }
@@ -1062,21 +1115,28 @@ impl MasterCore {
                 // A frame rendered again is its own job's frame.
                 let (owner, owner_frame) = (self.kept.repairs.get(&job.0))
                     .map_or((job.0, frame), |&(owner, frame)| (owner, frame));
-                // Encoded (and compressed) once: the journal and the
-                // submitter get the same bytes.
+                // Encoded (and compressed) once, here or by a whole frame's
+                // worker: the journal and the submitter get the same bytes.
+                let (image, aux) = match done.finished.take() {
+                    Some(finished) => finished,
+                    None => (
+                        WireImage::encode_reusing(
+                            done.image.color(),
+                            j.image,
+                            &mut self.frame_bytes,
+                        ),
+                        match &done.image {
+                            Assembled::Components(image) => Some(WireFrameAux::encode(image)),
+                            Assembled::Color(_) => None,
+                        },
+                    ),
+                };
                 let message = FrameDone {
                     job: owner,
                     frame: owner_frame,
-                    image: WireImage::encode_reusing(
-                        done.image.color(),
-                        j.image,
-                        &mut self.frame_bytes,
-                    ),
+                    image,
                     stats: frame_stats.clone(),
-                    aux: match &done.image {
-                        Assembled::Components(image) => Some(WireFrameAux::encode(image)),
-                        Assembled::Color(_) => None,
-                    },
+                    aux,
                 };
                 let submitters = j.submitters.clone();
                 if self.journals(owner) {
@@ -1178,21 +1238,22 @@ impl MasterCore {
         }
     }
 
-    /// Rasterizes a frame's base image and announces the frame to the workers.
-    fn start_frame(&mut self, job: u64, frame: u32) {
+    /// Announces the frame to the workers and, for a split frame, asks for
+    /// its base image.
+    fn start_frame(&mut self, job: u64, frame: u32, whole: bool) {
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
         };
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let base = BaseFrameRequest {
+        let base = (!whole).then(|| BaseFrameRequest {
             job,
             frame,
             scene: j.scene.clone(),
             setup: setup.clone(),
             spare: self.spare_bases.pop().map(Box::new),
-        };
+        });
         let start = FrameStart {
             job,
             frame,
@@ -1201,9 +1262,12 @@ impl MasterCore {
             reflectors: j.reflectors.clone(),
             method: j.method.into(),
             aux: j.aux,
+            image: j.image,
         };
         j.assembling.push(FrameAssembly {
             start: start.clone(),
+            whole,
+            finished: None,
             ids: None,
             // The base frame, when it comes; until then results are held.
             image: Assembled::Color(Image::black(0, 0)),
@@ -1215,7 +1279,12 @@ impl MasterCore {
         });
         let submitters = j.submitters.clone();
         let total = j.reflectors.len() as u32;
-        let workers: Vec<ConnId> = self.workers().collect();
+        // A whole frame's set-up goes only with its package (`assign`).
+        let workers: Vec<ConnId> = if whole {
+            Vec::new()
+        } else {
+            self.workers().collect()
+        };
         for conn in workers {
             self.send(conn, Message::FrameStart(start.clone()));
         }
@@ -1228,7 +1297,9 @@ impl MasterCore {
                 total,
             },
         );
-        self.outbox.push_back(Output::RasterizeBase(base));
+        if let Some(base) = base {
+            self.outbox.push_back(Output::RasterizeBase(base));
+        }
     }
 
     /// The driver rasterized the base frame that [`Output::RasterizeBase`]
@@ -1248,11 +1319,14 @@ impl MasterCore {
         let components = match j.frames.get(frame as usize) {
             Some(setup) if j.aux => {
                 let is_reflector = reflector_flags(&j.scene, &j.reflectors);
-                Some(reflector_bounds(&j.scene, &setup.camera, &is_reflector, 0))
+                Some(components_bounds(&j.scene, &setup.camera, &is_reflector))
             }
             _ => None,
         };
-        let Some(current) = j.assembly_mut(frame).filter(|c| c.ids.is_none()) else {
+        let Some(current) = j
+            .assembly_mut(frame)
+            .filter(|c| c.ids.is_none() && !c.whole)
+        else {
             return;
         };
         // Nothing is composited yet: the image starts as the base frame.
@@ -1310,18 +1384,23 @@ impl MasterCore {
     }
 
     fn assign(&mut self, a: Assignment) {
-        let triangles =
-            (self.jobs.get(&a.job.0)).map_or_else(Vec::new, |j| j.triangles_in(&a.items));
+        let job = self.jobs.get(&a.job.0);
+        let triangles = job.map_or_else(Vec::new, |j| j.triangles_in(&a.items));
+        let whole = (job.and_then(|j| j.assembly(a.frame)))
+            .filter(|_| a.whole)
+            .map(|assembly| Box::new(assembly.start.clone()));
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,
             frame: a.frame,
             triangles: a.items,
+            whole,
         });
         let in_flight = InFlight {
             job: a.job.0,
             worker: a.worker.0,
             frame: a.frame,
+            whole: a.whole,
             triangles,
             bytes_in: encoded_len(&message),
             assigned_at: self.now,
@@ -1342,7 +1421,7 @@ impl MasterCore {
             }
         }
         let id = self.next_job;
-        let queued = self.queue_job(now, id, planned.job.clone(), BTreeSet::new(), 0);
+        let queued = self.queue_job(now, id, planned.job.clone(), BTreeSet::new(), 0, true);
         if let Err(e) = queued {
             self.pump();
             return Err(ViewError::Queue(e.to_string()));
@@ -1490,7 +1569,7 @@ impl MasterCore {
         definition.frames = vec![setup];
         definition.name = format!("{} (frame {frame} again)", definition.name);
         let id = self.next_job;
-        self.queue_job(now, id, definition, BTreeSet::from([conn]), 0)
+        self.queue_job(now, id, definition, BTreeSet::from([conn]), 0, false)
             .map_err(|e| e.to_string())?;
         self.next_job += 1;
         self.kept.repairs.insert(id, (job, frame));
@@ -1590,6 +1669,55 @@ impl MasterCore {
 }
 
 /// A timeline phase from `start` to `end`, in microseconds from `t0`.
+/// Checks a whole frame's finished image (and components) against what
+/// its job asks for: the frame's size, the job's format, components when
+/// the job asks for them, linear and of the frame's size. The compressed
+/// bytes themselves are the submitter's to decode: its decoder
+/// decompresses into exactly the size the sides imply.
+fn check_finished(
+    job: &Job,
+    frame: u32,
+    image: WireImage,
+    aux: Option<WireFrameAux>,
+) -> Result<(WireImage, Option<WireFrameAux>), ResultRejected> {
+    let camera = job.frames.get(frame as usize).map(|setup| setup.camera);
+    let expected = camera.map_or((0, 0), |c| (c.width, c.height));
+    let mismatch = |what, found: String, expected: String| {
+        Err(ResultRejected::FinishedFrameMismatch {
+            what,
+            found,
+            expected,
+        })
+    };
+    let size = |image: &WireImage| (image.width, image.height);
+    let show = |(w, h): (u32, u32)| format!("{w}x{h}");
+    if size(&image) != expected {
+        return mismatch("size", show(size(&image)), show(expected));
+    }
+    if image.format != job.image {
+        return mismatch(
+            "format",
+            format!("{:?}", image.format),
+            format!("{:?}", job.image),
+        );
+    }
+    match &aux {
+        Some(_) if !job.aux => return mismatch("components", "sent".into(), "none".into()),
+        None if job.aux => return mismatch("components", "none".into(), "asked for".into()),
+        Some(aux) => {
+            for component in [&aux.reflected, &aux.transmitted] {
+                if size(component) != expected || component.format != WireImageFormat::LinearF32 {
+                    let found = format!("{} {:?}", show(size(component)), component.format);
+                    let wanted = format!("{} LinearF32", show(expected));
+                    return mismatch("component image", found, wanted);
+                }
+            }
+        }
+        None => {}
+    }
+    Ok((image, aux))
+}
+
 fn phase(t0: Duration, who: String, kind: PhaseKind, start: Duration, end: Duration) -> FramePhase {
     let micros = |t: Duration| t.saturating_sub(t0).as_micros() as u64;
     FramePhase {

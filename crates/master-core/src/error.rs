@@ -34,4 +34,18 @@ pub enum ResultRejected {
     /// gives to a triangle outside its package.
     #[error("result writes pixel ({x}, {y}), which its package does not own")]
     ForeignPixel { x: u32, y: u32 },
+    /// A whole frame's package must come back finished (the worker
+    /// composites it), not as pixels for the master to composite.
+    #[error("a package's pixels for a whole frame, which must come back finished")]
+    PixelsForWholeFrame,
+    /// Only a whole frame's package comes back finished.
+    #[error("a finished frame for a package that is not a whole frame")]
+    FinishedFrameForSplitPackage,
+    /// A finished frame is not what the job asked for.
+    #[error("finished frame's {what} is {found}, the job's is {expected}")]
+    FinishedFrameMismatch {
+        what: &'static str,
+        found: String,
+        expected: String,
+    },
 }

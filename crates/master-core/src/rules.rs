@@ -22,6 +22,10 @@ pub struct FarmRules {
     pub straggler: Option<StragglerPolicy>,
     pub retry: RetryPolicy,
     pub estimation: CostEstimation,
+    /// Whole frames for batch work (`SchedulerConfig::whole_frames`; the
+    /// worker renders a whole frame end to end); `false` splits every
+    /// frame into packages.
+    pub whole_frames: bool,
 }
 
 impl Default for FarmRules {
@@ -41,14 +45,16 @@ impl Default for FarmRules {
             straggler,
             retry,
             estimation,
+            whole_frames: true,
         }
     }
 }
 
 impl FarmRules {
     /// The scheduler's configuration under these rules: [`FRAMES_IN_FLIGHT`]
-    /// frames pipelined with frame affinity (a worker sets up only its
-    /// crew's frames), and requests for work carry over a frame start.
+    /// split frames pipelined with frame affinity (a worker sets up only
+    /// its crew's frames), whole frames for batch work (the worker renders
+    /// them end to end), and requests for work carry over a frame start.
     pub fn scheduler_config(&self) -> SchedulerConfig {
         let pipelined = SchedulerConfig {
             heartbeat_timeout: self.heartbeat_timeout,
@@ -59,10 +65,8 @@ impl FarmRules {
             ..SchedulerConfig::default()
         }
         .pipelined(FRAMES_IN_FLIGHT as u32);
-        // Whole frames wait for the workers to render them end to end: the
-        // core still rasterizes a base frame for every frame in flight.
         SchedulerConfig {
-            whole_frames: false,
+            whole_frames: self.whole_frames,
             ..pipelined
         }
     }

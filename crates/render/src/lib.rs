@@ -19,11 +19,12 @@ use glam::Vec3;
 use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_method::{MethodKind, ReflectionMethod, VertexTracing};
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Scene, TriangleId};
+use vtfarm_scene::{Camera, Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
-    Behind, FinishedFace, Frame, FrameImage, GlassPass, PackageOptions, PackageStats, PhaseTimes,
-    PixelValue, ShadowCache, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
+    Behind, FinishedFace, Frame, FrameImage, GlassPass, IdBufferCache, PackageOptions,
+    PackageStats, PhaseTimes, PixelRect, PixelValue, ShadowCache, SparseBitmap, VertexOwners,
+    VertexSettings, reflector_bounds, trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -68,6 +69,12 @@ pub struct FrameTimes {
     pub phases: PhaseTimes,
 }
 
+/// The rectangle a frame's component planes cover: the reflectors' screen
+/// bounds, no margin (the master's and a worker's finished frames alike).
+pub fn components_bounds(scene: &Scene, camera: &Camera, is_reflector: &[bool]) -> PixelRect {
+    reflector_bounds(scene, camera, is_reflector, 0)
+}
+
 /// For each scene triangle, whether it is one of `reflectors` (ids past the
 /// scene's triangles are left out).
 pub fn reflector_flags(scene: &Scene, reflectors: &[TriangleId]) -> Vec<bool> {
@@ -88,6 +95,9 @@ pub struct Renderer {
     is_reflector: Vec<bool>,
     /// The last frame's shadow maps of the thin-glass pass.
     shadows: ShadowCache,
+    /// A worker's frame set-up's ID buffers, kept for the next frame of the
+    /// same camera (they do not depend on the lights).
+    id_buffers: IdBufferCache,
 }
 
 impl Renderer {
@@ -124,6 +134,7 @@ impl Renderer {
             reflectors,
             is_reflector,
             shadows: ShadowCache::default(),
+            id_buffers: IdBufferCache::default(),
         })
     }
 
@@ -144,6 +155,12 @@ impl Renderer {
         &self.shadows
     }
 
+    /// A worker's ID buffers ([`Renderer::id_buffers`]), kept from frame to
+    /// frame: frames of one camera rasterize them once.
+    pub fn id_buffer_cache(&self) -> &IdBufferCache {
+        &self.id_buffers
+    }
+
     /// The rasterized base frame and ID buffer.
     pub fn base_frame(&self, setup: &FrameSetup) -> (Image, IdBuffer) {
         vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
@@ -152,8 +169,19 @@ impl Renderer {
     /// A frame to composite into over `base`, its component planes over the
     /// reflectors' bounds ([`FrameImage::new`]).
     pub fn frame_image(&self, setup: &FrameSetup, base: Image) -> FrameImage {
-        let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, 0);
+        let bounds = components_bounds(self.scene(), &setup.camera, &self.is_reflector);
         FrameImage::new(base, bounds)
+    }
+
+    /// A whole frame finished where it was traced (a farm worker's whole
+    /// frame): the base frame, and the frame's `bitmap` (all its reflector
+    /// pixels) composited over it ([`FrameImage::composite`]) — what the
+    /// master makes of a split frame's results, bit for bit.
+    pub fn finish_frame(&self, setup: &FrameSetup, bitmap: &SparseBitmap) -> FrameImage {
+        let (base, _) = self.base_frame(setup);
+        let mut image = self.frame_image(setup, base);
+        image.composite(bitmap);
+        image
     }
 
     /// Only the raster results a worker needs (no base frame): the frame's
@@ -173,6 +201,7 @@ impl Renderer {
             setup.vertex.transmission,
             GlassPass::OnDemand,
             &self.shadows,
+            &self.id_buffers,
         )
     }
 

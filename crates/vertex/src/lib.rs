@@ -174,7 +174,7 @@ pub use package::{
     SparseBitmap, TracedPackage, trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};
-pub use thin::{Behind, GlassPass, ShadowCache};
+pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache};
 pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;

@@ -123,6 +123,7 @@ impl Behind {
     /// A worker's frame set-up: the frame's ID buffer over `frame_within`
     /// and what lies behind its reflectors ([`Behind::new`]), the buffers
     /// rasterized together (the scene projected and set up once).
+    #[allow(clippy::too_many_arguments)]
     pub fn with_frame_ids(
         tracer: &Tracer<'_>,
         camera: &Camera,
@@ -131,14 +132,22 @@ impl Behind {
         transmission: Transmission,
         pass: GlassPass,
         cache: &ShadowCache,
+        id_cache: &IdBufferCache,
     ) -> (IdBuffer, Behind) {
-        let mut buffers = BehindBuffers::new(
-            tracer,
-            camera,
-            Some(frame_within),
-            is_reflector,
+        let key = IdBufferKey {
+            camera: *camera,
+            frame_within,
             transmission,
-        );
+        };
+        let mut buffers = id_cache.get(key, || {
+            BehindBuffers::new(
+                tracer,
+                camera,
+                Some(frame_within),
+                is_reflector,
+                transmission,
+            )
+        });
         let ids = buffers.frame.take().expect("asked for the frame's buffer");
         let behind = Behind::from_buffers(tracer, camera, &ids, is_reflector, buffers, pass, cache);
         (ids, behind)
@@ -236,6 +245,7 @@ fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
 }
 
 /// The ID buffers a frame's [`Behind`] is made of, rasterized in one go.
+#[derive(Clone, Debug)]
 struct BehindBuffers {
     /// The pixels [`Behind`] covers.
     bounds: PixelRect,
@@ -639,6 +649,58 @@ struct ShadowKey {
     lights: Vec<Light>,
     lo: Vec3,
     hi: Vec3,
+}
+
+/// What a frame's ID buffers ([`BehindBuffers::new`]) depend on besides the
+/// scene and its reflectors, which are the renderer's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct IdBufferKey {
+    camera: Camera,
+    frame_within: PixelRect,
+    transmission: Transmission,
+}
+
+/// The ID buffers of the last frame (the frame's own, the opaque scene
+/// behind the reflectors, the slab backs), kept for the next: a renderer
+/// holds one for its scene and reflectors. They are a function of the
+/// camera, the rectangle and the transmission model alone — not of the
+/// lights — so frames that differ only in the sun (a study's sweep)
+/// rasterize them once, and whether they come from here or are made anew
+/// never changes a pixel.
+#[derive(Debug, Default)]
+pub struct IdBufferCache {
+    last: Mutex<Option<(IdBufferKey, BehindBuffers)>>,
+    builds: AtomicU64,
+}
+
+impl IdBufferCache {
+    /// How many sets of buffers were rasterized (a frame that reuses the
+    /// last frame's rasterizes none).
+    pub fn builds(&self) -> u64 {
+        self.builds.load(Ordering::Relaxed)
+    }
+
+    /// Forgets the kept buffers (the next frame rasterizes its own).
+    pub fn clear(&self) {
+        *self.lock() = None;
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(IdBufferKey, BehindBuffers)>> {
+        (self.last.lock()).unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// The buffers for `key`, made with `build` unless the last frame's match.
+    fn get(&self, key: IdBufferKey, build: impl FnOnce() -> BehindBuffers) -> BehindBuffers {
+        if let Some((k, buffers)) = self.lock().as_ref()
+            && *k == key
+        {
+            return buffers.clone();
+        }
+        self.builds.fetch_add(1, Ordering::Relaxed);
+        let buffers = build();
+        *self.lock() = Some((key, buffers.clone()));
+        buffers
+    }
 }
 
 /// The shadow maps of the last frame, kept for the next (a renderer holds

@@ -78,6 +78,7 @@ fn main() -> std::io::Result<()> {
                 reflectors: vec![0],
                 method: WireMethod::VertexTracing,
                 aux: false,
+                image: vtfarm_proto::WireImageFormat::LinearF32,
             }),
         ),
         (
@@ -87,13 +88,14 @@ fn main() -> std::io::Result<()> {
                 job: 1,
                 frame: 0,
                 triangles: vec![0],
+                whole: None,
             }),
         ),
         (
             "result",
             Message::PackageResult(PackageResult {
                 id: 3,
-                bitmap: WireBitmap::from(&SparseBitmap {
+                pixels: vtfarm_proto::ResultPixels::Bitmap(WireBitmap::from(&SparseBitmap {
                     x0: 1,
                     y0: 1,
                     width: 2,
@@ -103,7 +105,7 @@ fn main() -> std::io::Result<()> {
                     reflected: vec![Vec3::ZERO],
                     transmitted: vec![Vec3::ZERO],
                     reflected_object: vec![0],
-                }),
+                })),
                 stats: WirePackageStats::default(),
                 busy_micros: 7,
                 setup_micros: 3,

@@ -57,6 +57,7 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
         reflectors: vec![0],
         method: WireMethod::VertexTracing,
         aux: false,
+        image: vtfarm_proto::WireImageFormat::LinearF32,
     }
 }
 
@@ -66,13 +67,14 @@ fn package(id: u64, job: u64, frame: u32) -> Message {
         job,
         frame,
         triangles: vec![0],
+        whole: None,
     })
 }
 
 fn result(id: u64) -> PackageResult {
     PackageResult {
         id,
-        bitmap: Default::default(),
+        pixels: vtfarm_proto::ResultPixels::Bitmap(Default::default()),
         stats: Default::default(),
         busy_micros: 1,
         setup_micros: 0,
@@ -164,7 +166,10 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
     let mut s = WorkerSession::new(Duration::ZERO);
     s.handle_message(
         Duration::ZERO,
-        Message::SceneOffer { hash: SCENE },
+        Message::SceneOffer {
+            hash: SCENE,
+            job: 1,
+        },
         &mut scenes,
     );
     assert_eq!(
