@@ -129,7 +129,7 @@ pub struct WorkerSession {
     /// when a package of it comes.
     announced: VecDeque<FrameStart>,
     /// A frame whose scene is still on its way.
-    awaiting_scene: Option<FrameStart>,
+    awaiting_scene: VecDeque<FrameStart>,
     /// The job last offered (`SceneOffer`): work of it may be asked for
     /// once its scene is here.
     offered: Option<JobOffer>,
@@ -165,7 +165,7 @@ impl WorkerSession {
             setup_to_tell: BTreeMap::new(),
             now,
             announced: VecDeque::new(),
-            awaiting_scene: None,
+            awaiting_scene: VecDeque::new(),
             offered: None,
             unusable: None,
             queue: VecDeque::new(),
@@ -283,7 +283,7 @@ impl WorkerSession {
                         }
                     }
                 }
-                if let Some(start) = self.awaiting_scene.take() {
+                for start in std::mem::take(&mut self.awaiting_scene) {
                     self.start_frame(start, scenes);
                 }
             }
@@ -411,7 +411,6 @@ impl WorkerSession {
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
         self.unusable = None;
-        self.awaiting_scene = None;
         if scenes.has_scene(&start.scene) {
             if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
                 self.announced.pop_front();
@@ -419,8 +418,12 @@ impl WorkerSession {
             self.announced.push_back(start);
             self.prepare_next();
         } else {
-            // The scene was offered and requested; the frame waits for it.
-            self.awaiting_scene = Some(start);
+            // The scene was offered and requested; the frame waits for it
+            // (so do whole frames' set-ups that came with their packages).
+            if self.awaiting_scene.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+                self.awaiting_scene.pop_front();
+            }
+            self.awaiting_scene.push_back(start);
         }
     }
 
@@ -441,15 +444,21 @@ impl WorkerSession {
             }
             let key = (package.job, package.frame);
             let waiting = self.preparing == Some(key)
-                || self
-                    .awaiting_scene
-                    .as_ref()
-                    .is_some_and(|f| (f.job, f.frame) == key);
+                || (self.awaiting_scene.iter()).any(|f| (f.job, f.frame) == key);
             if waiting {
                 break;
             }
             if self.ready != Some(key) && !self.older.contains(&key) {
-                let announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
+                let mut announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
+                // A whole frame's package carries its set-up: announced
+                // again if others pushed it out meanwhile.
+                if let Some(start) = package.whole.as_ref().filter(|_| !announced) {
+                    if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+                        self.announced.pop_front();
+                    }
+                    self.announced.push_back((**start).clone());
+                    announced = true;
+                }
                 if announced {
                     // Its first package: prepare the frame now.
                     self.prepare_next();
@@ -498,7 +507,7 @@ impl WorkerSession {
             .chain(self.ready)
             .chain(offered)
             .max();
-        let asks = nothing_queued && self.awaiting_scene.is_none() && !self.requested;
+        let asks = nothing_queued && self.awaiting_scene.is_empty() && !self.requested;
         if let Some((job, frame)) = newest.filter(|_| asks) {
             self.outbox.push_back(Message::RequestWork { job, frame });
             self.requested = true;
