@@ -75,7 +75,9 @@
 //!   a base frame and the compositing of every split frame; with whole
 //!   frames each frame is set up once, by the worker that renders it end to
 //!   end, and throughput grows with every worker. Latency is what counts
-//!   at the job's tail (frames left ≤ workers), for single-frame jobs and
+//!   at the job's tail (frames left ≤ workers, and no more than
+//!   `frames_in_flight`: each split frame costs the master a base frame,
+//!   one at a time, which would bound a wide farm), for single-frame jobs and
 //!   for the interactive view (each move a job of one frame), so those
 //!   frames are split as below and every worker shares them. A slow
 //!   worker never holds the frames the others wait for: a whole frame

@@ -1665,7 +1665,10 @@ fn may_duplicate(package: &Package, worker: WorkerId) -> bool {
 
 /// Whether a frame starting now is whole ([`SchedulerConfig::whole_frames`]):
 /// more of its job's frames are not started (`unstarted`, it included) than
-/// workers may work on the job, so every worker has frames of its own.
+/// workers may work on the job, so every worker has frames of its own —
+/// and than [`SchedulerConfig::frames_in_flight`]: a split frame costs the
+/// master a base frame (one at a time), so a wide farm's tail splits only
+/// as many frames as may be in flight, not one per worker.
 fn starts_whole(
     config: &SchedulerConfig,
     workers: &BTreeMap<WorkerId, Worker>,
@@ -1675,7 +1678,8 @@ fn starts_whole(
     let eligible = (workers.iter())
         .filter(|(id, w)| w.connected && !blocklist.contains(id))
         .count();
-    config.whole_frames && config.frame_affinity && unstarted > eligible.max(1)
+    let tail = eligible.min(config.frames_in_flight as usize).max(1);
+    config.whole_frames && config.frame_affinity && unstarted > tail
 }
 
 /// When the running copy of an assigned package becomes a straggler.

@@ -509,7 +509,7 @@ fn packages_near_a_jobs_end_are_sized_for_every_worker() {
 /// crews' frames, each worker setting a frame up for a small share).
 #[test]
 fn crews_leave_three_of_the_frames_in_flight_free() {
-    let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
+    let mut farm = Farm::with(common::split_pipelined());
     for w in 0..40 {
         farm.join(WorkerId(w));
     }
