@@ -10,6 +10,8 @@
 //! STATE/jobs/NNNNNNNNNNNN/job      SubmitJob { job } (scene by hash)
 //! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F
 //! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
+//! STATE/jobs/NNNNNNNNNNNN/state    JobList { jobs: [its listing] }: state,
+//!                                  priority, times (the newest replaces it)
 //! STATE/jobs/damaged/NNNNNNNNNNNN  a job set aside, with `why` beside its files
 //! ```
 //!
@@ -22,8 +24,9 @@
 //! Frames are the bulk; a `FrameDone` already carries its image compressed
 //! in the job's format (`WireImage`), so the file holds the very message the
 //! submitter got, and a re-attached submitter gets the same bytes. A
-//! delivered job's frames go [`ATTACH_GRACE`](vtfarm_master_core::ATTACH_GRACE)
-//! after it completes. A journal of another format (an older master's) is
+//! finished job (completed, failed or cancelled) and its frames go when the
+//! master's retention lets it go (`vtfarm master --keep-jobs`,
+//! `--keep-jobs-hours`). A journal of another format (an older master's) is
 //! refused at start with an error that says what to do.
 //!
 //! The core never touches it: it emits [`Record`]s, the driver writes them
@@ -40,8 +43,8 @@ use std::sync::Arc;
 use tracing::warn;
 use vtfarm_master_core::{DamagedJob, Record, StoredJob, Written};
 use vtfarm_proto::{
-    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, decode_message,
-    encode_message,
+    FrameDone, JobScene, JobSummary, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash,
+    decode_message, encode_message,
 };
 
 /// Writes a [`Journal`]'s records on a thread of its own, in order, so that
@@ -141,10 +144,11 @@ pub struct Loaded {
     pub damaged: Vec<DamagedJob>,
 }
 
-/// The journal's format: 3 since every record carries its checksum, 2 when
-/// finished frames were kept as sent without one, 1 (no `format` file)
-/// before.
-pub const JOURNAL_FORMAT: u32 = 3;
+/// The journal's format: 4 since jobs carry their priority and kind and
+/// keep their listing (`state`), 3 when every record first carried its
+/// checksum, 2 when finished frames were kept as sent without one, 1 (no
+/// `format` file) before.
+pub const JOURNAL_FORMAT: u32 = 4;
 
 /// Every record file starts with the CRC32C of the bytes after it, 4 bytes
 /// little-endian.
@@ -380,6 +384,40 @@ impl Journal {
         self.job_dir(id).join("job")
     }
 
+    /// The listing file of job `id` (its state, priority and times).
+    pub fn state_path(&self, id: u64) -> PathBuf {
+        self.job_dir(id).join("state")
+    }
+
+    /// Job `id`'s listing as last written; `None` when there is none, or
+    /// (with a warning naming the file, which is kept as `state.damaged`)
+    /// when it fails its check: the job is then listed as queued.
+    fn load_state(&self, id: u64) -> Option<JobSummary> {
+        let path = self.state_path(id);
+        let error = match read_message(&path, "a job's listing") {
+            Ok(Message::JobList { mut jobs }) if jobs.len() == 1 && jobs[0].id == id => {
+                return jobs.pop();
+            }
+            Ok(other) => RecordError::Content {
+                path: path.clone(),
+                expected: "this job's listing",
+                error: format!("it holds a {}", other.name()),
+            },
+            Err(RecordError::Missing { .. }) => return None,
+            Err(e) => e,
+        };
+        let aside = path.with_extension("damaged");
+        warn!(
+            job = id,
+            "{error}: the job is listed as queued (the file is kept as {})",
+            aside.display()
+        );
+        if let Err(e) = std::fs::rename(&path, &aside) {
+            warn!(path = %path.display(), "cannot rename the damaged listing: {e}");
+        }
+        None
+    }
+
     fn write_record(&self, what: &str, path: &Path, payload: &[u8]) -> Result<(), WriteError> {
         (self.storage)
             .write_atomic(path, &record_bytes(payload))
@@ -425,6 +463,13 @@ impl Journal {
             }
             Record::JobComplete { id } => {
                 self.write_record(&what, &self.job_dir(id).join("complete"), b"")
+            }
+            Record::JobState(summary) => {
+                let path = self.state_path(summary.id);
+                let message = Message::JobList {
+                    jobs: vec![*summary],
+                };
+                self.write_message(&what, &path, &message)
             }
             Record::JobForgotten { id } => {
                 let dir = self.job_dir(id);
@@ -637,6 +682,7 @@ impl Journal {
             frames_done,
             complete,
             damaged_frame,
+            summary: self.load_state(id),
         })
     }
 }
@@ -648,6 +694,7 @@ fn record_name(record: &Record) -> String {
         Record::JobComplete { id } => format!("the completion of job {id}"),
         Record::JobForgotten { id } => format!("the removal of job {id}"),
         Record::JobDamaged { id, .. } => format!("setting job {id} aside"),
+        Record::JobState(summary) => format!("the state of job {}", summary.id),
     }
 }
 

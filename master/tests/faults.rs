@@ -16,7 +16,8 @@ use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
-use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
+use vtfarm_master::{JobOptions, wire_job};
+use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
@@ -342,7 +343,7 @@ fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
 }
 
 #[test]
-fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
+fn unknown_jobs_fail_to_attach_and_journaled_orphans_render_to_the_end() {
     let job = Job::new(3);
     let mut pair = support::pair::persistent(FarmRules::default());
     pair.attach_submitter(77);
@@ -355,24 +356,28 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     let (wire, data) = job.wire();
     pair.submit(wire, data.clone());
     pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    let id = pair.job_id().unwrap();
     pair.drop_submitter();
     assert!(pair.master.status().queue.running.is_none());
+    let entry = pair.master.jobs().get(id).expect("listed");
+    assert_eq!(entry.state, JobState::Cancelled);
+    assert!(entry.reason.contains("submitter left"), "{}", entry.reason);
 
-    // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
+    // Journaled: the farm renders it to the end (its frames are kept), and
+    // a submitter attaching afterwards gets every frame.
     let mut pair = support::pair::persistent(FarmRules::default());
-    pair.add_worker("a", 1e4);
+    pair.add_worker("a", 1.0);
     pair.submit(job.wire().0, data);
     pair.drive(BOUND, |p| p.workers[0].is_running_a_package());
-    let left_at = pair.now;
+    let id = pair.job_id().unwrap();
     pair.drop_submitter();
-    pair.drive(2 * ATTACH_GRACE, |p| {
-        p.master.status().queue.running.is_none()
+    pair.drive(BOUND, |p| {
+        p.master.jobs().get(id).map(|e| e.state) == Some(JobState::Completed)
     });
-    assert!(
-        pair.now >= left_at + ATTACH_GRACE,
-        "cancelled after {:?}",
-        pair.now - left_at
-    );
+    assert_eq!(pair.master.jobs().get(id).unwrap().frames_done, 3);
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(3));
+    check_images(&pair, &job);
 }
 
 /// Later base frames are rasterized into earlier frames' buffers, and

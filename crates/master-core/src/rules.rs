@@ -7,6 +7,8 @@
 use std::time::Duration;
 
 use vtfarm_proto::{FRAMES_IN_FLIGHT, PEER_TIMEOUT};
+
+use crate::jobs::Retention;
 use vtfarm_scheduler::{
     CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy,
 };
@@ -22,6 +24,9 @@ pub struct FarmRules {
     pub straggler: Option<StragglerPolicy>,
     pub retry: RetryPolicy,
     pub estimation: CostEstimation,
+    /// How many finished jobs stay listed, and for how long (not a
+    /// scheduler knob: the master core's).
+    pub retention: Retention,
 }
 
 impl Default for FarmRules {
@@ -41,6 +46,7 @@ impl Default for FarmRules {
             straggler,
             retry,
             estimation,
+            retention: Retention::DEFAULT,
         }
     }
 }

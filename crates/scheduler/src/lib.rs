@@ -138,9 +138,15 @@
 //!
 //! # Job states
 //!
-//! Queued (`submit_job`) → Running (`advance_jobs`, when the job before it
-//! ends) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
-//! (`cancel_job`); a queued job may be cancelled directly.
+//! Queued (`submit_job`, `submit_job_with_priority`) → Running
+//! (`advance_jobs`, when the job before it ends: the queued job of the
+//! highest priority that is not paused, the lowest id among equals) →
+//! Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
+//! (`cancel_job`); a queued job may be cancelled directly. `pause_job`
+//! holds a queued job back and keeps a running one from handing out new
+//! packages or starting frames (its running packages finish and count);
+//! `resume_job` lets it go on. The master core's `JobState` is the users'
+//! view of these.
 
 mod config;
 mod costs;

@@ -65,11 +65,17 @@ struct Worker {
 struct QueuedJob {
     id: JobId,
     frames: Vec<FrameWork>,
+    /// Higher starts first; equal priorities start in id order.
+    priority: i32,
+    /// A paused job does not start.
+    paused: bool,
 }
 
 #[derive(Debug)]
 struct RunningJob {
     id: JobId,
+    /// A paused job hands out nothing new; its running packages finish.
+    paused: bool,
     /// Frames not started yet.
     frames: VecDeque<FrameWork>,
     frame_count: u32,
@@ -278,14 +284,83 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
+        self.submit_job_with_priority(now, job, frames, 0)
+    }
+
+    /// [`Scheduler::submit_job`] at a priority: a queued job of a higher
+    /// priority starts first, equal priorities in id order.
+    pub fn submit_job_with_priority(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+        priority: i32,
+    ) -> Result<(), SubmitError> {
         self.advance(now);
         let running = self.running.as_ref().is_some_and(|r| r.id == job);
         if running || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
-        self.queued_jobs.push_back(QueuedJob { id: job, frames });
+        self.queued_jobs.push_back(QueuedJob {
+            id: job,
+            frames,
+            priority,
+            paused: false,
+        });
         self.dispatch();
         Ok(())
+    }
+
+    /// Pauses a queued or running job: it starts no frame and hands out no
+    /// package until [`Scheduler::resume_job`]; its running packages finish
+    /// and their results count.
+    pub fn pause_job(&mut self, now: Duration, job: JobId) -> Result<(), CancelError> {
+        self.set_paused(now, job, true)
+    }
+
+    /// Lets a paused job go on.
+    pub fn resume_job(&mut self, now: Duration, job: JobId) -> Result<(), CancelError> {
+        self.set_paused(now, job, false)
+    }
+
+    fn set_paused(&mut self, now: Duration, job: JobId, paused: bool) -> Result<(), CancelError> {
+        self.advance(now);
+        if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
+            queued.paused = paused;
+        } else if let Some(running) = self.running.as_mut().filter(|r| r.id == job) {
+            running.paused = paused;
+        } else {
+            return Err(CancelError::UnknownJob(job));
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Changes a queued or running job's priority.
+    pub fn set_priority(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        priority: i32,
+    ) -> Result<(), CancelError> {
+        self.advance(now);
+        if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
+            queued.priority = priority;
+        } else if self.running.as_ref().is_none_or(|r| r.id != job) {
+            return Err(CancelError::UnknownJob(job));
+        }
+        // The running job's priority orders nothing: one job runs at a time.
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Takes the queued job to start next: the highest priority that is
+    /// not paused, the lowest id among equals.
+    fn take_next_queued(&mut self) -> Option<QueuedJob> {
+        let (index, _) = (self.queued_jobs.iter().enumerate())
+            .filter(|(_, q)| !q.paused)
+            .min_by_key(|(_, q)| (std::cmp::Reverse(q.priority), q.id))?;
+        self.queued_jobs.remove(index)
     }
 
     /// Cancels a queued or running job. The packages of a running job are
@@ -452,7 +527,11 @@ impl Scheduler {
     /// The job queue and the running job's progress.
     pub fn queue(&self) -> QueueStatus {
         QueueStatus {
-            waiting: self.queued_jobs.iter().map(|q| q.id).collect(),
+            waiting: {
+                let mut order: Vec<&QueuedJob> = self.queued_jobs.iter().collect();
+                order.sort_by_key(|q| (std::cmp::Reverse(q.priority), q.id));
+                order.into_iter().map(|q| q.id).collect()
+            },
             running: self.running.as_ref().map(|job| JobProgress {
                 job: job.id,
                 frame: job.frame.index,
@@ -697,7 +776,8 @@ impl Scheduler {
 
     /// Whether another frame of `job` may start now.
     fn room_for_a_frame(&self, job: &RunningJob) -> bool {
-        job.ahead.len() + 1 < self.config.frames_in_flight as usize
+        !job.paused
+            && job.ahead.len() + 1 < self.config.frames_in_flight as usize
             && !job.frames.is_empty()
             && !job.frame.is_complete()
     }
@@ -714,7 +794,7 @@ impl Scheduler {
         let lookahead = self.config.frames_in_flight as usize;
         loop {
             let Some(job) = &mut self.running else {
-                let Some(next) = self.queued_jobs.pop_front() else {
+                let Some(next) = self.take_next_queued() else {
                     return;
                 };
                 self.start_job(next);
@@ -836,6 +916,7 @@ impl Scheduler {
         self.lapse_requests();
         let mut job = RunningJob {
             id: next.id,
+            paused: false,
             frames,
             frame_count,
             costs,
@@ -870,7 +951,7 @@ impl Scheduler {
     /// nothing is left to hand out, a straggler's second copy.
     fn pick(&self, worker: WorkerId) -> Option<Pick> {
         let job = self.running.as_ref()?;
-        if job.blocklist.contains(&worker) {
+        if job.blocklist.contains(&worker) || job.paused {
             return None;
         }
         if self.config.frame_affinity {
