@@ -5,77 +5,18 @@
 
 #[path = "support/frame.rs"]
 mod frame;
+#[path = "support/job.rs"]
+mod job;
 
 mod support;
 
-use frame::small_frame;
-use std::sync::Arc;
 use std::time::Duration;
 
-use glam::Vec3;
+use job::Job;
 use support::pair::Pair;
-use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
-use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_master_core::JobState;
-use vtfarm_method::MethodKind;
-use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
-use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::Scene;
-
-/// A small cockpit job of `frames` frames from slightly different eyes.
-struct Job {
-    scene: Scene,
-    reflectors: Vec<u32>,
-    frames: Vec<FrameSetup>,
-}
-
-impl Job {
-    fn new(frames: usize) -> Job {
-        let c = cockpit(&CockpitConfig {
-            detail: 0.2,
-            glass_segments: 24,
-            ..CockpitConfig::default()
-        });
-        let reflectors = c.cover_glass_triangles();
-        let frames = (0..frames)
-            .map(|k| small_frame(&c, Vec3::new(0.01, 0.005, 0.0) * k as f32))
-            .collect();
-        Job {
-            scene: c.scene,
-            reflectors,
-            frames,
-        }
-    }
-
-    fn wire(&self) -> (WireJob, SceneData) {
-        let data = SceneData::from_scene(&self.scene);
-        (
-            wire_job(
-                "faults",
-                &data,
-                &self.frames,
-                &self.reflectors,
-                JobOptions {
-                    method: MethodKind::VertexTracing,
-                    aux: false,
-                },
-            ),
-            data,
-        )
-    }
-
-    /// The single-process images.
-    fn reference(&self) -> Vec<Vec<Vec3>> {
-        let renderer = Renderer::new(Arc::new(self.scene.clone()), self.reflectors.clone());
-        (self.frames.iter())
-            .map(|f| {
-                let render = renderer.render(f, &Default::default(), &mut |_, _| {});
-                render.image.color.pixels
-            })
-            .collect()
-    }
-}
+use vtfarm_proto::{FrameStats, Message};
 
 /// Virtual time a scenario may take at most.
 const BOUND: Duration = Duration::from_secs(600);

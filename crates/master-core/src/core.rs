@@ -33,8 +33,8 @@ use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
-    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, WorkerId,
-    WorkerState,
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler,
+    WorkerId, WorkerState,
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap, reflector_bounds};
 
@@ -443,8 +443,15 @@ impl MasterCore {
         };
         entry.frames_done = stored.frames_done;
         entry.frames_total = stored.job.frames.len() as u32;
-        if stored.complete {
-            entry.state = JobState::Completed;
+        // The frames decide whether it is complete: one whose journal lost
+        // a frame renders from there again.
+        match (stored.complete, entry.state) {
+            (true, _) => entry.state = JobState::Completed,
+            (false, JobState::Completed) => {
+                entry.state = JobState::Queued;
+                entry.finished_ms = None;
+            }
+            _ => {}
         }
         let state = entry.state;
         if state.is_finished() {
@@ -480,10 +487,15 @@ impl MasterCore {
         (self.kept.definitions).insert(stored.id, definition);
         let mut job = stored.job;
         job.priority = priority;
-        let queued = self.queue_job(now, stored.id, job, BTreeSet::new(), stored.frames_done);
-        if queued.is_ok() && state == JobState::Paused {
-            let _ = self.scheduler.pause_job(now, JobId(stored.id));
-        }
+        let paused = state == JobState::Paused;
+        let queued = self.queue_job_with(
+            now,
+            stored.id,
+            job,
+            BTreeSet::new(),
+            stored.frames_done,
+            paused,
+        );
         if let Err(e) = queued {
             self.table.remove(stored.id);
             let reason = format!("cannot resume job {}: {e}", stored.id);
@@ -642,14 +654,13 @@ impl MasterCore {
         };
         match message {
             Message::Heartbeat => {}
-            Message::RequestWork { job, .. } => {
-                // A request for a job that is over is stale; a worker sets
-                // a frame up when its first package of it comes, so any
-                // frame of the running job will do.
-                let running = self.scheduler.queue().running.map(|r| r.job.0);
-                if running == Some(job) {
-                    let _ = self.scheduler.request_work(now, worker);
-                }
+            Message::RequestWork { .. } => {
+                // A worker has one request out at a time and sets a frame up
+                // when its first package of it comes, so any job's work will
+                // do, whichever frame it names: the newest it heard of may
+                // be of a job that ended (a higher priority's that ran
+                // after it, say), and dropping the request would idle it.
+                let _ = self.scheduler.request_work(now, worker);
             }
             Message::SceneRequest { hash } => match self.scenes.get(&hash) {
                 Some((_, data)) => {
@@ -664,11 +675,15 @@ impl MasterCore {
             }
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
-                if let Err(e) =
-                    self.scheduler
-                        .package_failed(now, worker, PackageId(failed.id), failed.error)
-                {
-                    debug!("failure report ignored: {e}");
+                match (self.scheduler).package_failed(
+                    now,
+                    worker,
+                    PackageId(failed.id),
+                    failed.error,
+                ) {
+                    // It runs nowhere now (a retry is a new assignment).
+                    Ok(()) => self.drop_in_flight(failed.id, conn),
+                    Err(e) => debug!("failure report ignored: {e}"),
                 }
             }
             other => self.close(conn, format!("unexpected {} from a worker", other.name())),
@@ -1025,9 +1040,22 @@ impl MasterCore {
         &mut self,
         now: Duration,
         id: u64,
+        job: WireJob,
+        submitters: BTreeSet<ConnId>,
+        resume_from: u32,
+    ) -> Result<(), JobRejected> {
+        self.queue_job_with(now, id, job, submitters, resume_from, false)
+    }
+
+    /// [`MasterCore::queue_job`], the job queued `paused` or not.
+    fn queue_job_with(
+        &mut self,
+        now: Duration,
+        id: u64,
         mut job: WireJob,
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
+        paused: bool,
     ) -> Result<(), JobRejected> {
         let priority = job.priority;
         let scene_hash = match &job.scene {
@@ -1092,7 +1120,10 @@ impl MasterCore {
                 assembling: Vec::new(),
             },
         );
-        let submitted = (self.scheduler).submit_job_with_priority(now, JobId(id), work, priority);
+        let options = QueueOptions { priority, paused };
+        let submitted = self
+            .scheduler
+            .submit_job_with(now, JobId(id), work, options);
         submitted.map_err(|e| {
             self.jobs.remove(&id);
             JobRejected::from(e)
@@ -1192,6 +1223,15 @@ impl MasterCore {
     fn forget_job(&mut self, job: u64) -> Option<Job> {
         self.packages.retain(|_, p| p.job != job);
         self.jobs.remove(&job)
+    }
+
+    /// Package `id` no longer runs on `worker` (it failed there, or the
+    /// worker was lost): it leaves the packages in flight unless another
+    /// worker runs it now.
+    fn drop_in_flight(&mut self, id: u64, worker: ConnId) {
+        if self.packages.get(&id).is_some_and(|p| p.worker == worker) {
+            self.packages.remove(&id);
+        }
     }
 
     fn send(&mut self, conn: ConnId, message: Message) {
@@ -1466,6 +1506,9 @@ impl MasterCore {
                 cause,
                 requeued,
             } => {
+                for package in &requeued {
+                    self.drop_in_flight(package.0, worker.0);
+                }
                 warn!(worker = %self.name(worker.0), ?cause, requeued = requeued.len(), "worker lost");
                 if matches!(cause, vtfarm_scheduler::LossCause::HeartbeatTimeout) {
                     self.close(worker.0, "missed its heartbeats".into());

@@ -138,7 +138,7 @@
 //!
 //! # Job states
 //!
-//! Queued (`submit_job`, `submit_job_with_priority`) → Running
+//! Queued (`submit_job`, `submit_job_with`) → Running
 //! (`advance_jobs`, when the job before it ends: the queued job of the
 //! highest priority that is not paused, the lowest id among equals) →
 //! Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
@@ -162,4 +162,4 @@ pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
 pub use scheduler::Scheduler;
 pub use status::{Counters, JobProgress, PackageState, QueueStatus, WorkerState, WorkerStatus};
-pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, WorkerId};
+pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, WorkerId};

@@ -1,5 +1,6 @@
 //! The scheduler state machine: inputs (`worker_*`, `request_work`,
-//! `package_*`, `submit_job`, `cancel_job`, `handle_timeout`) change the
+//! `package_*`, `submit_job`, `cancel_job`, `pause_job`, `resume_job`,
+//! `set_priority`, `handle_timeout`) change the
 //! state and queue outputs, which the driver takes with `poll_assignment`,
 //! `poll_event` and `poll_timeout`.
 //!
@@ -15,9 +16,9 @@ use crate::costs::CostModel;
 use crate::frame::{Attempt, Frame, Package};
 use crate::{
     Assignment, CancelError, Counters, Event, FrameWork, InvariantError, JobFailure, JobId,
-    JobProgress, JoinError, LossCause, PackageId, PackageMeasure, PackageState, QueueStatus,
-    ReportError, SchedulerConfig, StragglerPolicy, SubmitError, WorkerError, WorkerFrameStats,
-    WorkerId, WorkerState, WorkerStatus,
+    JobProgress, JoinError, LossCause, PackageId, PackageMeasure, PackageState, QueueOptions,
+    QueueStatus, ReportError, SchedulerConfig, StragglerPolicy, SubmitError, WorkerError,
+    WorkerFrameStats, WorkerId, WorkerState, WorkerStatus,
 };
 
 /// The master's scheduler and load balancer. See the crate documentation for
@@ -284,17 +285,18 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
-        self.submit_job_with_priority(now, job, frames, 0)
+        self.submit_job_with(now, job, frames, QueueOptions::default())
     }
 
-    /// [`Scheduler::submit_job`] at a priority: a queued job of a higher
-    /// priority starts first, equal priorities in id order.
-    pub fn submit_job_with_priority(
+    /// [`Scheduler::submit_job`] at a priority, perhaps paused (a job
+    /// restored paused): a queued job of a higher priority starts first,
+    /// equal priorities in id order.
+    pub fn submit_job_with(
         &mut self,
         now: Duration,
         job: JobId,
         frames: Vec<FrameWork>,
-        priority: i32,
+        options: QueueOptions,
     ) -> Result<(), SubmitError> {
         self.advance(now);
         let running = self.running.as_ref().is_some_and(|r| r.id == job);
@@ -304,8 +306,8 @@ impl Scheduler {
         self.queued_jobs.push_back(QueuedJob {
             id: job,
             frames,
-            priority,
-            paused: false,
+            priority: options.priority,
+            paused: options.paused,
         });
         self.dispatch();
         Ok(())
