@@ -849,7 +849,7 @@ mod tests {
         Journal::open(dir.path()).unwrap();
         assert_eq!(
             std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
-            "3\n"
+            "4\n"
         );
         Journal::open(dir.path()).expect("the current format opens again");
 
@@ -857,7 +857,7 @@ mod tests {
         std::fs::create_dir_all(old.path().join("jobs/000000000001")).unwrap();
         let error = Journal::open(old.path()).expect_err("format 1").to_string();
         assert!(
-            error.contains("format 1, but this master reads format 3"),
+            error.contains("format 1, but this master reads format 4"),
             "{error}"
         );
         assert!(
@@ -865,9 +865,109 @@ mod tests {
             "{error}"
         );
 
+        // Format 3's jobs carry no priority or kind: they do not decode here.
+        std::fs::write(old.path().join("jobs/format"), "3\n").unwrap();
+        let error = Journal::open(old.path()).expect_err("format 3").to_string();
+        assert!(
+            error.contains("format 3, but this master reads format 4"),
+            "{error}"
+        );
+        assert!(
+            error.contains("finish its jobs with the master that wrote it"),
+            "{error}"
+        );
+
         std::fs::write(old.path().join("jobs/format"), "7\n").unwrap();
         let error = Journal::open(old.path()).expect_err("format 7").to_string();
         assert!(error.contains("format 7"), "{error}");
+    }
+
+    /// Every job state, its priority and times read back as written; the
+    /// newest listing replaces the one before; a damaged listing is set
+    /// aside with the job listed as queued, and a job without one has none.
+    #[test]
+    fn every_job_state_round_trips_through_the_journal() {
+        use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let scene = Arc::new(SceneData::from_scene(&Scene::default()));
+        let setup = FrameSetup {
+            camera: Camera {
+                eye: Vec3::ZERO,
+                target: Vec3::Z,
+                up: Vec3::Y,
+                fov_y_deg: 60.0,
+                width: 1,
+                height: 1,
+            },
+            lighting: Default::default(),
+            trace: Default::default(),
+            vertex: Default::default(),
+        };
+        let options = vtfarm_proto::JobOptions {
+            method: vtfarm_method::MethodKind::VertexTracing,
+            aux: false,
+        };
+        let job = vtfarm_proto::wire_job("j", &scene, &[setup], &[0], options);
+        let states = [
+            WireJobState::Queued,
+            WireJobState::Running,
+            WireJobState::Paused,
+            WireJobState::Completed,
+            WireJobState::Failed,
+            WireJobState::Cancelled,
+        ];
+        let summary = |id: u64, state: WireJobState| JobSummary {
+            id,
+            name: format!("job {id}"),
+            kind: [WireJobKind::Render, WireJobKind::Study][id as usize % 2],
+            state,
+            priority: id as i32 - 3,
+            frames_done: 0,
+            frames_failed: 0,
+            frames_total: 1,
+            submitted_ms: 1_000 * id,
+            started_ms: (id > 1).then_some(2_000 * id),
+            finished_ms: (id > 3).then_some(3_000 * id),
+            host: "10.0.0.9:4000".into(),
+            reason: format!("why {id}"),
+        };
+        for (id, &state) in (1..).zip(&states) {
+            let queued = Record::JobQueued {
+                id,
+                job: Box::new(job.clone()),
+                scene: scene.clone(),
+            };
+            journal.write(queued).unwrap();
+            // An older listing first: the newest wins.
+            let older = summary(id, WireJobState::Queued);
+            journal.write(Record::JobState(Box::new(older))).unwrap();
+            journal
+                .write(Record::JobState(Box::new(summary(id, state))))
+                .unwrap();
+        }
+        let loaded = journal.load();
+        assert!(loaded.damaged.is_empty(), "{:?}", loaded.damaged);
+        let read: Vec<Option<JobSummary>> = loaded.jobs.into_iter().map(|j| j.summary).collect();
+        let written: Vec<Option<JobSummary>> = (1..)
+            .zip(&states)
+            .map(|(id, &state)| Some(summary(id, state)))
+            .collect();
+        assert_eq!(read, written);
+
+        flip_listing(&journal.state_path(2));
+        std::fs::remove_file(journal.state_path(3)).unwrap();
+        let jobs = journal.load().jobs;
+        assert_eq!((jobs[1].id, &jobs[1].summary), (2, &None));
+        assert_eq!((jobs[2].id, &jobs[2].summary), (3, &None));
+        assert!(journal.state_path(2).with_extension("damaged").exists());
+    }
+
+    fn flip_listing(path: &Path) {
+        let mut bytes = std::fs::read(path).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] ^= 0x5a;
+        std::fs::write(path, bytes).unwrap();
     }
 
     /// Every kind of damage to a frame record is an error naming the file
