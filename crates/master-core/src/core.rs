@@ -1692,18 +1692,18 @@ impl MasterCore {
         }
         self.next_job += 1;
         self.table.insert(entry);
+        self.telemetry.counters.jobs_submitted += 1;
         self.views.started(planned, id);
         self.pump();
         Ok(id)
     }
 
-    /// Whether a job's end counts in the submitted, completed, failed and
-    /// cancelled totals: the listed jobs but the view's (a frame rendered
-    /// again is no job of its own), as `jobs_submitted` counts them.
+    /// Whether a job's end counts in the completed, failed and cancelled
+    /// totals: the listed jobs (a frame rendered again is no job of its
+    /// own), which `jobs_submitted` counts as they are queued, so the
+    /// totals agree.
     fn counts_in_totals(&self, id: u64) -> bool {
-        self.table
-            .get(id)
-            .is_some_and(|e| e.kind != WireJobKind::View)
+        self.table.get(id).is_some()
     }
 
     /// A view's job is listed only while it runs: each move of the eye
