@@ -1057,7 +1057,7 @@ impl MasterCore {
         resume_from: u32,
         paused: bool,
     ) -> Result<(), JobRejected> {
-        let priority = job.priority;
+        let (priority, job_kind) = (job.priority, job.kind);
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
@@ -1120,7 +1120,13 @@ impl MasterCore {
                 assembling: Vec::new(),
             },
         );
-        let options = QueueOptions { priority, paused };
+        // The view's stages are split over the workers: their latency counts.
+        let interactive = job_kind == WireJobKind::View;
+        let options = QueueOptions {
+            priority,
+            paused,
+            interactive,
+        };
         let submitted = self
             .scheduler
             .submit_job_with(now, JobId(id), work, options);

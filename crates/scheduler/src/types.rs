@@ -64,6 +64,9 @@ pub struct Assignment {
     pub expected: Duration,
     /// Whether this is the second copy of a straggler (the first result wins).
     pub duplicate: bool,
+    /// Whether the package is its whole frame ([`Event::FrameStarted`](crate::Event::FrameStarted)'s
+    /// `whole`): every item of the frame, for the worker to render end to end.
+    pub whole: bool,
 }
 
 /// What a worker measured while computing a package, sent with its result.
@@ -91,4 +94,7 @@ pub struct QueueOptions {
     pub priority: i32,
     /// Queued paused: it starts once resumed.
     pub paused: bool,
+    /// Every frame split, none whole
+    /// ([`Scheduler::submit_interactive_job`](crate::Scheduler::submit_interactive_job)).
+    pub interactive: bool,
 }
