@@ -130,13 +130,14 @@ enum SceneCommand {
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    // The daemons say what they do (joins, leaves, jobs); the other
+    // commands only warn.
+    match cli.command {
+        Command::Master(_) | Command::Worker(_) => vtfarm_transport::init_logging(),
+        _ => vtfarm_transport::init_logging_at("warn"),
+    }
+    match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -280,10 +280,11 @@ fn every_transition_of_the_table_happens_and_no_other_is_allowed() {
 }
 
 #[test]
-fn queued_jobs_start_by_priority_then_submission() {
+fn jobs_run_by_priority_then_submission_and_a_higher_one_goes_first() {
     let job = Job::new(1);
     let mut pair = Pair::new(FarmRules::default());
-    // The first job starts at once; the others wait for it in order.
+    // No worker yet: a job runs with nothing out, so a higher priority
+    // takes its place at once (it waits, parked, where it stopped).
     let first = submit(&mut pair, &job, 0);
     let low = submit(&mut pair, &job, -1);
     let normal = submit(&mut pair, &job, 0);
@@ -291,21 +292,32 @@ fn queued_jobs_start_by_priority_then_submission() {
     let high_later = submit(&mut pair, &job, 5);
     let raised = submit(&mut pair, &job, 0);
     assert_eq!(
+        pair.master.status().queue.running.map(|r| r.job),
+        Some(high)
+    );
+    assert_eq!(
         control(&mut pair, raised, JobAction::SetPriority(9)),
-        Ok(JobState::Queued)
+        Ok(JobState::Running)
     );
     assert_eq!(
         pair.master.status().queue.waiting,
-        vec![raised, high, high_later, normal, low]
+        vec![high, high_later, first, normal, low]
     );
     pair.add_worker("w1", 1.0);
     pair.drive(BOUND, |p| {
         (p.master.jobs().list(true)).all(|e| e.state == JobState::Completed)
             && frames_of(p, low).len() == 1
     });
-    let started: Vec<u64> = (pair.frame_starts.iter()).map(|&(job, _)| job).collect();
-    assert_eq!(started, vec![first, raised, high, high_later, normal, low]);
-    check_images(&pair, low, &job);
+    let finished: Vec<u64> = (pair.to_submitter.iter())
+        .filter_map(|m| match m {
+            Message::FrameDone(done) => Some(done.job),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(finished, vec![raised, high, high_later, first, normal, low]);
+    for id in [first, low, raised] {
+        check_images(&pair, id, &job);
+    }
 }
 
 #[test]
@@ -530,4 +542,102 @@ fn finished_jobs_beyond_retention_are_forgotten_with_their_frames() {
     let expired = pair.now + Duration::from_secs(3601);
     pair.drive(2 * 3600 * BOUND, |p| p.now >= expired);
     assert_eq!(pair.master.jobs().list(true).count(), 0);
+}
+
+/// The frames of `job` the master started, in order.
+fn starts_of(pair: &Pair, job: u64) -> Vec<u32> {
+    (pair.frame_starts.iter())
+        .filter(|&&(j, _)| j == job)
+        .map(|&(_, frame)| frame)
+        .collect()
+}
+
+#[test]
+fn a_higher_priority_job_takes_the_workers_as_their_packages_finish() {
+    let (long, short) = (Job::new(3), Job::new(1));
+    let mut pair = Pair::new(FarmRules {
+        straggler: None,
+        ..FarmRules::default()
+    });
+    pair.add_worker("w1", 1.0);
+    pair.add_worker("w2", 2.0);
+    let low = submit(&mut pair, &long, 0);
+    pair.drive(BOUND, |p| !p.master.packages_by_worker().is_empty());
+    let submitted_at = pair.now;
+    let high = submit(&mut pair, &short, 5);
+    // The low job hands out nothing more; once its running packages are in,
+    // the high one runs.
+    pair.drive(BOUND, |p| !starts_of(p, high).is_empty());
+    assert_eq!(
+        pair.master.status().queue.running.map(|r| r.job),
+        Some(high)
+    );
+    assert_eq!(pair.master.status().queue.waiting, vec![low]);
+    complete(&mut pair, high, 1);
+    assert_eq!(state(&pair, low), Some(JobState::Running), "not done yet");
+    let low_done_before = frames_of(&pair, low).len();
+    assert!(
+        low_done_before < 3,
+        "{low_done_before} frames of the low job"
+    );
+    complete(&mut pair, low, 3);
+    assert!(pair.now > submitted_at);
+    check_images(&pair, high, &short);
+    check_images(&pair, low, &long);
+    // Nothing was taken back from a worker for it.
+    for done in frames_of(&pair, low) {
+        assert_eq!(
+            (done.stats.requeued, done.stats.failures),
+            (0, 0),
+            "{:?}",
+            done.stats
+        );
+    }
+}
+
+#[test]
+fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
+    use vtfarm_master::view::ViewRequest;
+    let batch = Job::new(3);
+    let mut pair = Pair::new(FarmRules {
+        straggler: None,
+        ..FarmRules::default()
+    });
+    pair.add_worker("w1", 1.0);
+    pair.add_worker("w2", 1.0);
+    let id = submit(&mut pair, &batch, 0);
+    pair.drive(BOUND, |p| !p.master.packages_by_worker().is_empty());
+    let request = ViewRequest {
+        job: id,
+        offset: [0.01, 0.0, 0.0],
+    };
+    let view = pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    // The batch job's packages out at the workers finish; then the view runs.
+    pair.drive(BOUND, |p| !starts_of(p, view).is_empty());
+    assert_eq!(
+        pair.master.status().queue.running.map(|r| r.job),
+        Some(view)
+    );
+    let batch_frames = frames_of(&pair, id).len();
+    pair.drive(BOUND, |p| {
+        let current = p.master.views().current().unwrap();
+        current.stages_done == current.stages_total
+    });
+    // The batch job waited: no frame of it finished meanwhile.
+    assert_eq!(frames_of(&pair, id).len(), batch_frames);
+    assert_eq!(
+        state(&pair, id),
+        Some(JobState::Running),
+        "the batch job waited"
+    );
+    complete(&mut pair, id, 3);
+    check_images(&pair, id, &batch);
+    for done in frames_of(&pair, id) {
+        assert_eq!(
+            (done.stats.requeued, done.stats.failures),
+            (0, 0),
+            "{:?}",
+            done.stats
+        );
+    }
 }

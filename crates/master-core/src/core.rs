@@ -1328,6 +1328,26 @@ impl MasterCore {
                     self.send(conn, Message::SceneOffer { hash });
                 }
             }
+            Event::JobResumed { job } => {
+                // The workers may have set other frames up meanwhile.
+                let Some(j) = self.jobs.get(&job.0) else {
+                    return;
+                };
+                let starts: Vec<Message> =
+                    std::iter::once(Message::SceneOffer { hash: j.scene_hash })
+                        .chain(
+                            j.assembling
+                                .iter()
+                                .map(|a| Message::FrameStart(a.start.clone())),
+                        )
+                        .collect();
+                let workers: Vec<ConnId> = self.workers().collect();
+                for conn in workers {
+                    for message in &starts {
+                        self.send(conn, message.clone());
+                    }
+                }
+            }
             Event::FrameStarted { job, frame, .. } => {
                 let resumed = (self.jobs.get(&job.0)).is_some_and(|j| frame < j.resume_from);
                 if !resumed {
@@ -1515,9 +1535,18 @@ impl MasterCore {
                 for package in &requeued {
                     self.drop_in_flight(package.0, worker.0);
                 }
-                warn!(worker = %self.name(worker.0), ?cause, requeued = requeued.len(), "worker lost");
-                if matches!(cause, vtfarm_scheduler::LossCause::HeartbeatTimeout) {
-                    self.close(worker.0, "missed its heartbeats".into());
+                let name = self.name(worker.0);
+                match cause {
+                    // A clean leave (a drained worker finished its package
+                    // first) is no fault: `disconnected` said it left.
+                    vtfarm_scheduler::LossCause::Left if requeued.is_empty() => {}
+                    vtfarm_scheduler::LossCause::Left => {
+                        info!(worker = %name, requeued = requeued.len(), "its packages go to the other workers");
+                    }
+                    vtfarm_scheduler::LossCause::HeartbeatTimeout => {
+                        warn!(worker = %name, requeued = requeued.len(), "worker lost: it missed its heartbeats");
+                        self.close(worker.0, "missed its heartbeats".into());
+                    }
                 }
             }
             Event::PackageCancelled { worker, package } => {

@@ -33,6 +33,9 @@ pub struct Scheduler {
     waiting: VecDeque<WorkerId>,
     queued_jobs: VecDeque<QueuedJob>,
     running: Option<RunningJob>,
+    /// Jobs that started and gave way (paused, or a higher priority came)
+    /// once none of their packages ran: they go on where they stopped.
+    parked: Vec<RunningJob>,
     next_package: u64,
     assignments: VecDeque<Assignment>,
     events: VecDeque<Event>,
@@ -76,6 +79,7 @@ struct QueuedJob {
 #[derive(Debug)]
 struct RunningJob {
     id: JobId,
+    priority: i32,
     /// A paused job hands out nothing new; its running packages finish.
     paused: bool,
     /// Frames not started yet.
@@ -204,6 +208,7 @@ impl Scheduler {
             waiting: VecDeque::new(),
             queued_jobs: VecDeque::new(),
             running: None,
+            parked: Vec::new(),
             next_package: 0,
             assignments: VecDeque::new(),
             events: VecDeque::new(),
@@ -366,7 +371,9 @@ impl Scheduler {
         self.advance(now);
         if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
             queued.paused = paused;
-        } else if let Some(running) = self.running.as_mut().filter(|r| r.id == job) {
+        } else if let Some(running) =
+            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
+        {
             running.paused = paused;
         } else {
             return Err(CancelError::UnknownJob(job));
@@ -385,21 +392,76 @@ impl Scheduler {
         self.advance(now);
         if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
             queued.priority = priority;
-        } else if self.running.as_ref().is_none_or(|r| r.id != job) {
+        } else if let Some(running) =
+            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
+        {
+            running.priority = priority;
+        } else {
             return Err(CancelError::UnknownJob(job));
         }
-        // The running job's priority orders nothing: one job runs at a time.
         self.dispatch();
         Ok(())
     }
 
-    /// Takes the queued job to start next: the highest priority that is
+    /// The job to run next, queued or parked: the highest priority that is
     /// not paused, the lowest id among equals.
-    fn take_next_queued(&mut self) -> Option<QueuedJob> {
-        let (index, _) = (self.queued_jobs.iter().enumerate())
-            .filter(|(_, q)| !q.paused)
-            .min_by_key(|(_, q)| (std::cmp::Reverse(q.priority), q.id))?;
-        self.queued_jobs.remove(index)
+    fn next_waiting(&self) -> Option<(i32, JobId)> {
+        let queued = (self.queued_jobs.iter())
+            .filter(|q| !q.paused)
+            .map(|q| (q.priority, q.id));
+        let parked = (self.parked.iter())
+            .filter(|r| !r.paused)
+            .map(|r| (r.priority, r.id));
+        queued
+            .chain(parked)
+            .min_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id))
+    }
+
+    /// Starts the job [`Scheduler::next_waiting`] names; false if none.
+    fn start_next(&mut self) -> bool {
+        let Some((_, id)) = self.next_waiting() else {
+            return false;
+        };
+        if let Some(index) = self.parked.iter().position(|r| r.id == id) {
+            let job = self.parked.remove(index);
+            self.forget_worker_measures();
+            self.events.push_back(Event::JobResumed { job: id });
+            self.running = Some(job);
+        } else if let Some(index) = self.queued_jobs.iter().position(|q| q.id == id) {
+            let next = self.queued_jobs.remove(index).expect("found above");
+            self.start_job(next);
+        }
+        true
+    }
+
+    /// Whether the running job gives way: it is paused, or a job of a
+    /// higher priority waits. It then hands out nothing new, and parks
+    /// once none of its packages runs (no package is stopped for it).
+    fn gives_way(&self, job: &RunningJob) -> bool {
+        job.paused || self.next_waiting().is_some_and(|(p, _)| p > job.priority)
+    }
+
+    /// Parks the running job if it gives way and none of its packages runs.
+    fn park_if_due(&mut self) -> bool {
+        let due = (self.running.as_ref())
+            .is_some_and(|job| self.gives_way(job) && self.running_packages().next().is_none());
+        if !due {
+            return false;
+        }
+        let job = self.running.take().expect("checked above");
+        self.parked.push(job);
+        true
+    }
+
+    /// Rates are in the running job's cost unit and frames are its: a job
+    /// that starts or comes back is measured anew.
+    fn forget_worker_measures(&mut self) {
+        for w in self.workers.values_mut() {
+            w.rate = None;
+            w.compute_samples.clear();
+            w.frames.clear();
+            w.crew = None;
+        }
     }
 
     /// Cancels a queued or running job. The packages of a running job are
@@ -409,6 +471,9 @@ impl Scheduler {
         self.advance(now);
         if let Some(index) = self.queued_jobs.iter().position(|q| q.id == job) {
             self.queued_jobs.remove(index);
+        } else if let Some(index) = self.parked.iter().position(|r| r.id == job) {
+            // None of its packages runs: nothing to stop.
+            self.parked.remove(index);
         } else if self.running.as_ref().is_some_and(|r| r.id == job) {
             self.abandon_running_job();
         } else {
@@ -527,7 +592,7 @@ impl Scheduler {
 
     /// Whether a job is queued or running.
     pub fn has_jobs(&self) -> bool {
-        self.running.is_some() || !self.queued_jobs.is_empty()
+        self.running.is_some() || !self.queued_jobs.is_empty() || !self.parked.is_empty()
     }
 
     /// Every worker ever joined, by id, for a `status` listing.
@@ -567,9 +632,11 @@ impl Scheduler {
     pub fn queue(&self) -> QueueStatus {
         QueueStatus {
             waiting: {
-                let mut order: Vec<&QueuedJob> = self.queued_jobs.iter().collect();
-                order.sort_by_key(|q| (std::cmp::Reverse(q.priority), q.id));
-                order.into_iter().map(|q| q.id).collect()
+                let queued = self.queued_jobs.iter().map(|q| (q.priority, q.id));
+                let parked = self.parked.iter().map(|r| (r.priority, r.id));
+                let mut order: Vec<(i32, JobId)> = queued.chain(parked).collect();
+                order.sort_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id));
+                order.into_iter().map(|(_, id)| id).collect()
             },
             running: self.running.as_ref().map(|job| JobProgress {
                 job: job.id,
@@ -820,7 +887,7 @@ impl Scheduler {
     /// [`SchedulerConfig::frames_in_flight`], whole ones up to
     /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
     fn room_for_a_frame(&self, job: &RunningJob) -> bool {
-        if job.paused || job.frames.is_empty() || job.frame.is_complete() {
+        if self.gives_way(job) || job.frames.is_empty() || job.frame.is_complete() {
             return false;
         }
         let frames_in_flight = self.config.frames_in_flight as usize;
@@ -850,13 +917,15 @@ impl Scheduler {
         let lookahead = self.config.frames_in_flight as usize;
         loop {
             let Some(job) = &mut self.running else {
-                let Some(next) = self.take_next_queued() else {
+                if !self.start_next() {
                     return;
-                };
-                self.start_job(next);
+                }
                 continue;
             };
             if !job.frame.is_complete() {
+                if self.park_if_due() {
+                    continue;
+                }
                 if self.may_start_ahead() {
                     self.start_ahead();
                 }
@@ -960,12 +1029,7 @@ impl Scheduler {
     /// Starts a job. Rates are in the job's cost unit, so every worker's are
     /// forgotten and measured anew.
     fn start_job(&mut self, next: QueuedJob) {
-        for w in self.workers.values_mut() {
-            w.rate = None;
-            w.compute_samples.clear();
-            w.frames.clear();
-            w.crew = None;
-        }
+        self.forget_worker_measures();
         let frame_count = u32::try_from(next.frames.len()).unwrap_or(u32::MAX);
         self.events.push_back(Event::JobStarted {
             job: next.id,
@@ -993,6 +1057,7 @@ impl Scheduler {
         self.lapse_requests();
         let mut job = RunningJob {
             id: next.id,
+            priority: next.priority,
             paused: false,
             frames,
             interactive: next.interactive,
@@ -1029,7 +1094,7 @@ impl Scheduler {
     /// nothing is left to hand out, a straggler's second copy.
     fn pick(&self, worker: WorkerId) -> Option<Pick> {
         let job = self.running.as_ref()?;
-        if job.blocklist.contains(&worker) || job.paused {
+        if job.blocklist.contains(&worker) || self.gives_way(job) {
             return None;
         }
         if self.config.frame_affinity {
