@@ -234,7 +234,7 @@ impl Master {
     }
 }
 
-fn job_of<'a>(jobs: &'a [Value], id: u64) -> &'a Value {
+fn job_of(jobs: &[Value], id: u64) -> &Value {
     (jobs.iter().find(|j| j["id"] == id)).unwrap_or_else(|| panic!("job {id} in {jobs:?}"))
 }
 
