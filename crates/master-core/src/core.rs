@@ -884,13 +884,12 @@ impl MasterCore {
     /// Moves a listed job to `to` and journals it; a job the table does
     /// not list (a frame rendered again) has no state to keep.
     fn set_job_state(&mut self, id: u64, to: JobState) {
-        if self.table.get(id).is_none() {
-            return;
-        }
         let at = self.wall_ms(self.now);
         match self.table.set_state(id, to, at) {
-            Ok(_) => self.persist_state(id),
-            Err(e) => debug!("{e}"),
+            Ok(Some(_)) => self.persist_state(id),
+            Ok(None) => {}
+            // The core asks only for what the table allows: a bug if not.
+            Err(e) => warn!("{e}"),
         }
     }
 

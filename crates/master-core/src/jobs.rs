@@ -258,21 +258,16 @@ impl JobTable {
     }
 
     /// Moves job `id` to `to` at `at_ms` (setting its start or finish
-    /// time), if the table allows it.
+    /// time), if the table allows it; `Ok(None)` for a job the table does
+    /// not list (a frame rendered again has no state to keep).
     pub(crate) fn set_state(
         &mut self,
         id: u64,
         to: JobState,
         at_ms: u64,
-    ) -> Result<&JobEntry, TransitionRefused> {
+    ) -> Result<Option<&JobEntry>, TransitionRefused> {
         let Some(entry) = self.entries.get_mut(&id) else {
-            // Jobs the table does not list (a frame rendered again) have
-            // no state to keep.
-            return Err(TransitionRefused {
-                job: id,
-                from: to,
-                to,
-            });
+            return Ok(None);
         };
         if !entry.state.may_become(to) {
             return Err(TransitionRefused {
@@ -293,7 +288,7 @@ impl JobTable {
             _ if to.is_finished() => entry.finished_ms = Some(at_ms),
             _ => {}
         }
-        Ok(entry)
+        Ok(Some(entry))
     }
 
     /// The jobs, oldest first: every one with `all`, else the unfinished.
