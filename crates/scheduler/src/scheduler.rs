@@ -340,8 +340,8 @@ impl Scheduler {
         options: QueueOptions,
     ) -> Result<(), SubmitError> {
         self.advance(now);
-        let running = self.running.as_ref().is_some_and(|r| r.id == job);
-        if running || self.queued_jobs.iter().any(|q| q.id == job) {
+        let started = (self.running.iter().chain(&self.parked)).any(|r| r.id == job);
+        if started || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
         self.queued_jobs.push_back(QueuedJob {
