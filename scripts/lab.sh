@@ -144,7 +144,7 @@ links_text() {
   if $localhost; then echo "localhost"; else echo "tbf links: workers $(join "${mbits[@]}") Mbit/s, master $master_mbit Mbit/s, through one bridge"; fi
 }
 if $dry_run; then
-  echo "lab (dry run): $workers workers, $frames frames of the cockpit at detail $detail, ${width}x${height}, full; $(links_text)"
+  echo "lab (dry run): $workers worker$([ "$workers" = 1 ] || echo s), $frames frames of the cockpit at detail $detail, ${width}x${height}, full; $(links_text)"
   for ((i = 1; i <= workers; i++)); do
     if [ ${#percents[@]} -gt 0 ]; then
       g=${groups[i - 1]}
