@@ -257,6 +257,13 @@ in_cgroup() {
   in_cgroup_cmd=(sh -c 'echo $$ >"$0" && exec "$@"' "$1/cgroup.procs")
 }
 
+# quota_throttled DIR: prints how many of the quota's periods throttled the
+# group, and how many periods it ran in ("THROTTLED PERIODS", from its
+# cpu.stat, alike in v1 and v2): proof the quota held.
+quota_throttled() {
+  awk '$1 == "nr_periods" { p = $2 } $1 == "nr_throttled" { t = $2 } END { print t + 0, p + 0 }' "$1/cpu.stat"
+}
+
 # quota_remove_all: removes the cgroups quota_create made (their processes
 # must have ended), newest first; says which stay.
 quota_remove_all() {

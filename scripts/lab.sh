@@ -237,6 +237,8 @@ done
 measure_from=$((frames / 2))
 measured_submit "$work/out" "$work/submit.log" "$frames" "${pids[@]}" -- \
   "${pin_master[@]}" "${in_master[@]}" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out"
+throttled=()
+for g in "${groups[@]}"; do throttled+=("$(quota_throttled "$g" | tr ' ' /)"); done
 stop_pids "${pids[@]}"
 pids=()
 
@@ -252,11 +254,11 @@ else
 fi
 python3 - "$work/sim.json" "$job_from" "$frames" "$measured" "$sent" "$job_cpu" "$others" \
   "$(join "${percents[@]}")" "$(join "${mbits[@]}")" "${master_mbit:-}" "$($localhost && echo localhost || echo tbf)" \
-  "$cores" "$(cut -d' ' -f1-3 /proc/loadavg)" "$json" "$workers" "$width" "$height" "$detail" \
+  "$cores" "$(cut -d' ' -f1-3 /proc/loadavg)" "$json" "$workers" "$width" "$height" "$detail" "$(join "${throttled[@]}")" \
   "lab: $workers workers, $(links_text); $layout; other processes used $others cores meanwhile" <<'PY'
 import json, math, sys
 (sim_path, start, frames, measured, sent, cpu, others, percents, mbits, master_mbit, links,
- cores, load, out, workers, width, height, detail, headline) = sys.argv[1:]
+ cores, load, out, workers, width, height, detail, throttled, headline) = sys.argv[1:]
 start, frames, measured, sent = int(start), int(frames), float(measured), float(sent)
 row = [r for r in json.load(open(sim_path)) if not r["heterogeneous"]][-1]
 done = row["done_seconds_per_frame"]
@@ -281,6 +283,12 @@ report = {
     "frames_per_second": fps(measured), "predicted_frames_per_second": fps(predicted),
     "measured_over_predicted": fps(measured) / fps(predicted),
     "result_mb_per_frame": sent,
+    # Per worker: periods its quota throttled it in, periods it ran in.
+    "quota_throttled_periods": [list(map(int, t.split("/"))) for t in throttled.split(",")] if throttled else [],
+    # Per worker: the share of its quota it used (CPU per frame x frames per
+    # second over the share): below 1, it waited for work.
+    "quota_used": [c * fps(measured) / (float(p) / 100) for c, p in zip(measured_cpu[2:], percents.split(","))]
+                  if percents else [],
     "cpu_per_frame": {"master": measured_cpu[0], "submitter": measured_cpu[1], "workers": measured_cpu[2:]},
     "predicted_cpu_per_frame": {"master": simulated[0], "submitter": simulated[1], "workers": simulated[2:]},
 }
@@ -294,6 +302,10 @@ else:
 w = lambda c: " + ".join(f"{x:.3f}" for x in c)
 print(f"  CPU per frame: master {measured_cpu[0]:.3f} s, submitter {measured_cpu[1]:.3f} s, workers {w(measured_cpu[2:])} s")
 print(f"     simulated:  master {simulated[0]:.3f} s, submitter {simulated[1]:.3f} s, workers {w(simulated[2:])} s")
+if percents:
+    use = ", ".join(f"{u * 100:.0f}%" for u in report["quota_used"])
+    held = ", ".join(f"{t} of {p}" for t, p in report["quota_throttled_periods"])
+    print(f"  the workers used {use} of their quotas; throttled in {held} periods")
 print(f"  load average {load}")
 if out:
     with open(out, "w") as f:

@@ -392,3 +392,31 @@ fn stopping_the_farm_is_bounded_even_for_a_process_that_ignores_term() {
     );
     assert_eq!(text(&out.stdout).trim(), "stopped");
 }
+
+/// `quota_throttled` reads a group's cpu.stat the same way for v1 and v2
+/// (v2's has usage figures beside the period counts).
+#[test]
+fn throttling_is_read_from_cpu_stat_in_v1_and_v2() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, stat) in [
+        ("v1", "nr_periods 812\nnr_throttled 377\nthrottled_time 1520000000\n"),
+        (
+            "v2",
+            "usage_usec 9000\nuser_usec 8000\nsystem_usec 1000\nnr_periods 812\nnr_throttled 377\nthrottled_usec 1520000\n",
+        ),
+    ] {
+        let group = dir.path().join(name);
+        std::fs::create_dir(&group).unwrap();
+        std::fs::write(group.join("cpu.stat"), stat).unwrap();
+        let out = Command::new("timeout")
+            .args([SCRIPT_LIMIT_SECONDS, "bash", "-c"])
+            .arg(r#"set -eu; source "$1"; quota_throttled "$2""#)
+            .arg("bash")
+            .arg(script("farm-common.sh"))
+            .arg(&group)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert_eq!(text(&out.stdout).trim(), "377 812", "{name}");
+    }
+}
