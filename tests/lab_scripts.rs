@@ -119,7 +119,10 @@ fn v1_quotas_hold_each_worker_to_its_share_over_a_10_ms_period() {
     // each worker's link; the master keeps its core.
     let prediction = stdout
         .lines()
-        .find(|l| l.trim_start().starts_with("prediction: vtfarm bench simulate"))
+        .find(|l| {
+            l.trim_start()
+                .starts_with("prediction: vtfarm bench simulate")
+        })
         .unwrap_or_else(|| panic!("no prediction in {stdout}"));
     for flag in [
         "--workers 2",
@@ -161,7 +164,10 @@ fn v2_quotas_write_cpu_max_and_hand_the_cpu_controller_on() {
         assert_eq!(read(&group.join("cpu.max")), "2200 10000");
     }
     assert!(stdout.contains("w3: 22% of core 2"), "{stdout}");
-    assert!(stdout.contains("master and submitter: cores 3,5"), "{stdout}");
+    assert!(
+        stdout.contains("master and submitter: cores 3,5"),
+        "{stdout}"
+    );
     assert!(
         stdout.contains("--master-threads 2 --worker-speed 0.22,0.22,0.22"),
         "{stdout}"
@@ -193,13 +199,20 @@ fn where_no_quota_can_be_made_the_lab_says_why_and_fails() {
     let out = run(
         "lab.sh",
         root.path(),
-        &["--dry-run", "--workers", "2", "--cpu-percent", "45", "--cpus", "0,1"],
+        &[
+            "--dry-run",
+            "--workers",
+            "2",
+            "--cpu-percent",
+            "45",
+            "--cpus",
+            "0,1",
+        ],
     );
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stdout));
     let stderr = text(&out.stderr);
     assert!(
-        stderr.contains("no CPU quotas here")
-            && stderr.contains("refusing to run without quotas"),
+        stderr.contains("no CPU quotas here") && stderr.contains("refusing to run without quotas"),
         "{stderr}"
     );
     assert!(!text(&out.stdout).contains("prediction"));
@@ -213,7 +226,15 @@ fn where_no_quota_can_be_made_the_lab_says_why_and_fails() {
     let out = run(
         "lab.sh",
         root.path(),
-        &["--dry-run", "--workers", "1", "--cpu-percent", "45", "--cpus", "0,1"],
+        &[
+            "--dry-run",
+            "--workers",
+            "1",
+            "--cpu-percent",
+            "45",
+            "--cpus",
+            "0,1",
+        ],
     );
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stdout));
     let stderr = text(&out.stderr);
@@ -278,18 +299,33 @@ fn bad_arguments_are_refused_naming_the_option() {
         assert!(stderr.contains(message), "{args:?}: {stderr}");
     }
     // None of them made a cgroup: arguments are checked first.
-    assert_eq!(std::fs::read_dir(root.path().join("cpu")).unwrap().count(), 2);
+    assert_eq!(
+        std::fs::read_dir(root.path().join("cpu")).unwrap().count(),
+        2
+    );
 
     // Quotas on a one-core layout cannot keep the workers off the master's core.
     let out = run(
         "lab.sh",
         root.path(),
-        &["--dry-run", "--workers", "1", "--cpu-percent", "45", "--cpus", "0"],
+        &[
+            "--dry-run",
+            "--workers",
+            "1",
+            "--cpu-percent",
+            "45",
+            "--cpus",
+            "0",
+        ],
     );
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out.stderr).contains("--cpu-percent needs two cores"));
 
-    let out = run("hosts.sh", root.path(), &["--dry-run", "--configs", "45 45,x"]);
+    let out = run(
+        "hosts.sh",
+        root.path(),
+        &["--dry-run", "--configs", "45 45,x"],
+    );
     assert_eq!(out.status.code(), Some(2));
     assert!(
         text(&out.stderr).contains("'45,x' is not a comma-separated list of percents"),
@@ -399,7 +435,10 @@ fn stopping_the_farm_is_bounded_even_for_a_process_that_ignores_term() {
 fn throttling_is_read_from_cpu_stat_in_v1_and_v2() {
     let dir = tempfile::tempdir().unwrap();
     for (name, stat) in [
-        ("v1", "nr_periods 812\nnr_throttled 377\nthrottled_time 1520000000\n"),
+        (
+            "v1",
+            "nr_periods 812\nnr_throttled 377\nthrottled_time 1520000000\n",
+        ),
         (
             "v2",
             "usage_usec 9000\nuser_usec 8000\nsystem_usec 1000\nnr_periods 812\nnr_throttled 377\nthrottled_usec 1520000\n",
