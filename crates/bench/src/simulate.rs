@@ -27,6 +27,10 @@
 //! frame is the recorded frame again, so from the second frame on the
 //! scheduler's cost estimates are measured ones. Not modelled: the
 //! transport's own CPU (QUIC, the runtimes).
+//!
+//! `--worker-speed` and `--worker-mbit` give each worker its own speed and
+//! link: the lab's CPU quotas and rate-limited links (`scripts/lab.sh`,
+//! docs/lab.md), which slow the workers and leave the master as it is.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -103,7 +107,8 @@ pub struct SimulateArgs {
     /// 0.45,0.15`). Only the workers slow down: the master and the
     /// submitter keep their machine's cores (--master-threads). Given, the
     /// rows with half the workers at half speed are left out, and each
-    /// farm's "vs 1" is over its first worker alone.
+    /// farm's "vs 1" is over its first worker alone. (With --shared-cores
+    /// a slower worker needs more of the shared cores, unlike a quota.)
     #[arg(long, value_delimiter = ',', value_name = "SPEED")]
     worker_speed: Vec<f64>,
     /// Each worker's own link in Mbit/s, with the same rule as
