@@ -16,7 +16,9 @@
 #   [--frames 24] [--width 1920] [--height 1080] [--detail 2.1] [--cpus LIST]
 #   [--bin target/release/vtfarm] [--json FILE] [--keep DIR] [--dry-run]
 # --configs: one farm per word, its workers' quotas in % of one core,
-#   comma-separated ("45,15": two workers, 45% and 15%).
+#   comma-separated ("45,15": two workers, 45% and 15%); "@" and Mbit/s
+#   per worker put the farm behind rate-limited links instead of localhost
+#   ("45,45@100,10": a 10 Mbit worker beside a 100 Mbit one; lab.sh --mbit).
 # --json FILE: every farm's figures (default hosts.json in --keep DIR, if given).
 # --keep DIR: keeps each farm's lab output and JSON.
 # --dry-run: each farm's scripts/lab.sh --dry-run (arguments and quotas), nothing run.
@@ -47,7 +49,8 @@ done
 read -ra farms <<<"$configs"
 [ ${#farms[@]} -gt 0 ] || die 2 "--configs names no farm"
 for farm in "${farms[@]}"; do
-  [[ $farm =~ ^[0-9.]+(,[0-9.]+)*$ ]] || die 2 "--configs: '$farm' is not a comma-separated list of percents"
+  [[ $farm =~ ^[0-9.]+(,[0-9.]+)*(@[0-9.]+(,[0-9.]+)*)?$ ]] ||
+    die 2 "--configs: '$farm' is not a comma-separated list of percents (and optionally @ and one Mbit/s value per worker)"
 done
 [ -z "$keep" ] || mkdir -p "$keep"
 [ -n "$json" ] || [ -z "$keep" ] || json="$keep/hosts.json"
@@ -57,14 +60,15 @@ trap 'rm -rf "$work"' EXIT
 trap 'exit 130' INT
 trap 'exit 143' TERM
 
-common=(--localhost --frames "$frames" --width "$width" --height "$height" --detail "$detail" --bin "$bin")
+common=(--frames "$frames" --width "$width" --height "$height" --detail "$detail" --bin "$bin")
 [ -z "$cpus" ] || common+=(--cpus "$cpus")
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 runs=()
 for k in "${!farms[@]}"; do
   farm=${farms[k]}
-  IFS=, read -ra quotas <<<"$farm"
-  args=("${common[@]}" --workers "${#quotas[@]}" --cpu-percent "$farm" --json "$work/farm-$k.json")
+  IFS=, read -ra quotas <<<"${farm%@*}"
+  args=("${common[@]}" --workers "${#quotas[@]}" --cpu-percent "${farm%@*}" --json "$work/farm-$k.json")
+  if [[ $farm == *@* ]]; then args+=(--mbit "${farm#*@}"); else args+=(--localhost); fi
   if $dry_run; then
     "$here/lab.sh" "${args[@]}" --dry-run
     continue
@@ -81,10 +85,12 @@ python3 - "$json" "$load_before" "$(cut -d' ' -f1-3 /proc/loadavg)" "$(date -u +
 import json, sys
 out, load_before, load_after, date, *paths = sys.argv[1:]
 runs = [json.load(open(p)) for p in paths]
-label = lambda r: (f"{r['workers']} x {r['cpu_percent'][0]:g}%" if len(set(r["cpu_percent"])) == 1
-                   else " + ".join(f"{p:g}%" for p in r["cpu_percent"]))
-# One worker alone at each quota: the rate each farm's workers add up to.
-alone = {r["cpu_percent"][0]: r for r in runs if r["workers"] == 1}
+def label(r):
+    quotas = (f"{r['workers']} x {r['cpu_percent'][0]:g}%" if len(set(r["cpu_percent"])) == 1
+              else " + ".join(f"{p:g}%" for p in r["cpu_percent"]))
+    return quotas + ("" if r["links"] == "localhost" else " @" + ",".join(f"{m:g}" for m in r["worker_mbit"]))
+# One worker alone at each quota (on localhost): the rate each farm's workers add up to.
+alone = {r["cpu_percent"][0]: r for r in runs if r["workers"] == 1 and r["links"] == "localhost"}
 for r in runs:
     one = alone.get(r["cpu_percent"][0])
     parts = [alone.get(p) for p in r["cpu_percent"]]
@@ -98,13 +104,13 @@ print(f"emulated separate hosts: cockpit detail {job['detail']:g}, {job['width']
 print("workers on one core under CPU quotas (10 ms period), the master and the submitter pinned to the other(s); "
       "predicted: vtfarm bench simulate --worker-speed (quota / 100) --master-threads (their cores)")
 head = ("farm", "frames/s", "predicted", "meas/pred", "speed-up", "pred.", "effic.", "pred.", "CPU/frame: master", "submitter", "workers (s)")
-print(f"{head[0]:<18} {head[1]:>9} {head[2]:>9} {head[3]:>9} {head[4]:>9} {head[5]:>6} {head[6]:>7} {head[7]:>6}  {head[8]} {head[9]} {head[10]}")
+print(f"{head[0]:<22} {head[1]:>9} {head[2]:>9} {head[3]:>9} {head[4]:>9} {head[5]:>6} {head[6]:>7} {head[7]:>6}  {head[8]} {head[9]} {head[10]}")
 fmt = lambda x, f: "-" if x is None else format(x, f)
 for r in runs:
     c, p = r["cpu_per_frame"], r["predicted_cpu_per_frame"]
     workers = " + ".join(f"{m:.3f} ({s:.3f})" for m, s in zip(c["workers"], p["workers"]))
     eff = lambda x: None if x is None else 100 * x
-    print(f"{label(r):<18} {r['frames_per_second']:>9.3f} {r['predicted_frames_per_second']:>9.3f} "
+    print(f"{label(r):<22} {r['frames_per_second']:>9.3f} {r['predicted_frames_per_second']:>9.3f} "
           f"{r['measured_over_predicted']:>9.2f} {fmt(r['speedup'], '>8.2f')}x {fmt(r['predicted_speedup'], '>5.2f')}x "
           f"{fmt(eff(r['efficiency']), '>6.0f')}% {fmt(eff(r['predicted_efficiency']), '>5.0f')}%  "
           f"{c['master']:.3f} ({p['master']:.3f}) {c['submitter']:.3f} ({p['submitter']:.3f}) {workers}")

@@ -332,6 +332,18 @@ fn bad_arguments_are_refused_naming_the_option() {
         "{}",
         text(&out.stderr)
     );
+    // A farm's links are checked against its workers by lab.sh.
+    let out = run(
+        "hosts.sh",
+        root.path(),
+        &["--dry-run", "--cpus", "0,1", "--configs", "45,45@100,10,5"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("--mbit 100,10,5 gives 3 values for 2 workers"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 #[test]
@@ -347,12 +359,22 @@ fn the_hosts_benchmark_gives_every_farm_its_quotas() {
             "--frames",
             "8",
             "--configs",
-            "45 45,45 22,22,22,22 45,15",
+            "45 45,45 22,22,22,22 45,15 45,45@100,10",
         ],
     );
     let stdout = text(&out.stdout);
     assert!(out.status.success(), "{stdout}{}", text(&out.stderr));
-    assert_eq!(stdout.matches("lab (dry run)").count(), 4, "{stdout}");
+    assert_eq!(stdout.matches("lab (dry run)").count(), 5, "{stdout}");
+    assert_eq!(stdout.matches("; localhost").count(), 4, "{stdout}");
+    // The farm with links: a 10 Mbit worker beside a 100 Mbit one.
+    assert!(
+        stdout.contains("tbf links: workers 100,10 Mbit/s, master 100 Mbit/s"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("--link-mbit 100 --worker-mbit 100,10"),
+        "{stdout}"
+    );
     for workers in ["1 worker", "2 workers", "4 workers"] {
         assert!(stdout.contains(&format!("{workers}, 8 frames")), "{stdout}");
     }
@@ -366,10 +388,10 @@ fn the_hosts_benchmark_gives_every_farm_its_quotas() {
     };
     let mut first = quotas(1);
     first.sort();
-    assert_eq!(first, ["2200", "4500", "4500", "4500"]);
+    assert_eq!(first, ["2200", "4500", "4500", "4500", "4500"]);
     let mut second = quotas(2);
     second.sort();
-    assert_eq!(second, ["1500", "2200", "4500"]);
+    assert_eq!(second, ["1500", "2200", "4500", "4500"]);
     assert_eq!(quotas(3), ["2200"]);
     assert_eq!(quotas(4), ["2200"]);
 }
