@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Shared by scripts/scaling.sh, scripts/lab.sh and scripts/hosts.sh (sourced,
 # not run).
 
@@ -295,18 +296,23 @@ stop_pids() {
   for p in "$@"; do wait "$p" 2>/dev/null || true; done
 }
 
-# allowed_cpus: this process's allowed cores, comma-separated
-# (Cpus_allowed_list in /proc/self/status, ranges expanded).
-allowed_cpus() {
-  local list part parts=() cpus=() i
-  list=$(awk '/^Cpus_allowed_list:/ { print $2 }' /proc/self/status)
-  IFS=, read -ra parts <<<"$list"
+# cpu_list LIST: a kernel CPU list ("0-2,5") as cores, comma-separated
+# ("0,1,2,5").
+cpu_list() {
+  local part parts=() expanded=() i
+  IFS=, read -ra parts <<<"$1"
   for part in "${parts[@]}"; do
     if [[ $part == *-* ]]; then
-      for ((i = ${part%-*}; i <= ${part#*-}; i++)); do cpus+=("$i"); done
+      for ((i = ${part%-*}; i <= ${part#*-}; i++)); do expanded+=("$i"); done
     else
-      cpus+=("$part")
+      expanded+=("$part")
     fi
   done
-  (IFS=,; echo "${cpus[*]}")
+  (IFS=,; echo "${expanded[*]}")
+}
+
+# allowed_cpus: this process's allowed cores, comma-separated (from
+# Cpus_allowed_list in /proc/self/status).
+allowed_cpus() {
+  cpu_list "$(awk '/^Cpus_allowed_list:/ { print $2 }' /proc/self/status)"
 }

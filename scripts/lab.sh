@@ -28,7 +28,7 @@
 #   [--bin target/release/vtfarm] [--json FILE] [--dry-run]
 # --mbit, --cpu-percent: one value for every worker, or one each.
 # --master-mbit: the master's link (default: the fastest worker link).
-# --cpus: the cores to lay out (default: this process's allowed ones); the
+# --cpus: the cores to lay out, a CPU list such as 0-3 (default: this process's allowed ones); the
 #   first holds the workers, the rest the master and the submitter.
 # --dry-run: checks the arguments, makes the quotas' cgroups (and removes
 #   them), prints the plan and the prediction's command, runs nothing.
@@ -84,7 +84,8 @@ if [ -n "$cpu" ]; then
   total=$(printf '%s\n' "${percents[@]}" | awk '{ s += $1 } END { print s }')
   awk -v t="$total" 'BEGIN { exit !(t <= 100) }' ||
     die 2 "--cpu-percent $cpu: the workers share one core, so their shares must add up to at most 100 (they add up to $total)"
-  IFS=, read -ra cores_list <<<"${cpus:-$(allowed_cpus)}"
+  [ -z "$cpus" ] || [[ $cpus =~ ^[0-9]+(-[0-9]+)?(,[0-9]+(-[0-9]+)?)*$ ]] || die 2 "--cpus $cpus: not a CPU list (e.g. 0,1 or 0-3)"
+  IFS=, read -ra cores_list <<<"$(if [ -n "$cpus" ]; then cpu_list "$cpus"; else allowed_cpus; fi)"
   [ "${#cores_list[@]}" -ge 2 ] ||
     die 1 "--cpu-percent needs two cores (the workers on one, the master and the submitter on the others); allowed: ${cores_list[*]}"
   worker_cpu=${cores_list[0]}

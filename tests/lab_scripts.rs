@@ -289,6 +289,10 @@ fn bad_arguments_are_refused_naming_the_option() {
         (&["--workers", "0"][..], "--workers 0: give 1 to 64"),
         (&["--frames", "2"][..], "--frames 2: give at least 4"),
         (&["--bogus", "1"][..], "unknown option --bogus"),
+        (
+            &["--cpu-percent", "20", "--cpus", "0;1"][..],
+            "--cpus 0;1: not a CPU list",
+        ),
         (&["--workers"][..], "--workers needs a value"),
     ] {
         let mut all = vec!["--dry-run", "--cpus", "0,1"];
@@ -480,4 +484,18 @@ fn throttling_is_read_from_cpu_stat_in_v1_and_v2() {
         assert!(out.status.success(), "{}", text(&out.stderr));
         assert_eq!(text(&out.stdout).trim(), "377 812", "{name}");
     }
+}
+
+/// The lab lays out the cores the kernel allows it, in its list's form.
+#[test]
+fn cpu_lists_expand_their_ranges() {
+    let out = Command::new("timeout")
+        .args([SCRIPT_LIMIT_SECONDS, "bash", "-c"])
+        .arg(r#"set -eu; source "$1"; cpu_list 0-2,5,7-8; cpu_list 3"#)
+        .arg("bash")
+        .arg(script("farm-common.sh"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "0,1,2,5,7,8\n3\n");
 }
