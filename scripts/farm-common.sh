@@ -107,6 +107,7 @@ measured_submit() {
   reaped_cpu_ticks; reaped_before=$children_ticks
   "$@" >"$log" 2>&1 &
   submitter=$!
+  submit_pid=$submitter  # for a caller's clean-up on an interrupt
   deadline=$((SECONDS + 600))
   while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
     printf -v png '%s/frame_%04d.png' "$out" "$next"

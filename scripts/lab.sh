@@ -97,7 +97,7 @@ tag="vtlab$$"
 work=$(mktemp -d /tmp/vtfarm-lab.XXXXXX)
 pids=()
 cleanup() {
-  stop_pids "${pids[@]}"
+  stop_pids "${pids[@]}" ${submit_pid:+"$submit_pid"}
   if ! $localhost && command -v ip >/dev/null; then
     for ns in $(ip netns list 2>/dev/null | awk '{print $1}' | grep "^$tag-" || true); do ip netns del "$ns"; done
   fi
