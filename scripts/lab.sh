@@ -74,6 +74,7 @@ else
   is_positive "$master_mbit" || die 2 "--master-mbit $master_mbit: not a positive number"
 fi
 percents=()
+[ -n "$cpu" ] || [ -z "$cpus" ] || die 2 "--cpus lays out the workers under --cpu-percent: give both"
 if [ -n "$cpu" ]; then
   per_worker_list percents --cpu-percent "$cpu" "$workers"
   for p in "${percents[@]}"; do

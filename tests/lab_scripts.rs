@@ -290,12 +290,16 @@ fn bad_arguments_are_refused_naming_the_option() {
         (&["--frames", "2"][..], "--frames 2: give at least 4"),
         (&["--bogus", "1"][..], "unknown option --bogus"),
         (
+            &["--cpus", "0,1"][..],
+            "--cpus lays out the workers under --cpu-percent",
+        ),
+        (
             &["--cpu-percent", "20", "--cpus", "0;1"][..],
             "--cpus 0;1: not a CPU list",
         ),
         (&["--workers"][..], "--workers needs a value"),
     ] {
-        let mut all = vec!["--dry-run", "--cpus", "0,1"];
+        let mut all = vec!["--dry-run"];
         all.extend_from_slice(args);
         let out = run("lab.sh", root.path(), &all);
         let stderr = text(&out.stderr);
