@@ -23,16 +23,20 @@ eyes = [${eyes%,}]
 TOML
 }
 
-# steady_frame STATS_JSON: prints the first frame of the steady state: the
-# first whose work started (its arrival less its wall time on the master)
-# after frame 0 had arrived. Frame 0 includes the scene transfer and the
-# BVH builds; frames pipelined meanwhile arrive in a bunch right after it,
-# and counted from frame 0 they made the interval up to half the real one.
-# 1 if no frame started that late.
+# Frames are counted in the order they arrived at the submitter (a farm
+# of whole frames finishes them out of order): "arrival k" is the k-th to
+# arrive, from 0.
+
+# steady_frame STATS_JSON: prints the first arrival of the steady state: the
+# first frame to arrive whose work started (its arrival less its wall time
+# on the master) after the first arrival. The first frame includes the
+# scene transfer and the BVH builds; frames pipelined meanwhile arrive in a
+# bunch right after it, and counted from the first they made the interval
+# up to half the real one. 1 if no frame started that late.
 steady_frame() {
   python3 - "$1" <<'PY'
 import json, sys
-frames = json.load(open(sys.argv[1]))
+frames = sorted(json.load(open(sys.argv[1])), key=lambda f: f["arrival_micros"])
 first = frames[0]["arrival_micros"]
 late = [i for i, f in enumerate(frames) if i > 0 and f["arrival_micros"] - f["wall_micros"] >= first]
 print(late[0] if late and late[0] < len(frames) - 1 else min(1, len(frames) - 1))
@@ -40,13 +44,14 @@ PY
 }
 
 # frame_figures STATS_JSON FROM: prints the mean interval between frame
-# arrivals at the submitter from frame FROM on (see steady_frame), the mean
-# master frame wall time of those frames, the result MB per frame as sent,
-# and the same pixels' MB at the previous 40 bytes each.
+# arrivals at the submitter from arrival FROM on (see steady_frame), the
+# mean master frame wall time of those frames, the result MB per frame as
+# sent, and the same pixels' MB at the previous 40 bytes each.
 frame_figures() {
   python3 - "$1" "$2" <<'PY'
 import json, sys
-frames, start = json.load(open(sys.argv[1])), int(sys.argv[2])
+frames = sorted(json.load(open(sys.argv[1])), key=lambda f: f["arrival_micros"])
+start = int(sys.argv[2])
 arrivals = [f["arrival_micros"] for f in frames[start:]]
 gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
 walls = [f["wall_micros"] for f in frames[max(start, 1):]] or [frames[0]["wall_micros"]]
@@ -95,10 +100,10 @@ machine_cpu_ticks() {
 # after it of the farm's processes (the first PID, the submitter, then the
 # other PIDs; comma-separated) and `job_others` to the cores the machine's
 # other processes used meanwhile (/proc/stat less the farm's). CPU is
-# sampled as each frame arrives and at the end. Needs `work` (a scratch
-# directory).
+# sampled at each arrival (a new frame_NNNN.png in OUT, whichever frame)
+# and at the end. Needs `work` (a scratch directory).
 measured_submit() {
-  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline next=0 png
+  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline next=0 arrived=()
   shift 3
   while [ "$1" != -- ]; do pids+=("$1"); shift; done
   shift
@@ -110,8 +115,10 @@ measured_submit() {
   submit_pid=$submitter  # for a caller's clean-up on an interrupt
   deadline=$((SECONDS + 600))
   while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
-    printf -v png '%s/frame_%04d.png' "$out" "$next"
-    if [ -e "$png" ]; then
+    shopt -s nullglob
+    arrived=("$out"/frame_[0-9][0-9][0-9][0-9].png)
+    shopt -u nullglob
+    if [ "${#arrived[@]}" -gt "$next" ]; then
       cpu_ticks "${pids[@]}" "$submitter"; machine_cpu_ticks
       echo "${ticks[*]} $machine_ticks $machine_at" >>"$samples"
       next=$((next + 1))

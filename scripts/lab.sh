@@ -235,8 +235,9 @@ for _ in $(seq 1 100); do
   read -rt 0.2 -u "$sleeper" || true
 done
 [ "$n" -ge "$workers" ] || { echo "workers did not join" >&2; cat "$work"/w1.log "$work/master.log" >&2; exit 1; }
-# The figures: the second half of the frames.
-measure_from=$((frames / 2))
+# The figures: the second half of the frames, over the time from the
+# arrival that completes the first half to the last.
+measure_from=$((frames / 2 - 1))
 measured_submit "$work/out" "$work/submit.log" "$frames" "${pids[@]}" -- \
   "${pin_master[@]}" "${in_master[@]}" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out"
 throttled=()
@@ -263,11 +264,13 @@ import json, math, sys
  cores, load, out, workers, width, height, detail, throttled, headline) = sys.argv[1:]
 start, frames, measured, sent = int(start), int(frames), float(measured), float(sent)
 row = [r for r in json.load(open(sim_path)) if not r["heterogeneous"]][-1]
-done = row["done_seconds_per_frame"]
+# The frames in the order they were delivered, as the measured ones.
+order = sorted(range(len(row["done_seconds_per_frame"])), key=lambda i: row["done_seconds_per_frame"][i])
+done = [row["done_seconds_per_frame"][i] for i in order]
 predicted = (done[-1] - done[start]) / max(frames - 1 - start, 1)
 # CPU per frame over the same frames; a simulated worker's CPU is on its
 # own machine at its speed: times the speed, the CPU the same work takes here.
-at = row["cpu_at_delivery"]
+at = [row["cpu_at_delivery"][i] for i in order]
 speeds = row["worker_speeds"]
 simulated = [(b - a) / max(frames - 1 - start, 1) for a, b in zip(at[start], at[-1])]
 simulated = [simulated[0], simulated[-1], *(c * s for c, s in zip(simulated[1:-1], speeds))]
@@ -280,7 +283,7 @@ report = {
     "master_mbit": float(master_mbit) if master_mbit else None,
     "job": {"scene": "cockpit", "detail": float(detail), "width": int(width), "height": int(height),
             "quality": "full", "frames": frames},
-    "measured_from_frame": start, "cores": int(cores), "load_average": load, "others_cores": float(others),
+    "measured_from_arrival": start, "cores": int(cores), "load_average": load, "others_cores": float(others),
     "frame_seconds": measured, "predicted_frame_seconds": predicted,
     "frames_per_second": fps(measured), "predicted_frames_per_second": fps(predicted),
     "measured_over_predicted": fps(measured) / fps(predicted),
@@ -295,7 +298,7 @@ report = {
     "predicted_cpu_per_frame": {"master": simulated[0], "submitter": simulated[1], "workers": simulated[2:]},
 }
 print(headline)
-print(f"  frames per second over frames {start}-{frames - 1}: measured {fps(measured):.3f} ({measured:.3f} s per frame), "
+print(f"  frames per second over the second half (arrivals {start + 1}-{frames - 1} after arrival {start}): measured {fps(measured):.3f} ({measured:.3f} s per frame), "
       f"predicted {fps(predicted):.3f} ({predicted:.3f} s); measured/predicted {report['measured_over_predicted']:.2f}")
 if master_mbit:
     print(f"  results per frame: {sent:.3f} MB ({sent * 8 / float(master_mbit):.3f} s of the master link)")
