@@ -196,6 +196,7 @@ impl Renderer {
             bvh: &self.bvh,
             lighting: &setup.lighting,
             settings: setup.trace,
+            cone: vtfarm_trace::PixelCone::of(&setup.camera),
         }
     }
 

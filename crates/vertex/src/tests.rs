@@ -160,6 +160,7 @@ impl TestFrame {
             bvh: &bvh,
             lighting: &lighting,
             settings: TraceSettings::default(),
+            cone: vtfarm_trace::PixelCone::FINEST,
         };
         let behind = Behind::new(
             &tracer,
@@ -186,6 +187,7 @@ impl TestFrame {
                 bvh: &self.bvh,
                 lighting: &self.lighting,
                 settings: TraceSettings::default(),
+                cone: vtfarm_trace::PixelCone::FINEST,
             },
             camera: self.camera,
             ids: &self.ids,
