@@ -2,7 +2,8 @@
 //! through preview, refine and full on the same vertices, each stage's
 //! image byte for byte the frame rendered from scratch at that quality (what
 //! `vtfarm render --quality` writes: the farm composites the same packages),
-//! each stage tracing only the vertices its quality adds.
+//! each stage tracing only the vertices its quality adds and no pixel an
+//! earlier stage traced.
 
 use std::sync::Arc;
 
@@ -149,6 +150,7 @@ fn check(renderer: &Renderer, setup: &FrameSetup, name: &str) {
     let set_ups = renderer.set_ups();
     let mut progressive = renderer.progressive(setup, &options);
     let mut scratch_samples = 0;
+    let (mut traced_pixels, mut scratch_pixels) = (0, 0);
     for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
         let stage = progressive.advance(quality).unwrap();
         let scratch = renderer.render(
@@ -177,12 +179,22 @@ fn check(renderer: &Renderer, setup: &FrameSetup, name: &str) {
             "{name} {quality:?}"
         );
         scratch_samples = scratch.stats.vertex_samples;
+        // Pixels traced one by one: only those no earlier stage traced.
+        assert!(stage.stats.filled_pixels <= scratch.stats.filled_pixels);
+        traced_pixels += stage.stats.filled_pixels;
+        scratch_pixels += scratch.stats.filled_pixels;
         // Each stage has vertices of its own to add here (at this size the
         // cockpit's glass has no edge longer than the default maximum).
         if quality != Quality::Full || setup.vertex.max_edge < 24.0 {
             assert!(stage.stats.vertex_samples > 0, "{name} {quality:?}");
         }
     }
+    // Rim pixels no face reaches are traced at every level from scratch,
+    // once in a progressive frame.
+    assert!(
+        traced_pixels < scratch_pixels,
+        "{name}: {traced_pixels} {scratch_pixels}"
+    );
     // One set-up for the three stages, one per render from scratch.
     assert_eq!(renderer.set_ups() - set_ups, 1 + 3, "{name}");
 }

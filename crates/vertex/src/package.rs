@@ -18,7 +18,7 @@ use vtfarm_raster::{IdBuffer, PixelRect};
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
-use crate::fill::{Filled, Planes, TrianglePlan, fill};
+use crate::fill::{Filled, Planes, TracedPixels, TrianglePlan, fill};
 use crate::refine::{MeshVertex, TriangleMesh};
 use crate::{Frame, FrameImage, Quality, VertexSettings};
 
@@ -347,8 +347,9 @@ impl DensePlanes {
 /// ([`ProgressivePackage::new`]: which triangles own pixels, and where),
 /// then advanced `Preview` → `Refine` → `Full`, each stage continuing the
 /// meshes the last one left (the corners are traced at the first stage,
-/// each split's vertex once, in the pass that splits it) and writing every
-/// pixel its triangles own. A stage gives exactly the pixels of the
+/// each split's vertex once, in the pass that splits it; a pixel traced one
+/// by one, once, whichever stages need it) and writing every pixel its
+/// triangles own. A stage gives exactly the pixels of the
 /// package traced from scratch at its quality, because that is this type
 /// too, advanced once ([`trace_package`]); stages may be skipped
 /// (`Preview` → `Full`), and `Reference` (every pixel traced) may follow any.
@@ -361,6 +362,9 @@ pub struct ProgressivePackage {
     /// The pixels the last stage left (bitmap stages only), so the next
     /// stage's bitmap holds only what changed.
     pixels: Option<DensePlanes>,
+    /// The pixels earlier stages traced one by one, so none is traced
+    /// twice; `None` for a package of one stage ([`trace_package`]).
+    traced_pixels: Option<TracedPixels>,
     stopped: bool,
 }
 
@@ -387,6 +391,7 @@ impl ProgressivePackage {
             meshes: Vec::new(),
             stage: None,
             pixels: None,
+            traced_pixels: Some(TracedPixels::new()),
             stopped: false,
         }
     }
@@ -506,7 +511,12 @@ impl ProgressivePackage {
             x1: a.x1.max(b.x1),
             y1: a.y1.max(b.y1),
         }) {
-            Some(rect) => fill(frame, &plans, &mut target.planes(rect)),
+            Some(rect) => fill(
+                frame,
+                &plans,
+                &mut target.planes(rect),
+                self.traced_pixels.as_mut(),
+            ),
             None => Filled::default(),
         };
         stats.fill_time = fill_start.elapsed();
@@ -551,7 +561,11 @@ fn run_package(
     progress: &mut dyn FnMut(&[FinishedFace]),
     target: &mut dyn Target,
 ) -> TracedPackage {
-    ProgressivePackage::new(frame, triangles)
+    let mut package = ProgressivePackage {
+        traced_pixels: None,
+        ..ProgressivePackage::new(frame, triangles)
+    };
+    package
         .run(frame, frame.settings.quality, options, progress, target)
         .expect("a new package takes any stage")
 }
