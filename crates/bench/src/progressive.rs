@@ -115,7 +115,10 @@ fn print(args: &ProgressiveArgs, renderer: &Renderer, r: &Round) {
         args.height,
         rayon::current_num_threads(),
         args.rounds.max(1),
-        load.split_whitespace().take(3).collect::<Vec<_>>().join(" ")
+        load.split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
     );
     println!(
         "{:<8} {:>12} {:>12} {:>12} {:>12} {:>16} {:>16}",

@@ -328,9 +328,10 @@ impl DensePlanes {
             ..SparseBitmap::default()
         };
         for y in y0..y1 {
-            for i in y * stride + x0..y * stride + x1 {
-                bitmap.mask.push(mask[i]);
-                if mask[i] {
+            let row = y * stride + x0..y * stride + x1;
+            for (i, &kept) in row.clone().zip(&mask[row]) {
+                bitmap.mask.push(kept);
+                if kept {
                     bitmap.color.push(self.color[i]);
                     bitmap.reflected.push(self.reflected[i]);
                     bitmap.transmitted.push(self.transmitted[i]);
