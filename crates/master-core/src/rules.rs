@@ -50,7 +50,7 @@ impl FarmRules {
     /// frames pipelined with frame affinity (a worker sets up only its
     /// crew's frames), and requests for work carry over a frame start.
     pub fn scheduler_config(&self) -> SchedulerConfig {
-        SchedulerConfig {
+        let pipelined = SchedulerConfig {
             heartbeat_timeout: self.heartbeat_timeout,
             sizing: self.sizing.clone(),
             straggler: self.straggler.clone(),
@@ -58,6 +58,12 @@ impl FarmRules {
             estimation: self.estimation.clone(),
             ..SchedulerConfig::default()
         }
-        .pipelined(FRAMES_IN_FLIGHT as u32)
+        .pipelined(FRAMES_IN_FLIGHT as u32);
+        // Whole frames wait for the workers to render them end to end: the
+        // core still rasterizes a base frame for every frame in flight.
+        SchedulerConfig {
+            whole_frames: false,
+            ..pipelined
+        }
     }
 }

@@ -40,6 +40,15 @@ pub struct SchedulerConfig {
     /// left. Package sizes follow the frame's crew, bounded by the whole
     /// job's remaining work over every worker. Default `false`.
     pub frame_affinity: bool,
+    /// Whole frames for batch work (with [`SchedulerConfig::frame_affinity`]):
+    /// while the running job has more frames not started than workers may
+    /// work on it, a frame starts whole — one package of all its items for
+    /// one worker, which then renders the frame end to end — and up to
+    /// [`WHOLE_FRAMES_PER_WORKER`](crate::WHOLE_FRAMES_PER_WORKER) whole
+    /// frames per worker are in flight. The job's tail, single-frame jobs
+    /// and jobs no wider than the farm are split as without it. See the
+    /// crate documentation for the rule and its reason. Default `false`.
+    pub whole_frames: bool,
 }
 
 impl Default for SchedulerConfig {
@@ -53,21 +62,24 @@ impl Default for SchedulerConfig {
             requests_lapse_at_frame_start: false,
             frames_in_flight: 1,
             frame_affinity: false,
+            whole_frames: false,
         }
     }
 }
 
 impl SchedulerConfig {
     /// The rules for workers that set a frame up when its first package for
-    /// them comes (vtfarm's): `frames_in_flight` frames pipelined with frame
-    /// affinity, so that a worker sets up only the frames of its crew, and
-    /// requests carry over a frame start. vtfarm's master takes it with the
-    /// protocol's `FRAMES_IN_FLIGHT` (`vtfarm_master_core::FarmRules`).
+    /// them comes (vtfarm's): `frames_in_flight` split frames pipelined with
+    /// frame affinity, so that a worker sets up only the frames of its crew,
+    /// whole frames for batch work, and requests carry over a frame start.
+    /// vtfarm's master takes it with the protocol's `FRAMES_IN_FLIGHT`
+    /// (`vtfarm_master_core::FarmRules`).
     pub fn pipelined(self, frames_in_flight: u32) -> Self {
         SchedulerConfig {
             requests_lapse_at_frame_start: false,
             frames_in_flight,
             frame_affinity: true,
+            whole_frames: true,
             ..self
         }
     }

@@ -18,6 +18,11 @@ pub enum Event {
         job: JobId,
         frame: u32,
         items: usize,
+        /// Whether the frame is whole ([`SchedulerConfig::whole_frames`](crate::SchedulerConfig::whole_frames)):
+        /// all its items go to one worker as one package (and again as one
+        /// when that worker is lost or fails it), so the worker renders the
+        /// frame end to end; else packages split it over workers.
+        whole: bool,
     },
     /// Every item of the frame is done, exactly once.
     FrameComplete {

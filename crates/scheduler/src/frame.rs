@@ -19,6 +19,9 @@ use crate::{FrameStats, PackageId, PackageState, WorkerFrameStats, WorkerId};
 pub(crate) struct Frame {
     pub(crate) index: u32,
     pub(crate) items: Vec<u32>,
+    /// A whole frame: one package of every item, never split (see
+    /// [`SchedulerConfig::whole_frames`](crate::SchedulerConfig::whole_frames)).
+    pub(crate) whole: bool,
     /// `prefix[i]` is the estimated cost of `items[..i]`, so any range's cost
     /// is a difference and cutting a package is a binary search.
     prefix: Vec<f64>,
@@ -63,13 +66,15 @@ pub(crate) struct Attempt {
 }
 
 impl Frame {
-    /// A frame whose items are estimated by `costs`.
-    pub(crate) fn new(index: u32, items: Vec<u32>, costs: &CostModel) -> Frame {
+    /// A frame whose items are estimated by `costs`; `whole` when it goes
+    /// to one worker as one package.
+    pub(crate) fn new(index: u32, items: Vec<u32>, whole: bool, costs: &CostModel) -> Frame {
         let prefix = prefix_costs(&items, costs);
         let n = items.len();
         Frame {
             index,
             items,
+            whole,
             prefix,
             next_fresh: 0,
             queue: VecDeque::new(),

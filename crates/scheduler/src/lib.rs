@@ -8,7 +8,7 @@
 //! packages are opaque ids, and time is the `now: Duration` (time since the
 //! master started) passed to every input. Inputs are the `Scheduler` methods
 //! `worker_joined`, `worker_left`, `heartbeat`, `request_work`,
-//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `cancel_job` and
+//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `submit_interactive_job`, `cancel_job` and
 //! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
 //! hash-map order, no threads). Its tests drive it with simulated workers on
@@ -65,6 +65,37 @@
 //!   unassigned and unstarted work over every worker), so near a job's end
 //!   every worker shares the last frames in small packages. A worker so
 //!   sets up only its crew's frames, not every frame.
+//! * **Whole frames** ([`SchedulerConfig::whole_frames`], the farm's rules):
+//!   while the running job has more frames not started than workers may work
+//!   on it, a frame starts whole — one package of all its items for one
+//!   worker (a crew of one), never split, and requeued whole when its worker
+//!   is lost or fails it. Why: every worker on a frame pays that frame's
+//!   set-up (ID buffers, buffers behind the glass, shadow maps; about a
+//!   quarter of a worker's work per frame in vtfarm), and the master pays
+//!   a base frame and the compositing of every split frame; with whole
+//!   frames each frame is set up once, by the worker that renders it end to
+//!   end, and throughput grows with every worker. Latency is what counts
+//!   at the job's tail (frames left ≤ workers), for single-frame jobs and
+//!   for the interactive view (each move a job of one frame), so those
+//!   frames are split as below and every worker shares them. A slow
+//!   worker never holds the frames the others wait for: a whole frame
+//!   whose worker runs `factor` times longer than its rate, as now
+//!   measured, predicts is copied to a waiting worker — at once when it is
+//!   the oldest running frame (frames complete in order), else once no frame
+//!   may start — and once none may, so is one a waiting worker would finish
+//!   in under `1 / factor` of the time its holder still needs.
+//!   [`Event::FrameStarted`] and [`Assignment::whole`] say which mode a
+//!   frame runs in, decided when it starts.
+//! * **Frames in flight.** Split frames: at most
+//!   [`SchedulerConfig::frames_in_flight`] (each holds the master's base
+//!   frame and the image being composited). Whole frames: the master holds
+//!   no base frame, only finished frames waiting for an older one (frames
+//!   complete in order), so they follow the farm's width: up to
+//!   `frames_in_flight` + [`WHOLE_FRAMES_PER_WORKER`] (2) per worker —
+//!   each worker runs one and holds the next (it asks one package ahead),
+//!   and `frames_in_flight` more may be done, waiting for a slower
+//!   worker's; the master's memory so stays at that many finished images
+//!   and a worker's at two frames.
 //! * **Held results.** A driver that checks results only later (the master
 //!   waits for the frame's base image) reports them with
 //!   [`Scheduler::package_arrived`] first: such a package is no straggler and
@@ -138,7 +169,7 @@
 //!
 //! # Job states
 //!
-//! Queued (`submit_job`) → Running (`advance_jobs`, when the job before it
+//! Queued (`submit_job`, `submit_interactive_job`) → Running (`advance_jobs`, when the job before it
 //! ends) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
 //! (`cancel_job`); a queued job may be cancelled directly.
 
@@ -154,6 +185,6 @@ mod types;
 pub use config::{CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy};
 pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError, WorkerError};
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
-pub use scheduler::Scheduler;
+pub use scheduler::{Scheduler, WHOLE_FRAMES_PER_WORKER};
 pub use status::{Counters, JobProgress, PackageState, QueueStatus, WorkerState, WorkerStatus};
 pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, WorkerId};

@@ -65,6 +65,7 @@ struct Worker {
 struct QueuedJob {
     id: JobId,
     frames: Vec<FrameWork>,
+    interactive: bool,
 }
 
 #[derive(Debug)]
@@ -72,6 +73,8 @@ struct RunningJob {
     id: JobId,
     /// Frames not started yet.
     frames: VecDeque<FrameWork>,
+    /// Every frame split, none whole ([`Scheduler::submit_interactive_job`]).
+    interactive: bool,
     frame_count: u32,
     costs: CostModel,
     failures_by_worker: BTreeMap<WorkerId, u32>,
@@ -89,6 +92,16 @@ struct RunningJob {
 }
 
 impl RunningJob {
+    /// The frames not started yet that count towards whole frames (none
+    /// for an interactive job).
+    fn batch_frames_left(&self) -> usize {
+        if self.interactive {
+            0
+        } else {
+            self.frames.len()
+        }
+    }
+
     /// Estimates the next `lookahead` frames not started yet anew: after a
     /// frame started or the cost estimates learned from a complete one.
     /// With [`SchedulerConfig::frames_in_flight`] frames the whole-job bound
@@ -148,6 +161,13 @@ const MIN_CREW: usize = 4;
 /// the other crews' frames, each worker paying a set-up for a small share
 /// (at 64 simulated workers such helping doubled the set-ups per frame).
 const SPARE_FRAMES: u32 = 3;
+
+/// Whole frames in flight per worker (see [`SchedulerConfig::whole_frames`]):
+/// each worker runs one and holds the next, asked for one package ahead.
+/// Beyond them [`SchedulerConfig::frames_in_flight`] more may be in flight,
+/// done and waiting for an older one (frames complete in order; a slower
+/// worker's frame holds them). The crate documentation gives the reason.
+pub const WHOLE_FRAMES_PER_WORKER: usize = 2;
 
 /// How many recent packages a worker's compute rate is the median of.
 const COMPUTE_SAMPLES: usize = 16;
@@ -278,12 +298,38 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
+        self.queue_job(now, job, frames, false)
+    }
+
+    /// Queues a job whose frames' latency is what counts (the interactive
+    /// view's stages): every frame is split over the workers, none is whole
+    /// ([`SchedulerConfig::whole_frames`]). Otherwise as [`Scheduler::submit_job`].
+    pub fn submit_interactive_job(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+    ) -> Result<(), SubmitError> {
+        self.queue_job(now, job, frames, true)
+    }
+
+    fn queue_job(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frames: Vec<FrameWork>,
+        interactive: bool,
+    ) -> Result<(), SubmitError> {
         self.advance(now);
         let running = self.running.as_ref().is_some_and(|r| r.id == job);
         if running || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
-        self.queued_jobs.push_back(QueuedJob { id: job, frames });
+        self.queued_jobs.push_back(QueuedJob {
+            id: job,
+            frames,
+            interactive,
+        });
         self.dispatch();
         Ok(())
     }
@@ -543,6 +589,9 @@ impl Scheduler {
             if p.range.is_empty() || p.range.end > frame.next_fresh {
                 return fail(format!("{id} covers {:?}", p.range));
             }
+            if frame.whole && p.range != (0..n) {
+                return fail(format!("{id} covers {:?} of a whole frame", p.range));
+            }
             if copies == 2 && p.attempts[0].worker == p.attempts[1].worker {
                 return fail(format!("{id} runs twice on one worker"));
             }
@@ -695,11 +744,26 @@ impl Scheduler {
                 .is_some_and(|job| self.room_for_a_frame(job) && self.a_worker_waits(job))
     }
 
-    /// Whether another frame of `job` may start now.
+    /// Whether another frame of `job` may start now: split frames up to
+    /// [`SchedulerConfig::frames_in_flight`], whole ones up to
+    /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
     fn room_for_a_frame(&self, job: &RunningJob) -> bool {
-        job.ahead.len() + 1 < self.config.frames_in_flight as usize
-            && !job.frames.is_empty()
-            && !job.frame.is_complete()
+        if job.frames.is_empty() || job.frame.is_complete() {
+            return false;
+        }
+        let frames_in_flight = self.config.frames_in_flight as usize;
+        if self.starts_whole(&job.blocklist, job.batch_frames_left()) {
+            let workers = self.eligible_workers(job).count().max(1);
+            job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
+        } else {
+            job.running_frames().filter(|f| !f.whole).count() < frames_in_flight
+        }
+    }
+
+    /// Whether a frame starting now, with `unstarted` frames of the job not
+    /// started yet (it included), is whole.
+    fn starts_whole(&self, blocklist: &BTreeSet<WorkerId>, unstarted: usize) -> bool {
+        starts_whole(&self.config, &self.workers, blocklist, unstarted)
     }
 
     /// Whether a worker that may work on `job` still waits (after hand-out:
@@ -753,15 +817,22 @@ impl Scheduler {
                 }
                 continue;
             }
+            let whole = starts_whole(
+                &self.config,
+                &self.workers,
+                &job.blocklist,
+                job.batch_frames_left(),
+            );
             match job.frames.pop_front() {
                 Some(next) => {
                     let index = job.frame.index + 1;
-                    job.frame = Frame::new(index, next.items, &job.costs);
+                    job.frame = Frame::new(index, next.items, whole, &job.costs);
                     job.estimate_unstarted(lookahead);
                     self.events.push_back(Event::FrameStarted {
                         job: job.id,
                         frame: index,
                         items: job.frame.items.len(),
+                        whole,
                     });
                     self.lapse_requests();
                 }
@@ -779,16 +850,23 @@ impl Scheduler {
         let Some(job) = &mut self.running else {
             return;
         };
+        let whole = starts_whole(
+            &self.config,
+            &self.workers,
+            &job.blocklist,
+            job.batch_frames_left(),
+        );
         let Some(next) = job.frames.pop_front() else {
             return;
         };
         let index = job.ahead.back().unwrap_or(&job.frame).index + 1;
-        let ahead = Frame::new(index, next.items, &job.costs);
+        let ahead = Frame::new(index, next.items, whole, &job.costs);
         job.estimate_unstarted(lookahead);
         self.events.push_back(Event::FrameStarted {
             job: job.id,
             frame: index,
             items: ahead.items.len(),
+            whole,
         });
         job.ahead.push_back(ahead);
         self.lapse_requests();
@@ -827,16 +905,24 @@ impl Scheduler {
             return;
         };
         let costs = CostModel::new(self.config.estimation.initial_item_cost);
-        let frame = Frame::new(0, first.items, &costs);
+        let unstarted = if next.interactive {
+            0
+        } else {
+            frames.len() + 1
+        };
+        let whole = self.starts_whole(&BTreeSet::new(), unstarted);
+        let frame = Frame::new(0, first.items, whole, &costs);
         self.events.push_back(Event::FrameStarted {
             job: next.id,
             frame: 0,
             items: frame.items.len(),
+            whole,
         });
         self.lapse_requests();
         let mut job = RunningJob {
             id: next.id,
             frames,
+            interactive: next.interactive,
             frame_count,
             costs,
             failures_by_worker: BTreeMap::new(),
@@ -874,6 +960,9 @@ impl Scheduler {
             return None;
         }
         if self.config.frame_affinity {
+            if let Some(pick) = self.copy_of_a_late_oldest_frame(job, worker) {
+                return Some(pick);
+            }
             if let Some(pick) = self.pick_with_affinity(job, worker) {
                 return Some(pick);
             }
@@ -894,11 +983,76 @@ impl Scheduler {
             }
         }
         let policy = self.config.straggler.as_ref()?;
+        let no_room = !self.room_for_a_frame(job);
         self.running_packages()
             .filter(|(_, p)| may_duplicate(p, worker))
-            .filter(|(_, p)| straggler_deadline(p, policy) <= self.now)
+            .filter(|(id, p)| {
+                straggler_deadline(p, policy) <= self.now
+                    || (no_room && self.whole_copy_due(job, **id, p, worker, policy))
+            })
             .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
             .map(|(&id, _)| Pick::Duplicate(id))
+    }
+
+    /// A copy of the oldest running frame when it is whole and its holder is
+    /// late ([`Scheduler::whole_copy_late_at`]): frames complete in order,
+    /// so every frame after it waits for it, and a copy comes before new
+    /// work.
+    fn copy_of_a_late_oldest_frame(&self, job: &RunningJob, worker: WorkerId) -> Option<Pick> {
+        let policy = self.config.straggler.as_ref()?;
+        let frame = Some(&job.frame).filter(|f| f.whole)?;
+        let (&id, package) = (frame.packages.iter()).find(|(_, p)| may_duplicate(p, worker))?;
+        let late_at = self.whole_copy_late_at(frame, package, policy)?;
+        (late_at <= self.now).then_some(Pick::Duplicate(id))
+    }
+
+    /// Whether a waiting worker that may start no frame takes a copy of
+    /// package `id` because it is a whole frame's: its holder is late by
+    /// its rate as now measured ([`Scheduler::whole_copy_late_at`]), or
+    /// `worker` would finish a copy in less than `1 / factor` of the time
+    /// the holder is still expected to need. So a slow worker never holds
+    /// the frame that the others wait for (frames complete in order) or
+    /// the job's last frames alone, though it was given its frame before
+    /// its speed was known.
+    fn whole_copy_due(
+        &self,
+        job: &RunningJob,
+        id: PackageId,
+        package: &Package,
+        worker: WorkerId,
+        policy: &StragglerPolicy,
+    ) -> bool {
+        let Some(frame) = job.frame_of(id).filter(|f| f.whole) else {
+            return false;
+        };
+        let (Some(attempt), Some(late_at)) = (
+            package.attempts.first(),
+            self.whole_copy_late_at(frame, package, policy),
+        ) else {
+            return false;
+        };
+        let cost = frame.cost(package.range.clone());
+        let expected_end = attempt.assigned_at + seconds(cost / self.rate_of(attempt.worker));
+        let left = expected_end.saturating_sub(self.now);
+        let copy = seconds(policy.factor * cost / self.rate_of(worker));
+        late_at <= self.now || copy < left
+    }
+
+    /// When the running copy of a whole frame's package counts as late:
+    /// `max(factor · expected, min_delay)` after it was handed out, with
+    /// the expectation from its worker's rate as now measured (not as
+    /// guessed when the frame was handed out, before its first result).
+    /// `None` for a package of a split frame.
+    fn whole_copy_late_at(
+        &self,
+        frame: &Frame,
+        package: &Package,
+        policy: &StragglerPolicy,
+    ) -> Option<Duration> {
+        let attempt = package.attempts.first().filter(|_| frame.whole)?;
+        let expected = frame.cost(package.range.clone()) / self.rate_of(attempt.worker);
+        let wait = seconds(expected * policy.factor).max(policy.min_delay);
+        Some(attempt.assigned_at.saturating_add(wait))
     }
 
     /// Unassigned work for `worker` under frame affinity: of a frame it has
@@ -990,7 +1144,8 @@ impl Scheduler {
             if !self.may_retry(package, worker) {
                 continue;
             }
-            let split = if frame.cost(package.range.clone()) > split_factor * target {
+            let split = if !frame.whole && frame.cost(package.range.clone()) > split_factor * target
+            {
                 frame.cut(package.range.clone(), target)
             } else {
                 package.range.end
@@ -1004,7 +1159,11 @@ impl Scheduler {
         }
         (frame.next_fresh < frame.items.len()).then(|| Pick::Fresh {
             frame: frame.index,
-            end: frame.cut(frame.next_fresh..frame.items.len(), target),
+            end: if frame.whole {
+                frame.items.len()
+            } else {
+                frame.cut(frame.next_fresh..frame.items.len(), target)
+            },
         })
     }
 
@@ -1100,8 +1259,14 @@ impl Scheduler {
     fn straggler_deadline(&self) -> Option<Duration> {
         let policy = self.config.straggler.as_ref()?;
         let job = self.running.as_ref()?;
+        let oldest_late = (job.frame.packages.values())
+            .filter(|p| {
+                (self.waiting.iter()).any(|&w| !job.blocklist.contains(&w) && may_duplicate(p, w))
+            })
+            .filter_map(|p| self.whole_copy_late_at(&job.frame, p, policy))
+            .min();
         if job.running_frames().any(Frame::has_unassigned) {
-            return None;
+            return oldest_late;
         }
         let takers: Vec<WorkerId> = self
             .waiting
@@ -1109,9 +1274,15 @@ impl Scheduler {
             .copied()
             .filter(|w| !job.blocklist.contains(w))
             .collect();
+        let no_room = !self.room_for_a_frame(job);
         self.running_packages()
             .filter(|(_, p)| takers.iter().any(|&w| may_duplicate(p, w)))
-            .map(|(_, p)| straggler_deadline(p, policy))
+            .map(|(id, p)| {
+                let late = (job.frame_of(*id).filter(|_| no_room))
+                    .and_then(|frame| self.whole_copy_late_at(frame, p, policy));
+                straggler_deadline(p, policy).min(late.unwrap_or(Duration::MAX))
+            })
+            .chain(oldest_late)
             .min()
     }
 
@@ -1213,6 +1384,7 @@ impl Scheduler {
             estimated_cost: cost,
             expected: seconds(cost / rate),
             duplicate,
+            whole: frame.whole,
         });
     }
 
@@ -1489,6 +1661,21 @@ fn may_duplicate(package: &Package, worker: WorkerId) -> bool {
         && !package.failed_on(worker)
         // Its result is here, waiting for the driver's check.
         && package.attempts.iter().all(|a| a.arrived_at.is_none())
+}
+
+/// Whether a frame starting now is whole ([`SchedulerConfig::whole_frames`]):
+/// more of its job's frames are not started (`unstarted`, it included) than
+/// workers may work on the job, so every worker has frames of its own.
+fn starts_whole(
+    config: &SchedulerConfig,
+    workers: &BTreeMap<WorkerId, Worker>,
+    blocklist: &BTreeSet<WorkerId>,
+    unstarted: usize,
+) -> bool {
+    let eligible = (workers.iter())
+        .filter(|(id, w)| w.connected && !blocklist.contains(id))
+        .count();
+    config.whole_frames && config.frame_affinity && unstarted > eligible.max(1)
 }
 
 /// When the running copy of an assigned package becomes a straggler.

@@ -64,6 +64,9 @@ pub struct Assignment {
     pub expected: Duration,
     /// Whether this is the second copy of a straggler (the first result wins).
     pub duplicate: bool,
+    /// Whether the package is its whole frame ([`Event::FrameStarted`](crate::Event::FrameStarted)'s
+    /// `whole`): every item of the frame, for the worker to render end to end.
+    pub whole: bool,
 }
 
 /// What a worker measured while computing a package, sent with its result.

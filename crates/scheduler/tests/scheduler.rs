@@ -483,7 +483,7 @@ fn packages_near_a_jobs_end_are_sized_for_every_worker() {
     // 16 workers at the prior rate of 1 unit/s, frames of 60 items of 1
     // unit; crews of max(16 / (8 − 3), 4) = 4 workers.
     let check = |frames: usize, expected: usize| {
-        let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
+        let mut farm = Farm::with(common::split_pipelined());
         for w in 0..16 {
             farm.join(WorkerId(w));
         }
@@ -757,7 +757,7 @@ fn an_arrived_result_held_by_the_driver_is_not_a_straggler() {
 fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
     let config = SchedulerConfig {
         frames_in_flight: 2,
-        ..SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
+        ..common::split_pipelined()
     };
     let mut farm = Farm::with(config);
     farm.join(W0);
@@ -834,5 +834,116 @@ fn a_lost_worker_requeues_its_packages_in_both_pipelined_frames() {
     farm.done(W1, &redo).expect("accepted");
     let next = farm.request(W1).expect("requeued");
     assert_eq!((next.frame, &next.items), (1, &c.items));
+    farm.valid();
+}
+
+// ----- Whole frames -----
+
+/// The master's rules over two workers and a job of `frames` frames of 6
+/// items.
+fn whole_farm(frames: usize) -> Farm {
+    let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JOB, 6, frames);
+    farm
+}
+
+fn started_whole(events: &[Event]) -> Vec<(u32, bool)> {
+    (events.iter())
+        .filter_map(|e| match e {
+            Event::FrameStarted { frame, whole, .. } => Some((*frame, *whole)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn a_deep_job_starts_whole_frames_and_splits_its_last_ones() {
+    let mut farm = whole_farm(4);
+    let a = farm.request(W0).expect("frame 0");
+    let b = farm.request(W1).expect("frame 1");
+    // Whole: every item of the frame in one package, marked so.
+    assert_eq!((a.frame, a.items.len(), a.whole), (0, 6, true));
+    assert_eq!((b.frame, b.items.len(), b.whole), (1, 6, true));
+    // Frames 2 and 3 start with 2 and 1 frames left, no more than the
+    // workers: split.
+    let c = farm.request(W0).expect("frame 2, asking ahead");
+    assert!(!c.whole && c.items.len() < 6, "{c:?}");
+    farm.valid();
+    let starts = started_whole(&farm.events());
+    assert_eq!(&starts[..3], [(0, true), (1, true), (2, false)]);
+}
+
+#[test]
+fn a_lost_or_failed_whole_frame_goes_back_whole() {
+    let mut farm = whole_farm(6);
+    let a = farm.request(W0).expect("frame 0");
+    assert!(a.whole);
+    farm.s.worker_left(farm.now, W0).expect("left");
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    farm.valid();
+    // W1 takes frame 0 again, all of it, though its target is smaller.
+    let again = farm.request(W1).expect("requeued");
+    assert_eq!(
+        (again.package, again.frame, &again.items),
+        (a.package, 0, &a.items)
+    );
+    assert!(again.whole);
+    farm.fail(W1, &again).expect("failure accepted");
+    assert_eq!(farm.state(a.package), Some(PackageState::Queued));
+    farm.join(W2);
+    let third = farm.request(W2).expect("requeued after the failure");
+    assert_eq!((third.package, &third.items), (a.package, &a.items));
+    farm.valid();
+}
+
+/// Whole frames in flight are bounded by the workers: each runs one and
+/// holds one ahead, and `frames_in_flight` more may be done waiting for an
+/// older one (frames complete in order).
+#[test]
+fn whole_frames_in_flight_follow_the_workers() {
+    let mut farm = Farm::with(SchedulerConfig {
+        frames_in_flight: 2,
+        ..SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
+    });
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JOB, 6, 40);
+    let oldest = farm.request(W1).expect("frame 0");
+    let mut later = Vec::new();
+    while let Some(a) = farm.request(W0) {
+        assert!(a.whole, "{a:?}");
+        farm.done(W0, &a).expect("accepted");
+        later.push(a.frame);
+        assert!(later.len() <= 10, "{later:?}");
+    }
+    // Frame 0 (W1's) holds the others: 2 + 2 · 2 = 6 frames in flight,
+    // then W0 waits.
+    assert_eq!(later, [1, 2, 3, 4, 5]);
+    farm.valid();
+    farm.at_ms(50);
+    farm.done(W1, &oldest).expect("accepted");
+    let next = farm.assignments();
+    assert_eq!(next.iter().map(|a| a.frame).collect::<Vec<_>>(), [6]);
+    farm.valid();
+}
+
+#[test]
+fn an_interactive_jobs_frames_are_all_split() {
+    let mut farm = Farm::with(SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT));
+    farm.join(W0);
+    farm.join(W1);
+    let frame = FrameWork {
+        items: (100..106).collect(),
+    };
+    farm.s
+        .submit_interactive_job(farm.now, JOB, vec![frame; 3])
+        .expect("submit");
+    let a = farm.request(W0).expect("frame 0");
+    let b = farm.request(W1).expect("frame 0");
+    assert!(!a.whole && !b.whole && a.items.len() < 6, "{a:?} {b:?}");
+    // Three frames on two workers would start whole in a batch job.
+    assert_eq!(started_whole(&farm.events())[0], (0, false));
     farm.valid();
 }

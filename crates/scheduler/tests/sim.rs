@@ -616,3 +616,141 @@ fn frame_affinity_keeps_workers_on_fewer_frames_and_as_fast() {
         end(&without)
     );
 }
+
+/// The master's rules with a frame set-up that costs as much as a quarter
+/// of a frame's tracing on one worker, as vtfarm's does (issue 26).
+fn batch_config() -> SimConfig {
+    SimConfig {
+        scheduler: vtfarm_scheduler::SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT),
+        master_frame_cost: Duration::from_millis(20),
+        ..checked()
+    }
+}
+
+/// The workers that got packages of each frame (a worker sets a frame up
+/// once for all its packages of it), by frame.
+fn crews(
+    report: &SimReport,
+) -> std::collections::BTreeMap<u32, std::collections::BTreeSet<WorkerId>> {
+    let mut crews = std::collections::BTreeMap::<u32, std::collections::BTreeSet<WorkerId>>::new();
+    for (_, a) in &report.assignments {
+        crews.entry(a.frame).or_default().insert(a.worker);
+    }
+    crews
+}
+
+/// Which frames started whole, by frame.
+fn whole_frames(report: &SimReport) -> Vec<bool> {
+    (report.events.iter())
+        .filter_map(|(_, e)| match e {
+            Event::FrameStarted { whole, .. } => Some(*whole),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A deep batch job: while more frames are left to start than there are
+/// workers, each frame goes to one worker whole, so each is set up once
+/// (one worker per frame); the last frames, no more than the workers, are
+/// split and spread over several; the farm stays busy throughout.
+#[test]
+fn a_deep_batch_job_sets_each_frame_up_once_and_its_tail_spreads() {
+    let frame = uneven_frame(200, 11, 0.002, 50..80, 3.0);
+    let mut job = repeated_job(1, &frame, 40);
+    job.submit_at = Duration::from_millis(1); // after the workers joined
+    let report = run(
+        batch_config(),
+        vec![SimWorker::with_speed(1.0); 8],
+        std::slice::from_ref(&job),
+    );
+    assert_eq!(report.frames.len(), 40);
+    // Frame i starts with 40 − i frames not started: whole while that is
+    // more than the 8 workers.
+    let expected: Vec<bool> = (0..40).map(|i| 40 - i > 8).collect();
+    assert_eq!(whole_frames(&report), expected);
+    let crews = crews(&report);
+    let set_ups: usize = crews.values().map(|c| c.len()).sum();
+    for (frame, crew) in &crews {
+        if *frame < 32 {
+            assert_eq!(crew.len(), 1, "whole frame {frame}: {crew:?}");
+        }
+    }
+    let tail_spread = (32..40).filter(|f| crews[f].len() > 1).count();
+    assert!(
+        tail_spread >= 6,
+        "tail frames on several workers: {tail_spread} of 8"
+    );
+    // 32 whole frames set up once each; the tail pays more, but far less
+    // than every worker on every frame (8 · 40).
+    assert!(set_ups < 32 + 8 * 8, "{set_ups} set-ups");
+    let work: f64 = frame.costs.iter().sum::<f64>() * 40.0;
+    let end = report.frames.last().expect("frames").done_at.as_secs_f64();
+    let efficiency = work / 8.0 / end;
+    println!("{set_ups} set-ups, efficiency {:.1}%", 100.0 * efficiency);
+    assert!(efficiency > 0.85, "efficiency {efficiency}");
+}
+
+/// A single-frame job (and a job no longer than the farm is wide) is split:
+/// every worker takes part in its frame.
+#[test]
+fn a_single_frame_job_spreads_over_every_worker() {
+    let frame = uneven_frame(400, 12, 0.002, 0..0, 1.0);
+    let mut job = repeated_job(1, &frame, 1);
+    job.submit_at = Duration::from_millis(1);
+    let report = run(
+        batch_config(),
+        vec![SimWorker::with_speed(1.0); 8],
+        std::slice::from_ref(&job),
+    );
+    assert_eq!(whole_frames(&report), [false]);
+    let crews = crews(&report);
+    assert_eq!(crews[&0].len(), 8, "{:?}", crews[&0]);
+}
+
+/// A worker ten times slower than the others gets whole frames too (its
+/// speed is not known in advance), but at the job's end the others take
+/// copies of its last whole frames rather than wait: the job ends no later
+/// than it would without the slow worker.
+#[test]
+fn a_slow_workers_last_frame_is_finished_by_the_others() {
+    let frame = uneven_frame(200, 13, 0.002, 0..0, 1.0);
+    let mut job = repeated_job(1, &frame, 30);
+    job.submit_at = Duration::from_millis(1);
+    let fast = SimWorker::with_speed(1.0);
+    let slow = SimWorker::with_speed(0.1);
+    let with_slow = run(
+        batch_config(),
+        vec![fast.clone(), fast.clone(), fast.clone(), slow],
+        std::slice::from_ref(&job),
+    );
+    let without = run(batch_config(), vec![fast; 3], std::slice::from_ref(&job));
+    let end = |r: &SimReport| r.frames.last().expect("frames").done_at.as_secs_f64();
+    let duplicates: u32 = with_slow.frames.iter().map(|f| f.stats.duplicates).sum();
+    println!(
+        "with the slow worker {:.3} s ({duplicates} duplicates), without {:.3} s",
+        end(&with_slow),
+        end(&without)
+    );
+    assert!(duplicates >= 1, "no copy of the slow worker's frame");
+    // Its last whole frame was finished by another worker.
+    let slow_id = WorkerId(3);
+    let last = (with_slow.assignments.iter())
+        .filter(|(_, a)| a.worker == slow_id && a.whole)
+        .map(|(_, a)| a.frame)
+        .max()
+        .expect("the slow worker got a whole frame");
+    let finished = (with_slow.frames.iter())
+        .find(|f| f.frame == last)
+        .expect("complete");
+    assert!(
+        finished.stats.workers.iter().all(|w| w.worker != slow_id),
+        "frame {last}: {:?}",
+        finished.stats.workers
+    );
+    assert!(
+        end(&with_slow) <= end(&without) * 1.02,
+        "{} s with the slow worker, {} s without",
+        end(&with_slow),
+        end(&without)
+    );
+}

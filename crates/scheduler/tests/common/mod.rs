@@ -16,6 +16,15 @@ use vtfarm_scheduler::{Event, JobId, WorkerId};
 /// `vtfarm_proto::FRAMES_IN_FLIGHT`, of which this crate knows nothing.
 pub(crate) const FRAMES_IN_FLIGHT: u32 = 8;
 
+/// The master's rules with every frame split into packages (no whole
+/// frames), for the tests of how split frames are shared.
+pub(crate) fn split_pipelined() -> vtfarm_scheduler::SchedulerConfig {
+    vtfarm_scheduler::SchedulerConfig {
+        whole_frames: false,
+        ..vtfarm_scheduler::SchedulerConfig::default().pipelined(FRAMES_IN_FLIGHT)
+    }
+}
+
 /// A small seeded generator (SplitMix64), so workloads are the same on every run.
 pub(crate) struct Rng(u64);
 

@@ -21,8 +21,9 @@
 //! a package of the older frame shares its core between the two, so both
 //! take longer) and then asks for work of that frame; like the master core,
 //! the simulated master takes only requests for the newest frame. The
-//! master rasterizes each frame's base image ([`SimConfig::master_frame_cost`],
-//! from the frame start on, one at a time, beside the tracing); results that
+//! master rasterizes each split frame's base image ([`SimConfig::master_frame_cost`],
+//! from the frame start on, one at a time, beside the tracing; a whole
+//! frame's worker makes its own); results that
 //! arrive before it are held ([`Scheduler::package_arrived`]) and accepted
 //! when it is ready, as the master core does. The master handles messages
 //! one at a time, and checking and compositing a result costs
@@ -1008,11 +1009,20 @@ impl Simulation {
                         w.inbox.clear();
                     }
                 }
-                Event::FrameStarted { job, frame, .. } => {
+                Event::FrameStarted {
+                    job, frame, whole, ..
+                } => {
                     let key = (*job, *frame);
-                    self.master_free = now.max(self.master_free) + self.config.master_frame_cost;
-                    self.frame_starts.insert(key, self.master_free);
-                    self.schedule(self.master_free, SimEvent::BaseReady(key));
+                    // A whole frame's worker renders its base image itself.
+                    let base_ready = if *whole {
+                        now
+                    } else {
+                        self.master_free =
+                            now.max(self.master_free) + self.config.master_frame_cost;
+                        self.master_free
+                    };
+                    self.frame_starts.insert(key, base_ready);
+                    self.schedule(base_ready, SimEvent::BaseReady(key));
                     self.newest = Some(key);
                     if self.hears_frames() {
                         self.announce_frame(key);
