@@ -89,7 +89,7 @@ pub(crate) fn prepare_job(
     let loaded = job.load_scene()?;
     let mut camera = loaded.camera;
     (camera.width, camera.height) = size.resolve(camera.width, camera.height);
-    let reflectors = job.reflector_triangles(&loaded.scene)?;
+    let reflectors = job.reflector_triangles(&loaded.scene, &loaded.object_aliases)?;
     let setups = job
         .frames(&camera)?
         .into_iter()
