@@ -1,4 +1,6 @@
-# Shared by scripts/scaling.sh and scripts/lab.sh (sourced, not run).
+# shellcheck shell=bash
+# Shared by scripts/scaling.sh, scripts/lab.sh and scripts/hosts.sh (sourced,
+# not run).
 
 # write_job FILE FRAMES WIDTH HEIGHT DETAIL: the cockpit job, `full`, frame 0
 # from the driver's eye and the others from eyes 1 cm apart.
@@ -21,16 +23,20 @@ eyes = [${eyes%,}]
 TOML
 }
 
-# steady_frame STATS_JSON: prints the first frame of the steady state: the
-# first whose work started (its arrival less its wall time on the master)
-# after frame 0 had arrived. Frame 0 includes the scene transfer and the
-# BVH builds; frames pipelined meanwhile arrive in a bunch right after it,
-# and counted from frame 0 they made the interval up to half the real one.
-# 1 if no frame started that late.
+# Frames are counted in the order they arrived at the submitter (a farm
+# of whole frames finishes them out of order): "arrival k" is the k-th to
+# arrive, from 0.
+
+# steady_frame STATS_JSON: prints the first arrival of the steady state: the
+# first frame to arrive whose work started (its arrival less its wall time
+# on the master) after the first arrival. The first frame includes the
+# scene transfer and the BVH builds; frames pipelined meanwhile arrive in a
+# bunch right after it, and counted from the first they made the interval
+# up to half the real one. 1 if no frame started that late.
 steady_frame() {
   python3 - "$1" <<'PY'
 import json, sys
-frames = json.load(open(sys.argv[1]))
+frames = sorted(json.load(open(sys.argv[1])), key=lambda f: f["arrival_micros"])
 first = frames[0]["arrival_micros"]
 late = [i for i, f in enumerate(frames) if i > 0 and f["arrival_micros"] - f["wall_micros"] >= first]
 print(late[0] if late and late[0] < len(frames) - 1 else min(1, len(frames) - 1))
@@ -38,13 +44,14 @@ PY
 }
 
 # frame_figures STATS_JSON FROM: prints the mean interval between frame
-# arrivals at the submitter from frame FROM on (see steady_frame), the mean
-# master frame wall time of those frames, the result MB per frame as sent,
-# and the same pixels' MB at the previous 40 bytes each.
+# arrivals at the submitter from arrival FROM on (see steady_frame), the
+# mean master frame wall time of those frames, the result MB per frame as
+# sent, and the same pixels' MB at the previous 40 bytes each.
 frame_figures() {
   python3 - "$1" "$2" <<'PY'
 import json, sys
-frames, start = json.load(open(sys.argv[1])), int(sys.argv[2])
+frames = sorted(json.load(open(sys.argv[1])), key=lambda f: f["arrival_micros"])
+start = int(sys.argv[2])
 arrivals = [f["arrival_micros"] for f in frames[start:]]
 gaps = [b - a for a, b in zip(arrivals, arrivals[1:])] or [arrivals[0]]
 walls = [f["wall_micros"] for f in frames[max(start, 1):]] or [frames[0]["wall_micros"]]
@@ -89,14 +96,14 @@ machine_cpu_ticks() {
 # measured_submit OUT LOG FRAMES PID... -- COMMAND...: runs COMMAND (a
 # `vtfarm submit` writing to OUT, exec'd so that its process is the
 # submitter's; output to LOG), bounded to 600 s, and sets `job_from` to the
-# first steady frame (steady_frame), `job_cpu` to the CPU seconds per frame
+# first steady frame (steady_frame; `measure_from` when set), `job_cpu` to the CPU seconds per frame
 # after it of the farm's processes (the first PID, the submitter, then the
 # other PIDs; comma-separated) and `job_others` to the cores the machine's
 # other processes used meanwhile (/proc/stat less the farm's). CPU is
-# sampled as each frame arrives and at the end. Needs `work` (a scratch
-# directory).
+# sampled at each arrival (a new frame_NNNN.png in OUT, whichever frame)
+# and at the end. Needs `work` (a scratch directory).
 measured_submit() {
-  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline next=0 png
+  local out="$1" log="$2" frames="$3" pids=() submitter reaped_before deadline next=0 arrived=()
   shift 3
   while [ "$1" != -- ]; do pids+=("$1"); shift; done
   shift
@@ -105,10 +112,13 @@ measured_submit() {
   reaped_cpu_ticks; reaped_before=$children_ticks
   "$@" >"$log" 2>&1 &
   submitter=$!
+  submit_pid=$submitter  # for a caller's clean-up on an interrupt
   deadline=$((SECONDS + 600))
   while kill -0 "$submitter" 2>/dev/null && [ ! -e "$out/stats.json" ]; do
-    printf -v png '%s/frame_%04d.png' "$out" "$next"
-    if [ -e "$png" ]; then
+    shopt -s nullglob
+    arrived=("$out"/frame_[0-9][0-9][0-9][0-9].png)
+    shopt -u nullglob
+    if [ "${#arrived[@]}" -gt "$next" ]; then
       cpu_ticks "${pids[@]}" "$submitter"; machine_cpu_ticks
       echo "${ticks[*]} $machine_ticks $machine_at" >>"$samples"
       next=$((next + 1))
@@ -122,7 +132,7 @@ measured_submit() {
   wait "$submitter" || { cat "$log" >&2; exit 1; }
   reaped_cpu_ticks
   last+=($((children_ticks - reaped_before)))
-  job_from=$(steady_frame "$out/stats.json")
+  job_from=${measure_from:-$(steady_frame "$out/stats.json")}
   read -r job_cpu job_others < <(python3 - "$frames" "$(getconf CLK_TCK)" "$job_from" "$samples" \
     "${last[*]} ${machine_last[*]}" <<'PY'
 import sys
@@ -140,4 +150,177 @@ else:  # that frame's arrival was not seen
 print(",".join(f"{x:.4f}" for x in [per[0], per[-1], *per[1:-1]]), f"{others:.3f}")
 PY
 )
+}
+
+# --- Arguments and CPU quotas (scripts/lab.sh, scripts/hosts.sh) ---
+
+# die CODE MESSAGE: the message on stderr, named by the script, and exit
+# CODE (2: bad arguments, 1: the machine cannot do what was asked).
+die() {
+  echo "$(basename "$0"): $2" >&2
+  exit "$1"
+}
+
+# is_positive VALUE: a decimal number above 0 (no sign, no exponent).
+is_positive() {
+  [[ $1 =~ ^[0-9]+([.][0-9]+)?$ ]] && awk -v v="$1" 'BEGIN { exit !(v > 0) }'
+}
+
+# per_worker_list NAME OPTION VALUES COUNT: sets the array NAME to COUNT
+# positive numbers from VALUES, comma-separated: one for every worker or
+# one each (`--cpu-percent 45,15`, `--mbit 100,10`). Exits 2 naming OPTION
+# otherwise.
+per_worker_list() {
+  local -n _per_worker=$1
+  local option=$2 values=$3 count=$4 v i
+  IFS=, read -ra _per_worker <<<"$values"
+  [ "${#_per_worker[@]}" -gt 0 ] || die 2 "$option needs a value"
+  for v in "${_per_worker[@]}"; do
+    is_positive "$v" || die 2 "$option $values: '$v' is not a positive number"
+  done
+  if [ "${#_per_worker[@]}" = 1 ]; then
+    v=${_per_worker[0]}
+    _per_worker=()
+    for ((i = 0; i < count; i++)); do _per_worker+=("$v"); done
+  elif [ "${#_per_worker[@]}" != "$count" ]; then
+    die 2 "$option $values gives ${#_per_worker[@]} values for $count workers (--workers): give one value for every worker, or one each"
+  fi
+}
+
+# The hierarchy CPU quotas are made in: cgroup v2's unified one, or the
+# directory that holds v1's `cpu` hierarchy (the same path on most machines).
+cgroup_root=${VTFARM_CGROUP_ROOT:-/sys/fs/cgroup}
+# The quota's period: 10 ms, so a 45% worker runs 4.5 ms in every 10 ms
+# (smoother shares than the kernel's default 100 ms: no 55 ms stalls).
+cpu_period_us=10000
+# The cgroups quota_create made, for quota_remove_all.
+quota_groups=()
+
+# cpu_quota_us PERCENT: the quota per period for PERCENT of one core; fails
+# outside 10..100 % (the kernel takes no quota under 1 ms, and one process
+# of one thread cannot use more than a core).
+cpu_quota_us() {
+  is_positive "$1" || return 1
+  awk -v p="$1" -v period="$cpu_period_us" 'BEGIN {
+    q = int(p * period / 100 + 0.5); if (q < 1000 || p > 100) exit 1; print q }'
+}
+
+# cgroup_version: v2 where $cgroup_root is a unified hierarchy offering the
+# cpu controller, v1 where it holds v1's cpu hierarchy; fails otherwise (a
+# hybrid machine's v2 part at unified/ usually offers no cpu controller: v1).
+cgroup_version() {
+  if [ -f "$cgroup_root/cgroup.controllers" ] && grep -qw cpu "$cgroup_root/cgroup.controllers"; then
+    echo v2
+  elif [ -f "$cgroup_root/cpu/cpu.cfs_quota_us" ]; then
+    echo v1
+  else
+    return 1
+  fi
+}
+
+# write_cgroup FILE VALUE: writes VALUE to a cgroup's FILE; exits 1 naming it
+# when the kernel (or the file system) refuses.
+write_cgroup() {
+  { printf '%s\n' "$2" >"$1"; } 2>/dev/null ||
+    die 1 "cannot write '$2' to $1: CPU quotas need root and a writable cgroup hierarchy; refusing to run without them"
+}
+
+# quota_create NAME PERCENT: a cgroup NAME whose processes together get at
+# most PERCENT of one core (cgroup v2: cpu.max; v1: cpu.cfs_quota_us over
+# cpu.cfs_period_us), both over $cpu_period_us. Sets `quota_dir` to it and
+# `quota_version`, and remembers it for quota_remove_all. Exits 2 for a bad
+# percent and 1, saying why, where no quota can be made: never a run
+# without one.
+quota_create() {
+  local name=$1 percent=$2 quota
+  quota=$(cpu_quota_us "$percent") ||
+    die 2 "--cpu-percent $percent: give a share of one core from 10 to 100 (the quota is at least 1 ms of each $((cpu_period_us / 1000)) ms period)"
+  quota_version=$(cgroup_version) ||
+    die 1 "no CPU quotas here: $cgroup_root has neither cgroup v2's cpu controller (cgroup.controllers) nor cgroup v1's cpu hierarchy (cpu/cpu.cfs_quota_us); refusing to run without quotas"
+  case $quota_version in
+    v2) quota_dir=$cgroup_root/$name;;
+    v1) quota_dir=$cgroup_root/cpu/$name;;
+  esac
+  mkdir "$quota_dir" 2>/dev/null ||
+    die 1 "cannot create the cgroup $quota_dir: CPU quotas need root and a writable cgroup hierarchy; refusing to run without them"
+  quota_groups+=("$quota_dir")
+  case $quota_version in
+    v2)
+      # Children get the cpu controller only where their parent hands it on.
+      grep -qw cpu "$cgroup_root/cgroup.subtree_control" 2>/dev/null ||
+        write_cgroup "$cgroup_root/cgroup.subtree_control" +cpu
+      write_cgroup "$quota_dir/cpu.max" "$quota $cpu_period_us";;
+    v1)
+      # The period first: a quota is checked against the period in force.
+      write_cgroup "$quota_dir/cpu.cfs_period_us" "$cpu_period_us"
+      write_cgroup "$quota_dir/cpu.cfs_quota_us" "$quota";;
+  esac
+}
+
+# in_cgroup DIR: sets the array `in_cgroup_cmd` to a command prefix that
+# moves the process into the cgroup DIR (its PID into cgroup.procs, which
+# v1 and v2 both have) and then execs the rest, so the process is held from
+# its first instruction and keeps its PID.
+in_cgroup() {
+  # shellcheck disable=SC2016 # $$ and $@ belong to the inner shell
+  in_cgroup_cmd=(sh -c 'echo $$ >"$0" && exec "$@"' "$1/cgroup.procs")
+}
+
+# quota_throttled DIR: prints how many of the quota's periods throttled the
+# group, and how many periods it ran in ("THROTTLED PERIODS", from its
+# cpu.stat, alike in v1 and v2): proof the quota held.
+quota_throttled() {
+  awk '$1 == "nr_periods" { p = $2 } $1 == "nr_throttled" { t = $2 } END { print t + 0, p + 0 }' "$1/cpu.stat"
+}
+
+# quota_remove_all: removes the cgroups quota_create made (their processes
+# must have ended), newest first; says which stay.
+quota_remove_all() {
+  local i
+  for ((i = ${#quota_groups[@]} - 1; i >= 0; i--)); do
+    rmdir "${quota_groups[i]}" 2>/dev/null || echo "$(basename "$0"): the cgroup ${quota_groups[i]} stays (rmdir failed)" >&2
+  done
+  quota_groups=()
+}
+
+# alive PID: the process exists and has not ended (a zombie has).
+alive() {
+  local line
+  { read -r line <"/proc/$1/stat"; } 2>/dev/null || return 1
+  line=${line##*) }
+  [ "${line%% *}" != Z ]
+}
+
+# stop_pids PID...: asks the processes to end (TERM), gives them 5 s, then
+# kills what is left, and reaps them: bounded, whatever they do.
+stop_pids() {
+  local p deadline=$((SECONDS + 5))
+  [ $# -gt 0 ] || return 0
+  kill "$@" 2>/dev/null || true
+  for p in "$@"; do
+    while alive "$p" && [ "$SECONDS" -lt "$deadline" ]; do read -rt 0.05 -u "$sleeper" || true; done
+  done
+  kill -KILL "$@" 2>/dev/null || true
+  for p in "$@"; do wait "$p" 2>/dev/null || true; done
+}
+
+# cpu_list LIST: a kernel CPU list ("0-2,5") as cores, comma-separated
+# ("0,1,2,5").
+cpu_list() {
+  local part parts=() expanded=() i
+  IFS=, read -ra parts <<<"$1"
+  for part in "${parts[@]}"; do
+    if [[ $part == *-* ]]; then
+      for ((i = ${part%-*}; i <= ${part#*-}; i++)); do expanded+=("$i"); done
+    else
+      expanded+=("$part")
+    fi
+  done
+  (IFS=,; echo "${expanded[*]}")
+}
+
+# allowed_cpus: this process's allowed cores, comma-separated (from
+# Cpus_allowed_list in /proc/self/status).
+allowed_cpus() {
+  cpu_list "$(awk '/^Cpus_allowed_list:/ { print $2 }' /proc/self/status)"
 }

@@ -1,5 +1,6 @@
 //! The farm commands of the CLI: the embedded master behind `render`,
-//! `submit` and `status` against a running master.
+//! `submit` and `status` against a running master, and the `--cluster`
+//! and `--master` options every command that dials the master shares.
 
 use std::path::{Path, PathBuf};
 
@@ -57,6 +58,39 @@ pub(crate) struct SubmitArgs {
     quality: Option<Quality>,
     #[command(flatten)]
     size: crate::shared::ImageSize,
+    /// The job's priority: higher runs first, equal ones in submission
+    /// order; negative values go behind the default.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 0,
+        allow_negative_numbers = true
+    )]
+    priority: i32,
+    /// The job's name in `vtfarm jobs` (default: the job file's name).
+    #[arg(long, value_name = "NAME")]
+    name: Option<String>,
+    /// Print the job's id and what happens to it as JSON lines on stderr
+    /// (`{"event":"accepted","job":3,"frames":40}`, …) for scripts.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `--cluster` and `--master`: how a command reaches the master.
+#[derive(clap::Args)]
+pub(crate) struct ClusterArgs {
+    /// The cluster file from `vtfarm cluster init`.
+    #[arg(long)]
+    cluster: PathBuf,
+    /// The master's HOST:PORT (default: the cluster file's).
+    #[arg(long)]
+    master: Option<String>,
+}
+
+impl ClusterArgs {
+    pub(crate) fn client_options(&self) -> Result<ClientOptions> {
+        client_options(&self.cluster, &self.master)
+    }
 }
 
 /// `png` or `exr`, the frame formats of `vtfarm submit`.
@@ -134,7 +168,7 @@ pub(crate) fn render_embedded(
     })
 }
 
-fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptions> {
+pub(crate) fn client_options(cluster: &Path, master: &Option<String>) -> Result<ClientOptions> {
     let config = ClusterConfig::load(cluster)?;
     Ok(ClientOptions {
         master: master.clone().unwrap_or(config.master),
@@ -178,11 +212,12 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     let client = client_options(&args.cluster, &args.master)?;
-    let name = args
-        .job
-        .file_name()
-        .map_or("job".into(), |n| n.to_string_lossy().into_owned());
+    let name = args.name.clone().unwrap_or_else(|| {
+        (args.job.file_name()).map_or("job".into(), |n| n.to_string_lossy().into_owned())
+    });
     let output = args.output.clone();
+    let (priority, json) = (args.priority, args.json);
+    let again = AttachHint::of(&args);
     let (args_aux, attach, format) = (args.aux, args.attach, args.format);
     let exposure = job.output.exposure();
     let mut arrivals = std::collections::BTreeMap::new();
@@ -202,7 +237,11 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         } else {
             WireImageFormat::Srgb8
         };
-        let wire = WireJob { image, ..wire };
+        let wire = WireJob {
+            image,
+            priority,
+            ..wire
+        };
         let start = match attach {
             Some(job) => RemoteJob::Attach { job },
             None => RemoteJob::Submit {
@@ -212,43 +251,64 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         };
         let bar =
             crate::shared::progress_bar(reflectors.len() as u64, "reflector triangles", "frame");
+        let say = |line: String| say(&bar, line);
         let submitted = std::time::Instant::now();
-        let result = run_remote_job(&client, start, |event| match event {
+        let accepted = std::cell::Cell::new(attach);
+        let run = run_remote_job(&client, start, |event| match event {
             JobEvent::Accepted { job, frames } => {
-                bar.println(format!("job {job} accepted: {frames} frame(s)"))
+                accepted.set(Some(job));
+                match json {
+                    true => json_line(serde_json::json!({"event": "accepted", "job": job, "frames": frames})),
+                    false => say(format!("job {job} accepted: {frames} frame(s)")),
+                }
             }
             JobEvent::Progress { frame, done, .. } => {
                 bar.set_message(format!("frame {frame}"));
                 bar.set_position(done.into());
             }
-            JobEvent::Warning(warning) => bar.println(format!("warning: {warning}")),
+            JobEvent::Warning(warning) => say(format!("warning: {warning}")),
+            JobEvent::StateChanged { job, state, reason } => match json {
+                true => json_line(serde_json::json!({"event": "state", "job": job, "state": state, "reason": reason})),
+                false => say(format!("job {job} is {}: {reason}", crate::jobs::state_name(state))),
+            },
             JobEvent::FrameDone(f) => {
                 arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);
                 let path = output.join(format!("frame_{:04}.{}", f.frame, format.extension()));
                 if let Err(e) = write_frame(&path, f, format, &exposure) {
-                    bar.println(format!("error: {e:#}"));
+                    say(format!("error: {e:#}"));
                 }
                 let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
                 let svg = vtfarm_master::timeline::timeline_svg(&f.stats);
                 if let Err(e) = std::fs::write(&timeline, svg) {
-                    bar.println(format!("error: {}: {e}", timeline.display()));
+                    say(format!("error: {}: {e}", timeline.display()));
                 }
                 if let Some(components) = &f.components {
                     let dir = output.join(format!("frame_{:04}", f.frame));
                     if let Err(e) = vtfarm_render::output::write_aux(&dir, components, &[], &scene)
                     {
-                        bar.println(format!("error: {e}"));
+                        say(format!("error: {e}"));
                     }
                 }
-                bar.println(format!(
+                say(format!(
                     "frame {}: {} ({})",
                     f.frame,
                     path.display(),
                     frame_line(&f.stats)
                 ));
             }
-        })
-        .await;
+        });
+        // Ctrl-C leaves the job to the farm: say so, and how to come back.
+        let result = tokio::select! {
+            result = run => result,
+            _ = tokio::signal::ctrl_c() => {
+                bar.finish_and_clear();
+                match accepted.get() {
+                    Some(job) => eprintln!("{}", again.message(job)),
+                    None => eprintln!("interrupted before the master accepted the job"),
+                }
+                std::process::exit(130);
+            }
+        };
         bar.finish_and_clear();
         anyhow::Ok(result?)
     })?;
@@ -267,6 +327,52 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
     Ok(())
+}
+
+/// A line for the user on stderr: above the progress bar on a terminal,
+/// plainly when there is none (the bar then draws nothing).
+fn say(bar: &ProgressBar, line: String) {
+    if bar.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        bar.println(line);
+    }
+}
+
+/// One machine-readable line on stderr (`submit --json`).
+fn json_line(value: serde_json::Value) {
+    eprintln!("{value}");
+}
+
+/// How to follow an interrupted `vtfarm submit`'s job again or stop it:
+/// the same command with `--attach`, and `vtfarm cancel`.
+struct AttachHint {
+    job_file: PathBuf,
+    cluster: PathBuf,
+    output: PathBuf,
+}
+
+impl AttachHint {
+    fn of(args: &SubmitArgs) -> AttachHint {
+        AttachHint {
+            job_file: args.job.clone(),
+            cluster: args.cluster.clone(),
+            output: args.output.clone(),
+        }
+    }
+
+    fn message(&self, job: u64) -> String {
+        let (file, cluster, output) = (
+            self.job_file.display(),
+            self.cluster.display(),
+            self.output.display(),
+        );
+        format!(
+            "interrupted: job {job} keeps running on the farm.\n  \
+             follow it again: vtfarm submit {file} --cluster {cluster} --output {output} --attach {job}\n  \
+             stop it:         vtfarm cancel {job} --cluster {cluster}"
+        )
+    }
 }
 
 /// One frame in `stats.json`: the master's statistics, and when the frame
@@ -347,13 +453,22 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
         conn.endpoint.wait_idle().await;
         anyhow::Ok(reply)
     })?;
+    // Throughput is the load balancer's: estimated cost (traced samples,
+    // once a frame has been measured) per second, transfers included.
     println!(
-        "{:<24} {:<22} {:>7} {:>8} {:>12} {:>9} {:>10} {:>8}",
-        "worker", "address", "threads", "state", "throughput", "packages", "triangles", "failures"
+        "{:<24} {:<22} {:>7} {:>8} {:>18} {:>9} {:>10} {:>8}",
+        "worker",
+        "address",
+        "threads",
+        "state",
+        "throughput (samples/s)",
+        "packages",
+        "triangles",
+        "failures"
     );
     for w in &reply.workers {
         println!(
-            "{:<24} {:<22} {:>7} {:>8} {:>12.1} {:>9} {:>10} {:>8}",
+            "{:<24} {:<22} {:>7} {:>8} {:>22.0} {:>9} {:>10} {:>8}",
             w.name,
             w.address,
             w.threads,
@@ -365,14 +480,10 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
         );
     }
     match &reply.queue.running {
+        // Frames are numbered from 0, as the files are (frame_0000).
         Some(r) => println!(
-            "running: job {} ({}) frame {}/{}: {}/{} triangles",
-            r.job,
-            r.name,
-            r.frame + 1,
-            r.frames,
-            r.triangles_done,
-            r.triangles_total
+            "running: job {} ({}) frame {} of {} (frame_{:04}): {}/{} triangles",
+            r.job, r.name, r.frame, r.frames, r.frame, r.triangles_done, r.triangles_total
         ),
         None => println!("running: nothing"),
     }

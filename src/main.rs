@@ -2,7 +2,9 @@
 //! job, drives `vtfarm-render` and prints progress and tables.
 
 mod compare;
+mod control;
 mod farm;
+mod jobs;
 mod shared;
 mod study;
 
@@ -55,6 +57,18 @@ enum Command {
     Submit(farm::SubmitArgs),
     /// Lists the master's workers (with their measured throughput) and queue.
     Status(farm::StatusArgs),
+    /// Lists the master's jobs: state, priority, frames, times, host.
+    Jobs(jobs::JobsArgs),
+    /// Cancels jobs: queued ones never run, running ones stop at once.
+    Cancel(control::CancelArgs),
+    /// Pauses a job: it gets no new work; what runs finishes and is kept.
+    Pause(control::JobArgs),
+    /// Resumes a paused job.
+    Resume(control::JobArgs),
+    /// Queues a finished job again (every frame, or only its unfinished ones).
+    Requeue(control::RequeueArgs),
+    /// Sets a job's priority (higher runs first).
+    Priority(control::PriorityArgs),
     /// Scene tools (export the built-in cockpit as OBJ + MTL).
     #[command(subcommand)]
     Scene(SceneCommand),
@@ -116,13 +130,14 @@ enum SceneCommand {
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    // The daemons say what they do (joins, leaves, jobs); the other
+    // commands only warn.
+    match cli.command {
+        Command::Master(_) | Command::Worker(_) => vtfarm_transport::init_logging(),
+        _ => vtfarm_transport::init_logging_at("warn"),
+    }
+    match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -147,6 +162,12 @@ fn run(cli: Cli) -> Result<()> {
         Command::Compare(args) => compare::compare(args),
         Command::Submit(args) => farm::submit(args),
         Command::Status(args) => farm::status(args),
+        Command::Jobs(args) => jobs::jobs(args),
+        Command::Cancel(args) => control::cancel(args),
+        Command::Pause(args) => control::pause(args),
+        Command::Resume(args) => control::resume(args),
+        Command::Requeue(args) => control::requeue(args),
+        Command::Priority(args) => control::priority(args),
         Command::Cluster(ClusterCommand::Init(args)) => {
             let path = vtfarm_master::cli::cluster_init(&args)?;
             println!(

@@ -89,7 +89,7 @@ pub(crate) fn prepare_job(
     let loaded = job.load_scene()?;
     let mut camera = loaded.camera;
     (camera.width, camera.height) = size.resolve(camera.width, camera.height);
-    let reflectors = job.reflector_triangles(&loaded.scene)?;
+    let reflectors = job.reflector_triangles(&loaded.scene, &loaded.object_aliases)?;
     let setups = job
         .frames(&camera)?
         .into_iter()
@@ -144,9 +144,38 @@ pub(crate) fn progress_bar(
     bar
 }
 
+/// Milliseconds since the Unix epoch as `YYYY-MM-DD HH:MM:SS` (UTC), for
+/// listings (the proleptic Gregorian calendar, days to civil date as in
+/// Howard Hinnant's `civil_from_days`).
+pub(crate) fn utc_time(ms: u64) -> String {
+    let seconds = ms / 1000;
+    let (days, day_seconds) = ((seconds / 86_400) as i64, seconds % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let day_of_era = z.rem_euclid(146_097);
+    let year_of_era =
+        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
+    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+    let mp = (5 * day_of_year + 2) / 153;
+    let day = day_of_year - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = year_of_era + era * 400 + i64::from(month <= 2);
+    let (h, m, s) = (day_seconds / 3600, day_seconds / 60 % 60, day_seconds % 60);
+    format!("{year:04}-{month:02}-{day:02} {h:02}:{m:02}:{s:02}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::ImageSize;
+
+    #[test]
+    fn utc_times_match_known_dates() {
+        assert_eq!(super::utc_time(0), "1970-01-01 00:00:00");
+        // A leap day, and the last second of a century's leap year.
+        assert_eq!(super::utc_time(951_782_400_000), "2000-02-29 00:00:00");
+        assert_eq!(super::utc_time(978_307_199_999), "2000-12-31 23:59:59");
+        assert_eq!(super::utc_time(1_764_672_000_000), "2025-12-02 10:40:00");
+    }
 
     #[test]
     fn one_side_alone_keeps_the_aspect_ratio_and_both_are_taken_as_given() {

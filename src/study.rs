@@ -74,7 +74,10 @@ pub(crate) async fn render_study(
             method: plan.method,
             aux: true,
         };
-        let job = wire_job(&name, &data, &variant.setups, &variant.reflectors, options);
+        let job = vtfarm_proto::WireJob {
+            kind: vtfarm_proto::WireJobKind::Study,
+            ..wire_job(&name, &data, &variant.setups, &variant.reflectors, options)
+        };
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {

@@ -704,7 +704,7 @@ fn help_lists_the_users_commands_first_and_bench_last() {
         commands,
         [
             "render", "study", "compare", "cluster", "master", "worker", "submit", "status",
-            "scene", "bench", "help"
+            "jobs", "cancel", "pause", "resume", "requeue", "priority", "scene", "bench", "help"
         ],
         "{commands:?}"
     );

@@ -382,6 +382,7 @@ fn method_reference(job: &Job, frame: &FrameSetup, kind: MethodKind) -> Vec<Vec3
                 bvh: &bvh,
                 lighting: &frame.lighting,
                 settings: frame.trace,
+                cone: vtfarm_trace::PixelCone::of(&frame.camera),
             },
             camera: frame.camera,
             ids: &ids,

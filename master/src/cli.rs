@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Parser;
 use tracing::info;
-use vtfarm_master_core::FarmRules;
+use vtfarm_master_core::{FarmRules, Retention};
 use vtfarm_proto::HandshakePolicy;
 use vtfarm_transport::{CLUSTER_FILE, ClusterConfig};
 
@@ -36,6 +36,13 @@ pub struct MasterArgs {
     /// same host that adds no `Forwarded`/`X-Forwarded-For` header.
     #[arg(long)]
     pub http_require_token: bool,
+    /// Finished jobs (completed, failed, cancelled) kept listed, with their
+    /// frames for `submit --attach`; the earliest finished go first.
+    #[arg(long, value_name = "N", default_value_t = Retention::DEFAULT.max_jobs)]
+    pub keep_jobs: usize,
+    /// Hours a finished job is kept at most.
+    #[arg(long, value_name = "HOURS", default_value_t = Retention::DEFAULT.max_age.as_secs() / 3600)]
+    pub keep_jobs_hours: u64,
 }
 
 /// Creates a cluster: the master's key and certificate, and `cluster.toml`.
@@ -111,7 +118,14 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     // Jobs and finished frames are journaled beside the key: a restarted
     // master resumes them.
     let journal = Journal::open(state_dir)?;
-    let (handle, _task) = spawn_persistent_master(FarmRules::default(), journal);
+    let rules = FarmRules {
+        retention: Retention {
+            max_jobs: args.keep_jobs,
+            max_age: std::time::Duration::from_secs(args.keep_jobs_hours.saturating_mul(3600)),
+        },
+        ..FarmRules::default()
+    };
+    let (handle, _task) = spawn_persistent_master(rules, journal);
     let http = http::bind(args.http).await?;
     info!(address = %http.local_addr()?, "dashboard listening");
     println!("dashboard on http://{}/", http.local_addr()?);

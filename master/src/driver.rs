@@ -14,8 +14,8 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::debug;
 use vtfarm_master_core::view::{ViewError, ViewRequest};
-use vtfarm_master_core::{ConnId, FarmRules, MasterCore, Output, Peer};
-use vtfarm_proto::{Message, StatusReply};
+use vtfarm_master_core::{ConnId, FarmRules, JobControlError, MasterCore, Output, Peer};
+use vtfarm_proto::{JobAction, JobSummary, Message, StatusReply};
 use vtfarm_transport::Link;
 
 use crate::journal::{Journal, JournalWriter};
@@ -46,6 +46,13 @@ enum Input {
     },
     /// How writing a journal record went (from the journal's thread).
     Journaled(Written),
+    /// A user's request about a job (from the HTTP API and dashboard).
+    Control {
+        job: u64,
+        action: JobAction,
+        who: String,
+        reply: oneshot::Sender<Result<JobSummary, JobControlError>>,
+    },
     /// Move the interactive view's eye (from the HTTP view).
     Steer {
         request: ViewRequest,
@@ -106,6 +113,26 @@ impl MasterHandle {
         });
         self.inputs.send(Input::Inspect(read)).ok()?;
         rx.await.ok()
+    }
+
+    /// Cancels, pauses, resumes, requeues or re-prioritises a job
+    /// ([`MasterCore::control_job`]) on behalf of `who`; `None` once the
+    /// master has stopped.
+    pub async fn control_job(
+        &self,
+        job: u64,
+        action: JobAction,
+        who: String,
+    ) -> Option<Result<JobSummary, JobControlError>> {
+        let (reply, answer) = oneshot::channel();
+        let control = Input::Control {
+            job,
+            action,
+            who,
+            reply,
+        };
+        self.inputs.send(control).ok()?;
+        answer.await.ok()
     }
 
     /// Moves the interactive view's eye ([`MasterCore::steer_view`]); `None`
@@ -184,6 +211,9 @@ async fn run(
     changed: watch::Sender<u64>,
 ) {
     let start = Instant::now();
+    // The jobs' times: the core adds its `now` to this reading.
+    let wall = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH);
+    core.set_wall_clock(wall.map_or(0, |t| t.as_millis() as u64));
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
     if let Some(journal) = &journal {
         let loaded = tokio::task::block_in_place(|| journal.load());
@@ -242,6 +272,9 @@ async fn run(
                         core.base_frame_ready(now, job, frame, base);
                     }
                     Input::Journaled(written) => core.journal_written(now, written),
+                    Input::Control { job, action, who, reply } => {
+                        let _ = reply.send(core.control_job(now, job, action, &who));
+                    }
                     Input::Steer { request, reply } => {
                         let _ = reply.send(core.steer_view(now, request));
                     }

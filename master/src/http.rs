@@ -1,8 +1,11 @@
 //! The master's HTTP side (`vtfarm master --http ADDR`): the dashboard page,
 //! its live event stream, frames as PNG, `/api/status` and Prometheus
 //! `/metrics`, the interactive view (`POST /api/view` moves the eye,
-//! `/view/image.png` and `/view/objects.png` show its newest stage) and each
-//! kept frame's timeline (`/frames/SEQ.svg`).
+//! `/view/image.png` and `/view/objects.png` show its newest stage), each
+//! kept frame's timeline (`/frames/SEQ.svg`), and the jobs: `GET /api/jobs`
+//! lists them as `vtfarm jobs --all --json` does, `POST
+//! /api/jobs/{id}/cancel|pause|resume|requeue|priority` changes one
+//! (`docs/http-api.md`).
 //!
 //! It reads the core's state through [`MasterHandle::inspect`] and wakes on
 //! [`MasterHandle::changes`]; it owns no farm state, so the page, the
@@ -56,12 +59,12 @@ use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use vtfarm_imaging::Image;
-use vtfarm_master_core::MasterCore;
 use vtfarm_master_core::telemetry::{
     FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals,
 };
 use vtfarm_master_core::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
-use vtfarm_proto::{FrameStats, StatusReply, WireImage};
+use vtfarm_master_core::{JobControlError, JobEntry, JobState, MasterCore};
+use vtfarm_proto::{FrameStats, JobAction, JobSummary, StatusReply, WireImage};
 
 use crate::driver::MasterHandle;
 
@@ -248,6 +251,8 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         .route("/", get(|| async { Html(DASHBOARD) }))
         .route("/login", get(login_page).post(login))
         .route("/api/view", post(steer_view))
+        .route("/api/jobs", get(list_jobs))
+        .route("/api/jobs/{id}/{action}", post(control_job))
         .route("/view/image.png", get(view_png))
         .route("/view/objects.png", get(view_objects_png))
         .route("/metrics", get(metrics))
@@ -395,10 +400,83 @@ async fn status(State(state): State<HttpState>) -> Response {
     }
 }
 
+/// Every job the master lists (finished ones kept too), oldest first: what
+/// `vtfarm jobs --all --json` prints.
+async fn list_jobs(State(state): State<HttpState>) -> Response {
+    match state.master.inspect(job_summaries).await {
+        Some(jobs) => axum::Json(jobs).into_response(),
+        None => unavailable(),
+    }
+}
+
+fn job_summaries(core: &MasterCore) -> Vec<JobSummary> {
+    core.jobs().list(true).map(JobEntry::summary).collect()
+}
+
+/// The body `POST /api/jobs/{id}/requeue` and `…/priority` may carry.
+#[derive(Deserialize, Default)]
+struct ControlBody {
+    /// requeue: only the frames the job did not finish.
+    #[serde(default)]
+    failed: bool,
+    /// priority: the new priority.
+    priority: Option<i32>,
+}
+
+/// Cancels, pauses, resumes, requeues or re-prioritises a job: answers the
+/// job as it is afterwards, 404 for an unknown job, 409 when its state
+/// does not allow it, 400 for an unknown action or a bad body.
+async fn control_job(
+    State(state): State<HttpState>,
+    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    Path((id, action)): Path<(u64, String)>,
+    body: axum::body::Bytes,
+) -> Response {
+    let bad = |message: String| (StatusCode::BAD_REQUEST, message + "\n").into_response();
+    let body: ControlBody = match body.is_empty() {
+        true => ControlBody::default(),
+        false => match serde_json::from_slice(&body) {
+            Ok(body) => body,
+            Err(e) => return bad(format!("bad body: {e}")),
+        },
+    };
+    let action = match action.as_str() {
+        "cancel" => JobAction::Cancel,
+        "pause" => JobAction::Pause,
+        "resume" => JobAction::Resume,
+        "requeue" => JobAction::Requeue {
+            failed_only: body.failed,
+        },
+        "priority" => match body.priority {
+            Some(priority) => JobAction::SetPriority(priority),
+            None => return bad("priority needs {\"priority\": N}".into()),
+        },
+        other => {
+            return bad(format!(
+                "unknown action {other:?}: cancel, pause, resume, requeue or priority"
+            ));
+        }
+    };
+    let who = format!("the dashboard ({peer})");
+    match state.master.control_job(id, action, who).await {
+        Some(Ok(summary)) => axum::Json(summary).into_response(),
+        Some(Err(e)) => {
+            let status = match e {
+                JobControlError::UnknownJob(_) => StatusCode::NOT_FOUND,
+                _ => StatusCode::CONFLICT,
+            };
+            (status, format!("{e}\n")).into_response()
+        }
+        None => unavailable(),
+    }
+}
+
 /// Everything the dashboard shows.
 #[derive(Serialize)]
 pub struct DashboardView {
     pub status: StatusReply,
+    /// Every listed job, oldest first (as `GET /api/jobs`).
+    pub jobs: Vec<JobSummary>,
     pub counters: FarmCounters,
     /// Per worker name: totals and the packages it is working on.
     pub workers: BTreeMap<String, WorkerView>,
@@ -477,6 +555,7 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
         .collect();
     DashboardView {
         status,
+        jobs: job_summaries(core),
         counters: telemetry.counters.clone(),
         workers,
         live: core.live_frame().map(|f| LiveView {
@@ -791,17 +870,16 @@ fn metrics_registry(core: &MasterCore) -> Registry {
             (label("state", "cancelled"), c.jobs_cancelled),
         ],
     );
+    // The listing's states, as `vtfarm jobs --all` counts them.
+    let jobs = core.jobs();
+    let per_state: Vec<(Labels, f64)> = (JobState::ALL.into_iter())
+        .map(|s| (label("state", s.name()), jobs.count(s) as f64))
+        .collect();
     gauge_family(
         &mut r,
         "jobs_now",
-        "Jobs running or waiting now",
-        &[
-            (
-                label("state", "running"),
-                f64::from(u8::from(status.queue.running.is_some())),
-            ),
-            (label("state", "waiting"), status.queue.waiting.len() as f64),
-        ],
+        "Jobs the master lists now, by state (finished ones while it keeps them)",
+        &per_state,
     );
     counter(&mut r, "frames", "Frames completed", c.frames_completed);
     counter_family(

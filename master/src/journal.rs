@@ -10,6 +10,8 @@
 //! STATE/jobs/NNNNNNNNNNNN/job      SubmitJob { job } (scene by hash)
 //! STATE/jobs/NNNNNNNNNNNN/FFFFFF   FrameDone of frame F
 //! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
+//! STATE/jobs/NNNNNNNNNNNN/state    JobList { jobs: [its listing] }: state,
+//!                                  priority, times (the newest replaces it)
 //! STATE/jobs/damaged/NNNNNNNNNNNN  a job set aside, with `why` beside its files
 //! ```
 //!
@@ -22,8 +24,9 @@
 //! Frames are the bulk; a `FrameDone` already carries its image compressed
 //! in the job's format (`WireImage`), so the file holds the very message the
 //! submitter got, and a re-attached submitter gets the same bytes. A
-//! delivered job's frames go [`ATTACH_GRACE`](vtfarm_master_core::ATTACH_GRACE)
-//! after it completes. A journal of another format (an older master's) is
+//! finished job (completed, failed or cancelled) and its frames go when the
+//! master's retention lets it go (`vtfarm master --keep-jobs`,
+//! `--keep-jobs-hours`). A journal of another format (an older master's) is
 //! refused at start with an error that says what to do.
 //!
 //! The core never touches it: it emits [`Record`]s, the driver writes them
@@ -40,8 +43,8 @@ use std::sync::Arc;
 use tracing::warn;
 use vtfarm_master_core::{DamagedJob, Record, StoredJob, Written};
 use vtfarm_proto::{
-    FrameDone, JobScene, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash, decode_message,
-    encode_message,
+    FrameDone, JobScene, JobSummary, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash,
+    decode_message, encode_message,
 };
 
 /// Writes a [`Journal`]'s records on a thread of its own, in order, so that
@@ -141,10 +144,11 @@ pub struct Loaded {
     pub damaged: Vec<DamagedJob>,
 }
 
-/// The journal's format: 3 since every record carries its checksum, 2 when
-/// finished frames were kept as sent without one, 1 (no `format` file)
-/// before.
-pub const JOURNAL_FORMAT: u32 = 3;
+/// The journal's format: 4 since jobs carry their priority and kind and
+/// keep their listing (`state`), 3 when every record first carried its
+/// checksum, 2 when finished frames were kept as sent without one, 1 (no
+/// `format` file) before.
+pub const JOURNAL_FORMAT: u32 = 4;
 
 /// Every record file starts with the CRC32C of the bytes after it, 4 bytes
 /// little-endian.
@@ -380,6 +384,40 @@ impl Journal {
         self.job_dir(id).join("job")
     }
 
+    /// The listing file of job `id` (its state, priority and times).
+    pub fn state_path(&self, id: u64) -> PathBuf {
+        self.job_dir(id).join("state")
+    }
+
+    /// Job `id`'s listing as last written; `None` when there is none, or
+    /// (with a warning naming the file, which is kept as `state.damaged`)
+    /// when it fails its check: the job is then listed as queued.
+    fn load_state(&self, id: u64) -> Option<JobSummary> {
+        let path = self.state_path(id);
+        let error = match read_message(&path, "a job's listing") {
+            Ok(Message::JobList { mut jobs }) if jobs.len() == 1 && jobs[0].id == id => {
+                return jobs.pop();
+            }
+            Ok(other) => RecordError::Content {
+                path: path.clone(),
+                expected: "this job's listing",
+                error: format!("it holds a {}", other.name()),
+            },
+            Err(RecordError::Missing { .. }) => return None,
+            Err(e) => e,
+        };
+        let aside = path.with_extension("damaged");
+        warn!(
+            job = id,
+            "{error}: the job is listed as queued (the file is kept as {})",
+            aside.display()
+        );
+        if let Err(e) = std::fs::rename(&path, &aside) {
+            warn!(path = %path.display(), "cannot rename the damaged listing: {e}");
+        }
+        None
+    }
+
     fn write_record(&self, what: &str, path: &Path, payload: &[u8]) -> Result<(), WriteError> {
         (self.storage)
             .write_atomic(path, &record_bytes(payload))
@@ -425,6 +463,13 @@ impl Journal {
             }
             Record::JobComplete { id } => {
                 self.write_record(&what, &self.job_dir(id).join("complete"), b"")
+            }
+            Record::JobState(summary) => {
+                let path = self.state_path(summary.id);
+                let message = Message::JobList {
+                    jobs: vec![*summary],
+                };
+                self.write_message(&what, &path, &message)
             }
             Record::JobForgotten { id } => {
                 let dir = self.job_dir(id);
@@ -637,6 +682,7 @@ impl Journal {
             frames_done,
             complete,
             damaged_frame,
+            summary: self.load_state(id),
         })
     }
 }
@@ -648,6 +694,7 @@ fn record_name(record: &Record) -> String {
         Record::JobComplete { id } => format!("the completion of job {id}"),
         Record::JobForgotten { id } => format!("the removal of job {id}"),
         Record::JobDamaged { id, .. } => format!("setting job {id} aside"),
+        Record::JobState(summary) => format!("the state of job {}", summary.id),
     }
 }
 
@@ -802,7 +849,7 @@ mod tests {
         Journal::open(dir.path()).unwrap();
         assert_eq!(
             std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
-            "3\n"
+            "4\n"
         );
         Journal::open(dir.path()).expect("the current format opens again");
 
@@ -810,7 +857,7 @@ mod tests {
         std::fs::create_dir_all(old.path().join("jobs/000000000001")).unwrap();
         let error = Journal::open(old.path()).expect_err("format 1").to_string();
         assert!(
-            error.contains("format 1, but this master reads format 3"),
+            error.contains("format 1, but this master reads format 4"),
             "{error}"
         );
         assert!(
@@ -818,9 +865,109 @@ mod tests {
             "{error}"
         );
 
+        // Format 3's jobs carry no priority or kind: they do not decode here.
+        std::fs::write(old.path().join("jobs/format"), "3\n").unwrap();
+        let error = Journal::open(old.path()).expect_err("format 3").to_string();
+        assert!(
+            error.contains("format 3, but this master reads format 4"),
+            "{error}"
+        );
+        assert!(
+            error.contains("finish its jobs with the master that wrote it"),
+            "{error}"
+        );
+
         std::fs::write(old.path().join("jobs/format"), "7\n").unwrap();
         let error = Journal::open(old.path()).expect_err("format 7").to_string();
         assert!(error.contains("format 7"), "{error}");
+    }
+
+    /// Every job state, its priority and times read back as written; the
+    /// newest listing replaces the one before; a damaged listing is set
+    /// aside with the job listed as queued, and a job without one has none.
+    #[test]
+    fn every_job_state_round_trips_through_the_journal() {
+        use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let scene = Arc::new(SceneData::from_scene(&Scene::default()));
+        let setup = FrameSetup {
+            camera: Camera {
+                eye: Vec3::ZERO,
+                target: Vec3::Z,
+                up: Vec3::Y,
+                fov_y_deg: 60.0,
+                width: 1,
+                height: 1,
+            },
+            lighting: Default::default(),
+            trace: Default::default(),
+            vertex: Default::default(),
+        };
+        let options = vtfarm_proto::JobOptions {
+            method: vtfarm_method::MethodKind::VertexTracing,
+            aux: false,
+        };
+        let job = vtfarm_proto::wire_job("j", &scene, &[setup], &[0], options);
+        let states = [
+            WireJobState::Queued,
+            WireJobState::Running,
+            WireJobState::Paused,
+            WireJobState::Completed,
+            WireJobState::Failed,
+            WireJobState::Cancelled,
+        ];
+        let summary = |id: u64, state: WireJobState| JobSummary {
+            id,
+            name: format!("job {id}"),
+            kind: [WireJobKind::Render, WireJobKind::Study][id as usize % 2],
+            state,
+            priority: id as i32 - 3,
+            frames_done: 0,
+            frames_failed: 0,
+            frames_total: 1,
+            submitted_ms: 1_000 * id,
+            started_ms: (id > 1).then_some(2_000 * id),
+            finished_ms: (id > 3).then_some(3_000 * id),
+            host: "10.0.0.9:4000".into(),
+            reason: format!("why {id}"),
+        };
+        for (id, &state) in (1..).zip(&states) {
+            let queued = Record::JobQueued {
+                id,
+                job: Box::new(job.clone()),
+                scene: scene.clone(),
+            };
+            journal.write(queued).unwrap();
+            // An older listing first: the newest wins.
+            let older = summary(id, WireJobState::Queued);
+            journal.write(Record::JobState(Box::new(older))).unwrap();
+            journal
+                .write(Record::JobState(Box::new(summary(id, state))))
+                .unwrap();
+        }
+        let loaded = journal.load();
+        assert!(loaded.damaged.is_empty(), "{:?}", loaded.damaged);
+        let read: Vec<Option<JobSummary>> = loaded.jobs.into_iter().map(|j| j.summary).collect();
+        let written: Vec<Option<JobSummary>> = (1..)
+            .zip(&states)
+            .map(|(id, &state)| Some(summary(id, state)))
+            .collect();
+        assert_eq!(read, written);
+
+        flip_listing(&journal.state_path(2));
+        std::fs::remove_file(journal.state_path(3)).unwrap();
+        let jobs = journal.load().jobs;
+        assert_eq!((jobs[1].id, &jobs[1].summary), (2, &None));
+        assert_eq!((jobs[2].id, &jobs[2].summary), (3, &None));
+        assert!(journal.state_path(2).with_extension("damaged").exists());
+    }
+
+    fn flip_listing(path: &Path) {
+        let mut bytes = std::fs::read(path).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] ^= 0x5a;
+        std::fs::write(path, bytes).unwrap();
     }
 
     /// Every kind of damage to a frame record is an error naming the file

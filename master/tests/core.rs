@@ -271,7 +271,6 @@ fn assert_one_failure_and_the_reference(started: &StartedFrame, done: FrameDone)
 #[test]
 fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
     let mut started = start_frame();
-    let (job, frame) = (started.job, started.frame);
     let h = &mut started.h;
     h.core.connected(
         h.now,
@@ -289,15 +288,9 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         "{out:?}"
     );
     h.core.disconnected(h.now, INTRUDER);
-    // A request for another job is stale and gets nothing.
-    let out = h.send(
-        WORKER,
-        Message::RequestWork {
-            job: job + 1,
-            frame,
-        },
-    );
-    assert!(messages_to(&out, WORKER).is_empty());
+    // (A request naming another job is a request all the same: a worker's
+    // newest frame may be of a job that ended. `tests/jobs.rs` runs jobs
+    // out of id order, where that happens.)
     // A result for a package nobody assigned is ignored.
     let out = h.send(
         WORKER,

@@ -5,76 +5,22 @@
 
 #[path = "support/frame.rs"]
 mod frame;
+#[path = "support/job.rs"]
+mod job;
 
 mod support;
 
-use frame::small_frame;
 use std::sync::Arc;
 use std::time::Duration;
 
-use glam::Vec3;
+use job::Job;
 use support::pair::Pair;
-use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
-use vtfarm_master::{ATTACH_GRACE, JobOptions, wire_job};
+use vtfarm_master::{JobOptions, wire_job};
+use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{FrameStats, Message, SceneData, WireJob};
-use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::Scene;
-
-/// A small cockpit job of `frames` frames from slightly different eyes.
-struct Job {
-    scene: Scene,
-    reflectors: Vec<u32>,
-    frames: Vec<FrameSetup>,
-}
-
-impl Job {
-    fn new(frames: usize) -> Job {
-        let c = cockpit(&CockpitConfig {
-            detail: 0.2,
-            glass_segments: 24,
-            ..CockpitConfig::default()
-        });
-        let reflectors = c.cover_glass_triangles();
-        let frames = (0..frames)
-            .map(|k| small_frame(&c, Vec3::new(0.01, 0.005, 0.0) * k as f32))
-            .collect();
-        Job {
-            scene: c.scene,
-            reflectors,
-            frames,
-        }
-    }
-
-    fn wire(&self) -> (WireJob, SceneData) {
-        let data = SceneData::from_scene(&self.scene);
-        (
-            wire_job(
-                "faults",
-                &data,
-                &self.frames,
-                &self.reflectors,
-                JobOptions {
-                    method: MethodKind::VertexTracing,
-                    aux: false,
-                },
-            ),
-            data,
-        )
-    }
-
-    /// The single-process images.
-    fn reference(&self) -> Vec<Vec<Vec3>> {
-        let renderer = Renderer::new(Arc::new(self.scene.clone()), self.reflectors.clone());
-        (self.frames.iter())
-            .map(|f| {
-                let render = renderer.render(f, &Default::default(), &mut |_, _| {});
-                render.image.color.pixels
-            })
-            .collect()
-    }
-}
+use vtfarm_proto::{FrameStats, Message, SceneData};
+use vtfarm_render::Renderer;
 
 /// Virtual time a scenario may take at most.
 const BOUND: Duration = Duration::from_secs(600);
@@ -351,7 +297,7 @@ fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
 }
 
 #[test]
-fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
+fn unknown_jobs_fail_to_attach_and_journaled_orphans_render_to_the_end() {
     let job = Job::new(3);
     let mut pair = support::pair::persistent(FarmRules::default());
     pair.attach_submitter(77);
@@ -364,24 +310,28 @@ fn unknown_jobs_fail_to_attach_and_orphans_are_cancelled_after_the_grace() {
     let (wire, data) = job.wire();
     pair.submit(wire, data.clone());
     pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    let id = pair.job_id().unwrap();
     pair.drop_submitter();
     assert!(pair.master.status().queue.running.is_none());
+    let entry = pair.master.jobs().get(id).expect("listed");
+    assert_eq!(entry.state, JobState::Cancelled);
+    assert!(entry.reason.contains("submitter left"), "{}", entry.reason);
 
-    // Journaled: kept for the grace period (a slow worker keeps it running), then cancelled.
+    // Journaled: the farm renders it to the end (its frames are kept), and
+    // a submitter attaching afterwards gets every frame.
     let mut pair = support::pair::persistent(FarmRules::default());
-    pair.add_worker("a", 1e4);
+    pair.add_worker("a", 1.0);
     pair.submit(job.wire().0, data);
     pair.drive(BOUND, |p| p.workers[0].is_running_a_package());
-    let left_at = pair.now;
+    let id = pair.job_id().unwrap();
     pair.drop_submitter();
-    pair.drive(2 * ATTACH_GRACE, |p| {
-        p.master.status().queue.running.is_none()
+    pair.drive(BOUND, |p| {
+        p.master.jobs().get(id).map(|e| e.state) == Some(JobState::Completed)
     });
-    assert!(
-        pair.now >= left_at + ATTACH_GRACE,
-        "cancelled after {:?}",
-        pair.now - left_at
-    );
+    assert_eq!(pair.master.jobs().get(id).unwrap().frames_done, 3);
+    pair.attach_submitter(id);
+    pair.drive(BOUND, all_frames(3));
+    check_images(&pair, &job);
 }
 
 /// Later base frames are rasterized into earlier frames' buffers, and

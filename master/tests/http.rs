@@ -27,8 +27,9 @@ use vtfarm_master::view::ViewOutcome;
 use vtfarm_master::{MasterHandle, http, server, spawn_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{HandshakePolicy, Role, SceneData, StatusReply};
+use vtfarm_proto::{JobSummary, WireJobState};
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_submit::{FinishedFrame, JobOptions, run_job, wire_job};
+use vtfarm_submit::{FinishedFrame, JobError, JobOptions, run_job, wire_job};
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::{ClientOptions, connect};
 use vtfarm_vertex::Quality;
@@ -48,6 +49,11 @@ struct Farm {
 
 impl Farm {
     async fn start() -> Farm {
+        Farm::with_workers(2).await
+    }
+
+    /// A farm of `workers` workers (none: a job runs and never progresses).
+    async fn with_workers(workers: usize) -> Farm {
         let dir = tempfile::tempdir().unwrap();
         let identity = server::identity(dir.path(), &["127.0.0.1".into()]).unwrap();
         let endpoint = server::bind("127.0.0.1:0".parse().unwrap(), &identity).unwrap();
@@ -78,7 +84,7 @@ impl Farm {
             http,
             _tasks: tasks,
         };
-        for name in ["w1", "w2"] {
+        for name in ["w1", "w2"].into_iter().take(workers) {
             let (options, name) = (farm.options.clone(), name.to_owned());
             let engine = Engine::new(Some(farm.dir.path().join(format!("cache-{name}"))));
             farm._tasks.push(tokio::spawn(async move {
@@ -93,8 +99,39 @@ impl Farm {
                 .await;
             }));
         }
-        farm.wait_until(|s| s.workers.len() == 2).await;
+        farm.wait_until(|s| s.workers.len() == workers).await;
         farm
+    }
+
+    /// Submits a one-frame job from a task of its own that follows it
+    /// until it ends (bounded); waits until the master lists it running.
+    async fn submit_in_background(
+        &self,
+    ) -> (u64, JoinHandle<Result<Vec<FinishedFrame>, JobError>>) {
+        let c = cockpit(&CockpitConfig {
+            detail: 0.3,
+            ..CockpitConfig::default()
+        });
+        let setups = [small_frame(&c, Vec3::ZERO)];
+        let reflectors = c.cover_glass_triangles();
+        let data = SceneData::from_scene(&c.scene);
+        let options = JobOptions {
+            method: MethodKind::VertexTracing,
+            aux: false,
+        };
+        let job = wire_job("background", &data, &setups, &reflectors, options);
+        let mut conn = connect(&self.options, Role::Submitter).await.unwrap();
+        let submitter = tokio::spawn(async move {
+            let run = run_job(&mut conn.link, job, &data, |_| {});
+            (tokio::time::timeout(WAIT, run).await).expect("the job ended in time")
+        });
+        self.wait_until(|s| s.queue.running.is_some()).await;
+        let id = (self
+            .master
+            .inspect(|c| c.status().queue.running.unwrap().job))
+        .await
+        .unwrap();
+        (id, submitter)
     }
 
     /// Waits (bounded) for the master's state to satisfy `done`, woken by
@@ -425,10 +462,132 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     assert_eq!(farm.get("/view/objects.png").await.status, 200);
 }
 
+/// `GET /api/jobs` and `POST /api/jobs/{id}/…` over real sockets: the
+/// listing, pause, resume, priority and cancel of a running job (whose
+/// submitter hears of it), the refusals, and `/metrics`' per-state gauges
+/// agreeing with the listing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_jobs_api_lists_and_changes_jobs_and_the_metrics_agree() {
+    // No worker: the job runs and makes no progress.
+    let farm = Farm::with_workers(0).await;
+    let (id, submitter) = farm.submit_in_background().await;
+    let jobs = |r: &Response| -> Vec<JobSummary> { serde_json::from_slice(&r.body).unwrap() };
+    let listed = jobs(&farm.get("/api/jobs").await);
+    assert_eq!(listed.len(), 1);
+    assert_eq!((listed[0].id, listed[0].state), (id, WireJobState::Running));
+    assert_eq!(listed[0].name, "background");
+    assert_eq!(listed[0].frames_total, 1);
+    assert!(
+        listed[0].host.starts_with("127.0.0.1:"),
+        "{}",
+        listed[0].host
+    );
+
+    let farm = &farm;
+    let post = |action: &'static str, body: serde_json::Value| {
+        let path = format!("/api/jobs/{id}/{action}");
+        async move { farm.post(&path, body).await }
+    };
+    let state_of = |r: &Response| -> WireJobState {
+        assert_eq!(r.status, 200, "{}", r.text());
+        serde_json::from_slice::<JobSummary>(&r.body).unwrap().state
+    };
+    assert_eq!(
+        state_of(&post("pause", serde_json::json!({})).await),
+        WireJobState::Paused
+    );
+    let again = post("pause", serde_json::json!({})).await;
+    assert_eq!(again.status, 409);
+    assert!(again.text().contains("is paused"), "{}", again.text());
+    assert_eq!(
+        state_of(&post("resume", serde_json::json!({})).await),
+        WireJobState::Running
+    );
+    let raised = post("priority", serde_json::json!({ "priority": 7 })).await;
+    assert_eq!(raised.status, 200, "{}", raised.text());
+    assert_eq!(
+        serde_json::from_slice::<JobSummary>(&raised.body)
+            .unwrap()
+            .priority,
+        7
+    );
+    assert_eq!(post("priority", serde_json::json!({})).await.status, 400);
+    assert_eq!(post("explode", serde_json::json!({})).await.status, 400);
+    assert_eq!(
+        farm.post("/api/jobs/99/cancel", serde_json::json!({}))
+            .await
+            .status,
+        404
+    );
+
+    let cancelled = post("cancel", serde_json::json!({})).await;
+    assert_eq!(state_of(&cancelled), WireJobState::Cancelled);
+    let ended = (tokio::time::timeout(WAIT, submitter).await)
+        .expect("the submitter ended")
+        .unwrap();
+    match ended {
+        Err(JobError::Cancelled { job, reason }) => {
+            assert_eq!(job, id);
+            assert!(
+                reason.contains(&format!(
+                    "job {id} was cancelled by the dashboard (127.0.0.1:"
+                )),
+                "{reason}"
+            );
+        }
+        other => panic!("the submitter got {other:?}"),
+    }
+    assert_eq!(post("cancel", serde_json::json!({})).await.status, 409);
+
+    // The gauges count the listing's states.
+    let listed = jobs(&farm.get("/api/jobs").await);
+    let metrics = parse_metrics(farm.get("/metrics").await.text());
+    for state in [
+        "queued",
+        "running",
+        "paused",
+        "completed",
+        "failed",
+        "cancelled",
+    ] {
+        let n = listed
+            .iter()
+            .filter(|j| serde_json::to_value(j.state).unwrap() == state)
+            .count();
+        assert_eq!(
+            metrics[&format!("vtfarm_jobs_now{{state=\"{state}\"}}")],
+            n as f64,
+            "{state}"
+        );
+    }
+    assert_eq!(metrics["vtfarm_jobs_now{state=\"cancelled\"}"], 1.0);
+    assert_eq!(metrics["vtfarm_jobs_total{state=\"submitted\"}"], 1.0);
+    assert_eq!(metrics["vtfarm_jobs_total{state=\"cancelled\"}"], 1.0);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_peer_off_loopback_needs_the_cluster_token() {
     let (master, _task) = spawn_master(FarmRules::default());
     let token = "c0ffee".to_owned();
+    // Reading and changing jobs follow the same rule.
+    let cancel = |peer: SocketAddr, authorization: Option<&str>| {
+        let app = http::router(master.clone(), http::HttpAccess::new(token.clone()))
+            .layer(MockConnectInfo(peer));
+        let mut request = Request::post("/api/jobs/5/cancel");
+        if let Some(value) = authorization {
+            request = request.header("authorization", value);
+        }
+        app.oneshot(request.body(Body::empty()).unwrap())
+    };
+    let outsider: SocketAddr = "192.0.2.7:40000".parse().unwrap();
+    let code = |r: axum::response::Response| r.status();
+    assert_eq!(
+        code(cancel(outsider, None).await.unwrap()),
+        StatusCode::UNAUTHORIZED
+    );
+    // Let through, it finds no job 5.
+    let allowed = cancel(outsider, Some("Bearer c0ffee")).await.unwrap();
+    assert_eq!(code(allowed), StatusCode::NOT_FOUND);
     let ask = |peer: SocketAddr, authorization: Option<&str>| {
         let app = http::router(master.clone(), http::HttpAccess::new(token.clone()))
             .layer(MockConnectInfo(peer));
@@ -898,4 +1057,67 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("dashboard.png");
     std::fs::write(&path, png).unwrap();
     eprintln!("dashboard screenshot: {}", path.display());
+}
+
+/// The dashboard's jobs table in chromium: the cancel button of a running
+/// job cancels it (its submitter hears of it), and the row shows it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_dashboards_cancel_button_cancels_a_running_job() {
+    let Some(mut browser) = Browser::start().await else {
+        return;
+    };
+    let farm = Farm::with_workers(0).await;
+    let (id, submitter) = farm.submit_in_background().await;
+    let url = format!("http://{}/", farm.http);
+    browser.call("Page.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.navigate", serde_json::json!({ "url": url }))
+        .await;
+    browser.event("Page.loadEventFired").await;
+    // Click the row's cancel button once the page lists the job running,
+    // then wait for the row to say cancelled (the page's own events).
+    let click = format!(
+        r#"new Promise((resolve) => {{
+            const row = () => document.querySelector('#jobs tr[data-job="{id}"]');
+            let clicked = false;
+            const step = () => {{
+                const r = row();
+                if (!r) return;
+                if (!clicked && r.dataset.state === "running") {{
+                    clicked = true;
+                    r.querySelector('button[data-action="cancel"]').click();
+                }}
+                const answered = document.getElementById("job-answer").textContent !== "";
+                if (clicked && answered && r.dataset.state === "cancelled") {{
+                    resolve({{ state: r.dataset.state, answer: document.getElementById("job-answer").textContent,
+                      buttons: [...r.querySelectorAll("button")].map((b) => b.dataset.action) }});
+                }}
+            }};
+            document.addEventListener("vtfarm-update", step);
+            document.addEventListener("vtfarm-job-answer", step);
+            step();
+        }})"#
+    );
+    let row = browser.eval(&click).await;
+    assert_eq!(row["state"], "cancelled", "{row}");
+    assert_eq!(row["answer"], format!("job {id}: cancelled"), "{row}");
+    // A finished job offers requeue and priority, no cancel or pause.
+    assert_eq!(
+        row["buttons"],
+        serde_json::json!(["requeue", "priority"]),
+        "{row}"
+    );
+    let ended = (tokio::time::timeout(WAIT, submitter).await)
+        .expect("the submitter ended")
+        .unwrap();
+    assert!(
+        matches!(ended, Err(JobError::Cancelled { job, .. }) if job == id),
+        "{ended:?}"
+    );
+    let state = (farm
+        .master
+        .inspect(move |c| c.jobs().get(id).map(|e| e.state)))
+    .await
+    .unwrap();
+    assert_eq!(state, Some(vtfarm_master_core::JobState::Cancelled));
 }

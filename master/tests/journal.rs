@@ -552,6 +552,7 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
             frames_done: FRAMES as u32,
             complete: true,
             damaged_frame: None,
+            summary: None,
         },
     );
     let submitter = vtfarm_master::Peer::Submitter {

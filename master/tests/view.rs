@@ -127,7 +127,12 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         })
         .collect();
     assert_eq!(stages, [Quality::Preview, Quality::Refine, Quality::Full]);
-    assert_eq!(pair.master.telemetry().counters.jobs_cancelled, 2);
+    let counters = &pair.master.telemetry().counters;
+    assert_eq!(counters.jobs_cancelled, 2);
+    // The source job and three moves: every one submitted has ended once.
+    assert_eq!(counters.jobs_submitted, 4);
+    let ended = counters.jobs_completed + counters.jobs_failed + counters.jobs_cancelled;
+    assert_eq!(ended, counters.jobs_submitted);
 
     // The view shows the clamped eye, equal to the single-process render.
     let current = pair.master.views().current().unwrap();

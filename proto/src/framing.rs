@@ -272,6 +272,8 @@ mod tests {
                     aux: true,
                     method: crate::WireMethod::CubeMapGrid,
                     image: crate::WireImageFormat::LinearF32,
+                    priority: -2,
+                    kind: crate::WireJobKind::Study,
                 },
             },
             Message::SubmitJob {
@@ -283,6 +285,8 @@ mod tests {
                     aux: false,
                     method: crate::WireMethod::VertexTracing,
                     image: crate::WireImageFormat::Srgb8,
+                    priority: 5,
+                    kind: crate::WireJobKind::Render,
                 },
             },
             Message::JobAccepted { job: 3, frames: 2 },
@@ -365,6 +369,41 @@ mod tests {
                 },
                 scene_bytes_sent: 12_345,
             }),
+            Message::ListJobs { all: true },
+            Message::JobList {
+                jobs: vec![crate::JobSummary {
+                    id: 8,
+                    name: "cockpit".to_owned(),
+                    kind: crate::WireJobKind::View,
+                    state: crate::WireJobState::Paused,
+                    priority: 3,
+                    frames_done: 1,
+                    frames_failed: 0,
+                    frames_total: 3,
+                    submitted_ms: 1_700_000_000_000,
+                    started_ms: Some(1_700_000_001_000),
+                    finished_ms: None,
+                    host: "10.0.0.2:40000".to_owned(),
+                    reason: String::new(),
+                }],
+            },
+            Message::ControlJob {
+                job: 8,
+                action: crate::JobAction::Requeue { failed_only: true },
+            },
+            Message::ControlJob {
+                job: 8,
+                action: crate::JobAction::SetPriority(-7),
+            },
+            Message::JobControlled {
+                job: 8,
+                outcome: Err("no job 8".to_owned()),
+            },
+            Message::JobStateChanged {
+                job: 8,
+                state: crate::WireJobState::Cancelled,
+                reason: "cancelled from 127.0.0.1".to_owned(),
+            },
         ]
     }
 
@@ -384,7 +423,7 @@ mod tests {
         let messages = every_message();
         // Every variant is covered (the list has two extra alternatives).
         let names: std::collections::BTreeSet<_> = messages.iter().map(Message::name).collect();
-        assert_eq!(names.len(), 21);
+        assert_eq!(names.len(), 26);
         let stream: Vec<u8> = (messages.iter())
             .flat_map(|m| encode_message(m).expect("encodes"))
             .collect();

@@ -31,10 +31,11 @@ pub use framing::{
 };
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use message::{
-    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobId, JobOptions, JobScene, Message,
-    Package, PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode,
-    ResultPixels, Role, RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux,
-    WireJob, WorkerFrameStats, WorkerStatus, scene_hash, wire_job,
+    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobScene,
+    JobSummary, Message, Package, PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus,
+    Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData, SceneHash, StatusReply,
+    Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WorkerFrameStats, WorkerStatus,
+    scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -46,7 +47,7 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 7;
+pub const PROTOCOL_VERSION: u32 = 8;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many prepared frames a worker keeps: a package of any

@@ -18,7 +18,9 @@
 //! - submitter ↔ master: `SubmitJob` → `JobAccepted`, then `Progress` and
 //!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`;
 //!   `AttachJob` → `JobAccepted` and the frames, each a `FrameDone` or a
-//!   `FrameMissing`; `JournalFailed` when the master cannot keep a record.
+//!   `FrameMissing`; `JournalFailed` when the master cannot keep a record;
+//!   `ListJobs` → `JobList`; `ControlJob` → `JobControlled` (and
+//!   `JobStateChanged` to the job's submitters).
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -119,6 +121,29 @@ pub enum Message {
     /// full disk, say): a restarted master would not have it. The job goes
     /// on; a frame that was not written stays in the master's memory.
     JournalFailed { job: JobId, error: String },
+
+    // Submitter ↔ master, since version 7: managing jobs.
+    /// Submitter → master: list the jobs (`all`: the finished ones kept
+    /// too, not only queued, running and paused).
+    ListJobs { all: bool },
+    /// Master → submitter: the jobs, oldest first.
+    JobList { jobs: Vec<JobSummary> },
+    /// Submitter → master: change a job (cancel, pause, resume, requeue,
+    /// set its priority).
+    ControlJob { job: JobId, action: JobAction },
+    /// Master → submitter: how a `ControlJob` went: the job as it is now,
+    /// or why the master refused.
+    JobControlled {
+        job: JobId,
+        outcome: Result<JobSummary, String>,
+    },
+    /// Master → the job's submitters: the job changed state by a user's
+    /// hand (paused, resumed, cancelled), with who asked.
+    JobStateChanged {
+        job: JobId,
+        state: WireJobState,
+        reason: String,
+    },
 }
 
 impl Message {
@@ -149,6 +174,11 @@ impl Message {
             Message::AttachJob { .. } => "AttachJob",
             Message::FrameMissing { .. } => "FrameMissing",
             Message::JournalFailed { .. } => "JournalFailed",
+            Message::ListJobs { .. } => "ListJobs",
+            Message::JobList { .. } => "JobList",
+            Message::ControlJob { .. } => "ControlJob",
+            Message::JobControlled { .. } => "JobControlled",
+            Message::JobStateChanged { .. } => "JobStateChanged",
         }
     }
 }
@@ -418,6 +448,73 @@ pub struct WireJob {
     /// submitter writes only 8-bit outputs. The components (`aux`) are
     /// always linear.
     pub image: WireImageFormat,
+    /// Higher runs first; equal priorities run in submission order.
+    pub priority: i32,
+    /// What the job is, for listings.
+    pub kind: WireJobKind,
+}
+
+/// What a job is, for `vtfarm jobs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WireJobKind {
+    /// A job file's frames (`vtfarm submit`, `vtfarm render`).
+    Render,
+    /// A variant of a glare study.
+    Study,
+    /// A move of the dashboard's interactive view.
+    View,
+}
+
+/// A job's state on the wire (the master core's `JobState`, whose table
+/// of transitions is the one rule).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WireJobState {
+    Queued,
+    Running,
+    Paused,
+    Completed,
+    Failed,
+    Cancelled,
+}
+
+/// What a user asks of a job (`vtfarm cancel|pause|resume|requeue|priority`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum JobAction {
+    Cancel,
+    Pause,
+    Resume,
+    /// Render a finished job again: every frame, or with `failed_only`
+    /// only the frames it did not finish.
+    Requeue {
+        failed_only: bool,
+    },
+    SetPriority(i32),
+}
+
+/// One job as `vtfarm jobs`, `GET /api/jobs` and the dashboard list it.
+/// Times are milliseconds since the Unix epoch, as the master's clock
+/// read them.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JobSummary {
+    pub id: JobId,
+    pub name: String,
+    pub kind: WireJobKind,
+    pub state: WireJobState,
+    pub priority: i32,
+    pub frames_done: u32,
+    /// Frames a failed or cancelled job did not finish.
+    pub frames_failed: u32,
+    pub frames_total: u32,
+    pub submitted_ms: u64,
+    pub started_ms: Option<u64>,
+    pub finished_ms: Option<u64>,
+    /// Where it was submitted from (the submitter's address; `master` for
+    /// the interactive view's jobs).
+    pub host: String,
+    /// Why it failed or who cancelled it; empty otherwise.
+    pub reason: String,
 }
 
 /// What a job asks the farm for, besides its scene and frames.
@@ -447,6 +544,8 @@ pub fn wire_job(
         aux: options.aux,
         method: options.method.into(),
         image: WireImageFormat::LinearF32,
+        priority: 0,
+        kind: WireJobKind::Render,
     }
 }
 

@@ -35,10 +35,19 @@ pub use tls::{
 /// Logs to stderr through `tracing`, filtered by `RUST_LOG` (default `info`):
 /// the master's and the worker's command lines.
 pub fn init_logging() {
+    init_logging_at("info");
+}
+
+/// [`init_logging`] with `default` as the filter when `RUST_LOG` is unset
+/// (the CLI's other commands log warnings only). Colours only when stderr
+/// is a terminal: a redirected log holds no escape codes.
+pub fn init_logging_at(default: &str) {
+    use std::io::IsTerminal;
     let filter =
-        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into());
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
+        .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
         .try_init();
 }

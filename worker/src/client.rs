@@ -34,7 +34,7 @@ pub async fn run_worker(
         .await
         {
             Ok(conn) => {
-                info!(master = %options.master, "connected");
+                info!(master = %options.master, "connected to the master");
                 backoff = Duration::from_millis(200);
                 let end = serve(conn.link, &mut engine, config, drain.clone()).await;
                 conn.connection

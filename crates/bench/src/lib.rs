@@ -1,17 +1,20 @@
 //! `vtfarm bench`, which the command-line program calls: the paper's
 //! Table 1 on the built-in cockpit and the tracer's ray throughput
 //! (`table1`), the load balancer on simulated farms driven by costs
-//! recorded from a real frame (`simulate`, see [`SimulateArgs`]), and a real
-//! QUIC farm on localhost (`cluster`, see [`ClusterArgs`]). Speed targets
-//! live here, not in tests.
+//! recorded from a real frame (`simulate`, see [`SimulateArgs`]), a real
+//! QUIC farm on localhost (`cluster`, see [`ClusterArgs`]), and a
+//! progressive frame against separate renders (`progressive`, see
+//! [`ProgressiveArgs`]). Speed targets live here, not in tests.
 
 mod cluster;
+mod progressive;
 mod raster;
 mod rays;
 mod simulate;
 pub mod support;
 
 pub use cluster::ClusterArgs;
+pub use progressive::ProgressiveArgs;
 pub use raster::RasterArgs;
 pub use rays::RaysArgs;
 pub use simulate::SimulateArgs;
@@ -41,6 +44,9 @@ pub enum BenchCommand {
     /// The rasterizer's per-frame costs: the master's base frame and a
     /// worker's ID buffer over the reflectors' bounds, on 1 and more threads.
     Raster(raster::RasterArgs),
+    /// Preview, refine and full as three separate renders against one
+    /// progressive frame (set up once, each stage continuing the last).
+    Progressive(progressive::ProgressiveArgs),
 }
 
 #[derive(clap::Args)]
@@ -124,6 +130,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Cluster(args) => cluster::run(args),
         BenchCommand::Rays(args) => rays::run(args),
         BenchCommand::Raster(args) => raster::run(args),
+        BenchCommand::Progressive(args) => progressive::run(args),
     }
 }
 

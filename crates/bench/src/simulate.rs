@@ -27,6 +27,10 @@
 //! frame is the recorded frame again, so from the second frame on the
 //! scheduler's cost estimates are measured ones. Not modelled: the
 //! transport's own CPU (QUIC, the runtimes).
+//!
+//! `--worker-speed` and `--worker-mbit` give each worker its own speed and
+//! link: the lab's CPU quotas and rate-limited links (`scripts/lab.sh`,
+//! docs/lab.md), which slow the workers and leave the master as it is.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -63,8 +67,8 @@ pub struct SimulateArgs {
     /// more frames blur the pipeline's ramp up and down less.
     #[arg(long, default_value_t = 32)]
     frames: usize,
-    /// Link bandwidths in Mbit/s: every worker's own link and the master's
-    /// one shared link.
+    /// Link bandwidths in Mbit/s, one simulation each: every worker's own
+    /// link (unless --worker-mbit) and the master's one shared link.
     #[arg(long, value_delimiter = ',', default_values_t = [1000.0f64, 100.0])]
     link_mbit: Vec<f64>,
     /// One-way link latency in milliseconds.
@@ -96,6 +100,24 @@ pub struct SimulateArgs {
     /// divided by this. Its driver handles one input at a time.
     #[arg(long)]
     master_threads: Option<u32>,
+    /// Each worker's speed (1: one thread of this machine; 0.45: a worker
+    /// held to 45% of a core by a CPU quota, as `scripts/lab.sh
+    /// --cpu-percent 45` runs it): one value for every worker, or one per
+    /// worker with a single --workers count (`--workers 2 --worker-speed
+    /// 0.45,0.15`). Only the workers slow down: the master and the
+    /// submitter keep their machine's cores (--master-threads). Given, the
+    /// rows with half the workers at half speed are left out, and each
+    /// farm's "vs 1" is over its first worker alone. (With --shared-cores
+    /// a slower worker needs more of the shared cores, unlike a quota.)
+    #[arg(long, value_delimiter = ',', value_name = "SPEED")]
+    worker_speed: Vec<f64>,
+    /// Each worker's own link in Mbit/s, with the same rule as
+    /// --worker-speed (`--workers 2 --worker-mbit 100,10`: the paper's
+    /// mixture of 10 and 100 Mbit connections); --link-mbit stays the
+    /// master's one shared link. Default: each --link-mbit value, for
+    /// every worker's link too.
+    #[arg(long, value_delimiter = ',', value_name = "MBIT")]
+    worker_mbit: Vec<f64>,
     /// Cores of each worker's machine: a package uses them all (speed 1 is
     /// one thread each; the tracing is taken as parallel without loss), a
     /// frame's set-up one, so it overlaps a package on a spare core.
@@ -493,20 +515,36 @@ fn composite_time(
 #[derive(Serialize)]
 struct Row {
     workers: usize,
+    /// The master's shared link.
     link_mbit: f64,
     /// Half the workers (rounded down) at half speed.
     heterogeneous: bool,
+    /// Each worker's speed (1: one thread of this machine).
+    worker_speeds: Vec<f64>,
+    /// Each worker's own link, Mbit/s.
+    worker_mbit: Vec<f64>,
     /// Sum of the workers' speeds: the ideal speed-up over one worker.
     ideal: f64,
     /// Last frame: sum of busy times over its wall time (the scheduler's
     /// figure; with pipelined frames, others' work shares that wall time).
     speedup: f64,
-    /// One worker's `frame_seconds` (same link) over this one's.
+    /// One worker's `frame_seconds` (same link; the first worker's speed
+    /// and link with --worker-speed or --worker-mbit, else speed 1) over
+    /// this one's.
     speedup_vs_one: f64,
     /// Per frame: the lifetime window's imbalance (see `FarmFrame::imbalance`).
     imbalance_per_frame: Vec<f64>,
     /// Per frame: announcement to delivery.
     latency_seconds_per_frame: Vec<f64>,
+    /// Per frame: its delivery, seconds from the job's start (a script sets
+    /// any window of frames beside a real run's arrivals: `scripts/lab.sh`
+    /// takes the second half).
+    done_seconds_per_frame: Vec<f64>,
+    /// Per frame: the CPU seconds each process had used by its delivery
+    /// (the master, each worker, the submitter; see `FarmFrame::cpu`). A
+    /// worker's CPU is on its own machine: at speed 0.45, 1 / 0.45 of the
+    /// CPU the same work takes here.
+    cpu_at_delivery: Vec<Vec<f64>>,
     /// Packages of the last frame.
     packages: u32,
     /// Straggler copies handed out in the last frame.
@@ -534,19 +572,32 @@ struct Row {
 }
 
 impl Row {
-    /// The figures of `frames` simulated on workers of `speeds`, against
-    /// `one`, the same job on one worker of speed 1, and `work`, one
-    /// thread's tracing per frame.
+    /// The table's "set": mixed (half the workers at half speed), equal
+    /// (one speed and link), or given (workers that differ, as given).
+    fn set_name(&self) -> &'static str {
+        let same = |v: &[f64]| v.windows(2).all(|w| w[0] == w[1]);
+        if self.heterogeneous {
+            "mixed"
+        } else if same(&self.worker_speeds) && same(&self.worker_mbit) {
+            "equal"
+        } else {
+            "given"
+        }
+    }
+
+    /// The figures of `frames` simulated on `workers`, against `one`, the
+    /// same job on one worker, and `work`, one thread's tracing per frame.
     fn new(
         frames: &[FarmFrame],
         one: &[FarmFrame],
         work: f64,
-        speeds: &[f64],
+        workers: &[WorkerSpec],
         link_mbit: f64,
         heterogeneous: bool,
     ) -> Result<Row> {
         let last = &frames.last().context("no frame simulated")?.stats;
-        let ideal: f64 = speeds.iter().sum();
+        let worker_speeds: Vec<f64> = workers.iter().map(|w| w.speed).collect();
+        let ideal: f64 = worker_speeds.iter().sum();
         let frame_seconds = steady_frame_seconds(frames);
         // The steady frames: after the first (the start-up) and delivered
         // before the last frame was announced (from then on the job
@@ -562,9 +613,13 @@ impl Row {
             undrained
         };
         Ok(Row {
-            workers: speeds.len(),
+            workers: workers.len(),
             link_mbit,
             heterogeneous,
+            worker_speeds,
+            worker_mbit: (workers.iter())
+                .map(|w| w.link_bits_per_second / 1e6)
+                .collect(),
             ideal,
             speedup: last.speedup,
             speedup_vs_one: steady_frame_seconds(one) / frame_seconds.max(1e-12),
@@ -572,6 +627,8 @@ impl Row {
             latency_seconds_per_frame: (frames.iter())
                 .map(|f| f.done_at.saturating_sub(f.started_at).as_secs_f64())
                 .collect(),
+            done_seconds_per_frame: frames.iter().map(|f| f.done_at.as_secs_f64()).collect(),
+            cpu_at_delivery: frames.iter().map(|f| f.cpu.clone()).collect(),
             packages: last.packages,
             duplicates: last.duplicates,
             frame_seconds,
@@ -583,6 +640,72 @@ impl Row {
             imbalance_after_first: (steady.iter()).map(|f| f.imbalance).fold(0.0, f64::max),
         })
     }
+}
+
+/// A per-worker option (`--worker-speed`, `--worker-mbit`): not given, one
+/// value for every worker, or one value per worker of the one simulated
+/// count.
+#[derive(Clone, Debug, PartialEq)]
+enum PerWorker {
+    Default,
+    Every(f64),
+    Each(Vec<f64>),
+}
+
+impl PerWorker {
+    /// `values` of `option` for the farms of `workers`: each positive and
+    /// finite; more than one only as many as the one --workers count.
+    fn parse(option: &str, values: &[f64], workers: &[usize]) -> Result<PerWorker> {
+        if let Some(bad) = values.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+            bail!("every {option} entry must be positive and finite, not {bad}");
+        }
+        Ok(match (values, workers) {
+            ([], _) => PerWorker::Default,
+            ([one], _) => PerWorker::Every(*one),
+            (each, [n]) if each.len() == *n => PerWorker::Each(each.to_vec()),
+            (each, _) => bail!(
+                "{option} gives {} values but --workers is {}: give one value for every \
+                 worker, or one per worker with a single --workers count",
+                each.len(),
+                workers
+                    .iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(",")
+            ),
+        })
+    }
+
+    /// Worker `k`'s value (`default` when the option was not given).
+    fn value(&self, k: usize, default: f64) -> f64 {
+        match self {
+            PerWorker::Default => default,
+            PerWorker::Every(v) => *v,
+            PerWorker::Each(each) => each[k],
+        }
+    }
+}
+
+/// The `n` workers of a simulated farm: `base` with each one's speed and
+/// own link from `speeds` and `links` (by default `base`'s), the last
+/// `slow` of them at half that speed.
+fn farm_workers(
+    speeds: &PerWorker,
+    links: &PerWorker,
+    n: usize,
+    slow: usize,
+    base: &WorkerSpec,
+) -> Vec<WorkerSpec> {
+    (0..n)
+        .map(|k| {
+            let half = if k + slow >= n { 0.5 } else { 1.0 };
+            WorkerSpec {
+                speed: speeds.value(k, base.speed) * half,
+                link_bits_per_second: links.value(k, base.link_bits_per_second / 1e6) * 1e6,
+                ..base.clone()
+            }
+        })
+        .collect()
 }
 
 /// Simulates `frames` copies of the recorded frame on `workers`.
@@ -646,6 +769,10 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     if args.link_mbit.iter().any(|&m| !(m.is_finite() && m > 0.0)) {
         bail!("every --link-mbit entry must be positive and finite");
     }
+    let speeds = PerWorker::parse("--worker-speed", &args.worker_speed, &args.workers)?;
+    let links = PerWorker::parse("--worker-mbit", &args.worker_mbit, &args.workers)?;
+    // Workers as given: no made-up half-speed farms beside them.
+    let given = speeds != PerWorker::Default || links != PerWorker::Default;
     // Durations and scales: finite, so the virtual clock stays meaningful.
     let times = [args.latency_ms, args.package_overhead_ms.unwrap_or(0.0)];
     let scales = [args.cost_scale, args.fixed_cost_scale];
@@ -762,17 +889,20 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         package_overhead: overhead,
         cores: args.worker_threads.max(1),
     };
+    let farm = |n: usize, mbit: f64, slow: usize| {
+        farm_workers(&speeds, &links, n, slow, &worker(1.0, mbit))
+    };
     let mut rows = Vec::new();
     for &mbit in &args.link_mbit {
         let config = &config(mbit);
-        let one = simulate(&farm_job, &costs, config, vec![worker(1.0, mbit)])?;
+        let one = simulate(&farm_job, &costs, config, farm(1, mbit, 0))?;
         for (k, &n) in args.workers.iter().enumerate() {
             let background = match args.background_cores.as_slice() {
                 [] => 0.0,
                 [all] => *all,
                 each => each[k],
             };
-            let equal = vec![worker(1.0, mbit); n];
+            let equal = farm(n, mbit, 0);
             let config = &SimulationConfig {
                 background_threads: background_threads_for(
                     &farm_job, &costs, config, &equal, background,
@@ -780,16 +910,13 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
                 ..config.clone()
             };
             for heterogeneous in [false, true] {
-                if heterogeneous && n < 2 {
+                if heterogeneous && (n < 2 || given) {
                     continue;
                 }
                 let slow = if heterogeneous { n / 2 } else { 0 };
-                let speeds: Vec<f64> = (0..n)
-                    .map(|k| if k >= n - slow { 0.5 } else { 1.0 })
-                    .collect();
-                let workers: Vec<WorkerSpec> = speeds.iter().map(|&s| worker(s, mbit)).collect();
+                let workers = farm(n, mbit, slow);
                 let frames = simulate(&farm_job, &costs, config, workers.clone())?;
-                let mut row = Row::new(&frames, &one, total, &speeds, mbit, heterogeneous)?;
+                let mut row = Row::new(&frames, &one, total, &workers, mbit, heterogeneous)?;
                 if config.background_threads > 0.0 {
                     let idle = SimulationConfig {
                         background_threads: 0.0,
@@ -884,7 +1011,7 @@ fn print_report(
         }
     );
     println!(
-        "columns: mixed = half the workers at half speed; ideal = sum of speeds; frame s = steady-state time per frame: from the first frame's delivery to the last's, over the frames' work traced in between (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first and delivered before the last frame's announcement (the job's drain) of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
+        "columns: mixed = half the workers at half speed; given = workers of differing --worker-speed or --worker-mbit; ideal = sum of speeds; frame s = steady-state time per frame: from the first frame's delivery to the last's, over the frames' work traced in between (set-ups, base frame, links included); effic. = one thread's tracing per frame / (frame s x ideal), at most 100%; vs 1 = one worker's frame s / frame s; imb. = worst frame after the first and delivered before the last frame's announcement (the job's drain) of (max - mean) / mean of the workers' package time within the frame's lifetime (announcement to delivery); latency = the last frame's lifetime"
     );
     println!(
         "{:>7} {:>6} {:>6} {:>6} {:>9} {:>7} {:>7} {:>7} {:>8} {:>8}",
@@ -904,7 +1031,7 @@ fn print_report(
             "{:>7} {:>6} {:>6} {:>6.1} {:>9.3} {:>6.0}% {:>7.2} {:>6.1}% {:>8.3} {:>8}",
             r.workers,
             format!("{}M", r.link_mbit),
-            if r.heterogeneous { "mixed" } else { "equal" },
+            r.set_name(),
             r.ideal,
             r.frame_seconds,
             r.efficiency * 100.0,
@@ -913,6 +1040,15 @@ fn print_report(
             r.latency_seconds_per_frame.last().copied().unwrap_or(0.0),
             r.packages
         );
+        if !(args.worker_speed.is_empty() && args.worker_mbit.is_empty()) {
+            let list = |v: &[f64]| v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+            println!(
+                "{:>7} worker speeds {}, their own links {} Mbit/s",
+                "",
+                list(&r.worker_speeds),
+                list(&r.worker_mbit)
+            );
+        }
         if r.background_threads > 0.0 {
             println!(
                 "{:>7} other work on the machine: {:.2} always-runnable threads got {:.2} cores; {:.3} s per frame without it",
@@ -993,6 +1129,175 @@ fn print_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    /// `vtfarm bench simulate`'s arguments alone.
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: SimulateArgs,
+    }
+
+    fn parse(args: &[&str]) -> SimulateArgs {
+        Cli::try_parse_from(["simulate"].iter().chain(args))
+            .expect("arguments parse")
+            .args
+    }
+
+    fn per_worker(args: &SimulateArgs) -> Result<(PerWorker, PerWorker)> {
+        Ok((
+            PerWorker::parse("--worker-speed", &args.worker_speed, &args.workers)?,
+            PerWorker::parse("--worker-mbit", &args.worker_mbit, &args.workers)?,
+        ))
+    }
+
+    #[test]
+    fn per_worker_speeds_and_links_parse_one_each_or_one_for_every_worker() {
+        let args = parse(&[
+            "--workers",
+            "2",
+            "--worker-speed",
+            "0.45,0.15",
+            "--worker-mbit",
+            "100,10",
+        ]);
+        assert_eq!(
+            per_worker(&args).unwrap(),
+            (
+                PerWorker::Each(vec![0.45, 0.15]),
+                PerWorker::Each(vec![100.0, 10.0])
+            )
+        );
+        let args = parse(&["--workers", "1,2,4", "--worker-speed", "0.22"]);
+        assert_eq!(
+            per_worker(&args).unwrap(),
+            (PerWorker::Every(0.22), PerWorker::Default)
+        );
+        let args = parse(&[]);
+        assert_eq!(
+            per_worker(&args).unwrap(),
+            (PerWorker::Default, PerWorker::Default)
+        );
+    }
+
+    #[test]
+    fn a_per_worker_list_that_does_not_match_the_workers_is_a_clear_error() {
+        for (args, message) in [
+            (
+                &["--workers", "3", "--worker-speed", "0.45,0.15"][..],
+                "--worker-speed gives 2 values but --workers is 3",
+            ),
+            (
+                &["--workers", "1,2", "--worker-mbit", "100,10"][..],
+                "--worker-mbit gives 2 values but --workers is 1,2",
+            ),
+            (
+                &["--workers", "2", "--worker-speed", "0.45,0"][..],
+                "every --worker-speed entry must be positive and finite, not 0",
+            ),
+            (
+                &["--workers", "2", "--worker-mbit", "100,-10"][..],
+                "every --worker-mbit entry must be positive and finite, not -10",
+            ),
+            (
+                &["--workers", "1", "--worker-speed", "NaN"][..],
+                "every --worker-speed entry must be positive and finite, not NaN",
+            ),
+        ] {
+            let args = parse(args);
+            let error = per_worker(&args).unwrap_err().to_string();
+            assert!(error.starts_with(message), "{error}");
+            // `run` refuses them before it records anything.
+            let error = run(args).unwrap_err().to_string();
+            assert!(error.starts_with(message), "{error}");
+        }
+    }
+
+    #[test]
+    fn farm_workers_take_each_speed_and_link_and_keep_the_rest() {
+        let base = WorkerSpec {
+            speed: 1.0,
+            link_bits_per_second: 1e9,
+            latency: Duration::from_micros(50),
+            package_overhead: Duration::from_micros(20),
+            cores: 1,
+        };
+        let each = farm_workers(
+            &PerWorker::Each(vec![0.45, 0.15]),
+            &PerWorker::Each(vec![100.0, 10.0]),
+            2,
+            0,
+            &base,
+        );
+        let figures: Vec<(f64, f64)> = (each.iter())
+            .map(|w| (w.speed, w.link_bits_per_second))
+            .collect();
+        assert_eq!(figures, [(0.45, 100e6), (0.15, 10e6)]);
+        assert!(each.iter().all(|w| w.latency == base.latency
+            && w.package_overhead == base.package_overhead
+            && w.cores == 1));
+        // The default farms: the base link, and the last `slow` at half speed.
+        let mixed = farm_workers(&PerWorker::Default, &PerWorker::Default, 3, 1, &base);
+        let figures: Vec<(f64, f64)> = (mixed.iter())
+            .map(|w| (w.speed, w.link_bits_per_second))
+            .collect();
+        assert_eq!(figures, [(1.0, 1e9), (1.0, 1e9), (0.5, 1e9)]);
+    }
+
+    /// A whole run with workers as given: one farm of exactly those workers
+    /// (no half-speed farm beside it), the master's link as --link-mbit,
+    /// and per frame its delivery and every process's CPU in the JSON.
+    #[test]
+    fn given_workers_are_simulated_as_given_and_reported_per_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let json = dir.path().join("sim.json");
+        let args = parse(&[
+            "--workers",
+            "2",
+            "--worker-speed",
+            "0.45,0.15",
+            "--worker-mbit",
+            "100,10",
+            "--link-mbit",
+            "1000",
+            "--frames",
+            "4",
+            "--width",
+            "64",
+            "--height",
+            "36",
+            "--detail",
+            "0.3",
+            "--repeats",
+            "1",
+            "--threads",
+            "1",
+            "--master-threads",
+            "1",
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        run(args).unwrap();
+        let rows: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let rows = rows.as_array().unwrap();
+        assert_eq!(rows.len(), 1, "one farm, no mixed one: {rows:?}");
+        let row = &rows[0];
+        assert_eq!(row["workers"], 2);
+        assert_eq!(row["heterogeneous"], false);
+        assert_eq!(row["link_mbit"], 1000.0);
+        assert_eq!(row["worker_speeds"], serde_json::json!([0.45, 0.15]));
+        assert_eq!(row["worker_mbit"], serde_json::json!([100.0, 10.0]));
+        assert!((row["ideal"].as_f64().unwrap() - 0.6).abs() < 1e-12);
+        let done = row["done_seconds_per_frame"].as_array().unwrap();
+        assert_eq!(done.len(), 4);
+        let done: Vec<f64> = done.iter().map(|d| d.as_f64().unwrap()).collect();
+        assert!(done.windows(2).all(|w| w[0] <= w[1]), "{done:?}");
+        let cpu = row["cpu_at_delivery"].as_array().unwrap();
+        assert_eq!(cpu.len(), 4);
+        // The master, two workers, the submitter.
+        assert!(cpu.iter().all(|c| c.as_array().unwrap().len() == 4));
+    }
 
     /// The recording has one entry per reflector triangle, in the master's
     /// Morton order, and its one-triangle packages together cover exactly

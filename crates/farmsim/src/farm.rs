@@ -184,6 +184,12 @@ impl<W> SimWorker<W> {
     pub fn is_connected(&self) -> bool {
         self.session.is_some()
     }
+
+    /// The master's connection of its current session (for inputs from
+    /// outside the model, as a test's injected message).
+    pub fn conn(&self) -> ConnId {
+        self.conn
+    }
 }
 
 /// A timed event.

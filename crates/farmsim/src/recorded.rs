@@ -307,6 +307,8 @@ fn run_farm(
         aux: false,
         method: MethodKind::VertexTracing.into(),
         image: WireImageFormat::LinearF32,
+        priority: 0,
+        kind: vtfarm_proto::WireJobKind::Render,
     };
     farm.submit(wire, scene);
     let mut delivered = |f: &Farm<Recorded>| f.deliveries.len() >= frames;

@@ -801,6 +801,7 @@ fn a_flat_mirror_reflecting_a_panel_returns_kr_times_its_luminance() {
         bvh: &bvh,
         lighting: &dark,
         settings: TraceSettings::default(),
+        cone: vtfarm_trace::PixelCone::FINEST,
     }
     .trace(&Ray {
         origin: eye,

@@ -24,7 +24,7 @@ use vtfarm_method::MethodKind;
 use vtfarm_scene::obj::{ObjOptions, load_obj};
 use vtfarm_scene::{
     Camera, DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, Lighting,
-    Material, Scene, Texture, TextureId, Triangle, TriangleId, fresnel_reflectance,
+    Material, ObjectId, Scene, Texture, TextureId, Triangle, TriangleId, fresnel_reflectance,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::VertexSettings;
@@ -251,7 +251,15 @@ impl LightingSpec {
     }
 }
 
-/// Selects reflector triangles by the name of their object or material.
+/// Second names of a scene's objects, which `[reflectors] objects` also
+/// selects by: each glTF mesh name a node's name hides, with the objects of
+/// the nodes that instance the mesh
+/// ([`vtfarm_scene::gltf::ImportedGltf::mesh_objects`]); empty for OBJ
+/// files and the cockpit.
+pub type ObjectAliases = BTreeMap<String, Vec<ObjectId>>;
+
+/// Selects reflector triangles by the name of their object (a glTF node's
+/// or its mesh's, [`ObjectAliases`]) or material.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum ReflectorSelector {
     Object(String),
@@ -259,13 +267,17 @@ pub enum ReflectorSelector {
 }
 
 impl ReflectorSelector {
-    /// Whether `triangle` of `scene` is selected.
-    pub fn matches(&self, scene: &Scene, triangle: &Triangle) -> bool {
+    /// Whether `triangle` of `scene` (whose objects have `aliases` as
+    /// second names) is selected.
+    pub fn matches(&self, scene: &Scene, aliases: &ObjectAliases, triangle: &Triangle) -> bool {
         match self {
-            ReflectorSelector::Object(name) => scene
-                .objects
-                .get(triangle.object as usize)
-                .is_some_and(|o| o.name == *name),
+            ReflectorSelector::Object(name) => {
+                let named = scene.objects.get(triangle.object as usize);
+                named.is_some_and(|o| o.name == *name)
+                    || aliases
+                        .get(name)
+                        .is_some_and(|objects| objects.contains(&triangle.object))
+            }
             ReflectorSelector::Material(name) => scene
                 .materials
                 .get(triangle.material as usize)
@@ -300,9 +312,18 @@ pub struct LoadedScene {
     /// (same target, up, field of view and size).
     pub frames: Vec<Camera>,
     pub lighting: Lighting,
+    /// The objects' second names, for [`Job::reflector_triangles`].
+    pub object_aliases: ObjectAliases,
     /// What the job filled in for the scene (the default light, Fresnel
     /// reflectance for a reflector): each is also logged as a warning.
     pub notes: Vec<String>,
+}
+
+/// A job's scene with its objects' second names ([`Job::scene_only`]).
+#[derive(Clone, Debug)]
+pub struct JobScene {
+    pub scene: Scene,
+    pub object_aliases: ObjectAliases,
 }
 
 /// Reads and validates a job file.
@@ -325,11 +346,12 @@ impl Job {
     /// Generates the cockpit or loads the OBJ file, and resolves the camera,
     /// frames and lighting against it.
     pub fn load_scene(&self) -> Result<LoadedScene, JobError> {
-        let (scene, camera, lighting) = match &self.scene {
+        let (scene, aliases, camera, lighting) = match &self.scene {
             SceneSource::Cockpit(config) => {
                 let cockpit = vtfarm_cockpit::cockpit(config);
                 (
                     cockpit.scene,
+                    ObjectAliases::new(),
                     self.camera.over(&cockpit.camera),
                     self.lighting.over(cockpit.lighting),
                 )
@@ -339,8 +361,16 @@ impl Job {
                     .camera
                     .complete()
                     .map_err(|missing| self.invalid(None, obj_camera_missing(&missing)))?;
-                let scene = self.loaded_scene()?;
-                (scene, camera, self.lighting.over(Lighting::default()))
+                let JobScene {
+                    scene,
+                    object_aliases,
+                } = self.loaded_scene()?;
+                (
+                    scene,
+                    object_aliases,
+                    camera,
+                    self.lighting.over(Lighting::default()),
+                )
             }
             SceneSource::Gltf(path) => {
                 let imported = self.gltf(path)?;
@@ -353,12 +383,13 @@ impl Job {
                 };
                 (
                     imported.scene,
+                    imported.mesh_objects,
                     camera,
                     self.lighting.over(Lighting::default()),
                 )
             }
         };
-        let (scene, mut notes) = self.prepare(scene)?;
+        let (scene, mut notes) = self.prepare(scene, &aliases)?;
         let lighting = match (&self.scene, &self.lighting.lights) {
             // A file with no light of its own, and the job sets none.
             (SceneSource::Obj(_) | SceneSource::Gltf(_), None) => {
@@ -386,6 +417,7 @@ impl Job {
             camera,
             frames,
             lighting,
+            object_aliases: aliases,
             notes,
         })
     }
@@ -393,19 +425,30 @@ impl Job {
     /// The scene alone, with the job's material changes but without
     /// resolving camera or lighting (a glare study takes those from its base
     /// job for every design variant).
-    pub fn scene_only(&self) -> Result<Scene, JobError> {
-        let (scene, notes) = self.prepare(self.loaded_scene()?)?;
+    pub fn scene_only(&self) -> Result<JobScene, JobError> {
+        let JobScene {
+            scene,
+            object_aliases,
+        } = self.loaded_scene()?;
+        let (scene, notes) = self.prepare(scene, &object_aliases)?;
         for note in &notes {
             tracing::warn!("{}: {note}", self.file.display());
         }
-        Ok(scene)
+        Ok(JobScene {
+            scene,
+            object_aliases,
+        })
     }
 
     /// `scene` with the job's `[materials]` applied, then Fresnel
     /// reflectance for the reflectors' materials that have `Ni` > 1 and no
     /// other reflectance (the usual export of glass), then `thin`; returns
     /// notes for the user about what the job filled in.
-    fn prepare(&self, mut scene: Scene) -> Result<(Scene, Vec<String>), JobError> {
+    fn prepare(
+        &self,
+        mut scene: Scene,
+        aliases: &ObjectAliases,
+    ) -> Result<(Scene, Vec<String>), JobError> {
         let mut notes = Vec::new();
         let mut overridden = vec![None; scene.materials.len()];
         for change in &self.materials {
@@ -439,7 +482,7 @@ impl Job {
         }
         let mut is_reflector_material = vec![false; scene.materials.len()];
         for triangle in &scene.triangles {
-            if self.reflectors.iter().any(|r| r.matches(&scene, triangle)) {
+            if (self.reflectors.iter()).any(|r| r.matches(&scene, aliases, triangle)) {
                 is_reflector_material[triangle.material as usize] = true;
             }
         }
@@ -521,10 +564,16 @@ impl Job {
     }
 
     /// The scene as its source gives it.
-    fn loaded_scene(&self) -> Result<Scene, JobError> {
-        match &self.scene {
-            SceneSource::Gltf(path) => Ok(self.gltf(path)?.scene),
-            SceneSource::Cockpit(config) => Ok(vtfarm_cockpit::cockpit(config).scene),
+    fn loaded_scene(&self) -> Result<JobScene, JobError> {
+        let scene = match &self.scene {
+            SceneSource::Gltf(path) => {
+                let imported = self.gltf(path)?;
+                return Ok(JobScene {
+                    scene: imported.scene,
+                    object_aliases: imported.mesh_objects,
+                });
+            }
+            SceneSource::Cockpit(config) => vtfarm_cockpit::cockpit(config).scene,
             SceneSource::Obj(path) => {
                 let options = ObjOptions {
                     keep_uvs: self.materials.iter().any(|m| m.texture.is_some()),
@@ -534,9 +583,13 @@ impl Job {
                     file: self.file.clone(),
                     obj: path.clone(),
                     error: Box::new(error),
-                })
+                })?
             }
-        }
+        };
+        Ok(JobScene {
+            scene,
+            object_aliases: ObjectAliases::new(),
+        })
     }
 
     /// One camera per frame: `camera` itself, then `camera` moved to each
@@ -577,14 +630,19 @@ impl Job {
     }
 
     /// The sorted, de-duplicated ids of all triangles any reflector selector
-    /// matches. Fails on a selector that matches nothing, listing the scene's
-    /// object and material names.
-    pub fn reflector_triangles(&self, scene: &Scene) -> Result<Vec<TriangleId>, JobError> {
+    /// matches (objects by their names and `aliases`, see
+    /// [`ObjectAliases`]). Fails on a selector that matches nothing, listing
+    /// the scene's object and material names.
+    pub fn reflector_triangles(
+        &self,
+        scene: &Scene,
+        aliases: &ObjectAliases,
+    ) -> Result<Vec<TriangleId>, JobError> {
         let mut chosen = vec![false; scene.triangles.len()];
         for selector in &self.reflectors {
             let mut matched = false;
             for (chosen, triangle) in chosen.iter_mut().zip(&scene.triangles) {
-                if selector.matches(scene, triangle) {
+                if selector.matches(scene, aliases, triangle) {
                     *chosen = true;
                     matched = true;
                 }
@@ -594,7 +652,9 @@ impl Job {
                     file: self.file.clone(),
                     location: self.locations.get(&selector.key()).copied(),
                     selector: Box::new(selector.clone()),
-                    objects: sorted_names(scene.objects.iter().map(|o| &o.name)),
+                    objects: sorted_names(
+                        (scene.objects.iter().map(|o| &o.name)).chain(aliases.keys()),
+                    ),
                     materials: sorted_names(scene.materials.iter().map(|m| &m.name)),
                 });
             }

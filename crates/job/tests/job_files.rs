@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use vtfarm_job::{
-    CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, OutputSettings,
-    ReflectorSelector, SceneSource, ToneCurve, load_job, parse_job,
+    CameraSpec, CockpitConfig, GlassDesign, Job, JobError, LightingSpec, ObjectAliases,
+    OutputSettings, ReflectorSelector, SceneSource, ToneCurve, load_job, parse_job,
 };
 use vtfarm_method::MethodKind;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
@@ -294,7 +294,11 @@ fn an_obj_job_loads_with_its_camera_frames_and_default_lighting() {
         "{}",
         loaded.notes[0]
     );
-    assert_eq!(job.reflector_triangles(&loaded.scene).unwrap(), [0]);
+    assert_eq!(
+        job.reflector_triangles(&loaded.scene, &loaded.object_aliases)
+            .unwrap(),
+        [0]
+    );
 }
 
 #[test]
@@ -920,7 +924,7 @@ fn reflectors_select_by_object_and_by_material() {
     scene.validate().unwrap();
     let select = |selectors| {
         with_reflectors(selectors)
-            .reflector_triangles(&scene)
+            .reflector_triangles(&scene, &ObjectAliases::new())
             .unwrap()
     };
     assert_eq!(select(vec![Object("glass".into())]), [0, 2]);
@@ -936,7 +940,9 @@ fn reflectors_select_by_object_and_by_material() {
 fn a_reflector_matching_nothing_lists_the_names() {
     let scene = two_by_two_scene();
     let job = with_reflectors(vec![ReflectorSelector::Object("cover_glass".into())]);
-    let err = job.reflector_triangles(&scene).unwrap_err();
+    let err = job
+        .reflector_triangles(&scene, &ObjectAliases::new())
+        .unwrap_err();
     assert!(matches!(err, JobError::NoReflector { .. }));
     assert_eq!(
         err.to_string(),
@@ -1221,9 +1227,9 @@ fn errors_found_against_the_scene_name_the_line() {
         message.starts_with(&format!("{JOB}:7:")) && message.contains("frames.eyes[1]"),
         "{message}"
     );
-    let scene = job.scene_only().expect("the cockpit");
+    let scene = job.scene_only().expect("the cockpit").scene;
     let message = job
-        .reflector_triangles(&scene)
+        .reflector_triangles(&scene, &ObjectAliases::new())
         .expect_err("no such object")
         .to_string();
     assert!(
@@ -1310,7 +1316,9 @@ fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
     assert_eq!(loaded.camera.eye, Vec3::new(0.0, 1.0, 2.0));
     assert_eq!((loaded.camera.fov_y_deg, loaded.camera.width), (30.0, 64));
     let right = loaded.scene.object_id("right").unwrap();
-    let chosen = job.reflector_triangles(&loaded.scene).unwrap();
+    let chosen = job
+        .reflector_triangles(&loaded.scene, &loaded.object_aliases)
+        .unwrap();
     assert_eq!(chosen.len(), 2);
     assert!(
         chosen
@@ -1337,4 +1345,56 @@ fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
         message.contains("[camera] needs eye, target, fov_y"),
         "{message}"
     );
+}
+
+/// glTF reflectors by node, by the mesh a named node hides, or by material:
+/// `instanced.glb` has nodes "left" and "right", both instancing mesh
+/// "panel" (two triangles each) in material "paint".
+#[test]
+fn gltf_reflectors_are_picked_by_node_mesh_or_material_name() {
+    let fixture =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scene/tests/data/gltf/instanced.glb");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(&fixture, dir.path().join("car.glb")).unwrap();
+    let job_path = dir.path().join("job.toml");
+    let chosen = |reflectors: &str| {
+        std::fs::write(
+            &job_path,
+            format!(
+                "[scene]\ngltf = \"car.glb\"\n[camera]\ncamera = \"driver\"\nwidth = 64\n\
+                 height = 48\n[reflectors]\n{reflectors}\n"
+            ),
+        )
+        .unwrap();
+        let job = load_job(&job_path).unwrap_or_else(|e| panic!("{e}"));
+        let loaded = job.load_scene().unwrap_or_else(|e| panic!("{e}"));
+        let objects = |triangles: &[u32]| -> Vec<String> {
+            let mut names: Vec<String> = (triangles.iter())
+                .map(|&t| loaded.scene.triangles[t as usize].object)
+                .map(|o| loaded.scene.objects[o as usize].name.clone())
+                .collect();
+            names.dedup();
+            names
+        };
+        let triangles = job.reflector_triangles(&loaded.scene, &loaded.object_aliases);
+        triangles.map(|t| (t.len(), objects(&t)))
+    };
+    let both = (4, vec!["left".to_owned(), "right".to_owned()]);
+    assert_eq!(
+        chosen("objects = [\"right\"]").unwrap(),
+        (2, vec!["right".to_owned()])
+    );
+    assert_eq!(chosen("objects = [\"panel\"]").unwrap(), both);
+    assert_eq!(chosen("materials = [\"paint\"]").unwrap(), both);
+    // A misspelt name lists the nodes' and the meshes' names.
+    let message = chosen("objects = [\"pannel\"]").unwrap_err().to_string();
+    assert!(
+        message.starts_with(&format!("{}:8:", job_path.display()))
+            && message.contains("objects: left, panel, right"),
+        "{message}"
+    );
+    // The study's path (the scene without camera) knows the second names too.
+    let job = load_job(&job_path).unwrap();
+    let scene = job.scene_only().unwrap();
+    assert_eq!(scene.object_aliases["panel"].len(), 2);
 }

@@ -27,21 +27,22 @@ use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
-    FrameDone, FramePhase, FrameStart, JobScene, Message, Package, PackageResult, PhaseKind,
-    QueueStatus, RunningJob, SceneData, SceneHash, StatusReply, WireBitmap, WireFrameAux,
-    WireFrameSetup, WireImage, WireImageFormat, WireJob, WirePackageStats, WorkerFrameStats,
-    WorkerStatus, check_triangle_ids, encoded_len,
+    FrameDone, FramePhase, FrameStart, JobAction, JobScene, JobSummary, Message, Package,
+    PackageResult, PhaseKind, QueueStatus, RunningJob, SceneData, SceneHash, StatusReply,
+    WireBitmap, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob, WireJobKind,
+    WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, components_bounds, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::{
-    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, WorkerId,
-    WorkerState,
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler,
+    WorkerId, WorkerState,
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap};
 
 use crate::error::{JobRejected, ResultRejected};
+use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
 use crate::telemetry::Telemetry;
@@ -135,10 +136,9 @@ pub use vtfarm_proto::ATTACH_GRACE;
 struct Job {
     name: String,
     /// The submitters following the job: each gets every frame. Empty
-    /// while none is attached (lost, or not back after a restart).
+    /// while none is attached (lost, or not back after a restart): a
+    /// persistent master renders it on, journaling its frames.
     submitters: BTreeSet<ConnId>,
-    /// When the last submitter went away: past [`ATTACH_GRACE`] the job is cancelled.
-    orphaned_at: Option<Duration>,
     /// Frames before this one were finished before a restart: they are
     /// journaled, and the scheduler's empty stand-ins for them are skipped.
     resume_from: u32,
@@ -363,10 +363,19 @@ pub struct MasterCore {
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
     telemetry: Telemetry,
-    /// Whether jobs are journaled and outlive their submitter for [`ATTACH_GRACE`].
+    /// Whether jobs are journaled and outlive their submitter.
     persistent: bool,
-    /// Completed jobs still kept for re-attaching: frame count and completion time.
-    completed: BTreeMap<u64, (u32, Duration)>,
+    /// Every listed job: its state, priority, progress and times; finished
+    /// ones stay as long as `retention` allows (and, on a persistent
+    /// master, their journaled frames for re-attaching).
+    table: JobTable,
+    retention: Retention,
+    /// The wall clock at `now` zero, in milliseconds since the Unix epoch
+    /// (the driver's reading; 0 on a virtual clock): the jobs' times.
+    wall_origin_ms: u64,
+    /// Why a job is being cancelled (who asked), for its listing and its
+    /// submitters, until the scheduler's `JobCancelled`.
+    cancel_reasons: BTreeMap<u64, String>,
     /// The journal's side of the core (persistent cores only).
     kept: Kept,
     /// The time of the input being handled.
@@ -395,7 +404,10 @@ impl MasterCore {
             outbox: VecDeque::new(),
             telemetry: Telemetry::default(),
             persistent: false,
-            completed: BTreeMap::new(),
+            table: JobTable::default(),
+            retention: rules.retention,
+            wall_origin_ms: 0,
+            cancel_reasons: BTreeMap::new(),
             kept: Kept::default(),
             now: Duration::ZERO,
             departed: BTreeMap::new(),
@@ -405,13 +417,30 @@ impl MasterCore {
         }
     }
 
-    /// A core that journals its jobs (`Output::Persist`) and keeps a job
-    /// whose submitter went away for [`ATTACH_GRACE`].
+    /// A core that journals its jobs (`Output::Persist`) and renders a job
+    /// whose submitter went away to the end.
     pub fn persistent(rules: FarmRules) -> Self {
         MasterCore {
             persistent: true,
             ..MasterCore::new(rules)
         }
+    }
+
+    /// Sets what the wall clock read at `now` zero (milliseconds since the
+    /// Unix epoch): the jobs' submitted, started and finished times. The
+    /// driver reads the clock; the core only adds.
+    pub fn set_wall_clock(&mut self, origin_ms: u64) {
+        self.wall_origin_ms = origin_ms;
+    }
+
+    /// The wall clock at `now`, in milliseconds since the epoch.
+    fn wall_ms(&self, now: Duration) -> u64 {
+        self.wall_origin_ms.saturating_add(now.as_millis() as u64)
+    }
+
+    /// The jobs as `vtfarm jobs` lists them.
+    pub fn jobs(&self) -> &JobTable {
+        &self.table
     }
 
     /// Resumes a journaled job (at start, before any connection): it runs
@@ -422,13 +451,37 @@ impl MasterCore {
         if let Some(damaged) = stored.damaged_frame.clone() {
             self.kept.damaged_frames.insert(stored.id, damaged);
         }
-        if stored.complete {
+        let mut entry = match stored.summary.clone() {
+            Some(summary) => JobEntry::from_summary(summary),
+            // Written before its state (a crash between the two): queued.
+            None => self.new_entry(stored.id, &stored.job, "unknown".into(), now),
+        };
+        entry.frames_done = stored.frames_done;
+        entry.frames_total = stored.job.frames.len() as u32;
+        // The frames decide whether it is complete: one whose journal lost
+        // a frame renders from there again.
+        match (stored.complete, entry.state) {
+            (true, _) => entry.state = JobState::Completed,
+            (false, JobState::Completed) => {
+                entry.state = JobState::Queued;
+                entry.finished_ms = None;
+            }
+            _ => {}
+        }
+        let state = entry.state;
+        if state.is_finished() {
             // Kept (with its scene's bytes) to render a frame again that
-            // the journal cannot give back.
+            // the journal cannot give back, or to queue it again.
             (self.kept.definitions).insert(stored.id, stored.job);
-            self.completed.insert(stored.id, (stored.frames_done, now));
+            self.table.insert(entry);
             return;
         }
+        // It runs again from where it was: queued, or held while paused.
+        if state == JobState::Running {
+            entry.state = JobState::Queued;
+        }
+        let priority = entry.priority;
+        self.table.insert(entry);
         // Once queued the scene is in the cache: the definition names it by hash.
         let job = &stored.job;
         let scene = match &job.scene {
@@ -443,17 +496,23 @@ impl MasterCore {
             aux: job.aux,
             method: job.method,
             image: job.image,
+            priority: job.priority,
+            kind: job.kind,
         };
         (self.kept.definitions).insert(stored.id, definition);
-        let queued = self.queue_job(
+        let mut job = stored.job;
+        job.priority = priority;
+        let paused = state == JobState::Paused;
+        let queued = self.queue_job_with(
             now,
             stored.id,
-            stored.job,
+            job,
             BTreeSet::new(),
             stored.frames_done,
-            false,
+            paused,
         );
         if let Err(e) = queued {
+            self.table.remove(stored.id);
             let reason = format!("cannot resume job {}: {e}", stored.id);
             warn!(job = stored.id, "{reason}; setting it aside");
             self.kept.definitions.remove(&stored.id);
@@ -466,6 +525,8 @@ impl MasterCore {
                 reason,
             });
         } else {
+            // Queued by this master: its end counts like a submitted job's.
+            self.telemetry.counters.jobs_submitted += 1;
             info!(
                 job = stored.id,
                 from_frame = stored.frames_done,
@@ -482,10 +543,10 @@ impl MasterCore {
 
     /// When [`MasterCore::handle_timeout`] should run next.
     pub fn poll_timeout(&self) -> Option<Duration> {
-        let orphans = (self.jobs.values()).filter_map(|j| j.orphaned_at);
-        let completed = self.completed.values().map(|&(_, at)| at);
-        let grace_ends = orphans.chain(completed).min().map(|t| t + ATTACH_GRACE);
-        [self.scheduler.poll_timeout(), grace_ends]
+        // A finished job too old to keep goes at its expiry.
+        let expiry = (self.table.next_expiry(self.retention))
+            .map(|ms| Duration::from_millis(ms.saturating_sub(self.wall_origin_ms)));
+        [self.scheduler.poll_timeout(), expiry]
             .into_iter()
             .flatten()
             .min()
@@ -494,28 +555,19 @@ impl MasterCore {
     pub fn handle_timeout(&mut self, now: Duration) {
         self.now = now;
         self.scheduler.handle_timeout(now);
-        let expired = |at: Duration| now >= at + ATTACH_GRACE;
-        let abandoned: Vec<u64> = (self.jobs.iter())
-            .filter(|(_, j)| j.orphaned_at.is_some_and(expired))
-            .map(|(&id, _)| id)
-            .collect();
-        for job in abandoned {
-            info!(job, "no submitter re-attached, cancelling the job");
-            if self.scheduler.cancel_job(now, JobId(job)).is_err() {
-                // Not in the scheduler (any more): drop it here too.
-                self.forget_job(job);
-                self.persist(Record::JobForgotten { id: job });
-            }
-        }
-        let delivered: Vec<u64> = (self.completed.iter())
-            .filter(|(_, (_, at))| expired(*at))
-            .map(|(&id, _)| id)
-            .collect();
-        for id in delivered {
-            self.completed.remove(&id);
+        self.forget_expired();
+        self.pump();
+    }
+
+    /// Lets go of the finished jobs beyond [`Retention`]: their listing,
+    /// their definition and their journaled frames.
+    fn forget_expired(&mut self) {
+        let now_ms = self.wall_ms(self.now);
+        for id in self.table.expired(self.retention, now_ms) {
+            debug!(job = id, "finished job no longer kept");
+            self.table.remove(id);
             self.persist(Record::JobForgotten { id });
         }
-        self.pump();
     }
 
     /// A connection passed its handshake.
@@ -581,12 +633,14 @@ impl MasterCore {
                         continue; // others still follow it
                     }
                     if self.persistent {
-                        // It may come back (or attach from elsewhere).
-                        info!(job, "submitter left, keeping its job for {ATTACH_GRACE:?}");
-                        j.orphaned_at = Some(now);
+                        // Its frames are journaled: it may come back (or
+                        // attach from elsewhere) and get them.
+                        info!(job, "submitter left; the job renders on");
                     } else {
                         // Nobody is left to receive the images: stop its jobs.
                         info!(job, "submitter left, cancelling its job");
+                        let reason = "its submitter left (the embedded master keeps no frames)";
+                        self.cancel_reasons.insert(job, reason.into());
                         let _ = self.scheduler.cancel_job(now, JobId(job));
                     }
                 }
@@ -618,14 +672,13 @@ impl MasterCore {
         };
         match message {
             Message::Heartbeat => {}
-            Message::RequestWork { job, .. } => {
-                // A request for a job that is over is stale; a worker sets
-                // a frame up when its first package of it comes, so any
-                // frame of the running job will do.
-                let running = self.scheduler.queue().running.map(|r| r.job.0);
-                if running == Some(job) {
-                    let _ = self.scheduler.request_work(now, worker);
-                }
+            Message::RequestWork { .. } => {
+                // A worker has one request out at a time and sets a frame up
+                // when its first package of it comes, so any job's work will
+                // do, whichever frame it names: the newest it heard of may
+                // be of a job that ended (a higher priority's that ran
+                // after it, say), and dropping the request would idle it.
+                let _ = self.scheduler.request_work(now, worker);
             }
             Message::SceneRequest { hash } => match self.scenes.get(&hash) {
                 Some((_, data)) => {
@@ -640,11 +693,15 @@ impl MasterCore {
             }
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.name(conn), package = failed.id, "package failed: {}", failed.error);
-                if let Err(e) =
-                    self.scheduler
-                        .package_failed(now, worker, PackageId(failed.id), failed.error)
-                {
-                    debug!("failure report ignored: {e}");
+                match (self.scheduler).package_failed(
+                    now,
+                    worker,
+                    PackageId(failed.id),
+                    failed.error,
+                ) {
+                    // It runs nowhere now (a retry is a new assignment).
+                    Ok(()) => self.drop_in_flight(failed.id, conn),
+                    Err(e) => debug!("failure report ignored: {e}"),
                 }
             }
             other => self.close(conn, format!("unexpected {} from a worker", other.name())),
@@ -775,6 +832,15 @@ impl MasterCore {
             }
             Message::SubmitJob { job } => self.submit(now, conn, job),
             Message::AttachJob { job, from_frame } => self.attach(conn, job, from_frame),
+            Message::ListJobs { all } => {
+                let jobs = self.table.list(all).map(JobEntry::summary).collect();
+                self.send(conn, Message::JobList { jobs });
+            }
+            Message::ControlJob { job, action } => {
+                let who = self.name(conn);
+                let outcome = (self.control_job(now, job, action, &who)).map_err(|e| e.to_string());
+                self.send(conn, Message::JobControlled { job, outcome });
+            }
             Message::SceneData(data) => match self.awaiting_scene.remove(&conn) {
                 Some(mut job) if job.scene == JobScene::Hash(data.hash) => {
                     job.scene = JobScene::Data(data);
@@ -807,10 +873,16 @@ impl MasterCore {
         job.scene = scene;
         let id = self.next_job;
         let frames = job.frames.len() as u32;
-        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0, false) {
+        let host = match self.peers.get(&conn) {
+            Some(Peer::Submitter { address }) => address.clone(),
+            _ => "unknown".into(),
+        };
+        let entry = self.new_entry(id, &job, host, now);
+        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0) {
             return self.refuse_job(conn, e.to_string());
         }
         self.next_job += 1;
+        self.table.insert(entry);
         self.remember_for_view(id);
         self.send(conn, Message::JobAccepted { job: id, frames });
         self.telemetry.counters.jobs_submitted += 1;
@@ -822,7 +894,186 @@ impl MasterCore {
                 job: Box::new(job),
                 scene,
             });
+            self.persist_state(id);
         }
+    }
+
+    /// A listing for a job just submitted.
+    fn new_entry(&self, id: u64, job: &WireJob, host: String, now: Duration) -> JobEntry {
+        JobEntry {
+            id,
+            name: job.name.clone(),
+            kind: job.kind,
+            state: JobState::Queued,
+            priority: job.priority,
+            frames_done: 0,
+            frames_total: job.frames.len() as u32,
+            submitted_ms: self.wall_ms(now),
+            started_ms: None,
+            finished_ms: None,
+            host,
+            reason: String::new(),
+        }
+    }
+
+    /// Journals job `id`'s listing (its state, priority and times).
+    fn persist_state(&mut self, id: u64) {
+        if let Some(entry) = self.table.get(id) {
+            let summary = entry.summary();
+            self.persist(Record::JobState(Box::new(summary)));
+        }
+    }
+
+    /// Moves a listed job to `to` and journals it; a job the table does
+    /// not list (a frame rendered again) has no state to keep.
+    fn set_job_state(&mut self, id: u64, to: JobState) {
+        let at = self.wall_ms(self.now);
+        match self.table.set_state(id, to, at) {
+            Ok(Some(_)) => self.persist_state(id),
+            Ok(None) => {}
+            // The core asks only for what the table allows: a bug if not.
+            Err(e) => warn!("{e}"),
+        }
+    }
+
+    /// A user's request about a job (`vtfarm cancel` and the like, the
+    /// dashboard's buttons, the HTTP API): the job as it is afterwards, or
+    /// why not. `who` names the asker for the job's submitters and listing.
+    pub fn control_job(
+        &mut self,
+        now: Duration,
+        id: u64,
+        action: JobAction,
+        who: &str,
+    ) -> Result<JobSummary, JobControlError> {
+        self.now = now;
+        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
+        let state = entry.state;
+        if entry.kind == WireJobKind::View {
+            return Err(JobControlError::ViewJob(id));
+        }
+        let not_now = |action, applies_to| JobControlError::NotNow {
+            job: id,
+            state,
+            action,
+            applies_to,
+        };
+        match action {
+            JobAction::Cancel => {
+                if state.is_finished() {
+                    return Err(not_now("cancel", "queued, running or paused"));
+                }
+                info!(job = id, by = who, "cancelling the job");
+                let reason = format!("job {id} was cancelled by {who}");
+                self.cancel_reasons.insert(id, reason);
+                let _ = self.scheduler.cancel_job(now, JobId(id));
+            }
+            JobAction::Pause => {
+                if !matches!(state, JobState::Queued | JobState::Running) {
+                    return Err(not_now("pause", "queued or running"));
+                }
+                info!(job = id, by = who, "pausing the job");
+                let _ = self.scheduler.pause_job(now, JobId(id));
+                self.set_job_state(id, JobState::Paused);
+                self.tell_state(id, format!("paused by {who}"));
+            }
+            JobAction::Resume => {
+                if state != JobState::Paused {
+                    return Err(not_now("resume", "paused"));
+                }
+                info!(job = id, by = who, "resuming the job");
+                let started = self.table.get(id).is_some_and(|e| e.started_ms.is_some());
+                let to = if started {
+                    JobState::Running
+                } else {
+                    JobState::Queued
+                };
+                self.set_job_state(id, to);
+                let _ = self.scheduler.resume_job(now, JobId(id));
+                self.tell_state(id, format!("resumed by {who}"));
+            }
+            JobAction::Requeue { failed_only } => {
+                if !state.is_finished() {
+                    return Err(not_now("requeue", "completed, failed or cancelled"));
+                }
+                self.requeue(now, id, failed_only)?;
+                info!(job = id, by = who, failed_only, "job queued again");
+            }
+            JobAction::SetPriority(priority) => {
+                let _ = self.scheduler.set_priority(now, JobId(id), priority);
+                if let Some(entry) = self.table.get_mut(id) {
+                    entry.priority = priority;
+                }
+                self.persist_state(id);
+            }
+        }
+        self.pump();
+        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
+        Ok(entry.summary())
+    }
+
+    /// Tells a job's submitters its new state and why.
+    fn tell_state(&mut self, id: u64, reason: String) {
+        let (Some(entry), Some(job)) = (self.table.get(id), self.jobs.get(&id)) else {
+            return;
+        };
+        let message = Message::JobStateChanged {
+            job: id,
+            state: entry.state.into(),
+            reason,
+        };
+        let submitters = job.submitters.clone();
+        self.send_to(&submitters, message);
+    }
+
+    /// Queues a finished job again under its id: every frame, or with
+    /// `failed_only` the frames it did not finish.
+    fn requeue(
+        &mut self,
+        now: Duration,
+        id: u64,
+        failed_only: bool,
+    ) -> Result<(), JobControlError> {
+        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
+        let resume_from = if failed_only { entry.frames_done } else { 0 };
+        if failed_only && resume_from >= entry.frames_total {
+            return Err(JobControlError::NothingToRequeue(id));
+        }
+        let requeue_error = |reason: String| JobControlError::Requeue { job: id, reason };
+        let definition = (self.kept.definitions.get(&id).cloned()).ok_or_else(|| {
+            requeue_error("this master keeps no job definitions (it journals nothing)".into())
+        })?;
+        let mut job = definition.clone();
+        job.priority = entry.priority;
+        // The definition names its scene by hash once queued.
+        let scene_hash = match &job.scene {
+            JobScene::Data(d) => d.hash,
+            JobScene::Hash(h) => *h,
+        };
+        self.queue_job(now, id, job, BTreeSet::new(), resume_from)
+            .map_err(|e| requeue_error(e.to_string()))?;
+        if let Some(entry) = self.table.get_mut(id) {
+            entry.frames_done = resume_from;
+            entry.started_ms = None;
+        }
+        if self.journals(id) && !failed_only {
+            // Its old frames go: a restart must not take them for new ones.
+            self.persist(Record::JobForgotten { id });
+            let mut journaled = definition;
+            journaled.scene = JobScene::Hash(scene_hash);
+            self.kept.definitions.insert(id, journaled.clone());
+            if let Some((_, data)) = self.scenes.get(&scene_hash) {
+                let scene = data.clone();
+                self.persist(Record::JobQueued {
+                    id,
+                    job: Box::new(journaled),
+                    scene,
+                });
+            }
+        }
+        self.set_job_state(id, JobState::Queued);
+        self.telemetry.counters.jobs_submitted += 1;
+        Ok(())
     }
 
     /// Checks a job whose scene is in the cache (or in `job`) and queues it
@@ -831,11 +1082,24 @@ impl MasterCore {
         &mut self,
         now: Duration,
         id: u64,
+        job: WireJob,
+        submitters: BTreeSet<ConnId>,
+        resume_from: u32,
+    ) -> Result<(), JobRejected> {
+        self.queue_job_with(now, id, job, submitters, resume_from, false)
+    }
+
+    /// [`MasterCore::queue_job`], the job queued `paused` or not.
+    fn queue_job_with(
+        &mut self,
+        now: Duration,
+        id: u64,
         mut job: WireJob,
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
-        interactive: bool,
+        paused: bool,
     ) -> Result<(), JobRejected> {
+        let (priority, job_kind) = (job.priority, job.kind);
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
@@ -884,7 +1148,6 @@ impl MasterCore {
             id,
             Job {
                 name: job.name,
-                orphaned_at: submitters.is_empty().then_some(now),
                 submitters,
                 resume_from,
                 frames_done: resume_from,
@@ -899,13 +1162,16 @@ impl MasterCore {
                 assembling: Vec::new(),
             },
         );
-        // The view's stages are split (latency counts); batch work may run
-        // in whole frames.
-        let submitted = if interactive {
-            self.scheduler.submit_interactive_job(now, JobId(id), work)
-        } else {
-            self.scheduler.submit_job(now, JobId(id), work)
+        // The view's stages are split over the workers: their latency counts.
+        let interactive = job_kind == WireJobKind::View;
+        let options = QueueOptions {
+            priority,
+            paused,
+            interactive,
         };
+        let submitted = self
+            .scheduler
+            .submit_job_with(now, JobId(id), work, options);
         submitted.map_err(|e| {
             self.jobs.remove(&id);
             JobRejected::from(e)
@@ -914,22 +1180,29 @@ impl MasterCore {
 
     /// A submitter asks for a job's frames from `from_frame` on.
     fn attach(&mut self, conn: ConnId, job: u64, from_frame: u32) {
+        // A finished job within retention: its journaled frames, then how it ended.
+        let finished = (self.table.get(job))
+            .filter(|e| e.state.is_finished() && self.persistent)
+            .map(|e| (e.frames_total, e.frames_done, e.state, e.reason.clone()));
         let (frames, done) = if let Some(j) = self.jobs.get_mut(&job) {
             if !j.submitters.is_empty() {
                 info!(job, "another submitter attached; each gets every frame");
             }
             j.submitters.insert(conn);
-            j.orphaned_at = None;
             (j.frames.len() as u32, j.frames_done)
-        } else if let Some(&(frames, _)) = self.completed.get(&job) {
-            (frames, frames)
+        } else if let Some((frames, done, _, _)) = &finished {
+            (*frames, *done)
         } else {
-            let error = match self.kept.damaged.get(&job) {
-                Some(reason) => {
+            let error = match (self.kept.damaged.get(&job), self.table.get(job)) {
+                (Some(reason), _) => {
                     format!("job {job} could not be read back from the journal: {reason}")
                 }
-                None => format!(
-                    "the master has no job {job} (finished long ago, failed or never submitted)"
+                (None, Some(entry)) => format!(
+                    "job {job} is {} and this master keeps no frames (it journals nothing)",
+                    entry.state
+                ),
+                (None, None) => format!(
+                    "the master has no job {job} (finished longer ago than it keeps jobs, or never submitted)"
                 ),
             };
             let errors = vec![error];
@@ -953,6 +1226,22 @@ impl MasterCore {
             }
         }
         self.replay(conn, job, from_frame..done);
+        match finished {
+            Some((_, _, JobState::Failed, reason)) => {
+                self.send(
+                    conn,
+                    Message::JobFailed {
+                        job,
+                        errors: vec![reason],
+                    },
+                );
+            }
+            Some((_, _, JobState::Cancelled, reason)) => {
+                let state = JobState::Cancelled.into();
+                self.send(conn, Message::JobStateChanged { job, state, reason });
+            }
+            _ => {}
+        }
     }
 
     /// Sends `conn` the finished frames `frames` of `job`, in order: those
@@ -982,6 +1271,15 @@ impl MasterCore {
     fn forget_job(&mut self, job: u64) -> Option<Job> {
         self.packages.retain(|_, p| p.job != job);
         self.jobs.remove(&job)
+    }
+
+    /// Package `id` no longer runs on `worker` (it failed there, or the
+    /// worker was lost): it leaves the packages in flight unless another
+    /// worker runs it now.
+    fn drop_in_flight(&mut self, id: u64, worker: ConnId) {
+        if self.packages.get(&id).is_some_and(|p| p.worker == worker) {
+            self.packages.remove(&id);
+        }
     }
 
     fn send(&mut self, conn: ConnId, message: Message) {
@@ -1057,12 +1355,41 @@ impl MasterCore {
     fn event(&mut self, event: Event) {
         match event {
             Event::JobStarted { job, .. } => {
+                if self
+                    .table
+                    .get(job.0)
+                    .is_some_and(|e| e.state == JobState::Queued)
+                {
+                    self.set_job_state(job.0, JobState::Running);
+                }
                 let Some(hash) = self.jobs.get(&job.0).map(|j| j.scene_hash) else {
                     return;
                 };
                 let workers: Vec<ConnId> = self.workers().collect();
                 for conn in workers {
                     self.send(conn, Message::SceneOffer { hash, job: job.0 });
+                }
+            }
+            Event::JobResumed { job } => {
+                // The workers may have set other frames up meanwhile.
+                let Some(j) = self.jobs.get(&job.0) else {
+                    return;
+                };
+                let starts: Vec<Message> = std::iter::once(Message::SceneOffer {
+                    hash: j.scene_hash,
+                    job: job.0,
+                })
+                .chain(
+                    (j.assembling.iter())
+                        .filter(|a| !a.whole)
+                        .map(|a| Message::FrameStart(a.start.clone())),
+                )
+                .collect();
+                let workers: Vec<ConnId> = self.workers().collect();
+                for conn in workers {
+                    for message in &starts {
+                        self.send(conn, message.clone());
+                    }
                 }
             }
             Event::FrameStarted {
@@ -1112,6 +1439,9 @@ impl MasterCore {
                 };
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 j.frames_done = frame + 1;
+                if let Some(entry) = self.table.get_mut(job.0) {
+                    entry.frames_done = frame + 1;
+                }
                 // A frame rendered again is its own job's frame.
                 let (owner, owner_frame) = (self.kept.repairs.get(&job.0))
                     .map_or((job.0, frame), |&(owner, frame)| (owner, frame));
@@ -1158,15 +1488,17 @@ impl MasterCore {
             }
             Event::JobComplete { job } => {
                 info!(job = job.0, "job complete");
-                self.telemetry.counters.jobs_completed += 1;
+                if self.counts_in_totals(job.0) {
+                    self.telemetry.counters.jobs_completed += 1;
+                }
                 let repaired = self.kept.repairs.remove(&job.0);
-                if let Some(j) = self.forget_job(job.0).filter(|_| repaired.is_none()) {
-                    if self.persistent {
-                        // Kept a while for a submitter that lost the connection.
-                        self.completed
-                            .insert(job.0, (j.frames.len() as u32, self.now));
-                        self.persist(Record::JobComplete { id: job.0 });
-                    }
+                if self.forget_job(job.0).is_some() && repaired.is_none() {
+                    // Kept (as retention allows) for a submitter that lost
+                    // the connection or attaches later.
+                    self.persist(Record::JobComplete { id: job.0 });
+                    self.set_job_state(job.0, JobState::Completed);
+                    self.forget_view_job(job.0);
+                    self.forget_expired();
                 }
             }
             Event::JobFailed {
@@ -1190,8 +1522,16 @@ impl MasterCore {
                     )
                     .collect();
                 warn!(job = job.0, "{}", errors.join("; "));
-                self.telemetry.counters.jobs_failed += 1;
+                if self.counts_in_totals(job.0) {
+                    self.telemetry.counters.jobs_failed += 1;
+                }
                 let repaired = self.kept.repairs.remove(&job.0);
+                if repaired.is_none() {
+                    if let Some(entry) = self.table.get_mut(job.0) {
+                        entry.reason = errors.join("; ");
+                    }
+                    self.set_job_state(job.0, JobState::Failed);
+                }
                 if let Some(j) = self.forget_job(job.0) {
                     let message = match repaired {
                         // Rendering a lost frame again failed: its job's
@@ -1207,14 +1547,32 @@ impl MasterCore {
                     self.send_to(&j.submitters, message);
                 }
                 if repaired.is_none() {
-                    self.persist(Record::JobForgotten { id: job.0 });
+                    self.forget_view_job(job.0);
+                    self.forget_expired();
                 }
             }
             Event::JobCancelled { job } => {
-                self.telemetry.counters.jobs_cancelled += 1;
-                self.forget_job(job.0);
+                if self.counts_in_totals(job.0) {
+                    self.telemetry.counters.jobs_cancelled += 1;
+                }
+                let reason = (self.cancel_reasons.remove(&job.0))
+                    .unwrap_or_else(|| format!("job {} was cancelled", job.0));
+                if let Some(entry) = self.table.get_mut(job.0) {
+                    entry.reason = reason.clone();
+                }
+                self.set_job_state(job.0, JobState::Cancelled);
+                if let Some(j) = self.forget_job(job.0) {
+                    let state = JobState::Cancelled.into();
+                    let message = Message::JobStateChanged {
+                        job: job.0,
+                        state,
+                        reason,
+                    };
+                    self.send_to(&j.submitters, message);
+                }
                 if self.kept.repairs.remove(&job.0).is_none() {
-                    self.persist(Record::JobForgotten { id: job.0 });
+                    self.forget_view_job(job.0);
+                    self.forget_expired();
                 }
             }
             Event::WorkerBlocklisted { worker, job } => {
@@ -1227,9 +1585,21 @@ impl MasterCore {
                 cause,
                 requeued,
             } => {
-                warn!(worker = %self.name(worker.0), ?cause, requeued = requeued.len(), "worker lost");
-                if matches!(cause, vtfarm_scheduler::LossCause::HeartbeatTimeout) {
-                    self.close(worker.0, "missed its heartbeats".into());
+                for package in &requeued {
+                    self.drop_in_flight(package.0, worker.0);
+                }
+                let name = self.name(worker.0);
+                match cause {
+                    // A clean leave (a drained worker finished its package
+                    // first) is no fault: `disconnected` said it left.
+                    vtfarm_scheduler::LossCause::Left if requeued.is_empty() => {}
+                    vtfarm_scheduler::LossCause::Left => {
+                        info!(worker = %name, requeued = requeued.len(), "its packages go to the other workers");
+                    }
+                    vtfarm_scheduler::LossCause::HeartbeatTimeout => {
+                        warn!(worker = %name, requeued = requeued.len(), "worker lost: it missed its heartbeats");
+                        self.close(worker.0, "missed its heartbeats".into());
+                    }
                 }
             }
             Event::PackageCancelled { worker, package } => {
@@ -1421,19 +1791,38 @@ impl MasterCore {
             }
         }
         let id = self.next_job;
-        let queued = self.queue_job(now, id, planned.job.clone(), BTreeSet::new(), 0, true);
+        let entry = self.new_entry(id, &planned.job, "dashboard".into(), now);
+        let queued = self.queue_job(now, id, planned.job.clone(), BTreeSet::new(), 0);
         if let Err(e) = queued {
             self.pump();
             return Err(ViewError::Queue(e.to_string()));
         }
         self.next_job += 1;
-        // Nobody attaches to a view's job: it is not orphaned.
-        if let Some(j) = self.jobs.get_mut(&id) {
-            j.orphaned_at = None;
-        }
+        self.table.insert(entry);
+        self.telemetry.counters.jobs_submitted += 1;
         self.views.started(planned, id);
         self.pump();
         Ok(id)
+    }
+
+    /// Whether a job's end counts in the completed, failed and cancelled
+    /// totals: the listed jobs (a frame rendered again is no job of its
+    /// own), which `jobs_submitted` counts as they are queued, so the
+    /// totals agree.
+    fn counts_in_totals(&self, id: u64) -> bool {
+        self.table.get(id).is_some()
+    }
+
+    /// A view's job is listed only while it runs: each move of the eye
+    /// makes several.
+    fn forget_view_job(&mut self, id: u64) {
+        if self
+            .table
+            .get(id)
+            .is_some_and(|e| e.kind == WireJobKind::View)
+        {
+            self.table.remove(id);
+        }
     }
 
     /// The interactive view's state.
@@ -1569,7 +1958,7 @@ impl MasterCore {
         definition.frames = vec![setup];
         definition.name = format!("{} (frame {frame} again)", definition.name);
         let id = self.next_job;
-        self.queue_job(now, id, definition, BTreeSet::from([conn]), 0, false)
+        self.queue_job(now, id, definition, BTreeSet::from([conn]), 0)
             .map_err(|e| e.to_string())?;
         self.next_job += 1;
         self.kept.repairs.insert(id, (job, frame));

@@ -8,12 +8,15 @@
 //! - [`MasterCore`]: jobs, packages, compositing, status.
 //! - [`FarmRules`]: the scheduling rules a master runs.
 //! - [`JobRejected`], [`ResultRejected`]: why it turns a job or a result away.
+//! - [`jobs`]: the jobs as users see them (states and their table,
+//!   listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare).
 
 mod core;
 mod error;
+pub mod jobs;
 pub mod record;
 mod rules;
 pub mod telemetry;
@@ -23,5 +26,6 @@ pub use crate::core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
 };
 pub use error::{JobRejected, ResultRejected};
+pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 pub use record::{DamagedJob, Record, StoredJob, Written};
 pub use rules::FarmRules;

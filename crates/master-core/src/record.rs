@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use vtfarm_proto::{FrameDone, SceneData, WireJob};
+use vtfarm_proto::{FrameDone, JobSummary, SceneData, WireJob};
 
 /// What the core asks to keep.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,6 +25,9 @@ pub enum Record {
     /// The job cannot run from its record: set it aside in `jobs/damaged/`
     /// with `reason`, never delete it.
     JobDamaged { id: u64, reason: String },
+    /// The job's listing changed (state, priority, times): the newest
+    /// replaces the one before.
+    JobState(Box<JobSummary>),
 }
 
 impl Record {
@@ -36,6 +39,7 @@ impl Record {
             | Record::JobForgotten { id }
             | Record::JobDamaged { id, .. } => *id,
             Record::FrameDone(done) => done.job,
+            Record::JobState(summary) => summary.id,
         }
     }
 
@@ -67,6 +71,9 @@ pub struct StoredJob {
     /// How many frames are finished, counted from frame 0 without a gap.
     pub frames_done: u32,
     pub complete: bool,
+    /// Its listing as last journaled (state, priority, times); `None` when
+    /// the master stopped between the job's record and its first listing.
+    pub summary: Option<JobSummary>,
     /// The frame that ended the count because its record failed its check
     /// (or is missing while later ones are there), and why: it is rendered
     /// again, and an attaching submitter is told.

@@ -7,6 +7,8 @@
 use std::time::Duration;
 
 use vtfarm_proto::{FRAMES_IN_FLIGHT, PEER_TIMEOUT};
+
+use crate::jobs::Retention;
 use vtfarm_scheduler::{
     CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy,
 };
@@ -26,6 +28,9 @@ pub struct FarmRules {
     /// worker renders a whole frame end to end); `false` splits every
     /// frame into packages.
     pub whole_frames: bool,
+    /// How many finished jobs stay listed, and for how long (not a
+    /// scheduler knob: the master core's).
+    pub retention: Retention,
 }
 
 impl Default for FarmRules {
@@ -46,6 +51,7 @@ impl Default for FarmRules {
             retry,
             estimation,
             whole_frames: true,
+            retention: Retention::DEFAULT,
         }
     }
 }

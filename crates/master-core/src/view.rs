@@ -174,6 +174,9 @@ impl Views {
             aux: true,
             method: source.method.into(),
             image: vtfarm_proto::WireImageFormat::LinearF32,
+            // Each move of the eye goes before every other job.
+            priority: i32::MAX,
+            kind: vtfarm_proto::WireJobKind::View,
         };
         Ok(PlannedView {
             job,

@@ -104,6 +104,7 @@ impl OwnedFrame {
                 bvh: &self.bvh,
                 lighting: &self.lighting,
                 settings: self.trace,
+                cone: vtfarm_trace::PixelCone::of(&self.camera),
             },
             camera: self.camera,
             ids: &self.ids,

@@ -13,6 +13,7 @@ pub mod output;
 pub use vtfarm_method::FrameSetup;
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
@@ -23,8 +24,8 @@ use vtfarm_scene::{Camera, Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, GlassPass, IdBufferCache, PackageOptions,
-    PackageStats, PhaseTimes, PixelRect, PixelValue, ShadowCache, SparseBitmap, VertexOwners,
-    VertexSettings, reflector_bounds, trace_package_into,
+    PackageStats, PhaseTimes, PixelRect, PixelValue, ProgressivePackage, Quality, ShadowCache,
+    SparseBitmap, StageError, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -98,6 +99,8 @@ pub struct Renderer {
     /// A worker's frame set-up's ID buffers, kept for the next frame of the
     /// same camera (they do not depend on the lights).
     id_buffers: IdBufferCache,
+    /// Frames set up so far ([`Renderer::set_ups`]).
+    set_ups: AtomicU64,
 }
 
 impl Renderer {
@@ -135,7 +138,26 @@ impl Renderer {
             is_reflector,
             shadows: ShadowCache::default(),
             id_buffers: IdBufferCache::default(),
+            set_ups: AtomicU64::new(0),
         })
+    }
+
+    /// How many frames this renderer has set up: a whole frame's raster
+    /// pass (base frame, ID buffer, the thin-glass pass) for
+    /// [`Renderer::render`] or [`Renderer::progressive`], or a worker's
+    /// ([`Renderer::id_buffers`]). A progressive frame counts one for all
+    /// its stages.
+    pub fn set_ups(&self) -> u64 {
+        self.set_ups.load(Ordering::Relaxed)
+    }
+
+    /// A whole frame's raster pass: the base frame, its ID buffer and what
+    /// lies behind the reflectors, with the thin-glass terms up front.
+    fn set_up(&self, setup: &FrameSetup) -> (Image, IdBuffer, Behind) {
+        self.set_ups.fetch_add(1, Ordering::Relaxed);
+        let (base, ids) = self.base_frame(setup);
+        let behind = self.behind(setup, &ids);
+        (base, ids, behind)
     }
 
     pub fn scene(&self) -> &Scene {
@@ -191,6 +213,7 @@ impl Renderer {
     /// the pixels the worker's packages finish (`GlassPass::OnDemand`), so
     /// two workers split that pass instead of each doing all of it.
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
+        self.set_ups.fetch_add(1, Ordering::Relaxed);
         let margin = setup.vertex.visibility_radius + 1;
         let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
         Behind::with_frame_ids(
@@ -225,6 +248,7 @@ impl Renderer {
             bvh: &self.bvh,
             lighting: &setup.lighting,
             settings: setup.trace,
+            cone: vtfarm_trace::PixelCone::of(&setup.camera),
         }
     }
 
@@ -256,8 +280,7 @@ impl Renderer {
         progress: &mut dyn FnMut(u64, u64),
     ) -> RenderedFrame {
         let start = Instant::now();
-        let (base, ids) = self.base_frame(setup);
-        let behind = self.behind(setup, &ids);
+        let (base, ids, behind) = self.set_up(setup);
         let raster_time = start.elapsed();
         let frame = self.frame(setup, &ids, &behind);
         let setup_start = Instant::now();
@@ -303,6 +326,103 @@ impl Renderer {
     ) -> RenderedFrame {
         let packages = split_packages(&self.reflectors, options.package_size);
         self.render_packages(setup, &packages, options, progress)
+    }
+
+    /// Sets a frame up once (the raster pass, the frame's planes, the
+    /// packages' set-ups) for [`ProgressiveFrame::advance`] to take it
+    /// through the stages on the same vertices (`setup.vertex.quality` is
+    /// not used).
+    pub fn progressive(&self, setup: &FrameSetup, options: &RenderOptions) -> ProgressiveFrame<'_> {
+        let start = Instant::now();
+        let (base, ids, behind) = self.set_up(setup);
+        let image = self.frame_image(setup, base);
+        let packages = {
+            let frame = self.frame(setup, &ids, &behind);
+            split_packages(&self.reflectors, options.package_size)
+                .iter()
+                .map(|package| ProgressivePackage::new(&frame, package))
+                .collect()
+        };
+        ProgressiveFrame {
+            renderer: self,
+            setup: setup.clone(),
+            ids,
+            behind,
+            image,
+            packages,
+            collect_faces: options.collect_faces,
+            set_up_time: start.elapsed(),
+        }
+    }
+}
+
+/// A frame rendered stage by stage on one set-up ([`Renderer::progressive`]):
+/// each [`ProgressiveFrame::advance`] continues every package's vertices
+/// and edges (no vertex traced twice) and rewrites the reflector pixels, so
+/// after each stage [`ProgressiveFrame::image`] is exactly the frame
+/// [`Renderer::render`] gives at that quality.
+pub struct ProgressiveFrame<'r> {
+    renderer: &'r Renderer,
+    setup: FrameSetup,
+    ids: IdBuffer,
+    behind: Behind,
+    image: FrameImage,
+    packages: Vec<ProgressivePackage>,
+    collect_faces: bool,
+    set_up_time: Duration,
+}
+
+/// What one stage of a [`ProgressiveFrame`] did.
+#[derive(Clone, Debug)]
+pub struct RenderedStage {
+    pub quality: Quality,
+    /// This stage's work (samples traced in it, splits made in it).
+    pub stats: PackageStats,
+    pub times: PhaseTimes,
+    /// Wall time of the stage.
+    pub time: Duration,
+    /// The final faces after the stage, when the options asked for them.
+    pub faces: Vec<FinishedFace>,
+}
+
+impl ProgressiveFrame<'_> {
+    /// Runs stage `quality` (later than the last; see
+    /// `vtfarm_vertex::ProgressivePackage`) over every package, into the
+    /// frame's image.
+    pub fn advance(&mut self, quality: Quality) -> Result<RenderedStage, StageError> {
+        let start = Instant::now();
+        let frame = self.renderer.frame(&self.setup, &self.ids, &self.behind);
+        let options = PackageOptions {
+            collect_faces: self.collect_faces,
+            time_break: None,
+        };
+        let mut stats = PackageStats::default();
+        let mut times = PhaseTimes::default();
+        let mut faces = Vec::new();
+        for package in &mut self.packages {
+            let traced =
+                package.advance_into(&frame, quality, &options, &mut |_| {}, &mut self.image)?;
+            stats.add(&traced.stats);
+            times.add(&traced.times);
+            faces.extend(traced.faces);
+        }
+        Ok(RenderedStage {
+            quality,
+            stats,
+            times,
+            time: start.elapsed(),
+            faces,
+        })
+    }
+
+    /// The frame as the last stage left it (the base frame before the first).
+    pub fn image(&self) -> &FrameImage {
+        &self.image
+    }
+
+    /// Wall time of the set-up (raster pass, planes, packages).
+    pub fn set_up_time(&self) -> Duration {
+        self.set_up_time
     }
 }
 

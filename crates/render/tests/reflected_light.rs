@@ -29,7 +29,9 @@ fn stock_job(
         job.trace.fresnel = fresnel;
     }
     let loaded = job.load_scene().expect("the cockpit builds");
-    let reflectors = job.reflector_triangles(&loaded.scene).unwrap();
+    let reflectors = job
+        .reflector_triangles(&loaded.scene, &loaded.object_aliases)
+        .unwrap();
     let camera = Camera {
         width,
         height,

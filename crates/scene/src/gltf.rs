@@ -7,7 +7,14 @@
 //! scene) are walked with their transforms, so a mesh used by several nodes
 //! is instanced once per node. Each node with a mesh becomes an [`Object`]
 //! named after the node, or after its mesh when the node has no name (nodes
-//! that share a name share the object, as OBJ groups do). Triangles (lists,
+//! that share a name share the object, as OBJ groups do); the mesh's name
+//! hidden by a node's stays a second name of the object
+//! ([`ImportedGltf::mesh_objects`]), so a job can pick it by either.
+//! Before anything is read, the node tree is walked once to count what it
+//! instances: deeper than [`MAX_NODE_DEPTH`] levels, more than
+//! [`MAX_NODE_VISITS`] node instances or [`MAX_IMPORTED_VERTICES`]
+//! vertices is an error, so a small file that instances without end costs
+//! neither time nor memory. Triangles (lists,
 //! strips and fans; points and lines are skipped with a warning), indexed or
 //! not, with their normals (or, without, normals computed per object with
 //! the crease angle of [`ObjOptions`]) and the first set of texture
@@ -44,7 +51,7 @@
 //! [`import_gltf`] gives back the scene that [`crate::obj::load_obj`] gives
 //! for the same scene's OBJ export.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -111,6 +118,10 @@ pub struct ImportedGltf {
     pub scene: Scene,
     pub cameras: Vec<GltfCamera>,
     pub warnings: Vec<GltfWarning>,
+    /// Each mesh name that differs from the name of an object instancing
+    /// it (a named node hides its mesh's name), with those objects in
+    /// order: the objects' second names.
+    pub mesh_objects: BTreeMap<String, Vec<ObjectId>>,
 }
 
 /// Loads a `.gltf` or `.glb` file; see the [module documentation](self).
@@ -150,7 +161,7 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
         warnings: Vec::new(),
         cameras: Vec::new(),
         to_smooth: Vec::new(),
-        visits: 0,
+        mesh_objects: BTreeMap::new(),
     };
     import.scene.materials = (gltf.document.materials())
         .map(|m| import.material(&m))
@@ -170,14 +181,21 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
                 .collect()
         }
     };
+    let mut instanced = Instanced::default();
+    for node in &roots {
+        instanced
+            .count(node, 0)
+            .map_err(|bound| invalid(path, bound))?;
+    }
     for node in roots {
-        import.node(&node, Mat4::IDENTITY, 0)?;
+        import.node(&node, Mat4::IDENTITY);
     }
     let Import {
         mut scene,
         warnings,
         cameras,
         to_smooth,
+        mesh_objects,
         ..
     } = import;
     if scene.triangles.is_empty() {
@@ -196,6 +214,7 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
         scene,
         cameras,
         warnings,
+        mesh_objects,
     })
 }
 
@@ -209,13 +228,52 @@ pub fn load_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gltf
 }
 
 /// Node trees deeper than this are refused (a cycle would never end).
-const MAX_NODE_DEPTH: usize = 256;
+pub const MAX_NODE_DEPTH: usize = 256;
 
-/// Instancing lets a small file name a huge scene (a node listing one child
-/// many times, at every level): the node visits and the vertices they emit
-/// are bounded, so the work and memory of a load are.
-const MAX_NODE_VISITS: usize = 1 << 20;
-const MAX_IMPORTED_VERTICES: usize = 1 << 24;
+/// Instancing lets a small file name a huge scene (nodes that share their
+/// children, at every level): the node instances and the vertices they
+/// emit are bounded, so the work and memory of a load are.
+pub const MAX_NODE_VISITS: usize = 1 << 20;
+/// See [`MAX_NODE_VISITS`].
+pub const MAX_IMPORTED_VERTICES: usize = 1 << 24;
+
+/// What a node tree instances, counted before anything is read.
+#[derive(Default)]
+struct Instanced {
+    visits: usize,
+    vertices: usize,
+}
+
+impl Instanced {
+    /// Counts `node` at `depth` and everything under it; the bound it breaks.
+    fn count(&mut self, node: &gltf::Node, depth: usize) -> Result<(), String> {
+        if depth >= MAX_NODE_DEPTH {
+            return Err(format!(
+                "nodes nested deeper than {MAX_NODE_DEPTH} levels (a node that contains itself?)"
+            ));
+        }
+        self.visits += 1;
+        if let Some(mesh) = node.mesh() {
+            let vertices = mesh.primitives().map(|p| {
+                p.get(&gltf::Semantic::Positions)
+                    .map_or(0, |positions| positions.count())
+            });
+            self.vertices = vertices.fold(self.vertices, usize::saturating_add);
+        }
+        if self.visits > MAX_NODE_VISITS {
+            return Err(format!(
+                "the node tree instances more than {MAX_NODE_VISITS} nodes"
+            ));
+        }
+        if self.vertices > MAX_IMPORTED_VERTICES {
+            return Err(format!(
+                "the node tree instances more than {MAX_IMPORTED_VERTICES} vertices"
+            ));
+        }
+        node.children()
+            .try_for_each(|child| self.count(&child, depth + 1))
+    }
+}
 
 struct Import<'a> {
     path: &'a Path,
@@ -228,8 +286,7 @@ struct Import<'a> {
     cameras: Vec<GltfCamera>,
     /// Per triangle, whether its normals are to be computed.
     to_smooth: Vec<bool>,
-    /// Nodes visited so far (instances counted each time).
-    visits: usize,
+    mesh_objects: BTreeMap<String, Vec<ObjectId>>,
 }
 
 impl Import<'_> {
@@ -240,23 +297,9 @@ impl Import<'_> {
         });
     }
 
-    fn node(&mut self, node: &gltf::Node, parent: Mat4, depth: usize) -> Result<(), GltfError> {
-        if depth > MAX_NODE_DEPTH {
-            return Err(invalid(
-                self.path,
-                format!("nodes nested deeper than {MAX_NODE_DEPTH}"),
-            ));
-        }
-        self.visits += 1;
-        if self.visits > MAX_NODE_VISITS || self.scene.positions.len() > MAX_IMPORTED_VERTICES {
-            return Err(invalid(
-                self.path,
-                format!(
-                    "the node tree instances more than {MAX_NODE_VISITS} nodes or \
-                     {MAX_IMPORTED_VERTICES} vertices"
-                ),
-            ));
-        }
+    /// Imports `node` and its children (within the bounds
+    /// [`Instanced::count`] checked).
+    fn node(&mut self, node: &gltf::Node, parent: Mat4) {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(camera) = node.camera() {
             self.camera(node, &camera, world);
@@ -265,14 +308,19 @@ impl Import<'_> {
             let name = (node.name().or(mesh.name()))
                 .map_or_else(|| format!("node {}", node.index()), str::to_owned);
             let object = object_id(&mut self.scene, &name);
+            if let Some(mesh_name) = mesh.name().filter(|&m| m != name) {
+                let objects = self.mesh_objects.entry(mesh_name.to_owned()).or_default();
+                if !objects.contains(&object) {
+                    objects.push(object);
+                }
+            }
             for primitive in mesh.primitives() {
                 self.primitive(&primitive, world, object);
             }
         }
         for child in node.children() {
-            self.node(&child, world, depth + 1)?;
+            self.node(&child, world);
         }
-        Ok(())
     }
 
     fn camera(&mut self, node: &gltf::Node, camera: &gltf::Camera, world: Mat4) {

@@ -7,7 +7,9 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
-use vtfarm_scene::gltf::{GltfError, import_gltf, write_glb};
+use vtfarm_scene::gltf::{
+    GltfError, MAX_IMPORTED_VERTICES, MAX_NODE_DEPTH, MAX_NODE_VISITS, import_gltf, write_glb,
+};
 use vtfarm_scene::obj::ObjOptions;
 use vtfarm_scene::{Material, Scene};
 
@@ -42,6 +44,11 @@ fn nodes_place_each_instance_of_a_mesh_and_cameras_come_with_their_node() {
     // One object per node, named after it; the parent moves both.
     let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
     assert_eq!(names, ["left", "right"]);
+    // The mesh both nodes instance stays a second name of both.
+    assert_eq!(
+        imported.mesh_objects.into_iter().collect::<Vec<_>>(),
+        [("panel".to_owned(), vec![0, 1])]
+    );
     let left = corners(scene, "left");
     assert_eq!(left.len(), 2);
     let offset = Vec3::new(10.0, 2.0, 0.0);
@@ -174,4 +181,45 @@ fn the_glb_export_reads_back_as_the_same_scene() {
     let back = import_gltf(&path, &ObjOptions::default()).unwrap();
     assert!(back.warnings.is_empty(), "{:?}", back.warnings);
     assert_eq!(back.scene, scene);
+}
+
+/// Files whose node trees instance without end (nodes sharing their
+/// children, level after level; a node inside itself) are refused by the
+/// count taken before any mesh is read, naming the file and the bound, so
+/// a few kilobytes cannot make the import take unbounded time or memory.
+#[test]
+fn node_trees_that_instance_beyond_the_bounds_are_refused_before_reading() {
+    let cases = [
+        // 2^21 instances of a quad.
+        (
+            "instances_beyond_bound.gltf",
+            format!("more than {MAX_NODE_VISITS} nodes"),
+        ),
+        // 2^9 instances of 2^16 vertices.
+        (
+            "vertices_beyond_bound.gltf",
+            format!("more than {MAX_IMPORTED_VERTICES} vertices"),
+        ),
+        (
+            "node_cycle.gltf",
+            format!("deeper than {MAX_NODE_DEPTH} levels"),
+        ),
+    ];
+    for (name, bound) in cases {
+        let path = fixture(name);
+        assert!(
+            std::fs::metadata(&path).unwrap().len() < 10_000,
+            "{name} is small"
+        );
+        let error = import_gltf(&path, &ObjOptions::default()).unwrap_err();
+        assert!(
+            matches!(error, GltfError::Invalid { .. }),
+            "{name}: {error:?}"
+        );
+        let message = error.to_string();
+        assert!(
+            message.starts_with(&path.display().to_string()) && message.contains(&bound),
+            "{name}: {message}"
+        );
+    }
 }

@@ -45,12 +45,19 @@
 //! # Policy
 //!
 //! * **Demand-driven.** A worker asks ([`Scheduler::request_work`]) and gets
-//!   one package, now or as soon as there is work. Jobs run one after another
-//!   in submission order, frames one after another; with
+//!   one package, now or as soon as there is work. One job runs at a time,
+//!   frames one after another; with
 //!   [`SchedulerConfig::frames_in_flight`] above 1 the next frame starts as
 //!   soon as the newest running one has nothing left to hand out, so idle
 //!   workers take its packages while older frames' last ones finish (frames
 //!   complete in order; older frames' requeued work first).
+//! * **Priorities.** The job to run is the waiting one (queued, or parked)
+//!   of the highest priority that is not paused, the lowest id among equals
+//!   (the view's jobs carry the highest). A running job gives way when it
+//!   is paused or a job of a higher priority waits: it hands out nothing
+//!   new, and once none of its packages runs (none is stopped for it) it is
+//!   parked as it stands and the other starts; a parked job comes back
+//!   where it stopped ([`Event::JobResumed`]).
 //! * **Frame affinity** ([`SchedulerConfig::frame_affinity`], the farm's
 //!   rules, for workers that set a frame up before its first package): a
 //!   waiting worker takes work of a running frame it already has (oldest
@@ -171,9 +178,14 @@
 //!
 //! # Job states
 //!
-//! Queued (`submit_job`, `submit_interactive_job`) → Running (`advance_jobs`, when the job before it
-//! ends) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
-//! (`cancel_job`); a queued job may be cancelled directly.
+//! Queued (`submit_job`, `submit_interactive_job`, `submit_job_with`) → Running
+//! (`advance_jobs`, when the job before it ends or gives way; see
+//! Priorities) ⇄ Parked (`park_if_due`, `start_next`) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
+//! (`cancel_job`); a queued or parked job may be cancelled directly.
+//! `pause_job` holds a queued job back and keeps a running one from handing
+//! out new packages or starting frames (its running packages finish and
+//! count, then it is parked); `resume_job` lets it go on; `set_priority`
+//! reorders. The master core's `JobState` is the users' view of these.
 
 mod config;
 mod costs;
@@ -189,4 +201,4 @@ pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
 pub use scheduler::{Scheduler, WHOLE_FRAMES_PER_WORKER};
 pub use status::{Counters, JobProgress, PackageState, QueueStatus, WorkerState, WorkerStatus};
-pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, WorkerId};
+pub use types::{Assignment, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, WorkerId};

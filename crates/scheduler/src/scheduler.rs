@@ -1,5 +1,6 @@
 //! The scheduler state machine: inputs (`worker_*`, `request_work`,
-//! `package_*`, `submit_job`, `cancel_job`, `handle_timeout`) change the
+//! `package_*`, `submit_job`, `cancel_job`, `pause_job`, `resume_job`,
+//! `set_priority`, `handle_timeout`) change the
 //! state and queue outputs, which the driver takes with `poll_assignment`,
 //! `poll_event` and `poll_timeout`.
 //!
@@ -15,9 +16,9 @@ use crate::costs::CostModel;
 use crate::frame::{Attempt, Frame, Package};
 use crate::{
     Assignment, CancelError, Counters, Event, FrameWork, InvariantError, JobFailure, JobId,
-    JobProgress, JoinError, LossCause, PackageId, PackageMeasure, PackageState, QueueStatus,
-    ReportError, SchedulerConfig, StragglerPolicy, SubmitError, WorkerError, WorkerFrameStats,
-    WorkerId, WorkerState, WorkerStatus,
+    JobProgress, JoinError, LossCause, PackageId, PackageMeasure, PackageState, QueueOptions,
+    QueueStatus, ReportError, SchedulerConfig, StragglerPolicy, SubmitError, WorkerError,
+    WorkerFrameStats, WorkerId, WorkerState, WorkerStatus,
 };
 
 /// The master's scheduler and load balancer. See the crate documentation for
@@ -32,6 +33,9 @@ pub struct Scheduler {
     waiting: VecDeque<WorkerId>,
     queued_jobs: VecDeque<QueuedJob>,
     running: Option<RunningJob>,
+    /// Jobs that started and gave way (paused, or a higher priority came)
+    /// once none of their packages ran: they go on where they stopped.
+    parked: Vec<RunningJob>,
     next_package: u64,
     assignments: VecDeque<Assignment>,
     events: VecDeque<Event>,
@@ -65,12 +69,19 @@ struct Worker {
 struct QueuedJob {
     id: JobId,
     frames: Vec<FrameWork>,
+    /// Higher starts first; equal priorities start in id order.
+    priority: i32,
+    /// A paused job does not start.
+    paused: bool,
     interactive: bool,
 }
 
 #[derive(Debug)]
 struct RunningJob {
     id: JobId,
+    priority: i32,
+    /// A paused job hands out nothing new; its running packages finish.
+    paused: bool,
     /// Frames not started yet.
     frames: VecDeque<FrameWork>,
     /// Every frame split, none whole ([`Scheduler::submit_interactive_job`]).
@@ -197,6 +208,7 @@ impl Scheduler {
             waiting: VecDeque::new(),
             queued_jobs: VecDeque::new(),
             running: None,
+            parked: Vec::new(),
             next_package: 0,
             assignments: VecDeque::new(),
             events: VecDeque::new(),
@@ -298,7 +310,7 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
-        self.queue_job(now, job, frames, false)
+        self.submit_job_with(now, job, frames, QueueOptions::default())
     }
 
     /// Queues a job whose frames' latency is what counts (the interactive
@@ -310,28 +322,146 @@ impl Scheduler {
         job: JobId,
         frames: Vec<FrameWork>,
     ) -> Result<(), SubmitError> {
-        self.queue_job(now, job, frames, true)
+        let options = QueueOptions {
+            interactive: true,
+            ..QueueOptions::default()
+        };
+        self.submit_job_with(now, job, frames, options)
     }
 
-    fn queue_job(
+    /// [`Scheduler::submit_job`] at a priority, perhaps paused (a job
+    /// restored paused) or interactive: a queued job of a higher priority
+    /// starts first, equal priorities in id order.
+    pub fn submit_job_with(
         &mut self,
         now: Duration,
         job: JobId,
         frames: Vec<FrameWork>,
-        interactive: bool,
+        options: QueueOptions,
     ) -> Result<(), SubmitError> {
         self.advance(now);
-        let running = self.running.as_ref().is_some_and(|r| r.id == job);
-        if running || self.queued_jobs.iter().any(|q| q.id == job) {
+        let started = (self.running.iter().chain(&self.parked)).any(|r| r.id == job);
+        if started || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
         self.queued_jobs.push_back(QueuedJob {
             id: job,
             frames,
-            interactive,
+            priority: options.priority,
+            paused: options.paused,
+            interactive: options.interactive,
         });
         self.dispatch();
         Ok(())
+    }
+
+    /// Pauses a queued or running job: it starts no frame and hands out no
+    /// package until [`Scheduler::resume_job`]; its running packages finish
+    /// and their results count.
+    pub fn pause_job(&mut self, now: Duration, job: JobId) -> Result<(), CancelError> {
+        self.set_paused(now, job, true)
+    }
+
+    /// Lets a paused job go on.
+    pub fn resume_job(&mut self, now: Duration, job: JobId) -> Result<(), CancelError> {
+        self.set_paused(now, job, false)
+    }
+
+    fn set_paused(&mut self, now: Duration, job: JobId, paused: bool) -> Result<(), CancelError> {
+        self.advance(now);
+        if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
+            queued.paused = paused;
+        } else if let Some(running) =
+            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
+        {
+            running.paused = paused;
+        } else {
+            return Err(CancelError::UnknownJob(job));
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// Changes a queued or running job's priority.
+    pub fn set_priority(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        priority: i32,
+    ) -> Result<(), CancelError> {
+        self.advance(now);
+        if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
+            queued.priority = priority;
+        } else if let Some(running) =
+            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
+        {
+            running.priority = priority;
+        } else {
+            return Err(CancelError::UnknownJob(job));
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The job to run next, queued or parked: the highest priority that is
+    /// not paused, the lowest id among equals.
+    fn next_waiting(&self) -> Option<(i32, JobId)> {
+        let queued = (self.queued_jobs.iter())
+            .filter(|q| !q.paused)
+            .map(|q| (q.priority, q.id));
+        let parked = (self.parked.iter())
+            .filter(|r| !r.paused)
+            .map(|r| (r.priority, r.id));
+        queued
+            .chain(parked)
+            .min_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id))
+    }
+
+    /// Starts the job [`Scheduler::next_waiting`] names; false if none.
+    fn start_next(&mut self) -> bool {
+        let Some((_, id)) = self.next_waiting() else {
+            return false;
+        };
+        if let Some(index) = self.parked.iter().position(|r| r.id == id) {
+            let job = self.parked.remove(index);
+            self.forget_worker_measures();
+            self.events.push_back(Event::JobResumed { job: id });
+            self.running = Some(job);
+        } else if let Some(index) = self.queued_jobs.iter().position(|q| q.id == id) {
+            let next = self.queued_jobs.remove(index).expect("found above");
+            self.start_job(next);
+        }
+        true
+    }
+
+    /// Whether the running job gives way: it is paused, or a job of a
+    /// higher priority waits. It then hands out nothing new, and parks
+    /// once none of its packages runs (no package is stopped for it).
+    fn gives_way(&self, job: &RunningJob) -> bool {
+        job.paused || self.next_waiting().is_some_and(|(p, _)| p > job.priority)
+    }
+
+    /// Parks the running job if it gives way and none of its packages runs.
+    fn park_if_due(&mut self) -> bool {
+        let due = (self.running.as_ref())
+            .is_some_and(|job| self.gives_way(job) && self.running_packages().next().is_none());
+        if !due {
+            return false;
+        }
+        let job = self.running.take().expect("checked above");
+        self.parked.push(job);
+        true
+    }
+
+    /// Rates are in the running job's cost unit and frames are its: a job
+    /// that starts or comes back is measured anew.
+    fn forget_worker_measures(&mut self) {
+        for w in self.workers.values_mut() {
+            w.rate = None;
+            w.compute_samples.clear();
+            w.frames.clear();
+            w.crew = None;
+        }
     }
 
     /// Cancels a queued or running job. The packages of a running job are
@@ -341,6 +471,9 @@ impl Scheduler {
         self.advance(now);
         if let Some(index) = self.queued_jobs.iter().position(|q| q.id == job) {
             self.queued_jobs.remove(index);
+        } else if let Some(index) = self.parked.iter().position(|r| r.id == job) {
+            // None of its packages runs: nothing to stop.
+            self.parked.remove(index);
         } else if self.running.as_ref().is_some_and(|r| r.id == job) {
             self.abandon_running_job();
         } else {
@@ -459,7 +592,7 @@ impl Scheduler {
 
     /// Whether a job is queued or running.
     pub fn has_jobs(&self) -> bool {
-        self.running.is_some() || !self.queued_jobs.is_empty()
+        self.running.is_some() || !self.queued_jobs.is_empty() || !self.parked.is_empty()
     }
 
     /// Every worker ever joined, by id, for a `status` listing.
@@ -498,7 +631,13 @@ impl Scheduler {
     /// The job queue and the running job's progress.
     pub fn queue(&self) -> QueueStatus {
         QueueStatus {
-            waiting: self.queued_jobs.iter().map(|q| q.id).collect(),
+            waiting: {
+                let queued = self.queued_jobs.iter().map(|q| (q.priority, q.id));
+                let parked = self.parked.iter().map(|r| (r.priority, r.id));
+                let mut order: Vec<(i32, JobId)> = queued.chain(parked).collect();
+                order.sort_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id));
+                order.into_iter().map(|(_, id)| id).collect()
+            },
             running: self.running.as_ref().map(|job| JobProgress {
                 job: job.id,
                 frame: job.frame.index,
@@ -748,7 +887,7 @@ impl Scheduler {
     /// [`SchedulerConfig::frames_in_flight`], whole ones up to
     /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
     fn room_for_a_frame(&self, job: &RunningJob) -> bool {
-        if job.frames.is_empty() || job.frame.is_complete() {
+        if self.gives_way(job) || job.frames.is_empty() || job.frame.is_complete() {
             return false;
         }
         let frames_in_flight = self.config.frames_in_flight as usize;
@@ -778,13 +917,15 @@ impl Scheduler {
         let lookahead = self.config.frames_in_flight as usize;
         loop {
             let Some(job) = &mut self.running else {
-                let Some(next) = self.queued_jobs.pop_front() else {
+                if !self.start_next() {
                     return;
-                };
-                self.start_job(next);
+                }
                 continue;
             };
             if !job.frame.is_complete() {
+                if self.park_if_due() {
+                    continue;
+                }
                 if self.may_start_ahead() {
                     self.start_ahead();
                 }
@@ -888,12 +1029,7 @@ impl Scheduler {
     /// Starts a job. Rates are in the job's cost unit, so every worker's are
     /// forgotten and measured anew.
     fn start_job(&mut self, next: QueuedJob) {
-        for w in self.workers.values_mut() {
-            w.rate = None;
-            w.compute_samples.clear();
-            w.frames.clear();
-            w.crew = None;
-        }
+        self.forget_worker_measures();
         let frame_count = u32::try_from(next.frames.len()).unwrap_or(u32::MAX);
         self.events.push_back(Event::JobStarted {
             job: next.id,
@@ -921,6 +1057,8 @@ impl Scheduler {
         self.lapse_requests();
         let mut job = RunningJob {
             id: next.id,
+            priority: next.priority,
+            paused: false,
             frames,
             interactive: next.interactive,
             frame_count,
@@ -956,7 +1094,7 @@ impl Scheduler {
     /// nothing is left to hand out, a straggler's second copy.
     fn pick(&self, worker: WorkerId) -> Option<Pick> {
         let job = self.running.as_ref()?;
-        if job.blocklist.contains(&worker) {
+        if job.blocklist.contains(&worker) || self.gives_way(job) {
             return None;
         }
         if self.config.frame_affinity {

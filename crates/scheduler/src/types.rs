@@ -86,3 +86,15 @@ pub struct PackageMeasure {
     /// Bytes the worker sent back (the result).
     pub bytes_out: u64,
 }
+
+/// How a job joins the queue ([`Scheduler::submit_job_with`](crate::Scheduler::submit_job_with)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct QueueOptions {
+    /// Higher starts first; equal priorities start in id order.
+    pub priority: i32,
+    /// Queued paused: it starts once resumed.
+    pub paused: bool,
+    /// Every frame split, none whole
+    /// ([`Scheduler::submit_interactive_job`](crate::Scheduler::submit_interactive_job)).
+    pub interactive: bool,
+}

@@ -1,5 +1,6 @@
 //! Random sequences of inputs (joins, leaves, heartbeats, requests, results,
-//! failures, timeouts, submissions, cancellations), with worker, package and
+//! failures, timeouts, submissions at priorities, cancellations, pauses,
+//! resumes and priority changes, so jobs give way and come back), with worker, package and
 //! job ids that are often unknown or stale. The scheduler must never panic,
 //! keep its invariants after every input, accept a result only for a package
 //! the worker runs, and complete every item of a frame exactly once. The
@@ -16,8 +17,8 @@ use common::sim::{
 };
 use proptest::prelude::*;
 use vtfarm_scheduler::{
-    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, Scheduler, SchedulerConfig,
-    WorkerId,
+    Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler,
+    SchedulerConfig, WorkerId,
 };
 
 #[derive(Clone, Debug)]
@@ -63,9 +64,20 @@ enum Op {
         job: u8,
         frames: u8,
         items: u8,
+        priority: i8,
     },
     Cancel {
         job: u8,
+    },
+    Pause {
+        job: u8,
+    },
+    Resume {
+        job: u8,
+    },
+    Priority {
+        job: u8,
+        priority: i8,
     },
 }
 
@@ -82,8 +94,11 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (any::<u16>(), prop::bool::weighted(0.9), worker).prop_map(|(pick, own, worker)| Op::Fail { pick, own, worker }),
         2 => prop::bool::weighted(0.3).prop_map(|jump| Op::Timeout { jump }),
         3 => prop_oneof![0u16..500, 0u16..20_000].prop_map(|ms| Op::Advance { ms }),
-        2 => (0u8..4, 0u8..4, 0u8..60).prop_map(|(job, frames, items)| Op::Submit { job, frames, items }),
+        2 => (0u8..4, 0u8..4, 0u8..60, -2i8..3).prop_map(|(job, frames, items, priority)| Op::Submit { job, frames, items, priority }),
         1 => (0u8..4).prop_map(|job| Op::Cancel { job }),
+        1 => (0u8..4).prop_map(|job| Op::Pause { job }),
+        1 => (0u8..4).prop_map(|job| Op::Resume { job }),
+        1 => (0u8..4, -2i8..3).prop_map(|(job, priority)| Op::Priority { job, priority }),
     ]
 }
 
@@ -189,18 +204,41 @@ impl Model {
                 self.s.handle_timeout(at);
             }
             Op::Advance { ms } => self.now += Duration::from_millis(u64::from(*ms)),
-            Op::Submit { job, frames, items } => {
+            Op::Submit {
+                job,
+                frames,
+                items,
+                priority,
+            } => {
                 let frame = FrameWork {
                     items: (0..u32::from(*items)).map(|i| i * 7 + 3).collect(),
                 };
                 let frames = vec![frame; usize::from(*frames)];
                 let job = JobId(u64::from(*job));
-                if self.s.submit_job(now, job, frames.clone()).is_ok() {
+                let options = QueueOptions {
+                    priority: i32::from(*priority),
+                    ..QueueOptions::default()
+                };
+                if self
+                    .s
+                    .submit_job_with(now, job, frames.clone(), options)
+                    .is_ok()
+                {
                     self.jobs.insert(job, frames);
                 }
             }
             Op::Cancel { job } => {
                 let _ = self.s.cancel_job(now, JobId(u64::from(*job)));
+            }
+            Op::Pause { job } => {
+                let _ = self.s.pause_job(now, JobId(u64::from(*job)));
+            }
+            Op::Resume { job } => {
+                let _ = self.s.resume_job(now, JobId(u64::from(*job)));
+            }
+            Op::Priority { job, priority } => {
+                let job = JobId(u64::from(*job));
+                let _ = self.s.set_priority(now, job, i32::from(*priority));
             }
         }
         self.drain()

@@ -344,8 +344,11 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
     let mut slugs: Vec<String> = Vec::new();
     for variant in &study.variants {
         let job = study.variant_job(variant);
-        let scene = job.scene_only()?;
-        let reflectors = job.reflector_triangles(&scene)?;
+        let vtfarm_job::JobScene {
+            scene,
+            object_aliases,
+        } = job.scene_only()?;
+        let reflectors = job.reflector_triangles(&scene, &object_aliases)?;
         let objects = |key: &'static str, names: &[String]| {
             names
                 .iter()

@@ -14,6 +14,11 @@
 //! each reconnect, and fails naming the frame when the master says one
 //! cannot be delivered. Several submitters may follow one job: each gets
 //! every frame.
+//!
+//! [`list_jobs`] and [`control_job`] manage the master's jobs (`vtfarm
+//! jobs`, `cancel`, `pause`, `resume`, `requeue`, `priority`); a job's
+//! follower learns of a user's pause, resume or cancel
+//! (`JobStateChanged`): a cancel ends it with [`JobError::Cancelled`].
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -21,8 +26,8 @@ use std::time::{Duration, Instant};
 use tracing::warn;
 use vtfarm_imaging::Image;
 use vtfarm_proto::{
-    ATTACH_GRACE, FrameStats, Message, Role, SceneData, WireFrameAux, WireImage, WireImageFormat,
-    WireJob,
+    ATTACH_GRACE, FrameStats, JobAction, JobSummary, Message, Role, SceneData, WireFrameAux,
+    WireImage, WireImageFormat, WireJob, WireJobState,
 };
 use vtfarm_transport::Link;
 use vtfarm_transport::client::{ClientOptions, ConnectError, connect};
@@ -100,6 +105,12 @@ pub enum JobEvent<'a> {
     /// Something the user should know that does not end the job (a frame
     /// being rendered again, a record the master could not journal).
     Warning(String),
+    /// A user paused or resumed the job (`reason` says who).
+    StateChanged {
+        job: u64,
+        state: WireJobState,
+        reason: String,
+    },
 }
 
 /// Why a job did not complete.
@@ -111,6 +122,12 @@ pub enum JobError {
     Disconnected(Option<String>),
     #[error("bad answer from the master: {0}")]
     Protocol(String),
+    /// A user cancelled the job (`reason` says who).
+    #[error("{reason}")]
+    Cancelled { job: u64, reason: String },
+    /// The master refused a request about a job (`vtfarm cancel` and the like).
+    #[error("{0}")]
+    Refused(String),
     #[error("frame {frame} of job {job} cannot be delivered: {reason}")]
     FrameLost {
         job: u64,
@@ -199,6 +216,56 @@ pub async fn run_remote_job(
             Err(e) => return Err(e),
         }
     }
+}
+
+/// The master's jobs (`all`: the finished ones it keeps too), oldest first.
+pub async fn list_jobs(options: &ClientOptions, all: bool) -> Result<Vec<JobSummary>, JobError> {
+    let reply = request(options, Message::ListJobs { all }, |m| match m {
+        Message::JobList { jobs } => Some(jobs),
+        _ => None,
+    });
+    reply.await
+}
+
+/// Asks the master to cancel, pause, resume, requeue or re-prioritise
+/// `job`; the job as it is afterwards, or [`JobError::Refused`] with why.
+pub async fn control_job(
+    options: &ClientOptions,
+    job: u64,
+    action: JobAction,
+) -> Result<JobSummary, JobError> {
+    let reply = request(options, Message::ControlJob { job, action }, |m| match m {
+        Message::JobControlled { job: j, outcome } if j == job => Some(outcome),
+        _ => None,
+    });
+    reply.await?.map_err(JobError::Refused)
+}
+
+/// Sends one request on a connection of its own and waits for the answer
+/// `answer` picks out (skipping other messages).
+async fn request<T>(
+    options: &ClientOptions,
+    message: Message,
+    answer: impl Fn(Message) -> Option<T>,
+) -> Result<T, JobError> {
+    let conn = connect(options, Role::Submitter).await?;
+    let mut link = conn.link;
+    let reply = async {
+        send(&link, message)?;
+        loop {
+            let Some(message) = link.rx.recv().await else {
+                return Err(JobError::Disconnected(link.error()));
+            };
+            if let Some(reply) = answer(message) {
+                return Ok(reply);
+            }
+        }
+    };
+    let reply = reply.await;
+    conn.connection
+        .close(vtfarm_transport::CLOSE_NORMAL, b"done");
+    conn.endpoint.wait_idle().await;
+    reply
 }
 
 fn send(link: &Link, message: Message) -> Result<(), JobError> {
@@ -312,6 +379,12 @@ impl JobFollower {
                     on_event(JobEvent::Warning(warning));
                 }
                 Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
+                Message::JobStateChanged { job, state, reason } => {
+                    if state == WireJobState::Cancelled {
+                        return Err(JobError::Cancelled { job, reason });
+                    }
+                    on_event(JobEvent::StateChanged { job, state, reason });
+                }
                 Message::Heartbeat => {}
                 other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
             }

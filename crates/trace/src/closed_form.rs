@@ -11,7 +11,7 @@ use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
 use vtfarm_scene::{Light, LightKind, Lighting, Material};
 
 use crate::testutil::{SceneBuilder, emitter, mirror};
-use crate::{SceneBvh, SurfacePoint, TraceSettings, Tracer};
+use crate::{PixelCone, SceneBvh, SurfacePoint, TraceSettings, Tracer};
 
 /// The emitter's luminance, cd/m².
 const EMITTER_CD_M2: f32 = 20_000.0;
@@ -80,6 +80,7 @@ fn reflected_at(bvh: &SceneBvh, theta_deg: f32, max_depth: u32) -> f64 {
             max_depth,
             ..TraceSettings::default()
         },
+        cone: PixelCone::FINEST,
     };
     let a = theta_deg.to_radians();
     let point = SurfacePoint {
@@ -174,6 +175,7 @@ fn a_lambertian_panel_under_e_lux_has_rho_e_over_pi() {
             bvh: &bvh,
             lighting: &lighting,
             settings: TraceSettings::default(),
+            cone: PixelCone::FINEST,
         };
         let point = SurfacePoint {
             position: Vec3::ZERO,
@@ -207,6 +209,7 @@ fn an_ideal_mirror_reflects_l() {
             bvh: &bvh,
             lighting: &lighting,
             settings: TraceSettings::default(),
+            cone: PixelCone::FINEST,
         };
         let a = theta.to_radians();
         let point = SurfacePoint {

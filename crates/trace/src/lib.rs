@@ -30,7 +30,7 @@ mod testutil;
 pub use bvh::{
     BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
 };
-pub use whitted::{Rays, SurfaceTerms, Tracer, fresnel_reflectance, reflect, refract};
+pub use whitted::{PixelCone, Rays, SurfaceTerms, Tracer, fresnel_reflectance, reflect, refract};
 
 use glam::Vec3;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};

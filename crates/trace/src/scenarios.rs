@@ -10,7 +10,7 @@ use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, Scene};
 use crate::testutil::{SceneBuilder, XorShift, emitter, glass, mirror};
 use crate::whitted::{reflect, refract};
 use crate::{
-    BuildPreset, BvhLayout, BvhOptions, Hit, Ray, Rays, Sample, SceneBvh, SurfacePoint,
+    BuildPreset, BvhLayout, BvhOptions, Hit, PixelCone, Ray, Rays, Sample, SceneBvh, SurfacePoint,
     TraceSettings, Tracer,
 };
 
@@ -40,6 +40,7 @@ fn tracer<'a>(bvh: &'a SceneBvh, lighting: &'a Lighting) -> Tracer<'a> {
         bvh,
         lighting,
         settings: TraceSettings::default(),
+        cone: PixelCone::FINEST,
     }
 }
 
@@ -292,6 +293,7 @@ fn fresnel_moves_transmission_into_reflection_at_grazing_angles() {
             fresnel: true,
             ..Default::default()
         },
+        cone: PixelCone::FINEST,
     };
     let graze = fresnel.shade(&point, incoming);
     assert_eq!(graze.reflected_object, sky);
@@ -443,6 +445,7 @@ fn max_depth_one_shades_only_the_first_surface() {
             fresnel: false,
             ..Default::default()
         },
+        cone: PixelCone::FINEST,
     };
     let sample = shallow.trace(&ray);
     assert_eq!(sample.color, Vec3::splat(0.25));
@@ -1008,6 +1011,84 @@ fn shade_points_traces_the_first_reflections_in_packets_with_the_single_ray_samp
     }
 }
 
+/// The pixel cone only picks textures' mip levels: untextured samples are
+/// the same bits with or without it; with textures, shading on demand and
+/// generation by generation carry the same path lengths (the same bits),
+/// and the cone does change what minified textures give.
+#[test]
+fn the_pixel_cone_changes_only_textured_samples_the_same_way_in_both_walks() {
+    let (scene, lighting) = branching_scene();
+    let eye = Vec3::new(0.3, 2.0, 7.0);
+    let cone = PixelCone { eye, spread: 0.05 };
+    let rays: Vec<Ray> = (0..48 * 32)
+        .map(|i| {
+            let target = Vec3::new(
+                -2.0 + (i % 48) as f32 * 0.09,
+                2.4 - (i / 48) as f32 * 0.07,
+                1.2,
+            );
+            Ray {
+                origin: eye,
+                direction: (target - eye).normalize(),
+            }
+        })
+        .collect();
+    let samples = |tracer: &Tracer| {
+        let points: Vec<(SurfacePoint, Vec3)> = (rays.iter())
+            .filter_map(|ray| {
+                let hit = tracer.bvh.closest_hit(ray, f32::INFINITY)?;
+                Some((tracer.bvh.surface_point(&hit), ray.direction))
+            })
+            .collect();
+        let traced: Vec<_> = rays.iter().map(|r| bits(&tracer.trace(r))).collect();
+        let shaded: Vec<_> = (points.iter())
+            .map(|(p, d)| bits(&tracer.shade(p, *d)))
+            .collect();
+        let batched: Vec<_> = (tracer.shade_points(&points, Rays::Both).iter())
+            .map(bits)
+            .collect();
+        (traced, shaded, batched)
+    };
+    let settings = TraceSettings {
+        max_depth: 6,
+        ..Default::default()
+    };
+    let bvh = SceneBvh::new(scene.clone());
+    let finest = Tracer {
+        settings,
+        ..tracer(&bvh, &lighting)
+    };
+    assert_eq!(samples(&Tracer { cone, ..finest }), samples(&finest));
+
+    // Every material textured with a checkerboard of one-texel squares.
+    let mut textured = (*scene).clone();
+    let rgba = (0..16 * 16)
+        .flat_map(|i: u32| [if (i % 16 + i / 16) % 2 == 0 { 255 } else { 0 }; 4])
+        .collect();
+    textured.textures = vec![vtfarm_scene::Texture::from_rgba8("checker", 16, 16, rgba).unwrap()];
+    for material in &mut textured.materials {
+        material.diffuse_texture = Some(0);
+    }
+    textured.corner_uvs = (0..textured.triangles.len() as u32)
+        .map(|t| {
+            textured
+                .triangle_positions(t)
+                .map(|p| glam::Vec2::new(p.x + p.y, p.z) * 4.0)
+        })
+        .collect();
+    let bvh = SceneBvh::new(Arc::new(textured));
+    let finest = Tracer {
+        settings,
+        ..tracer(&bvh, &lighting)
+    };
+    let coned = samples(&Tracer { cone, ..finest });
+    assert_eq!(coned.1, coned.2, "on demand and by generations");
+    let changed = (coned.0.iter().zip(&samples(&finest).0))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(changed > 500, "{changed} samples changed by the cone");
+}
+
 #[test]
 fn piles_of_identical_triangles_are_traversed_completely() {
     // Identical boxes give PLOC nothing to sort by: a worst case for tree
@@ -1102,6 +1183,7 @@ fn surface_terms_recombine_to_the_shaded_sample() {
             bvh: &bvh,
             lighting: &lighting,
             settings,
+            cone: PixelCone::FINEST,
         };
         // The secondary rays start one level deeper inside `shade`.
         let deeper = Tracer {

@@ -6,7 +6,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_scene::shading::phong;
-use vtfarm_scene::{Light, LightKind, Lighting, NONE, ObjectId};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, NONE, ObjectId};
 
 use crate::bvh::spawn_offset;
 use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
@@ -27,6 +27,46 @@ pub struct Tracer<'a> {
     pub bvh: &'a SceneBvh,
     pub lighting: &'a Lighting,
     pub settings: TraceSettings,
+    /// The pixel's cone, for the mip level of the textures rays meet.
+    pub cone: PixelCone,
+}
+
+/// The cone of rays through one pixel, for the mip level of textures in
+/// traced shading ([`vtfarm_scene::Scene::textured_material`]'s
+/// footprint). The rule: a surface's footprint is `spread` times the length
+/// of the ray path from the eye to it — the eye's distance for a point
+/// shaded directly or the first hit of a ray from the eye, plus every
+/// segment after it for reflected and refracted rays (the cone keeps its
+/// angle at a surface, exact for flat mirrors and thin glass). The
+/// rasterized base frame and the thin-glass pass use the same footprint
+/// for what they see directly, so the three shading paths pick the same
+/// level. A function of the ray tree alone: deterministic.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelCone {
+    pub eye: Vec3,
+    /// Metres of footprint per metre of path (a pixel's width at unit depth).
+    pub spread: f32,
+}
+
+impl PixelCone {
+    /// No cone: every texture sampled at its finest level.
+    pub const FINEST: PixelCone = PixelCone {
+        eye: Vec3::ZERO,
+        spread: 0.0,
+    };
+
+    /// The cone of one pixel of `camera`.
+    pub fn of(camera: &Camera) -> PixelCone {
+        PixelCone {
+            eye: camera.eye,
+            spread: camera.pixel_size_at_unit_depth(),
+        }
+    }
+
+    /// The path length from the eye to `point`, seen directly.
+    fn distance(&self, point: Vec3) -> f32 {
+        (point - self.eye).length()
+    }
 }
 
 /// What shading one surface produced; `reflected`, `transmitted` and
@@ -218,7 +258,8 @@ fn fresnel_factor(cos_i: f32, cos_t: f32, eta: f32) -> f32 {
 impl Tracer<'_> {
     /// Traces a primary ray from the camera (depth 0).
     pub fn trace(&self, ray: &Ray) -> Sample {
-        self.sample_of(&mut OnDemand { tracer: self }, Link::Ray(*ray), Rays::Both)
+        let link = Link::Ray(*ray, self.cone.distance(ray.origin));
+        self.sample_of(&mut OnDemand { tracer: self }, link, Rays::Both)
     }
 
     /// Shades a known surface point seen along `incoming` (unit direction of
@@ -252,7 +293,7 @@ impl Tracer<'_> {
             .flat_map_iter(|chunk| {
                 let hits = self.bvh.closest_hits(chunk, f32::INFINITY);
                 chunk.iter().zip(hits).map(|(ray, hit)| {
-                    let link = Link::Hit(*ray, hit);
+                    let link = Link::Hit(*ray, hit, self.cone.distance(ray.origin));
                     self.sample_of(&mut OnDemand { tracer: self }, link, Rays::Both)
                 })
             })
@@ -381,11 +422,12 @@ impl Tracer<'_> {
         &self,
         point: &SurfacePoint,
         incoming: Vec3,
+        path: f32,
         depth: u32,
         rays: Rays,
         lit: &mut Vec<u64>,
     ) -> (SurfaceTerms, Option<Ray>, Option<Ray>) {
-        let terms = self.terms(point, incoming, &mut |light| {
+        let terms = self.terms(point, incoming, path, &mut |light| {
             if rays == Rays::Both {
                 lit.push(word::LIT + light_index(self.lighting, light));
             }
@@ -403,14 +445,15 @@ impl Tracer<'_> {
     /// methods (cube maps, PVRR) find the reflected radiance their own way and
     /// combine it as `local + kr * reflected + kt * transmitted`.
     pub fn surface_terms(&self, point: &SurfacePoint, incoming: Vec3) -> SurfaceTerms {
-        self.terms(point, incoming, &mut |_| {})
+        let path = self.cone.distance(point.position);
+        self.terms(point, incoming, path, &mut |_| {})
     }
 
     /// Only kr and kt of [`Tracer::surface_terms`] (Fresnel included when
     /// set): no shadow or secondary ray, so cheap enough for every pixel.
     pub fn weights(&self, point: &SurfacePoint, incoming: Vec3) -> (Vec3, Vec3) {
         let (normal, geometric, incoming) = self.normals(point, incoming);
-        let material = self.material_at(point);
+        let material = self.material_at(point, self.cone.distance(point.position));
         let s = secondary_rays(
             &material,
             normal,
@@ -421,16 +464,20 @@ impl Tracer<'_> {
         (s.kr, s.kt)
     }
 
-    /// The material at `point`, textured
-    /// ([`vtfarm_scene::Scene::textured_material`]). Rays carry no
-    /// footprint, so traced shading samples the finest mip level.
-    fn material_at(&self, point: &SurfacePoint) -> std::borrow::Cow<'_, vtfarm_scene::Material> {
+    /// The material at `point`, `path` metres along the rays from the eye,
+    /// textured ([`vtfarm_scene::Scene::textured_material`], the footprint
+    /// of [`PixelCone`] choosing the mip level).
+    fn material_at(
+        &self,
+        point: &SurfacePoint,
+        path: f32,
+    ) -> std::borrow::Cow<'_, vtfarm_scene::Material> {
         let scene = self.bvh.scene();
         if !scene.material_of(point.triangle).is_textured() {
             return std::borrow::Cow::Borrowed(scene.material_of(point.triangle));
         }
         let weights = scene.barycentrics(point.triangle, point.position);
-        scene.textured_material(point.triangle, weights, 0.0)
+        scene.textured_material(point.triangle, weights, path * self.cone.spread)
     }
 
     /// The unit shading normal, geometric normal and incoming direction at
@@ -453,9 +500,10 @@ impl Tracer<'_> {
         &self,
         point: &SurfacePoint,
         incoming: Vec3,
+        path: f32,
         lit: &mut dyn FnMut(&Light),
     ) -> SurfaceTerms {
-        let material = self.material_at(point);
+        let material = self.material_at(point, path);
         let (normal, geometric, incoming) = self.normals(point, incoming);
         let local = phong(
             &material,
@@ -573,12 +621,14 @@ trait TreeSource {
 /// A node of a ray tree traced on demand.
 #[derive(Clone, Copy)]
 enum Link {
-    /// A known surface point and the direction it is seen along.
+    /// A known surface point (seen from the eye) and the direction it is
+    /// seen along.
     Point(SurfacePoint, Vec3),
-    /// A ray still to trace.
-    Ray(Ray),
-    /// A ray and its closest hit.
-    Hit(Ray, Option<Hit>),
+    /// A ray still to trace, and the path length to its origin
+    /// ([`PixelCone`]).
+    Ray(Ray, f32),
+    /// A ray, its closest hit and the path length to its origin.
+    Hit(Ray, Option<Hit>, f32),
 }
 
 /// Traces each ray when the depth-first walk reaches it.
@@ -591,24 +641,27 @@ impl TreeSource for OnDemand<'_> {
 
     fn visit(&mut self, link: Link, depth: u32, rays: Rays, lit: &mut Vec<u64>) -> Visited<Link> {
         let tracer = self.tracer;
-        let (point, incoming) = match link {
-            Link::Point(point, incoming) => (point, incoming),
-            Link::Ray(ray) => {
+        let (point, incoming, path) = match link {
+            Link::Point(point, incoming) => (point, incoming, tracer.cone.distance(point.position)),
+            Link::Ray(ray, path) => {
                 let hit = tracer.bvh.closest_hit(&ray, f32::INFINITY);
-                return self.visit(Link::Hit(ray, hit), depth, rays, lit);
+                return self.visit(Link::Hit(ray, hit, path), depth, rays, lit);
             }
-            Link::Hit(_, None) => return Visited::Miss,
-            Link::Hit(ray, Some(hit)) => (tracer.bvh.surface_point(&hit), ray.direction),
+            Link::Hit(_, None, _) => return Visited::Miss,
+            Link::Hit(ray, Some(hit), path) => {
+                (tracer.bvh.surface_point(&hit), ray.direction, path + hit.t)
+            }
         };
-        let (terms, reflection, refraction) = tracer.surface_of(&point, incoming, depth, rays, lit);
+        let (terms, reflection, refraction) =
+            tracer.surface_of(&point, incoming, path, depth, rays, lit);
         Visited::Surface(VisitedSurface {
             object: tracer.bvh.scene().triangles[point.triangle as usize].object,
             see_through: tracer.bvh.see_through(point.triangle),
             local: terms.local,
             kr: terms.kr,
             kt: terms.kt,
-            reflection: reflection.map(Link::Ray),
-            refraction: refraction.map(Link::Ray),
+            reflection: reflection.map(|ray| Link::Ray(ray, path)),
+            refraction: refraction.map(|ray| Link::Ray(ray, path)),
         })
     }
 }

@@ -6,6 +6,7 @@
 //! (triangle filling, the rim no face reaches, every pixel at `reference`)
 //! are collected and traced afterwards in batches, then written.
 
+use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3};
@@ -230,14 +231,23 @@ pub(crate) struct Filled {
     pub(crate) tracing: Duration,
 }
 
+/// The finished values of pixels traced one by one by earlier stages of a
+/// progressive package, by frame index: a pixel's traced value is a
+/// function of the pixel alone (its triangle, the frame), so a later stage
+/// that traces the pixel again takes it from here, the same bits.
+pub(crate) type TracedPixels = HashMap<u32, PixelValue>;
+
 /// Phase 3: writes every pixel the plans' triangles own into `planes`
 /// (which must cover their rectangles). A stopped package writes nothing,
 /// or stops tracing within a batch and writes no traced value (its partial
-/// result is dropped).
+/// result is dropped). Pixels to trace that `earlier` holds are taken from
+/// it, the others traced and added to it (not at `reference`, whose
+/// pixels are traced another way); without it, every one is traced.
 pub(crate) fn fill(
     frame: &Frame<'_>,
     plans: &[TrianglePlan<'_>],
     planes: &mut Planes<'_>,
+    mut earlier: Option<&mut TracedPixels>,
 ) -> Filled {
     let mut filled = Filled {
         traced: vec![0; plans.len()],
@@ -286,10 +296,21 @@ pub(crate) fn fill(
     // Triangle by triangle, row-major: a batch then covers a compact patch
     // of the glass (its reflection rays stay coherent), not a strip of rows.
     to_trace.sort_by_key(|&(plan, _, _)| plan);
+    let reference = frame.settings.quality == Quality::Reference;
+    let index = |x: u32, y: u32| frame.ids.frame_index(x, y) as u32;
+    if let Some(earlier) = earlier.as_deref().filter(|_| !reference) {
+        to_trace.retain(|&(_, x, y)| match earlier.get(&index(x, y)) {
+            Some(value) => {
+                planes.set(x, y, value);
+                filled.written += 1;
+                false
+            }
+            None => true,
+        });
+    }
     filled.interpolation = start.elapsed();
 
     let start = Instant::now();
-    let reference = frame.settings.quality == Quality::Reference;
     let values: Vec<Vec<PixelValue>> = to_trace
         .par_chunks(PIXEL_BATCH)
         .map(|batch| {
@@ -313,6 +334,9 @@ pub(crate) fn fill(
             if write {
                 planes.set(x, y, value);
                 filled.written += 1;
+                if let Some(earlier) = earlier.as_deref_mut().filter(|_| !reference) {
+                    earlier.insert(index(x, y), *value);
+                }
             }
         }
     }

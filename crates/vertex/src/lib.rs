@@ -6,8 +6,9 @@
 //! that triangle, the scene and the frame set-up, never on which other
 //! triangles share its package. The farm splits work on this.
 
-/// How far the vertex tracer goes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// How far the vertex tracer goes, in the order a progressive frame goes
+/// ([`ProgressivePackage`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Quality {
     /// Trace the mesh vertices only, Gouraud-interpolate between them.
     Preview,
@@ -171,7 +172,7 @@ mod thin;
 pub use composite::{Components, FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelValue,
-    SparseBitmap, TracedPackage, trace_package, trace_package_into,
+    ProgressivePackage, SparseBitmap, StageError, TracedPackage, trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};
 pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache};

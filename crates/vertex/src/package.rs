@@ -18,9 +18,9 @@ use vtfarm_raster::{IdBuffer, PixelRect};
 use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
 use vtfarm_trace::Sample;
 
-use crate::fill::{Filled, Planes, TrianglePlan, fill};
+use crate::fill::{Filled, Planes, TracedPixels, TrianglePlan, fill};
 use crate::refine::{MeshVertex, TriangleMesh};
-use crate::{Frame, FrameImage, Quality};
+use crate::{Frame, FrameImage, Quality, VertexSettings};
 
 /// What the caller wants besides pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -181,7 +181,7 @@ pub fn trace_package(
     let mut dense = DensePlanes::default();
     let traced = run_package(frame, triangles, options, progress, &mut dense);
     PackageResult {
-        bitmap: dense.into_bitmap(),
+        bitmap: dense.bitmap(|_| true),
         stats: traced.stats,
         faces: traced.faces,
         triangle_samples: traced.triangle_samples,
@@ -286,14 +286,31 @@ impl Target for DensePlanes {
 }
 
 impl DensePlanes {
-    /// The written pixels as a bitmap over their bounding rectangle.
-    fn into_bitmap(self) -> SparseBitmap {
+    /// Whether pixel `i` was written here and differs from `last`'s (the
+    /// same rectangle: a package's stages): written there, or not in
+    /// every bit of colour, components and object.
+    fn differs(&self, last: &DensePlanes, i: usize) -> bool {
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        last.rect != self.rect
+            || !last.mask[i]
+            || bits(last.color[i]) != bits(self.color[i])
+            || bits(last.reflected[i]) != bits(self.reflected[i])
+            || bits(last.transmitted[i]) != bits(self.transmitted[i])
+            || last.object[i] != self.object[i]
+    }
+
+    /// The written pixels `keep` accepts (by index into the planes) as a
+    /// bitmap over their bounding rectangle.
+    fn bitmap(&self, keep: impl Fn(usize) -> bool) -> SparseBitmap {
         let Some(rect) = self.rect else {
             return SparseBitmap::default();
         };
+        let mask: Vec<bool> = (0..self.mask.len())
+            .map(|i| self.mask[i] && keep(i))
+            .collect();
         let stride = (rect.x1 - rect.x0) as usize;
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-        for (i, _) in self.mask.iter().enumerate().filter(|(_, m)| **m) {
+        for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
             let (x, y) = (i % stride, i / stride);
             x0 = x0.min(x);
             y0 = y0.min(y);
@@ -311,9 +328,10 @@ impl DensePlanes {
             ..SparseBitmap::default()
         };
         for y in y0..y1 {
-            for i in y * stride + x0..y * stride + x1 {
-                bitmap.mask.push(self.mask[i]);
-                if self.mask[i] {
+            let row = y * stride + x0..y * stride + x1;
+            for (i, &kept) in row.clone().zip(&mask[row]) {
+                bitmap.mask.push(kept);
+                if kept {
                     bitmap.color.push(self.color[i]);
                     bitmap.reflected.push(self.reflected[i]);
                     bitmap.transmitted.push(self.transmitted[i]);
@@ -325,7 +343,218 @@ impl DensePlanes {
     }
 }
 
-/// The three phases of a package, its pixels written into `target`.
+/// A package traced stage by stage on the same vertices and edges, as the
+/// paper's `Refine()` goes on after `TimeToBreak`: set up once
+/// ([`ProgressivePackage::new`]: which triangles own pixels, and where),
+/// then advanced `Preview` → `Refine` → `Full`, each stage continuing the
+/// meshes the last one left (the corners are traced at the first stage,
+/// each split's vertex once, in the pass that splits it; a pixel traced one
+/// by one, once, whichever stages need it) and writing every pixel its
+/// triangles own. A stage gives exactly the pixels of the
+/// package traced from scratch at its quality, because that is this type
+/// too, advanced once ([`trace_package`]); stages may be skipped
+/// (`Preview` → `Full`), and `Reference` (every pixel traced) may follow any.
+pub struct ProgressivePackage {
+    triangles: Vec<TriangleId>,
+    owned: Vec<(TriangleId, PixelRect)>,
+    /// One per owned triangle once the corners are traced.
+    meshes: Vec<TriangleMesh>,
+    stage: Option<Quality>,
+    /// The pixels the last stage left (bitmap stages only), so the next
+    /// stage's bitmap holds only what changed.
+    pixels: Option<DensePlanes>,
+    /// The pixels earlier stages traced one by one, so none is traced
+    /// twice; `None` for a package of one stage ([`trace_package`]).
+    traced_pixels: Option<TracedPixels>,
+    stopped: bool,
+}
+
+/// Why a [`ProgressivePackage`] cannot take a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum StageError {
+    #[error(
+        "a package at {from:?} cannot go to {to:?}: stages go preview, refine, full, and reference after any"
+    )]
+    NotLater { from: Quality, to: Quality },
+    #[error("the package was stopped in an earlier stage: its meshes are incomplete")]
+    Stopped,
+}
+
+impl ProgressivePackage {
+    /// The package's set-up: the triangles that own pixels (the others cost
+    /// nothing at any stage) and the rectangles that hold their pixels.
+    pub fn new(frame: &Frame<'_>, triangles: &[TriangleId]) -> Self {
+        ProgressivePackage {
+            triangles: triangles.to_vec(),
+            owned: (triangles.iter())
+                .filter_map(|&t| frame.owned_rect(t).map(|r| (t, r)))
+                .collect(),
+            meshes: Vec::new(),
+            stage: None,
+            pixels: None,
+            traced_pixels: Some(TracedPixels::new()),
+            stopped: false,
+        }
+    }
+
+    /// The last stage run to its end (`None` before the first).
+    pub fn stage(&self) -> Option<Quality> {
+        self.stage
+    }
+
+    /// Runs stage `quality` (later than [`ProgressivePackage::stage`]) on
+    /// `frame` (the one the package was set up on; its
+    /// `settings.quality` is ignored) and returns the package's pixels that
+    /// changed since the last stage, every owned pixel at the first, as a
+    /// bitmap: composited in order over the base frame, the stages' bitmaps
+    /// give each stage's image. The counters are this stage's work
+    /// ([`TracedPackage::stats`]).
+    pub fn advance(
+        &mut self,
+        frame: &Frame<'_>,
+        quality: Quality,
+        options: &PackageOptions,
+        progress: &mut dyn FnMut(&[FinishedFace]),
+    ) -> Result<PackageResult, StageError> {
+        let mut planes = DensePlanes::default();
+        let traced = self.run(frame, quality, options, progress, &mut planes)?;
+        let bitmap = match &self.pixels {
+            Some(last) => planes.bitmap(|i| planes.differs(last, i)),
+            None => planes.bitmap(|_| true),
+        };
+        self.pixels = Some(planes);
+        Ok(PackageResult {
+            bitmap,
+            stats: traced.stats,
+            faces: traced.faces,
+            triangle_samples: traced.triangle_samples,
+        })
+    }
+
+    /// [`ProgressivePackage::advance`] writing the stage's pixels straight
+    /// into `image` (every owned pixel, over the last stage's).
+    pub fn advance_into(
+        &mut self,
+        frame: &Frame<'_>,
+        quality: Quality,
+        options: &PackageOptions,
+        progress: &mut dyn FnMut(&[FinishedFace]),
+        image: &mut FrameImage,
+    ) -> Result<TracedPackage, StageError> {
+        self.run(frame, quality, options, progress, image)
+    }
+
+    /// One stage's three phases, its pixels written into `target`.
+    fn run(
+        &mut self,
+        frame: &Frame<'_>,
+        quality: Quality,
+        options: &PackageOptions,
+        progress: &mut dyn FnMut(&[FinishedFace]),
+        target: &mut dyn Target,
+    ) -> Result<TracedPackage, StageError> {
+        if self.stopped {
+            return Err(StageError::Stopped);
+        }
+        if let Some(from) = self.stage.filter(|&from| quality <= from) {
+            return Err(StageError::NotLater { from, to: quality });
+        }
+        let frame = &Frame {
+            settings: VertexSettings {
+                quality,
+                ..frame.settings
+            },
+            ..*frame
+        };
+        let owned = &self.owned;
+        let mut stats = PackageStats {
+            triangles: self.triangles.len() as u64,
+            traced_triangles: owned.len() as u64,
+            ..Default::default()
+        };
+        let mut times = PhaseTimes::default();
+
+        // Per owned triangle, the vertex samples this stage traces.
+        let mut new_samples = vec![0; owned.len()];
+        let vertex_start = Instant::now();
+        let refined = quality != Quality::Reference;
+        if refined {
+            if self.meshes.len() != owned.len() {
+                self.meshes = trace_corners(frame, owned, &mut stats);
+                new_samples.fill(3);
+            }
+            let before: Vec<u64> = self.meshes.iter().map(|m| m.refined_edges).collect();
+            refine_all(frame, &mut self.meshes, quality, options, progress);
+            for ((m, before), new) in self.meshes.iter().zip(before).zip(&mut new_samples) {
+                stats.refined_edges += m.refined_edges - before;
+                *new += m.refined_edges - before;
+                stats.visible_vertices += m.vertices.iter().filter(|v| v.visible).count() as u64;
+                stats.faces += m.faces().count() as u64;
+            }
+            stats.vertex_samples += stats.refined_edges;
+        }
+        stats.vertex_time = vertex_start.elapsed();
+        times.vertices = stats.vertex_time;
+
+        let fill_start = Instant::now();
+        let meshes = &self.meshes;
+        let plans: Vec<TrianglePlan> = owned
+            .par_iter()
+            .enumerate()
+            .map(|(k, &(t, rect))| {
+                TrianglePlan::new(frame, t, rect, meshes.get(k).filter(|_| refined))
+            })
+            .collect();
+        let planning = fill_start.elapsed();
+        let filled = match owned.iter().map(|&(_, r)| r).reduce(|a, b| PixelRect {
+            x0: a.x0.min(b.x0),
+            y0: a.y0.min(b.y0),
+            x1: a.x1.max(b.x1),
+            y1: a.y1.max(b.y1),
+        }) {
+            Some(rect) => fill(
+                frame,
+                &plans,
+                &mut target.planes(rect),
+                self.traced_pixels.as_mut(),
+            ),
+            None => Filled::default(),
+        };
+        stats.fill_time = fill_start.elapsed();
+        times.pixel_tracing = filled.tracing;
+        times.interpolation = planning + filled.interpolation;
+        stats.filled_pixels = filled.traced.iter().sum();
+        stats.pixels = filled.written;
+        let mut triangle_samples = vec![0; self.triangles.len()];
+        let mut next_owned = 0;
+        for (slot, &t) in triangle_samples.iter_mut().zip(&self.triangles) {
+            if owned.get(next_owned).is_some_and(|&(o, _)| o == t) {
+                let traced = filled.traced.get(next_owned).copied().unwrap_or(0);
+                *slot = (new_samples[next_owned] + traced) as u32;
+                next_owned += 1;
+            }
+        }
+
+        let faces = if options.collect_faces && refined {
+            meshes.iter().flat_map(finished_faces).collect()
+        } else {
+            Vec::new()
+        };
+        if frame.stopped() {
+            self.stopped = true;
+        } else {
+            self.stage = Some(quality);
+        }
+        Ok(TracedPackage {
+            stats,
+            faces,
+            triangle_samples,
+            times,
+        })
+    }
+}
+
+/// A package from scratch: one stage of a [`ProgressivePackage`].
 fn run_package(
     frame: &Frame<'_>,
     triangles: &[TriangleId],
@@ -333,84 +562,20 @@ fn run_package(
     progress: &mut dyn FnMut(&[FinishedFace]),
     target: &mut dyn Target,
 ) -> TracedPackage {
-    let mut stats = PackageStats {
-        triangles: triangles.len() as u64,
-        ..Default::default()
+    let mut package = ProgressivePackage {
+        traced_pixels: None,
+        ..ProgressivePackage::new(frame, triangles)
     };
-    let mut times = PhaseTimes::default();
-    let owned: Vec<(TriangleId, PixelRect)> = triangles
-        .iter()
-        .filter_map(|&t| frame.owned_rect(t).map(|r| (t, r)))
-        .collect();
-    stats.traced_triangles = owned.len() as u64;
-
-    let vertex_start = Instant::now();
-    let meshes = if frame.settings.quality == Quality::Reference {
-        Vec::new()
-    } else {
-        let meshes = refine_all(frame, &owned, options, progress, &mut stats);
-        for m in &meshes {
-            stats.refined_edges += m.refined_edges;
-            stats.visible_vertices += m.vertices.iter().filter(|v| v.visible).count() as u64;
-            stats.faces += m.faces().count() as u64;
-        }
-        meshes
-    };
-    stats.vertex_time = vertex_start.elapsed();
-    times.vertices = stats.vertex_time;
-
-    let fill_start = Instant::now();
-    let plans: Vec<TrianglePlan> = owned
-        .par_iter()
-        .enumerate()
-        .map(|(k, &(t, rect))| TrianglePlan::new(frame, t, rect, meshes.get(k)))
-        .collect();
-    let planning = fill_start.elapsed();
-    let filled = match owned.iter().map(|&(_, r)| r).reduce(|a, b| PixelRect {
-        x0: a.x0.min(b.x0),
-        y0: a.y0.min(b.y0),
-        x1: a.x1.max(b.x1),
-        y1: a.y1.max(b.y1),
-    }) {
-        Some(rect) => fill(frame, &plans, &mut target.planes(rect)),
-        None => Filled::default(),
-    };
-    stats.fill_time = fill_start.elapsed();
-    times.pixel_tracing = filled.tracing;
-    times.interpolation = planning + filled.interpolation;
-    stats.filled_pixels = filled.traced.iter().sum();
-    stats.pixels = filled.written;
-    let mut triangle_samples = vec![0; triangles.len()];
-    let mut next_owned = 0;
-    for (slot, &t) in triangle_samples.iter_mut().zip(triangles) {
-        if owned.get(next_owned).is_some_and(|&(o, _)| o == t) {
-            let refined = meshes.get(next_owned).map_or(0, |m| m.refined_edges + 3);
-            let traced = filled.traced.get(next_owned).copied().unwrap_or(0);
-            *slot = (refined + traced) as u32;
-            next_owned += 1;
-        }
-    }
-
-    let faces = if options.collect_faces {
-        meshes.iter().flat_map(finished_faces).collect()
-    } else {
-        Vec::new()
-    };
-    TracedPackage {
-        stats,
-        faces,
-        triangle_samples,
-        times,
-    }
+    package
+        .run(frame, frame.settings.quality, options, progress, target)
+        .expect("a new package takes any stage")
 }
 
-/// Phases 1 and 2: traces the distinct original vertices once, then refines
-/// each triangle, reporting finished faces at time breaks.
-fn refine_all(
+/// Phase 1: traces the distinct original vertices of the owned triangles
+/// once (neighbours share corners) and makes each triangle's unrefined mesh.
+fn trace_corners(
     frame: &Frame<'_>,
     owned: &[(TriangleId, PixelRect)],
-    options: &PackageOptions,
-    progress: &mut dyn FnMut(&[FinishedFace]),
     stats: &mut PackageStats,
 ) -> Vec<TriangleMesh> {
     let scene = frame.tracer.bvh.scene();
@@ -441,7 +606,7 @@ fn refine_all(
     stats.vertex_samples += samples.len() as u64;
 
     let projector = frame.projector();
-    let mut meshes: Vec<TriangleMesh> = owned
+    owned
         .iter()
         .zip(&corner_slots)
         .map(|(&(t, _), slots)| {
@@ -459,7 +624,19 @@ fn refine_all(
             };
             TriangleMesh::new(t, [corner(0), corner(1), corner(2)])
         })
-        .collect();
+        .collect()
+}
+
+/// Phase 2: refines each triangle's mesh on to `quality` (in parallel),
+/// reporting finished faces at time breaks.
+fn refine_all(
+    frame: &Frame<'_>,
+    meshes: &mut [TriangleMesh],
+    quality: Quality,
+    options: &PackageOptions,
+    progress: &mut dyn FnMut(&[FinishedFace]),
+) {
+    let projector = frame.projector();
     if let Some(every) = options.time_break {
         progress(&meshes.iter().flat_map(finished_faces).collect::<Vec<_>>());
         let mut last_break = Instant::now();
@@ -468,7 +645,7 @@ fn refine_all(
         let chunk = (rayon::current_num_threads() * 8).max(1);
         for part in meshes.chunks_mut(chunk) {
             part.par_iter_mut()
-                .for_each(|m| m.refine(frame, &projector));
+                .for_each(|m| m.refine_to(frame, &projector, quality));
             pending.extend(part.iter().flat_map(finished_faces));
             if last_break.elapsed() >= every {
                 progress(&pending);
@@ -482,12 +659,9 @@ fn refine_all(
     } else {
         meshes
             .par_iter_mut()
-            .for_each(|m| m.refine(frame, &projector));
+            .for_each(|m| m.refine_to(frame, &projector, quality));
     }
-    stats.vertex_samples += meshes.iter().map(|m| m.refined_edges).sum::<u64>();
-    meshes
 }
-
 /// The screen-space faces of a mesh with their corner colours.
 fn finished_faces(mesh: &TriangleMesh) -> impl Iterator<Item = FinishedFace> + '_ {
     mesh.faces().filter_map(|f| {

@@ -6,6 +6,13 @@
 //! inserts one vertex at its midpoint and splits both faces that share it, so
 //! one new sample serves up to four new faces. Because nothing here looks
 //! beyond the triangle, its result cannot depend on the package it came in.
+//!
+//! Refinement runs in passes, one per level, each continuing on the mesh
+//! the last left (the paper's `Refine()` going on after `TimeToBreak`):
+//! `refine` splits edges whose samples disagree; `full` then also splits
+//! agreeing edges longer than [`crate::VertexSettings::max_edge`]. A mesh
+//! refined to `full` at once runs both passes, so a progressive frame and a
+//! frame rendered from scratch are one algorithm and give the same mesh.
 
 use std::collections::{BinaryHeap, HashMap};
 
@@ -101,6 +108,8 @@ pub(crate) struct TriangleMesh {
     /// The (up to two) live faces on each edge.
     edge_faces: HashMap<(u32, u32), [u32; 2]>,
     pub(crate) refined_edges: u64,
+    /// The last level whose pass ran to its end (`Preview`: none yet).
+    pub(crate) level: Quality,
 }
 
 const NO_FACE: u32 = u32::MAX;
@@ -122,6 +131,7 @@ impl TriangleMesh {
             }],
             edge_faces,
             refined_edges: 0,
+            level: Quality::Preview,
         }
     }
 
@@ -163,14 +173,31 @@ impl TriangleMesh {
         }
     }
 
-    /// Runs the edge list to exhaustion (the paper's Refine()).
-    pub(crate) fn refine(&mut self, frame: &Frame<'_>, projector: &Projector) {
-        let settings = frame.settings;
-        if settings.quality == Quality::Preview {
-            return;
+    /// Refines the mesh on to `quality` (`Preview`, `Refine` or `Full`):
+    /// each level's pass after the last one run, in order. A stopped pass
+    /// leaves the level where it was.
+    pub(crate) fn refine_to(&mut self, frame: &Frame<'_>, projector: &Projector, quality: Quality) {
+        let level = self.level;
+        let passes = [Quality::Refine, Quality::Full].into_iter();
+        for pass in passes.filter(|&p| p > level && p <= quality) {
+            self.run_pass(frame, projector, pass);
+            if frame.stopped() {
+                return;
+            }
+            self.level = pass;
         }
+    }
+
+    /// One level's pass: the edge list, seeded with every live edge (the
+    /// original triangle's three at first), run to exhaustion (the paper's
+    /// Refine()). The list is ordered totally, so the order the seeds go in
+    /// does not matter.
+    fn run_pass(&mut self, frame: &Frame<'_>, projector: &Projector, pass: Quality) {
+        let settings = frame.settings;
         let mut queue = BinaryHeap::new();
-        for (a, b) in [(0, 1), (1, 2), (2, 0)] {
+        let mut seeds: Vec<(u32, u32)> = self.edge_faces.keys().copied().collect();
+        seeds.sort_unstable();
+        for (a, b) in seeds {
             self.queue_edge(&mut queue, a, b, false);
         }
         while let Some(edge) = queue.pop() {
@@ -180,7 +207,7 @@ impl TriangleMesh {
             let Some(&faces) = self.edge_faces.get(&(edge.a, edge.b)) else {
                 continue; // Split already (queued twice, or forced after queueing).
             };
-            if !self.check_refinement(frame, &edge, faces) {
+            if !self.check_refinement(frame, &edge, faces, pass) {
                 continue;
             }
             let new_faces = self.split(frame, projector, edge.a, edge.b, faces);
@@ -211,9 +238,15 @@ impl TriangleMesh {
 
     /// CheckRefinement(): long enough on screen, not too deep, at least one
     /// end visible, and the samples disagree (or the flatness test forced it,
-    /// or, at `full`, the edge is longer than the maximum edge, below which
-    /// agreeing ends are trusted).
-    fn check_refinement(&self, frame: &Frame<'_>, edge: &QueuedEdge, faces: [u32; 2]) -> bool {
+    /// or, in the `full` pass, the edge is longer than the maximum edge,
+    /// below which agreeing ends are trusted).
+    fn check_refinement(
+        &self,
+        frame: &Frame<'_>,
+        edge: &QueuedEdge,
+        faces: [u32; 2],
+        pass: Quality,
+    ) -> bool {
         let settings = &frame.settings;
         let deep = faces
             .iter()
@@ -225,7 +258,7 @@ impl TriangleMesh {
             && !deep
             && visible
             && (edge.forced
-                || (settings.quality == Quality::Full && edge.length > settings.max_edge)
+                || (pass == Quality::Full && edge.length > settings.max_edge)
                 || self.disagree(edge.a, edge.b, settings.epsilon)
                 || self.crosses_hidden_edge(frame, edge))
     }

@@ -58,6 +58,11 @@ impl Stop {
         self.samples.fetch_add(samples, Ordering::Relaxed);
     }
 
+    /// The samples counted so far: every sample the package traced.
+    pub fn charged(&self) -> u64 {
+        self.samples.load(Ordering::Relaxed)
+    }
+
     /// Why the package must stop, if it must.
     pub fn stopped(&self) -> Option<Stopped> {
         if self.cancelled.load(Ordering::Relaxed) {

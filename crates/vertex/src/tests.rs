@@ -32,8 +32,9 @@ use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, Triangle
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
-    Behind, Frame, GlassPass, PackageOptions, PackageResult, Quality, ShadowCache, Stop, Stopped,
-    Transmission, VertexOwners, VertexSettings, trace_package,
+    Behind, Frame, GlassPass, PackageOptions, PackageResult, ProgressivePackage, Quality,
+    ShadowCache, SparseBitmap, StageError, Stop, Stopped, Transmission, VertexOwners,
+    VertexSettings, trace_package,
 };
 
 /// The default thresholds without the maximum edge length, so that only
@@ -160,6 +161,7 @@ impl TestFrame {
             bvh: &bvh,
             lighting: &lighting,
             settings: TraceSettings::default(),
+            cone: vtfarm_trace::PixelCone::FINEST,
         };
         let behind = Behind::new(
             &tracer,
@@ -186,6 +188,7 @@ impl TestFrame {
                 bvh: &self.bvh,
                 lighting: &self.lighting,
                 settings: TraceSettings::default(),
+                cone: vtfarm_trace::PixelCone::FINEST,
             },
             camera: self.camera,
             ids: &self.ids,
@@ -536,4 +539,127 @@ fn batched_pixels_and_vertices_equal_one_at_a_time() {
             .collect();
         assert_eq!(f.shade_vertices(&vertices), single, "{transmission:?}");
     }
+}
+
+/// The pixels of a bitmap as (x, y) → (colour, reflected, transmitted,
+/// object) bits, for byte-exact comparison of composited stages.
+type PixelBits = std::collections::BTreeMap<(u32, u32), ([u32; 3], [u32; 3], [u32; 3], u32)>;
+
+fn composite(pixels: &mut PixelBits, bitmap: &SparseBitmap) {
+    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+    for (x, y, k) in bitmap.covered() {
+        let value = (
+            bits(bitmap.color[k]),
+            bits(bitmap.reflected[k]),
+            bits(bitmap.transmitted[k]),
+            bitmap.reflected_object[k],
+        );
+        pixels.insert((x, y), value);
+    }
+}
+
+/// Preview, refine and full on one package's vertices and edges give, stage
+/// by stage, the pixels of the package traced from scratch at each quality,
+/// each stage's bitmap holding only what changed; no vertex is traced
+/// twice: each stage traces the samples its quality adds (counted by the
+/// stop's meter too), and the package is set up once.
+#[test]
+fn progressive_stages_equal_packages_traced_from_scratch_and_trace_each_vertex_once() {
+    let frame = TestFrame::new(Extras::default());
+    let stages = [Quality::Preview, Quality::Refine, Quality::Full];
+    // The hand-worked thresholds, the defaults (the maximum edge splits at
+    // `full`) and a fine floor.
+    let settings = [
+        VertexSettings {
+            pixel_floor: 20.0,
+            ..unguarded()
+        },
+        VertexSettings::default(),
+        VertexSettings {
+            pixel_floor: 2.0,
+            max_edge: 8.0,
+            ..VertexSettings::default()
+        },
+    ];
+    for settings in settings {
+        let meter = Stop::with_budget(u64::MAX);
+        let f = Frame {
+            stop: Some(&meter),
+            ..frame.frame(settings)
+        };
+        let mut package = ProgressivePackage::new(&f, &[A, B]);
+        let mut progressive = PixelBits::new();
+        let mut scratch_before = None;
+        let mut changed = Vec::new();
+        for quality in stages {
+            let charged = meter.charged();
+            let stage = package
+                .advance(&f, quality, &PackageOptions::default(), &mut |_| {})
+                .unwrap();
+            assert_eq!(package.stage(), Some(quality));
+            assert_eq!(meter.charged() - charged, stage.stats.samples());
+            composite(&mut progressive, &stage.bitmap);
+            changed.push(stage.bitmap.color.len());
+
+            let scratch = frame.trace(
+                VertexSettings {
+                    quality,
+                    ..settings
+                },
+                &[A, B],
+            );
+            let mut expected = PixelBits::new();
+            composite(&mut expected, &scratch.bitmap);
+            assert_eq!(progressive, expected, "{quality:?} {settings:?}");
+            // The vertices this stage traced are those its quality adds.
+            let before = scratch_before.map_or(0, |s: crate::PackageStats| s.vertex_samples);
+            assert_eq!(
+                stage.stats.vertex_samples,
+                scratch.stats.vertex_samples - before,
+                "{quality:?} {settings:?}"
+            );
+            assert_eq!(
+                (stage.stats.faces, stage.stats.pixels),
+                (scratch.stats.faces, scratch.stats.pixels)
+            );
+            scratch_before = Some(scratch.stats);
+        }
+        // Every owned pixel at the first stage; later, only what changed
+        // (with the hand-worked thresholds, B's pixels never do).
+        let owned = (frame.owned_pixels(A) + frame.owned_pixels(B)) as usize;
+        assert_eq!(changed[0], owned);
+        if settings.max_edge == f32::MAX {
+            let a = frame.owned_pixels(A) as usize;
+            assert!(changed[1..].iter().all(|&n| n <= a), "{changed:?}");
+        }
+        // Stages go forward only.
+        assert_eq!(
+            package
+                .advance(&f, Quality::Refine, &PackageOptions::default(), &mut |_| {})
+                .map(|_| ()),
+            Err(StageError::NotLater {
+                from: Quality::Full,
+                to: Quality::Refine
+            })
+        );
+    }
+    // The hand-worked case: 3 corners at preview, 2 splits at refine, none
+    // more at full, where A's disagreeing face is filled.
+    let settings = VertexSettings {
+        pixel_floor: 20.0,
+        ..unguarded()
+    };
+    let f = frame.frame(settings);
+    let mut package = ProgressivePackage::new(&f, &[A]);
+    let counts: Vec<(u64, u64, u64)> = stages
+        .iter()
+        .map(|&q| {
+            let s = package
+                .advance(&f, q, &PackageOptions::default(), &mut |_| {})
+                .unwrap()
+                .stats;
+            (s.vertex_samples, s.refined_edges, s.filled_pixels)
+        })
+        .collect();
+    assert_eq!(counts, [(3, 0, 0), (2, 2, 0), (0, 0, 136)]);
 }

@@ -64,6 +64,8 @@ fn main() -> std::io::Result<()> {
                     aux: false,
                     method: WireMethod::VertexTracing,
                     image: WireImageFormat::Srgb8,
+                    priority: 0,
+                    kind: vtfarm_proto::WireJobKind::Render,
                 },
             },
         ),

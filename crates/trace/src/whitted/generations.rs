@@ -45,6 +45,8 @@ struct Pending {
     node: usize,
     point: SurfacePoint,
     incoming: Vec3,
+    /// The path length from the eye ([`super::PixelCone`]).
+    path: f32,
     rays: Rays,
 }
 
@@ -70,20 +72,27 @@ pub(super) fn shade_points(
             node,
             point,
             incoming,
+            path: tracer.cone.distance(point.position),
             rays,
         })
         .collect();
     let mut depth = 1;
     while !pending.is_empty() {
-        // (parent node, ray) of the next generation, by kind.
-        let mut reflections: Vec<(usize, Ray)> = Vec::new();
-        let mut refractions: Vec<(usize, Ray)> = Vec::new();
+        // (parent node, ray, path to the parent) of the next generation, by kind.
+        let mut reflections: Vec<(usize, Ray, f32)> = Vec::new();
+        let mut refractions: Vec<(usize, Ray, f32)> = Vec::new();
         for p in &pending {
             let start = recorded.lit_words.len();
-            let (terms, reflection, refraction) =
-                tracer.surface_of(&p.point, p.incoming, depth, p.rays, &mut recorded.lit_words);
-            reflections.extend(reflection.map(|ray| (p.node, ray)));
-            refractions.extend(refraction.map(|ray| (p.node, ray)));
+            let (terms, reflection, refraction) = tracer.surface_of(
+                &p.point,
+                p.incoming,
+                p.path,
+                depth,
+                p.rays,
+                &mut recorded.lit_words,
+            );
+            reflections.extend(reflection.map(|ray| (p.node, ray, p.path)));
+            refractions.extend(refraction.map(|ray| (p.node, ray, p.path)));
             recorded.nodes[p.node].surface = Some(Surface {
                 see_through: tracer.bvh.see_through(p.point.triangle),
                 local: terms.local,
@@ -96,9 +105,9 @@ pub(super) fn shade_points(
         }
         pending.clear();
         for (spawned, is_reflection) in [(reflections, true), (refractions, false)] {
-            let batch: Vec<Ray> = spawned.iter().map(|&(_, ray)| ray).collect();
+            let batch: Vec<Ray> = spawned.iter().map(|&(_, ray, _)| ray).collect();
             let hits = tracer.bvh.closest_hits(&batch, f32::INFINITY);
-            for (&(parent, ray), hit) in spawned.iter().zip(hits) {
+            for (&(parent, ray, path), hit) in spawned.iter().zip(hits) {
                 let node = recorded.nodes.len();
                 let parent = recorded.nodes[parent].surface.as_mut();
                 let parent = parent.expect("a node spawns rays once shaded");
@@ -114,6 +123,7 @@ pub(super) fn shade_points(
                             node,
                             point: tracer.bvh.surface_point(&hit),
                             incoming: ray.direction,
+                            path: path + hit.t,
                             rays: Rays::Both,
                         });
                         scene.triangles[hit.triangle as usize].object

@@ -9,9 +9,10 @@ import base64
 import struct
 import zlib
 
-from pygltflib import (GLTF2, Accessor, Asset, Buffer, BufferView, Camera, Image, Material,
-                       Mesh, Node, PbrMetallicRoughness, Perspective, Primitive, Sampler, Scene,
-                       Texture, TextureInfo, Attributes)
+from pygltflib import (GLTF2, Accessor, AccessorSparseIndices, AccessorSparseValues, Asset, Buffer,
+                       BufferView, Camera, Image, Material, Mesh, Node, PbrMetallicRoughness,
+                       Perspective, Primitive, Sampler, Scene, Sparse, Texture, TextureInfo,
+                       Attributes)
 
 FLOAT, UINT = 5126, 5125
 ARRAY, ELEMENTS = 34962, 34963
@@ -142,7 +143,58 @@ def draco():
     b.save("draco.gltf", embed=True)
 
 
+def shared_levels(b, levels, mesh):
+    """Two nodes per level, each with both nodes of the next level as children, the last
+    level's nodes instancing `mesh`: 2^levels instances of it from 2 * levels nodes."""
+    b.gltf.nodes = []
+    for level in range(levels):
+        last = level == levels - 1
+        children = [] if last else [2 * level + 2, 2 * level + 3]
+        for side in range(2):
+            b.gltf.nodes.append(Node(name=f"n{level}{'ab'[side]}", children=children, mesh=mesh if last else None,
+                                     translation=[0.0, 0.0, 0.001 * side]))
+    b.gltf.scenes = [Scene(nodes=[0, 1])]
+    b.gltf.scene = 0
+
+
+def instances_beyond_bound():
+    """A quad instanced 2^21 times through 21 levels of nodes that share their children:
+    more node instances than the importer's MAX_NODE_VISITS (2^20), in 8 kB of JSON."""
+    b = Builder()
+    b.quad("tile", None)
+    shared_levels(b, 21, 0)
+    b.save("instances_beyond_bound.gltf", embed=True)
+
+
+def vertices_beyond_bound():
+    """A mesh of 2^16 vertices (a sparse accessor: zeros and one stored value, so the file stays
+    small) instanced 2^9 times: 2^25 vertices, beyond MAX_IMPORTED_VERTICES (2^24)."""
+    b = Builder()
+    count = 1 << 16
+    index_view = b.view(struct.pack("<I", count - 1))
+    value_view = b.view(struct.pack("<3f", 1.0, 1.0, 0.0))
+    b.gltf.accessors.append(Accessor(componentType=FLOAT, count=count, type="VEC3", min=[0, 0, 0], max=[1, 1, 0],
+                                     sparse=Sparse(count=1, indices=AccessorSparseIndices(bufferView=index_view, componentType=UINT),
+                                                   values=AccessorSparseValues(bufferView=value_view))))
+    b.gltf.meshes.append(Mesh(name="dust", primitives=[Primitive(attributes=Attributes(POSITION=0))]))
+    shared_levels(b, 9, 0)
+    b.save("vertices_beyond_bound.gltf", embed=True)
+
+
+def node_cycle():
+    """A node that is its own grandchild, under a root: a tree that never ends."""
+    b = Builder()
+    b.quad("loop", None)
+    b.gltf.nodes = [Node(name="root", children=[1]), Node(name="a", mesh=0, children=[2]), Node(name="b", children=[1])]
+    b.gltf.scenes = [Scene(nodes=[0])]
+    b.gltf.scene = 0
+    b.save("node_cycle.gltf", embed=True)
+
+
 instanced()
 textured()
 glass()
 draco()
+instances_beyond_bound()
+vertices_beyond_bound()
+node_cycle()

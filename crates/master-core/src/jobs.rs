@@ -1,0 +1,388 @@
+//! The farm's jobs as its users see them: each job's state ([`JobState`],
+//! whose transitions are the one table [`JobState::may_become`]), priority,
+//! progress, times and origin ([`JobEntry`], kept in the [`JobTable`]), and
+//! how long finished jobs stay listed ([`Retention`]).
+//!
+//! | from | to | when |
+//! |---|---|---|
+//! | Queued | Running | the scheduler starts it |
+//! | Queued, Running | Paused | `pause` |
+//! | Paused | Queued | `resume` of a job that never started |
+//! | Paused | Running | `resume` of a job that had started |
+//! | Running, Paused | Completed | its last frame is done (a paused job's running packages finish) |
+//! | Running, Paused | Failed | a package failed on too many workers, or no worker may take its work |
+//! | Queued, Running, Paused | Cancelled | `cancel` |
+//! | Completed, Failed, Cancelled | Queued | `requeue` |
+//!
+//! Completed, Failed and Cancelled are finished: such a job stays listed
+//! (and a persistent master keeps its frames for re-attaching) until
+//! [`Retention`] lets it go.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+
+/// A job's state; the module documentation has the transition table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum JobState {
+    /// Waiting for the scheduler to start it.
+    Queued,
+    /// Its frames are being rendered.
+    Running,
+    /// Hands out no new work; what runs finishes and is kept.
+    Paused,
+    /// Every frame is done. Finished.
+    Completed,
+    /// Given up (see its reason). Finished.
+    Failed,
+    /// Cancelled by a user (or because its embedded submitter left). Finished.
+    Cancelled,
+}
+
+impl JobState {
+    /// Every state, in the order listings count them.
+    pub const ALL: [JobState; 6] = [
+        JobState::Queued,
+        JobState::Running,
+        JobState::Paused,
+        JobState::Completed,
+        JobState::Failed,
+        JobState::Cancelled,
+    ];
+
+    /// Whether the transition table allows `self → to`. Jobs are created
+    /// straight into [`JobState::Queued`].
+    pub fn may_become(self, to: JobState) -> bool {
+        use JobState::*;
+        matches!(
+            (self, to),
+            (Queued, Running | Paused | Cancelled)
+                | (Running, Paused | Completed | Failed | Cancelled)
+                | (Paused, Queued | Running | Completed | Failed | Cancelled)
+                | (Completed | Failed | Cancelled, Queued)
+        )
+    }
+
+    /// Whether the job is over (only a requeue leaves the state).
+    pub fn is_finished(self) -> bool {
+        matches!(
+            self,
+            JobState::Completed | JobState::Failed | JobState::Cancelled
+        )
+    }
+
+    /// The lowercase name listings and metrics use.
+    pub fn name(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Paused => "paused",
+            JobState::Completed => "completed",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+}
+
+impl std::fmt::Display for JobState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl From<JobState> for WireJobState {
+    fn from(state: JobState) -> Self {
+        match state {
+            JobState::Queued => WireJobState::Queued,
+            JobState::Running => WireJobState::Running,
+            JobState::Paused => WireJobState::Paused,
+            JobState::Completed => WireJobState::Completed,
+            JobState::Failed => WireJobState::Failed,
+            JobState::Cancelled => WireJobState::Cancelled,
+        }
+    }
+}
+
+impl From<WireJobState> for JobState {
+    fn from(state: WireJobState) -> Self {
+        match state {
+            WireJobState::Queued => JobState::Queued,
+            WireJobState::Running => JobState::Running,
+            WireJobState::Paused => JobState::Paused,
+            WireJobState::Completed => JobState::Completed,
+            WireJobState::Failed => JobState::Failed,
+            WireJobState::Cancelled => JobState::Cancelled,
+        }
+    }
+}
+
+/// How many finished jobs a master keeps listed (with their frames, on a
+/// persistent master), and for how long after they finished: the older
+/// ones go first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Retention {
+    pub max_jobs: usize,
+    pub max_age: Duration,
+}
+
+impl Retention {
+    /// 100 finished jobs, each for at most a day.
+    pub const DEFAULT: Retention = Retention {
+        max_jobs: 100,
+        max_age: Duration::from_secs(24 * 3600),
+    };
+}
+
+impl Default for Retention {
+    fn default() -> Self {
+        Retention::DEFAULT
+    }
+}
+
+/// One job's listing: what `vtfarm jobs` shows and the journal keeps.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct JobEntry {
+    pub id: u64,
+    pub name: String,
+    pub kind: WireJobKind,
+    pub state: JobState,
+    pub priority: i32,
+    pub frames_done: u32,
+    pub frames_total: u32,
+    /// Milliseconds since the Unix epoch.
+    pub submitted_ms: u64,
+    pub started_ms: Option<u64>,
+    pub finished_ms: Option<u64>,
+    pub host: String,
+    /// Why it failed or who cancelled it.
+    pub reason: String,
+}
+
+impl JobEntry {
+    /// The listing as the wire carries it.
+    pub fn summary(&self) -> JobSummary {
+        let unfinished = self.frames_total.saturating_sub(self.frames_done);
+        let frames_failed = match self.state {
+            JobState::Failed | JobState::Cancelled => unfinished,
+            _ => 0,
+        };
+        JobSummary {
+            id: self.id,
+            name: self.name.clone(),
+            kind: self.kind,
+            state: self.state.into(),
+            priority: self.priority,
+            frames_done: self.frames_done,
+            frames_failed,
+            frames_total: self.frames_total,
+            submitted_ms: self.submitted_ms,
+            started_ms: self.started_ms,
+            finished_ms: self.finished_ms,
+            host: self.host.clone(),
+            reason: self.reason.clone(),
+        }
+    }
+
+    /// The listing back from the journal.
+    pub fn from_summary(summary: JobSummary) -> JobEntry {
+        JobEntry {
+            id: summary.id,
+            name: summary.name,
+            kind: summary.kind,
+            state: summary.state.into(),
+            priority: summary.priority,
+            frames_done: summary.frames_done,
+            frames_total: summary.frames_total,
+            submitted_ms: summary.submitted_ms,
+            started_ms: summary.started_ms,
+            finished_ms: summary.finished_ms,
+            host: summary.host,
+            reason: summary.reason,
+        }
+    }
+}
+
+/// A transition the table does not allow.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("job {job} is {from} and cannot become {to}")]
+pub struct TransitionRefused {
+    pub job: u64,
+    pub from: JobState,
+    pub to: JobState,
+}
+
+/// Why a user's request about a job is refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum JobControlError {
+    #[error(
+        "the master has no job {0} (finished longer ago than it keeps jobs, or never submitted)"
+    )]
+    UnknownJob(u64),
+    #[error("job {job} is {state}: {action} applies to {applies_to} jobs")]
+    NotNow {
+        job: u64,
+        state: JobState,
+        action: &'static str,
+        applies_to: &'static str,
+    },
+    #[error("job {0} has no failed frames to requeue")]
+    NothingToRequeue(u64),
+    #[error("job {0} is the interactive view's: the dashboard steers it")]
+    ViewJob(u64),
+    #[error("job {job} cannot be queued again: {reason}")]
+    Requeue { job: u64, reason: String },
+}
+
+/// Every listed job, by id (so in submission order).
+#[derive(Debug, Default)]
+pub struct JobTable {
+    entries: BTreeMap<u64, JobEntry>,
+}
+
+impl JobTable {
+    pub fn get(&self, id: u64) -> Option<&JobEntry> {
+        self.entries.get(&id)
+    }
+
+    pub(crate) fn get_mut(&mut self, id: u64) -> Option<&mut JobEntry> {
+        self.entries.get_mut(&id)
+    }
+
+    pub(crate) fn insert(&mut self, entry: JobEntry) {
+        self.entries.insert(entry.id, entry);
+    }
+
+    pub(crate) fn remove(&mut self, id: u64) -> Option<JobEntry> {
+        self.entries.remove(&id)
+    }
+
+    /// Moves job `id` to `to` at `at_ms` (setting its start or finish
+    /// time), if the table allows it; `Ok(None)` for a job the table does
+    /// not list (a frame rendered again has no state to keep).
+    pub(crate) fn set_state(
+        &mut self,
+        id: u64,
+        to: JobState,
+        at_ms: u64,
+    ) -> Result<Option<&JobEntry>, TransitionRefused> {
+        let Some(entry) = self.entries.get_mut(&id) else {
+            return Ok(None);
+        };
+        if !entry.state.may_become(to) {
+            return Err(TransitionRefused {
+                job: id,
+                from: entry.state,
+                to,
+            });
+        }
+        entry.state = to;
+        match to {
+            JobState::Running => {
+                entry.started_ms.get_or_insert(at_ms);
+            }
+            JobState::Queued => {
+                entry.finished_ms = None;
+                entry.reason.clear();
+            }
+            _ if to.is_finished() => entry.finished_ms = Some(at_ms),
+            _ => {}
+        }
+        Ok(Some(entry))
+    }
+
+    /// The jobs, oldest first: every one with `all`, else the unfinished.
+    pub fn list(&self, all: bool) -> impl Iterator<Item = &JobEntry> {
+        (self.entries.values()).filter(move |e| all || !e.state.is_finished())
+    }
+
+    /// How many jobs are in `state`.
+    pub fn count(&self, state: JobState) -> usize {
+        self.entries.values().filter(|e| e.state == state).count()
+    }
+
+    /// The finished jobs `retention` lets go at `now_ms`: those beyond its
+    /// count (the earliest finished first) and those finished too long ago.
+    pub(crate) fn expired(&self, retention: Retention, now_ms: u64) -> Vec<u64> {
+        let mut finished: Vec<(u64, u64)> = (self.entries.values())
+            .filter_map(|e| Some((e.finished_ms?, e.id)).filter(|_| e.state.is_finished()))
+            .collect();
+        finished.sort_unstable();
+        let excess = finished.len().saturating_sub(retention.max_jobs);
+        let max_age = retention.max_age.as_millis() as u64;
+        (finished.iter().enumerate())
+            .filter(|&(i, &(at, _))| i < excess || now_ms >= at.saturating_add(max_age))
+            .map(|(_, &(_, id))| id)
+            .collect()
+    }
+
+    /// When the next finished job gets too old, in milliseconds since the epoch.
+    pub(crate) fn next_expiry(&self, retention: Retention) -> Option<u64> {
+        let max_age = retention.max_age.as_millis() as u64;
+        (self.entries.values())
+            .filter(|e| e.state.is_finished())
+            .filter_map(|e| e.finished_ms)
+            .min()
+            .map(|at| at.saturating_add(max_age))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finished_states_leave_only_by_requeue() {
+        for from in JobState::ALL.into_iter().filter(|s| s.is_finished()) {
+            for to in JobState::ALL {
+                assert_eq!(from.may_become(to), to == JobState::Queued, "{from} → {to}");
+            }
+        }
+    }
+
+    #[test]
+    fn wire_states_convert_both_ways() {
+        for state in JobState::ALL {
+            assert_eq!(JobState::from(WireJobState::from(state)), state);
+        }
+    }
+
+    fn finished(id: u64, at_ms: u64) -> JobEntry {
+        JobEntry {
+            id,
+            name: format!("job {id}"),
+            kind: WireJobKind::Render,
+            state: JobState::Completed,
+            priority: 0,
+            frames_done: 1,
+            frames_total: 1,
+            submitted_ms: 0,
+            started_ms: Some(0),
+            finished_ms: Some(at_ms),
+            host: "test".into(),
+            reason: String::new(),
+        }
+    }
+
+    #[test]
+    fn retention_lets_the_earliest_finished_and_the_too_old_go() {
+        let mut table = JobTable::default();
+        // Job 1 finished last, job 3 first.
+        table.insert(finished(1, 3_000));
+        table.insert(finished(2, 2_000));
+        table.insert(finished(3, 1_000));
+        let keep_two = Retention {
+            max_jobs: 2,
+            max_age: Duration::from_secs(10),
+        };
+        assert_eq!(table.expired(keep_two, 3_000), vec![3]);
+        assert_eq!(table.next_expiry(keep_two), Some(11_000));
+        // 10 s after job 2 finished, it and job 3 are too old.
+        assert_eq!(table.expired(keep_two, 12_000), vec![3, 2]);
+        let mut running = finished(4, 0);
+        running.state = JobState::Running;
+        running.finished_ms = None;
+        table.insert(running);
+        assert_eq!(table.expired(keep_two, 100_000), vec![3, 2, 1]);
+    }
+}

@@ -1,0 +1,144 @@
+//! `vtfarm jobs`: the master's jobs, as a table or as JSON.
+
+use anyhow::Result;
+use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+
+use crate::farm::ClusterArgs;
+use crate::shared::{runtime, utc_time};
+
+/// Options of `vtfarm jobs`.
+#[derive(clap::Args)]
+pub(crate) struct JobsArgs {
+    #[command(flatten)]
+    cluster: ClusterArgs,
+    /// Also list the finished jobs the master keeps (completed, failed,
+    /// cancelled).
+    #[arg(long)]
+    all: bool,
+    /// One JSON array of the jobs instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `vtfarm jobs`.
+pub(crate) fn jobs(args: JobsArgs) -> Result<()> {
+    let options = args.cluster.client_options()?;
+    let jobs = runtime()?.block_on(vtfarm_submit::list_jobs(&options, args.all))?;
+    if args.json {
+        println!("{}", serde_json::to_string(&jobs)?);
+        return Ok(());
+    }
+    print!("{}", table(&jobs));
+    Ok(())
+}
+
+/// The table `vtfarm jobs` prints: one line per job under a header.
+fn table(jobs: &[JobSummary]) -> String {
+    let mut out = format!(
+        "{:>5} {:<24} {:<6} {:<9} {:>8} {:>6} {:>6} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
+        "id",
+        "name",
+        "kind",
+        "state",
+        "priority",
+        "done",
+        "failed",
+        "total",
+        "submitted (UTC)",
+        "started",
+        "finished",
+        "host"
+    );
+    let time = |ms: Option<u64>| ms.map_or("-".to_owned(), utc_time);
+    for job in jobs {
+        out += &format!(
+            "{:>5} {:<24} {:<6} {:<9} {:>8} {:>6} {:>6} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
+            job.id,
+            job.name,
+            kind_name(job.kind),
+            state_name(job.state),
+            job.priority,
+            job.frames_done,
+            job.frames_failed,
+            job.frames_total,
+            utc_time(job.submitted_ms),
+            time(job.started_ms),
+            time(job.finished_ms),
+            job.host
+        );
+        if !job.reason.is_empty() {
+            out += &format!("      {}\n", job.reason);
+        }
+    }
+    out
+}
+
+pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
+    match kind {
+        WireJobKind::Render => "render",
+        WireJobKind::Study => "study",
+        WireJobKind::View => "view",
+    }
+}
+
+pub(crate) fn state_name(state: WireJobState) -> &'static str {
+    match state {
+        WireJobState::Queued => "queued",
+        WireJobState::Running => "running",
+        WireJobState::Paused => "paused",
+        WireJobState::Completed => "completed",
+        WireJobState::Failed => "failed",
+        WireJobState::Cancelled => "cancelled",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_lists_every_column_and_a_finished_jobs_reason() {
+        let job = JobSummary {
+            id: 7,
+            name: "cockpit.toml".into(),
+            kind: WireJobKind::Study,
+            state: WireJobState::Cancelled,
+            priority: -3,
+            frames_done: 2,
+            frames_failed: 38,
+            frames_total: 40,
+            submitted_ms: 1_764_672_000_000,
+            started_ms: Some(1_764_672_001_000),
+            finished_ms: None,
+            host: "127.0.0.1:5000".into(),
+            reason: "job 7 was cancelled by submitter (127.0.0.1:6000)".into(),
+        };
+        let text = table(&[job]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 3, "{text}");
+        let fields: Vec<&str> = lines[1].split_whitespace().collect();
+        assert_eq!(
+            fields,
+            [
+                "7",
+                "cockpit.toml",
+                "study",
+                "cancelled",
+                "-3",
+                "2",
+                "38",
+                "40",
+                "2025-12-02",
+                "10:40:00",
+                "2025-12-02",
+                "10:40:01",
+                "-",
+                "127.0.0.1:5000"
+            ]
+        );
+        assert_eq!(
+            lines[2].trim(),
+            "job 7 was cancelled by submitter (127.0.0.1:6000)"
+        );
+    }
+}

@@ -1,0 +1,408 @@
+//! Managing jobs with the real `vtfarm` binary on 127.0.0.1: a master and
+//! workers as child processes, `vtfarm submit`, `jobs`, `cancel`, `pause`
+//! from the command line. Every wait is bounded and triggered by what the
+//! processes say (their log lines, `--json` events), never by a delay.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// A bound for every wait: generous for a loaded machine, but a failing
+/// test ends.
+const BOUND: Duration = Duration::from_secs(180);
+
+/// A small job file: the built-in cockpit at `width` × `height`.
+fn job_file(dir: &Path, name: &str, width: u32, height: u32) -> PathBuf {
+    let path = dir.join(name);
+    let text = format!(
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n[camera]\nwidth = {width}\nheight = {height}\n"
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A `vtfarm` child process, killed when dropped; its stderr (and stdout)
+/// lines come through channels as it writes them.
+struct Process {
+    child: Child,
+    stderr: Receiver<String>,
+    stdout: Receiver<String>,
+    /// Every stderr line read so far.
+    log: Vec<String>,
+}
+
+impl Process {
+    fn spawn(args: &[&str]) -> Process {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_vtfarm"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the vtfarm binary starts");
+        let lines = |stream: Box<dyn std::io::Read + Send>| {
+            let (send, receive) = channel();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stream).lines() {
+                    let Ok(line) = line else { break };
+                    if send.send(line).is_err() {
+                        break;
+                    }
+                }
+            });
+            receive
+        };
+        let stderr = lines(Box::new(child.stderr.take().unwrap()));
+        let stdout = lines(Box::new(child.stdout.take().unwrap()));
+        Process {
+            child,
+            stderr,
+            stdout,
+            log: Vec::new(),
+        }
+    }
+
+    /// The first stderr line (from now) containing `needle`, bounded.
+    fn wait_for(&mut self, needle: &str) -> String {
+        let deadline = Instant::now() + BOUND;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = (self.stderr.recv_timeout(left))
+                .unwrap_or_else(|e| panic!("no line with {needle:?} ({e}); got {:?}", self.log));
+            self.log.push(line.clone());
+            if line.contains(needle) {
+                return line;
+            }
+        }
+    }
+
+    /// The first stdout line containing `needle`, bounded.
+    fn wait_for_stdout(&mut self, needle: &str) -> String {
+        let deadline = Instant::now() + BOUND;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = (self.stdout.recv_timeout(left))
+                .unwrap_or_else(|e| panic!("no stdout line with {needle:?} ({e})"));
+            if line.contains(needle) {
+                return line;
+            }
+        }
+    }
+
+    /// The job id of `submit --json`'s accepted event.
+    fn accepted_job(&mut self) -> u64 {
+        let line = self.wait_for("\"accepted\"");
+        let event: Value = serde_json::from_str(&line).expect("a JSON line");
+        event["job"].as_u64().expect("the job's id")
+    }
+
+    /// Waits (bounded) for the exit; the rest of stderr joins the log.
+    fn exit(&mut self) -> std::process::ExitStatus {
+        let deadline = Instant::now() + BOUND;
+        let status = loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                break status;
+            }
+            assert!(Instant::now() < deadline, "no exit within {BOUND:?}");
+            // Reading its stderr meanwhile keeps a chatty child going.
+            if let Ok(line) = self.stderr.recv_timeout(Duration::from_millis(50)) {
+                self.log.push(line);
+            }
+        };
+        // The pipes close at the exit: what is left comes at once.
+        while let Ok(line) = self.stderr.recv_timeout(BOUND) {
+            self.log.push(line);
+        }
+        status
+    }
+
+    /// The rest of stdout, once the process has exited.
+    fn rest_of_stdout(&self) -> String {
+        let mut lines = Vec::new();
+        while let Ok(line) = self.stdout.recv_timeout(BOUND) {
+            lines.push(line);
+        }
+        lines.join("\n")
+    }
+
+    fn log_text(&self) -> String {
+        self.log.join("\n")
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs `vtfarm ARGS` to its end (bounded): exit status, stdout, stderr.
+fn vtfarm(args: &[&str]) -> (std::process::ExitStatus, String, String) {
+    let mut process = Process::spawn(args);
+    let status = process.exit();
+    let stdout = process.rest_of_stdout();
+    (status, stdout, process.log_text())
+}
+
+/// A cluster directory and a master process on a free localhost port.
+struct Master {
+    dir: tempfile::TempDir,
+    cluster: String,
+    process: Process,
+}
+
+impl Master {
+    fn start() -> Master {
+        let dir = tempfile::tempdir().unwrap();
+        let free = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let address = free.local_addr().unwrap().to_string();
+        drop(free);
+        let out = dir.path().to_str().unwrap().to_owned();
+        let (status, _, stderr) = vtfarm(&["cluster", "init", "-o", &out, "--master", &address]);
+        assert!(status.success(), "{stderr}");
+        let cluster = dir.path().join("cluster.toml").to_str().unwrap().to_owned();
+        let process = Master::process(&cluster);
+        Master {
+            dir,
+            cluster,
+            process,
+        }
+    }
+
+    /// `vtfarm master` on the cluster file; returns once it serves.
+    fn process(cluster: &str) -> Process {
+        let mut process =
+            Process::spawn(&["master", "--cluster", cluster, "--http", "127.0.0.1:0"]);
+        process.wait_for_stdout("dashboard on");
+        process
+    }
+
+    /// Kills the master (no goodbye) and starts it again on its state.
+    fn restart(&mut self) {
+        self.process.child.kill().unwrap();
+        self.process.exit();
+        self.process = Master::process(&self.cluster);
+    }
+
+    fn worker(&self, name: &str) -> Process {
+        let cache = self.dir.path().join(name);
+        Process::spawn(&[
+            "worker",
+            "--cluster",
+            &self.cluster,
+            "--name",
+            name,
+            "--threads",
+            "1",
+            "--cache",
+            cache.to_str().unwrap(),
+        ])
+    }
+
+    /// `vtfarm submit FILE` with `extra` options, in the background.
+    fn submit(&self, file: &Path, output: &str, extra: &[&str]) -> Process {
+        let output = self.dir.path().join(output);
+        let mut args = vec![
+            "submit",
+            file.to_str().unwrap(),
+            "--cluster",
+            &self.cluster,
+            "-o",
+            output.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        Process::spawn(&args)
+    }
+
+    /// `vtfarm jobs --all --json`.
+    fn jobs(&self) -> Vec<Value> {
+        let (status, stdout, stderr) =
+            vtfarm(&["jobs", "--all", "--json", "--cluster", &self.cluster]);
+        assert!(status.success(), "{stderr}");
+        serde_json::from_str(&stdout).expect("a JSON array of jobs")
+    }
+
+    /// `vtfarm ACTION ARGS --cluster …`.
+    fn control(&self, args: &[&str]) -> (std::process::ExitStatus, String, String) {
+        let mut all = args.to_vec();
+        all.extend(["--cluster", &self.cluster]);
+        vtfarm(&all)
+    }
+}
+
+fn job_of(jobs: &[Value], id: u64) -> &Value {
+    (jobs.iter().find(|j| j["id"] == id)).unwrap_or_else(|| panic!("job {id} in {jobs:?}"))
+}
+
+#[test]
+fn the_higher_priority_job_finishes_first_and_both_images_equal_vtfarm_render() {
+    let mut master = Master::start();
+    let dir = master.dir.path().to_owned();
+    let (low_file, high_file) = (
+        job_file(&dir, "low.toml", 96, 54),
+        job_file(&dir, "high.toml", 120, 68),
+    );
+    // No worker yet: the low job runs with nothing out, and the high one,
+    // submitted after it, takes its place at once.
+    let mut low = master.submit(&low_file, "low", &["--json", "--name", "low"]);
+    let low_id = low.accepted_job();
+    let mut high = master.submit(&high_file, "high", &["--json", "--priority", "5"]);
+    let high_id = high.accepted_job();
+    let listed = master.jobs();
+    assert_eq!(job_of(&listed, low_id)["name"], "low");
+    assert_eq!(job_of(&listed, high_id)["priority"], 5);
+    let mut workers = [master.worker("w1"), master.worker("w2")];
+    for w in &mut workers {
+        w.wait_for("connected to the master");
+    }
+    assert!(low.exit().success(), "{}", low.log_text());
+    assert!(high.exit().success(), "{}", high.log_text());
+    let listed = master.jobs();
+    let (l, h) = (job_of(&listed, low_id), job_of(&listed, high_id));
+    assert_eq!(
+        (l["state"].as_str(), h["state"].as_str()),
+        (Some("completed"), Some("completed"))
+    );
+    assert!(
+        h["finished_ms"].as_u64() < l["finished_ms"].as_u64(),
+        "the high job finished first: {listed:?}"
+    );
+    assert!(
+        l["started_ms"].as_u64() <= h["started_ms"].as_u64(),
+        "{listed:?}"
+    );
+    // Both images byte for byte as `vtfarm render` writes them.
+    for (file, output) in [(&low_file, "low"), (&high_file, "high")] {
+        let rendered = dir.join(format!("{output}.png"));
+        let (status, _, stderr) = vtfarm(&[
+            "render",
+            file.to_str().unwrap(),
+            "-o",
+            rendered.to_str().unwrap(),
+            "--local-workers",
+            "1",
+        ]);
+        assert!(status.success(), "{stderr}");
+        let farm = std::fs::read(dir.join(output).join("frame_0000.png")).unwrap();
+        assert!(
+            farm == std::fs::read(&rendered).unwrap(),
+            "{output}: the PNGs differ"
+        );
+    }
+    // The master said who joined; its redirected log has no colour codes.
+    master.process.wait_for("worker joined");
+    master.process.wait_for("worker joined");
+    let log = master.process.log_text();
+    assert!(
+        !log.contains('\u{1b}'),
+        "escape codes in a redirected log: {log}"
+    );
+}
+
+#[test]
+fn a_cancel_ends_its_submit_with_an_error_naming_it_and_ctrl_c_says_how_to_come_back() {
+    let master = Master::start();
+    let file = job_file(master.dir.path(), "job.toml", 96, 54);
+    // No worker: the job runs and never finishes on its own.
+    let mut submit = master.submit(&file, "a", &["--json"]);
+    let id = submit.accepted_job();
+    let (status, stdout, stderr) = master.control(&["cancel", &id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    assert_eq!(
+        stdout,
+        format!("job {id}: cancelled (priority 0, 0/1 frames done)")
+    );
+    assert!(!submit.exit().success());
+    let log = submit.log_text();
+    assert!(
+        log.contains(&format!(
+            "error: job {id} was cancelled by submitter (127.0.0.1:"
+        )),
+        "{log}"
+    );
+    let (status, _, stderr) = master.control(&["cancel", &id.to_string()]);
+    assert!(!status.success());
+    assert!(
+        stderr.contains(&format!("job {id} is cancelled")),
+        "{stderr}"
+    );
+
+    // Ctrl-C: the job stays on the farm, and the submitter says how to
+    // follow it again or stop it. Without --json the id is on stderr too.
+    let mut submit = master.submit(&file, "b", &[]);
+    let line = submit.wait_for("accepted");
+    let id: u64 = (line.split_whitespace().nth(1).and_then(|w| w.parse().ok()))
+        .unwrap_or_else(|| panic!("{line}"));
+    let sent = Command::new("kill")
+        .args(["-INT", &submit.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let status = submit.exit();
+    assert_eq!(status.code(), Some(130), "{}", submit.log_text());
+    let log = submit.log_text();
+    assert!(
+        log.contains(&format!("job {id} keeps running on the farm")),
+        "{log}"
+    );
+    assert!(log.contains(&format!("--attach {id}")), "{log}");
+    assert!(log.contains(&format!("vtfarm cancel {id}")), "{log}");
+    assert_eq!(job_of(&master.jobs(), id)["state"], "running");
+    // Cancelling it and an unknown job: the one is cancelled, the other named.
+    let (status, _, stderr) = master.control(&["cancel", &id.to_string(), "99"]);
+    assert!(!status.success());
+    assert!(stderr.contains("no job 99"), "{stderr}");
+    assert_eq!(job_of(&master.jobs(), id)["state"], "cancelled");
+}
+
+#[test]
+fn after_a_master_restart_jobs_all_lists_the_same_jobs_and_states() {
+    let mut master = Master::start();
+    let file = job_file(master.dir.path(), "job.toml", 96, 54);
+    let mut cancelled = master.submit(&file, "a", &["--json"]);
+    let cancelled_id = cancelled.accepted_job();
+    assert!(
+        master
+            .control(&["cancel", &cancelled_id.to_string()])
+            .0
+            .success()
+    );
+    assert!(!cancelled.exit().success());
+    let mut running = master.submit(&file, "b", &["--json", "--name", "running"]);
+    let running_id = running.accepted_job();
+    let mut paused = master.submit(&file, "c", &["--json", "--priority", "-1"]);
+    let paused_id = paused.accepted_job();
+    let (status, stdout, stderr) = master.control(&["pause", &paused_id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    assert!(stdout.contains("paused"), "{stdout}");
+    let (status, _, _) = master.control(&["priority", &paused_id.to_string(), "-2"]);
+    assert!(status.success());
+    let before = master.jobs();
+    let states: Vec<&str> = before
+        .iter()
+        .map(|j| j["state"].as_str().unwrap())
+        .collect();
+    assert_eq!(states, ["cancelled", "running", "paused"]);
+
+    master.restart();
+    let after = master.jobs();
+    assert_eq!(after, before);
+    assert_eq!(job_of(&after, paused_id)["priority"], -2);
+    assert_eq!(job_of(&after, running_id)["name"], "running");
+    // The table in text names every job and state too.
+    let (status, table, _) = master.control(&["jobs", "--all"]);
+    assert!(status.success());
+    for (id, state) in [
+        (cancelled_id, "cancelled"),
+        (running_id, "running"),
+        (paused_id, "paused"),
+    ] {
+        let row = (table.lines()).find(|l| l.split_whitespace().next() == Some(&id.to_string()));
+        assert!(row.is_some_and(|r| r.contains(state)), "{table}");
+    }
+    drop((running, paused));
+}
