@@ -1070,49 +1070,37 @@ fn print_report(
             .map(|r| r.frame_seconds)
             .fold(f64::INFINITY, f64::min);
         println!(
-            "  {mbit} Mbit/s master link: the results take {link_seconds:.3} s per frame through it{}",
-            if link_seconds > 0.5 * fastest {
-                format!(
-                    ": it bounds the frame (fastest simulated {fastest:.3} s); more workers cannot help"
-                )
-            } else {
-                format!(
-                    ", {:.0}% of the fastest simulated frame",
-                    link_seconds / fastest * 100.0
-                )
-            }
+            "  {mbit} Mbit/s master link, split frames (the tail, single frames, the view): the results take {link_seconds:.3} s per frame through it, {:.0}% of the fastest simulated frame ({fastest:.3} s)",
+            link_seconds / fastest * 100.0
         );
     }
-    // The master does per frame what no worker can take over: its base
-    // frame (one at a time) and every result's compositing.
+    // The master's own work per frame, one input at a time: a whole frame
+    // costs it the forwarding and the journal; a split frame also its base
+    // frame and the compositing of every result.
+    let whole = rec.frame_out_seconds + rec.journal_seconds;
     let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
-    let fastest = rows
-        .iter()
-        .map(|r| r.frame_seconds)
-        .fold(f64::INFINITY, f64::min);
-    let driver = rec.composite_seconds + rec.frame_out_seconds;
-    let master = base.max(driver);
-    if master > 0.5 * fastest {
-        println!(
-            "  the master's own work per frame (base frame {base:.3} s on {master_cores} core(s), driver {driver:.3} s: compositing and the finished frame) is {:.0}% of the fastest simulated frame ({fastest:.3} s): it bounds the frame",
-            master / fastest * 100.0
-        );
-    }
-    // The aims: 16 workers >= 90% and < 5% imbalance, 64 workers >= 80%.
+    let split = base.max(rec.composite_seconds + rec.frame_out_seconds);
+    println!(
+        "  the master's own work: {whole:.4} s per whole frame (forwarding and journal: at most {:.0} frames per second), {split:.3} s per split frame (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s)",
+        1.0 / whole.max(1e-9),
+        rec.composite_seconds
+    );
+    // The aims of issue 26 for equal workers, as speed-up over one worker
+    // per worker (a whole frame's base frame and compositing are the
+    // workers' work now, so `effic.`, tracing alone, cannot reach 100%).
     for &mbit in &args.link_mbit {
         let equal = |n: usize| {
             (rows.iter()).find(|r| !r.heterogeneous && r.link_mbit == mbit && r.workers == n)
         };
-        for (n, aim) in [(16, 0.9), (64, 0.8)] {
+        for (n, aim) in [(16, 0.9), (64, 0.85), (256, 0.9)] {
             if let Some(r) = equal(n) {
-                let met = r.efficiency >= aim && (n != 16 || r.imbalance_after_first < 0.05);
+                let per_worker = r.speedup_vs_one / r.ideal;
                 println!(
-                    "  aim at {mbit} Mbit, {n} equal workers: efficiency >= {:.0}%{}: {:.0}%, imbalance {:.1}%: {}",
+                    "  aim at {mbit} Mbit, {n} equal workers: speed-up per worker >= {:.0}%: {:.1}% ({:.2}x): {}",
                     aim * 100.0,
-                    if n == 16 { " and imbalance < 5%" } else { "" },
-                    r.efficiency * 100.0,
-                    r.imbalance_after_first * 100.0,
-                    if met { "met" } else { "missed" }
+                    per_worker * 100.0,
+                    r.speedup_vs_one,
+                    if per_worker >= aim { "met" } else { "missed" }
                 );
             }
         }
