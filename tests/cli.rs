@@ -634,6 +634,25 @@ fn bench_simulate_refuses_absurd_settings() {
     }
 }
 
+/// A master told to keep absurdly many finished jobs, or for absurdly
+/// long, is refused before it binds anything (each kept job costs memory
+/// and a line in every `jobs` reply).
+#[test]
+fn master_refuses_absurd_retention() {
+    for (args, needle) in [
+        (&["--keep-jobs", "99999999"][..], "--keep-jobs"),
+        (&["--keep-jobs-hours", "99999999"], "--keep-jobs-hours"),
+    ] {
+        let out = vtfarm(&[&["master"][..], args].concat());
+        assert!(!out.status.success(), "{args:?} was accepted");
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains(needle) && stderr.contains("is not in 0..="),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
 /// A small cockpit job (detail 0.3, 160x90, preview) written into `dir`.
 fn small_job(dir: &Path) -> PathBuf {
     let job = dir.join("small.toml");

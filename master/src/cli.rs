@@ -37,11 +37,14 @@ pub struct MasterArgs {
     #[arg(long)]
     pub http_require_token: bool,
     /// Finished jobs (completed, failed, cancelled) kept listed, with their
-    /// frames for `submit --attach`; the earliest finished go first.
-    #[arg(long, value_name = "N", default_value_t = Retention::DEFAULT.max_jobs)]
-    pub keep_jobs: usize,
-    /// Hours a finished job is kept at most.
-    #[arg(long, value_name = "HOURS", default_value_t = Retention::DEFAULT.max_age.as_secs() / 3600)]
+    /// frames for `submit --attach`; the earliest finished go first (at
+    /// most 10000).
+    #[arg(long, value_name = "N", default_value_t = Retention::DEFAULT.max_jobs as u64,
+          value_parser = clap::value_parser!(u64).range(0..=Retention::MAX_JOBS as u64))]
+    pub keep_jobs: u64,
+    /// Hours a finished job is kept at most (at most 87600, ten years).
+    #[arg(long, value_name = "HOURS", default_value_t = Retention::DEFAULT.max_age.as_secs() / 3600,
+          value_parser = clap::value_parser!(u64).range(0..=87_600))]
     pub keep_jobs_hours: u64,
 }
 
@@ -120,7 +123,7 @@ pub async fn serve(args: &MasterArgs) -> Result<()> {
     let journal = Journal::open(state_dir)?;
     let rules = FarmRules {
         retention: Retention {
-            max_jobs: args.keep_jobs,
+            max_jobs: args.keep_jobs as usize, // at most Retention::MAX_JOBS
             max_age: std::time::Duration::from_secs(args.keep_jobs_hours.saturating_mul(3600)),
         },
         ..FarmRules::default()

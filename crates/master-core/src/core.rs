@@ -902,7 +902,7 @@ impl MasterCore {
     fn new_entry(&self, id: u64, job: &WireJob, host: String, now: Duration) -> JobEntry {
         JobEntry {
             id,
-            name: job.name.clone(),
+            name: crate::jobs::listed_name(&job.name),
             kind: job.kind,
             state: JobState::Queued,
             priority: job.priority,

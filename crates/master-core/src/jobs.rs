@@ -127,6 +127,10 @@ pub struct Retention {
 }
 
 impl Retention {
+    /// The most finished jobs a master may be told to keep: each keeps its
+    /// definition in memory and its listing in every `jobs` reply.
+    pub const MAX_JOBS: usize = 10_000;
+
     /// 100 finished jobs, each for at most a day.
     pub const DEFAULT: Retention = Retention {
         max_jobs: 100,
@@ -137,6 +141,19 @@ impl Retention {
 impl Default for Retention {
     fn default() -> Self {
         Retention::DEFAULT
+    }
+}
+
+/// The characters of a job's name its listing keeps: a name is the
+/// submitter's to choose, and every `jobs` reply carries every listing.
+pub const MAX_LISTED_NAME_CHARS: usize = 200;
+
+/// `name` as a listing keeps it: at most [`MAX_LISTED_NAME_CHARS`]
+/// characters, an ellipsis where it was cut.
+pub fn listed_name(name: &str) -> String {
+    match name.char_indices().nth(MAX_LISTED_NAME_CHARS) {
+        Some((cut, _)) => format!("{}…", &name[..cut]),
+        None => name.to_owned(),
     }
 }
 
@@ -330,6 +347,17 @@ impl JobTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_listing_keeps_a_bounded_name_cut_at_a_character() {
+        assert_eq!(listed_name("cockpit"), "cockpit");
+        let exact = "é".repeat(MAX_LISTED_NAME_CHARS);
+        assert_eq!(listed_name(&exact), exact);
+        let long = "é".repeat(10 * MAX_LISTED_NAME_CHARS);
+        let listed = listed_name(&long);
+        assert_eq!(listed.chars().count(), MAX_LISTED_NAME_CHARS + 1);
+        assert!(listed.ends_with('…'));
+    }
 
     #[test]
     fn finished_states_leave_only_by_requeue() {
