@@ -228,6 +228,7 @@ mod tests {
                 method: crate::WireMethod::Pvrr,
                 aux: true,
                 image: crate::WireImageFormat::Srgb8,
+                stages: vec![crate::WireQuality::Preview, crate::WireQuality::Full],
             }),
             Message::RequestWork { job: 3, frame: 1 },
             Message::Package(Package {
@@ -244,6 +245,7 @@ mod tests {
                 busy_micros: 1234,
                 setup_micros: 56,
                 triangle_samples: vec![3, 0, 17],
+                stage: Some(crate::WireQuality::Refine),
             }),
             Message::PackageResult(PackageResult {
                 id: 100,
@@ -255,6 +257,7 @@ mod tests {
                 busy_micros: 4321,
                 setup_micros: 0,
                 triangle_samples: vec![1, 2],
+                stage: None,
             }),
             Message::PackageFailed(PackageFailed {
                 id: 98,

@@ -32,10 +32,10 @@ pub use framing::{
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use message::{
     FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobScene,
-    JobSummary, Message, Package, PackageFailed, PackageId, PackageResult, PhaseKind, QueueStatus,
-    Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData, SceneHash, StatusReply,
-    Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WorkerFrameStats, WorkerStatus,
-    scene_hash, wire_job,
+    JobSummary, MAX_STAGES, Message, Package, PackageFailed, PackageId, PackageResult, PhaseKind,
+    QueueStatus, Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData, SceneHash,
+    StatusReply, Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WorkerFrameStats,
+    WorkerStatus, check_stages, scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -47,7 +47,7 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding; the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 8;
+pub const PROTOCOL_VERSION: u32 = 9;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many prepared frames a worker keeps: a package of any

@@ -13,7 +13,8 @@
 //!   (see [`crate::handshake`]);
 //! - worker ↔ master: master `SceneOffer` → worker `SceneRequest` (when the
 //!   hash is not cached) → master `SceneData`; master `FrameStart`; worker
-//!   `RequestWork` → master `Package`; worker `PackageResult` |
+//!   `RequestWork` → master `Package`; worker `PackageResult` (one per
+//!   stage of a progressive frame, in the stages' order) |
 //!   `PackageFailed`; master `CancelPackage`, `Shutdown`; both `Heartbeat`;
 //! - submitter ↔ master: `SubmitJob` → `JobAccepted`, then `Progress` and
 //!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`;
@@ -26,10 +27,11 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use vtfarm_method::{FrameSetup, MethodKind};
 use vtfarm_scene::Scene;
+use vtfarm_vertex::Quality;
 
 use crate::wire::{
     WireBitmap, WireError, WireFrameSetup, WireImage, WireImageFormat, WireMethod,
-    WirePackageStats, WireScene,
+    WirePackageStats, WireQuality, WireScene,
 };
 
 /// A scene's content hash: SHA-256 of its canonical encoding (see [`scene_hash`]).
@@ -372,6 +374,36 @@ pub struct FrameStart {
     pub aux: bool,
     /// How a whole frame's image travels (the job's [`WireJob::image`]).
     pub image: WireImageFormat,
+    /// A progressive frame's stages (the interactive view: `preview`,
+    /// `refine`, `full`): each package is set up once and advanced through
+    /// them on the same vertices, one [`PackageResult`] per stage, the
+    /// last completing the package. Empty: one stage, at the set-up's
+    /// quality. Check with [`check_stages`].
+    pub stages: Vec<WireQuality>,
+}
+
+/// The most stages a progressive frame has (every [`WireQuality`] once).
+pub const MAX_STAGES: usize = 4;
+
+/// Checks a progressive frame's stages: at most [`MAX_STAGES`], each later
+/// than the one before (preview, refine, full, reference), and none for a
+/// per-reflector method (it has no quality levels).
+pub fn check_stages(stages: &[WireQuality], method: WireMethod) -> Result<(), WireError> {
+    let bad = |reason: String| Err(WireError::BadStages(reason));
+    if stages.len() > MAX_STAGES {
+        return bad(format!("{} stages, at most {MAX_STAGES}", stages.len()));
+    }
+    let later = |a: WireQuality, b: WireQuality| Quality::from(b) > Quality::from(a);
+    if let Some(pair) = stages.windows(2).find(|pair| !later(pair[0], pair[1])) {
+        return bad(format!("{:?} before {:?}", pair[0], pair[1]));
+    }
+    if stages.len() > 1 && MethodKind::from(method).per_reflector() {
+        return bad(format!(
+            "{} stages for a per-reflector method",
+            stages.len()
+        ));
+    }
+    Ok(())
 }
 
 /// A package: reflector triangle ids of one frame, traced as a unit (or
@@ -406,6 +438,11 @@ pub struct PackageResult {
     /// Samples traced per triangle of the package, in package order: how the
     /// load balancer splits `busy_micros` over the triangles.
     pub triangle_samples: Vec<u32>,
+    /// The stage of a progressive frame these pixels are ([`FrameStart::stages`],
+    /// in order; the pixels that changed since the package's last stage,
+    /// every owned pixel at the first; counters and times of this stage
+    /// alone); `None` for a frame of one stage.
+    pub stage: Option<WireQuality>,
 }
 
 /// What a result carries: a split package's pixels, for the master to

@@ -21,13 +21,14 @@ use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, re
 use vtfarm_proto::{
     FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash, WireBitmap,
     WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WirePackageStats,
-    check_triangle_ids,
+    check_stages, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_scene::Scene;
 use vtfarm_vertex::{
-    Behind, Frame, PackageOptions, PackageStats, SparseBitmap, Stop, trace_package,
+    Behind, Frame, PackageOptions, PackageStats, ProgressivePackage, Quality, SparseBitmap,
+    StageError, Stop, trace_package,
 };
 
 /// The frames a worker keeps prepared: the newest and the ones before it
@@ -70,6 +71,8 @@ pub enum FrameError {
     Reflectors(WireError),
     #[error("frame set-up: {0}")]
     Setup(WireError),
+    #[error("{0}")]
+    Stages(WireError),
     #[error("the scene cannot be traced: {0}")]
     Renderer(String),
     #[error(transparent)]
@@ -90,6 +93,16 @@ pub enum PackageError {
     Stopped { id: u64, why: String },
     #[error("the package's frame is not prepared")]
     FrameNotPrepared,
+    #[error("stage {stage} of a frame of {stages} stages")]
+    NoSuchStage { stage: usize, stages: usize },
+    /// A later stage of a progressive package whose earlier stages did not
+    /// run here (the driver keeps a package's progress between stages).
+    #[error("stage {stage} of package {id} without its earlier stages")]
+    StageWithoutProgress { id: u64, stage: usize },
+    #[error("a whole frame of {0} stages (a progressive frame is split)")]
+    WholeProgressiveFrame(usize),
+    #[error("package stage: {0}")]
+    Stage(StageError),
     #[error(transparent)]
     Panicked(#[from] Panicked),
     /// The blocking task that ran the package did not finish.
@@ -118,6 +131,9 @@ pub struct ActiveFrame {
     parts: WireBitmapParts,
     /// How a whole frame's finished image travels.
     image: WireImageFormat,
+    /// A progressive frame's stages, in order (empty: one stage, at the
+    /// set-up's quality).
+    stages: Vec<Quality>,
 }
 
 /// A per-reflector method with the reflector groups its package items index.
@@ -140,14 +156,46 @@ impl ActiveFrame {
         slowdown: f64,
         stop: &Stop,
     ) -> Result<PackageResult, PackageError> {
+        self.run_stage(package, 0, &mut None, slowdown, stop)
+    }
+
+    /// How many stages each package of this frame runs (1 unless the frame
+    /// is progressive).
+    pub fn stages(&self) -> usize {
+        self.stages.len().max(1)
+    }
+
+    /// Runs stage `stage` (an index into the frame's stages; 0 for a frame
+    /// of one stage) of `package`, as [`ActiveFrame::run`] does a whole
+    /// package. `progress` is the package's state between stages: `None`
+    /// before its first, where it is set up (once) and kept for the next;
+    /// each later stage continues its vertices and edges, and its result
+    /// holds the pixels that changed.
+    pub fn run_stage(
+        &self,
+        package: &Package,
+        stage: usize,
+        progress: &mut Option<ProgressivePackage>,
+        slowdown: f64,
+        stop: &Stop,
+    ) -> Result<PackageResult, PackageError> {
         let start = Instant::now();
         let frame = Frame {
             stop: Some(stop),
             ..self.renderer.frame(&self.setup, &self.ids, &self.behind)
         };
-        let (bitmap, stats, samples) = contain_panic(|| match &self.per_reflector {
-            None => trace(&frame, &package.triangles),
-            Some(per_reflector) => per_reflector.render(&frame, &package.triangles),
+        let stages = self.stages();
+        if stage >= stages {
+            return Err(PackageError::NoSuchStage { stage, stages });
+        }
+        if package.whole.is_some() && stages > 1 {
+            return Err(PackageError::WholeProgressiveFrame(stages));
+        }
+        let quality = self.stages.get(stage).copied();
+        let (bitmap, stats, samples) = contain_panic(|| match (&self.per_reflector, quality) {
+            (Some(per_reflector), _) => per_reflector.render(&frame, &package.triangles),
+            (None, None) => trace(&frame, &package.triangles),
+            (None, Some(quality)) => advance(&frame, package, stage, quality, progress),
         })??;
         if let Some(why) = stop.stopped() {
             let (id, why) = (package.id, why.to_string());
@@ -169,6 +217,7 @@ impl ActiveFrame {
             busy_micros: start.elapsed().as_micros() as u64,
             setup_micros: 0,
             triangle_samples: samples,
+            stage: quality.map(Into::into),
         })
     }
 
@@ -216,6 +265,33 @@ fn trace(
     check_triangle_ids("package triangles", triangles, triangle_count)
         .map_err(PackageError::Triangles)?;
     let result = trace_package(frame, triangles, &PackageOptions::default(), &mut |_| {});
+    Ok((result.bitmap, result.stats, result.triangle_samples))
+}
+
+/// Runs stage `stage` at `quality` of a progressive package: sets the
+/// package up at its first stage, continues it at the others.
+fn advance(
+    frame: &Frame<'_>,
+    package: &Package,
+    stage: usize,
+    quality: Quality,
+    progress: &mut Option<ProgressivePackage>,
+) -> Result<(SparseBitmap, PackageStats, Vec<u32>), PackageError> {
+    let staged = match progress {
+        Some(staged) => staged,
+        None if stage == 0 => {
+            let triangle_count = frame.tracer.bvh.scene().triangles.len();
+            check_triangle_ids("package triangles", &package.triangles, triangle_count)
+                .map_err(PackageError::Triangles)?;
+            progress.insert(ProgressivePackage::new(frame, &package.triangles))
+        }
+        None => {
+            let id = package.id;
+            return Err(PackageError::StageWithoutProgress { id, stage });
+        }
+    };
+    let result = (staged.advance(frame, quality, &PackageOptions::default(), &mut |_| {}))
+        .map_err(PackageError::Stage)?;
     Ok((result.bitmap, result.stats, result.triangle_samples))
 }
 
@@ -416,6 +492,8 @@ impl Engine {
         check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
             .map_err(FrameError::Reflectors)?;
         let setup = FrameSetup::try_from(start.setup).map_err(FrameError::Setup)?;
+        check_stages(&start.stages, start.method).map_err(FrameError::Stages)?;
+        let stages = start.stages.iter().map(|&q| Quality::from(q)).collect();
         // Items index the groups of the frame's reflector list as sent (the master's order).
         let method = MethodKind::from(start.method);
         let per_reflector = method.per_reflector().then(|| PerReflector {
@@ -440,6 +518,7 @@ impl Engine {
             renderer,
             setup,
             per_reflector,
+            stages,
         })
     }
 
@@ -462,6 +541,7 @@ pub struct FrameParts {
     renderer: Option<Arc<Renderer>>,
     setup: FrameSetup,
     per_reflector: Option<PerReflector>,
+    stages: Vec<Quality>,
 }
 
 impl FrameParts {
@@ -478,6 +558,7 @@ impl FrameParts {
             renderer,
             setup,
             per_reflector,
+            stages,
         } = self;
         let renderer = match renderer {
             Some(renderer) => renderer,
@@ -503,6 +584,7 @@ impl FrameParts {
                 WireBitmapParts::Color
             },
             image,
+            stages,
         })
     }
 }
@@ -556,6 +638,7 @@ mod tests {
             method: MethodKind::VertexTracing.into(),
             aux: true,
             image: WireImageFormat::LinearF32,
+            stages: Vec::new(),
         }
     }
 

@@ -3,7 +3,7 @@
 //! frames with the [`Engine`], runs packages on blocking threads, and sends
 //! what the session says. No protocol decision is made here.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,7 +14,7 @@ use tracing::{debug, warn};
 use vtfarm_proto::{Message, PackageId, PackageResult, SceneData, SceneHash};
 use vtfarm_scene::Scene;
 use vtfarm_transport::Link;
-use vtfarm_vertex::Stop;
+use vtfarm_vertex::{ProgressivePackage, Stop};
 
 use crate::engine::{ActiveFrame, Engine, FrameError, PackageError, PreparedFrames, SceneError};
 use crate::session::{FrameKey, SceneStore, SessionEnd, Task, WorkerConfig, WorkerSession};
@@ -89,12 +89,14 @@ impl SceneStore for Ready<'_> {
     }
 }
 
-/// The package being computed, and its stop (set when the master cancels it).
-type Running = (
-    PackageId,
-    JoinHandle<Result<PackageResult, PackageError>>,
-    Arc<Stop>,
+/// A package stage's outcome, with the package's progress for its next stage.
+type StageDone = (
+    Result<PackageResult, PackageError>,
+    Option<ProgressivePackage>,
 );
+
+/// The package stage being computed, and its stop (set when the master cancels it).
+type Running = (PackageId, JoinHandle<StageDone>, Arc<Stop>);
 
 /// A frame being set up on a blocking thread.
 type Preparing = (FrameKey, JoinHandle<Result<ActiveFrame, FrameError>>);
@@ -125,7 +127,11 @@ pub async fn serve(
     let mut running: Option<Running> = None;
     let mut scene_work: Option<SceneWork> = None;
     let mut waiting: VecDeque<Message> = VecDeque::new();
+    // Progressive packages between their stages.
+    let mut progress: BTreeMap<PackageId, ProgressivePackage> = BTreeMap::new();
     loop {
+        // A cancelled package's progress goes with it.
+        progress.retain(|&id, _| session.continues(id));
         // Hand the session the messages that waited for a scene, until
         // one needs the disk or a check again.
         while scene_work.is_none() {
@@ -166,19 +172,28 @@ pub async fn serve(
                         Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),
                     }
                 }
-                Task::RunPackage(package) => {
+                Task::RunPackage { package, stage } => {
                     let id = package.id;
-                    debug!(package = id, "package started");
+                    debug!(package = id, stage, "package started");
                     let active = frames.get(package.job, package.frame);
                     let budget =
                         active.as_ref().map_or(0, |a| a.pixels()) * config.samples_per_pixel_budget;
                     let stop = Arc::new(Stop::with_budget(budget));
                     let task_stop = stop.clone();
-                    let task = tokio::task::spawn_blocking(move || match active {
-                        Some(a) if (a.job, a.frame) == (package.job, package.frame) => {
-                            a.run(&package, config.slowdown, &task_stop)
-                        }
-                        _ => Err(PackageError::FrameNotPrepared),
+                    let mut staged = progress.remove(&id);
+                    let task = tokio::task::spawn_blocking(move || {
+                        let outcome = match active {
+                            Some(a) if (a.job, a.frame) == (package.job, package.frame) => a
+                                .run_stage(
+                                    &package,
+                                    stage,
+                                    &mut staged,
+                                    config.slowdown,
+                                    &task_stop,
+                                ),
+                            _ => Err(PackageError::FrameNotPrepared),
+                        };
+                        (outcome, staged)
                     });
                     running = Some((id, task, stop));
                 }
@@ -225,11 +240,14 @@ pub async fn serve(
             }
             outcome = async { (&mut running.as_mut().expect("guarded by the select condition").1).await }, if running.is_some() => {
                 let (id, _, _) = running.take().expect("guarded by the select condition");
-                let outcome = match outcome {
-                    Ok(result) => result,
-                    Err(join) => Err(PackageError::Task(join)),
+                let (outcome, staged) = match outcome {
+                    Ok(done) => done,
+                    Err(join) => (Err(PackageError::Task(join)), None),
                 };
                 session.package_finished(start.elapsed(), id, outcome);
+                if let Some(staged) = staged.filter(|_| session.continues(id)) {
+                    progress.insert(id, staged);
+                }
             }
             built = async { (&mut preparing.as_mut().expect("guarded by the select condition").1).await }, if preparing.is_some() => {
                 let (key, _) = preparing.take().expect("guarded by the select condition");

@@ -20,6 +20,12 @@
 //! are fetched only when the store lacks them. Heartbeats go out every
 //! [`HEARTBEAT_INTERVAL`].
 //!
+//! A progressive frame (the interactive view, `FrameStart::stages`) runs
+//! each package stage by stage, one result per stage: the lowest stage
+//! waiting goes first, a package not started before every later stage, so
+//! the whole frame's preview is out before any refinement; a package is
+//! done (and leaves the session) with its last stage.
+//!
 //! Draining (SIGTERM): no more requests; the package in hand (the running
 //! one, or else the first received, whose frame may still be set up)
 //! finishes (or the [`DRAIN_LIMIT`] passes), then the session ends with
@@ -102,10 +108,19 @@ pub enum Task {
     /// Build the frame's ID buffers (and renderer); answer with
     /// [`WorkerSession::frame_prepared`].
     PrepareFrame(FrameStart),
-    /// Run the package on its frame, which is among the prepared ones (the
-    /// newest or a kept older one); answer with
-    /// [`WorkerSession::package_finished`].
-    RunPackage(Package),
+    /// Run stage `stage` of the package (0 for a frame of one stage; the
+    /// driver keeps a progressive package's progress between its stages
+    /// while [`WorkerSession::continues`] says so) on its frame, which is
+    /// among the prepared ones (the newest or a kept older one); answer
+    /// with [`WorkerSession::package_finished`].
+    RunPackage { package: Package, stage: usize },
+}
+
+/// A package stage the driver runs.
+#[derive(Clone, Debug)]
+struct RunningStage {
+    package: Package,
+    stage: usize,
 }
 
 /// The worker's session state.
@@ -136,8 +151,13 @@ pub struct WorkerSession {
     /// A frame that could not be prepared, with why: its packages fail so.
     unusable: Option<(FrameKey, FrameError)>,
     queue: VecDeque<Package>,
-    running: Option<PackageId>,
-    running_frame: Option<FrameKey>,
+    running: Option<RunningStage>,
+    /// Packages of progressive frames between their stages, with the
+    /// next stage each runs, in the order they got there.
+    continuing: VecDeque<(Package, usize)>,
+    /// Stages per frame (more than one for a progressive frame), of the
+    /// frames announced lately.
+    stage_counts: VecDeque<(FrameKey, usize)>,
     /// Packages the master took back while they ran: their results are dropped.
     cancelled: BTreeSet<PackageId>,
     /// Whether a `RequestWork` is outstanding.
@@ -170,7 +190,8 @@ impl WorkerSession {
             unusable: None,
             queue: VecDeque::new(),
             running: None,
-            running_frame: None,
+            continuing: VecDeque::new(),
+            stage_counts: VecDeque::new(),
             cancelled: BTreeSet::new(),
             requested: false,
             next_heartbeat: now + HEARTBEAT_INTERVAL,
@@ -210,7 +231,13 @@ impl WorkerSession {
 
     /// The package running now, if any.
     pub fn running(&self) -> Option<PackageId> {
-        self.running
+        self.running.as_ref().map(|r| r.package.id)
+    }
+
+    /// Whether package `id` has stages left to run after the one running
+    /// (or finished) now: the driver keeps its progress while it has.
+    pub fn continues(&self, id: PackageId) -> bool {
+        self.continuing.iter().any(|(p, _)| p.id == id)
     }
 
     /// Whether the master cancelled the running package `id`: the driver
@@ -228,7 +255,7 @@ impl WorkerSession {
         }
         if self.drain_deadline.is_some_and(|d| now >= d) && self.end.is_none() {
             warn!(
-                package = self.running,
+                package = self.running(),
                 "drain limit reached, handing the running package back"
             );
             self.end = Some(SessionEnd::Drained);
@@ -241,9 +268,8 @@ impl WorkerSession {
         if self.drain_deadline.is_none() {
             info!("draining: finishing the running package, handing back the rest");
             self.drain_deadline = Some(now + DRAIN_LIMIT);
-            if self.running.is_none() {
-                self.held_at_drain = self.queue.front().map(|p| p.id);
-            }
+            // Its later stages, if it has any, finish too.
+            self.held_at_drain = self.running().or(self.queue.front().map(|p| p.id));
         }
         self.advance();
     }
@@ -296,9 +322,9 @@ impl WorkerSession {
                 self.queue.push_back(package);
             }
             Message::CancelPackage { id } => {
-                let before = self.queue.len();
                 self.queue.retain(|p| p.id != id);
-                if self.queue.len() == before && self.running == Some(id) {
+                self.continuing.retain(|(p, _)| p.id != id);
+                if self.running() == Some(id) {
                     self.cancelled.insert(id);
                 }
             }
@@ -386,16 +412,19 @@ impl WorkerSession {
         outcome: Result<PackageResult, PackageError>,
     ) {
         self.now = now;
-        if self.running != Some(id) {
+        if self.running() != Some(id) {
             return;
         }
-        let frame = self.running_frame.take();
-        self.running = None;
+        let RunningStage { package, stage } = self.running.take().expect("checked above");
+        let frame = (package.job, package.frame);
         if !self.cancelled.remove(&id) {
             self.outbox.push_back(match outcome {
                 Ok(mut result) => {
-                    if let Some(setup) = frame.and_then(|f| self.setup_to_tell.remove(&f)) {
+                    if let Some(setup) = self.setup_to_tell.remove(&frame) {
                         result.setup_micros = setup.as_micros() as u64;
+                    }
+                    if stage + 1 < self.stage_count(frame) {
+                        self.continuing.push_back((package, stage + 1));
                     }
                     Message::PackageResult(result)
                 }
@@ -409,8 +438,21 @@ impl WorkerSession {
         self.advance();
     }
 
+    /// How many stages each package of frame `key` runs.
+    fn stage_count(&self, key: FrameKey) -> usize {
+        (self.stage_counts.iter())
+            .rfind(|(k, _)| *k == key)
+            .map_or(1, |&(_, count)| count)
+    }
+
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
         self.unusable = None;
+        // As many as the frames announced, set up and kept can be.
+        if self.stage_counts.len() == 3 * vtfarm_proto::FRAMES_IN_FLIGHT {
+            self.stage_counts.pop_front();
+        }
+        let key = (start.job, start.frame);
+        (self.stage_counts).push_back((key, start.stages.len().max(1)));
         if scenes.has_scene(&start.scene) {
             if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
                 self.announced.pop_front();
@@ -436,57 +478,17 @@ impl WorkerSession {
         // beside it.
         self.prepare_next();
         while self.running.is_none() {
-            let Some(package) = self.queue.front() else {
+            // A package not started yet first (its preview before any
+            // package's later stages); while it waits for its frame, a
+            // later stage of another.
+            if !self.start_queued() && !self.start_continuing() {
                 break;
-            };
-            if self.is_draining() && Some(package.id) != self.held_at_drain {
-                break;
-            }
-            let key = (package.job, package.frame);
-            let waiting = self.preparing == Some(key)
-                || (self.awaiting_scene.iter()).any(|f| (f.job, f.frame) == key);
-            if waiting {
-                break;
-            }
-            if self.ready != Some(key) && !self.older.contains(&key) {
-                let mut announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
-                // A whole frame's package carries its set-up: announced
-                // again if others pushed it out meanwhile.
-                if let Some(start) = package.whole.as_ref().filter(|_| !announced) {
-                    if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
-                        self.announced.pop_front();
-                    }
-                    self.announced.push_back((**start).clone());
-                    announced = true;
-                }
-                if announced {
-                    // Its first package: prepare the frame now.
-                    self.prepare_next();
-                    break;
-                }
-            }
-            let package = self.queue.pop_front().expect("front exists");
-            if self.ready == Some(key) || self.older.contains(&key) {
-                self.running = Some(package.id);
-                self.running_frame = Some(key);
-                self.tasks.push_back(Task::RunPackage(package));
-            } else {
-                // The master retries it elsewhere.
-                let error = match &self.unusable {
-                    Some((k, why)) if *k == key => format!("cannot start frame: {why}"),
-                    _ => format!(
-                        "package of job {} frame {} arrived without its frame",
-                        key.0, key.1
-                    ),
-                };
-                self.outbox.push_back(Message::PackageFailed(PackageFailed {
-                    id: package.id,
-                    error,
-                }));
             }
         }
         if self.is_draining() {
-            let held_waits = (self.queue.front()).is_some_and(|p| Some(p.id) == self.held_at_drain);
+            let held = |id: PackageId| Some(id) == self.held_at_drain;
+            let held_waits = (self.queue.front()).is_some_and(|p| held(p.id))
+                || self.continuing.iter().any(|(p, _)| held(p.id));
             if self.running.is_none() && !held_waits {
                 // Queued packages go back to the queue when the link closes.
                 self.end = Some(SessionEnd::Drained);
@@ -512,6 +514,94 @@ impl WorkerSession {
             self.outbox.push_back(Message::RequestWork { job, frame });
             self.requested = true;
         }
+    }
+
+    /// Starts the first queued package, or fails it when its frame cannot
+    /// be had; `false` when there is none or it waits (for its frame, or
+    /// for the drain: only the package in hand runs then).
+    fn start_queued(&mut self) -> bool {
+        let Some(package) = self.queue.front() else {
+            return false;
+        };
+        if self.is_draining() && Some(package.id) != self.held_at_drain {
+            return false;
+        }
+        let key = (package.job, package.frame);
+        let waiting = self.preparing == Some(key)
+            || (self.awaiting_scene.iter()).any(|f| (f.job, f.frame) == key);
+        if waiting {
+            return false;
+        }
+        if !self.is_prepared(key) {
+            let mut announced = self.announced.iter().any(|f| (f.job, f.frame) == key);
+            // A whole frame's package carries its set-up: announced
+            // again if others pushed it out meanwhile.
+            if let Some(start) = package.whole.as_ref().filter(|_| !announced) {
+                if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
+                    self.announced.pop_front();
+                }
+                self.announced.push_back((**start).clone());
+                announced = true;
+            }
+            if announced {
+                // Its first package: prepare the frame now.
+                self.prepare_next();
+                return false;
+            }
+        }
+        let package = self.queue.pop_front().expect("front exists");
+        self.run(package, 0);
+        true
+    }
+
+    /// Starts the lowest later stage waiting (the earliest to get there
+    /// among equals); `false` when none may run.
+    fn start_continuing(&mut self) -> bool {
+        let draining = self.is_draining();
+        let next = (self.continuing.iter().enumerate())
+            .filter(|(_, (p, _))| !draining || Some(p.id) == self.held_at_drain)
+            .min_by_key(|(i, (_, stage))| (*stage, *i))
+            .map(|(i, _)| i);
+        let Some((package, stage)) = next.and_then(|i| self.continuing.remove(i)) else {
+            return false;
+        };
+        self.run(package, stage);
+        true
+    }
+
+    /// Whether frame `key` is prepared (the newest or a kept older one).
+    fn is_prepared(&self, key: FrameKey) -> bool {
+        self.ready == Some(key) || self.older.contains(&key)
+    }
+
+    /// Hands the driver stage `stage` of `package`, or fails the package
+    /// when its frame is not prepared (the master retries it elsewhere).
+    fn run(&mut self, package: Package, stage: usize) {
+        let key = (package.job, package.frame);
+        if self.is_prepared(key) {
+            let task = Task::RunPackage {
+                package: package.clone(),
+                stage,
+            };
+            self.running = Some(RunningStage { package, stage });
+            self.tasks.push_back(task);
+            return;
+        }
+        let error = match &self.unusable {
+            Some((k, why)) if *k == key => format!("cannot start frame: {why}"),
+            _ if stage > 0 => format!(
+                "frame {} of job {} is no longer prepared for the package's later stages",
+                key.1, key.0
+            ),
+            _ => format!(
+                "package of job {} frame {} arrived without its frame",
+                key.0, key.1
+            ),
+        };
+        self.outbox.push_back(Message::PackageFailed(PackageFailed {
+            id: package.id,
+            error,
+        }));
     }
 }
 

@@ -286,6 +286,7 @@ fn result_message_bytes(
         busy_micros: busy.as_micros() as u64,
         setup_micros: 0,
         triangle_samples,
+        stage: None,
     });
     Ok(encode_message(&message)?.len() as u64)
 }

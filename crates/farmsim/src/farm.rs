@@ -41,8 +41,14 @@ pub trait CostModel {
         start: FrameStart,
     ) -> (Result<(), FrameError>, f64);
 
-    /// Runs a package of a prepared frame.
-    fn run_package(&mut self, worker: &mut Self::Worker, package: &Package) -> PackageWork;
+    /// Runs stage `stage` of a package of a prepared frame (0 unless the
+    /// frame is progressive; see `vtfarm_worker::Task::RunPackage`).
+    fn run_package(
+        &mut self,
+        worker: &mut Self::Worker,
+        package: &Package,
+        stage: usize,
+    ) -> PackageWork;
 
     /// What the master's machine spends.
     fn master_costs(&self) -> MasterCosts;
@@ -1024,8 +1030,8 @@ impl<M: CostModel> Farm<M> {
                     };
                     self.start_cpu(machine, 1, seconds / speed, work);
                 }
-                Task::RunPackage(package) => {
-                    let run = self.model.run_package(&mut worker.state, &package);
+                Task::RunPackage { package, stage } => {
+                    let run = self.model.run_package(&mut worker.state, &package, stage);
                     let overhead = worker.spec.package_overhead.as_secs_f64();
                     let threads = if shared { 1 } else { worker.spec.cores };
                     self.busy[w].push(PackageRun {

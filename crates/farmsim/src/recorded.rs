@@ -207,7 +207,13 @@ impl CostModel for Recorded<'_> {
         (Ok(()), self.costs.worker_setup)
     }
 
-    fn run_package(&mut self, _: &mut SceneHashes, package: &Package) -> PackageWork {
+    /// A recorded frame has one stage: `_stage` is 0.
+    fn run_package(
+        &mut self,
+        _: &mut SceneHashes,
+        package: &Package,
+        _stage: usize,
+    ) -> PackageWork {
         let indices: Vec<usize> = (package.triangles.iter())
             .filter_map(|t| self.index_of.get(t).copied())
             .collect();
@@ -250,6 +256,7 @@ impl CostModel for Recorded<'_> {
                 busy_micros: 0,
                 setup_micros: 0,
                 triangle_samples: indices.iter().map(|&i| costs.samples[i]).collect(),
+                stage: None,
             },
             seconds,
             wire_bytes: Some(bytes),

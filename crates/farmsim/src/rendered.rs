@@ -6,11 +6,12 @@
 //! have a latency only. Schedules, faults and load balance replay exactly,
 //! in milliseconds, without sockets or sleeps.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use vtfarm_master_core::FarmRules;
-use vtfarm_proto::{FrameStart, Package, SceneData, SceneHash};
-use vtfarm_vertex::Stop;
+use vtfarm_proto::{FrameStart, Package, PackageId, SceneData, SceneHash};
+use vtfarm_vertex::{ProgressivePackage, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::SceneStore;
 use vtfarm_worker::engine::{FrameError, PreparedFrames};
@@ -27,10 +28,13 @@ pub const TEST_LATENCY: Duration = Duration::from_millis(1);
 #[derive(Debug, Default)]
 pub struct Rendered;
 
-/// A rendering worker's engine (scene cache) and prepared frames.
+/// A rendering worker's engine (scene cache), prepared frames and the
+/// progressive packages between their stages (as `serve` keeps them; a
+/// cancelled one's stays until the worker reconnects: test farms are short).
 pub struct RenderingWorker {
     pub engine: Engine,
     frames: PreparedFrames,
+    progress: BTreeMap<PackageId, ProgressivePackage>,
 }
 
 impl SceneStore for RenderingWorker {
@@ -52,11 +56,13 @@ impl CostModel for Rendered {
         RenderingWorker {
             engine: Engine::new(None),
             frames: PreparedFrames::default(),
+            progress: BTreeMap::new(),
         }
     }
 
     fn reconnected(&mut self, worker: &mut RenderingWorker) {
         worker.frames = PreparedFrames::default();
+        worker.progress.clear();
     }
 
     fn prepare_frame(
@@ -68,11 +74,21 @@ impl CostModel for Rendered {
         (outcome.map(|frame| worker.frames.insert(frame)), 0.0)
     }
 
-    fn run_package(&mut self, worker: &mut RenderingWorker, package: &Package) -> PackageWork {
+    fn run_package(
+        &mut self,
+        worker: &mut RenderingWorker,
+        package: &Package,
+        stage: usize,
+    ) -> PackageWork {
         let frame = (worker.frames.get(package.job, package.frame))
             .expect("the session runs packages of prepared frames only");
         let unlimited = Stop::with_budget(u64::MAX);
-        let result = (frame.run(package, 1.0, &unlimited)).expect("packages render");
+        let mut progress = worker.progress.remove(&package.id);
+        let result = frame.run_stage(package, stage, &mut progress, 1.0, &unlimited);
+        let result = result.expect("packages render");
+        if let Some(progress) = progress.filter(|_| stage + 1 < frame.stages()) {
+            worker.progress.insert(package.id, progress);
+        }
         let samples: u64 = (result.triangle_samples.iter())
             .map(|&s| u64::from(s) + 1)
             .sum();

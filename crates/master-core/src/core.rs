@@ -39,12 +39,13 @@ use vtfarm_scheduler::{
     Assignment, Event, FrameWork, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler,
     WorkerId, WorkerState,
 };
-use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, SparseBitmap};
+use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, Quality, SparseBitmap};
 
 use crate::error::{JobRejected, ResultRejected};
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
+use crate::stages::{StageProgress, StageWork};
 use crate::telemetry::Telemetry;
 use crate::view::{ViewError, ViewRequest, ViewSource, Views};
 
@@ -158,6 +159,9 @@ struct Job {
     groups: Option<Vec<Vec<u32>>>,
     /// The frames being assembled, oldest first (two while pipelined).
     assembling: Vec<FrameAssembly>,
+    /// A progressive job's stages (the interactive view's moves), in
+    /// order; empty for one stage at each frame's quality.
+    stages: Vec<Quality>,
 }
 
 impl Job {
@@ -206,6 +210,8 @@ struct FrameAssembly {
     phases: Vec<FramePhase>,
     totals: PackageStats,
     triangles_done: u64,
+    /// A progressive frame's stages as they come in (`stages.rs`).
+    progress: Option<StageProgress<ResultPixels>>,
 }
 
 /// A frame's pixels as results are composited over the base frame: the
@@ -307,8 +313,10 @@ struct InFlight {
     triangles: Vec<TriangleId>,
     /// Size of the `Package` message, for the statistics.
     bytes_in: u64,
-    /// When it was handed out, for the timeline.
-    assigned_at: Duration,
+    /// When it was handed out, or when its last result (a progressive
+    /// frame's stage) arrived: where the next result's phases start on
+    /// the timeline.
+    last_result_at: Duration,
 }
 
 /// What a persistent core keeps beside the journal, so that nothing the
@@ -750,77 +758,192 @@ impl MasterCore {
             busy_micros,
             setup_micros: _,
             triangle_samples,
+            stage,
         } = result;
         let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
-        let checked = match (pixels, in_flight.whole, ids) {
-            (vtfarm_proto::ResultPixels::Bitmap(bitmap), false, Some(ids)) => current
-                .image
-                .check(bitmap, ids, owned)
-                .map(Accepted::Composite),
-            (vtfarm_proto::ResultPixels::Frame { image, aux }, true, _) => {
-                check_finished(job, in_flight.frame, image, aux)
-                    .map(|(image, aux)| Accepted::Finished(image, aux))
-            }
-            (vtfarm_proto::ResultPixels::Frame { .. }, false, _) => {
-                Err(ResultRejected::FinishedFrameForSplitPackage)
-            }
-            // A split package's result without its base frame is held above.
-            (vtfarm_proto::ResultPixels::Bitmap(_), _, _) => {
-                Err(ResultRejected::PixelsForWholeFrame)
-            }
+        // A progressive frame's result is the stage its package's copy
+        // on this worker is due to send; any other frame's has none.
+        let stage = match (&current.progress, stage) {
+            (Some(progress), stage) => progress.check(id, conn, stage.map(Quality::from)).map(Some),
+            (None, None) => Ok(None),
+            (None, Some(found)) => Err(crate::StageRejected::OutOfOrder {
+                found: Quality::from(found).name().to_owned(),
+                expected: "none (a frame of one stage)".to_owned(),
+            }),
         };
-        let accepted = match checked {
-            Ok(accepted) => accepted,
+        let checked = stage.map_err(ResultRejected::from).and_then(|stage| {
+            let accepted = match (pixels, in_flight.whole, ids) {
+                (vtfarm_proto::ResultPixels::Bitmap(bitmap), false, Some(ids)) => current
+                    .image
+                    .check(bitmap, ids, owned)
+                    .map(Accepted::Composite),
+                (vtfarm_proto::ResultPixels::Frame { image, aux }, true, _) => {
+                    check_finished(job, in_flight.frame, image, aux)
+                        .map(|(image, aux)| Accepted::Finished(image, aux))
+                }
+                (vtfarm_proto::ResultPixels::Frame { .. }, false, _) => {
+                    Err(ResultRejected::FinishedFrameForSplitPackage)
+                }
+                // A split package's result without its base frame is held above.
+                (vtfarm_proto::ResultPixels::Bitmap(_), _, _) => {
+                    Err(ResultRejected::PixelsForWholeFrame)
+                }
+            };
+            accepted.map(|accepted| (stage, accepted))
+        });
+        let (job_id, frame) = (in_flight.job, in_flight.frame);
+        let (stage, accepted) = match checked {
+            Ok(checked) => checked,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = id, "{error}");
                 let _ =
                     self.scheduler
                         .package_failed(now, worker, PackageId(id), error.to_string());
+                let current = (self.jobs.get_mut(&job_id)).and_then(|j| j.assembly_mut(frame));
+                if let Some(progress) = current.and_then(|c| c.progress.as_mut()) {
+                    progress.forget_copy(id, conn);
+                }
                 return;
             }
         };
         let stats = PackageStats::from(stats);
-        let measure = PackageMeasure {
+        let work = StageWork {
             busy: Duration::from_micros(busy_micros),
+            samples: &triangle_samples,
+            rays: stats.samples(),
+            bytes_out,
+        };
+        if let Some(stage) = stage {
+            // Still its package's copy on this worker (not done elsewhere
+            // or requeued meanwhile); a stage in shows it is no straggler.
+            if let Err(e) = self.scheduler.package_arrived(now, worker, PackageId(id)) {
+                debug!(package = id, "stage result ignored: {e}");
+                return;
+            }
+            let current = (self.jobs.get_mut(&job_id))
+                .and_then(|j| j.assembly_mut(frame))
+                .expect("checked above");
+            let progress = current.progress.as_mut().expect("a stage was checked");
+            let last = progress.is_last(stage);
+            let copy = progress.record(id, conn, work);
+            let measure = last.then(|| PackageMeasure {
+                busy: copy.busy,
+                item_seconds: copy.samples.iter().map(|&s| s as f64 + 1.0).collect(),
+                rays: copy.rays,
+                bytes_in: self.packages[&id].bytes_in,
+                bytes_out: copy.bytes_out,
+            });
+            current.totals.add(&stats);
+            let Accepted::Composite(pixels) = accepted else {
+                unreachable!("a progressive frame is split")
+            };
+            self.stage_arrived(job_id, frame, stage, id, pixels);
+            if let Some(measure) = measure {
+                self.package_finished(now, conn, id, measure);
+            }
+            return;
+        }
+        let measure = PackageMeasure {
+            busy: work.busy,
             // Samples are what an item costs; +1 so hidden ones are not free.
             // The scheduler checks that there is one per item.
             item_seconds: (triangle_samples.iter())
                 .map(|&s| f64::from(s) + 1.0)
                 .collect(),
-            rays: stats.samples(),
+            rays: work.rays,
             bytes_in: in_flight.bytes_in,
             bytes_out,
         };
-        if let Err(e) = self
-            .scheduler
-            .package_done(now, worker, PackageId(id), measure)
-        {
-            // A late straggler copy or a duplicate: the first result won.
-            debug!(package = id, "result ignored: {e}");
+        if !self.package_finished(now, conn, id, measure) {
             return;
         }
-        let (job_id, frame) = (in_flight.job, in_flight.frame);
-        let triangles = in_flight.triangles.len() as u64;
-        let worker_name = self.worker_name(conn);
-        (self.telemetry).package_done(&worker_name, stats.samples(), in_flight.bytes_in, bytes_out);
-        // Done: a late duplicate copy now finds nothing and is ignored.
-        self.packages.remove(&id);
-        let job = self.jobs.get_mut(&job_id).expect("checked above");
-        let current = job.assembly_mut(frame).expect("checked above");
+        let current = (self.jobs.get_mut(&job_id))
+            .and_then(|j| j.assembly_mut(frame))
+            .expect("checked above");
+        current.totals.add(&stats);
         match accepted {
             Accepted::Composite(pixels) => current.image.composite(&pixels),
             Accepted::Finished(image, aux) => current.finished = Some((image, aux)),
         }
-        current.totals.add(&stats);
-        current.triangles_done += triangles;
+    }
+
+    /// Package `id`'s last result from `conn` is in and checked: the
+    /// scheduler hears it done with `measure` (all its stages' work);
+    /// `false` when it refuses it (a late straggler copy or a duplicate:
+    /// the first result won).
+    fn package_finished(
+        &mut self,
+        now: Duration,
+        conn: ConnId,
+        id: u64,
+        measure: PackageMeasure,
+    ) -> bool {
+        let (rays, bytes_out) = (measure.rays, measure.bytes_out);
+        let done = self
+            .scheduler
+            .package_done(now, WorkerId(conn), PackageId(id), measure);
+        if let Err(e) = done {
+            debug!(package = id, "result ignored: {e}");
+            return false;
+        }
+        // Done: a late duplicate copy now finds nothing and is ignored.
+        let Some(in_flight) = self.packages.remove(&id) else {
+            return true;
+        };
+        let worker_name = self.worker_name(conn);
+        (self.telemetry).package_done(&worker_name, rays, in_flight.bytes_in, bytes_out);
+        let Some(job) = self.jobs.get_mut(&in_flight.job) else {
+            return true;
+        };
+        let total = job.reflectors.len() as u32;
+        let Some(current) = job.assembly_mut(in_flight.frame) else {
+            return true;
+        };
+        current.triangles_done += in_flight.triangles.len() as u64;
+        if let Some(progress) = current.progress.as_mut() {
+            progress.forget(id);
+        }
         let progress = Message::Progress {
-            job: job_id,
+            job: in_flight.job,
             frame: current.start.frame,
             done: current.triangles_done as u32,
-            total: job.reflectors.len() as u32,
+            total,
         };
         let submitters = job.submitters.clone();
         self.send_to(&submitters, progress);
+        true
+    }
+
+    /// A checked stage `stage` of package `id` of a progressive frame:
+    /// composited in place or held (`stages.rs`); a stage complete now is
+    /// the view's.
+    fn stage_arrived(
+        &mut self,
+        job_id: u64,
+        frame: u32,
+        stage: usize,
+        id: u64,
+        pixels: ResultPixels,
+    ) {
+        let Some(job) = self.jobs.get_mut(&job_id) else {
+            return;
+        };
+        let Some(triangles) = self.packages.get(&id).map(|p| &p.triangles) else {
+            return;
+        };
+        let Some(current) = job.assembling.iter_mut().find(|a| a.start.frame == frame) else {
+            return;
+        };
+        let FrameAssembly {
+            image, progress, ..
+        } = current;
+        let Some(progress) = progress.as_mut() else {
+            return;
+        };
+        let completed = progress.deliver(stage, triangles, pixels, |p| image.composite(p));
+        if let (Some(stage), Assembled::Components(image)) = (completed, &*image) {
+            (self.views).stage_finished(job_id, stage, image, &job.scene);
+        }
     }
 
     fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
@@ -1160,6 +1283,7 @@ impl MasterCore {
                 method,
                 groups,
                 assembling: Vec::new(),
+                stages: Vec::new(),
             },
         );
         // The view's stages are split over the workers: their latency counts.
@@ -1408,8 +1532,9 @@ impl MasterCore {
                     return;
                 };
                 let mut done = j.assembling.remove(index);
-                if let Assembled::Components(image) = &done.image {
-                    (self.views).frame_finished(job.0, frame, image, &j.scene);
+                // A progressive frame's stages went to the view as they came.
+                if let (Assembled::Components(image), None) = (&done.image, &done.progress) {
+                    (self.views).stage_finished(job.0, frame as usize, image, &j.scene);
                 }
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let workers = stats
@@ -1633,7 +1758,10 @@ impl MasterCore {
             method: j.method.into(),
             aux: j.aux,
             image: j.image,
+            stages: j.stages.iter().map(|&q| q.into()).collect(),
         };
+        let progress =
+            (j.stages.len() > 1).then(|| StageProgress::new(j.stages.clone(), &j.reflectors));
         j.assembling.push(FrameAssembly {
             start: start.clone(),
             whole,
@@ -1646,6 +1774,7 @@ impl MasterCore {
             phases: Vec::new(),
             totals: PackageStats::default(),
             triangles_done: 0,
+            progress,
         });
         let submitters = j.submitters.clone();
         let total = j.reflectors.len() as u32;
@@ -1722,10 +1851,12 @@ impl MasterCore {
     fn record_package(&mut self, conn: ConnId, result: &PackageResult) {
         let name = self.name(conn);
         let now = self.now;
-        let Some(in_flight) = self.packages.get(&result.id) else {
+        let Some(in_flight) = self.packages.get_mut(&result.id) else {
             return;
         };
-        let (frame, assigned_at) = (in_flight.frame, in_flight.assigned_at);
+        // A progressive frame's later stage: from the stage before.
+        let (frame, assigned_at) = (in_flight.frame, in_flight.last_result_at);
+        in_flight.last_result_at = now;
         let Some(current) = (self.jobs.get_mut(&in_flight.job)).and_then(|j| j.assembly_mut(frame))
         else {
             return;
@@ -1773,7 +1904,7 @@ impl MasterCore {
             whole: a.whole,
             triangles,
             bytes_in: encoded_len(&message),
-            assigned_at: self.now,
+            last_result_at: self.now,
         };
         self.packages.insert(a.package.0, in_flight);
         self.send(a.worker.0, message);
@@ -1796,6 +1927,15 @@ impl MasterCore {
         if let Err(e) = queued {
             self.pump();
             return Err(ViewError::Queue(e.to_string()));
+        }
+        // One progressive frame: its packages go through the stages (its
+        // frame starts as the scheduler's events are pumped, below).
+        if let Some(j) = self
+            .jobs
+            .get_mut(&id)
+            .filter(|_| planned.stages().len() > 1)
+        {
+            j.stages = planned.stages().to_vec();
         }
         self.next_job += 1;
         self.table.insert(entry);

@@ -5,6 +5,8 @@
 use vtfarm_proto::WireError;
 use vtfarm_scheduler::SubmitError;
 
+use crate::stages::StageRejected;
+
 /// Why a submitted (or journaled) job cannot be queued.
 #[derive(Debug, thiserror::Error)]
 pub enum JobRejected {
@@ -41,6 +43,10 @@ pub enum ResultRejected {
     /// Only a whole frame's package comes back finished.
     #[error("a finished frame for a package that is not a whole frame")]
     FinishedFrameForSplitPackage,
+    /// A progressive frame's stage out of order (or a stage for a frame
+    /// of one, or none for a progressive one).
+    #[error(transparent)]
+    Stage(#[from] StageRejected),
     /// A finished frame is not what the job asked for.
     #[error("finished frame's {what} is {found}, the job's is {expected}")]
     FinishedFrameMismatch {

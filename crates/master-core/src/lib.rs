@@ -12,13 +12,15 @@
 //!   listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
-//! - [`view`]: the interactive view (move the eye, progressive stages, glare).
+//! - [`view`]: the interactive view (move the eye, progressive stages, glare);
+//!   `stages`: a progressive frame's stages composited in place.
 
 mod core;
 mod error;
 pub mod jobs;
 pub mod record;
 mod rules;
+mod stages;
 pub mod telemetry;
 pub mod view;
 
@@ -29,3 +31,4 @@ pub use error::{JobRejected, ResultRejected};
 pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 pub use record::{DamagedJob, Record, StoredJob, Written};
 pub use rules::FarmRules;
+pub use stages::StageRejected;

@@ -1,9 +1,12 @@
 //! The interactive view (the dashboard's "move the eye"): the user picks a
 //! job's scene and moves the eye within a box around that job's eye; each
-//! move becomes a small farm job of its own whose frames are the same view
-//! at rising quality (`preview`, `refine`, `full`), so the view sharpens in
-//! place. A move cancels the previous move's job, whatever stage it was at:
-//! only the newest eye is ever rendered to the end.
+//! move becomes a small farm job of its own, one progressive frame whose
+//! stages are the same view at rising quality (`preview`, `refine`,
+//! `full`): the master rasterizes its base frame once, each worker sets its
+//! packages up once and sends each stage's pixels as they are ready, and
+//! the master composites each stage in place (`stages.rs`), so the view
+//! sharpens in place. A move cancels the previous move's job, whatever
+//! stage it was at: only the newest eye is ever rendered to the end.
 //!
 //! Plain bookkeeping: the core owns a [`Views`], queues and cancels the jobs
 //! and hands finished frames in; the glare figures of each finished stage
@@ -137,8 +140,9 @@ impl Views {
         self.sources.iter().map(|(id, s)| (*id, s.name.as_str()))
     }
 
-    /// The job a move should be rendered as, checked; the view's frame set-up
-    /// per stage goes in the job's frames.
+    /// The job a move should be rendered as, checked: one frame, at the
+    /// last stage's quality (the workers' progressive packages take it
+    /// through every stage, [`PlannedView::stages`]).
     pub(crate) fn plan(&self, request: &ViewRequest) -> Result<PlannedView, ViewError> {
         if !request.offset.iter().all(|v| v.is_finite()) {
             return Err(ViewError::BadOffset);
@@ -157,13 +161,8 @@ impl Views {
         } else {
             vec![Quality::Preview, Quality::Refine, Quality::Full]
         };
-        let frames = (stages.iter())
-            .map(|&quality| {
-                let mut stage = setup.clone();
-                stage.vertex.quality = quality;
-                WireFrameSetup::from(&stage)
-            })
-            .collect();
+        setup.vertex.quality = *stages.last().expect("a view has a stage");
+        let frames = vec![WireFrameSetup::from(&setup)];
         let job = WireJob {
             name: format!("view of job {}", request.job),
             scene: JobScene::Hash(source.scene_hash),
@@ -219,22 +218,26 @@ impl Views {
             })
     }
 
-    /// A frame of some job finished: if it is a stage of the current move,
-    /// it becomes the view, with its glare figures.
-    pub(crate) fn frame_finished(
+    /// Stages up to `stage` (an index into the move's stages) of some job's
+    /// frame are complete, `image` the last of them: if it is the current
+    /// move's, it becomes the view, with its glare figures (each stage is
+    /// recorded, the image and figures are the newest's).
+    pub(crate) fn stage_finished(
         &mut self,
         job: u64,
-        frame: u32,
+        stage: usize,
         image: &FrameImage,
         scene: &Scene,
     ) {
         let Some(current) = self.current.as_mut().filter(|c| c.job == job) else {
             return;
         };
-        let Some(&quality) = current.stages.get(frame as usize) else {
+        let Some(&quality) = current.stages.get(stage) else {
             return;
         };
-        current.stages_done = frame as usize + 1;
+        let reached = (current.stages_done..=stage).map(|s| current.stages[s]);
+        let reached: Vec<Quality> = reached.collect();
+        current.stages_done = stage + 1;
         let generation = current.generation;
         let (object_map, glare) = glare_of(image, scene);
         self.latest = Some(ViewFrame {
@@ -244,11 +247,13 @@ impl Views {
             object_map: Arc::new(object_map),
             glare,
         });
-        self.record(ViewOutcome::Rendered {
-            generation,
-            job,
-            quality,
-        });
+        for quality in reached {
+            self.record(ViewOutcome::Rendered {
+                generation,
+                job,
+                quality,
+            });
+        }
     }
 
     /// A newer move cancelled the current move's job.
@@ -287,6 +292,13 @@ pub(crate) struct PlannedView {
     offset: [f32; 3],
     eye: [f32; 3],
     stages: Vec<Quality>,
+}
+
+impl PlannedView {
+    /// The qualities its frame goes through, in order.
+    pub(crate) fn stages(&self) -> &[Quality] {
+        &self.stages
+    }
 }
 
 /// The reflected-object map and the glare summary of a composited frame.

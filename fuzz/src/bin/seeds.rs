@@ -81,6 +81,7 @@ fn main() -> std::io::Result<()> {
                 method: WireMethod::VertexTracing,
                 aux: false,
                 image: vtfarm_proto::WireImageFormat::LinearF32,
+                stages: Vec::new(),
             }),
         ),
         (
@@ -112,6 +113,7 @@ fn main() -> std::io::Result<()> {
                 busy_micros: 7,
                 setup_micros: 3,
                 triangle_samples: vec![3],
+                stage: None,
             }),
         ),
     ];

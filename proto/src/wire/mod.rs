@@ -77,6 +77,10 @@ pub enum WireError {
     /// Nested bincode (scene bytes) that does not decode.
     #[error("cannot decode {what}: {message}")]
     Decode { what: &'static str, message: String },
+    /// A progressive frame's stages out of order or too many
+    /// ([`crate::check_stages`]).
+    #[error("frame stages: {0}")]
+    BadStages(String),
 }
 
 pub(crate) fn vec3(v: Vec3) -> [f32; 3] {

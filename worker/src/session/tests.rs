@@ -58,6 +58,7 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
         method: WireMethod::VertexTracing,
         aux: false,
         image: vtfarm_proto::WireImageFormat::LinearF32,
+        stages: Vec::new(),
     }
 }
 
@@ -79,6 +80,7 @@ fn result(id: u64) -> PackageResult {
         busy_micros: 1,
         setup_micros: 0,
         triangle_samples: vec![1],
+        stage: None,
     }
 }
 
@@ -125,7 +127,7 @@ fn preparing_session() -> (WorkerSession, Scenes) {
 fn ready_session() -> (WorkerSession, Scenes) {
     let (mut s, scenes) = preparing_session();
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     assert_eq!(
         messages(&mut s),
         vec![Message::RequestWork { job: 1, frame: 0 }],
@@ -141,7 +143,9 @@ fn work_is_asked_for_at_once_and_one_package_ahead() {
     let (mut s, mut scenes) = ready_session();
     let now = Duration::from_millis(5);
     s.handle_message(now, package(10, 1, 0), &mut scenes);
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 10)
+    );
     assert_eq!(
         messages(&mut s),
         vec![Message::RequestWork { job: 1, frame: 0 }],
@@ -150,7 +154,9 @@ fn work_is_asked_for_at_once_and_one_package_ahead() {
     s.handle_message(now, package(11, 1, 0), &mut scenes);
     assert_eq!(messages(&mut s), vec![], "no second request ahead");
     s.package_finished(now, 10, Ok(result(10)));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 11)
+    );
     assert_eq!(
         messages(&mut s),
         vec![
@@ -191,7 +197,9 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
     s.handle_message(Duration::ZERO, Message::SceneData(data), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 10)
+    );
 }
 
 #[test]
@@ -235,7 +243,10 @@ fn a_cancelled_running_package_sends_no_result() {
     s.package_finished(Duration::ZERO, 10, Ok(result(10)));
     let ran: Vec<u64> = (tasks(&mut s).into_iter())
         .map(|t| match t {
-            Task::RunPackage(p) => p.id,
+            Task::RunPackage {
+                package: p,
+                stage: 0,
+            } => p.id,
             other => panic!("{other:?}"),
         })
         .collect();
@@ -289,7 +300,7 @@ fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
     s.handle_message(Duration::ZERO, next, &mut scenes);
     s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
     // Only the package runs: frame (1, 1), announced while draining, is not set up.
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     assert_eq!(messages(&mut s), vec![], "no request while draining");
     s.package_finished(Duration::ZERO, 9, Ok(result(9)));
     assert_eq!(messages(&mut s), vec![Message::PackageResult(result(9))]);
@@ -328,7 +339,9 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     let (mut s, mut scenes) = ready_session();
     let now = Duration::from_millis(5);
     s.handle_message(now, package(10, 1, 0), &mut scenes);
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 10)
+    );
     let _ = messages(&mut s);
     for frame in [1, 2] {
         s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
@@ -348,7 +361,9 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 2))]);
     s.frame_prepared(now, (1, 2), Ok(()));
     s.package_finished(now, 10, Ok(result(10)));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 11));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 11)
+    );
     assert_eq!(
         messages(&mut s),
         vec![
@@ -363,10 +378,14 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     s.handle_message(now, package(12, 1, 1), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
     s.frame_prepared(now, (1, 1), Ok(()));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 12));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 12)
+    );
     s.package_finished(now, 12, Ok(result(12)));
     s.handle_message(now, package(13, 1, 0), &mut scenes);
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 13));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 13)
+    );
     s.package_finished(now, 13, Ok(result(13)));
     let _ = messages(&mut s);
     // Prepare frames up to FRAMES_IN_FLIGHT + 2: frame 0 falls out, and
@@ -389,7 +408,7 @@ fn the_first_result_of_a_frame_tells_how_long_its_set_up_took() {
     // Frame (1, 0) was handed over for set-up at 0; ready at 40 ms.
     let ms = Duration::from_millis;
     s.frame_prepared(ms(40), (1, 0), Ok(()));
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 9));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     s.handle_message(ms(41), package(10, 1, 0), &mut scenes);
     s.package_finished(ms(50), 9, Ok(result(9)));
     let told = PackageResult {
@@ -398,7 +417,9 @@ fn the_first_result_of_a_frame_tells_how_long_its_set_up_took() {
     };
     assert!(messages(&mut s).contains(&Message::PackageResult(told)));
     // The frame's next package had no set-up of its own.
-    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage(p)] if p.id == 10));
+    assert!(
+        matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 10)
+    );
     s.package_finished(ms(60), 10, Ok(result(10)));
     assert!(messages(&mut s).contains(&Message::PackageResult(result(10))));
 }
