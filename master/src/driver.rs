@@ -13,7 +13,7 @@ use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::debug;
-use vtfarm_master_core::view::{ViewError, ViewRequest};
+use vtfarm_master_core::view::{GlareRequest, ViewError, ViewFigures, ViewRequest};
 use vtfarm_master_core::{ConnId, FarmRules, JobControlError, MasterCore, Output, Peer};
 use vtfarm_proto::{JobAction, JobSummary, Message, StatusReply};
 use vtfarm_transport::Link;
@@ -46,6 +46,12 @@ enum Input {
     },
     /// How writing a journal record went (from the journal's thread).
     Journaled(Written),
+    /// The glare figures of a view's stage, computed on the blocking pool.
+    ViewFigures {
+        generation: u64,
+        quality: vtfarm_vertex::Quality,
+        figures: ViewFigures,
+    },
     /// A user's request about a job (from the HTTP API and dashboard).
     Control {
         job: u64,
@@ -215,6 +221,10 @@ async fn run(
     let wall = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH);
     core.set_wall_clock(wall.map_or(0, |t| t.as_millis() as u64));
     let mut conns: BTreeMap<ConnId, Connection> = BTreeMap::new();
+    // The view's glare figures: one computation at a time; a stage shown
+    // meanwhile replaces the one waiting (only the stage on view gets them).
+    let mut glare_running = false;
+    let mut glare_next: Option<GlareRequest> = None;
     if let Some(journal) = &journal {
         let loaded = tokio::task::block_in_place(|| journal.load());
         for damaged in loaded.damaged {
@@ -272,6 +282,14 @@ async fn run(
                         core.base_frame_ready(now, job, frame, base);
                     }
                     Input::Journaled(written) => core.journal_written(now, written),
+                    Input::ViewFigures { generation, quality, figures } => {
+                        core.view_figures_ready(now, generation, quality, figures);
+                        glare_running = false;
+                        if let Some(request) = glare_next.take() {
+                            glare_running = true;
+                            spawn_glare(request, feedback.clone());
+                        }
+                    }
                     Input::Control { job, action, who, reply } => {
                         let _ = reply.send(core.control_job(now, job, action, &who));
                     }
@@ -309,6 +327,14 @@ async fn run(
                         let _ = feedback.send(Input::BaseFrame { job, frame, base });
                     });
                 }
+                Output::ViewGlare(request) => {
+                    if glare_running {
+                        glare_next = Some(request);
+                    } else {
+                        glare_running = true;
+                        spawn_glare(request, feedback.clone());
+                    }
+                }
                 Output::Persist(record) => {
                     if let Some(writer) = &writer {
                         // Waits only when the disk is behind by a few frames.
@@ -338,4 +364,18 @@ async fn run(
         }
         changed.send_modify(|tick| *tick += 1);
     }
+}
+
+/// Computes a view stage's glare figures on the blocking pool and hands
+/// them back as an input.
+fn spawn_glare(request: GlareRequest, feedback: UnboundedSender<Input>) {
+    tokio::task::spawn_blocking(move || {
+        let figures = request.compute();
+        let (generation, quality) = (request.generation, request.quality);
+        let _ = feedback.send(Input::ViewFigures {
+            generation,
+            quality,
+            figures,
+        });
+    });
 }

@@ -149,6 +149,21 @@ struct HttpState {
     streams: Arc<Semaphore>,
     /// The dashboard view every event stream follows, started with the first.
     view_feed: Arc<OnceLock<watch::Receiver<Arc<str>>>>,
+    /// The view's newest stage as PNG, encoded once for every request.
+    view_png: Arc<std::sync::Mutex<Option<(ViewKey, axum::body::Bytes)>>>,
+}
+
+/// Which stage of which move is on view, and whether its figures are in.
+type ViewKey = (u64, &'static str, bool);
+
+/// The stage on view, if any.
+fn view_key(core: &MasterCore) -> Option<ViewKey> {
+    let latest = core.views().latest()?;
+    Some((
+        latest.generation,
+        latest.quality.name(),
+        latest.figures.is_some(),
+    ))
 }
 
 /// Why the HTTP server could not start.
@@ -246,6 +261,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         access: Arc::new(access),
         streams: Arc::new(Semaphore::new(max_event_streams)),
         view_feed: Arc::new(OnceLock::new()),
+        view_png: Arc::default(),
     };
     Router::new()
         .route("/", get(|| async { Html(DASHBOARD) }))
@@ -510,7 +526,8 @@ pub struct ViewSourceView {
 pub struct LatestView {
     pub generation: u64,
     pub quality: &'static str,
-    pub glare: vtfarm_glare::Summary,
+    /// `null` until computed, after the stage went on view.
+    pub glare: Option<vtfarm_glare::Summary>,
 }
 
 #[derive(Serialize)]
@@ -590,7 +607,7 @@ fn view_state(core: &MasterCore) -> ViewState {
         latest: views.latest().map(|v| LatestView {
             generation: v.generation,
             quality: v.quality.name(),
-            glare: v.glare.clone(),
+            glare: v.figures.as_ref().map(|f| f.glare.clone()),
         }),
         outcomes: views.outcomes().copied().collect(),
     }
@@ -609,15 +626,66 @@ async fn steer_view(
     }
 }
 
-/// The view's newest finished stage.
+/// The view's newest finished stage, encoded once per stage.
 async fn view_png(State(state): State<HttpState>) -> Response {
-    let image = (state.master).inspect(|c| c.views().latest().map(|v| v.image.clone()));
-    kept_png(image.await, linear_srgb8).await
+    let latest = state.master.inspect(|c| {
+        let key = view_key(c)?;
+        Some(((key.0, key.1), c.views().latest()?.frame.clone()))
+    });
+    let Some(latest) = latest.await else {
+        return unavailable();
+    };
+    let Some(((generation, quality), frame)) = latest else {
+        return (StatusCode::NOT_FOUND, "no such image (yet)\n").into_response();
+    };
+    let key = (generation, quality, false);
+    let cached = state.view_png.lock().ok().and_then(|c| c.clone());
+    if let Some((_, png)) = cached.filter(|(k, _)| (k.0, k.1) == (key.0, key.1)) {
+        return (
+            [
+                (header::CONTENT_TYPE, "image/png"),
+                (header::CACHE_CONTROL, "no-store"),
+            ],
+            png,
+        )
+            .into_response();
+    }
+    let encoded = tokio::task::spawn_blocking(move || {
+        let image = &frame.color;
+        encode_srgb8_png(image.width, image.height, &image.to_srgb8())
+    })
+    .await;
+    match encoded {
+        Ok(Ok(png)) => {
+            let png = axum::body::Bytes::from(png);
+            if let Ok(mut cache) = state.view_png.lock() {
+                *cache = Some((key, png.clone()));
+            }
+            (
+                [
+                    (header::CONTENT_TYPE, "image/png"),
+                    (header::CACHE_CONTROL, "no-store"),
+                ],
+                png,
+            )
+                .into_response()
+        }
+        Ok(Err(e)) => png_error(PngError::from(e)),
+        Err(e) => png_error(PngError::from(e)),
+    }
 }
 
-/// The reflected-object map of the view's newest finished stage.
+fn png_error(error: PngError) -> Response {
+    (StatusCode::INTERNAL_SERVER_ERROR, format!("{error}\n")).into_response()
+}
+
+/// The reflected-object map of the view's newest finished stage, once its
+/// figures are computed (404 until then).
 async fn view_objects_png(State(state): State<HttpState>) -> Response {
-    let image = (state.master).inspect(|c| c.views().latest().map(|v| v.object_map.clone()));
+    let image = (state.master).inspect(|c| {
+        let figures = c.views().latest()?.figures.clone()?;
+        Some(Arc::new(figures.object_map.clone()))
+    });
     kept_png(image.await, linear_srgb8).await
 }
 
@@ -696,23 +764,51 @@ fn dashboard_json(core: &MasterCore) -> Arc<str> {
 /// The dashboard view as JSON, computed again (at most every
 /// [`VIEW_INTERVAL`]) when the master's state moved and someone follows
 /// it; ends with the master.
+///
+/// A new stage of the interactive view (or its glare figures) goes out at
+/// once, not at the end of the interval: the view's latency is what its
+/// user feels.
 fn view_feed(master: MasterHandle) -> watch::Receiver<Arc<str>> {
     let (publish, feed) = watch::channel(Arc::<str>::from(""));
     let mut changes = master.changes();
     tokio::spawn(async move {
+        // A change seen during the last interval, not published yet.
+        let mut pending = false;
         loop {
-            if changes.changed().await.is_err() {
+            if !pending && changes.changed().await.is_err() {
                 return;
             }
             changes.mark_unchanged();
+            pending = false;
+            let mut published = None;
             // The feed kept by the router is one receiver; streams are the rest.
             if publish.receiver_count() > 1 {
-                let Some(json) = master.inspect(dashboard_json).await else {
+                let read = |c: &MasterCore| (dashboard_json(c), view_key(c));
+                let Some((json, key)) = master.inspect(read).await else {
                     return;
                 };
                 publish.send_replace(json);
+                published = key;
             }
-            tokio::time::sleep(VIEW_INTERVAL).await;
+            let until = tokio::time::Instant::now() + VIEW_INTERVAL;
+            loop {
+                tokio::select! {
+                    () = tokio::time::sleep_until(until) => break,
+                    changed = changes.changed() => {
+                        if changed.is_err() {
+                            return;
+                        }
+                        changes.mark_unchanged();
+                        pending = true;
+                        let Some(key) = master.inspect(view_key).await else {
+                            return;
+                        };
+                        if key != published {
+                            break;
+                        }
+                    }
+                }
+            }
         }
     });
     feed
@@ -786,7 +882,7 @@ async fn png_response(
             png,
         )
             .into_response(),
-        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
+        Err(e) => png_error(e),
     }
 }
 

@@ -446,7 +446,7 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     })
     .await;
     let core_view = (farm.master)
-        .inspect(|c| c.views().latest().unwrap().image.clone())
+        .inspect(|c| c.views().latest().unwrap().image().clone())
         .await
         .unwrap();
     assert_eq!(
@@ -459,6 +459,9 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     let png = farm.get("/view/image.png").await;
     let decoded = image::load_from_memory(&png.body).unwrap().to_rgb8();
     assert_eq!(decoded.as_raw(), &core_view.to_srgb8());
+    // The figures come after the stage went on view, and the object map with them.
+    farm.wait_for_core(|c| c.views().latest().is_some_and(|l| l.figures.is_some()))
+        .await;
     assert_eq!(farm.get("/view/objects.png").await.status, 200);
 }
 

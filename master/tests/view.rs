@@ -1,7 +1,10 @@
 //! The interactive view through the sans-IO core (`Pair`: real worker
-//! sessions, virtual clock): moving the eye cancels the outdated view's
-//! job and only the newest eye is rendered to `full`, equal to the
-//! single-process render of that eye.
+//! sessions, virtual clock): a move of the eye is one progressive frame,
+//! set up once on the master and on each worker, its stages composited in
+//! place, each byte for byte the single-process render at its quality, the
+//! refinement continuing the preview's vertices; moving the eye cancels the
+//! outdated move's remaining stages, and only the newest eye is rendered to
+//! `full`.
 
 #[path = "support/frame.rs"]
 mod frame;
@@ -14,14 +17,15 @@ use std::time::Duration;
 
 use glam::Vec3;
 use support::pair::Pair;
+use vtfarm_cockpit::Cockpit;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
 use vtfarm_master::view::{EYE_BOX, ViewError, ViewOutcome, ViewRequest};
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
-use vtfarm_proto::SceneData;
-use vtfarm_render::Renderer;
-use vtfarm_vertex::Quality;
+use vtfarm_proto::{Message, PackageResult, ResultPixels, SceneData, WireBitmap, WireQuality};
+use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_vertex::{Quality, SparseBitmap};
 
 /// Virtual time a scenario may take at most.
 const BOUND: Duration = Duration::from_secs(600);
@@ -86,6 +90,10 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         let current = p.master.views().current().unwrap();
         current.stages_done == current.stages_total
             && p.workers.iter().all(|w| !w.is_running_a_package())
+            && p.master
+                .views()
+                .latest()
+                .is_some_and(|l| l.figures.is_some())
     });
 
     let outcomes: Vec<ViewOutcome> = pair.master.views().outcomes().copied().collect();
@@ -142,8 +150,324 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
     let moved = small_frame(&c, Vec3::new(EYE_BOX, 0.0, 0.0));
     let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
     let reference = renderer.render(&moved, &Default::default(), &mut |_, _| {});
-    assert!(latest.image.pixels == reference.image.color.pixels);
-    // Its glare figures are those of the composited components.
-    assert_eq!(latest.glare.glass_pixels, reference.image.glass().count());
-    assert!(latest.object_map.width >= latest.image.width);
+    assert!(latest.image().pixels == reference.image.color.pixels);
+    // Its glare figures (computed after it went on view) are those of the
+    // composited components.
+    let figures = latest
+        .figures
+        .as_ref()
+        .expect("the figures of the stage on view");
+    assert_eq!(figures.glare.glass_pixels, reference.image.glass().count());
+    assert!(figures.object_map.width >= latest.image().width);
+}
+
+const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
+
+/// A farm of two workers that rendered a job of the small cockpit (the
+/// view's source): the farm, the cockpit, its reflectors, the job's id.
+fn farm_with_a_source() -> (Pair, Cockpit, Vec<u32>, u64) {
+    let c = cockpit(&CockpitConfig {
+        detail: 0.2,
+        glass_segments: 24,
+        ..CockpitConfig::default()
+    });
+    let reflectors = c.cover_glass_triangles();
+    let data = SceneData::from_scene(&c.scene);
+    let options = JobOptions {
+        method: MethodKind::VertexTracing,
+        aux: false,
+    };
+    let setup = small_frame(&c, Vec3::ZERO);
+    let job = wire_job("source", &data, &[setup], &reflectors, options);
+    let mut pair = Pair::new(FarmRules::default());
+    pair.add_worker("w1", 1.0);
+    pair.add_worker("w2", 1.0);
+    pair.submit(job, data);
+    pair.drive(BOUND, |p| p.frames_done().len() == 1);
+    let source = pair.job_id().expect("the job was accepted");
+    (pair, c, reflectors, source)
+}
+
+/// The small frame of `c` with the eye moved by `offset`, at `quality`.
+fn moved(c: &Cockpit, offset: Vec3, quality: Quality) -> FrameSetup {
+    let mut setup = small_frame(c, offset);
+    setup.vertex.quality = quality;
+    setup
+}
+
+/// Drives until the view shows stage `quality` of move `generation`.
+fn drive_to_stage(pair: &mut Pair, generation: u64, quality: Quality) {
+    pair.drive(BOUND, |p| {
+        (p.master.views().latest())
+            .is_some_and(|l| (l.generation, l.quality) == (generation, quality))
+    });
+}
+
+/// One move: the master rasterizes one base frame and each worker sets its
+/// frame up once for the three stages; each stage the view shows is, byte
+/// for byte, the single-process render at that quality; each package runs
+/// each stage once, and the stages together trace exactly the vertices the
+/// same packages trace at `full` from scratch (refine and full continue the
+/// preview's vertices and edges; none is traced twice).
+#[test]
+fn a_move_is_one_progressive_frame_set_up_once_each_stage_the_single_process_render() {
+    let (mut pair, c, reflectors, source) = farm_with_a_source();
+    let set_ups_before: Vec<u64> = (pair.workers.iter())
+        .map(|w| w.state.engine.set_ups())
+        .collect();
+    let runs_before: Vec<usize> = pair
+        .workers
+        .iter()
+        .map(|w| w.state.stages_run.len())
+        .collect();
+    let offset = Vec3::new(0.03, 0.01, -0.02);
+    let request = ViewRequest {
+        job: source,
+        offset: offset.to_array(),
+    };
+    let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
+    for quality in STAGES {
+        drive_to_stage(&mut pair, 1, quality);
+        let latest = pair.master.views().latest().unwrap();
+        let reference = renderer.render(
+            &moved(&c, offset, quality),
+            &Default::default(),
+            &mut |_, _| {},
+        );
+        assert!(
+            latest.image().pixels == reference.image.color.pixels,
+            "{quality:?}: the single-process render's pixels"
+        );
+    }
+    pair.drive(BOUND, |p| {
+        p.master.telemetry().frames().any(|f| f.job == job)
+    });
+
+    // Set up once: one base frame on the master, one set-up per worker.
+    let bases: Vec<_> = (pair.base_frames.iter())
+        .filter(|(j, _)| *j == job)
+        .collect();
+    assert_eq!(bases, [&(job, 0)]);
+    for (w, before) in pair.workers.iter().zip(set_ups_before) {
+        assert_eq!(w.state.engine.set_ups() - before, 1, "{}", w.name);
+    }
+    // Each package ran its three stages once, in order, on one worker.
+    let mut stages_of: std::collections::BTreeMap<u64, Vec<usize>> = Default::default();
+    let mut packages = Vec::new();
+    let mut traced = (0, 0);
+    for (w, before) in pair.workers.iter().zip(runs_before) {
+        for run in &w.state.stages_run[before..] {
+            assert_eq!(run.job, job);
+            stages_of.entry(run.package).or_default().push(run.stage);
+            if run.stage == 0 {
+                packages.push(run.triangles.clone());
+            }
+            traced.0 += run.stats.vertex_samples;
+            traced.1 += run.stats.filled_pixels;
+        }
+    }
+    assert!(packages.len() >= 2, "{packages:?}");
+    assert!(stages_of.values().all(|s| s == &[0, 1, 2]), "{stages_of:?}");
+    let scratch = |quality| {
+        let setup = moved(&c, offset, quality);
+        renderer
+            .render_packages(&setup, &packages, &Default::default(), &mut |_, _| {})
+            .stats
+    };
+    let full = scratch(Quality::Full);
+    assert_eq!(traced.0, full.vertex_samples, "every vertex traced once");
+    // Three renders from scratch trace the preview's vertices three times
+    // (and any rim pixels at every level; a pixel of the progressive frame
+    // is traced once).
+    let separate = STAGES.map(scratch);
+    let separate_vertices: u64 = separate.iter().map(|s| s.vertex_samples).sum();
+    let separate_pixels: u64 = separate.iter().map(|s| s.filled_pixels).sum();
+    assert!(traced.0 < separate_vertices, "{traced:?} {separate:?}");
+    assert!(traced.1 <= separate_pixels, "{traced:?} {separate:?}");
+    assert!(traced.1 >= full.filled_pixels, "{traced:?} {full:?}");
+    // The frame's totals are its stages' work.
+    let done = pair
+        .master
+        .telemetry()
+        .frames()
+        .find(|f| f.job == job)
+        .unwrap();
+    assert_eq!(done.stats.totals.vertex_samples, traced.0);
+}
+
+/// A move whose preview is on screen is cancelled by a newer move at
+/// once: its refine and full are never shown, its packages' later stages
+/// stop, and the newer move goes through its stages to the newest eye.
+#[test]
+fn a_newer_move_cancels_the_older_moves_remaining_stages() {
+    let (mut pair, c, reflectors, source) = farm_with_a_source();
+    let first = ViewRequest {
+        job: source,
+        offset: [0.02, 0.0, 0.0],
+    };
+    let old = pair.act(|m, now| m.steer_view(now, first)).unwrap();
+    drive_to_stage(&mut pair, 1, Quality::Preview);
+    let runs_at_cancel: Vec<usize> = pair
+        .workers
+        .iter()
+        .map(|w| w.state.stages_run.len())
+        .collect();
+    let second = ViewRequest {
+        job: source,
+        offset: [-0.03, 0.02, 0.0],
+    };
+    let new = pair.act(|m, now| m.steer_view(now, second)).unwrap();
+    assert!(pair.master.views().outcomes().any(|o| *o
+        == ViewOutcome::Cancelled {
+            generation: 1,
+            job: old
+        }));
+    drive_to_stage(&mut pair, 2, Quality::Full);
+    let shown: Vec<(u64, Quality)> = (pair.master.views().outcomes())
+        .filter_map(|o| match *o {
+            ViewOutcome::Rendered {
+                generation,
+                quality,
+                ..
+            } => Some((generation, quality)),
+            ViewOutcome::Cancelled { .. } => None,
+        })
+        .collect();
+    assert_eq!(
+        shown,
+        [
+            (1, Quality::Preview),
+            (2, Quality::Preview),
+            (2, Quality::Refine),
+            (2, Quality::Full)
+        ]
+    );
+    // The cancel reaches each worker before the newer move's packages do
+    // (in order on its link): no stage of the old move starts after the
+    // worker's first stage of the new one.
+    for (w, before) in pair.workers.iter().zip(runs_at_cancel) {
+        let runs = &w.state.stages_run[before..];
+        let first_new = runs.iter().position(|r| r.job == new);
+        let first_new = first_new.unwrap_or_else(|| panic!("{} ran the new move", w.name));
+        let late: Vec<_> = (runs[first_new..].iter())
+            .filter(|r| r.job == old)
+            .map(|r| (r.package, r.stage))
+            .collect();
+        assert_eq!(late, [], "{}", w.name);
+    }
+    // The old move's frame never completed.
+    assert!(!pair.master.telemetry().frames().any(|f| f.job == old));
+    assert_eq!(pair.master.telemetry().counters.jobs_cancelled, 1);
+    let latest = pair.master.views().latest().unwrap();
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
+    let offset = Vec3::from(second.offset);
+    let reference = renderer.render(
+        &moved(&c, offset, Quality::Full),
+        &Default::default(),
+        &mut |_, _| {},
+    );
+    assert!(latest.image().pixels == reference.image.color.pixels);
+}
+
+/// A worker's stage results are checked like any result, and refused
+/// naming the peer when out of order (a refine before the package's
+/// preview, a stage for a frame of one stage) or out of the frame: the
+/// package fails and runs again, and the move still ends byte for byte
+/// the single-process render.
+#[test]
+fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
+    let (mut pair, c, reflectors, source) = farm_with_a_source();
+    let request = ViewRequest {
+        job: source,
+        offset: [0.01, 0.01, 0.0],
+    };
+    let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    pair.drive(BOUND, |p| {
+        p.workers.iter().any(|w| w.is_running_a_package())
+            && !p.master.packages_by_worker().is_empty()
+    });
+    let (name, conn) = (pair.workers[0].name.clone(), pair.workers[0].conn());
+    let result = |id, stage, pixels| PackageResult {
+        id,
+        pixels,
+        stats: Default::default(),
+        busy_micros: 1,
+        setup_micros: 0,
+        triangle_samples: vec![],
+        stage,
+    };
+    let outside = ResultPixels::Bitmap(WireBitmap::from(&SparseBitmap {
+        x0: 500,
+        y0: 0,
+        width: 1,
+        height: 1,
+        mask: vec![true],
+        color: vec![Vec3::ONE],
+        reflected: vec![Vec3::ZERO],
+        transmitted: vec![Vec3::ZERO],
+        reflected_object: vec![0],
+    }));
+    let empty = ResultPixels::Bitmap(Default::default());
+    let tampered = [
+        // A refine before the package's preview.
+        result(0, Some(WireQuality::Refine), empty.clone()),
+        // No stage on a progressive frame's result.
+        result(0, None, empty),
+        // A preview with pixels outside the frame.
+        result(0, Some(WireQuality::Preview), outside),
+    ];
+    let mut failed = 0;
+    for tampered in tampered {
+        let mine = pair
+            .master
+            .packages_by_worker()
+            .get(&name)
+            .cloned()
+            .unwrap_or_default();
+        let Some(&id) = mine.first() else { continue };
+        let failures = pair
+            .master
+            .status()
+            .workers
+            .iter()
+            .find(|w| w.name == name)
+            .map(|w| w.failures);
+        pair.act(|m, now| {
+            m.message(
+                now,
+                conn,
+                Message::PackageResult(PackageResult { id, ..tampered }),
+            )
+        });
+        let after = pair
+            .master
+            .status()
+            .workers
+            .iter()
+            .find(|w| w.name == name)
+            .map(|w| w.failures);
+        assert_eq!(
+            after,
+            failures.map(|f| f + 1),
+            "refused, counted against {name}"
+        );
+        let listed = (pair.master.packages_by_worker().get(&name).cloned()).unwrap_or_default();
+        assert!(!listed.contains(&id), "{id} runs nowhere now: {listed:?}");
+        failed += 1;
+    }
+    assert!(failed >= 1);
+    drive_to_stage(&mut pair, 1, Quality::Full);
+    pair.drive(BOUND, |p| {
+        p.master.telemetry().frames().any(|f| f.job == job)
+    });
+    let latest = pair.master.views().latest().unwrap();
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
+    let offset = Vec3::from(request.offset);
+    let reference = renderer.render(
+        &moved(&c, offset, Quality::Full),
+        &Default::default(),
+        &mut |_, _| {},
+    );
+    assert!(latest.image().pixels == reference.image.color.pixels);
 }

@@ -522,6 +522,12 @@ impl Engine {
         })
     }
 
+    /// Frames the kept renderer has set up ([`Renderer::set_ups`]; a
+    /// progressive frame counts one for all its stages).
+    pub fn set_ups(&self) -> u64 {
+        self.renderer.as_ref().map_or(0, |(_, _, r)| r.set_ups())
+    }
+
     /// Keeps a prepared frame's renderer for the next frames of its scene
     /// and reflectors.
     pub fn keep_renderer(&mut self, frame: &ActiveFrame) {
@@ -797,5 +803,104 @@ mod tests {
                 .count();
             assert!(covered > 50, "{covered} pixels covered");
         }
+    }
+
+    /// A progressive frame's package set up once and advanced preview →
+    /// refine → full: each stage's pixels, composited in order, are the
+    /// package traced from scratch at that quality, and the stages trace
+    /// together exactly the vertices the package traces at `full` from
+    /// scratch (none twice). Stages go in order, each after the one before.
+    #[test]
+    fn a_progressive_package_runs_its_stages_on_one_set_up() {
+        let (cockpit, hash, mut engine) = cockpit_engine();
+        let reflectors = cockpit.cover_glass_triangles();
+        let camera = Camera {
+            width: 96,
+            height: 54,
+            ..cockpit.camera
+        };
+        let sun = Vec3::new(0.45, -0.85, -0.15);
+        let stages = [Quality::Preview, Quality::Refine, Quality::Full];
+        let start = |quality: Quality, staged: bool| {
+            let mut start = cockpit_frame((&cockpit, hash), 0, camera, sun, &reflectors);
+            let mut setup = FrameSetup::try_from(start.setup).unwrap();
+            setup.vertex.quality = quality;
+            start.setup = WireFrameSetup::from(&setup);
+            if staged {
+                start.stages = stages.iter().map(|&q| q.into()).collect();
+            }
+            start
+        };
+        let progressive = engine.start_frame(start(Quality::Full, true)).unwrap();
+        assert_eq!(progressive.stages(), 3);
+        let package = Package {
+            id: 4,
+            job: 1,
+            frame: 0,
+            triangles: reflectors[reflectors.len() / 3..].to_vec(),
+            whole: None,
+        };
+        let unlimited = || Stop::with_budget(u64::MAX);
+        let bitmap = |result: &PackageResult| match &result.pixels {
+            ResultPixels::Bitmap(b) => SparseBitmap::try_from(b.clone()).unwrap(),
+            ResultPixels::Frame { .. } => panic!("a split package's result is a bitmap"),
+        };
+        // A later stage needs the earlier ones' progress.
+        assert!(matches!(
+            progressive.run_stage(&package, 1, &mut None, 1.0, &unlimited()),
+            Err(PackageError::StageWithoutProgress { id: 4, stage: 1 })
+        ));
+        assert!(matches!(
+            progressive.run_stage(&package, 3, &mut None, 1.0, &unlimited()),
+            Err(PackageError::NoSuchStage {
+                stage: 3,
+                stages: 3
+            })
+        ));
+        // Each pixel's colour and components, bit for bit.
+        type Pixels = BTreeMap<(u32, u32), ([u32; 3], [u32; 3], [u32; 3], u32)>;
+        let composite = |pixels: &mut Pixels, result: &PackageResult| {
+            let bitmap = bitmap(result);
+            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+            for (x, y, k) in bitmap.covered() {
+                let value = (
+                    bits(bitmap.color[k]),
+                    bits(bitmap.reflected[k]),
+                    bits(bitmap.transmitted[k]),
+                    bitmap.reflected_object[k],
+                );
+                pixels.insert((x, y), value);
+            }
+        };
+        let mut progress = None;
+        let mut pixels = Pixels::new();
+        let mut vertex_samples = 0;
+        for (k, &quality) in stages.iter().enumerate() {
+            let result = progressive
+                .run_stage(&package, k, &mut progress, 1.0, &unlimited())
+                .unwrap();
+            assert_eq!(result.stage, Some(quality.into()));
+            composite(&mut pixels, &result);
+            vertex_samples += result.stats.vertex_samples;
+            let alone = cockpit_engine()
+                .2
+                .start_frame(start(quality, false))
+                .unwrap();
+            let scratch = alone.run(&package, 1.0, &unlimited()).unwrap();
+            assert_eq!(scratch.stage, None);
+            let mut expected = Pixels::new();
+            composite(&mut expected, &scratch);
+            assert!(
+                expected.len() > 50,
+                "{quality:?}: {} pixels",
+                expected.len()
+            );
+            assert!(pixels == expected, "{quality:?}");
+            if quality == Quality::Full {
+                assert_eq!(vertex_samples, scratch.stats.vertex_samples);
+            }
+        }
+        // The package's frame was set up once for its three stages.
+        assert_eq!(engine.set_ups(), 1);
     }
 }

@@ -9,6 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::time::Duration;
 
+use vtfarm_master_core::view::GlareRequest;
 use vtfarm_master_core::{
     BaseFrameRequest, ConnId, DamagedJob, FarmRules, MasterCore, Output, Peer, Record, StoredJob,
     Written,
@@ -255,6 +256,8 @@ enum DriverInput {
     Message(ConnId, Box<Message>),
     Base((u64, u32)),
     Closed(ConnId),
+    /// The view's glare figures (costing nothing), after the stage is shown.
+    Glare(Box<GlareRequest>),
 }
 
 /// The master, its workers and one submitter on a virtual clock.
@@ -267,6 +270,8 @@ pub struct Farm<M: CostModel> {
     /// Every frame a `FrameStart` announced, in order (a whole frame's
     /// with each of its packages).
     pub frame_starts: Vec<(u64, u32)>,
+    /// Every base frame the master asked for (job, frame), in order.
+    pub base_frames: Vec<(u64, u32)>,
     /// Base frames rasterized into a finished frame's buffers.
     pub bases_in_reused_buffers: usize,
     /// Each finished frame the submitter got, with its times and CPU.
@@ -335,6 +340,7 @@ impl<M: CostModel> Farm<M> {
             workers: Vec::new(),
             to_submitter: Vec::new(),
             frame_starts: Vec::new(),
+            base_frames: Vec::new(),
             bases_in_reused_buffers: 0,
             deliveries: Vec::new(),
             busy: Vec::new(),
@@ -841,6 +847,11 @@ impl<M: CostModel> Farm<M> {
                 self.master.message(self.now, conn, *message);
             }
             DriverInput::Closed(conn) => self.master.disconnected(self.now, conn),
+            DriverInput::Glare(request) => {
+                let figures = request.compute();
+                let (generation, quality) = (request.generation, request.quality);
+                (self.master).view_figures_ready(self.now, generation, quality, figures);
+            }
             DriverInput::Base(key) => {
                 self.base_pending.remove(&key);
                 let held = self.held_items.remove(&key).unwrap_or(0);
@@ -916,8 +927,12 @@ impl<M: CostModel> Farm<M> {
                 }
                 self.master.disconnected(self.now, conn);
             }
+            Output::ViewGlare(request) => {
+                self.queue_for_driver(DriverInput::Glare(Box::new(request)))
+            }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);
+                self.base_frames.push(key);
                 self.bases_in_reused_buffers += usize::from(request.reuses_buffers());
                 let shares = self.cores[0];
                 self.base_left.insert(key, shares);

@@ -45,7 +45,7 @@ pub use recorded::{
     FarmCosts, FarmFrame, FarmJob, SimulationConfig, background_threads_for, cpu_per_frame,
     simulate_farm, steady_background_cores, steady_frame_seconds,
 };
-pub use rendered::{Rendered, SAMPLE_COST, TEST_LATENCY, TestFarm};
+pub use rendered::{Rendered, SAMPLE_COST, StageRun, TEST_LATENCY, TestFarm};
 
 /// Why a recorded simulation gave no figures.
 #[derive(Debug, thiserror::Error)]

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use vtfarm_master_core::FarmRules;
-use vtfarm_proto::{FrameStart, Package, PackageId, SceneData, SceneHash};
+use vtfarm_proto::{FrameStart, Package, PackageId, SceneData, SceneHash, WirePackageStats};
 use vtfarm_vertex::{ProgressivePackage, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::SceneStore;
@@ -35,6 +35,19 @@ pub struct RenderingWorker {
     pub engine: Engine,
     frames: PreparedFrames,
     progress: BTreeMap<PackageId, ProgressivePackage>,
+    /// Every package stage it ran, in order, for tests to count.
+    pub stages_run: Vec<StageRun>,
+}
+
+/// A package stage a rendering worker ran.
+#[derive(Clone, Debug)]
+pub struct StageRun {
+    pub job: u64,
+    pub package: PackageId,
+    /// Its index among its frame's stages (0 for a frame of one stage).
+    pub stage: usize,
+    pub triangles: Vec<u32>,
+    pub stats: WirePackageStats,
 }
 
 impl SceneStore for RenderingWorker {
@@ -57,6 +70,7 @@ impl CostModel for Rendered {
             engine: Engine::new(None),
             frames: PreparedFrames::default(),
             progress: BTreeMap::new(),
+            stages_run: Vec::new(),
         }
     }
 
@@ -89,6 +103,13 @@ impl CostModel for Rendered {
         if let Some(progress) = progress.filter(|_| stage + 1 < frame.stages()) {
             worker.progress.insert(package.id, progress);
         }
+        worker.stages_run.push(StageRun {
+            job: package.job,
+            package: package.id,
+            stage,
+            triangles: package.triangles.clone(),
+            stats: result.stats,
+        });
         let samples: u64 = (result.triangle_samples.iter())
             .map(|&s| u64::from(s) + 1)
             .sum();

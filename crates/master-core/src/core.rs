@@ -47,7 +47,7 @@ use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
 use crate::stages::{StageProgress, StageWork};
 use crate::telemetry::Telemetry;
-use crate::view::{ViewError, ViewRequest, ViewSource, Views};
+use crate::view::{GlareRequest, ViewError, ViewFigures, ViewRequest, ViewSource, Views};
 
 /// A connection, numbered by the driver.
 pub type ConnId = u64;
@@ -84,6 +84,11 @@ pub enum Output {
     /// Rasterize a base frame (CPU work, off the driver's task) and hand it
     /// to [`MasterCore::base_frame_ready`].
     RasterizeBase(BaseFrameRequest),
+    /// Compute the glare figures of the view's stage just put on view (CPU
+    /// work, off the driver's task, after the stage is shown; a driver may
+    /// drop a request a newer one replaced before it started) and hand them
+    /// to [`MasterCore::view_figures_ready`].
+    ViewGlare(GlareRequest),
 }
 
 /// A base frame to rasterize: what [`BaseFrameRequest::rasterize`] needs.
@@ -796,9 +801,12 @@ impl MasterCore {
             Ok(checked) => checked,
             Err(error) => {
                 warn!(worker = %self.name(conn), package = id, "{error}");
-                let _ =
-                    self.scheduler
-                        .package_failed(now, worker, PackageId(id), error.to_string());
+                let failed =
+                    (self.scheduler).package_failed(now, worker, PackageId(id), error.to_string());
+                if failed.is_ok() {
+                    // It runs nowhere now (a retry is a new assignment).
+                    self.drop_in_flight(id, conn);
+                }
                 let current = (self.jobs.get_mut(&job_id)).and_then(|j| j.assembly_mut(frame));
                 if let Some(progress) = current.and_then(|c| c.progress.as_mut()) {
                     progress.forget_copy(id, conn);
@@ -940,10 +948,34 @@ impl MasterCore {
         let Some(progress) = progress.as_mut() else {
             return;
         };
-        let completed = progress.deliver(stage, triangles, pixels, |p| image.composite(p));
-        if let (Some(stage), Assembled::Components(image)) = (completed, &*image) {
-            (self.views).stage_finished(job_id, stage, image, &job.scene);
+        let (views, scene) = (&mut self.views, &job.scene);
+        let show = |stage, image: &Assembled| {
+            if let Assembled::Components(image) = image {
+                views.stage_finished(job_id, stage, image, scene);
+            }
+        };
+        progress.deliver(stage, triangles, pixels, image, Assembled::composite, show);
+        self.ask_for_view_figures();
+    }
+
+    /// The view's stage just shown gets its glare figures computed (after
+    /// the driver carried out what came before: the stage is on view).
+    fn ask_for_view_figures(&mut self) {
+        if let Some(request) = self.views.take_glare_request() {
+            self.outbox.push_back(Output::ViewGlare(request));
         }
+    }
+
+    /// The driver computed the glare figures [`Output::ViewGlare`] asked for.
+    pub fn view_figures_ready(
+        &mut self,
+        now: Duration,
+        generation: u64,
+        quality: Quality,
+        figures: ViewFigures,
+    ) {
+        self.now = now;
+        self.views.figures_ready(generation, quality, figures);
     }
 
     fn submitter_message(&mut self, now: Duration, conn: ConnId, message: Message) {
@@ -1535,6 +1567,7 @@ impl MasterCore {
                 // A progressive frame's stages went to the view as they came.
                 if let (Assembled::Components(image), None) = (&done.image, &done.progress) {
                     (self.views).stage_finished(job.0, frame as usize, image, &j.scene);
+                    self.ask_for_view_figures();
                 }
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
                 let workers = stats

@@ -137,20 +137,23 @@ impl<P> StageProgress<P> {
         self.copies.remove(&(package, conn));
     }
 
-    /// Stage `stage`'s checked pixels of `triangles`: composited now
-    /// (`composite`) if it is the stage being assembled, dropped if it is
-    /// complete already, else held. Returns the last stage this completed,
-    /// if any: the image is that stage's frame then.
-    pub(crate) fn deliver(
+    /// Stage `stage`'s checked pixels of `triangles`: composited into
+    /// `image` now (`composite`) if it is the stage being assembled, dropped
+    /// if it is complete already, else held. Each stage this completes is
+    /// told to `completed` with the image as that stage's frame, before the
+    /// next stage's held pixels go in.
+    pub(crate) fn deliver<I>(
         &mut self,
         stage: usize,
         triangles: &[TriangleId],
         pixels: P,
-        mut composite: impl FnMut(&P),
-    ) -> Option<usize> {
+        image: &mut I,
+        composite: impl Fn(&mut I, &P),
+        mut completed: impl FnMut(usize, &I),
+    ) {
         match stage.cmp(&self.complete) {
             std::cmp::Ordering::Less => {}
-            std::cmp::Ordering::Equal => composite(&pixels),
+            std::cmp::Ordering::Equal => composite(image, &pixels),
             std::cmp::Ordering::Greater => self.held[stage].push(pixels),
         }
         let reached = (stage + 1) as u8;
@@ -166,19 +169,17 @@ impl<P> StageProgress<P> {
                 }
             }
         }
-        let mut completed = None;
         while self.complete < self.qualities.len()
             && self.counts[self.complete] == self.reflectors.len()
         {
-            completed = Some(self.complete);
+            completed(self.complete, image);
             self.complete += 1;
             if let Some(held) = self.held.get_mut(self.complete) {
                 for pixels in std::mem::take(held) {
-                    composite(&pixels);
+                    composite(image, &pixels);
                 }
             }
         }
-        completed
     }
 }
 
@@ -191,19 +192,30 @@ mod tests {
     /// Pixels as (pixel, value) writes.
     type Writes = Vec<(usize, u32)>;
 
-    /// Delivers `writes` of stage `stage` of `triangles` into `image`.
+    /// Delivers `writes` of stage `stage` of `triangles` into `image`;
+    /// the stages it completed, each with the image as it was then.
     fn deliver(
         progress: &mut StageProgress<Writes>,
-        image: &mut [u32],
+        image: &mut [u32; 4],
         stage: usize,
         triangles: &[u32],
         writes: Writes,
-    ) -> Option<usize> {
-        progress.deliver(stage, triangles, writes, |writes| {
+    ) -> Vec<(usize, [u32; 4])> {
+        let mut completed = Vec::new();
+        let composite = |image: &mut [u32; 4], writes: &Writes| {
             for &(i, v) in writes {
                 image[i] = v;
             }
-        })
+        };
+        progress.deliver(
+            stage,
+            triangles,
+            writes,
+            image,
+            composite,
+            |stage, image| completed.push((stage, *image)),
+        );
+        completed
     }
 
     /// Two packages (triangles 1, 2 and 3) on a four-pixel frame; package B
@@ -217,31 +229,24 @@ mod tests {
         let b_preview = vec![(2, 10), (3, 10)];
         assert_eq!(
             deliver(&mut progress, image, 0, &[3], b_preview.clone()),
-            None
+            []
         );
-        assert_eq!(deliver(&mut progress, image, 1, &[3], vec![(3, 11)]), None);
+        assert_eq!(deliver(&mut progress, image, 1, &[3], vec![(3, 11)]), []);
         assert_eq!(image, &[0, 0, 10, 10]);
         // A (triangles 1 and 2, pixels 0 and 1): its preview completes the
-        // preview; B's held refine goes in after it.
+        // preview, shown as it is; B's held refine goes in after it.
         let a_preview = vec![(0, 20), (1, 20)];
-        assert_eq!(
-            deliver(&mut progress, image, 0, &[1, 2], a_preview),
-            Some(0)
-        );
+        let completed = deliver(&mut progress, image, 0, &[1, 2], a_preview);
+        assert_eq!(completed, [(0, [20, 20, 10, 10])]);
         assert_eq!(image, &[20, 20, 10, 11]);
         // A second copy of B repeats its preview: nothing changes.
-        assert_eq!(deliver(&mut progress, image, 0, &[3], b_preview), None);
+        assert_eq!(deliver(&mut progress, image, 0, &[3], b_preview), []);
         assert_eq!(image, &[20, 20, 10, 11]);
-        assert_eq!(
-            deliver(&mut progress, image, 1, &[1, 2], vec![(0, 21)]),
-            Some(1)
-        );
-        assert_eq!(deliver(&mut progress, image, 2, &[1, 2], vec![]), None);
-        assert_eq!(
-            deliver(&mut progress, image, 2, &[3], vec![(2, 12)]),
-            Some(2)
-        );
-        assert_eq!(image, &[21, 20, 12, 11]);
+        let completed = deliver(&mut progress, image, 1, &[1, 2], vec![(0, 21)]);
+        assert_eq!(completed, [(1, [21, 20, 10, 11])]);
+        assert_eq!(deliver(&mut progress, image, 2, &[1, 2], vec![]), []);
+        let completed = deliver(&mut progress, image, 2, &[3], vec![(2, 12)]);
+        assert_eq!(completed, [(2, [21, 20, 12, 11])]);
     }
 
     /// Each copy sends its stages in order; a copy elsewhere starts at the

@@ -9,9 +9,12 @@
 //! stage it was at: only the newest eye is ever rendered to the end.
 //!
 //! Plain bookkeeping: the core owns a [`Views`], queues and cancels the jobs
-//! and hands finished frames in; the glare figures of each finished stage
+//! and hands finished stages in. The glare figures of a stage
 //! (`vtfarm-glare`: reflected luminance, veiling ratio, reflected objects)
-//! are computed here from the frame's components. No I/O, no clock.
+//! are no part of showing it: the core asks the driver for them
+//! ([`GlareRequest`], `Output::ViewGlare`) once the stage is on view, and
+//! they join it when they come, unless a newer stage is on view by then
+//! (only the stage shown gets figures). No I/O, no clock.
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -104,15 +107,48 @@ pub struct CurrentView {
     pub stages_total: usize,
 }
 
-/// A finished stage of a view, with its glare figures.
+/// A finished stage of a view, with its glare figures once computed.
 #[derive(Clone, Debug)]
 pub struct ViewFrame {
     pub generation: u64,
     pub quality: Quality,
-    pub image: Arc<Image>,
+    /// The stage's frame: its colour ([`ViewFrame::image`]) and components.
+    pub frame: Arc<FrameImage>,
+    /// Its glare figures, computed after it went on view.
+    pub figures: Option<Arc<ViewFigures>>,
+}
+
+impl ViewFrame {
+    /// The stage's image.
+    pub fn image(&self) -> &Image {
+        &self.frame.color
+    }
+}
+
+/// A view stage's glare figures.
+#[derive(Clone, Debug)]
+pub struct ViewFigures {
     /// The reflected-object map with its legend (`vtfarm_glare::object_map`).
-    pub object_map: Arc<Image>,
+    pub object_map: Image,
     pub glare: vtfarm_glare::Summary,
+}
+
+/// The glare figures of a stage on view, to compute off the driver's task
+/// ([`GlareRequest::compute`]) and hand to `MasterCore::view_figures_ready`.
+#[derive(Clone, Debug)]
+pub struct GlareRequest {
+    pub generation: u64,
+    pub quality: Quality,
+    frame: Arc<FrameImage>,
+    scene: Arc<Scene>,
+}
+
+impl GlareRequest {
+    /// The stage's reflected-object map and glare summary.
+    pub fn compute(&self) -> ViewFigures {
+        let (object_map, glare) = glare_of(&self.frame, &self.scene);
+        ViewFigures { object_map, glare }
+    }
 }
 
 /// The view's state, owned by the core.
@@ -123,6 +159,8 @@ pub struct Views {
     /// The newest finished stage (of this move or, until it has one, of an
     /// earlier move).
     latest: Option<ViewFrame>,
+    /// Figures to ask the driver for (the newest stage's).
+    glare_wanted: Option<GlareRequest>,
     outcomes: VecDeque<ViewOutcome>,
 }
 
@@ -227,7 +265,7 @@ impl Views {
         job: u64,
         stage: usize,
         image: &FrameImage,
-        scene: &Scene,
+        scene: &Arc<Scene>,
     ) {
         let Some(current) = self.current.as_mut().filter(|c| c.job == job) else {
             return;
@@ -239,13 +277,18 @@ impl Views {
         let reached: Vec<Quality> = reached.collect();
         current.stages_done = stage + 1;
         let generation = current.generation;
-        let (object_map, glare) = glare_of(image, scene);
+        let frame = Arc::new(image.clone());
+        self.glare_wanted = Some(GlareRequest {
+            generation,
+            quality,
+            frame: frame.clone(),
+            scene: scene.clone(),
+        });
         self.latest = Some(ViewFrame {
             generation,
             quality,
-            image: Arc::new(image.color.clone()),
-            object_map: Arc::new(object_map),
-            glare,
+            frame,
+            figures: None,
         });
         for quality in reached {
             self.record(ViewOutcome::Rendered {
@@ -261,6 +304,25 @@ impl Views {
         if let Some(c) = &self.current {
             let (generation, job) = (c.generation, c.job);
             self.record(ViewOutcome::Cancelled { generation, job });
+        }
+    }
+
+    /// The figures to compute for the stage just put on view, once.
+    pub(crate) fn take_glare_request(&mut self) -> Option<GlareRequest> {
+        self.glare_wanted.take()
+    }
+
+    /// A stage's figures came: they join it if it is still the one on view.
+    pub(crate) fn figures_ready(
+        &mut self,
+        generation: u64,
+        quality: Quality,
+        figures: ViewFigures,
+    ) {
+        if let Some(latest) =
+            (self.latest.as_mut()).filter(|l| (l.generation, l.quality) == (generation, quality))
+        {
+            latest.figures = Some(Arc::new(figures));
         }
     }
 
