@@ -4,7 +4,9 @@
 //! recorded from a real frame (`simulate`, see [`SimulateArgs`]), a real
 //! QUIC farm on localhost (`cluster`, see [`ClusterArgs`]), and a
 //! progressive frame against separate renders (`progressive`, see
-//! [`ProgressiveArgs`]). Speed targets live here, not in tests.
+//! [`ProgressiveArgs`]), and the interactive view's latency on a localhost
+//! farm of processes (`view`, see [`ViewArgs`]). Speed targets live here,
+//! not in tests.
 
 mod cluster;
 mod progressive;
@@ -12,12 +14,14 @@ mod raster;
 mod rays;
 mod simulate;
 pub mod support;
+mod view;
 
 pub use cluster::ClusterArgs;
 pub use progressive::ProgressiveArgs;
 pub use raster::RasterArgs;
 pub use rays::RaysArgs;
 pub use simulate::SimulateArgs;
+pub use view::ViewArgs;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -47,10 +51,15 @@ pub enum BenchCommand {
     /// Preview, refine and full as three separate renders against one
     /// progressive frame (set up once, each stage continuing the last).
     Progressive(progressive::ProgressiveArgs),
+    /// The interactive view's latency: a localhost farm of processes, eye
+    /// moves through its HTTP API, each stage timed on the event stream.
+    View(view::ViewArgs),
 }
 
+/// The cockpit frame a one-process benchmark renders and the threads it
+/// renders on: what `table1`, `progressive` and `view` share.
 #[derive(clap::Args)]
-pub struct Table1Args {
+pub struct CockpitFrameArgs {
     #[arg(long, default_value_t = 1920)]
     width: u32,
     #[arg(long, default_value_t = 1080)]
@@ -61,6 +70,21 @@ pub struct Table1Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+}
+
+impl CockpitFrameArgs {
+    /// Sizes the process's thread pool (`--threads`) and builds the
+    /// cockpit job at `quality`.
+    fn set_up(&self, quality: Quality) -> Result<CockpitJob> {
+        crate::support::set_threads(self.threads)?;
+        CockpitJob::new(self.detail, self.width, self.height, quality)
+    }
+}
+
+#[derive(clap::Args)]
+pub struct Table1Args {
+    #[command(flatten)]
+    frame: CockpitFrameArgs,
     /// Refinement threshold in 8-bit sRGB steps (default: the job default).
     #[arg(long)]
     epsilon: Option<f32>,
@@ -131,27 +155,16 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Rays(args) => rays::run(args),
         BenchCommand::Raster(args) => raster::run(args),
         BenchCommand::Progressive(args) => progressive::run(args),
+        BenchCommand::View(args) => view::run(args),
     }
 }
 
 fn table1(args: Table1Args) -> Result<()> {
-    crate::support::set_threads(args.threads)?;
-    let c = cockpit(&CockpitConfig {
-        detail: args.detail,
-        ..CockpitConfig::default()
-    });
-    let reflectors = c.cover_glass_triangles();
-    let scene = Arc::new(c.scene);
-    let renderer = Renderer::new(scene.clone(), reflectors);
-    let camera = vtfarm_scene::Camera {
-        width: args.width,
-        height: args.height,
-        ..c.camera
-    };
+    let job = args.frame.set_up(Quality::Full)?;
+    let scene = job.scene.clone();
+    let renderer = Renderer::new(scene.clone(), job.reflectors.clone());
+    let camera = job.setup.camera;
     let setup_for = |quality| FrameSetup {
-        camera,
-        lighting: c.lighting.clone(),
-        trace: TraceSettings::default(),
         vertex: VertexSettings {
             quality,
             epsilon: args
@@ -159,6 +172,7 @@ fn table1(args: Table1Args) -> Result<()> {
                 .map_or(VertexSettings::default().epsilon, |e| e / 255.0),
             ..VertexSettings::default()
         },
+        ..job.setup.clone()
     };
     // Reference first: the others are measured against it.
     let order = [
@@ -235,8 +249,8 @@ fn table1(args: Table1Args) -> Result<()> {
     };
     let (coherent, incoherent) = ray_throughput(renderer.bvh(), &camera);
     let table = Table1 {
-        width: args.width,
-        height: args.height,
+        width: camera.width,
+        height: camera.height,
         scene_triangles: scene.triangles.len(),
         reflector_triangles: renderer.reflectors().len(),
         glass_pixels: reference.stats.pixels,

@@ -8,24 +8,15 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, ensure};
-use vtfarm_cockpit::CockpitConfig;
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_vertex::{FrameImage, PixelValue, Quality, VertexSettings};
 
-use super::CockpitJob;
+use super::CockpitFrameArgs;
 
 #[derive(clap::Args)]
 pub struct ProgressiveArgs {
-    #[arg(long, default_value_t = 1920)]
-    width: u32,
-    #[arg(long, default_value_t = 1080)]
-    height: u32,
-    /// Cockpit detail (1.0 ≈ 100k triangles).
-    #[arg(long, default_value_t = CockpitConfig::DEFAULT_DETAIL)]
-    detail: f32,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
+    #[command(flatten)]
+    frame: CockpitFrameArgs,
     /// Rounds; the least time of each figure is kept.
     #[arg(long, default_value_t = 5)]
     rounds: u32,
@@ -47,8 +38,7 @@ struct Round {
 }
 
 pub(crate) fn run(args: ProgressiveArgs) -> Result<()> {
-    crate::support::set_threads(args.threads)?;
-    let job = CockpitJob::new(args.detail, args.width, args.height, Quality::Full)?;
+    let job = args.frame.set_up(Quality::Full)?;
     let renderer = Renderer::new(job.scene.clone(), job.reflectors.clone());
     let options = RenderOptions::default();
     let at = |quality| FrameSetup {
@@ -93,7 +83,7 @@ pub(crate) fn run(args: ProgressiveArgs) -> Result<()> {
         });
     }
     let best = best.expect("at least one round");
-    print(&args, &renderer, &best);
+    print(&args, &renderer, job.setup.camera, &best);
     Ok(())
 }
 
@@ -114,19 +104,15 @@ fn least(a: Round, b: Round) -> Round {
     }
 }
 
-fn print(args: &ProgressiveArgs, renderer: &Renderer, r: &Round) {
-    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+fn print(args: &ProgressiveArgs, renderer: &Renderer, camera: vtfarm_scene::Camera, r: &Round) {
     println!(
         "cockpit {} triangles, {}x{}, {} threads, least of {} rounds; load average {}",
         renderer.scene().triangles.len(),
-        args.width,
-        args.height,
+        camera.width,
+        camera.height,
         rayon::current_num_threads(),
         args.rounds.max(1),
-        load.split_whitespace()
-            .take(3)
-            .collect::<Vec<_>>()
-            .join(" ")
+        crate::support::load_average()
     );
     println!(
         "{:<8} {:>12} {:>12} {:>12} {:>12} {:>16} {:>16}",

@@ -45,6 +45,20 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
+/// The system's load averages over 1, 5 and 15 minutes, as `uptime` prints
+/// them ("?" where /proc/loadavg cannot be read): every speed figure on a
+/// shared machine goes with it.
+pub fn load_average() -> String {
+    match std::fs::read_to_string("/proc/loadavg") {
+        Ok(text) => text
+            .split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" "),
+        Err(_) => "?".to_owned(),
+    }
+}
+
 /// Whose CPU time [`cpu_time`] reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CpuClock {

@@ -1249,49 +1249,6 @@ fn errors_found_against_the_scene_name_the_line() {
     assert!(message.contains("at most 16777216 pixels"), "{message}");
 }
 
-/// Eye points are located in one pass: 100,000 of them parse in about ten
-/// times the time of 10,000 (a location computed per eye from the start of
-/// the text made it a hundred times, 7.6 s for 20,000). Checked as a ratio
-/// in one run, with a wide margin (the best of a few runs of each size, on
-/// a machine other work shares), and every eye's location is right.
-#[test]
-fn eye_points_parse_in_linear_time() {
-    let job_with = |eyes: usize| {
-        let mut text = format!("{COCKPIT}[frames]\neyes = [\n");
-        for i in 0..eyes {
-            let x = i as f32 * 1e-5;
-            text.push_str(&format!("  [{x}, 1.2, 0.4],\n"));
-        }
-        text.push_str("]\n");
-        text
-    };
-    let best_time = |text: &str, runs: usize| {
-        (0..runs)
-            .map(|_| {
-                let start = std::time::Instant::now();
-                let job = parse(text);
-                (start.elapsed(), job)
-            })
-            .min_by_key(|(time, _)| *time)
-            .expect("a run")
-    };
-    let (small, _) = best_time(&job_with(10_000), 3);
-    // Two runs only: a quadratic parse takes minutes here before it fails.
-    let (large, job) = best_time(&job_with(100_000), 2);
-    assert_eq!(job.eyes.len(), 100_000);
-    // Eye i stands on line 5 + i, after its two leading spaces.
-    for i in [0, 1, 54_321, 99_999] {
-        let at = job.locations[&format!("frames.eyes[{i}]")];
-        assert_eq!((at.line, at.column), (5 + i, 3), "eye {i}");
-    }
-    let ratio = large.as_secs_f64() / small.as_secs_f64();
-    println!("10,000 eyes {small:?}, 100,000 eyes {large:?}: {ratio:.1} times");
-    assert!(
-        ratio < 30.0,
-        "100,000 eyes took {large:?}, {ratio:.1} times the {small:?} of 10,000 (linear: 10)"
-    );
-}
-
 #[test]
 fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
     let fixture =
