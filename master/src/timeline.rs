@@ -1,7 +1,9 @@
 //! The per-frame timeline (`vtfarm submit` writes it beside each frame, the
 //! dashboard shows it for the frame on view): one row for the master and one
 //! per worker, with their phases (base frame, set-up, packages in flight,
-//! packages computing) from the frame's statistics; the gaps are idle time.
+//! packages computing) from the frame's statistics, and for a progressive
+//! frame (the view) a `view` row of its stages as they went on view; the
+//! gaps are idle time.
 
 use vtfarm_proto::{FrameStats, PhaseKind};
 
@@ -58,9 +60,10 @@ pub fn timeline_svg(stats: &FrameStats) -> String {
         (PhaseKind::Setup, "set-up"),
         (PhaseKind::Sending, "package/result in flight"),
         (PhaseKind::Package, "package"),
+        (PhaseKind::Shown, "view stage"),
     ];
     for (k, (kind, name)) in kinds.iter().enumerate() {
-        let lx = LABEL + 190.0 * k as f64;
+        let lx = LABEL + 180.0 * k as f64;
         svg += &format!(
             "<rect x=\"{lx}\" y=\"{}\" width=\"12\" height=\"12\" fill=\"{}\"/><text x=\"{}\" y=\"{legend_y}\">{name}</text>\n",
             legend_y - 10.0,
@@ -81,6 +84,7 @@ fn color(kind: PhaseKind) -> &'static str {
         PhaseKind::Setup => "#e8a33d",
         PhaseKind::Sending => "#5b9bd5",
         PhaseKind::Package => "#4caf50",
+        PhaseKind::Shown => "#d9534f",
     }
 }
 
@@ -114,8 +118,8 @@ mod tests {
         };
         let svg = timeline_svg(&stats);
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
-        // Two row backgrounds, four phases, four legend boxes.
-        assert_eq!(svg.matches("<rect").count(), 2 + 4 + 4);
+        // Two row backgrounds, four phases, five legend boxes.
+        assert_eq!(svg.matches("<rect").count(), 2 + 4 + 5);
         assert!(svg.contains("w&lt;1&gt;"), "names are escaped");
         // The last phase ends at the right edge of the plot.
         assert!(svg.contains("Package 0.1-1.0 ms"), "{svg}");

@@ -23,7 +23,9 @@ use vtfarm_master::FarmRules;
 use vtfarm_master::view::{EYE_BOX, ViewError, ViewOutcome, ViewRequest};
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{Message, PackageResult, ResultPixels, SceneData, WireBitmap, WireQuality};
+use vtfarm_proto::{
+    Message, PackageResult, PhaseKind, ResultPixels, SceneData, WireBitmap, WireQuality,
+};
 use vtfarm_render::{FrameSetup, Renderer};
 use vtfarm_vertex::{Quality, SparseBitmap};
 
@@ -294,6 +296,23 @@ fn a_move_is_one_progressive_frame_set_up_once_each_stage_the_single_process_ren
         .find(|f| f.job == job)
         .unwrap();
     assert_eq!(done.stats.totals.vertex_samples, traced.0);
+    // Its timeline has the master's base frame, the workers' set-ups and
+    // stages, and the three stages going on view one after another.
+    let kinds: Vec<PhaseKind> = done.stats.phases.iter().map(|p| p.kind).collect();
+    for kind in [PhaseKind::Base, PhaseKind::Setup, PhaseKind::Package] {
+        assert!(kinds.contains(&kind), "{kinds:?}");
+    }
+    let shown: Vec<(u64, u64)> = (done.stats.phases.iter())
+        .filter(|p| p.kind == PhaseKind::Shown)
+        .map(|p| (p.start_micros, p.end_micros))
+        .collect();
+    assert_eq!(shown.len(), 3, "{shown:?}");
+    assert!(
+        shown
+            .windows(2)
+            .all(|w| w[0].1 == w[1].0 && w[0].0 <= w[0].1),
+        "{shown:?}"
+    );
 }
 
 /// A move whose preview is on screen is cancelled by a newer move at

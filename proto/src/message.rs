@@ -678,6 +678,10 @@ pub enum PhaseKind {
     /// A worker computing a package (its reported busy time, ending when
     /// the result arrived).
     Package,
+    /// A progressive frame's stage on its way to the view (row `view`):
+    /// from the stage before it went on view (or the frame's start) until
+    /// this one did.
+    Shown,
 }
 
 /// One worker's share of a frame.

@@ -943,16 +943,25 @@ impl MasterCore {
             return;
         };
         let FrameAssembly {
-            image, progress, ..
+            image,
+            progress,
+            phases,
+            started,
+            ..
         } = current;
         let Some(progress) = progress.as_mut() else {
             return;
         };
-        let (views, scene) = (&mut self.views, &job.scene);
+        let (views, scene, now, t0) = (&mut self.views, &job.scene, self.now, *started);
         let show = |stage, image: &Assembled| {
             if let Assembled::Components(image) = image {
                 views.stage_finished(job_id, stage, image, scene);
             }
+            // On the timeline: from the stage before it to this one.
+            let shown = |p: &&FramePhase| p.kind == PhaseKind::Shown;
+            let since = (phases.iter().rfind(shown))
+                .map_or(t0, |p| t0 + Duration::from_micros(p.end_micros));
+            phases.push(phase(t0, "view".into(), PhaseKind::Shown, since, now));
         };
         progress.deliver(stage, triangles, pixels, image, Assembled::composite, show);
         self.ask_for_view_figures();
@@ -1605,17 +1614,31 @@ impl MasterCore {
                     .map_or((job.0, frame), |&(owner, frame)| (owner, frame));
                 // Encoded (and compressed) once, here or by a whole frame's
                 // worker: the journal and the submitter get the same bytes.
+                // A frame nobody receives or keeps (a view's: the view holds
+                // its stages) goes only to the dashboard's list, in 8 bits,
+                // without components: its encoding is no part of the view's
+                // latency.
+                let journaled = self.journals(owner);
+                let j = self.jobs.get_mut(&job.0).expect("checked above");
+                let delivered = !j.submitters.is_empty() || journaled;
+                let format = if delivered {
+                    j.image
+                } else {
+                    WireImageFormat::Srgb8
+                };
                 let (image, aux) = match done.finished.take() {
                     Some(finished) => finished,
                     None => (
                         WireImage::encode_reusing(
                             done.image.color(),
-                            j.image,
+                            format,
                             &mut self.frame_bytes,
                         ),
                         match &done.image {
-                            Assembled::Components(image) => Some(WireFrameAux::encode(image)),
-                            Assembled::Color(_) => None,
+                            Assembled::Components(image) if delivered => {
+                                Some(WireFrameAux::encode(image))
+                            }
+                            Assembled::Components(_) | Assembled::Color(_) => None,
                         },
                     ),
                 };
