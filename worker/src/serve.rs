@@ -245,6 +245,7 @@ pub async fn serve(
                     Err(join) => (Err(PackageError::Task(join)), None),
                 };
                 session.package_finished(start.elapsed(), id, outcome);
+                // Its next stage may be the session's next task already.
                 if let Some(staged) = staged.filter(|_| session.continues(id)) {
                     progress.insert(id, staged);
                 }

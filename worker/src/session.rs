@@ -234,10 +234,13 @@ impl WorkerSession {
         self.running.as_ref().map(|r| r.package.id)
     }
 
-    /// Whether package `id` has stages left to run after the one running
-    /// (or finished) now: the driver keeps its progress while it has.
+    /// Whether package `id`'s progress between stages is still wanted: a
+    /// later stage of it waits, or runs (the driver keeps the progress
+    /// while so, and hands it to that stage's task).
     pub fn continues(&self, id: PackageId) -> bool {
-        self.continuing.iter().any(|(p, _)| p.id == id)
+        let running_later =
+            (self.running.as_ref()).is_some_and(|r| r.package.id == id && r.stage > 0);
+        running_later || self.continuing.iter().any(|(p, _)| p.id == id)
     }
 
     /// Whether the master cancelled the running package `id`: the driver

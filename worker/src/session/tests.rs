@@ -423,3 +423,66 @@ fn the_first_result_of_a_frame_tells_how_long_its_set_up_took() {
     s.package_finished(ms(60), 10, Ok(result(10)));
     assert!(messages(&mut s).contains(&Message::PackageResult(result(10))));
 }
+
+/// A progressive frame's packages run stage by stage, one result each, the
+/// lowest stage first (every package's preview before any refinement, a
+/// package that came later before the others' later stages); a package
+/// keeps its progress until its last stage, and a cancelled one loses its
+/// remaining stages at once.
+#[test]
+fn a_progressive_frames_packages_run_the_lowest_stage_first() {
+    let mut scenes = Scenes::default();
+    scenes.0.insert(SCENE);
+    let mut s = WorkerSession::new(Duration::ZERO);
+    let start = FrameStart {
+        stages: vec![
+            vtfarm_proto::WireQuality::Preview,
+            vtfarm_proto::WireQuality::Refine,
+            vtfarm_proto::WireQuality::Full,
+        ],
+        ..frame_start(1, 0)
+    };
+    s.handle_message(
+        Duration::ZERO,
+        Message::FrameStart(start.clone()),
+        &mut scenes,
+    );
+    s.handle_message(Duration::ZERO, package(9, 1, 0), &mut scenes);
+    assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(start)]);
+    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
+    let mut ran = Vec::new();
+    let mut results = 0;
+    let ms = Duration::from_millis;
+    for step in 1..=8 {
+        let task = tasks(&mut s);
+        let [Task::RunPackage { package, stage }] = &task[..] else {
+            break;
+        };
+        ran.push((package.id, *stage));
+        if (package.id, *stage) == (10, 0) {
+            // A third package comes while the others wait for refinement.
+            s.handle_message(ms(step), package(11, 1, 0), &mut scenes);
+        }
+        let id = package.id;
+        s.package_finished(ms(step), id, Ok(result(id)));
+        results += (messages(&mut s).iter())
+            .filter(|m| matches!(m, Message::PackageResult(_)))
+            .count();
+        if (id, *stage) == (9, 1) {
+            assert!(s.continues(9), "9's full is next: its progress is kept");
+            // The master cancels package 11 between its stages.
+            s.handle_message(ms(step), Message::CancelPackage { id: 11 }, &mut scenes);
+            assert!(!s.continues(11));
+        }
+    }
+    assert_eq!(
+        ran,
+        [(9, 0), (10, 0), (11, 0), (9, 1), (10, 1), (9, 2), (10, 2)]
+    );
+    assert_eq!(results, ran.len(), "one result per stage");
+    assert!(
+        !s.continues(9) && !s.continues(10),
+        "done with their last stage"
+    );
+}
