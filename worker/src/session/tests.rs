@@ -456,15 +456,15 @@ fn a_progressive_frames_packages_run_the_lowest_stage_first() {
     let ms = Duration::from_millis;
     for step in 1..=8 {
         let task = tasks(&mut s);
-        let [Task::RunPackage { package, stage }] = &task[..] else {
+        let [Task::RunPackage { package: p, stage }] = &task[..] else {
             break;
         };
-        ran.push((package.id, *stage));
-        if (package.id, *stage) == (10, 0) {
+        ran.push((p.id, *stage));
+        if (p.id, *stage) == (10, 0) {
             // A third package comes while the others wait for refinement.
             s.handle_message(ms(step), package(11, 1, 0), &mut scenes);
         }
-        let id = package.id;
+        let id = p.id;
         s.package_finished(ms(step), id, Ok(result(id)));
         results += (messages(&mut s).iter())
             .filter(|m| matches!(m, Message::PackageResult(_)))
