@@ -43,6 +43,21 @@ print(late[0] if late and late[0] < len(frames) - 1 else min(1, len(frames) - 1)
 PY
 }
 
+# Where scripts/steady_window.py is, for the Python below and in lab.sh.
+farm_scripts=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+
+# window_start STATS_JSON K: prints the arrival the steady window starts
+# at: the last of the bunch that holds arrival K (steady_window.bunch_end).
+window_start() {
+  python3 - "$1" "$2" "$farm_scripts" <<'PY'
+import json, sys
+sys.path.insert(0, sys.argv[3])
+from steady_window import bunch_end
+frames = json.load(open(sys.argv[1]))
+print(bunch_end(sorted(f["arrival_micros"] for f in frames), int(sys.argv[2])))
+PY
+}
+
 # frame_figures STATS_JSON FROM: prints the mean interval between frame
 # arrivals at the submitter from arrival FROM on (see steady_frame), the
 # mean master frame wall time of those frames, the result MB per frame as
@@ -96,7 +111,8 @@ machine_cpu_ticks() {
 # measured_submit OUT LOG FRAMES PID... -- COMMAND...: runs COMMAND (a
 # `vtfarm submit` writing to OUT, exec'd so that its process is the
 # submitter's; output to LOG), bounded to 600 s, and sets `job_from` to the
-# first steady frame (steady_frame; `measure_from` when set), `job_cpu` to the CPU seconds per frame
+# first steady frame (steady_frame; `measure_from` when set; moved to the end
+# of its bunch by window_start), `job_cpu` to the CPU seconds per frame
 # after it of the farm's processes (the first PID, the submitter, then the
 # other PIDs; comma-separated) and `job_others` to the cores the machine's
 # other processes used meanwhile (/proc/stat less the farm's). CPU is
@@ -132,7 +148,7 @@ measured_submit() {
   wait "$submitter" || { cat "$log" >&2; exit 1; }
   reaped_cpu_ticks
   last+=($((children_ticks - reaped_before)))
-  job_from=${measure_from:-$(steady_frame "$out/stats.json")}
+  job_from=$(window_start "$out/stats.json" "${measure_from:-$(steady_frame "$out/stats.json")}")
   read -r job_cpu job_others < <(python3 - "$frames" "$(getconf CLK_TCK)" "$job_from" "$samples" \
     "${last[*]} ${machine_last[*]}" <<'PY'
 import sys

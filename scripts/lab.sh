@@ -236,7 +236,7 @@ for _ in $(seq 1 100); do
 done
 [ "$n" -ge "$workers" ] || { echo "workers did not join" >&2; cat "$work"/w1.log "$work/master.log" >&2; exit 1; }
 # The figures: the second half of the frames, over the time from the
-# arrival that completes the first half to the last.
+# arrival that completes the first half (the end of its bunch: steady_window.py) to the last.
 measure_from=$((frames / 2 - 1))
 measured_submit "$work/out" "$work/submit.log" "$frames" "${pids[@]}" -- \
   "${pin_master[@]}" "${in_master[@]}" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out"
@@ -258,21 +258,27 @@ fi
 python3 - "$work/sim.json" "$job_from" "$frames" "$measured" "$sent" "$job_cpu" "$others" \
   "$(join "${percents[@]}")" "$(join "${mbits[@]}")" "${master_mbit:-}" "$($localhost && echo localhost || echo tbf)" \
   "$cores" "$(cut -d' ' -f1-3 /proc/loadavg)" "$json" "$workers" "$width" "$height" "$detail" "$(join "${throttled[@]}")" \
-  "lab: $workers workers, $(links_text); $layout; other processes used $others cores meanwhile" <<'PY'
+  "lab: $workers workers, $(links_text); $layout; other processes used $others cores meanwhile" \
+  "$farm_scripts" <<'PY'
 import json, math, sys
 (sim_path, start, frames, measured, sent, cpu, others, percents, mbits, master_mbit, links,
- cores, load, out, workers, width, height, detail, throttled, headline) = sys.argv[1:]
+ cores, load, out, workers, width, height, detail, throttled, headline, scripts) = sys.argv[1:]
+sys.path.insert(0, scripts)
+from steady_window import bunch_end
 start, frames, measured, sent = int(start), int(frames), float(measured), float(sent)
 row = [r for r in json.load(open(sim_path)) if not r["heterogeneous"]][-1]
 # The frames in the order they were delivered, as the measured ones.
 order = sorted(range(len(row["done_seconds_per_frame"])), key=lambda i: row["done_seconds_per_frame"][i])
 done = [row["done_seconds_per_frame"][i] for i in order]
-predicted = (done[-1] - done[start]) / max(frames - 1 - start, 1)
+# The predicted frames bunch in their own way: their window starts at the
+# end of the bunch that holds the measured window's start.
+pstart = bunch_end(done, start)
+predicted = (done[-1] - done[pstart]) / max(frames - 1 - pstart, 1)
 # CPU per frame over the same frames; a simulated worker's CPU is on its
 # own machine at its speed: times the speed, the CPU the same work takes here.
 at = [row["cpu_at_delivery"][i] for i in order]
 speeds = row["worker_speeds"]
-simulated = [(b - a) / max(frames - 1 - start, 1) for a, b in zip(at[start], at[-1])]
+simulated = [(b - a) / max(frames - 1 - pstart, 1) for a, b in zip(at[pstart], at[-1])]
 simulated = [simulated[0], simulated[-1], *(c * s for c, s in zip(simulated[1:-1], speeds))]
 measured_cpu = [float(x) for x in cpu.split(",")]
 fps = lambda s: 1 / s if s > 0 else math.nan
@@ -283,7 +289,7 @@ report = {
     "master_mbit": float(master_mbit) if master_mbit else None,
     "job": {"scene": "cockpit", "detail": float(detail), "width": int(width), "height": int(height),
             "quality": "full", "frames": frames},
-    "measured_from_arrival": start, "cores": int(cores), "load_average": load, "others_cores": float(others),
+    "measured_from_arrival": start, "predicted_from_arrival": pstart, "cores": int(cores), "load_average": load, "others_cores": float(others),
     "frame_seconds": measured, "predicted_frame_seconds": predicted,
     "frames_per_second": fps(measured), "predicted_frames_per_second": fps(predicted),
     "measured_over_predicted": fps(measured) / fps(predicted),
@@ -298,7 +304,7 @@ report = {
     "predicted_cpu_per_frame": {"master": simulated[0], "submitter": simulated[1], "workers": simulated[2:]},
 }
 print(headline)
-print(f"  frames per second over the second half (arrivals {start + 1}-{frames - 1} after arrival {start}): measured {fps(measured):.3f} ({measured:.3f} s per frame), "
+print(f"  frames per second over the second half (after arrival {start}, predicted after {pstart}, each the end of a bunch): measured {fps(measured):.3f} ({measured:.3f} s per frame), "
       f"predicted {fps(predicted):.3f} ({predicted:.3f} s); measured/predicted {report['measured_over_predicted']:.2f}")
 if master_mbit:
     print(f"  results per frame: {sent:.3f} MB ({sent * 8 / float(master_mbit):.3f} s of the master link)")

@@ -503,3 +503,41 @@ fn cpu_lists_expand_their_ranges() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(text(&out.stdout), "0,1,2,5,7,8\n3\n");
 }
+
+/// Frames that wait for a slow worker's reach the submitter in a bunch; the
+/// steady window starts at the end of the bunch that holds its first frame,
+/// so that it counts whole bunches. Evenly spaced frames keep their start.
+#[test]
+fn the_steady_window_starts_at_the_end_of_a_bunch() {
+    let dir = tempfile::tempdir().unwrap();
+    let stats = |name: &str, arrivals: &[u64]| {
+        let frames: Vec<String> = (arrivals.iter())
+            .map(|a| format!(r#"{{"arrival_micros": {a}}}"#))
+            .collect();
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("[{}]", frames.join(","))).unwrap();
+        path
+    };
+    // A slow frame every 2.5 s releases three waiting ones within 30 ms;
+    // listed out of order, as frames finished out of order arrive.
+    let bunched = stats(
+        "bunched.json",
+        &[
+            2_500_000, 2_510_000, 0, 2_520_000, 5_000_000, 5_010_000, 5_020_000, 7_500_000,
+        ],
+    );
+    let even = stats(
+        "even.json",
+        &[0, 1_000_000, 2_000_000, 3_000_000, 4_000_000],
+    );
+    let out = Command::new("timeout")
+        .args([SCRIPT_LIMIT_SECONDS, "bash", "-c"])
+        .arg(r#"set -eu; source "$1"; window_start "$2" 1; window_start "$2" 4; window_start "$3" 1"#)
+        .arg("bash")
+        .arg(script("farm-common.sh"))
+        .args([&bunched, &even])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "3\n6\n1\n");
+}

@@ -687,19 +687,22 @@ impl StageFrame {
     /// From a `FrameStats` as JSON; phases of kinds it does not know are
     /// left out (a newer server may add some).
     fn from_stats(stats: &Value) -> StageFrame {
-        let seconds = |micros: &Value| micros.as_u64().unwrap_or(0) as f64 / 1e6;
         let mut frame = StageFrame {
-            wall: seconds(&stats["wall_micros"]),
+            wall: stats["wall_micros"].as_u64().unwrap_or(0) as f64 / 1e6,
             ..StageFrame::default()
         };
-        // Per worker and kind: the phases' total.
-        let mut by_worker = std::collections::BTreeMap::<(&str, &str), f64>::new();
+        // Per worker and kind: the time covered by its phases (a package in
+        // flight overlaps the one computing: the worker asks one ahead).
+        let mut by_worker = std::collections::BTreeMap::<(&str, &str), Vec<(u64, u64)>>::new();
         for phase in stats["phases"].as_array().map_or(&[][..], |p| p) {
-            let length = seconds(&phase["end_micros"]) - seconds(&phase["start_micros"]);
+            let micros = |key: &str| phase[key].as_u64().unwrap_or(0);
             let who = phase["who"].as_str().unwrap_or_default();
             let kind = phase["kind"].as_str().unwrap_or_default();
-            *by_worker.entry((who, kind)).or_default() += length.max(0.0);
+            let span = (micros("start_micros"), micros("end_micros"));
+            by_worker.entry((who, kind)).or_default().push(span);
         }
+        let by_worker =
+            (by_worker.into_iter()).map(|(key, spans)| (key, covered_micros(spans) as f64 / 1e6));
         for ((who, kind), total) in by_worker {
             let busiest = match (who, kind) {
                 ("master", "base") => &mut frame.base,
@@ -712,6 +715,20 @@ impl StageFrame {
         }
         frame
     }
+}
+
+/// The time the union of `spans` (start, end) covers.
+fn covered_micros(mut spans: Vec<(u64, u64)>) -> u64 {
+    spans.sort_unstable();
+    let (mut covered, mut reached) = (0, 0);
+    for (start, end) in spans {
+        let start = start.max(reached);
+        if end > start {
+            covered += end - start;
+            reached = end;
+        }
+    }
+    covered
 }
 
 /// `GET path` answered as JSON (an error for any status but 200).
@@ -1200,6 +1217,7 @@ mod tests {
                 { "who": "w0", "kind": "package", "start_micros": 210_000, "end_micros": 260_000 },
                 { "who": "w1", "kind": "package", "start_micros": 5_000, "end_micros": 105_000 },
                 { "who": "w1", "kind": "sending", "start_micros": 105_000, "end_micros": 107_000 },
+                { "who": "w1", "kind": "sending", "start_micros": 106_000, "end_micros": 108_000 },
                 { "who": "w1", "kind": "later", "start_micros": 0, "end_micros": 9_000_000 },
             ],
         });
@@ -1231,8 +1249,9 @@ mod tests {
         let preview = watch.figures.frames[0].clone().unwrap();
         let p = &preview;
         let figures = [p.wall, p.base, p.setup, p.packages, p.sending];
-        // w0's two packages, not w1's one; the unknown kind left out.
-        let expected = [0.3, 0.06, 0.1, 0.15, 0.002];
+        // w0's two packages, not w1's one; w1's overlapping transfers
+        // once; the unknown kind left out.
+        let expected = [0.3, 0.06, 0.1, 0.15, 0.003];
         assert!(
             figures
                 .iter()
