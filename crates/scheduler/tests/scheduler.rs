@@ -700,7 +700,7 @@ fn status_shows_progress_and_rates() {
     farm.at_ms(100);
     farm.done(W0, &a).expect("done");
     let queue = farm.s.queue();
-    let progress = queue.running.expect("running");
+    let progress = queue.running.first().expect("running");
     assert_eq!((progress.job, progress.frame, progress.frames), (JOB, 0, 3));
     assert_eq!((progress.items_done, progress.items_total), (10, 100));
     let workers = farm.s.workers();
@@ -803,7 +803,7 @@ fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
         })
         .collect();
     assert_eq!(order, [("complete", 0), ("complete", 1), ("started", 2)]);
-    assert_eq!(farm.s.queue().running.expect("frame 2").frame, 2);
+    assert_eq!(farm.s.queue().running[0].frame, 2);
     farm.valid();
 }
 

@@ -370,7 +370,10 @@ fn a_job_fails_when_every_worker_is_blocklisted() {
 }
 
 #[test]
-fn jobs_run_one_after_another_in_submission_order() {
+fn jobs_run_by_rank_and_the_first_job_starts_when_none_runs() {
+    // Job 3 comes first and starts (nothing runs); job 1, submitted at
+    // once, outranks it (equal priority, lower id) and takes every worker
+    // from its first package on; job 2 comes later and still outranks 3.
     let frame = uneven_frame(100, 9, 0.01, 0..0, 1.0);
     let mut jobs: Vec<SimJob> = [3, 1, 2]
         .iter()
@@ -391,9 +394,6 @@ fn jobs_run_one_after_another_in_submission_order() {
         order,
         [
             "start 3",
-            "frame 3.0",
-            "frame 3.1",
-            "end 3",
             "start 1",
             "frame 1.0",
             "frame 1.1",
@@ -401,7 +401,10 @@ fn jobs_run_one_after_another_in_submission_order() {
             "start 2",
             "frame 2.0",
             "frame 2.1",
-            "end 2"
+            "end 2",
+            "frame 3.0",
+            "frame 3.1",
+            "end 3"
         ]
     );
 }
