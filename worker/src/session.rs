@@ -410,6 +410,12 @@ impl WorkerSession {
     }
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
+        // Announced again (the master does when the worker comes from
+        // another job's work): a frame still kept is not set up twice.
+        let key = (start.job, start.frame);
+        if self.ready == Some(key) || self.older.contains(&key) {
+            return;
+        }
         self.unusable = None;
         if scenes.has_scene(&start.scene) {
             if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {

@@ -367,7 +367,8 @@ impl Scheduler {
         Ok(())
     }
 
-    /// Queues a job; jobs run one after another in submission order, and the
+    /// Queues a job: jobs run by rank (priority, then id; several at once
+    /// when workers would otherwise idle, see the crate documentation), the
     /// frames of a job one after another. A job without frames completes at
     /// once; a frame without items completes at once.
     pub fn submit_job(

@@ -757,3 +757,44 @@ fn a_slow_workers_last_frame_is_finished_by_the_others() {
         end(&without)
     );
 }
+
+/// A single frame of two big items on four workers, beside a deep job:
+/// the two workers the frame cannot use take the deep job's work at once,
+/// so no worker idles while work exists and the farm ends when the work
+/// over four workers does.
+#[test]
+fn a_small_job_beside_a_deep_one_leaves_no_worker_idle() {
+    let big = common::sim::SimFrame {
+        items: vec![1, 2],
+        costs: vec![1.0, 1.0],
+    };
+    let small = SimJob {
+        id: JobId(1),
+        submit_at: Duration::from_millis(1),
+        frames: vec![big],
+    };
+    let frame = uneven_frame(100, 14, 0.005, 0..0, 1.0);
+    let mut deep = repeated_job(2, &frame, 12);
+    deep.submit_at = Duration::from_millis(1);
+    let jobs = [small, deep];
+    for config in [checked(), batch_config()] {
+        let report = run(config, vec![SimWorker::with_speed(1.0); 4], &jobs);
+        let small_done = (report.frames.iter())
+            .find(|f| f.job == JobId(1))
+            .expect("complete")
+            .at;
+        let deep_first = (report.assignments.iter())
+            .find(|(_, a)| a.job == JobId(2))
+            .expect("assigned")
+            .0;
+        assert!(
+            deep_first < Duration::from_millis(100),
+            "the deep job waited until {deep_first:?}"
+        );
+        assert!(small_done < Duration::from_millis(1200), "{small_done:?}");
+        let work = 2.0 + frame.costs.iter().sum::<f64>() * 12.0;
+        let end = report.end.as_secs_f64();
+        println!("end {end:.3} s, ideal {:.3} s", work / 4.0);
+        assert!(end < work / 4.0 * 1.1, "{end} s for {work} s of work on 4");
+    }
+}
