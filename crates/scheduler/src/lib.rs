@@ -68,10 +68,10 @@
 //!   start when a waiting worker reaches them. Rates are measured per job
 //!   (each job's costs are in its own unit), and frame affinity and whole
 //!   frames hold within each job. Split frames share the master's
-//!   `frames_in_flight` base frames by rank: a job starts a split frame
-//!   only while it and the jobs ranked before it run fewer (each job keeps
-//!   the one frame it runs), so a lower job never holds the slots a higher
-//!   one needs.
+//!   `frames_in_flight` base frames by rank: beside the one frame each
+//!   running job has, a job starts a split frame ahead only while it and
+//!   the jobs ranked before it run fewer, so a lower job never holds the
+//!   slots a higher one needs.
 //! * **Frame affinity** ([`SchedulerConfig::frame_affinity`], the farm's
 //!   rules, for workers that set a frame up before its first package): a
 //!   waiting worker takes work of a running frame it already has (oldest

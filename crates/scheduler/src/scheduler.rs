@@ -916,15 +916,10 @@ impl Scheduler {
         let mut queued: Vec<&QueuedJob> = (self.queued_jobs.iter()).filter(|q| !q.paused).collect();
         queued.sort_by_key(|q| rank(q.priority, q.id));
         let mut queued = queued.into_iter().peekable();
+        // The first queued job ranked before `before` (or any, for `None`).
         let mut start = |before: Option<(Reverse<i32>, JobId)>| {
-            while let Some(q) =
-                queued.next_if(|q| before.is_none_or(|b| rank(q.priority, q.id) < b))
-            {
-                if self.may_start_job(q) {
-                    return Some(Choice::Wait(rank(q.priority, q.id), Wanted::Job(q.id)));
-                }
-            }
-            None
+            let q = queued.next_if(|q| before.is_none_or(|b| rank(q.priority, q.id) < b))?;
+            Some(Choice::Wait(rank(q.priority, q.id), Wanted::Job(q.id)))
         };
         for (j, job) in self.running.iter().enumerate() {
             if let Some(choice) = start(Some(job.rank())) {
@@ -939,22 +934,6 @@ impl Scheduler {
         start(None).unwrap_or(Choice::Nothing)
     }
 
-    /// Whether a queued job may start: its first frame is whole, or split
-    /// and the jobs ranked before it leave room for a split frame.
-    fn may_start_job(&self, queued: &QueuedJob) -> bool {
-        let unstarted = if queued.interactive {
-            0
-        } else {
-            queued.frames.len()
-        };
-        let before = (self.running.iter())
-            .take_while(|r| r.rank() < rank(queued.priority, queued.id))
-            .map(RunningJob::split_frames)
-            .sum::<usize>();
-        self.starts_whole(&BTreeSet::new(), unstarted)
-            || before < self.config.frames_in_flight as usize
-    }
-
     /// Whether the next frame of running job `j` starts early
     /// ([`SchedulerConfig::frames_in_flight`]): its newest running frame
     /// has nothing left to hand out, and it has room for a frame.
@@ -964,11 +943,12 @@ impl Scheduler {
         !newest.has_unassigned() && self.room_for_a_frame(j)
     }
 
-    /// Whether another frame of running job `j` may start now: split
-    /// frames while the split frames of `j` and of the jobs ranked before
-    /// it are fewer than [`SchedulerConfig::frames_in_flight`] (each holds
-    /// a base frame of the master's, made one at a time, so a lower job
-    /// never holds the slots a higher one needs), whole ones up to
+    /// Whether another frame of running job `j` may start now (beside the
+    /// one it runs): split frames while the split frames of `j` and of the
+    /// jobs ranked before it are fewer than
+    /// [`SchedulerConfig::frames_in_flight`] (each holds a base frame of
+    /// the master's, made one at a time, so a lower job never holds the
+    /// slots a higher one needs), whole ones up to
     /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
     fn room_for_a_frame(&self, j: usize) -> bool {
         let job = &self.running[j];

@@ -978,7 +978,10 @@ fn a_second_job_runs_on_a_worker_the_first_has_nothing_for() {
     farm.valid();
     farm.at_ms(100);
     farm.done(W0, &a).expect("done");
-    assert!(farm.events().contains(&Event::JobComplete { job: JobId(1) }));
+    assert!(
+        farm.events()
+            .contains(&Event::JobComplete { job: JobId(1) })
+    );
     let c = farm.request(W0).expect("work");
     assert_eq!(c.job, JobId(2));
     farm.valid();
@@ -1089,7 +1092,10 @@ fn a_pause_of_one_of_two_running_jobs_holds_only_its_new_work() {
     // The waiting workers get its work again.
     let resumed = farm.assignments();
     assert_eq!(
-        resumed.iter().map(|x| (x.worker, x.job)).collect::<Vec<_>>(),
+        resumed
+            .iter()
+            .map(|x| (x.worker, x.job))
+            .collect::<Vec<_>>(),
         [(W2, JobId(2)), (W1, JobId(2))]
     );
     farm.valid();
@@ -1121,7 +1127,10 @@ fn cancelling_one_of_two_running_jobs_cancels_exactly_its_packages() {
     assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
     farm.at_ms(100);
     farm.done(W0, &a).expect("job 1 goes on");
-    assert!(farm.events().contains(&Event::JobComplete { job: JobId(1) }));
+    assert!(
+        farm.events()
+            .contains(&Event::JobComplete { job: JobId(1) })
+    );
     farm.valid();
 }
 

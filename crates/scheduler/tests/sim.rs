@@ -373,7 +373,8 @@ fn a_job_fails_when_every_worker_is_blocklisted() {
 fn jobs_run_by_rank_and_the_first_job_starts_when_none_runs() {
     // Job 3 comes first and starts (nothing runs); job 1, submitted at
     // once, outranks it (equal priority, lower id) and takes every worker
-    // from its first package on; job 2 comes later and still outranks 3.
+    // from its first package on; job 2 comes later, starts on a worker job
+    // 1 has nothing for (its last packages run), and still outranks 3.
     let frame = uneven_frame(100, 9, 0.01, 0..0, 1.0);
     let mut jobs: Vec<SimJob> = [3, 1, 2]
         .iter()
@@ -395,10 +396,10 @@ fn jobs_run_by_rank_and_the_first_job_starts_when_none_runs() {
         [
             "start 3",
             "start 1",
+            "start 2",
             "frame 1.0",
             "frame 1.1",
             "end 1",
-            "start 2",
             "frame 2.0",
             "frame 2.1",
             "end 2",
