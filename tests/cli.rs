@@ -302,23 +302,30 @@ fn a_material_override_changes_the_image_as_stated() {
     );
 }
 
-/// Renders `job` (written into `dir` as bad.toml) and returns stderr,
-/// asserting that the render failed cleanly and wrote no image.
-fn refused_render(dir: &Path, job: &str) -> String {
-    let job_path = dir.join("bad.toml");
-    std::fs::write(&job_path, job).unwrap();
-    let png = dir.join("x.png");
+/// Runs `vtfarm SUBCOMMAND DIR/FILE -o DIR/OUTPUT` on `contents` written
+/// into `file` and returns stderr, asserting that it failed cleanly and
+/// wrote nothing at `output`.
+fn refused(dir: &Path, subcommand: &str, file: &str, contents: &str, output: &str) -> String {
+    let path = dir.join(file);
+    std::fs::write(&path, contents).unwrap();
+    let output = dir.join(output);
     let out = vtfarm(&[
-        "render",
-        job_path.to_str().unwrap(),
+        subcommand,
+        path.to_str().unwrap(),
         "-o",
-        png.to_str().unwrap(),
+        output.to_str().unwrap(),
     ]);
     assert!(!out.status.success());
-    assert!(!png.exists(), "nothing written");
+    assert!(!output.exists(), "nothing written");
     let err = text(&out.stderr);
     assert!(!err.contains("panicked"), "{err}");
     err
+}
+
+/// Renders `job` (written into `dir` as bad.toml) and returns stderr,
+/// asserting that the render failed cleanly and wrote no image.
+fn refused_render(dir: &Path, job: &str) -> String {
+    refused(dir, "render", "bad.toml", job, "x.png")
 }
 
 #[test]
@@ -355,27 +362,14 @@ fn bad_job_and_obj_files_are_refused_with_file_and_line() {
 }
 
 /// Runs `vtfarm study` on `study` (written into `dir` next to a base job)
-/// and returns stderr, asserting that it failed before rendering anything.
+/// and returns stderr, asserting that it failed before any output.
 fn refused_study(dir: &Path, study: &str) -> String {
     std::fs::write(
         dir.join("job.toml"),
         "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
     )
     .unwrap();
-    let path = dir.join("bad-study.toml");
-    std::fs::write(&path, study).unwrap();
-    let out_dir = dir.join("out");
-    let out = vtfarm(&[
-        "study",
-        path.to_str().unwrap(),
-        "-o",
-        out_dir.to_str().unwrap(),
-    ]);
-    assert!(!out.status.success());
-    assert!(!out_dir.exists(), "refused before any output");
-    let err = text(&out.stderr);
-    assert!(!err.contains("panicked"), "{err}");
-    err
+    refused(dir, "study", "bad-study.toml", study, "out")
 }
 
 #[test]

@@ -7,7 +7,11 @@
 //! buffer and `Behind`, rasterized together, with on-demand thin-glass
 //! terms) and those terms per glass pixel (`Frame::finish_pixel` over every
 //! see-through reflector pixel, as a frame's packages finish them between
-//! them).
+//! them). Last, whether the master should send its visibility (the ID
+//! buffer over the reflectors' bounds) to a split frame's workers instead
+//! of each rasterizing it: its bytes packed with zstd, the CPU to pack and
+//! unpack them and their time on a 100 Mbit and a 1 Gbit link, against the
+//! one-thread time to rasterize it.
 
 use std::time::Instant;
 
@@ -106,7 +110,13 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                     &|_| true,
                 ))
             });
-            let setup = least(&|| drop(renderer.id_buffers(&job.setup)));
+            // A new view's set-up: the buffers kept from the last frame of
+            // the same camera (`IdBufferCache`) are forgotten first.
+            let fresh_setup = || {
+                renderer.id_buffer_cache().clear();
+                drop(renderer.id_buffers(&job.setup))
+            };
+            let setup = least(&fresh_setup);
             // The same in CPU time per set-up over a few rounds: what the
             // set-up costs a busy machine's cores, whatever else runs.
             let setup_cpu = cpu_time(CpuClock::Process)
@@ -114,7 +124,7 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                 .map(|before| {
                     let rounds = args.rounds.max(1) * 2;
                     for _ in 0..rounds {
-                        pool.install(|| drop(renderer.id_buffers(&job.setup)));
+                        pool.install(fresh_setup);
                     }
                     cpu_time(CpuClock::Process)
                         .map(|t| t.as_secs_f64())
@@ -183,7 +193,65 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                 terms * 1e9 / glass.len().max(1) as f64
             );
         }
+        print_visibility_transfer(&job, bounds, args.rounds.max(1))?;
     }
+    Ok(())
+}
+
+/// The links the visibility's transfer is priced on, in Mbit/s.
+const VISIBILITY_LINKS_MBIT: [f64; 2] = [100.0, 1000.0];
+
+/// Prints what sending the master's visibility (the frame's ID buffer over
+/// the reflectors' bounds) would cost a split frame's worker against
+/// rasterizing it itself, one thread each, least of `rounds`.
+fn print_visibility_transfer(job: &CockpitJob, bounds: PixelRect, rounds: u32) -> Result<()> {
+    let (scene, camera) = (&*job.scene, &job.setup.camera);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .context("building a one-thread pool")?;
+    let least = |f: &mut dyn FnMut()| {
+        (0..rounds)
+            .map(|_| {
+                let start = Instant::now();
+                f();
+                start.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let ids = vtfarm_raster::id_buffer_within(scene, camera, bounds, &|_| true);
+    let rasterize = least(&mut || {
+        pool.install(|| {
+            drop(vtfarm_raster::id_buffer_within(
+                scene,
+                camera,
+                bounds,
+                &|_| true,
+            ))
+        })
+    });
+    // What a worker needs of it: object, triangle and depth per pixel.
+    let raw: Vec<u8> = (ids.object.iter().flat_map(|o| o.to_le_bytes()))
+        .chain(ids.triangle.iter().flat_map(|t| t.to_le_bytes()))
+        .chain(ids.depth.iter().flat_map(|d| d.to_le_bytes()))
+        .collect();
+    let packed = zstd::bulk::compress(&raw, 1).context("packing the visibility")?;
+    let pack = least(&mut || drop(zstd::bulk::compress(&raw, 1)));
+    let unpack = least(&mut || drop(zstd::bulk::decompress(&packed, raw.len())));
+    let links = VISIBILITY_LINKS_MBIT.map(|mbit| {
+        let on_link = packed.len() as f64 * 8.0 / (mbit * 1e6);
+        let sent = pack + on_link + unpack;
+        format!(
+            "{mbit:.0} Mbit {sent:.4} s ({:.1}× the raster)",
+            sent / rasterize
+        )
+    });
+    println!(
+        "  sending the visibility instead of rasterizing it ({rasterize:.4} s, one thread): {:.2} MB, {:.2} MB with zstd -1 (pack {pack:.4} s, unpack {unpack:.4} s); packed, on the link and unpacked: {}",
+        raw.len() as f64 / 1e6,
+        packed.len() as f64 / 1e6,
+        links.join(", ")
+    );
     Ok(())
 }
 

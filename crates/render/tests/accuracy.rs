@@ -67,31 +67,6 @@ fn add_sphere(
     scene.append(&part);
 }
 
-/// A flat quad (two triangles, facing `normal`) appended as object `name`.
-fn add_quad(scene: &mut Scene, name: &str, material: Material, corner: Vec3, u: Vec3, v: Vec3) {
-    let n = u.cross(v).normalize();
-    let part = Scene {
-        positions: vec![corner, corner + u, corner + u + v, corner + v],
-        normals: vec![n; 4],
-        triangles: vec![
-            Triangle {
-                vertices: [0, 1, 2],
-                object: 0,
-                material: 0,
-            },
-            Triangle {
-                vertices: [0, 2, 3],
-                object: 0,
-                material: 0,
-            },
-        ],
-        objects: vec![Object { name: name.into() }],
-        materials: vec![material],
-        ..Default::default()
-    };
-    scene.append(&part);
-}
-
 fn emissive(name: &str, color: Vec3) -> Material {
     Material {
         emission: color,
@@ -111,40 +86,35 @@ fn mirror_sphere_scene() -> (Scene, Camera, Lighting) {
     };
     add_sphere(&mut scene, "sphere", mirror, Vec3::ZERO, 1.0, 24, 48);
     let s = 4.0;
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "floor",
         Material::diffuse("floor", Vec3::new(0.6, 0.5, 0.4)),
         Vec3::new(-s, -1.5, s),
         Vec3::X * 2.0 * s,
         Vec3::NEG_Z * 2.0 * s,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "back",
         emissive("back", Vec3::new(0.9, 0.2, 0.2)),
         Vec3::new(-s, -1.5, -s),
         Vec3::X * 2.0 * s,
         Vec3::Y * 6.0,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "left",
         emissive("left", Vec3::new(0.2, 0.9, 0.3)),
         Vec3::new(-s, -1.5, s),
         Vec3::NEG_Z * 2.0 * s,
         Vec3::Y * 6.0,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "window",
         emissive("window", Vec3::splat(3.0)),
         Vec3::new(s - 0.01, 0.0, 1.0),
         Vec3::NEG_Z * 2.0,
         Vec3::Y * 1.5,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "block",
         Material::diffuse("block", Vec3::new(0.2, 0.3, 0.8)),
         Vec3::new(-1.0, -1.5, 2.0),
@@ -269,8 +239,7 @@ fn large_triangle_scene() -> (Scene, Camera, Lighting) {
         reflectance: Vec3::splat(0.8),
         ..Material::diffuse("mirror", Vec3::splat(0.05))
     };
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "mirror",
         mirror,
         Vec3::new(-2.0, -1.5, 0.0),
@@ -278,8 +247,7 @@ fn large_triangle_scene() -> (Scene, Camera, Lighting) {
         Vec3::Y * 3.0,
     );
     // The wall behind the eye that the mirror shows, dim.
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "wall",
         Material::diffuse("wall", Vec3::splat(0.3)),
         Vec3::new(-20.0, -20.0, 12.0),
@@ -291,8 +259,7 @@ fn large_triangle_scene() -> (Scene, Camera, Lighting) {
     for ix in -2..=2 {
         for iy in -1..=1 {
             let centre = Vec3::new(ix as f32 * 3.1 + 0.4, iy as f32 * 3.3 + 0.3, 11.9);
-            add_quad(
-                &mut scene,
+            scene.append_quad(
                 &format!("lamp{k}"),
                 emissive("lamp", Vec3::new(3.0, 2.5, 1.5)),
                 centre - Vec3::new(0.7, 0.7, 0.0),
@@ -529,16 +496,14 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
         ..Material::diffuse("glass", Vec3::splat(0.01))
     };
     let (w, h) = (1.2, 0.9);
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "pane",
         glass.clone(),
         Vec3::new(-w, -h, 0.0),
         Vec3::X * 2.0 * w,
         Vec3::Y * 2.0 * h,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "pane_back",
         glass,
         Vec3::new(-w, -h, -0.003),
@@ -552,8 +517,7 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
         } else {
             Vec3::new(0.1, 0.3, 0.8)
         };
-        add_quad(
-            &mut scene,
+        scene.append_quad(
             &format!("stripe{k}"),
             Material::diffuse("stripe", color),
             Vec3::new(x, -1.5, -0.4),
@@ -561,8 +525,7 @@ fn thin_glass_model_agrees_with_traced_transmission_on_a_flat_pane() {
             Vec3::Y * 3.0,
         );
     }
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "lamp",
         emissive("lamp", Vec3::splat(2.0)),
         Vec3::new(-0.5, 0.2, 5.0),

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
-use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, Scene, TriangleId};
 use vtfarm_trace::{Ray, SceneBvh};
 use vtfarm_vertex::{FrameImage, Quality};
 
@@ -121,31 +121,6 @@ fn full_and_reference_agree_on_the_reflected_light_of_the_stock_job() {
     assert!(lr > 1.7 * front && lr < 1.75 * front, "{lr} cd/m²");
 }
 
-/// A quad (two triangles) facing `u × v`, appended as object `name`.
-fn add_quad(scene: &mut Scene, name: &str, material: Material, corner: Vec3, u: Vec3, v: Vec3) {
-    let n = u.cross(v).normalize();
-    let part = Scene {
-        positions: vec![corner, corner + u, corner + u + v, corner + v],
-        normals: vec![n; 4],
-        triangles: vec![
-            Triangle {
-                vertices: [0, 1, 2],
-                object: 0,
-                material: 0,
-            },
-            Triangle {
-                vertices: [0, 2, 3],
-                object: 0,
-                material: 0,
-            },
-        ],
-        objects: vec![Object { name: name.into() }],
-        materials: vec![material],
-        ..Default::default()
-    };
-    scene.append(&part);
-}
-
 #[test]
 fn full_and_reference_agree_on_a_pane_whose_back_surface_is_no_reflector() {
     // A 4-mm pane: its front the reflector, its back a separate surface
@@ -159,24 +134,21 @@ fn full_and_reference_agree_on_a_pane_whose_back_surface_is_no_reflector() {
     };
     let mut scene = Scene::default();
     let (w, h) = (1.0, 0.8);
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "pane",
         glass.clone(),
         Vec3::new(-w, -h, 0.0),
         Vec3::X * 2.0 * w,
         Vec3::Y * 2.0 * h,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "pane_back",
         glass,
         Vec3::new(-w, -h, -0.004),
         Vec3::Y * 2.0 * h,
         Vec3::X * 2.0 * w,
     );
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "board",
         Material::diffuse("board", Vec3::splat(0.3)),
         Vec3::new(-2.0, -2.0, -0.5),
@@ -184,8 +156,7 @@ fn full_and_reference_agree_on_a_pane_whose_back_surface_is_no_reflector() {
         Vec3::Y * 4.0,
     );
     let glow = photometry::emission(Vec3::ONE, 20_000.0).unwrap();
-    add_quad(
-        &mut scene,
+    scene.append_quad(
         "panel",
         Material {
             emission: glow,

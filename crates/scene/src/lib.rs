@@ -218,6 +218,36 @@ impl Scene {
         )
     }
 
+    /// Appends the parallelogram `corner + s·u + t·v` (s, t in 0..1) as a
+    /// new object named `name` with `material` of its own: two triangles
+    /// with the flat normal `u × v`. For scenes built in code (tests,
+    /// examples). Returns the two triangles' ids.
+    pub fn append_quad(
+        &mut self,
+        name: &str,
+        material: Material,
+        corner: Vec3,
+        u: Vec3,
+        v: Vec3,
+    ) -> [TriangleId; 2] {
+        let first = self.triangles.len() as TriangleId;
+        let n = u.cross(v).normalize();
+        let triangle = |vertices| Triangle {
+            vertices,
+            object: 0,
+            material: 0,
+        };
+        self.append(&Scene {
+            positions: vec![corner, corner + u, corner + u + v, corner + v],
+            normals: vec![n; 4],
+            triangles: vec![triangle([0, 1, 2]), triangle([0, 2, 3])],
+            objects: vec![Object { name: name.into() }],
+            materials: vec![material],
+            ..Default::default()
+        });
+        [first, first + 1]
+    }
+
     /// Appends another scene's content, remapping its indices.
     pub fn append(&mut self, other: &Scene) {
         let v0 = self.positions.len() as u32;

@@ -28,7 +28,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, Scene, TriangleId};
 use vtfarm_trace::{SceneBvh, TraceSettings, Tracer};
 
 use crate::{
@@ -74,27 +74,10 @@ fn emitter(name: &str, color: Vec3) -> Material {
     }
 }
 
-/// Appends a quad `corner + s * u + t * v` as one object with its own material.
+/// Appends a quad `corner + s * u + t * v` as one object named after its material.
 fn quad(scene: &mut Scene, material: Material, corner: Vec3, u: Vec3, v: Vec3) {
-    let object = scene.objects.len() as u32;
-    scene.objects.push(Object {
-        name: material.name.clone(),
-    });
-    let material_id = scene.materials.len() as u32;
-    scene.materials.push(material);
-    let normal = u.cross(v).normalize();
-    let base = scene.positions.len() as u32;
-    scene
-        .positions
-        .extend([corner, corner + u, corner + u + v, corner + v]);
-    scene.normals.extend([normal; 4]);
-    for vertices in [[0, 1, 2], [0, 2, 3]] {
-        scene.triangles.push(Triangle {
-            vertices: vertices.map(|k| base + k),
-            object,
-            material: material_id,
-        });
-    }
+    let name = material.name.clone();
+    scene.append_quad(&name, material, corner, u, v);
 }
 
 impl TestFrame {

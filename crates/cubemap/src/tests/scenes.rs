@@ -65,14 +65,6 @@ pub(super) fn add_sphere(
     (first..scene.triangles.len() as u32).collect()
 }
 
-/// A coloured quad (two triangles, flat normal `u × v`).
-fn add_quad(scene: &mut Scene, name: &str, color: Vec3, corner: Vec3, u: Vec3, v: Vec3) {
-    let object = add_object(scene, name, Material::diffuse(name, color));
-    let n = u.cross(v).normalize();
-    let positions = [corner, corner + u, corner + u + v, corner + v];
-    push(scene, object, &positions, &[n; 4], &[[0, 1, 2], [0, 2, 3]]);
-}
-
 /// Adds an `n` × `n` grid of quads (two triangles each) over the unit
 /// square to `object`; `surface(s, t)` places each lattice point and gives
 /// its normal. Returns the new triangle ids.
@@ -137,10 +129,9 @@ pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
         ),
     ];
     for (name, color, corner, u, v) in quads {
-        add_quad(
-            &mut scene,
+        scene.append_quad(
             name,
-            color,
+            Material::diffuse(name, color),
             corner * radius,
             u * radius,
             v * radius,
