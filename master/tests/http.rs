@@ -126,11 +126,9 @@ impl Farm {
             (tokio::time::timeout(WAIT, run).await).expect("the job ended in time")
         });
         self.wait_until(|s| !s.queue.running.is_empty()).await;
-        let id = (self
-            .master
-            .inspect(|c| c.status().queue.running[0].job))
-        .await
-        .unwrap();
+        let id = (self.master.inspect(|c| c.status().queue.running[0].job))
+            .await
+            .unwrap();
         (id, submitter)
     }
 
