@@ -242,9 +242,11 @@ fn job_of(jobs: &[Value], id: u64) -> &Value {
 fn the_higher_priority_job_finishes_first_and_both_images_equal_vtfarm_render() {
     let mut master = Master::start();
     let dir = master.dir.path().to_owned();
+    // The low job has far more work: the workers the high one has nothing
+    // for near its end take the low one's, which still ends later.
     let (low_file, high_file) = (
-        job_file(&dir, "low.toml", 96, 54),
-        job_file(&dir, "high.toml", 120, 68),
+        job_file(&dir, "low.toml", 240, 135),
+        job_file(&dir, "high.toml", 96, 54),
     );
     // No worker yet: the low job starts (none runs); the high one, submitted
     // after it, starts when a worker asks and gets the workers first.
