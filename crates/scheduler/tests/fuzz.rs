@@ -1,11 +1,13 @@
 //! Random sequences of inputs (joins, leaves, heartbeats, requests, results,
 //! failures, timeouts, submissions at priorities, cancellations, pauses,
-//! resumes and priority changes, so jobs give way and come back), with worker, package and
-//! job ids that are often unknown or stale. The scheduler must never panic,
-//! keep its invariants after every input, accept a result only for a package
+//! resumes and priority changes, so several jobs run at once, pause and go
+//! on), with worker, package and job ids that are often unknown or stale.
+//! The scheduler must never panic, keep its invariants after every input,
+//! accept a result only for a package
 //! the worker runs, and complete every item of a frame exactly once. The
 //! same holds for random simulated farms (speeds, links, crashes, slowdowns,
-//! failures) with at least one reliable worker, which also always finish.
+//! failures) with at least one reliable worker and up to four jobs, which
+//! also always finish.
 
 mod common;
 
