@@ -479,13 +479,16 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
             w.failures
         );
     }
-    match &reply.queue.running {
-        // Frames are numbered from 0, as the files are (frame_0000).
-        Some(r) => println!(
+    if reply.queue.running.is_empty() {
+        println!("running: nothing");
+    }
+    // In the order the jobs get workers; frames are numbered from 0, as
+    // the files are (frame_0000).
+    for r in &reply.queue.running {
+        println!(
             "running: job {} ({}) frame {} of {} (frame_{:04}): {}/{} triangles",
             r.job, r.name, r.frame, r.frames, r.frame, r.triangles_done, r.triangles_total
-        ),
-        None => println!("running: nothing"),
+        );
     }
     println!(
         "waiting: {} job(s) {:?}",

@@ -312,7 +312,7 @@ fn unknown_jobs_fail_to_attach_and_journaled_orphans_render_to_the_end() {
     pair.drive(BOUND, |p| p.frames_done().len() == 1);
     let id = pair.job_id().unwrap();
     pair.drop_submitter();
-    assert!(pair.master.status().queue.running.is_none());
+    assert!(pair.master.status().queue.running.is_empty());
     let entry = pair.master.jobs().get(id).expect("listed");
     assert_eq!(entry.state, JobState::Cancelled);
     assert!(entry.reason.contains("submitter left"), "{}", entry.reason);

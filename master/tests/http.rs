@@ -125,12 +125,10 @@ impl Farm {
             let run = run_job(&mut conn.link, job, &data, |_| {});
             (tokio::time::timeout(WAIT, run).await).expect("the job ended in time")
         });
-        self.wait_until(|s| s.queue.running.is_some()).await;
-        let id = (self
-            .master
-            .inspect(|c| c.status().queue.running.unwrap().job))
-        .await
-        .unwrap();
+        self.wait_until(|s| !s.queue.running.is_empty()).await;
+        let id = (self.master.inspect(|c| c.status().queue.running[0].job))
+            .await
+            .unwrap();
         (id, submitter)
     }
 
@@ -361,7 +359,7 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     // The job's end reaches the master before the submitter hears of it,
     // but wait for the workers to be idle again so the figures hold still.
     farm.wait_until(|s| {
-        s.queue.running.is_none() && s.workers.iter().all(|w| w.packages_running == 0)
+        s.queue.running.is_empty() && s.workers.iter().all(|w| w.packages_running == 0)
     })
     .await;
 

@@ -283,25 +283,22 @@ fn every_transition_of_the_table_happens_and_no_other_is_allowed() {
 fn jobs_run_by_priority_then_submission_and_a_higher_one_goes_first() {
     let job = Job::new(1);
     let mut pair = Pair::new(FarmRules::default());
-    // No worker yet: a job runs with nothing out, so a higher priority
-    // takes its place at once (it waits, parked, where it stopped).
+    // No worker yet: the first job starts (none runs), the others wait
+    // for a worker to ask, in priority order.
     let first = submit(&mut pair, &job, 0);
     let low = submit(&mut pair, &job, -1);
     let normal = submit(&mut pair, &job, 0);
     let high = submit(&mut pair, &job, 5);
     let high_later = submit(&mut pair, &job, 5);
     let raised = submit(&mut pair, &job, 0);
-    assert_eq!(
-        pair.master.status().queue.running.map(|r| r.job),
-        Some(high)
-    );
+    assert_eq!(running_jobs(&pair), vec![first]);
     assert_eq!(
         control(&mut pair, raised, JobAction::SetPriority(9)),
-        Ok(JobState::Running)
+        Ok(JobState::Queued)
     );
     assert_eq!(
         pair.master.status().queue.waiting,
-        vec![high, high_later, first, normal, low]
+        vec![raised, high, high_later, normal, low]
     );
     pair.add_worker("w1", 1.0);
     pair.drive(BOUND, |p| {
@@ -415,7 +412,7 @@ fn a_cancel_sends_cancel_package_to_exactly_the_workers_holding_the_job() {
     assert_eq!(cancels, expected);
     assert_eq!(told, Some(format!("job {id} was cancelled by {WHO}")));
     assert_eq!(pair.master.jobs().get(id).unwrap().frames_done, 0);
-    assert!(pair.master.status().queue.running.is_none());
+    assert!(pair.master.status().queue.running.is_empty());
 }
 
 #[test]
@@ -546,6 +543,13 @@ fn finished_jobs_beyond_retention_are_forgotten_with_their_frames() {
     assert_eq!(pair.master.jobs().list(true).count(), 0);
 }
 
+/// The running jobs, in the order they get workers.
+fn running_jobs(pair: &Pair) -> Vec<u64> {
+    (pair.master.status().queue.running.iter())
+        .map(|r| r.job)
+        .collect()
+}
+
 /// The frames of `job` the master started, in order.
 fn starts_of(pair: &Pair, job: u64) -> Vec<u32> {
     (pair.frame_starts.iter())
@@ -567,14 +571,12 @@ fn a_higher_priority_job_takes_the_workers_as_their_packages_finish() {
     pair.drive(BOUND, |p| !p.master.packages_by_worker().is_empty());
     let submitted_at = pair.now;
     let high = submit(&mut pair, &short, 5);
-    // The low job hands out nothing more; once its running packages are in,
-    // the high one runs.
+    // The high one starts as soon as a worker asks (each asks one package
+    // ahead) and gets every worker first; the low one runs beside it on
+    // the workers it cannot use.
     pair.drive(BOUND, |p| !starts_of(p, high).is_empty());
-    assert_eq!(
-        pair.master.status().queue.running.map(|r| r.job),
-        Some(high)
-    );
-    assert_eq!(pair.master.status().queue.waiting, vec![low]);
+    assert_eq!(running_jobs(&pair), vec![high, low]);
+    assert!(pair.master.status().queue.waiting.is_empty());
     complete(&mut pair, high, 1);
     assert_eq!(state(&pair, low), Some(JobState::Running), "not done yet");
     let low_done_before = frames_of(&pair, low).len();
@@ -614,24 +616,26 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
         offset: [0.01, 0.0, 0.0],
     };
     let view = pair.act(|m, now| m.steer_view(now, request)).unwrap();
-    // The batch job's packages out at the workers finish; then the view runs.
+    let steered_at = pair.now;
+    // The batch job's packages out at the workers finish; the view comes
+    // first from the next package on.
     pair.drive(BOUND, |p| !starts_of(p, view).is_empty());
-    assert_eq!(
-        pair.master.status().queue.running.map(|r| r.job),
-        Some(view)
-    );
-    let batch_frames = frames_of(&pair, id).len();
+    assert_eq!(running_jobs(&pair).first(), Some(&view));
     pair.drive(BOUND, |p| {
         let current = p.master.views().current().unwrap();
         current.stages_done == current.stages_total
     });
-    // The batch job waited: no frame of it finished meanwhile.
-    assert_eq!(frames_of(&pair, id).len(), batch_frames);
-    assert_eq!(
-        state(&pair, id),
-        Some(JobState::Running),
-        "the batch job waited"
-    );
+    // Each worker starts at most the batch package it held (it asks one
+    // package ahead) before the view's.
+    for runs in &pair.busy {
+        let after: Vec<u64> = (runs.iter())
+            .filter(|run| run.start > steered_at)
+            .map(|run| run.job)
+            .collect();
+        let first_view = after.iter().position(|&job| job == view);
+        assert!(first_view.is_some_and(|i| i <= 1), "{after:?}");
+    }
+    assert_eq!(state(&pair, id), Some(JobState::Running));
     complete(&mut pair, id, 3);
     check_images(&pair, id, &batch);
     for done in frames_of(&pair, id) {
@@ -642,4 +646,49 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
             done.stats
         );
     }
+}
+
+#[test]
+fn two_jobs_run_at_once_and_a_cancel_of_one_tells_exactly_its_holders() {
+    let (single, deep) = (Job::new(1), Job::new(3));
+    let mut pair = Pair::new(FarmRules {
+        straggler: None,
+        ..FarmRules::default()
+    });
+    for (name, slowdown) in [("a", 1.0), ("b", 3.0), ("c", 5.0)] {
+        pair.add_worker(name, slowdown);
+    }
+    let first = submit(&mut pair, &single, 0);
+    let second = submit(&mut pair, &deep, 0);
+    // Near the first job's end its last packages run while the workers it
+    // has nothing for take the second job's: both hold packages at once.
+    pair.drive(BOUND, |p| {
+        !p.master.job_packages_by_worker(first).is_empty()
+            && !p.master.job_packages_by_worker(second).is_empty()
+    });
+    assert_eq!(running_jobs(&pair), vec![first, second]);
+    let held = pair.master.job_packages_by_worker(second);
+    let expected: BTreeSet<(u64, u64)> = (pair.workers.iter())
+        .flat_map(|w| {
+            let ids = held.get(&w.name).cloned().unwrap_or_default();
+            ids.into_iter().map(move |p| (w.conn(), p))
+        })
+        .collect();
+    let now = pair.now;
+    (pair.master)
+        .control_job(now, second, JobAction::Cancel, WHO)
+        .expect("running jobs may be cancelled");
+    let mut cancels = BTreeSet::new();
+    while let Some(output) = pair.master.poll_output() {
+        if let Output::Send(conn, message) = output {
+            if let Message::CancelPackage { id } = *message {
+                assert!(cancels.insert((conn, id)), "package {id} cancelled twice");
+            }
+        }
+    }
+    assert_eq!(cancels, expected);
+    assert!(!pair.master.job_packages_by_worker(first).is_empty());
+    complete(&mut pair, first, 1);
+    check_images(&pair, first, &single);
+    assert_eq!(state(&pair, second), Some(JobState::Cancelled));
 }

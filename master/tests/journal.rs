@@ -327,7 +327,7 @@ async fn a_frame_damaged_after_start_is_rendered_again_for_the_submitter() {
     // The master has read the journal once it answers a status request.
     let status = master.handle.inspect(|core| core.status()).await.unwrap();
     assert!(
-        status.queue.running.is_none(),
+        status.queue.running.is_empty(),
         "the job was restored complete"
     );
     flip_byte(&job_dir(clean.path()).join("000001"), 100);

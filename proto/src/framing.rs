@@ -361,14 +361,24 @@ mod tests {
                 }],
                 queue: QueueStatus {
                     waiting: vec![9],
-                    running: Some(RunningJob {
-                        job: 8,
-                        name: "cockpit".to_owned(),
-                        frame: 1,
-                        frames: 3,
-                        triangles_done: 100,
-                        triangles_total: 576,
-                    }),
+                    running: vec![
+                        RunningJob {
+                            job: 8,
+                            name: "cockpit".to_owned(),
+                            frame: 1,
+                            frames: 3,
+                            triangles_done: 100,
+                            triangles_total: 576,
+                        },
+                        RunningJob {
+                            job: 10,
+                            name: "single".to_owned(),
+                            frame: 0,
+                            frames: 1,
+                            triangles_done: 0,
+                            triangles_total: 576,
+                        },
+                    ],
                 },
                 scene_bytes_sent: 12_345,
             }),

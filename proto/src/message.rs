@@ -729,13 +729,15 @@ pub struct WorkerStatus {
 /// The master's queue.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct QueueStatus {
-    /// Jobs waiting behind the running one.
+    /// Jobs waiting to start, in the order they will.
     pub waiting: Vec<JobId>,
-    /// The running job, its current frame and that frame's progress.
-    pub running: Option<RunningJob>,
+    /// The running jobs (several run at once when workers would otherwise
+    /// idle), in the order they get workers: each with its current frame
+    /// and that frame's progress.
+    pub running: Vec<RunningJob>,
 }
 
-/// Progress of the running job.
+/// Progress of a running job.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RunningJob {
     pub job: JobId,

@@ -449,6 +449,12 @@ impl WorkerSession {
     }
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
+        // Announced again (the master does when the worker comes from
+        // another job's work): a frame still kept is not set up twice.
+        let key = (start.job, start.frame);
+        if self.ready == Some(key) || self.older.contains(&key) {
+            return;
+        }
         self.unusable = None;
         // As many as the frames announced, set up and kept can be.
         if self.stage_counts.len() == 3 * vtfarm_proto::FRAMES_IN_FLIGHT {

@@ -155,6 +155,8 @@ pub struct PackageRun {
     pub start: Duration,
     /// `None` while it runs.
     pub end: Option<Duration>,
+    /// Its job.
+    pub job: u64,
     /// Its frame's index.
     pub frame: u32,
     /// Its CPU seconds as the model gave them.
@@ -1052,6 +1054,7 @@ impl<M: CostModel> Farm<M> {
                     self.busy[w].push(PackageRun {
                         start: self.now,
                         end: None,
+                        job: package.job,
                         frame: package.frame,
                         work: run.seconds,
                     });

@@ -372,6 +372,8 @@ pub struct MasterCore {
     /// Submissions whose scene the master still has to receive.
     awaiting_scene: BTreeMap<ConnId, WireJob>,
     packages: BTreeMap<u64, InFlight>,
+    /// The job of each worker's latest package (several jobs run at once).
+    worker_jobs: BTreeMap<ConnId, u64>,
     next_job: u64,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
@@ -412,6 +414,7 @@ impl MasterCore {
             jobs: BTreeMap::new(),
             awaiting_scene: BTreeMap::new(),
             packages: BTreeMap::new(),
+            worker_jobs: BTreeMap::new(),
             next_job: 1,
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
@@ -628,6 +631,7 @@ impl MasterCore {
             Some(peer @ Peer::Worker { .. }) => {
                 info!(worker = %peer_name(conn, Some(&peer)), "worker left");
                 let _ = self.scheduler.worker_left(now, WorkerId(conn));
+                self.worker_jobs.remove(&conn);
                 // Its packages of the running frame still count in the frame's stats.
                 self.departed.insert(conn, peer);
             }
@@ -1520,6 +1524,7 @@ impl MasterCore {
     fn event(&mut self, event: Event) {
         match event {
             Event::JobStarted { job, .. } => {
+                info!(job = job.0, "job started");
                 if self
                     .table
                     .get(job.0)
@@ -1946,6 +1951,15 @@ impl MasterCore {
         let whole = (job.and_then(|j| j.assembly(a.frame)))
             .filter(|_| a.whole)
             .map(|assembly| Box::new(assembly.start.clone()));
+        // A worker coming from another job's work may have let this split
+        // frame's set-up go (it keeps a few frames, of any job): its start
+        // comes again first. Within one job frames are pipelined no deeper
+        // than the worker keeps.
+        let previous = self.worker_jobs.insert(a.worker.0, a.job.0);
+        let switched = previous.is_some_and(|p| p != a.job.0);
+        let again = (job.and_then(|j| j.assembly(a.frame)))
+            .filter(|_| switched && !a.whole)
+            .map(|assembly| Message::FrameStart(assembly.start.clone()));
         let message = Message::Package(Package {
             id: a.package.0,
             job: a.job.0,
@@ -1963,6 +1977,9 @@ impl MasterCore {
             last_result_at: self.now,
         };
         self.packages.insert(a.package.0, in_flight);
+        if let Some(start) = again {
+            self.send(a.worker.0, start);
+        }
         self.send(a.worker.0, message);
     }
 
@@ -2168,8 +2185,21 @@ impl MasterCore {
 
     /// The packages each worker (by name) is working on now.
     pub fn packages_by_worker(&self) -> BTreeMap<String, Vec<u64>> {
+        self.packages_by_worker_where(|_| true)
+    }
+
+    /// The packages of job `job` each worker (by name) is working on now
+    /// (several jobs run at once).
+    pub fn job_packages_by_worker(&self, job: u64) -> BTreeMap<String, Vec<u64>> {
+        self.packages_by_worker_where(|p| p.job == job)
+    }
+
+    fn packages_by_worker_where(
+        &self,
+        keep: impl Fn(&InFlight) -> bool,
+    ) -> BTreeMap<String, Vec<u64>> {
         let mut by_worker: BTreeMap<String, Vec<u64>> = BTreeMap::new();
-        for (&id, p) in &self.packages {
+        for (&id, p) in self.packages.iter().filter(|(_, p)| keep(p)) {
             by_worker
                 .entry(self.worker_name(p.worker))
                 .or_default()
@@ -2178,19 +2208,22 @@ impl MasterCore {
         by_worker
     }
 
-    /// The frame being assembled: job, frame index, reflector triangles
-    /// done, and its image so far (base frame with the results composited).
+    /// The frame being assembled of the first running job (in the order
+    /// jobs get workers) that assembles one: job, frame index, reflector
+    /// triangles done, and its image so far (base frame with the results
+    /// composited).
     pub fn live_frame(&self) -> Option<LiveFrame<'_>> {
-        let running = self.scheduler.queue().running?;
-        let job = self.jobs.get(&running.job.0)?;
-        // Nothing to show until the base frame is there.
-        let current = job.assembly(running.frame).filter(|c| c.ids.is_some())?;
-        Some(LiveFrame {
-            job: running.job.0,
-            frame: current.start.frame,
-            triangles_done: current.triangles_done,
-            triangles_total: job.reflectors.len() as u64,
-            image: current.image.color(),
+        (self.scheduler.queue().running.iter()).find_map(|running| {
+            let job = self.jobs.get(&running.job.0)?;
+            // Nothing to show until the base frame is there.
+            let current = job.assembly(running.frame).filter(|c| c.ids.is_some())?;
+            Some(LiveFrame {
+                job: running.job.0,
+                frame: current.start.frame,
+                triangles_done: current.triangles_done,
+                triangles_total: job.reflectors.len() as u64,
+                image: current.image.color(),
+            })
         })
     }
 
@@ -2230,18 +2263,20 @@ impl MasterCore {
         let queue = self.scheduler.queue();
         // Progress in reflector triangles, as `Message::Progress` counts it
         // (work items are reflector groups for per-reflector methods).
-        let running = queue.running.map(|p| {
-            let job = self.jobs.get(&p.job.0);
-            RunningJob {
-                job: p.job.0,
-                name: job.map(|j| j.name.clone()).unwrap_or_default(),
-                frame: p.frame,
-                frames: p.frames,
-                triangles_done: (job.and_then(|j| j.assembly(p.frame)))
-                    .map_or(0, |c| c.triangles_done),
-                triangles_total: job.map_or(0, |j| j.reflectors.len() as u64),
-            }
-        });
+        let running = (queue.running.iter())
+            .map(|p| {
+                let job = self.jobs.get(&p.job.0);
+                RunningJob {
+                    job: p.job.0,
+                    name: job.map(|j| j.name.clone()).unwrap_or_default(),
+                    frame: p.frame,
+                    frames: p.frames,
+                    triangles_done: (job.and_then(|j| j.assembly(p.frame)))
+                        .map_or(0, |c| c.triangles_done),
+                    triangles_total: job.map_or(0, |j| j.reflectors.len() as u64),
+                }
+            })
+            .collect();
         StatusReply {
             workers,
             queue: QueueStatus {

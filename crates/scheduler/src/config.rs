@@ -41,7 +41,7 @@ pub struct SchedulerConfig {
     /// job's remaining work over every worker. Default `false`.
     pub frame_affinity: bool,
     /// Whole frames for batch work (with [`SchedulerConfig::frame_affinity`]):
-    /// while the running job has more frames not started than workers may
+    /// while a running job has more frames not started than workers may
     /// work on it, a frame starts whole — one package of all its items for
     /// one worker, which then renders the frame end to end — and up to
     /// [`WHOLE_FRAMES_PER_WORKER`](crate::WHOLE_FRAMES_PER_WORKER) whole

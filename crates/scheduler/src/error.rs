@@ -46,7 +46,7 @@ pub enum ReportError {
 /// Why [`Scheduler::submit_job`](crate::Scheduler::submit_job) refused.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
 pub enum SubmitError {
-    #[error("{0} is already queued, running or parked")]
+    #[error("{0} is already queued or running")]
     DuplicateJob(JobId),
 }
 

@@ -13,11 +13,11 @@ pub enum Event {
     /// A job left the queue and runs now (the driver may send its scene to
     /// the workers).
     JobStarted { job: JobId, frames: u32 },
-    /// A job that gave way (paused, or a job of a higher priority came)
-    /// runs again where it stopped: its running frames go on (the driver
-    /// may announce them to the workers again).
+    /// A paused job that had started is resumed and goes on where it
+    /// stopped: its running frames go on (the driver may announce them to
+    /// the workers again).
     JobResumed { job: JobId },
-    /// A frame of the running job started.
+    /// A frame of a running job started.
     FrameStarted {
         job: JobId,
         frame: u32,

@@ -14,7 +14,7 @@ use std::time::Duration;
 use crate::costs::CostModel;
 use crate::{FrameStats, PackageId, PackageState, WorkerFrameStats, WorkerId};
 
-/// One frame of the running job.
+/// One running frame of a running job.
 #[derive(Debug)]
 pub(crate) struct Frame {
     pub(crate) index: u32,

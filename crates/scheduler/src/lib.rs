@@ -45,19 +45,33 @@
 //! # Policy
 //!
 //! * **Demand-driven.** A worker asks ([`Scheduler::request_work`]) and gets
-//!   one package, now or as soon as there is work. One job runs at a time,
-//!   frames one after another; with
-//!   [`SchedulerConfig::frames_in_flight`] above 1 the next frame starts as
-//!   soon as the newest running one has nothing left to hand out, so idle
-//!   workers take its packages while older frames' last ones finish (frames
-//!   complete in order; older frames' requeued work first).
-//! * **Priorities.** The job to run is the waiting one (queued, or parked)
-//!   of the highest priority that is not paused, the lowest id among equals
-//!   (the view's jobs carry the highest). A running job gives way when it
-//!   is paused or a job of a higher priority waits: it hands out nothing
-//!   new, and once none of its packages runs (none is stopped for it) it is
-//!   parked as it stands and the other starts; a parked job comes back
-//!   where it stopped ([`Event::JobResumed`]).
+//!   one package, now or as soon as there is work. A job's frames run one
+//!   after another; with [`SchedulerConfig::frames_in_flight`] above 1 the
+//!   next frame starts as soon as the newest running one has nothing left
+//!   to hand out, so idle workers take its packages while older frames'
+//!   last ones finish (frames complete in order; older frames' requeued
+//!   work first).
+//! * **Several jobs, by rank.** Jobs rank by priority (the view's jobs
+//!   carry the highest), then id (submission order), and several run at
+//!   once: a waiting worker takes work of the first job in rank order that
+//!   has work it may take, starting a queued one when it gets there; only
+//!   when a job has nothing for this worker (its frames-in-flight limit
+//!   reached, the worker blocklisted, its remaining work all running, or
+//!   it is paused) does the worker go on to the next. Why: a job's tail,
+//!   a single frame or a job at its limit would otherwise leave workers
+//!   idle while other work waits. So a job of a higher priority takes the
+//!   workers as their running packages finish (no package is stopped for
+//!   it) and the lower one goes on with the workers it cannot use; a
+//!   paused job hands out nothing new, its running packages finish and
+//!   count, and it goes on where it stopped when resumed
+//!   ([`Event::JobResumed`]). The first job starts when none runs; others
+//!   start when a waiting worker reaches them. Rates are measured per job
+//!   (each job's costs are in its own unit), and frame affinity and whole
+//!   frames hold within each job. Split frames share the master's
+//!   `frames_in_flight` base frames by rank: beside the one frame each
+//!   running job has, a job starts a split frame ahead only while it and
+//!   the jobs ranked before it run fewer, so a lower job never holds the
+//!   slots a higher one needs.
 //! * **Frame affinity** ([`SchedulerConfig::frame_affinity`], the farm's
 //!   rules, for workers that set a frame up before its first package): a
 //!   waiting worker takes work of a running frame it already has (oldest
@@ -73,7 +87,7 @@
 //!   every worker shares the last frames in small packages. A worker so
 //!   sets up only its crew's frames, not every frame.
 //! * **Whole frames** ([`SchedulerConfig::whole_frames`], the farm's rules):
-//!   while the running job has more frames not started than workers may work
+//!   while a running job has more frames not started than workers may work
 //!   on it, a frame starts whole — one package of all its items for one
 //!   worker (a crew of one), never split, and requeued whole when its worker
 //!   is lost or fails it. Why: every worker on a frame pays that frame's
@@ -151,7 +165,7 @@
 //! | Duplicated | Assigned | one copy's worker is lost | `lose` |
 //! | Duplicated | Assigned | one copy failed | `fail_attempt` |
 //! | Assigned | Failed | it failed on the 3rd different worker (the job fails) | `fail_attempt` |
-//! | Queued, Assigned, Duplicated | Cancelled | its job is cancelled or fails | `abandon_running_job` |
+//! | Queued, Assigned, Duplicated | Cancelled | its job is cancelled or fails | `abandon_job` |
 //!
 //! Done, Failed and Cancelled are final. A package's items never change
 //! except when a queued package is split: its first part becomes a new
@@ -170,7 +184,7 @@
 //! | Idle, Busy | Waiting | it asks for work | `request_work` |
 //! | Waiting | Busy | it gets a package | `assign` |
 //! | Waiting | Idle | a frame starts and requests lapse (`SchedulerConfig::requests_lapse_at_frame_start`) | `lapse_requests` |
-//! | Busy | Idle | its last package is done, failed or cancelled | `complete`, `fail_attempt`, `cancel_losing_copy`, `abandon_running_job` |
+//! | Busy | Idle | its last package is done, failed or cancelled | `complete`, `fail_attempt`, `cancel_losing_copy`, `abandon_job` |
 //! | Idle, Waiting, Busy | Gone | it leaves or misses its heartbeats | `lose` |
 //!
 //! Being blocklisted is not a state: it holds for one job, and a blocklisted
@@ -179,13 +193,14 @@
 //! # Job states
 //!
 //! Queued (`submit_job`, `submit_interactive_job`, `submit_job_with`) → Running
-//! (`advance_jobs`, when the job before it ends or gives way; see
-//! Priorities) ⇄ Parked (`park_if_due`, `start_next`) → Complete (`advance_jobs`), Failed (`fail_job`) or Cancelled
-//! (`cancel_job`); a queued or parked job may be cancelled directly.
-//! `pause_job` holds a queued job back and keeps a running one from handing
-//! out new packages or starting frames (its running packages finish and
-//! count, then it is parked); `resume_job` lets it go on; `set_priority`
-//! reorders. The master core's `JobState` is the users' view of these.
+//! (`start_queued`: none runs, or a waiting worker reaches it in rank order;
+//! see Several jobs) → Complete (`finish_oldest_frame`), Failed
+//! (`fail_job`) or Cancelled (`cancel_job`); a queued job may be cancelled
+//! directly. Several jobs may be Running at once. `pause_job` holds a
+//! queued job back and keeps a running one from handing out new packages
+//! or starting frames (its running packages finish and count; it stays
+//! running); `resume_job` lets it go on; `set_priority` reorders. The
+//! master core's `JobState` is the users' view of these.
 
 mod config;
 mod costs;

@@ -8,6 +8,7 @@
 //! starts queued jobs and frames, fails a job nobody may work on, and hands
 //! work to the waiting workers.
 
+use std::cmp::Reverse;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::ops::Range;
 use std::time::Duration;
@@ -32,10 +33,9 @@ pub struct Scheduler {
     /// Workers that asked for work and got none yet, in the order they asked.
     waiting: VecDeque<WorkerId>,
     queued_jobs: VecDeque<QueuedJob>,
-    running: Option<RunningJob>,
-    /// Jobs that started and gave way (paused, or a higher priority came)
-    /// once none of their packages ran: they go on where they stopped.
-    parked: Vec<RunningJob>,
+    /// The jobs that started and are not over, by rank ([`rank`]: the
+    /// view's first, then priority, then id).
+    running: Vec<RunningJob>,
     next_package: u64,
     assignments: VecDeque<Assignment>,
     events: VecDeque<Event>,
@@ -48,21 +48,32 @@ struct Worker {
     connected: bool,
     last_seen: Duration,
     wants_work: bool,
-    /// Packages it runs, all of the running frame.
+    /// Packages it runs, of any running job.
     running: BTreeSet<PackageId>,
-    /// Smoothed cost units per second from assignment to result.
-    rate: Option<f64>,
-    /// Cost units per busy second of its last packages, newest last.
-    compute_samples: VecDeque<f64>,
+    /// The job of its latest package: `status` shows its rates there.
+    latest_job: Option<JobId>,
+    /// Its measures in that job once the job ended (for `status`).
+    ended_measures: Option<Measures>,
     packages_done: u64,
     items_done: u64,
     busy: Duration,
     failures: u64,
-    /// Running frames of the running job it got packages of (so has set
-    /// up), for [`SchedulerConfig::frame_affinity`].
-    frames: BTreeSet<u32>,
+    /// Running frames (job, index) it got packages of (so has set up),
+    /// for [`SchedulerConfig::frame_affinity`].
+    frames: BTreeSet<(JobId, u32)>,
     /// The frame it took its last own (not duplicate) package of: its crew.
-    crew: Option<u32>,
+    crew: Option<(JobId, u32)>,
+}
+
+/// What a worker measured in one job: rates are in the job's cost unit
+/// (its first frame's items cost [`CostEstimation::initial_item_cost`](crate::CostEstimation::initial_item_cost)
+/// each), so each running job keeps its own.
+#[derive(Debug, Default)]
+struct Measures {
+    /// Smoothed cost units per second from assignment to result.
+    rate: Option<f64>,
+    /// Cost units per busy second of its last packages, newest last.
+    compute_samples: VecDeque<f64>,
 }
 
 #[derive(Debug)]
@@ -100,6 +111,8 @@ struct RunningJob {
     /// Estimated cost of the next frames not started yet (`frames`), kept
     /// by [`RunningJob::estimate_unstarted`].
     unstarted_cost: f64,
+    /// Each worker's rates in this job's cost unit.
+    measures: BTreeMap<WorkerId, Measures>,
 }
 
 impl RunningJob {
@@ -156,6 +169,32 @@ impl RunningJob {
     fn frame_mut(&mut self, index: u32) -> Option<&mut Frame> {
         (self.running_frames_mut()).find(|f| f.index == index)
     }
+
+    /// Its running frames that are split (each holds a base frame of the
+    /// master's).
+    fn split_frames(&self) -> usize {
+        self.running_frames().filter(|f| !f.whole).count()
+    }
+
+    /// The packages of its frames that run now (one or two copies).
+    fn running_packages(&self) -> impl Iterator<Item = (&PackageId, &Package)> {
+        (self.running_frames())
+            .flat_map(|f| &f.packages)
+            .filter(|(_, p)| !p.attempts.is_empty())
+    }
+
+    /// Where it stands among the jobs ([`rank`]).
+    fn rank(&self) -> (Reverse<i32>, JobId) {
+        rank(self.priority, self.id)
+    }
+}
+
+/// The order jobs run in: the highest priority first (the view's jobs
+/// carry the highest), the lowest id (the earliest submitted) among
+/// equals. A waiting worker takes work of the first job in this order that
+/// has work it may take.
+fn rank(priority: i32, id: JobId) -> (Reverse<i32>, JobId) {
+    (Reverse(priority), id)
 }
 
 /// The smallest crew under frame affinity: a small farm keeps every
@@ -199,6 +238,34 @@ enum Pick {
     Duplicate(PackageId),
 }
 
+/// What one running job has for a waiting worker.
+#[derive(Clone, Copy, Debug)]
+enum Offer {
+    Take(Pick),
+    /// Nothing yet, but a frame of its own may start for it (frame affinity).
+    NewFrame,
+    Nothing,
+}
+
+/// What a waiting worker gets, from all the jobs.
+#[derive(Clone, Copy, Debug)]
+enum Choice {
+    /// Work of running job `j`.
+    Take(usize, Pick),
+    /// It waits for a job (ranked so) to start a frame, or to start.
+    Wait((Reverse<i32>, JobId), Wanted),
+    Nothing,
+}
+
+/// What a waiting worker waits for.
+#[derive(Clone, Copy, Debug)]
+enum Wanted {
+    /// A frame of this running job to start for it.
+    Frame(JobId),
+    /// This queued job to start.
+    Job(JobId),
+}
+
 impl Scheduler {
     pub fn new(config: SchedulerConfig) -> Scheduler {
         Scheduler {
@@ -207,8 +274,7 @@ impl Scheduler {
             workers: BTreeMap::new(),
             waiting: VecDeque::new(),
             queued_jobs: VecDeque::new(),
-            running: None,
-            parked: Vec::new(),
+            running: Vec::new(),
             next_package: 0,
             assignments: VecDeque::new(),
             events: VecDeque::new(),
@@ -250,8 +316,8 @@ impl Scheduler {
                         last_seen: now,
                         wants_work: false,
                         running: BTreeSet::new(),
-                        rate: None,
-                        compute_samples: VecDeque::new(),
+                        latest_job: None,
+                        ended_measures: None,
                         packages_done: 0,
                         items_done: 0,
                         busy: Duration::ZERO,
@@ -301,7 +367,8 @@ impl Scheduler {
         Ok(())
     }
 
-    /// Queues a job; jobs run one after another in submission order, and the
+    /// Queues a job: jobs run by rank (priority, then id; several at once
+    /// when workers would otherwise idle, see the crate documentation), the
     /// frames of a job one after another. A job without frames completes at
     /// once; a frame without items completes at once.
     pub fn submit_job(
@@ -340,7 +407,7 @@ impl Scheduler {
         options: QueueOptions,
     ) -> Result<(), SubmitError> {
         self.advance(now);
-        let started = (self.running.iter().chain(&self.parked)).any(|r| r.id == job);
+        let started = self.running.iter().any(|r| r.id == job);
         if started || self.queued_jobs.iter().any(|q| q.id == job) {
             return Err(SubmitError::DuplicateJob(job));
         }
@@ -371,9 +438,10 @@ impl Scheduler {
         self.advance(now);
         if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
             queued.paused = paused;
-        } else if let Some(running) =
-            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
-        {
+        } else if let Some(running) = self.running.iter_mut().find(|r| r.id == job) {
+            if running.paused && !paused {
+                self.events.push_back(Event::JobResumed { job });
+            }
             running.paused = paused;
         } else {
             return Err(CancelError::UnknownJob(job));
@@ -392,10 +460,9 @@ impl Scheduler {
         self.advance(now);
         if let Some(queued) = self.queued_jobs.iter_mut().find(|q| q.id == job) {
             queued.priority = priority;
-        } else if let Some(running) =
-            (self.running.iter_mut().chain(&mut self.parked)).find(|r| r.id == job)
-        {
+        } else if let Some(running) = self.running.iter_mut().find(|r| r.id == job) {
             running.priority = priority;
+            self.running.sort_by_key(RunningJob::rank);
         } else {
             return Err(CancelError::UnknownJob(job));
         }
@@ -403,65 +470,20 @@ impl Scheduler {
         Ok(())
     }
 
-    /// The job to run next, queued or parked: the highest priority that is
-    /// not paused, the lowest id among equals.
-    fn next_waiting(&self) -> Option<(i32, JobId)> {
-        let queued = (self.queued_jobs.iter())
-            .filter(|q| !q.paused)
-            .map(|q| (q.priority, q.id));
-        let parked = (self.parked.iter())
-            .filter(|r| !r.paused)
-            .map(|r| (r.priority, r.id));
-        queued
-            .chain(parked)
-            .min_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id))
+    /// The running job with this id.
+    fn job_index(&self, job: JobId) -> Option<usize> {
+        self.running.iter().position(|r| r.id == job)
     }
 
-    /// Starts the job [`Scheduler::next_waiting`] names; false if none.
-    fn start_next(&mut self) -> bool {
-        let Some((_, id)) = self.next_waiting() else {
-            return false;
-        };
-        if let Some(index) = self.parked.iter().position(|r| r.id == id) {
-            let job = self.parked.remove(index);
-            self.forget_worker_measures();
-            self.events.push_back(Event::JobResumed { job: id });
-            self.running = Some(job);
-        } else if let Some(index) = self.queued_jobs.iter().position(|q| q.id == id) {
-            let next = self.queued_jobs.remove(index).expect("found above");
-            self.start_job(next);
-        }
-        true
+    /// The running job a package of a running frame belongs to.
+    fn job_of(&self, package: PackageId) -> Option<usize> {
+        (self.running.iter()).position(|job| job.frame_of(package).is_some())
     }
 
-    /// Whether the running job gives way: it is paused, or a job of a
-    /// higher priority waits. It then hands out nothing new, and parks
-    /// once none of its packages runs (no package is stopped for it).
-    fn gives_way(&self, job: &RunningJob) -> bool {
-        job.paused || self.next_waiting().is_some_and(|(p, _)| p > job.priority)
-    }
-
-    /// Parks the running job if it gives way and none of its packages runs.
-    fn park_if_due(&mut self) -> bool {
-        let due = (self.running.as_ref())
-            .is_some_and(|job| self.gives_way(job) && self.running_packages().next().is_none());
-        if !due {
-            return false;
-        }
-        let job = self.running.take().expect("checked above");
-        self.parked.push(job);
-        true
-    }
-
-    /// Rates are in the running job's cost unit and frames are its: a job
-    /// that starts or comes back is measured anew.
-    fn forget_worker_measures(&mut self) {
-        for w in self.workers.values_mut() {
-            w.rate = None;
-            w.compute_samples.clear();
-            w.frames.clear();
-            w.crew = None;
-        }
+    /// A package of a running frame, wherever it runs.
+    fn package(&self, package: PackageId) -> Option<&Package> {
+        let job = &self.running[self.job_of(package)?];
+        job.frame_of(package)?.packages.get(&package)
     }
 
     /// Cancels a queued or running job. The packages of a running job are
@@ -471,11 +493,8 @@ impl Scheduler {
         self.advance(now);
         if let Some(index) = self.queued_jobs.iter().position(|q| q.id == job) {
             self.queued_jobs.remove(index);
-        } else if let Some(index) = self.parked.iter().position(|r| r.id == job) {
-            // None of its packages runs: nothing to stop.
-            self.parked.remove(index);
-        } else if self.running.as_ref().is_some_and(|r| r.id == job) {
-            self.abandon_running_job();
+        } else if let Some(index) = self.job_index(job) {
+            self.abandon_job(index);
         } else {
             return Err(CancelError::UnknownJob(job));
         }
@@ -514,8 +533,8 @@ impl Scheduler {
     ) -> Result<(), ReportError> {
         let now = self.advance(now);
         self.check_report(worker, package)?;
-        let attempt = (self.running.as_mut())
-            .and_then(|job| job.frame_of_mut(package))
+        let attempt = (self.job_of(package))
+            .and_then(|j| self.running[j].frame_of_mut(package))
             .and_then(|frame| frame.packages.get_mut(&package))
             .and_then(|p| {
                 let index = p.attempt_of(worker)?;
@@ -592,19 +611,26 @@ impl Scheduler {
 
     /// Whether a job is queued or running.
     pub fn has_jobs(&self) -> bool {
-        self.running.is_some() || !self.queued_jobs.is_empty() || !self.parked.is_empty()
+        !self.running.is_empty() || !self.queued_jobs.is_empty()
     }
 
-    /// Every worker ever joined, by id, for a `status` listing.
+    /// Every worker ever joined, by id, for a `status` listing; its rates
+    /// are those in the job of its latest package while that job runs.
     pub fn workers(&self) -> Vec<WorkerStatus> {
         self.workers
             .iter()
-            .map(|(&id, w)| WorkerStatus {
+            .map(|(&id, w)| {
+                let running = (w.latest_job.and_then(|job| self.job_index(job)))
+                    .map(|j| self.running[j].measures.get(&id));
+                let measures = running.unwrap_or(w.ended_measures.as_ref());
+                (id, w, measures)
+            })
+            .map(|(id, w, measures)| WorkerStatus {
                 worker: id,
                 state: w.state(),
                 threads: w.threads,
-                rate: w.rate,
-                compute_rate: w.compute_rate(),
+                rate: measures.and_then(|m| m.rate),
+                compute_rate: measures.and_then(Measures::compute_rate),
                 running: w.running.len(),
                 packages_done: w.packages_done,
                 items_done: w.items_done,
@@ -618,38 +644,30 @@ impl Scheduler {
         self.workers.get(&worker).map(Worker::state)
     }
 
-    /// The state of a package of the running frame; `None` for packages of
+    /// The state of a package of a running frame; `None` for packages of
     /// finished frames and jobs.
     pub fn package_state(&self, package: PackageId) -> Option<PackageState> {
-        let job = self.running.as_ref()?;
-        job.frame_of(package)?
-            .packages
-            .get(&package)
-            .map(Package::state)
+        self.package(package).map(Package::state)
     }
 
-    /// The job queue and the running job's progress.
+    /// The job queue and the running jobs' progress, each in rank order.
     pub fn queue(&self) -> QueueStatus {
+        let mut waiting: Vec<&QueuedJob> = self.queued_jobs.iter().collect();
+        waiting.sort_by_key(|q| rank(q.priority, q.id));
         QueueStatus {
-            waiting: {
-                let queued = self.queued_jobs.iter().map(|q| (q.priority, q.id));
-                let parked = self.parked.iter().map(|r| (r.priority, r.id));
-                let mut order: Vec<(i32, JobId)> = queued.chain(parked).collect();
-                order.sort_by_key(|&(priority, id)| (std::cmp::Reverse(priority), id));
-                order.into_iter().map(|(_, id)| id).collect()
-            },
-            running: self.running.as_ref().map(|job| JobProgress {
-                job: job.id,
-                frame: job.frame.index,
-                frames: job.frame_count,
-                items_done: job.frame.done_count,
-                items_total: job.frame.items.len(),
-                packages_running: (job.running_frames())
-                    .flat_map(|f| f.packages.values())
-                    .filter(|p| !p.attempts.is_empty())
-                    .count(),
-                blocklisted: job.blocklist.iter().copied().collect(),
-            }),
+            waiting: waiting.into_iter().map(|q| q.id).collect(),
+            running: (self.running.iter())
+                .map(|job| JobProgress {
+                    job: job.id,
+                    frame: job.frame.index,
+                    frames: job.frame_count,
+                    items_done: job.frame.done_count,
+                    items_total: job.frame.items.len(),
+                    packages_running: job.running_packages().count(),
+                    paused: job.paused,
+                    blocklisted: job.blocklist.iter().copied().collect(),
+                })
+                .collect(),
         }
     }
 
@@ -673,27 +691,43 @@ impl Scheduler {
                 return fail(format!("{id} is gone but waits or runs packages"));
             }
             for package in &w.running {
-                let runs = self.running.as_ref().and_then(|job| {
-                    let p = job.frame_of(*package)?.packages.get(package)?;
-                    p.attempt_of(id)
-                });
+                let runs = self.package(*package).and_then(|p| p.attempt_of(id));
                 if runs.is_none() {
                     return fail(format!("{id} lists {package} but does not run it"));
                 }
+            }
+            let has_frame = |&(job, index): &(JobId, u32)| {
+                (self.job_index(job))
+                    .is_some_and(|j| (self.running[j].running_frames()).any(|f| f.index == index))
+            };
+            if let Some(stale) = (w.frames.iter().chain(&w.crew)).find(|f| !has_frame(f)) {
+                return fail(format!("{id} keeps {stale:?}, no running frame"));
             }
         }
         if self.waiting.iter().any(|w| !self.workers.contains_key(w)) {
             return fail("an unknown worker waits".to_string());
         }
-        let Some(job) = &self.running else {
-            return Ok(());
-        };
-        let indices: Vec<u32> = job.running_frames().map(|f| f.index).collect();
-        if indices.windows(2).any(|w| w[1] != w[0] + 1) {
-            return fail(format!("running frames {indices:?} are not consecutive"));
+        let ranks: Vec<_> = self.running.iter().map(RunningJob::rank).collect();
+        if ranks.windows(2).any(|w| w[0] >= w[1]) {
+            return fail(format!("running jobs {ranks:?} are not in rank order"));
         }
-        for frame in job.running_frames() {
-            self.validate_frame(frame)?;
+        if let Some(q) = (self.queued_jobs.iter()).find(|q| self.job_index(q.id).is_some()) {
+            return fail(format!("{} is queued and running", q.id));
+        }
+        for job in &self.running {
+            let indices: Vec<u32> = job.running_frames().map(|f| f.index).collect();
+            if indices.windows(2).any(|w| w[1] != w[0] + 1) {
+                return fail(format!(
+                    "{}: running frames {indices:?} are not consecutive",
+                    job.id
+                ));
+            }
+            if job.split_frames() > self.config.frames_in_flight.max(1) as usize {
+                return fail(format!("{}: {} split frames", job.id, job.split_frames()));
+            }
+            for frame in job.running_frames() {
+                self.validate_frame(frame)?;
+            }
         }
         Ok(())
     }
@@ -789,9 +823,7 @@ impl Scheduler {
             return Err(ReportError::NotConnected(worker));
         }
         self.touch(worker);
-        let current = (self.running.as_ref())
-            .and_then(|job| job.frame_of(package))
-            .and_then(|frame| frame.packages.get(&package));
+        let current = self.package(package);
         let refusal = match current {
             Some(p) if p.state().is_final() => Some(ReportError::Finished(package)),
             Some(p) if p.attempt_of(worker).is_none() => {
@@ -817,77 +849,110 @@ impl Scheduler {
     }
 
     /// Starts queued jobs and frames, fails a job nobody may work on, then
-    /// hands work to the waiting workers in the order they asked.
+    /// hands work to the waiting workers in the order they asked, each from
+    /// the first job in rank order that has work it may take.
     fn dispatch(&mut self) {
         loop {
             self.start_jobs_and_frames();
-            self.hand_out();
-            // Handing out a frame's last work may start the next frame, and
-            // so may a worker that waits for a frame of its own.
-            if self.a_worker_waits_for_a_frame() {
-                self.start_ahead();
-            } else if !self.may_start_ahead() {
-                break;
+            // A worker waits for a frame of its own to start (frame
+            // affinity) or for a queued job: the first such in rank order
+            // starts, and hand-out runs again. Handing out a frame's last
+            // work may start the next frame too.
+            match self.hand_out() {
+                Some(Wanted::Frame(job)) => {
+                    if let Some(j) = self.job_index(job) {
+                        self.start_ahead(j);
+                    }
+                }
+                Some(Wanted::Job(job)) => self.start_queued(job),
+                None if (0..self.running.len()).any(|j| self.may_start_ahead(j)) => {}
+                None => break,
             }
         }
     }
 
-    /// Starts queued jobs and frames, failing a job nobody may work on.
+    /// Completes finished frames and jobs, starts frames, and fails a job
+    /// nobody may work on.
     fn start_jobs_and_frames(&mut self) {
         loop {
             self.advance_jobs();
-            if !self.no_eligible_worker() {
+            let Some(j) = (0..self.running.len()).find(|&j| self.no_eligible_worker(j)) else {
                 break;
-            }
-            let errors = self
-                .running
-                .as_ref()
-                .map(|job| job.errors.clone())
-                .unwrap_or_default();
-            self.fail_job(JobFailure::NoEligibleWorker, errors);
+            };
+            let errors = self.running[j].errors.clone();
+            self.fail_job(j, JobFailure::NoEligibleWorker, errors);
         }
     }
 
-    /// Hands work to the waiting workers in the order they asked.
-    fn hand_out(&mut self) {
+    /// Hands work to the waiting workers in the order they asked, each from
+    /// the first job in rank order with work it may take. Returns what the
+    /// first in rank order of the workers left waiting waits for.
+    fn hand_out(&mut self) -> Option<Wanted> {
+        let mut wanted: Option<((Reverse<i32>, JobId), Wanted)> = None;
         let mut index = 0;
         while index < self.waiting.len() {
             let worker = self.waiting[index];
-            match self.pick(worker) {
-                Some(pick) => {
+            match self.choose(worker) {
+                Choice::Take(j, pick) => {
                     self.waiting.remove(index);
-                    self.assign(worker, pick);
+                    self.assign(j, worker, pick);
                 }
-                None => index += 1,
+                Choice::Wait(at, what) => {
+                    if wanted.as_ref().is_none_or(|(best, _)| at < *best) {
+                        wanted = Some((at, what));
+                    }
+                    index += 1;
+                }
+                Choice::Nothing => index += 1,
             }
         }
+        wanted.map(|(_, what)| what)
     }
 
-    /// Whether the next frame starts early ([`SchedulerConfig::frames_in_flight`]):
-    /// the newest running frame has nothing left to hand out, and fewer
-    /// frames than allowed run.
-    fn may_start_ahead(&self) -> bool {
-        self.running.as_ref().is_some_and(|job| {
-            let newest = job.ahead.back().unwrap_or(&job.frame);
-            self.room_for_a_frame(job) && !newest.has_unassigned()
-        })
+    /// What `worker` gets: walking the running and the queued jobs (not
+    /// paused) in rank order, the first that has work it may take gives it,
+    /// or starts a frame for it (frame affinity), or, queued, starts.
+    fn choose(&self, worker: WorkerId) -> Choice {
+        let mut queued: Vec<&QueuedJob> = (self.queued_jobs.iter()).filter(|q| !q.paused).collect();
+        queued.sort_by_key(|q| rank(q.priority, q.id));
+        let mut queued = queued.into_iter().peekable();
+        // The first queued job ranked before `before` (or any, for `None`).
+        let mut start = |before: Option<(Reverse<i32>, JobId)>| {
+            let q = queued.next_if(|q| before.is_none_or(|b| rank(q.priority, q.id) < b))?;
+            Some(Choice::Wait(rank(q.priority, q.id), Wanted::Job(q.id)))
+        };
+        for (j, job) in self.running.iter().enumerate() {
+            if let Some(choice) = start(Some(job.rank())) {
+                return choice;
+            }
+            match self.pick(j, worker) {
+                Offer::Take(pick) => return Choice::Take(j, pick),
+                Offer::NewFrame => return Choice::Wait(job.rank(), Wanted::Frame(job.id)),
+                Offer::Nothing => {}
+            }
+        }
+        start(None).unwrap_or(Choice::Nothing)
     }
 
-    /// Whether, after hand-out, a worker still waits for a frame of its
-    /// own under frame affinity and another frame may start for it.
-    fn a_worker_waits_for_a_frame(&self) -> bool {
-        self.config.frame_affinity
-            && self
-                .running
-                .as_ref()
-                .is_some_and(|job| self.room_for_a_frame(job) && self.a_worker_waits(job))
+    /// Whether the next frame of running job `j` starts early
+    /// ([`SchedulerConfig::frames_in_flight`]): its newest running frame
+    /// has nothing left to hand out, and it has room for a frame.
+    fn may_start_ahead(&self, j: usize) -> bool {
+        let job = &self.running[j];
+        let newest = job.ahead.back().unwrap_or(&job.frame);
+        !newest.has_unassigned() && self.room_for_a_frame(j)
     }
 
-    /// Whether another frame of `job` may start now: split frames up to
-    /// [`SchedulerConfig::frames_in_flight`], whole ones up to
+    /// Whether another frame of running job `j` may start now (beside the
+    /// one it runs): split frames while the split frames of `j` and of the
+    /// jobs ranked before it are fewer than
+    /// [`SchedulerConfig::frames_in_flight`] (each holds a base frame of
+    /// the master's, made one at a time, so a lower job never holds the
+    /// slots a higher one needs), whole ones up to
     /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
-    fn room_for_a_frame(&self, job: &RunningJob) -> bool {
-        if self.gives_way(job) || job.frames.is_empty() || job.frame.is_complete() {
+    fn room_for_a_frame(&self, j: usize) -> bool {
+        let job = &self.running[j];
+        if job.paused || job.frames.is_empty() || job.frame.is_complete() {
             return false;
         }
         let frames_in_flight = self.config.frames_in_flight as usize;
@@ -895,7 +960,11 @@ impl Scheduler {
             let workers = self.eligible_workers(job).count().max(1);
             job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
         } else {
-            job.running_frames().filter(|f| !f.whole).count() < frames_in_flight
+            let split: usize = self.running[..=j]
+                .iter()
+                .map(RunningJob::split_frames)
+                .sum();
+            split < frames_in_flight
         }
     }
 
@@ -905,92 +974,113 @@ impl Scheduler {
         starts_whole(&self.config, &self.workers, blocklist, unstarted)
     }
 
-    /// Whether a worker that may work on `job` still waits (after hand-out:
-    /// with frame affinity, for a frame of its own).
-    fn a_worker_waits(&self, job: &RunningJob) -> bool {
-        self.waiting.iter().any(|w| !job.blocklist.contains(w))
+    /// Completes finished frames and jobs and starts their next frames, and
+    /// frames early where they may; starts the first queued job when none
+    /// runs (a worker asks for work once it knows of a job).
+    fn advance_jobs(&mut self) {
+        let mut j = 0;
+        loop {
+            if j == self.running.len() {
+                let first = (self.queued_jobs.iter())
+                    .filter(|q| !q.paused)
+                    .min_by_key(|q| rank(q.priority, q.id))
+                    .map(|q| q.id);
+                match first.filter(|_| self.running.is_empty()) {
+                    Some(id) => {
+                        self.start_queued(id);
+                        j = 0;
+                        continue;
+                    }
+                    None => return,
+                }
+            }
+            if self.running[j].frame.is_complete() {
+                // The job's next frame, or the next job, is at `j` now.
+                self.finish_oldest_frame(j);
+                continue;
+            }
+            if self.may_start_ahead(j) {
+                self.start_ahead(j);
+            }
+            j += 1;
+        }
     }
 
-    /// Completes finished frames and jobs and starts the next ones, until a
-    /// frame has work or no job is left; starts a frame early when it may.
-    fn advance_jobs(&mut self) {
+    /// Completes running job `j`'s oldest frame, which is complete: the
+    /// next frame takes its place (started already, or now), or the job is
+    /// complete and leaves.
+    fn finish_oldest_frame(&mut self, j: usize) {
         let lookahead = self.config.frames_in_flight as usize;
-        loop {
-            let Some(job) = &mut self.running else {
-                if !self.start_next() {
-                    return;
-                }
-                continue;
-            };
-            if !job.frame.is_complete() {
-                if self.park_if_due() {
-                    continue;
-                }
-                if self.may_start_ahead() {
-                    self.start_ahead();
-                }
-                return;
+        let job = &mut self.running[j];
+        let speeds: BTreeMap<WorkerId, f64> = (job.measures.iter())
+            .filter_map(|(&id, m)| Some((id, m.compute_rate()?)))
+            .collect();
+        job.costs.learn(&job.frame, &speeds);
+        job.estimate_unstarted(lookahead);
+        let finished = (job.id, job.frame.index);
+        for w in self.workers.values_mut() {
+            w.frames.remove(&finished);
+            w.crew = w.crew.filter(|&c| c != finished);
+        }
+        let stats = job.frame.finish_stats(self.now);
+        self.events.push_back(Event::FrameComplete {
+            job: job.id,
+            frame: job.frame.index,
+            stats,
+        });
+        if let Some(next) = job.ahead.pop_front() {
+            // Started already; the estimates now learn from this frame too.
+            job.frame = next;
+            job.frame.reestimate(&job.costs);
+            for frame in &mut job.ahead {
+                frame.reestimate(&job.costs);
             }
-            let speeds: BTreeMap<WorkerId, f64> = self
-                .workers
-                .iter()
-                .filter_map(|(&id, w)| Some((id, w.compute_rate()?)))
-                .collect();
-            job.costs.learn(&job.frame, &speeds);
-            job.estimate_unstarted(lookahead);
-            let finished = job.frame.index;
-            for w in self.workers.values_mut() {
-                w.frames.remove(&finished);
-                w.crew = w.crew.filter(|&c| c != finished);
+            return;
+        }
+        let whole = starts_whole(
+            &self.config,
+            &self.workers,
+            &job.blocklist,
+            job.batch_frames_left(),
+        );
+        match job.frames.pop_front() {
+            Some(next) => {
+                let index = job.frame.index + 1;
+                job.frame = Frame::new(index, next.items, whole, &job.costs);
+                job.estimate_unstarted(lookahead);
+                self.events.push_back(Event::FrameStarted {
+                    job: job.id,
+                    frame: index,
+                    items: job.frame.items.len(),
+                    whole,
+                });
+                self.lapse_requests();
             }
-            let stats = job.frame.finish_stats(self.now);
-            self.events.push_back(Event::FrameComplete {
-                job: job.id,
-                frame: job.frame.index,
-                stats,
-            });
-            if let Some(next) = job.ahead.pop_front() {
-                // Started already; the estimates now learn from this frame too.
-                job.frame = next;
-                job.frame.reestimate(&job.costs);
-                for frame in &mut job.ahead {
-                    frame.reestimate(&job.costs);
-                }
-                continue;
-            }
-            let whole = starts_whole(
-                &self.config,
-                &self.workers,
-                &job.blocklist,
-                job.batch_frames_left(),
-            );
-            match job.frames.pop_front() {
-                Some(next) => {
-                    let index = job.frame.index + 1;
-                    job.frame = Frame::new(index, next.items, whole, &job.costs);
-                    job.estimate_unstarted(lookahead);
-                    self.events.push_back(Event::FrameStarted {
-                        job: job.id,
-                        frame: index,
-                        items: job.frame.items.len(),
-                        whole,
-                    });
-                    self.lapse_requests();
-                }
-                None => {
-                    self.events.push_back(Event::JobComplete { job: job.id });
-                    self.running = None;
-                }
+            None => {
+                self.events.push_back(Event::JobComplete { job: job.id });
+                self.end_job(j);
             }
         }
     }
 
-    /// Starts the running job's next frame while its running frame finishes.
-    fn start_ahead(&mut self) {
+    /// Removes running job `j` (complete, failed or cancelled): the workers
+    /// forget its frames, its measures go with it.
+    fn end_job(&mut self, j: usize) -> RunningJob {
+        let mut job = self.running.remove(j);
+        for (id, w) in &mut self.workers {
+            w.frames.retain(|&(id, _)| id != job.id);
+            w.crew = w.crew.filter(|&(id, _)| id != job.id);
+            if w.latest_job == Some(job.id) {
+                w.ended_measures = job.measures.remove(id);
+            }
+        }
+        job
+    }
+
+    /// Starts running job `j`'s next frame while its running frame finishes.
+    fn start_ahead(&mut self, j: usize) {
         let lookahead = self.config.frames_in_flight as usize;
-        let Some(job) = &mut self.running else {
-            return;
-        };
+        let job = &mut self.running[j];
         let whole = starts_whole(
             &self.config,
             &self.workers,
@@ -1026,10 +1116,13 @@ impl Scheduler {
         self.waiting.clear();
     }
 
-    /// Starts a job. Rates are in the job's cost unit, so every worker's are
-    /// forgotten and measured anew.
-    fn start_job(&mut self, next: QueuedJob) {
-        self.forget_worker_measures();
+    /// Starts the queued job `id`: it joins the running jobs at its rank,
+    /// with rates of its own (they are in its cost unit).
+    fn start_queued(&mut self, id: JobId) {
+        let Some(index) = self.queued_jobs.iter().position(|q| q.id == id) else {
+            return;
+        };
+        let next = self.queued_jobs.remove(index).expect("found above");
         let frame_count = u32::try_from(next.frames.len()).unwrap_or(u32::MAX);
         self.events.push_back(Event::JobStarted {
             job: next.id,
@@ -1069,18 +1162,18 @@ impl Scheduler {
             frame,
             ahead: VecDeque::new(),
             unstarted_cost: 0.0,
+            measures: BTreeMap::new(),
         };
         job.estimate_unstarted(self.config.frames_in_flight as usize);
-        self.running = Some(job);
+        let at = (self.running).partition_point(|r| r.rank() < job.rank());
+        self.running.insert(at, job);
     }
 
-    /// Whether the running job has work left that no connected worker may
-    /// take, because every one is blocklisted (with no worker connected, the
-    /// job waits for one).
-    fn no_eligible_worker(&self) -> bool {
-        let Some(job) = &self.running else {
-            return false;
-        };
+    /// Whether running job `j` has work left that no connected worker may
+    /// take, because every one is blocklisted (with no worker connected,
+    /// the job waits for one).
+    fn no_eligible_worker(&self, j: usize) -> bool {
+        let job = &self.running[j];
         let mut connected = self.workers.iter().filter(|(_, w)| w.connected).peekable();
         job.running_frames().any(Frame::has_unassigned)
             && connected.peek().is_some()
@@ -1089,47 +1182,52 @@ impl Scheduler {
 
     // ----- Package sizing -----
 
-    /// What to give `worker`: a queued package it may take (split when much
-    /// larger than its target), else the next unassigned items, else, once
-    /// nothing is left to hand out, a straggler's second copy.
-    fn pick(&self, worker: WorkerId) -> Option<Pick> {
-        let job = self.running.as_ref()?;
-        if job.blocklist.contains(&worker) || self.gives_way(job) {
-            return None;
+    /// What running job `j` has for `worker`: a queued package it may take
+    /// (split when much larger than its target), else the next unassigned
+    /// items, else, once nothing is left to hand out, a straggler's second
+    /// copy; or, under frame affinity, a frame to start for it. A paused
+    /// job, or one that blocklisted the worker, has nothing.
+    fn pick(&self, j: usize, worker: WorkerId) -> Offer {
+        let job = &self.running[j];
+        if job.blocklist.contains(&worker) || job.paused {
+            return Offer::Nothing;
         }
         if self.config.frame_affinity {
             if let Some(pick) = self.copy_of_a_late_oldest_frame(job, worker) {
-                return Some(pick);
+                return Offer::Take(pick);
             }
-            if let Some(pick) = self.pick_with_affinity(job, worker) {
-                return Some(pick);
+            match self.pick_with_affinity(j, worker) {
+                Offer::Nothing => {}
+                offer => return offer,
             }
             if job.running_frames().any(Frame::has_unassigned) {
-                return None;
+                return Offer::Nothing;
             }
         } else {
-            let target = self.target_cost(worker);
+            let target = self.target_cost(job, worker);
             // Unassigned work of the older frame first; stragglers only once
             // both frames have nothing left to hand out.
             for frame in job.running_frames() {
-                if let Some(pick) = self.pick_unassigned(frame, worker, target) {
-                    return Some(pick);
+                if let Some(pick) = self.pick_unassigned(job, frame, worker, target) {
+                    return Offer::Take(pick);
                 }
             }
             if job.running_frames().any(|f| !f.queue.is_empty()) {
-                return None;
+                return Offer::Nothing;
             }
         }
-        let policy = self.config.straggler.as_ref()?;
-        let no_room = !self.room_for_a_frame(job);
-        self.running_packages()
+        let Some(policy) = self.config.straggler.as_ref() else {
+            return Offer::Nothing;
+        };
+        let no_room = !self.room_for_a_frame(j);
+        (job.running_packages())
             .filter(|(_, p)| may_duplicate(p, worker))
             .filter(|(id, p)| {
                 straggler_deadline(p, policy) <= self.now
                     || (no_room && self.whole_copy_due(job, **id, p, worker, policy))
             })
             .min_by_key(|&(&id, p)| (straggler_deadline(p, policy), id))
-            .map(|(&id, _)| Pick::Duplicate(id))
+            .map_or(Offer::Nothing, |(&id, _)| Offer::Take(Pick::Duplicate(id)))
     }
 
     /// A copy of the oldest running frame when it is whole and its holder is
@@ -1140,7 +1238,7 @@ impl Scheduler {
         let policy = self.config.straggler.as_ref()?;
         let frame = Some(&job.frame).filter(|f| f.whole)?;
         let (&id, package) = (frame.packages.iter()).find(|(_, p)| may_duplicate(p, worker))?;
-        let late_at = self.whole_copy_late_at(frame, package, policy)?;
+        let late_at = self.whole_copy_late_at(job, frame, package, policy)?;
         (late_at <= self.now).then_some(Pick::Duplicate(id))
     }
 
@@ -1165,14 +1263,14 @@ impl Scheduler {
         };
         let (Some(attempt), Some(late_at)) = (
             package.attempts.first(),
-            self.whole_copy_late_at(frame, package, policy),
+            self.whole_copy_late_at(job, frame, package, policy),
         ) else {
             return false;
         };
         let cost = frame.cost(package.range.clone());
-        let expected_end = attempt.assigned_at + seconds(cost / self.rate_of(attempt.worker));
+        let expected_end = attempt.assigned_at + seconds(cost / self.rate_of(job, attempt.worker));
         let left = expected_end.saturating_sub(self.now);
-        let copy = seconds(policy.factor * cost / self.rate_of(worker));
+        let copy = seconds(policy.factor * cost / self.rate_of(job, worker));
         late_at <= self.now || copy < left
     }
 
@@ -1183,47 +1281,54 @@ impl Scheduler {
     /// `None` for a package of a split frame.
     fn whole_copy_late_at(
         &self,
+        job: &RunningJob,
         frame: &Frame,
         package: &Package,
         policy: &StragglerPolicy,
     ) -> Option<Duration> {
         let attempt = package.attempts.first().filter(|_| frame.whole)?;
-        let expected = frame.cost(package.range.clone()) / self.rate_of(attempt.worker);
+        let expected = frame.cost(package.range.clone()) / self.rate_of(job, attempt.worker);
         let wait = seconds(expected * policy.factor).max(policy.min_delay);
         Some(attempt.assigned_at.saturating_add(wait))
     }
 
-    /// Unassigned work for `worker` under frame affinity: of a frame it has
-    /// (oldest first), else requeued work of any frame (frames complete in
-    /// order), else of a frame whose crew is short; else nothing while a
-    /// new frame may start (the dispatcher starts it for this worker), and
-    /// once none may, of the oldest frame with work left.
-    fn pick_with_affinity(&self, job: &RunningJob, worker: WorkerId) -> Option<Pick> {
-        let w = self.workers.get(&worker)?;
-        let pick =
-            |frame: &Frame| self.pick_unassigned(frame, worker, self.crew_target(worker, frame));
-        let own = (job.running_frames()).filter(|f| w.frames.contains(&f.index));
+    /// Unassigned work of running job `j` for `worker` under frame
+    /// affinity: of a frame it has (oldest first), else requeued work of
+    /// any frame (frames complete in order), else of a frame whose crew is
+    /// short; else a new frame while one may start (the dispatcher starts
+    /// it for this worker), and once none may, of the oldest frame with
+    /// work left.
+    fn pick_with_affinity(&self, j: usize, worker: WorkerId) -> Offer {
+        let job = &self.running[j];
+        let Some(w) = self.workers.get(&worker) else {
+            return Offer::Nothing;
+        };
+        let pick = |frame: &Frame| {
+            let target = self.crew_target(job, worker, frame);
+            self.pick_unassigned(job, frame, worker, target)
+        };
+        let own = (job.running_frames()).filter(|f| w.frames.contains(&(job.id, f.index)));
         if let Some(pick) = own.filter_map(pick).next() {
-            return Some(pick);
+            return Offer::Take(pick);
         }
         let requeued = (job.running_frames())
             .filter(|f| !f.queue.is_empty())
             .filter_map(pick)
             .find(|p| matches!(p, Pick::Queued { .. }));
-        if requeued.is_some() {
-            return requeued;
+        if let Some(pick) = requeued {
+            return Offer::Take(pick);
         }
         let size = self.crew_size(job);
         let short = (job.running_frames())
             .filter(|f| f.next_fresh < f.items.len())
-            .find(|f| self.crew_of(f.index) < size);
+            .find(|f| self.crew_of(job.id, f.index) < size);
         if let Some(frame) = short {
-            return pick(frame);
+            return pick(frame).map_or(Offer::Nothing, Offer::Take);
         }
-        if self.room_for_a_frame(job) {
-            return None;
+        if self.room_for_a_frame(j) {
+            return Offer::NewFrame;
         }
-        job.running_frames().filter_map(pick).next()
+        (job.running_frames().filter_map(pick).next()).map_or(Offer::Nothing, Offer::Take)
     }
 
     /// Workers per frame under frame affinity: the eligible workers spread
@@ -1239,15 +1344,23 @@ impl Scheduler {
 
     /// Connected workers not blocklisted for `job`.
     fn eligible_workers<'a>(&'a self, job: &'a RunningJob) -> impl Iterator<Item = &'a Worker> {
-        (self.workers.iter())
-            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
-            .map(|(_, w)| w)
+        self.eligible_ids(job).map(|(_, w)| w)
     }
 
-    /// Connected workers whose crew is frame `index`.
-    fn crew_of(&self, index: u32) -> usize {
+    /// Connected workers not blocklisted for `job`, with their ids.
+    fn eligible_ids<'a>(
+        &'a self,
+        job: &'a RunningJob,
+    ) -> impl Iterator<Item = (WorkerId, &'a Worker)> {
+        (self.workers.iter())
+            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
+            .map(|(&id, w)| (id, w))
+    }
+
+    /// Connected workers whose crew is frame `index` of `job`.
+    fn crew_of(&self, job: JobId, index: u32) -> usize {
         (self.workers.values())
-            .filter(|w| w.connected && w.crew == Some(index))
+            .filter(|w| w.connected && w.crew == Some((job, index)))
             .count()
     }
 
@@ -1258,28 +1371,32 @@ impl Scheduler {
     /// `k` times every worker's rate) gives: near the job's end, or in a
     /// job shorter than the farm is wide, every worker shares the last
     /// frames, so their packages shrink for all of them, not for one crew.
-    fn crew_target(&self, worker: WorkerId, frame: &Frame) -> f64 {
-        let Some(job) = &self.running else {
-            return 0.0;
-        };
-        let prior = self.prior_rate_per_thread();
-        let (sum, count) = (self.eligible_workers(job))
-            .fold((0.0, 0usize), |(sum, n), w| (sum + w.rate_or(prior), n + 1));
+    fn crew_target(&self, job: &RunningJob, worker: WorkerId, frame: &Frame) -> f64 {
+        let prior = self.prior_rate_per_thread(job);
+        let (sum, count) = (self.eligible_ids(job)).fold((0.0, 0usize), |(sum, n), (id, w)| {
+            (sum + rate_with_prior(job, id, w, prior), n + 1)
+        });
         let crew_rate = sum / count.max(1) as f64 * self.crew_size(job) as f64;
         let crew = self.sized(frame.unassigned_cost(), crew_rate);
         let whole_job = self.sized(job.remaining_cost(), sum);
-        crew.min(whole_job) * self.rate_of(worker)
+        crew.min(whole_job) * self.rate_of(job, worker)
     }
 
     /// A queued package of `frame` that `worker` may take (split when much
     /// larger than `target`), else the frame's next unassigned items.
-    fn pick_unassigned(&self, frame: &Frame, worker: WorkerId, target: f64) -> Option<Pick> {
+    fn pick_unassigned(
+        &self,
+        job: &RunningJob,
+        frame: &Frame,
+        worker: WorkerId,
+        target: f64,
+    ) -> Option<Pick> {
         let split_factor = self.config.sizing.split_factor;
         for (index, id) in frame.queue.iter().enumerate() {
             let Some(package) = frame.packages.get(id) else {
                 continue;
             };
-            if !self.may_retry(package, worker) {
+            if !self.may_retry(job, package, worker) {
                 continue;
             }
             let split = if !frame.whole && frame.cost(package.range.clone()) > split_factor * target
@@ -1307,13 +1424,10 @@ impl Scheduler {
 
     /// A worker retries a package it failed only when every worker that may
     /// work on the job failed it too.
-    fn may_retry(&self, package: &Package, worker: WorkerId) -> bool {
+    fn may_retry(&self, job: &RunningJob, package: &Package, worker: WorkerId) -> bool {
         if !package.failed_on(worker) {
             return true;
         }
-        let Some(job) = &self.running else {
-            return false;
-        };
         self.workers
             .iter()
             .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
@@ -1322,20 +1436,13 @@ impl Scheduler {
 
     /// The cost of the next package for `worker` (see
     /// [`PackageSizing`](crate::PackageSizing)).
-    fn target_cost(&self, worker: WorkerId) -> f64 {
-        let Some(job) = &self.running else {
-            return 0.0;
-        };
-        let prior = self.prior_rate_per_thread();
-        let total_rate: f64 = self
-            .workers
-            .iter()
-            .filter(|(id, w)| w.connected && !job.blocklist.contains(id))
-            .map(|(_, w)| w.rate_or(prior))
+    fn target_cost(&self, job: &RunningJob, worker: WorkerId) -> f64 {
+        let prior = self.prior_rate_per_thread(job);
+        let total_rate: f64 = (self.eligible_ids(job))
+            .map(|(id, w)| rate_with_prior(job, id, w, prior))
             .sum();
         let unassigned: f64 = job.running_frames().map(Frame::unassigned_cost).sum();
-        self.sized(unassigned, total_rate)
-            * self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+        self.sized(unassigned, total_rate) * self.rate_of(job, worker)
     }
 
     /// A package's target duration in seconds: `unassigned` work over `k`
@@ -1357,20 +1464,20 @@ impl Scheduler {
         }
     }
 
-    /// The worker's rate (see [`Worker::rate_or`]).
-    fn rate_of(&self, worker: WorkerId) -> f64 {
-        let prior = self.prior_rate_per_thread();
-        self.workers.get(&worker).map_or(0.0, |w| w.rate_or(prior))
+    /// The worker's rate in `job` (see [`rate_with_prior`]).
+    fn rate_of(&self, job: &RunningJob, worker: WorkerId) -> f64 {
+        let prior = self.prior_rate_per_thread(job);
+        (self.workers.get(&worker)).map_or(0.0, |w| rate_with_prior(job, worker, w, prior))
     }
 
-    /// The rate per thread assumed for a worker before its first result: the
-    /// mean over the measured connected workers, else the configured one.
-    fn prior_rate_per_thread(&self) -> f64 {
-        let (sum, count) = self
-            .workers
-            .values()
-            .filter(|v| v.connected)
-            .filter_map(|v| v.rate.map(|r| r / f64::from(v.threads)))
+    /// The rate per thread assumed for a worker before its first result in
+    /// `job`: the mean over the job's measured connected workers, else the
+    /// configured one.
+    fn prior_rate_per_thread(&self, job: &RunningJob) -> f64 {
+        let (sum, count) = (job.measures.iter())
+            .filter_map(|(id, m)| Some((self.workers.get(id)?, m.rate?)))
+            .filter(|(w, _)| w.connected)
+            .map(|(w, rate)| rate / f64::from(w.threads))
             .fold((0.0, 0), |(sum, count), r| (sum + r, count + 1));
         let initial = self.config.estimation.initial_rate_per_thread;
         if count > 0 {
@@ -1382,26 +1489,28 @@ impl Scheduler {
         }
     }
 
-    /// The packages that run now, by id.
-    fn running_packages(&self) -> impl Iterator<Item = (&PackageId, &Package)> {
-        let running: BTreeSet<&PackageId> =
-            self.workers.values().flat_map(|w| &w.running).collect();
-        let job = self.running.as_ref();
-        running
-            .into_iter()
-            .filter_map(move |id| Some((id, job?.frame_of(*id)?.packages.get(id)?)))
+    /// The earliest moment a running package of any running job becomes
+    /// a straggler that a waiting worker could take.
+    fn straggler_deadline(&self) -> Option<Duration> {
+        (0..self.running.len())
+            .filter_map(|j| self.straggler_deadline_of(j))
+            .min()
     }
 
-    /// The earliest moment a running package becomes a straggler that a
-    /// waiting worker could take; `None` while work is left to hand out.
-    fn straggler_deadline(&self) -> Option<Duration> {
+    /// The earliest moment a running package of running job `j` becomes a
+    /// straggler that a waiting worker could take; `None` while work is
+    /// left to hand out (but for a late whole oldest frame).
+    fn straggler_deadline_of(&self, j: usize) -> Option<Duration> {
         let policy = self.config.straggler.as_ref()?;
-        let job = self.running.as_ref()?;
+        let job = &self.running[j];
+        if job.paused {
+            return None;
+        }
         let oldest_late = (job.frame.packages.values())
             .filter(|p| {
                 (self.waiting.iter()).any(|&w| !job.blocklist.contains(&w) && may_duplicate(p, w))
             })
-            .filter_map(|p| self.whole_copy_late_at(&job.frame, p, policy))
+            .filter_map(|p| self.whole_copy_late_at(job, &job.frame, p, policy))
             .min();
         if job.running_frames().any(Frame::has_unassigned) {
             return oldest_late;
@@ -1412,12 +1521,12 @@ impl Scheduler {
             .copied()
             .filter(|w| !job.blocklist.contains(w))
             .collect();
-        let no_room = !self.room_for_a_frame(job);
-        self.running_packages()
+        let no_room = !self.room_for_a_frame(j);
+        (job.running_packages())
             .filter(|(_, p)| takers.iter().any(|&w| may_duplicate(p, w)))
             .map(|(id, p)| {
                 let late = (job.frame_of(*id).filter(|_| no_room))
-                    .and_then(|frame| self.whole_copy_late_at(frame, p, policy));
+                    .and_then(|frame| self.whole_copy_late_at(job, frame, p, policy));
                 straggler_deadline(p, policy).min(late.unwrap_or(Duration::MAX))
             })
             .chain(oldest_late)
@@ -1428,12 +1537,10 @@ impl Scheduler {
 
     /// Hands `pick` to `worker`: (new) → Assigned, Queued → Assigned, or
     /// Assigned → Duplicated; the worker goes Waiting → Busy.
-    fn assign(&mut self, worker: WorkerId, pick: Pick) {
+    fn assign(&mut self, j: usize, worker: WorkerId, pick: Pick) {
         let now = self.now;
-        let rate = self.rate_of(worker);
-        let Some(job) = &mut self.running else {
-            return;
-        };
+        let rate = self.rate_of(&self.running[j], worker);
+        let job = &mut self.running[j];
         let job_id = job.id;
         let frame = match pick {
             Pick::Fresh { frame, .. } | Pick::Queued { frame, .. } => job.frame_mut(frame),
@@ -1508,9 +1615,10 @@ impl Scheduler {
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.insert(id);
             w.wants_work = false;
-            w.frames.insert(frame.index);
+            w.latest_job = Some(job_id);
+            w.frames.insert((job_id, frame.index));
             if !duplicate {
-                w.crew = Some(frame.index);
+                w.crew = Some((job_id, frame.index));
             }
         }
         self.assignments.push_back(Assignment {
@@ -1532,7 +1640,13 @@ impl Scheduler {
     fn complete(&mut self, worker: WorkerId, id: PackageId, measure: &PackageMeasure) {
         let now = self.now;
         let smoothing = self.config.estimation.rate_smoothing;
-        let Some(frame) = (self.running.as_mut()).and_then(|job| job.frame_of_mut(id)) else {
+        let Some(j) = self.job_of(id) else {
+            return;
+        };
+        let job = &mut self.running[j];
+        let measures = job.measures.entry(worker).or_default();
+        let frames = std::iter::once(&mut job.frame).chain(job.ahead.iter_mut());
+        let Some(frame) = frames.into_iter().find(|f| f.packages.contains_key(&id)) else {
             return;
         };
         let Some(package) = frame.packages.get_mut(&id) else {
@@ -1579,41 +1693,42 @@ impl Scheduler {
         stats.bytes_in += measure.bytes_in;
         stats.bytes_out += measure.bytes_out;
 
+        // Up to its arrival: a result held by the driver is not slow.
+        let arrived = attempt.arrived_at.unwrap_or(now);
+        let elapsed = arrived.saturating_sub(attempt.assigned_at).as_secs_f64();
+        measures.rate = smooth(measures.rate, cost / elapsed, smoothing);
+        let compute_rate = cost / busy;
+        if compute_rate.is_finite() && compute_rate > 0.0 {
+            if measures.compute_samples.len() == COMPUTE_SAMPLES {
+                measures.compute_samples.pop_front();
+            }
+            measures.compute_samples.push_back(compute_rate);
+        }
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.remove(&id);
             w.packages_done += 1;
             w.items_done += range.len() as u64;
             w.busy += measure.busy;
-            // Up to its arrival: a result held by the driver is not slow.
-            let arrived = attempt.arrived_at.unwrap_or(now);
-            let elapsed = arrived.saturating_sub(attempt.assigned_at).as_secs_f64();
-            w.rate = smooth(w.rate, cost / elapsed, smoothing);
-            let compute_rate = cost / busy;
-            if compute_rate.is_finite() && compute_rate > 0.0 {
-                if w.compute_samples.len() == COMPUTE_SAMPLES {
-                    w.compute_samples.pop_front();
-                }
-                w.compute_samples.push_back(compute_rate);
-            }
         }
         for loser in losers {
-            self.cancel_losing_copy(id, cost, loser);
+            self.cancel_losing_copy(j, id, cost, loser);
         }
     }
 
     /// The other copy of a package that just completed is cancelled. That it
     /// had not finished is news about its worker: its rate is at most
     /// `cost / elapsed`.
-    fn cancel_losing_copy(&mut self, id: PackageId, cost: f64, loser: Attempt) {
+    fn cancel_losing_copy(&mut self, j: usize, id: PackageId, cost: f64, loser: Attempt) {
         let bound = cost / self.now.saturating_sub(loser.assigned_at).as_secs_f64();
-        let rate = self.rate_of(loser.worker);
+        let rate = self.rate_of(&self.running[j], loser.worker);
         if let Some(w) = self.workers.get_mut(&loser.worker) {
             w.running.remove(&id);
-            if bound.is_finite() && bound > 0.0 && bound < rate {
-                w.rate = Some(bound);
-            }
         }
-        if let Some(frame) = (self.running.as_mut()).and_then(|job| job.frame_of_mut(id)) {
+        let job = &mut self.running[j];
+        if bound.is_finite() && bound > 0.0 && bound < rate {
+            job.measures.entry(loser.worker).or_default().rate = Some(bound);
+        }
+        if let Some(frame) = job.frame_of_mut(id) {
             frame.stats.cancelled_copies += 1;
         }
         self.events.push_back(Event::PackageCancelled {
@@ -1628,9 +1743,10 @@ impl Scheduler {
     /// worker is blocklisted for the job after enough failures.
     fn fail_attempt(&mut self, worker: WorkerId, id: PackageId, error: String) {
         let retry = self.config.retry.clone();
-        let Some(job) = &mut self.running else {
+        let Some(j) = self.job_of(id) else {
             return;
         };
+        let job = &mut self.running[j];
         let Some(frame) = job.frame_of_mut(id) else {
             return;
         };
@@ -1668,7 +1784,7 @@ impl Scheduler {
             });
         }
         if let Some(errors) = job_fails {
-            self.fail_job(JobFailure::PackageFailed(id), errors);
+            self.fail_job(j, JobFailure::PackageFailed(id), errors);
         }
     }
 
@@ -1684,7 +1800,7 @@ impl Scheduler {
         let running = std::mem::take(&mut w.running);
         self.waiting.retain(|&x| x != worker);
         let mut all_requeued: Vec<PackageId> = Vec::new();
-        if let Some(job) = &mut self.running {
+        for job in &mut self.running {
             for frame in job.running_frames_mut() {
                 let mut requeued: Vec<(usize, PackageId)> = Vec::new();
                 for &id in &running {
@@ -1716,22 +1832,22 @@ impl Scheduler {
         });
     }
 
-    /// Fails the running job: its packages are cancelled, then
+    /// Fails running job `j`: its packages are cancelled, then
     /// [`Event::JobFailed`].
-    fn fail_job(&mut self, reason: JobFailure, errors: Vec<(WorkerId, String)>) {
-        if let Some(job) = self.abandon_running_job() {
-            self.events.push_back(Event::JobFailed {
-                job,
-                reason,
-                errors,
-            });
-        }
+    fn fail_job(&mut self, j: usize, reason: JobFailure, errors: Vec<(WorkerId, String)>) {
+        let job = self.abandon_job(j);
+        self.events.push_back(Event::JobFailed {
+            job,
+            reason,
+            errors,
+        });
     }
 
-    /// Ends the running job: every package not final goes → Cancelled, with
-    /// [`Event::PackageCancelled`] for each copy that runs.
-    fn abandon_running_job(&mut self) -> Option<JobId> {
-        let mut job = self.running.take()?;
+    /// Ends running job `j`: every package not final goes → Cancelled,
+    /// with [`Event::PackageCancelled`] for each copy that runs (only the
+    /// job's holders are told).
+    fn abandon_job(&mut self, j: usize) -> JobId {
+        let mut job = self.end_job(j);
         for frame in job.running_frames_mut() {
             for (&id, package) in &mut frame.packages {
                 if package.state().is_final() {
@@ -1749,18 +1865,18 @@ impl Scheduler {
                 package.set_state(PackageState::Cancelled);
             }
         }
-        Some(job.id)
+        job.id
     }
 }
 
-impl Worker {
-    /// Its measured rate, or before its first result `prior_per_thread`
-    /// times its threads.
-    fn rate_or(&self, prior_per_thread: f64) -> f64 {
-        self.rate
-            .unwrap_or(prior_per_thread * f64::from(self.threads))
-    }
+/// A worker's measured rate in `job`, or before its first result there
+/// `prior_per_thread` times its threads.
+fn rate_with_prior(job: &RunningJob, id: WorkerId, worker: &Worker, prior_per_thread: f64) -> f64 {
+    (job.measures.get(&id).and_then(|m| m.rate))
+        .unwrap_or(prior_per_thread * f64::from(worker.threads))
+}
 
+impl Measures {
     /// The median of its recent per-package compute rates. A package whose
     /// cost was misestimated (a hot spot in the first frame) gives an outlier
     /// that the median ignores, so that the worker's speed is not confused
@@ -1778,7 +1894,9 @@ impl Worker {
             samples[middle]
         })
     }
+}
 
+impl Worker {
     fn state(&self) -> WorkerState {
         if !self.connected {
             WorkerState::Gone

@@ -103,10 +103,11 @@ pub struct WorkerStatus {
 pub struct QueueStatus {
     /// Jobs waiting, in the order they will run.
     pub waiting: Vec<JobId>,
-    pub running: Option<JobProgress>,
+    /// The running jobs, in rank order (the first gets workers first).
+    pub running: Vec<JobProgress>,
 }
 
-/// Progress of the running job.
+/// Progress of a running job.
 #[derive(Clone, Debug, PartialEq)]
 pub struct JobProgress {
     pub job: JobId,
@@ -116,8 +117,10 @@ pub struct JobProgress {
     /// Items of the current frame done so far.
     pub items_done: usize,
     pub items_total: usize,
-    /// Packages of the frame running now.
+    /// Its packages running now (of any of its frames).
     pub packages_running: usize,
+    /// Paused: it hands out nothing new.
+    pub paused: bool,
     /// Workers that get no more of this job's work.
     pub blocklisted: Vec<WorkerId>,
 }

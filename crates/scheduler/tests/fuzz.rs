@@ -1,11 +1,13 @@
 //! Random sequences of inputs (joins, leaves, heartbeats, requests, results,
 //! failures, timeouts, submissions at priorities, cancellations, pauses,
-//! resumes and priority changes, so jobs give way and come back), with worker, package and
-//! job ids that are often unknown or stale. The scheduler must never panic,
-//! keep its invariants after every input, accept a result only for a package
+//! resumes and priority changes, so several jobs run at once, pause and go
+//! on), with worker, package and job ids that are often unknown or stale.
+//! The scheduler must never panic, keep its invariants after every input,
+//! accept a result only for a package
 //! the worker runs, and complete every item of a frame exactly once. The
 //! same holds for random simulated farms (speeds, links, crashes, slowdowns,
-//! failures) with at least one reliable worker, which also always finish.
+//! failures) with at least one reliable worker and up to four jobs, which
+//! also always finish.
 
 mod common;
 
@@ -352,13 +354,17 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     /// Random farms with one reliable worker and at most two failing ones
-    /// always finish every frame, each item exactly once.
+    /// always finish every frame of every job, each item exactly once,
+    /// with one to three jobs submitted at random times (several run at
+    /// once on workers the first cannot use).
     #[test]
     fn random_simulated_farms_finish_every_frame_exactly_once(
         mut workers in prop::collection::vec(sim_worker(), 0..8),
         items in 1usize..300,
         frames in 1usize..4,
         seed in any::<u64>(),
+        later_jobs in prop::collection::vec((0u64..3000, 1usize..4, 1usize..60), 0..3),
+        farm in any::<bool>(),
     ) {
         // Failing workers beyond two could fail a package three times, which
         // rightly fails the job; keep failures to two and add a reliable one.
@@ -376,16 +382,34 @@ proptest! {
                 })
                 .collect(),
         };
-        let job = SimJob { id: JobId(1), submit_at: Duration::ZERO, frames: vec![frame.clone(); frames] };
-        let config = SimConfig { validate: true, ..SimConfig::default() };
+        let mut jobs = vec![SimJob { id: JobId(1), submit_at: Duration::ZERO, frames: vec![frame.clone(); frames] }];
+        for (i, &(at_ms, frames, items)) in later_jobs.iter().enumerate() {
+            // A prefix of the first job's frame.
+            let items = items.min(frame.items.len());
+            let frame = SimFrame {
+                items: frame.items[..items].to_vec(),
+                costs: frame.costs[..items].to_vec(),
+            };
+            jobs.push(SimJob { id: JobId(2 + i as u64), submit_at: Duration::from_millis(at_ms), frames: vec![frame; frames] });
+        }
+        let scheduler = if farm {
+            SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
+        } else {
+            SchedulerConfig::default()
+        };
+        let config = SimConfig { validate: true, scheduler, ..SimConfig::default() };
         let mut sim = Simulation::new(config, workers);
-        sim.submit(job);
+        for job in &jobs {
+            sim.submit(job.clone());
+        }
         let report = sim.drive();
         prop_assert!(report.violations.is_empty(), "{:?}", report.violations);
         prop_assert!(report.finished);
-        prop_assert_eq!(report.frames.len(), frames);
+        let expected: usize = jobs.iter().map(|j| j.frames.len()).sum();
+        prop_assert_eq!(report.frames.len(), expected);
         for f in &report.frames {
-            prop_assert_eq!(f.completions.len(), items);
+            let job = jobs.iter().find(|j| j.id == f.job).expect("a submitted job");
+            prop_assert_eq!(f.completions.len(), job.frames[0].items.len());
             prop_assert!(f.completions.values().all(|&c| c == 1));
         }
     }

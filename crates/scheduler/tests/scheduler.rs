@@ -700,7 +700,7 @@ fn status_shows_progress_and_rates() {
     farm.at_ms(100);
     farm.done(W0, &a).expect("done");
     let queue = farm.s.queue();
-    let progress = queue.running.expect("running");
+    let progress = queue.running.first().expect("running");
     assert_eq!((progress.job, progress.frame, progress.frames), (JOB, 0, 3));
     assert_eq!((progress.items_done, progress.items_total), (10, 100));
     let workers = farm.s.workers();
@@ -803,7 +803,7 @@ fn pipelined_frames_start_when_the_running_frame_has_nothing_left() {
         })
         .collect();
     assert_eq!(order, [("complete", 0), ("complete", 1), ("started", 2)]);
-    assert_eq!(farm.s.queue().running.expect("frame 2").frame, 2);
+    assert_eq!(farm.s.queue().running[0].frame, 2);
     farm.valid();
 }
 
@@ -945,5 +945,208 @@ fn an_interactive_jobs_frames_are_all_split() {
     assert!(!a.whole && !b.whole && a.items.len() < 6, "{a:?} {b:?}");
     // Three frames on two workers would start whole in a batch job.
     assert_eq!(started_whole(&farm.events())[0], (0, false));
+    farm.valid();
+}
+
+// ----- Several jobs at once -----
+
+/// The running jobs, in rank order.
+fn running_jobs(farm: &Farm) -> Vec<JobId> {
+    farm.s.queue().running.iter().map(|r| r.job).collect()
+}
+
+/// Two workers, two jobs: job 1's one package runs on W0 and job 2 has 10
+/// items; W1 got job 2's work.
+fn two_jobs_running() -> (Farm, Assignment, Assignment) {
+    let mut farm = Farm::new();
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JobId(1), 1, 1);
+    farm.submit(JobId(2), 10, 1);
+    let a = farm.request(W0).expect("work");
+    let b = farm.request(W1).expect("work");
+    (farm, a, b)
+}
+
+#[test]
+fn a_second_job_runs_on_a_worker_the_first_has_nothing_for() {
+    let (mut farm, a, b) = two_jobs_running();
+    // Job 1's only package runs: W1 takes job 2's work instead of idling.
+    assert_eq!((a.job, b.job), (JobId(1), JobId(2)));
+    assert_eq!(running_jobs(&farm), [JobId(1), JobId(2)]);
+    assert!(farm.s.queue().waiting.is_empty());
+    farm.valid();
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    assert!(
+        farm.events()
+            .contains(&Event::JobComplete { job: JobId(1) })
+    );
+    let c = farm.request(W0).expect("work");
+    assert_eq!(c.job, JobId(2));
+    farm.valid();
+}
+
+#[test]
+fn a_job_at_its_frames_in_flight_limit_lets_the_next_job_use_the_worker() {
+    let mut farm = Farm::new(); // one frame in flight
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JobId(1), 1, 3);
+    farm.submit(JobId(2), 10, 1);
+    let a = farm.request(W0).expect("work");
+    // Frame 0's one package runs and frame 1 may not start yet.
+    let b = farm.request(W1).expect("work");
+    assert_eq!((a.job, a.frame), (JobId(1), 0));
+    assert_eq!(b.job, JobId(2));
+    // Frame 0 done: frame 1 starts, and job 1 comes first again.
+    farm.at_ms(50);
+    farm.done(W0, &a).expect("done");
+    let c = farm.request(W0).expect("work");
+    assert_eq!((c.job, c.frame), (JobId(1), 1));
+    farm.valid();
+}
+
+#[test]
+fn a_worker_blocklisted_for_one_job_works_on_the_next() {
+    let mut farm = Farm::new();
+    farm.join(W0);
+    farm.join(W1);
+    farm.submit(JobId(1), 100, 1);
+    farm.submit(JobId(2), 10, 1);
+    let _held = farm.request(W0).expect("work");
+    for _ in 0..3 {
+        let a = farm.request(W1).expect("work");
+        assert_eq!(a.job, JobId(1));
+        farm.fail(W1, &a).expect("failed");
+    }
+    let events = farm.events();
+    assert!(events.contains(&Event::WorkerBlocklisted {
+        worker: W1,
+        job: JobId(1)
+    }));
+    // Job 1 still has work, but none for W1.
+    let progress = &farm.s.queue().running[0];
+    assert!(progress.items_done < progress.items_total);
+    let b = farm.request(W1).expect("work of the next job");
+    assert_eq!(b.job, JobId(2));
+    farm.valid();
+}
+
+#[test]
+fn a_higher_priority_job_takes_each_worker_at_its_next_request_and_stops_nothing() {
+    let mut farm = Farm::running(2, 100, 2);
+    let a = farm.request(W0).expect("work");
+    let b = farm.request(W1).expect("work");
+    let _ = farm.events();
+    let options = vtfarm_scheduler::QueueOptions {
+        priority: 5,
+        ..Default::default()
+    };
+    let high = JobId(9);
+    let frame = FrameWork {
+        items: (0..100).collect(),
+    };
+    (farm.s)
+        .submit_job_with(farm.now, high, vec![frame], options)
+        .expect("submit");
+    // Nobody waits: it starts when a worker asks, and no package is stopped.
+    assert!(farm.events().is_empty());
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    let c = farm.request(W0).expect("work");
+    assert_eq!(c.job, high);
+    assert_eq!(running_jobs(&farm), [high, JOB]);
+    // W1's package of the lower job finishes and counts; W1 goes over too.
+    farm.done(W1, &b).expect("the running package counts");
+    let d = farm.request(W1).expect("work");
+    assert_eq!(d.job, high);
+    let events = farm.events();
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, Event::PackageCancelled { .. })),
+        "{events:?}"
+    );
+    farm.valid();
+}
+
+#[test]
+fn a_pause_of_one_of_two_running_jobs_holds_only_its_new_work() {
+    let (mut farm, a, b) = two_jobs_running();
+    farm.join(W2);
+    farm.s.pause_job(farm.now, JobId(2)).expect("pause");
+    // Job 1 has nothing left to hand out, job 2 is paused: W2 waits.
+    assert_eq!(farm.request(W2), None);
+    assert_eq!(running_jobs(&farm), [JobId(1), JobId(2)]);
+    assert!(farm.s.queue().running[1].paused);
+    // Both running packages finish and count.
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    farm.done(W1, &b).expect("done while paused");
+    assert_eq!(farm.request(W1), None);
+    assert_eq!(farm.s.queue().running[0].items_done, b.items.len());
+    let _ = farm.events();
+    farm.s.resume_job(farm.now, JobId(2)).expect("resume");
+    assert_eq!(farm.events()[0], Event::JobResumed { job: JobId(2) });
+    // The waiting workers get its work again.
+    let resumed = farm.assignments();
+    assert_eq!(
+        resumed
+            .iter()
+            .map(|x| (x.worker, x.job))
+            .collect::<Vec<_>>(),
+        [(W2, JobId(2)), (W1, JobId(2))]
+    );
+    farm.valid();
+}
+
+#[test]
+fn cancelling_one_of_two_running_jobs_cancels_exactly_its_packages() {
+    let (mut farm, a, b) = two_jobs_running();
+    farm.join(W2);
+    let c = farm.request(W2).expect("work");
+    assert_eq!(c.job, JobId(2));
+    let _ = farm.events();
+    farm.s.cancel_job(farm.now, JobId(2)).expect("cancel");
+    assert_eq!(
+        farm.events(),
+        [
+            Event::PackageCancelled {
+                worker: W1,
+                package: b.package
+            },
+            Event::PackageCancelled {
+                worker: W2,
+                package: c.package
+            },
+            Event::JobCancelled { job: JobId(2) },
+        ]
+    );
+    assert_eq!(running_jobs(&farm), [JobId(1)]);
+    assert_eq!(farm.state(a.package), Some(PackageState::Assigned));
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("job 1 goes on");
+    assert!(
+        farm.events()
+            .contains(&Event::JobComplete { job: JobId(1) })
+    );
+    farm.valid();
+}
+
+#[test]
+fn rates_are_measured_per_job() {
+    let (mut farm, a, b) = two_jobs_running();
+    farm.at_ms(100);
+    farm.done(W0, &a).expect("done");
+    farm.done(W1, &b).expect("done");
+    // W1 measured job 2 (its unit: b.items.len() items in 0.1 s); W0 has
+    // no rate in job 2 yet and starts from W1's per thread, not from its
+    // rate in job 1.
+    let w1 = farm.s.workers()[1].rate.expect("measured");
+    assert!((w1 - b.items.len() as f64 / 0.1).abs() < 1e-6, "{w1}");
+    let c = farm.request(W0).expect("work");
+    assert_eq!(c.job, JobId(2));
+    assert!((c.expected.as_secs_f64() - c.estimated_cost / w1).abs() < 1e-6);
     farm.valid();
 }

@@ -370,7 +370,11 @@ fn a_job_fails_when_every_worker_is_blocklisted() {
 }
 
 #[test]
-fn jobs_run_one_after_another_in_submission_order() {
+fn jobs_run_by_rank_and_the_first_job_starts_when_none_runs() {
+    // Job 3 comes first and starts (nothing runs); job 1, submitted at
+    // once, outranks it (equal priority, lower id) and takes every worker
+    // from its first package on; job 2 comes later, starts on a worker job
+    // 1 has nothing for (its last packages run), and still outranks 3.
     let frame = uneven_frame(100, 9, 0.01, 0..0, 1.0);
     let mut jobs: Vec<SimJob> = [3, 1, 2]
         .iter()
@@ -391,17 +395,17 @@ fn jobs_run_one_after_another_in_submission_order() {
         order,
         [
             "start 3",
-            "frame 3.0",
-            "frame 3.1",
-            "end 3",
             "start 1",
+            "start 2",
             "frame 1.0",
             "frame 1.1",
             "end 1",
-            "start 2",
             "frame 2.0",
             "frame 2.1",
-            "end 2"
+            "end 2",
+            "frame 3.0",
+            "frame 3.1",
+            "end 3"
         ]
     );
 }
@@ -753,4 +757,45 @@ fn a_slow_workers_last_frame_is_finished_by_the_others() {
         end(&with_slow),
         end(&without)
     );
+}
+
+/// A single frame of two big items on four workers, beside a deep job:
+/// the two workers the frame cannot use take the deep job's work at once,
+/// so no worker idles while work exists and the farm ends when the work
+/// over four workers does.
+#[test]
+fn a_small_job_beside_a_deep_one_leaves_no_worker_idle() {
+    let big = common::sim::SimFrame {
+        items: vec![1, 2],
+        costs: vec![1.0, 1.0],
+    };
+    let small = SimJob {
+        id: JobId(1),
+        submit_at: Duration::from_millis(1),
+        frames: vec![big],
+    };
+    let frame = uneven_frame(100, 14, 0.005, 0..0, 1.0);
+    let mut deep = repeated_job(2, &frame, 12);
+    deep.submit_at = Duration::from_millis(1);
+    let jobs = [small, deep];
+    for config in [checked(), batch_config()] {
+        let report = run(config, vec![SimWorker::with_speed(1.0); 4], &jobs);
+        let small_done = (report.frames.iter())
+            .find(|f| f.job == JobId(1))
+            .expect("complete")
+            .at;
+        let deep_first = (report.assignments.iter())
+            .find(|(_, a)| a.job == JobId(2))
+            .expect("assigned")
+            .0;
+        assert!(
+            deep_first < Duration::from_millis(100),
+            "the deep job waited until {deep_first:?}"
+        );
+        assert!(small_done < Duration::from_millis(1200), "{small_done:?}");
+        let work = 2.0 + frame.costs.iter().sum::<f64>() * 12.0;
+        let end = report.end.as_secs_f64();
+        println!("end {end:.3} s, ideal {:.3} s", work / 4.0);
+        assert!(end < work / 4.0 * 1.1, "{end} s for {work} s of work on 4");
+    }
 }
