@@ -635,7 +635,17 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
         let first_view = after.iter().position(|&job| job == view);
         assert!(first_view.is_some_and(|i| i <= 1), "{after:?}");
     }
-    assert_eq!(state(&pair, id), Some(JobState::Running));
+    // Between the view's stages a worker that has no view package to run
+    // takes the batch job's (several jobs run at once), so the batch job
+    // may be done by now; it is never cancelled or failed for the view.
+    assert!(
+        matches!(
+            state(&pair, id),
+            Some(JobState::Running | JobState::Completed)
+        ),
+        "{:?}",
+        state(&pair, id)
+    );
     complete(&mut pair, id, 3);
     check_images(&pair, id, &batch);
     for done in frames_of(&pair, id) {

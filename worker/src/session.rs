@@ -450,9 +450,16 @@ impl WorkerSession {
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
         // Announced again (the master does when the worker comes from
-        // another job's work): a frame still kept is not set up twice.
+        // another job's work): a frame still kept, being set up or waiting
+        // to be is not set up twice.
         let key = (start.job, start.frame);
-        if self.ready == Some(key) || self.older.contains(&key) {
+        let known = |f: &FrameStart| (f.job, f.frame) == key;
+        if self.ready == Some(key)
+            || self.preparing == Some(key)
+            || self.older.contains(&key)
+            || self.announced.iter().any(known)
+            || self.awaiting_scene.iter().any(known)
+        {
             return;
         }
         self.unusable = None;

@@ -53,6 +53,10 @@ pub trait CostModel {
 
     /// What the master's machine spends.
     fn master_costs(&self) -> MasterCosts;
+
+    /// Drops what the model records of the worker's work for the tests
+    /// ([`Farm::forget_records`]).
+    fn forget_records(&mut self, _worker: &mut Self::Worker) {}
 }
 
 /// A package's outcome under a [`CostModel`].
@@ -534,14 +538,19 @@ impl<M: CostModel> Farm<M> {
     }
 
     /// Forgets what the farm recorded for its user (what the submitter
-    /// got, the frames announced, the deliveries and package runs), so that
+    /// got, the frames announced, the base frames, the deliveries, package
+    /// and stage runs), so that
     /// only the master's and the sessions' memory is left.
     pub fn forget_records(&mut self) {
         self.to_submitter = Vec::new();
         self.frame_starts = Vec::new();
+        self.base_frames = Vec::new();
         self.deliveries = Vec::new();
         for runs in &mut self.busy {
             *runs = Vec::new();
+        }
+        for worker in &mut self.workers {
+            self.model.forget_records(&mut worker.state);
         }
     }
 

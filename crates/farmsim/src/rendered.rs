@@ -123,6 +123,10 @@ impl CostModel for Rendered {
     fn master_costs(&self) -> MasterCosts {
         MasterCosts::default()
     }
+
+    fn forget_records(&mut self, worker: &mut RenderingWorker) {
+        worker.stages_run = Vec::new();
+    }
 }
 
 /// The test harness: the real master core and N rendering workers, one
