@@ -33,6 +33,7 @@ fn main() -> std::io::Result<()> {
             name: "glass".into(),
         }],
         materials: vec![Material::default()],
+        ..Default::default()
     };
     let camera = Camera {
         eye: Vec3::new(0.2, 0.2, 2.0),
