@@ -719,10 +719,8 @@ mod tests {
         }))
     }
 
-    #[test]
-    fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
-        let dir = tempfile::tempdir().unwrap();
-        let journal = Journal::open(dir.path()).unwrap();
+    /// A job of `frames` one-pixel frames of the empty scene, and its scene.
+    fn one_pixel_job(frames: usize) -> (Arc<SceneData>, vtfarm_proto::WireJob) {
         let scene = Arc::new(SceneData::from_scene(&Scene::default()));
         let setup = FrameSetup {
             camera: Camera {
@@ -741,8 +739,15 @@ mod tests {
             method: vtfarm_method::MethodKind::VertexTracing,
             aux: false,
         };
-        let frames = [setup.clone(), setup.clone(), setup];
-        let job = vtfarm_proto::wire_job("j", &scene, &frames, &[0], options);
+        let job = vtfarm_proto::wire_job("j", &scene, &vec![setup; frames], &[0], options);
+        (scene, job)
+    }
+
+    #[test]
+    fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        let (scene, job) = one_pixel_job(3);
         journal
             .write(Record::JobQueued {
                 id: 4,
@@ -890,25 +895,7 @@ mod tests {
         use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
         let dir = tempfile::tempdir().unwrap();
         let journal = Journal::open(dir.path()).unwrap();
-        let scene = Arc::new(SceneData::from_scene(&Scene::default()));
-        let setup = FrameSetup {
-            camera: Camera {
-                eye: Vec3::ZERO,
-                target: Vec3::Z,
-                up: Vec3::Y,
-                fov_y_deg: 60.0,
-                width: 1,
-                height: 1,
-            },
-            lighting: Default::default(),
-            trace: Default::default(),
-            vertex: Default::default(),
-        };
-        let options = vtfarm_proto::JobOptions {
-            method: vtfarm_method::MethodKind::VertexTracing,
-            aux: false,
-        };
-        let job = vtfarm_proto::wire_job("j", &scene, &[setup], &[0], options);
+        let (scene, job) = one_pixel_job(1);
         let states = [
             WireJobState::Queued,
             WireJobState::Running,

@@ -72,6 +72,13 @@ pub struct ViewArgs {
     json: Option<PathBuf>,
 }
 
+/// The most worker processes and threads per worker the bench starts.
+const MAX_WORKERS: usize = 64;
+const MAX_WORKER_THREADS: usize = 256;
+
+/// The longest `--timeout`, in seconds (an hour).
+const MAX_TIMEOUT_SECONDS: f64 = 3600.0;
+
 /// The stages a move of the view renders, in order, as the master names them.
 const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
 
@@ -187,9 +194,15 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
         args.workers >= 1 && args.worker_threads >= 1 && args.moves >= 1,
         "--workers, --worker-threads and --moves must be at least 1"
     );
+    // Each worker is a process of this machine and each thread a pool
+    // thread of it: a localhost farm, not a cluster.
     ensure!(
-        args.timeout.is_finite() && args.timeout > 0.0,
-        "--timeout must be a positive number of seconds"
+        args.workers <= MAX_WORKERS && args.worker_threads <= MAX_WORKER_THREADS,
+        "--workers at most {MAX_WORKERS}, --worker-threads at most {MAX_WORKER_THREADS} (a localhost farm)"
+    );
+    ensure!(
+        args.timeout.is_finite() && args.timeout > 0.0 && args.timeout <= MAX_TIMEOUT_SECONDS,
+        "--timeout must be a positive number of seconds, at most {MAX_TIMEOUT_SECONDS}"
     );
     let offsets = move_offsets(args.moves + 1, args.step)?;
     let singles = single_frame_offsets(args.single_frames, args.step)?;
