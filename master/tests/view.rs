@@ -197,6 +197,24 @@ fn moved(c: &Cockpit, offset: Vec3, quality: Quality) -> FrameSetup {
     setup
 }
 
+/// The view's latest image is, byte for byte, the single-process render
+/// at `full` of the source eye moved by `offset`.
+fn assert_the_view_shows_the_full_render(
+    pair: &Pair,
+    c: &Cockpit,
+    reflectors: Vec<u32>,
+    offset: Vec3,
+) {
+    let latest = pair.master.views().latest().unwrap();
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
+    let reference = renderer.render(
+        &moved(c, offset, Quality::Full),
+        &Default::default(),
+        &mut |_, _| {},
+    );
+    assert!(latest.image().pixels == reference.image.color.pixels);
+}
+
 /// Drives until the view shows stage `quality` of move `generation`.
 fn drive_to_stage(pair: &mut Pair, generation: u64, quality: Quality) {
     pair.drive(BOUND, |p| {
@@ -379,15 +397,7 @@ fn a_newer_move_cancels_the_older_moves_remaining_stages() {
     // The old move's frame never completed.
     assert!(!pair.master.telemetry().frames().any(|f| f.job == old));
     assert_eq!(pair.master.telemetry().counters.jobs_cancelled, 1);
-    let latest = pair.master.views().latest().unwrap();
-    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
-    let offset = Vec3::from(second.offset);
-    let reference = renderer.render(
-        &moved(&c, offset, Quality::Full),
-        &Default::default(),
-        &mut |_, _| {},
-    );
-    assert!(latest.image().pixels == reference.image.color.pixels);
+    assert_the_view_shows_the_full_render(&pair, &c, reflectors, Vec3::from(second.offset));
 }
 
 /// A worker's stage results are checked like any result, and refused
@@ -481,13 +491,5 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
     pair.drive(BOUND, |p| {
         p.master.telemetry().frames().any(|f| f.job == job)
     });
-    let latest = pair.master.views().latest().unwrap();
-    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
-    let offset = Vec3::from(request.offset);
-    let reference = renderer.render(
-        &moved(&c, offset, Quality::Full),
-        &Default::default(),
-        &mut |_, _| {},
-    );
-    assert!(latest.image().pixels == reference.image.color.pixels);
+    assert_the_view_shows_the_full_render(&pair, &c, reflectors, Vec3::from(request.offset));
 }
