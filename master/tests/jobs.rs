@@ -78,6 +78,19 @@ fn complete(pair: &mut Pair, id: u64, frames: usize) {
     });
 }
 
+/// No frame of `id` had a package requeued or failed: nothing was taken
+/// back from a worker.
+fn assert_nothing_taken_back(pair: &Pair, id: u64) {
+    for done in frames_of(pair, id) {
+        assert_eq!(
+            (done.stats.requeued, done.stats.failures),
+            (0, 0),
+            "{:?}",
+            done.stats
+        );
+    }
+}
+
 /// Checks `job`'s delivered frames against the single-process render.
 fn check_images(pair: &Pair, id: u64, job: &Job) {
     let reference = job.reference();
@@ -589,14 +602,7 @@ fn a_higher_priority_job_takes_the_workers_as_their_packages_finish() {
     check_images(&pair, high, &short);
     check_images(&pair, low, &long);
     // Nothing was taken back from a worker for it.
-    for done in frames_of(&pair, low) {
-        assert_eq!(
-            (done.stats.requeued, done.stats.failures),
-            (0, 0),
-            "{:?}",
-            done.stats
-        );
-    }
+    assert_nothing_taken_back(&pair, low);
 }
 
 #[test]
@@ -648,14 +654,7 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
     );
     complete(&mut pair, id, 3);
     check_images(&pair, id, &batch);
-    for done in frames_of(&pair, id) {
-        assert_eq!(
-            (done.stats.requeued, done.stats.failures),
-            (0, 0),
-            "{:?}",
-            done.stats
-        );
-    }
+    assert_nothing_taken_back(&pair, id);
 }
 
 #[test]
