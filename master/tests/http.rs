@@ -570,16 +570,20 @@ async fn the_jobs_api_lists_and_changes_jobs_and_the_metrics_agree() {
 async fn a_peer_off_loopback_needs_the_cluster_token() {
     let (master, _task) = spawn_master(FarmRules::default());
     let token = "c0ffee".to_owned();
-    // Reading and changing jobs follow the same rule.
-    let cancel = |peer: SocketAddr, authorization: Option<&str>| {
+    // `request` from `peer`, with that authorization header if any.
+    let send = |mut request: axum::http::request::Builder,
+                peer: SocketAddr,
+                authorization: Option<&str>| {
         let app = http::router(master.clone(), http::HttpAccess::new(token.clone()))
             .layer(MockConnectInfo(peer));
-        let mut request = Request::post("/api/jobs/5/cancel");
         if let Some(value) = authorization {
             request = request.header("authorization", value);
         }
         app.oneshot(request.body(Body::empty()).unwrap())
     };
+    // Reading and changing jobs follow the same rule.
+    let cancel =
+        |peer, authorization| send(Request::post("/api/jobs/5/cancel"), peer, authorization);
     let outsider: SocketAddr = "192.0.2.7:40000".parse().unwrap();
     let code = |r: axum::response::Response| r.status();
     assert_eq!(
@@ -589,15 +593,7 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
     // Let through, it finds no job 5.
     let allowed = cancel(outsider, Some("Bearer c0ffee")).await.unwrap();
     assert_eq!(code(allowed), StatusCode::NOT_FOUND);
-    let ask = |peer: SocketAddr, authorization: Option<&str>| {
-        let app = http::router(master.clone(), http::HttpAccess::new(token.clone()))
-            .layer(MockConnectInfo(peer));
-        let mut request = Request::get("/api/status");
-        if let Some(value) = authorization {
-            request = request.header("authorization", value);
-        }
-        app.oneshot(request.body(Body::empty()).unwrap())
-    };
+    let ask = |peer, authorization| send(Request::get("/api/status"), peer, authorization);
     let remote: SocketAddr = "192.0.2.7:40000".parse().unwrap();
     let local: SocketAddr = "127.0.0.1:40000".parse().unwrap();
     let mapped_local: SocketAddr = "[::ffff:127.0.0.1]:40000".parse().unwrap();
