@@ -46,7 +46,7 @@ enum Input {
     },
     /// How writing a journal record went (from the journal's thread).
     Journaled(Written),
-    /// The glare figures of a view's stage, computed on the blocking pool.
+    /// The glare figures of a view's stage, computed on their thread.
     ViewFigures {
         generation: u64,
         quality: vtfarm_vertex::Quality,
@@ -225,6 +225,7 @@ async fn run(
     // meanwhile replaces the one waiting (only the stage on view gets them).
     let mut glare_running = false;
     let mut glare_next: Option<GlareRequest> = None;
+    let glare = GlareThread::start(feedback.clone());
     if let Some(journal) = &journal {
         let loaded = tokio::task::block_in_place(|| journal.load());
         for damaged in loaded.damaged {
@@ -287,7 +288,7 @@ async fn run(
                         glare_running = false;
                         if let Some(request) = glare_next.take() {
                             glare_running = true;
-                            spawn_glare(request, feedback.clone());
+                            glare.compute(request);
                         }
                     }
                     Input::Control { job, action, who, reply } => {
@@ -332,7 +333,7 @@ async fn run(
                         glare_next = Some(request);
                     } else {
                         glare_running = true;
-                        spawn_glare(request, feedback.clone());
+                        glare.compute(request);
                     }
                 }
                 Output::Persist(record) => {
@@ -366,16 +367,47 @@ async fn run(
     }
 }
 
-/// Computes a view stage's glare figures on the blocking pool and hands
-/// them back as an input.
-fn spawn_glare(request: GlareRequest, feedback: UnboundedSender<Input>) {
-    tokio::task::spawn_blocking(move || {
-        let figures = request.compute();
-        let (generation, quality) = (request.generation, request.quality);
-        let _ = feedback.send(Input::ViewFigures {
-            generation,
-            quality,
-            figures,
-        });
-    });
+/// How much lower than the master's other work the view's glare figures
+/// run (a `nice` increment): below the workers' later stages
+/// (`vtfarm_worker`'s 10) too, so on a machine the master shares with its
+/// workers the figures of a stage on view take only the cores that
+/// rendering the next stage leaves, and never delay it.
+const VIEW_FIGURES_NICENESS: i32 = 15;
+
+/// The thread that computes the view's glare figures, one request at a
+/// time, at [`VIEW_FIGURES_NICENESS`]; it ends with the driver.
+struct GlareThread {
+    requests: std::sync::mpsc::Sender<GlareRequest>,
+}
+
+impl GlareThread {
+    fn start(feedback: UnboundedSender<Input>) -> GlareThread {
+        let (requests, incoming) = std::sync::mpsc::channel::<GlareRequest>();
+        let spawned = std::thread::Builder::new()
+            .name("view-figures".into())
+            .spawn(move || {
+                vtfarm_transport::lower_this_thread(VIEW_FIGURES_NICENESS);
+                for request in incoming {
+                    let figures = request.compute();
+                    let (generation, quality) = (request.generation, request.quality);
+                    let figures = Input::ViewFigures {
+                        generation,
+                        quality,
+                        figures,
+                    };
+                    if feedback.send(figures).is_err() {
+                        return;
+                    }
+                }
+            });
+        if let Err(e) = spawned {
+            tracing::warn!("cannot start the view's figures thread: {e}");
+        }
+        GlareThread { requests }
+    }
+
+    /// Computes `request`'s figures and hands them back as an input.
+    fn compute(&self, request: GlareRequest) {
+        let _ = self.requests.send(request);
+    }
 }

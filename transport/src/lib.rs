@@ -14,7 +14,8 @@
 //! - [`client`]: dialling the master.
 //!
 //! [`init_logging`] is the farm daemons' (`vtfarm master`, `vtfarm worker`)
-//! log set-up, here because both sit on this crate.
+//! log set-up, and [`lower_this_thread`] the priority of their background
+//! threads, here because both sit on this crate.
 
 pub mod client;
 pub mod cluster;
@@ -52,6 +53,30 @@ pub fn init_logging_at(default: &str) {
         .try_init();
 }
 
+/// Lowers the calling thread's scheduling priority by `niceness` (a
+/// `nice` increment, up to the lowest, 19): work that nobody waits for
+/// yet takes the cores the rest leaves. Linux keeps a nice value per
+/// thread; elsewhere the thread keeps the process's priority. Lowering
+/// needs no privilege, raising it again would: a thread lowered so stays
+/// so, so callers lower threads of their own.
+pub fn lower_this_thread(niceness: i32) {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: `getpriority`/`setpriority` with who = 0 read and change
+        // only the calling thread's scheduling weight (Linux).
+        let done = unsafe {
+            let now = libc::getpriority(libc::PRIO_PROCESS, 0);
+            libc::setpriority(libc::PRIO_PROCESS, 0, (now + niceness).min(19))
+        };
+        if done != 0 {
+            let error = std::io::Error::last_os_error();
+            tracing::debug!("a background thread keeps its priority: {error}");
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = niceness;
+}
+
 /// The longest prefix of `text` of at most `max` bytes that ends on a
 /// character boundary.
 pub(crate) fn truncate_utf8(text: &str, max: usize) -> &str {
@@ -60,4 +85,34 @@ pub(crate) fn truncate_utf8(text: &str, max: usize) -> &str {
         end -= 1;
     }
     &text[..end]
+}
+
+#[cfg(test)]
+mod tests {
+    /// The calling thread's nice value.
+    #[cfg(target_os = "linux")]
+    fn niceness() -> i32 {
+        // SAFETY: reads the calling thread's nice value.
+        unsafe { libc::getpriority(libc::PRIO_PROCESS, 0) }
+    }
+
+    /// A thread lowers only itself, by the increment, down to the lowest
+    /// priority (19) and no further.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_thread_lowers_only_its_own_priority() {
+        let caller = niceness();
+        let lowered = std::thread::spawn(|| {
+            let before = niceness();
+            super::lower_this_thread(3);
+            let once = niceness();
+            super::lower_this_thread(40);
+            (before, once, niceness())
+        });
+        let (before, once, floor) = lowered.join().unwrap();
+        assert_eq!(before, caller);
+        assert_eq!(once, (caller + 3).min(19));
+        assert_eq!(floor, 19);
+        assert_eq!(niceness(), caller, "the caller keeps its priority");
+    }
 }

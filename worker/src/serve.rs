@@ -183,14 +183,20 @@ pub async fn serve(
                     let mut staged = progress.remove(&id);
                     let task = tokio::task::spawn_blocking(move || {
                         let outcome = match active {
-                            Some(a) if (a.job, a.frame) == (package.job, package.frame) => a
-                                .run_stage(
-                                    &package,
-                                    stage,
-                                    &mut staged,
-                                    config.slowdown,
-                                    &task_stop,
-                                ),
+                            Some(a) if (a.job, a.frame) == (package.job, package.frame) => {
+                                let mut run = || {
+                                    let slowdown = config.slowdown;
+                                    a.run_stage(&package, stage, &mut staged, slowdown, &task_stop)
+                                };
+                                // A progressive package's later stages yield
+                                // the cores to what the view's first image
+                                // waits for (`priority`).
+                                if stage > 0 {
+                                    crate::priority::later_stages().install(run)
+                                } else {
+                                    run()
+                                }
+                            }
                             _ => Err(PackageError::FrameNotPrepared),
                         };
                         (outcome, staged)
