@@ -109,11 +109,28 @@ impl Exposure {
 }
 
 /// A linear RGB image, row 0 at the top.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct Image {
     pub width: u32,
     pub height: u32,
     pub pixels: Vec<Vec3>,
+}
+
+impl Clone for Image {
+    fn clone(&self) -> Self {
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels: self.pixels.clone(),
+        }
+    }
+
+    /// Copies `source` into this image's allocation (a copy without the
+    /// page faults of a fresh 1080p buffer when it fits).
+    fn clone_from(&mut self, source: &Self) {
+        (self.width, self.height) = (source.width, source.height);
+        self.pixels.clone_from(&source.pixels);
+    }
 }
 
 impl Image {

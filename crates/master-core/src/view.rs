@@ -161,6 +161,10 @@ pub struct Views {
     latest: Option<ViewFrame>,
     /// Figures to ask the driver for (the newest stage's).
     glare_wanted: Option<GlareRequest>,
+    /// A stage's frame no longer on view nor used by anyone, kept to copy
+    /// the next stage into: a 1080p frame copied into fresh buffers costs
+    /// their page faults too, on the way to the screen.
+    spare: Option<FrameImage>,
     outcomes: VecDeque<ViewOutcome>,
 }
 
@@ -277,19 +281,29 @@ impl Views {
         let reached: Vec<Quality> = reached.collect();
         current.stages_done = stage + 1;
         let generation = current.generation;
-        let frame = Arc::new(image.clone());
+        let frame = Arc::new(match self.spare.take() {
+            Some(mut spare) => {
+                spare.clone_from(image);
+                spare
+            }
+            None => image.clone(),
+        });
         self.glare_wanted = Some(GlareRequest {
             generation,
             quality,
             frame: frame.clone(),
             scene: scene.clone(),
         });
-        self.latest = Some(ViewFrame {
+        let shown = ViewFrame {
             generation,
             quality,
             frame,
             figures: None,
-        });
+        };
+        if let Some(before) = self.latest.replace(shown) {
+            // Unless its figures are still being computed.
+            self.spare = Arc::try_unwrap(before.frame).ok();
+        }
         for quality in reached {
             self.record(ViewOutcome::Rendered {
                 generation,
@@ -378,4 +392,71 @@ fn glare_of(image: &FrameImage, scene: &Scene) -> (Image, vtfarm_glare::Summary)
         vtfarm_glare::analyze(&input, &params).expect("a composited frame is consistent");
     let map = vtfarm_glare::object_map(&input, &params).expect("a composited frame is consistent");
     (map, analysis.summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vtfarm_raster::PixelRect;
+
+    /// A view rendering job 7 in the three stages, as `started` leaves it.
+    fn rendering() -> Views {
+        let stages = vec![Quality::Preview, Quality::Refine, Quality::Full];
+        Views {
+            current: Some(CurrentView {
+                generation: 1,
+                source: 1,
+                offset: [0.0; 3],
+                eye: [0.0; 3],
+                job: 7,
+                stages_total: stages.len(),
+                stages,
+                stages_done: 0,
+            }),
+            ..Views::default()
+        }
+    }
+
+    /// A 6x4 frame in `shade`, its components over a 3x2 rectangle.
+    fn frame(shade: f32) -> FrameImage {
+        let bounds = PixelRect {
+            x0: 1,
+            y0: 1,
+            x1: 4,
+            y1: 3,
+        };
+        FrameImage::new(Image::new(6, 4, Vec3::splat(shade)), bounds)
+    }
+
+    /// Each stage on view is a copy of the stage's frame as it was; a
+    /// stage's frame nobody uses any more is copied into, not allocated
+    /// afresh, and one whose figures are still being computed is left be.
+    #[test]
+    fn stages_on_view_are_copies_into_the_buffers_of_one_no_longer_used() {
+        let scene = Arc::new(Scene::default());
+        let mut views = rendering();
+        let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
+        let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
+
+        views.stage_finished(7, 0, &frame(0.25), &scene);
+        let preview = address(&views);
+        assert_eq!(shade(&views), Vec3::splat(0.25));
+        // The preview's figures are computed and done with.
+        drop(views.take_glare_request());
+        views.stage_finished(7, 1, &frame(0.5), &scene);
+        assert_ne!(address(&views), preview, "the preview is still on view");
+        // The refine's figures are still being computed.
+        let computing = views.take_glare_request().unwrap();
+        views.stage_finished(7, 2, &frame(0.75), &scene);
+        assert_eq!(address(&views), preview, "into the preview's buffers");
+        assert_eq!(shade(&views), Vec3::splat(0.75));
+        assert_eq!(
+            views.latest().unwrap().frame.components(),
+            frame(0.75).components()
+        );
+        assert_eq!(views.latest().unwrap().quality, Quality::Full);
+        assert!(views.spare.is_none(), "the refine's frame is still in use");
+        assert_eq!(computing.quality, Quality::Refine);
+        assert_eq!(computing.frame.color.pixels[0], Vec3::splat(0.5));
+    }
 }

@@ -15,7 +15,7 @@ use crate::{FinishedFace, PixelRect, PixelValue, SparseBitmap};
 /// pixel lies; outside it a pixel reads as black, `NONE` and unmasked. They
 /// start as zeroed allocations, so a frame touches only the reflectors'
 /// pages of them: no full-frame pass and no full-frame first touch.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct FrameImage {
     pub color: Image,
     /// The rectangle the component planes cover.
@@ -27,7 +27,7 @@ pub struct FrameImage {
 
 /// A frame's per-pixel components over the whole frame: what the outputs
 /// write and the wire carries ([`FrameImage::components`]).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct Components {
     /// The reflected component (black outside the reflectors).
     pub reflected: Image,
@@ -37,6 +37,43 @@ pub struct Components {
     pub reflected_object: Vec<u32>,
     /// Which pixels the traced bitmaps wrote.
     pub mask: Vec<bool>,
+}
+
+/// Field by field, so that [`Clone::clone_from`] copies into the
+/// target's allocations (the view keeps a stage's frame so, without fresh
+/// buffers' page faults).
+impl Clone for FrameImage {
+    fn clone(&self) -> Self {
+        FrameImage {
+            color: self.color.clone(),
+            bounds: self.bounds,
+            components: self.components.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.color.clone_from(&source.color);
+        self.bounds = source.bounds;
+        self.components.clone_from(&source.components);
+    }
+}
+
+impl Clone for Components {
+    fn clone(&self) -> Self {
+        Components {
+            reflected: self.reflected.clone(),
+            transmitted: self.transmitted.clone(),
+            reflected_object: self.reflected_object.clone(),
+            mask: self.mask.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.reflected.clone_from(&source.reflected);
+        self.transmitted.clone_from(&source.transmitted);
+        self.reflected_object.clone_from(&source.reflected_object);
+        self.mask.clone_from(&source.mask);
+    }
 }
 
 impl FrameImage {
