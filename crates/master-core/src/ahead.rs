@@ -11,10 +11,13 @@
 //! which with a whole frame's time bounds how many frames the tail splits.
 //!
 //! Memory: the base frames made ahead and those of the split frames being
-//! assembled are together at most [`vtfarm_proto::FRAMES_IN_FLIGHT`] (each
-//! a 1080p image and ID buffer, about 33 MB), the bound the split frames in
-//! flight alone had; one made ahead becomes its split frame's when that
-//! starts. The images do not change: a base frame is the same
+//! assembled are together at most [`AHEAD_BYTES`] (1 GiB: 21 base frames
+//! and ID buffers at 1080p, 24 bytes a pixel), or the frames in flight
+//! where those are more (the bound the split frames in flight alone had);
+//! one made ahead becomes its split frame's when that starts. A wide
+//! farm's tail needs them: 256 workers at the paper's work per frame end a
+//! 560-frame job with 40 or so split frames, and the master makes a base
+//! frame in 0.06 s, three times a worker's share of a frame there. The images do not change: a base frame is the same
 //! `BaseFrameRequest::rasterize` of the same scene and set-up, whenever it
 //! is made.
 //!
@@ -26,6 +29,24 @@ use std::time::Duration;
 
 use vtfarm_imaging::Image;
 use vtfarm_raster::IdBuffer;
+
+/// The memory the base frames the master holds may take (made ahead and
+/// those of the split frames being assembled).
+pub(crate) const AHEAD_BYTES: u64 = 1 << 30;
+
+/// Bytes of a base frame and its ID buffer per pixel: linear RGB in
+/// `f32`, and object, triangle and depth of 4 bytes each.
+const BASE_BYTES_PER_PIXEL: u64 = 24;
+
+/// How many base frames of `width` × `height` the master holds at most:
+/// [`AHEAD_BYTES`] of them, or the `frames_in_flight` split frames' own.
+pub(crate) fn frames_held_at_most(frames_in_flight: usize, width: u32, height: u32) -> usize {
+    let bytes = u64::from(width) * u64::from(height) * BASE_BYTES_PER_PIXEL;
+    let fit = AHEAD_BYTES / bytes.max(1);
+    usize::try_from(fit)
+        .unwrap_or(usize::MAX)
+        .max(frames_in_flight)
+}
 
 /// A frame by job id and index.
 pub(crate) type FrameKey = (u64, u32);
@@ -132,6 +153,15 @@ mod tests {
         assert_eq!(bases.arrived((1, 1), 200 * MS), None);
         assert_eq!(bases.arrived((1, 2), 220 * MS), None);
         assert_eq!(bases.arrived((1, 2), 230 * MS), None, "not in the making");
+    }
+
+    /// 1 GiB holds 21 base frames at 1080p, never fewer than the frames in
+    /// flight, and many small ones.
+    #[test]
+    fn the_budget_is_a_gibibyte_of_base_frames_or_the_frames_in_flight() {
+        assert_eq!(frames_held_at_most(8, 1920, 1080), 21);
+        assert_eq!(frames_held_at_most(8, 7680, 4320), 8);
+        assert_eq!(frames_held_at_most(8, 320, 180), 776);
     }
 
     /// Base frames made ahead are held until taken, and go with their job.

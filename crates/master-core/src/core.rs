@@ -41,7 +41,7 @@ use vtfarm_scheduler::{
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, Quality, SparseBitmap};
 
-use crate::ahead::Bases;
+use crate::ahead::{Bases, frames_held_at_most};
 use crate::error::{JobRejected, ResultRejected};
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
@@ -1884,10 +1884,18 @@ impl MasterCore {
 
     /// Asks the driver for the next base frame of `job`'s last frames
     /// ahead of their start (`ahead.rs`): one at a time, while its whole
-    /// frames run, the last `frames_in_flight` frames (no more than the
-    /// workers), while the base frames held stay within `frames_in_flight`.
+    /// frames run, for as many of its last frames (no more than the
+    /// workers) as the base frames held, with those of the split frames
+    /// being assembled, stay within the budget (`ahead::frames_held_at_most`).
     fn make_base_ahead(&mut self, job: u64) {
-        let budget = self.scheduler.config().frames_in_flight as usize;
+        let Some(j) = (self.jobs.get(&job)).filter(|j| j.assembling.iter().any(|a| a.whole)) else {
+            return;
+        };
+        let Some(camera) = j.frames.last().map(|setup| setup.camera) else {
+            return;
+        };
+        let in_flight = self.scheduler.config().frames_in_flight as usize;
+        let budget = frames_held_at_most(in_flight, camera.width, camera.height);
         let assembling = (self.jobs.values().flat_map(|j| &j.assembling))
             .filter(|a| !a.whole)
             .count();
@@ -1895,13 +1903,6 @@ impl MasterCore {
             return;
         }
         let tail = budget.min(self.workers().count()) as u32;
-        let Some(j) = self
-            .jobs
-            .get(&job)
-            .filter(|j| j.assembling.iter().any(|a| a.whole))
-        else {
-            return;
-        };
         let frames = j.frames.len() as u32;
         let first = next_to_start(j).max(frames.saturating_sub(tail));
         let Some(frame) = (first..frames).find(|&f| !self.bases.has((job, f))) else {
