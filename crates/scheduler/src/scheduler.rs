@@ -124,7 +124,7 @@ struct RunningJob {
 struct TailCosts {
     /// Smoothed busy seconds of the job's whole frames on their workers.
     whole_frame_seconds: Option<f64>,
-    /// Smoothed seconds of the master's base frames made alone
+    /// The least seconds of the master's base frames made alone
     /// ([`Scheduler::base_frame_cost`]).
     base_frame_seconds: Option<f64>,
     /// Frames not started whose base frames the master holds ready
@@ -489,9 +489,11 @@ impl Scheduler {
 
     /// The master made one of `job`'s base frames in `cost`, with no other
     /// base frame in the making meanwhile: its measured time per split
-    /// frame's base frame (smoothed over the reports). With the job's
-    /// measured whole-frame time it bounds how many of the job's last
-    /// frames are split (see the crate documentation's Whole frames).
+    /// frame's base frame, the least reported (a report also holds the
+    /// master's waits for other work, which only add to it: a job's start
+    /// keeps the master busy). With the job's measured whole-frame time it
+    /// bounds how many of the job's last frames are split (see the crate
+    /// documentation's Whole frames). A zero cost is ignored.
     pub fn base_frame_cost(
         &mut self,
         now: Duration,
@@ -499,10 +501,13 @@ impl Scheduler {
         cost: Duration,
     ) -> Result<(), CancelError> {
         self.advance(now);
-        let smoothing = self.config.estimation.rate_smoothing;
         let j = self.job_index(job).ok_or(CancelError::UnknownJob(job))?;
         let tail = &mut self.running[j].tail;
-        tail.base_frame_seconds = smooth_seconds(tail.base_frame_seconds, cost, smoothing);
+        let seconds = cost.as_secs_f64();
+        if seconds > 0.0 {
+            let least = tail.base_frame_seconds.map_or(seconds, |s| s.min(seconds));
+            tail.base_frame_seconds = Some(least);
+        }
         self.dispatch();
         Ok(())
     }
