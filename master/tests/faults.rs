@@ -372,6 +372,37 @@ fn pipelined_frames_overlap_and_stay_byte_identical() {
     assert!(stats.iter().all(|s| s.failures == 0), "{stats:?}");
 }
 
+/// While a batch job's whole frames run, the master makes its tail's base
+/// frames ahead, one at a time (the last frames, no more than the
+/// workers); the split tail frames then use them instead of asking again,
+/// and every frame keeps the single-process render's bytes.
+#[test]
+fn tail_frames_on_base_frames_made_ahead_stay_byte_identical() {
+    let job = Job::new(5);
+    let mut pair = Pair::new(FarmRules::default());
+    pair.add_worker("a", 1.0);
+    pair.add_worker("b", 1.0);
+    let (wire, data) = job.wire();
+    pair.submit(wire, data);
+    // Frames 0..3 whole (more frames left than workers), 3 and 4 split.
+    pair.drive(BOUND, |p| p.base_frames.len() == 2);
+    let id = pair.job_id().expect("submitted");
+    assert_eq!(pair.base_frames, [(id, 3), (id, 4)]);
+    assert!(
+        !(pair.frame_starts.iter()).any(|&(_, f)| f >= 3),
+        "made before the tail started: {:?}",
+        pair.frame_starts
+    );
+    pair.drive(BOUND, all_frames(5));
+    check_images(&pair, &job);
+    assert_eq!(pair.base_frames, [(id, 3), (id, 4)], "none made again");
+    let split: Vec<u32> = (pair.frames_done().iter())
+        .filter(|d| d.stats.packages > 1)
+        .map(|d| d.frame)
+        .collect();
+    assert!(split.contains(&4), "the last frame split: {split:?}");
+}
+
 /// Batch work runs in whole frames (each finished on its worker) and its
 /// tail split (composited on the master); both give the single-process
 /// render's bytes, colour and components, on 1, 2 and 3 workers (a mixed

@@ -41,6 +41,7 @@ use vtfarm_scheduler::{
 };
 use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, Quality, SparseBitmap};
 
+use crate::ahead::{Bases, frames_held_at_most};
 use crate::error::{JobRejected, ResultRejected};
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
@@ -401,6 +402,9 @@ pub struct MasterCore {
     views: Views,
     /// Finished frames' buffers for the next base frames (at most [`SPARE_BASES`]).
     spare_bases: Vec<SpareBase>,
+    /// Base frames in the making and made ahead of a batch job's tail
+    /// (`ahead.rs`).
+    bases: Bases,
     /// The last finished frame's uncompressed bytes, the next one's buffer.
     frame_bytes: Vec<u8>,
 }
@@ -429,6 +433,7 @@ impl MasterCore {
             departed: BTreeMap::new(),
             views: Views::default(),
             spare_bases: Vec::new(),
+            bases: Bases::default(),
             frame_bytes: Vec::new(),
         }
     }
@@ -1439,6 +1444,7 @@ impl MasterCore {
     /// Drops a job that ended, with its packages still in flight.
     fn forget_job(&mut self, job: u64) -> Option<Job> {
         self.packages.retain(|_, p| p.job != job);
+        self.bases.forget(job);
         self.jobs.remove(&job)
     }
 
@@ -1568,6 +1574,10 @@ impl MasterCore {
                 let resumed = (self.jobs.get(&job.0)).is_some_and(|j| frame < j.resume_from);
                 if !resumed {
                     self.start_frame(job.0, frame, whole);
+                }
+                if whole {
+                    // The master has little else to do while whole frames run.
+                    self.make_base_ahead(job.0);
                 }
             }
             Event::FrameComplete { job, frame, stats } => {
@@ -1803,7 +1813,11 @@ impl MasterCore {
         let Some(setup) = j.frames.get(frame as usize) else {
             return;
         };
-        let base = (!whole).then(|| BaseFrameRequest {
+        // Made ahead, or coming: no base frame asked for again.
+        let key = (job, frame);
+        let ahead = self.bases.take(key);
+        let coming = self.bases.making_ahead(key);
+        let base = (!whole && ahead.is_none() && !coming).then(|| BaseFrameRequest {
             job,
             frame,
             scene: j.scene.clone(),
@@ -1858,7 +1872,57 @@ impl MasterCore {
             },
         );
         if let Some(base) = base {
+            self.bases.requested(key, self.now, false);
             self.outbox.push_back(Output::RasterizeBase(base));
+        }
+        match ahead {
+            Some(base) if !whole => self.use_base(job, frame, base),
+            Some(base) => self.spare(base),
+            None => {}
+        }
+    }
+
+    /// Asks the driver for the next base frame of `job`'s last frames
+    /// ahead of their start (`ahead.rs`): one at a time, while its whole
+    /// frames run, for as many of its last frames (no more than the
+    /// workers) as the base frames held, with those of the split frames
+    /// being assembled, stay within the budget (`ahead::frames_held_at_most`).
+    fn make_base_ahead(&mut self, job: u64) {
+        let Some(j) = (self.jobs.get(&job)).filter(|j| j.assembling.iter().any(|a| a.whole)) else {
+            return;
+        };
+        let Some(camera) = j.frames.last().map(|setup| setup.camera) else {
+            return;
+        };
+        let in_flight = self.scheduler.config().frames_in_flight as usize;
+        let budget = frames_held_at_most(in_flight, camera.width, camera.height);
+        let assembling = (self.jobs.values().flat_map(|j| &j.assembling))
+            .filter(|a| !a.whole)
+            .count();
+        if self.bases.any_making_ahead() || self.bases.held() + assembling >= budget {
+            return;
+        }
+        let tail = budget.min(self.workers().count()) as u32;
+        let frames = j.frames.len() as u32;
+        let first = next_to_start(j).max(frames.saturating_sub(tail));
+        let Some(frame) = (first..frames).find(|&f| !self.bases.has((job, f))) else {
+            return;
+        };
+        let request = BaseFrameRequest {
+            job,
+            frame,
+            scene: j.scene.clone(),
+            setup: j.frames[frame as usize].clone(),
+            spare: self.spare_bases.pop().map(Box::new),
+        };
+        self.bases.requested((job, frame), self.now, true);
+        self.outbox.push_back(Output::RasterizeBase(request));
+    }
+
+    /// Keeps a base frame's buffers for a later one, as a finished frame's.
+    fn spare(&mut self, (color, ids): (Image, IdBuffer)) {
+        if self.spare_bases.len() < SPARE_BASES {
+            self.spare_bases.push(SpareBase(color, ids));
         }
     }
 
@@ -1869,9 +1933,36 @@ impl MasterCore {
         now: Duration,
         job: u64,
         frame: u32,
-        (base, ids): (Image, IdBuffer),
+        base: (Image, IdBuffer),
     ) {
         self.now = now;
+        let key = (job, frame);
+        if let Some(cost) = self.bases.arrived(key, now) {
+            // Gone meanwhile: nothing to learn for it.
+            let _ = self.scheduler.base_frame_cost(now, JobId(job), cost);
+        }
+        let Some(j) = self.jobs.get(&job) else {
+            self.spare(base);
+            return;
+        };
+        let waiting = (j.assembly(frame)).is_some_and(|c| c.ids.is_none() && !c.whole);
+        if waiting {
+            self.use_base(job, frame, base);
+        } else if frame >= next_to_start(j) {
+            // Made ahead: kept for the frame's start.
+            self.bases.keep(key, base);
+            let _ = self.scheduler.base_frame_ahead(now, JobId(job), frame);
+        } else {
+            self.spare(base);
+        }
+        self.make_base_ahead(job);
+        self.pump();
+    }
+
+    /// A split frame's base frame is here: the results held for it are
+    /// checked and composited now.
+    fn use_base(&mut self, job: u64, frame: u32, (base, ids): (Image, IdBuffer)) {
+        let now = self.now;
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
         };
@@ -1903,7 +1994,6 @@ impl MasterCore {
         for (conn, result, bytes) in std::mem::take(&mut current.held) {
             self.package_result(now, conn, result, bytes);
         }
-        self.pump();
     }
 
     /// A result arrived: its package was in flight, its frame set up first
@@ -2294,6 +2384,12 @@ impl MasterCore {
 /// the job asks for them, linear and of the frame's size. The compressed
 /// bytes themselves are the submitter's to decode: its decoder
 /// decompresses into exactly the size the sides imply.
+/// The index of the next frame of `j` to start: frames start and complete
+/// in order.
+fn next_to_start(j: &Job) -> u32 {
+    (j.assembling.iter().map(|a| a.start.frame + 1).max()).unwrap_or(j.frames_done)
+}
+
 fn check_finished(
     job: &Job,
     frame: u32,

@@ -12,9 +12,12 @@
 //!   listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
+//! - `ahead`: base frames made ahead of a batch job's tail, and the
+//!   master's measured time per base frame, for the scheduler's tail rule.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
 //!   `stages`: a progressive frame's stages composited in place.
 
+mod ahead;
 mod core;
 mod error;
 pub mod jobs;

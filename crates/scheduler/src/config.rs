@@ -45,9 +45,10 @@ pub struct SchedulerConfig {
     /// work on it, a frame starts whole — one package of all its items for
     /// one worker, which then renders the frame end to end — and up to
     /// [`WHOLE_FRAMES_PER_WORKER`](crate::WHOLE_FRAMES_PER_WORKER) whole
-    /// frames per worker are in flight. The job's tail, single-frame jobs
-    /// and jobs no wider than the farm are split as without it. See the
-    /// crate documentation for the rule and its reason. Default `false`.
+    /// frames per worker are in flight. The job's tail (its last frames, as
+    /// many as the measured costs allow), single-frame jobs and jobs no
+    /// wider than the farm are split as without it. See the crate
+    /// documentation for the rule and its reason. Default `false`.
     pub whole_frames: bool,
 }
 

@@ -8,8 +8,8 @@
 //! packages are opaque ids, and time is the `now: Duration` (time since the
 //! master started) passed to every input. Inputs are the `Scheduler` methods
 //! `worker_joined`, `worker_left`, `heartbeat`, `request_work`,
-//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `submit_interactive_job`, `cancel_job` and
-//! `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
+//! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `submit_interactive_job`, `cancel_job`,
+//! `base_frame_cost`, `base_frame_ahead` and `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
 //! hash-map order, no threads). Its tests drive it with simulated workers on
 //! a virtual clock (`tests/common/sim.rs`); `vtfarm-farmsim` drives the real
@@ -96,11 +96,19 @@
 //!   a base frame and the compositing of every split frame; with whole
 //!   frames each frame is set up once, by the worker that renders it end to
 //!   end, and throughput grows with every worker. Latency is what counts
-//!   at the job's tail (frames left ≤ workers, and no more than
-//!   `frames_in_flight`: each split frame costs the master a base frame,
-//!   one at a time, which would bound a wide farm), for single-frame jobs and
-//!   for the interactive view (each move a job of one frame), so those
-//!   frames are split as below and every worker shares them. A slow
+//!   at the job's tail, for single-frame jobs and for the interactive view
+//!   (each move a job of one frame), so those frames are split as below
+//!   and every worker shares them. The tail is the job's last frames, no
+//!   more than the workers, and no more than the master can make the base
+//!   frames of (one at a time) within the time of one whole frame on a
+//!   worker: a tail frame split later than that would wait for the master
+//!   longer than it would take whole. Both times are measured — a whole
+//!   frame's busy time as its packages report it, the master's time per
+//!   base frame by [`Scheduler::base_frame_cost`] — and a base frame the
+//!   master made ahead ([`Scheduler::base_frame_ahead`], while the whole
+//!   frames ran and it had little else to do) costs nothing there. Until
+//!   both are measured the tail is no more than `frames_in_flight` frames.
+//!   The last frame is always split. A slow
 //!   worker never holds the frames the others wait for: a whole frame
 //!   whose worker runs `factor` times longer than its rate, as now
 //!   measured, predicts is copied to a waiting worker — at once when it is

@@ -113,6 +113,23 @@ struct RunningJob {
     unstarted_cost: f64,
     /// Each worker's rates in this job's cost unit.
     measures: BTreeMap<WorkerId, Measures>,
+    /// What its tail's split frames cost, as measured ([`TailCosts`]).
+    tail: TailCosts,
+}
+
+/// What a batch job's tail rule ([`tail_frames`]) reads: a whole frame's
+/// time on a worker and the master's time per base frame, both measured,
+/// and the frames whose base frames the master made ahead.
+#[derive(Debug, Default)]
+struct TailCosts {
+    /// Smoothed busy seconds of the job's whole frames on their workers.
+    whole_frame_seconds: Option<f64>,
+    /// The least seconds of the master's base frames made alone
+    /// ([`Scheduler::base_frame_cost`]).
+    base_frame_seconds: Option<f64>,
+    /// Frames not started whose base frames the master holds ready
+    /// ([`Scheduler::base_frame_ahead`]).
+    bases_ahead: BTreeSet<u32>,
 }
 
 impl RunningJob {
@@ -465,6 +482,52 @@ impl Scheduler {
             self.running.sort_by_key(RunningJob::rank);
         } else {
             return Err(CancelError::UnknownJob(job));
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The master made one of `job`'s base frames in `cost`, with no other
+    /// base frame in the making meanwhile: its measured time per split
+    /// frame's base frame, the least reported (a report also holds the
+    /// master's waits for other work, which only add to it: a job's start
+    /// keeps the master busy). With the job's measured whole-frame time it
+    /// bounds how many of the job's last frames are split (see the crate
+    /// documentation's Whole frames). A zero cost is ignored.
+    pub fn base_frame_cost(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        cost: Duration,
+    ) -> Result<(), CancelError> {
+        self.advance(now);
+        let j = self.job_index(job).ok_or(CancelError::UnknownJob(job))?;
+        let tail = &mut self.running[j].tail;
+        let seconds = cost.as_secs_f64();
+        if seconds > 0.0 {
+            let least = tail.base_frame_seconds.map_or(seconds, |s| s.min(seconds));
+            tail.base_frame_seconds = Some(least);
+        }
+        self.dispatch();
+        Ok(())
+    }
+
+    /// The master holds the base frame of `job`'s frame `frame` ready, made
+    /// ahead while the job's whole frames ran: splitting that frame costs
+    /// the master no base frame at the tail. A frame that started already
+    /// is ignored.
+    pub fn base_frame_ahead(
+        &mut self,
+        now: Duration,
+        job: JobId,
+        frame: u32,
+    ) -> Result<(), CancelError> {
+        self.advance(now);
+        let j = self.job_index(job).ok_or(CancelError::UnknownJob(job))?;
+        let job = &mut self.running[j];
+        let next = (job.frame_count).saturating_sub(job.frames.len() as u32);
+        if frame >= next {
+            job.tail.bases_ahead.insert(frame);
         }
         self.dispatch();
         Ok(())
@@ -956,7 +1019,7 @@ impl Scheduler {
             return false;
         }
         let frames_in_flight = self.config.frames_in_flight as usize;
-        if self.starts_whole(&job.blocklist, job.batch_frames_left()) {
+        if starts_whole(&self.config, &self.workers, job) {
             let workers = self.eligible_workers(job).count().max(1);
             job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
         } else {
@@ -966,12 +1029,6 @@ impl Scheduler {
                 .sum();
             split < frames_in_flight
         }
-    }
-
-    /// Whether a frame starting now, with `unstarted` frames of the job not
-    /// started yet (it included), is whole.
-    fn starts_whole(&self, blocklist: &BTreeSet<WorkerId>, unstarted: usize) -> bool {
-        starts_whole(&self.config, &self.workers, blocklist, unstarted)
     }
 
     /// Completes finished frames and jobs and starts their next frames, and
@@ -1037,15 +1094,11 @@ impl Scheduler {
             }
             return;
         }
-        let whole = starts_whole(
-            &self.config,
-            &self.workers,
-            &job.blocklist,
-            job.batch_frames_left(),
-        );
+        let whole = starts_whole(&self.config, &self.workers, job);
         match job.frames.pop_front() {
             Some(next) => {
                 let index = job.frame.index + 1;
+                job.tail.bases_ahead.remove(&index);
                 job.frame = Frame::new(index, next.items, whole, &job.costs);
                 job.estimate_unstarted(lookahead);
                 self.events.push_back(Event::FrameStarted {
@@ -1081,16 +1134,12 @@ impl Scheduler {
     fn start_ahead(&mut self, j: usize) {
         let lookahead = self.config.frames_in_flight as usize;
         let job = &mut self.running[j];
-        let whole = starts_whole(
-            &self.config,
-            &self.workers,
-            &job.blocklist,
-            job.batch_frames_left(),
-        );
+        let whole = starts_whole(&self.config, &self.workers, job);
         let Some(next) = job.frames.pop_front() else {
             return;
         };
         let index = job.ahead.back().unwrap_or(&job.frame).index + 1;
+        job.tail.bases_ahead.remove(&index);
         let ahead = Frame::new(index, next.items, whole, &job.costs);
         job.estimate_unstarted(lookahead);
         self.events.push_back(Event::FrameStarted {
@@ -1139,7 +1188,14 @@ impl Scheduler {
         } else {
             frames.len() + 1
         };
-        let whole = self.starts_whole(&BTreeSet::new(), unstarted);
+        let whole = starts_whole_with(
+            &self.config,
+            &self.workers,
+            &BTreeSet::new(),
+            unstarted,
+            frame_count,
+            &TailCosts::default(),
+        );
         let frame = Frame::new(0, first.items, whole, &costs);
         self.events.push_back(Event::FrameStarted {
             job: next.id,
@@ -1163,6 +1219,7 @@ impl Scheduler {
             ahead: VecDeque::new(),
             unstarted_cost: 0.0,
             measures: BTreeMap::new(),
+            tail: TailCosts::default(),
         };
         job.estimate_unstarted(self.config.frames_in_flight as usize);
         let at = (self.running).partition_point(|r| r.rank() < job.rank());
@@ -1661,6 +1718,7 @@ impl Scheduler {
         package.completed_by = Some(worker);
         let range = package.range.clone();
         let cost = frame.cost(range.clone());
+        let whole = frame.whole;
 
         let busy = measure.busy.as_secs_f64();
         let weights = split_weights(measure, frame, range.clone());
@@ -1703,6 +1761,10 @@ impl Scheduler {
                 measures.compute_samples.pop_front();
             }
             measures.compute_samples.push_back(compute_rate);
+        }
+        if whole {
+            let seconds = &mut job.tail.whole_frame_seconds;
+            *seconds = smooth_seconds(*seconds, measure.busy, smoothing);
         }
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.remove(&id);
@@ -1919,23 +1981,78 @@ fn may_duplicate(package: &Package, worker: WorkerId) -> bool {
         && package.attempts.iter().all(|a| a.arrived_at.is_none())
 }
 
-/// Whether a frame starting now is whole ([`SchedulerConfig::whole_frames`]):
-/// more of its job's frames are not started (`unstarted`, it included) than
-/// workers may work on the job, so every worker has frames of its own —
-/// and than [`SchedulerConfig::frames_in_flight`]: a split frame costs the
-/// master a base frame (one at a time), so a wide farm's tail splits only
-/// as many frames as may be in flight, not one per worker.
+/// Whether the next frame of `job` to start is whole
+/// ([`SchedulerConfig::whole_frames`]): more of its frames are not started
+/// (the next included) than its tail ([`tail_frames`]) splits.
 fn starts_whole(
+    config: &SchedulerConfig,
+    workers: &BTreeMap<WorkerId, Worker>,
+    job: &RunningJob,
+) -> bool {
+    let unstarted = job.batch_frames_left();
+    starts_whole_with(
+        config,
+        workers,
+        &job.blocklist,
+        unstarted,
+        job.frame_count,
+        &job.tail,
+    )
+}
+
+/// [`starts_whole`] for a job's next frame with `unstarted` frames not
+/// started (it included) of `frame_count`.
+fn starts_whole_with(
     config: &SchedulerConfig,
     workers: &BTreeMap<WorkerId, Worker>,
     blocklist: &BTreeSet<WorkerId>,
     unstarted: usize,
+    frame_count: u32,
+    tail: &TailCosts,
 ) -> bool {
     let eligible = (workers.iter())
         .filter(|(id, w)| w.connected && !blocklist.contains(id))
         .count();
-    let tail = eligible.min(config.frames_in_flight as usize).max(1);
-    config.whole_frames && config.frame_affinity && unstarted > tail
+    config.whole_frames
+        && config.frame_affinity
+        && unstarted > tail_frames(config, eligible, frame_count, tail)
+}
+
+/// How many of a batch job's last frames are split (its tail; see the
+/// crate documentation's Whole frames): no more than the `eligible`
+/// workers, and, once a whole frame's time on a worker and the master's
+/// time per base frame are measured, only as many as the master makes the
+/// base frames of within one whole frame (one at a time), those it made
+/// ahead costing nothing. Until then no more than
+/// [`SchedulerConfig::frames_in_flight`]. At least one: a job's last frame
+/// is always split.
+fn tail_frames(
+    config: &SchedulerConfig,
+    eligible: usize,
+    frame_count: u32,
+    tail: &TailCosts,
+) -> usize {
+    let widest = eligible.max(1);
+    let (Some(whole), Some(base)) = (tail.whole_frame_seconds, tail.base_frame_seconds) else {
+        return widest.min(config.frames_in_flight as usize).max(1);
+    };
+    let affordable = if base > 0.0 {
+        (whole / base).floor()
+    } else {
+        f64::INFINITY
+    };
+    let mut to_make = 0.0;
+    let mut split = 0;
+    for index in (0..frame_count).rev().take(widest) {
+        if !tail.bases_ahead.contains(&index) {
+            if to_make + 1.0 > affordable {
+                break;
+            }
+            to_make += 1.0;
+        }
+        split += 1;
+    }
+    split.max(1)
 }
 
 /// When the running copy of an assigned package becomes a straggler.
@@ -1973,6 +2090,11 @@ fn smooth(old: Option<f64>, observed: f64, weight: f64) -> Option<f64> {
         weight.clamp(0.0, 1.0)
     };
     Some(old.map_or(observed, |old| old + weight * (observed - old)))
+}
+
+/// [`smooth`] of a measured time in seconds.
+fn smooth_seconds(old: Option<f64>, observed: Duration, weight: f64) -> Option<f64> {
+    smooth(old, observed.as_secs_f64(), weight)
 }
 
 /// A duration from seconds, 0 for what is not a positive number, capped so

@@ -81,6 +81,16 @@ enum Op {
         job: u8,
         priority: i8,
     },
+    /// The master's time for one of the job's base frames (0 is ignored).
+    BaseFrameCost {
+        job: u8,
+        ms: u16,
+    },
+    /// The master made a base frame of the job ahead.
+    BaseFrameAhead {
+        job: u8,
+        frame: u8,
+    },
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -101,6 +111,8 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (0u8..4).prop_map(|job| Op::Pause { job }),
         1 => (0u8..4).prop_map(|job| Op::Resume { job }),
         1 => (0u8..4, -2i8..3).prop_map(|(job, priority)| Op::Priority { job, priority }),
+        1 => (0u8..4, 0u16..400).prop_map(|(job, ms)| Op::BaseFrameCost { job, ms }),
+        1 => (0u8..4, 0u8..4).prop_map(|(job, frame)| Op::BaseFrameAhead { job, frame }),
     ]
 }
 
@@ -241,6 +253,14 @@ impl Model {
             Op::Priority { job, priority } => {
                 let job = JobId(u64::from(*job));
                 let _ = self.s.set_priority(now, job, i32::from(*priority));
+            }
+            Op::BaseFrameCost { job, ms } => {
+                let cost = Duration::from_millis(u64::from(*ms));
+                let _ = self.s.base_frame_cost(now, JobId(u64::from(*job)), cost);
+            }
+            Op::BaseFrameAhead { job, frame } => {
+                let job = JobId(u64::from(*job));
+                let _ = self.s.base_frame_ahead(now, job, u32::from(*frame));
             }
         }
         self.drain()

@@ -1150,3 +1150,17 @@ fn rates_are_measured_per_job() {
     assert!((c.expected.as_secs_f64() - c.estimated_cost / w1).abs() < 1e-6);
     farm.valid();
 }
+
+/// The master's base-frame measures name a running job; for any other
+/// (never submitted, or over) they are refused and change nothing.
+#[test]
+fn base_frame_measures_of_a_job_not_running_are_refused() {
+    let mut farm = Farm::running(1, 4, 1);
+    let other = JobId(99);
+    let unknown = Err(CancelError::UnknownJob(other));
+    let cost = Duration::from_millis(60);
+    assert_eq!(farm.s.base_frame_cost(farm.now, other, cost), unknown);
+    assert_eq!(farm.s.base_frame_ahead(farm.now, other, 0), unknown);
+    assert_eq!(farm.s.base_frame_cost(farm.now, JOB, cost), Ok(()));
+    assert_eq!(farm.s.base_frame_ahead(farm.now, JOB, 0), Ok(()));
+}

@@ -622,11 +622,14 @@ fn frame_affinity_keeps_workers_on_fewer_frames_and_as_fast() {
 }
 
 /// The master's rules with a frame set-up that costs as much as a quarter
-/// of a frame's tracing on one worker, as vtfarm's does (issue 26).
+/// of a frame's tracing on one worker, as vtfarm's does (issue 26), and a
+/// master that makes the base frames of a batch job's last frames ahead, as
+/// the master core does.
 fn batch_config() -> SimConfig {
     SimConfig {
         scheduler: vtfarm_scheduler::SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT),
         master_frame_cost: Duration::from_millis(20),
+        bases_ahead: common::FRAMES_IN_FLIGHT as usize,
         ..checked()
     }
 }
@@ -656,7 +659,11 @@ fn whole_frames(report: &SimReport) -> Vec<bool> {
 /// A deep batch job: while more frames are left to start than there are
 /// workers, each frame goes to one worker whole, so each is set up once
 /// (one worker per frame); the last frames, no more than the workers, are
-/// split and spread over several; the farm stays busy throughout.
+/// split and spread over several; the farm stays busy throughout. The
+/// master's base frame (20 ms) is cheap against a whole frame (about 1 s),
+/// so the tail is as wide as the farm: all of the last 8 frames split, and
+/// (but for a frame whose items went out before the other workers were
+/// free) each on several workers.
 #[test]
 fn a_deep_batch_job_sets_each_frame_up_once_and_its_tail_spreads() {
     let frame = uneven_frame(200, 11, 0.002, 50..80, 3.0);
@@ -797,5 +804,73 @@ fn a_small_job_beside_a_deep_one_leaves_no_worker_idle() {
         let end = report.end.as_secs_f64();
         println!("end {end:.3} s, ideal {:.3} s", work / 4.0);
         assert!(end < work / 4.0 * 1.1, "{end} s for {work} s of work on 4");
+    }
+}
+
+/// The tail splits no more frames than the master's measured costs allow:
+/// a whole frame takes about 0.8 s on a worker and the master 0.32 s per
+/// base frame, so beside the 2 base frames it made ahead it makes 2 more
+/// within a whole frame's time — the last 4 frames split, the others whole
+/// (each set up once), however many workers there are. A split frame so
+/// never waits for its base frame longer than it would take whole.
+#[test]
+fn a_deep_batch_jobs_tail_splits_no_more_frames_than_the_measured_costs_allow() {
+    let frame = uneven_frame(200, 15, 0.002, 0..0, 1.0);
+    let work: f64 = frame.costs.iter().sum();
+    let mut job = repeated_job(1, &frame, 40);
+    job.submit_at = Duration::from_millis(1);
+    let config = SimConfig {
+        master_frame_cost: Duration::from_secs_f64(work / 2.5),
+        bases_ahead: 2,
+        ..batch_config()
+    };
+    let report = run(
+        config,
+        vec![SimWorker::with_speed(1.0); 8],
+        std::slice::from_ref(&job),
+    );
+    assert_eq!(report.frames.len(), 40);
+    let expected: Vec<bool> = (0..40).map(|i| i < 36).collect();
+    assert_eq!(whole_frames(&report), expected);
+    let crews = crews(&report);
+    for frame in 0..36 {
+        assert_eq!(
+            crews[&frame].len(),
+            1,
+            "whole frame {frame}: {:?}",
+            crews[&frame]
+        );
+    }
+    let spread = (36..40).filter(|f| crews[f].len() > 1).count();
+    assert!(spread >= 3, "tail frames on several workers: {spread} of 4");
+    // Every base frame the master made was measured and reported.
+    let reported = (report.inputs.iter())
+        .filter(|(_, i)| matches!(i, common::sim::SimInput::BaseFrameCost(..)))
+        .count();
+    assert_eq!(reported, 4, "2 ahead and 2 at their frames' start");
+}
+
+/// Until the costs are measured (no base frame made yet) the tail is no
+/// wider than the frames in flight, and a job's last frame is always split:
+/// a job of 12 frames on 16 workers, where every frame is at the tail,
+/// splits them all; on 2 workers the last 2 split.
+#[test]
+fn unmeasured_tails_split_up_to_the_frames_in_flight_and_the_last_frame_always() {
+    let frame = uneven_frame(100, 16, 0.002, 0..0, 1.0);
+    let mut job = repeated_job(1, &frame, 12);
+    job.submit_at = Duration::from_millis(1);
+    let config = SimConfig {
+        bases_ahead: 0,
+        master_frame_cost: Duration::ZERO,
+        ..batch_config()
+    };
+    for (workers, split) in [(16, common::FRAMES_IN_FLIGHT as usize), (2, 2), (1, 1)] {
+        let report = run(
+            config.clone(),
+            vec![SimWorker::with_speed(1.0); workers],
+            std::slice::from_ref(&job),
+        );
+        let expected: Vec<bool> = (0..12).map(|i| 12 - i > split).collect();
+        assert_eq!(whole_frames(&report), expected, "{workers} workers");
     }
 }

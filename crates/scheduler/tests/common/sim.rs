@@ -25,7 +25,11 @@
 //! from the frame start on, one at a time, beside the tracing; a whole
 //! frame's worker makes its own); results that
 //! arrive before it are held ([`Scheduler::package_arrived`]) and accepted
-//! when it is ready, as the master core does. The master handles messages
+//! when it is ready, as the master core does. Like the master core, it
+//! reports each base frame's time ([`Scheduler::base_frame_cost`]: one at a
+//! time, each takes the cost) and, with [`SimConfig::bases_ahead`], makes
+//! the base frames of a batch job's last frames ahead once its first whole
+//! frame starts ([`Scheduler::base_frame_ahead`]). The master handles messages
 //! one at a time, and checking and compositing a result costs
 //! [`SimConfig::master_result_cost_per_item`] per item.
 //! [`SimReport::inputs`] logs every call into the scheduler.
@@ -67,6 +71,10 @@ pub(crate) struct SimConfig {
     /// The master's time to check and composite a result, per item; its
     /// messages wait meanwhile. Default zero.
     pub master_result_cost_per_item: Duration,
+    /// How many of a batch job's last frames the master makes the base
+    /// frames of ahead, one at a time from its first whole frame's start
+    /// on (at most one per worker), as the master core does. Default 0.
+    pub bases_ahead: usize,
 }
 
 impl Default for SimConfig {
@@ -83,6 +91,7 @@ impl Default for SimConfig {
             master_link_bits_per_second: None,
             master_frame_cost: Duration::ZERO,
             master_result_cost_per_item: Duration::ZERO,
+            bases_ahead: 0,
         }
     }
 }
@@ -210,6 +219,10 @@ pub(crate) enum SimInput {
     Heartbeat(WorkerId),
     /// A result held until its frame's base image is ready.
     Arrived(WorkerId, PackageId),
+    /// The master's time for a base frame of the job.
+    BaseFrameCost(JobId, Duration),
+    /// The master holds the base frame of a frame not started.
+    BaseFrameAhead(JobId, u32),
     Left(WorkerId),
     Done(WorkerId, PackageId, PackageMeasure),
     Failed(WorkerId, PackageId, String),
@@ -260,6 +273,8 @@ pub(crate) struct Simulation {
     newest: Option<FrameKey>,
     /// Results held until their frame's base image is ready.
     held: BTreeMap<FrameKey, Vec<HeldResult>>,
+    /// Base frames made ahead ([`SimConfig::bases_ahead`]), ready then.
+    bases_ahead: BTreeMap<FrameKey, Duration>,
     report: SimReport,
 }
 
@@ -335,6 +350,11 @@ enum SimEvent {
     FrameReady(usize, FrameKey),
     /// The master's base image of a frame is ready.
     BaseReady(FrameKey),
+    /// A base frame made ahead is ready (its frame has not started).
+    BaseAhead(FrameKey),
+    /// A frame's base frame, made ahead or none (whole), is there: the
+    /// held results are accepted (nothing to measure).
+    HeldReady(FrameKey),
     ToWorker(usize, ToWorker),
     ToMaster(usize, ToMaster),
 }
@@ -385,6 +405,7 @@ impl Simulation {
             master_busy_until: Duration::ZERO,
             newest: None,
             held: BTreeMap::new(),
+            bases_ahead: BTreeMap::new(),
             report: SimReport::default(),
         };
         for (index, spec) in workers.into_iter().enumerate() {
@@ -641,6 +662,14 @@ impl Simulation {
                 }
             }
             SimEvent::BaseReady(key) => self.base_ready(key),
+            SimEvent::HeldReady(key) => self.accept_held(key),
+            SimEvent::BaseAhead((job, frame)) => {
+                let cost = self.config.master_frame_cost;
+                self.log(SimInput::BaseFrameCost(job, cost));
+                let _ = self.scheduler.base_frame_cost(now, job, cost);
+                self.log(SimInput::BaseFrameAhead(job, frame));
+                let _ = self.scheduler.base_frame_ahead(now, job, frame);
+            }
             SimEvent::ToWorker(index, message) => self.deliver_to_worker(index, message),
             SimEvent::ToMaster(index, message) => {
                 // The master's driver handles one message at a time.
@@ -736,6 +765,16 @@ impl Simulation {
 
     /// A frame's base image is ready: the held results are accepted.
     fn base_ready(&mut self, key: FrameKey) {
+        let cost = self.config.master_frame_cost;
+        if self.open_jobs.contains(&key.0) && !cost.is_zero() {
+            self.log(SimInput::BaseFrameCost(key.0, cost));
+            let _ = self.scheduler.base_frame_cost(self.now, key.0, cost);
+        }
+        self.accept_held(key);
+    }
+
+    /// The master accepts the results it held for the frame's base frame.
+    fn accept_held(&mut self, key: FrameKey) {
         for held in self.held.remove(&key).unwrap_or_default() {
             let refusal = self.accept(held.worker, held.assignment, held.measure, held.true_cost);
             if let Some(refusal) = refusal {
@@ -1014,15 +1053,24 @@ impl Simulation {
                 } => {
                     let key = (*job, *frame);
                     // A whole frame's worker renders its base image itself.
+                    let ahead = self.bases_ahead.remove(&key);
+                    if *whole && *frame == 0 {
+                        self.make_bases_ahead(*job);
+                    }
                     let base_ready = if *whole {
                         now
+                    } else if let Some(at) = ahead {
+                        now.max(at)
                     } else {
                         self.master_free =
                             now.max(self.master_free) + self.config.master_frame_cost;
+                        self.schedule(self.master_free, SimEvent::BaseReady(key));
                         self.master_free
                     };
                     self.frame_starts.insert(key, base_ready);
-                    self.schedule(base_ready, SimEvent::BaseReady(key));
+                    if ahead.is_some() || *whole {
+                        self.schedule(base_ready, SimEvent::HeldReady(key));
+                    }
                     self.newest = Some(key);
                     if self.hears_frames() {
                         self.announce_frame(key);
@@ -1050,6 +1098,21 @@ impl Simulation {
                 _ => {}
             }
             self.report.events.push((now, event));
+        }
+    }
+
+    /// The master makes the base frames of `job`'s last frames ahead, one
+    /// at a time after the base frames it is making
+    /// ([`SimConfig::bases_ahead`]).
+    fn make_bases_ahead(&mut self, job: JobId) {
+        let frames = self.costs.get(&job).map_or(0, Vec::len) as u32;
+        let count = (self.config.bases_ahead)
+            .min(self.workers.len())
+            .min(frames as usize) as u32;
+        for frame in frames - count..frames {
+            self.master_free = self.now.max(self.master_free) + self.config.master_frame_cost;
+            self.bases_ahead.insert((job, frame), self.master_free);
+            self.schedule(self.master_free, SimEvent::BaseAhead((job, frame)));
         }
     }
 
