@@ -701,3 +701,42 @@ fn two_jobs_run_at_once_and_a_cancel_of_one_tells_exactly_its_holders() {
     check_images(&pair, first, &single);
     assert_eq!(state(&pair, second), Some(JobState::Cancelled));
 }
+
+/// One worker, a low job's one split frame under way and a high job taking
+/// the worker at its next package boundary: when the worker comes back to
+/// the low frame it still keeps it (no `FrameStart` again) unless more
+/// frames than it keeps came between (then the start comes once more).
+/// Either way nothing is taken back and both jobs' images are right.
+#[test]
+fn a_worker_gets_a_frames_start_again_only_when_it_let_the_frame_go() {
+    let kept = vtfarm_proto::FRAMES_IN_FLIGHT;
+    for (high_frames, low_starts) in [(1, 1), (kept + 2, 2)] {
+        let (low_job, high_job) = (Job::new(1), Job::new(high_frames));
+        let mut pair = Pair::new(FarmRules {
+            straggler: None,
+            ..FarmRules::default()
+        });
+        pair.add_worker("w", 1.0);
+        let low = submit(&mut pair, &low_job, 0);
+        pair.drive(BOUND, |p| !p.master.job_packages_by_worker(low).is_empty());
+        let high = submit(&mut pair, &high_job, 5);
+        complete(&mut pair, high, high_frames);
+        complete(&mut pair, low, 1);
+        // The jobs did interleave: low, then high, then low again.
+        let mut jobs: Vec<u64> = pair.busy[0].iter().map(|run| run.job).collect();
+        jobs.dedup();
+        assert_eq!(jobs, [low, high, low], "{high_frames} high frames");
+        let got = &pair.workers[0].frame_starts_got;
+        let low_got = got.iter().filter(|&&(job, _)| job == low).count();
+        assert_eq!(low_got, low_starts, "{high_frames} high frames: {got:?}");
+        // Each of the high job's split frames is announced once (its
+        // whole frames' starts come with their packages).
+        let high_got: Vec<_> = got.iter().filter(|&&(job, _)| job == high).collect();
+        let once: BTreeSet<_> = high_got.iter().collect();
+        assert_eq!(once.len(), high_got.len(), "{got:?}");
+        check_images(&pair, low, &low_job);
+        check_images(&pair, high, &high_job);
+        assert_nothing_taken_back(&pair, low);
+        assert_nothing_taken_back(&pair, high);
+    }
+}

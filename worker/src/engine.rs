@@ -19,9 +19,9 @@ use std::time::Instant;
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
-    FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash, WireBitmap,
-    WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WirePackageStats,
-    check_stages, check_triangle_ids,
+    FrameKey, FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash,
+    WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat,
+    WirePackageStats, check_stages, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -38,15 +38,16 @@ use vtfarm_vertex::{
 pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
 
 impl PreparedFrames {
-    /// Keeps `frame`, dropping the oldest (by job and frame) beyond
-    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`]: a skipped frame may be prepared
-    /// after newer ones.
+    /// Keeps `frame` (until [`PreparedFrames::retain`] lets it go).
     pub fn insert(&mut self, frame: ActiveFrame) {
         self.0.push(Arc::new(frame));
-        self.0.sort_by_key(|a| (a.job, a.frame));
-        if self.0.len() > vtfarm_proto::FRAMES_IN_FLIGHT {
-            self.0.remove(0);
-        }
+    }
+
+    /// Lets go of the frames `keep` refuses: the driver passes the
+    /// session's [`crate::WorkerSession::keeps_set_up`], so the frames kept
+    /// are the session's, bounded as it bounds them.
+    pub fn retain(&mut self, keep: impl Fn(FrameKey) -> bool) {
+        self.0.retain(|a| keep((a.job, a.frame)));
     }
 
     /// The prepared frame `frame` of `job`, if kept.
