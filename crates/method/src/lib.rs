@@ -411,7 +411,10 @@ impl Reflection {
 /// `local + kr * reflection + kt * transmitted`, with local Phong (shadow rays
 /// included) and kr/kt exactly as the ray tracer has them. `transmitted` is
 /// the radiance arriving along the refraction ray per pixel; `None` traces
-/// those rays (for methods that handle reflection only). Returns the bitmap
+/// those rays (for methods that handle reflection only), and then a back
+/// surface's ghost image counts as reflected, as the ray tracer counts it.
+/// A given radiance carries no ghost: PVRR's mapped refraction keeps it in
+/// the transmitted part (the colour is the same either way). Returns the bitmap
 /// and the number of rays traced for the transmission (already charged to
 /// the frame's stop). Once the frame is stopped, the pixels left are black.
 pub fn shade_reflector(
@@ -445,20 +448,22 @@ pub fn shade_reflector(
             } else {
                 Vec3::ZERO
             };
-            let (through, rays) = match (transmitted, terms.refraction) {
-                (_, None) => (Vec3::ZERO, 0),
-                (Some(given), Some(_)) => (given[i], 0),
+            let (through, ghost, rays) = match (transmitted, terms.refraction) {
+                (_, None) => (Vec3::ZERO, Vec3::ZERO, 0),
+                (Some(given), Some(_)) => (given[i], Vec3::ZERO, 0),
                 (None, Some(ray)) => {
                     frame.charge(1);
-                    (secondary.trace(&ray).color, 1)
+                    let seen = secondary.trace_transmission(&ray);
+                    (seen.radiance, seen.ghost, 1)
                 }
             };
-            let through = terms.kt * through;
+            let (through, ghost) = (terms.kt * through, terms.kt * ghost);
             let value = PixelValue {
                 index,
                 color: terms.local + reflected + through,
-                reflected,
-                transmitted: through,
+                // The ghost is reflected light (`vtfarm_trace::Sample`).
+                reflected: reflected + ghost,
+                transmitted: through - ghost,
                 object: if terms.reflection.is_some() {
                     reflection.object
                 } else {

@@ -48,6 +48,16 @@ fn exact_reflections_through_the_shared_finish_equal_the_reference() {
     for (a, b) in bitmap.color.iter().zip(&reference.color) {
         assert!((*a - *b).abs().max_element() < 1e-5, "{a} vs {b}");
     }
+    // The components split as the reference splits them: a back surface's
+    // ghost image is reflected light.
+    for (ours, theirs) in [
+        (&bitmap.reflected, &reference.reflected),
+        (&bitmap.transmitted, &reference.transmitted),
+    ] {
+        for (a, b) in ours.iter().zip(theirs) {
+            assert!((*a - *b).abs().max_element() < 1e-5, "{a} vs {b}");
+        }
+    }
 }
 
 #[test]

@@ -110,6 +110,17 @@ impl Default for TraceSettings {
     }
 }
 
+/// What a refraction ray brought back ([`Tracer::trace_transmission`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transmission {
+    /// The radiance arriving along the ray.
+    pub radiance: Vec3,
+    /// The part of `radiance` that the see-through surfaces along the ray
+    /// reflect back (the ghost image; reflected light, see
+    /// [`Sample::reflected`]).
+    pub ghost: Vec3,
+}
+
 /// What one traced sample saw.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {

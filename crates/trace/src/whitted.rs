@@ -9,7 +9,7 @@ use vtfarm_scene::shading::phong;
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, NONE, ObjectId};
 
 use crate::bvh::spawn_offset;
-use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings};
+use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings, Transmission};
 
 /// Whitted tracer for one frame's lighting.
 ///
@@ -272,6 +272,20 @@ impl Tracer<'_> {
         self.sample_of(&mut OnDemand { tracer: self }, link, Rays::Both)
     }
 
+    /// What a refraction ray leaving a see-through surface brings back:
+    /// its radiance, and the part of it that the see-through surfaces on
+    /// its way reflect back (a slab's back surface: the ghost image, which
+    /// [`Sample::reflected`] counts as reflected light). Weighted by the
+    /// surface's `kt`, they are its transmitted and ghost terms.
+    pub fn trace_transmission(&self, ray: &Ray) -> Transmission {
+        let link = Link::Ray(*ray, self.cone.distance(ray.origin));
+        let (shaded, _) = self.shade_root(&mut OnDemand { tracer: self }, link, Rays::Both);
+        Transmission {
+            radiance: shaded.color,
+            ghost: shaded.ghost,
+        }
+    }
+
     /// [`Tracer::shade`] without the point's own refraction ray: local Phong
     /// with shadow rays plus kr times the reflected radiance (traced in full
     /// Whitted), `transmitted` zero, and a signature of the reflected subtree
@@ -322,12 +336,23 @@ impl Tracer<'_> {
     /// The sample of the ray tree rooted at `root`, whose first surface
     /// spawns `rays`.
     fn sample_of<S: TreeSource>(&self, source: &mut S, root: S::Link, rays: Rays) -> Sample {
+        let (shaded, signature) = self.shade_root(source, root, rays);
+        sample(shaded, signature)
+    }
+
+    /// The ray tree rooted at `root` shaded, and its signature.
+    fn shade_root<S: TreeSource>(
+        &self,
+        source: &mut S,
+        root: S::Link,
+        rays: Rays,
+    ) -> (Shaded, Signature) {
         let mut walk = Walk {
             signature: Signature::new(),
             lit: Vec::new(),
         };
         let (shaded, _) = self.shade_tree(source, root, 1, 1.0, rays, &mut walk);
-        sample(shaded, walk.signature)
+        (shaded, walk.signature)
     }
 
     /// The one shading path of every sample: the radiance arriving along
