@@ -617,6 +617,15 @@ mod tests {
         (cockpit, hash, engine)
     }
 
+    /// The cockpit's own camera, `width` × `height` pixels.
+    fn sized(cockpit: &Cockpit, width: u32, height: u32) -> Camera {
+        Camera {
+            width,
+            height,
+            ..cockpit.camera
+        }
+    }
+
     /// Frame `frame` of the cockpit seen by `camera`, the sun along `sun`.
     fn cockpit_frame(
         (cockpit, hash): (&Cockpit, SceneHash),
@@ -655,11 +664,7 @@ mod tests {
     fn frames_that_differ_only_in_the_sun_share_the_renderer() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 32,
-            height: 18,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 32, 18);
         let start = |frame: u32, sun: Vec3, reflectors: &[u32]| {
             cockpit_frame((&cockpit, hash), frame, camera, sun, reflectors)
         };
@@ -687,11 +692,7 @@ mod tests {
     fn a_sun_only_frame_reuses_the_id_buffers_and_traces_as_alone() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         let start = |frame: u32, sun: Vec3| {
             cockpit_frame((&cockpit, hash), frame, camera, sun, &reflectors)
         };
@@ -730,11 +731,7 @@ mod tests {
     fn a_frame_traces_the_same_after_other_frames_as_alone() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         // The eye moved sideways and up, the sun turned: other reflector
         // bounds, other ID buffers, other shadows.
         let moved = Camera {
@@ -815,11 +812,7 @@ mod tests {
     fn a_progressive_package_runs_its_stages_on_one_set_up() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         let sun = Vec3::new(0.45, -0.85, -0.15);
         let stages = [Quality::Preview, Quality::Refine, Quality::Full];
         let start = |quality: Quality, staged: bool| {
