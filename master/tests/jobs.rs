@@ -45,6 +45,19 @@ fn accepted(pair: &Pair) -> Vec<u64> {
         .collect()
 }
 
+/// A harness of `workers` (name, slowdown) that copies no straggler's
+/// package: which worker holds what follows from the speeds alone.
+fn without_stragglers(workers: &[(&str, f64)]) -> Pair {
+    let mut pair = Pair::new(FarmRules {
+        straggler: None,
+        ..FarmRules::default()
+    });
+    for &(name, slowdown) in workers {
+        pair.add_worker(name, slowdown);
+    }
+    pair
+}
+
 /// Submits `wire` at `priority`; returns its id.
 fn submit(pair: &mut Pair, job: &Job, priority: i32) -> u64 {
     let (wire, data) = job.wire();
@@ -333,12 +346,8 @@ fn jobs_run_by_priority_then_submission_and_a_higher_one_goes_first() {
 #[test]
 fn a_pause_hands_out_nothing_new_and_keeps_what_runs() {
     let job = Job::new(2);
-    let mut pair = Pair::new(FarmRules {
-        straggler: None,
-        ..FarmRules::default()
-    });
-    let slow = pair.add_worker("slow", 3.0);
-    pair.add_worker("fast", 1.0);
+    let mut pair = without_stragglers(&[("slow", 3.0), ("fast", 1.0)]);
+    let slow = 0; // the first worker
     let id = submit(&mut pair, &job, 0);
     pair.drive(BOUND, |p| p.workers[slow].is_running_a_package());
     assert_eq!(
@@ -383,13 +392,7 @@ fn a_pause_hands_out_nothing_new_and_keeps_what_runs() {
 #[test]
 fn a_cancel_sends_cancel_package_to_exactly_the_workers_holding_the_job() {
     let job = Job::new(1);
-    let mut pair = Pair::new(FarmRules {
-        straggler: None,
-        ..FarmRules::default()
-    });
-    for (name, slowdown) in [("a", 1.0), ("b", 4.0), ("c", 8.0)] {
-        pair.add_worker(name, slowdown);
-    }
+    let mut pair = without_stragglers(&[("a", 1.0), ("b", 4.0), ("c", 8.0)]);
     let id = submit(&mut pair, &job, 0);
     // Near the frame's end some workers hold nothing while others work.
     pair.drive(BOUND, |p| {
@@ -574,12 +577,7 @@ fn starts_of(pair: &Pair, job: u64) -> Vec<u32> {
 #[test]
 fn a_higher_priority_job_takes_the_workers_as_their_packages_finish() {
     let (long, short) = (Job::new(3), Job::new(1));
-    let mut pair = Pair::new(FarmRules {
-        straggler: None,
-        ..FarmRules::default()
-    });
-    pair.add_worker("w1", 1.0);
-    pair.add_worker("w2", 2.0);
+    let mut pair = without_stragglers(&[("w1", 1.0), ("w2", 2.0)]);
     let low = submit(&mut pair, &long, 0);
     pair.drive(BOUND, |p| !p.master.packages_by_worker().is_empty());
     let submitted_at = pair.now;
@@ -609,12 +607,7 @@ fn a_higher_priority_job_takes_the_workers_as_their_packages_finish() {
 fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
     use vtfarm_master::view::ViewRequest;
     let batch = Job::new(3);
-    let mut pair = Pair::new(FarmRules {
-        straggler: None,
-        ..FarmRules::default()
-    });
-    pair.add_worker("w1", 1.0);
-    pair.add_worker("w2", 1.0);
+    let mut pair = without_stragglers(&[("w1", 1.0), ("w2", 1.0)]);
     let id = submit(&mut pair, &batch, 0);
     pair.drive(BOUND, |p| !p.master.packages_by_worker().is_empty());
     let request = ViewRequest {
@@ -660,13 +653,7 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
 #[test]
 fn two_jobs_run_at_once_and_a_cancel_of_one_tells_exactly_its_holders() {
     let (single, deep) = (Job::new(1), Job::new(3));
-    let mut pair = Pair::new(FarmRules {
-        straggler: None,
-        ..FarmRules::default()
-    });
-    for (name, slowdown) in [("a", 1.0), ("b", 3.0), ("c", 5.0)] {
-        pair.add_worker(name, slowdown);
-    }
+    let mut pair = without_stragglers(&[("a", 1.0), ("b", 3.0), ("c", 5.0)]);
     let first = submit(&mut pair, &single, 0);
     let second = submit(&mut pair, &deep, 0);
     // Near the first job's end its last packages run while the workers it
@@ -700,4 +687,39 @@ fn two_jobs_run_at_once_and_a_cancel_of_one_tells_exactly_its_holders() {
     complete(&mut pair, first, 1);
     check_images(&pair, first, &single);
     assert_eq!(state(&pair, second), Some(JobState::Cancelled));
+}
+
+/// One worker, a low job's one split frame under way and a high job taking
+/// the worker at its next package boundary: when the worker comes back to
+/// the low frame it still keeps it (no `FrameStart` again) unless more
+/// frames than it keeps came between (then the start comes once more).
+/// Either way nothing is taken back and both jobs' images are right.
+#[test]
+fn a_worker_gets_a_frames_start_again_only_when_it_let_the_frame_go() {
+    let kept = vtfarm_proto::FRAMES_IN_FLIGHT;
+    for (high_frames, low_starts) in [(1, 1), (kept + 2, 2)] {
+        let (low_job, high_job) = (Job::new(1), Job::new(high_frames));
+        let mut pair = without_stragglers(&[("w", 1.0)]);
+        let low = submit(&mut pair, &low_job, 0);
+        pair.drive(BOUND, |p| !p.master.job_packages_by_worker(low).is_empty());
+        let high = submit(&mut pair, &high_job, 5);
+        complete(&mut pair, high, high_frames);
+        complete(&mut pair, low, 1);
+        // The jobs did interleave: low, then high, then low again.
+        let mut jobs: Vec<u64> = pair.busy[0].iter().map(|run| run.job).collect();
+        jobs.dedup();
+        assert_eq!(jobs, [low, high, low], "{high_frames} high frames");
+        let got = &pair.workers[0].frame_starts_got;
+        let low_got = got.iter().filter(|&&(job, _)| job == low).count();
+        assert_eq!(low_got, low_starts, "{high_frames} high frames: {got:?}");
+        // Each of the high job's split frames is announced once (its
+        // whole frames' starts come with their packages).
+        let high_got: Vec<_> = got.iter().filter(|&&(job, _)| job == high).collect();
+        let once: BTreeSet<_> = high_got.iter().collect();
+        assert_eq!(once.len(), high_got.len(), "{got:?}");
+        check_images(&pair, low, &low_job);
+        check_images(&pair, high, &high_job);
+        assert_nothing_taken_back(&pair, low);
+        assert_nothing_taken_back(&pair, high);
+    }
 }

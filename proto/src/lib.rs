@@ -17,11 +17,14 @@
 //! - [`framing`]: `u32` little-endian length prefix plus a bincode body,
 //!   [`encode_message`] / [`decode_message`] and the limits.
 //! - [`handshake`]: what a `Hello` must be ([`check_hello`]).
+//! - [`kept`]: which frames a worker keeps ([`KeptFrames`]), as both ends
+//!   of its session count them.
 
 use std::time::Duration;
 
 pub mod framing;
 pub mod handshake;
+pub mod kept;
 pub mod message;
 pub mod wire;
 
@@ -30,6 +33,7 @@ pub use framing::{
     decode_message, encode_message, encoded_len, split_frame,
 };
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
+pub use kept::{FrameKey, KeptFrames};
 pub use message::{
     FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobScene,
     JobSummary, MAX_STAGES, Message, Package, PackageFailed, PackageId, PackageResult, PhaseKind,
@@ -50,11 +54,12 @@ pub use wire::{
 pub const PROTOCOL_VERSION: u32 = 9;
 
 /// How many split frames of a job the master runs at once (pipelined
-/// frames) and so how many prepared frames a worker keeps: a package of any
-/// of them may come. The master's scheduler configuration must not exceed
-/// it for split frames; whole frames (more of them in flight, two per
-/// worker) bring their `FrameStart` with their package, so a worker never
-/// needs one it was not sent.
+/// frames) and so how many frames a worker keeps ([`KeptFrames`]): a
+/// package of any of them may come. The master's scheduler configuration
+/// must not exceed it for split frames; whole frames (more of them in
+/// flight, two per worker) bring their `FrameStart` with their package, and
+/// the master sends a split frame's `FrameStart` again to a worker that no
+/// longer keeps it, so a worker never needs one it was not sent.
 pub const FRAMES_IN_FLIGHT: usize = 8;
 
 /// A peer silent this long is gone: the master drops a worker that sent

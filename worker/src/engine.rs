@@ -19,9 +19,9 @@ use std::time::Instant;
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
-    FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash, WireBitmap,
-    WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WirePackageStats,
-    check_stages, check_triangle_ids,
+    FrameKey, FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash,
+    WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat,
+    WirePackageStats, check_stages, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -38,15 +38,16 @@ use vtfarm_vertex::{
 pub struct PreparedFrames(Vec<Arc<ActiveFrame>>);
 
 impl PreparedFrames {
-    /// Keeps `frame`, dropping the oldest (by job and frame) beyond
-    /// [`vtfarm_proto::FRAMES_IN_FLIGHT`]: a skipped frame may be prepared
-    /// after newer ones.
+    /// Keeps `frame` (until [`PreparedFrames::retain`] lets it go).
     pub fn insert(&mut self, frame: ActiveFrame) {
         self.0.push(Arc::new(frame));
-        self.0.sort_by_key(|a| (a.job, a.frame));
-        if self.0.len() > vtfarm_proto::FRAMES_IN_FLIGHT {
-            self.0.remove(0);
-        }
+    }
+
+    /// Lets go of the frames `keep` refuses: the driver passes the
+    /// session's [`crate::WorkerSession::keeps_set_up`], so the frames kept
+    /// are the session's, bounded as it bounds them.
+    pub fn retain(&mut self, keep: impl Fn(FrameKey) -> bool) {
+        self.0.retain(|a| keep((a.job, a.frame)));
     }
 
     /// The prepared frame `frame` of `job`, if kept.
@@ -616,6 +617,15 @@ mod tests {
         (cockpit, hash, engine)
     }
 
+    /// The cockpit's own camera, `width` × `height` pixels.
+    fn sized(cockpit: &Cockpit, width: u32, height: u32) -> Camera {
+        Camera {
+            width,
+            height,
+            ..cockpit.camera
+        }
+    }
+
     /// Frame `frame` of the cockpit seen by `camera`, the sun along `sun`.
     fn cockpit_frame(
         (cockpit, hash): (&Cockpit, SceneHash),
@@ -654,11 +664,7 @@ mod tests {
     fn frames_that_differ_only_in_the_sun_share_the_renderer() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 32,
-            height: 18,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 32, 18);
         let start = |frame: u32, sun: Vec3, reflectors: &[u32]| {
             cockpit_frame((&cockpit, hash), frame, camera, sun, reflectors)
         };
@@ -686,11 +692,7 @@ mod tests {
     fn a_sun_only_frame_reuses_the_id_buffers_and_traces_as_alone() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         let start = |frame: u32, sun: Vec3| {
             cockpit_frame((&cockpit, hash), frame, camera, sun, &reflectors)
         };
@@ -729,11 +731,7 @@ mod tests {
     fn a_frame_traces_the_same_after_other_frames_as_alone() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         // The eye moved sideways and up, the sun turned: other reflector
         // bounds, other ID buffers, other shadows.
         let moved = Camera {
@@ -814,11 +812,7 @@ mod tests {
     fn a_progressive_package_runs_its_stages_on_one_set_up() {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
-        let camera = Camera {
-            width: 96,
-            height: 54,
-            ..cockpit.camera
-        };
+        let camera = sized(&cockpit, 96, 54);
         let sun = Vec3::new(0.45, -0.85, -0.15);
         let stages = [Quality::Preview, Quality::Refine, Quality::Full];
         let start = |quality: Quality, staged: bool| {

@@ -130,8 +130,10 @@ pub async fn serve(
     // Progressive packages between their stages.
     let mut progress: BTreeMap<PackageId, ProgressivePackage> = BTreeMap::new();
     loop {
-        // A cancelled package's progress goes with it.
+        // A cancelled package's progress goes with it, and the frames the
+        // session let go with them.
         progress.retain(|&id, _| session.continues(id));
+        frames.retain(|key| session.keeps_set_up(key));
         // Hand the session the messages that waited for a scene, until
         // one needs the disk or a check again.
         while scene_work.is_none() {

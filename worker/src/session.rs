@@ -13,7 +13,10 @@
 //! master pipelines frames and gives each frame's work to a crew of workers
 //! (frame affinity), so a frame is prepared only when a package of it comes:
 //! a worker sets up the frames of its crew, not every frame announced.
-//! Prepared frames stay usable, [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all.
+//! Prepared frames stay usable: the session keeps the frames the master
+//! named last ([`KeptFrames`], the rule the master counts on, so it sends a
+//! frame's `FrameStart` again only to a worker that let it go) and those of
+//! the packages in hand.
 //! A whole frame's package brings its frame's set-up itself (no other
 //! worker hears of that frame); its result is the finished frame.
 //! Frames are prepared one at a time, for the first waiting package. Scenes
@@ -37,8 +40,8 @@ use std::time::Duration;
 
 use tracing::{info, warn};
 use vtfarm_proto::{
-    FrameStart, JobId, Message, Package, PackageFailed, PackageId, PackageResult, SceneData,
-    SceneHash,
+    FrameStart, JobId, KeptFrames, Message, Package, PackageFailed, PackageId, PackageResult,
+    SceneData, SceneHash,
 };
 
 use crate::engine::{FrameError, PackageError};
@@ -92,7 +95,7 @@ pub trait SceneStore {
 }
 
 /// A frame by job and index.
-pub type FrameKey = (JobId, u32);
+pub use vtfarm_proto::FrameKey;
 
 /// A job the master offered and whether its scene is at hand.
 #[derive(Clone, Copy, Debug)]
@@ -111,7 +114,7 @@ pub enum Task {
     /// Run stage `stage` of the package (0 for a frame of one stage; the
     /// driver keeps a progressive package's progress between its stages
     /// while [`WorkerSession::continues`] says so) on its frame, which is
-    /// among the prepared ones (the newest or a kept older one); answer
+    /// among the prepared ones; answer
     /// with [`WorkerSession::package_finished`].
     RunPackage { package: Package, stage: usize },
 }
@@ -126,11 +129,12 @@ struct RunningStage {
 /// The worker's session state.
 #[derive(Debug)]
 pub struct WorkerSession {
-    /// The frame whose packages can run now (the newest prepared).
-    ready: Option<FrameKey>,
-    /// Frames prepared before `ready`, oldest first: their packages can run
-    /// too.
-    older: VecDeque<FrameKey>,
+    /// The frames the master named last: the session keeps these (and
+    /// those of packages in hand) announced or prepared, and lets the
+    /// others go.
+    kept: KeptFrames,
+    /// The frames prepared: their packages can run.
+    prepared: BTreeSet<FrameKey>,
     /// A frame handed to the driver for preparation (one at a time), and
     /// since when.
     preparing: Option<FrameKey>,
@@ -178,8 +182,8 @@ impl WorkerSession {
     /// A session that starts at `now`.
     pub fn new(now: Duration) -> Self {
         WorkerSession {
-            ready: None,
-            older: VecDeque::new(),
+            kept: KeptFrames::default(),
+            prepared: BTreeSet::new(),
             preparing: None,
             preparing_since: now,
             setup_to_tell: BTreeMap::new(),
@@ -285,6 +289,9 @@ impl WorkerSession {
         scenes: &mut impl SceneStore,
     ) {
         self.now = now;
+        // What the master counts on this worker keeping (the frames of
+        // packages in hand stay too; see `forget_unkept`).
+        self.kept.saw(&message);
         // A package answers the request. A frame start renews it: the
         // master drops a request naming a job that is no longer running
         // (asking twice changes nothing at the master).
@@ -358,15 +365,7 @@ impl WorkerSession {
         match outcome {
             Ok(()) => {
                 info!(job = key.0, frame = key.1, "frame ready");
-                match self.ready {
-                    // A skipped older frame, prepared for a package of it.
-                    Some(ready) if ready > key => self.keep_older(key),
-                    _ => {
-                        if let Some(previous) = self.ready.replace(key) {
-                            self.keep_older(previous);
-                        }
-                    }
-                }
+                self.prepared.insert(key);
             }
             Err(error) => {
                 warn!(job = key.0, frame = key.1, "cannot start frame: {error}");
@@ -377,14 +376,24 @@ impl WorkerSession {
         self.advance();
     }
 
-    /// Keeps a prepared frame older than the newest, dropping the oldest
-    /// beyond [`vtfarm_proto::FRAMES_IN_FLIGHT`] in all.
-    fn keep_older(&mut self, key: FrameKey) {
-        self.older.push_back(key);
-        self.older.make_contiguous().sort_unstable();
-        while self.older.len() + 1 > vtfarm_proto::FRAMES_IN_FLIGHT {
-            self.older.pop_front();
-        }
+    /// Lets go of the frames (announced, waiting for their scene or
+    /// prepared) that are neither kept ([`KeptFrames`]) nor the frame of a
+    /// package in hand: at most `FRAMES_IN_FLIGHT` and those stay.
+    fn forget_unkept(&mut self) {
+        let in_hand = (self.queue.iter())
+            .chain(self.continuing.iter().map(|(p, _)| p))
+            .chain(self.running.iter().map(|r| &r.package));
+        let in_hand: BTreeSet<FrameKey> = in_hand.map(|p| (p.job, p.frame)).collect();
+        let keep = |key: FrameKey| self.kept.contains(key) || in_hand.contains(&key);
+        self.announced.retain(|f| keep((f.job, f.frame)));
+        self.awaiting_scene.retain(|f| keep((f.job, f.frame)));
+        self.prepared.retain(|&key| keep(key));
+    }
+
+    /// Whether the driver keeps frame `key` set up: it is prepared, or
+    /// being prepared (the driver lets the others go).
+    pub fn keeps_set_up(&self, key: FrameKey) -> bool {
+        self.is_prepared(key) || self.preparing == Some(key)
     }
 
     /// Hands the driver the next frame to prepare, if none is being
@@ -449,14 +458,13 @@ impl WorkerSession {
     }
 
     fn start_frame(&mut self, start: FrameStart, scenes: &mut impl SceneStore) {
-        // Announced again (the master does when the worker comes from
-        // another job's work): a frame still kept, being set up or waiting
-        // to be is not set up twice.
+        // Announced again (as a whole frame's package brings it again): a
+        // frame still kept, being set up or waiting to be is not set up
+        // twice.
         let key = (start.job, start.frame);
         let known = |f: &FrameStart| (f.job, f.frame) == key;
-        if self.ready == Some(key)
+        if self.is_prepared(key)
             || self.preparing == Some(key)
-            || self.older.contains(&key)
             || self.announced.iter().any(known)
             || self.awaiting_scene.iter().any(known)
         {
@@ -469,18 +477,13 @@ impl WorkerSession {
         }
         let key = (start.job, start.frame);
         (self.stage_counts).push_back((key, start.stages.len().max(1)));
+        // Both lists are kept to the frames kept (`forget_unkept`).
         if scenes.has_scene(&start.scene) {
-            if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
-                self.announced.pop_front();
-            }
             self.announced.push_back(start);
             self.prepare_next();
         } else {
             // The scene was offered and requested; the frame waits for it
             // (so do whole frames' set-ups that came with their packages).
-            if self.awaiting_scene.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
-                self.awaiting_scene.pop_front();
-            }
             self.awaiting_scene.push_back(start);
         }
     }
@@ -490,6 +493,7 @@ impl WorkerSession {
         if self.end.is_some() {
             return;
         }
+        self.forget_unkept();
         // The frame of a package that came while another runs is set up
         // beside it.
         self.prepare_next();
@@ -522,7 +526,7 @@ impl WorkerSession {
             .filter(|o| o.ready)
             .map(|o| (o.job, 0));
         let newest = (self.announced.iter().map(|f| (f.job, f.frame)))
-            .chain(self.ready)
+            .chain(self.prepared.last().copied())
             .chain(offered)
             .max();
         let asks = nothing_queued && self.awaiting_scene.is_empty() && !self.requested;
@@ -553,9 +557,6 @@ impl WorkerSession {
             // A whole frame's package carries its set-up: announced
             // again if others pushed it out meanwhile.
             if let Some(start) = package.whole.as_ref().filter(|_| !announced) {
-                if self.announced.len() == vtfarm_proto::FRAMES_IN_FLIGHT {
-                    self.announced.pop_front();
-                }
                 self.announced.push_back((**start).clone());
                 announced = true;
             }
@@ -585,9 +586,9 @@ impl WorkerSession {
         true
     }
 
-    /// Whether frame `key` is prepared (the newest or a kept older one).
+    /// Whether frame `key` is prepared.
     fn is_prepared(&self, key: FrameKey) -> bool {
-        self.ready == Some(key) || self.older.contains(&key)
+        self.prepared.contains(&key)
     }
 
     /// Hands the driver stage `stage` of `package`, or fails the package

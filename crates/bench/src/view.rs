@@ -20,13 +20,22 @@
 use std::fs::File;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::pin::pin;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, anyhow, bail, ensure};
+use futures_util::StreamExt;
+use http_body_util::{BodyDataStream, BodyExt, Full, Limited};
+use hyper::body::{Body, Bytes, Incoming};
+use hyper::client::conn::http1;
+use hyper::{Method, Request, Response, StatusCode, header};
+use hyper_util::rt::TokioIo;
 use serde::Serialize;
 use serde_json::Value;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use sse_stream::SseByteStream;
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 // The box the server keeps the view's eye in: the bench's eyes stay within
@@ -550,9 +559,9 @@ impl Processes {
         events.discard_pending()?;
         let sent = Instant::now();
         let body = serde_json::json!({ "job": source, "offset": offset }).to_string();
-        let (status, reply) = request(self.http, "POST", "/api/view", Some(&body)).await?;
+        let (status, reply) = request(self.http, Method::POST, "/api/view", Some(&body)).await?;
         ensure!(
-            status == 200,
+            status == StatusCode::OK,
             "POST /api/view answered {status}: {}",
             String::from_utf8_lossy(&reply).trim()
         );
@@ -746,183 +755,58 @@ fn covered_micros(mut spans: Vec<(u64, u64)>) -> u64 {
 
 /// `GET path` answered as JSON (an error for any status but 200).
 async fn get_json(address: SocketAddr, path: &str) -> Result<Value> {
-    let (status, body) = request(address, "GET", path, None).await?;
-    ensure!(status == 200, "GET {path} answered {status}");
+    let (status, body) = request(address, Method::GET, path, None).await?;
+    ensure!(status == StatusCode::OK, "GET {path} answered {status}");
     serde_json::from_slice(&body).with_context(|| format!("GET {path}: not JSON"))
 }
 
-/// One HTTP/1.1 request over a fresh connection (closed after it), with
-/// an optional JSON body: the status and the body (de-chunked), bounded by
-/// [`MAX_BODY`] and [`REQUEST_TIMEOUT`].
+/// One request with an optional JSON body over a fresh connection: the
+/// status and the whole body, bounded by [`MAX_BODY`] and [`REQUEST_TIMEOUT`].
 async fn request(
     address: SocketAddr,
-    method: &str,
+    method: Method,
     path: &str,
     json: Option<&str>,
-) -> Result<(u16, Vec<u8>)> {
-    let answer = tokio::time::timeout(REQUEST_TIMEOUT, exchange(address, method, path, json));
-    (answer.await).with_context(|| format!("{method} {path}: no answer within 30 s"))?
+) -> Result<(StatusCode, Bytes)> {
+    let what = format!("{method} {path}");
+    let exchange = async {
+        let response = send(address, method, path, json).await?;
+        let status = response.status();
+        let body = Limited::new(response.into_body(), MAX_BODY).collect().await;
+        let body = body.map_err(|e| anyhow!("reading the answer: {e}"))?;
+        anyhow::Ok((status, body.to_bytes()))
+    };
+    let answer = tokio::time::timeout(REQUEST_TIMEOUT, exchange).await;
+    answer
+        .with_context(|| format!("{what}: no answer within 30 s"))?
+        .context(what)
 }
 
-async fn exchange(
+/// Sends a request to the master's HTTP API over a connection of its own
+/// (hyper's HTTP/1 client; the connection ends with the answer's body) and
+/// answers its head.
+async fn send(
     address: SocketAddr,
-    method: &str,
+    method: Method,
     path: &str,
     json: Option<&str>,
-) -> Result<(u16, Vec<u8>)> {
-    let mut stream = TcpStream::connect(address)
+) -> Result<Response<Incoming>> {
+    let mut builder = Request::builder()
+        .method(method)
+        .uri(path)
+        // The master checks `Host` against the address it listens on.
+        .header(header::HOST, address.to_string());
+    if json.is_some() {
+        builder = builder.header(header::CONTENT_TYPE, "application/json");
+    }
+    let body = Full::new(Bytes::from(json.unwrap_or_default().to_owned()));
+    let request = builder.body(body)?;
+    let stream = TcpStream::connect(address)
         .await
         .with_context(|| format!("connecting to the master's HTTP at {address}"))?;
-    let body = json.unwrap_or_default();
-    let head = format!(
-        "{method} {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\
-         Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-        body.len()
-    );
-    stream.write_all(head.as_bytes()).await?;
-    let mut answer = Vec::new();
-    (&mut stream)
-        .take(MAX_BODY as u64)
-        .read_to_end(&mut answer)
-        .await?;
-    let (status, chunked, start) = parse_head(&answer)
-        .with_context(|| format!("{method} {path}: not an HTTP answer"))?
-        .context("the answer ended within its head")?;
-    let raw = &answer[start..];
-    if !chunked {
-        return Ok((status, raw.to_vec()));
-    }
-    let mut body = Vec::new();
-    let mut decoder = Dechunker::default();
-    decoder.feed(raw, &mut body)?;
-    Ok((status, body))
-}
-
-/// An HTTP answer's head: its status, whether its body is chunked, and
-/// where the body starts; `Ok(None)` while the head is incomplete.
-fn parse_head(bytes: &[u8]) -> Result<Option<(u16, bool, usize)>> {
-    let Some(end) = bytes.windows(4).position(|w| w == b"\r\n\r\n") else {
-        return Ok(None);
-    };
-    let head = std::str::from_utf8(&bytes[..end]).context("the head is not UTF-8")?;
-    let mut lines = head.split("\r\n");
-    let status_line = lines.next().unwrap_or_default();
-    let status = (status_line.split(' ').nth(1))
-        .and_then(|s| s.parse().ok())
-        .with_context(|| format!("no status in '{status_line}'"))?;
-    let chunked = lines.any(|line| {
-        line.split_once(':').is_some_and(|(k, v)| {
-            k.trim().eq_ignore_ascii_case("transfer-encoding")
-                && v.to_ascii_lowercase().contains("chunked")
-        })
-    });
-    Ok(Some((status, chunked, end + 4)))
-}
-
-/// HTTP/1.1 chunked transfer decoding, fed as bytes arrive.
-#[derive(Default)]
-struct Dechunker {
-    /// Bytes of a size line or a chunk's closing CRLF not yet complete.
-    pending: Vec<u8>,
-    /// Bytes left of the current chunk's data.
-    left: usize,
-    /// The CRLF after a chunk's data is still due.
-    closing: bool,
-    ended: bool,
-}
-
-impl Dechunker {
-    /// Decodes `input`, appending the data to `out`.
-    fn feed(&mut self, mut input: &[u8], out: &mut Vec<u8>) -> Result<()> {
-        while !input.is_empty() && !self.ended {
-            if self.left > 0 {
-                let n = self.left.min(input.len());
-                out.extend_from_slice(&input[..n]);
-                (self.left, input) = (self.left - n, &input[n..]);
-                self.closing = self.left == 0;
-                continue;
-            }
-            let Some(eol) = input.iter().position(|&b| b == b'\n') else {
-                self.pending.extend_from_slice(input);
-                ensure!(
-                    self.pending.len() <= 4096,
-                    "a chunk's size line is too long"
-                );
-                return Ok(());
-            };
-            self.pending.extend_from_slice(&input[..=eol]);
-            input = &input[eol + 1..];
-            let line = std::mem::take(&mut self.pending);
-            let line = std::str::from_utf8(&line).context("a chunk's size line is not UTF-8")?;
-            let line = line.trim_end_matches(['\r', '\n']);
-            if self.closing {
-                ensure!(line.is_empty(), "a chunk's data does not end with CRLF");
-                self.closing = false;
-                continue;
-            }
-            let size = line.split(';').next().unwrap_or_default().trim();
-            let size = usize::from_str_radix(size, 16)
-                .with_context(|| format!("'{line}' is not a chunk size"))?;
-            ensure!(size <= MAX_BODY, "a chunk of {size} bytes is too large");
-            self.left = size;
-            self.ended = size == 0;
-        }
-        Ok(())
-    }
-}
-
-/// Server-sent events, parsed as lines arrive: an event's `data:` lines
-/// joined, handed out at the blank line that ends it.
-#[derive(Default)]
-struct EventParser {
-    line: Vec<u8>,
-    data: String,
-    kind: String,
-}
-
-/// One parsed server-sent event.
-#[derive(Debug, PartialEq)]
-struct SseEvent {
-    kind: String,
-    data: String,
-}
-
-impl EventParser {
-    /// Parses `bytes`, pushing each completed event.
-    fn feed(&mut self, bytes: &[u8], events: &mut Vec<SseEvent>) -> Result<()> {
-        for &b in bytes {
-            if b != b'\n' {
-                self.line.push(b);
-                ensure!(self.line.len() <= MAX_BODY, "an event line is too long");
-                continue;
-            }
-            let line = std::mem::take(&mut self.line);
-            let line = std::str::from_utf8(&line).context("an event line is not UTF-8")?;
-            let line = line.strip_suffix('\r').unwrap_or(line);
-            if line.is_empty() {
-                if !self.data.is_empty() || !self.kind.is_empty() {
-                    events.push(SseEvent {
-                        kind: std::mem::take(&mut self.kind),
-                        data: std::mem::take(&mut self.data),
-                    });
-                }
-                continue;
-            }
-            let (field, value) = line.split_once(':').unwrap_or((line, ""));
-            let value = value.strip_prefix(' ').unwrap_or(value);
-            match field {
-                "event" => self.kind = value.to_owned(),
-                "data" => {
-                    if !self.data.is_empty() {
-                        self.data.push('\n');
-                    }
-                    self.data.push_str(value);
-                }
-                _ => {} // comments (empty field), id, retry
-            }
-        }
-        Ok(())
-    }
+    let (mut sender, connection) = http1::handshake(TokioIo::new(stream)).await?;
+    tokio::spawn(connection);
+    Ok(sender.send_request(request).await?)
 }
 
 /// The dashboard's event stream: each `farm` event's JSON with the time it
@@ -935,14 +819,15 @@ struct EventStream {
 
 impl EventStream {
     async fn open(address: SocketAddr) -> Result<EventStream> {
-        let mut stream = TcpStream::connect(address)
-            .await
-            .with_context(|| format!("connecting to the master's HTTP at {address}"))?;
-        let head = format!("GET /api/events HTTP/1.1\r\nHost: {address}\r\n\r\n");
-        stream.write_all(head.as_bytes()).await?;
+        let path = "/api/events";
+        let response =
+            tokio::time::timeout(REQUEST_TIMEOUT, send(address, Method::GET, path, None));
+        let response = (response.await).context("GET /api/events: no answer within 30 s")??;
+        let status = response.status();
+        ensure!(status == StatusCode::OK, "GET {path} answered {status}");
         let (send, events) = mpsc::unbounded_channel();
         let reader = tokio::spawn(async move {
-            if let Err(e) = read_events(stream, &send).await {
+            if let Err(e) = read_events(response.into_body(), MAX_BODY, &send).await {
                 let _ = send.send(Err(e));
             }
         });
@@ -972,46 +857,50 @@ impl Drop for EventStream {
     }
 }
 
-async fn read_events(
-    mut stream: TcpStream,
+/// Reads the event stream's `farm` events (as JSON, with the time each
+/// was read) into `send` until the stream fails or ends, or nobody listens;
+/// it may not run `limit` bytes without an event (what the parser holds).
+async fn read_events<B>(
+    body: B,
+    limit: usize,
     send: &mpsc::UnboundedSender<Result<(Instant, Value)>>,
-) -> Result<()> {
-    let mut buffer = vec![0; 1 << 16];
-    let mut head = Vec::new();
-    let (status, chunked, start) = loop {
-        let n = stream.read(&mut buffer).await?;
-        ensure!(n > 0, "the event stream closed before its head");
-        head.extend_from_slice(&buffer[..n]);
-        ensure!(head.len() <= 1 << 20, "the event stream's head is too long");
-        if let Some(parsed) = parse_head(&head)? {
-            break parsed;
+) -> Result<()>
+where
+    B: Body<Data = Bytes>,
+    B::Error: std::error::Error + Send + Sync + 'static,
+{
+    // The bytes read since the last event: what the parser may hold.
+    let unparsed = Arc::new(AtomicUsize::new(0));
+    let counted = unparsed.clone();
+    let bytes = BodyDataStream::new(body).map(move |piece| {
+        let piece = piece.map_err(std::io::Error::other)?;
+        let held = counted.fetch_add(piece.len(), Ordering::Relaxed) + piece.len();
+        if held > limit {
+            let why = format!("the stream ran {limit} bytes without an event");
+            return Err(std::io::Error::other(why));
         }
-    };
-    ensure!(status == 200, "GET /api/events answered {status}");
-    let mut dechunker = chunked.then(Dechunker::default);
-    let mut parser = EventParser::default();
-    let (mut body, mut events) = (Vec::new(), Vec::new());
-    let mut input = head.split_off(start);
-    loop {
-        match &mut dechunker {
-            Some(d) => d.feed(&input, &mut body)?,
-            None => body.append(&mut input),
-        }
-        parser.feed(&body, &mut events)?;
-        body.clear();
+        Ok(piece)
+    });
+    let mut events = pin!(SseByteStream::new(bytes));
+    while let Some(event) = events.next().await {
+        // A failure of the body is the crate's `Body` error around ours.
+        let event = event.map_err(|e| match e {
+            sse_stream::Error::Body(source) => anyhow::Error::from_boxed(source),
+            other => other.into(),
+        });
+        let event = event.context("the event stream")?;
         let at = Instant::now();
-        for event in events.drain(..) {
-            if event.kind == "farm" {
-                let json = serde_json::from_str(&event.data).context("an event is not JSON")?;
-                if send.send(Ok((at, json))).is_err() {
-                    return Ok(());
-                }
-            }
+        unparsed.store(0, Ordering::Relaxed);
+        if event.event.as_deref() != Some("farm") {
+            continue;
         }
-        let n = stream.read(&mut buffer).await?;
-        ensure!(n > 0, "the event stream ended");
-        input = buffer[..n].to_vec();
+        let data = event.data.unwrap_or_default();
+        let json = serde_json::from_str(&data).context("an event is not JSON")?;
+        if send.send(Ok((at, json))).is_err() {
+            return Ok(());
+        }
     }
+    bail!("the event stream ended")
 }
 
 /// Renders each move's eye at each quality in this process (after one
@@ -1150,6 +1039,8 @@ fn single_frame_spread(farm: &FarmFigures) -> Option<(Spread, Spread)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use http_body_util::StreamBody;
+    use hyper::body::Frame;
 
     #[test]
     fn the_median_and_the_90th_percentile_by_nearest_rank() {
@@ -1164,55 +1055,49 @@ mod tests {
         assert_eq!((ten.median, ten.p90), (5.5, 9.0));
     }
 
-    #[test]
-    fn chunked_bodies_decode_however_the_bytes_are_cut() {
-        let wire = b"4\r\nWiki\r\n7;ext=1\r\npedia i\r\nB\r\nn \r\nchunks.\r\n0\r\n\r\n";
-        for cut in 1..wire.len() {
-            let (mut decoder, mut out) = (Dechunker::default(), Vec::new());
-            for piece in wire.chunks(cut) {
-                decoder.feed(piece, &mut out).unwrap();
-            }
-            assert_eq!(out, b"Wikipedia in \r\nchunks.", "pieces of {cut}");
-            assert!(decoder.ended);
+    /// The farm events of an event stream cut into `pieces` bytes, read
+    /// with `limit`, and how the reading ended.
+    async fn farm_events(wire: &str, pieces: usize, limit: usize) -> (Vec<Value>, String) {
+        let body = futures_util::stream::iter(wire.as_bytes().chunks(pieces)).map(|piece| {
+            Ok::<_, std::convert::Infallible>(Frame::data(Bytes::from(piece.to_vec())))
+        });
+        let (send, mut events) = mpsc::unbounded_channel();
+        let end = read_events(StreamBody::new(body), limit, &send).await;
+        let mut read = Vec::new();
+        while let Ok(event) = events.try_recv() {
+            read.push(event.unwrap().1);
         }
-        let mut out = Vec::new();
-        let error = Dechunker::default().feed(b"zz\r\n", &mut out).unwrap_err();
-        assert_eq!(error.to_string(), "'zz' is not a chunk size");
-        let error = (Dechunker::default().feed(b"2\r\nabX\r\n", &mut out)).unwrap_err();
-        assert_eq!(error.to_string(), "a chunk's data does not end with CRLF");
+        (read, format!("{:#}", end.unwrap_err()))
     }
 
-    #[test]
-    fn server_sent_events_join_their_data_lines_and_end_at_a_blank_line() {
-        let wire = "event: farm\ndata: {\"a\":\ndata: 1}\n\n: a comment\n\nevent: farm\r\ndata:{}\r\n\r\nevent: farm\ndata: 2";
-        for cut in 1..wire.len() {
-            let (mut parser, mut events) = (EventParser::default(), Vec::new());
-            for piece in wire.as_bytes().chunks(cut) {
-                parser.feed(piece, &mut events).unwrap();
-            }
-            let farm = |data: &str| SseEvent {
-                kind: "farm".into(),
-                data: data.into(),
-            };
+    #[tokio::test]
+    async fn the_event_stream_gives_each_farm_event_however_the_bytes_are_cut() {
+        let wire = "event: farm\ndata: {\"a\":\ndata: 1}\n\n: a comment\n\nevent: other\ndata: 3\n\n\
+                    event: farm\r\ndata:{}\r\n\r\nevent: farm\ndata: 2";
+        for pieces in 1..=wire.len() {
+            let (events, end) = farm_events(wire, pieces, wire.len()).await;
             // The last event has no blank line yet: not handed out.
-            assert_eq!(events, [farm("{\"a\":\n1}"), farm("{}")], "pieces of {cut}");
+            let expected = [serde_json::json!({ "a": 1 }), serde_json::json!({})];
+            assert_eq!(events, expected, "pieces of {pieces}");
+            assert_eq!(end, "the event stream ended");
         }
     }
 
-    #[test]
-    fn http_heads_give_the_status_the_coding_and_the_body() {
-        let answer = b"HTTP/1.1 200 OK\r\ncontent-type: text/event-stream\r\nTransfer-Encoding: chunked\r\n\r\n5\r\n";
-        assert_eq!(
-            parse_head(answer).unwrap(),
-            Some((200, true, answer.len() - 3))
+    #[tokio::test]
+    async fn an_event_over_the_limit_or_not_json_ends_the_stream() {
+        let long = format!(
+            "event: farm\ndata: {{}}\n\nevent: farm\ndata: \"{}\"\n\n",
+            "x".repeat(100)
         );
-        let answer = b"HTTP/1.1 400 Bad Request\r\ncontent-length: 4\r\n\r\nbad\n";
+        let (events, end) = farm_events(&long, 10, 64).await;
+        assert_eq!(events, [serde_json::json!({})]);
         assert_eq!(
-            parse_head(answer).unwrap(),
-            Some((400, false, answer.len() - 4))
+            end,
+            "the event stream: the stream ran 64 bytes without an event"
         );
-        assert_eq!(parse_head(b"HTTP/1.1 200 OK\r\nconte").unwrap(), None);
-        assert!(parse_head(b"garbage\r\n\r\n").is_err());
+        let (events, end) = farm_events("event: farm\ndata: {\n\n", 4, 64).await;
+        assert!(events.is_empty());
+        assert!(end.starts_with("an event is not JSON: "), "{end}");
     }
 
     /// A move's stages are timed at the first event that lists each for the

@@ -15,8 +15,8 @@ use vtfarm_master_core::{
     Written,
 };
 use vtfarm_proto::{
-    FrameDone, FrameStart, FrameStats, JobScene, Message, Package, PackageResult, ResultPixels,
-    SceneData, WireJob, encoded_len,
+    FrameDone, FrameKey, FrameStart, FrameStats, JobScene, Message, Package, PackageResult,
+    ResultPixels, SceneData, WireJob, encoded_len,
 };
 use vtfarm_worker::engine::FrameError;
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
@@ -57,6 +57,11 @@ pub trait CostModel {
     /// Drops what the model records of the worker's work for the tests
     /// ([`Farm::forget_records`]).
     fn forget_records(&mut self, _worker: &mut Self::Worker) {}
+
+    /// The worker's session keeps only the frames `keeps` accepts
+    /// (`WorkerSession::keeps_set_up`): a model that holds prepared frames
+    /// lets the others go, as the real driver does.
+    fn retain_frames(&mut self, _worker: &mut Self::Worker, _keeps: &dyn Fn(FrameKey) -> bool) {}
 }
 
 /// A package's outcome under a [`CostModel`].
@@ -178,6 +183,8 @@ pub struct SimWorker<W> {
     pub duplicate_results: bool,
     /// Results this worker's sessions sent.
     pub results_sent: u32,
+    /// The frames of the `FrameStart`s the master sent it, in order.
+    pub frame_starts_got: Vec<(u64, u32)>,
     conn: ConnId,
     /// Bumped on every (re)connection and loss, so old events are dropped.
     epoch: u64,
@@ -466,6 +473,7 @@ impl<M: CostModel> Farm<M> {
             partitioned: false,
             duplicate_results: false,
             results_sent: 0,
+            frame_starts_got: Vec::new(),
             conn: 0,
             epoch: 0,
             session: None,
@@ -920,6 +928,7 @@ impl<M: CostModel> Farm<M> {
                     Message::FrameStart(start) => {
                         let key = (start.job, start.frame);
                         self.frame_starts.push(key);
+                        self.workers[w].frame_starts_got.push(key);
                         self.frame_started.entry(key).or_insert(self.now);
                     }
                     _ => {}
@@ -1029,6 +1038,11 @@ impl<M: CostModel> Farm<M> {
     fn pump_worker_sized(&mut self, w: usize, result_bytes: Option<u64>) {
         let machine = self.machine_of_worker(w);
         let shared = self.config.shared_cores.is_some();
+        let worker = &mut self.workers[w];
+        if let Some(session) = &worker.session {
+            let keeps = |key| session.keeps_set_up(key);
+            self.model.retain_frames(&mut worker.state, &keeps);
+        }
         let Some(session) = self.workers[w].session.as_mut() else {
             return;
         };

@@ -10,7 +10,9 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use vtfarm_master_core::FarmRules;
-use vtfarm_proto::{FrameStart, Package, PackageId, SceneData, SceneHash, WirePackageStats};
+use vtfarm_proto::{
+    FrameKey, FrameStart, Package, PackageId, SceneData, SceneHash, WirePackageStats,
+};
 use vtfarm_vertex::{ProgressivePackage, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::SceneStore;
@@ -86,6 +88,10 @@ impl CostModel for Rendered {
     ) -> (Result<(), FrameError>, f64) {
         let outcome = worker.engine.start_frame(start);
         (outcome.map(|frame| worker.frames.insert(frame)), 0.0)
+    }
+
+    fn retain_frames(&mut self, worker: &mut RenderingWorker, keeps: &dyn Fn(FrameKey) -> bool) {
+        worker.frames.retain(keeps);
     }
 
     fn run_package(

@@ -27,8 +27,8 @@ use tracing::{debug, info, warn};
 use vtfarm_imaging::Image;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
-    FrameDone, FramePhase, FrameStart, JobAction, JobScene, JobSummary, Message, Package,
-    PackageResult, PhaseKind, QueueStatus, RunningJob, SceneData, SceneHash, StatusReply,
+    FrameDone, FramePhase, FrameStart, JobAction, JobScene, JobSummary, KeptFrames, Message,
+    Package, PackageResult, PhaseKind, QueueStatus, RunningJob, SceneData, SceneHash, StatusReply,
     WireBitmap, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob, WireJobKind,
     WirePackageStats, WorkerFrameStats, WorkerStatus, check_triangle_ids, encoded_len,
 };
@@ -373,8 +373,10 @@ pub struct MasterCore {
     /// Submissions whose scene the master still has to receive.
     awaiting_scene: BTreeMap<ConnId, WireJob>,
     packages: BTreeMap<u64, InFlight>,
-    /// The job of each worker's latest package (several jobs run at once).
-    worker_jobs: BTreeMap<ConnId, u64>,
+    /// The frames each worker keeps, as it counts them from the messages
+    /// it got (`KeptFrames`, fed by [`MasterCore::send`]): a split frame's
+    /// `FrameStart` goes again only to a worker that let it go.
+    worker_frames: BTreeMap<ConnId, KeptFrames>,
     next_job: u64,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
@@ -418,7 +420,7 @@ impl MasterCore {
             jobs: BTreeMap::new(),
             awaiting_scene: BTreeMap::new(),
             packages: BTreeMap::new(),
-            worker_jobs: BTreeMap::new(),
+            worker_frames: BTreeMap::new(),
             next_job: 1,
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
@@ -605,6 +607,7 @@ impl MasterCore {
                 self.close(conn, format!("cannot join: {e}"));
                 return;
             }
+            self.worker_frames.insert(conn, KeptFrames::default());
             // A running frame: bring the newcomer up to date.
             let catch_up: Vec<Message> = self
                 .jobs
@@ -636,7 +639,7 @@ impl MasterCore {
             Some(peer @ Peer::Worker { .. }) => {
                 info!(worker = %peer_name(conn, Some(&peer)), "worker left");
                 let _ = self.scheduler.worker_left(now, WorkerId(conn));
-                self.worker_jobs.remove(&conn);
+                self.worker_frames.remove(&conn);
                 // Its packages of the running frame still count in the frame's stats.
                 self.departed.insert(conn, peer);
             }
@@ -1457,8 +1460,19 @@ impl MasterCore {
         }
     }
 
+    /// Sends `message` to `conn`; a frame it names to a worker is among the
+    /// frames that worker keeps now.
     fn send(&mut self, conn: ConnId, message: Message) {
+        if let Some(kept) = self.worker_frames.get_mut(&conn) {
+            kept.saw(&message);
+        }
         self.outbox.push_back(Output::Send(conn, Box::new(message)));
+    }
+
+    /// Whether worker `conn` keeps frame `frame` of `job` (announced or
+    /// set up), by the rule both ends count ([`KeptFrames`]).
+    fn worker_keeps(&self, conn: ConnId, job: u64, frame: u32) -> bool {
+        (self.worker_frames.get(&conn)).is_some_and(|kept| kept.contains((job, frame)))
     }
 
     /// Sends to each of a job's submitters.
@@ -1547,24 +1561,26 @@ impl MasterCore {
                 }
             }
             Event::JobResumed { job } => {
-                // The workers may have set other frames up meanwhile.
+                // The workers may have let the job's frames go meanwhile:
+                // each gets the starts it lacks.
                 let Some(j) = self.jobs.get(&job.0) else {
                     return;
                 };
-                let starts: Vec<Message> = std::iter::once(Message::SceneOffer {
+                let offer = Message::SceneOffer {
                     hash: j.scene_hash,
                     job: job.0,
-                })
-                .chain(
-                    (j.assembling.iter())
-                        .filter(|a| !a.whole)
-                        .map(|a| Message::FrameStart(a.start.clone())),
-                )
-                .collect();
+                };
+                let starts: Vec<FrameStart> = (j.assembling.iter())
+                    .filter(|a| !a.whole)
+                    .map(|a| a.start.clone())
+                    .collect();
                 let workers: Vec<ConnId> = self.workers().collect();
                 for conn in workers {
-                    for message in &starts {
-                        self.send(conn, message.clone());
+                    self.send(conn, offer.clone());
+                    for start in &starts {
+                        if !self.worker_keeps(conn, start.job, start.frame) {
+                            self.send(conn, Message::FrameStart(start.clone()));
+                        }
                     }
                 }
             }
@@ -2041,14 +2057,12 @@ impl MasterCore {
         let whole = (job.and_then(|j| j.assembly(a.frame)))
             .filter(|_| a.whole)
             .map(|assembly| Box::new(assembly.start.clone()));
-        // A worker coming from another job's work may have let this split
-        // frame's set-up go (it keeps a few frames, of any job): its start
-        // comes again first. Within one job frames are pipelined no deeper
-        // than the worker keeps.
-        let previous = self.worker_jobs.insert(a.worker.0, a.job.0);
-        let switched = previous.is_some_and(|p| p != a.job.0);
+        // A worker that let this split frame go (it keeps the frames named
+        // to it last, of any job: several jobs run at once) gets its start
+        // again first; one that keeps it does not.
+        let kept = self.worker_keeps(a.worker.0, a.job.0, a.frame);
         let again = (job.and_then(|j| j.assembly(a.frame)))
-            .filter(|_| switched && !a.whole)
+            .filter(|_| !kept && !a.whole)
             .map(|assembly| Message::FrameStart(assembly.start.clone()));
         let message = Message::Package(Package {
             id: a.package.0,

@@ -486,3 +486,56 @@ fn a_progressive_frames_packages_run_the_lowest_stage_first() {
         "done with their last stage"
     );
 }
+
+/// Runs one package `id` of frame `key` from its `FrameStart` to its
+/// result (the frame prepared on the way).
+fn run_frame(s: &mut WorkerSession, scenes: &mut Scenes, id: u64, (job, frame): (u64, u32)) {
+    let now = Duration::ZERO;
+    s.handle_message(now, Message::FrameStart(frame_start(job, frame)), scenes);
+    s.handle_message(now, package(id, job, frame), scenes);
+    assert_eq!(tasks(s), vec![Task::PrepareFrame(frame_start(job, frame))]);
+    s.frame_prepared(now, (job, frame), Ok(()));
+    assert!(matches!(&tasks(s)[..], [Task::RunPackage { package: p, .. }] if p.id == id));
+    s.package_finished(now, id, Ok(result(id)));
+    let _ = messages(s);
+}
+
+/// The frames the master named last stay usable whatever their jobs' ids
+/// (a lower job's frame after many of a higher job's), a frame not named
+/// for longer falls out, and a package's frame stays while it is in hand.
+#[test]
+fn the_frames_named_last_stay_prepared_and_a_package_keeps_its_frame() {
+    let (mut s, mut scenes) = ready_session();
+    let kept = vtfarm_proto::FRAMES_IN_FLIGHT as u32;
+    let now = Duration::ZERO;
+    for frame in 0..kept {
+        run_frame(&mut s, &mut scenes, 100 + u64::from(frame), (2, frame));
+    }
+    // Job 1's frame after job 2's: prepared and kept (the newest named).
+    run_frame(&mut s, &mut scenes, 20, (1, 5));
+    for key in [(1, 5), (2, 1), (2, kept - 1)] {
+        assert!(s.keeps_set_up(key), "{key:?}");
+    }
+    // Job 2's frame 0 was named longest ago: let go.
+    assert!(!s.keeps_set_up((2, 0)));
+    // Packages in hand keep their frames however many frames are named
+    // meanwhile; each frame goes once its package is done.
+    s.handle_message(now, package(22, 2, 6), &mut scenes);
+    s.handle_message(now, package(23, 2, 7), &mut scenes);
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, .. }] if p.id == 22));
+    for frame in 0..kept {
+        s.handle_message(now, Message::FrameStart(frame_start(3, frame)), &mut scenes);
+    }
+    assert!(s.keeps_set_up((2, 6)) && s.keeps_set_up((2, 7)));
+    assert!(!s.keeps_set_up((1, 5)));
+    s.package_finished(now, 22, Ok(result(22)));
+    assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, .. }] if p.id == 23));
+    assert!(!s.keeps_set_up((2, 6)));
+    s.package_finished(now, 23, Ok(result(23)));
+    assert!(!s.keeps_set_up((2, 7)));
+    // A package of a frame let go fails: the master, counting the same,
+    // sends the frame's start again first.
+    let _ = messages(&mut s);
+    s.handle_message(now, package(24, 1, 5), &mut scenes);
+    assert!(matches!(&messages(&mut s)[..], [Message::PackageFailed(f), ..] if f.id == 24));
+}
