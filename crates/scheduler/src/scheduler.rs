@@ -132,6 +132,13 @@ struct TailCosts {
     bases_ahead: BTreeSet<u32>,
 }
 
+impl TailCosts {
+    /// Whether both times the tail rule reads are measured.
+    fn is_measured(&self) -> bool {
+        self.whole_frame_seconds.is_some() && self.base_frame_seconds.is_some()
+    }
+}
+
 impl RunningJob {
     /// The frames not started yet that count towards whole frames (none
     /// for an interactive job).
@@ -1021,7 +1028,16 @@ impl Scheduler {
         let frames_in_flight = self.config.frames_in_flight as usize;
         if starts_whole(&self.config, &self.workers, job) {
             let workers = self.eligible_workers(job).count().max(1);
-            job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
+            // Until the tail is measured no frames beyond the workers' own
+            // two: such a frame waits for a worker's third round, and the
+            // tail's split frames, though done, wait for it (frames
+            // complete in order) while the other workers idle.
+            let beyond = if job.tail.is_measured() {
+                frames_in_flight
+            } else {
+                0
+            };
+            job.ahead.len() + 1 < beyond + WHOLE_FRAMES_PER_WORKER * workers
         } else {
             let split: usize = self.running[..=j]
                 .iter()
