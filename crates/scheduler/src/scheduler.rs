@@ -1019,7 +1019,8 @@ impl Scheduler {
     /// [`SchedulerConfig::frames_in_flight`] (each holds a base frame of
     /// the master's, made one at a time, so a lower job never holds the
     /// slots a higher one needs), whole ones up to
-    /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
+    /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that (beyond
+    /// nothing while the job's tail is unmeasured).
     fn room_for_a_frame(&self, j: usize) -> bool {
         let job = &self.running[j];
         if job.paused || job.frames.is_empty() || job.frame.is_complete() {
