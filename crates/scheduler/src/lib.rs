@@ -126,7 +126,11 @@
 //!   each worker runs one and holds the next (it asks one package ahead),
 //!   and `frames_in_flight` more may be done, waiting for a slower
 //!   worker's; the master's memory so stays at that many finished images
-//!   and a worker's at two frames.
+//!   and a worker's at two frames. Those `frames_in_flight` more only once
+//!   the tail is measured: before, at a job's start, they would be whole
+//!   frames that no worker takes before its third round, and the tail's
+//!   split frames, done, would wait for them (frames complete in order)
+//!   while the other workers idle.
 //! * **Held results.** A driver that checks results only later (the master
 //!   waits for the frame's base image) reports them with
 //!   [`Scheduler::package_arrived`] first: such a package is no straggler and

@@ -132,6 +132,13 @@ struct TailCosts {
     bases_ahead: BTreeSet<u32>,
 }
 
+impl TailCosts {
+    /// Whether both times the tail rule reads are measured.
+    fn is_measured(&self) -> bool {
+        self.whole_frame_seconds.is_some() && self.base_frame_seconds.is_some()
+    }
+}
+
 impl RunningJob {
     /// The frames not started yet that count towards whole frames (none
     /// for an interactive job).
@@ -1012,7 +1019,8 @@ impl Scheduler {
     /// [`SchedulerConfig::frames_in_flight`] (each holds a base frame of
     /// the master's, made one at a time, so a lower job never holds the
     /// slots a higher one needs), whole ones up to
-    /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that.
+    /// [`WHOLE_FRAMES_PER_WORKER`] per eligible worker beyond that (beyond
+    /// nothing while the job's tail is unmeasured).
     fn room_for_a_frame(&self, j: usize) -> bool {
         let job = &self.running[j];
         if job.paused || job.frames.is_empty() || job.frame.is_complete() {
@@ -1021,7 +1029,16 @@ impl Scheduler {
         let frames_in_flight = self.config.frames_in_flight as usize;
         if starts_whole(&self.config, &self.workers, job) {
             let workers = self.eligible_workers(job).count().max(1);
-            job.ahead.len() + 1 < frames_in_flight + WHOLE_FRAMES_PER_WORKER * workers
+            // Until the tail is measured no frames beyond the workers' own
+            // two: such a frame waits for a worker's third round, and the
+            // tail's split frames, though done, wait for it (frames
+            // complete in order) while the other workers idle.
+            let beyond = if job.tail.is_measured() {
+                frames_in_flight
+            } else {
+                0
+            };
+            job.ahead.len() + 1 < beyond + WHOLE_FRAMES_PER_WORKER * workers
         } else {
             let split: usize = self.running[..=j]
                 .iter()

@@ -898,11 +898,12 @@ fn a_lost_or_failed_whole_frame_goes_back_whole() {
     farm.valid();
 }
 
-/// Whole frames in flight are bounded by the workers: each runs one and
-/// holds one ahead, and `frames_in_flight` more may be done waiting for an
-/// older one (frames complete in order).
-#[test]
-fn whole_frames_in_flight_follow_the_workers() {
+/// Two workers on a 40-frame job with 2 frames in flight; W1 holds frame 0
+/// while W0 finishes whole frames as fast as it gets them: the frames W0
+/// got, then W1 finishes frame 0 and the frames that start then.
+/// `base_frame` is the master's time per base frame, reported first where
+/// given (the tail measured once W0's first frame is done).
+fn whole_frames_behind_a_slow_one(base_frame: Option<Duration>) -> (Vec<u32>, Vec<u32>) {
     let mut farm = Farm::with(SchedulerConfig {
         frames_in_flight: 2,
         ..SchedulerConfig::default().pipelined(common::FRAMES_IN_FLIGHT)
@@ -910,6 +911,11 @@ fn whole_frames_in_flight_follow_the_workers() {
     farm.join(W0);
     farm.join(W1);
     farm.submit(JOB, 6, 40);
+    if let Some(cost) = base_frame {
+        farm.s
+            .base_frame_cost(farm.now, JOB, cost)
+            .expect("running");
+    }
     let oldest = farm.request(W1).expect("frame 0");
     let mut later = Vec::new();
     while let Some(a) = farm.request(W0) {
@@ -918,15 +924,36 @@ fn whole_frames_in_flight_follow_the_workers() {
         later.push(a.frame);
         assert!(later.len() <= 10, "{later:?}");
     }
-    // Frame 0 (W1's) holds the others: 2 + 2 · 2 = 6 frames in flight,
-    // then W0 waits.
-    assert_eq!(later, [1, 2, 3, 4, 5]);
     farm.valid();
     farm.at_ms(50);
     farm.done(W1, &oldest).expect("accepted");
-    let next = farm.assignments();
-    assert_eq!(next.iter().map(|a| a.frame).collect::<Vec<_>>(), [6]);
+    let next = farm.assignments().iter().map(|a| a.frame).collect();
     farm.valid();
+    (later, next)
+}
+
+/// Whole frames in flight are bounded by the workers: each runs one and
+/// holds one ahead, and, once the tail is measured, `frames_in_flight`
+/// more may be done waiting for an older one (frames complete in order).
+#[test]
+fn whole_frames_in_flight_follow_the_workers() {
+    let (later, next) = whole_frames_behind_a_slow_one(Some(Duration::from_millis(1)));
+    // Frame 0 (W1's) holds the others: 2 + 2 · 2 = 6 frames in flight,
+    // then W0 waits.
+    assert_eq!(later, [1, 2, 3, 4, 5]);
+    assert_eq!(next, [6]);
+}
+
+/// Before the tail is measured (no base frame's time reported), a job's
+/// start commits no whole frames beyond the workers' own two: one more
+/// would wait for a third round while the tail's split frames, done,
+/// waited for it.
+#[test]
+fn an_unmeasured_tail_holds_whole_frames_to_two_per_worker() {
+    let (later, next) = whole_frames_behind_a_slow_one(None);
+    // 2 · 2 = 4 frames in flight, then W0 waits.
+    assert_eq!(later, [1, 2, 3]);
+    assert_eq!(next, [4]);
 }
 
 #[test]
