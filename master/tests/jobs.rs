@@ -705,10 +705,13 @@ fn a_worker_gets_a_frames_start_again_only_when_it_let_the_frame_go() {
         let high = submit(&mut pair, &high_job, 5);
         complete(&mut pair, high, high_frames);
         complete(&mut pair, low, 1);
-        // The jobs did interleave: low, then high, then low again.
+        // The jobs did interleave: low, then high, then low again. (While
+        // the high job's unmeasured whole frames are at their limit, two
+        // per worker, the worker may turn to the low job in between too.)
         let mut jobs: Vec<u64> = pair.busy[0].iter().map(|run| run.job).collect();
         jobs.dedup();
-        assert_eq!(jobs, [low, high, low], "{high_frames} high frames");
+        let interleaved = jobs.starts_with(&[low, high]) && jobs.last() == Some(&low);
+        assert!(interleaved, "{high_frames} high frames: {jobs:?}");
         let got = &pair.workers[0].frame_starts_got;
         let low_got = got.iter().filter(|&&(job, _)| job == low).count();
         assert_eq!(low_got, low_starts, "{high_frames} high frames: {got:?}");
