@@ -11,7 +11,7 @@ mod job;
 
 mod support;
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 use job::Job;
@@ -89,6 +89,17 @@ fn complete(pair: &mut Pair, id: u64, frames: usize) {
     pair.drive(BOUND, |p| {
         state(p, id) == Some(JobState::Completed) && frames_of(p, id).len() == frames
     });
+}
+
+/// Packages held per worker name (`packages_by_worker`) as the
+/// (connection, package) pairs a cancel tells.
+fn by_connection(pair: &Pair, held: &BTreeMap<String, Vec<u64>>) -> BTreeSet<(u64, u64)> {
+    (pair.workers.iter())
+        .flat_map(|w| {
+            let ids = held.get(&w.name).cloned().unwrap_or_default();
+            ids.into_iter().map(move |p| (w.conn(), p))
+        })
+        .collect()
 }
 
 /// No frame of `id` had a package requeued or failed: nothing was taken
@@ -400,12 +411,7 @@ fn a_cancel_sends_cancel_package_to_exactly_the_workers_holding_the_job() {
         !held.is_empty() && held.len() < p.workers.len()
     });
     let held = pair.master.packages_by_worker();
-    let expected: BTreeSet<(u64, u64)> = (pair.workers.iter())
-        .flat_map(|w| {
-            let ids = held.get(&w.name).cloned().unwrap_or_default();
-            ids.into_iter().map(move |p| (w.conn(), p))
-        })
-        .collect();
+    let expected = by_connection(&pair, &held);
     // The core's outputs straight: which connection is told what.
     let now = pair.now;
     let summary = (pair.master)
@@ -664,12 +670,7 @@ fn two_jobs_run_at_once_and_a_cancel_of_one_tells_exactly_its_holders() {
     });
     assert_eq!(running_jobs(&pair), vec![first, second]);
     let held = pair.master.job_packages_by_worker(second);
-    let expected: BTreeSet<(u64, u64)> = (pair.workers.iter())
-        .flat_map(|w| {
-            let ids = held.get(&w.name).cloned().unwrap_or_default();
-            ids.into_iter().map(move |p| (w.conn(), p))
-        })
-        .collect();
+    let expected = by_connection(&pair, &held);
     let now = pair.now;
     (pair.master)
         .control_job(now, second, JobAction::Cancel, WHO)
