@@ -28,6 +28,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use vtfarm_imaging::Image;
+use vtfarm_proto::FrameKey;
 use vtfarm_raster::IdBuffer;
 
 /// The memory the base frames the master holds may take (made ahead and
@@ -47,9 +48,6 @@ pub(crate) fn frames_held_at_most(frames_in_flight: usize, width: u32, height: u
         .unwrap_or(usize::MAX)
         .max(frames_in_flight)
 }
-
-/// A frame by job id and index.
-pub(crate) type FrameKey = (u64, u32);
 
 /// The base frames in the making and those made ahead.
 #[derive(Default)]
