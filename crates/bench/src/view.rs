@@ -105,6 +105,10 @@ const REQUEST_TIMEOUT: Duration = Duration::from_secs(30);
 /// The most bytes the bench reads of one HTTP answer or one event.
 const MAX_BODY: usize = 256 << 20;
 
+/// Events read but not yet taken by the bench: beyond that the reader
+/// waits, so a stream the bench does not follow holds bounded memory.
+const EVENTS_QUEUED: usize = 1024;
+
 /// One move: when each stage was on screen after it, and each stage's
 /// frame as the master recorded it (where the server lists it).
 #[derive(Clone, Debug, Default, Serialize)]
@@ -813,7 +817,7 @@ async fn send(
 /// was read, from a task of its own (so events are timed as they come, not
 /// when the bench asks).
 struct EventStream {
-    events: mpsc::UnboundedReceiver<Result<(Instant, Value)>>,
+    events: mpsc::Receiver<Result<(Instant, Value)>>,
     reader: tokio::task::JoinHandle<()>,
 }
 
@@ -825,10 +829,10 @@ impl EventStream {
         let response = (response.await).context("GET /api/events: no answer within 30 s")??;
         let status = response.status();
         ensure!(status == StatusCode::OK, "GET {path} answered {status}");
-        let (send, events) = mpsc::unbounded_channel();
+        let (send, events) = mpsc::channel(EVENTS_QUEUED);
         let reader = tokio::spawn(async move {
             if let Err(e) = read_events(response.into_body(), MAX_BODY, &send).await {
-                let _ = send.send(Err(e));
+                let _ = send.send(Err(e)).await;
             }
         });
         Ok(EventStream { events, reader })
@@ -863,7 +867,7 @@ impl Drop for EventStream {
 async fn read_events<B>(
     body: B,
     limit: usize,
-    send: &mpsc::UnboundedSender<Result<(Instant, Value)>>,
+    send: &mpsc::Sender<Result<(Instant, Value)>>,
 ) -> Result<()>
 where
     B: Body<Data = Bytes>,
@@ -896,7 +900,7 @@ where
         }
         let data = event.data.unwrap_or_default();
         let json = serde_json::from_str(&data).context("an event is not JSON")?;
-        if send.send(Ok((at, json))).is_err() {
+        if send.send(Ok((at, json))).await.is_err() {
             return Ok(());
         }
     }
@@ -1061,7 +1065,7 @@ mod tests {
         let body = futures_util::stream::iter(wire.as_bytes().chunks(pieces)).map(|piece| {
             Ok::<_, std::convert::Infallible>(Frame::data(Bytes::from(piece.to_vec())))
         });
-        let (send, mut events) = mpsc::unbounded_channel();
+        let (send, mut events) = mpsc::channel(EVENTS_QUEUED);
         let end = read_events(StreamBody::new(body), limit, &send).await;
         let mut read = Vec::new();
         while let Ok(event) = events.try_recv() {
