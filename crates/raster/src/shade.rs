@@ -7,7 +7,9 @@ use rayon::prelude::*;
 use vtfarm_imaging::Image;
 use vtfarm_scene::{Camera, LightKind, Lighting, Material, NONE, Scene, TriangleId};
 
-use crate::lanes::{F, LANES, V3};
+#[cfg(target_arch = "x86_64")]
+use crate::lanes::Avx2;
+use crate::lanes::{Backend, F, LANES, Portable, V3};
 
 use crate::IdBuffer;
 
@@ -35,7 +37,13 @@ pub(crate) fn shade_into(
         crate::PixelRect::full(ids.width, ids.height),
         "shading needs an ID buffer of the whole frame"
     );
-    image.refill(ids.width, ids.height, lighting.background);
+    // Every pixel is written below (empty ones get the background), so a
+    // reused image of the right size is not filled first.
+    (image.width, image.height) = (ids.width, ids.height);
+    image.pixels.resize(
+        ids.width as usize * ids.height as usize,
+        lighting.background,
+    );
     let width = ids.width as usize;
     if width == 0 {
         return;
@@ -57,9 +65,13 @@ struct FrameShading<'a> {
     scene: &'a Scene,
     lighting: &'a Lighting,
     eye: Vec3,
+    /// The frame's width in pixels.
+    width: usize,
     /// Per column, the pixel ray's part that depends on the column
-    /// (`Projector::pixel_ray` before its row term and normalization).
-    columns: Vec<Vec3>,
+    /// (`Projector::pixel_ray` before its row term and normalization), by
+    /// component, padded with [`LANES`] zeros so that a row's last lanes
+    /// load whole registers.
+    columns: [Vec<f32>; 3],
     up: Vec3,
     pixel: f32,
     half_height: f32,
@@ -85,9 +97,14 @@ impl<'a> FrameShading<'a> {
         let (forward, right, up) = camera.basis();
         let pixel = camera.pixel_size_at_unit_depth();
         let half_width = camera.width as f32 * 0.5;
-        let columns = (0..camera.width)
-            .map(|x| forward + right * ((x as f32 + 0.5 - half_width) * pixel))
-            .collect();
+        let column = |x: u32| forward + right * ((x as f32 + 0.5 - half_width) * pixel);
+        let padded = |component: fn(Vec3) -> f32| {
+            (0..camera.width)
+                .map(|x| component(column(x)))
+                .chain([0.0; LANES])
+                .collect()
+        };
+        let columns = [padded(|v| v.x), padded(|v| v.y), padded(|v| v.z)];
         let lights = lighting
             .lights
             .iter()
@@ -105,6 +122,7 @@ impl<'a> FrameShading<'a> {
             scene,
             lighting,
             eye: camera.eye,
+            width: camera.width as usize,
             columns,
             up,
             pixel,
@@ -114,9 +132,9 @@ impl<'a> FrameShading<'a> {
     }
 
     /// Shades whole rows from `first_row` on: their pixels `colors`, their
-    /// ID buffer rows `triangles`. With the widest vector instructions this
-    /// CPU has: the same bits either way (IEEE arithmetic is exact per lane
-    /// and nothing is fused).
+    /// ID buffer rows `triangles`. With AVX2 where this CPU has it: the same
+    /// bits either way (IEEE arithmetic is exact per lane and nothing is
+    /// fused).
     fn shade_rows(&self, first_row: u32, colors: &mut [Vec3], triangles: &[TriangleId]) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -124,10 +142,10 @@ impl<'a> FrameShading<'a> {
             unsafe { self.shade_rows_avx2(first_row, colors, triangles) };
             return;
         }
-        self.shade_rows_portable(first_row, colors, triangles);
+        self.shade_rows_with::<Portable>(first_row, colors, triangles);
     }
 
-    /// [`Self::shade_rows_portable`] compiled for AVX2.
+    /// [`Self::shade_rows_with`] in AVX registers, compiled for AVX2.
     ///
     /// # Safety
     /// The CPU must support AVX2.
@@ -139,18 +157,24 @@ impl<'a> FrameShading<'a> {
         colors: &mut [Vec3],
         triangles: &[TriangleId],
     ) {
-        self.shade_rows_portable(first_row, colors, triangles);
+        self.shade_rows_with::<Avx2>(first_row, colors, triangles);
     }
 
     /// See [`Self::shade_rows`]. A row is shaded run by run of pixels that
-    /// see the same triangle, whose set-up is reused while it lasts.
+    /// see the same triangle, whose set-up is reused while it lasts; empty
+    /// runs get the background.
     #[inline(always)]
-    fn shade_rows_portable(&self, first_row: u32, colors: &mut [Vec3], triangles: &[TriangleId]) {
-        let width = self.columns.len();
+    fn shade_rows_with<B: Backend>(
+        &self,
+        first_row: u32,
+        colors: &mut [Vec3],
+        triangles: &[TriangleId],
+    ) {
+        let width = self.width;
         let mut surface: Option<Surface> = None;
         let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
         for (row, (colors, triangles)) in rows.enumerate() {
-            let row_ray = self.row_ray(first_row + row as u32);
+            let row_ray = V3::splat(self.row_ray(first_row + row as u32));
             let mut x = 0;
             while x < width {
                 let t = triangles[x];
@@ -158,14 +182,16 @@ impl<'a> FrameShading<'a> {
                 while x + run < width && triangles[x + run] == t {
                     run += 1;
                 }
-                if t != NONE {
+                if t == NONE {
+                    colors[x..x + run].fill(self.lighting.background);
+                } else {
                     let surface = match &mut surface {
                         Some(s) if s.id == t => s,
                         slot => slot.insert(Surface::new(self, t)),
                     };
                     for start in (x..x + run).step_by(LANES) {
                         let end = (start + LANES).min(x + run);
-                        self.shade(surface, row_ray, start, &mut colors[start..end]);
+                        self.shade::<B>(surface, row_ray, start, &mut colors[start..end]);
                     }
                 }
                 x += run;
@@ -178,13 +204,25 @@ impl<'a> FrameShading<'a> {
         self.up * ((self.half_height - (y as f32 + 0.5)) * self.pixel)
     }
 
+    /// The pixel rays of columns `x0..x0 + LANES` with row term `row_ray`,
+    /// before normalization (lanes beyond the row read padding).
+    #[inline(always)]
+    fn column_rays<B: Backend>(&self, x0: usize, row_ray: V3<B>) -> V3<B> {
+        let [x, y, z] = &self.columns;
+        let lanes = x0..x0 + LANES;
+        V3 {
+            x: F::load(&x[lanes.clone()]),
+            y: F::load(&y[lanes.clone()]),
+            z: F::load(&z[lanes]),
+        } + row_ray
+    }
+
     /// Shades pixels `x0..x0 + out.len()` (at most [`LANES`]) of a row with
     /// ray term `row_ray`, all on `surface`: Phong at the point the pixel ray
     /// meets the triangle, exactly as `vtfarm_scene::shading::phong` lights it.
     #[inline(always)]
-    fn shade(&self, surface: &Surface, row_ray: Vec3, x0: usize, out: &mut [Vec3]) {
-        let last = out.len() - 1;
-        let dir = V3::from_fn(|i| self.columns[x0 + i.min(last)] + row_ray).normalize();
+    fn shade<B: Backend>(&self, surface: &Surface, row_ray: V3<B>, x0: usize, out: &mut [Vec3]) {
+        let dir = self.column_rays(x0, row_ray).normalize();
         let w = perspective_barycentrics(surface.opposite, dir);
         let [n0, n1, n2] = surface.normals;
         let [n0, n1, n2] = [V3::splat(n0), V3::splat(n1), V3::splat(n2)];
@@ -204,9 +242,7 @@ impl<'a> FrameShading<'a> {
             }
         };
         let color = self.phong(surface, &albedo, position, normal, to_eye, out.len());
-        for (i, out) in out.iter_mut().enumerate() {
-            *out = color.lane(i);
-        }
+        out.copy_from_slice(&color.to_array()[..out.len()]);
     }
 
     /// The textured diffuse and unlit terms of lanes `..used` at weights
@@ -214,13 +250,20 @@ impl<'a> FrameShading<'a> {
     /// ([`vtfarm_scene::Scene::textured_material`], a pixel's footprint
     /// there choosing the mip level); padding lanes repeat the last.
     #[cold]
-    fn textured(&self, surface: &Surface, w: V3, offset: V3, used: usize) -> Albedo {
+    fn textured<B: Backend>(
+        &self,
+        surface: &Surface,
+        w: V3<B>,
+        offset: V3<B>,
+        used: usize,
+    ) -> Albedo<B> {
+        let (w, offset) = (w.to_array(), offset.to_array());
         let mut diffuse = [Vec3::ZERO; LANES];
         let mut unlit = [Vec3::ZERO; LANES];
         for i in 0..LANES {
             let lane = i.min(used - 1);
-            let footprint = offset.lane(lane).length() * self.pixel;
-            let material = (self.scene).textured_material(surface.id, w.lane(lane), footprint);
+            let footprint = offset[lane].length() * self.pixel;
+            let material = (self.scene).textured_material(surface.id, w[lane], footprint);
             diffuse[i] = material.diffuse;
             unlit[i] = material.emission + material.ambient * self.lighting.ambient;
         }
@@ -234,17 +277,17 @@ impl<'a> FrameShading<'a> {
     /// per-material and per-light terms computed once; lanes from `used` on
     /// are padding.
     #[inline(always)]
-    fn phong(
+    fn phong<B: Backend>(
         &self,
         surface: &Surface,
-        albedo: &Albedo,
-        position: V3,
-        normal: V3,
-        to_eye: V3,
+        albedo: &Albedo<B>,
+        position: V3<B>,
+        normal: V3<B>,
+        to_eye: V3<B>,
         used: usize,
-    ) -> V3 {
+    ) -> V3<B> {
         let material = surface.material;
-        let facing_away = normal.dot(to_eye).test(|d| d < 0.0);
+        let facing_away = normal.dot(to_eye).lt(F::splat(0.0));
         let n = V3::select(facing_away, -normal, normal);
         let mut color = albedo.unlit;
         for light in &self.lights {
@@ -252,24 +295,31 @@ impl<'a> FrameShading<'a> {
                 Toward::Direction(d) => V3::splat(d),
                 Toward::Point(p) => {
                     let d = V3::splat(p) - position;
-                    let length = d.dot(d).map(f32::sqrt);
-                    d / length.map(|l| l.max(f32::MIN_POSITIVE))
+                    let length = d.dot(d).sqrt();
+                    d / F::select(
+                        length.gt(F::splat(f32::MIN_POSITIVE)),
+                        length,
+                        F::splat(f32::MIN_POSITIVE),
+                    )
                 }
             };
             let n_dot_l = n.dot(to_light);
             // As `phong`'s `n_dot_l <= 0.0` skip: a NaN lights.
-            let lit = n_dot_l.test(|d| d > 0.0 || d.is_nan());
+            let lit = n_dot_l.not_le(F::splat(0.0));
             let mut term = albedo.diffuse * n_dot_l;
             if material.specular.max_element() > 0.0 {
                 let reflected = n * (F::splat(2.0) * n_dot_l) - to_light;
-                let r_dot_v = reflected.dot(to_eye).map(|d| d.max(0.0));
+                // `max(0.0)`: NaN gives 0; the sign of a zero cannot reach
+                // the colour (it only meets `power`'s zero cases).
+                let r_dot_v = reflected.dot(to_eye).positive_part().to_array();
                 let exponent = material.shininess.max(1.0);
                 // The one call that does not vectorize: only where it counts.
-                let mut highlight = F::splat(0.0);
+                let lit = B::mask_to_array(lit);
+                let mut highlight = [0.0; LANES];
                 for i in (0..used).filter(|&i| lit[i]) {
-                    highlight.0[i] = power(r_dot_v.0[i], exponent);
+                    highlight[i] = power(r_dot_v[i], exponent);
                 }
-                term = term + V3::splat(material.specular) * highlight;
+                term = term + V3::splat(material.specular) * F(B::from_array(highlight));
             }
             color = V3::select(lit, color + term * V3::splat(light.radiance), color);
         }
@@ -293,9 +343,9 @@ fn power(base: f32, exponent: f32) -> f32 {
 
 /// The per-lane diffuse reflectance and unlit (emission plus ambient) term:
 /// the material's own, or textured.
-struct Albedo {
-    diffuse: V3,
-    unlit: V3,
+struct Albedo<B: Backend> {
+    diffuse: V3<B>,
+    unlit: V3<B>,
 }
 
 /// What shading a triangle's pixels needs, set up once per triangle.
@@ -342,7 +392,7 @@ fn opposite_products([a, b, c]: [Vec3; 3]) -> [Vec3; 3] {
 /// interpolation) but needs no projected corners, so it also holds for
 /// triangles clipped at the near plane.
 #[inline(always)]
-fn perspective_barycentrics([bc, ca, ab]: [Vec3; 3], dir: V3) -> V3 {
+fn perspective_barycentrics<B: Backend>([bc, ca, ab]: [Vec3; 3], dir: V3<B>) -> V3<B> {
     let raw = V3 {
         x: dir.dot(V3::splat(bc)),
         y: dir.dot(V3::splat(ca)),
@@ -350,14 +400,13 @@ fn perspective_barycentrics([bc, ca, ab]: [Vec3; 3], dir: V3) -> V3 {
     };
     let w = raw / (raw.x + raw.y + raw.z);
     // Where the ray grazes the plane, any point of the triangle will do.
-    let finite = w.x.test(f32::is_finite);
-    let finite = std::array::from_fn(|i| finite[i] && w.y.0[i].is_finite() && w.z.0[i].is_finite());
+    let finite = B::and(B::and(w.x.is_finite(), w.y.is_finite()), w.z.is_finite());
     let w = V3::select(finite, w, V3::splat(Vec3::splat(1.0 / 3.0)));
     // Pixel centres lie inside the triangle up to snapping; clamp the rest.
     let w = V3 {
-        x: w.x.map(|v| if v > 0.0 { v } else { 0.0 }),
-        y: w.y.map(|v| if v > 0.0 { v } else { 0.0 }),
-        z: w.z.map(|v| if v > 0.0 { v } else { 0.0 }),
+        x: w.x.positive_part(),
+        y: w.y.positive_part(),
+        z: w.z.positive_part(),
     };
     w / (w.x + w.y + w.z)
 }
@@ -430,9 +479,10 @@ mod tests {
             let rays = Projector::new(&camera);
             for y in (0..height).step_by(7) {
                 for x in (0..width).step_by(5) {
-                    let lanes = V3::from_fn(|_| frame.columns[x as usize] + frame.row_ray(y));
+                    let row_ray = V3::<Portable>::splat(frame.row_ray(y));
+                    let lanes = frame.column_rays(x as usize, row_ray);
                     assert_eq!(
-                        lanes.normalize().lane(0),
+                        lanes.normalize().to_array()[0],
                         rays.pixel_ray(x, y),
                         "({x}, {y})"
                     );
@@ -520,6 +570,23 @@ mod tests {
                 *slot = if t == triangles { NONE } else { t };
             }
             let image = shade(&scene, &camera, &lighting, &ids);
+            // The portable lanes too, where this CPU picks AVX2 above.
+            let frame = FrameShading::new(&scene, &camera, &lighting);
+            let mut portable = Image::new(camera.width, camera.height, Vec3::NAN);
+            frame.shade_rows_with::<Portable>(0, &mut portable.pixels, &ids.triangle);
+            assert_eq!(
+                portable
+                    .pixels
+                    .iter()
+                    .map(|p| p.to_array().map(f32::to_bits))
+                    .collect::<Vec<_>>(),
+                image
+                    .pixels
+                    .iter()
+                    .map(|p| p.to_array().map(f32::to_bits))
+                    .collect::<Vec<_>>(),
+                "the portable lanes give the same bits"
+            );
             for (x, y) in crate::PixelRect::full(camera.width, camera.height).pixels() {
                 let id = ids.triangle_at(x, y);
                 let expected = if id == NONE {
@@ -544,15 +611,15 @@ mod tests {
             Vec3::new(-1.0, 1.0, -1.0),
         ];
         let point = corners[0] * 0.2 + corners[1] * 0.5 + corners[2] * 0.3;
-        let dir = V3::splat(point.normalize());
-        let w = perspective_barycentrics(opposite_products(corners), dir).lane(0);
+        let dir = V3::<Portable>::splat(point.normalize());
+        let w = perspective_barycentrics(opposite_products(corners), dir).to_array()[0];
         assert!(
             (w - Vec3::new(0.2, 0.5, 0.3)).abs().max_element() < 1e-5,
             "{w}"
         );
         // Independent of the corners' orientation.
         let swapped = [corners[0], corners[2], corners[1]];
-        let w = perspective_barycentrics(opposite_products(swapped), dir).lane(0);
+        let w = perspective_barycentrics(opposite_products(swapped), dir).to_array()[0];
         assert!(
             (w - Vec3::new(0.2, 0.3, 0.5)).abs().max_element() < 1e-5,
             "{w}"

@@ -1,0 +1,112 @@
+//! Profiling harness (not a benchmark of record): runs one raster phase on
+//! the stock cockpit at 1080p in a loop, for `perf record`.
+//! `cargo run --release -p vtfarm-raster --example profile -- base|ids|within|passes [rounds]`
+
+use std::time::Instant;
+
+use vtfarm_cockpit::{CockpitConfig, cockpit};
+use vtfarm_raster::{IdPass, PixelRect};
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let phase = args.next().unwrap_or_else(|| "base".into());
+    let rounds: u32 = args.next().map_or(20, |r| r.parse().expect("rounds"));
+    let threads: usize = args.next().map_or(1, |r| r.parse().expect("threads"));
+    let c = cockpit(&CockpitConfig::default());
+    let camera = vtfarm_scene::Camera {
+        width: 1920,
+        height: 1080,
+        ..c.camera
+    };
+    let scene = &c.scene;
+    let bounds = PixelRect {
+        x0: 600,
+        y0: 500,
+        x1: 1315,
+        y1: 924,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut image = vtfarm_imaging::Image::new(0, 0, glam::Vec3::ZERO);
+    let mut ids = vtfarm_raster::IdBuffer::new(0, 0);
+    let mut least = f64::INFINITY;
+    let cpu_before = process_cpu_seconds();
+    for _ in 0..rounds {
+        let start = Instant::now();
+        pool.install(|| match phase.as_str() {
+            "base" => {
+                vtfarm_raster::rasterize_into(scene, &camera, &c.lighting, &mut image, &mut ids)
+            }
+            "ids" => drop(vtfarm_raster::id_buffer(scene, &camera)),
+            "within" => drop(vtfarm_raster::id_buffer_within(
+                scene,
+                &camera,
+                bounds,
+                &|_| true,
+            )),
+            "passes" => {
+                let all = |_: u32| true;
+                let passes = [0, 16, 0].map(|m| IdPass {
+                    within: PixelRect {
+                        x0: bounds.x0 - m,
+                        y0: bounds.y0 - m,
+                        x1: bounds.x1 + m,
+                        y1: bounds.y1 + m,
+                    },
+                    keep: &all,
+                });
+                drop(vtfarm_raster::id_buffers_within(scene, &camera, &passes))
+            }
+            "stats" => {
+                let (_, ids) = vtfarm_raster::rasterize(scene, &camera, &c.lighting);
+                let (mut runs, mut lanes, mut px, mut switches, mut last) =
+                    (0usize, 0usize, 0usize, 0usize, u32::MAX);
+                let mut seen = std::collections::HashSet::new();
+                for row in ids.triangle.chunks(1920) {
+                    let mut x = 0;
+                    while x < row.len() {
+                        let t = row[x];
+                        let mut r = 1;
+                        while x + r < row.len() && row[x + r] == t {
+                            r += 1;
+                        }
+                        if t != u32::MAX {
+                            runs += 1;
+                            lanes += r.div_ceil(8) * 8;
+                            px += r;
+                            if t != last {
+                                switches += 1;
+                                last = t;
+                            }
+                            seen.insert(t);
+                        }
+                        x += r;
+                    }
+                }
+                println!(
+                    "runs {runs} px {px} lanes {lanes} switches {switches} visible {}",
+                    seen.len()
+                );
+            }
+            other => panic!("unknown phase {other}"),
+        });
+        least = least.min(start.elapsed().as_secs_f64());
+    }
+    let cpu = (process_cpu_seconds() - cpu_before) / f64::from(rounds);
+    println!("{phase}: least {least:.4} s of {rounds}, mean CPU {cpu:.4} s");
+}
+
+/// User plus system time of this process (`/proc/self/stat`, clock ticks of 10 ms).
+fn process_cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .expect("stat")
+        .1
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
