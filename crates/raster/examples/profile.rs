@@ -90,6 +90,29 @@ fn main() {
                     seen.len()
                 );
             }
+            "hash" => {
+                let mut h = 0xcbf2_9ce4_8422_2325u64;
+                let mut eat = |bits: u32| h = (h ^ u64::from(bits)).wrapping_mul(0x100_0000_01b3);
+                for k in 0..6 {
+                    let cam = vtfarm_scene::Camera {
+                        eye: camera.eye + glam::Vec3::new(0.13, -0.07, 0.21) * k as f32,
+                        target: camera.target + glam::Vec3::new(-0.3, 0.1, 0.05) * k as f32,
+                        ..camera
+                    };
+                    let (image, ids) = vtfarm_raster::rasterize(scene, &cam, &c.lighting);
+                    image
+                        .pixels
+                        .iter()
+                        .for_each(|p| p.to_array().iter().for_each(|v| eat(v.to_bits())));
+                    let within =
+                        vtfarm_raster::id_buffer_within(scene, &cam, bounds, &|t| t % 3 != 0);
+                    for b in [&ids, &within] {
+                        b.triangle.iter().chain(&b.object).for_each(|&t| eat(t));
+                        b.depth.iter().for_each(|d| eat(d.to_bits()));
+                    }
+                }
+                println!("hash {h:016x}");
+            }
             other => panic!("unknown phase {other}"),
         });
         least = least.min(start.elapsed().as_secs_f64());

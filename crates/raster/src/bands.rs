@@ -12,6 +12,8 @@
 
 use rayon::prelude::*;
 
+use vtfarm_scene::TriangleId;
+
 use crate::triangle::RasterTriangle;
 use crate::{IdBuffer, PixelRect};
 
@@ -34,42 +36,79 @@ pub(crate) fn resolve_nearest_first(triangles: &[RasterTriangle], ids: &mut IdBu
     let band_len = stride * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
     depth
         .zip(triangle)
         .enumerate()
         .for_each(|(band, (depth, triangle))| {
-            let first_row = window.y0 + band as u32 * BAND_ROWS;
-            let last_row = first_row + (depth.len() / stride) as u32 - 1;
-            // The planes' index of pixel (x, y) of this band.
-            let slot =
-                |x: u32, y: u32| (y - first_row) as usize * stride + (x - window.x0) as usize;
-            for &t in bins.band(band) {
-                let t = &triangles[t as usize];
-                let nearest = t.nearest_depth();
-                let hidden = |row: &[f32]| nearest > farthest(row);
-                for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
-                    let (c0, c1) = (t.columns.0.max(window.x0), t.columns.1.min(window.x1 - 1));
-                    if c0 > c1 || hidden(&depth[slot(c0, y)..=slot(c1, y)]) {
-                        continue;
-                    }
-                    let Some((x0, x1)) = t.span(y) else { continue };
-                    let (x0, x1) = (x0.max(window.x0), x1.min(window.x1 - 1));
-                    if x0 > x1 || hidden(&depth[slot(x0, y)..=slot(x1, y)]) {
-                        continue;
-                    }
-                    let span = slot(x0, y)..=slot(x1, y);
-                    let slots = depth[span.clone()].iter_mut().zip(&mut triangle[span]);
-                    for (x, (stored, seen)) in (x0..x1 + 1).zip(slots) {
-                        let d = t.depth_at(x, y);
-                        // Nearer wins; an exact tie goes to the lower triangle id.
-                        // Unconditional stores let the loop vectorize.
-                        let wins = d < *stored || (d == *stored && t.id < *seen);
-                        *stored = if wins { d } else { *stored };
-                        *seen = if wins { t.id } else { *seen };
-                    }
-                }
+            let band = Band {
+                window,
+                first_row: window.y0 + band as u32 * BAND_ROWS,
+                triangles: bins.band(band).iter().map(|&t| &triangles[t as usize]),
+            };
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: the CPU supports AVX2, checked above.
+                unsafe { band.resolve_avx2(depth, triangle) };
+                return;
             }
+            band.resolve(depth, triangle);
         });
+}
+
+/// One band's share of [`resolve_nearest_first`].
+struct Band<I> {
+    window: PixelRect,
+    /// The band's first row in the frame.
+    first_row: u32,
+    /// Its triangles, nearest first.
+    triangles: I,
+}
+
+impl<'a, I: Iterator<Item = &'a RasterTriangle>> Band<I> {
+    /// [`Self::resolve`] compiled for AVX2: the same bits (the z-test's
+    /// arithmetic is IEEE's in any register), in wider ones.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn resolve_avx2(self, depth: &mut [f32], triangle: &mut [TriangleId]) {
+        self.resolve(depth, triangle);
+    }
+
+    /// Scan-converts the band's triangles into its rows of the planes
+    /// `depth` and `triangle`.
+    #[inline(always)]
+    fn resolve(self, depth: &mut [f32], triangle: &mut [TriangleId]) {
+        let Band {
+            window,
+            first_row,
+            triangles,
+        } = self;
+        let stride = (window.x1 - window.x0) as usize;
+        let last_row = first_row + (depth.len() / stride) as u32 - 1;
+        // The planes' index of pixel (x, y) of this band.
+        let slot = |x: u32, y: u32| (y - first_row) as usize * stride + (x - window.x0) as usize;
+        for t in triangles {
+            let nearest = t.nearest_depth();
+            let hidden = |row: &[f32]| nearest > farthest(row);
+            for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
+                let (c0, c1) = (t.columns.0.max(window.x0), t.columns.1.min(window.x1 - 1));
+                if c0 > c1 || hidden(&depth[slot(c0, y)..=slot(c1, y)]) {
+                    continue;
+                }
+                let Some((x0, x1)) = t.span(y) else { continue };
+                let (x0, x1) = (x0.max(window.x0), x1.min(window.x1 - 1));
+                if x0 > x1 || hidden(&depth[slot(x0, y)..=slot(x1, y)]) {
+                    continue;
+                }
+                let span = slot(x0, y)..slot(x1, y) + 1;
+                t.z_test_span(y, x0, &mut depth[span.clone()], &mut triangle[span]);
+            }
+        }
+    }
 }
 
 /// The largest of `depths` (never NaN), in eight independent lanes so that

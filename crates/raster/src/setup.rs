@@ -99,18 +99,33 @@ pub(crate) fn setup(
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> Vec<RasterTriangle> {
     let view = View::new(camera, near, within);
-    let vertices: Vec<ClipVertex> = scene
+    let corners: Vec<Corner> = scene
         .positions
         .par_iter()
-        .map(|&p| view.vertex(p))
+        .map(|&p| view.corner(p))
         .collect();
+    // Apart from the corners: the one byte per vertex that most triangles
+    // (those wholly beside a small rectangle) are dropped by.
+    let beyond: Vec<u8> = corners.par_iter().map(|c| view.beyond(c)).collect();
     scene
         .triangles
         .par_iter()
         .enumerate()
-        .filter(|&(id, _)| keep(id as TriangleId))
-        .flat_map_iter(|(id, t)| view.triangle(&vertices, id as TriangleId, t))
+        .filter(|&(id, t)| {
+            let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
+            a & b & c == 0 && keep(id as TriangleId)
+        })
+        .flat_map_iter(|(id, t)| view.triangle(scene, &corners, id as TriangleId, t))
         .collect()
+}
+
+/// What set-up keeps of a scene vertex for its triangles: where it
+/// projects and the clip planes it lies outside of (a [`ClipVertex`]
+/// without its view-space position, which only clipping needs).
+#[derive(Clone, Copy, Debug, Default)]
+struct Corner {
+    screen: ScreenVertex,
+    outside: u8,
 }
 
 impl View {
@@ -150,36 +165,92 @@ impl View {
     /// (so the default near plane gives exactly its screen points); between a
     /// nearer plane and `NEAR`, where the projector declines, it projects in
     /// `f64` like the corners clipping makes.
-    fn vertex(&self, p: Vec3) -> ClipVertex {
+    fn corner(&self, p: Vec3) -> Corner {
         if !p.is_finite() {
-            return ClipVertex {
+            return Corner {
                 outside: INVALID,
-                ..ClipVertex::default()
+                ..Corner::default()
             };
         }
-        let d = p.as_dvec3() - self.eye;
-        let view = DVec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward));
         match self.projector.project(p) {
             Some(s) if s.depth >= self.near => {
                 let (x, y) = (f64::from(s.x), f64::from(s.y));
-                let screen = ScreenVertex {
-                    x,
-                    y,
-                    inv_depth: 1.0 / f64::from(s.depth),
-                };
-                ClipVertex {
-                    view,
-                    screen,
+                Corner {
+                    screen: ScreenVertex {
+                        x,
+                        y,
+                        inv_depth: 1.0 / f64::from(s.depth),
+                    },
                     outside: self.guard_outside(x, y),
                 }
             }
-            None if self.near < NEAR && view.z >= f64::from(self.near) => self.clipped_vertex(view),
-            _ => ClipVertex {
-                view,
+            None if self.near < NEAR => {
+                let view = self.view_of(p);
+                if view.z >= f64::from(self.near) {
+                    let v = self.clipped_vertex(view);
+                    Corner {
+                        screen: v.screen,
+                        outside: v.outside,
+                    }
+                } else {
+                    Corner {
+                        outside: NEAR_PLANE,
+                        ..Corner::default()
+                    }
+                }
+            }
+            _ => Corner {
                 outside: NEAR_PLANE,
-                ..ClipVertex::default()
+                ..Corner::default()
             },
         }
+    }
+
+    /// [`Self::corner`] with its view-space position, for clipping.
+    fn vertex(&self, p: Vec3) -> ClipVertex {
+        let Corner { screen, outside } = self.corner(p);
+        let view = if outside & INVALID == 0 {
+            self.view_of(p)
+        } else {
+            DVec3::ZERO
+        };
+        ClipVertex {
+            view,
+            screen,
+            outside,
+        }
+    }
+
+    /// A point's view-space position: (right, up, forward) relative to the eye.
+    fn view_of(&self, p: Vec3) -> DVec3 {
+        let d = p.as_dvec3() - self.eye;
+        DVec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward))
+    }
+
+    /// The sides of the rectangle being rasterized that a corner lies
+    /// wholly beyond, by more than a pixel (as [`LEFT`] .. [`BOTTOM`]): a
+    /// triangle whose three corners share a side covers no pixel of it.
+    /// Corners off the near plane (or invalid) are beyond none: their
+    /// triangles are clipped first. A triangle of three corners in front
+    /// of the near plane projects inside their screen points' hull, and the
+    /// guard band only moves corners inwards along its edges; the pixel of
+    /// slack covers snapping and the `f64` projection of clipped corners.
+    fn beyond(&self, corner: &Corner) -> u8 {
+        if corner.outside & (NEAR_PLANE | INVALID) != 0 {
+            return 0;
+        }
+        let ScreenVertex { x, y, .. } = corner.screen;
+        let w = self.within;
+        let slack = 1.0;
+        [
+            (x < f64::from(w.x0) - slack, LEFT),
+            (x > f64::from(w.x1) + slack, RIGHT),
+            (y < f64::from(w.y0) - slack, TOP),
+            (y > f64::from(w.y1) + slack, BOTTOM),
+        ]
+        .into_iter()
+        .filter(|&(out, _)| out)
+        .fold(0, |mask, (_, side)| mask | side)
     }
 
     /// A new corner made by clipping, projected in `f64`.
@@ -261,7 +332,8 @@ impl View {
     /// its clipped polygon.
     fn triangle(
         &self,
-        vertices: &[ClipVertex],
+        scene: &Scene,
+        vertices: &[Corner],
         id: TriangleId,
         triangle: &Triangle,
     ) -> impl Iterator<Item = RasterTriangle> + use<'_> {
@@ -276,7 +348,10 @@ impl View {
         // Entirely beyond one plane (or invalid): nothing to draw.
         let mut polygon = Box::<Polygon>::default();
         if all_outside == 0 && any_outside & INVALID == 0 {
-            corners.into_iter().for_each(|c| polygon.push(c));
+            (triangle.vertices)
+                .map(|v| self.vertex(scene.positions[v as usize]))
+                .into_iter()
+                .for_each(|c| polygon.push(c));
             *polygon = self.clip(*polygon);
         }
         let fan = 1..polygon.len.saturating_sub(1);
@@ -342,12 +417,12 @@ mod tests {
             object: 0,
             material: 0,
         };
-        let vertices = [
+        let positions = [
             Vec3::new(0.0, 0.0, -1.0),
             Vec3::new(1e3, 0.0, -0.01),
             Vec3::new(0.0, 0.1, -1.0),
-        ]
-        .map(|p| view.vertex(p));
+        ];
+        let vertices = positions.map(|p| view.vertex(p));
         assert_eq!(vertices[1].outside, RIGHT);
         let mut polygon = Polygon::default();
         vertices.into_iter().for_each(|v| polygon.push(v));
@@ -359,6 +434,11 @@ mod tests {
             .map(|c| c.screen.x)
             .fold(f64::MIN, f64::max);
         assert!((max_x - (64.0 + GUARD)).abs() < 1e-6, "{max_x}");
-        assert!(view.triangle(&vertices, 0, &t).count() >= 1);
+        let scene = Scene {
+            positions: positions.to_vec(),
+            ..Scene::default()
+        };
+        let corners = positions.map(|p| view.corner(p));
+        assert!(view.triangle(&scene, &corners, 0, &t).count() >= 1);
     }
 }

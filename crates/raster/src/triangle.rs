@@ -150,11 +150,52 @@ impl RasterTriangle {
     /// linearly in screen space (perspective-correct). Evaluated from scratch
     /// per pixel, never incrementally, so it does not depend on where a band
     /// or span starts.
+    #[cfg(test)]
     pub(crate) fn depth_at(&self, x: u32, y: u32) -> f32 {
-        let [inv0, ddx, ddy] = self.inv_depth;
-        let [x0, y0] = self.corners[0].map(|c| c as f64 / SUBPIXEL as f64);
-        let inv = inv0 + ddx * (f64::from(x) + 0.5 - x0) + ddy * (f64::from(y) + 0.5 - y0);
-        (1.0 / inv.clamp(self.inv_depth_range[0], self.inv_depth_range[1])) as f32
+        self.depth_in_row(self.row_term(y), f64::from(x))
+    }
+
+    /// The part of 1/z that depends on the row alone.
+    #[inline(always)]
+    fn row_term(&self, y: u32) -> f64 {
+        let y0 = self.corners[0][1] as f64 / SUBPIXEL as f64;
+        self.inv_depth[2] * (f64::from(y) + 0.5 - y0)
+    }
+
+    /// [`Self::depth_at`] of column `x` in the row of `row_term`.
+    #[inline(always)]
+    fn depth_in_row(&self, row_term: f64, x: f64) -> f32 {
+        let [inv0, ddx, _] = self.inv_depth;
+        let x0 = self.corners[0][0] as f64 / SUBPIXEL as f64;
+        let inv = inv0 + ddx * (x + 0.5 - x0) + row_term;
+        // `f64::clamp` without its check of the bounds, which would keep
+        // the loop of `z_test_span` from vectorizing (the range is ordered).
+        let [lo, hi] = self.inv_depth_range;
+        let inv = if inv < lo { lo } else { inv };
+        let inv = if inv > hi { hi } else { inv };
+        (1.0 / inv) as f32
+    }
+
+    /// Z-tests the pixels of row `y` from column `x0` on, one per slot of
+    /// `depth` and `seen` (the row's stored depths and triangles there):
+    /// where this triangle is nearer ([`Self::depth_at`]), or as near with
+    /// a lower id, it takes the pixel.
+    #[inline(always)]
+    pub(crate) fn z_test_span(&self, y: u32, x0: u32, depth: &mut [f32], seen: &mut [TriangleId]) {
+        let row_term = self.row_term(y);
+        let n = depth.len().min(seen.len());
+        let (depth, seen) = (&mut depth[..n], &mut seen[..n]);
+        for i in 0..n {
+            // Columns are below 2^20: exact as `i32`, whose conversion
+            // vectorizes.
+            let x = f64::from((x0 + i as u32) as i32);
+            let d = self.depth_in_row(row_term, x);
+            // Nearer wins; an exact tie goes to the lower triangle id.
+            // Unconditional stores let the loop vectorize.
+            let wins = d < depth[i] || (d == depth[i] && self.id < seen[i]);
+            depth[i] = if wins { d } else { depth[i] };
+            seen[i] = if wins { self.id } else { seen[i] };
+        }
     }
 }
 
