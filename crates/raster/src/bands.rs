@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use vtfarm_scene::TriangleId;
+use vtfarm_scene::{NONE, Triangle, TriangleId};
 
 use crate::triangle::RasterTriangle;
 use crate::{IdBuffer, PixelRect};
@@ -21,12 +21,18 @@ use crate::{IdBuffer, PixelRect};
 /// z-buffer slice, large enough that big triangles are not set up too often.
 const BAND_ROWS: u32 = 16;
 
-/// Fills `ids.depth` and `ids.triangle` with the nearest triangle per pixel
-/// of the buffer's window. A pixel's result does not depend on the window,
-/// as long as it lies inside.
+/// Fills `ids`' planes (whatever they held, of the window's size) with the
+/// nearest triangle per pixel of the buffer's window, its depth and its
+/// object (`NONE` and infinity where none is). A pixel's result does not
+/// depend on the window, as long as it lies inside. Each band initializes
+/// its own slices first, while they are in its cache.
 /// `triangles` come in [`nearest_first`] order (a subsequence of such a
 /// list keeps it, so several buffers made from one set-up sort it once).
-pub(crate) fn resolve_nearest_first(triangles: &[RasterTriangle], ids: &mut IdBuffer) {
+pub(crate) fn resolve_nearest_first(
+    scene_triangles: &[Triangle],
+    triangles: &[RasterTriangle],
+    ids: &mut IdBuffer,
+) {
     let window = ids.window;
     if window.is_empty() {
         return;
@@ -36,12 +42,16 @@ pub(crate) fn resolve_nearest_first(triangles: &[RasterTriangle], ids: &mut IdBu
     let band_len = stride * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
+    let object = ids.object.par_chunks_mut(band_len);
     #[cfg(target_arch = "x86_64")]
     let avx2 = std::arch::is_x86_feature_detected!("avx2");
     depth
         .zip(triangle)
+        .zip(object)
         .enumerate()
-        .for_each(|(band, (depth, triangle))| {
+        .for_each(|(band, ((depth, triangle), object))| {
+            depth.fill(f32::INFINITY);
+            triangle.fill(NONE);
             let band = Band {
                 window,
                 first_row: window.y0 + band as u32 * BAND_ROWS,
@@ -51,9 +61,18 @@ pub(crate) fn resolve_nearest_first(triangles: &[RasterTriangle], ids: &mut IdBu
             if avx2 {
                 // SAFETY: the CPU supports AVX2, checked above.
                 unsafe { band.resolve_avx2(depth, triangle) };
-                return;
+            } else {
+                band.resolve(depth, triangle);
             }
+            #[cfg(not(target_arch = "x86_64"))]
             band.resolve(depth, triangle);
+            for (o, &t) in object.iter_mut().zip(&*triangle) {
+                *o = if t == NONE {
+                    NONE
+                } else {
+                    scene_triangles[t as usize].object
+                };
+            }
         });
 }
 

@@ -120,7 +120,7 @@ impl Backend for Portable {
     }
     #[inline(always)]
     fn not_le(a: Self::Reg, b: Self::Reg) -> Self::Mask {
-        Self::test(a, b, |a, b| !(a <= b))
+        Self::test(a, b, |a, b| a > b || a.is_nan() || b.is_nan())
     }
     #[inline(always)]
     fn gt(a: Self::Reg, b: Self::Reg) -> Self::Mask {

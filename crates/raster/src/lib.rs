@@ -24,9 +24,9 @@ mod bands;
 mod lanes;
 mod setup;
 mod shade;
+mod spare;
 mod triangle;
 
-use rayon::prelude::*;
 use vtfarm_imaging::Image;
 use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 
@@ -57,32 +57,40 @@ impl IdBuffer {
 
     /// An empty buffer whose planes hold `window` (cut to the frame).
     pub fn empty_within(width: u32, height: u32, window: PixelRect) -> Self {
-        let mut ids = IdBuffer {
+        let mut ids = IdBuffer::unshaped();
+        ids.reshape_within(width, height, window);
+        ids.object.fill(NONE);
+        ids.triangle.fill(NONE);
+        ids.depth.fill(f32::INFINITY);
+        ids
+    }
+
+    /// A buffer of no pixels, no allocations yet.
+    fn unshaped() -> Self {
+        IdBuffer {
             width: 0,
             height: 0,
             window: EMPTY,
             object: Vec::new(),
             triangle: Vec::new(),
             depth: Vec::new(),
-        };
-        ids.clear_within(width, height, window);
-        ids
+        }
     }
 
-    /// Makes this the empty buffer [`IdBuffer::empty_within`] makes, in
-    /// this buffer's allocations.
-    fn clear_within(&mut self, width: u32, height: u32, window: PixelRect) {
+    /// Gives this buffer the frame size and `window` (cut to the frame) of
+    /// [`IdBuffer::empty_within`], its planes that window's length with
+    /// whatever values: in this buffer's allocations, or else in planes of
+    /// dropped buffers ([`spare`]).
+    fn reshape_within(&mut self, width: u32, height: u32, window: PixelRect) {
         let window = Some(window.clamped(width, height))
             .filter(|w| !w.is_empty())
             .unwrap_or(EMPTY);
         let n = window.area();
         (self.width, self.height, self.window) = (width, height, window);
         for plane in [&mut self.object, &mut self.triangle] {
-            plane.clear();
-            plane.resize(n, NONE);
+            spare::reshape(plane, n, NONE);
         }
-        self.depth.clear();
-        self.depth.resize(n, f32::INFINITY);
+        spare::reshape(&mut self.depth, n, f32::INFINITY);
     }
 
     /// The frame's index of pixel (`x`, `y`): row-major over the whole
@@ -116,6 +124,15 @@ impl IdBuffer {
     #[inline]
     pub fn depth_at(&self, x: u32, y: u32) -> f32 {
         self.slot(x, y).map_or(f32::INFINITY, |i| self.depth[i])
+    }
+}
+
+impl Drop for IdBuffer {
+    /// Keeps the planes for the next buffer ([`spare`]).
+    fn drop(&mut self) {
+        spare::keep(std::mem::take(&mut self.object));
+        spare::keep(std::mem::take(&mut self.triangle));
+        spare::keep(std::mem::take(&mut self.depth));
     }
 }
 
@@ -200,7 +217,7 @@ const MAX_DIMENSION: u32 = 1 << 20;
 /// indexes missing vertices, objects or materials.
 pub fn rasterize(scene: &Scene, camera: &Camera, lighting: &Lighting) -> (Image, IdBuffer) {
     let mut image = Image::new(0, 0, lighting.background);
-    let mut ids = IdBuffer::new(0, 0);
+    let mut ids = IdBuffer::unshaped();
     rasterize_into(scene, camera, lighting, &mut image, &mut ids);
     (image, ids)
 }
@@ -401,7 +418,7 @@ fn rasterize_ids(
     within: PixelRect,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
 ) -> IdBuffer {
-    let mut ids = IdBuffer::new(0, 0);
+    let mut ids = IdBuffer::unshaped();
     rasterize_ids_into(scene, camera, near, within, keep, &mut ids);
     ids
 }
@@ -422,7 +439,7 @@ fn rasterize_ids_into(
     check_camera(camera);
     let within = within.clamped(camera.width, camera.height);
     if within.is_empty() {
-        return ids.clear_within(camera.width, camera.height, EMPTY);
+        return ids.reshape_within(camera.width, camera.height, EMPTY);
     }
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
@@ -454,7 +471,7 @@ fn resolve(
     triangles: &[triangle::RasterTriangle],
     within: PixelRect,
 ) -> IdBuffer {
-    let mut ids = IdBuffer::new(0, 0);
+    let mut ids = IdBuffer::unshaped();
     resolve_into(scene, camera, triangles, within, &mut ids);
     ids
 }
@@ -467,19 +484,7 @@ fn resolve_into(
     within: PixelRect,
     ids: &mut IdBuffer,
 ) {
-    ids.clear_within(camera.width, camera.height, within);
-    if ids.window.is_empty() {
-        return;
-    }
-    bands::resolve_nearest_first(triangles, ids);
-    let IdBuffer {
-        object, triangle, ..
-    } = ids;
-    object
-        .par_iter_mut()
-        .zip(triangle.par_iter())
-        .filter(|(_, t)| **t != NONE)
-        .for_each(|(o, &t)| {
-            *o = scene.triangles[t as usize].object;
-        });
+    // The bands initialize the planes they fill.
+    ids.reshape_within(camera.width, camera.height, within);
+    bands::resolve_nearest_first(&scene.triangles, triangles, ids);
 }

@@ -191,10 +191,12 @@ impl RasterTriangle {
             let x = f64::from((x0 + i as u32) as i32);
             let d = self.depth_in_row(row_term, x);
             // Nearer wins; an exact tie goes to the lower triangle id.
-            // Unconditional stores let the loop vectorize.
-            let wins = d < depth[i] || (d == depth[i] && self.id < seen[i]);
-            depth[i] = if wins { d } else { depth[i] };
-            seen[i] = if wins { self.id } else { seen[i] };
+            // Unconditional stores and no short-circuit let the loop
+            // vectorize.
+            let (stored, id) = (depth[i], seen[i]);
+            let wins = (d < stored) | ((d == stored) & (self.id < id));
+            depth[i] = if wins { d } else { stored };
+            seen[i] = if wins { self.id } else { id };
         }
     }
 }
