@@ -106,7 +106,33 @@ fn main() {
                         .for_each(|p| p.to_array().iter().for_each(|v| eat(v.to_bits())));
                     let within =
                         vtfarm_raster::id_buffer_within(scene, &cam, bounds, &|t| t % 3 != 0);
-                    for b in [&ids, &within] {
+                    let (odd, third) = (|t: u32| t % 2 == 1, |t: u32| t % 3 != 0);
+                    let passes = [
+                        IdPass {
+                            within: bounds,
+                            keep: &odd,
+                        },
+                        IdPass {
+                            within: PixelRect {
+                                x0: 100,
+                                y0: 40,
+                                x1: 900,
+                                y1: 700,
+                            },
+                            keep: &third,
+                        },
+                        IdPass {
+                            within: PixelRect {
+                                x0: 0,
+                                y0: 0,
+                                x1: 1920,
+                                y1: 1080,
+                            },
+                            keep: &odd,
+                        },
+                    ];
+                    let together = vtfarm_raster::id_buffers_within(scene, &cam, &passes);
+                    for b in [&ids, &within].into_iter().chain(&together) {
                         b.triangle.iter().chain(&b.object).for_each(|&t| eat(t));
                         b.depth.iter().for_each(|d| eat(d.to_bits()));
                     }

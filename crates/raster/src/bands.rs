@@ -26,11 +26,13 @@ const BAND_ROWS: u32 = 16;
 /// object (`NONE` and infinity where none is). A pixel's result does not
 /// depend on the window, as long as it lies inside. Each band initializes
 /// its own slices first, while they are in its cache.
-/// `triangles` come in [`nearest_first`] order (a subsequence of such a
-/// list keeps it, so several buffers made from one set-up sort it once).
+/// `triangles` come in [`nearest_first`] order; the buffer is made of those
+/// `kept` (a subsequence of such a list keeps it, so several buffers made
+/// from one set-up sort it once).
 pub(crate) fn resolve_nearest_first(
     scene_triangles: &[Triangle],
     triangles: &[RasterTriangle],
+    kept: Kept<'_>,
     ids: &mut IdBuffer,
 ) {
     let window = ids.window;
@@ -38,7 +40,7 @@ pub(crate) fn resolve_nearest_first(
         return;
     }
     let stride = (window.x1 - window.x0) as usize;
-    let bins = Bins::new(triangles, window);
+    let bins = Bins::new(triangles, kept, window);
     let band_len = stride * BAND_ROWS as usize;
     let depth = ids.depth.par_chunks_mut(band_len);
     let triangle = ids.triangle.par_chunks_mut(band_len);
@@ -145,19 +147,36 @@ fn farthest(depths: &[f32]) -> f32 {
     rest.iter().chain(&lanes).fold(0.0, |m, &d| max(m, d))
 }
 
-/// `triangles` nearest first (ties in their order), copied so that bands
-/// read them in memory order.
-pub(crate) fn nearest_first(triangles: &[RasterTriangle]) -> Vec<RasterTriangle> {
+/// The runs of set-up triangles `runs` as one list, nearest first (ties in
+/// their order), copied so that bands read them in memory order.
+pub(crate) fn nearest_first(runs: &[Vec<RasterTriangle>]) -> Vec<RasterTriangle> {
+    let all: Vec<&RasterTriangle> = runs.iter().flatten().collect();
     // Positive depths order like their bits: sort (depth bits, index) keys.
-    let mut keys: Vec<u64> = triangles
+    let mut keys: Vec<u64> = all
         .par_iter()
         .enumerate()
         .map(|(i, t)| u64::from(t.nearest_depth().to_bits()) << 32 | i as u64)
         .collect();
     keys.par_sort_unstable();
-    keys.par_iter()
-        .map(|&k| triangles[k as u32 as usize])
-        .collect()
+    keys.par_iter().map(|&k| *all[k as u32 as usize]).collect()
+}
+
+/// Which of the triangles a buffer is made of: all, or those whose flag is
+/// set (several buffers made from one set-up take their share of it
+/// without copying it).
+#[derive(Clone, Copy)]
+pub(crate) enum Kept<'a> {
+    All,
+    Flagged(&'a [bool]),
+}
+
+impl Kept<'_> {
+    fn keeps(self, i: usize) -> bool {
+        match self {
+            Kept::All => true,
+            Kept::Flagged(flags) => flags[i],
+        }
+    }
 }
 
 /// Triangle indices per band, in triangle order (a counting sort).
@@ -168,14 +187,16 @@ struct Bins {
 }
 
 impl Bins {
-    /// Bins by the bands of `window`'s rows, the first starting at its top.
-    fn new(triangles: &[RasterTriangle], window: PixelRect) -> Self {
+    /// Bins the `kept` triangles by the bands of `window`'s rows, the first
+    /// starting at its top.
+    fn new(triangles: &[RasterTriangle], kept: Kept<'_>, window: PixelRect) -> Self {
         let bands = (window.y1 - window.y0).div_ceil(BAND_ROWS) as usize;
         let band_of =
             |y: u32| ((y.clamp(window.y0, window.y1 - 1) - window.y0) / BAND_ROWS) as usize;
         let overlapped = |t: &RasterTriangle| band_of(t.rows.0)..=band_of(t.rows.1);
+        let kept = || (triangles.iter().enumerate()).filter(|&(i, _)| kept.keeps(i));
         let mut offsets = vec![0; bands + 1];
-        for t in triangles {
+        for (_, t) in kept() {
             overlapped(t).for_each(|b| offsets[b + 1] += 1);
         }
         for b in 0..bands {
@@ -183,7 +204,7 @@ impl Bins {
         }
         let mut next = offsets.clone();
         let mut entries = vec![0; offsets[bands]];
-        for (i, t) in triangles.iter().enumerate() {
+        for (i, t) in kept() {
             for b in overlapped(t) {
                 entries[next[b]] = i as u32;
                 next[b] += 1;

@@ -27,6 +27,7 @@ mod shade;
 mod spare;
 mod triangle;
 
+use rayon::prelude::*;
 use vtfarm_imaging::Image;
 use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 
@@ -330,15 +331,23 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
             // A triangle's set-up does not depend on the rectangle beyond
             // which triangles are dropped, so the pass's own are these,
             // still nearest first.
-            let kept: Vec<_> = if within.is_empty() {
+            let kept: Vec<bool> = if within.is_empty() {
                 Vec::new()
             } else {
-                (triangles.iter())
-                    .filter(|t| t.reaches(within) && (pass.keep)(t.id))
-                    .cloned()
+                (triangles.par_iter())
+                    .map(|t| t.reaches(within) && (pass.keep)(t.id))
                     .collect()
             };
-            resolve(scene, camera, &kept, within)
+            let mut ids = IdBuffer::unshaped();
+            resolve_into(
+                scene,
+                camera,
+                &triangles,
+                bands::Kept::Flagged(&kept),
+                within,
+                &mut ids,
+            );
+            ids
         })
         .collect()
 }
@@ -444,13 +453,8 @@ fn rasterize_ids_into(
     // Only triangles that reach `within` are set up: a small rectangle costs
     // little more than projecting the scene's vertices.
     let triangles = setup::setup(scene, camera, near, within, keep);
-    resolve_into(
-        scene,
-        camera,
-        &bands::nearest_first(&triangles),
-        within,
-        ids,
-    );
+    let triangles = bands::nearest_first(&triangles);
+    resolve_into(scene, camera, &triangles, bands::Kept::All, within, ids);
 }
 
 /// Panics unless the camera's image fits the rasterizer.
@@ -463,28 +467,18 @@ fn check_camera(camera: &Camera) {
     );
 }
 
-/// The ID buffer of set-up `triangles`, nearest first
-/// (`bands::nearest_first`), over `within` (inside the image): its window.
-fn resolve(
-    scene: &Scene,
-    camera: &Camera,
-    triangles: &[triangle::RasterTriangle],
-    within: PixelRect,
-) -> IdBuffer {
-    let mut ids = IdBuffer::unshaped();
-    resolve_into(scene, camera, triangles, within, &mut ids);
-    ids
-}
-
-/// [`resolve`] into `ids`, whatever it holds.
+/// Makes `ids` (whatever it holds) the ID buffer over `within` (inside the
+/// image; its window) of the set-up `triangles` (nearest first,
+/// `bands::nearest_first`) that are `kept`.
 fn resolve_into(
     scene: &Scene,
     camera: &Camera,
     triangles: &[triangle::RasterTriangle],
+    kept: bands::Kept<'_>,
     within: PixelRect,
     ids: &mut IdBuffer,
 ) {
     // The bands initialize the planes they fill.
     ids.reshape_within(camera.width, camera.height, within);
-    bands::resolve_nearest_first(&scene.triangles, triangles, ids);
+    bands::resolve_nearest_first(&scene.triangles, triangles, kept, ids);
 }

@@ -88,16 +88,22 @@ struct View {
     within: PixelRect,
 }
 
+/// Scene triangles set up per rayon task: each task's raster triangles go
+/// into one vector sized for them up front (most triangles make at most one).
+const TRIANGLES_PER_TASK: usize = 4096;
+
 /// Projects, clips (at view depth `near`) and snaps the triangles of `scene`
 /// that `keep` accepts and that may cover pixels of `within` (a non-empty
-/// rectangle inside the image), in triangle order.
+/// rectangle inside the image): in triangle order, in runs (one per
+/// [`TRIANGLES_PER_TASK`] scene triangles), which are not copied together
+/// here as [`crate::bands::nearest_first`] reorders them anyway.
 pub(crate) fn setup(
     scene: &Scene,
     camera: &Camera,
     near: f32,
     within: PixelRect,
     keep: &(dyn Fn(TriangleId) -> bool + Sync),
-) -> Vec<RasterTriangle> {
+) -> Vec<Vec<RasterTriangle>> {
     let view = View::new(camera, near, within);
     let corners: Vec<Corner> = scene
         .positions
@@ -109,13 +115,19 @@ pub(crate) fn setup(
     let beyond: Vec<u8> = corners.par_iter().map(|c| view.beyond(c)).collect();
     scene
         .triangles
-        .par_iter()
+        .par_chunks(TRIANGLES_PER_TASK)
         .enumerate()
-        .filter(|&(id, t)| {
-            let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
-            a & b & c == 0 && keep(id as TriangleId)
+        .map(|(task, triangles)| {
+            let first = task * TRIANGLES_PER_TASK;
+            let mut out = Vec::with_capacity(triangles.len());
+            for (id, t) in (first..).zip(triangles) {
+                let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
+                if a & b & c == 0 && keep(id as TriangleId) {
+                    out.extend(view.triangle(scene, &corners, id as TriangleId, t));
+                }
+            }
+            out
         })
-        .flat_map_iter(|(id, t)| view.triangle(scene, &corners, id as TriangleId, t))
         .collect()
 }
 

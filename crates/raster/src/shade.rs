@@ -16,6 +16,11 @@ use crate::IdBuffer;
 /// Rows per rayon task: enough work per task to amortise scheduling.
 const ROWS_PER_TASK: usize = 8;
 
+/// Triangle set-ups a task keeps, by triangle id modulo this: a triangle
+/// seen in a row is mostly seen in the next, between a hundred or so others
+/// at 1080p.
+const SURFACE_SLOTS: usize = 512;
+
 /// Shades every pixel of `ids`, a buffer of the whole frame; empty pixels
 /// get the background.
 pub(crate) fn shade(scene: &Scene, camera: &Camera, lighting: &Lighting, ids: &IdBuffer) -> Image {
@@ -161,8 +166,9 @@ impl<'a> FrameShading<'a> {
     }
 
     /// See [`Self::shade_rows`]. A row is shaded run by run of pixels that
-    /// see the same triangle, whose set-up is reused while it lasts; empty
-    /// runs get the background.
+    /// see the same triangle, with the triangle's set-up from a small cache
+    /// (a triangle's runs in neighbouring rows reuse it); empty runs get the
+    /// background.
     #[inline(always)]
     fn shade_rows_with<B: Backend>(
         &self,
@@ -171,7 +177,7 @@ impl<'a> FrameShading<'a> {
         triangles: &[TriangleId],
     ) {
         let width = self.width;
-        let mut surface: Option<Surface> = None;
+        let mut surfaces: Vec<Option<Surface>> = (0..SURFACE_SLOTS).map(|_| None).collect();
         let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
         for (row, (colors, triangles)) in rows.enumerate() {
             let row_ray = V3::splat(self.row_ray(first_row + row as u32));
@@ -185,13 +191,17 @@ impl<'a> FrameShading<'a> {
                 if t == NONE {
                     colors[x..x + run].fill(self.lighting.background);
                 } else {
-                    let surface = match &mut surface {
+                    let surface = match &mut surfaces[t as usize % SURFACE_SLOTS] {
                         Some(s) if s.id == t => s,
                         slot => slot.insert(Surface::new(self, t)),
                     };
                     for start in (x..x + run).step_by(LANES) {
-                        let end = (start + LANES).min(x + run);
-                        self.shade::<B>(surface, row_ray, start, &mut colors[start..end]);
+                        let color = self.shade::<B>(surface, row_ray, start, x + run - start);
+                        // Whole registers where the row has room: lanes
+                        // beyond the run land on pixels of later runs,
+                        // which their own runs overwrite.
+                        let lanes = LANES.min(width - start);
+                        colors[start..start + lanes].copy_from_slice(&color[..lanes]);
                     }
                 }
                 x += run;
@@ -217,11 +227,19 @@ impl<'a> FrameShading<'a> {
         } + row_ray
     }
 
-    /// Shades pixels `x0..x0 + out.len()` (at most [`LANES`]) of a row with
-    /// ray term `row_ray`, all on `surface`: Phong at the point the pixel ray
-    /// meets the triangle, exactly as `vtfarm_scene::shading::phong` lights it.
+    /// Shades pixels `x0..x0 + used` (`used` at most [`LANES`]; the other
+    /// lanes are padding) of a row with ray term `row_ray`, all on
+    /// `surface`: Phong at the point the pixel ray meets the triangle,
+    /// exactly as `vtfarm_scene::shading::phong` lights it.
     #[inline(always)]
-    fn shade<B: Backend>(&self, surface: &Surface, row_ray: V3<B>, x0: usize, out: &mut [Vec3]) {
+    fn shade<B: Backend>(
+        &self,
+        surface: &Surface,
+        row_ray: V3<B>,
+        x0: usize,
+        used: usize,
+    ) -> [Vec3; LANES] {
+        let used = used.min(LANES);
         let dir = self.column_rays(x0, row_ray).normalize();
         let w = perspective_barycentrics(surface.opposite, dir);
         let [n0, n1, n2] = surface.normals;
@@ -234,15 +252,15 @@ impl<'a> FrameShading<'a> {
         let to_eye = (-offset).normalize_or(-dir);
         let position = V3::splat(self.eye) + offset;
         let albedo = if surface.material.is_textured() {
-            self.textured(surface, w, offset, out.len())
+            self.textured(surface, w, offset, used)
         } else {
             Albedo {
                 diffuse: V3::splat(surface.material.diffuse),
                 unlit: V3::splat(surface.unlit),
             }
         };
-        let color = self.phong(surface, &albedo, position, normal, to_eye, out.len());
-        out.copy_from_slice(&color.to_array()[..out.len()]);
+        self.phong(surface, &albedo, position, normal, to_eye, used)
+            .to_array()
     }
 
     /// The textured diffuse and unlit terms of lanes `..used` at weights
