@@ -453,4 +453,96 @@ mod tests {
         let corners = positions.map(|p| view.corner(p));
         assert!(view.triangle(&scene, &corners, 0, &t).count() >= 1);
     }
+
+    /// xorshift64*: uniform in [lo, hi).
+    fn uniform(state: &mut u64, lo: f32, hi: f32) -> f32 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        let bits = state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40;
+        lo + (hi - lo) * bits as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn a_triangle_dropped_beside_the_rectangle_covers_none_of_its_pixels() {
+        // Brute force: triangles near a rectangle's sides (corners within a
+        // few pixels of them, some far off-screen, some behind the eye), each
+        // either dropped by its corners' `beyond` bits or set up as usual;
+        // every dropped one must be one that set-up itself gives no raster
+        // triangle reaching the rectangle.
+        let camera = camera();
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let (mut dropped, mut close_calls) = (0, 0);
+        for case in 0..20_000 {
+            let r = &mut state;
+            let x0 = uniform(r, 0.0, 50.0) as u32;
+            let y0 = uniform(r, 0.0, 36.0) as u32;
+            let within = PixelRect {
+                x0,
+                y0,
+                x1: x0 + 1 + uniform(r, 0.0, 14.0) as u32,
+                y1: y0 + 1 + uniform(r, 0.0, 12.0) as u32,
+            };
+            let view = View::new(&camera, NEAR, within);
+            // Screen points near the rectangle, at random depths, lifted
+            // back into the scene; every eighth corner far off or behind.
+            let positions: Vec<Vec3> = (0..3)
+                .map(|_| {
+                    let depth = uniform(r, 0.5, 20.0);
+                    let (w, outside) = (within, uniform(r, 0.9, 2.5));
+                    let sx = uniform(r, w.x0 as f32 - 3.0, w.x1 as f32 + 3.0);
+                    let sy = uniform(r, w.y0 as f32 - 3.0, w.y1 as f32 + 3.0);
+                    // Mostly just beyond one side, the case's.
+                    let (sx, sy) = match (uniform(r, 0.0, 8.0) as u32, case % 4) {
+                        (0, _) => (uniform(r, -4e5, 4e5), uniform(r, -4e5, 4e5)),
+                        (1, _) => (sx, sy),
+                        (_, 0) => (w.x0 as f32 - outside, sy),
+                        (_, 1) => (w.x1 as f32 + outside, sy),
+                        (_, 2) => (sx, w.y0 as f32 - outside),
+                        _ => (sx, w.y1 as f32 + outside),
+                    };
+                    let pixel = camera.pixel_size_at_unit_depth();
+                    let right = (sx - 32.0) * pixel * depth;
+                    let up = (24.0 - sy) * pixel * depth;
+                    let behind = case % 16 == 0;
+                    Vec3::new(right, up, if behind { depth } else { -depth })
+                })
+                .collect();
+            let scene = Scene {
+                positions,
+                ..Scene::default()
+            };
+            let corners: Vec<Corner> = scene.positions.iter().map(|&p| view.corner(p)).collect();
+            let t = Triangle {
+                vertices: [0, 1, 2],
+                object: 0,
+                material: 0,
+            };
+            let [a, b, c] = [0, 1, 2].map(|i| view.beyond(&corners[i]));
+            if a & b & c == 0 {
+                continue;
+            }
+            dropped += 1;
+            let near_side = corners.iter().any(|c| {
+                let (x, y) = (c.screen.x, c.screen.y);
+                let w = within;
+                (x - f64::from(w.x0)).abs() < 1.5
+                    || (x - f64::from(w.x1)).abs() < 1.5
+                    || (y - f64::from(w.y0)).abs() < 1.5
+                    || (y - f64::from(w.y1)).abs() < 1.5
+            });
+            close_calls += usize::from(near_side);
+            let set_up: Vec<_> = view.triangle(&scene, &corners, 0, &t).collect();
+            assert!(
+                set_up.iter().all(|t| !t.reaches(within)),
+                "case {case}: a dropped triangle reaches {within:?}"
+            );
+        }
+        // Not vacuous: many were dropped, many with a corner within a pixel
+        // and a half of the rectangle's side.
+        assert!(
+            dropped > 2_000 && close_calls > 1_000,
+            "{dropped} {close_calls}"
+        );
+    }
 }
