@@ -53,7 +53,7 @@ impl EnvironmentCube {
             let ids = id_buffer_where(scene, &camera, &keep);
             let image: Image = shade_ids(scene, &camera, lighting, &ids);
             cube.color.extend(image.pixels);
-            cube.object.extend(ids.object);
+            cube.object.extend_from_slice(&ids.object);
         }
         cube
     }
