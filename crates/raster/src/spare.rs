@@ -3,8 +3,8 @@
 //! new buffers every frame: at a worker's set-up sizes the faults cost as
 //! much as a third of the rasterizing. A few planes' allocations (at most
 //! [`MAX_KEPT`] of each type and [`MAX_KEPT_BYTES`] in all) are kept here
-//! and handed to the next buffers that need that much; a plane's contents
-//! never carry over (every user overwrites or fills it).
+//! and handed to the next buffers that need that much; a plane's values
+//! never carry over (every user overwrites or fills what it reshapes).
 
 use std::sync::Mutex;
 
@@ -13,7 +13,7 @@ const MAX_KEPT: usize = 12;
 /// The most bytes kept in all: about five full 1080p buffers.
 const MAX_KEPT_BYTES: usize = 128 << 20;
 
-/// The kept allocations (empty vectors with capacity), per element type.
+/// The kept planes, per element type.
 pub(crate) struct Kept {
     words: Vec<Vec<u32>>,
     floats: Vec<Vec<f32>>,
@@ -41,9 +41,10 @@ impl Plane for f32 {
     }
 }
 
-/// Makes `plane` `n` long, with `fill` where it grows: in its own
-/// allocation where that is large enough, else in the smallest kept one
-/// that is.
+/// Makes `plane` `n` long, with `fill` where it grows beyond what it (or
+/// the kept plane it takes) held before, whatever values it holds
+/// elsewhere: in its own allocation where that is large enough, else in the
+/// smallest kept one that is.
 pub(crate) fn reshape<T: Plane>(plane: &mut Vec<T>, n: usize, fill: T) {
     if plane.capacity() < n {
         let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
@@ -63,11 +64,12 @@ pub(crate) fn reshape<T: Plane>(plane: &mut Vec<T>, n: usize, fill: T) {
 }
 
 /// Keeps `plane`'s allocation for a later [`reshape`], while there is room.
-pub(crate) fn keep<T: Plane>(mut plane: Vec<T>) {
+pub(crate) fn keep<T: Plane>(plane: Vec<T>) {
     if plane.capacity() == 0 {
         return;
     }
-    plane.clear();
+    // Kept with its values: a later `reshape` fills only beyond them, as
+    // its callers overwrite what they use.
     let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
     let bytes = |k: &Kept| {
         let words: usize = k.words.iter().map(Vec::capacity).sum();
