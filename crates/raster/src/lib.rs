@@ -13,12 +13,18 @@
 //!    a fixed-point sub-pixel grid (`triangle`). The near plane lies at view
 //!    depth `vtfarm_scene::NEAR` unless the caller of [`id_buffer_clipped`]
 //!    places it elsewhere (a reflection map seen from behind its mirror).
-//!    Only triangles that reach the rectangle being rasterized are kept.
+//!    Only triangles that reach the rectangle being rasterized are kept;
+//!    those wholly beside it are dropped first, by a byte per vertex.
 //! 2. `bands`: bin triangles into horizontal bands and scan-convert each band
 //!    on its own rayon task, nearest triangles first, with exact integer edge
 //!    functions, the top-left fill rule and a (depth, triangle id) z-test.
 //! 3. `shade`: deferred Phong shading, once per visible pixel, several pixels
 //!    of a triangle at a time (`lanes`), bit-identical to the scalar model.
+//!
+//! The z-test's span loop and the shading lanes run in AVX2 registers where
+//! the CPU has it (checked at run time): IEEE arithmetic is correctly
+//! rounded in any register and nothing is fused, so every machine gets the
+//! same bits. Dropped buffers leave their planes to the next (`spare`).
 
 mod bands;
 mod lanes;
