@@ -1,6 +1,13 @@
-//! Profiling harness (not a benchmark of record): runs one raster phase on
-//! the stock cockpit at 1080p in a loop, for `perf record`.
-//! `cargo run --release -p vtfarm-raster --example profile -- base|ids|within|passes [rounds]`
+//! A profiling harness, not a benchmark of record (that is `vtfarm bench
+//! raster`): runs one phase of the rasterizer on the stock cockpit at 1080p
+//! in a loop, for `perf record`, and prints the least wall time and the mean
+//! CPU time per round. `base` is the master's base frame into reused
+//! buffers, `ids` the whole ID buffer, `within` the buffer over the
+//! reflectors' bounds (a fixed 715x424 rectangle there), `passes` three
+//! buffers of about those bounds rasterized together; `hash` prints a hash
+//! of the images and buffers of six eyes, to compare two builds bit for bit.
+//!
+//! `cargo run --release -p vtfarm-raster --example profile -- PHASE [ROUNDS [THREADS]]`
 
 use std::time::Instant;
 
@@ -58,37 +65,6 @@ fn main() {
                     keep: &all,
                 });
                 drop(vtfarm_raster::id_buffers_within(scene, &camera, &passes))
-            }
-            "stats" => {
-                let (_, ids) = vtfarm_raster::rasterize(scene, &camera, &c.lighting);
-                let (mut runs, mut lanes, mut px, mut switches, mut last) =
-                    (0usize, 0usize, 0usize, 0usize, u32::MAX);
-                let mut seen = std::collections::HashSet::new();
-                for row in ids.triangle.chunks(1920) {
-                    let mut x = 0;
-                    while x < row.len() {
-                        let t = row[x];
-                        let mut r = 1;
-                        while x + r < row.len() && row[x + r] == t {
-                            r += 1;
-                        }
-                        if t != u32::MAX {
-                            runs += 1;
-                            lanes += r.div_ceil(8) * 8;
-                            px += r;
-                            if t != last {
-                                switches += 1;
-                                last = t;
-                            }
-                            seen.insert(t);
-                        }
-                        x += r;
-                    }
-                }
-                println!(
-                    "runs {runs} px {px} lanes {lanes} switches {switches} visible {}",
-                    seen.len()
-                );
             }
             "hash" => {
                 let mut h = 0xcbf2_9ce4_8422_2325u64;
