@@ -8,7 +8,8 @@
 //! Most triangles of a detailed scene are hidden. Bands take their triangles
 //! nearest first, and a row of a triangle whose nearest depth lies beyond
 //! every depth already stored along it is skipped without interpolating its
-//! depths: it could not win a single pixel there.
+//! depths: it could not win a single pixel there. The scan that tells stops
+//! at the first stored depth at or beyond it.
 
 use rayon::prelude::*;
 
@@ -114,7 +115,7 @@ impl<'a, I: Iterator<Item = &'a RasterTriangle>> Band<I> {
         let slot = |x: u32, y: u32| (y - first_row) as usize * stride + (x - window.x0) as usize;
         for t in triangles {
             let nearest = t.nearest_depth();
-            let hidden = |row: &[f32]| nearest > farthest(row);
+            let hidden = |row: &[f32]| !reaches_beyond(row, nearest);
             for y in t.rows.0.max(first_row)..=t.rows.1.min(last_row) {
                 let (c0, c1) = (t.columns.0.max(window.x0), t.columns.1.min(window.x1 - 1));
                 if c0 > c1 || hidden(&depth[slot(c0, y)..=slot(c1, y)]) {
@@ -132,19 +133,15 @@ impl<'a, I: Iterator<Item = &'a RasterTriangle>> Band<I> {
     }
 }
 
-/// The largest of `depths` (never NaN), in eight independent lanes so that
-/// it vectorizes.
-fn farthest(depths: &[f32]) -> f32 {
-    let max = |a: f32, b: f32| if b > a { b } else { a };
-    let mut lanes = [0.0f32; 8];
-    let chunks = depths.chunks_exact(lanes.len());
-    let rest = chunks.remainder();
-    for chunk in chunks {
-        for (lane, &d) in lanes.iter_mut().zip(chunk) {
-            *lane = max(*lane, d);
-        }
-    }
-    rest.iter().chain(&lanes).fold(0.0, |m, &d| max(m, d))
+/// Whether any of `depths` (never NaN) lies at or beyond `nearest`: where
+/// none does, a triangle no nearer than `nearest` wins none of them. Scanned
+/// a few registers at a time, stopping at the first that does.
+fn reaches_beyond(depths: &[f32], nearest: f32) -> bool {
+    const BLOCK: usize = 32;
+    let beyond = |block: &[f32]| block.iter().fold(false, |any, &d| any | (d >= nearest));
+    let blocks = depths.chunks_exact(BLOCK);
+    let rest = blocks.remainder();
+    blocks.into_iter().any(beyond) || beyond(rest)
 }
 
 /// The runs of set-up triangles `runs` as one list, nearest first (ties in
