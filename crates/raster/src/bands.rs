@@ -214,3 +214,77 @@ impl Bins {
         &self.entries[self.offsets[band]..self.offsets[band + 1]]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::triangle::ScreenVertex;
+
+    #[test]
+    fn the_portable_and_the_avx2_band_give_the_same_bits() {
+        // Overlapping triangles at random depths (ties included: every
+        // fourth shares its depths with the one before), whole bands of a
+        // window that does not start at the frame's corner.
+        let window = PixelRect {
+            x0: 3,
+            y0: 5,
+            x1: 70,
+            y1: 53,
+        };
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = |lo: f64, hi: f64| {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            lo + (hi - lo) * (state.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as f64
+                / 2f64.powi(53)
+        };
+        let mut depths = [1.0; 3];
+        let triangles: Vec<RasterTriangle> = (0..300)
+            .filter_map(|id| {
+                if id % 4 != 1 {
+                    depths = [next(0.05, 1.0), next(0.05, 1.0), next(0.05, 1.0)];
+                }
+                let corners = depths.map(|inv_depth| ScreenVertex {
+                    x: next(-10.0, 80.0),
+                    y: next(-10.0, 60.0),
+                    inv_depth,
+                });
+                RasterTriangle::new(id, corners, window)
+            })
+            .collect();
+        let triangles = nearest_first(&[triangles]);
+        let bins = Bins::new(&triangles, Kept::All, window);
+        let stride = (window.x1 - window.x0) as usize;
+        let mut covered = 0;
+        for band in 0..(window.y1 - window.y0).div_ceil(BAND_ROWS) as usize {
+            let first_row = window.y0 + band as u32 * BAND_ROWS;
+            let rows = (window.y1 - first_row).min(BAND_ROWS) as usize;
+            let make = || Band {
+                window,
+                first_row,
+                triangles: bins.band(band).iter().map(|&t| &triangles[t as usize]),
+            };
+            let mut portable = (
+                vec![f32::INFINITY; stride * rows],
+                vec![NONE; stride * rows],
+            );
+            make().resolve(&mut portable.0, &mut portable.1);
+            covered += portable.1.iter().filter(|&&t| t != NONE).count();
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                let mut avx2 = (
+                    vec![f32::INFINITY; stride * rows],
+                    vec![NONE; stride * rows],
+                );
+                // SAFETY: the CPU supports AVX2, checked just above.
+                unsafe { make().resolve_avx2(&mut avx2.0, &mut avx2.1) };
+                assert_eq!(avx2.1, portable.1, "band {band}");
+                let bits = |d: &[f32]| d.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&avx2.0), bits(&portable.0), "band {band}");
+            }
+        }
+        // Not vacuous: most of the window is covered.
+        assert!(covered > stride * 30, "{covered}");
+    }
+}
