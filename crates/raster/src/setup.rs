@@ -11,7 +11,6 @@
 //! reflector for a map rendered from a virtual viewpoint behind it.
 
 use glam::{DVec3, Vec3};
-use rayon::iter::Either;
 use rayon::prelude::*;
 use vtfarm_scene::{Camera, NEAR, Projector, Scene, Triangle, TriangleId};
 
@@ -123,7 +122,7 @@ pub(crate) fn setup(
             for (id, t) in (first..).zip(triangles) {
                 let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
                 if a & b & c == 0 && keep(id as TriangleId) {
-                    out.extend(view.triangle(scene, &corners, id as TriangleId, t));
+                    view.triangle_into(scene, &corners, id as TriangleId, t, &mut out);
                 }
             }
             out
@@ -340,37 +339,39 @@ impl View {
         polygon
     }
 
-    /// The raster triangles of scene triangle `id`: none, one, or a fan over
-    /// its clipped polygon.
-    fn triangle(
+    /// Pushes the raster triangles of scene triangle `id` onto `out`: none,
+    /// one, or a fan over its clipped polygon.
+    fn triangle_into(
         &self,
         scene: &Scene,
         vertices: &[Corner],
         id: TriangleId,
         triangle: &Triangle,
-    ) -> impl Iterator<Item = RasterTriangle> + use<'_> {
+        out: &mut Vec<RasterTriangle>,
+    ) {
         let corners = triangle.vertices.map(|v| vertices[v as usize]);
         let any_outside = corners.iter().fold(0, |m, c| m | c.outside);
         let all_outside = corners.iter().fold(u8::MAX, |m, c| m & c.outside);
         if any_outside == 0 {
             // The common case: in front of the eye and near the image.
             let screen = corners.map(|c| c.screen);
-            return Either::Left(RasterTriangle::new(id, screen, self.within).into_iter());
+            out.extend(RasterTriangle::new(id, screen, self.within));
+            return;
         }
         // Entirely beyond one plane (or invalid): nothing to draw.
-        let mut polygon = Box::<Polygon>::default();
-        if all_outside == 0 && any_outside & INVALID == 0 {
-            (triangle.vertices)
-                .map(|v| self.vertex(scene.positions[v as usize]))
-                .into_iter()
-                .for_each(|c| polygon.push(c));
-            *polygon = self.clip(*polygon);
+        if all_outside != 0 || any_outside & INVALID != 0 {
+            return;
         }
-        let fan = 1..polygon.len.saturating_sub(1);
-        Either::Right(fan.filter_map(move |i| {
+        let mut polygon = Polygon::default();
+        (triangle.vertices)
+            .map(|v| self.vertex(scene.positions[v as usize]))
+            .into_iter()
+            .for_each(|c| polygon.push(c));
+        let polygon = self.clip(polygon);
+        out.extend((1..polygon.len.saturating_sub(1)).filter_map(|i| {
             let [a, b, c] = [0, i, i + 1].map(|j| polygon.corners[j].screen);
             RasterTriangle::new(id, [a, b, c], self.within)
-        }))
+        }));
     }
 }
 
@@ -451,7 +452,9 @@ mod tests {
             ..Scene::default()
         };
         let corners = positions.map(|p| view.corner(p));
-        assert!(view.triangle(&scene, &corners, 0, &t).count() >= 1);
+        let mut set_up = Vec::new();
+        view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
+        assert!(!set_up.is_empty());
     }
 
     /// xorshift64*: uniform in [lo, hi).
@@ -532,7 +535,8 @@ mod tests {
                     || (y - f64::from(w.y1)).abs() < 1.5
             });
             close_calls += usize::from(near_side);
-            let set_up: Vec<_> = view.triangle(&scene, &corners, 0, &t).collect();
+            let mut set_up = Vec::new();
+            view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
             assert!(
                 set_up.iter().all(|t| !t.reaches(within)),
                 "case {case}: a dropped triangle reaches {within:?}"

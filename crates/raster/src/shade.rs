@@ -200,8 +200,11 @@ impl<'a> FrameShading<'a> {
                         // Whole registers where the row has room: lanes
                         // beyond the run land on pixels of later runs,
                         // which their own runs overwrite.
-                        let lanes = LANES.min(width - start);
-                        colors[start..start + lanes].copy_from_slice(&color[..lanes]);
+                        match colors.get_mut(start..start + LANES) {
+                            // A copy of a constant size: no call.
+                            Some(whole) => whole.copy_from_slice(&color),
+                            None => colors[start..].copy_from_slice(&color[..width - start]),
+                        }
                     }
                 }
                 x += run;
