@@ -21,7 +21,7 @@
 //! it like the ID buffers.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -40,12 +40,15 @@ use crate::{
 /// reflector pixel need (see the module docs). Part of the frame's raster
 /// pass, built over the reflectors' bounds only ([`crate::reflector_bounds`]):
 /// the ID buffer is empty elsewhere.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Behind {
     pub ids: IdBuffer,
     /// The pixels the thin-glass terms cover.
     bounds: PixelRect,
     glass: GlassTerms,
+    /// How many glass pixels' terms were computed (see
+    /// [`Behind::glass_computations`]).
+    computed: AtomicU64,
 }
 
 /// When the thin-glass terms of the glass pixels are computed. Either way a
@@ -58,24 +61,64 @@ pub enum GlassPass {
     Upfront,
     /// Each as its pixel is finished: a farm worker, which finishes only
     /// the pixels of its packages, so the pass splits between workers
-    /// instead of being repeated on each.
+    /// instead of being repeated on each. A pixel's terms are computed the
+    /// first time and kept: the later stages of a progressive frame, which
+    /// finish the same pixels again, take them from the store.
     OnDemand,
 }
 
 /// The thin-glass terms, or what computing them needs.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 enum GlassTerms {
     /// Traced transmission, or no see-through reflector pixel.
     Nothing,
     /// Per pixel of `bounds`, row-major.
     Upfront(Vec<ThinGlass>),
     /// The see-through surfaces that are not reflectors (a slab's back),
-    /// the shadow maps and the frame camera's view.
+    /// the shadow maps and the frame camera's view, and the terms computed
+    /// so far: each pixel's once per frame, however many stages of a
+    /// progressive frame finish it.
     OnDemand {
         layers: IdBuffer,
         shadows: Arc<ShadowMaps>,
         view: View,
+        store: TermStore,
     },
+}
+
+/// The thin-glass terms computed so far, per pixel of [`Behind`]'s bounds.
+/// A row's slots are allocated when a pixel of it is first finished, so a
+/// worker pays only for the rows its packages reach.
+#[derive(Debug)]
+struct TermStore {
+    width: u32,
+    rows: Box<[OnceLock<Box<[OnceLock<ThinGlass>]>>]>,
+}
+
+impl TermStore {
+    fn new(bounds: PixelRect) -> TermStore {
+        let rows = (bounds.y1 - bounds.y0) as usize;
+        TermStore {
+            width: bounds.x1 - bounds.x0,
+            rows: std::iter::repeat_with(OnceLock::new).take(rows).collect(),
+        }
+    }
+
+    /// The terms of the pixel in `column` of `row` (relative to the
+    /// bounds), computed by `compute` unless they already were.
+    fn get_or_compute(
+        &self,
+        column: u32,
+        row: u32,
+        compute: impl FnOnce() -> ThinGlass,
+    ) -> ThinGlass {
+        let slots = self.rows[row as usize].get_or_init(|| {
+            std::iter::repeat_with(OnceLock::new)
+                .take(self.width as usize)
+                .collect()
+        });
+        *slots[column as usize].get_or_init(compute)
+    }
 }
 
 /// Pixels around the reflectors that [`Behind`] covers besides them: the
@@ -168,8 +211,8 @@ impl Behind {
             layers,
             ..
         } = buffers;
-        let glass = match layers {
-            None => GlassTerms::Nothing,
+        let (glass, computed) = match layers {
+            None => (GlassTerms::Nothing, 0),
             Some(layers) => GlassTerms::new(
                 tracer,
                 camera,
@@ -186,7 +229,16 @@ impl Behind {
             ids: behind,
             bounds,
             glass,
+            computed: AtomicU64::new(computed),
         }
+    }
+
+    /// How many glass pixels' thin-glass terms were computed: every one in
+    /// [`Behind::new`] with [`GlassPass::Upfront`]; with
+    /// [`GlassPass::OnDemand`], each pixel the first time it is finished
+    /// (later stages of a progressive frame take the stored terms).
+    pub fn glass_computations(&self) -> u64 {
+        self.computed.load(Ordering::Relaxed)
     }
 
     /// Finishes a reflector pixel whose value holds the local part and the
@@ -216,13 +268,18 @@ impl Behind {
                 layers,
                 shadows,
                 view,
+                store,
             } => {
                 let t = ids.triangle_at(x, y);
                 if t == NONE || !see_through(tracer.bvh.scene(), t) {
                     // What the up-front pass holds there, to the bit.
                     ThinGlass::default()
                 } else {
-                    glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
+                    let (column, row) = (x - self.bounds.x0, y - self.bounds.y0);
+                    store.get_or_compute(column, row, || {
+                        self.computed.fetch_add(1, Ordering::Relaxed);
+                        glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
+                    })
                 }
             }
         };
@@ -315,7 +372,8 @@ impl BehindBuffers {
 
 impl GlassTerms {
     /// The thin-glass terms of every pixel of `bounds` whose reflector is
-    /// see-through, or (`GlassPass::OnDemand`) what computing them needs.
+    /// see-through, or (`GlassPass::OnDemand`) what computing them needs;
+    /// and how many were computed.
     #[allow(clippy::too_many_arguments)]
     fn new(
         tracer: &Tracer<'_>,
@@ -327,14 +385,14 @@ impl GlassTerms {
         bounds: PixelRect,
         pass: GlassPass,
         cache: &ShadowCache,
-    ) -> GlassTerms {
+    ) -> (GlassTerms, u64) {
         let scene = tracer.bvh.scene();
         let glass_pixel = |x: u32, y: u32| {
             let t = ids.triangle_at(x, y);
             t != NONE && is_reflector[t as usize] && see_through(scene, t)
         };
         if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
-            return GlassTerms::Nothing;
+            return (GlassTerms::Nothing, 0);
         }
         let shadows = ShadowMaps::for_frame(tracer, camera, behind, bounds, &glass_pixel, cache);
         let view = View {
@@ -342,27 +400,35 @@ impl GlassTerms {
             forward: camera.basis().0,
         };
         if pass == GlassPass::OnDemand {
-            return GlassTerms::OnDemand {
+            let store = TermStore::new(bounds);
+            let terms = GlassTerms::OnDemand {
                 layers,
                 shadows,
                 view,
+                store,
             };
+            return (terms, 0);
         }
         let width = (bounds.x1 - bounds.x0) as usize;
         let mut out = vec![ThinGlass::default(); width * (bounds.y1 - bounds.y0) as usize];
-        out.par_chunks_mut(width)
+        let computed = out
+            .par_chunks_mut(width)
             .enumerate()
-            .for_each(|(row, slots)| {
+            .map(|(row, slots)| {
                 let y = bounds.y0 + row as u32;
+                let mut computed = 0;
                 for (column, slot) in slots.iter_mut().enumerate() {
                     let x = bounds.x0 + column as u32;
                     if glass_pixel(x, y) {
                         *slot =
                             glass_at(tracer, camera, &view, ids, &layers, behind, &shadows, x, y);
+                        computed += 1;
                     }
                 }
-            });
-        GlassTerms::Upfront(out)
+                computed
+            })
+            .sum();
+        (GlassTerms::Upfront(out), computed)
     }
 }
 
