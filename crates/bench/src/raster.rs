@@ -160,8 +160,15 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
             // hundred microseconds, the least of each kept, so that a
             // machine busy with other work still gives the quiet figure.
             // A frame computes a pixel's terms once and later stages take
-            // them from its store: each round finishes the pixels of a
-            // fresh set-up twice, timing both.
+            // them from its store: each round has a set-up of its own, and
+            // each run is finished on every round's set-up in turn, then
+            // again, from their stores.
+            let set_ups: Vec<_> = (0..args.rounds.max(1))
+                .map(|_| renderer.id_buffers(&job.setup))
+                .collect();
+            let frames: Vec<_> = (set_ups.iter())
+                .map(|(ids, behind)| renderer.frame(&job.setup, ids, behind))
+                .collect();
             let runs: Vec<&[(u32, u32)]> = glass.chunks(1024).collect();
             let finish_run = |frame: &vtfarm_vertex::Frame<'_>, run: &[(u32, u32)]| {
                 let start = Instant::now();
@@ -178,18 +185,13 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
                 }
                 start.elapsed().as_secs_f64()
             };
-            let (mut computed, mut stored) = (
-                vec![f64::INFINITY; runs.len()],
-                vec![f64::INFINITY; runs.len()],
-            );
-            for _ in 0..args.rounds.max(1) {
-                let (ids, behind) = renderer.id_buffers(&job.setup);
-                let frame = renderer.frame(&job.setup, &ids, &behind);
-                for (k, run) in runs.iter().enumerate() {
-                    computed[k] = computed[k].min(finish_run(&frame, run));
-                    stored[k] = stored[k].min(finish_run(&frame, run));
-                }
-            }
+            let least_run = |run: &[(u32, u32)]| {
+                (frames.iter())
+                    .map(|frame| finish_run(frame, run))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let computed: Vec<f64> = runs.iter().map(|run| least_run(run)).collect();
+            let stored: Vec<f64> = runs.iter().map(|run| least_run(run)).collect();
             let (terms, stored): (f64, f64) = (computed.iter().sum(), stored.iter().sum());
             println!(
                 "  {n} thread(s): base frame {base:.4} s (ID buffer {ids:.4} s, shading {:.4} s), within {within:.4} s",

@@ -20,7 +20,7 @@
 //! Everything here is deterministic for any thread count, so workers rebuild
 //! it like the ID buffers.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::Vec3;
@@ -31,7 +31,8 @@ use vtfarm_scene::{Camera, Light, LightKind, NONE, Projector, Scene, TriangleId}
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
 use crate::{
-    PixelRect, PixelValue, Transmission, barycentric, pixel_surface_along, reflector_bounds,
+    PixelRect, PixelValue, Transmission, barycentric_in_plane, pixel_surface_along,
+    reflector_bounds,
 };
 
 /// What lies behind the reflectors: the ID buffer of the opaque scene
@@ -92,7 +93,16 @@ enum GlassTerms {
 #[derive(Debug)]
 struct TermStore {
     width: u32,
-    rows: Box<[OnceLock<Box<[OnceLock<ThinGlass>]>>]>,
+    rows: Box<[OnceLock<Box<[TermSlot]>>]>,
+}
+
+/// One pixel's stored terms: their bits, and whether they are there yet.
+/// Two threads that computed the same pixel's terms at once would store the
+/// same bits (the terms are a function of the pixel), so no lock is needed.
+#[derive(Debug, Default)]
+struct TermSlot {
+    bits: [AtomicU32; 4],
+    stored: AtomicBool,
 }
 
 impl TermStore {
@@ -113,11 +123,32 @@ impl TermStore {
         compute: impl FnOnce() -> ThinGlass,
     ) -> ThinGlass {
         let slots = self.rows[row as usize].get_or_init(|| {
-            std::iter::repeat_with(OnceLock::new)
+            std::iter::repeat_with(TermSlot::default)
                 .take(self.width as usize)
                 .collect()
         });
-        *slots[column as usize].get_or_init(compute)
+        let slot = &slots[column as usize];
+        if slot.stored.load(Ordering::Acquire) {
+            let [x, y, z, scale] = slot
+                .bits
+                .each_ref()
+                .map(|b| f32::from_bits(b.load(Ordering::Relaxed)));
+            return ThinGlass {
+                transmitted: Vec3::new(x, y, z),
+                reflection_scale: scale,
+            };
+        }
+        let terms = compute();
+        let t = terms.transmitted;
+        for (b, v) in slot
+            .bits
+            .iter()
+            .zip([t.x, t.y, t.z, terms.reflection_scale])
+        {
+            b.store(v.to_bits(), Ordering::Relaxed);
+        }
+        slot.stored.store(true, Ordering::Release);
+        terms
     }
 }
 
@@ -466,7 +497,8 @@ fn glass_at(
         // The back surface is met from inside, along the refracted ray
         // (with Fresnel weights its angle matters; parallel surfaces give
         // it the front's kr again, as a traced ray finds).
-        let inside = inside_direction(scene, &front, direction).unwrap_or(direction);
+        let refracted = inside_direction(scene, &front, direction);
+        let inside = refracted.unwrap_or(direction);
         let (kr_back, kt_back) = tracer.weights(&back_point, inside);
         weight *= kt_back;
         // The ghost: in through the front, reflected at the back, out
@@ -476,7 +508,9 @@ fn glass_at(
         if kr_front > 0.0 {
             reflection_scale += (kt * kt * kr_back).max_element() / kr_front;
         }
-        shift = slab_shift(scene, &front, &back_point, direction);
+        shift = refracted.map_or(Vec3::ZERO, |inside| {
+            slab_shift(&front, &back_point, direction, inside)
+        });
     }
     let seen = opaque_radiance(
         tracer,
@@ -496,13 +530,10 @@ fn glass_at(
 
 /// How far sideways a ray along `direction` leaves a slab whose front and
 /// back surfaces it meets (straight) at `front` and `back`: inside, it runs
-/// along the Snell direction to the back plane, and leaves parallel to
-/// `direction` again.
-fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, direction: Vec3) -> Vec3 {
+/// along the Snell direction `inside` ([`inside_direction`]) to the back
+/// plane, and leaves parallel to `direction` again.
+fn slab_shift(front: &SurfacePoint, back: &SurfacePoint, direction: Vec3, inside: Vec3) -> Vec3 {
     let normal = facing_normal(front, direction);
-    let Some(inside) = inside_direction(scene, front, direction) else {
-        return Vec3::ZERO;
-    };
     let thickness = (back.position - front.position).dot(-normal);
     let along = inside.dot(-normal);
     if thickness <= 0.0 || along <= 1e-6 {
@@ -602,8 +633,13 @@ fn opaque_radiance(
     let normal = normalize_or_else(na * wa + nb * wb + nc * wc, || {
         scene.geometric_normal(triangle).normalize_or(Vec3::Y)
     });
-    // A pixel's footprint there, for the texture's mip level.
-    let footprint = (position - camera.eye).length() * camera.pixel_size_at_unit_depth();
+    // A pixel's footprint there, for the texture's mip level (an
+    // untextured material is borrowed whatever the footprint).
+    let footprint = if scene.material_of(triangle).is_textured() {
+        (position - camera.eye).length() * camera.pixel_size_at_unit_depth()
+    } else {
+        0.0
+    };
     phong(
         &scene.textured_material(triangle, Vec3::new(wa, wb, wc), footprint),
         tracer.lighting,
@@ -662,7 +698,7 @@ fn ray_plane(
         return None;
     }
     let position = origin + direction * ((a - origin).dot(plane) / denom);
-    Some((position, barycentric([a, b, c], position)))
+    Some((position, barycentric_in_plane([a, b, c], plane, position)))
 }
 
 /// One shadow map per light: the scene's ID buffer seen from the light
