@@ -33,13 +33,12 @@
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
-use std::io::Cursor;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use axum::Router;
-use axum::extract::{ConnectInfo, Form, Path, Request, State};
+use axum::extract::{ConnectInfo, Form, Path, Query, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, Sse};
@@ -150,7 +149,8 @@ struct HttpState {
     /// The dashboard view every event stream follows, started with the first.
     view_feed: Arc<OnceLock<watch::Receiver<Arc<str>>>>,
     /// The view's newest stage as PNG, encoded once for every request.
-    view_png: Arc<std::sync::Mutex<Option<(ViewKey, axum::body::Bytes)>>>,
+    /// The view's stages as PNG, newest last, at most [`VIEW_PNGS_KEPT`].
+    view_pngs: Arc<std::sync::Mutex<Vec<ViewPng>>>,
 }
 
 /// Which stage of which move is on view, and whether its figures are in.
@@ -261,7 +261,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         access: Arc::new(access),
         streams: Arc::new(Semaphore::new(max_event_streams)),
         view_feed: Arc::new(OnceLock::new()),
-        view_png: Arc::default(),
+        view_pngs: Arc::default(),
     };
     Router::new()
         .route("/", get(|| async { Html(DASHBOARD) }))
@@ -626,53 +626,101 @@ async fn steer_view(
     }
 }
 
-/// The view's newest finished stage, encoded once per stage.
-async fn view_png(State(state): State<HttpState>) -> Response {
+/// A stage of the view encoded for a display: the stage, the factor its
+/// image was reduced by, the PNG.
+#[derive(Clone)]
+struct ViewPng {
+    generation: u64,
+    quality: &'static str,
+    factor: u32,
+    png: axum::body::Bytes,
+}
+
+/// Encoded view stages kept, the oldest encoded first out: a few display
+/// sizes (a dashboard and a bench, a phone's and a desktop's) of the
+/// stages on view.
+const VIEW_PNGS_KEPT: usize = 4;
+
+/// `/view/image.png`'s query: `width`, the display's width in pixels, asks
+/// for the image reduced to fit it (the stage's own pixels when it is at
+/// least as wide as the image).
+#[derive(Deserialize)]
+struct ViewImageQuery {
+    width: Option<u32>,
+}
+
+/// The view's newest finished stage as PNG, reduced by a whole factor to
+/// the display's `width` if given (`Image::reduced`), encoded once per
+/// stage and size: the dashboard shows it at a few hundred pixels, and a
+/// 1080p frame costs some 10 ms to encode where its reduction to the
+/// display costs a few.
+async fn view_png(State(state): State<HttpState>, query: Query<ViewImageQuery>) -> Response {
+    if query.width == Some(0) {
+        return (StatusCode::BAD_REQUEST, "width must be at least 1 pixel\n").into_response();
+    }
     let latest = state.master.inspect(|c| {
-        let key = view_key(c)?;
-        Some(((key.0, key.1), c.views().latest()?.frame.clone()))
+        let latest = c.views().latest()?;
+        Some((
+            latest.generation,
+            latest.quality.name(),
+            latest.frame.clone(),
+        ))
     });
     let Some(latest) = latest.await else {
         return unavailable();
     };
-    let Some(((generation, quality), frame)) = latest else {
+    let Some((generation, quality, frame)) = latest else {
         return (StatusCode::NOT_FOUND, "no such image (yet)\n").into_response();
     };
-    let key = (generation, quality, false);
-    let cached = state.view_png.lock().ok().and_then(|c| c.clone());
-    if let Some((_, png)) = cached.filter(|(k, _)| (k.0, k.1) == (key.0, key.1)) {
-        return (
-            [
-                (header::CONTENT_TYPE, "image/png"),
-                (header::CACHE_CONTROL, "no-store"),
-            ],
-            png,
-        )
-            .into_response();
-    }
-    let encoded = tokio::task::spawn_blocking(move || {
-        let image = &frame.color;
-        encode_srgb8_png(image.width, image.height, &image.to_srgb8())
-    })
-    .await;
-    match encoded {
-        Ok(Ok(png)) => {
-            let png = axum::body::Bytes::from(png);
-            if let Ok(mut cache) = state.view_png.lock() {
-                *cache = Some((key, png.clone()));
+    let factor = query
+        .width
+        .map_or(1, |w| frame.color.width.div_ceil(w).max(1));
+    let is_this =
+        |p: &ViewPng| (p.generation, p.quality, p.factor) == (generation, quality, factor);
+    let cached =
+        (state.view_pngs.lock().ok()).and_then(|kept| kept.iter().find(|p| is_this(p)).cloned());
+    let png = match cached {
+        Some(kept) => kept.png,
+        None => {
+            let encoded = tokio::task::spawn_blocking(move || {
+                let image = frame.color.reduced(factor);
+                let mut png = Vec::new();
+                vtfarm_imaging::encode_srgb8_png(
+                    &mut png,
+                    image.width,
+                    image.height,
+                    &image.to_srgb8(),
+                )
+                .map(|()| png)
+            })
+            .await;
+            let png = match encoded {
+                Ok(Ok(png)) => axum::body::Bytes::from(png),
+                Ok(Err(e)) => return png_error(PngError::from(e)),
+                Err(e) => return png_error(PngError::from(e)),
+            };
+            if let Ok(mut kept) = state.view_pngs.lock() {
+                kept.push(ViewPng {
+                    generation,
+                    quality,
+                    factor,
+                    png: png.clone(),
+                });
+                if kept.len() > VIEW_PNGS_KEPT {
+                    kept.remove(0);
+                }
             }
-            (
-                [
-                    (header::CONTENT_TYPE, "image/png"),
-                    (header::CACHE_CONTROL, "no-store"),
-                ],
-                png,
-            )
-                .into_response()
+            png
         }
-        Ok(Err(e)) => png_error(PngError::from(e)),
-        Err(e) => png_error(PngError::from(e)),
-    }
+    };
+    (
+        [
+            (header::CONTENT_TYPE, "image/png"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        png,
+    )
+        .into_response()
 }
 
 fn png_error(error: PngError) -> Response {
@@ -869,7 +917,9 @@ async fn png_response(
 ) -> Response {
     let encoded = tokio::task::spawn_blocking(move || {
         let (width, height, pixels) = srgb8()?;
-        Ok::<_, PngError>(encode_srgb8_png(width, height, &pixels)?)
+        let mut png = Vec::new();
+        vtfarm_imaging::encode_srgb8_png(&mut png, width, height, &pixels)?;
+        Ok::<_, PngError>(png)
     })
     .await
     .unwrap_or_else(|e| Err(PngError::from(e)));
@@ -884,21 +934,6 @@ async fn png_response(
             .into_response(),
         Err(e) => png_error(e),
     }
-}
-
-/// 8-bit sRGB pixels (RGB interleaved, the bytes `Image::write_png`
-/// writes) as a PNG.
-fn encode_srgb8_png(width: u32, height: u32, pixels: &[u8]) -> Result<Vec<u8>, image::ImageError> {
-    let mut png = Vec::new();
-    image::write_buffer_with_format(
-        &mut Cursor::new(&mut png),
-        pixels,
-        width,
-        height,
-        image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
-    )?;
-    Ok(png)
 }
 
 /// The farm's metrics in the Prometheus (OpenMetrics) text format.

@@ -457,6 +457,21 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     let png = farm.get("/view/image.png").await;
     let decoded = image::load_from_memory(&png.body).unwrap().to_rgb8();
     assert_eq!(decoded.as_raw(), &core_view.to_srgb8());
+    // At a display's width: reduced by the whole factor that fits it (96
+    // pixels into 40: 3), again the same bytes the second time (kept); a
+    // display at least as wide gets the stage's own pixels.
+    for _ in 0..2 {
+        let small = farm.get("/view/image.png?width=40&stage=x").await;
+        assert_eq!(small.status, 200, "{}", small.text());
+        let decoded = image::load_from_memory(&small.body).unwrap().to_rgb8();
+        assert_eq!((decoded.width(), decoded.height()), (32, 18));
+        assert_eq!(decoded.as_raw(), &core_view.reduced(3).to_srgb8());
+    }
+    assert_eq!(farm.get("/view/image.png?width=96").await.body, png.body);
+    for bad in ["width=0", "width=-3", "width=wide"] {
+        let refused = farm.get(&format!("/view/image.png?{bad}")).await;
+        assert_eq!(refused.status, 400, "{bad}: {}", refused.text());
+    }
     // The figures come after the stage went on view, and the object map with them.
     farm.wait_for_core(|c| c.views().latest().is_some_and(|l| l.figures.is_some()))
         .await;

@@ -3,8 +3,9 @@
 //! `--bin`, default this executable, each worker `--worker-threads 1`)
 //! renders one cockpit frame as the view's source; then the bench moves the
 //! eye `--moves` times through the master's HTTP API (`POST /api/view`)
-//! and times the dashboard's event stream (`GET /api/events`) from each
-//! move until each stage (preview, refine, full) is listed as rendered,
+//! and times each move until each stage (preview, refine, full) is listed
+//! as rendered on the dashboard's event stream (`GET /api/events`) and its
+//! image, at the display's width, is in (`GET /view/image.png?width=`),
 //! with the phases the master's timeline records for each stage's frame.
 //! Beside it: the same eyes rendered in this process at each quality, and
 //! optionally single-frame jobs timed from submission to image
@@ -72,6 +73,11 @@ pub struct ViewArgs {
     /// submission to its image.
     #[arg(long, default_value_t = 0)]
     single_frames: usize,
+    /// The width in pixels the view is shown at: each stage counts as on
+    /// screen once `GET /view/image.png?width=` answered it, as the
+    /// dashboard asks (its 384 CSS pixels at a device pixel ratio of 2).
+    #[arg(long, default_value_t = 768)]
+    display_width: u32,
     /// Seconds a move's stages, the source frame or a single-frame job may
     /// take before the bench gives up with an error naming what it waited for.
     #[arg(long, default_value_t = 120.0)]
@@ -109,12 +115,16 @@ const MAX_BODY: usize = 256 << 20;
 /// waits, so a stream the bench does not follow holds bounded memory.
 const EVENTS_QUEUED: usize = 1024;
 
-/// One move: when each stage was on screen after it, and each stage's
-/// frame as the master recorded it (where the server lists it).
+/// One move: when each stage was listed and on screen after it, and each
+/// stage's frame as the master recorded it (where the server lists it).
 #[derive(Clone, Debug, Default, Serialize)]
 struct MoveFigures {
     offset: [f32; 3],
     /// Seconds from the move's request to the first event listing the stage.
+    listed_seconds: [f64; 3],
+    /// Seconds from the move's request until the view's image, asked for
+    /// at the display's width after the event listing the stage, was in
+    /// (the stage's or a newer one's).
     on_screen_seconds: [f64; 3],
     frames: [Option<StageFrame>; 3],
 }
@@ -204,8 +214,8 @@ struct ViewFigures {
 
 pub(crate) fn run(args: ViewArgs) -> Result<()> {
     ensure!(
-        args.workers >= 1 && args.worker_threads >= 1 && args.moves >= 1,
-        "--workers, --worker-threads and --moves must be at least 1"
+        args.workers >= 1 && args.worker_threads >= 1 && args.moves >= 1 && args.display_width >= 1,
+        "--workers, --worker-threads, --moves and --display-width must be at least 1"
     );
     // Each worker is a process of this machine and each thread a pool
     // thread of it: a localhost farm, not a cluster.
@@ -254,7 +264,7 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
             for (k, &offset) in offsets.iter().enumerate() {
                 let timed = k > 0;
                 let figures = farm
-                    .time_move(&mut events, source, offset, timeout)
+                    .time_move(&mut events, source, offset, args.display_width, timeout)
                     .await
                     .with_context(|| format!("move {k} (offset {offset:?} m)"))?;
                 let s = figures.on_screen_seconds;
@@ -558,6 +568,7 @@ impl Processes {
         events: &mut EventStream,
         source: u64,
         offset: [f32; 3],
+        display_width: u32,
         timeout: Duration,
     ) -> Result<MoveFigures> {
         events.discard_pending()?;
@@ -585,7 +596,15 @@ impl Processes {
                 );
             };
             let (at, event) = event?;
-            watch.saw(at.saturating_duration_since(sent), &event)?;
+            let listed = watch.saw(at.saturating_duration_since(sent), &event)?;
+            if !listed.is_empty() {
+                let path = format!("/view/image.png?width={display_width}&stage={job}");
+                let (status, _) = request(self.http, Method::GET, &path, None).await?;
+                ensure!(status == StatusCode::OK, "GET {path} answered {status}");
+                for k in listed {
+                    watch.figures.on_screen_seconds[k] = sent.elapsed().as_secs_f64();
+                }
+            }
         }
         Ok(watch.figures)
     }
@@ -672,8 +691,10 @@ impl MoveWatch {
         STAGES[k]
     }
 
-    /// An event of the dashboard's stream, `after` the move was requested.
-    fn saw(&mut self, after: Duration, event: &Value) -> Result<()> {
+    /// An event of the dashboard's stream, `after` the move was requested;
+    /// answers the stages it lists first (by index in [`STAGES`]).
+    fn saw(&mut self, after: Duration, event: &Value) -> Result<Vec<usize>> {
+        let mut listed = Vec::new();
         let outcomes = event["view"]["outcomes"].as_array().map_or(&[][..], |o| o);
         for outcome in outcomes {
             if outcome["job"].as_u64() != Some(self.job) {
@@ -687,7 +708,8 @@ impl MoveWatch {
                     };
                     if !self.seen[k] {
                         self.seen[k] = true;
-                        self.figures.on_screen_seconds[k] = after.as_secs_f64();
+                        self.figures.listed_seconds[k] = after.as_secs_f64();
+                        listed.push(k);
                     }
                 }
                 Some("cancelled") => bail!(
@@ -705,7 +727,7 @@ impl MoveWatch {
                 self.figures.frames[index] = Some(StageFrame::from_stats(&frame["stats"]));
             }
         }
-        Ok(())
+        Ok(listed)
     }
 }
 
@@ -944,11 +966,20 @@ fn local_renders(
 fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
     println!(
         "bench view — cockpit {triangles} triangles (detail {}), {}x{}; a master and {} worker process(es) of --threads {} on 127.0.0.1; \
-         {} moves of {} m through POST /api/view (after one warm-up move), each timed until the event stream lists the stage",
-        f.detail, f.width, f.height, f.workers, f.worker_threads, args.moves, args.step
+         {} moves of {} m through POST /api/view (after one warm-up move), each timed until the event stream lists the stage \
+         and its image at {} px wide is in",
+        f.detail,
+        f.width,
+        f.height,
+        f.workers,
+        f.worker_threads,
+        args.moves,
+        args.step,
+        args.display_width
     );
     println!(
-        "columns: on screen = move to the first event listing the stage; the stage's frame as the master's timeline has it \
+        "columns: on screen = move to the stage's image (GET /view/image.png?width=, asked for after the first event listing \
+         the stage) in hand; listed = move to that event; the stage's frame as the master's timeline has it \
          (medians): wall = its first assignment to its last result, base = the master's base frame, set-up / packages / in flight = \
          the busiest worker's; local = the same eye rendered in this process on {} thread(s), set-up included",
         f.local.threads
@@ -962,10 +993,11 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
             farm.load_average_after
         );
         println!(
-            "  {:<8} {:>10} {:>8} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
+            "  {:<8} {:>10} {:>8} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
             "stage",
             "median ms",
             "p90 ms",
+            "listed",
             "wall",
             "base",
             "set-up",
@@ -975,6 +1007,7 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
         );
         for (k, quality) in STAGES.iter().enumerate() {
             let on_screen = Spread::of(farm.moves.iter().map(|m| m.on_screen_seconds[k]));
+            let listed = Spread::of(farm.moves.iter().map(|m| m.listed_seconds[k]));
             let frames: Vec<&StageFrame> = farm
                 .moves
                 .iter()
@@ -985,10 +1018,11 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
             };
             let local = Spread::of(f.local.seconds[k].iter().copied());
             println!(
-                "  {:<8} {:>10} {:>8} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
+                "  {:<8} {:>10} {:>8} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
                 quality.name(),
                 ms(on_screen.map(|s| s.median)),
                 ms(on_screen.map(|s| s.p90)),
+                ms(listed.map(|s| s.median)),
                 ms(phase(|f| f.wall)),
                 ms(phase(|f| f.base)),
                 ms(phase(|f| f.setup)),
@@ -1126,16 +1160,20 @@ mod tests {
         let event = |outcomes: Vec<Value>, frames: Vec<Value>| serde_json::json!({ "view": { "outcomes": outcomes }, "frames": frames });
         let mut watch = MoveWatch::new(7, [0.005, 0.001, 0.0]);
         let ms = Duration::from_millis;
-        watch
+        let listed = watch
             .saw(ms(50), &event(vec![rendered(6, "preview")], vec![]))
             .unwrap();
+        assert!(listed.is_empty(), "another move's stage");
         assert_eq!(watch.missing(), Quality::Preview);
         let first = event(
             vec![rendered(6, "full"), rendered(7, "preview")],
             vec![serde_json::json!({ "seq": 4, "job": 7, "frame": 0, "stats": stats })],
         );
-        watch.saw(ms(120), &first).unwrap();
-        watch.saw(ms(150), &first).unwrap();
+        assert_eq!(watch.saw(ms(120), &first).unwrap(), [0]);
+        assert!(
+            watch.saw(ms(150), &first).unwrap().is_empty(),
+            "listed before"
+        );
         let second = event(
             vec![
                 rendered(7, "preview"),
@@ -1145,9 +1183,9 @@ mod tests {
             vec![],
         );
         assert!(!watch.done());
-        watch.saw(ms(400), &second).unwrap();
+        assert_eq!(watch.saw(ms(400), &second).unwrap(), [1, 2]);
         assert!(watch.done());
-        assert_eq!(watch.figures.on_screen_seconds, [0.12, 0.4, 0.4]);
+        assert_eq!(watch.figures.listed_seconds, [0.12, 0.4, 0.4]);
         let preview = watch.figures.frames[0].clone().unwrap();
         let p = &preview;
         let figures = [p.wall, p.base, p.setup, p.packages, p.sending];

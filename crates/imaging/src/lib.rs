@@ -218,6 +218,38 @@ impl Image {
         }
     }
 
+    /// The image reduced `factor` times in each direction (rounded up) for
+    /// a display smaller than it: each pixel the mean, in linear light, of
+    /// the up to `factor` × `factor` pixels it covers. Factor 1 (or 0) is
+    /// the image itself.
+    pub fn reduced(&self, factor: u32) -> Image {
+        let factor = factor.max(1);
+        if factor == 1 {
+            return self.clone();
+        }
+        let (width, height) = (self.width.div_ceil(factor), self.height.div_ceil(factor));
+        let mut pixels = Vec::with_capacity(width as usize * height as usize);
+        for y in 0..height {
+            let rows = y * factor..((y + 1) * factor).min(self.height);
+            for x in 0..width {
+                let columns = x * factor..((x + 1) * factor).min(self.width);
+                let mut sum = Vec3::ZERO;
+                for sy in rows.clone() {
+                    let row = self.index(0, sy);
+                    for sx in columns.clone() {
+                        sum += self.pixels[row + sx as usize];
+                    }
+                }
+                pixels.push(sum / (rows.len() * columns.len()) as f32);
+            }
+        }
+        Image {
+            width,
+            height,
+            pixels,
+        }
+    }
+
     /// Writes an 8-bit sRGB PNG ([`write_srgb8_png`] of [`Image::to_srgb8`]).
     pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
         write_srgb8_png(path, self.width, self.height, &self.to_srgb8())
@@ -257,23 +289,36 @@ pub fn write_srgb8_png(
     height: u32,
     pixels: &[u8],
 ) -> Result<(), ImageError> {
-    use image::ImageEncoder;
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    let encode = |cause| ImageError::Encode {
-        path: path.to_owned(),
-        cause,
-    };
     let file = std::fs::File::create(path).map_err(|cause| ImageError::Io {
         path: path.to_owned(),
         cause,
     })?;
     let mut out = std::io::BufWriter::new(file);
-    let encoder = PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub);
-    (encoder.write_image(pixels, width, height, image::ExtendedColorType::Rgb8)).map_err(encode)?;
+    encode_srgb8_png(&mut out, width, height, pixels).map_err(|cause| ImageError::Encode {
+        path: path.to_owned(),
+        cause,
+    })?;
     out.flush().map_err(|cause| ImageError::Io {
         path: path.to_owned(),
         cause,
     })
+}
+
+/// [`write_srgb8_png`]'s encoding into `out` (an HTTP answer's bytes, a
+/// file): the same bytes for the same pixels.
+///
+/// # Panics
+/// If `pixels` does not hold `width * height * 3` bytes.
+pub fn encode_srgb8_png(
+    out: impl Write,
+    width: u32,
+    height: u32,
+    pixels: &[u8],
+) -> Result<(), image::ImageError> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    let encoder = PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Sub);
+    encoder.write_image(pixels, width, height, image::ExtendedColorType::Rgb8)
 }
 
 /// [`encode_srgb8`]'s channel rule by table: per bucket of floats in
@@ -496,6 +541,44 @@ mod tests {
     }
 
     use super::*;
+
+    /// A reduced pixel is the mean of the pixels it covers, the partial
+    /// blocks at the right and bottom edges over the pixels they hold.
+    #[test]
+    fn a_reduced_image_averages_the_blocks_it_covers() {
+        let mut image = Image::black(5, 4);
+        for y in 0..4 {
+            for x in 0..5 {
+                image.set(x, y, Vec3::new(x as f32, y as f32, (x * y) as f32));
+            }
+        }
+        assert_eq!(image.reduced(1), image);
+        assert_eq!(image.reduced(0), image);
+        let half = image.reduced(2);
+        assert_eq!((half.width, half.height), (3, 2));
+        assert_eq!(half.get(0, 0), Vec3::new(0.5, 0.5, 0.25));
+        // Columns 4 only, rows 2 and 3.
+        assert_eq!(half.get(2, 1), Vec3::new(4.0, 2.5, 10.0));
+        let whole = image.reduced(8);
+        assert_eq!((whole.width, whole.height), (1, 1));
+        assert_eq!(whole.get(0, 0), Vec3::new(2.0, 1.5, 3.0));
+    }
+
+    /// The bytes encoder and the file writer give the same PNG, and it
+    /// decodes to the pixels.
+    #[test]
+    fn a_png_in_bytes_is_the_file_and_decodes_to_its_pixels() {
+        let (w, h) = (7, 3);
+        let pixels: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
+        let mut bytes = Vec::new();
+        encode_srgb8_png(&mut bytes, w, h, &pixels).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        write_srgb8_png(&path, w, h, &pixels).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), bytes);
+        let decoded = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!(decoded.into_raw(), pixels);
+    }
 
     /// A refilled image is the new one whatever it held before, larger or
     /// smaller.

@@ -3,16 +3,18 @@
 //! image byte for byte the frame rendered from scratch at that quality (what
 //! `vtfarm render --quality` writes: the farm composites the same packages),
 //! each stage tracing only the vertices its quality adds and no pixel an
-//! earlier stage traced.
+//! earlier stage traced. A farm worker's progressive frame (its packages
+//! advanced on one `Renderer::id_buffers` set-up) gives the same images and
+//! computes each glass pixel's thin-glass terms once for all stages.
 
 use std::sync::Arc;
 
 use glam::Vec3;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
+use vtfarm_render::{FrameSetup, RenderOptions, Renderer, split_packages};
 use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
 use vtfarm_trace::TraceSettings;
-use vtfarm_vertex::{Quality, Transmission, VertexSettings};
+use vtfarm_vertex::{PackageOptions, ProgressivePackage, Quality, Transmission, VertexSettings};
 
 fn small_cockpit() -> (Renderer, FrameSetup) {
     let c = cockpit(&CockpitConfig {
@@ -232,4 +234,68 @@ fn a_progressive_frame_may_skip_a_stage_but_not_go_back() {
     let full = renderer.render(&setup, &options, &mut |_, _| {});
     assert!(*progressive.image() == full.image);
     assert!(progressive.advance(Quality::Refine).is_err());
+}
+
+/// A worker's progressive frame: the thin-glass terms computed as its
+/// packages finish pixels, each glass pixel's once for the three stages
+/// (counted, against the up-front pass of a whole frame), and each stage's
+/// image, composited from the packages' bitmaps, the frame rendered from
+/// scratch at that quality.
+#[test]
+fn a_workers_progressive_frame_computes_each_glass_pixels_terms_once() {
+    let (cockpit, cockpit_setup) = small_cockpit();
+    let (pane, pane_setup) = quads(Transmission::Raster);
+    for (renderer, setup, name) in [
+        (cockpit, cockpit_setup, "cockpit"),
+        (pane, pane_setup, "pane"),
+    ] {
+        let (base, full_ids) = renderer.base_frame(&setup);
+        let upfront = renderer.behind(&setup, &full_ids).glass_computations();
+        let scene = renderer.scene();
+        let glass_pixels = (full_ids.triangle.iter())
+            .filter(|&&t| renderer.reflectors().contains(&t) && scene.material_of(t).see_through())
+            .count() as u64;
+        assert!(glass_pixels > 100, "{name}: {glass_pixels} glass pixels");
+        assert_eq!(upfront, glass_pixels, "{name}: the up-front pass");
+
+        let (ids, behind) = renderer.id_buffers(&setup);
+        assert_eq!(
+            behind.glass_computations(),
+            0,
+            "{name}: none before a package"
+        );
+        let frame = renderer.frame(&setup, &ids, &behind);
+        let mut packages: Vec<ProgressivePackage> = split_packages(renderer.reflectors(), 16)
+            .iter()
+            .map(|package| ProgressivePackage::new(&frame, package))
+            .collect();
+        let mut image = renderer.frame_image(&setup, base.clone());
+        for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
+            for package in &mut packages {
+                let stage =
+                    (package.advance(&frame, quality, &PackageOptions::default(), &mut |_| {}))
+                        .unwrap();
+                image.composite(&stage.bitmap);
+            }
+            let scratch = renderer.render(
+                &FrameSetup {
+                    vertex: VertexSettings {
+                        quality,
+                        ..setup.vertex
+                    },
+                    ..setup.clone()
+                },
+                &RenderOptions::default(),
+                &mut |_, _| {},
+            );
+            assert!(image == scratch.image, "{name} {quality:?}: the values");
+            // Every glass pixel is finished at each stage, its terms
+            // computed at the first alone.
+            assert_eq!(
+                behind.glass_computations(),
+                glass_pixels,
+                "{name} {quality:?}: terms computed"
+            );
+        }
+    }
 }

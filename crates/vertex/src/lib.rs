@@ -471,7 +471,7 @@ pub(crate) fn pixel_surface_along(
         ids.depth_at(x, y) / direction.dot(forward)
     };
     let position = camera.eye + direction * t;
-    let [wa, wb, wc] = barycentric([a, b, c], position);
+    let [wa, wb, wc] = barycentric_in_plane([a, b, c], plane_normal, position);
     let normal = thin::normalize_or_else(na * wa + nb * wb + nc * wc, || {
         plane_normal.normalize_or(Vec3::Y)
     });
@@ -558,7 +558,13 @@ fn behind_id_buffer_within(
 /// Barycentric weights of `p` (on the triangle's plane) in the triangle
 /// `[a, b, c]`; a degenerate triangle gives equal weights.
 pub fn barycentric([a, b, c]: [Vec3; 3], p: Vec3) -> [f32; 3] {
-    let n = (b - a).cross(c - a);
+    barycentric_in_plane([a, b, c], (b - a).cross(c - a), p)
+}
+
+/// [`barycentric`] with the triangle's plane normal `n` at hand: exactly
+/// `(b - a).cross(c - a)`, which callers that intersect the plane have
+/// worked out already (the same weights, to the bit).
+pub(crate) fn barycentric_in_plane([a, b, c]: [Vec3; 3], n: Vec3, p: Vec3) -> [f32; 3] {
     let area = n.length_squared();
     if area <= 0.0 {
         return [1.0 / 3.0; 3];

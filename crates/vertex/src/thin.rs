@@ -20,8 +20,8 @@
 //! Everything here is deterministic for any thread count, so workers rebuild
 //! it like the ID buffers.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -31,7 +31,8 @@ use vtfarm_scene::{Camera, Light, LightKind, NONE, Projector, Scene, TriangleId}
 use vtfarm_trace::{SurfacePoint, Tracer, refract};
 
 use crate::{
-    PixelRect, PixelValue, Transmission, barycentric, pixel_surface_along, reflector_bounds,
+    PixelRect, PixelValue, Transmission, barycentric_in_plane, pixel_surface_along,
+    reflector_bounds,
 };
 
 /// What lies behind the reflectors: the ID buffer of the opaque scene
@@ -40,12 +41,15 @@ use crate::{
 /// reflector pixel need (see the module docs). Part of the frame's raster
 /// pass, built over the reflectors' bounds only ([`crate::reflector_bounds`]):
 /// the ID buffer is empty elsewhere.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Behind {
     pub ids: IdBuffer,
     /// The pixels the thin-glass terms cover.
     bounds: PixelRect,
     glass: GlassTerms,
+    /// How many glass pixels' terms were computed (see
+    /// [`Behind::glass_computations`]).
+    computed: AtomicU64,
 }
 
 /// When the thin-glass terms of the glass pixels are computed. Either way a
@@ -58,24 +62,94 @@ pub enum GlassPass {
     Upfront,
     /// Each as its pixel is finished: a farm worker, which finishes only
     /// the pixels of its packages, so the pass splits between workers
-    /// instead of being repeated on each.
+    /// instead of being repeated on each. A pixel's terms are computed the
+    /// first time and kept: the later stages of a progressive frame, which
+    /// finish the same pixels again, take them from the store.
     OnDemand,
 }
 
 /// The thin-glass terms, or what computing them needs.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 enum GlassTerms {
     /// Traced transmission, or no see-through reflector pixel.
     Nothing,
     /// Per pixel of `bounds`, row-major.
     Upfront(Vec<ThinGlass>),
     /// The see-through surfaces that are not reflectors (a slab's back),
-    /// the shadow maps and the frame camera's view.
+    /// the shadow maps and the frame camera's view, and the terms computed
+    /// so far: each pixel's once per frame, however many stages of a
+    /// progressive frame finish it.
     OnDemand {
         layers: IdBuffer,
         shadows: Arc<ShadowMaps>,
         view: View,
+        store: TermStore,
     },
+}
+
+/// The thin-glass terms computed so far, per pixel of [`Behind`]'s bounds.
+/// A row's slots are allocated when a pixel of it is first finished, so a
+/// worker pays only for the rows its packages reach.
+#[derive(Debug)]
+struct TermStore {
+    width: u32,
+    rows: Box<[OnceLock<Box<[TermSlot]>>]>,
+}
+
+/// One pixel's stored terms: their bits, and whether they are there yet.
+/// Two threads that computed the same pixel's terms at once would store the
+/// same bits (the terms are a function of the pixel), so no lock is needed.
+#[derive(Debug, Default)]
+struct TermSlot {
+    bits: [AtomicU32; 4],
+    stored: AtomicBool,
+}
+
+impl TermStore {
+    fn new(bounds: PixelRect) -> TermStore {
+        let rows = (bounds.y1 - bounds.y0) as usize;
+        TermStore {
+            width: bounds.x1 - bounds.x0,
+            rows: std::iter::repeat_with(OnceLock::new).take(rows).collect(),
+        }
+    }
+
+    /// The terms of the pixel in `column` of `row` (relative to the
+    /// bounds), computed by `compute` unless they already were.
+    fn get_or_compute(
+        &self,
+        column: u32,
+        row: u32,
+        compute: impl FnOnce() -> ThinGlass,
+    ) -> ThinGlass {
+        let slots = self.rows[row as usize].get_or_init(|| {
+            std::iter::repeat_with(TermSlot::default)
+                .take(self.width as usize)
+                .collect()
+        });
+        let slot = &slots[column as usize];
+        if slot.stored.load(Ordering::Acquire) {
+            let [x, y, z, scale] = slot
+                .bits
+                .each_ref()
+                .map(|b| f32::from_bits(b.load(Ordering::Relaxed)));
+            return ThinGlass {
+                transmitted: Vec3::new(x, y, z),
+                reflection_scale: scale,
+            };
+        }
+        let terms = compute();
+        let t = terms.transmitted;
+        for (b, v) in slot
+            .bits
+            .iter()
+            .zip([t.x, t.y, t.z, terms.reflection_scale])
+        {
+            b.store(v.to_bits(), Ordering::Relaxed);
+        }
+        slot.stored.store(true, Ordering::Release);
+        terms
+    }
 }
 
 /// Pixels around the reflectors that [`Behind`] covers besides them: the
@@ -168,8 +242,8 @@ impl Behind {
             layers,
             ..
         } = buffers;
-        let glass = match layers {
-            None => GlassTerms::Nothing,
+        let (glass, computed) = match layers {
+            None => (GlassTerms::Nothing, 0),
             Some(layers) => GlassTerms::new(
                 tracer,
                 camera,
@@ -186,7 +260,16 @@ impl Behind {
             ids: behind,
             bounds,
             glass,
+            computed: AtomicU64::new(computed),
         }
+    }
+
+    /// How many glass pixels' thin-glass terms were computed: every one in
+    /// [`Behind::new`] with [`GlassPass::Upfront`]; with
+    /// [`GlassPass::OnDemand`], each pixel the first time it is finished
+    /// (later stages of a progressive frame take the stored terms).
+    pub fn glass_computations(&self) -> u64 {
+        self.computed.load(Ordering::Relaxed)
     }
 
     /// Finishes a reflector pixel whose value holds the local part and the
@@ -216,13 +299,18 @@ impl Behind {
                 layers,
                 shadows,
                 view,
+                store,
             } => {
                 let t = ids.triangle_at(x, y);
                 if t == NONE || !see_through(tracer.bvh.scene(), t) {
                     // What the up-front pass holds there, to the bit.
                     ThinGlass::default()
                 } else {
-                    glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
+                    let (column, row) = (x - self.bounds.x0, y - self.bounds.y0);
+                    store.get_or_compute(column, row, || {
+                        self.computed.fetch_add(1, Ordering::Relaxed);
+                        glass_at(tracer, camera, view, ids, layers, &self.ids, shadows, x, y)
+                    })
                 }
             }
         };
@@ -315,7 +403,8 @@ impl BehindBuffers {
 
 impl GlassTerms {
     /// The thin-glass terms of every pixel of `bounds` whose reflector is
-    /// see-through, or (`GlassPass::OnDemand`) what computing them needs.
+    /// see-through, or (`GlassPass::OnDemand`) what computing them needs;
+    /// and how many were computed.
     #[allow(clippy::too_many_arguments)]
     fn new(
         tracer: &Tracer<'_>,
@@ -327,14 +416,14 @@ impl GlassTerms {
         bounds: PixelRect,
         pass: GlassPass,
         cache: &ShadowCache,
-    ) -> GlassTerms {
+    ) -> (GlassTerms, u64) {
         let scene = tracer.bvh.scene();
         let glass_pixel = |x: u32, y: u32| {
             let t = ids.triangle_at(x, y);
             t != NONE && is_reflector[t as usize] && see_through(scene, t)
         };
         if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
-            return GlassTerms::Nothing;
+            return (GlassTerms::Nothing, 0);
         }
         let shadows = ShadowMaps::for_frame(tracer, camera, behind, bounds, &glass_pixel, cache);
         let view = View {
@@ -342,27 +431,35 @@ impl GlassTerms {
             forward: camera.basis().0,
         };
         if pass == GlassPass::OnDemand {
-            return GlassTerms::OnDemand {
+            let store = TermStore::new(bounds);
+            let terms = GlassTerms::OnDemand {
                 layers,
                 shadows,
                 view,
+                store,
             };
+            return (terms, 0);
         }
         let width = (bounds.x1 - bounds.x0) as usize;
         let mut out = vec![ThinGlass::default(); width * (bounds.y1 - bounds.y0) as usize];
-        out.par_chunks_mut(width)
+        let computed = out
+            .par_chunks_mut(width)
             .enumerate()
-            .for_each(|(row, slots)| {
+            .map(|(row, slots)| {
                 let y = bounds.y0 + row as u32;
+                let mut computed = 0;
                 for (column, slot) in slots.iter_mut().enumerate() {
                     let x = bounds.x0 + column as u32;
                     if glass_pixel(x, y) {
                         *slot =
                             glass_at(tracer, camera, &view, ids, &layers, behind, &shadows, x, y);
+                        computed += 1;
                     }
                 }
-            });
-        GlassTerms::Upfront(out)
+                computed
+            })
+            .sum();
+        (GlassTerms::Upfront(out), computed)
     }
 }
 
@@ -400,7 +497,8 @@ fn glass_at(
         // The back surface is met from inside, along the refracted ray
         // (with Fresnel weights its angle matters; parallel surfaces give
         // it the front's kr again, as a traced ray finds).
-        let inside = inside_direction(scene, &front, direction).unwrap_or(direction);
+        let refracted = inside_direction(scene, &front, direction);
+        let inside = refracted.unwrap_or(direction);
         let (kr_back, kt_back) = tracer.weights(&back_point, inside);
         weight *= kt_back;
         // The ghost: in through the front, reflected at the back, out
@@ -410,7 +508,9 @@ fn glass_at(
         if kr_front > 0.0 {
             reflection_scale += (kt * kt * kr_back).max_element() / kr_front;
         }
-        shift = slab_shift(scene, &front, &back_point, direction);
+        shift = refracted.map_or(Vec3::ZERO, |inside| {
+            slab_shift(&front, &back_point, direction, inside)
+        });
     }
     let seen = opaque_radiance(
         tracer,
@@ -430,13 +530,10 @@ fn glass_at(
 
 /// How far sideways a ray along `direction` leaves a slab whose front and
 /// back surfaces it meets (straight) at `front` and `back`: inside, it runs
-/// along the Snell direction to the back plane, and leaves parallel to
-/// `direction` again.
-fn slab_shift(scene: &Scene, front: &SurfacePoint, back: &SurfacePoint, direction: Vec3) -> Vec3 {
+/// along the Snell direction `inside` ([`inside_direction`]) to the back
+/// plane, and leaves parallel to `direction` again.
+fn slab_shift(front: &SurfacePoint, back: &SurfacePoint, direction: Vec3, inside: Vec3) -> Vec3 {
     let normal = facing_normal(front, direction);
-    let Some(inside) = inside_direction(scene, front, direction) else {
-        return Vec3::ZERO;
-    };
     let thickness = (back.position - front.position).dot(-normal);
     let along = inside.dot(-normal);
     if thickness <= 0.0 || along <= 1e-6 {
@@ -536,8 +633,13 @@ fn opaque_radiance(
     let normal = normalize_or_else(na * wa + nb * wb + nc * wc, || {
         scene.geometric_normal(triangle).normalize_or(Vec3::Y)
     });
-    // A pixel's footprint there, for the texture's mip level.
-    let footprint = (position - camera.eye).length() * camera.pixel_size_at_unit_depth();
+    // A pixel's footprint there, for the texture's mip level (an
+    // untextured material is borrowed whatever the footprint).
+    let footprint = if scene.material_of(triangle).is_textured() {
+        (position - camera.eye).length() * camera.pixel_size_at_unit_depth()
+    } else {
+        0.0
+    };
     phong(
         &scene.textured_material(triangle, Vec3::new(wa, wb, wc), footprint),
         tracer.lighting,
@@ -596,7 +698,7 @@ fn ray_plane(
         return None;
     }
     let position = origin + direction * ((a - origin).dot(plane) / denom);
-    Some((position, barycentric([a, b, c], position)))
+    Some((position, barycentric_in_plane([a, b, c], plane, position)))
 }
 
 /// One shadow map per light: the scene's ID buffer seen from the light
