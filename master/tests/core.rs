@@ -11,10 +11,10 @@ use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
-use vtfarm_master_core::JobState;
 use vtfarm_master::{
     BaseFrameRequest, FrameEncodeRequest, JobOptions, MasterCore, Output, Peer, wire_job,
 };
+use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, ResultPixels, SceneData,
@@ -212,10 +212,12 @@ fn finish_frame(
             .iter()
             .any(|m| matches!(m, Message::FrameDone(_)))
     });
-    let done = messages_to(&out, SUBMITTER).into_iter().find_map(|m| match m {
-        Message::FrameDone(done) => Some(done.clone()),
-        _ => None,
-    });
+    let done = messages_to(&out, SUBMITTER)
+        .into_iter()
+        .find_map(|m| match m {
+            Message::FrameDone(done) => Some(done.clone()),
+            _ => None,
+        });
     done.expect("run until a frame was done")
 }
 

@@ -594,7 +594,8 @@ mod tests {
         let (job, mut costs) = small_farm(0.0, 0.0);
         let farm = workers(4);
         let traced = costs.seconds.iter().sum::<f64>() / farm.len() as f64;
-        let without = steady_frame_seconds(&simulate_farm(&job, &costs, &config(16), &farm).unwrap());
+        let without =
+            steady_frame_seconds(&simulate_farm(&job, &costs, &config(16), &farm).unwrap());
         costs.master.frame_out = traced / 2.0;
         let frames = simulate_farm(&job, &costs, &config(16), &farm).unwrap();
         let with = steady_frame_seconds(&frames);

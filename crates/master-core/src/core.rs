@@ -1866,8 +1866,8 @@ impl MasterCore {
         }
         let submitters = j.submitters.clone();
         // A frame rendered again is its own job's frame.
-        let (owner, owner_frame) = (self.kept.repairs.get(&job))
-            .map_or((job, frame), |&(owner, frame)| (owner, frame));
+        let (owner, owner_frame) =
+            (self.kept.repairs.get(&job)).map_or((job, frame), |&(owner, frame)| (owner, frame));
         let message = FrameDone {
             job: owner,
             frame: owner_frame,
