@@ -331,6 +331,13 @@ async fn run(
                         let _ = feedback.send(Input::BaseFrame { job, frame, base });
                     });
                 }
+                Output::EncodeFrame(request) if request.for_dashboard_only() => {
+                    // A view's frame for the dashboard's list, here as
+                    // before: on a thread it would compete with the figures
+                    // of the stage on view, asked for just before it.
+                    let encoded = tokio::task::block_in_place(|| request.encode());
+                    core.frame_encoded(start.elapsed(), encoded);
+                }
                 Output::EncodeFrame(request) => {
                     // Off the driver's task too: the next frames' results
                     // and packages do not wait for a finished frame's bytes.

@@ -887,7 +887,18 @@ impl<M: CostModel> Farm<M> {
                 }
             }
         }
-        let outputs = std::iter::from_fn(|| self.master.poll_output()).collect();
+        let mut outputs = Vec::new();
+        while let Some(output) = self.master.poll_output() {
+            match output {
+                // The real driver encodes a view's frame for the dashboard
+                // on its task (beside the figures, not before them).
+                Output::EncodeFrame(request) if request.for_dashboard_only() => {
+                    seconds += costs.frame_out;
+                    self.master.frame_encoded(self.now, request.encode());
+                }
+                output => outputs.push(output),
+            }
+        }
         self.driver_busy = true;
         self.start_cpu(0, 1, seconds, Work::Driver(outputs));
     }

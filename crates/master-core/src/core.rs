@@ -1673,7 +1673,7 @@ impl MasterCore {
                         frame,
                         image: done.image,
                         format,
-                        components: delivered,
+                        delivered,
                         scratch: std::mem::take(&mut self.frame_bytes),
                     };
                     self.outbox.push_back(Output::EncodeFrame(request));
@@ -1804,6 +1804,9 @@ impl MasterCore {
     /// The scheduler's `JobComplete`, once the job's last frame is out.
     fn job_complete(&mut self, job: u64) {
         info!(job, "job complete");
+        // A cancel asked for while its last frame was encoding came too
+        // late (the scheduler had finished the job): the job completes.
+        self.cancel_reasons.remove(&job);
         if self.counts_in_totals(job) {
             self.telemetry.counters.jobs_completed += 1;
         }

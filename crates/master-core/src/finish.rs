@@ -23,8 +23,10 @@ pub struct FrameEncodeRequest {
     pub frame: u32,
     pub(crate) image: Assembled,
     pub(crate) format: WireImageFormat,
-    /// Whether the components go too (a job that asks for them, delivered).
-    pub(crate) components: bool,
+    /// Whether a submitter or the journal gets it (with the components a
+    /// job asks for); else only the dashboard's list of finished frames
+    /// (a view's frame, whose stages went to the view as they came).
+    pub(crate) delivered: bool,
     /// The last frame's uncompressed bytes, this one's buffer.
     pub(crate) scratch: Vec<u8>,
 }
@@ -41,6 +43,13 @@ impl std::fmt::Debug for FrameEncodeRequest {
 }
 
 impl FrameEncodeRequest {
+    /// Whether it goes only to the dashboard's list (a view's frame): the
+    /// real driver encodes those on its task, so they never compete with
+    /// the glare figures of the stage on view, asked for just before.
+    pub fn for_dashboard_only(&self) -> bool {
+        !self.delivered
+    }
+
     /// The frame's image (and components) as the wire carries them; the
     /// frame's buffers come back with it for a later base frame.
     pub fn encode(self) -> EncodedFrame {
@@ -49,12 +58,12 @@ impl FrameEncodeRequest {
             frame,
             image,
             format,
-            components,
+            delivered,
             mut scratch,
         } = self;
         let wire = WireImage::encode_reusing(image.color(), format, &mut scratch);
         let aux = match &image {
-            Assembled::Components(image) if components => Some(WireFrameAux::encode(image)),
+            Assembled::Components(image) if delivered => Some(WireFrameAux::encode(image)),
             Assembled::Components(_) | Assembled::Color(_) => None,
         };
         EncodedFrame {
