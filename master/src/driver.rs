@@ -19,7 +19,7 @@ use vtfarm_proto::{JobAction, JobSummary, Message, StatusReply};
 use vtfarm_transport::Link;
 
 use crate::journal::{Journal, JournalWriter};
-use vtfarm_master_core::Written;
+use vtfarm_master_core::{EncodedFrame, Written};
 
 /// Called when the core drops a connection (closes the QUIC connection).
 pub type Closer = Box<dyn FnOnce(&str) + Send>;
@@ -44,6 +44,8 @@ enum Input {
         frame: u32,
         base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
     },
+    /// A finished frame encoded on the blocking pool.
+    FrameEncoded(Box<EncodedFrame>),
     /// How writing a journal record went (from the journal's thread).
     Journaled(Written),
     /// The glare figures of a view's stage, computed on their thread.
@@ -282,6 +284,7 @@ async fn run(
                     Input::BaseFrame { job, frame, base } => {
                         core.base_frame_ready(now, job, frame, base);
                     }
+                    Input::FrameEncoded(encoded) => core.frame_encoded(now, *encoded),
                     Input::Journaled(written) => core.journal_written(now, written),
                     Input::ViewFigures { generation, quality, figures } => {
                         core.view_figures_ready(now, generation, quality, figures);
@@ -326,6 +329,22 @@ async fn run(
                         let (job, frame) = (request.job, request.frame);
                         let base = request.rasterize();
                         let _ = feedback.send(Input::BaseFrame { job, frame, base });
+                    });
+                }
+                Output::EncodeFrame(request) if request.for_dashboard_only() => {
+                    // A view's frame for the dashboard's list, here as
+                    // before: on a thread it would compete with the figures
+                    // of the stage on view, asked for just before it.
+                    let encoded = tokio::task::block_in_place(|| request.encode());
+                    core.frame_encoded(start.elapsed(), encoded);
+                }
+                Output::EncodeFrame(request) => {
+                    // Off the driver's task too: the next frames' results
+                    // and packages do not wait for a finished frame's bytes.
+                    let feedback = feedback.clone();
+                    tokio::task::spawn_blocking(move || {
+                        let encoded = Box::new(request.encode());
+                        let _ = feedback.send(Input::FrameEncoded(encoded));
                     });
                 }
                 Output::ViewGlare(request) => {

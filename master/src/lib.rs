@@ -27,8 +27,8 @@ pub mod timeline;
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use journal::{Journal, JournalWriter};
 pub use vtfarm_master_core::{
-    ATTACH_GRACE, BaseFrameRequest, ConnId, FarmRules, MasterCore, Output, Peer, Record, StoredJob,
-    telemetry, view,
+    ATTACH_GRACE, BaseFrameRequest, ConnId, EncodedFrame, FarmRules, FrameEncodeRequest,
+    MasterCore, Output, Peer, Record, StoredJob, telemetry, view,
 };
 /// The job message, for the core's users (tests, the farm simulator).
 pub use vtfarm_proto::{JobOptions, wire_job};

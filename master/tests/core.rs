@@ -11,7 +11,10 @@ use std::time::Duration;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
-use vtfarm_master::{BaseFrameRequest, JobOptions, MasterCore, Output, Peer, wire_job};
+use vtfarm_master::{
+    BaseFrameRequest, FrameEncodeRequest, JobOptions, MasterCore, Output, Peer, wire_job,
+};
+use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     FrameDone, JobScene, Message, Package, PackageResult, PhaseKind, ResultPixels, SceneData,
@@ -34,6 +37,8 @@ struct Harness {
     frame: Option<ActiveFrame>,
     /// Base frames the core asked for, rasterized only when the test says.
     bases: Vec<BaseFrameRequest>,
+    /// Finished frames to encode, held here when set (else encoded at once).
+    held_encodings: Option<Vec<FrameEncodeRequest>>,
 }
 
 impl Harness {
@@ -42,11 +47,24 @@ impl Harness {
         self.now
     }
 
+    /// The core's outputs; a finished frame's encoding is carried out at
+    /// once (as a driver's thread would), so what follows it is here too.
     fn outputs(&mut self) -> Vec<Output> {
-        let outputs: Vec<Output> = std::iter::from_fn(|| self.core.poll_output()).collect();
-        for output in &outputs {
-            if let Output::RasterizeBase(request) = output {
-                self.bases.push(request.clone());
+        let mut outputs = Vec::new();
+        while let Some(output) = self.core.poll_output() {
+            match output {
+                Output::RasterizeBase(request) => {
+                    self.bases.push(request.clone());
+                    outputs.push(Output::RasterizeBase(request));
+                }
+                Output::EncodeFrame(request) => match self.held_encodings.as_mut() {
+                    Some(held) => held.push(request),
+                    None => {
+                        let now = self.tick();
+                        self.core.frame_encoded(now, request.encode());
+                    }
+                },
+                output => outputs.push(output),
             }
         }
         outputs
@@ -120,6 +138,7 @@ fn start_job(frames: usize) -> StartedFrame {
         engine: Engine::new(None),
         frame: None,
         bases: Vec::new(),
+        held_encodings: None,
     };
     h.core.connected(
         h.now,
@@ -188,6 +207,28 @@ fn finish_frame(
     started: &mut StartedFrame,
     tamper: impl FnOnce(&Package, &mut PackageResult),
 ) -> FrameDone {
+    let out = run_packages(started, tamper, |_, out| {
+        messages_to(out, SUBMITTER)
+            .iter()
+            .any(|m| matches!(m, Message::FrameDone(_)))
+    });
+    let done = messages_to(&out, SUBMITTER)
+        .into_iter()
+        .find_map(|m| match m {
+            Message::FrameDone(done) => Some(done.clone()),
+            _ => None,
+        });
+    done.expect("run until a frame was done")
+}
+
+/// Runs the frame's packages on the worker until `stop` holds for the
+/// harness and the last outputs (which it returns); the first package's
+/// result goes through `tamper` first.
+fn run_packages(
+    started: &mut StartedFrame,
+    tamper: impl FnOnce(&Package, &mut PackageResult),
+    stop: impl Fn(&Harness, &[Output]) -> bool,
+) -> Vec<Output> {
     let h = &mut started.h;
     let request = Message::RequestWork {
         job: started.job,
@@ -196,11 +237,8 @@ fn finish_frame(
     let mut tamper = Some(tamper);
     let mut out = h.send(WORKER, request.clone());
     for _ in 0..10_000 {
-        if let Some(Message::FrameDone(done)) = messages_to(&out, SUBMITTER)
-            .into_iter()
-            .find(|m| matches!(m, Message::FrameDone(_)))
-        {
-            return done.clone();
+        if stop(h, &out) {
+            return out;
         }
         let package = messages_to(&out, WORKER).into_iter().find_map(|m| match m {
             Message::Package(p) => Some(p.clone()),
@@ -234,7 +272,7 @@ fn finish_frame(
             None => h.send(WORKER, request.clone()),
         };
     }
-    panic!("the frame did not complete")
+    panic!("the frame did not get there")
 }
 
 /// The frame counted one failed package and still equals the single-process render.
@@ -315,6 +353,44 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
         bitmap.width = 4;
     });
     assert_one_failure_and_the_reference(&started, done);
+}
+
+/// A split frame's image is encoded off the driver (`Output::EncodeFrame`):
+/// the frame goes out only once encoded, still equal to the single-process
+/// render, and its job is complete only after it.
+#[test]
+fn a_finished_frame_goes_out_once_encoded_and_its_job_ends_after_it() {
+    let mut started = start_frame();
+    started.h.held_encodings = Some(Vec::new());
+    let out = run_packages(
+        &mut started,
+        |_, _| {},
+        |h, _| h.held_encodings.as_ref().is_some_and(|e| !e.is_empty()),
+    );
+    let told = |out: &[Output]| -> Vec<&str> {
+        messages_to(out, SUBMITTER)
+            .iter()
+            .map(|m| m.name())
+            .filter(|&n| n != "Progress")
+            .collect()
+    };
+    assert!(!told(&out).contains(&"FrameDone"), "{out:?}");
+    let h = &mut started.h;
+    let running = |h: &Harness| h.core.jobs().get(started.job).map(|e| e.state);
+    assert_eq!(running(h), Some(JobState::Running));
+    let mut held = h.held_encodings.take().unwrap();
+    assert_eq!(held.len(), 1);
+    let now = h.tick();
+    h.core.frame_encoded(now, held.remove(0).encode());
+    let out = h.outputs();
+    assert_eq!(told(&out), vec!["FrameDone"], "{out:?}");
+    assert_eq!(running(h), Some(JobState::Completed));
+    let Message::FrameDone(done) = messages_to(&out, SUBMITTER)[0] else {
+        unreachable!()
+    };
+    let (_, _, pixels) = done.image.clone().into_pixels().unwrap();
+    let pixels: Vec<[f32; 3]> = pixels.iter().map(|p| p.to_array()).collect();
+    assert!(pixels == started.reference);
 }
 
 #[test]

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use vtfarm_master_core::view::GlareRequest;
 use vtfarm_master_core::{
-    BaseFrameRequest, ConnId, DamagedJob, FarmRules, MasterCore, Output, Peer, Record, StoredJob,
-    Written,
+    BaseFrameRequest, ConnId, DamagedJob, EncodedFrame, FarmRules, FrameEncodeRequest, MasterCore,
+    Output, Peer, Record, StoredJob, Written,
 };
 use vtfarm_proto::{
     FrameDone, FrameKey, FrameStart, FrameStats, JobScene, Message, Package, PackageResult,
@@ -77,7 +77,9 @@ pub struct PackageWork {
 /// CPU seconds the master's machine spends, one thread each. A whole frame
 /// (batch work) costs the master none of `base_frame`, `result_per_item`
 /// and `frame_out`: its worker rasterizes, composites and encodes it (the
-/// same functions), and the driver only forwards it.
+/// same functions), and the driver only forwards it. A split frame's
+/// `frame_out` runs beside the driver (`Output::EncodeFrame`), as the real
+/// driver runs it on a blocking thread.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MasterCosts {
     /// A split frame's base frame (spread over the master's cores: the
@@ -85,7 +87,7 @@ pub struct MasterCosts {
     pub base_frame: f64,
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// The driver per finished split frame (the image for the wire).
+    /// Per finished split frame, beside the driver: the image for the wire.
     pub frame_out: f64,
     /// The journal thread per finished frame, beside the driver.
     pub journal: f64,
@@ -238,6 +240,8 @@ enum Work {
     },
     /// One core's share of a base frame.
     Base((u64, u32)),
+    /// A finished split frame's encoding, beside the driver.
+    Encode(Box<FrameEncodeRequest>),
     /// The driver's handling of an input: its outputs go out when done.
     Driver(Vec<Output>),
     /// Work that only takes CPU (the journal's).
@@ -268,6 +272,8 @@ struct CpuJob {
 enum DriverInput {
     Message(ConnId, Box<Message>),
     Base((u64, u32)),
+    /// A finished frame encoded (costing the driver nothing more).
+    Encoded(Box<EncodedFrame>),
     Closed(ConnId),
     /// The view's glare figures (costing nothing), after the stage is shown.
     Glare(Box<GlareRequest>),
@@ -323,9 +329,6 @@ pub struct Farm<M: CostModel> {
     package_frames: HashMap<u64, (u64, u32)>,
     /// When each frame was first announced (until its delivery).
     frame_started: BTreeMap<(u64, u32), Duration>,
-    /// Whole frames handed out and not yet sent on: their `FrameDone` costs
-    /// the driver no encoding.
-    whole_frames: BTreeSet<(u64, u32)>,
     /// CPU seconds the other work on the shared machine has got so far.
     background_cpu: f64,
     /// CPU seconds used so far: the master's, the submitter's.
@@ -378,7 +381,6 @@ impl<M: CostModel> Farm<M> {
             held_items: BTreeMap::new(),
             package_frames: HashMap::new(),
             frame_started: BTreeMap::new(),
-            whole_frames: BTreeSet::new(),
             background_cpu: 0.0,
             master_cpu: 0.0,
             submitter_cpu: 0.0,
@@ -435,7 +437,6 @@ impl<M: CostModel> Farm<M> {
         self.base_left.clear();
         self.pending_base.clear();
         self.base_pending.clear();
-        self.whole_frames.clear();
         self.held_items.clear();
         self.package_frames.clear();
         self.submitter = None;
@@ -814,6 +815,10 @@ impl<M: CostModel> Farm<M> {
                     self.queue_for_driver(DriverInput::Base(key));
                 }
             }
+            Work::Encode(request) => {
+                let encoded = request.encode();
+                self.queue_for_driver(DriverInput::Encoded(Box::new(encoded)));
+            }
             Work::Driver(outputs) => {
                 self.driver_busy = false;
                 for output in outputs {
@@ -871,6 +876,7 @@ impl<M: CostModel> Farm<M> {
                 let (generation, quality) = (request.generation, request.quality);
                 (self.master).view_figures_ready(self.now, generation, quality, figures);
             }
+            DriverInput::Encoded(encoded) => self.master.frame_encoded(self.now, *encoded),
             DriverInput::Base(key) => {
                 self.base_pending.remove(&key);
                 let held = self.held_items.remove(&key).unwrap_or(0);
@@ -883,15 +889,15 @@ impl<M: CostModel> Farm<M> {
         }
         let mut outputs = Vec::new();
         while let Some(output) = self.master.poll_output() {
-            if let Output::Send(_, message) = &output {
-                if let Message::FrameDone(done) = message.as_ref() {
-                    // A whole frame's worker encoded it.
-                    if !self.whole_frames.remove(&(done.job, done.frame)) {
-                        seconds += costs.frame_out;
-                    }
+            match output {
+                // The real driver encodes a view's frame for the dashboard
+                // on its task (beside the figures, not before them).
+                Output::EncodeFrame(request) if request.for_dashboard_only() => {
+                    seconds += costs.frame_out;
+                    self.master.frame_encoded(self.now, request.encode());
                 }
+                output => outputs.push(output),
             }
-            outputs.push(output);
         }
         self.driver_busy = true;
         self.start_cpu(0, 1, seconds, Work::Driver(outputs));
@@ -922,7 +928,6 @@ impl<M: CostModel> Farm<M> {
                             // A whole frame's set-up travels with it.
                             self.frame_starts.push(key);
                             self.frame_started.entry(key).or_insert(self.now);
-                            self.whole_frames.insert(key);
                         }
                     }
                     Message::FrameStart(start) => {
@@ -949,6 +954,10 @@ impl<M: CostModel> Farm<M> {
             }
             Output::ViewGlare(request) => {
                 self.queue_for_driver(DriverInput::Glare(Box::new(request)))
+            }
+            Output::EncodeFrame(request) => {
+                let seconds = self.model.master_costs().frame_out;
+                self.start_cpu(0, 1, seconds, Work::Encode(Box::new(request)));
             }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);

@@ -582,6 +582,36 @@ mod tests {
         );
     }
 
+    /// A finished split frame is encoded beside the master's driver, as
+    /// the real driver does it on a blocking thread: while frame N's image
+    /// is encoded, the driver goes on handing out and taking in frame
+    /// N+1's packages, so an encoding as long as half a frame's tracing on
+    /// the farm costs the split frames little (on the driver it added
+    /// itself to every frame; what is left is the last frame's, after the
+    /// tracing), and the master's CPU still counts it.
+    #[test]
+    fn a_frames_encoding_does_not_hold_the_next_split_frame() {
+        let (job, mut costs) = small_farm(0.0, 0.0);
+        let farm = workers(4);
+        let traced = costs.seconds.iter().sum::<f64>() / farm.len() as f64;
+        let without =
+            steady_frame_seconds(&simulate_farm(&job, &costs, &config(16), &farm).unwrap());
+        costs.master.frame_out = traced / 2.0;
+        let frames = simulate_farm(&job, &costs, &config(16), &farm).unwrap();
+        let with = steady_frame_seconds(&frames);
+        assert!(
+            with < without + 0.2 * costs.master.frame_out,
+            "{with} s per frame with {} s of encoding, {without} s without",
+            costs.master.frame_out
+        );
+        let master = frames.last().unwrap().cpu[0];
+        let encoding = frames.len() as f64 * costs.master.frame_out;
+        assert!(
+            (master - encoding).abs() < 1e-9,
+            "master {master} s, encoding {encoding} s"
+        );
+    }
+
     /// Same inputs, same frames at the same virtual times; every frame is
     /// delivered with every item traced once.
     #[test]

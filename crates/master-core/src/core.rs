@@ -43,6 +43,7 @@ use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, Quality, SparseBitmap};
 
 use crate::ahead::{Bases, frames_held_at_most};
 use crate::error::{JobRejected, ResultRejected};
+use crate::finish::{EncodedFrame, FinishQueue, FinishedFrame, Finishing, FrameEncodeRequest};
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
@@ -67,7 +68,7 @@ pub enum Peer {
 }
 
 /// What the core asks the driver to do.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub enum Output {
     Send(ConnId, Box<Message>),
     /// Drop the connection, logging why.
@@ -90,6 +91,10 @@ pub enum Output {
     /// drop a request a newer one replaced before it started) and hand them
     /// to [`MasterCore::view_figures_ready`].
     ViewGlare(GlareRequest),
+    /// Encode a finished split frame for the wire (CPU work, off the
+    /// driver's task: `finish.rs` says why) and hand it to
+    /// [`MasterCore::frame_encoded`].
+    EncodeFrame(FrameEncodeRequest),
 }
 
 /// A base frame to rasterize: what [`BaseFrameRequest::rasterize`] needs.
@@ -168,6 +173,8 @@ struct Job {
     /// A progressive job's stages (the interactive view's moves), in
     /// order; empty for one stage at each frame's quality.
     stages: Vec<Quality>,
+    /// Finished frames on their way out, and the job's end after them.
+    finishing: FinishQueue,
 }
 
 impl Job {
@@ -224,7 +231,7 @@ struct FrameAssembly {
 /// colour only, or with the per-pixel components when the job asks for
 /// them (a view's jobs always do). No output of a colour-only job reads
 /// the components, so their planes are not made.
-enum Assembled {
+pub(crate) enum Assembled {
     Color(Image),
     Components(FrameImage),
 }
@@ -239,10 +246,18 @@ impl Assembled {
         }
     }
 
-    fn color(&self) -> &Image {
+    pub(crate) fn color(&self) -> &Image {
         match self {
             Assembled::Color(color) => color,
             Assembled::Components(image) => &image.color,
+        }
+    }
+
+    /// The colour buffer alone.
+    pub(crate) fn into_color(self) -> Image {
+        match self {
+            Assembled::Color(color) => color,
+            Assembled::Components(image) => image.color,
         }
     }
 
@@ -1337,6 +1352,7 @@ impl MasterCore {
                 groups,
                 assembling: Vec::new(),
                 stages: Vec::new(),
+                finishing: FinishQueue::default(),
             },
         );
         // The view's stages are split over the workers: their latency counts.
@@ -1635,20 +1651,13 @@ impl MasterCore {
                     workers,
                     phases: done.phases.clone(),
                 };
-                let j = self.jobs.get_mut(&job.0).expect("checked above");
-                j.frames_done = frame + 1;
-                if let Some(entry) = self.table.get_mut(job.0) {
-                    entry.frames_done = frame + 1;
-                }
-                // A frame rendered again is its own job's frame.
-                let (owner, owner_frame) = (self.kept.repairs.get(&job.0))
-                    .map_or((job.0, frame), |&(owner, frame)| (owner, frame));
-                // Encoded (and compressed) once, here or by a whole frame's
-                // worker: the journal and the submitter get the same bytes.
-                // A frame nobody receives or keeps (a view's: the view holds
-                // its stages) goes only to the dashboard's list, in 8 bits,
-                // without components: its encoding is no part of the view's
-                // latency.
+                // Encoded (and compressed) once, off the driver or by a
+                // whole frame's worker: the journal and the submitter get the
+                // same bytes. A frame nobody receives or keeps (a view's: the
+                // view holds its stages) goes only to the dashboard's list,
+                // in 8 bits, without components: its encoding is no part of
+                // the view's latency.
+                let owner = (self.kept.repairs.get(&job.0)).map_or(job.0, |&(owner, _)| owner);
                 let journaled = self.journals(owner);
                 let j = self.jobs.get_mut(&job.0).expect("checked above");
                 let delivered = !j.submitters.is_empty() || journaled;
@@ -1657,62 +1666,34 @@ impl MasterCore {
                 } else {
                     WireImageFormat::Srgb8
                 };
-                let (image, aux) = match done.finished.take() {
-                    Some(finished) => finished,
-                    None => (
-                        WireImage::encode_reusing(
-                            done.image.color(),
-                            format,
-                            &mut self.frame_bytes,
-                        ),
-                        match &done.image {
-                            Assembled::Components(image) if delivered => {
-                                Some(WireFrameAux::encode(image))
-                            }
-                            Assembled::Components(_) | Assembled::Color(_) => None,
-                        },
-                    ),
-                };
-                let message = FrameDone {
-                    job: owner,
-                    frame: owner_frame,
-                    image,
-                    stats: frame_stats.clone(),
-                    aux,
-                };
-                let submitters = j.submitters.clone();
-                if self.journals(owner) {
-                    self.persist(Record::FrameDone(Box::new(message.clone())));
-                }
-                let image = message.image.clone();
-                (self.telemetry).frame_finished(owner, owner_frame, frame_stats, image);
-                self.send_to(&submitters, Message::FrameDone(message));
-                if let Some(ids) = done.ids {
-                    let color = match done.image {
-                        Assembled::Color(color) => color,
-                        Assembled::Components(image) => image.color,
+                let encoded = done.finished.take();
+                if encoded.is_none() {
+                    let request = FrameEncodeRequest {
+                        job: job.0,
+                        frame,
+                        image: done.image,
+                        format,
+                        delivered,
+                        scratch: std::mem::take(&mut self.frame_bytes),
                     };
-                    if self.spare_bases.len() < SPARE_BASES {
-                        self.spare_bases.push(SpareBase(color, ids));
-                    }
+                    self.outbox.push_back(Output::EncodeFrame(request));
                 }
+                let finished = FinishedFrame {
+                    frame,
+                    stats: frame_stats,
+                    ids: done.ids,
+                    encoded,
+                    color: None,
+                };
+                j.finishing.push(Finishing::Frame(Box::new(finished)));
                 self.departed.clear();
+                self.tell_finished(job.0);
             }
-            Event::JobComplete { job } => {
-                info!(job = job.0, "job complete");
-                if self.counts_in_totals(job.0) {
-                    self.telemetry.counters.jobs_completed += 1;
-                }
-                let repaired = self.kept.repairs.remove(&job.0);
-                if self.forget_job(job.0).is_some() && repaired.is_none() {
-                    // Kept (as retention allows) for a submitter that lost
-                    // the connection or attaches later.
-                    self.persist(Record::JobComplete { id: job.0 });
-                    self.set_job_state(job.0, JobState::Completed);
-                    self.forget_view_job(job.0);
-                    self.forget_expired();
-                }
-            }
+            Event::JobComplete { job } => match self.jobs.get_mut(&job.0) {
+                // Its last frames are on their way out: it ends after them.
+                Some(j) if !j.finishing.is_empty() => j.finishing.push(Finishing::Complete),
+                _ => self.job_complete(job.0),
+            },
             Event::JobFailed {
                 job,
                 reason,
@@ -1816,6 +1797,96 @@ impl MasterCore {
             }
             Event::PackageCancelled { worker, package } => {
                 self.send(worker.0, Message::CancelPackage { id: package.0 });
+            }
+        }
+    }
+
+    /// The scheduler's `JobComplete`, once the job's last frame is out.
+    fn job_complete(&mut self, job: u64) {
+        info!(job, "job complete");
+        // A cancel asked for while its last frame was encoding came too
+        // late (the scheduler had finished the job): the job completes.
+        self.cancel_reasons.remove(&job);
+        if self.counts_in_totals(job) {
+            self.telemetry.counters.jobs_completed += 1;
+        }
+        let repaired = self.kept.repairs.remove(&job);
+        if self.forget_job(job).is_some() && repaired.is_none() {
+            // Kept (as retention allows) for a submitter that lost
+            // the connection or attaches later.
+            self.persist(Record::JobComplete { id: job });
+            self.set_job_state(job, JobState::Completed);
+            self.forget_view_job(job);
+            self.forget_expired();
+        }
+    }
+
+    /// The driver encoded the frame [`Output::EncodeFrame`] asked for: it
+    /// goes out once the job's frames before it have (a job that ended
+    /// meanwhile, cancelled or failed, drops it).
+    pub fn frame_encoded(&mut self, now: Duration, encoded: EncodedFrame) {
+        self.now = now;
+        let job = encoded.job;
+        let (taken, scratch) = match self.jobs.get_mut(&job) {
+            Some(j) => j.finishing.encoded(encoded),
+            None => (false, encoded.scratch),
+        };
+        if self.frame_bytes.is_empty() {
+            self.frame_bytes = scratch;
+        }
+        if taken {
+            self.tell_finished(job);
+        }
+    }
+
+    /// Sends `job`'s finished frames that are ready, in order, and its end
+    /// once they are all out.
+    fn tell_finished(&mut self, job: u64) {
+        while let Some(next) = (self.jobs.get_mut(&job)).and_then(|j| j.finishing.pop_ready()) {
+            match next {
+                Finishing::Frame(frame) => self.deliver_frame(job, *frame),
+                Finishing::Complete => self.job_complete(job),
+            }
+        }
+    }
+
+    /// A finished frame, encoded, to its submitters and the journal.
+    fn deliver_frame(&mut self, job: u64, finished: FinishedFrame) {
+        let FinishedFrame {
+            frame,
+            stats,
+            ids,
+            encoded,
+            color,
+        } = finished;
+        let (image, aux) = encoded.expect("only encoded frames are delivered");
+        let Some(j) = self.jobs.get_mut(&job) else {
+            return;
+        };
+        j.frames_done = frame + 1;
+        if let Some(entry) = self.table.get_mut(job) {
+            entry.frames_done = frame + 1;
+        }
+        let submitters = j.submitters.clone();
+        // A frame rendered again is its own job's frame.
+        let (owner, owner_frame) =
+            (self.kept.repairs.get(&job)).map_or((job, frame), |&(owner, frame)| (owner, frame));
+        let message = FrameDone {
+            job: owner,
+            frame: owner_frame,
+            image,
+            stats: stats.clone(),
+            aux,
+        };
+        if self.journals(owner) {
+            self.persist(Record::FrameDone(Box::new(message.clone())));
+        }
+        let image = message.image.clone();
+        (self.telemetry).frame_finished(owner, owner_frame, stats, image);
+        self.send_to(&submitters, Message::FrameDone(message));
+        if let (Some(ids), Some(color)) = (ids, color) {
+            if self.spare_bases.len() < SPARE_BASES {
+                self.spare_bases.push(SpareBase(color, ids));
             }
         }
     }
@@ -2401,7 +2472,9 @@ impl MasterCore {
 /// The index of the next frame of `j` to start: frames start and complete
 /// in order.
 fn next_to_start(j: &Job) -> u32 {
-    (j.assembling.iter().map(|a| a.start.frame + 1).max()).unwrap_or(j.frames_done)
+    let assembling = j.assembling.iter().map(|a| a.start.frame + 1).max();
+    let finishing = j.finishing.last_frame().map(|f| f + 1);
+    (assembling.max(finishing)).unwrap_or(j.frames_done)
 }
 
 fn check_finished(

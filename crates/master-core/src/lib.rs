@@ -12,6 +12,8 @@
 //!   listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
+//! - [`FrameEncodeRequest`]: a finished split frame's encoding, off the
+//!   driver's task (`finish.rs`), delivered in order.
 //! - `ahead`: base frames made ahead of a batch job's tail, and the
 //!   master's measured time per base frame, for the scheduler's tail rule.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
@@ -20,6 +22,7 @@
 mod ahead;
 mod core;
 mod error;
+mod finish;
 pub mod jobs;
 pub mod record;
 mod rules;
@@ -31,6 +34,7 @@ pub use crate::core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
 };
 pub use error::{JobRejected, ResultRejected};
+pub use finish::{EncodedFrame, FrameEncodeRequest};
 pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 pub use record::{DamagedJob, Record, StoredJob, Written};
 pub use rules::FarmRules;
