@@ -46,6 +46,7 @@ use vtfarm_proto::{
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
+use vtfarm_scene::TriangleId;
 
 use crate::support::{CpuClock, cpu_time};
 use vtfarm_farmsim::{
@@ -53,7 +54,7 @@ use vtfarm_farmsim::{
     background_threads_for, cpu_per_frame, simulate_farm, steady_background_cores,
     steady_frame_seconds,
 };
-use vtfarm_vertex::{PackageOptions, Quality, SparseBitmap, trace_package};
+use vtfarm_vertex::{Frame, PackageOptions, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
 
@@ -299,6 +300,68 @@ const FIXED_COST_RUNS: usize = 3;
 /// and from its first pass the result's bitmap as sent).
 type Measure = (usize, f64, u64, u64, u64, Option<WireBitmap>);
 
+/// One pass of [`record`]: every triangle of `triangles` traced as a
+/// package of its own on `threads` one-thread pools sharing `frame`; the
+/// result bitmaps kept where `keep`.
+fn trace_pass(
+    frame: &Frame<'_>,
+    triangles: &[TriangleId],
+    threads: usize,
+    keep: bool,
+) -> Result<Vec<Vec<Measure>>> {
+    let next = AtomicUsize::new(0);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads.max(1))
+            .map(|_| {
+                s.spawn(|| -> Result<Vec<Measure>> {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(1)
+                        .build()
+                        .context("building a one-thread pool")?;
+                    pool.install(|| {
+                        let mut out = Vec::new();
+                        loop {
+                            let i = next.fetch_add(1, Ordering::Relaxed);
+                            if i >= triangles.len() {
+                                break;
+                            }
+                            let clock = CpuStopwatch::start();
+                            let result = trace_package(
+                                frame,
+                                &triangles[i..=i],
+                                &PackageOptions::default(),
+                                &mut |_| {},
+                            );
+                            let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
+                            let busy = clock.elapsed();
+                            let kept = keep.then(|| bitmap.clone());
+                            let bytes = result_message_bytes(
+                                bitmap,
+                                WirePackageStats::from(&result.stats),
+                                busy,
+                                result.triangle_samples,
+                            )?;
+                            out.push((
+                                i,
+                                busy.as_secs_f64(),
+                                bytes,
+                                result.stats.samples(),
+                                result.stats.pixels,
+                                kept,
+                            ));
+                        }
+                        Ok(out)
+                    })
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("a recording thread panicked"))
+            .collect::<Result<_>>()
+    })
+}
+
 /// Traces each reflector triangle of `job` as a package of its own on
 /// `threads` one-thread pools, `repeats` times, and records its least time,
 /// its result bytes, samples and pixels.
@@ -331,60 +394,16 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     });
     let triangles = renderer.reflectors().to_vec();
     let n = triangles.len();
-    let runs = n * repeats.max(1);
-    let next = AtomicUsize::new(0);
     let start = Instant::now();
-    let per_thread: Vec<Vec<Measure>> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads.max(1))
-            .map(|_| {
-                s.spawn(|| -> Result<Vec<Measure>> {
-                    let pool = rayon::ThreadPoolBuilder::new()
-                        .num_threads(1)
-                        .build()
-                        .context("building a one-thread pool")?;
-                    pool.install(|| {
-                        let mut out = Vec::new();
-                        loop {
-                            let run = next.fetch_add(1, Ordering::Relaxed);
-                            if run >= runs {
-                                break;
-                            }
-                            let i = run % n;
-                            let clock = CpuStopwatch::start();
-                            let result = trace_package(
-                                &frame,
-                                &triangles[i..=i],
-                                &PackageOptions::default(),
-                                &mut |_| {},
-                            );
-                            let bitmap = WireBitmap::encode(&result.bitmap, WireBitmapParts::Color);
-                            let busy = clock.elapsed();
-                            let kept = (run < n).then(|| bitmap.clone());
-                            let bytes = result_message_bytes(
-                                bitmap,
-                                WirePackageStats::from(&result.stats),
-                                busy,
-                                result.triangle_samples,
-                            )?;
-                            out.push((
-                                i,
-                                busy.as_secs_f64(),
-                                bytes,
-                                result.stats.samples(),
-                                result.stats.pixels,
-                                kept,
-                            ));
-                        }
-                        Ok(out)
-                    })
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().expect("a recording thread panicked"))
-            .collect::<Result<_>>()
-    })?;
+    // Each pass on a frame set up afresh: a worker computes a glass pixel's
+    // thin-glass terms once per frame and keeps them (`Behind`), so a pass
+    // over a frame already traced would time its packages without them.
+    let mut per_thread: Vec<Vec<Measure>> = Vec::new();
+    for pass in 0..repeats.max(1) {
+        let (ids, behind) = renderer.id_buffers(&job.setup);
+        let frame = renderer.frame(&job.setup, &ids, &behind);
+        per_thread.extend(trace_pass(&frame, &triangles, threads, pass == 0)?);
+    }
     let tracing_wall_seconds = start.elapsed().as_secs_f64();
     let mut seconds = vec![f64::INFINITY; n];
     let mut result_bytes = vec![0; n];
