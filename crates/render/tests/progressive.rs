@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_render::{FrameSetup, RenderOptions, Renderer, split_packages};
+use vtfarm_render::{FrameSetup, RenderOptions, RenderedFrame, Renderer, split_packages};
 use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageOptions, ProgressivePackage, Quality, Transmission, VertexSettings};
@@ -155,17 +155,7 @@ fn check(renderer: &Renderer, setup: &FrameSetup, name: &str) {
     let (mut traced_pixels, mut scratch_pixels) = (0, 0);
     for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
         let stage = progressive.advance(quality).unwrap();
-        let scratch = renderer.render(
-            &FrameSetup {
-                vertex: VertexSettings {
-                    quality,
-                    ..setup.vertex
-                },
-                ..setup.clone()
-            },
-            &options,
-            &mut |_, _| {},
-        );
+        let scratch = render_at(renderer, setup, quality, &options);
         let image = progressive.image();
         assert_eq!(
             image.color.to_srgb8(),
@@ -277,17 +267,7 @@ fn a_workers_progressive_frame_computes_each_glass_pixels_terms_once() {
                         .unwrap();
                 image.composite(&stage.bitmap);
             }
-            let scratch = renderer.render(
-                &FrameSetup {
-                    vertex: VertexSettings {
-                        quality,
-                        ..setup.vertex
-                    },
-                    ..setup.clone()
-                },
-                &RenderOptions::default(),
-                &mut |_, _| {},
-            );
+            let scratch = render_at(&renderer, &setup, quality, &RenderOptions::default());
             assert!(image == scratch.image, "{name} {quality:?}: the values");
             // Every glass pixel is finished at each stage, its terms
             // computed at the first alone.
@@ -298,4 +278,21 @@ fn a_workers_progressive_frame_computes_each_glass_pixels_terms_once() {
             );
         }
     }
+}
+
+/// `setup` rendered from scratch at `quality`.
+fn render_at(
+    renderer: &Renderer,
+    setup: &FrameSetup,
+    quality: Quality,
+    options: &RenderOptions,
+) -> RenderedFrame {
+    let setup = FrameSetup {
+        vertex: VertexSettings {
+            quality,
+            ..setup.vertex
+        },
+        ..setup.clone()
+    };
+    renderer.render(&setup, options, &mut |_, _| {})
 }
