@@ -852,19 +852,9 @@ mod tests {
             })
         ));
         // Each pixel's colour and components, bit for bit.
-        type Pixels = BTreeMap<(u32, u32), ([u32; 3], [u32; 3], [u32; 3], u32)>;
+        type Pixels = BTreeMap<(u32, u32), vtfarm_vertex::PixelBits>;
         let composite = |pixels: &mut Pixels, result: &PackageResult| {
-            let bitmap = bitmap(result);
-            let bits = |v: Vec3| v.to_array().map(f32::to_bits);
-            for (x, y, k) in bitmap.covered() {
-                let value = (
-                    bits(bitmap.color[k]),
-                    bits(bitmap.reflected[k]),
-                    bits(bitmap.transmitted[k]),
-                    bitmap.reflected_object[k],
-                );
-                pixels.insert((x, y), value);
-            }
+            pixels.extend(bitmap(result).pixel_bits());
         };
         let mut progress = None;
         let mut pixels = Pixels::new();

@@ -171,7 +171,7 @@ mod thin;
 
 pub use composite::{Components, FrameImage, draw_wireframe};
 pub use package::{
-    FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelValue,
+    FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelBits, PixelValue,
     ProgressivePackage, SparseBitmap, StageError, TracedPackage, trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};

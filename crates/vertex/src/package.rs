@@ -102,7 +102,25 @@ pub struct SparseBitmap {
     pub reflected_object: Vec<u32>,
 }
 
+/// A covered pixel's colour, reflected and transmitted parts as float bits
+/// and its reflected object: what byte-exact comparisons of bitmaps compare.
+pub type PixelBits = ([u32; 3], [u32; 3], [u32; 3], u32);
+
 impl SparseBitmap {
+    /// Each covered pixel, (x, y), with its [`PixelBits`].
+    pub fn pixel_bits(&self) -> impl Iterator<Item = ((u32, u32), PixelBits)> + '_ {
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        self.covered().map(move |(x, y, k)| {
+            let value = (
+                bits(self.color[k]),
+                bits(self.reflected[k]),
+                bits(self.transmitted[k]),
+                self.reflected_object[k],
+            );
+            ((x, y), value)
+        })
+    }
+
     /// The covered pixels as (x, y, index into the per-pixel arrays).
     pub fn covered(&self) -> impl Iterator<Item = (u32, u32, usize)> + '_ {
         self.mask

@@ -524,21 +524,12 @@ fn batched_pixels_and_vertices_equal_one_at_a_time() {
     }
 }
 
-/// The pixels of a bitmap as (x, y) → (colour, reflected, transmitted,
-/// object) bits, for byte-exact comparison of composited stages.
-type PixelBits = std::collections::BTreeMap<(u32, u32), ([u32; 3], [u32; 3], [u32; 3], u32)>;
+/// The pixels of a bitmap as (x, y) → their bits, for byte-exact
+/// comparison of composited stages.
+type PixelBits = std::collections::BTreeMap<(u32, u32), crate::PixelBits>;
 
 fn composite(pixels: &mut PixelBits, bitmap: &SparseBitmap) {
-    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
-    for (x, y, k) in bitmap.covered() {
-        let value = (
-            bits(bitmap.color[k]),
-            bits(bitmap.reflected[k]),
-            bits(bitmap.transmitted[k]),
-            bitmap.reflected_object[k],
-        );
-        pixels.insert((x, y), value);
-    }
+    pixels.extend(bitmap.pixel_bits());
 }
 
 /// Preview, refine and full on one package's vertices and edges give, stage
