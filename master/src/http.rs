@@ -683,7 +683,10 @@ async fn view_png(State(state): State<HttpState>, query: Query<ViewImageQuery>) 
         Some(kept) => kept.png,
         None => {
             let encoded = tokio::task::spawn_blocking(move || {
-                let image = frame.color.reduced(factor);
+                // The stage's own pixels where no reduction is asked for
+                // (no copy of a 1080p frame).
+                let reduced = (factor > 1).then(|| frame.color.reduced(factor));
+                let image = reduced.as_ref().unwrap_or(&frame.color);
                 let mut png = Vec::new();
                 vtfarm_imaging::encode_srgb8_png(
                     &mut png,
