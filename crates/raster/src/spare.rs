@@ -3,8 +3,9 @@
 //! new buffers every frame: at a worker's set-up sizes the faults cost as
 //! much as a third of the rasterizing. A few planes' allocations (at most
 //! [`MAX_KEPT`] of each type and [`MAX_KEPT_BYTES`] in all) are kept here
-//! and handed to the next buffers that need that much; a plane's values
-//! never carry over (every user overwrites or fills what it reshapes).
+//! and handed to the next buffers that need that much. A kept plane's old
+//! values carry over ([`reshape`] fills only beyond them), so every user
+//! writes or fills what it reads.
 
 use std::sync::Mutex;
 
