@@ -87,7 +87,7 @@ impl IdBuffer {
     /// Gives this buffer the frame size and `window` (cut to the frame) of
     /// [`IdBuffer::empty_within`], its planes that window's length with
     /// whatever values: in this buffer's allocations, or else in planes of
-    /// dropped buffers ([`spare`]).
+    /// dropped buffers (`spare`).
     fn reshape_within(&mut self, width: u32, height: u32, window: PixelRect) {
         let window = Some(window.clamped(width, height))
             .filter(|w| !w.is_empty())
@@ -135,7 +135,7 @@ impl IdBuffer {
 }
 
 impl Drop for IdBuffer {
-    /// Keeps the planes for the next buffer ([`spare`]).
+    /// Keeps the planes for the next buffer (`spare`).
     fn drop(&mut self) {
         spare::keep(std::mem::take(&mut self.object));
         spare::keep(std::mem::take(&mut self.triangle));
