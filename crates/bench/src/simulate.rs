@@ -188,9 +188,14 @@ pub(super) struct Recording {
     pub(super) sun_only_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
-    /// The master's driver per finished frame: the image for the wire and
-    /// its encoding.
+    /// The master per finished frame: the image for the wire (sRGB and
+    /// zstd, `WireImage::encode`), one thread's CPU.
     pub(super) frame_out_seconds: f64,
+    /// The threads that encoding keeps busy (its compressed pieces).
+    pub(super) frame_out_threads: u32,
+    /// The master's driver per finished frame once encoded: the
+    /// `FrameDone`'s bytes and the telemetry's copy.
+    pub(super) frame_sent_seconds: f64,
     /// A finished frame's image on the wire (`FrameDone::image`, sRGB as
     /// `vtfarm submit` asks): what a whole frame's result carries.
     pub(super) frame_bytes: u64,
@@ -448,8 +453,14 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
-    let (frame_out_seconds, journal_seconds, submitter_seconds, frame_bytes) =
-        frame_out_time(&renderer, job)?;
+    let FrameOut {
+        encode_seconds: frame_out_seconds,
+        encode_threads: frame_out_threads,
+        sent_seconds: frame_sent_seconds,
+        journal_seconds,
+        submitter_seconds,
+        frame_bytes,
+    } = frame_out_time(&renderer, job, &one_thread)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -468,6 +479,8 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
+        frame_out_threads,
+        frame_sent_seconds,
         frame_bytes,
         journal_seconds,
         submitter_seconds,
@@ -477,26 +490,52 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
 }
 
 /// The master's work on a finished frame, as `MasterCore` and its driver do
-/// it: the driver makes the frame's image for the wire and encodes the
-/// `FrameDone` for the submitter (first figure); the journal's thread
-/// compresses and writes its copy (second); the submitter decodes it and
-/// writes the PNG and the timeline, as `vtfarm submit` does (third).
-fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f64, u64)> {
+/// it, each part's CPU on one thread (see [`FrameOut`]).
+struct FrameOut {
+    /// The frame's image for the wire, on `pool` (one thread: all its
+    /// pieces on the timed thread).
+    encode_seconds: f64,
+    /// The threads the encoding can keep busy.
+    encode_threads: u32,
+    /// The `FrameDone` encoded for the submitter and the telemetry's copy.
+    sent_seconds: f64,
+    /// The journal's thread: its copy compressed and written.
+    journal_seconds: f64,
+    /// The submitter: decoded, the PNG and the timeline written, as
+    /// `vtfarm submit` does.
+    submitter_seconds: f64,
+    /// The image's bytes on the wire.
+    frame_bytes: u64,
+}
+
+/// [`FrameOut`] of the job's frame, the encoding on `pool`.
+fn frame_out_time(
+    renderer: &Renderer,
+    job: &CockpitJob,
+    pool: &rayon::ThreadPool,
+) -> Result<FrameOut> {
     let (base, _) = renderer.base_frame(&job.setup);
     let dir = tempfile::tempdir()?;
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
-    let (mut driver, mut journaled, mut submitted) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let [mut encoded, mut sent, mut journaled, mut submitted] = [f64::INFINITY; 4];
     let mut frame_bytes = 0;
     let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
+    // As `vtfarm submit` asks for it (it writes only PNGs).
+    let format = WireImageFormat::Srgb8;
     for _ in 0..FIXED_COST_RUNS {
+        let (seconds, image) = pool.install(|| {
+            let clock = CpuStopwatch::start();
+            let image = WireImage::encode(&base, format);
+            (clock.elapsed().as_secs_f64(), image)
+        });
+        encoded = encoded.min(seconds);
         let clock = CpuStopwatch::start();
         let done = FrameDone {
             job: 1,
             frame: 0,
-            // As `vtfarm submit` asks for it (it writes only PNGs).
-            image: WireImage::encode(&base, WireImageFormat::Srgb8),
+            image,
             stats: Default::default(),
             aux: None,
         };
@@ -505,7 +544,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         let kept_image = done.image.clone();
         frame_bytes = done.image.pixels.len() as u64;
         let message = encode_message(&Message::FrameDone(done))?;
-        driver = driver.min(clock.elapsed().as_secs_f64());
+        sent = sent.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
         journal.write(record)?;
         journaled = journaled.min(clock.elapsed().as_secs_f64());
@@ -520,7 +559,15 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         submitted = submitted.min(clock.elapsed().as_secs_f64());
         kept.push((kept_image, pixels));
     }
-    Ok((driver, journaled, submitted, frame_bytes))
+    let threads = WireImage::encoding_threads(base.width, base.height, format);
+    Ok(FrameOut {
+        encode_seconds: encoded,
+        encode_threads: u32::try_from(threads).unwrap_or(u32::MAX),
+        sent_seconds: sent,
+        journal_seconds: journaled,
+        submitter_seconds: submitted,
+        frame_bytes,
+    })
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -874,6 +921,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         recording.worker_setup_seconds = 0.0;
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
+        recording.frame_sent_seconds = 0.0;
         recording.journal_seconds = 0.0;
         recording.submitter_seconds = 0.0;
     }
@@ -900,6 +948,8 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             // Compositing does not grow with the work per pixel: not scaled.
             result_per_item: recording.composite_seconds / n,
             frame_out: recording.frame_out_seconds,
+            frame_out_threads: recording.frame_out_threads,
+            frame_sent: recording.frame_sent_seconds,
             journal: recording.journal_seconds,
             submitter: recording.submitter_seconds,
         },
@@ -1028,7 +1078,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun); master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun); master compositing {:.3} s, finished frame out {:.3} s (on up to {} threads) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -1039,6 +1089,8 @@ fn print_report(
         rec.sun_only_setup_seconds * args.fixed_cost_scale,
         rec.composite_seconds,
         rec.frame_out_seconds,
+        rec.frame_out_threads,
+        rec.frame_sent_seconds,
         rec.journal_seconds,
         rec.submitter_seconds,
         rec.package_seconds * 1e3,
@@ -1127,13 +1179,14 @@ fn print_report(
     // costs the base frame, the compositing of every result and the image
     // for the wire.
     let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
-    let split = base.max(rec.composite_seconds + rec.frame_out_seconds);
+    let out_threads = rec.frame_out_threads.clamp(1, master_cores.max(1));
+    let out = rec.frame_out_seconds / f64::from(out_threads) + rec.frame_sent_seconds;
+    let split = base.max(rec.composite_seconds + out);
     println!(
-        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {:.3} s)",
+        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {out:.3} s on {out_threads} core(s))",
         rec.journal_seconds,
         1.0 / rec.journal_seconds.max(1e-9),
         rec.composite_seconds,
-        rec.frame_out_seconds
     );
     // The aims of issue 26 for equal workers, as speed-up over one worker
     // per worker (a whole frame's base frame and compositing are the

@@ -87,8 +87,16 @@ pub struct MasterCosts {
     pub base_frame: f64,
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// Per finished split frame, beside the driver: the image for the wire.
+    /// Per finished split frame, beside the driver: the image for the wire
+    /// (sRGB and zstd), spread over `frame_out_threads` of the master's
+    /// cores (`WireImage::encode_reusing` compresses in pieces on all).
     pub frame_out: f64,
+    /// The threads the image's encoding can keep busy
+    /// (`WireImage::encoding_threads`; 0 counts as 1).
+    pub frame_out_threads: u32,
+    /// Per finished split frame, on the driver once it is encoded: the
+    /// `FrameDone` for the submitter and the telemetry's copy (serial).
+    pub frame_sent: f64,
     /// The journal thread per finished frame, beside the driver.
     pub journal: f64,
     /// The submitter per finished frame (decode, PNG, timeline), on the
@@ -876,7 +884,10 @@ impl<M: CostModel> Farm<M> {
                 let (generation, quality) = (request.generation, request.quality);
                 (self.master).view_figures_ready(self.now, generation, quality, figures);
             }
-            DriverInput::Encoded(encoded) => self.master.frame_encoded(self.now, *encoded),
+            DriverInput::Encoded(encoded) => {
+                seconds += costs.frame_sent;
+                self.master.frame_encoded(self.now, *encoded)
+            }
             DriverInput::Base(key) => {
                 self.base_pending.remove(&key);
                 let held = self.held_items.remove(&key).unwrap_or(0);
@@ -956,8 +967,11 @@ impl<M: CostModel> Farm<M> {
                 self.queue_for_driver(DriverInput::Glare(Box::new(request)))
             }
             Output::EncodeFrame(request) => {
-                let seconds = self.model.master_costs().frame_out;
-                self.start_cpu(0, 1, seconds, Work::Encode(Box::new(request)));
+                // One job on as many threads as it keeps busy: the machine's
+                // other work (the driver, base frames) shares the cores.
+                let costs = self.model.master_costs();
+                let threads = costs.frame_out_threads.clamp(1, self.cores[0]);
+                self.start_cpu(0, threads, costs.frame_out, Work::Encode(Box::new(request)));
             }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);

@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 use vtfarm_scene::MAX_IMAGE_SIDE;
 use vtfarm_vertex::{Components, FrameImage};
 
-use super::planes::{byte_planes, compress, decompress, pixel_planes_into};
+use super::planes::{
+    PIECE_BYTES, byte_planes, compress, compress_in_pieces, decompress, pieces, pixel_planes_into,
+};
 use super::{WireError, finite3, out_of_range};
 
 /// How a [`WireImage`] codes its pixels: what the job's outputs need
@@ -69,14 +71,33 @@ impl WireImage {
     ) -> Self {
         match format {
             WireImageFormat::LinearF32 => pixel_planes_into(&image.pixels, scratch),
-            WireImageFormat::Srgb8 => image.to_srgb8_into(scratch),
+            WireImageFormat::Srgb8 => {
+                use rayon::prelude::*;
+                // Per pixel, so any cut gives the same bytes.
+                const PIXELS: usize = PIECE_BYTES / 3;
+                scratch.clear();
+                scratch.resize(3 * image.pixels.len(), 0);
+                (scratch.par_chunks_mut(3 * PIXELS))
+                    .zip(image.pixels.par_chunks(PIXELS))
+                    .for_each(|(out, pixels)| vtfarm_imaging::srgb8_into(pixels, out));
+            }
         }
         WireImage {
             width: image.width,
             height: image.height,
             format,
-            pixels: compress(scratch),
+            pixels: compress_in_pieces(scratch),
         }
+    }
+
+    /// The threads [`WireImage::encode_reusing`] can keep busy on a
+    /// `width` × `height` image in `format` (its compressed pieces).
+    pub fn encoding_threads(width: u32, height: u32, format: WireImageFormat) -> usize {
+        let bytes_per_pixel = match format {
+            WireImageFormat::LinearF32 => 12,
+            WireImageFormat::Srgb8 => 3,
+        };
+        pieces(width as usize * height as usize * bytes_per_pixel)
     }
 
     /// The pixel count, with the sides checked.
@@ -299,6 +320,60 @@ mod tests {
         bad_mask.mask = compress(&[0, 2, 1]);
         let error = (bad_mask.into_components(frame.color.clone())).expect_err("a mask of 2");
         assert!(error.to_string().contains("mask = 2 at pixel 1"), "{error}");
+    }
+
+    /// A frame larger than a piece is compressed in pieces on every core:
+    /// the same bytes on one thread or several, decoding (as one zstd
+    /// stream, by this decoder and by zstd's own) to exactly what one
+    /// piece would, for both formats.
+    #[test]
+    fn large_images_compress_in_pieces_to_the_same_decoded_bytes() {
+        let (width, height) = (700, 400);
+        let image = vtfarm_imaging::Image {
+            width,
+            height,
+            pixels: (0..width * height)
+                .map(|i| Vec3::new((i % 977) as f32 / 500.0, (i % 13) as f32 * 0.1, 0.3))
+                .collect(),
+        };
+        let pool = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+        };
+        for (format, bytes_per_pixel) in [
+            (WireImageFormat::Srgb8, 3),
+            (WireImageFormat::LinearF32, 12),
+        ] {
+            let len = (width * height) as usize * bytes_per_pixel;
+            let threads = WireImage::encoding_threads(width, height, format);
+            assert_eq!(threads, len.div_ceil(PIECE_BYTES));
+            assert!(threads > 1, "{format:?}: more than one piece");
+            let one = pool(1).install(|| WireImage::encode(&image, format));
+            let three = pool(3).install(|| WireImage::encode(&image, format));
+            assert_eq!(
+                one, three,
+                "{format:?}: the bytes do not depend on the threads"
+            );
+            let whole = zstd::bulk::decompress(&one.pixels, len).expect("one zstd stream");
+            let mut uncompressed = Vec::new();
+            match format {
+                WireImageFormat::Srgb8 => image.to_srgb8_into(&mut uncompressed),
+                WireImageFormat::LinearF32 => pixel_planes_into(&image.pixels, &mut uncompressed),
+            }
+            assert_eq!(whole, uncompressed, "{format:?}");
+        }
+        let srgb = WireImage::encode(&image, WireImageFormat::Srgb8);
+        assert_eq!(
+            srgb.into_srgb8().unwrap(),
+            (width, height, image.to_srgb8())
+        );
+        let linear = WireImage::encode(&image, WireImageFormat::LinearF32);
+        assert_eq!(
+            linear.into_pixels().unwrap(),
+            (width, height, image.pixels.clone())
+        );
     }
 
     /// An sRGB frame carries exactly the bytes a PNG of the linear one
