@@ -33,6 +33,7 @@
 //! docs/lab.md), which slow the workers and leave the master as it is.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -41,8 +42,8 @@ use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
-    FrameDone, Message, PackageResult, ResultPixels, WireBitmap, WireBitmapParts, WireImage,
-    WireImageFormat, WirePackageStats, decode_message, encode_message,
+    FrameDone, Message, PackageResult, ResultPixels, SceneData, WireBitmap, WireBitmapParts,
+    WireImage, WireImageFormat, WirePackageStats, decode_message, encode_message,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
@@ -84,6 +85,12 @@ pub struct SimulateArgs {
     /// frame): the load balancer alone, as in the paper's figures.
     #[arg(long)]
     no_fixed_costs: bool,
+    /// Every worker already holds the scene with its renderer (BVH), from
+    /// an earlier job of it: a shared cluster's common case. Without it
+    /// each worker gets the scene over the links and, on its first frame,
+    /// decodes it and builds the renderer (measured here, one thread).
+    #[arg(long)]
+    workers_hold_scene: bool,
     /// Multiplies every recorded tracing cost (36: the paper's work per
     /// frame).
     #[arg(long, default_value_t = 1.0)]
@@ -183,6 +190,9 @@ pub(super) struct Recording {
     pub(super) base_frame_seconds: f64,
     /// A worker's frame set-up (ID and behind buffers), one thread.
     pub(super) worker_setup_seconds: f64,
+    /// A worker's first frame of the scene beside its set-up: the scene
+    /// decoded and checked, the renderer (BVH) built, one thread.
+    pub(super) scene_prepare_seconds: f64,
     /// The set-up of a frame that differs from the worker's last only in
     /// the sun (its ID buffers kept), one thread.
     pub(super) sun_only_setup_seconds: f64,
@@ -403,6 +413,15 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         renderer.id_buffers(&job.setup)
     });
     let sun_only_setup_seconds = least_cpu_seconds(&one_thread, || renderer.id_buffers(&job.setup));
+    // A worker's first frame of the scene: `SceneCache::store`'s check and
+    // decode, then `FrameParts::build`'s new renderer.
+    let scene_data = SceneData::from_scene(&job.scene);
+    let scene_prepare_seconds = least_cpu_seconds(&one_thread, || {
+        let scene = scene_data
+            .to_scene()
+            .expect("the scene's own encoding decodes");
+        Renderer::new(Arc::new(scene), job.reflectors.clone())
+    });
     let frame = renderer.frame(&job.setup, &ids, &behind);
     // A package's own cost beside its triangles', at least: tracing none
     // and encoding the empty result.
@@ -476,6 +495,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         empty_result_bytes,
         base_frame_seconds,
         worker_setup_seconds,
+        scene_prepare_seconds,
         sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
@@ -919,6 +939,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     if args.no_fixed_costs {
         recording.base_frame_seconds = 0.0;
         recording.worker_setup_seconds = 0.0;
+        recording.scene_prepare_seconds = 0.0;
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
         recording.frame_sent_seconds = 0.0;
@@ -943,6 +964,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         empty_result_bytes: recording.empty_result_bytes,
         frame_bytes: recording.frame_bytes,
         worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
+        scene_prepare: recording.scene_prepare_seconds * args.fixed_cost_scale,
         master: MasterCosts {
             base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
             // Compositing does not grow with the work per pixel: not scaled.
@@ -975,6 +997,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
         rules: vtfarm_master::FarmRules::default(),
+        workers_hold_scene: args.workers_hold_scene,
     };
     let latency = Duration::from_secs_f64(args.latency_ms / 1e3);
     let overhead = Duration::from_secs_f64(
@@ -1078,7 +1101,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun); master compositing {:.3} s, finished frame out {:.3} s (on up to {} threads) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (on up to {} threads) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -1087,6 +1110,12 @@ fn print_report(
         rec.base_frame_seconds * args.fixed_cost_scale,
         rec.worker_setup_seconds * args.fixed_cost_scale,
         rec.sun_only_setup_seconds * args.fixed_cost_scale,
+        rec.scene_prepare_seconds * args.fixed_cost_scale,
+        if args.workers_hold_scene {
+            ": every worker holds it prepared"
+        } else {
+            ""
+        },
         rec.composite_seconds,
         rec.frame_out_seconds,
         rec.frame_out_threads,
