@@ -198,11 +198,12 @@ pub(super) struct Recording {
     pub(super) sun_only_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
-    /// The master per finished frame: the image for the wire (sRGB and
-    /// zstd, `WireImage::encode`), one thread's CPU.
+    /// The master per finished frame: the image for the wire
+    /// (`WireImage::encode`), one thread's CPU: its sRGB conversion (on
+    /// every core in the master)...
     pub(super) frame_out_seconds: f64,
-    /// The threads that encoding keeps busy (its compressed pieces).
-    pub(super) frame_out_threads: u32,
+    /// ... and its compression (one thread).
+    pub(super) frame_out_serial_seconds: f64,
     /// The master's driver per finished frame once encoded: the
     /// `FrameDone`'s bytes and the telemetry's copy.
     pub(super) frame_sent_seconds: f64,
@@ -473,13 +474,13 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
     let FrameOut {
-        encode_seconds: frame_out_seconds,
-        encode_threads: frame_out_threads,
+        convert_seconds: frame_out_seconds,
+        compress_seconds: frame_out_serial_seconds,
         sent_seconds: frame_sent_seconds,
         journal_seconds,
         submitter_seconds,
         frame_bytes,
-    } = frame_out_time(&renderer, job, &one_thread)?;
+    } = frame_out_time(&renderer, job)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -499,7 +500,7 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
-        frame_out_threads,
+        frame_out_serial_seconds,
         frame_sent_seconds,
         frame_bytes,
         journal_seconds,
@@ -512,11 +513,11 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
 /// The master's work on a finished frame, as `MasterCore` and its driver do
 /// it, each part's CPU on one thread (see [`FrameOut`]).
 struct FrameOut {
-    /// The frame's image for the wire, on `pool` (one thread: all its
-    /// pieces on the timed thread).
-    encode_seconds: f64,
-    /// The threads the encoding can keep busy.
-    encode_threads: u32,
+    /// The frame's image for the wire, on one thread: the sRGB
+    /// conversion...
+    convert_seconds: f64,
+    /// ... and the rest of `WireImage::encode` (zstd).
+    compress_seconds: f64,
     /// The `FrameDone` encoded for the submitter and the telemetry's copy.
     sent_seconds: f64,
     /// The journal's thread: its copy compressed and written.
@@ -528,29 +529,44 @@ struct FrameOut {
     frame_bytes: u64,
 }
 
-/// [`FrameOut`] of the job's frame, the encoding on `pool`.
-fn frame_out_time(
-    renderer: &Renderer,
-    job: &CockpitJob,
-    pool: &rayon::ThreadPool,
-) -> Result<FrameOut> {
+/// [`FrameOut`] of the job's frame.
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<FrameOut> {
+    // The encoding's tasks on this thread, the timed one: a pool of its
+    // own thread would spin beside the parts timed after it (the
+    // submitter's read 0.005 s for 0.003 s on this 2-thread machine).
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .use_current_thread()
+        .build()
+        .context("building a pool of this thread")?;
     let (base, _) = renderer.base_frame(&job.setup);
     let dir = tempfile::tempdir()?;
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
-    let [mut encoded, mut sent, mut journaled, mut submitted] = [f64::INFINITY; 4];
+    let [
+        mut converted,
+        mut encoded,
+        mut sent,
+        mut journaled,
+        mut submitted,
+    ] = [f64::INFINITY; 5];
+    let mut srgb = Vec::new();
     let mut frame_bytes = 0;
     let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
     // As `vtfarm submit` asks for it (it writes only PNGs).
     let format = WireImageFormat::Srgb8;
     for _ in 0..FIXED_COST_RUNS {
-        let (seconds, image) = pool.install(|| {
+        let (convert, encode, image) = pool.install(|| {
+            let clock = CpuStopwatch::start();
+            base.to_srgb8_into(&mut srgb);
+            let convert = clock.elapsed().as_secs_f64();
             let clock = CpuStopwatch::start();
             let image = WireImage::encode(&base, format);
-            (clock.elapsed().as_secs_f64(), image)
+            (convert, clock.elapsed().as_secs_f64(), image)
         });
-        encoded = encoded.min(seconds);
+        converted = converted.min(convert);
+        encoded = encoded.min(encode);
         let clock = CpuStopwatch::start();
         let done = FrameDone {
             job: 1,
@@ -579,10 +595,9 @@ fn frame_out_time(
         submitted = submitted.min(clock.elapsed().as_secs_f64());
         kept.push((kept_image, pixels));
     }
-    let threads = WireImage::encoding_threads(base.width, base.height, format);
     Ok(FrameOut {
-        encode_seconds: encoded,
-        encode_threads: u32::try_from(threads).unwrap_or(u32::MAX),
+        convert_seconds: converted.min(encoded),
+        compress_seconds: (encoded - converted).max(0.0),
         sent_seconds: sent,
         journal_seconds: journaled,
         submitter_seconds: submitted,
@@ -942,6 +957,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         recording.scene_prepare_seconds = 0.0;
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
+        recording.frame_out_serial_seconds = 0.0;
         recording.frame_sent_seconds = 0.0;
         recording.journal_seconds = 0.0;
         recording.submitter_seconds = 0.0;
@@ -970,7 +986,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             // Compositing does not grow with the work per pixel: not scaled.
             result_per_item: recording.composite_seconds / n,
             frame_out: recording.frame_out_seconds,
-            frame_out_threads: recording.frame_out_threads,
+            frame_out_serial: recording.frame_out_serial_seconds,
             frame_sent: recording.frame_sent_seconds,
             journal: recording.journal_seconds,
             submitter: recording.submitter_seconds,
@@ -1101,7 +1117,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (on up to {} threads) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (sRGB, on every core) + {:.3} s (zstd) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -1118,7 +1134,7 @@ fn print_report(
         },
         rec.composite_seconds,
         rec.frame_out_seconds,
-        rec.frame_out_threads,
+        rec.frame_out_serial_seconds,
         rec.frame_sent_seconds,
         rec.journal_seconds,
         rec.submitter_seconds,
@@ -1208,11 +1224,12 @@ fn print_report(
     // costs the base frame, the compositing of every result and the image
     // for the wire.
     let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
-    let out_threads = rec.frame_out_threads.clamp(1, master_cores.max(1));
-    let out = rec.frame_out_seconds / f64::from(out_threads) + rec.frame_sent_seconds;
+    let out = rec.frame_out_seconds / f64::from(master_cores.max(1))
+        + rec.frame_out_serial_seconds
+        + rec.frame_sent_seconds;
     let split = base.max(rec.composite_seconds + out);
     println!(
-        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {out:.3} s on {out_threads} core(s))",
+        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {out:.3} s)",
         rec.journal_seconds,
         1.0 / rec.journal_seconds.max(1e-9),
         rec.composite_seconds,

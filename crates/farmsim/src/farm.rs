@@ -87,13 +87,12 @@ pub struct MasterCosts {
     pub base_frame: f64,
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// Per finished split frame, beside the driver: the image for the wire
-    /// (sRGB and zstd), spread over `frame_out_threads` of the master's
-    /// cores (`WireImage::encode_reusing` compresses in pieces on all).
+    /// Per finished split frame, beside the driver: the image for the wire,
+    /// its part spread over the master's cores (`WireImage::encode_reusing`
+    /// converts to sRGB on all)...
     pub frame_out: f64,
-    /// The threads the image's encoding can keep busy
-    /// (`WireImage::encoding_threads`; 0 counts as 1).
-    pub frame_out_threads: u32,
+    /// ... and then its part on one thread (zstd).
+    pub frame_out_serial: f64,
     /// Per finished split frame, on the driver once it is encoded: the
     /// `FrameDone` for the submitter and the telemetry's copy (serial).
     pub frame_sent: f64,
@@ -248,8 +247,9 @@ enum Work {
     },
     /// One core's share of a base frame.
     Base((u64, u32)),
-    /// A finished split frame's encoding, beside the driver.
-    Encode(Box<FrameEncodeRequest>),
+    /// A finished split frame's encoding, beside the driver: its part on
+    /// every core, then (`Some`: seconds) its part on one thread.
+    Encode(Box<FrameEncodeRequest>, Option<f64>),
     /// The driver's handling of an input: its outputs go out when done.
     Driver(Vec<Output>),
     /// Work that only takes CPU (the journal's).
@@ -823,7 +823,10 @@ impl<M: CostModel> Farm<M> {
                     self.queue_for_driver(DriverInput::Base(key));
                 }
             }
-            Work::Encode(request) => {
+            Work::Encode(request, Some(serial)) => {
+                self.start_cpu(0, 1, serial, Work::Encode(request, None));
+            }
+            Work::Encode(request, None) => {
                 let encoded = request.encode();
                 self.queue_for_driver(DriverInput::Encoded(Box::new(encoded)));
             }
@@ -904,7 +907,7 @@ impl<M: CostModel> Farm<M> {
                 // The real driver encodes a view's frame for the dashboard
                 // on its task (beside the figures, not before them).
                 Output::EncodeFrame(request) if request.for_dashboard_only() => {
-                    seconds += costs.frame_out;
+                    seconds += costs.frame_out + costs.frame_out_serial;
                     self.master.frame_encoded(self.now, request.encode());
                 }
                 output => outputs.push(output),
@@ -967,11 +970,11 @@ impl<M: CostModel> Farm<M> {
                 self.queue_for_driver(DriverInput::Glare(Box::new(request)))
             }
             Output::EncodeFrame(request) => {
-                // One job on as many threads as it keeps busy: the machine's
-                // other work (the driver, base frames) shares the cores.
+                // One job on every core (the machine's other work, the
+                // driver and base frames, shares them), then one thread.
                 let costs = self.model.master_costs();
-                let threads = costs.frame_out_threads.clamp(1, self.cores[0]);
-                self.start_cpu(0, threads, costs.frame_out, Work::Encode(Box::new(request)));
+                let work = Work::Encode(Box::new(request), Some(costs.frame_out_serial));
+                self.start_cpu(0, self.cores[0], costs.frame_out, work);
             }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);

@@ -254,6 +254,7 @@ impl CostModel for Recorded<'_> {
                 let finish = master.base_frame
                     + master.result_per_item * indices.len() as f64
                     + master.frame_out
+                    + master.frame_out_serial
                     + master.frame_sent;
                 let pixels = ResultPixels::Frame {
                     image: WireImage::encode(&stand_in, start.image),
@@ -683,16 +684,16 @@ mod tests {
     }
 
     /// A single frame's encoding, the master's serial work after its last
-    /// result, runs on as many of the master's cores as it keeps busy: on
-    /// two cores the frame is delivered half its encoding sooner than on
-    /// one thread, and on a one-core master no sooner.
+    /// result, runs its parallel part on every core of the master: on two
+    /// cores the frame is delivered half that part sooner than on one,
+    /// and its serial part takes as long on both.
     #[test]
     fn a_single_frames_encoding_spreads_over_the_masters_cores() {
         let (job, mut costs) = small_farm(0.0, 0.0);
-        costs.master.frame_out = 0.2;
-        let latency = |threads: u32, cores: u32| {
+        costs.master.frame_out_serial = 0.05;
+        let latency = |parallel: f64, cores: u32| {
             let mut costs = costs.clone();
-            costs.master.frame_out_threads = threads;
+            costs.master.frame_out = parallel;
             let config = SimulationConfig {
                 master_cores: cores,
                 ..config(1)
@@ -700,11 +701,16 @@ mod tests {
             let frames = simulate_farm(&job, &costs, &config, &workers(4)).unwrap();
             frames[0].done_at.as_secs_f64()
         };
-        let serial = latency(1, 2);
         let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
-        assert!(close(latency(2, 2), serial - 0.1), "{} s", latency(2, 2));
-        assert!(close(latency(12, 2), serial - 0.1), "{} s", latency(12, 2));
-        assert!(close(latency(12, 1), serial), "{} s", latency(12, 1));
+        for cores in [1, 2] {
+            let none = latency(0.0, cores);
+            let with = latency(0.2, cores);
+            let expected = none + 0.2 / f64::from(cores);
+            assert!(
+                close(with, expected),
+                "{cores} cores: {with} s, not {expected} s"
+            );
+        }
     }
 
     /// Same inputs, same frames at the same virtual times; every frame is
@@ -864,7 +870,7 @@ mod tests {
         costs.master = MasterCosts {
             result_per_item: 1e-4,
             frame_out: 0.003,
-            frame_out_threads: 4,
+            frame_out_serial: 0.0005,
             frame_sent: 0.001,
             journal: 0.002,
             ..costs.master
@@ -881,8 +887,12 @@ mod tests {
         assert_eq!(cpu.len(), 4, "master, two workers, submitter");
         let (n, items) = (frames.len() as f64, costs.items.len() as f64);
         let m = &costs.master;
-        let master = n * (m.base_frame + m.result_per_item * items + m.frame_out + m.frame_sent)
-            + (n - 1.0) * m.journal;
+        let per_frame = m.base_frame
+            + m.result_per_item * items
+            + m.frame_out
+            + m.frame_out_serial
+            + m.frame_sent;
+        let master = n * per_frame + (n - 1.0) * m.journal;
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.max(1.0);
         assert!(
             close(cpu[0], master),

@@ -64,33 +64,6 @@ pub(super) fn compress(bytes: &[u8]) -> Vec<u8> {
     })
 }
 
-/// Bytes per piece of [`compress_in_pieces`]: fixed, not the thread
-/// count, so the bytes are the same on every machine. Half a MiB keeps
-/// level 1's ratio (its window is 512 KiB) and cuts a 1080p frame into 12
-/// pieces (sRGB), 48 (linear floats).
-pub(crate) const PIECE_BYTES: usize = 1 << 19;
-
-/// [`compress`] of a large buffer (a finished frame's) on every core: each
-/// [`PIECE_BYTES`] piece its own zstd frame, compressed at once, the frames
-/// one after another. Why: the finished frame's encoding is the master's
-/// serial work after a split frame's last result. Concatenated frames are
-/// one standard zstd stream that decodes to the whole (the format's rule;
-/// [`decompress`] and every zstd decoder read it), so the wire is unchanged.
-pub(super) fn compress_in_pieces(bytes: &[u8]) -> Vec<u8> {
-    use rayon::prelude::*;
-    if bytes.len() <= PIECE_BYTES {
-        return compress(bytes);
-    }
-    let pieces: Vec<Vec<u8>> = bytes.par_chunks(PIECE_BYTES).map(compress).collect();
-    pieces.concat()
-}
-
-/// The pieces [`compress_in_pieces`] cuts `len` bytes into: the threads it
-/// can keep busy.
-pub(crate) fn pieces(len: usize) -> usize {
-    len.div_ceil(PIECE_BYTES).max(1)
-}
-
 /// Decompresses exactly `expected` bytes (no more may be allocated).
 pub(super) fn decompress(field: &str, bytes: &[u8], expected: usize) -> Result<Vec<u8>, WireError> {
     let data = if expected == 0 && bytes.is_empty() {
