@@ -33,6 +33,7 @@
 //! docs/lab.md), which slow the workers and leave the master as it is.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -41,8 +42,8 @@ use serde::Serialize;
 use vtfarm_cockpit::CockpitConfig;
 use vtfarm_proto::PhaseKind;
 use vtfarm_proto::{
-    FrameDone, Message, PackageResult, ResultPixels, WireBitmap, WireBitmapParts, WireImage,
-    WireImageFormat, WirePackageStats, decode_message, encode_message,
+    FrameDone, Message, PackageResult, ResultPixels, SceneData, WireBitmap, WireBitmapParts,
+    WireImage, WireImageFormat, WirePackageStats, decode_message, encode_message,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_render::Renderer;
@@ -84,6 +85,12 @@ pub struct SimulateArgs {
     /// frame): the load balancer alone, as in the paper's figures.
     #[arg(long)]
     no_fixed_costs: bool,
+    /// Every worker already holds the scene with its renderer (BVH), from
+    /// an earlier job of it: a shared cluster's common case. Without it
+    /// each worker gets the scene over the links and, on its first frame,
+    /// decodes it and builds the renderer (measured here, one thread).
+    #[arg(long)]
+    workers_hold_scene: bool,
     /// Multiplies every recorded tracing cost (36: the paper's work per
     /// frame).
     #[arg(long, default_value_t = 1.0)]
@@ -183,14 +190,23 @@ pub(super) struct Recording {
     pub(super) base_frame_seconds: f64,
     /// A worker's frame set-up (ID and behind buffers), one thread.
     pub(super) worker_setup_seconds: f64,
+    /// A worker's first frame of the scene beside its set-up: the scene
+    /// decoded and checked, the renderer (BVH) built, one thread.
+    pub(super) scene_prepare_seconds: f64,
     /// The set-up of a frame that differs from the worker's last only in
     /// the sun (its ID buffers kept), one thread.
     pub(super) sun_only_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
-    /// The master's driver per finished frame: the image for the wire and
-    /// its encoding.
+    /// The master per finished frame: the image for the wire
+    /// (`WireImage::encode`), one thread's CPU: its sRGB conversion (on
+    /// every core in the master)...
     pub(super) frame_out_seconds: f64,
+    /// ... and its compression (one thread).
+    pub(super) frame_out_serial_seconds: f64,
+    /// The master's driver per finished frame once encoded: the
+    /// `FrameDone`'s bytes and the telemetry's copy.
+    pub(super) frame_sent_seconds: f64,
     /// A finished frame's image on the wire (`FrameDone::image`, sRGB as
     /// `vtfarm submit` asks): what a whole frame's result carries.
     pub(super) frame_bytes: u64,
@@ -398,6 +414,15 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         renderer.id_buffers(&job.setup)
     });
     let sun_only_setup_seconds = least_cpu_seconds(&one_thread, || renderer.id_buffers(&job.setup));
+    // A worker's first frame of the scene: `SceneCache::store`'s check and
+    // decode, then `FrameParts::build`'s new renderer.
+    let scene_data = SceneData::from_scene(&job.scene);
+    let scene_prepare_seconds = least_cpu_seconds(&one_thread, || {
+        let scene = scene_data
+            .to_scene()
+            .expect("the scene's own encoding decodes");
+        Renderer::new(Arc::new(scene), job.reflectors.clone())
+    });
     let frame = renderer.frame(&job.setup, &ids, &behind);
     // A package's own cost beside its triangles', at least: tracing none
     // and encoding the empty result.
@@ -448,8 +473,14 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         pixels[i] = p;
     }
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
-    let (frame_out_seconds, journal_seconds, submitter_seconds, frame_bytes) =
-        frame_out_time(&renderer, job)?;
+    let FrameOut {
+        convert_seconds: frame_out_seconds,
+        compress_seconds: frame_out_serial_seconds,
+        sent_seconds: frame_sent_seconds,
+        journal_seconds,
+        submitter_seconds,
+        frame_bytes,
+    } = frame_out_time(&renderer, job)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -465,9 +496,12 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         empty_result_bytes,
         base_frame_seconds,
         worker_setup_seconds,
+        scene_prepare_seconds,
         sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
+        frame_out_serial_seconds,
+        frame_sent_seconds,
         frame_bytes,
         journal_seconds,
         submitter_seconds,
@@ -477,26 +511,67 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
 }
 
 /// The master's work on a finished frame, as `MasterCore` and its driver do
-/// it: the driver makes the frame's image for the wire and encodes the
-/// `FrameDone` for the submitter (first figure); the journal's thread
-/// compresses and writes its copy (second); the submitter decodes it and
-/// writes the PNG and the timeline, as `vtfarm submit` does (third).
-fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f64, u64)> {
+/// it, each part's CPU on one thread (see [`FrameOut`]).
+struct FrameOut {
+    /// The frame's image for the wire, on one thread: the sRGB
+    /// conversion...
+    convert_seconds: f64,
+    /// ... and the rest of `WireImage::encode` (zstd).
+    compress_seconds: f64,
+    /// The `FrameDone` encoded for the submitter and the telemetry's copy.
+    sent_seconds: f64,
+    /// The journal's thread: its copy compressed and written.
+    journal_seconds: f64,
+    /// The submitter: decoded, the PNG and the timeline written, as
+    /// `vtfarm submit` does.
+    submitter_seconds: f64,
+    /// The image's bytes on the wire.
+    frame_bytes: u64,
+}
+
+/// [`FrameOut`] of the job's frame.
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<FrameOut> {
+    // The encoding's tasks on this thread, the timed one: a pool of its
+    // own thread would spin beside the parts timed after it (the
+    // submitter's read 0.005 s for 0.003 s on this 2-thread machine).
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .use_current_thread()
+        .build()
+        .context("building a pool of this thread")?;
     let (base, _) = renderer.base_frame(&job.setup);
     let dir = tempfile::tempdir()?;
     let journal = vtfarm_master::Journal::open(dir.path())?;
     // The job's directory, which its queued record would have made.
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
-    let (mut driver, mut journaled, mut submitted) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let [
+        mut converted,
+        mut encoded,
+        mut sent,
+        mut journaled,
+        mut submitted,
+    ] = [f64::INFINITY; 5];
+    let mut srgb = Vec::new();
     let mut frame_bytes = 0;
     let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
+    // As `vtfarm submit` asks for it (it writes only PNGs).
+    let format = WireImageFormat::Srgb8;
     for _ in 0..FIXED_COST_RUNS {
+        let (convert, encode, image) = pool.install(|| {
+            let clock = CpuStopwatch::start();
+            base.to_srgb8_into(&mut srgb);
+            let convert = clock.elapsed().as_secs_f64();
+            let clock = CpuStopwatch::start();
+            let image = WireImage::encode(&base, format);
+            (convert, clock.elapsed().as_secs_f64(), image)
+        });
+        converted = converted.min(convert);
+        encoded = encoded.min(encode);
         let clock = CpuStopwatch::start();
         let done = FrameDone {
             job: 1,
             frame: 0,
-            // As `vtfarm submit` asks for it (it writes only PNGs).
-            image: WireImage::encode(&base, WireImageFormat::Srgb8),
+            image,
             stats: Default::default(),
             aux: None,
         };
@@ -505,7 +580,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         let kept_image = done.image.clone();
         frame_bytes = done.image.pixels.len() as u64;
         let message = encode_message(&Message::FrameDone(done))?;
-        driver = driver.min(clock.elapsed().as_secs_f64());
+        sent = sent.min(clock.elapsed().as_secs_f64());
         let clock = CpuStopwatch::start();
         journal.write(record)?;
         journaled = journaled.min(clock.elapsed().as_secs_f64());
@@ -520,7 +595,14 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<(f64, f64, f6
         submitted = submitted.min(clock.elapsed().as_secs_f64());
         kept.push((kept_image, pixels));
     }
-    Ok((driver, journaled, submitted, frame_bytes))
+    Ok(FrameOut {
+        convert_seconds: converted.min(encoded),
+        compress_seconds: (encoded - converted).max(0.0),
+        sent_seconds: sent,
+        journal_seconds: journaled,
+        submitter_seconds: submitted,
+        frame_bytes,
+    })
 }
 
 /// The master's work on the results of a frame, on one thread: each
@@ -872,8 +954,11 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     if args.no_fixed_costs {
         recording.base_frame_seconds = 0.0;
         recording.worker_setup_seconds = 0.0;
+        recording.scene_prepare_seconds = 0.0;
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
+        recording.frame_out_serial_seconds = 0.0;
+        recording.frame_sent_seconds = 0.0;
         recording.journal_seconds = 0.0;
         recording.submitter_seconds = 0.0;
     }
@@ -895,11 +980,14 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         empty_result_bytes: recording.empty_result_bytes,
         frame_bytes: recording.frame_bytes,
         worker_setup: recording.worker_setup_seconds * args.fixed_cost_scale,
+        scene_prepare: recording.scene_prepare_seconds * args.fixed_cost_scale,
         master: MasterCosts {
             base_frame: recording.base_frame_seconds * args.fixed_cost_scale,
             // Compositing does not grow with the work per pixel: not scaled.
             result_per_item: recording.composite_seconds / n,
             frame_out: recording.frame_out_seconds,
+            frame_out_serial: recording.frame_out_serial_seconds,
+            frame_sent: recording.frame_sent_seconds,
             journal: recording.journal_seconds,
             submitter: recording.submitter_seconds,
         },
@@ -925,6 +1013,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         frames: args.frames as u32,
         time_limit: Duration::from_secs(24 * 3600),
         rules: vtfarm_master::FarmRules::default(),
+        workers_hold_scene: args.workers_hold_scene,
     };
     let latency = Duration::from_secs_f64(args.latency_ms / 1e3);
     let overhead = Duration::from_secs_f64(
@@ -1028,7 +1117,7 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun); master compositing {:.3} s, finished frame out {:.3} s and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (sRGB, on every core) + {:.3} s (zstd) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
@@ -1037,8 +1126,16 @@ fn print_report(
         rec.base_frame_seconds * args.fixed_cost_scale,
         rec.worker_setup_seconds * args.fixed_cost_scale,
         rec.sun_only_setup_seconds * args.fixed_cost_scale,
+        rec.scene_prepare_seconds * args.fixed_cost_scale,
+        if args.workers_hold_scene {
+            ": every worker holds it prepared"
+        } else {
+            ""
+        },
         rec.composite_seconds,
         rec.frame_out_seconds,
+        rec.frame_out_serial_seconds,
+        rec.frame_sent_seconds,
         rec.journal_seconds,
         rec.submitter_seconds,
         rec.package_seconds * 1e3,
@@ -1127,13 +1224,15 @@ fn print_report(
     // costs the base frame, the compositing of every result and the image
     // for the wire.
     let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
-    let split = base.max(rec.composite_seconds + rec.frame_out_seconds);
+    let out = rec.frame_out_seconds / f64::from(master_cores.max(1))
+        + rec.frame_out_serial_seconds
+        + rec.frame_sent_seconds;
+    let split = base.max(rec.composite_seconds + out);
     println!(
-        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {:.3} s)",
+        "  the master's own work: per whole frame its journal {:.4} s (its own thread: at most {:.0} frames per second); per split frame {split:.3} s (base frame {base:.3} s on {master_cores} core(s), compositing {:.3} s, the image out {out:.3} s)",
         rec.journal_seconds,
         1.0 / rec.journal_seconds.max(1e-9),
         rec.composite_seconds,
-        rec.frame_out_seconds
     );
     // The aims of issue 26 for equal workers, as speed-up over one worker
     // per worker (a whole frame's base frame and compositing are the

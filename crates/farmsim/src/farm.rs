@@ -87,8 +87,15 @@ pub struct MasterCosts {
     pub base_frame: f64,
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// Per finished split frame, beside the driver: the image for the wire.
+    /// Per finished split frame, beside the driver: the image for the wire,
+    /// its part spread over the master's cores (`WireImage::encode_reusing`
+    /// converts to sRGB on all)...
     pub frame_out: f64,
+    /// ... and then its part on one thread (zstd).
+    pub frame_out_serial: f64,
+    /// Per finished split frame, on the driver once it is encoded: the
+    /// `FrameDone` for the submitter and the telemetry's copy (serial).
+    pub frame_sent: f64,
     /// The journal thread per finished frame, beside the driver.
     pub journal: f64,
     /// The submitter per finished frame (decode, PNG, timeline), on the
@@ -240,8 +247,9 @@ enum Work {
     },
     /// One core's share of a base frame.
     Base((u64, u32)),
-    /// A finished split frame's encoding, beside the driver.
-    Encode(Box<FrameEncodeRequest>),
+    /// A finished split frame's encoding, beside the driver: its part on
+    /// every core, then (`Some`: seconds) its part on one thread.
+    Encode(Box<FrameEncodeRequest>, Option<f64>),
     /// The driver's handling of an input: its outputs go out when done.
     Driver(Vec<Output>),
     /// Work that only takes CPU (the journal's).
@@ -815,7 +823,10 @@ impl<M: CostModel> Farm<M> {
                     self.queue_for_driver(DriverInput::Base(key));
                 }
             }
-            Work::Encode(request) => {
+            Work::Encode(request, Some(serial)) => {
+                self.start_cpu(0, 1, serial, Work::Encode(request, None));
+            }
+            Work::Encode(request, None) => {
                 let encoded = request.encode();
                 self.queue_for_driver(DriverInput::Encoded(Box::new(encoded)));
             }
@@ -876,7 +887,10 @@ impl<M: CostModel> Farm<M> {
                 let (generation, quality) = (request.generation, request.quality);
                 (self.master).view_figures_ready(self.now, generation, quality, figures);
             }
-            DriverInput::Encoded(encoded) => self.master.frame_encoded(self.now, *encoded),
+            DriverInput::Encoded(encoded) => {
+                seconds += costs.frame_sent;
+                self.master.frame_encoded(self.now, *encoded)
+            }
             DriverInput::Base(key) => {
                 self.base_pending.remove(&key);
                 let held = self.held_items.remove(&key).unwrap_or(0);
@@ -893,7 +907,7 @@ impl<M: CostModel> Farm<M> {
                 // The real driver encodes a view's frame for the dashboard
                 // on its task (beside the figures, not before them).
                 Output::EncodeFrame(request) if request.for_dashboard_only() => {
-                    seconds += costs.frame_out;
+                    seconds += costs.frame_out + costs.frame_out_serial;
                     self.master.frame_encoded(self.now, request.encode());
                 }
                 output => outputs.push(output),
@@ -956,8 +970,11 @@ impl<M: CostModel> Farm<M> {
                 self.queue_for_driver(DriverInput::Glare(Box::new(request)))
             }
             Output::EncodeFrame(request) => {
-                let seconds = self.model.master_costs().frame_out;
-                self.start_cpu(0, 1, seconds, Work::Encode(Box::new(request)));
+                // One job on every core (the machine's other work, the
+                // driver and base frames, shares them), then one thread.
+                let costs = self.model.master_costs();
+                let work = Work::Encode(Box::new(request), Some(costs.frame_out_serial));
+                self.start_cpu(0, self.cores[0], costs.frame_out, work);
             }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);

@@ -50,6 +50,11 @@ pub struct FarmCosts {
     pub frame_bytes: u64,
     /// A worker's set-up of a frame.
     pub worker_setup: f64,
+    /// A worker's first frame of the scene, beside its set-up: the scene
+    /// decoded and checked, its renderer (the BVH) built
+    /// (`vtfarm_worker::engine::FrameParts::build`); none for a worker that
+    /// holds it ([`SimulationConfig::workers_hold_scene`]).
+    pub scene_prepare: f64,
     /// The master's machine's.
     pub master: MasterCosts,
 }
@@ -75,6 +80,11 @@ pub struct SimulationConfig {
     pub rules: FarmRules,
     /// Gives up at this virtual time.
     pub time_limit: Duration,
+    /// Every worker holds the job's scene with its renderer from an earlier
+    /// job of it (a shared cluster's common case): the master's offer needs
+    /// no transfer and the first frame no [`FarmCosts::scene_prepare`]. Off,
+    /// each worker gets the scene over the links and prepares it first.
+    pub workers_hold_scene: bool,
 }
 
 /// A finished frame as the submitter got it.
@@ -171,21 +181,28 @@ struct Recorded<'a> {
     costs: &'a FarmCosts,
     index_of: HashMap<u32, usize>,
     empty_bitmap: WireBitmap,
+    /// The scene every new worker holds prepared
+    /// ([`SimulationConfig::workers_hold_scene`]).
+    held: Option<SceneHash>,
 }
 
-/// A recorded worker's scene store: the hashes it holds.
+/// A recorded worker's scene store: the hashes it holds, and those it has
+/// prepared (decoded, its renderer built: the engine keeps them).
 #[derive(Default)]
-pub struct SceneHashes(Vec<SceneHash>);
+pub struct SceneHashes {
+    held: Vec<SceneHash>,
+    prepared: Vec<SceneHash>,
+}
 
 impl SceneStore for SceneHashes {
     fn has_scene(&mut self, hash: &SceneHash) -> bool {
-        self.0.contains(hash)
+        self.held.contains(hash)
     }
 
     type Error = std::convert::Infallible;
 
     fn add_scene(&mut self, data: SceneData) -> Result<(), Self::Error> {
-        self.0.push(data.hash);
+        self.held.push(data.hash);
         Ok(())
     }
 }
@@ -194,17 +211,26 @@ impl CostModel for Recorded<'_> {
     type Worker = SceneHashes;
 
     fn new_worker(&mut self) -> SceneHashes {
-        SceneHashes::default()
+        let held = Vec::from_iter(self.held);
+        SceneHashes {
+            prepared: held.clone(),
+            held,
+        }
     }
 
     fn reconnected(&mut self, _: &mut SceneHashes) {}
 
     fn prepare_frame(
         &mut self,
-        _: &mut SceneHashes,
-        _: FrameStart,
+        worker: &mut SceneHashes,
+        start: FrameStart,
     ) -> (Result<(), FrameError>, f64) {
-        (Ok(()), self.costs.worker_setup)
+        let mut seconds = self.costs.worker_setup;
+        if !worker.prepared.contains(&start.scene) {
+            worker.prepared.push(start.scene);
+            seconds += self.costs.scene_prepare;
+        }
+        (Ok(()), seconds)
     }
 
     /// A recorded frame has one stage: `_stage` is 0.
@@ -227,7 +253,9 @@ impl CostModel for Recorded<'_> {
                 let master = &costs.master;
                 let finish = master.base_frame
                     + master.result_per_item * indices.len() as f64
-                    + master.frame_out;
+                    + master.frame_out
+                    + master.frame_out_serial
+                    + master.frame_sent;
                 let pixels = ResultPixels::Frame {
                     image: WireImage::encode(&stand_in, start.image),
                     aux: None,
@@ -286,12 +314,14 @@ fn run_farm(
     config: &SimulationConfig,
     workers: &[WorkerSpec],
 ) -> Result<FinishedRun, SimulationError> {
+    let scene = SceneData::from_scene(&job.scene);
     let model = Recorded {
         costs,
         index_of: (costs.items.iter().enumerate())
             .map(|(i, &t)| (t, i))
             .collect(),
         empty_bitmap: WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
+        held: config.workers_hold_scene.then_some(scene.hash),
     };
     let machines = FarmConfig {
         master_link_bits_per_second: config.master_link_bits_per_second,
@@ -304,7 +334,6 @@ fn run_farm(
     for (w, spec) in workers.iter().enumerate() {
         farm.join(&format!("w{w}"), spec.clone());
     }
-    let scene = SceneData::from_scene(&job.scene);
     let frames = config.frames as usize;
     let wire = WireJob {
         name: "simulated".into(),
@@ -492,6 +521,7 @@ mod tests {
             empty_result_bytes: 30,
             frame_bytes: 1000,
             worker_setup,
+            scene_prepare: 0.0,
             master: MasterCosts {
                 base_frame,
                 ..MasterCosts::default()
@@ -508,6 +538,7 @@ mod tests {
             background_threads: 0.0,
             frames,
             time_limit: Duration::from_secs(3600),
+            workers_hold_scene: false,
             // The tests of the split frames' cost model; whole frames have
             // theirs.
             rules: FarmRules {
@@ -610,6 +641,76 @@ mod tests {
             (master - encoding).abs() < 1e-9,
             "master {master} s, encoding {encoding} s"
         );
+    }
+
+    /// A worker's first frame of the scene costs it the scene's
+    /// preparation beside the set-up, after the scene came over the link;
+    /// workers that hold the scene prepared get no transfer and no
+    /// preparation: their frame is delivered sooner by at least the
+    /// preparation, and the master sends no scene.
+    #[test]
+    fn workers_holding_the_scene_skip_its_transfer_and_preparation() {
+        let (job, mut costs) = small_farm(0.01, 0.0);
+        costs.scene_prepare = 0.3;
+        let run = |hold: bool| {
+            let config = SimulationConfig {
+                workers_hold_scene: hold,
+                // Slow enough that the scene's transfer shows.
+                master_link_bits_per_second: 1e7,
+                ..config(1)
+            };
+            let mut spec = workers(4);
+            for w in &mut spec {
+                w.link_bits_per_second = 1e7;
+            }
+            let frames = simulate_farm(&job, &costs, &config, &spec).unwrap();
+            let cpu: f64 = frames[0].cpu[1..5].iter().sum();
+            (frames[0].done_at.as_secs_f64(), cpu)
+        };
+        let ((cold, cold_cpu), (held, held_cpu)) = (run(false), run(true));
+        let items: f64 = costs.seconds.iter().sum();
+        let setups = 4.0 * costs.worker_setup;
+        let overheads = |cpu: f64| cpu - items - setups;
+        // Package overheads aside, the cold workers spent one preparation each more.
+        assert!(
+            (overheads(cold_cpu) - overheads(held_cpu) - 4.0 * costs.scene_prepare).abs() < 0.05,
+            "cold {cold_cpu} s of CPU, held {held_cpu} s"
+        );
+        let scene = SceneData::from_scene(&job.scene).bytes.len() as f64 * 8.0 / 1e7;
+        assert!(
+            cold > held + costs.scene_prepare + scene,
+            "cold {cold} s, held {held} s, the scene {scene} s on the link"
+        );
+    }
+
+    /// A single frame's encoding, the master's serial work after its last
+    /// result, runs its parallel part on every core of the master: on two
+    /// cores the frame is delivered half that part sooner than on one,
+    /// and its serial part takes as long on both.
+    #[test]
+    fn a_single_frames_encoding_spreads_over_the_masters_cores() {
+        let (job, mut costs) = small_farm(0.0, 0.0);
+        costs.master.frame_out_serial = 0.05;
+        let latency = |parallel: f64, cores: u32| {
+            let mut costs = costs.clone();
+            costs.master.frame_out = parallel;
+            let config = SimulationConfig {
+                master_cores: cores,
+                ..config(1)
+            };
+            let frames = simulate_farm(&job, &costs, &config, &workers(4)).unwrap();
+            frames[0].done_at.as_secs_f64()
+        };
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+        for cores in [1, 2] {
+            let none = latency(0.0, cores);
+            let with = latency(0.2, cores);
+            let expected = none + 0.2 / f64::from(cores);
+            assert!(
+                close(with, expected),
+                "{cores} cores: {with} s, not {expected} s"
+            );
+        }
     }
 
     /// Same inputs, same frames at the same virtual times; every frame is
@@ -769,6 +870,8 @@ mod tests {
         costs.master = MasterCosts {
             result_per_item: 1e-4,
             frame_out: 0.003,
+            frame_out_serial: 0.0005,
+            frame_sent: 0.001,
             journal: 0.002,
             ..costs.master
         };
@@ -784,8 +887,12 @@ mod tests {
         assert_eq!(cpu.len(), 4, "master, two workers, submitter");
         let (n, items) = (frames.len() as f64, costs.items.len() as f64);
         let m = &costs.master;
-        let master =
-            n * (m.base_frame + m.result_per_item * items + m.frame_out) + (n - 1.0) * m.journal;
+        let per_frame = m.base_frame
+            + m.result_per_item * items
+            + m.frame_out
+            + m.frame_out_serial
+            + m.frame_sent;
+        let master = n * per_frame + (n - 1.0) * m.journal;
         let close = |a: f64, b: f64| (a - b).abs() < 1e-9 * b.max(1.0);
         assert!(
             close(cpu[0], master),

@@ -210,12 +210,9 @@ impl Image {
     /// [`Image::to_srgb8`] into `out`'s allocation (whatever it held): a
     /// buffer kept from frame to frame spares a fresh one's page faults.
     pub fn to_srgb8_into(&self, out: &mut Vec<u8>) {
-        let table = Srgb8Table::get();
         out.clear();
         out.resize(3 * self.pixels.len(), 0);
-        for (bytes, c) in out.chunks_exact_mut(3).zip(&self.pixels) {
-            bytes.copy_from_slice(&[table.encode(c.x), table.encode(c.y), table.encode(c.z)]);
-        }
+        srgb8_into(&self.pixels, out);
     }
 
     /// The image reduced `factor` times in each direction (rounded up) for
@@ -319,6 +316,17 @@ pub fn encode_srgb8_png(
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let encoder = PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Sub);
     encoder.write_image(pixels, width, height, image::ExtendedColorType::Rgb8)
+}
+
+/// [`encode_srgb8`] of each of `pixels` into `out` (three bytes each, RGB;
+/// `out` holds exactly that many): what [`Image::to_srgb8`] does, for a
+/// caller that converts an image in pieces (on several threads).
+pub fn srgb8_into(pixels: &[Vec3], out: &mut [u8]) {
+    assert_eq!(out.len(), 3 * pixels.len(), "three bytes per pixel");
+    let table = Srgb8Table::get();
+    for (bytes, c) in out.chunks_exact_mut(3).zip(pixels) {
+        bytes.copy_from_slice(&[table.encode(c.x), table.encode(c.y), table.encode(c.z)]);
+    }
 }
 
 /// [`encode_srgb8`]'s channel rule by table: per bucket of floats in
