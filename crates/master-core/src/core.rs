@@ -1981,7 +1981,8 @@ impl MasterCore {
         let Some(camera) = j.frames.last().map(|setup| setup.camera) else {
             return;
         };
-        let in_flight = self.scheduler.config().frames_in_flight as usize;
+        // A batch job's split frames may be more than the frames in flight.
+        let in_flight = self.scheduler.config().split_frames_in_flight(false) as usize;
         let budget = frames_held_at_most(in_flight, camera.width, camera.height);
         let assembling = (self.jobs.values().flat_map(|j| &j.assembling))
             .filter(|a| !a.whole)

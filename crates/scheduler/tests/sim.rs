@@ -850,6 +850,76 @@ fn a_deep_batch_jobs_tail_splits_no_more_frames_than_the_measured_costs_allow() 
     assert_eq!(reported, 4, "2 ahead and 2 at their frames' start");
 }
 
+/// A wide farm's batch tail: the split frames after the whole ones (the
+/// last 24 or more of 88 on 32 workers) run up to `BATCH_SPLIT_WIDENING` times the frames in flight
+/// (16, never more), each over a crew of about `32 / (16 − 3)` workers (at
+/// least 4) instead of `32 / (8 − 3)`: a tail frame's set-up is paid by
+/// fewer workers while every worker stays busy. An interactive job's
+/// frames keep to the frames in flight.
+#[test]
+fn a_batch_tail_runs_more_split_frames_in_smaller_crews() {
+    let frame = uneven_frame(100, 17, 0.002, 0..0, 1.0);
+    let workers = 32;
+    let mut job = repeated_job(1, &frame, 2 * workers + 24);
+    job.submit_at = Duration::from_millis(1);
+    let config = SimConfig {
+        master_frame_cost: Duration::from_millis(5),
+        ..batch_config()
+    };
+    let report = run(
+        config.clone(),
+        vec![SimWorker::with_speed(1.0); workers],
+        std::slice::from_ref(&job),
+    );
+    let split: Vec<u32> = (whole_frames(&report).iter().enumerate())
+        .filter(|(_, whole)| !**whole)
+        .map(|(frame, _)| frame as u32)
+        .collect();
+    assert!(split.len() >= 24, "{split:?}");
+    let limit = (common::FRAMES_IN_FLIGHT * vtfarm_scheduler::BATCH_SPLIT_WIDENING) as usize;
+    let most = most_split_frames_in_flight(&report);
+    assert!(
+        most > common::FRAMES_IN_FLIGHT as usize && most <= limit,
+        "{most} split frames in flight"
+    );
+    // Set-ups of the tail: each worker that got a package of a frame set
+    // it up once. Crews of 8 (32 / 5) would pay 8 a frame.
+    let crews = crews(&report);
+    let setups: usize = split.iter().map(|f| crews[f].len()).sum();
+    println!(
+        "{} tail frames: {setups} set-ups, at most {most} in flight",
+        split.len()
+    );
+    assert!(setups < split.len() * 6, "{setups} set-ups");
+    // An interactive job's frames keep to the frames in flight.
+    assert_eq!(
+        config.scheduler.split_frames_in_flight(true),
+        common::FRAMES_IN_FLIGHT
+    );
+}
+
+/// The most split frames running at once (started, not complete).
+fn most_split_frames_in_flight(report: &SimReport) -> usize {
+    let mut split = std::collections::BTreeSet::new();
+    let (mut now, mut most) = (0usize, 0usize);
+    for (_, event) in &report.events {
+        match event {
+            Event::FrameStarted {
+                frame,
+                whole: false,
+                ..
+            } => {
+                split.insert(*frame);
+                now += 1;
+                most = most.max(now);
+            }
+            Event::FrameComplete { frame, .. } if split.contains(frame) => now -= 1,
+            _ => {}
+        }
+    }
+    most
+}
+
 /// Until the costs are measured (no base frame made yet) the tail is no
 /// wider than the frames in flight, and a job's last frame is always split:
 /// a job of 12 frames on 16 workers, where every frame is at the tail,
