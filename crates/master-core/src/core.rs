@@ -1981,8 +1981,7 @@ impl MasterCore {
         let Some(camera) = j.frames.last().map(|setup| setup.camera) else {
             return;
         };
-        // A batch job's split frames may be more than the frames in flight.
-        let in_flight = self.scheduler.config().split_frames_in_flight(false) as usize;
+        let in_flight = self.scheduler.config().frames_in_flight as usize;
         let budget = frames_held_at_most(in_flight, camera.width, camera.height);
         let assembling = (self.jobs.values().flat_map(|j| &j.assembling))
             .filter(|a| !a.whole)

@@ -68,27 +68,7 @@ impl Default for SchedulerConfig {
     }
 }
 
-/// How many times [`SchedulerConfig::frames_in_flight`] a batch job's
-/// split frames (its tail, or all its frames when it is no wider than the
-/// farm) may be in flight under whole frames: see the crate documentation's
-/// Frames in flight.
-pub const BATCH_SPLIT_WIDENING: u32 = 2;
-
 impl SchedulerConfig {
-    /// How many split frames of a job may be in flight: a batch job's
-    /// [`BATCH_SPLIT_WIDENING`] times [`SchedulerConfig::frames_in_flight`]
-    /// under whole frames (with frame affinity), else (an interactive job,
-    /// or without whole frames) the frames in flight. At least 1. The
-    /// master holds a base frame for each.
-    pub fn split_frames_in_flight(&self, interactive: bool) -> u32 {
-        let widening = if self.whole_frames && self.frame_affinity && !interactive {
-            BATCH_SPLIT_WIDENING
-        } else {
-            1
-        };
-        self.frames_in_flight.max(1) * widening
-    }
-
     /// The rules for workers that set a frame up when its first package for
     /// them comes (vtfarm's): `frames_in_flight` split frames pipelined with
     /// frame affinity, so that a worker sets up only the frames of its crew,

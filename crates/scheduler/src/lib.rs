@@ -119,18 +119,7 @@
 //!   frame runs in, decided when it starts.
 //! * **Frames in flight.** Split frames: at most
 //!   [`SchedulerConfig::frames_in_flight`] (each holds the master's base
-//!   frame and the image being composited); a batch job's under whole
-//!   frames (its tail) [`BATCH_SPLIT_WIDENING`] (2) times that, with its
-//!   crews sized over them
-//!   ([`SchedulerConfig::split_frames_in_flight`]). Why: a tail frame's
-//!   lifetime (set-up, its crew's share, the master's base frame and
-//!   compositing, frames completing in order) is several times a wide
-//!   farm's share of one frame, so the frames in flight, not the workers,
-//!   paced a 256-worker tail, and each frame's set-up was paid by a fifth
-//!   of the farm; twice the frames in smaller crews keep every worker busy
-//!   at half the set-ups. The master's base-frame budget (`ahead.rs`)
-//!   covers them (16 at 1080p in its 1 GiB); the view's frames, where each
-//!   frame's latency counts, keep to the frames in flight. Whole frames: the master holds
+//!   frame and the image being composited). Whole frames: the master holds
 //!   no base frame, only finished frames waiting for an older one (frames
 //!   complete in order), so they follow the farm's width: up to
 //!   `frames_in_flight` + [`WHOLE_FRAMES_PER_WORKER`] (2) per worker —
@@ -234,10 +223,7 @@ mod scheduler;
 mod status;
 mod types;
 
-pub use config::{
-    BATCH_SPLIT_WIDENING, CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig,
-    StragglerPolicy,
-};
+pub use config::{CostEstimation, PackageSizing, RetryPolicy, SchedulerConfig, StragglerPolicy};
 pub use error::{CancelError, InvariantError, JoinError, ReportError, SubmitError, WorkerError};
 pub use event::{Event, FrameStats, JobFailure, LossCause, WorkerFrameStats};
 pub use scheduler::{Scheduler, WHOLE_FRAMES_PER_WORKER};

@@ -792,7 +792,7 @@ impl Scheduler {
                     job.id
                 ));
             }
-            if job.split_frames() > self.split_limit(job) {
+            if job.split_frames() > self.config.frames_in_flight.max(1) as usize {
                 return fail(format!("{}: {} split frames", job.id, job.split_frames()));
             }
             for frame in job.running_frames() {
@@ -1044,7 +1044,7 @@ impl Scheduler {
                 .iter()
                 .map(RunningJob::split_frames)
                 .sum();
-            split < self.split_limit(job)
+            split < frames_in_flight
         }
     }
 
@@ -1399,39 +1399,21 @@ impl Scheduler {
         if let Some(frame) = short {
             return pick(frame).map_or(Offer::Nothing, Offer::Take);
         }
-        if self.room_for_a_frame(j) && self.may_start_for(job, w) {
+        if self.room_for_a_frame(j) {
             return Offer::NewFrame;
         }
         (job.running_frames().filter_map(pick).next()).map_or(Offer::Nothing, Offer::Take)
-    }
-
-    /// Whether `job`'s next frame may start for worker `w`: a split frame
-    /// not for a worker that holds a whole frame of it (asking one package
-    /// ahead), whose package would wait that frame's whole time while the
-    /// frame, its base frame and its crew's set-ups wait with it (frames
-    /// complete in order); the tail so starts when workers come free.
-    fn may_start_for(&self, job: &RunningJob, w: &Worker) -> bool {
-        let holds_whole = (w.running.iter()).any(|&id| job.frame_of(id).is_some_and(|f| f.whole));
-        !holds_whole || starts_whole(&self.config, &self.workers, job)
     }
 
     /// Workers per frame under frame affinity: the eligible workers spread
     /// over the frames in flight but [`SPARE_FRAMES`] (at least one crew),
     /// but at least [`MIN_CREW`].
     fn crew_size(&self, job: &RunningJob) -> usize {
-        let crews = (self.split_limit(job) as u32)
-            .saturating_sub(SPARE_FRAMES)
-            .max(1) as usize;
+        let crews = (self.config.frames_in_flight.saturating_sub(SPARE_FRAMES)).max(1) as usize;
         self.eligible_workers(job)
             .count()
             .div_ceil(crews)
             .max(MIN_CREW)
-    }
-
-    /// How many split frames `job` may have in flight
-    /// ([`SchedulerConfig::split_frames_in_flight`]).
-    fn split_limit(&self, job: &RunningJob) -> usize {
-        self.config.split_frames_in_flight(job.interactive) as usize
     }
 
     /// Connected workers not blocklisted for `job`.
