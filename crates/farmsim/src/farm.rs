@@ -181,6 +181,38 @@ pub struct PackageRun {
     pub work: f64,
 }
 
+/// Per-frame work of one thread that takes frames one at a time (the
+/// master's journal thread, the submitter): as one CPU job per frame, 256
+/// frames finished together would share the master's cores 512 ways and
+/// starve its driver, which the real one-thread consumers never do.
+#[derive(Debug, Default)]
+struct OneThread {
+    /// Frames not started yet.
+    waiting: usize,
+    /// Whether a frame's work runs.
+    running: bool,
+}
+
+impl OneThread {
+    /// A frame came: whether its work starts now (nothing runs).
+    fn add(&mut self) -> bool {
+        if self.running {
+            self.waiting += 1;
+            false
+        } else {
+            self.running = true;
+            true
+        }
+    }
+
+    /// A frame's work ended: whether the next one's starts.
+    fn next(&mut self) -> bool {
+        self.running = self.waiting > 0;
+        self.waiting = self.waiting.saturating_sub(1);
+        self.running
+    }
+}
+
 /// A simulated worker: its machine, its fault knobs, its session and the
 /// cost model's state of it.
 pub struct SimWorker<W> {
@@ -325,6 +357,10 @@ pub struct Farm<M: CostModel> {
     master_link_free: [Duration; 2],
     driver_queue: VecDeque<DriverInput>,
     driver_busy: bool,
+    /// Finished frames for the master's journal thread and for the
+    /// submitter: each takes them one at a time on one thread.
+    journal_frames: OneThread,
+    submitter_frames: OneThread,
     /// Base-frame shares still running, per frame.
     base_left: BTreeMap<(u64, u32), u32>,
     /// Base frames being "rasterized", to hand to the core when done.
@@ -383,6 +419,8 @@ impl<M: CostModel> Farm<M> {
             master_link_free: [Duration::ZERO; 2],
             driver_queue: VecDeque::new(),
             driver_busy: false,
+            journal_frames: OneThread::default(),
+            submitter_frames: OneThread::default(),
             base_left: BTreeMap::new(),
             pending_base: BTreeMap::new(),
             base_pending: BTreeSet::new(),
@@ -441,6 +479,8 @@ impl<M: CostModel> Farm<M> {
         self.events.clear();
         self.driver_queue.clear();
         self.driver_busy = false;
+        self.journal_frames = OneThread::default();
+        self.submitter_frames = OneThread::default();
         self.cpu.retain(|job| job.work.worker().is_some());
         self.base_left.clear();
         self.pending_base.clear();
@@ -837,7 +877,18 @@ impl<M: CostModel> Farm<M> {
                 }
                 self.next_driver_input();
             }
-            Work::Journal | Work::Submitter => {}
+            Work::Journal => {
+                if self.journal_frames.next() {
+                    let seconds = self.model.master_costs().journal;
+                    self.start_cpu(0, 1, seconds, Work::Journal);
+                }
+            }
+            Work::Submitter => {
+                if self.submitter_frames.next() {
+                    let seconds = self.model.master_costs().submitter;
+                    self.start_cpu(0, 1, seconds, Work::Submitter);
+                }
+            }
         }
     }
 
@@ -1047,8 +1098,12 @@ impl<M: CostModel> Farm<M> {
                     stats: done.stats.clone(),
                 });
                 let costs = self.model.master_costs();
-                self.start_cpu(0, 1, costs.journal, Work::Journal);
-                self.start_cpu(0, 1, costs.submitter, Work::Submitter);
+                if self.journal_frames.add() {
+                    self.start_cpu(0, 1, costs.journal, Work::Journal);
+                }
+                if self.submitter_frames.add() {
+                    self.start_cpu(0, 1, costs.submitter, Work::Submitter);
+                }
                 self.to_submitter.push(Message::FrameDone(done));
             }
             message => self.to_submitter.push(message),

@@ -17,7 +17,8 @@
 //!   frame up while it traces a package runs both at half speed, as the real
 //!   worker does. The master has its own machine: its base frame is spread
 //!   over its cores, and its driver handles one input at a time, each
-//!   costing CPU ([`MasterCosts`]); inputs queue meanwhile. A finished split
+//!   costing CPU ([`MasterCosts`]); inputs queue meanwhile. Its journal
+//!   thread and the submitter each take finished frames one at a time. A finished split
 //!   frame's encoding runs beside the driver, on the master's cores. With
 //!   [`FarmConfig::shared_cores`] everything runs on one machine (a
 //!   localhost farm), and [`FarmConfig::background_threads`] stand for
