@@ -916,6 +916,35 @@ mod tests {
         assert!((per_frame[0] - master / n).abs() < 0.1 * master / n);
     }
 
+    /// The submitter takes finished frames one at a time, as the real one
+    /// does: when a round of whole frames finishes together it falls
+    /// behind on one core instead of taking every core of the master's
+    /// machine (which starved the driver of a 256-worker farm). Between any
+    /// two deliveries its CPU grows by at most the time between them.
+    #[test]
+    fn the_submitter_takes_finished_frames_one_at_a_time() {
+        let (job, mut costs) = small_farm(0.0, 0.0);
+        let whole_frame: f64 = costs.seconds.iter().sum();
+        // Eight frames finishing together bring two frames' worth of work.
+        costs.master.submitter = whole_frame / 4.0;
+        let batch = SimulationConfig {
+            master_cores: 2,
+            rules: FarmRules::default(),
+            ..config(24)
+        };
+        assert!(batch.rules.whole_frames);
+        let frames = simulate_farm(&job, &costs, &batch, &workers(8)).unwrap();
+        let submitter = |f: &FarmFrame| *f.cpu.last().unwrap();
+        let (first, last) = (&frames[0], frames.last().unwrap());
+        let (cpu, wall) = (
+            submitter(last) - submitter(first),
+            (last.done_at - first.done_at).as_secs_f64(),
+        );
+        assert!(cpu <= wall + 1e-9, "{cpu} s of CPU in {wall} s");
+        // It stayed busy: one core's worth, not less.
+        assert!(cpu > 0.9 * wall, "{cpu} s of CPU in {wall} s");
+    }
+
     /// A slow shared master link bounds the frame: results can come no
     /// faster than their bytes through it.
     #[test]
