@@ -39,9 +39,9 @@ pub(crate) struct SubmitArgs {
     /// (where each frame's time went) and stats.json; created if missing.
     #[arg(short, long)]
     output: PathBuf,
-    /// The frames' format: png (8-bit sRGB, the job's [output] exposure) or
-    /// exr (OpenEXR, linear cd/m², RGB and Y; with --aux also the reflected
-    /// and transmitted layers).
+    /// The frames' format: png (8-bit sRGB, at the exposure of the job's
+    /// output section) or exr (OpenEXR, linear cd/m², RGB and Y; with --aux
+    /// also the reflected and transmitted layers).
     #[arg(long, default_value = "png", value_parser = parse_frame_format)]
     format: vtfarm_render::output::ImageFormat,
     /// Follow job JOB that the master already has (submitted from another

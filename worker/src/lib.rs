@@ -4,7 +4,7 @@
 //!
 //! - [`engine`]: computing, no network: scene cache, renderer, packages.
 //! - [`session`]: the worker's side of the protocol, a sans-IO state machine.
-//! - [`serve`]: the async driver of a session over any `Link`.
+//! - [`serve()`]: the async driver of a session over any `Link`.
 //! - `priority`: the later stages of the view's frames at a lower priority.
 //! - [`client`]: QUIC: connect, handshake, reconnect with backoff.
 

@@ -2,7 +2,7 @@
 //! [`WorkerSession`]s on a virtual clock. It routes the core's `Output`s and
 //! the sessions' tasks and messages exactly as the real drivers do, hands
 //! the work to a [`CostModel`], holds each message on the links for its
-//! modelled time ([`Farm::transfer`]) and shares each machine's cores among
+//! modelled time (`Farm::transfer`) and shares each machine's cores among
 //! its running CPU jobs. Fault knobs (kills, partitions, duplicated results,
 //! draining, master restarts, submitter loss) act on the same loop.
 

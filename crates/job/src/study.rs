@@ -172,7 +172,7 @@ pub struct MetricsSpec {
 }
 
 /// A setting with where it comes from: the study's `<key>_source`, or
-/// "set in <study file>" when only the value is given.
+/// "set in `<study file>`" when only the value is given.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sourced {
     pub value: f32,

@@ -5,7 +5,7 @@
 //!
 //! The default scene's nodes (or every root node when the file names no
 //! scene) are walked with their transforms, so a mesh used by several nodes
-//! is instanced once per node. Each node with a mesh becomes an [`Object`]
+//! is instanced once per node. Each node with a mesh becomes an [`Object`](crate::Object)
 //! named after the node, or after its mesh when the node has no name (nodes
 //! that share a name share the object, as OBJ groups do); the mesh's name
 //! hidden by a node's stays a second name of the object
