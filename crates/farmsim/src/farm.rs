@@ -88,7 +88,7 @@ pub struct MasterCosts {
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
     /// Per finished split frame, beside the driver: the image for the wire,
-    /// its part spread over the master's cores (`WireImage::encode_reusing`
+    /// its part spread over the master's cores (`Image::to_srgb8_into`
     /// converts to sRGB on all)...
     pub frame_out: f64,
     /// ... and then its part on one thread (zstd).

@@ -10,13 +10,6 @@ use vtfarm_vertex::{Components, FrameImage};
 use super::planes::{byte_planes, compress, decompress, pixel_planes_into};
 use super::{WireError, finite3, out_of_range};
 
-/// Pixels per task of a finished frame's sRGB conversion, which
-/// [`WireImage::encode_reusing`] spreads over every core: it is most of
-/// the master's serial work after a split frame's last result (at 1080p
-/// 15 ms of one thread's 17, zstd the rest). Per pixel, so any cut gives
-/// the same bytes; 32 tasks at 1080p.
-const SRGB_TASK_PIXELS: usize = 1 << 16;
-
 /// How a [`WireImage`] codes its pixels: what the job's outputs need
 /// (`WireJob::image`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -76,14 +69,8 @@ impl WireImage {
     ) -> Self {
         match format {
             WireImageFormat::LinearF32 => pixel_planes_into(&image.pixels, scratch),
-            WireImageFormat::Srgb8 => {
-                use rayon::prelude::*;
-                scratch.clear();
-                scratch.resize(3 * image.pixels.len(), 0);
-                (scratch.par_chunks_mut(3 * SRGB_TASK_PIXELS))
-                    .zip(image.pixels.par_chunks(SRGB_TASK_PIXELS))
-                    .for_each(|(out, pixels)| vtfarm_imaging::srgb8_into(pixels, out));
-            }
+            // On every core of the calling pool (`Image::to_srgb8_into`).
+            WireImageFormat::Srgb8 => image.to_srgb8_into(scratch),
         }
         WireImage {
             width: image.width,
@@ -328,7 +315,10 @@ mod tests {
                 .map(|i| Vec3::new((i % 977) as f32 / 500.0, (i % 13) as f32 * 0.1, 0.3))
                 .collect(),
         };
-        assert!(image.pixels.len() > 2 * SRGB_TASK_PIXELS, "several tasks");
+        assert!(
+            image.pixels.len() > 2 * vtfarm_imaging::SRGB_TASK_PIXELS,
+            "several tasks"
+        );
         let pool = |threads| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
