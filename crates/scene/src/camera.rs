@@ -200,6 +200,16 @@ impl Projector {
         self.ray_direction(x as f32 + 0.5, y as f32 + 0.5)
     }
 
+    /// The direction through the centre of pixel (`x`, `y`), scaled to a
+    /// unit step along the view axis: the point seen there at view depth
+    /// `d` is `eye + d × this`. No square root or division, for passes over
+    /// many pixels that only need the points.
+    pub fn pixel_depth_step(&self, x: u32, y: u32) -> Vec3 {
+        let cx = (x as f32 + 0.5 - self.half_w) * self.pixel;
+        let cy = (self.half_h - (y as f32 + 0.5)) * self.pixel;
+        self.forward + self.right * cx + self.up * cy
+    }
+
     /// See [`Camera::project`].
     pub fn project(&self, p: Vec3) -> Option<ScreenPoint> {
         let d = p - self.eye;
@@ -237,6 +247,19 @@ mod tests {
         for (x, y) in [(0, 0), (63, 47), (10, 30), (32, 24)] {
             let p = cam.eye + cam.pixel_ray(x, y) * 3.7;
             let s = cam.project(p).unwrap();
+            assert!((s.x - (x as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
+            assert!((s.y - (y as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
+        }
+    }
+
+    #[test]
+    fn a_pixel_depth_step_reaches_the_point_at_that_view_depth() {
+        let cam = camera();
+        let projector = Projector::new(&cam);
+        for (x, y) in [(0, 0), (63, 47), (10, 30), (32, 24)] {
+            let p = cam.eye + projector.pixel_depth_step(x, y) * 3.7;
+            let s = cam.project(p).unwrap();
+            assert!((s.depth - 3.7).abs() < 1e-5, "{x} {y} {s:?}");
             assert!((s.x - (x as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
             assert!((s.y - (y as f32 + 0.5)).abs() < 1e-3, "{x} {y} {s:?}");
         }

@@ -418,14 +418,16 @@ impl GlassTerms {
         cache: &ShadowCache,
     ) -> (GlassTerms, u64) {
         let scene = tracer.bvh.scene();
+        let glass_triangle = |t: TriangleId| is_reflector[t as usize] && see_through(scene, t);
         let glass_pixel = |x: u32, y: u32| {
             let t = ids.triangle_at(x, y);
-            t != NONE && is_reflector[t as usize] && see_through(scene, t)
+            t != NONE && glass_triangle(t)
         };
         if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
             return (GlassTerms::Nothing, 0);
         }
-        let shadows = ShadowMaps::for_frame(tracer, camera, behind, bounds, &glass_pixel, cache);
+        let shadows =
+            ShadowMaps::for_frame(tracer, camera, ids, behind, bounds, &glass_triangle, cache);
         let view = View {
             projector: Projector::new(camera),
             forward: camera.basis().0,
@@ -845,19 +847,26 @@ impl ShadowMaps {
     fn for_frame(
         tracer: &Tracer<'_>,
         camera: &Camera,
+        ids: &IdBuffer,
         behind: &IdBuffer,
         bounds: PixelRect,
-        glass_pixel: &(dyn Fn(u32, u32) -> bool + Sync),
+        glass_triangle: &dyn Fn(TriangleId) -> bool,
         cache: &ShadowCache,
     ) -> Arc<ShadowMaps> {
-        // The opaque points behind the glass, bounded by a box.
+        // The opaque points behind the glass, bounded by a box. A pass
+        // over every pixel of the reflectors' bounds on every frame: each
+        // triangle's test is made once per run of its pixels, and the
+        // points need no unit rays.
         let projector = Projector::new(camera);
-        let forward = camera.basis().0;
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut last = (NONE, false);
         for (x, y) in bounds.pixels() {
-            if glass_pixel(x, y) && behind.triangle_at(x, y) != NONE {
-                let d = projector.pixel_ray(x, y);
-                let p = camera.eye + d * (behind.depth_at(x, y) / d.dot(forward));
+            let t = ids.triangle_at(x, y);
+            if t != last.0 {
+                last = (t, t != NONE && glass_triangle(t));
+            }
+            if last.1 && behind.triangle_at(x, y) != NONE {
+                let p = camera.eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
                 lo = lo.min(p);
                 hi = hi.max(p);
             }
