@@ -99,7 +99,7 @@ for r in runs:
         r[key + "efficiency"] = r[rate] / sum(p[rate] for p in parts) if all(parts) else None
 job = runs[0]["job"]
 print(f"emulated separate hosts: cockpit detail {job['detail']:g}, {job['width']}x{job['height']}, full, "
-      f"{job['frames']} frames, figures from arrival {job['frames'] // 2 - 1} to the last (each window from the end of that arrival's bunch, lab.sh); "
+      f"{job['frames']} frames, frames per second from completion {job['frames'] // 2 - 1} at the master to the last (lab.sh); "
       f"{runs[0]['cores']} cores; load average {load_before} before, {load_after} after ({date})")
 print("workers on one core under CPU quotas (10 ms period), the master and the submitter pinned to the other(s); "
       "predicted: vtfarm bench simulate --worker-speed (quota / 100) --master-threads (their cores)")

@@ -16,7 +16,7 @@
 #
 # Runs one job, prints the frames per second over the second half of the
 # frames (the first half holds the start-up and a burst of pipelined
-# frames), result bytes and each process's CPU per frame next to the
+# frames), timed by their completion at the master, result bytes and each process's CPU per frame next to the
 # simulator's prediction (`vtfarm bench simulate` with the same workers,
 # speeds, links and job), and removes everything it created. Without root
 # (namespaces) it prints why and exits 0. Addresses are 10.77.x.y inside
@@ -236,7 +236,10 @@ for _ in $(seq 1 100); do
 done
 [ "$n" -ge "$workers" ] || { echo "workers did not join" >&2; cat "$work"/w1.log "$work/master.log" >&2; exit 1; }
 # The figures: the second half of the frames, over the time from the
-# arrival that completes the first half (the end of its bunch: steady_window.py) to the last.
+# completion at the master that ends the first half to the last
+# (steady_window.py: arrivals bunch behind a slow worker's frames, the
+# completions do not); CPU over the arrivals from the end of the bunch that
+# holds the same arrival.
 measure_from=$((frames / 2 - 1))
 measured_submit "$work/out" "$work/submit.log" "$frames" "${pids[@]}" -- \
   "${pin_master[@]}" "${in_master[@]}" "$bin" submit "$work/job.toml" --cluster "$cluster" -o "$work/out"
@@ -248,32 +251,36 @@ pids=()
 others=$job_others; [ "$others" = nan ] && others=0
 [ ${#percents[@]} -gt 0 ] || sim+=(--background-cores "$others")
 timeout 1800 "$bin" "${sim[@]}" >"$work/sim.log" 2>&1 || { cat "$work/sim.log" >&2; die 1 "the prediction (vtfarm ${sim[*]}) failed"; }
-read -r measured _ sent _ <<<"$(frame_figures "$work/out/stats.json" "$job_from")"
+read -r _ _ sent _ <<<"$(frame_figures "$work/out/stats.json" "$job_from")"
 
 if [ ${#percents[@]} -gt 0 ]; then
   layout="each worker a one-thread process held to its share of core $worker_cpu by a CPU quota (cgroup $quota_version, ${cpu_period_us} us period): $(join "${percents[@]}") %; the master and the submitter on core(s) $master_cpus"
 else
   layout="all on this machine's $cores cores, not pinned"
 fi
-python3 - "$work/sim.json" "$job_from" "$frames" "$measured" "$sent" "$job_cpu" "$others" \
+python3 - "$work/sim.json" "$job_from" "$frames" "$measure_from" "$work/out/stats.json" "$sent" "$job_cpu" "$others" \
   "$(join "${percents[@]}")" "$(join "${mbits[@]}")" "${master_mbit:-}" "$($localhost && echo localhost || echo tbf)" \
   "$cores" "$(cut -d' ' -f1-3 /proc/loadavg)" "$json" "$workers" "$width" "$height" "$detail" "$(join "${throttled[@]}")" \
   "lab: $workers workers, $(links_text); $layout; other processes used $others cores meanwhile" \
   "$farm_scripts" <<'PY'
 import json, math, sys
-(sim_path, start, frames, measured, sent, cpu, others, percents, mbits, master_mbit, links,
+(sim_path, start, frames, measure_from, stats_path, sent, cpu, others, percents, mbits, master_mbit, links,
  cores, load, out, workers, width, height, detail, throttled, headline, scripts) = sys.argv[1:]
 sys.path.insert(0, scripts)
-from steady_window import bunch_end
-start, frames, measured, sent = int(start), int(frames), float(measured), float(sent)
+from steady_window import bunch_end, completions, seconds_per_frame
+start, frames, measure_from, sent = int(start), int(frames), int(measure_from), float(sent)
 row = [r for r in json.load(open(sim_path)) if not r["heterogeneous"]][-1]
+completed = completions(json.load(open(stats_path)))
+if len(completed) != frames:
+    sys.exit(f"lab: {stats_path} holds {len(completed)} frames of {frames}")
+measured = seconds_per_frame(completed, measure_from)
+predicted = seconds_per_frame(sorted(row["completed_seconds_per_frame"]), measure_from)
 # The frames in the order they were delivered, as the measured ones.
 order = sorted(range(len(row["done_seconds_per_frame"])), key=lambda i: row["done_seconds_per_frame"][i])
 done = [row["done_seconds_per_frame"][i] for i in order]
-# The predicted frames bunch in their own way: their window starts at the
-# end of the bunch that holds the measured window's start.
+# The predicted frames bunch in their own way: their CPU window starts at
+# the end of the bunch that holds the measured one's start.
 pstart = bunch_end(done, start)
-predicted = (done[-1] - done[pstart]) / max(frames - 1 - pstart, 1)
 # CPU per frame over the same frames; a simulated worker's CPU is on its
 # own machine at its speed: times the speed, the CPU the same work takes here.
 at = [row["cpu_at_delivery"][i] for i in order]
@@ -289,7 +296,7 @@ report = {
     "master_mbit": float(master_mbit) if master_mbit else None,
     "job": {"scene": "cockpit", "detail": float(detail), "width": int(width), "height": int(height),
             "quality": "full", "frames": frames},
-    "measured_from_arrival": start, "predicted_from_arrival": pstart, "cores": int(cores), "load_average": load, "others_cores": float(others),
+    "measured_from_completion": measure_from, "measured_from_arrival": start, "predicted_from_arrival": pstart, "cores": int(cores), "load_average": load, "others_cores": float(others),
     "frame_seconds": measured, "predicted_frame_seconds": predicted,
     "frames_per_second": fps(measured), "predicted_frames_per_second": fps(predicted),
     "measured_over_predicted": fps(measured) / fps(predicted),
@@ -304,14 +311,14 @@ report = {
     "predicted_cpu_per_frame": {"master": simulated[0], "submitter": simulated[1], "workers": simulated[2:]},
 }
 print(headline)
-print(f"  frames per second over the second half (after arrival {start}, predicted after {pstart}, each the end of a bunch): measured {fps(measured):.3f} ({measured:.3f} s per frame), "
+print(f"  frames per second over the second half (completions at the master from the {measure_from}th on): measured {fps(measured):.3f} ({measured:.3f} s per frame), "
       f"predicted {fps(predicted):.3f} ({predicted:.3f} s); measured/predicted {report['measured_over_predicted']:.2f}")
 if master_mbit:
     print(f"  results per frame: {sent:.3f} MB ({sent * 8 / float(master_mbit):.3f} s of the master link)")
 else:
     print(f"  results per frame: {sent:.3f} MB")
 w = lambda c: " + ".join(f"{x:.3f}" for x in c)
-print(f"  CPU per frame: master {measured_cpu[0]:.3f} s, submitter {measured_cpu[1]:.3f} s, workers {w(measured_cpu[2:])} s")
+print(f"  CPU per frame (after arrival {start}, predicted after {pstart}, each the end of a bunch): master {measured_cpu[0]:.3f} s, submitter {measured_cpu[1]:.3f} s, workers {w(measured_cpu[2:])} s")
 print(f"     simulated:  master {simulated[0]:.3f} s, submitter {simulated[1]:.3f} s, workers {w(simulated[2:])} s")
 if percents:
     use = ", ".join(f"{u * 100:.0f}%" for u in report["quota_used"])

@@ -541,3 +541,49 @@ fn the_steady_window_starts_at_the_end_of_a_bunch() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(text(&out.stdout), "3\n6\n1\n");
 }
+
+/// A farm of a fast and a slow worker: the fast worker's frames wait for
+/// the slow one's and arrive in a bunch, but their completions at the
+/// master (arrival less the held time: the wall less the workers' phases'
+/// span) keep their own pace, and the steady window's rate is taken over
+/// those. A frame without worker phases counts at its arrival.
+#[test]
+fn the_steady_rate_is_timed_by_completions_not_bunched_arrivals() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = |arrival: u64, wall: u64, span: (u64, u64)| {
+        format!(
+            r#"{{"arrival_micros": {arrival}, "wall_micros": {wall}, "phases": [
+                {{"who": "master", "kind": "base", "start_micros": 0, "end_micros": 0}},
+                {{"who": "w1", "kind": "setup", "start_micros": {}, "end_micros": {}}},
+                {{"who": "w1", "kind": "package", "start_micros": {}, "end_micros": {}}}]}}"#,
+            span.0,
+            span.0 + 1000,
+            span.0 + 1000,
+            span.1
+        )
+    };
+    // Frame 0 by the slow worker (3 s), frames 1 and 2 by the fast one
+    // (1 s each, done at 1 s and 2 s, held until 3 s); frame 3 resumed.
+    let frames = [
+        frame(3_000_000, 3_000_000, (0, 3_000_000)),
+        frame(3_000_100, 3_000_100, (0, 1_000_000)),
+        frame(3_000_200, 2_000_200, (1_000_000, 2_000_000)),
+        r#"{"arrival_micros": 4000000, "wall_micros": 0, "phases": []}"#.to_owned(),
+    ];
+    let stats = dir.path().join("stats.json");
+    std::fs::write(&stats, format!("[{}]", frames.join(","))).unwrap();
+    let out = Command::new("timeout")
+        .args([SCRIPT_LIMIT_SECONDS, "python3", "-c"])
+        .arg(
+            "import json, sys; sys.path.insert(0, sys.argv[1]); \
+             from steady_window import completions, seconds_per_frame; \
+             t = completions(json.load(open(sys.argv[2]))); \
+             print(' '.join(f'{x:.1f}' for x in t)); print(f'{seconds_per_frame(t, 1):.2f}')",
+        )
+        .arg(script(""))
+        .arg(&stats)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "1.0 2.0 3.0 4.0\n1.00\n");
+}

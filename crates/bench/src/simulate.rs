@@ -670,6 +670,12 @@ struct Row {
     /// any window of frames beside a real run's arrivals: `scripts/lab.sh`
     /// takes the second half).
     done_seconds_per_frame: Vec<f64>,
+    /// Per frame: when its last result reached the master, seconds from the
+    /// job's start (`FarmFrame::completed_at`: frames leave in order, so on
+    /// a farm of unequal workers deliveries bunch; these do not, and
+    /// `scripts/lab.sh` measures its rates over them, as the master's
+    /// "frame complete" log lines of a real run).
+    completed_seconds_per_frame: Vec<f64>,
     /// Per frame: the CPU seconds each process had used by its delivery
     /// (the master, each worker, the submitter; see `FarmFrame::cpu`). A
     /// worker's CPU is on its own machine: at speed 0.45, 1 / 0.45 of the
@@ -758,6 +764,9 @@ impl Row {
                 .map(|f| f.done_at.saturating_sub(f.started_at).as_secs_f64())
                 .collect(),
             done_seconds_per_frame: frames.iter().map(|f| f.done_at.as_secs_f64()).collect(),
+            completed_seconds_per_frame: (frames.iter())
+                .map(|f| f.completed_at.as_secs_f64())
+                .collect(),
             cpu_at_delivery: frames.iter().map(|f| f.cpu.clone()).collect(),
             packages: last.packages,
             duplicates: last.duplicates,
@@ -1451,6 +1460,12 @@ mod tests {
         assert_eq!(done.len(), 4);
         let done: Vec<f64> = done.iter().map(|d| d.as_f64().unwrap()).collect();
         assert!(done.windows(2).all(|w| w[0] <= w[1]), "{done:?}");
+        let completed = row["completed_seconds_per_frame"].as_array().unwrap();
+        assert_eq!(completed.len(), 4);
+        assert!(
+            (completed.iter().zip(&done)).all(|(c, d)| c.as_f64().unwrap() <= *d),
+            "{completed:?} {done:?}"
+        );
         let cpu = row["cpu_at_delivery"].as_array().unwrap();
         assert_eq!(cpu.len(), 4);
         // The master, two workers, the submitter.

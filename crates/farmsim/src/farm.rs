@@ -159,6 +159,10 @@ pub struct Delivery {
     pub started_at: Duration,
     /// When the master's driver sent it.
     pub done_at: Duration,
+    /// When its last result reached the master's driver (`done_at` when
+    /// none came: a replayed frame): frames are sent in order, so one
+    /// finished early may wait after this for those before it.
+    pub completed_at: Duration,
     /// CPU seconds the other work had got by then.
     pub background_cpu: f64,
     /// CPU seconds each process had used by then: the master (driver, base
@@ -373,6 +377,8 @@ pub struct Farm<M: CostModel> {
     package_frames: HashMap<u64, (u64, u32)>,
     /// When each frame was first announced (until its delivery).
     frame_started: BTreeMap<(u64, u32), Duration>,
+    /// When each frame's latest result reached the driver (until its delivery).
+    frame_last_result: BTreeMap<(u64, u32), Duration>,
     /// CPU seconds the other work on the shared machine has got so far.
     background_cpu: f64,
     /// CPU seconds used so far: the master's, the submitter's.
@@ -427,6 +433,7 @@ impl<M: CostModel> Farm<M> {
             held_items: BTreeMap::new(),
             package_frames: HashMap::new(),
             frame_started: BTreeMap::new(),
+            frame_last_result: BTreeMap::new(),
             background_cpu: 0.0,
             master_cpu: 0.0,
             submitter_cpu: 0.0,
@@ -925,6 +932,7 @@ impl<M: CostModel> Farm<M> {
                     };
                     seconds += costs.result_per_item * items as f64;
                     if let Some(key) = self.package_frames.remove(&result.id) {
+                        self.frame_last_result.insert(key, self.now);
                         if self.base_pending.contains(&key) {
                             *self.held_items.entry(key).or_default() += items;
                         }
@@ -1086,6 +1094,7 @@ impl<M: CostModel> Farm<M> {
             Message::FrameDone(done) => {
                 let key = (done.job, done.frame);
                 let started_at = self.frame_started.remove(&key);
+                let completed_at = self.frame_last_result.remove(&key);
                 let mut cpu = vec![self.master_cpu];
                 cpu.extend(&self.worker_cpu);
                 cpu.push(self.submitter_cpu);
@@ -1093,6 +1102,7 @@ impl<M: CostModel> Farm<M> {
                     index: done.frame,
                     started_at: started_at.unwrap_or(self.now),
                     done_at: self.now,
+                    completed_at: completed_at.unwrap_or(self.now),
                     background_cpu: self.background_cpu,
                     cpu,
                     stats: done.stats.clone(),

@@ -95,6 +95,11 @@ pub struct FarmFrame {
     pub started_at: Duration,
     /// When the master's driver sent it.
     pub done_at: Duration,
+    /// When its last result reached the master ([`Delivery::completed_at`]):
+    /// unlike `done_at`, never held back by the frames before it.
+    ///
+    /// [`Delivery::completed_at`]: crate::farm::Delivery::completed_at
+    pub completed_at: Duration,
     /// Load imbalance over the frame's lifetime (`started_at` to
     /// `done_at`): `(max − mean) / mean` of every worker's time spent on
     /// packages in that window, whichever frame they belonged to (with
@@ -360,6 +365,7 @@ fn run_farm(
         .map(|d| FarmFrame {
             started_at: d.started_at,
             done_at: d.done_at,
+            completed_at: d.completed_at,
             imbalance: 0.0,
             share_after_first_delivery: 0.0,
             index: d.index,
@@ -1010,6 +1016,32 @@ mod tests {
             cpu[1] > n * (work + costs.worker_setup) + 7.0 * split * 0.99,
             "{cpu:?}"
         );
+    }
+
+    /// Frames go out in order, so on a farm of a fast and a slow worker
+    /// the fast one's whole frames wait for the slow one's and leave in a
+    /// bunch; `completed_at` is when each one's work was done: never after
+    /// its delivery, and for the held frames well before it (what a steady
+    /// rate is measured over: scripts/lab.sh).
+    #[test]
+    fn a_held_frame_completes_before_its_delivery() {
+        let (job, costs) = small_farm(0.02, 0.05);
+        let whole = SimulationConfig {
+            rules: FarmRules::default(),
+            ..config(12)
+        };
+        let mut farm = workers(2);
+        farm[1].speed = 0.2;
+        let frames = simulate_farm(&job, &costs, &whole, &farm).unwrap();
+        let work: f64 = costs.seconds.iter().sum();
+        assert!(frames.iter().all(|f| f.completed_at <= f.done_at));
+        let held = (frames.iter())
+            .filter(|f| (f.done_at - f.completed_at).as_secs_f64() > work)
+            .count();
+        assert!(held >= 2, "{held} frames held for a slower one");
+        let mut completed: Vec<Duration> = frames.iter().map(|f| f.completed_at).collect();
+        completed.sort();
+        assert_ne!(completed, frame_times(&frames), "no frame was held");
     }
 
     #[test]
