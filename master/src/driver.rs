@@ -42,7 +42,7 @@ enum Input {
     BaseFrame {
         job: u64,
         frame: u32,
-        base: (vtfarm_imaging::Image, vtfarm_raster::IdBuffer),
+        base: vtfarm_master_core::BaseFrame,
     },
     /// A finished frame encoded on the blocking pool.
     FrameEncoded(Box<EncodedFrame>),

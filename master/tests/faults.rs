@@ -19,7 +19,7 @@ use vtfarm_master::FarmRules;
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{FrameStats, Message, SceneData};
+use vtfarm_proto::{FrameStats, Message, SceneData, WireImage, WireImageFormat};
 use vtfarm_render::Renderer;
 
 /// Virtual time a scenario may take at most.
@@ -401,6 +401,66 @@ fn tail_frames_on_base_frames_made_ahead_stay_byte_identical() {
         .map(|d| d.frame)
         .collect();
     assert!(split.contains(&4), "the last frame split: {split:?}");
+}
+
+/// The finished frames of a job whose frames go out in 8-bit sRGB, after
+/// checking every image's wire bytes against the single-process render's
+/// encoded whole (the master converts each base frame ahead and only the
+/// pixels results wrote after: the same bytes, compressed the same way).
+fn check_srgb_images(pair: &Pair, job: &Job) {
+    assert_eq!(pair.job_failed(), None);
+    let done = pair.frames_done();
+    assert_eq!(done.len(), job.frames.len());
+    for ((done, pixels), setup) in done.iter().zip(job.reference()).zip(&job.frames) {
+        let reference = vtfarm_imaging::Image {
+            width: setup.camera.width,
+            height: setup.camera.height,
+            pixels,
+        };
+        assert_eq!(done.image.format, WireImageFormat::Srgb8);
+        assert!(
+            done.image == WireImage::encode(&reference, WireImageFormat::Srgb8),
+            "frame {}: bytes differ from the single-process render's",
+            done.frame
+        );
+    }
+}
+
+/// A job in 8-bit sRGB (what `vtfarm submit` asks): split frames on one
+/// and three workers, their base frames converted ahead into the buffers
+/// of earlier frames (whose bytes differ: another eye), and a batch job's
+/// tail on base frames made ahead, all give the single-process render's
+/// bytes.
+#[test]
+fn srgb_frames_on_bases_converted_ahead_stay_byte_identical() {
+    let job = Job::new(4);
+    for workers in [1, 3] {
+        let mut pair = Pair::new(split_frames());
+        for w in 0..workers {
+            pair.add_worker(&format!("w{w}"), 1.0);
+        }
+        let (mut wire, data) = job.wire();
+        wire.image = WireImageFormat::Srgb8;
+        pair.submit(wire, data);
+        pair.drive(BOUND, all_frames(4));
+        assert!(
+            pair.bases_in_reused_buffers >= 2,
+            "{workers} worker(s): {} base frames in reused buffers",
+            pair.bases_in_reused_buffers
+        );
+        check_srgb_images(&pair, &job);
+    }
+    let job = Job::new(5);
+    let mut pair = Pair::new(FarmRules::default());
+    pair.add_worker("a", 1.0);
+    pair.add_worker("b", 1.0);
+    let (mut wire, data) = job.wire();
+    wire.image = WireImageFormat::Srgb8;
+    pair.submit(wire, data);
+    pair.drive(BOUND, all_frames(5));
+    let id = pair.job_id().expect("submitted");
+    assert_eq!(pair.base_frames, [(id, 3), (id, 4)], "made ahead");
+    check_srgb_images(&pair, &job);
 }
 
 /// Batch work runs in whole frames (each finished on its worker) and its

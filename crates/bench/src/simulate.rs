@@ -55,7 +55,7 @@ use vtfarm_farmsim::{
     background_threads_for, cpu_per_frame, simulate_farm, steady_background_cores,
     steady_frame_seconds,
 };
-use vtfarm_vertex::{Frame, PackageOptions, Quality, SparseBitmap, trace_package};
+use vtfarm_vertex::{Frame, PackageOptions, PixelRect, Quality, SparseBitmap, trace_package};
 
 use super::{CockpitJob, write_json};
 
@@ -198,12 +198,18 @@ pub(super) struct Recording {
     pub(super) sun_only_setup_seconds: f64,
     /// The master's checking and compositing of a frame's results, one thread.
     pub(super) composite_seconds: f64,
-    /// The master per finished frame: the image for the wire
-    /// (`WireImage::encode`), one thread's CPU: its sRGB conversion (on
-    /// every core in the master)...
+    /// The master per frame: the image for the wire (`WireImage::encode`),
+    /// one thread's CPU: its sRGB conversion, all of it (on every core in
+    /// the master, with the base frame of a split frame)...
     pub(super) frame_out_seconds: f64,
+    /// ... that of the rectangle a split frame's results write
+    /// ([`Recording::written`]), per finished split frame (on every core)...
+    pub(super) frame_out_written_seconds: f64,
     /// ... and its compression (one thread).
     pub(super) frame_out_serial_seconds: f64,
+    /// The rectangle a split frame's results write, as the master tracks
+    /// it: the union of the recorded results' rectangles.
+    pub(super) written: PixelRect,
     /// The master's driver per finished frame once encoded: the
     /// `FrameDone`'s bytes and the telemetry's copy.
     pub(super) frame_sent_seconds: f64,
@@ -472,15 +478,24 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         samples[i] = k;
         pixels[i] = p;
     }
+    let written = (bitmaps.iter()).fold(PixelRect::EMPTY, |written, (_, b)| {
+        written.union(PixelRect {
+            x0: b.x0,
+            y0: b.y0,
+            x1: b.x0 + b.width,
+            y1: b.y0 + b.height,
+        })
+    });
     let composite_seconds = composite_time(&renderer, job, &triangles, bitmaps)?;
     let FrameOut {
         convert_seconds: frame_out_seconds,
+        convert_written_seconds: frame_out_written_seconds,
         compress_seconds: frame_out_serial_seconds,
         sent_seconds: frame_sent_seconds,
         journal_seconds,
         submitter_seconds,
         frame_bytes,
-    } = frame_out_time(&renderer, job)?;
+    } = frame_out_time(&renderer, job, written)?;
     let empty_result_bytes = result_message_bytes(
         WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color),
         WirePackageStats::default(),
@@ -500,7 +515,9 @@ pub(super) fn record(job: &CockpitJob, threads: usize, repeats: usize) -> Result
         sun_only_setup_seconds,
         composite_seconds,
         frame_out_seconds,
+        frame_out_written_seconds,
         frame_out_serial_seconds,
+        written,
         frame_sent_seconds,
         frame_bytes,
         journal_seconds,
@@ -516,6 +533,9 @@ struct FrameOut {
     /// The frame's image for the wire, on one thread: the sRGB
     /// conversion...
     convert_seconds: f64,
+    /// ... that of the written rectangle only, into the base frame's
+    /// bytes converted ahead (`vtfarm_master_core`'s split frames)...
+    convert_written_seconds: f64,
     /// ... and the rest of `WireImage::encode` (zstd).
     compress_seconds: f64,
     /// The `FrameDone` encoded for the submitter and the telemetry's copy.
@@ -529,8 +549,8 @@ struct FrameOut {
     frame_bytes: u64,
 }
 
-/// [`FrameOut`] of the job's frame.
-fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<FrameOut> {
+/// [`FrameOut`] of the job's frame, its results written within `written`.
+fn frame_out_time(renderer: &Renderer, job: &CockpitJob, written: PixelRect) -> Result<FrameOut> {
     // The encoding's tasks on this thread, the timed one: a pool of its
     // own thread would spin beside the parts timed after it (the
     // submitter's read 0.005 s for 0.003 s on this 2-thread machine).
@@ -546,26 +566,37 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<FrameOut> {
     std::fs::create_dir_all(dir.path().join("jobs").join(format!("{:012}", 1)))?;
     let [
         mut converted,
+        mut converted_written,
         mut encoded,
         mut sent,
         mut journaled,
         mut submitted,
-    ] = [f64::INFINITY; 5];
+    ] = [f64::INFINITY; 6];
     let mut srgb = Vec::new();
     let mut frame_bytes = 0;
     let mut kept = Vec::with_capacity(FIXED_COST_RUNS);
     // As `vtfarm submit` asks for it (it writes only PNGs).
     let format = WireImageFormat::Srgb8;
+    let (columns, rows) = (written.x0..written.x1, written.y0..written.y1);
     for _ in 0..FIXED_COST_RUNS {
-        let (convert, encode, image) = pool.install(|| {
+        let (convert, convert_written, encode, image) = pool.install(|| {
             let clock = CpuStopwatch::start();
             base.to_srgb8_into(&mut srgb);
             let convert = clock.elapsed().as_secs_f64();
             let clock = CpuStopwatch::start();
+            base.to_srgb8_region_into(&mut srgb, columns.clone(), rows.clone());
+            let convert_written = clock.elapsed().as_secs_f64();
+            let clock = CpuStopwatch::start();
             let image = WireImage::encode(&base, format);
-            (convert, clock.elapsed().as_secs_f64(), image)
+            (
+                convert,
+                convert_written,
+                clock.elapsed().as_secs_f64(),
+                image,
+            )
         });
         converted = converted.min(convert);
+        converted_written = converted_written.min(convert_written);
         encoded = encoded.min(encode);
         let clock = CpuStopwatch::start();
         let done = FrameDone {
@@ -597,6 +628,7 @@ fn frame_out_time(renderer: &Renderer, job: &CockpitJob) -> Result<FrameOut> {
     }
     Ok(FrameOut {
         convert_seconds: converted.min(encoded),
+        convert_written_seconds: converted_written.min(converted),
         compress_seconds: (encoded - converted).max(0.0),
         sent_seconds: sent,
         journal_seconds: journaled,
@@ -966,6 +998,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
         recording.scene_prepare_seconds = 0.0;
         recording.composite_seconds = 0.0;
         recording.frame_out_seconds = 0.0;
+        recording.frame_out_written_seconds = 0.0;
         recording.frame_out_serial_seconds = 0.0;
         recording.frame_sent_seconds = 0.0;
         recording.journal_seconds = 0.0;
@@ -995,6 +1028,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
             // Compositing does not grow with the work per pixel: not scaled.
             result_per_item: recording.composite_seconds / n,
             frame_out: recording.frame_out_seconds,
+            frame_out_written: recording.frame_out_written_seconds,
             frame_out_serial: recording.frame_out_serial_seconds,
             frame_sent: recording.frame_sent_seconds,
             journal: recording.journal_seconds,
@@ -1126,13 +1160,14 @@ fn print_report(
         rec.empty_result_bytes
     );
     println!(
-        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s (overlaps the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (sRGB, on every core) + {:.3} s (zstd) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
+        "  fixed costs per frame (one thread, x{}{}): master base frame {:.3} s + its sRGB {:.3} s on every core (not scaled; overlap the tracing), worker set-up {:.3} s ({:.3} s for a frame that differs from the last only in the sun; a worker's first frame of the scene {:.3} s more{}); master compositing {:.3} s, finished frame out {:.3} s (sRGB of the {}x{} pixels results write, on every core) + {:.3} s (zstd) + {:.3} s sent and journal {:.3} s, submitter {:.3} s (not scaled); per package beside its triangles {:.2} ms; per-triangle tracing {:.3} s wall ({} passes, least CPU time kept); all CPU time",
         args.fixed_cost_scale,
         match &args.fixed_costs {
             Some(path) => format!(", base and set-up from {}", path.display()),
             None => String::new(),
         },
         rec.base_frame_seconds * args.fixed_cost_scale,
+        rec.frame_out_seconds,
         rec.worker_setup_seconds * args.fixed_cost_scale,
         rec.sun_only_setup_seconds * args.fixed_cost_scale,
         rec.scene_prepare_seconds * args.fixed_cost_scale,
@@ -1142,7 +1177,9 @@ fn print_report(
             ""
         },
         rec.composite_seconds,
-        rec.frame_out_seconds,
+        rec.frame_out_written_seconds,
+        rec.written.x1.saturating_sub(rec.written.x0),
+        rec.written.y1.saturating_sub(rec.written.y0),
         rec.frame_out_serial_seconds,
         rec.frame_sent_seconds,
         rec.journal_seconds,
@@ -1230,10 +1267,11 @@ fn print_report(
     }
     // The master's own work per frame: a whole frame costs its driver only
     // the forwarding and its journal thread the record; a split frame also
-    // costs the base frame, the compositing of every result and the image
-    // for the wire.
-    let base = rec.base_frame_seconds * args.fixed_cost_scale / f64::from(master_cores);
-    let out = rec.frame_out_seconds / f64::from(master_cores.max(1))
+    // costs the base frame (with its sRGB conversion), the compositing of
+    // every result and the image for the wire (the written pixels' sRGB).
+    let base = (rec.base_frame_seconds * args.fixed_cost_scale + rec.frame_out_seconds)
+        / f64::from(master_cores.max(1));
+    let out = rec.frame_out_written_seconds / f64::from(master_cores.max(1))
         + rec.frame_out_serial_seconds
         + rec.frame_sent_seconds;
     let split = base.max(rec.composite_seconds + out);

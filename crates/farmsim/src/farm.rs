@@ -77,9 +77,13 @@ pub struct PackageWork {
 /// CPU seconds the master's machine spends, one thread each. A whole frame
 /// (batch work) costs the master none of `base_frame`, `result_per_item`
 /// and `frame_out`: its worker rasterizes, composites and encodes it (the
-/// same functions), and the driver only forwards it. A split frame's
-/// `frame_out` runs beside the driver (`Output::EncodeFrame`), as the real
-/// driver runs it on a blocking thread.
+/// same functions, the whole frame converted once), and the driver only
+/// forwards it. A split frame's `frame_out` runs beside the driver
+/// (`Output::EncodeFrame`), as the real driver runs it on a blocking
+/// thread. A job whose frames go out in sRGB has its base frames
+/// converted with their rasterizing (`BaseFrameRequest::converts_to_srgb`:
+/// `frame_out` there) and its finished split frames convert only the
+/// pixels results wrote (`frame_out_written`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MasterCosts {
     /// A split frame's base frame (spread over the master's cores: the
@@ -87,10 +91,14 @@ pub struct MasterCosts {
     pub base_frame: f64,
     /// The driver per item of a split frame's result (decode, check, composite).
     pub result_per_item: f64,
-    /// Per finished split frame, beside the driver: the image for the wire,
-    /// its part spread over the master's cores (`Image::to_srgb8_into`
-    /// converts to sRGB on all)...
+    /// A whole frame's sRGB conversion, spread over the master's cores
+    /// (`Image::to_srgb8_into` converts on all): with the base frame when
+    /// it converts it ahead, else per finished split frame, beside the
+    /// driver, its image for the wire's parallel part...
     pub frame_out: f64,
+    /// ... or that of the pixels results wrote (the reflectors' rectangle)
+    /// when the base frame came converted...
+    pub frame_out_written: f64,
     /// ... and then its part on one thread (zstd).
     pub frame_out_serial: f64,
     /// Per finished split frame, on the driver once it is encoded: the
@@ -101,6 +109,19 @@ pub struct MasterCosts {
     /// The submitter per finished frame (decode, PNG, timeline), on the
     /// master's machine.
     pub submitter: f64,
+}
+
+impl MasterCosts {
+    /// A finished split frame's sRGB conversion, the parallel part of its
+    /// encoding: only the written pixels' where its base frame came
+    /// converted.
+    fn frame_conversion(&self, request: &FrameEncodeRequest) -> f64 {
+        if request.converts_written_pixels_only() {
+            self.frame_out_written
+        } else {
+            self.frame_out
+        }
+    }
 }
 
 /// A worker's machine and link.
@@ -966,7 +987,7 @@ impl<M: CostModel> Farm<M> {
                 // The real driver encodes a view's frame for the dashboard
                 // on its task (beside the figures, not before them).
                 Output::EncodeFrame(request) if request.for_dashboard_only() => {
-                    seconds += costs.frame_out + costs.frame_out_serial;
+                    seconds += costs.frame_conversion(&request) + costs.frame_out_serial;
                     self.master.frame_encoded(self.now, request.encode());
                 }
                 output => outputs.push(output),
@@ -1032,8 +1053,9 @@ impl<M: CostModel> Farm<M> {
                 // One job on every core (the machine's other work, the
                 // driver and base frames, shares them), then one thread.
                 let costs = self.model.master_costs();
+                let conversion = costs.frame_conversion(&request);
                 let work = Work::Encode(Box::new(request), Some(costs.frame_out_serial));
-                self.start_cpu(0, self.cores[0], costs.frame_out, work);
+                self.start_cpu(0, self.cores[0], conversion, work);
             }
             Output::RasterizeBase(request) => {
                 let key = (request.job, request.frame);
@@ -1042,8 +1064,14 @@ impl<M: CostModel> Farm<M> {
                 let shares = self.cores[0];
                 self.base_left.insert(key, shares);
                 self.base_pending.insert(key);
+                let costs = self.model.master_costs();
+                let srgb = if request.converts_to_srgb() {
+                    costs.frame_out
+                } else {
+                    0.0
+                };
                 self.pending_base.insert(key, request);
-                let seconds = self.model.master_costs().base_frame / f64::from(shares);
+                let seconds = (costs.base_frame + srgb) / f64::from(shares);
                 for _ in 0..shares {
                     self.start_cpu(0, 1, seconds, Work::Base(key));
                 }

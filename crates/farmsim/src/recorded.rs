@@ -251,7 +251,10 @@ impl CostModel for Recorded<'_> {
         let costs = self.costs;
         let traced: f64 = indices.iter().map(|&i| costs.seconds[i]).sum();
         let (pixels, seconds, bytes) = match &package.whole {
-            // Finished here: the master's work on a split frame, on the worker.
+            // Finished here: the master's work on a split frame, on the
+            // worker, which converts the whole frame once, after its
+            // tracing (`vtfarm_render::Renderer::finish_frame`: its base
+            // frame is made then, so there is nothing to convert ahead).
             Some(start) => {
                 let camera = &start.setup.camera;
                 let stand_in = Image::black(camera.width, camera.height);
@@ -347,7 +350,9 @@ fn run_farm(
         reflectors: job.reflectors.clone(),
         aux: false,
         method: MethodKind::VertexTracing.into(),
-        image: WireImageFormat::LinearF32,
+        // As `vtfarm submit` asks (it writes only PNGs): what the
+        // recorded encoding costs are of.
+        image: WireImageFormat::Srgb8,
         priority: 0,
         kind: vtfarm_proto::WireJobKind::Render,
     };
@@ -633,16 +638,18 @@ mod tests {
         let traced = costs.seconds.iter().sum::<f64>() / farm.len() as f64;
         let without =
             steady_frame_seconds(&simulate_farm(&job, &costs, &config(16), &farm).unwrap());
-        costs.master.frame_out = traced / 2.0;
+        // The finished frame's part (the job is in sRGB: the whole
+        // frame's conversion went with its base frame).
+        costs.master.frame_out_written = traced / 2.0;
         let frames = simulate_farm(&job, &costs, &config(16), &farm).unwrap();
         let with = steady_frame_seconds(&frames);
         assert!(
-            with < without + 0.2 * costs.master.frame_out,
+            with < without + 0.2 * costs.master.frame_out_written,
             "{with} s per frame with {} s of encoding, {without} s without",
-            costs.master.frame_out
+            costs.master.frame_out_written
         );
         let master = frames.last().unwrap().cpu[0];
-        let encoding = frames.len() as f64 * costs.master.frame_out;
+        let encoding = frames.len() as f64 * costs.master.frame_out_written;
         assert!(
             (master - encoding).abs() < 1e-9,
             "master {master} s, encoding {encoding} s"
@@ -690,16 +697,17 @@ mod tests {
     }
 
     /// A single frame's encoding, the master's serial work after its last
-    /// result, runs its parallel part on every core of the master: on two
-    /// cores the frame is delivered half that part sooner than on one,
-    /// and its serial part takes as long on both.
+    /// result, runs its parallel part (the sRGB conversion of the pixels
+    /// results wrote) on every core of the master: on two cores the frame
+    /// is delivered half that part sooner than on one, and its serial part
+    /// takes as long on both.
     #[test]
     fn a_single_frames_encoding_spreads_over_the_masters_cores() {
         let (job, mut costs) = small_farm(0.0, 0.0);
         costs.master.frame_out_serial = 0.05;
         let latency = |parallel: f64, cores: u32| {
             let mut costs = costs.clone();
-            costs.master.frame_out = parallel;
+            costs.master.frame_out_written = parallel;
             let config = SimulationConfig {
                 master_cores: cores,
                 ..config(1)
@@ -717,6 +725,47 @@ mod tests {
                 "{cores} cores: {with} s, not {expected} s"
             );
         }
+    }
+
+    /// A job whose frames go out in sRGB has its base frame converted with
+    /// its rasterizing, while the workers trace: the whole frame's
+    /// conversion costs the master's CPU as before but no longer stands
+    /// between the frame's last result and its delivery, where only the
+    /// conversion of the pixels results wrote is left.
+    #[test]
+    fn a_split_frame_converts_only_its_written_pixels_after_the_last_result() {
+        let (job, costs) = small_farm(0.0, 0.0);
+        let cores = 2;
+        let farm = workers(4);
+        let run = |whole: f64, written: f64| {
+            let mut costs = costs.clone();
+            costs.master.frame_out = whole;
+            costs.master.frame_out_written = written;
+            let config = SimulationConfig {
+                master_cores: cores,
+                ..config(1)
+            };
+            let frames = simulate_farm(&job, &costs, &config, &farm).unwrap();
+            (frames[0].done_at.as_secs_f64(), frames[0].cpu[0])
+        };
+        let (whole, written) = (0.2, 0.02);
+        // The base frame and its conversion are over before the tracing.
+        let traced = costs.seconds.iter().sum::<f64>() / farm.len() as f64;
+        assert!(whole / f64::from(cores) < traced / 2.0, "{traced} s traced");
+        let (none, none_cpu) = run(0.0, 0.0);
+        let (ahead, ahead_cpu) = run(whole, 0.0);
+        let (delivered, cpu) = run(whole, written);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+        assert!(close(ahead, none), "{ahead} s, {none} s with no conversion");
+        let expected = none + written / f64::from(cores);
+        assert!(
+            close(delivered, expected),
+            "{delivered} s, not {expected} s"
+        );
+        // The whole conversion after the last result would come later.
+        assert!(delivered < none + whole / f64::from(cores) - 0.05);
+        assert!(close(ahead_cpu - none_cpu, whole), "{ahead_cpu} s of CPU");
+        assert!(close(cpu - none_cpu, whole + written), "{cpu} s of CPU");
     }
 
     /// Same inputs, same frames at the same virtual times; every frame is
@@ -876,6 +925,7 @@ mod tests {
         costs.master = MasterCosts {
             result_per_item: 1e-4,
             frame_out: 0.003,
+            frame_out_written: 0.0007,
             frame_out_serial: 0.0005,
             frame_sent: 0.001,
             journal: 0.002,
@@ -893,9 +943,12 @@ mod tests {
         assert_eq!(cpu.len(), 4, "master, two workers, submitter");
         let (n, items) = (frames.len() as f64, costs.items.len() as f64);
         let m = &costs.master;
+        // The whole frame's sRGB conversion with the base frame, the
+        // written pixels' with the finished frame.
         let per_frame = m.base_frame
             + m.result_per_item * items
             + m.frame_out
+            + m.frame_out_written
             + m.frame_out_serial
             + m.frame_sent;
         let master = n * per_frame + (n - 1.0) * m.journal;

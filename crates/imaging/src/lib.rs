@@ -7,6 +7,7 @@
 //! encoding happens only here, on the way out.
 
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
@@ -218,14 +219,46 @@ impl Image {
         let table = Srgb8Table::get();
         (out.par_chunks_mut(3 * SRGB_TASK_PIXELS))
             .zip(self.pixels.par_chunks(SRGB_TASK_PIXELS))
+            .for_each(|(out, pixels)| table.encode_pixels(out, pixels));
+    }
+
+    /// [`Image::to_srgb8_into`] of the pixels in `columns` × `rows` only,
+    /// into `out`, which holds this image's sRGB bytes elsewhere: a frame
+    /// whose base was converted ahead converts only the pixels written
+    /// since. The bytes are [`Image::to_srgb8`]'s there (per pixel, on the
+    /// calling pool's threads, row by row).
+    ///
+    /// # Panics
+    /// If `out` is not 3 bytes a pixel of this image, or the region
+    /// reaches outside it.
+    pub fn to_srgb8_region_into(&self, out: &mut [u8], columns: Range<u32>, rows: Range<u32>) {
+        use rayon::prelude::*;
+        assert_eq!(
+            out.len(),
+            3 * self.pixels.len(),
+            "an sRGB buffer of the image's size"
+        );
+        assert!(
+            columns.end <= self.width && rows.end <= self.height,
+            "the region {columns:?} x {rows:?} lies inside the {}x{} image",
+            self.width,
+            self.height
+        );
+        if columns.is_empty() || rows.is_empty() {
+            return;
+        }
+        let width = self.width as usize;
+        let (x0, x1) = (columns.start as usize, columns.end as usize);
+        // About SRGB_TASK_PIXELS a task, as for a whole image.
+        let rows_per_task = (SRGB_TASK_PIXELS / (x1 - x0)).max(1);
+        let table = Srgb8Table::get();
+        (out.par_chunks_mut(3 * width))
+            .zip(self.pixels.par_chunks(width))
+            .skip(rows.start as usize)
+            .take(rows.len())
+            .with_min_len(rows_per_task)
             .for_each(|(out, pixels)| {
-                for (bytes, c) in out.chunks_exact_mut(3).zip(pixels) {
-                    bytes.copy_from_slice(&[
-                        table.encode(c.x),
-                        table.encode(c.y),
-                        table.encode(c.z),
-                    ]);
-                }
+                table.encode_pixels(&mut out[3 * x0..3 * x1], &pixels[x0..x1])
             });
     }
 
@@ -405,6 +438,13 @@ impl Srgb8Table {
             })
             .collect();
         Srgb8Table { buckets }
+    }
+
+    /// Codes `pixels` into `out`, three bytes each.
+    fn encode_pixels(&self, out: &mut [u8], pixels: &[Vec3]) {
+        for (bytes, c) in out.chunks_exact_mut(3).zip(pixels) {
+            bytes.copy_from_slice(&[self.encode(c.x), self.encode(c.y), self.encode(c.z)]);
+        }
     }
 
     #[inline]
@@ -661,6 +701,55 @@ mod tests {
             image.to_srgb8_into(&mut out);
             assert_eq!(out, by_rule);
         }
+    }
+
+    /// A region's conversion writes exactly the whole image's bytes inside
+    /// it and leaves every byte outside it as it was: the bytes of an
+    /// image changed only there, converted before, come out as the changed
+    /// image's whole conversion.
+    #[test]
+    fn a_regions_conversion_writes_the_whole_images_bytes_there_only() {
+        let (width, height) = (300u32, 700u32);
+        let pixel =
+            |i: u32, k: f32| Vec3::new((i % 97) as f32 / 50.0 * k, 0.25 * k, (i % 7) as f32 * 0.1);
+        let before = Image {
+            width,
+            height,
+            pixels: (0..width * height).map(|i| pixel(i, 1.0)).collect(),
+        };
+        let (columns, rows) = (17..250, 3..690);
+        let mut after = before.clone();
+        for (y, x) in rows
+            .clone()
+            .flat_map(|y| columns.clone().map(move |x| (y, x)))
+        {
+            after.set(x, y, pixel(y * width + x, 0.5));
+        }
+        assert!(
+            rows.len() * columns.len() > 2 * SRGB_TASK_PIXELS,
+            "several tasks"
+        );
+        let mut bytes = before.to_srgb8();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        pool.install(|| after.to_srgb8_region_into(&mut bytes, columns.clone(), rows.clone()));
+        assert_eq!(bytes, after.to_srgb8());
+        // Outside the region nothing is written.
+        let mut stale = vec![0xab; bytes.len()];
+        after.to_srgb8_region_into(&mut stale, columns.clone(), rows.clone());
+        let inside = |i: usize| {
+            let (x, y) = ((i / 3) as u32 % width, (i / 3) as u32 / width);
+            columns.contains(&x) && rows.contains(&y)
+        };
+        for (i, (&got, &whole)) in stale.iter().zip(&bytes).enumerate() {
+            assert_eq!(got, if inside(i) { whole } else { 0xab }, "byte {i}");
+        }
+        // An empty region writes nothing.
+        let mut untouched = before.to_srgb8();
+        after.to_srgb8_region_into(&mut untouched, 5..5, rows.clone());
+        assert_eq!(untouched, before.to_srgb8());
     }
 
     #[test]

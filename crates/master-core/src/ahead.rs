@@ -11,8 +11,8 @@
 //! which with a whole frame's time bounds how many frames the tail splits.
 //!
 //! Memory: the base frames made ahead and those of the split frames being
-//! assembled are together at most [`AHEAD_BYTES`] (1 GiB: 21 base frames
-//! and ID buffers at 1080p, 24 bytes a pixel), or the frames in flight
+//! assembled are together at most [`AHEAD_BYTES`] (1 GiB: 19 base frames
+//! with their ID buffers and sRGB bytes at 1080p, 27 bytes a pixel), or the frames in flight
 //! where those are more (the bound the split frames in flight alone had);
 //! one made ahead becomes its split frame's when that starts. A wide
 //! farm's tail needs them: 256 workers at the paper's work per frame end a
@@ -27,17 +27,18 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use vtfarm_imaging::Image;
 use vtfarm_proto::FrameKey;
-use vtfarm_raster::IdBuffer;
+
+use crate::core::BaseFrame;
 
 /// The memory the base frames the master holds may take (made ahead and
 /// those of the split frames being assembled).
 pub(crate) const AHEAD_BYTES: u64 = 1 << 30;
 
-/// Bytes of a base frame and its ID buffer per pixel: linear RGB in
-/// `f32`, and object, triangle and depth of 4 bytes each.
-const BASE_BYTES_PER_PIXEL: u64 = 24;
+/// Bytes of a base frame per pixel: linear RGB in `f32`, object, triangle
+/// and depth of 4 bytes each in its ID buffer, and its 8-bit sRGB bytes
+/// (converted ahead for a job whose frames go out in sRGB).
+const BASE_BYTES_PER_PIXEL: u64 = 27;
 
 /// How many base frames of `width` × `height` the master holds at most:
 /// [`AHEAD_BYTES`] of them, or the `frames_in_flight` split frames' own.
@@ -57,7 +58,7 @@ pub(crate) struct Bases {
     /// ahead of its frame's start.
     making: BTreeMap<FrameKey, Making>,
     /// Made ahead, for frames not started yet.
-    ready: BTreeMap<FrameKey, (Image, IdBuffer)>,
+    ready: BTreeMap<FrameKey, BaseFrame>,
 }
 
 #[derive(Clone, Copy)]
@@ -112,13 +113,13 @@ impl Bases {
     }
 
     /// Keeps a base frame made ahead.
-    pub(crate) fn keep(&mut self, key: FrameKey, base: (Image, IdBuffer)) {
+    pub(crate) fn keep(&mut self, key: FrameKey, base: BaseFrame) {
         self.ready.insert(key, base);
     }
 
     /// The base frame made ahead for `key`, taken for its frame (split) or
     /// to be dropped (whole).
-    pub(crate) fn take(&mut self, key: FrameKey) -> Option<(Image, IdBuffer)> {
+    pub(crate) fn take(&mut self, key: FrameKey) -> Option<BaseFrame> {
         self.ready.remove(&key)
     }
 
@@ -153,20 +154,24 @@ mod tests {
         assert_eq!(bases.arrived((1, 2), 230 * MS), None, "not in the making");
     }
 
-    /// 1 GiB holds 21 base frames at 1080p, never fewer than the frames in
+    /// 1 GiB holds 19 base frames at 1080p, never fewer than the frames in
     /// flight, and many small ones.
     #[test]
     fn the_budget_is_a_gibibyte_of_base_frames_or_the_frames_in_flight() {
-        assert_eq!(frames_held_at_most(8, 1920, 1080), 21);
+        assert_eq!(frames_held_at_most(8, 1920, 1080), 19);
         assert_eq!(frames_held_at_most(8, 7680, 4320), 8);
-        assert_eq!(frames_held_at_most(8, 320, 180), 776);
+        assert_eq!(frames_held_at_most(8, 320, 180), 690);
     }
 
     /// Base frames made ahead are held until taken, and go with their job.
     #[test]
     fn base_frames_made_ahead_are_held_until_taken_or_their_job_ends() {
         let mut bases = Bases::default();
-        let base = || (Image::black(2, 1), IdBuffer::new(2, 1));
+        let base = || BaseFrame {
+            image: vtfarm_imaging::Image::black(2, 1),
+            ids: vtfarm_raster::IdBuffer::new(2, 1),
+            srgb: Default::default(),
+        };
         bases.keep((1, 8), base());
         bases.keep((2, 3), base());
         bases.requested((1, 9), MS, true);

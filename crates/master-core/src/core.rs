@@ -43,7 +43,9 @@ use vtfarm_vertex::{FrameImage, PackageStats, PixelRect, Quality, SparseBitmap};
 
 use crate::ahead::{Bases, frames_held_at_most};
 use crate::error::{JobRejected, ResultRejected};
-use crate::finish::{EncodedFrame, FinishQueue, FinishedFrame, Finishing, FrameEncodeRequest};
+use crate::finish::{
+    EncodedFrame, FinishQueue, FinishedFrame, Finishing, FrameEncodeRequest, SrgbBytes,
+};
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 use crate::record::{DamagedJob, Record, StoredJob, Written};
 use crate::rules::FarmRules;
@@ -104,43 +106,79 @@ pub struct BaseFrameRequest {
     pub frame: u32,
     scene: Arc<Scene>,
     setup: FrameSetup,
+    /// Also convert it to 8-bit sRGB: the job's frames go out so
+    /// (`finish.rs`). A view's job does not: its frames go only to the
+    /// dashboard's list, off the view's latency, which its base frame is on.
+    srgb: bool,
     /// A finished frame's buffers to rasterize into.
-    spare: Option<Box<SpareBase>>,
+    spare: Option<Box<BaseFrame>>,
 }
 
 impl BaseFrameRequest {
-    /// The shaded base frame and its ID buffer, in a finished frame's
-    /// buffers where the master has some (`vtfarm_raster::rasterize_into`).
-    pub fn rasterize(self) -> (Image, IdBuffer) {
-        let SpareBase(mut image, mut ids) = (self.spare).map_or_else(
-            || SpareBase(Image::black(0, 0), IdBuffer::new(0, 0)),
-            |spare| *spare,
-        );
+    /// The shaded base frame and its ID buffer (and its sRGB bytes where
+    /// the job's frames go out in sRGB), in a finished frame's buffers
+    /// where the master has some (`vtfarm_raster::rasterize_into`).
+    pub fn rasterize(self) -> BaseFrame {
+        let BaseFrame {
+            mut image,
+            mut ids,
+            mut srgb,
+        } = self.spare.map_or_else(BaseFrame::empty, |spare| *spare);
         let (camera, lighting) = (&self.setup.camera, &self.setup.lighting);
         vtfarm_raster::rasterize_into(&self.scene, camera, lighting, &mut image, &mut ids);
-        (image, ids)
+        if self.srgb {
+            srgb.convert_base(&image);
+        } else {
+            // Not held unused with a base frame made ahead.
+            srgb = SrgbBytes::default();
+        }
+        BaseFrame { image, ids, srgb }
     }
 
     /// Whether it rasterizes into a finished frame's buffers.
     pub fn reuses_buffers(&self) -> bool {
         self.spare.is_some()
     }
-}
 
-/// A finished frame's image and ID buffer, kept for a later frame's base
-/// frame: rasterizing into them spares the page faults of fresh buffers
-/// (at 1080p as much CPU as the rasterizing itself).
-#[derive(Clone)]
-struct SpareBase(Image, IdBuffer);
-
-impl std::fmt::Debug for SpareBase {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "SpareBase({}x{})", self.0.width, self.0.height)
+    /// Whether it also converts the base frame to sRGB (all of it).
+    pub fn converts_to_srgb(&self) -> bool {
+        self.srgb
     }
 }
 
-/// Spare base-frame buffers kept: two pairs (a 1080p image and ID buffer are
-/// about 33 MB); base frames beyond them rasterize into fresh buffers.
+/// A split frame's base frame ([`BaseFrameRequest::rasterize`]): the shaded
+/// image, its ID buffer and its sRGB bytes (converted where the job's
+/// frames go out in sRGB). A finished frame's buffers are kept for a later
+/// frame's base frame: rasterizing and converting into them spares the
+/// page faults of fresh buffers (at 1080p as much CPU as the work itself).
+#[derive(Clone)]
+pub struct BaseFrame {
+    pub(crate) image: Image,
+    pub(crate) ids: IdBuffer,
+    pub(crate) srgb: SrgbBytes,
+}
+
+impl BaseFrame {
+    fn empty() -> BaseFrame {
+        BaseFrame {
+            image: Image::black(0, 0),
+            ids: IdBuffer::new(0, 0),
+            srgb: SrgbBytes::default(),
+        }
+    }
+}
+
+impl std::fmt::Debug for BaseFrame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (width, height) = (self.image.width, self.image.height);
+        let srgb = self.srgb.of_base();
+        write!(f, "BaseFrame({width}x{height}, sRGB converted: {srgb})")
+    }
+}
+
+/// Spare base-frame buffers kept: two (a 1080p image, ID buffer and sRGB
+/// bytes are about 56 MB); base frames beyond them rasterize into fresh
+/// buffers.
 const SPARE_BASES: usize = 2;
 
 pub use vtfarm_proto::ATTACH_GRACE;
@@ -227,37 +265,77 @@ struct FrameAssembly {
     progress: Option<StageProgress<ResultPixels>>,
 }
 
-/// A frame's pixels as results are composited over the base frame: the
-/// colour only, or with the per-pixel components when the job asks for
-/// them (a view's jobs always do). No output of a colour-only job reads
-/// the components, so their planes are not made.
-pub(crate) enum Assembled {
+/// A frame as results are composited over its base frame: its pixels, the
+/// rectangle results wrote, and the base frame's sRGB bytes (the encoding
+/// converts only that rectangle into them, `finish.rs`).
+pub(crate) struct Assembled {
+    pub(crate) pixels: AssembledPixels,
+    /// The union of the composited results' rectangles: every pixel
+    /// written over the base frame lies inside.
+    pub(crate) written: PixelRect,
+    pub(crate) srgb: SrgbBytes,
+}
+
+/// A frame's pixels: the colour only, or with the per-pixel components
+/// when the job asks for them (a view's jobs always do). No output of a
+/// colour-only job reads the components, so their planes are not made.
+pub(crate) enum AssembledPixels {
     Color(Image),
     Components(FrameImage),
 }
 
-impl Assembled {
-    /// Starts from the base frame, with components over `components` (the
-    /// reflectors' rectangle) when the job asks for them.
-    fn new(base: Image, components: Option<PixelRect>) -> Assembled {
-        match components {
-            Some(bounds) => Assembled::Components(FrameImage::new(base, bounds)),
-            None => Assembled::Color(base),
-        }
-    }
-
+impl AssembledPixels {
     pub(crate) fn color(&self) -> &Image {
         match self {
-            Assembled::Color(color) => color,
-            Assembled::Components(image) => &image.color,
+            AssembledPixels::Color(color) => color,
+            AssembledPixels::Components(image) => &image.color,
         }
     }
 
     /// The colour buffer alone.
     pub(crate) fn into_color(self) -> Image {
         match self {
-            Assembled::Color(color) => color,
-            Assembled::Components(image) => image.color,
+            AssembledPixels::Color(color) => color,
+            AssembledPixels::Components(image) => image.color,
+        }
+    }
+}
+
+impl Assembled {
+    /// Starts from the base frame, with components over `components` (the
+    /// reflectors' rectangle) when the job asks for them.
+    fn new(base: BaseFrame, components: Option<PixelRect>) -> (Assembled, IdBuffer) {
+        let BaseFrame { image, ids, srgb } = base;
+        let pixels = match components {
+            Some(bounds) => AssembledPixels::Components(FrameImage::new(image, bounds)),
+            None => AssembledPixels::Color(image),
+        };
+        let assembled = Assembled {
+            pixels,
+            written: PixelRect::EMPTY,
+            srgb,
+        };
+        (assembled, ids)
+    }
+
+    /// Nothing yet: the base frame is on its way.
+    fn awaiting_base() -> Assembled {
+        Assembled {
+            pixels: AssembledPixels::Color(Image::black(0, 0)),
+            written: PixelRect::EMPTY,
+            srgb: SrgbBytes::default(),
+        }
+    }
+
+    pub(crate) fn color(&self) -> &Image {
+        self.pixels.color()
+    }
+
+    /// The frame with its components, when the job asks for them.
+    fn components(&self) -> Option<&FrameImage> {
+        match &self.pixels {
+            AssembledPixels::Components(image) => Some(image),
+            AssembledPixels::Color(_) => None,
         }
     }
 
@@ -273,16 +351,23 @@ impl Assembled {
     ) -> Result<ResultPixels, ResultRejected> {
         let (width, height) = (self.color().width, self.color().height);
         let foreign = |(x, y): (u32, u32)| ResultRejected::ForeignPixel { x, y };
-        match self {
-            Assembled::Color(_) => {
+        match self.pixels {
+            AssembledPixels::Color(_) => {
                 let colors = bitmap.colors_within(width, height)?;
+                // Inside the frame: `colors_within` checked.
+                let bounds = PixelRect {
+                    x0: bitmap.x0,
+                    y0: bitmap.y0,
+                    x1: bitmap.x0 + bitmap.width,
+                    y1: bitmap.y0 + bitmap.height,
+                };
                 // The ID buffer is the frame's size: every index is in it.
                 match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
                     Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
-                    None => Ok(ResultPixels::Colors(colors)),
+                    None => Ok(ResultPixels::Colors { bounds, colors }),
                 }
             }
-            Assembled::Components(_) => {
+            AssembledPixels::Components(_) => {
                 let bitmap = bitmap.into_bitmap_within(width, height)?;
                 match bitmap.foreign_pixel(ids, owned) {
                     Some(pixel) => Err(foreign(pixel)),
@@ -292,15 +377,19 @@ impl Assembled {
         }
     }
 
-    /// Writes a checked result's pixels ([`FrameImage::composite`]).
+    /// Writes a checked result's pixels ([`FrameImage::composite`]),
+    /// adding its rectangle to the written one.
     fn composite(&mut self, pixels: &ResultPixels) {
-        match (self, pixels) {
-            (Assembled::Color(color), ResultPixels::Colors(colors)) => {
+        self.written = self.written.union(pixels.bounds());
+        match (&mut self.pixels, pixels) {
+            (AssembledPixels::Color(color), ResultPixels::Colors { colors, .. }) => {
                 for &(i, c) in colors {
                     color.pixels[i] = c;
                 }
             }
-            (Assembled::Components(image), ResultPixels::Bitmap(bitmap)) => image.composite(bitmap),
+            (AssembledPixels::Components(image), ResultPixels::Bitmap(bitmap)) => {
+                image.composite(bitmap)
+            }
             // `check` decodes for the kind of assembly it is called on, and
             // a frame's kind is set once, with its base frame.
             _ => unreachable!("a result decoded for another kind of frame"),
@@ -315,10 +404,29 @@ enum Accepted {
 }
 
 /// A checked result in the form its frame composites: frame indices and
-/// colours, or the whole bitmap with the components.
+/// colours (with the rectangle they lie in), or the whole bitmap with the
+/// components.
 enum ResultPixels {
-    Colors(Vec<(usize, Vec3)>),
+    Colors {
+        bounds: PixelRect,
+        colors: Vec<(usize, Vec3)>,
+    },
     Bitmap(SparseBitmap),
+}
+
+impl ResultPixels {
+    /// The rectangle every pixel it writes lies in.
+    fn bounds(&self) -> PixelRect {
+        match self {
+            ResultPixels::Colors { bounds, .. } => *bounds,
+            ResultPixels::Bitmap(bitmap) => PixelRect {
+                x0: bitmap.x0,
+                y0: bitmap.y0,
+                x1: bitmap.x0 + bitmap.width,
+                y1: bitmap.y0 + bitmap.height,
+            },
+        }
+    }
 }
 
 /// A package on its way: what the results must be matched against.
@@ -418,11 +526,12 @@ pub struct MasterCore {
     /// The interactive view: pickable scenes and the move being rendered.
     views: Views,
     /// Finished frames' buffers for the next base frames (at most [`SPARE_BASES`]).
-    spare_bases: Vec<SpareBase>,
+    spare_bases: Vec<BaseFrame>,
     /// Base frames in the making and made ahead of a batch job's tail
     /// (`ahead.rs`).
     bases: Bases,
-    /// The last finished frame's uncompressed bytes, the next one's buffer.
+    /// The last finished frame's uncompressed bytes, the next one's buffer
+    /// (where its base frame's sRGB bytes were not converted ahead).
     frame_bytes: Vec<u8>,
 }
 
@@ -981,7 +1090,7 @@ impl MasterCore {
         };
         let (views, scene, now, t0) = (&mut self.views, &job.scene, self.now, *started);
         let show = |stage, image: &Assembled| {
-            if let Assembled::Components(image) = image {
+            if let Some(image) = image.components() {
                 views.stage_finished(job_id, stage, image, scene);
             }
             // On the timeline: from the stage before it to this one.
@@ -1621,7 +1730,7 @@ impl MasterCore {
                 };
                 let mut done = j.assembling.remove(index);
                 // A progressive frame's stages went to the view as they came.
-                if let (Assembled::Components(image), None) = (&done.image, &done.progress) {
+                if let (Some(image), None) = (done.image.components(), &done.progress) {
                     (self.views).stage_finished(job.0, frame as usize, image, &j.scene);
                     self.ask_for_view_figures();
                 }
@@ -1683,7 +1792,7 @@ impl MasterCore {
                     stats: frame_stats,
                     ids: done.ids,
                     encoded,
-                    color: None,
+                    buffers: None,
                 };
                 j.finishing.push(Finishing::Frame(Box::new(finished)));
                 self.departed.clear();
@@ -1857,7 +1966,7 @@ impl MasterCore {
             stats,
             ids,
             encoded,
-            color,
+            buffers,
         } = finished;
         let (image, aux) = encoded.expect("only encoded frames are delivered");
         let Some(j) = self.jobs.get_mut(&job) else {
@@ -1884,10 +1993,8 @@ impl MasterCore {
         let image = message.image.clone();
         (self.telemetry).frame_finished(owner, owner_frame, stats, image);
         self.send_to(&submitters, Message::FrameDone(message));
-        if let (Some(ids), Some(color)) = (ids, color) {
-            if self.spare_bases.len() < SPARE_BASES {
-                self.spare_bases.push(SpareBase(color, ids));
-            }
+        if let (Some(ids), Some((image, srgb))) = (ids, buffers) {
+            self.spare(BaseFrame { image, ids, srgb });
         }
     }
 
@@ -1909,6 +2016,7 @@ impl MasterCore {
             frame,
             scene: j.scene.clone(),
             setup: setup.clone(),
+            srgb: j.image == WireImageFormat::Srgb8,
             spare: self.spare_bases.pop().map(Box::new),
         });
         let start = FrameStart {
@@ -1930,7 +2038,7 @@ impl MasterCore {
             finished: None,
             ids: None,
             // The base frame, when it comes; until then results are held.
-            image: Assembled::Color(Image::black(0, 0)),
+            image: Assembled::awaiting_base(),
             held: Vec::new(),
             started: self.now,
             phases: Vec::new(),
@@ -2000,28 +2108,24 @@ impl MasterCore {
             frame,
             scene: j.scene.clone(),
             setup: j.frames[frame as usize].clone(),
+            srgb: j.image == WireImageFormat::Srgb8,
             spare: self.spare_bases.pop().map(Box::new),
         };
         self.bases.requested((job, frame), self.now, true);
         self.outbox.push_back(Output::RasterizeBase(request));
     }
 
-    /// Keeps a base frame's buffers for a later one, as a finished frame's.
-    fn spare(&mut self, (color, ids): (Image, IdBuffer)) {
+    /// Keeps a base frame's buffers (or a finished frame's) for a later
+    /// base frame.
+    fn spare(&mut self, base: BaseFrame) {
         if self.spare_bases.len() < SPARE_BASES {
-            self.spare_bases.push(SpareBase(color, ids));
+            self.spare_bases.push(base);
         }
     }
 
     /// The driver rasterized the base frame that [`Output::RasterizeBase`]
     /// asked for: the held results are checked and composited now.
-    pub fn base_frame_ready(
-        &mut self,
-        now: Duration,
-        job: u64,
-        frame: u32,
-        base: (Image, IdBuffer),
-    ) {
+    pub fn base_frame_ready(&mut self, now: Duration, job: u64, frame: u32, base: BaseFrame) {
         self.now = now;
         let key = (job, frame);
         if let Some(cost) = self.bases.arrived(key, now) {
@@ -2048,7 +2152,7 @@ impl MasterCore {
 
     /// A split frame's base frame is here: the results held for it are
     /// checked and composited now.
-    fn use_base(&mut self, job: u64, frame: u32, (base, ids): (Image, IdBuffer)) {
+    fn use_base(&mut self, job: u64, frame: u32, base: BaseFrame) {
         let now = self.now;
         let Some(j) = self.jobs.get_mut(&job) else {
             return;
@@ -2068,7 +2172,8 @@ impl MasterCore {
             return;
         };
         // Nothing is composited yet: the image starts as the base frame.
-        current.image = Assembled::new(base, components);
+        let (image, ids) = Assembled::new(base, components);
+        current.image = image;
         current.ids = Some(ids);
         let phase = phase(
             current.started,
@@ -2546,5 +2651,146 @@ fn peer_name(conn: ConnId, peer: Option<&Peer>) -> String {
         Some(Peer::Worker { name, address, .. }) => format!("{name} ({address})"),
         Some(Peer::Submitter { address }) => format!("submitter ({address})"),
         None => format!("connection {conn}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An image with a different colour in (nearly) every pixel, by `seed`.
+    fn gradient(width: u32, height: u32, seed: f32) -> Image {
+        let pixels = (0..width * height)
+            .map(|i| {
+                let (x, y) = ((i % width) as f32, (i / width) as f32);
+                Vec3::new(x / width as f32, y / height as f32, seed) * (1.0 + seed)
+            })
+            .collect();
+        Image {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    /// Pixels of `rect` a result writes: every other one, in `seed`'s colour.
+    fn written_pixels(rect: PixelRect, seed: f32) -> Vec<(u32, u32, Vec3)> {
+        (rect.pixels())
+            .filter(|(x, y)| (x + y) % 2 == 0)
+            .map(|(x, y)| (x, y, Vec3::new(seed, 1.0 - seed, 0.5 * seed)))
+            .collect()
+    }
+
+    /// A result over `rect` in the form a frame of `components` composites.
+    fn result(width: u32, rect: PixelRect, seed: f32, components: bool) -> ResultPixels {
+        let written = written_pixels(rect, seed);
+        if !components {
+            let colors = (written.iter())
+                .map(|&(x, y, c)| ((y * width + x) as usize, c))
+                .collect();
+            return ResultPixels::Colors {
+                bounds: rect,
+                colors,
+            };
+        }
+        let mask = (rect.pixels()).map(|(x, y)| (x + y) % 2 == 0).collect();
+        let n = written.len();
+        ResultPixels::Bitmap(SparseBitmap {
+            x0: rect.x0,
+            y0: rect.y0,
+            width: rect.x1 - rect.x0,
+            height: rect.y1 - rect.y0,
+            mask,
+            color: written.iter().map(|&(_, _, c)| c).collect(),
+            reflected: vec![Vec3::splat(0.1); n],
+            transmitted: vec![Vec3::splat(0.2); n],
+            reflected_object: vec![3; n],
+        })
+    }
+
+    /// A frame whose base frame was converted to sRGB ahead, in a buffer
+    /// that held another frame's bytes, encodes to exactly the bytes of
+    /// its composited image converted whole: the written rectangle holds
+    /// every composited pixel, and the base's conversion left nothing of
+    /// the other frame. Colour-only frames and frames with components,
+    /// results far apart and none.
+    #[test]
+    fn a_frame_converted_ahead_encodes_as_its_whole_conversion() {
+        let (width, height) = (97, 61);
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        let results = [
+            rect(3, 4, 20, 9),
+            rect(60, 40, 97, 61),
+            rect(10, 50, 12, 52),
+        ];
+        for components in [false, true] {
+            for count in 0..=results.len() {
+                let mut srgb = SrgbBytes::default();
+                // Another frame's bytes, larger: converted over.
+                srgb.convert_base(&gradient(width + 5, height, 0.9));
+                let image = gradient(width, height, 0.1);
+                srgb.convert_base(&image);
+                let ids = IdBuffer::new(width, height);
+                let base = BaseFrame { image, ids, srgb };
+                let bounds = components.then_some(rect(0, 0, width, height));
+                let (mut assembled, _) = Assembled::new(base, bounds);
+                for (k, &r) in results.iter().take(count).enumerate() {
+                    assembled.composite(&result(width, r, 0.3 * k as f32, components));
+                }
+                let expected = WireImage::encode(assembled.color(), WireImageFormat::Srgb8);
+                let request = FrameEncodeRequest {
+                    job: 1,
+                    frame: 0,
+                    image: assembled,
+                    format: WireImageFormat::Srgb8,
+                    delivered: true,
+                    scratch: Vec::new(),
+                };
+                assert!(request.converts_written_pixels_only());
+                let encoded = request.encode();
+                assert!(
+                    encoded.image == expected,
+                    "components {components}, {count} results: other bytes"
+                );
+            }
+        }
+    }
+
+    /// A job whose frames do not go out in sRGB has no bytes converted
+    /// ahead: its frames are encoded whole, as before, in its format.
+    #[test]
+    fn a_frame_not_converted_ahead_is_encoded_whole() {
+        let (width, height) = (31, 17);
+        let base = BaseFrame {
+            image: gradient(width, height, 0.4),
+            ids: IdBuffer::new(width, height),
+            srgb: SrgbBytes::default(),
+        };
+        let (mut assembled, _) = Assembled::new(base, None);
+        let written = PixelRect {
+            x0: 2,
+            y0: 3,
+            x1: 9,
+            y1: 8,
+        };
+        assembled.composite(&result(width, written, 0.7, false));
+        for format in [WireImageFormat::Srgb8, WireImageFormat::LinearF32] {
+            let pixels = AssembledPixels::Color(assembled.color().clone());
+            let expected = WireImage::encode(pixels.color(), format);
+            let request = FrameEncodeRequest {
+                job: 1,
+                frame: 0,
+                image: Assembled {
+                    pixels,
+                    written,
+                    srgb: SrgbBytes::default(),
+                },
+                format,
+                delivered: true,
+                scratch: vec![0xab; 7],
+            };
+            assert!(!request.converts_written_pixels_only());
+            assert!(request.encode().image == expected, "{format:?}");
+        }
     }
 }

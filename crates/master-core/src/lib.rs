@@ -31,7 +31,7 @@ pub mod telemetry;
 pub mod view;
 
 pub use crate::core::{
-    ATTACH_GRACE, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
+    ATTACH_GRACE, BaseFrame, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
 };
 pub use error::{JobRejected, ResultRejected};
 pub use finish::{EncodedFrame, FrameEncodeRequest};

@@ -185,6 +185,24 @@ impl PixelRect {
         (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
     }
 
+    /// No pixel.
+    pub const EMPTY: PixelRect = EMPTY;
+
+    /// The smallest rectangle holding every pixel of both (an empty one
+    /// adds nothing).
+    pub fn union(self, other: PixelRect) -> PixelRect {
+        match (self.is_empty(), other.is_empty()) {
+            (_, true) => self,
+            (true, false) => other,
+            (false, false) => PixelRect {
+                x0: self.x0.min(other.x0),
+                y0: self.y0.min(other.y0),
+                x1: self.x1.max(other.x1),
+                y1: self.y1.max(other.y1),
+            },
+        }
+    }
+
     /// Whether every pixel of `other` lies inside (an empty `other` does).
     pub fn holds(self, other: PixelRect) -> bool {
         other.is_empty()
@@ -316,12 +334,7 @@ pub fn id_buffers_within(scene: &Scene, camera: &Camera, passes: &[IdPass<'_>]) 
         .map(|p| clamp(p.within))
         .filter(|r| !r.is_empty())
         .collect();
-    let Some(union) = live.iter().copied().reduce(|a, b| PixelRect {
-        x0: a.x0.min(b.x0),
-        y0: a.y0.min(b.y0),
-        x1: a.x1.max(b.x1),
-        y1: a.y1.max(b.y1),
-    }) else {
+    let Some(union) = live.iter().copied().reduce(PixelRect::union) else {
         return passes
             .iter()
             .map(|_| IdBuffer::empty_within(camera.width, camera.height, EMPTY))

@@ -1065,3 +1065,37 @@ fn a_near_plane_closer_than_the_default_shows_what_lies_between() {
         }
     }
 }
+
+/// A union holds both rectangles and no more; an empty one adds nothing.
+#[test]
+fn a_union_is_the_smallest_rectangle_holding_both() {
+    let a = PixelRect {
+        x0: 2,
+        y0: 5,
+        x1: 10,
+        y1: 7,
+    };
+    let b = PixelRect {
+        x0: 4,
+        y0: 1,
+        x1: 12,
+        y1: 6,
+    };
+    let both = PixelRect {
+        x0: 2,
+        y0: 1,
+        x1: 12,
+        y1: 7,
+    };
+    assert_eq!(a.union(b), both);
+    assert_eq!(b.union(a), both);
+    let empty = PixelRect {
+        x0: 50,
+        y0: 50,
+        x1: 50,
+        y1: 60,
+    };
+    assert_eq!(a.union(empty), a);
+    assert_eq!(empty.union(a), a);
+    assert!(PixelRect::EMPTY.union(empty).is_empty());
+}

@@ -46,12 +46,7 @@ impl WireImage {
     pub fn from_pixels(width: u32, height: u32, pixels: &[Vec3]) -> Self {
         let mut planes = Vec::new();
         pixel_planes_into(pixels, &mut planes);
-        WireImage {
-            width,
-            height,
-            format: WireImageFormat::LinearF32,
-            pixels: compress(&planes),
-        }
+        WireImage::from_uncompressed(width, height, WireImageFormat::LinearF32, &planes)
     }
 
     /// The wire form of `image` in `format`.
@@ -72,11 +67,36 @@ impl WireImage {
             // On every core of the calling pool (`Image::to_srgb8_into`).
             WireImageFormat::Srgb8 => image.to_srgb8_into(scratch),
         }
+        WireImage::from_uncompressed(image.width, image.height, format, scratch)
+    }
+
+    /// The wire form of a `width` × `height` image whose uncompressed
+    /// bytes in `format` the caller made (as [`WireImage::encode_reusing`]
+    /// makes them: a master that converted a frame's base to sRGB ahead
+    /// converts only what changed since): compressed as one zstd frame.
+    ///
+    /// # Panics
+    /// If `bytes` is not `format`'s size for the sides.
+    pub fn from_uncompressed(
+        width: u32,
+        height: u32,
+        format: WireImageFormat,
+        bytes: &[u8],
+    ) -> Self {
+        let per_pixel = match format {
+            WireImageFormat::LinearF32 => 12,
+            WireImageFormat::Srgb8 => 3,
+        };
+        assert_eq!(
+            bytes.len(),
+            per_pixel * width as usize * height as usize,
+            "{format:?} bytes of a {width}x{height} image"
+        );
         WireImage {
-            width: image.width,
-            height: image.height,
+            width,
+            height,
             format,
-            pixels: compress(scratch),
+            pixels: compress(bytes),
         }
     }
 
@@ -330,6 +350,9 @@ mod tests {
         let three = pool(3).install(|| WireImage::encode(&image, format));
         assert_eq!(one, three, "the bytes do not depend on the threads");
         assert_eq!(one.pixels, compress(&image.to_srgb8()), "one zstd frame");
+        // Bytes converted by the caller take the same compression.
+        let made = WireImage::from_uncompressed(width, height, format, &image.to_srgb8());
+        assert_eq!(made, one, "one compression path");
         assert_eq!(one.into_srgb8().unwrap(), (width, height, image.to_srgb8()));
     }
 
