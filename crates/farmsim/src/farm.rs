@@ -953,7 +953,11 @@ impl<M: CostModel> Farm<M> {
                     };
                     seconds += costs.result_per_item * items as f64;
                     if let Some(key) = self.package_frames.remove(&result.id) {
-                        self.frame_last_result.insert(key, self.now);
+                        // A straggler's copy after the frame went out is
+                        // not kept (its entry would never be removed).
+                        if self.frame_started.contains_key(&key) {
+                            self.frame_last_result.insert(key, self.now);
+                        }
                         if self.base_pending.contains(&key) {
                             *self.held_items.entry(key).or_default() += items;
                         }

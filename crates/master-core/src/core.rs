@@ -216,6 +216,20 @@ struct Job {
 }
 
 impl Job {
+    /// The request for frame `job`/`frame`'s base frame (its set-up must
+    /// exist), into `spare`'s buffers where given; converted to sRGB ahead
+    /// when the job's frames go out so (`finish.rs`).
+    fn base_request(&self, job: u64, frame: u32, spare: Option<BaseFrame>) -> BaseFrameRequest {
+        BaseFrameRequest {
+            job,
+            frame,
+            scene: self.scene.clone(),
+            setup: self.frames[frame as usize].clone(),
+            srgb: self.image == WireImageFormat::Srgb8,
+            spare: spare.map(Box::new),
+        }
+    }
+
     /// The frame `frame` if it is being assembled.
     fn assembly(&self, frame: u32) -> Option<&FrameAssembly> {
         self.assembling.iter().find(|a| a.start.frame == frame)
@@ -355,12 +369,7 @@ impl Assembled {
             AssembledPixels::Color(_) => {
                 let colors = bitmap.colors_within(width, height)?;
                 // Inside the frame: `colors_within` checked.
-                let bounds = PixelRect {
-                    x0: bitmap.x0,
-                    y0: bitmap.y0,
-                    x1: bitmap.x0 + bitmap.width,
-                    y1: bitmap.y0 + bitmap.height,
-                };
+                let bounds = bitmap_rect(bitmap.x0, bitmap.y0, bitmap.width, bitmap.height);
                 // The ID buffer is the frame's size: every index is in it.
                 match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
                     Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
@@ -419,13 +428,21 @@ impl ResultPixels {
     fn bounds(&self) -> PixelRect {
         match self {
             ResultPixels::Colors { bounds, .. } => *bounds,
-            ResultPixels::Bitmap(bitmap) => PixelRect {
-                x0: bitmap.x0,
-                y0: bitmap.y0,
-                x1: bitmap.x0 + bitmap.width,
-                y1: bitmap.y0 + bitmap.height,
-            },
+            ResultPixels::Bitmap(bitmap) => {
+                bitmap_rect(bitmap.x0, bitmap.y0, bitmap.width, bitmap.height)
+            }
         }
+    }
+}
+
+/// The rectangle of a result's bitmap (its corner and sides, inside the
+/// frame once checked).
+fn bitmap_rect(x0: u32, y0: u32, width: u32, height: u32) -> PixelRect {
+    PixelRect {
+        x0,
+        y0,
+        x1: x0 + width,
+        y1: y0 + height,
     }
 }
 
@@ -2011,14 +2028,8 @@ impl MasterCore {
         let key = (job, frame);
         let ahead = self.bases.take(key);
         let coming = self.bases.making_ahead(key);
-        let base = (!whole && ahead.is_none() && !coming).then(|| BaseFrameRequest {
-            job,
-            frame,
-            scene: j.scene.clone(),
-            setup: setup.clone(),
-            srgb: j.image == WireImageFormat::Srgb8,
-            spare: self.spare_bases.pop().map(Box::new),
-        });
+        let base = (!whole && ahead.is_none() && !coming)
+            .then(|| j.base_request(job, frame, self.spare_bases.pop()));
         let start = FrameStart {
             job,
             frame,
@@ -2103,14 +2114,7 @@ impl MasterCore {
         let Some(frame) = (first..frames).find(|&f| !self.bases.has((job, f))) else {
             return;
         };
-        let request = BaseFrameRequest {
-            job,
-            frame,
-            scene: j.scene.clone(),
-            setup: j.frames[frame as usize].clone(),
-            srgb: j.image == WireImageFormat::Srgb8,
-            spare: self.spare_bases.pop().map(Box::new),
-        };
+        let request = j.base_request(job, frame, self.spare_bases.pop());
         self.bases.requested((job, frame), self.now, true);
         self.outbox.push_back(Output::RasterizeBase(request));
     }
