@@ -227,11 +227,11 @@ impl ActiveFrame {
     /// ([`Renderer::finish_frame`]), encoded in the job's format with the
     /// components when the job asks for them (the `FrameDone` codecs).
     fn finish(&self, bitmap: &SparseBitmap) -> ResultPixels {
-        let image = self.renderer.finish_frame(&self.setup, bitmap);
-        ResultPixels::Frame {
-            image: WireImage::encode(&image.color, self.image),
-            aux: matches!(self.parts, WireBitmapParts::All).then(|| WireFrameAux::encode(&image)),
-        }
+        let all_parts = matches!(self.parts, WireBitmapParts::All);
+        (self.renderer).finish_frame(&self.setup, bitmap, |image, scratch| ResultPixels::Frame {
+            image: WireImage::encode_reusing(&image.color, self.image, scratch),
+            aux: all_parts.then(|| WireFrameAux::encode(image)),
+        })
     }
 
     /// The frame's pixel count: a package's sample budget is a multiple of it

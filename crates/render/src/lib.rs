@@ -12,8 +12,8 @@ pub mod output;
 
 pub use vtfarm_method::FrameSetup;
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
@@ -101,7 +101,24 @@ pub struct Renderer {
     id_buffers: IdBufferCache,
     /// Frames set up so far ([`Renderer::set_ups`]).
     set_ups: AtomicU64,
+    /// Whole frames' buffers, kept for the next ([`Renderer::finish_frame`]).
+    whole_frames: Mutex<Vec<WholeFrameBuffers>>,
 }
+
+/// A whole frame's large buffers, kept from frame to frame: buffers in
+/// fresh memory pay a page fault per 4 KiB on their first write, 33 MB of
+/// them at 1080p (the base image, its ID buffer, the encoded bytes), which
+/// cost a one-thread worker about a tenth of its frame, and more where
+/// other processes share its core (docs/benchmarks.md, session 15).
+struct WholeFrameBuffers {
+    image: Image,
+    ids: IdBuffer,
+    scratch: Vec<u8>,
+}
+
+/// The most whole frames' buffers kept: a worker finishes at most two whole
+/// frames at once (the scheduler's `WHOLE_FRAMES_PER_WORKER`).
+const KEPT_WHOLE_FRAMES: usize = 2;
 
 impl Renderer {
     /// Prepares a scene; the reflectors are kept in spatial (Morton) order so
@@ -139,6 +156,7 @@ impl Renderer {
             shadows: ShadowCache::default(),
             id_buffers: IdBufferCache::default(),
             set_ups: AtomicU64::new(0),
+            whole_frames: Mutex::new(Vec::new()),
         })
     }
 
@@ -198,12 +216,38 @@ impl Renderer {
     /// A whole frame finished where it was traced (a farm worker's whole
     /// frame): the base frame, and the frame's `bitmap` (all its reflector
     /// pixels) composited over it ([`FrameImage::composite`]) — what the
-    /// master makes of a split frame's results, bit for bit.
-    pub fn finish_frame(&self, setup: &FrameSetup, bitmap: &SparseBitmap) -> FrameImage {
-        let (base, _) = self.base_frame(setup);
-        let mut image = self.frame_image(setup, base);
-        image.composite(bitmap);
-        image
+    /// master makes of a split frame's results, bit for bit — handed to
+    /// `encode` with a scratch buffer for its bytes. The buffers are kept
+    /// for the next whole frame.
+    pub fn finish_frame<R>(
+        &self,
+        setup: &FrameSetup,
+        bitmap: &SparseBitmap,
+        encode: impl FnOnce(&FrameImage, &mut Vec<u8>) -> R,
+    ) -> R {
+        let kept = self.lock_whole_frames().pop();
+        let mut buffers = kept.unwrap_or_else(|| WholeFrameBuffers {
+            image: Image::new(0, 0, Vec3::ZERO),
+            ids: IdBuffer::new(0, 0),
+            scratch: Vec::new(),
+        });
+        let (scene, camera) = (self.scene(), &setup.camera);
+        let (image, ids) = (&mut buffers.image, &mut buffers.ids);
+        vtfarm_raster::rasterize_into(scene, camera, &setup.lighting, image, ids);
+        let base = std::mem::replace(&mut buffers.image, Image::new(0, 0, Vec3::ZERO));
+        let mut frame = self.frame_image(setup, base);
+        frame.composite(bitmap);
+        let encoded = encode(&frame, &mut buffers.scratch);
+        buffers.image = frame.color;
+        let mut kept = self.lock_whole_frames();
+        if kept.len() < KEPT_WHOLE_FRAMES {
+            kept.push(buffers);
+        }
+        encoded
+    }
+
+    fn lock_whole_frames(&self) -> MutexGuard<'_, Vec<WholeFrameBuffers>> {
+        (self.whole_frames.lock()).unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
     /// Only the raster results a worker needs (no base frame): the frame's

@@ -118,3 +118,48 @@ fn glass_pixels_split_into_reflected_and_transmitted_light() {
     assert_eq!(image.pixel(outside).reflected, glam::Vec3::ZERO);
     assert_eq!(image.pixel(outside).object, NONE);
 }
+
+/// A whole frame ([`Renderer::finish_frame`]) in the buffers a frame of
+/// another size and eye left behind is bit for bit the one a fresh renderer
+/// finishes: the kept buffers carry nothing over.
+#[test]
+fn a_whole_frame_in_kept_buffers_is_the_one_in_fresh_buffers() {
+    let (renderer, setup) = small_cockpit();
+    let other = FrameSetup {
+        camera: Camera {
+            width: 320,
+            height: 150,
+            eye: setup.camera.eye + glam::Vec3::new(0.03, 0.0, 0.01),
+            ..setup.camera
+        },
+        ..setup.clone()
+    };
+    let finish = |renderer: &Renderer, setup: &FrameSetup| {
+        let (ids, behind) = renderer.id_buffers(setup);
+        let frame = renderer.frame(setup, &ids, &behind);
+        let options = PackageOptions::default();
+        let traced = trace_package(&frame, renderer.reflectors(), &options, &mut |_| {});
+        renderer.finish_frame(setup, &traced.bitmap, |image, _| {
+            let bits: Vec<u32> = (image.color.pixels.iter())
+                .flat_map(|p| p.to_array().map(f32::to_bits))
+                .collect();
+            (bits, image.components())
+        })
+    };
+    let fresh = |setup: &FrameSetup| finish(&small_cockpit().0, setup);
+    let (first, second, third) = (
+        finish(&renderer, &other),
+        finish(&renderer, &setup),
+        finish(&renderer, &other),
+    );
+    assert!(first == fresh(&other), "the first frame");
+    assert!(
+        second == fresh(&setup),
+        "a smaller frame in the larger one's buffers"
+    );
+    assert!(
+        third == fresh(&other),
+        "a larger frame in the smaller one's buffers"
+    );
+    assert_ne!(first.0, second.0, "the two frames differ");
+}
