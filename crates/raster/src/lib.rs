@@ -44,7 +44,7 @@ use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
 /// whole frame as its window; a worker's covers the reflectors' bounds, so
 /// that it costs their pixels, not the frame's. Read pixels with
 /// [`IdBuffer::triangle_at`] and its siblings, or [`IdBuffer::slot`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct IdBuffer {
     pub width: u32,
     pub height: u32,
@@ -131,6 +131,26 @@ impl IdBuffer {
     #[inline]
     pub fn depth_at(&self, x: u32, y: u32) -> f32 {
         self.slot(x, y).map_or(f32::INFINITY, |i| self.depth[i])
+    }
+}
+
+impl Clone for IdBuffer {
+    /// In planes of dropped buffers where there are some (`spare`): a copy
+    /// in fresh memory pays a page fault per 4 KiB (a worker copies its
+    /// kept set-up buffers every frame).
+    fn clone(&self) -> Self {
+        let mut copy = IdBuffer::unshaped();
+        (copy.width, copy.height, copy.window) = (self.width, self.height, self.window);
+        for (plane, source) in [
+            (&mut copy.object, &self.object),
+            (&mut copy.triangle, &self.triangle),
+        ] {
+            spare::reshape(plane, source.len(), NONE);
+            plane.copy_from_slice(source);
+        }
+        spare::reshape(&mut copy.depth, self.depth.len(), f32::INFINITY);
+        copy.depth.copy_from_slice(&self.depth);
+        copy
     }
 }
 

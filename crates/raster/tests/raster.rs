@@ -1099,3 +1099,25 @@ fn a_union_is_the_smallest_rectangle_holding_both() {
     assert_eq!(empty.union(a), a);
     assert!(PixelRect::EMPTY.union(empty).is_empty());
 }
+
+/// A copy made in the planes of dropped buffers of other sizes (larger and
+/// smaller, holding other values) is the buffer, to the bit.
+#[test]
+fn a_copy_in_dropped_buffers_planes_is_the_buffer() {
+    let (scene, camera) = procedural_scene(7, 96, 64);
+    let ids = id_buffer(&scene, &camera);
+    let window = PixelRect {
+        x0: 10,
+        y0: 5,
+        x1: 70,
+        y1: 40,
+    };
+    let part = id_buffer_within(&scene, &camera, window, &|_| true);
+    for other in [(160, 120), (40, 30)] {
+        let (scene, camera) = procedural_scene(3, other.0, other.1);
+        drop(id_buffer(&scene, &camera));
+        assert_same_ids(&ids.clone(), &ids);
+        drop(id_buffer(&scene, &camera));
+        assert_same_ids(&part.clone(), &part);
+    }
+}

@@ -338,12 +338,19 @@ impl DensePlanes {
         if x0 > x1 {
             return SparseBitmap::default();
         }
+        // Sized up front: planes grown by pushing copy themselves into
+        // fresh pages at every doubling.
+        let kept = mask.iter().filter(|&&m| m).count();
         let mut bitmap = SparseBitmap {
             x0: rect.x0 + x0 as u32,
             y0: rect.y0 + y0 as u32,
             width: (x1 - x0) as u32,
             height: (y1 - y0) as u32,
-            ..SparseBitmap::default()
+            mask: Vec::with_capacity((x1 - x0) * (y1 - y0)),
+            color: Vec::with_capacity(kept),
+            reflected: Vec::with_capacity(kept),
+            transmitted: Vec::with_capacity(kept),
+            reflected_object: Vec::with_capacity(kept),
         };
         for y in y0..y1 {
             let row = y * stride + x0..y * stride + x1;
