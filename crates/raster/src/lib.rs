@@ -139,18 +139,14 @@ impl Clone for IdBuffer {
     /// in fresh memory pays a page fault per 4 KiB (a worker copies its
     /// kept set-up buffers every frame).
     fn clone(&self) -> Self {
-        let mut copy = IdBuffer::unshaped();
-        (copy.width, copy.height, copy.window) = (self.width, self.height, self.window);
-        for (plane, source) in [
-            (&mut copy.object, &self.object),
-            (&mut copy.triangle, &self.triangle),
-        ] {
-            spare::reshape(plane, source.len(), NONE);
-            plane.copy_from_slice(source);
+        IdBuffer {
+            width: self.width,
+            height: self.height,
+            window: self.window,
+            object: spare::copied(&self.object),
+            triangle: spare::copied(&self.triangle),
+            depth: spare::copied(&self.depth),
         }
-        spare::reshape(&mut copy.depth, self.depth.len(), f32::INFINITY);
-        copy.depth.copy_from_slice(&self.depth);
-        copy
     }
 }
 

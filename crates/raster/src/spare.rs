@@ -47,21 +47,33 @@ impl Plane for f32 {
 /// elsewhere: in its own allocation where that is large enough, else in the
 /// smallest kept one that is.
 pub(crate) fn reshape<T: Plane>(plane: &mut Vec<T>, n: usize, fill: T) {
-    if plane.capacity() < n {
-        let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
-        let list = T::kept(&mut kept);
-        let best = (list.iter().enumerate())
-            .filter(|(_, p)| p.capacity() >= n)
-            .min_by_key(|(_, p)| p.capacity())
-            .map(|(i, _)| i);
-        if let Some(i) = best {
-            let old = std::mem::replace(plane, list.swap_remove(i));
-            drop(kept);
-            keep(old);
-        }
+    if plane.capacity() < n
+        && let Some(larger) = take(n)
+    {
+        keep(std::mem::replace(plane, larger));
     }
     plane.truncate(n);
     plane.resize(n, fill);
+}
+
+/// A copy of `source` in the smallest kept plane that holds it, else in a
+/// fresh allocation.
+pub(crate) fn copied<T: Plane>(source: &[T]) -> Vec<T> {
+    let mut plane = take(source.len()).unwrap_or_default();
+    plane.clear();
+    plane.extend_from_slice(source);
+    plane
+}
+
+/// Takes the smallest kept plane of at least `n` elements' capacity.
+fn take<T: Plane>(n: usize) -> Option<Vec<T>> {
+    let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
+    let list = T::kept(&mut kept);
+    let best = (list.iter().enumerate())
+        .filter(|(_, p)| p.capacity() >= n)
+        .min_by_key(|(_, p)| p.capacity())
+        .map(|(i, _)| i)?;
+    Some(list.swap_remove(best))
 }
 
 /// Keeps `plane`'s allocation for a later [`reshape`], while there is room.

@@ -108,7 +108,7 @@ pub struct Renderer {
 /// A whole frame's large buffers, kept from frame to frame: buffers in
 /// fresh memory pay a page fault per 4 KiB on their first write, 33 MB of
 /// them at 1080p (the base image, its ID buffer, the encoded bytes), which
-/// cost a one-thread worker about a tenth of its frame, and more where
+/// cost a one-thread worker up to a tenth of its frame, and more where
 /// other processes share its core (docs/benchmarks.md, session 15).
 struct WholeFrameBuffers {
     image: Image,
@@ -226,19 +226,25 @@ impl Renderer {
         encode: impl FnOnce(&FrameImage, &mut Vec<u8>) -> R,
     ) -> R {
         let kept = self.lock_whole_frames().pop();
-        let mut buffers = kept.unwrap_or_else(|| WholeFrameBuffers {
+        let WholeFrameBuffers {
+            mut image,
+            mut ids,
+            mut scratch,
+        } = kept.unwrap_or_else(|| WholeFrameBuffers {
             image: Image::new(0, 0, Vec3::ZERO),
             ids: IdBuffer::new(0, 0),
             scratch: Vec::new(),
         });
         let (scene, camera) = (self.scene(), &setup.camera);
-        let (image, ids) = (&mut buffers.image, &mut buffers.ids);
-        vtfarm_raster::rasterize_into(scene, camera, &setup.lighting, image, ids);
-        let base = std::mem::replace(&mut buffers.image, Image::new(0, 0, Vec3::ZERO));
-        let mut frame = self.frame_image(setup, base);
+        vtfarm_raster::rasterize_into(scene, camera, &setup.lighting, &mut image, &mut ids);
+        let mut frame = self.frame_image(setup, image);
         frame.composite(bitmap);
-        let encoded = encode(&frame, &mut buffers.scratch);
-        buffers.image = frame.color;
+        let encoded = encode(&frame, &mut scratch);
+        let buffers = WholeFrameBuffers {
+            image: frame.color,
+            ids,
+            scratch,
+        };
         let mut kept = self.lock_whole_frames();
         if kept.len() < KEPT_WHOLE_FRAMES {
             kept.push(buffers);
