@@ -19,23 +19,30 @@
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
 //!   `stages`: a progressive frame's stages composited in place.
 
-mod ahead;
 mod core;
 mod error;
-mod finish;
+mod frames;
 pub mod jobs;
+mod output;
+mod peers;
 pub mod record;
+mod recovery;
 mod rules;
 mod stages;
+mod status;
 pub mod telemetry;
+#[cfg(test)]
+mod testkit;
 pub mod view;
 
-pub use crate::core::{
-    ATTACH_GRACE, BaseFrame, BaseFrameRequest, ConnId, LiveFrame, MasterCore, Output, Peer,
-};
+pub use crate::core::{ATTACH_GRACE, MasterCore};
 pub use error::{JobRejected, ResultRejected};
-pub use finish::{EncodedFrame, FrameEncodeRequest};
+pub use frames::base::{BaseFrame, BaseFrameRequest};
+pub use frames::finish::{EncodedFrame, FrameEncodeRequest};
 pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
+pub use output::Output;
+pub use peers::{ConnId, Peer};
 pub use record::{DamagedJob, Record, StoredJob, Written};
 pub use rules::FarmRules;
 pub use stages::StageRejected;
+pub use status::LiveFrame;

@@ -29,7 +29,7 @@ use std::time::Duration;
 
 use vtfarm_proto::FrameKey;
 
-use crate::core::BaseFrame;
+use super::base::BaseFrame;
 
 /// The memory the base frames the master holds may take (made ahead and
 /// those of the split frames being assembled).
