@@ -37,7 +37,11 @@ struct Cli {
 /// benchmarks last.
 #[derive(Subcommand)]
 enum Command {
-    /// Renders a job's first frame to an image (PNG, or linear float32 .npy by extension).
+    /// Renders a job's first frame to an image.
+    #[command(about = format!(
+        "Renders a job's first frame to an image, by the output's extension: {}",
+        vtfarm_render::output::ImageFormat::SUPPORTED
+    ))]
     Render(RenderArgs),
     /// Runs a glare study (design variants x eye points, optionally x sun
     /// positions) and writes its images, summary and report.
@@ -69,7 +73,7 @@ enum Command {
     Requeue(control::RequeueArgs),
     /// Sets a job's priority (higher runs first).
     Priority(control::PriorityArgs),
-    /// Scene tools (export the built-in cockpit as OBJ + MTL).
+    /// Scene tools (export the built-in cockpit as OBJ + MTL or as GLB).
     #[command(subcommand)]
     Scene(SceneCommand),
     /// Benchmarks: the paper's Table 1, ray and rasterizer throughput, the
@@ -140,7 +144,7 @@ fn main() -> std::process::ExitCode {
     match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", vtfarm_transport::error_report(e.as_ref()));
             std::process::ExitCode::FAILURE
         }
     }

@@ -36,12 +36,19 @@ fn quality_help(quality: Quality) -> &'static str {
 pub(crate) struct ImageSize {
     /// Image width in pixels (default: the job's). Given without --height,
     /// the height follows from the job's aspect ratio.
-    #[arg(long)]
+    #[arg(long, value_parser = image_side)]
     pub(crate) width: Option<u32>,
     /// Image height in pixels (default: the job's). Given without --width,
     /// the width follows from the job's aspect ratio.
-    #[arg(long)]
+    #[arg(long, value_parser = image_side)]
     pub(crate) height: Option<u32>,
+}
+
+/// One side given on the command line, checked by the camera's own rule so
+/// that a bad value is blamed on the option, not on the job file.
+fn image_side(text: &str) -> std::result::Result<u32, String> {
+    let pixels: u32 = text.parse().map_err(|e| format!("{e}"))?;
+    vtfarm_scene::Camera::check_side("side", pixels).map_err(|e| format!("must be {}", e.rule))
 }
 
 impl ImageSize {
@@ -89,6 +96,10 @@ pub(crate) fn prepare_job(
     let loaded = job.load_scene()?;
     let mut camera = loaded.camera;
     (camera.width, camera.height) = size.resolve(camera.width, camera.height);
+    if size.is_set() {
+        vtfarm_scene::Camera::check_size(camera.width, camera.height)
+            .map_err(|e| anyhow::anyhow!("--width/--height (command line): {e}"))?;
+    }
     let reflectors = job.reflector_triangles(&loaded.scene, &loaded.object_aliases)?;
     let setups = job
         .frames(&camera)?

@@ -762,3 +762,48 @@ fn help_describes_every_option_and_lists_the_quality_levels() {
         "{stderr}"
     );
 }
+
+/// Each cause of a failure is printed once, and a value that came from the
+/// command line is blamed on the command line.
+#[test]
+fn errors_name_their_cause_once_and_at_the_right_place() {
+    let missing = vtfarm(&["render", "no/such/job.toml", "-o", "x.png"]);
+    assert!(!missing.status.success());
+    let err = text(&missing.stderr);
+    assert_eq!(err.matches("os error 2").count(), 1, "{err}");
+    assert!(err.contains("no/such/job.toml"), "{err}");
+
+    let job = repo("configs/cockpit.toml");
+    let zero = vtfarm(&[
+        "render",
+        job.to_str().unwrap(),
+        "--width",
+        "0",
+        "-o",
+        "x.png",
+    ]);
+    assert!(!zero.status.success());
+    let err = text(&zero.stderr);
+    assert!(err.contains("--width"), "{err}");
+    assert!(
+        !err.contains("cockpit.toml"),
+        "the job file is not to blame: {err}"
+    );
+
+    let study = repo("configs/cockpit-sun-study.toml");
+    let wrong = vtfarm(&["render", study.to_str().unwrap(), "-o", "x.png"]);
+    assert!(!wrong.status.success());
+    let err = text(&wrong.stderr);
+    assert!(err.contains("vtfarm study"), "{err}");
+    assert!(err.contains("cockpit-sun-study.toml:14:1"), "{err}");
+    assert!(!err.contains("unknown field"), "{err}");
+}
+
+/// The top-level help names every output format of `render` and `scene export`.
+#[test]
+fn the_help_lists_every_output_format() {
+    let help = text(&vtfarm(&["--help"]).stdout);
+    for format in [".png", ".exr", ".npy", "OBJ", "GLB"] {
+        assert!(help.contains(format), "{format} missing from:\n{help}");
+    }
+}

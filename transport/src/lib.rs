@@ -13,7 +13,8 @@
 //! - [`cluster`]: `cluster.toml` and the shared token.
 //! - [`client`]: dialling the master.
 //!
-//! [`init_logging`] is the farm daemons' (`vtfarm master`, `vtfarm worker`)
+//! [`error_report`] is every command's one way to print a failure, and
+//! [`init_logging`] the farm daemons' (`vtfarm master`, `vtfarm worker`)
 //! log set-up, and [`lower_this_thread`] the priority of their background
 //! threads, here because both sit on this crate.
 
@@ -53,6 +54,23 @@ pub fn init_logging_at(default: &str) {
         .try_init();
 }
 
+/// The line a command prints for `error`: its message, then each cause the
+/// text so far does not already quote, so every cause is printed once (a
+/// library error's message often names its cause and also chains it).
+pub fn error_report(error: &(dyn std::error::Error + 'static)) -> String {
+    let mut report = error.to_string();
+    let mut cause = error.source();
+    while let Some(e) = cause {
+        let text = e.to_string();
+        if !text.is_empty() && !report.contains(&text) {
+            report.push_str(": ");
+            report.push_str(&text);
+        }
+        cause = e.source();
+    }
+    report
+}
+
 /// Lowers the calling thread's scheduling priority by `niceness` (a
 /// `nice` increment, up to the lowest, 19): work that nobody waits for
 /// yet takes the cores the rest leaves. Linux keeps a nice value per
@@ -89,6 +107,8 @@ pub(crate) fn truncate_utf8(text: &str, max: usize) -> &str {
 
 #[cfg(test)]
 mod tests {
+    use super::error_report;
+
     /// The calling thread's nice value.
     #[cfg(target_os = "linux")]
     fn niceness() -> i32 {
@@ -114,5 +134,36 @@ mod tests {
         assert_eq!(once, (caller + 3).min(19));
         assert_eq!(floor, 19);
         assert_eq!(niceness(), caller, "the caller keeps its priority");
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("{file}: cannot read: {source}")]
+    struct Quoting {
+        file: &'static str,
+        source: std::io::Error,
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("loading the job")]
+    struct Outer(#[source] Quoting);
+
+    #[test]
+    fn a_cause_the_message_already_quotes_is_printed_once() {
+        let quoting = Quoting {
+            file: "job.toml",
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        };
+        assert_eq!(
+            error_report(&quoting),
+            "job.toml: cannot read: no such file"
+        );
+        let outer = Outer(Quoting {
+            file: "job.toml",
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        });
+        assert_eq!(
+            error_report(&outer),
+            "loading the job: job.toml: cannot read: no such file"
+        );
     }
 }

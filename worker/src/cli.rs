@@ -124,7 +124,7 @@ pub fn main() -> std::process::ExitCode {
     match run(Standalone::parse().args) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", vtfarm_transport::error_report(e.as_ref()));
             std::process::ExitCode::FAILURE
         }
     }

@@ -169,7 +169,27 @@ struct RawFrames {
 /// See [`crate::parse_job`].
 pub(crate) fn parse(text: &str, origin: &Path) -> Result<Job, JobError> {
     let source = Source { file: origin, text };
-    let raw: RawJob = toml::from_str(text).map_err(|e| source.toml_error(&e))?;
+    let raw: RawJob = toml::from_str(text).map_err(|e| {
+        if crate::study::is_study_text(text) {
+            // A study file handed to a command that renders one job: point
+            // at the commands that take it instead of at its `[study]` key.
+            let header = text
+                .lines()
+                .scan(0, |start, line| {
+                    let at = *start;
+                    *start += line.len() + 1;
+                    Some((at, line))
+                })
+                .find(|(_, line)| line.trim() == "[study]");
+            source.error(
+                header.map(|(start, line)| start..start + line.len()),
+                "this is a study file, not a job file: run it with `vtfarm study FILE -o DIR` \
+                 (or `vtfarm submit FILE` on a cluster)",
+            )
+        } else {
+            source.toml_error(&e)
+        }
+    })?;
     let scene = source.scene(raw.scene)?;
     let is_obj = matches!(scene, SceneSource::Obj(_) | SceneSource::Gltf(_));
     let camera_name = raw.camera.camera.as_ref().map(|n| n.get_ref().clone());

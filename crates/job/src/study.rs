@@ -304,10 +304,13 @@ pub const COCKPIT_MARKING_OBJECTS: [&str; 2] = ["dial_markings", "needles"];
 /// rather than a job file; unreadable or broken files count as jobs, whose
 /// loader then reports the problem.
 pub fn is_study_file(path: &Path) -> bool {
-    std::fs::read_to_string(path)
-        .ok()
-        .and_then(|text| text.parse::<toml::Table>().ok())
-        .is_some_and(|table| table.contains_key("study"))
+    std::fs::read_to_string(path).is_ok_and(|text| is_study_text(&text))
+}
+
+/// Whether `text` is a study file's: a TOML table with a `[study]` table.
+pub(crate) fn is_study_text(text: &str) -> bool {
+    text.parse::<toml::Table>()
+        .is_ok_and(|table| table.contains_key("study"))
 }
 
 /// Reads and validates a study file and its base job.
