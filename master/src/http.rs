@@ -1445,9 +1445,7 @@ mod tests {
             "not for an address holding many"
         );
         // The IPv4-mapped form of an address counts as the address.
-        let mapped = IpAddr::from(std::net::Ipv6Addr::from(
-            std::net::Ipv4Addr::new(127, 0, 0, 3).to_ipv6_mapped(),
-        ));
+        let mapped = IpAddr::from(std::net::Ipv4Addr::new(127, 0, 0, 3).to_ipv6_mapped());
         let again = slots.take(mapped).expect("the last reserved slot");
         assert_eq!(again.address, newcomer.address);
         drop((flood, second, newcomer, again));

@@ -1,7 +1,8 @@
 //! The handshake every connection starts with, on its first bidirectional
 //! stream: the client sends `Hello`, the master answers `Welcome` or
-//! `Refused`; both messages are limited to [`MAX_HANDSHAKE_BYTES`]. Both
-//! ends then finish that stream; the session continues on new streams.
+//! `Refused`; both messages are limited to
+//! [`MAX_HANDSHAKE_BYTES`](vtfarm_proto::MAX_HANDSHAKE_BYTES). Both ends
+//! then finish that stream; the session continues on new streams.
 //!
 //! On a refusal the master sends `Refused`, waits up to [`REFUSAL_LINGER`]
 //! for it to be acknowledged, and closes the connection with the code's
@@ -16,8 +17,8 @@
 use std::time::Duration;
 
 use vtfarm_proto::{
-    FrameError, HANDSHAKE_TIMEOUT, HandshakePolicy, Hello, MAX_HANDSHAKE_BYTES, Message, Refusal,
-    RefuseCode, Welcome, check_hello,
+    FrameError, HANDSHAKE_TIMEOUT, HandshakePolicy, Hello, Message, Refusal, RefuseCode, Welcome,
+    check_hello,
 };
 
 use crate::stream::{ProtoError, ReadBounds, read_frame, read_message, write_message};
