@@ -22,14 +22,22 @@
 //!
 //! Every request's `Host` must name this server (loopback names, the
 //! listening address, or an [`HttpAccess::allowed_hosts`] name), so a page
-//! of another site cannot reach it by DNS rebinding. [`serve`] bounds every
-//! client ([`HttpLimits`]): connections beyond the cap and event streams
-//! beyond theirs get 503; a connection that sends no complete request head
-//! within the header timeout, or idles that long between requests, is
-//! closed (hyper's `header_read_timeout`); a client that does not read its
-//! event stream holds one coalesced view and hyper's bounded write buffer,
-//! never a backlog: every stream follows one shared view, computed once
-//! per change for all of them.
+//! of another site cannot reach it by DNS rebinding; and a request that can
+//! change the farm must come from this server's own pages
+//! ([`cross_origin`]: `Sec-Fetch-Site`, `Origin`) and, but for the login
+//! form, be declared JSON, so that no page of another site can make one;
+//! preflights are refused to other origins. These rules are layers on the
+//! whole router, so every route inherits them.
+//!
+//! [`serve`] bounds every client ([`HttpLimits`]): connections beyond the
+//! caps (in all, per address, the reserve for addresses holding few) and
+//! event streams beyond theirs get 503; a connection that sends no
+//! complete request head within the header timeout, or idles that long
+//! between requests, is closed (hyper's `header_read_timeout`); a body is
+//! read whole, within its own deadline, before the request is handled; a
+//! client that does not read its event stream holds one coalesced view
+//! and hyper's bounded write buffer, never a backlog: every stream follows
+//! one shared view, computed once per change for all of them.
 
 use std::collections::{BTreeMap, HashMap};
 use std::convert::Infallible;

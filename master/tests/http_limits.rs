@@ -1,10 +1,13 @@
 //! The HTTP server under abuse, over real sockets on 127.0.0.1: a foreign
 //! `Host` is refused (DNS rebinding), a forwarded loopback request needs
-//! the token, idle connections are closed by the header timeout while an
-//! authorised request still gets through, event streams beyond the cap get
-//! 503, and a thousand clients that never read leave the master's memory
-//! within a stated bound. Every wait is bounded and ends on a socket event
-//! (a response, an end of stream).
+//! the token (compared exactly), idle connections are closed by the header
+//! timeout while an authorised request still gets through, a trickled head
+//! or body is closed at its deadline, slow bodies flooding from one
+//! address leave room for others (127.0.0.2) and for the address itself
+//! once they time out, event streams beyond the cap get 503, and a
+//! thousand clients that never read leave the master's memory within a
+//! stated bound. Every wait is bounded and ends on a socket event (a
+//! response, an end of stream).
 
 use std::net::SocketAddr;
 use std::time::Duration;
