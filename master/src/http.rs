@@ -22,16 +22,24 @@
 //!
 //! Every request's `Host` must name this server (loopback names, the
 //! listening address, or an [`HttpAccess::allowed_hosts`] name), so a page
-//! of another site cannot reach it by DNS rebinding. [`serve`] bounds every
-//! client ([`HttpLimits`]): connections beyond the cap and event streams
-//! beyond theirs get 503; a connection that sends no complete request head
-//! within the header timeout, or idles that long between requests, is
-//! closed (hyper's `header_read_timeout`); a client that does not read its
-//! event stream holds one coalesced view and hyper's bounded write buffer,
-//! never a backlog: every stream follows one shared view, computed once
-//! per change for all of them.
+//! of another site cannot reach it by DNS rebinding; and a request that can
+//! change the farm must come from this server's own pages
+//! ([`cross_origin`]: `Sec-Fetch-Site`, `Origin`) and, but for the login
+//! form, be declared JSON, so that no page of another site can make one;
+//! preflights are refused to other origins. These rules are layers on the
+//! whole router, so every route inherits them.
+//!
+//! [`serve`] bounds every client ([`HttpLimits`]): connections beyond the
+//! caps (in all, per address, the reserve for addresses holding few) and
+//! event streams beyond theirs get 503; a connection that sends no
+//! complete request head within the header timeout, or idles that long
+//! between requests, is closed (hyper's `header_read_timeout`); a body is
+//! read whole, within its own deadline, before the request is handled; a
+//! client that does not read its event stream holds one coalesced view
+//! and hyper's bounded write buffer, never a backlog: every stream follows
+//! one shared view, computed once per change for all of them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::convert::Infallible;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, OnceLock};
@@ -39,7 +47,7 @@ use std::time::Duration;
 
 use axum::Router;
 use axum::extract::{ConnectInfo, Form, Path, Query, Request, State};
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, Sse};
 use axum::response::{Html, IntoResponse, Redirect, Response};
@@ -53,7 +61,6 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-use subtle::ConstantTimeEq;
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
@@ -63,7 +70,7 @@ use vtfarm_master_core::telemetry::{
 };
 use vtfarm_master_core::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
 use vtfarm_master_core::{JobControlError, JobEntry, JobState, MasterCore};
-use vtfarm_proto::{FrameStats, JobAction, JobSummary, StatusReply, WireImage};
+use vtfarm_proto::{FrameStats, JobAction, JobSummary, StatusReply, WireImage, token_matches};
 
 use crate::driver::MasterHandle;
 
@@ -72,6 +79,9 @@ const DASHBOARD: &str = include_str!("dashboard.html");
 
 /// The login page for peers off loopback (`{message}` is filled in).
 const LOGIN: &str = include_str!("login.html");
+
+/// The login form's path: the one state-changing request that is a form, not JSON.
+const LOGIN_PATH: &str = "/login";
 
 /// The session cookie's name.
 pub const SESSION_COOKIE: &str = "vtfarm_session";
@@ -110,8 +120,22 @@ pub struct HttpLimits {
     /// A request's head must be in within this, and a kept-alive connection
     /// idles no longer between requests.
     pub header_read_timeout: Duration,
+    /// A request's body must be in within this after its head, plus its
+    /// length at [`HttpLimits::min_body_rate`]; else 408 and the connection
+    /// is closed. Every body is read whole before the request is handled.
+    pub body_read_timeout: Duration,
+    /// The slowest a body may arrive beyond `body_read_timeout`, in bytes per second.
+    pub min_body_rate: u64,
+    /// The largest request body; a larger one gets 413 and the connection is closed.
+    pub max_body_bytes: usize,
     /// Connections served at once; more get 503 and are closed.
     pub max_connections: usize,
+    /// Connections served at once from one client address.
+    pub max_connections_per_address: usize,
+    /// The last of the `max_connections` slots, kept for addresses that
+    /// hold fewer than [`FEW_CONNECTIONS`]: one address flooding the
+    /// server, or a few, leave room for a dashboard elsewhere.
+    pub reserved_connections: usize,
     /// Event streams (`/api/events`, one per open dashboard) at once; more get 503.
     pub max_event_streams: usize,
     /// The most a connection buffers for a client that does not read.
@@ -122,7 +146,12 @@ impl Default for HttpLimits {
     fn default() -> Self {
         HttpLimits {
             header_read_timeout: Duration::from_secs(10),
+            body_read_timeout: Duration::from_secs(10),
+            min_body_rate: 16 * 1024,
+            max_body_bytes: 64 * 1024,
             max_connections: 256,
+            max_connections_per_address: 128,
+            reserved_connections: 32,
             max_event_streams: 64,
             write_buffer_bytes: 64 * 1024,
         }
@@ -134,9 +163,13 @@ impl Default for HttpLimits {
 /// interval however many follow it.
 const VIEW_INTERVAL: Duration = Duration::from_millis(100);
 
-/// Connections answered 503 at once beyond [`HttpLimits::max_connections`];
-/// past them a connection is closed unanswered.
+/// Connections answered 503 at once beyond the caps; past them a
+/// connection is closed unanswered.
 const TURNED_AWAY: usize = 64;
+
+/// Connections an address may hold and still be given a reserved slot: a
+/// browser opens at most six to one server.
+pub const FEW_CONNECTIONS: usize = 8;
 
 #[derive(Clone)]
 struct HttpState {
@@ -191,7 +224,7 @@ pub async fn serve(
 ) {
     access.listen = listener.local_addr().ok();
     let app = router_with(master, access, limits.max_event_streams);
-    let served = Arc::new(Semaphore::new(limits.max_connections));
+    let slots = Arc::new(Slots::new(limits));
     let turned_away = Arc::new(Semaphore::new(TURNED_AWAY));
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(hyper_util::rt::TokioTimer::new())
@@ -207,7 +240,7 @@ pub async fn serve(
                 continue;
             }
         };
-        let Ok(permit) = served.clone().try_acquire_owned() else {
+        let Some(slot) = slots.take(peer.ip()) else {
             if let Ok(permit) = turned_away.clone().try_acquire_owned() {
                 let timeout = limits.header_read_timeout;
                 tokio::spawn(turn_away(stream, timeout, permit));
@@ -217,17 +250,134 @@ pub async fn serve(
         let service = hyper::service::service_fn({
             let app = app.clone();
             move |request: hyper::Request<hyper::body::Incoming>| {
-                let mut request = request.map(axum::body::Body::new);
-                request.extensions_mut().insert(ConnectInfo(peer));
-                tower::ServiceExt::oneshot(app.clone(), request)
+                let app = app.clone();
+                async move {
+                    let mut request = match whole_request(request, &limits).await {
+                        Ok(request) => request,
+                        Err(refusal) => return Ok::<_, Infallible>(refusal),
+                    };
+                    request.extensions_mut().insert(ConnectInfo(peer));
+                    tower::ServiceExt::oneshot(app, request).await
+                }
             }
         });
-        let connection = http.serve_connection(hyper_util::rt::TokioIo::new(stream), service);
+        let connection = http
+            .serve_connection(hyper_util::rt::TokioIo::new(stream), service)
+            .with_upgrades();
         tokio::spawn(async move {
             let _ = connection.await;
-            drop(permit);
+            drop(slot);
         });
     }
+}
+
+/// The connections being served, counted per client address.
+struct Slots {
+    limits: HttpLimits,
+    held: std::sync::Mutex<SlotCounts>,
+}
+
+#[derive(Default)]
+struct SlotCounts {
+    total: usize,
+    per_address: HashMap<IpAddr, usize>,
+}
+
+/// A served connection's slot, given back when dropped.
+struct Slot {
+    slots: Arc<Slots>,
+    address: IpAddr,
+}
+
+impl Slots {
+    fn new(limits: HttpLimits) -> Slots {
+        Slots {
+            limits,
+            held: std::sync::Mutex::default(),
+        }
+    }
+
+    /// A slot for a connection from `address`, if the caps leave one: the
+    /// address holds fewer than its cap, and the open slots are not all
+    /// taken or it holds only a few.
+    fn take(self: &Arc<Self>, address: IpAddr) -> Option<Slot> {
+        let address = address.to_canonical();
+        let limits = &self.limits;
+        let mut held = self.held.lock().unwrap_or_else(|p| p.into_inner());
+        let mine = held.per_address.get(&address).copied().unwrap_or(0);
+        let open = (limits.max_connections).saturating_sub(limits.reserved_connections);
+        let admitted = mine < limits.max_connections_per_address
+            && (held.total < open
+                || (held.total < limits.max_connections && mine < FEW_CONNECTIONS));
+        if !admitted {
+            return None;
+        }
+        held.total += 1;
+        *held.per_address.entry(address).or_default() += 1;
+        Some(Slot {
+            slots: self.clone(),
+            address,
+        })
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        let mut held = (self.slots.held.lock()).unwrap_or_else(|p| p.into_inner());
+        held.total -= 1;
+        if let Some(n) = held.per_address.get_mut(&self.address) {
+            *n -= 1;
+            if *n == 0 {
+                held.per_address.remove(&self.address);
+            }
+        }
+    }
+}
+
+/// The request with its body read whole, within
+/// [`HttpLimits::body_read_timeout`] plus its length at
+/// [`HttpLimits::min_body_rate`] and at most [`HttpLimits::max_body_bytes`]
+/// long: a client that trickles a body holds its connection that long at
+/// most. Else the refusal, which closes the connection.
+async fn whole_request(
+    request: hyper::Request<hyper::body::Incoming>,
+    limits: &HttpLimits,
+) -> Result<Request, Response> {
+    use hyper::body::Body as _;
+    let (parts, body) = request.into_parts();
+    if body.is_end_stream() {
+        return Ok(Request::from_parts(parts, axum::body::Body::empty()));
+    }
+    let max = limits.max_body_bytes;
+    let announced = body.size_hint().exact();
+    if announced.is_some_and(|n| n > max as u64) {
+        let message = format!("request bodies are at most {max} bytes\n");
+        return Err(closing(StatusCode::PAYLOAD_TOO_LARGE, message));
+    }
+    let length = announced.unwrap_or(max as u64);
+    let bound = limits.body_read_timeout
+        + Duration::from_secs_f64(length as f64 / limits.min_body_rate.max(1) as f64);
+    let read = axum::body::to_bytes(axum::body::Body::new(body), max);
+    match tokio::time::timeout(bound, read).await {
+        Ok(Ok(bytes)) => Ok(Request::from_parts(parts, axum::body::Body::from(bytes))),
+        Ok(Err(e)) => Err(closing(
+            StatusCode::BAD_REQUEST,
+            format!("the request body could not be read: {e}\n"),
+        )),
+        Err(_) => Err(closing(
+            StatusCode::REQUEST_TIMEOUT,
+            format!(
+                "the request body did not arrive within {:.1} s\n",
+                bound.as_secs_f64()
+            ),
+        )),
+    }
+}
+
+/// A refusal after which the connection is closed (its request was not
+/// read to the end).
+fn closing(status: StatusCode, message: String) -> Response {
+    (status, [(header::CONNECTION, "close")], message).into_response()
 }
 
 /// Answers a connection beyond the cap with 503 and closes it.
@@ -265,7 +415,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
     };
     Router::new()
         .route("/", get(|| async { Html(DASHBOARD) }))
-        .route("/login", get(login_page).post(login))
+        .route(LOGIN_PATH, get(login_page).post(login))
         .route("/api/view", post(steer_view))
         .route("/api/jobs", get(list_jobs))
         .route("/api/jobs/{id}/{action}", post(control_job))
@@ -278,7 +428,9 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         .route("/frames/live.png", get(live_png))
         .route("/frames/{seq}", get(frame_png))
         .layer(middleware::from_fn_with_state(state.clone(), require_token))
+        .layer(middleware::from_fn(require_same_origin))
         .layer(middleware::from_fn_with_state(state.clone(), require_host))
+        .layer(middleware::map_response(own_pages_only))
         .with_state(state)
 }
 
@@ -297,8 +449,8 @@ pub fn authorized(peer: IpAddr, headers: &HeaderMap, access: &HttpAccess) -> boo
     let bearer = (headers.get(header::AUTHORIZATION))
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
-    bearer.is_some_and(|t| same(t, token))
-        || session_cookie(headers).is_some_and(|c| same(c, &session_value(token)))
+    bearer.is_some_and(|t| token_matches(token, t))
+        || session_cookie(headers).is_some_and(|c| token_matches(&session_value(token), c))
 }
 
 /// Whether `host` (a `Host` header: a name or address, maybe with a port)
@@ -340,8 +492,130 @@ async fn require_host(State(state): State<HttpState>, request: Request, next: Ne
     }
 }
 
-fn same(a: &str, b: &str) -> bool {
-    bool::from(a.as_bytes().ct_eq(b.as_bytes()))
+/// Whether a request can change the farm: any method but GET, HEAD and
+/// OPTIONS, and any protocol upgrade (a WebSocket is not bound by CORS).
+fn changes_state(request: &Request) -> bool {
+    let method = request.method();
+    !matches!(*method, Method::GET | Method::HEAD | Method::OPTIONS)
+        || request.headers().contains_key(header::UPGRADE)
+}
+
+/// Why a request does not come from this server's own pages, if a browser
+/// says so: its `Sec-Fetch-Site` is not `same-origin` (or `none`, a typed
+/// address), or its `Origin` is not this server's: `http` or `https` and
+/// the request's own `Host`. A request with neither (not a browser's, or an
+/// old browser's) passes; [`require_same_origin`] asks it for JSON.
+pub fn cross_origin(headers: &HeaderMap) -> Option<String> {
+    let text = |name| {
+        headers
+            .get(name)
+            .map(|v: &HeaderValue| v.to_str().unwrap_or("(not text)"))
+    };
+    if let Some(site) = text(header::HeaderName::from_static("sec-fetch-site"))
+        && !matches!(site, "same-origin" | "none")
+    {
+        return Some(format!("Sec-Fetch-Site: {site}"));
+    }
+    if let Some(origin) = text(header::ORIGIN) {
+        let authority =
+            (origin.strip_prefix("http://")).or_else(|| origin.strip_prefix("https://"));
+        let host = text(header::HOST);
+        let own = authority
+            .zip(host)
+            .is_some_and(|(a, h)| a.eq_ignore_ascii_case(h));
+        if !own {
+            return Some(format!("Origin: {origin}"));
+        }
+    }
+    None
+}
+
+/// Whether the request's body is declared JSON (a type no page of another
+/// site may send without a preflight, which [`require_same_origin`] refuses).
+fn is_json(headers: &HeaderMap) -> bool {
+    (headers.get(header::CONTENT_TYPE))
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|essence| essence.trim().eq_ignore_ascii_case("application/json"))
+}
+
+/// Lets a request change the farm only from this server's own pages
+/// (cross-site request forgery): one a browser marks as from another
+/// origin gets 403, and every one but the login form must be declared
+/// JSON (else 415). A CORS preflight is answered only for this origin, so a
+/// page of another site (a public one reaching this private address
+/// included) is never let through.
+async fn require_same_origin(request: Request, next: Next) -> Response {
+    let headers = request.headers();
+    if request.method() == Method::OPTIONS {
+        return preflight(headers);
+    }
+    if changes_state(&request) {
+        if let Some(why) = cross_origin(headers) {
+            let message = format!(
+                "only this server's own pages may change the farm (this request's {why})\n"
+            );
+            return (StatusCode::FORBIDDEN, message).into_response();
+        }
+        let upgrade = headers.contains_key(header::UPGRADE);
+        if request.uri().path() != LOGIN_PATH && !upgrade && !is_json(headers) {
+            let message =
+                "requests that change the farm are sent as Content-Type: application/json\n";
+            return (StatusCode::UNSUPPORTED_MEDIA_TYPE, message).into_response();
+        }
+    }
+    next.run(request).await
+}
+
+/// A CORS preflight: refused (403, no `Access-Control-Allow-*`) unless it
+/// comes from this server's own origin, which browsers never preflight;
+/// that one is allowed, a private-network request included.
+fn preflight(headers: &HeaderMap) -> Response {
+    let vary = (header::VARY, HeaderValue::from_static("Origin"));
+    let own = (headers.get(header::ORIGIN)).filter(|_| cross_origin(headers).is_none());
+    let Some(origin) = own else {
+        let message = "this server answers requests from its own pages only\n";
+        return (StatusCode::FORBIDDEN, [vary], message).into_response();
+    };
+    let mut response = (StatusCode::NO_CONTENT, [vary]).into_response();
+    let answer = response.headers_mut();
+    answer.insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, origin.clone());
+    answer.insert(
+        header::ACCESS_CONTROL_ALLOW_METHODS,
+        HeaderValue::from_static("GET, POST"),
+    );
+    answer.insert(
+        header::ACCESS_CONTROL_ALLOW_HEADERS,
+        HeaderValue::from_static("content-type, authorization"),
+    );
+    if headers.contains_key(REQUEST_PRIVATE_NETWORK) {
+        answer.insert(ALLOW_PRIVATE_NETWORK, HeaderValue::from_static("true"));
+    }
+    response
+}
+
+/// Private Network Access: a preflight asking whether a page may reach this
+/// (private) address, and the answer that allows it.
+const REQUEST_PRIVATE_NETWORK: &str = "access-control-request-private-network";
+const ALLOW_PRIVATE_NETWORK: &str = "access-control-allow-private-network";
+
+/// Every response may be shown, embedded or read by this server's own pages
+/// only: no framing by another site (clickjacking the buttons), no image or
+/// script loads from another site, no content sniffing.
+async fn own_pages_only(mut response: Response) -> Response {
+    let headers = response.headers_mut();
+    for (name, value) in [
+        (header::X_FRAME_OPTIONS, "DENY"),
+        (header::CONTENT_SECURITY_POLICY, "frame-ancestors 'none'"),
+        (
+            header::HeaderName::from_static("cross-origin-resource-policy"),
+            "same-origin",
+        ),
+        (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+    ] {
+        headers.insert(name, HeaderValue::from_static(value));
+    }
+    response
 }
 
 /// The session cookie's value for `token`: a hash, so that a stolen cookie
@@ -366,7 +640,8 @@ async fn require_token(
     request: Request,
     next: Next,
 ) -> Response {
-    if request.uri().path() == "/login" || authorized(peer.ip(), request.headers(), &state.access) {
+    if request.uri().path() == LOGIN_PATH || authorized(peer.ip(), request.headers(), &state.access)
+    {
         return next.run(request).await;
     }
     let wants_page = (request.headers().get(header::ACCEPT))
@@ -374,7 +649,7 @@ async fn require_token(
         .is_some_and(|v| v.contains("text/html"));
     if wants_page {
         // A browser: log in first.
-        return Redirect::to("/login").into_response();
+        return Redirect::to(LOGIN_PATH).into_response();
     }
     let challenge = [(header::WWW_AUTHENTICATE, "Bearer")];
     let message =
@@ -393,7 +668,7 @@ struct LoginForm {
 
 /// The token entered once: the session cookie, then the dashboard.
 async fn login(State(state): State<HttpState>, Form(form): Form<LoginForm>) -> Response {
-    if !same(form.token.trim(), &state.access.token) {
+    if !token_matches(&state.access.token, &form.token) {
         let page = LOGIN.replace("{message}", "That is not the cluster token.");
         return (StatusCode::UNAUTHORIZED, Html(page)).into_response();
     }
@@ -1139,5 +1414,87 @@ impl EncodeMetric for FrameDurationMetric {
 
     fn metric_type(&self) -> MetricType {
         MetricType::Histogram
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn address(last: u8) -> IpAddr {
+        IpAddr::from([127, 0, 0, last])
+    }
+
+    /// One address takes up to its cap; the reserved slots go only to
+    /// addresses holding a few; a given-back slot is taken again.
+    #[test]
+    fn the_reserved_slots_go_to_addresses_holding_few() {
+        let slots = Arc::new(Slots::new(HttpLimits {
+            max_connections: 20,
+            max_connections_per_address: 12,
+            reserved_connections: 4,
+            ..HttpLimits::default()
+        }));
+        let mut flood: Vec<Slot> = (0..12).map_while(|_| slots.take(address(1))).collect();
+        assert_eq!(flood.len(), 12, "one address up to its cap");
+        assert!(slots.take(address(1)).is_none());
+        // A second address takes the 4 open slots left, then reserved ones
+        // while it holds fewer than FEW_CONNECTIONS (8).
+        let second: Vec<Slot> = (0..12).map_while(|_| slots.take(address(2))).collect();
+        assert_eq!(second.len(), 8);
+        // All 20 taken: nobody else, not even a newcomer.
+        assert!(slots.take(address(3)).is_none());
+        flood.truncate(10);
+        let newcomer = slots
+            .take(address(3))
+            .expect("a reserved slot for a newcomer");
+        assert!(
+            slots.take(address(2)).is_none(),
+            "not for an address holding many"
+        );
+        // The IPv4-mapped form of an address counts as the address.
+        let mapped = IpAddr::from(std::net::Ipv4Addr::new(127, 0, 0, 3).to_ipv6_mapped());
+        let again = slots.take(mapped).expect("the last reserved slot");
+        assert_eq!(again.address, newcomer.address);
+        drop((flood, second, newcomer, again));
+        let held = slots.held.lock().unwrap();
+        assert_eq!((held.total, held.per_address.len()), (0, 0));
+    }
+
+    #[test]
+    fn only_this_servers_own_pages_are_same_origin() {
+        let headers = |pairs: &[(&'static str, &'static str)]| {
+            let mut map = HeaderMap::new();
+            for (name, value) in pairs {
+                map.insert(*name, HeaderValue::from_static(value));
+            }
+            map
+        };
+        let host = ("host", "127.0.0.1:7879");
+        for own in [
+            vec![host],
+            vec![host, ("origin", "http://127.0.0.1:7879")],
+            vec![("host", "Dash.Example"), ("origin", "https://dash.example")],
+            vec![host, ("sec-fetch-site", "same-origin")],
+            vec![host, ("sec-fetch-site", "none")],
+        ] {
+            assert_eq!(cross_origin(&headers(&own)), None, "{own:?}");
+        }
+        for other in [
+            vec![host, ("sec-fetch-site", "cross-site")],
+            vec![host, ("sec-fetch-site", "same-site")],
+            vec![host, ("origin", "http://127.0.0.1:7880")],
+            vec![host, ("origin", "http://localhost:7879")],
+            vec![host, ("origin", "null")],
+            vec![host, ("origin", "ftp://127.0.0.1:7879")],
+            vec![("origin", "http://127.0.0.1:7879")],
+            vec![
+                host,
+                ("origin", "http://127.0.0.1:7879"),
+                ("sec-fetch-site", "same-site"),
+            ],
+        ] {
+            assert!(cross_origin(&headers(&other)).is_some(), "{other:?}");
+        }
     }
 }

@@ -10,7 +10,7 @@ use tracing::{info, warn};
 use vtfarm_master_core::Peer;
 use vtfarm_proto::{HandshakePolicy, Role, SESSION_LIMIT};
 use vtfarm_transport::{
-    IdentityError, Link, MasterIdentity, TlsError, server_config, server_handshake,
+    IdentityError, Link, MasterIdentity, ReadBounds, TlsError, server_config, server_handshake,
 };
 
 use crate::driver::MasterHandle;
@@ -73,9 +73,13 @@ pub async fn serve(endpoint: quinn::Endpoint, policy: HandshakePolicy, master: M
             };
             info!(peer = %address, ?peer, "accepted");
             let closer = conn.clone();
+            let bounds = ReadBounds {
+                limit: SESSION_LIMIT,
+                stall: policy.message_stall,
+            };
             master.attach(
                 peer,
-                Link::over_connection(conn.clone(), recv, send, SESSION_LIMIT, address.to_string()),
+                Link::over_connection(conn.clone(), recv, send, bounds, address.to_string()),
                 Some(Box::new(move |reason: &str| {
                     closer.close(vtfarm_transport::CLOSE_NORMAL, reason.as_bytes())
                 })),

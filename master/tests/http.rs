@@ -225,22 +225,28 @@ async fn get(address: SocketAddr, path: &str) -> Response {
 }
 
 /// A plain HTTP/1.1 request over a fresh connection, with an optional JSON
-/// body; reads the headers, then exactly `Content-Length` bytes (servers
-/// need not close the connection).
+/// body.
 async fn request(
     address: SocketAddr,
     method: &str,
     path: &str,
     json: Option<serde_json::Value>,
 ) -> Response {
-    let stream = TcpStream::connect(address).await.unwrap();
-    let mut stream = BufReader::new(stream);
     let body = json.map(|j| j.to_string()).unwrap_or_default();
     let request = format!(
         "{method} {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\
          Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
     );
+    exchange(address, &request).await
+}
+
+/// Sends `request` (head and body as given) over a fresh connection; reads
+/// the headers, then exactly `Content-Length` bytes (servers need not
+/// close the connection).
+async fn exchange(address: SocketAddr, request: &str) -> Response {
+    let stream = TcpStream::connect(address).await.unwrap();
+    let mut stream = BufReader::new(stream);
     stream
         .get_mut()
         .write_all(request.as_bytes())
@@ -260,7 +266,9 @@ async fn request(
         let (key, value) = line.split_once(':').expect("header line");
         headers.insert(key.to_ascii_lowercase(), value.trim().to_owned());
     }
-    let length: usize = headers["content-length"].parse().unwrap();
+    let length: usize = headers
+        .get("content-length")
+        .map_or(0, |l| l.parse().unwrap());
     let mut body = vec![0; length];
     stream.read_exact(&mut body).await.unwrap();
     Response {
@@ -554,6 +562,25 @@ async fn the_jobs_api_lists_and_changes_jobs_and_the_metrics_agree() {
         other => panic!("the submitter got {other:?}"),
     }
     assert_eq!(post("cancel", serde_json::json!({})).await.status, 409);
+    // A finished job's state allows a requeue only.
+    for (action, body) in [
+        ("priority", serde_json::json!({ "priority": 3 })),
+        ("pause", serde_json::json!({})),
+        ("resume", serde_json::json!({})),
+    ] {
+        let refused = post(action, body).await;
+        assert_eq!(refused.status, 409, "{action}: {}", refused.text());
+        assert!(
+            refused.text().contains("is cancelled"),
+            "{}",
+            refused.text()
+        );
+    }
+    let listed = jobs(&farm.get("/api/jobs").await);
+    assert_eq!(
+        listed[0].priority, 7,
+        "the finished job's priority is as it was"
+    );
 
     // The gauges count the listing's states.
     let listed = jobs(&farm.get("/api/jobs").await);
@@ -581,6 +608,148 @@ async fn the_jobs_api_lists_and_changes_jobs_and_the_metrics_agree() {
     assert_eq!(metrics["vtfarm_jobs_total{state=\"cancelled\"}"], 1.0);
 }
 
+/// What a page of another site can send with `fetch(url, {method: "POST",
+/// mode: "no-cors"})` or a form, and what a sibling site (same site,
+/// another origin) can: every one refused over real sockets while the
+/// job keeps running; preflights (Private Network Access ones included)
+/// are refused; the dashboard's own requests (its origin, JSON) work.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_from_other_sites_are_refused_and_the_job_keeps_running() {
+    let farm = Farm::with_workers(0).await;
+    let (id, submitter) = farm.submit_in_background().await;
+    let address = farm.http;
+    let port = address.port();
+    let post = |path: String, headers: &str, body: &str| {
+        format!(
+            "POST {path} HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n{headers}\
+             Content-Length: {}\r\n\r\n{body}",
+            body.len()
+        )
+    };
+    let evil = "Origin: https://evil.example\r\nSec-Fetch-Site: cross-site\r\n";
+    let sibling = format!("Origin: http://other.localhost:{port}\r\nSec-Fetch-Site: same-site\r\n");
+    let plain = "Content-Type: text/plain;charset=UTF-8\r\n";
+    let json = "Content-Type: application/json\r\n";
+    let priority = r#"{"priority": 9}"#;
+    let refused = [
+        // fetch(…, {method: "POST", mode: "no-cors"}): no body.
+        (post(format!("/api/jobs/{id}/cancel"), evil, ""), 403),
+        (post(format!("/api/jobs/{id}/pause"), evil, ""), 403),
+        (
+            post(
+                format!("/api/jobs/{id}/priority"),
+                &format!("{evil}{plain}"),
+                priority,
+            ),
+            403,
+        ),
+        // A sibling site, marked same-site by the browser.
+        (
+            post(
+                format!("/api/jobs/{id}/cancel"),
+                &format!("{sibling}{json}"),
+                "",
+            ),
+            403,
+        ),
+        // Another origin named without Sec-Fetch-Site (an older browser).
+        (
+            post(
+                format!("/api/jobs/{id}/cancel"),
+                &format!("Origin: http://127.0.0.1:{}\r\n{json}", port + 1),
+                "",
+            ),
+            403,
+        ),
+        (
+            post(
+                format!("/api/jobs/{id}/cancel"),
+                &format!("Origin: null\r\n{json}"),
+                "",
+            ),
+            403,
+        ),
+        // No browser header at all, and not JSON: what a form or
+        // no-cors fetch of a browser that sends neither would make.
+        (post(format!("/api/jobs/{id}/cancel"), plain, ""), 415),
+        (
+            post(format!("/api/jobs/{id}/priority"), plain, priority),
+            415,
+        ),
+        (
+            post(
+                "/api/view".into(),
+                &format!("{evil}{json}"),
+                r#"{"job": 1, "offset": [0, 0, 0]}"#,
+            ),
+            403,
+        ),
+        (
+            post(
+                "/login".into(),
+                &format!("{evil}Content-Type: application/x-www-form-urlencoded\r\n"),
+                "token=x",
+            ),
+            403,
+        ),
+    ];
+    for (request, code) in &refused {
+        let answer = exchange(address, request).await;
+        assert_eq!(answer.status, *code, "{request}\n{}", answer.text());
+    }
+    // Preflights, a Private Network Access one included: no CORS header
+    // lets the page go on.
+    for headers in [
+        "Access-Control-Request-Method: POST\r\nAccess-Control-Request-Headers: content-type\r\n",
+        "Access-Control-Request-Method: GET\r\nAccess-Control-Request-Private-Network: true\r\n",
+    ] {
+        let request = format!(
+            "OPTIONS /api/jobs/{id}/cancel HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\
+             Origin: https://evil.example\r\nSec-Fetch-Site: cross-site\r\nSec-Fetch-Mode: cors\r\n{headers}\r\n"
+        );
+        let answer = exchange(address, &request).await;
+        assert_eq!(answer.status, 403, "{headers}");
+        for header in [
+            "access-control-allow-origin",
+            "access-control-allow-private-network",
+        ] {
+            assert!(
+                !answer.headers.contains_key(header),
+                "{header} in {:?}",
+                answer.headers
+            );
+        }
+    }
+    let listed: Vec<JobSummary> =
+        serde_json::from_slice(&farm.get("/api/jobs").await.body).unwrap();
+    assert_eq!(
+        (listed[0].state, listed[0].priority),
+        (WireJobState::Running, 0)
+    );
+    // No other site may frame the dashboard or load its images.
+    let page = farm.get("/").await;
+    assert_eq!(page.headers["x-frame-options"], "DENY");
+    assert_eq!(page.headers["cross-origin-resource-policy"], "same-origin");
+
+    // The dashboard's own request: its origin, JSON.
+    let own = format!("Origin: http://{address}\r\nSec-Fetch-Site: same-origin\r\n{json}");
+    let answer = exchange(
+        address,
+        &post(format!("/api/jobs/{id}/priority"), &own, priority),
+    )
+    .await;
+    assert_eq!(answer.status, 200, "{}", answer.text());
+    let answer = exchange(address, &post(format!("/api/jobs/{id}/cancel"), &own, "")).await;
+    assert_eq!(answer.status, 200, "{}", answer.text());
+    let ended = (tokio::time::timeout(WAIT, submitter).await)
+        .expect("the submitter ended")
+        .unwrap();
+    assert!(
+        matches!(ended, Err(JobError::Cancelled { job, .. }) if job == id),
+        "{ended:?}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_peer_off_loopback_needs_the_cluster_token() {
     let (master, _task) = spawn_master(FarmRules::default());
@@ -597,8 +766,11 @@ async fn a_peer_off_loopback_needs_the_cluster_token() {
         app.oneshot(request.body(Body::empty()).unwrap())
     };
     // Reading and changing jobs follow the same rule.
-    let cancel =
-        |peer, authorization| send(Request::post("/api/jobs/5/cancel"), peer, authorization);
+    let cancel = |peer, authorization| {
+        let request =
+            Request::post("/api/jobs/5/cancel").header("content-type", "application/json");
+        send(request, peer, authorization)
+    };
     let outsider: SocketAddr = "192.0.2.7:40000".parse().unwrap();
     let code = |r: axum::response::Response| r.status();
     assert_eq!(
@@ -1113,12 +1285,8 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
     let row = browser.eval(&click).await;
     assert_eq!(row["state"], "cancelled", "{row}");
     assert_eq!(row["answer"], format!("job {id}: cancelled"), "{row}");
-    // A finished job offers requeue and priority, no cancel or pause.
-    assert_eq!(
-        row["buttons"],
-        serde_json::json!(["requeue", "priority"]),
-        "{row}"
-    );
+    // A finished job offers requeue only (its state allows nothing else).
+    assert_eq!(row["buttons"], serde_json::json!(["requeue"]), "{row}");
     let ended = (tokio::time::timeout(WAIT, submitter).await)
         .expect("the submitter ended")
         .unwrap();

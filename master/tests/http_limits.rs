@@ -1,10 +1,13 @@
 //! The HTTP server under abuse, over real sockets on 127.0.0.1: a foreign
 //! `Host` is refused (DNS rebinding), a forwarded loopback request needs
-//! the token, idle connections are closed by the header timeout while an
-//! authorised request still gets through, event streams beyond the cap get
-//! 503, and a thousand clients that never read leave the master's memory
-//! within a stated bound. Every wait is bounded and ends on a socket event
-//! (a response, an end of stream).
+//! the token (compared exactly), idle connections are closed by the header
+//! timeout while an authorised request still gets through, a trickled head
+//! or body is closed at its deadline, slow bodies flooding from one
+//! address leave room for others (127.0.0.2) and for the address itself
+//! once they time out, event streams beyond the cap get 503, and a
+//! thousand clients that never read leave the master's memory within a
+//! stated bound. Every wait is bounded and ends on a socket event (a
+//! response, an end of stream).
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -23,7 +26,12 @@ const WAIT: Duration = Duration::from_secs(60);
 /// Limits small enough to reach in a test.
 const LIMITS: HttpLimits = HttpLimits {
     header_read_timeout: Duration::from_secs(1),
+    body_read_timeout: Duration::from_secs(1),
+    min_body_rate: 1024,
+    max_body_bytes: 64 * 1024,
     max_connections: 64,
+    max_connections_per_address: 64,
+    reserved_connections: 0,
     max_event_streams: 8,
     write_buffer_bytes: 16 * 1024,
 };
@@ -138,6 +146,24 @@ async fn a_foreign_host_is_refused_and_a_forwarded_loopback_request_needs_the_to
             .0,
         200
     );
+    // Tokens are compared exactly: nothing around them is ignored. (A
+    // header's own surrounding whitespace is not part of its value in
+    // HTTP: the parser drops it before anyone sees it.)
+    for near in ["c0ffee%20", "c0ffee x", " c0ffee", "c0ffe", "C0FFEE"] {
+        let bearer = format!("Authorization: Bearer {near}\r\n");
+        let (code, _) = exchange(address, &get("/api/status", &host, &bearer)).await;
+        assert_eq!(code, 401, "{bearer:?}");
+    }
+    for near in ["c0ffee%20", "c0ffee%09", "%20c0ffee", "c0ffee%0A", "c0ffe"] {
+        let form = format!("token={near}");
+        let login = format!(
+            "POST /login HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/x-www-form-urlencoded\r\n\
+             Content-Length: {}\r\nConnection: close\r\n\r\n{form}",
+            form.len()
+        );
+        let (code, text) = exchange(address, &login).await;
+        assert_eq!(code, 401, "{form}: {text}");
+    }
 }
 
 /// 2,000 connections that send nothing: those over the cap are answered
@@ -266,4 +292,159 @@ async fn a_thousand_slow_readers_leave_the_memory_bounded() {
     let reply = tokio::time::timeout(WAIT, master.inspect(|c| c.status())).await;
     assert!(reply.expect("bounded").is_some());
     drop(readers);
+}
+
+/// A connection to `address` from the loopback address `from` (127.0.0.2
+/// and so on: another client on the same host).
+async fn connect_from(from: [u8; 4], address: SocketAddr) -> TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket
+        .bind(SocketAddr::from((from, 0)))
+        .expect("any 127.0.0.0/8 address binds on loopback");
+    socket.connect(address).await.unwrap()
+}
+
+/// Sends `request` from `from` and reads the response to its end.
+async fn exchange_from(from: [u8; 4], address: SocketAddr, request: &str) -> (u16, String) {
+    let mut stream = connect_from(from, address).await;
+    stream.write_all(request.as_bytes()).await.unwrap();
+    let mut response = Vec::new();
+    tokio::time::timeout(WAIT, stream.read_to_end(&mut response))
+        .await
+        .expect("the server answered and closed")
+        .unwrap();
+    let text = String::from_utf8_lossy(&response).into_owned();
+    let code = (text.split(' ').nth(1)).and_then(|c| c.parse().ok());
+    (code.unwrap_or(0), text)
+}
+
+/// What became of a slow client: the response the server sent before it
+/// closed the connection (empty when it closed it unanswered).
+async fn trickle(mut stream: TcpStream, head: String) -> Vec<u8> {
+    let _ = stream.write_all(head.as_bytes()).await;
+    let (mut read, mut write) = stream.into_split();
+    let dribble = async {
+        // One byte at a time, until the server stops taking them.
+        loop {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            if write.write_all(b"x").await.is_err() {
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    let mut response = Vec::new();
+    tokio::select! {
+        _ = read.read_to_end(&mut response) => {}
+        () = dribble => {}
+    }
+    response
+}
+
+/// 260 clients on one address that send a request head for a body and
+/// then trickle it a byte at a time: the address gets no more than its cap
+/// (the rest are told 503), a dashboard on another address is served at
+/// once, each trickler is answered 408 and closed at the body's deadline,
+/// and a client on the flooding address itself, retrying on 503, is
+/// served once they are.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_bodies_from_one_address_hold_neither_the_server_nor_other_clients() {
+    const SLOW: usize = 260;
+    raise_fd_limit(2 * SLOW as u64 + 256);
+    let limits = HttpLimits {
+        header_read_timeout: Duration::from_secs(2),
+        body_read_timeout: Duration::from_secs(3),
+        max_connections: 256,
+        max_connections_per_address: 128,
+        reserved_connections: 32,
+        ..HttpLimits::default()
+    };
+    let (_master, address) = start(HttpAccess::new("c0ffee"), limits).await;
+    let host = format!("127.0.0.1:{}", address.port());
+    let head = format!(
+        "POST /login HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/x-www-form-urlencoded\r\n\
+         Content-Length: 60000\r\n\r\ntoken="
+    );
+    let (turned_away, turned_away_seen) = tokio::sync::mpsc::unbounded_channel();
+    let mut slow = Vec::with_capacity(SLOW);
+    for _ in 0..SLOW {
+        let stream = connect_from([127, 0, 0, 1], address).await;
+        let (head, turned_away) = (head.clone(), turned_away.clone());
+        slow.push(tokio::spawn(async move {
+            let response = trickle(stream, head).await;
+            if response.starts_with(b"HTTP/1.1 503") {
+                let _ = turned_away.send(());
+            }
+            response
+        }));
+    }
+    let mut turned_away_seen = turned_away_seen;
+    // The address's cap is reached once one of them is turned away.
+    tokio::time::timeout(WAIT, turned_away_seen.recv())
+        .await
+        .expect("a client beyond the address's cap is told 503");
+    let status = get("/api/status", &host, "");
+    let (code, text) = exchange_from([127, 0, 0, 2], address, &status).await;
+    assert_eq!(code, 200, "another address is served at once: {text}");
+
+    // The flooding address itself, retrying on 503 as a browser's user would.
+    let served = async {
+        loop {
+            let (code, text) = exchange_from([127, 0, 0, 1], address, &status).await;
+            match code {
+                200 => return,
+                503 | 0 => tokio::time::sleep(Duration::from_millis(100)).await,
+                _ => panic!("{text}"),
+            }
+        }
+    };
+    tokio::time::timeout(WAIT, served)
+        .await
+        .expect("the flooding address is served once its slow bodies time out");
+    for client in slow {
+        // Answered 408 (or reset: it closed with the trickled bytes unread).
+        tokio::time::timeout(WAIT, client)
+            .await
+            .expect("every slow client is closed")
+            .unwrap();
+    }
+}
+
+/// A body that stops coming is answered 408 at its deadline and the
+/// connection closed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_body_that_stops_coming_is_answered_408() {
+    let (_master, address) = start(HttpAccess::new("c0ffee"), LIMITS).await;
+    let host = format!("127.0.0.1:{}", address.port());
+    let part = format!(
+        "POST /api/jobs/1/cancel HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n\
+         Content-Length: 100\r\n\r\n{{\"failed\""
+    );
+    let (code, text) = exchange(address, &part).await;
+    assert_eq!(code, 408, "{text}");
+}
+
+/// A request head trickled a byte at a time is closed at the header
+/// deadline, not kept while bytes keep coming.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_trickled_request_head_is_closed_at_the_header_deadline() {
+    let (_master, address) = start(HttpAccess::new("c0ffee"), LIMITS).await;
+    let host = format!("127.0.0.1:{}", address.port());
+    let endless_head = format!("GET /api/status HTTP/1.1\r\nHost: {host}\r\n");
+    let client = trickle(TcpStream::connect(address).await.unwrap(), endless_head);
+    tokio::time::timeout(WAIT, client)
+        .await
+        .expect("the server closed the trickling client");
+}
+
+/// A body announced over the limit is refused before it is read.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_body_over_the_limit_is_refused_at_its_head() {
+    let (_master, address) = start(HttpAccess::new("c0ffee"), LIMITS).await;
+    let host = format!("127.0.0.1:{}", address.port());
+    let head = format!(
+        "POST /login HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/x-www-form-urlencoded\r\n\
+         Content-Length: 1000000\r\n\r\n"
+    );
+    let (code, text) = exchange(address, &head).await;
+    assert_eq!(code, 413, "{text}");
 }

@@ -8,6 +8,8 @@
 //! bincode limit scaled to the body's size, so a small body cannot claim a
 //! huge vector either. No I/O here: frames in memory only.
 
+use std::time::Duration;
+
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -22,6 +24,12 @@ pub const MAX_HANDSHAKE_BYTES: u32 = 64 * 1024;
 /// The limit of a session's messages (after the handshake): the protocol's
 /// maximum, since scene data and finished frames travel on the session.
 pub const SESSION_LIMIT: u32 = MAX_MESSAGE_BYTES;
+
+/// Once a message's first byte is in, the longest a reader waits for the
+/// next one. A session may idle between messages (QUIC keeps the
+/// connection alive), but a peer that announces a message and goes silent
+/// inside it is closed.
+pub const MESSAGE_STALL: Duration = Duration::from_secs(10);
 
 /// Why a frame does not hold a message (or a message makes no frame).
 #[derive(Debug, thiserror::Error)]

@@ -30,6 +30,9 @@ pub struct HandshakePolicy {
     pub master_name: String,
     /// How long a client may take to send its `Hello`.
     pub timeout: Duration,
+    /// How long an accepted peer's message may stall once begun
+    /// ([`crate::MESSAGE_STALL`]).
+    pub message_stall: Duration,
 }
 
 impl HandshakePolicy {
@@ -40,6 +43,7 @@ impl HandshakePolicy {
             version: crate::PROTOCOL_VERSION,
             master_name: master_name.into(),
             timeout: HANDSHAKE_TIMEOUT,
+            message_stall: crate::MESSAGE_STALL,
         }
     }
 }
@@ -51,6 +55,7 @@ impl std::fmt::Debug for HandshakePolicy {
             .field("version", &self.version)
             .field("master_name", &self.master_name)
             .field("timeout", &self.timeout)
+            .field("message_stall", &self.message_stall)
             .finish_non_exhaustive()
     }
 }

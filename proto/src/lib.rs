@@ -29,8 +29,8 @@ pub mod message;
 pub mod wire;
 
 pub use framing::{
-    DecodeError, FrameError, MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, SESSION_LIMIT, body_len,
-    decode_message, encode_message, encoded_len, split_frame,
+    DecodeError, FrameError, MAX_HANDSHAKE_BYTES, MAX_MESSAGE_BYTES, MESSAGE_STALL, SESSION_LIMIT,
+    body_len, decode_message, encode_message, encoded_len, split_frame,
 };
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use kept::{FrameKey, KeptFrames};

@@ -244,7 +244,8 @@ pub enum RefuseCode {
     /// Close code 4: the first message is longer than
     /// [`crate::MAX_HANDSHAKE_BYTES`].
     TooLarge,
-    /// Close code 5: no `Hello` within the handshake timeout.
+    /// Close code 5: no `Hello` within the handshake timeout, or a message
+    /// on an accepted session that stalled ([`crate::MESSAGE_STALL`]).
     Timeout,
     /// Close code 6: the master is shutting down.
     ShuttingDown,

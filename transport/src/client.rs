@@ -6,9 +6,9 @@ use std::time::Duration;
 
 use tokio::net::lookup_host;
 
-use vtfarm_proto::{Hello, Role, SESSION_LIMIT};
+use vtfarm_proto::{Hello, Role};
 
-use crate::{Link, ProtoError, SERVER_NAME, client_config, client_handshake};
+use crate::{Link, ProtoError, ReadBounds, SERVER_NAME, client_config, client_handshake};
 
 /// Where and who to connect as.
 #[derive(Clone, Debug)]
@@ -111,7 +111,7 @@ pub async fn connect(options: &ClientOptions, role: Role) -> Result<Connection, 
         connection.clone(),
         recv,
         send,
-        SESSION_LIMIT,
+        ReadBounds::SESSION,
         options.master.clone(),
     );
     Ok(Connection {

@@ -1,7 +1,8 @@
 //! The handshake every connection starts with, on its first bidirectional
 //! stream: the client sends `Hello`, the master answers `Welcome` or
-//! `Refused`; both messages are limited to [`MAX_HANDSHAKE_BYTES`]. Both
-//! ends then finish that stream; the session continues on new streams.
+//! `Refused`; both messages are limited to
+//! [`MAX_HANDSHAKE_BYTES`](vtfarm_proto::MAX_HANDSHAKE_BYTES). Both ends
+//! then finish that stream; the session continues on new streams.
 //!
 //! On a refusal the master sends `Refused`, waits up to [`REFUSAL_LINGER`]
 //! for it to be acknowledged, and closes the connection with the code's
@@ -16,11 +17,11 @@
 use std::time::Duration;
 
 use vtfarm_proto::{
-    FrameError, HANDSHAKE_TIMEOUT, HandshakePolicy, Hello, MAX_HANDSHAKE_BYTES, Message, Refusal,
-    RefuseCode, Welcome, check_hello,
+    FrameError, HANDSHAKE_TIMEOUT, HandshakePolicy, Hello, Message, Refusal, RefuseCode, Welcome,
+    check_hello,
 };
 
-use crate::stream::{ProtoError, read_frame, read_message, write_message};
+use crate::stream::{ProtoError, ReadBounds, read_frame, read_message, write_message};
 use crate::truncate_utf8;
 
 /// How long the master waits for a `Refused` to be acknowledged before closing.
@@ -50,7 +51,7 @@ async fn client_exchange(conn: &quinn::Connection, hello: &Hello) -> Result<Welc
     write_message(&mut send, &Message::Hello(hello.clone())).await?;
     // Already finished or reset only if the connection is gone; the read says so.
     let _ = send.finish();
-    match read_message(&mut recv, MAX_HANDSHAKE_BYTES).await? {
+    match read_message(&mut recv, ReadBounds::HANDSHAKE).await? {
         Message::Welcome(welcome) if welcome.version == hello.version => Ok(welcome),
         Message::Welcome(_) => Err(ProtoError::Unexpected {
             expected: "Welcome of our version",
@@ -140,7 +141,7 @@ async fn receive_hello(
         (None, Refusal::new(RefuseCode::Disconnected, message))
     })?;
     let refuse = |send, code, message: String| Err((Some(send), Refusal::new(code, message)));
-    let body = match read_frame(&mut recv, MAX_HANDSHAKE_BYTES).await {
+    let body = match read_frame(&mut recv, ReadBounds::HANDSHAKE).await {
         Ok(body) => body,
         Err(ProtoError::Frame(FrameError::TooLarge { len, limit })) => {
             let message = format!("first message of {len} bytes exceeds {limit}");

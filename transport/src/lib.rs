@@ -28,7 +28,7 @@ pub mod tls;
 pub use cluster::{CLUSTER_FILE, ClusterConfig, ConfigError};
 pub use handshake::{CLOSE_NORMAL, REFUSAL_LINGER, client_handshake, server_handshake};
 pub use link::Link;
-pub use stream::{ProtoError, read_message, write_message};
+pub use stream::{ProtoError, ReadBounds, read_message, write_message};
 pub use tls::{
     ALPN, IdentityError, KEEP_ALIVE_INTERVAL, MasterIdentity, SERVER_NAME, TlsError, client_config,
     fingerprint_of, parse_fingerprint, server_config,

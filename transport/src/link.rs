@@ -11,7 +11,7 @@ use tracing::{debug, warn};
 
 use vtfarm_proto::{FrameError, Message, RefuseCode, StatusReply, encode_message};
 
-use crate::stream::{ProtoError, read_message};
+use crate::stream::{ProtoError, ReadBounds, read_message};
 
 /// One end of a message link.
 #[derive(Debug)]
@@ -50,34 +50,36 @@ impl Link {
     }
 
     /// A link over a byte stream pair (a QUIC bidirectional stream): a task
-    /// reads framed messages of at most `limit` bytes into `rx`, another
-    /// writes `tx` out. The link goes down on the first error either way.
-    pub fn over_stream<R, W>(recv: R, send: W, limit: u32) -> Link
+    /// reads framed messages within `bounds` into `rx`, another writes `tx`
+    /// out. The link goes down on the first error either way.
+    pub fn over_stream<R, W>(recv: R, send: W, bounds: ReadBounds) -> Link
     where
         R: AsyncRead + Unpin + Send + 'static,
         W: AsyncWrite + Unpin + Send + 'static,
     {
-        Link::with_read_error(recv, send, limit, |_| {})
+        Link::with_read_error(recv, send, bounds, |_| {})
     }
 
     /// A link over a QUIC connection's session stream (after the handshake).
-    /// Bad input from the peer — a length prefix over `limit`, a body that
-    /// does not decode, a stream cut inside a message — is logged naming
-    /// `peer` and closes the connection with the handshake's close code for
-    /// it (3 bad message, 4 too large) and the error as the reason.
+    /// Bad input from the peer — a length prefix over the limit, a body that
+    /// does not decode, a stream cut inside a message, a message that
+    /// stalls — is logged naming `peer` and closes the connection with the
+    /// handshake's close code for it (3 bad message, 4 too large, 5 timed
+    /// out) and the error as the reason.
     pub fn over_connection(
         connection: quinn::Connection,
         recv: quinn::RecvStream,
         send: quinn::SendStream,
-        limit: u32,
+        bounds: ReadBounds,
         peer: String,
     ) -> Link {
-        Link::with_read_error(recv, send, limit, move |e| {
+        Link::with_read_error(recv, send, bounds, move |e| {
             let code = match e {
                 ProtoError::Frame(FrameError::TooLarge { .. }) => RefuseCode::TooLarge,
                 ProtoError::Frame(FrameError::Decode(_) | FrameError::Truncated { .. }) => {
                     RefuseCode::BadMessage
                 }
+                ProtoError::Stalled { .. } => RefuseCode::Timeout,
                 _ => return,
             };
             warn!(%peer, ?code, "closing the connection: {e}");
@@ -94,7 +96,7 @@ impl Link {
     fn with_read_error<R, W>(
         mut recv: R,
         mut send: W,
-        limit: u32,
+        bounds: ReadBounds,
         on_read_error: impl FnOnce(&ProtoError) + Send + 'static,
     ) -> Link
     where
@@ -107,7 +109,7 @@ impl Link {
         let read_error = error.clone();
         tokio::spawn(async move {
             loop {
-                match read_message(&mut recv, limit).await {
+                match read_message(&mut recv, bounds).await {
                     Ok(message) => {
                         if in_tx.send(message).is_err() {
                             break;

@@ -2,10 +2,42 @@
 //! wire's framing (`vtfarm_proto::framing`) read and written
 //! asynchronously. The reader checks the length prefix before it allocates
 //! anything and then lets the body buffer grow only as bytes actually
-//! arrive, so a peer that announces 256 MiB and sends nothing costs nothing.
+//! arrive, so a peer that announces 256 MiB and sends nothing costs nothing;
+//! and once a message has begun, each read must bring bytes within the
+//! stall bound ([`ReadBounds::stall`]), so such a peer is not waited on
+//! for ever either.
+
+use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
-use vtfarm_proto::{FrameError, Message, RefuseCode, body_len, decode_message, encode_message};
+use vtfarm_proto::{
+    FrameError, HANDSHAKE_TIMEOUT, MAX_HANDSHAKE_BYTES, MESSAGE_STALL, Message, RefuseCode,
+    SESSION_LIMIT, body_len, decode_message, encode_message,
+};
+
+/// What a reader allows its peer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReadBounds {
+    /// The largest message body (clamped to [`vtfarm_proto::MAX_MESSAGE_BYTES`]).
+    pub limit: u32,
+    /// Once a message's first byte is in, the longest wait for the next.
+    pub stall: Duration,
+}
+
+impl ReadBounds {
+    /// A session's messages, after the handshake.
+    pub const SESSION: ReadBounds = ReadBounds {
+        limit: SESSION_LIMIT,
+        stall: MESSAGE_STALL,
+    };
+
+    /// A connection's first message and its answer (under the handshake's
+    /// own timeout as a whole).
+    pub const HANDSHAKE: ReadBounds = ReadBounds {
+        limit: MAX_HANDSHAKE_BYTES,
+        stall: HANDSHAKE_TIMEOUT,
+    };
+}
 
 /// The body buffer starts at most this big and grows with the data received.
 const INITIAL_BODY_CAPACITY: usize = 64 * 1024;
@@ -37,28 +69,43 @@ pub enum ProtoError {
     /// The peer took too long.
     #[error("timed out")]
     Timeout,
+    /// A message began and then stopped coming.
+    #[error(
+        "message stalled: {received} of {expected} bytes in, nothing more for {:.1} s",
+        stall.as_secs_f64()
+    )]
+    Stalled {
+        received: u64,
+        expected: u64,
+        stall: Duration,
+    },
 }
 
-/// Reads one message whose body may be at most `limit` bytes (clamped to
-/// [`vtfarm_proto::MAX_MESSAGE_BYTES`]). Clean end of stream before the first byte gives
-/// [`ProtoError::Closed`].
+/// Reads one message within `bounds`. Clean end of stream before the first
+/// byte gives [`ProtoError::Closed`]; a message that stops coming for
+/// [`ReadBounds::stall`] gives [`ProtoError::Stalled`].
 pub async fn read_message<R: AsyncRead + Unpin>(
     r: &mut R,
-    limit: u32,
+    bounds: ReadBounds,
 ) -> Result<Message, ProtoError> {
-    let body = read_frame(r, limit).await?;
+    let body = read_frame(r, bounds).await?;
     Ok(decode_message(&body)?)
 }
 
-/// Reads one frame's body, checking its length against `limit` first.
+/// Reads one frame's body, checking its length against the limit first.
 pub(crate) async fn read_frame<R: AsyncRead + Unpin>(
     r: &mut R,
-    limit: u32,
+    bounds: ReadBounds,
 ) -> Result<Vec<u8>, ProtoError> {
     let mut prefix = [0u8; 4];
     let mut filled = 0;
     while filled < prefix.len() {
-        let n = r.read(&mut prefix[filled..]).await?;
+        let read = r.read(&mut prefix[filled..]);
+        // Between messages the peer may idle; inside one it may not stall.
+        let n = match filled {
+            0 => read.await?,
+            _ => within(bounds.stall, filled as u64, 4, read).await?,
+        };
         if n == 0 {
             return Err(if filled == 0 {
                 ProtoError::Closed
@@ -71,16 +118,39 @@ pub(crate) async fn read_frame<R: AsyncRead + Unpin>(
         }
         filled += n;
     }
-    let len = body_len(prefix, limit)?;
+    let len = body_len(prefix, bounds.limit)?;
+    let expected = 4 + u64::from(len);
     let mut body = Vec::with_capacity((len as usize).min(INITIAL_BODY_CAPACITY));
-    let received = (&mut *r).take(len.into()).read_to_end(&mut body).await?;
-    if received < len as usize {
-        return Err(ProtoError::Frame(FrameError::Truncated {
-            expected: 4 + u64::from(len),
-            received: 4 + received as u64,
-        }));
+    let mut rest = (&mut *r).take(len.into());
+    while body.len() < len as usize {
+        let received = 4 + body.len() as u64;
+        let n = within(bounds.stall, received, expected, rest.read_buf(&mut body)).await?;
+        if n == 0 {
+            return Err(ProtoError::Frame(FrameError::Truncated {
+                expected,
+                received,
+            }));
+        }
     }
     Ok(body)
+}
+
+/// `read` if it completes within `stall`; else the message stalled at
+/// `received` of `expected` bytes.
+async fn within(
+    stall: Duration,
+    received: u64,
+    expected: u64,
+    read: impl Future<Output = std::io::Result<usize>>,
+) -> Result<usize, ProtoError> {
+    match tokio::time::timeout(stall, read).await {
+        Ok(read) => Ok(read?),
+        Err(_) => Err(ProtoError::Stalled {
+            received,
+            expected,
+            stall,
+        }),
+    }
 }
 
 /// Writes one message (prefix and body) and flushes.
@@ -105,14 +175,22 @@ mod tests {
 
     fn block_on<F: std::future::Future>(f: F) -> F::Output {
         tokio::runtime::Builder::new_current_thread()
+            .enable_time()
             .build()
             .expect("a current-thread runtime builds")
             .block_on(f)
     }
 
+    fn bounds(limit: u32) -> ReadBounds {
+        ReadBounds {
+            limit,
+            ..ReadBounds::SESSION
+        }
+    }
+
     fn read_all(bytes: &[u8], limit: u32) -> Result<Message, ProtoError> {
         let mut reader = bytes;
-        block_on(read_message(&mut reader, limit))
+        block_on(read_message(&mut reader, bounds(limit)))
     }
 
     #[tokio::test]
@@ -130,7 +208,7 @@ mod tests {
             }
         });
         for expected in &messages {
-            let got = read_message(&mut b, MAX_MESSAGE_BYTES)
+            let got = read_message(&mut b, ReadBounds::SESSION)
                 .await
                 .expect("a whole message");
             assert_eq!(&got, expected);
@@ -138,7 +216,7 @@ mod tests {
         writer.await.expect("writer finished");
         // The writer dropped its end at a message boundary.
         assert!(matches!(
-            read_message(&mut b, MAX_MESSAGE_BYTES).await,
+            read_message(&mut b, ReadBounds::SESSION).await,
             Err(ProtoError::Closed)
         ));
     }
@@ -173,13 +251,57 @@ mod tests {
             let mut r = PrefixOnly {
                 prefix: len.to_le_bytes().to_vec(),
             };
-            match read_message(&mut r, limit).await {
+            match read_message(&mut r, bounds(limit)).await {
                 Err(ProtoError::Frame(FrameError::TooLarge { len: l, limit: m })) => {
                     assert_eq!((l, m), (len.into(), limit.min(MAX_MESSAGE_BYTES)));
                 }
                 other => panic!("expected TooLarge, got {other:?}"),
             }
         }
+    }
+
+    /// A peer that announces a message, sends part of it and goes silent
+    /// (its end still open) is given up on after the stall bound; one that
+    /// is silent between messages is waited for.
+    #[tokio::test]
+    async fn a_message_that_stops_coming_stalls_and_an_idle_stream_does_not() {
+        let stall = Duration::from_millis(50);
+        let bounds = ReadBounds {
+            stall,
+            ..ReadBounds::SESSION
+        };
+        let (mut peer, mut reader) = tokio::io::duplex(1 << 16);
+        let mut begun = 1000u32.to_le_bytes().to_vec();
+        begun.extend_from_slice(&[7; 10]);
+        peer.write_all(&begun).await.expect("duplex accepts");
+        match read_message(&mut reader, bounds).await {
+            Err(ProtoError::Stalled {
+                received,
+                expected,
+                stall: s,
+            }) => {
+                assert_eq!((received, expected, s), (14, 1004, stall));
+            }
+            other => panic!("expected a stall, got {other:?}"),
+        }
+        // Half a prefix stalls too.
+        let (mut peer, mut reader) = tokio::io::duplex(1 << 16);
+        peer.write_all(&[1, 0]).await.expect("duplex accepts");
+        assert!(matches!(
+            read_message(&mut reader, bounds).await,
+            Err(ProtoError::Stalled {
+                received: 2,
+                expected: 4,
+                ..
+            })
+        ));
+        // Nothing at all: still waiting after many stall bounds.
+        let (_peer, mut reader) = tokio::io::duplex(1 << 16);
+        let idle = tokio::time::timeout(20 * stall, read_message(&mut reader, bounds)).await;
+        assert!(
+            idle.is_err(),
+            "an idle stream is not a stalled message: {idle:?}"
+        );
     }
 
     #[test]

@@ -12,14 +12,16 @@ use vtfarm_proto::{
     Role, SESSION_LIMIT, encode_message,
 };
 use vtfarm_transport::{
-    Link, MasterIdentity, ProtoError, SERVER_NAME, client_config, client_handshake, read_message,
-    server_config, server_handshake,
+    Link, MasterIdentity, ProtoError, ReadBounds, SERVER_NAME, client_config, client_handshake,
+    read_message, server_config, server_handshake,
 };
 
 const TOKEN: &str = "0123456789abcdef0123456789abcdef";
 const MASTER_NAME: &str = "test-master";
 /// Short, so the silent client's test does not wait 10 s.
 const TEST_HANDSHAKE_TIMEOUT: Duration = Duration::from_millis(400);
+/// Short, so the stalled message's test does not wait 10 s.
+const TEST_MESSAGE_STALL: Duration = Duration::from_millis(400);
 /// Upper bound for anything a test waits on.
 const PATIENCE: Duration = Duration::from_secs(10);
 
@@ -50,6 +52,7 @@ impl Server {
         let (tx, outcomes) = mpsc::unbounded_channel();
         let policy = HandshakePolicy {
             timeout: TEST_HANDSHAKE_TIMEOUT,
+            message_stall: TEST_MESSAGE_STALL,
             ..HandshakePolicy::new(TOKEN, MASTER_NAME)
         };
         let accepting = endpoint.clone();
@@ -71,7 +74,10 @@ impl Server {
                                 conn.clone(),
                                 recv,
                                 send,
-                                SESSION_LIMIT,
+                                ReadBounds {
+                                    limit: SESSION_LIMIT,
+                                    stall: policy.message_stall,
+                                },
                                 "test client".to_owned(),
                             )),
                             Err(_) => None,
@@ -290,7 +296,7 @@ async fn raw_first_message(conn: &quinn::Connection, client: BadClient) -> Refus
     let (mut send, mut recv) = conn.open_bi().await.expect("a stream opens");
     send.write_all(&bytes).await.expect("the bytes are sent");
     let _ = send.finish();
-    match read_message(&mut recv, MAX_HANDSHAKE_BYTES).await {
+    match read_message(&mut recv, ReadBounds::HANDSHAKE).await {
         Ok(Message::Refused(refusal)) => refusal.code,
         Ok(other) => panic!("expected Refused, got {other:?}"),
         Err(e) => match conn.close_reason() {
@@ -419,4 +425,23 @@ async fn bad_session_input_closes_with_its_code_and_reason() {
         let text = check_closed_with(&conn, code).await;
         assert!(text.contains(reason), "{text:?}");
     }
+}
+
+/// An accepted peer that announces the largest message, sends a little of
+/// it and goes silent (its connection kept alive by QUIC) is closed with
+/// the timeout code once the message has stalled for the bound.
+#[tokio::test]
+async fn a_message_that_stalls_on_the_session_is_closed() {
+    let server = Server::start();
+    let (_endpoint, conn) = server.connect(&server.fingerprint).await;
+    let conn = conn.expect("TLS with the right fingerprint");
+    client_handshake(&conn, &Hello::new(TOKEN, Role::Submitter))
+        .await
+        .expect("welcomed");
+    let (mut send, _recv) = conn.open_bi().await.expect("session stream");
+    let mut begun = SESSION_LIMIT.to_le_bytes().to_vec();
+    begun.extend_from_slice(&[0; 1000]);
+    send.write_all(&begun).await.expect("written");
+    let text = check_closed_with(&conn, RefuseCode::Timeout).await;
+    assert!(text.contains("stalled: 1004 of"), "{text:?}");
 }

@@ -166,6 +166,9 @@ impl MasterCore {
                 info!(job = id, by = who, failed_only, "job queued again");
             }
             JobAction::SetPriority(priority) => {
+                if state.is_finished() {
+                    return Err(not_now("priority", "queued, running or paused"));
+                }
                 let _ = self.scheduler.set_priority(now, JobId(id), priority);
                 if let Some(entry) = self.table.get_mut(id) {
                     entry.priority = priority;
