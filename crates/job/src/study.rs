@@ -304,7 +304,7 @@ pub const COCKPIT_MARKING_OBJECTS: [&str; 2] = ["dial_markings", "needles"];
 /// rather than a job file; unreadable or broken files count as jobs, whose
 /// loader then reports the problem.
 pub fn is_study_file(path: &Path) -> bool {
-    std::fs::read_to_string(path)
+    crate::read_job_text(path)
         .ok()
         .and_then(|text| text.parse::<toml::Table>().ok())
         .is_some_and(|table| table.contains_key("study"))
@@ -312,10 +312,7 @@ pub fn is_study_file(path: &Path) -> bool {
 
 /// Reads and validates a study file and its base job.
 pub fn load_study(path: &Path) -> Result<Study, JobError> {
-    let text = std::fs::read_to_string(path).map_err(|source| JobError::Read {
-        file: path.to_owned(),
-        source,
-    })?;
+    let text = crate::read_job_text(path)?;
     parse_study(&text, path)
 }
 
