@@ -47,7 +47,7 @@ use crate::finish::{
     EncodedFrame, FinishQueue, FinishedFrame, Finishing, FrameEncodeRequest, SrgbBytes,
 };
 use crate::jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
-use crate::record::{DamagedJob, Record, StoredJob, Written};
+use crate::record::{DamagedJob, KEPT_FRAME_RETRY, Record, StoredJob, Written};
 use crate::rules::FarmRules;
 use crate::stages::{StageProgress, StageWork};
 use crate::telemetry::Telemetry;
@@ -465,6 +465,10 @@ struct InFlight {
     last_result_at: Duration,
 }
 
+/// The reason listed for a restored job whose journaled listing is lost.
+const LISTING_LOST: &str =
+    "its state could not be read back from the journal: held paused (resume or cancel it)";
+
 /// What a persistent core keeps beside the journal, so that nothing the
 /// journal fails to keep or give back is lost (see `journal.rs`).
 #[derive(Default)]
@@ -486,8 +490,12 @@ struct Kept {
     /// a submitter attaching later is told too.
     failed_writes: BTreeMap<u64, String>,
     /// Frames of `unjournaled` whose write failed (not queued again yet):
-    /// one is written again after each write that succeeds.
+    /// one is written again after each write that succeeds, and at
+    /// `retry_at` when no other record is written.
     to_rewrite: BTreeSet<(u64, u32)>,
+    /// When to write a frame of `to_rewrite` again ([`KEPT_FRAME_RETRY`]
+    /// after the last failure).
+    retry_at: Option<Duration>,
     /// Restored jobs whose journal had a damaged frame, rendered again:
     /// the frame and why, told to attaching submitters.
     damaged_frames: BTreeMap<u64, (u32, String)>,
@@ -617,8 +625,14 @@ impl MasterCore {
         }
         let mut entry = match stored.summary.clone() {
             Some(summary) => JobEntry::from_summary(summary),
-            // Written before its state (a crash between the two): queued.
-            None => self.new_entry(stored.id, &stored.job, "unknown".into(), now),
+            None => {
+                // Its listing is lost (the journal warned, naming the file):
+                // nothing says it was not cancelled or paused, so it is held.
+                let mut entry = self.new_entry(stored.id, &stored.job, "unknown".into(), now);
+                entry.state = JobState::Paused;
+                entry.reason = LISTING_LOST.to_owned();
+                entry
+            }
         };
         entry.frames_done = stored.frames_done;
         entry.frames_total = stored.job.frames.len() as u32;
@@ -710,7 +724,9 @@ impl MasterCore {
         // A finished job too old to keep goes at its expiry.
         let expiry = (self.table.next_expiry(self.retention))
             .map(|ms| Duration::from_millis(ms.saturating_sub(self.wall_origin_ms)));
-        [self.scheduler.poll_timeout(), expiry]
+        // A kept frame is written again even while nothing else is.
+        let retry = (self.kept.retry_at).filter(|_| !self.kept.to_rewrite.is_empty());
+        [self.scheduler.poll_timeout(), expiry, retry]
             .into_iter()
             .flatten()
             .min()
@@ -720,6 +736,10 @@ impl MasterCore {
         self.now = now;
         self.scheduler.handle_timeout(now);
         self.forget_expired();
+        if self.kept.retry_at.is_some_and(|at| at <= now) {
+            self.kept.retry_at = None;
+            self.rewrite_kept_frame();
+        }
         self.pump();
     }
 
@@ -2365,17 +2385,13 @@ impl MasterCore {
                     self.kept.unjournaled.remove(&(written.job, frame));
                 }
                 // The disk takes records again: write a frame that failed.
-                if let Some(key) = self.kept.to_rewrite.pop_first() {
-                    if let Some(done) = self.kept.unjournaled.get(&key).cloned() {
-                        let record = Record::FrameDone(Box::new(done));
-                        self.outbox.push_back(Output::Persist(record));
-                    }
-                }
+                self.rewrite_kept_frame();
             }
             Err(error) => {
                 if let Some(frame) = written.frame {
                     self.kept.to_rewrite.insert((written.job, frame));
                 }
+                self.kept.retry_at = Some(now + KEPT_FRAME_RETRY);
                 warn!(job = written.job, "{error}");
                 let counters = &mut self.telemetry.counters;
                 counters.journal_write_failures += 1;
@@ -2394,6 +2410,16 @@ impl MasterCore {
             }
         }
         self.pump();
+    }
+
+    /// Asks the journal to write one kept frame whose write failed again.
+    fn rewrite_kept_frame(&mut self) {
+        if let Some(key) = self.kept.to_rewrite.pop_first() {
+            if let Some(done) = self.kept.unjournaled.get(&key).cloned() {
+                let record = Record::FrameDone(Box::new(done));
+                self.outbox.push_back(Output::Persist(record));
+            }
+        }
     }
 
     /// The driver could not read frame `frame` of `job` back from the

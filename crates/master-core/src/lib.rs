@@ -36,6 +36,6 @@ pub use crate::core::{
 pub use error::{JobRejected, ResultRejected};
 pub use finish::{EncodedFrame, FrameEncodeRequest};
 pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
-pub use record::{DamagedJob, Record, StoredJob, Written};
+pub use record::{DamagedJob, KEPT_FRAME_RETRY, Record, StoredJob, Written};
 pub use rules::FarmRules;
 pub use stages::StageRejected;
