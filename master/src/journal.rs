@@ -1467,4 +1467,47 @@ mod tests {
             std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
         }
     }
+
+    /// A FIFO (no writer) or `/dev/zero` in a record's place is an error
+    /// naming the file, returned at once: a read of either would block the
+    /// master or never end.
+    #[test]
+    fn a_fifo_or_a_device_in_a_records_place_is_an_error_without_blocking() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        queue(&journal, 1);
+        journal.write(frame_done(1, 0)).unwrap();
+        let frame = journal.frame_path(1, 1);
+        let made = std::process::Command::new("mkfifo")
+            .arg(&frame)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        std::os::unix::fs::symlink("/dev/zero", journal.state_path(1)).unwrap();
+        let (done, result) = std::sync::mpsc::channel();
+        let reader = journal.clone();
+        std::thread::spawn(move || {
+            let frame = reader.frame(1, 1).map(|_| ()).map_err(|e| e.to_string());
+            let _ = done.send((frame, reader.load()));
+        });
+        let (frame_error, loaded) = result
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("read without blocking");
+        let error = frame_error.unwrap_err();
+        assert!(
+            error.contains(&frame.display().to_string())
+                && error.contains("a FIFO, not a regular file"),
+            "{error}"
+        );
+        // The FIFO is the frame after the last good one: rendered again.
+        let job = &loaded.jobs[0];
+        assert_eq!(job.frames_done, 1);
+        assert!(
+            (job.damaged_frame.as_ref()).is_some_and(|(f, why)| *f == 1 && why.contains("a FIFO")),
+            "{:?}",
+            job.damaged_frame
+        );
+        // The device as the listing: lost, the job held (`summary` none).
+        assert_eq!(job.summary, None);
+    }
 }
