@@ -13,21 +13,42 @@
 //! STATE/jobs/NNNNNNNNNNNN/state    JobList { jobs: [its listing] }: state,
 //!                                  priority, times (the newest replaces it)
 //! STATE/jobs/damaged/NNNNNNNNNNNN  a job set aside, with `why` beside its files
+//! STATE/jobs/damaged/stray-NAME    an entry that is no job's (a second
+//!                                  spelling of an id, a stray file), with `why`
 //! ```
+//!
+//! A job's directory is named by its id in exactly one spelling (twelve
+//! digits); any other entry in `jobs/` is set aside at start with its
+//! reason and never read as a job, so no job is read twice.
 //!
 //! A record proves itself: its bytes follow their CRC32C ([`RECORD_HEADER`]),
 //! and every read checks it, so a flipped byte, a truncated or an emptied
-//! file is an error naming the file and the check, never a wrong frame. A
-//! record is written to a temporary file, fsynced and renamed (and the
-//! directory fsynced), so a crash leaves the old record or the new one.
+//! file is an error naming the file and the check, never a wrong frame.
+//! Inside the checksum every job record starts with its envelope
+//! ([`RecordKind`]): the journal's format, the record's kind and its job's
+//! id, so a record in another job's directory (or in another file's place)
+//! is an error naming the file, never that job's. A record is written to a
+//! temporary file, fsynced and renamed (and the directory fsynced), so a
+//! crash leaves the old record or the new one. Records are read only from
+//! regular files and within [`MAX_MESSAGE_BYTES`]: a FIFO or a device in
+//! the journal is an error, never a read that blocks or does not end.
+//!
+//! A job whose `state` is missing or damaged is held paused with a warning
+//! naming the file (nothing else says whether it was cancelled or paused,
+//! and such a job must not run again on its own); one whose `complete`
+//! stands with every frame is complete.
 //!
 //! Frames are the bulk; a `FrameDone` already carries its image compressed
 //! in the job's format (`WireImage`), so the file holds the very message the
 //! submitter got, and a re-attached submitter gets the same bytes. A
 //! finished job (completed, failed or cancelled) and its frames go when the
 //! master's retention lets it go (`vtfarm master --keep-jobs`,
-//! `--keep-jobs-hours`). A journal of another format (an older master's) is
-//! refused at start with an error that says what to do.
+//! `--keep-jobs-hours`). A journal of format 4 (records without their
+//! envelope) is upgraded at start: each record of each job's directory is
+//! written again inside its envelope, naming the job its directory names,
+//! and the format becomes [`JOURNAL_FORMAT`]; an interrupted upgrade
+//! continues at the next start. A journal of any other format is refused at
+//! start with an error that says what to do.
 //!
 //! The core never touches it: it emits [`Record`]s, the driver writes them
 //! (and tells the core how each frame's write went) and feeds [`StoredJob`]s
@@ -36,7 +57,7 @@
 //! never deleted; a frame that fails its check is renamed `FFFFFF.damaged`
 //! and the job resumes from it (it is rendered again).
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -46,6 +67,7 @@ use vtfarm_proto::{
     FrameDone, JobScene, JobSummary, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash,
     decode_message, encode_message,
 };
+use vtfarm_scene::file::{read_regular, read_regular_text};
 
 /// Writes a [`Journal`]'s records on a thread of its own, in order, so that
 /// the master's driver does not wait for a finished frame's compression and
@@ -144,11 +166,154 @@ pub struct Loaded {
     pub damaged: Vec<DamagedJob>,
 }
 
-/// The journal's format: 4 since jobs carry their priority and kind and
-/// keep their listing (`state`), 3 when every record first carried its
-/// checksum, 2 when finished frames were kept as sent without one, 1 (no
-/// `format` file) before.
-pub const JOURNAL_FORMAT: u32 = 4;
+/// The journal's format: 5 since every record names its job, kind and
+/// format ([`RecordKind`]), 4 when jobs first carried their priority and
+/// kind and kept their listing (`state`), 3 when every record first carried
+/// its checksum, 2 when finished frames were kept as sent without one, 1
+/// (no `format` file) before.
+pub const JOURNAL_FORMAT: u32 = 5;
+
+/// The older format this master upgrades at start (see the module's doc).
+pub const UPGRADED_FORMAT: u32 = 4;
+
+/// The most bytes of the `format` file and of a `why` file.
+const MAX_NOTE_BYTES: u64 = 64 << 10;
+
+/// What a job's record holds; its envelope's kind byte. A new kind of
+/// record takes the next free code, and a master that does not know a code
+/// refuses the record naming it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordKind {
+    /// `job`: the job as submitted (`SubmitJob`).
+    Job,
+    /// `FFFFFF`: a finished frame (`FrameDone`).
+    Frame,
+    /// `state`: the job's listing (`JobList` of one).
+    State,
+    /// `complete`: every frame is done (no body).
+    Complete,
+}
+
+/// The start of every job record's payload.
+const ENVELOPE_MAGIC: [u8; 4] = *b"vtjr";
+/// Magic, format (u32), kind (u8), job id (u64), little-endian.
+const ENVELOPE_BYTES: usize = 4 + 4 + 1 + 8;
+
+impl RecordKind {
+    const ALL: [RecordKind; 4] = [
+        RecordKind::Job,
+        RecordKind::Frame,
+        RecordKind::State,
+        RecordKind::Complete,
+    ];
+
+    fn code(self) -> u8 {
+        match self {
+            RecordKind::Job => 1,
+            RecordKind::Frame => 2,
+            RecordKind::State => 3,
+            RecordKind::Complete => 4,
+        }
+    }
+
+    /// What a record of this kind is, for errors.
+    fn record(self) -> &'static str {
+        match self {
+            RecordKind::Job => "a job record",
+            RecordKind::Frame => "a frame record",
+            RecordKind::State => "a state record",
+            RecordKind::Complete => "a complete record",
+        }
+    }
+
+    /// The kind a file of this name in a job's directory holds.
+    fn of_file(name: &str) -> Option<RecordKind> {
+        match name {
+            "job" => Some(RecordKind::Job),
+            "state" => Some(RecordKind::State),
+            "complete" => Some(RecordKind::Complete),
+            _ if name.len() == 6 && name.bytes().all(|b| b.is_ascii_digit()) => {
+                Some(RecordKind::Frame)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// A job record's payload: its envelope, then `body`.
+fn envelope(kind: RecordKind, job: u64, body: &[u8]) -> Vec<u8> {
+    let mut payload = Vec::with_capacity(ENVELOPE_BYTES + body.len());
+    payload.extend_from_slice(&ENVELOPE_MAGIC);
+    payload.extend_from_slice(&JOURNAL_FORMAT.to_le_bytes());
+    payload.push(kind.code());
+    payload.extend_from_slice(&job.to_le_bytes());
+    payload.extend_from_slice(body);
+    payload
+}
+
+/// What an envelope names.
+struct Envelope {
+    format: u32,
+    kind: Result<RecordKind, u8>,
+    job: u64,
+}
+
+/// The envelope at the start of `payload` and the body after it; `None`
+/// without one (a record of format 4).
+fn split_envelope(payload: &[u8]) -> Option<(Envelope, &[u8])> {
+    if payload.len() < ENVELOPE_BYTES || payload[..4] != ENVELOPE_MAGIC {
+        return None;
+    }
+    let format = u32::from_le_bytes(payload[4..8].try_into().expect("4 bytes"));
+    let code = payload[8];
+    let kind = (RecordKind::ALL.into_iter())
+        .find(|k| k.code() == code)
+        .ok_or(code);
+    let job = u64::from_le_bytes(payload[9..17].try_into().expect("8 bytes"));
+    Some((Envelope { format, kind, job }, &payload[ENVELOPE_BYTES..]))
+}
+
+/// The body of the record at `path`, which must be a `kind` record of job
+/// `job` in this format.
+fn open_envelope(
+    path: &Path,
+    payload: &[u8],
+    kind: RecordKind,
+    job: u64,
+) -> Result<Vec<u8>, RecordError> {
+    let content = |error: String| RecordError::Content {
+        path: path.to_owned(),
+        expected: kind.record(),
+        error,
+    };
+    let Some((envelope, body)) = split_envelope(payload) else {
+        return Err(content(
+            "no envelope naming its job, kind and format".to_owned(),
+        ));
+    };
+    if envelope.format != JOURNAL_FORMAT {
+        return Err(content(format!(
+            "a record of format {}, this master reads format {JOURNAL_FORMAT}",
+            envelope.format
+        )));
+    }
+    match envelope.kind {
+        Ok(found) if found == kind => {}
+        Ok(found) => return Err(content(format!("it holds {}", found.record()))),
+        Err(code) => {
+            return Err(content(format!(
+                "it holds a record of kind {code}, which this master does not know"
+            )));
+        }
+    }
+    if envelope.job != job {
+        return Err(content(format!(
+            "it holds a record of job {}, not of job {job} whose directory it is in",
+            envelope.job
+        )));
+    }
+    Ok(body.to_vec())
+}
 
 /// Every record file starts with the CRC32C of the bytes after it, 4 bytes
 /// little-endian.
@@ -191,6 +356,8 @@ pub enum RecordError {
         stored: u32,
         computed: u32,
     },
+    #[error("{}: not a directory (a job's records are a directory)", .path.display())]
+    NotADirectory { path: PathBuf },
     #[error("{}: checksum good but not {expected}: {error}", .path.display())]
     Content {
         path: PathBuf,
@@ -267,24 +434,17 @@ fn record_bytes(payload: &[u8]) -> Vec<u8> {
 /// (a damaged file cannot make the master allocate more).
 fn read_record(path: &Path) -> Result<Vec<u8>, RecordError> {
     let path_buf = || path.to_owned();
-    let file = std::fs::File::open(path).map_err(|source| match source.kind() {
+    let limit = u64::from(MAX_MESSAGE_BYTES) + RECORD_HEADER as u64;
+    // Only a regular file: a FIFO or a device in the journal is an error,
+    // never a read that blocks the master or does not end.
+    let mut bytes = read_regular(path, limit).map_err(|source| match source.kind() {
         std::io::ErrorKind::NotFound => RecordError::Missing { path: path_buf() },
+        std::io::ErrorKind::FileTooLarge => RecordError::TooLarge { path: path_buf() },
         _ => RecordError::Read {
             path: path_buf(),
             source,
         },
     })?;
-    let limit = u64::from(MAX_MESSAGE_BYTES) + RECORD_HEADER as u64;
-    let mut bytes = Vec::new();
-    (file.take(limit + 1))
-        .read_to_end(&mut bytes)
-        .map_err(|source| RecordError::Read {
-            path: path_buf(),
-            source,
-        })?;
-    if bytes.len() as u64 > limit {
-        return Err(RecordError::TooLarge { path: path_buf() });
-    }
     if bytes.len() < RECORD_HEADER {
         return Err(RecordError::Truncated {
             path: path_buf(),
@@ -304,9 +464,14 @@ fn read_record(path: &Path) -> Result<Vec<u8>, RecordError> {
     Ok(bytes)
 }
 
-/// Reads a record holding one protocol message.
-fn read_message(path: &Path, expected: &'static str) -> Result<Message, RecordError> {
-    let bytes = read_record(path)?;
+/// Reads job `job`'s `kind` record holding one protocol message.
+fn read_message(
+    path: &Path,
+    kind: RecordKind,
+    job: u64,
+    expected: &'static str,
+) -> Result<Message, RecordError> {
+    let bytes = open_envelope(path, &read_record(path)?, kind, job)?;
     decode_message(&bytes).map_err(|e| RecordError::Content {
         path: path.to_owned(),
         expected,
@@ -330,7 +495,7 @@ impl Journal {
         })?;
         let journal = Journal { dir, storage };
         let path = journal.dir.join("format");
-        let format = match std::fs::read_to_string(&path) {
+        let format = match read_regular_text(&path, MAX_NOTE_BYTES) {
             Ok(text) => text.trim().parse::<u32>().ok(),
             // No file: format 1, unless the journal is empty.
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -340,6 +505,13 @@ impl Journal {
         };
         match format {
             Some(JOURNAL_FORMAT) => Ok(journal),
+            Some(UPGRADED_FORMAT) => {
+                journal.upgrade();
+                (journal.storage)
+                    .write_atomic(&path, format!("{JOURNAL_FORMAT}\n").as_bytes())
+                    .map_err(|source| JournalError { path, source })?;
+                Ok(journal)
+            }
             None if !path.exists() => {
                 (journal.storage)
                     .write_atomic(&path, format!("{JOURNAL_FORMAT}\n").as_bytes())
@@ -352,7 +524,7 @@ impl Journal {
                 Err(JournalError::other(
                     journal.dir.clone(),
                     format!(
-                        "{found}, but this master reads format {JOURNAL_FORMAT}: finish its jobs with the master that wrote it, or remove the directory to start afresh"
+                        "{found}, but this master reads format {JOURNAL_FORMAT} (and upgrades format {UPGRADED_FORMAT}): finish its jobs with the master that wrote it, or remove the directory to start afresh"
                     ),
                 ))
             }
@@ -360,7 +532,12 @@ impl Journal {
     }
 
     fn job_dir(&self, id: u64) -> PathBuf {
-        self.dir.join(format!("{id:012}"))
+        self.dir.join(job_dir_name(id))
+    }
+
+    /// The completion marker of job `id`.
+    fn complete_path(&self, id: u64) -> PathBuf {
+        self.job_dir(id).join("complete")
     }
 
     fn damaged_dir(&self) -> PathBuf {
@@ -389,12 +566,12 @@ impl Journal {
         self.job_dir(id).join("state")
     }
 
-    /// Job `id`'s listing as last written; `None` when there is none, or
-    /// (with a warning naming the file, which is kept as `state.damaged`)
-    /// when it fails its check: the job is then listed as queued.
+    /// Job `id`'s listing as last written; `None` (with a warning naming
+    /// the file) when there is none or it fails its check (the file is then
+    /// kept as `state.damaged`): the job is held paused.
     fn load_state(&self, id: u64) -> Option<JobSummary> {
         let path = self.state_path(id);
-        let error = match read_message(&path, "a job's listing") {
+        let error = match read_message(&path, RecordKind::State, id, "a job's listing") {
             Ok(Message::JobList { mut jobs }) if jobs.len() == 1 && jobs[0].id == id => {
                 return jobs.pop();
             }
@@ -403,13 +580,19 @@ impl Journal {
                 expected: "this job's listing",
                 error: format!("it holds a {}", other.name()),
             },
-            Err(RecordError::Missing { .. }) => return None,
+            Err(e @ RecordError::Missing { .. }) => {
+                warn!(
+                    job = id,
+                    "{e}: the job's state is lost; it is held paused (resume or cancel it)"
+                );
+                return None;
+            }
             Err(e) => e,
         };
         let aside = path.with_extension("damaged");
         warn!(
             job = id,
-            "{error}: the job is listed as queued (the file is kept as {})",
+            "{error}: the job's state is lost; it is held paused (resume or cancel it; the file is kept as {})",
             aside.display()
         );
         if let Err(e) = std::fs::rename(&path, &aside) {
@@ -428,13 +611,19 @@ impl Journal {
             })
     }
 
-    fn write_message(&self, what: &str, path: &Path, message: &Message) -> Result<(), WriteError> {
+    fn write_message(
+        &self,
+        what: &str,
+        path: &Path,
+        (kind, job): (RecordKind, u64),
+        message: &Message,
+    ) -> Result<(), WriteError> {
         let frame = encode_message(message).map_err(|e| WriteError {
             what: what.to_owned(),
             path: path.to_owned(),
             source: std::io::Error::other(e),
         })?;
-        self.write_record(what, path, &frame[4..])
+        self.write_record(what, path, &envelope(kind, job, &frame[4..]))
     }
 
     /// Writes a record. Taken by value: a finished frame is written without
@@ -455,21 +644,23 @@ impl Journal {
                 let dir = self.job_dir(id);
                 std::fs::create_dir_all(&dir).map_err(io(&dir))?;
                 let message = Message::SubmitJob { job: *job };
-                self.write_message(&what, &self.job_path(id), &message)
+                self.write_message(&what, &self.job_path(id), (RecordKind::Job, id), &message)
             }
             Record::FrameDone(done) => {
                 let path = self.frame_path(done.job, done.frame);
-                self.write_message(&what, &path, &Message::FrameDone(*done))
+                let kind = (RecordKind::Frame, done.job);
+                self.write_message(&what, &path, kind, &Message::FrameDone(*done))
             }
             Record::JobComplete { id } => {
-                self.write_record(&what, &self.job_dir(id).join("complete"), b"")
+                let payload = envelope(RecordKind::Complete, id, b"");
+                self.write_record(&what, &self.complete_path(id), &payload)
             }
             Record::JobState(summary) => {
-                let path = self.state_path(summary.id);
+                let (path, id) = (self.state_path(summary.id), summary.id);
                 let message = Message::JobList {
                     jobs: vec![*summary],
                 };
-                self.write_message(&what, &path, &message)
+                self.write_message(&what, &path, (RecordKind::State, id), &message)
             }
             Record::JobForgotten { id } => {
                 let dir = self.job_dir(id);
@@ -490,26 +681,65 @@ impl Journal {
     /// Moves job `id`'s directory to `jobs/damaged/` with a `why` file
     /// holding `reason`; returns where it went. Nothing is deleted.
     fn set_aside(&self, id: u64, reason: &str) -> std::io::Result<PathBuf> {
+        self.set_aside_entry(&self.job_dir(id), &job_dir_name(id), reason)
+    }
+
+    /// Moves `source` (a directory, a file, or nothing) to
+    /// `jobs/damaged/NAME` (`NAME.1`, … when taken), a directory with a
+    /// `why` file holding `reason` (a file is moved inside it); returns
+    /// where it went. Nothing is deleted.
+    fn set_aside_entry(&self, source: &Path, name: &str, reason: &str) -> std::io::Result<PathBuf> {
         let damaged = self.damaged_dir();
         std::fs::create_dir_all(&damaged)?;
-        let name = format!("{id:012}");
-        // A job of this id set aside before keeps its place.
+        // An entry of this name set aside before keeps its place.
         let target = (0..)
             .map(|k| match k {
-                0 => damaged.join(&name),
+                0 => damaged.join(name),
                 k => damaged.join(format!("{name}.{k}")),
             })
-            .find(|p| !p.exists())
+            .find(|p| std::fs::symlink_metadata(p).is_err())
             .expect("an unused name");
-        let source = self.job_dir(id);
-        if source.exists() {
-            std::fs::rename(&source, &target)?;
-        } else {
-            std::fs::create_dir_all(&target)?;
+        match std::fs::symlink_metadata(source) {
+            Ok(meta) if meta.is_dir() => std::fs::rename(source, &target)?,
+            Ok(_) => {
+                std::fs::create_dir_all(&target)?;
+                let file_name = source.file_name().unwrap_or(name.as_ref());
+                std::fs::rename(source, target.join(file_name))?;
+            }
+            Err(_) => std::fs::create_dir_all(&target)?,
         }
         std::fs::write(target.join("why"), format!("{reason}\n"))?;
-        warn!(job = id, path = %target.display(), "journaled job set aside: {reason}");
+        warn!(path = %target.display(), "journal entry {name} set aside: {reason}");
         Ok(target)
+    }
+
+    /// Upgrades a format-4 journal's records: each record of each job's
+    /// directory without its envelope is written again inside one naming
+    /// the job of its directory. A record that fails its check is left as
+    /// it is (the load sets it aside, naming it).
+    fn upgrade(&self) {
+        for id in self.job_ids() {
+            let Ok(entries) = std::fs::read_dir(self.job_dir(id)) else {
+                continue;
+            };
+            for entry in entries.flatten() {
+                let name = entry.file_name();
+                let Some(kind) = name.to_str().and_then(RecordKind::of_file) else {
+                    continue;
+                };
+                let path = entry.path();
+                let Ok(payload) = read_record(&path) else {
+                    continue;
+                };
+                if split_envelope(&payload).is_some() {
+                    continue;
+                }
+                let what = format!("the upgrade of {}", path.display());
+                if let Err(e) = self.write_record(&what, &path, &envelope(kind, id, &payload)) {
+                    warn!("{e}");
+                }
+            }
+        }
     }
 
     /// Removes the scenes no journaled job names any more (jobs set aside
@@ -522,7 +752,7 @@ impl Journal {
         let records = (self.job_ids().into_iter().map(|id| self.job_path(id)))
             .chain(damaged.into_iter().map(|dir| dir.join("job")));
         let used: Vec<String> = records
-            .filter_map(|path| match read_message(&path, "a job").ok()? {
+            .filter_map(|path| match scene_record(&path)? {
                 Message::SubmitJob { job } => match job.scene {
                     JobScene::Hash(hash) => Some(format!("{}.scene", hex::encode(hash))),
                     JobScene::Data(_) => None,
@@ -539,22 +769,55 @@ impl Journal {
         Ok(())
     }
 
-    /// The ids of the journaled jobs, in order.
+    /// The ids of the journaled jobs (the directories named by an id in
+    /// its one spelling), in order.
     fn job_ids(&self) -> Vec<u64> {
         let Ok(entries) = std::fs::read_dir(&self.dir) else {
             return Vec::new();
         };
         let mut ids: Vec<u64> = entries
-            .filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok())
+            .filter_map(|e| parse_job_dir_name(e.ok()?.file_name().to_str()?))
             .collect();
         ids.sort_unstable();
         ids
     }
 
+    /// The entries of `jobs/` that are neither a job's directory nor the
+    /// journal's own, each with why it is not read.
+    fn strays(&self) -> Vec<(PathBuf, String)> {
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return Vec::new();
+        };
+        let mut strays: Vec<(PathBuf, String)> = entries
+            .filter_map(|e| {
+                let entry = e.ok()?;
+                let name = entry.file_name().to_string_lossy().into_owned();
+                if ["format", "scenes", "damaged"].contains(&name.as_str())
+                    || parse_job_dir_name(&name).is_some()
+                {
+                    return None;
+                }
+                let reason = match name.parse::<u64>() {
+                    Ok(id) => format!(
+                        "jobs/{name} is not how job {id}'s directory is spelled (jobs/{}); it is not read as a second copy of the job",
+                        job_dir_name(id)
+                    ),
+                    Err(_) => format!(
+                        "jobs/{name} is no job's directory (a job's is named by its id in twelve digits, as jobs/{})",
+                        job_dir_name(1)
+                    ),
+                };
+                Some((entry.path(), reason))
+            })
+            .collect();
+        strays.sort();
+        strays
+    }
+
     /// A finished frame, checked against its checksum.
     pub fn frame(&self, id: u64, frame: u32) -> Result<FrameDone, RecordError> {
         let path = self.frame_path(id, frame);
-        match read_message(&path, "a finished frame")? {
+        match read_message(&path, RecordKind::Frame, id, "a finished frame")? {
             Message::FrameDone(done) if done.job == id && done.frame == frame => Ok(done),
             other => Err(RecordError::Content {
                 path,
@@ -574,6 +837,14 @@ impl Journal {
     /// with the jobs set aside by earlier starts.
     pub fn load(&self) -> Loaded {
         let mut loaded = Loaded::default();
+        for (path, reason) in self.strays() {
+            let name = path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+            if let Err(e) = self.set_aside_entry(&path, &format!("stray-{name}"), &reason) {
+                warn!(path = %path.display(), "{reason}; and it cannot be set aside: {e}");
+            }
+        }
         for id in self.job_ids() {
             match self.load_job(id) {
                 Ok(job) => loaded.jobs.push(job),
@@ -587,7 +858,9 @@ impl Journal {
             }
         }
         loaded.damaged.extend(self.set_aside_jobs());
+        // One per id: the reason found now before the one set aside with.
         loaded.damaged.sort_by_key(|d| d.id);
+        loaded.damaged.dedup_by_key(|d| d.id);
         loaded
     }
 
@@ -613,16 +886,26 @@ impl Journal {
         found.dedup_by_key(|(id, _)| *id);
         (found.into_iter())
             .map(|(id, path)| {
-                let why = std::fs::read_to_string(path.join("why")).unwrap_or_default();
-                let reason = format!("{}; the job is kept in {}", why.trim(), path.display());
+                let why_path = path.join("why");
+                let why = match read_regular_text(&why_path, MAX_NOTE_BYTES) {
+                    Ok(why) if !why.trim().is_empty() => why.trim().to_owned(),
+                    Ok(_) => format!("{}: empty, the reason is lost", why_path.display()),
+                    Err(e) => format!("{}: {e}, the reason is lost", why_path.display()),
+                };
+                let reason = format!("{why}; the job is kept in {}", path.display());
                 DamagedJob { id, reason }
             })
             .collect()
     }
 
     fn load_job(&self, id: u64) -> Result<StoredJob, RecordError> {
+        let dir = self.job_dir(id);
+        if !std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir()) {
+            return Err(RecordError::NotADirectory { path: dir });
+        }
         let path = self.job_path(id);
-        let Message::SubmitJob { mut job } = read_message(&path, "a job")? else {
+        let Message::SubmitJob { mut job } = read_message(&path, RecordKind::Job, id, "a job")?
+        else {
             return Err(RecordError::Content {
                 path,
                 expected: "a job",
@@ -675,7 +958,7 @@ impl Journal {
                 }
             }
         }
-        let complete = self.job_dir(id).join("complete").exists() && frames_done == frames;
+        let complete = self.is_complete(id) && frames_done == frames;
         Ok(StoredJob {
             id,
             job,
@@ -685,6 +968,46 @@ impl Journal {
             summary: self.load_state(id),
         })
     }
+}
+
+impl Journal {
+    /// Whether job `id`'s completion marker stands (one that fails its
+    /// check does not, with a warning naming it: its frames are counted).
+    fn is_complete(&self, id: u64) -> bool {
+        let path = self.complete_path(id);
+        let checked = read_record(&path)
+            .and_then(|payload| open_envelope(&path, &payload, RecordKind::Complete, id));
+        match checked {
+            Ok(_) => true,
+            Err(RecordError::Missing { .. }) => false,
+            Err(e) => {
+                warn!(
+                    job = id,
+                    "{e}: the job is complete only if every frame is there"
+                );
+                false
+            }
+        }
+    }
+}
+
+/// A job's directory name: its id in twelve digits, its one spelling.
+fn job_dir_name(id: u64) -> String {
+    format!("{id:012}")
+}
+
+/// The job id a directory name spells, if it is that id's one spelling.
+fn parse_job_dir_name(name: &str) -> Option<u64> {
+    let id = name.parse().ok()?;
+    (job_dir_name(id) == name).then_some(id)
+}
+
+/// The message of a job record of this format or the one before, of any
+/// job (to find the scenes still in use, set-aside jobs' included).
+fn scene_record(path: &Path) -> Option<Message> {
+    let payload = read_record(path).ok()?;
+    let body = split_envelope(&payload).map_or(&payload[..], |(_, body)| body);
+    decode_message(body).ok()
 }
 
 fn record_name(record: &Record) -> String {
@@ -854,7 +1177,7 @@ mod tests {
         Journal::open(dir.path()).unwrap();
         assert_eq!(
             std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
-            "4\n"
+            format!("{JOURNAL_FORMAT}\n")
         );
         Journal::open(dir.path()).expect("the current format opens again");
 
@@ -862,7 +1185,7 @@ mod tests {
         std::fs::create_dir_all(old.path().join("jobs/000000000001")).unwrap();
         let error = Journal::open(old.path()).expect_err("format 1").to_string();
         assert!(
-            error.contains("format 1, but this master reads format 4"),
+            error.contains("format 1, but this master reads format 5"),
             "{error}"
         );
         assert!(
@@ -874,7 +1197,7 @@ mod tests {
         std::fs::write(old.path().join("jobs/format"), "3\n").unwrap();
         let error = Journal::open(old.path()).expect_err("format 3").to_string();
         assert!(
-            error.contains("format 3, but this master reads format 4"),
+            error.contains("format 3, but this master reads format 5"),
             "{error}"
         );
         assert!(
@@ -985,6 +1308,18 @@ mod tests {
         check(b"", "too short");
         std::fs::copy(journal.frame_path(1, 1), &path).unwrap();
         check(&std::fs::read(&path).unwrap(), "it holds frame 1 of job 1");
+        // A valid frame of another job in this job's directory.
+        std::fs::create_dir_all(journal.job_dir(2)).unwrap();
+        journal.write(frame_done(2, 0)).unwrap();
+        std::fs::copy(journal.frame_path(2, 0), &path).unwrap();
+        check(
+            &std::fs::read(&path).unwrap(),
+            "it holds a record of job 2, not of job 1",
+        );
+        // The job's completion marker in a frame's place.
+        journal.write(Record::JobComplete { id: 1 }).unwrap();
+        std::fs::copy(journal.complete_path(1), &path).unwrap();
+        check(&std::fs::read(&path).unwrap(), "it holds a complete record");
         std::fs::remove_file(&path).unwrap();
         assert!(matches!(
             journal.frame(1, 0),
@@ -996,5 +1331,183 @@ mod tests {
             0,
             "the good bytes read back"
         );
+    }
+
+    fn queue(journal: &Journal, id: u64) {
+        let (scene, job) = one_pixel_job(2);
+        let job = Box::new(job);
+        journal.write(Record::JobQueued { id, job, scene }).unwrap();
+    }
+
+    /// A second spelling of a job's directory is set aside (never read as
+    /// a second copy of the job), as is any other stray entry, and a job's
+    /// directory that is a file; each with its reason, nothing deleted.
+    #[test]
+    fn each_job_is_read_in_its_one_spelling_and_strays_are_set_aside_with_reasons() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        queue(&journal, 1);
+        journal.write(frame_done(1, 0)).unwrap();
+        let jobs = dir.path().join("jobs");
+        copy_dir(&journal.job_dir(1), &jobs.join("1"));
+        std::fs::write(jobs.join("000000000002"), b"not a directory").unwrap();
+        std::fs::write(jobs.join("notes"), b"a stray file").unwrap();
+
+        let loaded = journal.load();
+        let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+        assert_eq!(ids, [1], "job 1 once");
+        assert_eq!(loaded.jobs[0].frames_done, 1);
+        assert_eq!(loaded.damaged.len(), 1, "{:?}", loaded.damaged);
+        let reason = &loaded.damaged[0].reason;
+        assert_eq!(loaded.damaged[0].id, 2);
+        assert!(
+            reason.contains("000000000002: not a directory")
+                && reason.contains("damaged/000000000002"),
+            "{reason}"
+        );
+        let why = |name: &str| {
+            std::fs::read_to_string(jobs.join("damaged").join(name).join("why")).unwrap()
+        };
+        assert!(
+            why("stray-1")
+                .contains("jobs/1 is not how job 1's directory is spelled (jobs/000000000001)"),
+            "{}",
+            why("stray-1")
+        );
+        assert!(why("stray-notes").contains("jobs/notes is no job's directory"));
+        // Moved, not deleted.
+        assert!(jobs.join("damaged/stray-1/job").exists());
+        assert!(jobs.join("damaged/stray-notes/notes").exists());
+        assert!(jobs.join("damaged/000000000002/000000000002").exists());
+        // A second start reads the same, with the same reasons.
+        let again = journal.load();
+        assert_eq!(again.jobs.len(), 1);
+        assert_eq!(again.damaged, loaded.damaged);
+    }
+
+    /// A valid job record copied into another job's directory names its
+    /// own job: the directory's job is set aside, naming both, never run
+    /// as the other scene.
+    #[test]
+    fn a_job_record_in_another_jobs_directory_is_refused_naming_both() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        queue(&journal, 1);
+        queue(&journal, 2);
+        std::fs::copy(journal.job_path(2), journal.job_path(1)).unwrap();
+        let loaded = journal.load();
+        let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+        assert_eq!(ids, [2]);
+        assert_eq!(loaded.damaged.len(), 1);
+        let reason = &loaded.damaged[0].reason;
+        assert!(
+            reason.contains("it holds a record of job 2, not of job 1"),
+            "{reason}"
+        );
+    }
+
+    /// A journal of format 4 (records without their envelope) is upgraded
+    /// at start: its job, frames, listing and completion read back.
+    #[test]
+    fn a_format_4_journal_is_upgraded_and_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        queue(&journal, 3);
+        journal.write(frame_done(3, 0)).unwrap();
+        journal.write(frame_done(3, 1)).unwrap();
+        journal.write(Record::JobComplete { id: 3 }).unwrap();
+        let summary = JobSummary {
+            id: 3,
+            name: "old".into(),
+            kind: vtfarm_proto::WireJobKind::Render,
+            state: vtfarm_proto::WireJobState::Completed,
+            priority: 2,
+            frames_done: 2,
+            frames_failed: 0,
+            frames_total: 2,
+            submitted_ms: 1,
+            started_ms: Some(2),
+            finished_ms: Some(3),
+            host: "h".into(),
+            reason: String::new(),
+        };
+        journal
+            .write(Record::JobState(Box::new(summary.clone())))
+            .unwrap();
+        let written = journal.load();
+        // Strip every envelope: the records as a format-4 master wrote them.
+        for entry in std::fs::read_dir(journal.job_dir(3)).unwrap() {
+            let path = entry.unwrap().path();
+            let payload = read_record(&path).unwrap();
+            let (_, body) = split_envelope(&payload).expect("an envelope");
+            std::fs::write(&path, record_bytes(body)).unwrap();
+        }
+        std::fs::write(dir.path().join("jobs/format"), "4\n").unwrap();
+
+        let upgraded = Journal::open(dir.path()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("jobs/format")).unwrap(),
+            format!("{JOURNAL_FORMAT}\n")
+        );
+        let read = upgraded.load();
+        assert!(read.damaged.is_empty(), "{:?}", read.damaged);
+        let (was, is) = (&written.jobs[0], &read.jobs[0]);
+        assert_eq!(
+            (is.id, is.frames_done, is.complete, &is.summary),
+            (3, 2, true, &Some(summary))
+        );
+        assert_eq!((was.frames_done, was.complete), (2, true));
+        assert_eq!(upgraded.frame(3, 1).unwrap(), journal.frame(3, 1).unwrap());
+    }
+
+    fn copy_dir(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for entry in std::fs::read_dir(from).unwrap() {
+            let entry = entry.unwrap();
+            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+
+    /// A FIFO (no writer) or `/dev/zero` in a record's place is an error
+    /// naming the file, returned at once: a read of either would block the
+    /// master or never end.
+    #[test]
+    fn a_fifo_or_a_device_in_a_records_place_is_an_error_without_blocking() {
+        let dir = tempfile::tempdir().unwrap();
+        let journal = Journal::open(dir.path()).unwrap();
+        queue(&journal, 1);
+        journal.write(frame_done(1, 0)).unwrap();
+        let frame = journal.frame_path(1, 1);
+        let made = std::process::Command::new("mkfifo")
+            .arg(&frame)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        std::os::unix::fs::symlink("/dev/zero", journal.state_path(1)).unwrap();
+        let (done, result) = std::sync::mpsc::channel();
+        let reader = journal.clone();
+        std::thread::spawn(move || {
+            let frame = reader.frame(1, 1).map(|_| ()).map_err(|e| e.to_string());
+            let _ = done.send((frame, reader.load()));
+        });
+        let (frame_error, loaded) = result
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("read without blocking");
+        let error = frame_error.unwrap_err();
+        assert!(
+            error.contains(&frame.display().to_string())
+                && error.contains("a FIFO, not a regular file"),
+            "{error}"
+        );
+        // The FIFO is the frame after the last good one: rendered again.
+        let job = &loaded.jobs[0];
+        assert_eq!(job.frames_done, 1);
+        assert!(
+            (job.damaged_frame.as_ref()).is_some_and(|(f, why)| *f == 1 && why.contains("a FIFO")),
+            "{:?}",
+            job.damaged_frame
+        );
+        // The device as the listing: lost, the job held (`summary` none).
+        assert_eq!(job.summary, None);
     }
 }

@@ -600,3 +600,185 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
         "{reason}"
     );
 }
+
+/// A second spelling of a journaled job's directory (`jobs/1` beside
+/// `jobs/000000000001`) is set aside with its reason, never read as a
+/// second job 1: the restarted master delivers job 1 again and runs a new
+/// job to the end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_stray_job_directory_is_set_aside_and_the_restarted_master_runs_new_jobs() {
+    let (reference, state) = clean_run().await;
+    copy_dir(&job_dir(state.path()), &state.path().join("jobs/1"));
+    let master = Master::start(state.path(), None);
+    let (job, scene) = job();
+    let (frames, warnings) = master
+        .follow(RemoteJob::Submit { job, scene: &scene })
+        .await;
+    assert_identical(&frames.expect("a new job runs"), &reference, "new job");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let (again, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    assert_identical(&again.expect("job 1 once"), &reference, "job 1");
+    master.stop().await;
+    let why = std::fs::read_to_string(state.path().join("jobs/damaged/stray-1/why")).unwrap();
+    assert!(
+        why.contains("jobs/1 is not how job 1's directory is spelled"),
+        "{why}"
+    );
+    assert!(state.path().join("jobs/damaged/stray-1/job").exists());
+}
+
+/// A valid `job` record of job 2 copied into job 1's directory names job
+/// 2: a submitter attaching to job 1 is refused with the file and the
+/// mismatch, never given job 2's frames as job 1's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_job_record_copied_into_another_jobs_directory_is_refused_on_attach() {
+    let (_, state) = clean_run().await;
+    let master = Master::start(state.path(), None);
+    let (mut second, scene) = job();
+    second.frames.truncate(1);
+    let (frames, _) = master
+        .follow(RemoteJob::Submit {
+            job: second,
+            scene: &scene,
+        })
+        .await;
+    assert_eq!(frames.expect("job 2 runs").len(), 1);
+    master.stop().await;
+    let jobs = state.path().join("jobs");
+    std::fs::copy(jobs.join("000000000002/job"), jobs.join("000000000001/job")).unwrap();
+
+    let master = Master::start(state.path(), None);
+    let (attached, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    let error = attached.expect_err("job 1's record is job 2's").to_string();
+    assert!(
+        error.contains("000000000001/job") && error.contains("it holds a record of job 2"),
+        "{error}"
+    );
+    let (again, _) = master.follow(RemoteJob::Attach { job: 2 }).await;
+    assert_eq!(again.expect("job 2 is untouched").len(), 1);
+    master.stop().await;
+}
+
+/// A journaled job in `state` (cancelled or paused) whose listing is then
+/// lost (`damage`): the restarted master holds it paused, says why in its
+/// listing, and runs a new job to the end while it waits.
+async fn a_lost_listing_holds_the_job(state: vtfarm_proto::WireJobState, damage: fn(&Path)) {
+    let dir = tempfile::tempdir().unwrap();
+    let journal = Journal::open(dir.path()).unwrap();
+    let (job, scene) = job();
+    let summary = vtfarm_proto::JobSummary {
+        id: 1,
+        name: "held".into(),
+        kind: job.kind,
+        state,
+        priority: 0,
+        frames_done: 0,
+        frames_failed: 0,
+        frames_total: FRAMES as u32,
+        submitted_ms: 1,
+        started_ms: None,
+        finished_ms: None,
+        host: "test".into(),
+        reason: "asked by the test".into(),
+    };
+    let mut queued = job.clone();
+    queued.scene = vtfarm_proto::JobScene::Hash(scene.hash);
+    journal
+        .write(vtfarm_master::Record::JobQueued {
+            id: 1,
+            job: Box::new(queued),
+            scene: Arc::new(scene.clone()),
+        })
+        .unwrap();
+    journal
+        .write(vtfarm_master::Record::JobState(Box::new(summary)))
+        .unwrap();
+    damage(&dir.path().join("jobs/000000000001/state"));
+
+    let master = Master::start(dir.path(), None);
+    let (frames, _) = master
+        .follow(RemoteJob::Submit { job, scene: &scene })
+        .await;
+    assert_eq!(frames.expect("job 2 runs").len(), FRAMES);
+    let listed = master
+        .handle
+        .inspect(|core| {
+            let entry = core.jobs().get(1).expect("job 1 listed");
+            (entry.state, entry.frames_done, entry.reason.clone())
+        })
+        .await
+        .expect("the master runs");
+    assert_eq!(
+        (listed.0, listed.1),
+        (vtfarm_master_core::JobState::Paused, 0),
+        "{state:?}: {}",
+        listed.2
+    );
+    assert!(listed.2.contains("held paused"), "{}", listed.2);
+    master.stop().await;
+    assert!(
+        !dir.path().join("jobs/000000000001/000000").exists(),
+        "{state:?}: job 1 never ran"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_cancelled_job_whose_state_record_is_lost_never_runs_again_on_its_own() {
+    a_lost_listing_holds_the_job(vtfarm_proto::WireJobState::Cancelled, |path| {
+        std::fs::remove_file(path).unwrap()
+    })
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_paused_job_whose_state_record_is_damaged_stays_paused() {
+    a_lost_listing_holds_the_job(vtfarm_proto::WireJobState::Paused, |path| {
+        flip_byte(path, 30)
+    })
+    .await;
+}
+
+/// Frames kept in memory while the disk was full are written once it has
+/// room again, with nothing else happening on the master (no other record
+/// to write after).
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn kept_frames_are_written_when_the_disk_frees_up_while_the_master_is_idle() {
+    let state = tempfile::tempdir().unwrap();
+    let disk = Arc::new(FullDisk {
+        full: AtomicBool::new(true),
+    });
+    let master = Master::start(state.path(), Some(disk.clone()));
+    let (job, scene) = job();
+    let (frames, _) = master
+        .follow(RemoteJob::Submit { job, scene: &scene })
+        .await;
+    let frames = frames.expect("delivered from memory");
+    let failures =
+        |core: &vtfarm_master::MasterCore| core.telemetry().counters.journal_write_failures;
+    let mut changes = master.handle.changes();
+    tokio::time::timeout(WAIT, async {
+        while master.handle.inspect(failures).await < Some(FRAMES as u64) {
+            changes.changed().await.expect("the master runs");
+        }
+    })
+    .await
+    .expect("every frame write failed");
+    disk.full.store(false, Ordering::SeqCst);
+    let journal = Journal::open(state.path()).unwrap();
+    let all_written = |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(1, f).is_ok());
+    tokio::time::timeout(WAIT, async {
+        while !all_written(&journal) {
+            changes.changed().await.expect("the master runs");
+        }
+    })
+    .await
+    .expect("the kept frames were written with nothing else to write");
+    for f in 0..FRAMES as u32 {
+        let done = journal.frame(1, f).unwrap();
+        assert!(
+            done.image == reference_wire(&frames, f),
+            "frame {f} as sent"
+        );
+    }
+    master.stop().await;
+}

@@ -326,12 +326,23 @@ pub struct JobScene {
     pub object_aliases: ObjectAliases,
 }
 
+/// The most bytes of a job or study file.
+pub const MAX_JOB_FILE_BYTES: u64 = 16 << 20;
+
+/// The text of a job or study file: a regular file of at most
+/// [`MAX_JOB_FILE_BYTES`].
+pub(crate) fn read_job_text(path: &Path) -> Result<String, JobError> {
+    vtfarm_scene::file::read_regular_text(path, MAX_JOB_FILE_BYTES).map_err(|source| {
+        JobError::Read {
+            file: path.to_owned(),
+            source,
+        }
+    })
+}
+
 /// Reads and validates a job file.
 pub fn load_job(path: &Path) -> Result<Job, JobError> {
-    let text = std::fs::read_to_string(path).map_err(|source| JobError::Read {
-        file: path.to_owned(),
-        source,
-    })?;
+    let text = read_job_text(path)?;
     parse_job(&text, path)
 }
 

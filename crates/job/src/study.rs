@@ -304,7 +304,7 @@ pub const COCKPIT_MARKING_OBJECTS: [&str; 2] = ["dial_markings", "needles"];
 /// rather than a job file; unreadable or broken files count as jobs, whose
 /// loader then reports the problem.
 pub fn is_study_file(path: &Path) -> bool {
-    std::fs::read_to_string(path).is_ok_and(|text| is_study_text(&text))
+    crate::read_job_text(path).is_ok_and(|text| is_study_text(&text))
 }
 
 /// Whether `text` is a study file's: a TOML table with a `[study]` table.
@@ -315,10 +315,7 @@ pub(crate) fn is_study_text(text: &str) -> bool {
 
 /// Reads and validates a study file and its base job.
 pub fn load_study(path: &Path) -> Result<Study, JobError> {
-    let text = std::fs::read_to_string(path).map_err(|source| JobError::Read {
-        file: path.to_owned(),
-        source,
-    })?;
+    let text = crate::read_job_text(path)?;
     parse_study(&text, path)
 }
 

@@ -1355,3 +1355,42 @@ fn gltf_reflectors_are_picked_by_node_mesh_or_material_name() {
     let scene = job.scene_only().unwrap();
     assert_eq!(scene.object_aliases["panel"].len(), 2);
 }
+
+/// A job or study file that is `/dev/zero` or a FIFO without a writer is
+/// refused at once (not read without end, not waited on), naming the file
+/// and what it is.
+#[test]
+fn a_job_file_that_is_a_device_or_a_fifo_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("job.toml");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    for (path, kind) in [
+        (PathBuf::from("/dev/zero"), "a character device"),
+        (fifo, "a FIFO"),
+    ] {
+        let (done, result) = std::sync::mpsc::channel();
+        let file = path.clone();
+        std::thread::spawn(move || {
+            let job = load_job(&file).map(|_| ()).map_err(|e| e.to_string());
+            let study = vtfarm_job::study::load_study(&file)
+                .map(|_| ())
+                .map_err(|e| e.to_string());
+            let _ = done.send([job, study]);
+        });
+        let outcomes = result
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("refused without blocking");
+        for outcome in outcomes {
+            let error = outcome.unwrap_err();
+            assert!(
+                error.contains(&path.display().to_string())
+                    && error.contains(&format!("{kind}, not a regular file")),
+                "{error}"
+            );
+        }
+    }
+}

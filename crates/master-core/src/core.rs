@@ -153,7 +153,8 @@ impl MasterCore {
         // A finished job too old to keep goes at its expiry.
         let expiry = (self.table.next_expiry(self.retention))
             .map(|ms| Duration::from_millis(ms.saturating_sub(self.wall_origin_ms)));
-        [self.scheduler.poll_timeout(), expiry]
+        // A kept frame is written again even while nothing else is.
+        [self.scheduler.poll_timeout(), expiry, self.recovery.retry_at()]
             .into_iter()
             .flatten()
             .min()
@@ -163,6 +164,9 @@ impl MasterCore {
         self.now = now;
         self.scheduler.handle_timeout(now);
         self.forget_expired();
+        if let Some(record) = self.recovery.retry_due(now) {
+            self.outbox.push_back(Output::Persist(record));
+        }
         self.pump();
     }
 

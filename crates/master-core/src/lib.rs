@@ -42,7 +42,7 @@ pub use frames::finish::{EncodedFrame, FrameEncodeRequest};
 pub use jobs::{JobControlError, JobEntry, JobState, JobTable, Retention};
 pub use output::Output;
 pub use peers::{ConnId, Peer};
-pub use record::{DamagedJob, Record, StoredJob, Written};
+pub use record::{DamagedJob, KEPT_FRAME_RETRY, Record, StoredJob, Written};
 pub use rules::FarmRules;
 pub use stages::StageRejected;
 pub use status::LiveFrame;

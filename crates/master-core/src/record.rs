@@ -4,6 +4,7 @@
 //! `journal` writes and reads the files.
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use vtfarm_proto::{FrameDone, JobSummary, SceneData, WireJob};
 
@@ -52,6 +53,10 @@ impl Record {
     }
 }
 
+/// How long after a failed write (a full disk) a frame kept in memory is
+/// written again when no other record is: the disk may have room by then.
+pub const KEPT_FRAME_RETRY: Duration = Duration::from_secs(2);
+
 /// How writing one record went, as the server's journal writer reports it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Written {
@@ -72,7 +77,9 @@ pub struct StoredJob {
     pub frames_done: u32,
     pub complete: bool,
     /// Its listing as last journaled (state, priority, times); `None` when
-    /// the master stopped between the job's record and its first listing.
+    /// it is missing or damaged: the job is then held paused (nothing says
+    /// it was not cancelled or paused, and such a job must not run again on
+    /// its own) unless its records say it is complete.
     pub summary: Option<JobSummary>,
     /// The frame that ended the count because its record failed its check
     /// (or is missing while later ones are there), and why: it is rendered

@@ -9,10 +9,11 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
+use std::time::Duration;
 
 use vtfarm_proto::{FrameDone, JobScene, WireJob};
 
-use crate::record::{Record, Written};
+use crate::record::{KEPT_FRAME_RETRY, Record, Written};
 
 /// One step of sending a submitter a job's finished frames in order
 /// ([`Recovery::replay`]).
@@ -55,8 +56,12 @@ pub(crate) struct Recovery {
     /// a submitter attaching later is told too.
     failed_writes: BTreeMap<u64, String>,
     /// Frames of `unjournaled` whose write failed (not queued again yet):
-    /// one is written again after each write that succeeds.
+    /// one is written again after each write that succeeds, and at
+    /// `retry_at` when no other record is written.
     to_rewrite: BTreeSet<(u64, u32)>,
+    /// When to write a frame of `to_rewrite` again ([`KEPT_FRAME_RETRY`]
+    /// after the last failure).
+    retry_at: Option<Duration>,
     /// Restored jobs whose journal had a damaged frame, rendered again:
     /// the frame and why, told to attaching submitters.
     damaged_frames: BTreeMap<u64, (u32, String)>,
@@ -177,22 +182,20 @@ impl Recovery {
     /// The driver wrote a record (or failed to): a written frame leaves
     /// memory and a frame whose write failed is written again; a failure
     /// is kept for attaching submitters and its frame stays in memory.
-    pub(crate) fn written(&mut self, written: Written) -> AfterWrite {
+    pub(crate) fn written(&mut self, now: Duration, written: Written) -> AfterWrite {
         match written.outcome {
             Ok(()) => {
                 if let Some(frame) = written.frame {
                     self.unjournaled.remove(&(written.job, frame));
                 }
                 // The disk takes records again: write a frame that failed.
-                let again = (self.to_rewrite.pop_first())
-                    .and_then(|key| self.unjournaled.get(&key).cloned())
-                    .map(|done| Record::FrameDone(Box::new(done)));
-                AfterWrite::Rewrite(again)
+                AfterWrite::Rewrite(self.kept_frame_to_rewrite())
             }
             Err(error) => {
                 if let Some(frame) = written.frame {
                     self.to_rewrite.insert((written.job, frame));
                 }
+                self.retry_at = Some(now + KEPT_FRAME_RETRY);
                 let kept = written.frame.map_or(String::new(), |f| {
                     format!("; frame {f} is kept in memory until it is written")
                 });
@@ -201,6 +204,28 @@ impl Recovery {
                 AfterWrite::Failed(error)
             }
         }
+    }
+
+    /// A frame whose write failed, to write again, if any.
+    fn kept_frame_to_rewrite(&mut self) -> Option<Record> {
+        (self.to_rewrite.pop_first())
+            .and_then(|key| self.unjournaled.get(&key).cloned())
+            .map(|done| Record::FrameDone(Box::new(done)))
+    }
+
+    /// When a kept frame is to be written again even while nothing else
+    /// is written (the disk may have freed up).
+    pub(crate) fn retry_at(&self) -> Option<Duration> {
+        self.retry_at.filter(|_| !self.to_rewrite.is_empty())
+    }
+
+    /// At `now`: a kept frame to write again, if its retry is due.
+    pub(crate) fn retry_due(&mut self, now: Duration) -> Option<Record> {
+        if self.retry_at.is_none_or(|at| at > now) {
+            return None;
+        }
+        self.retry_at = None;
+        self.kept_frame_to_rewrite()
     }
 
     /// The job of frame `frame` of `job`, and the frame there: a frame
@@ -317,19 +342,34 @@ mod tests {
         let mut recovery = Recovery::new(true);
         recovery.persisting(&done(1, 0));
         recovery.persisting(&done(1, 1));
-        let failed = recovery.written(written(1, 0, Err("disk full".into())));
+        let failed = recovery.written(Duration::ZERO, written(1, 0, Err("disk full".into())));
         let error = "disk full; frame 0 is kept in memory until it is written";
         assert_eq!(failed, AfterWrite::Failed(error.into()));
         assert_eq!(recovery.failed_write(1), Some(error));
         assert!(recovery.unjournaled(1, 0).is_some());
-        let again = recovery.written(written(1, 1, Ok(())));
+        let again = recovery.written(Duration::ZERO, written(1, 1, Ok(())));
         assert_eq!(again, AfterWrite::Rewrite(Some(done(1, 0))));
         assert!(recovery.unjournaled(1, 1).is_none(), "written");
         assert_eq!(
-            recovery.written(written(1, 0, Ok(()))),
+            recovery.written(Duration::ZERO, written(1, 0, Ok(()))),
             AfterWrite::Rewrite(None)
         );
         assert!(recovery.unjournaled(1, 0).is_none());
+    }
+
+    /// A frame whose write failed is written again when its retry is due,
+    /// even if no other record is written meanwhile (the disk freed up
+    /// while the master was idle).
+    #[test]
+    fn a_frame_whose_write_failed_is_written_again_when_its_retry_is_due() {
+        let mut recovery = Recovery::new(true);
+        recovery.persisting(&done(1, 0));
+        let at = Duration::from_secs(7);
+        recovery.written(at, written(1, 0, Err("disk full".into())));
+        assert_eq!(recovery.retry_at(), Some(at + KEPT_FRAME_RETRY));
+        assert_eq!(recovery.retry_due(at), None, "not due yet");
+        assert_eq!(recovery.retry_due(at + KEPT_FRAME_RETRY), Some(done(1, 0)));
+        assert_eq!(recovery.retry_at(), None, "nothing left to retry");
     }
 
     /// A forgotten job takes what is kept of it; a repair renders its

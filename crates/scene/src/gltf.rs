@@ -59,6 +59,7 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use serde_json::{Value, json};
 
+use crate::file::{self, MAX_IMAGE_FILE_BYTES, MAX_SCENE_FILE_BYTES};
 use crate::normals;
 use crate::obj::{ObjOptions, default_material, object_id};
 use crate::{
@@ -126,7 +127,7 @@ pub struct ImportedGltf {
 
 /// Loads a `.gltf` or `.glb` file; see the [module documentation](self).
 pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, GltfError> {
-    let bytes = fs::read(path).map_err(|error| GltfError::Io {
+    let bytes = file::read_regular(path, MAX_SCENE_FILE_BYTES).map_err(|error| GltfError::Io {
         path: path.to_owned(),
         error,
     })?;
@@ -150,8 +151,7 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
     }
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(parse)?;
     let base = path.parent().unwrap_or(Path::new(""));
-    let buffers =
-        gltf::import_buffers(&gltf.document, Some(base), gltf.blob.clone()).map_err(parse)?;
+    let buffers = load_buffers(path, base, &gltf)?;
     let mut import = Import {
         path,
         base,
@@ -188,7 +188,9 @@ pub fn import_gltf(path: &Path, options: &ObjOptions) -> Result<ImportedGltf, Gl
             .map_err(|bound| invalid(path, bound))?;
     }
     for node in roots {
-        import.node(&node, Mat4::IDENTITY);
+        import
+            .node(&node, Mat4::IDENTITY)
+            .map_err(|message| invalid(path, message))?;
     }
     let Import {
         mut scene,
@@ -298,8 +300,9 @@ impl Import<'_> {
     }
 
     /// Imports `node` and its children (within the bounds
-    /// [`Instanced::count`] checked).
-    fn node(&mut self, node: &gltf::Node, parent: Mat4) {
+    /// [`Instanced::count`] checked); an inconsistent primitive is an
+    /// error naming it and its accessor.
+    fn node(&mut self, node: &gltf::Node, parent: Mat4) -> Result<(), String> {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(camera) = node.camera() {
             self.camera(node, &camera, world);
@@ -315,12 +318,15 @@ impl Import<'_> {
                 }
             }
             for primitive in mesh.primitives() {
-                self.primitive(&primitive, world, object);
+                let label = format!("mesh {} primitive {}", mesh.index(), primitive.index());
+                self.primitive(&primitive, &label, world, object)
+                    .map_err(|e| format!("{label}: {e}"))?;
             }
         }
         for child in node.children() {
-            self.node(&child, world);
+            self.node(&child, world)?;
         }
+        Ok(())
     }
 
     fn camera(&mut self, node: &gltf::Node, camera: &gltf::Camera, world: Mat4) {
@@ -344,18 +350,52 @@ impl Import<'_> {
         });
     }
 
-    fn primitive(&mut self, primitive: &gltf::Primitive, world: Mat4, object: ObjectId) {
+    fn primitive(
+        &mut self,
+        primitive: &gltf::Primitive,
+        label: &str,
+        world: Mat4,
+        object: ObjectId,
+    ) -> Result<(), String> {
         use gltf::mesh::Mode;
-        let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
-        let Some(positions) = reader.read_positions() else {
-            return;
+        let Some(position_accessor) = primitive.get(&gltf::Semantic::Positions) else {
+            return Ok(());
         };
-        let positions: Vec<Vec3> = positions
+        let count = position_accessor.count();
+        for (semantic, accessor) in primitive.attributes() {
+            self.check_accessor(&accessor)?;
+            if accessor.count() != count {
+                return Err(format!(
+                    "accessor {} ({semantic:?}) has {} elements, the POSITION accessor {} has {count}",
+                    accessor.index(),
+                    accessor.count(),
+                    position_accessor.index()
+                ));
+            }
+        }
+        if let Some(indices) = primitive.indices() {
+            self.check_accessor(&indices)?;
+            if primitive.mode() == Mode::Triangles && indices.count() % 3 != 0 {
+                return Err(format!(
+                    "accessor {} (indices) has {} elements, not a whole number of triangles",
+                    indices.index(),
+                    indices.count()
+                ));
+            }
+        }
+        let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let unreadable =
+            |accessor: &gltf::Accessor| format!("accessor {} cannot be read", accessor.index());
+        let positions: Vec<Vec3> = (reader.read_positions())
+            .ok_or_else(|| unreadable(&position_accessor))?
             .map(|p| world.transform_point3(Vec3::from(p)))
             .collect();
         let count = positions.len() as u32;
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(indices) => indices.into_u32().collect(),
+        let indices: Vec<u32> = match primitive.indices() {
+            Some(accessor) => (reader.read_indices())
+                .ok_or_else(|| unreadable(&accessor))?
+                .into_u32()
+                .collect(),
             None => (0..count).collect(),
         };
         let mut triangles: Vec<[u32; 3]> = match primitive.mode() {
@@ -374,14 +414,17 @@ impl Import<'_> {
                 .collect(),
             mode => {
                 self.warn(format!(
-                    "a primitive of {mode:?} skipped: vtfarm renders triangles"
+                    "{label}: a primitive of {mode:?} skipped: vtfarm renders triangles"
                 ));
-                return;
+                return Ok(());
             }
         };
-        if triangles.iter().flatten().any(|&v| v >= count) {
-            self.warn("a primitive indexes a missing vertex; skipped".to_owned());
-            return;
+        if let Some(&v) = triangles.iter().flatten().find(|&&v| v >= count) {
+            let accessor = primitive.indices().map_or(0, |a| a.index());
+            return Err(format!(
+                "accessor {accessor} (indices) names vertex {v}, the POSITION accessor {} has {count}",
+                position_accessor.index()
+            ));
         }
         // A mirroring transform turns the winding around.
         if world.determinant() < 0.0 {
@@ -395,7 +438,7 @@ impl Import<'_> {
                 .map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
                 .collect()
         });
-        let has_normals = normals.as_ref().is_some_and(|n| n.len() == positions.len());
+        let has_normals = normals.is_some();
         let mut normals = match normals {
             Some(n) if has_normals => n,
             _ => vec![Vec3::Y; positions.len()],
@@ -425,6 +468,47 @@ impl Import<'_> {
                 material,
             });
         }
+        Ok(())
+    }
+
+    /// Checks that `accessor`'s elements lie within its buffer view and
+    /// the view within its buffer: the `gltf` crate's reader reads one
+    /// that does not as absent, and the mesh would be drawn otherwise.
+    fn check_accessor(&self, accessor: &gltf::Accessor) -> Result<(), String> {
+        let index = accessor.index();
+        let Some(view) = accessor.view() else {
+            return match accessor.sparse() {
+                Some(_) => Ok(()),
+                None => Err(format!("accessor {index} has no buffer view")),
+            };
+        };
+        let buffer = view.buffer().index();
+        let held = self.buffers.get(buffer).map_or(0, |d| d.0.len());
+        let view_end = view.offset().saturating_add(view.length());
+        if view_end > held {
+            return Err(format!(
+                "accessor {index}: its buffer view {} ends at byte {view_end} of buffer {buffer}, which holds {held}",
+                view.index()
+            ));
+        }
+        let count = accessor.count();
+        if count == 0 {
+            return Ok(());
+        }
+        let element = accessor.size();
+        let stride = view.stride().unwrap_or(element);
+        let end = (stride.saturating_mul(count - 1))
+            .saturating_add(element)
+            .saturating_add(accessor.offset());
+        if end > view.length() {
+            return Err(format!(
+                "accessor {index} ({count} elements of {element} bytes from byte {}) needs {end} bytes of buffer view {}, which holds {}",
+                accessor.offset(),
+                view.index(),
+                view.length()
+            ));
+        }
+        Ok(())
     }
 
     fn material(&mut self, m: &gltf::Material) -> Material {
@@ -537,13 +621,72 @@ impl Import<'_> {
                 if uri.starts_with("data:") {
                     return Err("data URIs for images are not read".to_owned());
                 }
-                let file = self.base.join(percent_decode(uri));
-                let bytes = fs::read(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+                let file = uri_file(self.base, uri)?;
+                let bytes = file::read_regular(&file, MAX_IMAGE_FILE_BYTES)
+                    .map_err(|e| format!("{}: {e}", file.display()))?;
                 (uri.to_owned(), bytes)
             }
         };
         Texture::decode(&name, &bytes).map_err(|e| e.to_string())
     }
+}
+
+/// The buffers of a parsed file: the GLB's binary chunk, data URIs, and
+/// the files it names, each read as a regular file within
+/// [`MAX_SCENE_FILE_BYTES`] (the `gltf` crate's own import reads any file
+/// without bound).
+fn load_buffers(
+    path: &Path,
+    base: &Path,
+    gltf: &gltf::Gltf,
+) -> Result<Vec<gltf::buffer::Data>, GltfError> {
+    let mut blob = gltf.blob.clone();
+    let mut buffers = Vec::new();
+    for buffer in gltf.document.buffers() {
+        let index = buffer.index();
+        let mut bytes = match buffer.source() {
+            gltf::buffer::Source::Bin => blob
+                .take()
+                .ok_or_else(|| invalid(path, format!("buffer {index}: no binary chunk")))?,
+            source @ gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                let data = gltf::buffer::Data::from_source(source, None);
+                data.map_err(|error| invalid(path, format!("buffer {index}: {error}")))?
+                    .0
+            }
+            gltf::buffer::Source::Uri(uri) => {
+                let file = uri_file(base, uri)
+                    .map_err(|message| invalid(path, format!("buffer {index}: {message}")))?;
+                file::read_regular(&file, MAX_SCENE_FILE_BYTES)
+                    .map_err(|error| GltfError::Io { path: file, error })?
+            }
+        };
+        if bytes.len() < buffer.length() {
+            return Err(invalid(
+                path,
+                format!(
+                    "buffer {index}: {} bytes, {} declared",
+                    bytes.len(),
+                    buffer.length()
+                ),
+            ));
+        }
+        // The reader expects the padding to 4 bytes that a GLB chunk has.
+        bytes.resize(bytes.len().next_multiple_of(4), 0);
+        buffers.push(gltf::buffer::Data(bytes));
+    }
+    Ok(buffers)
+}
+
+/// The file a (non-data) URI names: `file:` paths as they are, relative
+/// ones beside the glTF file; other schemes are not read.
+fn uri_file(base: &Path, uri: &str) -> Result<PathBuf, String> {
+    if let Some(path) = (uri.strip_prefix("file://")).or_else(|| uri.strip_prefix("file:")) {
+        return Ok(PathBuf::from(percent_decode(path)));
+    }
+    if uri.contains(':') {
+        return Err(format!("URI {uri:?}: only files and data URIs are read"));
+    }
+    Ok(base.join(percent_decode(uri)))
 }
 
 /// `%20` and friends in a URI turned back into bytes.

@@ -7,6 +7,7 @@
 
 pub mod bounds;
 mod camera;
+pub mod file;
 pub mod gltf;
 mod light;
 mod material;

@@ -86,6 +86,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
 
+use crate::file;
 use crate::normals::{self, DEFAULT_CREASE_ANGLE_DEG};
 use crate::{
     Material, MaterialId, Object, ObjectId, Scene, SceneError, Texture, TextureId, Triangle,
@@ -293,10 +294,11 @@ pub fn load_obj(path: &Path, options: &ObjOptions) -> Result<Scene, ObjError> {
 
 /// [`load_obj`], returning the warnings instead of logging them.
 pub fn import_obj(path: &Path, options: &ObjOptions) -> Result<ImportedObj, ObjError> {
-    let bytes = fs::read(path).map_err(|error| ObjError::Io {
-        path: path.to_owned(),
-        error,
-    })?;
+    let bytes =
+        file::read_regular(path, file::MAX_SCENE_FILE_BYTES).map_err(|error| ObjError::Io {
+            path: path.to_owned(),
+            error,
+        })?;
     let text = decode_text(path, bytes)?;
     let checked = check_obj(path, &text)?;
     // tobj's `merging` and `reordering` features add fields; keep their defaults.
@@ -842,12 +844,14 @@ impl ObjCheck {
             return Ok(Cow::Borrowed(""));
         }
         let file = obj.parent().unwrap_or(Path::new("")).join(name.as_ref());
-        let bytes = fs::read(&file).map_err(|error| ObjError::Reference {
-            path: obj.to_owned(),
-            line,
-            what: "material library",
-            file: file.clone(),
-            error,
+        let bytes = file::read_regular(&file, file::MAX_SCENE_FILE_BYTES).map_err(|error| {
+            ObjError::Reference {
+                path: obj.to_owned(),
+                line,
+                what: "material library",
+                file: file.clone(),
+                error,
+            }
         })?;
         let text = decode_text(&file, bytes)?;
         let clean = check_mtl(&file, &text, &mut self.warnings, &mut self.textures)?;

@@ -127,31 +127,29 @@ impl Texture {
         })
     }
 
-    /// Reads and decodes an image file (PNG, JPEG or PNM), named by its file name.
+    /// Reads and decodes an image file (PNG, JPEG or PNM), named by its
+    /// file name; only a regular file of at most
+    /// [`MAX_IMAGE_FILE_BYTES`](crate::file::MAX_IMAGE_FILE_BYTES) is read.
     pub fn load(path: &Path) -> Result<Texture, TextureError> {
-        let decode = |error| TextureError::Decode {
-            path: path.to_owned(),
-            error,
-        };
-        let image = image::ImageReader::open(path)
-            .map_err(|e| decode(image::ImageError::IoError(e)))?
-            .with_guessed_format()
-            .map_err(|e| decode(image::ImageError::IoError(e)))?;
-        let (width, height) = image.into_dimensions().map_err(decode)?;
+        let bytes =
+            crate::file::read_regular(path, crate::file::MAX_IMAGE_FILE_BYTES).map_err(|e| {
+                TextureError::Decode {
+                    path: path.to_owned(),
+                    error: image::ImageError::IoError(e),
+                }
+            })?;
         let name = path.file_name().map_or_else(
             || path.display().to_string(),
             |n| n.to_string_lossy().into_owned(),
         );
-        // Check the size before decoding the pixels into memory.
-        if width == 0 || height == 0 || width > MAX_TEXTURE_SIDE || height > MAX_TEXTURE_SIDE {
-            return Err(TextureError::Size {
-                name,
-                width,
-                height,
-            });
-        }
-        let rgba = image::open(path).map_err(decode)?.to_rgba8();
-        Texture::from_rgba8(&name, width, height, rgba.into_raw())
+        Texture::decode(&name, &bytes).map_err(|e| match e {
+            // A decoding error names the file by its path, as a read error does.
+            TextureError::Decode { error, .. } => TextureError::Decode {
+                path: path.to_owned(),
+                error,
+            },
+            other => other,
+        })
     }
 
     /// Decodes an image file's bytes (PNG, JPEG or PNM).

@@ -16,6 +16,10 @@ use crate::recovery::{AfterWrite, by_hash};
 
 use super::MasterCore;
 
+/// The reason listed for a restored job whose journaled listing is lost.
+const LISTING_LOST: &str =
+    "its state could not be read back from the journal: held paused (resume or cancel it)";
+
 impl MasterCore {
     /// Resumes a journaled job (at start, before any connection): it runs
     /// from its first unfinished frame, or waits complete for its submitter.
@@ -27,8 +31,14 @@ impl MasterCore {
         }
         let mut entry = match stored.summary.clone() {
             Some(summary) => JobEntry::from_summary(summary),
-            // Written before its state (a crash between the two): queued.
-            None => self.new_entry(stored.id, &stored.job, "unknown".into(), now),
+            None => {
+                // Its listing is lost (the journal warned, naming the file):
+                // nothing says it was not cancelled or paused, so it is held.
+                let mut entry = self.new_entry(stored.id, &stored.job, "unknown".into(), now);
+                entry.state = JobState::Paused;
+                entry.reason = LISTING_LOST.to_owned();
+                entry
+            }
         };
         entry.frames_done = stored.frames_done;
         entry.frames_total = stored.job.frames.len() as u32;
@@ -107,7 +117,7 @@ impl MasterCore {
     pub fn journal_written(&mut self, now: Duration, written: Written) {
         self.now = now;
         let job = written.job;
-        match self.recovery.written(written) {
+        match self.recovery.written(now, written) {
             AfterWrite::Rewrite(record) => {
                 // Written again as is: it is kept in memory already.
                 if let Some(record) = record {
