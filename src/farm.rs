@@ -321,6 +321,10 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         .collect();
     let path = args.output.join("stats.json");
     crate::shared::write_json(&path, &stats)?;
+    if json {
+        json_line(serde_json::json!({"event": "done", "frames": frames.len(), "stats": path}));
+        return Ok(());
+    }
     for f in &frames {
         println!("frame {}:", f.frame);
         print_frame_stats(&f.stats);
@@ -339,9 +343,10 @@ fn say(bar: &ProgressBar, line: String) {
     }
 }
 
-/// One machine-readable line on stderr (`submit --json`).
+/// One machine-readable line on stdout (`submit --json`): stdout then holds
+/// JSON lines alone, and every line for people goes to stderr.
 fn json_line(value: serde_json::Value) {
-    eprintln!("{value}");
+    println!("{value}");
 }
 
 /// How to follow an interrupted `vtfarm submit`'s job again or stop it:
@@ -485,8 +490,10 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
     // In the order the jobs get workers; frames are numbered from 0, as
     // the files are (frame_0000).
     for r in &reply.queue.running {
+        // A paused job keeps its place in the queue but gets no work.
+        let state = if r.paused { "paused" } else { "running" };
         println!(
-            "running: job {} ({}) frame {} of {} (frame_{:04}): {}/{} triangles",
+            "{state}: job {} ({}) frame {} of {} (frame_{:04}): {}/{} triangles",
             r.job, r.name, r.frame, r.frames, r.frame, r.triangles_done, r.triangles_total
         );
     }

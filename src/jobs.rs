@@ -35,7 +35,7 @@ pub(crate) fn jobs(args: JobsArgs) -> Result<()> {
 /// The table `vtfarm jobs` prints: one line per job under a header.
 fn table(jobs: &[JobSummary]) -> String {
     let mut out = format!(
-        "{:>5} {:<24} {:<6} {:<9} {:>8} {:>6} {:>6} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
+        "{:>5} {:<NAME_WIDTH$} {:<6} {:<9} {:>8} {:>6} {:>6} {:>9} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
         "id",
         "name",
         "kind",
@@ -43,6 +43,7 @@ fn table(jobs: &[JobSummary]) -> String {
         "priority",
         "done",
         "failed",
+        "cancelled",
         "total",
         "submitted (UTC)",
         "started",
@@ -52,14 +53,15 @@ fn table(jobs: &[JobSummary]) -> String {
     let time = |ms: Option<u64>| ms.map_or("-".to_owned(), utc_time);
     for job in jobs {
         out += &format!(
-            "{:>5} {:<24} {:<6} {:<9} {:>8} {:>6} {:>6} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
+            "{:>5} {:<NAME_WIDTH$} {:<6} {:<9} {:>8} {:>6} {:>6} {:>9} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
             job.id,
-            job.name,
+            fitted(&job.name, NAME_WIDTH),
             kind_name(job.kind),
             state_name(job.state),
             job.priority,
             job.frames_done,
             job.frames_failed,
+            job.frames_cancelled,
             job.frames_total,
             utc_time(job.submitted_ms),
             time(job.started_ms),
@@ -71,6 +73,18 @@ fn table(jobs: &[JobSummary]) -> String {
         }
     }
     out
+}
+
+/// The name column's width: a longer name is cut, so the columns stay aligned.
+const NAME_WIDTH: usize = 24;
+
+/// `text` in at most `width` characters: cut with an ellipsis when longer.
+fn fitted(text: &str, width: usize) -> String {
+    if text.chars().count() <= width {
+        return text.to_owned();
+    }
+    let kept: String = text.chars().take(width.saturating_sub(1)).collect();
+    format!("{kept}…")
 }
 
 pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
@@ -105,7 +119,8 @@ mod tests {
             state: WireJobState::Cancelled,
             priority: -3,
             frames_done: 2,
-            frames_failed: 38,
+            frames_failed: 0,
+            frames_cancelled: 38,
             frames_total: 40,
             submitted_ms: 1_764_672_000_000,
             started_ms: Some(1_764_672_001_000),
@@ -126,6 +141,7 @@ mod tests {
                 "cancelled",
                 "-3",
                 "2",
+                "0",
                 "38",
                 "40",
                 "2025-12-02",
@@ -140,5 +156,36 @@ mod tests {
             lines[2].trim(),
             "job 7 was cancelled by submitter (127.0.0.1:6000)"
         );
+    }
+
+    #[test]
+    fn a_long_name_is_cut_so_the_columns_stay_aligned() {
+        let job = |id, name: &str| JobSummary {
+            id,
+            name: name.into(),
+            kind: WireJobKind::Study,
+            state: WireJobState::Running,
+            priority: 0,
+            frames_done: 1,
+            frames_failed: 0,
+            frames_cancelled: 0,
+            frames_total: 40,
+            submitted_ms: 1_764_672_000_000,
+            started_ms: None,
+            finished_ms: None,
+            host: "127.0.0.1".into(),
+            reason: String::new(),
+        };
+        let long = "Instrument cover glass designs over sun positions / current";
+        let text = table(&[job(1, "short"), job(2, long)]);
+        let lines: Vec<&str> = text.lines().collect();
+        let column = |line: &str| {
+            let at = line.find("study").expect("the kind column");
+            line[..at].chars().count()
+        };
+        assert_eq!(column(lines[1]), column(lines[2]), "{text}");
+        assert!(lines[2].contains("Instrument cover glass …"), "{text}");
+        assert_eq!(fitted("abc", 3), "abc");
+        assert_eq!(fitted("abcd", 3), "ab…");
     }
 }

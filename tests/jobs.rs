@@ -92,9 +92,10 @@ impl Process {
         }
     }
 
-    /// The job id of `submit --json`'s accepted event.
+    /// The job id of `submit --json`'s accepted event (on stdout, which
+    /// holds JSON lines alone).
     fn accepted_job(&mut self) -> u64 {
-        let line = self.wait_for("\"accepted\"");
+        let line = self.wait_for_stdout("\"accepted\"");
         let event: Value = serde_json::from_str(&line).expect("a JSON line");
         event["job"].as_u64().expect("the job's id")
     }
@@ -371,10 +372,14 @@ fn a_cancel_ends_its_submit_with_an_error_naming_it_and_ctrl_c_says_how_to_come_
     let log = submit.log_text();
     assert!(
         log.contains(&format!(
-            "error: job {id} was cancelled by submitter (127.0.0.1:"
+            "error: job {id} was cancelled by `vtfarm cancel` on 127.0.0.1"
         )),
         "{log}"
     );
+    for line in submit.rest_of_stdout().lines() {
+        let parsed: Result<Value, _> = serde_json::from_str(line);
+        assert!(parsed.is_ok(), "a plain line in --json's stdout: {line}");
+    }
     let (status, _, stderr) = master.control(&["cancel", &id.to_string()]);
     assert!(!status.success());
     assert!(

@@ -1235,6 +1235,7 @@ mod tests {
             priority: id as i32 - 3,
             frames_done: 0,
             frames_failed: 0,
+            frames_cancelled: 0,
             frames_total: 1,
             submitted_ms: 1_000 * id,
             started_ms: (id > 1).then_some(2_000 * id),

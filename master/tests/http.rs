@@ -1263,7 +1263,7 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
     let click = format!(
         r#"new Promise((resolve) => {{
             const row = () => document.querySelector('#jobs tr[data-job="{id}"]');
-            let clicked = false;
+            let clicked = false, confirmed = false, armedWhileRunning = null;
             const step = () => {{
                 const r = row();
                 if (!r) return;
@@ -1271,9 +1271,18 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
                     clicked = true;
                     r.querySelector('button[data-action="cancel"]').click();
                 }}
+                // The first press only asks to confirm: nothing is sent yet.
+                const confirm = row().querySelector('button[data-action="confirm-cancel"]');
+                if (clicked && !confirmed && confirm) {{
+                    armedWhileRunning = row().dataset.state === "running"
+                        && document.getElementById("job-answer").textContent === "";
+                    confirmed = true;
+                    confirm.click();
+                }}
                 const answered = document.getElementById("job-answer").textContent !== "";
-                if (clicked && answered && r.dataset.state === "cancelled") {{
-                    resolve({{ state: r.dataset.state, answer: document.getElementById("job-answer").textContent,
+                if (confirmed && answered && r.dataset.state === "cancelled") {{
+                    resolve({{ state: r.dataset.state, armedWhileRunning,
+                      answer: document.getElementById("job-answer").textContent,
                       buttons: [...r.querySelectorAll("button")].map((b) => b.dataset.action) }});
                 }}
             }};
@@ -1285,8 +1294,17 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
     let row = browser.eval(&click).await;
     assert_eq!(row["state"], "cancelled", "{row}");
     assert_eq!(row["answer"], format!("job {id}: cancelled"), "{row}");
-    // A finished job offers requeue only (its state allows nothing else).
-    assert_eq!(row["buttons"], serde_json::json!(["requeue"]), "{row}");
+    assert_eq!(
+        row["armedWhileRunning"], true,
+        "a single press cancels nothing: {row}"
+    );
+    // A finished job offers requeue (all or its unfinished frames) and
+    // nothing else: its priority changes once it is requeued.
+    assert_eq!(
+        row["buttons"],
+        serde_json::json!(["requeue", "requeue-failed"]),
+        "{row}"
+    );
     let ended = (tokio::time::timeout(WAIT, submitter).await)
         .expect("the submitter ended")
         .unwrap();

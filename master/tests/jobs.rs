@@ -451,7 +451,11 @@ fn requeue_failed_renders_only_the_frames_a_cancelled_job_did_not_finish() {
     let done = pair.master.jobs().get(id).unwrap().frames_done;
     assert!(done >= 1);
     let summary = pair.master.jobs().get(id).unwrap().summary();
-    assert_eq!(summary.frames_failed, 3 - done);
+    assert_eq!(summary.frames_cancelled, 3 - done);
+    assert_eq!(
+        summary.frames_failed, 0,
+        "cancelled frames are not failed ones"
+    );
     let starts_before = pair.frame_starts.len();
     assert_eq!(
         control(&mut pair, id, JobAction::Requeue { failed_only: true }),

@@ -377,6 +377,7 @@ mod tests {
                             frames: 3,
                             triangles_done: 100,
                             triangles_total: 576,
+                            paused: false,
                         },
                         RunningJob {
                             job: 10,
@@ -385,6 +386,7 @@ mod tests {
                             frames: 1,
                             triangles_done: 0,
                             triangles_total: 576,
+                            paused: true,
                         },
                     ],
                 },
@@ -400,6 +402,7 @@ mod tests {
                     priority: 3,
                     frames_done: 1,
                     frames_failed: 0,
+                    frames_cancelled: 0,
                     frames_total: 3,
                     submitted_ms: 1_700_000_000_000,
                     started_ms: Some(1_700_000_001_000),

@@ -52,7 +52,7 @@ pub use wire::{
 /// to a message's encoding or to a rule both ends follow (10: the frames a
 /// worker keeps, [`KeptFrames`], which the master mirrors); the master
 /// refuses other versions with [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 10;
+pub const PROTOCOL_VERSION: u32 = 11;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

@@ -531,6 +531,20 @@ pub enum JobAction {
     SetPriority(i32),
 }
 
+impl JobAction {
+    /// The `vtfarm` command that asks for it.
+    pub fn command(&self) -> &'static str {
+        match self {
+            JobAction::Cancel => "cancel",
+            JobAction::Pause => "pause",
+            JobAction::Resume => "resume",
+            JobAction::Requeue { failed_only: false } => "requeue",
+            JobAction::Requeue { failed_only: true } => "requeue --failed",
+            JobAction::SetPriority(_) => "priority",
+        }
+    }
+}
+
 /// One job as `vtfarm jobs`, `GET /api/jobs` and the dashboard list it.
 /// Times are milliseconds since the Unix epoch, as the master's clock
 /// read them.
@@ -542,8 +556,10 @@ pub struct JobSummary {
     pub state: WireJobState,
     pub priority: i32,
     pub frames_done: u32,
-    /// Frames a failed or cancelled job did not finish.
+    /// Frames a failed job did not finish.
     pub frames_failed: u32,
+    /// Frames a cancelled job did not finish.
+    pub frames_cancelled: u32,
     pub frames_total: u32,
     pub submitted_ms: u64,
     pub started_ms: Option<u64>,
@@ -749,6 +765,8 @@ pub struct RunningJob {
     /// [`Message::Progress`] counts them).
     pub triangles_done: u64,
     pub triangles_total: u64,
+    /// Paused: it keeps its place but gets no new work.
+    pub paused: bool,
 }
 
 /// Serde helper for byte vectors: bincode then writes a length and the raw

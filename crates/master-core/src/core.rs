@@ -459,7 +459,7 @@ impl MasterCore {
                 self.send(conn, Message::JobList { jobs });
             }
             Message::ControlJob { job, action } => {
-                let who = self.peers.name(conn);
+                let who = self.peers.controller(conn, &action);
                 let outcome = (self.control_job(now, job, action, &who)).map_err(|e| e.to_string());
                 self.send(conn, Message::JobControlled { job, outcome });
             }

@@ -180,9 +180,10 @@ impl JobEntry {
     /// The listing as the wire carries it.
     pub fn summary(&self) -> JobSummary {
         let unfinished = self.frames_total.saturating_sub(self.frames_done);
-        let frames_failed = match self.state {
-            JobState::Failed | JobState::Cancelled => unfinished,
-            _ => 0,
+        let (frames_failed, frames_cancelled) = match self.state {
+            JobState::Failed => (unfinished, 0),
+            JobState::Cancelled => (0, unfinished),
+            _ => (0, 0),
         };
         JobSummary {
             id: self.id,
@@ -192,6 +193,7 @@ impl JobEntry {
             priority: self.priority,
             frames_done: self.frames_done,
             frames_failed,
+            frames_cancelled,
             frames_total: self.frames_total,
             submitted_ms: self.submitted_ms,
             started_ms: self.started_ms,

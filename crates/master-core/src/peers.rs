@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use vtfarm_proto::{KeptFrames, Message};
+use vtfarm_proto::{JobAction, KeptFrames, Message};
 
 /// A connection, numbered by the driver.
 pub type ConnId = u64;
@@ -81,6 +81,16 @@ impl Peers {
         }
     }
 
+    /// Who asks for `action` over `conn`: the command and the host it ran
+    /// on (`vtfarm cancel` on 10.0.0.7), for a job's reason and listing.
+    pub(crate) fn controller(&self, conn: ConnId, action: &JobAction) -> String {
+        let command = format!("`vtfarm {}`", action.command());
+        match self.peers.get(&conn).or(self.departed.get(&conn)) {
+            Some(Peer::Submitter { address }) => format!("{command} on {}", host_of(address)),
+            _ => format!("{command} from {}", self.name(conn)),
+        }
+    }
+
     /// A worker's name (its connection number if it is gone).
     pub(crate) fn worker_name(&self, conn: ConnId) -> String {
         match self.peers.get(&conn) {
@@ -110,6 +120,14 @@ impl Peers {
     pub(crate) fn keeps(&self, conn: ConnId, job: u64, frame: u32) -> bool {
         (self.worker_frames.get(&conn)).is_some_and(|kept| kept.contains((job, frame)))
     }
+}
+
+/// The host of a socket address (`127.0.0.1:5000`, `[::1]:5000`): the
+/// port says only which connection it was.
+fn host_of(address: &str) -> &str {
+    address
+        .rsplit_once(':')
+        .map_or(address, |(host, _port)| host)
 }
 
 #[cfg(test)]
@@ -173,5 +191,30 @@ mod tests {
         assert!(!peers.keeps(2, 5, 0), "a submitter keeps no frames");
         peers.left(1);
         assert!(!peers.keeps(1, 5, 0), "gone with its worker");
+    }
+
+    /// A job's reason names the command and the host that asked, not the
+    /// connection's ephemeral port.
+    #[test]
+    fn a_control_request_is_named_by_its_command_and_host() {
+        let mut peers = Peers::default();
+        let submitter = |address: &str| Peer::Submitter {
+            address: address.into(),
+        };
+        peers.joined(1, submitter("10.0.0.9:33292"));
+        peers.joined(2, submitter("[::1]:5000"));
+        peers.joined(3, worker("w1"));
+        assert_eq!(
+            peers.controller(1, &JobAction::Cancel),
+            "`vtfarm cancel` on 10.0.0.9"
+        );
+        assert_eq!(
+            peers.controller(2, &JobAction::Requeue { failed_only: true }),
+            "`vtfarm requeue --failed` on [::1]"
+        );
+        assert_eq!(
+            peers.controller(3, &JobAction::Pause),
+            "`vtfarm pause` from w1 (10.0.0.7:4000)"
+        );
     }
 }

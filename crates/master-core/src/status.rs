@@ -77,6 +77,7 @@ pub(crate) fn status(
                 triangles_done: (job.and_then(|j| j.assembly(p.frame)))
                     .map_or(0, |c| c.triangles_done),
                 triangles_total: job.map_or(0, |j| j.reflectors.len() as u64),
+                paused: p.paused,
             }
         })
         .collect();
