@@ -508,7 +508,7 @@ impl Job {
                 if change.transmittance.is_none() {
                     material.transmittance = Vec3::ONE - material.reflectance;
                 }
-                material.ior = 1.0;
+                material.thin = true;
             }
         }
         Ok((scene, notes))

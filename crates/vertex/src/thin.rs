@@ -558,12 +558,8 @@ fn facing_normal(front: &SurfacePoint, direction: Vec3) -> Vec3 {
 /// The direction of a ray along `direction` inside a slab whose front
 /// surface it enters at `front` (Snell); `None` on total internal reflection.
 fn inside_direction(scene: &Scene, front: &SurfacePoint, direction: Vec3) -> Option<Vec3> {
-    let ior = scene.material_of(front.triangle).ior;
-    let eta = if ior.is_finite() && ior > 0.0 {
-        1.0 / ior
-    } else {
-        1.0
-    };
+    // A thin sheet's rays pass straight (`Material::bending_ior`).
+    let eta = 1.0 / scene.material_of(front.triangle).bending_ior();
     refract(direction, facing_normal(front, direction), eta)
 }
 
