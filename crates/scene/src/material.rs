@@ -224,7 +224,11 @@ mod tests {
             );
             assert_eq!(reflectance(Some(illum), None, false), ks, "illum {illum}");
             let fresnel = optics(Some(illum), Some(ks), None, false).fresnel;
-            assert_eq!(fresnel, illum == 5 || illum == 7, "illum {illum}: Fresnel on");
+            assert_eq!(
+                fresnel,
+                illum == 5 || illum == 7,
+                "illum {illum}: Fresnel on"
+            );
         }
         for illum in [3, 4, 6] {
             assert_eq!(optics(Some(illum), None, Some(1.5), true).kr, Vec3::ZERO);

@@ -132,7 +132,12 @@ fn a_room_maps_objects_materials_and_normals() {
     );
     let glass = material("glass");
     assert_eq!(
-        (glass.transmittance, glass.ior, glass.reflectance, glass.fresnel),
+        (
+            glass.transmittance,
+            glass.ior,
+            glass.reflectance,
+            glass.fresnel
+        ),
         // illum 7 with Ks 1: a mirror of Ks, passing (1 - Ks) of d's 0.9.
         (Vec3::ZERO, 1.5, Vec3::ONE, true)
     );

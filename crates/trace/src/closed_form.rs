@@ -136,6 +136,29 @@ fn a_thin_sheet_reflects_l_times_the_fresnel_reflectance_of_its_ior() {
         let f = fresnel(f64::from(theta).to_radians(), f64::from(n));
         let expected = f64::from(EMITTER_CD_M2) * f;
         within_one_percent(&format!("{theta}°"), reflected_at(&bvh, theta, 5), expected);
+        // The rest passes straight through: the ior bends no ray.
+        let lighting = dark();
+        let tracer = Tracer {
+            bvh: &bvh,
+            lighting: &lighting,
+            settings: TraceSettings {
+                fresnel: true,
+                ..TraceSettings::default()
+            },
+            cone: PixelCone::FINEST,
+        };
+        let a = theta.to_radians();
+        let incoming = Vec3::new(a.sin(), -a.cos(), 0.0);
+        let point = SurfacePoint {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            triangle: 0,
+        };
+        let terms = tracer.surface_terms(&point, incoming);
+        let through = terms.refraction.expect("a thin sheet transmits").direction;
+        assert!(through.distance(incoming) < 1e-6, "{theta}°: {through}");
+        let kt = f64::from(terms.kt.x);
+        assert!((kt - (1.0 - f)).abs() < 1e-3, "{theta}°: kt {kt}");
     }
 }
 

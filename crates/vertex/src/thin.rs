@@ -327,6 +327,13 @@ pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: Triang
     !is_reflector[triangle as usize] && !see_through(scene, triangle)
 }
 
+/// Whether `triangle`'s front (its winding's normal) faces away from `eye`:
+/// the back surface of a closed pane, seen through its front.
+fn faces_away(scene: &Scene, eye: Vec3, triangle: TriangleId) -> bool {
+    let [a, ..] = scene.triangle_positions(triangle);
+    (a - eye).dot(scene.geometric_normal(triangle)) > 0.0
+}
+
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
     scene.material_of(triangle).see_through()
@@ -341,9 +348,11 @@ struct BehindBuffers {
     frame: Option<IdBuffer>,
     /// The opaque scene (neither reflectors nor see-through surfaces).
     behind: IdBuffer,
-    /// The see-through surfaces that are not reflectors (a slab's back),
-    /// over the reflectors alone (only glass pixels read it): with the
-    /// thin-glass model, when a reflector is see-through.
+    /// The see-through surfaces that can lie behind a reflector's front (a
+    /// slab's back): those that are not reflectors, and the reflectors'
+    /// that face away from the eye (the back of a pane whose two faces are
+    /// one reflector). Over the reflectors alone (only glass pixels read
+    /// it): with the thin-glass model, when a reflector is see-through.
     layers: Option<IdBuffer>,
 }
 
@@ -363,7 +372,9 @@ impl BehindBuffers {
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
         let not_opaque = |t: TriangleId| !opaque(t);
-        let layer = |t: TriangleId| !is_reflector[t as usize] && see_through(scene, t);
+        let layer = |t: TriangleId| {
+            see_through(scene, t) && (!is_reflector[t as usize] || faces_away(scene, camera.eye, t))
+        };
         let mut passes = vec![IdPass {
             within: bounds,
             keep: &opaque,
@@ -494,7 +505,9 @@ fn glass_at(
     let mut reflection_scale = 1.0;
     let mut shift = Vec3::ZERO;
     let back = layers.triangle_at(x, y);
-    if back != NONE && layers.depth_at(x, y) < behind.depth_at(x, y) {
+    // A pane drawn as one surface facing away is in the layers too, as
+    // its own nearest layer: it has no back surface.
+    if back != NONE && back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y) {
         let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
         // The back surface is met from inside, along the refracted ray
         // (with Fresnel weights its angle matters; parallel surfaces give
