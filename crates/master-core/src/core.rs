@@ -20,6 +20,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use glam::Vec3;
@@ -105,6 +106,11 @@ pub struct BaseFrameRequest {
     pub job: u64,
     pub frame: u32,
     scene: Arc<Scene>,
+    /// Per scene triangle, whether it is one of the job's reflectors (glass
+    /// that is none is blended over what lies behind it).
+    is_reflector: Arc<[bool]>,
+    /// The job's: whether its glass that is no reflector was warned about.
+    warned_glass: Arc<AtomicBool>,
     setup: FrameSetup,
     /// Also convert it to 8-bit sRGB: the job's frames go out so
     /// (`finish.rs`). A view's job does not: its frames go only to the
@@ -117,15 +123,20 @@ pub struct BaseFrameRequest {
 impl BaseFrameRequest {
     /// The shaded base frame and its ID buffer (and its sRGB bytes where
     /// the job's frames go out in sRGB), in a finished frame's buffers
-    /// where the master has some (`vtfarm_raster::rasterize_into`).
+    /// where the master has some (`vtfarm_render::base_frame_into`).
     pub fn rasterize(self) -> BaseFrame {
         let BaseFrame {
             mut image,
             mut ids,
             mut srgb,
         } = self.spare.map_or_else(BaseFrame::empty, |spare| *spare);
-        let (camera, lighting) = (&self.setup.camera, &self.setup.lighting);
-        vtfarm_raster::rasterize_into(&self.scene, camera, lighting, &mut image, &mut ids);
+        vtfarm_render::base_frame_into(
+            &self.scene,
+            &self.setup,
+            &self.is_reflector,
+            (&mut image, &mut ids),
+            &self.warned_glass,
+        );
         if self.srgb {
             srgb.convert_base(&image);
         } else {
@@ -197,6 +208,10 @@ struct Job {
     scene: Arc<Scene>,
     scene_hash: SceneHash,
     reflectors: Vec<u32>,
+    /// [`reflector_flags`] of `reflectors`.
+    is_reflector: Arc<[bool]>,
+    /// Whether its base frames' glass that is no reflector was warned about.
+    warned_glass: Arc<AtomicBool>,
     frames: Vec<FrameSetup>,
     /// Send the per-pixel components with each frame.
     aux: bool,
@@ -224,6 +239,8 @@ impl Job {
             job,
             frame,
             scene: self.scene.clone(),
+            is_reflector: self.is_reflector.clone(),
+            warned_glass: self.warned_glass.clone(),
             setup: self.frames[frame as usize].clone(),
             srgb: self.image == WireImageFormat::Srgb8,
             spare: spare.map(Box::new),
@@ -1460,6 +1477,7 @@ impl MasterCore {
                 },
             })
             .collect();
+        let is_reflector = reflector_flags(&scene, &reflectors).into();
         info!(job = id, name = %job.name, frames = frames.len(), reflectors = reflectors.len(), method = method.name(), "job queued");
         self.jobs.insert(
             id,
@@ -1470,6 +1488,8 @@ impl MasterCore {
                 frames_done: resume_from,
                 scene,
                 scene_hash,
+                is_reflector,
+                warned_glass: Arc::default(),
                 reflectors,
                 frames,
                 aux: job.aux,
@@ -2164,8 +2184,7 @@ impl MasterCore {
         // The components' planes cover the reflectors' rectangle only.
         let components = match j.frames.get(frame as usize) {
             Some(setup) if j.aux => {
-                let is_reflector = reflector_flags(&j.scene, &j.reflectors);
-                Some(components_bounds(&j.scene, &setup.camera, &is_reflector))
+                Some(components_bounds(&j.scene, &setup.camera, &j.is_reflector))
             }
             _ => None,
         };

@@ -358,3 +358,219 @@ fn a_panes_ghost_is_the_same_at_every_quality_whether_its_back_is_in_the_reflect
         }
     }
 }
+
+/// A UV sphere of radius `r` at the origin, outward normals, triangles
+/// wound counter-clockwise seen from outside.
+fn sphere(r: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let (rings, segments) = (16u32, 24u32);
+    let mut positions = Vec::new();
+    for i in 0..=rings {
+        let polar = std::f32::consts::PI * i as f32 / rings as f32;
+        for j in 0..=segments {
+            let azimuth = std::f32::consts::TAU * j as f32 / segments as f32;
+            positions.push(
+                Vec3::new(
+                    polar.sin() * azimuth.cos(),
+                    polar.cos(),
+                    -polar.sin() * azimuth.sin(),
+                ) * r,
+            );
+        }
+    }
+    let at = |i: u32, j: u32| i * (segments + 1) + j;
+    let mut triangles = Vec::new();
+    for i in 0..rings {
+        for j in 0..segments {
+            let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    (positions, triangles)
+}
+
+/// Writes a glTF file of meshes (positions, normals, triangles, material)
+/// and nodes (name, mesh, translation), the buffer beside it.
+fn write_gltf(
+    dir: &Path,
+    meshes: &[(Vec<Vec3>, Vec<Vec3>, Vec<[u32; 3]>, usize)],
+    nodes: &[(&str, usize, Vec3)],
+    materials: &str,
+) -> std::path::PathBuf {
+    let mut bin: Vec<u8> = Vec::new();
+    let (mut views, mut accessors, mut primitives) = (vec![], vec![], vec![]);
+    for (positions, normals, triangles, material) in meshes {
+        let first = accessors.len();
+        for (vectors, bounds) in [(positions, true), (normals, false)] {
+            let offset = bin.len();
+            for v in vectors.iter().flat_map(|v| v.to_array()) {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+            views.push(format!(
+                r#"{{"buffer": 0, "byteOffset": {offset}, "byteLength": {}}}"#,
+                bin.len() - offset
+            ));
+            let (lo, hi) = (vectors.iter())
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+                    (lo.min(p), hi.max(p))
+                });
+            let range = if bounds {
+                format!(
+                    r#", "min": {:?}, "max": {:?}"#,
+                    lo.to_array(),
+                    hi.to_array()
+                )
+            } else {
+                String::new()
+            };
+            accessors.push(format!(
+                r#"{{"bufferView": {}, "componentType": 5126, "count": {}, "type": "VEC3"{range}}}"#,
+                views.len() - 1,
+                vectors.len()
+            ));
+        }
+        let offset = bin.len();
+        for i in triangles.iter().flatten() {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        views.push(format!(
+            r#"{{"buffer": 0, "byteOffset": {offset}, "byteLength": {}}}"#,
+            bin.len() - offset
+        ));
+        accessors.push(format!(
+            r#"{{"bufferView": {}, "componentType": 5125, "count": {}, "type": "SCALAR"}}"#,
+            views.len() - 1,
+            triangles.len() * 3
+        ));
+        primitives.push(format!(
+            r#"{{"primitives": [{{"attributes": {{"POSITION": {first}, "NORMAL": {}}}, "indices": {}, "material": {material}}}]}}"#,
+            first + 1,
+            first + 2
+        ));
+    }
+    std::fs::write(dir.join("scene.bin"), &bin).unwrap();
+    let nodes: Vec<String> = (nodes.iter())
+        .map(|(name, mesh, t)| {
+            format!(
+                r#"{{"name": "{name}", "mesh": {mesh}, "translation": {:?}}}"#,
+                t.to_array()
+            )
+        })
+        .collect();
+    let json = format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "extensionsUsed": ["KHR_materials_ior", "KHR_materials_transmission"],
+  "scene": 0,
+  "scenes": [{{"nodes": {:?}}}],
+  "nodes": [{}],
+  "meshes": [{}],
+  "materials": {materials},
+  "buffers": [{{"uri": "scene.bin", "byteLength": {}}}],
+  "bufferViews": [{}],
+  "accessors": [{}]
+}}"#,
+        (0..nodes.len()).collect::<Vec<_>>(),
+        nodes.join(", "),
+        primitives.join(", "),
+        bin.len(),
+        views.join(", "),
+        accessors.join(", ")
+    );
+    let path = dir.join("scene.gltf");
+    std::fs::write(&path, json).unwrap();
+    path
+}
+
+#[test]
+fn glass_spheres_that_are_no_reflector_show_what_lies_behind_them_with_one_warning() {
+    // Three transmission-glass spheres of a glTF file before a grey
+    // backdrop; the left one is the reflector. The other two are drawn
+    // see-through: kt of their front and back surfaces (1 - F0 = 0.96
+    // each) times the backdrop, not black.
+    let dir = tempfile::tempdir().unwrap();
+    let (ball, ball_triangles) = sphere(0.5);
+    let ball_normals = ball.iter().map(|p| p.normalize()).collect();
+    let backdrop = vec![
+        Vec3::new(-5.0, -5.0, -2.0),
+        Vec3::new(5.0, -5.0, -2.0),
+        Vec3::new(5.0, 5.0, -2.0),
+        Vec3::new(-5.0, 5.0, -2.0),
+    ];
+    let path = write_gltf(
+        dir.path(),
+        &[
+            (ball, ball_normals, ball_triangles, 0),
+            (backdrop, vec![Vec3::Z; 4], vec![[0, 1, 2], [0, 2, 3]], 1),
+        ],
+        &[
+            ("sphere_a", 0, Vec3::new(-1.5, 0.0, 0.0)),
+            ("sphere_b", 0, Vec3::ZERO),
+            ("sphere_c", 0, Vec3::new(1.5, 0.0, 0.0)),
+            ("backdrop", 1, Vec3::ZERO),
+        ],
+        r#"[{"name": "glass",
+             "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
+             "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}}},
+            {"name": "grey",
+             "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1], "metallicFactor": 0, "roughnessFactor": 1}}]"#,
+    );
+    let imported = vtfarm_scene::gltf::import_gltf(&path, &Default::default()).unwrap();
+    assert!(imported.warnings.is_empty(), "{:?}", imported.warnings);
+    let scene = Arc::new(imported.scene);
+    let object = |name| scene.object_id(name).unwrap();
+    let reflectors = triangles_of(&scene, &[object("sphere_a")]);
+    let renderer = Renderer::new(scene.clone(), reflectors);
+    let lighting = Lighting {
+        ambient: Vec3::splat(0.2),
+        ..dark()
+    };
+    let camera = Camera {
+        eye: Vec3::new(0.0, 0.0, 5.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 40.0,
+        width: 96,
+        height: 64,
+    };
+    let setup = setup(camera, lighting, false, Quality::Full);
+    let (_, ids) = renderer.base_frame(&setup);
+    let frame = render(&renderer, &setup);
+    // The backdrop's ambient term, through two surfaces of kt 0.96.
+    let backdrop = 0.5 * 0.2;
+    let expected = 0.96 * 0.96 * backdrop;
+    for name in ["sphere_b", "sphere_c"] {
+        let id = object(name);
+        let seen: Vec<f32> = (0..camera.width * camera.height)
+            .filter(|&i| ids.object_at(i % camera.width, i / camera.width) == id)
+            .map(|i| frame.color.pixels[i as usize].x)
+            .collect();
+        assert!(seen.len() > 100, "{name}: {} px", seen.len());
+        let lowest = seen.iter().copied().fold(f32::INFINITY, f32::min);
+        let middle = median(seen);
+        assert!(
+            (middle / expected - 1.0).abs() <= 0.01,
+            "{name}: {middle}, expected {expected}"
+        );
+        assert!(lowest >= 0.9 * expected, "{name}: a pixel of {lowest}");
+    }
+    // One warning names them (and not the reflector).
+    let mut image = vtfarm_imaging::Image::new(0, 0, Vec3::ZERO);
+    let mut ids = vtfarm_raster::IdBuffer::new(0, 0);
+    let warned = std::sync::atomic::AtomicBool::new(false);
+    let is_reflector = vtfarm_render::reflector_flags(&scene, renderer.reflectors());
+    let glass = vtfarm_render::base_frame_into(
+        &scene,
+        &setup,
+        &is_reflector,
+        (&mut image, &mut ids),
+        &warned,
+    );
+    assert_eq!(glass, [object("sphere_b"), object("sphere_c")]);
+    assert!(warned.load(std::sync::atomic::Ordering::Relaxed));
+    let warning = vtfarm_render::see_through_warning(&scene, &glass);
+    assert!(
+        warning.contains("(sphere_b, sphere_c)") && !warning.contains("sphere_a"),
+        "{warning}"
+    );
+}
