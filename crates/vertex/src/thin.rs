@@ -3,8 +3,10 @@
 //! blends a transparent surface over the scene, with no ray traced.
 //!
 //! A see-through reflector is a thin shell: its front surface, optionally a
-//! back surface close behind (a slab, like the cover glass), then the opaque
-//! scene. Per reflector pixel, from the interpolated normals:
+//! back surface close behind (a slab, like the cover glass: a see-through
+//! surface that is no reflector, or one of the reflector's own that faces
+//! away from the eye), then the opaque scene. Per reflector pixel, from the
+//! interpolated normals:
 //! - the transmitted part is kt(front) · kt(back) times the opaque surface
 //!   behind, seen along the eye ray shifted sideways by the slab (Snell
 //!   through both surfaces, which leaves the direction unchanged), shaded
