@@ -389,11 +389,14 @@ fn sphere(r: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     (positions, triangles)
 }
 
-/// Writes a glTF file of meshes (positions, normals, triangles, material)
-/// and nodes (name, mesh, translation), the buffer beside it.
+/// A mesh of [`write_gltf`]: positions, normals, triangles and material.
+type GltfMesh = (Vec<Vec3>, Vec<Vec3>, Vec<[u32; 3]>, usize);
+
+/// Writes a glTF file of meshes and nodes (name, mesh, translation), the
+/// buffer beside it.
 fn write_gltf(
     dir: &Path,
-    meshes: &[(Vec<Vec3>, Vec<Vec3>, Vec<[u32; 3]>, usize)],
+    meshes: &[GltfMesh],
     nodes: &[(&str, usize, Vec3)],
     materials: &str,
 ) -> std::path::PathBuf {
