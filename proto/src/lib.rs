@@ -49,8 +49,8 @@ pub use wire::{
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
-/// to a message's encoding or to a rule both ends follow (10: the frames a
-/// worker keeps, [`KeptFrames`], which the master mirrors); the master
+/// to a message's encoding or to a rule both ends follow (11: a material's
+/// `thin` and `fresnel`); the master
 /// refuses other versions with [`RefuseCode::BadVersion`].
 pub const PROTOCOL_VERSION: u32 = 11;
 

@@ -71,7 +71,7 @@ pub struct Job {
 /// `kd` also sets the ambient reflectance unless `ka` is given (as MTL does
 /// without `Ka`). `thin = true` makes the material a thin sheet of glass:
 /// it transmits `1 - kr` (unless `kt` is given) and rays pass it straight
-/// (its index of refraction serves the Fresnel reflectance only).
+/// (its index of refraction serves the Fresnel weights only: `Material::thin`).
 /// `emission_cd_m2` (with `emission_color`, white by default) makes it
 /// glow; `texture` is a base-colour texture (MTL's `map_Kd`).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -519,7 +519,7 @@ impl Job {
                 if change.transmittance.is_none() {
                     material.transmittance = Vec3::ONE - material.reflectance;
                 }
-                material.ior = 1.0;
+                material.thin = true;
             }
         }
         Ok((scene, notes))

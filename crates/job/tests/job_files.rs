@@ -437,7 +437,9 @@ thin = true
     // kr as given (no Fresnel note), thin: transmits the rest, straight.
     assert_eq!(glass.reflectance, Vec3::splat(0.08));
     assert_eq!(glass.transmittance, Vec3::splat(0.92));
-    assert_eq!(glass.ior, 1.0);
+    // Its Ni stays for the Fresnel weights; rays do not bend.
+    assert!(glass.thin);
+    assert_eq!((glass.ior, glass.bending_ior()), (1.45, 1.0));
     assert_eq!(
         loaded.notes.len(),
         1,

@@ -237,7 +237,7 @@ impl Pvrr {
         let first = *frame.reflector.first()?;
         let material = scene.material_of(first);
         (material.transmittance.max_element() > 0.0).then(|| Kind::Refraction {
-            iors: iors.unwrap_or([material.ior; 3]),
+            iors: iors.unwrap_or([material.bending_ior(); 3]),
         })
     }
 }

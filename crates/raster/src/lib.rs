@@ -27,11 +27,14 @@
 //! same bits. Dropped buffers leave their planes to the next (`spare`).
 
 mod bands;
+mod glass;
 mod lanes;
 mod setup;
 mod shade;
 mod spare;
 mod triangle;
+
+pub use glass::blend_see_through;
 
 use rayon::prelude::*;
 use vtfarm_imaging::Image;

@@ -12,7 +12,7 @@ pub mod output;
 
 pub use vtfarm_method::FrameSetup;
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -20,7 +20,7 @@ use glam::Vec3;
 use vtfarm_imaging::{Image, encode_srgb8};
 use vtfarm_method::{MethodKind, ReflectionMethod, VertexTracing};
 use vtfarm_raster::IdBuffer;
-use vtfarm_scene::{Camera, Scene, TriangleId};
+use vtfarm_scene::{Camera, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, GlassPass, IdBufferCache, PackageOptions,
@@ -88,6 +88,42 @@ pub fn reflector_flags(scene: &Scene, reflectors: &[TriangleId]) -> Vec<bool> {
     is_reflector
 }
 
+/// The base frame of `setup` into `image` and `ids`, whatever they hold
+/// (`vtfarm_raster::rasterize_into`), with the see-through surfaces that are
+/// no reflector blended over the opaque scene behind them
+/// (`vtfarm_raster::blend_see_through`): every machine's base frame, so
+/// that a frame is the same wherever it is made. Returns the objects of
+/// that glass; `warned` is set the first time there are some, when the one
+/// warning naming them ([`see_through_warning`]) is logged.
+pub fn base_frame_into(
+    scene: &Scene,
+    setup: &FrameSetup,
+    is_reflector: &[bool],
+    (image, ids): (&mut Image, &mut IdBuffer),
+    warned: &AtomicBool,
+) -> Vec<ObjectId> {
+    let (camera, lighting) = (&setup.camera, &setup.lighting);
+    vtfarm_raster::rasterize_into(scene, camera, lighting, image, ids);
+    let glass = vtfarm_raster::blend_see_through(scene, camera, lighting, ids, image, is_reflector);
+    if !glass.is_empty() && !warned.swap(true, Ordering::Relaxed) {
+        tracing::warn!("{}", see_through_warning(scene, &glass));
+    }
+    glass
+}
+
+/// The warning for see-through glass that is no reflector (`objects`): it
+/// is drawn see-through, and shows no reflection.
+pub fn see_through_warning(scene: &Scene, objects: &[ObjectId]) -> String {
+    let names: Vec<&str> = (objects.iter())
+        .map(|&o| scene.objects[o as usize].name.as_str())
+        .collect();
+    format!(
+        "see-through glass that is no reflector ({}) is drawn see-through, without its \
+         reflection: list it under [reflectors] to trace it",
+        names.join(", ")
+    )
+}
+
 /// A scene ready to render: its BVH and the reflector triangles.
 pub struct Renderer {
     bvh: SceneBvh,
@@ -103,6 +139,8 @@ pub struct Renderer {
     set_ups: AtomicU64,
     /// Whole frames' buffers, kept for the next ([`Renderer::finish_frame`]).
     whole_frames: Mutex<Vec<WholeFrameBuffers>>,
+    /// Whether glass that is no reflector was warned about ([`base_frame_into`]).
+    warned_glass: AtomicBool,
 }
 
 /// A whole frame's large buffers, kept from frame to frame: buffers in
@@ -157,6 +195,7 @@ impl Renderer {
             id_buffers: IdBufferCache::default(),
             set_ups: AtomicU64::new(0),
             whole_frames: Mutex::new(Vec::new()),
+            warned_glass: AtomicBool::new(false),
         })
     }
 
@@ -201,9 +240,20 @@ impl Renderer {
         &self.id_buffers
     }
 
-    /// The rasterized base frame and ID buffer.
+    /// The rasterized base frame and ID buffer, glass that is no reflector
+    /// blended over what lies behind it ([`base_frame_into`]).
     pub fn base_frame(&self, setup: &FrameSetup) -> (Image, IdBuffer) {
-        vtfarm_raster::rasterize(self.scene(), &setup.camera, &setup.lighting)
+        let mut image = Image::new(0, 0, setup.lighting.background);
+        let mut ids = IdBuffer::new(0, 0);
+        let buffers = (&mut image, &mut ids);
+        base_frame_into(
+            self.scene(),
+            setup,
+            &self.is_reflector,
+            buffers,
+            &self.warned_glass,
+        );
+        (image, ids)
     }
 
     /// A frame to composite into over `base`, its component planes over the
@@ -235,8 +285,14 @@ impl Renderer {
             ids: IdBuffer::new(0, 0),
             scratch: Vec::new(),
         });
-        let (scene, camera) = (self.scene(), &setup.camera);
-        vtfarm_raster::rasterize_into(scene, camera, &setup.lighting, &mut image, &mut ids);
+        let buffers = (&mut image, &mut ids);
+        base_frame_into(
+            self.scene(),
+            setup,
+            &self.is_reflector,
+            buffers,
+            &self.warned_glass,
+        );
         let mut frame = self.frame_image(setup, image);
         frame.composite(bitmap);
         let encoded = encode(&frame, &mut scratch);

@@ -31,7 +31,7 @@
 //! | mix(F0, base colour, `metallic`)       | `specular` (the Phong highlight)              |
 //! | `roughness` r                          | `shininess` = 2 / r⁴ − 2, within 1 to 10,000  |
 //! | `KHR_materials_ior`                    | `ior` (1.5 without)                           |
-//! | `KHR_materials_transmission` t > 0     | thin glass: `reflectance` = F0, `transmittance` = t × base colour × (1 − F0), `ior` 1 (rays pass straight) |
+//! | `KHR_materials_transmission` t > 0     | `thin` glass: `reflectance` = F0, `transmittance` = t × base colour × (1 − F0), rays pass straight, `ior` for the Fresnel weights |
 //! | `alphaMode` `BLEND`                    | `transmittance` 1 − alpha; the base-colour texture also the `alpha_texture` |
 //! | `emissiveFactor` × `KHR_materials_emissive_strength` | `emission` (render units: 1 is 10,000 cd/m²) |
 //! | `extras.vtfarm`                        | vtfarm's own exact values (what [`write_glb`] writes) |
@@ -542,13 +542,18 @@ impl Import<'_> {
             reflectance: Vec3::ZERO,
             transmittance: Vec3::ZERO,
             ior,
+            thin: false,
+            fresnel: false,
             diffuse_texture: None,
             alpha_texture: None,
         };
         if transmission > 0.0 {
+            // KHR_materials_transmission's surfaces are infinitely thin
+            // (its specification): rays pass straight, the ior gives F0
+            // and, under Fresnel, the rise towards grazing angles.
             material.reflectance = f0;
             material.transmittance = base * transmission * (Vec3::ONE - f0);
-            material.ior = 1.0;
+            material.thin = true;
         }
         let blend = m.alpha_mode() == gltf::material::AlphaMode::Blend;
         if blend {
@@ -725,6 +730,10 @@ struct ExactMaterial {
     reflectance: [f32; 3],
     transmittance: [f32; 3],
     ior: f32,
+    #[serde(default)]
+    thin: bool,
+    #[serde(default)]
+    fresnel: bool,
 }
 
 impl ExactMaterial {
@@ -737,6 +746,8 @@ impl ExactMaterial {
         m.reflectance = self.reflectance.into();
         m.transmittance = self.transmittance.into();
         m.ior = self.ior;
+        m.thin = self.thin;
+        m.fresnel = self.fresnel;
     }
 }
 
@@ -910,6 +921,8 @@ fn material_json(m: &Material) -> Value {
             "reflectance": m.reflectance.to_array(),
             "transmittance": m.transmittance.to_array(),
             "ior": m.ior,
+            "thin": m.thin,
+            "fresnel": m.fresnel,
         }},
     })
 }

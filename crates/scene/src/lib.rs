@@ -23,7 +23,9 @@ pub use camera::{Camera, MAX_IMAGE_SIDE, MAX_PIXELS, NEAR, Projector, ScreenPoin
 pub use light::{
     DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, LightKind, Lighting,
 };
-pub use material::{GLASS_IOR, Material, MtlOptics, fresnel_reflectance, mtl_reflectance};
+pub use material::{
+    GLASS_IOR, Material, MtlOptics, MtlTerms, fresnel_reflectance, mtl_reflectance,
+};
 pub use texture::{Texture, TextureId};
 
 use std::borrow::Cow;

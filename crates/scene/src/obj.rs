@@ -47,9 +47,13 @@
 //! | `Ns s`             | `shininess` (default: 1)                               |
 //! | `Ke r g b`         | `emission` (default: black)                            |
 //! | `Kr r g b`         | `reflectance`, overriding `illum` (vtfarm extension)   |
-//! | `illum 3`, `4`, `6`| `reflectance = Ks` (ray-traced, no Fresnel)            |
-//! | `illum 5`, `7`     | `reflectance` = Fresnel at normal incidence from `Ni`: |
-//! |                    | `((Ni - 1) / (Ni + 1))²`, glass (1.5) without `Ni`     |
+//! | `illum 3` to `7`   | `reflectance = Ks` (the specification's ray-traced     |
+//! |                    | models); 5 and 7 without `Ks`: Fresnel at normal       |
+//! |                    | incidence from `Ni`, `((Ni - 1) / (Ni + 1))²`, glass   |
+//! |                    | (1.5) without `Ni`                                     |
+//! | `illum 5`, `7`     | `fresnel`: "Fresnel on", kr rises towards grazing      |
+//! | `illum 6`, `7`     | `transmittance` times `1 - kr` (the spec's `(1-Ks) Tf`)|
+//! |                    | unless `Kr` is given                                   |
 //! | other `illum`      | `reflectance` = that Fresnel term when the material    |
 //! |                    | transmits and has `Ni`, otherwise 0                    |
 //!
@@ -63,9 +67,10 @@
 //! | `map_d file`       | `alpha_texture`: alpha (or grey), times `d`            |
 //! | other `map_*`, …   | checked to exist (a warning if not); not used          |
 //!
-//! The Fresnel term is the head-on reflectance; with `[quality] fresnel` the
-//! tracer raises it towards grazing angles (the Fresnel equations at `Ni`
-//! for see-through materials, Schlick's approximation for opaque ones).
+//! kr is the head-on reflectance; for `illum` 5 and 7, or any material with
+//! `[quality] fresnel`, the tracer raises it towards grazing angles (the
+//! Fresnel equations at `Ni` for see-through materials, Schlick's
+//! approximation for opaque ones).
 //!
 //! # Export
 //!
@@ -74,7 +79,8 @@
 //! formatting, and a scene that came from [`load_obj`] reloads bit for bit.
 //! MTL's `d` is a single number, so a transmittance that is not grey is
 //! written (and read back) as its mean. Textures are written beside them
-//! as PNG (`NAME_textureI.png`), with a `vt` per triangle corner.
+//! as PNG (`NAME_textureI.png`), with a `vt` per triangle corner. MTL has
+//! no thin sheet: a `thin` material is written as what its rays do, `Ni 1`.
 
 use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
@@ -403,15 +409,19 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
         let _ = writeln!(mtl, "Ks {}", format_vec3(m.specular));
         let _ = writeln!(mtl, "Ns {}", m.shininess);
         let _ = writeln!(mtl, "Ke {}", format_vec3(m.emission));
-        let _ = writeln!(mtl, "Ni {}", m.ior);
+        // MTL has no thin sheet: one is written as what its rays do (`Ni
+        // 1`, straight through), and its Fresnel index is not kept.
+        let _ = writeln!(mtl, "Ni {}", if m.thin { 1.0 } else { m.ior });
         let _ = writeln!(mtl, "d {}", 1.0 - grey(m.transmittance));
-        // illum 3 tells other readers "ray-traced mirror"; Kr gives ours
-        // the exact reflectance (also 0, which `Ni` with `d` < 1 would
-        // otherwise turn into Fresnel reflectance).
-        let illum = if m.reflectance.max_element() > 0.0 {
-            3
-        } else {
-            2
+        // illum 3 tells other readers "ray-traced mirror" (5 and 7 with
+        // the material's own Fresnel); Kr gives ours the exact reflectance
+        // (also 0, which `Ni` with `d` < 1 would otherwise turn into
+        // Fresnel reflectance).
+        let illum = match (m.fresnel, m.transmittance.max_element() > 0.0) {
+            (true, false) => 5,
+            (true, true) => 7,
+            _ if m.reflectance.max_element() > 0.0 => 3,
+            _ => 2,
         };
         let _ = writeln!(mtl, "illum {illum}\nKr {}", format_vec3(m.reflectance));
         let maps = [("map_Kd", m.diffuse_texture), ("map_d", m.alpha_texture)];
@@ -1172,12 +1182,12 @@ fn convert_material(m: &tobj::Material) -> Result<Material, MaterialError> {
         (None, _) => Vec3::ZERO,
     }
     .clamp(Vec3::ZERO, Vec3::ONE);
-    let reflectance = mtl_reflectance(&MtlOptics {
+    let terms = mtl_reflectance(&MtlOptics {
         kr: extension(m, "Kr", parse_vec3)?,
         illum: m.illumination_model,
-        ks: specular,
+        ks: m.specular.map(Vec3::from),
         ni: m.optical_density,
-        transmits: transmittance.max_element() > 0.0,
+        transmittance,
     });
     Ok(Material {
         name: m.name.clone(),
@@ -1186,9 +1196,11 @@ fn convert_material(m: &tobj::Material) -> Result<Material, MaterialError> {
         specular,
         shininess: m.shininess.unwrap_or(base.shininess),
         emission,
-        reflectance,
-        transmittance,
+        reflectance: terms.kr,
+        transmittance: terms.kt,
         ior: m.optical_density.unwrap_or(base.ior),
+        thin: false,
+        fresnel: terms.fresnel,
         diffuse_texture: None,
         alpha_texture: None,
     })

@@ -146,8 +146,11 @@ fn transmission_and_ior_make_thin_glass() {
         "{}",
         glass.transmittance
     );
-    // Thin-walled: rays pass straight; nothing diffuse.
-    assert_eq!((glass.ior, glass.diffuse), (1.0, Vec3::ZERO));
+    // Thin-walled: rays pass straight, the ior is the Fresnel weights';
+    // nothing diffuse.
+    assert!(glass.thin && !glass.fresnel);
+    assert_eq!((glass.ior, glass.bending_ior()), (1.5, 1.0));
+    assert_eq!(glass.diffuse, Vec3::ZERO);
     // No normals in the file: computed, facing +Z.
     assert!(close(scene.triangle_normals(0)[0], Vec3::Z));
 }
@@ -175,6 +178,9 @@ fn the_glb_export_reads_back_as_the_same_scene() {
     paint.ambient = Vec3::new(0.01, 0.02, 0.03);
     paint.reflectance = Vec3::new(0.3, 0.2, 0.1);
     paint.emission = Vec3::splat(2.5);
+    paint.ior = 1.6;
+    paint.thin = true;
+    paint.fresnel = true;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("back.glb");
     write_glb(&scene, &path).unwrap();

@@ -132,9 +132,14 @@ fn a_room_maps_objects_materials_and_normals() {
     );
     let glass = material("glass");
     assert_eq!(
-        (glass.transmittance, glass.ior, glass.reflectance),
-        // illum 7: Fresnel at normal incidence from Ni, ((1.5 - 1) / (1.5 + 1))².
-        (Vec3::splat(0.9), 1.5, Vec3::splat(0.2f32 * 0.2))
+        (
+            glass.transmittance,
+            glass.ior,
+            glass.reflectance,
+            glass.fresnel
+        ),
+        // illum 7 with Ks 1: a mirror of Ks, passing (1 - Ks) of d's 0.9.
+        (Vec3::ZERO, 1.5, Vec3::ONE, true)
     );
     let frosted = material("frosted");
     assert_eq!(
@@ -212,6 +217,8 @@ fn built_scene() -> Scene {
     glass.transmittance = Vec3::splat(0.3);
     glass.reflectance = Vec3::splat(0.1);
     glass.ior = 1.52;
+    // Written as illum 7 with Kr: its own Fresnel and kt as they are.
+    glass.fresnel = true;
     let mut lamp = Material::diffuse("lamp", Vec3::ONE);
     lamp.emission = Vec3::new(10.0, 9.0, 1.0 / 3.0);
     let positions = vec![
@@ -317,8 +324,9 @@ fn written_files_follow_the_obj_conventions_other_loaders_expect() {
             .collect();
         assert_eq!(corners, t.vertices.map(|v| v + 1));
     }
-    // Mirrors say `illum 3` and carry Kr; the rest `illum 2`.
-    assert_eq!(lines(&mtl, "illum"), ["2", "3", "3", "2"]);
+    // Mirrors say `illum 3` (glass with its own Fresnel `illum 7`) and
+    // carry Kr; the rest `illum 2`.
+    assert_eq!(lines(&mtl, "illum"), ["2", "3", "7", "2"]);
     assert_eq!(
         lines(&mtl, "Kr"),
         ["0 0 0", "0.9 0.85 0.8", "0.1 0.1 0.1", "0 0 0"]
@@ -639,55 +647,76 @@ fn huge_polygons_load_and_oversized_ones_are_refused() {
     );
 }
 
-/// The reflectance and transmittance a one-material MTL gives.
-fn optics(mtl: &str) -> (Vec3, Vec3) {
+/// The reflectance, transmittance and own Fresnel a one-material MTL gives.
+fn optics(mtl: &str) -> (Vec3, Vec3, bool) {
     let obj = format!("mtllib m.mtl\n{TRIANGLE_OBJ}usemtl m\nf 1 2 3\n");
-    let mtl = format!("newmtl m\nKs 0.5 0.5 0.5\n{mtl}");
+    let mtl = format!("newmtl m\n{mtl}");
     let (_dir, result) = load_files(&[("m.obj", obj.as_bytes()), ("m.mtl", mtl.as_bytes())]);
     let m = result.unwrap().material_of(0).clone();
-    (m.reflectance, m.transmittance)
+    (m.reflectance, m.transmittance, m.fresnel)
 }
 
 #[test]
-fn glass_and_dielectrics_reflect_by_fresnel() {
+fn illum_models_reflect_ks_as_the_specification_says_and_dielectrics_by_fresnel() {
     let glass = Vec3::splat(0.2f32 * 0.2); // ((1.5 - 1) / (1.5 + 1))²
     let water = Vec3::splat((0.33f32 / 2.33).powi(2));
+    let ks = Vec3::splat(0.5);
     for (mtl, expected) in [
         // Ray-traced without Fresnel (illum 3, 4, 6): Ks, whatever Ni says.
-        ("illum 3\n", (Vec3::splat(0.5), Vec3::ZERO)),
+        ("Ks 0.5 0.5 0.5\nillum 3\n", (ks, Vec3::ZERO, false)),
         (
-            "illum 4\nNi 1.5\nd 0.2\n",
-            (Vec3::splat(0.5), Vec3::splat(0.8)),
+            "Ks 0.5 0.5 0.5\nillum 4\nNi 1.5\nd 0.2\n",
+            (ks, Vec3::splat(0.8), false),
         ),
         (
-            "illum 4\nNi 1.00\nd 0.2\n",
-            (Vec3::splat(0.5), Vec3::splat(0.8)),
+            "Ks 0.5 0.5 0.5\nillum 4\nNi 1.00\nd 0.2\n",
+            (ks, Vec3::splat(0.8), false),
         ),
-        ("illum 6\nd 0.5\n", (Vec3::splat(0.5), Vec3::splat(0.5))),
-        // Fresnel models (illum 5, 7): from Ni, or glass without Ni.
-        ("illum 5\n", (glass, Vec3::ZERO)),
+        // The refraction models pass (1 - Ks) Tf.
         (
-            "illum 7\nNi 1.33\nTf 0.6 0.7 0.9\n",
-            (water, Vec3::new(0.6, 0.7, 0.9)),
+            "Ks 0.5 0.5 0.5\nillum 6\nd 0.5\n",
+            (ks, Vec3::splat(0.25), false),
         ),
-        ("illum 7\nNi 1.33\nTf 1\nd 0.5\n", (water, Vec3::splat(0.5))),
-        // A dielectric with any illum: d < 1 (or Tr) and Ni.
-        ("illum 2\nNi 1.5\nd 0.3\n", (glass, Vec3::splat(0.7))),
-        ("Ni 1.5\nTr 0.6\n", (glass, Vec3::splat(0.6))),
+        // Fresnel on (illum 5, 7): Ks head-on, rising with the angle; an
+        // `illum 5` mirror of Ks 0.95 reflects 0.95 head-on.
+        (
+            "Ks 0.95 0.95 0.95\nillum 5\n",
+            (Vec3::splat(0.95), Vec3::ZERO, true),
+        ),
+        (
+            "Ks 0.5 0.5 0.5\nillum 7\nNi 1.33\nTf 0.6 0.7 0.9\n",
+            (ks, Vec3::new(0.3, 0.35, 0.45), true),
+        ),
+        // Without Ks, the Fresnel models reflect the dielectric's F0.
+        ("illum 5\n", (glass, Vec3::ZERO, true)),
+        (
+            "illum 7\nNi 1.33\nTf 1\nd 0.5\n",
+            (water, Vec3::splat(0.5) * (1.0 - water), true),
+        ),
+        // A dielectric with any other illum: d < 1 (or Tr) and Ni.
+        (
+            "Ks 0.5 0.5 0.5\nillum 2\nNi 1.5\nd 0.3\n",
+            (glass, Vec3::splat(0.7), false),
+        ),
+        ("Ni 1.5\nTr 0.6\n", (glass, Vec3::splat(0.6), false)),
         // Not dielectric: opaque (Tf alone is a filter), or no Ni.
-        ("illum 2\nNi 1.5\nTf 1 1 1\n", (Vec3::ZERO, Vec3::ZERO)),
-        ("illum 2\nd 0.3\n", (Vec3::ZERO, Vec3::splat(0.7))),
-        // Kr wins over everything.
         (
-            "illum 7\nNi 1.5\nd 0.2\nKr 0.1 0.2 0.3\n",
-            (Vec3::new(0.1, 0.2, 0.3), Vec3::splat(0.8)),
+            "illum 2\nNi 1.5\nTf 1 1 1\n",
+            (Vec3::ZERO, Vec3::ZERO, false),
+        ),
+        ("illum 2\nd 0.3\n", (Vec3::ZERO, Vec3::splat(0.7), false)),
+        // Kr wins over everything, and keeps the transmittance as written.
+        (
+            "Ks 0.5 0.5 0.5\nillum 7\nNi 1.5\nd 0.2\nKr 0.1 0.2 0.3\n",
+            (Vec3::new(0.1, 0.2, 0.3), Vec3::splat(0.8), true),
         ),
     ] {
-        let (kr, kt) = optics(mtl);
+        let (kr, kt, fresnel) = optics(mtl);
         assert!(
             (kr - expected.0).abs().max_element() < 1e-6
-                && (kt - expected.1).abs().max_element() < 1e-6,
-            "{mtl:?}: kr {kr}, kt {kt}, expected {expected:?}"
+                && (kt - expected.1).abs().max_element() < 1e-6
+                && fresnel == expected.2,
+            "{mtl:?}: kr {kr}, kt {kt}, fresnel {fresnel}, expected {expected:?}"
         );
     }
 }

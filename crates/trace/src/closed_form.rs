@@ -115,6 +115,54 @@ fn a_dielectric_surface_reflects_l_times_the_fresnel_reflectance() {
 }
 
 #[test]
+fn a_thin_sheet_reflects_l_times_the_fresnel_reflectance_of_its_ior() {
+    // One surface drawn as a thin sheet (a job's `thin = true`, a glTF
+    // transmission material): rays pass it straight, its ior 1.6 gives the
+    // Fresnel weights. Nothing lies below it.
+    let n = 1.6;
+    let mut b = SceneBuilder::default();
+    b.quad(
+        Material {
+            thin: true,
+            ..dielectric("sheet", n)
+        },
+        Vec3::new(-50.0, 0.0, -50.0),
+        Vec3::Z * 100.0,
+        Vec3::X * 100.0,
+    );
+    sky(&mut b);
+    let bvh = SceneBvh::new(Arc::new(b.scene));
+    for theta in [0.0f32, 45.0, 70.0] {
+        let f = fresnel(f64::from(theta).to_radians(), f64::from(n));
+        let expected = f64::from(EMITTER_CD_M2) * f;
+        within_one_percent(&format!("{theta}°"), reflected_at(&bvh, theta, 5), expected);
+        // The rest passes straight through: the ior bends no ray.
+        let lighting = dark();
+        let tracer = Tracer {
+            bvh: &bvh,
+            lighting: &lighting,
+            settings: TraceSettings {
+                fresnel: true,
+                ..TraceSettings::default()
+            },
+            cone: PixelCone::FINEST,
+        };
+        let a = theta.to_radians();
+        let incoming = Vec3::new(a.sin(), -a.cos(), 0.0);
+        let point = SurfacePoint {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            triangle: 0,
+        };
+        let terms = tracer.surface_terms(&point, incoming);
+        let through = terms.refraction.expect("a thin sheet transmits").direction;
+        assert!(through.distance(incoming) < 1e-6, "{theta}°: {through}");
+        let kt = f64::from(terms.kt.x);
+        assert!((kt - (1.0 - f)).abs() < 1e-3, "{theta}°: kt {kt}");
+    }
+}
+
+#[test]
 fn a_pane_reflects_both_surfaces_as_reflected_light() {
     // A 1-cm pane of n = 1.5: the front faces up, the back (a separate
     // surface) faces down. Its reflectance with every inner bounce is

@@ -74,7 +74,9 @@ pub struct TraceSettings {
     /// Weight kr and kt by angle: see-through surfaces with the
     /// unpolarised Fresnel equations at their index of refraction (kr and
     /// kt are the head-on values), opaque reflectors with Schlick's
-    /// approximation.
+    /// approximation. A material whose own `fresnel` is set is weighted
+    /// so either way; a thin sheet's (`thin`) index serves these weights
+    /// only, its rays passing straight.
     pub fresnel: bool,
     /// Ray-tree branches whose weight (the product of kr/kt above them) is
     /// below this are left out of the signature.

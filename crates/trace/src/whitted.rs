@@ -721,19 +721,17 @@ fn secondary_rays(
         normal
     };
     // Inside/outside is a property of the geometry, not of the smoothed
-    // normal: the geometric normal points outside.
-    let entering = geometric.dot(incoming) < 0.0;
-    let ior = if material.ior.is_finite() && material.ior > 0.0 {
-        material.ior
-    } else {
-        1.0
-    };
+    // normal: the geometric normal points outside. A thin sheet has no
+    // inside: light meets it from air on either side.
+    let entering = geometric.dot(incoming) < 0.0 || material.thin;
+    let ior = material.fresnel_ior();
     let eta = if entering { 1.0 / ior } else { ior };
 
     let mut kr = material.reflectance;
     let mut kt = material.transmittance;
     let refracted = if kt.max_element() > 0.0 {
-        Refraction::new(incoming, facing, eta)
+        // A thin sheet's ray passes straight (eta 1).
+        Refraction::new(incoming, facing, if material.thin { 1.0 } else { eta })
     } else {
         None
     };
@@ -742,11 +740,17 @@ fn secondary_rays(
         kr += kt;
         kt = Vec3::ZERO;
     }
-    if fresnel {
+    if fresnel || material.fresnel {
         let cos_i = -incoming.dot(facing);
         match refracted {
             Some(t) if kt.max_element() > 0.0 => {
-                let cos_t = -t.direction().dot(facing);
+                // The angle inside: the ray's own, or for a thin sheet the
+                // one Snell gives at its ior (never total from air).
+                let cos_t = if material.thin {
+                    Refraction::new(incoming, facing, eta).map_or(0.0, |r| r.k.sqrt())
+                } else {
+                    -t.direction().dot(facing)
+                };
                 let moved = kt * fresnel_factor(cos_i, cos_t, eta);
                 kr += moved;
                 kt -= moved;

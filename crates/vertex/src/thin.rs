@@ -3,8 +3,10 @@
 //! blends a transparent surface over the scene, with no ray traced.
 //!
 //! A see-through reflector is a thin shell: its front surface, optionally a
-//! back surface close behind (a slab, like the cover glass), then the opaque
-//! scene. Per reflector pixel, from the interpolated normals:
+//! back surface close behind (a slab, like the cover glass: a see-through
+//! surface that is no reflector, or one of the reflector's own that faces
+//! away from the eye), then the opaque scene. Per reflector pixel, from the
+//! interpolated normals:
 //! - the transmitted part is kt(front) · kt(back) times the opaque surface
 //!   behind, seen along the eye ray shifted sideways by the slab (Snell
 //!   through both surfaces, which leaves the direction unchanged), shaded
@@ -327,6 +329,13 @@ pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: Triang
     !is_reflector[triangle as usize] && !see_through(scene, triangle)
 }
 
+/// Whether `triangle`'s front (its winding's normal) faces away from `eye`:
+/// the back surface of a closed pane, seen through its front.
+fn faces_away(scene: &Scene, eye: Vec3, triangle: TriangleId) -> bool {
+    let [a, ..] = scene.triangle_positions(triangle);
+    (a - eye).dot(scene.geometric_normal(triangle)) > 0.0
+}
+
 /// Whether `triangle`'s material lets light through.
 fn see_through(scene: &Scene, triangle: TriangleId) -> bool {
     scene.material_of(triangle).see_through()
@@ -341,9 +350,11 @@ struct BehindBuffers {
     frame: Option<IdBuffer>,
     /// The opaque scene (neither reflectors nor see-through surfaces).
     behind: IdBuffer,
-    /// The see-through surfaces that are not reflectors (a slab's back),
-    /// over the reflectors alone (only glass pixels read it): with the
-    /// thin-glass model, when a reflector is see-through.
+    /// The see-through surfaces that can lie behind a reflector's front (a
+    /// slab's back): those that are not reflectors, and the reflectors'
+    /// that face away from the eye (the back of a pane whose two faces are
+    /// one reflector). Over the reflectors alone (only glass pixels read
+    /// it): with the thin-glass model, when a reflector is see-through.
     layers: Option<IdBuffer>,
 }
 
@@ -363,7 +374,9 @@ impl BehindBuffers {
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
         let not_opaque = |t: TriangleId| !opaque(t);
-        let layer = |t: TriangleId| !is_reflector[t as usize] && see_through(scene, t);
+        let layer = |t: TriangleId| {
+            see_through(scene, t) && (!is_reflector[t as usize] || faces_away(scene, camera.eye, t))
+        };
         let mut passes = vec![IdPass {
             within: bounds,
             keep: &opaque,
@@ -494,7 +507,9 @@ fn glass_at(
     let mut reflection_scale = 1.0;
     let mut shift = Vec3::ZERO;
     let back = layers.triangle_at(x, y);
-    if back != NONE && layers.depth_at(x, y) < behind.depth_at(x, y) {
+    // A pane drawn as one surface facing away is in the layers too, as
+    // its own nearest layer: it has no back surface.
+    if back != NONE && back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y) {
         let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
         // The back surface is met from inside, along the refracted ray
         // (with Fresnel weights its angle matters; parallel surfaces give
@@ -558,12 +573,8 @@ fn facing_normal(front: &SurfacePoint, direction: Vec3) -> Vec3 {
 /// The direction of a ray along `direction` inside a slab whose front
 /// surface it enters at `front` (Snell); `None` on total internal reflection.
 fn inside_direction(scene: &Scene, front: &SurfacePoint, direction: Vec3) -> Option<Vec3> {
-    let ior = scene.material_of(front.triangle).ior;
-    let eta = if ior.is_finite() && ior > 0.0 {
-        1.0 / ior
-    } else {
-        1.0
-    };
+    // A thin sheet's rays pass straight (`Material::bending_ior`).
+    let eta = 1.0 / scene.material_of(front.triangle).bending_ior();
     refract(direction, facing_normal(front, direction), eta)
 }
 

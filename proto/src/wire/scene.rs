@@ -29,6 +29,8 @@ pub struct WireMaterial {
     pub reflectance: [f32; 3],
     pub transmittance: [f32; 3],
     pub ior: f32,
+    pub thin: bool,
+    pub fresnel: bool,
     pub diffuse_texture: Option<u32>,
     pub alpha_texture: Option<u32>,
 }
@@ -45,6 +47,8 @@ impl From<&Material> for WireMaterial {
             reflectance: vec3(m.reflectance),
             transmittance: vec3(m.transmittance),
             ior: m.ior,
+            thin: m.thin,
+            fresnel: m.fresnel,
             diffuse_texture: m.diffuse_texture,
             alpha_texture: m.alpha_texture,
         }
@@ -65,6 +69,8 @@ impl TryFrom<WireMaterial> for Material {
             reflectance: finite3(|| field("reflectance"), m.reflectance)?,
             transmittance: finite3(|| field("transmittance"), m.transmittance)?,
             ior: finite(&field("ior"), m.ior)?,
+            thin: m.thin,
+            fresnel: m.fresnel,
             // Checked against the scene's textures by `Scene::validate`.
             diffuse_texture: m.diffuse_texture,
             alpha_texture: m.alpha_texture,

@@ -3,6 +3,7 @@
 //! later base frames ([`Spares`]).
 
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 use vtfarm_imaging::Image;
 use vtfarm_proto::{WireImage, WireImageFormat};
@@ -17,6 +18,11 @@ pub struct BaseFrameRequest {
     pub job: u64,
     pub frame: u32,
     pub(super) scene: Arc<Scene>,
+    /// Per scene triangle, whether it is one of the job's reflectors (glass
+    /// that is none is blended over what lies behind it).
+    pub(super) is_reflector: Arc<[bool]>,
+    /// The job's: whether its glass that is no reflector was warned about.
+    pub(super) warned_glass: Arc<AtomicBool>,
     pub(super) setup: FrameSetup,
     /// Also convert it to 8-bit sRGB: the job's frames go out so
     /// (`finish.rs`). A view's job does not: its frames go only to the
@@ -29,15 +35,20 @@ pub struct BaseFrameRequest {
 impl BaseFrameRequest {
     /// The shaded base frame and its ID buffer (and its sRGB bytes where
     /// the job's frames go out in sRGB), in a finished frame's buffers
-    /// where the master has some (`vtfarm_raster::rasterize_into`).
+    /// where the master has some (`vtfarm_render::base_frame_into`).
     pub fn rasterize(self) -> BaseFrame {
         let BaseFrame {
             mut image,
             mut ids,
             mut srgb,
         } = self.spare.map_or_else(BaseFrame::empty, |spare| *spare);
-        let (camera, lighting) = (&self.setup.camera, &self.setup.lighting);
-        vtfarm_raster::rasterize_into(&self.scene, camera, lighting, &mut image, &mut ids);
+        vtfarm_render::base_frame_into(
+            &self.scene,
+            &self.setup,
+            &self.is_reflector,
+            (&mut image, &mut ids),
+            &self.warned_glass,
+        );
         if self.srgb {
             srgb.convert_base(&image);
         } else {

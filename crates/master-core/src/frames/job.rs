@@ -4,13 +4,14 @@
 
 use std::collections::BTreeSet;
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameStart, SceneHash, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob,
     check_triangle_ids,
 };
-use vtfarm_render::{FrameSetup, morton_order};
+use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::FrameWork;
 use vtfarm_vertex::Quality;
@@ -35,6 +36,10 @@ pub(crate) struct Job {
     pub(crate) scene: Arc<Scene>,
     pub(crate) scene_hash: SceneHash,
     pub(crate) reflectors: Vec<u32>,
+    /// [`reflector_flags`] of `reflectors`.
+    pub(crate) is_reflector: Arc<[bool]>,
+    /// Whether its base frames' glass that is no reflector was warned about.
+    pub(crate) warned_glass: Arc<AtomicBool>,
     pub(crate) frames: Vec<FrameSetup>,
     /// Send the per-pixel components with each frame.
     pub(crate) aux: bool,
@@ -67,6 +72,8 @@ impl Job {
             job,
             frame,
             scene: self.scene.clone(),
+            is_reflector: self.is_reflector.clone(),
+            warned_glass: self.warned_glass.clone(),
             setup: self.frames[frame as usize].clone(),
             srgb: self.image == WireImageFormat::Srgb8,
             spare: spare.map(Box::new),
@@ -160,6 +167,7 @@ impl Job {
                 },
             })
             .collect();
+        let is_reflector = reflector_flags(&scene, &reflectors).into();
         let job = Job {
             name: job.name,
             submitters,
@@ -168,6 +176,8 @@ impl Job {
             scene,
             scene_hash,
             reflectors,
+            is_reflector,
+            warned_glass: Arc::default(),
             frames,
             aux: job.aux,
             image: job.image,

@@ -24,7 +24,7 @@ use vtfarm_proto::{
     FramePhase, FrameStart, FrameStats, Message, Package, PackageResult, PhaseKind, ResultPixels,
     WireImageFormat, WirePackageStats, WireQuality, WorkerFrameStats, encoded_len,
 };
-use vtfarm_render::{components_bounds, reflector_flags};
+use vtfarm_render::components_bounds;
 use vtfarm_scene::TriangleId;
 use vtfarm_scheduler::{Assignment, PackageMeasure};
 use vtfarm_vertex::{PackageStats, Quality};
@@ -243,8 +243,7 @@ impl Frames {
         // The components' planes cover the reflectors' rectangle only.
         let components = match j.frames.get(frame as usize) {
             Some(setup) if j.aux => {
-                let is_reflector = reflector_flags(&j.scene, &j.reflectors);
-                Some(components_bounds(&j.scene, &setup.camera, &is_reflector))
+                Some(components_bounds(&j.scene, &setup.camera, &j.is_reflector))
             }
             _ => None,
         };
