@@ -49,10 +49,10 @@ pub use wire::{
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
-/// to a message's encoding or to a rule both ends follow (10: the frames a
-/// worker keeps, [`KeptFrames`], which the master mirrors); the master
-/// refuses other versions with [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 10;
+/// to a message's encoding or to a rule both ends follow (11: a
+/// directional light's disc, `angular_diameter_deg`, in [`WireLightKind`]);
+/// the master refuses other versions with [`RefuseCode::BadVersion`].
+pub const PROTOCOL_VERSION: u32 = 11;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

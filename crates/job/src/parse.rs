@@ -117,6 +117,7 @@ struct RawLight {
     color: Option<Vec3Value>,
     intensity: Option<Spanned<f32>>,
     illuminance_lux: Option<Spanned<f32>>,
+    angular_diameter_deg: Option<Spanned<f32>>,
 }
 
 #[derive(Clone, Copy, Deserialize)]
@@ -707,8 +708,29 @@ impl Source<'_> {
             .map_or(Vec3::ONE, |c| Vec3::from_array(*c.get_ref()));
         let light = Light {
             kind: match kind {
-                RawLightKind::Point => LightKind::Point { position: v },
-                RawLightKind::Directional => LightKind::Directional { direction: v },
+                RawLightKind::Point => {
+                    if let Some(d) = &raw.angular_diameter_deg {
+                        let message = format!(
+                            "{}: a point light has no disc; angular_diameter_deg is for directional lights",
+                            key("angular_diameter_deg")
+                        );
+                        return Err(self.error_at(d, message));
+                    }
+                    LightKind::Point { position: v }
+                }
+                RawLightKind::Directional => LightKind::Directional {
+                    direction: v,
+                    // A sun given in lux has the sun's disc unless told
+                    // otherwise; a light in render units is a point.
+                    angular_diameter_deg: raw.angular_diameter_deg.as_ref().map_or(
+                        if raw.illuminance_lux.is_some() {
+                            vtfarm_scene::SUN_ANGULAR_DIAMETER_DEG
+                        } else {
+                            0.0
+                        },
+                        |d| *d.get_ref(),
+                    ),
+                },
             },
             color,
             intensity: self.light_intensity(index, kind, raw, color)?,
@@ -718,6 +740,10 @@ impl Source<'_> {
             let (name, span) = match e.field {
                 "color" => ("color", raw.color.as_ref().map(Spanned::span)),
                 "intensity" => ("intensity", raw.intensity.as_ref().map(Spanned::span)),
+                "angular_diameter_deg" => (
+                    "angular_diameter_deg",
+                    raw.angular_diameter_deg.as_ref().map(Spanned::span),
+                ),
                 _ => (needs, Some(value.span())),
             };
             self.error(span, e.message_for(&key(name)))
