@@ -50,7 +50,8 @@ pub use wire::{
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding or to a rule both ends follow (11: a
-/// directional light's disc, `angular_diameter_deg`, in [`WireLightKind`]);
+/// directional light's disc, `angular_diameter_deg`, in [`WireLightKind`],
+/// and the vertex tracer's `capture_cd_m2`);
 /// the master refuses other versions with [`RefuseCode::BadVersion`].
 pub const PROTOCOL_VERSION: u32 = 11;
 

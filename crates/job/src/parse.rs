@@ -158,6 +158,7 @@ struct RawQuality {
     method: Option<Spanned<String>>,
     max_edge: Option<Spanned<f32>>,
     transmission: Option<Spanned<String>>,
+    capture_cd_m2: Option<Spanned<f32>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -975,6 +976,9 @@ impl Source<'_> {
         if let Some(max_edge) = &raw.max_edge {
             vertex.max_edge = *max_edge.get_ref();
         }
+        if let Some(capture) = &raw.capture_cd_m2 {
+            vertex.capture_cd_m2 = *capture.get_ref();
+        }
         if let Some(name) = &raw.transmission {
             vertex.transmission = Transmission::from_name(name.get_ref()).ok_or_else(|| {
                 let valid: Vec<&str> = Transmission::ALL.iter().map(|t| t.name()).collect();
@@ -1015,6 +1019,9 @@ impl Source<'_> {
                 &e,
             ),
             "max_edge" => self.out_of_bounds("quality.max_edge", raw.max_edge.as_ref(), &e),
+            "capture_cd_m2" => {
+                self.out_of_bounds("quality.capture_cd_m2", raw.capture_cd_m2.as_ref(), &e)
+            }
             // Not a job file key: the defaults are valid.
             _ => self.error(None, format!("quality: vertex {e}")),
         })?;
