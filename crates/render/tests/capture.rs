@@ -75,12 +75,13 @@ fn sun() -> Light {
 /// window or a roof) across the sun's way back when given.
 fn glint_scene(width: u32, between: Option<Material>) -> (Renderer, FrameSetup) {
     let mut scene = Scene::default();
+    // The glint at the origin: off the quad's diagonal and its samples.
     scene.append_quad(
         "mirror",
         mirror(KR),
-        Vec3::new(-0.5, -0.5, 0.0),
-        Vec3::X,
-        Vec3::Y,
+        Vec3::new(-0.37, -0.41, 0.0),
+        Vec3::X * 0.93,
+        Vec3::Y * 0.87,
     );
     if let Some(material) = between {
         // At z = 1 the reflected rays of the glint pass y = -0.25; the eye's
