@@ -282,3 +282,59 @@ impl Default for Lighting {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photometry;
+
+    fn sun(lux: f32, diameter_deg: f32) -> Light {
+        Light {
+            kind: LightKind::Directional {
+                direction: Vec3::new(0.0, -1.0, -1.0),
+                angular_diameter_deg: diameter_deg,
+            },
+            color: Vec3::ONE,
+            intensity: photometry::directional_intensity(Vec3::ONE, lux).unwrap(),
+        }
+    }
+
+    #[test]
+    fn the_suns_disc_has_the_luminance_e_over_omega() {
+        let disc = sun(100_000.0, 0.53).disc().unwrap();
+        let omega = disc.solid_angle();
+        let expected = 100_000.0 / omega;
+        let l = photometry::cd_m2(disc.radiance);
+        assert!((l / expected - 1.0).abs() < 1e-4, "{l} vs {expected}");
+        assert!((l / 1.5e9 - 1.0).abs() < 0.02, "about 1.5·10⁹ cd/m²: {l}");
+        assert_eq!(sun(100_000.0, 0.0).disc(), None);
+    }
+
+    #[test]
+    fn pixel_footprints_on_a_grid_share_the_disc_without_loss() {
+        let disc = sun(1.0, 0.53).disc().unwrap();
+        let (right, up) = disc.toward.any_orthonormal_pair();
+        for pixel_deg in [0.03f32, 0.1, 0.25, 0.6] {
+            let s = pixel_deg.to_radians();
+            let footprint = s / std::f32::consts::PI.sqrt();
+            let mut sum = 0.0f64;
+            for i in -60..60 {
+                for j in -60..60 {
+                    let (a, b) = ((i as f32 + 0.31) * s, (j as f32 + 0.17) * s);
+                    let d = (disc.toward + right * a + up * b).normalize();
+                    sum += f64::from(disc.coverage(d, footprint)) * f64::from(s * s);
+                }
+            }
+            let omega = f64::from(disc.solid_angle());
+            assert!((sum / omega - 1.0).abs() < 0.02, "{pixel_deg}°: {sum} vs {omega}");
+        }
+    }
+
+    #[test]
+    fn a_disc_wider_than_the_bound_or_negative_is_refused() {
+        assert!(sun(1.0, -0.1).validate().is_err());
+        assert!(sun(1.0, f32::NAN).validate().is_err());
+        assert!(sun(1.0, MAX_ANGULAR_DIAMETER_DEG + 1.0).validate().is_err());
+        assert!(sun(1.0, 0.53).validate().is_ok());
+    }
+}
