@@ -76,7 +76,11 @@ mod tests {
         let h = 2.0 * (15f64).to_radians().tan();
         let w = h * 400.0 / 300.0;
         let field = 4.0 * ((w * h / 4.0) / (1.0 + w * w / 4.0 + h * h / 4.0).sqrt()).atan();
-        assert!((g.solid_angle_sr / field - 1.0).abs() < 1e-3, "{} vs {field}", g.solid_angle_sr);
+        assert!(
+            (g.solid_angle_sr / field - 1.0).abs() < 1e-3,
+            "{} vs {field}",
+            g.solid_angle_sr
+        );
         assert!((g.eye_illuminance_lux / (1000.0 * field) - 1.0).abs() < 1e-3);
         assert_eq!(g.peak_luminance_cd_m2, 1000.0);
     }

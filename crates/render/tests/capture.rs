@@ -321,7 +321,10 @@ fn a_mirror_whose_corners_are_off_screen_or_hidden_reflects_at_every_level() {
         assert!(reference > 0.0);
         for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
             let level = reflected_sum(&render(&renderer, &setup, quality));
-            eprintln!("hidden {hidden} {}: {level:.4e} of {reference:.4e}", quality.name());
+            eprintln!(
+                "hidden {hidden} {}: {level:.4e} of {reference:.4e}",
+                quality.name()
+            );
             assert!(
                 (level / reference - 1.0).abs() <= 0.01,
                 "hidden {hidden} {}: {level} of {reference}",

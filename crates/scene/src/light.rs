@@ -326,7 +326,10 @@ mod tests {
                 }
             }
             let omega = f64::from(disc.solid_angle());
-            assert!((sum / omega - 1.0).abs() < 0.02, "{pixel_deg}°: {sum} vs {omega}");
+            assert!(
+                (sum / omega - 1.0).abs() < 0.02,
+                "{pixel_deg}°: {sum} vs {omega}"
+            );
         }
     }
 
