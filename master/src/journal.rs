@@ -1425,6 +1425,7 @@ mod tests {
             priority: 2,
             frames_done: 2,
             frames_failed: 0,
+            frames_cancelled: 0,
             frames_total: 2,
             submitted_ms: 1,
             started_ms: Some(2),

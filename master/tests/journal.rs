@@ -674,6 +674,7 @@ async fn a_lost_listing_holds_the_job(state: vtfarm_proto::WireJobState, damage:
         priority: 0,
         frames_done: 0,
         frames_failed: 0,
+        frames_cancelled: 0,
         frames_total: FRAMES as u32,
         submitted_ms: 1,
         started_ms: None,

@@ -49,9 +49,10 @@ pub use wire::{
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
-/// to a message's encoding or to a rule both ends follow (11: a material's
-/// `thin` and `fresnel`); the master
-/// refuses other versions with [`RefuseCode::BadVersion`].
+/// to a message's encoding or to a rule both ends follow (such as a
+/// material's `thin` and `fresnel`, a directional light's disc or the
+/// vertex tracer's `capture_cd_m2`); the master refuses other versions with
+/// [`RefuseCode::BadVersion`].
 pub const PROTOCOL_VERSION: u32 = 11;
 
 /// How many split frames of a job the master runs at once (pipelined

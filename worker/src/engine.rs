@@ -636,7 +636,7 @@ mod tests {
     ) -> FrameStart {
         let mut lighting = cockpit.lighting.clone();
         lighting.lights[0] = Light {
-            kind: LightKind::Directional { direction: sun },
+            kind: LightKind::sun(sun),
             ..lighting.lights[0]
         };
         let setup = FrameSetup {

@@ -218,9 +218,7 @@ pub const WARNING_LAMP_CD_M2: f32 = 1_500.0;
 fn lighting() -> Lighting {
     let color = Vec3::new(1.0, 0.95, 0.85);
     let sun = Light {
-        kind: LightKind::Directional {
-            direction: SUN_DIRECTION.normalize(),
-        },
+        kind: LightKind::sun(SUN_DIRECTION.normalize()),
         color,
         intensity: photometry::directional_intensity(color, SUN_ILLUMINANCE_LUX)
             .expect("the sun's colour has luminance"),

@@ -524,7 +524,7 @@ fn glass_mirrors_the_left_door_window_in_its_lower_part() {
 fn sun_shines_in_through_the_left_door_window() {
     let c = default_cockpit();
     let caster = Caster::new(&c.scene);
-    let LightKind::Directional { direction } = c.lighting.lights[0].kind else {
+    let LightKind::Directional { direction, .. } = c.lighting.lights[0].kind else {
         panic!("no sun first")
     };
     let to_sun = -direction.normalize();

@@ -72,6 +72,7 @@ use vtfarm_scene::NONE;
 use vtfarm_vertex::Components;
 
 mod font;
+pub mod glint;
 mod images;
 mod ramp;
 

@@ -117,6 +117,7 @@ struct RawLight {
     color: Option<Vec3Value>,
     intensity: Option<Spanned<f32>>,
     illuminance_lux: Option<Spanned<f32>>,
+    angular_diameter_deg: Option<Spanned<f32>>,
 }
 
 #[derive(Clone, Copy, Deserialize)]
@@ -157,6 +158,7 @@ struct RawQuality {
     method: Option<Spanned<String>>,
     max_edge: Option<Spanned<f32>>,
     transmission: Option<Spanned<String>>,
+    capture_cd_m2: Option<Spanned<f32>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -727,8 +729,29 @@ impl Source<'_> {
             .map_or(Vec3::ONE, |c| Vec3::from_array(*c.get_ref()));
         let light = Light {
             kind: match kind {
-                RawLightKind::Point => LightKind::Point { position: v },
-                RawLightKind::Directional => LightKind::Directional { direction: v },
+                RawLightKind::Point => {
+                    if let Some(d) = &raw.angular_diameter_deg {
+                        let message = format!(
+                            "{}: a point light has no disc; angular_diameter_deg is for directional lights",
+                            key("angular_diameter_deg")
+                        );
+                        return Err(self.error_at(d, message));
+                    }
+                    LightKind::Point { position: v }
+                }
+                RawLightKind::Directional => LightKind::Directional {
+                    direction: v,
+                    // A sun given in lux has the sun's disc unless told
+                    // otherwise; a light in render units is a point.
+                    angular_diameter_deg: raw.angular_diameter_deg.as_ref().map_or(
+                        if raw.illuminance_lux.is_some() {
+                            vtfarm_scene::SUN_ANGULAR_DIAMETER_DEG
+                        } else {
+                            0.0
+                        },
+                        |d| *d.get_ref(),
+                    ),
+                },
             },
             color,
             intensity: self.light_intensity(index, kind, raw, color)?,
@@ -738,6 +761,10 @@ impl Source<'_> {
             let (name, span) = match e.field {
                 "color" => ("color", raw.color.as_ref().map(Spanned::span)),
                 "intensity" => ("intensity", raw.intensity.as_ref().map(Spanned::span)),
+                "angular_diameter_deg" => (
+                    "angular_diameter_deg",
+                    raw.angular_diameter_deg.as_ref().map(Spanned::span),
+                ),
                 _ => (needs, Some(value.span())),
             };
             self.error(span, e.message_for(&key(name)))
@@ -969,6 +996,9 @@ impl Source<'_> {
         if let Some(max_edge) = &raw.max_edge {
             vertex.max_edge = *max_edge.get_ref();
         }
+        if let Some(capture) = &raw.capture_cd_m2 {
+            vertex.capture_cd_m2 = *capture.get_ref();
+        }
         if let Some(name) = &raw.transmission {
             vertex.transmission = Transmission::from_name(name.get_ref()).ok_or_else(|| {
                 let valid: Vec<&str> = Transmission::ALL.iter().map(|t| t.name()).collect();
@@ -1009,6 +1039,9 @@ impl Source<'_> {
                 &e,
             ),
             "max_edge" => self.out_of_bounds("quality.max_edge", raw.max_edge.as_ref(), &e),
+            "capture_cd_m2" => {
+                self.out_of_bounds("quality.capture_cd_m2", raw.capture_cd_m2.as_ref(), &e)
+            }
             // Not a job file key: the defaults are valid.
             _ => self.error(None, format!("quality: vertex {e}")),
         })?;

@@ -149,6 +149,7 @@ eyes = [[1, 2, 4], [2, 2, 3]]
                 Light {
                     kind: LightKind::Directional {
                         direction: Vec3::new(0.0, -1.0, -1.0),
+                        angular_diameter_deg: 0.0,
                     },
                     color: Vec3::ONE,
                     intensity: 1.0,
@@ -788,6 +789,11 @@ fn photometric_lighting_keys_convert_by_the_convention() {
         "{facing_white}"
     );
     assert_eq!(sun.color, Vec3::new(1.0, 0.9, 0.8));
+    assert!(matches!(
+        sun.kind,
+        LightKind::Directional { angular_diameter_deg, .. }
+            if angular_diameter_deg == vtfarm_scene::SUN_ANGULAR_DIAMETER_DEG
+    ));
     assert_eq!(lights[1].intensity, 0.5);
     assert_eq!(job.lighting.ambient, Some(photometry::ambient(3000.0)));
     assert_eq!(
@@ -810,6 +816,18 @@ fn photometric_lighting_keys_are_checked() {
         &light("kind = \"point\"\nposition = [0, 1, 0]\nilluminance_lux = 1000\n"),
         6,
         &["illuminance_lux", "point lights"],
+    );
+    assert_rejected(
+        &light("kind = \"point\"\nposition = [0, 1, 0]\nangular_diameter_deg = 0.5\n"),
+        6,
+        &["angular_diameter_deg", "directional"],
+    );
+    assert_rejected(
+        &light(
+            "kind = \"directional\"\ndirection = [0, -1, 0]\nilluminance_lux = 1000\nangular_diameter_deg = -1\n",
+        ),
+        7,
+        &["angular_diameter_deg = -1", "between 0 and 10"],
     );
     assert_rejected(
         &light("kind = \"directional\"\ndirection = [0, -1, 0]\nilluminance_lux = -5\n"),

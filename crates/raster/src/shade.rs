@@ -565,6 +565,7 @@ mod tests {
                 Light {
                     kind: LightKind::Directional {
                         direction: Vec3::new(0.3, -1.0, -0.4),
+                        angular_diameter_deg: 0.0,
                     },
                     color: Vec3::ONE,
                     intensity: 0.7,

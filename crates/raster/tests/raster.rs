@@ -835,6 +835,7 @@ fn shading_lighting(eye: Vec3) -> Lighting {
             Light {
                 kind: LightKind::Directional {
                     direction: Vec3::new(0.3, -0.5, -1.0),
+                    angular_diameter_deg: 0.0,
                 },
                 color: Vec3::new(1.0, 0.9, 0.7),
                 intensity: 0.5,

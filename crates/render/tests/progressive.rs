@@ -126,6 +126,7 @@ fn quads(transmission: Transmission) -> (Renderer, FrameSetup) {
             lights: vec![vtfarm_scene::Light {
                 kind: vtfarm_scene::LightKind::Directional {
                     direction: Vec3::new(0.3, -1.0, -0.4).normalize(),
+                    angular_diameter_deg: 0.0,
                 },
                 color: Vec3::ONE,
                 intensity: 0.8,

@@ -141,6 +141,18 @@ impl Camera {
         2.0 * self.tan_half_fov() / self.height as f32
     }
 
+    /// The solid angle (sr) pixel (`x`, `y`) subtends at the eye: its area
+    /// on the image plane at unit depth times cos³ of its centre's angle
+    /// off the view axis. The sum of luminance times this over the pixels
+    /// is the illuminance at the eye (on a plane facing what is summed).
+    pub fn pixel_solid_angle(&self, x: u32, y: u32) -> f32 {
+        let s = self.pixel_size_at_unit_depth();
+        let cx = (x as f32 + 0.5 - 0.5 * self.width as f32) * s;
+        let cy = (y as f32 + 0.5 - 0.5 * self.height as f32) * s;
+        let cos = 1.0 / (1.0 + cx * cx + cy * cy).sqrt();
+        s * s * cos * cos * cos
+    }
+
     /// The unit direction of the ray from the eye through continuous pixel
     /// coordinates (`px`, `py`); the centre of pixel (x, y) is (x + 0.5, y + 0.5).
     pub fn ray_direction(&self, px: f32, py: f32) -> Vec3 {

@@ -22,6 +22,7 @@ pub use bounds::{MAX_COORDINATE, OutOfBounds};
 pub use camera::{Camera, MAX_IMAGE_SIDE, MAX_PIXELS, NEAR, Projector, ScreenPoint};
 pub use light::{
     DAYLIGHT_SKY_CD_M2, DAYLIGHT_SUN_DIRECTION, DAYLIGHT_SUN_LUX, Light, LightKind, Lighting,
+    MAX_ANGULAR_DIAMETER_DEG, SUN_ANGULAR_DIAMETER_DEG, SunDisc, solid_angle_of_cone,
 };
 pub use material::{
     GLASS_IOR, Material, MtlOptics, MtlTerms, fresnel_reflectance, mtl_reflectance,

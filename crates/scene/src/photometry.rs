@@ -109,6 +109,7 @@ mod tests {
             let sun = Light {
                 kind: LightKind::Directional {
                     direction: -Vec3::Z,
+                    angular_diameter_deg: 0.0,
                 },
                 color,
                 intensity: directional_intensity(color, 100_000.0).unwrap(),

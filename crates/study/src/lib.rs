@@ -212,7 +212,7 @@ fn lighting_with_sun(base: &Lighting, sun: &SunPosition) -> Lighting {
     let travel = -sun::direction_to_sun(sun.azimuth_deg, sun.elevation_deg);
     let mut lighting = base.clone();
     for light in &mut lighting.lights {
-        if let LightKind::Directional { direction } = &mut light.kind {
+        if let LightKind::Directional { direction, .. } = &mut light.kind {
             *direction = travel;
         }
     }
@@ -222,7 +222,7 @@ fn lighting_with_sun(base: &Lighting, sun: &SunPosition) -> Lighting {
 /// The direction of the first directional light of `lighting`.
 fn base_sun(lighting: &Lighting) -> Option<SunPosition> {
     lighting.lights.iter().find_map(|light| match light.kind {
-        LightKind::Directional { direction } => {
+        LightKind::Directional { direction, .. } => {
             let (azimuth_deg, elevation_deg) = sun::vehicle_angles(-direction);
             Some(SunPosition {
                 azimuth_deg,

@@ -377,7 +377,7 @@ fn a_date_range_skips_the_night_and_turns_the_sun_with_the_heading() {
     assert!((noon.elevation_deg - 64.5).abs() < 1.5, "{noon:?}");
     // The frame's sun light comes from there.
     let lighting = &plan.variants[0].setups[2].lighting;
-    let vtfarm_scene::LightKind::Directional { direction } = lighting.lights[0].kind else {
+    let vtfarm_scene::LightKind::Directional { direction, .. } = lighting.lights[0].kind else {
         panic!("the cockpit's sun is its first light");
     };
     let (azimuth, elevation) = sun::vehicle_angles(-direction);

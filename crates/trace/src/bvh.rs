@@ -299,6 +299,50 @@ pub struct SceneBvh {
     avx2: bool,
     /// Whether each slot's triangle casts shadows ([`casts_shadow`]).
     slot_casts_shadow: Vec<bool>,
+    /// The scene's emitters ([`Emitter`]), by object and material.
+    emitters: Vec<Emitter>,
+}
+
+/// The emitting triangles of one object and material: how bright they are
+/// and where, for the vertex tracer's capture test (what a reflector face
+/// may mirror). Bounds by a sphere around their box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Emitter {
+    pub object: vtfarm_scene::ObjectId,
+    /// The luminance of the material's emission in cd/m²
+    /// ([`vtfarm_scene::photometry::cd_m2`]).
+    pub luminance_cd_m2: f32,
+    pub centre: Vec3,
+    pub radius: f32,
+}
+
+/// The emitters of `scene` ([`Emitter`]), in (object, material) order.
+fn emitters_of(scene: &Scene) -> Vec<Emitter> {
+    let mut boxes: std::collections::BTreeMap<(u32, u32), (Vec3, Vec3)> = Default::default();
+    for (id, t) in scene.triangles.iter().enumerate() {
+        let material = &scene.materials[t.material as usize];
+        if material.emission.max_element() <= 0.0 {
+            continue;
+        }
+        let entry = boxes
+            .entry((t.object, t.material))
+            .or_insert((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)));
+        for p in scene.triangle_positions(id as TriangleId) {
+            entry.0 = entry.0.min(p);
+            entry.1 = entry.1.max(p);
+        }
+    }
+    boxes
+        .into_iter()
+        .map(|((object, material), (lo, hi))| Emitter {
+            object,
+            luminance_cd_m2: vtfarm_scene::photometry::cd_m2(
+                scene.materials[material as usize].emission,
+            ),
+            centre: (lo + hi) * 0.5,
+            radius: (hi - lo).length() * 0.5,
+        })
+        .collect()
 }
 
 /// Whether a surface of `material` blocks light: every surface except those
@@ -468,6 +512,7 @@ impl SceneBvh {
             _ => options,
         };
 
+        let emitters = emitters_of(&scene);
         Ok(SceneBvh {
             scene,
             options,
@@ -478,11 +523,17 @@ impl SceneBvh {
             geometric_normals,
             avx2: has_avx2(),
             slot_casts_shadow,
+            emitters,
         })
     }
 
     pub fn scene(&self) -> &Scene {
         &self.scene
+    }
+
+    /// The scene's emitters, by object and material ([`Emitter`]).
+    pub fn emitters(&self) -> &[Emitter] {
+        &self.emitters
     }
 
     /// The options the BVH was built with; the layout is `Binary` when a

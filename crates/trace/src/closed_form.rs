@@ -212,6 +212,7 @@ fn a_lambertian_panel_under_e_lux_has_rho_e_over_pi() {
             lights: vec![Light {
                 kind: LightKind::Directional {
                     direction: Vec3::new(a.sin(), -a.cos(), 0.0),
+                    angular_diameter_deg: 0.0,
                 },
                 color,
                 intensity: photometry::directional_intensity(color, lux).unwrap(),

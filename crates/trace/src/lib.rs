@@ -28,7 +28,7 @@ mod scenarios;
 mod testutil;
 
 pub use bvh::{
-    BuildPreset, BvhLayout, BvhOptions, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
+    BuildPreset, BvhLayout, BvhOptions, Emitter, InvalidScene, SceneBvh, casts_shadow, spawn_offset,
 };
 pub use whitted::{PixelCone, Rays, SurfaceTerms, Tracer, fresnel_reflectance, reflect, refract};
 

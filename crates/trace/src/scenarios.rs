@@ -377,6 +377,7 @@ fn a_point_behind_an_occluder_gets_only_ambient() {
     s.lighting.lights.push(Light {
         kind: LightKind::Directional {
             direction: -Vec3::Y,
+            angular_diameter_deg: 0.0,
         },
         color: Vec3::ONE,
         intensity: 2.0,

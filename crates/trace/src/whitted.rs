@@ -114,6 +114,9 @@ mod word {
     /// Plus the light's index: the light lights the surface (facing it and
     /// unoccluded).
     pub(super) const LIT: u64 = 2 << 32;
+    /// Plus the light's index: a ray that left the scene saw the light's
+    /// disc (some of its footprint did).
+    pub(super) const DISC: u64 = 3 << 32;
 }
 
 impl Shaded {
@@ -373,11 +376,24 @@ impl Tracer<'_> {
         // signature, so they do not drive the refinement.
         let tracked = weight >= self.settings.signature_min_weight;
         walk.lit.clear();
-        let Visited::Surface(surface) = source.visit(link, depth, rays, &mut walk.lit) else {
-            if tracked {
-                walk.signature.add(word::MISS);
+        let surface = match source.visit(link, depth, rays, &mut walk.lit) {
+            Visited::Surface(surface) => surface,
+            Visited::Miss(direction) => {
+                if tracked {
+                    walk.signature.add(word::MISS);
+                }
+                let mut sky = self.lighting.background;
+                for (index, light) in self.lighting.lights.iter().enumerate() {
+                    let seen = self.disc_seen(light, direction);
+                    if seen != Vec3::ZERO {
+                        sky += seen;
+                        if tracked {
+                            walk.signature.add(word::DISC + index as u64);
+                        }
+                    }
+                }
+                return (Shaded::only(sky), NONE);
             }
-            return (Shaded::only(self.lighting.background), NONE);
         };
         if tracked {
             walk.signature.add(u64::from(surface.object));
@@ -438,6 +454,28 @@ impl Tracer<'_> {
             shaded.ghost = shaded.reflected;
         }
         (shaded, surface.object)
+    }
+
+    /// The radiance of `light`'s disc ([`Light::disc`]) that a ray leaving
+    /// the scene along unit `direction` brings back: the disc's radiance
+    /// times the share of the ray's pixel footprint it covers
+    /// ([`vtfarm_scene::SunDisc::coverage`]). The footprint is a disc of
+    /// the pixel's area, `spread` wide, about the ray: the cone keeps its
+    /// angle at every surface ([`PixelCone`]), exact for flat mirrors and
+    /// thin glass. Without a cone ([`PixelCone::FINEST`]) the ray is one
+    /// direction, inside the disc or not. Direct lighting stays the light's
+    /// (local shading): a disc is only ever seen, never lights a surface.
+    fn disc_seen(&self, light: &Light, direction: Vec3) -> Vec3 {
+        let Some(disc) = light.disc() else {
+            return Vec3::ZERO;
+        };
+        let footprint = self.cone.spread / std::f32::consts::PI.sqrt();
+        let coverage = disc.coverage(direction.normalize_or_zero(), footprint);
+        if coverage > 0.0 {
+            disc.radiance * coverage
+        } else {
+            Vec3::ZERO
+        }
     }
 
     /// A surface's terms with the `LIT` words of the lights that reach it
@@ -620,8 +658,8 @@ struct VisitedSurface<L> {
 }
 
 enum Visited<L> {
-    /// The ray hit nothing.
-    Miss,
+    /// The ray hit nothing; it left the scene along this direction.
+    Miss(Vec3),
     Surface(VisitedSurface<L>),
 }
 
@@ -672,7 +710,7 @@ impl TreeSource for OnDemand<'_> {
                 let hit = tracer.bvh.closest_hit(&ray, f32::INFINITY);
                 return self.visit(Link::Hit(ray, hit, path), depth, rays, lit);
             }
-            Link::Hit(_, None, _) => return Visited::Miss,
+            Link::Hit(ray, None, _) => return Visited::Miss(ray.direction),
             Link::Hit(ray, Some(hit), path) => {
                 (tracer.bvh.surface_point(&hit), ray.direction, path + hit.t)
             }

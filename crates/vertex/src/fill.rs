@@ -124,6 +124,10 @@ impl<'m> TrianglePlan<'m> {
         rect: PixelRect,
         mesh: Option<&'m TriangleMesh>,
     ) -> Self {
+        // A triangle none of whose samples is visible (corners off screen
+        // or hidden) has nothing to interpolate from: every pixel it owns
+        // is traced, at every level.
+        let mesh = mesh.filter(|m| m.vertices.iter().any(|v| v.visible));
         let faces: Vec<ScreenFace> = mesh.map_or_else(Vec::new, |mesh| {
             mesh.faces()
                 .filter_map(|f| ScreenFace::new(mesh, f))
@@ -148,9 +152,15 @@ impl<'m> TrianglePlan<'m> {
             }
         }
         let fill = frame.settings.quality == Quality::Full;
+        // At `full`, faces whose samples disagree are filled, and so are
+        // faces that may mirror a bright source (`capture.rs`).
         let interpolated = faces
             .iter()
-            .map(|f| !(fill && f.mesh.face_disagrees(f.face, frame.settings.epsilon)))
+            .map(|f| {
+                !(fill
+                    && (f.mesh.face_disagrees(f.face, frame.settings.epsilon)
+                        || f.mesh.face_captures(frame, f.face)))
+            })
             .collect();
         let behind_corner = faces
             .iter()

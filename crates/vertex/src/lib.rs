@@ -68,7 +68,20 @@ pub struct VertexSettings {
     pub max_edge: f32,
     /// Where a see-through reflector's transmitted part comes from.
     pub transmission: Transmission,
+    /// Conservative capture (`capture.rs`): emitters at least this bright
+    /// (cd/m²) are looked for in every reflector face's cone of reflected
+    /// directions, as a directional light's disc always is; a face that may
+    /// mirror one is split and, at `full`, traced per pixel.
+    pub capture_cd_m2: f32,
 }
+
+/// The default [`VertexSettings::capture_cd_m2`]: 50,000 cd/m², lamps,
+/// LEDs and sunlit specular highlights rather than sky and windows (a
+/// cover glass of kr 0.04 mirrors such a source at 2,000 cd/m² and more,
+/// four times the 500 cd/m² glare threshold of `vtfarm-glare`). A
+/// vtfarm engineering default; lower it to capture dimmer sources at the
+/// cost of more traced pixels.
+pub const DEFAULT_CAPTURE_CD_M2: f32 = 50_000.0;
 
 /// Where the transmitted part of a see-through reflector comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -142,6 +155,7 @@ impl VertexSettings {
         )?;
         non_negative("depth_tolerance", self.depth_tolerance)?;
         non_negative("max_edge", self.max_edge)?;
+        non_negative("capture_cd_m2", self.capture_cd_m2)?;
         Ok(())
     }
 }
@@ -158,10 +172,12 @@ impl Default for VertexSettings {
             depth_tolerance: 0.01,
             max_edge: 24.0,
             transmission: Transmission::Raster,
+            capture_cd_m2: DEFAULT_CAPTURE_CD_M2,
         }
     }
 }
 
+mod capture;
 mod composite;
 mod fill;
 mod package;

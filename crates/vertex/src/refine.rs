@@ -200,6 +200,12 @@ impl TriangleMesh {
         for (a, b) in seeds {
             self.queue_edge(&mut queue, a, b, false);
         }
+        let captured: Vec<(u32, u32)> = (self.faces())
+            .filter_map(|f| self.capture_edge(frame, f))
+            .collect();
+        for (a, b) in captured {
+            self.queue_edge(&mut queue, a, b, true);
+        }
         while let Some(edge) = queue.pop() {
             if frame.stopped() {
                 return;
@@ -230,6 +236,9 @@ impl TriangleMesh {
                     settings.pixel_floor,
                     settings.epsilon,
                 ) {
+                    self.queue_edge(&mut queue, a, b, true);
+                }
+                if let Some((a, b)) = self.capture_edge(frame, &face) {
                     self.queue_edge(&mut queue, a, b, true);
                 }
             }
@@ -325,6 +334,30 @@ impl TriangleMesh {
             new_faces[2 * i + 1] = second;
         }
         new_faces
+    }
+
+    /// Whether `face` may mirror a bright source (`capture.rs`).
+    pub(crate) fn face_captures(&self, frame: &Frame<'_>, face: &Face) -> bool {
+        let corners = face.vertices.map(|i| &self.vertices[i as usize]);
+        frame.captures(
+            corners.map(|v| (v.position, v.normal)),
+            corners.map(|v| v.sample.reflected_object),
+        )
+    }
+
+    /// The longest screen edge of a captured face, split whatever its
+    /// samples say (`capture.rs`); `None` for a face that captures nothing
+    /// or has a corner behind the eye.
+    fn capture_edge(&self, frame: &Frame<'_>, face: &Face) -> Option<(u32, u32)> {
+        if !self.face_captures(frame, face) {
+            return None;
+        }
+        let [a, b, c] = face.vertices;
+        [(a, b), (b, c), (c, a)]
+            .into_iter()
+            .filter_map(|(p, q)| Some((self.screen_length(p, q)?, p, q)))
+            .max_by(|x, y| x.0.total_cmp(&y.0))
+            .map(|(_, p, q)| (p, q))
     }
 
     fn push_face(&mut self, vertices: [u32; 3], depth: u32) -> u32 {

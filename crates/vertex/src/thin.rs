@@ -910,7 +910,7 @@ impl ShadowMaps {
                 let centre = (lo + hi) * 0.5;
                 let (eye, distance) = match light.kind {
                     LightKind::Point { position } => (position, (centre - position).length()),
-                    LightKind::Directional { direction } => {
+                    LightKind::Directional { direction, .. } => {
                         let far = radius * 100.0;
                         (centre - direction.normalize_or(Vec3::NEG_Y) * far, far)
                     }

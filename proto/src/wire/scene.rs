@@ -242,8 +242,13 @@ impl TryFrom<WireCamera> for Camera {
 /// [`LightKind`] on the wire.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum WireLightKind {
-    Point { position: [f32; 3] },
-    Directional { direction: [f32; 3] },
+    Point {
+        position: [f32; 3],
+    },
+    Directional {
+        direction: [f32; 3],
+        angular_diameter_deg: f32,
+    },
 }
 
 /// [`Light`] on the wire.
@@ -261,8 +266,12 @@ impl From<&Light> for WireLight {
                 LightKind::Point { position } => WireLightKind::Point {
                     position: vec3(position),
                 },
-                LightKind::Directional { direction } => WireLightKind::Directional {
+                LightKind::Directional {
+                    direction,
+                    angular_diameter_deg,
+                } => WireLightKind::Directional {
                     direction: vec3(direction),
+                    angular_diameter_deg,
                 },
             },
             color: vec3(l.color),
@@ -280,8 +289,12 @@ impl TryFrom<WireLight> for Light {
                 WireLightKind::Point { position } => LightKind::Point {
                     position: Vec3::from_array(position),
                 },
-                WireLightKind::Directional { direction } => LightKind::Directional {
+                WireLightKind::Directional {
+                    direction,
+                    angular_diameter_deg,
+                } => LightKind::Directional {
                     direction: Vec3::from_array(direction),
+                    angular_diameter_deg,
                 },
             },
             color: Vec3::from_array(w.color),
@@ -427,9 +440,20 @@ mod tests {
             |l| {
                 l.kind = WireLightKind::Directional {
                     direction: [0.0; 3],
+                    angular_diameter_deg: 0.53,
                 }
             },
             "light direction",
+        );
+        check_rejects::<WireLight, Light>(
+            &light,
+            |l| {
+                l.kind = WireLightKind::Directional {
+                    direction: [0.0, -1.0, 0.0],
+                    angular_diameter_deg: f32::NAN,
+                }
+            },
+            "light angular_diameter_deg",
         );
         check_rejects::<WireLight, Light>(&light, |l| l.intensity = f32::NAN, "light intensity");
         check_rejects::<WireLighting, Lighting>(

@@ -146,6 +146,7 @@ pub struct WireVertexSettings {
     pub depth_tolerance: f32,
     pub max_edge: f32,
     pub transmission: WireTransmission,
+    pub capture_cd_m2: f32,
 }
 
 impl From<&VertexSettings> for WireVertexSettings {
@@ -160,6 +161,7 @@ impl From<&VertexSettings> for WireVertexSettings {
             depth_tolerance: v.depth_tolerance,
             max_edge: v.max_edge,
             transmission: v.transmission.into(),
+            capture_cd_m2: v.capture_cd_m2,
         }
     }
 }
@@ -178,6 +180,7 @@ impl TryFrom<WireVertexSettings> for VertexSettings {
             depth_tolerance: w.depth_tolerance,
             max_edge: w.max_edge,
             transmission: w.transmission.into(),
+            capture_cd_m2: w.capture_cd_m2,
         };
         vertex.validate().map_err(bounds("vertex"))?;
         Ok(vertex)

@@ -77,6 +77,7 @@ pub(crate) fn lighting() -> Lighting {
             Light {
                 kind: LightKind::Directional {
                     direction: Vec3::new(0.0, -1.0, -1.0),
+                    angular_diameter_deg: vtfarm_scene::SUN_ANGULAR_DIAMETER_DEG,
                 },
                 color: Vec3::new(1.0, 0.9, 0.8),
                 intensity: 0.5,

@@ -25,6 +25,8 @@ struct Node {
     /// The object the ray into this node hit (`NONE` for a miss).
     object: ObjectId,
     surface: Option<Surface>,
+    /// The direction a ray that hit nothing left the scene along.
+    escape: Vec3,
 }
 
 /// What the first pass found at a surface.
@@ -64,6 +66,7 @@ pub(super) fn shade_points(
     recorded.nodes.extend(points.iter().map(|(point, _)| Node {
         object: scene.triangles[point.triangle as usize].object,
         surface: None,
+        escape: Vec3::ZERO,
     }));
     let mut pending: Vec<Pending> = points
         .iter()
@@ -132,6 +135,7 @@ pub(super) fn shade_points(
                 recorded.nodes.push(Node {
                     object,
                     surface: None,
+                    escape: ray.direction,
                 });
             }
         }
@@ -154,7 +158,7 @@ impl TreeSource for Recorded {
     fn visit(&mut self, index: usize, _: u32, _: Rays, lit: &mut Vec<u64>) -> Visited<usize> {
         let node = &self.nodes[index];
         let Some(surface) = &node.surface else {
-            return Visited::Miss;
+            return Visited::Miss(node.escape);
         };
         lit.extend_from_slice(&self.lit_words[surface.lit.clone()]);
         Visited::Surface(VisitedSurface {
