@@ -622,7 +622,7 @@ fn frame_affinity_keeps_workers_on_fewer_frames_and_as_fast() {
 }
 
 /// The master's rules with a frame set-up that costs as much as a quarter
-/// of a frame's tracing on one worker, as vtfarm's does (issue 26), and a
+/// of a frame's tracing on one worker, as vtfarm's does, and a
 /// master that makes the base frames of a batch job's last frames ahead, as
 /// the master core does.
 fn batch_config() -> SimConfig {
