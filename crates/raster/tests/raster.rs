@@ -3,8 +3,6 @@
 //! the shared Phong model, and bit-identical results on any thread count.
 
 use glam::{DVec3, Quat, Vec3};
-use rand::{Rng as _, RngCore, SeedableRng};
-use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_raster::{
     IdBuffer, IdPass, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within,
     id_buffers_within, nearer_of, rasterize, rasterize_into,
@@ -15,22 +13,24 @@ use vtfarm_scene::{
     TriangleId,
 };
 
-/// Seeded scenes from the workspace's one test generator (`rand_xoshiro`),
-/// so they are reproducible.
-struct Rng(Xoshiro256PlusPlus);
+/// xorshift64*: a tiny seeded generator, so scenes are reproducible.
+struct Rng(u64);
 
 impl Rng {
     fn new(seed: u64) -> Self {
-        Rng(Xoshiro256PlusPlus::seed_from_u64(seed))
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
     }
 
     fn next_u64(&mut self) -> u64 {
-        self.0.next_u64()
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
     }
 
     /// Uniform in [lo, hi).
     fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.0.random::<f32>()
+        lo + (hi - lo) * (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 
     fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
