@@ -6,7 +6,6 @@ use anyhow::{Result, bail};
 use vtfarm_proto::JobAction;
 
 use crate::farm::ClusterArgs;
-use crate::jobs::state_name;
 use crate::shared::runtime;
 
 /// Options of `vtfarm cancel`.
@@ -98,7 +97,7 @@ fn control(cluster: &ClusterArgs, job: u64, action: JobAction, doing: &str) -> R
     println!(
         "job {}: {} (priority {}, {}/{} frames done)",
         summary.id,
-        state_name(summary.state),
+        summary.state.name(),
         summary.priority,
         summary.frames_done,
         summary.frames_total

@@ -269,7 +269,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             JobEvent::Warning(warning) => say(format!("warning: {warning}")),
             JobEvent::StateChanged { job, state, reason } => match json {
                 true => json_line(serde_json::json!({"event": "state", "job": job, "state": state, "reason": reason})),
-                false => say(format!("job {job} is {}: {reason}", crate::jobs::state_name(state))),
+                false => say(format!("job {job} is {}: {reason}", state.name())),
             },
             JobEvent::FrameDone(f) => {
                 arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);

@@ -1,7 +1,7 @@
 //! `vtfarm jobs`: the master's jobs, as a table or as JSON.
 
 use anyhow::Result;
-use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+use vtfarm_proto::{JobSummary, WireJobKind};
 
 use crate::farm::ClusterArgs;
 use crate::shared::{runtime, utc_time};
@@ -57,7 +57,7 @@ fn table(jobs: &[JobSummary]) -> String {
             job.id,
             fitted(&job.name, NAME_WIDTH),
             kind_name(job.kind),
-            state_name(job.state),
+            job.state.name(),
             job.priority,
             job.frames_done,
             job.frames_failed,
@@ -95,20 +95,10 @@ pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
     }
 }
 
-pub(crate) fn state_name(state: WireJobState) -> &'static str {
-    match state {
-        WireJobState::Queued => "queued",
-        WireJobState::Running => "running",
-        WireJobState::Paused => "paused",
-        WireJobState::Completed => "completed",
-        WireJobState::Failed => "failed",
-        WireJobState::Cancelled => "cancelled",
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vtfarm_proto::WireJobState;
 
     #[test]
     fn the_table_lists_every_column_and_a_finished_jobs_reason() {

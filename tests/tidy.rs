@@ -5,7 +5,10 @@
 //! set once; no test passes without testing (no `#[ignore]`, and a test
 //! that cannot run fails, except behind a named opt-out that CI never sets).
 //! Also the architecture's boundaries: the wire and the master's
-//! core build without an async runtime, QUIC, TLS or a web server.
+//! core build without an async runtime, QUIC, TLS or a web server. Sources,
+//! docs and help texts describe the code, not its history (no tracker
+//! numbers, numbered work periods or "wave"), and no module outside the
+//! tests is over [`MAX_MODULE_LINES`] lines.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -126,6 +129,83 @@ fn dependencies_outside_the_workspace_table(manifest: &str) -> Vec<String> {
         }
     }
     outside
+}
+
+/// The longest a module may be (tests aside): a longer one mixes concerns
+/// that a reader has to hold apart.
+const MAX_MODULE_LINES: usize = 1500;
+
+/// A module over [`MAX_MODULE_LINES`] lines outside the tests (a `tests/`
+/// directory or a `tests.rs` module), as `path: N lines`.
+fn oversized_module(path: &Path, source: &str) -> Option<String> {
+    let in_tests = path.components().any(|c| c.as_os_str() == "tests")
+        || path.file_name().is_some_and(|n| n == "tests.rs");
+    let lines = source.lines().count();
+    (!in_tests && lines > MAX_MODULE_LINES).then(|| format!("{}: {lines} lines", path.display()))
+}
+
+/// Words of a development log rather than a description: a tracker number
+/// ("issue 13", "issues 26 and 27"), a numbered work period ("session 14"),
+/// the tracker as a source ("the issue compares"), or "wave". Each finding
+/// as `line: text`.
+fn development_log_words(text: &str) -> Vec<String> {
+    let numbered = [
+        "issue", "issues", "session", "sessions", "sprint", "sprints",
+    ];
+    let mut found = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let lower = line.to_lowercase();
+        let words: Vec<&str> = (lower.split(|c: char| !c.is_alphanumeric()))
+            .filter(|w| !w.is_empty())
+            .collect();
+        let logged = words.iter().enumerate().any(|(k, word)| {
+            let next = words.get(k + 1).copied().unwrap_or("");
+            (numbered.contains(word)
+                && next.chars().all(|c| c.is_ascii_digit())
+                && !next.is_empty())
+                || (["the", "this", "last", "next"].contains(word) && next == "issue")
+                || ["wave", "waves"].contains(word)
+        });
+        if logged {
+            found.push(format!("{}: {}", i + 1, line.trim()));
+        }
+    }
+    found
+}
+
+/// Every text file of the repository a reader meets besides the Rust
+/// sources: docs, scripts, configurations, the dashboard's pages, sorted.
+fn text_files() -> Vec<PathBuf> {
+    const SKIPPED_DIRS: [&str; 4] = ["target", ".git", "node_modules", "shared"];
+    const TEXT: [&str; 11] = [
+        "md", "sh", "toml", "yml", "yaml", "html", "js", "css", "txt", "py", "json",
+    ];
+    fn walk(dir: &Path, files: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for entry in entries {
+            let path = entry.expect("a readable directory entry").path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if path.is_dir() {
+                if !SKIPPED_DIRS.contains(&name) {
+                    walk(&path, files);
+                }
+            } else if name == "Dockerfile"
+                || path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| TEXT.contains(&e))
+            {
+                files.push(path);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(Path::new(env!("CARGO_MANIFEST_DIR")), &mut files);
+    files.retain(|p| p.file_name().is_none_or(|n| n != "Cargo.lock"));
+    files.sort();
+    files
 }
 
 #[test]
@@ -282,6 +362,40 @@ fn the_master_runs_no_worker_and_the_submitter_knows_only_the_wire() {
     );
 }
 
+#[test]
+fn no_module_outside_the_tests_is_over_the_limit() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let oversized: Vec<String> = rust_files()
+        .into_iter()
+        .filter_map(|path| {
+            let relative = path.strip_prefix(root).unwrap_or(&path).to_owned();
+            oversized_module(&relative, &read(&path))
+        })
+        .collect();
+    assert!(
+        oversized.is_empty(),
+        "modules over {MAX_MODULE_LINES} lines (split them along their concerns):\n{}",
+        oversized.join("\n")
+    );
+}
+
+#[test]
+fn sources_docs_and_help_texts_describe_rather_than_narrate() {
+    // This file names what it looks for.
+    let this_file = Path::new(env!("CARGO_MANIFEST_DIR")).join(file!());
+    let mut found = Vec::new();
+    for path in (rust_files().into_iter().chain(text_files())).filter(|p| *p != this_file) {
+        for finding in development_log_words(&read(&path)) {
+            found.push(format!("{}:{finding}", path.display()));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "development-log words (say what the code does and why; its history is in git):\n{}",
+        found.join("\n")
+    );
+}
+
 /// The checks themselves catch what they are for.
 #[test]
 fn the_checks_catch_violations() {
@@ -323,6 +437,37 @@ fn the_checks_catch_violations() {
             "dependencies: table",
             "target.cfg(unix).dependencies: unix-only",
             "dev-dependencies: not-shared",
+        ]
+    );
+    let long = "//! A module.\n".to_owned() + &"fn f() {}\n".repeat(MAX_MODULE_LINES);
+    assert_eq!(
+        oversized_module(Path::new("crates/x/src/big.rs"), &long).as_deref(),
+        Some("crates/x/src/big.rs: 1501 lines")
+    );
+    assert_eq!(
+        oversized_module(Path::new("crates/x/tests/big.rs"), &long),
+        None
+    );
+    assert_eq!(
+        oversized_module(Path::new("crates/x/src/tests.rs"), &long),
+        None
+    );
+    let fits = "fn f() {}\n".repeat(MAX_MODULE_LINES);
+    assert_eq!(oversized_module(Path::new("src/lib.rs"), &fits), None);
+    let log = "// Overflowed in obvhs (issue 13).\n\
+               /// Fixed in Session 14's main.\n\
+               /// (default: 1, the figure the issue compares)\n\
+               // Measured in the last wave.\n\
+               // Issues 26 and 27: the fixed costs.\n\
+               // A `WorkerSession` per connection; a wavefront; an issue of the queue.\n";
+    assert_eq!(
+        development_log_words(log),
+        [
+            "1: // Overflowed in obvhs (issue 13).",
+            "2: /// Fixed in Session 14's main.",
+            "3: /// (default: 1, the figure the issue compares)",
+            "4: // Measured in the last wave.",
+            "5: // Issues 26 and 27: the fixed costs.",
         ]
     );
 }

@@ -5,6 +5,7 @@
 //! frame (the view) a `view` row of its stages as they went on view; the
 //! gaps are idle time.
 
+use vtfarm_imaging::escape_html;
 use vtfarm_proto::{FrameStats, PhaseKind};
 
 const ROW: f64 = 28.0;
@@ -35,7 +36,7 @@ pub fn timeline_svg(stats: &FrameStats) -> String {
         svg += &format!(
             "<text x=\"4\" y=\"{}\">{}</text>\n<rect x=\"{LABEL}\" y=\"{}\" width=\"{PLOT}\" height=\"{}\" fill=\"#eeeeee\"/>\n",
             y + ROW * 0.65,
-            escape(who),
+            escape_html(who),
             y + 4.0,
             ROW - 8.0
         );
@@ -86,12 +87,6 @@ fn color(kind: PhaseKind) -> &'static str {
         PhaseKind::Package => "#4caf50",
         PhaseKind::Shown => "#d9534f",
     }
-}
-
-fn escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 #[cfg(test)]

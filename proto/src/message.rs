@@ -505,9 +505,10 @@ pub enum WireJobKind {
 }
 
 /// A job's state on the wire (the master core's `JobState`, whose table
-/// of transitions is the one rule).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+/// of transitions is the one rule). [`WireJobState::name`] is the one
+/// table of the states' names: listings, metrics, logs and the serde
+/// names (JSON) all read it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WireJobState {
     Queued,
     Running,
@@ -515,6 +516,100 @@ pub enum WireJobState {
     Completed,
     Failed,
     Cancelled,
+}
+
+impl WireJobState {
+    /// Every state, in the order listings count them (and the serde
+    /// variant index: the order is part of the wire).
+    pub const ALL: [WireJobState; 6] = [
+        WireJobState::Queued,
+        WireJobState::Running,
+        WireJobState::Paused,
+        WireJobState::Completed,
+        WireJobState::Failed,
+        WireJobState::Cancelled,
+    ];
+
+    /// The lowercase name listings, metrics and JSON use.
+    pub fn name(self) -> &'static str {
+        match self {
+            WireJobState::Queued => "queued",
+            WireJobState::Running => "running",
+            WireJobState::Paused => "paused",
+            WireJobState::Completed => "completed",
+            WireJobState::Failed => "failed",
+            WireJobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// The state with this name.
+    fn from_name(name: &str) -> Option<WireJobState> {
+        Self::ALL.into_iter().find(|s| s.name() == name)
+    }
+}
+
+impl std::fmt::Display for WireJobState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// As a derived unit enum serializes: the variant's index (bincode) and its
+/// name from [`WireJobState::name`] (JSON).
+impl Serialize for WireJobState {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let index = Self::ALL.iter().position(|s| s == self).unwrap_or_default();
+        serializer.serialize_unit_variant("WireJobState", index as u32, self.name())
+    }
+}
+
+/// The names serde's errors and `deserialize_enum` want as a static list.
+static STATE_NAMES: std::sync::LazyLock<[&'static str; 6]> =
+    std::sync::LazyLock::new(|| WireJobState::ALL.map(WireJobState::name));
+
+impl<'de> Deserialize<'de> for WireJobState {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::{EnumAccess, Error, VariantAccess, Visitor};
+
+        /// A variant tag: an index (bincode) or a name (JSON).
+        struct Tag(WireJobState);
+        impl<'de> Deserialize<'de> for Tag {
+            fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+                deserializer.deserialize_identifier(TagVisitor)
+            }
+        }
+        struct TagVisitor;
+        impl Visitor<'_> for TagVisitor {
+            type Value = Tag;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a job state's name or index")
+            }
+            fn visit_u64<E: Error>(self, index: u64) -> Result<Tag, E> {
+                (usize::try_from(index).ok())
+                    .and_then(|i| WireJobState::ALL.get(i).copied())
+                    .map(Tag)
+                    .ok_or_else(|| E::custom(format_args!("no job state has index {index}")))
+            }
+            fn visit_str<E: Error>(self, name: &str) -> Result<Tag, E> {
+                WireJobState::from_name(name)
+                    .map(Tag)
+                    .ok_or_else(|| E::unknown_variant(name, &*STATE_NAMES))
+            }
+        }
+        struct StateVisitor;
+        impl<'de> Visitor<'de> for StateVisitor {
+            type Value = WireJobState;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a job state")
+            }
+            fn visit_enum<A: EnumAccess<'de>>(self, data: A) -> Result<WireJobState, A::Error> {
+                let (Tag(state), variant) = data.variant::<Tag>()?;
+                variant.unit_variant()?;
+                Ok(state)
+            }
+        }
+        deserializer.deserialize_enum("WireJobState", &*STATE_NAMES, StateVisitor)
+    }
 }
 
 /// What a user asks of a job (`vtfarm cancel|pause|resume|requeue|priority`).
@@ -815,6 +910,50 @@ pub(crate) mod bytes {
 mod tests {
     use super::*;
     use crate::wire::tests::scene;
+
+    /// The unit enum serde derives, as the wire carried job states before
+    /// their names moved into [`WireJobState::name`].
+    #[derive(Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(rename_all = "lowercase")]
+    enum Derived {
+        Queued,
+        Running,
+        Paused,
+        Completed,
+        Failed,
+        Cancelled,
+    }
+
+    #[test]
+    fn job_states_serialize_as_the_derived_enum_in_bincode_and_json() {
+        let derived = [
+            Derived::Queued,
+            Derived::Running,
+            Derived::Paused,
+            Derived::Completed,
+            Derived::Failed,
+            Derived::Cancelled,
+        ];
+        let config = bincode::config::standard();
+        for (state, derived) in WireJobState::ALL.into_iter().zip(derived) {
+            let bytes = bincode::serde::encode_to_vec(state, config).unwrap();
+            assert_eq!(
+                bytes,
+                bincode::serde::encode_to_vec(&derived, config).unwrap()
+            );
+            let (back, _): (WireJobState, _) =
+                bincode::serde::decode_from_slice(&bytes, config).unwrap();
+            assert_eq!(back, state);
+            let json = serde_json::to_string(&state).unwrap();
+            assert_eq!(json, serde_json::to_string(&derived).unwrap());
+            assert_eq!(json, format!("\"{state}\""));
+            assert_eq!(serde_json::from_str::<WireJobState>(&json).unwrap(), state);
+        }
+        let bad = serde_json::from_str::<WireJobState>("\"done\"").unwrap_err();
+        assert!(bad.to_string().contains("unknown variant `done`"), "{bad}");
+        let beyond = bincode::serde::encode_to_vec(6u32, config).unwrap();
+        assert!(bincode::serde::decode_from_slice::<WireJobState, _>(&beyond, config).is_err());
+    }
 
     #[test]
     fn scene_data_round_trips_and_hashes_the_canonical_encoding() {

@@ -55,7 +55,7 @@ pub struct RaysArgs {
     /// The reflector object whose reflection rays are traced.
     #[arg(long, default_value = COVER_GLASS)]
     reflector: String,
-    /// Worker threads (default: 1, the figure the issue compares).
+    /// Worker threads (default: 1: rays per second on one thread, as docs/benchmarks.md compares them).
     #[arg(long, default_value_t = 1)]
     threads: usize,
     /// BVH build preset: fastest, very-fast, fast, medium, slow, very-slow

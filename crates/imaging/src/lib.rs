@@ -581,8 +581,36 @@ pub fn write_npy_f32(path: &Path, shape: &[usize], data: &[f32]) -> Result<(), I
         .map_err(io)
 }
 
+/// Text escaped for HTML and SVG, in element content and in quoted
+/// attributes alike: the one escaper of vtfarm's reports (the study's HTML,
+/// the master's frame timelines).
+pub fn escape_html(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn markup_characters_are_escaped_for_content_and_attributes() {
+        use super::escape_html;
+        assert_eq!(
+            escape_html(r#"<a href="x">Tom & Jerry's</a>"#),
+            "&lt;a href=&quot;x&quot;&gt;Tom &amp; Jerry&#39;s&lt;/a&gt;"
+        );
+        assert_eq!(escape_html("plain ü"), "plain ü");
+    }
+
     #[test]
     fn a_black_image_is_a_zero_filled_one() {
         for (w, h) in [(0, 0), (1, 1), (3, 2), (1920, 1080)] {

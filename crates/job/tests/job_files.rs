@@ -1173,7 +1173,7 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
     assert!(dull_reflectors(&scene, &[1, 2]).is_empty());
 }
 
-/// The runaway values of issue 13: each is refused at its line by the
+/// Values that would run away: each is refused at its line by the
 /// settings' own bounds (the wire conversion calls the same `validate`).
 #[test]
 fn values_that_would_run_away_are_refused_at_their_line() {

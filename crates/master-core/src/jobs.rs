@@ -72,16 +72,10 @@ impl JobState {
         )
     }
 
-    /// The lowercase name listings and metrics use.
+    /// The lowercase name listings and metrics use: the wire's
+    /// ([`WireJobState::name`], the one table of names).
     pub fn name(self) -> &'static str {
-        match self {
-            JobState::Queued => "queued",
-            JobState::Running => "running",
-            JobState::Paused => "paused",
-            JobState::Completed => "completed",
-            JobState::Failed => "failed",
-            JobState::Cancelled => "cancelled",
-        }
+        WireJobState::from(self).name()
     }
 }
 

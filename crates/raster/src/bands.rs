@@ -219,6 +219,8 @@ impl Bins {
 mod tests {
     use super::*;
     use crate::triangle::ScreenVertex;
+    use rand::{Rng as _, SeedableRng};
+    use rand_xoshiro::Xoshiro256PlusPlus;
 
     #[test]
     fn the_portable_and_the_avx2_band_give_the_same_bits() {
@@ -231,14 +233,8 @@ mod tests {
             x1: 70,
             y1: 53,
         };
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = |lo: f64, hi: f64| {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            lo + (hi - lo) * (state.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as f64
-                / 2f64.powi(53)
-        };
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+        let mut next = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
         let mut depths = [1.0; 3];
         let triangles: Vec<RasterTriangle> = (0..300)
             .filter_map(|id| {

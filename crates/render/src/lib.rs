@@ -147,7 +147,7 @@ pub struct Renderer {
 /// fresh memory pay a page fault per 4 KiB on their first write, 33 MB of
 /// them at 1080p (the base image, its ID buffer, the encoded bytes), which
 /// cost a one-thread worker up to a tenth of its frame, and more where
-/// other processes share its core (docs/benchmarks.md, session 15).
+/// other processes share its core (docs/benchmarks.md, page faults).
 struct WholeFrameBuffers {
     image: Image,
     ids: IdBuffer,

@@ -5,6 +5,8 @@ use std::f32::consts::PI;
 use std::sync::Arc;
 
 use glam::Vec3;
+use rand::{Rng as _, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
 use vtfarm_render::{ErrorFigures, FrameSetup, RenderOptions, Renderer, compare, split_packages};
 use vtfarm_scene::{
@@ -398,12 +400,9 @@ fn check_random_packages(scene: Scene, reflector: &str, camera: Camera, lighting
         let s = setup(camera, lighting, quality);
         let whole = render_with(&renderer, &s, std::slice::from_ref(&reflectors));
         let mut shuffled = reflectors.clone();
-        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
         for i in (1..shuffled.len()).rev() {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            shuffled.swap(i, (state % (i as u64 + 1)) as usize);
+            shuffled.swap(i, rng.random_range(0..=i));
         }
         for size in [1, 7, 100] {
             let split = render_with(&renderer, &s, &split_packages(&shuffled, size));

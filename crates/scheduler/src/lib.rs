@@ -163,7 +163,7 @@
 //!
 //! A package is created when a worker takes unassigned items (or the first
 //! part of a queued package that is too big for it), directly as `Assigned`.
-//! Each change is made by one function of `scheduler.rs`, through
+//! Each change is made by one function of `scheduler/transitions.rs`, through
 //! `Package::set_state`, which checks [`PackageState::may_become`]:
 //!
 //! | from | to | when | function |

@@ -392,15 +392,10 @@ proptest! {
             w.failures = SimFailures::Never;
         }
         workers.push(SimWorker::with_speed(1.0));
-        let mut rng = seed;
+        let mut rng = common::Rng::new(seed);
         let frame = SimFrame {
             items: (0..items as u32).collect(),
-            costs: (0..items)
-                .map(|_| {
-                    rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                    0.001 + (rng >> 40) as f64 / (1u64 << 24) as f64 * 0.05
-                })
-                .collect(),
+            costs: (0..items).map(|_| 0.001 + rng.unit() * 0.05).collect(),
         };
         let mut jobs = vec![SimJob { id: JobId(1), submit_at: Duration::ZERO, frames: vec![frame.clone(); frames] }];
         for (i, &(at_ms, frames, items)) in later_jobs.iter().enumerate() {

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 use serde::Serialize;
+use vtfarm_imaging::escape_html as escape;
 
 use std::collections::BTreeMap;
 
@@ -287,21 +288,6 @@ fn rank_variants(plan: &StudyPlan, frames: &[FrameRow]) -> Vec<VariantScore> {
             )
     });
     scores
-}
-
-fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// A metric plotted over the eye points.

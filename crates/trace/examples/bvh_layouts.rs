@@ -10,17 +10,21 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
+use rand::{Rng as _, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_scene::{Material, Object, Scene, Triangle};
 use vtfarm_trace::{BuildPreset, BvhLayout, BvhOptions, Ray, SceneBvh};
 
-struct Rng(u64);
+/// Seeded inputs from the workspace's one test generator (`rand_xoshiro`).
+struct Rng(Xoshiro256PlusPlus);
 
 impl Rng {
+    fn new(seed: u64) -> Rng {
+        Rng(Xoshiro256PlusPlus::seed_from_u64(seed))
+    }
+
     fn unit(&mut self) -> f32 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
+        self.0.random()
     }
 
     fn vec3(&mut self, lo: Vec3, hi: Vec3) -> Vec3 {
@@ -116,7 +120,7 @@ fn room() -> Scene {
         );
         push_sphere(&mut scene, centre, 0.4 + 0.1 * (i % 5) as f32, 20, 32);
     }
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng::new(1);
     for _ in 0..20_000 {
         let c = rng.vec3(lo, hi);
         let s = Vec3::splat(0.15);
@@ -135,7 +139,7 @@ fn room() -> Scene {
 /// Camera rays from a corner of the room plus random rays from random points
 /// inside it (a stand-in for secondary and shadow rays).
 fn rays() -> Vec<Ray> {
-    let mut rng = Rng(12345);
+    let mut rng = Rng::new(12345);
     let eye = Vec3::new(-9.0, 3.0, 9.0);
     let forward = (Vec3::new(0.0, 1.5, 0.0) - eye).normalize();
     let right = forward.cross(Vec3::Y).normalize();

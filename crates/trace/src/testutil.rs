@@ -1,26 +1,27 @@
-//! Test helpers: a seeded xorshift generator and a small scene builder.
+//! Test helpers: the seeded test generator and a small scene builder.
 
 use glam::Vec3;
+use rand::{Rng, RngCore, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle};
 
-/// xorshift64*: enough randomness for test inputs, no dependency.
-pub(crate) struct XorShift(u64);
+/// Seeded test inputs: the workspace's one test generator
+/// (`rand_xoshiro`'s xoshiro256++, a reproducible stream per seed) with the
+/// shapes these tests draw.
+pub(crate) struct TestRng(Xoshiro256PlusPlus);
 
-impl XorShift {
+impl TestRng {
     pub(crate) fn new(seed: u64) -> Self {
-        XorShift(seed.max(1))
+        TestRng(Xoshiro256PlusPlus::seed_from_u64(seed))
     }
 
     pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1).
     pub(crate) fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+        self.0.random()
     }
 
     /// Uniform in [lo, hi).

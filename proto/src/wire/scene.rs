@@ -408,7 +408,7 @@ mod tests {
             |s| s.materials[1].ior = f32::INFINITY,
             "material \"default\" ior is not finite",
         );
-        // Finite but absurd: obvhs' build overflowed on it (issue 13).
+        // Finite but absurd: obvhs' build overflows on it.
         check(
             |s| s.positions[3][0] = 1e22,
             "vertex 3: position = [10000000000000000000000, 1, -0.5]: must be finite and within ±1e6 m",

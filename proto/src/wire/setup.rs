@@ -330,7 +330,7 @@ mod tests {
             |v| v.visibility_radius = 1000,
             "vertex visibility_radius = 1000",
         );
-        // Issue 13's runaway values: the same `validate` as the job parser.
+        // Values that would run away: the same `validate` as the job parser.
         check_rejects::<_, VertexSettings>(
             &vertex,
             |v| v.max_depth = u32::MAX,

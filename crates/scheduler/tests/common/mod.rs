@@ -8,6 +8,8 @@ pub(crate) mod sim;
 
 use std::collections::BTreeMap;
 
+use rand::{Rng as _, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use sim::{SimFrame, SimJob, SimReport};
 use vtfarm_scheduler::{Event, JobId, WorkerId};
 
@@ -25,25 +27,18 @@ pub(crate) fn split_pipelined() -> vtfarm_scheduler::SchedulerConfig {
     }
 }
 
-/// A small seeded generator (SplitMix64), so workloads are the same on every run.
-pub(crate) struct Rng(u64);
+/// Seeded workloads from the workspace's one test generator
+/// (`rand_xoshiro`), so they are the same on every run.
+pub(crate) struct Rng(Xoshiro256PlusPlus);
 
 impl Rng {
     pub(crate) fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        Rng(Xoshiro256PlusPlus::seed_from_u64(seed))
     }
 
     /// Uniform in [0, 1).
     pub(crate) fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.random()
     }
 }
 
