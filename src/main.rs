@@ -18,8 +18,7 @@ use vtfarm_render::{RenderOptions, Renderer, output};
 use vtfarm_vertex::Quality;
 
 use crate::shared::{
-    ImageSize, PreparedJob, prepare_job, progress_bar, quality_parser, set_threads,
-    warn_unsupported_reflectors,
+    ImageSize, PreparedJob, prepare_job, quality_parser, set_threads, warn_unsupported_reflectors,
 };
 
 #[derive(Parser)]
@@ -196,7 +195,7 @@ fn render(args: RenderArgs) -> Result<()> {
         .context("a job has at least one frame")?;
 
     warn_unsupported_reflectors(job.method, &scene, &reflectors);
-    let bar = progress_bar(
+    let bar = vtfarm_submit::progress::Progress::new(
         reflectors.len() as u64,
         "reflector triangles",
         job.vertex.quality.name(),
@@ -214,7 +213,7 @@ fn render(args: RenderArgs) -> Result<()> {
             ..RenderOptions::default()
         };
         let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
-        bar.finish_and_clear();
+        bar.finish();
         let components = (format == output::ImageFormat::Exr).then(|| frame.image.components());
         let exposure = job.output.exposure();
         output::write_image(
@@ -249,7 +248,7 @@ fn render(args: RenderArgs) -> Result<()> {
             aux: args.aux.is_some(),
         };
         let frame = farm::render_embedded(embedded, args.local_workers, &bar)?;
-        bar.finish_and_clear();
+        bar.finish();
         let image =
             (frame.image.linear()).context("the master sent an sRGB frame for linear output")?;
         let components = (frame.components.as_ref())

@@ -21,6 +21,7 @@
 mod masks;
 mod report;
 pub mod sun;
+mod table;
 
 use std::path::{Path, PathBuf};
 
@@ -155,6 +156,14 @@ impl StudyPlan {
         (sun, frame % eyes)
     }
 
+    /// "eye 3" or "sun 12 eye 3": a variant's frame for the user.
+    pub fn frame_name(&self, frame: usize) -> String {
+        match self.frame_at(frame) {
+            (Some(sun), eye) => format!("sun {sun} eye {eye}"),
+            (None, eye) => format!("eye {eye}"),
+        }
+    }
+
     /// The sun lighting a frame of the given sun index.
     pub fn sun(&self, sun: Option<usize>) -> Option<SunPosition> {
         sun.map_or(self.base_sun, |s| Some(self.suns[s]))
@@ -279,6 +288,12 @@ fn glare_params(metrics: &MetricsSpec) -> Params {
         },
         ..defaults
     }
+}
+
+/// Reads a study file and plans it ([`plan`]): every variant loaded before
+/// anything renders.
+pub fn plan_file(path: &Path, quality: Option<Quality>) -> Result<StudyPlan, StudyError> {
+    plan(&vtfarm_job::study::load_study(path)?, quality)
 }
 
 /// Loads every variant's scene and makes the frames; `quality` overrides the
