@@ -388,7 +388,9 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let output = args.output.clone();
     let report = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
-        let report = crate::study::render_study(&mut conn.link, &plan, &output).await;
+        let workers = format!("the cluster's workers (master {})", options.master);
+        let report =
+            crate::study::render_and_write(&mut conn.link, &plan, &output, workers).await;
         conn.connection
             .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;

@@ -21,10 +21,18 @@ use crate::shared::{
     ImageSize, PreparedJob, prepare_job, quality_parser, set_threads, warn_unsupported_reflectors,
 };
 
+/// vtfarm's version with the commit it is built from (see build.rs).
+pub(crate) const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (commit ",
+    env!("VTFARM_COMMIT"),
+    ")"
+);
+
 #[derive(Parser)]
 #[command(
     name = "vtfarm",
-    version,
+    version = VERSION,
     about = "Distributed adaptive progressive vertex tracing"
 )]
 struct Cli {

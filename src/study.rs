@@ -41,26 +41,61 @@ pub(crate) struct StudyArgs {
 pub(crate) fn study(args: StudyArgs) -> Result<()> {
     crate::shared::set_threads(args.threads)?;
     let plan = vtfarm_study::plan_file(&args.study, args.quality)?;
+    let threads = (args.threads)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = format!(
+        "local, {} worker(s) sharing {threads} threads",
+        args.local_workers
+    );
     let report = crate::shared::runtime()?.block_on(async {
         let farm = LocalFarm::start(args.local_workers, FarmRules::default());
         let mut link = farm.submitter();
-        let report = render_study(&mut link, &plan, &args.output).await;
+        let report = render_and_write(&mut link, &plan, &args.output, workers).await;
         farm.shutdown().await;
         report
     })?;
     println!("{}", report.table(&args.output));
+    if !report.missing_frames.is_empty() {
+        std::process::exit(130);
+    }
     Ok(())
 }
 
-/// Runs the study's variants over `link` (to an embedded or remote master)
-/// and writes its outputs into `dir`.
-pub(crate) async fn render_study(
+/// Runs the study over `link` (to an embedded or remote master) and writes
+/// its outputs into `dir`, rendered by `workers`; on Ctrl-C, a partial
+/// report of the frames done, which lists those it lacks.
+pub(crate) async fn render_and_write(
     link: &mut Link,
     plan: &StudyPlan,
     dir: &Path,
+    workers: String,
 ) -> Result<StudyReport> {
     let mut writer = StudyWriter::new(plan, dir)?;
+    let interrupted = tokio::select! {
+        result = render_study(link, plan, &mut writer) => {
+            result?;
+            false
+        }
+        _ = tokio::signal::ctrl_c() => true,
+    };
+    let run = vtfarm_study::RunInfo::of_this_process(crate::VERSION, workers);
+    if !interrupted {
+        return Ok(writer.finish(&run)?);
+    }
+    let done = writer.done();
+    let report = writer.finish_partial(&run)?;
+    eprintln!(
+        "interrupted: wrote a partial report of {done} of {} frames (it lists those it lacks)",
+        plan.frames()
+    );
+    Ok(report)
+}
+
+/// Runs the study's variants over `link`, each variant's frames coarse to
+/// fine ([`StudyPlan::frame_order`]), into `writer`.
+async fn render_study(link: &mut Link, plan: &StudyPlan, writer: &mut StudyWriter<'_>) -> Result<()> {
     let bar = Progress::new(plan.frames() as u64, "frames", "");
+    let order = plan.frame_order();
     for (v, variant) in plan.variants.iter().enumerate() {
         bar.set_message(variant.name.clone());
         let data = SceneData::from_scene(&variant.scene);
@@ -69,20 +104,22 @@ pub(crate) async fn render_study(
             method: plan.method,
             aux: true,
         };
+        let setups: Vec<_> = order.iter().map(|&f| variant.setups[f].clone()).collect();
         let job = vtfarm_proto::WireJob {
             kind: vtfarm_proto::WireJobKind::Study,
-            ..wire_job(&name, &data, &variant.setups, &variant.reflectors, options)
+            ..wire_job(&name, &data, &setups, &variant.reflectors, options)
         };
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {
+                let frame = order[f.frame as usize];
                 let written = match &f.components {
                     Some(components) => writer
-                        .frame(v, f.frame as usize, components)
+                        .frame(v, frame, components)
                         .map(|row| row.summary.mean_reflected_luminance_cd_m2),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
-                        eye: plan.frame_at(f.frame as usize).1,
+                        eye: plan.frame_at(frame).1,
                         why: "the master sent no components".into(),
                     }),
                 };
@@ -90,7 +127,7 @@ pub(crate) async fn render_study(
                     Ok(mean) => bar.println(format!(
                         "{} {}: mean reflected luminance {mean:.1} cd/m²",
                         variant.name,
-                        plan.frame_name(f.frame as usize)
+                        plan.frame_name(frame)
                     )),
                     Err(e) => {
                         failure.get_or_insert(e);
@@ -106,5 +143,5 @@ pub(crate) async fn render_study(
         }
     }
     bar.finish();
-    Ok(writer.finish()?)
+    Ok(())
 }
