@@ -389,8 +389,7 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let report = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
         let workers = format!("the cluster's workers (master {})", options.master);
-        let report =
-            crate::study::render_and_write(&mut conn.link, &plan, &output, workers).await;
+        let report = crate::study::render_and_write(&mut conn.link, &plan, &output, workers).await;
         conn.connection
             .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;

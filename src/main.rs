@@ -293,36 +293,12 @@ fn print_summary(
     reflector_triangles: usize,
     quality: Quality,
 ) {
-    let rows: [(&str, String); 10] = [
+    let rows = [
         ("quality", quality.name().to_owned()),
         ("scene triangles", scene_triangles.to_string()),
         ("reflector triangles", reflector_triangles.to_string()),
-        ("traced triangles", s.traced_triangles.to_string()),
-        ("visible vertices", s.visible_vertices.to_string()),
-        ("refined edges", s.refined_edges.to_string()),
-        (
-            "traced samples",
-            format!(
-                "{} ({} vertices + {} filled pixels)",
-                s.samples(),
-                s.vertex_samples,
-                s.filled_pixels
-            ),
-        ),
-        ("reflector pixels", s.pixels.to_string()),
-        (
-            "vertex tracing",
-            format!(
-                "{:.3} s (summed over packages)",
-                s.vertex_time.as_secs_f64()
-            ),
-        ),
-        (
-            "triangle filling",
-            format!("{:.3} s (summed over packages)", s.fill_time.as_secs_f64()),
-        ),
     ];
-    for (name, value) in rows {
+    for (name, value) in rows.into_iter().chain(s.rows()) {
         println!("{name:>20}  {value}");
     }
     for (name, time) in timings {

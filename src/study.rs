@@ -93,7 +93,11 @@ pub(crate) async fn render_and_write(
 
 /// Runs the study's variants over `link`, each variant's frames coarse to
 /// fine ([`StudyPlan::frame_order`]), into `writer`.
-async fn render_study(link: &mut Link, plan: &StudyPlan, writer: &mut StudyWriter<'_>) -> Result<()> {
+async fn render_study(
+    link: &mut Link,
+    plan: &StudyPlan,
+    writer: &mut StudyWriter<'_>,
+) -> Result<()> {
     let bar = Progress::new(plan.frames() as u64, "frames", "");
     let order = plan.frame_order();
     for (v, variant) in plan.variants.iter().enumerate() {

@@ -42,8 +42,7 @@ impl Default for GlintThreshold {
 /// `L_v = 10·E/θ²` holds (CIE 146:2002 gives its simple form for about
 /// 1° to 30°).
 pub const CIE_VALIDITY_DEG: (f32, f32) = (1.0, 30.0);
-pub const CIE_SOURCE: &str =
-    "CIE 146:2002 disability glare, L_v = 10 E / theta^2 (theta in degrees, valid about 1 to 30 deg)";
+pub const CIE_SOURCE: &str = "CIE 146:2002 disability glare, L_v = 10 E / theta^2 (theta in degrees, valid about 1 to 30 deg)";
 
 /// The CIE veiling luminance at the eye (cd/m²) of a glare source giving
 /// `illuminance_lux` at the eye at `theta_deg` from the line of sight.
@@ -114,8 +113,10 @@ impl Glint {
 
     /// The instrument veiled most.
     pub fn worst_instrument(&self) -> Option<&InstrumentVeil> {
-        (self.instruments.iter())
-            .max_by(|a, b| a.veiling_luminance_cd_m2.total_cmp(&b.veiling_luminance_cd_m2))
+        (self.instruments.iter()).max_by(|a, b| {
+            a.veiling_luminance_cd_m2
+                .total_cmp(&b.veiling_luminance_cd_m2)
+        })
     }
 }
 
@@ -191,7 +192,10 @@ mod tests {
             .flat_map(|y| (0..64).map(move |x| (x, y)))
             .map(|(x, y)| f64::from(pixel_solid_angle(&c, x, y)))
             .sum();
-        assert!((sum as f32 / closed - 1.0).abs() < 1e-3, "{sum} vs {closed}");
+        assert!(
+            (sum as f32 / closed - 1.0).abs() < 1e-3,
+            "{sum} vs {closed}"
+        );
     }
 
     /// A synthetic glint: a disc of the sun's angular diameter (0.53°) and
@@ -217,18 +221,30 @@ mod tests {
         let instruments = [
             Instrument {
                 name: "dial 1.5°".into(),
-                pixel: [500.0 + 1.5f32.to_radians().tan() / c.pixel_size_at_unit_depth(), 500.0],
+                pixel: [
+                    500.0 + 1.5f32.to_radians().tan() / c.pixel_size_at_unit_depth(),
+                    500.0,
+                ],
             },
             Instrument {
                 name: "dial at the glint".into(),
                 pixel: [500.0, 500.0],
             },
         ];
-        let g = measure_glint(&sun_disc(&c, l), &c, &GlintThreshold::default(), &instruments);
+        let g = measure_glint(
+            &sun_disc(&c, l),
+            &c,
+            &GlintThreshold::default(),
+            &instruments,
+        );
         assert!(g.reaches_eye());
         assert_eq!(g.peak_luminance_cd_m2, l);
         let closed = l * omega;
-        assert!((g.eye_illuminance_lux / closed - 1.0).abs() < 0.01, "{} vs {closed}", g.eye_illuminance_lux);
+        assert!(
+            (g.eye_illuminance_lux / closed - 1.0).abs() < 0.01,
+            "{} vs {closed}",
+            g.eye_illuminance_lux
+        );
         let near = &g.instruments[0];
         assert!((near.angle_deg - 1.5).abs() < 0.01, "{}", near.angle_deg);
         assert!(near.within_validity);

@@ -76,12 +76,12 @@ mod glint;
 mod images;
 mod ramp;
 
+pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
 pub use glint::{
     CIE_SOURCE, CIE_VALIDITY_DEG, DEFAULT_GLINT_LUMINANCE_CD_M2, DEFAULT_GLINT_SOURCE, Glint,
-    GlintThreshold, Instrument, InstrumentVeil, cie_valid, cie_veiling_luminance, contrast_with_veil,
-    measure_glint, pixel_solid_angle,
+    GlintThreshold, Instrument, InstrumentVeil, cie_valid, cie_veiling_luminance,
+    contrast_with_veil, measure_glint, pixel_solid_angle,
 };
-pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
 pub use images::{
     FONT_COLOR, LogRange, NO_OBJECT_COLOR, PALETTE, format_label, heat_map, heat_map_frame,
     object_color_srgb, object_map, object_map_frame,

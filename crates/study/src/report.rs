@@ -9,8 +9,8 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 
 use crate::{
-    CULPRITS, Coverage, Culprit, FrameRow, MissingFrame, Provenance, StudyError, StudyPlan, StudyReport, SunSetting,
-    VariantScore, WorstCase,
+    CULPRITS, Coverage, Culprit, FrameRow, MissingFrame, Provenance, StudyError, StudyPlan,
+    StudyReport, SunSetting, VariantScore, WorstCase,
 };
 
 /// Worst cases listed per variant.

@@ -484,9 +484,17 @@ fn the_report_says_how_it_was_made_and_warns_below_full() {
             .unwrap();
     let p = &json["provenance"];
     assert_eq!(p["quality"], "preview");
-    assert!(p["quality_warning"].as_str().unwrap().contains("below \"full\""));
+    assert!(
+        p["quality_warning"]
+            .as_str()
+            .unwrap()
+            .contains("below \"full\"")
+    );
     assert_eq!(p["vtfarm_version"], "0.1.0 (commit 0123456789ab)");
-    assert_eq!((p["width"].as_u64(), p["height"].as_u64()), (Some(96), Some(54)));
+    assert_eq!(
+        (p["width"].as_u64(), p["height"].as_u64()),
+        (Some(96), Some(54))
+    );
     assert_eq!(p["method"], plan.method.name());
     assert_eq!(p["hash"], "SHA-256");
     assert_eq!(p["command"], "vtfarm study 'study file.toml'");
@@ -564,7 +572,11 @@ fn after_a_tenth_of_a_sweeps_frames_every_region_of_the_sun_polar_plot_has_a_fra
             let upper = sun.elevation_deg >= 45.0;
             regions.insert((quadrant, upper));
         }
-        assert_eq!(regions.len(), 8, "{azimuths}x{elevations}x{eyes}: {regions:?}");
+        assert_eq!(
+            regions.len(),
+            8,
+            "{azimuths}x{elevations}x{eyes}: {regions:?}"
+        );
         // The nominal eye and the first sun come first.
         assert_eq!(order[0], 0);
     }
@@ -572,7 +584,10 @@ fn after_a_tenth_of_a_sweeps_frames_every_region_of_the_sun_polar_plot_has_a_fra
 
 #[test]
 fn the_order_takes_every_other_index_before_those_between() {
-    assert_eq!((0..8).map(|i| order::level(i, 8)).collect::<Vec<_>>(), [0, 3, 2, 3, 1, 3, 2, 3]);
+    assert_eq!(
+        (0..8).map(|i| order::level(i, 8)).collect::<Vec<_>>(),
+        [0, 3, 2, 3, 1, 3, 2, 3]
+    );
     assert_eq!(order::level(0, 1), 0);
     let plan = sweep_plan(1, 1, 5);
     assert_eq!(plan.frame_order(), [0, 4, 2, 1, 3]);
@@ -596,8 +611,15 @@ fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists
         let start = disc.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
         disc[start..].split('"').next().unwrap().to_owned()
     };
-    let discs: Vec<&str> = html.split("<circle").filter(|c| c.contains("data-value")).collect();
-    assert_eq!(discs.len(), 2 * 2 * 2, "two plots per variant, a disc per sun");
+    let discs: Vec<&str> = html
+        .split("<circle")
+        .filter(|c| c.contains("data-value"))
+        .collect();
+    assert_eq!(
+        discs.len(),
+        2 * 2 * 2,
+        "two plots per variant, a disc per sun"
+    );
     let mut tops = std::collections::BTreeSet::new();
     for disc in &discs {
         let value: f32 = attr(disc, "data-value").parse().unwrap();
@@ -610,7 +632,10 @@ fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists
     let largest = (report.frames.iter())
         .map(|f| f.summary.mean_reflected_luminance_cd_m2)
         .fold(0.0f32, f32::max);
-    assert!(tops.contains(&largest.to_bits()), "{largest} not a scale's top");
+    assert!(
+        tops.contains(&largest.to_bits()),
+        "{largest} not a scale's top"
+    );
     assert!(html.contains("scale shared by all variants"));
 
     // A partial report of the frames so far names the ones it lacks.
@@ -618,10 +643,16 @@ fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists
     let mut writer = StudyWriter::new(&plan, &partial).unwrap();
     let variant = &plan.variants[1];
     let renderer = Renderer::new(Arc::new(variant.scene.clone()), variant.reflectors.clone());
-    let frame = renderer.render(&variant.setups[1], &RenderOptions::default(), &mut |_, _| {});
+    let frame = renderer.render(
+        &variant.setups[1],
+        &RenderOptions::default(),
+        &mut |_, _| {},
+    );
     writer.frame(1, 1, &frame.image).unwrap();
     assert!(matches!(
-        StudyWriter::new(&plan, &partial).unwrap().finish(&test_run()),
+        StudyWriter::new(&plan, &partial)
+            .unwrap()
+            .finish(&test_run()),
         Err(StudyError::Frame { .. })
     ));
     let report = writer.finish_partial(&test_run()).unwrap();
@@ -629,10 +660,23 @@ fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists
     let missing: Vec<(&str, Option<usize>)> = (report.missing_frames.iter())
         .map(|m| (m.variant.as_str(), m.sun_index))
         .collect();
-    assert_eq!(missing, [("current", Some(0)), ("current", Some(1)), ("flat", Some(0))]);
+    assert_eq!(
+        missing,
+        [
+            ("current", Some(0)),
+            ("current", Some(1)),
+            ("flat", Some(0))
+        ]
+    );
     let html = std::fs::read_to_string(partial.join("report.html")).unwrap();
-    assert!(html.contains("Partial report: 1 of 4 frames rendered"), "{}", &html[..2000]);
-    assert!(html.contains("Missing (3): current sun 0 eye 0, current sun 1 eye 0, flat sun 0 eye 0"));
+    assert!(
+        html.contains("Partial report: 1 of 4 frames rendered"),
+        "{}",
+        &html[..2000]
+    );
+    assert!(
+        html.contains("Missing (3): current sun 0 eye 0, current sun 1 eye 0, flat sun 0 eye 0")
+    );
     assert!(html.contains("not rendered</title>"));
     let json = std::fs::read_to_string(partial.join("summary.json")).unwrap();
     assert!(json.contains("\"complete\": false"));
