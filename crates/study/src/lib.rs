@@ -441,7 +441,13 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         base_sun,
         variants,
         params,
-        glint: vtfarm_glare::GlintThreshold::default(),
+        glint: (study.metrics.glint_luminance_cd_m2.as_ref()).map_or_else(
+            vtfarm_glare::GlintThreshold::default,
+            |s| vtfarm_glare::GlintThreshold {
+                luminance_cd_m2: s.value,
+                source: s.source.clone(),
+            },
+        ),
         heat_range,
         method: study.job.method,
         quality: vertex.quality,

@@ -40,10 +40,11 @@ pub(crate) fn input_files(study: &Study) -> Result<Vec<InputFile>, StudyError> {
         files.push(("scene file of the job".into(), p));
     }
     for v in &study.variants {
-        if let Some(p) = scene_file(&v.scene) {
-            if !files.iter().any(|(_, f)| *f == p) {
+        match scene_file(&v.scene) {
+            Some(p) if !files.iter().any(|(_, f)| *f == p) => {
                 files.push((format!("scene file of variant {:?}", v.name), p));
             }
+            _ => {}
         }
     }
     files

@@ -527,7 +527,7 @@ fn luminance_label(v: f32) -> String {
 /// The heat maps' legend (SVG): the colour bar of the shared logarithmic
 /// scale with its luminances, and the glare threshold marked on it.
 fn heat_legend(plan: &StudyPlan) -> String {
-    const BAR_TOP: f32 = 24.0;
+    const BAR_TOP: f32 = 38.0;
     const BAR_HEIGHT: f32 = 150.0;
     const STEPS: usize = 30;
     let range = plan.heat_range;
@@ -560,8 +560,8 @@ fn heat_legend(plan: &StudyPlan) -> String {
     let _ = writeln!(
         svg,
         r##"<rect x="0" y="{y}" width="16" height="8" fill="rgb({r},{g},{b})" stroke="#333"/><text x="24" y="{ty}">&gt; {top}</text>"##,
-        y = BAR_TOP - 11.0,
-        ty = BAR_TOP - 3.0,
+        y = BAR_TOP - 14.0,
+        ty = BAR_TOP - 6.0,
         top = luminance_label(range.max_cd_m2)
     );
     let threshold = plan.params.thresholds.veiling_luminance_cd_m2;

@@ -50,6 +50,33 @@ impl StudyReport {
                 );
             }
         }
+        for s in &self.ranking {
+            let glints: Vec<&crate::FrameRow> = (self.frames.iter())
+                .filter(|f| f.variant == s.variant && f.glint.reaches_eye())
+                .collect();
+            let worst = (glints.iter())
+                .filter_map(|f| f.glint.worst_instrument())
+                .max_by(|a, b| a.veiling_luminance_cd_m2.total_cmp(&b.veiling_luminance_cd_m2));
+            if let Some(w) = worst {
+                let _ = writeln!(
+                    t,
+                    "sun glint at the eye for {}: {} frame(s), worst veiling luminance {:.0} cd/m² on {} at {:.1}°{}",
+                    s.variant,
+                    glints.len(),
+                    w.veiling_luminance_cd_m2,
+                    w.name,
+                    w.angle_deg,
+                    if w.within_validity { "" } else { " (outside the CIE formula's 1-30°)" }
+                );
+            }
+        }
+        if !self.missing_frames.is_empty() {
+            let _ = writeln!(
+                t,
+                "partial: {} frame(s) missing (listed in the report)",
+                self.missing_frames.len()
+            );
+        }
         let _ = write!(
             t,
             "wrote {} frame(s), summary.csv, summary.json and report.html to {}",
