@@ -643,7 +643,10 @@ async fn study_on_one_machine_and_a_cluster(
     let names: Vec<&PathBuf> = a.keys().collect();
     assert_eq!(names, b.keys().collect::<Vec<_>>());
     for (name, bytes) in &a {
-        let (x, y) = (without_provenance(name, bytes), without_provenance(name, &b[name]));
+        let (x, y) = (
+            without_provenance(name, bytes),
+            without_provenance(name, &b[name]),
+        );
         assert!(x == y, "{} differs", name.display());
     }
     a
@@ -662,7 +665,9 @@ fn without_provenance(name: &std::path::Path, bytes: &[u8]) -> Vec<u8> {
         }
         Some("report.html") => {
             let text = std::str::from_utf8(bytes).unwrap();
-            let start = text.find("<section id=\"provenance\">").expect("a provenance section");
+            let start = text
+                .find("<section id=\"provenance\">")
+                .expect("a provenance section");
             let end = start + text[start..].find("</section>").unwrap();
             format!("{}{}", &text[..start], &text[end..]).into_bytes()
         }

@@ -527,7 +527,7 @@ fn luminance_label(v: f32) -> String {
 /// The heat maps' legend (SVG): the colour bar of the shared logarithmic
 /// scale with its luminances, and the glare threshold marked on it.
 fn heat_legend(plan: &StudyPlan) -> String {
-    const BAR_TOP: f32 = 38.0;
+    const BAR_TOP: f32 = 44.0;
     const BAR_HEIGHT: f32 = 150.0;
     const STEPS: usize = 30;
     let range = plan.heat_range;
@@ -560,8 +560,8 @@ fn heat_legend(plan: &StudyPlan) -> String {
     let _ = writeln!(
         svg,
         r##"<rect x="0" y="{y}" width="16" height="8" fill="rgb({r},{g},{b})" stroke="#333"/><text x="24" y="{ty}">&gt; {top}</text>"##,
-        y = BAR_TOP - 14.0,
-        ty = BAR_TOP - 6.0,
+        y = BAR_TOP - 24.0,
+        ty = BAR_TOP - 16.0,
         top = luminance_label(range.max_cd_m2)
     );
     let threshold = plan.params.thresholds.veiling_luminance_cd_m2;
@@ -990,7 +990,7 @@ fn polar_svg(
         svg,
         r#"<svg class="polar" xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="11">"#,
         w = SIZE + 170.0,
-        h = SIZE + 30.0
+        h = SIZE + 50.0
     );
     let _ = writeln!(
         svg,
@@ -1052,7 +1052,7 @@ fn polar_svg(
         );
     }
     // The colour scale, shared by the variants' plots.
-    let (x0, y0, height) = (SIZE + 30.0, 52.0, 200.0);
+    let (x0, y0, height) = (SIZE + 30.0, 80.0, 200.0);
     let [r, g, b] = vtfarm_glare::BEYOND_SCALE_SRGB;
     let _ = writeln!(
         svg,

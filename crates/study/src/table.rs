@@ -56,7 +56,10 @@ impl StudyReport {
                 .collect();
             let worst = (glints.iter())
                 .filter_map(|f| f.glint.worst_instrument())
-                .max_by(|a, b| a.veiling_luminance_cd_m2.total_cmp(&b.veiling_luminance_cd_m2));
+                .max_by(|a, b| {
+                    a.veiling_luminance_cd_m2
+                        .total_cmp(&b.veiling_luminance_cd_m2)
+                });
             if let Some(w) = worst {
                 let _ = writeln!(
                     t,
@@ -66,7 +69,11 @@ impl StudyReport {
                     w.veiling_luminance_cd_m2,
                     w.name,
                     w.angle_deg,
-                    if w.within_validity { "" } else { " (outside the CIE formula's 1-30°)" }
+                    if w.within_validity {
+                        ""
+                    } else {
+                        " (outside the CIE formula's 1-30°)"
+                    }
                 );
             }
         }
