@@ -54,13 +54,8 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
     let frame = owned.frame();
     let methods = standard_methods(job.vertex);
     let methods: Vec<&dyn ReflectionMethod> = methods.iter().map(|m| m.as_ref()).collect();
-    let bar = crate::shared::progress_bar(methods.len() as u64 + 1, "methods", "compare");
-    let bar_style = indicatif::ProgressStyle::with_template(
-        "{spinner} {msg} [{bar:40}] {pos}/{len} methods ({elapsed})",
-    )
-    .expect("template is valid")
-    .progress_chars("=> ");
-    bar.set_style(bar_style);
+    let bar =
+        vtfarm_submit::progress::Progress::new(methods.len() as u64 + 1, "methods", "compare");
     let mut started = false;
     let runs = run_all(
         &frame,
@@ -74,7 +69,7 @@ pub(crate) fn compare(args: CompareArgs) -> Result<()> {
             bar.set_message(name.to_owned());
         },
     );
-    bar.finish_and_clear();
+    bar.finish();
 
     println!(
         "{:<14} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11} {:>12}",

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use indicatif::ProgressBar;
 use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
 use vtfarm_method::MethodKind;
@@ -13,6 +12,7 @@ use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob};
 use vtfarm_render::FrameSetup;
 use vtfarm_render::output::ImageFormat;
 use vtfarm_scene::Scene;
+use vtfarm_submit::progress::Progress;
 use vtfarm_submit::{
     FinishedFrame, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
 };
@@ -131,7 +131,7 @@ pub(crate) struct EmbeddedJob<'a> {
 pub(crate) fn render_embedded(
     job: EmbeddedJob<'_>,
     workers: usize,
-    bar: &ProgressBar,
+    bar: &Progress,
 ) -> Result<FinishedFrame> {
     let EmbeddedJob {
         name,
@@ -250,8 +250,8 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             },
         };
         let bar =
-            crate::shared::progress_bar(reflectors.len() as u64, "reflector triangles", "frame");
-        let say = |line: String| say(&bar, line);
+            Progress::new(reflectors.len() as u64, "reflector triangles", "frame");
+        let say = |line: String| bar.println(line);
         let submitted = std::time::Instant::now();
         let accepted = std::cell::Cell::new(attach);
         let run = run_remote_job(&client, start, |event| match event {
@@ -301,7 +301,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         let result = tokio::select! {
             result = run => result,
             _ = tokio::signal::ctrl_c() => {
-                bar.finish_and_clear();
+                bar.finish();
                 match accepted.get() {
                     Some(job) => eprintln!("{}", again.message(job)),
                     None => eprintln!("interrupted before the master accepted the job"),
@@ -309,7 +309,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 std::process::exit(130);
             }
         };
-        bar.finish_and_clear();
+        bar.finish();
         anyhow::Ok(result?)
     })?;
     let stats: Vec<FrameRecord> = (frames.iter())
@@ -331,16 +331,6 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
     Ok(())
-}
-
-/// A line for the user on stderr: above the progress bar on a terminal,
-/// plainly when there is none (the bar then draws nothing).
-fn say(bar: &ProgressBar, line: String) {
-    if bar.is_hidden() {
-        eprintln!("{line}");
-    } else {
-        bar.println(line);
-    }
 }
 
 /// One machine-readable line on stdout (`submit --json`): stdout then holds
@@ -398,18 +388,19 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
             "--width, --height and --aux apply to job files; a study file sets its own size and always keeps the components"
         );
     }
-    let plan = crate::study::plan_study(&args.job, args.quality)?;
+    let plan = vtfarm_study::plan_file(&args.job, args.quality)?;
     let options = client_options(&args.cluster, &args.master)?;
     let output = args.output.clone();
     let report = runtime()?.block_on(async move {
         let mut conn = connect(&options, Role::Submitter).await?;
-        let report = crate::study::render_study(&mut conn.link, &plan, &output).await;
+        let workers = format!("the cluster's workers (master {})", options.master);
+        let report = crate::study::render_and_write(&mut conn.link, &plan, &output, workers).await;
         conn.connection
             .close(vtfarm_transport::CLOSE_NORMAL, b"done");
         conn.endpoint.wait_idle().await;
         report
     })?;
-    crate::study::print_report(&report, &args.output);
+    println!("{}", report.table(&args.output));
     Ok(())
 }
 

@@ -18,14 +18,21 @@ use vtfarm_render::{RenderOptions, Renderer, output};
 use vtfarm_vertex::Quality;
 
 use crate::shared::{
-    ImageSize, PreparedJob, prepare_job, progress_bar, quality_parser, set_threads,
-    warn_unsupported_reflectors,
+    ImageSize, PreparedJob, prepare_job, quality_parser, set_threads, warn_unsupported_reflectors,
 };
+
+/// vtfarm's version with the commit it is built from (see build.rs).
+pub(crate) const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (commit ",
+    env!("VTFARM_COMMIT"),
+    ")"
+);
 
 #[derive(Parser)]
 #[command(
     name = "vtfarm",
-    version,
+    version = VERSION,
     about = "Distributed adaptive progressive vertex tracing"
 )]
 struct Cli {
@@ -200,7 +207,7 @@ fn render(args: RenderArgs) -> Result<()> {
         .context("a job has at least one frame")?;
 
     warn_unsupported_reflectors(job.method, &scene, &reflectors);
-    let bar = progress_bar(
+    let bar = vtfarm_submit::progress::Progress::new(
         reflectors.len() as u64,
         "reflector triangles",
         job.vertex.quality.name(),
@@ -218,7 +225,7 @@ fn render(args: RenderArgs) -> Result<()> {
             ..RenderOptions::default()
         };
         let frame = renderer.render(&setup, &options, &mut |done, _| bar.set_position(done));
-        bar.finish_and_clear();
+        bar.finish();
         let components = (format == output::ImageFormat::Exr).then(|| frame.image.components());
         let exposure = job.output.exposure();
         output::write_image(
@@ -253,7 +260,7 @@ fn render(args: RenderArgs) -> Result<()> {
             aux: args.aux.is_some(),
         };
         let frame = farm::render_embedded(embedded, args.local_workers, &bar)?;
-        bar.finish_and_clear();
+        bar.finish();
         let image =
             (frame.image.linear()).context("the master sent an sRGB frame for linear output")?;
         let components = (frame.components.as_ref())
@@ -290,36 +297,12 @@ fn print_summary(
     reflector_triangles: usize,
     quality: Quality,
 ) {
-    let rows: [(&str, String); 10] = [
+    let rows = [
         ("quality", quality.name().to_owned()),
         ("scene triangles", scene_triangles.to_string()),
         ("reflector triangles", reflector_triangles.to_string()),
-        ("traced triangles", s.traced_triangles.to_string()),
-        ("visible vertices", s.visible_vertices.to_string()),
-        ("refined edges", s.refined_edges.to_string()),
-        (
-            "traced samples",
-            format!(
-                "{} ({} vertices + {} filled pixels)",
-                s.samples(),
-                s.vertex_samples,
-                s.filled_pixels
-            ),
-        ),
-        ("reflector pixels", s.pixels.to_string()),
-        (
-            "vertex tracing",
-            format!(
-                "{:.3} s (summed over packages)",
-                s.vertex_time.as_secs_f64()
-            ),
-        ),
-        (
-            "triangle filling",
-            format!("{:.3} s (summed over packages)", s.fill_time.as_secs_f64()),
-        ),
     ];
-    for (name, value) in rows {
+    for (name, value) in rows.into_iter().chain(s.rows()) {
         println!("{name:>20}  {value}");
     }
     for (name, time) in timings {

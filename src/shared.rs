@@ -1,14 +1,12 @@
 //! What the subcommands share: loading a job with the command line's
-//! overrides, progress bars and the cube-map reflector warning; the
+//! overrides, the listings' UTC times and the cube-map reflector warning; the
 //! `--quality` parser, thread pool, async runtime and JSON output come from
 //! `vtfarm_bench::support`, which the benchmarks share too.
 
-use std::borrow::Cow;
 use std::path::Path;
 
 use anyhow::Result;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-use indicatif::{ProgressBar, ProgressStyle};
 use vtfarm_render::FrameSetup;
 use vtfarm_vertex::Quality;
 
@@ -126,52 +124,18 @@ pub(crate) fn warn_unsupported_reflectors(
     scene: &vtfarm_scene::Scene,
     reflectors: &[u32],
 ) {
-    use vtfarm_method::MethodKind;
-    if !matches!(method, MethodKind::CubeMap | MethodKind::CubeMapGrid) {
-        return;
+    for warning in vtfarm_cubemap::unsupported_reflector_warnings(method, scene, reflectors) {
+        eprintln!("warning: {warning}");
     }
-    for group in vtfarm_method::reflector_groups(scene, reflectors) {
-        if let Some(warning) = vtfarm_cubemap::classify(scene, &group).warning() {
-            let object = scene.triangles[group[0] as usize].object;
-            let name = &scene.objects[object as usize].name;
-            eprintln!("warning: reflector {name:?}: {warning}");
-        }
-    }
-}
-
-/// A progress bar counting `total` `unit`s (reflector triangles, frames).
-pub(crate) fn progress_bar(
-    total: u64,
-    unit: &str,
-    message: impl Into<Cow<'static, str>>,
-) -> ProgressBar {
-    let template = format!("{{spinner}} {{msg}} [{{bar:40}}] {{pos}}/{{len}} {unit} ({{elapsed}})");
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template(&template)
-            .expect("template is valid")
-            .progress_chars("=> "),
-    );
-    bar.set_message(message);
-    bar
 }
 
 /// Milliseconds since the Unix epoch as `YYYY-MM-DD HH:MM:SS` (UTC), for
-/// listings (the proleptic Gregorian calendar, days to civil date as in
-/// Howard Hinnant's `civil_from_days`).
+/// listings.
 pub(crate) fn utc_time(ms: u64) -> String {
-    let seconds = ms / 1000;
-    let (days, day_seconds) = ((seconds / 86_400) as i64, seconds % 86_400);
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let day_of_era = z.rem_euclid(146_097);
-    let year_of_era =
-        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
-    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
-    let mp = (5 * day_of_year + 2) / 153;
-    let day = day_of_year - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = year_of_era + era * 400 + i64::from(month <= 2);
-    let (h, m, s) = (day_seconds / 3600, day_seconds / 60 % 60, day_seconds % 60);
+    let time = vtfarm_job::study::UtcTime {
+        unix_seconds: (ms / 1000) as i64,
+    };
+    let (year, month, day, h, m, s) = time.civil();
     format!("{year:04}-{month:02}-{day:02} {h:02}:{m:02}:{s:02}")
 }
 

@@ -11,6 +11,7 @@ use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
 use vtfarm_proto::SceneData;
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
+use vtfarm_submit::progress::Progress;
 use vtfarm_submit::{JobEvent, JobOptions, run_job, wire_job};
 use vtfarm_transport::Link;
 use vtfarm_vertex::Quality;
@@ -36,36 +37,69 @@ pub(crate) struct StudyArgs {
     threads: Option<usize>,
 }
 
-/// Reads a study file and loads every variant, before anything renders.
-pub(crate) fn plan_study(path: &Path, quality: Option<Quality>) -> Result<StudyPlan> {
-    let study = vtfarm_job::study::load_study(path)?;
-    Ok(vtfarm_study::plan(&study, quality)?)
-}
-
 /// `vtfarm study`.
 pub(crate) fn study(args: StudyArgs) -> Result<()> {
     crate::shared::set_threads(args.threads)?;
-    let plan = plan_study(&args.study, args.quality)?;
+    let plan = vtfarm_study::plan_file(&args.study, args.quality)?;
+    let threads = (args.threads)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let workers = format!(
+        "local, {} worker(s) sharing {threads} threads",
+        args.local_workers
+    );
     let report = crate::shared::runtime()?.block_on(async {
         let farm = LocalFarm::start(args.local_workers, FarmRules::default());
         let mut link = farm.submitter();
-        let report = render_study(&mut link, &plan, &args.output).await;
+        let report = render_and_write(&mut link, &plan, &args.output, workers).await;
         farm.shutdown().await;
         report
     })?;
-    print_report(&report, &args.output);
+    println!("{}", report.table(&args.output));
+    if !report.missing_frames.is_empty() {
+        std::process::exit(130);
+    }
     Ok(())
 }
 
-/// Runs the study's variants over `link` (to an embedded or remote master)
-/// and writes its outputs into `dir`.
-pub(crate) async fn render_study(
+/// Runs the study over `link` (to an embedded or remote master) and writes
+/// its outputs into `dir`, rendered by `workers`; on Ctrl-C, a partial
+/// report of the frames done, which lists those it lacks.
+pub(crate) async fn render_and_write(
     link: &mut Link,
     plan: &StudyPlan,
     dir: &Path,
+    workers: String,
 ) -> Result<StudyReport> {
     let mut writer = StudyWriter::new(plan, dir)?;
-    let bar = crate::shared::progress_bar(plan.frames() as u64, "frames", "");
+    let interrupted = tokio::select! {
+        result = render_study(link, plan, &mut writer) => {
+            result?;
+            false
+        }
+        _ = tokio::signal::ctrl_c() => true,
+    };
+    let run = vtfarm_study::RunInfo::of_this_process(crate::VERSION, workers);
+    if !interrupted {
+        return Ok(writer.finish(&run)?);
+    }
+    let done = writer.done();
+    let report = writer.finish_partial(&run)?;
+    eprintln!(
+        "interrupted: wrote a partial report of {done} of {} frames (it lists those it lacks)",
+        plan.frames()
+    );
+    Ok(report)
+}
+
+/// Runs the study's variants over `link`, each variant's frames coarse to
+/// fine ([`StudyPlan::frame_order`]), into `writer`.
+async fn render_study(
+    link: &mut Link,
+    plan: &StudyPlan,
+    writer: &mut StudyWriter<'_>,
+) -> Result<()> {
+    let bar = Progress::new(plan.frames() as u64, "frames", "");
+    let order = plan.frame_order();
     for (v, variant) in plan.variants.iter().enumerate() {
         bar.set_message(variant.name.clone());
         let data = SceneData::from_scene(&variant.scene);
@@ -74,20 +108,22 @@ pub(crate) async fn render_study(
             method: plan.method,
             aux: true,
         };
+        let setups: Vec<_> = order.iter().map(|&f| variant.setups[f].clone()).collect();
         let job = vtfarm_proto::WireJob {
             kind: vtfarm_proto::WireJobKind::Study,
-            ..wire_job(&name, &data, &variant.setups, &variant.reflectors, options)
+            ..wire_job(&name, &data, &setups, &variant.reflectors, options)
         };
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {
+                let frame = order[f.frame as usize];
                 let written = match &f.components {
                     Some(components) => writer
-                        .frame(v, f.frame as usize, components)
+                        .frame(v, frame, components)
                         .map(|row| row.summary.mean_reflected_luminance_cd_m2),
                     None => Err(vtfarm_study::StudyError::Frame {
                         variant: v,
-                        eye: plan.frame_at(f.frame as usize).1,
+                        eye: plan.frame_at(frame).1,
                         why: "the master sent no components".into(),
                     }),
                 };
@@ -95,7 +131,7 @@ pub(crate) async fn render_study(
                     Ok(mean) => bar.println(format!(
                         "{} {}: mean reflected luminance {mean:.1} cd/m²",
                         variant.name,
-                        frame_name(plan, f.frame as usize)
+                        plan.frame_name(frame)
                     )),
                     Err(e) => {
                         failure.get_or_insert(e);
@@ -110,58 +146,6 @@ pub(crate) async fn render_study(
             return Err(e).with_context(|| format!("variant {:?}", variant.name));
         }
     }
-    bar.finish_and_clear();
-    Ok(writer.finish()?)
-}
-
-/// "eye 3" or "sun 12 eye 3".
-fn frame_name(plan: &StudyPlan, frame: usize) -> String {
-    match plan.frame_at(frame) {
-        (Some(sun), eye) => format!("sun {sun} eye {eye}"),
-        (None, eye) => format!("eye {eye}"),
-    }
-}
-
-pub(crate) fn print_report(report: &StudyReport, dir: &Path) {
-    println!(
-        "{:<24} {:>12} {:>12} {:>14} {:>14}  glare culprit (share of the glare area)",
-        "variant (best first)", "glare area", "worst area", "low contrast", "mean Lr cd/m²"
-    );
-    let culprit = |culprits: &[vtfarm_study::Culprit]| {
-        culprits.first().map_or("none (no glare)".to_owned(), |c| {
-            format!("{} ({:.1}%)", c.name, c.glare_share * 100.0)
-        })
-    };
-    for s in &report.ranking {
-        println!(
-            "{:<24} {:>11.2}% {:>11.2}% {:>13.2}% {:>14.1}  {}",
-            s.variant,
-            s.mean_glare_area_share * 100.0,
-            s.worst_glare_area_share * 100.0,
-            s.worst_low_contrast_share * 100.0,
-            s.mean_reflected_luminance_cd_m2,
-            culprit(&s.glare_culprits)
-        );
-    }
-    for s in &report.ranking {
-        if let Some(w) = s.worst_cases.first() {
-            // A frame names its sun only in a sweep.
-            let sun = match (w.sun_azimuth_deg, w.sun_elevation_deg) {
-                (Some(a), Some(e)) => format!("sun at azimuth {a:.1}°, elevation {e:.1}°, "),
-                _ => String::new(),
-            };
-            println!(
-                "worst for {}: {sun}eye {}: mean Lr {:.1} cd/m², glare culprit {}",
-                s.variant,
-                w.eye_index,
-                w.mean_reflected_luminance_cd_m2,
-                culprit(&w.glare_culprits)
-            );
-        }
-    }
-    println!(
-        "wrote {} frame(s), summary.csv, summary.json and report.html to {}",
-        report.frames.len(),
-        dir.display()
-    );
+    bar.finish();
+    Ok(())
 }

@@ -81,7 +81,7 @@ pub use maps::{ReflectorMaps, SurfaceSample, TexelKind};
 pub use method::{CubeMapConfig, CubeMapMethod, PreparedReflector};
 pub use reflected::{BACK_SUFFIX, reflected_triangle_flags};
 pub use search::{Region, SearchSettings, VirtualVertex, search};
-pub use shape::{ReflectorShape, classify};
+pub use shape::{ReflectorShape, classify, unsupported_reflector_warnings};
 pub use vertices::GridSettings;
 
 #[cfg(test)]

@@ -40,6 +40,28 @@ impl ReflectorShape {
     }
 }
 
+/// The warnings for a job of `method` whose reflectors are `reflectors`:
+/// one per reflector object the cube-map search does not support (neither
+/// convex nor concave), naming it; none for the other methods.
+pub fn unsupported_reflector_warnings(
+    method: vtfarm_method::MethodKind,
+    scene: &Scene,
+    reflectors: &[TriangleId],
+) -> Vec<String> {
+    use vtfarm_method::MethodKind;
+    if !matches!(method, MethodKind::CubeMap | MethodKind::CubeMapGrid) {
+        return Vec::new();
+    }
+    (vtfarm_method::reflector_groups(scene, reflectors).iter())
+        .filter_map(|group| {
+            let warning = classify(scene, group).warning()?;
+            let object = scene.triangles[group[0] as usize].object;
+            let name = &scene.objects[object as usize].name;
+            Some(format!("reflector {name:?}: {warning}"))
+        })
+        .collect()
+}
+
 /// Mean bends smaller than this fraction of the edge length count as flat.
 const FLAT: f32 = 1e-5;
 /// A kind of bend whose sum is below this share of all bends is noise.

@@ -1,87 +1,270 @@
-//! The glint: a source mirrored toward the eye (the sun's disc in the
-//! cover glass, SAE J1757-1's direct-sunlight case), measured on a
-//! luminance map (cd/m² per pixel, row-major, the camera's size; e.g.
-//! [`crate::reflected_luminance`] of a frame).
+//! Sun glare: the sun's image mirrored in the glass (the glint) as the
+//! driver's eye receives it, from a frame's reflected luminance and its
+//! camera (SAE J1757-1's direct-sunlight case).
 //!
-//! * **Peak luminance**: the brightest pixel's, in cd/m². A pixel the
-//!   disc's image covers wholly has the disc's luminance times the glass's
-//!   reflectance (the sun of E lux: `kr · E / Ω`, Ω its solid angle); a
-//!   pixel it covers in part has its share.
-//! * **Illuminance at the eye**: `E = Σ L · Ω_pixel` over the pixels at or
-//!   above a luminance floor ([`vtfarm_scene::Camera::pixel_solid_angle`]),
-//!   in lux on a plane facing the glint: the quantity the disability-glare
-//!   formulas take. For the sun mirrored by a glass of reflectance kr it is
-//!   `kr · E_sun`, whatever the resolution (the tracer gives a pixel its
-//!   share of the disc).
+//! - The glint is the glass pixels whose reflected luminance `L_r` reaches
+//!   [`GlintThreshold`]; its illuminance at the eye is `E = Σ L_r·Ω` over
+//!   them, `Ω` each pixel's solid angle
+//!   ([`vtfarm_scene::Camera::pixel_solid_angle`]). For the sun mirrored by
+//!   a glass of reflectance kr it is `kr · E_sun` whatever the resolution:
+//!   the tracer gives a pixel its share of the disc.
+//! - The veiling luminance it casts on an instrument follows the CIE
+//!   disability-glare formula `L_v = 10·E/θ²` ([`cie_veiling_luminance`]),
+//!   `θ` in degrees between the glint and the instrument as seen from the
+//!   eye; it holds for roughly 1° < θ < 30° ([`CIE_VALIDITY_DEG`]), and a
+//!   `θ` outside is flagged, never silently used.
+//! - The marking contrast with `L_v` added to both luminances
+//!   ([`contrast_with_veil`]) is the contrast in the direct-sun case.
 
+use glam::Vec3;
 use serde::Serialize;
 use vtfarm_scene::Camera;
 
-/// The glint figures of one luminance map (see the module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Glint {
-    pub peak_luminance_cd_m2: f32,
-    pub eye_illuminance_lux: f64,
-    /// Pixels at or above the floor.
-    pub pixels: usize,
-    /// Their solid angle in steradians.
-    pub solid_angle_sr: f64,
+/// Glass pixels at or above this reflected luminance form the glint.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GlintThreshold {
+    pub luminance_cd_m2: f32,
+    pub source: String,
 }
 
-/// The glint of `luminance_cd_m2` seen by `camera`, over the pixels at or
-/// above `floor_cd_m2` (0 counts every pixel). Non-finite values count as 0.
-///
-/// # Panics
-/// When the map is not the camera's size.
-pub fn glint(luminance_cd_m2: &[f32], camera: &Camera, floor_cd_m2: f32) -> Glint {
-    assert_eq!(
-        luminance_cd_m2.len(),
-        camera.width as usize * camera.height as usize,
-        "a luminance map of the camera's size"
-    );
-    let mut g = Glint::default();
-    for (i, &l) in luminance_cd_m2.iter().enumerate() {
-        let l = if l.is_finite() { l } else { 0.0 };
-        if l <= 0.0 || l < floor_cd_m2 {
+/// Default [`GlintThreshold`]: above any daylit sky or surface seen in the
+/// glass, below the sun's image in a plain glass.
+pub const DEFAULT_GLINT_LUMINANCE_CD_M2: f32 = 100_000.0;
+pub const DEFAULT_GLINT_SOURCE: &str = "vtfarm engineering default: above a bright sky or sunlit surface (at most about 10^4 cd/m2), below the sun's image in a 4% glass (about 6*10^7 cd/m2); the engineer's to set";
+
+impl Default for GlintThreshold {
+    fn default() -> Self {
+        GlintThreshold {
+            luminance_cd_m2: DEFAULT_GLINT_LUMINANCE_CD_M2,
+            source: DEFAULT_GLINT_SOURCE.to_owned(),
+        }
+    }
+}
+
+/// The glare angles (degrees) within which the CIE disability-glare formula
+/// `L_v = 10·E/θ²` holds (CIE 146:2002 gives its simple form for about
+/// 1° to 30°).
+pub const CIE_VALIDITY_DEG: (f32, f32) = (1.0, 30.0);
+pub const CIE_SOURCE: &str = "CIE 146:2002 disability glare, L_v = 10 E / theta^2 (theta in degrees, valid about 1 to 30 deg)";
+
+/// The CIE veiling luminance at the eye (cd/m²) of a glare source giving
+/// `illuminance_lux` at the eye at `theta_deg` from the line of sight.
+pub fn cie_veiling_luminance(illuminance_lux: f32, theta_deg: f32) -> f32 {
+    10.0 * illuminance_lux / (theta_deg * theta_deg)
+}
+
+/// Whether `theta_deg` lies where the CIE formula holds.
+pub fn cie_valid(theta_deg: f32) -> bool {
+    (CIE_VALIDITY_DEG.0..=CIE_VALIDITY_DEG.1).contains(&theta_deg)
+}
+
+/// `CR = (L_m + L_veil) / (L_b + L_veil)`: a marking's contrast with a veil
+/// (reflection, ambient and glare luminances summed) over both.
+pub fn contrast_with_veil(marking_cd_m2: f32, background_cd_m2: f32, veil_cd_m2: f32) -> f32 {
+    (marking_cd_m2 + veil_cd_m2) / (background_cd_m2 + veil_cd_m2)
+}
+
+/// An instrument the glint may veil: its name and where it is in the image
+/// (pixel coordinates of its visible area's centre).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instrument {
+    pub name: String,
+    pub pixel: [f32; 2],
+}
+
+/// The glint's veil on one instrument.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InstrumentVeil {
+    pub name: String,
+    /// Angle between the glint and the instrument seen from the eye.
+    pub angle_deg: f32,
+    /// `L_v = 10·E/θ²` (cd/m²).
+    pub veiling_luminance_cd_m2: f32,
+    /// Whether `angle_deg` lies in [`CIE_VALIDITY_DEG`]; outside it the
+    /// figure is an extrapolation.
+    pub within_validity: bool,
+}
+
+/// The sun glare of one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Glint {
+    /// Glass pixels at or above the glint threshold (0: no glint).
+    pub pixels: usize,
+    pub peak_luminance_cd_m2: f32,
+    /// `Σ L·Ω` over the glint's pixels (lux at the eye, on the plane facing
+    /// the glint).
+    pub eye_illuminance_lux: f32,
+    /// The `L·Ω`-weighted mean direction of the glint (world, unit).
+    pub direction: Option<[f32; 3]>,
+    pub instruments: Vec<InstrumentVeil>,
+}
+
+impl Glint {
+    /// Whether the sun's image reaches the eye in this frame.
+    pub fn reaches_eye(&self) -> bool {
+        self.pixels > 0
+    }
+
+    /// The instrument veiled most.
+    pub fn worst_instrument(&self) -> Option<&InstrumentVeil> {
+        (self.instruments.iter()).max_by(|a, b| {
+            a.veiling_luminance_cd_m2
+                .total_cmp(&b.veiling_luminance_cd_m2)
+        })
+    }
+}
+
+/// Measures the glint of a frame seen by `camera` whose glass pixels have
+/// reflected luminance `reflected_cd_m2` (row-major, 0 off the glass).
+pub fn measure_glint(
+    reflected_cd_m2: &[f32],
+    camera: &Camera,
+    threshold: &GlintThreshold,
+    instruments: &[Instrument],
+) -> Glint {
+    let width = camera.width as usize;
+    let mut glint = Glint::default();
+    let mut sum = Vec3::ZERO;
+    // Summed in f64: a glint of a few bright pixels beside millions of
+    // dim ones loses no digits.
+    let mut illuminance = 0.0f64;
+    for (i, &l) in reflected_cd_m2.iter().enumerate() {
+        if !l.is_finite() || l <= 0.0 || l < threshold.luminance_cd_m2 {
             continue;
         }
-        let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
-        let omega = f64::from(camera.pixel_solid_angle(x, y));
-        g.peak_luminance_cd_m2 = g.peak_luminance_cd_m2.max(l);
-        g.eye_illuminance_lux += f64::from(l) * omega;
-        g.pixels += 1;
-        g.solid_angle_sr += omega;
+        let (x, y) = ((i % width) as u32, (i / width) as u32);
+        let e = l * camera.pixel_solid_angle(x, y);
+        glint.pixels += 1;
+        glint.peak_luminance_cd_m2 = glint.peak_luminance_cd_m2.max(l);
+        illuminance += f64::from(e);
+        sum += camera.pixel_ray(x, y) * e;
     }
-    g
+    glint.eye_illuminance_lux = illuminance as f32;
+    let Some(direction) = sum.try_normalize() else {
+        return glint;
+    };
+    glint.direction = Some(direction.to_array());
+    glint.instruments = (instruments.iter())
+        .map(|instrument| {
+            let [px, py] = instrument.pixel;
+            let to = camera.ray_direction(px, py);
+            let angle_deg = direction.dot(to).clamp(-1.0, 1.0).acos().to_degrees();
+            InstrumentVeil {
+                name: instrument.name.clone(),
+                angle_deg,
+                veiling_luminance_cd_m2: cie_veiling_luminance(
+                    glint.eye_illuminance_lux,
+                    angle_deg,
+                ),
+                within_validity: cie_valid(angle_deg),
+            }
+        })
+        .collect();
+    glint
 }
 
 #[cfg(test)]
 mod tests {
-    use glam::Vec3;
-
     use super::*;
 
-    #[test]
-    fn a_uniform_map_gives_its_luminance_times_the_fields_solid_angle() {
-        let camera = Camera {
+    fn camera(width: u32, height: u32, fov_y_deg: f32) -> Camera {
+        Camera {
             eye: Vec3::ZERO,
-            target: -Vec3::Z,
+            target: Vec3::NEG_Z,
             up: Vec3::Y,
-            fov_y_deg: 30.0,
-            width: 400,
-            height: 300,
-        };
-        let g = glint(&vec![1000.0; 400 * 300], &camera, 0.0);
-        // The field of a w × h rectangle at unit depth: 4·atan(w·h / (4·√(1 + w²/4 + h²/4))) for its half sides.
-        let h = 2.0 * (15f64).to_radians().tan();
-        let w = h * 400.0 / 300.0;
-        let field = 4.0 * ((w * h / 4.0) / (1.0 + w * w / 4.0 + h * h / 4.0).sqrt()).atan();
+            fov_y_deg,
+            width,
+            height,
+        }
+    }
+
+    #[test]
+    fn the_pixels_solid_angles_sum_to_the_images_solid_angle() {
+        // A rectangular pyramid of half-angles a, b subtends
+        // 4·asin(sin a · sin b).
+        let c = camera(64, 48, 40.0);
+        let tb = c.tan_half_fov();
+        let ta = tb * 64.0 / 48.0;
+        let closed = 4.0 * (ta.atan().sin() * tb.atan().sin()).asin();
+        let sum: f64 = (0..48)
+            .flat_map(|y| (0..64).map(move |x| (x, y)))
+            .map(|(x, y)| f64::from(c.pixel_solid_angle(x, y)))
+            .sum();
         assert!(
-            (g.solid_angle_sr / field - 1.0).abs() < 1e-3,
-            "{} vs {field}",
-            g.solid_angle_sr
+            (sum as f32 / closed - 1.0).abs() < 1e-3,
+            "{sum} vs {closed}"
         );
-        assert!((g.eye_illuminance_lux / (1000.0 * field) - 1.0).abs() < 1e-3);
-        assert_eq!(g.peak_luminance_cd_m2, 1000.0);
+    }
+
+    /// A synthetic glint: a disc of the sun's angular diameter (0.53°) and
+    /// luminance `l` at the image centre.
+    fn sun_disc(c: &Camera, l: f32) -> Vec<f32> {
+        let radius = (0.53f32 / 2.0).to_radians();
+        (0..c.height)
+            .flat_map(|y| (0..c.width).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let angle = c.pixel_ray(x, y).angle_between(Vec3::NEG_Z);
+                if angle <= radius { l } else { 0.0 }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_synthetic_sun_glint_gives_its_closed_form_illuminance_and_veil() {
+        // A 0.53° disc of L = 1.5e8 cd/m² (a Kr 0.1 mirror of a 100,000 lx
+        // sun) gives E = L·Ω_disc = Kr·E_sun = 10,000 lx at the eye.
+        let c = camera(1000, 1000, 4.0);
+        let l = 1.5e8;
+        let omega = std::f32::consts::PI * (0.53f32 / 2.0).to_radians().powi(2);
+        let instruments = [
+            Instrument {
+                name: "dial 1.5°".into(),
+                pixel: [
+                    500.0 + 1.5f32.to_radians().tan() / c.pixel_size_at_unit_depth(),
+                    500.0,
+                ],
+            },
+            Instrument {
+                name: "dial at the glint".into(),
+                pixel: [500.0, 500.0],
+            },
+        ];
+        let g = measure_glint(
+            &sun_disc(&c, l),
+            &c,
+            &GlintThreshold::default(),
+            &instruments,
+        );
+        assert!(g.reaches_eye());
+        assert_eq!(g.peak_luminance_cd_m2, l);
+        let closed = l * omega;
+        assert!(
+            (g.eye_illuminance_lux / closed - 1.0).abs() < 0.01,
+            "{} vs {closed}",
+            g.eye_illuminance_lux
+        );
+        let near = &g.instruments[0];
+        assert!((near.angle_deg - 1.5).abs() < 0.01, "{}", near.angle_deg);
+        assert!(near.within_validity);
+        let lv = 10.0 * g.eye_illuminance_lux / (near.angle_deg * near.angle_deg);
+        assert!((near.veiling_luminance_cd_m2 / lv - 1.0).abs() < 1e-5);
+        // At the glint itself θ ≈ 0: outside the formula's range, flagged.
+        assert!(!g.instruments[1].within_validity);
+    }
+
+    #[test]
+    fn a_frame_below_the_threshold_has_no_glint() {
+        let c = camera(50, 50, 30.0);
+        let g = measure_glint(&vec![50_000.0; 2500], &c, &GlintThreshold::default(), &[]);
+        assert_eq!(g, Glint::default());
+        assert!(!g.reaches_eye());
+    }
+
+    #[test]
+    fn the_veil_lowers_the_contrast_towards_one() {
+        assert_eq!(contrast_with_veil(300.0, 100.0, 0.0), 3.0);
+        assert!((contrast_with_veil(300.0, 100.0, 100.0) - 2.0).abs() < 1e-6);
+        assert!(cie_valid(1.0) && cie_valid(30.0) && !cie_valid(0.5) && !cie_valid(31.0));
+        assert_eq!(cie_veiling_luminance(1000.0, 10.0), 100.0);
     }
 }

@@ -173,7 +173,8 @@ impl LogRange {
 /// The heat map of reflected luminance `L_r` in cd/m² on a logarithmic
 /// colour scale, the frame alone (no legend: a report draws it beside the
 /// image, from [`LogRange::ticks`] and [`ramp_color`]): glass pixels take
-/// [`ramp_color`] of their [`LogRange::position`], everything else is black.
+/// [`ramp_color`] of their [`LogRange::position`] ([`crate::beyond_scale_color`]
+/// above its top), everything else is black.
 /// `range` is `Some` for a fixed scale (to compare the frames of a study),
 /// `None` for [`LogRange::below_peak`] of the frame's peak; the range used
 /// comes back with the image.
@@ -187,7 +188,13 @@ pub fn heat_map_frame(
     let peak = lr.iter().copied().fold(0.0f32, f32::max);
     let range = range.unwrap_or_else(|| LogRange::below_peak(peak));
     let mut img = Image::new(input.width, input.height, Vec3::ZERO);
-    paint_glass(&mut img, input, |i| ramp_color(range.position(lr[i])));
+    paint_glass(&mut img, input, |i| {
+        if lr[i] > range.max_cd_m2 {
+            crate::beyond_scale_color()
+        } else {
+            ramp_color(range.position(lr[i]))
+        }
+    });
     Ok((img, range))
 }
 

@@ -72,16 +72,21 @@ use vtfarm_scene::NONE;
 use vtfarm_vertex::Components;
 
 mod font;
-pub mod glint;
+mod glint;
 mod images;
 mod ramp;
 
 pub use font::{GLYPH_HEIGHT, GLYPH_WIDTH, draw_text, text_width};
+pub use glint::{
+    CIE_SOURCE, CIE_VALIDITY_DEG, DEFAULT_GLINT_LUMINANCE_CD_M2, DEFAULT_GLINT_SOURCE, Glint,
+    GlintThreshold, Instrument, InstrumentVeil, cie_valid, cie_veiling_luminance,
+    contrast_with_veil, measure_glint,
+};
 pub use images::{
     FONT_COLOR, LogRange, NO_OBJECT_COLOR, PALETTE, format_label, heat_map, heat_map_frame,
     object_color_srgb, object_map, object_map_frame,
 };
-pub use ramp::{INFERNO_SRGB, ramp_color};
+pub use ramp::{BEYOND_SCALE_SRGB, INFERNO_SRGB, beyond_scale_color, ramp_color};
 
 pub use vtfarm_scene::photometry::{CD_M2_PER_UNIT, luminance};
 

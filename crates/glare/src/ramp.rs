@@ -28,6 +28,16 @@ pub const INFERNO_SRGB: [[f32; 3]; 16] = [
     [0.988362, 0.998364, 0.644924],
 ];
 
+/// The colour of a value above its scale's top (cyan, outside the ramp), so
+/// that a clipped value is never read as the top of the scale.
+pub const BEYOND_SCALE_SRGB: [u8; 3] = [0, 230, 255];
+
+/// [`BEYOND_SCALE_SRGB`] as a linear RGB colour.
+pub fn beyond_scale_color() -> Vec3 {
+    let [r, g, b] = BEYOND_SCALE_SRGB.map(|c| srgb_to_linear(f32::from(c) / 255.0));
+    Vec3::new(r, g, b)
+}
+
 /// The ramp colour at `t` (clamped to [0, 1]; NaN counts as 0), as a
 /// **linear** RGB colour ready for [`vtfarm_imaging::Image`].
 pub fn ramp_color(t: f32) -> Vec3 {

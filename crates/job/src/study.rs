@@ -160,6 +160,8 @@ pub struct MetricsSpec {
     pub min_contrast: Option<Sourced>,
     /// The ambient condition: diffuse illuminance on the display.
     pub ambient_illuminance_lux: Option<Sourced>,
+    /// Reflected luminance from which a glass pixel is the sun's glint.
+    pub glint_luminance_cd_m2: Option<Sourced>,
     /// Diffuse reflectance of the cover glass under the ambient condition.
     pub glass_diffuse_reflectance: Option<f32>,
     /// The heat maps' logarithmic scale (the same for every frame).
@@ -283,6 +285,8 @@ struct RawMetrics {
     min_contrast_source: Option<String>,
     ambient_illuminance_lux: Option<Spanned<f32>>,
     ambient_source: Option<String>,
+    glint_luminance_cd_m2: Option<Spanned<f32>>,
+    glint_luminance_source: Option<String>,
     glass_diffuse_reflectance: Option<Spanned<f32>>,
     heat_min_cd_m2: Option<Spanned<f32>>,
     heat_max_cd_m2: Option<Spanned<f32>>,
@@ -741,6 +745,15 @@ impl Source<'_> {
                     |x| x.is_finite() && x >= 0.0,
                 )?,
                 &raw.ambient_source,
+            ),
+            glint_luminance_cd_m2: sourced(
+                self.check_opt(
+                    "metrics.glint_luminance_cd_m2",
+                    &raw.glint_luminance_cd_m2,
+                    "positive",
+                    positive,
+                )?,
+                &raw.glint_luminance_source,
             ),
             glass_diffuse_reflectance: self.check_opt(
                 "metrics.glass_diffuse_reflectance",

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_glare::glint::{Glint, glint};
+use vtfarm_glare::{Glint, GlintThreshold, measure_glint};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_scene::photometry::{self, directional_intensity};
 use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Scene, TriangleId};
@@ -108,6 +108,15 @@ fn glint_scene(width: u32, between: Option<Material>) -> (Renderer, FrameSetup) 
     (Renderer::new(Arc::new(scene), reflectors), setup)
 }
 
+/// The glint of luminance map `l`: its pixels at or above `floor_cd_m2`.
+fn glint(l: &[f32], camera: &Camera, floor_cd_m2: f32) -> Glint {
+    let threshold = GlintThreshold {
+        luminance_cd_m2: floor_cd_m2,
+        source: "the test's floor".into(),
+    };
+    measure_glint(l, camera, &threshold, &[])
+}
+
 /// The glint of a frame's reflected light, and the angular diameter (°)
 /// of its image: the disc whose second moment about its centre the
 /// image's has, the pixel footprint's share taken out (the tracer gives a
@@ -125,7 +134,7 @@ fn measure(frame: &FrameImage, camera: &Camera) -> (Glint, f64) {
         let theta = f64::from(seen.dot(reflected_axis).clamp(-1.0, 1.0).acos());
         moment += f64::from(l) * f64::from(camera.pixel_solid_angle(x, y)) * theta * theta;
     }
-    moment /= g.eye_illuminance_lux;
+    moment /= f64::from(g.eye_illuminance_lux);
     let footprint = f64::from(camera.pixel_size_at_unit_depth()) / std::f64::consts::PI.sqrt();
     // A uniform disc of radius r has E[θ²] = r²/2; the footprint's adds ρ²/2.
     let radius = (2.0 * moment - footprint * footprint).max(0.0).sqrt();
@@ -148,7 +157,7 @@ fn the_suns_glint_in_a_flat_mirror_lights_the_eye_with_kr_times_e_at_every_resol
                 g.pixels
             );
             assert!(
-                (g.eye_illuminance_lux / expected - 1.0).abs() <= 0.02,
+                (f64::from(g.eye_illuminance_lux) / expected - 1.0).abs() <= 0.02,
                 "{width} px {}: {} lx, expected {expected}",
                 quality.name(),
                 g.eye_illuminance_lux
@@ -183,7 +192,7 @@ fn a_window_of_kt_0_8_on_the_suns_way_passes_0_8_of_the_glint() {
         let frame = render(&renderer, &setup, quality);
         let g = glint(&reflected_cd_m2(&frame), &setup.camera, 0.0);
         assert!(
-            (g.eye_illuminance_lux / expected - 1.0).abs() <= 0.02,
+            (f64::from(g.eye_illuminance_lux) / expected - 1.0).abs() <= 0.02,
             "{}: {} lx, expected {expected}",
             quality.name(),
             g.eye_illuminance_lux

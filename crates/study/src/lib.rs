@@ -18,9 +18,13 @@
 //! function of the frames, so the same study gives byte-identical files on
 //! one machine and on a cluster (no timings in them).
 
+mod glint;
 mod masks;
+pub mod order;
+mod provenance;
 mod report;
 pub mod sun;
+mod table;
 
 use std::path::{Path, PathBuf};
 
@@ -34,6 +38,7 @@ use vtfarm_scene::{Camera, LightKind, Lighting, ObjectId, Scene, TriangleId};
 use vtfarm_vertex::{FrameImage, Quality};
 
 pub use masks::InstrumentMasks;
+pub use provenance::{HASH, InputFile, Provenance, RunInfo, command_line, quality_warning};
 
 /// Why a study could not be planned or written.
 #[derive(Debug, thiserror::Error)]
@@ -125,14 +130,27 @@ pub struct StudyPlan {
     pub suns: Vec<SunPosition>,
     /// Times of the sweep with the sun below the horizon: not rendered.
     pub suns_below_horizon: Vec<UtcTime>,
+    /// A grid sweep's (azimuths, elevations): `suns` holds them elevation
+    /// by elevation.
+    pub sun_grid: Option<(usize, usize)>,
     /// The direction of the base job's sun, if it has one.
     pub base_sun: Option<SunPosition>,
     pub variants: Vec<PlannedVariant>,
     pub params: Params,
+    /// Glass pixels at or above this reflected luminance are the sun's glint.
+    pub glint: vtfarm_glare::GlintThreshold,
     /// The heat maps' logarithmic scale, the same for every frame.
     pub heat_range: LogRange,
     /// The base job's reflection method.
     pub method: vtfarm_method::MethodKind,
+    /// The quality level of every frame (the base job's, or the command
+    /// line's).
+    pub quality: Quality,
+    /// Every frame's image size, pixels.
+    pub width: u32,
+    pub height: u32,
+    /// The files the study was made from, with their hashes.
+    pub inputs: Vec<InputFile>,
     /// The base job's `[output]` exposure of the frames' PNG images.
     pub exposure: vtfarm_imaging::Exposure,
 }
@@ -153,6 +171,14 @@ impl StudyPlan {
         let eyes = self.eyes.len();
         let sun = (!self.suns.is_empty()).then_some(frame / eyes);
         (sun, frame % eyes)
+    }
+
+    /// "eye 3" or "sun 12 eye 3": a variant's frame for the user.
+    pub fn frame_name(&self, frame: usize) -> String {
+        match self.frame_at(frame) {
+            (Some(sun), eye) => format!("sun {sun} eye {eye}"),
+            (None, eye) => format!("eye {eye}"),
+        }
     }
 
     /// The sun lighting a frame of the given sun index.
@@ -281,6 +307,12 @@ fn glare_params(metrics: &MetricsSpec) -> Params {
     }
 }
 
+/// Reads a study file and plans it ([`plan`]): every variant loaded before
+/// anything renders.
+pub fn plan_file(path: &Path, quality: Option<Quality>) -> Result<StudyPlan, StudyError> {
+    plan(&vtfarm_job::study::load_study(path)?, quality)
+}
+
 /// Loads every variant's scene and makes the frames; `quality` overrides the
 /// base job's level.
 pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyError> {
@@ -300,6 +332,13 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
     let base = study.job.load_scene()?;
     let base_sun = base_sun(&base.lighting);
     let (suns, suns_below_horizon) = study.sun.as_ref().map(sun_positions).unwrap_or_default();
+    let sun_grid = match &study.sun {
+        Some(SunSweep::Grid {
+            azimuths_deg,
+            elevations_deg,
+        }) => Some((azimuths_deg.len(), elevations_deg.len())),
+        _ => None,
+    };
     if study.sun.is_some() {
         if base_sun.is_none() {
             return Err(StudyError::NoSun {
@@ -402,8 +441,20 @@ pub fn plan(study: &Study, quality: Option<Quality>) -> Result<StudyPlan, StudyE
         base_sun,
         variants,
         params,
+        glint: (study.metrics.glint_luminance_cd_m2.as_ref()).map_or_else(
+            vtfarm_glare::GlintThreshold::default,
+            |s| vtfarm_glare::GlintThreshold {
+                luminance_cd_m2: s.value,
+                source: s.source.clone(),
+            },
+        ),
         heat_range,
         method: study.job.method,
+        quality: vertex.quality,
+        width: cameras.first().map_or(0, |c| c.width),
+        height: cameras.first().map_or(0, |c| c.height),
+        inputs: provenance::input_files(study)?,
+        sun_grid,
         exposure: study.job.output.exposure(),
     })
 }
@@ -466,6 +517,11 @@ pub struct FrameRow {
     pub heat_map: String,
     pub object_map: String,
     pub summary: Summary,
+    /// The sun's glint in the frame (none below the glint threshold).
+    pub glint: vtfarm_glare::Glint,
+    /// The marking contrast with the glint's veiling luminance added (the
+    /// direct-sun case); `None` without a glint or markings.
+    pub direct_sun_contrast: Option<f32>,
 }
 
 /// Measures frames and writes their outputs.
@@ -575,6 +631,14 @@ impl<'a> StudyWriter<'a> {
         ] {
             vtfarm_imaging::write_npy_f32(&dir.join(format!("{name}.npy")), &shape, data)?;
         }
+        let (glint, direct_sun_contrast) = glint::frame_glint(
+            &planned.scene,
+            &camera,
+            &masks,
+            &analysis.reflected_luminance,
+            &analysis.summary,
+            &self.plan.glint,
+        );
         // A frame names its sun only in a sweep (see `SunSetting`).
         let sun_position = sun.map(|s| self.plan.suns[s]);
         let row = FrameRow {
@@ -589,36 +653,75 @@ impl<'a> StudyWriter<'a> {
             heat_map: format!("{rel}/heat.png"),
             object_map: format!("{rel}/objects.png"),
             summary: analysis.summary,
+            glint,
+            direct_sun_contrast,
         };
         let slot = &mut self.rows[variant * self.plan.frames_per_variant() + frame_index];
         Ok(slot.insert(row))
     }
 
-    /// Writes `summary.csv`, `summary.json` and `report.html`; fails when a
-    /// frame is missing.
-    pub fn finish(self) -> Result<StudyReport, StudyError> {
-        let per_variant = self.plan.frames_per_variant();
-        let plan = self.plan;
-        let rows = self
-            .rows
-            .into_iter()
-            .enumerate()
-            .map(|(i, r)| {
-                r.ok_or_else(|| StudyError::Frame {
-                    variant: i / per_variant,
-                    eye: plan.frame_at(i % per_variant).1,
-                    why: "never rendered".into(),
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        report::write_all(self.plan, &self.dir, rows)
+    /// Writes `summary.csv`, `summary.json` and `report.html` made as `run`
+    /// says; fails naming the first frame that is missing.
+    pub fn finish(self, run: &RunInfo) -> Result<StudyReport, StudyError> {
+        if let Some(m) = self.missing().first() {
+            return Err(StudyError::Frame {
+                variant: m.variant_index,
+                eye: m.eye_index,
+                why: "never rendered".into(),
+            });
+        }
+        self.finish_partial(run)
     }
+
+    /// The frames not measured yet, in frame order.
+    pub fn missing(&self) -> Vec<MissingFrame> {
+        let per_variant = self.plan.frames_per_variant();
+        (self.rows.iter().enumerate())
+            .filter(|(_, r)| r.is_none())
+            .map(|(i, _)| {
+                let (sun_index, eye_index) = self.plan.frame_at(i % per_variant);
+                MissingFrame {
+                    variant_index: i / per_variant,
+                    variant: self.plan.variants[i / per_variant].name.clone(),
+                    sun_index,
+                    eye_index,
+                }
+            })
+            .collect()
+    }
+
+    /// Frames measured so far.
+    pub fn done(&self) -> usize {
+        self.rows.iter().filter(|r| r.is_some()).count()
+    }
+
+    /// Writes the summaries and the report from the frames measured so far
+    /// (a study not finished: interrupted, or followed while it runs); they
+    /// list the frames they lack.
+    pub fn finish_partial(self, run: &RunInfo) -> Result<StudyReport, StudyError> {
+        let missing = self.missing();
+        let rows = self.rows.into_iter().flatten().collect();
+        let provenance = provenance::Provenance::new(self.plan, run);
+        report::write_all(self.plan, &self.dir, rows, &provenance, missing)
+    }
+}
+
+/// A frame a report lacks.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MissingFrame {
+    #[serde(skip)]
+    pub variant_index: usize,
+    pub variant: String,
+    pub sun_index: Option<usize>,
+    pub eye_index: usize,
 }
 
 /// What [`StudyWriter::finish`] wrote.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct StudyReport {
     pub frames: Vec<FrameRow>,
+    /// Frames not rendered (a partial report); empty when complete.
+    pub missing_frames: Vec<MissingFrame>,
     /// Variants best first.
     pub ranking: Vec<VariantScore>,
 }

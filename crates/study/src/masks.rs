@@ -10,6 +10,9 @@ pub struct InstrumentMasks {
     pub instrument: Vec<bool>,
     /// Instrument pixels that show a marking object.
     pub marking: Vec<bool>,
+    /// Each instrument object seen through the glass, with the centre of
+    /// its pixels (pixel coordinates): where the sun's glint veils it.
+    pub centres: Vec<(ObjectId, [f32; 2])>,
 }
 
 impl InstrumentMasks {
@@ -29,6 +32,7 @@ impl InstrumentMasks {
             is_reflector[t as usize] = true;
         }
         let behind = vtfarm_vertex::behind_id_buffer(scene, camera, &is_reflector);
+        let instrument_objects = instrument;
         let instrument: Vec<bool> = behind
             .object
             .iter()
@@ -41,9 +45,24 @@ impl InstrumentMasks {
             .zip(&instrument)
             .map(|(o, &i)| i && marking.contains(o))
             .collect();
+        let width = camera.width as usize;
+        let centres = (instrument_objects.iter())
+            .filter_map(|&object| {
+                let (mut n, mut sx, mut sy) = (0usize, 0f64, 0f64);
+                for (i, _) in (behind.object.iter().zip(glass).enumerate())
+                    .filter(|(_, (o, g))| **g && **o == object)
+                {
+                    n += 1;
+                    sx += (i % width) as f64 + 0.5;
+                    sy += (i / width) as f64 + 0.5;
+                }
+                (n > 0).then(|| (object, [(sx / n as f64) as f32, (sy / n as f64) as f32]))
+            })
+            .collect();
         InstrumentMasks {
             instrument,
             marking,
+            centres,
         }
     }
 }

@@ -10,8 +10,8 @@ use vtfarm_imaging::escape_html as escape;
 use std::collections::BTreeMap;
 
 use crate::{
-    CULPRITS, Coverage, Culprit, FrameRow, StudyError, StudyPlan, StudyReport, SunSetting,
-    VariantScore, WorstCase,
+    CULPRITS, Coverage, Culprit, FrameRow, MissingFrame, Provenance, StudyError, StudyPlan,
+    StudyReport, SunSetting, VariantScore, WorstCase,
 };
 
 /// Worst cases listed per variant.
@@ -52,16 +52,32 @@ struct CsvRow<'a> {
     culprit_3_excess_cd_m2_px: Option<f32>,
     most_covering_object: &'a str,
     most_covering_object_coverage_share: Option<f32>,
+    glint_pixels: usize,
+    glint_peak_luminance_cd_m2: f32,
+    glint_eye_illuminance_lux: f32,
+    glint_worst_instrument: &'a str,
+    glint_worst_veiling_luminance_cd_m2: Option<f32>,
+    glint_worst_angle_deg: Option<f32>,
+    glint_worst_within_cie_validity: Option<bool>,
+    direct_sun_contrast: Option<f32>,
 }
 
 #[derive(Serialize)]
 struct JsonSummary<'a> {
     study: &'a str,
+    /// How the report was made (inputs with hashes, quality, workers).
+    provenance: &'a Provenance,
+    /// Whether every frame of the study is in it.
+    complete: bool,
+    missing_frames: &'a [MissingFrame],
     cd_m2_per_unit: f32,
     thresholds: &'a vtfarm_glare::Thresholds,
     ambient: &'a vtfarm_glare::AmbientCondition,
     heat_min_cd_m2: f32,
     heat_max_cd_m2: f32,
+    /// The sun glint's threshold and the veiling-luminance formula.
+    glint_threshold: &'a vtfarm_glare::GlintThreshold,
+    glint_veiling_formula: &'static str,
     /// Eye points, metres.
     eyes_m: Vec<[f32; 3]>,
     /// How the sun was set: a sweep, a fixed sun from the base job, or none.
@@ -76,16 +92,23 @@ pub(crate) fn write_all(
     plan: &StudyPlan,
     dir: &Path,
     frames: Vec<FrameRow>,
+    provenance: &Provenance,
+    missing_frames: Vec<MissingFrame>,
 ) -> Result<StudyReport, StudyError> {
     let ranking = rank_variants(plan, &frames);
     write_file(&dir.join("summary.csv"), &csv_text(&frames)?)?;
     let json = JsonSummary {
         study: &plan.name,
+        provenance,
+        complete: missing_frames.is_empty(),
+        missing_frames: &missing_frames,
         cd_m2_per_unit: plan.params.cd_m2_per_unit,
         thresholds: &plan.params.thresholds,
         ambient: &plan.params.ambient,
         heat_min_cd_m2: plan.heat_range.min_cd_m2,
         heat_max_cd_m2: plan.heat_range.max_cd_m2,
+        glint_threshold: &plan.glint,
+        glint_veiling_formula: vtfarm_glare::CIE_SOURCE,
         eyes_m: plan.eyes.iter().map(|e| e.to_array()).collect(),
         sun: plan.sun_setting(),
         suns_below_horizon: plan
@@ -98,8 +121,13 @@ pub(crate) fn write_all(
     };
     let json = serde_json::to_string_pretty(&json).expect("summaries serialize");
     write_file(&dir.join("summary.json"), &json)?;
-    write_file(&dir.join("report.html"), &html(plan, &frames, &ranking)?)?;
-    Ok(StudyReport { frames, ranking })
+    let html = html(plan, &frames, &ranking, provenance, &missing_frames)?;
+    write_file(&dir.join("report.html"), &html)?;
+    Ok(StudyReport {
+        frames,
+        missing_frames,
+        ranking,
+    })
 }
 
 fn write_file(path: &Path, text: &str) -> Result<(), StudyError> {
@@ -119,6 +147,7 @@ fn csv_text(frames: &[FrameRow]) -> Result<String, StudyError> {
         let name = |k: usize| culprit(k).map_or("", |c| c.name.as_str());
         let glare_share = |k: usize| culprit(k).map(|c| c.glare_share);
         let excess = |k: usize| culprit(k).map(|c| c.excess_luminance_cd_m2);
+        let worst = f.glint.worst_instrument();
         writer
             .serialize(CsvRow {
                 variant: &f.variant,
@@ -152,6 +181,14 @@ fn csv_text(frames: &[FrameRow]) -> Result<String, StudyError> {
                 culprit_3_excess_cd_m2_px: excess(2),
                 most_covering_object: covering.as_ref().map_or("", |c| c.name.as_str()),
                 most_covering_object_coverage_share: covering.as_ref().map(|c| c.coverage_share),
+                glint_pixels: f.glint.pixels,
+                glint_peak_luminance_cd_m2: f.glint.peak_luminance_cd_m2,
+                glint_eye_illuminance_lux: f.glint.eye_illuminance_lux,
+                glint_worst_instrument: worst.map_or("", |w| w.name.as_str()),
+                glint_worst_veiling_luminance_cd_m2: worst.map(|w| w.veiling_luminance_cd_m2),
+                glint_worst_angle_deg: worst.map(|w| w.angle_deg),
+                glint_worst_within_cie_validity: worst.map(|w| w.within_validity),
+                direct_sun_contrast: f.direct_sun_contrast,
             })
             .map_err(|e| StudyError::Plot(format!("CSV: {e}")))?;
     }
@@ -476,7 +513,7 @@ fn luminance_label(v: f32) -> String {
 /// The heat maps' legend (SVG): the colour bar of the shared logarithmic
 /// scale with its luminances, and the glare threshold marked on it.
 fn heat_legend(plan: &StudyPlan) -> String {
-    const BAR_TOP: f32 = 24.0;
+    const BAR_TOP: f32 = 44.0;
     const BAR_HEIGHT: f32 = 150.0;
     const STEPS: usize = 30;
     let range = plan.heat_range;
@@ -505,6 +542,14 @@ fn heat_legend(plan: &StudyPlan) -> String {
             label = luminance_label(value)
         );
     }
+    let [r, g, b] = vtfarm_glare::BEYOND_SCALE_SRGB;
+    let _ = writeln!(
+        svg,
+        r##"<rect x="0" y="{y}" width="16" height="8" fill="rgb({r},{g},{b})" stroke="#333"/><text x="24" y="{ty}">&gt; {top}</text>"##,
+        y = BAR_TOP - 24.0,
+        ty = BAR_TOP - 16.0,
+        top = luminance_label(range.max_cd_m2)
+    );
     let threshold = plan.params.thresholds.veiling_luminance_cd_m2;
     let t = range.position(threshold);
     if threshold > range.min_cd_m2 && threshold < range.max_cd_m2 {
@@ -581,6 +626,8 @@ fn html(
     plan: &StudyPlan,
     frames: &[FrameRow],
     ranking: &[VariantScore],
+    provenance: &Provenance,
+    missing: &[MissingFrame],
 ) -> Result<String, StudyError> {
     let mut h = String::new();
     let t = &plan.params.thresholds;
@@ -606,18 +653,22 @@ table.objects td, table.objects th {{ border: none; padding: 1px 4px; text-align
 .swatch {{ display: inline-block; width: 12px; height: 12px; border: 1px solid #555; }}
 .legend span {{ margin-right: 1.5em; white-space: nowrap; }}
 figure {{ display: inline-block; margin: 0 1em 1em 0; }}
+.warning {{ background: #fff3cd; border: 1px solid #c9a227; padding: 6px 10px; }}
+table.provenance td {{ text-align: left; }}
 </style></head><body>
 <h1>{title}</h1>
-<p>{variants} design variant(s) &times; {eyes} eye point(s){suns} = {frames} frames. Study file <code>{file}</code>.</p>
+{made}<p>{variants} design variant(s) &times; {eyes} eye point(s){suns} = {frames} frames. Study file <code>{file}</code>.</p>
 <p>{sun}</p>
 <p>Luminances in cd/m² ({scale} cd/m² per unit of rendered radiance). The reflected luminance L<sub>r</sub> is the light the glass reflects toward the eye, its back surface's ghost image included.
 Thresholds: glare where L<sub>r</sub> &gt; {veil} cd/m² ({veil_source});
 markings hard to read where CR = (L<sub>m</sub> + L<sub>r</sub> + L<sub>a</sub>) / (L<sub>b</sub> + L<sub>r</sub> + L<sub>a</sub>) &lt; {cr} ({cr_source}),
 under {lux} lx ambient on a glass of diffuse reflectance {rho}, L<sub>a</sub> = {la:.1} cd/m² ({ambient_source}).
 Heat maps share one logarithmic scale, {heat_min} to {heat_max} cd/m².
+The sun's glint is the glass pixels with L<sub>r</sub> &ge; {glint} cd/m² ({glint_source}); its illuminance at the eye E is &Sigma; L&middot;&Omega; over them, and its veiling luminance on each instrument L<sub>v</sub> = 10&middot;E/&theta;² ({cie}); a &theta; outside 1&ndash;30&deg; is flagged. The contrast with L<sub>v</sub> adds it to both luminances (the direct-sun case).
 The culprits of the glare are the objects whose reflections cause it: ranked by the glass area over the threshold they cause, then the luminance they add above it; each share is of the glare area.</p>
 "#,
         title = escape(&plan.name),
+        made = provenance_html(provenance, missing, plan.frames()),
         variants = plan.variants.len(),
         eyes = plan.eyes.len(),
         suns = if plan.suns.is_empty() {
@@ -639,6 +690,9 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
         ambient_source = escape(&plan.params.ambient.source),
         heat_min = plan.heat_range.min_cd_m2,
         heat_max = plan.heat_range.max_cd_m2,
+        glint = plan.glint.luminance_cd_m2,
+        glint_source = escape(&plan.glint.source),
+        cie = escape(vtfarm_glare::CIE_SOURCE),
     );
 
     h.push_str("<h2>Ranking of the variants</h2>\n<p>Best first: by the mean glass area over the glare threshold, then the worst share of the instruments under the contrast threshold, then the mean reflected luminance.</p>\n<table><tr><th>variant</th><th>mean glare area<br>(% of glass)</th><th>worst glare area<br>(% of glass)</th><th>worst low-contrast area<br>(% of instruments)</th><th>mean L<sub>r</sub><br>(cd/m²)</th><th>peak L<sub>r</sub><br>(cd/m²)</th><th>glare culprits<br>(% of the glare area)</th><th>covers most glass<br>(% of glass, any luminance)</th></tr>\n");
@@ -688,12 +742,14 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
                 .join(", ")
         );
     }
-    // The polar plots of all variants share their colour scales.
+    // The polar plots of all variants share their colour scales: each
+    // covers every variant's values.
     let polar_tops: Vec<f32> = POLAR_PLOTS
         .iter()
         .map(|plot| {
-            per_sun(plan, frames, None, plot.value)
-                .into_iter()
+            (plan.variants.iter())
+                .flat_map(|v| per_sun(plan, frames, &v.name, plot.value))
+                .flatten()
                 .fold(0.0f32, f32::max)
         })
         .collect();
@@ -759,6 +815,54 @@ The culprits of the glare are the objects whose reflections cause it: ranked by 
     Ok(h)
 }
 
+/// The report's header block: a warning for a quality below `full`, the
+/// frames a partial report lacks, and how the report was made.
+fn provenance_html(p: &Provenance, missing: &[MissingFrame], frames: usize) -> String {
+    let mut h = String::new();
+    if let Some(w) = &p.quality_warning {
+        let _ = writeln!(h, "<p class=\"warning\">Warning: {}.</p>", escape(w));
+    }
+    if !missing.is_empty() {
+        let list: Vec<String> = (missing.iter())
+            .map(|m| {
+                let sun = m.sun_index.map_or(String::new(), |s| format!(" sun {s}"));
+                format!("{}{sun} eye {}", escape(&m.variant), m.eye_index)
+            })
+            .collect();
+        let _ = writeln!(
+            h,
+            "<p class=\"warning\">Partial report: {} of {frames} frames rendered; every figure below is over those only. Missing ({}): {}.</p>",
+            frames - missing.len(),
+            missing.len(),
+            list.join(", ")
+        );
+    }
+    let inputs: String = (p.inputs.iter())
+        .map(|f| {
+            format!(
+                "<tr><th>{}</th><td><code>{}</code><br>{} {}</td></tr>",
+                escape(&f.role),
+                escape(&f.path),
+                p.hash,
+                f.sha256
+            )
+        })
+        .collect();
+    let _ = writeln!(
+        h,
+        "<section id=\"provenance\"><table class=\"provenance\"><tr><th>made by</th><td>vtfarm {version}</td></tr><tr><th>date</th><td>{date}</td></tr><tr><th>quality, method</th><td>{quality}, {method}</td></tr><tr><th>resolution</th><td>{w} &times; {h} px</td></tr>{inputs}<tr><th>rendered by</th><td>{workers}</td></tr><tr><th>command</th><td><code>{command}</code></td></tr></table></section>",
+        version = escape(&p.vtfarm_version),
+        date = escape(&p.date),
+        quality = p.quality,
+        method = p.method,
+        w = p.width,
+        h = p.height,
+        workers = escape(&p.workers),
+        command = escape(&p.command),
+    );
+    h
+}
+
 /// The column widths of a frame table (px): a first column of
 /// `first_width` (none for 0), the eye, then [`frame_cells`]' columns, so
 /// that every legend sits beside its map within 1400 px.
@@ -781,7 +885,7 @@ const FRAME_HEADERS: &str = "<th>rendered image</th><th>reflected luminance L<su
 fn frame_cells(plan: &StudyPlan, f: &FrameRow) -> String {
     let s = &f.summary;
     format!(
-        "<td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><div class=\"map\"><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a>{heat_legend}</div></td><td><div class=\"map\"><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a>{object_legend}</div></td><td>mean L<sub>r</sub> {mean:.1} cd/m²<br>peak L<sub>r</sub> {peak:.1} cd/m²<br>glare area {area:.2}% of glass<br>low contrast {low:.2}% of instruments<br>glare culprits:<br>{culprits}<br>covers most glass:<br>{covering}</td>",
+        "<td><a href=\"{img}\"><img src=\"{img}\" alt=\"image\"></a></td><td><div class=\"map\"><a href=\"{heat}\"><img src=\"{heat}\" alt=\"heat map\"></a>{heat_legend}</div></td><td><div class=\"map\"><a href=\"{obj}\"><img src=\"{obj}\" alt=\"object map\"></a>{object_legend}</div></td><td>mean L<sub>r</sub> {mean:.1} cd/m²<br>peak L<sub>r</sub> {peak:.1} cd/m²<br>glare area {area:.2}% of glass<br>low contrast {low:.2}% of instruments<br>glare culprits:<br>{culprits}<br>covers most glass:<br>{covering}{glint}</td>",
         img = escape(&f.image),
         heat = escape(&f.heat_map),
         obj = escape(&f.object_map),
@@ -793,6 +897,7 @@ fn frame_cells(plan: &StudyPlan, f: &FrameRow) -> String {
         low = s.low_contrast_share * 100.0,
         culprits = culprits_text(&Culprit::of_frame(s)),
         covering = coverage_text(&Coverage::of_frame(s)),
+        glint = crate::glint::glint_html(f),
     )
 }
 
@@ -829,30 +934,33 @@ const POLAR_PLOTS: [PolarPlot; 2] = [
     },
 ];
 
-/// Per sun position, the mean of `value` over the eye points of `variant`
-/// (of every variant for `None`).
+/// Per sun position, the mean of `value` over the rendered eye points of
+/// `variant`; `None` where none is rendered (a partial report).
 fn per_sun(
     plan: &StudyPlan,
     frames: &[FrameRow],
-    variant: Option<&str>,
+    variant: &str,
     value: fn(&FrameRow) -> f32,
-) -> Vec<f32> {
+) -> Vec<Option<f32>> {
     let mut sums = vec![(0.0f32, 0usize); plan.suns.len()];
     for f in frames {
-        if let (Some(s), true) = (f.sun_index, variant.is_none_or(|v| v == f.variant)) {
+        if let (Some(s), true) = (f.sun_index, variant == f.variant) {
             sums[s].0 += value(f);
             sums[s].1 += 1;
         }
     }
     sums.into_iter()
-        .map(|(sum, n)| sum / n.max(1) as f32)
+        .map(|(sum, n)| (n > 0).then(|| sum / n as f32))
         .collect()
 }
 
 /// A polar plot (SVG) of a metric over the sun's azimuth (relative to the
 /// vehicle, ahead at the top, clockwise) and elevation (the horizon at the
 /// rim, the zenith in the centre): one disc per sun position, coloured from
-/// 0 to `top` (the mean over the eye points).
+/// 0 to `top` (the mean over the eye points), in the beyond-scale colour
+/// above it, hollow where not rendered; a ring marks the sun positions
+/// whose glint reaches the eye. Every disc carries its value and the
+/// scale's top (`data-value`, `data-top`).
 fn polar_svg(
     plan: &StudyPlan,
     frames: &[FrameRow],
@@ -866,15 +974,15 @@ fn polar_svg(
     let mut svg = String::new();
     let _ = writeln!(
         svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="11">"#,
-        w = SIZE + 150.0,
-        h = SIZE + 30.0
+        r#"<svg class="polar" xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="11">"#,
+        w = SIZE + 170.0,
+        h = SIZE + 50.0
     );
     let _ = writeln!(
         svg,
         r#"<text x="{x}" y="14" text-anchor="middle" font-size="12">{}</text>"#,
         escape(plot.title),
-        x = (SIZE + 150.0) / 2.0
+        x = (SIZE + 170.0) / 2.0
     );
     for elevation in [0.0f32, 30.0, 60.0] {
         let r = RIM * (90.0 - elevation) / 90.0;
@@ -898,20 +1006,48 @@ fn polar_svg(
             r##"<line x1="{cx}" y1="{cy}" x2="{x:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{lx:.1}" y="{ly:.1}" text-anchor="middle" dominant-baseline="middle">{label}</text>"##
         );
     }
-    let values = per_sun(plan, frames, Some(variant), plot.value);
-    for (sun, value) in plan.suns.iter().zip(&values) {
+    let values = per_sun(plan, frames, variant, plot.value);
+    let glints = crate::glint::suns_with_glint(frames, variant);
+    for (s, (sun, value)) in plan.suns.iter().zip(&values).enumerate() {
         let (x, y) = polar_point(cx, cy, RIM, sun.azimuth_deg, sun.elevation_deg);
-        let t = if top > 0.0 { value / top } else { 0.0 };
-        let [r, g, b] = vtfarm_imaging::encode_srgb8(vtfarm_glare::ramp_color(t));
+        let (a, e) = (sun.azimuth_deg, sun.elevation_deg);
+        if glints.contains(&s) {
+            let _ = writeln!(
+                svg,
+                r##"<circle cx="{x:.1}" cy="{y:.1}" r="11" fill="none" stroke="#d00" stroke-width="2.5"/>"##
+            );
+        }
+        let Some(value) = *value else {
+            let _ = writeln!(
+                svg,
+                r##"<circle cx="{x:.1}" cy="{y:.1}" r="7" fill="none" stroke="#999" stroke-dasharray="2,2"><title>azimuth {a:.1}, elevation {e:.1}: not rendered</title></circle>"##
+            );
+            continue;
+        };
+        let beyond = value > top;
+        let [r, g, b] = if beyond {
+            vtfarm_glare::BEYOND_SCALE_SRGB
+        } else {
+            let t = if top > 0.0 { value / top } else { 0.0 };
+            vtfarm_imaging::encode_srgb8(vtfarm_glare::ramp_color(t))
+        };
         let _ = writeln!(
             svg,
-            r##"<circle cx="{x:.1}" cy="{y:.1}" r="7" fill="rgb({r},{g},{b})" stroke="#333"><title>azimuth {a:.1}, elevation {e:.1}: {value:.5}</title></circle>"##,
-            a = sun.azimuth_deg,
-            e = sun.elevation_deg
+            r##"<circle cx="{x:.1}" cy="{y:.1}" r="7" fill="rgb({r},{g},{b})" stroke="#333" data-value="{value}" data-top="{top}" data-beyond="{beyond}"><title>azimuth {a:.1}, elevation {e:.1}: {label}</title></circle>"##,
+            label = (plot.label)(value),
         );
     }
-    // The colour scale.
-    let (x0, y0, height) = (SIZE + 30.0, 40.0, 200.0);
+    // The colour scale, shared by the variants' plots.
+    let (x0, y0, height) = (SIZE + 30.0, 80.0, 200.0);
+    let [r, g, b] = vtfarm_glare::BEYOND_SCALE_SRGB;
+    let _ = writeln!(
+        svg,
+        r##"<text x="{x0}" y="{t0}">scale shared by all variants</text><rect x="{x0}" y="{y:.1}" width="14" height="8" fill="rgb({r},{g},{b})" stroke="#333"/><text x="{tx}" y="{ty:.1}">above the scale</text>"##,
+        t0 = y0 - 34.0,
+        y = y0 - 26.0,
+        tx = x0 + 18.0,
+        ty = y0 - 18.5,
+    );
     for k in 0..20 {
         let t = 1.0 - k as f32 / 19.0;
         let [r, g, b] = vtfarm_imaging::encode_srgb8(vtfarm_glare::ramp_color(t));
@@ -924,10 +1060,16 @@ fn polar_svg(
     }
     let _ = writeln!(
         svg,
-        r#"<text x="{x0}" y="{y1}">{top}</text><text x="{x0}" y="{y2}">0</text></svg>"#,
+        r##"<text x="{tx}" y="{y1}">{top}</text><text x="{tx}" y="{y2}">0</text><circle cx="{cx2}" cy="{y3}" r="7" fill="none" stroke="#999" stroke-dasharray="2,2"/><text x="{tx}" y="{y4}">not rendered</text><circle cx="{cx2}" cy="{y5}" r="9" fill="none" stroke="#d00" stroke-width="2.5"/><text x="{tx}" y="{y6}">sun glint at the eye</text></svg>"##,
         top = (plot.label)(top),
-        y1 = y0 - 4.0,
-        y2 = y0 + height + 12.0
+        tx = x0 + 18.0,
+        y1 = y0 + 8.0,
+        y2 = y0 + height,
+        cx2 = x0 + 7.0,
+        y3 = y0 + height + 22.0,
+        y4 = y0 + height + 26.0,
+        y5 = y0 + height + 44.0,
+        y6 = y0 + height + 48.0,
     );
     svg
 }

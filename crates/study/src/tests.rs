@@ -28,6 +28,7 @@ fn study_plan(dir: &Path, eyes: &[Vec3], variants: &str) -> StudyPlan {
         points.join(", ")
     );
     let file = dir.join("study.toml");
+    std::fs::write(&file, &text).unwrap();
     let study = parse_study(&text, &file).unwrap();
     plan(&study, None).unwrap()
 }
@@ -46,7 +47,17 @@ fn run(plan: &StudyPlan, dir: &Path) -> (StudyReport, Vec<Vec<FrameImage>>) {
         }
         images.push(frames);
     }
-    (writer.finish().unwrap(), images)
+    (writer.finish(&test_run()).unwrap(), images)
+}
+
+/// A run as a caller would describe it.
+fn test_run() -> RunInfo {
+    RunInfo {
+        version: "0.1.0 (commit 0123456789ab)".into(),
+        date: "2026-12-07T05:00:00Z".into(),
+        workers: "local, 1 worker(s) sharing 2 threads".into(),
+        command: command_line(["vtfarm", "study", "study file.toml"].map(String::from)),
+    }
 }
 
 fn mean_lr(report: &StudyReport, variant: &str, eye: usize) -> f32 {
@@ -452,4 +463,221 @@ fn the_stock_glass_names_the_side_window_as_culprit_and_its_fixed_sun_once() {
     );
     assert!(html.contains("<th>x (m)</th>"), "units on the eye table");
     assert!(html.contains("glare threshold"), "threshold lines");
+}
+
+#[test]
+fn the_report_says_how_it_was_made_and_warns_below_full() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("job.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let file = dir.path().join("study.toml");
+    let text = "[study]\njob = \"job.toml\"\nwidth = 96\nheight = 54\n[eyes]\npoints = [[-0.55, 1.4, 0.1]]\n[[variants]]\nname = \"flat\"\nglass = \"flat\"\n";
+    std::fs::write(&file, text).unwrap();
+    let plan = plan_file(&file, Some(Quality::Preview)).unwrap();
+    let (report, _) = run(&plan, dir.path());
+    assert!(report.missing_frames.is_empty());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("summary.json")).unwrap())
+            .unwrap();
+    let p = &json["provenance"];
+    assert_eq!(p["quality"], "preview");
+    assert!(
+        p["quality_warning"]
+            .as_str()
+            .unwrap()
+            .contains("below \"full\"")
+    );
+    assert_eq!(p["vtfarm_version"], "0.1.0 (commit 0123456789ab)");
+    assert_eq!(
+        (p["width"].as_u64(), p["height"].as_u64()),
+        (Some(96), Some(54))
+    );
+    assert_eq!(p["method"], plan.method.name());
+    assert_eq!(p["hash"], "SHA-256");
+    assert_eq!(p["command"], "vtfarm study 'study file.toml'");
+    // The study file's hash is SHA-256 of its bytes (a known digest).
+    use sha2::Digest;
+    let digest = hex::encode(sha2::Sha256::digest(text.as_bytes()));
+    assert_eq!(p["inputs"][0]["role"], "study file");
+    assert_eq!(p["inputs"][0]["sha256"], digest.as_str());
+    assert_eq!(p["inputs"][1]["role"], "job file");
+    assert_eq!(json["complete"], true);
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(
+        html.contains("<p class=\"warning\">Warning: quality &quot;preview&quot; is below"),
+        "{}",
+        &html[..3000]
+    );
+    assert!(html.contains(&digest) && html.contains("local, 1 worker(s) sharing 2 threads"));
+    // At `full` no warning.
+    let full = plan_file(&file, Some(Quality::Full)).unwrap();
+    let provenance = Provenance::new(&full, &test_run());
+    assert_eq!(provenance.quality_warning, None);
+}
+
+/// A plan of a sun grid and eye points, without variants (the order
+/// depends on the sweep only).
+fn sweep_plan(azimuths: usize, elevations: usize, eyes: usize) -> StudyPlan {
+    let suns = (0..elevations)
+        .flat_map(|e| {
+            (0..azimuths).map(move |a| SunPosition {
+                azimuth_deg: a as f32 * 360.0 / azimuths as f32,
+                elevation_deg: 5.0 + 80.0 * e as f32 / elevations as f32,
+                time: None,
+            })
+        })
+        .collect();
+    StudyPlan {
+        name: "sweep".into(),
+        file: "study.toml".into(),
+        eyes: vec![Vec3::ZERO; eyes],
+        suns,
+        suns_below_horizon: Vec::new(),
+        sun_grid: Some((azimuths, elevations)),
+        base_sun: None,
+        variants: Vec::new(),
+        params: Params::default(),
+        glint: vtfarm_glare::GlintThreshold::default(),
+        heat_range: LogRange {
+            min_cd_m2: 1.0,
+            max_cd_m2: 10.0,
+        },
+        method: vtfarm_method::MethodKind::VertexTracing,
+        quality: Quality::Full,
+        width: 1,
+        height: 1,
+        inputs: Vec::new(),
+        exposure: vtfarm_imaging::Exposure::default(),
+    }
+}
+
+#[test]
+fn after_a_tenth_of_a_sweeps_frames_every_region_of_the_sun_polar_plot_has_a_frame() {
+    // The polar plot's regions: four azimuth quadrants (ahead, right,
+    // behind, left) by the lower and upper half of the swept elevations.
+    for (azimuths, elevations, eyes) in [(8, 2, 7), (24, 4, 7), (16, 3, 3), (36, 6, 9)] {
+        let plan = sweep_plan(azimuths, elevations, eyes);
+        let order = plan.frame_order();
+        let mut sorted = order.clone();
+        sorted.sort();
+        assert_eq!(sorted, (0..plan.frames_per_variant()).collect::<Vec<_>>());
+        let tenth = plan.frames_per_variant().div_ceil(10);
+        let mut regions = std::collections::BTreeSet::new();
+        for &frame in &order[..tenth] {
+            let sun = plan.suns[plan.frame_at(frame).0.unwrap()];
+            let quadrant = ((sun.azimuth_deg + 45.0).rem_euclid(360.0) / 90.0) as usize;
+            let upper = sun.elevation_deg >= 45.0;
+            regions.insert((quadrant, upper));
+        }
+        assert_eq!(
+            regions.len(),
+            8,
+            "{azimuths}x{elevations}x{eyes}: {regions:?}"
+        );
+        // The nominal eye and the first sun come first.
+        assert_eq!(order[0], 0);
+    }
+}
+
+#[test]
+fn the_order_takes_every_other_index_before_those_between() {
+    assert_eq!(
+        (0..8).map(|i| order::level(i, 8)).collect::<Vec<_>>(),
+        [0, 3, 2, 3, 1, 3, 2, 3]
+    );
+    assert_eq!(order::level(0, 1), 0);
+    let plan = sweep_plan(1, 1, 5);
+    assert_eq!(plan.frame_order(), [0, 4, 2, 1, 3]);
+}
+
+#[test]
+fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists_its_gaps() {
+    let dir = tempfile::tempdir().unwrap();
+    // The current glass mirrors far more than the flat one: one shared
+    // scale must cover both.
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        "[[variants]]\nname = \"current\"\nglass = \"current\"\n\
+         [[variants]]\nname = \"flat\"\nglass = \"flat\"\n\
+         [sun]\nazimuths = [90, 180]\nelevations = [10]\n",
+    );
+    let (report, _) = run(&plan, dir.path());
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    let attr = |disc: &str, name: &str| -> String {
+        let start = disc.find(&format!("{name}=\"")).unwrap() + name.len() + 2;
+        disc[start..].split('"').next().unwrap().to_owned()
+    };
+    let discs: Vec<&str> = html
+        .split("<circle")
+        .filter(|c| c.contains("data-value"))
+        .collect();
+    assert_eq!(
+        discs.len(),
+        2 * 2 * 2,
+        "two plots per variant, a disc per sun"
+    );
+    let mut tops = std::collections::BTreeSet::new();
+    for disc in &discs {
+        let value: f32 = attr(disc, "data-value").parse().unwrap();
+        let top: f32 = attr(disc, "data-top").parse().unwrap();
+        let beyond = attr(disc, "data-beyond") == "true";
+        assert!(value <= top || beyond, "{value} beyond {top} unmarked");
+        tops.insert(top.to_bits());
+    }
+    // The mean-luminance scale ends at the largest value of any variant.
+    let largest = (report.frames.iter())
+        .map(|f| f.summary.mean_reflected_luminance_cd_m2)
+        .fold(0.0f32, f32::max);
+    assert!(
+        tops.contains(&largest.to_bits()),
+        "{largest} not a scale's top"
+    );
+    assert!(html.contains("scale shared by all variants"));
+
+    // A partial report of the frames so far names the ones it lacks.
+    let partial = dir.path().join("partial");
+    let mut writer = StudyWriter::new(&plan, &partial).unwrap();
+    let variant = &plan.variants[1];
+    let renderer = Renderer::new(Arc::new(variant.scene.clone()), variant.reflectors.clone());
+    let frame = renderer.render(
+        &variant.setups[1],
+        &RenderOptions::default(),
+        &mut |_, _| {},
+    );
+    writer.frame(1, 1, &frame.image).unwrap();
+    assert!(matches!(
+        StudyWriter::new(&plan, &partial)
+            .unwrap()
+            .finish(&test_run()),
+        Err(StudyError::Frame { .. })
+    ));
+    let report = writer.finish_partial(&test_run()).unwrap();
+    assert_eq!(report.frames.len(), 1);
+    let missing: Vec<(&str, Option<usize>)> = (report.missing_frames.iter())
+        .map(|m| (m.variant.as_str(), m.sun_index))
+        .collect();
+    assert_eq!(
+        missing,
+        [
+            ("current", Some(0)),
+            ("current", Some(1)),
+            ("flat", Some(0))
+        ]
+    );
+    let html = std::fs::read_to_string(partial.join("report.html")).unwrap();
+    assert!(
+        html.contains("Partial report: 1 of 4 frames rendered"),
+        "{}",
+        &html[..2000]
+    );
+    assert!(
+        html.contains("Missing (3): current sun 0 eye 0, current sun 1 eye 0, flat sun 0 eye 0")
+    );
+    assert!(html.contains("not rendered</title>"));
+    let json = std::fs::read_to_string(partial.join("summary.json")).unwrap();
+    assert!(json.contains("\"complete\": false"));
 }

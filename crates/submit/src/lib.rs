@@ -20,6 +20,8 @@
 //! follower learns of a user's pause, resume or cancel
 //! (`JobStateChanged`): a cancel ends it with [`JobError::Cancelled`].
 
+pub mod progress;
+
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 

@@ -66,6 +66,29 @@ pub struct PackageStats {
 }
 
 impl PackageStats {
+    /// The counters and times as (name, value) rows for a summary table.
+    pub fn rows(&self) -> [(&'static str, String); 7] {
+        let summed =
+            |t: std::time::Duration| format!("{:.3} s (summed over packages)", t.as_secs_f64());
+        [
+            ("traced triangles", self.traced_triangles.to_string()),
+            ("visible vertices", self.visible_vertices.to_string()),
+            ("refined edges", self.refined_edges.to_string()),
+            (
+                "traced samples",
+                format!(
+                    "{} ({} vertices + {} filled pixels)",
+                    self.samples(),
+                    self.vertex_samples,
+                    self.filled_pixels
+                ),
+            ),
+            ("reflector pixels", self.pixels.to_string()),
+            ("vertex tracing", summed(self.vertex_time)),
+            ("triangle filling", summed(self.fill_time)),
+        ]
+    }
+
     /// All traced samples (the paper's "pixel" column of Table 1).
     pub fn samples(&self) -> u64 {
         self.vertex_samples + self.filled_pixels
