@@ -426,6 +426,7 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
         setup_micros: 0,
         triangle_samples: vec![],
         stage,
+        mesh: None,
     };
     let outside = ResultPixels::Bitmap(WireBitmap::from(&SparseBitmap {
         x0: 500,

@@ -246,6 +246,7 @@ mod tests {
                 setup_micros: 56,
                 triangle_samples: vec![3, 0, 17],
                 stage: Some(crate::WireQuality::Refine),
+                mesh: None,
             }),
             Message::PackageResult(PackageResult {
                 id: 100,
@@ -258,6 +259,7 @@ mod tests {
                 setup_micros: 0,
                 triangle_samples: vec![1, 2],
                 stage: None,
+                mesh: None,
             }),
             Message::PackageFailed(PackageFailed {
                 id: 98,

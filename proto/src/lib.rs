@@ -43,16 +43,16 @@ pub use message::{
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
-    WireLight, WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats,
-    WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings,
-    check_triangle_ids,
+    WireLight, WireLightKind, WireLighting, WireMaterial, WireMesh, WireMeshPart, WireMethod,
+    WirePackageStats, WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle,
+    WireVertexSettings, check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
-/// to a message's encoding or to a rule both ends follow (10: the frames a
-/// worker keeps, [`KeptFrames`], which the master mirrors); the master
+/// to a message's encoding or to a rule both ends follow (11: a progressive
+/// stage's reflector meshes in its result, `PackageResult::mesh`); the master
 /// refuses other versions with [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 10;
+pub const PROTOCOL_VERSION: u32 = 11;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

@@ -917,6 +917,7 @@ impl MasterCore {
             setup_micros: _,
             triangle_samples,
             stage,
+            mesh,
         } = result;
         let owned = |t| in_flight.triangles.binary_search(&t).is_ok();
         // A progressive frame's result is the stage its package's copy
@@ -980,6 +981,12 @@ impl MasterCore {
             if let Err(e) = self.scheduler.package_arrived(now, worker, PackageId(id)) {
                 debug!(package = id, "stage result ignored: {e}");
                 return;
+            }
+            if let Some(mesh) = &mesh {
+                let triangles = &in_flight.triangles;
+                if let Err(e) = (self.views).mesh_arrived(job_id, stage, triangles, mesh) {
+                    warn!(worker = %self.name(conn), package = id, "mesh left out: {e}");
+                }
             }
             let current = (self.jobs.get_mut(&job_id))
                 .and_then(|j| j.assembly_mut(frame))

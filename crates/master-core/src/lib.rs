@@ -17,7 +17,8 @@
 //! - `ahead`: base frames made ahead of a batch job's tail, and the
 //!   master's measured time per base frame, for the scheduler's tail rule.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
-//!   `stages`: a progressive frame's stages composited in place.
+//!   `stages`: a progressive frame's stages composited in place;
+//!   [`stream`]: the stage messages the view streams to the page.
 
 mod ahead;
 mod core;
@@ -27,6 +28,7 @@ pub mod jobs;
 pub mod record;
 mod rules;
 mod stages;
+pub mod stream;
 pub mod telemetry;
 pub mod view;
 

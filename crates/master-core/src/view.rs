@@ -16,17 +16,19 @@
 //! they join it when they come, unless a newer stage is on view by then
 //! (only the stage shown gets figures). No I/O, no clock.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{JobScene, SceneHash, WireFrameSetup, WireJob};
+use vtfarm_proto::{JobScene, SceneHash, WireError, WireFrameSetup, WireJob, WireMesh};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_vertex::{FrameImage, Quality};
+use vtfarm_vertex::{FrameImage, Quality, StageMesh};
+
+use crate::stream::{Overlay, StageHeader, encode_mesh, encode_overlay};
 
 /// Half the side of the box the eye moves in, in metres, around the picked
 /// job's eye (each axis is clamped to it). About a driver's head movement.
@@ -166,6 +168,28 @@ pub struct Views {
     /// their page faults too, on the way to the screen.
     spare: Option<FrameImage>,
     outcomes: VecDeque<ViewOutcome>,
+    /// The current move's meshes by (stage, reflector triangle) until
+    /// their stage is complete: a repeated copy's mesh replaces the same.
+    meshes: BTreeMap<(usize, u32), StageMesh>,
+    /// The current move's stage messages, in order.
+    stream: StageStream,
+}
+
+/// The stage messages of the move on view ([`crate::stream`]), each
+/// encoded once; a newer move starts an empty list, so nothing of an
+/// outdated move is streamed after it.
+#[derive(Clone, Debug, Default)]
+pub struct StageStream {
+    /// The move (0 before the first).
+    pub generation: u64,
+    pub messages: Vec<StreamedStage>,
+}
+
+/// One stage message and its stage.
+#[derive(Clone, Debug)]
+pub struct StreamedStage {
+    pub quality: Quality,
+    pub bytes: Arc<[u8]>,
 }
 
 impl Views {
@@ -238,6 +262,11 @@ impl Views {
     /// The planned move is queued as farm job `job`.
     pub(crate) fn started(&mut self, planned: PlannedView, job: u64) {
         let generation = self.current.as_ref().map_or(0, |c| c.generation) + 1;
+        self.meshes.clear();
+        self.stream = StageStream {
+            generation,
+            messages: Vec::new(),
+        };
         self.current = Some(CurrentView {
             generation,
             source: planned.source,
@@ -279,8 +308,28 @@ impl Views {
         };
         let reached = (current.stages_done..=stage).map(|s| current.stages[s]);
         let reached: Vec<Quality> = reached.collect();
+        let first = current.stages_done;
         current.stages_done = stage + 1;
         let generation = current.generation;
+        let eye = Vec3::from(current.eye);
+        for (s, &quality) in (first..).zip(&reached) {
+            let header = StageHeader {
+                generation,
+                quality,
+                eye,
+            };
+            let bytes = if quality < Quality::Full {
+                let meshes: Vec<StageMesh> = (self.meshes.range((s, 0)..=(s, u32::MAX)))
+                    .map(|(_, m)| m.clone())
+                    .collect();
+                encode_mesh(&header, &meshes)
+            } else {
+                encode_overlay(&header, &Overlay::of(image))
+            };
+            self.meshes.retain(|&(m, _), _| m > s);
+            let bytes = bytes.into();
+            self.stream.messages.push(StreamedStage { quality, bytes });
+        }
         let frame = Arc::new(match self.spare.take() {
             Some(mut spare) => {
                 spare.clone_from(image);
@@ -311,6 +360,36 @@ impl Views {
                 quality,
             });
         }
+    }
+
+    /// A checked result of stage `stage` of farm job `job` brought its
+    /// package's meshes: kept for the stage's message if the job is the
+    /// current move's and the stage still to come. Only the parts of
+    /// `triangles` (the package's, sorted) count.
+    pub(crate) fn mesh_arrived(
+        &mut self,
+        job: u64,
+        stage: usize,
+        triangles: &[u32],
+        mesh: &WireMesh,
+    ) -> Result<(), WireError> {
+        let Some(current) = self.current.as_ref().filter(|c| c.job == job) else {
+            return Ok(());
+        };
+        if stage < current.stages_done {
+            return Ok(());
+        }
+        for part in mesh.decode()? {
+            if triangles.binary_search(&part.triangle).is_ok() {
+                self.meshes.insert((stage, part.triangle), part);
+            }
+        }
+        Ok(())
+    }
+
+    /// The stage messages of the move on view, so far.
+    pub fn stream(&self) -> &StageStream {
+        &self.stream
     }
 
     /// A newer move cancelled the current move's job.
