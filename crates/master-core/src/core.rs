@@ -1115,7 +1115,7 @@ impl MasterCore {
         let (views, scene, now, t0) = (&mut self.views, &job.scene, self.now, *started);
         let show = |stage, image: &Assembled| {
             if let Some(image) = image.components() {
-                views.stage_finished(job_id, stage, image, scene);
+                views.stage_finished(job_id, stage, image, scene, now);
             }
             // On the timeline: from the stage before it to this one.
             let shown = |p: &&FramePhase| p.kind == PhaseKind::Shown;
@@ -1755,7 +1755,8 @@ impl MasterCore {
                 let mut done = j.assembling.remove(index);
                 // A progressive frame's stages went to the view as they came.
                 if let (Some(image), None) = (done.image.components(), &done.progress) {
-                    (self.views).stage_finished(job.0, frame as usize, image, &j.scene);
+                    let now = self.now;
+                    (self.views).stage_finished(job.0, frame as usize, image, &j.scene, now);
                     self.ask_for_view_figures();
                 }
                 info!(job = job.0, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
@@ -2304,7 +2305,7 @@ impl MasterCore {
         self.next_job += 1;
         self.table.insert(entry);
         self.telemetry.counters.jobs_submitted += 1;
-        self.views.started(planned, id);
+        self.views.started(planned, id, now);
         self.pump();
         Ok(id)
     }

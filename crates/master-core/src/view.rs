@@ -18,6 +18,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
+use std::time::Duration;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -182,6 +183,8 @@ pub struct Views {
 pub struct StageStream {
     /// The move (0 before the first).
     pub generation: u64,
+    /// When the core queued the move.
+    moved: Duration,
     pub messages: Vec<StreamedStage>,
 }
 
@@ -190,6 +193,9 @@ pub struct StageStream {
 pub struct StreamedStage {
     pub quality: Quality,
     pub bytes: Arc<[u8]>,
+    /// From the move's arrival to the message's making: the server's part
+    /// of the stage (`vtfarm bench view`).
+    pub after: Duration,
 }
 
 impl Views {
@@ -204,6 +210,17 @@ impl Views {
     /// The pickable jobs: id and name, oldest first.
     pub fn sources(&self) -> impl Iterator<Item = (u64, &str)> {
         self.sources.iter().map(|(id, s)| (*id, s.name.as_str()))
+    }
+
+    /// The kept source `job`, or without one the current move's source,
+    /// else the newest kept.
+    pub fn source(&self, job: Option<u64>) -> Option<(u64, &ViewSource)> {
+        let job = job.or(self.current.as_ref().map(|c| c.source));
+        let found = match job {
+            Some(job) => self.sources.iter().find(|(id, _)| *id == job),
+            None => self.sources.back(),
+        };
+        found.map(|(id, s)| (*id, s))
     }
 
     /// The job a move should be rendered as, checked: one frame, at the
@@ -260,11 +277,12 @@ impl Views {
     }
 
     /// The planned move is queued as farm job `job`.
-    pub(crate) fn started(&mut self, planned: PlannedView, job: u64) {
+    pub(crate) fn started(&mut self, planned: PlannedView, job: u64, now: Duration) {
         let generation = self.current.as_ref().map_or(0, |c| c.generation) + 1;
         self.meshes.clear();
         self.stream = StageStream {
             generation,
+            moved: now,
             messages: Vec::new(),
         };
         self.current = Some(CurrentView {
@@ -299,6 +317,7 @@ impl Views {
         stage: usize,
         image: &FrameImage,
         scene: &Arc<Scene>,
+        now: Duration,
     ) {
         let Some(current) = self.current.as_mut().filter(|c| c.job == job) else {
             return;
@@ -328,7 +347,12 @@ impl Views {
             };
             self.meshes.retain(|&(m, _), _| m > s);
             let bytes = bytes.into();
-            self.stream.messages.push(StreamedStage { quality, bytes });
+            let after = now.saturating_sub(self.stream.moved);
+            (self.stream.messages).push(StreamedStage {
+                quality,
+                bytes,
+                after,
+            });
         }
         let frame = Arc::new(match self.spare.take() {
             Some(mut spare) => {
@@ -517,16 +541,16 @@ mod tests {
         let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
         let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
 
-        views.stage_finished(7, 0, &frame(0.25), &scene);
+        views.stage_finished(7, 0, &frame(0.25), &scene, Duration::ZERO);
         let preview = address(&views);
         assert_eq!(shade(&views), Vec3::splat(0.25));
         // The preview's figures are computed and done with.
         drop(views.take_glare_request());
-        views.stage_finished(7, 1, &frame(0.5), &scene);
+        views.stage_finished(7, 1, &frame(0.5), &scene, Duration::ZERO);
         assert_ne!(address(&views), preview, "the preview is still on view");
         // The refine's figures are still being computed.
         let computing = views.take_glare_request().unwrap();
-        views.stage_finished(7, 2, &frame(0.75), &scene);
+        views.stage_finished(7, 2, &frame(0.75), &scene, Duration::ZERO);
         assert_eq!(address(&views), preview, "into the preview's buffers");
         assert_eq!(shade(&views), Vec3::splat(0.75));
         assert_eq!(
