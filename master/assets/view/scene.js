@@ -221,7 +221,8 @@ export class SceneView {
       uniforms: { pixels: { value: texture } },
       transparent: true,
       depthTest: false,
-      vertexShader: `varying vec2 uv0; void main() { uv0 = uv; gl_Position = vec4(position.xy, 0.0, 1.0); }`,
+      // Placed in clip space by the quad's own position (no camera).
+      vertexShader: `varying vec2 uv0; void main() { uv0 = uv; gl_Position = modelMatrix * vec4(position.xy, 0.0, 1.0); }`,
       fragmentShader: `
         uniform sampler2D pixels;
         varying vec2 uv0;

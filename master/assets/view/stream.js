@@ -92,9 +92,14 @@ export function followStages(onStage) {
   open();
 }
 
-// Linear light to 8-bit sRGB, as the CPU's images are written.
+// Linear light to 8-bit sRGB as the CPU's images are written
+// (vtfarm_imaging: f32 arithmetic, truncating after + 0.5).
+const f = Math.fround;
+const INVERSE_GAMMA = f(1 / f(2.4));
 export function srgb8(linear) {
-  const c = Math.min(1, Math.max(0, linear));
-  const s = c <= 0.0031308 ? c * 12.92 : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
-  return Math.round(s * 255);
+  const c = f(Math.min(1, Math.max(0, linear)));
+  const s = c <= f(0.0031308)
+    ? f(c * f(12.92))
+    : f(f(f(1.055) * f(Math.pow(c, INVERSE_GAMMA))) - f(0.055));
+  return Math.floor(f(f(s * 255) + 0.5));
 }
