@@ -1294,6 +1294,7 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
     let timings = browser.eval("window.vtfarm.viewTimings").await;
     let timings = timings.as_array().unwrap();
     assert_eq!(timings.len(), moves);
+    eprintln!("the page's view timings (ms, performance.now()): {timings:?}");
     for (k, t) in timings.iter().enumerate() {
         for stage in ["sent", "preview", "refine", "full", "draw"] {
             assert!(t.get(stage).is_some(), "move {k} has {stage}: {t}");

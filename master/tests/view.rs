@@ -20,7 +20,7 @@ use support::pair::Pair;
 use vtfarm_cockpit::Cockpit;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::stream::{self, StageMessage};
-use vtfarm_master::view::{EYE_BOX, ViewError, ViewOutcome, ViewRequest};
+use vtfarm_master::view::{EYE_BOX, STAGES, ViewError, ViewOutcome, ViewRequest};
 use vtfarm_master::{FarmRules, MasterCore};
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
@@ -138,7 +138,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
             _ => None,
         })
         .collect();
-    assert_eq!(stages, [Quality::Preview, Quality::Refine, Quality::Full]);
+    assert_eq!(stages, STAGES);
     let counters = &pair.master.telemetry().counters;
     assert_eq!(counters.jobs_cancelled, 2);
     // The source job and three moves: every one submitted has ended once.
@@ -164,8 +164,6 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
     assert_eq!(figures.glare.glass_pixels, reference.image.glass().count());
     assert!(figures.object_map.width >= latest.image().width);
 }
-
-const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
 
 /// A farm of two workers that rendered a job of the small cockpit (the
 /// view's source): the farm, the cockpit, its reflectors, the job's id.

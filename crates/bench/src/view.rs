@@ -41,7 +41,7 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 // The box the server keeps the view's eye in: the bench's eyes stay within
 // it, or the server would clamp some of them together.
-use vtfarm_master::view::EYE_BOX;
+use vtfarm_master::view::{EYE_BOX, STAGES};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_vertex::Quality;
 
@@ -93,9 +93,6 @@ const MAX_WORKER_THREADS: usize = 256;
 
 /// The longest `--timeout`, in seconds (an hour).
 const MAX_TIMEOUT_SECONDS: f64 = 3600.0;
-
-/// The stages a move of the view renders, in order, as the master names them.
-const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
 
 /// The pause after a move's last stage before the next move: longer than
 /// the event stream's coalescing interval (100 ms), so that each move finds

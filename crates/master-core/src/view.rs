@@ -35,6 +35,10 @@ use crate::stream::{Overlay, StageHeader, encode_mesh, encode_overlay};
 /// job's eye (each axis is clamped to it). About a driver's head movement.
 pub const EYE_BOX: f32 = 0.15;
 
+/// The stages a move of the eye goes through, in order (a per-reflector
+/// method has none: its one frame is `full`).
+pub const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
+
 /// How many submitted jobs' scenes stay pickable for the view.
 pub const KEPT_SOURCES: usize = 8;
 
@@ -242,7 +246,7 @@ impl Views {
         let stages = if source.method.per_reflector() {
             vec![Quality::Full]
         } else {
-            vec![Quality::Preview, Quality::Refine, Quality::Full]
+            STAGES.to_vec()
         };
         setup.vertex.quality = *stages.last().expect("a view has a stage");
         let frames = vec![WireFrameSetup::from(&setup)];
@@ -504,7 +508,7 @@ mod tests {
 
     /// A view rendering job 7 in the three stages, as `started` leaves it.
     fn rendering() -> Views {
-        let stages = vec![Quality::Preview, Quality::Refine, Quality::Full];
+        let stages = STAGES.to_vec();
         Views {
             current: Some(CurrentView {
                 generation: 1,

@@ -103,3 +103,71 @@ impl WireMeshPart {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn part() -> WireMeshPart {
+        WireMeshPart {
+            triangle: 7,
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            colors: vec![[0.5; 3]; 3],
+            reflected: vec![[0.25; 3]; 3],
+            transmitted: vec![[0.0; 3]; 3],
+            objects: vec![1, 2, u32::MAX],
+            faces: vec![[0, 1, 2]],
+        }
+    }
+
+    #[test]
+    fn a_mesh_decodes_to_the_meshes_it_was_made_of() {
+        let mesh = WireMesh {
+            parts: vec![part()],
+        };
+        let decoded = mesh.decode().unwrap();
+        assert_eq!(WireMesh::from(&decoded[..]), mesh);
+    }
+
+    #[test]
+    fn a_mesh_with_short_lists_or_faces_out_of_range_is_refused() {
+        let short = WireMesh {
+            parts: vec![WireMeshPart {
+                objects: vec![1],
+                ..part()
+            }],
+        };
+        assert!(matches!(
+            short.decode(),
+            Err(WireError::SizeMismatch {
+                expected: 3,
+                actual: 1,
+                ..
+            })
+        ));
+        let outside = WireMesh {
+            parts: vec![WireMeshPart {
+                faces: vec![[0, 1, 3]],
+                ..part()
+            }],
+        };
+        assert!(matches!(
+            outside.decode(),
+            Err(WireError::IndexOutOfRange {
+                index: 3,
+                len: 3,
+                ..
+            })
+        ));
+        let infinite = WireMesh {
+            parts: vec![WireMeshPart {
+                positions: vec![[f32::INFINITY, 0.0, 0.0], [0.0; 3], [0.0; 3]],
+                ..part()
+            }],
+        };
+        assert!(matches!(
+            infinite.decode(),
+            Err(WireError::NotFinite { .. })
+        ));
+    }
+}
