@@ -427,6 +427,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         .route("/api/events", get(events))
         .route("/frames/live.png", get(live_png))
         .route("/frames/{seq}", get(frame_png))
+        .merge(crate::view_http::routes::<HttpState>(state.master.clone()))
         .layer(middleware::from_fn_with_state(state.clone(), require_token))
         .layer(middleware::from_fn(require_same_origin))
         .layer(middleware::from_fn_with_state(state.clone(), require_host))
@@ -889,13 +890,25 @@ fn view_state(core: &MasterCore) -> ViewState {
 }
 
 /// Moves the view's eye: `{"job": ID, "offset": [x, y, z]}` in metres;
-/// answers the view's farm job.
+/// answers the view's farm job and the move's number (`generation`).
 async fn steer_view(
     State(state): State<HttpState>,
     axum::Json(request): axum::Json<ViewRequest>,
 ) -> Response {
     match state.master.steer_view(request).await {
-        Some(Ok(job)) => axum::Json(serde_json::json!({ "job": job })).into_response(),
+        Some(Ok(job)) => {
+            // The move's number, which its stage messages carry.
+            let generation = (state.master)
+                .inspect(move |c| {
+                    c.views()
+                        .current()
+                        .filter(|v| v.job == job)
+                        .map(|v| v.generation)
+                })
+                .await
+                .flatten();
+            axum::Json(serde_json::json!({ "job": job, "generation": generation })).into_response()
+        }
         Some(Err(e)) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
         None => unavailable(),
     }

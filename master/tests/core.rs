@@ -340,6 +340,7 @@ fn a_frame_completes_through_the_core_despite_bad_peer_messages() {
             setup_micros: 0,
             triangle_samples: vec![],
             stage: None,
+            mesh: None,
         }),
     );
     assert!(messages_to(&out, WORKER).is_empty());

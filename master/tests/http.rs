@@ -23,6 +23,7 @@ use tokio::task::JoinHandle;
 use tower::ServiceExt;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
+use vtfarm_master::stream::StageMessage;
 use vtfarm_master::view::ViewOutcome;
 use vtfarm_master::{MasterHandle, http, server, spawn_master};
 use vtfarm_method::MethodKind;
@@ -896,10 +897,21 @@ struct Browser {
 }
 
 impl Browser {
-    /// Starts Chromium. Without it the test fails, unless the run is not
+    /// Starts Chromium without WebGL (the view falls back to the master's
+    /// images). Without Chromium the test fails, unless the run is not
     /// CI's and `VTFARM_ALLOW_NO_BROWSER=1` asks for a run without the
     /// browser (`None`, said aloud).
     async fn start() -> Option<Browser> {
+        Browser::start_with(&["--disable-gpu", "--disable-webgl"]).await
+    }
+
+    /// [`Browser::start`] with WebGL2 on SwiftShader, the software
+    /// rasterizer (the machine's GPU, if any, is not asked for).
+    async fn start_with_webgl() -> Option<Browser> {
+        Browser::start_with(&["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]).await
+    }
+
+    async fn start_with(graphics: &[&str]) -> Option<Browser> {
         let Ok(path) = which_chromium() else {
             no_browser();
             return None;
@@ -909,7 +921,6 @@ impl Browser {
             .args([
                 "--headless",
                 "--no-sandbox",
-                "--disable-gpu",
                 "--disable-quic",
                 "--no-first-run",
                 "--disable-background-networking",
@@ -918,6 +929,7 @@ impl Browser {
                 "--remote-debugging-port=0",
                 "--window-size=1100,900",
             ])
+            .args(graphics)
             .arg(format!("--user-data-dir={}", profile.path().display()))
             .arg("about:blank")
             .stdin(std::process::Stdio::null())
@@ -1172,6 +1184,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
                 glare: document.querySelectorAll("#glare tr").length,
                 unshown: [...document.querySelectorAll("#glare td")].filter((td) => td.textContent.includes("–")).length,
                 objects: document.getElementById("view-objects").src,
+                mode: document.getElementById("view-mode").textContent,
                 current: window.lastView.view.current,
                 outcomes: window.lastView.view.outcomes,
             }))"##,
@@ -1192,6 +1205,10 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         moved.camera.eye
     );
     assert!(view["glare"].as_u64().unwrap() >= 7, "{view}");
+    assert!(
+        view["mode"].as_str().unwrap().contains("no WebGL2"),
+        "the page says it shows the master's images: {view}"
+    );
     assert_eq!(view["unshown"], 0, "every glare figure is shown: {view}");
     assert!(
         view["objects"]
@@ -1318,4 +1335,288 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
     .await
     .unwrap();
     assert_eq!(state, Some(vtfarm_master_core::JobState::Cancelled));
+}
+
+/// Presses and releases `key` on the page.
+async fn press(browser: &mut Browser, key: &str, code: u32) {
+    for kind in ["keyDown", "keyUp"] {
+        let event = serde_json::json!({
+            "type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code
+        });
+        browser.call("Input.dispatchKeyEvent", event).await;
+    }
+}
+
+/// Resolves to `true` when move `index` (0-based, in the page's order)
+/// has drawn its `full` stage (the page's own timings), or after 45 s to
+/// what the page has (within the DevTools wait).
+fn full_drawn(index: usize) -> String {
+    format!(
+        r#"new Promise((resolve) => {{
+            const start = performance.now();
+            const check = () => {{
+                const t = window.vtfarm.viewTimings && window.vtfarm.viewTimings[{index}];
+                if (t && t.full !== null) return resolve(true);
+                if (performance.now() - start > 30000) {{
+                    return resolve(JSON.stringify({{ timings: window.vtfarm.viewTimings, mode: document.getElementById("view-mode").textContent }}));
+                }}
+                setTimeout(check, 20);
+            }};
+            check();
+        }})"#
+    )
+}
+
+/// Fails with what the page logged when `result` is not `true`.
+fn page_reached(browser: &Browser, result: serde_json::Value, what: &str) {
+    if result == true {
+        return;
+    }
+    let logged: Vec<String> = (browser.events.iter())
+        .filter(|e| {
+            let m = e["method"].as_str().unwrap_or_default();
+            m == "Runtime.consoleAPICalled" || m == "Runtime.exceptionThrown"
+        })
+        .map(|e| e["params"].to_string())
+        .collect();
+    panic!("{what}: {result}; the page logged {logged:#?}");
+}
+
+/// The page draws the view itself (WebGL2 on SwiftShader): it draws the
+/// cockpit, takes three moves and a drag, records one timing per move with
+/// every stage of the moves it waited for, and at the still eye its canvas
+/// is the CPU's: the base scene within 8/255 on at least 95% of the pixels
+/// off the glass, and on the glass the `full` render's pixels.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_render_at_a_still_eye()
+{
+    let Some(mut browser) = Browser::start_with_webgl().await else {
+        return;
+    };
+    let farm = Farm::start().await;
+    farm.submit(1).await;
+    let url = format!("http://{}/", farm.http);
+    browser.call("Page.enable", serde_json::json!({})).await;
+    browser.call("Runtime.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.navigate", serde_json::json!({ "url": url }))
+        .await;
+    browser.event("Page.loadEventFired").await;
+    let pick = r#"new Promise((resolve) => {
+        const select = document.getElementById("view-source");
+        const ready = () => resolve(true);
+        document.addEventListener("vtfarm-gl-ready", ready);
+        setTimeout(() => resolve(document.getElementById("view-mode").textContent), 30000);
+        const pick = () => {
+            if (![...select.options].some((o) => o.value === "1")) return false;
+            select.value = "1";
+            select.dispatchEvent(new Event("change"));
+            return true;
+        };
+        if (pick()) return;
+        const retry = () => { if (pick()) document.removeEventListener("vtfarm-update", retry); };
+        document.addEventListener("vtfarm-update", retry);
+    })"#;
+    let picked = browser.eval(pick).await;
+    page_reached(&browser, picked, "the scene drawn");
+    // The move to the job's eye that loading the scene sends.
+    let drawn = browser.eval(&full_drawn(0)).await;
+    page_reached(&browser, drawn, "the first move's full stage");
+    for k in 1..=3 {
+        press(&mut browser, "ArrowRight", 39).await;
+        let drawn = browser.eval(&full_drawn(k)).await;
+        page_reached(&browser, drawn, &format!("move {k}'s full stage"));
+    }
+    // A drag: 10 pixels left, a millimetre each.
+    let bounds = browser
+        .eval(
+            r#"(() => {
+            const canvas = document.getElementById("view-gl");
+            canvas.scrollIntoView();
+            const r = canvas.getBoundingClientRect();
+            return [r.x + 20, r.y + 20];
+        })()"#,
+        )
+        .await;
+    let (x, y) = (bounds[0].as_f64().unwrap(), bounds[1].as_f64().unwrap());
+    let mouse = |kind: &str, x: f64| serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 });
+    browser
+        .call("Input.dispatchMouseEvent", mouse("mousePressed", x))
+        .await;
+    for step in 1..=10 {
+        let at = x - step as f64;
+        browser
+            .call("Input.dispatchMouseEvent", mouse("mouseMoved", at))
+            .await;
+    }
+    browser
+        .call("Input.dispatchMouseEvent", mouse("mouseReleased", x - 10.0))
+        .await;
+    let settled = r#"new Promise((resolve) => {
+        const start = performance.now();
+        const check = () => {
+            const t = window.vtfarm.viewTimings;
+            const offset = document.getElementById("eye-offset").textContent;
+            if (offset === "20, 0, 0" && t.length > 4 && t[t.length - 1].full !== null) return resolve(t.length);
+            if (performance.now() - start > 30000) return resolve(JSON.stringify({ offset, timings: t }));
+            setTimeout(check, 20);
+        };
+        check();
+    })"#;
+    let moves = browser.eval(settled).await;
+    let Some(moves) = moves.as_u64() else {
+        return page_reached(&browser, moves, "the drag's last move's full stage");
+    };
+    let moves = moves as usize;
+    let current = (farm.master)
+        .inspect(|c| c.views().current().map(|v| (v.generation, v.offset)))
+        .await
+        .unwrap()
+        .expect("a move");
+    assert_eq!(
+        current.0 as usize, moves,
+        "one timing per move the page sent"
+    );
+    let timings = browser.eval("window.vtfarm.viewTimings").await;
+    let timings = timings.as_array().unwrap();
+    assert_eq!(timings.len(), moves);
+    eprintln!("the page's view timings (ms, performance.now()): {timings:?}");
+    for (k, t) in timings.iter().enumerate() {
+        for stage in ["sent", "preview", "refine", "full", "draw"] {
+            assert!(t.get(stage).is_some(), "move {k} has {stage}: {t}");
+        }
+        let awaited = k <= 3 || k + 1 == moves;
+        if awaited {
+            for stage in ["preview", "refine", "full", "draw"] {
+                assert!(t[stage].is_number(), "move {k} drew {stage}: {t}");
+            }
+            let (sent, preview, full) = (
+                t["sent"].as_f64().unwrap(),
+                t["preview"].as_f64().unwrap(),
+                t["full"].as_f64().unwrap(),
+            );
+            assert!(sent <= preview && preview <= full, "{t}");
+        }
+    }
+
+    // The page's decoder reads the stages the master sent bit for bit.
+    let decoded = browser
+        .eval(
+            r#"(() => {
+            const s = window.vtfarm.stages;
+            const bits = (a) => Array.from(new Uint32Array(a.buffer, a.byteOffset, a.length));
+            return ["preview", "refine", "full"].map((q) => ({
+                generation: s[q].generation,
+                positions: s[q].positions ? bits(s[q].positions) : [],
+                colors: bits(s[q].colors),
+                faces: s[q].faces ? Array.from(s[q].faces) : [],
+            }));
+        })()"#,
+        )
+        .await;
+    let sent = (farm.master)
+        .inspect(|c| {
+            let stream = c.views().stream();
+            (stream.messages.iter())
+                .map(|m| vtfarm_master::stream::decode(&m.bytes).unwrap())
+                .collect::<Vec<_>>()
+        })
+        .await
+        .unwrap();
+    assert_eq!(sent.len(), 3);
+    let bits = |v: &[Vec3]| -> Vec<u64> {
+        v.iter()
+            .flat_map(|c| c.to_array())
+            .map(|f| u64::from(f.to_bits()))
+            .collect()
+    };
+    let json = |v: &serde_json::Value| -> Vec<u64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap())
+            .collect()
+    };
+    for (message, page) in sent.iter().zip(decoded.as_array().unwrap()) {
+        assert_eq!(page["generation"].as_u64().unwrap(), current.0);
+        match message {
+            StageMessage::Mesh { meshes, .. } => {
+                let m = &meshes[0];
+                let colors: Vec<Vec3> = m.samples.iter().map(|s| s.color).collect();
+                assert_eq!(json(&page["colors"]), bits(&colors));
+                assert_eq!(json(&page["positions"]), bits(&m.positions));
+                let faces: Vec<u64> = m.faces.iter().flatten().map(|&v| u64::from(v)).collect();
+                assert_eq!(json(&page["faces"]), faces);
+            }
+            StageMessage::Overlay { overlay, .. } => {
+                assert_eq!(json(&page["colors"]), bits(&overlay.colors));
+            }
+        }
+    }
+
+    // The still eye: the canvas against the CPU's frames of that eye.
+    let pixels = browser
+        .eval(
+            r#"(() => {
+            const canvas = document.getElementById("view-gl");
+            const gl = canvas.getContext("webgl2");
+            const out = new Uint8Array(canvas.width * canvas.height * 4);
+            gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
+            return [canvas.width, canvas.height, Array.from(out)];
+        })()"#,
+        )
+        .await;
+    let c = cockpit(&CockpitConfig {
+        detail: 0.3,
+        ..CockpitConfig::default()
+    });
+    assert_eq!(current.1, [0.02, 0.0, 0.0]);
+    let setup = small_frame(&c, Vec3::from(current.1));
+    let (width, height) = (setup.camera.width as usize, setup.camera.height as usize);
+    assert_eq!(pixels[0].as_u64().unwrap() as usize, width);
+    assert_eq!(pixels[1].as_u64().unwrap() as usize, height);
+    let rgba: Vec<u8> = (pixels[2].as_array().unwrap().iter())
+        .map(|v| v.as_u64().unwrap() as u8)
+        .collect();
+    // Read back bottom row first: the frame's row y is the canvas's height - 1 - y.
+    let canvas = |x: usize, y: usize| {
+        let at = ((height - 1 - y) * width + x) * 4;
+        [rgba[at], rgba[at + 1], rgba[at + 2]]
+    };
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), c.cover_glass_triangles());
+    let full = renderer.render(&setup, &Default::default(), &mut |_, _| {});
+    let (base, _) = renderer.base_frame(&setup);
+    let (full_srgb, base_srgb) = (full.image.color.to_srgb8(), base.to_srgb8());
+    let rgb = |bytes: &[u8], x: usize, y: usize| {
+        let at = (y * width + x) * 3;
+        [bytes[at], bytes[at + 1], bytes[at + 2]]
+    };
+    let (mut off_glass, mut close, mut glass, mut same, mut worst) = (0, 0, 0, 0, 0);
+    for y in 0..height {
+        for x in 0..width {
+            let shown = canvas(x, y);
+            if full.image.is_glass(y * width + x) {
+                glass += 1;
+                let cpu = rgb(&full_srgb, x, y);
+                same += usize::from(shown == cpu);
+                worst = (0..3)
+                    .map(|k| shown[k].abs_diff(cpu[k]))
+                    .fold(worst, u8::max);
+            } else {
+                off_glass += 1;
+                let cpu = rgb(&base_srgb, x, y);
+                let near = (0..3).all(|k| shown[k].abs_diff(cpu[k]) <= 8);
+                close += usize::from(near);
+            }
+        }
+    }
+    assert!(glass > 0 && off_glass > 0);
+    assert!(
+        close * 100 >= off_glass * 95,
+        "base scene: {close} of {off_glass} pixels within 8/255"
+    );
+    assert_eq!(
+        same, glass,
+        "the glass shows the full render's pixels (off by up to {worst})"
+    );
 }

@@ -19,14 +19,16 @@ use glam::Vec3;
 use support::pair::Pair;
 use vtfarm_cockpit::Cockpit;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::FarmRules;
-use vtfarm_master::view::{EYE_BOX, ViewError, ViewOutcome, ViewRequest};
+use vtfarm_master::stream::{self, StageMessage};
+use vtfarm_master::view::{EYE_BOX, STAGES, ViewError, ViewOutcome, ViewRequest};
+use vtfarm_master::{FarmRules, MasterCore};
 use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     Message, PackageResult, PhaseKind, ResultPixels, SceneData, WireBitmap, WireQuality,
 };
-use vtfarm_render::{FrameSetup, Renderer};
+use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
+use vtfarm_scene::{Projector, ScreenPoint};
 use vtfarm_vertex::{Quality, SparseBitmap};
 
 /// Virtual time a scenario may take at most.
@@ -136,7 +138,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
             _ => None,
         })
         .collect();
-    assert_eq!(stages, [Quality::Preview, Quality::Refine, Quality::Full]);
+    assert_eq!(stages, STAGES);
     let counters = &pair.master.telemetry().counters;
     assert_eq!(counters.jobs_cancelled, 2);
     // The source job and three moves: every one submitted has ended once.
@@ -162,8 +164,6 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
     assert_eq!(figures.glare.glass_pixels, reference.image.glass().count());
     assert!(figures.object_map.width >= latest.image().width);
 }
-
-const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
 
 /// A farm of two workers that rendered a job of the small cockpit (the
 /// view's source): the farm, the cockpit, its reflectors, the job's id.
@@ -426,6 +426,7 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
         setup_micros: 0,
         triangle_samples: vec![],
         stage,
+        mesh: None,
     };
     let outside = ResultPixels::Bitmap(WireBitmap::from(&SparseBitmap {
         x0: 500,
@@ -492,4 +493,136 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
         p.master.telemetry().frames().any(|f| f.job == job)
     });
     assert_the_view_shows_the_full_render(&pair, &c, reflectors, Vec3::from(request.offset));
+}
+
+/// The stage messages streamed so far: each decoded.
+fn streamed(master: &MasterCore) -> (u64, Vec<StageMessage>) {
+    let stream = master.views().stream();
+    let decoded = (stream.messages.iter())
+        .map(|m| stream::decode(&m.bytes).expect("a stage message decodes"))
+        .collect();
+    (stream.generation, decoded)
+}
+
+/// A face as the single-process render reports it: screen corners and
+/// corner colours, as bits.
+type FaceBits = [([u32; 3], [u32; 3]); 3];
+
+fn face_bits(corners: [ScreenPoint; 3], colors: [Vec3; 3]) -> FaceBits {
+    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+    [0, 1, 2].map(|k| {
+        let s = corners[k];
+        (bits(Vec3::new(s.x, s.y, s.depth)), bits(colors[k]))
+    })
+}
+
+/// Each stage goes out as its message once the stage is complete, while
+/// the later stages are still being traced; decoded, a `preview` or
+/// `refine` message is, face for face and bit for bit, the refined faces
+/// the single-process render at that quality traces for the move's eye,
+/// and the `full` overlay is that render's reflector pixels.
+#[test]
+fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_render() {
+    let (mut pair, c, reflectors, source) = farm_with_a_source();
+    let offset = Vec3::new(0.01, 0.0, 0.0);
+    let request = ViewRequest {
+        job: source,
+        offset: offset.to_array(),
+    };
+    pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
+    for (k, quality) in STAGES.into_iter().enumerate() {
+        drive_to_stage(&mut pair, 1, quality);
+        let (generation, messages) = streamed(&pair.master);
+        assert_eq!(generation, 1);
+        assert_eq!(messages.len(), k + 1, "one message per stage complete");
+        let message = &messages[k];
+        let header = message.header();
+        assert_eq!((header.generation, header.quality), (1, quality));
+        let setup = moved(&c, offset, quality);
+        assert_eq!(header.eye, setup.camera.eye);
+        let options = RenderOptions {
+            collect_faces: true,
+            ..Default::default()
+        };
+        let reference = renderer.render(&setup, &options, &mut |_, _| {});
+        match message {
+            StageMessage::Mesh { meshes, .. } => {
+                let projector = Projector::new(&setup.camera);
+                let mut sent: Vec<FaceBits> = (meshes.iter())
+                    .flat_map(|m| {
+                        m.faces.iter().map(|f| {
+                            let corners = f.map(|v| {
+                                let p = m.positions[v as usize];
+                                projector.project(p).expect("a sent face is in front")
+                            });
+                            face_bits(corners, f.map(|v| m.samples[v as usize].color))
+                        })
+                    })
+                    .collect();
+                let mut traced: Vec<FaceBits> = (reference.faces.iter())
+                    .map(|f| face_bits(f.corners, f.colors))
+                    .collect();
+                sent.sort_unstable();
+                traced.sort_unstable();
+                assert!(!sent.is_empty());
+                assert!(sent == traced, "{quality:?}: the render's faces");
+            }
+            StageMessage::Overlay { overlay, .. } => {
+                assert_eq!(quality, Quality::Full);
+                let width = reference.image.color.width;
+                let sent: Vec<(usize, [u32; 3])> = (overlay.pixels())
+                    .map(|(x, y, c)| ((y * width + x) as usize, c.to_array().map(f32::to_bits)))
+                    .collect();
+                let rendered: Vec<(usize, [u32; 3])> = (reference.image.glass())
+                    .map(|i| {
+                        (
+                            i,
+                            reference.image.color.pixels[i].to_array().map(f32::to_bits),
+                        )
+                    })
+                    .collect();
+                assert!(!sent.is_empty());
+                assert!(sent == rendered, "the render's reflector pixels");
+            }
+        }
+    }
+}
+
+/// A newer move empties the stream: at no step after it does a message of
+/// the cancelled move go out, and the newer move's three stages follow in
+/// order.
+#[test]
+fn a_newer_move_cancels_the_older_and_nothing_of_the_cancelled_move_is_streamed() {
+    let (mut pair, _, _, source) = farm_with_a_source();
+    let request = |x| ViewRequest {
+        job: source,
+        offset: [x, 0.0, 0.0],
+    };
+    pair.act(|m, now| m.steer_view(now, request(0.01))).unwrap();
+    drive_to_stage(&mut pair, 1, Quality::Preview);
+    assert_eq!(
+        streamed(&pair.master).1.len(),
+        1,
+        "the first move's preview"
+    );
+    pair.act(|m, now| m.steer_view(now, request(0.02))).unwrap();
+    assert_eq!(streamed(&pair.master), (2, Vec::new()));
+    let mut seen = Vec::new();
+    pair.drive(BOUND, |p| {
+        let (generation, messages) = streamed(&p.master);
+        assert_eq!(generation, 2);
+        for m in &messages {
+            assert_eq!(m.header().generation, 2, "a message of the cancelled move");
+        }
+        seen.push(messages.len());
+        messages.len() == STAGES.len()
+    });
+    assert!(seen.windows(2).all(|w| w[0] <= w[1]), "{seen:?}");
+    let qualities: Vec<Quality> = streamed(&pair.master)
+        .1
+        .iter()
+        .map(|m| m.header().quality)
+        .collect();
+    assert_eq!(qualities, STAGES);
 }

@@ -254,6 +254,17 @@ mod tests {
                 setup_micros: 56,
                 triangle_samples: vec![3, 0, 17],
                 stage: Some(crate::WireQuality::Refine),
+                mesh: Some(crate::WireMesh {
+                    parts: vec![crate::WireMeshPart {
+                        triangle: 1,
+                        positions: vec![[0.5, -1.0, 2.0]],
+                        colors: vec![[0.1, 0.2, 0.3]],
+                        reflected: vec![[0.0; 3]],
+                        transmitted: vec![[0.25; 3]],
+                        objects: vec![4],
+                        faces: vec![[0, 0, 0]],
+                    }],
+                }),
             }),
             Message::PackageResult(PackageResult {
                 id: 100,
@@ -266,6 +277,7 @@ mod tests {
                 setup_micros: 0,
                 triangle_samples: vec![1, 2],
                 stage: None,
+                mesh: None,
             }),
             Message::PackageFailed(PackageFailed {
                 id: 98,

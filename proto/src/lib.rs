@@ -43,15 +43,16 @@ pub use message::{
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
-    WireLight, WireLightKind, WireLighting, WireMaterial, WireMethod, WirePackageStats,
-    WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle, WireVertexSettings,
-    check_triangle_ids,
+    WireLight, WireLightKind, WireLighting, WireMaterial, WireMesh, WireMeshPart, WireMethod,
+    WirePackageStats, WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle,
+    WireVertexSettings, check_triangle_ids,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding or to a rule both ends follow (such as a
-/// material's `thin` and `fresnel`, a directional light's disc or the
-/// vertex tracer's `capture_cd_m2`); the master refuses other versions with
+/// material's `thin` and `fresnel`, a directional light's disc, the vertex
+/// tracer's `capture_cd_m2` or a progressive stage's reflector meshes in
+/// its result); the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
 pub const PROTOCOL_VERSION: u32 = 11;
 

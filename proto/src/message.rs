@@ -30,7 +30,7 @@ use vtfarm_scene::Scene;
 use vtfarm_vertex::Quality;
 
 use crate::wire::{
-    WireBitmap, WireError, WireFrameSetup, WireImage, WireImageFormat, WireMethod,
+    WireBitmap, WireError, WireFrameSetup, WireImage, WireImageFormat, WireMesh, WireMethod,
     WirePackageStats, WireQuality, WireScene,
 };
 
@@ -444,6 +444,10 @@ pub struct PackageResult {
     /// every owned pixel at the first; counters and times of this stage
     /// alone); `None` for a frame of one stage.
     pub stage: Option<WireQuality>,
+    /// A progressive frame's `preview` and `refine` stages: the package's
+    /// refinement meshes after the stage, which the dashboard's view draws
+    /// as vertex colours; `None` otherwise.
+    pub mesh: Option<WireMesh>,
 }
 
 /// What a result carries: a split package's pixels, for the master to

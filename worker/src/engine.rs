@@ -20,7 +20,7 @@ use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
     FrameKey, FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash,
-    WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat,
+    WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WireMesh,
     WirePackageStats, check_stages, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
@@ -193,10 +193,18 @@ impl ActiveFrame {
             return Err(PackageError::WholeProgressiveFrame(stages));
         }
         let quality = self.stages.get(stage).copied();
+        let mut mesh = None;
         let (bitmap, stats, samples) = contain_panic(|| match (&self.per_reflector, quality) {
             (Some(per_reflector), _) => per_reflector.render(&frame, &package.triangles),
             (None, None) => trace(&frame, &package.triangles),
-            (None, Some(quality)) => advance(&frame, package, stage, quality, progress),
+            (None, Some(quality)) => {
+                let traced = advance(&frame, package, stage, quality, progress);
+                // The view draws a mesh stage as its vertex colours.
+                if quality < Quality::Full {
+                    mesh = progress.as_ref().map(|p| WireMesh::from(&p.meshes()[..]));
+                }
+                traced
+            }
         })??;
         if let Some(why) = stop.stopped() {
             let (id, why) = (package.id, why.to_string());
@@ -219,6 +227,7 @@ impl ActiveFrame {
             setup_micros: 0,
             triangle_samples: samples,
             stage: quality.map(Into::into),
+            mesh,
         })
     }
 

@@ -41,7 +41,7 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 // The box the server keeps the view's eye in: the bench's eyes stay within
 // it, or the server would clamp some of them together.
-use vtfarm_master::view::EYE_BOX;
+use vtfarm_master::view::{EYE_BOX, STAGES};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_vertex::Quality;
 
@@ -94,9 +94,6 @@ const MAX_WORKER_THREADS: usize = 256;
 /// The longest `--timeout`, in seconds (an hour).
 const MAX_TIMEOUT_SECONDS: f64 = 3600.0;
 
-/// The stages a move of the view renders, in order, as the master names them.
-const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
-
 /// The pause after a move's last stage before the next move: longer than
 /// the event stream's coalescing interval (100 ms), so that each move finds
 /// the stream idle, as a user's first move after looking does.
@@ -127,6 +124,10 @@ struct MoveFigures {
     /// (the stage's or a newer one's).
     on_screen_seconds: [f64; 3],
     frames: [Option<StageFrame>; 3],
+    /// The server's part of each stage: from the move's arrival to the
+    /// stage's message for the page (`GET /api/view/stages`); `None` from
+    /// a server without it.
+    server_seconds: [Option<f64>; 3],
 }
 
 /// A stage's frame on the master's timeline (`FrameStats`, seconds).
@@ -267,6 +268,8 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
                     .time_move(&mut events, source, offset, args.display_width, timeout)
                     .await
                     .with_context(|| format!("move {k} (offset {offset:?} m)"))?;
+                let mut figures = figures;
+                figures.server_seconds = farm.server_part().await;
                 let s = figures.on_screen_seconds;
                 eprintln!(
                     "  move {k}{}: preview {:.3} s, refine {:.3} s, full {:.3} s",
@@ -661,6 +664,24 @@ fn one_frame_job(setup: &FrameSetup, detail: f32, offset: [f32; 3]) -> String {
     )
 }
 
+impl Processes {
+    /// The current move's stages' server part, seconds (`None` for a
+    /// stage not streamed, or a server without `GET /api/view/stages`).
+    async fn server_part(&self) -> [Option<f64>; 3] {
+        let mut part = [None; 3];
+        let Ok(stages) = get_json(self.http, "/api/view/stages").await else {
+            return part;
+        };
+        for stage in stages["stages"].as_array().map_or(&[][..], |s| s) {
+            let quality = stage["quality"].as_str().unwrap_or_default();
+            if let Some(k) = STAGES.iter().position(|q| q.name() == quality) {
+                part[k] = stage["server_ms"].as_f64().map(|ms| ms / 1e3);
+            }
+        }
+        part
+    }
+}
+
 /// What a move's events have shown so far: the stages listed as rendered
 /// (`view.outcomes`) for the move's job, and their frames (`frames`).
 struct MoveWatch {
@@ -979,7 +1000,8 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
     );
     println!(
         "columns: on screen = move to the stage's image (GET /view/image.png?width=, asked for after the first event listing \
-         the stage) in hand; listed = move to that event; the stage's frame as the master's timeline has it \
+         the stage) in hand; listed = move to that event; server = the master's part, the move's arrival to the stage's \
+         message for the page (GET /api/view/stages); the stage's frame as the master's timeline has it \
          (medians): wall = its first assignment to its last result, base = the master's base frame, set-up / packages / in flight = \
          the busiest worker's; local = the same eye rendered in this process on {} thread(s), set-up included",
         f.local.threads
@@ -993,11 +1015,12 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
             farm.load_average_after
         );
         println!(
-            "  {:<8} {:>10} {:>8} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
+            "  {:<8} {:>10} {:>8} {:>7} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
             "stage",
             "median ms",
             "p90 ms",
             "listed",
+            "server",
             "wall",
             "base",
             "set-up",
@@ -1017,12 +1040,14 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
                 Spread::of(frames.iter().map(|f| get(f))).map(|s| s.median)
             };
             let local = Spread::of(f.local.seconds[k].iter().copied());
+            let server = Spread::of(farm.moves.iter().filter_map(|m| m.server_seconds[k]));
             println!(
-                "  {:<8} {:>10} {:>8} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
+                "  {:<8} {:>10} {:>8} {:>7} {:>7} | {:>8} {:>8} {:>8} {:>9} {:>9} | {:>8}",
                 quality.name(),
                 ms(on_screen.map(|s| s.median)),
                 ms(on_screen.map(|s| s.p90)),
                 ms(listed.map(|s| s.median)),
+                ms(server.map(|s| s.median)),
                 ms(phase(|f| f.wall)),
                 ms(phase(|f| f.base)),
                 ms(phase(|f| f.setup)),

@@ -293,6 +293,7 @@ impl CostModel for Recorded<'_> {
                 setup_micros: 0,
                 triangle_samples: indices.iter().map(|&i| costs.samples[i]).collect(),
                 stage: None,
+                mesh: None,
             },
             seconds,
             wire_bytes: Some(bytes),

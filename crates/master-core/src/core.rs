@@ -334,6 +334,7 @@ impl MasterCore {
             setup_micros: _,
             triangle_samples,
             stage,
+            mesh,
         } = result;
         let Some(in_flight) = self.frames.packages.get(&id) else {
             return;
@@ -365,6 +366,13 @@ impl MasterCore {
             // or requeued meanwhile); a stage in shows it is no straggler.
             if let Err(e) = self.scheduler.package_arrived(now, worker, PackageId(id)) {
                 return debug!(package = id, "stage result ignored: {e}");
+            }
+            if let Some(mesh) = &mesh {
+                let triangles = (self.frames.packages.get(&id)).map_or(&[][..], |p| &p.triangles);
+                if let Err(e) = (self.views).mesh_arrived(job_id, stage, triangles, mesh) {
+                    let worker = self.peers.name(conn);
+                    warn!(%worker, package = id, "mesh left out: {e}");
+                }
             }
             let measure = self.frames.stage_in(id, conn, stage, work, &stats);
             let Accepted::Composite(pixels) = accepted else {
@@ -713,7 +721,7 @@ impl MasterCore {
         self.next_job += 1;
         self.table.insert(entry);
         self.telemetry.counters.jobs_submitted += 1;
-        self.views.started(planned, id);
+        self.views.started(planned, id, now);
         self.pump();
         Ok(id)
     }

@@ -17,7 +17,8 @@
 //! - `ahead`: base frames made ahead of a batch job's tail, and the
 //!   master's measured time per base frame, for the scheduler's tail rule.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
-//!   `stages`: a progressive frame's stages composited in place.
+//!   `stages`: a progressive frame's stages composited in place;
+//!   [`stream`]: the stage messages the view streams to the page.
 
 mod core;
 mod error;
@@ -30,6 +31,7 @@ mod recovery;
 mod rules;
 mod stages;
 mod status;
+pub mod stream;
 pub mod telemetry;
 #[cfg(test)]
 mod testkit;

@@ -187,7 +187,7 @@ impl<P> StageProgress<P> {
 mod tests {
     use super::*;
 
-    const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
+    use crate::view::STAGES;
 
     /// Pixels as (pixel, value) writes.
     type Writes = Vec<(usize, u32)>;

@@ -16,21 +16,28 @@
 //! they join it when they come, unless a newer stage is on view by then
 //! (only the stage shown gets figures). No I/O, no clock.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
+use std::time::Duration;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{JobScene, SceneHash, WireFrameSetup, WireJob};
+use vtfarm_proto::{JobScene, SceneHash, WireError, WireFrameSetup, WireJob, WireMesh};
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
-use vtfarm_vertex::{FrameImage, Quality};
+use vtfarm_vertex::{FrameImage, Quality, StageMesh};
+
+use crate::stream::{Overlay, StageHeader, encode_mesh, encode_overlay};
 
 /// Half the side of the box the eye moves in, in metres, around the picked
 /// job's eye (each axis is clamped to it). About a driver's head movement.
 pub const EYE_BOX: f32 = 0.15;
+
+/// The stages a move of the eye goes through, in order (a per-reflector
+/// method has none: its one frame is `full`).
+pub const STAGES: [Quality; 3] = [Quality::Preview, Quality::Refine, Quality::Full];
 
 /// How many submitted jobs' scenes stay pickable for the view.
 pub const KEPT_SOURCES: usize = 8;
@@ -166,6 +173,33 @@ pub struct Views {
     /// their page faults too, on the way to the screen.
     spare: Option<FrameImage>,
     outcomes: VecDeque<ViewOutcome>,
+    /// The current move's meshes by (stage, reflector triangle) until
+    /// their stage is complete: a repeated copy's mesh replaces the same.
+    meshes: BTreeMap<(usize, u32), StageMesh>,
+    /// The current move's stage messages, in order.
+    stream: StageStream,
+}
+
+/// The stage messages of the move on view ([`crate::stream`]), each
+/// encoded once; a newer move starts an empty list, so nothing of an
+/// outdated move is streamed after it.
+#[derive(Clone, Debug, Default)]
+pub struct StageStream {
+    /// The move (0 before the first).
+    pub generation: u64,
+    /// When the core queued the move.
+    moved: Duration,
+    pub messages: Vec<StreamedStage>,
+}
+
+/// One stage message and its stage.
+#[derive(Clone, Debug)]
+pub struct StreamedStage {
+    pub quality: Quality,
+    pub bytes: Arc<[u8]>,
+    /// From the move's arrival to the message's making: the server's part
+    /// of the stage (`vtfarm bench view`).
+    pub after: Duration,
 }
 
 impl Views {
@@ -180,6 +214,17 @@ impl Views {
     /// The pickable jobs: id and name, oldest first.
     pub fn sources(&self) -> impl Iterator<Item = (u64, &str)> {
         self.sources.iter().map(|(id, s)| (*id, s.name.as_str()))
+    }
+
+    /// The kept source `job`, or without one the current move's source,
+    /// else the newest kept.
+    pub fn source(&self, job: Option<u64>) -> Option<(u64, &ViewSource)> {
+        let job = job.or(self.current.as_ref().map(|c| c.source));
+        let found = match job {
+            Some(job) => self.sources.iter().find(|(id, _)| *id == job),
+            None => self.sources.back(),
+        };
+        found.map(|(id, s)| (*id, s))
     }
 
     /// The job a move should be rendered as, checked: one frame, at the
@@ -201,7 +246,7 @@ impl Views {
         let stages = if source.method.per_reflector() {
             vec![Quality::Full]
         } else {
-            vec![Quality::Preview, Quality::Refine, Quality::Full]
+            STAGES.to_vec()
         };
         setup.vertex.quality = *stages.last().expect("a view has a stage");
         let frames = vec![WireFrameSetup::from(&setup)];
@@ -236,8 +281,14 @@ impl Views {
     }
 
     /// The planned move is queued as farm job `job`.
-    pub(crate) fn started(&mut self, planned: PlannedView, job: u64) {
+    pub(crate) fn started(&mut self, planned: PlannedView, job: u64, now: Duration) {
         let generation = self.current.as_ref().map_or(0, |c| c.generation) + 1;
+        self.meshes.clear();
+        self.stream = StageStream {
+            generation,
+            moved: now,
+            messages: Vec::new(),
+        };
         self.current = Some(CurrentView {
             generation,
             source: planned.source,
@@ -270,6 +321,7 @@ impl Views {
         stage: usize,
         image: &FrameImage,
         scene: &Arc<Scene>,
+        now: Duration,
     ) {
         let Some(current) = self.current.as_mut().filter(|c| c.job == job) else {
             return;
@@ -279,8 +331,33 @@ impl Views {
         };
         let reached = (current.stages_done..=stage).map(|s| current.stages[s]);
         let reached: Vec<Quality> = reached.collect();
+        let first = current.stages_done;
         current.stages_done = stage + 1;
         let generation = current.generation;
+        let eye = Vec3::from(current.eye);
+        for (s, &quality) in (first..).zip(&reached) {
+            let header = StageHeader {
+                generation,
+                quality,
+                eye,
+            };
+            let bytes = if quality < Quality::Full {
+                let meshes: Vec<StageMesh> = (self.meshes.range((s, 0)..=(s, u32::MAX)))
+                    .map(|(_, m)| m.clone())
+                    .collect();
+                encode_mesh(&header, &meshes)
+            } else {
+                encode_overlay(&header, &Overlay::of(image))
+            };
+            self.meshes.retain(|&(m, _), _| m > s);
+            let bytes = bytes.into();
+            let after = now.saturating_sub(self.stream.moved);
+            (self.stream.messages).push(StreamedStage {
+                quality,
+                bytes,
+                after,
+            });
+        }
         let frame = Arc::new(match self.spare.take() {
             Some(mut spare) => {
                 spare.clone_from(image);
@@ -311,6 +388,36 @@ impl Views {
                 quality,
             });
         }
+    }
+
+    /// A checked result of stage `stage` of farm job `job` brought its
+    /// package's meshes: kept for the stage's message if the job is the
+    /// current move's and the stage still to come. Only the parts of
+    /// `triangles` (the package's, sorted) count.
+    pub(crate) fn mesh_arrived(
+        &mut self,
+        job: u64,
+        stage: usize,
+        triangles: &[u32],
+        mesh: &WireMesh,
+    ) -> Result<(), WireError> {
+        let Some(current) = self.current.as_ref().filter(|c| c.job == job) else {
+            return Ok(());
+        };
+        if stage < current.stages_done {
+            return Ok(());
+        }
+        for part in mesh.decode()? {
+            if triangles.binary_search(&part.triangle).is_ok() {
+                self.meshes.insert((stage, part.triangle), part);
+            }
+        }
+        Ok(())
+    }
+
+    /// The stage messages of the move on view, so far.
+    pub fn stream(&self) -> &StageStream {
+        &self.stream
     }
 
     /// A newer move cancelled the current move's job.
@@ -401,7 +508,7 @@ mod tests {
 
     /// A view rendering job 7 in the three stages, as `started` leaves it.
     fn rendering() -> Views {
-        let stages = vec![Quality::Preview, Quality::Refine, Quality::Full];
+        let stages = STAGES.to_vec();
         Views {
             current: Some(CurrentView {
                 generation: 1,
@@ -438,16 +545,16 @@ mod tests {
         let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
         let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
 
-        views.stage_finished(7, 0, &frame(0.25), &scene);
+        views.stage_finished(7, 0, &frame(0.25), &scene, Duration::ZERO);
         let preview = address(&views);
         assert_eq!(shade(&views), Vec3::splat(0.25));
         // The preview's figures are computed and done with.
         drop(views.take_glare_request());
-        views.stage_finished(7, 1, &frame(0.5), &scene);
+        views.stage_finished(7, 1, &frame(0.5), &scene, Duration::ZERO);
         assert_ne!(address(&views), preview, "the preview is still on view");
         // The refine's figures are still being computed.
         let computing = views.take_glare_request().unwrap();
-        views.stage_finished(7, 2, &frame(0.75), &scene);
+        views.stage_finished(7, 2, &frame(0.75), &scene, Duration::ZERO);
         assert_eq!(address(&views), preview, "into the preview's buffers");
         assert_eq!(shade(&views), Vec3::splat(0.75));
         assert_eq!(

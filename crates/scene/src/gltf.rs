@@ -780,9 +780,17 @@ fn invalid(path: &Path, message: impl Into<String>) -> GltfError {
 /// Writes `scene` as a binary glTF file at `path` (see the [module
 /// documentation](self)). Textures are not written.
 pub fn write_glb(scene: &Scene, path: &Path) -> Result<(), GltfError> {
-    scene
-        .validate()
-        .map_err(|e| invalid(path, format!("invalid scene: {e}")))?;
+    let glb = encode_glb(scene).map_err(|e| invalid(path, format!("invalid scene: {e}")))?;
+    fs::write(path, glb).map_err(|error| GltfError::Io {
+        path: path.to_owned(),
+        error,
+    })
+}
+
+/// `scene` as the bytes of a binary glTF file ([`write_glb`] writes them;
+/// the master serves them to the dashboard's view).
+pub fn encode_glb(scene: &Scene) -> Result<Vec<u8>, crate::SceneError> {
+    scene.validate()?;
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes) = (vec![], vec![], vec![], vec![]);
     let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: u32| {
@@ -880,10 +888,7 @@ pub fn write_glb(scene: &Scene, path: &Path) -> Result<(), GltfError> {
     glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
     glb.extend_from_slice(b"BIN\0");
     glb.extend_from_slice(&bin);
-    fs::write(path, glb).map_err(|error| GltfError::Io {
-        path: path.to_owned(),
-        error,
-    })
+    Ok(glb)
 }
 
 /// A material in PBR terms (for other readers) and exactly (`extras.vtfarm`).

@@ -188,7 +188,8 @@ mod thin;
 pub use composite::{Components, FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelBits, PixelValue,
-    ProgressivePackage, SparseBitmap, StageError, TracedPackage, trace_package, trace_package_into,
+    ProgressivePackage, SparseBitmap, StageError, StageMesh, TracedPackage, trace_package,
+    trace_package_into,
 };
 pub use stop::{Stop, Stopped};
 pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache};

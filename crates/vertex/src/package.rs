@@ -602,6 +602,46 @@ impl ProgressivePackage {
     }
 }
 
+impl ProgressivePackage {
+    /// The refined meshes as the last stage left them, one per owned
+    /// triangle in package order (empty before the first stage, and after
+    /// a `Reference` stage only the meshes the stages before it made):
+    /// what the dashboard's view draws Gouraud-shaded. Faces with a corner
+    /// behind the eye are left out, as in [`FinishedFace`]s.
+    pub fn meshes(&self) -> Vec<StageMesh> {
+        self.meshes.iter().map(StageMesh::of).collect()
+    }
+}
+
+/// One reflector triangle's refinement mesh after a stage: its vertices
+/// (world positions with their traced samples) and its live faces.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StageMesh {
+    /// The original reflector triangle the mesh refines.
+    pub triangle: TriangleId,
+    pub positions: Vec<Vec3>,
+    /// Per vertex, the traced sample as a pixel would hold it (`index` 0).
+    pub samples: Vec<PixelValue>,
+    /// Indices into `positions`, winding as the original triangle's.
+    pub faces: Vec<[u32; 3]>,
+}
+
+impl StageMesh {
+    fn of(mesh: &TriangleMesh) -> StageMesh {
+        let projected = |f: &&crate::refine::Face| {
+            (f.vertices.iter()).all(|&v| mesh.vertices[v as usize].screen.is_some())
+        };
+        StageMesh {
+            triangle: mesh.triangle,
+            positions: mesh.vertices.iter().map(|v| v.position).collect(),
+            samples: (mesh.vertices.iter())
+                .map(|v| PixelValue::from_sample(0, &v.sample))
+                .collect(),
+            faces: mesh.faces().filter(projected).map(|f| f.vertices).collect(),
+        }
+    }
+}
+
 /// A package from scratch: one stage of a [`ProgressivePackage`].
 fn run_package(
     frame: &Frame<'_>,

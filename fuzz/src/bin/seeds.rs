@@ -115,6 +115,7 @@ fn main() -> std::io::Result<()> {
                 setup_micros: 3,
                 triangle_samples: vec![3],
                 stage: None,
+                mesh: None,
             }),
         ),
     ];

@@ -11,6 +11,7 @@
 //! - [`scene`]: the scene, camera and lights (`WireScene`, `WireCamera`, ...).
 //! - [`setup`]: a frame's settings (`WireFrameSetup`) and a package's counters.
 //! - [`bitmap`]: a package's result (`WireBitmap`), the bitmap codec.
+//! - [`mesh`]: a progressive stage's reflector meshes (`WireMesh`), for the view.
 //! - [`image`]: a finished frame and its components (`WireImage`), the image codec.
 //! - `planes`: what both codecs share: byte planes and zstd.
 
@@ -19,6 +20,7 @@ use vtfarm_scene::OutOfBounds;
 
 pub mod bitmap;
 pub mod image;
+pub mod mesh;
 mod planes;
 pub mod scene;
 pub mod setup;
@@ -27,6 +29,7 @@ pub(crate) mod tests;
 
 pub use bitmap::{WireBitmap, WireBitmapParts};
 pub use image::{WireImage, WireImageFormat};
+pub use mesh::{WireMesh, WireMeshPart};
 pub use scene::{
     WireCamera, WireLight, WireLightKind, WireLighting, WireMaterial, WireScene, WireTriangle,
 };

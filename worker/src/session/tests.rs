@@ -81,6 +81,7 @@ fn result(id: u64) -> PackageResult {
         setup_micros: 0,
         triangle_samples: vec![1],
         stage: None,
+        mesh: None,
     }
 }
 

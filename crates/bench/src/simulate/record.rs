@@ -161,6 +161,7 @@ pub(super) fn result_message_bytes(
         setup_micros: 0,
         triangle_samples,
         stage: None,
+        mesh: None,
     });
     Ok(encode_message(&message)?.len() as u64)
 }

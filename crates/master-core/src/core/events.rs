@@ -87,9 +87,9 @@ impl MasterCore {
         let journaled = self.journals(self.recovery.owner(job, frame).0);
         let peers = &self.peers;
         let name = |conn| peers.name(conn);
-        let views = &mut self.views;
-        let Some(request) = (self.frames).complete_frame(job, frame, stats, name, journaled, views)
-        else {
+        let (views, now) = (&mut self.views, self.now);
+        let completed = (self.frames).complete_frame(job, frame, stats, name, journaled, views, now);
+        let Some(request) = completed else {
             return;
         };
         self.ask_for_view_figures();

@@ -381,6 +381,7 @@ mod tests {
             setup_micros: 5_000,
             triangle_samples: vec![1],
             stage: None,
+            mesh: None,
         };
         assembly.record_package("w".into(), 20 * MS, 100 * MS, &result);
         let spans: Vec<_> = (assembly.phases.iter())

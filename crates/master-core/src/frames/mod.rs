@@ -543,7 +543,7 @@ impl Frames {
         let (scene, t0) = (&job.scene, *started);
         let show = |stage, image: &Assembled| {
             if let Some(image) = image.components() {
-                views.stage_finished(job_id, stage, image, scene);
+                views.stage_finished(job_id, stage, image, scene, now);
             }
             // On the timeline: from the stage before it to this one.
             let shown = |p: &&FramePhase| p.kind == PhaseKind::Shown;
@@ -568,12 +568,13 @@ impl Frames {
         name: impl Fn(ConnId) -> String,
         journaled: bool,
         views: &mut Views,
+        now: Duration,
     ) -> Option<Option<FrameEncodeRequest>> {
         let j = self.jobs.get_mut(&job)?;
         let index = j.assembling.iter().position(|a| a.start.frame == frame)?;
         let mut done = j.assembling.remove(index);
         if let (Some(image), None) = (done.image.components(), &done.progress) {
-            views.stage_finished(job, frame as usize, image, &j.scene);
+            views.stage_finished(job, frame as usize, image, &j.scene, now);
         }
         let workers = (stats.workers.iter())
             .map(|w| WorkerFrameStats {
@@ -693,6 +694,7 @@ mod tests {
             setup_micros: 0,
             triangle_samples: vec![1, 1],
             stage: None,
+            mesh: None,
         }
     }
 
@@ -805,7 +807,8 @@ mod tests {
                     &Default::default(),
                     |_| String::new(),
                     false,
-                    &mut Views::default()
+                    &mut Views::default(),
+                    MS,
                 )
                 .is_some()
         );

@@ -1,0 +1,266 @@
+// The view's scene renderer (WebGL2, three.js): the source job's scene from
+// the current eye, shaded as the CPU rasterizer shades it (Phong with the
+// scene's exact Ka, Kd, Ks and shininess, no distance falloff, two-sided),
+// the reflector drawn from the stage meshes' vertex colours over what lies
+// behind it, and the `full` stage's pixels while the eye stays.
+//
+// Three passes: the opaque scene (the reflectors left out) into a linear
+// float target with its depth; that target to the canvas in 8-bit sRGB with
+// its depth; then the reflector mesh, depth-tested, each fragment the
+// Gouraud-interpolated vertex colour plus the glass's transmittance times
+// the target's colour there (the paper's stencil and z-buffer blend), in
+// linear light before the one sRGB conversion.
+
+import * as THREE from "three";
+import { srgb8 } from "./stream.js";
+
+const MAX_LIGHTS = 8;
+
+const SRGB_GLSL = `
+vec3 toSrgb(vec3 c) {
+  c = clamp(c, 0.0, 1.0);
+  return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+}`;
+
+// vtfarm_raster's Phong, per fragment in world space.
+function phongMaterial(exact, setup) {
+  const lights = setup.lights.slice(0, MAX_LIGHTS);
+  const vec = (a) => new THREE.Vector3(a[0], a[1], a[2]);
+  const uniforms = {
+    unlit: { value: vec(exact.emission).add(vec(exact.ambient).multiply(vec(setup.ambient))) },
+    diffuse: { value: vec(exact.diffuse) },
+    specular: { value: vec(exact.specular) },
+    shininess: { value: Math.max(exact.shininess, 1) },
+    eye: { value: new THREE.Vector3() },
+    lightVector: { value: lights.map((l) => vec(l.vector)) },
+    lightPoint: { value: lights.map((l) => (l.kind === "point" ? 1 : 0)) },
+    lightRadiance: { value: lights.map((l) => vec(l.radiance)) },
+  };
+  return new THREE.ShaderMaterial({
+    uniforms,
+    side: THREE.DoubleSide,
+    defines: { LIGHTS: Math.max(lights.length, 1), USED_LIGHTS: lights.length },
+    vertexShader: `
+      varying vec3 worldPosition;
+      varying vec3 worldNormal;
+      void main() {
+        vec4 w = modelMatrix * vec4(position, 1.0);
+        worldPosition = w.xyz;
+        worldNormal = mat3(modelMatrix) * normal;
+        gl_Position = projectionMatrix * viewMatrix * w;
+      }`,
+    fragmentShader: `
+      uniform vec3 unlit, diffuse, specular, eye;
+      uniform float shininess;
+      uniform vec3 lightVector[LIGHTS];
+      uniform float lightPoint[LIGHTS];
+      uniform vec3 lightRadiance[LIGHTS];
+      varying vec3 worldPosition;
+      varying vec3 worldNormal;
+      void main() {
+        vec3 toEye = normalize(eye - worldPosition);
+        vec3 n = normalize(worldNormal);
+        if (dot(n, toEye) < 0.0) n = -n;
+        vec3 color = unlit;
+        for (int i = 0; i < USED_LIGHTS; i++) {
+          vec3 toLight = lightPoint[i] > 0.5
+            ? normalize(lightVector[i] - worldPosition) : normalize(-lightVector[i]);
+          float nDotL = dot(n, toLight);
+          if (nDotL <= 0.0) continue;
+          vec3 term = diffuse * nDotL;
+          if (max(specular.r, max(specular.g, specular.b)) > 0.0) {
+            vec3 r = n * (2.0 * nDotL) - toLight;
+            term += specular * pow(max(dot(r, toEye), 0.0), shininess);
+          }
+          color += term * lightRadiance[i];
+        }
+        gl_FragColor = vec4(color, 1.0);
+      }`,
+  });
+}
+
+// A full-screen pass: the linear target to sRGB, with its depth.
+function presentMaterial(target) {
+  return new THREE.ShaderMaterial({
+    uniforms: { color: { value: target.texture }, depth: { value: target.depthTexture } },
+    // Depth writes need the test on: it always passes.
+    depthTest: true,
+    depthFunc: THREE.AlwaysDepth,
+    depthWrite: true,
+    vertexShader: `varying vec2 uv0; void main() { uv0 = uv; gl_Position = vec4(position.xy, 0.0, 1.0); }`,
+    fragmentShader: `
+      uniform sampler2D color, depth;
+      varying vec2 uv0;
+      ${SRGB_GLSL}
+      void main() {
+        gl_FragColor = vec4(toSrgb(texture2D(color, uv0).rgb), 1.0);
+        gl_FragDepth = texture2D(depth, uv0).r;
+      }`,
+  });
+}
+
+// The reflector: vertex colours plus transmittance times what lies behind.
+function glassMaterial(target, transmittance) {
+  const size = new THREE.Vector2(target.width, target.height);
+  return new THREE.ShaderMaterial({
+    uniforms: {
+      behind: { value: target.texture },
+      size: { value: size },
+      transmittance: { value: new THREE.Vector3(...transmittance) },
+    },
+    side: THREE.DoubleSide,
+    vertexColors: true,
+    vertexShader: `
+      varying vec3 traced;
+      void main() { traced = color; gl_Position = projectionMatrix * viewMatrix * vec4(position, 1.0); }`,
+    fragmentShader: `
+      uniform sampler2D behind;
+      uniform vec2 size;
+      uniform vec3 transmittance;
+      varying vec3 traced;
+      ${SRGB_GLSL}
+      void main() {
+        vec3 back = texture2D(behind, gl_FragCoord.xy / size).rgb;
+        gl_FragColor = vec4(toSrgb(traced + transmittance * back), 1.0);
+      }`,
+  });
+}
+
+export class SceneView {
+  // canvas: the page's; setup: /view/setup.json; gltf: the loaded scene.
+  constructor(canvas, setup, gltf) {
+    this.setup = setup;
+    this.canvas = canvas;
+    canvas.width = setup.width;
+    canvas.height = setup.height;
+    const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true });
+    renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
+    renderer.setPixelRatio(1);
+    renderer.setSize(setup.width, setup.height, false);
+    renderer.autoClear = false;
+    this.renderer = renderer;
+    this.target = new THREE.WebGLRenderTarget(setup.width, setup.height, {
+      type: THREE.FloatType,
+      minFilter: THREE.NearestFilter,
+      magFilter: THREE.NearestFilter,
+      depthTexture: new THREE.DepthTexture(setup.width, setup.height, THREE.FloatType),
+    });
+    this.camera = new THREE.PerspectiveCamera(setup.fov_y_deg, setup.width / setup.height, 0.01, 1000);
+    this.camera.up.set(...setup.up);
+    this.opaque = new THREE.Scene();
+    this.background = new THREE.Color(...setup.background);
+    this.phong = [];
+    const reflectors = new Set(setup.reflector_objects);
+    const meshes = [];
+    gltf.scene.traverse((o) => { if (o.isMesh) meshes.push(o); });
+    for (const mesh of meshes) {
+      // The GLB names each mesh's node after its scene object.
+      const name = mesh.name || (mesh.parent && mesh.parent.name);
+      if (reflectors.has(name)) continue;
+      const exact = mesh.material.userData && mesh.material.userData.vtfarm;
+      if (!exact) continue;
+      if (Math.max(...exact.transmittance) > 0) continue; // other glass: not behind
+      mesh.material = phongMaterial(exact, setup);
+      this.phong.push(mesh.material);
+      mesh.updateWorldMatrix(true, false);
+      this.opaque.add(mesh.clone());
+    }
+    this.present = new THREE.Scene();
+    this.present.add(new THREE.Mesh(new THREE.PlaneGeometry(2, 2), presentMaterial(this.target)));
+    this.screen = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+    this.glass = new THREE.Scene();
+    this.glassMaterial = glassMaterial(this.target, setup.transmittance);
+    this.overlayScene = new THREE.Scene();
+    this.overlay = null;
+    this.offset = [0, 0, 0];
+  }
+
+  // The eye at `offset` (metres) from the source job's eye.
+  setOffset(offset) {
+    this.offset = offset.slice();
+  }
+
+  eye() {
+    return this.setup.eye.map((v, k) => Math.fround(v + this.offset[k]));
+  }
+
+  // A `preview` or `refine` message: the reflector mesh from now on.
+  setMesh(stage) {
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.BufferAttribute(stage.positions, 3));
+    geometry.setAttribute("color", new THREE.BufferAttribute(stage.colors, 3));
+    geometry.setIndex(new THREE.BufferAttribute(stage.faces, 1));
+    this.glass.clear();
+    const mesh = new THREE.Mesh(geometry, this.glassMaterial);
+    mesh.frustumCulled = false;
+    this.glass.add(mesh);
+  }
+
+  // A `full` message: its pixels, drawn while the eye is where they were traced.
+  setOverlay(stage) {
+    const { width, height } = stage;
+    const rgba = new Uint8Array(width * height * 4);
+    let k = 0;
+    for (let i = 0; i < stage.mask.length; i++) {
+      if (!stage.mask[i]) continue;
+      // Rows go up in the texture: the message's rows go down the frame.
+      const row = height - 1 - Math.floor(i / width);
+      const at = (row * width + (i % width)) * 4;
+      for (let c = 0; c < 3; c++) rgba[at + c] = srgb8(stage.colors[k * 3 + c]);
+      rgba[at + 3] = 255;
+      k++;
+    }
+    const texture = new THREE.DataTexture(rgba, width, height, THREE.RGBAFormat);
+    texture.minFilter = THREE.NearestFilter;
+    texture.magFilter = THREE.NearestFilter;
+    texture.needsUpdate = true;
+    const W = stage.frameWidth;
+    const H = stage.frameHeight;
+    const plane = new THREE.PlaneGeometry((2 * width) / W, (2 * height) / H);
+    const material = new THREE.ShaderMaterial({
+      uniforms: { pixels: { value: texture } },
+      transparent: true,
+      depthTest: false,
+      // Placed in clip space by the quad's own position (no camera).
+      vertexShader: `varying vec2 uv0; void main() { uv0 = uv; gl_Position = modelMatrix * vec4(position.xy, 0.0, 1.0); }`,
+      fragmentShader: `
+        uniform sampler2D pixels;
+        varying vec2 uv0;
+        void main() { vec4 p = texture2D(pixels, uv0); if (p.a < 0.5) discard; gl_FragColor = p; }`,
+    });
+    const quad = new THREE.Mesh(plane, material);
+    quad.position.set(((stage.x0 + width / 2) / W) * 2 - 1, 1 - ((stage.y0 + height / 2) / H) * 2, 0);
+    this.overlayScene.clear();
+    this.overlayScene.add(quad);
+    this.overlay = stage;
+  }
+
+  // Whether the overlay was traced from the eye shown now.
+  overlayHolds() {
+    const eye = this.eye();
+    return this.overlay !== null && this.overlay.eye.every((v, k) => Math.abs(v - eye[k]) < 1e-5);
+  }
+
+  // Draws the view; returns how long it took, to a one-pixel read-back (ms).
+  draw() {
+    const start = performance.now();
+    const eye = this.eye();
+    this.camera.position.set(...eye);
+    this.camera.lookAt(...this.setup.target);
+    this.camera.updateMatrixWorld();
+    for (const m of this.phong) m.uniforms.eye.value.set(...eye);
+    const r = this.renderer;
+    r.setRenderTarget(this.target);
+    r.setClearColor(this.background, 1);
+    r.clear();
+    r.render(this.opaque, this.camera);
+    r.setRenderTarget(null);
+    r.clear();
+    r.render(this.present, this.screen);
+    r.render(this.glass, this.camera);
+    if (this.overlayHolds()) r.render(this.overlayScene, this.screen);
+    const gl = r.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+    return performance.now() - start;
+  }
+}
