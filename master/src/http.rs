@@ -39,7 +39,7 @@
 //! and hyper's bounded write buffer, never a backlog: every stream follows
 //! one shared view, computed once per change for all of them.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::convert::Infallible;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, OnceLock};
@@ -769,7 +769,7 @@ pub struct DashboardView {
     pub status: StatusReply,
     /// Every listed job, oldest first (as `GET /api/jobs`).
     pub jobs: Vec<JobSummary>,
-    pub counters: FarmCounters,
+    pub counters: CountersView,
     /// Per worker name: totals and the packages it is working on.
     pub workers: BTreeMap<String, WorkerView>,
     pub live: Option<LiveView>,
@@ -785,11 +785,11 @@ pub struct ViewState {
     pub sources: Vec<ViewSourceView>,
     /// Half the side of the box the eye moves in (metres).
     pub eye_box: f32,
-    pub current: Option<CurrentView>,
+    pub current: Option<CurrentViewJson>,
     /// The newest finished stage, shown at `/view/image.png`.
     pub latest: Option<LatestView>,
     /// What happened to the last views' jobs, oldest first.
-    pub outcomes: Vec<ViewOutcome>,
+    pub outcomes: Vec<ViewOutcomeView>,
 }
 
 #[derive(Serialize)]
@@ -809,8 +809,129 @@ pub struct LatestView {
 #[derive(Serialize)]
 pub struct WorkerView {
     #[serde(flatten)]
-    pub totals: WorkerTotals,
+    pub totals: WorkerTotalsView,
     pub packages: Vec<u64>,
+}
+
+/// The master's cumulative counts ([`FarmCounters`]), as the API shows them.
+#[derive(Serialize)]
+pub struct CountersView {
+    pub jobs_submitted: u64,
+    pub jobs_completed: u64,
+    pub jobs_failed: u64,
+    pub jobs_cancelled: u64,
+    pub frames_completed: u64,
+    pub packages_done: u64,
+    pub packages_failed: u64,
+    pub packages_requeued: u64,
+    pub packages_duplicated: u64,
+    pub journal_write_failures: u64,
+    pub frames_rendered_again: u64,
+}
+
+impl From<&FarmCounters> for CountersView {
+    fn from(c: &FarmCounters) -> Self {
+        CountersView {
+            jobs_submitted: c.jobs_submitted,
+            jobs_completed: c.jobs_completed,
+            jobs_failed: c.jobs_failed,
+            jobs_cancelled: c.jobs_cancelled,
+            frames_completed: c.frames_completed,
+            packages_done: c.packages_done,
+            packages_failed: c.packages_failed,
+            packages_requeued: c.packages_requeued,
+            packages_duplicated: c.packages_duplicated,
+            journal_write_failures: c.journal_write_failures,
+            frames_rendered_again: c.frames_rendered_again,
+        }
+    }
+}
+
+/// A worker's totals ([`WorkerTotals`]), as the API shows them.
+#[derive(Serialize)]
+pub struct WorkerTotalsView {
+    pub samples: u64,
+    pub bytes_in: u64,
+    pub bytes_out: u64,
+    pub blocklisted_jobs: BTreeSet<u64>,
+}
+
+impl From<WorkerTotals> for WorkerTotalsView {
+    fn from(t: WorkerTotals) -> Self {
+        WorkerTotalsView {
+            samples: t.samples,
+            bytes_in: t.bytes_in,
+            bytes_out: t.bytes_out,
+            blocklisted_jobs: t.blocklisted_jobs,
+        }
+    }
+}
+
+/// The move being rendered ([`CurrentView`]), as the API shows it.
+#[derive(Serialize)]
+pub struct CurrentViewJson {
+    pub generation: u64,
+    pub source: u64,
+    pub offset: [f32; 3],
+    pub eye: [f32; 3],
+    pub job: u64,
+    pub stages_done: usize,
+    pub stages_total: usize,
+}
+
+impl From<&CurrentView> for CurrentViewJson {
+    fn from(v: &CurrentView) -> Self {
+        CurrentViewJson {
+            generation: v.generation,
+            source: v.source,
+            offset: v.offset,
+            eye: v.eye,
+            job: v.job,
+            stages_done: v.stages_done,
+            stages_total: v.stages_total,
+        }
+    }
+}
+
+/// What happened to a view's job ([`ViewOutcome`]), as the API shows it.
+#[derive(Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum ViewOutcomeView {
+    Rendered {
+        generation: u64,
+        job: u64,
+        quality: &'static str,
+    },
+    Cancelled {
+        generation: u64,
+        job: u64,
+    },
+}
+
+impl From<ViewOutcome> for ViewOutcomeView {
+    fn from(outcome: ViewOutcome) -> Self {
+        match outcome {
+            ViewOutcome::Rendered {
+                generation,
+                job,
+                quality,
+            } => ViewOutcomeView::Rendered {
+                generation,
+                job,
+                quality: quality.name(),
+            },
+            ViewOutcome::Cancelled { generation, job } => {
+                ViewOutcomeView::Cancelled { generation, job }
+            }
+        }
+    }
+}
+
+/// A move of the view's eye as the API takes it ([`ViewRequest`]).
+#[derive(Deserialize)]
+struct ViewRequestBody {
+    job: u64,
+    offset: [f32; 3],
 }
 
 #[derive(Serialize)]
@@ -840,7 +961,7 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
         .into_iter()
         .map(|name| {
             let view = WorkerView {
-                totals: telemetry.workers.get(&name).cloned().unwrap_or_default(),
+                totals: (telemetry.workers.get(&name).cloned().unwrap_or_default()).into(),
                 packages: packages.remove(&name).unwrap_or_default(),
             };
             (name, view)
@@ -849,7 +970,7 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
     DashboardView {
         status,
         jobs: job_summaries(core),
-        counters: telemetry.counters.clone(),
+        counters: CountersView::from(&telemetry.counters),
         workers,
         live: core.live_frame().map(|f| LiveView {
             job: f.job,
@@ -879,13 +1000,17 @@ fn view_state(core: &MasterCore) -> ViewState {
             })
             .collect(),
         eye_box: EYE_BOX,
-        current: views.current().cloned(),
+        current: views.current().map(CurrentViewJson::from),
         latest: views.latest().map(|v| LatestView {
             generation: v.generation,
             quality: v.quality.name(),
             glare: v.figures.as_ref().map(|f| f.glare.clone()),
         }),
-        outcomes: views.outcomes().copied().collect(),
+        outcomes: views
+            .outcomes()
+            .copied()
+            .map(ViewOutcomeView::from)
+            .collect(),
     }
 }
 
@@ -893,8 +1018,12 @@ fn view_state(core: &MasterCore) -> ViewState {
 /// answers the view's farm job and the move's number (`generation`).
 async fn steer_view(
     State(state): State<HttpState>,
-    axum::Json(request): axum::Json<ViewRequest>,
+    axum::Json(body): axum::Json<ViewRequestBody>,
 ) -> Response {
+    let request = ViewRequest {
+        job: body.job,
+        offset: body.offset,
+    };
     match state.master.steer_view(request).await {
         Some(Ok(job)) => {
             // The move's number, which its stage messages carry.

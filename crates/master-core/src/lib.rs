@@ -5,20 +5,29 @@
 //! or file and starts no thread; the server crate (`vtfarm-master`: driver,
 //! QUIC server, HTTP, journal) runs it.
 //!
-//! - [`MasterCore`]: jobs, packages, compositing, status.
+//! - [`MasterCore`]: owns the parts below and routes each input to them
+//!   (`core/`: one method per input and per scheduler event), and the pump.
+//! - `peers`: connections and peers ([`ConnId`], [`Peer`]): names, the
+//!   frames each worker keeps.
+//! - `frames`: frame assembly and compositing: jobs being rendered,
+//!   packages in flight, base frames (made ahead of a batch job's tail),
+//!   finished frames encoded off the driver's task ([`FrameEncodeRequest`])
+//!   and delivered in order.
+//! - `recovery`: the journal's side: frames kept until written, repairs of
+//!   frames the journal cannot give back, damaged jobs.
+//! - `status`: the farm's status and the live frame ([`LiveFrame`]).
 //! - [`FarmRules`]: the scheduling rules a master runs.
 //! - [`JobRejected`], [`ResultRejected`]: why it turns a job or a result away.
 //! - [`jobs`]: the jobs as users see them (states and their table,
 //!   listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
-//! - [`FrameEncodeRequest`]: a finished split frame's encoding, off the
-//!   driver's task (`finish.rs`), delivered in order.
-//! - `ahead`: base frames made ahead of a batch job's tail, and the
-//!   master's measured time per base frame, for the scheduler's tail rule.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);
 //!   `stages`: a progressive frame's stages composited in place;
 //!   [`stream`]: the stage messages the view streams to the page.
+//!
+//! Parts import only lower parts, never `core`; none derives serde (the
+//! server maps them at its boundary).
 
 mod core;
 mod error;

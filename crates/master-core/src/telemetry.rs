@@ -6,7 +6,6 @@
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
 
-use serde::Serialize;
 use vtfarm_proto::{FrameStats, WireImage};
 
 /// How many finished frames the master keeps for flicking through.
@@ -40,7 +39,7 @@ impl FrameDurations {
 }
 
 /// Cumulative counts since the master started.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FarmCounters {
     pub jobs_submitted: u64,
     pub jobs_completed: u64,
@@ -59,7 +58,7 @@ pub struct FarmCounters {
 
 /// One worker's totals since it first joined (kept by name, so a worker
 /// that reconnects continues its figures).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct WorkerTotals {
     pub samples: u64,
     pub bytes_in: u64,

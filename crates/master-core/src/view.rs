@@ -21,7 +21,6 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec3;
-use serde::{Deserialize, Serialize};
 use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, SceneHash, WireError, WireFrameSetup, WireJob, WireMesh};
@@ -58,7 +57,7 @@ pub struct ViewSource {
 
 /// A move of the eye: which job's view, and the eye's offset from that
 /// job's eye in metres (world axes; clamped to [`EYE_BOX`]).
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewRequest {
     pub job: u64,
     pub offset: [f32; 3],
@@ -76,26 +75,20 @@ pub enum ViewError {
 }
 
 /// What happened to a view's job.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(tag = "kind", rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ViewOutcome {
     /// A stage finished.
     Rendered {
         generation: u64,
         job: u64,
-        #[serde(serialize_with = "quality_name")]
         quality: Quality,
     },
     /// A newer move cancelled the job (its later stages never ran).
     Cancelled { generation: u64, job: u64 },
 }
 
-fn quality_name<S: serde::Serializer>(q: &Quality, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_str(q.name())
-}
-
 /// The move being rendered.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug)]
 pub struct CurrentView {
     /// Moves so far, this one included.
     pub generation: u64,
@@ -107,7 +100,6 @@ pub struct CurrentView {
     /// The farm job rendering this move.
     pub job: u64,
     /// The qualities its frames render, in order.
-    #[serde(skip)]
     stages: Vec<Quality>,
     /// Stages finished so far.
     pub stages_done: usize,
