@@ -154,10 +154,14 @@ impl MasterCore {
         let expiry = (self.table.next_expiry(self.retention))
             .map(|ms| Duration::from_millis(ms.saturating_sub(self.wall_origin_ms)));
         // A kept frame is written again even while nothing else is.
-        [self.scheduler.poll_timeout(), expiry, self.recovery.retry_at()]
-            .into_iter()
-            .flatten()
-            .min()
+        [
+            self.scheduler.poll_timeout(),
+            expiry,
+            self.recovery.retry_at(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     pub fn handle_timeout(&mut self, now: Duration) {

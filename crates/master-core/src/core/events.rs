@@ -88,7 +88,8 @@ impl MasterCore {
         let peers = &self.peers;
         let name = |conn| peers.name(conn);
         let (views, now) = (&mut self.views, self.now);
-        let completed = (self.frames).complete_frame(job, frame, stats, name, journaled, views, now);
+        let completed =
+            (self.frames).complete_frame((job, frame), stats, name, journaled, views, now);
         let Some(request) = completed else {
             return;
         };

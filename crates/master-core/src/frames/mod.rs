@@ -554,7 +554,7 @@ impl Frames {
         progress.deliver(stage, triangles, pixels, image, Assembled::composite, show);
     }
 
-    /// The scheduler completed frame `frame` of `job` (with `stats`, its
+    /// The scheduler completed frame `(job, frame)` (with `stats`, its
     /// workers named by `name`): it leaves assembly for its job's finished
     /// frames, to be encoded (the request returned, for a split frame) and
     /// told in order. A frame of one stage with components goes on view
@@ -562,8 +562,7 @@ impl Frames {
     /// journal keeps it. `None` when it is not assembled.
     pub(crate) fn complete_frame(
         &mut self,
-        job: u64,
-        frame: u32,
+        (job, frame): (u64, u32),
         stats: &vtfarm_scheduler::FrameStats,
         name: impl Fn(ConnId) -> String,
         journaled: bool,
@@ -802,8 +801,7 @@ mod tests {
         assert!(
             frames
                 .complete_frame(
-                    1,
-                    0,
+                    (1, 0),
                     &Default::default(),
                     |_| String::new(),
                     false,
