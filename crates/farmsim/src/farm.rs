@@ -18,7 +18,7 @@ use vtfarm_proto::{
     FrameDone, FrameKey, FrameStart, FrameStats, JobScene, Message, Package, PackageResult,
     ResultPixels, SceneData, WireJob, encoded_len,
 };
-use vtfarm_worker::engine::FrameError;
+use vtfarm_worker::engine::{FrameError, PackageError};
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
 
 /// What the work of a farm costs and gives: the pluggable cost model.
@@ -72,6 +72,9 @@ pub struct PackageWork {
     pub seconds: f64,
     /// Its result's size on the wire (`None`: the encoded message's).
     pub wire_bytes: Option<u64>,
+    /// The package fails after its seconds with this error instead of
+    /// giving `result` (a worker's fault, for the tests of retries).
+    pub failure: Option<PackageError>,
 }
 
 /// CPU seconds the master's machine spends, one thread each. A whole frame
@@ -299,6 +302,7 @@ enum Work {
         worker: usize,
         epoch: u64,
         result: Box<PackageResult>,
+        failure: Option<PackageError>,
         started: Duration,
         bytes: Option<u64>,
     },
@@ -467,6 +471,11 @@ impl<M: CostModel> Farm<M> {
     /// The cost model.
     pub fn model(&self) -> &M {
         &self.model
+    }
+
+    /// The cost model, to change between steps (a test's new costs).
+    pub fn model_mut(&mut self) -> &mut M {
+        &mut self.model
     }
 
     fn connect_submitter(&mut self) {
@@ -868,6 +877,7 @@ impl<M: CostModel> Farm<M> {
                 worker,
                 epoch,
                 mut result,
+                failure,
                 started,
                 bytes,
             } => {
@@ -879,7 +889,9 @@ impl<M: CostModel> Farm<M> {
                 }
                 let w = &mut self.workers[worker];
                 if let Some(session) = w.session.as_mut().filter(|_| w.epoch == epoch) {
-                    session.package_finished(self.now, result.id, Ok(*result));
+                    let id = result.id;
+                    let outcome = failure.map_or(Ok(*result), Err);
+                    session.package_finished(self.now, id, outcome);
                     self.pump_worker_sized(worker, bytes);
                 }
             }
@@ -1208,6 +1220,7 @@ impl<M: CostModel> Farm<M> {
                         worker: w,
                         epoch,
                         result: Box::new(run.result),
+                        failure: run.failure,
                         started: self.now,
                         bytes: run.wire_bytes,
                     };
