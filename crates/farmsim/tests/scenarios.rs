@@ -505,11 +505,7 @@ fn a_deep_batch_jobs_tail_splits_no_more_frames_than_the_measured_costs_allow() 
 #[test]
 fn unmeasured_tails_split_up_to_the_frames_in_flight_and_the_last_frame_always() {
     let items = uneven_items(100, 0, 16, 0.002, 0..0, 1.0);
-    for (workers, split) in [
-        (16, vtfarm_proto::FRAMES_IN_FLIGHT as usize),
-        (2, 2),
-        (1, 1),
-    ] {
+    for (workers, split) in [(16, vtfarm_proto::FRAMES_IN_FLIGHT), (2, 2), (1, 1)] {
         let (farm, _) = run_job(
             FarmRules::default(),
             ItemCosts::default(),
@@ -523,16 +519,6 @@ fn unmeasured_tails_split_up_to_the_frames_in_flight_and_the_last_frame_always()
 }
 
 // ----- Faults -----
-
-/// Kills worker `w` at `at`; `noticed`: its connection drops (the master
-/// hears at once), else only its missing heartbeats tell.
-fn crash(farm: &mut ItemFarm, w: usize, noticed: bool) {
-    let conn = farm.workers[w].conn();
-    farm.kill(w);
-    if noticed {
-        farm.act(|master, now| master.disconnected(now, conn));
-    }
-}
 
 #[test]
 fn a_crash_mid_frame_requeues_its_packages() {

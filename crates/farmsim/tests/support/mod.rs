@@ -477,3 +477,13 @@ pub(crate) fn worker_index(name: &str) -> usize {
         .and_then(|n| n.parse().ok())
         .expect("a worker of join_all")
 }
+
+/// Kills worker `w` now; `noticed`: its connection drops (the master hears
+/// at once), else only its missing heartbeats tell.
+pub(crate) fn crash(farm: &mut ItemFarm, w: usize, noticed: bool) {
+    let conn = farm.workers[w].conn();
+    farm.kill(w);
+    if noticed {
+        farm.act(|master, now| master.disconnected(now, conn));
+    }
+}
