@@ -773,7 +773,8 @@ impl<M: CostModel> Farm<M> {
         } else if event_at == Some(next) {
             let (_, event) = self.events.pop_first().expect("an event is due");
             self.deliver(event);
-        } else if master_at == Some(next) {
+        } else if master_at.is_some_and(|t| t <= next) {
+            // A deadline that an input set in the past is due now.
             self.master.handle_timeout(next);
             self.route_master_outputs();
         } else if let Some((_, w)) = worker_at {

@@ -706,3 +706,42 @@ fn a_frame_completes_while_one_worker_remains() {
     assert_each_item_once(&frames, 600);
     assert_eq!(workers_of(&frames[1]), [0]);
 }
+
+/// A worker that failed three packages (blocklisted) and then crashed
+/// silently mid-package, among slow workers on slow links: the master's
+/// deadlines, some already past when an input sets them, are all acted
+/// on, and the frame completes with each item once.
+#[test]
+fn a_blocklisted_worker_that_crashes_silently_still_lets_the_frame_complete() {
+    let items = uneven_items(97, 0, 0, 0.001, 0..0, 1.0);
+    let slow_link = |speed: f64| WorkerSpec {
+        link_bits_per_second: 1e6,
+        ..worker(speed)
+    };
+    let mut farm = farm(split_rules(), ItemCosts::default());
+    join_all(
+        &mut farm,
+        &[
+            worker(1.0),
+            WorkerSpec {
+                link_bits_per_second: 1e9,
+                ..worker(0.2)
+            },
+        ],
+    );
+    farm.workers[1].state.failures = Failures::FirstPackages(3);
+    submit(&mut farm, &items, 1, 0);
+    run_until(&mut farm, Duration::from_millis(66));
+    crash(&mut farm, 1, false);
+    run_until(&mut farm, Duration::from_millis(859));
+    join_all(&mut farm, &[slow_link(0.2)]);
+    run_until(&mut farm, Duration::from_millis(895));
+    join_all(&mut farm, &[slow_link(1.5), slow_link(2.5)]);
+    farm.workers[3].state.failures = Failures::FirstPackages(2);
+    run_until(&mut farm, Duration::from_millis(2422));
+    join_all(&mut farm, &[slow_link(0.2)]);
+    run_to_end(&mut farm, &[1]);
+    let frames = delivered(&farm);
+    assert_each_item_once(&frames, 97);
+    assert!(!workers_of(&frames[0]).contains(&1));
+}
