@@ -74,20 +74,6 @@ pub(crate) fn world() -> &'static World {
     })
 }
 
-/// Seeded draws from the workspace's one test generator (`rand_xoshiro`).
-pub(crate) struct Rng(Xoshiro256PlusPlus);
-
-impl Rng {
-    pub(crate) fn new(seed: u64) -> Rng {
-        Rng(Xoshiro256PlusPlus::seed_from_u64(seed))
-    }
-
-    /// Uniform in [0, 1).
-    pub(crate) fn unit(&mut self) -> f64 {
-        self.0.random()
-    }
-}
-
 /// A frame's items in the master's (Morton) order and their true costs
 /// (seconds at speed 1), in the same order.
 #[derive(Clone, Debug)]
@@ -116,10 +102,11 @@ pub(crate) fn uneven_items(
 ) -> Items {
     let ids: Vec<u32> = (first..first + n as u32).collect();
     let items = morton_order(&world().scene, ids);
-    let mut rng = Rng::new(seed);
+    // The workspace's one seeded test generator.
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let costs = (0..n)
         .map(|i| {
-            let c = base * (1.0 + 2.0 * rng.unit());
+            let c = base * (1.0 + 2.0 * rng.random::<f64>());
             if hot.contains(&i) { c * hot_factor } else { c }
         })
         .collect();
