@@ -489,6 +489,15 @@ fn a_deep_batch_jobs_tail_splits_no_more_frames_than_the_measured_costs_allow() 
         let whole = whole_frames(&farm);
         let split = whole.iter().filter(|w| !**w).count();
         assert_eq!(whole, (0..40).map(|i| i < 40 - split).collect::<Vec<_>>());
+        // Each split frame's base frame made once.
+        let bases: BTreeSet<(u64, u32)> = farm.base_frames.iter().copied().collect();
+        assert_eq!(
+            bases.len(),
+            farm.base_frames.len(),
+            "{:?}",
+            farm.base_frames
+        );
+        assert!((40 - split as u32..40).all(|f| bases.iter().any(|b| b.1 == f)));
         split
     };
     // A cheap base frame: the tail is as wide as the farm; one that
@@ -529,6 +538,8 @@ fn a_crash_mid_frame_requeues_its_packages() {
     submit(&mut farm, &items, 2, 0);
     run_until(&mut farm, Duration::from_millis(1500));
     crash(&mut farm, 1, true);
+    // Lost at once, and only it.
+    assert_eq!(connected_workers(&farm), [0, 2, 3]);
     run_to_end(&mut farm, &[2]);
     let frames = delivered(&farm);
     assert_eq!(frames.len(), 2);
@@ -550,6 +561,12 @@ fn a_silent_crash_is_found_by_the_heartbeat_timeout() {
     let at = Duration::from_millis(1500);
     run_until(&mut farm, at);
     crash(&mut farm, 2, false);
+    // The master holds it until the heartbeat timeout, from its last
+    // message (at most a heartbeat interval before the crash).
+    run_until(&mut farm, at + timeout - Duration::from_secs(1));
+    assert_eq!(connected_workers(&farm), [0, 1, 2, 3]);
+    run_until(&mut farm, at + timeout);
+    assert_eq!(connected_workers(&farm), [0, 1, 3]);
     run_to_end(&mut farm, &[2]);
     let frames = delivered(&farm);
     assert_each_item_once(&frames, 600);
@@ -706,6 +723,7 @@ fn a_frame_completes_while_one_worker_remains() {
     assert_eq!(frames.len(), 2);
     assert_each_item_once(&frames, 600);
     assert_eq!(workers_of(&frames[1]), [0]);
+    assert_eq!(connected_workers(&farm), [0], "three lost");
 }
 
 /// A worker that failed three packages (blocklisted) and then crashed

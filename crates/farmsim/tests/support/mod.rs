@@ -474,3 +474,13 @@ pub(crate) fn crash(farm: &mut ItemFarm, w: usize, noticed: bool) {
         farm.act(|master, now| master.disconnected(now, conn));
     }
 }
+
+/// The workers the master holds connected (by index), from its status.
+pub(crate) fn connected_workers(farm: &ItemFarm) -> Vec<usize> {
+    let status = farm.master.status();
+    status
+        .workers
+        .iter()
+        .map(|w| worker_index(&w.name))
+        .collect()
+}
