@@ -1169,6 +1169,37 @@ impl<M: CostModel> Farm<M> {
         self.pump_worker_sized(w, None);
     }
 
+    /// A package cancelled while it runs stops now, freeing the worker's
+    /// cores, as the real worker's driver stops it.
+    fn stop_cancelled_package(&mut self, w: usize) {
+        let Some(session) = self.workers[w].session.as_mut() else {
+            return;
+        };
+        let Some(id) = session.running().filter(|&id| session.is_cancelled(id)) else {
+            return;
+        };
+        let epoch = self.workers[w].epoch;
+        let job = (self.cpu.iter()).position(|job| {
+            matches!(&job.work, Work::Package { worker, epoch: e, result, .. }
+                if *worker == w && *e == epoch && result.id == id)
+        });
+        let Some(job) = job else {
+            return;
+        };
+        if let Work::Package { started, .. } = self.cpu.swap_remove(job).work {
+            let open = (self.busy[w].iter_mut()).rfind(|r| r.start == started && r.end.is_none());
+            if let Some(run) = open {
+                run.end = Some(self.now);
+            }
+        }
+        let stopped = PackageError::Stopped {
+            id,
+            why: "cancelled".into(),
+        };
+        let session = self.workers[w].session.as_mut().expect("checked above");
+        session.package_finished(self.now, id, Err(stopped));
+    }
+
     /// Starts worker `w`'s tasks and sends its messages (a result at
     /// `result_bytes` on the wire, when the model says).
     fn pump_worker_sized(&mut self, w: usize, result_bytes: Option<u64>) {
@@ -1179,6 +1210,7 @@ impl<M: CostModel> Farm<M> {
             let keeps = |key| session.keeps_set_up(key);
             self.model.retain_frames(&mut worker.state, &keeps);
         }
+        self.stop_cancelled_package(w);
         let Some(session) = self.workers[w].session.as_mut() else {
             return;
         };

@@ -15,7 +15,7 @@
 //! - **CPU.** Each machine has cores shared fairly by its running jobs (a
 //!   job runs on its threads at most): a worker with one core that sets a
 //!   frame up while it traces a package runs both at half speed, as the real
-//!   worker does. The master has its own machine: its base frame is spread
+//!   worker does; a package cancelled while it runs stops at once. The master has its own machine: its base frame is spread
 //!   over its cores, and its driver handles one input at a time, each
 //!   costing CPU ([`MasterCosts`]); inputs queue meanwhile. Its journal
 //!   thread and the submitter each take finished frames one at a time. A finished split
