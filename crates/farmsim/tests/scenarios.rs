@@ -390,8 +390,8 @@ fn a_single_frame_job_spreads_over_every_worker() {
 }
 
 /// A worker ten times slower than the others gets whole frames too (its
-/// speed is not known in advance), but the others take copies of its last
-/// whole frame rather than wait for it.
+/// speed is not known in advance), but the others take copies of its
+/// whole frames rather than wait for them, and it stops each copied one.
 #[test]
 fn a_slow_workers_last_frame_is_finished_by_the_others() {
     let items = uneven_items(200, 0, 13, 0.002, 0..0, 1.0);
@@ -415,6 +415,17 @@ fn a_slow_workers_last_frame_is_finished_by_the_others() {
         "frame {last}: {:?}",
         with_slow[last as usize].stats.workers
     );
+    // Its frames that others finished stopped on it when they went out
+    // (the cancel reached it), not at their own end.
+    for (run, r) in runs(&with_farm, 3) {
+        let out = with_slow[r.frame as usize].done_at;
+        let end = run.end.unwrap_or(with_farm.now);
+        assert!(
+            end <= out + Duration::from_millis(10),
+            "frame {}: ran to {end:?}, out at {out:?}",
+            r.frame
+        );
+    }
 }
 
 /// A single frame of two big items on four workers, beside a deep job: the
