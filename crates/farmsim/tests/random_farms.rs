@@ -121,7 +121,7 @@ proptest! {
                 Action::Crash(i, noticed) => crash(&mut farm, index[i], noticed),
                 Action::Slow(i, factor) => farm.workers[index[i]].spec.speed /= factor,
                 Action::Submit(j) => {
-                    submit(&mut farm, &jobs[j].1, jobs[j].2, 0);
+                    submit(&mut farm, &jobs[j].1, jobs[j].2);
                     submitted.push(j);
                 }
             }

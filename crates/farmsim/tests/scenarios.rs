@@ -23,7 +23,7 @@ fn run_job(
 ) -> (ItemFarm, Vec<Delivered>) {
     let mut farm = farm(rules, model);
     join_all(&mut farm, workers);
-    submit(&mut farm, items, frames, 0);
+    submit(&mut farm, items, frames);
     run_to_end(&mut farm, &[frames]);
     let delivered = delivered(&farm);
     assert_eq!(delivered.len(), frames);
@@ -151,7 +151,7 @@ fn a_late_joiner_gets_work_mid_frame() {
     let items = plain_items();
     let mut farm = farm(split_rules(), ItemCosts::default());
     join_all(&mut farm, &[worker(1.0)]);
-    submit(&mut farm, &items, 1, 0);
+    submit(&mut farm, &items, 1);
     run_until(&mut farm, Duration::from_secs(2));
     join_all(&mut farm, &[worker(1.0)]);
     run_to_end(&mut farm, &[1]);
@@ -199,7 +199,7 @@ fn a_shared_master_link_bounds_the_frame_and_runs_repeat_exactly() {
         };
         let mut farm = farm_with_link(FarmRules::default(), model, master_link);
         join_all(&mut farm, &vec![spec.clone(); 8]);
-        submit(&mut farm, &items, 3, 0);
+        submit(&mut farm, &items, 3);
         run_to_end(&mut farm, &[3]);
         let frames = delivered(&farm);
         assert_each_item_once(&frames, 400);
@@ -440,8 +440,8 @@ fn a_small_job_beside_a_deep_one_leaves_no_worker_idle() {
     for rules in [split_rules(), FarmRules::default()] {
         let mut farm = farm(rules, batch_model());
         join_all(&mut farm, &vec![worker(1.0); 4]);
-        submit(&mut farm, &big, 1, 0);
-        submit(&mut farm, &deep, 12, 0);
+        submit(&mut farm, &big, 1);
+        submit(&mut farm, &deep, 12);
         run_to_end(&mut farm, &[1, 12]);
         let jobs = accepted_jobs(&farm);
         let frames = delivered(&farm);
@@ -546,7 +546,7 @@ fn a_crash_mid_frame_requeues_its_packages() {
     let items = plain_items();
     let mut farm = farm(split_rules(), ItemCosts::default());
     join_all(&mut farm, &vec![worker(1.0); 4]);
-    submit(&mut farm, &items, 2, 0);
+    submit(&mut farm, &items, 2);
     run_until(&mut farm, Duration::from_millis(1500));
     crash(&mut farm, 1, true);
     // Lost at once, and only it.
@@ -568,7 +568,7 @@ fn a_silent_crash_is_found_by_the_heartbeat_timeout() {
     let timeout = rules.heartbeat_timeout;
     let mut farm = farm(rules, ItemCosts::default());
     join_all(&mut farm, &vec![worker(1.0); 4]);
-    submit(&mut farm, &items, 2, 0);
+    submit(&mut farm, &items, 2);
     let at = Duration::from_millis(1500);
     run_until(&mut farm, at);
     crash(&mut farm, 2, false);
@@ -605,7 +605,7 @@ fn a_straggler_is_copied_and_the_frame_does_not_wait_for_it() {
     let run = |rules: FarmRules| {
         let mut farm = farm(rules, ItemCosts::default());
         join_all(&mut farm, &vec![worker(1.0); 4]);
-        submit(&mut farm, &items, 1, 0);
+        submit(&mut farm, &items, 1);
         run_until(&mut farm, Duration::from_millis(1500));
         // From its next package on it computes 20 times slower.
         farm.workers[0].spec.speed = 0.05;
@@ -632,7 +632,7 @@ fn failed_packages_are_retried_on_other_workers() {
     let mut farm = farm(split_rules(), ItemCosts::default());
     join_all(&mut farm, &vec![worker(1.0); 3]);
     farm.workers[2].state.failures = Failures::FirstPackages(2);
-    submit(&mut farm, &items, 1, 0);
+    submit(&mut farm, &items, 1);
     run_to_end(&mut farm, &[1]);
     let frames = delivered(&farm);
     assert_each_item_once(&frames, 600);
@@ -647,7 +647,7 @@ fn three_failures_blocklist_a_worker_for_the_job() {
     let mut farm = farm(split_rules(), ItemCosts::default());
     join_all(&mut farm, &vec![worker(1.0); 3]);
     farm.workers[1].state.failures = Failures::Always;
-    submit(&mut farm, &items, 2, 0);
+    submit(&mut farm, &items, 2);
     run_to_end(&mut farm, &[2]);
     let frames = delivered(&farm);
     assert_eq!(frames.len(), 2);
@@ -672,8 +672,8 @@ fn a_package_failing_on_three_workers_fails_the_job_and_the_next_job_runs() {
     for w in 0..4 {
         farm.workers[w].state.failures = Failures::Items(vec![bad_item]);
     }
-    submit(&mut farm, &bad, 1, 0);
-    submit(&mut farm, &good, 1, 0);
+    submit(&mut farm, &bad, 1);
+    submit(&mut farm, &good, 1);
     run_to_end(&mut farm, &[1, 1]);
     let jobs = accepted_jobs(&farm);
     let errors = failure(&farm, jobs[0]).expect("the bad job failed");
@@ -703,7 +703,7 @@ fn a_job_fails_when_every_worker_is_blocklisted() {
     for w in 0..2 {
         farm.workers[w].state.failures = Failures::Always;
     }
-    submit(&mut farm, &plain_items(), 1, 0);
+    submit(&mut farm, &plain_items(), 1);
     run_to_end(&mut farm, &[1]);
     let errors = failure(&farm, accepted_jobs(&farm)[0]).expect("failed");
     assert!(errors[0].contains("NoEligibleWorker"), "{errors:?}");
@@ -724,7 +724,7 @@ fn a_frame_completes_while_one_worker_remains() {
     let items = plain_items();
     let mut farm = farm(split_rules(), ItemCosts::default());
     join_all(&mut farm, &vec![worker(1.0); 4]);
-    submit(&mut farm, &items, 2, 0);
+    submit(&mut farm, &items, 2);
     for w in 1..4 {
         run_until(&mut farm, Duration::from_millis(500 * w as u64));
         crash(&mut farm, w, w % 2 == 1);
@@ -760,7 +760,7 @@ fn a_blocklisted_worker_that_crashes_silently_still_lets_the_frame_complete() {
         ],
     );
     farm.workers[1].state.failures = Failures::FirstPackages(3);
-    submit(&mut farm, &items, 1, 0);
+    submit(&mut farm, &items, 1);
     run_until(&mut farm, Duration::from_millis(66));
     crash(&mut farm, 1, false);
     run_until(&mut farm, Duration::from_millis(859));

@@ -12,7 +12,7 @@
 // Each test binary uses only some of the helpers.
 #![allow(dead_code)]
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
@@ -318,8 +318,8 @@ pub(crate) fn join_all(farm: &mut ItemFarm, specs: &[WorkerSpec]) {
 }
 
 /// Submits a job of `frames` copies of `items`' frame (its costs join the
-/// model's) at `priority`.
-pub(crate) fn submit(farm: &mut ItemFarm, items: &Items, frames: usize, priority: i32) {
+/// model's).
+pub(crate) fn submit(farm: &mut ItemFarm, items: &Items, frames: usize) {
     let world = world();
     let job = WireJob {
         name: "scenario".into(),
@@ -329,7 +329,7 @@ pub(crate) fn submit(farm: &mut ItemFarm, items: &Items, frames: usize, priority
         aux: false,
         method: MethodKind::VertexTracing.into(),
         image: WireImageFormat::Srgb8,
-        priority,
+        priority: 0,
         kind: WireJobKind::Render,
     };
     farm.model_mut().add(items);
@@ -422,14 +422,6 @@ pub(crate) fn assert_each_item_once(frames: &[Delivered], items: usize) {
         let traced: u32 = f.stats.workers.iter().map(|w| w.triangles).sum();
         assert_eq!(traced as usize, items, "job {} frame {}", f.job, f.frame);
     }
-}
-
-/// Each worker's share of the frame's accepted items, by name.
-pub(crate) fn item_shares(stats: &FrameStats) -> BTreeMap<String, f64> {
-    let total: u32 = stats.workers.iter().map(|w| w.triangles).sum();
-    (stats.workers.iter())
-        .map(|w| (w.name.clone(), f64::from(w.triangles) / f64::from(total)))
-        .collect()
 }
 
 /// The packages worker `w` ran: each run on the clock with what it was.
