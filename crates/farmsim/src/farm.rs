@@ -831,12 +831,18 @@ impl<M: CostModel> Farm<M> {
             return self.now + worker.spec.latency;
         }
         let bytes = bytes.unwrap_or_else(|| encoded_len(message));
-        let start = (self.now)
-            .max(worker.link_free[direction])
-            .max(self.master_link_free[direction]);
+        // An unlimited master link is held by no message: each crosses its
+        // worker's link alone.
+        let shared = self.config.master_link_bits_per_second.is_finite();
+        let mut start = (self.now).max(worker.link_free[direction]);
+        if shared {
+            start = start.max(self.master_link_free[direction]);
+        }
         let end = start + Duration::from_secs_f64(bytes as f64 * 8.0 / rate);
         self.workers[w].link_free[direction] = end;
-        self.master_link_free[direction] = end;
+        if shared {
+            self.master_link_free[direction] = end;
+        }
         end + self.workers[w].spec.latency
     }
 

@@ -28,8 +28,9 @@
 //!   the slower rate (QUIC streams pass packets on as they arrive, so a
 //!   message is not sent over one link and then forwarded over the other),
 //!   one message at a time per direction, and arrives a latency after its
-//!   last byte left. An infinite rate leaves the latency alone. The
-//!   submitter sits on the master's machine: its messages cost no link.
+//!   last byte left. An infinite rate leaves the latency alone; an unlimited
+//!   master link is held by no message. The submitter sits on the master's
+//!   machine: its messages cost no link.
 //! - **Clock.** The driver jumps to the next event, deadline or finished CPU
 //!   job; nothing sleeps or reads a clock, so a run replays exactly.
 
