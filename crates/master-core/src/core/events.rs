@@ -188,7 +188,8 @@ impl MasterCore {
 
     /// The scheduler gives `worker` no more work of `job`.
     pub(super) fn worker_blocklisted(&mut self, worker: ConnId, job: u64) {
-        warn!(worker = %self.peers.name(worker), job, "worker failed 3 packages: no more work of this job");
+        let failures = self.scheduler.config().retry.worker_failures_per_job;
+        warn!(worker = %self.peers.name(worker), job, "worker failed {failures} packages: no more work of this job");
         let name = self.peers.worker_name(worker);
         self.telemetry.blocklisted(&name, job);
     }
