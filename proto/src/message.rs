@@ -915,8 +915,8 @@ mod tests {
     use super::*;
     use crate::wire::tests::scene;
 
-    /// The unit enum serde derives, as the wire carried job states before
-    /// their names moved into [`WireJobState::name`].
+    /// The unit enum serde would derive: the encoding that the names of
+    /// [`WireJobState::name`] must keep, on the wire and in JSON.
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
     #[serde(rename_all = "lowercase")]
     enum Derived {

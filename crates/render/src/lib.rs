@@ -245,15 +245,14 @@ impl Renderer {
     pub fn base_frame(&self, setup: &FrameSetup) -> (Image, IdBuffer) {
         let mut image = Image::new(0, 0, setup.lighting.background);
         let mut ids = IdBuffer::new(0, 0);
-        let buffers = (&mut image, &mut ids);
-        base_frame_into(
-            self.scene(),
-            setup,
-            &self.is_reflector,
-            buffers,
-            &self.warned_glass,
-        );
+        self.base_frame_in(setup, (&mut image, &mut ids));
         (image, ids)
+    }
+
+    /// [`base_frame_into`] this renderer's scene and reflectors.
+    fn base_frame_in(&self, setup: &FrameSetup, buffers: (&mut Image, &mut IdBuffer)) {
+        let warned = &self.warned_glass;
+        base_frame_into(self.scene(), setup, &self.is_reflector, buffers, warned);
     }
 
     /// A frame to composite into over `base`, its component planes over the
@@ -285,14 +284,7 @@ impl Renderer {
             ids: IdBuffer::new(0, 0),
             scratch: Vec::new(),
         });
-        let buffers = (&mut image, &mut ids);
-        base_frame_into(
-            self.scene(),
-            setup,
-            &self.is_reflector,
-            buffers,
-            &self.warned_glass,
-        );
+        self.base_frame_in(setup, (&mut image, &mut ids));
         let mut frame = self.frame_image(setup, image);
         frame.composite(bitmap);
         let encoded = encode(&frame, &mut scratch);
