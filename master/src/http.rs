@@ -3,7 +3,8 @@
 //! `/metrics`, the interactive view (`POST /api/view` moves the eye,
 //! `/view/image.png` and `/view/objects.png` show its newest stage), each
 //! kept frame's timeline (`/frames/SEQ.svg`), and the jobs: `GET /api/jobs`
-//! lists them as `vtfarm jobs --all --json` does, `POST
+//! lists them as `vtfarm jobs --all --json` does (a study as one row with
+//! its variants), `GET /api/jobs/{id}` shows one, `POST
 //! /api/jobs/{id}/cancel|pause|resume|requeue|priority` changes one
 //! (`docs/http-api.md`).
 //!
@@ -69,8 +70,10 @@ use vtfarm_master_core::telemetry::{
     FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals,
 };
 use vtfarm_master_core::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
-use vtfarm_master_core::{JobControlError, JobEntry, JobState, MasterCore};
-use vtfarm_proto::{FrameStats, JobAction, JobSummary, StatusReply, WireImage, token_matches};
+use vtfarm_master_core::{JobControlError, JobState, MasterCore};
+use vtfarm_proto::{
+    FrameStats, JobAction, JobRow, JobSummary, StatusReply, WireImage, token_matches,
+};
 
 use crate::driver::MasterHandle;
 
@@ -418,6 +421,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         .route(LOGIN_PATH, get(login_page).post(login))
         .route("/api/view", post(steer_view))
         .route("/api/jobs", get(list_jobs))
+        .route("/api/jobs/{id}", get(show_job))
         .route("/api/jobs/{id}/{action}", post(control_job))
         .route("/view/image.png", get(view_png))
         .route("/view/objects.png", get(view_objects_png))
@@ -695,14 +699,50 @@ async fn status(State(state): State<HttpState>) -> Response {
 /// Every job the master lists (finished ones kept too), oldest first: what
 /// `vtfarm jobs --all --json` prints.
 async fn list_jobs(State(state): State<HttpState>) -> Response {
-    match state.master.inspect(job_summaries).await {
+    match state.master.inspect(job_rows).await {
         Some(jobs) => axum::Json(jobs).into_response(),
         None => unavailable(),
     }
 }
 
-fn job_summaries(core: &MasterCore) -> Vec<JobSummary> {
-    core.jobs().list(true).map(JobEntry::summary).collect()
+/// One job (a study with its variants): 404 for a job the master does
+/// not list (a variant is listed under its study).
+async fn show_job(State(state): State<HttpState>, Path(id): Path<u64>) -> Response {
+    let row = state.master.inspect(move |core| {
+        let jobs = core.jobs();
+        let entry = jobs.get(id)?;
+        Some(JobRowView::from(jobs.row(entry)))
+    });
+    match row.await {
+        Some(Some(row)) => axum::Json(row).into_response(),
+        Some(None) => (StatusCode::NOT_FOUND, format!("no job {id}\n")).into_response(),
+        None => unavailable(),
+    }
+}
+
+fn job_rows(core: &MasterCore) -> Vec<JobRowView> {
+    (core.jobs().rows(true).into_iter())
+        .map(JobRowView::from)
+        .collect()
+}
+
+/// A row of the jobs as JSON (`GET /api/jobs`, `vtfarm jobs --json`): the
+/// job's listing, and a study's `variants` (each a listing) with it.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+pub struct JobRowView {
+    #[serde(flatten)]
+    pub job: JobSummary,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<JobSummary>,
+}
+
+impl From<JobRow> for JobRowView {
+    fn from(row: JobRow) -> Self {
+        JobRowView {
+            job: row.job,
+            variants: row.variants,
+        }
+    }
 }
 
 /// The body `POST /api/jobs/{id}/requeue` and `…/priority` may carry.
@@ -768,7 +808,7 @@ async fn control_job(
 pub struct DashboardView {
     pub status: StatusReply,
     /// Every listed job, oldest first (as `GET /api/jobs`).
-    pub jobs: Vec<JobSummary>,
+    pub jobs: Vec<JobRowView>,
     pub counters: CountersView,
     /// Per worker name: totals and the packages it is working on.
     pub workers: BTreeMap<String, WorkerView>,
@@ -969,7 +1009,7 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
         .collect();
     DashboardView {
         status,
-        jobs: job_summaries(core),
+        jobs: job_rows(core),
         counters: CountersView::from(&telemetry.counters),
         workers,
         live: core.live_frame().map(|f| LiveView {

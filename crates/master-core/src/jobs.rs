@@ -17,11 +17,20 @@
 //! Completed, Failed and Cancelled are finished: such a job stays listed
 //! (and a persistent master keeps its frames for re-attaching) until
 //! [`Retention`] lets it go.
+//!
+//! A study is one listed job over its variants, each a job of its own
+//! (listed under it, never on its own, and controlled only through it).
+//! Its state follows from theirs ([`study_state`]) through the same table:
+//! finished when every variant is (completed when each completed, else
+//! cancelled when one was cancelled, else failed); paused when every
+//! unfinished variant is; running once a variant started or finished;
+//! queued before. Its frames are its variants' together, and it goes with
+//! them when [`Retention`] lets it go.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+use vtfarm_proto::{JobRow, JobSummary, WireJobKind, WireJobState};
 
 /// A job's state; the module documentation has the transition table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -168,6 +177,10 @@ pub struct JobEntry {
     pub host: String,
     /// Why it failed or who cancelled it.
     pub reason: String,
+    /// The study it is a variant of.
+    pub study: Option<u64>,
+    /// A study's variants, in order (empty for any other job).
+    pub variants: Vec<u64>,
 }
 
 impl JobEntry {
@@ -212,8 +225,44 @@ impl JobEntry {
             finished_ms: summary.finished_ms,
             host: summary.host,
             reason: summary.reason,
+            study: None,
+            variants: Vec::new(),
         }
     }
+
+    /// Whether it is a study (its variants listed under it).
+    pub fn is_study(&self) -> bool {
+        self.kind == WireJobKind::Study && self.study.is_none() && !self.variants.is_empty()
+    }
+}
+
+/// A study's state from its variants' (the module's documentation has the
+/// rule); `None` for a study without variants.
+pub fn study_state(variants: &[&JobEntry]) -> Option<JobState> {
+    use JobState::*;
+    if variants.is_empty() {
+        return None;
+    }
+    let has = |state: JobState| variants.iter().any(|v| v.state == state);
+    let unfinished = || variants.iter().filter(|v| !v.state.is_finished());
+    Some(if variants.iter().all(|v| v.state.is_finished()) {
+        if variants.iter().all(|v| v.state == Completed) {
+            Completed
+        } else if has(Cancelled) {
+            Cancelled
+        } else {
+            Failed
+        }
+    } else if unfinished().all(|v| v.state == Paused) {
+        Paused
+    } else if variants
+        .iter()
+        .any(|v| v.state == Running || v.state.is_finished() || v.started_ms.is_some())
+    {
+        Running
+    } else {
+        Queued
+    })
 }
 
 /// A transition the table does not allow.
@@ -245,6 +294,8 @@ pub enum JobControlError {
     ViewJob(u64),
     #[error("job {job} cannot be queued again: {reason}")]
     Requeue { job: u64, reason: String },
+    #[error("job {job} is a variant of study {study}: control the study")]
+    InStudy { job: u64, study: u64 },
 }
 
 /// Every listed job, by id (so in submission order).
@@ -304,9 +355,81 @@ impl JobTable {
         Ok(Some(entry))
     }
 
-    /// The jobs, oldest first: every one with `all`, else the unfinished.
+    /// The jobs, oldest first: every one with `all`, else the unfinished;
+    /// a study's variants only under it ([`JobTable::row`]).
     pub fn list(&self, all: bool) -> impl Iterator<Item = &JobEntry> {
-        (self.entries.values()).filter(move |e| all || !e.state.is_finished())
+        (self.entries.values())
+            .filter(move |e| e.study.is_none() && (all || !e.state.is_finished()))
+    }
+
+    /// A job's row: its listing, and a study's variants' under it.
+    pub fn row(&self, entry: &JobEntry) -> JobRow {
+        JobRow {
+            job: entry.summary(),
+            variants: (entry.variants.iter())
+                .filter_map(|&v| self.entries.get(&v))
+                .map(JobEntry::summary)
+                .collect(),
+        }
+    }
+
+    /// The listed rows, as [`JobTable::list`] picks them.
+    pub fn rows(&self, all: bool) -> Vec<JobRow> {
+        self.list(all).map(|e| self.row(e)).collect()
+    }
+
+    /// Lists `study` over `variants` (listed already): its frames and
+    /// state follow theirs from now on.
+    pub(crate) fn insert_study(&mut self, mut study: JobEntry, variants: &[u64]) {
+        study.variants = (variants.iter().copied())
+            .filter(|v| self.entries.contains_key(v))
+            .collect();
+        for v in &study.variants {
+            if let Some(variant) = self.entries.get_mut(v) {
+                variant.study = Some(study.id);
+            }
+        }
+        self.entries.insert(study.id, study);
+    }
+
+    /// Brings study `id`'s frames and state in line with its variants' at
+    /// `at_ms`; whether its state changed. A state the table does not
+    /// allow at once is reached through running (a variant that finished
+    /// before any was seen running).
+    pub(crate) fn refresh_study(&mut self, id: u64, at_ms: u64) -> bool {
+        let Some(study) = self.entries.get(&id) else {
+            return false;
+        };
+        let variants: Vec<&JobEntry> = (study.variants.iter())
+            .filter_map(|v| self.entries.get(v))
+            .collect();
+        let Some(to) = study_state(&variants) else {
+            return false;
+        };
+        let done = variants.iter().map(|v| v.frames_done).sum();
+        let total = variants.iter().map(|v| v.frames_total).sum();
+        // A finished study says why from its first variant that did not complete.
+        let why = (variants.iter())
+            .find(|v| v.state == to && !v.reason.is_empty())
+            .map(|v| format!("variant {:?}: {}", v.name, v.reason));
+        let from = study.state;
+        let study = self.entries.get_mut(&id).expect("looked up above");
+        study.frames_done = done;
+        study.frames_total = total;
+        if from == to {
+            return false;
+        }
+        if !from.may_become(to) && from.may_become(JobState::Running) {
+            let _ = self.set_state(id, JobState::Running, at_ms);
+        }
+        let moved = matches!(self.set_state(id, to, at_ms), Ok(Some(_)));
+        if let (true, Some(why)) = (moved && to.is_finished(), why) {
+            let study = self.entries.get_mut(&id).expect("looked up above");
+            if study.reason.is_empty() {
+                study.reason = why;
+            }
+        }
+        moved
     }
 
     /// How many jobs are in `state`.
@@ -317,7 +440,9 @@ impl JobTable {
     /// The finished jobs `retention` lets go at `now_ms`: those beyond its
     /// count (the earliest finished first) and those finished too long ago.
     pub(crate) fn expired(&self, retention: Retention, now_ms: u64) -> Vec<u64> {
+        // A study's variants go with it.
         let mut finished: Vec<(u64, u64)> = (self.entries.values())
+            .filter(|e| e.study.is_none())
             .filter_map(|e| Some((e.finished_ms?, e.id)).filter(|_| e.state.is_finished()))
             .collect();
         finished.sort_unstable();
@@ -333,7 +458,7 @@ impl JobTable {
     pub(crate) fn next_expiry(&self, retention: Retention) -> Option<u64> {
         let max_age = retention.max_age.as_millis() as u64;
         (self.entries.values())
-            .filter(|e| e.state.is_finished())
+            .filter(|e| e.state.is_finished() && e.study.is_none())
             .filter_map(|e| e.finished_ms)
             .min()
             .map(|at| at.saturating_add(max_age))
@@ -385,6 +510,8 @@ mod tests {
             finished_ms: Some(at_ms),
             host: "test".into(),
             reason: String::new(),
+            study: None,
+            variants: Vec::new(),
         }
     }
 
