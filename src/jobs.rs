@@ -3,7 +3,7 @@
 
 use anyhow::Result;
 use vtfarm_master::http::JobRowView;
-use vtfarm_proto::{JobRow, JobSummary, WireJobKind};
+use vtfarm_proto::{JobRow, WireJobKind};
 
 use crate::farm::ClusterArgs;
 use crate::shared::{runtime, utc_time};
@@ -113,7 +113,7 @@ pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use vtfarm_proto::WireJobState;
+    use vtfarm_proto::{JobSummary, WireJobState};
 
     #[test]
     fn the_table_lists_every_column_and_a_finished_jobs_reason() {
