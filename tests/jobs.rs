@@ -654,3 +654,31 @@ fn a_master_killed_mid_study_resumes_it_and_attach_writes_the_same_report() {
     assert_eq!(job_of(&master.jobs(), id)["state"], "completed");
     drop(worker);
 }
+
+#[test]
+fn ctrl_c_on_a_study_submit_writes_a_partial_report_and_says_how_to_follow_or_cancel_it() {
+    let master = Master::start();
+    let study = study_file(master.dir.path());
+    // No worker: the study never finishes on its own.
+    let mut submit = master.submit(&study, "study", &[]);
+    let line = submit.wait_for("accepted");
+    let id: u64 = (line.split_whitespace().nth(1).and_then(|w| w.parse().ok()))
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(line.starts_with(&format!("study {id} accepted")), "{line}");
+    let sent = Command::new("kill")
+        .args(["-INT", &submit.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    assert_eq!(submit.exit().code(), Some(130), "{}", submit.log_text());
+    let log = submit.log_text();
+    assert!(
+        log.contains(&format!("study {id} keeps running on the farm")),
+        "{log}"
+    );
+    assert!(log.contains(&format!("--attach {id}")), "{log}");
+    assert!(log.contains(&format!("vtfarm cancel {id}")), "{log}");
+    assert!(log.contains("partial report of 0 of 4 frames"), "{log}");
+    assert!(master.dir.path().join("study/report.html").exists());
+    assert_eq!(job_of(&master.jobs(), id)["state"], "running");
+}

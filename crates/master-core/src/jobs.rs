@@ -515,6 +515,102 @@ mod tests {
         }
     }
 
+    fn variant(id: u64, state: JobState, started: bool) -> JobEntry {
+        JobEntry {
+            kind: WireJobKind::Variant,
+            state,
+            frames_done: u32::from(state == JobState::Completed) * 2,
+            frames_total: 2,
+            started_ms: started.then_some(10),
+            finished_ms: state.is_finished().then_some(20),
+            ..finished(id, 0)
+        }
+    }
+
+    #[test]
+    fn a_studys_state_follows_its_variants() {
+        use JobState::*;
+        let cases = [
+            (vec![(Queued, false), (Queued, false)], Queued),
+            (vec![(Running, true), (Queued, false)], Running),
+            // Between two variants (one done, the next not yet started).
+            (vec![(Completed, true), (Queued, false)], Running),
+            // Resumed after it had started: running though none runs now.
+            (vec![(Queued, true), (Queued, false)], Running),
+            (vec![(Paused, true), (Paused, false)], Paused),
+            (vec![(Completed, true), (Paused, false)], Paused),
+            (vec![(Paused, true), (Running, true)], Running),
+            (vec![(Completed, true), (Completed, true)], Completed),
+            (vec![(Completed, true), (Failed, true)], Failed),
+            (vec![(Failed, true), (Cancelled, true)], Cancelled),
+            (vec![(Completed, true), (Cancelled, false)], Cancelled),
+        ];
+        for (states, expected) in cases {
+            let variants: Vec<JobEntry> = (states.iter().enumerate())
+                .map(|(i, &(state, started))| variant(i as u64, state, started))
+                .collect();
+            let refs: Vec<&JobEntry> = variants.iter().collect();
+            assert_eq!(study_state(&refs), Some(expected), "{states:?}");
+        }
+        assert_eq!(study_state(&[]), None);
+    }
+
+    /// A table of a study (id 1) over variants 2 and 3, queued.
+    fn study_table(a: JobState, b: JobState) -> JobTable {
+        let mut table = JobTable::default();
+        table.insert(variant(2, a, a != JobState::Queued));
+        table.insert(variant(3, b, b != JobState::Queued));
+        let study = JobEntry {
+            kind: WireJobKind::Study,
+            state: JobState::Queued,
+            frames_done: 0,
+            frames_total: 0,
+            started_ms: None,
+            finished_ms: None,
+            ..finished(1, 0)
+        };
+        table.insert_study(study, &[2, 3, 99]);
+        table
+    }
+
+    #[test]
+    fn a_study_lists_its_variants_under_it_and_sums_their_frames() {
+        let mut table = study_table(JobState::Completed, JobState::Running);
+        assert!(table.refresh_study(1, 30));
+        let study = table.get(1).unwrap();
+        // An unknown variant is not listed.
+        assert_eq!(study.variants, [2, 3]);
+        assert_eq!((study.frames_done, study.frames_total), (2, 4));
+        assert_eq!(
+            (study.state, study.started_ms),
+            (JobState::Running, Some(30))
+        );
+        let listed: Vec<u64> = table.list(true).map(|e| e.id).collect();
+        assert_eq!(listed, [1]);
+        let row = table.row(table.get(1).unwrap());
+        let ids: Vec<u64> = row.variants.iter().map(|v| v.id).collect();
+        assert_eq!((row.job.id, ids), (1, vec![2, 3]));
+        // Nothing changed: nothing to journal.
+        assert!(!table.refresh_study(1, 40));
+    }
+
+    #[test]
+    fn a_study_finished_at_once_goes_through_running_by_the_table() {
+        let mut table = study_table(JobState::Completed, JobState::Failed);
+        table.get_mut(3).unwrap().reason = "package failed".into();
+        assert!(table.refresh_study(1, 50));
+        let study = table.get(1).unwrap();
+        assert_eq!(study.state, JobState::Failed);
+        assert_eq!((study.started_ms, study.finished_ms), (Some(50), Some(50)));
+        assert_eq!(study.reason, "variant \"job 3\": package failed");
+        // Its variants go with it, never before it.
+        let retention = Retention {
+            max_jobs: 0,
+            max_age: Duration::from_secs(1),
+        };
+        assert_eq!(table.expired(retention, 1_000_000), vec![1]);
+    }
+
     #[test]
     fn retention_lets_the_earliest_finished_and_the_too_old_go() {
         let mut table = JobTable::default();
