@@ -609,7 +609,7 @@ fn render_of_a_poison_scene_exits_with_the_reason() {
 }
 
 /// Absurd simulator settings are refused at once, before any cost is
-/// recorded (an infinite latency used to panic in `Duration`).
+/// recorded (an infinite latency would panic in `Duration`).
 #[test]
 fn bench_simulate_refuses_absurd_settings() {
     for (args, needle) in [

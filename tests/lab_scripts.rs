@@ -175,7 +175,7 @@ fn v2_quotas_write_cpu_max_and_hand_the_cpu_controller_on() {
     assert!(stdout.contains("--link-mbit 10000"), "{stdout}");
 }
 
-/// Without quotas the lab shares the machine's cores as before, links as given.
+/// Without quotas the lab's processes share the machine's cores, links as given.
 #[test]
 fn without_quotas_the_prediction_shares_the_machine() {
     let root = tempfile::tempdir().unwrap();

@@ -176,7 +176,8 @@ fn development_log_words(text: &str) -> Vec<String> {
 /// Every text file of the repository a reader meets besides the Rust
 /// sources: docs, scripts, configurations, the dashboard's pages, sorted.
 fn text_files() -> Vec<PathBuf> {
-    const SKIPPED_DIRS: [&str; 4] = ["target", ".git", "node_modules", "shared"];
+    // `vendor`: third-party code kept as its authors wrote it.
+    const SKIPPED_DIRS: [&str; 5] = ["target", ".git", "node_modules", "shared", "vendor"];
     const TEXT: [&str; 11] = [
         "md", "sh", "toml", "yml", "yaml", "html", "js", "css", "txt", "py", "json",
     ];

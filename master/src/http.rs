@@ -40,7 +40,7 @@
 //! and hyper's bounded write buffer, never a backlog: every stream follows
 //! one shared view, computed once per change for all of them.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::HashMap;
 use std::convert::Infallible;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, OnceLock};
@@ -60,22 +60,28 @@ use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::Registry;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use sha2::{Digest, Sha256};
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use vtfarm_imaging::Image;
-use vtfarm_master_core::telemetry::{
-    FRAME_SECONDS_BUCKETS, FarmCounters, FrameDurations, WorkerTotals,
-};
-use vtfarm_master_core::view::{CurrentView, EYE_BOX, ViewOutcome, ViewRequest};
+use vtfarm_master_core::telemetry::{FRAME_SECONDS_BUCKETS, FrameDurations, WorkerTotals};
+use vtfarm_master_core::view::{EYE_BOX, ViewRequest};
 use vtfarm_master_core::{JobControlError, JobState, MasterCore};
-use vtfarm_proto::{
-    FrameStats, JobAction, JobRow, JobSummary, StatusReply, WireImage, token_matches,
-};
+use vtfarm_proto::{JobAction, WireImage, token_matches};
 
 use crate::driver::MasterHandle;
+
+mod json;
+#[cfg(test)]
+mod tests;
+
+use json::ViewRequestBody;
+pub use json::{
+    CountersView, CurrentViewJson, DashboardView, FrameView, JobRowView, LatestView, LiveView,
+    ViewOutcomeView, ViewSourceView, ViewState, WorkerTotalsView, WorkerView,
+};
 
 /// The dashboard, served from the binary.
 const DASHBOARD: &str = include_str!("dashboard.html");
@@ -726,25 +732,6 @@ fn job_rows(core: &MasterCore) -> Vec<JobRowView> {
         .collect()
 }
 
-/// A row of the jobs as JSON (`GET /api/jobs`, `vtfarm jobs --json`): the
-/// job's listing, and a study's `variants` (each a listing) with it.
-#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
-pub struct JobRowView {
-    #[serde(flatten)]
-    pub job: JobSummary,
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub variants: Vec<JobSummary>,
-}
-
-impl From<JobRow> for JobRowView {
-    fn from(row: JobRow) -> Self {
-        JobRowView {
-            job: row.job,
-            variants: row.variants,
-        }
-    }
-}
-
 /// The body `POST /api/jobs/{id}/requeue` and `…/priority` may carry.
 #[derive(Deserialize, Default)]
 struct ControlBody {
@@ -801,193 +788,6 @@ async fn control_job(
         }
         None => unavailable(),
     }
-}
-
-/// Everything the dashboard shows.
-#[derive(Serialize)]
-pub struct DashboardView {
-    pub status: StatusReply,
-    /// Every listed job, oldest first (as `GET /api/jobs`).
-    pub jobs: Vec<JobRowView>,
-    pub counters: CountersView,
-    /// Per worker name: totals and the packages it is working on.
-    pub workers: BTreeMap<String, WorkerView>,
-    pub live: Option<LiveView>,
-    /// The kept finished frames, oldest first.
-    pub frames: Vec<FrameView>,
-    pub view: ViewState,
-}
-
-/// The interactive view, as the page shows it.
-#[derive(Serialize)]
-pub struct ViewState {
-    /// The jobs whose scene the view can start from.
-    pub sources: Vec<ViewSourceView>,
-    /// Half the side of the box the eye moves in (metres).
-    pub eye_box: f32,
-    pub current: Option<CurrentViewJson>,
-    /// The newest finished stage, shown at `/view/image.png`.
-    pub latest: Option<LatestView>,
-    /// What happened to the last views' jobs, oldest first.
-    pub outcomes: Vec<ViewOutcomeView>,
-}
-
-#[derive(Serialize)]
-pub struct ViewSourceView {
-    pub job: u64,
-    pub name: String,
-}
-
-#[derive(Serialize)]
-pub struct LatestView {
-    pub generation: u64,
-    pub quality: &'static str,
-    /// `null` until computed, after the stage went on view.
-    pub glare: Option<vtfarm_glare::Summary>,
-}
-
-#[derive(Serialize)]
-pub struct WorkerView {
-    #[serde(flatten)]
-    pub totals: WorkerTotalsView,
-    pub packages: Vec<u64>,
-}
-
-/// The master's cumulative counts ([`FarmCounters`]), as the API shows them.
-#[derive(Serialize)]
-pub struct CountersView {
-    pub jobs_submitted: u64,
-    pub jobs_completed: u64,
-    pub jobs_failed: u64,
-    pub jobs_cancelled: u64,
-    pub frames_completed: u64,
-    pub packages_done: u64,
-    pub packages_failed: u64,
-    pub packages_requeued: u64,
-    pub packages_duplicated: u64,
-    pub journal_write_failures: u64,
-    pub frames_rendered_again: u64,
-}
-
-impl From<&FarmCounters> for CountersView {
-    fn from(c: &FarmCounters) -> Self {
-        CountersView {
-            jobs_submitted: c.jobs_submitted,
-            jobs_completed: c.jobs_completed,
-            jobs_failed: c.jobs_failed,
-            jobs_cancelled: c.jobs_cancelled,
-            frames_completed: c.frames_completed,
-            packages_done: c.packages_done,
-            packages_failed: c.packages_failed,
-            packages_requeued: c.packages_requeued,
-            packages_duplicated: c.packages_duplicated,
-            journal_write_failures: c.journal_write_failures,
-            frames_rendered_again: c.frames_rendered_again,
-        }
-    }
-}
-
-/// A worker's totals ([`WorkerTotals`]), as the API shows them.
-#[derive(Serialize)]
-pub struct WorkerTotalsView {
-    pub samples: u64,
-    pub bytes_in: u64,
-    pub bytes_out: u64,
-    pub blocklisted_jobs: BTreeSet<u64>,
-}
-
-impl From<WorkerTotals> for WorkerTotalsView {
-    fn from(t: WorkerTotals) -> Self {
-        WorkerTotalsView {
-            samples: t.samples,
-            bytes_in: t.bytes_in,
-            bytes_out: t.bytes_out,
-            blocklisted_jobs: t.blocklisted_jobs,
-        }
-    }
-}
-
-/// The move being rendered ([`CurrentView`]), as the API shows it.
-#[derive(Serialize)]
-pub struct CurrentViewJson {
-    pub generation: u64,
-    pub source: u64,
-    pub offset: [f32; 3],
-    pub eye: [f32; 3],
-    pub job: u64,
-    pub stages_done: usize,
-    pub stages_total: usize,
-}
-
-impl From<&CurrentView> for CurrentViewJson {
-    fn from(v: &CurrentView) -> Self {
-        CurrentViewJson {
-            generation: v.generation,
-            source: v.source,
-            offset: v.offset,
-            eye: v.eye,
-            job: v.job,
-            stages_done: v.stages_done,
-            stages_total: v.stages_total,
-        }
-    }
-}
-
-/// What happened to a view's job ([`ViewOutcome`]), as the API shows it.
-#[derive(Serialize)]
-#[serde(tag = "kind", rename_all = "lowercase")]
-pub enum ViewOutcomeView {
-    Rendered {
-        generation: u64,
-        job: u64,
-        quality: &'static str,
-    },
-    Cancelled {
-        generation: u64,
-        job: u64,
-    },
-}
-
-impl From<ViewOutcome> for ViewOutcomeView {
-    fn from(outcome: ViewOutcome) -> Self {
-        match outcome {
-            ViewOutcome::Rendered {
-                generation,
-                job,
-                quality,
-            } => ViewOutcomeView::Rendered {
-                generation,
-                job,
-                quality: quality.name(),
-            },
-            ViewOutcome::Cancelled { generation, job } => {
-                ViewOutcomeView::Cancelled { generation, job }
-            }
-        }
-    }
-}
-
-/// A move of the view's eye as the API takes it ([`ViewRequest`]).
-#[derive(Deserialize)]
-struct ViewRequestBody {
-    job: u64,
-    offset: [f32; 3],
-}
-
-#[derive(Serialize)]
-pub struct LiveView {
-    pub job: u64,
-    pub frame: u32,
-    pub triangles_done: u64,
-    pub triangles_total: u64,
-}
-
-#[derive(Serialize)]
-pub struct FrameView {
-    pub seq: u64,
-    pub job: u64,
-    pub frame: u32,
-    pub stats: FrameStats,
 }
 
 fn dashboard_view(core: &MasterCore) -> DashboardView {
@@ -1596,87 +1396,5 @@ impl EncodeMetric for FrameDurationMetric {
 
     fn metric_type(&self) -> MetricType {
         MetricType::Histogram
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn address(last: u8) -> IpAddr {
-        IpAddr::from([127, 0, 0, last])
-    }
-
-    /// One address takes up to its cap; the reserved slots go only to
-    /// addresses holding a few; a given-back slot is taken again.
-    #[test]
-    fn the_reserved_slots_go_to_addresses_holding_few() {
-        let slots = Arc::new(Slots::new(HttpLimits {
-            max_connections: 20,
-            max_connections_per_address: 12,
-            reserved_connections: 4,
-            ..HttpLimits::default()
-        }));
-        let mut flood: Vec<Slot> = (0..12).map_while(|_| slots.take(address(1))).collect();
-        assert_eq!(flood.len(), 12, "one address up to its cap");
-        assert!(slots.take(address(1)).is_none());
-        // A second address takes the 4 open slots left, then reserved ones
-        // while it holds fewer than FEW_CONNECTIONS (8).
-        let second: Vec<Slot> = (0..12).map_while(|_| slots.take(address(2))).collect();
-        assert_eq!(second.len(), 8);
-        // All 20 taken: nobody else, not even a newcomer.
-        assert!(slots.take(address(3)).is_none());
-        flood.truncate(10);
-        let newcomer = slots
-            .take(address(3))
-            .expect("a reserved slot for a newcomer");
-        assert!(
-            slots.take(address(2)).is_none(),
-            "not for an address holding many"
-        );
-        // The IPv4-mapped form of an address counts as the address.
-        let mapped = IpAddr::from(std::net::Ipv4Addr::new(127, 0, 0, 3).to_ipv6_mapped());
-        let again = slots.take(mapped).expect("the last reserved slot");
-        assert_eq!(again.address, newcomer.address);
-        drop((flood, second, newcomer, again));
-        let held = slots.held.lock().unwrap();
-        assert_eq!((held.total, held.per_address.len()), (0, 0));
-    }
-
-    #[test]
-    fn only_this_servers_own_pages_are_same_origin() {
-        let headers = |pairs: &[(&'static str, &'static str)]| {
-            let mut map = HeaderMap::new();
-            for (name, value) in pairs {
-                map.insert(*name, HeaderValue::from_static(value));
-            }
-            map
-        };
-        let host = ("host", "127.0.0.1:7879");
-        for own in [
-            vec![host],
-            vec![host, ("origin", "http://127.0.0.1:7879")],
-            vec![("host", "Dash.Example"), ("origin", "https://dash.example")],
-            vec![host, ("sec-fetch-site", "same-origin")],
-            vec![host, ("sec-fetch-site", "none")],
-        ] {
-            assert_eq!(cross_origin(&headers(&own)), None, "{own:?}");
-        }
-        for other in [
-            vec![host, ("sec-fetch-site", "cross-site")],
-            vec![host, ("sec-fetch-site", "same-site")],
-            vec![host, ("origin", "http://127.0.0.1:7880")],
-            vec![host, ("origin", "http://localhost:7879")],
-            vec![host, ("origin", "null")],
-            vec![host, ("origin", "ftp://127.0.0.1:7879")],
-            vec![("origin", "http://127.0.0.1:7879")],
-            vec![
-                host,
-                ("origin", "http://127.0.0.1:7879"),
-                ("sec-fetch-site", "same-site"),
-            ],
-        ] {
-            assert!(cross_origin(&headers(&other)).is_some(), "{other:?}");
-        }
     }
 }

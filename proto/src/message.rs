@@ -8,7 +8,7 @@
 //! master can tell an old or new client's version even when the rest of its
 //! `Hello` no longer decodes.
 //!
-//! Flows (the farm issue has the full state machines):
+//! Flows (the scheduler's and the job table's docs have the state machines):
 //! - every connection: `Hello` → `Welcome` | `Refused` on the first stream
 //!   (see [`crate::handshake`]);
 //! - worker ↔ master: master `SceneOffer` → worker `SceneRequest` (when the

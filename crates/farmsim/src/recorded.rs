@@ -577,8 +577,8 @@ mod tests {
 
     /// The steady frame time can never beat the work: pipelined frames
     /// that finish in a bunch (a straggler holds frame 0 while the next
-    /// frames' work is done) made the old measure, the mean interval
-    /// between deliveries, near 0 s and the efficiency above 100%. Over
+    /// frames' work is done) would make the mean interval between
+    /// deliveries near 0 s and the efficiency above 100%. Over
     /// farms of 1 to 24 workers, equal and mixed speeds, 2 to 5 frames:
     /// frame time × summed speed ≥ one thread's work per frame, and every
     /// frame's imbalance is finite and not negative.
@@ -730,7 +730,7 @@ mod tests {
 
     /// A job whose frames go out in sRGB has its base frame converted with
     /// its rasterizing, while the workers trace: the whole frame's
-    /// conversion costs the master's CPU as before but no longer stands
+    /// conversion still costs the master's CPU but does not stand
     /// between the frame's last result and its delivery, where only the
     /// conversion of the pixels results wrote is left.
     #[test]

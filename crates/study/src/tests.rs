@@ -681,3 +681,96 @@ fn no_polar_plot_value_lies_beyond_its_scale_unmarked_and_a_partial_report_lists
     let json = std::fs::read_to_string(partial.join("summary.json")).unwrap();
     assert!(json.contains("\"complete\": false"));
 }
+
+#[test]
+fn a_sun_sweep_finds_the_suns_glint_in_the_cover_glass_and_reports_its_veil() {
+    let dir = tempfile::tempdir().unwrap();
+    // The stock cab stands emissive panels outside its windows for the
+    // sky and the view, and nothing is seen through a panel, the sun
+    // included. Without those panels its windows open onto the sky.
+    let mut cab = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
+        detail: 0.3,
+        ..Default::default()
+    })
+    .scene;
+    let panels: Vec<u32> = ["windshield_sky", "side_window_left", "side_window_right"]
+        .iter()
+        .map(|name| cab.object_id(name).expect("a stock panel"))
+        .collect();
+    cab.triangles.retain(|t| !panels.contains(&t.object));
+    vtfarm_scene::obj::write_obj(&cab, dir.path(), "open-cab").unwrap();
+    let variant = "[[variants]]\nname = \"open cab\"\nobj = \"open-cab.obj\"\n";
+
+    // Where the glass mirrors the sky seen from the eye, a sun would glint:
+    // the mirror direction at the middle one of those glass pixels.
+    let probe = study_plan(dir.path(), &[vtfarm_cockpit::default_eye()], variant);
+    let v = &probe.variants[0];
+    let setup = &v.setups[0];
+    let renderer = Renderer::new(Arc::new(v.scene.clone()), v.reflectors.clone());
+    let frame = (renderer.render(setup, &RenderOptions::default(), &mut |_, _| {})).image;
+    let (ids, _) = renderer.id_buffers(setup);
+    let camera = &setup.camera;
+    let mirrored: Vec<Vec3> = (frame.glass())
+        .filter(|&i| frame.pixel(i).object == NONE)
+        .map(|i| {
+            let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
+            let triangle = ids.triangle_at(x, y);
+            let (surface, ray) =
+                vtfarm_vertex::pixel_surface(&v.scene, camera, &ids, triangle, x, y);
+            vtfarm_trace::reflect(ray, surface.normal)
+        })
+        .collect();
+    assert!(
+        mirrored.len() >= 10,
+        "the glass mirrors the sky on {} pixels",
+        mirrored.len()
+    );
+    let (azimuth, elevation) = crate::sun::vehicle_angles(mirrored[mirrored.len() / 2]);
+    assert!(elevation > 1.0, "a sun above the horizon: {elevation}°");
+
+    // The sweep: that sun, and one a quarter turn away.
+    let away = (azimuth + 90.0) % 360.0;
+    let plan = study_plan(
+        dir.path(),
+        &[vtfarm_cockpit::default_eye()],
+        &format!("{variant}[sun]\nazimuths = [{azimuth}, {away}]\nelevations = [{elevation}]\n"),
+    );
+    let (report, _) = run(&plan, dir.path());
+    let at = |a: f32| {
+        let row = (report.frames.iter())
+            .find(|f| f.sun_azimuth_deg == Some(a))
+            .expect("a frame per sun");
+        &row.glint
+    };
+    let glint = at(azimuth);
+    assert!(glint.reaches_eye(), "the mirrored sun glints: {glint:?}");
+    assert!(glint.peak_luminance_cd_m2 >= plan.glint.luminance_cd_m2);
+    assert!(glint.eye_illuminance_lux > 0.0);
+    let worst = glint.worst_instrument().expect("a veil on an instrument");
+    let closed = 10.0 * glint.eye_illuminance_lux / (worst.angle_deg * worst.angle_deg);
+    assert!(
+        (worst.veiling_luminance_cd_m2 / closed - 1.0).abs() < 1e-5,
+        "{worst:?}"
+    );
+    assert!(!at(away).reaches_eye(), "{:?}", at(away));
+
+    // The report marks that sun on the polar plots and in the table, and
+    // summary.json carries the figures.
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(
+        html.contains("sun glint at the eye</b>"),
+        "the frame's figures"
+    );
+    assert!(
+        html.contains(r##"r="11" fill="none" stroke="#d00""##),
+        "the polar mark"
+    );
+    let json = std::fs::read_to_string(dir.path().join("summary.json")).unwrap();
+    for key in [
+        "\"eye_illuminance_lux\"",
+        "\"angle_deg\"",
+        "\"within_validity\"",
+    ] {
+        assert!(json.contains(key), "summary.json lacks {key}");
+    }
+}

@@ -324,7 +324,7 @@ mod tests {
 
     /// A frame's sRGB conversion runs on every core in tasks: on one
     /// thread or several, exactly the bytes of the whole image converted
-    /// and compressed at once (one zstd frame, as before).
+    /// and compressed at once (one zstd frame).
     #[test]
     fn srgb_images_convert_on_every_core_to_the_same_bytes() {
         let (width, height) = (700, 400);

@@ -315,7 +315,8 @@ pub(super) fn print_report(
     );
     // The farm's aims for equal workers, as speed-up over one worker
     // per worker (a whole frame's base frame and compositing are the
-    // workers' work now, so `effic.`, tracing alone, cannot reach 100%).
+    // workers' work in whole frames, so `effic.`, tracing alone, cannot
+    // reach 100%).
     for &mbit in &args.link_mbit {
         let equal = |n: usize| {
             (rows.iter()).find(|r| !r.heterogeneous && r.link_mbit == mbit && r.workers == n)

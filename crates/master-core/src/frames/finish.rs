@@ -2,9 +2,9 @@
 //! the wire ([`FrameEncodeRequest`], `Output::EncodeFrame`, answered by
 //! `MasterCore::frame_encoded`). Why: at 1080p the encoding costs the
 //! master more than compositing the whole frame's results, and on the
-//! driver it held every other input meanwhile (the next split frames'
-//! results and packages), so a farm's split frames could finish no faster
-//! than one encoding each. The core delivers a job's finished frames in
+//! driver it would hold every other input meanwhile (the next split
+//! frames' results and packages), so a farm's split frames could finish no
+//! faster than one encoding each. The core delivers a job's finished frames in
 //! order ([`Finishing`]): one encoded early waits for the frames before it,
 //! and the job's end waits for its last frame.
 //!
@@ -298,7 +298,7 @@ mod tests {
     }
 
     /// A job whose frames do not go out in sRGB has no bytes converted
-    /// ahead: its frames are encoded whole, as before, in its format.
+    /// ahead: its frames are encoded whole, in its format.
     #[test]
     fn a_frame_not_converted_ahead_is_encoded_whole() {
         let (width, height) = (31, 17);
