@@ -432,9 +432,10 @@ impl JobTable {
         moved
     }
 
-    /// How many jobs are in `state`.
+    /// How many listed jobs are in `state` (a study counts once, as
+    /// [`JobTable::list`] lists it).
     pub fn count(&self, state: JobState) -> usize {
-        self.entries.values().filter(|e| e.state == state).count()
+        self.list(true).filter(|e| e.state == state).count()
     }
 
     /// The finished jobs `retention` lets go at `now_ms`: those beyond its

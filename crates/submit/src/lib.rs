@@ -385,6 +385,12 @@ impl JobFollower {
                     }
                     on_event(JobEvent::StateChanged { job, state, reason });
                 }
+                // The answer to attaching to a study.
+                Message::StudyAccepted { study, .. } => {
+                    return Err(JobError::Refused(format!(
+                        "job {study} is a study: follow it with its study file"
+                    )));
+                }
                 Message::Heartbeat => {}
                 other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
             }
