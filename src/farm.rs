@@ -441,10 +441,13 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
                         .map_err(|e| e.to_string())?;
                 }
                 StudyEvent::Warning(warning) => say(format!("warning: {warning}")),
-                StudyEvent::StateChanged { job, state, reason } => match json {
-                    true => json_line(serde_json::json!({"event": "state", "job": job, "state": state, "reason": reason})),
-                    false => say(format!("job {job} is {}: {reason}", state.name())),
-                },
+                StudyEvent::StateChanged { variant, job, state, reason } => {
+                    let name = &plan.variants[variant].name;
+                    match json {
+                        true => json_line(serde_json::json!({"event": "state", "job": job, "variant": name, "state": state, "reason": reason})),
+                        false => say(format!("variant {name:?} (job {job}) is {}: {reason}", state.name())),
+                    }
+                }
             }
             Ok(())
         });

@@ -40,8 +40,10 @@ pub enum StudyEvent<'a> {
     },
     /// Something the user should know that does not end the study.
     Warning(String),
-    /// A user paused or resumed it (`reason` says who).
+    /// A user paused or resumed variant `variant` (its index in the
+    /// study), job `job` (`reason` says who).
     StateChanged {
+        variant: usize,
         job: u64,
         state: WireJobState,
         reason: String,
@@ -170,8 +172,18 @@ impl StudyFollower {
                         let job = self.study.unwrap_or(job);
                         return Err(JobError::Cancelled { job, reason });
                     }
-                    on_event(StudyEvent::StateChanged { job, state, reason })
-                        .map_err(JobError::Stopped)?;
+                    let variant = (self.variants.as_ref())
+                        .and_then(|v| v.get(&job))
+                        .map(|v| v.index);
+                    if let Some(variant) = variant {
+                        let event = StudyEvent::StateChanged {
+                            variant,
+                            job,
+                            state,
+                            reason,
+                        };
+                        on_event(event).map_err(JobError::Stopped)?;
+                    }
                 }
                 other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
             }

@@ -178,6 +178,9 @@ impl MasterCore {
                 // Queued again itself: its state follows its variants' from here.
                 let at = self.wall_ms(now);
                 let _ = self.table.set_state(id, JobState::Queued, at);
+                if let Some(entry) = self.table.get_mut(id) {
+                    entry.started_ms = None;
+                }
                 for job in again {
                     self.control_one(now, job, action, who)?;
                 }
