@@ -18,7 +18,7 @@ use vtfarm_proto::{
     FrameDone, FrameKey, FrameStart, FrameStats, JobRow, JobScene, Message, Package, PackageResult,
     ResultPixels, SceneData, WireJob, WireStudy, encoded_len,
 };
-use vtfarm_worker::engine::FrameError;
+use vtfarm_worker::engine::{FrameError, PackageError};
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
 
 /// What the work of a farm costs and gives: the pluggable cost model.
@@ -72,6 +72,9 @@ pub struct PackageWork {
     pub seconds: f64,
     /// Its result's size on the wire (`None`: the encoded message's).
     pub wire_bytes: Option<u64>,
+    /// The package fails after its seconds with this error instead of
+    /// giving `result` (a worker's fault, for the tests of retries).
+    pub failure: Option<PackageError>,
 }
 
 /// CPU seconds the master's machine spends, one thread each. A whole frame
@@ -303,6 +306,7 @@ enum Work {
         worker: usize,
         epoch: u64,
         result: Box<PackageResult>,
+        failure: Option<PackageError>,
         started: Duration,
         bytes: Option<u64>,
     },
@@ -471,6 +475,11 @@ impl<M: CostModel> Farm<M> {
     /// The cost model.
     pub fn model(&self) -> &M {
         &self.model
+    }
+
+    /// The cost model, to change between steps (a test's new costs).
+    pub fn model_mut(&mut self) -> &mut M {
+        &mut self.model
     }
 
     fn connect_submitter(&mut self) {
@@ -785,7 +794,8 @@ impl<M: CostModel> Farm<M> {
         } else if event_at == Some(next) {
             let (_, event) = self.events.pop_first().expect("an event is due");
             self.deliver(event);
-        } else if master_at == Some(next) {
+        } else if master_at.is_some_and(|t| t <= next) {
+            // A deadline that an input set in the past is due now.
             self.master.handle_timeout(next);
             self.route_master_outputs();
         } else if let Some((_, w)) = worker_at {
@@ -842,12 +852,18 @@ impl<M: CostModel> Farm<M> {
             return self.now + worker.spec.latency;
         }
         let bytes = bytes.unwrap_or_else(|| encoded_len(message));
-        let start = (self.now)
-            .max(worker.link_free[direction])
-            .max(self.master_link_free[direction]);
+        // An unlimited master link is held by no message: each crosses its
+        // worker's link alone.
+        let shared = self.config.master_link_bits_per_second.is_finite();
+        let mut start = (self.now).max(worker.link_free[direction]);
+        if shared {
+            start = start.max(self.master_link_free[direction]);
+        }
         let end = start + Duration::from_secs_f64(bytes as f64 * 8.0 / rate);
         self.workers[w].link_free[direction] = end;
-        self.master_link_free[direction] = end;
+        if shared {
+            self.master_link_free[direction] = end;
+        }
         end + self.workers[w].spec.latency
     }
 
@@ -889,6 +905,7 @@ impl<M: CostModel> Farm<M> {
                 worker,
                 epoch,
                 mut result,
+                failure,
                 started,
                 bytes,
             } => {
@@ -900,7 +917,9 @@ impl<M: CostModel> Farm<M> {
                 }
                 let w = &mut self.workers[worker];
                 if let Some(session) = w.session.as_mut().filter(|_| w.epoch == epoch) {
-                    session.package_finished(self.now, result.id, Ok(*result));
+                    let id = result.id;
+                    let outcome = failure.map_or(Ok(*result), Err);
+                    session.package_finished(self.now, id, outcome);
                     self.pump_worker_sized(worker, bytes);
                 }
             }
@@ -1177,6 +1196,37 @@ impl<M: CostModel> Farm<M> {
         self.pump_worker_sized(w, None);
     }
 
+    /// A package cancelled while it runs stops now, freeing the worker's
+    /// cores, as the real worker's driver stops it.
+    fn stop_cancelled_package(&mut self, w: usize) {
+        let Some(session) = self.workers[w].session.as_mut() else {
+            return;
+        };
+        let Some(id) = session.running().filter(|&id| session.is_cancelled(id)) else {
+            return;
+        };
+        let epoch = self.workers[w].epoch;
+        let job = (self.cpu.iter()).position(|job| {
+            matches!(&job.work, Work::Package { worker, epoch: e, result, .. }
+                if *worker == w && *e == epoch && result.id == id)
+        });
+        let Some(job) = job else {
+            return;
+        };
+        if let Work::Package { started, .. } = self.cpu.swap_remove(job).work {
+            let open = (self.busy[w].iter_mut()).rfind(|r| r.start == started && r.end.is_none());
+            if let Some(run) = open {
+                run.end = Some(self.now);
+            }
+        }
+        let stopped = PackageError::Stopped {
+            id,
+            why: "cancelled".into(),
+        };
+        let session = self.workers[w].session.as_mut().expect("checked above");
+        session.package_finished(self.now, id, Err(stopped));
+    }
+
     /// Starts worker `w`'s tasks and sends its messages (a result at
     /// `result_bytes` on the wire, when the model says).
     fn pump_worker_sized(&mut self, w: usize, result_bytes: Option<u64>) {
@@ -1187,6 +1237,7 @@ impl<M: CostModel> Farm<M> {
             let keeps = |key| session.keeps_set_up(key);
             self.model.retain_frames(&mut worker.state, &keeps);
         }
+        self.stop_cancelled_package(w);
         let Some(session) = self.workers[w].session.as_mut() else {
             return;
         };
@@ -1229,6 +1280,7 @@ impl<M: CostModel> Farm<M> {
                         worker: w,
                         epoch,
                         result: Box::new(run.result),
+                        failure: run.failure,
                         started: self.now,
                         bytes: run.wire_bytes,
                     };

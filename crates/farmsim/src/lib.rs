@@ -15,7 +15,7 @@
 //! - **CPU.** Each machine has cores shared fairly by its running jobs (a
 //!   job runs on its threads at most): a worker with one core that sets a
 //!   frame up while it traces a package runs both at half speed, as the real
-//!   worker does. The master has its own machine: its base frame is spread
+//!   worker does; a package cancelled while it runs stops at once. The master has its own machine: its base frame is spread
 //!   over its cores, and its driver handles one input at a time, each
 //!   costing CPU ([`MasterCosts`]); inputs queue meanwhile. Its journal
 //!   thread and the submitter each take finished frames one at a time. A finished split
@@ -28,8 +28,9 @@
 //!   the slower rate (QUIC streams pass packets on as they arrive, so a
 //!   message is not sent over one link and then forwarded over the other),
 //!   one message at a time per direction, and arrives a latency after its
-//!   last byte left. An infinite rate leaves the latency alone. The
-//!   submitter sits on the master's machine: its messages cost no link.
+//!   last byte left. An infinite rate leaves the latency alone; an unlimited
+//!   master link is held by no message. The submitter sits on the master's
+//!   machine: its messages cost no link.
 //! - **Clock.** The driver jumps to the next event, deadline or finished CPU
 //!   job; nothing sleeps or reads a clock, so a run replays exactly.
 

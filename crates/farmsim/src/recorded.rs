@@ -297,6 +297,7 @@ impl CostModel for Recorded<'_> {
             },
             seconds,
             wire_bytes: Some(bytes),
+            failure: None,
         }
     }
 

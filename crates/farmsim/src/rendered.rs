@@ -123,6 +123,7 @@ impl CostModel for Rendered {
             result,
             seconds: SAMPLE_COST.as_secs_f64() * samples as f64,
             wire_bytes: None,
+            failure: None,
         }
     }
 

@@ -412,15 +412,16 @@ fn heat_map_is_black_outside_the_glass_and_rises_with_luminance() {
         assert!(y > previous, "heat map not rising at x = {x}");
         previous = y;
     }
-    // The top of the ramp is the peak; a fixed scale saturates above it.
+    // The top of the ramp is the peak; above a fixed scale a pixel is
+    // marked beyond it, not drawn as the scale's top.
     assert_eq!(img.get(15, 0), ramp_color(1.0));
     let fixed = LogRange {
         min_cd_m2: 0.05,
         max_cd_m2: 0.5,
     };
     let fixed_img = heat_map(&f.input(), &relative(), Some(fixed)).unwrap();
-    assert_eq!(fixed_img.get(15, 0), ramp_color(1.0));
-    assert_eq!(fixed_img.get(8, 0), ramp_color(1.0));
+    assert_eq!(fixed_img.get(15, 0), beyond_scale_color());
+    assert_eq!(fixed_img.get(8, 0), beyond_scale_color());
     assert!(luminance(fixed_img.get(7, 0)) < luminance(ramp_color(1.0)));
     assert_eq!(fixed_img.get(0, 0), ramp_color(0.0));
 }

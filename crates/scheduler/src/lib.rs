@@ -11,9 +11,9 @@
 //! `package_arrived`, `package_done`, `package_failed`, `submit_job`, `submit_interactive_job`, `cancel_job`,
 //! `base_frame_cost`, `base_frame_ahead` and `handle_timeout`; outputs are polled with `poll_assignment`, `poll_event`
 //! and `poll_timeout`. The same inputs give the same outputs, bit for bit (no
-//! hash-map order, no threads). Its tests drive it with simulated workers on
-//! a virtual clock (`tests/common/sim.rs`); `vtfarm-farmsim` drives the real
-//! master core around it.
+//! hash-map order, no threads). Its tests drive it alone, inputs and time in,
+//! assignments and events out; farm scenarios (links, speeds, faults) run on
+//! `vtfarm-farmsim`, which drives the real master core around it.
 //!
 //! A driver feeds inputs and sends what comes out:
 //!

@@ -4,6 +4,7 @@
 
 mod common;
 
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
 use vtfarm_scheduler::{
@@ -16,6 +17,10 @@ use vtfarm_scheduler::{
 struct Farm {
     s: Scheduler,
     now: Duration,
+    /// [`Farm::run_to_end`]'s workers: the packages each holds, and the
+    /// one it computes (from, until).
+    queued: BTreeMap<WorkerId, VecDeque<Assignment>>,
+    computing: BTreeMap<WorkerId, (Duration, Duration, Assignment)>,
 }
 
 const W0: WorkerId = WorkerId(0);
@@ -33,6 +38,8 @@ impl Farm {
         Farm {
             s: Scheduler::new(config),
             now: Duration::ZERO,
+            queued: BTreeMap::new(),
+            computing: BTreeMap::new(),
         }
     }
 
@@ -101,6 +108,82 @@ impl Farm {
 
     fn valid(&self) {
         self.s.validate().expect("invariants");
+    }
+
+    /// The least a test needs to run jobs on the scheduler alone: each
+    /// worker computes its packages one at a time, an item taking
+    /// `cost(item)` seconds, reports each at once and asks for more when it
+    /// has none; deadlines are handled when due. `asking` workers ask
+    /// first. Runs until nothing is left to happen or the next thing lies
+    /// after `until`; returns what the scheduler gave out, with the times.
+    /// No links, no master: those are `vtfarm-farmsim`'s.
+    fn run_to_end(
+        &mut self,
+        asking: &[WorkerId],
+        until: Duration,
+        cost: &dyn Fn(u32) -> f64,
+    ) -> Log {
+        let mut log = Log::default();
+        for &w in asking {
+            self.s.request_work(self.now, w).expect("request");
+        }
+        loop {
+            for a in self.assignments() {
+                log.assignments.push((self.now, a.clone()));
+                self.queued.entry(a.worker).or_default().push_back(a);
+            }
+            log.events
+                .extend(self.events().into_iter().map(|e| (self.now, e)));
+            // Idle workers start their next package.
+            for (&w, queue) in &mut self.queued {
+                if !self.computing.contains_key(&w) {
+                    if let Some(a) = queue.pop_front() {
+                        let seconds: f64 = a.items.iter().map(|&i| cost(i)).sum();
+                        let end = self.now + Duration::from_secs_f64(seconds);
+                        self.computing.insert(w, (self.now, end, a));
+                    }
+                }
+            }
+            let finish = (self.computing.iter())
+                .map(|(&w, (_, end, _))| (*end, w))
+                .min();
+            let deadline = self.s.poll_timeout();
+            let next = finish.map(|(end, _)| end).into_iter().chain(deadline).min();
+            let Some(next) = next.filter(|&t| t <= until) else {
+                return log;
+            };
+            self.now = self.now.max(next);
+            match finish {
+                Some((end, w)) if Some(end) == Some(next) => {
+                    let (start, _, a) = self.computing.remove(&w).expect("computing");
+                    let measure = PackageMeasure {
+                        busy: end - start,
+                        item_seconds: a.items.iter().map(|&i| cost(i)).collect(),
+                        ..PackageMeasure::default()
+                    };
+                    // A cancelled copy's result is refused, as it should be.
+                    let _ = self.s.package_done(self.now, w, a.package, measure);
+                    if self.queued.get(&w).is_none_or(|q| q.is_empty()) {
+                        self.s.request_work(self.now, w).expect("request");
+                    }
+                }
+                _ => self.s.handle_timeout(self.now),
+            }
+        }
+    }
+}
+
+/// What [`Farm::run_to_end`] saw, with the times.
+#[derive(Debug, Default)]
+struct Log {
+    assignments: Vec<(Duration, Assignment)>,
+    events: Vec<(Duration, Event)>,
+}
+
+impl Log {
+    fn extend(&mut self, more: Log) {
+        self.assignments.extend(more.assignments);
+        self.events.extend(more.events);
     }
 }
 
@@ -527,25 +610,17 @@ fn crews_leave_three_of_the_frames_in_flight_free() {
 
 #[test]
 fn packages_are_large_early_and_small_late() {
-    use common::sim::{SimConfig, SimFrame, SimJob, SimWorker, Simulation};
-    let frame = SimFrame {
-        items: (0..2000).collect(),
-        costs: vec![0.005; 2000],
-    };
-    let mut sim = Simulation::new(SimConfig::default(), vec![SimWorker::with_speed(1.0); 4]);
-    sim.submit(SimJob {
-        id: JOB,
-        submit_at: Duration::ZERO,
-        frames: vec![frame; 2],
-    });
-    let report = sim.drive();
-    let sizes: Vec<usize> = report
-        .assignments
-        .iter()
+    let mut farm = Farm::new();
+    let workers = [W0, W1, W2, W3];
+    for w in workers {
+        farm.join(w);
+    }
+    farm.submit(JOB, 2000, 2);
+    let log = farm.run_to_end(&workers, Duration::from_secs(3600), &|_| 0.005);
+    let sizes: Vec<usize> = (log.assignments.iter())
         .filter(|(_, a)| a.frame == 1)
         .map(|(_, a)| a.items.len())
         .collect();
-    println!("package sizes of frame 2: {sizes:?}");
     // Each round of 4 takes about 1/k = half of the rest, down to the
     // minimum duration (20 ms = 4 items).
     assert!(sizes[0] >= 200, "{sizes:?}");
@@ -554,6 +629,60 @@ fn packages_are_large_early_and_small_late() {
         sizes[sizes.len() - 4..].iter().all(|&s| s <= 5),
         "{sizes:?}"
     );
+    assert!(
+        log.events
+            .iter()
+            .any(|(_, e)| *e == Event::JobComplete { job: JOB })
+    );
+    farm.valid();
+}
+
+/// Job 3 comes first and starts (nothing runs); job 1, submitted at once,
+/// outranks it (equal priority, lower id) and takes every worker from its
+/// first package on; job 2 comes later, starts on a worker job 1 has
+/// nothing for (its last packages run), and still outranks 3.
+#[test]
+fn jobs_run_by_rank_and_the_first_job_starts_when_none_runs() {
+    let mut farm = Farm::new();
+    let workers = [W0, W1, W2];
+    for w in workers {
+        farm.join(w);
+    }
+    // 100 items of 10 to 30 ms.
+    let mut rng = common::Rng::new(9);
+    let costs: Vec<f64> = (0..100).map(|_| 0.01 * (1.0 + 2.0 * rng.unit())).collect();
+    let cost = |item: u32| costs[(item - 100) as usize];
+    farm.submit(JobId(3), 100, 2);
+    farm.submit(JobId(1), 100, 2);
+    let mut log = farm.run_to_end(&workers, Duration::from_millis(100), &cost);
+    farm.submit(JobId(2), 100, 2);
+    log.extend(farm.run_to_end(&[], Duration::from_secs(3600), &cost));
+    let order: Vec<String> = (log.events.iter())
+        .filter_map(|(_, e)| match e {
+            Event::JobStarted { job, .. } => Some(format!("start {}", job.0)),
+            Event::FrameComplete { job, frame, .. } => Some(format!("frame {}.{frame}", job.0)),
+            Event::JobComplete { job } => Some(format!("end {}", job.0)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        order,
+        [
+            "start 3",
+            "start 1",
+            "start 2",
+            "frame 1.0",
+            "frame 1.1",
+            "end 1",
+            "frame 2.0",
+            "frame 2.1",
+            "end 2",
+            "frame 3.0",
+            "frame 3.1",
+            "end 3"
+        ]
+    );
+    farm.valid();
 }
 
 #[test]

@@ -1,3 +1,6 @@
+//! The HTTP layer's own rules tested without a server: hosts, tokens,
+//! origins, connection slots.
+
 use super::*;
 
 fn address(last: u8) -> IpAddr {

@@ -1,3 +1,5 @@
+//! The journal's records and directories tested on a temporary disk.
+
 use std::sync::Arc;
 
 use glam::Vec3;
