@@ -161,8 +161,10 @@ impl MasterCore {
                 if let Some(entry) = self.table.get_mut(id) {
                     entry.reason = reason.clone();
                 }
-                for &(job, _, _) in &variants {
-                    self.cancel_reasons.insert(job, reason.clone());
+                for &(job, state, _) in &variants {
+                    if !state.is_finished() {
+                        self.cancel_reasons.insert(job, reason.clone());
+                    }
                 }
             }
             JobAction::Requeue { failed_only } => {
