@@ -242,3 +242,45 @@ fn a_study_survives_a_master_restart_and_an_attach_by_its_id_gets_every_frame() 
         pair.drive(BOUND, |p| frames_got(p) == [(v, 0), (v, 1)].into());
     }
 }
+
+#[test]
+fn a_study_with_a_variant_the_master_refuses_is_listed_cancelled_with_why() {
+    let job = Job::new(2);
+    let mut pair = Pair::new(FarmRules::default());
+    pair.add_worker("w1", 1.0);
+    let (wire, data) = job.wire();
+    let refused = vtfarm_proto::WireJob {
+        name: "no frames".into(),
+        frames: Vec::new(),
+        ..wire.clone()
+    };
+    let study = WireStudy {
+        name: "study".into(),
+        priority: 0,
+        variants: vec![wire, refused],
+    };
+    pair.submit_study(study, data);
+    pair.drive(BOUND, |p| p.job_failed().is_some());
+    let errors = pair.job_failed().unwrap().clone();
+    assert!(
+        errors[0].starts_with("variant \"no frames\": "),
+        "{errors:?}"
+    );
+    // The variant queued before it is cancelled; the study is listed so, saying why.
+    let rows = pair.master.jobs().rows(true);
+    assert_eq!(rows.len(), 1, "{rows:?}");
+    assert_eq!(rows[0].job.state, vtfarm_proto::WireJobState::Cancelled);
+    assert!(
+        rows[0]
+            .job
+            .reason
+            .contains("was refused: variant \"no frames\""),
+        "{}",
+        rows[0].job.reason
+    );
+    assert_eq!(rows[0].variants.len(), 1);
+    assert_eq!(
+        rows[0].variants[0].state,
+        vtfarm_proto::WireJobState::Cancelled
+    );
+}
