@@ -201,4 +201,60 @@ mod tests {
         assert_eq!(fitted("abc", 3), "abc");
         assert_eq!(fitted("abcd", 3), "ab…");
     }
+
+    #[test]
+    fn a_study_is_one_row_with_each_variants_progress_under_it() {
+        let listing = |id, name: &str, kind, state, done| JobSummary {
+            id,
+            name: name.into(),
+            kind,
+            state,
+            priority: 0,
+            frames_done: done,
+            frames_failed: 0,
+            frames_cancelled: 0,
+            frames_total: 2 * u32::from(kind == WireJobKind::Study) + 2,
+            submitted_ms: 1_764_672_000_000,
+            started_ms: None,
+            finished_ms: None,
+            host: "127.0.0.1".into(),
+            reason: String::new(),
+        };
+        let row = JobRow {
+            job: listing(4, "sun study", WireJobKind::Study, WireJobState::Running, 3),
+            variants: vec![
+                listing(
+                    5,
+                    "sun study / current",
+                    WireJobKind::Variant,
+                    WireJobState::Completed,
+                    2,
+                ),
+                listing(
+                    6,
+                    "sun study / flat",
+                    WireJobKind::Variant,
+                    WireJobState::Running,
+                    1,
+                ),
+            ],
+        };
+        let text = table(&[row]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        let fields: Vec<&str> = lines[1].split_whitespace().take(9).collect();
+        assert_eq!(
+            fields,
+            ["4", "sun", "study", "study", "running", "0", "3", "0", "0"]
+        );
+        for (line, (id, state, done)) in lines[2..]
+            .iter()
+            .zip([(5, "completed", "2/2"), (6, "running", "1/2")])
+        {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(words[0], "variant", "{text}");
+            assert!(line.contains(&format!("job {id:>5} {state}")), "{text}");
+            assert!(words.contains(&done), "{text}");
+        }
+    }
 }
