@@ -27,7 +27,9 @@ use crate::shared::runtime;
 #[derive(clap::Args)]
 pub(crate) struct SubmitArgs {
     /// The job file (TOML), or a study file (one with a `[study]` table,
-    /// e.g. configs/cockpit-study.toml): its variants run on the cluster.
+    /// e.g. configs/cockpit-study.toml): the study is one job of kind
+    /// `study` on the cluster, its variants jobs under it; OUTPUT gets what
+    /// `vtfarm study` writes.
     #[arg(value_name = "JOB_OR_STUDY")]
     job: PathBuf,
     /// The cluster file from `vtfarm cluster init`.
@@ -48,6 +50,7 @@ pub(crate) struct SubmitArgs {
     /// Follow job JOB that the master already has (submitted from another
     /// shell, or before this one lost the master) instead of submitting
     /// the job file again; the job file still names the scene and outputs.
+    /// A study's id with the study file it was submitted from.
     #[arg(long, value_name = "JOB")]
     attach: Option<u64>,
     /// Also write each frame's auxiliary outputs (mask, reflected and
@@ -71,8 +74,9 @@ pub(crate) struct SubmitArgs {
     /// The job's name in `vtfarm jobs` (default: the job file's name).
     #[arg(long, value_name = "NAME")]
     name: Option<String>,
-    /// Print the job's id and what happens to it as JSON lines on stderr
-    /// (`{"event":"accepted","job":3,"frames":40}`, …) for scripts.
+    /// Print the job's id and what happens to it as JSON lines on stdout
+    /// (`{"event":"accepted","job":3,"frames":40}`, …) for scripts; the
+    /// lines for people go to stderr.
     #[arg(long)]
     json: bool,
 }
