@@ -8,13 +8,14 @@ use anyhow::{Context, Result, bail};
 use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
 use vtfarm_method::MethodKind;
-use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob};
+use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob, WireStudy};
 use vtfarm_render::FrameSetup;
 use vtfarm_render::output::ImageFormat;
 use vtfarm_scene::Scene;
 use vtfarm_submit::progress::Progress;
 use vtfarm_submit::{
-    FinishedFrame, JobEvent, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
+    FinishedFrame, JobEvent, JobOptions, RemoteJob, RemoteStudy, StudyEvent, run_job,
+    run_remote_job, run_remote_study, wire_job,
 };
 use vtfarm_transport::ClusterConfig;
 use vtfarm_transport::client::{ClientOptions, connect};
@@ -26,7 +27,9 @@ use crate::shared::runtime;
 #[derive(clap::Args)]
 pub(crate) struct SubmitArgs {
     /// The job file (TOML), or a study file (one with a `[study]` table,
-    /// e.g. configs/cockpit-study.toml): its variants run on the cluster.
+    /// e.g. configs/cockpit-study.toml): the study is one job of kind
+    /// `study` on the cluster, its variants jobs under it; OUTPUT gets what
+    /// `vtfarm study` writes.
     #[arg(value_name = "JOB_OR_STUDY")]
     job: PathBuf,
     /// The cluster file from `vtfarm cluster init`.
@@ -47,6 +50,7 @@ pub(crate) struct SubmitArgs {
     /// Follow job JOB that the master already has (submitted from another
     /// shell, or before this one lost the master) instead of submitting
     /// the job file again; the job file still names the scene and outputs.
+    /// A study's id with the study file it was submitted from.
     #[arg(long, value_name = "JOB")]
     attach: Option<u64>,
     /// Also write each frame's auxiliary outputs (mask, reflected and
@@ -70,8 +74,9 @@ pub(crate) struct SubmitArgs {
     /// The job's name in `vtfarm jobs` (default: the job file's name).
     #[arg(long, value_name = "NAME")]
     name: Option<String>,
-    /// Print the job's id and what happens to it as JSON lines on stderr
-    /// (`{"event":"accepted","job":3,"frames":40}`, …) for scripts.
+    /// Print the job's id and what happens to it as JSON lines on stdout
+    /// (`{"event":"accepted","job":3,"frames":40}`, …) for scripts; the
+    /// lines for people go to stderr.
     #[arg(long)]
     json: bool,
 }
@@ -303,7 +308,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             _ = tokio::signal::ctrl_c() => {
                 bar.finish();
                 match accepted.get() {
-                    Some(job) => eprintln!("{}", again.message(job)),
+                    Some(job) => eprintln!("{}", again.message("job", job)),
                     None => eprintln!("interrupted before the master accepted the job"),
                 }
                 std::process::exit(130);
@@ -356,14 +361,15 @@ impl AttachHint {
         }
     }
 
-    fn message(&self, job: u64) -> String {
+    /// The hint for `what` (a job or a study) `job`.
+    fn message(&self, what: &str, job: u64) -> String {
         let (file, cluster, output) = (
             self.job_file.display(),
             self.cluster.display(),
             self.output.display(),
         );
         format!(
-            "interrupted: job {job} keeps running on the farm.\n  \
+            "interrupted: {what} {job} keeps running on the farm.\n  \
              follow it again: vtfarm submit {file} --cluster {cluster} --output {output} --attach {job}\n  \
              stop it:         vtfarm cancel {job} --cluster {cluster}"
         )
@@ -381,7 +387,9 @@ struct FrameRecord<'a> {
     stats: &'a FrameStats,
 }
 
-/// `vtfarm submit` of a study file: its variants run on the cluster.
+/// `vtfarm submit` of a study file: the study is one job on the cluster
+/// (its variants jobs under it), followed until every frame is in, or
+/// followed again with `--attach`; the outputs are `vtfarm study`'s.
 fn submit_study(args: SubmitArgs) -> Result<()> {
     if args.size.is_set() || args.aux {
         bail!(
@@ -389,17 +397,97 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
         );
     }
     let plan = vtfarm_study::plan_file(&args.job, args.quality)?;
-    let options = client_options(&args.cluster, &args.master)?;
-    let output = args.output.clone();
-    let report = runtime()?.block_on(async move {
-        let mut conn = connect(&options, Role::Submitter).await?;
-        let workers = format!("the cluster's workers (master {})", options.master);
-        let report = crate::study::render_and_write(&mut conn.link, &plan, &output, workers).await;
-        conn.connection
-            .close(vtfarm_transport::CLOSE_NORMAL, b"done");
-        conn.endpoint.wait_idle().await;
-        report
-    })?;
+    let client = client_options(&args.cluster, &args.master)?;
+    let again = AttachHint::of(&args);
+    let json = args.json;
+    let mut writer = vtfarm_study::StudyWriter::new(&plan, &args.output)?;
+    let order = plan.frame_order();
+    let (study, scenes) = crate::study::wire_study(&plan, args.priority);
+    let study = WireStudy {
+        name: args.name.clone().unwrap_or(study.name),
+        ..study
+    };
+    let start = match args.attach {
+        Some(study) => RemoteStudy::Attach { study },
+        None => RemoteStudy::Submit {
+            study,
+            scenes: &scenes,
+        },
+    };
+    let workers = format!("the cluster's workers (master {})", client.master);
+    let bar = Progress::new(plan.frames() as u64, "frames", "");
+    let say = |line: String| bar.println(line);
+    let accepted = std::cell::Cell::new(args.attach);
+    let outcome = runtime()?.block_on(async {
+        let run = run_remote_study(&client, start, |event| {
+            match event {
+                StudyEvent::Accepted { study, variants } => {
+                    accepted.set(Some(study));
+                    let planned: Vec<u32> = (plan.variants.iter())
+                        .map(|v| v.setups.len() as u32)
+                        .collect();
+                    let has: Vec<u32> = variants.iter().map(|&(_, frames)| frames).collect();
+                    if has != planned {
+                        return Err(format!(
+                            "study {study} has variants of {has:?} frames, {} plans {planned:?}: attach with the study file it was submitted from",
+                            args.job.display()
+                        ));
+                    }
+                    let frames: u32 = has.iter().sum();
+                    let jobs: Vec<u64> = variants.iter().map(|&(job, _)| job).collect();
+                    match json {
+                        true => json_line(serde_json::json!({"event": "accepted", "job": study, "kind": "study", "frames": frames, "variants": jobs})),
+                        false => say(format!("study {study} accepted: {} variant(s) (jobs {jobs:?}), {frames} frame(s)", jobs.len())),
+                    }
+                }
+                StudyEvent::FrameDone { variant, frame } => {
+                    crate::study::write_frame(&plan, &mut writer, (variant, frame.frame), &order, frame, &bar)
+                        .map_err(|e| e.to_string())?;
+                }
+                StudyEvent::Warning(warning) => say(format!("warning: {warning}")),
+                StudyEvent::StateChanged { variant, job, state, reason } => {
+                    let name = &plan.variants[variant].name;
+                    match json {
+                        true => json_line(serde_json::json!({"event": "state", "job": job, "variant": name, "state": state, "reason": reason})),
+                        false => say(format!("variant {name:?} (job {job}) is {}: {reason}", state.name())),
+                    }
+                }
+            }
+            Ok(())
+        });
+        // Ctrl-C leaves the study to the farm: a partial report of what
+        // is in, and how to come back.
+        tokio::select! {
+            result = run => Some(result),
+            _ = tokio::signal::ctrl_c() => None,
+        }
+    });
+    bar.finish();
+    let run = vtfarm_study::RunInfo::of_this_process(crate::VERSION, workers);
+    let Some(result) = outcome else {
+        let done = writer.done();
+        let report = writer.finish_partial(&run)?;
+        eprintln!(
+            "wrote a partial report of {done} of {} frames (it lists those it lacks): {}",
+            plan.frames(),
+            args.output.display()
+        );
+        drop(report);
+        match accepted.get() {
+            Some(study) => eprintln!("{}", again.message("study", study)),
+            None => eprintln!("interrupted before the master accepted the study"),
+        }
+        std::process::exit(130);
+    };
+    result?;
+    let report = writer.finish(&run)?;
+    if json {
+        let summary = args.output.join("summary.json");
+        json_line(
+            serde_json::json!({"event": "done", "frames": plan.frames(), "summary": summary}),
+        );
+        return Ok(());
+    }
     println!("{}", report.table(&args.output));
     Ok(())
 }

@@ -1,7 +1,9 @@
-//! `vtfarm jobs`: the master's jobs, as a table or as JSON.
+//! `vtfarm jobs`: the master's jobs, as a table or as JSON; a study is one
+//! row, its variants' progress under it.
 
 use anyhow::Result;
-use vtfarm_proto::{JobSummary, WireJobKind};
+use vtfarm_master::http::JobRowView;
+use vtfarm_proto::{JobRow, WireJobKind};
 
 use crate::farm::ClusterArgs;
 use crate::shared::{runtime, utc_time};
@@ -23,17 +25,19 @@ pub(crate) struct JobsArgs {
 /// `vtfarm jobs`.
 pub(crate) fn jobs(args: JobsArgs) -> Result<()> {
     let options = args.cluster.client_options()?;
-    let jobs = runtime()?.block_on(vtfarm_submit::list_jobs(&options, args.all))?;
+    let rows = runtime()?.block_on(vtfarm_submit::list_jobs(&options, args.all))?;
     if args.json {
-        println!("{}", serde_json::to_string(&jobs)?);
+        let rows: Vec<JobRowView> = rows.into_iter().map(JobRowView::from).collect();
+        println!("{}", serde_json::to_string(&rows)?);
         return Ok(());
     }
-    print!("{}", table(&jobs));
+    print!("{}", table(&rows));
     Ok(())
 }
 
-/// The table `vtfarm jobs` prints: one line per job under a header.
-fn table(jobs: &[JobSummary]) -> String {
+/// The table `vtfarm jobs` prints: one line per job under a header; a
+/// study's variants each a line under it (`done/total` and state).
+fn table(rows: &[JobRow]) -> String {
     let mut out = format!(
         "{:>5} {:<NAME_WIDTH$} {:<6} {:<9} {:>8} {:>6} {:>6} {:>9} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
         "id",
@@ -51,7 +55,7 @@ fn table(jobs: &[JobSummary]) -> String {
         "host"
     );
     let time = |ms: Option<u64>| ms.map_or("-".to_owned(), utc_time);
-    for job in jobs {
+    for JobRow { job, variants } in rows {
         out += &format!(
             "{:>5} {:<NAME_WIDTH$} {:<6} {:<9} {:>8} {:>6} {:>6} {:>9} {:>6}  {:<19}  {:<19}  {:<19}  {}\n",
             job.id,
@@ -70,6 +74,16 @@ fn table(jobs: &[JobSummary]) -> String {
         );
         if !job.reason.is_empty() {
             out += &format!("      {}\n", job.reason);
+        }
+        for v in variants {
+            out += &format!(
+                "      variant {:<NAME_WIDTH$} job {:>5} {:<9} {:>6}/{} frames\n",
+                fitted(&v.name, NAME_WIDTH),
+                v.id,
+                v.state.name(),
+                v.frames_done,
+                v.frames_total
+            );
         }
     }
     out
@@ -92,13 +106,14 @@ pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
         WireJobKind::Render => "render",
         WireJobKind::Study => "study",
         WireJobKind::View => "view",
+        WireJobKind::Variant => "variant",
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use vtfarm_proto::WireJobState;
+    use vtfarm_proto::{JobSummary, WireJobState};
 
     #[test]
     fn the_table_lists_every_column_and_a_finished_jobs_reason() {
@@ -118,7 +133,11 @@ mod tests {
             host: "127.0.0.1:5000".into(),
             reason: "job 7 was cancelled by submitter (127.0.0.1:6000)".into(),
         };
-        let text = table(&[job]);
+        let row = JobRow {
+            job,
+            variants: Vec::new(),
+        };
+        let text = table(&[row]);
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines.len(), 3, "{text}");
         let fields: Vec<&str> = lines[1].split_whitespace().collect();
@@ -167,7 +186,11 @@ mod tests {
             reason: String::new(),
         };
         let long = "Instrument cover glass designs over sun positions / current";
-        let text = table(&[job(1, "short"), job(2, long)]);
+        let row = |job| JobRow {
+            job,
+            variants: Vec::new(),
+        };
+        let text = table(&[row(job(1, "short")), row(job(2, long))]);
         let lines: Vec<&str> = text.lines().collect();
         let column = |line: &str| {
             let at = line.find("study").expect("the kind column");
@@ -177,5 +200,61 @@ mod tests {
         assert!(lines[2].contains("Instrument cover glass …"), "{text}");
         assert_eq!(fitted("abc", 3), "abc");
         assert_eq!(fitted("abcd", 3), "ab…");
+    }
+
+    #[test]
+    fn a_study_is_one_row_with_each_variants_progress_under_it() {
+        let listing = |id, name: &str, kind, state, done| JobSummary {
+            id,
+            name: name.into(),
+            kind,
+            state,
+            priority: 0,
+            frames_done: done,
+            frames_failed: 0,
+            frames_cancelled: 0,
+            frames_total: 2 * u32::from(kind == WireJobKind::Study) + 2,
+            submitted_ms: 1_764_672_000_000,
+            started_ms: None,
+            finished_ms: None,
+            host: "127.0.0.1".into(),
+            reason: String::new(),
+        };
+        let row = JobRow {
+            job: listing(4, "sun study", WireJobKind::Study, WireJobState::Running, 3),
+            variants: vec![
+                listing(
+                    5,
+                    "sun study / current",
+                    WireJobKind::Variant,
+                    WireJobState::Completed,
+                    2,
+                ),
+                listing(
+                    6,
+                    "sun study / flat",
+                    WireJobKind::Variant,
+                    WireJobState::Running,
+                    1,
+                ),
+            ],
+        };
+        let text = table(&[row]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        let fields: Vec<&str> = lines[1].split_whitespace().take(9).collect();
+        assert_eq!(
+            fields,
+            ["4", "sun", "study", "study", "running", "0", "3", "0", "0"]
+        );
+        for (line, (id, state, done)) in lines[2..]
+            .iter()
+            .zip([(5, "completed", "2/2"), (6, "running", "1/2")])
+        {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(words[0], "variant", "{text}");
+            assert!(line.contains(&format!("job {id:>5} {state}")), "{text}");
+            assert!(words.contains(&done), "{text}");
+        }
     }
 }

@@ -462,3 +462,223 @@ fn after_a_master_restart_jobs_all_lists_the_same_jobs_and_states() {
     }
     drop((running, paused));
 }
+
+/// A small study: two designs of the built-in cockpit seen from two eye
+/// points (four frames of 96 × 54), and its base job beside it.
+fn study_file(dir: &Path) -> PathBuf {
+    std::fs::write(
+        dir.join("base.toml"),
+        "[scene]\nbuiltin = \"cockpit\"\ndetail = 0.3\n",
+    )
+    .unwrap();
+    let path = dir.join("study.toml");
+    let text = "[study]\nname = \"small study\"\njob = \"base.toml\"\nwidth = 96\nheight = 54\n\
+        [eyes]\npoints = [[-0.55, 1.4, 0.1], [-0.5, 1.42, 0.12]]\n\
+        [[variants]]\nname = \"current\"\nglass = \"current\"\n\
+        [[variants]]\nname = \"flat\"\nglass = \"flat\"\n";
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `summary.json` under `dir` without how it was made (its date, workers
+/// and command differ between runs; every figure must not).
+fn summary_figures(dir: &Path) -> Value {
+    let bytes = std::fs::read(dir.join("summary.json")).unwrap();
+    let mut json: Value = serde_json::from_slice(&bytes).unwrap();
+    let provenance = json.as_object_mut().unwrap().remove("provenance");
+    assert!(provenance.is_some(), "summary.json says how it was made");
+    json
+}
+
+/// The study's figures as `vtfarm study` writes them on this machine.
+fn local_study_figures(dir: &Path, study: &Path) -> Value {
+    let out = dir.join("local-study");
+    let (status, _, stderr) = vtfarm(&[
+        "study",
+        study.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--local-workers",
+        "1",
+    ]);
+    assert!(status.success(), "{stderr}");
+    summary_figures(&out)
+}
+
+/// `submit --attach STUDY --json` to its end: it succeeds.
+fn attach_to_the_end(master: &Master, study: &Path, output: &str, id: u64) {
+    let id = id.to_string();
+    let mut attach = master.submit(study, output, &["--json", "--attach", &id]);
+    assert!(attach.exit().success(), "{}", attach.log_text());
+}
+
+#[test]
+fn a_study_is_one_job_through_submit_pause_resume_cancel_requeue_and_attach() {
+    let master = Master::start();
+    let dir = master.dir.path().to_owned();
+    let study = study_file(&dir);
+    // No worker yet: the study waits, one row of kind study.
+    let mut submit = master.submit(&study, "study", &["--json"]);
+    let id = submit.accepted_job();
+    let jobs = master.jobs();
+    assert_eq!(jobs.len(), 1, "one row: {jobs:?}");
+    let row = job_of(&jobs, id);
+    assert_eq!(row["kind"], "study");
+    assert_eq!(row["frames_total"], 4);
+    let variants = row["variants"].as_array().expect("its variants");
+    let names: Vec<&str> = variants
+        .iter()
+        .map(|v| v["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["small study / current", "small study / flat"]);
+    assert!(variants.iter().all(|v| v["kind"] == "variant"), "{row}");
+    // A variant is controlled through its study.
+    let variant = variants[1]["id"].as_u64().unwrap().to_string();
+    let (status, _, stderr) = master.control(&["pause", &variant]);
+    assert!(!status.success());
+    assert!(
+        stderr.contains(&format!("a variant of study {id}")),
+        "{stderr}"
+    );
+
+    // Paused, every variant is; the submitter killed, the study stays.
+    let pause = |master: &Master| {
+        let (status, stdout, stderr) = master.control(&["pause", &id.to_string()]);
+        assert!(status.success(), "{stderr}");
+        assert!(stdout.contains("paused"), "{stdout}");
+    };
+    pause(&master);
+    submit.child.kill().unwrap();
+    submit.exit();
+    let states = |master: &Master| -> (String, Vec<String>) {
+        let jobs = master.jobs();
+        let row = job_of(&jobs, id);
+        let variants = (row["variants"].as_array().unwrap().iter())
+            .map(|v| v["state"].as_str().unwrap().to_owned())
+            .collect();
+        (row["state"].as_str().unwrap().to_owned(), variants)
+    };
+    assert_eq!(states(&master), ("paused".into(), vec!["paused".into(); 2]));
+
+    // Cancelled as one, by whom; its unfinished variants queued again.
+    let (status, stdout, stderr) = master.control(&["cancel", &id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    assert!(stdout.contains("cancelled"), "{stdout}");
+    assert_eq!(
+        states(&master),
+        ("cancelled".into(), vec!["cancelled".into(); 2])
+    );
+    let row = job_of(&master.jobs(), id).clone();
+    let reason = row["reason"].as_str().unwrap();
+    assert!(
+        reason.starts_with(&format!("study {id} was cancelled by `vtfarm cancel`")),
+        "{reason}"
+    );
+    let (status, _, stderr) = master.control(&["requeue", "--failed", &id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    let (_, variants) = states(&master);
+    assert!(
+        (variants.iter()).all(|s| s == "queued" || s == "running"),
+        "{variants:?}"
+    );
+
+    // Paused, it holds: a worker joins and gets none of its work.
+    pause(&master);
+    let mut worker = master.worker("w1");
+    worker.wait_for("connected to the master");
+    assert_eq!(states(&master), ("paused".into(), vec!["paused".into(); 2]));
+    assert_eq!(job_of(&master.jobs(), id)["frames_done"], 0);
+
+    // Resumed and followed again: the report is `vtfarm study`'s.
+    let (status, _, stderr) = master.control(&["resume", &id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    attach_to_the_end(&master, &study, "attached", id);
+    let local = local_study_figures(&dir, &study);
+    assert_eq!(summary_figures(&dir.join("attached")), local);
+    let row = job_of(&master.jobs(), id).clone();
+    assert_eq!(
+        (row["state"].as_str(), row["frames_done"].as_u64()),
+        (Some("completed"), Some(4))
+    );
+
+    // Queued again whole: the same report again.
+    let (status, _, stderr) = master.control(&["requeue", &id.to_string()]);
+    assert!(status.success(), "{stderr}");
+    attach_to_the_end(&master, &study, "requeued", id);
+    assert_eq!(summary_figures(&dir.join("requeued")), local);
+    let (status, _, stderr) = master.control(&["priority", &id.to_string(), "3"]);
+    assert!(
+        !status.success(),
+        "a completed study has no priority to set"
+    );
+    assert!(
+        stderr.contains(&format!("job {id} is completed")),
+        "{stderr}"
+    );
+    drop(worker);
+}
+
+#[test]
+fn a_master_killed_mid_study_resumes_it_and_attach_writes_the_same_report() {
+    let mut master = Master::start();
+    let dir = master.dir.path().to_owned();
+    let study = study_file(&dir);
+    let mut worker = master.worker("w1");
+    worker.wait_for("connected to the master");
+    let mut submit = master.submit(&study, "study", &["--json"]);
+    let id = submit.accepted_job();
+    // A frame done (and journaled): the master is killed, and the submitter.
+    master.process.wait_for("frame complete");
+    submit.child.kill().unwrap();
+    submit.exit();
+    let before = master.jobs();
+    master.restart();
+    let after = master.jobs();
+    assert_eq!(after.len(), 1, "one row: {after:?}");
+    let (b, a) = (job_of(&before, id), job_of(&after, id));
+    assert_eq!(
+        (a["kind"].as_str(), a["name"].as_str()),
+        (Some("study"), b["name"].as_str())
+    );
+    let ids = |row: &Value| -> Vec<u64> {
+        (row["variants"].as_array().unwrap().iter())
+            .map(|v| v["id"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(ids(a), ids(b));
+    attach_to_the_end(&master, &study, "attached", id);
+    assert_eq!(
+        summary_figures(&dir.join("attached")),
+        local_study_figures(&dir, &study)
+    );
+    assert_eq!(job_of(&master.jobs(), id)["state"], "completed");
+    drop(worker);
+}
+
+#[test]
+fn ctrl_c_on_a_study_submit_writes_a_partial_report_and_says_how_to_follow_or_cancel_it() {
+    let master = Master::start();
+    let study = study_file(master.dir.path());
+    // No worker: the study never finishes on its own.
+    let mut submit = master.submit(&study, "study", &[]);
+    let line = submit.wait_for("accepted");
+    let id: u64 = (line.split_whitespace().nth(1).and_then(|w| w.parse().ok()))
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(line.starts_with(&format!("study {id} accepted")), "{line}");
+    let sent = Command::new("kill")
+        .args(["-INT", &submit.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    assert_eq!(submit.exit().code(), Some(130), "{}", submit.log_text());
+    let log = submit.log_text();
+    assert!(
+        log.contains(&format!("study {id} keeps running on the farm")),
+        "{log}"
+    );
+    assert!(log.contains(&format!("--attach {id}")), "{log}");
+    assert!(log.contains(&format!("vtfarm cancel {id}")), "{log}");
+    assert!(log.contains("partial report of 0 of 4 frames"), "{log}");
+    assert!(master.dir.path().join("study/report.html").exists());
+    assert_eq!(job_of(&master.jobs(), id)["state"], "running");
+}

@@ -67,14 +67,8 @@ pub fn job(data: &[u8]) {
 /// The conversions to domain types that the master and the workers apply.
 fn convert(message: Message) {
     match message {
-        Message::SubmitJob { job } => {
-            for frame in job.frames {
-                let _ = FrameSetup::try_from(frame);
-            }
-            if let JobScene::Data(data) = job.scene {
-                scene(data.bytes);
-            }
-        }
+        Message::SubmitJob { job } => submitted(job),
+        Message::SubmitStudy { study } => study.variants.into_iter().for_each(submitted),
         Message::SceneData(data) => scene(data.bytes),
         Message::FrameStart(start) => {
             let _ = FrameSetup::try_from(start.setup);
@@ -91,6 +85,16 @@ fn convert(message: Message) {
             let _ = done.image.into_pixels();
         }
         _ => {}
+    }
+}
+
+/// A submitted job's conversions: its frames and an inline scene.
+fn submitted(job: vtfarm_proto::WireJob) {
+    for frame in job.frames {
+        let _ = FrameSetup::try_from(frame);
+    }
+    if let JobScene::Data(data) = job.scene {
+        scene(data.bytes);
     }
 }
 

@@ -236,6 +236,9 @@ async fn run(
         for stored in loaded.jobs {
             core.restore(start.elapsed(), stored);
         }
+        for study in loaded.studies {
+            core.restore_study(start.elapsed(), study);
+        }
     }
     // Records are written off this task (a finished frame is compressed and
     // written while the next results come in); replays wait for them. How

@@ -3,7 +3,8 @@
 //! `/metrics`, the interactive view (`POST /api/view` moves the eye,
 //! `/view/image.png` and `/view/objects.png` show its newest stage), each
 //! kept frame's timeline (`/frames/SEQ.svg`), and the jobs: `GET /api/jobs`
-//! lists them as `vtfarm jobs --all --json` does, `POST
+//! lists them as `vtfarm jobs --all --json` does (a study as one row with
+//! its variants), `GET /api/jobs/{id}` shows one, `POST
 //! /api/jobs/{id}/cancel|pause|resume|requeue|priority` changes one
 //! (`docs/http-api.md`).
 //!
@@ -67,8 +68,8 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use vtfarm_imaging::Image;
 use vtfarm_master_core::telemetry::{FRAME_SECONDS_BUCKETS, FrameDurations, WorkerTotals};
 use vtfarm_master_core::view::{EYE_BOX, ViewRequest};
-use vtfarm_master_core::{JobControlError, JobEntry, JobState, MasterCore};
-use vtfarm_proto::{JobAction, JobSummary, WireImage, token_matches};
+use vtfarm_master_core::{JobControlError, JobState, MasterCore};
+use vtfarm_proto::{JobAction, WireImage, token_matches};
 
 use crate::driver::MasterHandle;
 
@@ -78,8 +79,8 @@ mod tests;
 
 use json::ViewRequestBody;
 pub use json::{
-    CountersView, CurrentViewJson, DashboardView, FrameView, LatestView, LiveView, ViewOutcomeView,
-    ViewSourceView, ViewState, WorkerTotalsView, WorkerView,
+    CountersView, CurrentViewJson, DashboardView, FrameView, JobRowView, LatestView, LiveView,
+    ViewOutcomeView, ViewSourceView, ViewState, WorkerTotalsView, WorkerView,
 };
 
 /// The dashboard, served from the binary.
@@ -426,6 +427,7 @@ fn router_with(master: MasterHandle, access: HttpAccess, max_event_streams: usiz
         .route(LOGIN_PATH, get(login_page).post(login))
         .route("/api/view", post(steer_view))
         .route("/api/jobs", get(list_jobs))
+        .route("/api/jobs/{id}", get(show_job))
         .route("/api/jobs/{id}/{action}", post(control_job))
         .route("/view/image.png", get(view_png))
         .route("/view/objects.png", get(view_objects_png))
@@ -703,14 +705,31 @@ async fn status(State(state): State<HttpState>) -> Response {
 /// Every job the master lists (finished ones kept too), oldest first: what
 /// `vtfarm jobs --all --json` prints.
 async fn list_jobs(State(state): State<HttpState>) -> Response {
-    match state.master.inspect(job_summaries).await {
+    match state.master.inspect(job_rows).await {
         Some(jobs) => axum::Json(jobs).into_response(),
         None => unavailable(),
     }
 }
 
-fn job_summaries(core: &MasterCore) -> Vec<JobSummary> {
-    core.jobs().list(true).map(JobEntry::summary).collect()
+/// One job (a study with its variants): 404 for a job the master does
+/// not list (a variant is listed under its study).
+async fn show_job(State(state): State<HttpState>, Path(id): Path<u64>) -> Response {
+    let row = state.master.inspect(move |core| {
+        let jobs = core.jobs();
+        let entry = jobs.get(id)?;
+        Some(JobRowView::from(jobs.row(entry)))
+    });
+    match row.await {
+        Some(Some(row)) => axum::Json(row).into_response(),
+        Some(None) => (StatusCode::NOT_FOUND, format!("no job {id}\n")).into_response(),
+        None => unavailable(),
+    }
+}
+
+fn job_rows(core: &MasterCore) -> Vec<JobRowView> {
+    (core.jobs().rows(true).into_iter())
+        .map(JobRowView::from)
+        .collect()
 }
 
 /// The body `POST /api/jobs/{id}/requeue` and `…/priority` may carry.
@@ -790,7 +809,7 @@ fn dashboard_view(core: &MasterCore) -> DashboardView {
         .collect();
     DashboardView {
         status,
-        jobs: job_summaries(core),
+        jobs: job_rows(core),
         counters: CountersView::from(&telemetry.counters),
         workers,
         live: core.live_frame().map(|f| LiveView {

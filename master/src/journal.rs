@@ -12,6 +12,9 @@
 //! STATE/jobs/NNNNNNNNNNNN/complete present once every frame is done
 //! STATE/jobs/NNNNNNNNNNNN/state    JobList { jobs: [its listing] }: state,
 //!                                  priority, times (the newest replaces it)
+//! STATE/jobs/NNNNNNNNNNNN/study    a study's directory holds this alone:
+//!                                  JobRows { rows: [its row] }, its listing
+//!                                  and its variants (jobs of their own)
 //! STATE/jobs/damaged/NNNNNNNNNNNN  a job set aside, with `why` beside its files
 //! STATE/jobs/damaged/stray-NAME    an entry that is no job's (a second
 //!                                  spelling of an id, a stray file), with `why`
@@ -64,7 +67,7 @@ use std::sync::Arc;
 use tracing::warn;
 use vtfarm_master_core::{DamagedJob, Record, StoredJob, Written};
 use vtfarm_proto::{
-    FrameDone, JobScene, JobSummary, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash,
+    FrameDone, JobRow, JobScene, JobSummary, MAX_MESSAGE_BYTES, Message, SceneData, SceneHash,
     decode_message, encode_message,
 };
 use vtfarm_scene::file::{read_regular, read_regular_text};
@@ -164,6 +167,9 @@ pub struct Loaded {
     pub jobs: Vec<StoredJob>,
     /// The jobs set aside, in id order.
     pub damaged: Vec<DamagedJob>,
+    /// The studies (each a listing over its variants, which are `jobs`),
+    /// in id order: restored after the jobs.
+    pub studies: Vec<JobRow>,
 }
 
 /// The journal's format: 5 since every record names its job, kind and
@@ -192,6 +198,8 @@ pub enum RecordKind {
     State,
     /// `complete`: every frame is done (no body).
     Complete,
+    /// `study`: a study's row (`JobRows` of one), alone in its directory.
+    Study,
 }
 
 /// The start of every job record's payload.
@@ -200,11 +208,12 @@ const ENVELOPE_MAGIC: [u8; 4] = *b"vtjr";
 const ENVELOPE_BYTES: usize = 4 + 4 + 1 + 8;
 
 impl RecordKind {
-    const ALL: [RecordKind; 4] = [
+    const ALL: [RecordKind; 5] = [
         RecordKind::Job,
         RecordKind::Frame,
         RecordKind::State,
         RecordKind::Complete,
+        RecordKind::Study,
     ];
 
     fn code(self) -> u8 {
@@ -213,6 +222,7 @@ impl RecordKind {
             RecordKind::Frame => 2,
             RecordKind::State => 3,
             RecordKind::Complete => 4,
+            RecordKind::Study => 5,
         }
     }
 
@@ -223,6 +233,7 @@ impl RecordKind {
             RecordKind::Frame => "a frame record",
             RecordKind::State => "a state record",
             RecordKind::Complete => "a complete record",
+            RecordKind::Study => "a study record",
         }
     }
 
@@ -232,6 +243,7 @@ impl RecordKind {
             "job" => Some(RecordKind::Job),
             "state" => Some(RecordKind::State),
             "complete" => Some(RecordKind::Complete),
+            "study" => Some(RecordKind::Study),
             _ if name.len() == 6 && name.bytes().all(|b| b.is_ascii_digit()) => {
                 Some(RecordKind::Frame)
             }
@@ -561,6 +573,11 @@ impl Journal {
         self.job_dir(id).join("job")
     }
 
+    /// The record of study `id` (its listing and its variants).
+    pub fn study_path(&self, id: u64) -> PathBuf {
+        self.job_dir(id).join("study")
+    }
+
     /// The listing file of job `id` (its state, priority and times).
     pub fn state_path(&self, id: u64) -> PathBuf {
         self.job_dir(id).join("state")
@@ -661,6 +678,14 @@ impl Journal {
                     jobs: vec![*summary],
                 };
                 self.write_message(&what, &path, (RecordKind::State, id), &message)
+            }
+            Record::StudyState(row) => {
+                let id = row.job.id;
+                let dir = self.job_dir(id);
+                std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+                let message = Message::JobRows { rows: vec![*row] };
+                let kind = (RecordKind::Study, id);
+                self.write_message(&what, &self.study_path(id), kind, &message)
             }
             Record::JobForgotten { id } => {
                 let dir = self.job_dir(id);
@@ -846,6 +871,25 @@ impl Journal {
             }
         }
         for id in self.job_ids() {
+            if self.study_path(id).exists() && !self.job_path(id).exists() {
+                match self.load_study(id) {
+                    Ok(row) => loaded.studies.push(row),
+                    Err(e) => {
+                        // Its variants run on as jobs of their own.
+                        warn!(
+                            study = id,
+                            "{e}: the study's variants are listed on their own"
+                        );
+                        if let Err(move_error) = self.set_aside(id, &e.to_string()) {
+                            warn!(
+                                study = id,
+                                "cannot set the damaged study aside: {move_error}"
+                            );
+                        }
+                    }
+                }
+                continue;
+            }
             match self.load_job(id) {
                 Ok(job) => loaded.jobs.push(job),
                 Err(e) => {
@@ -896,6 +940,21 @@ impl Journal {
                 DamagedJob { id, reason }
             })
             .collect()
+    }
+
+    /// Study `id`'s row as last written.
+    fn load_study(&self, id: u64) -> Result<JobRow, RecordError> {
+        let path = self.study_path(id);
+        match read_message(&path, RecordKind::Study, id, "a study's row")? {
+            Message::JobRows { mut rows } if rows.len() == 1 && rows[0].job.id == id => {
+                Ok(rows.pop().expect("one row"))
+            }
+            other => Err(RecordError::Content {
+                path,
+                expected: "this study's row",
+                error: format!("it holds a {}", other.name()),
+            }),
+        }
     }
 
     fn load_job(&self, id: u64) -> Result<StoredJob, RecordError> {
@@ -1018,6 +1077,7 @@ fn record_name(record: &Record) -> String {
         Record::JobForgotten { id } => format!("the removal of job {id}"),
         Record::JobDamaged { id, .. } => format!("setting job {id} aside"),
         Record::JobState(summary) => format!("the state of job {}", summary.id),
+        Record::StudyState(row) => format!("the state of study {}", row.job.id),
     }
 }
 

@@ -487,8 +487,8 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     assert_eq!(farm.get("/view/objects.png").await.status, 200);
 }
 
-/// `GET /api/jobs` and `POST /api/jobs/{id}/…` over real sockets: the
-/// listing, pause, resume, priority and cancel of a running job (whose
+/// `GET /api/jobs`, `GET /api/jobs/{id}` and `POST /api/jobs/{id}/…`
+/// over real sockets: the listing, pause, resume, priority and cancel of a running job (whose
 /// submitter hears of it), the refusals, and `/metrics`' per-state gauges
 /// agreeing with the listing.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -507,6 +507,14 @@ async fn the_jobs_api_lists_and_changes_jobs_and_the_metrics_agree() {
         "{}",
         listed[0].host
     );
+    // One job by its id, as listed.
+    let one = farm.get(&format!("/api/jobs/{id}")).await;
+    assert_eq!(one.status, 200, "{}", one.text());
+    assert_eq!(
+        serde_json::from_slice::<JobSummary>(&one.body).unwrap(),
+        listed[0]
+    );
+    assert_eq!(farm.get("/api/jobs/99").await.status, 404);
 
     let farm = &farm;
     let post = |action: &'static str, body: serde_json::Value| {

@@ -423,6 +423,38 @@ mod tests {
                     reason: String::new(),
                 }],
             },
+            Message::SubmitStudy {
+                study: crate::WireStudy {
+                    name: "sun study".to_owned(),
+                    priority: 2,
+                    variants: Vec::new(),
+                },
+            },
+            Message::StudyAccepted {
+                study: 9,
+                variants: vec![(10, 4), (11, 4)],
+            },
+            Message::JobRows {
+                rows: vec![crate::JobRow {
+                    job: crate::JobSummary {
+                        id: 9,
+                        name: "sun study".to_owned(),
+                        kind: crate::WireJobKind::Study,
+                        state: crate::WireJobState::Running,
+                        priority: 0,
+                        frames_done: 1,
+                        frames_failed: 0,
+                        frames_cancelled: 0,
+                        frames_total: 8,
+                        submitted_ms: 1_700_000_000_000,
+                        started_ms: None,
+                        finished_ms: None,
+                        host: "10.0.0.2:40000".to_owned(),
+                        reason: String::new(),
+                    },
+                    variants: Vec::new(),
+                }],
+            },
             Message::ControlJob {
                 job: 8,
                 action: crate::JobAction::Requeue { failed_only: true },
@@ -459,7 +491,7 @@ mod tests {
         let messages = every_message();
         // Every variant is covered (the list has two extra alternatives).
         let names: std::collections::BTreeSet<_> = messages.iter().map(Message::name).collect();
-        assert_eq!(names.len(), 26);
+        assert_eq!(names.len(), 29);
         let stream: Vec<u8> = (messages.iter())
             .flat_map(|m| encode_message(m).expect("encodes"))
             .collect();

@@ -35,11 +35,11 @@ pub use framing::{
 pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_matches};
 pub use kept::{FrameKey, KeptFrames};
 pub use message::{
-    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobScene,
-    JobSummary, MAX_STAGES, Message, Package, PackageFailed, PackageId, PackageResult, PhaseKind,
-    QueueStatus, Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData, SceneHash,
-    StatusReply, Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WorkerFrameStats,
-    WorkerStatus, check_stages, scene_hash, wire_job,
+    FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobRow,
+    JobScene, JobSummary, MAX_STAGES, Message, Package, PackageFailed, PackageId, PackageResult,
+    PhaseKind, QueueStatus, Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData,
+    SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WireStudy,
+    WorkerFrameStats, WorkerStatus, check_stages, scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
@@ -54,7 +54,7 @@ pub use wire::{
 /// tracer's `capture_cd_m2` or a progressive stage's reflector meshes in
 /// its result); the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 11;
+pub const PROTOCOL_VERSION: u32 = 12;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

@@ -20,8 +20,11 @@
 //!   `FrameDone` per frame, or `JobFailed`; `StatusRequest` → `StatusReply`;
 //!   `AttachJob` → `JobAccepted` and the frames, each a `FrameDone` or a
 //!   `FrameMissing`; `JournalFailed` when the master cannot keep a record;
-//!   `ListJobs` → `JobList`; `ControlJob` → `JobControlled` (and
-//!   `JobStateChanged` to the job's submitters).
+//!   `ListJobs` → `JobRows`; `ControlJob` → `JobControlled` (and
+//!   `JobStateChanged` to the job's submitters); `SubmitStudy` →
+//!   `SceneRequest`s for the scenes the master lacks, then `StudyAccepted`
+//!   and each variant's messages as a job's; `AttachJob` of a study →
+//!   `StudyAccepted` (the submitter then attaches to its variants).
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -128,7 +131,8 @@ pub enum Message {
     /// Submitter → master: list the jobs (`all`: the finished ones kept
     /// too, not only queued, running and paused).
     ListJobs { all: bool },
-    /// Master → submitter: the jobs, oldest first.
+    /// Listings (the master's journal keeps a job's as a `JobList` of
+    /// one; `ListJobs` is answered with [`Message::JobRows`]).
     JobList { jobs: Vec<JobSummary> },
     /// Submitter → master: change a job (cancel, pause, resume, requeue,
     /// set its priority).
@@ -146,6 +150,21 @@ pub enum Message {
         state: WireJobState,
         reason: String,
     },
+
+    // Submitter ↔ master: studies.
+    /// Submitter → master: run this study, its variants as one job (the
+    /// master asks for each scene it does not have).
+    SubmitStudy { study: WireStudy },
+    /// Master → submitter: the study is queued (or attached to) under
+    /// `study`; its variants, in order, are the jobs `variants` (each its
+    /// id and frame count), whose messages follow as any job's.
+    StudyAccepted {
+        study: JobId,
+        variants: Vec<(JobId, u32)>,
+    },
+    /// Master → submitter: the jobs (`ListJobs`), oldest first, a study
+    /// with its variants.
+    JobRows { rows: Vec<JobRow> },
 }
 
 impl Message {
@@ -181,6 +200,9 @@ impl Message {
             Message::ControlJob { .. } => "ControlJob",
             Message::JobControlled { .. } => "JobControlled",
             Message::JobStateChanged { .. } => "JobStateChanged",
+            Message::SubmitStudy { .. } => "SubmitStudy",
+            Message::StudyAccepted { .. } => "StudyAccepted",
+            Message::JobRows { .. } => "JobRows",
         }
     }
 }
@@ -502,10 +524,34 @@ pub struct WireJob {
 pub enum WireJobKind {
     /// A job file's frames (`vtfarm submit`, `vtfarm render`).
     Render,
-    /// A variant of a glare study.
+    /// A glare study: one job whose variants are jobs of their own.
     Study,
     /// A move of the dashboard's interactive view.
     View,
+    /// A variant of a glare study (listed under its study).
+    Variant,
+}
+
+/// A glare study as a submitter sends it: its variants, each a job (a
+/// variant is one scene), run and controlled as one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WireStudy {
+    /// Its name in listings.
+    pub name: String,
+    /// Every variant's priority (higher runs first).
+    pub priority: i32,
+    /// The variants in the study's order, each naming its scene by hash.
+    pub variants: Vec<WireJob>,
+}
+
+/// One row of `vtfarm jobs`: a job, or a study with its variants.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JobRow {
+    /// The job, or the study: its state and frames are its variants'
+    /// together.
+    pub job: JobSummary,
+    /// A study's variants, in order (none for other jobs).
+    pub variants: Vec<JobSummary>,
 }
 
 /// A job's state on the wire (the master core's `JobState`, whose table

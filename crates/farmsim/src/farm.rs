@@ -15,8 +15,8 @@ use vtfarm_master_core::{
     Output, Peer, Record, StoredJob, Written,
 };
 use vtfarm_proto::{
-    FrameDone, FrameKey, FrameStart, FrameStats, JobScene, Message, Package, PackageResult,
-    ResultPixels, SceneData, WireJob, encoded_len,
+    FrameDone, FrameKey, FrameStart, FrameStats, JobRow, JobScene, Message, Package, PackageResult,
+    ResultPixels, SceneData, WireJob, WireStudy, encoded_len,
 };
 use vtfarm_worker::engine::{FrameError, PackageError};
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
@@ -172,6 +172,10 @@ pub trait JobJournal {
     /// Every kept unfinished job, for a restarted master, and the jobs set
     /// aside as damaged.
     fn load(&self) -> (Vec<StoredJob>, Vec<DamagedJob>);
+    /// Every kept study (restored after the jobs, its variants among them).
+    fn load_studies(&self) -> Vec<JobRow> {
+        Vec::new()
+    }
 }
 
 /// A finished frame as the submitter got it.
@@ -528,8 +532,12 @@ impl<M: CostModel> Farm<M> {
         for job in damaged {
             self.master.restore_damaged(job);
         }
+        let studies = journal.load_studies();
         for job in stored {
             self.master.restore(self.now, job);
+        }
+        for study in studies {
+            self.master.restore_study(self.now, study);
         }
         for w in 0..self.workers.len() {
             if self.workers[w].session.is_some() {
@@ -628,6 +636,19 @@ impl<M: CostModel> Farm<M> {
         let conn = self.submitter.expect("the submitter is connected");
         self.master
             .message(self.now, conn, Message::SubmitJob { job });
+        self.route_master_outputs();
+    }
+
+    /// Submits `study`, its variants' scene `scene` by hash (the
+    /// submitter answers the master's scene requests).
+    pub fn submit_study(&mut self, mut study: WireStudy, scene: SceneData) {
+        for variant in &mut study.variants {
+            variant.scene = JobScene::Hash(scene.hash);
+        }
+        self.scene = Some(scene);
+        let conn = self.submitter.expect("the submitter is connected");
+        self.master
+            .message(self.now, conn, Message::SubmitStudy { study });
         self.route_master_outputs();
     }
 

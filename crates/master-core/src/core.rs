@@ -26,6 +26,7 @@
 mod control;
 mod events;
 mod journal;
+mod study;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
@@ -34,7 +35,7 @@ use std::time::Duration;
 use tracing::{debug, info, warn};
 use vtfarm_proto::{
     JobScene, Message, PackageResult, SceneData, SceneHash, StatusReply, WireJob, WireJobKind,
-    encoded_len,
+    WireStudy, encoded_len,
 };
 use vtfarm_scene::Scene;
 use vtfarm_scheduler::{
@@ -48,7 +49,7 @@ use crate::frames::base::BaseFrame;
 use crate::frames::finish::EncodedFrame;
 use crate::frames::job::Job;
 use crate::frames::{Arrival, BaseUse, Frames};
-use crate::jobs::{JobEntry, JobTable, Retention};
+use crate::jobs::{JobTable, Retention};
 use crate::output::Output;
 use crate::peers::{ConnId, Peer, Peers};
 use crate::record::Record;
@@ -72,6 +73,8 @@ pub struct MasterCore {
     frames: Frames,
     /// Submissions whose scene the master still has to receive.
     awaiting_scene: BTreeMap<ConnId, WireJob>,
+    /// Studies whose scenes (these hashes) the master still has to receive.
+    awaiting_scenes: BTreeMap<ConnId, (WireStudy, BTreeSet<SceneHash>)>,
     next_job: u64,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
@@ -103,6 +106,7 @@ impl MasterCore {
             scenes: BTreeMap::new(),
             frames: Frames::default(),
             awaiting_scene: BTreeMap::new(),
+            awaiting_scenes: BTreeMap::new(),
             next_job: 1,
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
@@ -180,8 +184,12 @@ impl MasterCore {
         let now_ms = self.wall_ms(self.now);
         for id in self.table.expired(self.retention, now_ms) {
             debug!(job = id, "finished job no longer kept");
-            self.table.remove(id);
+            let variants = self.table.remove(id).map(|e| e.variants);
             self.persist(Record::JobForgotten { id });
+            for variant in variants.unwrap_or_default() {
+                self.table.remove(variant);
+                self.persist(Record::JobForgotten { id: variant });
+            }
         }
     }
 
@@ -228,6 +236,7 @@ impl MasterCore {
     /// is journaled, else it is cancelled.
     fn submitter_left(&mut self, now: Duration, conn: ConnId) {
         self.awaiting_scene.remove(&conn);
+        self.awaiting_scenes.remove(&conn);
         for (&job, j) in self.frames.jobs.iter_mut() {
             if !j.submitters.remove(&conn) || !j.submitters.is_empty() {
                 continue; // not its, or others still follow it
@@ -466,9 +475,10 @@ impl MasterCore {
             }
             Message::SubmitJob { job } => self.submit(now, conn, job),
             Message::AttachJob { job, from_frame } => self.attach(conn, job, from_frame),
+            Message::SubmitStudy { study } => self.submit_study(now, conn, study),
             Message::ListJobs { all } => {
-                let jobs = self.table.list(all).map(JobEntry::summary).collect();
-                self.send(conn, Message::JobList { jobs });
+                let rows = self.table.rows(all);
+                self.send(conn, Message::JobRows { rows });
             }
             Message::ControlJob { job, action } => {
                 let who = self.peers.controller(conn, &action);
@@ -479,6 +489,9 @@ impl MasterCore {
                 Some(mut job) if job.scene == JobScene::Hash(data.hash) => {
                     job.scene = JobScene::Data(data);
                     self.submit(now, conn, job);
+                }
+                None if self.awaiting_scenes.contains_key(&conn) => {
+                    self.study_scene(now, conn, data)
                 }
                 _ => self.close(conn, "scene data nobody asked for".into()),
             },

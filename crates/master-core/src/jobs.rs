@@ -17,11 +17,20 @@
 //! Completed, Failed and Cancelled are finished: such a job stays listed
 //! (and a persistent master keeps its frames for re-attaching) until
 //! [`Retention`] lets it go.
+//!
+//! A study is one listed job over its variants, each a job of its own
+//! (listed under it, never on its own, and controlled only through it).
+//! Its state follows from theirs ([`study_state`]) through the same table:
+//! finished when every variant is (completed when each completed, else
+//! cancelled when one was cancelled, else failed); paused when every
+//! unfinished variant is; running once a variant started or finished;
+//! queued before. Its frames are its variants' together, and it goes with
+//! them when [`Retention`] lets it go.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use vtfarm_proto::{JobSummary, WireJobKind, WireJobState};
+use vtfarm_proto::{JobRow, JobSummary, WireJobKind, WireJobState};
 
 /// A job's state; the module documentation has the transition table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -168,6 +177,10 @@ pub struct JobEntry {
     pub host: String,
     /// Why it failed or who cancelled it.
     pub reason: String,
+    /// The study it is a variant of.
+    pub study: Option<u64>,
+    /// A study's variants, in order (empty for any other job).
+    pub variants: Vec<u64>,
 }
 
 impl JobEntry {
@@ -212,8 +225,44 @@ impl JobEntry {
             finished_ms: summary.finished_ms,
             host: summary.host,
             reason: summary.reason,
+            study: None,
+            variants: Vec::new(),
         }
     }
+
+    /// Whether it is a study (its variants listed under it).
+    pub fn is_study(&self) -> bool {
+        self.kind == WireJobKind::Study && self.study.is_none() && !self.variants.is_empty()
+    }
+}
+
+/// A study's state from its variants' (the module's documentation has the
+/// rule); `None` for a study without variants.
+pub fn study_state(variants: &[&JobEntry]) -> Option<JobState> {
+    use JobState::*;
+    if variants.is_empty() {
+        return None;
+    }
+    let has = |state: JobState| variants.iter().any(|v| v.state == state);
+    let unfinished = || variants.iter().filter(|v| !v.state.is_finished());
+    Some(if variants.iter().all(|v| v.state.is_finished()) {
+        if variants.iter().all(|v| v.state == Completed) {
+            Completed
+        } else if has(Cancelled) {
+            Cancelled
+        } else {
+            Failed
+        }
+    } else if unfinished().all(|v| v.state == Paused) {
+        Paused
+    } else if variants
+        .iter()
+        .any(|v| v.state == Running || v.state.is_finished() || v.started_ms.is_some())
+    {
+        Running
+    } else {
+        Queued
+    })
 }
 
 /// A transition the table does not allow.
@@ -245,6 +294,8 @@ pub enum JobControlError {
     ViewJob(u64),
     #[error("job {job} cannot be queued again: {reason}")]
     Requeue { job: u64, reason: String },
+    #[error("job {job} is a variant of study {study}: control the study")]
+    InStudy { job: u64, study: u64 },
 }
 
 /// Every listed job, by id (so in submission order).
@@ -304,20 +355,95 @@ impl JobTable {
         Ok(Some(entry))
     }
 
-    /// The jobs, oldest first: every one with `all`, else the unfinished.
+    /// The jobs, oldest first: every one with `all`, else the unfinished;
+    /// a study's variants only under it ([`JobTable::row`]).
     pub fn list(&self, all: bool) -> impl Iterator<Item = &JobEntry> {
-        (self.entries.values()).filter(move |e| all || !e.state.is_finished())
+        (self.entries.values())
+            .filter(move |e| e.study.is_none() && (all || !e.state.is_finished()))
     }
 
-    /// How many jobs are in `state`.
+    /// A job's row: its listing, and a study's variants' under it.
+    pub fn row(&self, entry: &JobEntry) -> JobRow {
+        JobRow {
+            job: entry.summary(),
+            variants: (entry.variants.iter())
+                .filter_map(|&v| self.entries.get(&v))
+                .map(JobEntry::summary)
+                .collect(),
+        }
+    }
+
+    /// The listed rows, as [`JobTable::list`] picks them.
+    pub fn rows(&self, all: bool) -> Vec<JobRow> {
+        self.list(all).map(|e| self.row(e)).collect()
+    }
+
+    /// Lists `study` over `variants` (listed already): its frames and
+    /// state follow theirs from now on.
+    pub(crate) fn insert_study(&mut self, mut study: JobEntry, variants: &[u64]) {
+        study.variants = (variants.iter().copied())
+            .filter(|v| self.entries.contains_key(v))
+            .collect();
+        for v in &study.variants {
+            if let Some(variant) = self.entries.get_mut(v) {
+                variant.study = Some(study.id);
+            }
+        }
+        self.entries.insert(study.id, study);
+    }
+
+    /// Brings study `id`'s frames and state in line with its variants' at
+    /// `at_ms`; whether its state changed. A state the table does not
+    /// allow at once is reached through running (a variant that finished
+    /// before any was seen running).
+    pub(crate) fn refresh_study(&mut self, id: u64, at_ms: u64) -> bool {
+        let Some(study) = self.entries.get(&id) else {
+            return false;
+        };
+        let variants: Vec<&JobEntry> = (study.variants.iter())
+            .filter_map(|v| self.entries.get(v))
+            .collect();
+        let Some(to) = study_state(&variants) else {
+            return false;
+        };
+        let done = variants.iter().map(|v| v.frames_done).sum();
+        let total = variants.iter().map(|v| v.frames_total).sum();
+        // A finished study says why from its first variant that did not complete.
+        let why = (variants.iter())
+            .find(|v| v.state == to && !v.reason.is_empty())
+            .map(|v| format!("variant {:?}: {}", v.name, v.reason));
+        let from = study.state;
+        let study = self.entries.get_mut(&id).expect("looked up above");
+        study.frames_done = done;
+        study.frames_total = total;
+        if from == to {
+            return false;
+        }
+        if !from.may_become(to) && from.may_become(JobState::Running) {
+            let _ = self.set_state(id, JobState::Running, at_ms);
+        }
+        let moved = matches!(self.set_state(id, to, at_ms), Ok(Some(_)));
+        if let (true, Some(why)) = (moved && to.is_finished(), why) {
+            let study = self.entries.get_mut(&id).expect("looked up above");
+            if study.reason.is_empty() {
+                study.reason = why;
+            }
+        }
+        moved
+    }
+
+    /// How many listed jobs are in `state` (a study counts once, as
+    /// [`JobTable::list`] lists it).
     pub fn count(&self, state: JobState) -> usize {
-        self.entries.values().filter(|e| e.state == state).count()
+        self.list(true).filter(|e| e.state == state).count()
     }
 
     /// The finished jobs `retention` lets go at `now_ms`: those beyond its
     /// count (the earliest finished first) and those finished too long ago.
     pub(crate) fn expired(&self, retention: Retention, now_ms: u64) -> Vec<u64> {
+        // A study's variants go with it.
         let mut finished: Vec<(u64, u64)> = (self.entries.values())
+            .filter(|e| e.study.is_none())
             .filter_map(|e| Some((e.finished_ms?, e.id)).filter(|_| e.state.is_finished()))
             .collect();
         finished.sort_unstable();
@@ -333,7 +459,7 @@ impl JobTable {
     pub(crate) fn next_expiry(&self, retention: Retention) -> Option<u64> {
         let max_age = retention.max_age.as_millis() as u64;
         (self.entries.values())
-            .filter(|e| e.state.is_finished())
+            .filter(|e| e.state.is_finished() && e.study.is_none())
             .filter_map(|e| e.finished_ms)
             .min()
             .map(|at| at.saturating_add(max_age))
@@ -385,7 +511,105 @@ mod tests {
             finished_ms: Some(at_ms),
             host: "test".into(),
             reason: String::new(),
+            study: None,
+            variants: Vec::new(),
         }
+    }
+
+    fn variant(id: u64, state: JobState, started: bool) -> JobEntry {
+        JobEntry {
+            kind: WireJobKind::Variant,
+            state,
+            frames_done: u32::from(state == JobState::Completed) * 2,
+            frames_total: 2,
+            started_ms: started.then_some(10),
+            finished_ms: state.is_finished().then_some(20),
+            ..finished(id, 0)
+        }
+    }
+
+    #[test]
+    fn a_studys_state_follows_its_variants() {
+        use JobState::*;
+        let cases = [
+            (vec![(Queued, false), (Queued, false)], Queued),
+            (vec![(Running, true), (Queued, false)], Running),
+            // Between two variants (one done, the next not yet started).
+            (vec![(Completed, true), (Queued, false)], Running),
+            // Resumed after it had started: running though none runs now.
+            (vec![(Queued, true), (Queued, false)], Running),
+            (vec![(Paused, true), (Paused, false)], Paused),
+            (vec![(Completed, true), (Paused, false)], Paused),
+            (vec![(Paused, true), (Running, true)], Running),
+            (vec![(Completed, true), (Completed, true)], Completed),
+            (vec![(Completed, true), (Failed, true)], Failed),
+            (vec![(Failed, true), (Cancelled, true)], Cancelled),
+            (vec![(Completed, true), (Cancelled, false)], Cancelled),
+        ];
+        for (states, expected) in cases {
+            let variants: Vec<JobEntry> = (states.iter().enumerate())
+                .map(|(i, &(state, started))| variant(i as u64, state, started))
+                .collect();
+            let refs: Vec<&JobEntry> = variants.iter().collect();
+            assert_eq!(study_state(&refs), Some(expected), "{states:?}");
+        }
+        assert_eq!(study_state(&[]), None);
+    }
+
+    /// A table of a study (id 1) over variants 2 and 3, queued.
+    fn study_table(a: JobState, b: JobState) -> JobTable {
+        let mut table = JobTable::default();
+        table.insert(variant(2, a, a != JobState::Queued));
+        table.insert(variant(3, b, b != JobState::Queued));
+        let study = JobEntry {
+            kind: WireJobKind::Study,
+            state: JobState::Queued,
+            frames_done: 0,
+            frames_total: 0,
+            started_ms: None,
+            finished_ms: None,
+            ..finished(1, 0)
+        };
+        table.insert_study(study, &[2, 3, 99]);
+        table
+    }
+
+    #[test]
+    fn a_study_lists_its_variants_under_it_and_sums_their_frames() {
+        let mut table = study_table(JobState::Completed, JobState::Running);
+        assert!(table.refresh_study(1, 30));
+        let study = table.get(1).unwrap();
+        // An unknown variant is not listed.
+        assert_eq!(study.variants, [2, 3]);
+        assert_eq!((study.frames_done, study.frames_total), (2, 4));
+        assert_eq!(
+            (study.state, study.started_ms),
+            (JobState::Running, Some(30))
+        );
+        let listed: Vec<u64> = table.list(true).map(|e| e.id).collect();
+        assert_eq!(listed, [1]);
+        let row = table.row(table.get(1).unwrap());
+        let ids: Vec<u64> = row.variants.iter().map(|v| v.id).collect();
+        assert_eq!((row.job.id, ids), (1, vec![2, 3]));
+        // Nothing changed: nothing to journal.
+        assert!(!table.refresh_study(1, 40));
+    }
+
+    #[test]
+    fn a_study_finished_at_once_goes_through_running_by_the_table() {
+        let mut table = study_table(JobState::Completed, JobState::Failed);
+        table.get_mut(3).unwrap().reason = "package failed".into();
+        assert!(table.refresh_study(1, 50));
+        let study = table.get(1).unwrap();
+        assert_eq!(study.state, JobState::Failed);
+        assert_eq!((study.started_ms, study.finished_ms), (Some(50), Some(50)));
+        assert_eq!(study.reason, "variant \"job 3\": package failed");
+        // Its variants go with it, never before it.
+        let retention = Retention {
+            max_jobs: 0,
+            max_age: Duration::from_secs(1),
+        };
+        assert_eq!(table.expired(retention, 1_000_000), vec![1]);
     }
 
     #[test]

@@ -19,7 +19,7 @@
 //! - [`FarmRules`]: the scheduling rules a master runs.
 //! - [`JobRejected`], [`ResultRejected`]: why it turns a job or a result away.
 //! - [`jobs`]: the jobs as users see them (states and their table,
-//!   listing, retention of finished jobs).
+//!   studies over their variants, listing, retention of finished jobs).
 //! - [`record`]: what the core asks the journal to keep and reads back.
 //! - [`telemetry`]: the core's counters and kept frames, for the dashboard.
 //! - [`view`]: the interactive view (move the eye, progressive stages, glare);

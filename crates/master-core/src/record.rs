@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use vtfarm_proto::{FrameDone, JobSummary, SceneData, WireJob};
+use vtfarm_proto::{FrameDone, JobRow, JobSummary, SceneData, WireJob};
 
 /// What the core asks to keep.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,6 +29,9 @@ pub enum Record {
     /// The job's listing changed (state, priority, times): the newest
     /// replaces the one before.
     JobState(Box<JobSummary>),
+    /// A study's listing and its variants (their ids; each variant's own
+    /// records keep its state): the newest replaces the one before.
+    StudyState(Box<JobRow>),
 }
 
 impl Record {
@@ -41,6 +44,7 @@ impl Record {
             | Record::JobDamaged { id, .. } => *id,
             Record::FrameDone(done) => done.job,
             Record::JobState(summary) => summary.id,
+            Record::StudyState(row) => row.job.id,
         }
     }
 

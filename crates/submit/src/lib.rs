@@ -15,12 +15,18 @@
 //! cannot be delivered. Several submitters may follow one job: each gets
 //! every frame.
 //!
+//! [`run_remote_study`] runs a study as one job: its variants' frames on
+//! one connection, re-attached the same way.
+//!
 //! [`list_jobs`] and [`control_job`] manage the master's jobs (`vtfarm
 //! jobs`, `cancel`, `pause`, `resume`, `requeue`, `priority`); a job's
 //! follower learns of a user's pause, resume or cancel
 //! (`JobStateChanged`): a cancel ends it with [`JobError::Cancelled`].
 
 pub mod progress;
+mod study;
+
+pub use study::{RemoteStudy, StudyEvent, run_remote_study};
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -28,8 +34,8 @@ use std::time::{Duration, Instant};
 use tracing::warn;
 use vtfarm_imaging::Image;
 use vtfarm_proto::{
-    ATTACH_GRACE, FrameStats, JobAction, JobSummary, Message, Role, SceneData, WireFrameAux,
-    WireImage, WireImageFormat, WireJob, WireJobState,
+    ATTACH_GRACE, FrameDone, FrameStats, JobAction, JobRow, JobSummary, Message, Role, SceneData,
+    WireFrameAux, WireImage, WireImageFormat, WireJob, WireJobState,
 };
 use vtfarm_transport::Link;
 use vtfarm_transport::client::{ClientOptions, ConnectError, connect};
@@ -130,6 +136,9 @@ pub enum JobError {
     /// The master refused a request about a job (`vtfarm cancel` and the like).
     #[error("{0}")]
     Refused(String),
+    /// The follower's own handling of an event failed (it says why).
+    #[error("{0}")]
+    Stopped(String),
     #[error("frame {frame} of job {job} cannot be delivered: {reason}")]
     FrameLost {
         job: u64,
@@ -175,22 +184,9 @@ pub async fn run_remote_job(
         RemoteJob::Submit { job, scene } => (Some(job), Some(scene), JobFollower::default()),
         RemoteJob::Attach { job } => (None, None, JobFollower::attaching(job)),
     };
-    let mut backoff = Duration::from_millis(200);
     let mut lost_at: Option<Instant> = None;
     loop {
-        let conn = match connect(options, Role::Submitter).await {
-            Ok(conn) => conn,
-            Err(e) => {
-                let retry = lost_at.is_some_and(|t| t.elapsed() < ATTACH_GRACE);
-                if !(retry && e.is_transient()) {
-                    return Err(JobError::Connect(e));
-                }
-                warn!("{e}; retrying in {backoff:?}");
-                tokio::time::sleep(backoff).await;
-                backoff = (backoff * 2).min(Duration::from_secs(5));
-                continue;
-            }
-        };
+        let conn = connect_following(options, lost_at).await?;
         let mut link = conn.link;
         let request = match (submission.take(), follower.job) {
             (Some(job), _) => Message::SubmitJob { job },
@@ -213,17 +209,41 @@ pub async fn run_remote_job(
                 let why = why.map(|w| format!(": {w}")).unwrap_or_default();
                 warn!("lost the master{why}; reconnecting to follow the job");
                 lost_at = Some(Instant::now());
-                backoff = Duration::from_millis(200);
             }
             Err(e) => return Err(e),
         }
     }
 }
 
-/// The master's jobs (`all`: the finished ones it keeps too), oldest first.
-pub async fn list_jobs(options: &ClientOptions, all: bool) -> Result<Vec<JobSummary>, JobError> {
+/// Connects to the master; after a lost connection (at `lost_at`) it
+/// retries a transient failure with backoff for up to [`ATTACH_GRACE`],
+/// the first time it fails fast.
+async fn connect_following(
+    options: &ClientOptions,
+    lost_at: Option<Instant>,
+) -> Result<vtfarm_transport::client::Connection, JobError> {
+    let mut backoff = Duration::from_millis(200);
+    loop {
+        match connect(options, Role::Submitter).await {
+            Ok(conn) => return Ok(conn),
+            Err(e) => {
+                let retry = lost_at.is_some_and(|t| t.elapsed() < ATTACH_GRACE);
+                if !(retry && e.is_transient()) {
+                    return Err(JobError::Connect(e));
+                }
+                warn!("{e}; retrying in {backoff:?}");
+                tokio::time::sleep(backoff).await;
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+            }
+        }
+    }
+}
+
+/// The master's jobs (`all`: the finished ones it keeps too), oldest
+/// first, each study with its variants.
+pub async fn list_jobs(options: &ClientOptions, all: bool) -> Result<Vec<JobRow>, JobError> {
     let reply = request(options, Message::ListJobs { all }, |m| match m {
-        Message::JobList { jobs } => Some(jobs),
+        Message::JobRows { rows } => Some(rows),
         _ => None,
     });
     reply.await
@@ -338,31 +358,9 @@ impl JobFollower {
                         || self.job.is_some_and(|job| job != done.job)
                         || self.total.is_some_and(|total| done.frame as usize >= total) => {}
                 Message::FrameDone(done) => {
-                    let frame = done.frame;
-                    let in_frame = |e: JobError| match e {
-                        JobError::Protocol(e) => JobError::Protocol(format!("frame {frame}: {e}")),
-                        other => other,
-                    };
-                    let image = frame_color(done.image).map_err(in_frame)?;
-                    let components = match (done.aux, &image) {
-                        (None, _) => None,
-                        (Some(aux), FrameColor::Linear(color)) => {
-                            Some(components(color, aux).map_err(in_frame)?)
-                        }
-                        (Some(_), FrameColor::Srgb8 { .. }) => {
-                            return Err(in_frame(JobError::Protocol(
-                                "components with an sRGB colour".into(),
-                            )));
-                        }
-                    };
-                    let finished = FinishedFrame {
-                        frame: done.frame,
-                        image,
-                        stats: done.stats,
-                        components,
-                    };
+                    let finished = finished_frame(done)?;
                     on_event(JobEvent::FrameDone(&finished));
-                    self.frames.insert(frame, finished);
+                    self.frames.insert(finished.frame, finished);
                 }
                 Message::FrameMissing {
                     job,
@@ -387,12 +385,43 @@ impl JobFollower {
                     }
                     on_event(JobEvent::StateChanged { job, state, reason });
                 }
+                // The answer to attaching to a study.
+                Message::StudyAccepted { study, .. } => {
+                    return Err(JobError::Refused(format!(
+                        "job {study} is a study: follow it with its study file"
+                    )));
+                }
                 Message::Heartbeat => {}
                 other => return Err(JobError::Protocol(format!("unexpected {}", other.name()))),
             }
         }
         Ok(())
     }
+}
+
+/// A finished frame off the wire, its colour and components checked.
+fn finished_frame(done: FrameDone) -> Result<FinishedFrame, JobError> {
+    let frame = done.frame;
+    let in_frame = |e: JobError| match e {
+        JobError::Protocol(e) => JobError::Protocol(format!("frame {frame}: {e}")),
+        other => other,
+    };
+    let image = frame_color(done.image).map_err(in_frame)?;
+    let components = match (done.aux, &image) {
+        (None, _) => None,
+        (Some(aux), FrameColor::Linear(color)) => Some(components(color, aux).map_err(in_frame)?),
+        (Some(_), FrameColor::Srgb8 { .. }) => {
+            return Err(in_frame(JobError::Protocol(
+                "components with an sRGB colour".into(),
+            )));
+        }
+    };
+    Ok(FinishedFrame {
+        frame,
+        image,
+        stats: done.stats,
+        components,
+    })
 }
 
 fn frame_color(wire: WireImage) -> Result<FrameColor, JobError> {

@@ -6,14 +6,14 @@ use std::collections::{BTreeMap, BTreeSet};
 use serde::{Deserialize, Serialize};
 use vtfarm_master_core::telemetry::{FarmCounters, WorkerTotals};
 use vtfarm_master_core::view::{CurrentView, ViewOutcome};
-use vtfarm_proto::{FrameStats, JobSummary, StatusReply};
+use vtfarm_proto::{FrameStats, JobRow, JobSummary, StatusReply};
 
 /// Everything the dashboard shows.
 #[derive(Serialize)]
 pub struct DashboardView {
     pub status: StatusReply,
     /// Every listed job, oldest first (as `GET /api/jobs`).
-    pub jobs: Vec<JobSummary>,
+    pub jobs: Vec<JobRowView>,
     pub counters: CountersView,
     /// Per worker name: totals and the packages it is working on.
     pub workers: BTreeMap<String, WorkerView>,
@@ -193,4 +193,23 @@ pub struct FrameView {
     pub job: u64,
     pub frame: u32,
     pub stats: FrameStats,
+}
+
+/// A row of the jobs as JSON (`GET /api/jobs`, `vtfarm jobs --json`): the
+/// job's listing, and a study's `variants` (each a listing) with it.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+pub struct JobRowView {
+    #[serde(flatten)]
+    pub job: JobSummary,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<JobSummary>,
+}
+
+impl From<JobRow> for JobRowView {
+    fn from(row: JobRow) -> Self {
+        JobRowView {
+            job: row.job,
+            variants: row.variants,
+        }
+    }
 }

@@ -487,3 +487,62 @@ fn a_fifo_or_a_device_in_a_records_place_is_an_error_without_blocking() {
     // The device as the listing: lost, the job held (`summary` none).
     assert_eq!(job.summary, None);
 }
+
+#[test]
+fn a_study_reads_back_over_its_variants_and_a_damaged_one_is_set_aside() {
+    use vtfarm_proto::{JobRow, JobSummary, WireJobKind, WireJobState};
+    let dir = tempfile::tempdir().unwrap();
+    let journal = Journal::open(dir.path()).unwrap();
+    let (scene, job) = one_pixel_job(1);
+    let listing = |id: u64, kind: WireJobKind| JobSummary {
+        id,
+        name: format!("job {id}"),
+        kind,
+        state: WireJobState::Running,
+        priority: 0,
+        frames_done: 0,
+        frames_failed: 0,
+        frames_cancelled: 0,
+        frames_total: 1,
+        submitted_ms: 1_000,
+        started_ms: Some(2_000),
+        finished_ms: None,
+        host: "10.0.0.9:4000".into(),
+        reason: String::new(),
+    };
+    // Study 1 over variants 2 and 3 (each journaled as a job).
+    for id in [2, 3] {
+        let queued = Record::JobQueued {
+            id,
+            job: Box::new(job.clone()),
+            scene: scene.clone(),
+        };
+        journal.write(queued).unwrap();
+        let state = Record::JobState(Box::new(listing(id, WireJobKind::Variant)));
+        journal.write(state).unwrap();
+    }
+    let row = JobRow {
+        job: listing(1, WireJobKind::Study),
+        variants: vec![
+            listing(2, WireJobKind::Variant),
+            listing(3, WireJobKind::Variant),
+        ],
+    };
+    journal
+        .write(Record::StudyState(Box::new(row.clone())))
+        .unwrap();
+    let loaded = journal.load();
+    assert!(loaded.damaged.is_empty(), "{:?}", loaded.damaged);
+    assert_eq!(loaded.studies, [row]);
+    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+    assert_eq!(ids, [2, 3]);
+
+    // A damaged study record is set aside with its reason; its variants
+    // read back as jobs.
+    flip_listing(&journal.study_path(1));
+    let loaded = journal.load();
+    assert!(loaded.studies.is_empty());
+    assert_eq!(loaded.jobs.len(), 2);
+    let why = std::fs::read_to_string(dir.path().join("jobs/damaged/000000000001/why")).unwrap();
+    assert!(why.contains("checksum mismatch"), "{why}");
+}

@@ -6,7 +6,7 @@
 use vtfarm_farmsim::{JobJournal, TestFarm};
 use vtfarm_master::{FarmRules, Journal, Record, StoredJob};
 use vtfarm_master_core::DamagedJob;
-use vtfarm_proto::FrameDone;
+use vtfarm_proto::{FrameDone, JobRow};
 
 /// The harness under its old name.
 pub(crate) type Pair = TestFarm;
@@ -29,6 +29,10 @@ impl JobJournal for TempJournal {
     fn load(&self) -> (Vec<StoredJob>, Vec<DamagedJob>) {
         let loaded = self.journal.load();
         (loaded.jobs, loaded.damaged)
+    }
+
+    fn load_studies(&self) -> Vec<JobRow> {
+        self.journal.load().studies
     }
 }
 

@@ -9,6 +9,7 @@ use tracing::{info, warn};
 use vtfarm_proto::{JobAction, JobScene, JobSummary, Message, WireJob, WireJobKind};
 use vtfarm_scheduler::JobId;
 
+use crate::error::JobRejected;
 use crate::jobs::{JobControlError, JobEntry, JobState};
 use crate::output::Output;
 use crate::peers::ConnId;
@@ -19,7 +20,7 @@ use super::MasterCore;
 
 impl MasterCore {
     /// Checks a submitted job and queues it (or asks for its scene first).
-    pub(super) fn submit(&mut self, now: Duration, conn: ConnId, mut job: WireJob) {
+    pub(super) fn submit(&mut self, now: Duration, conn: ConnId, job: WireJob) {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
@@ -30,21 +31,37 @@ impl MasterCore {
             self.send(conn, Message::SceneRequest { hash: scene_hash });
             return;
         }
+        let frames = job.frames.len() as u32;
+        let host = self.peers.submitter_host(conn);
+        match self.accept_job(now, BTreeSet::from([conn]), host, job) {
+            Ok(id) => self.send(conn, Message::JobAccepted { job: id, frames }),
+            Err(e) => self.refuse_job(conn, e.to_string()),
+        }
+    }
+
+    /// Queues a job whose scene the master has (or `job` carries) for
+    /// `submitters`, lists it and journals it; its id.
+    pub(super) fn accept_job(
+        &mut self,
+        now: Duration,
+        submitters: BTreeSet<ConnId>,
+        host: String,
+        mut job: WireJob,
+    ) -> Result<u64, JobRejected> {
+        let scene_hash = match &job.scene {
+            JobScene::Data(d) => d.hash,
+            JobScene::Hash(h) => *h,
+        };
         // The journal keeps the job with its scene by hash (the bytes once per scene).
         let scene = std::mem::replace(&mut job.scene, JobScene::Hash(scene_hash));
         let journaled = self.recovery.persistent().then(|| job.clone());
         job.scene = scene;
         let id = self.next_job;
-        let frames = job.frames.len() as u32;
-        let host = self.peers.submitter_host(conn);
         let entry = self.new_entry(id, &job, host, now);
-        if let Err(e) = self.queue_job(now, id, job, BTreeSet::from([conn]), 0) {
-            return self.refuse_job(conn, e.to_string());
-        }
+        self.queue_job(now, id, job, submitters, 0)?;
         self.next_job += 1;
         self.table.insert(entry);
         self.remember_for_view(id);
-        self.send(conn, Message::JobAccepted { job: id, frames });
         self.telemetry.counters.jobs_submitted += 1;
         if let Some(job) = journaled {
             self.recovery.keep_definition(id, job.clone());
@@ -56,6 +73,7 @@ impl MasterCore {
             });
             self.persist_state(id);
         }
+        Ok(id)
     }
 
     /// A listing for a job just submitted.
@@ -79,6 +97,8 @@ impl MasterCore {
             finished_ms: None,
             host,
             reason: String::new(),
+            study: None,
+            variants: Vec::new(),
         }
     }
 
@@ -90,21 +110,45 @@ impl MasterCore {
         }
     }
 
-    /// Moves a listed job to `to` and journals it; a job the table does
-    /// not list (a frame rendered again) has no state to keep.
+    /// Moves a listed job to `to` and journals it (and its study's state
+    /// that follows); a job the table does not list (a frame rendered
+    /// again) has no state to keep.
     pub(super) fn set_job_state(&mut self, id: u64, to: JobState) {
         let at = self.wall_ms(self.now);
         match self.table.set_state(id, to, at) {
-            Ok(Some(_)) => self.persist_state(id),
+            Ok(Some(_)) => {
+                self.persist_state(id);
+                self.refresh_study_of(id);
+            }
             Ok(None) => {}
             // The core asks only for what the table allows: a bug if not.
             Err(e) => warn!("{e}"),
         }
     }
 
+    /// Brings the study job `id` is a variant of in line with its
+    /// variants, journaling its state when that changed.
+    pub(super) fn refresh_study_of(&mut self, id: u64) {
+        let Some(study) = self.table.get(id).and_then(|e| e.study) else {
+            return;
+        };
+        if self.table.refresh_study(study, self.wall_ms(self.now)) {
+            self.persist_study(study);
+        }
+    }
+
+    /// Journals study `id`'s listing with its variants.
+    pub(super) fn persist_study(&mut self, id: u64) {
+        if let Some(entry) = self.table.get(id).filter(|e| e.is_study()) {
+            let row = self.table.row(entry);
+            self.persist(Record::StudyState(Box::new(row)));
+        }
+    }
+
     /// A user's request about a job (`vtfarm cancel` and the like, the
     /// dashboard's buttons, the HTTP API): the job as it is afterwards, or
     /// why not. `who` names the asker for the job's submitters and listing.
+    /// A study's request acts on each of its variants it applies to.
     pub fn control_job(
         &mut self,
         now: Duration,
@@ -114,39 +158,82 @@ impl MasterCore {
     ) -> Result<JobSummary, JobControlError> {
         self.now = now;
         let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
-        let state = entry.state;
         if entry.kind == WireJobKind::View {
             return Err(JobControlError::ViewJob(id));
         }
-        let not_now = |action, applies_to| JobControlError::NotNow {
-            job: id,
-            state,
-            action,
-            applies_to,
+        if let Some(study) = entry.study {
+            return Err(JobControlError::InStudy { job: id, study });
+        }
+        if entry.is_study() {
+            self.control_study(now, id, action, who)?;
+        } else {
+            self.control_one(now, id, action, who)?;
+        }
+        self.pump();
+        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
+        Ok(entry.summary())
+    }
+
+    /// Whether `action` applies to a job in `state`: why not, if not.
+    pub(super) fn applies(
+        id: u64,
+        state: JobState,
+        action: &JobAction,
+    ) -> Result<(), JobControlError> {
+        let (applies, name, applies_to) = match action {
+            JobAction::Cancel => (!state.is_finished(), "cancel", "queued, running or paused"),
+            JobAction::Pause => (
+                matches!(state, JobState::Queued | JobState::Running),
+                "pause",
+                "queued or running",
+            ),
+            JobAction::Resume => (state == JobState::Paused, "resume", "paused"),
+            JobAction::Requeue { .. } => (
+                state.is_finished(),
+                "requeue",
+                "completed, failed or cancelled",
+            ),
+            JobAction::SetPriority(_) => (
+                !state.is_finished(),
+                "priority",
+                "queued, running or paused",
+            ),
         };
+        match applies {
+            true => Ok(()),
+            false => Err(JobControlError::NotNow {
+                job: id,
+                state,
+                action: name,
+                applies_to,
+            }),
+        }
+    }
+
+    /// [`MasterCore::control_job`] of one job (not a study's).
+    pub(super) fn control_one(
+        &mut self,
+        now: Duration,
+        id: u64,
+        action: JobAction,
+        who: &str,
+    ) -> Result<(), JobControlError> {
+        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
+        Self::applies(id, entry.state, &action)?;
         match action {
             JobAction::Cancel => {
-                if state.is_finished() {
-                    return Err(not_now("cancel", "queued, running or paused"));
-                }
                 info!(job = id, by = who, "cancelling the job");
                 let reason = format!("job {id} was cancelled by {who}");
-                self.cancel_reasons.insert(id, reason);
+                self.cancel_reasons.entry(id).or_insert(reason);
                 let _ = self.scheduler.cancel_job(now, JobId(id));
             }
             JobAction::Pause => {
-                if !matches!(state, JobState::Queued | JobState::Running) {
-                    return Err(not_now("pause", "queued or running"));
-                }
                 info!(job = id, by = who, "pausing the job");
                 let _ = self.scheduler.pause_job(now, JobId(id));
                 self.set_job_state(id, JobState::Paused);
                 self.tell_state(id, format!("paused by {who}"));
             }
             JobAction::Resume => {
-                if state != JobState::Paused {
-                    return Err(not_now("resume", "paused"));
-                }
                 info!(job = id, by = who, "resuming the job");
                 let started = self.table.get(id).is_some_and(|e| e.started_ms.is_some());
                 let to = if started {
@@ -159,16 +246,10 @@ impl MasterCore {
                 self.tell_state(id, format!("resumed by {who}"));
             }
             JobAction::Requeue { failed_only } => {
-                if !state.is_finished() {
-                    return Err(not_now("requeue", "completed, failed or cancelled"));
-                }
                 self.requeue(now, id, failed_only)?;
                 info!(job = id, by = who, failed_only, "job queued again");
             }
             JobAction::SetPriority(priority) => {
-                if state.is_finished() {
-                    return Err(not_now("priority", "queued, running or paused"));
-                }
                 let _ = self.scheduler.set_priority(now, JobId(id), priority);
                 if let Some(entry) = self.table.get_mut(id) {
                     entry.priority = priority;
@@ -176,9 +257,7 @@ impl MasterCore {
                 self.persist_state(id);
             }
         }
-        self.pump();
-        let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
-        Ok(entry.summary())
+        Ok(())
     }
 
     /// Tells a job's submitters its new state and why.
@@ -246,6 +325,12 @@ impl MasterCore {
 
     /// A submitter asks for a job's frames from `from_frame` on.
     pub(super) fn attach(&mut self, conn: ConnId, job: u64, from_frame: u32) {
+        // A study: the submitter attaches to each of its variants.
+        if let Some(variants) = self.study_variants(job) {
+            info!(study = job, conn, "submitter attached to the study");
+            let study = job;
+            return self.send(conn, Message::StudyAccepted { study, variants });
+        }
         // A finished job within retention: its journaled frames, then how it ended.
         let finished = (self.table.get(job))
             .filter(|e| e.state.is_finished() && self.recovery.persistent())

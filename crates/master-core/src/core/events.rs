@@ -262,10 +262,11 @@ impl MasterCore {
             return;
         };
         j.frames_done = frame + 1;
+        let submitters = j.submitters.clone();
         if let Some(entry) = self.table.get_mut(job) {
             entry.frames_done = frame + 1;
         }
-        let submitters = j.submitters.clone();
+        self.refresh_study_of(job);
         // A frame rendered again is its own job's frame.
         let (owner, owner_frame) = self.recovery.owner(job, frame);
         let message = FrameDone {
