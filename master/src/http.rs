@@ -845,6 +845,13 @@ fn view_state(core: &MasterCore) -> ViewState {
             generation: v.generation,
             quality: v.quality.name(),
             glare: v.figures.as_ref().map(|f| f.glare.clone()),
+            object_colors: (v.figures.iter())
+                .flat_map(|f| 0..f.glare.objects.len())
+                .map(|rank| {
+                    let [r, g, b] = vtfarm_glare::object_color_srgb(rank);
+                    format!("#{r:02x}{g:02x}{b:02x}")
+                })
+                .collect(),
         }),
         outcomes: views
             .outcomes()

@@ -1192,6 +1192,12 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
                 glare: document.querySelectorAll("#glare tr").length,
                 unshown: [...document.querySelectorAll("#glare td")].filter((td) => td.textContent.includes("–")).length,
                 objects: document.getElementById("view-objects").src,
+                legend: [...document.querySelectorAll("#view-legend li")].map((li) => ({
+                    text: li.textContent,
+                    color: getComputedStyle(li.querySelector(".swatch")).backgroundColor,
+                    px: parseFloat(getComputedStyle(li).fontSize),
+                })),
+                objectCount: window.lastView.view.latest.glare.objects.length,
                 mode: document.getElementById("view-mode").textContent,
                 current: window.lastView.view.current,
                 outcomes: window.lastView.view.outcomes,
@@ -1224,6 +1230,14 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
             .unwrap()
             .contains("/view/objects.png")
     );
+    // The object map's legend: one readable entry per object, in the
+    // map's colours.
+    let legend = view["legend"].as_array().unwrap();
+    assert!(!legend.is_empty(), "{view}");
+    assert_eq!(legend.len() as u64, view["objectCount"].as_u64().unwrap());
+    let [r, g, b] = vtfarm_glare::object_color_srgb(0);
+    assert_eq!(legend[0]["color"], format!("rgb({r}, {g}, {b})"), "{view}");
+    assert!(legend[0]["px"].as_f64().unwrap() >= 12.0, "{view}");
     // Only the newest move was rendered to `full`.
     let fulls = farm
         .master

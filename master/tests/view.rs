@@ -162,7 +162,11 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         .as_ref()
         .expect("the figures of the stage on view");
     assert_eq!(figures.glare.glass_pixels, reference.image.glass().count());
-    assert!(figures.object_map.width >= latest.image().width);
+    let map = &figures.object_map;
+    assert_eq!(
+        (map.width, map.height),
+        (latest.image().width, latest.image().height)
+    );
 }
 
 /// A farm of two workers that rendered a job of the small cockpit (the

@@ -127,7 +127,9 @@ impl ViewFrame {
 /// A view stage's glare figures.
 #[derive(Clone, Debug)]
 pub struct ViewFigures {
-    /// The reflected-object map with its legend (`vtfarm_glare::object_map`).
+    /// The reflected-object map, the frame alone
+    /// (`vtfarm_glare::object_map_frame`): the page draws its legend from
+    /// the figures' objects, in the same rank order.
     pub object_map: Image,
     pub glare: vtfarm_glare::Summary,
 }
@@ -489,7 +491,8 @@ fn glare_of(image: &FrameImage, scene: &Scene) -> (Image, vtfarm_glare::Summary)
     // defaults, so neither call can fail.
     let analysis =
         vtfarm_glare::analyze(&input, &params).expect("a composited frame is consistent");
-    let map = vtfarm_glare::object_map(&input, &params).expect("a composited frame is consistent");
+    let (map, _) =
+        vtfarm_glare::object_map_frame(&input, &params).expect("a composited frame is consistent");
     (map, analysis.summary)
 }
 

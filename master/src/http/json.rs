@@ -49,6 +49,9 @@ pub struct LatestView {
     pub quality: &'static str,
     /// `null` until computed, after the stage went on view.
     pub glare: Option<vtfarm_glare::Summary>,
+    /// The object map's colour (`#rrggbb`) of each of `glare.objects`, in
+    /// their order: the page's legend.
+    pub object_colors: Vec<String>,
 }
 
 #[derive(Serialize)]
