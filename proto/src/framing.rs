@@ -224,11 +224,14 @@ mod tests {
                 master_name: "master".to_owned(),
             }),
             Message::Refused(Refusal::new(RefuseCode::BadToken, "wrong token")),
-            Message::SceneOffer { hash, job: 3 },
+            Message::SceneOffer {
+                hash,
+                job: JobId(3),
+            },
             Message::SceneRequest { hash },
             Message::SceneData(SceneData::from_scene(&scene())),
             Message::FrameStart(FrameStart {
-                job: 3,
+                job: JobId(3),
                 frame: 1,
                 scene: hash,
                 setup: setup(),
@@ -238,10 +241,13 @@ mod tests {
                 image: crate::WireImageFormat::Srgb8,
                 stages: vec![crate::WireQuality::Preview, crate::WireQuality::Full],
             }),
-            Message::RequestWork { job: 3, frame: 1 },
+            Message::RequestWork {
+                job: JobId(3),
+                frame: 1,
+            },
             Message::Package(Package {
                 id: 99,
-                job: 3,
+                job: JobId(3),
                 frame: 1,
                 triangles: vec![1, 0],
                 whole: None,
@@ -312,15 +318,18 @@ mod tests {
                     kind: crate::WireJobKind::Render,
                 },
             },
-            Message::JobAccepted { job: 3, frames: 2 },
+            Message::JobAccepted {
+                job: JobId(3),
+                frames: 2,
+            },
             Message::Progress {
-                job: 3,
+                job: JobId(3),
                 frame: 1,
                 done: 5,
                 total: 8,
             },
             Message::FrameDone(FrameDone {
-                job: 3,
+                job: JobId(3),
                 frame: 1,
                 image: WireImage::from_pixels(2, 1, &[Vec3::X, Vec3::ONE]),
                 aux: Some(WireFrameAux::encode(
@@ -362,7 +371,7 @@ mod tests {
                 },
             }),
             Message::JobFailed {
-                job: 4,
+                job: JobId(4),
                 errors: vec!["scene missing".to_owned()],
             },
             Message::StatusRequest,
@@ -380,10 +389,10 @@ mod tests {
                     busy_micros: 3_600_000,
                 }],
                 queue: QueueStatus {
-                    waiting: vec![9],
+                    waiting: vec![JobId(9)],
                     running: vec![
                         RunningJob {
-                            job: 8,
+                            job: JobId(8),
                             name: "cockpit".to_owned(),
                             frame: 1,
                             frames: 3,
@@ -392,7 +401,7 @@ mod tests {
                             paused: false,
                         },
                         RunningJob {
-                            job: 10,
+                            job: JobId(10),
                             name: "single".to_owned(),
                             frame: 0,
                             frames: 1,
@@ -407,7 +416,7 @@ mod tests {
             Message::ListJobs { all: true },
             Message::JobList {
                 jobs: vec![crate::JobSummary {
-                    id: 8,
+                    id: JobId(8),
                     name: "cockpit".to_owned(),
                     kind: crate::WireJobKind::View,
                     state: crate::WireJobState::Paused,
@@ -431,13 +440,13 @@ mod tests {
                 },
             },
             Message::StudyAccepted {
-                study: 9,
-                variants: vec![(10, 4), (11, 4)],
+                study: JobId(9),
+                variants: vec![(JobId(10), 4), (JobId(11), 4)],
             },
             Message::JobRows {
                 rows: vec![crate::JobRow {
                     job: crate::JobSummary {
-                        id: 9,
+                        id: JobId(9),
                         name: "sun study".to_owned(),
                         kind: crate::WireJobKind::Study,
                         state: crate::WireJobState::Running,
@@ -456,19 +465,19 @@ mod tests {
                 }],
             },
             Message::ControlJob {
-                job: 8,
+                job: JobId(8),
                 action: crate::JobAction::Requeue { failed_only: true },
             },
             Message::ControlJob {
-                job: 8,
+                job: JobId(8),
                 action: crate::JobAction::SetPriority(-7),
             },
             Message::JobControlled {
-                job: 8,
+                job: JobId(8),
                 outcome: Err("no job 8".to_owned()),
             },
             Message::JobStateChanged {
-                job: 8,
+                job: JobId(8),
                 state: crate::WireJobState::Cancelled,
                 reason: "cancelled from 127.0.0.1".to_owned(),
             },
@@ -576,7 +585,11 @@ mod tests {
                 received: 2
             })
         ));
-        let whole = encode_message(&Message::JobAccepted { job: 1, frames: 2 }).expect("encodes");
+        let whole = encode_message(&Message::JobAccepted {
+            job: JobId(1),
+            frames: 2,
+        })
+        .expect("encodes");
         let cut = &whole[..whole.len() - 1];
         assert!(matches!(
             read_all(cut, 100),

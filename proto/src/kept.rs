@@ -74,14 +74,14 @@ mod tests {
         assert_eq!(kept.saw(&Message::Heartbeat), None);
         let frames = FRAMES_IN_FLIGHT as u32;
         for frame in 0..frames {
-            assert_eq!(kept.saw(&package(1, frame)), None);
+            assert_eq!(kept.saw(&package(JobId(1), frame)), None);
         }
         // Frame 0 named again: frame 1 is now the oldest and goes first.
-        assert_eq!(kept.saw(&package(1, 0)), None);
-        assert_eq!(kept.saw(&package(2, 0)), Some((1, 1)));
-        assert_eq!(kept.saw(&package(2, 1)), Some((1, 2)));
-        assert!(kept.contains((1, 0)) && kept.contains((2, 1)));
-        assert!(!kept.contains((1, 1)) && !kept.contains((1, 2)));
+        assert_eq!(kept.saw(&package(JobId(1), 0)), None);
+        assert_eq!(kept.saw(&package(JobId(2), 0)), Some((JobId(1), 1)));
+        assert_eq!(kept.saw(&package(JobId(2), 1)), Some((JobId(1), 2)));
+        assert!(kept.contains((JobId(1), 0)) && kept.contains((JobId(2), 1)));
+        assert!(!kept.contains((JobId(1), 1)) && !kept.contains((JobId(1), 2)));
         assert_eq!(kept.newest_last.len(), FRAMES_IN_FLIGHT);
     }
 }

@@ -39,8 +39,8 @@ use crate::wire::{
 
 /// A scene's content hash: SHA-256 of its canonical encoding (see [`scene_hash`]).
 pub type SceneHash = [u8; 32];
-/// A job, numbered by the master.
-pub type JobId = u64;
+/// A job, numbered by the master: the scheduler's id, encoded as the bare number.
+pub use vtfarm_scheduler::JobId;
 /// A package, numbered by the master; unique for the master's lifetime.
 pub type PackageId = u64;
 

@@ -46,14 +46,14 @@ pub enum ReportError {
 /// Why [`Scheduler::submit_job`](crate::Scheduler::submit_job) refused.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
 pub enum SubmitError {
-    #[error("{0} is already queued or running")]
+    #[error("job {0} is already queued or running")]
     DuplicateJob(JobId),
 }
 
 /// Why [`Scheduler::cancel_job`](crate::Scheduler::cancel_job) refused.
 #[derive(Clone, Debug, Error, PartialEq, Eq)]
 pub enum CancelError {
-    #[error("{0} is neither queued nor running")]
+    #[error("job {0} is neither queued nor running")]
     UnknownJob(JobId),
 }
 

@@ -18,7 +18,22 @@ pub struct WorkerId(pub u64);
 pub struct PackageId(pub u64);
 
 /// A job, as the driver names it; unique among the jobs queued or running.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+/// The one job id of the farm: the wire, the master and the CLI use it too,
+/// and serde (JSON and bincode alike) sees it as the bare number.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    PartialOrd,
+    Ord,
+    Hash,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(transparent)]
 pub struct JobId(pub u64);
 
 impl fmt::Display for WorkerId {
@@ -33,9 +48,19 @@ impl fmt::Display for PackageId {
     }
 }
 
+/// The number alone, so that messages read "job 7" wherever they say `job {id}`.
 impl fmt::Display for JobId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "job {}", self.0)
+        write!(f, "{}", self.0)
+    }
+}
+
+/// A job id as typed on a command line: the number alone.
+impl std::str::FromStr for JobId {
+    type Err = std::num::ParseIntError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        s.parse().map(JobId)
     }
 }
 

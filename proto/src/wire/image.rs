@@ -254,7 +254,7 @@ mod tests {
         ];
         let wire = WireImage::from_pixels(2, 2, &pixels);
         let message = crate::Message::FrameDone(crate::FrameDone {
-            job: 1,
+            job: crate::JobId(1),
             frame: 2,
             image: wire,
             stats: Default::default(),

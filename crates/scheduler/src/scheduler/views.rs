@@ -123,7 +123,11 @@ impl Scheduler {
                 ));
             }
             if job.split_frames() > self.config.frames_in_flight.max(1) as usize {
-                return fail(format!("{}: {} split frames", job.id, job.split_frames()));
+                return fail(format!(
+                    "job {}: {} split frames",
+                    job.id,
+                    job.split_frames()
+                ));
             }
             for frame in job.running_frames() {
                 self.validate_frame(frame)?;
