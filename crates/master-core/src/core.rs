@@ -75,7 +75,7 @@ pub struct MasterCore {
     awaiting_scene: BTreeMap<ConnId, WireJob>,
     /// Studies whose scenes (these hashes) the master still has to receive.
     awaiting_scenes: BTreeMap<ConnId, (WireStudy, BTreeSet<SceneHash>)>,
-    next_job: u64,
+    next_job: JobId,
     scene_bytes_sent: u64,
     outbox: VecDeque<Output>,
     telemetry: Telemetry,
@@ -89,7 +89,7 @@ pub struct MasterCore {
     wall_origin_ms: u64,
     /// Why a job is being cancelled (who asked), for its listing and its
     /// submitters, until the scheduler's `JobCancelled`.
-    cancel_reasons: BTreeMap<u64, String>,
+    cancel_reasons: BTreeMap<JobId, String>,
     /// The journal's side of the core (whether it journals at all too).
     recovery: Recovery,
     /// The time of the input being handled.
@@ -107,7 +107,7 @@ impl MasterCore {
             frames: Frames::default(),
             awaiting_scene: BTreeMap::new(),
             awaiting_scenes: BTreeMap::new(),
-            next_job: 1,
+            next_job: JobId(1),
             scene_bytes_sent: 0,
             outbox: VecDeque::new(),
             telemetry: Telemetry::default(),
@@ -183,7 +183,7 @@ impl MasterCore {
     fn forget_expired(&mut self) {
         let now_ms = self.wall_ms(self.now);
         for id in self.table.expired(self.retention, now_ms) {
-            debug!(job = id, "finished job no longer kept");
+            debug!(job = %id, "finished job no longer kept");
             let variants = self.table.remove(id).map(|e| e.variants);
             self.persist(Record::JobForgotten { id });
             for variant in variants.unwrap_or_default() {
@@ -244,13 +244,13 @@ impl MasterCore {
             if self.recovery.persistent() {
                 // Its frames are journaled: it may come back (or attach
                 // from elsewhere) and get them.
-                info!(job, "submitter left; the job renders on");
+                info!(%job, "submitter left; the job renders on");
             } else {
                 // Nobody is left to receive the images: stop its jobs.
-                info!(job, "submitter left, cancelling its job");
+                info!(%job, "submitter left, cancelling its job");
                 let reason = "its submitter left (the embedded master keeps no frames)";
                 self.cancel_reasons.insert(job, reason.into());
-                let _ = self.scheduler.cancel_job(now, JobId(job));
+                let _ = self.scheduler.cancel_job(now, job);
             }
         }
     }
@@ -507,7 +507,7 @@ impl MasterCore {
     fn queue_job(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         job: WireJob,
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
@@ -519,7 +519,7 @@ impl MasterCore {
     fn queue_job_with(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         mut job: WireJob,
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
@@ -542,7 +542,7 @@ impl MasterCore {
         let (name, frames) = (job.name.clone(), job.frames.len());
         let (job, work) = Job::checked(job, scene, scene_hash, submitters, resume_from)?;
         let (reflectors, method) = (job.reflectors.len(), job.method.name());
-        info!(job = id, %name, frames, reflectors, method, "job queued");
+        info!(job = %id, %name, frames, reflectors, method, "job queued");
         self.frames.jobs.insert(id, job);
         // The view's stages are split over the workers: their latency counts.
         let interactive = job_kind == WireJobKind::View;
@@ -551,9 +551,7 @@ impl MasterCore {
             paused,
             interactive,
         };
-        let submitted = self
-            .scheduler
-            .submit_job_with(now, JobId(id), work, options);
+        let submitted = self.scheduler.submit_job_with(now, id, work, options);
         submitted.map_err(|e| {
             self.frames.jobs.remove(&id);
             JobRejected::from(e)
@@ -575,7 +573,7 @@ impl MasterCore {
     }
 
     /// Sends to each of job `job`'s submitters (none when it is not rendered).
-    fn send_to_job(&mut self, job: u64, message: Message) {
+    fn send_to_job(&mut self, job: JobId, message: Message) {
         let submitters = (self.frames.jobs.get(&job)).map(|j| j.submitters.clone());
         self.send_to(&submitters.unwrap_or_default(), message);
     }
@@ -589,7 +587,7 @@ impl MasterCore {
     }
 
     /// Whether `job`'s records are journaled.
-    fn journals(&self, job: u64) -> bool {
+    fn journals(&self, job: JobId) -> bool {
         self.recovery.journals(job, self.views.owns(job))
     }
 
@@ -598,7 +596,7 @@ impl MasterCore {
         self.send(
             conn,
             Message::JobFailed {
-                job: 0,
+                job: JobId(0),
                 errors: vec![error],
             },
         );
@@ -613,24 +611,22 @@ impl MasterCore {
     fn pump(&mut self) {
         while let Some(event) = self.scheduler.poll_event() {
             match event {
-                Event::JobStarted { job, .. } => self.job_started(job.0),
-                Event::JobResumed { job } => self.job_resumed(job.0),
+                Event::JobStarted { job, .. } => self.job_started(job),
+                Event::JobResumed { job } => self.job_resumed(job),
                 Event::FrameStarted {
                     job, frame, whole, ..
-                } => self.frame_started(job.0, frame, whole),
+                } => self.frame_started(job, frame, whole),
                 Event::FrameComplete { job, frame, stats } => {
-                    self.frame_complete(job.0, frame, &stats)
+                    self.frame_complete(job, frame, &stats)
                 }
-                Event::JobComplete { job } => self.job_done(job.0),
+                Event::JobComplete { job } => self.job_done(job),
                 Event::JobFailed {
                     job,
                     reason,
                     errors,
-                } => self.job_failed(job.0, &reason, &errors),
-                Event::JobCancelled { job } => self.job_cancelled(job.0),
-                Event::WorkerBlocklisted { worker, job } => {
-                    self.worker_blocklisted(worker.0, job.0)
-                }
+                } => self.job_failed(job, &reason, &errors),
+                Event::JobCancelled { job } => self.job_cancelled(job),
+                Event::WorkerBlocklisted { worker, job } => self.worker_blocklisted(worker.0, job),
                 Event::WorkerLost {
                     worker,
                     cause,
@@ -659,7 +655,7 @@ impl MasterCore {
 
     /// Asks the driver for the next base frame of `job`'s last frames
     /// ahead of their start, if one is to be made ([`Frames::base_ahead`]).
-    fn make_base_ahead(&mut self, job: u64) {
+    fn make_base_ahead(&mut self, job: JobId) {
         let in_flight = self.scheduler.config().frames_in_flight as usize;
         let workers = self.peers.workers().len();
         if let Some(request) = self.frames.base_ahead(job, in_flight, workers, self.now) {
@@ -669,12 +665,12 @@ impl MasterCore {
 
     /// The driver rasterized the base frame that [`Output::RasterizeBase`]
     /// asked for: the held results are checked and composited now.
-    pub fn base_frame_ready(&mut self, now: Duration, job: u64, frame: u32, base: BaseFrame) {
+    pub fn base_frame_ready(&mut self, now: Duration, job: JobId, frame: u32, base: BaseFrame) {
         self.now = now;
         let (cost, used) = self.frames.base_ready(job, frame, base, now);
         if let Some(cost) = cost {
             // Gone meanwhile: nothing to learn for it.
-            let _ = self.scheduler.base_frame_cost(now, JobId(job), cost);
+            let _ = self.scheduler.base_frame_cost(now, job, cost);
         }
         match used {
             BaseUse::Waiting(base) => {
@@ -683,7 +679,7 @@ impl MasterCore {
                 }
             }
             BaseUse::Ahead => {
-                let _ = self.scheduler.base_frame_ahead(now, JobId(job), frame);
+                let _ = self.scheduler.base_frame_ahead(now, job, frame);
             }
             BaseUse::Spared => {}
             BaseUse::JobGone => return,
@@ -704,7 +700,7 @@ impl MasterCore {
         // A worker that let this split frame go (it keeps the frames named
         // to it last, of any job: several jobs run at once) gets its start
         // again first; one that keeps it does not.
-        let (worker, kept) = (a.worker.0, self.peers.keeps(a.worker.0, a.job.0, a.frame));
+        let (worker, kept) = (a.worker.0, self.peers.keeps(a.worker.0, a.job, a.frame));
         let (again, package) = self.frames.assign(a, kept, self.now);
         if let Some(start) = again {
             self.send(worker, start);
@@ -715,11 +711,11 @@ impl MasterCore {
     /// Moves the interactive view's eye: cancels the previous move's job and
     /// queues the new view at rising quality (see `view.rs`); returns the
     /// new job's id.
-    pub fn steer_view(&mut self, now: Duration, request: ViewRequest) -> Result<u64, ViewError> {
+    pub fn steer_view(&mut self, now: Duration, request: ViewRequest) -> Result<JobId, ViewError> {
         self.now = now;
         let planned = self.views.plan(&request)?;
         if let Some(outdated) = self.views.running_job() {
-            if self.scheduler.cancel_job(now, JobId(outdated)).is_ok() {
+            if self.scheduler.cancel_job(now, outdated).is_ok() {
                 self.views.superseded();
             }
         }
@@ -735,7 +731,7 @@ impl MasterCore {
         if let Some(j) = (self.frames.jobs.get_mut(&id)).filter(|_| planned.stages().len() > 1) {
             j.stages = planned.stages().to_vec();
         }
-        self.next_job += 1;
+        self.next_job.0 += 1;
         self.table.insert(entry);
         self.telemetry.counters.jobs_submitted += 1;
         self.views.started(planned, id, now);
@@ -747,13 +743,13 @@ impl MasterCore {
     /// totals: the listed jobs (a frame rendered again is no job of its
     /// own), which `jobs_submitted` counts as they are queued, so the
     /// totals agree.
-    fn counts_in_totals(&self, id: u64) -> bool {
+    fn counts_in_totals(&self, id: JobId) -> bool {
         self.table.get(id).is_some()
     }
 
     /// A view's job is listed only while it runs: each move of the eye
     /// makes several.
-    fn forget_view_job(&mut self, id: u64) {
+    fn forget_view_job(&mut self, id: JobId) {
         if self
             .table
             .get(id)
@@ -769,7 +765,7 @@ impl MasterCore {
     }
 
     /// Keeps a submitted job's scene and first frame pickable for the view.
-    fn remember_for_view(&mut self, id: u64) {
+    fn remember_for_view(&mut self, id: JobId) {
         let Some(j) = self.frames.jobs.get(&id) else {
             return;
         };
@@ -799,7 +795,7 @@ impl MasterCore {
 
     /// The packages of job `job` each worker (by name) is working on now
     /// (several jobs run at once).
-    pub fn job_packages_by_worker(&self, job: u64) -> BTreeMap<String, Vec<u64>> {
+    pub fn job_packages_by_worker(&self, job: JobId) -> BTreeMap<String, Vec<u64>> {
         (self.frames).packages_by_worker(|p| p.job == job, |conn| self.peers.worker_name(conn))
     }
 

@@ -29,6 +29,7 @@
 
 use std::collections::BTreeMap;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{JobRow, JobSummary, WireJobKind, WireJobState};
 
@@ -163,7 +164,7 @@ pub fn listed_name(name: &str) -> String {
 /// One job's listing: what `vtfarm jobs` shows and the journal keeps.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct JobEntry {
-    pub id: u64,
+    pub id: JobId,
     pub name: String,
     pub kind: WireJobKind,
     pub state: JobState,
@@ -178,9 +179,9 @@ pub struct JobEntry {
     /// Why it failed or who cancelled it.
     pub reason: String,
     /// The study it is a variant of.
-    pub study: Option<u64>,
+    pub study: Option<JobId>,
     /// A study's variants, in order (empty for any other job).
-    pub variants: Vec<u64>,
+    pub variants: Vec<JobId>,
 }
 
 impl JobEntry {
@@ -269,7 +270,7 @@ pub fn study_state(variants: &[&JobEntry]) -> Option<JobState> {
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("job {job} is {from} and cannot become {to}")]
 pub struct TransitionRefused {
-    pub job: u64,
+    pub job: JobId,
     pub from: JobState,
     pub to: JobState,
 }
@@ -280,36 +281,36 @@ pub enum JobControlError {
     #[error(
         "the master has no job {0} (finished longer ago than it keeps jobs, or never submitted)"
     )]
-    UnknownJob(u64),
+    UnknownJob(JobId),
     #[error("job {job} is {state}: {action} applies to {applies_to} jobs")]
     NotNow {
-        job: u64,
+        job: JobId,
         state: JobState,
         action: &'static str,
         applies_to: &'static str,
     },
     #[error("job {0} has no failed frames to requeue")]
-    NothingToRequeue(u64),
+    NothingToRequeue(JobId),
     #[error("job {0} is the interactive view's: the dashboard steers it")]
-    ViewJob(u64),
+    ViewJob(JobId),
     #[error("job {job} cannot be queued again: {reason}")]
-    Requeue { job: u64, reason: String },
+    Requeue { job: JobId, reason: String },
     #[error("job {job} is a variant of study {study}: control the study")]
-    InStudy { job: u64, study: u64 },
+    InStudy { job: JobId, study: JobId },
 }
 
 /// Every listed job, by id (so in submission order).
 #[derive(Debug, Default)]
 pub struct JobTable {
-    entries: BTreeMap<u64, JobEntry>,
+    entries: BTreeMap<JobId, JobEntry>,
 }
 
 impl JobTable {
-    pub fn get(&self, id: u64) -> Option<&JobEntry> {
+    pub fn get(&self, id: JobId) -> Option<&JobEntry> {
         self.entries.get(&id)
     }
 
-    pub(crate) fn get_mut(&mut self, id: u64) -> Option<&mut JobEntry> {
+    pub(crate) fn get_mut(&mut self, id: JobId) -> Option<&mut JobEntry> {
         self.entries.get_mut(&id)
     }
 
@@ -317,7 +318,7 @@ impl JobTable {
         self.entries.insert(entry.id, entry);
     }
 
-    pub(crate) fn remove(&mut self, id: u64) -> Option<JobEntry> {
+    pub(crate) fn remove(&mut self, id: JobId) -> Option<JobEntry> {
         self.entries.remove(&id)
     }
 
@@ -326,7 +327,7 @@ impl JobTable {
     /// not list (a frame rendered again has no state to keep).
     pub(crate) fn set_state(
         &mut self,
-        id: u64,
+        id: JobId,
         to: JobState,
         at_ms: u64,
     ) -> Result<Option<&JobEntry>, TransitionRefused> {
@@ -380,7 +381,7 @@ impl JobTable {
 
     /// Lists `study` over `variants` (listed already): its frames and
     /// state follow theirs from now on.
-    pub(crate) fn insert_study(&mut self, mut study: JobEntry, variants: &[u64]) {
+    pub(crate) fn insert_study(&mut self, mut study: JobEntry, variants: &[JobId]) {
         study.variants = (variants.iter().copied())
             .filter(|v| self.entries.contains_key(v))
             .collect();
@@ -396,7 +397,7 @@ impl JobTable {
     /// `at_ms`; whether its state changed. A state the table does not
     /// allow at once is reached through running (a variant that finished
     /// before any was seen running).
-    pub(crate) fn refresh_study(&mut self, id: u64, at_ms: u64) -> bool {
+    pub(crate) fn refresh_study(&mut self, id: JobId, at_ms: u64) -> bool {
         let Some(study) = self.entries.get(&id) else {
             return false;
         };
@@ -440,9 +441,9 @@ impl JobTable {
 
     /// The finished jobs `retention` lets go at `now_ms`: those beyond its
     /// count (the earliest finished first) and those finished too long ago.
-    pub(crate) fn expired(&self, retention: Retention, now_ms: u64) -> Vec<u64> {
+    pub(crate) fn expired(&self, retention: Retention, now_ms: u64) -> Vec<JobId> {
         // A study's variants go with it.
-        let mut finished: Vec<(u64, u64)> = (self.entries.values())
+        let mut finished: Vec<(u64, JobId)> = (self.entries.values())
             .filter(|e| e.study.is_none())
             .filter_map(|e| Some((e.finished_ms?, e.id)).filter(|_| e.state.is_finished()))
             .collect();
@@ -497,7 +498,7 @@ mod tests {
         }
     }
 
-    fn finished(id: u64, at_ms: u64) -> JobEntry {
+    fn finished(id: JobId, at_ms: u64) -> JobEntry {
         JobEntry {
             id,
             name: format!("job {id}"),
@@ -516,7 +517,7 @@ mod tests {
         }
     }
 
-    fn variant(id: u64, state: JobState, started: bool) -> JobEntry {
+    fn variant(id: JobId, state: JobState, started: bool) -> JobEntry {
         JobEntry {
             kind: WireJobKind::Variant,
             state,
@@ -548,7 +549,7 @@ mod tests {
         ];
         for (states, expected) in cases {
             let variants: Vec<JobEntry> = (states.iter().enumerate())
-                .map(|(i, &(state, started))| variant(i as u64, state, started))
+                .map(|(i, &(state, started))| variant(JobId(i as u64), state, started))
                 .collect();
             let refs: Vec<&JobEntry> = variants.iter().collect();
             assert_eq!(study_state(&refs), Some(expected), "{states:?}");
@@ -559,8 +560,8 @@ mod tests {
     /// A table of a study (id 1) over variants 2 and 3, queued.
     fn study_table(a: JobState, b: JobState) -> JobTable {
         let mut table = JobTable::default();
-        table.insert(variant(2, a, a != JobState::Queued));
-        table.insert(variant(3, b, b != JobState::Queued));
+        table.insert(variant(JobId(2), a, a != JobState::Queued));
+        table.insert(variant(JobId(3), b, b != JobState::Queued));
         let study = JobEntry {
             kind: WireJobKind::Study,
             state: JobState::Queued,
@@ -568,39 +569,39 @@ mod tests {
             frames_total: 0,
             started_ms: None,
             finished_ms: None,
-            ..finished(1, 0)
+            ..finished(JobId(1), 0)
         };
-        table.insert_study(study, &[2, 3, 99]);
+        table.insert_study(study, &[JobId(2), JobId(3), JobId(99)]);
         table
     }
 
     #[test]
     fn a_study_lists_its_variants_under_it_and_sums_their_frames() {
         let mut table = study_table(JobState::Completed, JobState::Running);
-        assert!(table.refresh_study(1, 30));
-        let study = table.get(1).unwrap();
+        assert!(table.refresh_study(JobId(1), 30));
+        let study = table.get(JobId(1)).unwrap();
         // An unknown variant is not listed.
-        assert_eq!(study.variants, [2, 3]);
+        assert_eq!(study.variants, [JobId(2), JobId(3)]);
         assert_eq!((study.frames_done, study.frames_total), (2, 4));
         assert_eq!(
             (study.state, study.started_ms),
             (JobState::Running, Some(30))
         );
-        let listed: Vec<u64> = table.list(true).map(|e| e.id).collect();
-        assert_eq!(listed, [1]);
-        let row = table.row(table.get(1).unwrap());
-        let ids: Vec<u64> = row.variants.iter().map(|v| v.id).collect();
-        assert_eq!((row.job.id, ids), (1, vec![2, 3]));
+        let listed: Vec<JobId> = table.list(true).map(|e| e.id).collect();
+        assert_eq!(listed, [JobId(1)]);
+        let row = table.row(table.get(JobId(1)).unwrap());
+        let ids: Vec<JobId> = row.variants.iter().map(|v| v.id).collect();
+        assert_eq!((row.job.id, ids), (JobId(1), vec![JobId(2), JobId(3)]));
         // Nothing changed: nothing to journal.
-        assert!(!table.refresh_study(1, 40));
+        assert!(!table.refresh_study(JobId(1), 40));
     }
 
     #[test]
     fn a_study_finished_at_once_goes_through_running_by_the_table() {
         let mut table = study_table(JobState::Completed, JobState::Failed);
-        table.get_mut(3).unwrap().reason = "package failed".into();
-        assert!(table.refresh_study(1, 50));
-        let study = table.get(1).unwrap();
+        table.get_mut(JobId(3)).unwrap().reason = "package failed".into();
+        assert!(table.refresh_study(JobId(1), 50));
+        let study = table.get(JobId(1)).unwrap();
         assert_eq!(study.state, JobState::Failed);
         assert_eq!((study.started_ms, study.finished_ms), (Some(50), Some(50)));
         assert_eq!(study.reason, "variant \"job 3\": package failed");
@@ -609,28 +610,31 @@ mod tests {
             max_jobs: 0,
             max_age: Duration::from_secs(1),
         };
-        assert_eq!(table.expired(retention, 1_000_000), vec![1]);
+        assert_eq!(table.expired(retention, 1_000_000), vec![JobId(1)]);
     }
 
     #[test]
     fn retention_lets_the_earliest_finished_and_the_too_old_go() {
         let mut table = JobTable::default();
         // Job 1 finished last, job 3 first.
-        table.insert(finished(1, 3_000));
-        table.insert(finished(2, 2_000));
-        table.insert(finished(3, 1_000));
+        table.insert(finished(JobId(1), 3_000));
+        table.insert(finished(JobId(2), 2_000));
+        table.insert(finished(JobId(3), 1_000));
         let keep_two = Retention {
             max_jobs: 2,
             max_age: Duration::from_secs(10),
         };
-        assert_eq!(table.expired(keep_two, 3_000), vec![3]);
+        assert_eq!(table.expired(keep_two, 3_000), vec![JobId(3)]);
         assert_eq!(table.next_expiry(keep_two), Some(11_000));
         // 10 s after job 2 finished, it and job 3 are too old.
-        assert_eq!(table.expired(keep_two, 12_000), vec![3, 2]);
-        let mut running = finished(4, 0);
+        assert_eq!(table.expired(keep_two, 12_000), vec![JobId(3), JobId(2)]);
+        let mut running = finished(JobId(4), 0);
         running.state = JobState::Running;
         running.finished_ms = None;
         table.insert(running);
-        assert_eq!(table.expired(keep_two, 100_000), vec![3, 2, 1]);
+        assert_eq!(
+            table.expired(keep_two, 100_000),
+            vec![JobId(3), JobId(2), JobId(1)]
+        );
     }
 }

@@ -1,5 +1,6 @@
 //! What the master core asks its driver to do ([`Output`]).
 
+use vtfarm_proto::JobId;
 use vtfarm_proto::Message;
 
 use crate::frames::base::BaseFrameRequest;
@@ -21,7 +22,7 @@ pub enum Output {
     /// back goes to `MasterCore::replay_failed` (rendered again).
     Replay {
         conn: ConnId,
-        job: u64,
+        job: JobId,
         frames: std::ops::Range<u32>,
     },
     /// Rasterize a base frame (CPU work, off the driver's task) and hand it

@@ -3,6 +3,7 @@
 //! included), and the frames each worker keeps as it counts them.
 
 use std::collections::BTreeMap;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{JobAction, KeptFrames, Message};
 
@@ -117,7 +118,7 @@ impl Peers {
 
     /// Whether worker `conn` keeps frame `frame` of `job` (announced or
     /// set up), by the rule both ends count ([`KeptFrames`]).
-    pub(crate) fn keeps(&self, conn: ConnId, job: u64, frame: u32) -> bool {
+    pub(crate) fn keeps(&self, conn: ConnId, job: JobId, frame: u32) -> bool {
         (self.worker_frames.get(&conn)).is_some_and(|kept| kept.contains((job, frame)))
     }
 }
@@ -179,18 +180,18 @@ mod tests {
         );
         let package = Message::Package(vtfarm_proto::Package {
             id: 1,
-            job: 5,
+            job: JobId(5),
             frame: 0,
             triangles: vec![0],
             whole: None,
         });
         peers.saw(1, &package);
         peers.saw(2, &package);
-        assert!(peers.keeps(1, 5, 0));
-        assert!(!peers.keeps(1, 5, 1), "another frame");
-        assert!(!peers.keeps(2, 5, 0), "a submitter keeps no frames");
+        assert!(peers.keeps(1, JobId(5), 0));
+        assert!(!peers.keeps(1, JobId(5), 1), "another frame");
+        assert!(!peers.keeps(2, JobId(5), 0), "a submitter keeps no frames");
         peers.left(1);
-        assert!(!peers.keeps(1, 5, 0), "gone with its worker");
+        assert!(!peers.keeps(1, JobId(5), 0), "gone with its worker");
     }
 
     /// A job's reason names the command and the host that asked, not the

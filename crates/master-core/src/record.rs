@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{FrameDone, JobRow, JobSummary, SceneData, WireJob};
 
@@ -13,19 +14,19 @@ use vtfarm_proto::{FrameDone, JobRow, JobSummary, SceneData, WireJob};
 pub enum Record {
     /// A job was queued (its scene by hash in `job`, the bytes in `scene`).
     JobQueued {
-        id: u64,
+        id: JobId,
         job: Box<WireJob>,
         scene: Arc<SceneData>,
     },
     /// A frame finished.
     FrameDone(Box<FrameDone>),
     /// Every frame of the job is done (kept for re-attaching submitters).
-    JobComplete { id: u64 },
+    JobComplete { id: JobId },
     /// The job is gone: failed, cancelled, or delivered long enough ago.
-    JobForgotten { id: u64 },
+    JobForgotten { id: JobId },
     /// The job cannot run from its record: set it aside in `jobs/damaged/`
     /// with `reason`, never delete it.
-    JobDamaged { id: u64, reason: String },
+    JobDamaged { id: JobId, reason: String },
     /// The job's listing changed (state, priority, times): the newest
     /// replaces the one before.
     JobState(Box<JobSummary>),
@@ -36,7 +37,7 @@ pub enum Record {
 
 impl Record {
     /// The job the record is about.
-    pub fn job(&self) -> u64 {
+    pub fn job(&self) -> JobId {
         match self {
             Record::JobQueued { id, .. }
             | Record::JobComplete { id }
@@ -64,7 +65,7 @@ pub const KEPT_FRAME_RETRY: Duration = Duration::from_secs(2);
 /// How writing one record went, as the server's journal writer reports it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Written {
-    pub job: u64,
+    pub job: JobId,
     /// The frame, when the record was a finished frame.
     pub frame: Option<u32>,
     /// `Err` with the error's text (which names the file) when it failed.
@@ -74,7 +75,7 @@ pub struct Written {
 /// A job read back from the journal.
 #[derive(Debug)]
 pub struct StoredJob {
-    pub id: u64,
+    pub id: JobId,
     /// The job with its scene's bytes (`JobScene::Data`).
     pub job: WireJob,
     /// How many frames are finished, counted from frame 0 without a gap.
@@ -94,7 +95,7 @@ pub struct StoredJob {
 /// A job set aside in `jobs/damaged/` (now or by an earlier start).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct DamagedJob {
-    pub id: u64,
+    pub id: JobId,
     /// What failed (the file and the check) and where the job now lies.
     pub reason: String,
 }

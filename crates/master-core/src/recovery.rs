@@ -10,6 +10,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{FrameDone, JobScene, WireJob};
 
@@ -43,28 +44,28 @@ pub(crate) struct Recovery {
     /// says a frame's write succeeded ([`Recovery::written`]) it is
     /// replayed from here, and a frame whose write failed stays here as
     /// long as its job is kept.
-    unjournaled: BTreeMap<(u64, u32), FrameDone>,
+    unjournaled: BTreeMap<(JobId, u32), FrameDone>,
     /// Each journaled job as queued (its scene by hash, or inline for a
     /// job restored complete), to render a frame again.
-    definitions: BTreeMap<u64, WireJob>,
+    definitions: BTreeMap<JobId, WireJob>,
     /// Jobs rendering one frame again that the journal could not give
     /// back: repair job → (its job, the frame).
-    repairs: BTreeMap<u64, (u64, u32)>,
+    repairs: BTreeMap<JobId, (JobId, u32)>,
     /// Jobs set aside as damaged, with why: an attach is told so.
-    damaged: BTreeMap<u64, String>,
+    damaged: BTreeMap<JobId, String>,
     /// Jobs a record of which could not be written, with the last error:
     /// a submitter attaching later is told too.
-    failed_writes: BTreeMap<u64, String>,
+    failed_writes: BTreeMap<JobId, String>,
     /// Frames of `unjournaled` whose write failed (not queued again yet):
     /// one is written again after each write that succeeds, and at
     /// `retry_at` when no other record is written.
-    to_rewrite: BTreeSet<(u64, u32)>,
+    to_rewrite: BTreeSet<(JobId, u32)>,
     /// When to write a frame of `to_rewrite` again ([`KEPT_FRAME_RETRY`]
     /// after the last failure).
     retry_at: Option<Duration>,
     /// Restored jobs whose journal had a damaged frame, rendered again:
     /// the frame and why, told to attaching submitters.
-    damaged_frames: BTreeMap<u64, (u32, String)>,
+    damaged_frames: BTreeMap<JobId, (u32, String)>,
 }
 
 impl Recovery {
@@ -85,7 +86,7 @@ impl Recovery {
     /// unless it is a view's job (`view_owned`: it lives as long as the
     /// page looks at it) or a frame rendered again (journaled under its
     /// own job).
-    pub(crate) fn journals(&self, job: u64, view_owned: bool) -> bool {
+    pub(crate) fn journals(&self, job: JobId, view_owned: bool) -> bool {
         self.persistent && !view_owned && !self.repairs.contains_key(&job)
     }
 
@@ -102,7 +103,7 @@ impl Recovery {
     }
 
     /// A job's records are gone (or set aside): so is what is kept of it.
-    fn forget(&mut self, job: u64) {
+    fn forget(&mut self, job: JobId) {
         self.definitions.remove(&job);
         self.failed_writes.remove(&job);
         self.damaged_frames.remove(&job);
@@ -112,54 +113,54 @@ impl Recovery {
 
     /// Keeps job `id`'s definition (its scene named by hash) to queue it
     /// again or render a frame of it again.
-    pub(crate) fn keep_definition(&mut self, id: u64, job: WireJob) {
+    pub(crate) fn keep_definition(&mut self, id: JobId, job: WireJob) {
         self.definitions.insert(id, job);
     }
 
-    pub(crate) fn forget_definition(&mut self, id: u64) {
+    pub(crate) fn forget_definition(&mut self, id: JobId) {
         self.definitions.remove(&id);
     }
 
     /// Job `id`'s definition as kept.
-    pub(crate) fn definition(&self, id: u64) -> Option<&WireJob> {
+    pub(crate) fn definition(&self, id: JobId) -> Option<&WireJob> {
         self.definitions.get(&id)
     }
 
     /// A restored job's frame was damaged in the journal and is rendered
     /// again: attaching submitters are told.
-    pub(crate) fn frame_damaged(&mut self, job: u64, damaged: (u32, String)) {
+    pub(crate) fn frame_damaged(&mut self, job: JobId, damaged: (u32, String)) {
         self.damaged_frames.insert(job, damaged);
     }
 
     /// A job the journal set aside as damaged, and why.
-    pub(crate) fn job_damaged(&mut self, job: u64, reason: String) {
+    pub(crate) fn job_damaged(&mut self, job: JobId, reason: String) {
         self.damaged.insert(job, reason);
     }
 
     /// Why job `job` could not be read back, if it could not.
-    pub(crate) fn damaged(&self, job: u64) -> Option<&str> {
+    pub(crate) fn damaged(&self, job: JobId) -> Option<&str> {
         self.damaged.get(&job).map(String::as_str)
     }
 
     /// The last failed write of `job`, if any.
-    pub(crate) fn failed_write(&self, job: u64) -> Option<&str> {
+    pub(crate) fn failed_write(&self, job: JobId) -> Option<&str> {
         self.failed_writes.get(&job).map(String::as_str)
     }
 
     /// `job`'s frame that was damaged in the journal, and why, if any.
-    pub(crate) fn damaged_frame(&self, job: u64) -> Option<&(u32, String)> {
+    pub(crate) fn damaged_frame(&self, job: JobId) -> Option<&(u32, String)> {
         self.damaged_frames.get(&job)
     }
 
     /// Frame `frame` of `job`, held in memory (its write pending or failed).
-    pub(crate) fn unjournaled(&self, job: u64, frame: u32) -> Option<&FrameDone> {
+    pub(crate) fn unjournaled(&self, job: JobId, frame: u32) -> Option<&FrameDone> {
         self.unjournaled.get(&(job, frame))
     }
 
     /// The finished frames `frames` of `job`, in order: those whose
     /// journal write is pending or failed from memory, the runs between
     /// them read back from the journal by the driver.
-    pub(crate) fn replay(&self, job: u64, frames: Range<u32>) -> Vec<Replayed> {
+    pub(crate) fn replay(&self, job: JobId, frames: Range<u32>) -> Vec<Replayed> {
         let mut steps = Vec::new();
         let mut from_journal = frames.start..frames.start;
         for frame in frames {
@@ -230,24 +231,24 @@ impl Recovery {
 
     /// The job of frame `frame` of `job`, and the frame there: a frame
     /// rendered again is its own job's frame.
-    pub(crate) fn owner(&self, job: u64, frame: u32) -> (u64, u32) {
+    pub(crate) fn owner(&self, job: JobId, frame: u32) -> (JobId, u32) {
         self.repairs.get(&job).copied().unwrap_or((job, frame))
     }
 
     /// The repair job rendering frame `frame` of `job` again, if one runs.
-    pub(crate) fn repair_of(&self, job: u64, frame: u32) -> Option<u64> {
+    pub(crate) fn repair_of(&self, job: JobId, frame: u32) -> Option<JobId> {
         (self.repairs.iter())
             .find_map(|(&repair, &owned)| (owned == (job, frame)).then_some(repair))
     }
 
     /// A repair job ended: the frame it rendered again, if it was one.
-    pub(crate) fn repair_ended(&mut self, job: u64) -> Option<(u64, u32)> {
+    pub(crate) fn repair_ended(&mut self, job: JobId) -> Option<(JobId, u32)> {
         self.repairs.remove(&job)
     }
 
     /// A job of the one frame `frame` of `job`, to render it again (its
     /// definition kept), or why not.
-    pub(crate) fn again(&self, job: u64, frame: u32) -> Result<WireJob, String> {
+    pub(crate) fn again(&self, job: JobId, frame: u32) -> Result<WireJob, String> {
         let mut definition = (self.definitions.get(&job).cloned())
             .ok_or_else(|| format!("the master no longer keeps job {job}"))?;
         let setup = (definition.frames.get(frame as usize).cloned())
@@ -258,7 +259,7 @@ impl Recovery {
     }
 
     /// Job `repair` renders frame `frame` of `job` again.
-    pub(crate) fn repairing(&mut self, repair: u64, job: u64, frame: u32) {
+    pub(crate) fn repairing(&mut self, repair: JobId, job: JobId, frame: u32) {
         self.repairs.insert(repair, (job, frame));
     }
 }
@@ -290,7 +291,7 @@ mod tests {
     use super::*;
     use crate::testkit;
 
-    fn done(job: u64, frame: u32) -> Record {
+    fn done(job: JobId, frame: u32) -> Record {
         Record::FrameDone(Box::new(FrameDone {
             job,
             frame,
@@ -300,7 +301,7 @@ mod tests {
         }))
     }
 
-    fn written(job: u64, frame: u32, outcome: Result<(), String>) -> Written {
+    fn written(job: JobId, frame: u32, outcome: Result<(), String>) -> Written {
         Written {
             job,
             frame: Some(frame),
@@ -314,9 +315,9 @@ mod tests {
     fn a_replay_takes_unwritten_frames_from_memory_and_the_rest_from_the_journal() {
         let mut recovery = Recovery::new(true);
         for frame in [2, 3, 6] {
-            recovery.persisting(&done(1, frame));
+            recovery.persisting(&done(JobId(1), frame));
         }
-        let steps: Vec<String> = (recovery.replay(1, 0..8).iter())
+        let steps: Vec<String> = (recovery.replay(JobId(1), 0..8).iter())
             .map(|step| match step {
                 Replayed::Frame(done) => format!("memory {}", done.frame),
                 Replayed::Journal(frames) => format!("journal {frames:?}"),
@@ -331,7 +332,7 @@ mod tests {
             "journal 7..8",
         ];
         assert_eq!(steps, expected);
-        assert_eq!(recovery.replay(2, 0..2), [Replayed::Journal(0..2)]);
+        assert_eq!(recovery.replay(JobId(2), 0..2), [Replayed::Journal(0..2)]);
     }
 
     /// A frame whose write failed stays in memory and is written again
@@ -340,21 +341,24 @@ mod tests {
     #[test]
     fn a_frame_whose_write_failed_is_written_again_after_the_next_success() {
         let mut recovery = Recovery::new(true);
-        recovery.persisting(&done(1, 0));
-        recovery.persisting(&done(1, 1));
-        let failed = recovery.written(Duration::ZERO, written(1, 0, Err("disk full".into())));
+        recovery.persisting(&done(JobId(1), 0));
+        recovery.persisting(&done(JobId(1), 1));
+        let failed = recovery.written(
+            Duration::ZERO,
+            written(JobId(1), 0, Err("disk full".into())),
+        );
         let error = "disk full; frame 0 is kept in memory until it is written";
         assert_eq!(failed, AfterWrite::Failed(error.into()));
-        assert_eq!(recovery.failed_write(1), Some(error));
-        assert!(recovery.unjournaled(1, 0).is_some());
-        let again = recovery.written(Duration::ZERO, written(1, 1, Ok(())));
-        assert_eq!(again, AfterWrite::Rewrite(Some(done(1, 0))));
-        assert!(recovery.unjournaled(1, 1).is_none(), "written");
+        assert_eq!(recovery.failed_write(JobId(1)), Some(error));
+        assert!(recovery.unjournaled(JobId(1), 0).is_some());
+        let again = recovery.written(Duration::ZERO, written(JobId(1), 1, Ok(())));
+        assert_eq!(again, AfterWrite::Rewrite(Some(done(JobId(1), 0))));
+        assert!(recovery.unjournaled(JobId(1), 1).is_none(), "written");
         assert_eq!(
-            recovery.written(Duration::ZERO, written(1, 0, Ok(()))),
+            recovery.written(Duration::ZERO, written(JobId(1), 0, Ok(()))),
             AfterWrite::Rewrite(None)
         );
-        assert!(recovery.unjournaled(1, 0).is_none());
+        assert!(recovery.unjournaled(JobId(1), 0).is_none());
     }
 
     /// A frame whose write failed is written again when its retry is due,
@@ -363,12 +367,15 @@ mod tests {
     #[test]
     fn a_frame_whose_write_failed_is_written_again_when_its_retry_is_due() {
         let mut recovery = Recovery::new(true);
-        recovery.persisting(&done(1, 0));
+        recovery.persisting(&done(JobId(1), 0));
         let at = Duration::from_secs(7);
-        recovery.written(at, written(1, 0, Err("disk full".into())));
+        recovery.written(at, written(JobId(1), 0, Err("disk full".into())));
         assert_eq!(recovery.retry_at(), Some(at + KEPT_FRAME_RETRY));
         assert_eq!(recovery.retry_due(at), None, "not due yet");
-        assert_eq!(recovery.retry_due(at + KEPT_FRAME_RETRY), Some(done(1, 0)));
+        assert_eq!(
+            recovery.retry_due(at + KEPT_FRAME_RETRY),
+            Some(done(JobId(1), 0))
+        );
         assert_eq!(recovery.retry_at(), None, "nothing left to retry");
     }
 
@@ -378,22 +385,25 @@ mod tests {
     fn a_repair_renders_a_kept_jobs_frame_and_is_not_journaled_itself() {
         let mut recovery = Recovery::new(true);
         let (job, _, _) = testkit::job(3);
-        recovery.keep_definition(1, job);
-        let again = recovery.again(1, 2).unwrap();
+        recovery.keep_definition(JobId(1), job);
+        let again = recovery.again(JobId(1), 2).unwrap();
         assert_eq!(
             (again.frames.len(), again.name.as_str()),
             (1, "square (frame 2 again)")
         );
-        assert!(recovery.again(1, 3).is_err(), "no frame 3");
-        recovery.repairing(5, 1, 2);
-        assert_eq!(recovery.owner(5, 0), (1, 2));
-        assert_eq!(recovery.repair_of(1, 2), Some(5));
-        assert!(recovery.journals(1, false));
-        assert!(!recovery.journals(5, false), "a repair");
-        assert!(!recovery.journals(1, true), "a view's job");
-        assert!(!Recovery::new(false).journals(1, false), "not persistent");
-        recovery.persisting(&Record::JobForgotten { id: 1 });
-        assert!(recovery.again(1, 2).is_err(), "forgotten");
-        assert_eq!(recovery.repair_ended(5), Some((1, 2)));
+        assert!(recovery.again(JobId(1), 3).is_err(), "no frame 3");
+        recovery.repairing(JobId(5), JobId(1), 2);
+        assert_eq!(recovery.owner(JobId(5), 0), (JobId(1), 2));
+        assert_eq!(recovery.repair_of(JobId(1), 2), Some(JobId(5)));
+        assert!(recovery.journals(JobId(1), false));
+        assert!(!recovery.journals(JobId(5), false), "a repair");
+        assert!(!recovery.journals(JobId(1), true), "a view's job");
+        assert!(
+            !Recovery::new(false).journals(JobId(1), false),
+            "not persistent"
+        );
+        recovery.persisting(&Record::JobForgotten { id: JobId(1) });
+        assert!(recovery.again(JobId(1), 2).is_err(), "forgotten");
+        assert_eq!(recovery.repair_ended(JobId(5)), Some((JobId(1), 2)));
     }
 }

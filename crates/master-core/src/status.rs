@@ -2,6 +2,7 @@
 //! dashboard, read from the scheduler, the peers and the frames being
 //! assembled.
 
+use vtfarm_proto::JobId;
 use vtfarm_proto::{QueueStatus, RunningJob, StatusReply, WorkerStatus};
 use vtfarm_scheduler::{Scheduler, WorkerState};
 
@@ -10,7 +11,7 @@ use crate::peers::{Peer, Peers};
 
 /// The frame being assembled, borrowed from the core.
 pub struct LiveFrame<'a> {
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub triangles_done: u64,
     pub triangles_total: u64,
@@ -22,11 +23,11 @@ pub struct LiveFrame<'a> {
 /// done, and its image so far (base frame with the results composited).
 pub(crate) fn live_frame<'a>(scheduler: &Scheduler, frames: &'a Frames) -> Option<LiveFrame<'a>> {
     (scheduler.queue().running.iter()).find_map(|running| {
-        let job = frames.jobs.get(&running.job.0)?;
+        let job = frames.jobs.get(&running.job)?;
         // Nothing to show until the base frame is there.
         let current = job.assembly(running.frame).filter(|c| c.ids.is_some())?;
         Some(LiveFrame {
-            job: running.job.0,
+            job: running.job,
             frame: current.start.frame,
             triangles_done: current.triangles_done,
             triangles_total: job.reflectors.len() as u64,
@@ -68,9 +69,9 @@ pub(crate) fn status(
     // (work items are reflector groups for per-reflector methods).
     let running = (queue.running.iter())
         .map(|p| {
-            let job = frames.jobs.get(&p.job.0);
+            let job = frames.jobs.get(&p.job);
             RunningJob {
-                job: p.job.0,
+                job: p.job,
                 name: job.map(|j| j.name.clone()).unwrap_or_default(),
                 frame: p.frame,
                 frames: p.frames,
@@ -84,7 +85,7 @@ pub(crate) fn status(
     StatusReply {
         workers,
         queue: QueueStatus {
-            waiting: queue.waiting.iter().map(|j| j.0).collect(),
+            waiting: queue.waiting.clone(),
             running,
         },
         scene_bytes_sent,

@@ -5,6 +5,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{FrameStats, WireImage};
 
@@ -64,7 +65,7 @@ pub struct WorkerTotals {
     pub bytes_in: u64,
     pub bytes_out: u64,
     /// Jobs the worker may no longer work on (failed too often).
-    pub blocklisted_jobs: BTreeSet<u64>,
+    pub blocklisted_jobs: BTreeSet<JobId>,
 }
 
 /// A finished frame as the submitter received it.
@@ -72,7 +73,7 @@ pub struct WorkerTotals {
 pub struct FinishedFrameRecord {
     /// Numbers frames in the order they finished, from 1.
     pub seq: u64,
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub stats: FrameStats,
     /// The image as it went to the submitter (compressed: a few MB where
@@ -94,7 +95,7 @@ pub struct Telemetry {
 
 impl Telemetry {
     /// Records a finished frame: its counts, and its image among the kept ones.
-    pub fn frame_finished(&mut self, job: u64, frame: u32, stats: FrameStats, image: WireImage) {
+    pub fn frame_finished(&mut self, job: JobId, frame: u32, stats: FrameStats, image: WireImage) {
         let c = &mut self.counters;
         c.frames_completed += 1;
         c.packages_failed += u64::from(stats.failures);
@@ -123,7 +124,7 @@ impl Telemetry {
         w.bytes_out += bytes_out;
     }
 
-    pub fn blocklisted(&mut self, worker: &str, job: u64) {
+    pub fn blocklisted(&mut self, worker: &str, job: JobId) {
         let w = self.workers.entry(worker.to_owned()).or_default();
         w.blocklisted_jobs.insert(job);
     }
@@ -152,7 +153,7 @@ mod tests {
                 wall_micros: 200_000,
                 ..FrameStats::default()
             };
-            t.frame_finished(1, k, stats, WireImage::default());
+            t.frame_finished(JobId(1), k, stats, WireImage::default());
         }
         assert_eq!(t.counters.frames_completed, KEPT_FRAMES as u64 + 3);
         assert_eq!(t.counters.packages_failed, KEPT_FRAMES as u64 + 3);

@@ -19,6 +19,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use glam::Vec3;
 use vtfarm_imaging::Image;
@@ -59,7 +60,7 @@ pub struct ViewSource {
 /// job's eye in metres (world axes; clamped to [`EYE_BOX`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewRequest {
-    pub job: u64,
+    pub job: JobId,
     pub offset: [f32; 3],
 }
 
@@ -67,7 +68,7 @@ pub struct ViewRequest {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ViewError {
     #[error("job {0} is not among the scenes the master keeps for the view")]
-    UnknownSource(u64),
+    UnknownSource(JobId),
     #[error("the eye offset must be finite")]
     BadOffset,
     #[error("cannot queue the view: {0}")]
@@ -80,11 +81,11 @@ pub enum ViewOutcome {
     /// A stage finished.
     Rendered {
         generation: u64,
-        job: u64,
+        job: JobId,
         quality: Quality,
     },
     /// A newer move cancelled the job (its later stages never ran).
-    Cancelled { generation: u64, job: u64 },
+    Cancelled { generation: u64, job: JobId },
 }
 
 /// The move being rendered.
@@ -93,12 +94,12 @@ pub struct CurrentView {
     /// Moves so far, this one included.
     pub generation: u64,
     /// The job whose scene and eye the view starts from.
-    pub source: u64,
+    pub source: JobId,
     /// The eye's offset after clamping.
     pub offset: [f32; 3],
     pub eye: [f32; 3],
     /// The farm job rendering this move.
-    pub job: u64,
+    pub job: JobId,
     /// The qualities its frames render, in order.
     stages: Vec<Quality>,
     /// Stages finished so far.
@@ -155,7 +156,7 @@ impl GlareRequest {
 /// The view's state, owned by the core.
 #[derive(Debug, Default)]
 pub struct Views {
-    sources: VecDeque<(u64, ViewSource)>,
+    sources: VecDeque<(JobId, ViewSource)>,
     current: Option<CurrentView>,
     /// The newest finished stage (of this move or, until it has one, of an
     /// earlier move).
@@ -198,7 +199,7 @@ pub struct StreamedStage {
 
 impl Views {
     /// Keeps a submitted job's scene pickable (the newest [`KEPT_SOURCES`]).
-    pub fn remember(&mut self, job: u64, source: ViewSource) {
+    pub fn remember(&mut self, job: JobId, source: ViewSource) {
         if self.sources.len() == KEPT_SOURCES {
             self.sources.pop_front();
         }
@@ -206,13 +207,13 @@ impl Views {
     }
 
     /// The pickable jobs: id and name, oldest first.
-    pub fn sources(&self) -> impl Iterator<Item = (u64, &str)> {
+    pub fn sources(&self) -> impl Iterator<Item = (JobId, &str)> {
         self.sources.iter().map(|(id, s)| (*id, s.name.as_str()))
     }
 
     /// The kept source `job`, or without one the current move's source,
     /// else the newest kept.
-    pub fn source(&self, job: Option<u64>) -> Option<(u64, &ViewSource)> {
+    pub fn source(&self, job: Option<JobId>) -> Option<(JobId, &ViewSource)> {
         let job = job.or(self.current.as_ref().map(|c| c.source));
         let found = match job {
             Some(job) => self.sources.iter().find(|(id, _)| *id == job),
@@ -268,14 +269,14 @@ impl Views {
     }
 
     /// The farm job of the move being rendered, if it still runs.
-    pub(crate) fn running_job(&self) -> Option<u64> {
+    pub(crate) fn running_job(&self) -> Option<JobId> {
         (self.current.as_ref())
             .filter(|c| c.stages_done < c.stages_total)
             .map(|c| c.job)
     }
 
     /// The planned move is queued as farm job `job`.
-    pub(crate) fn started(&mut self, planned: PlannedView, job: u64, now: Duration) {
+    pub(crate) fn started(&mut self, planned: PlannedView, job: JobId, now: Duration) {
         let generation = self.current.as_ref().map_or(0, |c| c.generation) + 1;
         self.meshes.clear();
         self.stream = StageStream {
@@ -296,7 +297,7 @@ impl Views {
     }
 
     /// Whether farm job `job` renders a view (view jobs are not journaled).
-    pub fn owns(&self, job: u64) -> bool {
+    pub fn owns(&self, job: JobId) -> bool {
         self.current.as_ref().is_some_and(|c| c.job == job)
             || self.outcomes.iter().any(|o| match *o {
                 ViewOutcome::Rendered { job: j, .. } | ViewOutcome::Cancelled { job: j, .. } => {
@@ -311,7 +312,7 @@ impl Views {
     /// recorded, the image and figures are the newest's).
     pub(crate) fn stage_finished(
         &mut self,
-        job: u64,
+        job: JobId,
         stage: usize,
         image: &FrameImage,
         scene: &Arc<Scene>,
@@ -390,7 +391,7 @@ impl Views {
     /// `triangles` (the package's, sorted) count.
     pub(crate) fn mesh_arrived(
         &mut self,
-        job: u64,
+        job: JobId,
         stage: usize,
         triangles: &[u32],
         mesh: &WireMesh,
@@ -465,7 +466,7 @@ impl Views {
 /// A move checked and turned into a job, not yet queued.
 pub(crate) struct PlannedView {
     pub(crate) job: WireJob,
-    source: u64,
+    source: JobId,
     offset: [f32; 3],
     eye: [f32; 3],
     stages: Vec<Quality>,
@@ -507,10 +508,10 @@ mod tests {
         Views {
             current: Some(CurrentView {
                 generation: 1,
-                source: 1,
+                source: JobId(1),
                 offset: [0.0; 3],
                 eye: [0.0; 3],
-                job: 7,
+                job: JobId(7),
                 stages_total: stages.len(),
                 stages,
                 stages_done: 0,
@@ -540,16 +541,16 @@ mod tests {
         let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
         let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
 
-        views.stage_finished(7, 0, &frame(0.25), &scene, Duration::ZERO);
+        views.stage_finished(JobId(7), 0, &frame(0.25), &scene, Duration::ZERO);
         let preview = address(&views);
         assert_eq!(shade(&views), Vec3::splat(0.25));
         // The preview's figures are computed and done with.
         drop(views.take_glare_request());
-        views.stage_finished(7, 1, &frame(0.5), &scene, Duration::ZERO);
+        views.stage_finished(JobId(7), 1, &frame(0.5), &scene, Duration::ZERO);
         assert_ne!(address(&views), preview, "the preview is still on view");
         // The refine's figures are still being computed.
         let computing = views.take_glare_request().unwrap();
-        views.stage_finished(7, 2, &frame(0.75), &scene, Duration::ZERO);
+        views.stage_finished(JobId(7), 2, &frame(0.75), &scene, Duration::ZERO);
         assert_eq!(address(&views), preview, "into the preview's buffers");
         assert_eq!(shade(&views), Vec3::splat(0.75));
         assert_eq!(

@@ -47,7 +47,7 @@ impl MasterCore {
         submitters: BTreeSet<ConnId>,
         host: String,
         mut job: WireJob,
-    ) -> Result<u64, JobRejected> {
+    ) -> Result<JobId, JobRejected> {
         let scene_hash = match &job.scene {
             JobScene::Data(d) => d.hash,
             JobScene::Hash(h) => *h,
@@ -59,7 +59,7 @@ impl MasterCore {
         let id = self.next_job;
         let entry = self.new_entry(id, &job, host, now);
         self.queue_job(now, id, job, submitters, 0)?;
-        self.next_job += 1;
+        self.next_job.0 += 1;
         self.table.insert(entry);
         self.remember_for_view(id);
         self.telemetry.counters.jobs_submitted += 1;
@@ -79,7 +79,7 @@ impl MasterCore {
     /// A listing for a job just submitted.
     pub(super) fn new_entry(
         &self,
-        id: u64,
+        id: JobId,
         job: &WireJob,
         host: String,
         now: Duration,
@@ -103,7 +103,7 @@ impl MasterCore {
     }
 
     /// Journals job `id`'s listing (its state, priority and times).
-    pub(super) fn persist_state(&mut self, id: u64) {
+    pub(super) fn persist_state(&mut self, id: JobId) {
         if let Some(entry) = self.table.get(id) {
             let summary = entry.summary();
             self.persist(Record::JobState(Box::new(summary)));
@@ -113,7 +113,7 @@ impl MasterCore {
     /// Moves a listed job to `to` and journals it (and its study's state
     /// that follows); a job the table does not list (a frame rendered
     /// again) has no state to keep.
-    pub(super) fn set_job_state(&mut self, id: u64, to: JobState) {
+    pub(super) fn set_job_state(&mut self, id: JobId, to: JobState) {
         let at = self.wall_ms(self.now);
         match self.table.set_state(id, to, at) {
             Ok(Some(_)) => {
@@ -128,7 +128,7 @@ impl MasterCore {
 
     /// Brings the study job `id` is a variant of in line with its
     /// variants, journaling its state when that changed.
-    pub(super) fn refresh_study_of(&mut self, id: u64) {
+    pub(super) fn refresh_study_of(&mut self, id: JobId) {
         let Some(study) = self.table.get(id).and_then(|e| e.study) else {
             return;
         };
@@ -138,7 +138,7 @@ impl MasterCore {
     }
 
     /// Journals study `id`'s listing with its variants.
-    pub(super) fn persist_study(&mut self, id: u64) {
+    pub(super) fn persist_study(&mut self, id: JobId) {
         if let Some(entry) = self.table.get(id).filter(|e| e.is_study()) {
             let row = self.table.row(entry);
             self.persist(Record::StudyState(Box::new(row)));
@@ -152,7 +152,7 @@ impl MasterCore {
     pub fn control_job(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         action: JobAction,
         who: &str,
     ) -> Result<JobSummary, JobControlError> {
@@ -176,7 +176,7 @@ impl MasterCore {
 
     /// Whether `action` applies to a job in `state`: why not, if not.
     pub(super) fn applies(
-        id: u64,
+        id: JobId,
         state: JobState,
         action: &JobAction,
     ) -> Result<(), JobControlError> {
@@ -214,7 +214,7 @@ impl MasterCore {
     pub(super) fn control_one(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         action: JobAction,
         who: &str,
     ) -> Result<(), JobControlError> {
@@ -222,19 +222,19 @@ impl MasterCore {
         Self::applies(id, entry.state, &action)?;
         match action {
             JobAction::Cancel => {
-                info!(job = id, by = who, "cancelling the job");
+                info!(job = %id, by = who, "cancelling the job");
                 let reason = format!("job {id} was cancelled by {who}");
                 self.cancel_reasons.entry(id).or_insert(reason);
-                let _ = self.scheduler.cancel_job(now, JobId(id));
+                let _ = self.scheduler.cancel_job(now, id);
             }
             JobAction::Pause => {
-                info!(job = id, by = who, "pausing the job");
-                let _ = self.scheduler.pause_job(now, JobId(id));
+                info!(job = %id, by = who, "pausing the job");
+                let _ = self.scheduler.pause_job(now, id);
                 self.set_job_state(id, JobState::Paused);
                 self.tell_state(id, format!("paused by {who}"));
             }
             JobAction::Resume => {
-                info!(job = id, by = who, "resuming the job");
+                info!(job = %id, by = who, "resuming the job");
                 let started = self.table.get(id).is_some_and(|e| e.started_ms.is_some());
                 let to = if started {
                     JobState::Running
@@ -242,15 +242,15 @@ impl MasterCore {
                     JobState::Queued
                 };
                 self.set_job_state(id, to);
-                let _ = self.scheduler.resume_job(now, JobId(id));
+                let _ = self.scheduler.resume_job(now, id);
                 self.tell_state(id, format!("resumed by {who}"));
             }
             JobAction::Requeue { failed_only } => {
                 self.requeue(now, id, failed_only)?;
-                info!(job = id, by = who, failed_only, "job queued again");
+                info!(job = %id, by = who, failed_only, "job queued again");
             }
             JobAction::SetPriority(priority) => {
-                let _ = self.scheduler.set_priority(now, JobId(id), priority);
+                let _ = self.scheduler.set_priority(now, id, priority);
                 if let Some(entry) = self.table.get_mut(id) {
                     entry.priority = priority;
                 }
@@ -261,7 +261,7 @@ impl MasterCore {
     }
 
     /// Tells a job's submitters its new state and why.
-    pub(super) fn tell_state(&mut self, id: u64, reason: String) {
+    pub(super) fn tell_state(&mut self, id: JobId, reason: String) {
         let Some(entry) = self.table.get(id) else {
             return;
         };
@@ -278,7 +278,7 @@ impl MasterCore {
     pub(super) fn requeue(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         failed_only: bool,
     ) -> Result<(), JobControlError> {
         let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
@@ -324,10 +324,10 @@ impl MasterCore {
     }
 
     /// A submitter asks for a job's frames from `from_frame` on.
-    pub(super) fn attach(&mut self, conn: ConnId, job: u64, from_frame: u32) {
+    pub(super) fn attach(&mut self, conn: ConnId, job: JobId, from_frame: u32) {
         // A study: the submitter attaches to each of its variants.
         if let Some(variants) = self.study_variants(job) {
-            info!(study = job, conn, "submitter attached to the study");
+            info!(study = %job, conn, "submitter attached to the study");
             let study = job;
             return self.send(conn, Message::StudyAccepted { study, variants });
         }
@@ -337,7 +337,7 @@ impl MasterCore {
             .map(|e| (e.frames_total, e.frames_done, e.state, e.reason.clone()));
         let (frames, done) = if let Some(j) = self.frames.jobs.get_mut(&job) {
             if !j.submitters.is_empty() {
-                info!(job, "another submitter attached; each gets every frame");
+                info!(%job, "another submitter attached; each gets every frame");
             }
             j.submitters.insert(conn);
             (j.frames.len() as u32, j.frames_done)
@@ -360,7 +360,7 @@ impl MasterCore {
             self.send(conn, Message::JobFailed { job, errors });
             return;
         };
-        info!(job, conn, from_frame, "submitter attached");
+        info!(%job, conn, from_frame, "submitter attached");
         self.send(conn, Message::JobAccepted { job, frames });
         if let Some(error) = self.recovery.failed_write(job).map(str::to_owned) {
             self.send(conn, Message::JournalFailed { job, error });
@@ -398,7 +398,7 @@ impl MasterCore {
     /// Sends `conn` the finished frames `frames` of `job`, in order: those
     /// whose journal write is pending or failed from memory, the rest read
     /// back from the journal by the driver.
-    pub(super) fn replay(&mut self, conn: ConnId, job: u64, frames: std::ops::Range<u32>) {
+    pub(super) fn replay(&mut self, conn: ConnId, job: JobId, frames: std::ops::Range<u32>) {
         for step in self.recovery.replay(job, frames) {
             match step {
                 Replayed::Frame(done) => self.send(conn, Message::FrameDone(*done)),

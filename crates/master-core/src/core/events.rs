@@ -3,6 +3,7 @@
 //! blocklisted and lost. Finished frames go out from here, in order.
 
 use tracing::{info, warn};
+use vtfarm_proto::JobId;
 use vtfarm_proto::{FrameDone, FrameStart, Message};
 use vtfarm_scheduler::{FrameStats, LossCause, PackageId, WorkerId};
 
@@ -18,8 +19,8 @@ use super::MasterCore;
 impl MasterCore {
     /// The scheduler started `job`: listed as running, its scene offered
     /// to the workers.
-    pub(super) fn job_started(&mut self, job: u64) {
-        info!(job, "job started");
+    pub(super) fn job_started(&mut self, job: JobId) {
+        info!(%job, "job started");
         if (self.table.get(job)).is_some_and(|e| e.state == JobState::Queued) {
             self.set_job_state(job, JobState::Running);
         }
@@ -33,7 +34,7 @@ impl MasterCore {
 
     /// The scheduler resumed `job`: the workers may have let its frames go
     /// meanwhile, so each gets the starts it lacks.
-    pub(super) fn job_resumed(&mut self, job: u64) {
+    pub(super) fn job_resumed(&mut self, job: JobId) {
         let Some(j) = self.frames.jobs.get(&job) else {
             return;
         };
@@ -59,7 +60,7 @@ impl MasterCore {
     /// restart: nothing to assemble). The workers hear of a split frame
     /// and the driver is asked for its base frame; while whole frames run,
     /// base frames of the job's tail are made ahead.
-    pub(super) fn frame_started(&mut self, job: u64, frame: u32, whole: bool) {
+    pub(super) fn frame_started(&mut self, job: JobId, frame: u32, whole: bool) {
         let resumed = (self.frames.jobs.get(&job)).is_some_and(|j| frame < j.resume_from);
         if !resumed {
             if let Some(started) = self.frames.start_frame(job, frame, whole, self.now) {
@@ -82,7 +83,7 @@ impl MasterCore {
 
     /// The scheduler completed frame `frame` of `job`: it goes to be
     /// encoded, and out in order.
-    pub(super) fn frame_complete(&mut self, job: u64, frame: u32, stats: &FrameStats) {
+    pub(super) fn frame_complete(&mut self, job: JobId, frame: u32, stats: &FrameStats) {
         // A frame rendered again is journaled under its own job.
         let journaled = self.journals(self.recovery.owner(job, frame).0);
         let peers = &self.peers;
@@ -94,7 +95,7 @@ impl MasterCore {
             return;
         };
         self.ask_for_view_figures();
-        info!(job, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
+        info!(%job, frame, wall = ?stats.wall, imbalance = stats.imbalance(), "frame complete");
         if let Some(request) = request {
             self.outbox.push_back(Output::EncodeFrame(request));
         }
@@ -104,7 +105,7 @@ impl MasterCore {
 
     /// The scheduler's `JobComplete`: the job ends once its last frames
     /// are out.
-    pub(super) fn job_done(&mut self, job: u64) {
+    pub(super) fn job_done(&mut self, job: JobId) {
         match self.frames.jobs.get_mut(&job) {
             Some(j) if !j.finishing.is_empty() => j.finishing.push(Finishing::Complete),
             _ => self.job_complete(job),
@@ -114,7 +115,7 @@ impl MasterCore {
     /// The scheduler failed `job` (`reason`, and the workers' `errors`).
     pub(super) fn job_failed(
         &mut self,
-        job: u64,
+        job: JobId,
         reason: &vtfarm_scheduler::JobFailure,
         errors: &[(WorkerId, String)],
     ) {
@@ -133,7 +134,7 @@ impl MasterCore {
                     .map(|(error, names)| format!("{}: {error}", names.join(", "))),
             )
             .collect();
-        warn!(job, "{}", errors.join("; "));
+        warn!(%job, "{}", errors.join("; "));
         if self.counts_in_totals(job) {
             self.telemetry.counters.jobs_failed += 1;
         }
@@ -165,7 +166,7 @@ impl MasterCore {
     }
 
     /// The scheduler cancelled `job` (a user asked, or its submitter left).
-    pub(super) fn job_cancelled(&mut self, job: u64) {
+    pub(super) fn job_cancelled(&mut self, job: JobId) {
         if self.counts_in_totals(job) {
             self.telemetry.counters.jobs_cancelled += 1;
         }
@@ -187,9 +188,9 @@ impl MasterCore {
     }
 
     /// The scheduler gives `worker` no more work of `job`.
-    pub(super) fn worker_blocklisted(&mut self, worker: ConnId, job: u64) {
+    pub(super) fn worker_blocklisted(&mut self, worker: ConnId, job: JobId) {
         let failures = self.scheduler.config().retry.worker_failures_per_job;
-        warn!(worker = %self.peers.name(worker), job, "worker failed {failures} packages: no more work of this job");
+        warn!(worker = %self.peers.name(worker), %job, "worker failed {failures} packages: no more work of this job");
         let name = self.peers.worker_name(worker);
         self.telemetry.blocklisted(&name, job);
     }
@@ -216,8 +217,8 @@ impl MasterCore {
     }
 
     /// The scheduler's `JobComplete`, once the job's last frame is out.
-    pub(super) fn job_complete(&mut self, job: u64) {
-        info!(job, "job complete");
+    pub(super) fn job_complete(&mut self, job: JobId) {
+        info!(%job, "job complete");
         // A cancel asked for while its last frame was encoding came too
         // late (the scheduler had finished the job): the job completes.
         self.cancel_reasons.remove(&job);
@@ -237,7 +238,7 @@ impl MasterCore {
 
     /// Sends `job`'s finished frames that are ready, in order, and its end
     /// once they are all out.
-    pub(super) fn tell_finished(&mut self, job: u64) {
+    pub(super) fn tell_finished(&mut self, job: JobId) {
         while let Some(next) =
             (self.frames.jobs.get_mut(&job)).and_then(|j| j.finishing.pop_ready())
         {
@@ -249,7 +250,7 @@ impl MasterCore {
     }
 
     /// A finished frame, encoded, to its submitters and the journal.
-    pub(super) fn deliver_frame(&mut self, job: u64, finished: FinishedFrame) {
+    pub(super) fn deliver_frame(&mut self, job: JobId, finished: FinishedFrame) {
         let FinishedFrame {
             frame,
             stats,

@@ -4,6 +4,7 @@
 
 use std::collections::BTreeSet;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use tracing::{info, warn};
 use vtfarm_proto::Message;
@@ -25,7 +26,7 @@ impl MasterCore {
     /// from its first unfinished frame, or waits complete for its submitter.
     pub fn restore(&mut self, now: Duration, stored: StoredJob) {
         self.now = now;
-        self.next_job = self.next_job.max(stored.id + 1);
+        self.next_job = self.next_job.max(JobId(stored.id.0 + 1));
         if let Some(damaged) = stored.damaged_frame.clone() {
             self.recovery.frame_damaged(stored.id, damaged);
         }
@@ -82,7 +83,7 @@ impl MasterCore {
         if let Err(e) = queued {
             self.table.remove(stored.id);
             let reason = format!("cannot resume job {}: {e}", stored.id);
-            warn!(job = stored.id, "{reason}; setting it aside");
+            warn!(job = %stored.id, "{reason}; setting it aside");
             self.recovery.forget_definition(stored.id);
             self.restore_damaged(DamagedJob {
                 id: stored.id,
@@ -96,7 +97,7 @@ impl MasterCore {
             // Queued by this master: its end counts like a submitted job's.
             self.telemetry.counters.jobs_submitted += 1;
             info!(
-                job = stored.id,
+                job = %stored.id,
                 from_frame = stored.frames_done,
                 "job resumed from the journal"
             );
@@ -107,7 +108,7 @@ impl MasterCore {
     /// A job the journal set aside as damaged (at start): a submitter
     /// attaching to it is told why.
     pub fn restore_damaged(&mut self, damaged: DamagedJob) {
-        self.next_job = self.next_job.max(damaged.id + 1);
+        self.next_job = self.next_job.max(JobId(damaged.id.0 + 1));
         self.recovery.job_damaged(damaged.id, damaged.reason);
     }
 
@@ -125,7 +126,7 @@ impl MasterCore {
                 }
             }
             AfterWrite::Failed(error) => {
-                warn!(job, "{error}");
+                warn!(%job, "{error}");
                 self.telemetry.counters.journal_write_failures += 1;
                 self.telemetry.last_journal_error = Some(error.clone());
                 self.send_to_job(job, Message::JournalFailed { job, error });
@@ -141,12 +142,12 @@ impl MasterCore {
         &mut self,
         now: Duration,
         conn: ConnId,
-        job: u64,
+        job: JobId,
         frame: u32,
         error: String,
     ) {
         self.now = now;
-        warn!(job, frame, "a finished frame cannot be read back: {error}");
+        warn!(%job, frame, "a finished frame cannot be read back: {error}");
         if let Some(done) = self.recovery.unjournaled(job, frame).cloned() {
             self.send(conn, Message::FrameDone(done));
             return self.pump();
@@ -182,16 +183,16 @@ impl MasterCore {
         &mut self,
         now: Duration,
         conn: ConnId,
-        job: u64,
+        job: JobId,
         frame: u32,
     ) -> Result<(), String> {
         let definition = self.recovery.again(job, frame)?;
         let id = self.next_job;
         self.queue_job(now, id, definition, BTreeSet::from([conn]), 0)
             .map_err(|e| e.to_string())?;
-        self.next_job += 1;
+        self.next_job.0 += 1;
         self.recovery.repairing(id, job, frame);
-        info!(job, frame, repair = id, "rendering a finished frame again");
+        info!(%job, frame, repair = %id, "rendering a finished frame again");
         Ok(())
     }
 }

@@ -64,7 +64,7 @@ impl MasterCore {
         }
         let host = self.peers.submitter_host(conn);
         let id = self.next_job;
-        self.next_job += 1;
+        self.next_job.0 += 1;
         let frames = study.variants.iter().map(|v| v.frames.len() as u32).sum();
         let entry = JobEntry {
             id,
@@ -97,18 +97,18 @@ impl MasterCore {
                 }
             }
         }
-        let ids: Vec<u64> = variants.iter().map(|&(job, _)| job).collect();
+        let ids: Vec<JobId> = variants.iter().map(|&(job, _)| job).collect();
         self.table.insert_study(entry, &ids);
-        info!(study = id, variants = ids.len(), frames, "study queued");
+        info!(study = %id, variants = ids.len(), frames, "study queued");
         if let Some(error) = refused {
-            warn!(study = id, "study refused: {error}");
+            warn!(study = %id, "study refused: {error}");
             if let Some(entry) = self.table.get_mut(id) {
                 entry.reason = format!("study {id} was refused: {error}");
             }
             for &job in &ids {
                 let reason = format!("its study {id} was refused: {error}");
                 self.cancel_reasons.insert(job, reason);
-                let _ = self.scheduler.cancel_job(now, JobId(job));
+                let _ = self.scheduler.cancel_job(now, job);
             }
             self.persist_study(id);
             return self.refuse_job(conn, error);
@@ -125,7 +125,7 @@ impl MasterCore {
 
     /// Study `id`'s variants with their frame counts; `None` when `id` is
     /// no study.
-    pub(super) fn study_variants(&self, id: u64) -> Option<Vec<(u64, u32)>> {
+    pub(super) fn study_variants(&self, id: JobId) -> Option<Vec<(JobId, u32)>> {
         let entry = self.table.get(id).filter(|e| e.is_study())?;
         let variants = (entry.variants.iter())
             .filter_map(|&v| self.table.get(v))
@@ -139,18 +139,18 @@ impl MasterCore {
     pub(super) fn control_study(
         &mut self,
         now: Duration,
-        id: u64,
+        id: JobId,
         action: JobAction,
         who: &str,
     ) -> Result<(), JobControlError> {
         let entry = self.table.get(id).ok_or(JobControlError::UnknownJob(id))?;
         Self::applies(id, entry.state, &action)?;
-        let variants: Vec<(u64, JobState, bool)> = (entry.variants.iter())
+        let variants: Vec<(JobId, JobState, bool)> = (entry.variants.iter())
             .filter_map(|&v| self.table.get(v))
             .map(|v| (v.id, v.state, v.frames_done < v.frames_total))
             .collect();
         info!(
-            study = id,
+            study = %id,
             by = who,
             action = action.command(),
             "controlling the study"
@@ -168,7 +168,7 @@ impl MasterCore {
                 }
             }
             JobAction::Requeue { failed_only } => {
-                let again: Vec<u64> = (variants.iter())
+                let again: Vec<JobId> = (variants.iter())
                     .filter(|&&(_, state, unfinished)| {
                         state.is_finished() && (!failed_only || unfinished)
                     })
@@ -211,15 +211,15 @@ impl MasterCore {
     pub fn restore_study(&mut self, now: Duration, row: JobRow) {
         self.now = now;
         let id = row.job.id;
-        self.next_job = self.next_job.max(id + 1);
-        let variants: Vec<u64> = row.variants.iter().map(|v| v.id).collect();
+        self.next_job = self.next_job.max(JobId(id.0 + 1));
+        let variants: Vec<JobId> = row.variants.iter().map(|v| v.id).collect();
         let entry = JobEntry::from_summary(row.job);
         self.table.insert_study(entry, &variants);
         if self.table.refresh_study(id, self.wall_ms(now)) {
             self.persist_study(id);
         }
         info!(
-            study = id,
+            study = %id,
             variants = variants.len(),
             "study restored from the journal"
         );

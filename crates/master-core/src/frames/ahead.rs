@@ -26,6 +26,7 @@
 
 use std::collections::BTreeMap;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::FrameKey;
 
@@ -125,7 +126,7 @@ impl Bases {
 
     /// Forgets a job that ended: its base frames made ahead go; those in
     /// the making are dropped when they come (the job is gone then).
-    pub(crate) fn forget(&mut self, job: u64) {
+    pub(crate) fn forget(&mut self, job: JobId) {
         self.ready.retain(|&(j, _), _| j != job);
     }
 }
@@ -142,16 +143,20 @@ mod tests {
     #[test]
     fn only_a_base_frame_made_alone_measures_the_masters_time() {
         let mut bases = Bases::default();
-        bases.requested((1, 7), 10 * MS, true);
-        assert!(bases.making_ahead((1, 7)));
-        assert_eq!(bases.arrived((1, 7), 70 * MS), Some(60 * MS));
-        assert!(!bases.has((1, 7)));
+        bases.requested((JobId(1), 7), 10 * MS, true);
+        assert!(bases.making_ahead((JobId(1), 7)));
+        assert_eq!(bases.arrived((JobId(1), 7), 70 * MS), Some(60 * MS));
+        assert!(!bases.has((JobId(1), 7)));
 
-        bases.requested((1, 1), 100 * MS, false);
-        bases.requested((1, 2), 110 * MS, false);
-        assert_eq!(bases.arrived((1, 1), 200 * MS), None);
-        assert_eq!(bases.arrived((1, 2), 220 * MS), None);
-        assert_eq!(bases.arrived((1, 2), 230 * MS), None, "not in the making");
+        bases.requested((JobId(1), 1), 100 * MS, false);
+        bases.requested((JobId(1), 2), 110 * MS, false);
+        assert_eq!(bases.arrived((JobId(1), 1), 200 * MS), None);
+        assert_eq!(bases.arrived((JobId(1), 2), 220 * MS), None);
+        assert_eq!(
+            bases.arrived((JobId(1), 2), 230 * MS),
+            None,
+            "not in the making"
+        );
     }
 
     /// 1 GiB holds 19 base frames at 1080p, never fewer than the frames in
@@ -172,15 +177,15 @@ mod tests {
             ids: vtfarm_raster::IdBuffer::new(2, 1),
             srgb: Default::default(),
         };
-        bases.keep((1, 8), base());
-        bases.keep((2, 3), base());
-        bases.requested((1, 9), MS, true);
+        bases.keep((JobId(1), 8), base());
+        bases.keep((JobId(2), 3), base());
+        bases.requested((JobId(1), 9), MS, true);
         assert_eq!(bases.held(), 3);
-        assert!(bases.take((2, 3)).is_some());
-        assert!(bases.take((2, 3)).is_none());
-        bases.forget(1);
+        assert!(bases.take((JobId(2), 3)).is_some());
+        assert!(bases.take((JobId(2), 3)).is_none());
+        bases.forget(JobId(1));
         assert_eq!(bases.held(), 1, "the one in the making comes back still");
-        assert!(!bases.has((1, 8)));
-        assert!(bases.has((1, 9)));
+        assert!(!bases.has((JobId(1), 8)));
+        assert!(bases.has((JobId(1), 9)));
     }
 }

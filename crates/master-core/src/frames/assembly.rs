@@ -360,7 +360,7 @@ mod tests {
     #[test]
     fn a_frames_timeline_splits_a_package_into_setup_sending_and_computing() {
         let start = FrameStart {
-            job: 1,
+            job: vtfarm_proto::JobId(1),
             frame: 0,
             scene: Default::default(),
             setup: (&crate::testkit::frame()).into(),

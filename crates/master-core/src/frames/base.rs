@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use vtfarm_proto::JobId;
 
 use vtfarm_imaging::Image;
 use vtfarm_proto::{WireImage, WireImageFormat};
@@ -15,7 +16,7 @@ use vtfarm_vertex::PixelRect;
 /// A base frame to rasterize: what [`BaseFrameRequest::rasterize`] needs.
 #[derive(Clone, Debug)]
 pub struct BaseFrameRequest {
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub(super) scene: Arc<Scene>,
     /// Per scene triangle, whether it is one of the job's reflectors (glass

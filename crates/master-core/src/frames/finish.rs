@@ -15,6 +15,7 @@
 //! whole conversion was most of the encoding's parallel part).
 
 use std::collections::VecDeque;
+use vtfarm_proto::JobId;
 
 use vtfarm_imaging::Image;
 use vtfarm_proto::{FrameStats, WireFrameAux, WireImage, WireImageFormat};
@@ -26,7 +27,7 @@ use super::base::SrgbBytes;
 /// A finished split frame to encode (CPU work, off the driver's task): what
 /// [`FrameEncodeRequest::encode`] needs.
 pub struct FrameEncodeRequest {
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub(crate) image: Assembled,
     pub(crate) format: WireImageFormat,
@@ -105,7 +106,7 @@ impl FrameEncodeRequest {
 /// A frame [`FrameEncodeRequest::encode`] encoded, for
 /// `MasterCore::frame_encoded`.
 pub struct EncodedFrame {
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub(crate) image: WireImage,
     pub(crate) aux: Option<WireFrameAux>,
@@ -280,7 +281,7 @@ mod tests {
                 }
                 let expected = WireImage::encode(assembled.color(), WireImageFormat::Srgb8);
                 let request = FrameEncodeRequest {
-                    job: 1,
+                    job: JobId(1),
                     frame: 0,
                     image: assembled,
                     format: WireImageFormat::Srgb8,
@@ -319,7 +320,7 @@ mod tests {
             let pixels = AssembledPixels::Color(assembled.color().clone());
             let expected = WireImage::encode(pixels.color(), format);
             let request = FrameEncodeRequest {
-                job: 1,
+                job: JobId(1),
                 frame: 0,
                 image: Assembled {
                     pixels,
@@ -347,7 +348,7 @@ mod tests {
 
     fn encoded(frame: u32) -> EncodedFrame {
         EncodedFrame {
-            job: 1,
+            job: JobId(1),
             frame,
             image: WireImage::encode(&Image::black(1, 1), WireImageFormat::Srgb8),
             aux: None,

@@ -5,6 +5,7 @@
 use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use vtfarm_proto::JobId;
 
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
@@ -64,7 +65,7 @@ impl Job {
     /// when the job's frames go out so (`finish.rs`).
     pub(crate) fn base_request(
         &self,
-        job: u64,
+        job: JobId,
         frame: u32,
         spare: Option<BaseFrame>,
     ) -> BaseFrameRequest {
@@ -113,7 +114,7 @@ impl Job {
     }
 
     /// Frame `frame`'s start as the workers get it (its set-up must exist).
-    pub(crate) fn frame_start(&self, job: u64, frame: u32) -> FrameStart {
+    pub(crate) fn frame_start(&self, job: JobId, frame: u32) -> FrameStart {
         FrameStart {
             job,
             frame,
@@ -284,7 +285,7 @@ mod tests {
         assert_eq!(items, [0, 2, 2]);
         assert_eq!(job.next_to_start(), 1);
         assert_eq!(job.triangles_in(&[1, 0]), [0, 1]);
-        assert_eq!(job.frame_start(7, 2).frame, 2);
+        assert_eq!(job.frame_start(JobId(7), 2).frame, 2);
     }
 
     /// A whole frame's finished image must be the frame's size and the

@@ -19,6 +19,7 @@ pub(crate) mod job;
 
 use std::collections::BTreeMap;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_proto::{
     FramePhase, FrameStart, FrameStats, Message, Package, PackageResult, PhaseKind, ResultPixels,
@@ -41,7 +42,7 @@ use job::Job;
 
 /// A package on its way: what the results must be matched against.
 pub(crate) struct InFlight {
-    pub(crate) job: u64,
+    pub(crate) job: JobId,
     /// The connection of the worker it went to.
     pub(crate) worker: ConnId,
     pub(crate) frame: u32,
@@ -86,7 +87,7 @@ pub(crate) enum BaseUse {
 /// The frames being rendered: see the module's documentation.
 #[derive(Default)]
 pub(crate) struct Frames {
-    pub(crate) jobs: BTreeMap<u64, Job>,
+    pub(crate) jobs: BTreeMap<JobId, Job>,
     pub(crate) packages: BTreeMap<u64, InFlight>,
     /// Finished frames' buffers for the next base frames.
     spares: Spares,
@@ -100,7 +101,7 @@ pub(crate) struct Frames {
 impl Frames {
     /// Drops a job that ended, with its packages still in flight and its
     /// base frames made ahead.
-    pub(crate) fn forget_job(&mut self, job: u64) -> Option<Job> {
+    pub(crate) fn forget_job(&mut self, job: JobId) -> Option<Job> {
         self.packages.retain(|_, p| p.job != job);
         self.bases.forget(job);
         self.jobs.remove(&job)
@@ -127,7 +128,7 @@ impl Frames {
     /// no held results from a frame just started).
     pub(crate) fn start_frame(
         &mut self,
-        job: u64,
+        job: JobId,
         frame: u32,
         whole: bool,
         now: Duration,
@@ -176,7 +177,7 @@ impl Frames {
     /// within the budget ([`frames_held_at_most`] with `frames_in_flight`).
     pub(crate) fn base_ahead(
         &mut self,
-        job: u64,
+        job: JobId,
         frames_in_flight: usize,
         workers: usize,
         now: Duration,
@@ -204,7 +205,7 @@ impl Frames {
     /// per base frame), and where it goes.
     pub(crate) fn base_ready(
         &mut self,
-        job: u64,
+        job: JobId,
         frame: u32,
         base: BaseFrame,
         now: Duration,
@@ -232,7 +233,7 @@ impl Frames {
     /// it, and the results held for it are returned to be checked now.
     pub(crate) fn use_base(
         &mut self,
-        job: u64,
+        job: JobId,
         frame: u32,
         base: BaseFrame,
         now: Duration,
@@ -284,7 +285,7 @@ impl Frames {
         kept: bool,
         now: Duration,
     ) -> (Option<Message>, Message) {
-        let job = self.jobs.get(&a.job.0);
+        let job = self.jobs.get(&a.job);
         let triangles = job.map_or_else(Vec::new, |j| j.triangles_in(&a.items));
         let whole = (job.and_then(|j| j.assembly(a.frame)))
             .filter(|_| a.whole)
@@ -294,13 +295,13 @@ impl Frames {
             .map(|assembly| Message::FrameStart(assembly.start.clone()));
         let message = Message::Package(Package {
             id: a.package.0,
-            job: a.job.0,
+            job: a.job,
             frame: a.frame,
             triangles: a.items,
             whole,
         });
         let in_flight = InFlight {
-            job: a.job.0,
+            job: a.job,
             worker: a.worker.0,
             frame: a.frame,
             whole: a.whole,
@@ -467,7 +468,7 @@ impl Frames {
     /// whole frame's image kept).
     pub(crate) fn accept(
         &mut self,
-        job: u64,
+        job: JobId,
         frame: u32,
         stats: &PackageStats,
         accepted: Accepted,
@@ -514,7 +515,7 @@ impl Frames {
     /// timeline.
     pub(crate) fn stage_arrived(
         &mut self,
-        (job_id, frame): (u64, u32),
+        (job_id, frame): (JobId, u32),
         stage: usize,
         id: u64,
         pixels: assembly::ResultPixels,
@@ -562,7 +563,7 @@ impl Frames {
     /// journal keeps it. `None` when it is not assembled.
     pub(crate) fn complete_frame(
         &mut self,
-        (job, frame): (u64, u32),
+        (job, frame): (JobId, u32),
         stats: &vtfarm_scheduler::FrameStats,
         name: impl Fn(ConnId) -> String,
         journaled: bool,
@@ -666,7 +667,7 @@ mod tests {
         let (job, scene, hash) = testkit::job(frames);
         let (job, _) = Job::checked(job, scene, hash, BTreeSet::from([9]), 0).unwrap();
         let mut all = Frames::default();
-        all.jobs.insert(1, job);
+        all.jobs.insert(JobId(1), job);
         all
     }
 
@@ -703,13 +704,23 @@ mod tests {
     #[test]
     fn a_split_frame_asks_for_its_base_frame_and_a_whole_one_does_not() {
         let mut frames = frames_with_job(2);
-        let split = frames.start_frame(1, 0, false, MS).unwrap();
+        let split = frames.start_frame(JobId(1), 0, false, MS).unwrap();
         assert!(split.start.is_some());
-        assert!(split.rasterize.is_some_and(|r| (r.job, r.frame) == (1, 0)));
-        let whole = frames.start_frame(1, 1, true, MS).unwrap();
+        assert!(
+            split
+                .rasterize
+                .is_some_and(|r| (r.job, r.frame) == (JobId(1), 0))
+        );
+        let whole = frames.start_frame(JobId(1), 1, true, MS).unwrap();
         assert!(whole.start.is_none() && whole.rasterize.is_none());
-        assert!(frames.start_frame(1, 2, false, MS).is_none(), "no frame 2");
-        assert!(frames.start_frame(2, 0, false, MS).is_none(), "no job 2");
+        assert!(
+            frames.start_frame(JobId(1), 2, false, MS).is_none(),
+            "no frame 2"
+        );
+        assert!(
+            frames.start_frame(JobId(2), 0, false, MS).is_none(),
+            "no job 2"
+        );
         let (again, package) = frames.assign(assignment(5, 3, 1, true), false, MS);
         assert!(again.is_none(), "a whole frame's start goes in its package");
         assert!(matches!(package, Message::Package(p) if p.whole.is_some()));
@@ -721,7 +732,7 @@ mod tests {
     fn results_before_the_base_frame_are_held_until_it_is_here() {
         let mut frames = frames_with_job(1);
         let request = frames
-            .start_frame(1, 0, false, MS)
+            .start_frame(JobId(1), 0, false, MS)
             .unwrap()
             .rasterize
             .unwrap();
@@ -731,12 +742,12 @@ mod tests {
         assert_eq!(frames.arrival(5), Arrival::AwaitingBase);
         frames.hold(3, result(5), 10);
         frames.hold(4, result(6), 20);
-        let (cost, used) = frames.base_ready(1, 0, request.rasterize(), 5 * MS);
+        let (cost, used) = frames.base_ready(JobId(1), 0, request.rasterize(), 5 * MS);
         assert_eq!(cost, Some(4 * MS), "made alone: the master's time");
         let BaseUse::Waiting(base) = used else {
             panic!("the frame waits for its base frame");
         };
-        let held = frames.use_base(1, 0, base, 5 * MS);
+        let held = frames.use_base(JobId(1), 0, base, 5 * MS);
         let held: Vec<_> = held
             .iter()
             .map(|(conn, r, bytes)| (*conn, r.id, *bytes))
@@ -752,7 +763,7 @@ mod tests {
     #[test]
     fn a_package_in_flight_goes_with_its_worker_its_result_or_its_job() {
         let mut frames = frames_with_job(1);
-        frames.start_frame(1, 0, false, MS);
+        frames.start_frame(JobId(1), 0, false, MS);
         for (package, worker) in [(5, 3), (6, 4), (7, 4)] {
             frames.assign(assignment(package, worker, 0, false), true, MS);
         }
@@ -772,7 +783,7 @@ mod tests {
         ));
         let by_worker = frames.packages_by_worker(|_| true, |conn| format!("w{conn}"));
         assert_eq!(by_worker, BTreeMap::from([("w4".to_owned(), vec![7])]));
-        assert!(frames.forget_job(1).is_some());
+        assert!(frames.forget_job(JobId(1)).is_some());
         assert!(frames.packages.is_empty());
         assert_eq!(frames.arrival(7), Arrival::UnknownPackage);
     }
@@ -783,17 +794,17 @@ mod tests {
     fn a_base_frame_nobody_waits_for_is_kept_as_spare_buffers() {
         let mut frames = frames_with_job(1);
         let request = frames
-            .start_frame(1, 0, false, MS)
+            .start_frame(JobId(1), 0, false, MS)
             .unwrap()
             .rasterize
             .unwrap();
         let base = request.clone().rasterize();
-        frames.forget_job(1);
-        let (_, used) = frames.base_ready(1, 0, base, 2 * MS);
+        frames.forget_job(JobId(1));
+        let (_, used) = frames.base_ready(JobId(1), 0, base, 2 * MS);
         assert!(matches!(used, BaseUse::JobGone));
         let mut frames = frames_with_job(1);
         let again = frames
-            .start_frame(1, 0, false, MS)
+            .start_frame(JobId(1), 0, false, MS)
             .unwrap()
             .rasterize
             .unwrap();
@@ -801,7 +812,7 @@ mod tests {
         assert!(
             frames
                 .complete_frame(
-                    (1, 0),
+                    (JobId(1), 0),
                     &Default::default(),
                     |_| String::new(),
                     false,
@@ -810,7 +821,7 @@ mod tests {
                 )
                 .is_some()
         );
-        let (_, used) = frames.base_ready(1, 0, request.rasterize(), 2 * MS);
+        let (_, used) = frames.base_ready(JobId(1), 0, request.rasterize(), 2 * MS);
         assert!(matches!(used, BaseUse::Spared), "its frame is past");
     }
 }
