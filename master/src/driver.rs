@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 use tokio::sync::{oneshot, watch};
@@ -40,7 +41,7 @@ enum Input {
     },
     /// A base frame and ID buffer rasterized on the blocking pool.
     BaseFrame {
-        job: u64,
+        job: JobId,
         frame: u32,
         base: vtfarm_master_core::BaseFrame,
     },
@@ -56,7 +57,7 @@ enum Input {
     },
     /// A user's request about a job (from the HTTP API and dashboard).
     Control {
-        job: u64,
+        job: JobId,
         action: JobAction,
         who: String,
         reply: oneshot::Sender<Result<JobSummary, JobControlError>>,
@@ -64,7 +65,7 @@ enum Input {
     /// Move the interactive view's eye (from the HTTP view).
     Steer {
         request: ViewRequest,
-        reply: oneshot::Sender<Result<u64, ViewError>>,
+        reply: oneshot::Sender<Result<JobId, ViewError>>,
     },
     /// Read the core's state (for the HTTP view); changes nothing.
     Inspect(Box<dyn FnOnce(&MasterCore) + Send>),
@@ -128,7 +129,7 @@ impl MasterHandle {
     /// master has stopped.
     pub async fn control_job(
         &self,
-        job: u64,
+        job: JobId,
         action: JobAction,
         who: String,
     ) -> Option<Result<JobSummary, JobControlError>> {
@@ -145,7 +146,7 @@ impl MasterHandle {
 
     /// Moves the interactive view's eye ([`MasterCore::steer_view`]); `None`
     /// once the master has stopped.
-    pub async fn steer_view(&self, request: ViewRequest) -> Option<Result<u64, ViewError>> {
+    pub async fn steer_view(&self, request: ViewRequest) -> Option<Result<JobId, ViewError>> {
         let (reply, answer) = oneshot::channel();
         self.inputs.send(Input::Steer { request, reply }).ok()?;
         answer.await.ok()

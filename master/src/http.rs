@@ -45,6 +45,7 @@ use std::convert::Infallible;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use axum::Router;
 use axum::extract::{ConnectInfo, Form, Path, Query, Request, State};
@@ -713,7 +714,7 @@ async fn list_jobs(State(state): State<HttpState>) -> Response {
 
 /// One job (a study with its variants): 404 for a job the master does
 /// not list (a variant is listed under its study).
-async fn show_job(State(state): State<HttpState>, Path(id): Path<u64>) -> Response {
+async fn show_job(State(state): State<HttpState>, Path(id): Path<JobId>) -> Response {
     let row = state.master.inspect(move |core| {
         let jobs = core.jobs();
         let entry = jobs.get(id)?;
@@ -748,7 +749,7 @@ struct ControlBody {
 async fn control_job(
     State(state): State<HttpState>,
     ConnectInfo(peer): ConnectInfo<SocketAddr>,
-    Path((id, action)): Path<(u64, String)>,
+    Path((id, action)): Path<(JobId, String)>,
     body: axum::body::Bytes,
 ) -> Response {
     let bad = |message: String| (StatusCode::BAD_REQUEST, message + "\n").into_response();

@@ -63,6 +63,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use vtfarm_proto::JobId;
 
 use tracing::warn;
 use vtfarm_master_core::{DamagedJob, Record, StoredJob, Written};
@@ -253,12 +254,12 @@ impl RecordKind {
 }
 
 /// A job record's payload: its envelope, then `body`.
-fn envelope(kind: RecordKind, job: u64, body: &[u8]) -> Vec<u8> {
+fn envelope(kind: RecordKind, job: JobId, body: &[u8]) -> Vec<u8> {
     let mut payload = Vec::with_capacity(ENVELOPE_BYTES + body.len());
     payload.extend_from_slice(&ENVELOPE_MAGIC);
     payload.extend_from_slice(&JOURNAL_FORMAT.to_le_bytes());
     payload.push(kind.code());
-    payload.extend_from_slice(&job.to_le_bytes());
+    payload.extend_from_slice(&job.0.to_le_bytes());
     payload.extend_from_slice(body);
     payload
 }
@@ -267,7 +268,7 @@ fn envelope(kind: RecordKind, job: u64, body: &[u8]) -> Vec<u8> {
 struct Envelope {
     format: u32,
     kind: Result<RecordKind, u8>,
-    job: u64,
+    job: JobId,
 }
 
 /// The envelope at the start of `payload` and the body after it; `None`
@@ -281,7 +282,9 @@ fn split_envelope(payload: &[u8]) -> Option<(Envelope, &[u8])> {
     let kind = (RecordKind::ALL.into_iter())
         .find(|k| k.code() == code)
         .ok_or(code);
-    let job = u64::from_le_bytes(payload[9..17].try_into().expect("8 bytes"));
+    let job = JobId(u64::from_le_bytes(
+        payload[9..17].try_into().expect("8 bytes"),
+    ));
     Some((Envelope { format, kind, job }, &payload[ENVELOPE_BYTES..]))
 }
 
@@ -291,7 +294,7 @@ fn open_envelope(
     path: &Path,
     payload: &[u8],
     kind: RecordKind,
-    job: u64,
+    job: JobId,
 ) -> Result<Vec<u8>, RecordError> {
     let content = |error: String| RecordError::Content {
         path: path.to_owned(),
@@ -480,7 +483,7 @@ fn read_record(path: &Path) -> Result<Vec<u8>, RecordError> {
 fn read_message(
     path: &Path,
     kind: RecordKind,
-    job: u64,
+    job: JobId,
     expected: &'static str,
 ) -> Result<Message, RecordError> {
     let bytes = open_envelope(path, &read_record(path)?, kind, job)?;
@@ -543,12 +546,12 @@ impl Journal {
         }
     }
 
-    fn job_dir(&self, id: u64) -> PathBuf {
+    fn job_dir(&self, id: JobId) -> PathBuf {
         self.dir.join(job_dir_name(id))
     }
 
     /// The completion marker of job `id`.
-    fn complete_path(&self, id: u64) -> PathBuf {
+    fn complete_path(&self, id: JobId) -> PathBuf {
         self.job_dir(id).join("complete")
     }
 
@@ -564,29 +567,29 @@ impl Journal {
     }
 
     /// The file of frame `frame` of job `id`.
-    pub fn frame_path(&self, id: u64, frame: u32) -> PathBuf {
+    pub fn frame_path(&self, id: JobId, frame: u32) -> PathBuf {
         self.job_dir(id).join(format!("{frame:06}"))
     }
 
     /// The record file of job `id`.
-    pub fn job_path(&self, id: u64) -> PathBuf {
+    pub fn job_path(&self, id: JobId) -> PathBuf {
         self.job_dir(id).join("job")
     }
 
     /// The record of study `id` (its listing and its variants).
-    pub fn study_path(&self, id: u64) -> PathBuf {
+    pub fn study_path(&self, id: JobId) -> PathBuf {
         self.job_dir(id).join("study")
     }
 
     /// The listing file of job `id` (its state, priority and times).
-    pub fn state_path(&self, id: u64) -> PathBuf {
+    pub fn state_path(&self, id: JobId) -> PathBuf {
         self.job_dir(id).join("state")
     }
 
     /// Job `id`'s listing as last written; `None` (with a warning naming
     /// the file) when there is none or it fails its check (the file is then
     /// kept as `state.damaged`): the job is held paused.
-    fn load_state(&self, id: u64) -> Option<JobSummary> {
+    fn load_state(&self, id: JobId) -> Option<JobSummary> {
         let path = self.state_path(id);
         let error = match read_message(&path, RecordKind::State, id, "a job's listing") {
             Ok(Message::JobList { mut jobs }) if jobs.len() == 1 && jobs[0].id == id => {
@@ -599,7 +602,7 @@ impl Journal {
             },
             Err(e @ RecordError::Missing { .. }) => {
                 warn!(
-                    job = id,
+                    job = %id,
                     "{e}: the job's state is lost; it is held paused (resume or cancel it)"
                 );
                 return None;
@@ -608,7 +611,7 @@ impl Journal {
         };
         let aside = path.with_extension("damaged");
         warn!(
-            job = id,
+            job = %id,
             "{error}: the job's state is lost; it is held paused (resume or cancel it; the file is kept as {})",
             aside.display()
         );
@@ -632,7 +635,7 @@ impl Journal {
         &self,
         what: &str,
         path: &Path,
-        (kind, job): (RecordKind, u64),
+        (kind, job): (RecordKind, JobId),
         message: &Message,
     ) -> Result<(), WriteError> {
         let frame = encode_message(message).map_err(|e| WriteError {
@@ -705,7 +708,7 @@ impl Journal {
 
     /// Moves job `id`'s directory to `jobs/damaged/` with a `why` file
     /// holding `reason`; returns where it went. Nothing is deleted.
-    fn set_aside(&self, id: u64, reason: &str) -> std::io::Result<PathBuf> {
+    fn set_aside(&self, id: JobId, reason: &str) -> std::io::Result<PathBuf> {
         self.set_aside_entry(&self.job_dir(id), &job_dir_name(id), reason)
     }
 
@@ -796,11 +799,11 @@ impl Journal {
 
     /// The ids of the journaled jobs (the directories named by an id in
     /// its one spelling), in order.
-    fn job_ids(&self) -> Vec<u64> {
+    fn job_ids(&self) -> Vec<JobId> {
         let Ok(entries) = std::fs::read_dir(&self.dir) else {
             return Vec::new();
         };
-        let mut ids: Vec<u64> = entries
+        let mut ids: Vec<JobId> = entries
             .filter_map(|e| parse_job_dir_name(e.ok()?.file_name().to_str()?))
             .collect();
         ids.sort_unstable();
@@ -822,14 +825,14 @@ impl Journal {
                 {
                     return None;
                 }
-                let reason = match name.parse::<u64>() {
+                let reason = match name.parse::<JobId>() {
                     Ok(id) => format!(
                         "jobs/{name} is not how job {id}'s directory is spelled (jobs/{}); it is not read as a second copy of the job",
                         job_dir_name(id)
                     ),
                     Err(_) => format!(
                         "jobs/{name} is no job's directory (a job's is named by its id in twelve digits, as jobs/{})",
-                        job_dir_name(1)
+                        job_dir_name(JobId(1))
                     ),
                 };
                 Some((entry.path(), reason))
@@ -840,7 +843,7 @@ impl Journal {
     }
 
     /// A finished frame, checked against its checksum.
-    pub fn frame(&self, id: u64, frame: u32) -> Result<FrameDone, RecordError> {
+    pub fn frame(&self, id: JobId, frame: u32) -> Result<FrameDone, RecordError> {
         let path = self.frame_path(id, frame);
         match read_message(&path, RecordKind::Frame, id, "a finished frame")? {
             Message::FrameDone(done) if done.job == id && done.frame == frame => Ok(done),
@@ -877,12 +880,12 @@ impl Journal {
                     Err(e) => {
                         // Its variants run on as jobs of their own.
                         warn!(
-                            study = id,
+                            study = %id,
                             "{e}: the study's variants are listed on their own"
                         );
                         if let Err(move_error) = self.set_aside(id, &e.to_string()) {
                             warn!(
-                                study = id,
+                                study = %id,
                                 "cannot set the damaged study aside: {move_error}"
                             );
                         }
@@ -894,7 +897,7 @@ impl Journal {
                 Ok(job) => loaded.jobs.push(job),
                 Err(e) => {
                     if let Err(move_error) = self.set_aside(id, &e.to_string()) {
-                        warn!(job = id, "cannot set the damaged job aside: {move_error}");
+                        warn!(job = %id, "cannot set the damaged job aside: {move_error}");
                         let reason = format!("{e} (and it could not be set aside: {move_error})");
                         loaded.damaged.push(DamagedJob { id, reason });
                     }
@@ -913,10 +916,10 @@ impl Journal {
         let Ok(entries) = std::fs::read_dir(self.damaged_dir()) else {
             return Vec::new();
         };
-        let mut found: Vec<(u64, PathBuf)> = entries
+        let mut found: Vec<(JobId, PathBuf)> = entries
             .filter_map(|e| {
                 let path = e.ok()?.path();
-                let id: u64 = path
+                let id: JobId = path
                     .file_name()?
                     .to_str()?
                     .split('.')
@@ -943,7 +946,7 @@ impl Journal {
     }
 
     /// Study `id`'s row as last written.
-    fn load_study(&self, id: u64) -> Result<JobRow, RecordError> {
+    fn load_study(&self, id: JobId) -> Result<JobRow, RecordError> {
         let path = self.study_path(id);
         match read_message(&path, RecordKind::Study, id, "a study's row")? {
             Message::JobRows { mut rows } if rows.len() == 1 && rows[0].job.id == id => {
@@ -957,7 +960,7 @@ impl Journal {
         }
     }
 
-    fn load_job(&self, id: u64) -> Result<StoredJob, RecordError> {
+    fn load_job(&self, id: JobId) -> Result<StoredJob, RecordError> {
         let dir = self.job_dir(id);
         if !std::fs::symlink_metadata(&dir).is_ok_and(|m| m.is_dir()) {
             return Err(RecordError::NotADirectory { path: dir });
@@ -992,7 +995,7 @@ impl Journal {
                     let later = (frames_done + 1..frames).any(|f| self.frame_path(id, f).exists());
                     if later {
                         warn!(
-                            job = id,
+                            job = %id,
                             frame = frames_done,
                             "{e}: the frame is rendered again"
                         );
@@ -1005,7 +1008,7 @@ impl Journal {
                     let aside = path.with_extension("damaged");
                     let reason = format!("{e} (the file is kept as {})", aside.display());
                     warn!(
-                        job = id,
+                        job = %id,
                         frame = frames_done,
                         "{reason}: the frame is rendered again"
                     );
@@ -1032,7 +1035,7 @@ impl Journal {
 impl Journal {
     /// Whether job `id`'s completion marker stands (one that fails its
     /// check does not, with a warning naming it: its frames are counted).
-    fn is_complete(&self, id: u64) -> bool {
+    fn is_complete(&self, id: JobId) -> bool {
         let path = self.complete_path(id);
         let checked = read_record(&path)
             .and_then(|payload| open_envelope(&path, &payload, RecordKind::Complete, id));
@@ -1041,7 +1044,7 @@ impl Journal {
             Err(RecordError::Missing { .. }) => false,
             Err(e) => {
                 warn!(
-                    job = id,
+                    job = %id,
                     "{e}: the job is complete only if every frame is there"
                 );
                 false
@@ -1051,12 +1054,12 @@ impl Journal {
 }
 
 /// A job's directory name: its id in twelve digits, its one spelling.
-fn job_dir_name(id: u64) -> String {
-    format!("{id:012}")
+fn job_dir_name(id: JobId) -> String {
+    format!("{:012}", id.0)
 }
 
 /// The job id a directory name spells, if it is that id's one spelling.
-fn parse_job_dir_name(name: &str) -> Option<u64> {
+fn parse_job_dir_name(name: &str) -> Option<JobId> {
     let id = name.parse().ok()?;
     (job_dir_name(id) == name).then_some(id)
 }

@@ -5,6 +5,7 @@
 //! Merged into [`crate::http`]'s router, behind its host and token checks.
 
 use std::sync::{Arc, Mutex};
+use vtfarm_proto::JobId;
 
 use axum::Router;
 use axum::body::{Body, Bytes};
@@ -96,10 +97,10 @@ async fn asset(Path(path): Path<String>) -> Response {
 /// `?job=ID`: which kept source (the current move's, else the newest).
 #[derive(Deserialize)]
 struct SourceQuery {
-    job: Option<u64>,
+    job: Option<JobId>,
 }
 
-fn source_of(core: &MasterCore, job: Option<u64>) -> Option<(u64, ViewSource)> {
+fn source_of(core: &MasterCore, job: Option<JobId>) -> Option<(JobId, ViewSource)> {
     core.views().source(job).map(|(id, s)| (id, s.clone()))
 }
 
@@ -139,7 +140,7 @@ async fn scene_glb(State(state): State<ViewHttp>, query: Query<SourceQuery>) -> 
 /// lights, the reflectors and the box the eye moves in.
 #[derive(Serialize)]
 struct ViewSetup {
-    job: u64,
+    job: JobId,
     scene: String,
     eye: [f32; 3],
     target: [f32; 3],

@@ -300,7 +300,7 @@ fn a_submitter_that_lost_its_connection_re_attaches_and_gets_every_frame() {
 fn unknown_jobs_fail_to_attach_and_journaled_orphans_render_to_the_end() {
     let job = Job::new(3);
     let mut pair = support::pair::persistent(FarmRules::default());
-    pair.attach_submitter(77);
+    pair.attach_submitter(vtfarm_proto::JobId(77));
     let errors = pair.job_failed().expect("no job 77");
     assert!(errors[0].contains("no job 77"), "{errors:?}");
 

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use frame::small_frame;
 use glam::Vec3;
@@ -245,7 +246,7 @@ async fn damaged_records_are_rendered_again_or_refused_by_name_and_never_deleted
         copy_dir(clean.path(), state.path());
         damage.apply(state.path());
         let master = Master::start(state.path(), None);
-        let (frames, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let (frames, warnings) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
         let case = format!("{damage:?}");
         let frames = frames.unwrap_or_else(|e| panic!("{case}: {e}"));
         assert_identical(&frames, &reference, &case);
@@ -285,7 +286,7 @@ async fn damaged_records_are_rendered_again_or_refused_by_name_and_never_deleted
         copy_dir(clean.path(), state.path());
         damage.apply(state.path());
         let master = Master::start(state.path(), None);
-        let (outcome, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let (outcome, _) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
         let case = format!("{damage:?}");
         let error = outcome.expect_err(&case).to_string();
         let aside = state.path().join("jobs/damaged/000000000001");
@@ -305,7 +306,7 @@ async fn damaged_records_are_rendered_again_or_refused_by_name_and_never_deleted
         master.stop().await;
         // A second start still knows why, and the files stay.
         let master = Master::start(state.path(), None);
-        let (outcome, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+        let (outcome, _) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
         assert!(
             outcome
                 .expect_err(&case)
@@ -332,7 +333,7 @@ async fn a_frame_damaged_after_start_is_rendered_again_for_the_submitter() {
     );
     flip_byte(&job_dir(clean.path()).join("000001"), 100);
     std::fs::remove_file(job_dir(clean.path()).join("000003")).unwrap();
-    let (frames, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    let (frames, warnings) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
     assert_identical(
         &frames.expect("attached"),
         &reference,
@@ -351,8 +352,8 @@ async fn a_frame_damaged_after_start_is_rendered_again_for_the_submitter() {
     master.stop().await;
     // Rendered again, the frames are journaled again.
     let journal = Journal::open(clean.path()).unwrap();
-    assert_eq!(journal.frame(1, 1).unwrap().frame, 1);
-    assert_eq!(journal.frame(1, 3).unwrap().frame, 3);
+    assert_eq!(journal.frame(JobId(1), 1).unwrap().frame, 1);
+    assert_eq!(journal.frame(JobId(1), 3).unwrap().frame, 3);
 }
 
 /// A full disk: every frame write fails. The submitter still gets every
@@ -384,7 +385,7 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
     })
     .await
     .expect("every frame write failed");
-    let (again, warnings) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    let (again, warnings) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
     assert_identical(&again.expect("from memory"), &reference, "attached later");
     assert!(
         warnings
@@ -423,7 +424,8 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
     let (frames, _) = master.follow(submit).await;
     assert_identical(&frames.expect("the second job"), &reference, "room again");
     let journal = Journal::open(state.path()).unwrap();
-    let all_written = |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(1, f).is_ok());
+    let all_written =
+        |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(JobId(1), f).is_ok());
     let mut changes = master.handle.changes();
     tokio::time::timeout(WAIT, async {
         while !all_written(&journal) {
@@ -433,7 +435,7 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
     .await
     .expect("the kept frames were written once the disk had room");
     for f in 0..FRAMES as u32 {
-        let done = journal.frame(1, f).unwrap();
+        let done = journal.frame(JobId(1), f).unwrap();
         assert!(
             done.image == reference_wire(&reference, f),
             "frame {f} as sent"
@@ -462,7 +464,7 @@ async fn two_submitters_on_one_job_both_get_every_frame() {
     let second = {
         let master = master.clone();
         tokio::spawn(async move {
-            let job: u64 = on_accepted.await.expect("the first submitter's job");
+            let job: JobId = on_accepted.await.expect("the first submitter's job");
             master.follow(RemoteJob::Attach { job }).await
         })
     };
@@ -475,7 +477,7 @@ async fn two_submitters_on_one_job_both_get_every_frame() {
             if let JobEvent::FrameDone(f) = event {
                 if f.frame == 0 {
                     if let Some(accepted) = accepted.take() {
-                        let _ = accepted.send(1);
+                        let _ = accepted.send(JobId(1));
                     }
                 }
             }
@@ -508,9 +510,12 @@ async fn a_frame_the_master_cannot_deliver_fails_the_submitter_naming_it() {
         let submitted = tokio::time::timeout(WAIT, master.rx.recv()).await;
         assert!(matches!(submitted, Ok(Some(Message::SubmitJob { .. }))));
         for message in [
-            Message::JobAccepted { job: 7, frames: 3 },
+            Message::JobAccepted {
+                job: JobId(7),
+                frames: 3,
+            },
             Message::FrameMissing {
-                job: 7,
+                job: JobId(7),
                 frame: 1,
                 reason: "its record is gone and so is its job".into(),
                 rendering_again: false,
@@ -547,7 +552,7 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
     core.restore(
         now,
         vtfarm_master::StoredJob {
-            id: 3,
+            id: JobId(3),
             job,
             frames_done: FRAMES as u32,
             complete: true,
@@ -563,7 +568,7 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
         now,
         1,
         Message::AttachJob {
-            job: 3,
+            job: JobId(3),
             from_frame: 0,
         },
     );
@@ -575,7 +580,13 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
     }
     assert_eq!(replays.len(), 1);
     assert_eq!(replays[0], 0..FRAMES as u32);
-    core.replay_failed(now, 1, 3, 2, "jobs/000000000003/000002: missing".into());
+    core.replay_failed(
+        now,
+        1,
+        JobId(3),
+        2,
+        "jobs/000000000003/000002: missing".into(),
+    );
     let told: Vec<Message> = std::iter::from_fn(|| core.poll_output())
         .filter_map(|o| match o {
             vtfarm_master::Output::Send(1, message) => Some(*message),
@@ -584,7 +595,7 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
         .collect();
     let [
         Message::FrameMissing {
-            job: 3,
+            job: JobId(3),
             frame: 2,
             reason,
             rendering_again: false,
@@ -616,7 +627,7 @@ async fn a_stray_job_directory_is_set_aside_and_the_restarted_master_runs_new_jo
         .await;
     assert_identical(&frames.expect("a new job runs"), &reference, "new job");
     assert!(warnings.is_empty(), "{warnings:?}");
-    let (again, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    let (again, _) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
     assert_identical(&again.expect("job 1 once"), &reference, "job 1");
     master.stop().await;
     let why = std::fs::read_to_string(state.path().join("jobs/damaged/stray-1/why")).unwrap();
@@ -648,13 +659,13 @@ async fn a_job_record_copied_into_another_jobs_directory_is_refused_on_attach() 
     std::fs::copy(jobs.join("000000000002/job"), jobs.join("000000000001/job")).unwrap();
 
     let master = Master::start(state.path(), None);
-    let (attached, _) = master.follow(RemoteJob::Attach { job: 1 }).await;
+    let (attached, _) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
     let error = attached.expect_err("job 1's record is job 2's").to_string();
     assert!(
         error.contains("000000000001/job") && error.contains("it holds a record of job 2"),
         "{error}"
     );
-    let (again, _) = master.follow(RemoteJob::Attach { job: 2 }).await;
+    let (again, _) = master.follow(RemoteJob::Attach { job: JobId(2) }).await;
     assert_eq!(again.expect("job 2 is untouched").len(), 1);
     master.stop().await;
 }
@@ -667,7 +678,7 @@ async fn a_lost_listing_holds_the_job(state: vtfarm_proto::WireJobState, damage:
     let journal = Journal::open(dir.path()).unwrap();
     let (job, scene) = job();
     let summary = vtfarm_proto::JobSummary {
-        id: 1,
+        id: JobId(1),
         name: "held".into(),
         kind: job.kind,
         state,
@@ -686,7 +697,7 @@ async fn a_lost_listing_holds_the_job(state: vtfarm_proto::WireJobState, damage:
     queued.scene = vtfarm_proto::JobScene::Hash(scene.hash);
     journal
         .write(vtfarm_master::Record::JobQueued {
-            id: 1,
+            id: JobId(1),
             job: Box::new(queued),
             scene: Arc::new(scene.clone()),
         })
@@ -704,7 +715,7 @@ async fn a_lost_listing_holds_the_job(state: vtfarm_proto::WireJobState, damage:
     let listed = master
         .handle
         .inspect(|core| {
-            let entry = core.jobs().get(1).expect("job 1 listed");
+            let entry = core.jobs().get(JobId(1)).expect("job 1 listed");
             (entry.state, entry.frames_done, entry.reason.clone())
         })
         .await
@@ -766,7 +777,8 @@ async fn kept_frames_are_written_when_the_disk_frees_up_while_the_master_is_idle
     .expect("every frame write failed");
     disk.full.store(false, Ordering::SeqCst);
     let journal = Journal::open(state.path()).unwrap();
-    let all_written = |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(1, f).is_ok());
+    let all_written =
+        |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(JobId(1), f).is_ok());
     tokio::time::timeout(WAIT, async {
         while !all_written(&journal) {
             changes.changed().await.expect("the master runs");
@@ -775,7 +787,7 @@ async fn kept_frames_are_written_when_the_disk_frees_up_while_the_master_is_idle
     .await
     .expect("the kept frames were written with nothing else to write");
     for f in 0..FRAMES as u32 {
-        let done = journal.frame(1, f).unwrap();
+        let done = journal.frame(JobId(1), f).unwrap();
         assert!(
             done.image == reference_wire(&frames, f),
             "frame {f} as sent"

@@ -364,11 +364,11 @@ impl WorkerSession {
         }
         match outcome {
             Ok(()) => {
-                info!(job = key.0, frame = key.1, "frame ready");
+                info!(job = %key.0, frame = key.1, "frame ready");
                 self.prepared.insert(key);
             }
             Err(error) => {
-                warn!(job = key.0, frame = key.1, "cannot start frame: {error}");
+                warn!(job = %key.0, frame = key.1, "cannot start frame: {error}");
                 self.unusable = Some((key, error));
             }
         }

@@ -8,6 +8,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_master_core::view::GlareRequest;
 use vtfarm_master_core::{
@@ -168,7 +169,7 @@ pub trait JobJournal {
     /// Keeps `record`; `Err` with the error's text when the write failed.
     fn write(&self, record: Record) -> Result<(), String>;
     /// A kept finished frame; `Err` with the reason when it cannot be read.
-    fn frame(&self, job: u64, frame: u32) -> Result<FrameDone, String>;
+    fn frame(&self, job: JobId, frame: u32) -> Result<FrameDone, String>;
     /// Every kept unfinished job, for a restarted master, and the jobs set
     /// aside as damaged.
     fn load(&self) -> (Vec<StoredJob>, Vec<DamagedJob>);
@@ -206,7 +207,7 @@ pub struct PackageRun {
     /// `None` while it runs.
     pub end: Option<Duration>,
     /// Its job.
-    pub job: u64,
+    pub job: JobId,
     /// Its frame's index.
     pub frame: u32,
     /// Its CPU seconds as the model gave them.
@@ -257,7 +258,7 @@ pub struct SimWorker<W> {
     /// Results this worker's sessions sent.
     pub results_sent: u32,
     /// The frames of the `FrameStart`s the master sent it, in order.
-    pub frame_starts_got: Vec<(u64, u32)>,
+    pub frame_starts_got: Vec<(JobId, u32)>,
     conn: ConnId,
     /// Bumped on every (re)connection and loss, so old events are dropped.
     epoch: u64,
@@ -299,7 +300,7 @@ enum Work {
     Setup {
         worker: usize,
         epoch: u64,
-        key: (u64, u32),
+        key: (JobId, u32),
         outcome: Result<(), FrameError>,
     },
     Package {
@@ -311,7 +312,7 @@ enum Work {
         bytes: Option<u64>,
     },
     /// One core's share of a base frame.
-    Base((u64, u32)),
+    Base((JobId, u32)),
     /// A finished split frame's encoding, beside the driver: its part on
     /// every core, then (`Some`: seconds) its part on one thread.
     Encode(Box<FrameEncodeRequest>, Option<f64>),
@@ -344,7 +345,7 @@ struct CpuJob {
 /// An input waiting for the master's driver, which handles one at a time.
 enum DriverInput {
     Message(ConnId, Box<Message>),
-    Base((u64, u32)),
+    Base((JobId, u32)),
     /// A finished frame encoded (costing the driver nothing more).
     Encoded(Box<EncodedFrame>),
     Closed(ConnId),
@@ -361,9 +362,9 @@ pub struct Farm<M: CostModel> {
     pub to_submitter: Vec<Message>,
     /// Every frame a `FrameStart` announced, in order (a whole frame's
     /// with each of its packages).
-    pub frame_starts: Vec<(u64, u32)>,
+    pub frame_starts: Vec<(JobId, u32)>,
     /// Every base frame the master asked for (job, frame), in order.
-    pub base_frames: Vec<(u64, u32)>,
+    pub base_frames: Vec<(JobId, u32)>,
     /// Base frames rasterized into a finished frame's buffers.
     pub bases_in_reused_buffers: usize,
     /// Each finished frame the submitter got, with its times and CPU.
@@ -395,19 +396,19 @@ pub struct Farm<M: CostModel> {
     journal_frames: OneThread,
     submitter_frames: OneThread,
     /// Base-frame shares still running, per frame.
-    base_left: BTreeMap<(u64, u32), u32>,
+    base_left: BTreeMap<(JobId, u32), u32>,
     /// Base frames being "rasterized", to hand to the core when done.
-    pending_base: BTreeMap<(u64, u32), BaseFrameRequest>,
+    pending_base: BTreeMap<(JobId, u32), BaseFrameRequest>,
     /// Frames whose base image is asked for and not ready yet.
-    base_pending: BTreeSet<(u64, u32)>,
+    base_pending: BTreeSet<(JobId, u32)>,
     /// Items of results that arrived before their frame's base image.
-    held_items: BTreeMap<(u64, u32), usize>,
+    held_items: BTreeMap<(JobId, u32), usize>,
     /// Each package's frame, for the held results (until its result comes).
-    package_frames: HashMap<u64, (u64, u32)>,
+    package_frames: HashMap<u64, (JobId, u32)>,
     /// When each frame was first announced (until its delivery).
-    frame_started: BTreeMap<(u64, u32), Duration>,
+    frame_started: BTreeMap<(JobId, u32), Duration>,
     /// When each frame's latest result reached the driver (until its delivery).
-    frame_last_result: BTreeMap<(u64, u32), Duration>,
+    frame_last_result: BTreeMap<(JobId, u32), Duration>,
     /// CPU seconds the other work on the shared machine has got so far.
     background_cpu: f64,
     /// CPU seconds used so far: the master's, the submitter's.
@@ -501,7 +502,7 @@ impl<M: CostModel> Farm<M> {
     }
 
     /// A submitter connects and attaches to `job` from the first frame it lacks.
-    pub fn attach_submitter(&mut self, job: u64) {
+    pub fn attach_submitter(&mut self, job: JobId) {
         self.connect_submitter();
         let from_frame = self.frames_done().len() as u32;
         let conn = self.submitter.expect("just connected");
@@ -548,7 +549,7 @@ impl<M: CostModel> Farm<M> {
     }
 
     /// The job id the master gave the submitter.
-    pub fn job_id(&self) -> Option<u64> {
+    pub fn job_id(&self) -> Option<JobId> {
         self.to_submitter.iter().find_map(|m| match m {
             Message::JobAccepted { job, .. } => Some(*job),
             _ => None,

@@ -8,6 +8,7 @@
 
 use std::collections::BTreeMap;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_master_core::FarmRules;
 use vtfarm_proto::{
@@ -44,7 +45,7 @@ pub struct RenderingWorker {
 /// A package stage a rendering worker ran.
 #[derive(Clone, Debug)]
 pub struct StageRun {
-    pub job: u64,
+    pub job: JobId,
     pub package: PackageId,
     /// Its index among its frame's stages (0 for a frame of one stage).
     pub stage: usize,

@@ -51,7 +51,7 @@ impl fmt::Display for PackageId {
 /// The number alone, so that messages read "job 7" wherever they say `job {id}`.
 impl fmt::Display for JobId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.0)
+        fmt::Display::fmt(&self.0, f)
     }
 }
 

@@ -30,6 +30,7 @@ pub use study::{RemoteStudy, StudyEvent, run_remote_study};
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
+use vtfarm_proto::JobId;
 
 use tracing::warn;
 use vtfarm_imaging::Image;
@@ -101,7 +102,7 @@ impl FrameColor {
 #[derive(Clone, Debug)]
 pub enum JobEvent<'a> {
     Accepted {
-        job: u64,
+        job: JobId,
         frames: u32,
     },
     Progress {
@@ -115,7 +116,7 @@ pub enum JobEvent<'a> {
     Warning(String),
     /// A user paused or resumed the job (`reason` says who).
     StateChanged {
-        job: u64,
+        job: JobId,
         state: WireJobState,
         reason: String,
     },
@@ -132,7 +133,7 @@ pub enum JobError {
     Protocol(String),
     /// A user cancelled the job (`reason` says who).
     #[error("{reason}")]
-    Cancelled { job: u64, reason: String },
+    Cancelled { job: JobId, reason: String },
     /// The master refused a request about a job (`vtfarm cancel` and the like).
     #[error("{0}")]
     Refused(String),
@@ -141,7 +142,7 @@ pub enum JobError {
     Stopped(String),
     #[error("frame {frame} of job {job} cannot be delivered: {reason}")]
     FrameLost {
-        job: u64,
+        job: JobId,
         frame: u32,
         reason: String,
     },
@@ -167,7 +168,7 @@ pub enum RemoteJob<'a> {
     /// Submit this job (its scene is sent if the master asks).
     Submit { job: WireJob, scene: &'a SceneData },
     /// Re-attach to a job the master already has (`vtfarm submit --attach`).
-    Attach { job: u64 },
+    Attach { job: JobId },
 }
 
 /// Runs a job on the master at `options` and waits for all its frames. When
@@ -253,7 +254,7 @@ pub async fn list_jobs(options: &ClientOptions, all: bool) -> Result<Vec<JobRow>
 /// `job`; the job as it is afterwards, or [`JobError::Refused`] with why.
 pub async fn control_job(
     options: &ClientOptions,
-    job: u64,
+    job: JobId,
     action: JobAction,
 ) -> Result<JobSummary, JobError> {
     let reply = request(options, Message::ControlJob { job, action }, |m| match m {
@@ -300,7 +301,7 @@ fn send(link: &Link, message: Message) -> Result<(), JobError> {
 #[derive(Default)]
 struct JobFollower {
     /// The job's id, once accepted (or the one attached to).
-    job: Option<u64>,
+    job: Option<JobId>,
     /// How many frames the job has, once accepted.
     total: Option<usize>,
     /// The frames received, by number: the others are still owed.
@@ -308,7 +309,7 @@ struct JobFollower {
 }
 
 impl JobFollower {
-    fn attaching(job: u64) -> Self {
+    fn attaching(job: JobId) -> Self {
         JobFollower {
             job: Some(job),
             ..JobFollower::default()

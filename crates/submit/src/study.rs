@@ -6,6 +6,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Instant;
+use vtfarm_proto::JobId;
 
 use tracing::warn;
 use vtfarm_proto::{Message, SceneData, WireJobState, WireStudy};
@@ -22,7 +23,7 @@ pub enum RemoteStudy<'a> {
         scenes: &'a [SceneData],
     },
     /// Follow the study the master has under this id.
-    Attach { study: u64 },
+    Attach { study: JobId },
 }
 
 /// What happens while a study runs.
@@ -30,8 +31,8 @@ pub enum RemoteStudy<'a> {
 pub enum StudyEvent<'a> {
     /// The master has the study: its id and its variants' jobs (id, frames).
     Accepted {
-        study: u64,
-        variants: &'a [(u64, u32)],
+        study: JobId,
+        variants: &'a [(JobId, u32)],
     },
     /// A frame of variant `variant` (its index in the study).
     FrameDone {
@@ -44,7 +45,7 @@ pub enum StudyEvent<'a> {
     /// study), job `job` (`reason` says who).
     StateChanged {
         variant: usize,
-        job: u64,
+        job: JobId,
         state: WireJobState,
         reason: String,
     },
@@ -72,9 +73,9 @@ impl Variant {
 /// A study's frames over one connection or several.
 #[derive(Default)]
 struct StudyFollower {
-    study: Option<u64>,
+    study: Option<JobId>,
     /// Its variants' jobs, once accepted.
-    variants: Option<BTreeMap<u64, Variant>>,
+    variants: Option<BTreeMap<JobId, Variant>>,
 }
 
 impl StudyFollower {
@@ -202,7 +203,7 @@ pub async fn run_remote_study(
     options: &ClientOptions,
     start: RemoteStudy<'_>,
     mut on_event: impl FnMut(StudyEvent<'_>) -> Result<(), String>,
-) -> Result<u64, JobError> {
+) -> Result<JobId, JobError> {
     let (mut submission, scenes, mut follower) = match start {
         RemoteStudy::Submit { study, scenes } => (Some(study), scenes, StudyFollower::default()),
         RemoteStudy::Attach { study } => {

@@ -2,6 +2,7 @@
 //! the HTTP boundary (the core's own types know nothing of serde).
 
 use std::collections::{BTreeMap, BTreeSet};
+use vtfarm_proto::JobId;
 
 use serde::{Deserialize, Serialize};
 use vtfarm_master_core::telemetry::{FarmCounters, WorkerTotals};
@@ -39,7 +40,7 @@ pub struct ViewState {
 
 #[derive(Serialize)]
 pub struct ViewSourceView {
-    pub job: u64,
+    pub job: JobId,
     pub name: String,
 }
 
@@ -101,7 +102,7 @@ pub struct WorkerTotalsView {
     pub samples: u64,
     pub bytes_in: u64,
     pub bytes_out: u64,
-    pub blocklisted_jobs: BTreeSet<u64>,
+    pub blocklisted_jobs: BTreeSet<JobId>,
 }
 
 impl From<WorkerTotals> for WorkerTotalsView {
@@ -119,10 +120,10 @@ impl From<WorkerTotals> for WorkerTotalsView {
 #[derive(Serialize)]
 pub struct CurrentViewJson {
     pub generation: u64,
-    pub source: u64,
+    pub source: JobId,
     pub offset: [f32; 3],
     pub eye: [f32; 3],
-    pub job: u64,
+    pub job: JobId,
     pub stages_done: usize,
     pub stages_total: usize,
 }
@@ -147,12 +148,12 @@ impl From<&CurrentView> for CurrentViewJson {
 pub enum ViewOutcomeView {
     Rendered {
         generation: u64,
-        job: u64,
+        job: JobId,
         quality: &'static str,
     },
     Cancelled {
         generation: u64,
-        job: u64,
+        job: JobId,
     },
 }
 
@@ -178,13 +179,13 @@ impl From<ViewOutcome> for ViewOutcomeView {
 /// A move of the view's eye as the API takes it ([`vtfarm_master_core::view::ViewRequest`]).
 #[derive(Deserialize)]
 pub(super) struct ViewRequestBody {
-    pub(super) job: u64,
+    pub(super) job: JobId,
     pub(super) offset: [f32; 3],
 }
 
 #[derive(Serialize)]
 pub struct LiveView {
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub triangles_done: u64,
     pub triangles_total: u64,
@@ -193,7 +194,7 @@ pub struct LiveView {
 #[derive(Serialize)]
 pub struct FrameView {
     pub seq: u64,
-    pub job: u64,
+    pub job: JobId,
     pub frame: u32,
     pub stats: FrameStats,
 }

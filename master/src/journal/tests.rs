@@ -50,7 +50,7 @@ fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
     let (scene, job) = one_pixel_job(3);
     journal
         .write(Record::JobQueued {
-            id: 4,
+            id: JobId(4),
             job: Box::new(job.clone()),
             scene: scene.clone(),
         })
@@ -65,11 +65,13 @@ fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
     );
     assert_eq!(stored[0].job.scene, JobScene::Data((*scene).clone()));
     assert_eq!(stored[0].job.frames, job.frames);
-    assert_eq!(journal.frame(4, 2).unwrap().frame, 2);
+    assert_eq!(journal.frame(JobId(4), 2).unwrap().frame, 2);
 
-    journal.write(Record::JobForgotten { id: 4 }).unwrap();
+    journal
+        .write(Record::JobForgotten { id: JobId(4) })
+        .unwrap();
     assert!(journal.load().jobs.is_empty());
-    assert!(journal.frame(4, 0).is_err());
+    assert!(journal.frame(JobId(4), 0).is_err());
     let scenes = std::fs::read_dir(dir.path().join("jobs/scenes")).unwrap();
     assert_eq!(scenes.count(), 0, "the scene went with its last job");
 }
@@ -86,24 +88,27 @@ fn the_writer_thread_keeps_the_order_and_a_flush_makes_records_readable() {
         let _ = report.send(written);
     });
     // No JobQueued: the frames need the job's directory, made here.
-    std::fs::create_dir_all(journal.job_dir(3)).unwrap();
+    std::fs::create_dir_all(journal.job_dir(JobId(3))).unwrap();
     for frame in 0..20 {
         writer.write(frame_done(3, frame));
     }
     writer.flush();
     for frame in 0..20 {
-        assert_eq!(journal.frame(3, frame).map(|d| d.frame).ok(), Some(frame));
+        assert_eq!(
+            journal.frame(JobId(3), frame).map(|d| d.frame).ok(),
+            Some(frame)
+        );
         let written = reports.try_recv().expect("a report per record");
         assert_eq!((written.frame, written.outcome), (Some(frame), Ok(())));
     }
     writer.write(frame_done(3, 20));
-    writer.write(Record::JobForgotten { id: 3 });
+    writer.write(Record::JobForgotten { id: JobId(3) });
     writer.write(frame_done(3, 21));
     drop(writer);
     // Removed after frame 20; frame 21 then finds no directory, and
     // the writer says so.
-    assert!(journal.frame(3, 20).is_err());
-    assert!(journal.frame(3, 21).is_err());
+    assert!(journal.frame(JobId(3), 20).is_err());
+    assert!(journal.frame(JobId(3), 21).is_err());
     let outcomes: Vec<_> = reports
         .try_iter()
         .map(|w| (w.frame, w.outcome.is_ok()))
@@ -127,7 +132,7 @@ fn a_frame_is_kept_compressed_and_reads_back_bit_for_bit() {
     };
     let (image, _) = vtfarm_raster::rasterize(&c.scene, &camera, &c.lighting);
     let done = FrameDone {
-        job: 7,
+        job: JobId(7),
         frame: 3,
         image: WireImage::from_pixels(160, 90, &image.pixels),
         stats: FrameStats::default(),
@@ -135,13 +140,15 @@ fn a_frame_is_kept_compressed_and_reads_back_bit_for_bit() {
     };
     let dir = tempfile::tempdir().unwrap();
     let journal = Journal::open(dir.path()).unwrap();
-    std::fs::create_dir_all(journal.job_dir(7)).unwrap();
+    std::fs::create_dir_all(journal.job_dir(JobId(7))).unwrap();
     journal
         .write(Record::FrameDone(Box::new(done.clone())))
         .unwrap();
-    assert_eq!(journal.frame(7, 3).unwrap(), done);
+    assert_eq!(journal.frame(JobId(7), 3).unwrap(), done);
     let raw = 160 * 90 * 12;
-    let kept = std::fs::metadata(journal.frame_path(7, 3)).unwrap().len();
+    let kept = std::fs::metadata(journal.frame_path(JobId(7), 3))
+        .unwrap()
+        .len();
     assert!(kept * 3 < raw, "{kept} bytes for a {raw}-byte frame");
 }
 
@@ -222,7 +229,7 @@ fn every_job_state_round_trips_through_the_journal() {
     };
     for (id, &state) in (1..).zip(&states) {
         let queued = Record::JobQueued {
-            id,
+            id: JobId(id),
             job: Box::new(job.clone()),
             scene: scene.clone(),
         };
@@ -243,12 +250,17 @@ fn every_job_state_round_trips_through_the_journal() {
         .collect();
     assert_eq!(read, written);
 
-    flip_listing(&journal.state_path(2));
-    std::fs::remove_file(journal.state_path(3)).unwrap();
+    flip_listing(&journal.state_path(JobId(2)));
+    std::fs::remove_file(journal.state_path(JobId(3))).unwrap();
     let jobs = journal.load().jobs;
     assert_eq!((jobs[1].id, &jobs[1].summary), (2, &None));
     assert_eq!((jobs[2].id, &jobs[2].summary), (3, &None));
-    assert!(journal.state_path(2).with_extension("damaged").exists());
+    assert!(
+        journal
+            .state_path(JobId(2))
+            .with_extension("damaged")
+            .exists()
+    );
 }
 
 fn flip_listing(path: &Path) {
@@ -265,14 +277,14 @@ fn flip_listing(path: &Path) {
 fn a_damaged_frame_record_is_an_error_naming_the_file_and_the_check() {
     let dir = tempfile::tempdir().unwrap();
     let journal = Journal::open(dir.path()).unwrap();
-    std::fs::create_dir_all(journal.job_dir(1)).unwrap();
+    std::fs::create_dir_all(journal.job_dir(JobId(1))).unwrap();
     journal.write(frame_done(1, 0)).unwrap();
     journal.write(frame_done(1, 1)).unwrap();
-    let path = journal.frame_path(1, 0);
+    let path = journal.frame_path(JobId(1), 0);
     let good = std::fs::read(&path).unwrap();
     let check = |bytes: &[u8], needle: &str| {
         std::fs::write(&path, bytes).unwrap();
-        let error = journal.frame(1, 0).expect_err("damaged").to_string();
+        let error = journal.frame(JobId(1), 0).expect_err("damaged").to_string();
         assert!(error.contains(&path.display().to_string()), "{error}");
         assert!(error.contains(needle), "{error}");
     };
@@ -284,28 +296,28 @@ fn a_damaged_frame_record_is_an_error_naming_the_file_and_the_check() {
     check(&good[..good.len() - 1], "checksum mismatch");
     check(&good[..2], "too short");
     check(b"", "too short");
-    std::fs::copy(journal.frame_path(1, 1), &path).unwrap();
+    std::fs::copy(journal.frame_path(JobId(1), 1), &path).unwrap();
     check(&std::fs::read(&path).unwrap(), "it holds frame 1 of job 1");
     // A valid frame of another job in this job's directory.
-    std::fs::create_dir_all(journal.job_dir(2)).unwrap();
+    std::fs::create_dir_all(journal.job_dir(JobId(2))).unwrap();
     journal.write(frame_done(2, 0)).unwrap();
-    std::fs::copy(journal.frame_path(2, 0), &path).unwrap();
+    std::fs::copy(journal.frame_path(JobId(2), 0), &path).unwrap();
     check(
         &std::fs::read(&path).unwrap(),
         "it holds a record of job 2, not of job 1",
     );
     // The job's completion marker in a frame's place.
-    journal.write(Record::JobComplete { id: 1 }).unwrap();
-    std::fs::copy(journal.complete_path(1), &path).unwrap();
+    journal.write(Record::JobComplete { id: JobId(1) }).unwrap();
+    std::fs::copy(journal.complete_path(JobId(1)), &path).unwrap();
     check(&std::fs::read(&path).unwrap(), "it holds a complete record");
     std::fs::remove_file(&path).unwrap();
     assert!(matches!(
-        journal.frame(1, 0),
+        journal.frame(JobId(1), 0),
         Err(RecordError::Missing { .. })
     ));
     std::fs::write(&path, &good).unwrap();
     assert_eq!(
-        journal.frame(1, 0).unwrap().frame,
+        journal.frame(JobId(1), 0).unwrap().frame,
         0,
         "the good bytes read back"
     );
@@ -327,7 +339,7 @@ fn each_job_is_read_in_its_one_spelling_and_strays_are_set_aside_with_reasons() 
     queue(&journal, 1);
     journal.write(frame_done(1, 0)).unwrap();
     let jobs = dir.path().join("jobs");
-    copy_dir(&journal.job_dir(1), &jobs.join("1"));
+    copy_dir(&journal.job_dir(JobId(1)), &jobs.join("1"));
     std::fs::write(jobs.join("000000000002"), b"not a directory").unwrap();
     std::fs::write(jobs.join("notes"), b"a stray file").unwrap();
 
@@ -337,7 +349,7 @@ fn each_job_is_read_in_its_one_spelling_and_strays_are_set_aside_with_reasons() 
     assert_eq!(loaded.jobs[0].frames_done, 1);
     assert_eq!(loaded.damaged.len(), 1, "{:?}", loaded.damaged);
     let reason = &loaded.damaged[0].reason;
-    assert_eq!(loaded.damaged[0].id, 2);
+    assert_eq!(loaded.damaged[0].id, JobId(2));
     assert!(
         reason.contains("000000000002: not a directory") && reason.contains("damaged/000000000002"),
         "{reason}"
@@ -370,7 +382,7 @@ fn a_job_record_in_another_jobs_directory_is_refused_naming_both() {
     let journal = Journal::open(dir.path()).unwrap();
     queue(&journal, 1);
     queue(&journal, 2);
-    std::fs::copy(journal.job_path(2), journal.job_path(1)).unwrap();
+    std::fs::copy(journal.job_path(JobId(2)), journal.job_path(JobId(1))).unwrap();
     let loaded = journal.load();
     let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
     assert_eq!(ids, [2]);
@@ -391,9 +403,9 @@ fn a_format_4_journal_is_upgraded_and_reads_back() {
     queue(&journal, 3);
     journal.write(frame_done(3, 0)).unwrap();
     journal.write(frame_done(3, 1)).unwrap();
-    journal.write(Record::JobComplete { id: 3 }).unwrap();
+    journal.write(Record::JobComplete { id: JobId(3) }).unwrap();
     let summary = JobSummary {
-        id: 3,
+        id: JobId(3),
         name: "old".into(),
         kind: vtfarm_proto::WireJobKind::Render,
         state: vtfarm_proto::WireJobState::Completed,
@@ -413,7 +425,7 @@ fn a_format_4_journal_is_upgraded_and_reads_back() {
         .unwrap();
     let written = journal.load();
     // Strip every envelope: the records as a format-4 master wrote them.
-    for entry in std::fs::read_dir(journal.job_dir(3)).unwrap() {
+    for entry in std::fs::read_dir(journal.job_dir(JobId(3))).unwrap() {
         let path = entry.unwrap().path();
         let payload = read_record(&path).unwrap();
         let (_, body) = split_envelope(&payload).expect("an envelope");
@@ -434,7 +446,10 @@ fn a_format_4_journal_is_upgraded_and_reads_back() {
         (3, 2, true, &Some(summary))
     );
     assert_eq!((was.frames_done, was.complete), (2, true));
-    assert_eq!(upgraded.frame(3, 1).unwrap(), journal.frame(3, 1).unwrap());
+    assert_eq!(
+        upgraded.frame(JobId(3), 1).unwrap(),
+        journal.frame(JobId(3), 1).unwrap()
+    );
 }
 
 fn copy_dir(from: &Path, to: &Path) {
@@ -454,17 +469,20 @@ fn a_fifo_or_a_device_in_a_records_place_is_an_error_without_blocking() {
     let journal = Journal::open(dir.path()).unwrap();
     queue(&journal, 1);
     journal.write(frame_done(1, 0)).unwrap();
-    let frame = journal.frame_path(1, 1);
+    let frame = journal.frame_path(JobId(1), 1);
     let made = std::process::Command::new("mkfifo")
         .arg(&frame)
         .status()
         .unwrap();
     assert!(made.success());
-    std::os::unix::fs::symlink("/dev/zero", journal.state_path(1)).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", journal.state_path(JobId(1))).unwrap();
     let (done, result) = std::sync::mpsc::channel();
     let reader = journal.clone();
     std::thread::spawn(move || {
-        let frame = reader.frame(1, 1).map(|_| ()).map_err(|e| e.to_string());
+        let frame = reader
+            .frame(JobId(1), 1)
+            .map(|_| ())
+            .map_err(|e| e.to_string());
         let _ = done.send((frame, reader.load()));
     });
     let (frame_error, loaded) = result
@@ -513,7 +531,7 @@ fn a_study_reads_back_over_its_variants_and_a_damaged_one_is_set_aside() {
     // Study 1 over variants 2 and 3 (each journaled as a job).
     for id in [2, 3] {
         let queued = Record::JobQueued {
-            id,
+            id: JobId(id),
             job: Box::new(job.clone()),
             scene: scene.clone(),
         };
@@ -539,7 +557,7 @@ fn a_study_reads_back_over_its_variants_and_a_damaged_one_is_set_aside() {
 
     // A damaged study record is set aside with its reason; its variants
     // read back as jobs.
-    flip_listing(&journal.study_path(1));
+    flip_listing(&journal.study_path(JobId(1)));
     let loaded = journal.load();
     assert!(loaded.studies.is_empty());
     assert_eq!(loaded.jobs.len(), 2);

@@ -6,6 +6,7 @@
 use vtfarm_farmsim::{JobJournal, TestFarm};
 use vtfarm_master::{FarmRules, Journal, Record, StoredJob};
 use vtfarm_master_core::DamagedJob;
+use vtfarm_proto::JobId;
 use vtfarm_proto::{FrameDone, JobRow};
 
 /// The harness under its old name.
@@ -22,7 +23,7 @@ impl JobJournal for TempJournal {
         self.journal.write(record).map_err(|e| e.to_string())
     }
 
-    fn frame(&self, job: u64, frame: u32) -> Result<FrameDone, String> {
+    fn frame(&self, job: JobId, frame: u32) -> Result<FrameDone, String> {
         self.journal.frame(job, frame).map_err(|e| e.to_string())
     }
 
