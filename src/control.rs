@@ -4,6 +4,7 @@
 
 use anyhow::{Result, bail};
 use vtfarm_proto::JobAction;
+use vtfarm_proto::JobId;
 
 use crate::farm::ClusterArgs;
 use crate::shared::runtime;
@@ -92,7 +93,7 @@ pub(crate) fn priority(args: PriorityArgs) -> Result<()> {
 /// Asks the master and prints the job's new state.
 fn control(cluster: &ClusterArgs, job: u64, action: JobAction, doing: &str) -> Result<()> {
     let options = cluster.client_options()?;
-    let outcome = runtime()?.block_on(vtfarm_submit::control_job(&options, job, action));
+    let outcome = runtime()?.block_on(vtfarm_submit::control_job(&options, JobId(job), action));
     let summary = outcome.map_err(|e| anyhow::anyhow!("{doing} job {job}: {e}"))?;
     println!(
         "job {}: {} (priority {}, {}/{} frames done)",

@@ -3,6 +3,7 @@
 //! and `--master` options every command that dials the master shares.
 
 use std::path::{Path, PathBuf};
+use vtfarm_proto::JobId;
 
 use anyhow::{Context, Result, bail};
 use vtfarm_embedded::LocalFarm;
@@ -248,7 +249,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             ..wire
         };
         let start = match attach {
-            Some(job) => RemoteJob::Attach { job },
+            Some(job) => RemoteJob::Attach { job: JobId(job) },
             None => RemoteJob::Submit {
                 job: wire,
                 scene: &data,
@@ -258,7 +259,7 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
             Progress::new(reflectors.len() as u64, "reflector triangles", "frame");
         let say = |line: String| bar.println(line);
         let submitted = std::time::Instant::now();
-        let accepted = std::cell::Cell::new(attach);
+        let accepted = std::cell::Cell::new(attach.map(JobId));
         let run = run_remote_job(&client, start, |event| match event {
             JobEvent::Accepted { job, frames } => {
                 accepted.set(Some(job));
@@ -362,7 +363,7 @@ impl AttachHint {
     }
 
     /// The hint for `what` (a job or a study) `job`.
-    fn message(&self, what: &str, job: u64) -> String {
+    fn message(&self, what: &str, job: JobId) -> String {
         let (file, cluster, output) = (
             self.job_file.display(),
             self.cluster.display(),
@@ -408,7 +409,9 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
         ..study
     };
     let start = match args.attach {
-        Some(study) => RemoteStudy::Attach { study },
+        Some(study) => RemoteStudy::Attach {
+            study: JobId(study),
+        },
         None => RemoteStudy::Submit {
             study,
             scenes: &scenes,
@@ -417,7 +420,7 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let workers = format!("the cluster's workers (master {})", client.master);
     let bar = Progress::new(plan.frames() as u64, "frames", "");
     let say = |line: String| bar.println(line);
-    let accepted = std::cell::Cell::new(args.attach);
+    let accepted = std::cell::Cell::new(args.attach.map(JobId));
     let outcome = runtime()?.block_on(async {
         let run = run_remote_study(&client, start, |event| {
             match event {
@@ -434,7 +437,7 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
                         ));
                     }
                     let frames: u32 = has.iter().sum();
-                    let jobs: Vec<u64> = variants.iter().map(|&(job, _)| job).collect();
+                    let jobs: Vec<JobId> = variants.iter().map(|&(job, _)| job).collect();
                     match json {
                         true => json_line(serde_json::json!({"event": "accepted", "job": study, "kind": "study", "frames": frames, "variants": jobs})),
                         false => say(format!("study {study} accepted: {} variant(s) (jobs {jobs:?}), {frames} frame(s)", jobs.len())),

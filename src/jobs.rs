@@ -113,12 +113,13 @@ pub(crate) fn kind_name(kind: WireJobKind) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vtfarm_proto::JobId;
     use vtfarm_proto::{JobSummary, WireJobState};
 
     #[test]
     fn the_table_lists_every_column_and_a_finished_jobs_reason() {
         let job = JobSummary {
-            id: 7,
+            id: JobId(7),
             name: "cockpit.toml".into(),
             kind: WireJobKind::Study,
             state: WireJobState::Cancelled,
@@ -190,7 +191,7 @@ mod tests {
             job,
             variants: Vec::new(),
         };
-        let text = table(&[row(job(1, "short")), row(job(2, long))]);
+        let text = table(&[row(job(JobId(1), "short")), row(job(JobId(2), long))]);
         let lines: Vec<&str> = text.lines().collect();
         let column = |line: &str| {
             let at = line.find("study").expect("the kind column");
@@ -221,17 +222,23 @@ mod tests {
             reason: String::new(),
         };
         let row = JobRow {
-            job: listing(4, "sun study", WireJobKind::Study, WireJobState::Running, 3),
+            job: listing(
+                JobId(4),
+                "sun study",
+                WireJobKind::Study,
+                WireJobState::Running,
+                3,
+            ),
             variants: vec![
                 listing(
-                    5,
+                    JobId(5),
                     "sun study / current",
                     WireJobKind::Variant,
                     WireJobState::Completed,
                     2,
                 ),
                 listing(
-                    6,
+                    JobId(6),
                     "sun study / flat",
                     WireJobKind::Variant,
                     WireJobState::Running,

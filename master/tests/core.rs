@@ -8,6 +8,7 @@ mod frame;
 use frame::small_frame;
 use std::sync::Arc;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
@@ -103,7 +104,7 @@ fn messages_to(outputs: &[Output], conn: u64) -> Vec<&Message> {
 /// started on both sides.
 struct StartedFrame {
     h: Harness,
-    job: u64,
+    job: JobId,
     frame: u32,
     /// The master's ID buffer of the frame (every worker rebuilds the same).
     ids: IdBuffer,

@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use axum::body::Body;
 use axum::extract::connect_info::MockConnectInfo;
@@ -108,7 +109,7 @@ impl Farm {
     /// until it ends (bounded); waits until the master lists it running.
     async fn submit_in_background(
         &self,
-    ) -> (u64, JoinHandle<Result<Vec<FinishedFrame>, JobError>>) {
+    ) -> (JobId, JoinHandle<Result<Vec<FinishedFrame>, JobError>>) {
         let c = cockpit(&CockpitConfig {
             detail: 0.3,
             ..CockpitConfig::default()
@@ -459,7 +460,7 @@ async fn metrics_move_when_a_job_runs_and_every_view_matches_vtfarm_status() {
     assert_eq!(
         view_job["job"],
         farm.master
-            .inspect(|c| c.views().current().unwrap().job)
+            .inspect(|c| c.views().current().unwrap().job.0)
             .await
             .unwrap()
     );

@@ -13,6 +13,7 @@ mod support;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use job::Job;
 use support::pair::Pair;
@@ -26,17 +27,17 @@ const BOUND: Duration = Duration::from_secs(600);
 /// The user who asks, as the listing names them.
 const WHO: &str = "tester";
 
-fn state(pair: &Pair, job: u64) -> Option<JobState> {
+fn state(pair: &Pair, job: JobId) -> Option<JobState> {
     pair.master.jobs().get(job).map(|e| e.state)
 }
 
-fn control(pair: &mut Pair, job: u64, action: JobAction) -> Result<JobState, JobControlError> {
+fn control(pair: &mut Pair, job: JobId, action: JobAction) -> Result<JobState, JobControlError> {
     let summary = pair.act(|m, now| m.control_job(now, job, action, WHO))?;
     Ok(summary.state.into())
 }
 
 /// The ids the master gave the submitter's jobs, in order.
-fn accepted(pair: &Pair) -> Vec<u64> {
+fn accepted(pair: &Pair) -> Vec<JobId> {
     (pair.to_submitter.iter())
         .filter_map(|m| match m {
             Message::JobAccepted { job, .. } => Some(*job),
@@ -59,7 +60,7 @@ fn without_stragglers(workers: &[(&str, f64)]) -> Pair {
 }
 
 /// Submits `wire` at `priority`; returns its id.
-fn submit(pair: &mut Pair, job: &Job, priority: i32) -> u64 {
+fn submit(pair: &mut Pair, job: &Job, priority: i32) -> JobId {
     let (wire, data) = job.wire();
     let before = accepted(pair).len();
     pair.submit(WireJob { priority, ..wire }, data);
@@ -71,7 +72,7 @@ fn submit(pair: &mut Pair, job: &Job, priority: i32) -> u64 {
 }
 
 /// The finished frames of `job` the submitter got, first copy of each.
-fn frames_of(pair: &Pair, job: u64) -> Vec<&FrameDone> {
+fn frames_of(pair: &Pair, job: JobId) -> Vec<&FrameDone> {
     let mut frames: Vec<&FrameDone> = Vec::new();
     for m in &pair.to_submitter {
         if let Message::FrameDone(done) = m {
@@ -85,7 +86,7 @@ fn frames_of(pair: &Pair, job: u64) -> Vec<&FrameDone> {
 
 /// Runs until job `id` is complete and the submitter has its `frames`
 /// frames (they reach it a latency after the core finished them).
-fn complete(pair: &mut Pair, id: u64, frames: usize) {
+fn complete(pair: &mut Pair, id: JobId, frames: usize) {
     pair.drive(BOUND, |p| {
         state(p, id) == Some(JobState::Completed) && frames_of(p, id).len() == frames
     });
@@ -104,7 +105,7 @@ fn by_connection(pair: &Pair, held: &BTreeMap<String, Vec<u64>>) -> BTreeSet<(u6
 
 /// No frame of `id` had a package requeued or failed: nothing was taken
 /// back from a worker.
-fn assert_nothing_taken_back(pair: &Pair, id: u64) {
+fn assert_nothing_taken_back(pair: &Pair, id: JobId) {
     for done in frames_of(pair, id) {
         assert_eq!(
             (done.stats.requeued, done.stats.failures),
@@ -116,7 +117,7 @@ fn assert_nothing_taken_back(pair: &Pair, id: u64) {
 }
 
 /// Checks `job`'s delivered frames against the single-process render.
-fn check_images(pair: &Pair, id: u64, job: &Job) {
+fn check_images(pair: &Pair, id: JobId, job: &Job) {
     let reference = job.reference();
     let done = frames_of(pair, id);
 
@@ -133,7 +134,7 @@ fn check_images(pair: &Pair, id: u64, job: &Job) {
 
 /// Fails every package the workers hold (as `PackageFailed` from each)
 /// until the job fails: a package failed on three workers fails it.
-fn fail_until_the_job_fails(pair: &mut Pair, id: u64) {
+fn fail_until_the_job_fails(pair: &mut Pair, id: JobId) {
     for _ in 0..30 {
         if state(pair, id) == Some(JobState::Failed) {
             return;
@@ -177,7 +178,7 @@ struct Seen(BTreeSet<(JobState, JobState)>);
 impl Seen {
     /// Job `id` went through `path` (its first state the one before) and
     /// is in the last now; each step must be one the table allows.
-    fn went(&mut self, pair: &Pair, id: u64, path: &[JobState]) {
+    fn went(&mut self, pair: &Pair, id: JobId, path: &[JobState]) {
         for step in path.windows(2) {
             assert!(step[0].may_become(step[1]), "{:?} → {:?}", step[0], step[1]);
             self.0.insert((step[0], step[1]));
@@ -311,8 +312,8 @@ fn every_transition_of_the_table_happens_and_no_other_is_allowed() {
         assert_eq!(state(&pair, job), before);
     }
     assert_eq!(
-        control(&mut pair, 99, JobAction::Cancel),
-        Err(JobControlError::UnknownJob(99))
+        control(&mut pair, JobId(99), JobAction::Cancel),
+        Err(JobControlError::UnknownJob(JobId(99)))
     );
 }
 
@@ -342,7 +343,7 @@ fn jobs_run_by_priority_then_submission_and_a_higher_one_goes_first() {
         (p.master.jobs().list(true)).all(|e| e.state == JobState::Completed)
             && frames_of(p, low).len() == 1
     });
-    let finished: Vec<u64> = (pair.to_submitter.iter())
+    let finished: Vec<JobId> = (pair.to_submitter.iter())
         .filter_map(|m| match m {
             Message::FrameDone(done) => Some(done.job),
             _ => None,
@@ -547,7 +548,7 @@ fn finished_jobs_beyond_retention_are_forgotten_with_their_frames() {
     };
     let mut pair = support::pair::persistent(rules);
     pair.add_worker("w1", 1.0);
-    let ids: Vec<u64> = (0..3)
+    let ids: Vec<JobId> = (0..3)
         .map(|_| {
             let id = submit(&mut pair, &job, 0);
             pair.drive(BOUND, |p| state(p, id) == Some(JobState::Completed));
@@ -555,7 +556,7 @@ fn finished_jobs_beyond_retention_are_forgotten_with_their_frames() {
         })
         .collect();
     // Three finished, two kept: the earliest went.
-    let listed: Vec<u64> = pair.master.jobs().list(true).map(|e| e.id).collect();
+    let listed: Vec<JobId> = pair.master.jobs().list(true).map(|e| e.id).collect();
     assert_eq!(listed, ids[1..]);
     pair.attach_submitter(ids[0]);
     let errors = pair.job_failed().expect("job 1 is forgotten");
@@ -570,14 +571,14 @@ fn finished_jobs_beyond_retention_are_forgotten_with_their_frames() {
 }
 
 /// The running jobs, in the order they get workers.
-fn running_jobs(pair: &Pair) -> Vec<u64> {
+fn running_jobs(pair: &Pair) -> Vec<JobId> {
     (pair.master.status().queue.running.iter())
         .map(|r| r.job)
         .collect()
 }
 
 /// The frames of `job` the master started, in order.
-fn starts_of(pair: &Pair, job: u64) -> Vec<u32> {
+fn starts_of(pair: &Pair, job: JobId) -> Vec<u32> {
     (pair.frame_starts.iter())
         .filter(|&&(j, _)| j == job)
         .map(|&(_, frame)| frame)
@@ -637,7 +638,7 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
     // Each worker starts at most the batch package it held (it asks one
     // package ahead) before the view's.
     for runs in &pair.busy {
-        let after: Vec<u64> = (runs.iter())
+        let after: Vec<JobId> = (runs.iter())
             .filter(|run| run.start > steered_at)
             .map(|run| run.job)
             .collect();
@@ -713,7 +714,7 @@ fn a_worker_gets_a_frames_start_again_only_when_it_let_the_frame_go() {
         // The jobs did interleave: low, then high, then low again. (While
         // the high job's unmeasured whole frames are at their limit, two
         // per worker, the worker may turn to the low job in between too.)
-        let mut jobs: Vec<u64> = pair.busy[0].iter().map(|run| run.job).collect();
+        let mut jobs: Vec<JobId> = pair.busy[0].iter().map(|run| run.job).collect();
         jobs.dedup();
         let interleaved = jobs.starts_with(&[low, high]) && jobs.last() == Some(&low);
         assert!(interleaved, "{high_frames} high frames: {jobs:?}");

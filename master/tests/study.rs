@@ -12,6 +12,7 @@ mod job;
 mod support;
 
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use job::Job;
 use support::pair::Pair;
@@ -24,17 +25,17 @@ const BOUND: Duration = Duration::from_secs(600);
 
 const WHO: &str = "tester";
 
-fn state(pair: &Pair, job: u64) -> Option<JobState> {
+fn state(pair: &Pair, job: JobId) -> Option<JobState> {
     pair.master.jobs().get(job).map(|e| e.state)
 }
 
-fn control(pair: &mut Pair, job: u64, action: JobAction) -> Result<JobState, JobControlError> {
+fn control(pair: &mut Pair, job: JobId, action: JobAction) -> Result<JobState, JobControlError> {
     let summary = pair.act(|m, now| m.control_job(now, job, action, WHO))?;
     Ok(summary.state.into())
 }
 
 /// The study's variants' states, in order.
-fn variant_states(pair: &Pair, study: u64) -> Vec<JobState> {
+fn variant_states(pair: &Pair, study: JobId) -> Vec<JobState> {
     let entry = pair.master.jobs().get(study).expect("the study is listed");
     (entry.variants.iter())
         .map(|&v| state(pair, v).expect("a variant is listed"))
@@ -43,7 +44,7 @@ fn variant_states(pair: &Pair, study: u64) -> Vec<JobState> {
 
 /// Submits a study of `variants` variants of `job`; its id and its
 /// variants' ids.
-fn submit_study(pair: &mut Pair, job: &Job, variants: usize) -> (u64, Vec<u64>) {
+fn submit_study(pair: &mut Pair, job: &Job, variants: usize) -> (JobId, Vec<JobId>) {
     let (wire, data) = job.wire();
     let study = WireStudy {
         name: "study".into(),
@@ -69,7 +70,7 @@ fn submit_study(pair: &mut Pair, job: &Job, variants: usize) -> (u64, Vec<u64>) 
 }
 
 /// The frames the submitter got, by (job, frame), each once.
-fn frames_got(pair: &Pair) -> std::collections::BTreeSet<(u64, u32)> {
+fn frames_got(pair: &Pair) -> std::collections::BTreeSet<(JobId, u32)> {
     (pair.to_submitter.iter())
         .filter_map(|m| match m {
             Message::FrameDone(done) => Some((done.job, done.frame)),
@@ -91,7 +92,7 @@ fn a_study_is_one_row_whose_state_follows_its_variants_through_pause_and_resume(
     assert_eq!(rows[0].job.id, study);
     assert_eq!(rows[0].job.kind, WireJobKind::Study);
     assert_eq!(rows[0].job.frames_total, 4);
-    let listed: Vec<u64> = rows[0].variants.iter().map(|v| v.id).collect();
+    let listed: Vec<JobId> = rows[0].variants.iter().map(|v| v.id).collect();
     assert_eq!(listed, variants);
     assert!(
         rows[0]
@@ -139,7 +140,7 @@ fn a_study_is_one_row_whose_state_follows_its_variants_through_pause_and_resume(
     let entry = pair.master.jobs().get(study).unwrap().clone();
     assert_eq!((entry.frames_done, entry.frames_total), (4, 4));
     pair.drive(BOUND, |p| frames_got(p).len() == 4);
-    let expected: std::collections::BTreeSet<(u64, u32)> =
+    let expected: std::collections::BTreeSet<(JobId, u32)> =
         (variants.iter()).flat_map(|&v| [(v, 0), (v, 1)]).collect();
     assert_eq!(frames_got(&pair), expected);
     // Each variant's frames are the single-process render's.

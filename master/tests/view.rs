@@ -14,6 +14,7 @@ mod support;
 use frame::small_frame;
 use std::sync::Arc;
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use glam::Vec3;
 use support::pair::Pair;
@@ -58,12 +59,12 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
 
     // Refused moves change nothing.
     let unknown = ViewRequest {
-        job: 99,
+        job: JobId(99),
         offset: [0.0; 3],
     };
     assert_eq!(
         pair.act(|m, now| m.steer_view(now, unknown)),
-        Err(ViewError::UnknownSource(99))
+        Err(ViewError::UnknownSource(JobId(99)))
     );
     let bad = ViewRequest {
         job: source,
@@ -171,7 +172,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
 
 /// A farm of two workers that rendered a job of the small cockpit (the
 /// view's source): the farm, the cockpit, its reflectors, the job's id.
-fn farm_with_a_source() -> (Pair, Cockpit, Vec<u32>, u64) {
+fn farm_with_a_source() -> (Pair, Cockpit, Vec<u32>, JobId) {
     let c = cockpit(&CockpitConfig {
         detail: 0.2,
         glass_segments: 24,

@@ -197,7 +197,10 @@ mod tests {
     async fn messages_round_trip_through_a_stream() {
         let messages = [
             Message::Heartbeat,
-            Message::JobAccepted { job: 1, frames: 2 },
+            Message::JobAccepted {
+                job: vtfarm_proto::JobId(1),
+                frames: 2,
+            },
             Message::StatusRequest,
         ];
         let (mut a, mut b) = tokio::io::duplex(16);
@@ -314,7 +317,11 @@ mod tests {
                 received: 2
             }))
         ));
-        let whole = encode_message(&Message::JobAccepted { job: 1, frames: 2 }).expect("encodes");
+        let whole = encode_message(&Message::JobAccepted {
+            job: vtfarm_proto::JobId(1),
+            frames: 2,
+        })
+        .expect("encodes");
         let cut = &whole[..whole.len() - 1];
         assert!(matches!(
             read_all(cut, 100),

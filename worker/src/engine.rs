@@ -655,7 +655,7 @@ mod tests {
             vertex: Default::default(),
         };
         FrameStart {
-            job: 1,
+            job: JobId(1),
             frame,
             scene: hash,
             setup: WireFrameSetup::from(&setup),
@@ -708,7 +708,7 @@ mod tests {
         let second = start(1, Vec3::new(-0.9, -0.3, 0.1));
         let package = Package {
             id: 1,
-            job: 1,
+            job: JobId(1),
             frame: 1,
             triangles: reflectors.clone(),
             whole: Some(Box::new(second.clone())),
@@ -768,7 +768,7 @@ mod tests {
             let half = reflectors.len() / 2;
             [&reflectors[..half], &reflectors[half..]].map(|triangles| Package {
                 id: u64::from(frame),
-                job: 1,
+                job: JobId(1),
                 frame,
                 triangles: triangles.to_vec(),
                 whole: None,
@@ -838,7 +838,7 @@ mod tests {
         assert_eq!(progressive.stages(), 3);
         let package = Package {
             id: 4,
-            job: 1,
+            job: JobId(1),
             frame: 0,
             triangles: reflectors[reflectors.len() / 3..].to_vec(),
             whole: None,

@@ -45,7 +45,7 @@ async fn a_cache_read_that_blocks_holds_no_heartbeat_back() {
         .tx
         .send(Message::SceneOffer {
             hash: data.hash,
-            job: 1,
+            job: vtfarm_proto::JobId(1),
         })
         .unwrap();
     // The worker now reads the FIFO (blocked until it is written); its

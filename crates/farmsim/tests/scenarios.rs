@@ -7,6 +7,7 @@ mod support;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use support::*;
 use vtfarm_farmsim::WorkerSpec;
@@ -451,7 +452,7 @@ fn a_small_job_beside_a_deep_one_leaves_no_worker_idle() {
             .find(|f| f.job == jobs[0])
             .expect("complete")
             .completed_at;
-        let first = |job: u64| {
+        let first = |job: JobId| {
             (0..4)
                 .flat_map(|w| runs(&farm, w))
                 .filter(|(_, r)| r.job == job)
@@ -503,7 +504,7 @@ fn a_deep_batch_jobs_tail_splits_no_more_frames_than_the_measured_costs_allow() 
         let split = whole.iter().filter(|w| !**w).count();
         assert_eq!(whole, (0..40).map(|i| i < 40 - split).collect::<Vec<_>>());
         // Each split frame's base frame made once.
-        let bases: BTreeSet<(u64, u32)> = farm.base_frames.iter().copied().collect();
+        let bases: BTreeSet<(JobId, u32)> = farm.base_frames.iter().copied().collect();
         assert_eq!(
             bases.len(),
             farm.base_frames.len(),

@@ -11,7 +11,7 @@ use super::*;
 
 fn frame_done(job: u64, frame: u32) -> Record {
     Record::FrameDone(Box::new(FrameDone {
-        job,
+        job: JobId(job),
         frame,
         image: WireImage::from_pixels(1, 1, &[Vec3::splat(frame as f32)]),
         stats: FrameStats::default(),
@@ -61,7 +61,7 @@ fn a_job_reads_back_up_to_its_first_missing_frame_and_goes_with_its_scene() {
     assert_eq!(stored.len(), 1);
     assert_eq!(
         (stored[0].id, stored[0].frames_done, stored[0].complete),
-        (4, 1, false)
+        (JobId(4), 1, false)
     );
     assert_eq!(stored[0].job.scene, JobScene::Data((*scene).clone()));
     assert_eq!(stored[0].job.frames, job.frames);
@@ -212,7 +212,7 @@ fn every_job_state_round_trips_through_the_journal() {
         WireJobState::Cancelled,
     ];
     let summary = |id: u64, state: WireJobState| JobSummary {
-        id,
+        id: JobId(id),
         name: format!("job {id}"),
         kind: [WireJobKind::Render, WireJobKind::Study][id as usize % 2],
         state,
@@ -253,8 +253,8 @@ fn every_job_state_round_trips_through_the_journal() {
     flip_listing(&journal.state_path(JobId(2)));
     std::fs::remove_file(journal.state_path(JobId(3))).unwrap();
     let jobs = journal.load().jobs;
-    assert_eq!((jobs[1].id, &jobs[1].summary), (2, &None));
-    assert_eq!((jobs[2].id, &jobs[2].summary), (3, &None));
+    assert_eq!((jobs[1].id, &jobs[1].summary), (JobId(2), &None));
+    assert_eq!((jobs[2].id, &jobs[2].summary), (JobId(3), &None));
     assert!(
         journal
             .state_path(JobId(2))
@@ -326,7 +326,13 @@ fn a_damaged_frame_record_is_an_error_naming_the_file_and_the_check() {
 fn queue(journal: &Journal, id: u64) {
     let (scene, job) = one_pixel_job(2);
     let job = Box::new(job);
-    journal.write(Record::JobQueued { id, job, scene }).unwrap();
+    journal
+        .write(Record::JobQueued {
+            id: JobId(id),
+            job,
+            scene,
+        })
+        .unwrap();
 }
 
 /// A second spelling of a job's directory is set aside (never read as
@@ -344,7 +350,7 @@ fn each_job_is_read_in_its_one_spelling_and_strays_are_set_aside_with_reasons() 
     std::fs::write(jobs.join("notes"), b"a stray file").unwrap();
 
     let loaded = journal.load();
-    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id.0).collect();
     assert_eq!(ids, [1], "job 1 once");
     assert_eq!(loaded.jobs[0].frames_done, 1);
     assert_eq!(loaded.damaged.len(), 1, "{:?}", loaded.damaged);
@@ -384,7 +390,7 @@ fn a_job_record_in_another_jobs_directory_is_refused_naming_both() {
     queue(&journal, 2);
     std::fs::copy(journal.job_path(JobId(2)), journal.job_path(JobId(1))).unwrap();
     let loaded = journal.load();
-    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id.0).collect();
     assert_eq!(ids, [2]);
     assert_eq!(loaded.damaged.len(), 1);
     let reason = &loaded.damaged[0].reason;
@@ -443,7 +449,7 @@ fn a_format_4_journal_is_upgraded_and_reads_back() {
     let (was, is) = (&written.jobs[0], &read.jobs[0]);
     assert_eq!(
         (is.id, is.frames_done, is.complete, &is.summary),
-        (3, 2, true, &Some(summary))
+        (JobId(3), 2, true, &Some(summary))
     );
     assert_eq!((was.frames_done, was.complete), (2, true));
     assert_eq!(
@@ -513,7 +519,7 @@ fn a_study_reads_back_over_its_variants_and_a_damaged_one_is_set_aside() {
     let journal = Journal::open(dir.path()).unwrap();
     let (scene, job) = one_pixel_job(1);
     let listing = |id: u64, kind: WireJobKind| JobSummary {
-        id,
+        id: JobId(id),
         name: format!("job {id}"),
         kind,
         state: WireJobState::Running,
@@ -552,7 +558,7 @@ fn a_study_reads_back_over_its_variants_and_a_damaged_one_is_set_aside() {
     let loaded = journal.load();
     assert!(loaded.damaged.is_empty(), "{:?}", loaded.damaged);
     assert_eq!(loaded.studies, [row]);
-    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id).collect();
+    let ids: Vec<u64> = loaded.jobs.iter().map(|j| j.id.0).collect();
     assert_eq!(ids, [2, 3]);
 
     // A damaged study record is set aside with its reason; its variants

@@ -6,7 +6,7 @@ use std::time::Duration;
 use glam::Vec3;
 use vtfarm_method::FrameSetup;
 use vtfarm_proto::{
-    FrameStart, Message, Package, PackageFailed, PackageResult, SceneData, SceneHash,
+    FrameStart, JobId, Message, Package, PackageFailed, PackageResult, SceneData, SceneHash,
     WireFrameSetup, WireMethod,
 };
 use vtfarm_scene::{Camera, Lighting};
@@ -45,7 +45,7 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
         height: 8,
     };
     FrameStart {
-        job,
+        job: JobId(job),
         frame,
         scene: SCENE,
         setup: WireFrameSetup::from(&FrameSetup {
@@ -65,7 +65,7 @@ fn frame_start(job: u64, frame: u32) -> FrameStart {
 fn package(id: u64, job: u64, frame: u32) -> Message {
     Message::Package(Package {
         id,
-        job,
+        job: JobId(job),
         frame,
         triangles: vec![0],
         whole: None,
@@ -108,7 +108,10 @@ fn announced_session() -> (WorkerSession, Scenes) {
     );
     assert_eq!(
         messages(&mut s),
-        vec![Message::RequestWork { job: 1, frame: 0 }]
+        vec![Message::RequestWork {
+            job: JobId(1),
+            frame: 0
+        }]
     );
     (s, scenes)
 }
@@ -127,11 +130,14 @@ fn preparing_session() -> (WorkerSession, Scenes) {
 /// asked for.
 fn ready_session() -> (WorkerSession, Scenes) {
     let (mut s, scenes) = preparing_session();
-    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    s.frame_prepared(Duration::ZERO, (JobId(1), 0), Ok(()));
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     assert_eq!(
         messages(&mut s),
-        vec![Message::RequestWork { job: 1, frame: 0 }],
+        vec![Message::RequestWork {
+            job: JobId(1),
+            frame: 0
+        }],
         "the next package is asked for while one runs"
     );
     s.package_finished(Duration::ZERO, 9, Ok(result(9)));
@@ -149,7 +155,10 @@ fn work_is_asked_for_at_once_and_one_package_ahead() {
     );
     assert_eq!(
         messages(&mut s),
-        vec![Message::RequestWork { job: 1, frame: 0 }],
+        vec![Message::RequestWork {
+            job: JobId(1),
+            frame: 0
+        }],
         "one ahead"
     );
     s.handle_message(now, package(11, 1, 0), &mut scenes);
@@ -162,7 +171,10 @@ fn work_is_asked_for_at_once_and_one_package_ahead() {
         messages(&mut s),
         vec![
             Message::PackageResult(result(10)),
-            Message::RequestWork { job: 1, frame: 0 }
+            Message::RequestWork {
+                job: JobId(1),
+                frame: 0
+            }
         ]
     );
 }
@@ -175,7 +187,7 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
         Duration::ZERO,
         Message::SceneOffer {
             hash: SCENE,
-            job: 1,
+            job: JobId(1),
         },
         &mut scenes,
     );
@@ -197,7 +209,7 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
     };
     s.handle_message(Duration::ZERO, Message::SceneData(data), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 0))]);
-    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    s.frame_prepared(Duration::ZERO, (JobId(1), 0), Ok(()));
     assert!(
         matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 10)
     );
@@ -207,7 +219,11 @@ fn a_frame_waits_for_its_scene_and_so_do_its_packages() {
 fn packages_of_a_frame_that_failed_to_prepare_fail_with_its_reason() {
     let (mut s, mut scenes) = preparing_session();
     let panicked = Panicked("BVH build panicked".into());
-    s.frame_prepared(Duration::ZERO, (1, 0), Err(FrameError::Panicked(panicked)));
+    s.frame_prepared(
+        Duration::ZERO,
+        (JobId(1), 0),
+        Err(FrameError::Panicked(panicked)),
+    );
     s.handle_message(Duration::ZERO, package(11, 2, 5), &mut scenes);
     let failed: Vec<(u64, String)> = messages(&mut s)
         .into_iter()
@@ -256,7 +272,13 @@ fn a_cancelled_running_package_sends_no_result() {
     // result of 10.
     assert_eq!(
         messages(&mut s),
-        vec![Message::RequestWork { job: 1, frame: 0 }; 2]
+        vec![
+            Message::RequestWork {
+                job: JobId(1),
+                frame: 0
+            };
+            2
+        ]
     );
 }
 
@@ -299,7 +321,7 @@ fn draining_finishes_a_package_whose_frame_is_still_being_set_up() {
     );
     let next = Message::FrameStart(frame_start(1, 1));
     s.handle_message(Duration::ZERO, next, &mut scenes);
-    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    s.frame_prepared(Duration::ZERO, (JobId(1), 0), Ok(()));
     // Only the package runs: frame (1, 1), announced while draining, is not set up.
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     assert_eq!(messages(&mut s), vec![], "no request while draining");
@@ -351,8 +373,14 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     assert_eq!(
         messages(&mut s),
         vec![
-            Message::RequestWork { job: 1, frame: 1 },
-            Message::RequestWork { job: 1, frame: 2 }
+            Message::RequestWork {
+                job: JobId(1),
+                frame: 1
+            },
+            Message::RequestWork {
+                job: JobId(1),
+                frame: 2
+            }
         ],
         "each frame start renews the request"
     );
@@ -360,7 +388,7 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     // beside the running package; frame 1 is skipped.
     s.handle_message(now, package(11, 1, 2), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 2))]);
-    s.frame_prepared(now, (1, 2), Ok(()));
+    s.frame_prepared(now, (JobId(1), 2), Ok(()));
     s.package_finished(now, 10, Ok(result(10)));
     assert!(
         matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 11)
@@ -369,7 +397,10 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
         messages(&mut s),
         vec![
             Message::PackageResult(result(10)),
-            Message::RequestWork { job: 1, frame: 2 }
+            Message::RequestWork {
+                job: JobId(1),
+                frame: 2
+            }
         ]
     );
     s.package_finished(now, 11, Ok(result(11)));
@@ -378,7 +409,7 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
     // one of frame 0 runs on the frame kept.
     s.handle_message(now, package(12, 1, 1), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(frame_start(1, 1))]);
-    s.frame_prepared(now, (1, 1), Ok(()));
+    s.frame_prepared(now, (JobId(1), 1), Ok(()));
     assert!(
         matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 12)
     );
@@ -395,7 +426,7 @@ fn a_frame_is_set_up_for_its_first_package_and_prepared_frames_stay_usable() {
         let id = 100 + u64::from(frame);
         s.handle_message(now, Message::FrameStart(frame_start(1, frame)), &mut scenes);
         s.handle_message(now, package(id, 1, frame), &mut scenes);
-        s.frame_prepared(now, (1, frame), Ok(()));
+        s.frame_prepared(now, (JobId(1), frame), Ok(()));
         s.package_finished(now, id, Ok(result(id)));
     }
     let _ = (tasks(&mut s), messages(&mut s));
@@ -408,7 +439,7 @@ fn the_first_result_of_a_frame_tells_how_long_its_set_up_took() {
     let (mut s, mut scenes) = preparing_session();
     // Frame (1, 0) was handed over for set-up at 0; ready at 40 ms.
     let ms = Duration::from_millis;
-    s.frame_prepared(ms(40), (1, 0), Ok(()));
+    s.frame_prepared(ms(40), (JobId(1), 0), Ok(()));
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, stage: 0 }] if p.id == 9));
     s.handle_message(ms(41), package(10, 1, 0), &mut scenes);
     s.package_finished(ms(50), 9, Ok(result(9)));
@@ -450,7 +481,7 @@ fn a_progressive_frames_packages_run_the_lowest_stage_first() {
     );
     s.handle_message(Duration::ZERO, package(9, 1, 0), &mut scenes);
     assert_eq!(tasks(&mut s), vec![Task::PrepareFrame(start)]);
-    s.frame_prepared(Duration::ZERO, (1, 0), Ok(()));
+    s.frame_prepared(Duration::ZERO, (JobId(1), 0), Ok(()));
     s.handle_message(Duration::ZERO, package(10, 1, 0), &mut scenes);
     let mut ran = Vec::new();
     let mut results = 0;
@@ -495,7 +526,7 @@ fn run_frame(s: &mut WorkerSession, scenes: &mut Scenes, id: u64, (job, frame): 
     s.handle_message(now, Message::FrameStart(frame_start(job, frame)), scenes);
     s.handle_message(now, package(id, job, frame), scenes);
     assert_eq!(tasks(s), vec![Task::PrepareFrame(frame_start(job, frame))]);
-    s.frame_prepared(now, (job, frame), Ok(()));
+    s.frame_prepared(now, (JobId(job), frame), Ok(()));
     assert!(matches!(&tasks(s)[..], [Task::RunPackage { package: p, .. }] if p.id == id));
     s.package_finished(now, id, Ok(result(id)));
     let _ = messages(s);
@@ -514,11 +545,11 @@ fn the_frames_named_last_stay_prepared_and_a_package_keeps_its_frame() {
     }
     // Job 1's frame after job 2's: prepared and kept (the newest named).
     run_frame(&mut s, &mut scenes, 20, (1, 5));
-    for key in [(1, 5), (2, 1), (2, kept - 1)] {
+    for key in [(JobId(1), 5), (JobId(2), 1), (JobId(2), kept - 1)] {
         assert!(s.keeps_set_up(key), "{key:?}");
     }
     // Job 2's frame 0 was named longest ago: let go.
-    assert!(!s.keeps_set_up((2, 0)));
+    assert!(!s.keeps_set_up((JobId(2), 0)));
     // Packages in hand keep their frames however many frames are named
     // meanwhile; each frame goes once its package is done.
     s.handle_message(now, package(22, 2, 6), &mut scenes);
@@ -527,13 +558,13 @@ fn the_frames_named_last_stay_prepared_and_a_package_keeps_its_frame() {
     for frame in 0..kept {
         s.handle_message(now, Message::FrameStart(frame_start(3, frame)), &mut scenes);
     }
-    assert!(s.keeps_set_up((2, 6)) && s.keeps_set_up((2, 7)));
-    assert!(!s.keeps_set_up((1, 5)));
+    assert!(s.keeps_set_up((JobId(2), 6)) && s.keeps_set_up((JobId(2), 7)));
+    assert!(!s.keeps_set_up((JobId(1), 5)));
     s.package_finished(now, 22, Ok(result(22)));
     assert!(matches!(&tasks(&mut s)[..], [Task::RunPackage { package: p, .. }] if p.id == 23));
-    assert!(!s.keeps_set_up((2, 6)));
+    assert!(!s.keeps_set_up((JobId(2), 6)));
     s.package_finished(now, 23, Ok(result(23)));
-    assert!(!s.keeps_set_up((2, 7)));
+    assert!(!s.keeps_set_up((JobId(2), 7)));
     // A package of a frame let go fails: the master, counting the same,
     // sends the frame's start again first.
     let _ = messages(&mut s);

@@ -456,7 +456,7 @@ pub(super) fn frame_out_time(
         encoded = encoded.min(encode);
         let clock = CpuStopwatch::start();
         let done = FrameDone {
-            job: 1,
+            job: vtfarm_proto::JobId(1),
             frame: 0,
             image,
             stats: Default::default(),

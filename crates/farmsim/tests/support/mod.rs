@@ -15,6 +15,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
+use vtfarm_proto::JobId;
 
 use rand::{Rng as _, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -128,7 +129,7 @@ pub(crate) enum Failures {
 /// A package a worker ran (in the order of [`Farm::busy`]'s runs).
 #[derive(Clone, Debug)]
 pub(crate) struct Ran {
-    pub(crate) job: u64,
+    pub(crate) job: JobId,
     pub(crate) frame: u32,
     pub(crate) whole: bool,
     pub(crate) items: usize,
@@ -366,7 +367,7 @@ fn ended(farm: &ItemFarm, frames_per_job: &[usize]) -> bool {
 }
 
 /// The jobs the master accepted, in submission order.
-pub(crate) fn accepted_jobs(farm: &ItemFarm) -> Vec<u64> {
+pub(crate) fn accepted_jobs(farm: &ItemFarm) -> Vec<JobId> {
     (farm.to_submitter.iter())
         .filter_map(|m| match m {
             Message::JobAccepted { job, .. } => Some(*job),
@@ -376,7 +377,7 @@ pub(crate) fn accepted_jobs(farm: &ItemFarm) -> Vec<u64> {
 }
 
 /// The errors a job failed with, if it failed.
-pub(crate) fn failure(farm: &ItemFarm, job: u64) -> Option<&Vec<String>> {
+pub(crate) fn failure(farm: &ItemFarm, job: JobId) -> Option<&Vec<String>> {
     farm.to_submitter.iter().find_map(|m| match m {
         Message::JobFailed { job: j, errors } if *j == job => Some(errors),
         _ => None,
@@ -386,7 +387,7 @@ pub(crate) fn failure(farm: &ItemFarm, job: u64) -> Option<&Vec<String>> {
 /// A delivered frame with its times.
 #[derive(Clone, Debug)]
 pub(crate) struct Delivered {
-    pub(crate) job: u64,
+    pub(crate) job: JobId,
     pub(crate) frame: u32,
     /// When the master sent it.
     pub(crate) done_at: Duration,
@@ -435,7 +436,7 @@ pub(crate) fn runs(farm: &ItemFarm, w: usize) -> Vec<(PackageRun, Ran)> {
 
 /// Each worker's share of the true cost of its packages of `frame` of
 /// `job` that did not fail (a straggler's both copies count).
-pub(crate) fn cost_shares(farm: &ItemFarm, job: u64, frame: u32) -> Vec<f64> {
+pub(crate) fn cost_shares(farm: &ItemFarm, job: JobId, frame: u32) -> Vec<f64> {
     let work: Vec<f64> = (0..farm.workers.len())
         .map(|w| {
             (runs(farm, w).iter())
