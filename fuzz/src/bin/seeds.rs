@@ -74,7 +74,7 @@ fn main() -> std::io::Result<()> {
         (
             "frame_start",
             Message::FrameStart(FrameStart {
-                job: 1,
+                job: vtfarm_proto::JobId(1),
                 frame: 0,
                 scene: data.hash,
                 setup,
@@ -89,7 +89,7 @@ fn main() -> std::io::Result<()> {
             "package",
             Message::Package(Package {
                 id: 3,
-                job: 1,
+                job: vtfarm_proto::JobId(1),
                 frame: 0,
                 triangles: vec![0],
                 whole: None,
