@@ -961,6 +961,22 @@ mod tests {
     use super::*;
     use crate::wire::tests::scene;
 
+    #[test]
+    fn a_job_id_encodes_as_the_bare_number_in_bincode_and_json() {
+        let config = bincode::config::standard();
+        for n in [0, 7, 300, u64::MAX] {
+            let bytes = bincode::serde::encode_to_vec(JobId(n), config).unwrap();
+            assert_eq!(bytes, bincode::serde::encode_to_vec(n, config).unwrap());
+            let (back, _): (JobId, usize) =
+                bincode::serde::decode_from_slice(&bytes, config).unwrap();
+            assert_eq!(back, JobId(n));
+            assert_eq!(serde_json::to_string(&JobId(n)).unwrap(), n.to_string());
+            assert_eq!(JobId(n).to_string(), n.to_string());
+            assert_eq!(n.to_string().parse::<JobId>(), Ok(JobId(n)));
+        }
+        assert_eq!(format!("{:012}", JobId(7)), "000000000007");
+    }
+
     /// The unit enum serde would derive: the encoding that the names of
     /// [`WireJobState::name`] must keep, on the wire and in JSON.
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
