@@ -16,25 +16,13 @@ use std::time::Duration;
 use vtfarm_proto::JobId;
 
 use job::Job;
-use support::pair::Pair;
+use support::pair::{Pair, WHO, control, state};
 use vtfarm_master::{FarmRules, Output};
 use vtfarm_master_core::{JobControlError, JobState};
 use vtfarm_proto::{FrameDone, JobAction, Message, PackageFailed, WireJob, WireJobState};
 
 /// Virtual time a scenario may take at most.
 const BOUND: Duration = Duration::from_secs(600);
-
-/// The user who asks, as the listing names them.
-const WHO: &str = "tester";
-
-fn state(pair: &Pair, job: JobId) -> Option<JobState> {
-    pair.master.jobs().get(job).map(|e| e.state)
-}
-
-fn control(pair: &mut Pair, job: JobId, action: JobAction) -> Result<JobState, JobControlError> {
-    let summary = pair.act(|m, now| m.control_job(now, job, action, WHO))?;
-    Ok(summary.state.into())
-}
 
 /// The ids the master gave the submitter's jobs, in order.
 fn accepted(pair: &Pair) -> Vec<JobId> {

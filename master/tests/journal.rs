@@ -125,6 +125,34 @@ impl Master {
             .unwrap();
     }
 
+    /// Waits, woken by the core's changes and within [`WAIT`], until every
+    /// frame's journal write has failed (`what` names it in the failure).
+    async fn until_every_frame_write_failed(&self, what: &str) {
+        let failures =
+            |core: &vtfarm_master::MasterCore| core.telemetry().counters.journal_write_failures;
+        let mut changes = self.handle.changes();
+        tokio::time::timeout(WAIT, async {
+            while self.handle.inspect(failures).await < Some(FRAMES as u64) {
+                changes.changed().await.expect("the master runs");
+            }
+        })
+        .await
+        .expect(what);
+    }
+
+    /// Waits, as above, until `journal` holds every frame of job 1.
+    async fn until_job_1_is_written(&self, journal: &Journal, what: &str) {
+        let all_written = || (0..FRAMES as u32).all(|f| journal.frame(JobId(1), f).is_ok());
+        let mut changes = self.handle.changes();
+        tokio::time::timeout(WAIT, async {
+            while !all_written() {
+                changes.changed().await.expect("the master runs");
+            }
+        })
+        .await
+        .expect(what);
+    }
+
     /// Runs a submitter from `start`, bounded; its warnings beside.
     async fn follow(
         &self,
@@ -375,16 +403,9 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
     // Every frame's write has failed by now (woken by the core's changes;
     // a kept frame is tried again after each record that fits, and fails
     // again while the disk is full).
-    let failures =
-        |core: &vtfarm_master::MasterCore| core.telemetry().counters.journal_write_failures;
-    let mut changes = master.handle.changes();
-    tokio::time::timeout(WAIT, async {
-        while master.handle.inspect(failures).await < Some(FRAMES as u64) {
-            changes.changed().await.expect("the master runs");
-        }
-    })
-    .await
-    .expect("every frame write failed");
+    master
+        .until_every_frame_write_failed("every frame write failed")
+        .await;
     let (again, warnings) = master.follow(RemoteJob::Attach { job: JobId(1) }).await;
     assert_identical(&again.expect("from memory"), &reference, "attached later");
     assert!(
@@ -424,16 +445,12 @@ async fn a_full_disk_reaches_the_submitter_and_metrics_and_frames_stay_in_memory
     let (frames, _) = master.follow(submit).await;
     assert_identical(&frames.expect("the second job"), &reference, "room again");
     let journal = Journal::open(state.path()).unwrap();
-    let all_written =
-        |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(JobId(1), f).is_ok());
-    let mut changes = master.handle.changes();
-    tokio::time::timeout(WAIT, async {
-        while !all_written(&journal) {
-            changes.changed().await.expect("the master runs");
-        }
-    })
-    .await
-    .expect("the kept frames were written once the disk had room");
+    master
+        .until_job_1_is_written(
+            &journal,
+            "the kept frames were written once the disk had room",
+        )
+        .await;
     for f in 0..FRAMES as u32 {
         let done = journal.frame(JobId(1), f).unwrap();
         assert!(
@@ -765,27 +782,17 @@ async fn kept_frames_are_written_when_the_disk_frees_up_while_the_master_is_idle
         .follow(RemoteJob::Submit { job, scene: &scene })
         .await;
     let frames = frames.expect("delivered from memory");
-    let failures =
-        |core: &vtfarm_master::MasterCore| core.telemetry().counters.journal_write_failures;
-    let mut changes = master.handle.changes();
-    tokio::time::timeout(WAIT, async {
-        while master.handle.inspect(failures).await < Some(FRAMES as u64) {
-            changes.changed().await.expect("the master runs");
-        }
-    })
-    .await
-    .expect("every frame write failed");
+    master
+        .until_every_frame_write_failed("every frame write failed")
+        .await;
     disk.full.store(false, Ordering::SeqCst);
     let journal = Journal::open(state.path()).unwrap();
-    let all_written =
-        |journal: &Journal| (0..FRAMES as u32).all(|f| journal.frame(JobId(1), f).is_ok());
-    tokio::time::timeout(WAIT, async {
-        while !all_written(&journal) {
-            changes.changed().await.expect("the master runs");
-        }
-    })
-    .await
-    .expect("the kept frames were written with nothing else to write");
+    master
+        .until_job_1_is_written(
+            &journal,
+            "the kept frames were written with nothing else to write",
+        )
+        .await;
     for f in 0..FRAMES as u32 {
         let done = journal.frame(JobId(1), f).unwrap();
         assert!(

@@ -15,24 +15,13 @@ use std::time::Duration;
 use vtfarm_proto::JobId;
 
 use job::Job;
-use support::pair::Pair;
+use support::pair::{Pair, WHO, control, state};
 use vtfarm_master::FarmRules;
 use vtfarm_master_core::{JobControlError, JobState};
 use vtfarm_proto::{JobAction, JobRow, Message, WireJobKind, WireStudy};
 
 /// Virtual time a scenario may take at most.
 const BOUND: Duration = Duration::from_secs(600);
-
-const WHO: &str = "tester";
-
-fn state(pair: &Pair, job: JobId) -> Option<JobState> {
-    pair.master.jobs().get(job).map(|e| e.state)
-}
-
-fn control(pair: &mut Pair, job: JobId, action: JobAction) -> Result<JobState, JobControlError> {
-    let summary = pair.act(|m, now| m.control_job(now, job, action, WHO))?;
-    Ok(summary.state.into())
-}
 
 /// The study's variants' states, in order.
 fn variant_states(pair: &Pair, study: JobId) -> Vec<JobState> {

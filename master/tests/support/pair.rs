@@ -5,12 +5,30 @@
 
 use vtfarm_farmsim::{JobJournal, TestFarm};
 use vtfarm_master::{FarmRules, Journal, Record, StoredJob};
-use vtfarm_master_core::DamagedJob;
+use vtfarm_master_core::{DamagedJob, JobControlError, JobState};
 use vtfarm_proto::JobId;
-use vtfarm_proto::{FrameDone, JobRow};
+use vtfarm_proto::{FrameDone, JobAction, JobRow};
 
 /// The harness under its old name.
 pub(crate) type Pair = TestFarm;
+
+/// The user who asks, as the listing names them.
+pub(crate) const WHO: &str = "tester";
+
+/// Job `job`'s state in the master's table.
+pub(crate) fn state(pair: &Pair, job: JobId) -> Option<JobState> {
+    pair.master.jobs().get(job).map(|e| e.state)
+}
+
+/// `action` on `job` as [`WHO`] asks it; the job's state after it.
+pub(crate) fn control(
+    pair: &mut Pair,
+    job: JobId,
+    action: JobAction,
+) -> Result<JobState, JobControlError> {
+    let summary = pair.act(|m, now| m.control_job(now, job, action, WHO))?;
+    Ok(summary.state.into())
+}
 
 /// The master's job journal in a temporary state directory it owns.
 struct TempJournal {
