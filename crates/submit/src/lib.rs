@@ -363,21 +363,10 @@ impl JobFollower {
                     on_event(JobEvent::FrameDone(&finished));
                     self.frames.insert(finished.frame, finished);
                 }
-                Message::FrameMissing {
-                    job,
-                    frame,
-                    reason,
-                    rendering_again,
-                } => {
-                    if !rendering_again {
-                        return Err(JobError::FrameLost { job, frame, reason });
+                told @ (Message::FrameMissing { .. } | Message::JournalFailed { .. }) => {
+                    if let Some(warning) = warning_of(told)? {
+                        on_event(JobEvent::Warning(warning));
                     }
-                    let warning = format!("frame {frame} of job {job} is rendered again: {reason}");
-                    on_event(JobEvent::Warning(warning));
-                }
-                Message::JournalFailed { job, error } => {
-                    let warning = format!("the master cannot journal job {job}: {error}");
-                    on_event(JobEvent::Warning(warning));
                 }
                 Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
                 Message::JobStateChanged { job, state, reason } => {
@@ -397,6 +386,29 @@ impl JobFollower {
             }
         }
         Ok(())
+    }
+}
+
+/// What a follower makes of a frame the master is missing or a journal it
+/// cannot write: a warning for the user, or the error that ends the
+/// follow (a frame that will not come); `None` for any other message.
+pub(crate) fn warning_of(message: Message) -> Result<Option<String>, JobError> {
+    match message {
+        Message::FrameMissing {
+            job,
+            frame,
+            reason,
+            rendering_again: true,
+        } => Ok(Some(format!(
+            "frame {frame} of job {job} is rendered again: {reason}"
+        ))),
+        Message::FrameMissing {
+            job, frame, reason, ..
+        } => Err(JobError::FrameLost { job, frame, reason }),
+        Message::JournalFailed { job, error } => Ok(Some(format!(
+            "the master cannot journal job {job}: {error}"
+        ))),
+        _ => Ok(None),
     }
 }
 

@@ -151,21 +151,10 @@ impl StudyFollower {
                     })
                     .map_err(JobError::Stopped)?;
                 }
-                Message::FrameMissing {
-                    job,
-                    frame,
-                    reason,
-                    rendering_again,
-                } => {
-                    if !rendering_again {
-                        return Err(JobError::FrameLost { job, frame, reason });
+                told @ (Message::FrameMissing { .. } | Message::JournalFailed { .. }) => {
+                    if let Some(warning) = crate::warning_of(told)? {
+                        on_event(StudyEvent::Warning(warning)).map_err(JobError::Stopped)?;
                     }
-                    let warning = format!("frame {frame} of job {job} is rendered again: {reason}");
-                    on_event(StudyEvent::Warning(warning)).map_err(JobError::Stopped)?;
-                }
-                Message::JournalFailed { job, error } => {
-                    let warning = format!("the master cannot journal job {job}: {error}");
-                    on_event(StudyEvent::Warning(warning)).map_err(JobError::Stopped)?;
                 }
                 Message::JobFailed { errors, .. } => return Err(JobError::Failed(errors)),
                 Message::JobStateChanged { job, state, reason } => {
