@@ -12,6 +12,7 @@ mod frame;
 mod support;
 
 use frame::small_frame;
+use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::Duration;
 use vtfarm_proto::JobId;
@@ -554,24 +555,64 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
         match message {
             StageMessage::Mesh { meshes, .. } => {
                 let projector = Projector::new(&setup.camera);
-                let mut sent: Vec<FaceBits> = (meshes.iter())
-                    .flat_map(|m| {
-                        m.faces.iter().map(|f| {
+                let faces_of = |m: &vtfarm_vertex::StageMesh| -> Vec<FaceBits> {
+                    (m.faces.iter())
+                        .map(|f| {
                             let corners = f.map(|v| {
                                 let p = m.positions[v as usize];
                                 projector.project(p).expect("a sent face is in front")
                             });
                             face_bits(corners, f.map(|v| m.samples[v as usize].color))
                         })
-                    })
-                    .collect();
+                        .collect()
+                };
                 let mut traced: Vec<FaceBits> = (reference.faces.iter())
                     .map(|f| face_bits(f.corners, f.colors))
                     .collect();
-                sent.sort_unstable();
                 traced.sort_unstable();
+                let mut sent: Vec<FaceBits> = meshes.iter().flat_map(faces_of).collect();
+                sent.sort_unstable();
                 assert!(!sent.is_empty());
-                assert!(sent == traced, "{quality:?}: the render's faces");
+                if quality == Quality::Preview {
+                    // The workers' corner mesh, sent before the frame's
+                    // set-up: every reflector triangle, hidden or not. The
+                    // render traces those that own pixels: their faces are
+                    // here bit for bit, and each other face is of a
+                    // triangle the frame does not show at all.
+                    let reflectors = c.cover_glass_triangles();
+                    let vertices: usize = meshes.iter().map(|m| m.positions.len()).sum();
+                    assert_eq!(vertices, 3 * reflectors.len(), "each reflector's corners");
+                    let corners_of = |t: u32| {
+                        let tri = c.scene.triangles[t as usize];
+                        tri.vertices
+                            .map(|v| c.scene.positions[v as usize].to_array().map(f32::to_bits))
+                    };
+                    let triangle_at: std::collections::BTreeMap<_, u32> =
+                        reflectors.iter().map(|&t| (corners_of(t), t)).collect();
+                    let (ids, _) = renderer.id_buffers(&setup);
+                    let shown: BTreeSet<u32> = (0..ids.height)
+                        .flat_map(|y| (0..ids.width).map(move |x| (x, y)))
+                        .map(|(x, y)| ids.triangle_at(x, y))
+                        .collect();
+                    let mut extra = 0;
+                    for m in meshes {
+                        for (face, bits) in m.faces.iter().zip(faces_of(m)) {
+                            if traced.binary_search(&bits).is_ok() {
+                                continue;
+                            }
+                            let corners =
+                                face.map(|v| m.positions[v as usize].to_array().map(f32::to_bits));
+                            let t = triangle_at[&corners];
+                            assert!(!shown.contains(&t), "triangle {t} is shown");
+                            extra += 1;
+                        }
+                    }
+                    assert!(extra > 0, "the frame hides some of the glass");
+                    assert_eq!(sent.len(), traced.len() + extra);
+                    assert!(traced.iter().all(|f| sent.binary_search(f).is_ok()));
+                } else {
+                    assert!(sent == traced, "{quality:?}: the render's faces");
+                }
             }
             StageMessage::Overlay { overlay, .. } => {
                 assert_eq!(quality, Quality::Full);
@@ -592,6 +633,32 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
             }
         }
     }
+}
+
+/// The preview goes out on a worker's corner mesh, traced before the
+/// frame's set-up: before any stage of the move's packages is complete,
+/// and once (the second worker's mesh is dropped); the stage's results
+/// then make its image without a second message.
+#[test]
+fn the_preview_goes_out_on_the_corner_mesh_before_any_stage_is_complete() {
+    let (mut pair, _, _, source) = farm_with_a_source();
+    let request = ViewRequest {
+        job: source,
+        offset: [0.02, 0.0, 0.0],
+    };
+    pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    pair.drive(BOUND, |p| !streamed(&p.master).1.is_empty());
+    let (generation, messages) = streamed(&pair.master);
+    assert_eq!(generation, 1);
+    assert_eq!(messages.len(), 1);
+    assert_eq!(messages[0].header().quality, Quality::Preview);
+    let current = pair.master.views().current().expect("the move is on");
+    assert_eq!(current.stages_done, 0, "no stage is complete yet");
+    drive_to_stage(&mut pair, 1, Quality::Refine);
+    let qualities: Vec<Quality> = (streamed(&pair.master).1.iter())
+        .map(|m| m.header().quality)
+        .collect();
+    assert_eq!(qualities, [Quality::Preview, Quality::Refine]);
 }
 
 /// A newer move empties the stream: at no step after it does a message of

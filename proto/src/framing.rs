@@ -481,6 +481,21 @@ mod tests {
                 state: crate::WireJobState::Cancelled,
                 reason: "cancelled from 127.0.0.1".to_owned(),
             },
+            Message::FrameMesh {
+                job: JobId(12),
+                frame: 0,
+                mesh: crate::WireMesh {
+                    parts: vec![crate::WireMeshPart {
+                        triangle: 4,
+                        positions: vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
+                        colors: vec![[0.5; 3]; 3],
+                        reflected: vec![[0.25; 3]; 3],
+                        transmitted: vec![[0.0; 3]; 3],
+                        objects: vec![2, 2, 7],
+                        faces: vec![[0, 1, 2]],
+                    }],
+                },
+            },
         ]
     }
 
@@ -500,7 +515,7 @@ mod tests {
         let messages = every_message();
         // Every variant is covered (the list has two extra alternatives).
         let names: std::collections::BTreeSet<_> = messages.iter().map(Message::name).collect();
-        assert_eq!(names.len(), 29);
+        assert_eq!(names.len(), 30);
         let stream: Vec<u8> = (messages.iter())
             .flat_map(|m| encode_message(m).expect("encodes"))
             .collect();

@@ -51,10 +51,10 @@ pub use wire::{
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change
 /// to a message's encoding or to a rule both ends follow (such as a
 /// material's `thin` and `fresnel`, a directional light's disc, the vertex
-/// tracer's `capture_cd_m2` or a progressive stage's reflector meshes in
-/// its result); the master refuses other versions with
+/// tracer's `capture_cd_m2`, a progressive stage's reflector meshes in
+/// its result or a view frame's corner mesh ahead of its set-up); the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 12;
+pub const PROTOCOL_VERSION: u32 = 13;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

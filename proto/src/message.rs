@@ -165,6 +165,18 @@ pub enum Message {
     /// Master → submitter: the jobs (`ListJobs`), oldest first, a study
     /// with its variants.
     JobRows { rows: Vec<JobRow> },
+
+    // Worker → master: the interactive view.
+    /// Worker → master: a progressive frame whose first stage is `preview`
+    /// (a move of the view's eye) sends, before its frame is set up, every
+    /// reflector triangle's corners traced from the eye
+    /// (`vtfarm_vertex::corner_meshes`): the view's first image, ahead of
+    /// the packages' results.
+    FrameMesh {
+        job: JobId,
+        frame: u32,
+        mesh: WireMesh,
+    },
 }
 
 impl Message {
@@ -203,6 +215,7 @@ impl Message {
             Message::SubmitStudy { .. } => "SubmitStudy",
             Message::StudyAccepted { .. } => "StudyAccepted",
             Message::JobRows { .. } => "JobRows",
+            Message::FrameMesh { .. } => "FrameMesh",
         }
     }
 }

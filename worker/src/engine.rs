@@ -561,29 +561,49 @@ pub struct FrameParts {
 }
 
 impl FrameParts {
-    /// Builds the frame's renderer (when not cached: the BVH, seconds for
-    /// the largest scenes) and ID buffers: the CPU work of a frame's set-up.
-    pub fn build(self) -> Result<ActiveFrame, FrameError> {
+    /// The renderer: the cached one, or a new one (the BVH, seconds for the
+    /// largest scenes), kept for [`FrameParts::build`].
+    fn renderer(&mut self) -> Result<Arc<Renderer>, FrameError> {
+        if let Some(renderer) = &self.renderer {
+            return Ok(renderer.clone());
+        }
+        let (scene, reflectors) = (self.scene.clone(), self.renderer_key.1.clone());
+        let built = contain_panic(|| Renderer::try_new(scene, reflectors))?;
+        let renderer = Arc::new(built.map_err(|e| FrameError::Renderer(e.to_string()))?);
+        self.renderer = Some(renderer.clone());
+        Ok(renderer)
+    }
+
+    /// For a frame whose first stage is `preview` (a move of the view's
+    /// eye), every reflector triangle's corners traced from the eye
+    /// ([`Renderer::corner_meshes`]), which need no set-up: sent ahead of
+    /// it, they are the view's first image. `None` for any other frame.
+    pub fn corner_mesh(&mut self) -> Result<Option<WireMesh>, FrameError> {
+        let vertex_traced = self.per_reflector.is_none();
+        if !(vertex_traced && self.stages.first() == Some(&Quality::Preview)) {
+            return Ok(None);
+        }
+        let renderer = self.renderer()?;
+        let meshes = contain_panic(|| renderer.corner_meshes(&self.setup))?;
+        Ok(Some(WireMesh::from(&meshes[..])))
+    }
+
+    /// Builds the frame's renderer (unless [`FrameParts::corner_mesh`] or
+    /// the cache has it) and ID buffers: the CPU work of a frame's set-up.
+    pub fn build(mut self) -> Result<ActiveFrame, FrameError> {
+        let renderer = self.renderer()?;
         let FrameParts {
             job,
             frame,
             aux,
             image,
             renderer_key,
-            scene,
-            renderer,
+            scene: _,
+            renderer: _,
             setup,
             per_reflector,
             stages,
         } = self;
-        let renderer = match renderer {
-            Some(renderer) => renderer,
-            None => {
-                let reflectors = renderer_key.1.clone();
-                let built = contain_panic(|| Renderer::try_new(scene, reflectors))?;
-                Arc::new(built.map_err(|e| FrameError::Renderer(e.to_string()))?)
-            }
-        };
         let (ids, behind) = contain_panic(|| renderer.id_buffers(&setup))?;
         Ok(ActiveFrame {
             job,
@@ -895,5 +915,61 @@ mod tests {
         }
         // The package's frame was set up once for its three stages.
         assert_eq!(engine.set_ups(), 1);
+    }
+
+    /// A view's frame (first stage `preview`) has a corner mesh before any
+    /// set-up: one part per reflector triangle, and each part a package's
+    /// preview stage sends for the same triangle is the same, bit for bit.
+    /// A frame of one stage has none.
+    #[test]
+    fn a_views_corner_mesh_needs_no_set_up_and_holds_the_preview_stages_meshes() {
+        let (cockpit, hash, mut engine) = cockpit_engine();
+        let reflectors = cockpit.cover_glass_triangles();
+        let camera = sized(&cockpit, 96, 54);
+        let sun = Vec3::new(0.45, -0.85, -0.15);
+        let single = cockpit_frame((&cockpit, hash), 0, camera, sun, &reflectors);
+        let mut view = single.clone();
+        view.stages = [Quality::Preview, Quality::Refine, Quality::Full]
+            .iter()
+            .map(|&q| q.into())
+            .collect();
+        assert_eq!(
+            engine.frame_parts(single).unwrap().corner_mesh().unwrap(),
+            None
+        );
+        let mesh = (engine.frame_parts(view.clone()).unwrap().corner_mesh())
+            .unwrap()
+            .expect("a view's frame has a corner mesh");
+        assert_eq!(engine.set_ups(), 0, "no frame was set up for it");
+        let corners = mesh.decode().unwrap();
+        let mut parts: Vec<u32> = corners.iter().map(|m| m.triangle).collect();
+        parts.sort_unstable();
+        let mut all = reflectors.clone();
+        all.sort_unstable();
+        assert_eq!(parts, all);
+
+        let frame = engine.start_frame(view).unwrap();
+        let package = Package {
+            id: 1,
+            job: JobId(1),
+            frame: 0,
+            triangles: reflectors.clone(),
+            whole: None,
+        };
+        let stop = Stop::with_budget(u64::MAX);
+        let preview = frame.run_stage(&package, 0, &mut None, 1.0, &stop).unwrap();
+        let sent = preview
+            .mesh
+            .expect("a preview result has its meshes")
+            .decode()
+            .unwrap();
+        assert!(sent.len() > 10, "{} triangles own pixels", sent.len());
+        for part in &sent {
+            let corner = corners
+                .iter()
+                .find(|m| m.triangle == part.triangle)
+                .unwrap();
+            assert_eq!(corner, part, "triangle {}", part.triangle);
+        }
     }
 }

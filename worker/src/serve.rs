@@ -7,11 +7,11 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Duration;
 
-use tokio::sync::watch;
+use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 use tracing::{debug, warn};
-use vtfarm_proto::{Message, PackageId, PackageResult, SceneData, SceneHash};
+use vtfarm_proto::{Message, PackageId, PackageResult, SceneData, SceneHash, WireMesh};
 use vtfarm_scene::Scene;
 use vtfarm_transport::Link;
 use vtfarm_vertex::{ProgressivePackage, Stop};
@@ -124,6 +124,8 @@ pub async fn serve(
     let mut session = WorkerSession::new(Duration::ZERO);
     let mut frames = PreparedFrames::default();
     let mut preparing: Option<Preparing> = None;
+    // The corner mesh of the frame being prepared, when it is a view's.
+    let mut corner_mesh: Option<(FrameKey, oneshot::Receiver<WireMesh>)> = None;
     let mut running: Option<Running> = None;
     let mut scene_work: Option<SceneWork> = None;
     let mut waiting: VecDeque<Message> = VecDeque::new();
@@ -162,14 +164,21 @@ pub async fn serve(
                 Task::PrepareFrame(frame_start) => {
                     let key = (frame_start.job, frame_start.frame);
                     match engine.frame_parts(frame_start) {
-                        Ok(parts) => {
+                        Ok(mut parts) => {
                             // The renderer (a new scene's BVH) and the ID
                             // buffers on a blocking thread, so that heartbeats
                             // and a finished package of an older frame go out
-                            // meanwhile.
-                            let task = tokio::task::spawn_blocking(move || parts.build());
+                            // meanwhile; a view's corner mesh first.
+                            let (mesh_tx, mesh_rx) = oneshot::channel();
+                            let task = tokio::task::spawn_blocking(move || {
+                                if let Some(mesh) = parts.corner_mesh()? {
+                                    let _ = mesh_tx.send(mesh);
+                                }
+                                parts.build()
+                            });
                             // The session prepares one frame at a time.
                             preparing = Some((key, task));
+                            corner_mesh = Some((key, mesh_rx));
                         }
                         Err(e) => session.frame_prepared(start.elapsed(), key, Err(e)),
                     }
@@ -258,8 +267,21 @@ pub async fn serve(
                     progress.insert(id, staged);
                 }
             }
+            traced = async { (&mut corner_mesh.as_mut().expect("guarded by the select condition").1).await }, if corner_mesh.is_some() => {
+                let (key, _) = corner_mesh.take().expect("guarded by the select condition");
+                // No mesh (not a view's frame, or its set-up failed): nothing to send.
+                if let Ok(mesh) = traced {
+                    session.corner_mesh_traced(start.elapsed(), key, mesh);
+                }
+            }
             built = async { (&mut preparing.as_mut().expect("guarded by the select condition").1).await }, if preparing.is_some() => {
                 let (key, _) = preparing.take().expect("guarded by the select condition");
+                // A corner mesh not taken yet goes out before the frame is ready.
+                if let Some((mesh_key, mut traced)) = corner_mesh.take() {
+                    if let Ok(mesh) = traced.try_recv() {
+                        session.corner_mesh_traced(start.elapsed(), mesh_key, mesh);
+                    }
+                }
                 let outcome = match built {
                     Ok(Ok(active)) => {
                         engine.keep_renderer(&active);

@@ -41,7 +41,7 @@ use std::time::Duration;
 use tracing::{info, warn};
 use vtfarm_proto::{
     FrameStart, JobId, KeptFrames, Message, Package, PackageFailed, PackageId, PackageResult,
-    SceneData, SceneHash,
+    SceneData, SceneHash, WireMesh,
 };
 
 use crate::engine::{FrameError, PackageError};
@@ -109,7 +109,8 @@ struct JobOffer {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Task {
     /// Build the frame's ID buffers (and renderer); answer with
-    /// [`WorkerSession::frame_prepared`].
+    /// [`WorkerSession::frame_prepared`], after
+    /// [`WorkerSession::corner_mesh_traced`] for a view's frame.
     PrepareFrame(FrameStart),
     /// Run stage `stage` of the package (0 for a frame of one stage; the
     /// driver keeps a progressive package's progress between its stages
@@ -374,6 +375,17 @@ impl WorkerSession {
         }
         self.prepare_next();
         self.advance();
+    }
+
+    /// The driver traced the corner mesh of the frame it is preparing
+    /// (`FrameParts::corner_mesh`): it goes to the master at once, ahead of
+    /// the set-up, unless the frame was let go meanwhile.
+    pub fn corner_mesh_traced(&mut self, now: Duration, key: FrameKey, mesh: WireMesh) {
+        self.now = now;
+        if self.preparing == Some(key) {
+            let (job, frame) = key;
+            (self.outbox).push_back(Message::FrameMesh { job, frame, mesh });
+        }
     }
 
     /// Lets go of the frames (announced, waiting for their scene or

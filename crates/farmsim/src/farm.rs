@@ -17,7 +17,7 @@ use vtfarm_master_core::{
 };
 use vtfarm_proto::{
     FrameDone, FrameKey, FrameStart, FrameStats, JobRow, JobScene, Message, Package, PackageResult,
-    ResultPixels, SceneData, WireJob, WireStudy, encoded_len,
+    ResultPixels, SceneData, WireJob, WireMesh, WireStudy, encoded_len,
 };
 use vtfarm_worker::engine::{FrameError, PackageError};
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
@@ -42,6 +42,12 @@ pub trait CostModel {
         worker: &mut Self::Worker,
         start: FrameStart,
     ) -> (Result<(), FrameError>, f64);
+
+    /// The corner mesh a worker sends ahead of setting up frame `start`
+    /// (`FrameParts::corner_mesh`: a view's frame), if the model makes one.
+    fn corner_mesh(&mut self, _worker: &mut Self::Worker, _start: &FrameStart) -> Option<WireMesh> {
+        None
+    }
 
     /// Runs stage `stage` of a package of a prepared frame (0 unless the
     /// frame is progressive; see `vtfarm_worker::Task::RunPackage`).
@@ -1246,17 +1252,18 @@ impl<M: CostModel> Farm<M> {
         while let Some(task) = session.poll_task() {
             tasks.push(task);
         }
-        let mut messages = Vec::new();
-        while let Some(message) = session.poll_message() {
-            messages.push(message);
-        }
-        let end = session.poll_end();
         for task in tasks {
             let worker = &mut self.workers[w];
             let (speed, epoch) = (worker.spec.speed, worker.epoch);
             match task {
                 Task::PrepareFrame(start) => {
                     let key = (start.job, start.frame);
+                    // Traced before the set-up, it goes out with this pump's messages.
+                    if let Some(mesh) = self.model.corner_mesh(&mut worker.state, &start) {
+                        if let Some(session) = worker.session.as_mut() {
+                            session.corner_mesh_traced(self.now, key, mesh);
+                        }
+                    }
                     let (outcome, seconds) = self.model.prepare_frame(&mut worker.state, start);
                     let work = Work::Setup {
                         worker: w,
@@ -1289,6 +1296,14 @@ impl<M: CostModel> Farm<M> {
                 }
             }
         }
+        let Some(session) = self.workers[w].session.as_mut() else {
+            return;
+        };
+        let mut messages = Vec::new();
+        while let Some(message) = session.poll_message() {
+            messages.push(message);
+        }
+        let end = session.poll_end();
         for message in messages {
             let worker = &mut self.workers[w];
             if worker.partitioned {

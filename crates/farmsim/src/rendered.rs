@@ -12,7 +12,7 @@ use vtfarm_proto::JobId;
 
 use vtfarm_master_core::FarmRules;
 use vtfarm_proto::{
-    FrameKey, FrameStart, Package, PackageId, SceneData, SceneHash, WirePackageStats,
+    FrameKey, FrameStart, Package, PackageId, SceneData, SceneHash, WireMesh, WirePackageStats,
 };
 use vtfarm_vertex::{ProgressivePackage, Stop};
 use vtfarm_worker::Engine;
@@ -89,6 +89,16 @@ impl CostModel for Rendered {
     ) -> (Result<(), FrameError>, f64) {
         let outcome = worker.engine.start_frame(start);
         (outcome.map(|frame| worker.frames.insert(frame)), 0.0)
+    }
+
+    fn corner_mesh(
+        &mut self,
+        worker: &mut RenderingWorker,
+        start: &FrameStart,
+    ) -> Option<WireMesh> {
+        let mut parts = worker.engine.frame_parts(start.clone()).ok()?;
+        // A frame that cannot be set up fails in `prepare_frame`.
+        parts.corner_mesh().ok().flatten()
     }
 
     fn retain_frames(&mut self, worker: &mut RenderingWorker, keeps: &dyn Fn(FrameKey) -> bool) {

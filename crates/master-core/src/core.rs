@@ -296,6 +296,11 @@ impl MasterCore {
                 self.record_package(conn, &result);
                 self.package_result(now, conn, result, result_bytes)
             }
+            Message::FrameMesh { job, frame, mesh } => {
+                if let Err(e) = self.views.corner_mesh_arrived(job, frame, &mesh, now) {
+                    warn!(worker = %self.peers.name(conn), %job, "corner mesh left out: {e}");
+                }
+            }
             Message::PackageFailed(failed) => {
                 warn!(worker = %self.peers.name(conn), package = failed.id, "package failed: {}", failed.error);
                 match (self.scheduler).package_failed(

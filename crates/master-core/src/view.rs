@@ -105,6 +105,9 @@ pub struct CurrentView {
     /// Stages finished so far.
     pub stages_done: usize,
     pub stages_total: usize,
+    /// Stages whose messages went out ([`Views::stream`]): the preview's
+    /// may go before the stage finishes ([`Views::corner_mesh_arrived`]).
+    streamed: usize,
 }
 
 /// A finished stage of a view, with its glare figures once computed.
@@ -185,6 +188,28 @@ pub struct StageStream {
     /// When the core queued the move.
     moved: Duration,
     pub messages: Vec<StreamedStage>,
+}
+
+impl StageStream {
+    /// Stage `quality`'s message, made at `now`.
+    fn push(&mut self, quality: Quality, bytes: Vec<u8>, now: Duration) {
+        let after = now.saturating_sub(self.moved);
+        let bytes = bytes.into();
+        (self.messages).push(StreamedStage {
+            quality,
+            bytes,
+            after,
+        });
+    }
+}
+
+/// Why a worker's corner mesh was not streamed.
+#[derive(Debug, thiserror::Error)]
+pub enum CornerMeshRefused {
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    #[error("it has {parts} parts for the view's {reflectors} reflector triangles")]
+    NotTheReflectors { parts: usize, reflectors: usize },
 }
 
 /// One stage message and its stage.
@@ -293,6 +318,7 @@ impl Views {
             stages_total: planned.stages.len(),
             stages: planned.stages,
             stages_done: 0,
+            streamed: 0,
         });
     }
 
@@ -331,6 +357,10 @@ impl Views {
         let generation = current.generation;
         let eye = Vec3::from(current.eye);
         for (s, &quality) in (first..).zip(&reached) {
+            if s < current.streamed {
+                continue;
+            }
+            current.streamed = s + 1;
             let header = StageHeader {
                 generation,
                 quality,
@@ -345,13 +375,7 @@ impl Views {
                 encode_overlay(&header, &Overlay::of(image))
             };
             self.meshes.retain(|&(m, _), _| m > s);
-            let bytes = bytes.into();
-            let after = now.saturating_sub(self.stream.moved);
-            (self.stream.messages).push(StreamedStage {
-                quality,
-                bytes,
-                after,
-            });
+            self.stream.push(quality, bytes, now);
         }
         let frame = Arc::new(match self.spare.take() {
             Some(mut spare) => {
@@ -399,7 +423,7 @@ impl Views {
         let Some(current) = self.current.as_ref().filter(|c| c.job == job) else {
             return Ok(());
         };
-        if stage < current.stages_done {
+        if stage < current.streamed {
             return Ok(());
         }
         for part in mesh.decode()? {
@@ -407,6 +431,53 @@ impl Views {
                 self.meshes.insert((stage, part.triangle), part);
             }
         }
+        Ok(())
+    }
+
+    /// A worker's corner mesh of frame `frame` of farm job `job`
+    /// (`Message::FrameMesh`): if it is the current move's, whose preview
+    /// has not gone out, and has one part for each of the view's reflector
+    /// triangles, it goes out at once as the move's `preview` message; the
+    /// stage's results then only make its image. A mesh of an older move
+    /// (or a second worker's) is dropped.
+    pub(crate) fn corner_mesh_arrived(
+        &mut self,
+        job: JobId,
+        frame: u32,
+        mesh: &WireMesh,
+        now: Duration,
+    ) -> Result<(), CornerMeshRefused> {
+        let Some(current) = self.current.as_mut().filter(|c| c.job == job && frame == 0) else {
+            return Ok(());
+        };
+        if current.streamed > 0 || current.stages.first() != Some(&Quality::Preview) {
+            return Ok(());
+        }
+        let source = (self.sources.iter()).find(|(id, _)| *id == current.source);
+        let Some((_, source)) = source else {
+            return Ok(());
+        };
+        let meshes = mesh.decode()?;
+        let mut covered: Vec<u32> = meshes.iter().map(|m| m.triangle).collect();
+        covered.sort_unstable();
+        let mut reflectors = source.reflectors.clone();
+        reflectors.sort_unstable();
+        reflectors.dedup();
+        if covered != reflectors {
+            return Err(CornerMeshRefused::NotTheReflectors {
+                parts: covered.len(),
+                reflectors: reflectors.len(),
+            });
+        }
+        current.streamed = 1;
+        let header = StageHeader {
+            generation: current.generation,
+            quality: Quality::Preview,
+            eye: Vec3::from(current.eye),
+        };
+        self.meshes.retain(|&(s, _), _| s > 0);
+        self.stream
+            .push(Quality::Preview, encode_mesh(&header, &meshes), now);
         Ok(())
     }
 
@@ -515,9 +586,105 @@ mod tests {
                 stages_total: stages.len(),
                 stages,
                 stages_done: 0,
+                streamed: 0,
             }),
             ..Views::default()
         }
+    }
+
+    /// [`rendering`] with job 1 as its source, reflector triangles 3 and 5.
+    fn rendering_with_source() -> Views {
+        let source = ViewSource {
+            name: "source".into(),
+            scene_hash: [0; 32],
+            scene: Arc::new(Scene::default()),
+            reflectors: vec![5, 3],
+            method: MethodKind::VertexTracing,
+            setup: FrameSetup {
+                camera: vtfarm_scene::Camera {
+                    eye: Vec3::ZERO,
+                    target: Vec3::Z,
+                    up: Vec3::Y,
+                    fov_y_deg: 60.0,
+                    width: 8,
+                    height: 8,
+                },
+                lighting: Default::default(),
+                trace: Default::default(),
+                vertex: Default::default(),
+            },
+        };
+        let mut views = rendering();
+        views.sources.push_back((JobId(1), source));
+        views
+    }
+
+    /// A corner mesh with a part for each of `triangles`.
+    fn corners(triangles: &[u32]) -> WireMesh {
+        let meshes: Vec<StageMesh> = (triangles.iter())
+            .map(|&triangle| StageMesh {
+                triangle,
+                positions: vec![Vec3::X, Vec3::Y, Vec3::Z],
+                samples: vec![
+                    vtfarm_vertex::PixelValue {
+                        index: 0,
+                        color: Vec3::ONE,
+                        reflected: Vec3::ONE,
+                        transmitted: Vec3::ZERO,
+                        object: 2,
+                    };
+                    3
+                ],
+                faces: vec![[0, 1, 2]],
+            })
+            .collect();
+        WireMesh::from(&meshes[..])
+    }
+
+    /// The current move's corner mesh goes out at once as its preview, once;
+    /// one of another job or that misses a reflector triangle does not; the
+    /// preview stage's end sends nothing more, the refine its own message.
+    #[test]
+    fn the_moves_corner_mesh_is_its_preview_message_once() {
+        let scene = Arc::new(Scene::default());
+        let mut views = rendering_with_source();
+        let qualities = |views: &Views| -> Vec<Quality> {
+            (views.stream().messages.iter())
+                .map(|m| m.quality)
+                .collect()
+        };
+        let ms = Duration::from_millis;
+        views
+            .corner_mesh_arrived(JobId(8), 0, &corners(&[3, 5]), ms(1))
+            .unwrap();
+        assert_eq!(qualities(&views), []);
+        let refused = views.corner_mesh_arrived(JobId(7), 0, &corners(&[3]), ms(2));
+        assert!(
+            matches!(
+                refused,
+                Err(CornerMeshRefused::NotTheReflectors {
+                    parts: 1,
+                    reflectors: 2
+                })
+            ),
+            "{refused:?}"
+        );
+        assert_eq!(qualities(&views), []);
+        views
+            .corner_mesh_arrived(JobId(7), 0, &corners(&[5, 3]), ms(3))
+            .unwrap();
+        assert_eq!(qualities(&views), [Quality::Preview]);
+        assert_eq!(views.stream().messages[0].after, ms(3));
+        let decoded = crate::stream::decode(&views.stream().messages[0].bytes).unwrap();
+        assert_eq!(decoded.header().generation, 1);
+        // A second worker's mesh.
+        views
+            .corner_mesh_arrived(JobId(7), 0, &corners(&[3, 5]), ms(4))
+            .unwrap();
+        views.stage_finished(JobId(7), 0, &frame(0.25), &scene, ms(5));
+        assert_eq!(qualities(&views), [Quality::Preview]);
+        views.stage_finished(JobId(7), 1, &frame(0.5), &scene, ms(6));
+        assert_eq!(qualities(&views), [Quality::Preview, Quality::Refine]);
     }
 
     /// A 6x4 frame in `shade`, its components over a 3x2 rectangle.

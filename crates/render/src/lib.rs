@@ -25,7 +25,8 @@ use vtfarm_trace::{InvalidScene, SceneBvh, Tracer};
 use vtfarm_vertex::{
     Behind, FinishedFace, Frame, FrameImage, GlassPass, IdBufferCache, PackageOptions,
     PackageStats, PhaseTimes, PixelRect, PixelValue, ProgressivePackage, Quality, ShadowCache,
-    SparseBitmap, StageError, VertexOwners, VertexSettings, reflector_bounds, trace_package_into,
+    SparseBitmap, StageError, StageMesh, VertexOwners, VertexSettings, reflector_bounds,
+    trace_package_into,
 };
 
 /// How to cut and run the reflector work.
@@ -338,6 +339,20 @@ impl Renderer {
             setup.vertex.transmission,
             GlassPass::Upfront,
             &self.shadows,
+        )
+    }
+
+    /// Every reflector triangle's `preview` mesh for `setup`'s eye, with
+    /// no set-up of the frame ([`vtfarm_vertex::corner_meshes`]): what the
+    /// interactive view draws first, while the frame is being set up.
+    pub fn corner_meshes(&self, setup: &FrameSetup) -> Vec<StageMesh> {
+        let tracer = self.tracer(setup);
+        vtfarm_vertex::corner_meshes(
+            tracer,
+            &setup.camera,
+            &setup.vertex,
+            &self.owners,
+            &self.reflectors,
         )
     }
 

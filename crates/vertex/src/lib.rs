@@ -188,8 +188,8 @@ mod thin;
 pub use composite::{Components, FrameImage, draw_wireframe};
 pub use package::{
     FinishedFace, PackageOptions, PackageResult, PackageStats, PhaseTimes, PixelBits, PixelValue,
-    ProgressivePackage, SparseBitmap, StageError, StageMesh, TracedPackage, trace_package,
-    trace_package_into,
+    ProgressivePackage, SparseBitmap, StageError, StageMesh, TracedPackage, corner_meshes,
+    trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};
 pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache};
@@ -222,6 +222,31 @@ impl VertexOwners {
     /// The owner of vertex `v`.
     pub(crate) fn of(&self, v: u32) -> TriangleId {
         self.0[v as usize]
+    }
+}
+
+/// A reflector vertex seen from `eye` as a surface point and the eye ray's
+/// direction.
+fn vertex_point(
+    eye: Vec3,
+    triangle: TriangleId,
+    position: Vec3,
+    normal: Vec3,
+) -> (SurfacePoint, Vec3) {
+    let incoming = (position - eye).normalize();
+    let point = SurfacePoint {
+        position,
+        normal,
+        triangle,
+    };
+    (point, incoming)
+}
+
+/// Which secondary rays a vertex-traced sample's first surface spawns.
+fn vertex_rays(transmission: Transmission) -> Rays {
+    match transmission {
+        Transmission::Raster => Rays::ReflectionOnly,
+        Transmission::Traced => Rays::Both,
     }
 }
 
@@ -387,28 +412,17 @@ impl Frame<'_> {
         self.tracer.shade_points(&points, self.rays())
     }
 
-    /// A reflector vertex as a surface point and the eye ray's direction.
     fn vertex_point(
         &self,
         triangle: TriangleId,
         position: Vec3,
         normal: Vec3,
     ) -> (SurfacePoint, Vec3) {
-        let incoming = (position - self.camera.eye).normalize();
-        let point = SurfacePoint {
-            position,
-            normal,
-            triangle,
-        };
-        (point, incoming)
+        vertex_point(self.camera.eye, triangle, position, normal)
     }
 
-    /// Which secondary rays a vertex-traced sample's first surface spawns.
     fn rays(&self) -> Rays {
-        match self.settings.transmission {
-            Transmission::Raster => Rays::ReflectionOnly,
-            Transmission::Traced => Rays::Both,
-        }
+        vertex_rays(self.settings.transmission)
     }
 
     /// Traces `pixels`, each (triangle, x, y) on its triangle (see

@@ -15,12 +15,12 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_raster::{IdBuffer, PixelRect};
-use vtfarm_scene::{NONE, ScreenPoint, TriangleId};
-use vtfarm_trace::Sample;
+use vtfarm_scene::{Camera, NONE, Projector, ScreenPoint, TriangleId};
+use vtfarm_trace::{Sample, Tracer};
 
 use crate::fill::{Filled, Planes, TracedPixels, TrianglePlan, fill};
 use crate::refine::{MeshVertex, TriangleMesh};
-use crate::{Frame, FrameImage, Quality, VertexSettings};
+use crate::{Frame, FrameImage, Quality, VertexOwners, VertexSettings, vertex_point, vertex_rays};
 
 /// What the caller wants besides pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -640,6 +640,69 @@ impl StageMesh {
             faces: mesh.faces().filter(projected).map(|f| f.vertices).collect(),
         }
     }
+}
+
+/// The `preview` meshes of `triangles` before any frame is set up: each
+/// triangle's corners traced from `camera`'s eye the way a package traces
+/// them (a shared corner as its owner's point, the same rays), hidden or
+/// not, with the triangle's face when every corner lies in front of the
+/// eye. A package's `preview` stage keeps the meshes of the triangles that
+/// own pixels: those are among these, bit for bit. Whoever draws them
+/// hides the rest with a depth test. In `triangles`' order.
+pub fn corner_meshes(
+    tracer: Tracer<'_>,
+    camera: &Camera,
+    settings: &VertexSettings,
+    owners: &VertexOwners,
+    triangles: &[TriangleId],
+) -> Vec<StageMesh> {
+    let scene = tracer.bvh.scene();
+    let mut corner_index = HashMap::new();
+    let mut corners = Vec::new();
+    let corner_slots: Vec<[usize; 3]> = (triangles.iter())
+        .map(|&t| {
+            scene.triangles[t as usize].vertices.map(|v| {
+                *corner_index.entry(v).or_insert_with(|| {
+                    corners.push((owners.of(v), v));
+                    corners.len() - 1
+                })
+            })
+        })
+        .collect();
+    let rays = vertex_rays(settings.transmission);
+    let samples: Vec<Sample> = corners
+        .par_chunks(VERTEX_BATCH)
+        .flat_map_iter(|chunk| {
+            let points: Vec<_> = (chunk.iter())
+                .map(|&(t, v)| {
+                    let v = v as usize;
+                    vertex_point(camera.eye, t, scene.positions[v], scene.normals[v])
+                })
+                .collect();
+            tracer.shade_points(&points, rays)
+        })
+        .collect();
+    let projector = Projector::new(camera);
+    (triangles.iter().zip(&corner_slots))
+        .map(|(&t, slots)| {
+            let positions: Vec<Vec3> = (scene.triangles[t as usize].vertices.iter())
+                .map(|&v| scene.positions[v as usize])
+                .collect();
+            let in_front = positions.iter().all(|&p| projector.project(p).is_some());
+            StageMesh {
+                triangle: t,
+                samples: slots
+                    .map(|k| PixelValue::from_sample(0, &samples[k]))
+                    .to_vec(),
+                positions,
+                faces: if in_front {
+                    vec![[0, 1, 2]]
+                } else {
+                    Vec::new()
+                },
+            }
+        })
+        .collect()
 }
 
 /// A package from scratch: one stage of a [`ProgressivePackage`].

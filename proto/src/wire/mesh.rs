@@ -9,7 +9,8 @@ use vtfarm_vertex::{PixelValue, StageMesh};
 use crate::wire::WireError;
 
 /// The refinement meshes of a package's triangles after one stage, one
-/// part per triangle that owns pixels.
+/// part per triangle that owns pixels (a frame's corner mesh: one per
+/// reflector triangle).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct WireMesh {
     pub parts: Vec<WireMeshPart>,

@@ -519,6 +519,31 @@ fn a_progressive_frames_packages_run_the_lowest_stage_first() {
     );
 }
 
+/// A view frame's corner mesh, traced while the frame is set up, goes to
+/// the master at once as `FrameMesh`; one that comes after the frame is
+/// ready, or for a frame not being prepared, is dropped.
+#[test]
+fn a_corner_mesh_traced_during_the_set_up_goes_out_at_once() {
+    let (mut s, _) = preparing_session();
+    let mesh = vtfarm_proto::WireMesh::default();
+    s.corner_mesh_traced(Duration::ZERO, (JobId(2), 0), mesh.clone());
+    assert_eq!(messages(&mut s), Vec::new(), "not a frame being prepared");
+    s.corner_mesh_traced(Duration::ZERO, (JobId(1), 0), mesh.clone());
+    let sent = Message::FrameMesh {
+        job: JobId(1),
+        frame: 0,
+        mesh: mesh.clone(),
+    };
+    assert_eq!(messages(&mut s), vec![sent]);
+    s.frame_prepared(Duration::ZERO, (JobId(1), 0), Ok(()));
+    s.corner_mesh_traced(Duration::ZERO, (JobId(1), 0), mesh);
+    let late = messages(&mut s);
+    assert!(
+        !late.iter().any(|m| matches!(m, Message::FrameMesh { .. })),
+        "{late:?}"
+    );
+}
+
 /// Runs one package `id` of frame `key` from its `FrameStart` to its
 /// result (the frame prepared on the way).
 fn run_frame(s: &mut WorkerSession, scenes: &mut Scenes, id: u64, (job, frame): (u64, u32)) {
