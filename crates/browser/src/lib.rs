@@ -5,11 +5,13 @@
 //! [`Browser::start`] runs Chromium (`--remote-debugging-port=0`), reads
 //! the DevTools endpoint it prints on stderr and connects to the page
 //! target of its first tab; [`Browser::call`], [`Browser::event`] and
-//! [`Browser::eval`] speak the protocol on that page. Every wait is bounded
+//! [`Browser::eval`] speak the protocol on that page, and
+//! [`Browser::send`] with [`Browser::reply`] send commands without waiting
+//! for each reply (input at its own pace, as a user gives it). Every wait is bounded
 //! by the caller's [`Options::timeout`], and Chromium is killed when the
 //! [`Browser`] is dropped, whichever way its owner ends.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -198,6 +200,17 @@ impl Browser {
         self.page.call(method, params).await
     }
 
+    /// Sends a DevTools command to the page without waiting for its reply;
+    /// [`Browser::reply`] waits for it.
+    pub async fn send(&mut self, method: &str, params: Value) -> Result<Sent, Error> {
+        self.page.send(method, params).await
+    }
+
+    /// The result of a command [`Browser::send`] sent.
+    pub async fn reply(&mut self, sent: Sent) -> Result<Value, Error> {
+        self.page.reply(sent).await
+    }
+
     /// Waits for the DevTools event `method` (one that came while waiting
     /// for something else counts) and returns its parameters.
     pub async fn event(&mut self, method: &str) -> Result<Value, Error> {
@@ -256,11 +269,23 @@ async fn page_target(browser_url: &str, timeout: Duration) -> Result<String, Err
     }
 }
 
-/// One DevTools WebSocket: numbered commands, and the events that came
-/// while waiting for something else.
+/// A command sent and not yet answered (see [`Browser::send`]).
+#[derive(Debug)]
+#[must_use = "the reply is waited for with Browser::reply"]
+pub struct Sent {
+    id: u64,
+    method: String,
+}
+
+/// One DevTools WebSocket: numbered commands, the replies to commands sent
+/// and not yet waited for, and the events that came while waiting for
+/// something else.
 struct Connection {
     socket: WebSocketStream<MaybeTlsStream<TcpStream>>,
     next_id: u64,
+    /// Commands sent whose replies are kept until asked for.
+    unanswered: HashSet<u64>,
+    replies: HashMap<u64, Value>,
     events: VecDeque<Value>,
     timeout: Duration,
 }
@@ -276,12 +301,19 @@ impl Connection {
         Ok(Connection {
             socket,
             next_id: 1,
+            unanswered: HashSet::new(),
+            replies: HashMap::new(),
             events: VecDeque::new(),
             timeout,
         })
     }
 
     async fn call(&mut self, method: &str, params: Value) -> Result<Value, Error> {
+        let sent = self.send(method, params).await?;
+        self.reply(sent).await
+    }
+
+    async fn send(&mut self, method: &str, params: Value) -> Result<Sent, Error> {
         let id = self.next_id;
         self.next_id += 1;
         let command = json!({ "id": id, "method": method, "params": params });
@@ -290,12 +322,30 @@ impl Connection {
         within(self.timeout, &what, send)
             .await?
             .map_err(|e| Error::Socket(Box::new(e)))?;
-        let timeout = self.timeout;
-        let reply = self.next_message(|v| v["id"] == id);
-        let mut reply = within(timeout, &format!("the reply to {method}"), reply).await??;
+        self.unanswered.insert(id);
+        Ok(Sent {
+            id,
+            method: method.to_owned(),
+        })
+    }
+
+    async fn reply(&mut self, sent: Sent) -> Result<Value, Error> {
+        let Sent { id, method } = sent;
+        let reply = match self.replies.remove(&id) {
+            Some(reply) => Ok(reply),
+            None => {
+                let timeout = self.timeout;
+                let reply = self.next_message(|v| v["id"] == id);
+                let what = format!("the reply to {method}");
+                within(timeout, &what, reply).await.and_then(|r| r)
+            }
+        };
+        // Answered or given up: a late reply is not kept.
+        self.unanswered.remove(&id);
+        let mut reply = reply?;
         if let Some(error) = reply.get("error") {
             return Err(Error::Command {
-                method: method.to_owned(),
+                method,
                 error: error.clone(),
             });
         }
@@ -313,7 +363,8 @@ impl Connection {
         Ok(event["params"].take())
     }
 
-    /// The next message that is `wanted`; events on the way are kept.
+    /// The next message that is `wanted`; events and the replies to
+    /// commands sent on the way are kept.
     async fn next_message(&mut self, wanted: impl Fn(&Value) -> bool) -> Result<Value, Error> {
         while let Some(message) = self.socket.next().await {
             let Message::Text(text) = message.map_err(|e| Error::Socket(Box::new(e)))? else {
@@ -323,7 +374,12 @@ impl Connection {
             if wanted(&value) {
                 return Ok(value);
             }
-            if value.get("method").is_some() {
+            if let Some(id) = value["id"]
+                .as_u64()
+                .filter(|id| self.unanswered.contains(id))
+            {
+                self.replies.insert(id, value);
+            } else if value.get("method").is_some() {
                 if self.events.len() == EVENTS_KEPT {
                     self.events.pop_front();
                 }

@@ -291,9 +291,10 @@ impl Page {
     }
 
     /// Drags over the view's canvas at [`DRAG_MOVES_PER_SECOND`] for
-    /// [`DRAG_DURATION`], each mouse move at its time on the clock (late
-    /// ones go at once); answers the page's clock at the press and at the
-    /// release, and the mouse moves made.
+    /// [`DRAG_DURATION`], each mouse event sent at its time on the clock
+    /// whether or not the page has handled the last (as a mouse gives
+    /// them; a busy page's input queue coalesces them); answers the drag's
+    /// press and release on the page's clock, and the mouse moves made.
     async fn drag(&mut self) -> Result<(f64, f64, usize)> {
         let centre = self
             .eval(
@@ -310,45 +311,59 @@ impl Page {
         let mouse = |kind: &str, x: f64| json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 });
         let moves = (DRAG_DURATION.as_secs_f64() * f64::from(DRAG_MOVES_PER_SECOND)) as usize;
         let period = Duration::from_secs(1) / DRAG_MOVES_PER_SECOND;
-        let now = "performance.now()";
-        let start = self.eval(now).await?;
-        self.call("Input.dispatchMouseEvent", mouse("mousePressed", x))
-            .await?;
+        // The page's clock at a moment of this one's: the drag's bounds on
+        // the page's clock follow from this one's, whenever the page gets
+        // to the events.
+        let page_clock = self.eval("performance.now()").await?;
+        let page_clock = page_clock.as_f64().context("performance.now()")?;
         let clock = tokio::time::Instant::now();
+        let on_page = |at: tokio::time::Instant| page_clock + (at - clock).as_secs_f64() * 1e3;
+        let mut sent = Vec::with_capacity(moves + 2);
+        let press = tokio::time::Instant::now();
+        let event = mouse("mousePressed", x);
+        sent.push(self.browser.send("Input.dispatchMouseEvent", event).await?);
         let mut to = x;
         for k in 1..=moves {
-            tokio::time::sleep_until(clock + period * k as u32).await;
+            tokio::time::sleep_until(press + period * k as u32).await;
             to += if k <= moves / 2 {
                 DRAG_PIXELS
             } else {
                 -DRAG_PIXELS
             };
-            self.call("Input.dispatchMouseEvent", mouse("mouseMoved", to))
-                .await?;
+            let event = mouse("mouseMoved", to);
+            sent.push(self.browser.send("Input.dispatchMouseEvent", event).await?);
         }
-        self.call("Input.dispatchMouseEvent", mouse("mouseReleased", to))
-            .await?;
-        let end = self.eval(now).await?;
-        let ms = |v: Value| v.as_f64().context("performance.now() is not a number");
-        Ok((ms(start)?, ms(end)?, moves))
+        let release = tokio::time::Instant::now();
+        let event = mouse("mouseReleased", to);
+        sent.push(self.browser.send("Input.dispatchMouseEvent", event).await?);
+        for sent in sent {
+            (self.browser.reply(sent).await).context("DevTools Input.dispatchMouseEvent")?;
+        }
+        Ok((on_page(press), on_page(release), moves))
     }
 
     /// Waits until the page's newest move has drawn its `full` stage and
     /// sent nothing newer for [`MOVE_PAUSE`]: every move of the drag has
-    /// its reply, so its timing is listed.
+    /// its reply, so its timing is listed. (A move made newer on its way
+    /// never draws its `full`: the newest is waited for, whichever it is.)
     async fn settled(&mut self) -> Result<()> {
         let deadline = tokio::time::Instant::now() + Duration::from_millis(self.wait_ms as u64);
         let count = "window.vtfarm.viewTimings.length";
+        let newest_full =
+            "((t) => t.length > 0 && t[t.length - 1].full !== null)(window.vtfarm.viewTimings)";
         loop {
+            let what = "the newest move's full stage drawn after the drag";
+            (self.until(newest_full, "{ timings: window.vtfarm.viewTimings }", what)).await?;
             let before = self.eval(count).await?;
-            let last = before.as_u64().context("the page's viewTimings")? as usize;
-            self.full_drawn(last.saturating_sub(1)).await?;
             tokio::time::sleep(MOVE_PAUSE).await;
-            if self.eval(count).await? == before {
+            if self.eval(count).await? == before && self.eval(newest_full).await? == true {
                 return Ok(());
             }
             if tokio::time::Instant::now() > deadline {
-                bail!("the page kept sending moves after the drag");
+                bail!(
+                    "the page kept sending moves for {} s after the drag",
+                    self.wait_ms as f64 / 1e3
+                );
             }
         }
     }
