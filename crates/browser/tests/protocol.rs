@@ -20,6 +20,8 @@ use vtfarm_browser::{Browser, Error, Graphics, Options};
 async fn accept(listener: &TcpListener) -> (WebSocketStream<TcpStream>, String) {
     let (stream, _) = listener.accept().await.unwrap();
     let mut path = String::new();
+    // The error type is tungstenite's callback's.
+    #[allow(clippy::result_large_err)]
     let callback = |request: &Request, response: Response| {
         path = request.uri().path().to_owned();
         Ok(response)
