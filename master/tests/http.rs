@@ -22,6 +22,7 @@ use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
 use tower::ServiceExt;
+use vtfarm_browser::{Browser, Graphics, Options};
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_master::FarmRules;
 use vtfarm_master::stream::StageMessage;
@@ -893,182 +894,35 @@ async fn a_browser_off_loopback_logs_in_once_and_keeps_a_cookie() {
     assert_eq!(bearer.status(), StatusCode::OK);
 }
 
-/// Headless Chromium driven over the DevTools protocol, with a fresh profile.
-struct Browser {
-    _child: KillOnDrop,
-    _profile: tempfile::TempDir,
-    socket: tokio_tungstenite::WebSocketStream<
-        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
-    >,
-    next_id: u64,
-    /// DevTools events that arrived while waiting for a reply.
-    events: Vec<serde_json::Value>,
+/// Headless Chromium (a 1100×900 window) without WebGL: the view falls
+/// back to the master's images. Without Chromium the test fails, unless
+/// the run is not CI's and `VTFARM_ALLOW_NO_BROWSER=1` asks for a run
+/// without the browser (`None`, said aloud).
+async fn start_browser() -> Option<Browser> {
+    start_browser_with(Graphics::NoWebGl).await
 }
 
-impl Browser {
-    /// Starts Chromium without WebGL (the view falls back to the master's
-    /// images). Without Chromium the test fails, unless the run is not
-    /// CI's and `VTFARM_ALLOW_NO_BROWSER=1` asks for a run without the
-    /// browser (`None`, said aloud).
-    async fn start() -> Option<Browser> {
-        Browser::start_with(&["--disable-gpu", "--disable-webgl"]).await
-    }
-
-    /// [`Browser::start`] with WebGL2 on SwiftShader, the software
-    /// rasterizer (the machine's GPU, if any, is not asked for).
-    async fn start_with_webgl() -> Option<Browser> {
-        Browser::start_with(&["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]).await
-    }
-
-    async fn start_with(graphics: &[&str]) -> Option<Browser> {
-        let Ok(path) = which_chromium() else {
-            no_browser();
-            return None;
-        };
-        let profile = tempfile::tempdir().unwrap();
-        let mut child = std::process::Command::new(path)
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--remote-debugging-port=0",
-                "--window-size=1100,900",
-            ])
-            .args(graphics)
-            .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg("about:blank")
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .expect("chromium starts");
-        let stderr = child.stderr.take().unwrap();
-        let child = KillOnDrop(child);
-        // Chromium says where its DevTools endpoint is on stderr; a thread
-        // passes the lines on and keeps draining, so Chromium never blocks.
-        let (lines_tx, mut lines) = tokio::sync::mpsc::unbounded_channel();
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            for line in std::io::BufReader::new(stderr)
-                .lines()
-                .map_while(Result::ok)
-            {
-                let _ = lines_tx.send(line);
-            }
-        });
-        let endpoint = async {
-            while let Some(line) = lines.recv().await {
-                if let Some(url) = line.strip_prefix("DevTools listening on ") {
-                    return url.to_owned();
-                }
-            }
-            panic!("chromium exited without a DevTools endpoint");
-        };
-        let browser_url = tokio::time::timeout(WAIT, endpoint)
-            .await
-            .expect("DevTools endpoint");
-        // The page target of the first tab.
-        let port: u16 = (browser_url.trim_start_matches("ws://127.0.0.1:"))
-            .split('/')
-            .next()
-            .and_then(|p| p.parse().ok())
-            .expect("DevTools port");
-        let list = get(SocketAddr::from(([127, 0, 0, 1], port)), "/json/list");
-        let list = tokio::time::timeout(WAIT, list)
-            .await
-            .expect("DevTools target list");
-        let targets: serde_json::Value = serde_json::from_slice(&list.body).unwrap();
-        let page_url = (targets.as_array().unwrap().iter())
-            .find(|t| t["type"] == "page")
-            .and_then(|t| t["webSocketDebuggerUrl"].as_str())
-            .expect("a page target")
-            .to_owned();
-        let (socket, _) = tokio_tungstenite::connect_async(page_url).await.unwrap();
-        Some(Browser {
-            _child: child,
-            _profile: profile,
-            socket,
-            next_id: 1,
-            events: Vec::new(),
-        })
-    }
-
-    /// Sends a DevTools command and returns its result (bounded wait).
-    async fn call(&mut self, method: &str, params: serde_json::Value) -> serde_json::Value {
-        use futures_util::SinkExt;
-        use tokio_tungstenite::tungstenite::Message as Ws;
-        let id = self.next_id;
-        self.next_id += 1;
-        let command = serde_json::json!({ "id": id, "method": method, "params": params });
-        self.socket
-            .send(Ws::text(command.to_string()))
-            .await
-            .unwrap();
-        let reply = self.next_message(|v| v["id"] == id);
-        let value = tokio::time::timeout(WAIT, reply)
-            .await
-            .expect("DevTools reply in time");
-        assert!(value.get("error").is_none(), "{method}: {value}");
-        value["result"].clone()
-    }
-
-    /// Waits (bounded) for the DevTools event `method`.
-    async fn event(&mut self, method: &str) {
-        if let Some(at) = self.events.iter().position(|e| e["method"] == method) {
-            self.events.remove(at);
-            return;
-        }
-        let event = self.next_message(|v| v["method"] == method);
-        tokio::time::timeout(WAIT, event)
-            .await
-            .expect("DevTools event in time");
-    }
-
-    /// The next message that is `wanted`; events on the way are kept.
-    async fn next_message(
-        &mut self,
-        wanted: impl Fn(&serde_json::Value) -> bool,
-    ) -> serde_json::Value {
-        use futures_util::StreamExt;
-        use tokio_tungstenite::tungstenite::Message as Ws;
-        while let Some(message) = self.socket.next().await {
-            let Ws::Text(text) = message.unwrap() else {
-                continue;
-            };
-            let value: serde_json::Value = serde_json::from_str(&text).unwrap();
-            if wanted(&value) {
-                return value;
-            }
-            if value.get("method").is_some() {
-                self.events.push(value);
-            }
-        }
-        panic!("DevTools connection closed");
-    }
-
-    /// Evaluates a JavaScript expression (awaiting a promise) to JSON.
-    async fn eval(&mut self, expression: &str) -> serde_json::Value {
-        let params = serde_json::json!({
-            "expression": expression, "awaitPromise": true, "returnByValue": true
-        });
-        let result = self.call("Runtime.evaluate", params).await;
-        assert!(result.get("exceptionDetails").is_none(), "{result}");
-        result["result"]["value"].clone()
-    }
+/// [`start_browser`] with WebGL2 on SwiftShader.
+async fn start_browser_with_webgl() -> Option<Browser> {
+    start_browser_with(Graphics::SwiftShader).await
 }
 
-/// Chromium ends with the test, whichever way the test ends.
-struct KillOnDrop(std::process::Child);
-
-impl Drop for KillOnDrop {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
+async fn start_browser_with(graphics: Graphics) -> Option<Browser> {
+    let Ok(path) = vtfarm_browser::which_chromium() else {
+        no_browser();
+        return None;
+    };
+    let options = Options {
+        graphics,
+        window: [1100, 900],
+        timeout: WAIT,
+        end_with_this_thread: false,
+    };
+    Some(
+        Browser::start(&path, &options)
+            .await
+            .expect("chromium starts"),
+    )
 }
 
 /// The opt-out of a machine without Chromium: never under CI (`CI` set to
@@ -1092,14 +946,6 @@ fn no_browser() {
     eprintln!("SKIPPED: no `chromium` on this machine and {ALLOW_NO_BROWSER}=1");
 }
 
-fn which_chromium() -> Result<std::path::PathBuf, ()> {
-    let path = std::env::var_os("PATH").ok_or(())?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join("chromium"))
-        .find(|p| p.is_file())
-        .ok_or(())
-}
-
 /// FNV-1a over the RGB bytes, as the dashboard hashes what it drew.
 fn fnv1a(bytes: &[u8]) -> String {
     let hash = bytes.iter().fold(0x811c_9dc5_u32, |h, &b| {
@@ -1110,16 +956,20 @@ fn fnv1a(bytes: &[u8]) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the_moved_eye() {
-    let Some(mut browser) = Browser::start().await else {
+    let Some(mut browser) = start_browser().await else {
         return;
     };
     let farm = Farm::start().await;
     let url = format!("http://{}/", farm.http);
-    browser.call("Page.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.enable", serde_json::json!({}))
+        .await
+        .unwrap();
     browser
         .call("Page.navigate", serde_json::json!({ "url": url }))
-        .await;
-    browser.event("Page.loadEventFired").await;
+        .await
+        .unwrap();
+    browser.event("Page.loadEventFired").await.unwrap();
     // Armed before the job starts: resolves when the page has drawn
     // finished frame #1 (the page's own event), whatever the timing.
     let arm = r#"window.shownFrame = new Promise((resolve) => {
@@ -1128,7 +978,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         if (done()) resolve();
         document.addEventListener("vtfarm-frame-shown", () => { if (done()) resolve(); });
     }); true"#;
-    assert_eq!(browser.eval(arm).await, true);
+    assert_eq!(browser.eval(arm).await.unwrap(), true);
     let frames = farm.submit(1).await;
     let shown = browser
         .eval(
@@ -1137,7 +987,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
                 workers: [...document.querySelectorAll("#workers tr td:first-child")].map((td) => td.textContent),
             }))"##,
         )
-        .await;
+        .await.unwrap();
     assert_eq!(
         shown["hash"],
         fnv1a(&frames[0].image.to_srgb8()),
@@ -1164,7 +1014,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         const retry = () => { if (pick()) { document.removeEventListener("vtfarm-update", retry); resolve(true); } };
         document.addEventListener("vtfarm-update", retry);
     })"#;
-    assert_eq!(browser.eval(pick).await, true);
+    assert_eq!(browser.eval(pick).await.unwrap(), true);
     let arm = r#"window.viewDone = new Promise((resolve) => {
         const done = () => {
             const v = window.lastView.view, img = document.getElementById("view");
@@ -1177,13 +1027,13 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
         document.addEventListener("vtfarm-update", check);
         check();
     }); true"#;
-    assert_eq!(browser.eval(arm).await, true);
+    assert_eq!(browser.eval(arm).await.unwrap(), true);
     for _ in 0..3 {
         for kind in ["keyDown", "keyUp"] {
             let key = serde_json::json!({
                 "type": kind, "key": "ArrowRight", "code": "ArrowRight", "windowsVirtualKeyCode": 39
             });
-            browser.call("Input.dispatchKeyEvent", key).await;
+            browser.call("Input.dispatchKeyEvent", key).await.unwrap();
         }
     }
     let view = browser
@@ -1204,7 +1054,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
                 outcomes: window.lastView.view.outcomes,
             }))"##,
         )
-        .await;
+        .await.unwrap();
     // The view is the single-process render of the moved eye at `full`.
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
@@ -1262,7 +1112,8 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
     // The whole page, view and timeline included.
     let metrics = browser
         .call("Page.getLayoutMetrics", serde_json::json!({}))
-        .await;
+        .await
+        .unwrap();
     let size = &metrics["cssContentSize"];
     let clip = serde_json::json!({
         "x": 0, "y": 0, "width": size["width"], "height": size["height"], "scale": 1
@@ -1272,7 +1123,8 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
             "Page.captureScreenshot",
             serde_json::json!({ "format": "png", "clip": clip, "captureBeyondViewport": true }),
         )
-        .await;
+        .await
+        .unwrap();
     let png = base64::Engine::decode(
         &base64::engine::general_purpose::STANDARD,
         shot["data"].as_str().unwrap(),
@@ -1287,17 +1139,21 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
 /// job cancels it (its submitter hears of it), and the row shows it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn the_dashboards_cancel_button_cancels_a_running_job() {
-    let Some(mut browser) = Browser::start().await else {
+    let Some(mut browser) = start_browser().await else {
         return;
     };
     let farm = Farm::with_workers(0).await;
     let (id, submitter) = farm.submit_in_background().await;
     let url = format!("http://{}/", farm.http);
-    browser.call("Page.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.enable", serde_json::json!({}))
+        .await
+        .unwrap();
     browser
         .call("Page.navigate", serde_json::json!({ "url": url }))
-        .await;
-    browser.event("Page.loadEventFired").await;
+        .await
+        .unwrap();
+    browser.event("Page.loadEventFired").await.unwrap();
     // Click the row's cancel button once the page lists the job running,
     // then wait for the row to say cancelled (the page's own events).
     let click = format!(
@@ -1331,7 +1187,7 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
             step();
         }})"#
     );
-    let row = browser.eval(&click).await;
+    let row = browser.eval(&click).await.unwrap();
     assert_eq!(row["state"], "cancelled", "{row}");
     assert_eq!(row["answer"], format!("job {id}: cancelled"), "{row}");
     assert_eq!(
@@ -1366,7 +1222,7 @@ async fn press(browser: &mut Browser, key: &str, code: u32) {
         let event = serde_json::json!({
             "type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code
         });
-        browser.call("Input.dispatchKeyEvent", event).await;
+        browser.call("Input.dispatchKeyEvent", event).await.unwrap();
     }
 }
 
@@ -1395,13 +1251,7 @@ fn page_reached(browser: &Browser, result: serde_json::Value, what: &str) {
     if result == true {
         return;
     }
-    let logged: Vec<String> = (browser.events.iter())
-        .filter(|e| {
-            let m = e["method"].as_str().unwrap_or_default();
-            m == "Runtime.consoleAPICalled" || m == "Runtime.exceptionThrown"
-        })
-        .map(|e| e["params"].to_string())
-        .collect();
+    let logged = browser.page_log();
     panic!("{what}: {result}; the page logged {logged:#?}");
 }
 
@@ -1413,18 +1263,25 @@ fn page_reached(browser: &Browser, result: serde_json::Value, what: &str) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_render_at_a_still_eye()
 {
-    let Some(mut browser) = Browser::start_with_webgl().await else {
+    let Some(mut browser) = start_browser_with_webgl().await else {
         return;
     };
     let farm = Farm::start().await;
     farm.submit(1).await;
     let url = format!("http://{}/", farm.http);
-    browser.call("Page.enable", serde_json::json!({})).await;
-    browser.call("Runtime.enable", serde_json::json!({})).await;
+    browser
+        .call("Page.enable", serde_json::json!({}))
+        .await
+        .unwrap();
+    browser
+        .call("Runtime.enable", serde_json::json!({}))
+        .await
+        .unwrap();
     browser
         .call("Page.navigate", serde_json::json!({ "url": url }))
-        .await;
-    browser.event("Page.loadEventFired").await;
+        .await
+        .unwrap();
+    browser.event("Page.loadEventFired").await.unwrap();
     let pick = r#"new Promise((resolve) => {
         const select = document.getElementById("view-source");
         const ready = () => resolve(true);
@@ -1440,14 +1297,14 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         const retry = () => { if (pick()) document.removeEventListener("vtfarm-update", retry); };
         document.addEventListener("vtfarm-update", retry);
     })"#;
-    let picked = browser.eval(pick).await;
+    let picked = browser.eval(pick).await.unwrap();
     page_reached(&browser, picked, "the scene drawn");
     // The move to the job's eye that loading the scene sends.
-    let drawn = browser.eval(&full_drawn(0)).await;
+    let drawn = browser.eval(&full_drawn(0)).await.unwrap();
     page_reached(&browser, drawn, "the first move's full stage");
     for k in 1..=3 {
         press(&mut browser, "ArrowRight", 39).await;
-        let drawn = browser.eval(&full_drawn(k)).await;
+        let drawn = browser.eval(&full_drawn(k)).await.unwrap();
         page_reached(&browser, drawn, &format!("move {k}'s full stage"));
     }
     // A drag: 10 pixels left, a millimetre each.
@@ -1460,21 +1317,25 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
             return [r.x + 20, r.y + 20];
         })()"#,
         )
-        .await;
+        .await
+        .unwrap();
     let (x, y) = (bounds[0].as_f64().unwrap(), bounds[1].as_f64().unwrap());
     let mouse = |kind: &str, x: f64| serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 });
     browser
         .call("Input.dispatchMouseEvent", mouse("mousePressed", x))
-        .await;
+        .await
+        .unwrap();
     for step in 1..=10 {
         let at = x - step as f64;
         browser
             .call("Input.dispatchMouseEvent", mouse("mouseMoved", at))
-            .await;
+            .await
+            .unwrap();
     }
     browser
         .call("Input.dispatchMouseEvent", mouse("mouseReleased", x - 10.0))
-        .await;
+        .await
+        .unwrap();
     let settled = r#"new Promise((resolve) => {
         const start = performance.now();
         const check = () => {
@@ -1486,7 +1347,7 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         };
         check();
     })"#;
-    let moves = browser.eval(settled).await;
+    let moves = browser.eval(settled).await.unwrap();
     let Some(moves) = moves.as_u64() else {
         return page_reached(&browser, moves, "the drag's last move's full stage");
     };
@@ -1500,7 +1361,7 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         current.0 as usize, moves,
         "one timing per move the page sent"
     );
-    let timings = browser.eval("window.vtfarm.viewTimings").await;
+    let timings = browser.eval("window.vtfarm.viewTimings").await.unwrap();
     let timings = timings.as_array().unwrap();
     assert_eq!(timings.len(), moves);
     eprintln!("the page's view timings (ms, performance.now()): {timings:?}");
@@ -1536,7 +1397,8 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
             }));
         })()"#,
         )
-        .await;
+        .await
+        .unwrap();
     let sent = (farm.master)
         .inspect(|c| {
             let stream = c.views().stream();
@@ -1588,7 +1450,8 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
             return [canvas.width, canvas.height, Array.from(out)];
         })()"#,
         )
-        .await;
+        .await
+        .unwrap();
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..CockpitConfig::default()

@@ -47,6 +47,8 @@ use vtfarm_vertex::Quality;
 
 use super::{CockpitFrameArgs, write_json};
 
+mod page;
+
 #[derive(clap::Args)]
 pub struct ViewArgs {
     /// The frame, and the threads of the local renders beside the farm.
@@ -85,6 +87,13 @@ pub struct ViewArgs {
     /// Also writes the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Also drives the dashboard in headless Chromium (`chromium` on PATH;
+    /// WebGL2 on SwiftShader, a 1400×1000 window), which draws the view
+    /// itself: `--moves` arrow-key moves, each until its full stage is
+    /// drawn, then a 2 s drag at 30 mouse moves a second; prints the
+    /// page's own timings.
+    #[arg(long)]
+    browser: bool,
 }
 
 /// The most worker processes and threads per worker the bench starts.
@@ -191,6 +200,8 @@ struct FarmFigures {
     bin: PathBuf,
     moves: Vec<MoveFigures>,
     single_frames: Vec<SingleFrame>,
+    /// The dashboard's own timings in Chromium (`--browser`).
+    page: Option<page::PageFigures>,
     load_average_before: String,
     load_average_after: String,
 }
@@ -237,6 +248,10 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
     for bin in &bins {
         ensure!(bin.is_file(), "--bin {}: no such file", bin.display());
     }
+    let chromium = match args.browser {
+        true => Some(vtfarm_browser::which_chromium().context("--browser")?),
+        false => None,
+    };
     let job = args.frame.set_up(Quality::Full)?;
     let timeout = Duration::from_secs_f64(args.timeout);
     let runtime = crate::support::runtime()?;
@@ -294,14 +309,23 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
                 );
                 single_frames.push(frame);
             }
-            anyhow::Ok((moves, single_frames))
+            let page = match &chromium {
+                Some(chromium) => {
+                    eprintln!("  the dashboard in Chromium ...");
+                    let page = page::measure(chromium, farm.http, source, args.moves, timeout);
+                    Some(page.await.context("--browser")?)
+                }
+                None => None,
+            };
+            anyhow::Ok((moves, single_frames, page))
         });
         drop(farm);
-        let (moves, single_frames) = result?;
+        let (moves, single_frames, page) = result?;
         farms.push(FarmFigures {
             bin: bin.clone(),
             moves,
             single_frames,
+            page,
             load_average_before,
             load_average_after: crate::support::load_average(),
         });
@@ -1064,6 +1088,9 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
                 ms(Some(spread.0.p90)),
                 ms(Some(spread.1.median)),
             );
+        }
+        if let Some(figures) = &farm.page {
+            page::print(figures);
         }
     }
     let [first, rest @ ..] = f.farms.as_slice() else {
