@@ -413,8 +413,10 @@ pub struct FrameStart {
     /// A progressive frame's stages (the interactive view: `preview`,
     /// `refine`, `full`): each package is set up once and advanced through
     /// them on the same vertices, one [`PackageResult`] per stage, the
-    /// last completing the package. Empty: one stage, at the set-up's
-    /// quality. Check with [`check_stages`].
+    /// last completing the package. Each stage but the last carries its
+    /// meshes and no pixels (an empty bitmap); the last carries every
+    /// pixel the package owns. Empty: one stage, at the set-up's quality.
+    /// Check with [`check_stages`].
     pub stages: Vec<WireQuality>,
 }
 

@@ -198,9 +198,10 @@ impl ActiveFrame {
             (Some(per_reflector), _) => per_reflector.render(&frame, &package.triangles),
             (None, None) => trace(&frame, &package.triangles),
             (None, Some(quality)) => {
-                let traced = advance(&frame, package, stage, quality, progress);
-                // The view draws a mesh stage as its vertex colours.
-                if quality < Quality::Full {
+                // Every stage but the last is drawn from its meshes alone.
+                let meshes_only = stage + 1 < stages;
+                let traced = advance(&frame, package, stage, quality, meshes_only, progress);
+                if meshes_only {
                     mesh = progress.as_ref().map(|p| WireMesh::from(&p.meshes()[..]));
                 }
                 traced
@@ -278,13 +279,15 @@ fn trace(
     Ok((result.bitmap, result.stats, result.triangle_samples))
 }
 
-/// Runs stage `stage` at `quality` of a progressive package: sets the
-/// package up at its first stage, continues it at the others.
+/// Runs stage `stage` at `quality` of a progressive package (on its
+/// meshes only, no pixels, with `meshes_only`): sets the package up at its
+/// first stage, continues it at the others.
 fn advance(
     frame: &Frame<'_>,
     package: &Package,
     stage: usize,
     quality: Quality,
+    meshes_only: bool,
     progress: &mut Option<ProgressivePackage>,
 ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), PackageError> {
     let staged = match progress {
@@ -300,8 +303,13 @@ fn advance(
             return Err(PackageError::StageWithoutProgress { id, stage });
         }
     };
-    let result = (staged.advance(frame, quality, &PackageOptions::default(), &mut |_| {}))
-        .map_err(PackageError::Stage)?;
+    let options = PackageOptions::default();
+    let result = if meshes_only {
+        staged.advance_meshes(frame, quality, &options, &mut |_| {})
+    } else {
+        staged.advance(frame, quality, &options, &mut |_| {})
+    };
+    let result = result.map_err(PackageError::Stage)?;
     Ok((result.bitmap, result.stats, result.triangle_samples))
 }
 
@@ -833,10 +841,11 @@ mod tests {
     }
 
     /// A progressive frame's package set up once and advanced preview →
-    /// refine → full: each stage's pixels, composited in order, are the
-    /// package traced from scratch at that quality, and the stages trace
-    /// together exactly the vertices the package traces at `full` from
-    /// scratch (none twice). Stages go in order, each after the one before.
+    /// refine → full: the stages before the last send their meshes and no
+    /// pixel, the last every pixel the package owns, the package traced
+    /// from scratch at `full`, and the stages trace together exactly the
+    /// vertices the package traces at `full` from scratch (none twice).
+    /// Stages go in order, each after the one before.
     #[test]
     fn a_progressive_package_runs_its_stages_on_one_set_up() {
         let (cockpit, hash, mut engine) = cockpit_engine();
@@ -893,8 +902,13 @@ mod tests {
                 .run_stage(&package, k, &mut progress, 1.0, &unlimited())
                 .unwrap();
             assert_eq!(result.stage, Some(quality.into()));
-            composite(&mut pixels, &result);
             vertex_samples += result.stats.vertex_samples;
+            if quality < Quality::Full {
+                assert!(bitmap(&result).color.is_empty(), "{quality:?} sent pixels");
+                assert!(result.mesh.is_some(), "{quality:?} sent no meshes");
+                continue;
+            }
+            composite(&mut pixels, &result);
             let alone = cockpit_engine()
                 .2
                 .start_frame(start(quality, false))
@@ -909,9 +923,7 @@ mod tests {
                 expected.len()
             );
             assert!(pixels == expected, "{quality:?}");
-            if quality == Quality::Full {
-                assert_eq!(vertex_samples, scratch.stats.vertex_samples);
-            }
+            assert_eq!(vertex_samples, scratch.stats.vertex_samples);
         }
         // The package's frame was set up once for its three stages.
         assert_eq!(engine.set_ups(), 1);

@@ -334,8 +334,9 @@ impl Views {
 
     /// Stages up to `stage` (an index into the move's stages) of some job's
     /// frame are complete, `image` the last of them: if it is the current
-    /// move's, it becomes the view, with its glare figures (each stage is
-    /// recorded, the image and figures are the newest's).
+    /// move's, each stage's message goes out (unless it went ahead) and is
+    /// recorded, and the last stage's image becomes the view, with its
+    /// glare figures (the stages before it carry meshes, no pixels).
     pub(crate) fn stage_finished(
         &mut self,
         job: JobId,
@@ -377,6 +378,25 @@ impl Views {
             self.meshes.retain(|&(m, _), _| m > s);
             self.stream.push(quality, bytes, now);
         }
+        let records = reached.into_iter().map(|quality| ViewOutcome::Rendered {
+            generation,
+            job,
+            quality,
+        });
+        let records: Vec<ViewOutcome> = records.collect();
+        // The stages before the last carry meshes, no pixels: only the
+        // last has an image to show and figures.
+        let pixels = stage + 1 == current.stages.len();
+        if pixels {
+            self.show(generation, quality, image, scene);
+        }
+        for outcome in records {
+            self.record(outcome);
+        }
+    }
+
+    /// The move's frame goes on view (a copy), and its figures are asked for.
+    fn show(&mut self, generation: u64, quality: Quality, image: &FrameImage, scene: &Arc<Scene>) {
         let frame = Arc::new(match self.spare.take() {
             Some(mut spare) => {
                 spare.clone_from(image);
@@ -399,13 +419,6 @@ impl Views {
         if let Some(before) = self.latest.replace(shown) {
             // Unless its figures are still being computed.
             self.spare = Arc::try_unwrap(before.frame).ok();
-        }
-        for quality in reached {
-            self.record(ViewOutcome::Rendered {
-                generation,
-                job,
-                quality,
-            });
         }
     }
 
@@ -575,21 +588,85 @@ mod tests {
 
     /// A view rendering job 7 in the three stages, as `started` leaves it.
     fn rendering() -> Views {
-        let stages = STAGES.to_vec();
         Views {
-            current: Some(CurrentView {
-                generation: 1,
-                source: JobId(1),
-                offset: [0.0; 3],
-                eye: [0.0; 3],
-                job: JobId(7),
-                stages_total: stages.len(),
-                stages,
-                stages_done: 0,
-                streamed: 0,
-            }),
+            current: Some(moving(1, JobId(7), STAGES.to_vec())),
             ..Views::default()
         }
+    }
+
+    /// Move `generation` rendered as farm job `job` in `stages`.
+    fn moving(generation: u64, job: JobId, stages: Vec<Quality>) -> CurrentView {
+        CurrentView {
+            generation,
+            source: JobId(1),
+            offset: [0.0; 3],
+            eye: [0.0; 3],
+            job,
+            stages_total: stages.len(),
+            stages,
+            stages_done: 0,
+            streamed: 0,
+        }
+    }
+
+    /// A 6x4 frame in `shade`, its components over a 3x2 rectangle.
+    fn frame(shade: f32) -> FrameImage {
+        let bounds = PixelRect {
+            x0: 1,
+            y0: 1,
+            x1: 4,
+            y1: 3,
+        };
+        FrameImage::new(Image::new(6, 4, Vec3::splat(shade)), bounds)
+    }
+
+    /// Only a move's last stage goes on view (the stages before it carry
+    /// meshes, no pixels), and each is recorded. Each frame on view is a
+    /// copy of the stage's frame as it was; a frame nobody uses any more is
+    /// copied into, not allocated afresh, and one whose figures are still
+    /// being computed is left be.
+    #[test]
+    fn moves_on_view_are_copies_into_the_buffers_of_one_no_longer_used() {
+        let scene = Arc::new(Scene::default());
+        let mut views = rendering();
+        let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
+        let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
+
+        views.stage_finished(JobId(7), 0, &frame(0.1), &scene, Duration::ZERO);
+        views.stage_finished(JobId(7), 1, &frame(0.2), &scene, Duration::ZERO);
+        assert!(views.latest().is_none(), "a mesh stage has no image");
+        assert!(views.take_glare_request().is_none());
+        views.stage_finished(JobId(7), 2, &frame(0.25), &scene, Duration::ZERO);
+        let first = address(&views);
+        assert_eq!(shade(&views), Vec3::splat(0.25));
+        let rendered = |g| ViewOutcome::Rendered {
+            generation: g,
+            job: JobId(7),
+            quality: Quality::Full,
+        };
+        assert_eq!(views.outcomes().count(), 3);
+        assert_eq!(views.outcomes().last(), Some(&rendered(1)));
+        // The first move's figures are computed and done with.
+        drop(views.take_glare_request());
+        views.current = Some(moving(2, JobId(8), vec![Quality::Full]));
+        views.stage_finished(JobId(8), 0, &frame(0.5), &scene, Duration::ZERO);
+        assert_ne!(address(&views), first, "the first move is still on view");
+        // The second move's figures are still being computed.
+        let computing = views.take_glare_request().unwrap();
+        views.current = Some(moving(3, JobId(9), vec![Quality::Full]));
+        views.stage_finished(JobId(9), 0, &frame(0.75), &scene, Duration::ZERO);
+        assert_eq!(address(&views), first, "into the first move's buffers");
+        assert_eq!(shade(&views), Vec3::splat(0.75));
+        assert_eq!(
+            views.latest().unwrap().frame.components(),
+            frame(0.75).components()
+        );
+        assert!(
+            views.spare.is_none(),
+            "the second move's frame is still in use"
+        );
+        assert_eq!(computing.generation, 2);
+        assert_eq!(computing.frame.color.pixels[0], Vec3::splat(0.5));
     }
 
     /// [`rendering`] with job 1 as its source, reflector triangles 3 and 5.
@@ -685,48 +762,5 @@ mod tests {
         assert_eq!(qualities(&views), [Quality::Preview]);
         views.stage_finished(JobId(7), 1, &frame(0.5), &scene, ms(6));
         assert_eq!(qualities(&views), [Quality::Preview, Quality::Refine]);
-    }
-
-    /// A 6x4 frame in `shade`, its components over a 3x2 rectangle.
-    fn frame(shade: f32) -> FrameImage {
-        let bounds = PixelRect {
-            x0: 1,
-            y0: 1,
-            x1: 4,
-            y1: 3,
-        };
-        FrameImage::new(Image::new(6, 4, Vec3::splat(shade)), bounds)
-    }
-
-    /// Each stage on view is a copy of the stage's frame as it was; a
-    /// stage's frame nobody uses any more is copied into, not allocated
-    /// afresh, and one whose figures are still being computed is left be.
-    #[test]
-    fn stages_on_view_are_copies_into_the_buffers_of_one_no_longer_used() {
-        let scene = Arc::new(Scene::default());
-        let mut views = rendering();
-        let address = |views: &Views| views.latest().unwrap().image().pixels.as_ptr();
-        let shade = |views: &Views| views.latest().unwrap().image().pixels[0];
-
-        views.stage_finished(JobId(7), 0, &frame(0.25), &scene, Duration::ZERO);
-        let preview = address(&views);
-        assert_eq!(shade(&views), Vec3::splat(0.25));
-        // The preview's figures are computed and done with.
-        drop(views.take_glare_request());
-        views.stage_finished(JobId(7), 1, &frame(0.5), &scene, Duration::ZERO);
-        assert_ne!(address(&views), preview, "the preview is still on view");
-        // The refine's figures are still being computed.
-        let computing = views.take_glare_request().unwrap();
-        views.stage_finished(JobId(7), 2, &frame(0.75), &scene, Duration::ZERO);
-        assert_eq!(address(&views), preview, "into the preview's buffers");
-        assert_eq!(shade(&views), Vec3::splat(0.75));
-        assert_eq!(
-            views.latest().unwrap().frame.components(),
-            frame(0.75).components()
-        );
-        assert_eq!(views.latest().unwrap().quality, Quality::Full);
-        assert!(views.spare.is_none(), "the refine's frame is still in use");
-        assert_eq!(computing.quality, Quality::Refine);
-        assert_eq!(computing.frame.color.pixels[0], Vec3::splat(0.5));
     }
 }

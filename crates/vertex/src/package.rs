@@ -465,7 +465,7 @@ impl ProgressivePackage {
         progress: &mut dyn FnMut(&[FinishedFace]),
     ) -> Result<PackageResult, StageError> {
         let mut planes = DensePlanes::default();
-        let traced = self.run(frame, quality, options, progress, &mut planes)?;
+        let traced = self.run(frame, quality, options, progress, Some(&mut planes))?;
         let bitmap = match &self.pixels {
             Some(last) => planes.bitmap(|i| planes.differs(last, i)),
             None => planes.bitmap(|_| true),
@@ -473,6 +473,28 @@ impl ProgressivePackage {
         self.pixels = Some(planes);
         Ok(PackageResult {
             bitmap,
+            stats: traced.stats,
+            faces: traced.faces,
+            triangle_samples: traced.triangle_samples,
+        })
+    }
+
+    /// Runs stage `quality` as [`ProgressivePackage::advance`] does, on the
+    /// vertices only: the meshes refined to `quality`
+    /// ([`ProgressivePackage::meshes`]) and no pixel filled or written, so
+    /// its bitmap is empty and the next stage's bitmap holds every owned
+    /// pixel. What a view draws from the meshes needs no more.
+    pub fn advance_meshes(
+        &mut self,
+        frame: &Frame<'_>,
+        quality: Quality,
+        options: &PackageOptions,
+        progress: &mut dyn FnMut(&[FinishedFace]),
+    ) -> Result<PackageResult, StageError> {
+        let traced = self.run(frame, quality, options, progress, None)?;
+        self.pixels = None;
+        Ok(PackageResult {
+            bitmap: SparseBitmap::default(),
             stats: traced.stats,
             faces: traced.faces,
             triangle_samples: traced.triangle_samples,
@@ -489,17 +511,18 @@ impl ProgressivePackage {
         progress: &mut dyn FnMut(&[FinishedFace]),
         image: &mut FrameImage,
     ) -> Result<TracedPackage, StageError> {
-        self.run(frame, quality, options, progress, image)
+        self.run(frame, quality, options, progress, Some(image))
     }
 
-    /// One stage's three phases, its pixels written into `target`.
+    /// One stage's three phases, its pixels written into `target` (without
+    /// one, the vertex phases only).
     fn run(
         &mut self,
         frame: &Frame<'_>,
         quality: Quality,
         options: &PackageOptions,
         progress: &mut dyn FnMut(&[FinishedFace]),
-        target: &mut dyn Target,
+        target: Option<&mut dyn Target>,
     ) -> Result<TracedPackage, StageError> {
         if self.stopped {
             return Err(StageError::Stopped);
@@ -546,27 +569,27 @@ impl ProgressivePackage {
 
         let fill_start = Instant::now();
         let meshes = &self.meshes;
-        let plans: Vec<TrianglePlan> = owned
-            .par_iter()
-            .enumerate()
-            .map(|(k, &(t, rect))| {
-                TrianglePlan::new(frame, t, rect, meshes.get(k).filter(|_| refined))
-            })
-            .collect();
-        let planning = fill_start.elapsed();
-        let filled = match owned.iter().map(|&(_, r)| r).reduce(|a, b| PixelRect {
+        let rect = owned.iter().map(|&(_, r)| r).reduce(|a, b| PixelRect {
             x0: a.x0.min(b.x0),
             y0: a.y0.min(b.y0),
             x1: a.x1.max(b.x1),
             y1: a.y1.max(b.y1),
-        }) {
-            Some(rect) => fill(
-                frame,
-                &plans,
-                &mut target.planes(rect),
-                self.traced_pixels.as_mut(),
-            ),
-            None => Filled::default(),
+        });
+        let (filled, planning) = match (target, rect) {
+            (Some(target), Some(rect)) => {
+                let plans: Vec<TrianglePlan> = owned
+                    .par_iter()
+                    .enumerate()
+                    .map(|(k, &(t, rect))| {
+                        TrianglePlan::new(frame, t, rect, meshes.get(k).filter(|_| refined))
+                    })
+                    .collect();
+                let planning = fill_start.elapsed();
+                let planes = &mut target.planes(rect);
+                let filled = fill(frame, &plans, planes, self.traced_pixels.as_mut());
+                (filled, planning)
+            }
+            _ => (Filled::default(), Duration::ZERO),
         };
         stats.fill_time = fill_start.elapsed();
         times.pixel_tracing = filled.tracing;
@@ -718,7 +741,13 @@ fn run_package(
         ..ProgressivePackage::new(frame, triangles)
     };
     package
-        .run(frame, frame.settings.quality, options, progress, target)
+        .run(
+            frame,
+            frame.settings.quality,
+            options,
+            progress,
+            Some(target),
+        )
         .expect("a new package takes any stage")
 }
 

@@ -637,3 +637,48 @@ fn progressive_stages_equal_packages_traced_from_scratch_and_trace_each_vertex_o
         .collect();
     assert_eq!(counts, [(3, 0, 0), (2, 2, 0), (0, 0, 136)]);
 }
+
+/// Stages advanced on their meshes only write no pixel and trace each
+/// vertex once as the full stages do; the next stage with pixels then
+/// holds every owned pixel, the package traced from scratch at its quality
+/// bit for bit, and the meshes are those of the full stages.
+#[test]
+fn mesh_only_stages_leave_the_next_stage_every_pixel_of_its_scratch_trace() {
+    let frame = TestFrame::new(Extras::default());
+    let settings = VertexSettings {
+        pixel_floor: 2.0,
+        max_edge: 8.0,
+        ..VertexSettings::default()
+    };
+    let f = frame.frame(settings);
+    let options = PackageOptions::default();
+    let mut meshes_only = ProgressivePackage::new(&f, &[A, B]);
+    let mut with_pixels = ProgressivePackage::new(&f, &[A, B]);
+    let mut vertex_samples = 0;
+    for quality in [Quality::Preview, Quality::Refine] {
+        let stage = (meshes_only.advance_meshes(&f, quality, &options, &mut |_| {})).unwrap();
+        let full = (with_pixels.advance(&f, quality, &options, &mut |_| {})).unwrap();
+        assert_eq!(meshes_only.stage(), Some(quality));
+        assert!(stage.bitmap.color.is_empty(), "{quality:?} wrote pixels");
+        assert_eq!(stage.stats.pixels, 0);
+        assert_eq!(stage.stats.vertex_samples, full.stats.vertex_samples);
+        assert_eq!(meshes_only.meshes(), with_pixels.meshes(), "{quality:?}");
+        vertex_samples += stage.stats.vertex_samples;
+    }
+    let stage = (meshes_only.advance(&f, Quality::Full, &options, &mut |_| {})).unwrap();
+    let scratch = frame.trace(
+        VertexSettings {
+            quality: Quality::Full,
+            ..settings
+        },
+        &[A, B],
+    );
+    let (mut got, mut expected) = (PixelBits::new(), PixelBits::new());
+    composite(&mut got, &stage.bitmap);
+    composite(&mut expected, &scratch.bitmap);
+    let owned = (frame.owned_pixels(A) + frame.owned_pixels(B)) as usize;
+    assert_eq!(got.len(), owned, "every owned pixel");
+    assert_eq!(got, expected);
+    vertex_samples += stage.stats.vertex_samples;
+    assert_eq!(vertex_samples, scratch.stats.vertex_samples);
+}
