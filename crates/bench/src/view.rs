@@ -4,8 +4,9 @@
 //! renders one cockpit frame as the view's source; then the bench moves the
 //! eye `--moves` times through the master's HTTP API (`POST /api/view`)
 //! and times each move until each stage (preview, refine, full) is listed
-//! as rendered on the dashboard's event stream (`GET /api/events`) and its
-//! image, at the display's width, is in (`GET /view/image.png?width=`),
+//! as rendered on the dashboard's event stream (`GET /api/events`) and the
+//! last stage's image, at the display's width, is in (`GET
+//! /view/image.png?width=`; the stages before it are meshes the page draws),
 //! with the phases the master's timeline records for each stage's frame.
 //! Beside it: the same eyes rendered in this process at each quality, and
 //! optionally single-frame jobs timed from submission to image
@@ -130,8 +131,9 @@ struct MoveFigures {
     listed_seconds: [f64; 3],
     /// Seconds from the move's request until the view's image, asked for
     /// at the display's width after the event listing the stage, was in
-    /// (the stage's or a newer one's).
-    on_screen_seconds: [f64; 3],
+    /// (the stage's or a newer one's): the last stage's only, as the stages
+    /// before it carry meshes, which the page draws (`--browser`).
+    on_screen_seconds: [Option<f64>; 3],
     frames: [Option<StageFrame>; 3],
     /// The server's part of each stage: from the move's arrival to the
     /// stage's message for the page (`GET /api/view/stages`); `None` from
@@ -285,13 +287,13 @@ pub(crate) fn run(args: ViewArgs) -> Result<()> {
                     .with_context(|| format!("move {k} (offset {offset:?} m)"))?;
                 let mut figures = figures;
                 figures.server_seconds = farm.server_part().await;
-                let s = figures.on_screen_seconds;
+                let (listed, full) = (figures.listed_seconds, figures.on_screen_seconds[2]);
                 eprintln!(
-                    "  move {k}{}: preview {:.3} s, refine {:.3} s, full {:.3} s",
+                    "  move {k}{}: preview listed {:.3} s, refine listed {:.3} s, full on screen {:.3} s",
                     if timed { "" } else { " (warm-up)" },
-                    s[0],
-                    s[1],
-                    s[2]
+                    listed[0],
+                    listed[1],
+                    full.unwrap_or(f64::NAN),
                 );
                 if timed {
                     moves.push(figures);
@@ -624,13 +626,12 @@ impl Processes {
             };
             let (at, event) = event?;
             let listed = watch.saw(at.saturating_duration_since(sent), &event)?;
-            if !listed.is_empty() {
+            let last = STAGES.len() - 1;
+            if listed.contains(&last) {
                 let path = format!("/view/image.png?width={display_width}&stage={job}");
                 let (status, _) = request(self.http, Method::GET, &path, None).await?;
                 ensure!(status == StatusCode::OK, "GET {path} answered {status}");
-                for k in listed {
-                    watch.figures.on_screen_seconds[k] = sent.elapsed().as_secs_f64();
-                }
+                watch.figures.on_screen_seconds[last] = Some(sent.elapsed().as_secs_f64());
             }
         }
         Ok(watch.figures)
@@ -1011,8 +1012,8 @@ fn local_renders(
 fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
     println!(
         "bench view — cockpit {triangles} triangles (detail {}), {}x{}; a master and {} worker process(es) of --threads {} on 127.0.0.1; \
-         {} moves of {} m through POST /api/view (after one warm-up move), each timed until the event stream lists the stage \
-         and its image at {} px wide is in",
+         {} moves of {} m through POST /api/view (after one warm-up move), each timed until the event stream lists each stage \
+         and the last one's image at {} px wide is in",
         f.detail,
         f.width,
         f.height,
@@ -1023,8 +1024,8 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
         args.display_width
     );
     println!(
-        "columns: on screen = move to the stage's image (GET /view/image.png?width=, asked for after the first event listing \
-         the stage) in hand; listed = move to that event; server = the master's part, the move's arrival to the stage's \
+        "columns: on screen = move to the view's image (GET /view/image.png?width=, asked for after the first event listing \
+         the stage) in hand, for the last stage only (the stages before it are meshes, which the page draws: --browser); listed = move to that event; server = the master's part, the move's arrival to the stage's \
          message for the page (GET /api/view/stages); the stage's frame as the master's timeline has it \
          (medians): wall = its first assignment to its last result, base = the master's base frame, set-up / packages / in flight = \
          the busiest worker's; local = the same eye rendered in this process on {} thread(s), set-up included",
@@ -1053,7 +1054,7 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
             "local ms"
         );
         for (k, quality) in STAGES.iter().enumerate() {
-            let on_screen = Spread::of(farm.moves.iter().map(|m| m.on_screen_seconds[k]));
+            let on_screen = Spread::of(farm.moves.iter().filter_map(|m| m.on_screen_seconds[k]));
             let listed = Spread::of(farm.moves.iter().map(|m| m.listed_seconds[k]));
             let frames: Vec<&StageFrame> = farm
                 .moves
@@ -1101,17 +1102,21 @@ fn print_figures(f: &ViewFigures, args: &ViewArgs, triangles: usize) {
             (Some(a), Some(b)) if b > 0.0 => format!("{:.2}", a / b),
             _ => "-".to_owned(),
         };
-        let stage = |farm: &FarmFigures, k: usize| {
-            Spread::of(farm.moves.iter().map(|m| m.on_screen_seconds[k])).map(|s| s.median)
+        let server = |farm: &FarmFigures, k: usize| {
+            Spread::of(farm.moves.iter().filter_map(|m| m.server_seconds[k])).map(|s| s.median)
+        };
+        let full_on_screen = |farm: &FarmFigures| {
+            Spread::of(farm.moves.iter().filter_map(|m| m.on_screen_seconds[2])).map(|s| s.median)
         };
         let single = |farm: &FarmFigures| single_frame_spread(farm).map(|s| s.0.median);
         println!(
-            "{} over {} (medians): preview {}, refine {}, full {}, single frame {}",
+            "{} over {} (medians): server's part preview {}, refine {}, full {}; full on screen {}; single frame {}",
             first.bin.display(),
             farm.bin.display(),
-            ratio(stage(first, 0), stage(farm, 0)),
-            ratio(stage(first, 1), stage(farm, 1)),
-            ratio(stage(first, 2), stage(farm, 2)),
+            ratio(server(first, 0), server(farm, 0)),
+            ratio(server(first, 1), server(farm, 1)),
+            ratio(server(first, 2), server(farm, 2)),
+            ratio(full_on_screen(first), full_on_screen(farm)),
             ratio(single(first), single(farm)),
         );
     }

@@ -1,6 +1,6 @@
 // The view's controls: the eye moves continuously (arrow keys and PgUp/PgDn
 // 1 cm, a drag 1 mm a pixel) within the box around the source job's eye;
-// each move is drawn at once from the scene the page holds and sent to
+// each move is drawn from the scene the page holds (onEye) and sent to
 // POST /api/view, one at a time (a move made while one is on its way goes
 // when it returns, the newest only). Each move sent gets its timings in
 // window.vtfarm.viewTimings: {sent, preview, refine, full} as

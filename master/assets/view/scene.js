@@ -127,23 +127,29 @@ function glassMaterial(target, transmittance) {
 }
 
 export class SceneView {
-  // canvas: the page's; setup: /view/setup.json; gltf: the loaded scene.
-  constructor(canvas, setup, gltf) {
+  // canvas: the page's; setup: /view/setup.json; gltf: the loaded scene;
+  // shownWidth: the device pixels the canvas is shown at. It is drawn at
+  // the job's size, or smaller to fit shownWidth: pixels never shown cost
+  // a draw as much as those shown.
+  constructor(canvas, setup, gltf, shownWidth) {
     this.setup = setup;
     this.canvas = canvas;
-    canvas.width = setup.width;
-    canvas.height = setup.height;
+    const scale = Math.min(1, shownWidth / setup.width);
+    const width = Math.max(1, Math.round(setup.width * scale));
+    const height = Math.max(1, Math.round(setup.height * scale));
+    canvas.width = width;
+    canvas.height = height;
     const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true });
     renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
     renderer.setPixelRatio(1);
-    renderer.setSize(setup.width, setup.height, false);
+    renderer.setSize(width, height, false);
     renderer.autoClear = false;
     this.renderer = renderer;
-    this.target = new THREE.WebGLRenderTarget(setup.width, setup.height, {
+    this.target = new THREE.WebGLRenderTarget(width, height, {
       type: THREE.FloatType,
       minFilter: THREE.NearestFilter,
       magFilter: THREE.NearestFilter,
-      depthTexture: new THREE.DepthTexture(setup.width, setup.height, THREE.FloatType),
+      depthTexture: new THREE.DepthTexture(width, height, THREE.FloatType),
     });
     this.camera = new THREE.PerspectiveCamera(setup.fov_y_deg, setup.width / setup.height, 0.01, 1000);
     this.camera.up.set(...setup.up);
@@ -173,6 +179,8 @@ export class SceneView {
     this.overlayScene = new THREE.Scene();
     this.overlay = null;
     this.offset = [0, 0, 0];
+    // The eye the target's opaque scene was drawn from.
+    this.opaqueEye = null;
   }
 
   // The eye at `offset` (metres) from the source job's eye.
@@ -250,10 +258,16 @@ export class SceneView {
     this.camera.updateMatrixWorld();
     for (const m of this.phong) m.uniforms.eye.value.set(...eye);
     const r = this.renderer;
-    r.setRenderTarget(this.target);
-    r.setClearColor(this.background, 1);
-    r.clear();
-    r.render(this.opaque, this.camera);
+    // The scene behind the glass changes only with the eye: a stage that
+    // comes for the same eye redraws the glass over it alone.
+    const key = eye.join(",");
+    if (this.opaqueEye !== key) {
+      r.setRenderTarget(this.target);
+      r.setClearColor(this.background, 1);
+      r.clear();
+      r.render(this.opaque, this.camera);
+      this.opaqueEye = key;
+    }
     r.setRenderTarget(null);
     r.clear();
     r.render(this.present, this.screen);
