@@ -1001,7 +1001,8 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
 
     // The interactive view: pick the job's scene, then three quick moves
     // with the keys. Armed first: resolves when the page shows the newest
-    // move's `full` stage (the page's own events, whatever the timing).
+    // move's `full` stage with its figures (the page's own events, whatever
+    // the timing).
     let pick = r#"new Promise((resolve) => {
         const select = document.getElementById("view-source");
         const pick = () => {
@@ -1020,7 +1021,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
             const v = window.lastView.view, img = document.getElementById("view");
             return v.current && v.latest && v.current.offset[0] > 0.029
                 && v.latest.generation === v.current.generation && v.latest.quality === "full"
-                && img.dataset.shown === v.latest.generation + "/full";
+                && v.latest.glare && img.dataset.shown === v.latest.generation + "/full";
         };
         const check = () => { if (done()) resolve(); };
         document.addEventListener("vtfarm-view-shown", check);
