@@ -34,18 +34,28 @@ export class ViewControls {
       const delta = KEYS[e.key];
       if (delta) { this.move(delta); e.preventDefault(); }
     });
-    let from = null;
+    // Where the pointer was last while it drags the eye.
+    this.from = null;
     surface.addEventListener("pointerdown", (e) => {
-      from = [e.clientX, e.clientY];
+      this.from = [e.clientX, e.clientY];
       surface.setPointerCapture(e.pointerId);
     });
     surface.addEventListener("pointermove", (e) => {
-      if (!from || this.source() === null) return;
-      const d = [e.clientX - from[0], e.clientY - from[1]];
-      from = [e.clientX, e.clientY];
+      if (!this.from || this.source() === null) return;
+      const d = [e.clientX - this.from[0], e.clientY - this.from[1]];
+      this.from = [e.clientX, e.clientY];
       this.move([d[0] * 0.001, -d[1] * 0.001, 0]);
     });
-    surface.addEventListener("pointerup", () => { from = null; });
+    surface.addEventListener("pointerup", () => {
+      this.from = null;
+      // The eye where the drag ended is drawn whole.
+      this.onEye(this.offset);
+    });
+  }
+
+  // Whether the eye is being dragged.
+  get dragging() {
+    return this.from !== null;
   }
 
   move(delta) {

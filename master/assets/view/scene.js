@@ -101,6 +101,7 @@ function presentMaterial(target) {
 
 // The reflector: vertex colours plus transmittance times what lies behind.
 function glassMaterial(target, transmittance) {
+  // The canvas's size: `behind` may be a coarser target over the same view.
   const size = new THREE.Vector2(target.width, target.height);
   return new THREE.ShaderMaterial({
     uniforms: {
@@ -145,12 +146,17 @@ export class SceneView {
     renderer.setSize(width, height, false);
     renderer.autoClear = false;
     this.renderer = renderer;
-    this.target = new THREE.WebGLRenderTarget(width, height, {
+    const target = (w, h) => new THREE.WebGLRenderTarget(w, h, {
       type: THREE.FloatType,
       minFilter: THREE.NearestFilter,
       magFilter: THREE.NearestFilter,
-      depthTexture: new THREE.DepthTexture(width, height, THREE.FloatType),
+      depthTexture: new THREE.DepthTexture(w, h, THREE.FloatType),
     });
+    this.target = target(width, height);
+    // The scene behind the glass while the eye is dragged: a quarter of
+    // the pixels, so a slow rasterizer keeps up with the hand; the eye
+    // drawn when the drag ends is drawn whole.
+    this.coarseTarget = target(Math.max(1, Math.round(width / 2)), Math.max(1, Math.round(height / 2)));
     this.camera = new THREE.PerspectiveCamera(setup.fov_y_deg, setup.width / setup.height, 0.01, 1000);
     this.camera.up.set(...setup.up);
     this.opaque = new THREE.Scene();
@@ -172,7 +178,8 @@ export class SceneView {
       this.opaque.add(mesh.clone());
     }
     this.present = new THREE.Scene();
-    this.present.add(new THREE.Mesh(new THREE.PlaneGeometry(2, 2), presentMaterial(this.target)));
+    this.presentMaterial = presentMaterial(this.target);
+    this.present.add(new THREE.Mesh(new THREE.PlaneGeometry(2, 2), this.presentMaterial));
     this.screen = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
     this.glass = new THREE.Scene();
     this.glassMaterial = glassMaterial(this.target, setup.transmittance);
@@ -249,9 +256,15 @@ export class SceneView {
     return this.overlay !== null && this.overlay.eye.every((v, k) => Math.abs(v - eye[k]) < 1e-5);
   }
 
-  // Draws the view; returns how long it took, to a one-pixel read-back (ms).
-  draw() {
+  // Draws the view (`coarse`: the scene behind the glass at a quarter of
+  // the pixels, while the eye is dragged); returns how long it took, to a
+  // one-pixel read-back (ms).
+  draw(coarse = false) {
     const start = performance.now();
+    const target = coarse ? this.coarseTarget : this.target;
+    this.presentMaterial.uniforms.color.value = target.texture;
+    this.presentMaterial.uniforms.depth.value = target.depthTexture;
+    this.glassMaterial.uniforms.behind.value = target.texture;
     const eye = this.eye();
     this.camera.position.set(...eye);
     this.camera.lookAt(...this.setup.target);
@@ -260,9 +273,9 @@ export class SceneView {
     const r = this.renderer;
     // The scene behind the glass changes only with the eye: a stage that
     // comes for the same eye redraws the glass over it alone.
-    const key = eye.join(",");
+    const key = eye.join(",") + (coarse ? "/coarse" : "");
     if (this.opaqueEye !== key) {
-      r.setRenderTarget(this.target);
+      r.setRenderTarget(target);
       r.setClearColor(this.background, 1);
       r.clear();
       r.render(this.opaque, this.camera);
