@@ -460,7 +460,9 @@ impl Processes {
             .stdin(Stdio::null())
             .stdout(log.try_clone()?)
             .stderr(log);
-        end_with_this_process(&mut command);
+        // SIGTERM when this thread ends: the processes are started from the
+        // main thread, which lives as long as the bench.
+        vtfarm_browser::end_with_this_thread(&mut command, libc::SIGTERM);
         let child = (command.spawn()).with_context(|| format!("starting the {name}"))?;
         self.children.push((name.to_owned(), child));
         Ok(())
@@ -654,26 +656,6 @@ impl Drop for Processes {
         }
     }
 }
-
-/// Asks the kernel to stop the child (SIGTERM) when the thread that started
-/// it ends, so a bench killed by a signal leaves no farm behind. (The
-/// processes are started from the main thread, which lives as long as the
-/// bench.)
-#[cfg(target_os = "linux")]
-fn end_with_this_process(command: &mut Command) {
-    use std::os::unix::process::CommandExt;
-    // SAFETY: the closure runs in the child between fork and exec and only
-    // calls `prctl`, which is async-signal-safe.
-    unsafe {
-        command.pre_exec(|| {
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-            Ok(())
-        });
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-fn end_with_this_process(_: &mut Command) {}
 
 /// A one-frame job of the built-in cockpit at `setup`'s size and eye
 /// moved by `offset` (the eye given explicitly, everything else the

@@ -151,7 +151,7 @@ impl Browser {
             .stdout(Stdio::null())
             .stderr(Stdio::piped());
         if options.end_with_this_thread {
-            end_with_this_thread(&mut command);
+            end_with_this_thread(&mut command, libc::SIGKILL);
         }
         let mut child = command.spawn().map_err(|source| Error::Spawn {
             path: chromium.to_owned(),
@@ -414,18 +414,21 @@ impl Drop for KillOnDrop {
     }
 }
 
+/// Asks the kernel to send the child `signal` when the thread that started
+/// it ends, so that a process killed outright leaves no child behind.
 #[cfg(target_os = "linux")]
-fn end_with_this_thread(command: &mut Command) {
+pub fn end_with_this_thread(command: &mut Command, signal: libc::c_int) {
     use std::os::unix::process::CommandExt;
     // SAFETY: the closure runs in the child between fork and exec and only
     // calls `prctl`, which is async-signal-safe.
     unsafe {
-        command.pre_exec(|| {
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+        command.pre_exec(move || {
+            libc::prctl(libc::PR_SET_PDEATHSIG, signal);
             Ok(())
         });
     }
 }
 
+/// Elsewhere the children end with their owners' drops only.
 #[cfg(not(target_os = "linux"))]
-fn end_with_this_thread(_: &mut Command) {}
+pub fn end_with_this_thread(_: &mut Command, _signal: i32) {}

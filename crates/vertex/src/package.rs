@@ -221,12 +221,7 @@ pub fn trace_package(
 ) -> PackageResult {
     let mut dense = DensePlanes::default();
     let traced = run_package(frame, triangles, options, progress, &mut dense);
-    PackageResult {
-        bitmap: dense.bitmap(|_| true),
-        stats: traced.stats,
-        faces: traced.faces,
-        triangle_samples: traced.triangle_samples,
-    }
+    traced.with(dense.bitmap(|_| true))
 }
 
 /// [`trace_package`] writing its pixels straight into a frame (one machine
@@ -251,6 +246,18 @@ pub struct TracedPackage {
     /// As [`PackageResult::triangle_samples`].
     pub triangle_samples: Vec<u32>,
     pub times: PhaseTimes,
+}
+
+impl TracedPackage {
+    /// The package's result with `bitmap` as its pixels.
+    fn with(self, bitmap: SparseBitmap) -> PackageResult {
+        PackageResult {
+            bitmap,
+            stats: self.stats,
+            faces: self.faces,
+            triangle_samples: self.triangle_samples,
+        }
+    }
 }
 
 /// Wall times of a package's phases on this machine: the breakdown of a
@@ -471,12 +478,7 @@ impl ProgressivePackage {
             None => planes.bitmap(|_| true),
         };
         self.pixels = Some(planes);
-        Ok(PackageResult {
-            bitmap,
-            stats: traced.stats,
-            faces: traced.faces,
-            triangle_samples: traced.triangle_samples,
-        })
+        Ok(traced.with(bitmap))
     }
 
     /// Runs stage `quality` as [`ProgressivePackage::advance`] does, on the
@@ -493,12 +495,7 @@ impl ProgressivePackage {
     ) -> Result<PackageResult, StageError> {
         let traced = self.run(frame, quality, options, progress, None)?;
         self.pixels = None;
-        Ok(PackageResult {
-            bitmap: SparseBitmap::default(),
-            stats: traced.stats,
-            faces: traced.faces,
-            triangle_samples: traced.triangle_samples,
-        })
+        Ok(traced.with(SparseBitmap::default()))
     }
 
     /// [`ProgressivePackage::advance`] writing the stage's pixels straight
