@@ -13,6 +13,7 @@ use vtfarm_proto::{FrameStats, Role, SceneData, WireImageFormat, WireJob, WireSt
 use vtfarm_render::FrameSetup;
 use vtfarm_render::output::ImageFormat;
 use vtfarm_scene::Scene;
+use vtfarm_submit::listing::{self, FrameRecord};
 use vtfarm_submit::progress::Progress;
 use vtfarm_submit::{
     FinishedFrame, JobEvent, JobOptions, RemoteJob, RemoteStudy, StudyEvent, run_job,
@@ -255,52 +256,55 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
                 scene: &data,
             },
         };
-        let bar =
-            Progress::new(reflectors.len() as u64, "reflector triangles", "frame");
+        let bar = Progress::new(reflectors.len() as u64, "reflector triangles", "frame");
         let say = |line: String| bar.println(line);
         let submitted = std::time::Instant::now();
         let accepted = std::cell::Cell::new(attach.map(JobId));
-        let run = run_remote_job(&client, start, |event| match event {
-            JobEvent::Accepted { job, frames } => {
-                accepted.set(Some(job));
-                match json {
-                    true => json_line(serde_json::json!({"event": "accepted", "job": job, "frames": frames})),
-                    false => say(format!("job {job} accepted: {frames} frame(s)")),
-                }
-            }
-            JobEvent::Progress { frame, done, .. } => {
-                bar.set_message(format!("frame {frame}"));
-                bar.set_position(done.into());
-            }
-            JobEvent::Warning(warning) => say(format!("warning: {warning}")),
-            JobEvent::StateChanged { job, state, reason } => match json {
-                true => json_line(serde_json::json!({"event": "state", "job": job, "state": state, "reason": reason})),
-                false => say(format!("job {job} is {}: {reason}", state.name())),
-            },
-            JobEvent::FrameDone(f) => {
-                arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);
-                let path = output.join(format!("frame_{:04}.{}", f.frame, format.extension()));
-                if let Err(e) = write_frame(&path, f, format, &exposure) {
-                    say(format!("error: {e:#}"));
-                }
-                let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
-                let svg = vtfarm_master::timeline::timeline_svg(&f.stats);
-                if let Err(e) = std::fs::write(&timeline, svg) {
-                    say(format!("error: {}: {e}", timeline.display()));
-                }
-                if let Some(components) = &f.components {
-                    let dir = output.join(format!("frame_{:04}", f.frame));
-                    if let Err(e) = vtfarm_render::output::write_aux(&dir, components, &[], &scene)
-                    {
-                        say(format!("error: {e}"));
+        let run = run_remote_job(&client, start, |event| {
+            let line = json.then(|| event.json_line()).flatten();
+            match event {
+                JobEvent::Accepted { job, frames } => {
+                    accepted.set(Some(job));
+                    match line {
+                        Some(line) => println!("{line}"),
+                        None => say(format!("job {job} accepted: {frames} frame(s)")),
                     }
                 }
-                say(format!(
-                    "frame {}: {} ({})",
-                    f.frame,
-                    path.display(),
-                    frame_line(&f.stats)
-                ));
+                JobEvent::Progress { frame, done, .. } => {
+                    bar.set_message(format!("frame {frame}"));
+                    bar.set_position(done.into());
+                }
+                JobEvent::Warning(warning) => say(format!("warning: {warning}")),
+                JobEvent::StateChanged { job, state, reason } => match line {
+                    Some(line) => println!("{line}"),
+                    None => say(format!("job {job} is {}: {reason}", state.name())),
+                },
+                JobEvent::FrameDone(f) => {
+                    arrivals.insert(f.frame, submitted.elapsed().as_micros() as u64);
+                    let path = output.join(format!("frame_{:04}.{}", f.frame, format.extension()));
+                    if let Err(e) = write_frame(&path, f, format, &exposure) {
+                        say(format!("error: {e:#}"));
+                    }
+                    let timeline = output.join(format!("frame_{:04}_timeline.svg", f.frame));
+                    let svg = vtfarm_master::timeline::timeline_svg(&f.stats);
+                    if let Err(e) = std::fs::write(&timeline, svg) {
+                        say(format!("error: {}: {e}", timeline.display()));
+                    }
+                    if let Some(components) = &f.components {
+                        let dir = output.join(format!("frame_{:04}", f.frame));
+                        if let Err(e) =
+                            vtfarm_render::output::write_aux(&dir, components, &[], &scene)
+                        {
+                            say(format!("error: {e}"));
+                        }
+                    }
+                    say(format!(
+                        "frame {}: {} ({})",
+                        f.frame,
+                        path.display(),
+                        listing::frame_line(&f.stats)
+                    ));
+                }
             }
         });
         // Ctrl-C leaves the job to the farm: say so, and how to come back.
@@ -318,31 +322,18 @@ pub(crate) fn submit(args: SubmitArgs) -> Result<()> {
         bar.finish();
         anyhow::Ok(result?)
     })?;
-    let stats: Vec<FrameRecord> = (frames.iter())
-        .map(|f| FrameRecord {
-            frame: f.frame,
-            arrival_micros: arrivals.get(&f.frame).copied().unwrap_or_default(),
-            stats: &f.stats,
-        })
-        .collect();
     let path = args.output.join("stats.json");
-    crate::shared::write_json(&path, &stats)?;
+    crate::shared::write_json(&path, &FrameRecord::of(&frames, &arrivals))?;
     if json {
-        json_line(serde_json::json!({"event": "done", "frames": frames.len(), "stats": path}));
+        println!("{}", listing::done_json_line(frames.len(), "stats", &path));
         return Ok(());
     }
     for f in &frames {
         println!("frame {}:", f.frame);
-        print_frame_stats(&f.stats);
+        print!("{}", listing::frame_table(&f.stats));
     }
     println!("wrote {} frame(s) and {} ", frames.len(), path.display());
     Ok(())
-}
-
-/// One machine-readable line on stdout (`submit --json`): stdout then holds
-/// JSON lines alone, and every line for people goes to stderr.
-fn json_line(value: serde_json::Value) {
-    println!("{value}");
 }
 
 /// How to follow an interrupted `vtfarm submit`'s job again or stop it:
@@ -377,17 +368,6 @@ impl AttachHint {
     }
 }
 
-/// One frame in `stats.json`: the master's statistics, and when the frame
-/// reached the submitter (from the submission; the intervals between
-/// arrivals are the farm's frame rate, pipelined or not).
-#[derive(serde::Serialize)]
-struct FrameRecord<'a> {
-    frame: u32,
-    arrival_micros: u64,
-    #[serde(flatten)]
-    stats: &'a FrameStats,
-}
-
 /// `vtfarm submit` of a study file: the study is one job on the cluster
 /// (its variants jobs under it), followed until every frame is in, or
 /// followed again with `--attach`; the outputs are `vtfarm study`'s.
@@ -403,7 +383,7 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let json = args.json;
     let mut writer = vtfarm_study::StudyWriter::new(&plan, &args.output)?;
     let order = plan.frame_order();
-    let (study, scenes) = crate::study::wire_study(&plan, args.priority);
+    let (study, scenes) = vtfarm_study::wire_study(&plan, args.priority);
     let study = WireStudy {
         name: args.name.clone().unwrap_or(study.name),
         ..study
@@ -421,40 +401,31 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let bar = Progress::new(plan.frames() as u64, "frames", "");
     let say = |line: String| bar.println(line);
     let accepted = std::cell::Cell::new(args.attach.map(JobId));
+    let variant_name = |v: usize| plan.variants[v].name.clone();
     let outcome = runtime()?.block_on(async {
         let run = run_remote_study(&client, start, |event| {
+            let line = json.then(|| event.json_line(variant_name)).flatten();
             match event {
                 StudyEvent::Accepted { study, variants } => {
                     accepted.set(Some(study));
-                    let planned: Vec<u32> = (plan.variants.iter())
-                        .map(|v| v.setups.len() as u32)
-                        .collect();
                     let has: Vec<u32> = variants.iter().map(|&(_, frames)| frames).collect();
-                    if has != planned {
-                        return Err(format!(
-                            "study {study} has variants of {has:?} frames, {} plans {planned:?}: attach with the study file it was submitted from",
-                            args.job.display()
-                        ));
-                    }
+                    plan.check_variant_frames(study, &has).map_err(|e| e.to_string())?;
                     let frames: u32 = has.iter().sum();
                     let jobs: Vec<JobId> = variants.iter().map(|&(job, _)| job).collect();
-                    match json {
-                        true => json_line(serde_json::json!({"event": "accepted", "job": study, "kind": "study", "frames": frames, "variants": jobs})),
-                        false => say(format!("study {study} accepted: {} variant(s) (jobs {jobs:?}), {frames} frame(s)", jobs.len())),
+                    match line {
+                        Some(line) => println!("{line}"),
+                        None => say(format!("study {study} accepted: {} variant(s) (jobs {jobs:?}), {frames} frame(s)", jobs.len())),
                     }
                 }
                 StudyEvent::FrameDone { variant, frame } => {
-                    crate::study::write_frame(&plan, &mut writer, (variant, frame.frame), &order, frame, &bar)
+                    crate::study::write_frame(&mut writer, (variant, frame.frame), &order, frame, &bar)
                         .map_err(|e| e.to_string())?;
                 }
                 StudyEvent::Warning(warning) => say(format!("warning: {warning}")),
-                StudyEvent::StateChanged { variant, job, state, reason } => {
-                    let name = &plan.variants[variant].name;
-                    match json {
-                        true => json_line(serde_json::json!({"event": "state", "job": job, "variant": name, "state": state, "reason": reason})),
-                        false => say(format!("variant {name:?} (job {job}) is {}: {reason}", state.name())),
-                    }
-                }
+                StudyEvent::StateChanged { variant, job, state, reason } => match line {
+                    Some(line) => println!("{line}"),
+                    None => say(format!("variant {:?} (job {job}) is {}: {reason}", variant_name(variant), state.name())),
+                },
             }
             Ok(())
         });
@@ -486,8 +457,9 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     let report = writer.finish(&run)?;
     if json {
         let summary = args.output.join("summary.json");
-        json_line(
-            serde_json::json!({"event": "done", "frames": plan.frames(), "summary": summary}),
+        println!(
+            "{}",
+            listing::done_json_line(plan.frames(), "summary", &summary)
         );
         return Ok(());
     }
@@ -495,38 +467,9 @@ fn submit_study(args: SubmitArgs) -> Result<()> {
     Ok(())
 }
 
-/// A frame's summary line. The last figure is `FrameStats::speedup`, the
-/// workers' summed busy time over the frame's wall time: how many workers
-/// were busy on average (it says nothing of a speed-up over anything).
-fn frame_line(s: &FrameStats) -> String {
-    format!(
-        "{:.3} s, {} packages, imbalance {:.1}%, {:.2} workers busy on average",
-        s.wall_micros as f64 / 1e6,
-        s.packages,
-        s.imbalance * 100.0,
-        s.speedup
-    )
-}
-
 /// Prints a frame's per-worker table.
 pub(crate) fn print_frame_stats(s: &FrameStats) {
-    println!("  {}", frame_line(s));
-    println!(
-        "  {:<24} {:>9} {:>8} {:>9} {:>10} {:>10} {:>10}",
-        "worker", "busy s", "packages", "triangles", "samples", "bytes in", "bytes out"
-    );
-    for w in &s.workers {
-        println!(
-            "  {:<24} {:>9.3} {:>8} {:>9} {:>10} {:>10} {:>10}",
-            w.name,
-            w.busy_micros as f64 / 1e6,
-            w.packages,
-            w.triangles,
-            w.rays,
-            w.bytes_in,
-            w.bytes_out
-        );
-    }
+    print!("{}", listing::frame_table(s));
 }
 
 /// `vtfarm status`.
@@ -540,50 +483,6 @@ pub(crate) fn status(args: StatusArgs) -> Result<()> {
         conn.endpoint.wait_idle().await;
         anyhow::Ok(reply)
     })?;
-    // Throughput is the load balancer's: estimated cost (traced samples,
-    // once a frame has been measured) per second, transfers included.
-    println!(
-        "{:<24} {:<22} {:>7} {:>8} {:>18} {:>9} {:>10} {:>8}",
-        "worker",
-        "address",
-        "threads",
-        "state",
-        "throughput (samples/s)",
-        "packages",
-        "triangles",
-        "failures"
-    );
-    for w in &reply.workers {
-        println!(
-            "{:<24} {:<22} {:>7} {:>8} {:>22.0} {:>9} {:>10} {:>8}",
-            w.name,
-            w.address,
-            w.threads,
-            w.state,
-            w.throughput,
-            w.packages_done,
-            w.triangles_done,
-            w.failures
-        );
-    }
-    if reply.queue.running.is_empty() {
-        println!("running: nothing");
-    }
-    // In the order the jobs get workers; frames are numbered from 0, as
-    // the files are (frame_0000).
-    for r in &reply.queue.running {
-        // A paused job keeps its place in the queue but gets no work.
-        let state = if r.paused { "paused" } else { "running" };
-        println!(
-            "{state}: job {} ({}) frame {} of {} (frame_{:04}): {}/{} triangles",
-            r.job, r.name, r.frame, r.frames, r.frame, r.triangles_done, r.triangles_total
-        );
-    }
-    println!(
-        "waiting: {} job(s) {:?}",
-        reply.queue.waiting.len(),
-        reply.queue.waiting
-    );
-    println!("scene bytes sent to workers: {}", reply.scene_bytes_sent);
+    print!("{}", listing::status_table(&reply));
     Ok(())
 }

@@ -1,5 +1,5 @@
 //! What the subcommands share: loading a job with the command line's
-//! overrides, the listings' UTC times and the cube-map reflector warning; the
+//! overrides and the cube-map reflector warning; the
 //! `--quality` parser, thread pool, async runtime and JSON output come from
 //! `vtfarm_bench::support`, which the benchmarks share too.
 
@@ -129,28 +129,9 @@ pub(crate) fn warn_unsupported_reflectors(
     }
 }
 
-/// Milliseconds since the Unix epoch as `YYYY-MM-DD HH:MM:SS` (UTC), for
-/// listings.
-pub(crate) fn utc_time(ms: u64) -> String {
-    let time = vtfarm_job::study::UtcTime {
-        unix_seconds: (ms / 1000) as i64,
-    };
-    let (year, month, day, h, m, s) = time.civil();
-    format!("{year:04}-{month:02}-{day:02} {h:02}:{m:02}:{s:02}")
-}
-
 #[cfg(test)]
 mod tests {
     use super::ImageSize;
-
-    #[test]
-    fn utc_times_match_known_dates() {
-        assert_eq!(super::utc_time(0), "1970-01-01 00:00:00");
-        // A leap day, and the last second of a century's leap year.
-        assert_eq!(super::utc_time(951_782_400_000), "2000-02-29 00:00:00");
-        assert_eq!(super::utc_time(978_307_199_999), "2000-12-31 23:59:59");
-        assert_eq!(super::utc_time(1_764_672_000_000), "2025-12-02 10:40:00");
-    }
 
     #[test]
     fn one_side_alone_keeps_the_aspect_ratio_and_both_are_taken_as_given() {

@@ -1,19 +1,15 @@
 //! `vtfarm study` (an embedded farm) and the study side of `vtfarm submit`
-//! (a cluster, where the study is one job of kind `study`): every variant
-//! is one farm job whose frames are its sun positions times its eye points,
-//! so the farm balances the study frame by frame, and the workers keep the
-//! variant's scene and BVH for all of them (a sun position changes only the
-//! lighting). Both write each frame through [`write_frame`].
+//! (a cluster, where the study is one job of kind `study`); the study's
+//! jobs are `vtfarm_study`'s. Both write each frame through [`write_frame`].
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use vtfarm_embedded::LocalFarm;
 use vtfarm_master::FarmRules;
-use vtfarm_proto::{SceneData, WireJob, WireStudy};
 use vtfarm_study::{StudyPlan, StudyReport, StudyWriter};
 use vtfarm_submit::progress::Progress;
-use vtfarm_submit::{FinishedFrame, JobEvent, JobOptions, run_job, wire_job};
+use vtfarm_submit::{FinishedFrame, JobEvent, run_job};
 use vtfarm_transport::Link;
 use vtfarm_vertex::Quality;
 
@@ -92,80 +88,16 @@ pub(crate) async fn render_and_write(
     Ok(report)
 }
 
-/// The job of variant `v`: its frames coarse to fine
-/// ([`StudyPlan::frame_order`]), components kept for measuring; its scene.
-pub(crate) fn variant_job(plan: &StudyPlan, v: usize, order: &[usize]) -> (WireJob, SceneData) {
-    let variant = &plan.variants[v];
-    let data = SceneData::from_scene(&variant.scene);
-    let name = format!("{} / {}", plan.name, variant.name);
-    let options = JobOptions {
-        method: plan.method,
-        aux: true,
-    };
-    let setups: Vec<_> = order.iter().map(|&f| variant.setups[f].clone()).collect();
-    let job = WireJob {
-        kind: vtfarm_proto::WireJobKind::Study,
-        ..wire_job(&name, &data, &setups, &variant.reflectors, options)
-    };
-    (job, data)
-}
-
-/// The study as one farm job with `priority`, and the scenes its variants
-/// name (each once).
-pub(crate) fn wire_study(plan: &StudyPlan, priority: i32) -> (WireStudy, Vec<SceneData>) {
-    let order = plan.frame_order();
-    let mut scenes: Vec<SceneData> = Vec::new();
-    let variants = (0..plan.variants.len())
-        .map(|v| {
-            let (job, data) = variant_job(plan, v, &order);
-            if !scenes.iter().any(|s| s.hash == data.hash) {
-                scenes.push(data);
-            }
-            job
-        })
-        .collect();
-    let study = WireStudy {
-        name: plan.name.clone(),
-        priority,
-        variants,
-    };
-    (study, scenes)
-}
-
-/// Measures and writes frame `sent` (its number in the variant's job,
-/// coarse to fine: `order` maps it back) of variant `v`, and says so.
+/// Measures and writes frame `sent` of variant `v` (see
+/// [`StudyWriter::sent_frame`]) and says so.
 pub(crate) fn write_frame(
-    plan: &StudyPlan,
     writer: &mut StudyWriter<'_>,
-    (v, sent): (usize, u32),
+    frame: (usize, u32),
     order: &[usize],
-    frame: &FinishedFrame,
+    finished: &FinishedFrame,
     bar: &Progress,
 ) -> Result<(), vtfarm_study::StudyError> {
-    let variant = &plan.variants[v];
-    let Some(&at) = order.get(sent as usize) else {
-        return Err(vtfarm_study::StudyError::Frame {
-            variant: v,
-            eye: 0,
-            why: format!("the master sent frame {sent}, beyond the variant's frames"),
-        });
-    };
-    let (name, eye) = (plan.frame_name(at), plan.frame_at(at).1);
-    let written = match &frame.components {
-        Some(components) => writer
-            .frame(v, at, components)
-            .map(|row| row.summary.mean_reflected_luminance_cd_m2),
-        None => Err(vtfarm_study::StudyError::Frame {
-            variant: v,
-            eye,
-            why: "the master sent no components".into(),
-        }),
-    };
-    let mean = written?;
-    bar.println(format!(
-        "{} {name}: mean reflected luminance {mean:.1} cd/m²",
-        variant.name
-    ));
+    bar.println(writer.sent_frame(frame, order, finished.components.as_ref())?);
     bar.inc(1);
     Ok(())
 }
@@ -181,11 +113,11 @@ async fn render_study(
     let order = plan.frame_order();
     for (v, variant) in plan.variants.iter().enumerate() {
         bar.set_message(variant.name.clone());
-        let (job, data) = variant_job(plan, v, &order);
+        let (job, data) = vtfarm_study::variant_job(plan, v, &order);
         let mut failure = None;
         run_job(link, job, &data, |event| {
             if let JobEvent::FrameDone(f) = event {
-                if let Err(e) = write_frame(plan, writer, (v, f.frame), &order, f, &bar) {
+                if let Err(e) = write_frame(writer, (v, f.frame), &order, f, &bar) {
                     failure.get_or_insert(e);
                 }
             }

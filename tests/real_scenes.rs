@@ -458,7 +458,7 @@ fn reference_map(
                 .filter_map(|t| intersect64(&triangles[t], point, mirror).map(|d| (d, t)))
                 .filter(|&(d, _)| d > floor)
                 .min_by(|p, q| p.0.total_cmp(&q.0));
-            Some(closest.map_or(NONE, |(_, t)| scene.triangles[t].object))
+            Some(closest.map_or(NONE, |(_, t)| scene.triangles[t].object.raw()))
         })
         .collect()
 }

@@ -84,7 +84,7 @@ pub struct MasterHandle {
 impl MasterHandle {
     /// Hands a connection that passed its handshake to the master.
     pub fn attach(&self, peer: Peer, link: Link, closer: Option<Closer>) -> ConnId {
-        let conn = self.next_conn.fetch_add(1, Ordering::Relaxed);
+        let conn = ConnId(self.next_conn.fetch_add(1, Ordering::Relaxed));
         let Link { tx, mut rx, .. } = link;
         let _ = self.inputs.send(Input::Connected {
             conn,
@@ -319,7 +319,7 @@ async fn run(
                 }
                 Output::Close(conn, reason) => {
                     if let Some(c) = conns.remove(&conn) {
-                        debug!(conn, "closing: {reason}");
+                        debug!(%conn, "closing: {reason}");
                         if let Some(close) = c.closer {
                             close(&reason);
                         }

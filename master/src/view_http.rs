@@ -179,7 +179,7 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
     let scene = &source.scene;
     let mut reflector_objects: Vec<String> = (source.reflectors.iter())
         .filter_map(|&t| scene.triangles.get(t as usize))
-        .map(|t| scene.objects[t.object as usize].name.clone())
+        .map(|t| scene.objects[t.object.index()].name.clone())
         .collect();
     reflector_objects.sort();
     reflector_objects.dedup();

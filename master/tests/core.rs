@@ -11,10 +11,10 @@ use std::time::Duration;
 use vtfarm_proto::JobId;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
-use vtfarm_master::FarmRules;
 use vtfarm_master::{
     BaseFrameRequest, FrameEncodeRequest, JobOptions, MasterCore, Output, Peer, wire_job,
 };
+use vtfarm_master::{ConnId, FarmRules};
 use vtfarm_master_core::JobState;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
@@ -27,9 +27,9 @@ use vtfarm_vertex::{SparseBitmap, Stop};
 use vtfarm_worker::Engine;
 use vtfarm_worker::engine::ActiveFrame;
 
-const WORKER: u64 = 1;
-const SUBMITTER: u64 = 2;
-const INTRUDER: u64 = 3;
+const WORKER: ConnId = ConnId(1);
+const SUBMITTER: ConnId = ConnId(2);
+const INTRUDER: ConnId = ConnId(3);
 
 struct Harness {
     core: MasterCore,
@@ -83,14 +83,14 @@ impl Harness {
     }
 
     /// Sends to the core and returns the messages for `conn` (and closes of anyone).
-    fn send(&mut self, from: u64, message: Message) -> Vec<Output> {
+    fn send(&mut self, from: ConnId, message: Message) -> Vec<Output> {
         let now = self.tick();
         self.core.message(now, from, message);
         self.outputs()
     }
 }
 
-fn messages_to(outputs: &[Output], conn: u64) -> Vec<&Message> {
+fn messages_to(outputs: &[Output], conn: ConnId) -> Vec<&Message> {
     outputs
         .iter()
         .filter_map(|o| match o {

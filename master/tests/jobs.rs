@@ -17,7 +17,7 @@ use vtfarm_proto::JobId;
 
 use job::Job;
 use support::pair::{Pair, WHO, control, state};
-use vtfarm_master::{FarmRules, Output};
+use vtfarm_master::{ConnId, FarmRules, Output};
 use vtfarm_master_core::{JobControlError, JobState};
 use vtfarm_proto::{FrameDone, JobAction, Message, PackageFailed, WireJob, WireJobState};
 
@@ -82,7 +82,7 @@ fn complete(pair: &mut Pair, id: JobId, frames: usize) {
 
 /// Packages held per worker name (`packages_by_worker`) as the
 /// (connection, package) pairs a cancel tells.
-fn by_connection(pair: &Pair, held: &BTreeMap<String, Vec<u64>>) -> BTreeSet<(u64, u64)> {
+fn by_connection(pair: &Pair, held: &BTreeMap<String, Vec<u64>>) -> BTreeSet<(ConnId, u64)> {
     (pair.workers.iter())
         .flat_map(|w| {
             let ids = held.get(&w.name).cloned().unwrap_or_default();
@@ -131,7 +131,7 @@ fn fail_until_the_job_fails(pair: &mut Pair, id: JobId) {
             !p.master.packages_by_worker().is_empty() || p.master.jobs().get(id).is_none()
         });
         let held = pair.master.packages_by_worker();
-        let failures: Vec<(u64, u64)> = (pair.workers.iter())
+        let failures: Vec<(ConnId, u64)> = (pair.workers.iter())
             .flat_map(|w| {
                 let ids = held.get(&w.name).cloned().unwrap_or_default();
                 ids.into_iter().map(move |p| (w.conn(), p))

@@ -21,8 +21,8 @@ use glam::Vec3;
 use tokio::task::JoinHandle;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_embedded::local_worker;
-use vtfarm_master::FarmRules;
 use vtfarm_master::journal::Storage;
+use vtfarm_master::{ConnId, FarmRules};
 use vtfarm_master::{Journal, MasterHandle, server, spawn_persistent_master};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{HandshakePolicy, Message, SceneData, WireJob};
@@ -580,10 +580,11 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
     let submitter = vtfarm_master::Peer::Submitter {
         address: "test".into(),
     };
-    core.connected(now, 1, submitter);
+    let conn = ConnId(1);
+    core.connected(now, conn, submitter);
     core.message(
         now,
-        1,
+        conn,
         Message::AttachJob {
             job: JobId(3),
             from_frame: 0,
@@ -599,14 +600,14 @@ fn a_frame_that_cannot_be_rendered_again_is_told_lost() {
     assert_eq!(replays[0], 0..FRAMES as u32);
     core.replay_failed(
         now,
-        1,
+        conn,
         JobId(3),
         2,
         "jobs/000000000003/000002: missing".into(),
     );
     let told: Vec<Message> = std::iter::from_fn(|| core.poll_output())
         .filter_map(|o| match o {
-            vtfarm_master::Output::Send(1, message) => Some(*message),
+            vtfarm_master::Output::Send(c, message) if c == conn => Some(*message),
             _ => None,
         })
         .collect();

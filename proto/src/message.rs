@@ -547,6 +547,18 @@ pub enum WireJobKind {
     Variant,
 }
 
+impl WireJobKind {
+    /// The lowercase name listings use: the one serde gives it in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            WireJobKind::Render => "render",
+            WireJobKind::Study => "study",
+            WireJobKind::View => "view",
+            WireJobKind::Variant => "variant",
+        }
+    }
+}
+
 /// A glare study as a submitter sends it: its variants, each a job (a
 /// variant is one scene), run and controlled as one.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -990,6 +1002,15 @@ mod tests {
             assert_eq!(n.to_string().parse::<JobId>(), Ok(JobId(n)));
         }
         assert_eq!(format!("{:012}", JobId(7)), "000000000007");
+    }
+
+    #[test]
+    fn a_job_kinds_name_is_its_json_name() {
+        use WireJobKind::*;
+        for kind in [Render, Study, View, Variant] {
+            let json = serde_json::to_string(&kind).unwrap();
+            assert_eq!(json, format!("\"{}\"", kind.name()));
+        }
     }
 
     /// The unit enum serde would derive: the encoding that the names of

@@ -355,13 +355,7 @@ fn print_table1(t: &Table1) {
 /// rays in the scene bounds (incoherent): `bench rays`' first two sets.
 fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
     let pixels = (camera.width * camera.height) as usize;
-    let sets = rays::RaySets::new(
-        bvh,
-        camera,
-        pixels,
-        rays::RayGenerator::DEFAULT_SEED,
-        vtfarm_scene::NONE,
-    );
+    let sets = rays::RaySets::new(bvh, camera, pixels, rays::RayGenerator::DEFAULT_SEED, None);
     (
         rays::rays_per_second(&[bvh], &sets.primary, rays::Batch::Single)[0].wall,
         rays::rays_per_second(&[bvh], &sets.incoherent, rays::Batch::Single)[0].wall,

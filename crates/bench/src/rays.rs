@@ -167,7 +167,7 @@ pub(crate) fn run(args: RaysArgs) -> Result<()> {
     let mut bvhs = vec![&bvh];
     bvhs.extend(baseline.as_ref().map(|(b, _)| b));
 
-    let sets = RaySets::new(&bvh, &camera, args.random_rays, args.seed, reflector);
+    let sets = RaySets::new(&bvh, &camera, args.random_rays, args.seed, Some(reflector));
     if let Some(dir) = &args.dump_rays {
         sets.dump(&bvh, dir)?;
     }
@@ -295,7 +295,7 @@ impl RaySets {
         camera: &Camera,
         random_rays: usize,
         seed: u64,
-        reflector: vtfarm_scene::ObjectId,
+        reflector: Option<vtfarm_scene::ObjectId>,
     ) -> RaySets {
         let primary: Vec<Ray> = (0..camera.height)
             .flat_map(|y| (0..camera.width).map(move |x| (x, y)))
@@ -312,7 +312,7 @@ impl RaySets {
             .iter()
             .filter_map(|ray| {
                 let hit = bvh.closest_hit(ray, f32::INFINITY)?;
-                if scene.triangles[hit.triangle as usize].object != reflector {
+                if Some(scene.triangles[hit.triangle as usize].object) != reflector {
                     return None;
                 }
                 let surface = bvh.surface_point(&hit);

@@ -28,7 +28,7 @@ fn main() {
         );
         let mut counts = vec![0usize; scene.objects.len()];
         for t in &scene.triangles {
-            counts[t.object as usize] += 1;
+            counts[t.object.index()] += 1;
         }
         for (object, count) in scene.objects.iter().zip(counts) {
             println!("  {:<20} {count:>7}", object.name);

@@ -36,7 +36,7 @@ impl SceneBuilder {
         self.scene.objects.push(Object {
             name: name.to_owned(),
         });
-        (self.scene.objects.len() - 1) as ObjectId
+        ObjectId(self.scene.objects.len() as u32 - 1)
     }
 
     /// Adds `mesh` to `object` with `material`.

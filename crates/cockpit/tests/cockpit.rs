@@ -106,7 +106,7 @@ impl<'a> Caster<'a> {
     /// Name of the object the ray hits first, or "none".
     fn object_hit(&self, origin: Vec3, dir: Vec3) -> &str {
         match self.cast(origin, dir) {
-            Some((t, _)) => &self.scene.objects[self.scene.triangles[t].object as usize].name,
+            Some((t, _)) => &self.scene.objects[self.scene.triangles[t].object.index()].name,
             None => "none",
         }
     }
@@ -165,7 +165,7 @@ fn windings_agree_with_vertex_normals() {
     let scene = &default_cockpit().scene;
     for t in 0..scene.triangles.len() as u32 {
         let mean: Vec3 = scene.triangle_normals(t).iter().sum();
-        let object = &scene.objects[scene.triangles[t as usize].object as usize].name;
+        let object = &scene.objects[scene.triangles[t as usize].object.index()].name;
         assert!(
             scene.geometric_normal(t).dot(mean) > 0.0,
             "triangle {t} of {object} is wound clockwise"
@@ -219,7 +219,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
         );
     }
     // Material -> objects using it: only the two glass surfaces share one.
-    let mut users: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    let mut users: BTreeMap<u32, Vec<ObjectId>> = BTreeMap::new();
     for t in &scene.triangles {
         let objects = users.entry(t.material).or_default();
         if !objects.contains(&t.object) {
@@ -239,7 +239,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
     }
     for id in 0..scene.objects.len() as u32 {
         assert!(
-            scene.triangles.iter().any(|t| t.object == id),
+            scene.triangles.iter().any(|t| t.object == ObjectId(id)),
             "{} is empty",
             names[id as usize]
         );

@@ -12,7 +12,7 @@ use vtfarm_method::{
     shade_reflector,
 };
 use vtfarm_raster::{id_buffer_where, shade_ids};
-use vtfarm_scene::{Lighting, ObjectId, Scene};
+use vtfarm_scene::{Lighting, Scene};
 
 use crate::cube::CubeLayout;
 use crate::reflected::reflected_triangle_flags;
@@ -35,7 +35,7 @@ impl Default for EnvironmentMap {
 pub struct EnvironmentCube {
     pub layout: CubeLayout,
     pub color: Vec<Vec3>,
-    pub object: Vec<ObjectId>,
+    pub object: Vec<u32>,
 }
 
 impl EnvironmentCube {

@@ -18,19 +18,19 @@ pub fn reflected_triangle_flags(scene: &Scene, reflector: &[TriangleId]) -> Vec<
     // (looked up by name once per reflector object, not per triangle).
     let mut is_reflector = vec![false; scene.objects.len()];
     for &t in reflector {
-        is_reflector[scene.triangles[t as usize].object as usize] = true;
+        is_reflector[scene.triangles[t as usize].object.index()] = true;
     }
     let mut excluded = vec![false; scene.objects.len()];
     for (object, _) in is_reflector.iter().enumerate().filter(|(_, r)| **r) {
         let back = format!("{}{BACK_SUFFIX}", scene.objects[object].name);
         if let Some(back) = scene.object_id(&back) {
-            excluded[back as usize] = true;
+            excluded[back.index()] = true;
         }
     }
     let mut flags: Vec<bool> = scene
         .triangles
         .iter()
-        .map(|t| !excluded[t.object as usize])
+        .map(|t| !excluded[t.object.index()])
         .collect();
     for &t in reflector {
         flags[t as usize] = false;

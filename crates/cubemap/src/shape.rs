@@ -56,7 +56,7 @@ pub fn unsupported_reflector_warnings(
         .filter_map(|group| {
             let warning = classify(scene, group).warning()?;
             let object = scene.triangles[group[0] as usize].object;
-            let name = &scene.objects[object as usize].name;
+            let name = &scene.objects[object.index()].name;
             Some(format!("reflector {name:?}: {warning}"))
         })
         .collect()

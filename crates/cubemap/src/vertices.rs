@@ -84,12 +84,12 @@ fn objects_vertices(mesh: &ReflectedMesh) -> Vec<Vec<u32>> {
     let count = mesh
         .objects
         .iter()
-        .map(|&o| o as usize + 1)
+        .map(|&o| o.index() + 1)
         .max()
         .unwrap_or(0);
     let mut objects = vec![Vec::new(); count];
     for (v, &object) in mesh.objects.iter().enumerate() {
-        objects[object as usize].push(v as u32);
+        objects[object.index()].push(v as u32);
     }
     objects.retain(|v| !v.is_empty());
     objects

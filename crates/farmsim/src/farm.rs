@@ -454,7 +454,7 @@ impl<M: CostModel> Farm<M> {
             journal,
             scene: None,
             submitter: None,
-            next_conn: 1,
+            next_conn: ConnId(1),
             events: BTreeMap::new(),
             next_seq: 0,
             cpu: Vec::new(),
@@ -491,7 +491,7 @@ impl<M: CostModel> Farm<M> {
 
     fn connect_submitter(&mut self) {
         let conn = self.next_conn;
-        self.next_conn += 1;
+        self.next_conn.0 += 1;
         self.submitter = Some(conn);
         let peer = Peer::Submitter {
             address: "simulated".into(),
@@ -575,7 +575,7 @@ impl<M: CostModel> Farm<M> {
             duplicate_results: false,
             results_sent: 0,
             frame_starts_got: Vec::new(),
-            conn: 0,
+            conn: ConnId(0),
             epoch: 0,
             session: None,
             state,
@@ -592,7 +592,7 @@ impl<M: CostModel> Farm<M> {
     pub fn connect(&mut self, w: usize) {
         self.stop_work_of(w);
         let conn = self.next_conn;
-        self.next_conn += 1;
+        self.next_conn.0 += 1;
         let worker = &mut self.workers[w];
         worker.conn = conn;
         worker.epoch += 1;

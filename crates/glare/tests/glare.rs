@@ -758,7 +758,7 @@ fn a_flat_mirror_reflecting_a_panel_returns_kr_times_its_luminance() {
         for vertices in [[0, 1, 2], [0, 2, 3]] {
             scene.triangles.push(Triangle {
                 vertices: vertices.map(|v| base + v),
-                object,
+                object: vtfarm_scene::ObjectId(object),
                 material: object,
             });
         }

@@ -272,7 +272,7 @@ impl ReflectorSelector {
     pub fn matches(&self, scene: &Scene, aliases: &ObjectAliases, triangle: &Triangle) -> bool {
         match self {
             ReflectorSelector::Object(name) => {
-                let named = scene.objects.get(triangle.object as usize);
+                let named = scene.objects.get(triangle.object.index());
                 named.is_some_and(|o| o.name == *name)
                     || aliases
                         .get(name)
@@ -736,7 +736,7 @@ pub fn dull_reflectors(scene: &Scene, triangles: &[TriangleId]) -> Vec<DullRefle
             && seen.insert((triangle.object, triangle.material))
         {
             dull.push(DullReflector {
-                object: scene.objects[triangle.object as usize].name.clone(),
+                object: scene.objects[triangle.object.index()].name.clone(),
                 material: material.name.clone(),
                 specular: material.specular.max_element(),
                 ior: material.ior,

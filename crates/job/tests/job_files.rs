@@ -10,7 +10,9 @@ use vtfarm_job::{
     OutputSettings, ReflectorSelector, SceneSource, ToneCurve, load_job, parse_job,
 };
 use vtfarm_method::MethodKind;
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_scene::{
+    Camera, Light, LightKind, Lighting, Material, Object, ObjectId, Scene, Triangle,
+};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
 
@@ -902,7 +904,7 @@ fn two_by_two_scene() -> Scene {
     let corners = [Vec3::ZERO, Vec3::X, Vec3::Y];
     let triangle = |i: u32, object, material| Triangle {
         vertices: [3 * i, 3 * i + 1, 3 * i + 2],
-        object,
+        object: ObjectId(object),
         material,
     };
     Scene {
@@ -1124,7 +1126,7 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
     };
     let triangle = |object, material| Triangle {
         vertices: [0, 1, 2],
-        object,
+        object: ObjectId(object),
         material,
     };
     let scene = Scene {
@@ -1348,7 +1350,7 @@ fn gltf_reflectors_are_picked_by_node_mesh_or_material_name() {
         let objects = |triangles: &[u32]| -> Vec<String> {
             let mut names: Vec<String> = (triangles.iter())
                 .map(|&t| loaded.scene.triangles[t as usize].object)
-                .map(|o| loaded.scene.objects[o as usize].name.clone())
+                .map(|o| loaded.scene.objects[o.index()].name.clone())
                 .collect();
             names.dedup();
             names

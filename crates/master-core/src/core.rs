@@ -39,7 +39,7 @@ use vtfarm_proto::{
 };
 use vtfarm_scene::Scene;
 use vtfarm_scheduler::{
-    Assignment, Event, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler, WorkerId,
+    Assignment, Event, JobId, PackageId, PackageMeasure, QueueOptions, Scheduler,
 };
 use vtfarm_vertex::{PackageStats, Quality};
 
@@ -203,7 +203,7 @@ impl MasterCore {
         } = &peer
         {
             info!(worker = %name, %address, threads, "worker joined");
-            if let Err(e) = self.scheduler.worker_joined(now, WorkerId(conn), *threads) {
+            if let Err(e) = self.scheduler.worker_joined(now, conn.worker(), *threads) {
                 self.close(conn, format!("cannot join: {e}"));
                 return;
             }
@@ -224,7 +224,7 @@ impl MasterCore {
         match self.peers.left(conn) {
             Some(Peer::Worker { .. }) => {
                 info!(worker = %self.peers.name(conn), "worker left");
-                let _ = self.scheduler.worker_left(now, WorkerId(conn));
+                let _ = self.scheduler.worker_left(now, conn.worker());
             }
             Some(Peer::Submitter { .. }) => self.submitter_left(now, conn),
             None => {}
@@ -261,13 +261,13 @@ impl MasterCore {
         match self.peers.get(conn) {
             Some(Peer::Worker { .. }) => self.worker_message(now, conn, message),
             Some(Peer::Submitter { .. }) => self.submitter_message(now, conn, message),
-            None => debug!(conn, "message from an unknown connection ignored"),
+            None => debug!(%conn, "message from an unknown connection ignored"),
         }
         self.pump();
     }
 
     fn worker_message(&mut self, now: Duration, conn: ConnId, message: Message) {
-        let worker = WorkerId(conn);
+        let worker = conn.worker();
         // Anything from a worker shows it is alive.
         let _ = self.scheduler.heartbeat(now, worker);
         // Results are counted at their wire size for the statistics.
@@ -325,7 +325,7 @@ impl MasterCore {
         result: PackageResult,
         bytes_out: u64,
     ) {
-        let worker = WorkerId(conn);
+        let worker = conn.worker();
         match self.frames.arrival(result.id) {
             Arrival::UnknownPackage => {
                 return debug!(package = result.id, "result for an unknown package ignored");
@@ -434,7 +434,7 @@ impl MasterCore {
         let (rays, bytes_out) = (measure.rays, measure.bytes_out);
         let done = self
             .scheduler
-            .package_done(now, WorkerId(conn), PackageId(id), measure);
+            .package_done(now, conn.worker(), PackageId(id), measure);
         if let Err(e) = done {
             debug!(package = id, "result ignored: {e}");
             return false;
@@ -597,7 +597,7 @@ impl MasterCore {
     }
 
     fn refuse_job(&mut self, conn: ConnId, error: String) {
-        warn!(conn, "job refused: {error}");
+        warn!(%conn, "job refused: {error}");
         self.send(
             conn,
             Message::JobFailed {
@@ -631,14 +631,19 @@ impl MasterCore {
                     errors,
                 } => self.job_failed(job, &reason, &errors),
                 Event::JobCancelled { job } => self.job_cancelled(job),
-                Event::WorkerBlocklisted { worker, job } => self.worker_blocklisted(worker.0, job),
+                Event::WorkerBlocklisted { worker, job } => {
+                    self.worker_blocklisted(ConnId::of_worker(worker), job)
+                }
                 Event::WorkerLost {
                     worker,
                     cause,
                     requeued,
-                } => self.worker_lost(worker.0, cause, &requeued),
+                } => self.worker_lost(ConnId::of_worker(worker), cause, &requeued),
                 Event::PackageCancelled { worker, package } => {
-                    self.send(worker.0, Message::CancelPackage { id: package.0 });
+                    self.send(
+                        ConnId::of_worker(worker),
+                        Message::CancelPackage { id: package.0 },
+                    );
                 }
             }
         }
@@ -705,7 +710,8 @@ impl MasterCore {
         // A worker that let this split frame go (it keeps the frames named
         // to it last, of any job: several jobs run at once) gets its start
         // again first; one that keeps it does not.
-        let (worker, kept) = (a.worker.0, self.peers.keeps(a.worker.0, a.job, a.frame));
+        let worker = ConnId::of_worker(a.worker);
+        let kept = self.peers.keeps(worker, a.job, a.frame);
         let (again, package) = self.frames.assign(a, kept, self.now);
         if let Some(start) = again {
             self.send(worker, start);

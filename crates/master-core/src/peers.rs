@@ -6,9 +6,31 @@ use std::collections::BTreeMap;
 use vtfarm_proto::JobId;
 
 use vtfarm_proto::{JobAction, KeptFrames, Message};
+use vtfarm_scheduler::WorkerId;
 
-/// A connection, numbered by the driver.
-pub type ConnId = u64;
+/// A connection, numbered by the driver. A worker's connection is its
+/// worker in the scheduler ([`ConnId::worker`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ConnId(pub u64);
+
+impl ConnId {
+    /// The scheduler's worker on this connection.
+    pub fn worker(self) -> WorkerId {
+        WorkerId(self.0)
+    }
+
+    /// The connection of the scheduler's `worker`.
+    pub fn of_worker(worker: WorkerId) -> ConnId {
+        ConnId(worker.0)
+    }
+}
+
+impl std::fmt::Display for ConnId {
+    /// The bare number, as logs name a connection.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
 
 /// Who is on a connection (from its handshake).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -135,6 +157,15 @@ fn host_of(address: &str) -> &str {
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_connection_prints_as_its_number_and_is_its_workers_id() {
+        let conn = ConnId(42);
+        assert_eq!(conn.to_string(), "42");
+        assert_eq!(format!("conn {conn}"), "conn 42");
+        assert_eq!(conn.worker(), WorkerId(42));
+        assert_eq!(ConnId::of_worker(conn.worker()), conn);
+    }
+
     fn worker(name: &str) -> Peer {
         Peer::Worker {
             name: name.into(),
@@ -148,32 +179,36 @@ mod tests {
     #[test]
     fn a_worker_that_left_is_named_until_its_frame_completes() {
         let mut peers = Peers::default();
-        peers.joined(3, worker("w1"));
+        peers.joined(ConnId(3), worker("w1"));
         peers.joined(
-            4,
+            ConnId(4),
             Peer::Submitter {
                 address: "10.0.0.9:1".into(),
             },
         );
-        assert_eq!(peers.workers(), vec![3]);
-        assert_eq!(peers.submitter_host(4), "10.0.0.9:1");
-        assert_eq!(peers.submitter_host(3), "unknown");
-        assert_eq!(peers.left(3), Some(worker("w1")));
+        assert_eq!(peers.workers(), vec![ConnId(3)]);
+        assert_eq!(peers.submitter_host(ConnId(4)), "10.0.0.9:1");
+        assert_eq!(peers.submitter_host(ConnId(3)), "unknown");
+        assert_eq!(peers.left(ConnId(3)), Some(worker("w1")));
         assert!(peers.workers().is_empty());
-        assert_eq!(peers.name(3), "w1 (10.0.0.7:4000)");
-        assert_eq!(peers.worker_name(3), "connection 3", "gone: no worker now");
+        assert_eq!(peers.name(ConnId(3)), "w1 (10.0.0.7:4000)");
+        assert_eq!(
+            peers.worker_name(ConnId(3)),
+            "connection 3",
+            "gone: no worker now"
+        );
         peers.frame_complete();
-        assert_eq!(peers.name(3), "connection 3");
-        assert_eq!(peers.left(3), None);
+        assert_eq!(peers.name(ConnId(3)), "connection 3");
+        assert_eq!(peers.left(ConnId(3)), None);
     }
 
     /// A worker keeps the frames its packages named; a submitter keeps none.
     #[test]
     fn a_worker_keeps_the_frames_its_messages_named() {
         let mut peers = Peers::default();
-        peers.joined(1, worker("w"));
+        peers.joined(ConnId(1), worker("w"));
         peers.joined(
-            2,
+            ConnId(2),
             Peer::Submitter {
                 address: "s".into(),
             },
@@ -185,13 +220,16 @@ mod tests {
             triangles: vec![0],
             whole: None,
         });
-        peers.saw(1, &package);
-        peers.saw(2, &package);
-        assert!(peers.keeps(1, JobId(5), 0));
-        assert!(!peers.keeps(1, JobId(5), 1), "another frame");
-        assert!(!peers.keeps(2, JobId(5), 0), "a submitter keeps no frames");
-        peers.left(1);
-        assert!(!peers.keeps(1, JobId(5), 0), "gone with its worker");
+        peers.saw(ConnId(1), &package);
+        peers.saw(ConnId(2), &package);
+        assert!(peers.keeps(ConnId(1), JobId(5), 0));
+        assert!(!peers.keeps(ConnId(1), JobId(5), 1), "another frame");
+        assert!(
+            !peers.keeps(ConnId(2), JobId(5), 0),
+            "a submitter keeps no frames"
+        );
+        peers.left(ConnId(1));
+        assert!(!peers.keeps(ConnId(1), JobId(5), 0), "gone with its worker");
     }
 
     /// A job's reason names the command and the host that asked, not the
@@ -202,19 +240,19 @@ mod tests {
         let submitter = |address: &str| Peer::Submitter {
             address: address.into(),
         };
-        peers.joined(1, submitter("10.0.0.9:33292"));
-        peers.joined(2, submitter("[::1]:5000"));
-        peers.joined(3, worker("w1"));
+        peers.joined(ConnId(1), submitter("10.0.0.9:33292"));
+        peers.joined(ConnId(2), submitter("[::1]:5000"));
+        peers.joined(ConnId(3), worker("w1"));
         assert_eq!(
-            peers.controller(1, &JobAction::Cancel),
+            peers.controller(ConnId(1), &JobAction::Cancel),
             "`vtfarm cancel` on 10.0.0.9"
         );
         assert_eq!(
-            peers.controller(2, &JobAction::Requeue { failed_only: true }),
+            peers.controller(ConnId(2), &JobAction::Requeue { failed_only: true }),
             "`vtfarm requeue --failed` on [::1]"
         );
         assert_eq!(
-            peers.controller(3, &JobAction::Pause),
+            peers.controller(ConnId(3), &JobAction::Pause),
             "`vtfarm pause` from w1 (10.0.0.7:4000)"
         );
     }

@@ -23,6 +23,8 @@ use std::time::Duration;
 use vtfarm_scene::TriangleId;
 use vtfarm_vertex::Quality;
 
+use crate::peers::ConnId;
+
 /// Why a result does not fit the stages of its package's frame.
 #[derive(Debug, thiserror::Error)]
 pub enum StageRejected {
@@ -66,7 +68,7 @@ pub(crate) struct StageProgress<P> {
     counts: Vec<usize>,
     /// Per stage, results that came before the stages before it were complete.
     held: Vec<Vec<P>>,
-    copies: BTreeMap<(u64, u64), CopyWork>,
+    copies: BTreeMap<(u64, ConnId), CopyWork>,
 }
 
 impl<P> StageProgress<P> {
@@ -91,7 +93,7 @@ impl<P> StageProgress<P> {
     pub(crate) fn check(
         &self,
         package: u64,
-        conn: u64,
+        conn: ConnId,
         stage: Option<Quality>,
     ) -> Result<usize, StageRejected> {
         let next = self.copies.get(&(package, conn)).map_or(0, |c| c.next);
@@ -113,7 +115,7 @@ impl<P> StageProgress<P> {
     }
 
     /// Adds a checked stage's work to its copy's; the copy's work so far.
-    pub(crate) fn record(&mut self, package: u64, conn: u64, work: StageWork<'_>) -> &CopyWork {
+    pub(crate) fn record(&mut self, package: u64, conn: ConnId, work: StageWork<'_>) -> &CopyWork {
         let copy = self.copies.entry((package, conn)).or_default();
         copy.next += 1;
         copy.busy += work.busy;
@@ -133,7 +135,7 @@ impl<P> StageProgress<P> {
     }
 
     /// A copy's record goes (its result was refused: it runs elsewhere).
-    pub(crate) fn forget_copy(&mut self, package: u64, conn: u64) {
+    pub(crate) fn forget_copy(&mut self, package: u64, conn: ConnId) {
         self.copies.remove(&(package, conn));
     }
 
@@ -254,25 +256,42 @@ mod tests {
     #[test]
     fn each_copy_sends_its_stages_in_order() {
         let mut progress = StageProgress::<()>::new(STAGES.to_vec(), &[1, 2]);
-        let refused = progress.check(7, 1, Some(Quality::Refine));
+        let refused = progress.check(7, ConnId(1), Some(Quality::Refine));
         assert_eq!(
             refused.unwrap_err().to_string(),
             "a result of stage refine where stage preview is due"
         );
-        assert!(progress.check(7, 1, None).is_err());
-        assert_eq!(progress.check(7, 1, Some(Quality::Preview)).unwrap(), 0);
+        assert!(progress.check(7, ConnId(1), None).is_err());
+        assert_eq!(
+            progress
+                .check(7, ConnId(1), Some(Quality::Preview))
+                .unwrap(),
+            0
+        );
         let work = |ms, samples: &'static [u32]| StageWork {
             busy: Duration::from_millis(ms),
             samples,
             rays: samples.iter().map(|&s| u64::from(s)).sum(),
             bytes_out: 100,
         };
-        progress.record(7, 1, work(5, &[3, 4]));
-        assert_eq!(progress.check(7, 1, Some(Quality::Refine)).unwrap(), 1);
-        assert_eq!(progress.check(7, 2, Some(Quality::Preview)).unwrap(), 0);
-        assert!(progress.check(7, 1, Some(Quality::Preview)).is_err());
-        progress.record(7, 1, work(7, &[1, 0]));
-        let copy = progress.record(7, 1, work(9, &[2, 2]));
+        progress.record(7, ConnId(1), work(5, &[3, 4]));
+        assert_eq!(
+            progress.check(7, ConnId(1), Some(Quality::Refine)).unwrap(),
+            1
+        );
+        assert_eq!(
+            progress
+                .check(7, ConnId(2), Some(Quality::Preview))
+                .unwrap(),
+            0
+        );
+        assert!(
+            progress
+                .check(7, ConnId(1), Some(Quality::Preview))
+                .is_err()
+        );
+        progress.record(7, ConnId(1), work(7, &[1, 0]));
+        let copy = progress.record(7, ConnId(1), work(9, &[2, 2]));
         assert_eq!(copy.busy, Duration::from_millis(21));
         assert_eq!(
             (copy.samples.as_slice(), copy.rays),
@@ -282,12 +301,17 @@ mod tests {
         assert!(progress.is_last(2) && !progress.is_last(1));
         assert_eq!(
             progress
-                .check(7, 1, Some(Quality::Full))
+                .check(7, ConnId(1), Some(Quality::Full))
                 .unwrap_err()
                 .to_string(),
             "a result of stage full where stage none (the package sent all its stages) is due"
         );
         progress.forget(7);
-        assert_eq!(progress.check(7, 1, Some(Quality::Preview)).unwrap(), 0);
+        assert_eq!(
+            progress
+                .check(7, ConnId(1), Some(Quality::Preview))
+                .unwrap(),
+            0
+        );
     }
 }

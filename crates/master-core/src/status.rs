@@ -7,7 +7,7 @@ use vtfarm_proto::{QueueStatus, RunningJob, StatusReply, WorkerStatus};
 use vtfarm_scheduler::{Scheduler, WorkerState};
 
 use crate::frames::Frames;
-use crate::peers::{Peer, Peers};
+use crate::peers::{ConnId, Peer, Peers};
 
 /// The frame being assembled, borrowed from the core.
 pub struct LiveFrame<'a> {
@@ -47,7 +47,8 @@ pub(crate) fn status(
     let workers = (scheduler.workers().into_iter())
         .filter(|w| w.state != WorkerState::Gone)
         .filter_map(|w| {
-            let Some(Peer::Worker { name, address, .. }) = peers.get(w.worker.0) else {
+            let Some(Peer::Worker { name, address, .. }) = peers.get(ConnId::of_worker(w.worker))
+            else {
                 return None;
             };
             Some(WorkerStatus {
@@ -114,7 +115,7 @@ mod tests {
             let address = format!("10.0.0.{conn}:4000");
             let threads = 2;
             peers.joined(
-                conn,
+                ConnId(conn),
                 Peer::Worker {
                     name: name.into(),
                     threads,
@@ -122,7 +123,7 @@ mod tests {
                 },
             );
         }
-        peers.left(4);
+        peers.left(ConnId(4));
         let frames = Frames::default();
         let reply = status(&scheduler, &peers, &frames, 123);
         let names: Vec<&str> = reply.workers.iter().map(|w| w.name.as_str()).collect();

@@ -22,7 +22,7 @@ pub(crate) fn scene() -> Scene {
     ];
     let triangle = |vertices| Triangle {
         vertices,
-        object: 0,
+        object: vtfarm_scene::ObjectId(0),
         material: 0,
     };
     Scene {

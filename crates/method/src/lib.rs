@@ -397,7 +397,8 @@ impl MethodFrame<'_> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Reflection {
     pub radiance: Vec3,
-    pub object: ObjectId,
+    /// The object's number ([`ObjectId::raw`]), `NONE` for none.
+    pub object: u32,
 }
 
 impl Reflection {

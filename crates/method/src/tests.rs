@@ -31,7 +31,9 @@ fn exact_reflections_through_the_shared_finish_equal_the_reference() {
                     Reflection {
                         radiance: s.color,
                         object: hit.map_or(NONE, |h| {
-                            setup.bvh.scene().triangles[h.triangle as usize].object
+                            setup.bvh.scene().triangles[h.triangle as usize]
+                                .object
+                                .raw()
                         }),
                     }
                 }

@@ -78,7 +78,7 @@ fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32)
     Some(Seen {
         point,
         incoming: direction,
-        object: ids.object_at(x, y),
+        object: ObjectId(ids.object_at(x, y)),
     })
 }
 
@@ -87,7 +87,7 @@ pub(crate) struct ReflectionMap {
     pub(crate) view: MapView,
     pub(crate) projector: Projector,
     radiance: Vec<Vec3>,
-    object: Vec<ObjectId>,
+    object: Vec<u32>,
     /// The objects left out (the reflector itself), sorted.
     excluded: Vec<ObjectId>,
 }
@@ -120,7 +120,10 @@ impl ReflectionMap {
             projector: Projector::new(&camera),
             view,
             radiance,
-            object: seen.iter().map(|s| s.map_or(NONE, |s| s.object)).collect(),
+            object: seen
+                .iter()
+                .map(|s| s.map_or(NONE, |s| s.object.raw()))
+                .collect(),
             excluded: excluded.to_vec(),
         }
     }
@@ -156,7 +159,7 @@ impl ReflectionMap {
     }
 
     /// The object of the texel containing `at`.
-    pub(crate) fn object_at(&self, at: Vec2) -> ObjectId {
+    pub(crate) fn object_at(&self, at: Vec2) -> u32 {
         let (w, h) = (self.view.camera.width, self.view.camera.height);
         let x = (at.x.max(0.0) as u32).min(w - 1);
         let y = (at.y.max(0.0) as u32).min(h - 1);

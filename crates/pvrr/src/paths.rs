@@ -7,7 +7,7 @@
 //! material can be traced with three indices for chromatic aberration.
 
 use glam::Vec3;
-use vtfarm_scene::{NONE, ObjectId};
+use vtfarm_scene::NONE;
 use vtfarm_trace::{Ray, SurfacePoint, refract};
 
 use crate::level::Level;
@@ -19,7 +19,7 @@ pub(crate) struct VertexPath {
     /// P, where the exit ray meets the scene.
     pub(crate) hit: Option<Vec3>,
     /// The object the path passed through (a lens's back face), or `NONE`.
-    pub(crate) inner: ObjectId,
+    pub(crate) inner: u32,
     /// Radiance along the front ray = `offset + weight * radiance(exit)`:
     /// what the back face adds itself (its local Phong and internal
     /// reflection) and its kt. Reflection: zero and one.
@@ -74,7 +74,7 @@ pub(crate) fn refraction(
     Some(VertexPath {
         hit: closest_point(level, &exit),
         exit,
-        inner: bvh.scene().triangles[back.triangle as usize].object,
+        inner: bvh.scene().triangles[back.triangle as usize].object.raw(),
         offset,
         weight,
     })

@@ -430,7 +430,7 @@ fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
                 continue;
             };
             let expected = traced_reflection(&frame)(point, *incoming);
-            assert_eq!(got.object, mirror_b);
+            assert_eq!(got.object, mirror_b.raw());
             mapped += 1;
             brightness += got.radiance.max_element();
             close += usize::from((got.radiance - expected).abs().max_element() < 0.03);
@@ -459,7 +459,7 @@ fn without_depth_for_a_second_bounce_the_mirror_in_the_mirror_is_dark() {
         let (mut on_b, mut dark) = (0, 0);
         for (point, incoming) in facing_vertices(&setup) {
             let got = warp.radiance_at(&point, incoming);
-            if got.object == mirror_b {
+            if got.object == mirror_b.raw() {
                 on_b += 1;
                 dark += usize::from(got.radiance.max_element() < 0.01);
             }

@@ -45,7 +45,7 @@ struct VertexCoords {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Lookup {
     pub(crate) radiance: Vec3,
-    pub(crate) object: ObjectId,
+    pub(crate) object: u32,
 }
 
 /// A reflector's map and texture coordinates, ready for lookups.
@@ -158,7 +158,7 @@ impl<'a> Warp<'a> {
         };
         Lookup {
             radiance: tracer.shade(&bvh.surface_point(&hit), ray.direction).color,
-            object: bvh.scene().triangles[hit.triangle as usize].object,
+            object: bvh.scene().triangles[hit.triangle as usize].object.raw(),
         }
     }
 
@@ -242,7 +242,13 @@ fn excluded_objects(
     let mut excluded: Vec<ObjectId> = triangles
         .iter()
         .map(|&t| scene.triangles[t as usize].object)
-        .chain(paths.iter().map(|p| p.inner).filter(|&o| o != NONE))
+        .chain(
+            paths
+                .iter()
+                .map(|p| p.inner)
+                .filter(|&o| o != NONE)
+                .map(ObjectId),
+        )
         .collect();
     excluded.sort_unstable();
     excluded.dedup();

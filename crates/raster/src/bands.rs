@@ -73,7 +73,7 @@ pub(crate) fn resolve_nearest_first(
                 *o = if t == NONE {
                     NONE
                 } else {
-                    scene_triangles[t as usize].object
+                    scene_triangles[t as usize].object.raw()
                 };
             }
         });

@@ -38,7 +38,7 @@ pub use glass::blend_see_through;
 
 use rayon::prelude::*;
 use vtfarm_imaging::Image;
-use vtfarm_scene::{Camera, Lighting, NEAR, NONE, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, NEAR, NONE, Scene, TriangleId};
 
 /// Per-pixel visibility: which object and triangle is seen, and at what view
 /// depth, over a `width` x `height` frame. The planes hold the pixels of
@@ -53,7 +53,8 @@ pub struct IdBuffer {
     pub height: u32,
     /// The pixels the planes hold, inside the frame.
     pub window: PixelRect,
-    pub object: Vec<ObjectId>,
+    /// The object seen at each pixel ([`vtfarm_scene::ObjectId::raw`]), `NONE` where none is.
+    pub object: Vec<u32>,
     pub triangle: Vec<TriangleId>,
     /// View depth (distance along the camera's forward axis); infinity where empty.
     pub depth: Vec<f32>,
@@ -126,7 +127,7 @@ impl IdBuffer {
 
     /// The object seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
     #[inline]
-    pub fn object_at(&self, x: u32, y: u32) -> ObjectId {
+    pub fn object_at(&self, x: u32, y: u32) -> u32 {
         self.slot(x, y).map_or(NONE, |i| self.object[i])
     }
 

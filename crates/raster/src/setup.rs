@@ -429,7 +429,7 @@ mod tests {
         // A sliver reaching far to the right, just in front of the eye.
         let t = Triangle {
             vertices: [0, 1, 2],
-            object: 0,
+            object: vtfarm_scene::ObjectId(0),
             material: 0,
         };
         let positions = [
@@ -516,7 +516,7 @@ mod tests {
             let corners: Vec<Corner> = scene.positions.iter().map(|&p| view.corner(p)).collect();
             let t = Triangle {
                 vertices: [0, 1, 2],
-                object: 0,
+                object: vtfarm_scene::ObjectId(0),
                 material: 0,
             };
             let [a, b, c] = [0, 1, 2].map(|i| view.beyond(&corners[i]));

@@ -541,7 +541,7 @@ mod tests {
         let triangles = [[0, 1, 2, 0], [2, 1, 0, 1], [3, 4, 5, 0], [5, 4, 3, 1]]
             .map(|[a, b, c, m]| Triangle {
                 vertices: [a, b, c],
-                object: 0,
+                object: vtfarm_scene::ObjectId(0),
                 material: m,
             })
             .to_vec();

@@ -54,7 +54,7 @@ impl Builder {
             name: name.to_owned(),
         });
         self.scene.materials.push(Material::diffuse(name, color));
-        self.scene.objects.len() as ObjectId - 1
+        ObjectId(self.scene.objects.len() as u32 - 1)
     }
 
     fn vertex(&mut self, p: Vec3, n: Vec3) -> u32 {
@@ -67,7 +67,7 @@ impl Builder {
         self.scene.triangles.push(Triangle {
             vertices,
             object,
-            material: object,
+            material: object.raw(),
         });
     }
 
@@ -339,7 +339,7 @@ fn id_buffer_matches_a_brute_force_ray_cast() {
             let expected = if t == NONE {
                 NONE
             } else {
-                scene.triangles[t as usize].object
+                scene.triangles[t as usize].object.raw()
             };
             assert_eq!(ids.object[i], expected);
         }
@@ -791,7 +791,7 @@ fn a_floor_reaching_behind_the_eye_is_clipped_not_dropped() {
     let ids = &ids;
     let row = |y: u32| (0..camera.width).map(move |x| ids.object_at(x, y));
     assert!(
-        row(camera.height - 1).all(|o| o == floor),
+        row(camera.height - 1).all(|o| o == floor.raw()),
         "the floor under the eye is missing"
     );
     assert!(row(0).all(|o| o == NONE), "the sky is not empty");
@@ -848,7 +848,7 @@ fn shading_lighting(eye: Vec3) -> Lighting {
 
 fn shiny(b: &mut Builder, name: &str) -> ObjectId {
     let o = b.object(name, Vec3::new(0.6, 0.5, 0.4));
-    let m = &mut b.scene.materials[o as usize];
+    let m = &mut b.scene.materials[o.index()];
     (m.specular, m.shininess) = (Vec3::splat(0.3), 20.0);
     o
 }
@@ -882,7 +882,7 @@ fn a_quad_facing_a_head_on_light_is_shaded_by_phong() {
             let dir = camera.pixel_ray(x, y);
             let hit = camera.eye + dir * (-3.0 / dir.z);
             let expected = phong(
-                &b.scene.materials[o as usize],
+                &b.scene.materials[o.index()],
                 &lighting,
                 hit,
                 Vec3::Z,
@@ -932,7 +932,7 @@ fn normals_are_interpolated_perspective_correctly() {
         let normal = (normals[0] * (1.0 - u - v) + normals[1] * u + normals[2] * v).normalize();
         let to_eye = (camera.eye - position).normalize();
         let expected = phong(
-            &b.scene.materials[o as usize],
+            &b.scene.materials[o.index()],
             &lighting,
             position,
             normal,
@@ -1010,7 +1010,7 @@ fn a_custom_near_plane_clips_exactly_there() {
                     empty += 1;
                 } else if margin > 1e-3 {
                     assert_ne!(ids.triangle[i], NONE, "near {near}: ({x}, {y}) beyond");
-                    assert_eq!(ids.object[i], o);
+                    assert_eq!(ids.object[i], o.raw());
                     let d = f64::from(ids.depth[i]);
                     assert!((d - expected).abs() < expected * 1e-4, "({x}, {y}): {d}");
                     assert!(ids.depth[i] >= near * (1.0 - 1e-6));

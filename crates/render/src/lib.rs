@@ -116,7 +116,7 @@ pub fn base_frame_into(
 /// is drawn see-through, and shows no reflection.
 pub fn see_through_warning(scene: &Scene, objects: &[ObjectId]) -> String {
     let names: Vec<&str> = (objects.iter())
-        .map(|&o| scene.objects[o as usize].name.as_str())
+        .map(|&o| scene.objects[o.index()].name.as_str())
         .collect();
     format!(
         "see-through glass that is no reflector ({}) is drawn see-through, without its \
@@ -696,7 +696,7 @@ mod tests {
             scene.normals.extend([Vec3::Z; 3]);
             scene.triangles.push(vtfarm_scene::Triangle {
                 vertices: [i, i + 1, i + 2],
-                object: 0,
+                object: vtfarm_scene::ObjectId(0),
                 material: 0,
             });
         }

@@ -59,7 +59,7 @@ fn add_sphere(
                 if (q - p).cross(w - p).length() > 1e-9 {
                     part.triangles.push(Triangle {
                         vertices,
-                        object: 0,
+                        object: vtfarm_scene::ObjectId(0),
                         material: 0,
                     });
                 }

@@ -232,10 +232,10 @@ fn add_lamp(scene: &mut Scene, camera: &Camera, at: Vec3) {
 
 /// The reflected light (sum of cd/m² over pixels) of the reflector pixels
 /// that mirror `object`.
-fn reflected_energy_of(frame: &FrameImage, object: u32) -> f64 {
+fn reflected_energy_of(frame: &FrameImage, object: vtfarm_scene::ObjectId) -> f64 {
     frame
         .glass()
-        .filter(|&i| frame.pixel(i).object == object)
+        .filter(|&i| frame.pixel(i).object == object.raw())
         .map(|i| f64::from(photometry::cd_m2(frame.pixel(i).reflected)))
         .sum()
 }

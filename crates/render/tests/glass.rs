@@ -121,7 +121,7 @@ fn check_sheet_under_fresnel(what: &str, sheet: Scene, n: f32) {
         let mut scene = sheet.clone();
         mirrored_emitter(&mut scene, theta);
         let scene = Arc::new(scene);
-        let reflectors = triangles_of(&scene, &[0]);
+        let reflectors = triangles_of(&scene, &[ObjectId(0)]);
         let camera = camera_at(theta, 3.0);
         let renderer = Renderer::new(scene.clone(), reflectors.clone());
         for quality in Quality::ALL {
@@ -186,7 +186,7 @@ fn sheet(material: Material) -> Scene {
         triangles: (triangles.into_iter())
             .map(|vertices| vtfarm_scene::Triangle {
                 vertices,
-                object: 0,
+                object: ObjectId(0),
                 material: 0,
             })
             .collect(),
@@ -302,7 +302,7 @@ fn slab(theta_deg: f32, one_object: bool) -> (Scene, Vec<TriangleId>) {
     );
     if one_object {
         for t in back {
-            scene.triangles[t as usize].object = 0;
+            scene.triangles[t as usize].object = ObjectId(0);
         }
     }
     scene.append_quad(
@@ -313,7 +313,7 @@ fn slab(theta_deg: f32, one_object: bool) -> (Scene, Vec<TriangleId>) {
         Vec3::Y * 8.0,
     );
     mirrored_emitter(&mut scene, theta_deg);
-    let reflectors = triangles_of(&scene, &[0]);
+    let reflectors = triangles_of(&scene, &[ObjectId(0)]);
     (scene, reflectors)
 }
 
@@ -545,7 +545,7 @@ fn glass_spheres_that_are_no_reflector_show_what_lies_behind_them_with_one_warni
     for name in ["sphere_b", "sphere_c"] {
         let id = object(name);
         let seen: Vec<f32> = (0..camera.width * camera.height)
-            .filter(|&i| ids.object_at(i % camera.width, i / camera.width) == id)
+            .filter(|&i| ids.object_at(i % camera.width, i / camera.width) == id.raw())
             .map(|i| frame.color.pixels[i as usize].x)
             .collect();
         assert!(seen.len() > 100, "{name}: {} px", seen.len());

@@ -106,7 +106,7 @@ fn scene() -> Scene {
         for [a, b, c] in [[0, 1, 2], [0, 2, 3]] {
             scene.triangles.push(Triangle {
                 vertices: [a, b, c].map(|v| base + v),
-                object: id,
+                object: vtfarm_scene::ObjectId(id),
                 material: id,
             });
             scene

@@ -108,7 +108,7 @@ fn quads(transmission: Transmission) -> (Renderer, FrameSetup) {
         for vertices in [[0, 1, 2], [0, 2, 3]] {
             scene.triangles.push(Triangle {
                 vertices: vertices.map(|v| base + v),
-                object: id as u32,
+                object: vtfarm_scene::ObjectId(id as u32),
                 material: id as u32,
             });
         }

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
-use vtfarm_scene::{Camera, Lighting, Material, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, ObjectId, Scene, TriangleId};
 use vtfarm_trace::{Ray, SceneBvh};
 use vtfarm_vertex::{FrameImage, Quality};
 
@@ -61,7 +61,8 @@ fn median(mut values: Vec<f32>) -> f32 {
 
 /// The median over the glass pixels where both frames mirror `object` of
 /// full's reflected luminance over the reference's.
-fn median_ratio(full: &FrameImage, reference: &FrameImage, object: u32) -> (f32, usize) {
+fn median_ratio(full: &FrameImage, reference: &FrameImage, object: ObjectId) -> (f32, usize) {
+    let object = object.raw();
     let ratios: Vec<f32> = reference
         .glass()
         .filter(|&i| full.pixel(i).object == object && reference.pixel(i).object == object)
@@ -113,7 +114,7 @@ fn full_and_reference_agree_on_the_reflected_light_of_the_stock_job() {
     let lr = median(
         reference
             .glass()
-            .filter(|&i| reference.pixel(i).object == window)
+            .filter(|&i| reference.pixel(i).object == window.raw())
             .map(|i| photometry::cd_m2(reference.pixel(i).reflected))
             .collect(),
     );
@@ -198,7 +199,7 @@ fn full_and_reference_agree_on_a_pane_whose_back_surface_is_no_reflector() {
     // Both count the back surface: 0.1 + 0.85² · 0.1 of the panel.
     let lr = median(
         (reference.glass())
-            .filter(|&i| reference.pixel(i).object == panel)
+            .filter(|&i| reference.pixel(i).object == panel.raw())
             .map(|i| photometry::cd_m2(reference.pixel(i).reflected))
             .collect(),
     );
@@ -229,7 +230,7 @@ fn a_probe_pixel_of_the_stock_cockpit_reflects_r_theta_times_the_side_window() {
     // A probe in the middle of the pixels that mirror the window.
     let probes: Vec<usize> = frame
         .glass()
-        .filter(|&i| frame.pixel(i).object == window)
+        .filter(|&i| frame.pixel(i).object == window.raw())
         .collect();
     assert!(
         probes.len() > 100,

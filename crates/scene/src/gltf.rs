@@ -857,7 +857,7 @@ pub fn encode_glb(scene: &Scene) -> Result<Vec<u8>, crate::SceneError> {
         );
         accessors.push(json!({"bufferView": i, "componentType": 5125, "count": indices.len(), "type": "SCALAR"}));
         meshes.push(json!({"primitives": [{"attributes": {"POSITION": a, "NORMAL": a + 1}, "indices": a + 2, "material": run.1, "mode": 4}]}));
-        nodes.push(json!({"name": scene.objects[run.0 as usize].name, "mesh": meshes.len() - 1}));
+        nodes.push(json!({"name": scene.objects[run.0.index()].name, "mesh": meshes.len() - 1}));
         start = end;
     }
     let materials: Vec<Value> = scene.materials.iter().map(material_json).collect();

@@ -34,7 +34,28 @@ use std::borrow::Cow;
 use glam::{Vec2, Vec3};
 
 /// Index of an object (a named OBJ object or group) in [`Scene::objects`].
-pub type ObjectId = u32;
+/// Per-pixel and per-sample object maps hold the bare number, with
+/// [`NONE`] for no object ([`ObjectId::raw`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ObjectId(pub u32);
+
+impl ObjectId {
+    /// The object's index in [`Scene::objects`].
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bare number, as object maps hold it.
+    pub fn raw(self) -> u32 {
+        self.0
+    }
+}
+
+impl std::fmt::Display for ObjectId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
 /// Index of a triangle in [`Scene::triangles`].
 pub type TriangleId = u32;
 /// Index of a material in [`Scene::materials`].
@@ -203,7 +224,7 @@ impl Scene {
         self.objects
             .iter()
             .position(|o| o.name == name)
-            .map(|i| i as ObjectId)
+            .map(|i| ObjectId(i as u32))
     }
 
     /// Looks up a material by name.
@@ -238,7 +259,7 @@ impl Scene {
         let n = u.cross(v).normalize();
         let triangle = |vertices| Triangle {
             vertices,
-            object: 0,
+            object: ObjectId(0),
             material: 0,
         };
         self.append(&Scene {
@@ -280,7 +301,7 @@ impl Scene {
         self.triangles
             .extend(other.triangles.iter().map(|t| Triangle {
                 vertices: t.vertices.map(|v| v + v0),
-                object: t.object + o0,
+                object: ObjectId(t.object.0 + o0),
                 material: t.material + m0,
             }));
     }
@@ -310,7 +331,7 @@ impl Scene {
             {
                 return Err(SceneError::MissingVertex(i));
             }
-            if t.object as usize >= self.objects.len() {
+            if t.object.index() >= self.objects.len() {
                 return Err(SceneError::MissingObject {
                     triangle: i,
                     object: t.object,

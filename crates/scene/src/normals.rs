@@ -511,7 +511,7 @@ mod tests {
                 .enumerate()
                 .map(|(i, &vertices)| Triangle {
                     vertices,
-                    object: 0,
+                    object: ObjectId(0),
                     material: (i / 6) as u32,
                 })
                 .collect(),
@@ -525,7 +525,7 @@ mod tests {
             .triangles
             .extend(triangles.iter().map(|&vertices| Triangle {
                 vertices,
-                object: 1,
+                object: ObjectId(1),
                 material: 0,
             }));
         scene

@@ -380,7 +380,7 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
     }
     let mut current = None;
     for (i, t) in scene.triangles.iter().enumerate() {
-        let object = &scene.objects[t.object as usize].name;
+        let object = &scene.objects[t.object.index()].name;
         let material = &scene.materials[t.material as usize].name;
         match current {
             Some((o, _)) if o == t.object => {}
@@ -1130,7 +1130,7 @@ pub(crate) fn object_id(scene: &mut Scene, name: &str) -> ObjectId {
         scene.objects.push(Object {
             name: name.to_owned(),
         });
-        scene.objects.len() as ObjectId - 1
+        ObjectId(scene.objects.len() as u32 - 1)
     })
 }
 

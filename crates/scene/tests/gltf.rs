@@ -11,7 +11,7 @@ use vtfarm_scene::gltf::{
     GltfError, MAX_IMPORTED_VERTICES, MAX_NODE_DEPTH, MAX_NODE_VISITS, import_gltf, write_glb,
 };
 use vtfarm_scene::obj::ObjOptions;
-use vtfarm_scene::{Material, Scene};
+use vtfarm_scene::{Material, ObjectId, Scene};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -47,7 +47,7 @@ fn nodes_place_each_instance_of_a_mesh_and_cameras_come_with_their_node() {
     // The mesh both nodes instance stays a second name of both.
     assert_eq!(
         imported.mesh_objects.into_iter().collect::<Vec<_>>(),
-        [("panel".to_owned(), vec![0, 1])]
+        [("panel".to_owned(), vec![ObjectId(0), ObjectId(1)])]
     );
     let left = corners(scene, "left");
     assert_eq!(left.len(), 2);

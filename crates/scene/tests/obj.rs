@@ -11,7 +11,7 @@ use vtfarm_scene::obj::{
     MAX_FACE_VERTICES, ObjError, ObjOptions, ObjWarning, import_obj, load_obj, write_obj,
 };
 use vtfarm_scene::shapes::disc_polygon_obj;
-use vtfarm_scene::{Material, Object, Scene, Triangle};
+use vtfarm_scene::{Material, Object, ObjectId, Scene, Triangle};
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -44,7 +44,7 @@ fn triangle_list(scene: &Scene) -> Vec<(String, Material, [Vec3; 3], [Vec3; 3])>
         .map(|i| {
             let t = scene.triangles[i as usize];
             (
-                scene.objects[t.object as usize].name.clone(),
+                scene.objects[t.object.index()].name.clone(),
                 scene.material_of(i).clone(),
                 scene.triangle_positions(i),
                 scene.triangle_normals(i),
@@ -114,7 +114,13 @@ fn a_room_maps_objects_materials_and_normals() {
     // floor 2, mirror 2, lamp pentagon 3, glass 4 + 1, mirror again 1; the
     // point and the 3-vertex line add nothing.
     assert_eq!(scene.triangles.len(), 13);
-    let per_object = |o: u32| scene.triangles.iter().filter(|t| t.object == o).count();
+    let per_object = |o| {
+        scene
+            .triangles
+            .iter()
+            .filter(|t| t.object == ObjectId(o))
+            .count()
+    };
     assert_eq!([0, 1, 2, 3].map(per_object), [2, 3, 3, 5]);
 
     let material = |name: &str| &scene.materials[scene.material_id(name).unwrap() as usize];
@@ -155,7 +161,7 @@ fn a_room_maps_objects_materials_and_normals() {
 
     for (i, t) in scene.triangles.iter().enumerate() {
         let i = i as u32;
-        let name = &scene.objects[t.object as usize].name;
+        let name = &scene.objects[t.object.index()].name;
         let normals = scene.triangle_normals(i);
         let expected = match &name[..] {
             // From the file's `vn 0 2 0`, normalised.
@@ -235,7 +241,7 @@ fn built_scene() -> Scene {
         .collect();
     let t = |vertices, object, material| Triangle {
         vertices,
-        object,
+        object: ObjectId(object),
         material,
     };
     Scene {
@@ -593,7 +599,7 @@ fn objects_without_groups_are_named_by_their_material() {
     let names: Vec<&str> = scene
         .triangles
         .iter()
-        .map(|t| scene.objects[t.object as usize].name.as_str())
+        .map(|t| scene.objects[t.object.index()].name.as_str())
         .collect();
     assert_eq!(names, ["default", "glass", "paint", "glass", "body"]);
 }

@@ -23,7 +23,7 @@ pub(crate) fn frame_glint(
 ) -> (Glint, Option<f32>) {
     let instruments: Vec<Instrument> = (masks.centres.iter())
         .map(|&(object, pixel)| Instrument {
-            name: scene.objects[object as usize].name.clone(),
+            name: scene.objects[object.index()].name.clone(),
             pixel,
         })
         .collect();

@@ -13,11 +13,15 @@
 //!   them and writes their images; [`StudyWriter::finish`] writes the
 //!   summaries and the report.
 //!
+//! - [`wire_study`], [`variant_job`]: the study as farm jobs, frames sent
+//!   coarse to fine; [`StudyWriter::sent_frame`] maps a frame back.
+//!
 //! Architecture invariant: no rendering and no networking here; the caller
 //! runs the frames (`vtfarm study`, `vtfarm submit`). Outputs are a pure
 //! function of the frames, so the same study gives byte-identical files on
 //! one machine and on a cluster (no timings in them).
 
+mod farm;
 mod glint;
 mod masks;
 pub mod order;
@@ -37,6 +41,7 @@ use vtfarm_render::FrameSetup;
 use vtfarm_scene::{Camera, LightKind, Lighting, ObjectId, Scene, TriangleId};
 use vtfarm_vertex::{FrameImage, Quality};
 
+pub use farm::{variant_job, wire_study};
 pub use masks::InstrumentMasks;
 pub use provenance::{HASH, InputFile, Provenance, RunInfo, command_line, quality_warning};
 
@@ -74,6 +79,16 @@ pub enum StudyError {
         variant: usize,
         eye: usize,
         why: String,
+    },
+    #[error(
+        "study {study} has variants of {has:?} frames, {} plans {planned:?}: attach with the study file it was submitted from",
+        file.display()
+    )]
+    OtherStudy {
+        study: vtfarm_proto::JobId,
+        has: Vec<u32>,
+        file: PathBuf,
+        planned: Vec<u32>,
     },
     #[error("writing the plots: {0}")]
     Plot(String),

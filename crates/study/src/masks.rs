@@ -37,20 +37,20 @@ impl InstrumentMasks {
             .object
             .iter()
             .zip(glass)
-            .map(|(o, &g)| g && instrument.contains(o))
+            .map(|(&o, &g)| g && instrument.contains(&ObjectId(o)))
             .collect();
         let marking = behind
             .object
             .iter()
             .zip(&instrument)
-            .map(|(o, &i)| i && marking.contains(o))
+            .map(|(&o, &i)| i && marking.contains(&ObjectId(o)))
             .collect();
         let width = camera.width as usize;
         let centres = (instrument_objects.iter())
             .filter_map(|&object| {
                 let (mut n, mut sx, mut sy) = (0usize, 0f64, 0f64);
                 for (i, _) in (behind.object.iter().zip(glass).enumerate())
-                    .filter(|(_, (o, g))| **g && **o == object)
+                    .filter(|(_, (o, g))| **g && **o == object.raw())
                 {
                     n += 1;
                     sx += (i % width) as f64 + 0.5;

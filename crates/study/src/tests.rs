@@ -693,10 +693,11 @@ fn a_sun_sweep_finds_the_suns_glint_in_the_cover_glass_and_reports_its_veil() {
         ..Default::default()
     })
     .scene;
-    let panels: Vec<u32> = ["windshield_sky", "side_window_left", "side_window_right"]
-        .iter()
-        .map(|name| cab.object_id(name).expect("a stock panel"))
-        .collect();
+    let panels: Vec<vtfarm_scene::ObjectId> =
+        ["windshield_sky", "side_window_left", "side_window_right"]
+            .iter()
+            .map(|name| cab.object_id(name).expect("a stock panel"))
+            .collect();
     cab.triangles.retain(|t| !panels.contains(&t.object));
     vtfarm_scene::obj::write_obj(&cab, dir.path(), "open-cab").unwrap();
     let variant = "[[variants]]\nname = \"open cab\"\nobj = \"open-cab.obj\"\n";

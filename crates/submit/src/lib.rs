@@ -22,7 +22,12 @@
 //! jobs`, `cancel`, `pause`, `resume`, `requeue`, `priority`); a job's
 //! follower learns of a user's pause, resume or cancel
 //! (`JobStateChanged`): a cancel ends it with [`JobError::Cancelled`].
+//!
+//! [`listing`] turns what the master answers into the text a submitter
+//! prints: the tables of `vtfarm jobs` and `vtfarm status`, a frame's
+//! statistics and the JSON lines of `vtfarm submit --json`.
 
+pub mod listing;
 pub mod progress;
 mod study;
 

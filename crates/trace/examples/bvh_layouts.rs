@@ -50,7 +50,7 @@ fn push_triangle(scene: &mut Scene, corners: [Vec3; 3]) {
     scene.normals.extend([n; 3]);
     scene.triangles.push(Triangle {
         vertices: [base, base + 1, base + 2],
-        object: 0,
+        object: vtfarm_scene::ObjectId(0),
         material: 0,
     });
 }

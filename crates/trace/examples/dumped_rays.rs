@@ -43,7 +43,7 @@ fn main() {
         }
         scene.triangles.push(Triangle {
             vertices: [base, base + 1, base + 2],
-            object: 0,
+            object: vtfarm_scene::ObjectId(0),
             material: 0,
         });
     }

@@ -22,7 +22,7 @@ use obvhs::ploc::PlocBuilder;
 use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
-use vtfarm_scene::{Scene, TriangleId};
+use vtfarm_scene::{ObjectId, Scene, TriangleId};
 
 use crate::leaf::{LaneHits, Leaves, bits};
 use crate::wide::{Isa, LeafTest};
@@ -308,7 +308,7 @@ pub struct SceneBvh {
 /// may mirror). Bounds by a sphere around their box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Emitter {
-    pub object: vtfarm_scene::ObjectId,
+    pub object: ObjectId,
     /// The luminance of the material's emission in cd/m²
     /// ([`vtfarm_scene::photometry::cd_m2`]).
     pub luminance_cd_m2: f32,
@@ -318,7 +318,7 @@ pub struct Emitter {
 
 /// The emitters of `scene` ([`Emitter`]), in (object, material) order.
 fn emitters_of(scene: &Scene) -> Vec<Emitter> {
-    let mut boxes: std::collections::BTreeMap<(u32, u32), (Vec3, Vec3)> = Default::default();
+    let mut boxes: std::collections::BTreeMap<(ObjectId, u32), (Vec3, Vec3)> = Default::default();
     for (id, t) in scene.triangles.iter().enumerate() {
         let material = &scene.materials[t.material as usize];
         if material.emission.max_element() <= 0.0 {

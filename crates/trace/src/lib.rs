@@ -33,8 +33,8 @@ pub use bvh::{
 pub use whitted::{PixelCone, Rays, SurfaceTerms, Tracer, fresnel_reflectance, reflect, refract};
 
 use glam::Vec3;
+use vtfarm_scene::TriangleId;
 use vtfarm_scene::bounds::{OutOfBounds, check, non_negative};
-use vtfarm_scene::{ObjectId, TriangleId};
 
 /// A ray; `direction` is unit length.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,8 +140,9 @@ pub struct Sample {
     /// refraction ray less the ghost counted in `reflected` (what is seen
     /// through the glass).
     pub transmitted: Vec3,
-    /// The object hit by the first reflection ray, or `vtfarm_scene::NONE`.
-    pub reflected_object: ObjectId,
+    /// The object hit by the first reflection ray (its
+    /// [`vtfarm_scene::ObjectId::raw`]), or `vtfarm_scene::NONE`.
+    pub reflected_object: u32,
     /// A compact ray-tree signature: a hash of the objects hit along the tree
     /// (and of shadow-ray outcomes), equal for samples whose trees match.
     pub signature: u64,

@@ -34,7 +34,7 @@ fn fan(rng: &mut TestRng, centre: Vec3, u: Vec3, v: Vec3, radius: f32, n: u32) -
         triangles: (0..n)
             .map(|i| Triangle {
                 vertices: [0, 1 + i, 1 + (i + 1) % n],
-                object: 0,
+                object: vtfarm_scene::ObjectId(0),
                 material: 0,
             })
             .collect(),

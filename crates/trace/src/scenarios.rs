@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, Scene};
+use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, ObjectId, Scene};
 
 use crate::testutil::{SceneBuilder, TestRng, emitter, glass, mirror};
 use crate::whitted::{reflect, refract};
@@ -95,7 +95,7 @@ fn mirror_sphere_reflects_in_the_analytic_direction() {
         };
         let sample = tracer(&bvh, &lighting).trace(&ray);
 
-        assert_eq!(sample.reflected_object, target, "decoy is {decoy}");
+        assert_eq!(sample.reflected_object, target.raw(), "decoy is {decoy}");
         // kr = 1 and nothing else lights the sphere: it shows the panel exactly.
         assert_eq!(sample.color, target_light);
         assert_eq!(sample.reflected, target_light);
@@ -250,7 +250,7 @@ fn total_internal_reflection_sends_the_transmitted_energy_into_the_mirror_ray() 
         let a = degrees.to_radians();
         let totally_reflected = tracer.shade(&point, Vec3::new(a.sin(), a.cos(), 0.0));
         assert_eq!(totally_reflected.color, inner_light, "{degrees}°");
-        assert_eq!(totally_reflected.reflected_object, inner);
+        assert_eq!(totally_reflected.reflected_object, inner.raw());
         assert_eq!(totally_reflected.reflected, inner_light);
         assert_ne!(totally_reflected.signature, below.signature);
     }
@@ -296,7 +296,7 @@ fn fresnel_moves_transmission_into_reflection_at_grazing_angles() {
         cone: PixelCone::FINEST,
     };
     let graze = fresnel.shade(&point, incoming);
-    assert_eq!(graze.reflected_object, sky);
+    assert_eq!(graze.reflected_object, sky.raw());
     // The Fresnel equations at n = 1.5 (kr = 0, kt = 1 head-on): the share
     // (F(θ) − F0) / (1 − F0) of the transmittance moves to the mirror ray.
     let (cos_i, sin_t) = (a.cos(), a.sin() / 1.5);
@@ -755,7 +755,7 @@ fn empty_and_single_triangle_scenes_work() {
 
 /// The two-light shadow scene plus a vertical mirror at z = -5 and red and
 /// blue panels it can show.
-fn signature_scene() -> (ShadowScene, [u32; 2]) {
+fn signature_scene() -> (ShadowScene, [ObjectId; 2]) {
     let mut s = shadow_scene(
         Material::diffuse("wall", Vec3::splat(0.3)),
         &[Vec3::new(-2.0, 3.0, 0.0), Vec3::new(2.0, 3.0, 0.0)],
@@ -829,7 +829,7 @@ fn signatures_match_exactly_when_ray_trees_match() {
             red_b.reflected_object,
             blue_a.reflected_object
         ),
-        (red, red, blue)
+        (red.raw(), red.raw(), blue.raw())
     );
     assert_eq!(red_a.reflected, Vec3::X);
     assert_eq!(red_a.signature, red_b.signature);

@@ -80,7 +80,7 @@ pub(crate) struct SceneBuilder {
 impl SceneBuilder {
     /// Starts a new object with its own material; returns the object id.
     fn object(&mut self, material: Material) -> (ObjectId, MaterialId) {
-        let object = self.scene.objects.len() as ObjectId;
+        let object = ObjectId(self.scene.objects.len() as u32);
         self.scene.objects.push(Object {
             name: format!("{}#{object}", material.name),
         });

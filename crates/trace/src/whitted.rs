@@ -6,7 +6,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 use vtfarm_scene::shading::phong;
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, NONE, ObjectId};
+use vtfarm_scene::{Camera, Light, LightKind, Lighting, NONE};
 
 use crate::bvh::spawn_offset;
 use crate::{Hit, Ray, Sample, SceneBvh, SurfacePoint, TraceSettings, Transmission};
@@ -84,7 +84,7 @@ struct Shaded {
     color: Vec3,
     reflected: Vec3,
     transmitted: Vec3,
-    reflected_object: ObjectId,
+    reflected_object: u32,
     /// The light this surface and the see-through surfaces behind it
     /// reflect back along the ray (zero for an opaque surface or a miss):
     /// `kr · reflection + kt · ghost of the refraction's surface`.
@@ -371,7 +371,7 @@ impl Tracer<'_> {
         weight: f32,
         rays: Rays,
         walk: &mut Walk,
-    ) -> (Shaded, ObjectId) {
+    ) -> (Shaded, u32) {
         // Branches too weak to change a pixel visibly stay out of the ray-tree
         // signature, so they do not drive the refinement.
         let tracked = weight >= self.settings.signature_min_weight;
@@ -647,7 +647,7 @@ pub struct SurfaceTerms {
 /// What [`Tracer::shade_tree`] needs of a surface: its object and terms,
 /// and where its secondary rays lead.
 struct VisitedSurface<L> {
-    object: ObjectId,
+    object: u32,
     /// The material lets light through (glass; see [`Shaded::ghost`]).
     see_through: bool,
     local: Vec3,
@@ -718,7 +718,9 @@ impl TreeSource for OnDemand<'_> {
         let (terms, reflection, refraction) =
             tracer.surface_of(&point, incoming, path, depth, rays, lit);
         Visited::Surface(VisitedSurface {
-            object: tracer.bvh.scene().triangles[point.triangle as usize].object,
+            object: tracer.bvh.scene().triangles[point.triangle as usize]
+                .object
+                .raw(),
             see_through: tracer.bvh.see_through(point.triangle),
             local: terms.local,
             kr: terms.kr,

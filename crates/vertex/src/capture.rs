@@ -23,7 +23,7 @@
 //! scene's emitters alone, so package independence holds.
 
 use glam::Vec3;
-use vtfarm_scene::{ObjectId, photometry};
+use vtfarm_scene::photometry;
 
 use crate::Frame;
 
@@ -68,7 +68,7 @@ impl Frame<'_> {
     /// Whether a face with `corners` (position, shading normal) may mirror
     /// a bright source (see the module docs).
     /// `seen`: the objects the corners' samples mirror.
-    pub(crate) fn captures(&self, corners: [(Vec3, Vec3); 3], seen: [ObjectId; 3]) -> bool {
+    pub(crate) fn captures(&self, corners: [(Vec3, Vec3); 3], seen: [u32; 3]) -> bool {
         let threshold = self.settings.capture_cd_m2;
         let cone = reflection_cone(self.camera.eye, corners);
         let within = |toward: Vec3, reach: f32| {
@@ -89,7 +89,7 @@ impl Frame<'_> {
             .map(|(p, _)| p.distance(centre))
             .fold(0.0, f32::max);
         let bright = (self.tracer.bvh.emitters().iter())
-            .filter(|e| e.luminance_cd_m2 >= threshold && !seen.contains(&e.object));
+            .filter(|e| e.luminance_cd_m2 >= threshold && !seen.contains(&e.object.raw()));
         for emitter in bright {
             let to = emitter.centre - centre;
             let distance = to.length();

@@ -372,7 +372,9 @@ impl Frame<'_> {
     /// at about the vertex's depth (vertices lie on edges, so their own pixel
     /// may belong to a neighbour).
     fn vertex_visible(&self, triangle: TriangleId, s: ScreenPoint) -> bool {
-        let object = self.tracer.bvh.scene().triangles[triangle as usize].object;
+        let object = self.tracer.bvh.scene().triangles[triangle as usize]
+            .object
+            .raw();
         let r = self.settings.visibility_radius as i64;
         let (cx, cy) = (s.x.floor() as i64, s.y.floor() as i64);
         let tolerance = self.settings.depth_tolerance * s.depth;

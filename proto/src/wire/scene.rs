@@ -114,7 +114,7 @@ impl From<&Scene> for WireScene {
                 .iter()
                 .map(|t| WireTriangle {
                     vertices: t.vertices,
-                    object: t.object,
+                    object: t.object.raw(),
                     material: t.material,
                 })
                 .collect(),
@@ -167,7 +167,7 @@ impl TryFrom<WireScene> for Scene {
                 )?;
                 Ok(Triangle {
                     vertices: t.vertices,
-                    object: t.object,
+                    object: vtfarm_scene::ObjectId(t.object),
                     material: t.material,
                 })
             })

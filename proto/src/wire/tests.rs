@@ -31,12 +31,12 @@ pub(crate) fn scene() -> Scene {
         triangles: vec![
             Triangle {
                 vertices: [0, 1, 2],
-                object: 0,
+                object: vtfarm_scene::ObjectId(0),
                 material: 0,
             },
             Triangle {
                 vertices: [1, 3, 2],
-                object: 1,
+                object: vtfarm_scene::ObjectId(1),
                 material: 1,
             },
         ],

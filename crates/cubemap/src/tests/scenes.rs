@@ -29,7 +29,7 @@ pub(crate) fn push(
     scene.normals.extend_from_slice(normals);
     scene.triangles.extend(faces.iter().map(|f| Triangle {
         vertices: f.map(|v| v + base),
-        object: object.0,
+        object: vtfarm_scene::ObjectId(object.0),
         material: object.1,
     }));
 }

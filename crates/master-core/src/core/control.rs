@@ -327,7 +327,7 @@ impl MasterCore {
     pub(super) fn attach(&mut self, conn: ConnId, job: JobId, from_frame: u32) {
         // A study: the submitter attaches to each of its variants.
         if let Some(variants) = self.study_variants(job) {
-            info!(study = %job, conn, "submitter attached to the study");
+            info!(study = %job, %conn, "submitter attached to the study");
             let study = job;
             return self.send(conn, Message::StudyAccepted { study, variants });
         }
@@ -360,7 +360,7 @@ impl MasterCore {
             self.send(conn, Message::JobFailed { job, errors });
             return;
         };
-        info!(%job, conn, from_frame, "submitter attached");
+        info!(%job, %conn, from_frame, "submitter attached");
         self.send(conn, Message::JobAccepted { job, frames });
         if let Some(error) = self.recovery.failed_write(job).map(str::to_owned) {
             self.send(conn, Message::JournalFailed { job, error });

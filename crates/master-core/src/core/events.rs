@@ -122,7 +122,7 @@ impl MasterCore {
         // The same error from several workers is told once, with their names.
         let mut grouped: Vec<(String, Vec<String>)> = Vec::new();
         for (worker, error) in errors {
-            let name = self.peers.name(worker.0);
+            let name = self.peers.name(ConnId::of_worker(*worker));
             match grouped.iter_mut().find(|(e, _)| e == error) {
                 Some((_, names)) => names.push(name),
                 None => grouped.push((error.clone(), vec![name])),

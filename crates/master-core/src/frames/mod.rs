@@ -302,7 +302,7 @@ impl Frames {
         });
         let in_flight = InFlight {
             job: a.job,
-            worker: a.worker.0,
+            worker: ConnId::of_worker(a.worker),
             frame: a.frame,
             whole: a.whole,
             triangles,
@@ -578,7 +578,7 @@ impl Frames {
         }
         let workers = (stats.workers.iter())
             .map(|w| WorkerFrameStats {
-                name: name(w.worker.0),
+                name: name(ConnId::of_worker(w.worker)),
                 busy_micros: w.busy.as_micros() as u64,
                 packages: w.packages,
                 triangles: w.items,
@@ -655,7 +655,7 @@ pub(crate) enum Arrival {
 mod tests {
     use std::collections::BTreeSet;
 
-    use vtfarm_scheduler::{JobId, PackageId, WorkerId};
+    use vtfarm_scheduler::{JobId, PackageId};
 
     use super::*;
     use crate::testkit;
@@ -665,15 +665,15 @@ mod tests {
     /// Frames holding job 1 of `frames` frames of the test square.
     fn frames_with_job(frames: usize) -> Frames {
         let (job, scene, hash) = testkit::job(frames);
-        let (job, _) = Job::checked(job, scene, hash, BTreeSet::from([9]), 0).unwrap();
+        let (job, _) = Job::checked(job, scene, hash, BTreeSet::from([ConnId(9)]), 0).unwrap();
         let mut all = Frames::default();
         all.jobs.insert(JobId(1), job);
         all
     }
 
-    fn assignment(package: u64, worker: ConnId, frame: u32, whole: bool) -> Assignment {
+    fn assignment(package: u64, worker: u64, frame: u32, whole: bool) -> Assignment {
         Assignment {
-            worker: WorkerId(worker),
+            worker: ConnId(worker).worker(),
             package: PackageId(package),
             job: JobId(1),
             frame,
@@ -740,8 +740,8 @@ mod tests {
         assert!(again.is_some(), "a worker that does not keep the frame");
         frames.assign(assignment(6, 4, 0, false), true, MS);
         assert_eq!(frames.arrival(5), Arrival::AwaitingBase);
-        frames.hold(3, result(5), 10);
-        frames.hold(4, result(6), 20);
+        frames.hold(ConnId(3), result(5), 10);
+        frames.hold(ConnId(4), result(6), 20);
         let (cost, used) = frames.base_ready(JobId(1), 0, request.rasterize(), 5 * MS);
         assert_eq!(cost, Some(4 * MS), "made alone: the master's time");
         let BaseUse::Waiting(base) = used else {
@@ -750,7 +750,7 @@ mod tests {
         let held = frames.use_base(JobId(1), 0, base, 5 * MS);
         let held: Vec<_> = held
             .iter()
-            .map(|(conn, r, bytes)| (*conn, r.id, *bytes))
+            .map(|(conn, r, bytes)| (conn.0, r.id, *bytes))
             .collect();
         assert_eq!(held, [(3, 5, 10), (4, 6, 20)]);
         assert_eq!(frames.arrival(5), Arrival::Ready);
@@ -767,9 +767,9 @@ mod tests {
         for (package, worker) in [(5, 3), (6, 4), (7, 4)] {
             frames.assign(assignment(package, worker, 0, false), true, MS);
         }
-        frames.drop_in_flight(5, 4);
+        frames.drop_in_flight(5, ConnId(4));
         assert!(frames.packages.contains_key(&5), "it runs on worker 3");
-        frames.drop_in_flight(5, 3);
+        frames.drop_in_flight(5, ConnId(3));
         assert!(!frames.packages.contains_key(&5));
         let (done, progress) = frames.package_done(6).unwrap();
         assert_eq!(done.triangles, [0, 1]);

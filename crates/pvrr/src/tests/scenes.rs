@@ -23,7 +23,7 @@ impl Builder {
         triangles: &[[u32; 3]],
     ) -> Vec<TriangleId> {
         let scene = &mut self.scene;
-        let object = scene.objects.len() as ObjectId;
+        let object = ObjectId(scene.objects.len() as u32);
         scene.objects.push(Object {
             name: name.to_owned(),
         });

@@ -15,7 +15,7 @@
 use std::ops::Range;
 
 use glam::Vec3;
-use vtfarm_scene::{NONE, ObjectId};
+use vtfarm_scene::NONE;
 
 use super::{Rays, Tracer, TreeSource, Visited, VisitedSurface};
 use crate::{Ray, Sample, SurfacePoint};
@@ -23,7 +23,7 @@ use crate::{Ray, Sample, SurfacePoint};
 /// One node of a sample's ray tree: a surface, or a ray that hit nothing.
 struct Node {
     /// The object the ray into this node hit (`NONE` for a miss).
-    object: ObjectId,
+    object: u32,
     surface: Option<Surface>,
     /// The direction a ray that hit nothing left the scene along.
     escape: Vec3,
@@ -64,7 +64,7 @@ pub(super) fn shade_points(
         lit_words: Vec::new(),
     };
     recorded.nodes.extend(points.iter().map(|(point, _)| Node {
-        object: scene.triangles[point.triangle as usize].object,
+        object: scene.triangles[point.triangle as usize].object.raw(),
         surface: None,
         escape: Vec3::ZERO,
     }));
@@ -129,7 +129,7 @@ pub(super) fn shade_points(
                             path: path + hit.t,
                             rays: Rays::Both,
                         });
-                        scene.triangles[hit.triangle as usize].object
+                        scene.triangles[hit.triangle as usize].object.raw()
                     }
                 };
                 recorded.nodes.push(Node {
