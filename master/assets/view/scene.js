@@ -101,7 +101,7 @@ function presentMaterial(target) {
 
 // The reflector: vertex colours plus transmittance times what lies behind.
 function glassMaterial(target, transmittance) {
-  // The canvas's size: `behind` may be a coarser target over the same view.
+  // The drawing's size, to find each fragment's pixel in `behind`.
   const size = new THREE.Vector2(target.width, target.height);
   return new THREE.ShaderMaterial({
     uniforms: {
@@ -140,6 +140,8 @@ export class SceneView {
     const height = Math.max(1, Math.round(setup.height * scale));
     canvas.width = width;
     canvas.height = height;
+    // Shown at this size whatever it is drawn at (a drag draws it coarser).
+    canvas.style.width = width / (window.devicePixelRatio || 1) + "px";
     const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true });
     renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
     renderer.setPixelRatio(1);
@@ -153,9 +155,9 @@ export class SceneView {
       depthTexture: new THREE.DepthTexture(w, h, THREE.FloatType),
     });
     this.target = target(width, height);
-    // The scene behind the glass while the eye is dragged: a quarter of
-    // the pixels, so a slow rasterizer keeps up with the hand; the eye
-    // drawn when the drag ends is drawn whole.
+    // The view while the eye is dragged: a quarter of the pixels, so a
+    // slow rasterizer keeps up with the hand; the eye where the drag ends
+    // is drawn whole.
     this.coarseTarget = target(Math.max(1, Math.round(width / 2)), Math.max(1, Math.round(height / 2)));
     this.camera = new THREE.PerspectiveCamera(setup.fov_y_deg, setup.width / setup.height, 0.01, 1000);
     this.camera.up.set(...setup.up);
@@ -188,6 +190,7 @@ export class SceneView {
     this.offset = [0, 0, 0];
     // The eye the target's opaque scene was drawn from.
     this.opaqueEye = null;
+    this.drawnCoarse = false;
   }
 
   // The eye at `offset` (metres) from the source job's eye.
@@ -256,12 +259,18 @@ export class SceneView {
     return this.overlay !== null && this.overlay.eye.every((v, k) => Math.abs(v - eye[k]) < 1e-5);
   }
 
-  // Draws the view (`coarse`: the scene behind the glass at a quarter of
-  // the pixels, while the eye is dragged); returns how long it took, to a
+  // Draws the view (`coarse`: at a quarter of the pixels, while the eye is
+  // dragged); returns how long it took, to a
   // one-pixel read-back (ms).
   draw(coarse = false) {
     const start = performance.now();
     const target = coarse ? this.coarseTarget : this.target;
+    if (this.drawnCoarse !== coarse) {
+      // The whole drawing at the target's size; the page scales the canvas.
+      this.renderer.setSize(target.width, target.height, false);
+      this.glassMaterial.uniforms.size.value.set(target.width, target.height);
+      this.drawnCoarse = coarse;
+    }
     this.presentMaterial.uniforms.color.value = target.texture;
     this.presentMaterial.uniforms.depth.value = target.depthTexture;
     this.glassMaterial.uniforms.behind.value = target.texture;
