@@ -127,6 +127,15 @@ function glassMaterial(target, transmittance) {
   });
 }
 
+// The smallest rectangle holding both.
+function union(a, b) {
+  if (a.w === 0 || a.h === 0) return b;
+  if (b.w === 0 || b.h === 0) return a;
+  const x = Math.min(a.x, b.x);
+  const y = Math.min(a.y, b.y);
+  return { x, y, w: Math.max(a.x + a.w, b.x + b.w) - x, h: Math.max(a.y + a.h, b.y + b.h) - y };
+}
+
 export class SceneView {
   // canvas: the page's; setup: /view/setup.json; gltf: the loaded scene;
   // shownWidth: the device pixels the canvas is shown at. It is drawn at
@@ -191,6 +200,8 @@ export class SceneView {
     // The eye the target's opaque scene was drawn from.
     this.opaqueEye = null;
     this.drawnCoarse = false;
+    // Where the glass was drawn last, to redraw only there while the eye stays.
+    this.shownGlass = null;
   }
 
   // The eye at `offset` (metres) from the source job's eye.
@@ -259,6 +270,38 @@ export class SceneView {
     return this.overlay !== null && this.overlay.eye.every((v, k) => Math.abs(v - eye[k]) < 1e-5);
   }
 
+  // The drawing's pixels the glass mesh and the overlay cover, from the
+  // bottom left (all of them when a vertex lies behind the eye).
+  glassRect(target) {
+    const all = { x: 0, y: 0, w: target.width, h: target.height };
+    let [x0, y0, x1, y1] = [Infinity, Infinity, -Infinity, -Infinity];
+    const p = new THREE.Vector3();
+    for (const mesh of this.glass.children) {
+      const positions = mesh.geometry.getAttribute("position");
+      for (let i = 0; i < positions.count; i++) {
+        p.fromBufferAttribute(positions, i);
+        if (p.clone().applyMatrix4(this.camera.matrixWorldInverse).z >= 0) return all;
+        p.project(this.camera);
+        x0 = Math.min(x0, p.x); x1 = Math.max(x1, p.x);
+        y0 = Math.min(y0, p.y); y1 = Math.max(y1, p.y);
+      }
+    }
+    if (this.overlay) {
+      const o = this.overlay;
+      const ndc = (v, size) => (v / size) * 2 - 1;
+      x0 = Math.min(x0, ndc(o.x0, o.frameWidth)); x1 = Math.max(x1, ndc(o.x0 + o.width, o.frameWidth));
+      y0 = Math.min(y0, -ndc(o.y0 + o.height, o.frameHeight)); y1 = Math.max(y1, -ndc(o.y0, o.frameHeight));
+    }
+    if (!(x0 <= x1)) return { x: 0, y: 0, w: 0, h: 0 };
+    // A pixel's margin for rounding.
+    const px = (v, size) => ((v + 1) / 2) * size;
+    const x = Math.max(0, Math.floor(px(x0, target.width)) - 1);
+    const y = Math.max(0, Math.floor(px(y0, target.height)) - 1);
+    const right = Math.min(target.width, Math.ceil(px(x1, target.width)) + 1);
+    const top = Math.min(target.height, Math.ceil(px(y1, target.height)) + 1);
+    return { x, y, w: Math.max(0, right - x), h: Math.max(0, top - y) };
+  }
+
   // Draws the view (`coarse`: at a quarter of the pixels, while the eye is
   // dragged); returns how long it took, to a
   // one-pixel read-back (ms).
@@ -283,7 +326,8 @@ export class SceneView {
     // The scene behind the glass changes only with the eye: a stage that
     // comes for the same eye redraws the glass over it alone.
     const key = eye.join(",") + (coarse ? "/coarse" : "");
-    if (this.opaqueEye !== key) {
+    const sameScene = this.opaqueEye === key;
+    if (!sameScene) {
       r.setRenderTarget(target);
       r.setClearColor(this.background, 1);
       r.clear();
@@ -291,10 +335,19 @@ export class SceneView {
       this.opaqueEye = key;
     }
     r.setRenderTarget(null);
+    // Over the same scene, only where the glass was or is now changes.
+    const glass = this.glassRect(target);
+    const redrawn = sameScene && this.shownGlass ? union(this.shownGlass, glass) : null;
+    this.shownGlass = glass;
+    if (redrawn) {
+      r.setScissor(redrawn.x, redrawn.y, redrawn.w, redrawn.h);
+      r.setScissorTest(true);
+    }
     r.clear();
     r.render(this.present, this.screen);
     r.render(this.glass, this.camera);
     if (this.overlayHolds()) r.render(this.overlayScene, this.screen);
+    r.setScissorTest(false);
     const gl = r.getContext();
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
     return performance.now() - start;
