@@ -1260,7 +1260,9 @@ fn page_reached(browser: &Browser, result: serde_json::Value, what: &str) {
 /// cockpit, takes three moves and a drag, records one timing per move with
 /// every stage of the moves it waited for, and at the still eye its canvas
 /// is the CPU's: the base scene within 8/255 on at least 95% of the pixels
-/// off the glass, and on the glass the `full` render's pixels.
+/// off the glass, and on the glass the `full` render's pixels. While the
+/// eye is dragged it draws previews only, and the stages it held when the
+/// drag ends.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_render_at_a_still_eye()
 {
@@ -1505,5 +1507,43 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
     assert_eq!(
         same, glass,
         "the glass shows the full render's pixels (off by up to {worst})"
+    );
+
+    // While the eye is dragged only previews are drawn: a move's `full`
+    // that comes before the mouse is let go is held, and drawn and
+    // recorded when it is.
+    browser
+        .call("Input.dispatchMouseEvent", mouse("mousePressed", x))
+        .await
+        .unwrap();
+    browser
+        .call("Input.dispatchMouseEvent", mouse("mouseMoved", x + 1.0))
+        .await
+        .unwrap();
+    let held = r#"new Promise((resolve) => {
+        const start = performance.now();
+        const check = () => {
+            const t = window.vtfarm.viewTimings, s = window.vtfarm.stages;
+            const last = t[t.length - 1];
+            if (t.length === MOVES + 1 && s.full.generation === t.length && last.preview !== null) {
+                return resolve(last.full === null ? true : JSON.stringify(last));
+            }
+            if (performance.now() - start > 30000) return resolve(JSON.stringify({ timings: t }));
+            setTimeout(check, 20);
+        };
+        check();
+    })"#
+    .replace("MOVES", &moves.to_string());
+    let held = browser.eval(&held).await.unwrap();
+    page_reached(&browser, held, "the dragged move's full stage, held");
+    browser
+        .call("Input.dispatchMouseEvent", mouse("mouseReleased", x + 1.0))
+        .await
+        .unwrap();
+    let drawn = browser.eval(&full_drawn(moves)).await.unwrap();
+    page_reached(
+        &browser,
+        drawn,
+        "the dragged move's full stage, drawn when the drag ends",
     );
 }
