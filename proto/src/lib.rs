@@ -36,10 +36,10 @@ pub use handshake::{HANDSHAKE_TIMEOUT, HandshakePolicy, check_hello, token_match
 pub use kept::{FrameKey, KeptFrames};
 pub use message::{
     FrameDone, FramePhase, FrameStart, FrameStats, Hello, JobAction, JobId, JobOptions, JobRow,
-    JobScene, JobSummary, MAX_STAGES, Message, Package, PackageFailed, PackageId, PackageResult,
-    PhaseKind, QueueStatus, Refusal, RefuseCode, ResultPixels, Role, RunningJob, SceneData,
-    SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WireJobKind, WireJobState, WireStudy,
-    WorkerFrameStats, WorkerStatus, check_stages, scene_hash, wire_job,
+    JobScene, JobSummary, MAX_CORNER_MESH_TRIANGLES, MAX_STAGES, Message, Package, PackageFailed,
+    PackageId, PackageResult, PhaseKind, QueueStatus, Refusal, RefuseCode, ResultPixels, Role,
+    RunningJob, SceneData, SceneHash, StatusReply, Welcome, WireFrameAux, WireJob, WireJobKind,
+    WireJobState, WireStudy, WorkerFrameStats, WorkerStatus, check_stages, scene_hash, wire_job,
 };
 pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,

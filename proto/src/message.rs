@@ -168,16 +168,22 @@ pub enum Message {
 
     // Worker → master: the interactive view.
     /// Worker → master: a progressive frame whose first stage is `preview`
-    /// (a move of the view's eye) sends, before its frame is set up, every
-    /// reflector triangle's corners traced from the eye
-    /// (`vtfarm_vertex::corner_meshes`): the view's first image, ahead of
-    /// the packages' results.
+    /// (a move of the view's eye) and has at most
+    /// [`MAX_CORNER_MESH_TRIANGLES`] reflector triangles sends, before its
+    /// frame is set up, every reflector triangle's corners traced from the
+    /// eye (`vtfarm_vertex::corner_meshes`): the view's first image, ahead
+    /// of the packages' results.
     FrameMesh {
         job: JobId,
         frame: u32,
         mesh: WireMesh,
     },
 }
+
+/// The most reflector triangles a [`Message::FrameMesh`] holds (about
+/// 180 bytes each on the wire, 12 MB at most): a larger reflector's preview
+/// comes with its packages' results, in pieces of a package's size.
+pub const MAX_CORNER_MESH_TRIANGLES: usize = 65_536;
 
 impl Message {
     /// The variant's name, for logs and "unexpected message" errors.

@@ -19,9 +19,9 @@ use std::time::Instant;
 use tracing::{debug, info, warn};
 use vtfarm_method::{MethodFrame, MethodKind, ReflectionMethod, merge_bitmaps, reflector_groups};
 use vtfarm_proto::{
-    FrameKey, FrameStart, JobId, Package, PackageResult, ResultPixels, SceneData, SceneHash,
-    WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage, WireImageFormat, WireMesh,
-    WirePackageStats, check_stages, check_triangle_ids,
+    FrameKey, FrameStart, JobId, MAX_CORNER_MESH_TRIANGLES, Package, PackageResult, ResultPixels,
+    SceneData, SceneHash, WireBitmap, WireBitmapParts, WireError, WireFrameAux, WireImage,
+    WireImageFormat, WireMesh, WirePackageStats, check_stages, check_triangle_ids,
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
@@ -585,10 +585,12 @@ impl FrameParts {
     /// For a frame whose first stage is `preview` (a move of the view's
     /// eye), every reflector triangle's corners traced from the eye
     /// ([`Renderer::corner_meshes`]), which need no set-up: sent ahead of
-    /// it, they are the view's first image. `None` for any other frame.
+    /// it, they are the view's first image. `None` for any other frame,
+    /// and for more than [`MAX_CORNER_MESH_TRIANGLES`] reflector triangles.
     pub fn corner_mesh(&mut self) -> Result<Option<WireMesh>, FrameError> {
         let vertex_traced = self.per_reflector.is_none();
-        if !(vertex_traced && self.stages.first() == Some(&Quality::Preview)) {
+        let fits = self.renderer_key.1.len() <= MAX_CORNER_MESH_TRIANGLES;
+        if !(vertex_traced && fits && self.stages.first() == Some(&Quality::Preview)) {
             return Ok(None);
         }
         let renderer = self.renderer()?;
@@ -643,8 +645,13 @@ mod tests {
 
     /// A small cockpit and an engine that holds it.
     fn cockpit_engine() -> (Cockpit, SceneHash, Engine) {
+        cockpit_engine_at(0.1)
+    }
+
+    /// The cockpit at `detail` and an engine that holds it.
+    fn cockpit_engine_at(detail: f32) -> (Cockpit, SceneHash, Engine) {
         let cockpit = vtfarm_cockpit::cockpit(&vtfarm_cockpit::CockpitConfig {
-            detail: 0.1,
+            detail,
             ..Default::default()
         });
         let data = SceneData::from_scene(&cockpit.scene);
@@ -983,5 +990,25 @@ mod tests {
                 .unwrap();
             assert_eq!(corner, part, "triangle {}", part.triangle);
         }
+    }
+
+    /// A view's frame with more reflector triangles than a corner mesh
+    /// holds sends none: its preview comes with its packages' results.
+    #[test]
+    fn a_reflector_too_large_for_a_corner_mesh_has_none() {
+        let (cockpit, hash, mut engine) = cockpit_engine_at(1.0);
+        let every_triangle: Vec<u32> = (0..cockpit.scene.triangles.len() as u32).collect();
+        assert!(every_triangle.len() > MAX_CORNER_MESH_TRIANGLES);
+        let camera = sized(&cockpit, 96, 54);
+        let sun = Vec3::new(0.45, -0.85, -0.15);
+        let mut view = cockpit_frame((&cockpit, hash), 0, camera, sun, &every_triangle);
+        view.stages = [Quality::Preview, Quality::Refine, Quality::Full]
+            .iter()
+            .map(|&q| q.into())
+            .collect();
+        assert_eq!(
+            engine.frame_parts(view).unwrap().corner_mesh().unwrap(),
+            None
+        );
     }
 }
