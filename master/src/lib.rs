@@ -28,6 +28,7 @@ mod view_http;
 
 pub use driver::{MasterHandle, spawn_master, spawn_persistent_master};
 pub use journal::{Journal, JournalWriter};
+pub use view_http::view_reaches;
 pub use vtfarm_master_core::{
     ATTACH_GRACE, BaseFrameRequest, ConnId, EncodedFrame, FarmRules, FrameEncodeRequest,
     MasterCore, Output, Peer, Record, StoredJob, stream, telemetry, view,

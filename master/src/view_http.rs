@@ -21,6 +21,26 @@ use vtfarm_scene::LightKind;
 
 use crate::driver::MasterHandle;
 
+/// A JavaScript expression for a driver of the dashboard (a browser test,
+/// `vtfarm bench view --browser`): a promise that resolves to `value` once
+/// `condition` holds on the page, checked at once and at each
+/// `vtfarm-view-changed` the page dispatches (a move sent, a stage come or
+/// drawn), or after `bound_ms` to `state` as JSON, for the error.
+pub fn view_reaches(condition: &str, value: &str, state: &str, bound_ms: u64) -> String {
+    format!(
+        r#"new Promise((resolve) => {{
+            const check = () => {{
+                if (!({condition})) return;
+                document.removeEventListener("vtfarm-view-changed", check);
+                resolve({value});
+            }};
+            document.addEventListener("vtfarm-view-changed", check);
+            setTimeout(() => resolve(JSON.stringify({state})), {bound_ms});
+            check();
+        }})"#
+    )
+}
+
 /// The page's files: path under `/assets/`, content type, bytes.
 const ASSETS: [(&str, &str, &str); 7] = [
     (

@@ -1227,24 +1227,18 @@ async fn press(browser: &mut Browser, key: &str, code: u32) {
     }
 }
 
-/// Resolves to `true` when move `index` (0-based, in the page's order)
-/// has drawn its `full` stage (the page's own timings), or after 45 s to
-/// what the page has (within the DevTools wait).
+/// [`view_reaches`] with a 30 s bound, after which it resolves to what
+/// the page has, for the failure's message.
+fn view_reaches(condition: &str, value: &str) -> String {
+    let state = r#"{ timings: window.vtfarm.viewTimings, mode: document.getElementById("view-mode").textContent }"#;
+    vtfarm_master::view_reaches(condition, value, state, 30_000)
+}
+
+/// Resolves to `true` once move `index` (0-based, in the page's order) has
+/// drawn its `full` stage (the page's own timings).
 fn full_drawn(index: usize) -> String {
-    format!(
-        r#"new Promise((resolve) => {{
-            const start = performance.now();
-            const check = () => {{
-                const t = window.vtfarm.viewTimings && window.vtfarm.viewTimings[{index}];
-                if (t && t.full !== null) return resolve(true);
-                if (performance.now() - start > 30000) {{
-                    return resolve(JSON.stringify({{ timings: window.vtfarm.viewTimings, mode: document.getElementById("view-mode").textContent }}));
-                }}
-                setTimeout(check, 20);
-            }};
-            check();
-        }})"#
-    )
+    let t = format!("window.vtfarm.viewTimings && window.vtfarm.viewTimings[{index}]");
+    view_reaches(&format!("{t} && {t}.full !== null"), "true")
 }
 
 /// Fails with what the page logged when `result` is not `true`.
@@ -1339,18 +1333,15 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         .call("Input.dispatchMouseEvent", mouse("mouseReleased", x - 10.0))
         .await
         .unwrap();
-    let settled = r#"new Promise((resolve) => {
-        const start = performance.now();
-        const check = () => {
+    let settled = view_reaches(
+        r#"(() => {
             const t = window.vtfarm.viewTimings;
             const offset = document.getElementById("eye-offset").textContent;
-            if (offset === "20, 0, 0" && t.length > 4 && t[t.length - 1].full !== null) return resolve(t.length);
-            if (performance.now() - start > 30000) return resolve(JSON.stringify({ offset, timings: t }));
-            setTimeout(check, 20);
-        };
-        check();
-    })"#;
-    let moves = browser.eval(settled).await.unwrap();
+            return offset === "20, 0, 0" && t.length > 4 && t[t.length - 1].full !== null;
+        })()"#,
+        "window.vtfarm.viewTimings.length",
+    );
+    let moves = browser.eval(&settled).await.unwrap();
     let Some(moves) = moves.as_u64() else {
         return page_reached(&browser, moves, "the drag's last move's full stage");
     };
@@ -1520,20 +1511,19 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         .call("Input.dispatchMouseEvent", mouse("mouseMoved", x + 1.0))
         .await
         .unwrap();
-    let held = r#"new Promise((resolve) => {
-        const start = performance.now();
-        const check = () => {
+    let held = view_reaches(
+        &format!(
+            r#"(() => {{
             const t = window.vtfarm.viewTimings, s = window.vtfarm.stages;
-            const last = t[t.length - 1];
-            if (t.length === MOVES + 1 && s.full.generation === t.length && last.preview !== null) {
-                return resolve(last.full === null ? true : JSON.stringify(last));
-            }
-            if (performance.now() - start > 30000) return resolve(JSON.stringify({ timings: t }));
-            setTimeout(check, 20);
-        };
-        check();
-    })"#
-    .replace("MOVES", &moves.to_string());
+            return t.length === {} && s.full.generation === t.length && t[t.length - 1].preview !== null;
+        }})()"#,
+            moves + 1
+        ),
+        r#"(() => {
+            const last = window.vtfarm.viewTimings[window.vtfarm.viewTimings.length - 1];
+            return last.full === null ? true : JSON.stringify(last);
+        })()"#,
+    );
     let held = browser.eval(&held).await.unwrap();
     page_reached(&browser, held, "the dragged move's full stage, held");
     browser

@@ -8,6 +8,12 @@
 // draw as how long the draw that first showed its preview took; null for
 // a stage never drawn.
 
+// Tells the page's watchers (its tests) that the view's state changed: a
+// move was sent, a stage came or was drawn.
+export function viewChanged() {
+  document.dispatchEvent(new CustomEvent("vtfarm-view-changed"));
+}
+
 const KEYS = {
   ArrowLeft: [-0.01, 0, 0], ArrowRight: [0.01, 0, 0], ArrowUp: [0, 0.01, 0],
   ArrowDown: [0, -0.01, 0], PageUp: [0, 0, 0.01], PageDown: [0, 0, -0.01],
@@ -87,6 +93,7 @@ export class ViewControls {
       if (reply.ok) {
         const { generation } = await reply.json();
         window.vtfarm.viewTimings.push(timing);
+        viewChanged();
         if (generation != null) {
           this.moves.set(generation, timing);
           for (const [quality, now, took] of this.early.get(generation) || []) {
@@ -118,5 +125,6 @@ export class ViewControls {
     if (timing[quality] !== null) return;
     timing[quality] = now;
     if (quality === "preview") timing.draw = took;
+    viewChanged();
   }
 }

@@ -276,11 +276,12 @@ export class SceneView {
     const all = { x: 0, y: 0, w: target.width, h: target.height };
     let [x0, y0, x1, y1] = [Infinity, Infinity, -Infinity, -Infinity];
     const p = new THREE.Vector3();
+    const inView = new THREE.Vector3();
     for (const mesh of this.glass.children) {
       const positions = mesh.geometry.getAttribute("position");
       for (let i = 0; i < positions.count; i++) {
         p.fromBufferAttribute(positions, i);
-        if (p.clone().applyMatrix4(this.camera.matrixWorldInverse).z >= 0) return all;
+        if (inView.copy(p).applyMatrix4(this.camera.matrixWorldInverse).z >= 0) return all;
         p.project(this.camera);
         x0 = Math.min(x0, p.x); x1 = Math.max(x1, p.x);
         y0 = Math.min(y0, p.y); y1 = Math.max(y1, p.y);

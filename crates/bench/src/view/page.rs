@@ -210,22 +210,11 @@ impl Page {
         (self.browser.eval(expression).await).context("evaluating on the dashboard")
     }
 
-    /// Resolves when `condition` (JavaScript) holds on the page, checked
-    /// every 10 ms; an error naming `what` with `state` (JavaScript) after
-    /// the wait.
+    /// Resolves when `condition` (JavaScript) holds on the page
+    /// ([`vtfarm_master::view_reaches`]); an error naming `what` with
+    /// `state` (JavaScript) after the wait.
     async fn until(&mut self, condition: &str, state: &str, what: &str) -> Result<()> {
-        let wait = format!(
-            r#"new Promise((resolve) => {{
-                const start = performance.now();
-                const check = () => {{
-                    if ({condition}) return resolve(true);
-                    if (performance.now() - start > {ms}) return resolve(JSON.stringify({state}));
-                    setTimeout(check, 10);
-                }};
-                check();
-            }})"#,
-            ms = self.wait_ms
-        );
+        let wait = vtfarm_master::view_reaches(condition, "true", state, self.wait_ms as u64);
         let result = self.eval(&wait).await?;
         if result == true {
             return Ok(());
