@@ -17,7 +17,8 @@ use vtfarm_master_core::{
 };
 use vtfarm_proto::{
     FrameDone, FrameKey, FrameStart, FrameStats, JobRow, JobScene, Message, Package, PackageResult,
-    ResultPixels, SceneData, WireJob, WireMesh, WireStudy, encoded_len,
+    ResultPixels, SceneData, WireBitmap, WireImage, WireJob, WireMesh, WirePackageStats, WireStudy,
+    encoded_len,
 };
 use vtfarm_worker::engine::{FrameError, PackageError};
 use vtfarm_worker::{SceneStore, SessionEnd, Task, WorkerSession};
@@ -82,6 +83,37 @@ pub struct PackageWork {
     /// The package fails after its seconds with this error instead of
     /// giving `result` (a worker's fault, for the tests of retries).
     pub failure: Option<PackageError>,
+}
+
+/// A modelled package's result: stand-in pixels (a black whole frame in
+/// its job's image format, or `bitmap` for a split frame's package) and
+/// `triangle_samples`, the cost the load balancer learns.
+pub fn stand_in_result(
+    package: &Package,
+    bitmap: WireBitmap,
+    triangle_samples: Vec<u32>,
+) -> PackageResult {
+    let pixels = match &package.whole {
+        Some(start) => {
+            let camera = &start.setup.camera;
+            let black = vtfarm_imaging::Image::black(camera.width, camera.height);
+            ResultPixels::Frame {
+                image: WireImage::encode(&black, start.image),
+                aux: None,
+            }
+        }
+        None => ResultPixels::Bitmap(bitmap),
+    };
+    PackageResult {
+        id: package.id,
+        pixels,
+        stats: WirePackageStats::default(),
+        busy_micros: 0,
+        setup_micros: 0,
+        triangle_samples,
+        stage: None,
+        mesh: None,
+    }
 }
 
 /// CPU seconds the master's machine spends, one thread each. A whole frame

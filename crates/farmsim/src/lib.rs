@@ -42,7 +42,7 @@ use std::time::Duration;
 
 pub use farm::{
     CostModel, Delivery, Farm, FarmConfig, JobJournal, MasterCosts, PackageRun, PackageWork,
-    SimWorker, WorkerSpec,
+    SimWorker, WorkerSpec, stand_in_result,
 };
 pub use recorded::{
     FarmCosts, FarmFrame, FarmJob, SimulationConfig, background_threads_for, cpu_per_frame,

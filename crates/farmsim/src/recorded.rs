@@ -15,13 +15,11 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
-use vtfarm_imaging::Image;
 use vtfarm_master_core::FarmRules;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameStart, FrameStats, JobScene, Package, PackageResult, ResultPixels, SceneData, SceneHash,
-    WireBitmap, WireBitmapParts, WireFrameSetup, WireImage, WireImageFormat, WireJob,
-    WirePackageStats,
+    FrameStart, FrameStats, JobScene, Package, SceneData, SceneHash, WireBitmap, WireBitmapParts,
+    WireFrameSetup, WireImageFormat, WireJob,
 };
 use vtfarm_render::FrameSetup;
 use vtfarm_scene::Scene;
@@ -30,7 +28,9 @@ use vtfarm_worker::SceneStore;
 use vtfarm_worker::engine::FrameError;
 
 use crate::SimulationError;
-use crate::farm::{CostModel, Farm, FarmConfig, MasterCosts, PackageRun, PackageWork, WorkerSpec};
+use crate::farm::{
+    CostModel, Farm, FarmConfig, MasterCosts, PackageRun, PackageWork, WorkerSpec, stand_in_result,
+};
 
 /// What the work costs: per item (reflector triangle, in the master's
 /// Morton order) and per frame, in one-thread seconds of this machine.
@@ -250,26 +250,19 @@ impl CostModel for Recorded<'_> {
             .collect();
         let costs = self.costs;
         let traced: f64 = indices.iter().map(|&i| costs.seconds[i]).sum();
-        let (pixels, seconds, bytes) = match &package.whole {
+        let (seconds, bytes) = match &package.whole {
             // Finished here: the master's work on a split frame, on the
             // worker, which converts the whole frame once, after its
             // tracing (`vtfarm_render::Renderer::finish_frame`: its base
             // frame is made then, so there is nothing to convert ahead).
-            Some(start) => {
-                let camera = &start.setup.camera;
-                let stand_in = Image::black(camera.width, camera.height);
+            Some(_) => {
                 let master = &costs.master;
                 let finish = master.base_frame
                     + master.result_per_item * indices.len() as f64
                     + master.frame_out
                     + master.frame_out_serial
                     + master.frame_sent;
-                let pixels = ResultPixels::Frame {
-                    image: WireImage::encode(&stand_in, start.image),
-                    aux: None,
-                };
                 (
-                    pixels,
                     traced + finish,
                     costs.empty_result_bytes + costs.frame_bytes,
                 )
@@ -277,24 +270,12 @@ impl CostModel for Recorded<'_> {
             None => {
                 let bytes = costs.empty_result_bytes
                     + indices.iter().map(|&i| costs.result_bytes[i]).sum::<u64>();
-                (
-                    ResultPixels::Bitmap(self.empty_bitmap.clone()),
-                    traced,
-                    bytes,
-                )
+                (traced, bytes)
             }
         };
+        let samples = indices.iter().map(|&i| costs.samples[i]).collect();
         PackageWork {
-            result: PackageResult {
-                id: package.id,
-                pixels,
-                stats: WirePackageStats::default(),
-                busy_micros: 0,
-                setup_micros: 0,
-                triangle_samples: indices.iter().map(|&i| costs.samples[i]).collect(),
-                stage: None,
-                mesh: None,
-            },
+            result: stand_in_result(package, self.empty_bitmap.clone(), samples),
             seconds,
             wire_bytes: Some(bytes),
             failure: None,

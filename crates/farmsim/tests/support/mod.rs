@@ -21,15 +21,13 @@ use rand::{Rng as _, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_farmsim::{
-    CostModel, Farm, FarmConfig, MasterCosts, PackageRun, PackageWork, WorkerSpec,
+    CostModel, Farm, FarmConfig, MasterCosts, PackageRun, PackageWork, WorkerSpec, stand_in_result,
 };
-use vtfarm_imaging::Image;
 use vtfarm_master_core::FarmRules;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
-    FrameDone, FrameStart, FrameStats, JobScene, Message, Package, PackageResult, ResultPixels,
-    SceneData, SceneHash, WireBitmap, WireBitmapParts, WireFrameSetup, WireImage, WireImageFormat,
-    WireJob, WireJobKind, WirePackageStats,
+    FrameDone, FrameStart, FrameStats, JobScene, Message, Package, SceneData, SceneHash,
+    WireBitmap, WireBitmapParts, WireFrameSetup, WireImageFormat, WireJob, WireJobKind,
 };
 use vtfarm_render::{FrameSetup, morton_order};
 use vtfarm_scene::Scene;
@@ -218,34 +216,13 @@ impl CostModel for ItemCosts {
             items: package.triangles.len(),
             failed: fails,
         });
-        let pixels = match &package.whole {
-            Some(start) => {
-                let camera = &start.setup.camera;
-                let image = Image::black(camera.width, camera.height);
-                ResultPixels::Frame {
-                    image: WireImage::encode(&image, start.image),
-                    aux: None,
-                }
-            }
-            None => ResultPixels::Bitmap(WireBitmap::encode(
-                &SparseBitmap::default(),
-                WireBitmapParts::Color,
-            )),
-        };
         let bytes = 64 + self.result_bytes_per_item * costs.len() as u64;
+        let bitmap = WireBitmap::encode(&SparseBitmap::default(), WireBitmapParts::Color);
+        let samples = (costs.iter())
+            .map(|c| (c * SAMPLES_PER_SECOND) as u32)
+            .collect();
         PackageWork {
-            result: PackageResult {
-                id: package.id,
-                pixels,
-                stats: WirePackageStats::default(),
-                busy_micros: 0,
-                setup_micros: 0,
-                triangle_samples: (costs.iter())
-                    .map(|c| (c * SAMPLES_PER_SECOND) as u32)
-                    .collect(),
-                stage: None,
-                mesh: None,
-            },
+            result: stand_in_result(package, bitmap, samples),
             seconds: if fails { 0.0 } else { costs.iter().sum() },
             wire_bytes: Some(bytes),
             failure: fails.then(|| PackageError::Stopped {
