@@ -203,14 +203,7 @@ fn every_job_state_round_trips_through_the_journal() {
     let dir = tempfile::tempdir().unwrap();
     let journal = Journal::open(dir.path()).unwrap();
     let (scene, job) = one_pixel_job(1);
-    let states = [
-        WireJobState::Queued,
-        WireJobState::Running,
-        WireJobState::Paused,
-        WireJobState::Completed,
-        WireJobState::Failed,
-        WireJobState::Cancelled,
-    ];
+    let states = WireJobState::ALL;
     let summary = |id: u64, state: WireJobState| JobSummary {
         id: JobId(id),
         name: format!("job {id}"),
