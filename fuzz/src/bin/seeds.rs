@@ -5,12 +5,12 @@ use std::fs;
 use std::path::Path;
 
 use glam::Vec3;
+use vtfarm_method::FrameSetup;
 use vtfarm_proto::{
     FrameStart, Hello, JobScene, Message, Package, PackageResult, Role, SceneData, WireBitmap,
     WireFrameSetup, WireImageFormat, WireJob, WireMethod, WirePackageStats, encode_message,
 };
-use vtfarm_method::FrameSetup;
-use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_scene::{Camera, Lighting, Material, Object, ObjectId, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{SparseBitmap, VertexSettings};
 
@@ -26,7 +26,7 @@ fn main() -> std::io::Result<()> {
         normals: vec![Vec3::Z; 3],
         triangles: vec![Triangle {
             vertices: [0, 1, 2],
-            object: 0,
+            object: ObjectId(0),
             material: 0,
         }],
         objects: vec![Object {
