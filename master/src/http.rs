@@ -862,7 +862,8 @@ fn view_state(core: &MasterCore) -> ViewState {
     }
 }
 
-/// Moves the view's eye: `{"job": ID, "offset": [x, y, z]}` in metres;
+/// Moves the view's eye: `{"job": ID, "offset": [x, y, z]}` in metres,
+/// with `"page_draws_scene": true` from a page that draws the scene itself;
 /// answers the view's farm job and the move's number (`generation`).
 async fn steer_view(
     State(state): State<HttpState>,
@@ -871,6 +872,7 @@ async fn steer_view(
     let request = ViewRequest {
         job: body.job,
         offset: body.offset,
+        page_draws_scene: body.page_draws_scene,
     };
     match state.master.steer_view(request).await {
         Some(Ok(job)) => {

@@ -62,6 +62,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
     let unknown = ViewRequest {
         job: JobId(99),
         offset: [0.0; 3],
+        page_draws_scene: false,
     };
     assert_eq!(
         pair.act(|m, now| m.steer_view(now, unknown)),
@@ -70,6 +71,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
     let bad = ViewRequest {
         job: source,
         offset: [f32::NAN, 0.0, 0.0],
+        page_draws_scene: false,
     };
     assert_eq!(
         pair.act(|m, now| m.steer_view(now, bad)),
@@ -84,6 +86,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         let request = ViewRequest {
             job: source,
             offset,
+            page_draws_scene: false,
         };
         jobs.push(pair.act(|m, now| m.steer_view(now, request)).unwrap());
         if k + 1 < offsets.len() {
@@ -257,6 +260,7 @@ fn a_move_is_one_progressive_frame_set_up_once_its_last_stage_the_single_process
     let request = ViewRequest {
         job: source,
         offset: offset.to_array(),
+        page_draws_scene: false,
     };
     let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
     let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
@@ -357,6 +361,7 @@ fn a_newer_move_cancels_the_older_moves_remaining_stages() {
     let first = ViewRequest {
         job: source,
         offset: [0.02, 0.0, 0.0],
+        page_draws_scene: false,
     };
     let old = pair.act(|m, now| m.steer_view(now, first)).unwrap();
     drive_to_stage(&mut pair, 1, Quality::Preview);
@@ -368,6 +373,7 @@ fn a_newer_move_cancels_the_older_moves_remaining_stages() {
     let second = ViewRequest {
         job: source,
         offset: [-0.03, 0.02, 0.0],
+        page_draws_scene: false,
     };
     let new = pair.act(|m, now| m.steer_view(now, second)).unwrap();
     assert!(pair.master.views().outcomes().any(|o| *o
@@ -425,6 +431,7 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
     let request = ViewRequest {
         job: source,
         offset: [0.01, 0.01, 0.0],
+        page_draws_scene: false,
     };
     let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
     pair.drive(BOUND, |p| {
@@ -534,7 +541,9 @@ fn face_bits(corners: [ScreenPoint; 3], colors: [Vec3; 3]) -> FaceBits {
 /// the later stages are still being traced; decoded, a `preview` or
 /// `refine` message is, face for face and bit for bit, the refined faces
 /// the single-process render at that quality traces for the move's eye,
-/// and the `full` overlay is that render's reflector pixels.
+/// and the `full` overlay is that render's reflector pixels. The page draws
+/// the scene itself: the master's image of the move is that render only
+/// where the packages look, the background elsewhere.
 #[test]
 fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_render() {
     let (mut pair, c, reflectors, source) = farm_with_a_source();
@@ -542,6 +551,7 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
     let request = ViewRequest {
         job: source,
         offset: offset.to_array(),
+        page_draws_scene: true,
     };
     pair.act(|m, now| m.steer_view(now, request)).unwrap();
     let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
@@ -638,6 +648,27 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
                     .collect();
                 assert!(!sent.is_empty());
                 assert!(sent == rendered, "the render's reflector pixels");
+                let latest = pair.master.views().latest().unwrap();
+                let is_reflector = vtfarm_render::reflector_flags(&c.scene, renderer.reflectors());
+                let around = vtfarm_render::package_bounds(&c.scene, &setup, &is_reflector);
+                let (mut inside, mut outside) = (0, 0);
+                for (i, (&shown, &rendered)) in (latest.image().pixels.iter())
+                    .zip(&reference.image.color.pixels)
+                    .enumerate()
+                {
+                    let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);
+                    if around.contains(x, y) {
+                        assert_eq!(shown, rendered, "({x}, {y})");
+                        inside += 1;
+                    } else {
+                        assert_eq!(shown, setup.lighting.background, "({x}, {y})");
+                        outside += 1;
+                    }
+                }
+                assert!(
+                    inside > 0 && outside > 0,
+                    "{inside} inside, {outside} outside"
+                );
             }
         }
     }
@@ -653,6 +684,7 @@ fn the_preview_goes_out_on_the_corner_mesh_before_any_stage_is_complete() {
     let request = ViewRequest {
         job: source,
         offset: [0.02, 0.0, 0.0],
+        page_draws_scene: false,
     };
     pair.act(|m, now| m.steer_view(now, request)).unwrap();
     pair.drive(BOUND, |p| !streamed(&p.master).1.is_empty());
@@ -678,6 +710,7 @@ fn a_newer_move_cancels_the_older_and_nothing_of_the_cancelled_move_is_streamed(
     let request = |x| ViewRequest {
         job: source,
         offset: [x, 0.0, 0.0],
+        page_draws_scene: false,
     };
     pair.act(|m, now| m.steer_view(now, request(0.01))).unwrap();
     drive_to_stage(&mut pair, 1, Quality::Preview);

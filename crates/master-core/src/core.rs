@@ -739,8 +739,13 @@ impl MasterCore {
         }
         // One progressive frame: its packages go through the stages (its
         // frame starts as the scheduler's events are pumped, below).
-        if let Some(j) = (self.frames.jobs.get_mut(&id)).filter(|_| planned.stages().len() > 1) {
-            j.stages = planned.stages().to_vec();
+        if let Some(j) = self.frames.jobs.get_mut(&id) {
+            if planned.stages().len() > 1 {
+                j.stages = planned.stages().to_vec();
+            }
+            if request.page_draws_scene {
+                j.base_extent = vtfarm_render::BaseExtent::Packages;
+            }
         }
         self.next_job.0 += 1;
         self.table.insert(entry);

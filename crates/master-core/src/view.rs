@@ -62,6 +62,10 @@ pub struct ViewSource {
 pub struct ViewRequest {
     pub job: JobId,
     pub offset: [f32; 3],
+    /// Whether the page draws the scene itself (WebGL2): then the move's
+    /// frame needs the master's base frame only where its packages look,
+    /// not the whole of it, which only the page without WebGL2 shows.
+    pub page_draws_scene: bool,
 }
 
 /// Why a move was refused.

@@ -286,6 +286,44 @@ pub fn rasterize_into(
     shade::shade_into(scene, camera, lighting, ids, image);
 }
 
+/// [`rasterize_into`] over the pixels of `within` only: they get exactly
+/// what the whole frame has there, every other pixel is empty and the
+/// background. For a caller that needs the frame at a known part alone (the
+/// reflectors of a view whose page draws the scene itself), at the cost of
+/// that part and of filling the buffers.
+///
+/// # Panics
+/// As [`rasterize`].
+pub fn rasterize_within_into(
+    scene: &Scene,
+    camera: &Camera,
+    lighting: &Lighting,
+    within: PixelRect,
+    image: &mut Image,
+    ids: &mut IdBuffer,
+) {
+    let part = rasterize_ids(scene, camera, NEAR, within, &|_| true);
+    ids.reshape_within(
+        camera.width,
+        camera.height,
+        PixelRect::full(camera.width, camera.height),
+    );
+    ids.object.fill(NONE);
+    ids.triangle.fill(NONE);
+    ids.depth.fill(f32::INFINITY);
+    let w = part.window;
+    let span = (w.x1 - w.x0) as usize;
+    for (row, y) in (w.y0..w.y1).enumerate() {
+        let from = row * span..(row + 1) * span;
+        let to = ids.frame_index(w.x0, y);
+        let to = to..to + span;
+        ids.object[to.clone()].copy_from_slice(&part.object[from.clone()]);
+        ids.triangle[to.clone()].copy_from_slice(&part.triangle[from.clone()]);
+        ids.depth[to].copy_from_slice(&part.depth[from]);
+    }
+    shade::shade_into(scene, camera, lighting, ids, image);
+}
+
 /// Shades an ID buffer of the whole frame (local Phong, no shadows): with
 /// [`id_buffer_where`] this rasterizes part of a scene, e.g. a cube-map face
 /// without the reflector.

@@ -5,7 +5,7 @@
 use glam::{DVec3, Quat, Vec3};
 use vtfarm_raster::{
     IdBuffer, IdPass, PixelRect, id_buffer, id_buffer_clipped, id_buffer_where, id_buffer_within,
-    id_buffers_within, nearer_of, rasterize, rasterize_into,
+    id_buffers_within, nearer_of, rasterize, rasterize_into, rasterize_within_into,
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
@@ -402,6 +402,57 @@ fn a_buffer_within_a_rectangle_is_the_whole_buffer_there_and_empty_elsewhere() {
     // Not vacuous: the middle rectangle shows several triangles.
     let middle = id_buffer_within(&scene, &camera, rects[1], &|_| true);
     let seen: std::collections::HashSet<_> = middle.triangle.iter().collect();
+    assert!(seen.len() > 10, "{} triangles seen", seen.len());
+}
+
+#[test]
+fn a_frame_rasterized_within_a_rectangle_is_the_whole_frame_there_and_background_elsewhere() {
+    let (scene, camera) = procedural_scene(3, 128, 96);
+    let lighting = Lighting {
+        lights: vec![Light {
+            kind: LightKind::Point {
+                position: Vec3::new(0.0, 3.0, 2.0),
+            },
+            color: Vec3::ONE,
+            intensity: 1.0,
+        }],
+        ambient: Vec3::splat(0.1),
+        background: Vec3::new(0.2, 0.3, 0.4),
+    };
+    let (whole, whole_ids) = rasterize(&scene, &camera, &lighting);
+    let rect = PixelRect {
+        x0: 7,
+        y0: 13,
+        x1: 77,
+        y1: 50,
+    };
+    // Into buffers of another frame, as a master reuses them.
+    let other = Lighting {
+        lights: Vec::new(),
+        ..lighting.clone()
+    };
+    let (mut image, mut ids) = rasterize(&scene, &camera, &other);
+    rasterize_within_into(&scene, &camera, &lighting, rect, &mut image, &mut ids);
+    assert_eq!(ids.window, PixelRect::full(128, 96));
+    let mut seen = std::collections::HashSet::new();
+    for (x, y) in PixelRect::full(128, 96).pixels() {
+        let i = ids.frame_index(x, y);
+        if rect.contains(x, y) {
+            assert_eq!(
+                ids.triangle_at(x, y),
+                whole_ids.triangle_at(x, y),
+                "({x}, {y})"
+            );
+            assert_eq!(ids.object_at(x, y), whole_ids.object_at(x, y), "({x}, {y})");
+            let depth = ids.depth_at(x, y).to_bits();
+            assert_eq!(depth, whole_ids.depth_at(x, y).to_bits(), "({x}, {y})");
+            assert_eq!(image.pixels[i], whole.pixels[i], "({x}, {y})");
+            seen.insert(ids.triangle_at(x, y));
+        } else {
+            assert_eq!(ids.triangle_at(x, y), NONE, "({x}, {y})");
+            assert_eq!(image.pixels[i], lighting.background, "({x}, {y})");
+        }
+    }
     assert!(seen.len() > 10, "{} triangles seen", seen.len());
 }
 

@@ -100,16 +100,43 @@ pub fn base_frame_into(
     scene: &Scene,
     setup: &FrameSetup,
     is_reflector: &[bool],
+    extent: BaseExtent,
     (image, ids): (&mut Image, &mut IdBuffer),
     warned: &AtomicBool,
 ) -> Vec<ObjectId> {
     let (camera, lighting) = (&setup.camera, &setup.lighting);
-    vtfarm_raster::rasterize_into(scene, camera, lighting, image, ids);
+    match extent {
+        BaseExtent::Whole => vtfarm_raster::rasterize_into(scene, camera, lighting, image, ids),
+        BaseExtent::Packages => {
+            let within = package_bounds(scene, setup, is_reflector);
+            vtfarm_raster::rasterize_within_into(scene, camera, lighting, within, image, ids);
+        }
+    }
     let glass = vtfarm_raster::blend_see_through(scene, camera, lighting, ids, image, is_reflector);
     if !glass.is_empty() && !warned.swap(true, Ordering::Relaxed) {
         tracing::warn!("{}", see_through_warning(scene, &glass));
     }
     glass
+}
+
+/// How much of a frame a base frame covers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BaseExtent {
+    /// Every pixel.
+    #[default]
+    Whole,
+    /// The pixels the packages look at ([`package_bounds`]), each exactly
+    /// as in the whole frame; the rest empty and the background. For a
+    /// frame whose viewer draws the scene itself and takes only the
+    /// reflectors' pixels from the farm.
+    Packages,
+}
+
+/// The pixels a frame's packages look at: the reflectors' bounds with the
+/// vertex tracer's visibility margin (`vtfarm_vertex::reflector_bounds`).
+pub fn package_bounds(scene: &Scene, setup: &FrameSetup, is_reflector: &[bool]) -> PixelRect {
+    let margin = setup.vertex.visibility_radius + 1;
+    reflector_bounds(scene, &setup.camera, is_reflector, margin)
 }
 
 /// The warning for see-through glass that is no reflector (`objects`): it
@@ -253,7 +280,15 @@ impl Renderer {
     /// [`base_frame_into`] this renderer's scene and reflectors.
     fn base_frame_in(&self, setup: &FrameSetup, buffers: (&mut Image, &mut IdBuffer)) {
         let warned = &self.warned_glass;
-        base_frame_into(self.scene(), setup, &self.is_reflector, buffers, warned);
+        let extent = BaseExtent::Whole;
+        base_frame_into(
+            self.scene(),
+            setup,
+            &self.is_reflector,
+            extent,
+            buffers,
+            warned,
+        );
     }
 
     /// A frame to composite into over `base`, its component planes over the
@@ -313,8 +348,7 @@ impl Renderer {
     /// two workers split that pass instead of each doing all of it.
     pub fn id_buffers(&self, setup: &FrameSetup) -> (IdBuffer, Behind) {
         self.set_ups.fetch_add(1, Ordering::Relaxed);
-        let margin = setup.vertex.visibility_radius + 1;
-        let bounds = reflector_bounds(self.scene(), &setup.camera, &self.is_reflector, margin);
+        let bounds = package_bounds(self.scene(), setup, &self.is_reflector);
         Behind::with_frame_ids(
             &self.tracer(setup),
             &setup.camera,

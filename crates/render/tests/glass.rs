@@ -635,6 +635,7 @@ fn glass_spheres_that_are_no_reflector_show_what_lies_behind_them_with_one_warni
         &scene,
         &setup,
         &is_reflector,
+        vtfarm_render::BaseExtent::Whole,
         (&mut image, &mut ids),
         &warned,
     );

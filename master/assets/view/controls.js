@@ -88,7 +88,9 @@ export class ViewControls {
       const reply = await fetch("/api/view", {
         method: "POST",
         headers: { "content-type": "application/json" },
-        body: JSON.stringify({ job: this.source(), offset: this.offset }),
+        // This page draws the scene: the master's base frame is needed only
+        // where the packages look.
+        body: JSON.stringify({ job: this.source(), offset: this.offset, page_draws_scene: true }),
       });
       if (reply.ok) {
         const { generation } = await reply.json();

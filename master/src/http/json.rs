@@ -181,6 +181,8 @@ impl From<ViewOutcome> for ViewOutcomeView {
 pub(super) struct ViewRequestBody {
     pub(super) job: JobId,
     pub(super) offset: [f32; 3],
+    #[serde(default)]
+    pub(super) page_draws_scene: bool,
 }
 
 #[derive(Serialize)]

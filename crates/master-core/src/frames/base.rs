@@ -9,7 +9,7 @@ use vtfarm_proto::JobId;
 use vtfarm_imaging::Image;
 use vtfarm_proto::{WireImage, WireImageFormat};
 use vtfarm_raster::IdBuffer;
-use vtfarm_render::FrameSetup;
+use vtfarm_render::{BaseExtent, FrameSetup};
 use vtfarm_scene::Scene;
 use vtfarm_vertex::PixelRect;
 
@@ -29,6 +29,9 @@ pub struct BaseFrameRequest {
     /// (`finish.rs`). A view's job does not: its frames go only to the
     /// dashboard's list, off the view's latency, which its base frame is on.
     pub(super) srgb: bool,
+    /// The whole frame, or (a view whose page draws the scene) only what
+    /// its packages look at.
+    pub(super) extent: BaseExtent,
     /// A finished frame's buffers to rasterize into.
     pub(super) spare: Option<Box<BaseFrame>>,
 }
@@ -47,6 +50,7 @@ impl BaseFrameRequest {
             &self.scene,
             &self.setup,
             &self.is_reflector,
+            self.extent,
             (&mut image, &mut ids),
             &self.warned_glass,
         );

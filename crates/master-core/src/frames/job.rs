@@ -12,7 +12,7 @@ use vtfarm_proto::{
     FrameStart, SceneHash, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob,
     check_triangle_ids,
 };
-use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
+use vtfarm_render::{BaseExtent, FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_scheduler::FrameWork;
 use vtfarm_vertex::Quality;
@@ -55,6 +55,9 @@ pub(crate) struct Job {
     /// A progressive job's stages (the interactive view's moves), in
     /// order; empty for one stage at each frame's quality.
     pub(crate) stages: Vec<Quality>,
+    /// How much of each frame its base frame covers: only what its
+    /// packages look at for a view whose page draws the scene itself.
+    pub(crate) base_extent: BaseExtent,
     /// Finished frames on their way out, and the job's end after them.
     pub(crate) finishing: FinishQueue,
 }
@@ -77,6 +80,7 @@ impl Job {
             warned_glass: self.warned_glass.clone(),
             setup: self.frames[frame as usize].clone(),
             srgb: self.image == WireImageFormat::Srgb8,
+            extent: self.base_extent,
             spare: spare.map(Box::new),
         }
     }
@@ -186,6 +190,7 @@ impl Job {
             groups,
             assembling: Vec::new(),
             stages: Vec::new(),
+            base_extent: BaseExtent::Whole,
             finishing: FinishQueue::default(),
         };
         Ok((job, work))
