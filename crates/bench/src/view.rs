@@ -604,7 +604,10 @@ impl Processes {
     ) -> Result<MoveFigures> {
         events.discard_pending()?;
         let sent = Instant::now();
-        let body = serde_json::json!({ "job": source, "offset": offset }).to_string();
+        // As the page that draws the scene moves it (the master's base
+        // frame then covers only what the packages look at).
+        let body = serde_json::json!({ "job": source, "offset": offset, "page_draws_scene": true })
+            .to_string();
         let (status, reply) = request(self.http, Method::POST, "/api/view", Some(&body)).await?;
         ensure!(
             status == StatusCode::OK,
