@@ -56,8 +56,36 @@ impl std::fmt::Display for ObjectId {
         self.0.fmt(f)
     }
 }
-/// Index of a triangle in [`Scene::triangles`].
-pub type TriangleId = u32;
+
+/// Index of a triangle in [`Scene::triangles`]. Per-pixel and per-sample
+/// triangle maps (ID buffers, sample records) hold the bare number, with
+/// [`NONE`] for no triangle ([`TriangleId::raw`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct TriangleId(pub u32);
+
+impl TriangleId {
+    /// The triangle's index in [`Scene::triangles`].
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bare number, as triangle maps hold it.
+    pub fn raw(self) -> u32 {
+        self.0
+    }
+
+    /// The ids of the first `n` triangles, in order.
+    pub fn range(n: usize) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
+        (0..n as u32).map(TriangleId)
+    }
+}
+
+impl std::fmt::Display for TriangleId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
 /// Index of a material in [`Scene::materials`].
 pub type MaterialId = u32;
 /// The "no object / no triangle" marker used in ID buffers and samples.
@@ -129,13 +157,13 @@ pub enum SceneError {
 impl Scene {
     /// The three corner positions of triangle `id`.
     pub fn triangle_positions(&self, id: TriangleId) -> [Vec3; 3] {
-        let t = &self.triangles[id as usize];
+        let t = &self.triangles[id.index()];
         t.vertices.map(|v| self.positions[v as usize])
     }
 
     /// The three corner normals of triangle `id`.
     pub fn triangle_normals(&self, id: TriangleId) -> [Vec3; 3] {
-        let t = &self.triangles[id as usize];
+        let t = &self.triangles[id.index()];
         t.vertices.map(|v| self.normals[v as usize])
     }
 
@@ -148,7 +176,7 @@ impl Scene {
 
     /// The material of triangle `id`.
     pub fn material_of(&self, id: TriangleId) -> &Material {
-        &self.materials[self.triangles[id as usize].material as usize]
+        &self.materials[self.triangles[id.index()].material as usize]
     }
 
     /// The material of triangle `id` at the point with barycentric
@@ -168,7 +196,7 @@ impl Scene {
         footprint: f32,
     ) -> Cow<'_, Material> {
         let material = self.material_of(id);
-        let Some(corners) = self.corner_uvs.get(id as usize) else {
+        let Some(corners) = self.corner_uvs.get(id.index()) else {
             return Cow::Borrowed(material);
         };
         if !material.is_textured() {
@@ -219,6 +247,11 @@ impl Scene {
         Vec3::new(1.0 - wb - wc, wb, wc)
     }
 
+    /// The ids of all triangles, in order.
+    pub fn triangle_ids(&self) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
+        TriangleId::range(self.triangles.len())
+    }
+
     /// Looks up an object by name.
     pub fn object_id(&self, name: &str) -> Option<ObjectId> {
         self.objects
@@ -255,7 +288,7 @@ impl Scene {
         u: Vec3,
         v: Vec3,
     ) -> [TriangleId; 2] {
-        let first = self.triangles.len() as TriangleId;
+        let first = TriangleId(self.triangles.len() as u32);
         let n = u.cross(v).normalize();
         let triangle = |vertices| Triangle {
             vertices,
@@ -270,7 +303,7 @@ impl Scene {
             materials: vec![material],
             ..Default::default()
         });
-        [first, first + 1]
+        [first, TriangleId(first.0 + 1)]
     }
 
     /// Appends another scene's content, remapping its indices.
@@ -373,5 +406,26 @@ impl Scene {
                 .map_err(|bound| SceneError::OutOfBounds { vertex: i, bound })?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_triangle_prints_as_its_number_and_indexes_its_scene() {
+        let mut scene = Scene::default();
+        let white = Material::default();
+        let first = scene.append_quad("floor", white.clone(), Vec3::ZERO, Vec3::X, Vec3::Z);
+        let second = scene.append_quad("wall", white, Vec3::ZERO, Vec3::X, Vec3::Y);
+        assert_eq!(first, [TriangleId(0), TriangleId(1)]);
+        assert_eq!(second, [TriangleId(2), TriangleId(3)]);
+        assert_eq!(second[1].to_string(), "3");
+        assert_eq!(second[1].raw(), 3);
+        assert!(scene.triangle_ids().eq(first.into_iter().chain(second)));
+        let wall = scene.object_id("wall").unwrap();
+        assert_eq!(scene.triangles[second[0].index()].object, wall);
+        assert_eq!(scene.triangle_positions(second[1])[2], Vec3::Y);
     }
 }
