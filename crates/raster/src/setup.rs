@@ -119,10 +119,10 @@ pub(crate) fn setup(
         .map(|(task, triangles)| {
             let first = task * TRIANGLES_PER_TASK;
             let mut out = Vec::with_capacity(triangles.len());
-            for (id, t) in (first..).zip(triangles) {
+            for (id, t) in (first as u32..).map(TriangleId).zip(triangles) {
                 let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
-                if a & b & c == 0 && keep(id as TriangleId) {
-                    view.triangle_into(scene, &corners, id as TriangleId, t, &mut out);
+                if a & b & c == 0 && keep(id) {
+                    view.triangle_into(scene, &corners, id, t, &mut out);
                 }
             }
             out
@@ -455,7 +455,7 @@ mod tests {
         };
         let corners = positions.map(|p| view.corner(p));
         let mut set_up = Vec::new();
-        view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
+        view.triangle_into(&scene, &corners, TriangleId(0), &t, &mut set_up);
         assert!(!set_up.is_empty());
     }
 
@@ -534,7 +534,7 @@ mod tests {
             });
             close_calls += usize::from(near_side);
             let mut set_up = Vec::new();
-            view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
+            view.triangle_into(&scene, &corners, TriangleId(0), &t, &mut set_up);
             assert!(
                 set_up.iter().all(|t| !t.reaches(within)),
                 "case {case}: a dropped triangle reaches {within:?}"

@@ -74,6 +74,11 @@ impl TriangleId {
         self.0
     }
 
+    /// The triangle a map's bare number names: none for [`NONE`].
+    pub fn from_raw(raw: u32) -> Option<TriangleId> {
+        (raw != NONE).then_some(TriangleId(raw))
+    }
+
     /// The ids of the first `n` triangles, in order.
     pub fn range(n: usize) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
         (0..n as u32).map(TriangleId)
@@ -250,6 +255,12 @@ impl Scene {
     /// The ids of all triangles, in order.
     pub fn triangle_ids(&self) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
         TriangleId::range(self.triangles.len())
+    }
+
+    /// The ids of the triangles of `object`, in order.
+    pub fn triangles_of(&self, object: ObjectId) -> impl Iterator<Item = TriangleId> + '_ {
+        self.triangle_ids()
+            .filter(move |t| self.triangles[t.index()].object == object)
     }
 
     /// Looks up an object by name.

@@ -27,8 +27,7 @@ fn material<'a>(scene: &'a Scene, name: &str) -> &'a Material {
 fn corners(scene: &Scene, object: &str) -> Vec<[Vec3; 3]> {
     let id = scene.object_id(object).unwrap();
     scene
-        .triangle_ids()
-        .filter(|&t| scene.triangles[t.index()].object == id)
+        .triangles_of(id)
         .map(|t| scene.triangle_positions(t))
         .collect()
 }
@@ -76,10 +75,7 @@ fn nodes_place_each_instance_of_a_mesh_and_cameras_come_with_their_node() {
     let normal = scene.triangle_normals(TriangleId(2))[0];
     assert!(close(normal, Vec3::X) || close(normal, Vec3::Z), "{normal}");
     let t = scene.object_id("right").unwrap();
-    let turned = scene
-        .triangle_ids()
-        .find(|&i| scene.triangles[i.index()].object == t)
-        .unwrap();
+    let turned = scene.triangles_of(t).next().unwrap();
     assert!(close(scene.triangle_normals(turned)[0], Vec3::X));
     // The PBR base colour is the diffuse colour; glTF's default ior 1.5.
     let paint = material(scene, "paint");
