@@ -304,7 +304,7 @@ impl Behind {
                 store,
             } => {
                 let t = ids.triangle_at(x, y);
-                if t == NONE || !see_through(tracer.bvh.scene(), t) {
+                if t == NONE || !see_through(tracer.bvh.scene(), TriangleId(t)) {
                     // What the up-front pass holds there, to the bit.
                     ThinGlass::default()
                 } else {
@@ -326,7 +326,7 @@ impl Behind {
 /// Whether `triangle` belongs in the ID buffer of what lies behind the
 /// reflectors: neither a reflector nor see-through.
 pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: TriangleId) -> bool {
-    !is_reflector[triangle as usize] && !see_through(scene, triangle)
+    !is_reflector[triangle.index()] && !see_through(scene, triangle)
 }
 
 /// Whether `triangle`'s front (its winding's normal) faces away from `eye`:
@@ -370,12 +370,12 @@ impl BehindBuffers {
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let any_glass = transmission == Transmission::Raster
             && (is_reflector.iter().enumerate())
-                .any(|(t, &r)| r && see_through(scene, t as TriangleId));
+                .any(|(t, &r)| r && see_through(scene, TriangleId(t as u32)));
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
         let not_opaque = |t: TriangleId| !opaque(t);
         let layer = |t: TriangleId| {
-            see_through(scene, t) && (!is_reflector[t as usize] || faces_away(scene, camera.eye, t))
+            see_through(scene, t) && (!is_reflector[t.index()] || faces_away(scene, camera.eye, t))
         };
         let mut passes = vec![IdPass {
             within: bounds,
@@ -431,10 +431,10 @@ impl GlassTerms {
         cache: &ShadowCache,
     ) -> (GlassTerms, u64) {
         let scene = tracer.bvh.scene();
-        let glass_triangle = |t: TriangleId| is_reflector[t as usize] && see_through(scene, t);
+        let glass_triangle = |t: TriangleId| is_reflector[t.index()] && see_through(scene, t);
         let glass_pixel = |x: u32, y: u32| {
             let t = ids.triangle_at(x, y);
-            t != NONE && glass_triangle(t)
+            t != NONE && glass_triangle(TriangleId(t))
         };
         if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
             return (GlassTerms::Nothing, 0);
@@ -500,8 +500,14 @@ fn glass_at(
 ) -> ThinGlass {
     let scene = tracer.bvh.scene();
     let direction = view.projector.pixel_ray(x, y);
-    let (front, direction) =
-        pixel_surface_along(scene, camera, ids, ids.triangle_at(x, y), (x, y), direction);
+    let (front, direction) = pixel_surface_along(
+        scene,
+        camera,
+        ids,
+        TriangleId(ids.triangle_at(x, y)),
+        (x, y),
+        direction,
+    );
     let (kr, kt) = tracer.weights(&front, direction);
     let mut weight = kt;
     let mut reflection_scale = 1.0;
@@ -509,8 +515,10 @@ fn glass_at(
     let back = layers.triangle_at(x, y);
     // A pane drawn as one surface facing away is in the layers too, as
     // its own nearest layer: it has no back surface.
-    if back != NONE && back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y) {
-        let (back_point, _) = pixel_surface_along(scene, camera, layers, back, (x, y), direction);
+    if back != NONE && back != front.triangle.raw() && layers.depth_at(x, y) < behind.depth_at(x, y)
+    {
+        let (back_point, _) =
+            pixel_surface_along(scene, camera, layers, TriangleId(back), (x, y), direction);
         // The back surface is met from inside, along the refracted ray
         // (with Fresnel weights its angle matters; parallel surfaces give
         // it the front's kr again, as a traced ray finds).
@@ -626,10 +634,9 @@ fn opaque_radiance(
         if px < 0 || py < 0 || px >= behind.width as i64 || py >= behind.height as i64 {
             continue;
         }
-        let triangle = behind.triangle_at(px as u32, py as u32);
-        if triangle == NONE {
+        let Some(triangle) = TriangleId::from_raw(behind.triangle_at(px as u32, py as u32)) else {
             continue;
-        }
+        };
         let Some((position, weights)) = ray_plane(scene, triangle, origin, direction) else {
             continue;
         };
@@ -734,7 +741,7 @@ struct ShadowMaps {
 struct ShadowMap {
     projector: Projector,
     size: u32,
-    texels: Vec<(TriangleId, f32)>,
+    texels: Vec<(u32, f32)>,
 }
 
 impl ShadowMap {
@@ -874,7 +881,7 @@ impl ShadowMaps {
         for (x, y) in bounds.pixels() {
             let t = ids.triangle_at(x, y);
             if t != last.0 {
-                last = (t, t != NONE && glass_triangle(t));
+                last = (t, t != NONE && glass_triangle(TriangleId(t)));
             }
             if last.1 && behind.triangle_at(x, y) != NONE {
                 let p = camera.eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
@@ -962,7 +969,7 @@ impl ShadowMaps {
             return true;
         }
         let (seen, depth) = map.texels[(y * size + x) as usize];
-        seen == triangle || depth >= s.depth - self.bias
+        seen == triangle.raw() || depth >= s.depth - self.bias
     }
 }
 
