@@ -402,10 +402,7 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
     // centre console, so that the reflectors spread over the workers.
     for name in ["steering_wheel", "center_console"] {
         let object = job.scene.object_id(name).unwrap();
-        job.reflectors.extend(
-            (0..job.scene.triangles.len() as u32)
-                .filter(|&t| job.scene.triangles[t as usize].object == object),
-        );
+        job.reflectors.extend(job.scene.triangles_of(object));
     }
     let cluster = Cluster::start(FarmRules::default());
     let _w1 = cluster.worker("w1", 1.0);

@@ -672,6 +672,7 @@ impl Job {
         }
         // Walking the triangles in order keeps the ids sorted and unique.
         let triangles: Vec<TriangleId> = (0..)
+            .map(TriangleId)
             .zip(chosen)
             .filter_map(|(id, chosen)| chosen.then_some(id))
             .collect();
@@ -730,7 +731,7 @@ pub fn dull_reflectors(scene: &Scene, triangles: &[TriangleId]) -> Vec<DullRefle
     let mut seen = std::collections::BTreeSet::new();
     let mut dull = Vec::new();
     for &t in triangles {
-        let triangle = &scene.triangles[t as usize];
+        let triangle = &scene.triangles[t.index()];
         let material = &scene.materials[triangle.material as usize];
         if material.reflectance.max_element() <= 0.0
             && seen.insert((triangle.object, triangle.material))

@@ -72,8 +72,9 @@ fn mirrored_emitter(scene: &mut Scene, theta_deg: f32) {
 }
 
 fn triangles_of(scene: &Scene, objects: &[ObjectId]) -> Vec<TriangleId> {
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| objects.contains(&scene.triangles[t as usize].object))
+    scene
+        .triangle_ids()
+        .filter(|&t| objects.contains(&scene.triangles[t.index()].object))
         .collect()
 }
 
@@ -302,7 +303,7 @@ fn slab(theta_deg: f32, one_object: bool) -> (Scene, Vec<TriangleId>) {
     );
     if one_object {
         for t in back {
-            scene.triangles[t as usize].object = ObjectId(0);
+            scene.triangles[t.index()].object = ObjectId(0);
         }
     }
     scene.append_quad(

@@ -36,7 +36,7 @@ impl From<&[StageMesh]> for WireMesh {
                 m.samples.iter().map(|s| f(s).to_array()).collect()
             };
             WireMeshPart {
-                triangle: m.triangle,
+                triangle: m.triangle.raw(),
                 positions: m.positions.iter().map(|p| p.to_array()).collect(),
                 colors: per_vertex(|s| s.color),
                 reflected: per_vertex(|s| s.reflected),
@@ -97,7 +97,7 @@ impl WireMeshPart {
             object: self.objects[k],
         });
         Ok(StageMesh {
-            triangle: self.triangle,
+            triangle: vtfarm_scene::TriangleId(self.triangle),
             positions: self.positions.iter().map(|&p| Vec3::from(p)).collect(),
             samples: samples.collect(),
             faces: self.faces.clone(),

@@ -34,7 +34,7 @@ impl Builder {
             scene.positions.push(p);
             scene.normals.push(n.normalize());
         }
-        let first = scene.triangles.len() as TriangleId;
+        let first = scene.triangles.len();
         for &[a, b, c] in triangles {
             let [pa, pb, pc] = [a, b, c].map(|i| vertices[i as usize].0);
             let normal = vertices[a as usize].1 + vertices[b as usize].1 + vertices[c as usize].1;
@@ -49,7 +49,7 @@ impl Builder {
                 material: material_id,
             });
         }
-        (first..scene.triangles.len() as TriangleId).collect()
+        scene.triangle_ids().skip(first).collect()
     }
 
     /// A square `size` wide centred at `center` with normal `normal`, split
