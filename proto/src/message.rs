@@ -772,7 +772,7 @@ pub fn wire_job(
         name: name.to_owned(),
         scene: JobScene::Hash(scene.hash),
         frames: frames.iter().map(WireFrameSetup::from).collect(),
-        reflectors: reflectors.iter().map(|t| t.raw()).collect(),
+        reflectors: crate::wire_triangles(reflectors),
         aux: options.aux,
         method: options.method.into(),
         image: WireImageFormat::LinearF32,

@@ -274,7 +274,7 @@ impl Views {
             name: format!("view of job {}", request.job),
             scene: JobScene::Hash(source.scene_hash),
             frames,
-            reflectors: source.reflectors.iter().map(|t| t.raw()).collect(),
+            reflectors: vtfarm_proto::wire_triangles(&source.reflectors),
             // The workers send the reflected and transmitted components
             // and the reflected objects: the glare figures need them.
             aux: true,

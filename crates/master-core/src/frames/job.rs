@@ -10,7 +10,7 @@ use vtfarm_proto::JobId;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameStart, SceneHash, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob,
-    check_triangle_ids,
+    check_triangle_ids, wire_triangles,
 };
 use vtfarm_render::{FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
@@ -120,7 +120,7 @@ impl Job {
             frame,
             scene: self.scene_hash,
             setup: WireFrameSetup::from(&self.frames[frame as usize]),
-            reflectors: self.reflectors.iter().map(|t| t.raw()).collect(),
+            reflectors: wire_triangles(&self.reflectors),
             method: self.method.into(),
             aux: self.aux,
             image: self.image,
@@ -138,9 +138,9 @@ impl Job {
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
     ) -> Result<(Job, Vec<FrameWork>), JobRejected> {
-        check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
+        let reflectors = check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
             .map_err(JobRejected::BadReflectors)?;
-        if job.reflectors.is_empty() || job.frames.is_empty() {
+        if reflectors.is_empty() || job.frames.is_empty() {
             return Err(JobRejected::Empty);
         }
         if job.aux && job.image != WireImageFormat::LinearF32 {
@@ -149,7 +149,6 @@ impl Job {
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = frames.map_err(JobRejected::BadFrame)?;
-        let reflectors = job.reflectors.into_iter().map(TriangleId).collect();
         let reflectors = morton_order(&scene, reflectors);
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
@@ -157,7 +156,7 @@ impl Job {
         let groups = (method.per_reflector()).then(|| reflector_groups(&scene, &reflectors));
         let items: Vec<u32> = match &groups {
             Some(groups) => (0..groups.len() as u32).collect(),
-            None => reflectors.iter().map(|t| t.raw()).collect(),
+            None => wire_triangles(&reflectors),
         };
         // Finished frames get no work: the scheduler completes them at once.
         let work = (0..frames.len() as u32)
