@@ -198,13 +198,13 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
     let lighting = &source.setup.lighting;
     let scene = &source.scene;
     let mut reflector_objects: Vec<String> = (source.reflectors.iter())
-        .filter_map(|&t| scene.triangles.get(t as usize))
+        .filter_map(|&t| scene.triangles.get(t.index()))
         .map(|t| scene.objects[t.object.index()].name.clone())
         .collect();
     reflector_objects.sort();
     reflector_objects.dedup();
     let transmittance = (source.reflectors.first())
-        .filter(|&&t| (t as usize) < scene.triangles.len())
+        .filter(|&&t| t.index() < scene.triangles.len())
         .map_or([0.0; 3], |&t| scene.material_of(t).transmittance.to_array());
     let lights = (lighting.lights.iter())
         .map(|l| {
