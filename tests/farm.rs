@@ -20,7 +20,7 @@ use vtfarm_proto::{
     encode_message,
 };
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::{Camera, Scene};
+use vtfarm_scene::{Camera, Scene, TriangleId};
 use vtfarm_submit::{
     FinishedFrame, JobError, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
 };
@@ -37,7 +37,7 @@ static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 /// A small cockpit, its reflectors and a few frames from slightly different eyes.
 struct Job {
     scene: Scene,
-    reflectors: Vec<u32>,
+    reflectors: Vec<TriangleId>,
     frames: Vec<FrameSetup>,
 }
 

@@ -182,8 +182,9 @@ fn setup() -> FrameSetup {
 
 fn reflector_triangles(scene: &Scene) -> Vec<TriangleId> {
     let chosen = [scene.object_id("mirror"), scene.object_id("pane")].map(Option::unwrap);
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| chosen.contains(&scene.triangles[t as usize].object))
+    scene
+        .triangle_ids()
+        .filter(|&t| chosen.contains(&scene.triangles[t.index()].object))
         .collect()
 }
 
