@@ -369,8 +369,7 @@ impl BehindBuffers {
         let scene = tracer.bvh.scene();
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let any_glass = transmission == Transmission::Raster
-            && (is_reflector.iter().enumerate())
-                .any(|(t, &r)| r && see_through(scene, TriangleId(t as u32)));
+            && (scene.triangle_ids().zip(is_reflector)).any(|(t, &r)| r && see_through(scene, t));
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
         let not_opaque = |t: TriangleId| !opaque(t);
