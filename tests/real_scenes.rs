@@ -368,7 +368,7 @@ fn a_corpus_of_exporter_quirks_loads_and_renders() {
         assert_eq!(warnings, usize::from(name == "textures"), "{name}");
         let glass = scene.material_id("glass").expect("glass keeps its name");
         assert!(
-            scene.materials[glass as usize].reflectance.min_element() > 0.03,
+            scene.materials[glass.index()].reflectance.min_element() > 0.03,
             "{name}: glass reflects by Fresnel"
         );
 

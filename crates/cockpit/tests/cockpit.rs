@@ -11,7 +11,7 @@ use vtfarm_cockpit::{
     DIAL_FACE_CD_M2, GLASS_MATERIAL, MARKING_CD_M2, SKY_CD_M2, SUN_ILLUMINANCE_LUX,
     SUNLIT_WINDOW_CD_M2, cockpit, default_eye,
 };
-use vtfarm_scene::{Camera, LightKind, ObjectId, Scene};
+use vtfarm_scene::{Camera, LightKind, MaterialId, ObjectId, Scene};
 
 fn default_cockpit() -> &'static Cockpit {
     static COCKPIT: OnceLock<Cockpit> = OnceLock::new();
@@ -215,7 +215,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
         );
     }
     // Material -> objects using it: only the two glass surfaces share one.
-    let mut users: BTreeMap<u32, Vec<ObjectId>> = BTreeMap::new();
+    let mut users: BTreeMap<MaterialId, Vec<ObjectId>> = BTreeMap::new();
     for t in &scene.triangles {
         let objects = users.entry(t.material).or_default();
         if !objects.contains(&t.object) {
@@ -223,7 +223,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
         }
     }
     for (material, objects) in users {
-        let name = &scene.materials[material as usize].name;
+        let name = &scene.materials[material.index()].name;
         if name == GLASS_MATERIAL {
             assert_eq!(
                 objects,
@@ -266,7 +266,7 @@ fn windows_are_bright_panels_and_the_glass_is_a_weak_mirror() {
         vtfarm_scene::photometry::cd_m2(sun.radiance()),
         SUN_ILLUMINANCE_LUX / std::f32::consts::PI
     ));
-    let glass = &scene.materials[scene.material_id(GLASS_MATERIAL).unwrap() as usize];
+    let glass = &scene.materials[scene.material_id(GLASS_MATERIAL).unwrap().index()];
     assert_eq!(glass.reflectance, Vec3::splat(0.12));
     assert_eq!(glass.transmittance, Vec3::splat(0.85));
     assert_eq!(glass.ior, 1.5);
@@ -483,7 +483,7 @@ fn glass_mirrors_the_left_door_window_in_its_lower_part() {
             .triangles
             .iter()
             .find(|t| t.object == id)
-            .map(|t| c.scene.materials[t.material as usize].emission)
+            .map(|t| c.scene.materials[t.material.index()].emission)
     };
     let window: Vec<_> = hits.iter().filter(|h| h.2 == "side_window_left").collect();
     let dark = hits

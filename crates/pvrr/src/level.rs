@@ -39,7 +39,7 @@ impl<'a> Context<'a> {
         let scene = frame.tracer.bvh.scene();
         let mut specular: BTreeMap<ObjectId, Vec<TriangleId>> = BTreeMap::new();
         for (id, triangle) in scene.triangle_ids().zip(&scene.triangles) {
-            if scene.materials[triangle.material as usize].is_specular() {
+            if scene.materials[triangle.material.index()].is_specular() {
                 specular.entry(triangle.object).or_default().push(id);
             }
         }

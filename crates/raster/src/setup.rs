@@ -380,6 +380,7 @@ mod tests {
     use super::*;
     use rand::{Rng as _, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
+    use vtfarm_scene::MaterialId;
 
     fn camera() -> Camera {
         Camera {
@@ -430,7 +431,7 @@ mod tests {
         let t = Triangle {
             vertices: [0, 1, 2],
             object: vtfarm_scene::ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         };
         let positions = [
             Vec3::new(0.0, 0.0, -1.0),
@@ -517,7 +518,7 @@ mod tests {
             let t = Triangle {
                 vertices: [0, 1, 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             };
             let [a, b, c] = [0, 1, 2].map(|i| view.beyond(&corners[i]));
             if a & b & c == 0 {

@@ -533,7 +533,7 @@ mod tests {
             .map(|[a, b, c, m]| Triangle {
                 vertices: [a, b, c],
                 object: vtfarm_scene::ObjectId(0),
-                material: m,
+                material: vtfarm_scene::MaterialId(m),
             })
             .to_vec();
         let scene = Scene {

@@ -9,8 +9,8 @@ use vtfarm_raster::{
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, NEAR, NONE, Object, ObjectId, Scene, Triangle,
-    TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, NEAR, NONE, Object, ObjectId, Scene,
+    Triangle, TriangleId,
 };
 
 /// xorshift64*: a tiny seeded generator, so scenes are reproducible.
@@ -67,7 +67,7 @@ impl Builder {
         self.scene.triangles.push(Triangle {
             vertices,
             object,
-            material: object.raw(),
+            material: MaterialId(object.raw()),
         });
     }
 

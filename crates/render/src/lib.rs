@@ -665,6 +665,7 @@ pub fn method(kind: MethodKind, vertex: VertexSettings) -> Box<dyn ReflectionMet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vtfarm_scene::MaterialId;
 
     #[test]
     fn spread_bits_interleaves() {
@@ -697,7 +698,7 @@ mod tests {
             scene.triangles.push(vtfarm_scene::Triangle {
                 vertices: [i, i + 1, i + 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             });
         }
         let order = morton_order(&scene, TriangleId::range(8).collect());

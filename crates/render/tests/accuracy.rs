@@ -10,7 +10,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
 use vtfarm_render::{ErrorFigures, FrameSetup, RenderOptions, Renderer, compare, split_packages};
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{
@@ -60,7 +60,7 @@ fn add_sphere(
                     part.triangles.push(Triangle {
                         vertices,
                         object: vtfarm_scene::ObjectId(0),
-                        material: 0,
+                        material: MaterialId(0),
                     });
                 }
             }

@@ -10,7 +10,7 @@ use glam::Vec3;
 use vtfarm_method::{MethodKind, OwnedFrame};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_scene::photometry;
-use vtfarm_scene::{Camera, Lighting, Material, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, MaterialId, ObjectId, Scene, TriangleId};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{FrameImage, PixelRect, Quality, VertexSettings};
 
@@ -188,7 +188,7 @@ fn sheet(material: Material) -> Scene {
             .map(|vertices| vtfarm_scene::Triangle {
                 vertices,
                 object: ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             })
             .collect(),
         objects: vec![vtfarm_scene::Object {

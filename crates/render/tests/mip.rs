@@ -107,7 +107,7 @@ fn scene() -> Scene {
             scene.triangles.push(Triangle {
                 vertices: [a, b, c].map(|v| base + v),
                 object: vtfarm_scene::ObjectId(id),
-                material: id,
+                material: vtfarm_scene::MaterialId(id),
             });
             scene
                 .corner_uvs

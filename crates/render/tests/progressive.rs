@@ -12,7 +12,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_render::{FrameSetup, RenderOptions, RenderedFrame, Renderer, split_packages};
-use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageOptions, ProgressivePackage, Quality, Transmission, VertexSettings};
 
@@ -109,7 +109,7 @@ fn quads(transmission: Transmission) -> (Renderer, FrameSetup) {
             scene.triangles.push(Triangle {
                 vertices: vertices.map(|v| base + v),
                 object: vtfarm_scene::ObjectId(id as u32),
-                material: id as u32,
+                material: MaterialId(id as u32),
             });
         }
     }

@@ -92,7 +92,27 @@ impl std::fmt::Display for TriangleId {
 }
 
 /// Index of a material in [`Scene::materials`].
-pub type MaterialId = u32;
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MaterialId(pub u32);
+
+impl MaterialId {
+    /// The material's index in [`Scene::materials`].
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bare number, as the wire carries it.
+    pub fn raw(self) -> u32 {
+        self.0
+    }
+}
+
+impl std::fmt::Display for MaterialId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
 /// The "no object / no triangle" marker used in ID buffers and samples.
 pub const NONE: u32 = u32::MAX;
 
@@ -181,7 +201,7 @@ impl Scene {
 
     /// The material of triangle `id`.
     pub fn material_of(&self, id: TriangleId) -> &Material {
-        &self.materials[self.triangles[id.index()].material as usize]
+        &self.materials[self.triangles[id.index()].material.index()]
     }
 
     /// The material of triangle `id` at the point with barycentric
@@ -276,7 +296,7 @@ impl Scene {
         self.materials
             .iter()
             .position(|m| m.name == name)
-            .map(|i| i as MaterialId)
+            .map(|i| MaterialId(i as u32))
     }
 
     /// The axis-aligned bounds (min, max) of all vertices.
@@ -304,7 +324,7 @@ impl Scene {
         let triangle = |vertices| Triangle {
             vertices,
             object: ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         };
         self.append(&Scene {
             positions: vec![corner, corner + u, corner + u + v, corner + v],
@@ -346,7 +366,7 @@ impl Scene {
             .extend(other.triangles.iter().map(|t| Triangle {
                 vertices: t.vertices.map(|v| v + v0),
                 object: ObjectId(t.object.0 + o0),
-                material: t.material + m0,
+                material: MaterialId(t.material.0 + m0),
             }));
     }
 
@@ -381,7 +401,7 @@ impl Scene {
                     object: t.object,
                 });
             }
-            if t.material as usize >= self.materials.len() {
+            if t.material.index() >= self.materials.len() {
                 return Err(SceneError::MissingMaterial {
                     triangle: i,
                     material: t.material,
@@ -437,6 +457,12 @@ mod tests {
         assert!(scene.triangle_ids().eq(first.into_iter().chain(second)));
         let wall = scene.object_id("wall").unwrap();
         assert_eq!(scene.triangles[second[0].index()].object, wall);
+        assert!(scene.triangles_of(wall).eq(second));
         assert_eq!(scene.triangle_positions(second[1])[2], Vec3::Y);
+        assert_eq!(TriangleId::from_raw(3), Some(second[1]));
+        assert_eq!(TriangleId::from_raw(NONE), None);
+        // Each quad brings its own material, numbered after the scene's.
+        assert_eq!(scene.triangles[second[0].index()].material, MaterialId(1));
+        assert_eq!(MaterialId(1).to_string(), "1");
     }
 }

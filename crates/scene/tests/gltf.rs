@@ -20,7 +20,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn material<'a>(scene: &'a Scene, name: &str) -> &'a Material {
-    &scene.materials[scene.material_id(name).unwrap() as usize]
+    &scene.materials[scene.material_id(name).unwrap().index()]
 }
 
 /// The corner positions of the object's triangles, in order.

@@ -11,7 +11,7 @@ use vtfarm_scene::obj::{
     MAX_FACE_VERTICES, ObjError, ObjOptions, ObjWarning, import_obj, load_obj, write_obj,
 };
 use vtfarm_scene::shapes::disc_polygon_obj;
-use vtfarm_scene::{Material, Object, ObjectId, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle, TriangleId};
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -124,7 +124,7 @@ fn a_room_maps_objects_materials_and_normals() {
     };
     assert_eq!([0, 1, 2, 3].map(per_object), [2, 3, 3, 5]);
 
-    let material = |name: &str| &scene.materials[scene.material_id(name).unwrap() as usize];
+    let material = |name: &str| &scene.materials[scene.material_id(name).unwrap().index()];
     assert_eq!(material("default"), &Material::default());
     let mirror = material("mirror");
     assert_eq!(
@@ -242,7 +242,7 @@ fn built_scene() -> Scene {
     let t = |vertices, object, material| Triangle {
         vertices,
         object: ObjectId(object),
-        material,
+        material: MaterialId(material),
     };
     Scene {
         positions,
@@ -371,7 +371,7 @@ fn write_obj_rejects_scenes_it_cannot_round_trip() {
     let mut nan = built_scene();
     nan.positions[3].y = f32::NAN;
     let mut broken = built_scene();
-    broken.triangles[0].material = 9;
+    broken.triangles[0].material = MaterialId(9);
     for (scene, message) in [
         (twins, "two materials are named \"mirror\""),
         (blank, "object name \" lamp\" cannot be written"),

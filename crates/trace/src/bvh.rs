@@ -22,7 +22,7 @@ use obvhs::ploc::PlocBuilder;
 use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
-use vtfarm_scene::{ObjectId, Scene, TriangleId};
+use vtfarm_scene::{MaterialId, ObjectId, Scene, TriangleId};
 
 use crate::leaf::{LaneHits, Leaves, bits};
 use crate::wide::{Isa, LeafTest};
@@ -318,9 +318,10 @@ pub struct Emitter {
 
 /// The emitters of `scene` ([`Emitter`]), in (object, material) order.
 fn emitters_of(scene: &Scene) -> Vec<Emitter> {
-    let mut boxes: std::collections::BTreeMap<(ObjectId, u32), (Vec3, Vec3)> = Default::default();
+    let mut boxes: std::collections::BTreeMap<(ObjectId, MaterialId), (Vec3, Vec3)> =
+        Default::default();
     for (id, t) in scene.triangle_ids().zip(&scene.triangles) {
-        let material = &scene.materials[t.material as usize];
+        let material = &scene.materials[t.material.index()];
         if material.emission.max_element() <= 0.0 {
             continue;
         }
@@ -337,7 +338,7 @@ fn emitters_of(scene: &Scene) -> Vec<Emitter> {
         .map(|((object, material), (lo, hi))| Emitter {
             object,
             luminance_cd_m2: vtfarm_scene::photometry::cd_m2(
-                scene.materials[material as usize].emission,
+                scene.materials[material.index()].emission,
             ),
             centre: (lo + hi) * 0.5,
             radius: (hi - lo).length() * 0.5,
@@ -363,8 +364,7 @@ pub fn casts_shadow(material: &vtfarm_scene::Material) -> bool {
 }
 
 fn triangle_casts_shadow(scene: &Scene, id: TriangleId) -> bool {
-    let material = scene.triangles[id.index()].material as usize;
-    casts_shadow(&scene.materials[material])
+    casts_shadow(scene.material_of(id))
 }
 
 impl fmt::Debug for SceneBvh {

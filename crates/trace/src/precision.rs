@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_scene::{Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Material, MaterialId, Object, Scene, Triangle, TriangleId};
 
 use crate::testutil::{SceneBuilder, TestRng};
 use crate::{Ray, SceneBvh, spawn_offset};
@@ -35,7 +35,7 @@ fn fan(rng: &mut TestRng, centre: Vec3, u: Vec3, v: Vec3, radius: f32, n: u32) -
             .map(|i| Triangle {
                 vertices: [0, 1 + i, 1 + (i + 1) % n],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             })
             .collect(),
         objects: vec![Object { name: "fan".into() }],

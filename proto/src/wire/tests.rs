@@ -4,7 +4,7 @@
 use glam::Vec3;
 use proptest::prelude::*;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId,
 };
 use vtfarm_vertex::SparseBitmap;
 
@@ -34,12 +34,12 @@ pub(crate) fn scene() -> Scene {
             Triangle {
                 vertices: [0, 1, 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             },
             Triangle {
                 vertices: [1, 3, 2],
                 object: vtfarm_scene::ObjectId(1),
-                material: 1,
+                material: MaterialId(1),
             },
         ],
         objects: vec![

@@ -2,24 +2,28 @@
 //! it, and a saddle.
 
 use glam::Vec3;
-use vtfarm_scene::{Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle, TriangleId};
 
 /// Adds an object with its own material; returns its (object, material) ids.
-pub(crate) fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
+pub(crate) fn add_object(
+    scene: &mut Scene,
+    name: &str,
+    material: Material,
+) -> (ObjectId, MaterialId) {
     scene.objects.push(Object {
         name: name.to_owned(),
     });
     scene.materials.push(material);
     (
-        scene.objects.len() as u32 - 1,
-        scene.materials.len() as u32 - 1,
+        ObjectId(scene.objects.len() as u32 - 1),
+        MaterialId(scene.materials.len() as u32 - 1),
     )
 }
 
 /// Adds vertices and faces (indices into `positions`) to `object`.
 pub(crate) fn push(
     scene: &mut Scene,
-    object: (u32, u32),
+    object: (ObjectId, MaterialId),
     positions: &[Vec3],
     normals: &[Vec3],
     faces: &[[u32; 3]],
@@ -29,7 +33,7 @@ pub(crate) fn push(
     scene.normals.extend_from_slice(normals);
     scene.triangles.extend(faces.iter().map(|f| Triangle {
         vertices: f.map(|v| v + base),
-        object: vtfarm_scene::ObjectId(object.0),
+        object: object.0,
         material: object.1,
     }));
 }
@@ -70,7 +74,7 @@ pub(super) fn add_sphere(
 /// its normal. Returns the new triangle ids.
 fn add_grid(
     scene: &mut Scene,
-    object: (u32, u32),
+    object: (ObjectId, MaterialId),
     n: u32,
     surface: impl Fn(f32, f32) -> (Vec3, Vec3),
 ) -> Vec<TriangleId> {

@@ -3,7 +3,8 @@
 
 use glam::Vec3;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, ObjectId, Scene, Triangle, TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, ObjectId, Scene, Triangle,
+    TriangleId,
 };
 
 /// A scene under construction.
@@ -27,7 +28,7 @@ impl Builder {
         scene.objects.push(Object {
             name: name.to_owned(),
         });
-        let material_id = scene.materials.len() as u32;
+        let material_id = MaterialId(scene.materials.len() as u32);
         scene.materials.push(material);
         let base = scene.positions.len() as u32;
         for &(p, n) in vertices {
