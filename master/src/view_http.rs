@@ -18,6 +18,7 @@ use vtfarm_master_core::MasterCore;
 use vtfarm_master_core::view::{EYE_BOX, ViewSource};
 use vtfarm_proto::SceneHash;
 use vtfarm_scene::LightKind;
+use vtfarm_vertex::ShadowViews;
 
 use crate::driver::MasterHandle;
 
@@ -173,9 +174,29 @@ struct ViewSetup {
     lights: Vec<LightSetup>,
     /// The objects the reflector triangles belong to (the GLB's node names).
     reflector_objects: Vec<String>,
-    /// The reflectors' transmittance (their first triangle's material).
-    transmittance: [f32; 3],
     eye_box: f32,
+    /// Per material of the scene (the GLB's order), whether it casts a
+    /// shadow (`vtfarm_trace::casts_shadow`).
+    shadow_casting: Vec<bool>,
+    shadows: ShadowSetup,
+}
+
+/// The shadow maps of what the glass shows behind it, as the CPU's
+/// thin-glass pass makes them (`vtfarm_vertex::ShadowViews`): per light,
+/// its map's camera or `null` (that light is never shadowed).
+#[derive(Serialize)]
+struct ShadowSetup {
+    size: u32,
+    bias: f32,
+    cameras: Vec<Option<CameraSetup>>,
+}
+
+#[derive(Serialize)]
+struct CameraSetup {
+    eye: [f32; 3],
+    target: [f32; 3],
+    up: [f32; 3],
+    fov_y_deg: f32,
 }
 
 #[derive(Serialize)]
@@ -197,15 +218,46 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
     let camera = source.setup.camera;
     let lighting = &source.setup.lighting;
     let scene = &source.scene;
+    let views = {
+        let (scene, lights) = (scene.clone(), lighting.lights.clone());
+        let mut is_reflector = vec![false; scene.triangles.len()];
+        for &t in &source.reflectors {
+            if let Some(r) = is_reflector.get_mut(t.index()) {
+                *r = true;
+            }
+        }
+        tokio::task::spawn_blocking(move || {
+            ShadowViews::for_frame(&scene, &camera, &lights, &is_reflector)
+        })
+        .await
+        .expect("the shadow views do not panic")
+    };
+    let shadows = ShadowSetup {
+        size: views
+            .cameras
+            .iter()
+            .flatten()
+            .map(|c| c.width)
+            .max()
+            .unwrap_or(0),
+        bias: views.bias,
+        cameras: (views.cameras.iter())
+            .map(|c| {
+                c.map(|c| CameraSetup {
+                    eye: c.eye.to_array(),
+                    target: c.target.to_array(),
+                    up: c.up.to_array(),
+                    fov_y_deg: c.fov_y_deg,
+                })
+            })
+            .collect(),
+    };
     let mut reflector_objects: Vec<String> = (source.reflectors.iter())
         .filter_map(|&t| scene.triangles.get(t.index()))
         .map(|t| scene.objects[t.object.index()].name.clone())
         .collect();
     reflector_objects.sort();
     reflector_objects.dedup();
-    let transmittance = (source.reflectors.first())
-        .filter(|&&t| t.index() < scene.triangles.len())
-        .map_or([0.0; 3], |&t| scene.material_of(t).transmittance.to_array());
     let lights = (lighting.lights.iter())
         .map(|l| {
             let (kind, vector) = match l.kind {
@@ -232,8 +284,13 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
         background: lighting.background.to_array(),
         lights,
         reflector_objects,
-        transmittance,
         eye_box: EYE_BOX,
+        shadow_casting: scene
+            .materials
+            .iter()
+            .map(vtfarm_trace::casts_shadow)
+            .collect(),
+        shadows,
     })
     .into_response()
 }

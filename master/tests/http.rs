@@ -894,6 +894,88 @@ async fn a_browser_off_loopback_logs_in_once_and_keeps_a_cookie() {
     assert_eq!(bearer.status(), StatusCode::OK);
 }
 
+/// The page's canvas, read back: its width, height and RGB rows from the
+/// top, as the CPU's images hold them.
+async fn canvas_pixels(browser: &mut Browser) -> (usize, usize, Vec<[u8; 3]>) {
+    let pixels = browser
+        .eval(
+            r#"(() => {
+            const canvas = document.getElementById("view-gl");
+            const gl = canvas.getContext("webgl2");
+            const out = new Uint8Array(canvas.width * canvas.height * 4);
+            gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
+            return [canvas.width, canvas.height, Array.from(out)];
+        })()"#,
+        )
+        .await
+        .unwrap();
+    let (width, height) = (
+        pixels[0].as_u64().unwrap() as usize,
+        pixels[1].as_u64().unwrap() as usize,
+    );
+    let rgba: Vec<u8> = (pixels[2].as_array().unwrap().iter())
+        .map(|v| v.as_u64().unwrap() as u8)
+        .collect();
+    // Read back bottom row first: the frame's row y is the canvas's height - 1 - y.
+    let rows = (0..height).rev().flat_map(|y| {
+        let rgba = &rgba;
+        (0..width).map(move |x| {
+            let at = (y * width + x) * 4;
+            [rgba[at], rgba[at + 1], rgba[at + 2]]
+        })
+    });
+    (width, height, rows.collect())
+}
+
+/// How a canvas agrees with the CPU's frame of the same eye: on the glass
+/// with the render, off it with the base frame.
+#[derive(Debug)]
+struct StillEye {
+    glass: usize,
+    /// Within 8/255 in every channel.
+    glass_close: usize,
+    glass_same: usize,
+    /// The largest difference on the glass.
+    worst: u8,
+    off_glass: usize,
+    off_glass_close: usize,
+}
+
+fn still_eye(
+    (width, height, shown): &(usize, usize, Vec<[u8; 3]>),
+    render: &vtfarm_vertex::FrameImage,
+    base_srgb: &[u8],
+) -> StillEye {
+    assert_eq!(*width as u32, render.color.width);
+    assert_eq!(*height as u32, render.color.height);
+    let render_srgb = render.color.to_srgb8();
+    let rgb = |bytes: &[u8], i: usize| [bytes[i * 3], bytes[i * 3 + 1], bytes[i * 3 + 2]];
+    let close = |a: [u8; 3], b: [u8; 3]| (0..3).all(|k| a[k].abs_diff(b[k]) <= 8);
+    let mut out = StillEye {
+        glass: 0,
+        glass_close: 0,
+        glass_same: 0,
+        worst: 0,
+        off_glass: 0,
+        off_glass_close: 0,
+    };
+    for (i, &page) in shown.iter().enumerate() {
+        if render.is_glass(i) {
+            let cpu = rgb(&render_srgb, i);
+            out.glass += 1;
+            out.glass_close += usize::from(close(page, cpu));
+            out.glass_same += usize::from(page == cpu);
+            out.worst = (0..3)
+                .map(|k| page[k].abs_diff(cpu[k]))
+                .fold(out.worst, u8::max);
+        } else {
+            out.off_glass += 1;
+            out.off_glass_close += usize::from(close(page, rgb(base_srgb, i)));
+        }
+    }
+    out
+}
+
 /// Headless Chromium (a 1100×900 window) without WebGL: the view falls
 /// back to the master's images. Without Chromium the test fails, unless
 /// the run is not CI's and `VTFARM_ALLOW_NO_BROWSER=1` asks for a run
@@ -1433,72 +1515,56 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         }
     }
 
-    // The still eye: the canvas against the CPU's frames of that eye.
-    let pixels = browser
-        .eval(
-            r#"(() => {
-            const canvas = document.getElementById("view-gl");
-            const gl = canvas.getContext("webgl2");
-            const out = new Uint8Array(canvas.width * canvas.height * 4);
-            gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
-            return [canvas.width, canvas.height, Array.from(out)];
-        })()"#,
-        )
-        .await
-        .unwrap();
+    // The still eye: each stage as the page shows it against the CPU's
+    // frames of that eye.
     let c = cockpit(&CockpitConfig {
         detail: 0.3,
         ..CockpitConfig::default()
     });
     assert_eq!(current.1, [0.02, 0.0, 0.0]);
     let setup = small_frame(&c, Vec3::from(current.1));
-    let (width, height) = (setup.camera.width as usize, setup.camera.height as usize);
-    assert_eq!(pixels[0].as_u64().unwrap() as usize, width);
-    assert_eq!(pixels[1].as_u64().unwrap() as usize, height);
-    let rgba: Vec<u8> = (pixels[2].as_array().unwrap().iter())
-        .map(|v| v.as_u64().unwrap() as u8)
-        .collect();
-    // Read back bottom row first: the frame's row y is the canvas's height - 1 - y.
-    let canvas = |x: usize, y: usize| {
-        let at = ((height - 1 - y) * width + x) * 4;
-        [rgba[at], rgba[at + 1], rgba[at + 2]]
-    };
     let renderer = Renderer::new(Arc::new(c.scene.clone()), c.cover_glass_triangles());
-    let full = renderer.render(&setup, &Default::default(), &mut |_, _| {});
     let (base, _) = renderer.base_frame(&setup);
-    let (full_srgb, base_srgb) = (full.image.color.to_srgb8(), base.to_srgb8());
-    let rgb = |bytes: &[u8], x: usize, y: usize| {
-        let at = (y * width + x) * 3;
-        [bytes[at], bytes[at + 1], bytes[at + 2]]
-    };
-    let (mut off_glass, mut close, mut glass, mut same, mut worst) = (0, 0, 0, 0, 0);
-    for y in 0..height {
-        for x in 0..width {
-            let shown = canvas(x, y);
-            if full.image.is_glass(y * width + x) {
-                glass += 1;
-                let cpu = rgb(&full_srgb, x, y);
-                same += usize::from(shown == cpu);
-                worst = (0..3)
-                    .map(|k| shown[k].abs_diff(cpu[k]))
-                    .fold(worst, u8::max);
-            } else {
-                off_glass += 1;
-                let cpu = rgb(&base_srgb, x, y);
-                let near = (0..3).all(|k| shown[k].abs_diff(cpu[k]) <= 8);
-                close += usize::from(near);
-            }
+    let base_srgb = base.to_srgb8();
+    for quality in [Quality::Preview, Quality::Refine, Quality::Full] {
+        let show = format!("window.vtfarm.showStage({:?})", quality.name());
+        assert_eq!(browser.eval(&show).await.unwrap(), true, "{quality:?}");
+        let shown = canvas_pixels(&mut browser).await;
+        let cpu = FrameSetup {
+            vertex: vtfarm_vertex::VertexSettings {
+                quality,
+                ..setup.vertex
+            },
+            ..setup.clone()
+        };
+        let cpu = renderer.render(&cpu, &Default::default(), &mut |_, _| {});
+        let agreement = still_eye(&shown, &cpu.image, &base_srgb);
+        eprintln!("the page's {quality:?} against the CPU's: {agreement:?}");
+        let StillEye {
+            glass,
+            glass_close,
+            glass_same,
+            worst,
+            off_glass,
+            off_glass_close,
+        } = agreement;
+        assert!(glass > 0 && off_glass > 0);
+        assert!(
+            off_glass_close * 100 >= off_glass * 95,
+            "{quality:?}: base scene: {off_glass_close} of {off_glass} pixels within 8/255"
+        );
+        if quality == Quality::Full {
+            assert_eq!(
+                glass_same, glass,
+                "the glass shows the full render's pixels (off by up to {worst})"
+            );
+        } else {
+            assert!(
+                glass_close * 100 >= glass * 95,
+                "{quality:?}: {glass_close} of {glass} glass pixels within 8/255 (worst {worst})"
+            );
         }
     }
-    assert!(glass > 0 && off_glass > 0);
-    assert!(
-        close * 100 >= off_glass * 95,
-        "base scene: {close} of {off_glass} pixels within 8/255"
-    );
-    assert_eq!(
-        same, glass,
-        "the glass shows the full render's pixels (off by up to {worst})"
-    );
 
     // While the eye is dragged only previews are drawn: a move's `full`
     // that comes before the mouse is let go is held, and drawn and

@@ -52,9 +52,10 @@ pub use wire::{
 /// to a message's encoding or to a rule both ends follow (such as a
 /// material's `thin` and `fresnel`, a directional light's disc, the vertex
 /// tracer's `capture_cd_m2`, a progressive stage's reflector meshes in
-/// its result or a view frame's corner mesh ahead of its set-up); the master refuses other versions with
+/// its result or a view frame's corner mesh ahead of its set-up, with the glass's
+/// weights per vertex); the master refuses other versions with
 /// [`RefuseCode::BadVersion`].
-pub const PROTOCOL_VERSION: u32 = 13;
+pub const PROTOCOL_VERSION: u32 = 14;
 
 /// How many split frames of a job the master runs at once (pipelined
 /// frames) and so how many frames a worker keeps ([`KeptFrames`]): a

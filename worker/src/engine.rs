@@ -202,7 +202,9 @@ impl ActiveFrame {
                 let meshes_only = stage + 1 < stages;
                 let traced = advance(&frame, package, stage, quality, meshes_only, progress);
                 if meshes_only {
-                    mesh = progress.as_ref().map(|p| WireMesh::from(&p.meshes()[..]));
+                    mesh = progress
+                        .as_ref()
+                        .map(|p| WireMesh::from(&p.meshes(&frame)[..]));
                 }
                 traced
             }

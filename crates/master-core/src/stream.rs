@@ -2,8 +2,9 @@
 //! move of the eye (`GET /view/stream`, the format in `docs/http-api.md`).
 //!
 //! A `preview` or `refine` stage is the reflector's refinement meshes with
-//! their traced samples ([`StageMessage::Mesh`]): the page Gouraud-shades
-//! them with the vertex colours over what it draws behind the glass. A
+//! their traced samples and the glass's weights ([`StageMessage::Mesh`]):
+//! the page Gouraud-shades them with the vertex colours over what it draws
+//! behind the glass, weighted as the CPU's thin-glass pass weights it. A
 //! `full` stage is a sparse pixel overlay ([`StageMessage::Overlay`]): the
 //! finished frame's reflector pixels, which the page draws while the eye
 //! stays. Each carries its move's number, so a page drops what a newer move
@@ -11,12 +12,12 @@
 //! so a decoded sample is the traced one byte for byte.
 
 use glam::Vec3;
-use vtfarm_vertex::{FrameImage, PixelValue, Quality, StageMesh};
+use vtfarm_vertex::{FrameImage, PixelValue, Quality, SlabWeights, StageMesh};
 
 /// The first bytes of every stage message.
 pub const MAGIC: [u8; 4] = *b"VTVS";
 /// The format's version, after [`MAGIC`].
-pub const VERSION: u8 = 1;
+pub const VERSION: u8 = 2;
 /// Bytes before a message's body: magic, version, kind, quality, a zero
 /// byte, the move (u64) and the eye (three f32).
 pub const HEADER_BYTES: usize = 4 + 4 + 8 + 12;
@@ -158,14 +159,20 @@ fn vec3(out: &mut Vec<u8>, v: Vec3) {
     }
 }
 
+/// Bytes per vertex of a mesh stage's message.
+const VERTEX_BYTES: u64 = 4 * 3 * 5 + 4 + 4;
+
 /// A mesh stage's message: counts of vertices and faces, then per vertex
 /// its position, colour, reflected and transmitted parts (each three f32,
-/// plane after plane) and reflected object (u32), then the faces (three
-/// u32 each, indices over all the meshes' vertices in order).
+/// plane after plane), reflected object (u32), what the glass lets through
+/// of the scene behind (three f32) and the factor on its reflection (f32)
+/// ([`SlabWeights`]), then the faces (three u32 each, indices over all the
+/// meshes' vertices in order).
 pub fn encode_mesh(header: &StageHeader, meshes: &[StageMesh]) -> Vec<u8> {
     let vertices: usize = meshes.iter().map(|m| m.positions.len()).sum();
     let faces: usize = meshes.iter().map(|m| m.faces.len()).sum();
-    let mut out = Vec::with_capacity(HEADER_BYTES + 16 + vertices * 52 + faces * 12);
+    let mut out =
+        Vec::with_capacity(HEADER_BYTES + 8 + vertices * VERTEX_BYTES as usize + faces * 12);
     header_bytes(&mut out, KIND_MESH, header);
     out.extend((vertices as u32).to_le_bytes());
     out.extend((faces as u32).to_le_bytes());
@@ -178,6 +185,9 @@ pub fn encode_mesh(header: &StageHeader, meshes: &[StageMesh]) -> Vec<u8> {
         samples().for_each(|s| vec3(&mut out, plane(s)));
     }
     samples().for_each(|s| out.extend(s.object.to_le_bytes()));
+    let slabs = || meshes.iter().flat_map(|m| &m.slabs);
+    slabs().for_each(|s| vec3(&mut out, s.behind));
+    slabs().for_each(|s| out.extend(s.reflection_scale.to_le_bytes()));
     let mut base = 0u32;
     for m in meshes {
         for v in m.faces.iter().flatten() {
@@ -292,7 +302,7 @@ pub fn decode(bytes: &[u8]) -> Result<StageMessage, StreamError> {
         KIND_MESH => {
             let vertices = r.u32()? as usize;
             let faces = r.u32()? as usize;
-            r.expect(vertices as u64, 52, "vertices")?;
+            r.expect(vertices as u64, VERTEX_BYTES, "vertices")?;
             let positions = (0..vertices)
                 .map(|_| r.vec3())
                 .collect::<Result<Vec<_>, _>>()?;
@@ -313,6 +323,17 @@ pub fn decode(bytes: &[u8]) -> Result<StageMessage, StreamError> {
                     object: r.u32()?,
                 });
             }
+            let behind = (0..vertices)
+                .map(|_| r.vec3())
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut slabs = Vec::with_capacity(vertices);
+            for behind in behind {
+                let reflection_scale = r.f32()?;
+                slabs.push(SlabWeights {
+                    behind,
+                    reflection_scale,
+                });
+            }
             r.expect(faces as u64, 12, "faces")?;
             let mut face_list = Vec::with_capacity(faces);
             for _ in 0..faces {
@@ -330,6 +351,7 @@ pub fn decode(bytes: &[u8]) -> Result<StageMessage, StreamError> {
                 triangle: vtfarm_scene::TriangleId(0),
                 positions,
                 samples,
+                slabs,
                 faces: face_list,
             };
             StageMessage::Mesh {
@@ -385,6 +407,7 @@ pub fn joined(meshes: &[StageMesh]) -> StageMesh {
         let base = out.positions.len() as u32;
         out.positions.extend(&m.positions);
         out.samples.extend(&m.samples);
+        out.slabs.extend(&m.slabs);
         out.faces
             .extend(m.faces.iter().map(|f| f.map(|v| base + v)));
     }
@@ -405,6 +428,13 @@ mod tests {
         }
     }
 
+    fn slab(k: f32) -> SlabWeights {
+        SlabWeights {
+            behind: Vec3::new(0.7 * k, -0.0, f32::from_bits(0x3f00_0001)),
+            reflection_scale: 1.0 + k,
+        }
+    }
+
     fn header(quality: Quality) -> StageHeader {
         StageHeader {
             generation: 0x0102_0304_0506_0708,
@@ -420,17 +450,19 @@ mod tests {
                 triangle: vtfarm_scene::TriangleId(4),
                 positions: vec![Vec3::X, Vec3::Y, Vec3::Z],
                 samples: vec![sample(1.0), sample(2.0), sample(3.0)],
+                slabs: vec![slab(1.0), slab(2.0), slab(3.0)],
                 faces: vec![[0, 1, 2]],
             },
             StageMesh {
                 triangle: vtfarm_scene::TriangleId(9),
                 positions: vec![Vec3::ONE, Vec3::NEG_ONE, Vec3::ZERO, Vec3::X],
                 samples: vec![sample(4.0), sample(5.0), sample(6.0), sample(7.0)],
+                slabs: vec![slab(4.0), slab(5.0), slab(6.0), slab(7.0)],
                 faces: vec![[0, 1, 3], [3, 1, 2]],
             },
         ];
         let bytes = encode_mesh(&header(Quality::Refine), &meshes);
-        assert_eq!(bytes.len(), HEADER_BYTES + 8 + 7 * 52 + 3 * 12);
+        assert_eq!(bytes.len(), HEADER_BYTES + 8 + 7 * 68 + 3 * 12);
         let StageMessage::Mesh {
             header: h,
             meshes: decoded,
@@ -446,6 +478,11 @@ mod tests {
         for (a, b) in sent.zip(&decoded[0].samples) {
             assert_eq!(bits(a.color), bits(b.color));
             assert_eq!(bits(a.transmitted), bits(b.transmitted));
+        }
+        let sent = meshes.iter().flat_map(|m| &m.slabs);
+        for (a, b) in sent.zip(&decoded[0].slabs) {
+            assert_eq!(bits(a.behind), bits(b.behind));
+            assert_eq!(a.reflection_scale.to_bits(), b.reflection_scale.to_bits());
         }
     }
 
@@ -504,6 +541,7 @@ mod tests {
             triangle: vtfarm_scene::TriangleId(0),
             positions: vec![Vec3::X],
             samples: vec![sample(1.0)],
+            slabs: vec![slab(1.0)],
             faces: vec![[0, 0, 0]],
         };
         let mut bad = encode_mesh(&header(Quality::Preview), &[mesh]);

@@ -714,6 +714,7 @@ mod tests {
                     };
                     3
                 ],
+                slabs: vec![vtfarm_vertex::SlabWeights::OPAQUE; 3],
                 faces: vec![[0, 1, 2]],
             })
             .collect();

@@ -360,6 +360,75 @@ fn a_panes_ghost_is_the_same_at_every_quality_whether_its_back_is_in_the_reflect
     }
 }
 
+/// The weights a view that draws the scene itself blends the glass with
+/// (`StageMesh::slabs`) are the pane's closed form at every vertex: the
+/// board behind weighted by kt(front) · kt(back), the reflection scaled by
+/// 1 + kt² (the back's kr is the front's), with and without Fresnel, the
+/// back in the reflector or not; a single sheet lets kt through and adds
+/// no ghost.
+#[test]
+fn a_panes_vertices_carry_the_weights_of_its_closed_form() {
+    let (kr0, kt0) = (0.1f64, 0.85f64);
+    for theta in [0.0f32, 45.0] {
+        for with_fresnel in [false, true] {
+            for back in [Some(false), Some(true), None] {
+                let (scene, reflectors) = match back {
+                    Some(one_object) => slab(theta, one_object),
+                    None => {
+                        let glass = slab(theta, false).0.materials[0].clone();
+                        let scene = sheet(glass);
+                        let reflectors = triangles_of(&scene, &[ObjectId(0)]);
+                        (scene, reflectors)
+                    }
+                };
+                let renderer = Renderer::new(Arc::new(scene), reflectors);
+                let setup = setup(
+                    camera_at(theta, 3.0),
+                    dark(),
+                    with_fresnel,
+                    Quality::Preview,
+                );
+                let mut checked = 0;
+                for mesh in renderer.corner_meshes(&setup) {
+                    for (p, slab) in mesh.positions.iter().zip(&mesh.slabs) {
+                        // The front's inner vertices (a ray at an edge can
+                        // miss the back).
+                        if p.z < -0.001 || p.x.abs() > 1.9 || p.y.abs() > 1.9 {
+                            continue;
+                        }
+                        let cos_i = f64::from((*p - setup.camera.eye).normalize().z.abs());
+                        let f0 = f64::from(f0(1.5));
+                        let moved = if with_fresnel {
+                            (fresnel(cos_i, 1.5) - f0) / (1.0 - f0)
+                        } else {
+                            0.0
+                        };
+                        let (kr, kt) = (kr0 + kt0 * moved, kt0 * (1.0 - moved));
+                        let (behind, scale) = match back {
+                            Some(_) => (kt * kt, 1.0 + kt * kt * kr / kr),
+                            None => (kt, 1.0),
+                        };
+                        let what =
+                            format!("{theta}°, fresnel {with_fresnel}, back {back:?}, at {p}");
+                        assert!(
+                            (f64::from(slab.behind.x) - behind).abs() < 1e-4,
+                            "{what}: behind {} against {behind}",
+                            slab.behind
+                        );
+                        assert!(
+                            (f64::from(slab.reflection_scale) - scale).abs() < 1e-4,
+                            "{what}: scale {} against {scale}",
+                            slab.reflection_scale
+                        );
+                        checked += 1;
+                    }
+                }
+                assert!(checked > 100, "{checked} vertices");
+            }
+        }
+    }
+}
+
 /// A UV sphere of radius `r` at the origin, outward normals, triangles
 /// wound counter-clockwise seen from outside.
 fn sphere(r: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {

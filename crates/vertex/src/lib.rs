@@ -192,7 +192,7 @@ pub use package::{
     trace_package, trace_package_into,
 };
 pub use stop::{Stop, Stopped};
-pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache};
+pub use thin::{Behind, GlassPass, IdBufferCache, ShadowCache, ShadowViews, SlabWeights};
 pub use vtfarm_raster::PixelRect;
 
 use glam::Vec3;

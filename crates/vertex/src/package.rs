@@ -20,6 +20,7 @@ use vtfarm_trace::{Sample, Tracer};
 
 use crate::fill::{Filled, Planes, TracedPixels, TrianglePlan, fill};
 use crate::refine::{MeshVertex, TriangleMesh};
+use crate::thin::SlabWeights;
 use crate::{Frame, FrameImage, Quality, VertexOwners, VertexSettings, vertex_point, vertex_rays};
 
 /// What the caller wants besides pixels.
@@ -628,10 +629,14 @@ impl ProgressivePackage {
     /// The refined meshes as the last stage left them, one per owned
     /// triangle in package order (empty before the first stage, and after
     /// a `Reference` stage only the meshes the stages before it made):
-    /// what the dashboard's view draws Gouraud-shaded. Faces with a corner
-    /// behind the eye are left out, as in [`FinishedFace`]s.
-    pub fn meshes(&self) -> Vec<StageMesh> {
-        self.meshes.iter().map(StageMesh::of).collect()
+    /// what the dashboard's view draws Gouraud-shaded over the scene it
+    /// draws itself, with each vertex's [`SlabWeights`] in `frame`. Faces
+    /// with a corner behind the eye are left out, as in [`FinishedFace`]s.
+    pub fn meshes(&self, frame: &Frame<'_>) -> Vec<StageMesh> {
+        self.meshes
+            .iter()
+            .map(|m| StageMesh::of(frame, m))
+            .collect()
     }
 }
 
@@ -644,12 +649,18 @@ pub struct StageMesh {
     pub positions: Vec<Vec3>,
     /// Per vertex, the traced sample as a pixel would hold it (`index` 0).
     pub samples: Vec<PixelValue>,
+    /// Per vertex, what the glass lets through of the scene behind it and
+    /// adds to its reflection, for a drawing that blends the samples over
+    /// that scene as [`Behind`](crate::Behind) does per pixel.
+    pub slabs: Vec<SlabWeights>,
     /// Indices into `positions`, winding as the original triangle's.
     pub faces: Vec<[u32; 3]>,
 }
 
 impl StageMesh {
-    fn of(mesh: &TriangleMesh) -> StageMesh {
+    fn of(frame: &Frame<'_>, mesh: &TriangleMesh) -> StageMesh {
+        let scene = frame.tracer.bvh.scene();
+        let corners = scene.triangles[mesh.triangle.index()].vertices;
         let projected = |f: &&crate::refine::Face| {
             (f.vertices.iter()).all(|&v| mesh.vertices[v as usize].screen.is_some())
         };
@@ -659,9 +670,30 @@ impl StageMesh {
             samples: (mesh.vertices.iter())
                 .map(|v| PixelValue::from_sample(0, &v.sample))
                 .collect(),
+            slabs: (mesh.vertices.iter().enumerate())
+                .map(|(k, v)| {
+                    // A corner is its owner's point, as it was traced.
+                    let on = corners
+                        .get(k)
+                        .map_or(mesh.triangle, |&c| frame.owners.of(c));
+                    slab_weights(frame, on, v.position, v.normal)
+                })
+                .collect(),
             faces: mesh.faces().filter(projected).map(|f| f.vertices).collect(),
         }
     }
+}
+
+/// The [`SlabWeights`] at a mesh vertex traced as a point of `triangle`.
+fn slab_weights(
+    frame: &Frame<'_>,
+    triangle: TriangleId,
+    position: Vec3,
+    normal: Vec3,
+) -> SlabWeights {
+    let eye = frame.camera.eye;
+    let (point, _) = vertex_point(eye, triangle, position, normal);
+    SlabWeights::at_point(&frame.tracer, eye, &point, frame.settings.transmission)
 }
 
 /// The `preview` meshes of `triangles` before any frame is set up: each
@@ -692,7 +724,7 @@ pub fn corner_meshes(
         })
         .collect();
     let rays = vertex_rays(settings.transmission);
-    let samples: Vec<Sample> = corners
+    let traced: Vec<(Sample, SlabWeights)> = corners
         .par_chunks(VERTEX_BATCH)
         .flat_map_iter(|chunk| {
             let points: Vec<_> = (chunk.iter())
@@ -701,7 +733,12 @@ pub fn corner_meshes(
                     vertex_point(camera.eye, t, scene.positions[v], scene.normals[v])
                 })
                 .collect();
-            tracer.shade_points(&points, rays)
+            let slabs: Vec<SlabWeights> = (points.iter())
+                .map(|(point, _)| {
+                    SlabWeights::at_point(&tracer, camera.eye, point, settings.transmission)
+                })
+                .collect();
+            tracer.shade_points(&points, rays).into_iter().zip(slabs)
         })
         .collect();
     let projector = Projector::new(camera);
@@ -714,8 +751,9 @@ pub fn corner_meshes(
             StageMesh {
                 triangle: t,
                 samples: slots
-                    .map(|k| PixelValue::from_sample(0, &samples[k]))
+                    .map(|k| PixelValue::from_sample(0, &traced[k].0))
                     .to_vec(),
+                slabs: slots.map(|k| traced[k].1).to_vec(),
                 positions,
                 faces: if in_front {
                     vec![[0, 1, 2]]

@@ -192,7 +192,8 @@ impl Behind {
         pass: GlassPass,
         cache: &ShadowCache,
     ) -> Behind {
-        let buffers = BehindBuffers::new(tracer, camera, None, is_reflector, transmission);
+        let scene = tracer.bvh.scene();
+        let buffers = BehindBuffers::new(scene, camera, None, is_reflector, transmission);
         Behind::from_buffers(tracer, camera, ids, is_reflector, buffers, pass, cache)
     }
 
@@ -217,7 +218,7 @@ impl Behind {
         };
         let mut buffers = id_cache.get(key, || {
             BehindBuffers::new(
-                tracer,
+                tracer.bvh.scene(),
                 camera,
                 Some(frame_within),
                 is_reflector,
@@ -360,13 +361,12 @@ struct BehindBuffers {
 
 impl BehindBuffers {
     fn new(
-        tracer: &Tracer<'_>,
+        scene: &Scene,
         camera: &Camera,
         frame_within: Option<PixelRect>,
         is_reflector: &[bool],
         transmission: Transmission,
     ) -> BehindBuffers {
-        let scene = tracer.bvh.scene();
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let any_glass = transmission == Transmission::Raster
             && (scene.triangle_ids().zip(is_reflector)).any(|(t, &r)| r && see_through(scene, t));
@@ -507,35 +507,18 @@ fn glass_at(
         (x, y),
         direction,
     );
-    let (kr, kt) = tracer.weights(&front, direction);
-    let mut weight = kt;
-    let mut reflection_scale = 1.0;
-    let mut shift = Vec3::ZERO;
-    let back = layers.triangle_at(x, y);
     // A pane drawn as one surface facing away is in the layers too, as
     // its own nearest layer: it has no back surface.
-    if back != NONE && back != front.triangle.raw() && layers.depth_at(x, y) < behind.depth_at(x, y)
-    {
-        let (back_point, _) =
-            pixel_surface_along(scene, camera, layers, TriangleId(back), (x, y), direction);
-        // The back surface is met from inside, along the refracted ray
-        // (with Fresnel weights its angle matters; parallel surfaces give
-        // it the front's kr again, as a traced ray finds).
-        let refracted = inside_direction(scene, &front, direction);
-        let inside = refracted.unwrap_or(direction);
-        let (kr_back, kt_back) = tracer.weights(&back_point, inside);
-        weight *= kt_back;
-        // The ghost: in through the front, reflected at the back, out
-        // through the front again. Counted as reflected, as the tracer
-        // counts it (`vtfarm_trace::Sample::reflected`).
-        let kr_front = kr.max_element();
-        if kr_front > 0.0 {
-            reflection_scale += (kt * kt * kr_back).max_element() / kr_front;
-        }
-        shift = refracted.map_or(Vec3::ZERO, |inside| {
-            slab_shift(&front, &back_point, direction, inside)
-        });
-    }
+    let back = TriangleId::from_raw(layers.triangle_at(x, y))
+        .filter(|&back| back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y))
+        .map(|back| pixel_surface_along(scene, camera, layers, back, (x, y), direction).0);
+    let slab = SlabWeights::of(tracer, &front, direction, back.as_ref());
+    let shift = back
+        .and_then(|back_point| {
+            let inside = inside_direction(scene, &front, direction)?;
+            Some(slab_shift(&front, &back_point, direction, inside))
+        })
+        .unwrap_or(Vec3::ZERO);
     let seen = opaque_radiance(
         tracer,
         camera,
@@ -547,8 +530,88 @@ fn glass_at(
         shift,
     );
     ThinGlass {
-        transmitted: weight * seen,
-        reflection_scale,
+        transmitted: slab.behind * seen,
+        reflection_scale: slab.reflection_scale,
+    }
+}
+
+/// What a see-through reflector lets through and adds to its reflection
+/// at one point: the weight of the opaque scene behind it, kt(front) ·
+/// kt(back), and the factor on the front surface's reflection that adds
+/// the back surface's ghost (see the module docs). An opaque reflector's
+/// are [`SlabWeights::OPAQUE`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlabWeights {
+    pub behind: Vec3,
+    pub reflection_scale: f32,
+}
+
+impl SlabWeights {
+    /// Nothing let through, the reflection as it is.
+    pub const OPAQUE: SlabWeights = SlabWeights {
+        behind: Vec3::ZERO,
+        reflection_scale: 1.0,
+    };
+
+    /// The weights at `front`, seen along `direction`, with the slab's
+    /// `back` surface behind it (met along the refracted ray) or none.
+    fn of(
+        tracer: &Tracer<'_>,
+        front: &SurfacePoint,
+        direction: Vec3,
+        back: Option<&SurfacePoint>,
+    ) -> SlabWeights {
+        let (kr, kt) = tracer.weights(front, direction);
+        let Some(back) = back else {
+            return SlabWeights {
+                behind: kt,
+                reflection_scale: 1.0,
+            };
+        };
+        // The back surface is met from inside, along the refracted ray
+        // (with Fresnel weights its angle matters; parallel surfaces give
+        // it the front's kr again, as a traced ray finds).
+        let scene = tracer.bvh.scene();
+        let inside = inside_direction(scene, front, direction).unwrap_or(direction);
+        let (kr_back, kt_back) = tracer.weights(back, inside);
+        // The ghost: in through the front, reflected at the back, out
+        // through the front again. Counted as reflected, as the tracer
+        // counts it (`vtfarm_trace::Sample::reflected`).
+        let kr_front = kr.max_element();
+        let reflection_scale = if kr_front > 0.0 {
+            1.0 + (kt * kt * kr_back).max_element() / kr_front
+        } else {
+            1.0
+        };
+        SlabWeights {
+            behind: kt * kt_back,
+            reflection_scale,
+        }
+    }
+
+    /// The weights at a reflector's surface point seen from `eye`, for a
+    /// view that draws the scene behind the glass itself and blends the
+    /// traced reflection over it: what [`Behind`] applies per pixel, at
+    /// the point. The back surface is the first see-through one along the
+    /// refracted ray; nothing is let through with traced transmission (the
+    /// traced sample holds it).
+    pub fn at_point(
+        tracer: &Tracer<'_>,
+        eye: Vec3,
+        point: &SurfacePoint,
+        transmission: Transmission,
+    ) -> SlabWeights {
+        let scene = tracer.bvh.scene();
+        if transmission != Transmission::Raster || !see_through(scene, point.triangle) {
+            return SlabWeights::OPAQUE;
+        }
+        let direction = (point.position - eye).normalize_or(-point.normal);
+        let inside = inside_direction(scene, point, direction).unwrap_or(direction);
+        let ray = tracer.bvh.spawn_ray(point.position, point.triangle, inside);
+        let back = (tracer.bvh.closest_hit(&ray, f32::INFINITY))
+            .map(|hit| tracer.bvh.surface_point(&hit))
+            .filter(|b| b.triangle != point.triangle && see_through(scene, b.triangle));
+        SlabWeights::of(tracer, point, direction, back.as_ref())
     }
 }
 
@@ -720,6 +783,134 @@ fn ray_plane(
     Some((position, barycentric_in_plane([a, b, c], plane, position)))
 }
 
+/// The box the shadow maps of a frame cover: around the opaque points
+/// behind the glass pixels of `bounds`, snapped outward to a grid (empty,
+/// `lo` above `hi`, when there are none).
+fn shadow_box(
+    camera: &Camera,
+    ids: &IdBuffer,
+    behind: &IdBuffer,
+    bounds: PixelRect,
+    glass_triangle: &dyn Fn(TriangleId) -> bool,
+) -> (Vec3, Vec3) {
+    // The opaque points behind the glass, bounded by a box. A pass
+    // over every pixel of the reflectors' bounds on every frame: each
+    // triangle's test is made once per run of its pixels, and the
+    // points need no unit rays.
+    let projector = Projector::new(camera);
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut last = (NONE, false);
+    for (x, y) in bounds.pixels() {
+        let t = ids.triangle_at(x, y);
+        if t != last.0 {
+            last = (t, t != NONE && glass_triangle(TriangleId(t)));
+        }
+        if last.1 && behind.triangle_at(x, y) != NONE {
+            let p = camera.eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    if lo.x <= hi.x {
+        let extent = (hi - lo).max_element().max(1e-3);
+        let grid = 2f32.powi((extent / 4.0).log2().ceil() as i32);
+        lo = (lo / grid).floor() * grid;
+        hi = (hi / grid).ceil() * grid;
+    }
+    (lo, hi)
+}
+
+/// Where the thin-glass pass's shadow maps look from: one camera per light
+/// (`None` for a light that sits among the points it lights, which then
+/// lights them all), each map [`SHADOW_MAP_SIZE`] texels square and
+/// holding every triangle that casts a shadow
+/// (`vtfarm_trace::casts_shadow`), and how much nearer than a point an
+/// occluder must be to shadow it (unless the map shows the point's own
+/// triangle there).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadowViews {
+    pub cameras: Vec<Option<Camera>>,
+    pub bias: f32,
+}
+
+impl ShadowViews {
+    /// The views of `lights` over the snapped box `lo`..`hi` ([`shadow_box`]).
+    fn of(lights: &[Light], lo: Vec3, hi: Vec3) -> ShadowViews {
+        let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.05;
+        let cameras = (lights.iter())
+            .map(|light| {
+                if lo.x > hi.x {
+                    return None;
+                }
+                let centre = (lo + hi) * 0.5;
+                let (eye, distance) = match light.kind {
+                    LightKind::Point { position } => (position, (centre - position).length()),
+                    LightKind::Directional { direction, .. } => {
+                        let far = radius * 100.0;
+                        (centre - direction.normalize_or(Vec3::NEG_Y) * far, far)
+                    }
+                };
+                if distance <= radius * 1.05 {
+                    // The light sits among the points: no frustum holds them.
+                    return None;
+                }
+                let forward = (centre - eye).normalize();
+                let up = if forward.y.abs() > 0.9 {
+                    Vec3::X
+                } else {
+                    Vec3::Y
+                };
+                Some(Camera {
+                    eye,
+                    target: centre,
+                    up,
+                    fov_y_deg: 2.0 * (radius / distance).asin().to_degrees(),
+                    width: SHADOW_MAP_SIZE,
+                    height: SHADOW_MAP_SIZE,
+                })
+            })
+            .collect();
+        ShadowViews {
+            cameras,
+            // 5 texels of a 1024 map across the box's bounding sphere.
+            bias: radius * 5e-3 * (1024.0 / SHADOW_MAP_SIZE as f32),
+        }
+    }
+
+    /// The views a frame from `camera` gets (the box of its opaque points
+    /// behind the see-through reflectors): for a drawing of the scene that
+    /// shadows what it shows through the glass as the thin-glass pass
+    /// does. No camera at all without see-through reflector pixels.
+    pub fn for_frame(
+        scene: &Scene,
+        camera: &Camera,
+        lights: &[Light],
+        is_reflector: &[bool],
+    ) -> ShadowViews {
+        let within = PixelRect::full(camera.width, camera.height);
+        let buffers = BehindBuffers::new(
+            scene,
+            camera,
+            Some(within),
+            is_reflector,
+            Transmission::Raster,
+        );
+        let ids = buffers
+            .frame
+            .as_ref()
+            .expect("asked for the frame's buffer");
+        let glass_triangle = |t: TriangleId| is_reflector[t.index()] && see_through(scene, t);
+        let (lo, hi) = shadow_box(
+            camera,
+            ids,
+            &buffers.behind,
+            buffers.bounds,
+            &glass_triangle,
+        );
+        ShadowViews::of(lights, lo, hi)
+    }
+}
+
 /// One shadow map per light: the scene's ID buffer seen from the light
 /// through a frustum fitted to a box around the opaque points behind the
 /// glass. The box is snapped outward to a grid (a power of two, a quarter
@@ -870,30 +1061,7 @@ impl ShadowMaps {
         glass_triangle: &dyn Fn(TriangleId) -> bool,
         cache: &ShadowCache,
     ) -> Arc<ShadowMaps> {
-        // The opaque points behind the glass, bounded by a box. A pass
-        // over every pixel of the reflectors' bounds on every frame: each
-        // triangle's test is made once per run of its pixels, and the
-        // points need no unit rays.
-        let projector = Projector::new(camera);
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        let mut last = (NONE, false);
-        for (x, y) in bounds.pixels() {
-            let t = ids.triangle_at(x, y);
-            if t != last.0 {
-                last = (t, t != NONE && glass_triangle(TriangleId(t)));
-            }
-            if last.1 && behind.triangle_at(x, y) != NONE {
-                let p = camera.eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
-        if lo.x <= hi.x {
-            let extent = (hi - lo).max_element().max(1e-3);
-            let grid = 2f32.powi((extent / 4.0).log2().ceil() as i32);
-            lo = (lo / grid).floor() * grid;
-            hi = (hi / grid).ceil() * grid;
-        }
+        let (lo, hi) = shadow_box(camera, ids, behind, bounds, glass_triangle);
         let key = ShadowKey {
             lights: tracer.lighting.lights.clone(),
             lo,
@@ -904,51 +1072,19 @@ impl ShadowMaps {
 
     fn new(tracer: &Tracer<'_>, key: &ShadowKey) -> ShadowMaps {
         let scene = tracer.bvh.scene();
-        let (lo, hi) = (key.lo, key.hi);
-        let radius = ((hi - lo) * 0.5).length().max(1e-3) * 1.05;
-        let maps = key
-            .lights
-            .iter()
-            .map(|light| {
-                if lo.x > hi.x {
-                    return None;
-                }
-                let centre = (lo + hi) * 0.5;
-                let (eye, distance) = match light.kind {
-                    LightKind::Point { position } => (position, (centre - position).length()),
-                    LightKind::Directional { direction, .. } => {
-                        let far = radius * 100.0;
-                        (centre - direction.normalize_or(Vec3::NEG_Y) * far, far)
-                    }
-                };
-                if distance <= radius * 1.05 {
-                    // The light sits among the points: no frustum holds them.
-                    return None;
-                }
-                let forward = (centre - eye).normalize();
-                let up = if forward.y.abs() > 0.9 {
-                    Vec3::X
-                } else {
-                    Vec3::Y
-                };
-                let view = Camera {
-                    eye,
-                    target: centre,
-                    up,
-                    fov_y_deg: 2.0 * (radius / distance).asin().to_degrees(),
-                    width: SHADOW_MAP_SIZE,
-                    height: SHADOW_MAP_SIZE,
-                };
+        let views = ShadowViews::of(&key.lights, key.lo, key.hi);
+        let maps = (views.cameras.iter())
+            .map(|view| {
+                let view = view.as_ref()?;
                 Some(ShadowMap::new(
-                    Projector::new(&view),
-                    &vtfarm_raster::id_buffer_where(scene, &view, &|t| tracer.bvh.casts_shadow(t)),
+                    Projector::new(view),
+                    &vtfarm_raster::id_buffer_where(scene, view, &|t| tracer.bvh.casts_shadow(t)),
                 ))
             })
             .collect();
         ShadowMaps {
             maps,
-            // 5 texels of a 1024 map across the box's bounding sphere.
-            bias: radius * 5e-3 * (1024.0 / SHADOW_MAP_SIZE as f32),
+            bias: views.bias,
         }
     }
 

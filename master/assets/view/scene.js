@@ -7,9 +7,9 @@
 // Three passes: the opaque scene (the reflectors left out) into a linear
 // float target with its depth; that target to the canvas in 8-bit sRGB with
 // its depth; then the reflector mesh, depth-tested, each fragment the
-// Gouraud-interpolated vertex colour plus the glass's transmittance times
-// the target's colour there (the paper's stencil and z-buffer blend), in
-// linear light before the one sRGB conversion.
+// Gouraud-interpolated vertex colour and ghost plus the glass's weight
+// times the target's colour there (the paper's stencil and z-buffer
+// blend), in linear light before the one sRGB conversion.
 
 import * as THREE from "three";
 import { srgb8 } from "./stream.js";
@@ -22,8 +22,11 @@ vec3 toSrgb(vec3 c) {
   return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
 }`;
 
-// vtfarm_raster's Phong, per fragment in world space.
-function phongMaterial(exact, setup) {
+// vtfarm_raster's Phong, per fragment in world space, into two targets:
+// unshadowed, as the CPU's base frame draws the scene, and shadowed by the
+// lights' shadow maps (`shadows`, from shadowMaps), as the CPU's
+// thin-glass pass shades what the glass shows behind it.
+function phongMaterial(exact, setup, shadows) {
   const lights = setup.lights.slice(0, MAX_LIGHTS);
   const vec = (a) => new THREE.Vector3(a[0], a[1], a[2]);
   const uniforms = {
@@ -35,14 +38,55 @@ function phongMaterial(exact, setup) {
     lightVector: { value: lights.map((l) => vec(l.vector)) },
     lightPoint: { value: lights.map((l) => (l.kind === "point" ? 1 : 0)) },
     lightRadiance: { value: lights.map((l) => vec(l.radiance)) },
+    shadowBias: { value: setup.shadows.bias },
   };
+  // Each mapped light's test, written out with its own sampler (a
+  // sampler array takes constant indices only).
+  const tests = lights.map((_, i) => {
+    const map = shadows[i];
+    if (!map) return `bool lit${i}(vec3 p) { return true; }`;
+    uniforms["shadowMap" + i] = { value: map.target.texture };
+    uniforms["shadowMatrix" + i] = { value: map.matrix };
+    uniforms["shadowEye" + i] = { value: map.eye };
+    uniforms["shadowForward" + i] = { value: map.forward };
+    return `
+      uniform sampler2D shadowMap${i};
+      uniform mat4 shadowMatrix${i};
+      uniform vec3 shadowEye${i}, shadowForward${i};
+      bool lit${i}(vec3 p) {
+        float depth = dot(p - shadowEye${i}, shadowForward${i});
+        vec4 c = shadowMatrix${i} * vec4(p, 1.0);
+        if (depth < 1e-3 || c.w <= 0.0) return true;
+        int size = textureSize(shadowMap${i}, 0).x;
+        ivec2 texel = ivec2(floor((c.xy / c.w * 0.5 + 0.5) * float(size)));
+        if (texel.x < 0 || texel.y < 0 || texel.x >= size || texel.y >= size) return true;
+        float seen = texelFetch(shadowMap${i}, texel, 0).r;
+        return seen <= 0.0 || seen >= depth - shadowBias;
+      }`;
+  });
+  const lightTerms = lights.map((_, i) => `
+        {
+          vec3 toLight = lightPoint[${i}] > 0.5
+            ? normalize(lightVector[${i}] - worldPosition) : normalize(-lightVector[${i}]);
+          float nDotL = dot(n, toLight);
+          if (nDotL > 0.0) {
+            vec3 term = diffuse * nDotL;
+            if (max(specular.r, max(specular.g, specular.b)) > 0.0) {
+              vec3 r = n * (2.0 * nDotL) - toLight;
+              term += specular * pow(max(dot(r, toEye), 0.0), shininess);
+            }
+            color += term * lightRadiance[${i}];
+            if (lit${i}(worldPosition)) shadowed += term * lightRadiance[${i}];
+          }
+        }`).join("");
   return new THREE.ShaderMaterial({
     uniforms,
+    glslVersion: THREE.GLSL3,
     side: THREE.DoubleSide,
-    defines: { LIGHTS: Math.max(lights.length, 1), USED_LIGHTS: lights.length },
+    defines: { LIGHTS: Math.max(lights.length, 1) },
     vertexShader: `
-      varying vec3 worldPosition;
-      varying vec3 worldNormal;
+      out vec3 worldPosition;
+      out vec3 worldNormal;
       void main() {
         vec4 w = modelMatrix * vec4(position, 1.0);
         worldPosition = w.xyz;
@@ -50,33 +94,80 @@ function phongMaterial(exact, setup) {
         gl_Position = projectionMatrix * viewMatrix * w;
       }`,
     fragmentShader: `
+      layout(location = 0) out highp vec4 baseColor;
+      layout(location = 1) out highp vec4 shadowedColor;
       uniform vec3 unlit, diffuse, specular, eye;
-      uniform float shininess;
+      uniform float shininess, shadowBias;
       uniform vec3 lightVector[LIGHTS];
       uniform float lightPoint[LIGHTS];
       uniform vec3 lightRadiance[LIGHTS];
-      varying vec3 worldPosition;
-      varying vec3 worldNormal;
+      in vec3 worldPosition;
+      in vec3 worldNormal;
+      ${tests.join("\n")}
       void main() {
         vec3 toEye = normalize(eye - worldPosition);
         vec3 n = normalize(worldNormal);
         if (dot(n, toEye) < 0.0) n = -n;
         vec3 color = unlit;
-        for (int i = 0; i < USED_LIGHTS; i++) {
-          vec3 toLight = lightPoint[i] > 0.5
-            ? normalize(lightVector[i] - worldPosition) : normalize(-lightVector[i]);
-          float nDotL = dot(n, toLight);
-          if (nDotL <= 0.0) continue;
-          vec3 term = diffuse * nDotL;
-          if (max(specular.r, max(specular.g, specular.b)) > 0.0) {
-            vec3 r = n * (2.0 * nDotL) - toLight;
-            term += specular * pow(max(dot(r, toEye), 0.0), shininess);
-          }
-          color += term * lightRadiance[i];
-        }
-        gl_FragColor = vec4(color, 1.0);
+        vec3 shadowed = unlit;
+        ${lightTerms}
+        baseColor = vec4(color, 1.0);
+        shadowedColor = vec4(shadowed, 1.0);
       }`,
   });
+}
+
+// The lights' shadow maps (setup.shadows, the CPU thin-glass pass's own
+// views): per light, the view depth of the nearest surface that casts a
+// shadow, per texel, or null for a light that is never shadowed. Drawn
+// once: they depend on the lights and the scene, not on the eye.
+function shadowMaps(renderer, casters, shadows) {
+  const depth = new THREE.ShaderMaterial({
+    side: THREE.DoubleSide,
+    uniforms: { from: { value: new THREE.Vector3() }, forward: { value: new THREE.Vector3() } },
+    vertexShader: `
+      varying vec3 worldPosition;
+      void main() {
+        vec4 w = modelMatrix * vec4(position, 1.0);
+        worldPosition = w.xyz;
+        gl_Position = projectionMatrix * viewMatrix * w;
+      }`,
+    fragmentShader: `
+      uniform vec3 from, forward;
+      varying vec3 worldPosition;
+      void main() { gl_FragColor = vec4(dot(worldPosition - from, forward), 0.0, 0.0, 1.0); }`,
+  });
+  casters.overrideMaterial = depth;
+  const maps = shadows.cameras.map((view) => {
+    if (!view) return null;
+    const eye = new THREE.Vector3(...view.eye);
+    const target = new THREE.Vector3(...view.target);
+    const distance = eye.distanceTo(target);
+    const radius = distance * Math.sin(THREE.MathUtils.degToRad(view.fov_y_deg / 2));
+    const camera = new THREE.PerspectiveCamera(view.fov_y_deg, 1, distance * 0.01, distance + 2 * radius);
+    camera.up.set(...view.up);
+    camera.position.copy(eye);
+    camera.lookAt(target);
+    camera.updateMatrixWorld();
+    const map = new THREE.WebGLRenderTarget(shadows.size, shadows.size, {
+      type: THREE.FloatType,
+      format: THREE.RedFormat,
+      minFilter: THREE.NearestFilter,
+      magFilter: THREE.NearestFilter,
+    });
+    depth.uniforms.from.value.copy(eye);
+    const forward = target.clone().sub(eye).normalize();
+    depth.uniforms.forward.value.copy(forward);
+    renderer.setRenderTarget(map);
+    // Nothing there (depth 0, nearer than any surface's): lit.
+    renderer.setClearColor(new THREE.Color(0, 0, 0), 1);
+    renderer.clear();
+    renderer.render(casters, camera);
+    const matrix = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse);
+    return { target: map, matrix, eye, forward };
+  });
+  renderer.setRenderTarget(null);
+  return maps;
 }
 
 // A full-screen pass: the linear target to sRGB, with its depth.
@@ -99,30 +190,44 @@ function presentMaterial(target) {
   });
 }
 
-// The reflector: vertex colours plus transmittance times what lies behind.
-function glassMaterial(target, transmittance) {
+// The reflector, as the CPU's thin-glass pass finishes a pixel
+// (vtfarm_vertex's `Behind`): the traced colour, the back surface's ghost
+// (the reflected part times the reflection's scale less one) and what the
+// glass lets through of the scene behind it, every term Gouraud-shaded
+// from the stage's vertices.
+function glassMaterial(target) {
   // The drawing's size, to find each fragment's pixel in `behind`.
   const size = new THREE.Vector2(target.width, target.height);
   return new THREE.ShaderMaterial({
     uniforms: {
-      behind: { value: target.texture },
+      behindScene: { value: target.textures[1] },
       size: { value: size },
-      transmittance: { value: new THREE.Vector3(...transmittance) },
     },
     side: THREE.DoubleSide,
     vertexColors: true,
     vertexShader: `
+      attribute vec3 reflected;
+      attribute vec3 behind;
+      attribute float reflectionScale;
       varying vec3 traced;
-      void main() { traced = color; gl_Position = projectionMatrix * viewMatrix * vec4(position, 1.0); }`,
+      varying vec3 ghost;
+      varying vec3 letThrough;
+      void main() {
+        traced = color;
+        ghost = reflected * (reflectionScale - 1.0);
+        letThrough = behind;
+        gl_Position = projectionMatrix * viewMatrix * vec4(position, 1.0);
+      }`,
     fragmentShader: `
-      uniform sampler2D behind;
+      uniform sampler2D behindScene;
       uniform vec2 size;
-      uniform vec3 transmittance;
       varying vec3 traced;
+      varying vec3 ghost;
+      varying vec3 letThrough;
       ${SRGB_GLSL}
       void main() {
-        vec3 back = texture2D(behind, gl_FragCoord.xy / size).rgb;
-        gl_FragColor = vec4(toSrgb(traced + transmittance * back), 1.0);
+        vec3 back = texture2D(behindScene, gl_FragCoord.xy / size).rgb;
+        gl_FragColor = vec4(toSrgb(traced + ghost + letThrough * back), 1.0);
       }`,
   });
 }
@@ -157,7 +262,10 @@ export class SceneView {
     renderer.setSize(width, height, false);
     renderer.autoClear = false;
     this.renderer = renderer;
+    // The scene as the base frame draws it, and shadowed as the glass
+    // shows it (phongMaterial).
     const target = (w, h) => new THREE.WebGLRenderTarget(w, h, {
+      count: 2,
       type: THREE.FloatType,
       minFilter: THREE.NearestFilter,
       magFilter: THREE.NearestFilter,
@@ -176,24 +284,35 @@ export class SceneView {
     const reflectors = new Set(setup.reflector_objects);
     const meshes = [];
     gltf.scene.traverse((o) => { if (o.isMesh) meshes.push(o); });
+    const behind = [];
+    const casters = new THREE.Scene();
     for (const mesh of meshes) {
+      mesh.updateWorldMatrix(true, false);
+      // The GLB's materials are the scene's, in order.
+      const association = gltf.parser.associations.get(mesh.material);
+      const index = association ? association.materials : undefined;
+      if (index === undefined || setup.shadow_casting[index]) casters.add(mesh.clone());
       // The GLB names each mesh's node after its scene object.
       const name = mesh.name || (mesh.parent && mesh.parent.name);
       if (reflectors.has(name)) continue;
       const exact = mesh.material.userData && mesh.material.userData.vtfarm;
       if (!exact) continue;
       if (Math.max(...exact.transmittance) > 0) continue; // other glass: not behind
-      mesh.material = phongMaterial(exact, setup);
-      this.phong.push(mesh.material);
-      mesh.updateWorldMatrix(true, false);
-      this.opaque.add(mesh.clone());
+      behind.push([mesh, exact]);
+    }
+    const shadows = shadowMaps(renderer, casters, setup.shadows);
+    for (const [mesh, exact] of behind) {
+      const drawn = mesh.clone();
+      drawn.material = phongMaterial(exact, setup, shadows);
+      this.phong.push(drawn.material);
+      this.opaque.add(drawn);
     }
     this.present = new THREE.Scene();
     this.presentMaterial = presentMaterial(this.target);
     this.present.add(new THREE.Mesh(new THREE.PlaneGeometry(2, 2), this.presentMaterial));
     this.screen = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
     this.glass = new THREE.Scene();
-    this.glassMaterial = glassMaterial(this.target, setup.transmittance);
+    this.glassMaterial = glassMaterial(this.target);
     this.overlayScene = new THREE.Scene();
     this.overlay = null;
     this.offset = [0, 0, 0];
@@ -218,6 +337,9 @@ export class SceneView {
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute("position", new THREE.BufferAttribute(stage.positions, 3));
     geometry.setAttribute("color", new THREE.BufferAttribute(stage.colors, 3));
+    geometry.setAttribute("reflected", new THREE.BufferAttribute(stage.reflected, 3));
+    geometry.setAttribute("behind", new THREE.BufferAttribute(stage.behind, 3));
+    geometry.setAttribute("reflectionScale", new THREE.BufferAttribute(stage.reflectionScale, 1));
     geometry.setIndex(new THREE.BufferAttribute(stage.faces, 1));
     this.glass.clear();
     const mesh = new THREE.Mesh(geometry, this.glassMaterial);
@@ -262,6 +384,12 @@ export class SceneView {
     this.overlayScene.clear();
     this.overlayScene.add(quad);
     this.overlay = stage;
+  }
+
+  // No `full` overlay until the next.
+  clearOverlay() {
+    this.overlayScene.clear();
+    this.overlay = null;
   }
 
   // Whether the overlay was traced from the eye shown now.
@@ -317,7 +445,7 @@ export class SceneView {
     }
     this.presentMaterial.uniforms.color.value = target.texture;
     this.presentMaterial.uniforms.depth.value = target.depthTexture;
-    this.glassMaterial.uniforms.behind.value = target.texture;
+    this.glassMaterial.uniforms.behindScene.value = target.textures[1];
     const eye = this.eye();
     this.camera.position.set(...eye);
     this.camera.lookAt(...this.setup.target);

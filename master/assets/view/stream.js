@@ -9,7 +9,7 @@ export function decodeStage(buffer) {
   const view = new DataView(buffer);
   const magic = String.fromCharCode(...new Uint8Array(buffer, 0, 4));
   if (magic !== "VTVS") throw new Error("not a stage message");
-  if (view.getUint8(4) !== 1) throw new Error("stage message version " + view.getUint8(4));
+  if (view.getUint8(4) !== 2) throw new Error("stage message version " + view.getUint8(4));
   const kind = view.getUint8(5);
   const header = {
     quality: QUALITIES[view.getUint8(6)],
@@ -31,10 +31,16 @@ export function decodeStage(buffer) {
     const transmitted = plane();
     const objects = words(at, vertices);
     at += vertices * 4;
+    const behind = plane();
+    const reflectionScale = floats(at, vertices);
+    at += vertices * 4;
     const indices = words(at, faces * 3);
     at += faces * 12;
     if (at !== buffer.byteLength) throw new Error("a mesh message of the wrong length");
-    return { kind: "mesh", ...header, positions, colors, reflected, transmitted, objects, faces: indices };
+    return {
+      kind: "mesh", ...header, positions, colors, reflected, transmitted, objects,
+      behind, reflectionScale, faces: indices,
+    };
   }
   if (kind === 2) {
     const [frameWidth, frameHeight, x0, y0, width, height] =

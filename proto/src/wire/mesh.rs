@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use vtfarm_vertex::{PixelValue, StageMesh};
+use vtfarm_vertex::{PixelValue, SlabWeights, StageMesh};
 
 use crate::wire::WireError;
 
@@ -26,6 +26,10 @@ pub struct WireMeshPart {
     pub reflected: Vec<[f32; 3]>,
     pub transmitted: Vec<[f32; 3]>,
     pub objects: Vec<u32>,
+    /// Per vertex, its [`SlabWeights`]: what of the scene behind shows
+    /// through, and the factor on the reflection.
+    pub behind: Vec<[f32; 3]>,
+    pub reflection_scale: Vec<f32>,
     pub faces: Vec<[u32; 3]>,
 }
 
@@ -42,6 +46,8 @@ impl From<&[StageMesh]> for WireMesh {
                 reflected: per_vertex(|s| s.reflected),
                 transmitted: per_vertex(|s| s.transmitted),
                 objects: m.samples.iter().map(|s| s.object).collect(),
+                behind: m.slabs.iter().map(|s| s.behind.to_array()).collect(),
+                reflection_scale: m.slabs.iter().map(|s| s.reflection_scale).collect(),
                 faces: m.faces.clone(),
             }
         });
@@ -67,6 +73,8 @@ impl WireMeshPart {
             ("mesh reflected", self.reflected.len()),
             ("mesh transmitted", self.transmitted.len()),
             ("mesh objects", self.objects.len()),
+            ("mesh behind", self.behind.len()),
+            ("mesh reflection_scale", self.reflection_scale.len()),
         ];
         for (field, actual) in lists {
             if actual != n {
@@ -77,9 +85,23 @@ impl WireMeshPart {
                 });
             }
         }
-        if self.positions.iter().flatten().any(|v| !v.is_finite()) {
+        let finite = [
+            (
+                "mesh positions",
+                self.positions.iter().flatten().all(|v| v.is_finite()),
+            ),
+            (
+                "mesh behind",
+                self.behind.iter().flatten().all(|v| v.is_finite()),
+            ),
+            (
+                "mesh reflection_scale",
+                self.reflection_scale.iter().all(|v| v.is_finite()),
+            ),
+        ];
+        if let Some((field, _)) = finite.iter().find(|(_, finite)| !finite) {
             return Err(WireError::NotFinite {
-                field: "mesh positions".to_owned(),
+                field: (*field).to_owned(),
             });
         }
         if let Some(&index) = self.faces.iter().flatten().find(|&&v| v as usize >= n) {
@@ -96,10 +118,15 @@ impl WireMeshPart {
             transmitted: Vec3::from(self.transmitted[k]),
             object: self.objects[k],
         });
+        let slabs = (0..n).map(|k| SlabWeights {
+            behind: Vec3::from(self.behind[k]),
+            reflection_scale: self.reflection_scale[k],
+        });
         Ok(StageMesh {
             triangle: vtfarm_scene::TriangleId(self.triangle),
             positions: self.positions.iter().map(|&p| Vec3::from(p)).collect(),
             samples: samples.collect(),
+            slabs: slabs.collect(),
             faces: self.faces.clone(),
         })
     }
@@ -117,6 +144,8 @@ mod tests {
             reflected: vec![[0.25; 3]; 3],
             transmitted: vec![[0.0; 3]; 3],
             objects: vec![1, 2, u32::MAX],
+            behind: vec![[0.7; 3], [0.6; 3], [0.0; 3]],
+            reflection_scale: vec![1.5, 1.25, 1.0],
             faces: vec![[0, 1, 2]],
         }
     }
@@ -169,6 +198,16 @@ mod tests {
         assert!(matches!(
             infinite.decode(),
             Err(WireError::NotFinite { .. })
+        ));
+        let not_a_number = WireMesh {
+            parts: vec![WireMeshPart {
+                reflection_scale: vec![1.0, f32::NAN, 1.0],
+                ..part()
+            }],
+        };
+        assert!(matches!(
+            not_a_number.decode(),
+            Err(WireError::NotFinite { field }) if field == "mesh reflection_scale"
         ));
     }
 }
