@@ -128,7 +128,7 @@ pub(crate) struct EmbeddedJob<'a> {
     pub(crate) name: &'a str,
     pub(crate) scene: &'a Scene,
     pub(crate) setup: &'a FrameSetup,
-    pub(crate) reflectors: &'a [u32],
+    pub(crate) reflectors: &'a [vtfarm_scene::TriangleId],
     pub(crate) method: MethodKind,
     /// Also return the per-pixel components.
     pub(crate) aux: bool,

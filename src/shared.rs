@@ -76,7 +76,7 @@ impl ImageSize {
 pub(crate) struct PreparedJob {
     pub(crate) job: vtfarm_job::Job,
     pub(crate) scene: vtfarm_scene::Scene,
-    pub(crate) reflectors: Vec<u32>,
+    pub(crate) reflectors: Vec<vtfarm_scene::TriangleId>,
     pub(crate) setups: Vec<FrameSetup>,
 }
 
@@ -122,7 +122,7 @@ pub(crate) fn prepare_job(
 pub(crate) fn warn_unsupported_reflectors(
     method: vtfarm_method::MethodKind,
     scene: &vtfarm_scene::Scene,
-    reflectors: &[u32],
+    reflectors: &[vtfarm_scene::TriangleId],
 ) {
     for warning in vtfarm_cubemap::unsupported_reflector_warnings(method, scene, reflectors) {
         eprintln!("warning: {warning}");

@@ -20,7 +20,7 @@ use vtfarm_proto::{
     encode_message,
 };
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::{Camera, Scene};
+use vtfarm_scene::{Camera, Scene, TriangleId};
 use vtfarm_submit::{
     FinishedFrame, JobError, JobOptions, RemoteJob, run_job, run_remote_job, wire_job,
 };
@@ -37,7 +37,7 @@ static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 /// A small cockpit, its reflectors and a few frames from slightly different eyes.
 struct Job {
     scene: Scene,
-    reflectors: Vec<u32>,
+    reflectors: Vec<TriangleId>,
     frames: Vec<FrameSetup>,
 }
 
@@ -402,10 +402,7 @@ async fn the_farm_runs_per_reflector_methods_reflector_by_reflector() {
     // centre console, so that the reflectors spread over the workers.
     for name in ["steering_wheel", "center_console"] {
         let object = job.scene.object_id(name).unwrap();
-        job.reflectors.extend(
-            (0..job.scene.triangles.len() as u32)
-                .filter(|&t| job.scene.triangles[t as usize].object == object),
-        );
+        job.reflectors.extend(job.scene.triangles_of(object));
     }
     let cluster = Cluster::start(FarmRules::default());
     let _w1 = cluster.worker("w1", 1.0);

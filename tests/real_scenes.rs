@@ -248,7 +248,8 @@ fn write(dir: &Path, name: &str, obj: &str, mtl: &str, files: &[&str]) -> std::p
 
 /// The triangles of objects whose material reflects.
 fn reflectors(scene: &Scene) -> Vec<TriangleId> {
-    (0..scene.triangles.len() as TriangleId)
+    scene
+        .triangle_ids()
         .filter(|&t| scene.material_of(t).reflectance.max_element() > 0.0)
         .collect()
 }
@@ -367,7 +368,7 @@ fn a_corpus_of_exporter_quirks_loads_and_renders() {
         assert_eq!(warnings, usize::from(name == "textures"), "{name}");
         let glass = scene.material_id("glass").expect("glass keeps its name");
         assert!(
-            scene.materials[glass as usize].reflectance.min_element() > 0.03,
+            scene.materials[glass.index()].reflectance.min_element() > 0.03,
             "{name}: glass reflects by Fresnel"
         );
 
@@ -426,19 +427,19 @@ fn reference_map(
     ids: &IdBuffer,
     is_reflector: &[bool],
 ) -> Vec<Option<u32>> {
-    let triangles: Vec<Triangle64> = (0..scene.triangles.len() as TriangleId)
+    let triangles: Vec<Triangle64> = (scene.triangle_ids())
         .map(|t| scene.triangle_positions(t).map(|p| p.as_dvec3()))
         .collect();
     let eye = camera.eye.as_dvec3();
     (0..ids.triangle.len())
         .map(|i| {
-            let own = ids.triangle[i];
-            if own == NONE || !is_reflector[own as usize] {
+            let own = TriangleId::from_raw(ids.triangle[i])?;
+            if !is_reflector[own.index()] {
                 return None;
             }
             let (x, y) = (i as u32 % ids.width, i as u32 / ids.width);
             let direction = camera.pixel_ray(x, y).as_dvec3();
-            let [a, b, c] = triangles[own as usize];
+            let [a, b, c] = triangles[own.index()];
             let n = (b - a).cross(c - a);
             let point = eye + direction * ((a - eye).dot(n) / direction.dot(n));
             let area = n.length_squared();
@@ -454,7 +455,7 @@ fn reference_map(
             let mirror = (direction - 2.0 * direction.dot(facing) * facing).normalize();
             let floor = 1e-9 * (1.0 + point.abs().max_element());
             let closest = (0..triangles.len())
-                .filter(|&t| t != own as usize)
+                .filter(|&t| t != own.index())
                 .filter_map(|t| intersect64(&triangles[t], point, mirror).map(|d| (d, t)))
                 .filter(|&(d, _)| d > floor)
                 .min_by(|p, q| p.0.total_cmp(&q.0));
@@ -475,7 +476,7 @@ fn agreement(scene: &Arc<Scene>, camera: Camera, quality: Quality) -> (f64, usiz
     );
     let mut is_reflector = vec![false; scene.triangles.len()];
     for t in reflectors {
-        is_reflector[t as usize] = true;
+        is_reflector[t.index()] = true;
     }
     let ids = vtfarm_raster::id_buffer(scene, &camera);
     let expected = reference_map(scene, &camera, &ids, &is_reflector);

@@ -182,8 +182,9 @@ fn setup() -> FrameSetup {
 
 fn reflector_triangles(scene: &Scene) -> Vec<TriangleId> {
     let chosen = [scene.object_id("mirror"), scene.object_id("pane")].map(Option::unwrap);
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| chosen.contains(&scene.triangles[t as usize].object))
+    scene
+        .triangle_ids()
+        .filter(|&t| chosen.contains(&scene.triangles[t.index()].object))
         .collect()
 }
 
@@ -268,6 +269,6 @@ fn a_missing_texture_is_a_warning_at_its_line_and_the_colour_stays_flat() {
         "{message}"
     );
     let scene = imported.scene;
-    let wall = &scene.materials[scene.material_id("wall").unwrap() as usize];
+    let wall = &scene.materials[scene.material_id("wall").unwrap().index()];
     assert_eq!((wall.diffuse, wall.diffuse_texture), (Vec3::ONE, None));
 }

@@ -222,7 +222,7 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
         let (scene, lights) = (scene.clone(), lighting.lights.clone());
         let mut is_reflector = vec![false; scene.triangles.len()];
         for &t in &source.reflectors {
-            if let Some(r) = is_reflector.get_mut(t as usize) {
+            if let Some(r) = is_reflector.get_mut(t.index()) {
                 *r = true;
             }
         }
@@ -253,7 +253,7 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
             .collect(),
     };
     let mut reflector_objects: Vec<String> = (source.reflectors.iter())
-        .filter_map(|&t| scene.triangles.get(t as usize))
+        .filter_map(|&t| scene.triangles.get(t.index()))
         .map(|t| scene.objects[t.object.index()].name.clone())
         .collect();
     reflector_objects.sort();

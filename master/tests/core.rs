@@ -124,7 +124,7 @@ fn start_job(frames: usize) -> StartedFrame {
         detail: 0.2,
         ..CockpitConfig::default()
     });
-    let reflectors: Vec<u32> = c.cover_glass_triangles();
+    let reflectors = c.cover_glass_triangles();
     let setup = small_frame(&c, glam::Vec3::ZERO);
     let reference = Renderer::new(Arc::new(c.scene.clone()), reflectors.clone()).render(
         &setup,

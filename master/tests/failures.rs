@@ -43,7 +43,7 @@ fn small_job() -> (
     WireJob,
     SceneData,
     FrameSetup,
-    Vec<u32>,
+    Vec<vtfarm_scene::TriangleId>,
     vtfarm_scene::Scene,
 ) {
     let c = cockpit(&CockpitConfig {

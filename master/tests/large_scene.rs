@@ -49,7 +49,7 @@ async fn a_worker_building_the_largest_scene_keeps_its_heartbeat() {
     };
     // A few reflector triangles: the BVH is the whole scene's all the same.
     let glass = c.cover_glass_triangles();
-    let reflectors: Vec<u32> = glass.iter().step_by(glass.len() / 64).copied().collect();
+    let reflectors: Vec<_> = glass.iter().step_by(glass.len() / 64).copied().collect();
     let data = SceneData::from_scene(&c.scene);
     drop(c);
     let options = JobOptions {

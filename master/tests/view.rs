@@ -30,7 +30,7 @@ use vtfarm_proto::{
     Message, PackageResult, PhaseKind, ResultPixels, SceneData, WireBitmap, WireQuality,
 };
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
-use vtfarm_scene::{Projector, ScreenPoint};
+use vtfarm_scene::{Projector, ScreenPoint, TriangleId};
 use vtfarm_vertex::{Quality, SparseBitmap};
 
 /// Virtual time a scenario may take at most.
@@ -176,7 +176,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
 
 /// A farm of two workers that rendered a job of the small cockpit (the
 /// view's source): the farm, the cockpit, its reflectors, the job's id.
-fn farm_with_a_source() -> (Pair, Cockpit, Vec<u32>, JobId) {
+fn farm_with_a_source() -> (Pair, Cockpit, Vec<TriangleId>, JobId) {
     let c = cockpit(&CockpitConfig {
         detail: 0.2,
         glass_segments: 24,
@@ -211,7 +211,7 @@ fn moved(c: &Cockpit, offset: Vec3, quality: Quality) -> FrameSetup {
 fn assert_the_view_shows_the_full_render(
     pair: &Pair,
     c: &Cockpit,
-    reflectors: Vec<u32>,
+    reflectors: Vec<TriangleId>,
     offset: Vec3,
 ) {
     let latest = pair.master.views().latest().unwrap();
@@ -302,7 +302,7 @@ fn a_move_is_one_progressive_frame_set_up_once_its_last_stage_the_single_process
             assert_eq!(run.job, job);
             stages_of.entry(run.package).or_default().push(run.stage);
             if run.stage == 0 {
-                packages.push(run.triangles.clone());
+                packages.push(run.triangles.iter().copied().map(TriangleId).collect());
             }
             traced.0 += run.stats.vertex_samples;
             traced.1 += run.stats.filled_pixels;
@@ -600,12 +600,12 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
                     let reflectors = c.cover_glass_triangles();
                     let vertices: usize = meshes.iter().map(|m| m.positions.len()).sum();
                     assert_eq!(vertices, 3 * reflectors.len(), "each reflector's corners");
-                    let corners_of = |t: u32| {
-                        let tri = c.scene.triangles[t as usize];
+                    let corners_of = |t: TriangleId| {
+                        let tri = c.scene.triangles[t.index()];
                         tri.vertices
                             .map(|v| c.scene.positions[v as usize].to_array().map(f32::to_bits))
                     };
-                    let triangle_at: std::collections::BTreeMap<_, u32> =
+                    let triangle_at: std::collections::BTreeMap<_, TriangleId> =
                         reflectors.iter().map(|&t| (corners_of(t), t)).collect();
                     let (ids, _) = renderer.id_buffers(&setup);
                     let shown: BTreeSet<u32> = (0..ids.height)
@@ -621,7 +621,7 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
                             let corners =
                                 face.map(|v| m.positions[v as usize].to_array().map(f32::to_bits));
                             let t = triangle_at[&corners];
-                            assert!(!shown.contains(&t), "triangle {t} is shown");
+                            assert!(!shown.contains(&t.raw()), "triangle {t} is shown");
                             extra += 1;
                         }
                     }

@@ -45,7 +45,7 @@ pub use wire::{
     WireBitmap, WireBitmapParts, WireCamera, WireError, WireFrameSetup, WireImage, WireImageFormat,
     WireLight, WireLightKind, WireLighting, WireMaterial, WireMesh, WireMeshPart, WireMethod,
     WirePackageStats, WireQuality, WireScene, WireTraceSettings, WireTransmission, WireTriangle,
-    WireVertexSettings, check_triangle_ids,
+    WireVertexSettings, check_triangle_ids, wire_triangles,
 };
 
 /// The protocol version in every `Hello` and `Welcome`. Bump it on any change

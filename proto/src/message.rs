@@ -29,7 +29,7 @@
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use vtfarm_method::{FrameSetup, MethodKind};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_vertex::Quality;
 
 use crate::wire::{
@@ -765,14 +765,14 @@ pub fn wire_job(
     name: &str,
     scene: &SceneData,
     frames: &[FrameSetup],
-    reflectors: &[u32],
+    reflectors: &[TriangleId],
     options: JobOptions,
 ) -> WireJob {
     WireJob {
         name: name.to_owned(),
         scene: JobScene::Hash(scene.hash),
         frames: frames.iter().map(WireFrameSetup::from).collect(),
-        reflectors: reflectors.to_vec(),
+        reflectors: crate::wire_triangles(reflectors),
         aux: options.aux,
         method: options.method.into(),
         image: WireImageFormat::LinearF32,

@@ -25,7 +25,7 @@ use vtfarm_proto::{
 };
 use vtfarm_raster::IdBuffer;
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_vertex::{
     Behind, Frame, PackageOptions, PackageStats, ProgressivePackage, Quality, SparseBitmap,
     StageError, Stop, trace_package,
@@ -121,7 +121,7 @@ pub struct ActiveFrame {
     pub job: JobId,
     pub frame: u32,
     /// The scene and reflectors the renderer was built for (its cache key).
-    renderer_key: (SceneHash, Vec<u32>),
+    renderer_key: (SceneHash, Vec<TriangleId>),
     renderer: Arc<Renderer>,
     setup: FrameSetup,
     ids: IdBuffer,
@@ -140,7 +140,7 @@ pub struct ActiveFrame {
 /// A per-reflector method with the reflector groups its package items index.
 struct PerReflector {
     method: Box<dyn ReflectionMethod>,
-    groups: Vec<Vec<u32>>,
+    groups: Vec<Vec<TriangleId>>,
 }
 
 impl ActiveFrame {
@@ -275,9 +275,9 @@ fn trace(
     triangles: &[u32],
 ) -> Result<(SparseBitmap, PackageStats, Vec<u32>), PackageError> {
     let triangle_count = frame.tracer.bvh.scene().triangles.len();
-    check_triangle_ids("package triangles", triangles, triangle_count)
+    let triangles = check_triangle_ids("package triangles", triangles, triangle_count)
         .map_err(PackageError::Triangles)?;
-    let result = trace_package(frame, triangles, &PackageOptions::default(), &mut |_| {});
+    let result = trace_package(frame, &triangles, &PackageOptions::default(), &mut |_| {});
     Ok((result.bitmap, result.stats, result.triangle_samples))
 }
 
@@ -296,9 +296,10 @@ fn advance(
         Some(staged) => staged,
         None if stage == 0 => {
             let triangle_count = frame.tracer.bvh.scene().triangles.len();
-            check_triangle_ids("package triangles", &package.triangles, triangle_count)
-                .map_err(PackageError::Triangles)?;
-            progress.insert(ProgressivePackage::new(frame, &package.triangles))
+            let triangles =
+                check_triangle_ids("package triangles", &package.triangles, triangle_count)
+                    .map_err(PackageError::Triangles)?;
+            progress.insert(ProgressivePackage::new(frame, &triangles))
         }
         None => {
             let id = package.id;
@@ -443,7 +444,7 @@ pub struct Engine {
     scenes: BTreeMap<SceneHash, Arc<Scene>>,
     /// The renderer of the last (scene, reflectors): building a BVH is the
     /// expensive part of a new frame, so consecutive frames share it.
-    renderer: Option<(SceneHash, Vec<u32>, Arc<Renderer>)>,
+    renderer: Option<(SceneHash, Vec<TriangleId>, Arc<Renderer>)>,
 }
 
 impl Engine {
@@ -509,8 +510,9 @@ impl Engine {
     /// [`Engine::keep_renderer`].
     pub fn frame_parts(&mut self, start: FrameStart) -> Result<FrameParts, FrameError> {
         let scene = (self.scenes.get(&start.scene).cloned()).ok_or(FrameError::UnknownScene)?;
-        check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
-            .map_err(FrameError::Reflectors)?;
+        let reflectors =
+            check_triangle_ids("frame reflectors", &start.reflectors, scene.triangles.len())
+                .map_err(FrameError::Reflectors)?;
         let setup = FrameSetup::try_from(start.setup).map_err(FrameError::Setup)?;
         check_stages(&start.stages, start.method).map_err(FrameError::Stages)?;
         let stages = start.stages.iter().map(|&q| Quality::from(q)).collect();
@@ -518,12 +520,10 @@ impl Engine {
         let method = MethodKind::from(start.method);
         let per_reflector = method.per_reflector().then(|| PerReflector {
             method: vtfarm_render::method(method, setup.vertex),
-            groups: reflector_groups(&scene, &start.reflectors),
+            groups: reflector_groups(&scene, &reflectors),
         });
         let renderer = match &self.renderer {
-            Some((hash, reflectors, r))
-                if *hash == start.scene && *reflectors == start.reflectors =>
-            {
+            Some((hash, cached, r)) if *hash == start.scene && *cached == reflectors => {
                 Some(r.clone())
             }
             _ => None,
@@ -533,7 +533,7 @@ impl Engine {
             frame: start.frame,
             aux: start.aux,
             image: start.image,
-            renderer_key: (start.scene, start.reflectors),
+            renderer_key: (start.scene, reflectors),
             scene,
             renderer,
             setup,
@@ -562,7 +562,7 @@ pub struct FrameParts {
     frame: u32,
     aux: bool,
     image: WireImageFormat,
-    renderer_key: (SceneHash, Vec<u32>),
+    renderer_key: (SceneHash, Vec<TriangleId>),
     scene: Arc<Scene>,
     renderer: Option<Arc<Renderer>>,
     setup: FrameSetup,
@@ -642,7 +642,7 @@ mod tests {
     use super::*;
     use glam::Vec3;
     use vtfarm_cockpit::Cockpit;
-    use vtfarm_proto::{SceneData, WireFrameSetup};
+    use vtfarm_proto::{SceneData, WireFrameSetup, wire_triangles};
     use vtfarm_scene::{Camera, Light, LightKind};
 
     /// A small cockpit and an engine that holds it.
@@ -678,7 +678,7 @@ mod tests {
         frame: u32,
         camera: Camera,
         sun: Vec3,
-        reflectors: &[u32],
+        reflectors: &[TriangleId],
     ) -> FrameStart {
         let mut lighting = cockpit.lighting.clone();
         lighting.lights[0] = Light {
@@ -696,7 +696,7 @@ mod tests {
             frame,
             scene: hash,
             setup: WireFrameSetup::from(&setup),
-            reflectors: reflectors.to_vec(),
+            reflectors: wire_triangles(reflectors),
             method: MethodKind::VertexTracing.into(),
             aux: true,
             image: WireImageFormat::LinearF32,
@@ -711,7 +711,7 @@ mod tests {
         let (cockpit, hash, mut engine) = cockpit_engine();
         let reflectors = cockpit.cover_glass_triangles();
         let camera = sized(&cockpit, 32, 18);
-        let start = |frame: u32, sun: Vec3, reflectors: &[u32]| {
+        let start = |frame: u32, sun: Vec3, reflectors: &[TriangleId]| {
             cockpit_frame((&cockpit, hash), frame, camera, sun, reflectors)
         };
         let a = engine
@@ -747,7 +747,7 @@ mod tests {
             id: 1,
             job: JobId(1),
             frame: 1,
-            triangles: reflectors.clone(),
+            triangles: wire_triangles(&reflectors),
             whole: Some(Box::new(second.clone())),
         };
         let run = |frame: &ActiveFrame| {
@@ -807,7 +807,7 @@ mod tests {
                 id: u64::from(frame),
                 job: JobId(1),
                 frame,
-                triangles: triangles.to_vec(),
+                triangles: wire_triangles(triangles),
                 whole: None,
             })
         };
@@ -878,7 +878,7 @@ mod tests {
             id: 4,
             job: JobId(1),
             frame: 0,
-            triangles: reflectors[reflectors.len() / 3..].to_vec(),
+            triangles: wire_triangles(&reflectors[reflectors.len() / 3..]),
             whole: None,
         };
         let unlimited = || Stop::with_budget(u64::MAX);
@@ -963,7 +963,7 @@ mod tests {
             .expect("a view's frame has a corner mesh");
         assert_eq!(engine.set_ups(), 0, "no frame was set up for it");
         let corners = mesh.decode().unwrap();
-        let mut parts: Vec<u32> = corners.iter().map(|m| m.triangle).collect();
+        let mut parts: Vec<TriangleId> = corners.iter().map(|m| m.triangle).collect();
         parts.sort_unstable();
         let mut all = reflectors.clone();
         all.sort_unstable();
@@ -974,7 +974,7 @@ mod tests {
             id: 1,
             job: JobId(1),
             frame: 0,
-            triangles: reflectors.clone(),
+            triangles: wire_triangles(&reflectors),
             whole: None,
         };
         let stop = Stop::with_budget(u64::MAX);
@@ -999,7 +999,7 @@ mod tests {
     #[test]
     fn a_reflector_too_large_for_a_corner_mesh_has_none() {
         let (cockpit, hash, mut engine) = cockpit_engine_at(1.0);
-        let every_triangle: Vec<u32> = (0..cockpit.scene.triangles.len() as u32).collect();
+        let every_triangle: Vec<TriangleId> = cockpit.scene.triangle_ids().collect();
         assert!(every_triangle.len() > MAX_CORNER_MESH_TRIANGLES);
         let camera = sized(&cockpit, 96, 54);
         let sun = Vec3::new(0.45, -0.85, -0.15);

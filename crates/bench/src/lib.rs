@@ -367,7 +367,7 @@ fn ray_throughput(bvh: &SceneBvh, camera: &vtfarm_scene::Camera) -> (f64, f64) {
 struct CockpitJob {
     scene: Arc<vtfarm_scene::Scene>,
     /// Reflector triangle ids, ascending (as a job file selects them).
-    reflectors: Vec<u32>,
+    reflectors: Vec<vtfarm_scene::TriangleId>,
     setup: FrameSetup,
 }
 

@@ -23,6 +23,7 @@ use vtfarm_render::Renderer;
 use vtfarm_vertex::{PixelValue, Quality, VertexSettings, reflector_bounds};
 
 use super::CockpitJob;
+use vtfarm_scene::TriangleId;
 
 #[derive(clap::Args)]
 pub struct RasterArgs {
@@ -60,7 +61,7 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
         let mut is_reflector = vec![false; scene.triangles.len()];
         job.reflectors
             .iter()
-            .for_each(|&t| is_reflector[t as usize] = true);
+            .for_each(|&t| is_reflector[t.index()] = true);
         let margin = VertexSettings::default().visibility_radius + 1;
         let bounds = reflector_bounds(scene, camera, &is_reflector, margin);
         println!(
@@ -78,10 +79,10 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
         let glass: Vec<(u32, u32)> = bounds
             .pixels()
             .filter(|&(x, y)| {
-                let t = frame_ids.triangle_at(x, y);
-                t != vtfarm_scene::NONE
-                    && is_reflector[t as usize]
-                    && scene.material_of(t).transmittance.max_element() > 0.0
+                TriangleId::from_raw(frame_ids.triangle_at(x, y)).is_some_and(|t| {
+                    is_reflector[t.index()]
+                        && scene.material_of(t).transmittance.max_element() > 0.0
+                })
             })
             .collect();
         for &n in &threads {
@@ -132,7 +133,7 @@ pub(crate) fn run(args: RasterArgs) -> Result<()> {
             // A worker's three buffers (frame, behind the glass, the slab's
             // back) rasterized one by one and together, rounds interleaved
             // so that both see the same machine.
-            let all = |_: u32| true;
+            let all = |_: TriangleId| true;
             let passes = [0, 16, 0].map(|margin| IdPass {
                 within: reflector_bounds(scene, camera, &is_reflector, margin),
                 keep: &all,

@@ -312,7 +312,7 @@ impl RaySets {
             .iter()
             .filter_map(|ray| {
                 let hit = bvh.closest_hit(ray, f32::INFINITY)?;
-                if Some(scene.triangles[hit.triangle as usize].object) != reflector {
+                if Some(scene.triangles[hit.triangle.index()].object) != reflector {
                     return None;
                 }
                 let surface = bvh.surface_point(&hit);
@@ -341,7 +341,7 @@ impl RaySets {
     fn dump(&self, bvh: &SceneBvh, dir: &std::path::Path) -> Result<()> {
         let scene = bvh.scene();
         std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
-        let corners: Vec<f32> = (0..scene.triangles.len() as vtfarm_scene::TriangleId)
+        let corners: Vec<f32> = (scene.triangle_ids())
             .flat_map(|id| scene.triangle_positions(id))
             .flat_map(|p| p.to_array())
             .collect();

@@ -360,7 +360,7 @@ pub(crate) fn run(args: SimulateArgs) -> Result<()> {
     let total = recording.total_seconds() * args.cost_scale;
     let n = recording.triangles.len().max(1) as f64;
     let costs = FarmCosts {
-        items: recording.triangles.clone(),
+        items: vtfarm_proto::wire_triangles(&recording.triangles),
         seconds: recording
             .seconds
             .iter()

@@ -965,7 +965,7 @@ where
 /// wall seconds each, set-up included.
 fn local_renders(
     scene: &std::sync::Arc<vtfarm_scene::Scene>,
-    reflectors: &[u32],
+    reflectors: &[vtfarm_scene::TriangleId],
     setup: &FrameSetup,
     offsets: &[[f32; 3]],
 ) -> LocalFigures {

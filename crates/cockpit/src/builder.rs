@@ -17,14 +17,15 @@ impl SceneBuilder {
     pub(crate) fn material(&mut self, material: Material) -> MaterialId {
         if let Some(id) = self.scene.material_id(&material.name) {
             debug_assert_eq!(
-                self.scene.materials[id as usize], material,
+                self.scene.materials[id.index()],
+                material,
                 "two materials named {}",
                 material.name
             );
             return id;
         }
         self.scene.materials.push(material);
-        (self.scene.materials.len() - 1) as MaterialId
+        MaterialId(self.scene.materials.len() as u32 - 1)
     }
 
     /// Starts a new object; names must be unique.

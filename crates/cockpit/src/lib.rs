@@ -128,9 +128,7 @@ impl Cockpit {
             .scene
             .object_id(COVER_GLASS)
             .expect("the generator always makes the cover glass");
-        (0..self.scene.triangles.len() as u32)
-            .filter(|&t| self.scene.triangles[t as usize].object == glass)
-            .collect()
+        self.scene.triangles_of(glass).collect()
     }
 }
 

@@ -11,7 +11,7 @@ use vtfarm_cockpit::{
     DIAL_FACE_CD_M2, GLASS_MATERIAL, MARKING_CD_M2, SKY_CD_M2, SUN_ILLUMINANCE_LUX,
     SUNLIT_WINDOW_CD_M2, cockpit, default_eye,
 };
-use vtfarm_scene::{Camera, LightKind, ObjectId, Scene};
+use vtfarm_scene::{Camera, LightKind, MaterialId, ObjectId, Scene};
 
 fn default_cockpit() -> &'static Cockpit {
     static COCKPIT: OnceLock<Cockpit> = OnceLock::new();
@@ -46,11 +46,6 @@ fn vertex_range(scene: &Scene, id: ObjectId) -> std::ops::RangeInclusive<usize> 
     lo as usize..=hi as usize
 }
 
-/// The triangles of an object.
-fn triangles_of(scene: &Scene, id: ObjectId) -> impl Iterator<Item = u32> + '_ {
-    (0..scene.triangles.len() as u32).filter(move |&t| scene.triangles[t as usize].object == id)
-}
-
 /// The bounding box of an object's vertices.
 fn object_bounds(scene: &Scene, id: ObjectId) -> (Vec3, Vec3) {
     vertex_range(scene, id)
@@ -68,7 +63,8 @@ struct Caster<'a> {
 
 impl<'a> Caster<'a> {
     fn new(scene: &'a Scene) -> Self {
-        let triangles = (0..scene.triangles.len() as u32)
+        let triangles = scene
+            .triangle_ids()
             .map(|t| scene.triangle_positions(t))
             .collect();
         Caster { scene, triangles }
@@ -148,7 +144,7 @@ fn generation_is_deterministic() {
 #[test]
 fn no_triangle_is_degenerate() {
     for scene in [&default_cockpit().scene, &large_cockpit().scene] {
-        for t in 0..scene.triangles.len() as u32 {
+        for t in scene.triangle_ids() {
             let [a, b, c] = scene.triangle_positions(t);
             let area = (b - a).cross(c - a).length() * 0.5;
             assert!(
@@ -163,9 +159,9 @@ fn no_triangle_is_degenerate() {
 #[test]
 fn windings_agree_with_vertex_normals() {
     let scene = &default_cockpit().scene;
-    for t in 0..scene.triangles.len() as u32 {
+    for t in scene.triangle_ids() {
         let mean: Vec3 = scene.triangle_normals(t).iter().sum();
-        let object = &scene.objects[scene.triangles[t as usize].object.index()].name;
+        let object = &scene.objects[scene.triangles[t.index()].object.index()].name;
         assert!(
             scene.geometric_normal(t).dot(mean) > 0.0,
             "triangle {t} of {object} is wound clockwise"
@@ -219,7 +215,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
         );
     }
     // Material -> objects using it: only the two glass surfaces share one.
-    let mut users: BTreeMap<u32, Vec<ObjectId>> = BTreeMap::new();
+    let mut users: BTreeMap<MaterialId, Vec<ObjectId>> = BTreeMap::new();
     for t in &scene.triangles {
         let objects = users.entry(t.material).or_default();
         if !objects.contains(&t.object) {
@@ -227,7 +223,7 @@ fn objects_are_the_documented_ones_each_with_its_own_material() {
         }
     }
     for (material, objects) in users {
-        let name = &scene.materials[material as usize].name;
+        let name = &scene.materials[material.index()].name;
         if name == GLASS_MATERIAL {
             assert_eq!(
                 objects,
@@ -252,7 +248,7 @@ fn windows_are_bright_panels_and_the_glass_is_a_weak_mirror() {
     let emission = |name: &str| {
         let id = object(scene, name);
         scene
-            .material_of(scene.triangles.iter().position(|t| t.object == id).unwrap() as u32)
+            .material_of(scene.triangles_of(id).next().unwrap())
             .emission
     };
     // Emitters have the luminance in cd/m² the cockpit documents.
@@ -270,7 +266,7 @@ fn windows_are_bright_panels_and_the_glass_is_a_weak_mirror() {
         vtfarm_scene::photometry::cd_m2(sun.radiance()),
         SUN_ILLUMINANCE_LUX / std::f32::consts::PI
     ));
-    let glass = &scene.materials[scene.material_id(GLASS_MATERIAL).unwrap() as usize];
+    let glass = &scene.materials[scene.material_id(GLASS_MATERIAL).unwrap().index()];
     assert_eq!(glass.reflectance, Vec3::splat(0.12));
     assert_eq!(glass.transmittance, Vec3::splat(0.85));
     assert_eq!(glass.ior, 1.5);
@@ -283,7 +279,7 @@ fn glass_is_a_concave_thin_shell_facing_the_driver() {
     let eye = default_eye();
     let (front, back) = (object(scene, COVER_GLASS), object(scene, COVER_GLASS_BACK));
     for id in [front, back] {
-        assert_eq!(triangles_of(scene, id).count(), 24 * 12 * 2);
+        assert_eq!(scene.triangles_of(id).count(), 24 * 12 * 2);
     }
     let (fr, br) = (vertex_range(scene, front), vertex_range(scene, back));
     assert_eq!(fr.clone().count(), br.clone().count());
@@ -319,7 +315,7 @@ fn glass_is_a_concave_thin_shell_facing_the_driver() {
         "corners are only {bulge} m in front of the centre"
     );
     // Smooth normals: each triangle's vertex normals stay close to its plane's.
-    for t in triangles_of(scene, front) {
+    for t in scene.triangles_of(front) {
         let g = scene.geometric_normal(t);
         assert!(
             scene.triangle_normals(t).iter().all(|n| n.dot(g) > 0.999),
@@ -348,7 +344,7 @@ fn glass_tessellation_follows_the_config() {
     .scene;
     scene.validate().unwrap();
     let id = object(&scene, COVER_GLASS);
-    assert_eq!(triangles_of(&scene, id).count(), 16 * 8 * 2);
+    assert_eq!(scene.triangles_of(id).count(), 16 * 8 * 2);
 }
 
 #[test]
@@ -398,7 +394,7 @@ fn cover_glass_covers_at_least_160k_pixels_at_1080p() {
     };
     let id = object(&c.scene, COVER_GLASS);
     let mut area = 0.0;
-    for t in triangles_of(&c.scene, id) {
+    for t in c.scene.triangles_of(id) {
         let [a, b, c] = c
             .scene
             .triangle_positions(t)
@@ -422,7 +418,7 @@ fn cover_glass_is_not_hidden_from_the_eye() {
     let eye = default_eye();
     let id = object(&c.scene, COVER_GLASS);
     let (mut seen, mut total) = (0, 0);
-    for t in triangles_of(&c.scene, id) {
+    for t in c.scene.triangles_of(id) {
         let centroid = c.scene.triangle_positions(t).iter().sum::<Vec3>() / 3.0;
         total += 1;
         if caster.object_hit(eye, (centroid - eye).normalize()) == COVER_GLASS {
@@ -487,7 +483,7 @@ fn glass_mirrors_the_left_door_window_in_its_lower_part() {
             .triangles
             .iter()
             .find(|t| t.object == id)
-            .map(|t| c.scene.materials[t.material as usize].emission)
+            .map(|t| c.scene.materials[t.material.index()].emission)
     };
     let window: Vec<_> = hits.iter().filter(|h| h.2 == "side_window_left").collect();
     let dark = hits
@@ -635,7 +631,7 @@ fn every_design_validates_and_keeps_the_glass_visible_as_a_thin_shell() {
             object(&c.scene, COVER_GLASS),
             object(&c.scene, COVER_GLASS_BACK),
         );
-        assert_eq!(triangles_of(&c.scene, front).count(), 16 * 8 * 2);
+        assert_eq!(c.scene.triangles_of(front).count(), 16 * 8 * 2);
         for (f, b) in vertex_range(&c.scene, front).zip(vertex_range(&c.scene, back)) {
             let (p, n) = (c.scene.positions[f], c.scene.normals[f]);
             assert!(n.dot(eye - p) > 0.0, "{}: normal faces away", design.name());
@@ -643,7 +639,7 @@ fn every_design_validates_and_keeps_the_glass_visible_as_a_thin_shell() {
         }
         let caster = Caster::new(&c.scene);
         let (mut seen, mut total) = (0, 0);
-        for t in triangles_of(&c.scene, front) {
+        for t in c.scene.triangles_of(front) {
             let centroid = c.scene.triangle_positions(t).iter().sum::<Vec3>() / 3.0;
             total += 1;
             if caster.object_hit(eye, (centroid - eye).normalize()) == COVER_GLASS {

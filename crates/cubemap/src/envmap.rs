@@ -12,7 +12,7 @@ use vtfarm_method::{
     shade_reflector,
 };
 use vtfarm_raster::{id_buffer_where, shade_ids};
-use vtfarm_scene::{Lighting, Scene};
+use vtfarm_scene::{Lighting, Scene, TriangleId};
 
 use crate::cube::CubeLayout;
 use crate::reflected::reflected_triangle_flags;
@@ -47,7 +47,7 @@ impl EnvironmentCube {
             color: Vec::with_capacity(layout.texel_count()),
             object: Vec::with_capacity(layout.texel_count()),
         };
-        let keep = |t: u32| keep.get(t as usize).copied().unwrap_or(false);
+        let keep = |t: TriangleId| keep.get(t.index()).copied().unwrap_or(false);
         for face_index in 0..6 {
             let camera = layout.camera(face_index);
             let ids = id_buffer_where(scene, &camera, &keep);
@@ -87,7 +87,7 @@ pub(crate) fn mirror_direction(pixel: &ReflectorPixel) -> Vec3 {
 }
 
 /// The area-weighted centroid of the reflector's triangles.
-pub(crate) fn reflector_centroid(scene: &Scene, triangles: &[u32]) -> Vec3 {
+pub(crate) fn reflector_centroid(scene: &Scene, triangles: &[TriangleId]) -> Vec3 {
     let (sum, area) = triangles.iter().fold((Vec3::ZERO, 0.0), |(sum, area), &t| {
         let [a, b, c] = scene.triangle_positions(t);
         let w = 0.5 * (b - a).cross(c - a).length();

@@ -42,11 +42,11 @@ impl ReflectedMesh {
         let mut mesh = ReflectedMesh::default();
         // Scene vertex -> mesh vertex, assigned on first use.
         let mut shared = vec![u32::MAX; scene.positions.len()];
-        for (t, triangle) in scene.triangles.iter().enumerate() {
-            if !keep[t] {
+        for (t, triangle) in scene.triangle_ids().zip(&scene.triangles) {
+            if !keep[t.index()] {
                 continue;
             }
-            let corners = scene.triangle_positions(t as TriangleId);
+            let corners = scene.triangle_positions(t);
             let longest = (0..3)
                 .map(|k| (corners[k] - corners[(k + 1) % 3]).length())
                 .fold(0.0, f32::max);
@@ -88,7 +88,7 @@ impl ReflectedMesh {
             };
             let mut emit = |a: (u32, Vec3), b: (u32, Vec3), c: (u32, Vec3)| {
                 mesh.triangles.push(MeshTriangle {
-                    original: t as TriangleId,
+                    original: t,
                     corners: [a.0, b.0, c.0],
                     barycentric: [a.1, b.1, c.1],
                 });

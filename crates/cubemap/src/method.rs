@@ -148,7 +148,7 @@ impl CubeMapMethod {
                     let incoming = (point.position - pixel.point.position).normalize_or_zero();
                     let reflection = Reflection {
                         radiance: secondary.shade(&point, incoming).color,
-                        object: scene.triangles[point.triangle as usize].object.raw(),
+                        object: scene.triangles[point.triangle.index()].object.raw(),
                     };
                     (reflection, true)
                 }

@@ -18,7 +18,7 @@ pub fn reflected_triangle_flags(scene: &Scene, reflector: &[TriangleId]) -> Vec<
     // (looked up by name once per reflector object, not per triangle).
     let mut is_reflector = vec![false; scene.objects.len()];
     for &t in reflector {
-        is_reflector[scene.triangles[t as usize].object.index()] = true;
+        is_reflector[scene.triangles[t.index()].object.index()] = true;
     }
     let mut excluded = vec![false; scene.objects.len()];
     for (object, _) in is_reflector.iter().enumerate().filter(|(_, r)| **r) {
@@ -33,7 +33,7 @@ pub fn reflected_triangle_flags(scene: &Scene, reflector: &[TriangleId]) -> Vec<
         .map(|t| !excluded[t.object.index()])
         .collect();
     for &t in reflector {
-        flags[t as usize] = false;
+        flags[t.index()] = false;
     }
     flags
 }

@@ -55,7 +55,7 @@ pub fn unsupported_reflector_warnings(
     (vtfarm_method::reflector_groups(scene, reflectors).iter())
         .filter_map(|group| {
             let warning = classify(scene, group).warning()?;
-            let object = scene.triangles[group[0] as usize].object;
+            let object = scene.triangles[group[0].index()].object;
             let name = &scene.objects[object.index()].name;
             Some(format!("reflector {name:?}: {warning}"))
         })

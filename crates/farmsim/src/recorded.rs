@@ -19,10 +19,10 @@ use vtfarm_master_core::FarmRules;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{
     FrameStart, FrameStats, JobScene, Package, SceneData, SceneHash, WireBitmap, WireBitmapParts,
-    WireFrameSetup, WireImageFormat, WireJob,
+    WireFrameSetup, WireImageFormat, WireJob, wire_triangles,
 };
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_vertex::SparseBitmap;
 use vtfarm_worker::SceneStore;
 use vtfarm_worker::engine::FrameError;
@@ -177,7 +177,7 @@ pub fn cpu_per_frame(frames: &[FarmFrame]) -> Vec<f64> {
 /// frame set-up repeated.
 pub struct FarmJob {
     pub scene: Arc<Scene>,
-    pub reflectors: Vec<u32>,
+    pub reflectors: Vec<TriangleId>,
     pub setup: FrameSetup,
 }
 
@@ -330,7 +330,7 @@ fn run_farm(
         name: "simulated".into(),
         scene: JobScene::Hash(scene.hash),
         frames: vec![WireFrameSetup::from(&job.setup); frames],
-        reflectors: job.reflectors.clone(),
+        reflectors: wire_triangles(&job.reflectors),
         aux: false,
         method: MethodKind::VertexTracing.into(),
         // As `vtfarm submit` asks (it writes only PNGs): what the
@@ -491,7 +491,7 @@ mod tests {
             ..CockpitConfig::default()
         });
         let reflectors = c.cover_glass_triangles();
-        let items = morton_order(&c.scene, reflectors.clone());
+        let items = wire_triangles(&morton_order(&c.scene, reflectors.clone()));
         let n = items.len();
         let job = FarmJob {
             scene: Arc::new(c.scene),

@@ -759,7 +759,7 @@ fn a_flat_mirror_reflecting_a_panel_returns_kr_times_its_luminance() {
             scene.triangles.push(Triangle {
                 vertices: vertices.map(|v| base + v),
                 object: vtfarm_scene::ObjectId(object),
-                material: object,
+                material: vtfarm_scene::MaterialId(object),
             });
         }
     };

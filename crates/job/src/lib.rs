@@ -280,7 +280,7 @@ impl ReflectorSelector {
             }
             ReflectorSelector::Material(name) => scene
                 .materials
-                .get(triangle.material as usize)
+                .get(triangle.material.index())
                 .is_some_and(|m| m.name == *name),
         }
     }
@@ -474,7 +474,7 @@ impl Job {
                     ),
                 ));
             };
-            change.apply(&mut scene.materials[id as usize]);
+            change.apply(&mut scene.materials[id.index()]);
             if let Some(path) = &change.texture {
                 let key = format!("{}.texture", MaterialOverride::key_of(&change.name));
                 let texture =
@@ -486,15 +486,15 @@ impl Job {
                     ));
                 }
                 scene.textures.push(texture);
-                scene.materials[id as usize].diffuse_texture =
+                scene.materials[id.index()].diffuse_texture =
                     Some(scene.textures.len() as TextureId - 1);
             }
-            overridden[id as usize] = Some(change);
+            overridden[id.index()] = Some(change);
         }
         let mut is_reflector_material = vec![false; scene.materials.len()];
         for triangle in &scene.triangles {
             if (self.reflectors.iter()).any(|r| r.matches(&scene, aliases, triangle)) {
-                is_reflector_material[triangle.material as usize] = true;
+                is_reflector_material[triangle.material.index()] = true;
             }
         }
         for (id, material) in scene.materials.iter_mut().enumerate() {
@@ -672,6 +672,7 @@ impl Job {
         }
         // Walking the triangles in order keeps the ids sorted and unique.
         let triangles: Vec<TriangleId> = (0..)
+            .map(TriangleId)
             .zip(chosen)
             .filter_map(|(id, chosen)| chosen.then_some(id))
             .collect();
@@ -730,8 +731,8 @@ pub fn dull_reflectors(scene: &Scene, triangles: &[TriangleId]) -> Vec<DullRefle
     let mut seen = std::collections::BTreeSet::new();
     let mut dull = Vec::new();
     for &t in triangles {
-        let triangle = &scene.triangles[t as usize];
-        let material = &scene.materials[triangle.material as usize];
+        let triangle = &scene.triangles[t.index()];
+        let material = &scene.materials[triangle.material.index()];
         if material.reflectance.max_element() <= 0.0
             && seen.insert((triangle.object, triangle.material))
         {

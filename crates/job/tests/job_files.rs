@@ -11,7 +11,8 @@ use vtfarm_job::{
 };
 use vtfarm_method::MethodKind;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, ObjectId, Scene, Triangle,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, ObjectId, Scene, Triangle,
+    TriangleId,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{Quality, Transmission, VertexSettings};
@@ -300,7 +301,7 @@ fn an_obj_job_loads_with_its_camera_frames_and_default_lighting() {
     assert_eq!(
         job.reflector_triangles(&loaded.scene, &loaded.object_aliases)
             .unwrap(),
-        [0]
+        [TriangleId(0)]
     );
 }
 
@@ -379,7 +380,7 @@ fn car_fixture(materials: &str) -> (tempfile::TempDir, PathBuf) {
 fn a_reflector_with_only_ni_reflects_by_fresnel_with_a_note() {
     let (_dir, job_path) = car_fixture("");
     let loaded = load_job(&job_path).unwrap().load_scene().unwrap();
-    let glass = &loaded.scene.materials[loaded.scene.material_id("glass").unwrap() as usize];
+    let glass = &loaded.scene.materials[loaded.scene.material_id("glass").unwrap().index()];
     let fresnel = (0.45f32 / 2.45).powi(2);
     assert!(
         (glass.reflectance - Vec3::splat(fresnel))
@@ -395,7 +396,7 @@ fn a_reflector_with_only_ni_reflects_by_fresnel_with_a_note() {
         loaded.notes[0]
     );
     // Not a reflector: untouched.
-    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap() as usize];
+    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap().index()];
     assert_eq!(paint.reflectance, Vec3::ZERO);
 }
 
@@ -417,7 +418,7 @@ thin = true
     );
     let job = load_job(&job_path).unwrap();
     let loaded = job.load_scene().unwrap();
-    let material = |name| &loaded.scene.materials[loaded.scene.material_id(name).unwrap() as usize];
+    let material = |name| &loaded.scene.materials[loaded.scene.material_id(name).unwrap().index()];
     let paint = material("paint");
     assert_eq!(
         (
@@ -461,7 +462,7 @@ thin = true
         .material_id(vtfarm_cockpit::GLASS_MATERIAL)
         .unwrap();
     assert_eq!(
-        cockpit.scene.materials[id as usize].reflectance,
+        cockpit.scene.materials[id.index()].reflectance,
         Vec3::splat(0.5)
     );
 }
@@ -905,7 +906,7 @@ fn two_by_two_scene() -> Scene {
     let triangle = |i: u32, object, material| Triangle {
         vertices: [3 * i, 3 * i + 1, 3 * i + 2],
         object: ObjectId(object),
-        material,
+        material: MaterialId(material),
     };
     Scene {
         positions: (0..4).flat_map(|_| corners).collect(),
@@ -945,9 +946,13 @@ fn reflectors_select_by_object_and_by_material() {
     let scene = two_by_two_scene();
     scene.validate().unwrap();
     let select = |selectors| {
-        with_reflectors(selectors)
+        let triangles = with_reflectors(selectors)
             .reflector_triangles(&scene, &ObjectAliases::new())
-            .unwrap()
+            .unwrap();
+        triangles
+            .into_iter()
+            .map(TriangleId::raw)
+            .collect::<Vec<_>>()
     };
     assert_eq!(select(vec![Object("glass".into())]), [0, 2]);
     assert_eq!(select(vec![Material("mirror".into())]), [1, 2]);
@@ -1127,7 +1132,7 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
     let triangle = |object, material| Triangle {
         vertices: [0, 1, 2],
         object: ObjectId(object),
-        material,
+        material: MaterialId(material),
     };
     let scene = Scene {
         positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
@@ -1142,7 +1147,7 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
         materials: vec![Material::diffuse("glass", Vec3::ONE), mirror],
         ..Default::default()
     };
-    let dull = dull_reflectors(&scene, &[0, 1, 2, 3]);
+    let dull = dull_reflectors(&scene, &[0, 1, 2, 3].map(TriangleId));
     assert_eq!(
         dull,
         [DullReflector {
@@ -1167,12 +1172,12 @@ fn reflectors_without_reflectance_are_named_with_their_fix() {
     // A highlight is not a reflection: said so.
     let mut glossy = scene.clone();
     glossy.materials[0].specular = Vec3::splat(0.5);
-    let message = dull_reflectors(&glossy, &[0])[0].to_string();
+    let message = dull_reflectors(&glossy, &[TriangleId(0)])[0].to_string();
     assert!(
         message.contains("its Ks 0.5 is only a highlight"),
         "{message}"
     );
-    assert!(dull_reflectors(&scene, &[1, 2]).is_empty());
+    assert!(dull_reflectors(&scene, &[1, 2].map(TriangleId)).is_empty());
 }
 
 /// Values that would run away: each is refused at its line by the
@@ -1302,10 +1307,10 @@ fn a_gltf_scene_takes_its_camera_by_name_and_reflectors_by_node() {
     assert!(
         chosen
             .iter()
-            .all(|&t| loaded.scene.triangles[t as usize].object == right)
+            .all(|&t| loaded.scene.triangles[t.index()].object == right)
     );
     // A named reflector with glTF's default ior 1.5 reflects by Fresnel.
-    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap() as usize];
+    let paint = &loaded.scene.materials[loaded.scene.material_id("paint").unwrap().index()];
     assert!((paint.reflectance - Vec3::splat(0.04)).abs().max_element() < 1e-6);
     // An unknown camera names the file's cameras, at its line.
     let message = write("camera = \"rear\"\n")
@@ -1347,9 +1352,9 @@ fn gltf_reflectors_are_picked_by_node_mesh_or_material_name() {
         .unwrap();
         let job = load_job(&job_path).unwrap_or_else(|e| panic!("{e}"));
         let loaded = job.load_scene().unwrap_or_else(|e| panic!("{e}"));
-        let objects = |triangles: &[u32]| -> Vec<String> {
+        let objects = |triangles: &[TriangleId]| -> Vec<String> {
             let mut names: Vec<String> = (triangles.iter())
-                .map(|&t| loaded.scene.triangles[t as usize].object)
+                .map(|&t| loaded.scene.triangles[t.index()].object)
                 .map(|o| loaded.scene.objects[o.index()].name.clone())
                 .collect();
             names.dedup();

@@ -209,9 +209,10 @@ mod tests {
                 image[i] = v;
             }
         };
+        let triangles: Vec<TriangleId> = triangles.iter().copied().map(TriangleId).collect();
         progress.deliver(
             stage,
-            triangles,
+            &triangles,
             writes,
             image,
             composite,
@@ -225,7 +226,7 @@ mod tests {
     /// completes with exactly that stage's pixels.
     #[test]
     fn a_later_stage_waits_until_the_one_before_is_complete() {
-        let mut progress = StageProgress::new(STAGES.to_vec(), &[3, 1, 2]);
+        let mut progress = StageProgress::new(STAGES.to_vec(), &[3, 1, 2].map(TriangleId));
         let image = &mut [0u32; 4];
         // B (triangle 3, pixels 2 and 3): preview, then refine (held).
         let b_preview = vec![(2, 10), (3, 10)];
@@ -255,7 +256,7 @@ mod tests {
     /// first; the work adds up over a copy's stages.
     #[test]
     fn each_copy_sends_its_stages_in_order() {
-        let mut progress = StageProgress::<()>::new(STAGES.to_vec(), &[1, 2]);
+        let mut progress = StageProgress::<()>::new(STAGES.to_vec(), &[1, 2].map(TriangleId));
         let refused = progress.check(7, ConnId(1), Some(Quality::Refine));
         assert_eq!(
             refused.unwrap_err().to_string(),

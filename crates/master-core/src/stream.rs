@@ -348,7 +348,7 @@ pub fn decode(bytes: &[u8]) -> Result<StageMessage, StreamError> {
                 face_list.push(face);
             }
             let mesh = StageMesh {
-                triangle: 0,
+                triangle: vtfarm_scene::TriangleId(0),
                 positions,
                 samples,
                 slabs,
@@ -447,14 +447,14 @@ mod tests {
     fn a_mesh_stage_decodes_to_its_meshes_joined_bit_for_bit() {
         let meshes = [
             StageMesh {
-                triangle: 4,
+                triangle: vtfarm_scene::TriangleId(4),
                 positions: vec![Vec3::X, Vec3::Y, Vec3::Z],
                 samples: vec![sample(1.0), sample(2.0), sample(3.0)],
                 slabs: vec![slab(1.0), slab(2.0), slab(3.0)],
                 faces: vec![[0, 1, 2]],
             },
             StageMesh {
-                triangle: 9,
+                triangle: vtfarm_scene::TriangleId(9),
                 positions: vec![Vec3::ONE, Vec3::NEG_ONE, Vec3::ZERO, Vec3::X],
                 samples: vec![sample(4.0), sample(5.0), sample(6.0), sample(7.0)],
                 slabs: vec![slab(4.0), slab(5.0), slab(6.0), slab(7.0)],
@@ -538,7 +538,7 @@ mod tests {
         assert_eq!(decode(&kind), Err(StreamError::Kind(9)));
         // A face naming a vertex that is not there.
         let mesh = StageMesh {
-            triangle: 0,
+            triangle: vtfarm_scene::TriangleId(0),
             positions: vec![Vec3::X],
             samples: vec![sample(1.0)],
             slabs: vec![slab(1.0)],

@@ -7,7 +7,7 @@ use glam::Vec3;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobOptions, SceneData, SceneHash, WireJob, wire_job};
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::{Camera, Material, Object, Scene, Triangle};
+use vtfarm_scene::{Camera, Material, MaterialId, Object, Scene, Triangle, TriangleId};
 
 /// Pixels on a side of the test frames.
 pub(crate) const SIDE: u32 = 4;
@@ -23,7 +23,7 @@ pub(crate) fn scene() -> Scene {
     let triangle = |vertices| Triangle {
         vertices,
         object: vtfarm_scene::ObjectId(0),
-        material: 0,
+        material: MaterialId(0),
     };
     Scene {
         normals: vec![Vec3::NEG_Z; positions.len()],
@@ -63,6 +63,12 @@ pub(crate) fn job(frames: usize) -> (WireJob, Arc<Scene>, SceneHash) {
         method: MethodKind::VertexTracing,
         aux: false,
     };
-    let job = wire_job("square", &data, &vec![frame(); frames], &[0, 1], options);
+    let job = wire_job(
+        "square",
+        &data,
+        &vec![frame(); frames],
+        &[0, 1].map(TriangleId),
+        options,
+    );
     (job, Arc::new(scene), data.hash)
 }

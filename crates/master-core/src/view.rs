@@ -26,7 +26,7 @@ use vtfarm_imaging::Image;
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{JobScene, SceneHash, WireError, WireFrameSetup, WireJob, WireMesh};
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_vertex::{FrameImage, Quality, StageMesh};
 
 use crate::stream::{Overlay, StageHeader, encode_mesh, encode_overlay};
@@ -51,7 +51,7 @@ pub struct ViewSource {
     pub name: String,
     pub scene_hash: SceneHash,
     pub scene: Arc<Scene>,
-    pub reflectors: Vec<u32>,
+    pub reflectors: Vec<TriangleId>,
     pub method: MethodKind,
     pub setup: FrameSetup,
 }
@@ -177,7 +177,7 @@ pub struct Views {
     outcomes: VecDeque<ViewOutcome>,
     /// The current move's meshes by (stage, reflector triangle) until
     /// their stage is complete: a repeated copy's mesh replaces the same.
-    meshes: BTreeMap<(usize, u32), StageMesh>,
+    meshes: BTreeMap<(usize, TriangleId), StageMesh>,
     /// The current move's stage messages, in order.
     stream: StageStream,
 }
@@ -278,7 +278,7 @@ impl Views {
             name: format!("view of job {}", request.job),
             scene: JobScene::Hash(source.scene_hash),
             frames,
-            reflectors: source.reflectors.clone(),
+            reflectors: vtfarm_proto::wire_triangles(&source.reflectors),
             // The workers send the reflected and transmitted components
             // and the reflected objects: the glare figures need them.
             aux: true,
@@ -372,9 +372,11 @@ impl Views {
                 eye,
             };
             let bytes = if quality < Quality::Full {
-                let meshes: Vec<StageMesh> = (self.meshes.range((s, 0)..=(s, u32::MAX)))
-                    .map(|(_, m)| m.clone())
-                    .collect();
+                let meshes: Vec<StageMesh> = (self
+                    .meshes
+                    .range((s, TriangleId(0))..=(s, TriangleId(u32::MAX))))
+                .map(|(_, m)| m.clone())
+                .collect();
                 encode_mesh(&header, &meshes)
             } else {
                 encode_overlay(&header, &Overlay::of(image))
@@ -434,7 +436,7 @@ impl Views {
         &mut self,
         job: JobId,
         stage: usize,
-        triangles: &[u32],
+        triangles: &[TriangleId],
         mesh: &WireMesh,
     ) -> Result<(), WireError> {
         let Some(current) = self.current.as_ref().filter(|c| c.job == job) else {
@@ -475,7 +477,7 @@ impl Views {
             return Ok(());
         };
         let meshes = mesh.decode()?;
-        let mut covered: Vec<u32> = meshes.iter().map(|m| m.triangle).collect();
+        let mut covered: Vec<TriangleId> = meshes.iter().map(|m| m.triangle).collect();
         covered.sort_unstable();
         let mut reflectors = source.reflectors.clone();
         reflectors.sort_unstable();
@@ -679,7 +681,7 @@ mod tests {
             name: "source".into(),
             scene_hash: [0; 32],
             scene: Arc::new(Scene::default()),
-            reflectors: vec![5, 3],
+            reflectors: vec![TriangleId(5), TriangleId(3)],
             method: MethodKind::VertexTracing,
             setup: FrameSetup {
                 camera: vtfarm_scene::Camera {
@@ -704,7 +706,7 @@ mod tests {
     fn corners(triangles: &[u32]) -> WireMesh {
         let meshes: Vec<StageMesh> = (triangles.iter())
             .map(|&triangle| StageMesh {
-                triangle,
+                triangle: TriangleId(triangle),
                 positions: vec![Vec3::X, Vec3::Y, Vec3::Z],
                 samples: vec![
                     vtfarm_vertex::PixelValue {

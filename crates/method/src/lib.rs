@@ -306,7 +306,7 @@ pub fn reflector_groups(
     let mut groups: std::collections::BTreeMap<ObjectId, Vec<TriangleId>> = Default::default();
     for &t in triangles {
         groups
-            .entry(scene.triangles[t as usize].object)
+            .entry(scene.triangles[t.index()].object)
             .or_default()
             .push(t);
     }
@@ -347,7 +347,7 @@ impl MethodFrame<'_> {
     pub fn reflector_flags(&self) -> Vec<bool> {
         let mut flags = vec![false; self.tracer.bvh.scene().triangles.len()];
         for &t in self.reflector {
-            flags[t as usize] = true;
+            flags[t.index()] = true;
         }
         flags
     }
@@ -362,8 +362,8 @@ impl MethodFrame<'_> {
             .flat_map_iter(|y| {
                 let flags = &flags;
                 (0..w).filter_map(move |x| {
-                    let triangle = self.ids.triangle_at(x, y);
-                    let owned = flags.get(triangle as usize).copied().unwrap_or(false);
+                    let triangle = TriangleId(self.ids.triangle_at(x, y));
+                    let owned = flags.get(triangle.index()).copied().unwrap_or(false);
                     owned.then(|| {
                         let (point, incoming) =
                             pixel_surface(scene, &self.camera, self.ids, triangle, x, y);

@@ -31,9 +31,7 @@ fn exact_reflections_through_the_shared_finish_equal_the_reference() {
                     Reflection {
                         radiance: s.color,
                         object: hit.map_or(NONE, |h| {
-                            setup.bvh.scene().triangles[h.triangle as usize]
-                                .object
-                                .raw()
+                            setup.bvh.scene().triangles[h.triangle.index()].object.raw()
                         }),
                     }
                 }
@@ -118,9 +116,7 @@ fn reflector_groups_are_objects_and_merged_groups_equal_one_render() {
         .expect("the cockpit has a glass back");
     // Two objects: the glass front and its back.
     let mut both = setup.reflector.clone();
-    both.extend(
-        (0..scene.triangles.len() as u32).filter(|&t| scene.triangles[t as usize].object == back),
-    );
+    both.extend(scene.triangles_of(back));
     let groups = reflector_groups(scene, &both);
     assert_eq!(groups.len(), 2);
     assert_eq!(groups[0].len() + groups[1].len(), both.len());

@@ -38,12 +38,9 @@ impl<'a> Context<'a> {
     pub(crate) fn new(config: &'a PvrrConfig, frame: &MethodFrame<'a>) -> Self {
         let scene = frame.tracer.bvh.scene();
         let mut specular: BTreeMap<ObjectId, Vec<TriangleId>> = BTreeMap::new();
-        for (id, triangle) in scene.triangles.iter().enumerate() {
-            if scene.materials[triangle.material as usize].is_specular() {
-                specular
-                    .entry(triangle.object)
-                    .or_default()
-                    .push(id as TriangleId);
+        for (id, triangle) in scene.triangle_ids().zip(&scene.triangles) {
+            if scene.materials[triangle.material.index()].is_specular() {
+                specular.entry(triangle.object).or_default().push(id);
             }
         }
         Context {

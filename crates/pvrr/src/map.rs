@@ -51,7 +51,7 @@ fn first_visible(
     };
     for _ in 0..MAX_SKIPS {
         let hit = bvh.closest_hit(&ray, f32::INFINITY)?;
-        let object = scene.triangles[hit.triangle as usize].object;
+        let object = scene.triangles[hit.triangle.index()].object;
         let point = bvh.surface_point(&hit);
         if excluded.binary_search(&object).is_err() {
             return Some(Seen {
@@ -70,10 +70,7 @@ fn first_visible(
 /// seen there (its view depth where the ray grazes the plane), with the
 /// barycentric vertex normal.
 fn texel_surface(scene: &Scene, camera: &Camera, ids: &IdBuffer, x: u32, y: u32) -> Option<Seen> {
-    let triangle = ids.triangle_at(x, y);
-    if triangle == NONE {
-        return None;
-    }
+    let triangle = TriangleId::from_raw(ids.triangle_at(x, y))?;
     let (point, direction) = vtfarm_vertex::pixel_surface(scene, camera, ids, triangle, x, y);
     Some(Seen {
         point,
@@ -102,7 +99,7 @@ impl ReflectionMap {
         let scene = level.tracer.bvh.scene();
         let keep = |t: TriangleId| {
             excluded
-                .binary_search(&scene.triangles[t as usize].object)
+                .binary_search(&scene.triangles[t.index()].object)
                 .is_err()
         };
         let ids = vtfarm_raster::id_buffer_clipped(scene, &camera, view.near, &keep);

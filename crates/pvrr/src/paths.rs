@@ -74,7 +74,7 @@ pub(crate) fn refraction(
     Some(VertexPath {
         hit: closest_point(level, &exit),
         exit,
-        inner: bvh.scene().triangles[back.triangle as usize].object.raw(),
+        inner: bvh.scene().triangles[back.triangle.index()].object.raw(),
         offset,
         weight,
     })

@@ -419,7 +419,7 @@ fn a_mirror_seen_in_a_mirror_shows_its_own_reflection() {
             setup
                 .bvh
                 .closest_hit(&ray, f32::INFINITY)
-                .is_some_and(|h| scene.triangles[h.triangle as usize].object == mirror_b)
+                .is_some_and(|h| scene.triangles[h.triangle.index()].object == mirror_b)
         })
         .collect();
     assert!(via_b.len() > 40, "{} vertices see mirror B", via_b.len());

@@ -105,7 +105,7 @@ impl<'a> Warp<'a> {
     /// corner has no texture coordinate.
     pub(crate) fn radiance_at(&self, point: &SurfacePoint, incoming: Vec3) -> Lookup {
         let scene = self.level.tracer.bvh.scene();
-        let corners = scene.triangles[point.triangle as usize].vertices.map(|v| {
+        let corners = scene.triangles[point.triangle.index()].vertices.map(|v| {
             let i = self.vertices.binary_search(&v);
             // Invariant: points lie on the triangles the warp was built for.
             &self.coords[i.expect("a point on the warp's own reflector")]
@@ -158,7 +158,7 @@ impl<'a> Warp<'a> {
         };
         Lookup {
             radiance: tracer.shade(&bvh.surface_point(&hit), ray.direction).color,
-            object: bvh.scene().triangles[hit.triangle as usize].object.raw(),
+            object: bvh.scene().triangles[hit.triangle.index()].object.raw(),
         }
     }
 
@@ -241,7 +241,7 @@ fn excluded_objects(
 ) -> Vec<ObjectId> {
     let mut excluded: Vec<ObjectId> = triangles
         .iter()
-        .map(|&t| scene.triangles[t as usize].object)
+        .map(|&t| scene.triangles[t.index()].object)
         .chain(
             paths
                 .iter()
@@ -294,7 +294,7 @@ pub(crate) fn reflector_vertices(
 ) -> (Vec<u32>, Vec<SurfacePoint>) {
     let mut owned: Vec<(u32, TriangleId)> = triangles
         .iter()
-        .flat_map(|&t| scene.triangles[t as usize].vertices.map(|v| (v, t)))
+        .flat_map(|&t| scene.triangles[t.index()].vertices.map(|v| (v, t)))
         .collect();
     owned.sort_unstable();
     owned.dedup_by_key(|(v, _)| *v);

@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_raster::{IdPass, PixelRect};
+use vtfarm_scene::TriangleId;
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -54,7 +55,7 @@ fn main() {
                 &|_| true,
             )),
             "passes" => {
-                let all = |_: u32| true;
+                let all = |_: TriangleId| true;
                 let passes = [0, 16, 0].map(|m| IdPass {
                     within: PixelRect {
                         x0: bounds.x0 - m,
@@ -81,8 +82,11 @@ fn main() {
                         .iter()
                         .for_each(|p| p.to_array().iter().for_each(|v| eat(v.to_bits())));
                     let within =
-                        vtfarm_raster::id_buffer_within(scene, &cam, bounds, &|t| t % 3 != 0);
-                    let (odd, third) = (|t: u32| t % 2 == 1, |t: u32| t % 3 != 0);
+                        vtfarm_raster::id_buffer_within(scene, &cam, bounds, &|t| t.raw() % 3 != 0);
+                    let (odd, third) = (
+                        |t: TriangleId| t.raw() % 2 == 1,
+                        |t: TriangleId| t.raw() % 3 != 0,
+                    );
                     let passes = [
                         IdPass {
                             within: bounds,

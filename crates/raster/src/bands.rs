@@ -13,7 +13,7 @@
 
 use rayon::prelude::*;
 
-use vtfarm_scene::{NONE, Triangle, TriangleId};
+use vtfarm_scene::{NONE, Triangle};
 
 use crate::triangle::RasterTriangle;
 use crate::{IdBuffer, PixelRect};
@@ -96,14 +96,14 @@ impl<'a, I: Iterator<Item = &'a RasterTriangle>> Band<I> {
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn resolve_avx2(self, depth: &mut [f32], triangle: &mut [TriangleId]) {
+    unsafe fn resolve_avx2(self, depth: &mut [f32], triangle: &mut [u32]) {
         self.resolve(depth, triangle);
     }
 
     /// Scan-converts the band's triangles into its rows of the planes
     /// `depth` and `triangle`.
     #[inline(always)]
-    fn resolve(self, depth: &mut [f32], triangle: &mut [TriangleId]) {
+    fn resolve(self, depth: &mut [f32], triangle: &mut [u32]) {
         let Band {
             window,
             first_row,
@@ -221,6 +221,7 @@ mod tests {
     use crate::triangle::ScreenVertex;
     use rand::{Rng as _, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
+    use vtfarm_scene::TriangleId;
 
     #[test]
     fn the_portable_and_the_avx2_band_give_the_same_bits() {
@@ -236,9 +237,9 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
         let mut next = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
         let mut depths = [1.0; 3];
-        let triangles: Vec<RasterTriangle> = (0..300)
+        let triangles: Vec<RasterTriangle> = TriangleId::range(300)
             .filter_map(|id| {
-                if id % 4 != 1 {
+                if id.raw() % 4 != 1 {
                     depths = [next(0.05, 1.0), next(0.05, 1.0), next(0.05, 1.0)];
                 }
                 let corners = depths.map(|inv_depth| ScreenVertex {

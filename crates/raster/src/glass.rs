@@ -33,13 +33,14 @@ pub fn blend_see_through(
     is_reflector: &[bool],
 ) -> Vec<ObjectId> {
     let see_through = |t: TriangleId| scene.material_of(t).see_through();
-    let glass: Vec<bool> = (0..scene.triangles.len() as TriangleId)
-        .map(|t| see_through(t) && !is_reflector.get(t as usize).copied().unwrap_or(false))
+    let glass: Vec<bool> = scene
+        .triangle_ids()
+        .map(|t| see_through(t) && !is_reflector.get(t.index()).copied().unwrap_or(false))
         .collect();
     if !glass.contains(&true) || ids.width == 0 {
         return Vec::new();
     }
-    let is_glass = |t: TriangleId| t != NONE && glass[t as usize];
+    let is_glass = |t: u32| t != NONE && glass[t as usize];
     let width = ids.width as usize;
     // The rectangle of the glass pixels, row by row.
     let rows: Vec<Option<(u32, u32)>> = ids
@@ -69,7 +70,7 @@ pub fn blend_see_through(
     let eye = camera.eye;
     let opaque = |t: TriangleId| !see_through(t);
     // The back of a closed glass object: glass facing away from the eye.
-    let back = |t: TriangleId| glass[t as usize] && faces_away(scene, eye, t);
+    let back = |t: TriangleId| glass[t.index()] && faces_away(scene, eye, t);
     let passes = [
         IdPass {
             within,
@@ -98,7 +99,8 @@ pub fn blend_see_through(
                 if !is_glass(front) {
                     continue;
                 }
-                objects.insert(scene.triangles[front as usize].object);
+                let front = TriangleId(front);
+                objects.insert(scene.triangles[front.index()].object);
                 let x = x as u32;
                 // The glass's own transmittance, and its back's when the
                 // back lies between it and the opaque scene.
@@ -110,9 +112,9 @@ pub fn blend_see_through(
                     eye,
                 );
                 let b = backs.triangle_at(x, y);
-                if b != NONE && b != front && backs.depth_at(x, y) < behind.depth_at(x, y) {
+                if b != NONE && b != front.raw() && backs.depth_at(x, y) < behind.depth_at(x, y) {
                     let at = eye + projector.pixel_depth_step(x, y) * backs.depth_at(x, y);
-                    kt *= transmittance(scene, b, at, footprint, eye);
+                    kt *= transmittance(scene, TriangleId(b), at, footprint, eye);
                 }
                 if kt.max_element() <= 0.0 {
                     continue;
@@ -122,7 +124,7 @@ pub fn blend_see_through(
                     t => {
                         let position =
                             eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
-                        shade(scene, lighting, t, position, eye, footprint)
+                        shade(scene, lighting, TriangleId(t), position, eye, footprint)
                     }
                 };
                 *color += kt * seen;

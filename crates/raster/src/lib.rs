@@ -55,7 +55,8 @@ pub struct IdBuffer {
     pub window: PixelRect,
     /// The object seen at each pixel ([`vtfarm_scene::ObjectId::raw`]), `NONE` where none is.
     pub object: Vec<u32>,
-    pub triangle: Vec<TriangleId>,
+    /// The triangle seen at each pixel ([`TriangleId::raw`]), `NONE` where none is.
+    pub triangle: Vec<u32>,
     /// View depth (distance along the camera's forward axis); infinity where empty.
     pub depth: Vec<f32>,
 }
@@ -121,7 +122,7 @@ impl IdBuffer {
 
     /// The triangle seen at pixel (`x`, `y`), `NONE` where none is (or off the frame).
     #[inline]
-    pub fn triangle_at(&self, x: u32, y: u32) -> TriangleId {
+    pub fn triangle_at(&self, x: u32, y: u32) -> u32 {
         self.slot(x, y).map_or(NONE, |i| self.triangle[i])
     }
 

@@ -119,10 +119,10 @@ pub(crate) fn setup(
         .map(|(task, triangles)| {
             let first = task * TRIANGLES_PER_TASK;
             let mut out = Vec::with_capacity(triangles.len());
-            for (id, t) in (first..).zip(triangles) {
+            for (id, t) in (first as u32..).map(TriangleId).zip(triangles) {
                 let [a, b, c] = t.vertices.map(|v| beyond[v as usize]);
-                if a & b & c == 0 && keep(id as TriangleId) {
-                    view.triangle_into(scene, &corners, id as TriangleId, t, &mut out);
+                if a & b & c == 0 && keep(id) {
+                    view.triangle_into(scene, &corners, id, t, &mut out);
                 }
             }
             out
@@ -380,6 +380,7 @@ mod tests {
     use super::*;
     use rand::{Rng as _, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
+    use vtfarm_scene::MaterialId;
 
     fn camera() -> Camera {
         Camera {
@@ -430,7 +431,7 @@ mod tests {
         let t = Triangle {
             vertices: [0, 1, 2],
             object: vtfarm_scene::ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         };
         let positions = [
             Vec3::new(0.0, 0.0, -1.0),
@@ -455,7 +456,7 @@ mod tests {
         };
         let corners = positions.map(|p| view.corner(p));
         let mut set_up = Vec::new();
-        view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
+        view.triangle_into(&scene, &corners, TriangleId(0), &t, &mut set_up);
         assert!(!set_up.is_empty());
     }
 
@@ -517,7 +518,7 @@ mod tests {
             let t = Triangle {
                 vertices: [0, 1, 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             };
             let [a, b, c] = [0, 1, 2].map(|i| view.beyond(&corners[i]));
             if a & b & c == 0 {
@@ -534,7 +535,7 @@ mod tests {
             });
             close_calls += usize::from(near_side);
             let mut set_up = Vec::new();
-            view.triangle_into(&scene, &corners, 0, &t, &mut set_up);
+            view.triangle_into(&scene, &corners, TriangleId(0), &t, &mut set_up);
             assert!(
                 set_up.iter().all(|t| !t.reaches(within)),
                 "case {case}: a dropped triangle reaches {within:?}"

@@ -140,7 +140,7 @@ impl<'a> FrameShading<'a> {
     /// ID buffer rows `triangles`. With AVX2 where this CPU has it: the same
     /// bits either way (IEEE arithmetic is exact per lane and nothing is
     /// fused).
-    fn shade_rows(&self, first_row: u32, colors: &mut [Vec3], triangles: &[TriangleId]) {
+    fn shade_rows(&self, first_row: u32, colors: &mut [Vec3], triangles: &[u32]) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above.
@@ -156,12 +156,7 @@ impl<'a> FrameShading<'a> {
     /// The CPU must support AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn shade_rows_avx2(
-        &self,
-        first_row: u32,
-        colors: &mut [Vec3],
-        triangles: &[TriangleId],
-    ) {
+    unsafe fn shade_rows_avx2(&self, first_row: u32, colors: &mut [Vec3], triangles: &[u32]) {
         self.shade_rows_with::<Avx2>(first_row, colors, triangles);
     }
 
@@ -170,12 +165,7 @@ impl<'a> FrameShading<'a> {
     /// (a triangle's runs in neighbouring rows reuse it); empty runs get the
     /// background.
     #[inline(always)]
-    fn shade_rows_with<B: Backend>(
-        &self,
-        first_row: u32,
-        colors: &mut [Vec3],
-        triangles: &[TriangleId],
-    ) {
+    fn shade_rows_with<B: Backend>(&self, first_row: u32, colors: &mut [Vec3], triangles: &[u32]) {
         let width = self.width;
         let mut surfaces: Vec<Option<Surface>> = (0..SURFACE_SLOTS).map(|_| None).collect();
         let rows = colors.chunks_mut(width).zip(triangles.chunks(width));
@@ -191,7 +181,8 @@ impl<'a> FrameShading<'a> {
                 if t == NONE {
                     colors[x..x + run].fill(self.lighting.background);
                 } else {
-                    let surface = match &mut surfaces[t as usize % SURFACE_SLOTS] {
+                    let t = TriangleId(t);
+                    let surface = match &mut surfaces[t.index() % SURFACE_SLOTS] {
                         Some(s) if s.id == t => s,
                         slot => slot.insert(Surface::new(self, t)),
                     };
@@ -542,7 +533,7 @@ mod tests {
             .map(|[a, b, c, m]| Triangle {
                 vertices: [a, b, c],
                 object: vtfarm_scene::ObjectId(0),
-                material: m,
+                material: vtfarm_scene::MaterialId(m),
             })
             .to_vec();
         let scene = Scene {
@@ -614,7 +605,13 @@ mod tests {
                 let expected = if id == NONE {
                     lighting.background
                 } else {
-                    scalar_shade(&scene, camera.eye, &lighting, id, rays.pixel_ray(x, y))
+                    scalar_shade(
+                        &scene,
+                        camera.eye,
+                        &lighting,
+                        TriangleId(id),
+                        rays.pixel_ray(x, y),
+                    )
                 };
                 assert_eq!(
                     image.get(x, y).to_array().map(f32::to_bits),

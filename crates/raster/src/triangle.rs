@@ -181,8 +181,9 @@ impl RasterTriangle {
     /// where this triangle is nearer ([`Self::depth_at`]), or as near with
     /// a lower id, it takes the pixel.
     #[inline(always)]
-    pub(crate) fn z_test_span(&self, y: u32, x0: u32, depth: &mut [f32], seen: &mut [TriangleId]) {
+    pub(crate) fn z_test_span(&self, y: u32, x0: u32, depth: &mut [f32], seen: &mut [u32]) {
         let row_term = self.row_term(y);
+        let own = self.id.raw();
         let n = depth.len().min(seen.len());
         let (depth, seen) = (&mut depth[..n], &mut seen[..n]);
         for i in 0..n {
@@ -194,9 +195,9 @@ impl RasterTriangle {
             // Unconditional stores and no short-circuit let the loop
             // vectorize.
             let (stored, id) = (depth[i], seen[i]);
-            let wins = (d < stored) | ((d == stored) & (self.id < id));
+            let wins = (d < stored) | ((d == stored) & (own < id));
             depth[i] = if wins { d } else { stored };
-            seen[i] = if wins { self.id } else { id };
+            seen[i] = if wins { own } else { id };
         }
     }
 }
@@ -227,8 +228,8 @@ mod tests {
             vertex(5.5, 5.5),
             vertex(1.5, 5.5),
         ];
-        let upper = RasterTriangle::new(0, [a, b, c], PixelRect::full(8, 8)).unwrap();
-        let lower = RasterTriangle::new(1, [a, d, c], PixelRect::full(8, 8)).unwrap();
+        let upper = RasterTriangle::new(TriangleId(0), [a, b, c], PixelRect::full(8, 8)).unwrap();
+        let lower = RasterTriangle::new(TriangleId(1), [a, d, c], PixelRect::full(8, 8)).unwrap();
         for y in 2..5 {
             for x in 2..5 {
                 assert_eq!(
@@ -246,7 +247,7 @@ mod tests {
     #[test]
     fn depth_is_perspective_correct() {
         let t = RasterTriangle::new(
-            0,
+            TriangleId(0),
             [
                 ScreenVertex {
                     x: 0.5,

@@ -9,8 +9,8 @@ use vtfarm_raster::{
 };
 use vtfarm_scene::shading::phong;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, NEAR, NONE, Object, ObjectId, Scene, Triangle,
-    TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, NEAR, NONE, Object, ObjectId, Scene,
+    Triangle, TriangleId,
 };
 
 /// xorshift64*: a tiny seeded generator, so scenes are reproducible.
@@ -67,7 +67,7 @@ impl Builder {
         self.scene.triangles.push(Triangle {
             vertices,
             object,
-            material: object.raw(),
+            material: MaterialId(object.raw()),
         });
     }
 
@@ -229,19 +229,16 @@ fn ray_cast_beyond(
 ) -> Vec<Option<(TriangleId, f64, f64, f64)>> {
     let forward = camera.basis().0.as_dvec3();
     let eye = camera.eye.as_dvec3();
-    let triangles: Vec<[DVec3; 3]> = (0..scene.triangles.len())
-        .map(|t| {
-            scene
-                .triangle_positions(t as TriangleId)
-                .map(|p| p.as_dvec3())
-        })
+    let triangles: Vec<[DVec3; 3]> = scene
+        .triangle_ids()
+        .map(|t| scene.triangle_positions(t).map(|p| p.as_dvec3()))
         .collect();
     let mut hits = Vec::new();
     for y in 0..camera.height {
         for x in 0..camera.width {
             let dir = camera.pixel_ray(x, y).as_dvec3();
             let mut best: Option<(TriangleId, f64, f64, f64)> = None;
-            for (id, [a, b, c]) in triangles.iter().enumerate() {
+            for (id, [a, b, c]) in scene.triangle_ids().zip(&triangles) {
                 let (e1, e2) = (*b - *a, *c - *a);
                 let p = dir.cross(e2);
                 let det = e1.dot(p);
@@ -257,7 +254,7 @@ fn ray_cast_beyond(
                     continue;
                 }
                 if best.is_none_or(|(_, d, _, _)| depth < d) {
-                    best = Some((id as TriangleId, depth, u, v));
+                    best = Some((id, depth, u, v));
                 }
             }
             hits.push(best);
@@ -283,7 +280,7 @@ fn assert_matches_ray_cast_beyond(
     let hits = ray_cast_beyond(scene, camera, near);
     let mut agree = 0;
     for (i, hit) in hits.iter().enumerate() {
-        let seen = (ids.triangle[i] != NONE).then_some(ids.triangle[i]);
+        let seen = TriangleId::from_raw(ids.triangle[i]);
         if seen != hit.map(|h| h.0) {
             continue;
         }
@@ -504,8 +501,8 @@ fn buffers_rasterized_together_are_each_the_buffer_rasterized_alone() {
     for seed in 1..=3 {
         let (scene, camera) = procedural_scene(seed, 128, 96);
         let all = |_: TriangleId| true;
-        let even = |t: TriangleId| t % 2 == 0;
-        let odd = |t: TriangleId| t % 2 == 1;
+        let even = |t: TriangleId| t.raw() % 2 == 0;
+        let odd = |t: TriangleId| t.raw() % 2 == 1;
         let none = |_: TriangleId| false;
         let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
         // Nested, overlapping, disjoint, past the image and empty
@@ -563,8 +560,8 @@ fn the_nearer_of_two_sets_buffers_is_the_buffer_of_both() {
         let (scene, camera) = procedural_scene(seed, 128, 96);
         let all = |_: TriangleId| true;
         // Disjoint sets that interleave in depth, and one set empty.
-        let thirds = |t: TriangleId| t % 3 == 0;
-        let rest = |t: TriangleId| t % 3 != 0;
+        let thirds = |t: TriangleId| t.raw() % 3 == 0;
+        let rest = |t: TriangleId| t.raw() % 3 != 0;
         let none = |_: TriangleId| false;
         let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
         let within = rect(10, 5, 100, 70);
@@ -583,7 +580,7 @@ fn the_nearer_of_two_sets_buffers_is_the_buffer_of_both() {
         let shown = |keep: &dyn Fn(TriangleId) -> bool| {
             both.triangle
                 .iter()
-                .filter(|&&t| t != NONE && keep(t))
+                .filter(|&&t| TriangleId::from_raw(t).is_some_and(keep))
                 .count()
         };
         let (thirds, rest) = (shown(&thirds), shown(&rest));
@@ -1004,7 +1001,7 @@ fn normals_are_interpolated_perspective_correctly() {
 fn the_default_near_plane_gives_the_id_buffer_bit_for_bit() {
     for seed in 1..=3 {
         let (scene, camera) = procedural_scene(seed, 96, 64);
-        let keep = |t: TriangleId| t % 3 != 0;
+        let keep = |t: TriangleId| t.raw() % 3 != 0;
         assert_same_ids(
             &id_buffer_clipped(&scene, &camera, NEAR, &keep),
             &id_buffer_where(&scene, &camera, &keep),

@@ -82,7 +82,7 @@ pub fn components_bounds(scene: &Scene, camera: &Camera, is_reflector: &[bool]) 
 pub fn reflector_flags(scene: &Scene, reflectors: &[TriangleId]) -> Vec<bool> {
     let mut is_reflector = vec![false; scene.triangles.len()];
     for &t in reflectors {
-        if let Some(flag) = is_reflector.get_mut(t as usize) {
+        if let Some(flag) = is_reflector.get_mut(t.index()) {
             *flag = true;
         }
     }
@@ -202,7 +202,7 @@ impl Renderer {
     pub fn try_new(scene: Arc<Scene>, reflectors: Vec<TriangleId>) -> Result<Self, InvalidScene> {
         if let Some(&t) = reflectors
             .iter()
-            .find(|&&t| t as usize >= scene.triangles.len())
+            .find(|&&t| t.index() >= scene.triangles.len())
         {
             return Err(InvalidScene(format!(
                 "reflector {t} names no triangle (the scene has {})",
@@ -629,7 +629,7 @@ pub fn thin_glass_model(reference: &FrameImage, frame: &Frame<'_>) -> FrameImage
         .par_iter()
         .map(|&i| {
             let (x, y) = ((i % width) as u32, (i / width) as u32);
-            let triangle = frame.ids.triangle_at(x, y);
+            let triangle = TriangleId(frame.ids.triangle_at(x, y));
             let (point, direction) =
                 vtfarm_vertex::pixel_surface(scene, &frame.camera, frame.ids, triangle, x, y);
             let sample = frame.tracer.shade_reflection(&point, direction);
@@ -699,6 +699,7 @@ pub fn method(kind: MethodKind, vertex: VertexSettings) -> Box<dyn ReflectionMet
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vtfarm_scene::MaterialId;
 
     #[test]
     fn spread_bits_interleaves() {
@@ -731,12 +732,12 @@ mod tests {
             scene.triangles.push(vtfarm_scene::Triangle {
                 vertices: [i, i + 1, i + 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             });
         }
-        let order = morton_order(&scene, (0..8).collect());
+        let order = morton_order(&scene, TriangleId::range(8).collect());
         for pair in order.chunks(2) {
-            assert_eq!(pair[0] % 4, pair[1] % 4, "{order:?}");
+            assert_eq!(pair[0].raw() % 4, pair[1].raw() % 4, "{order:?}");
         }
     }
 }

@@ -10,7 +10,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use vtfarm_cockpit::{COVER_GLASS, CockpitConfig, cockpit};
 use vtfarm_render::{ErrorFigures, FrameSetup, RenderOptions, Renderer, compare, split_packages};
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle, TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId,
 };
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{
@@ -60,7 +60,7 @@ fn add_sphere(
                     part.triangles.push(Triangle {
                         vertices,
                         object: vtfarm_scene::ObjectId(0),
-                        material: 0,
+                        material: MaterialId(0),
                     });
                 }
             }
@@ -147,9 +147,7 @@ fn mirror_sphere_scene() -> (Scene, Camera, Lighting) {
 
 fn object_triangles(scene: &Scene, name: &str) -> Vec<TriangleId> {
     let object = scene.object_id(name).expect("object exists");
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| scene.triangles[t as usize].object == object)
-        .collect()
+    scene.triangles_of(object).collect()
 }
 
 fn setup(camera: Camera, lighting: &Lighting, quality: Quality) -> FrameSetup {
@@ -442,7 +440,7 @@ fn workers_id_buffers_over_the_reflector_bounds_give_the_same_frame() {
         let mut is_reflector = vec![false; renderer.scene().triangles.len()];
         reflectors
             .iter()
-            .for_each(|&t| is_reflector[t as usize] = true);
+            .for_each(|&t| is_reflector[t.index()] = true);
         let margin = VertexSettings::default().visibility_radius + 1;
         let bounds = reflector_bounds(renderer.scene(), &camera, &is_reflector, margin);
         let area = (bounds.x1 - bounds.x0) * (bounds.y1 - bounds.y0);

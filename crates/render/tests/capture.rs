@@ -25,9 +25,7 @@ fn mirror(kr: f32) -> Material {
 /// The triangles of the object `name`.
 fn triangles_of(scene: &Scene, name: &str) -> Vec<TriangleId> {
     let object = scene.object_id(name).unwrap();
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| scene.triangles[t as usize].object == object)
-        .collect()
+    scene.triangles_of(object).collect()
 }
 
 fn render(renderer: &Renderer, setup: &FrameSetup, quality: Quality) -> FrameImage {

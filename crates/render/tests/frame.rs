@@ -47,7 +47,7 @@ fn id_buffer_agrees_with_ray_cast_first_hits_on_the_cockpit() {
             let hit = renderer
                 .bvh()
                 .closest_hit(&ray, f32::INFINITY)
-                .map_or(NONE, |h| h.triangle);
+                .map_or(NONE, |h| h.triangle.raw());
             agree += (hit == ids.triangle_at(x, y)) as u32;
         }
     }

@@ -10,7 +10,7 @@ use glam::Vec3;
 use vtfarm_method::{MethodKind, OwnedFrame};
 use vtfarm_render::{FrameSetup, RenderOptions, Renderer};
 use vtfarm_scene::photometry;
-use vtfarm_scene::{Camera, Lighting, Material, ObjectId, Scene, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, MaterialId, ObjectId, Scene, TriangleId};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{FrameImage, PixelRect, Quality, VertexSettings};
 
@@ -72,8 +72,9 @@ fn mirrored_emitter(scene: &mut Scene, theta_deg: f32) {
 }
 
 fn triangles_of(scene: &Scene, objects: &[ObjectId]) -> Vec<TriangleId> {
-    (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| objects.contains(&scene.triangles[t as usize].object))
+    scene
+        .triangle_ids()
+        .filter(|&t| objects.contains(&scene.triangles[t.index()].object))
         .collect()
 }
 
@@ -187,7 +188,7 @@ fn sheet(material: Material) -> Scene {
             .map(|vertices| vtfarm_scene::Triangle {
                 vertices,
                 object: ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             })
             .collect(),
         objects: vec![vtfarm_scene::Object {
@@ -302,7 +303,7 @@ fn slab(theta_deg: f32, one_object: bool) -> (Scene, Vec<TriangleId>) {
     );
     if one_object {
         for t in back {
-            scene.triangles[t as usize].object = ObjectId(0);
+            scene.triangles[t.index()].object = ObjectId(0);
         }
     }
     scene.append_quad(

@@ -107,7 +107,7 @@ fn scene() -> Scene {
             scene.triangles.push(Triangle {
                 vertices: [a, b, c].map(|v| base + v),
                 object: vtfarm_scene::ObjectId(id),
-                material: id,
+                material: vtfarm_scene::MaterialId(id),
             });
             scene
                 .corner_uvs
@@ -167,7 +167,7 @@ fn seen(x: u32, y: u32) -> Option<(&'static str, f32)> {
 #[test]
 fn a_minified_checkerboard_averages_to_its_mean_in_every_shading_path() {
     let scene = scene();
-    let reflectors: Vec<TriangleId> = (2..6).collect();
+    let reflectors: Vec<TriangleId> = (2..6).map(TriangleId).collect();
     let renderer = Renderer::new(Arc::new(scene), reflectors);
     let setup = FrameSetup {
         camera: camera(),

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_cockpit::{CockpitConfig, cockpit};
 use vtfarm_render::{FrameSetup, RenderOptions, RenderedFrame, Renderer, split_packages};
-use vtfarm_scene::{Camera, Lighting, Material, Object, Scene, Triangle, TriangleId};
+use vtfarm_scene::{Camera, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{PackageOptions, ProgressivePackage, Quality, Transmission, VertexSettings};
 
@@ -109,7 +109,7 @@ fn quads(transmission: Transmission) -> (Renderer, FrameSetup) {
             scene.triangles.push(Triangle {
                 vertices: vertices.map(|v| base + v),
                 object: vtfarm_scene::ObjectId(id as u32),
-                material: id as u32,
+                material: MaterialId(id as u32),
             });
         }
     }
@@ -140,7 +140,7 @@ fn quads(transmission: Transmission) -> (Renderer, FrameSetup) {
             ..VertexSettings::default()
         },
     };
-    let reflectors: Vec<TriangleId> = (0..4).collect();
+    let reflectors: Vec<TriangleId> = TriangleId::range(4).collect();
     (Renderer::new(Arc::new(scene), reflectors), setup)
 }
 
@@ -244,7 +244,8 @@ fn a_workers_progressive_frame_computes_each_glass_pixels_terms_once() {
         let upfront = renderer.behind(&setup, &full_ids).glass_computations();
         let scene = renderer.scene();
         let glass_pixels = (full_ids.triangle.iter())
-            .filter(|&&t| renderer.reflectors().contains(&t) && scene.material_of(t).see_through())
+            .filter_map(|&t| TriangleId::from_raw(t))
+            .filter(|t| renderer.reflectors().contains(t) && scene.material_of(*t).see_through())
             .count() as u64;
         assert!(glass_pixels > 100, "{name}: {glass_pixels} glass pixels");
         assert_eq!(upfront, glass_pixels, "{name}: the up-front pass");

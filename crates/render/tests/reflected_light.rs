@@ -168,9 +168,7 @@ fn full_and_reference_agree_on_a_pane_whose_back_surface_is_no_reflector() {
         Vec3::X * 6.0,
     );
     let pane = scene.object_id("pane").unwrap();
-    let reflectors: Vec<TriangleId> = (0..scene.triangles.len() as TriangleId)
-        .filter(|&t| scene.triangles[t as usize].object == pane)
-        .collect();
+    let reflectors: Vec<TriangleId> = scene.triangles_of(pane).collect();
     let panel = scene.object_id("panel").unwrap();
     let renderer = Renderer::new(Arc::new(scene), reflectors);
     let setup = FrameSetup {

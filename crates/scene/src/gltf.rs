@@ -453,7 +453,7 @@ impl Import<'_> {
         };
         let uv = |v: u32| uvs.get(v as usize).copied().unwrap_or(Vec2::ZERO);
         let material = match primitive.material().index() {
-            Some(m) if m < self.scene.materials.len() => m as MaterialId,
+            Some(m) if m < self.scene.materials.len() => MaterialId(m as u32),
             _ => default_material(&mut self.scene),
         };
         let base = self.scene.positions.len() as u32;
@@ -856,7 +856,7 @@ pub fn encode_glb(scene: &Scene) -> Result<Vec<u8>, crate::SceneError> {
             json!({"bufferView": n, "componentType": 5126, "count": order.len(), "type": "VEC3"}),
         );
         accessors.push(json!({"bufferView": i, "componentType": 5125, "count": indices.len(), "type": "SCALAR"}));
-        meshes.push(json!({"primitives": [{"attributes": {"POSITION": a, "NORMAL": a + 1}, "indices": a + 2, "material": run.1, "mode": 4}]}));
+        meshes.push(json!({"primitives": [{"attributes": {"POSITION": a, "NORMAL": a + 1}, "indices": a + 2, "material": run.1.raw(), "mode": 4}]}));
         nodes.push(json!({"name": scene.objects[run.0.index()].name, "mesh": meshes.len() - 1}));
         start = end;
     }

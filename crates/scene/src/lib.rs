@@ -56,10 +56,63 @@ impl std::fmt::Display for ObjectId {
         self.0.fmt(f)
     }
 }
-/// Index of a triangle in [`Scene::triangles`].
-pub type TriangleId = u32;
+
+/// Index of a triangle in [`Scene::triangles`]. Per-pixel and per-sample
+/// triangle maps (ID buffers, sample records) hold the bare number, with
+/// [`NONE`] for no triangle ([`TriangleId::raw`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct TriangleId(pub u32);
+
+impl TriangleId {
+    /// The triangle's index in [`Scene::triangles`].
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bare number, as triangle maps hold it.
+    pub fn raw(self) -> u32 {
+        self.0
+    }
+
+    /// The triangle a map's bare number names: none for [`NONE`].
+    pub fn from_raw(raw: u32) -> Option<TriangleId> {
+        (raw != NONE).then_some(TriangleId(raw))
+    }
+
+    /// The ids of the first `n` triangles, in order.
+    pub fn range(n: usize) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
+        (0..n as u32).map(TriangleId)
+    }
+}
+
+impl std::fmt::Display for TriangleId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
 /// Index of a material in [`Scene::materials`].
-pub type MaterialId = u32;
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MaterialId(pub u32);
+
+impl MaterialId {
+    /// The material's index in [`Scene::materials`].
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+
+    /// The bare number, as the wire carries it.
+    pub fn raw(self) -> u32 {
+        self.0
+    }
+}
+
+impl std::fmt::Display for MaterialId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
 /// The "no object / no triangle" marker used in ID buffers and samples.
 pub const NONE: u32 = u32::MAX;
 
@@ -129,13 +182,13 @@ pub enum SceneError {
 impl Scene {
     /// The three corner positions of triangle `id`.
     pub fn triangle_positions(&self, id: TriangleId) -> [Vec3; 3] {
-        let t = &self.triangles[id as usize];
+        let t = &self.triangles[id.index()];
         t.vertices.map(|v| self.positions[v as usize])
     }
 
     /// The three corner normals of triangle `id`.
     pub fn triangle_normals(&self, id: TriangleId) -> [Vec3; 3] {
-        let t = &self.triangles[id as usize];
+        let t = &self.triangles[id.index()];
         t.vertices.map(|v| self.normals[v as usize])
     }
 
@@ -148,7 +201,7 @@ impl Scene {
 
     /// The material of triangle `id`.
     pub fn material_of(&self, id: TriangleId) -> &Material {
-        &self.materials[self.triangles[id as usize].material as usize]
+        &self.materials[self.triangles[id.index()].material.index()]
     }
 
     /// The material of triangle `id` at the point with barycentric
@@ -168,7 +221,7 @@ impl Scene {
         footprint: f32,
     ) -> Cow<'_, Material> {
         let material = self.material_of(id);
-        let Some(corners) = self.corner_uvs.get(id as usize) else {
+        let Some(corners) = self.corner_uvs.get(id.index()) else {
             return Cow::Borrowed(material);
         };
         if !material.is_textured() {
@@ -219,6 +272,17 @@ impl Scene {
         Vec3::new(1.0 - wb - wc, wb, wc)
     }
 
+    /// The ids of all triangles, in order.
+    pub fn triangle_ids(&self) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
+        TriangleId::range(self.triangles.len())
+    }
+
+    /// The ids of the triangles of `object`, in order.
+    pub fn triangles_of(&self, object: ObjectId) -> impl Iterator<Item = TriangleId> + '_ {
+        self.triangle_ids()
+            .filter(move |t| self.triangles[t.index()].object == object)
+    }
+
     /// Looks up an object by name.
     pub fn object_id(&self, name: &str) -> Option<ObjectId> {
         self.objects
@@ -232,7 +296,7 @@ impl Scene {
         self.materials
             .iter()
             .position(|m| m.name == name)
-            .map(|i| i as MaterialId)
+            .map(|i| MaterialId(i as u32))
     }
 
     /// The axis-aligned bounds (min, max) of all vertices.
@@ -255,12 +319,12 @@ impl Scene {
         u: Vec3,
         v: Vec3,
     ) -> [TriangleId; 2] {
-        let first = self.triangles.len() as TriangleId;
+        let first = TriangleId(self.triangles.len() as u32);
         let n = u.cross(v).normalize();
         let triangle = |vertices| Triangle {
             vertices,
             object: ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         };
         self.append(&Scene {
             positions: vec![corner, corner + u, corner + u + v, corner + v],
@@ -270,7 +334,7 @@ impl Scene {
             materials: vec![material],
             ..Default::default()
         });
-        [first, first + 1]
+        [first, TriangleId(first.0 + 1)]
     }
 
     /// Appends another scene's content, remapping its indices.
@@ -302,7 +366,7 @@ impl Scene {
             .extend(other.triangles.iter().map(|t| Triangle {
                 vertices: t.vertices.map(|v| v + v0),
                 object: ObjectId(t.object.0 + o0),
-                material: t.material + m0,
+                material: MaterialId(t.material.0 + m0),
             }));
     }
 
@@ -337,7 +401,7 @@ impl Scene {
                     object: t.object,
                 });
             }
-            if t.material as usize >= self.materials.len() {
+            if t.material.index() >= self.materials.len() {
                 return Err(SceneError::MissingMaterial {
                     triangle: i,
                     material: t.material,
@@ -373,5 +437,32 @@ impl Scene {
                 .map_err(|bound| SceneError::OutOfBounds { vertex: i, bound })?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_triangle_prints_as_its_number_and_indexes_its_scene() {
+        let mut scene = Scene::default();
+        let white = Material::default();
+        let first = scene.append_quad("floor", white.clone(), Vec3::ZERO, Vec3::X, Vec3::Z);
+        let second = scene.append_quad("wall", white, Vec3::ZERO, Vec3::X, Vec3::Y);
+        assert_eq!(first, [TriangleId(0), TriangleId(1)]);
+        assert_eq!(second, [TriangleId(2), TriangleId(3)]);
+        assert_eq!(second[1].to_string(), "3");
+        assert_eq!(second[1].raw(), 3);
+        assert!(scene.triangle_ids().eq(first.into_iter().chain(second)));
+        let wall = scene.object_id("wall").unwrap();
+        assert_eq!(scene.triangles[second[0].index()].object, wall);
+        assert!(scene.triangles_of(wall).eq(second));
+        assert_eq!(scene.triangle_positions(second[1])[2], Vec3::Y);
+        assert_eq!(TriangleId::from_raw(3), Some(second[1]));
+        assert_eq!(TriangleId::from_raw(NONE), None);
+        // Each quad brings its own material, numbered after the scene's.
+        assert_eq!(scene.triangles[second[0].index()].material, MaterialId(1));
+        assert_eq!(MaterialId(1).to_string(), "1");
     }
 }

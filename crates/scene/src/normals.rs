@@ -326,7 +326,7 @@ fn position_key(p: Vec3) -> [u32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Material, Object, Triangle};
+    use crate::{Material, MaterialId, Object, Triangle};
     use proptest::prelude::*;
 
     /// A unit cube with 8 shared corners and 12 outward-facing triangles.
@@ -512,7 +512,7 @@ mod tests {
                 .map(|(i, &vertices)| Triangle {
                     vertices,
                     object: ObjectId(0),
-                    material: (i / 6) as u32,
+                    material: MaterialId((i / 6) as u32),
                 })
                 .collect(),
             objects: vec![Object { name: "a".into() }, Object { name: "b".into() }],
@@ -526,7 +526,7 @@ mod tests {
             .extend(triangles.iter().map(|&vertices| Triangle {
                 vertices,
                 object: ObjectId(1),
-                material: 0,
+                material: MaterialId(0),
             }));
         scene
     }

@@ -381,7 +381,7 @@ pub fn write_obj(scene: &Scene, dir: &Path, name: &str) -> Result<(), ObjError> 
     let mut current = None;
     for (i, t) in scene.triangles.iter().enumerate() {
         let object = &scene.objects[t.object.index()].name;
-        let material = &scene.materials[t.material as usize].name;
+        let material = &scene.materials[t.material.index()].name;
         match current {
             Some((o, _)) if o == t.object => {}
             _ => {
@@ -1074,7 +1074,7 @@ fn build_scene(
         }
         let object = object_id(&mut scene, &model.name);
         let material = match mesh.material_id {
-            Some(m) if m < scene.materials.len() => m as MaterialId,
+            Some(m) if m < scene.materials.len() => MaterialId(m as u32),
             _ => default_material(&mut scene),
         };
         let has_normals = mesh.normals.len() == mesh.positions.len();
@@ -1141,7 +1141,7 @@ pub(crate) fn default_material(scene: &mut Scene) -> MaterialId {
     let default = Material::default();
     scene.material_id(&default.name).unwrap_or_else(|| {
         scene.materials.push(default);
-        scene.materials.len() as MaterialId - 1
+        MaterialId(scene.materials.len() as u32 - 1)
     })
 }
 

@@ -11,7 +11,7 @@ use vtfarm_scene::gltf::{
     GltfError, MAX_IMPORTED_VERTICES, MAX_NODE_DEPTH, MAX_NODE_VISITS, import_gltf, write_glb,
 };
 use vtfarm_scene::obj::ObjOptions;
-use vtfarm_scene::{Material, ObjectId, Scene};
+use vtfarm_scene::{Material, ObjectId, Scene, TriangleId};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -20,14 +20,14 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn material<'a>(scene: &'a Scene, name: &str) -> &'a Material {
-    &scene.materials[scene.material_id(name).unwrap() as usize]
+    &scene.materials[scene.material_id(name).unwrap().index()]
 }
 
 /// The corner positions of the object's triangles, in order.
 fn corners(scene: &Scene, object: &str) -> Vec<[Vec3; 3]> {
     let id = scene.object_id(object).unwrap();
-    (0..scene.triangles.len() as u32)
-        .filter(|&t| scene.triangles[t as usize].object == id)
+    scene
+        .triangles_of(id)
         .map(|t| scene.triangle_positions(t))
         .collect()
 }
@@ -72,12 +72,10 @@ fn nodes_place_each_instance_of_a_mesh_and_cameras_come_with_their_node() {
         "{right:?}"
     );
     // Normals turn with the node: the turned quad faces +X.
-    let normal = scene.triangle_normals(2)[0];
+    let normal = scene.triangle_normals(TriangleId(2))[0];
     assert!(close(normal, Vec3::X) || close(normal, Vec3::Z), "{normal}");
     let t = scene.object_id("right").unwrap();
-    let turned = (0..scene.triangles.len() as u32)
-        .find(|&i| scene.triangles[i as usize].object == t)
-        .unwrap();
+    let turned = scene.triangles_of(t).next().unwrap();
     assert!(close(scene.triangle_normals(turned)[0], Vec3::X));
     // The PBR base colour is the diffuse colour; glTF's default ior 1.5.
     let paint = material(scene, "paint");
@@ -115,7 +113,7 @@ fn a_base_colour_texture_is_read_with_its_coordinates() {
     // The texel colours at the quad's quarters: top left red, bottom right yellow.
     let at = |x: f32, y: f32| {
         let point = Vec3::new(x, y, 0.0);
-        let t = if y <= x { 0 } else { 1 };
+        let t = TriangleId(if y <= x { 0 } else { 1 });
         let weights = scene.barycentrics(t, point);
         scene.textured_material(t, weights, 0.0).diffuse
     };
@@ -152,7 +150,7 @@ fn transmission_and_ior_make_thin_glass() {
     assert_eq!((glass.ior, glass.bending_ior()), (1.5, 1.0));
     assert_eq!(glass.diffuse, Vec3::ZERO);
     // No normals in the file: computed, facing +Z.
-    assert!(close(scene.triangle_normals(0)[0], Vec3::Z));
+    assert!(close(scene.triangle_normals(TriangleId(0))[0], Vec3::Z));
 }
 
 #[test]

@@ -11,7 +11,7 @@ use vtfarm_scene::obj::{
     MAX_FACE_VERTICES, ObjError, ObjOptions, ObjWarning, import_obj, load_obj, write_obj,
 };
 use vtfarm_scene::shapes::disc_polygon_obj;
-use vtfarm_scene::{Material, Object, ObjectId, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle, TriangleId};
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -40,9 +40,10 @@ fn approx(a: Vec3, b: Vec3) -> bool {
 /// The triangles of a scene as (object name, material, corner positions,
 /// corner normals), which is what survives any vertex renumbering.
 fn triangle_list(scene: &Scene) -> Vec<(String, Material, [Vec3; 3], [Vec3; 3])> {
-    (0..scene.triangles.len() as u32)
+    scene
+        .triangle_ids()
         .map(|i| {
-            let t = scene.triangles[i as usize];
+            let t = scene.triangles[i.index()];
             (
                 scene.objects[t.object.index()].name.clone(),
                 scene.material_of(i).clone(),
@@ -73,7 +74,7 @@ fn a_cube_without_normals_gets_24_vertices_with_face_normals() {
     );
     // Two runs of three faces, four corners per face.
     assert_eq!(scene.positions.len(), 24);
-    for i in 0..12 {
+    for i in TriangleId::range(12) {
         let face = scene.geometric_normal(i);
         assert!(scene.triangle_normals(i).iter().all(|&n| approx(n, face)));
         // Faces are wound counter-clockwise seen from outside.
@@ -123,7 +124,7 @@ fn a_room_maps_objects_materials_and_normals() {
     };
     assert_eq!([0, 1, 2, 3].map(per_object), [2, 3, 3, 5]);
 
-    let material = |name: &str| &scene.materials[scene.material_id(name).unwrap() as usize];
+    let material = |name: &str| &scene.materials[scene.material_id(name).unwrap().index()];
     assert_eq!(material("default"), &Material::default());
     let mirror = material("mirror");
     assert_eq!(
@@ -159,8 +160,7 @@ fn a_room_maps_objects_materials_and_normals() {
     );
     assert!(!material("lamp").is_specular() && frosted.is_specular());
 
-    for (i, t) in scene.triangles.iter().enumerate() {
-        let i = i as u32;
+    for (i, t) in scene.triangle_ids().zip(&scene.triangles) {
         let name = &scene.objects[t.object.index()].name;
         let normals = scene.triangle_normals(i);
         let expected = match &name[..] {
@@ -242,7 +242,7 @@ fn built_scene() -> Scene {
     let t = |vertices, object, material| Triangle {
         vertices,
         object: ObjectId(object),
-        material,
+        material: MaterialId(material),
     };
     Scene {
         positions,
@@ -355,7 +355,7 @@ fn written_files_follow_the_obj_conventions_other_loaders_expect() {
             })
         })
         .collect();
-    let expected: Vec<[f32; 3]> = (0..5)
+    let expected: Vec<[f32; 3]> = TriangleId::range(5)
         .flat_map(|i| scene.triangle_positions(i).map(|p| p.to_array()))
         .collect();
     assert_eq!(corners, expected);
@@ -371,7 +371,7 @@ fn write_obj_rejects_scenes_it_cannot_round_trip() {
     let mut nan = built_scene();
     nan.positions[3].y = f32::NAN;
     let mut broken = built_scene();
-    broken.triangles[0].material = 9;
+    broken.triangles[0].material = MaterialId(9);
     for (scene, message) in [
         (twins, "two materials are named \"mirror\""),
         (blank, "object name \" lamp\" cannot be written"),
@@ -523,9 +523,15 @@ fn tolerant_of_common_variations() {
         }]
     );
     assert_eq!(scene.materials.len(), 2);
-    assert_eq!(scene.material_of(0).diffuse, Vec3::new(0.1, 0.2, 0.3));
-    assert_eq!(scene.material_of(1).name, "dark red");
-    assert_eq!(scene.triangle_positions(0), [Vec3::ZERO, Vec3::X, Vec3::Y]);
+    assert_eq!(
+        scene.material_of(TriangleId(0)).diffuse,
+        Vec3::new(0.1, 0.2, 0.3)
+    );
+    assert_eq!(scene.material_of(TriangleId(1)).name, "dark red");
+    assert_eq!(
+        scene.triangle_positions(TriangleId(0)),
+        [Vec3::ZERO, Vec3::X, Vec3::Y]
+    );
 
     let coloured = "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n";
     let (_dir, result) = load_files(&[("c.obj", coloured.as_bytes())]);
@@ -567,8 +573,11 @@ fn what_exporters_write_loads() {
     // `#` that starts a word ends an `o` line too? No: names keep it.
     assert_eq!(scene.objects[0].name, "car # body");
     assert_eq!(scene.materials[0].name, "Material #25");
-    assert_eq!(scene.material_of(0).ambient, Vec3::new(0.1, 0.1, 0.8));
-    assert_eq!(scene.material_of(0).shininess, 10.0);
+    assert_eq!(
+        scene.material_of(TriangleId(0)).ambient,
+        Vec3::new(0.1, 0.1, 0.8)
+    );
+    assert_eq!(scene.material_of(TriangleId(0)).shininess, 10.0);
     assert_eq!(
         warnings,
         [ObjWarning {
@@ -658,7 +667,7 @@ fn optics(mtl: &str) -> (Vec3, Vec3, bool) {
     let obj = format!("mtllib m.mtl\n{TRIANGLE_OBJ}usemtl m\nf 1 2 3\n");
     let mtl = format!("newmtl m\n{mtl}");
     let (_dir, result) = load_files(&[("m.obj", obj.as_bytes()), ("m.mtl", mtl.as_bytes())]);
-    let m = result.unwrap().material_of(0).clone();
+    let m = result.unwrap().material_of(TriangleId(0)).clone();
     (m.reflectance, m.transmittance, m.fresnel)
 }
 
@@ -742,7 +751,7 @@ fn zero_normals_in_the_file_fall_back_to_the_face_normal() {
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 0\nvn 0 0 3\nf 1//1 2//2 3//2\n";
     let (_dir, result) = load_files(&[("z.obj", obj.as_bytes())]);
     let scene = result.unwrap();
-    assert_eq!(scene.triangle_normals(0), [Vec3::Z; 3]);
+    assert_eq!(scene.triangle_normals(TriangleId(0)), [Vec3::Z; 3]);
 }
 
 /// Tokens likely to upset a parser: broken numbers, odd indices, huge values.

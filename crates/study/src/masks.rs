@@ -29,7 +29,7 @@ impl InstrumentMasks {
     ) -> Self {
         let mut is_reflector = vec![false; scene.triangles.len()];
         for &t in reflectors {
-            is_reflector[t as usize] = true;
+            is_reflector[t.index()] = true;
         }
         let behind = vtfarm_vertex::behind_id_buffer(scene, camera, &is_reflector);
         let instrument_objects = instrument;

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_job::study::parse_study;
 use vtfarm_render::{RenderOptions, Renderer};
-use vtfarm_scene::{NONE, Scene};
+use vtfarm_scene::{NONE, Scene, TriangleId};
 
 use super::*;
 
@@ -168,18 +168,17 @@ fn a_flat_glass_reflects_the_analytic_mirror_image_of_the_scene() {
             .collect(),
         ..scene.clone()
     };
-    let is_glass: Vec<bool> = (0..scene.triangles.len())
-        .map(|t| {
-            variant.reflectors.contains(&(t as u32)) || Some(scene.triangles[t].object) == back
-        })
+    let is_glass: Vec<bool> = scene
+        .triangle_ids()
+        .map(|t| variant.reflectors.contains(&t) || Some(scene.triangles[t.index()].object) == back)
         .collect();
     mirrored
         .triangles
         .iter_mut()
         .for_each(|t| t.vertices.swap(1, 2));
-    let keep = |t: u32| {
+    let keep = |t: TriangleId| {
         let [p, q, r] = scene.triangle_positions(t);
-        !is_glass[t as usize] && ((p + q + r) / 3.0 - a).dot(n) * eye_side > 0.0
+        !is_glass[t.index()] && ((p + q + r) / 3.0 - a).dot(n) * eye_side > 0.0
     };
     let ids = vtfarm_raster::id_buffer_where(&mirrored, &camera, &keep);
 
@@ -715,7 +714,7 @@ fn a_sun_sweep_finds_the_suns_glint_in_the_cover_glass_and_reports_its_veil() {
         .filter(|&i| frame.pixel(i).object == NONE)
         .map(|i| {
             let (x, y) = (i as u32 % camera.width, i as u32 / camera.width);
-            let triangle = ids.triangle_at(x, y);
+            let triangle = TriangleId(ids.triangle_at(x, y));
             let (surface, ray) =
                 vtfarm_vertex::pixel_surface(&v.scene, camera, &ids, triangle, x, y);
             vtfarm_trace::reflect(ray, surface.normal)

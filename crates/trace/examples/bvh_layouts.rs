@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rand::{Rng as _, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
-use vtfarm_scene::{Material, Object, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, Scene, Triangle};
 use vtfarm_trace::{BuildPreset, BvhLayout, BvhOptions, Ray, SceneBvh};
 
 /// Seeded inputs from the workspace's one test generator (`rand_xoshiro`).
@@ -51,7 +51,7 @@ fn push_triangle(scene: &mut Scene, corners: [Vec3; 3]) {
     scene.triangles.push(Triangle {
         vertices: [base, base + 1, base + 2],
         object: vtfarm_scene::ObjectId(0),
-        material: 0,
+        material: MaterialId(0),
     });
 }
 

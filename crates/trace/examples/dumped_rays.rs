@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
-use vtfarm_scene::{Material, Object, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, Scene, Triangle};
 use vtfarm_trace::{BuildPreset, BvhLayout, BvhOptions, Ray, SceneBvh};
 
 fn main() {
@@ -44,7 +44,7 @@ fn main() {
         scene.triangles.push(Triangle {
             vertices: [base, base + 1, base + 2],
             object: vtfarm_scene::ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         });
     }
     let scene = Arc::new(scene);

@@ -22,7 +22,7 @@ use obvhs::ploc::PlocBuilder;
 use obvhs::ray::{Ray as BvhRay, RayHit};
 use obvhs::splits::split_aabbs_preset;
 use obvhs::triangle::Triangle as BvhTriangle;
-use vtfarm_scene::{ObjectId, Scene, TriangleId};
+use vtfarm_scene::{MaterialId, ObjectId, Scene, TriangleId};
 
 use crate::leaf::{LaneHits, Leaves, bits};
 use crate::wide::{Isa, LeafTest};
@@ -318,16 +318,17 @@ pub struct Emitter {
 
 /// The emitters of `scene` ([`Emitter`]), in (object, material) order.
 fn emitters_of(scene: &Scene) -> Vec<Emitter> {
-    let mut boxes: std::collections::BTreeMap<(ObjectId, u32), (Vec3, Vec3)> = Default::default();
-    for (id, t) in scene.triangles.iter().enumerate() {
-        let material = &scene.materials[t.material as usize];
+    let mut boxes: std::collections::BTreeMap<(ObjectId, MaterialId), (Vec3, Vec3)> =
+        Default::default();
+    for (id, t) in scene.triangle_ids().zip(&scene.triangles) {
+        let material = &scene.materials[t.material.index()];
         if material.emission.max_element() <= 0.0 {
             continue;
         }
         let entry = boxes
             .entry((t.object, t.material))
             .or_insert((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)));
-        for p in scene.triangle_positions(id as TriangleId) {
+        for p in scene.triangle_positions(id) {
             entry.0 = entry.0.min(p);
             entry.1 = entry.1.max(p);
         }
@@ -337,7 +338,7 @@ fn emitters_of(scene: &Scene) -> Vec<Emitter> {
         .map(|((object, material), (lo, hi))| Emitter {
             object,
             luminance_cd_m2: vtfarm_scene::photometry::cd_m2(
-                scene.materials[material as usize].emission,
+                scene.materials[material.index()].emission,
             ),
             centre: (lo + hi) * 0.5,
             radius: (hi - lo).length() * 0.5,
@@ -363,8 +364,7 @@ pub fn casts_shadow(material: &vtfarm_scene::Material) -> bool {
 }
 
 fn triangle_casts_shadow(scene: &Scene, id: TriangleId) -> bool {
-    let material = scene.triangles[id as usize].material as usize;
-    casts_shadow(&scene.materials[material])
+    casts_shadow(scene.material_of(id))
 }
 
 impl fmt::Debug for SceneBvh {
@@ -470,10 +470,12 @@ impl SceneBvh {
     ) -> Result<SceneBvh, InvalidScene> {
         scene.validate().map_err(|e| InvalidScene(e.to_string()))?;
         let count = scene.triangles.len();
-        let tri_positions: Vec<[Vec3; 3]> = (0..count as TriangleId)
+        let tri_positions: Vec<[Vec3; 3]> = scene
+            .triangle_ids()
             .map(|id| scene.triangle_positions(id))
             .collect();
-        let geometric_normals = (0..count as TriangleId)
+        let geometric_normals = scene
+            .triangle_ids()
             .map(|id| scene.geometric_normal(id))
             .collect();
 
@@ -493,7 +495,7 @@ impl SceneBvh {
         };
         let prims: Vec<PrimTriangle> = slots
             .iter()
-            .map(|&i| PrimTriangle::new(tri_positions[i as usize]))
+            .map(|&i| PrimTriangle::new(tri_positions[i.index()]))
             .collect();
         let leaves = match &accel {
             Accel::Cw(cw) if options.layout == BvhLayout::Cw => Leaves::new(cw, &prims, &slots),
@@ -589,7 +591,7 @@ impl SceneBvh {
     /// The unit geometric normal of a triangle (counter-clockwise winding),
     /// zero for a degenerate one.
     pub fn geometric_normal(&self, triangle: TriangleId) -> Vec3 {
-        self.geometric_normals[triangle as usize]
+        self.geometric_normals[triangle.index()]
     }
 
     /// The surface point of a hit: the barycentric interpolation of the
@@ -859,7 +861,7 @@ impl SceneBvh {
         let (origin, direction) = (Vec3A::from(ray.origin), Vec3A::from(ray.direction));
         let sheared = ShearedRay::new(origin, direction);
         let mut best = ClosestSoFar { t_max, hit: None };
-        for id in 0..self.scene.triangles.len() as TriangleId {
+        for id in self.scene.triangle_ids() {
             let tri = PrimTriangle::new(self.scene.triangle_positions(id));
             if let Some(tuv) = tri.intersect(&sheared) {
                 best.offer(id, tuv);
@@ -1017,7 +1019,7 @@ fn build(tris: &[[Vec3; 3]], options: BvhOptions, pad: f32) -> (Accel, Vec<Trian
         BvhLayout::Cw | BvhLayout::CwOctant => {
             let cw = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
             if cw_depth(&cw) < CW_STACK_LIMIT {
-                let slots = cw.primitive_indices.clone();
+                let slots = triangle_ids(&cw.primitive_indices);
                 return (Accel::Cw(cw), slots);
             }
             // obvhs traverses a CwBvh with a fixed 32-entry stack that
@@ -1052,8 +1054,13 @@ fn binary(
     // Traversal sizes its stack by `max_depth`, recorded during the PLOC
     // build; make sure the collapse and reinsertion passes did not deepen it.
     bvh2.max_depth = bvh2.max_depth.max(bvh2_depth(&bvh2));
-    let slots = bvh2.primitive_indices.clone();
+    let slots = triangle_ids(&bvh2.primitive_indices);
     (Accel::Binary(bvh2), slots)
+}
+
+/// The triangle of each primitive slot, from obvhs' primitive indices.
+fn triangle_ids(primitive_indices: &[u32]) -> Vec<TriangleId> {
+    primitive_indices.iter().copied().map(TriangleId).collect()
 }
 
 /// The number of node levels of a binary BVH.

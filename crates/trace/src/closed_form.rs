@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use vtfarm_scene::photometry::{self, CD_M2_PER_UNIT};
-use vtfarm_scene::{Light, LightKind, Lighting, Material};
+use vtfarm_scene::{Light, LightKind, Lighting, Material, TriangleId};
 
 use crate::testutil::{SceneBuilder, emitter, mirror};
 use crate::{PixelCone, SceneBvh, SurfacePoint, TraceSettings, Tracer};
@@ -86,7 +86,7 @@ fn reflected_at(bvh: &SceneBvh, theta_deg: f32, max_depth: u32) -> f64 {
     let point = SurfacePoint {
         position: Vec3::ZERO,
         normal: Vec3::Y,
-        triangle: 0,
+        triangle: TriangleId(0),
     };
     let incoming = Vec3::new(a.sin(), -a.cos(), 0.0);
     f64::from(photometry::cd_m2(tracer.shade(&point, incoming).reflected))
@@ -152,7 +152,7 @@ fn a_thin_sheet_reflects_l_times_the_fresnel_reflectance_of_its_ior() {
         let point = SurfacePoint {
             position: Vec3::ZERO,
             normal: Vec3::Y,
-            triangle: 0,
+            triangle: TriangleId(0),
         };
         let terms = tracer.surface_terms(&point, incoming);
         let through = terms.refraction.expect("a thin sheet transmits").direction;
@@ -229,7 +229,7 @@ fn a_lambertian_panel_under_e_lux_has_rho_e_over_pi() {
         let point = SurfacePoint {
             position: Vec3::ZERO,
             normal: Vec3::Y,
-            triangle: 0,
+            triangle: TriangleId(0),
         };
         let seen = tracer.shade(&point, Vec3::new(0.0, -1.0, 0.3).normalize());
         let expected = f64::from(rho * lux * a.cos()) / std::f64::consts::PI;
@@ -264,7 +264,7 @@ fn an_ideal_mirror_reflects_l() {
         let point = SurfacePoint {
             position: Vec3::ZERO,
             normal: Vec3::Y,
-            triangle: 0,
+            triangle: TriangleId(0),
         };
         let sample = tracer.shade(&point, Vec3::new(a.sin(), -a.cos(), 0.0));
         within_one_percent(

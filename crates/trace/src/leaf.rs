@@ -93,7 +93,7 @@ impl LeafBlock {
             "a leaf holds at most {LANES} triangles"
         );
         let mut corners = [[[0f32; LANES]; 3]; 3];
-        let mut lane_ids = [0; LANES];
+        let mut lane_ids = [TriangleId::default(); LANES];
         lane_ids[..ids.len()].copy_from_slice(ids);
         let mut live = 0;
         for (lane, prim) in prims.iter().enumerate() {

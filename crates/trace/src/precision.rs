@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_scene::{Material, Object, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, Scene, Triangle, TriangleId};
 
 use crate::testutil::{SceneBuilder, TestRng};
 use crate::{Ray, SceneBvh, spawn_offset};
@@ -35,7 +35,7 @@ fn fan(rng: &mut TestRng, centre: Vec3, u: Vec3, v: Vec3, radius: f32, n: u32) -
             .map(|i| Triangle {
                 vertices: [0, 1 + i, 1 + (i + 1) % n],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             })
             .collect(),
         objects: vec![Object { name: "fan".into() }],
@@ -96,7 +96,7 @@ fn spawned_rays_never_hit_their_own_triangle_at_any_scale() {
         let offset = rng.vec3(-1.0, 1.0) * scale * [0.0, 1.0, 50.0][case % 3];
         let corners = [0; 3].map(|_| offset + rng.vec3(-1.0, 1.0) * scale);
         let bvh = SceneBvh::new(Arc::new(scene_of(&[corners])));
-        let normal = bvh.geometric_normal(0);
+        let normal = bvh.geometric_normal(TriangleId(0));
         if normal == Vec3::ZERO {
             continue;
         }
@@ -116,7 +116,7 @@ fn spawned_rays_never_hit_their_own_triangle_at_any_scale() {
             let t = (a - eye).dot(normal) / to.dot(normal);
             for position in [interpolated, eye + to * t] {
                 let direction = rng.direction();
-                let ray = bvh.spawn_ray(position, 0, direction);
+                let ray = bvh.spawn_ray(position, TriangleId(0), direction);
                 assert_eq!(
                     bvh.closest_hit_brute_force(&ray, f32::INFINITY),
                     None,
@@ -137,13 +137,24 @@ fn the_spawn_offset_follows_the_hit_not_the_scene() {
         Vec3::splat(250.0),
     ];
     let bvh = SceneBvh::new(Arc::new(scene_of(&[detail, far])));
-    let near = bvh.spawn_distance(Vec3::new(0.25, 0.25, 0.0), 0);
+    let near = bvh.spawn_distance(Vec3::new(0.25, 0.25, 0.0), TriangleId(0));
     assert_eq!(near, spawn_offset(1.0));
     assert!(near < 1e-5, "{near}");
-    assert_eq!(bvh.spawn_distance(Vec3::ZERO, 1), spawn_offset(250.0));
+    assert_eq!(
+        bvh.spawn_distance(Vec3::ZERO, TriangleId(1)),
+        spawn_offset(250.0)
+    );
     // The origin leaves the plane by exactly that distance, tangentially in place.
-    let ray = bvh.spawn_ray(Vec3::new(0.25, 0.25, 0.0), 0, Vec3::new(0.0, 0.6, 0.8));
+    let ray = bvh.spawn_ray(
+        Vec3::new(0.25, 0.25, 0.0),
+        TriangleId(0),
+        Vec3::new(0.0, 0.6, 0.8),
+    );
     assert_eq!(ray.origin, Vec3::new(0.25, 0.25, near));
-    let ray = bvh.spawn_ray(Vec3::new(0.25, 0.25, 0.0), 0, Vec3::new(0.0, 0.6, -0.8));
+    let ray = bvh.spawn_ray(
+        Vec3::new(0.25, 0.25, 0.0),
+        TriangleId(0),
+        Vec3::new(0.0, 0.6, -0.8),
+    );
     assert_eq!(ray.origin, Vec3::new(0.25, 0.25, -near));
 }

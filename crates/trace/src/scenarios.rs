@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use glam::Vec3;
-use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, ObjectId, Scene};
+use vtfarm_scene::{Light, LightKind, Lighting, Material, NONE, ObjectId, Scene, TriangleId};
 
 use crate::testutil::{SceneBuilder, TestRng, emitter, glass, mirror};
 use crate::whitted::{reflect, refract};
@@ -236,7 +236,7 @@ fn total_internal_reflection_sends_the_transmitted_energy_into_the_mirror_ray() 
     let point = SurfacePoint {
         position: Vec3::new(0.0, 0.0, 1.0),
         normal: Vec3::Y,
-        triangle: 0,
+        triangle: TriangleId(0),
     };
 
     // Below the critical angle the ray leaves the glass and sees the sky.
@@ -278,7 +278,7 @@ fn fresnel_moves_transmission_into_reflection_at_grazing_angles() {
     let point = SurfacePoint {
         position: Vec3::new(0.0, 0.0, 1.0),
         normal: Vec3::Y,
-        triangle: 0,
+        triangle: TriangleId(0),
     };
     let a = 80f32.to_radians();
     let incoming = Vec3::new(a.sin(), -a.cos(), 0.0);
@@ -575,7 +575,7 @@ fn bvh_closest_and_any_hit_equal_brute_force_for_every_layout() {
         expected
             .iter()
             .flatten()
-            .all(|h| !degenerate.contains(&h.triangle))
+            .all(|h| !degenerate.contains(&h.triangle.raw()))
     );
 
     for layout in BvhLayout::ALL {
@@ -699,8 +699,8 @@ fn closest_hit_reports_original_ids_and_barycentrics_from_both_sides() {
             Vec3::new(5.0, 1.0, 0.0),
         ]],
     );
-    let known = (scene.triangles.len() / 2) as u32;
-    let mut tail = scene.triangles.split_off(known as usize);
+    let known = TriangleId((scene.triangles.len() / 2) as u32);
+    let mut tail = scene.triangles.split_off(known.index());
     scene.append(&b.scene);
     scene.triangles.append(&mut tail);
     assert_eq!(scene.validate(), Ok(()));
@@ -1070,7 +1070,8 @@ fn the_pixel_cone_changes_only_textured_samples_the_same_way_in_both_walks() {
     for material in &mut textured.materials {
         material.diffuse_texture = Some(0);
     }
-    textured.corner_uvs = (0..textured.triangles.len() as u32)
+    textured.corner_uvs = textured
+        .triangle_ids()
         .map(|t| {
             textured
                 .triangle_positions(t)
@@ -1128,7 +1129,12 @@ fn piles_of_identical_triangles_are_traversed_completely() {
         );
         for ray in &rays {
             let hit = bvh.closest_hit(ray, f32::INFINITY);
-            assert_eq!(hit.map(|h| h.triangle), Some(0), "{:?}", bvh.options());
+            assert_eq!(
+                hit.map(|h| h.triangle),
+                Some(TriangleId(0)),
+                "{:?}",
+                bvh.options()
+            );
             assert_eq!(hit, bvh.closest_hit_brute_force(ray, f32::INFINITY));
         }
     }
@@ -1249,6 +1255,6 @@ fn absurd_coordinates_are_refused_instead_of_panicking_the_build() {
     };
     assert_eq!(
         bvh.closest_hit(&ray, f32::INFINITY).map(|h| h.triangle),
-        Some(0)
+        Some(TriangleId(0))
     );
 }

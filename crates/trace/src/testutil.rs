@@ -84,7 +84,7 @@ impl SceneBuilder {
         self.scene.objects.push(Object {
             name: format!("{}#{object}", material.name),
         });
-        let material_id = self.scene.materials.len() as MaterialId;
+        let material_id = MaterialId(self.scene.materials.len() as u32);
         self.scene.materials.push(material);
         (object, material_id)
     }

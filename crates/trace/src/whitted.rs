@@ -718,7 +718,7 @@ impl TreeSource for OnDemand<'_> {
         let (terms, reflection, refraction) =
             tracer.surface_of(&point, incoming, path, depth, rays, lit);
         Visited::Surface(VisitedSurface {
-            object: tracer.bvh.scene().triangles[point.triangle as usize]
+            object: tracer.bvh.scene().triangles[point.triangle.index()]
                 .object
                 .raw(),
             see_through: tracer.bvh.see_through(point.triangle),

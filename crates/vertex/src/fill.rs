@@ -282,7 +282,7 @@ pub(crate) fn fill(
                 for y in plan.rect.y0.max(y0)..plan.rect.y1.min(y1) {
                     let row = frame.ids.frame_index(0, y);
                     for x in plan.rect.x0..plan.rect.x1 {
-                        if frame.ids.triangle_at(x, y) != plan.triangle {
+                        if frame.ids.triangle_at(x, y) != plan.triangle.raw() {
                             continue;
                         }
                         match plan.interpolating_face(frame, x, y) {

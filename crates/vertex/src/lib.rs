@@ -210,10 +210,11 @@ pub struct VertexOwners(Vec<TriangleId>);
 
 impl VertexOwners {
     pub fn new(scene: &vtfarm_scene::Scene) -> Self {
-        let mut owners = vec![vtfarm_scene::NONE; scene.positions.len()];
-        for (t, tri) in scene.triangles.iter().enumerate() {
+        // A vertex no triangle uses keeps an owner past every triangle.
+        let mut owners = vec![TriangleId(vtfarm_scene::NONE); scene.positions.len()];
+        for (t, tri) in scene.triangle_ids().zip(&scene.triangles) {
             for v in tri.vertices {
-                owners[v as usize] = owners[v as usize].min(t as TriangleId);
+                owners[v as usize] = owners[v as usize].min(t);
             }
         }
         VertexOwners(owners)
@@ -335,7 +336,7 @@ impl Frame<'_> {
 
     /// Whether the ID buffer assigns pixel (x, y) to `triangle`.
     fn owns(&self, triangle: TriangleId, x: u32, y: u32) -> bool {
-        self.ids.triangle_at(x, y) == triangle
+        self.ids.triangle_at(x, y) == triangle.raw()
     }
 
     /// The rectangle that holds every pixel `triangle` owns, or `None` when it
@@ -372,7 +373,7 @@ impl Frame<'_> {
     /// at about the vertex's depth (vertices lie on edges, so their own pixel
     /// may belong to a neighbour).
     fn vertex_visible(&self, triangle: TriangleId, s: ScreenPoint) -> bool {
-        let object = self.tracer.bvh.scene().triangles[triangle as usize]
+        let object = self.tracer.bvh.scene().triangles[triangle.index()]
             .object
             .raw();
         let r = self.settings.visibility_radius as i64;
@@ -537,8 +538,8 @@ pub fn reflector_bounds(
         glam::Vec2::splat(f32::INFINITY),
         glam::Vec2::splat(f32::NEG_INFINITY),
     );
-    for (t, _) in is_reflector.iter().enumerate().filter(|(_, r)| **r) {
-        for p in scene.triangle_positions(t as TriangleId) {
+    for (t, _) in scene.triangle_ids().zip(is_reflector).filter(|(_, r)| **r) {
+        for p in scene.triangle_positions(t) {
             let Some(s) = projector.project(p) else {
                 return full;
             };

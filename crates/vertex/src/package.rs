@@ -171,9 +171,11 @@ impl SparseBitmap {
         ids: &IdBuffer,
         owns: impl Fn(TriangleId) -> bool,
     ) -> Option<(u32, u32)> {
-        self.covered()
-            .map(|(x, y, _)| (x, y))
-            .find(|&(x, y)| x >= ids.width || y >= ids.height || !owns(ids.triangle_at(x, y)))
+        self.covered().map(|(x, y, _)| (x, y)).find(|&(x, y)| {
+            x >= ids.width
+                || y >= ids.height
+                || !TriangleId::from_raw(ids.triangle_at(x, y)).is_some_and(&owns)
+        })
     }
 }
 
@@ -658,7 +660,7 @@ pub struct StageMesh {
 impl StageMesh {
     fn of(frame: &Frame<'_>, mesh: &TriangleMesh) -> StageMesh {
         let scene = frame.tracer.bvh.scene();
-        let corners = scene.triangles[mesh.triangle as usize].vertices;
+        let corners = scene.triangles[mesh.triangle.index()].vertices;
         let projected = |f: &&crate::refine::Face| {
             (f.vertices.iter()).all(|&v| mesh.vertices[v as usize].screen.is_some())
         };
@@ -713,7 +715,7 @@ pub fn corner_meshes(
     let mut corners = Vec::new();
     let corner_slots: Vec<[usize; 3]> = (triangles.iter())
         .map(|&t| {
-            scene.triangles[t as usize].vertices.map(|v| {
+            scene.triangles[t.index()].vertices.map(|v| {
                 *corner_index.entry(v).or_insert_with(|| {
                     corners.push((owners.of(v), v));
                     corners.len() - 1
@@ -742,7 +744,7 @@ pub fn corner_meshes(
     let projector = Projector::new(camera);
     (triangles.iter().zip(&corner_slots))
         .map(|(&t, slots)| {
-            let positions: Vec<Vec3> = (scene.triangles[t as usize].vertices.iter())
+            let positions: Vec<Vec3> = (scene.triangles[t.index()].vertices.iter())
                 .map(|&v| scene.positions[v as usize])
                 .collect();
             let in_front = positions.iter().all(|&p| projector.project(p).is_some());
@@ -800,7 +802,7 @@ fn trace_corners(
     let corner_slots: Vec<[usize; 3]> = owned
         .iter()
         .map(|&(t, _)| {
-            scene.triangles[t as usize].vertices.map(|v| {
+            scene.triangles[t.index()].vertices.map(|v| {
                 *corner_index.entry(v).or_insert_with(|| {
                     corners.push((frame.owners.of(v), v));
                     corners.len() - 1
@@ -825,7 +827,7 @@ fn trace_corners(
         .iter()
         .zip(&corner_slots)
         .map(|(&(t, _), slots)| {
-            let tri = scene.triangles[t as usize];
+            let tri = scene.triangles[t.index()];
             let corner = |k: usize| {
                 let v = tri.vertices[k] as usize;
                 MeshVertex::new(
@@ -1018,12 +1020,24 @@ mod ownership_tests {
     fn a_bitmap_owns_only_its_triangles_pixels() {
         let ids = ids();
         let left_column = bitmap(0, 0, 1, 2, &[true, true]);
-        assert_eq!(left_column.foreign_pixel(&ids, |t| t == 7), None);
-        assert_eq!(left_column.foreign_pixel(&ids, |t| t == 8), Some((0, 0)));
+        assert_eq!(
+            left_column.foreign_pixel(&ids, |t| t == TriangleId(7)),
+            None
+        );
+        assert_eq!(
+            left_column.foreign_pixel(&ids, |t| t == TriangleId(8)),
+            Some((0, 0))
+        );
         // Uncovered pixels of the rectangle do not count; (1, 1) is 8's.
         let corner = bitmap(0, 0, 2, 2, &[true, false, true, true]);
-        assert_eq!(corner.foreign_pixel(&ids, |t| t == 7), Some((1, 1)));
-        assert_eq!(corner.foreign_pixel(&ids, |t| t == 7 || t == 8), None);
+        assert_eq!(
+            corner.foreign_pixel(&ids, |t| t == TriangleId(7)),
+            Some((1, 1))
+        );
+        assert_eq!(
+            corner.foreign_pixel(&ids, |t| t == TriangleId(7) || t == TriangleId(8)),
+            None
+        );
         // A pixel outside the frame is never owned.
         let outside = bitmap(3, 0, 1, 1, &[true]);
         assert_eq!(outside.foreign_pixel(&ids, |_| true), Some((3, 0)));

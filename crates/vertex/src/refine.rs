@@ -452,7 +452,10 @@ mod tests {
     /// colours `colors` (floor 2 px, v = 0.2, epsilon 0.1): the edge it
     /// forces, as corner indices, or `None`.
     fn check(screen: [(f32, f32); 3], colors: [f32; 3], expect: Option<(u32, u32)>) {
-        let mesh = TriangleMesh::new(0, [0, 1, 2].map(|k| vertex(screen[k], colors[k])));
+        let mesh = TriangleMesh::new(
+            TriangleId(0),
+            [0, 1, 2].map(|k| vertex(screen[k], colors[k])),
+        );
         let face = mesh.faces[0];
         let got = mesh
             .flat_long_edge(&face, 0.2, 2.0, 0.1)

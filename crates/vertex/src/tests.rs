@@ -47,8 +47,8 @@ fn unguarded() -> VertexSettings {
 }
 
 /// Mirror triangle A (the one with the blue corner) and B.
-const A: TriangleId = 0;
-const B: TriangleId = 1;
+const A: TriangleId = TriangleId(0);
+const B: TriangleId = TriangleId(1);
 
 /// What a test frame holds besides the mirror.
 #[derive(Clone, Copy, Default)]
@@ -131,8 +131,8 @@ impl TestFrame {
         };
         let ids = vtfarm_raster::id_buffer(&scene, &camera);
         let mut is_reflector = vec![false; scene.triangles.len()];
-        is_reflector[A as usize] = true;
-        is_reflector[B as usize] = true;
+        is_reflector[A.index()] = true;
+        is_reflector[B.index()] = true;
         let owners = VertexOwners::new(&scene);
         let bvh = SceneBvh::new(Arc::new(scene));
         let lighting = Lighting {
@@ -193,7 +193,11 @@ impl TestFrame {
 
     /// The pixels the ID buffer gives to `triangle`.
     fn owned_pixels(&self, triangle: TriangleId) -> u64 {
-        self.ids.triangle.iter().filter(|&&t| t == triangle).count() as u64
+        self.ids
+            .triangle
+            .iter()
+            .filter(|&&t| t == triangle.raw())
+            .count() as u64
     }
 }
 
@@ -511,7 +515,7 @@ fn batched_pixels_and_vertices_equal_one_at_a_time() {
         let vertices: Vec<(TriangleId, Vec3, Vec3)> = [A, B]
             .iter()
             .flat_map(|&t| {
-                scene.triangles[t as usize]
+                scene.triangles[t.index()]
                     .vertices
                     .map(|v| (t, scene.positions[v as usize], scene.normals[v as usize]))
             })

@@ -305,7 +305,7 @@ impl Behind {
                 store,
             } => {
                 let t = ids.triangle_at(x, y);
-                if t == NONE || !see_through(tracer.bvh.scene(), t) {
+                if t == NONE || !see_through(tracer.bvh.scene(), TriangleId(t)) {
                     // What the up-front pass holds there, to the bit.
                     ThinGlass::default()
                 } else {
@@ -327,7 +327,7 @@ impl Behind {
 /// Whether `triangle` belongs in the ID buffer of what lies behind the
 /// reflectors: neither a reflector nor see-through.
 pub(crate) fn lies_behind(scene: &Scene, is_reflector: &[bool], triangle: TriangleId) -> bool {
-    !is_reflector[triangle as usize] && !see_through(scene, triangle)
+    !is_reflector[triangle.index()] && !see_through(scene, triangle)
 }
 
 /// Whether `triangle`'s front (its winding's normal) faces away from `eye`:
@@ -369,13 +369,12 @@ impl BehindBuffers {
     ) -> BehindBuffers {
         let bounds = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let any_glass = transmission == Transmission::Raster
-            && (is_reflector.iter().enumerate())
-                .any(|(t, &r)| r && see_through(scene, t as TriangleId));
+            && (scene.triangle_ids().zip(is_reflector)).any(|(t, &r)| r && see_through(scene, t));
         let all = |_: TriangleId| true;
         let opaque = |t: TriangleId| lies_behind(scene, is_reflector, t);
         let not_opaque = |t: TriangleId| !opaque(t);
         let layer = |t: TriangleId| {
-            see_through(scene, t) && (!is_reflector[t as usize] || faces_away(scene, camera.eye, t))
+            see_through(scene, t) && (!is_reflector[t.index()] || faces_away(scene, camera.eye, t))
         };
         let mut passes = vec![IdPass {
             within: bounds,
@@ -431,10 +430,10 @@ impl GlassTerms {
         cache: &ShadowCache,
     ) -> (GlassTerms, u64) {
         let scene = tracer.bvh.scene();
-        let glass_triangle = |t: TriangleId| is_reflector[t as usize] && see_through(scene, t);
+        let glass_triangle = |t: TriangleId| is_reflector[t.index()] && see_through(scene, t);
         let glass_pixel = |x: u32, y: u32| {
             let t = ids.triangle_at(x, y);
-            t != NONE && glass_triangle(t)
+            t != NONE && glass_triangle(TriangleId(t))
         };
         if !bounds.pixels().any(|(x, y)| glass_pixel(x, y)) {
             return (GlassTerms::Nothing, 0);
@@ -500,14 +499,19 @@ fn glass_at(
 ) -> ThinGlass {
     let scene = tracer.bvh.scene();
     let direction = view.projector.pixel_ray(x, y);
-    let (front, direction) =
-        pixel_surface_along(scene, camera, ids, ids.triangle_at(x, y), (x, y), direction);
-    let back = layers.triangle_at(x, y);
+    let (front, direction) = pixel_surface_along(
+        scene,
+        camera,
+        ids,
+        TriangleId(ids.triangle_at(x, y)),
+        (x, y),
+        direction,
+    );
     // A pane drawn as one surface facing away is in the layers too, as
     // its own nearest layer: it has no back surface.
-    let back =
-        (back != NONE && back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y))
-            .then(|| pixel_surface_along(scene, camera, layers, back, (x, y), direction).0);
+    let back = TriangleId::from_raw(layers.triangle_at(x, y))
+        .filter(|&back| back != front.triangle && layers.depth_at(x, y) < behind.depth_at(x, y))
+        .map(|back| pixel_surface_along(scene, camera, layers, back, (x, y), direction).0);
     let slab = SlabWeights::of(tracer, &front, direction, back.as_ref());
     let shift = back
         .and_then(|back_point| {
@@ -692,10 +696,9 @@ fn opaque_radiance(
         if px < 0 || py < 0 || px >= behind.width as i64 || py >= behind.height as i64 {
             continue;
         }
-        let triangle = behind.triangle_at(px as u32, py as u32);
-        if triangle == NONE {
+        let Some(triangle) = TriangleId::from_raw(behind.triangle_at(px as u32, py as u32)) else {
             continue;
-        }
+        };
         let Some((position, weights)) = ray_plane(scene, triangle, origin, direction) else {
             continue;
         };
@@ -800,7 +803,7 @@ fn shadow_box(
     for (x, y) in bounds.pixels() {
         let t = ids.triangle_at(x, y);
         if t != last.0 {
-            last = (t, t != NONE && glass_triangle(t));
+            last = (t, t != NONE && glass_triangle(TriangleId(t)));
         }
         if last.1 && behind.triangle_at(x, y) != NONE {
             let p = camera.eye + projector.pixel_depth_step(x, y) * behind.depth_at(x, y);
@@ -896,7 +899,7 @@ impl ShadowViews {
             .frame
             .as_ref()
             .expect("asked for the frame's buffer");
-        let glass_triangle = |t: TriangleId| is_reflector[t as usize] && see_through(scene, t);
+        let glass_triangle = |t: TriangleId| is_reflector[t.index()] && see_through(scene, t);
         let (lo, hi) = shadow_box(
             camera,
             ids,
@@ -928,7 +931,7 @@ struct ShadowMaps {
 struct ShadowMap {
     projector: Projector,
     size: u32,
-    texels: Vec<(TriangleId, f32)>,
+    texels: Vec<(u32, f32)>,
 }
 
 impl ShadowMap {
@@ -1101,7 +1104,7 @@ impl ShadowMaps {
             return true;
         }
         let (seen, depth) = map.texels[(y * size + x) as usize];
-        seen == triangle || depth >= s.depth - self.bias
+        seen == triangle.raw() || depth >= s.depth - self.bias
     }
 }
 

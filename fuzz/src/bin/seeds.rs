@@ -10,7 +10,7 @@ use vtfarm_proto::{
     FrameStart, Hello, JobScene, Message, Package, PackageResult, Role, SceneData, WireBitmap,
     WireFrameSetup, WireImageFormat, WireJob, WireMethod, WirePackageStats, encode_message,
 };
-use vtfarm_scene::{Camera, Lighting, Material, Object, ObjectId, Scene, Triangle};
+use vtfarm_scene::{Camera, Lighting, Material, MaterialId, Object, ObjectId, Scene, Triangle};
 use vtfarm_trace::TraceSettings;
 use vtfarm_vertex::{SparseBitmap, VertexSettings};
 
@@ -27,7 +27,7 @@ fn main() -> std::io::Result<()> {
         triangles: vec![Triangle {
             vertices: [0, 1, 2],
             object: ObjectId(0),
-            material: 0,
+            material: MaterialId(0),
         }],
         objects: vec![Object {
             name: "glass".into(),

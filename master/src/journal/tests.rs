@@ -5,7 +5,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use vtfarm_proto::{FrameStats, WireImage};
 use vtfarm_render::FrameSetup;
-use vtfarm_scene::{Camera, Scene};
+use vtfarm_scene::{Camera, Scene, TriangleId};
 
 use super::*;
 
@@ -39,7 +39,7 @@ fn one_pixel_job(frames: usize) -> (Arc<SceneData>, vtfarm_proto::WireJob) {
         method: vtfarm_method::MethodKind::VertexTracing,
         aux: false,
     };
-    let job = vtfarm_proto::wire_job("j", &scene, &vec![setup; frames], &[0], options);
+    let job = vtfarm_proto::wire_job("j", &scene, &vec![setup; frames], &[TriangleId(0)], options);
     (scene, job)
 }
 

@@ -9,14 +9,14 @@ use vtfarm_master::{JobOptions, wire_job};
 use vtfarm_method::MethodKind;
 use vtfarm_proto::{SceneData, WireJob};
 use vtfarm_render::{FrameSetup, Renderer};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 
 use crate::frame::small_frame;
 
 /// A small cockpit job of `frames` frames from slightly different eyes.
 pub(crate) struct Job {
     pub(crate) scene: Scene,
-    pub(crate) reflectors: Vec<u32>,
+    pub(crate) reflectors: Vec<TriangleId>,
     pub(crate) frames: Vec<FrameSetup>,
 }
 

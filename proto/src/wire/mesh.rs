@@ -40,7 +40,7 @@ impl From<&[StageMesh]> for WireMesh {
                 m.samples.iter().map(|s| f(s).to_array()).collect()
             };
             WireMeshPart {
-                triangle: m.triangle,
+                triangle: m.triangle.raw(),
                 positions: m.positions.iter().map(|p| p.to_array()).collect(),
                 colors: per_vertex(|s| s.color),
                 reflected: per_vertex(|s| s.reflected),
@@ -123,7 +123,7 @@ impl WireMeshPart {
             reflection_scale: self.reflection_scale[k],
         });
         Ok(StageMesh {
-            triangle: self.triangle,
+            triangle: vtfarm_scene::TriangleId(self.triangle),
             positions: self.positions.iter().map(|&p| Vec3::from(p)).collect(),
             samples: samples.collect(),
             slabs: slabs.collect(),

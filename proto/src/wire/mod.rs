@@ -16,7 +16,7 @@
 //! - `planes`: what both codecs share: byte planes and zstd.
 
 use glam::Vec3;
-use vtfarm_scene::OutOfBounds;
+use vtfarm_scene::{OutOfBounds, TriangleId};
 
 pub mod bitmap;
 pub mod image;
@@ -126,12 +126,13 @@ pub(crate) fn index(
 }
 
 /// Checks a list of triangle ids (reflectors, a package) against a scene of
-/// `triangle_count` triangles: every id in range, none twice.
+/// `triangle_count` triangles: every id in range, none twice. Returns them
+/// as the scene's triangles, in the list's order.
 pub fn check_triangle_ids(
     field: &str,
     ids: &[u32],
     triangle_count: usize,
-) -> Result<(), WireError> {
+) -> Result<Vec<TriangleId>, WireError> {
     let mut seen = vec![false; triangle_count];
     for (i, &id) in ids.iter().enumerate() {
         index(|| format!("{field}[{i}]"), id, triangle_count)?;
@@ -144,7 +145,13 @@ pub fn check_triangle_ids(
         }
         *slot = true;
     }
-    Ok(())
+    Ok(ids.iter().copied().map(TriangleId).collect())
+}
+
+/// A list of triangles as the wire carries it (the inverse of
+/// [`check_triangle_ids`]).
+pub fn wire_triangles(ids: &[TriangleId]) -> Vec<u32> {
+    ids.iter().map(|t| t.raw()).collect()
 }
 
 /// Wraps a domain bound error, naming the value it is about.

@@ -115,7 +115,7 @@ impl From<&Scene> for WireScene {
                 .map(|t| WireTriangle {
                     vertices: t.vertices,
                     object: t.object.raw(),
-                    material: t.material,
+                    material: t.material.raw(),
                 })
                 .collect(),
             objects: s.objects.iter().map(|o| o.name.clone()).collect(),
@@ -168,7 +168,7 @@ impl TryFrom<WireScene> for Scene {
                 Ok(Triangle {
                     vertices: t.vertices,
                     object: vtfarm_scene::ObjectId(t.object),
-                    material: t.material,
+                    material: vtfarm_scene::MaterialId(t.material),
                 })
             })
             .collect::<Result<Vec<_>, WireError>>()?;

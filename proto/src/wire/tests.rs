@@ -3,7 +3,9 @@
 
 use glam::Vec3;
 use proptest::prelude::*;
-use vtfarm_scene::{Camera, Light, LightKind, Lighting, Material, Object, Scene, Triangle};
+use vtfarm_scene::{
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, Scene, Triangle, TriangleId,
+};
 use vtfarm_vertex::SparseBitmap;
 
 use super::{WireError, check_triangle_ids};
@@ -32,12 +34,12 @@ pub(crate) fn scene() -> Scene {
             Triangle {
                 vertices: [0, 1, 2],
                 object: vtfarm_scene::ObjectId(0),
-                material: 0,
+                material: MaterialId(0),
             },
             Triangle {
                 vertices: [1, 3, 2],
                 object: vtfarm_scene::ObjectId(1),
-                material: 1,
+                material: MaterialId(1),
             },
         ],
         objects: vec![
@@ -139,7 +141,10 @@ pub(crate) fn any_f32() -> impl Strategy<Value = f32> {
 
 #[test]
 fn triangle_id_lists_are_checked_against_the_scene() {
-    assert!(check_triangle_ids("reflectors", &[2, 0, 1], 3).is_ok());
+    assert_eq!(
+        check_triangle_ids("reflectors", &[2, 0, 1], 3).unwrap(),
+        [2, 0, 1].map(TriangleId)
+    );
     let error = check_triangle_ids("reflectors", &[0, 3], 3).expect_err("3 of 3");
     assert_eq!(
         error.to_string(),

@@ -23,7 +23,7 @@ use crate::CockpitJob;
 #[derive(Clone, Debug)]
 pub(super) struct Recording {
     /// Reflector triangle ids in Morton order.
-    pub(super) triangles: Vec<u32>,
+    pub(super) triangles: Vec<TriangleId>,
     /// Compute seconds on one thread, per triangle.
     pub(super) seconds: Vec<f64>,
     /// Bytes of the `PackageResult` message of a one-triangle package.
@@ -499,7 +499,7 @@ pub(super) fn frame_out_time(
 pub(super) fn composite_time(
     renderer: &Renderer,
     job: &CockpitJob,
-    triangles: &[u32],
+    triangles: &[TriangleId],
     bitmaps: Vec<(usize, WireBitmap)>,
 ) -> Result<f64> {
     let (base, ids) = renderer.base_frame(&job.setup);
@@ -513,7 +513,7 @@ pub(super) fn composite_time(
             let colors = bitmap.colors_within(width, height)?;
             if let Some((p, _)) = colors
                 .iter()
-                .find(|(p, _)| ids.triangle[*p] != triangles[*i])
+                .find(|(p, _)| ids.triangle[*p] != triangles[*i].raw())
             {
                 bail!(
                     "triangle {}'s result writes the foreign pixel {p}",

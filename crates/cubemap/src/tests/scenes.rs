@@ -2,24 +2,28 @@
 //! it, and a saddle.
 
 use glam::Vec3;
-use vtfarm_scene::{Material, Object, Scene, Triangle};
+use vtfarm_scene::{Material, MaterialId, Object, ObjectId, Scene, Triangle, TriangleId};
 
 /// Adds an object with its own material; returns its (object, material) ids.
-pub(crate) fn add_object(scene: &mut Scene, name: &str, material: Material) -> (u32, u32) {
+pub(crate) fn add_object(
+    scene: &mut Scene,
+    name: &str,
+    material: Material,
+) -> (ObjectId, MaterialId) {
     scene.objects.push(Object {
         name: name.to_owned(),
     });
     scene.materials.push(material);
     (
-        scene.objects.len() as u32 - 1,
-        scene.materials.len() as u32 - 1,
+        ObjectId(scene.objects.len() as u32 - 1),
+        MaterialId(scene.materials.len() as u32 - 1),
     )
 }
 
 /// Adds vertices and faces (indices into `positions`) to `object`.
 pub(crate) fn push(
     scene: &mut Scene,
-    object: (u32, u32),
+    object: (ObjectId, MaterialId),
     positions: &[Vec3],
     normals: &[Vec3],
     faces: &[[u32; 3]],
@@ -29,7 +33,7 @@ pub(crate) fn push(
     scene.normals.extend_from_slice(normals);
     scene.triangles.extend(faces.iter().map(|f| Triangle {
         vertices: f.map(|v| v + base),
-        object: vtfarm_scene::ObjectId(object.0),
+        object: object.0,
         material: object.1,
     }));
 }
@@ -49,7 +53,7 @@ pub(super) fn add_sphere(
     radius: f32,
     levels: u32,
     inward: bool,
-) -> Vec<u32> {
+) -> Vec<TriangleId> {
     let (points, mut faces) = vtfarm_scene::shapes::icosphere(levels);
     let sign = if inward { -1.0 } else { 1.0 };
     if inward {
@@ -57,12 +61,12 @@ pub(super) fn add_sphere(
             f.swap(1, 2);
         }
     }
-    let first = scene.triangles.len() as u32;
+    let first = scene.triangles.len();
     let object = add_object(scene, "sphere", mirror());
     let positions: Vec<Vec3> = points.iter().map(|&u| centre + u * radius).collect();
     let normals: Vec<Vec3> = points.iter().map(|&u| u * sign).collect();
     push(scene, object, &positions, &normals, &faces);
-    (first..scene.triangles.len() as u32).collect()
+    scene.triangle_ids().skip(first).collect()
 }
 
 /// Adds an `n` × `n` grid of quads (two triangles each) over the unit
@@ -70,10 +74,10 @@ pub(super) fn add_sphere(
 /// its normal. Returns the new triangle ids.
 fn add_grid(
     scene: &mut Scene,
-    object: (u32, u32),
+    object: (ObjectId, MaterialId),
     n: u32,
     surface: impl Fn(f32, f32) -> (Vec3, Vec3),
-) -> Vec<u32> {
+) -> Vec<TriangleId> {
     let (positions, normals): (Vec<Vec3>, Vec<Vec3>) = (0..=n)
         .flat_map(|j| (0..=n).map(move |i| (i, j)))
         .map(|(i, j)| surface(i as f32 / n as f32, j as f32 / n as f32))
@@ -86,14 +90,14 @@ fn add_grid(
             faces.push([k, k + n + 2, k + n + 1]);
         }
     }
-    let first = scene.triangles.len() as u32;
+    let first = scene.triangles.len();
     push(scene, object, &positions, &normals, &faces);
-    (first..scene.triangles.len() as u32).collect()
+    scene.triangle_ids().skip(first).collect()
 }
 
 /// The mirror sphere of radius `radius` at the origin with four quads
 /// around it; returns the scene and the sphere's triangles.
-pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
+pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<TriangleId>) {
     let mut scene = Scene::default();
     let sphere = add_sphere(&mut scene, Vec3::ZERO, radius, 4, false);
     let low = Vec3::new(-3.0, -1.5, -3.0);
@@ -141,7 +145,7 @@ pub(super) fn sphere_scene(radius: f32) -> (Scene, Vec<u32>) {
 }
 
 /// A saddle z = (x² - y²) / 2 over [-1, 1]², normals up.
-pub(super) fn saddle() -> (Scene, Vec<u32>) {
+pub(super) fn saddle() -> (Scene, Vec<TriangleId>) {
     let mut scene = Scene::default();
     let object = add_object(&mut scene, "saddle", mirror());
     let triangles = add_grid(&mut scene, object, 8, |s, t| {
@@ -155,7 +159,13 @@ pub(super) fn saddle() -> (Scene, Vec<u32>) {
 }
 
 /// A sheet `corner + s u + t v` split into `n` × `n` quads (one object).
-pub(super) fn dense_sheet(scene: &mut Scene, corner: Vec3, u: Vec3, v: Vec3, n: u32) -> Vec<u32> {
+pub(super) fn dense_sheet(
+    scene: &mut Scene,
+    corner: Vec3,
+    u: Vec3,
+    v: Vec3,
+    n: u32,
+) -> Vec<TriangleId> {
     let object = add_object(scene, "sheet", Material::diffuse("sheet", Vec3::splat(0.5)));
     let normal = u.cross(v).normalize();
     add_grid(scene, object, n, |s, t| (corner + u * s + v * t, normal))

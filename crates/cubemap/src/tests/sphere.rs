@@ -2,7 +2,7 @@
 //! the shape classification.
 
 use glam::Vec3;
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 
 use super::scenes::{add_sphere, saddle, sphere_scene};
 use crate::mesh::ReflectedMesh;
@@ -13,7 +13,7 @@ use crate::{
 const RADIUS: f32 = 0.5;
 const EYE: Vec3 = Vec3::new(0.3, 0.4, 2.0);
 
-fn sphere_maps() -> (Scene, Vec<u32>, ReflectorMaps) {
+fn sphere_maps() -> (Scene, Vec<TriangleId>, ReflectorMaps) {
     let (scene, sphere) = sphere_scene(RADIUS);
     let maps = ReflectorMaps::build(&scene, &sphere, 256, 1);
     (scene, sphere, maps)
@@ -137,7 +137,7 @@ fn the_grid_agrees_with_the_full_search() {
     let settings = SearchSettings::default();
     let mut keep = vec![false; sheet.triangles.len()];
     for &t in &sheet_triangles {
-        keep[t as usize] = true;
+        keep[t.index()] = true;
     }
     let mesh = ReflectedMesh::build(&sheet, &keep, 0.0);
     let full = crate::vertices::virtual_vertices(&mesh, &maps, EYE, &settings, None, &|| false);

@@ -30,7 +30,7 @@ use vtfarm_proto::{
     WireBitmap, WireBitmapParts, WireFrameSetup, WireImageFormat, WireJob, WireJobKind,
 };
 use vtfarm_render::{FrameSetup, morton_order};
-use vtfarm_scene::Scene;
+use vtfarm_scene::{Scene, TriangleId};
 use vtfarm_vertex::SparseBitmap;
 use vtfarm_worker::SceneStore;
 use vtfarm_worker::engine::{FrameError, PackageError};
@@ -99,8 +99,11 @@ pub(crate) fn uneven_items(
     hot: std::ops::Range<usize>,
     hot_factor: f64,
 ) -> Items {
-    let ids: Vec<u32> = (first..first + n as u32).collect();
-    let items = morton_order(&world().scene, ids);
+    let ids = (first..first + n as u32).map(TriangleId).collect();
+    let items = morton_order(&world().scene, ids)
+        .into_iter()
+        .map(TriangleId::raw)
+        .collect();
     // The workspace's one seeded test generator.
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let costs = (0..n)

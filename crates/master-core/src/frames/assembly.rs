@@ -201,7 +201,9 @@ impl Assembled {
                 // Inside the frame: `colors_within` checked.
                 let bounds = bitmap_rect(bitmap.x0, bitmap.y0, bitmap.width, bitmap.height);
                 // The ID buffer is the frame's size: every index is in it.
-                match colors.iter().find(|(i, _)| !owned(ids.triangle[*i])) {
+                match (colors.iter())
+                    .find(|(i, _)| !TriangleId::from_raw(ids.triangle[*i]).is_some_and(&owned))
+                {
                     Some(&(i, _)) => Err(foreign((i as u32 % width, i as u32 / width))),
                     None => Ok(ResultPixels::Colors { bounds, colors }),
                 }
@@ -341,7 +343,7 @@ mod tests {
     fn a_result_writes_only_pixels_its_triangles_own() {
         for components in [None, Some(rect(0, 0, 4, 2))] {
             let (mut assembled, ids) = Assembled::new(halves(), components);
-            let only_0 = |t: TriangleId| t == 0;
+            let only_0 = |t: TriangleId| t == TriangleId(0);
             let foreign = assembled.check(one_pixel(3), &ids, only_0).err();
             let pixel = Some(ResultRejected::ForeignPixel { x: 3, y: 0 });
             assert_eq!(format!("{foreign:?}"), format!("{pixel:?}"));

@@ -10,7 +10,7 @@ use vtfarm_proto::JobId;
 use vtfarm_method::{MethodKind, reflector_groups};
 use vtfarm_proto::{
     FrameStart, SceneHash, WireFrameAux, WireFrameSetup, WireImage, WireImageFormat, WireJob,
-    check_triangle_ids,
+    check_triangle_ids, wire_triangles,
 };
 use vtfarm_render::{BaseExtent, FrameSetup, morton_order, reflector_flags};
 use vtfarm_scene::{Scene, TriangleId};
@@ -36,7 +36,7 @@ pub(crate) struct Job {
     pub(crate) frames_done: u32,
     pub(crate) scene: Arc<Scene>,
     pub(crate) scene_hash: SceneHash,
-    pub(crate) reflectors: Vec<u32>,
+    pub(crate) reflectors: Vec<TriangleId>,
     /// [`reflector_flags`] of `reflectors`.
     pub(crate) is_reflector: Arc<[bool]>,
     /// Whether its base frames' glass that is no reflector was warned about.
@@ -49,7 +49,7 @@ pub(crate) struct Job {
     pub(crate) method: MethodKind,
     /// For per-reflector methods, the reflector groups the work items
     /// index; `None` when the items are the reflector triangles themselves.
-    pub(crate) groups: Option<Vec<Vec<u32>>>,
+    pub(crate) groups: Option<Vec<Vec<TriangleId>>>,
     /// The frames being assembled, oldest first (two while pipelined).
     pub(crate) assembling: Vec<FrameAssembly>,
     /// A progressive job's stages (the interactive view's moves), in
@@ -103,7 +103,7 @@ impl Job {
                 .flatten()
                 .copied()
                 .collect(),
-            None => items.to_vec(),
+            None => items.iter().copied().map(TriangleId).collect(),
         };
         triangles.sort_unstable();
         triangles
@@ -124,7 +124,7 @@ impl Job {
             frame,
             scene: self.scene_hash,
             setup: WireFrameSetup::from(&self.frames[frame as usize]),
-            reflectors: self.reflectors.clone(),
+            reflectors: wire_triangles(&self.reflectors),
             method: self.method.into(),
             aux: self.aux,
             image: self.image,
@@ -142,9 +142,9 @@ impl Job {
         submitters: BTreeSet<ConnId>,
         resume_from: u32,
     ) -> Result<(Job, Vec<FrameWork>), JobRejected> {
-        check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
+        let reflectors = check_triangle_ids("reflectors", &job.reflectors, scene.triangles.len())
             .map_err(JobRejected::BadReflectors)?;
-        if job.reflectors.is_empty() || job.frames.is_empty() {
+        if reflectors.is_empty() || job.frames.is_empty() {
             return Err(JobRejected::Empty);
         }
         if job.aux && job.image != WireImageFormat::LinearF32 {
@@ -153,14 +153,14 @@ impl Job {
         let frames: Result<Vec<FrameSetup>, _> =
             job.frames.into_iter().map(FrameSetup::try_from).collect();
         let frames = frames.map_err(JobRejected::BadFrame)?;
-        let reflectors = morton_order(&scene, job.reflectors);
+        let reflectors = morton_order(&scene, reflectors);
         let method = MethodKind::from(job.method);
         // Per-reflector methods take whole reflectors: their work items are
         // reflector groups, which the workers derive from the same list.
         let groups = (method.per_reflector()).then(|| reflector_groups(&scene, &reflectors));
         let items: Vec<u32> = match &groups {
             Some(groups) => (0..groups.len() as u32).collect(),
-            None => reflectors.clone(),
+            None => wire_triangles(&reflectors),
         };
         // Finished frames get no work: the scheduler completes them at once.
         let work = (0..frames.len() as u32)
@@ -289,7 +289,7 @@ mod tests {
         let items: Vec<usize> = work.iter().map(|w| w.items.len()).collect();
         assert_eq!(items, [0, 2, 2]);
         assert_eq!(job.next_to_start(), 1);
-        assert_eq!(job.triangles_in(&[1, 0]), [0, 1]);
+        assert_eq!(job.triangles_in(&[1, 0]), [0, 1].map(TriangleId));
         assert_eq!(job.frame_start(JobId(7), 2).frame, 2);
     }
 

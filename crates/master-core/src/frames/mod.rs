@@ -772,7 +772,7 @@ mod tests {
         frames.drop_in_flight(5, ConnId(3));
         assert!(!frames.packages.contains_key(&5));
         let (done, progress) = frames.package_done(6).unwrap();
-        assert_eq!(done.triangles, [0, 1]);
+        assert_eq!(done.triangles, [0, 1].map(TriangleId));
         assert!(matches!(
             progress,
             Some(Message::Progress {

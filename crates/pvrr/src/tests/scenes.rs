@@ -3,7 +3,8 @@
 
 use glam::Vec3;
 use vtfarm_scene::{
-    Camera, Light, LightKind, Lighting, Material, Object, ObjectId, Scene, Triangle, TriangleId,
+    Camera, Light, LightKind, Lighting, Material, MaterialId, Object, ObjectId, Scene, Triangle,
+    TriangleId,
 };
 
 /// A scene under construction.
@@ -27,14 +28,14 @@ impl Builder {
         scene.objects.push(Object {
             name: name.to_owned(),
         });
-        let material_id = scene.materials.len() as u32;
+        let material_id = MaterialId(scene.materials.len() as u32);
         scene.materials.push(material);
         let base = scene.positions.len() as u32;
         for &(p, n) in vertices {
             scene.positions.push(p);
             scene.normals.push(n.normalize());
         }
-        let first = scene.triangles.len() as TriangleId;
+        let first = scene.triangles.len();
         for &[a, b, c] in triangles {
             let [pa, pb, pc] = [a, b, c].map(|i| vertices[i as usize].0);
             let normal = vertices[a as usize].1 + vertices[b as usize].1 + vertices[c as usize].1;
@@ -49,7 +50,7 @@ impl Builder {
                 material: material_id,
             });
         }
-        (first..scene.triangles.len() as TriangleId).collect()
+        scene.triangle_ids().skip(first).collect()
     }
 
     /// A square `size` wide centred at `center` with normal `normal`, split

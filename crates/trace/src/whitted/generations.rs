@@ -64,7 +64,7 @@ pub(super) fn shade_points(
         lit_words: Vec::new(),
     };
     recorded.nodes.extend(points.iter().map(|(point, _)| Node {
-        object: scene.triangles[point.triangle as usize].object.raw(),
+        object: scene.triangles[point.triangle.index()].object.raw(),
         surface: None,
         escape: Vec3::ZERO,
     }));
@@ -129,7 +129,7 @@ pub(super) fn shade_points(
                             path: path + hit.t,
                             rays: Rays::Both,
                         });
-                        scene.triangles[hit.triangle as usize].object.raw()
+                        scene.triangles[hit.triangle.index()].object.raw()
                     }
                 };
                 recorded.nodes.push(Node {
