@@ -863,7 +863,8 @@ fn view_state(core: &MasterCore) -> ViewState {
 }
 
 /// Moves the view's eye: `{"job": ID, "offset": [x, y, z]}` in metres,
-/// with `"page_draws_scene": true` from a page that draws the scene itself;
+/// with `"page_draws_scene": true` from a page that draws the scene itself
+/// and `"preview_only": true` for a move it shows only the preview of;
 /// answers the view's farm job and the move's number (`generation`).
 async fn steer_view(
     State(state): State<HttpState>,
@@ -873,6 +874,7 @@ async fn steer_view(
         job: body.job,
         offset: body.offset,
         page_draws_scene: body.page_draws_scene,
+        preview_only: body.preview_only,
     };
     match state.master.steer_view(request).await {
         Some(Ok(job)) => {

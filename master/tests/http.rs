@@ -1469,6 +1469,8 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
                 generation: s[q].generation,
                 positions: s[q].positions ? bits(s[q].positions) : [],
                 colors: bits(s[q].colors),
+                behind: s[q].behind ? bits(s[q].behind) : [],
+                reflectionScale: s[q].reflectionScale ? bits(s[q].reflectionScale) : [],
                 faces: s[q].faces ? Array.from(s[q].faces) : [],
             }));
         })()"#,
@@ -1506,6 +1508,12 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
                 let colors: Vec<Vec3> = m.samples.iter().map(|s| s.color).collect();
                 assert_eq!(json(&page["colors"]), bits(&colors));
                 assert_eq!(json(&page["positions"]), bits(&m.positions));
+                let behind: Vec<Vec3> = m.slabs.iter().map(|s| s.behind).collect();
+                assert_eq!(json(&page["behind"]), bits(&behind));
+                let scales: Vec<u64> = (m.slabs.iter())
+                    .map(|s| u64::from(s.reflection_scale.to_bits()))
+                    .collect();
+                assert_eq!(json(&page["reflectionScale"]), scales);
                 let faces: Vec<u64> = m.faces.iter().flatten().map(|&v| u64::from(v)).collect();
                 assert_eq!(json(&page["faces"]), faces);
             }
@@ -1566,9 +1574,9 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         }
     }
 
-    // While the eye is dragged only previews are drawn: a move's `full`
-    // that comes before the mouse is let go is held, and drawn and
-    // recorded when it is.
+    // While the eye is dragged the page asks for previews only: the master
+    // ends the dragged move at its preview, which the page draws; when the
+    // mouse is let go, the page sends the eye again and draws it to `full`.
     browser
         .call("Input.dispatchMouseEvent", mouse("mousePressed", x))
         .await
@@ -1577,29 +1585,45 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         .call("Input.dispatchMouseEvent", mouse("mouseMoved", x + 1.0))
         .await
         .unwrap();
-    let held = view_reaches(
+    let last = "window.vtfarm.viewTimings[window.vtfarm.viewTimings.length - 1]";
+    let previewed = view_reaches(
         &format!(
-            r#"(() => {{
-            const t = window.vtfarm.viewTimings, s = window.vtfarm.stages;
-            return t.length === {} && s.full.generation === t.length && t[t.length - 1].preview !== null;
-        }})()"#,
+            "window.vtfarm.viewTimings.length === {} && {last}.preview !== null",
             moves + 1
         ),
-        r#"(() => {
-            const last = window.vtfarm.viewTimings[window.vtfarm.viewTimings.length - 1];
-            return last.full === null ? true : JSON.stringify(last);
-        })()"#,
+        "true",
     );
-    let held = browser.eval(&held).await.unwrap();
-    page_reached(&browser, held, "the dragged move's full stage, held");
+    let previewed = browser.eval(&previewed).await.unwrap();
+    page_reached(&browser, previewed, "the dragged move's preview");
+    let dragged = moves as u64 + 1;
+    let ended = (farm.master)
+        .inspect(move |c| {
+            c.views().outcomes().any(|o| {
+                matches!(*o, ViewOutcome::Cancelled { generation, .. } if generation == dragged)
+            })
+        })
+        .await
+        .unwrap();
+    assert!(ended, "the master ended the dragged move at its preview");
     browser
         .call("Input.dispatchMouseEvent", mouse("mouseReleased", x + 1.0))
         .await
         .unwrap();
-    let drawn = browser.eval(&full_drawn(moves)).await.unwrap();
+    let drawn = browser.eval(&full_drawn(moves + 1)).await.unwrap();
     page_reached(
         &browser,
         drawn,
-        "the dragged move's full stage, drawn when the drag ends",
+        "the eye where the drag ended, sent again and drawn to full",
+    );
+    let dragged = browser
+        .eval(&format!(
+            "JSON.stringify(window.vtfarm.viewTimings[{moves}])"
+        ))
+        .await
+        .unwrap();
+    let dragged: serde_json::Value = serde_json::from_str(dragged.as_str().unwrap()).unwrap();
+    assert!(
+        dragged["refine"].is_null() && dragged["full"].is_null(),
+        "the dragged move drew its preview only: {dragged}"
     );
 }

@@ -613,6 +613,7 @@ fn a_view_job_overtakes_a_running_batch_job_at_the_next_package_boundary() {
         job: id,
         offset: [0.01, 0.0, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     let view = pair.act(|m, now| m.steer_view(now, request)).unwrap();
     let steered_at = pair.now;

@@ -63,6 +63,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         job: JobId(99),
         offset: [0.0; 3],
         page_draws_scene: false,
+        preview_only: false,
     };
     assert_eq!(
         pair.act(|m, now| m.steer_view(now, unknown)),
@@ -72,6 +73,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
         job: source,
         offset: [f32::NAN, 0.0, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     assert_eq!(
         pair.act(|m, now| m.steer_view(now, bad)),
@@ -87,6 +89,7 @@ fn three_quick_moves_leave_one_frame_rendered_to_full_and_the_others_cancelled()
             job: source,
             offset,
             page_draws_scene: false,
+            preview_only: false,
         };
         jobs.push(pair.act(|m, now| m.steer_view(now, request)).unwrap());
         if k + 1 < offsets.len() {
@@ -261,6 +264,7 @@ fn a_move_is_one_progressive_frame_set_up_once_its_last_stage_the_single_process
         job: source,
         offset: offset.to_array(),
         page_draws_scene: false,
+        preview_only: false,
     };
     let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
     let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
@@ -362,6 +366,7 @@ fn a_newer_move_cancels_the_older_moves_remaining_stages() {
         job: source,
         offset: [0.02, 0.0, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     let old = pair.act(|m, now| m.steer_view(now, first)).unwrap();
     drive_to_stage(&mut pair, 1, Quality::Preview);
@@ -374,6 +379,7 @@ fn a_newer_move_cancels_the_older_moves_remaining_stages() {
         job: source,
         offset: [-0.03, 0.02, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     let new = pair.act(|m, now| m.steer_view(now, second)).unwrap();
     assert!(pair.master.views().outcomes().any(|o| *o
@@ -432,6 +438,7 @@ fn stage_results_out_of_order_or_out_of_the_frame_fail_their_package() {
         job: source,
         offset: [0.01, 0.01, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
     pair.drive(BOUND, |p| {
@@ -552,6 +559,7 @@ fn each_stage_is_streamed_as_it_completes_and_decodes_to_the_single_process_rend
         job: source,
         offset: offset.to_array(),
         page_draws_scene: true,
+        preview_only: false,
     };
     pair.act(|m, now| m.steer_view(now, request)).unwrap();
     let renderer = Renderer::new(Arc::new(c.scene.clone()), reflectors);
@@ -685,6 +693,7 @@ fn the_preview_goes_out_on_the_corner_mesh_before_any_stage_is_complete() {
         job: source,
         offset: [0.02, 0.0, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     pair.act(|m, now| m.steer_view(now, request)).unwrap();
     pair.drive(BOUND, |p| !streamed(&p.master).1.is_empty());
@@ -701,6 +710,34 @@ fn the_preview_goes_out_on_the_corner_mesh_before_any_stage_is_complete() {
     assert_eq!(qualities, [Quality::Preview, Quality::Refine]);
 }
 
+/// A move that asks for its preview only (a dragging hand's) ends there:
+/// in the step its preview is streamed, the master cancels the move's job,
+/// and nothing more of it is streamed.
+#[test]
+fn a_preview_only_move_ends_at_its_preview_and_nothing_more_is_streamed() {
+    let (mut pair, _, _, source) = farm_with_a_source();
+    let request = ViewRequest {
+        job: source,
+        offset: [0.02, 0.0, 0.0],
+        page_draws_scene: true,
+        preview_only: true,
+    };
+    let job = pair.act(|m, now| m.steer_view(now, request)).unwrap();
+    pair.drive(BOUND, |p| !streamed(&p.master).1.is_empty());
+    let cancelled = ViewOutcome::Cancelled { generation: 1, job };
+    assert!(pair.master.views().outcomes().any(|o| *o == cancelled));
+    // Whatever was on its way settles.
+    pair.drive(BOUND, |p| {
+        p.workers.iter().all(|w| !w.is_running_a_package())
+    });
+    let (generation, messages) = streamed(&pair.master);
+    assert_eq!(generation, 1);
+    let qualities: Vec<Quality> = messages.iter().map(|m| m.header().quality).collect();
+    assert_eq!(qualities, [Quality::Preview]);
+    let ended = (pair.master.views().outcomes()).filter(|o| **o == cancelled);
+    assert_eq!(ended.count(), 1, "the move ended once");
+}
+
 /// A newer move empties the stream: at no step after it does a message of
 /// the cancelled move go out, and the newer move's three stages follow in
 /// order.
@@ -711,6 +748,7 @@ fn a_newer_move_cancels_the_older_and_nothing_of_the_cancelled_move_is_streamed(
         job: source,
         offset: [x, 0.0, 0.0],
         page_draws_scene: false,
+        preview_only: false,
     };
     pair.act(|m, now| m.steer_view(now, request(0.01))).unwrap();
     drive_to_stage(&mut pair, 1, Quality::Preview);

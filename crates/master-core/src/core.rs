@@ -316,6 +316,9 @@ impl MasterCore {
             }
             other => self.close(conn, format!("unexpected {} from a worker", other.name())),
         }
+        if let Some(job) = self.views.take_ended_at_preview() {
+            let _ = self.scheduler.cancel_job(now, job);
+        }
     }
 
     fn package_result(

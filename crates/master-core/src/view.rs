@@ -66,6 +66,10 @@ pub struct ViewRequest {
     /// frame needs the master's base frame only where its packages look,
     /// not the whole of it, which only the page without WebGL2 shows.
     pub page_draws_scene: bool,
+    /// Whether the page shows only the move's preview (a dragging hand's
+    /// move): its frame is cancelled once the preview is out, so the farm
+    /// traces nothing the hand has already left behind.
+    pub preview_only: bool,
 }
 
 /// Why a move was refused.
@@ -112,6 +116,8 @@ pub struct CurrentView {
     /// Stages whose messages went out ([`Views::stream`]): the preview's
     /// may go before the stage finishes ([`Views::corner_mesh_arrived`]).
     streamed: usize,
+    /// Only the preview is wanted ([`ViewRequest::preview_only`]).
+    preview_only: bool,
 }
 
 /// A finished stage of a view, with its glare figures once computed.
@@ -293,6 +299,8 @@ impl Views {
             source: request.job,
             offset: offset.to_array(),
             eye: setup.camera.eye.to_array(),
+            // A move of one stage has no preview of its own to end at.
+            preview_only: request.preview_only && stages.len() > 1,
             stages,
         })
     }
@@ -323,7 +331,20 @@ impl Views {
             stages: planned.stages,
             stages_done: 0,
             streamed: 0,
+            preview_only: planned.preview_only,
         });
+    }
+
+    /// The farm job of a move that wanted only its preview, once that went
+    /// out and while the job still runs: the job to cancel. Asked once:
+    /// the move then counts as ended at its preview.
+    pub(crate) fn take_ended_at_preview(&mut self) -> Option<JobId> {
+        let c = (self.current.as_mut())
+            .filter(|c| c.preview_only && c.streamed >= 1 && c.stages_done < c.stages_total)?;
+        c.stages_total = c.stages_done;
+        let (generation, job) = (c.generation, c.job);
+        self.record(ViewOutcome::Cancelled { generation, job });
+        Some(job)
     }
 
     /// Whether farm job `job` renders a view (view jobs are not journaled).
@@ -560,6 +581,7 @@ pub(crate) struct PlannedView {
     offset: [f32; 3],
     eye: [f32; 3],
     stages: Vec<Quality>,
+    preview_only: bool,
 }
 
 impl PlannedView {
@@ -612,6 +634,7 @@ mod tests {
             stages,
             stages_done: 0,
             streamed: 0,
+            preview_only: false,
         }
     }
 

@@ -2,7 +2,9 @@
 // 1 cm, a drag 1 mm a pixel) within the box around the source job's eye;
 // each move is drawn from the scene the page holds (onEye) and sent to
 // POST /api/view, one at a time (a move made while one is on its way goes
-// when it returns, the newest only). Each move sent gets its timings in
+// when it returns, the newest only); a dragging hand's moves ask for their
+// preview only, and the eye where the drag ends is sent again for every
+// stage. Each move sent gets its timings in
 // window.vtfarm.viewTimings: {sent, preview, refine, full} as
 // performance.now() when it was sent and when each stage was first drawn,
 // draw as how long the draw that first showed its preview took; null for
@@ -28,6 +30,8 @@ export class ViewControls {
     this.offset = [0, 0, 0];
     this.sending = false;
     this.pending = false;
+    // Whether the last move sent asked for its preview only.
+    this.previewOnlySent = false;
     // Moves by generation (the master's number for them).
     this.moves = new Map();
     // Stages drawn before their move's reply came: generation -> [quality, now, took].
@@ -54,8 +58,10 @@ export class ViewControls {
     });
     surface.addEventListener("pointerup", () => {
       this.from = null;
-      // The eye where the drag ended is drawn whole.
+      // The eye where the drag ended is drawn whole, and (its moves having
+      // asked for previews only) sent again for all its stages.
       this.onEye(this.offset);
+      if (this.previewOnlySent) this.send();
     });
   }
 
@@ -84,13 +90,17 @@ export class ViewControls {
     if (this.sending) { this.pending = true; return; }
     this.sending = true;
     const timing = { sent: performance.now(), preview: null, refine: null, full: null, draw: null };
+    this.previewOnlySent = this.dragging;
     try {
       const reply = await fetch("/api/view", {
         method: "POST",
         headers: { "content-type": "application/json" },
         // This page draws the scene: the master's base frame is needed only
-        // where the packages look.
-        body: JSON.stringify({ job: this.source(), offset: this.offset, page_draws_scene: true }),
+        // where the packages look. A dragging hand sees previews only: the
+        // farm traces no more of its moves.
+        body: JSON.stringify({
+          job: this.source(), offset: this.offset, page_draws_scene: true, preview_only: this.dragging,
+        }),
       });
       if (reply.ok) {
         const { generation } = await reply.json();

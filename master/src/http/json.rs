@@ -183,6 +183,8 @@ pub(super) struct ViewRequestBody {
     pub(super) offset: [f32; 3],
     #[serde(default)]
     pub(super) page_draws_scene: bool,
+    #[serde(default)]
+    pub(super) preview_only: bool,
 }
 
 #[derive(Serialize)]
