@@ -4,12 +4,14 @@
 // the reflector drawn from the stage meshes' vertex colours over what lies
 // behind it, and the `full` stage's pixels while the eye stays.
 //
-// Three passes: the opaque scene (the reflectors left out) into a linear
-// float target with its depth; that target to the canvas in 8-bit sRGB with
-// its depth; then the reflector mesh, depth-tested, each fragment the
-// Gouraud-interpolated vertex colour and ghost plus the glass's weight
-// times the target's colour there (the paper's stencil and z-buffer
-// blend), in linear light before the one sRGB conversion.
+// Three passes: the opaque scene (the reflectors left out) into two linear
+// float targets with their depth, unshadowed and shadowed (the lights'
+// shadow maps are drawn once, when the scene is loaded); the first to the
+// canvas in 8-bit sRGB with its depth; then the reflector mesh,
+// depth-tested, each fragment the Gouraud-interpolated vertex colour and
+// ghost plus the glass's weight times the shadowed target's colour there
+// (the paper's stencil and z-buffer blend), in linear light before the one
+// sRGB conversion.
 
 import * as THREE from "three";
 import { srgb8 } from "./stream.js";
