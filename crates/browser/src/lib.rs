@@ -153,6 +153,9 @@ impl Browser {
         if options.end_with_this_thread {
             end_with_this_thread(&mut command, libc::SIGKILL);
         }
+        // Its own process group, so that its helpers (renderer, GPU) end
+        // with it at once, before its profile is removed.
+        in_own_group(&mut command);
         let mut child = command.spawn().map_err(|source| Error::Spawn {
             path: chromium.to_owned(),
             source,
@@ -404,15 +407,42 @@ async fn within<T>(
         })
 }
 
-/// Chromium ends with its [`Browser`], whichever way its owner ends.
+/// Chromium ends with its [`Browser`], whichever way its owner ends: its
+/// whole process group, so that no helper process still writes to the
+/// profile when it is removed.
 struct KillOnDrop(Child);
 
 impl Drop for KillOnDrop {
     fn drop(&mut self) {
+        kill_group(&self.0);
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
 }
+
+#[cfg(unix)]
+fn in_own_group(command: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    command.process_group(0);
+}
+
+#[cfg(not(unix))]
+fn in_own_group(_: &mut Command) {}
+
+/// Kills the process group `child` leads ([`in_own_group`]).
+#[cfg(unix)]
+fn kill_group(child: &Child) {
+    if let Ok(pid) = libc::pid_t::try_from(child.id()) {
+        // SAFETY: kill(2) with a negative pid signals that process group;
+        // it touches no memory of this process.
+        unsafe {
+            libc::kill(-pid, libc::SIGKILL);
+        }
+    }
+}
+
+#[cfg(not(unix))]
+fn kill_group(_: &Child) {}
 
 /// Asks the kernel to send the child `signal` when the thread that started
 /// it ends, so that a process killed outright leaves no child behind.

@@ -19,6 +19,12 @@ static SCRIPTS: LazyLock<PathBuf> = LazyLock::new(|| {
         ("ends", "echo 'cannot open display' >&2\nexit 1"),
         // Says its pid beside itself, then waits in silence.
         ("silent", "echo $$ > \"$0.pid\"\nexec sleep 60"),
+        // Starts a helper (as Chromium starts its renderer), says the
+        // helper's pid, then waits in silence.
+        (
+            "family",
+            "sleep 60 &\necho $! > \"$0.helper\"\nexec sleep 60",
+        ),
         (
             "closed",
             "echo 'DevTools listening on ws://127.0.0.1:1/devtools/browser/x' >&2\nexec sleep 60",
@@ -89,6 +95,36 @@ async fn a_browser_that_never_says_its_endpoint_is_killed_after_the_timeout() {
     // Killed and reaped: no such process.
     // SAFETY: signal 0 only checks whether the process exists.
     assert_eq!(unsafe { libc::kill(pid, 0) }, -1);
+}
+
+/// Whether process `pid` has ended (gone, or a zombie not yet reaped).
+fn ended(pid: libc::pid_t) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => true,
+        // The state follows the command's closing parenthesis.
+        Ok(stat) => stat
+            .rsplit_once(") ")
+            .is_some_and(|(_, rest)| rest.starts_with('Z')),
+    }
+}
+
+#[tokio::test]
+async fn a_browser_ends_with_its_helper_processes() {
+    let helper_file = SCRIPTS.join("family.helper");
+    let _ = std::fs::remove_file(&helper_file);
+    let error = start("family", Duration::from_secs(5)).await;
+    assert!(matches!(error, Error::Timeout { .. }), "{error:?}");
+    let helper: libc::pid_t = std::fs::read_to_string(&helper_file)
+        .expect("the stand-in ran")
+        .trim()
+        .parse()
+        .unwrap();
+    // SIGKILL is delivered at once, the helper's exit a moment later.
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !ended(helper) && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(ended(helper), "the helper {helper} outlived its browser");
 }
 
 #[tokio::test]
