@@ -1523,6 +1523,25 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         }
     }
 
+    // The page's sRGB table gives its formula's bytes: at 2^18 inputs
+    // spread over [0, 1] (the overlay's pixels below check the formula
+    // against the CPU's).
+    let differ = browser
+        .eval(
+            r#"import("/assets/view/stream.js").then(({ srgb8, srgb8Formula }) => {
+            const bits = new Uint32Array(1), float = new Float32Array(bits.buffer);
+            const differ = [];
+            for (let b = 0; b <= 0x3f800000; b += 4057) {
+                bits[0] = b;
+                if (srgb8(float[0]) !== srgb8Formula(float[0])) differ.push(float[0]);
+            }
+            return differ.slice(0, 8);
+        })"#,
+        )
+        .await
+        .unwrap();
+    assert_eq!(differ, serde_json::json!([]), "sRGB table and formula differ");
+
     // The still eye: each stage as the page shows it against the CPU's
     // frames of that eye.
     let c = cockpit(&CockpitConfig {

@@ -98,14 +98,45 @@ export function followStages(onStage) {
   open();
 }
 
-// Linear light to 8-bit sRGB as the CPU's images are written
-// (vtfarm_imaging: f32 arithmetic, truncating after + 0.5).
+// Linear light to 8-bit sRGB by the CPU's formula (vtfarm_imaging: f32
+// arithmetic, truncating after + 0.5).
 const f = Math.fround;
 const INVERSE_GAMMA = f(1 / f(2.4));
-export function srgb8(linear) {
+export function srgb8Formula(linear) {
   const c = f(Math.min(1, Math.max(0, linear)));
   const s = c <= f(0.0031308)
     ? f(c * f(12.92))
     : f(f(f(1.055) * f(Math.pow(c, INVERSE_GAMMA))) - f(0.055));
   return Math.floor(f(f(s * 255) + 0.5));
+}
+
+// The formula rises with its input: per output k, the smallest f32 that
+// gives k, found once by bisection over the f32s' bit patterns in [0, 1].
+const SRGB8_STEPS = (() => {
+  const bits = new Uint32Array(1);
+  const float = new Float32Array(bits.buffer);
+  const at = (b) => { bits[0] = b; return float[0]; };
+  const steps = new Float32Array(256);
+  for (let k = 1; k < 256; k++) {
+    let [lo, hi] = [0, 0x3f800000];
+    while (lo < hi) {
+      const mid = Math.floor((lo + hi) / 2);
+      if (srgb8Formula(at(mid)) >= k) hi = mid; else lo = mid + 1;
+    }
+    steps[k] = at(lo);
+  }
+  return steps;
+})();
+
+// Linear light to 8-bit sRGB as the CPU's images are written
+// (srgb8Formula, by its table: a frame's overlay converts hundreds of
+// thousands of values, and a search of 256 steps is far cheaper than pow).
+export function srgb8(linear) {
+  const c = f(Math.min(1, Math.max(0, linear)));
+  let [lo, hi] = [0, 255];
+  while (lo < hi) {
+    const mid = (lo + hi + 1) >> 1;
+    if (c >= SRGB8_STEPS[mid]) lo = mid; else hi = mid - 1;
+  }
+  return lo;
 }
