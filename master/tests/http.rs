@@ -1540,7 +1540,11 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         )
         .await
         .unwrap();
-    assert_eq!(differ, serde_json::json!([]), "sRGB table and formula differ");
+    assert_eq!(
+        differ,
+        serde_json::json!([]),
+        "sRGB table and formula differ"
+    );
 
     // The still eye: each stage as the page shows it against the CPU's
     // frames of that eye.
