@@ -84,6 +84,7 @@ pub(crate) fn routes<S: Clone + Send + Sync + 'static>(master: MasterHandle) -> 
     let state = ViewHttp {
         master,
         glb: Arc::default(),
+        setup: Arc::default(),
     };
     Router::new()
         .route("/view/stream", get(stream))
@@ -99,6 +100,9 @@ struct ViewHttp {
     master: MasterHandle,
     /// The last scene served as GLB, encoded once per scene.
     glb: Arc<Mutex<Option<(SceneHash, Bytes)>>>,
+    /// The last source's `setup.json`, made once per source job (its
+    /// shadow views rasterize the frame around the reflectors).
+    setup: Arc<Mutex<Option<(JobId, Bytes)>>>,
 }
 
 async fn asset(Path(path): Path<String>) -> Response {
@@ -215,17 +219,16 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
     let Some((job, source)) = found else {
         return (StatusCode::NOT_FOUND, "no scene kept for the view\n").into_response();
     };
+    let cached = state.setup.lock().expect("not poisoned").clone();
+    if let Some((_, json)) = cached.filter(|(j, _)| *j == job) {
+        return json_response(json);
+    }
     let camera = source.setup.camera;
     let lighting = &source.setup.lighting;
     let scene = &source.scene;
     let views = {
         let (scene, lights) = (scene.clone(), lighting.lights.clone());
-        let mut is_reflector = vec![false; scene.triangles.len()];
-        for &t in &source.reflectors {
-            if let Some(r) = is_reflector.get_mut(t.index()) {
-                *r = true;
-            }
-        }
+        let is_reflector = vtfarm_render::reflector_flags(&scene, &source.reflectors);
         tokio::task::spawn_blocking(move || {
             ShadowViews::for_frame(&scene, &camera, &lights, &is_reflector)
         })
@@ -233,13 +236,7 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
         .expect("the shadow views do not panic")
     };
     let shadows = ShadowSetup {
-        size: views
-            .cameras
-            .iter()
-            .flatten()
-            .map(|c| c.width)
-            .max()
-            .unwrap_or(0),
+        size: views.size,
         bias: views.bias,
         cameras: (views.cameras.iter())
             .map(|c| {
@@ -271,7 +268,7 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
             }
         })
         .collect();
-    axum::Json(ViewSetup {
+    let setup = ViewSetup {
         job,
         scene: source.name.clone(),
         eye: camera.eye.to_array(),
@@ -291,8 +288,14 @@ async fn setup_json(State(state): State<ViewHttp>, query: Query<SourceQuery>) ->
             .map(vtfarm_trace::casts_shadow)
             .collect(),
         shadows,
-    })
-    .into_response()
+    };
+    let json = Bytes::from(serde_json::to_vec(&setup).expect("JSON of plain values"));
+    *state.setup.lock().expect("not poisoned") = Some((job, json.clone()));
+    json_response(json)
+}
+
+fn json_response(json: Bytes) -> Response {
+    ([(header::CONTENT_TYPE, "application/json")], json).into_response()
 }
 
 /// Where a stage stream stands: the move it follows and how many of that

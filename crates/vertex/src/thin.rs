@@ -830,6 +830,8 @@ fn shadow_box(
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShadowViews {
     pub cameras: Vec<Option<Camera>>,
+    /// Texels along each side of a map.
+    pub size: u32,
     pub bias: f32,
 }
 
@@ -872,6 +874,7 @@ impl ShadowViews {
             .collect();
         ShadowViews {
             cameras,
+            size: SHADOW_MAP_SIZE,
             // 5 texels of a 1024 map across the box's bounding sphere.
             bias: radius * 5e-3 * (1024.0 / SHADOW_MAP_SIZE as f32),
         }
@@ -887,7 +890,8 @@ impl ShadowViews {
         lights: &[Light],
         is_reflector: &[bool],
     ) -> ShadowViews {
-        let within = PixelRect::full(camera.width, camera.height);
+        // The frame's own buffer is read only over the reflectors' bounds.
+        let within = reflector_bounds(scene, camera, is_reflector, BEHIND_MARGIN);
         let buffers = BehindBuffers::new(
             scene,
             camera,
