@@ -118,6 +118,9 @@ pub struct CurrentView {
     streamed: usize,
     /// Only the preview is wanted ([`ViewRequest::preview_only`]).
     preview_only: bool,
+    /// Its job was cancelled once the preview went out
+    /// ([`Views::take_ended_at_preview`]).
+    ended_at_preview: bool,
 }
 
 /// A finished stage of a view, with its glare figures once computed.
@@ -308,7 +311,7 @@ impl Views {
     /// The farm job of the move being rendered, if it still runs.
     pub(crate) fn running_job(&self) -> Option<JobId> {
         (self.current.as_ref())
-            .filter(|c| c.stages_done < c.stages_total)
+            .filter(|c| c.stages_done < c.stages_total && !c.ended_at_preview)
             .map(|c| c.job)
     }
 
@@ -332,6 +335,7 @@ impl Views {
             stages_done: 0,
             streamed: 0,
             preview_only: planned.preview_only,
+            ended_at_preview: false,
         });
     }
 
@@ -339,10 +343,10 @@ impl Views {
     /// out and while the job still runs: the job to cancel. Asked once:
     /// the move then counts as ended at its preview.
     pub(crate) fn take_ended_at_preview(&mut self) -> Option<JobId> {
-        let c = (self.current.as_mut())
-            .filter(|c| c.preview_only && c.streamed >= 1 && c.stages_done < c.stages_total)?;
-        c.stages_total = c.stages_done;
-        let (generation, job) = (c.generation, c.job);
+        let job = self.running_job()?;
+        let c = (self.current.as_mut()).filter(|c| c.preview_only && c.streamed >= 1)?;
+        c.ended_at_preview = true;
+        let generation = c.generation;
         self.record(ViewOutcome::Cancelled { generation, job });
         Some(job)
     }
@@ -635,6 +639,7 @@ mod tests {
             stages_done: 0,
             streamed: 0,
             preview_only: false,
+            ended_at_preview: false,
         }
     }
 
