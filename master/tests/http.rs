@@ -1112,12 +1112,7 @@ async fn the_dashboard_in_chromium_shows_both_workers_the_finished_frame_and_the
     }); true"#;
     assert_eq!(browser.eval(arm).await.unwrap(), true);
     for _ in 0..3 {
-        for kind in ["keyDown", "keyUp"] {
-            let key = serde_json::json!({
-                "type": kind, "key": "ArrowRight", "code": "ArrowRight", "windowsVirtualKeyCode": 39
-            });
-            browser.call("Input.dispatchKeyEvent", key).await.unwrap();
-        }
+        browser.press("ArrowRight", 39).await.unwrap();
     }
     let view = browser
         .eval(
@@ -1299,16 +1294,6 @@ async fn the_dashboards_cancel_button_cancels_a_running_job() {
     assert_eq!(state, Some(vtfarm_master_core::JobState::Cancelled));
 }
 
-/// Presses and releases `key` on the page.
-async fn press(browser: &mut Browser, key: &str, code: u32) {
-    for kind in ["keyDown", "keyUp"] {
-        let event = serde_json::json!({
-            "type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code
-        });
-        browser.call("Input.dispatchKeyEvent", event).await.unwrap();
-    }
-}
-
 /// [`view_reaches`] with a 30 s bound, after which it resolves to what
 /// the page has, for the failure's message.
 fn view_reaches(condition: &str, value: &str) -> String {
@@ -1382,7 +1367,7 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
     let drawn = browser.eval(&full_drawn(0)).await.unwrap();
     page_reached(&browser, drawn, "the first move's full stage");
     for k in 1..=3 {
-        press(&mut browser, "ArrowRight", 39).await;
+        browser.press("ArrowRight", 39).await.unwrap();
         let drawn = browser.eval(&full_drawn(k)).await.unwrap();
         page_reached(&browser, drawn, &format!("move {k}'s full stage"));
     }
@@ -1399,7 +1384,7 @@ async fn the_page_draws_the_cockpit_and_the_streamed_stages_and_matches_the_rend
         .await
         .unwrap();
     let (x, y) = (bounds[0].as_f64().unwrap(), bounds[1].as_f64().unwrap());
-    let mouse = |kind: &str, x: f64| serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 });
+    let mouse = |kind: &str, x: f64| vtfarm_browser::left_button(kind, x, y);
     browser
         .call("Input.dispatchMouseEvent", mouse("mousePressed", x))
         .await

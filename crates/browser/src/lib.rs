@@ -233,6 +233,18 @@ impl Browser {
         Ok(result["result"]["value"].clone())
     }
 
+    /// Presses and releases `key` (a DOM key name, `code` its Windows
+    /// virtual key code) on the page, as a keyboard does.
+    pub async fn press(&mut self, key: &str, code: u32) -> Result<(), Error> {
+        for kind in ["keyDown", "keyUp"] {
+            let event = json!({
+                "type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code
+            });
+            self.call("Input.dispatchKeyEvent", event).await?;
+        }
+        Ok(())
+    }
+
     /// What the page logged and threw (the parameters of the
     /// `Runtime.consoleAPICalled` and `Runtime.exceptionThrown` events
     /// kept so far; `Runtime.enable` asks for them).
@@ -405,6 +417,13 @@ async fn within<T>(
             what: what.to_owned(),
             after: timeout,
         })
+}
+
+/// The parameters of `Input.dispatchMouseEvent` for a left-button event
+/// of `kind` (`mousePressed`, `mouseMoved` with the button held,
+/// `mouseReleased`) at (`x`, `y`) in CSS pixels.
+pub fn left_button(kind: &str, x: f64, y: f64) -> Value {
+    json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 })
 }
 
 /// Chromium ends with its [`Browser`], whichever way its owner ends: its

@@ -14,7 +14,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
-use vtfarm_browser::{Browser, Graphics, Options};
+use vtfarm_browser::{Browser, Graphics, Options, left_button};
 use vtfarm_master::view::STAGES;
 
 use super::{MOVE_PAUSE, Spread};
@@ -270,13 +270,7 @@ impl Page {
     }
 
     async fn press(&mut self, key: &str, code: u32) -> Result<()> {
-        for kind in ["keyDown", "keyUp"] {
-            let event = json!({
-                "type": kind, "key": key, "code": key, "windowsVirtualKeyCode": code
-            });
-            self.call("Input.dispatchKeyEvent", event).await?;
-        }
-        Ok(())
+        (self.browser.press(key, code).await).context("DevTools Input.dispatchKeyEvent")
     }
 
     /// Drags over the view's canvas at [`DRAG_MOVES_PER_SECOND`] for
@@ -297,7 +291,7 @@ impl Page {
             .await?;
         let at = |k: usize| centre[k].as_f64().context("the canvas's position");
         let (x, y) = (at(0)?, at(1)?);
-        let mouse = |kind: &str, x: f64| json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 });
+        let mouse = |kind: &str, x: f64| left_button(kind, x, y);
         let moves = (DRAG_DURATION.as_secs_f64() * f64::from(DRAG_MOVES_PER_SECOND)) as usize;
         let period = Duration::from_secs(1) / DRAG_MOVES_PER_SECOND;
         // The page's clock at a moment of this one's: the drag's bounds on
