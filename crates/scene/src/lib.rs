@@ -33,47 +33,58 @@ use std::borrow::Cow;
 
 use glam::{Vec2, Vec3};
 
-/// Index of an object (a named OBJ object or group) in [`Scene::objects`].
-/// Per-pixel and per-sample object maps hold the bare number, with
-/// [`NONE`] for no object ([`ObjectId::raw`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct ObjectId(pub u32);
+/// An index into one of the scene's lists, as its own type: `index()` into
+/// the list, `raw()` the bare number that maps and the wire hold, printed
+/// as that number.
+macro_rules! scene_index {
+    ($(#[$doc:meta])* $name:ident, $list:literal) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+        pub struct $name(pub u32);
 
-impl ObjectId {
-    /// The object's index in [`Scene::objects`].
-    pub fn index(self) -> usize {
-        self.0 as usize
-    }
+        impl $name {
+            #[doc = concat!("Its index in [`Scene::", $list, "`].")]
+            pub fn index(self) -> usize {
+                self.0 as usize
+            }
 
-    /// The bare number, as object maps hold it.
-    pub fn raw(self) -> u32 {
-        self.0
-    }
+            /// The bare number, as maps and the wire hold it.
+            pub fn raw(self) -> u32 {
+                self.0
+            }
+        }
+
+        impl std::fmt::Display for $name {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                self.0.fmt(f)
+            }
+        }
+    };
 }
 
-impl std::fmt::Display for ObjectId {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        self.0.fmt(f)
-    }
-}
+scene_index!(
+    /// Index of an object (a named OBJ object or group) in [`Scene::objects`].
+    /// Per-pixel and per-sample object maps hold the bare number, with
+    /// [`NONE`] for no object ([`ObjectId::raw`]).
+    ObjectId,
+    "objects"
+);
 
-/// Index of a triangle in [`Scene::triangles`]. Per-pixel and per-sample
-/// triangle maps (ID buffers, sample records) hold the bare number, with
-/// [`NONE`] for no triangle ([`TriangleId::raw`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct TriangleId(pub u32);
+scene_index!(
+    /// Index of a triangle in [`Scene::triangles`]. Per-pixel and per-sample
+    /// triangle maps (ID buffers, sample records) hold the bare number, with
+    /// [`NONE`] for no triangle ([`TriangleId::raw`]).
+    TriangleId,
+    "triangles"
+);
+
+scene_index!(
+    /// Index of a material in [`Scene::materials`].
+    MaterialId,
+    "materials"
+);
 
 impl TriangleId {
-    /// The triangle's index in [`Scene::triangles`].
-    pub fn index(self) -> usize {
-        self.0 as usize
-    }
-
-    /// The bare number, as triangle maps hold it.
-    pub fn raw(self) -> u32 {
-        self.0
-    }
-
     /// The triangle a map's bare number names: none for [`NONE`].
     pub fn from_raw(raw: u32) -> Option<TriangleId> {
         (raw != NONE).then_some(TriangleId(raw))
@@ -82,34 +93,6 @@ impl TriangleId {
     /// The ids of the first `n` triangles, in order.
     pub fn range(n: usize) -> impl DoubleEndedIterator<Item = TriangleId> + ExactSizeIterator {
         (0..n as u32).map(TriangleId)
-    }
-}
-
-impl std::fmt::Display for TriangleId {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        self.0.fmt(f)
-    }
-}
-
-/// Index of a material in [`Scene::materials`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct MaterialId(pub u32);
-
-impl MaterialId {
-    /// The material's index in [`Scene::materials`].
-    pub fn index(self) -> usize {
-        self.0 as usize
-    }
-
-    /// The bare number, as the wire carries it.
-    pub fn raw(self) -> u32 {
-        self.0
-    }
-}
-
-impl std::fmt::Display for MaterialId {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        self.0.fmt(f)
     }
 }
 
